@@ -1,0 +1,567 @@
+"""Ellipses, ellipsoids, the pinhole camera and the projection ``C* = P Q* P^T``.
+
+Conventions (used everywhere in QuadLoc)
+----------------------------------------
+* Image coordinates are pixels, origin at the top-left pixel corner, +x right, +y down.
+* An ellipse is ``(cx, cy, a, b, angle)``: centre in pixels, **semi**-axes ``a`` (along the
+  direction ``angle``) and ``b`` in pixels, ``angle`` in **radians** measured from +x towards +y.
+* Shape matrix ``A = R(angle) diag(a^-2, b^-2) R(angle)^T``; level function
+  ``Phi(x) = (x - c)^T A (x - c)`` (the contour is the level 1).
+* Primal conic ``C = [[A, -A c], [-(A c)^T, c^T A c - 1]]``; the dual conic is ``C^-1``,
+  normalised so that ``C*[2, 2] = -1``: ``C* = [[A^-1 - c c^T, -c], [-c^T, -1]]``.
+* 2D Gaussian of an ellipse: ``mu = c``, ``Sigma = R diag(a^2, b^2) R^T = A^-1``.
+* An ellipsoid is ``(center, axes, rotation)``: ``center`` in world metres, ``axes`` the three
+  **semi**-axes in metres along the columns of ``rotation`` (ellipsoid frame -> world frame).
+  Dual quadric ``Q* = T diag(a^2, b^2, c^2, -1) T^T`` with ``T = [[rotation, center], [0, 1]]``.
+* Poses are named by direction. ``camera_from_world`` is a 4x4 homogeneous matrix mapping world
+  points into the camera frame (OpenCV's ``[R | t]``); ``world_from_camera`` is its inverse.
+* Camera axes are OpenCV's: +X right, +Y down, +Z forward.
+* Quaternions are ``quaternion_wxyz`` (scalar first), unit norm, canonical sign ``w >= 0``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: Largest ``max|R R^T - I|`` accepted for a rotation matrix (and ``|det R - 1|``).
+ORTHONORMAL_TOLERANCE = 1e-6
+#: Largest ``| |q| - 1 |`` accepted for a unit quaternion.
+QUATERNION_NORM_TOLERANCE = 1e-6
+#: Smallest depth (metres, camera Z) a point of an ellipsoid may have for a valid projection.
+MIN_DEPTH = 1e-6
+
+__all__ = [
+    "MIN_DEPTH",
+    "ORTHONORMAL_TOLERANCE",
+    "QUATERNION_NORM_TOLERANCE",
+    "Camera",
+    "DegenerateProjectionError",
+    "Ellipse",
+    "Ellipsoid",
+    "GeometryError",
+    "dual_conics_from_params",
+    "ellipse_params",
+    "ellipsoid_depth_margins",
+    "invert_pose",
+    "level_values",
+    "params_from_dual_conics",
+    "pose_matrix",
+    "project_ellipsoid",
+    "project_ellipsoids_dual",
+    "quaternion_wxyz_from_rotation",
+    "rotation_2d",
+    "rotation_from_quaternion_wxyz",
+    "snap_to_rotation",
+]
+
+
+class GeometryError(ValueError):
+    """Invalid geometric input; the message names the field and the problem."""
+
+
+class DegenerateProjectionError(ValueError):
+    """The image of an ellipsoid is not an ellipse.
+
+    Raised when the ellipsoid crosses the camera's principal plane (part of it is behind the
+    camera or the camera is inside it) or the projected conic is degenerate. ``reason`` is a
+    short machine-readable code: ``"behind_camera"``, ``"crosses_image_plane"``,
+    ``"camera_inside"`` or ``"degenerate_conic"``.
+    """
+
+    def __init__(self, reason: str, message: str) -> None:
+        super().__init__(message)
+        self.reason = reason
+
+
+# --------------------------------------------------------------------------- validation helpers
+
+
+def _finite_float(owner: str, name: str, value: object) -> float:
+    try:
+        f = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError) as exc:
+        raise GeometryError(f"{owner}.{name} must be a number, got {value!r}") from exc
+    if not math.isfinite(f):
+        raise GeometryError(f"{owner}.{name} must be finite, got {f}")
+    return f
+
+
+def _finite_array(owner: str, name: str, value: object, shape: tuple[int, ...]) -> np.ndarray:
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise GeometryError(f"{owner}.{name} must be numeric with shape {shape}") from exc
+    if arr.shape != shape:
+        raise GeometryError(f"{owner}.{name} must have shape {shape}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise GeometryError(f"{owner}.{name} must be finite, got {arr.tolist()}")
+    arr.setflags(write=False)
+    return arr
+
+
+def check_rotation(owner: str, name: str, value: object) -> np.ndarray:
+    """Validate a 3x3 rotation matrix (orthonormal within ``ORTHONORMAL_TOLERANCE``, det +1)."""
+    R = _finite_array(owner, name, value, (3, 3))
+    err = float(np.max(np.abs(R @ R.T - np.eye(3))))
+    if err > ORTHONORMAL_TOLERANCE:
+        raise GeometryError(
+            f"{owner}.{name} is not orthonormal: max|R R^T - I| = {err:.3g} "
+            f"> tolerance {ORTHONORMAL_TOLERANCE:g}"
+        )
+    det = float(np.linalg.det(R))
+    if abs(det - 1.0) > ORTHONORMAL_TOLERANCE:
+        raise GeometryError(f"{owner}.{name} must be a proper rotation (det +1), det = {det:.6g}")
+    return R
+
+
+# --------------------------------------------------------------------------- rotations and poses
+
+
+def rotation_2d(angle: float) -> np.ndarray:
+    """2x2 rotation by ``angle`` radians (counter-clockwise in a y-up frame, i.e. from +x to +y)."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s], [s, c]])
+
+
+def snap_to_rotation(matrix: np.ndarray) -> np.ndarray:
+    """Nearest rotation matrix (Frobenius norm) to a 3x3 ``matrix``, via SVD, det forced to +1."""
+    U, _, Vt = np.linalg.svd(np.asarray(matrix, dtype=float))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
+    return U @ D @ Vt
+
+
+def rotation_from_quaternion_wxyz(quaternion_wxyz: Sequence[float]) -> np.ndarray:
+    """3x3 rotation from a unit quaternion ``(w, x, y, z)``.
+
+    The norm must be 1 within ``QUATERNION_NORM_TOLERANCE``; the quaternion is renormalised.
+    """
+    q = _finite_array("quaternion", "quaternion_wxyz", quaternion_wxyz, (4,))
+    n = float(np.linalg.norm(q))
+    if abs(n - 1.0) > QUATERNION_NORM_TOLERANCE:
+        raise GeometryError(f"quaternion_wxyz must have unit norm, |q| = {n:.9g}")
+    w, x, y, z = q / n
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def quaternion_wxyz_from_rotation(rotation: np.ndarray) -> np.ndarray:
+    """Unit quaternion ``(w, x, y, z)`` with ``w >= 0`` of a 3x3 rotation matrix."""
+    R = np.asarray(rotation, dtype=float)
+    tr = R[0, 0] + R[1, 1] + R[2, 2]
+    if tr > 0:
+        s = 2.0 * math.sqrt(tr + 1.0)
+        q = np.array([0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s,
+                      (R[1, 0] - R[0, 1]) / s])
+    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
+        q = np.array([(R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s,
+                      (R[0, 2] + R[2, 0]) / s])
+    elif R[1, 1] > R[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
+        q = np.array([(R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s,
+                      (R[1, 2] + R[2, 1]) / s])
+    else:
+        s = 2.0 * math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
+        q = np.array([(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s,
+                      (R[1, 2] + R[2, 1]) / s, 0.25 * s])
+    q /= np.linalg.norm(q)
+    return -q if q[0] < 0 else q
+
+
+def pose_matrix(rotation: np.ndarray, translation: Sequence[float]) -> np.ndarray:
+    """4x4 homogeneous matrix ``[[rotation, translation], [0, 1]]`` (direction kept by caller)."""
+    T = np.eye(4)
+    T[:3, :3] = rotation
+    T[:3, 3] = translation
+    return T
+
+
+def invert_pose(a_from_b: np.ndarray) -> np.ndarray:
+    """Inverse of a rigid 4x4 transform: ``b_from_a`` from ``a_from_b``."""
+    R = a_from_b[:3, :3]
+    t = a_from_b[:3, 3]
+    return pose_matrix(R.T, -R.T @ t)
+
+
+# --------------------------------------------------------------------------- ellipse
+
+
+@dataclass(frozen=True)
+class Ellipse:
+    """An image ellipse: centre ``(cx, cy)`` px, semi-axes ``a, b`` px, ``angle`` radians.
+
+    ``a`` lies along the unit vector ``(cos angle, sin angle)``. Instances are validated:
+    finite numbers, strictly positive semi-axes.
+    """
+
+    cx: float
+    cy: float
+    a: float
+    b: float
+    angle: float
+
+    def __post_init__(self) -> None:
+        for name in ("cx", "cy", "a", "b", "angle"):
+            object.__setattr__(self, name, _finite_float("Ellipse", name, getattr(self, name)))
+        for name in ("a", "b"):
+            if getattr(self, name) <= 0.0:
+                raise GeometryError(
+                    f"Ellipse.{name} (semi-axis) must be > 0, got {getattr(self, name)}"
+                )
+
+    # -- basic properties
+    @property
+    def center(self) -> np.ndarray:
+        """Centre ``(cx, cy)`` in pixels, shape (2,)."""
+        return np.array([self.cx, self.cy])
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """2x2 rotation whose first column is the direction of semi-axis ``a``."""
+        return rotation_2d(self.angle)
+
+    @property
+    def area(self) -> float:
+        """Area in px^2: ``pi a b``."""
+        return math.pi * self.a * self.b
+
+    def shape_matrix(self) -> np.ndarray:
+        """``A = R diag(a^-2, b^-2) R^T`` (2x2, px^-2)."""
+        R = self.rotation
+        return R @ np.diag([self.a**-2, self.b**-2]) @ R.T
+
+    def params(self) -> np.ndarray:
+        """``[cx, cy, a, b, angle]`` as a float array of shape (5,)."""
+        return np.array([self.cx, self.cy, self.a, self.b, self.angle])
+
+    # -- conics
+    def primal_conic(self) -> np.ndarray:
+        """Point conic ``C`` (3x3): ``x~^T C x~ = 0`` on the contour, ``< 0`` inside."""
+        A = self.shape_matrix()
+        c = self.center
+        Ac = A @ c
+        C = np.empty((3, 3))
+        C[:2, :2] = A
+        C[:2, 2] = -Ac
+        C[2, :2] = -Ac
+        C[2, 2] = c @ Ac - 1.0
+        return C
+
+    def dual_conic(self) -> np.ndarray:
+        """Dual conic ``C* = C^-1`` normalised so that ``C*[2, 2] = -1`` (3x3, px^2)."""
+        return dual_conics_from_params(self.params()[None])[0]
+
+    @classmethod
+    def from_dual_conic(cls, dual_conic: np.ndarray) -> Ellipse:
+        """Ellipse of a dual conic of any scale; raises ``DegenerateProjectionError`` if none."""
+        return cls(*params_from_dual_conics(np.asarray(dual_conic, dtype=float)[None])[0])
+
+    @classmethod
+    def from_primal_conic(cls, conic: np.ndarray) -> Ellipse:
+        """Ellipse of a point conic of any scale and sign."""
+        C = np.asarray(conic, dtype=float)
+        if C.shape != (3, 3) or not np.all(np.isfinite(C)):
+            raise GeometryError("conic must be a finite 3x3 matrix")
+        try:
+            Cd = np.linalg.inv(C)
+        except np.linalg.LinAlgError as exc:
+            raise DegenerateProjectionError("degenerate_conic", "singular conic") from exc
+        return cls.from_dual_conic(Cd)
+
+    # -- Gaussian
+    def gaussian(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(mu, Sigma)``: ``mu = c`` (2,), ``Sigma = R diag(a^2, b^2) R^T`` (2x2)."""
+        R = self.rotation
+        return self.center, R @ np.diag([self.a**2, self.b**2]) @ R.T
+
+    @classmethod
+    def from_gaussian(cls, mu: Sequence[float], sigma: np.ndarray) -> Ellipse:
+        """Inverse of :meth:`gaussian` (``sigma`` symmetric positive definite)."""
+        mu = _finite_array("Ellipse.from_gaussian", "mu", mu, (2,))
+        S = _finite_array("Ellipse.from_gaussian", "sigma", sigma, (2, 2))
+        return cls(*_params_from_center_and_inverse_shape(mu[None], S[None])[0])
+
+    # -- boxes, levels, contour
+    def bbox(self) -> np.ndarray:
+        """Axis-aligned bounding box ``[xmin, ymin, xmax, ymax]`` in pixels."""
+        c, s = math.cos(self.angle), math.sin(self.angle)
+        hx = math.hypot(self.a * c, self.b * s)
+        hy = math.hypot(self.a * s, self.b * c)
+        return np.array([self.cx - hx, self.cy - hy, self.cx + hx, self.cy + hy])
+
+    @classmethod
+    def from_bbox(cls, xmin: float, ymin: float, xmax: float, ymax: float) -> Ellipse:
+        """Axis-aligned ellipse inscribed in a box (the usual box -> ellipse of detectors)."""
+        if not xmax > xmin or not ymax > ymin:
+            raise GeometryError(
+                f"box must have xmax > xmin and ymax > ymin, got {[xmin, ymin, xmax, ymax]}"
+            )
+        return cls((xmin + xmax) / 2, (ymin + ymax) / 2, (xmax - xmin) / 2, (ymax - ymin) / 2, 0.0)
+
+    def level(self, points: np.ndarray) -> np.ndarray:
+        """``Phi`` at ``points`` of shape (..., 2) px; returns shape (...,). 1 on the contour."""
+        d = np.asarray(points, dtype=float) - self.center
+        return np.einsum("...i,ij,...j->...", d, self.shape_matrix(), d)
+
+    def contour_points(self, n: int = 64) -> np.ndarray:
+        """``n`` points on the contour at equal parametric angles, shape (n, 2) px."""
+        t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+        local = np.stack([self.a * np.cos(t), self.b * np.sin(t)], axis=-1)
+        return local @ self.rotation.T + self.center
+
+    def transformed(self, angle: float, translation: Sequence[float]) -> Ellipse:
+        """Image of the ellipse under ``x -> R(angle) x + translation`` (rotation about (0, 0))."""
+        c = rotation_2d(angle) @ self.center + np.asarray(translation, dtype=float)
+        return Ellipse(c[0], c[1], self.a, self.b, self.angle + angle)
+
+    def canonical(self) -> Ellipse:
+        """Same set of points with ``a >= b`` and ``angle`` in ``[-pi/2, pi/2)``."""
+        a, b, ang = self.a, self.b, self.angle
+        if b > a:
+            a, b, ang = b, a, ang + math.pi / 2
+        ang = (ang + math.pi / 2) % math.pi - math.pi / 2
+        return Ellipse(self.cx, self.cy, a, b, ang)
+
+
+# --------------------------------------------------------------------------- batched ellipses
+
+
+def ellipse_params(ellipses: Sequence[Ellipse]) -> np.ndarray:
+    """Stack ellipses into an array of shape (N, 5): ``[cx, cy, a, b, angle]`` per row."""
+    return np.array([e.params() for e in ellipses], dtype=float).reshape(-1, 5)
+
+
+def dual_conics_from_params(params: np.ndarray) -> np.ndarray:
+    """Normalised dual conics (N, 3, 3), ``C*[2, 2] = -1``, from ellipse params (N, 5)."""
+    p = np.asarray(params, dtype=float)
+    c, s = np.cos(p[:, 4]), np.sin(p[:, 4])
+    a2, b2 = p[:, 2] ** 2, p[:, 3] ** 2
+    cx, cy = p[:, 0], p[:, 1]
+    out = np.empty((p.shape[0], 3, 3))
+    out[:, 0, 0] = a2 * c * c + b2 * s * s - cx * cx
+    out[:, 1, 1] = a2 * s * s + b2 * c * c - cy * cy
+    out[:, 0, 1] = out[:, 1, 0] = (a2 - b2) * c * s - cx * cy
+    out[:, 0, 2] = out[:, 2, 0] = -cx
+    out[:, 1, 2] = out[:, 2, 1] = -cy
+    out[:, 2, 2] = -1.0
+    return out
+
+
+def _params_from_center_and_inverse_shape(center: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """(N, 5) canonical params (a >= b, angle in [-pi/2, pi/2)) from centres and ``A^-1``."""
+    sxx, syy, sxy = sigma[:, 0, 0], sigma[:, 1, 1], 0.5 * (sigma[:, 0, 1] + sigma[:, 1, 0])
+    half_tr = 0.5 * (sxx + syy)
+    disc = np.sqrt(np.maximum((0.5 * (sxx - syy)) ** 2 + sxy**2, 0.0))
+    lam_major, lam_minor = half_tr + disc, half_tr - disc
+    if np.any(~(lam_minor > 0.0)):
+        bad = int(np.argmax(~(lam_minor > 0.0)))
+        raise DegenerateProjectionError(
+            "degenerate_conic", f"conic {bad} is not an ellipse (shape not positive definite)"
+        )
+    angle = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
+    angle = (angle + np.pi / 2) % np.pi - np.pi / 2
+    return np.column_stack([center[:, 0], center[:, 1], np.sqrt(lam_major),
+                            np.sqrt(lam_minor), angle])
+
+
+def params_from_dual_conics(dual_conics: np.ndarray) -> np.ndarray:
+    """Ellipse params (N, 5) from dual conics (N, 3, 3) of any scale.
+
+    Raises ``DegenerateProjectionError`` if a conic is not a real ellipse. Output is canonical:
+    ``a >= b`` and ``angle`` in ``[-pi/2, pi/2)``.
+    """
+    C = np.asarray(dual_conics, dtype=float)
+    if C.ndim != 3 or C.shape[1:] != (3, 3) or not np.all(np.isfinite(C)):
+        raise GeometryError("dual conics must be a finite array of shape (N, 3, 3)")
+    w = C[:, 2, 2]
+    if np.any(~(np.abs(w) > 0.0)):
+        raise DegenerateProjectionError("degenerate_conic", "dual conic with C*[2, 2] = 0 "
+                                        "(a parabola or a conic through infinity)")
+    Cn = C / (-w)[:, None, None]
+    center = -Cn[:, :2, 2]
+    sigma = Cn[:, :2, :2] + center[:, :, None] * center[:, None, :]
+    return _params_from_center_and_inverse_shape(center, sigma)
+
+
+def level_values(params: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """``Phi_j(x)`` for ellipses (N, 5) at points (N, M, 2); returns (N, M)."""
+    p = np.asarray(params, dtype=float)
+    d = np.asarray(points, dtype=float) - p[:, None, :2]
+    c, s = np.cos(p[:, 4])[:, None], np.sin(p[:, 4])[:, None]
+    u = d[..., 0] * c + d[..., 1] * s
+    v = -d[..., 0] * s + d[..., 1] * c
+    return (u / p[:, 2, None]) ** 2 + (v / p[:, 3, None]) ** 2
+
+
+# --------------------------------------------------------------------------- ellipsoid
+
+
+@dataclass(frozen=True)
+class Ellipsoid:
+    """An ellipsoid in the world: ``center`` (3,) m, semi-``axes`` (3,) m, ``rotation`` (3, 3).
+
+    ``rotation`` maps ellipsoid coordinates to world coordinates; its columns are the directions
+    of the semi-axes. Points ``X`` inside satisfy
+    ``(X - center)^T rotation diag(axes^-2) rotation^T (X - center) <= 1``.
+    """
+
+    center: np.ndarray
+    axes: np.ndarray
+    rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "center", _finite_array("Ellipsoid", "center", self.center, (3,)))
+        axes = _finite_array("Ellipsoid", "axes", self.axes, (3,))
+        if np.any(axes <= 0.0):
+            raise GeometryError(f"Ellipsoid.axes (semi-axes) must be > 0, got {axes.tolist()}")
+        object.__setattr__(self, "axes", axes)
+        object.__setattr__(self, "rotation", check_rotation("Ellipsoid", "rotation", self.rotation))
+
+    @classmethod
+    def from_quaternion_wxyz(
+        cls, center: Sequence[float], axes: Sequence[float], quaternion_wxyz: Sequence[float]
+    ) -> Ellipsoid:
+        """Build from a unit quaternion ``(w, x, y, z)`` (ellipsoid frame -> world frame)."""
+        return cls(np.asarray(center, float), np.asarray(axes, float),
+                   rotation_from_quaternion_wxyz(quaternion_wxyz))
+
+    @property
+    def quaternion_wxyz(self) -> np.ndarray:
+        """Orientation as a unit quaternion ``(w, x, y, z)``, ``w >= 0``."""
+        return quaternion_wxyz_from_rotation(self.rotation)
+
+    def dual_quadric(self) -> np.ndarray:
+        """``Q* = T diag(a^2, b^2, c^2, -1) T^T`` (4x4), ``T = [[rotation, center], [0, 1]]``."""
+        T = pose_matrix(self.rotation, self.center)
+        return T @ np.diag([*(self.axes**2), -1.0]) @ T.T
+
+    def shape_matrix(self) -> np.ndarray:
+        """``M = rotation diag(axes^2) rotation^T`` (3x3, m^2): the quadric's inverse shape."""
+        return self.rotation @ np.diag(self.axes**2) @ self.rotation.T
+
+    def surface_points(self, n_azimuth: int = 32, n_polar: int = 16) -> np.ndarray:
+        """Points on the surface (world metres), shape (n_azimuth * n_polar, 3)."""
+        az = np.linspace(0, 2 * np.pi, n_azimuth, endpoint=False)
+        po = np.linspace(0, np.pi, n_polar)
+        A, P = np.meshgrid(az, po, indexing="ij")
+        unit = np.stack([np.sin(P) * np.cos(A), np.sin(P) * np.sin(A), np.cos(P)], -1)
+        return (unit.reshape(-1, 3) * self.axes) @ self.rotation.T + self.center
+
+
+# --------------------------------------------------------------------------- camera
+
+
+@dataclass(frozen=True)
+class Camera:
+    """Pinhole camera: focal lengths ``fx, fy`` px, principal point ``cx, cy`` px, image size."""
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    width: int
+    height: int
+
+    def __post_init__(self) -> None:
+        for name in ("fx", "fy", "cx", "cy"):
+            object.__setattr__(self, name, _finite_float("Camera", name, getattr(self, name)))
+        for name in ("fx", "fy"):
+            if getattr(self, name) <= 0:
+                raise GeometryError(f"Camera.{name} must be > 0, got {getattr(self, name)}")
+        for name in ("width", "height"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not float(v).is_integer() or v <= 0:
+                raise GeometryError(f"Camera.{name} must be a positive integer, got {v!r}")
+            object.__setattr__(self, name, int(v))
+
+    @classmethod
+    def from_matrix(cls, K: np.ndarray, width: int, height: int) -> Camera:
+        """From a 3x3 intrinsic matrix (zero skew)."""
+        K = np.asarray(K, dtype=float)
+        return cls(K[0, 0], K[1, 1], K[0, 2], K[1, 2], width, height)
+
+    @property
+    def K(self) -> np.ndarray:
+        """3x3 intrinsic matrix."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    def projection_matrix(self, camera_from_world: np.ndarray) -> np.ndarray:
+        """``P = K [R | t]`` (3x4) from the 4x4 ``camera_from_world`` transform."""
+        return self.K @ np.asarray(camera_from_world, dtype=float)[:3, :]
+
+    def project_points(self, camera_from_world: np.ndarray, points_world: np.ndarray) -> np.ndarray:
+        """Pixels (N, 2) of world points (N, 3); points must be in front of the camera."""
+        T = np.asarray(camera_from_world, dtype=float)
+        pc = np.asarray(points_world, dtype=float) @ T[:3, :3].T + T[:3, 3]
+        uv = pc @ self.K.T
+        return uv[:, :2] / uv[:, 2:3]
+
+
+# --------------------------------------------------------------------------- projection
+
+
+def ellipsoid_depth_margins(
+    camera_from_world: np.ndarray, centers: np.ndarray, shape_matrices: np.ndarray
+) -> np.ndarray:
+    """Smallest camera-frame depth (m) of each ellipsoid: ``z_c - sqrt(n^T M n)``, shape (N,).
+
+    The projection is an ellipse exactly when this is positive (the whole ellipsoid is in front
+    of the camera's principal plane, which also puts the camera outside it).
+    ``centers`` (N, 3) world metres; ``shape_matrices`` (N, 3, 3) = ``R diag(axes^2) R^T``.
+    """
+    T = np.asarray(camera_from_world, dtype=float)
+    r3 = T[2, :3]
+    zc = np.asarray(centers) @ r3 + T[2, 3]
+    extent = np.sqrt(np.maximum(np.einsum("i,nij,j->n", r3, shape_matrices, r3), 0.0))
+    return zc - extent
+
+
+def project_ellipsoids_dual(
+    camera: Camera, camera_from_world: np.ndarray, dual_quadrics: np.ndarray
+) -> np.ndarray:
+    """Projected dual conics ``C* = P Q* P^T`` (N, 3, 3), unnormalised, for (N, 4, 4) quadrics.
+
+    No validity check: use :func:`ellipsoid_depth_margins` (or :func:`project_ellipsoid`).
+    """
+    P = camera.projection_matrix(camera_from_world)
+    return np.einsum("ij,njk,lk->nil", P, np.asarray(dual_quadrics, dtype=float), P)
+
+
+def project_ellipsoid(
+    camera: Camera, camera_from_world: np.ndarray, ellipsoid: Ellipsoid,
+    min_depth: float = MIN_DEPTH,
+) -> Ellipse:
+    """The image ellipse of ``ellipsoid`` seen with the 4x4 ``camera_from_world`` pose.
+
+    Raises ``DegenerateProjectionError`` when the ellipsoid is not entirely at depth
+    ``> min_depth`` (metres): behind the camera, crossing its principal plane, or containing it.
+    """
+    T = np.asarray(camera_from_world, dtype=float)
+    margin = float(
+        ellipsoid_depth_margins(T, ellipsoid.center[None], ellipsoid.shape_matrix()[None])[0]
+    )
+    if not margin > min_depth:
+        cam_world = -T[:3, :3].T @ T[:3, 3]
+        d = ellipsoid.rotation.T @ (cam_world - ellipsoid.center) / ellipsoid.axes
+        zc = float(T[2, :3] @ ellipsoid.center + T[2, 3])
+        if float(d @ d) <= 1.0:
+            reason, what = "camera_inside", "the camera is inside the ellipsoid"
+        elif zc <= 0.0:
+            reason, what = "behind_camera", "the ellipsoid is behind the camera"
+        else:
+            reason = "crosses_image_plane"
+            what = "the ellipsoid crosses the camera's principal plane"
+        raise DegenerateProjectionError(
+            reason, f"projection is not an ellipse: {what} (smallest depth {margin:.3g} m)"
+        )
+    Cd = project_ellipsoids_dual(camera, T, ellipsoid.dual_quadric()[None])
+    return Ellipse(*params_from_dual_conics(Cd)[0])
