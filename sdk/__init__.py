@@ -1,0 +1,88 @@
+"""QuadLoc Python SDK: a typed client of the relocalization service for AR apps.
+
+Imports neither gtsam nor the server (``service``, ``factors``, ``maps``): it needs httpx,
+pydantic and numpy (OpenCV only for the contour helpers of :mod:`sdk.geometry`, imported lazily).
+See docs/sdk.md.
+"""
+
+from sdk.client import DEFAULT_BASE_URL, SDK_VERSION, AsyncQuadLocClient, QuadLocClient
+from sdk.errors import (
+    APIError,
+    ClientError,
+    Conflict,
+    FieldError,
+    Forbidden,
+    NotFound,
+    PayloadTooLarge,
+    PreconditionFailed,
+    PreconditionRequired,
+    QuadLocError,
+    RateLimited,
+    ServerError,
+    ServiceUnavailable,
+    TransportError,
+    Unauthorized,
+    ValidationError,
+)
+from sdk.models import (
+    METRICS,
+    ROBUST_KERNELS,
+    BatchLocalizeResponse,
+    Box,
+    Camera,
+    Covariance,
+    Detection,
+    Ellipse,
+    Inlier,
+    LocalizeOptions,
+    LocalizeRequest,
+    LocalizeResponse,
+    MapRecord,
+    MapSummary,
+    Pose,
+    PoseInput,
+    PosePrior,
+)
+from sdk.retry import RetryPolicy
+
+__version__ = SDK_VERSION
+
+__all__ = [
+    "DEFAULT_BASE_URL",
+    "METRICS",
+    "ROBUST_KERNELS",
+    "APIError",
+    "AsyncQuadLocClient",
+    "BatchLocalizeResponse",
+    "Box",
+    "Camera",
+    "ClientError",
+    "Conflict",
+    "Covariance",
+    "Detection",
+    "Ellipse",
+    "FieldError",
+    "Forbidden",
+    "Inlier",
+    "LocalizeOptions",
+    "LocalizeRequest",
+    "LocalizeResponse",
+    "MapRecord",
+    "MapSummary",
+    "NotFound",
+    "PayloadTooLarge",
+    "Pose",
+    "PoseInput",
+    "PosePrior",
+    "PreconditionFailed",
+    "PreconditionRequired",
+    "QuadLocClient",
+    "QuadLocError",
+    "RateLimited",
+    "RetryPolicy",
+    "ServerError",
+    "ServiceUnavailable",
+    "TransportError",
+    "Unauthorized",
+    "ValidationError",
+]

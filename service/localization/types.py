@@ -4,14 +4,69 @@ Frames: ``world_from_camera`` is the camera's pose in the map (4x4, camera axes 
 +X right, +Y down, +Z forward). Covariances are 6x6 in GTSAM's Pose3 tangent order
 ``[omega_x, omega_y, omega_z, v_x, v_y, v_z]`` (radians, metres), right perturbation, expressed
 in the camera (body) frame.
+
+Public names:
+
+* :class:`Detection` — one detected object (ellipse px, label, optional sigma / score).
+* :class:`LocalizationOptions` — every knob of :func:`service.localization.pipeline.localize`.
+* :class:`PosePrior` — an optional client pose prior (e.g. from the AR session's tracking).
+* :class:`InlierMatch` — one detection -> map object assignment of the returned pose.
+* :class:`LocalizationResult` — the answer; ``localized=False`` with a ``reason`` is a normal
+  answer, not an error. Bad input raises :class:`LocalizationInputError` (a ``ValueError``) or
+  :class:`factors.geometry.GeometryError` (also a ``ValueError``) naming the field.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any
 
-from factors.geometry import Ellipse, GeometryError
+import numpy as np
+
+from factors.geometry import ORTHONORMAL_TOLERANCE, Ellipse, GeometryError
+
+__all__ = [
+    "METRICS",
+    "NO_REFINEMENT",
+    "REASONS",
+    "ROBUST_KERNELS",
+    "UNKNOWN_LABEL_POLICIES",
+    "Detection",
+    "InlierMatch",
+    "LocalizationInputError",
+    "LocalizationOptions",
+    "LocalizationResult",
+    "PosePrior",
+]
+
+#: The nine refinement metrics (same names as ``factors.metrics.METRIC_NAMES``).
+METRICS: tuple[str, ...] = (
+    "iou", "giou", "bbox", "qbbox", "algebraic", "frobenius", "wasserstein", "bhattacharyya",
+    "level_set",
+)
+#: ``LocalizationOptions.metric`` value that skips refinement (the RANSAC/P3P/P2E pose is
+#: returned as is; useful for evaluation).
+NO_REFINEMENT = "none"
+#: Robust kernels accepted by ``LocalizationOptions.robust`` (``None`` = plain least squares).
+ROBUST_KERNELS: tuple[str, ...] = ("huber", "cauchy", "geman_mcclure")
+#: ``LocalizationOptions.unknown_label_policy`` values, see there.
+UNKNOWN_LABEL_POLICIES: tuple[str, ...] = ("ignore", "error")
+#: Every ``LocalizationResult.reason`` when ``localized`` is false.
+REASONS: tuple[str, ...] = (
+    "too_few_detections",
+    "no_label_match",
+    "no_hypothesis_above_inlier_threshold",
+    "refinement_diverged",
+    "time_budget_exceeded",
+)
+
+
+class LocalizationInputError(ValueError):
+    """Invalid input to :func:`localize`; the message starts with the offending field, e.g.
+    ``"detections[2].label: 'Sofa' is not a category of the map (policy 'error')"``."""
 
 
 @dataclass(frozen=True)
@@ -34,3 +89,234 @@ class Detection:
             raise GeometryError(f"Detection.sigma must be finite and > 0, got {self.sigma}")
         if self.score is not None and not (math.isfinite(self.score) and 0 <= self.score <= 1):
             raise GeometryError(f"Detection.score must be in [0, 1], got {self.score}")
+
+
+def _bad(field_name: str, problem: str) -> LocalizationInputError:
+    return LocalizationInputError(f"{field_name}: {problem}")
+
+
+def _is_int(value: object) -> bool:
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+
+
+@dataclass(frozen=True)
+class LocalizationOptions:
+    """Options of :func:`service.localization.pipeline.localize` (validated on construction).
+
+    Attributes:
+        metric: refinement metric, one of :data:`METRICS` (default ``"level_set"``, the paper's),
+            or ``"none"`` to return the best RANSAC hypothesis unrefined.
+        ransac_max_hypotheses: budget of minimal samples (label-compatible detection/object
+            triples for P3P, pairs for P2E). When the number of label-compatible samples is at
+            most this budget they are all tried (exhaustive); otherwise this many are drawn at
+            random (seeded) with early exit once a hypothesis explains every detection.
+        inlier_iou: a detection is an inlier of a pose when the IoU (intersection over union,
+            in [0, 1]) of its ellipse and its assigned projected ellipsoid is >= this.
+        min_inliers: minimum number of inlier detections (>= 2) for a pose to be accepted.
+        use_sigma: weight each detection's cost by ``sigma^-1`` (paper eq. 8) when it has one.
+        robust: robust kernel of the refinement, ``None`` or one of :data:`ROBUST_KERNELS`.
+        robust_scale: kernel scale (in units of the metric's residual); ``None`` = the
+            refinement module's documented default. Only allowed with ``robust``.
+        unknown_label_policy: what to do with a detection whose label is not a category of
+            the map: ``"ignore"`` (default) drops it from matching (it is never an inlier, and
+            does not count towards ``too_few_detections``); ``"error"`` raises
+            :class:`LocalizationInputError` naming ``detections[i].label``.
+        seed: seed of the hypothesis sampler (``None`` = nondeterministic). Exhaustive runs do
+            not depend on it.
+        time_budget_ms: wall-clock budget (ms) of the hypothesis search; when it runs out the
+            best hypothesis so far is used (or ``reason="time_budget_exceeded"`` if none
+            qualifies). ``None`` = unbounded.
+        max_iterations: Levenberg-Marquardt iteration cap of the refinement.
+        metric_options: extra keyword options of the metric (e.g. level-set sampling).
+    """
+
+    metric: str = "level_set"
+    ransac_max_hypotheses: int = 300
+    inlier_iou: float = 0.2
+    min_inliers: int = 2
+    use_sigma: bool = True
+    robust: str | None = None
+    robust_scale: float | None = None
+    unknown_label_policy: str = "ignore"
+    seed: int | None = 0
+    time_budget_ms: float | None = 1000.0
+    max_iterations: int = 50
+    metric_options: Mapping[str, Any] | None = None
+
+    def __post_init__(self) -> None:
+        if self.metric not in METRICS and self.metric != NO_REFINEMENT:
+            raise _bad("options.metric",
+                       f"unknown metric {self.metric!r}; valid: {', '.join(METRICS)} "
+                       f"or {NO_REFINEMENT!r}")
+        if not _is_int(self.ransac_max_hypotheses) or self.ransac_max_hypotheses < 1:
+            raise _bad("options.ransac_max_hypotheses",
+                       f"must be an integer >= 1, got {self.ransac_max_hypotheses!r}")
+        if (isinstance(self.inlier_iou, bool) or not isinstance(self.inlier_iou, (int, float))
+                or not (0.0 < float(self.inlier_iou) <= 1.0)):
+            raise _bad("options.inlier_iou", f"must be in (0, 1], got {self.inlier_iou!r}")
+        if not _is_int(self.min_inliers) or self.min_inliers < 2:
+            raise _bad("options.min_inliers", f"must be an integer >= 2, got {self.min_inliers!r}")
+        if not isinstance(self.use_sigma, bool):
+            raise _bad("options.use_sigma", f"must be a bool, got {self.use_sigma!r}")
+        if self.robust is not None and self.robust not in ROBUST_KERNELS:
+            raise _bad("options.robust", f"unknown kernel {self.robust!r}; valid: None, "
+                       f"{', '.join(ROBUST_KERNELS)}")
+        if self.robust_scale is not None:
+            if self.robust is None:
+                raise _bad("options.robust_scale", "given without options.robust")
+            if (isinstance(self.robust_scale, bool)
+                    or not isinstance(self.robust_scale, (int, float))
+                    or not (math.isfinite(self.robust_scale) and self.robust_scale > 0)):
+                raise _bad("options.robust_scale",
+                           f"must be finite and > 0, got {self.robust_scale!r}")
+        if self.unknown_label_policy not in UNKNOWN_LABEL_POLICIES:
+            raise _bad("options.unknown_label_policy",
+                       f"must be one of {UNKNOWN_LABEL_POLICIES}, "
+                       f"got {self.unknown_label_policy!r}")
+        if self.seed is not None and not _is_int(self.seed):
+            raise _bad("options.seed", f"must be an integer or None, got {self.seed!r}")
+        if self.time_budget_ms is not None and (
+                isinstance(self.time_budget_ms, bool)
+                or not isinstance(self.time_budget_ms, (int, float))
+                or not (self.time_budget_ms > 0) or math.isnan(self.time_budget_ms)):
+            raise _bad("options.time_budget_ms",
+                       f"must be > 0 or None, got {self.time_budget_ms!r}")
+        if not _is_int(self.max_iterations) or self.max_iterations < 1:
+            raise _bad("options.max_iterations",
+                       f"must be an integer >= 1, got {self.max_iterations!r}")
+        if self.metric_options is not None:
+            if not isinstance(self.metric_options, Mapping):
+                raise _bad("options.metric_options",
+                           f"must be a mapping, got {type(self.metric_options).__name__}")
+            for key in self.metric_options:
+                if not isinstance(key, str):
+                    raise _bad("options.metric_options", f"keys must be strings, got {key!r}")
+            object.__setattr__(self, "metric_options", MappingProxyType(dict(self.metric_options)))
+
+
+def _check_pose(field_name: str, value: object) -> np.ndarray:
+    try:
+        T = np.array(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise _bad(field_name, "must be a numeric 4x4 matrix") from exc
+    if T.shape != (4, 4):
+        raise _bad(field_name, f"must have shape (4, 4), got {T.shape}")
+    if not np.all(np.isfinite(T)):
+        raise _bad(field_name, "must be finite")
+    if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
+        raise _bad(field_name, f"last row must be [0, 0, 0, 1], got {T[3].tolist()}")
+    R = T[:3, :3]
+    err = float(np.max(np.abs(R @ R.T - np.eye(3))))
+    if err > ORTHONORMAL_TOLERANCE or abs(float(np.linalg.det(R)) - 1.0) > ORTHONORMAL_TOLERANCE:
+        raise _bad(field_name, f"rotation block is not a proper rotation (max|R R^T - I| = "
+                   f"{err:.3g}, det = {float(np.linalg.det(R)):.6g})")
+    T.setflags(write=False)
+    return T
+
+
+def _check_covariance(field_name: str, value: object) -> np.ndarray:
+    try:
+        S = np.array(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise _bad(field_name, "must be a numeric 6x6 matrix") from exc
+    if S.shape != (6, 6):
+        raise _bad(field_name, f"must have shape (6, 6), got {S.shape}")
+    if not np.all(np.isfinite(S)):
+        raise _bad(field_name, "must be finite")
+    if not np.allclose(S, S.T, rtol=1e-9, atol=1e-12 * max(1.0, float(np.abs(S).max()))):
+        raise _bad(field_name, "must be symmetric")
+    if float(np.linalg.eigvalsh(0.5 * (S + S.T)).min()) <= 0.0:
+        raise _bad(field_name, "must be positive definite")
+    S.setflags(write=False)
+    return S
+
+
+@dataclass(frozen=True, eq=False)
+class PosePrior:
+    """A client's pose prior.
+
+    Attributes:
+        world_from_camera: 4x4 camera pose in the map frame (OpenCV camera axes).
+        covariance: optional 6x6 covariance in Pose3 tangent order ``[omega, v]`` (rad, m),
+            body (camera) frame, right perturbation. With a covariance the prior is also a soft
+            factor in the refinement; without, it is only the starting point.
+    """
+
+    world_from_camera: np.ndarray
+    covariance: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "world_from_camera",
+                           _check_pose("prior.world_from_camera", self.world_from_camera))
+        if self.covariance is not None:
+            object.__setattr__(self, "covariance",
+                               _check_covariance("prior.covariance", self.covariance))
+
+
+@dataclass(frozen=True)
+class InlierMatch:
+    """One inlier of the returned pose.
+
+    Attributes:
+        detection_index: index into the ``detections`` passed to ``localize``.
+        object_id: the matched map object's id.
+        iou: intersection over union (in [0, 1]) of the detection and the object's projection
+            at the returned pose.
+        cost: the refinement metric's (unweighted) cost for this pair at the returned pose; with
+            ``metric="none"`` it is the Jaccard distance ``1 - iou``.
+    """
+
+    detection_index: int
+    object_id: str
+    iou: float
+    cost: float
+
+
+@dataclass(frozen=True, eq=False)
+class LocalizationResult:
+    """The answer of ``localize``.
+
+    Attributes:
+        localized: whether a pose is returned.
+        reason: ``None`` when localized, else one of :data:`REASONS`:
+            ``too_few_detections`` (fewer than 2 usable detections), ``no_label_match`` (fewer
+            than 2 detections whose label exists in the map, or no label-compatible sample),
+            ``no_hypothesis_above_inlier_threshold`` (no pose with ``min_inliers`` detections at
+            IoU >= ``inlier_iou``), ``refinement_diverged`` (the refined pose lost its inliers
+            or the solver failed), ``time_budget_exceeded`` (the budget ran out before any
+            hypothesis qualified).
+        world_from_camera: 4x4 camera pose in the map frame, or ``None``.
+        covariance: 6x6 pose covariance, order ``[omega, v]``, body frame, or ``None`` (not
+            localized, ``metric="none"``, or a singular information matrix).
+        confidence: in [0, 1]; 0 when not localized. Defined as
+            ``(n_inliers / n_usable) * mean_inlier_iou * (1 - 0.5 ** (n_inliers - 1))``:
+            the fraction of usable detections explained, how well they overlap, and a factor
+            that grows with the number of inliers (2 -> 0.5, 3 -> 0.75, 4 -> 0.875, ...)
+            because few objects constrain a pose weakly.
+        inliers: the inlier matches (sorted by detection index).
+        metric: the refinement metric used (``"none"`` when unrefined).
+        hypotheses_evaluated: number of candidate poses scored (P3P/P2E solutions + prior).
+        used_prior: whether the returned pose comes from refining the client's prior.
+        timings_ms: wall time per stage in ms (``validate``, ``prior``, ``hypotheses``,
+            ``refine``, ``total``; stages not run are absent).
+    """
+
+    localized: bool
+    reason: str | None
+    world_from_camera: np.ndarray | None
+    covariance: np.ndarray | None
+    confidence: float
+    inliers: tuple[InlierMatch, ...]
+    metric: str
+    hypotheses_evaluated: int
+    used_prior: bool
+    timings_ms: dict[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.localized:
+            if self.reason is not None or self.world_from_camera is None:
+                raise ValueError("a localized result has a pose and no reason")
+        elif self.reason not in REASONS:
+            raise ValueError(f"reason must be one of {REASONS}, got {self.reason!r}")
+        if not (0.0 <= self.confidence <= 1.0):
+            raise ValueError(f"confidence must be in [0, 1], got {self.confidence}")

@@ -1,0 +1,255 @@
+"""Benchmark: reconstruct the Chess map's ellipsoids from synthetic views at real poses.
+
+Views: the 108 real ground-truth poses of ``chess_test_poses.json`` (R, t camera_from_world,
+snapped to rotations). An object is "visible" in a frame when the ellipsoid is entirely in front
+of the camera and its image centre is inside the 640x480 image; ``--views`` of those frames,
+evenly spaced in sequence order, are used. Observations are the exact projections, then noisy
+versions; each object is reconstructed with ``maps.reconstruct.reconstruct_ellipsoid`` (linear
+Rubino estimate + GTSAM LM refinement) and compared with the map's ellipsoid
+(``ellipsoid_errors``: matched over the 24 axis symmetries).
+
+Usage: ``.venv/bin/python -m bench.reconstruction [--trials 10] [--views 10] [--no-write]``;
+writes the "reconstruction" section of docs/results.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from factors.geometry import (
+    Camera,
+    Ellipse,
+    Ellipsoid,
+    ellipsoid_depth_margins,
+    invert_pose,
+    pose_matrix,
+    project_ellipsoid,
+    snap_to_rotation,
+)
+from maps.demo import load_demo_map
+from maps.reconstruct import ReconstructionError, ellipsoid_errors, reconstruct_ellipsoid
+
+POSES = Path(__file__).resolve().parents[2] / "shared" / "data" / "chess_test_poses.json"
+if not POSES.exists():  # the checkout is /work/main; the data lives in /work/shared
+    POSES = Path("/work/shared/data/chess_test_poses.json")
+
+
+def load_views() -> tuple[Camera, list[np.ndarray]]:
+    d = json.loads(POSES.read_text())
+    cam = Camera.from_matrix(np.array(d["K"]), d["width"], d["height"])
+    return cam, [pose_matrix(snap_to_rotation(np.array(f["R"])), f["t"]) for f in d["frames"]]
+
+
+def visible_frames(cam: Camera, cfw: list[np.ndarray], ellipsoid: Ellipsoid) -> list[int]:
+    """Frames where ``ellipsoid`` is entirely in front and its image centre is in the image."""
+    out = []
+    for i, T in enumerate(cfw):
+        margin = ellipsoid_depth_margins(T, ellipsoid.center[None],
+                                         ellipsoid.shape_matrix()[None])[0]
+        if margin <= 0:
+            continue
+        e = project_ellipsoid(cam, T, ellipsoid)
+        if 0 <= e.cx < cam.width and 0 <= e.cy < cam.height:
+            out.append(i)
+    return out
+
+
+def ellipse_noise(sigma_px: float, sigma_rel: float, sigma_deg: float) -> Callable:
+    def corrupt(e: Ellipse, rng: np.random.Generator) -> Ellipse:
+        return Ellipse(e.cx + rng.normal(0, sigma_px), e.cy + rng.normal(0, sigma_px),
+                       e.a * (1 + rng.normal(0, sigma_rel)), e.b * (1 + rng.normal(0, sigma_rel)),
+                       e.angle + np.radians(rng.normal(0, sigma_deg)))
+    return corrupt
+
+
+def box_noise(sigma_px: float) -> Callable:
+    def corrupt(e: Ellipse, rng: np.random.Generator) -> np.ndarray:
+        box = e.bbox() + rng.normal(0, sigma_px, size=4)
+        return box
+    return corrupt
+
+
+_HEADER = ("| setting | view set | solved | centre err cm (median / p90) "
+           "| semi-axes err cm (median / p90) | orientation err deg (median / p90) "
+           "| shape rel. err (median) | time ms (median) |\n|---|---|---|---|---|---|---|---|")
+
+
+def run(trials: int, n_views: int, seed: int) -> tuple[str, dict]:
+    cam, cfw = load_views()
+    scene = load_demo_map()
+    rng = np.random.default_rng(seed)
+    settings: list[tuple[str, Callable | None, dict]] = [
+        ("exact ellipses", None, {}),
+        ("ellipses, noise 2 px / 3 % / 2 deg", ellipse_noise(2.0, 0.03, 2.0), {}),
+        ("ellipses, noise 2 px / 3 % / 2 deg, linear only", ellipse_noise(2.0, 0.03, 2.0),
+         {"refine": False}),
+        ("boxes (inscribed ellipses), corner noise 2 px", box_noise(2.0), {}),
+        ("ellipses, noise 2 px / 3 % / 2 deg, log-axes prior 0.5", ellipse_noise(2.0, 0.03, 2.0),
+         {"log_axes_prior_sigma": 0.5}),
+    ]
+    per_object = []
+    for obj in scene.objects:
+        idx = visible_frames(cam, cfw, obj.ellipsoid)
+        sel = idx[:: max(1, len(idx) // n_views)][:n_views]
+        per_object.append((obj, idx, sel))
+    raw: dict = {"trials": trials, "views": n_views, "seed": seed, "settings": {}}
+    rows = []
+    for label, corrupt, options in settings:
+        stats: dict[str, list] = {"spread": [], "wide": [], "narrow": []}
+        failures: dict[str, int] = {}
+        times = []
+        for obj, _idx, sel in per_object:
+            E = obj.ellipsoid
+            exact = [project_ellipsoid(cam, cfw[i], E) for i in sel]
+            wfc = [invert_pose(cfw[i]) for i in sel]
+            for _ in range(1 if corrupt is None else trials):
+                obs = exact if corrupt is None else [corrupt(e, rng) for e in exact]
+                t0 = time.perf_counter()
+                try:
+                    res = reconstruct_ellipsoid(obs, wfc, cam, **options)
+                except ReconstructionError as exc:
+                    failures[exc.reason] = failures.get(exc.reason, 0) + 1
+                    key = "narrow" if obj.category == "TV" else "wide"
+                    stats[key].append(None)
+                    continue
+                times.append(time.perf_counter() - t0)
+                err = ellipsoid_errors(res.ellipsoid, E)
+                key = "narrow" if res.max_ray_angle_deg < 15 else "wide"
+                stats[key].append(err)
+        raw["settings"][label] = {k: v for k, v in stats.items() if k != "spread"}
+        for group in ("wide", "narrow"):
+            errs = [e for e in stats[group] if e is not None]
+            n_all = len(stats[group])
+            if n_all == 0:
+                continue
+            if not errs:
+                rows.append(f"| {label} | {group} | 0/{n_all} | - | - | - | - | - |")
+                continue
+
+            def med(key: str, errs: list = errs) -> float:
+                return float(np.median([e[key] for e in errs]))
+
+            def p90(key: str, errs: list = errs) -> float:
+                return float(np.percentile([e[key] for e in errs], 90))
+
+            rows.append(
+                f"| {label} | {group} | {len(errs)}/{n_all} | "
+                f"{med('center_m') * 100:.3g} / {p90('center_m') * 100:.3g} | "
+                f"{med('axes_m') * 100:.3g} / {p90('axes_m') * 100:.3g} | "
+                f"{med('orientation_deg'):.3g} / {p90('orientation_deg'):.3g} | "
+                f"{med('shape_rel'):.3g} | "
+                f"{np.median(times) * 1000:.1f} |"
+            )
+        if failures:
+            rows.append(f"| ↳ failures | | {', '.join(f'{k}: {v}' for k, v in failures.items())}"
+                        f" | | | | | |")
+    views_table = "\n".join(
+        f"| {o.object_id} | {o.category} | {len(idx)} | {len(sel)} | "
+        f"{_spread_deg(cam, cfw, sel, o.ellipsoid):.1f} |" for o, idx, sel in per_object)
+    md = f"""## Reconstruction of the Chess ellipsoids (`bench/reconstruction.py`)
+
+Each of the 11 ellipsoids of the Chess map is reconstructed from {n_views} views at real
+ground-truth poses (`chess_test_poses.json`, frames where the ellipsoid is entirely in front of
+the camera and its image centre inside the image, evenly spaced), by
+`maps.reconstruct.reconstruct_ellipsoid`: Rubino et al.'s linear dual-quadric estimate
+(normalised image and world coordinates), then GTSAM Levenberg-Marquardt on a Pose3 + log-axes
+with the level-set residual (16 contour samples per view; the refinement also starts from a
+sphere at the triangulated centre and keeps the better result). Errors against the map's
+ellipsoid, matched over the 24 axis symmetries: centre (Euclidean), semi-axes (largest absolute
+error), orientation (rotation angle), shape (relative Frobenius error of `R diag(axes^2) R^T`).
+Noise: centre `N(0, sigma_px)` per coordinate, semi-axes `x (1 + N(0, rel))`, angle
+`N(0, deg)`; boxes: the projected ellipse's bounding box, corners `+ N(0, 2 px)`, replaced by
+the inscribed axis-aligned ellipse (the paper built its map from such boxes).
+{trials} noise draws per object and setting, seed {seed}. "wide": view sets whose viewing rays
+span >= 15 deg (objects 2-10, 44-101 deg); "narrow": the two TVs, seen only within a 7-10 deg
+cone in these poses (all their failures counted there).
+
+| object | category | frames visible | views used | ray spread (deg) |
+|---|---|---|---|---|
+{views_table}
+
+{_HEADER}
+{chr(10).join(rows)}
+
+{_findings(raw)}
+"""
+    return md, raw
+
+
+def _median(raw: dict, setting: str, group: str, key: str) -> float:
+    errs = [e[key] for e in raw["settings"][setting][group] if e is not None]
+    return float(np.median(errs)) if errs else float("nan")
+
+
+def _solved(raw: dict, setting: str, group: str) -> str:
+    errs = raw["settings"][setting][group]
+    return f"{sum(e is not None for e in errs)}/{len(errs)}"
+
+
+def _findings(raw: dict) -> str:
+    """The summary sentences, computed from this run's numbers."""
+    exact, noisy = "exact ellipses", "ellipses, noise 2 px / 3 % / 2 deg"
+    linear, boxes = f"{noisy}, linear only", "boxes (inscribed ellipses), corner noise 2 px"
+    prior = f"{noisy}, log-axes prior 0.5"
+    worst_exact = max(e["center_m"] for g in ("wide", "narrow")
+                      for e in raw["settings"][exact][g] if e is not None)
+    c_ref, c_lin = _median(raw, noisy, "wide", "center_m"), _median(raw, linear, "wide", "center_m")
+    s_ref, s_lin = (_median(raw, noisy, "wide", "shape_rel"),
+                    _median(raw, linear, "wide", "shape_rel"))
+    return (
+        f"Findings (computed from this run): exact views recover every ellipsoid (largest centre "
+        f"error {worst_exact:.1e} m, all {_solved(raw, exact, 'wide')} + "
+        f"{_solved(raw, exact, 'narrow')} solved). Wide view sets with noisy ellipses: median "
+        f"centre error {c_ref * 100:.2f} cm after the LM refinement vs {c_lin * 100:.2f} cm for "
+        f"the linear estimate alone (shape error {s_ref:.3f} vs {s_lin:.3f}). Boxes: median centre "
+        f"error {_median(raw, boxes, 'wide', 'center_m') * 100:.2f} cm, shape error "
+        f"{_median(raw, boxes, 'wide', 'shape_rel'):.3f} (a box has no image orientation). The "
+        f"narrow TV view sets are ill-posed under noise (depth along the rays and thickness "
+        f"unobservable): solved {_solved(raw, noisy, 'narrow')}, median centre error "
+        f"{_median(raw, noisy, 'narrow', 'center_m') * 100:.1f} cm; the linear estimate is never "
+        f"an ellipsoid there ({_solved(raw, linear, 'narrow')}); the opt-in log-axes prior "
+        f"(biased towards a sphere of the apparent size) solves {_solved(raw, prior, 'narrow')} "
+        f"with a median centre error of {_median(raw, prior, 'narrow', 'center_m') * 100:.1f} cm. "
+        f"Orientation errors are large for near-spherical objects whose axes are ill-defined; the "
+        f"shape error is the frame-free measure."
+    )
+
+
+def _spread_deg(cam: Camera, cfw: list[np.ndarray], sel: list[int],
+                E: object) -> float:
+    d = []
+    for i in sel:
+        e = project_ellipsoid(cam, cfw[i], E)
+        ray = np.array([(e.cx - cam.cx) / cam.fx, (e.cy - cam.cy) / cam.fy, 1.0])
+        ray = cfw[i][:3, :3].T @ ray
+        d.append(ray / np.linalg.norm(ray))
+    d = np.array(d)
+    return float(np.degrees(np.arccos(np.clip(d @ d.T, -1, 1).min())))
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--trials", type=int, default=10)
+    parser.add_argument("--views", type=int, default=10)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--no-write", action="store_true", help="print only")
+    parser.add_argument("--json", type=Path, help="also write the raw errors here")
+    args = parser.parse_args(argv)
+    md, raw = run(args.trials, args.views, args.seed)
+    print(md)
+    if args.json:
+        args.json.write_text(json.dumps(raw, indent=1, default=float))
+    if not args.no_write:
+        from bench.results_doc import update_results_section
+
+        update_results_section("reconstruction", md)
+
+
+if __name__ == "__main__":
+    main()

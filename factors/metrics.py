@@ -1,0 +1,531 @@
+"""The nine ellipse-ellipse metrics of the paper, as costs and least-squares residuals.
+
+Public entry points
+-------------------
+* ``cost(name, detection, projection, **options) -> float``
+* ``residual(name, detection, projection, **options) -> np.ndarray`` (1-D, fixed length per
+  metric and options) with ``cost == ||residual||^2`` (to rounding, ~1e-12 relative).
+* ``residual_size(name, **options) -> int``.
+* ``level_set_sample_points(...)`` / ``level_set_sampling_scale(...)``: the level-set sampling
+  layout, shared with the GTSAM factors.
+
+Argument order: the **detection** (fixed, measured) comes first, the **projection** (the
+moving, predicted ellipse) second. Every residual is "detection minus projection". All lengths
+are pixels, angles radians (see :mod:`factors.geometry` for the ellipse conventions).
+
+Metrics, costs and residuals (``r``, length in brackets)
+--------------------------------------------------------
+``iou`` [1]
+    Jaccard distance ``1 - |D ∩ P| / |D ∪ P|`` in ``[0, 1]``; ``r = [sqrt(cost)]``. Areas are
+    exact (closed-form arc integrals, :mod:`factors.overlap`). Flat (== 1) for disjoint
+    ellipses. Near the optimum ``cost ~ k |delta|`` (symmetric-difference area grows linearly
+    with a displacement ``delta``), so ``r ~ sqrt(|delta|)`` has an unbounded derivative at 0:
+    Gauss-Newton steps overshoot by a factor ~2 and LM's damping is what makes it converge,
+    linearly. Use it for scoring more than for refinement.
+``giou`` [1]
+    ``1 - GIoU``, ``GIoU = IoU - |C \\ (D ∪ P)| / |C|`` (Rezatofighi et al.), ``C`` the convex
+    hull of the two ellipses; cost in ``[0, 2]``, ``r = [sqrt(cost)]`` (same remark as iou).
+    Exactly flat when one ellipse contains the other (``C`` is then the larger one). The hull
+    area is exact (arcs + common tangents, :mod:`factors.overlap`); option ``hull_directions``
+    (default 128) is the number of normal directions used to bracket the common tangents.
+``bbox`` [4]
+    ``r = B_D - B_P`` with ``B = [xmin, ymin, xmax, ymax]`` the axis-aligned boxes; cost is the
+    squared norm. Not rotation invariant (boxes follow the image axes).
+``qbbox`` [4]
+    QuadricSLAM's truncated box: ``r = B_D^trunc - B_P^trunc`` where ``B^trunc`` is the exact
+    box of the part of an ellipse inside the image ``[0, W] x [0, H]`` (:func:`clipped_bbox`;
+    the detection's box is clipped the same way, so identical ellipses give 0). Requires
+    ``image_size=(W, H)`` (pixels). If an ellipse does not meet the image at all, its full box
+    clamped to the image is used (a degenerate box on the border, so the residual stays finite
+    and points back inside). Equal to ``bbox`` when both ellipses are inside the image.
+``algebraic`` [5]
+    ``r = vec(Cn_D) - vec(Cn_P)``, ``vec`` = the 5 upper elements ``[C00, C01, C02, C11, C12]``
+    of the normalised dual conics (``C*[2,2] = -1``); units px^2 (C00, C01, C11) and px.
+``frobenius`` [5]
+    The paper's ``Delta_fro = ||Cn_D - Cn_P||_F`` is a norm. A least-squares solver needs a
+    smooth residual, so here **cost = Delta_fro^2** (squared Frobenius norm, same minimiser for
+    one pair) and ``r = [d00, sqrt2 d01, sqrt2 d02, d11, sqrt2 d12]`` with ``d = Cn_D - Cn_P``
+    (``d22 = 0``). ``Delta_fro = sqrt(cost)``. It differs from ``algebraic`` only by the
+    sqrt(2) weight of the off-diagonal elements.
+``wasserstein`` [5]
+    Squared 2-Wasserstein distance of the Gaussians ``N(c, Sigma = R diag(a^2, b^2) R^T)``:
+    ``|mu_D - mu_P|^2 + tr(S_D + S_P - 2 (S_D^1/2 S_P S_D^1/2)^1/2)``. For 2x2 covariances with
+    semi-axes ``a_i >= b_i`` and major axes at an angle ``delta``, the trace term is exactly
+    ``(a_D - a_P)^2 + (b_D - b_P)^2 + 2 P sin^2(delta) / (Q + sqrt(Q^2 - P sin^2(delta)))``
+    with ``P = (a_D^2 - b_D^2)(a_P^2 - b_P^2)``, ``Q = a_D a_P + b_D b_P`` (expand
+    ``tr(S_D S_P) + 2 sqrt(det S_D S_P) = Q^2 - P sin^2(delta)``). Residual
+    ``r = [mu_D - mu_P, a_D - a_P, b_D - b_P, k sin(delta)]``, ``k`` the square root of the
+    fraction: smooth at the optimum, and its Gauss-Newton Hessian in the angle equals the true
+    curvature ``2 P / Q`` (``delta`` reduced to ``[-pi/2, pi/2)``; ``r[4]`` flips sign only at
+    perpendicular axes, where the cost is continuous). An earlier polar-factor form
+    ``vec(S_D^1/2 - S_P^1/2 U)`` had half the true curvature, so LM oscillated.
+``bhattacharyya`` [5]
+    ``1/8 dmu^T S^-1 dmu + 1/2 ln(det S / sqrt(det S_D det S_P))``, ``S = (S_D + S_P) / 2``.
+    ``r = [L^-1 dmu / sqrt(8), G00, G11, sqrt2 G01]`` with ``S = L L^T`` (Cholesky) and
+    ``G = h(log N)`` the spectral function ``h(u) = sign(u) sqrt(ln cosh(u / 2) / 2)`` of
+    ``N = S_D^-1/2 S_P S_D^-1/2``: the shape term equals ``sum_i ln cosh(ln(lambda_i) / 2) / 2``
+    over N's eigenvalues, and ``h`` is odd and analytic, so ``r`` is smooth at the optimum.
+``level_set`` [n_azimuths * n_levels]
+    ``r_i = Phi_D(x_i) - Phi_P(x_i)`` at the sample points of :func:`level_set_sample_points`
+    (on the level curves of the DETECTION); cost ``sum r_i^2`` (the paper's Delta_lvs).
+    Options ``n_azimuths`` (6), ``n_levels`` (4), ``scale`` (2.0), ``adaptive`` (True).
+
+Invariances: iou, giou, wasserstein, bhattacharyya and level_set are invariant to a common
+rigid motion of both ellipses (level_set needs an even ``n_azimuths``, see the sampling);
+bbox/qbbox change with rotations; algebraic/frobenius change with rotations and translations.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from factors.geometry import Ellipse
+from factors.overlap import HULL_DIRECTIONS, hull_area, intersection_area
+
+__all__ = [
+    "DEFAULT_LEVEL_SET_SCALE",
+    "LEVEL_SET_ADAPTIVE_GAIN",
+    "METRIC_NAMES",
+    "clipped_bbox",
+    "convex_hull_area",
+    "cost",
+    "ellipse_intersection_area",
+    "level_set_sample_points",
+    "level_set_sampling_scale",
+    "residual",
+    "residual_size",
+]
+
+METRIC_NAMES: tuple[str, ...] = (
+    "iou", "giou", "bbox", "qbbox", "algebraic", "frobenius", "wasserstein", "bhattacharyya",
+    "level_set",
+)
+
+#: Default outermost sampled level "radius" ``s_max`` (the curve ``Phi_D = s_max^2``).
+DEFAULT_LEVEL_SET_SCALE = 2.0
+#: Adaptive sampling: ``s_max = max(scale, LEVEL_SET_ADAPTIVE_GAIN * d)`` (see sampling doc).
+LEVEL_SET_ADAPTIVE_GAIN = 1.0
+
+_SQRT2 = math.sqrt(2.0)
+_INV_SQRT8 = 1.0 / math.sqrt(8.0)
+
+_OPTIONS: dict[str, tuple[str, ...]] = {
+    "iou": (),
+    "giou": ("hull_directions",),
+    "bbox": (),
+    "qbbox": ("image_size",),
+    "algebraic": (),
+    "frobenius": (),
+    "wasserstein": (),
+    "bhattacharyya": (),
+    "level_set": ("n_azimuths", "n_levels", "scale", "adaptive"),
+}
+
+
+# --------------------------------------------------------------------------- validation
+
+
+def _check_name(name: str) -> None:
+    if name not in _OPTIONS:
+        raise ValueError(f"unknown metric {name!r}; valid names: {', '.join(METRIC_NAMES)}")
+
+
+def _check_options(name: str, options: dict) -> None:
+    allowed = _OPTIONS[name]
+    for key in options:
+        if key not in allowed:
+            valid = ", ".join(allowed) if allowed else "none"
+            raise TypeError(f"metric {name!r} got an unknown option {key!r} (valid: {valid})")
+
+
+def _check_ellipse(arg: str, value: object) -> Ellipse:
+    if not isinstance(value, Ellipse):
+        raise TypeError(f"{arg} must be a factors.geometry.Ellipse, got {type(value).__name__}")
+    return value
+
+
+def _positive_int(name: str, value: object) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ValueError(f"option {name} must be a positive integer, got {value!r}")
+    return int(value)
+
+
+def _positive_float(name: str, value: object) -> float:
+    try:
+        f = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"option {name} must be a number, got {value!r}") from exc
+    if not (math.isfinite(f) and f > 0.0):
+        raise ValueError(f"option {name} must be finite and > 0, got {value!r}")
+    return f
+
+
+def _image_size(value: object) -> tuple[float, float]:
+    if value is None:
+        raise ValueError("metric 'qbbox' needs the option image_size=(width, height) in pixels")
+    try:
+        w, h = value  # type: ignore[misc]
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"option image_size must be (width, height), got {value!r}") from exc
+    return _positive_float("image_size[0] (width)", w), _positive_float("image_size[1] (height)", h)
+
+
+# --------------------------------------------------------------------------- small closed forms
+
+
+def _sigma(e: Ellipse) -> tuple[float, float, float]:
+    """``Sigma = R diag(a^2, b^2) R^T`` as ``(s00, s01, s11)``."""
+    c, s = math.cos(e.angle), math.sin(e.angle)
+    a2, b2 = e.a * e.a, e.b * e.b
+    return a2 * c * c + b2 * s * s, (a2 - b2) * c * s, a2 * s * s + b2 * c * c
+
+
+def _dual_vec(e: Ellipse) -> tuple[float, float, float, float, float]:
+    """Upper elements ``[C00, C01, C02, C11, C12]`` of the normalised dual conic."""
+    s00, s01, s11 = _sigma(e)
+    cx, cy = e.cx, e.cy
+    return s00 - cx * cx, s01 - cx * cy, -cx, s11 - cy * cy, -cy
+
+
+def _log_cosh(x: np.ndarray) -> np.ndarray:
+    """``ln cosh(x)``, accurate for small ``|x|`` (series) and large ``|x|`` (no overflow)."""
+    ax = np.abs(x)
+    small = ax < 1e-2
+    x2 = ax * ax
+    series = x2 * (0.5 + x2 * (-1.0 / 12.0 + x2 * (1.0 / 45.0)))
+    big = ax + np.log1p(np.exp(-2.0 * ax)) - math.log(2.0)
+    return np.where(small, series, big)
+
+
+# --------------------------------------------------------------------------- boxes
+
+
+def clipped_bbox(ellipse: Ellipse, image_size: Sequence[float]) -> np.ndarray | None:
+    """Exact box ``[xmin, ymin, xmax, ymax]`` of ``ellipse ∩ [0, W] x [0, H]`` (pixels).
+
+    The extremes of the (convex) intersection are attained among: the ellipse's own axis
+    extreme points that lie in the image, the intersections of the contour with the four image
+    border lines that lie on the border segments, and the image corners inside the ellipse.
+    Returns ``None`` when the ellipse does not meet the image.
+    """
+    W, H = _image_size(image_size)
+    s00, s01, s11 = _sigma(ellipse)
+    cx, cy = ellipse.cx, ellipse.cy
+    # Inverse shape matrix A = Sigma^-1.
+    det = s00 * s11 - s01 * s01
+    a00, a01, a11 = s11 / det, -s01 / det, s00 / det
+    xs: list[float] = []
+    ys: list[float] = []
+    eps = 1e-9 * max(W, H)
+
+    def keep(x: float, y: float) -> None:
+        if -eps <= x <= W + eps and -eps <= y <= H + eps:
+            xs.append(min(max(x, 0.0), W))
+            ys.append(min(max(y, 0.0), H))
+
+    # Axis extreme points: c ± Sigma e_x / sqrt(s00), c ± Sigma e_y / sqrt(s11).
+    rx, ry = math.sqrt(s00), math.sqrt(s11)
+    for sg in (-1.0, 1.0):
+        keep(cx + sg * rx, cy + sg * s01 / rx)
+        keep(cx + sg * s01 / ry, cy + sg * ry)
+    # Contour ∩ vertical borders x = x0: a00 dx^2 + 2 a01 dx dy + a11 dy^2 = 1.
+    for x0 in (0.0, W):
+        dx = x0 - cx
+        disc = (a01 * dx) ** 2 - a11 * (a00 * dx * dx - 1.0)
+        if disc >= 0.0:
+            r = math.sqrt(disc)
+            for dy in ((-a01 * dx - r) / a11, (-a01 * dx + r) / a11):
+                keep(x0, cy + dy)
+    for y0 in (0.0, H):
+        dy = y0 - cy
+        disc = (a01 * dy) ** 2 - a00 * (a11 * dy * dy - 1.0)
+        if disc >= 0.0:
+            r = math.sqrt(disc)
+            for dx in ((-a01 * dy - r) / a00, (-a01 * dy + r) / a00):
+                keep(cx + dx, y0)
+    for x0 in (0.0, W):
+        for y0 in (0.0, H):
+            dx, dy = x0 - cx, y0 - cy
+            if a00 * dx * dx + 2.0 * a01 * dx * dy + a11 * dy * dy <= 1.0:
+                keep(x0, y0)
+    if not xs:
+        return None
+    return np.array([min(xs), min(ys), max(xs), max(ys)])
+
+
+def _clamped_box(box: np.ndarray, W: float, H: float) -> np.ndarray:
+    return np.clip(box, 0.0, [W, H, W, H])
+
+
+# --------------------------------------------------------------------------- areas
+
+
+def ellipse_intersection_area(e1: Ellipse, e2: Ellipse) -> float:
+    """Exact area (px^2) of ``e1 ∩ e2`` (see :mod:`factors.overlap`)."""
+    return intersection_area(e1.params(), e2.params())
+
+
+def convex_hull_area(e1: Ellipse, e2: Ellipse, hull_directions: int = HULL_DIRECTIONS) -> float:
+    """Area (px^2) of the convex hull of the two ellipses (exact, see :mod:`factors.overlap`)."""
+    inter = ellipse_intersection_area(e1, e2)
+    union = e1.area + e2.area - inter
+    return max(hull_area(e1.params(), e2.params(), hull_directions), union)
+
+
+# --------------------------------------------------------------------------- level-set sampling
+
+
+@functools.lru_cache(maxsize=64)
+def _level_template(n_azimuths: int, n_levels: int) -> tuple[np.ndarray, np.ndarray]:
+    """Unit-scale layout ``(radius, phi)`` arrays of length ``n_levels * n_azimuths``.
+
+    Level-major order: index ``i = l * n_azimuths + k`` is azimuth ``k`` of level ``l``.
+    ``radius = (l + 1) / n_levels``; ``phi = 2 pi k / n_azimuths + l pi / n_azimuths``
+    (staggered by half a step per level).
+    """
+    lv = np.repeat(np.arange(n_levels), n_azimuths)
+    k = np.tile(np.arange(n_azimuths), n_levels)
+    radius = (lv + 1.0) / n_levels
+    phi = 2.0 * np.pi * k / n_azimuths + np.pi * lv / n_azimuths
+    u = radius * np.cos(phi)
+    v = radius * np.sin(phi)
+    uv = np.stack([u, v], axis=-1)
+    uv.setflags(write=False)
+    r2 = radius**2
+    r2.setflags(write=False)
+    return uv, r2
+
+
+def _canonical_axes(e: Ellipse) -> tuple[float, float, float]:
+    """``(a, b, angle)`` with ``a >= b`` (angle shifted by pi/2 when the axes are swapped)."""
+    if e.b > e.a:
+        return e.b, e.a, e.angle + 0.5 * math.pi
+    return e.a, e.b, e.angle
+
+
+def _adaptive_scale(det: Ellipse, proj: Ellipse | None, scale: float, adaptive: bool) -> float:
+    if not adaptive or proj is None:
+        return scale
+    c, s = math.cos(det.angle), math.sin(det.angle)
+    dx, dy = proj.cx - det.cx, proj.cy - det.cy
+    u, v = (dx * c + dy * s) / det.a, (dy * c - dx * s) / det.b
+    return max(scale, LEVEL_SET_ADAPTIVE_GAIN * math.sqrt(u * u + v * v))
+
+
+def level_set_sampling_scale(
+    detection: Ellipse, projection: Ellipse | None = None, *,
+    scale: float = DEFAULT_LEVEL_SET_SCALE, adaptive: bool = True,
+) -> float:
+    """Outermost sampled level radius ``s_max`` (unitless, in detection radii).
+
+    ``s_max = scale`` unless ``adaptive`` and a ``projection`` is given, in which case
+    ``s_max = max(scale, LEVEL_SET_ADAPTIVE_GAIN * d)`` with ``d = sqrt(Phi_D(c_P))`` the
+    projection centre's distance from the detection centre in the detection's own normalised
+    metric (d = 1 on the detection contour). So when the ellipses are far apart the sampled
+    region grows to reach the projection. ``d`` is invariant to a common rigid motion.
+    For iterative refinement compute it once at the initial estimate (the paper: "depending
+    on the original distance") and pass ``scale=s_max, adaptive=False`` afterwards.
+    """
+    _check_ellipse("detection", detection)
+    if projection is not None:
+        _check_ellipse("projection", projection)
+    return _adaptive_scale(detection, projection, _positive_float("scale", scale), adaptive)
+
+
+def _sample_points(det: Ellipse, s_max: float, n_azimuths: int, n_levels: int) -> np.ndarray:
+    uv, _ = _level_template(n_azimuths, n_levels)
+    a, b, ang = _canonical_axes(det)
+    c, s = math.cos(ang), math.sin(ang)
+    # x = c_D + uv @ (s_max R diag(a, b))^T
+    Mt = np.array([[a * c * s_max, a * s * s_max], [-b * s * s_max, b * c * s_max]])
+    return uv @ Mt + (det.cx, det.cy)
+
+
+def level_set_sample_points(
+    detection: Ellipse, projection: Ellipse | None = None, *, n_azimuths: int = 6,
+    n_levels: int = 4, scale: float = DEFAULT_LEVEL_SET_SCALE, adaptive: bool = True,
+) -> np.ndarray:
+    """Sample points (M, 2) px, ``M = n_levels * n_azimuths``, on the detection's level curves.
+
+    Layout (level-major, index ``i = l * n_azimuths + k``, ``l < n_levels``, ``k < n_azimuths``)::
+
+        s_l   = s_max * (l + 1) / n_levels                  # level radius, Phi_D(x_i) = s_l^2
+        phi   = 2 pi k / n_azimuths + pi l / n_azimuths      # parametric angle, staggered
+        x_i   = c_D + R(angle_D) [a_D s_l cos(phi), b_D s_l sin(phi)]
+
+    with ``s_max`` from :func:`level_set_sampling_scale` (``scale`` = 2 by default: the levels
+    of radius 0.5, 1, 1.5, 2, i.e. ``Phi_D`` = 0.25, 1, 2.25, 4 including the contour).
+    The detection is first put in canonical form (``a >= b``), so the layout depends only on
+    the ellipse, not on how its axes are labelled. The points are attached to the detection's
+    frame, hence move with it under any rigid motion (rotation equivariance; with an even
+    ``n_azimuths`` the set is also unchanged by the ellipse's 180-degree symmetry, so the
+    metric is exactly invariant to common rigid motions).
+    """
+    s_max = level_set_sampling_scale(detection, projection, scale=scale, adaptive=adaptive)
+    return _sample_points(detection, s_max, _positive_int("n_azimuths", n_azimuths),
+                          _positive_int("n_levels", n_levels))
+
+
+def _level_set_residual(det: Ellipse, proj: Ellipse, n_azimuths: int = 6, n_levels: int = 4,
+                        scale: float = DEFAULT_LEVEL_SET_SCALE,
+                        adaptive: bool = True) -> np.ndarray:
+    if n_azimuths != 6 or n_levels != 4:
+        n_azimuths = _positive_int("n_azimuths", n_azimuths)
+        n_levels = _positive_int("n_levels", n_levels)
+    if scale != DEFAULT_LEVEL_SET_SCALE:
+        scale = _positive_float("scale", scale)
+    s_max = _adaptive_scale(det, proj, scale, adaptive)
+    pts = _sample_points(det, s_max, n_azimuths, n_levels)
+    _, r2 = _level_template(n_azimuths, n_levels)
+    phi_det = r2 * (s_max * s_max)  # exact Phi_D on the sampled level curves
+    c, s = math.cos(proj.angle), math.sin(proj.angle)
+    # Phi_P(x) = |diag(1/a, 1/b) R^T (x - c_P)|^2
+    uv = (pts - (proj.cx, proj.cy)) @ np.array([[c / proj.a, -s / proj.b],
+                                                [s / proj.a, c / proj.b]])
+    return phi_det - np.einsum("ij,ij->i", uv, uv)
+
+
+# --------------------------------------------------------------------------- residuals
+
+
+def _iou_cost(det: Ellipse, proj: Ellipse) -> float:
+    inter = ellipse_intersection_area(det, proj)
+    union = det.area + proj.area - inter
+    return min(max(1.0 - inter / union, 0.0), 1.0)
+
+
+def _giou_cost(det: Ellipse, proj: Ellipse, hull_directions: int = HULL_DIRECTIONS) -> float:
+    hull_directions = _positive_int("hull_directions", hull_directions)
+    if hull_directions < 8:
+        raise ValueError(f"option hull_directions must be >= 8, got {hull_directions}")
+    inter = ellipse_intersection_area(det, proj)
+    union = det.area + proj.area - inter
+    hull = max(hull_area(det.params(), proj.params(), hull_directions), union)
+    giou = inter / union - (hull - union) / hull
+    return min(max(1.0 - giou, 0.0), 2.0)
+
+
+def _bbox_residual(det: Ellipse, proj: Ellipse) -> np.ndarray:
+    return det.bbox() - proj.bbox()
+
+
+def _qbbox_residual(det: Ellipse, proj: Ellipse, image_size: object = None) -> np.ndarray:
+    W, H = _image_size(image_size)
+    return _truncated_box(det, W, H) - _truncated_box(proj, W, H)
+
+
+def _truncated_box(e: Ellipse, W: float, H: float) -> np.ndarray:
+    box = clipped_bbox(e, (W, H))
+    return _clamped_box(e.bbox(), W, H) if box is None else box
+
+
+def _algebraic_residual(det: Ellipse, proj: Ellipse) -> np.ndarray:
+    return np.subtract(_dual_vec(det), _dual_vec(proj))
+
+
+def _frobenius_residual(det: Ellipse, proj: Ellipse) -> np.ndarray:
+    d = np.subtract(_dual_vec(det), _dual_vec(proj))
+    d[[1, 2, 4]] *= _SQRT2
+    return d
+
+
+def _wasserstein_residual(det: Ellipse, proj: Ellipse) -> np.ndarray:
+    a1, b1, t1 = _canonical_axes(det)
+    a2, b2, t2 = _canonical_axes(proj)
+    # Angle between the major axes, reduced to [-pi/2, pi/2) (ellipses are pi-symmetric).
+    delta = (t1 - t2 + 0.5 * math.pi) % math.pi - 0.5 * math.pi
+    s = math.sin(delta)
+    P = (a1 * a1 - b1 * b1) * (a2 * a2 - b2 * b2)  # >= 0 with a >= b
+    Q = a1 * a2 + b1 * b2
+    k = math.sqrt(2.0 * P / (Q + math.sqrt(max(Q * Q - P * s * s, 0.0))))
+    return np.array([det.cx - proj.cx, det.cy - proj.cy, a1 - a2, b1 - b2, k * s])
+
+
+def _bhattacharyya_residual(det: Ellipse, proj: Ellipse) -> np.ndarray:
+    d00, d01, d11 = _sigma(det)
+    q00, q01, q11 = _sigma(proj)
+    # Mahalanobis part with the Cholesky factor of S = (S_D + S_P) / 2.
+    s00, s01, s11 = 0.5 * (d00 + q00), 0.5 * (d01 + q01), 0.5 * (d11 + q11)
+    l00 = math.sqrt(s00)
+    l10 = s01 / l00
+    l11 = math.sqrt(max(s11 - l10 * l10, 0.0))
+    dx, dy = det.cx - proj.cx, det.cy - proj.cy
+    y0 = dx / l00
+    y1 = (dy - l10 * y0) / l11
+    # N = S_D^-1/2 S_P S_D^-1/2 computed in the detection's frame: D^-1 R^T S_P R D^-1.
+    c, s = math.cos(det.angle), math.sin(det.angle)
+    t00 = c * (q00 * c + q01 * s) + s * (q01 * c + q11 * s)
+    t01 = c * (-q00 * s + q01 * c) + s * (-q01 * s + q11 * c)
+    t11 = -s * (-q00 * s + q01 * c) + c * (-q01 * s + q11 * c)
+    n00, n01, n11 = t00 / (det.a * det.a), t01 / (det.a * det.b), t11 / (det.b * det.b)
+    half_tr, half_diff = 0.5 * (n00 + n11), 0.5 * (n00 - n11)
+    rad = math.hypot(half_diff, n01)
+    lam = np.array([half_tr + rad, max(half_tr - rad, 1e-300)])
+    h = np.sign(np.log(lam)) * np.sqrt(0.5 * _log_cosh(0.5 * np.log(lam)))
+    # G = V diag(h) V^T in N's frame (back in the detection frame; rotation-free norm).
+    mean, half = 0.5 * (h[0] + h[1]), 0.5 * (h[0] - h[1])
+    if rad > 0.0:
+        cos2, sin2 = half_diff / rad, n01 / rad
+    else:
+        cos2, sin2 = 1.0, 0.0
+    g00, g11, g01 = mean + half * cos2, mean - half * cos2, half * sin2
+    return np.array([_INV_SQRT8 * y0, _INV_SQRT8 * y1, g00, g11, _SQRT2 * g01])
+
+
+_RESIDUALS = {
+    "bbox": _bbox_residual,
+    "qbbox": _qbbox_residual,
+    "algebraic": _algebraic_residual,
+    "frobenius": _frobenius_residual,
+    "wasserstein": _wasserstein_residual,
+    "bhattacharyya": _bhattacharyya_residual,
+    "level_set": _level_set_residual,
+}
+_SCALAR_COSTS = {"iou": _iou_cost, "giou": _giou_cost}
+
+
+def residual(name: str, detection: Ellipse, projection: Ellipse, **options: object) -> np.ndarray:
+    """Residual vector of metric ``name`` (1-D float array, length :func:`residual_size`).
+
+    ``cost(name, ...) == ||residual(name, ...)||^2``. See the module docstring for each
+    metric's residual, units and options. Unknown ``name`` -> ``ValueError`` listing the valid
+    names; unknown option -> ``TypeError`` naming it; bad option value -> ``ValueError``.
+    """
+    _check_name(name)
+    _check_options(name, options)
+    _check_ellipse("detection", detection)
+    _check_ellipse("projection", projection)
+    if name in _SCALAR_COSTS:
+        return np.array([math.sqrt(_SCALAR_COSTS[name](detection, projection, **options))])
+    return _RESIDUALS[name](detection, projection, **options)
+
+
+def cost(name: str, detection: Ellipse, projection: Ellipse, **options: object) -> float:
+    """Cost of metric ``name`` between a detection and a projection (>= 0, 0 when identical).
+
+    iou / giou return ``1 - IoU`` / ``1 - GIoU``; the others ``||residual||^2`` (frobenius is
+    the *squared* Frobenius norm, wasserstein the *squared* W2 distance).
+    """
+    _check_name(name)
+    _check_options(name, options)
+    _check_ellipse("detection", detection)
+    _check_ellipse("projection", projection)
+    if name in _SCALAR_COSTS:
+        return float(_SCALAR_COSTS[name](detection, projection, **options))
+    r = _RESIDUALS[name](detection, projection, **options)
+    return float(r @ r)
+
+
+def residual_size(name: str, **options: object) -> int:
+    """Length of :func:`residual` for metric ``name`` with these options."""
+    _check_name(name)
+    _check_options(name, options)
+    if name == "level_set":
+        return (_positive_int("n_azimuths", options.get("n_azimuths", 6))
+                * _positive_int("n_levels", options.get("n_levels", 4)))
+    return {"iou": 1, "giou": 1, "bbox": 4, "qbbox": 4, "algebraic": 5, "frobenius": 5,
+            "wasserstein": 5, "bhattacharyya": 5}[name]

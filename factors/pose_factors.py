@@ -1,0 +1,247 @@
+"""The nine ellipse metrics as GTSAM factors on the camera pose.
+
+Every factor is a ``gtsam.CustomFactor`` on ONE ``Pose3`` key holding the camera's
+``world_from_camera`` pose (OpenCV camera axes), for ONE detection/ellipsoid pair. Its
+unwhitened error is the metric residual ``r_j`` (``factors.metrics.residual``: cost
+``Delta_j = ||r_j||^2``) between the detected ellipse and the projection ``C* = P Q*_j P^T``.
+Jacobians are w.r.t. GTSAM's tangent ``xi = [omega, v]`` with right perturbation
+(``pose.retract(xi) = pose.compose(Pose3.Expmap(xi))``).
+
+Noise model and the paper's equation 8
+--------------------------------------
+GTSAM minimises ``sum_j 0.5 ||r_j||^2 / s_j^2`` for an isotropic noise of std ``s_j``. With
+``s_j = sqrt(sigma_j)`` (``sigma_j`` the detector's predicted uncertainty) this is
+``0.5 sum_j sigma_j^-1 Delta_j``: the argmin of the paper's equation 8. Without ``sigma``, unit
+noise (``s_j = 1``). An optional robust kernel (``huber``, ``cauchy``, ``geman_mcclure``) wraps that
+noise model per detection through ``gtsam.noiseModel.Robust``; its threshold ``k`` applies to the
+WHITENED residual norm ``sqrt(Delta_j / sigma_j)``; defaults per metric in
+:data:`DEFAULT_ROBUST_SCALE` (about the residual norm of a clearly wrong match: e.g. for the level
+set, a norm of 1 is an average level discrepancy of 0.2 over 24 samples).
+
+Design: per-detection factors over a shared, memoised evaluation
+-----------------------------------------------------------------
+Per-detection factors are needed for per-detection robust kernels (GTSAM reweights a whole
+factor). But evaluating each pair separately costs one round of numpy calls per pair, which
+dominates in Python (GUIDE section 3: per-object analytic 5.5 ms vs batched 1.3 ms at N = 8).
+So all the factors of one solve share ONE :class:`factors.pose_residuals.PoseResidualModel`: the
+first factor called at a pose evaluates every pair at once (vectorised over objects and samples)
+and memoises the result on the pose value; the other factors only slice their row. GTSAM's
+Python round trip per factor is ~1-3 us, so N factors cost about one batched evaluation plus N
+slices. Measured numbers are in ``docs/results.md`` (section ``refine_speed``) and produced by
+``python -m bench.refine_speed``; :func:`batched_pose_factor` (one factor for all pairs,
+Diagonal noise, no robust kernel) is kept for that comparison.
+
+Jacobians: analytic for ``level_set`` (see :mod:`factors.pose_residuals`); central differences
+of ``factors.metrics.residual`` (all pairs and the 12 perturbed poses at once where possible)
+for the others.
+
+Invalid projections (ellipsoid behind the camera, crossing the principal plane, containing the
+camera) give a bounded penalty residual with a Jacobian that restores a positive depth margin;
+see :mod:`factors.pose_residuals`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from functools import partial
+from typing import Any
+
+import gtsam
+import numpy as np
+
+from factors.geometry import Camera, Ellipse, Ellipsoid
+from factors.pose_residuals import PoseResidualModel
+
+__all__ = [
+    "DEFAULT_ROBUST_SCALE",
+    "FACTOR_FACTORIES",
+    "ROBUST_KERNELS",
+    "batched_pose_factor",
+    "make_noise_model",
+    "pose_factor",
+    "pose_factors",
+    "shared_pose_factor",
+]
+
+#: Robust kernels accepted by name.
+ROBUST_KERNELS: tuple[str, ...] = ("huber", "cauchy", "geman_mcclure")
+
+#: Default robust threshold ``k`` per metric, on the whitened residual norm
+#: ``sqrt(Delta_j / sigma_j)`` (units: those of the metric's residual).
+DEFAULT_ROBUST_SCALE: dict[str, float] = {
+    "level_set": 1.0,       # level-function units, 24 samples
+    "iou": 0.5,             # residual of the Jaccard distance (dimensionless)
+    "giou": 0.5,
+    "bbox": 20.0,           # pixels (box corner coordinates)
+    "qbbox": 20.0,
+    "wasserstein": 20.0,    # pixels (W2 distance)
+    "bhattacharyya": 0.5,   # dimensionless
+    "algebraic": 2000.0,    # px^2 (normalised dual-conic entries)
+    "frobenius": 2000.0,    # px^2
+}
+
+
+def make_noise_model(
+    dim: int,
+    sigma: float | None = None,
+    robust: str | None = None,
+    robust_scale: float | None = None,
+    metric: str = "level_set",
+) -> gtsam.noiseModel.Base:
+    """Noise model of one pair's factor: isotropic std ``sqrt(sigma)`` (unit if ``sigma`` None).
+
+    ``robust`` in :data:`ROBUST_KERNELS` (or None) wraps it in ``gtsam.noiseModel.Robust`` with
+    threshold ``robust_scale`` (default ``DEFAULT_ROBUST_SCALE[metric]``).
+    """
+    if sigma is None:
+        std = 1.0
+    else:
+        if not (isinstance(sigma, int | float) and math.isfinite(sigma) and sigma > 0):
+            raise ValueError(f"sigma must be finite and > 0, got {sigma!r}")
+        std = math.sqrt(float(sigma))
+    base = gtsam.noiseModel.Isotropic.Sigma(int(dim), std)
+    if robust is None:
+        if robust_scale is not None:
+            raise ValueError("robust_scale given without a robust kernel (robust=None)")
+        return base
+    if robust not in ROBUST_KERNELS:
+        raise ValueError(f"robust must be one of {', '.join(ROBUST_KERNELS)} or None, "
+                         f"got {robust!r}")
+    k = DEFAULT_ROBUST_SCALE.get(metric, 1.0) if robust_scale is None else robust_scale
+    if not (isinstance(k, int | float) and math.isfinite(k) and k > 0):
+        raise ValueError(f"robust_scale must be finite and > 0, got {robust_scale!r}")
+    est = {
+        "huber": gtsam.noiseModel.mEstimator.Huber,
+        "cauchy": gtsam.noiseModel.mEstimator.Cauchy,
+        "geman_mcclure": gtsam.noiseModel.mEstimator.GemanMcClure,
+    }[robust].Create(float(k))
+    return gtsam.noiseModel.Robust.Create(est, base)
+
+
+def shared_pose_factor(
+    key: int, model: PoseResidualModel, index: int, noise_model: gtsam.noiseModel.Base
+) -> gtsam.CustomFactor:
+    """Factor for pair ``index`` of ``model`` (whose evaluation is shared and memoised)."""
+    if not 0 <= index < model.n:
+        raise IndexError(f"index {index} out of range for a model of {model.n} pairs")
+    if noise_model.dim() != model.dim:
+        raise ValueError(f"noise_model dim {noise_model.dim()} != residual dim {model.dim}")
+    evaluate = model.evaluate
+
+    def error_fn(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
+        T = values.atPose3(key).matrix()
+        if H is None:
+            return evaluate(T, False).residuals[index]
+        ev = evaluate(T, True)
+        H[0] = ev.jacobians[index]  # type: ignore[index]
+        return ev.residuals[index]
+
+    return gtsam.CustomFactor(noise_model, [key], error_fn)
+
+
+def pose_factors(
+    metric: str,
+    key: int,
+    detections: Sequence[Ellipse],
+    ellipsoids: Sequence[Ellipsoid],
+    camera: Camera,
+    *,
+    sigmas: Sequence[float | None] | None = None,
+    robust: str | None = None,
+    robust_scale: float | None = None,
+    initial_world_from_camera: np.ndarray | None = None,
+    metric_options: Mapping[str, Any] | None = None,
+    batched: bool = False,
+    **model_options: Any,
+) -> tuple[list[gtsam.CustomFactor], PoseResidualModel]:
+    """Factors for N detection/ellipsoid pairs, all sharing one memoised evaluation.
+
+    ``sigmas[j]`` (or None) sets pair ``j``'s noise (std ``sqrt(sigma_j)``). By default one
+    factor per pair, in the pairs' order (each with its own robust kernel if ``robust``). With
+    ``batched=True`` (only without a robust kernel) a single factor with a Diagonal noise model
+    holding every pair's std: the same weighted error, one GTSAM callback instead of N.
+    Returns the factors and the shared :class:`PoseResidualModel` (e.g. for per-pair costs).
+    ``model_options`` go to :class:`PoseResidualModel` (``min_depth_margin``, ``penalty_cost``,
+    ``numeric_step``, ``eager_jacobian``).
+    """
+    model = PoseResidualModel(metric, detections, ellipsoids, camera,
+                              initial_world_from_camera=initial_world_from_camera,
+                              metric_options=metric_options, **model_options)
+    if sigmas is None:
+        sigmas = [None] * model.n
+    if len(sigmas) != model.n:
+        raise ValueError(f"sigmas must have one entry per detection ({model.n}), "
+                         f"got {len(sigmas)}")
+    for j, s in enumerate(sigmas):
+        if s is not None and not (isinstance(s, int | float) and math.isfinite(s) and s > 0):
+            raise ValueError(f"sigmas[{j}] must be finite and > 0, got {s!r}")
+    if batched:
+        if robust is not None:
+            raise ValueError("batched=True cannot carry per-detection robust kernels; "
+                             "use batched=False with robust")
+        return [batched_pose_factor(key, model, sigmas)], model
+    factors = [
+        shared_pose_factor(key, model, j,
+                           make_noise_model(model.dim, s, robust, robust_scale, metric))
+        for j, s in enumerate(sigmas)
+    ]
+    return factors, model
+
+
+def pose_factor(
+    metric: str,
+    key: int,
+    detection: Ellipse,
+    ellipsoid: Ellipsoid,
+    camera: Camera,
+    *,
+    sigma: float | None = None,
+    robust: str | None = None,
+    robust_scale: float | None = None,
+    initial_world_from_camera: np.ndarray | None = None,
+    metric_options: Mapping[str, Any] | None = None,
+    **model_options: Any,
+) -> gtsam.CustomFactor:
+    """A ``gtsam.CustomFactor`` on the ``world_from_camera`` Pose3 ``key`` for one pair.
+
+    Residual: ``metric``'s residual between ``detection`` and the projection of ``ellipsoid``;
+    noise std ``sqrt(sigma)`` (unit if None), optional robust kernel. For several pairs of one
+    solve prefer :func:`pose_factors` (shared evaluation, much faster).
+    """
+    factors, _ = pose_factors(metric, key, [detection], [ellipsoid], camera,
+                              sigmas=[sigma], robust=robust, robust_scale=robust_scale,
+                              initial_world_from_camera=initial_world_from_camera,
+                              metric_options=metric_options, **model_options)
+    return factors[0]
+
+
+#: ``FACTOR_FACTORIES[metric](key, detection, ellipsoid, camera, *, sigma=..., robust=..., ...)``
+FACTOR_FACTORIES: dict[str, Callable[..., gtsam.CustomFactor]] = {
+    name: partial(pose_factor, name)
+    for name in ("iou", "giou", "bbox", "qbbox", "algebraic", "frobenius", "wasserstein",
+                 "bhattacharyya", "level_set")
+}
+
+
+def batched_pose_factor(
+    key: int, model: PoseResidualModel, sigmas: Sequence[float | None] | None = None
+) -> gtsam.CustomFactor:
+    """ONE factor over all pairs of ``model`` (Diagonal noise: pair ``j`` rows std
+    ``sqrt(sigma_j)``). No per-detection robust kernel is possible in this form; it exists to
+    measure the per-detection design against it (``bench.refine_speed``)."""
+    n, m = model.n, model.dim
+    stds = np.ones(n) if sigmas is None else np.array(
+        [1.0 if s is None else math.sqrt(s) for s in sigmas])
+    noise = gtsam.noiseModel.Diagonal.Sigmas(np.repeat(stds, m))
+    evaluate = model.evaluate
+
+    def error_fn(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
+        T = values.atPose3(key).matrix()
+        if H is None:
+            return evaluate(T, False).residuals.reshape(-1)
+        ev = evaluate(T, True)
+        H[0] = ev.jacobians.reshape(n * m, 6)  # type: ignore[union-attr]
+        return ev.residuals.reshape(-1)
+
+    return gtsam.CustomFactor(noise, [key], error_fn)

@@ -1,0 +1,633 @@
+"""Residuals and Jacobians of the ellipse metrics w.r.t. the camera pose, batched over objects.
+
+This module is pure numpy (no GTSAM). It evaluates, for ONE camera pose and ALL
+detection/ellipsoid pairs of a refinement at once, the metric residual of every pair and its
+Jacobian with respect to the pose; :mod:`factors.pose_factors` wraps it in GTSAM factors.
+
+Conventions
+-----------
+* The pose is the camera's ``world_from_camera`` 4x4 matrix (OpenCV camera axes). Its tangent
+  vector is GTSAM's Pose3 order ``xi = [omega (3, rad), v (3, m)]`` with RIGHT perturbation:
+  ``world_from_camera(xi) = world_from_camera @ Exp(xi)`` (``Pose3.retract``). Jacobians are
+  ``d r / d xi`` at ``xi = 0``, shape ``(m, 6)`` per pair.
+* In the camera frame a world point moves as ``X_c(xi) = X_c - omega x X_c - v`` (first order).
+* The projected dual conic is ``C* = K A K^T`` with ``A = S_c - c_c c_c^T`` (3x3), ``c_c`` the
+  ellipsoid centre and ``S_c = R S R^T`` its shape matrix (``S = R_e diag(axes^2) R_e^T``), both in
+  the camera frame. ``A`` equals ``P Q* P^T`` up to ``K``: ``C* = P Q* P^T`` exactly.
+  Its first-order change is ``dA = -[w]x A - A [w]x^T + v c_c^T + c_c v^T``.
+
+Level-set residual (analytic, the product's hot path)
+-----------------------------------------------------
+For a sample ``x`` (pixels) of the detection, ``n = K^-1 (x, y, 1)`` (normalised, fixed), GUIDE
+section 2 gives ``Phi_proj(x) = 1 - C*[2,2] x~^T C*^-1 x~ = 1 - s n^T A^-1 n`` with
+``s = A[2,2]`` (``K``'s last row is ``e3``). With ``u = A^-1 n`` and ``g = n . u``::
+
+    r      = Phi_det(x) - Phi_proj(x) = (Phi_det(x) - 1) + s g
+    dr/dw  = 2 g (e3 x A e3) + 2 s (n x u)
+    dr/dv  = 2 g z_c e3 - 2 s (c_c . u) u
+
+(using ``A u = n``). One ``np.linalg.solve`` over all objects and samples gives every ``u``; no
+Python loop over samples or objects.
+
+Invalid projections (penalty)
+-----------------------------
+The projection of an ellipsoid is an ellipse only while the whole ellipsoid is in front of the
+camera: depth margin ``m = z_c - sqrt(S_c[2,2]) > 0`` (see
+:func:`factors.geometry.ellipsoid_depth_margins`). When ``m <= min_depth_margin`` during an
+optimisation (ellipsoid behind the camera, crossing its principal plane, or containing it), the
+pair's residual is replaced by the bounded penalty (every one of the ``dim`` components equal)::
+
+    r_k = sqrt(penalty_cost / dim) * (1 + d / (d + d_s)),   d = min_depth_margin - m >= 0
+
+so its cost lies in ``[penalty_cost, 4 penalty_cost)`` (finite, never NaN), with ``d_s`` the
+ellipsoid's largest semi-axis (m). Its Jacobian ``-sqrt(penalty_cost/dim) d_s / (d + d_s)^2
+dm/dxi`` points towards a positive margin (``dm/dw = e3 x c_c - (e3 x S_c e3) / sqrt(S_c[2,2])``,
+``dm/dv = -e3``). ``penalty_cost`` (default :data:`DEFAULT_PENALTY_COST`) is far above the cost of
+any sensible valid pair, so Levenberg-Marquardt rejects steps into the invalid region and, from
+an invalid start, is pushed back to valid poses.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from factors.geometry import (
+    Camera,
+    DegenerateProjectionError,
+    Ellipse,
+    Ellipsoid,
+    GeometryError,
+    dual_conics_from_params,
+    level_values,
+    params_from_dual_conics,
+)
+
+__all__ = [
+    "ANALYTIC_METRICS",
+    "DEFAULT_MIN_DEPTH_MARGIN",
+    "DEFAULT_NUMERIC_STEP",
+    "DEFAULT_PENALTY_COST",
+    "PoseEvaluation",
+    "PoseResidualModel",
+    "expmap_pose3",
+    "numerical_pose_jacobian",
+]
+
+#: Cost (unweighted, per pair) of the invalid-projection penalty; the penalty lies in [1x, 4x).
+DEFAULT_PENALTY_COST = 1e8
+#: A projection counts as valid while the ellipsoid's smallest camera depth exceeds this (m).
+DEFAULT_MIN_DEPTH_MARGIN = 1e-3
+#: Central-difference step on each tangent coordinate (rad or m) for numerical Jacobians.
+#: Larger for the area/box metrics whose polygon approximations have small kinks.
+DEFAULT_NUMERIC_STEP: dict[str, float] = {
+    "iou": 1e-5, "giou": 1e-5, "bbox": 1e-6, "qbbox": 1e-6, "algebraic": 1e-6,
+    "frobenius": 1e-6, "wasserstein": 1e-6, "bhattacharyya": 1e-6, "level_set": 1e-6,
+}
+#: Metrics whose pose Jacobian is analytic (the others use central differences).
+ANALYTIC_METRICS: tuple[str, ...] = ("level_set", "algebraic", "frobenius", "wasserstein")
+_CONIC_METRICS = ("algebraic", "frobenius", "wasserstein")
+# tangent generators: d(A)/d(omega_k) = G + G^T with G = -[e_k]x A; d(A)/d(v_k) = G + G^T with
+# G = e_k c^T
+_SKEW_BASIS = np.array([[[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]],
+                        [[0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [-1.0, 0.0, 0.0]],
+                        [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]])
+# upper elements [C00, C01, C02, C11, C12] of a 3x3 matrix, flat indices
+_VEC5 = np.array([0, 1, 2, 4, 5])
+_FRO_W = np.array([1.0, math.sqrt(2.0), math.sqrt(2.0), 1.0, math.sqrt(2.0)])
+
+# index helpers for cross products: (a x b)_i = a[P1]_i b[P2]_i - a[P2]_i b[P1]_i
+_P1 = np.array([1, 2, 0])
+_P2 = np.array([2, 0, 1])
+# e3 x a = (-a_1, a_0, 0)
+_E3X_ROWS = np.array([1, 0, 2])
+_E3X_SIGN = np.array([-1.0, 1.0, 0.0])
+
+
+@functools.lru_cache(maxsize=32)
+def _unit_level_set_layout(n_azimuths: int, n_levels: int) -> np.ndarray:
+    """``(u, v)`` (M, 2) of ``factors.metrics``' level-set layout for a unit circle, s_max = 1."""
+    from factors import metrics
+
+    uv = metrics.level_set_sample_points(Ellipse(0.0, 0.0, 1.0, 1.0, 0.0), None,
+                                         n_azimuths=n_azimuths, n_levels=n_levels, scale=1.0,
+                                         adaptive=False)
+    uv.setflags(write=False)
+    return uv
+
+
+def _skew(w: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+
+
+def expmap_pose3(xi: np.ndarray) -> np.ndarray:
+    """4x4 matrix of GTSAM's ``Pose3.Expmap(xi)``, ``xi = [omega (rad), v (m)]`` (SE(3) exp)."""
+    xi = np.asarray(xi, dtype=float)
+    w, v = xi[:3], xi[3:]
+    th = float(np.linalg.norm(w))
+    W = _skew(w)
+    if th < 1e-8:
+        R = np.eye(3) + W + 0.5 * W @ W
+        V = np.eye(3) + 0.5 * W + W @ W / 6.0
+    else:
+        a = math.sin(th) / th
+        b = (1.0 - math.cos(th)) / th**2
+        c = (th - math.sin(th)) / th**3
+        R = np.eye(3) + a * W + b * W @ W
+        V = np.eye(3) + b * W + c * W @ W
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = V @ v
+    return T
+
+
+def numerical_pose_jacobian(
+    fn: Any, world_from_camera: np.ndarray, step: float = 1e-6
+) -> np.ndarray:
+    """Central-difference ``d fn(world_from_camera @ Exp(xi)) / d xi`` at 0: shape (m, 6).
+
+    ``fn`` maps a 4x4 ``world_from_camera`` to a 1-D residual of length ``m``.
+    """
+    T = np.asarray(world_from_camera, dtype=float)
+    cols = []
+    for k in range(6):
+        e = np.zeros(6)
+        e[k] = step
+        cols.append((np.asarray(fn(T @ expmap_pose3(e))) -
+                     np.asarray(fn(T @ expmap_pose3(-e)))) / (2 * step))
+    return np.stack(cols, axis=-1)
+
+
+@dataclass(frozen=True)
+class PoseEvaluation:
+    """Residuals of all pairs at one pose.
+
+    ``residuals`` (N, dim); ``jacobians`` (N, dim, 6) or None (w.r.t. ``xi = [omega, v]``, right
+    perturbation of ``world_from_camera``); ``valid`` (N,) bool: projection is an ellipse (else
+    the row holds the penalty); ``depth_margins`` (N,) metres.
+    """
+
+    residuals: np.ndarray
+    jacobians: np.ndarray | None
+    valid: np.ndarray
+    depth_margins: np.ndarray
+
+
+class PoseResidualModel:
+    """Metric residuals of N detection/ellipsoid pairs as functions of ``world_from_camera``.
+
+    Parameters
+    ----------
+    metric:
+        One of ``factors.metrics.METRIC_NAMES``.
+    detections, ellipsoids:
+        Same length N >= 1, pair ``j`` = (detected ellipse in pixels, map ellipsoid in world m).
+    camera:
+        Pinhole intrinsics (pixels).
+    initial_world_from_camera:
+        4x4 pose used ONLY to fix the level-set sample points when the sampling is adaptive
+        (the sampling area depends on the distance between detection and projection). The
+        samples are then frozen for the whole solve, so LM minimises one fixed function.
+    metric_options:
+        Passed to ``factors.metrics.residual`` / ``level_set_sample_points``.
+    min_depth_margin, penalty_cost:
+        See the module docstring (invalid projections).
+    numeric_step:
+        Central-difference step for metrics without analytic Jacobian (default per metric in
+        :data:`DEFAULT_NUMERIC_STEP`).
+    eager_jacobian:
+        Compute the Jacobians with every evaluation (default: for the analytic metrics, where
+        they are cheap; LM linearises at nearly every pose it evaluates).
+
+    :meth:`evaluate` memoises the last pose (one full evaluation per pose, shared by all the
+    per-detection GTSAM factors that slice it).
+    """
+
+    def __init__(
+        self,
+        metric: str,
+        detections: Sequence[Ellipse],
+        ellipsoids: Sequence[Ellipsoid],
+        camera: Camera,
+        *,
+        initial_world_from_camera: np.ndarray | None = None,
+        metric_options: Mapping[str, Any] | None = None,
+        min_depth_margin: float = DEFAULT_MIN_DEPTH_MARGIN,
+        penalty_cost: float = DEFAULT_PENALTY_COST,
+        numeric_step: float | None = None,
+        eager_jacobian: bool | None = None,
+    ) -> None:
+        from factors import metrics
+
+        if metric not in metrics.METRIC_NAMES:
+            raise ValueError(
+                f"metric must be one of {', '.join(metrics.METRIC_NAMES)}; got {metric!r}"
+            )
+        if len(detections) != len(ellipsoids):
+            raise ValueError(
+                f"detections and ellipsoids must have the same length, got {len(detections)} "
+                f"and {len(ellipsoids)}"
+            )
+        if len(detections) == 0:
+            raise ValueError("detections must not be empty")
+        for j, (d, q) in enumerate(zip(detections, ellipsoids, strict=True)):
+            if not isinstance(d, Ellipse):
+                raise GeometryError(f"detections[{j}] must be an Ellipse, got {type(d).__name__}")
+            if not isinstance(q, Ellipsoid):
+                raise GeometryError(
+                    f"ellipsoids[{j}] must be an Ellipsoid, got {type(q).__name__}"
+                )
+        if not isinstance(camera, Camera):
+            raise GeometryError(f"camera must be a Camera, got {type(camera).__name__}")
+        if not (math.isfinite(penalty_cost) and penalty_cost > 0):
+            raise ValueError(f"penalty_cost must be finite and > 0, got {penalty_cost}")
+        if not (math.isfinite(min_depth_margin) and min_depth_margin >= 0):
+            raise ValueError(f"min_depth_margin must be finite and >= 0, got {min_depth_margin}")
+        self.metric = metric
+        self.detections = tuple(detections)
+        self.ellipsoids = tuple(ellipsoids)
+        self.camera = camera
+        self.options: dict[str, Any] = dict(metric_options or {})
+        if metric == "qbbox" and "image_size" not in self.options:
+            self.options["image_size"] = (camera.width, camera.height)
+        self.min_depth_margin = float(min_depth_margin)
+        self.penalty_cost = float(penalty_cost)
+        self.numeric_step = float(numeric_step or DEFAULT_NUMERIC_STEP.get(metric, 1e-6))
+        # analytic Jacobians are cheap: compute them with every residual evaluation, since
+        # LM linearises next at (almost) every pose whose error it evaluates
+        self.eager_jacobian = (metric in ANALYTIC_METRICS) if eager_jacobian is None \
+            else bool(eager_jacobian)
+        self.n = len(self.detections)
+        self._K = camera.K
+        # per-object constants (world frame)
+        self._centers = np.array([q.center for q in self.ellipsoids])  # (N, 3) m
+        axes = np.array([q.axes for q in self.ellipsoids])  # (N, 3) m
+        # S = R diag(axes^2) R^T = L L^T with L = R diag(axes)
+        self._L = np.array([q.rotation for q in self.ellipsoids]) * axes[:, None, :]
+        self._d_scale = axes.max(axis=1)  # (N,) m, penalty length scale
+        self._det_params = np.array([(d.cx, d.cy, d.a, d.b, d.angle) for d in self.detections])
+        self._cache_key: bytes | None = None
+        self._cache_jac = False
+        self._cache: PoseEvaluation | None = None
+        T0 = None if initial_world_from_camera is None else _check_pose(
+            initial_world_from_camera, "initial_world_from_camera")
+        if metric == "level_set":
+            self._init_level_set(T0)
+            self.dim = self._M
+        else:
+            self.dim = self._metric_dim()
+            if metric in _CONIC_METRICS:
+                self._init_conic()
+        self._pen_amp = math.sqrt(self.penalty_cost / self.dim)
+
+    # ------------------------------------------------------------------ set-up
+    def _projections(self, world_from_camera: np.ndarray) -> list[Ellipse | None]:
+        """Projected ellipses at a pose (None where the projection is not an ellipse)."""
+        A, _, _, margins = self._camera_frame(np.asarray(world_from_camera, dtype=float))
+        out: list[Ellipse | None] = [None] * self.n
+        ok = np.flatnonzero(margins > self.min_depth_margin)
+        if ok.size == 0:
+            return out
+        C = self._K @ A[ok] @ self._K.T
+        try:
+            params = params_from_dual_conics(C)
+        except (DegenerateProjectionError, GeometryError):  # one bad conic: go one by one
+            for i, j in enumerate(ok):
+                try:
+                    out[j] = Ellipse(*params_from_dual_conics(C[i : i + 1])[0])
+                except (DegenerateProjectionError, GeometryError):
+                    out[j] = None
+            return out
+        for i, j in enumerate(ok):
+            out[j] = Ellipse(*params[i])
+        return out
+
+    def _init_level_set(self, T0: np.ndarray | None) -> None:
+        """Fix the level-set samples: ``factors.metrics.level_set_sample_points``' layout,
+        computed for all detections at once (equality with it is tested)."""
+        from factors import metrics
+
+        self._M = int(metrics.residual_size("level_set", **self.options))  # validates options
+        n_az = self.options.get("n_azimuths", 6)
+        n_lv = self.options.get("n_levels", 4)
+        adaptive = bool(self.options.get("adaptive", True))
+        scale = self.options.get("scale", metrics.DEFAULT_LEVEL_SET_SCALE)
+        if isinstance(scale, bool) or not isinstance(scale, int | float) \
+                or not (math.isfinite(scale) and scale > 0):
+            raise ValueError(f"option scale must be a positive finite number, got {scale!r}")
+        uv = _unit_level_set_layout(n_az, n_lv)
+        P = self._det_params  # (N, 5)
+        s_max = np.full(self.n, scale)
+        if adaptive and T0 is not None:
+            A, _, _, margins = self._camera_frame(T0)
+            ok = margins > self.min_depth_margin
+            if np.any(ok):
+                # projected centre c_P = C*[:2, 2] / C*[2, 2] with C* = K A K^T
+                C = self._K @ A[ok] @ self._K.T
+                centre = C[:, :2, 2] / C[:, 2, 2, None]
+                d = np.sqrt(level_values(P[ok], centre[:, None, :])[:, 0])
+                s_max[ok] = np.maximum(scale, metrics.LEVEL_SET_ADAPTIVE_GAIN * d)
+        # canonical axes a >= b (the metric's layout does not depend on axis labelling)
+        swap = P[:, 3] > P[:, 2]
+        a = np.where(swap, P[:, 3], P[:, 2])
+        b = np.where(swap, P[:, 2], P[:, 3])
+        ang = P[:, 4] + np.where(swap, 0.5 * np.pi, 0.0)
+        ca, sa = np.cos(ang)[:, None], np.sin(ang)[:, None]
+        u = uv[None, :, 0] * (a * s_max)[:, None]
+        v = uv[None, :, 1] * (b * s_max)[:, None]
+        pts = np.stack([P[:, 0, None] + ca * u - sa * v, P[:, 1, None] + sa * u + ca * v], -1)
+        self.sample_points = pts  # (N, M, 2) px
+        self.sampling_scale = s_max  # (N,) outermost level radius per detection
+        self._phi0 = np.einsum("mk,mk->m", uv, uv)[None, :] * (s_max**2)[:, None] - 1.0
+        cam = self.camera
+        nT = np.ones((self.n, 3, self._M))  # normalised camera coordinates K^-1 (x, y, 1)
+        nT[:, 0] = (pts[..., 0] - cam.cx) / cam.fx
+        nT[:, 1] = (pts[..., 1] - cam.cy) / cam.fy
+        self._nT = nT
+        self._n_p1 = self._nT[:, _P1]
+        self._n_p2 = self._nT[:, _P2]
+
+    def _metric_dim(self) -> int:
+        from factors import metrics
+
+        return int(metrics.residual_size(self.metric, **self.options))
+
+    # ------------------------------------------------------------------ evaluation
+    def _camera_frame(
+        self, world_from_camera: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``A`` (N,3,3), centres ``c_c`` (N,3) m, ``S_c`` (N,3,3), depth margins (N,) m."""
+        Rwc = world_from_camera[:3, :3]
+        t = -(world_from_camera[:3, 3] @ Rwc)  # camera_from_world translation
+        c = self._centers @ Rwc + t
+        RL = Rwc.T @ self._L
+        S = RL @ RL.transpose(0, 2, 1)
+        A = S - c[:, :, None] * c[:, None, :]
+        margins = c[:, 2] - np.sqrt(S[:, 2, 2])
+        return A, c, S, margins
+
+    def evaluate(self, world_from_camera: np.ndarray, jacobian: bool = True) -> PoseEvaluation:
+        """Residuals (and Jacobians if ``jacobian``) of all pairs at ``world_from_camera`` (4x4).
+
+        Memoised on the pose value: repeated calls at the same pose cost one comparison.
+        """
+        T = np.asarray(world_from_camera, dtype=float)
+        key = T.tobytes()
+        if key == self._cache_key and (self._cache_jac or not jacobian):
+            return self._cache  # type: ignore[return-value]
+        jacobian = jacobian or self.eager_jacobian
+        if self.metric == "level_set":
+            ev = self._evaluate_level_set(T, jacobian)
+        elif self.metric in _CONIC_METRICS:
+            ev = self._evaluate_conic(T, jacobian)
+        else:
+            ev = self._evaluate_numeric(T, jacobian)
+        self._cache_key, self._cache_jac, self._cache = key, jacobian, ev
+        return ev
+
+    def _evaluate_level_set(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
+        A, c, S, margins = self._camera_frame(T)
+        valid = margins > self.min_depth_margin
+        all_valid = bool(valid.all())
+        if not all_valid:
+            A = A.copy()
+            A[~valid] = -np.eye(3)  # any invertible stand-in, rows replaced below
+        nT = self._nT
+        u = np.linalg.inv(A) @ nT  # (N, 3, M): A^-1 n
+        g = np.einsum("nkm,nkm->nm", nT, u)
+        s = A[:, 2, 2]
+        r = self._phi0 + s[:, None] * g
+        J = None
+        if jacobian:
+            # rows of d r / d xi, laid out (N, 6, M) then viewed as (N, M, 6)
+            Jt = np.empty((self.n, 6, self._M))
+            g2 = 2.0 * g
+            s2 = 2.0 * s
+            e3xa3 = A[:, _E3X_ROWS, 2] * _E3X_SIGN  # e3 x (A e3), (N, 3)
+            n_x_u = self._n_p1 * u[:, _P2] - self._n_p2 * u[:, _P1]  # n x u, (N, 3, M)
+            Jt[:, :3] = g2[:, None, :] * e3xa3[:, :, None] + s2[:, None, None] * n_x_u
+            cu = np.einsum("nk,nkm->nm", c, u) * s2[:, None]
+            Jt[:, 3:] = -cu[:, None, :] * u
+            Jt[:, 5] += g2 * c[:, 2, None]
+            J = Jt.transpose(0, 2, 1)
+        if not all_valid:
+            if J is not None:
+                J = np.ascontiguousarray(J)
+            self._apply_penalty(r, J, ~valid, c, S, margins)
+        return PoseEvaluation(r, J, valid, margins)
+
+    def _apply_penalty(
+        self, r: np.ndarray, J: np.ndarray | None, bad: np.ndarray, c: np.ndarray,
+        S: np.ndarray, margins: np.ndarray,
+    ) -> None:
+        """Overwrite rows ``bad`` of ``r`` (N, dim) / ``J`` (N, dim, 6) with the penalty."""
+        idx = np.flatnonzero(bad)
+        d = self.min_depth_margin - margins[idx]
+        ds = self._d_scale[idx]
+        r[idx] = (self._pen_amp * (1.0 + d / (d + ds)))[:, None]
+        if J is not None:
+            cb = c[idx]
+            s3 = S[idx, :, 2]
+            ext = np.sqrt(S[idx, 2, 2])
+            dm = np.zeros((idx.size, 6))
+            dm[:, 0] = -cb[:, 1] + s3[:, 1] / ext
+            dm[:, 1] = cb[:, 0] - s3[:, 0] / ext
+            dm[:, 5] = -1.0
+            coef = -self._pen_amp * ds / (d + ds) ** 2
+            J[idx] = (coef[:, None] * dm)[:, None, :]
+
+    # ------------------------------------------------------------------ conic metrics
+    def _init_conic(self) -> None:
+        """Detection constants of algebraic / frobenius / wasserstein (as factors.metrics)."""
+        P = self._det_params
+        self._det_vec5 = dual_conics_from_params(P).reshape(self.n, 9)[:, _VEC5]  # (N, 5)
+        # canonical (a >= b, angle + pi/2 when swapped) semi-axes and angle, as metrics does
+        swap = P[:, 3] > P[:, 2]
+        self._det_canon = np.stack([np.where(swap, P[:, 3], P[:, 2]),
+                                    np.where(swap, P[:, 2], P[:, 3]),
+                                    P[:, 4] + np.where(swap, 0.5 * np.pi, 0.0)], axis=1)
+
+    def _evaluate_conic(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
+        """Analytic residuals/Jacobians of the metrics that are smooth functions of the
+        normalised dual conic ``Cn = C* / (-C*[2,2])`` of the projection.
+
+        ``dC* = K dA K^T``; ``dCn = (dC* + Cn dC*[2,2]) / w`` with ``w = -C*[2,2]``;
+        ``mu = -Cn[:2, 2]``, ``Sigma = Cn[:2, :2] + mu mu^T``. Wasserstein uses the 2x2 closed
+        form ``Sigma^1/2 = (Sigma + d I) / t`` (``d = sqrt(det)``, ``t = sqrt(tr + 2 d)``).
+        """
+        A, c, S, margins = self._camera_frame(T)
+        valid = margins > self.min_depth_margin
+        all_valid = bool(valid.all())
+        if not all_valid:
+            A = A.copy()
+            A[~valid] = np.diag([1.0, 1.0, -1.0])  # stand-in ellipse, rows replaced below
+        K = self._K
+        Cs = K @ A @ K.T  # (N, 3, 3) C*
+        w = -Cs[:, 2, 2]
+        Cn = Cs / w[:, None, None]
+        dCn: np.ndarray | None = None
+        if jacobian:
+            G = np.empty((self.n, 6, 3, 3))
+            G[:, :3] = -np.einsum("kij,njl->nkil", _SKEW_BASIS, A)
+            G[:, 3:] = 0.0
+            idx = np.arange(3)
+            G[:, 3 + idx, idx, :] = c[:, None, :]
+            dA = G + G.transpose(0, 1, 3, 2)
+            dCs = K @ dA @ K.T  # (N, 6, 3, 3)
+            dCn = (dCs + Cn[:, None] * dCs[:, :, 2, 2, None, None]) / w[:, None, None, None]
+        if self.metric in ("algebraic", "frobenius"):
+            r = self._det_vec5 - Cn.reshape(self.n, 9)[:, _VEC5]
+            J = None
+            if dCn is not None:
+                J = -dCn.reshape(self.n, 6, 9)[:, :, _VEC5].transpose(0, 2, 1)
+            if self.metric == "frobenius":
+                r = r * _FRO_W
+                if J is not None:
+                    J = J * _FRO_W[None, :, None]
+        else:
+            r, J = self._wasserstein(Cn, dCn)
+        if J is not None:
+            J = np.ascontiguousarray(J)
+        if not all_valid:
+            self._apply_penalty(r, J, ~valid, c, S, margins)
+        return PoseEvaluation(r, J, valid, margins)
+
+    def _wasserstein(
+        self, Cn: np.ndarray, dCn: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """factors.metrics' W2 residual ``[mu_D - mu_P, a_D - a_P, b_D - b_P, k sin(delta)]``
+        (canonical semi-axes ``a >= b``, ``delta`` the angle between the major axes mod pi,
+        ``k = sqrt(2 P / (Q + sqrt(Q^2 - P sin^2 delta)))``, ``P = (a_D^2 - b_D^2)(a_P^2 -
+        b_P^2)``, ``Q = a_D a_P + b_D b_P``) and its pose Jacobian through ``Sigma_P``.
+
+        At a circular projection (the major-axis angle is undefined) or a circular detection
+        (``k = 0``) the angle terms of the Jacobian are set to 0 (the metric is not
+        differentiable there).
+        """
+        mu = -Cn[:, :2, 2]
+        s00 = Cn[:, 0, 0] + mu[:, 0] ** 2
+        s01 = Cn[:, 0, 1] + mu[:, 0] * mu[:, 1]
+        s11 = Cn[:, 1, 1] + mu[:, 1] ** 2
+        h, m = 0.5 * (s00 - s11), 0.5 * (s00 + s11)
+        rho = np.sqrt(h * h + s01 * s01)
+        a2, b2 = np.sqrt(m + rho), np.sqrt(np.maximum(m - rho, 0.0))
+        t2 = 0.5 * np.arctan2(s01, h)
+        a1, b1, t1 = self._det_canon.T
+        delta = (t1 - t2 + 0.5 * np.pi) % np.pi - 0.5 * np.pi
+        sn, cs = np.sin(delta), np.cos(delta)
+        P = (a1 * a1 - b1 * b1) * (a2 * a2 - b2 * b2)
+        Q = a1 * a2 + b1 * b2
+        Rq = np.sqrt(np.maximum(Q * Q - P * sn * sn, 0.0))
+        D = Q + Rq
+        k = np.sqrt(2.0 * P / D)
+        mu_d = self._det_params[:, :2]
+        r = np.stack([mu_d[:, 0] - mu[:, 0], mu_d[:, 1] - mu[:, 1], a1 - a2, b1 - b2, k * sn],
+                     axis=1)
+        if dCn is None:
+            return r, None
+        col = (slice(None), None)  # (N,) -> (N, 1) against the 6 tangent directions
+        dmu = -dCn[:, :, :2, 2]
+        m0, m1 = mu[:, 0][col], mu[:, 1][col]
+        ds00 = dCn[:, :, 0, 0] + 2.0 * m0 * dmu[..., 0]
+        ds01 = dCn[:, :, 0, 1] + m0 * dmu[..., 1] + m1 * dmu[..., 0]
+        ds11 = dCn[:, :, 1, 1] + 2.0 * m1 * dmu[..., 1]
+        dh, dm = 0.5 * (ds00 - ds11), 0.5 * (ds00 + ds11)
+        tiny = 1e-12 * m
+        round_proj = rho <= tiny
+        rho_s = np.where(round_proj, 1.0, rho)[col]
+        drho = (h[col] * dh + s01[col] * ds01) / rho_s
+        da2 = (dm + drho) / (2.0 * a2[col])
+        db2 = (dm - drho) / (2.0 * np.maximum(b2, 1e-300)[col])
+        dt2 = np.where(round_proj[col], 0.0, 0.5 * (h[col] * ds01 - s01[col] * dh) / rho_s**2)
+        ddelta = -dt2
+        dP = ((a1 * a1 - b1 * b1)[col]) * (2.0 * a2[col] * da2 - 2.0 * b2[col] * db2)
+        dQ = a1[col] * da2 + b1[col] * db2
+        Rs = np.where(Rq > 0, Rq, 1.0)[col]
+        dR = (2.0 * Q[col] * dQ - dP * (sn * sn)[col] - 2.0 * (P * sn * cs)[col] * ddelta) / (
+            2.0 * Rs)
+        zero_k = k <= 1e-150
+        ks = np.where(zero_k, 1.0, k)[col]
+        dk = np.where(zero_k[col], 0.0,
+                      (dP / D[col] - P[col] * (dQ + dR) / (D * D)[col]) / ks)
+        dks = dk * sn[col] + (k * cs)[col] * ddelta
+        J = np.stack([-dmu[..., 0], -dmu[..., 1], -da2, -db2, dks], axis=1)  # (N, 5, 6)
+        return r, J
+
+    # ------------------------------------------------------------------ generic metrics
+    def _metric_rows(self, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Residual rows (N, dim) via factors.metrics.residual, and validity (N,)."""
+        from factors import metrics
+
+        projs = self._projections(T)
+        r = np.empty((self.n, self.dim))
+        valid = np.zeros(self.n, dtype=bool)
+        for j, p in enumerate(projs):
+            if p is None:
+                continue
+            try:
+                rj = np.asarray(metrics.residual(self.metric, self.detections[j], p,
+                                                 **self.options), dtype=float)
+            except (DegenerateProjectionError, GeometryError):
+                continue
+            if rj.shape != (self.dim,) or not np.all(np.isfinite(rj)):
+                continue
+            r[j] = rj
+            valid[j] = True
+        return r, valid
+
+    def _evaluate_numeric(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
+        _, c, S, margins = self._camera_frame(T)
+        r, valid = self._metric_rows(T)
+        J = None
+        if jacobian:
+            h = self.numeric_step
+            J = np.zeros((self.n, self.dim, 6))
+            for k in range(6):
+                e = np.zeros(6)
+                e[k] = h
+                rp, vp = self._metric_rows(T @ expmap_pose3(e))
+                rm, vm = self._metric_rows(T @ expmap_pose3(-e))
+                both = vp & vm
+                J[both, :, k] = (rp[both] - rm[both]) / (2 * h)
+                only_p = vp & ~vm & valid
+                J[only_p, :, k] = (rp[only_p] - r[only_p]) / h
+                only_m = vm & ~vp & valid
+                J[only_m, :, k] = (r[only_m] - rm[only_m]) / h
+        if not valid.all():
+            self._apply_penalty(r, J, ~valid, c, S, margins)
+        return PoseEvaluation(r, J, valid, margins)
+
+    # ------------------------------------------------------------------ reporting
+    def costs(self, world_from_camera: np.ndarray) -> np.ndarray:
+        """Unweighted cost ``||r_j||^2`` of each pair at a pose (N,); penalty cost if invalid."""
+        ev = self.evaluate(world_from_camera, jacobian=False)
+        return np.einsum("nm,nm->n", ev.residuals, ev.residuals)
+
+
+def _check_pose(T: object, name: str) -> np.ndarray:
+    try:
+        M = np.array(T, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise GeometryError(f"{name} must be a numeric 4x4 matrix") from exc
+    if M.shape != (4, 4) or not np.all(np.isfinite(M)):
+        raise GeometryError(f"{name} must be a finite 4x4 matrix, got shape {M.shape}")
+    if np.max(np.abs(M[3] - [0, 0, 0, 1])) > 1e-9:
+        raise GeometryError(f"{name} last row must be [0, 0, 0, 1], got {M[3].tolist()}")
+    R = M[:3, :3]
+    err = float(np.max(np.abs(R @ R.T - np.eye(3))))
+    if err > 1e-6 or np.linalg.det(R) < 0:
+        raise GeometryError(
+            f"{name} rotation block is not a proper rotation (max|R R^T - I| = {err:.3g})"
+        )
+    return M
+
+
+def check_pose(T: object, name: str = "world_from_camera") -> np.ndarray:
+    """Validate a 4x4 rigid transform (finite, last row [0,0,0,1], rotation within 1e-6)."""
+    return _check_pose(T, name)
+

@@ -1,0 +1,118 @@
+"""A map compiled for the solver: per-object numpy arrays, computed once per (map id, version).
+
+Frames and units: everything is in the map's world frame, metres. ``shape_matrices[i]`` is
+``R_i diag(axes_i^2) R_i^T`` (m^2) and ``dual_quadrics[i]`` is
+``Q*_i = T_i diag(a^2, b^2, c^2, -1) T_i^T`` with ``T_i = [[R_i, center_i], [0, 1]]``, the
+conventions of :mod:`factors.geometry`. Object ``i`` in every array is ``scene_map.objects[i]``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from factors.geometry import Ellipsoid
+from maps.model import SceneMap
+
+__all__ = ["CompiledMap", "compile_map"]
+
+
+def _frozen(array: np.ndarray) -> np.ndarray:
+    array = np.ascontiguousarray(array, dtype=float) if array.dtype.kind == "f" else array
+    array.setflags(write=False)
+    return array
+
+
+@dataclass(frozen=True, eq=False)
+class CompiledMap:
+    """Immutable solver view of a :class:`SceneMap` (arrays are read-only).
+
+    Attributes:
+        scene_map: the source map (its ``version`` is the version compiled).
+        object_ids: ``(N,)`` object ids, in map order.
+        categories: ``(N,)`` category label of each object.
+        ellipsoids: ``(N,)`` the objects' :class:`Ellipsoid` (world frame).
+        centers: ``(N, 3)`` ellipsoid centres, world metres.
+        axes: ``(N, 3)`` semi-axes, metres.
+        rotations: ``(N, 3, 3)`` ellipsoid-to-world rotations.
+        shape_matrices: ``(N, 3, 3)`` ``R diag(axes^2) R^T``, m^2.
+        dual_quadrics: ``(N, 4, 4)`` dual quadrics ``Q*``.
+        indices_by_category: category -> ``int`` array of object indices (only categories that
+            have objects; ``indices_for`` returns an empty array for the others).
+    """
+
+    scene_map: SceneMap
+    object_ids: tuple[str, ...]
+    categories: tuple[str, ...]
+    ellipsoids: tuple[Ellipsoid, ...]
+    centers: np.ndarray
+    axes: np.ndarray
+    rotations: np.ndarray
+    shape_matrices: np.ndarray
+    dual_quadrics: np.ndarray
+    indices_by_category: dict[str, np.ndarray]
+
+    @property
+    def map_id(self) -> str:
+        return self.scene_map.map_id
+
+    @property
+    def version(self) -> int:
+        return self.scene_map.version
+
+    def __len__(self) -> int:
+        return len(self.object_ids)
+
+    def indices_for(self, category: str) -> np.ndarray:
+        """Object indices of ``category`` (empty ``int`` array if none)."""
+        found = self.indices_by_category.get(category)
+        return found if found is not None else np.zeros(0, dtype=np.intp)
+
+    def index_of(self, object_id: str) -> int:
+        """Position of ``object_id`` in the arrays; ``KeyError`` if absent."""
+        try:
+            return self.object_ids.index(object_id)
+        except ValueError:
+            raise KeyError(object_id) from None
+
+    def summary(self) -> dict[str, Any]:
+        return {"map_id": self.map_id, "version": self.version, "objects": len(self)}
+
+
+def compile_map(scene_map: SceneMap) -> CompiledMap:
+    """Precompute the solver's per-object arrays for ``scene_map`` (vectorised, O(N))."""
+    objects = scene_map.objects
+    n = len(objects)
+    ellipsoids = tuple(o.ellipsoid for o in objects)
+    centers = np.array([e.center for e in ellipsoids], dtype=float).reshape(n, 3)
+    axes = np.array([e.axes for e in ellipsoids], dtype=float).reshape(n, 3)
+    rotations = np.array([e.rotation for e in ellipsoids], dtype=float).reshape(n, 3, 3)
+    # M = R diag(axes^2) R^T, batched.
+    shape_matrices = np.einsum("nij,nj,nkj->nik", rotations, axes**2, rotations)
+    # Q* = T diag(a^2, b^2, c^2, -1) T^T = [[M - c c^T, -c], [-c^T, -1]].
+    dual_quadrics = np.empty((n, 4, 4))
+    dual_quadrics[:, :3, :3] = shape_matrices - centers[:, :, None] * centers[:, None, :]
+    dual_quadrics[:, :3, 3] = -centers
+    dual_quadrics[:, 3, :3] = -centers
+    dual_quadrics[:, 3, 3] = -1.0
+    categories = tuple(o.category for o in objects)
+    cats = np.array(categories, dtype=object)
+    indices_by_category: dict[str, np.ndarray] = {}
+    for category in dict.fromkeys(categories):
+        idx = np.flatnonzero(cats == category).astype(np.intp)
+        idx.setflags(write=False)
+        indices_by_category[category] = idx
+    return CompiledMap(
+        scene_map=scene_map,
+        object_ids=tuple(o.object_id for o in objects),
+        categories=categories,
+        ellipsoids=ellipsoids,
+        centers=_frozen(centers),
+        axes=_frozen(axes),
+        rotations=_frozen(rotations),
+        shape_matrices=_frozen(shape_matrices),
+        dual_quadrics=_frozen(dual_quadrics),
+        indices_by_category=indices_by_category,
+    )

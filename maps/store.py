@@ -1,0 +1,446 @@
+"""Versioned map storage over SQLAlchemy 2: SQLite (WAL, the embedded default) or PostgreSQL.
+
+``MapStore("sqlite:///path/quadloc.db")`` or ``MapStore("postgresql://user@host:5432/db")``
+(driven by psycopg 3). The schema is created and upgraded by Alembic migrations
+(``maps/migrations``), run by :meth:`MapStore.migrate` (automatically at construction unless
+``migrate=False``; idempotent, serialised between replicas on PostgreSQL by an advisory lock).
+
+Semantics
+---------
+* A map has versions 1, 2, ...; each version is immutable and stays readable until the map is
+  deleted. ``create`` makes version 1, ``update`` makes version ``n + 1``.
+* Optimistic concurrency: ``update(map_id, scene_map, expected_version)`` succeeds only if
+  ``expected_version`` is the latest version; otherwise :class:`VersionConflict` (carrying
+  ``current_version``). Of several concurrent updates naming the same version exactly one wins:
+  the latest-version row is advanced by a conditional ``UPDATE ... WHERE latest_version = n``
+  and the new version row is inserted under the primary key ``(map_id, version)``, both in one
+  transaction (SQLite: ``BEGIN IMMEDIATE``; PostgreSQL: the row lock of the ``UPDATE``).
+* Atomicity: every write is one transaction, so a crash mid-write leaves nothing visible.
+* ``delete(map_id)`` deletes the map and **all** its versions. A later ``create`` with the same
+  id starts again at version 1 (its content hash differs unless the content is identical).
+* ``content_hash`` is the hex sha256 of the version's canonical JSON (see
+  :func:`maps.model.canonical_json`; it covers ``map_id`` and ``version``) — the HTTP ETag.
+* ``compiled(map_id, version)`` returns the solver arrays (:class:`maps.compiled.CompiledMap`),
+  cached per process by ``(map_id, version, content_hash)``: one small indexed query per call
+  to resolve the version (so replicas see each other's updates), no JSON parsing on a hit.
+"""
+
+from __future__ import annotations
+
+import builtins
+import json
+import threading
+from collections import OrderedDict
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, replace
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import sqlalchemy as sa
+from sqlalchemy import event
+from sqlalchemy.engine import Connection, Engine
+from sqlalchemy.exc import IntegrityError, SQLAlchemyError
+from sqlalchemy.pool import StaticPool
+
+from maps.compiled import CompiledMap, compile_map
+from maps.errors import (
+    MapAlreadyExists,
+    MapNotFound,
+    MapStoreError,
+    StoreUnavailable,
+    VersionConflict,
+)
+from maps.model import MapValidationError, SceneMap, canonical_json, scene_map_from_dict
+
+__all__ = [
+    "MapAlreadyExists",
+    "MapNotFound",
+    "MapStore",
+    "MapStoreError",
+    "MapSummary",
+    "StoreUnavailable",
+    "StoredMap",
+    "VersionConflict",
+    "normalize_url",
+]
+
+MIGRATIONS_DIR = Path(__file__).resolve().parent / "migrations"
+#: Key of the PostgreSQL advisory lock taken while migrating (any constant 64-bit integer).
+_PG_MIGRATION_LOCK = 0x51_4C_4F_43_4D_41_50  # "QLOCMAP"
+#: SQLite busy timeout (seconds): how long a writer waits for another writer's lock.
+SQLITE_BUSY_TIMEOUT_S = 30.0
+#: Compiled maps kept per store (least recently used evicted first).
+COMPILED_CACHE_SIZE = 64
+
+_metadata = sa.MetaData()
+maps_table = sa.Table(
+    "quadloc_maps",
+    _metadata,
+    sa.Column("map_id", sa.String(128), primary_key=True),
+    sa.Column("name", sa.String(256), nullable=False),
+    sa.Column("latest_version", sa.Integer, nullable=False),
+    sa.Column("created_at", sa.DateTime(timezone=True), nullable=False),
+    sa.Column("updated_at", sa.DateTime(timezone=True), nullable=False),
+)
+versions_table = sa.Table(
+    "quadloc_map_versions",
+    _metadata,
+    sa.Column("map_id", sa.String(128), sa.ForeignKey("quadloc_maps.map_id", ondelete="CASCADE"),
+              primary_key=True),
+    sa.Column("version", sa.Integer, primary_key=True),
+    sa.Column("content", sa.Text, nullable=False),
+    sa.Column("content_hash", sa.String(64), nullable=False),
+    sa.Column("created_at", sa.DateTime(timezone=True), nullable=False),
+)
+
+
+@dataclass(frozen=True)
+class StoredMap:
+    """One stored version: the map (with its ``version``), its content hash, creation time (UTC)."""
+
+    scene_map: SceneMap
+    content_hash: str
+    created_at: datetime
+
+    @property
+    def map_id(self) -> str:
+        return self.scene_map.map_id
+
+    @property
+    def version(self) -> int:
+        return self.scene_map.version
+
+
+@dataclass(frozen=True)
+class MapSummary:
+    """A map in :meth:`MapStore.list`: its latest version, that version's hash, times (UTC)."""
+
+    map_id: str
+    name: str
+    latest_version: int
+    content_hash: str
+    updated_at: datetime
+    created_at: datetime
+
+
+def normalize_url(url: str) -> str:
+    """SQLAlchemy URL with the psycopg 3 driver for PostgreSQL (``postgresql://`` or
+    ``postgres://`` -> ``postgresql+psycopg://``); other URLs unchanged."""
+    if not isinstance(url, str) or not url:
+        raise ValueError("database url must be a non-empty string, e.g. sqlite:///quadloc.db")
+    for prefix in ("postgresql://", "postgres://"):
+        if url.startswith(prefix):
+            return "postgresql+psycopg://" + url[len(prefix):]
+    return url
+
+
+def _utc(value: datetime) -> datetime:
+    """Datetimes come back naive from SQLite: they are stored in UTC."""
+    return value.replace(tzinfo=UTC) if value.tzinfo is None else value.astimezone(UTC)
+
+
+def _now() -> datetime:
+    return datetime.now(UTC)
+
+
+class MapStore:
+    """Versioned map store. Thread-safe; one instance per process is enough (it pools).
+
+    Args:
+        url: ``sqlite:///path`` (file; WAL mode), ``sqlite://`` (in-memory, one connection;
+            for tests), or ``postgresql://...`` / ``postgresql+psycopg://...``.
+        migrate: run the Alembic migrations up to head at construction (default True).
+        engine_options: extra keyword arguments for :func:`sqlalchemy.create_engine`.
+    """
+
+    def __init__(self, url: str, *, migrate: bool = True,
+                 engine_options: dict[str, Any] | None = None) -> None:
+        self.url = normalize_url(url)
+        parsed = sa.engine.make_url(self.url)
+        self.dialect = parsed.get_backend_name()
+        if self.dialect not in ("sqlite", "postgresql"):
+            raise ValueError(f"database url: unsupported backend {self.dialect!r} "
+                             f"(use sqlite:/// or postgresql://)")
+        options: dict[str, Any] = dict(engine_options or {})
+        if self.dialect == "sqlite":
+            in_memory = parsed.database in (None, "", ":memory:")
+            connect_args = {"timeout": SQLITE_BUSY_TIMEOUT_S, "check_same_thread": False}
+            options.setdefault("connect_args", {}).update(connect_args)
+            if in_memory:
+                options.setdefault("poolclass", StaticPool)
+            elif parsed.database:
+                Path(parsed.database).expanduser().parent.mkdir(parents=True, exist_ok=True)
+        else:
+            options.setdefault("pool_pre_ping", True)
+        self.engine: Engine = sa.create_engine(self.url, **options)
+        if self.dialect == "sqlite":
+            _configure_sqlite(self.engine, wal=not in_memory)
+        self._cache: OrderedDict[tuple[str, int, str], CompiledMap] = OrderedDict()
+        self._cache_lock = threading.Lock()
+        if migrate:
+            self.migrate()
+
+    # ------------------------------------------------------------------ lifecycle
+    def migrate(self) -> None:
+        """Upgrade the schema to the newest Alembic revision (idempotent)."""
+        from alembic import command
+        from alembic.config import Config
+
+        cfg = Config()
+        cfg.set_main_option("script_location", str(MIGRATIONS_DIR))
+        with self._write() as conn:
+            if self.dialect == "postgresql":
+                conn.execute(sa.text("SELECT pg_advisory_xact_lock(:k)"),
+                             {"k": _PG_MIGRATION_LOCK})
+            cfg.attributes["connection"] = conn
+            command.upgrade(cfg, "head")
+
+    def close(self) -> None:
+        """Release the connection pool."""
+        self.engine.dispose()
+
+    def __enter__(self) -> MapStore:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def ping(self) -> None:
+        """Raise :class:`StoreUnavailable` if the database cannot be queried."""
+        try:
+            with self.engine.connect() as conn:
+                conn.execute(sa.text("SELECT 1")).scalar_one()
+        except SQLAlchemyError as exc:
+            raise StoreUnavailable(f"database unreachable: {exc.__class__.__name__}: "
+                                   f"{str(exc).splitlines()[0]}") from exc
+
+    # ------------------------------------------------------------------ transactions
+    @contextmanager
+    def _write(self) -> Iterator[Connection]:
+        """A write transaction (SQLite: ``BEGIN IMMEDIATE``, taking the write lock up front)."""
+        with self.engine.connect().execution_options(quadloc_write=True) as conn, conn.begin():
+            yield conn
+
+    @contextmanager
+    def _read(self) -> Iterator[Connection]:
+        with self.engine.connect() as conn, conn.begin():
+            yield conn
+
+    # ------------------------------------------------------------------ writes
+    def create(self, scene_map: SceneMap) -> StoredMap:
+        """Store ``scene_map`` as version 1 of a new map (its ``version`` field is ignored).
+
+        Raises :class:`MapAlreadyExists` if the id is taken.
+        """
+        _check_scene_map(scene_map)
+        stored = replace(scene_map, version=1)
+        text = canonical_json(stored)
+        digest = _sha256(text)
+        now = _now()
+        try:
+            with self._write() as conn:
+                exists = conn.execute(sa.select(maps_table.c.map_id).where(
+                    maps_table.c.map_id == stored.map_id)).first()
+                if exists is not None:
+                    raise MapAlreadyExists(stored.map_id)
+                conn.execute(maps_table.insert().values(
+                    map_id=stored.map_id, name=stored.name, latest_version=1,
+                    created_at=now, updated_at=now))
+                self._insert_version(conn, stored.map_id, 1, text, digest, now)
+        except IntegrityError as exc:  # a concurrent create won the race
+            raise MapAlreadyExists(stored.map_id) from exc
+        return StoredMap(stored, digest, now)
+
+    def update(self, map_id: str, scene_map: SceneMap, expected_version: int) -> StoredMap:
+        """Store ``scene_map`` as version ``expected_version + 1`` of ``map_id``.
+
+        Raises :class:`MapNotFound`, :class:`VersionConflict` if ``expected_version`` is not the
+        latest version, :class:`MapValidationError` if ``scene_map.map_id != map_id``.
+        """
+        _check_scene_map(scene_map)
+        if scene_map.map_id != map_id:
+            raise MapValidationError([{"field": "map_id", "message":
+                                       f"must be {map_id!r} (the map being updated), got "
+                                       f"{scene_map.map_id!r}"}])
+        if isinstance(expected_version, bool) or not isinstance(expected_version, int):
+            raise ValueError(f"expected_version must be an integer, got {expected_version!r}")
+        new_version = expected_version + 1
+        stored = replace(scene_map, version=new_version)
+        text = canonical_json(stored)
+        digest = _sha256(text)
+        now = _now()
+        try:
+            with self._write() as conn:
+                result = conn.execute(
+                    maps_table.update()
+                    .where(maps_table.c.map_id == map_id,
+                           maps_table.c.latest_version == expected_version)
+                    .values(latest_version=new_version, name=stored.name, updated_at=now))
+                if result.rowcount != 1:
+                    current = conn.execute(sa.select(maps_table.c.latest_version).where(
+                        maps_table.c.map_id == map_id)).scalar_one_or_none()
+                    if current is None:
+                        raise MapNotFound(map_id)
+                    raise VersionConflict(map_id, expected_version, int(current))
+                self._insert_version(conn, map_id, new_version, text, digest, now)
+        except IntegrityError as exc:  # (map_id, version) taken: another writer won
+            current = self._latest_version(map_id)
+            if current is None:
+                raise MapNotFound(map_id) from exc
+            raise VersionConflict(map_id, expected_version, current) from exc
+        return StoredMap(stored, digest, now)
+
+    def _insert_version(self, conn: Connection, map_id: str, version: int, content: str,
+                        digest: str, now: datetime) -> None:
+        """Insert one immutable version row (inside the caller's transaction)."""
+        conn.execute(versions_table.insert().values(
+            map_id=map_id, version=version, content=content, content_hash=digest,
+            created_at=now))
+
+    def delete(self, map_id: str) -> None:
+        """Delete the map and all its versions. Raises :class:`MapNotFound`."""
+        with self._write() as conn:
+            conn.execute(versions_table.delete().where(versions_table.c.map_id == map_id))
+            result = conn.execute(maps_table.delete().where(maps_table.c.map_id == map_id))
+            if result.rowcount != 1:
+                raise MapNotFound(map_id)
+        with self._cache_lock:
+            for key in [k for k in self._cache if k[0] == map_id]:
+                del self._cache[key]
+
+    # ------------------------------------------------------------------ reads
+    def _latest_version(self, map_id: str) -> int | None:
+        with self._read() as conn:
+            v = conn.execute(sa.select(maps_table.c.latest_version).where(
+                maps_table.c.map_id == map_id)).scalar_one_or_none()
+        return None if v is None else int(v)
+
+    def _version_query(self, map_id: str, version: int | None, *columns: Any) -> Any:
+        if version is None:
+            return (sa.select(*columns)
+                    .select_from(versions_table.join(
+                        maps_table, sa.and_(maps_table.c.map_id == versions_table.c.map_id,
+                                            maps_table.c.latest_version
+                                            == versions_table.c.version)))
+                    .where(versions_table.c.map_id == map_id))
+        return sa.select(*columns).where(versions_table.c.map_id == map_id,
+                                         versions_table.c.version == version)
+
+    @staticmethod
+    def _check_version(version: int | None) -> None:
+        if version is not None and (isinstance(version, bool) or not isinstance(version, int)
+                                    or version < 1):
+            raise ValueError(f"version must be a positive integer or None, got {version!r}")
+
+    def get(self, map_id: str, version: int | None = None) -> StoredMap:
+        """The given version of a map (the latest if ``version`` is None). :class:`MapNotFound`."""
+        self._check_version(version)
+        v = versions_table.c
+        with self._read() as conn:
+            row = conn.execute(self._version_query(
+                map_id, version, v.version, v.content, v.content_hash, v.created_at)).first()
+        if row is None:
+            raise MapNotFound(map_id, version)
+        scene_map = scene_map_from_dict(json.loads(row.content), version=int(row.version))
+        return StoredMap(scene_map, row.content_hash, _utc(row.created_at))
+
+    def versions(self, map_id: str) -> builtins.list[int]:
+        """All stored version numbers of a map, ascending. :class:`MapNotFound`."""
+        with self._read() as conn:
+            rows = conn.execute(sa.select(versions_table.c.version)
+                                .where(versions_table.c.map_id == map_id)
+                                .order_by(versions_table.c.version)).scalars().all()
+        if not rows:
+            raise MapNotFound(map_id)
+        return [int(r) for r in rows]
+
+    def list(self) -> builtins.list[MapSummary]:
+        """Every map with its latest version, ordered by ``map_id``."""
+        m, v = maps_table.c, versions_table.c
+        query = (sa.select(m.map_id, m.name, m.latest_version, v.content_hash, m.updated_at,
+                           m.created_at)
+                 .select_from(maps_table.join(versions_table, sa.and_(
+                     v.map_id == m.map_id, v.version == m.latest_version)))
+                 .order_by(m.map_id))
+        with self._read() as conn:
+            rows = conn.execute(query).all()
+        return [MapSummary(r.map_id, r.name, int(r.latest_version), r.content_hash,
+                           _utc(r.updated_at), _utc(r.created_at)) for r in rows]
+
+    def compiled(self, map_id: str, version: int | None = None) -> CompiledMap:
+        """Solver arrays of a map version (latest if None), cached per process.
+
+        Raises :class:`MapNotFound`.
+        """
+        self._check_version(version)
+        v = versions_table.c
+        with self._read() as conn:
+            row = conn.execute(self._version_query(map_id, version, v.version,
+                                                   v.content_hash)).first()
+        if row is None:
+            raise MapNotFound(map_id, version)
+        key = (map_id, int(row.version), str(row.content_hash))
+        with self._cache_lock:
+            hit = self._cache.get(key)
+            if hit is not None:
+                self._cache.move_to_end(key)
+                return hit
+        stored = self.get(map_id, key[1])
+        if stored.content_hash != key[2]:  # deleted and re-created in between: retry once
+            return self.compiled(map_id, version)
+        result = compile_map(stored.scene_map)
+        with self._cache_lock:
+            self._cache[key] = result
+            self._cache.move_to_end(key)
+            while len(self._cache) > COMPILED_CACHE_SIZE:
+                self._cache.popitem(last=False)
+        return result
+
+    def cache_info(self) -> dict[str, int]:
+        """Number of compiled maps currently cached."""
+        with self._cache_lock:
+            return {"entries": len(self._cache), "capacity": COMPILED_CACHE_SIZE}
+
+
+def _sha256(text: str) -> str:
+    import hashlib
+
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def _check_scene_map(scene_map: object) -> None:
+    if not isinstance(scene_map, SceneMap):
+        raise MapValidationError([{"field": "$", "message":
+                                   f"expected a SceneMap, got {type(scene_map).__name__}"}])
+
+
+def _configure_sqlite(engine: Engine, *, wal: bool) -> None:
+    """Pragmas on every new connection; explicit BEGIN (IMMEDIATE for writes).
+
+    pysqlite's own transaction handling is turned off (``isolation_level = None``) so that
+    SQLAlchemy's ``begin`` emits our BEGIN: writers take the write lock when the transaction
+    starts, so two writers queue on the busy timeout instead of failing with a lock upgrade
+    error; readers never block in WAL mode.
+    """
+
+    @event.listens_for(engine, "connect")
+    def _on_connect(dbapi_connection: Any, _record: Any) -> None:
+        dbapi_connection.isolation_level = None
+        cur = dbapi_connection.cursor()
+        try:
+            if wal:
+                cur.execute("PRAGMA journal_mode=WAL")
+                cur.execute("PRAGMA synchronous=NORMAL")
+            cur.execute("PRAGMA foreign_keys=ON")
+            cur.execute(f"PRAGMA busy_timeout={int(SQLITE_BUSY_TIMEOUT_S * 1000)}")
+        finally:
+            cur.close()
+
+    @event.listens_for(engine, "begin")
+    def _on_begin(conn: Connection) -> None:
+        if conn.get_execution_options().get("quadloc_write"):
+            conn.exec_driver_sql("BEGIN IMMEDIATE")
+        else:
+            conn.exec_driver_sql("BEGIN")

@@ -1,0 +1,339 @@
+"""Typed request/response models of the QuadLoc HTTP API (pydantic v2; no server imports).
+
+They mirror the server's wire format (``docs/openapi.json``):
+
+* Pixels with origin at the top-left pixel corner, +x right, +y down. Ellipses are
+  ``{cx, cy, a, b, angle}``: centre px, **semi**-axes px (``a`` along ``angle``), ``angle`` in
+  **radians** from +x towards +y. A :class:`Box` ``{xmin, ymin, xmax, ymax}`` is turned into its
+  inscribed axis-aligned ellipse by the server.
+* ``sigma`` is the detector's predicted uncertainty (> 0, cost weight ``1/sigma``);
+  ``log_variance`` is ``alpha = log sigma^2`` (``sigma = exp(alpha / 2)``). At most one.
+* Poses are ``world_from_camera`` (the camera's pose in the map frame, metres) as a unit
+  ``quaternion_wxyz`` (scalar first, ``w >= 0``) + ``translation_m`` and a 4x4 ``matrix``, with
+  camera axes ``opencv`` (+X right, +Y down, +Z forward) or ``opengl`` (ARKit/ARCore: +Y up,
+  -Z forward) as asked by ``LocalizeOptions.output_convention``.
+* Covariances are 6x6 in GTSAM Pose3 tangent order ``[omega_x, omega_y, omega_z, v_x, v_y,
+  v_z]`` (radians, metres), right perturbation ``T exp(xi)``, in the camera (body) frame.
+
+Request models reject unknown fields and non-finite numbers *before* anything is sent (so a
+typo such as ``sigm=`` fails at once, naming the field). Response models accept fields added by
+newer servers. Numpy scalars and arrays are accepted where floats / lists are expected.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    model_validator,
+)
+
+__all__ = [
+    "METRICS",
+    "ROBUST_KERNELS",
+    "BatchLocalizeResponse",
+    "Box",
+    "Camera",
+    "Covariance",
+    "Detection",
+    "Ellipse",
+    "Inlier",
+    "LocalizeOptions",
+    "LocalizeRequest",
+    "LocalizeResponse",
+    "MapRecord",
+    "MapSummary",
+    "Pose",
+    "PoseInput",
+    "PosePrior",
+]
+
+#: The nine refinement metrics the server accepts as ``LocalizeOptions.metric``.
+METRICS = (
+    "iou", "giou", "bbox", "qbbox", "algebraic", "frobenius", "wasserstein", "bhattacharyya",
+    "level_set",
+)
+#: Robust kernels accepted as ``LocalizeOptions.robust``.
+ROBUST_KERNELS = ("huber", "cauchy", "geman_mcclure")
+
+Metric = Literal[
+    "iou", "giou", "bbox", "qbbox", "algebraic", "frobenius", "wasserstein", "bhattacharyya",
+    "level_set",
+]
+RobustKernel = Literal["huber", "cauchy", "geman_mcclure"]
+Convention = Literal["opencv", "opengl"]
+
+
+def _plain(value: Any) -> Any:
+    """numpy scalars/arrays -> Python floats/lists (so ``np.float32`` and ``T[:3, 3]`` work)."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+Float = Annotated[float, BeforeValidator(_plain)]
+FloatList = Annotated[list[Float], BeforeValidator(_plain)]
+Matrix = Annotated[list[FloatList], BeforeValidator(_plain)]
+
+_REQUEST = ConfigDict(extra="forbid", allow_inf_nan=False, frozen=True)
+_RESPONSE = ConfigDict(extra="allow", frozen=True)
+
+
+# ----------------------------------------------------------------------------------- requests
+
+
+class Ellipse(BaseModel):
+    """Image ellipse: centre ``(cx, cy)`` px (origin top-left pixel corner, +y down), SEMI-axes
+    ``a`` (along ``angle``) and ``b`` px, ``angle`` radians from +x towards +y."""
+
+    model_config = _REQUEST
+    cx: Float
+    cy: Float
+    a: Float = Field(gt=0)
+    b: Float = Field(gt=0)
+    angle: Float = 0.0
+
+
+class Box(BaseModel):
+    """Axis-aligned detection box in px (origin top-left pixel corner)."""
+
+    model_config = _REQUEST
+    xmin: Float
+    ymin: Float
+    xmax: Float
+    ymax: Float
+
+    @model_validator(mode="after")
+    def _ordered(self) -> Box:
+        if not self.xmax > self.xmin:
+            raise ValueError(f"xmax ({self.xmax}) must be > xmin ({self.xmin})")
+        if not self.ymax > self.ymin:
+            raise ValueError(f"ymax ({self.ymax}) must be > ymin ({self.ymin})")
+        return self
+
+
+class Detection(BaseModel):
+    """One detected object: exactly one of ``ellipse`` / ``box``, its category ``label``, and
+    optionally ``sigma`` or ``log_variance`` (not both) and the detector ``score`` in [0, 1]."""
+
+    model_config = _REQUEST
+    label: str = Field(min_length=1)
+    ellipse: Ellipse | None = None
+    box: Box | None = None
+    sigma: Float | None = Field(default=None, gt=0)
+    log_variance: Float | None = None
+    score: Float | None = Field(default=None, ge=0, le=1)
+
+    @model_validator(mode="after")
+    def _one_shape(self) -> Detection:
+        if (self.ellipse is None) == (self.box is None):
+            raise ValueError("give exactly one of 'ellipse' or 'box'")
+        if self.sigma is not None and self.log_variance is not None:
+            raise ValueError("give at most one of 'sigma' or 'log_variance'")
+        return self
+
+
+class Camera(BaseModel):
+    """Pinhole intrinsics ``fx, fy, cx, cy`` (px, zero skew, undistorted detections) and the
+    image size ``width, height`` (px) of the image the detections come from."""
+
+    model_config = _REQUEST
+    fx: Float = Field(gt=0)
+    fy: Float = Field(gt=0)
+    cx: Float
+    cy: Float
+    width: int = Field(ge=1)
+    height: int = Field(ge=1)
+
+    @classmethod
+    def from_matrix(cls, K: np.ndarray, width: int, height: int) -> Camera:
+        """From a 3x3 intrinsic matrix ``K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]``."""
+        K = np.asarray(K, dtype=float)
+        if K.shape != (3, 3):
+            raise ValueError(f"K: expected shape (3, 3), got {K.shape}")
+        return cls(fx=K[0, 0], fy=K[1, 1], cx=K[0, 2], cy=K[1, 2], width=width, height=height)
+
+
+class PoseInput(BaseModel):
+    """A ``world_from_camera`` pose sent to the server: a 4x4 ``matrix`` OR ``quaternion_wxyz``
+    (scalar first) + ``translation_m`` (metres)."""
+
+    model_config = _REQUEST
+    quaternion_wxyz: FloatList | None = Field(default=None, min_length=4, max_length=4)
+    translation_m: FloatList | None = Field(default=None, min_length=3, max_length=3)
+    matrix: Matrix | None = Field(default=None, min_length=4, max_length=4)
+
+    @model_validator(mode="after")
+    def _one_form(self) -> PoseInput:
+        has_q = self.quaternion_wxyz is not None or self.translation_m is not None
+        if has_q == (self.matrix is not None):
+            raise ValueError("give either 'quaternion_wxyz' + 'translation_m' or 'matrix'")
+        if has_q and (self.quaternion_wxyz is None or self.translation_m is None):
+            raise ValueError("'quaternion_wxyz' and 'translation_m' go together")
+        if self.matrix is not None and any(len(row) != 4 for row in self.matrix):
+            raise ValueError("'matrix' must be 4x4")
+        return self
+
+
+class PosePrior(BaseModel):
+    """An optional prior ``world_from_camera`` with an optional 6x6 ``covariance`` ([omega, v],
+    body frame), in the camera axes ``convention`` (e.g. the AR session's tracking pose).
+    Build it from a 4x4 array with :meth:`from_matrix`."""
+
+    model_config = _REQUEST
+    world_from_camera: PoseInput
+    covariance: Matrix | None = None
+    convention: Convention = "opencv"
+
+    @classmethod
+    def from_matrix(
+        cls,
+        world_from_camera: np.ndarray,
+        covariance: np.ndarray | None = None,
+        convention: Convention = "opencv",
+    ) -> PosePrior:
+        T = np.asarray(world_from_camera, dtype=float)
+        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+            raise ValueError("world_from_camera: expected a finite 4x4 matrix")
+        cov = None
+        if covariance is not None:
+            cov = np.asarray(covariance, dtype=float)
+            if cov.shape != (6, 6) or not np.all(np.isfinite(cov)):
+                raise ValueError("covariance: expected a finite 6x6 matrix")
+            cov = cov.tolist()
+        return cls(world_from_camera=PoseInput(matrix=T.tolist()), covariance=cov,
+                   convention=convention)
+
+
+class LocalizeOptions(BaseModel):
+    """Solver options. ``None`` fields are not sent: the server's defaults apply (level-set
+    metric, RANSAC budget 300, inlier IoU 0.2, sigma weighting on, no robust kernel, OpenCV
+    output axes -- see docs/api.md)."""
+
+    model_config = _REQUEST
+    metric: Metric | None = None
+    ransac_max_hypotheses: int | None = Field(default=None, ge=1)
+    inlier_iou: Float | None = Field(default=None, gt=0, le=1)
+    min_inliers: int | None = Field(default=None, ge=2)
+    use_sigma: bool | None = None
+    robust: RobustKernel | None = None
+    robust_scale: Float | None = Field(default=None, gt=0)
+    unknown_label_policy: Literal["ignore", "error"] | None = None
+    seed: int | None = Field(default=None, ge=0)
+    time_budget_ms: Float | None = Field(default=None, gt=0)
+    max_iterations: int | None = Field(default=None, ge=1)
+    output_convention: Convention | None = None
+
+
+class LocalizeRequest(BaseModel):
+    """One frame: intrinsics, detections, optional prior, echoed ``frame_id``/``timestamp``."""
+
+    model_config = _REQUEST
+    camera: Camera
+    detections: list[Detection]
+    prior: PosePrior | None = None
+    frame_id: str | None = None
+    timestamp: Float | None = None
+    options: LocalizeOptions = Field(default_factory=LocalizeOptions)
+
+    def to_wire(self) -> dict[str, Any]:
+        """JSON body for the server (unset optional fields omitted)."""
+        return self.model_dump(mode="json", exclude_none=True)
+
+
+# ----------------------------------------------------------------------------------- responses
+
+
+class Pose(BaseModel):
+    """``world_from_camera``: the camera's pose in the map frame, with the camera axes
+    ``convention``. :meth:`as_matrix` gives the 4x4 numpy array."""
+
+    model_config = _RESPONSE
+    quaternion_wxyz: list[float]
+    translation_m: list[float]
+    matrix: list[list[float]]
+    convention: Convention = "opencv"
+
+    def as_matrix(self) -> np.ndarray:
+        """4x4 ``world_from_camera`` (float64)."""
+        return np.asarray(self.matrix, dtype=float)
+
+
+class Covariance(BaseModel):
+    """6x6 pose covariance; ``order`` names the rows/columns, ``frame`` states the convention."""
+
+    model_config = _RESPONSE
+    order: list[str]
+    frame: str = ""
+    matrix: list[list[float]]
+
+    def as_array(self) -> np.ndarray:
+        return np.asarray(self.matrix, dtype=float)
+
+
+class Inlier(BaseModel):
+    """A detection matched to a map object (``iou`` of detection vs projection, metric ``cost``)."""
+
+    model_config = _RESPONSE
+    detection_index: int
+    object_id: str
+    iou: float
+    cost: float
+
+
+class LocalizeResponse(BaseModel):
+    """Answer for one frame. ``localized: false`` with a ``reason`` is a normal answer."""
+
+    model_config = _RESPONSE
+    localized: bool
+    reason: str | None = None
+    world_from_camera: Pose | None = None
+    covariance: Covariance | None = None
+    confidence: float = 0.0
+    inliers: list[Inlier] = Field(default_factory=list)
+    metric: str | None = None
+    hypotheses_evaluated: int | None = None
+    used_prior: bool | None = None
+    map_id: str
+    map_version: int
+    timings_ms: dict[str, float] = Field(default_factory=dict)
+    frame_id: str | None = None
+    timestamp: float | None = None
+
+
+class BatchLocalizeResponse(BaseModel):
+    model_config = _RESPONSE
+    map_id: str
+    map_version: int
+    results: list[LocalizeResponse]
+
+
+class MapSummary(BaseModel):
+    """One entry of the map list: latest ``version`` and its ``content_hash`` (the ETag)."""
+
+    model_config = _RESPONSE
+    map_id: str
+    name: str
+    version: int
+    content_hash: str
+    updated_at: str | None = None
+
+
+class MapRecord(BaseModel):
+    """A stored map version: ``map`` is the document (docs/maps.md format); ``etag`` is the
+    response's ``ETag`` header (pass it back as ``if_match`` to update)."""
+
+    model_config = _RESPONSE
+    map_id: str
+    version: int
+    content_hash: str
+    created_at: str | None = None
+    map: dict[str, Any]
+    etag: str | None = None

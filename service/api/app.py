@@ -1,0 +1,138 @@
+"""The FastAPI application factory.
+
+``create_app(settings)`` builds a self-contained app: its own map store (migrated at creation,
+demo Chess map seeded as ``settings.default_map_id`` when absent), its own Prometheus registry,
+its own solver slots. Run it with ``quadloc serve`` or
+``uvicorn service.api.app:create_app --factory`` (settings from ``QUADLOC_*`` variables).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from typing import Any
+
+from fastapi import FastAPI
+from fastapi.openapi.utils import get_openapi
+
+from maps.demo import DEMO_MAP_ID, load_demo_map
+from maps.errors import MapAlreadyExists, MapNotFound
+from maps.store import MapStore
+from service.api.errors import PROBLEM_MEDIA_TYPE, install_error_handlers
+from service.api.metrics import ApiMetrics, MetricsAndLimitsMiddleware
+from service.api.routers import health, localize, maps
+from service.api.solver import Solver
+from service.settings import Settings
+
+__all__ = ["API_VERSION", "build_openapi", "create_app", "seed_demo_map"]
+
+log = logging.getLogger("quadloc.api")
+
+API_VERSION = "1.0.0"
+
+DESCRIPTION = """\
+Object-based camera relocalization. A client sends the ellipses its object detector found in
+one image (label, optional uncertainty) and the camera intrinsics; QuadLoc matches them to a
+map of 3D ellipsoids and returns the camera pose `world_from_camera`, its covariance and a
+confidence.
+
+Conventions: pixels with origin at the top-left corner; ellipses `{cx, cy, a, b, angle}` with
+SEMI-axes and the angle in RADIANS from +x towards +y; poses `world_from_camera` (metres) as
+`quaternion_wxyz` (scalar first) + `translation_m` and a 4x4 matrix; OpenCV camera axes
+(+X right, +Y down, +Z forward) unless `output_convention: "opengl"` (ARKit/ARCore);
+covariances 6x6 in order [omega, v], camera (body) frame.
+
+Errors are RFC 9457 `application/problem+json` naming each offending field; "not localized" is a
+normal 200 answer. Authentication: `Authorization: Bearer <key>` or `X-API-Key: <key>` when the
+server has keys configured (scopes `read` and `write`).
+"""
+
+
+def seed_demo_map(store: MapStore, map_id: str = DEMO_MAP_ID) -> bool:
+    """Create the demo Chess map as ``map_id`` if absent. Returns True if it was created."""
+    try:
+        store.get(map_id)
+        return False
+    except MapNotFound:
+        pass
+    scene_map = load_demo_map()
+    if map_id != scene_map.map_id:
+        scene_map = type(scene_map).from_dict({**scene_map.to_dict(), "map_id": map_id})
+    try:
+        store.create(scene_map)
+    except MapAlreadyExists:  # another worker seeded it first
+        return False
+    return True
+
+
+def _tidy_openapi(schema: dict[str, Any]) -> dict[str, Any]:
+    """Problem responses: schema under application/problem+json only; drop FastAPI's default
+    HTTPValidationError (our 422s are problem documents)."""
+    for path_item in schema.get("paths", {}).values():
+        for op in path_item.values():
+            for code, resp in op.get("responses", {}).items():
+                content = resp.get("content", {})
+                if str(code).startswith(("4", "5")) and PROBLEM_MEDIA_TYPE in content:
+                    plain = content.pop("application/json", None)
+                    if plain and "schema" in plain:
+                        content[PROBLEM_MEDIA_TYPE]["schema"] = plain["schema"]
+    comps = schema.get("components", {}).get("schemas", {})
+    text = str(schema.get("paths"))
+    for name in ("HTTPValidationError", "ValidationError"):
+        if name in comps and f"#/components/schemas/{name}" not in text:
+            del comps[name]
+    return schema
+
+
+def build_openapi(app: FastAPI) -> dict[str, Any]:
+    """The app's OpenAPI document (cached on the app)."""
+    if app.openapi_schema is None:
+        schema = get_openapi(title=app.title, version=app.version, description=app.description,
+                             routes=app.routes, tags=app.openapi_tags)
+        app.openapi_schema = _tidy_openapi(schema)
+    return app.openapi_schema
+
+
+def create_app(settings: Settings | None = None, *, store: MapStore | None = None) -> FastAPI:
+    """Build the QuadLoc app (see the module docstring). ``store`` overrides the database URL."""
+    settings = settings or Settings()
+    keys = settings.keys
+    if store is None:
+        store = MapStore(settings.effective_database_url)
+    if (settings.seed_demo_map and settings.default_map_id
+            and seed_demo_map(store, settings.default_map_id)):
+        log.info("seeded the demo Chess map as %r", settings.default_map_id)
+
+    @asynccontextmanager
+    async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
+        if not keys:
+            log.warning("no API key configured (QUADLOC_API_KEYS): the API is OPEN and must "
+                        "only listen on loopback")
+        yield
+        store.close()
+
+    app = FastAPI(
+        title="QuadLoc", version=API_VERSION, description=DESCRIPTION, lifespan=lifespan,
+        openapi_tags=[
+            {"name": "localization", "description": "Camera pose from detected objects."},
+            {"name": "maps", "description": "Versioned ellipsoid maps."},
+            {"name": "operations", "description": "Probes and metrics."},
+        ],
+    )
+    metrics = ApiMetrics()
+    app.state.settings = settings
+    app.state.api_keys = keys
+    app.state.store = store
+    app.state.metrics = metrics
+    app.state.solver = Solver(metrics, settings.max_concurrent_solves,
+                              settings.solve_queue_timeout_s, settings.solve_time_budget_ms,
+                              settings.max_detections)
+    install_error_handlers(app)
+    app.include_router(localize.router)
+    app.include_router(maps.router)
+    app.include_router(health.router)
+    app.add_middleware(MetricsAndLimitsMiddleware, metrics=metrics,
+                       max_body_bytes=settings.max_body_bytes)
+    app.openapi = lambda: build_openapi(app)  # type: ignore[method-assign]
+    return app

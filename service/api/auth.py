@@ -1,0 +1,94 @@
+"""API-key access control: scopes ``read`` (localize, get/list maps) and ``write`` (create,
+update, delete maps; implies ``read``).
+
+A key is presented as ``Authorization: Bearer <key>`` or ``X-API-Key: <key>``. The service only
+knows the sha256 digests of its keys (``QUADLOC_API_KEYS``, see :mod:`service.settings`); the
+presented key is hashed and compared in constant time against every configured digest.
+With no key configured, every request is allowed (and the server only binds loopback).
+A malformed ``Authorization`` header, or two different keys in the two headers, is refused too.
+Missing or unknown key -> 401 (with ``WWW-Authenticate: Bearer``); known key without the scope
+-> 403.
+"""
+
+from __future__ import annotations
+
+import hmac
+from typing import Annotated
+
+from fastapi import Depends, Request
+from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
+
+from service.api.errors import ProblemError
+from service.settings import ApiKey, hash_api_key
+
+__all__ = ["ReadAccess", "WriteAccess", "authenticate", "require_scope"]
+
+_bearer = HTTPBearer(auto_error=False, description="API key as a bearer token.")
+_api_key_header = APIKeyHeader(name="X-API-Key", auto_error=False,
+                               description="API key in the X-API-Key header.")
+
+
+def authenticate(keys: tuple[ApiKey, ...], presented: str | None, scope: str) -> ApiKey | None:
+    """Check ``presented`` (clear-text key or None) for ``scope``.
+
+    Returns the matching key (None when auth is disabled). Raises ``ProblemError`` 401/403.
+    """
+    if not keys:
+        return None
+    challenge = {"WWW-Authenticate": 'Bearer realm="quadloc"'}
+    if not presented:
+        raise ProblemError("unauthorized",
+                         "this endpoint needs an API key: 'Authorization: Bearer <key>' or "
+                         "'X-API-Key: <key>'",
+                         errors=[{"field": "header.authorization", "message": "missing"}],
+                         headers=challenge)
+    digest = hash_api_key(presented)
+    found = None
+    for key in keys:  # constant time per key; no early exit
+        if hmac.compare_digest(key.sha256, digest):
+            found = key
+    if found is None:
+        raise ProblemError("unauthorized", "unknown API key",
+                         errors=[{"field": "header.authorization", "message": "unknown key"}],
+                         headers=challenge)
+    if not found.allows(scope):
+        raise ProblemError("forbidden", f"this API key lacks the '{scope}' scope "
+                         f"(it has {sorted(found.scopes)})",
+                         errors=[{"field": "header.authorization",
+                                  "message": f"scope '{scope}' required"}])
+    return found
+
+
+def require_scope(scope: str):
+    """FastAPI dependency enforcing ``scope`` for the route."""
+
+    def dependency(
+        request: Request,
+        bearer: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)],
+        api_key: Annotated[str | None, Depends(_api_key_header)],
+    ) -> ApiKey | None:
+        keys = request.app.state.api_keys
+        if not keys:
+            return None
+        authorization = request.headers.get("authorization")
+        if authorization is not None and bearer is None:
+            raise ProblemError("unauthorized", "the Authorization header must be "
+                               "'Bearer <key>'",
+                               errors=[{"field": "header.authorization",
+                                        "message": "not a bearer token"}],
+                               headers={"WWW-Authenticate": 'Bearer realm="quadloc"'})
+        presented = [c for c in (bearer.credentials if bearer else None, api_key) if c]
+        if len(set(presented)) > 1:
+            raise ProblemError("unauthorized", "Authorization and X-API-Key carry different "
+                               "keys; send one",
+                               errors=[{"field": "header.x-api-key",
+                                        "message": "conflicts with Authorization"}],
+                               headers={"WWW-Authenticate": 'Bearer realm="quadloc"'})
+        return authenticate(keys, presented[0] if presented else None, scope)
+
+    dependency.__name__ = f"require_{scope}"
+    return dependency
+
+
+ReadAccess = Annotated[ApiKey | None, Depends(require_scope("read"))]
+WriteAccess = Annotated[ApiKey | None, Depends(require_scope("write"))]

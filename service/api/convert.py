@@ -1,0 +1,194 @@
+"""Conversions between the wire models (:mod:`service.api.schemas`) and the solver's types.
+
+Camera conventions: the solver works in OpenCV camera axes (+X right, +Y down, +Z forward).
+OpenGL/ARKit/ARCore axes (+X right, +Y up, -Z forward) differ by ``F = diag(1, -1, -1)`` on the
+camera side: ``world_from_camera_gl = world_from_camera_cv @ diag(F, 1)``. ``F`` is a proper
+rotation (pi about +X) and its own inverse, so the same product converts both ways. A body-frame
+covariance in tangent order ``[omega, v]`` transforms with the adjoint of ``F``:
+``Cov_gl = Ad Cov_cv Ad^T`` with ``Ad = blockdiag(F, F)`` (right perturbation:
+``T_cv exp(xi_cv) F = T_cv F exp(Ad_F^-1 xi_cv)``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from factors.geometry import (
+    Camera,
+    Ellipse,
+    quaternion_wxyz_from_rotation,
+    rotation_from_quaternion_wxyz,
+)
+from service.api.schemas import (
+    CameraIn,
+    CovarianceOut,
+    DetectionIn,
+    InlierOut,
+    LocalizeOptionsIn,
+    LocalizeResponse,
+    PoseIn,
+    PoseOut,
+    PosePriorIn,
+)
+from service.localization.types import (
+    Detection,
+    LocalizationOptions,
+    LocalizationResult,
+    PosePrior,
+)
+
+__all__ = [
+    "OPENGL_FROM_OPENCV",
+    "camera_from_request",
+    "convert_covariance",
+    "convert_pose",
+    "detections_from_request",
+    "options_from_request",
+    "pose_out",
+    "prior_from_request",
+    "response_from_result",
+]
+
+#: ``diag(1, -1, -1)``: camera-side flip between OpenCV and OpenGL axes (its own inverse).
+OPENGL_FROM_OPENCV = np.diag([1.0, -1.0, -1.0])
+
+
+def convert_pose(world_from_camera: np.ndarray, source: str, target: str) -> np.ndarray:
+    """Re-express a 4x4 ``world_from_camera`` from ``source`` to ``target`` camera axes
+    (``"opencv"`` or ``"opengl"``)."""
+    T = np.array(world_from_camera, dtype=float)
+    if source == target:
+        return T
+    T[:3, :3] = T[:3, :3] @ OPENGL_FROM_OPENCV
+    return T
+
+
+def convert_covariance(covariance: np.ndarray, source: str, target: str) -> np.ndarray:
+    """Re-express a 6x6 body-frame ``[omega, v]`` covariance between camera conventions."""
+    S = np.array(covariance, dtype=float)
+    if source == target:
+        return S
+    ad = np.kron(np.eye(2), OPENGL_FROM_OPENCV)
+    return ad @ S @ ad.T
+
+
+def camera_from_request(camera: CameraIn) -> Camera:
+    return Camera(camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height)
+
+
+def detections_from_request(detections: list[DetectionIn]) -> list[Detection]:
+    """Wire detections -> :class:`Detection` (boxes become inscribed ellipses)."""
+    out = []
+    for d in detections:
+        if d.ellipse is not None:
+            e = d.ellipse
+            ellipse = Ellipse(e.cx, e.cy, e.a, e.b, e.angle)
+        else:
+            b = d.box
+            assert b is not None  # guaranteed by DetectionIn's validator
+            ellipse = Ellipse.from_bbox(b.xmin, b.ymin, b.xmax, b.ymax)
+        out.append(Detection(ellipse, d.label, d.effective_sigma(), d.score))
+    return out
+
+
+def _pose_matrix_in(pose: PoseIn, field: str) -> np.ndarray:
+    from service.localization.types import LocalizationInputError
+
+    if pose.matrix is not None:
+        return np.array(pose.matrix, dtype=float)
+    q = np.array(pose.quaternion_wxyz, dtype=float)
+    n = float(np.linalg.norm(q))
+    if not abs(n - 1.0) <= 1e-6:
+        raise LocalizationInputError(f"{field}.quaternion_wxyz: must have unit norm, |q| = {n:.9g}")
+    T = np.eye(4)
+    T[:3, :3] = rotation_from_quaternion_wxyz(q / n)
+    T[:3, 3] = pose.translation_m
+    return T
+
+
+def prior_from_request(prior: PosePriorIn | None) -> PosePrior | None:
+    """Wire prior (any convention) -> :class:`PosePrior` in OpenCV axes."""
+    if prior is None:
+        return None
+    T = _pose_matrix_in(prior.world_from_camera, "prior.world_from_camera")
+    cov = None
+    if prior.covariance is not None:
+        cov = np.array(prior.covariance, dtype=float)
+        if np.all(np.isfinite(cov)):
+            cov = convert_covariance(cov, prior.convention, "opencv")
+    if np.all(np.isfinite(T)):
+        T = convert_pose(T, prior.convention, "opencv")
+    return PosePrior(T, cov)
+
+
+def options_from_request(options: LocalizeOptionsIn, max_budget_ms: float) -> LocalizationOptions:
+    """Wire options -> :class:`LocalizationOptions`; the time budget is capped by the server."""
+    budget = max_budget_ms if options.time_budget_ms is None else min(options.time_budget_ms,
+                                                                      max_budget_ms)
+    return LocalizationOptions(
+        metric=options.metric,
+        ransac_max_hypotheses=options.ransac_max_hypotheses,
+        inlier_iou=options.inlier_iou,
+        min_inliers=options.min_inliers,
+        use_sigma=options.use_sigma,
+        robust=options.robust,
+        robust_scale=options.robust_scale,
+        unknown_label_policy=options.unknown_label_policy,
+        seed=options.seed,
+        time_budget_ms=float(budget),
+        max_iterations=options.max_iterations,
+    )
+
+
+def pose_out(world_from_camera_cv: np.ndarray, convention: str) -> PoseOut:
+    """4x4 OpenCV-axes ``world_from_camera`` -> wire pose in ``convention`` axes."""
+    T = convert_pose(world_from_camera_cv, "opencv", convention)
+    q = quaternion_wxyz_from_rotation(T[:3, :3])
+    return PoseOut(quaternion_wxyz=[float(x) for x in q],
+                   translation_m=[float(x) for x in T[:3, 3]],
+                   matrix=[[float(x) for x in row] for row in T],
+                   convention=convention)  # type: ignore[arg-type]
+
+
+def _finite(x: float) -> float:
+    return float(x) if math.isfinite(float(x)) else 0.0
+
+
+def response_from_result(
+    result: LocalizationResult,
+    *,
+    map_id: str,
+    map_version: int,
+    convention: str,
+    frame_id: str | None,
+    timestamp: float | None,
+) -> LocalizeResponse:
+    """Solver result -> wire response (pose and covariance in ``convention`` camera axes)."""
+    pose = None
+    cov = None
+    if result.localized and not np.all(np.isfinite(result.world_from_camera)):
+        raise FloatingPointError("localize() returned a non-finite pose")
+    if result.localized and result.world_from_camera is not None:
+        pose = pose_out(result.world_from_camera, convention)
+        if result.covariance is not None and np.all(np.isfinite(result.covariance)):
+            S = convert_covariance(result.covariance, "opencv", convention)
+            cov = CovarianceOut(matrix=[[float(x) for x in row] for row in S])
+    return LocalizeResponse(
+        localized=result.localized,
+        reason=result.reason,
+        world_from_camera=pose,
+        covariance=cov,
+        confidence=_finite(result.confidence),
+        inliers=[InlierOut(detection_index=m.detection_index, object_id=m.object_id,
+                           iou=_finite(m.iou), cost=_finite(m.cost)) for m in result.inliers],
+        metric=result.metric,
+        hypotheses_evaluated=result.hypotheses_evaluated,
+        used_prior=result.used_prior,
+        map_id=map_id,
+        map_version=map_version,
+        timings_ms={k: _finite(v) for k, v in result.timings_ms.items()},
+        frame_id=frame_id,
+        timestamp=timestamp,
+    )

@@ -1,0 +1,209 @@
+"""RFC 9457 ``application/problem+json`` errors for every request failure.
+
+Body: ``{type, title, status, detail, instance, errors: [{field, message}]}``. ``type`` is a
+stable machine-readable URN ``urn:quadloc:problem:<slug>`` (slugs listed in :data:`PROBLEM_TYPES`
+and docs/api.md); ``instance`` is the request path; ``errors`` names each offending field with a
+JSON-path-like string (``detections[2].ellipse.a``; query and header fields are prefixed:
+``query.version``, ``header.if-match``).
+
+No request may produce a 5xx other than 503 (temporarily unavailable): the handlers here convert
+validation, geometry and storage errors to 4xx, and the last-resort handler still answers in the
+problem format if a bug slips through.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import Match
+
+__all__ = [
+    "PROBLEM_MEDIA_TYPE",
+    "PROBLEM_TYPES",
+    "ProblemError",
+    "field_path",
+    "install_error_handlers",
+    "problem_response",
+]
+
+log = logging.getLogger("quadloc.api")
+
+PROBLEM_MEDIA_TYPE = "application/problem+json"
+
+#: slug -> (HTTP status, title). ``type`` = ``urn:quadloc:problem:<slug>``.
+PROBLEM_TYPES: dict[str, tuple[int, str]] = {
+    "malformed-json": (400, "Malformed JSON body"),
+    "bad-request": (400, "Bad request"),
+    "unauthorized": (401, "Missing or invalid API key"),
+    "forbidden": (403, "API key lacks the required scope"),
+    "not-found": (404, "Not found"),
+    "map-not-found": (404, "Map not found"),
+    "method-not-allowed": (405, "Method not allowed"),
+    "not-acceptable": (406, "Not acceptable"),
+    "map-exists": (409, "Map already exists"),
+    "version-conflict": (409, "Map version conflict"),
+    "precondition-failed": (412, "Precondition failed: the map changed"),
+    "payload-too-large": (413, "Request body too large"),
+    "unsupported-media-type": (415, "Unsupported media type"),
+    "validation-error": (422, "Request validation failed"),
+    "invalid-map": (422, "Invalid map"),
+    "invalid-geometry": (422, "Invalid geometry"),
+    "precondition-required": (428, "If-Match header required"),
+    "busy": (503, "Solver busy, retry later"),
+    "not-ready": (503, "Service not ready"),
+    "internal-error": (500, "Internal error"),
+}
+
+
+def problem_type(slug: str) -> str:
+    return f"urn:quadloc:problem:{slug}"
+
+
+class ProblemError(Exception):
+    """Raise from a route to answer with a problem document (``slug`` from PROBLEM_TYPES)."""
+
+    def __init__(
+        self,
+        slug: str,
+        detail: str,
+        *,
+        errors: Sequence[Mapping[str, str]] = (),
+        headers: Mapping[str, str] | None = None,
+        status: int | None = None,
+    ) -> None:
+        super().__init__(detail)
+        default_status, self.title = PROBLEM_TYPES[slug]
+        self.slug = slug
+        self.status = status or default_status
+        self.detail = detail
+        self.errors = [dict(e) for e in errors]
+        self.headers = dict(headers or {})
+
+
+def problem_response(
+    request: Request | None,
+    slug: str,
+    detail: str,
+    *,
+    errors: Iterable[Mapping[str, str]] = (),
+    headers: Mapping[str, str] | None = None,
+    status: int | None = None,
+) -> JSONResponse:
+    """Build the ``application/problem+json`` response for ``slug``."""
+    default_status, title = PROBLEM_TYPES[slug]
+    body: dict[str, Any] = {
+        "type": problem_type(slug),
+        "title": title,
+        "status": status or default_status,
+        "detail": detail,
+        "instance": request.url.path if request is not None else None,
+        "errors": [{"field": str(e["field"]), "message": str(e["message"])} for e in errors],
+    }
+    return JSONResponse(body, status_code=body["status"], headers=dict(headers or {}),
+                        media_type=PROBLEM_MEDIA_TYPE)
+
+
+def field_path(loc: Sequence[Any]) -> str:
+    """``('body', 'detections', 2, 'ellipse', 'a')`` -> ``'detections[2].ellipse.a'``.
+
+    Body locations drop the ``body`` prefix; ``query``/``header``/``path`` keep it.
+    """
+    parts = list(loc)
+    prefix = ""
+    if parts and parts[0] == "body":
+        parts = parts[1:]
+    elif parts and parts[0] in ("query", "header", "path", "cookie"):
+        prefix = f"{parts[0]}."
+        parts = parts[1:]
+    out = ""
+    for p in parts:
+        if isinstance(p, int):
+            out += f"[{p}]"
+        elif str(p).startswith(("function-", "model-")):  # pydantic validator tags
+            continue
+        else:
+            out += ("." if out else "") + str(p)
+    return prefix + (out or "body")
+
+
+def _validation_errors(exc: RequestValidationError) -> tuple[str, list[dict[str, str]]]:
+    errors: list[dict[str, str]] = []
+    slug = "validation-error"
+    for err in exc.errors():
+        if err.get("type") == "json_invalid":
+            slug = "malformed-json"
+            ctx = err.get("ctx") or {}
+            errors.append({"field": "body",
+                           "message": f"malformed JSON: {ctx.get('error', 'cannot parse')}"})
+            continue
+        msg = str(err.get("msg", "invalid"))
+        if msg.startswith("Value error, "):
+            msg = msg[len("Value error, "):]
+        field = field_path(err.get("loc", ()))
+        if err.get("type") == "missing" and field == "body":
+            msg = "a JSON request body is required"
+        errors.append({"field": field, "message": msg})
+    return slug, errors
+
+
+async def _on_validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:
+    slug, errors = _validation_errors(exc)
+    detail = "; ".join(f"{e['field']}: {e['message']}" for e in errors[:5])
+    if len(errors) > 5:
+        detail += f"; ... ({len(errors)} errors)"
+    return problem_response(request, slug, detail, errors=errors)
+
+
+async def _on_problem(request: Request, exc: ProblemError) -> JSONResponse:
+    return problem_response(request, exc.slug, exc.detail, errors=exc.errors,
+                            headers=exc.headers, status=exc.status)
+
+
+_HTTP_SLUGS = {400: "bad-request", 401: "unauthorized", 403: "forbidden", 404: "not-found",
+               405: "method-not-allowed", 406: "not-acceptable", 413: "payload-too-large",
+               415: "unsupported-media-type"}
+
+
+def _allowed_methods(request: Request) -> list[str]:
+    """Every method any route accepts at this path (Starlette's 405 lists only one route's)."""
+    scope = {"type": "http", "path": request.url.path, "method": "\0", "root_path": ""}
+    methods: set[str] = set()
+    for route in request.app.routes:
+        match, _ = route.matches(scope)
+        if match != Match.NONE:
+            methods |= set(getattr(route, "methods", None) or ())
+    return sorted(methods)
+
+
+async def _on_http_exception(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+    slug = _HTTP_SLUGS.get(exc.status_code, "bad-request")
+    detail = exc.detail if isinstance(exc.detail, str) else str(exc.detail)
+    headers = dict(getattr(exc, "headers", None) or {})
+    if exc.status_code == 404 and detail == "Not Found":
+        detail = f"no route {request.method} {request.url.path}"
+    if exc.status_code == 405:
+        allowed = _allowed_methods(request)
+        headers["Allow"] = ", ".join(allowed)
+        detail = f"{request.method} is not allowed here; allowed: {', '.join(allowed)}"
+    return problem_response(request, slug, detail, headers=headers,
+                            status=exc.status_code if exc.status_code < 500 else 400)
+
+
+async def _on_unexpected(request: Request, exc: Exception) -> JSONResponse:  # pragma: no cover
+    log.exception("unhandled error on %s %s", request.method, request.url.path)
+    return problem_response(request, "internal-error",
+                            "unexpected server error (logged); please report it")
+
+
+def install_error_handlers(app: FastAPI) -> None:
+    """Register the problem+json handlers on ``app``."""
+    app.add_exception_handler(RequestValidationError, _on_validation_error)  # type: ignore[arg-type]
+    app.add_exception_handler(ProblemError, _on_problem)  # type: ignore[arg-type]
+    app.add_exception_handler(StarletteHTTPException, _on_http_exception)  # type: ignore[arg-type]
+    app.add_exception_handler(Exception, _on_unexpected)

@@ -1,0 +1,138 @@
+"""Prometheus metrics (one registry per app) and the ASGI middleware that records them and
+enforces the request-body size limit.
+
+Series:
+* ``quadloc_http_requests_total{method, route, status}`` - requests answered.
+* ``quadloc_http_request_duration_seconds{method, route}`` - latency histogram (seconds).
+* ``quadloc_localizations_total{outcome}`` - frames localized (``outcome="localized"``) or not
+  (``outcome`` = the reason, e.g. ``too_few_detections``).
+* ``quadloc_localization_solve_seconds`` - solve time per frame (seconds, histogram).
+* ``quadloc_solves_in_progress`` - frames being solved now.
+
+``route`` is the route template (``/v1/maps/{map_id}``), never the raw path, so cardinality is
+bounded; unmatched paths count as ``route="<unmatched>"``. With several Uvicorn workers each
+process has its own registry (one process per container is the supported layout).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from typing import Any
+
+from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
+
+from service.api.errors import PROBLEM_MEDIA_TYPE, problem_type
+
+__all__ = ["ApiMetrics", "MetricsAndLimitsMiddleware"]
+
+_LATENCY_BUCKETS = (0.001, 0.0025, 0.005, 0.01, 0.02, 0.03, 0.05, 0.075, 0.1, 0.15, 0.25, 0.5,
+                    1.0, 2.5, 5.0, 10.0)
+
+
+class ApiMetrics:
+    """The service's metric families in their own ``CollectorRegistry``."""
+
+    def __init__(self) -> None:
+        self.registry = CollectorRegistry(auto_describe=True)
+        self.requests = Counter("quadloc_http_requests_total", "HTTP requests answered.",
+                                ["method", "route", "status"], registry=self.registry)
+        self.latency = Histogram("quadloc_http_request_duration_seconds",
+                                 "HTTP request latency in seconds.", ["method", "route"],
+                                 buckets=_LATENCY_BUCKETS, registry=self.registry)
+        self.localizations = Counter("quadloc_localizations_total",
+                                     "Frames processed by outcome (localized or the reason).",
+                                     ["outcome"], registry=self.registry)
+        self.solve_seconds = Histogram("quadloc_localization_solve_seconds",
+                                       "Solve time per frame in seconds.",
+                                       buckets=_LATENCY_BUCKETS, registry=self.registry)
+        self.in_progress = Gauge("quadloc_solves_in_progress", "Frames being solved now.",
+                                 registry=self.registry)
+
+
+def _problem_413(path: str, limit: int) -> bytes:
+    return json.dumps({
+        "type": problem_type("payload-too-large"), "title": "Request body too large",
+        "status": 413, "detail": f"request body exceeds {limit} bytes", "instance": path,
+        "errors": [{"field": "body", "message": f"larger than {limit} bytes"}],
+    }).encode()
+
+
+class MetricsAndLimitsMiddleware:
+    """Pure ASGI middleware: body size limit (413 problem) and request metrics."""
+
+    def __init__(self, app: Any, metrics: ApiMetrics, max_body_bytes: int) -> None:
+        self.app = app
+        self.metrics = metrics
+        self.max_body_bytes = max_body_bytes
+
+    async def _reject(self, scope: dict, send: Any) -> None:
+        body = _problem_413(scope.get("path", ""), self.max_body_bytes)
+        await send({"type": "http.response.start", "status": 413,
+                    "headers": [(b"content-type", PROBLEM_MEDIA_TYPE.encode()),
+                                (b"content-length", str(len(body)).encode()),
+                                (b"connection", b"close")]})
+        await send({"type": "http.response.body", "body": body})
+
+    async def __call__(self, scope: dict, receive: Any, send: Any) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        start = time.perf_counter()
+        status_holder = {"status": 500}
+        limit = self.max_body_bytes
+
+        async def send_wrapper(message: dict) -> None:
+            if message["type"] == "http.response.start":
+                status_holder["status"] = message["status"]
+            await send(message)
+
+        try:
+            declared = None
+            for name, value in scope.get("headers", ()):
+                if name == b"content-length":
+                    try:
+                        declared = int(value)
+                    except ValueError:
+                        declared = None
+            if declared is not None and declared > limit:
+                status_holder["status"] = 413
+                await self._reject(scope, send)
+                return
+            # Buffer the body (bounded) so chunked uploads are limited too, then replay it.
+            chunks: list[bytes] = []
+            size = 0
+            more = True
+            disconnect: dict | None = None
+            while more:
+                message = await receive()
+                if message["type"] != "http.request":
+                    disconnect = message
+                    break
+                chunk = message.get("body", b"")
+                size += len(chunk)
+                if size > limit:
+                    status_holder["status"] = 413
+                    await self._reject(scope, send)
+                    return
+                chunks.append(chunk)
+                more = message.get("more_body", False)
+            body = b"".join(chunks)
+            replayed = False
+
+            async def replay() -> dict:
+                nonlocal replayed
+                if not replayed:
+                    replayed = True
+                    if disconnect is not None and not body:
+                        return disconnect
+                    return {"type": "http.request", "body": body, "more_body": False}
+                return await receive()
+
+            await self.app(scope, replay, send_wrapper)
+        finally:
+            route = scope.get("route")
+            template = getattr(route, "path", None) or "<unmatched>"
+            method = scope.get("method", "")
+            self.metrics.requests.labels(method, template, str(status_holder["status"])).inc()
+            self.metrics.latency.labels(method, template).observe(time.perf_counter() - start)

@@ -1,0 +1,59 @@
+"""Probes and metrics: ``/healthz`` (alive), ``/readyz`` (database + default map), ``/metrics``."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, Response
+from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
+
+from service.api.deps import MetricsDep, SettingsDep, StoreDep
+from service.api.errors import ProblemError
+from service.api.openapi_docs import problem_responses
+from service.api.schemas import HealthOut
+
+__all__ = ["router"]
+
+router = APIRouter(tags=["operations"])
+
+
+@router.get("/healthz", response_model=HealthOut, summary="Liveness probe",
+            description="200 while the process serves requests (no dependency checked).",
+            responses={200: {"content": {"application/json": {
+                "example": {"status": "ok", "checks": {}}}}}})
+def healthz() -> HealthOut:
+    return HealthOut(status="ok")
+
+
+@router.get("/readyz", response_model=HealthOut, summary="Readiness probe",
+            description="200 when the database answers and the default map compiles; "
+                        "503 problem otherwise.",
+            responses={**problem_responses(503), 200: {"content": {"application/json": {
+                "example": {"status": "ready",
+                            "checks": {"database": "ok", "default_map": "chess v1"}}}}}})
+def readyz(store: StoreDep, settings: SettingsDep) -> HealthOut:
+    checks: dict[str, str] = {}
+    try:
+        store.ping()
+        checks["database"] = "ok"
+    except Exception as exc:  # any driver error means not ready
+        raise ProblemError("not-ready", f"database unreachable: {type(exc).__name__}",
+                         errors=[{"field": "database", "message": str(exc)[:200]}]) from exc
+    if settings.default_map_id:
+        try:
+            compiled = store.compiled(settings.default_map_id)
+            checks["default_map"] = f"{compiled.map_id} v{compiled.version}"
+        except Exception as exc:
+            raise ProblemError("not-ready", f"default map {settings.default_map_id!r} not loadable",
+                             errors=[{"field": "default_map",
+                                      "message": str(exc)[:200]}]) from exc
+    return HealthOut(status="ready", checks=checks)
+
+
+@router.get("/metrics", summary="Prometheus metrics",
+            response_class=Response,
+            responses={200: {"content": {CONTENT_TYPE_LATEST: {
+                "schema": {"type": "string"},
+                "example": "# TYPE quadloc_localizations_total counter\n"
+                           'quadloc_localizations_total{outcome="localized"} 42.0\n'}},
+                             "description": "Prometheus text exposition format."}})
+def metrics(m: MetricsDep) -> Response:
+    return Response(generate_latest(m.registry), media_type=CONTENT_TYPE_LATEST)

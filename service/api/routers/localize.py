@@ -1,0 +1,95 @@
+"""``POST /v1/maps/{map_id}/localize`` and ``.../localize:batch``.
+
+Plain ``def`` routes: FastAPI runs them in its threadpool, so the CPU-bound solve never blocks
+the event loop. "Not localized" is a normal 200 answer with ``localized: false`` and a reason.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Body, Path, Query
+
+from maps.compiled import CompiledMap
+from maps.errors import MapNotFound
+from service.api.auth import ReadAccess
+from service.api.deps import SettingsDep, SolverDep, StoreDep
+from service.api.errors import ProblemError
+from service.api.examples import LOCALIZE_EXAMPLE, LOCALIZE_RESPONSE_EXAMPLE
+from service.api.openapi_docs import problem_responses
+from service.api.schemas import (
+    BatchLocalizeRequest,
+    BatchLocalizeResponse,
+    LocalizeRequest,
+    LocalizeResponse,
+)
+
+__all__ = ["router"]
+
+router = APIRouter(prefix="/v1", tags=["localization"])
+
+VersionQuery = Annotated[int | None, Query(ge=1, le=2**31 - 1,
+                                           description="Map version (default: latest).")]
+
+
+MapIdPath = Annotated[str, Path(description="Map id.", examples=["chess"])]
+
+
+def _compiled(store: object, map_id: str, version: int | None) -> CompiledMap:
+    try:
+        return store.compiled(map_id, version)  # type: ignore[attr-defined]
+    except MapNotFound as exc:
+        field = "path.map_id" if version is None else "query.version"
+        what = f"map {map_id!r}" if version is None else f"version {version} of map {map_id!r}"
+        raise ProblemError("map-not-found", f"{what} not found",
+                         errors=[{"field": field, "message": "not found"}]) from exc
+
+
+@router.post(
+    "/maps/{map_id}/localize", response_model=LocalizeResponse,
+    summary="Localize one frame",
+    description="Matches the frame's detections to the map's ellipsoids (label-constrained "
+                "RANSAC with P3P/P2E, then refinement with the chosen metric) and returns the "
+                "camera pose `world_from_camera`, its covariance and a confidence. "
+                "`localized: false` with a `reason` is a normal 200 answer.",
+    responses={**problem_responses(400, 401, 403, 404, 413, 422, 503),
+               200: {"content": {"application/json": {"example": LOCALIZE_RESPONSE_EXAMPLE}}}},
+)
+def localize_frame(
+    map_id: MapIdPath,
+    frame: Annotated[LocalizeRequest, Body(openapi_examples={
+        "chess_demo": {"summary": "A simulated frame of the demo Chess map",
+                       "value": LOCALIZE_EXAMPLE}})],
+    store: StoreDep, solver: SolverDep, _key: ReadAccess, version: VersionQuery = None,
+) -> LocalizeResponse:
+    compiled = _compiled(store, map_id, version)
+    return solver.localize_frames(compiled, [frame], batch=False)[0]
+
+
+@router.post(
+    "/maps/{map_id}/localize:batch", response_model=BatchLocalizeResponse,
+    summary="Localize several frames",
+    description="Frames are solved in order against one map version (bounded count: "
+                "QUADLOC_MAX_BATCH_FRAMES). Errors name the frame: `frames[3].detections[0]...`.",
+    responses={**problem_responses(400, 401, 403, 404, 413, 422, 503),
+               200: {"content": {"application/json": {"example": {
+                   "map_id": "chess", "map_version": 1,
+                   "results": [LOCALIZE_RESPONSE_EXAMPLE, LOCALIZE_RESPONSE_EXAMPLE]}}}}},
+)
+def localize_batch(
+    map_id: MapIdPath,
+    batch: Annotated[BatchLocalizeRequest, Body(openapi_examples={
+        "two_frames": {"summary": "The demo frame twice",
+                       "value": {"frames": [LOCALIZE_EXAMPLE, LOCALIZE_EXAMPLE]}}})],
+    store: StoreDep, solver: SolverDep, settings: SettingsDep, _key: ReadAccess,
+    version: VersionQuery = None,
+) -> BatchLocalizeResponse:
+    if len(batch.frames) > settings.max_batch_frames:
+        raise ProblemError("validation-error",
+                         f"frames: at most {settings.max_batch_frames} frames per batch",
+                         errors=[{"field": "frames",
+                                  "message": f"at most {settings.max_batch_frames} frames"}])
+    compiled = _compiled(store, map_id, version)
+    results = solver.localize_frames(compiled, batch.frames, batch=True)
+    return BatchLocalizeResponse(map_id=compiled.map_id, map_version=compiled.version,
+                                 results=results)

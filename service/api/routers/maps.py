@@ -1,0 +1,269 @@
+"""``/v1/maps``: create, import (Chess format), list, get (ETag), update (If-Match), delete.
+
+Concurrency: a map version is immutable and its ``content_hash`` is served as a strong ETag
+(``"<sha256hex>"``). ``PUT`` requires ``If-Match`` with the ETag of the latest version: a missing
+header is refused with 428, a stale one with 412, and a writer that loses a race between the
+check and the write gets 409 (the store's version conflict) - never a silent overwrite.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Body, Header, Path, Query, Response, status
+
+from maps.errors import MapAlreadyExists, MapNotFound, MapValidationError, VersionConflict
+from maps.model import (
+    MAP_ID_PATTERN,
+    MAP_JSON_SCHEMA,
+    content_hash,
+    scene_map_from_chess,
+    scene_map_from_dict,
+)
+from service.api.auth import ReadAccess, WriteAccess
+from service.api.deps import SettingsDep, StoreDep
+from service.api.errors import ProblemError
+from service.api.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
+from service.api.openapi_docs import problem_responses
+from service.api.schemas import MapListOut, MapOut, MapSummaryOut
+
+__all__ = ["router"]
+
+router = APIRouter(prefix="/v1", tags=["maps"])
+
+_MAP_SCHEMA = {k: v for k, v in MAP_JSON_SCHEMA.items() if not k.startswith("$")}
+_CHESS_SCHEMA: dict[str, Any] = {
+    "type": "object",
+    "required": ["category_id_to_label", "objects"],
+    "properties": {
+        "category_id_to_label": {"type": "object", "additionalProperties": {"type": "string"}},
+        "objects": {"type": "array", "items": {
+            "type": "object",
+            "required": ["category_id", "object_id", "ellipsoid"],
+            "properties": {
+                "category_id": {"type": "integer"},
+                "object_id": {"type": "integer"},
+                "ellipsoid": {"type": "object", "required": ["axes", "R", "center"],
+                              "properties": {
+                                  "axes": {"type": "array", "items": {"type": "number"}},
+                                  "R": {"type": "array",
+                                        "items": {"type": "array",
+                                                  "items": {"type": "number"}}},
+                                  "center": {"type": "array", "items": {"type": "number"}}}},
+            }}},
+    },
+}
+
+
+_EXAMPLE_MAP = scene_map_from_dict(MAP_EXAMPLE, version=1)
+_MAP_OUT_EXAMPLE = {"map_id": _EXAMPLE_MAP.map_id, "version": 1,
+                    "content_hash": content_hash(_EXAMPLE_MAP),
+                    "created_at": "2026-01-05T10:00:00+00:00", "map": _EXAMPLE_MAP.to_dict()}
+_LIST_EXAMPLE = {"maps": [{"map_id": _EXAMPLE_MAP.map_id, "name": _EXAMPLE_MAP.name, "version": 1,
+                           "content_hash": content_hash(_EXAMPLE_MAP),
+                           "updated_at": "2026-01-05T10:00:00+00:00"}]}
+
+
+def _ok(status_code: int, example: dict[str, Any], headers: bool = True) -> dict[int, Any]:
+    doc: dict[str, Any] = {"content": {"application/json": {"example": example}}}
+    if headers:
+        doc["headers"] = {"ETag": {"description": "Strong ETag: the version's content hash.",
+                                   "schema": {"type": "string"}}}
+    return {status_code: doc}
+
+
+MapIdPath = Annotated[str, Path(description="Map id.", examples=["chess"])]
+
+
+def _body_doc(schema: dict[str, Any], example: dict[str, Any]) -> dict[str, Any]:
+    return {"requestBody": {"required": True, "content": {"application/json": {
+        "schema": schema, "example": example}}}}
+
+
+def etag_of(content_hash: str) -> str:
+    """Strong ETag of a map version."""
+    return f'"{content_hash}"'
+
+
+def _map_out(stored: Any) -> MapOut:
+    sm = stored.scene_map
+    created = getattr(stored, "created_at", None)
+    return MapOut(map_id=sm.map_id, version=sm.version, content_hash=stored.content_hash,
+                  created_at=created.isoformat() if created is not None else None,
+                  map=sm.to_dict())
+
+
+def _invalid_map(exc: MapValidationError) -> ProblemError:
+    return ProblemError("invalid-map", str(exc), errors=exc.errors)
+
+
+def _not_found(map_id: str, version: int | None = None) -> ProblemError:
+    what = f"map {map_id!r}" if version is None else f"version {version} of map {map_id!r}"
+    return ProblemError("map-not-found", f"{what} not found",
+                      errors=[{"field": "path.map_id" if version is None else "query.version",
+                               "message": "not found"}])
+
+
+def _check_object_limit(body: Any, settings: Any) -> None:
+    objs = body.get("objects") if isinstance(body, dict) else None
+    if isinstance(objs, list) and len(objs) > settings.max_map_objects:
+        raise ProblemError("invalid-map", f"objects: at most {settings.max_map_objects} objects",
+                         errors=[{"field": "objects",
+                                  "message": f"at most {settings.max_map_objects} objects"}])
+
+
+def _created(store: Any, scene_map: Any, response: Response) -> MapOut:
+    try:
+        stored = store.create(scene_map)
+    except MapAlreadyExists as exc:
+        raise ProblemError("map-exists", f"map {scene_map.map_id!r} already exists; use PUT "
+                         "/v1/maps/{map_id} with If-Match to update it",
+                         errors=[{"field": "map_id", "message": "already exists"}]) from exc
+    response.headers["ETag"] = etag_of(stored.content_hash)
+    response.headers["Location"] = f"/v1/maps/{scene_map.map_id}"
+    return _map_out(stored)
+
+
+@router.post(
+    "/maps", status_code=status.HTTP_201_CREATED, response_model=MapOut,
+    summary="Create a map (version 1)",
+    description="Body: the map document (docs/maps.md). `version` in the body is ignored: a "
+                "new map is version 1. Answers 201 with the stored map, its `ETag` and "
+                "`Location`; 409 if the id is taken; 422 naming every invalid field.",
+    responses={**problem_responses(400, 401, 403, 409, 413, 422), **_ok(201, _MAP_OUT_EXAMPLE)},
+    openapi_extra=_body_doc(_MAP_SCHEMA, MAP_EXAMPLE),
+)
+def create_map(body: Annotated[dict[str, Any], Body()], response: Response, store: StoreDep,
+               settings: SettingsDep, _key: WriteAccess) -> MapOut:
+    _check_object_limit(body, settings)
+    try:
+        scene_map = scene_map_from_dict(body, version=1)
+    except MapValidationError as exc:
+        raise _invalid_map(exc) from exc
+    return _created(store, scene_map, response)
+
+
+@router.post(
+    "/maps:import-chess", status_code=status.HTTP_201_CREATED, response_model=MapOut,
+    summary="Create a map from the Chess scene format",
+    description="Body: the Chess format (`category_id_to_label`, `objects[]` with "
+                "`ellipsoid {axes, R, center}`; world +Z up). The map id and name come from "
+                "the query.",
+    responses={**problem_responses(400, 401, 403, 409, 413, 422), **_ok(201, _MAP_OUT_EXAMPLE)},
+    openapi_extra=_body_doc(_CHESS_SCHEMA, CHESS_IMPORT_EXAMPLE),
+)
+def import_chess_map(
+    body: Annotated[dict[str, Any], Body()], response: Response, store: StoreDep,
+    settings: SettingsDep, _key: WriteAccess,
+    map_id: Annotated[str, Query(pattern=MAP_ID_PATTERN, description="Id of the new map.")],
+    name: Annotated[str, Query(min_length=1, max_length=256)] = "Chess",
+) -> MapOut:
+    _check_object_limit(body, settings)
+    try:
+        scene_map = scene_map_from_chess(body, map_id=map_id, name=name)
+    except MapValidationError as exc:
+        raise _invalid_map(exc) from exc
+    return _created(store, scene_map, response)
+
+
+@router.get("/maps", response_model=MapListOut, summary="List maps (latest versions)",
+            responses={**problem_responses(401, 403), **_ok(200, _LIST_EXAMPLE, False)})
+def list_maps(store: StoreDep, _key: ReadAccess) -> MapListOut:
+    out = []
+    for s in store.list():
+        updated = getattr(s, "updated_at", None)
+        out.append(MapSummaryOut(map_id=s.map_id, name=s.name, version=s.latest_version,
+                                 content_hash=s.content_hash,
+                                 updated_at=updated.isoformat() if updated is not None else None))
+    return MapListOut(maps=out)
+
+
+@router.get(
+    "/maps/{map_id}", response_model=MapOut, summary="Get a map (latest or a given version)",
+    description="The response carries `ETag: \"<content_hash>\"`; send it back in `If-Match` "
+                "to update. Old versions stay readable with `?version=n`.",
+    responses={**problem_responses(401, 403, 404, 422), **_ok(200, _MAP_OUT_EXAMPLE)},
+)
+def get_map(map_id: MapIdPath, response: Response, store: StoreDep, _key: ReadAccess,
+            version: Annotated[int | None, Query(ge=1, le=2**31 - 1)] = None) -> MapOut:
+    try:
+        stored = store.get(map_id, version)
+    except MapNotFound as exc:
+        raise _not_found(map_id, version) from exc
+    response.headers["ETag"] = etag_of(stored.content_hash)
+    return _map_out(stored)
+
+
+def _parse_if_match(if_match: str | None) -> set[str]:
+    if if_match is None or not if_match.strip():
+        raise ProblemError("precondition-required",
+                         "PUT needs 'If-Match: \"<ETag>\"' with the ETag of the version you "
+                         "edited (GET /v1/maps/{map_id} returns it)",
+                         errors=[{"field": "header.if-match", "message": "missing"}])
+    tags = {t.strip() for t in if_match.split(",") if t.strip()}
+    if "*" in tags:
+        raise ProblemError("precondition-required",
+                         "'If-Match: *' would overwrite blindly; send the map's ETag",
+                         errors=[{"field": "header.if-match", "message": "'*' not accepted"}])
+    return {t[2:] if t.startswith("W/") else t for t in tags}
+
+
+@router.put(
+    "/maps/{map_id}", response_model=MapOut, summary="Update a map (new version)",
+    description="Body: the full map document (its `map_id` must equal the path's). Requires "
+                "`If-Match` with the latest version's ETag: missing -> 428, stale -> 412 "
+                "(the current ETag is in the response), lost race -> 409. Answers 200 with the "
+                "new version and its ETag.",
+    responses={**problem_responses(400, 401, 403, 404, 409, 412, 413, 422, 428),
+               **_ok(200, {**_MAP_OUT_EXAMPLE, "version": 2})},
+    openapi_extra=_body_doc(_MAP_SCHEMA, MAP_EXAMPLE),
+)
+def update_map(
+    map_id: MapIdPath, body: Annotated[dict[str, Any], Body()], response: Response, store: StoreDep,
+    settings: SettingsDep, _key: WriteAccess,
+    if_match: Annotated[str | None, Header(description="ETag of the version edited.",
+                                           examples=['"d79f785a18e6e97f..."'])] = None,
+) -> MapOut:
+    tags = _parse_if_match(if_match)
+    _check_object_limit(body, settings)
+    try:
+        current = store.get(map_id)
+    except MapNotFound as exc:
+        raise _not_found(map_id) from exc
+    if etag_of(current.content_hash) not in tags:
+        raise ProblemError("precondition-failed",
+                         f"map {map_id!r} is at version {current.scene_map.version} with ETag "
+                         f"{etag_of(current.content_hash)}; fetch it, re-apply your change and "
+                         "retry",
+                         errors=[{"field": "header.if-match", "message": "stale ETag"}],
+                         headers={"ETag": etag_of(current.content_hash)})
+    if isinstance(body, dict) and body.get("map_id", map_id) != map_id:
+        raise ProblemError("invalid-map", "map_id in the body differs from the path",
+                         errors=[{"field": "map_id", "message": f"must be {map_id!r}"}])
+    expected = current.scene_map.version
+    try:
+        scene_map = scene_map_from_dict({**body, "map_id": map_id}, version=expected + 1)
+    except MapValidationError as exc:
+        raise _invalid_map(exc) from exc
+    try:
+        stored = store.update(map_id, scene_map, expected_version=expected)
+    except VersionConflict as exc:
+        raise ProblemError("version-conflict",
+                         f"map {map_id!r} changed concurrently (now version "
+                         f"{exc.current_version}); fetch it and retry",
+                         errors=[{"field": "header.if-match", "message": "lost a race"}]) from exc
+    except MapNotFound as exc:
+        raise _not_found(map_id) from exc
+    response.headers["ETag"] = etag_of(stored.content_hash)
+    return _map_out(stored)
+
+
+@router.delete("/maps/{map_id}", status_code=status.HTTP_204_NO_CONTENT,
+               summary="Delete a map (all its versions)",
+               responses=problem_responses(401, 403, 404, 422))
+def delete_map(map_id: MapIdPath, store: StoreDep, _key: WriteAccess) -> Response:
+    try:
+        store.delete(map_id)
+    except MapNotFound as exc:
+        raise _not_found(map_id) from exc
+    return Response(status_code=status.HTTP_204_NO_CONTENT)

@@ -1,0 +1,339 @@
+"""Wire format of the REST API (pydantic v2 models; the OpenAPI document is generated from them).
+
+Conventions (also stated in the OpenAPI descriptions):
+* Pixels with origin at the top-left pixel corner, +x right, +y down. Ellipses are
+  ``{cx, cy, a, b, angle}``: centre px, **semi**-axes px (``a`` along ``angle``), ``angle`` in
+  **radians** from +x towards +y. A box ``{xmin, ymin, xmax, ymax}`` (px) becomes its inscribed
+  axis-aligned ellipse.
+* ``sigma`` is the detector's predicted uncertainty (> 0); ``log_variance`` is
+  ``alpha = log sigma^2``, converted as ``sigma = exp(alpha / 2)``. Give at most one.
+* Poses are ``world_from_camera`` (the camera's pose in the map frame, metres), as a unit
+  ``quaternion_wxyz`` (scalar first, ``w >= 0``) + ``translation_m``, and as a 4x4 matrix.
+  Camera axes are OpenCV's (+X right, +Y down, +Z forward) unless ``output_convention`` is
+  ``"opengl"`` (ARKit/ARCore: +X right, +Y up, -Z forward), i.e.
+  ``world_from_camera_gl = world_from_camera_cv @ diag(1, -1, -1, 1)``.
+* Covariances are 6x6 in GTSAM Pose3 tangent order ``[omega_x, omega_y, omega_z, v_x, v_y, v_z]``
+  (radians, metres), right perturbation ``T exp(xi)``, in the camera (body) frame of the stated
+  convention.
+
+Every float must be finite (NaN/Infinity are rejected with 422 naming the field); unknown fields
+are rejected (typos would otherwise be silently ignored).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from service.localization.types import METRICS, ROBUST_KERNELS
+
+__all__ = [
+    "COVARIANCE_ORDER",
+    "MAX_BATCH_FRAMES",
+    "MAX_DETECTIONS",
+    "BatchLocalizeRequest",
+    "BatchLocalizeResponse",
+    "BoxIn",
+    "CameraIn",
+    "CovarianceOut",
+    "DetectionIn",
+    "EllipseIn",
+    "HealthOut",
+    "InlierOut",
+    "LocalizeOptionsIn",
+    "LocalizeRequest",
+    "LocalizeResponse",
+    "MapListOut",
+    "MapOut",
+    "MapSummaryOut",
+    "PoseIn",
+    "PoseOut",
+    "PosePriorIn",
+    "Problem",
+    "ProblemField",
+]
+
+#: Static upper bounds published in the schema; the server's settings may be lower.
+MAX_DETECTIONS = 256
+MAX_BATCH_FRAMES = 64
+#: Largest |coordinate| in pixels accepted anywhere (keeps the solver's numbers sane).
+MAX_PIXELS = 1e6
+COVARIANCE_ORDER = ("omega_x", "omega_y", "omega_z", "v_x", "v_y", "v_z")
+COVARIANCE_FRAME = "camera (body) frame, right perturbation T*exp(xi), omega in rad, v in m"
+
+Convention = Literal["opencv", "opengl"]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
+
+
+# ----------------------------------------------------------------------------------- requests
+
+
+class EllipseIn(_Model):
+    """Image ellipse: centre px, semi-axes px, angle radians (from +x towards +y)."""
+
+    cx: float = Field(ge=-MAX_PIXELS, le=MAX_PIXELS, description="Centre x (px).")
+    cy: float = Field(ge=-MAX_PIXELS, le=MAX_PIXELS, description="Centre y (px).")
+    a: float = Field(gt=0, le=MAX_PIXELS, description="Semi-axis along `angle` (px).")
+    b: float = Field(gt=0, le=MAX_PIXELS, description="Other semi-axis (px).")
+    angle: float = Field(default=0.0, ge=-100.0, le=100.0,
+                         description="Direction of semi-axis `a`, radians from +x towards +y.")
+
+    @model_validator(mode="after")
+    def _aspect(self) -> EllipseIn:
+        if max(self.a, self.b) / min(self.a, self.b) > 1e4:
+            raise ValueError("a/b aspect ratio must be <= 1e4 (degenerate ellipse)")
+        return self
+
+
+class BoxIn(_Model):
+    """Axis-aligned box in px; the detection becomes its inscribed ellipse."""
+
+    xmin: float = Field(ge=-MAX_PIXELS, le=MAX_PIXELS)
+    ymin: float = Field(ge=-MAX_PIXELS, le=MAX_PIXELS)
+    xmax: float = Field(ge=-MAX_PIXELS, le=MAX_PIXELS)
+    ymax: float = Field(ge=-MAX_PIXELS, le=MAX_PIXELS)
+
+    @model_validator(mode="after")
+    def _ordered(self) -> BoxIn:
+        if not self.xmax > self.xmin:
+            raise ValueError(f"xmax ({self.xmax}) must be > xmin ({self.xmin})")
+        if not self.ymax > self.ymin:
+            raise ValueError(f"ymax ({self.ymax}) must be > ymin ({self.ymin})")
+        w, h = self.xmax - self.xmin, self.ymax - self.ymin
+        if max(w, h) / min(w, h) > 1e4:
+            raise ValueError("box aspect ratio must be <= 1e4 (degenerate box)")
+        return self
+
+
+class DetectionIn(_Model):
+    """One detected object: exactly one of `ellipse` or `box`, its label, optional uncertainty
+    (`sigma` or `log_variance`, not both) and optional detector `score`."""
+
+    ellipse: EllipseIn | None = None
+    box: BoxIn | None = None
+    label: str = Field(min_length=1, max_length=128, description="Category label of the map.")
+    sigma: float | None = Field(default=None, gt=0, le=1e6,
+                                description="Predicted uncertainty (> 0); cost weight 1/sigma.")
+    log_variance: float | None = Field(default=None, ge=-60, le=60,
+                                       description="alpha = log sigma^2; sigma = exp(alpha/2).")
+    score: float | None = Field(default=None, ge=0, le=1, description="Detector score.")
+
+    @model_validator(mode="after")
+    def _one_shape(self) -> DetectionIn:
+        if (self.ellipse is None) == (self.box is None):
+            raise ValueError("give exactly one of 'ellipse' or 'box'")
+        if self.sigma is not None and self.log_variance is not None:
+            raise ValueError("give at most one of 'sigma' or 'log_variance'")
+        return self
+
+    def effective_sigma(self) -> float | None:
+        """``sigma``, or ``exp(log_variance / 2)``, or None."""
+        if self.log_variance is not None:
+            return math.exp(self.log_variance / 2.0)
+        return self.sigma
+
+
+class CameraIn(_Model):
+    """Pinhole intrinsics (px, zero skew, undistorted detections) and image size (px)."""
+
+    fx: float = Field(gt=0, le=1e7)
+    fy: float = Field(gt=0, le=1e7)
+    cx: float = Field(ge=-MAX_PIXELS, le=MAX_PIXELS)
+    cy: float = Field(ge=-MAX_PIXELS, le=MAX_PIXELS)
+    width: int = Field(ge=1, le=100_000)
+    height: int = Field(ge=1, le=100_000)
+
+
+class PoseIn(_Model):
+    """A ``world_from_camera`` pose: `quaternion_wxyz` + `translation_m`, or a 4x4 `matrix`."""
+
+    quaternion_wxyz: list[float] | None = Field(default=None, min_length=4, max_length=4)
+    translation_m: list[float] | None = Field(default=None, min_length=3, max_length=3)
+    matrix: list[list[float]] | None = Field(default=None, min_length=4, max_length=4)
+
+    @model_validator(mode="after")
+    def _one_form(self) -> PoseIn:
+        has_q = self.quaternion_wxyz is not None or self.translation_m is not None
+        if has_q == (self.matrix is not None):
+            raise ValueError("give either 'quaternion_wxyz' + 'translation_m' or 'matrix'")
+        if has_q and (self.quaternion_wxyz is None or self.translation_m is None):
+            raise ValueError("'quaternion_wxyz' and 'translation_m' go together")
+        if self.matrix is not None and any(len(row) != 4 for row in self.matrix):
+            raise ValueError("'matrix' must be 4x4")
+        for name in ("quaternion_wxyz", "translation_m"):
+            v = getattr(self, name)
+            if v is not None and any(abs(x) > 1e6 for x in v):
+                raise ValueError(f"'{name}' entries must be within +-1e6")
+        if self.matrix is not None and any(abs(x) > 1e6 for row in self.matrix for x in row):
+            raise ValueError("'matrix' entries must be within +-1e6")
+        return self
+
+
+class PosePriorIn(_Model):
+    """Optional pose prior (e.g. from the AR session's tracking)."""
+
+    world_from_camera: PoseIn
+    covariance: list[list[float]] | None = Field(
+        default=None, min_length=6, max_length=6,
+        description="Optional 6x6 covariance in GTSAM Pose3 tangent order [omega_x, omega_y, "
+                    "omega_z, v_x, v_y, v_z], " + COVARIANCE_FRAME + ". Symmetric positive "
+                    "definite. With it the prior is also a soft factor of the refinement.")
+    convention: Convention = Field(default="opencv",
+                                   description="Camera axes of this prior (opencv or opengl).")
+
+    @field_validator("covariance")
+    @classmethod
+    def _six_by_six(cls, value: list[list[float]] | None) -> list[list[float]] | None:
+        if value is not None and any(len(row) != 6 for row in value):
+            raise ValueError("covariance must be 6x6")
+        return value
+
+
+class LocalizeOptionsIn(_Model):
+    """Solver options; omitted fields take the server defaults (shown)."""
+
+    metric: Literal[METRICS] = Field(  # type: ignore[valid-type]
+        default="level_set", description="Refinement metric (one of the nine).")
+    ransac_max_hypotheses: int = Field(default=300, ge=1, le=100_000,
+                                       description="RANSAC budget of minimal samples.")
+    inlier_iou: float = Field(default=0.2, gt=0, le=1,
+                              description="IoU threshold for a detection to be an inlier.")
+    min_inliers: int = Field(default=2, ge=2, le=MAX_DETECTIONS)
+    use_sigma: bool = Field(default=True, description="Weight costs by 1/sigma (paper eq. 8).")
+    robust: Literal[ROBUST_KERNELS] | None = Field(  # type: ignore[valid-type]
+        default=None, description="Robust kernel of the refinement.")
+    robust_scale: float | None = Field(default=None, gt=0, le=1e6,
+                                       description="Kernel scale (needs `robust`).")
+    unknown_label_policy: Literal["ignore", "error"] = "ignore"
+    seed: int | None = Field(default=0, ge=0, le=2**32 - 1)
+    time_budget_ms: float | None = Field(
+        default=None, gt=0, le=60_000,
+        description="Solve budget (ms); capped by the server's QUADLOC_SOLVE_TIME_BUDGET_MS.")
+    max_iterations: int = Field(default=50, ge=1, le=500)
+    output_convention: Convention = Field(
+        default="opencv", description="Camera axes of the returned pose and covariance.")
+
+    @model_validator(mode="after")
+    def _scale_needs_kernel(self) -> LocalizeOptionsIn:
+        if self.robust_scale is not None and self.robust is None:
+            raise ValueError("'robust_scale' needs 'robust'")
+        return self
+
+
+class LocalizeRequest(_Model):
+    """One frame to localize against the map."""
+
+    camera: CameraIn
+    detections: list[DetectionIn] = Field(max_length=MAX_DETECTIONS)
+    prior: PosePriorIn | None = None
+    frame_id: str | None = Field(default=None, max_length=256, description="Echoed back.")
+    timestamp: float | None = Field(default=None, description="Echoed back (client clock, s).")
+    options: LocalizeOptionsIn = Field(default_factory=LocalizeOptionsIn)
+
+
+class BatchLocalizeRequest(_Model):
+    """Several frames (bounded count) localized in order with the same map version."""
+
+    frames: list[LocalizeRequest] = Field(min_length=1, max_length=MAX_BATCH_FRAMES)
+
+
+# ----------------------------------------------------------------------------------- responses
+
+
+class PoseOut(BaseModel):
+    """The camera's pose in the map frame (``world_from_camera``)."""
+
+    quaternion_wxyz: list[float] = Field(description="Unit quaternion (w, x, y, z), w >= 0.")
+    translation_m: list[float] = Field(description="Camera centre in the map frame (m).")
+    matrix: list[list[float]] = Field(description="4x4 homogeneous world_from_camera.")
+    convention: Convention = Field(description="Camera axes of this pose.")
+
+
+class CovarianceOut(BaseModel):
+    order: list[str] = Field(default=list(COVARIANCE_ORDER),
+                             description="Row/column order of `matrix`.")
+    frame: str = Field(default=COVARIANCE_FRAME)
+    matrix: list[list[float]]
+
+
+class InlierOut(BaseModel):
+    detection_index: int
+    object_id: str
+    iou: float
+    cost: float
+
+
+class LocalizeResponse(BaseModel):
+    """`localized: false` with a `reason` is a normal answer (HTTP 200), not an error."""
+
+    localized: bool
+    reason: str | None = Field(
+        description="Why not localized: too_few_detections, no_label_match, "
+                    "no_hypothesis_above_inlier_threshold, refinement_diverged, "
+                    "time_budget_exceeded, numerical_failure; null when localized.")
+    world_from_camera: PoseOut | None
+    covariance: CovarianceOut | None
+    confidence: float = Field(ge=0, le=1)
+    inliers: list[InlierOut]
+    metric: str
+    hypotheses_evaluated: int
+    used_prior: bool
+    map_id: str
+    map_version: int
+    timings_ms: dict[str, float]
+    frame_id: str | None = None
+    timestamp: float | None = None
+
+
+class BatchLocalizeResponse(BaseModel):
+    map_id: str
+    map_version: int
+    results: list[LocalizeResponse]
+
+
+class MapSummaryOut(BaseModel):
+    map_id: str
+    name: str
+    version: int
+    content_hash: str
+    updated_at: str | None = None
+
+
+class MapListOut(BaseModel):
+    maps: list[MapSummaryOut]
+
+
+class MapOut(BaseModel):
+    """A stored map version: its metadata and the map document (docs/maps.md format)."""
+
+    map_id: str
+    version: int
+    content_hash: str = Field(description="sha256 of the canonical map content (the ETag).")
+    created_at: str | None = None
+    map: dict[str, Any] = Field(description="The map in the documented JSON format.")
+
+
+class HealthOut(BaseModel):
+    status: str
+    checks: dict[str, str] = Field(default_factory=dict)
+
+
+class ProblemField(BaseModel):
+    field: str
+    message: str
+
+
+class Problem(BaseModel):
+    """RFC 9457 problem details (media type application/problem+json)."""
+
+    type: str
+    title: str
+    status: int
+    detail: str
+    instance: str | None = None
+    errors: list[ProblemField] = Field(default_factory=list)

@@ -1,0 +1,128 @@
+"""Running localizations for the API: bounded concurrency, time budget, outcome metrics, and
+conversion of every solver failure into either a 4xx problem or a normal "not localized" answer.
+
+Solves are CPU-bound and hold the GIL: routes that call :meth:`Solver.localize_frames` are plain
+``def`` routes, which FastAPI runs in its threadpool, never on the event loop. A semaphore caps
+the number of frames solved at once per process (``QUADLOC_MAX_CONCURRENT_SOLVES``); a request
+that waits longer than ``QUADLOC_SOLVE_QUEUE_TIMEOUT_S`` for a slot gets 503 + ``Retry-After``.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+import threading
+import time
+from collections.abc import Sequence
+
+from factors.geometry import GeometryError
+from maps.compiled import CompiledMap
+from service.api.convert import (
+    camera_from_request,
+    detections_from_request,
+    options_from_request,
+    prior_from_request,
+    response_from_result,
+)
+from service.api.errors import ProblemError
+from service.api.metrics import ApiMetrics
+from service.api.schemas import LocalizeRequest, LocalizeResponse
+from service.localization.pipeline import localize
+from service.localization.types import LocalizationInputError
+
+__all__ = ["Solver"]
+
+log = logging.getLogger("quadloc.api")
+
+#: API-level reason (beyond the pipeline's) for a numerical failure deep in the solver.
+NUMERICAL_FAILURE = "numerical_failure"
+#: An input error raised inside ``localize`` is the client's when it names a request field.
+_REQUEST_FIELD = re.compile(r"^(detections|camera|prior|options)\b")
+
+
+def _field_and_message(exc: Exception, prefix: str) -> tuple[str, str]:
+    """Split ``"detections[2].label: problem"`` into field and message (prefix prepended)."""
+    text = str(exc)
+    head, sep, tail = text.partition(": ")
+    if sep and " " not in head and head:
+        return prefix + head, tail
+    return prefix + "body", text
+
+
+class Solver:
+    """Per-app localization runner (see the module docstring)."""
+
+    def __init__(self, metrics: ApiMetrics, max_concurrent: int, queue_timeout_s: float,
+                 max_budget_ms: float, max_detections: int) -> None:
+        self.metrics = metrics
+        self.slots = threading.BoundedSemaphore(max_concurrent)
+        self.queue_timeout_s = queue_timeout_s
+        self.max_budget_ms = max_budget_ms
+        self.max_detections = max_detections
+
+    def _solve_one(self, compiled: CompiledMap, frame: LocalizeRequest,
+                   prefix: str) -> LocalizeResponse:
+        if len(frame.detections) > self.max_detections:
+            raise ProblemError("validation-error",
+                               f"{prefix}detections: at most {self.max_detections} per frame",
+                             errors=[{"field": f"{prefix}detections",
+                                      "message": f"at most {self.max_detections} detections"}])
+        try:
+            camera = camera_from_request(frame.camera)
+            detections = detections_from_request(frame.detections)
+            prior = prior_from_request(frame.prior)
+            options = options_from_request(frame.options, self.max_budget_ms)
+        except ValueError as exc:  # GeometryError, LocalizationInputError
+            field, message = _field_and_message(exc, prefix)
+            raise ProblemError("invalid-geometry", f"{field}: {message}",
+                             errors=[{"field": field, "message": message}]) from exc
+        start = time.perf_counter()
+        self.metrics.in_progress.inc()
+        try:
+            result = localize(detections, compiled, camera, options, prior)
+            response = response_from_result(
+                result, map_id=compiled.map_id, map_version=compiled.version,
+                convention=frame.options.output_convention, frame_id=frame.frame_id,
+                timestamp=frame.timestamp)
+        except (GeometryError, LocalizationInputError) as exc:
+            field, message = _field_and_message(exc, prefix)
+            if _REQUEST_FIELD.match(field[len(prefix):]):
+                raise ProblemError("invalid-geometry", f"{field}: {message}",
+                                   errors=[{"field": field, "message": message}]) from exc
+            response = self._failed(compiled, frame, options.metric, start)
+        except Exception:  # a numerical failure deep in the solver is "not localized", not 5xx
+            response = self._failed(compiled, frame, options.metric, start)
+        finally:
+            self.metrics.in_progress.dec()
+            self.metrics.solve_seconds.observe(time.perf_counter() - start)
+        self.metrics.localizations.labels(
+            "localized" if response.localized else str(response.reason)).inc()
+        return response
+
+    @staticmethod
+    def _failed(compiled: CompiledMap, frame: LocalizeRequest, metric: str,
+                start: float) -> LocalizeResponse:
+        """The "not localized" answer for an unexpected solver failure (logged with traceback)."""
+        elapsed_ms = (time.perf_counter() - start) * 1e3
+        log.exception("solver failure in localize() for frame %r after %.1f ms; answered "
+                      "localized=false reason=%s", frame.frame_id, elapsed_ms, NUMERICAL_FAILURE)
+        return LocalizeResponse(
+            localized=False, reason=NUMERICAL_FAILURE, world_from_camera=None, covariance=None,
+            confidence=0.0, inliers=[], metric=metric, hypotheses_evaluated=0, used_prior=False,
+            map_id=compiled.map_id, map_version=compiled.version,
+            timings_ms={"total": elapsed_ms}, frame_id=frame.frame_id, timestamp=frame.timestamp)
+
+    def localize_frames(self, compiled: CompiledMap, frames: Sequence[LocalizeRequest],
+                        batch: bool) -> list[LocalizeResponse]:
+        """Solve ``frames`` in order against ``compiled`` (blocking; call from a thread).
+
+        Field names in errors are prefixed with ``frames[i].`` for batches.
+        """
+        if not self.slots.acquire(timeout=self.queue_timeout_s):
+            raise ProblemError("busy", "all solver slots are busy; retry shortly",
+                             headers={"Retry-After": "1"})
+        try:
+            return [self._solve_one(compiled, f, f"frames[{i}]." if batch else "")
+                    for i, f in enumerate(frames)]
+        finally:
+            self.slots.release()

@@ -1,0 +1,250 @@
+"""``localize()``: relocalization from scratch (paper section V-B) or from a client prior.
+
+Stages (wall time of each in ``LocalizationResult.timings_ms``):
+
+1. ``validate`` — check the input (errors name the field), compile the map (cached per map
+   object), keep the *usable* detections: those whose label is a category with objects in the
+   map (``options.unknown_label_policy``: ``"ignore"`` drops the others, ``"error"`` raises).
+2. ``prior`` (only with a :class:`PosePrior`) — match detections to objects by IoU at the prior
+   pose (one-to-one, IoU >= ``inlier_iou``); with >= ``min_inliers`` matches, refine from the
+   prior (the prior's covariance, if any, becomes a prior factor) and keep the result if it
+   still has >= ``min_inliers`` inliers; otherwise fall back to RANSAC.
+3. ``hypotheses`` — :func:`service.localization.ransac.ransac`: P3P / P2E over label-compatible
+   samples, IoU scoring, bounded by ``ransac_max_hypotheses`` and ``time_budget_ms``.
+4. ``refine`` — :func:`service.localization.refine.refine` on the best hypothesis' inliers with
+   ``options.metric`` (sigma-weighted, robust kernel option), then re-association: the inliers
+   are recomputed at the refined pose and, if the set changed, refined once more. The result
+   is accepted when it keeps >= ``min_inliers`` inliers; otherwise ``refinement_diverged``.
+
+The time budget bounds the hypothesis search (stage 3); a refinement that has started finishes.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+
+import numpy as np
+
+from factors.geometry import Camera, invert_pose
+from maps.compiled import CompiledMap, compile_map
+from maps.model import SceneMap
+from service.localization.ransac import Match, MatchScorer, ransac
+from service.localization.refine import refine
+from service.localization.types import (
+    NO_REFINEMENT,
+    Detection,
+    InlierMatch,
+    LocalizationInputError,
+    LocalizationOptions,
+    LocalizationResult,
+    PosePrior,
+)
+
+__all__ = ["compiled_map_of", "confidence_of", "localize"]
+
+_COMPILED: dict[int, tuple[SceneMap, CompiledMap]] = {}
+_COMPILED_MAX = 16
+
+
+def compiled_map_of(scene_map: SceneMap | CompiledMap) -> CompiledMap:
+    """The :class:`CompiledMap` of a map (cached by object identity, a few entries)."""
+    if isinstance(scene_map, CompiledMap):
+        return scene_map
+    hit = _COMPILED.get(id(scene_map))
+    if hit is not None and hit[0] is scene_map:
+        return hit[1]
+    compiled = compile_map(scene_map)
+    if len(_COMPILED) >= _COMPILED_MAX:
+        _COMPILED.pop(next(iter(_COMPILED)))
+    _COMPILED[id(scene_map)] = (scene_map, compiled)
+    return compiled
+
+
+def confidence_of(n_inliers: int, n_usable: int, mean_iou: float) -> float:
+    """``(n_inliers / n_usable) * mean_iou * (1 - 0.5 ** (n_inliers - 1))`` in [0, 1] (see
+    :class:`~service.localization.types.LocalizationResult`)."""
+    if n_inliers <= 0 or n_usable <= 0:
+        return 0.0
+    value = (n_inliers / n_usable) * mean_iou * (1.0 - 0.5 ** (n_inliers - 1))
+    return float(min(1.0, max(0.0, value)))
+
+
+def _validate(
+    detections: Sequence[Detection], scene_map: SceneMap | CompiledMap, camera: Camera,
+    options: LocalizationOptions, prior: PosePrior | None,
+) -> CompiledMap:
+    if isinstance(detections, (str, bytes, Detection)) or not isinstance(detections, Sequence):
+        raise LocalizationInputError("detections: must be a sequence of Detection, got "
+                                     f"{type(detections).__name__}")
+    if len(detections) == 0:
+        raise LocalizationInputError("detections: must not be empty")
+    for i, d in enumerate(detections):
+        if not isinstance(d, Detection):
+            raise LocalizationInputError(
+                f"detections[{i}]: must be a Detection, got {type(d).__name__}")
+    if not isinstance(scene_map, (SceneMap, CompiledMap)):
+        raise LocalizationInputError(
+            f"scene_map: must be a SceneMap or CompiledMap, got {type(scene_map).__name__}")
+    if not isinstance(camera, Camera):
+        raise LocalizationInputError(f"camera: must be a Camera, got {type(camera).__name__}")
+    if not isinstance(options, LocalizationOptions):
+        raise LocalizationInputError(
+            f"options: must be LocalizationOptions, got {type(options).__name__}")
+    if prior is not None and not isinstance(prior, PosePrior):
+        raise LocalizationInputError(
+            f"prior: must be a PosePrior or None, got {type(prior).__name__}")
+    compiled = compiled_map_of(scene_map)
+    if len(compiled) == 0:
+        raise LocalizationInputError("scene_map: the map has no objects")
+    if options.unknown_label_policy == "error":
+        for i, d in enumerate(detections):
+            if len(compiled.indices_for(d.label)) == 0:
+                raise LocalizationInputError(
+                    f"detections[{i}].label: {d.label!r} is not a category of the map "
+                    f"(unknown_label_policy 'error'; map categories: "
+                    f"{', '.join(sorted(set(compiled.categories)))})")
+    return compiled
+
+
+def _not_localized(reason: str, metric: str, evaluated: int, timings: dict[str, float],
+                   t0: float) -> LocalizationResult:
+    timings["total"] = (time.perf_counter() - t0) * 1e3
+    return LocalizationResult(False, reason, None, None, 0.0, (), metric, evaluated, False,
+                              timings)
+
+
+def _refine_matches(
+    matches: Sequence[Match], detections: Sequence[Detection], compiled: CompiledMap,
+    camera: Camera, world_from_camera: np.ndarray, options: LocalizationOptions,
+    prior: PosePrior | None,
+):
+    return refine(
+        [detections[m.detection_index] for m in matches],
+        [compiled.ellipsoids[m.object_index] for m in matches],
+        camera, world_from_camera, options.metric,
+        use_sigma=options.use_sigma, robust=options.robust, robust_scale=options.robust_scale,
+        prior_world_from_camera=None if prior is None or prior.covariance is None
+        else prior.world_from_camera,
+        prior_covariance=None if prior is None else prior.covariance,
+        max_iterations=options.max_iterations,
+        metric_options=dict(options.metric_options) if options.metric_options else None,
+    )
+
+
+def _refine_and_verify(
+    matches: Sequence[Match], detections: Sequence[Detection], compiled: CompiledMap,
+    camera: Camera, scorer: MatchScorer, world_from_camera: np.ndarray,
+    options: LocalizationOptions, prior: PosePrior | None,
+) -> tuple[np.ndarray, np.ndarray | None, list[InlierMatch]] | None:
+    """Refine on ``matches``, re-associate, refine again if the set changed; None if the
+    result fails the inlier check. Returns (world_from_camera, covariance, inliers)."""
+    thr = options.inlier_iou
+    if options.metric == NO_REFINEMENT:
+        final = scorer.matches(invert_pose(world_from_camera), thr)
+        if len(final) < options.min_inliers:
+            return None
+        return world_from_camera, None, [
+            InlierMatch(m.detection_index, compiled.object_ids[m.object_index], m.iou,
+                        1.0 - m.iou) for m in final]
+    current = list(matches)
+    T = world_from_camera
+    for round_ in range(2):
+        res = _refine_matches(current, detections, compiled, camera, T, options, prior)
+        if res.status in ("diverged", "invalid_projection") or not np.all(
+                np.isfinite(res.world_from_camera)):
+            return None
+        T = res.world_from_camera
+        new = scorer.matches(invert_pose(T), thr)
+        same = {(m.detection_index, m.object_index) for m in new} == {
+            (m.detection_index, m.object_index) for m in current}
+        if same or len(new) < options.min_inliers or round_ == 1:
+            break
+        current = new
+    cost = {(m.detection_index, m.object_index): float(c)
+            for m, c in zip(current, res.per_detection_cost, strict=True)}
+    inliers = [InlierMatch(m.detection_index, compiled.object_ids[m.object_index], m.iou,
+                           cost[(m.detection_index, m.object_index)])
+               for m in new if (m.detection_index, m.object_index) in cost]
+    if len(inliers) < options.min_inliers:
+        return None
+    return T, res.covariance, inliers
+
+
+def localize(
+    detections: Sequence[Detection],
+    scene_map: SceneMap | CompiledMap,
+    camera: Camera,
+    options: LocalizationOptions = LocalizationOptions(),  # noqa: B008 (frozen, immutable)
+    prior: PosePrior | None = None,
+) -> LocalizationResult:
+    """Estimate the camera pose from object detections (see the module docstring).
+
+    Args:
+        detections: the image's detections (ellipses in px, labels, optional sigma / score).
+        scene_map: the map (world frame, metres), or its :class:`CompiledMap`.
+        camera: intrinsics and image size of the image.
+        options: :class:`LocalizationOptions`.
+        prior: optional client pose prior (``world_from_camera``, optional covariance).
+
+    Returns:
+        :class:`LocalizationResult`; ``localized=False`` with a ``reason`` is a normal answer.
+
+    Raises:
+        LocalizationInputError: (a ``ValueError``) bad input, the message names the field.
+    """
+    t0 = time.perf_counter()
+    timings: dict[str, float] = {}
+    compiled = _validate(detections, scene_map, camera, options, prior)
+    metric = options.metric
+    usable = [i for i, d in enumerate(detections) if len(compiled.indices_for(d.label)) > 0]
+    t1 = time.perf_counter()
+    timings["validate"] = (t1 - t0) * 1e3
+    if len(detections) < 2:
+        return _not_localized("too_few_detections", metric, 0, timings, t0)
+    if len(usable) < 2:
+        return _not_localized("no_label_match", metric, 0, timings, t0)
+    scorer = MatchScorer(compiled, camera, [detections[i].ellipse for i in usable],
+                         [detections[i].label for i in usable], usable)
+    deadline = None if options.time_budget_ms is None else t0 + options.time_budget_ms / 1e3
+    evaluated = 0
+
+    def finish(T: np.ndarray, cov: np.ndarray | None, inliers: list[InlierMatch],
+               used_prior: bool) -> LocalizationResult:
+        timings["total"] = (time.perf_counter() - t0) * 1e3
+        mean_iou = float(np.mean([m.iou for m in inliers]))
+        return LocalizationResult(
+            True, None, np.array(T, dtype=float), cov,
+            confidence_of(len(inliers), len(usable), mean_iou),
+            tuple(sorted(inliers, key=lambda m: m.detection_index)), metric, evaluated,
+            used_prior, timings)
+
+    if prior is not None:
+        evaluated += 1
+        tp = time.perf_counter()
+        matches = scorer.matches(invert_pose(prior.world_from_camera), options.inlier_iou)
+        got = None
+        if len(matches) >= options.min_inliers:
+            got = _refine_and_verify(matches, detections, compiled, camera, scorer,
+                                     prior.world_from_camera, options, prior)
+        timings["prior"] = (time.perf_counter() - tp) * 1e3
+        if got is not None:
+            return finish(*got, used_prior=True)
+
+    th = time.perf_counter()
+    rng = np.random.default_rng(options.seed)
+    outcome = ransac(scorer, compiled.scene_map.up, inlier_iou=options.inlier_iou,
+                     min_inliers=options.min_inliers,
+                     max_hypotheses=options.ransac_max_hypotheses, rng=rng, deadline=deadline)
+    evaluated += outcome.hypotheses_evaluated
+    timings["hypotheses"] = (time.perf_counter() - th) * 1e3
+    if outcome.camera_from_world is None:
+        return _not_localized(outcome.reason or "no_hypothesis_above_inlier_threshold", metric,
+                              evaluated, timings, t0)
+    tr = time.perf_counter()
+    got = _refine_and_verify(list(outcome.matches), detections, compiled, camera, scorer,
+                             invert_pose(outcome.camera_from_world), options, None)
+    timings["refine"] = (time.perf_counter() - tr) * 1e3
+    if got is None:
+        return _not_localized("refinement_diverged", metric, evaluated, timings, t0)
+    return finish(*got, used_prior=False)

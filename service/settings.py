@@ -1,0 +1,193 @@
+"""Service settings, read from the environment (prefix ``QUADLOC_``) with pydantic-settings.
+
+Every field can be set as ``QUADLOC_<FIELD>`` (case-insensitive), e.g.
+``QUADLOC_DATABASE_URL=postgresql://user@db/quadloc`` or ``QUADLOC_PORT=9000``.
+
+API keys (``QUADLOC_API_KEYS``) are never stored in clear: each entry is the **sha256 hex digest**
+of the key and its scopes. Two accepted spellings:
+
+* compact: ``"<sha256hex>:read,<sha256hex>:read+write"`` (entries separated by ``,`` or
+  whitespace, scopes joined by ``+``);
+* JSON: ``[{"sha256": "<hex>", "scopes": ["read", "write"], "name": "ci"}]``.
+
+Scopes: ``read`` (localize, get and list maps) and ``write`` (create, update, delete maps).
+``write`` implies ``read``. Hash a key with ``quadloc hash-key`` or
+``python -c "import hashlib,sys; print(hashlib.sha256(sys.argv[1].encode()).hexdigest())" KEY``.
+
+With no key configured the service is open, and therefore refuses to bind anything but a
+loopback address (see :func:`check_bind_allowed`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import ipaddress
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+from pydantic import Field, field_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+__all__ = [
+    "SCOPES",
+    "ApiKey",
+    "Settings",
+    "check_bind_allowed",
+    "hash_api_key",
+    "is_loopback_host",
+    "parse_api_keys",
+]
+
+#: The two access scopes. ``write`` implies ``read``.
+SCOPES = ("read", "write")
+_HEX64 = re.compile(r"^[0-9a-f]{64}$")
+
+
+@dataclass(frozen=True)
+class ApiKey:
+    """One configured key: its sha256 hex digest, its scopes and an optional display name."""
+
+    sha256: str
+    scopes: frozenset[str]
+    name: str = ""
+
+    def allows(self, scope: str) -> bool:
+        """True when this key grants ``scope`` (``write`` implies ``read``)."""
+        return scope in self.scopes or (scope == "read" and "write" in self.scopes)
+
+
+def hash_api_key(key: str) -> str:
+    """sha256 hex digest of an API key (UTF-8), the form stored in ``QUADLOC_API_KEYS``."""
+    return hashlib.sha256(key.encode("utf-8")).hexdigest()
+
+
+def _make_key(where: str, digest: object, scopes: object, name: object = "") -> ApiKey:
+    if not isinstance(digest, str) or not _HEX64.match(digest.strip().lower()):
+        raise ValueError(f"{where}: the key must be a sha256 hex digest (64 hex characters)")
+    if isinstance(scopes, str):
+        scopes = [s for s in scopes.split("+") if s]
+    if not isinstance(scopes, list | tuple) or not scopes:
+        raise ValueError(f"{where}: scopes must be a non-empty list of {list(SCOPES)}")
+    bad = [s for s in scopes if s not in SCOPES]
+    if bad:
+        raise ValueError(f"{where}: unknown scope(s) {bad}; valid scopes are {list(SCOPES)}")
+    return ApiKey(digest.strip().lower(), frozenset(scopes), str(name or ""))
+
+
+def parse_api_keys(text: str) -> tuple[ApiKey, ...]:
+    """Parse ``QUADLOC_API_KEYS`` (compact or JSON form, see the module docstring).
+
+    Raises ``ValueError`` naming the entry and the problem.
+    """
+    text = (text or "").strip()
+    if not text:
+        return ()
+    if text.startswith("["):
+        try:
+            entries = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"QUADLOC_API_KEYS: invalid JSON: {exc}") from exc
+        keys = []
+        for i, entry in enumerate(entries):
+            where = f"QUADLOC_API_KEYS[{i}]"
+            if not isinstance(entry, dict):
+                raise ValueError(f"{where}: must be an object with 'sha256' and 'scopes'")
+            keys.append(_make_key(where, entry.get("sha256"), entry.get("scopes"),
+                                  entry.get("name", "")))
+        return tuple(keys)
+    keys = []
+    for i, entry in enumerate(re.split(r"[,\s]+", text)):
+        if not entry:
+            continue
+        digest, sep, scopes = entry.partition(":")
+        if not sep:
+            raise ValueError(f"QUADLOC_API_KEYS entry {i}: expected '<sha256hex>:<scopes>'")
+        keys.append(_make_key(f"QUADLOC_API_KEYS entry {i}", digest, scopes))
+    return tuple(keys)
+
+
+def _default_data_dir() -> Path:
+    return Path.home() / ".local" / "share" / "quadloc"
+
+
+class Settings(BaseSettings):
+    """All tunables of the service. Units are in the field names (``_ms``, ``_bytes``, ``_s``)."""
+
+    model_config = SettingsConfigDict(env_prefix="QUADLOC_", extra="ignore")
+
+    data_dir: Path = Field(default_factory=_default_data_dir,
+                           description="Directory of the default SQLite database.")
+    database_url: str | None = Field(
+        default=None,
+        description="SQLAlchemy URL: sqlite:///path or postgresql://... "
+                    "(default: sqlite:///<data_dir>/quadloc.db).",
+    )
+    api_keys: str = Field(default="", description="Hashed API keys with scopes (module doc).")
+    host: str = "127.0.0.1"
+    port: int = Field(default=8000, ge=0, le=65535)
+    workers: int = Field(default=1, ge=1, le=64,
+                         description="Uvicorn worker processes (CPU-bound: ~1 per core).")
+    log_level: str = "info"
+    default_map_id: str = "chess"
+    seed_demo_map: bool = Field(default=True,
+                                description="Create the demo Chess map at startup if absent.")
+    max_body_bytes: int = Field(default=2_000_000, ge=1024,
+                                description="Largest request body; larger -> 413.")
+    max_detections: int = Field(default=256, ge=1, description="Detections per frame.")
+    max_batch_frames: int = Field(default=32, ge=1, description="Frames per batch request.")
+    max_map_objects: int = Field(default=10_000, ge=1)
+    solve_time_budget_ms: float = Field(
+        default=1000.0, gt=0,
+        description="Per-frame solve budget; a client may ask for less, never more.",
+    )
+    max_concurrent_solves: int = Field(
+        default=4, ge=1,
+        description="Solves running at once per process (the GIL serialises them anyway).",
+    )
+    solve_queue_timeout_s: float = Field(
+        default=5.0, ge=0,
+        description="Longest wait for a solve slot before answering 503 + Retry-After.",
+    )
+
+    @field_validator("api_keys")
+    @classmethod
+    def _check_keys(cls, value: str) -> str:
+        parse_api_keys(value)
+        return value
+
+    @property
+    def effective_database_url(self) -> str:
+        """``database_url`` or the default SQLite file under ``data_dir``."""
+        if self.database_url:
+            return self.database_url
+        return f"sqlite:///{(Path(self.data_dir) / 'quadloc.db').resolve()}"
+
+    @property
+    def keys(self) -> tuple[ApiKey, ...]:
+        """Parsed API keys (empty when the service is open)."""
+        return parse_api_keys(self.api_keys)
+
+    @property
+    def auth_enabled(self) -> bool:
+        return bool(self.api_keys.strip())
+
+
+def is_loopback_host(host: str) -> bool:
+    """True for ``localhost`` and loopback IP literals (127.0.0.0/8, ::1)."""
+    if host.strip().lower() == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+def check_bind_allowed(settings: Settings, host: str) -> None:
+    """Refuse (``ValueError``) to bind a non-loopback ``host`` when no API key is configured."""
+    if not settings.auth_enabled and not is_loopback_host(host):
+        raise ValueError(
+            f"refusing to listen on {host!r} without API keys: set QUADLOC_API_KEYS "
+            "(sha256 of each key with its scopes) or bind 127.0.0.1"
+        )

@@ -1,0 +1,119 @@
+"""API keys: hashed storage, scopes, both headers, refusals; loopback-only when open."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import pytest
+from fastapi.testclient import TestClient
+
+from service.api.examples import MAP_EXAMPLE
+from service.settings import (
+    Settings,
+    check_bind_allowed,
+    hash_api_key,
+    is_loopback_host,
+    parse_api_keys,
+)
+from tests.conftest import make_test_app
+
+READ_KEY, WRITE_KEY, OTHER_KEY = "reader-key-123", "writer-key-456", "intruder-789"
+
+
+def _sha(k: str) -> str:
+    return hashlib.sha256(k.encode()).hexdigest()
+
+
+@pytest.fixture
+def client(tmp_path: Path):
+    keys = f"{_sha(READ_KEY)}:read,{_sha(WRITE_KEY)}:read+write"
+    with TestClient(make_test_app(tmp_path, api_keys=keys)) as c:
+        yield c
+
+
+def test_hash_matches_hashlib() -> None:
+    assert hash_api_key("abc") == hashlib.sha256(b"abc").hexdigest()
+
+
+def test_parse_compact_and_json_forms() -> None:
+    compact = parse_api_keys(f"{_sha('a')}:read {_sha('b')}:write")
+    as_json = parse_api_keys(json.dumps([{"sha256": _sha("a"), "scopes": ["read"]},
+                                         {"sha256": _sha("b"), "scopes": ["write"],
+                                          "name": "ci"}]))
+    assert [(k.sha256, k.scopes) for k in compact] == [(k.sha256, k.scopes) for k in as_json]
+    assert compact[1].allows("read") and compact[1].allows("write")
+    assert compact[0].allows("read") and not compact[0].allows("write")
+    for bad, word in [("nothex:read", "sha256"), (f"{_sha('a')}:admin", "admin"),
+                      (f"{_sha('a')}", "expected"), ("[{]", "JSON")]:
+        with pytest.raises(ValueError, match=word):
+            parse_api_keys(bad)
+    with pytest.raises(ValueError, match="api_keys"):
+        Settings(api_keys="zz:read")
+
+
+@pytest.mark.parametrize("host,loop", [("127.0.0.1", True), ("localhost", True), ("::1", True),
+                                       ("127.8.0.1", True), ("0.0.0.0", False),
+                                       ("192.168.1.4", False), ("example.com", False)])
+def test_loopback_detection(host: str, loop: bool) -> None:
+    assert is_loopback_host(host) is loop
+
+
+def test_open_service_refuses_public_binds() -> None:
+    open_settings = Settings(api_keys="")
+    check_bind_allowed(open_settings, "127.0.0.1")
+    with pytest.raises(ValueError, match="QUADLOC_API_KEYS"):
+        check_bind_allowed(open_settings, "0.0.0.0")
+    check_bind_allowed(Settings(api_keys=f"{_sha('k')}:read"), "0.0.0.0")
+
+
+def _assert_problem(r, status: int) -> None:
+    assert r.status_code == status, r.text
+    assert r.headers["content-type"].startswith("application/problem+json")
+    assert r.json()["status"] == status
+
+
+def test_missing_and_wrong_keys_are_refused(client: TestClient) -> None:
+    for path in ("/v1/maps", "/v1/maps/chess"):
+        r = client.get(path)
+        _assert_problem(r, 401)
+        assert r.headers["www-authenticate"].startswith("Bearer")
+        _assert_problem(client.get(path, headers={"Authorization": f"Bearer {OTHER_KEY}"}), 401)
+        _assert_problem(client.get(path, headers={"X-API-Key": OTHER_KEY}), 401)
+        _assert_problem(client.get(path, headers={"Authorization": f"Basic {READ_KEY}"}), 401)
+    _assert_problem(client.post("/v1/maps/chess/localize", json={}), 401)
+    _assert_problem(client.post("/v1/maps", json=MAP_EXAMPLE), 401)
+    # Probes stay public (Kubernetes does not send keys).
+    assert client.get("/healthz").status_code == 200
+    assert client.get("/readyz").status_code == 200
+
+
+def test_read_key_reads_but_cannot_write(client: TestClient) -> None:
+    for headers in ({"Authorization": f"Bearer {READ_KEY}"}, {"X-API-Key": READ_KEY}):
+        assert client.get("/v1/maps", headers=headers).status_code == 200
+        r = client.get("/v1/maps/chess", headers=headers)
+        assert r.status_code == 200
+        etag, doc = r.headers["etag"], r.json()["map"]
+        _assert_problem(client.post("/v1/maps", json=MAP_EXAMPLE, headers=headers), 403)
+        _assert_problem(client.put("/v1/maps/chess", json=doc,
+                                   headers={**headers, "If-Match": etag}), 403)
+        _assert_problem(client.delete("/v1/maps/chess", headers=headers), 403)
+        _assert_problem(client.post("/v1/maps:import-chess", params={"map_id": "x"}, json={},
+                                    headers=headers), 403)
+    # Localize is a read: the key passes auth (the empty body then fails validation).
+    r = client.post("/v1/maps/chess/localize", json={}, headers={"X-API-Key": READ_KEY})
+    _assert_problem(r, 422)
+
+
+def test_write_key_writes(client: TestClient) -> None:
+    headers = {"Authorization": f"Bearer {WRITE_KEY}"}
+    assert client.post("/v1/maps", json=MAP_EXAMPLE, headers=headers).status_code == 201
+    assert client.get("/v1/maps/office-3", headers=headers).status_code == 200
+    assert client.delete("/v1/maps/office-3", headers=headers).status_code == 204
+
+
+def test_no_keys_means_open(tmp_path: Path) -> None:
+    with TestClient(make_test_app(tmp_path)) as c:
+        assert c.get("/v1/maps").status_code == 200
+        assert c.post("/v1/maps", json=MAP_EXAMPLE).status_code == 201

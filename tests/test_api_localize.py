@@ -1,0 +1,321 @@
+"""POST /v1/maps/{id}/localize and :batch - accuracy on a real ground-truth pose, conventions,
+prior, "not localized" answers, every class of bad input, batch bounds, busy slots, metrics."""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+from pathlib import Path
+
+import gtsam
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from factors.geometry import Ellipse, GeometryError, rotation_from_quaternion_wxyz
+from service.api import solver as solver_module
+from service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, LOCALIZE_EXAMPLE
+from tests.conftest import make_test_app
+
+URL = "/v1/maps/chess/localize"
+TRUTH = np.array(EXAMPLE_TRUE_WORLD_FROM_CAMERA)
+FLIP = np.diag([1.0, -1.0, -1.0, 1.0])
+
+
+@pytest.fixture(scope="module")
+def client(tmp_path_factory: pytest.TempPathFactory):
+    with TestClient(make_test_app(tmp_path_factory.mktemp("loc"))) as c:
+        yield c
+
+
+def _frame(**changes: object) -> dict:
+    body = copy.deepcopy(LOCALIZE_EXAMPLE)
+    body.update(changes)
+    return body
+
+
+def _rot_err_deg(A: np.ndarray, B: np.ndarray) -> float:
+    c = (np.trace(A[:3, :3].T @ B[:3, :3]) - 1) / 2
+    return math.degrees(math.acos(min(1.0, max(-1.0, c))))
+
+
+def _problem(r, status: int, slug: str) -> dict:
+    assert r.status_code == status, r.text
+    assert r.headers["content-type"].startswith("application/problem+json")
+    body = r.json()
+    assert body["type"] == f"urn:quadloc:problem:{slug}", body
+    return body
+
+
+def test_demo_frame_localizes_near_the_ground_truth(client: TestClient) -> None:
+    r = client.post(URL, json=LOCALIZE_EXAMPLE)
+    assert r.status_code == 200, r.text
+    out = r.json()
+    assert out["localized"] and out["reason"] is None
+    pose = out["world_from_camera"]
+    T = np.array(pose["matrix"])
+    assert np.linalg.norm(T[:3, 3] - TRUTH[:3, 3]) < 0.05
+    assert _rot_err_deg(T, TRUTH) < 2.0
+    # The quaternion and translation describe the same matrix (independent conversion).
+    np.testing.assert_allclose(rotation_from_quaternion_wxyz(pose["quaternion_wxyz"]), T[:3, :3],
+                               atol=1e-9)
+    np.testing.assert_allclose(pose["translation_m"], T[:3, 3])
+    assert pose["quaternion_wxyz"][0] >= 0 and pose["convention"] == "opencv"
+    cov = np.array(out["covariance"]["matrix"])
+    assert out["covariance"]["order"] == ["omega_x", "omega_y", "omega_z", "v_x", "v_y", "v_z"]
+    np.testing.assert_allclose(cov, cov.T, atol=1e-15)
+    assert np.linalg.eigvalsh(cov).min() > 0
+    assert 0 < out["confidence"] <= 1 and len(out["inliers"]) >= 3
+    assert out["map_id"] == "chess" and out["map_version"] == 1
+    assert out["frame_id"] == LOCALIZE_EXAMPLE["frame_id"]
+    assert out["timestamp"] == LOCALIZE_EXAMPLE["timestamp"]
+    assert out["timings_ms"]["total"] > 0
+
+
+def test_opengl_output_is_the_flipped_pose_and_adjoint_covariance(client: TestClient) -> None:
+    cv = client.post(URL, json=LOCALIZE_EXAMPLE).json()
+    gl_body = _frame(options={**LOCALIZE_EXAMPLE["options"], "output_convention": "opengl"})
+    gl = client.post(URL, json=gl_body).json()
+    T_cv, T_gl = np.array(cv["world_from_camera"]["matrix"]), np.array(gl["world_from_camera"]
+                                                                        ["matrix"])
+    np.testing.assert_allclose(T_gl, T_cv @ FLIP, atol=1e-12)
+    assert gl["world_from_camera"]["convention"] == "opengl"
+    # OpenGL camera looks down -Z: its -Z axis is the OpenCV +Z axis in the world.
+    np.testing.assert_allclose(-T_gl[:3, 2], T_cv[:3, 2], atol=1e-12)
+    # Covariance: xi_gl = Ad(F^-1) xi_cv with GTSAM's adjoint (independent of our formula).
+    F = gtsam.Pose3(gtsam.Rot3(FLIP[:3, :3]), np.zeros(3))
+    ad = F.inverse().AdjointMap()
+    np.testing.assert_allclose(np.array(gl["covariance"]["matrix"]),
+                               ad @ np.array(cv["covariance"]["matrix"]) @ ad.T, atol=1e-15)
+
+
+def test_boxes_and_log_variance_are_converted(client: TestClient) -> None:
+    body = _frame()
+    sigmas = []
+    for d in body["detections"]:
+        e = Ellipse(**d["ellipse"])
+        xmin, ymin, xmax, ymax = e.bbox()
+        d.pop("ellipse")
+        d["box"] = {"xmin": xmin, "ymin": ymin, "xmax": xmax, "ymax": ymax}
+        sigmas.append(d.pop("sigma"))
+        d["log_variance"] = 2.0 * math.log(sigmas[-1])
+    ref = copy.deepcopy(body)
+    for d, s in zip(ref["detections"], sigmas, strict=True):
+        b = d.pop("box")
+        # Independent box -> inscribed ellipse.
+        d["ellipse"] = {"cx": (b["xmin"] + b["xmax"]) / 2, "cy": (b["ymin"] + b["ymax"]) / 2,
+                        "a": (b["xmax"] - b["xmin"]) / 2, "b": (b["ymax"] - b["ymin"]) / 2,
+                        "angle": 0.0}
+        d.pop("log_variance")
+        d["sigma"] = s
+    a, b = client.post(URL, json=body).json(), client.post(URL, json=ref).json()
+    assert a["localized"] == b["localized"]
+    if a["localized"]:
+        np.testing.assert_allclose(a["world_from_camera"]["matrix"],
+                                   b["world_from_camera"]["matrix"], atol=1e-9)
+
+
+def test_prior_in_either_convention(client: TestClient) -> None:
+    cov = np.diag([1e-3, 1e-3, 1e-3, 1e-2, 1e-2, 1e-2])
+    T_start = TRUTH.copy()
+    T_start[:3, 3] += [0.03, -0.02, 0.01]
+    prior_cv = {"world_from_camera": {"matrix": T_start.tolist()}, "covariance": cov.tolist()}
+    prior_gl = {"world_from_camera": {"matrix": (T_start @ FLIP).tolist()},
+                "covariance": cov.tolist(), "convention": "opengl"}
+    a = client.post(URL, json=_frame(prior=prior_cv)).json()
+    b = client.post(URL, json=_frame(prior=prior_gl)).json()
+    assert a["localized"] and a["used_prior"]
+    assert np.linalg.norm(np.array(a["world_from_camera"]["translation_m"]) - TRUTH[:3, 3]) < 0.05
+    # The diagonal covariance is invariant under the flip, so both requests are identical.
+    np.testing.assert_allclose(a["world_from_camera"]["matrix"], b["world_from_camera"]["matrix"],
+                               atol=1e-9)
+    q = prior_cv["world_from_camera"]
+    from factors.geometry import quaternion_wxyz_from_rotation
+
+    q_form = {"quaternion_wxyz": quaternion_wxyz_from_rotation(T_start[:3, :3]).tolist(),
+              "translation_m": T_start[:3, 3].tolist()}
+    c = client.post(URL, json=_frame(prior={**prior_cv, "world_from_camera": q_form})).json()
+    np.testing.assert_allclose(c["world_from_camera"]["matrix"], a["world_from_camera"]["matrix"],
+                               atol=1e-7)
+    assert q  # (matrix form used above)
+
+
+def test_not_localized_is_a_200(client: TestClient) -> None:
+    one = _frame(detections=LOCALIZE_EXAMPLE["detections"][:1])
+    r = client.post(URL, json=one)
+    assert r.status_code == 200
+    out = r.json()
+    assert out["localized"] is False and out["reason"] == "too_few_detections"
+    assert out["world_from_camera"] is None and out["confidence"] == 0
+    unknown = _frame(detections=[{**d, "label": "Sofa"} for d in LOCALIZE_EXAMPLE["detections"]])
+    out = client.post(URL, json=unknown).json()
+    assert out["localized"] is False and out["reason"] in ("too_few_detections",
+                                                           "no_label_match")
+
+
+BAD_INPUTS = [
+    # (body transformer, expected status, field that must be named)
+    (lambda b: b["camera"].update(fx=-1), 422, "camera.fx"),
+    (lambda b: b["camera"].update(width=640.5), 422, "camera.width"),
+    (lambda b: b["camera"].update(width="640"), 422, "camera.width"),
+    (lambda b: b["detections"][1]["ellipse"].update(a=0), 422, "detections[1].ellipse.a"),
+    (lambda b: b["detections"][0].update(label=""), 422, "detections[0].label"),
+    (lambda b: b["detections"][0].update(label=7), 422, "detections[0].label"),
+    (lambda b: b["detections"][0].update(sigma=-2), 422, "detections[0].sigma"),
+    (lambda b: b["detections"][0].update(log_variance=0.0), 422, "detections[0]"),
+    (lambda b: b["detections"][0].update(box={"xmin": 5, "ymin": 0, "xmax": 1, "ymax": 3}), 422,
+     "detections[0]"),
+    (lambda b: b["detections"][0].pop("ellipse"), 422, "detections[0]"),
+    (lambda b: b["detections"][0].update(score=1.5), 422, "detections[0].score"),
+    (lambda b: b["detections"][0].update(sigmaa=1.0), 422, "detections[0].sigmaa"),
+    (lambda b: b.update(detections="many"), 422, "detections"),
+    (lambda b: b.update(detections=b["detections"] * 40), 422, "detections"),
+    (lambda b: b["options"].update(metric="l2"), 422, "options.metric"),
+    (lambda b: b["options"].update(robust_scale=1.0), 422, "options"),
+    (lambda b: b["options"].update(inlier_iou=0), 422, "options.inlier_iou"),
+    (lambda b: b["options"].update(output_convention="arkit"), 422, "options.output_convention"),
+    (lambda b: b.update(prior={"world_from_camera": {"quaternion_wxyz": [1, 1, 0, 0],
+                                                     "translation_m": [0, 0, 0]}}),
+     422, "prior.world_from_camera.quaternion_wxyz"),
+    (lambda b: b.update(prior={"world_from_camera": {"matrix": np.diag([1, 1, -1, 1]).tolist()}}),
+     422, "prior.world_from_camera"),
+    (lambda b: b.update(prior={"world_from_camera": {"matrix": TRUTH.tolist()},
+                               "covariance": (-np.eye(6)).tolist()}), 422, "prior.covariance"),
+    (lambda b: b.update(prior={"world_from_camera": {"matrix": TRUTH.tolist()},
+                               "covariance": [[1.0] * 5] * 6}), 422, "prior.covariance"),
+    (lambda b: b.update(options={"unknown_label_policy": "error"},
+                        detections=[*b["detections"], {**b["detections"][0], "label": "Sofa"}]),
+     422, "detections[9].label"),
+]
+
+
+@pytest.mark.parametrize("mutate,status,field", BAD_INPUTS)
+def test_bad_inputs_are_problems_naming_the_field(client: TestClient, mutate, status: int,
+                                                  field: str) -> None:
+    body = _frame()
+    mutate(body)
+    r = client.post(URL, json=body)
+    assert r.status_code == status, r.text
+    assert r.headers["content-type"].startswith("application/problem+json")
+    problem = r.json()
+    assert problem["type"] in ("urn:quadloc:problem:validation-error",
+                               "urn:quadloc:problem:invalid-geometry")
+    fields = [e["field"] for e in problem["errors"]]
+    assert any(f == field or f.startswith((field + ".", field + "[")) for f in fields), \
+        (field, problem)
+    assert problem["detail"]
+
+
+@pytest.mark.parametrize("literal", ["NaN", "Infinity", "-Infinity", "1e400"])
+def test_non_finite_json_numbers(client: TestClient, literal: str) -> None:
+    text = json.dumps(LOCALIZE_EXAMPLE).replace('"fx": 532.57', f'"fx": {literal}', 1)
+    assert literal in text
+    body = _problem(client.post(URL, content=text, headers={"content-type": "application/json"}),
+                    422, "validation-error")
+    assert body["errors"][0]["field"] == "camera.fx"
+
+
+def test_malformed_json_unknown_map_and_wrong_media(client: TestClient) -> None:
+    _problem(client.post(URL, content=b'{"camera": ', headers={"content-type": "application/json"}),
+             400, "malformed-json")
+    body = _problem(client.post("/v1/maps/nope/localize", json=LOCALIZE_EXAMPLE), 404,
+                    "map-not-found")
+    assert body["errors"][0]["field"] == "path.map_id"
+    _problem(client.post(URL, params={"version": 99}, json=LOCALIZE_EXAMPLE), 404,
+             "map-not-found")
+    r = client.post(URL, content=json.dumps(LOCALIZE_EXAMPLE), headers={"content-type":
+                                                                        "text/plain"})
+    assert 400 <= r.status_code < 500
+    _problem(client.get(URL), 405, "method-not-allowed")
+
+
+def test_errors_from_deep_in_the_pipeline(client: TestClient, monkeypatch) -> None:
+    def geometry_error(*a, **k):
+        raise GeometryError("detections[2].ellipse: projection is not an ellipse")
+
+    monkeypatch.setattr(solver_module, "localize", geometry_error)
+    body = _problem(client.post(URL, json=LOCALIZE_EXAMPLE), 422, "invalid-geometry")
+    assert body["errors"] == [{"field": "detections[2].ellipse",
+                               "message": "projection is not an ellipse"}]
+
+    def linalg_error(*a, **k):
+        raise np.linalg.LinAlgError("Singular matrix")
+
+    monkeypatch.setattr(solver_module, "localize", linalg_error)
+    r = client.post(URL, json=LOCALIZE_EXAMPLE)
+    assert r.status_code == 200 and r.json()["reason"] == "numerical_failure"
+
+
+def test_time_budget_is_capped_by_the_server(tmp_path: Path, monkeypatch) -> None:
+    seen = []
+    real = solver_module.localize
+
+    def spy(detections, scene_map, camera, options, prior=None):
+        seen.append(options.time_budget_ms)
+        return real(detections, scene_map, camera, options, prior)
+
+    monkeypatch.setattr(solver_module, "localize", spy)
+    with TestClient(make_test_app(tmp_path, solve_time_budget_ms=250.0)) as c:
+        c.post(URL, json=_frame(options={"time_budget_ms": 60000}))
+        c.post(URL, json=_frame(options={"time_budget_ms": 10}))
+        c.post(URL, json=_frame(options={}))
+    assert seen == [250.0, 10.0, 250.0]
+
+
+def test_batch(client: TestClient) -> None:
+    frames = [LOCALIZE_EXAMPLE, _frame(detections=LOCALIZE_EXAMPLE["detections"][:1],
+                                       frame_id="f2")]
+    r = client.post(URL + ":batch", json={"frames": frames})
+    assert r.status_code == 200, r.text
+    out = r.json()
+    assert out["map_id"] == "chess" and out["map_version"] == 1
+    assert [x["localized"] for x in out["results"]] == [True, False]
+    assert out["results"][1]["frame_id"] == "f2"
+    _problem(client.post(URL + ":batch", json={"frames": []}), 422, "validation-error")
+    body = _problem(client.post(URL + ":batch", json={"frames": [LOCALIZE_EXAMPLE] * 65}), 422,
+                    "validation-error")
+    assert body["errors"][0]["field"] == "frames"
+    bad = _frame()
+    bad["detections"][3]["ellipse"]["b"] = -1
+    body = _problem(client.post(URL + ":batch", json={"frames": [LOCALIZE_EXAMPLE, bad]}), 422,
+                    "validation-error")
+    assert body["errors"][0]["field"] == "frames[1].detections[3].ellipse.b"
+
+
+def test_batch_limit_from_settings(tmp_path: Path) -> None:
+    with TestClient(make_test_app(tmp_path, max_batch_frames=2)) as c:
+        one = _frame(detections=LOCALIZE_EXAMPLE["detections"][:1])
+        assert c.post(URL + ":batch", json={"frames": [one] * 2}).status_code == 200
+        body = _problem(c.post(URL + ":batch", json={"frames": [one] * 3}), 422,
+                        "validation-error")
+        assert body["errors"][0]["field"] == "frames"
+
+
+def test_busy_solver_answers_503_with_retry_after(tmp_path: Path) -> None:
+    with TestClient(make_test_app(tmp_path, max_concurrent_solves=1,
+                                  solve_queue_timeout_s=0.0)) as c:
+        slots = c.app.state.solver.slots
+        assert slots.acquire(timeout=1)
+        try:
+            r = c.post(URL, json=LOCALIZE_EXAMPLE)
+        finally:
+            slots.release()
+        _problem(r, 503, "busy")
+        assert r.headers["retry-after"] == "1"
+        assert c.post(URL, json=LOCALIZE_EXAMPLE).status_code == 200
+
+
+def test_metrics_count_outcomes_and_latency(tmp_path: Path) -> None:
+    with TestClient(make_test_app(tmp_path)) as c:
+        c.post(URL, json=LOCALIZE_EXAMPLE)
+        c.post(URL, json=_frame(detections=LOCALIZE_EXAMPLE["detections"][:1]))
+        c.post(URL, json={})
+        text = c.get("/metrics").text
+    assert 'quadloc_localizations_total{outcome="localized"} 1.0' in text
+    assert 'quadloc_localizations_total{outcome="too_few_detections"} 1.0' in text
+    assert ('quadloc_http_requests_total{method="POST",route="/v1/maps/{map_id}/localize",'
+            'status="422"} 1.0') in text
+    assert ('quadloc_http_request_duration_seconds_count{method="POST",'
+            'route="/v1/maps/{map_id}/localize"} 3.0') in text
+    assert "quadloc_localization_solve_seconds_count 2.0" in text

@@ -1,0 +1,186 @@
+"""/v1/maps routes: create, import, list, get (ETag), update (If-Match), delete - in process."""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from maps.demo import load_demo_map
+from maps.model import content_hash, scene_map_from_dict
+from service.api.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
+from tests.conftest import make_test_app
+
+PROBLEM = "application/problem+json"
+CHESS_SCENE = Path(__file__).resolve().parents[2] / "shared" / "data" / "chess_scene.json"
+
+
+@pytest.fixture
+def client(tmp_path: Path):
+    with TestClient(make_test_app(tmp_path)) as c:
+        yield c
+
+
+def _problem(r, status: int, slug: str) -> dict:
+    assert r.status_code == status, r.text
+    assert r.headers["content-type"].startswith(PROBLEM)
+    body = r.json()
+    assert body["type"] == f"urn:quadloc:problem:{slug}"
+    assert body["status"] == status
+    assert set(body) >= {"type", "title", "status", "detail", "instance", "errors"}
+    return body
+
+
+def test_demo_map_is_seeded_and_matches_the_shipped_file(client: TestClient) -> None:
+    r = client.get("/v1/maps")
+    assert r.status_code == 200
+    [summary] = r.json()["maps"]
+    assert summary["map_id"] == "chess" and summary["version"] == 1
+    r = client.get("/v1/maps/chess")
+    assert r.status_code == 200
+    body = r.json()
+    demo = load_demo_map()
+    # The ETag is the independently computed content hash of the shipped demo map.
+    assert body["content_hash"] == content_hash(demo)
+    assert r.headers["etag"] == f'"{content_hash(demo)}"'
+    got = scene_map_from_dict(body["map"])
+    assert [o.object_id for o in got.objects] == [o.object_id for o in demo.objects]
+    for a, b in zip(got.objects, demo.objects, strict=True):
+        np.testing.assert_allclose(a.ellipsoid.center, b.ellipsoid.center, rtol=0, atol=0)
+
+
+def test_create_get_list_delete(client: TestClient) -> None:
+    r = client.post("/v1/maps", json=MAP_EXAMPLE)
+    assert r.status_code == 201, r.text
+    assert r.headers["location"] == "/v1/maps/office-3"
+    created = r.json()
+    assert created["version"] == 1
+    assert r.headers["etag"] == f'"{created["content_hash"]}"'
+    # The stored hash equals the hash of the parsed document (independent computation).
+    assert created["content_hash"] == content_hash(scene_map_from_dict(MAP_EXAMPLE, version=1))
+    ids = [m["map_id"] for m in client.get("/v1/maps").json()["maps"]]
+    assert ids == ["chess", "office-3"]
+    assert client.get("/v1/maps/office-3").json()["map"]["objects"][2]["object_id"] == "plant-1"
+    _problem(client.post("/v1/maps", json=MAP_EXAMPLE), 409, "map-exists")
+    assert client.delete("/v1/maps/office-3").status_code == 204
+    _problem(client.get("/v1/maps/office-3"), 404, "map-not-found")
+    _problem(client.delete("/v1/maps/office-3"), 404, "map-not-found")
+
+
+def test_create_ignores_client_version(client: TestClient) -> None:
+    doc = {**MAP_EXAMPLE, "version": 7}
+    assert client.post("/v1/maps", json=doc).json()["version"] == 1
+
+
+def test_invalid_maps_name_the_field(client: TestClient) -> None:
+    bad = copy.deepcopy(MAP_EXAMPLE)
+    bad["objects"][1]["axes"] = [0.3, -1.0, 0.2]
+    bad["objects"][0]["quaternion_wxyz"] = [2.0, 0.0, 0.0, 0.0]
+    body = _problem(client.post("/v1/maps", json=bad), 422, "invalid-map")
+    fields = {e["field"] for e in body["errors"]}
+    assert {"objects[1].axes", "objects[0].quaternion_wxyz"} <= fields
+    # NaN literal inside the map document (Python's json accepts it; the API must not).
+    text = json.dumps(MAP_EXAMPLE).replace("1.2, 0.4, 0.45", "NaN, 0.4, 0.45")
+    assert "NaN" in text
+    body = _problem(client.post("/v1/maps", content=text,
+                                headers={"content-type": "application/json"}),
+                    422, "invalid-map")
+    assert body["errors"][0]["field"] == "objects[0].center"
+    # Not an object at all.
+    _problem(client.post("/v1/maps", json=[1, 2, 3]), 422, "validation-error")
+    _problem(client.post("/v1/maps", content=b"{", headers={"content-type": "application/json"}),
+             400, "malformed-json")
+
+
+def test_object_count_limit(tmp_path: Path) -> None:
+    with TestClient(make_test_app(tmp_path, max_map_objects=2)) as c:
+        body = _problem(c.post("/v1/maps", json=MAP_EXAMPLE), 422, "invalid-map")
+        assert body["errors"][0]["field"] == "objects"
+
+
+def test_update_requires_a_fresh_etag(client: TestClient) -> None:
+    r = client.get("/v1/maps/chess")
+    etag, doc = r.headers["etag"], r.json()["map"]
+    doc["objects"][0]["axes"] = [0.2, 0.4, 0.3]
+    _problem(client.put("/v1/maps/chess", json=doc), 428, "precondition-required")
+    _problem(client.put("/v1/maps/chess", json=doc, headers={"If-Match": "*"}),
+             428, "precondition-required")
+    stale = _problem(client.put("/v1/maps/chess", json=doc, headers={"If-Match": '"0000"'}),
+                     412, "precondition-failed")
+    assert stale["errors"][0]["field"] == "header.if-match"
+    r = client.put("/v1/maps/chess", json=doc, headers={"If-Match": etag})
+    assert r.status_code == 200, r.text
+    v2 = r.json()
+    assert v2["version"] == 2 and r.headers["etag"] != etag
+    assert v2["map"]["objects"][0]["axes"] == [0.2, 0.4, 0.3]
+    # The old ETag is now stale: a second writer that edited version 1 is refused...
+    r = client.put("/v1/maps/chess", json=doc, headers={"If-Match": etag})
+    assert _problem(r, 412, "precondition-failed")
+    assert r.headers["etag"] == f'"{v2["content_hash"]}"'
+    # ...and version 1 stays readable, unchanged.
+    v1 = client.get("/v1/maps/chess", params={"version": 1})
+    assert v1.headers["etag"] == etag
+    assert v1.json()["map"]["objects"][0]["axes"] != [0.2, 0.4, 0.3]
+    _problem(client.get("/v1/maps/chess", params={"version": 3}), 404, "map-not-found")
+    _problem(client.get("/v1/maps/chess", params={"version": 0}), 422, "validation-error")
+    _problem(client.get("/v1/maps/chess", params={"version": "x"}), 422, "validation-error")
+
+
+def test_update_rejects_a_different_map_id_and_unknown_maps(client: TestClient) -> None:
+    r = client.get("/v1/maps/chess")
+    doc = {**r.json()["map"], "map_id": "other"}
+    body = _problem(client.put("/v1/maps/chess", json=doc, headers={"If-Match": r.headers["etag"]}),
+                    422, "invalid-map")
+    assert body["errors"][0]["field"] == "map_id"
+    _problem(client.put("/v1/maps/nope", json=MAP_EXAMPLE, headers={"If-Match": '"x"'}),
+             404, "map-not-found")
+
+
+def test_lost_race_is_a_409(client: TestClient, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Another writer commits between the If-Match check and the write: 409, not overwrite."""
+    store = client.app.state.store
+    r = client.get("/v1/maps/chess")
+    etag, doc = r.headers["etag"], r.json()["map"]
+    real_update = store.update
+
+    def racing_update(map_id, scene_map, expected_version):
+        real_update(map_id, scene_map_from_dict({**doc, "name": "other writer"},
+                                                version=expected_version + 1), expected_version)
+        return real_update(map_id, scene_map, expected_version)
+
+    monkeypatch.setattr(store, "update", racing_update)
+    body = _problem(client.put("/v1/maps/chess", json=doc, headers={"If-Match": etag}),
+                    409, "version-conflict")
+    assert "version 2" in body["detail"]
+    monkeypatch.undo()
+    latest = client.get("/v1/maps/chess").json()
+    assert latest["version"] == 2 and latest["map"]["name"] == "other writer"
+
+
+def test_import_chess_format(client: TestClient) -> None:
+    r = client.post("/v1/maps:import-chess", params={"map_id": "mini", "name": "Mini"},
+                    json=CHESS_IMPORT_EXAMPLE)
+    assert r.status_code == 201, r.text
+    objs = r.json()["map"]["objects"]
+    assert [o["category"] for o in objs] == ["TV", "Chair"]
+    # Orientation: the returned quaternion reproduces the Chess R (independent conversion).
+    from factors.geometry import rotation_from_quaternion_wxyz
+
+    R = np.array(CHESS_IMPORT_EXAMPLE["objects"][0]["ellipsoid"]["R"])
+    np.testing.assert_allclose(rotation_from_quaternion_wxyz(objs[0]["quaternion_wxyz"]), R,
+                               atol=1e-9)
+    if CHESS_SCENE.exists():
+        full = json.loads(CHESS_SCENE.read_text())
+        r = client.post("/v1/maps:import-chess", params={"map_id": "chess2"}, json=full)
+        assert r.status_code == 201 and len(r.json()["map"]["objects"]) == 11
+    bad = copy.deepcopy(CHESS_IMPORT_EXAMPLE)
+    bad["objects"][0]["ellipsoid"]["axes"] = [1.0, 2.0]
+    body = _problem(client.post("/v1/maps:import-chess", params={"map_id": "bad"}, json=bad),
+                    422, "invalid-map")
+    assert body["errors"][0]["field"] == "objects[0].ellipsoid.axes"
+    _problem(client.post("/v1/maps:import-chess", params={"map_id": "bad id!"},
+                         json=CHESS_IMPORT_EXAMPLE), 422, "validation-error")

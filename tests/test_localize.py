@@ -1,0 +1,212 @@
+"""localize(): the whole pipeline on the real Chess map, its reasons, input errors, priors."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+import service.localization.pipeline as pipeline
+from bench.chess_eval import load_chess_map, load_chess_poses
+from bench.simulate import SimulationConfig, simulate_frame
+from factors.geometry import Ellipse, GeometryError, pose_matrix
+from maps.compiled import compile_map
+from service.localization.pipeline import confidence_of, localize
+from service.localization.types import (
+    REASONS,
+    Detection,
+    LocalizationInputError,
+    LocalizationOptions,
+    PosePrior,
+)
+
+MAP = load_chess_map()
+CM = compile_map(MAP)
+CAMERA, POSES, _ = load_chess_poses()
+
+
+def rot_err_deg(A: np.ndarray, B: np.ndarray) -> float:
+    c = (np.trace(A[:3, :3].T @ B[:3, :3]) - 1) / 2
+    return math.degrees(math.acos(min(1.0, max(-1.0, c))))
+
+
+def perturbed(T: np.ndarray, rng: np.random.Generator, pos: float, rot_deg: float) -> np.ndarray:
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    a = math.radians(rot_deg)
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    R = np.eye(3) + math.sin(a) * K + (1 - math.cos(a)) * K @ K
+    d = rng.normal(size=3)
+    return pose_matrix(T[:3, :3] @ R, T[:3, 3] + pos * d / np.linalg.norm(d))
+
+
+@pytest.mark.parametrize("index", [0, 20, 40, 60, 80, 100])
+def test_exact_detections_localize_within_a_micrometre(index):
+    T = POSES[index]
+    frame = simulate_frame(MAP, CAMERA, T, index, SimulationConfig.exact())
+    r = localize(frame.detections, MAP, CAMERA)
+    assert r.localized and r.reason is None and not r.used_prior
+    assert np.linalg.norm(r.world_from_camera[:3, 3] - T[:3, 3]) < 1e-6
+    assert rot_err_deg(r.world_from_camera, T) < 1e-4
+    assert len(r.inliers) == len(frame)
+    for m in r.inliers:  # the inliers are the true objects
+        assert m.object_id == frame.object_ids[m.detection_index]
+        assert m.iou > 0.97  # estimated IoU of identical ellipses (sampling ~1e-2)
+    assert r.covariance is not None and r.covariance.shape == (6, 6)
+    assert np.all(np.linalg.eigvalsh(r.covariance) > 0)
+    assert 0.0 < r.confidence <= 1.0
+    assert set(r.timings_ms) >= {"validate", "hypotheses", "refine", "total"}
+    assert r.metric == "level_set" and r.hypotheses_evaluated >= 1
+
+
+def test_noisy_detections_with_outliers():
+    cfg = SimulationConfig(wrong_label_probability=0.1, spurious_rate=1.0)
+    errs = []
+    for i in range(3, 108, 15):
+        frame = simulate_frame(MAP, CAMERA, POSES[i], i, cfg)
+        r = localize(frame.detections, CM, CAMERA, LocalizationOptions(robust="huber"))
+        errs.append(np.linalg.norm(r.world_from_camera[:3, 3] - POSES[i][:3, 3])
+                    if r.localized else np.inf)
+        if r.localized:
+            for m in r.inliers:
+                assert frame.object_ids[m.detection_index] is not None  # no spurious inlier
+    errs = np.array(errs)
+    assert np.mean(errs < 0.2) >= 0.7
+    assert np.median(errs) < 0.1
+
+
+def test_no_refinement_metric():
+    frame = simulate_frame(MAP, CAMERA, POSES[5], 5, SimulationConfig.exact())
+    r = localize(frame.detections, MAP, CAMERA, LocalizationOptions(metric="none"))
+    assert r.localized and r.covariance is None and r.metric == "none"
+    assert "refine" in r.timings_ms
+    for m in r.inliers:
+        assert m.cost == pytest.approx(1.0 - m.iou)
+    # P3P on centres: close but biased (ellipse centre != projected ellipsoid centre)
+    err = np.linalg.norm(r.world_from_camera[:3, 3] - POSES[5][:3, 3])
+    assert 1e-6 < err < 0.1
+
+
+def test_two_detections_localize_with_p2e():
+    # frame 0's objects; keep two (ids differ in category, so the match is unique)
+    frame = simulate_frame(MAP, CAMERA, POSES[0], 0, SimulationConfig.exact())
+    cats = {}
+    for i, d in enumerate(frame.detections):
+        cats.setdefault(d.label, []).append(i)
+    singles = [v[0] for k, v in cats.items() if len(v) == 1 and len(CM.indices_for(k)) == 1]
+    dets = [frame.detections[i] for i in singles[:2]]
+    r = localize(dets, MAP, CAMERA)
+    assert r.hypotheses_evaluated >= 1
+    if r.localized:  # two objects constrain the pose; the minimum may not be unique
+        assert len(r.inliers) == 2
+
+
+def test_reasons_for_not_localized():
+    frame = simulate_frame(MAP, CAMERA, POSES[10], 10, SimulationConfig.exact())
+    d = list(frame.detections)
+    r = localize(d[:1], MAP, CAMERA)
+    assert not r.localized and r.reason == "too_few_detections" and r.world_from_camera is None
+    assert r.confidence == 0.0 and r.inliers == ()
+    unknown = [dataclasses.replace(x, label="Sofa") for x in d]
+    assert localize(unknown, MAP, CAMERA).reason == "no_label_match"
+    r = localize(d, MAP, CAMERA, LocalizationOptions(time_budget_ms=1e-6))
+    assert r.reason == "time_budget_exceeded"
+    # detections nowhere near any object's projection at any P3P pose: all far, tiny
+    junk = [Detection(Ellipse(20 + 200 * k, 20 + 100 * (k % 2), 4, 3, 0.0), x.label)
+            for k, x in enumerate(d[:4])]
+    r = localize(junk, MAP, CAMERA, LocalizationOptions(inlier_iou=0.9))
+    assert r.reason == "no_hypothesis_above_inlier_threshold"
+    assert all(reason in REASONS for reason in
+               ("too_few_detections", "no_label_match", "time_budget_exceeded"))
+
+
+def test_refinement_diverged_reason(monkeypatch):
+    frame = simulate_frame(MAP, CAMERA, POSES[30], 30, SimulationConfig.exact())
+    real = pipeline.refine
+
+    def broken(*args, **kwargs):
+        res = real(*args, **kwargs)
+        return dataclasses.replace(res, status="diverged", converged=False)
+
+    monkeypatch.setattr(pipeline, "refine", broken)
+    r = localize(frame.detections, MAP, CAMERA)
+    assert not r.localized and r.reason == "refinement_diverged"
+
+
+def test_input_errors_name_the_field():
+    frame = simulate_frame(MAP, CAMERA, POSES[0], 0, SimulationConfig.exact())
+    d = list(frame.detections)
+    with pytest.raises(LocalizationInputError, match=r"^detections: must not be empty"):
+        localize([], MAP, CAMERA)
+    with pytest.raises(LocalizationInputError, match=r"detections\[1\]: must be a Detection"):
+        localize([d[0], "x"], MAP, CAMERA)
+    bad = [d[0], dataclasses.replace(d[1], label="Sofa"), d[2]]
+    with pytest.raises(LocalizationInputError, match=r"detections\[1\]\.label: 'Sofa'"):
+        localize(bad, MAP, CAMERA, LocalizationOptions(unknown_label_policy="error"))
+    # "ignore" (default) drops the unknown label and still localizes
+    assert localize([*d, Detection(Ellipse(10, 10, 5, 5, 0), "Sofa")], MAP, CAMERA).localized
+    with pytest.raises(LocalizationInputError, match="camera"):
+        localize(d, MAP, "K")
+    with pytest.raises(LocalizationInputError, match="scene_map"):
+        localize(d, {"objects": []}, CAMERA)
+    with pytest.raises(GeometryError, match=r"Ellipse\.a"):
+        Detection(Ellipse(1, 1, 0.0, 1, 0), "TV")
+    with pytest.raises(GeometryError, match=r"Ellipse\.cx"):
+        Ellipse(float("nan"), 1, 1, 1, 0)
+    with pytest.raises(GeometryError, match="sigma"):
+        Detection(Ellipse(1, 1, 1, 1, 0), "TV", sigma=-1.0)
+    for kwargs, field in [({"metric": "l2"}, "options.metric"),
+                          ({"inlier_iou": 0.0}, "options.inlier_iou"),
+                          ({"min_inliers": 1}, "options.min_inliers"),
+                          ({"robust": "tukey"}, "options.robust"),
+                          ({"robust_scale": 1.0}, "options.robust_scale"),
+                          ({"unknown_label_policy": "drop"}, "options.unknown_label_policy"),
+                          ({"ransac_max_hypotheses": 0}, "options.ransac_max_hypotheses"),
+                          ({"time_budget_ms": -5.0}, "options.time_budget_ms"),
+                          ({"seed": 1.5}, "options.seed")]:
+        with pytest.raises(LocalizationInputError, match=field.replace(".", r"\.")):
+            LocalizationOptions(**kwargs)
+    with pytest.raises(LocalizationInputError, match=r"prior\.world_from_camera"):
+        PosePrior(np.eye(3))
+    with pytest.raises(LocalizationInputError, match=r"prior\.world_from_camera.*rotation"):
+        PosePrior(np.diag([1.0, 1.0, 2.0, 1.0]))
+    with pytest.raises(LocalizationInputError, match=r"prior\.covariance.*positive definite"):
+        PosePrior(np.eye(4), -np.eye(6))
+
+
+def test_prior_path_and_fallback():
+    rng = np.random.default_rng(0)
+    T = POSES[50]
+    frame = simulate_frame(MAP, CAMERA, T, 50, SimulationConfig.exact())
+    start = perturbed(T, rng, 0.05, 2.0)
+    r = localize(frame.detections, MAP, CAMERA, prior=PosePrior(start))
+    assert r.localized and r.used_prior and "hypotheses" not in r.timings_ms
+    assert np.linalg.norm(r.world_from_camera[:3, 3] - T[:3, 3]) < 1e-6  # start point only
+    # with a covariance the prior is also a factor: the estimate moves from the prior towards
+    # the detections' pose, and stays between them
+    cov = np.diag([1e-3] * 3 + [1e-2] * 3)
+    r = localize(frame.detections, MAP, CAMERA, prior=PosePrior(start, cov))
+    assert r.localized and r.used_prior
+    err = np.linalg.norm(r.world_from_camera[:3, 3] - T[:3, 3])
+    assert 1e-6 < err < 0.5 * np.linalg.norm(start[:3, 3] - T[:3, 3])
+    # a prior pointing the camera elsewhere fails the inlier check: RANSAC takes over
+    far = PosePrior(perturbed(T, rng, 1.5, 90.0))
+    r = localize(frame.detections, MAP, CAMERA, prior=far)
+    assert r.localized and not r.used_prior and "hypotheses" in r.timings_ms
+    assert np.linalg.norm(r.world_from_camera[:3, 3] - T[:3, 3]) < 1e-6
+
+
+def test_determinism_and_confidence():
+    frame = simulate_frame(MAP, CAMERA, POSES[70], 70, SimulationConfig())
+    opts = LocalizationOptions(seed=3, ransac_max_hypotheses=50)
+    a = localize(frame.detections, MAP, CAMERA, opts)
+    b = localize(frame.detections, MAP, CAMERA, opts)
+    assert a.localized == b.localized
+    if a.localized:
+        assert np.array_equal(a.world_from_camera, b.world_from_camera)
+    assert confidence_of(0, 5, 0.9) == 0.0
+    assert confidence_of(2, 2, 1.0) == pytest.approx(0.5)
+    assert confidence_of(3, 4, 0.8) == pytest.approx(0.75 * 0.8 * 0.75)
+    assert confidence_of(4, 4, 0.8) > confidence_of(3, 4, 0.8) > confidence_of(2, 4, 0.8)

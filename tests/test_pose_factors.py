@@ -1,0 +1,302 @@
+"""The metric GTSAM factors on the camera pose: residuals, Jacobians, noise, penalty.
+
+Independent references: residuals against ``factors.metrics.residual`` on ellipses projected by
+``factors.geometry.project_ellipsoid`` (and the level set against ``Ellipse.level`` directly);
+Jacobians against central differences through ``gtsam.Pose3.retract``; GTSAM's weighted error
+against ``0.5 * cost / sigma``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import gtsam
+import numpy as np
+import pytest
+
+from factors import metrics
+from factors.geometry import (
+    Camera,
+    Ellipse,
+    Ellipsoid,
+    ellipsoid_depth_margins,
+    invert_pose,
+    project_ellipsoid,
+    rotation_from_quaternion_wxyz,
+)
+from factors.pose_factors import (
+    FACTOR_FACTORIES,
+    ROBUST_KERNELS,
+    batched_pose_factor,
+    make_noise_model,
+    pose_factor,
+    pose_factors,
+)
+from factors.pose_residuals import (
+    ANALYTIC_METRICS,
+    DEFAULT_PENALTY_COST,
+    PoseResidualModel,
+    expmap_pose3,
+)
+
+CAMERA = Camera(500.0, 510.0, 320.0, 240.0, 640, 480)
+
+
+def random_scene(rng: np.random.Generator, n: int) -> list[Ellipsoid]:
+    """n ellipsoids 3-6 m in front of an identity camera, semi-axes 0.1-0.4 m."""
+    out = []
+    for _ in range(n):
+        q = rng.normal(size=4)
+        q = q / np.linalg.norm(q) * np.sign(q[0])
+        out.append(Ellipsoid(np.array([rng.uniform(-1, 1), rng.uniform(-0.7, 0.7),
+                                       rng.uniform(3, 6)]),
+                             rng.uniform(0.1, 0.4, 3), rotation_from_quaternion_wxyz(q)))
+    return out
+
+
+def perturbation(rng: np.random.Generator, rot: float, trans: float) -> np.ndarray:
+    """Pose3 tangent [omega, v] with |omega| = rot rad, |v| = trans m, random directions."""
+    w, v = rng.normal(size=3), rng.normal(size=3)
+    return np.r_[w / np.linalg.norm(w) * rot, v / np.linalg.norm(v) * trans]
+
+
+def retract(T: np.ndarray, xi: np.ndarray) -> np.ndarray:
+    """world_from_camera.retract(xi) computed by GTSAM (independent of expmap_pose3)."""
+    return gtsam.Pose3(T).retract(np.asarray(xi, dtype=float)).matrix()
+
+
+def numeric_jacobian(fn, T: np.ndarray, h: float = 1e-6) -> np.ndarray:
+    cols = []
+    for k in range(6):
+        e = np.zeros(6)
+        e[k] = h
+        cols.append((fn(retract(T, e)) - fn(retract(T, -e))) / (2 * h))
+    return np.stack(cols, axis=-1)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    rng = np.random.default_rng(11)
+    ells = random_scene(rng, 5)
+    truth = np.eye(4)
+    dets = [project_ellipsoid(CAMERA, invert_pose(truth), e) for e in ells]
+    # detections slightly wrong so that residuals are not ~0
+    dets = [d.transformed(0.02, [3.0, -2.0]) for d in dets]
+    pose = retract(truth, perturbation(rng, 0.03, 0.08))
+    return ells, dets, pose
+
+
+def test_expmap_matches_gtsam():
+    rng = np.random.default_rng(0)
+    for scale in (1e-9, 1e-3, 0.5, 2.0):
+        xi = rng.normal(size=6) * scale
+        np.testing.assert_allclose(expmap_pose3(xi), gtsam.Pose3.Expmap(xi).matrix(),
+                                   atol=1e-12)
+
+
+def test_level_set_residual_matches_independent_level_functions(scene):
+    ells, dets, pose = scene
+    model = PoseResidualModel("level_set", dets, ells, CAMERA, initial_world_from_camera=pose)
+    r = model.evaluate(pose, jacobian=False).residuals
+    for j, (d, e) in enumerate(zip(dets, ells, strict=True)):
+        proj = project_ellipsoid(CAMERA, invert_pose(pose), e)
+        x = model.sample_points[j]
+        np.testing.assert_allclose(r[j], d.level(x) - proj.level(x), atol=1e-9)
+        # the same layout as factors.metrics (samples fixed at the initial pose)
+        np.testing.assert_allclose(r[j], metrics.residual("level_set", d, proj), atol=1e-9)
+        np.testing.assert_allclose(x, metrics.level_set_sample_points(d, proj), atol=1e-9)
+
+
+@pytest.mark.parametrize("options", [{}, {"n_azimuths": 8, "n_levels": 3, "scale": 1.5},
+                                     {"adaptive": False}])
+def test_batched_sampling_is_the_metrics_layout(options):
+    """Far-away projections (adaptive area grows), swapped axes (b > a), custom layouts."""
+    rng = np.random.default_rng(21)
+    ells = random_scene(rng, 6)
+    truth = np.eye(4)
+    dets = [project_ellipsoid(CAMERA, truth, e) for e in ells]
+    dets = [Ellipse(d.cx + 40.0 * j, d.cy - 15.0 * j, d.b, d.a, d.angle + 0.5 * np.pi)
+            if j % 2 else Ellipse(d.cx + 40.0 * j, d.cy, d.a, d.b, d.angle)
+            for j, d in enumerate(dets)]
+    model = PoseResidualModel("level_set", dets, ells, CAMERA, initial_world_from_camera=truth,
+                              metric_options=options)
+    r = model.evaluate(truth, jacobian=False).residuals
+    for j, (d, e) in enumerate(zip(dets, ells, strict=True)):
+        proj = project_ellipsoid(CAMERA, truth, e)
+        np.testing.assert_allclose(model.sample_points[j],
+                                   metrics.level_set_sample_points(d, proj, **options),
+                                   rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(r[j], metrics.residual("level_set", d, proj, **options),
+                                   rtol=1e-9, atol=1e-9)
+    if options.get("adaptive", True):
+        assert model.sampling_scale.max() > metrics.DEFAULT_LEVEL_SET_SCALE
+
+
+@pytest.mark.parametrize("metric", metrics.METRIC_NAMES)
+def test_factor_residual_equals_metric_residual(scene, metric):
+    ells, dets, pose = scene
+    values = gtsam.Values()
+    values.insert(7, gtsam.Pose3(pose))
+    opts = {"image_size": (CAMERA.width, CAMERA.height)} if metric == "qbbox" else {}
+    for d, e in list(zip(dets, ells, strict=True))[:3]:
+        f = FACTOR_FACTORIES[metric](7, d, e, CAMERA, initial_world_from_camera=pose,
+                                     metric_options=opts)
+        proj = project_ellipsoid(CAMERA, invert_pose(pose), e)
+        expected = np.asarray(metrics.residual(metric, d, proj, **opts))
+        got = f.unwhitenedError(values)
+        np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-9)
+        # unit noise: GTSAM error = 0.5 * metric cost
+        assert f.error(values) == pytest.approx(0.5 * metrics.cost(metric, d, proj, **opts),
+                                                rel=1e-9, abs=1e-12)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_level_set_analytic_jacobian_matches_numerical(seed):
+    rng = np.random.default_rng(seed)
+    ells = random_scene(rng, 6)
+    dets = [project_ellipsoid(CAMERA, np.eye(4), e).transformed(0.05, [4.0, 1.0])
+            for e in ells]
+    pose = retract(np.eye(4), perturbation(rng, 0.05, 0.2))
+    model = PoseResidualModel("level_set", dets, ells, CAMERA, initial_world_from_camera=pose)
+    ev = model.evaluate(pose, jacobian=True)
+    assert ev.valid.all()
+    num = numeric_jacobian(lambda T: model.evaluate(T, jacobian=False).residuals.copy(), pose)
+    scale = np.abs(num).max()
+    np.testing.assert_allclose(ev.jacobians, num, atol=1e-6 * scale)
+
+
+@pytest.mark.parametrize("metric", ["algebraic", "frobenius", "wasserstein",  # analytic
+                                    "bhattacharyya", "bbox"])  # numerical path
+def test_smooth_metric_jacobians_match_numerical(scene, metric):
+    assert set(ANALYTIC_METRICS) == {"level_set", "algebraic", "frobenius", "wasserstein"}
+    ells, dets, pose = scene
+    model = PoseResidualModel(metric, dets, ells, CAMERA, initial_world_from_camera=pose)
+    ev = model.evaluate(pose, jacobian=True)
+
+    def fn(T):
+        return np.array([metrics.residual(metric, d, project_ellipsoid(CAMERA, invert_pose(T), e))
+                         for d, e in zip(dets, ells, strict=True)])
+
+    num = numeric_jacobian(fn, pose, h=1e-5)
+    np.testing.assert_allclose(ev.jacobians, num, rtol=1e-4, atol=1e-5 * np.abs(num).max())
+
+
+def test_factor_linearization_uses_the_model_jacobian(scene):
+    """GTSAM's linearized factor = whitened (J, -r) of the model (shape (m, 6), no transpose)."""
+    ells, dets, pose = scene
+    sigma = 2.5
+    f = pose_factor("level_set", 3, dets[0], ells[0], CAMERA, sigma=sigma,
+                    initial_world_from_camera=pose)
+    values = gtsam.Values()
+    values.insert(3, gtsam.Pose3(pose))
+    A, b = f.linearize(values).jacobian()
+    model = PoseResidualModel("level_set", dets[:1], ells[:1], CAMERA,
+                              initial_world_from_camera=pose)
+    ev = model.evaluate(pose)
+    np.testing.assert_allclose(A, ev.jacobians[0] / math.sqrt(sigma), rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(b, -ev.residuals[0] / math.sqrt(sigma), rtol=1e-10, atol=1e-12)
+
+
+def test_sigma_scales_error_as_equation_8(scene):
+    ells, dets, pose = scene
+    values = gtsam.Values()
+    values.insert(0, gtsam.Pose3(pose))
+    proj = project_ellipsoid(CAMERA, invert_pose(pose), ells[1])
+    cost = metrics.cost("level_set", dets[1], proj)
+    for sigma in (0.1, 1.0, 7.0):
+        f = pose_factor("level_set", 0, dets[1], ells[1], CAMERA, sigma=sigma,
+                        initial_world_from_camera=pose)
+        assert f.error(values) == pytest.approx(0.5 * cost / sigma, rel=1e-9)
+
+
+def test_shared_factors_and_batched_factor_agree(scene):
+    ells, dets, pose = scene
+    sigmas = [0.5, 1.0, None, 3.0, 2.0]
+    fs, model = pose_factors("level_set", 0, dets, ells, CAMERA, sigmas=sigmas,
+                             initial_world_from_camera=pose)
+    values = gtsam.Values()
+    values.insert(0, gtsam.Pose3(pose))
+    per = [f.error(values) for f in fs]
+    costs = model.costs(pose)
+    expected = [0.5 * c / (1.0 if s is None else s) for c, s in zip(costs, sigmas, strict=True)]
+    np.testing.assert_allclose(per, expected, rtol=1e-9)
+    batched = batched_pose_factor(0, model, sigmas)
+    assert batched.error(values) == pytest.approx(sum(per), rel=1e-9)
+    # memoised evaluation: a second pose gives fresh values, not stale ones
+    other = retract(pose, np.r_[0.0, 0.0, 0.01, 0.02, 0.0, 0.0])
+    v2 = gtsam.Values()
+    v2.insert(0, gtsam.Pose3(other))
+    fresh = PoseResidualModel("level_set", dets, ells, CAMERA, initial_world_from_camera=pose)
+    np.testing.assert_allclose([f.error(v2) for f in fs],
+                               0.5 * fresh.costs(other) / [1.0 if s is None else s
+                                                           for s in sigmas], rtol=1e-9)
+
+
+@pytest.mark.parametrize("kernel", ROBUST_KERNELS)
+def test_robust_kernels_downweight_large_residuals(scene, kernel):
+    ells, dets, pose = scene
+    values = gtsam.Values()
+    values.insert(0, gtsam.Pose3(pose))
+    plain = pose_factor("level_set", 0, dets[2], ells[2], CAMERA, initial_world_from_camera=pose)
+    cost = 2 * plain.error(values)
+    k = 0.1 * math.sqrt(cost)  # the residual norm is 10 k: deep in the robust regime
+    robust = pose_factor("level_set", 0, dets[2], ells[2], CAMERA, robust=kernel, robust_scale=k,
+                         initial_world_from_camera=pose)
+    assert robust.error(values) < 0.5 * plain.error(values)
+    # with a huge threshold the kernel is quadratic: same error
+    wide = pose_factor("level_set", 0, dets[2], ells[2], CAMERA, robust=kernel,
+                       robust_scale=1e6 * math.sqrt(cost), initial_world_from_camera=pose)
+    assert wide.error(values) == pytest.approx(plain.error(values), rel=1e-6)
+
+
+def test_noise_model_validation():
+    with pytest.raises(ValueError, match="robust"):
+        make_noise_model(5, robust="tukeyish")
+    with pytest.raises(ValueError, match="sigma"):
+        make_noise_model(5, sigma=-1.0)
+    with pytest.raises(ValueError, match="robust_scale"):
+        make_noise_model(5, robust="huber", robust_scale=0.0)
+    with pytest.raises(ValueError, match="metric"):
+        PoseResidualModel("nope", [], [], CAMERA)
+
+
+@pytest.mark.parametrize("case", ["behind", "inside", "crossing"])
+def test_invalid_projection_penalty_is_bounded_with_usable_jacobian(scene, case):
+    ells, dets, _ = scene
+    e = ells[0]
+    # camera looking along +Z from a position chosen relative to the ellipsoid
+    side = 2.0 * float(e.axes.max())
+    offset = {"behind": [0.0, 0.0, 2.0], "inside": [0.0, 0.0, 0.0], "crossing": [side, 0.0, 0.0]}
+    pose = np.eye(4)
+    pose[:3, 3] = e.center + np.array(offset[case])
+    model = PoseResidualModel("level_set", dets[:1], [e], CAMERA)
+    margin = ellipsoid_depth_margins(invert_pose(pose), e.center[None], e.shape_matrix()[None])
+    assert margin[0] < 0
+    ev = model.evaluate(pose)
+    assert not ev.valid[0]
+    cost = float(ev.residuals[0] @ ev.residuals[0])
+    assert DEFAULT_PENALTY_COST <= cost < 4 * DEFAULT_PENALTY_COST
+    assert np.all(np.isfinite(ev.jacobians))
+    num = numeric_jacobian(lambda T: model.evaluate(T, jacobian=False).residuals[0].copy(), pose)
+    np.testing.assert_allclose(ev.jacobians[0], num, rtol=1e-5, atol=1e-6 * np.abs(num).max())
+    # a Gauss-Newton-like small step along -J^T r increases the depth margin
+    step = -ev.jacobians[0].T @ ev.residuals[0]
+    moved = retract(pose, 1e-3 * step / np.linalg.norm(step))
+    margin2 = ellipsoid_depth_margins(invert_pose(moved), e.center[None], e.shape_matrix()[None])
+    assert margin2[0] > margin[0]
+
+
+@pytest.mark.parametrize("metric", metrics.METRIC_NAMES)
+def test_every_metric_factor_survives_invalid_projection(scene, metric):
+    ells, dets, _ = scene
+    pose = np.eye(4)
+    pose[:3, 3] = ells[0].center + np.array([0.0, 0.0, 1.0])  # object behind the camera
+    opts = {"image_size": (CAMERA.width, CAMERA.height)} if metric == "qbbox" else {}
+    model = PoseResidualModel(metric, dets[:2], ells[:2], CAMERA, metric_options=opts)
+    ev = model.evaluate(pose)
+    assert not ev.valid[0]
+    assert np.all(np.isfinite(ev.residuals)) and np.all(np.isfinite(ev.jacobians))
+    cost0 = float(ev.residuals[0] @ ev.residuals[0])
+    assert DEFAULT_PENALTY_COST <= cost0 < 4 * DEFAULT_PENALTY_COST
+    # its Jacobian row pushes the depth margin up (d margin / d v_z = -1: move backwards)
+    assert np.all(ev.jacobians[0][:, 5] > 0)

@@ -1,0 +1,177 @@
+"""RANSAC scoring (fast IoU, vectorised projection, assignment) and the search itself."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from factors import metrics
+from factors.geometry import (
+    Ellipse,
+    Ellipsoid,
+    invert_pose,
+    project_ellipsoid,
+)
+from maps.compiled import compile_map
+from maps.model import MapObject, SceneMap
+from service.localization.ransac import (
+    MatchScorer,
+    estimate_iou,
+    greedy_assignment,
+    project_objects,
+    ransac,
+)
+from tests.test_hypotheses import BACK, CAM, UP, look_at
+
+
+def random_ellipse(rng: np.random.Generator) -> Ellipse:
+    return Ellipse(rng.uniform(100, 500), rng.uniform(100, 400), rng.uniform(10, 80),
+                   rng.uniform(10, 80), rng.uniform(-math.pi, math.pi))
+
+
+def test_estimate_iou_matches_exact_metric():
+    rng = np.random.default_rng(0)
+    errs = []
+    for _ in range(60):
+        a = random_ellipse(rng)
+        b = Ellipse(a.cx + rng.normal(0, 15), a.cy + rng.normal(0, 15), a.a * rng.uniform(.7, 1.3),
+                    a.b * rng.uniform(.7, 1.3), a.angle + rng.normal(0, 0.3))
+        exact = 1.0 - metrics.cost("iou", a, b)
+        errs.append(abs(estimate_iou(a, b, 256) - exact))
+    assert max(errs) < 0.03
+    assert np.mean(errs) < 0.01
+
+
+def test_estimate_iou_closed_forms():
+    # concentric circles: IoU = (r1 / r2)^2; disjoint: 0; identical: 1 (to sampling accuracy)
+    assert estimate_iou(Ellipse(0, 0, 10, 10, 0), Ellipse(0, 0, 20, 20, 0)) == pytest.approx(
+        0.25, abs=0.01)
+    assert estimate_iou(Ellipse(0, 0, 20, 20, 0), Ellipse(0, 0, 10, 10, 0)) == pytest.approx(
+        0.25, abs=0.01)
+    assert estimate_iou(Ellipse(0, 0, 10, 5, 0), Ellipse(100, 0, 10, 5, 0)) == 0.0
+    assert estimate_iou(Ellipse(3, 4, 10, 5, 0.3), Ellipse(3, 4, 10, 5, 0.3)) == pytest.approx(
+        1.0, abs=1e-12)
+
+
+def test_project_objects_matches_geometry():
+    rng = np.random.default_rng(1)
+    E = [Ellipsoid(rng.uniform(-1, 1, 3), rng.uniform(.1, .4, 3)) for _ in range(5)]
+    poses = np.array([invert_pose(look_at(rng.uniform(-1, 1, 3) + BACK, np.zeros(3)))
+                      for _ in range(3)])
+    cen, inv_shape, valid, pc = project_objects(
+        CAM, poses, np.array([e.center for e in E]), np.array([e.shape_matrix() for e in E]),
+        np.array([e.dual_quadric() for e in E]))
+    assert valid.all()
+    for h, T in enumerate(poses):
+        for s, e in enumerate(E):
+            ref = project_ellipsoid(CAM, T, e)
+            assert np.allclose(cen[h, s], ref.center, atol=1e-8)
+            assert np.allclose(inv_shape[h, s], ref.gaussian()[1], rtol=1e-8, atol=1e-6)
+            assert np.allclose(pc[h, s], CAM.project_points(T, e.center[None])[0], atol=1e-8)
+    # the camera turned 180 degrees about its own Y axis: every object is behind it -> invalid
+    flipped = np.einsum("ij,hjk->hik", np.diag([-1.0, 1.0, -1.0, 1.0]), poses)
+    _, _, valid2, _ = project_objects(
+        CAM, flipped, np.array([e.center for e in E]), np.array([e.shape_matrix() for e in E]),
+        np.array([e.dual_quadric() for e in E]))
+    assert not valid2.any()
+
+
+def test_greedy_assignment_is_one_to_one_and_thresholded():
+    iou = np.array([[0.9, 0.8, 0.0], [0.85, 0.3, 0.0], [0.1, 0.15, 0.05]])
+    m = greedy_assignment(iou, [4, 7, 9], 0.2)
+    assert [(x.detection_index, x.object_index) for x in m] == [(4, 0), (7, 1)]
+    assert all(x.iou >= 0.2 for x in m)
+
+
+def synthetic_map(rng: np.random.Generator, n: int = 8, labels=("a", "b", "c", "a", "b", "d",
+                                                              "e", "a")) -> SceneMap:
+    objs = []
+    for i in range(n):
+        c = np.array([rng.uniform(-1.5, 1.5), rng.uniform(-0.5, 0.5), rng.uniform(-0.8, 0.8)])
+        objs.append(MapObject(f"o{i}", labels[i], Ellipsoid(c, rng.uniform(0.1, 0.25, 3))))
+    return SceneMap("synthetic", "synthetic", (0.0, 0.0, 1.0), tuple(sorted(set(labels))),
+                    tuple(objs))
+
+
+def exact_detections(compiled, T_cw):
+    ells, labels = [], []
+    for e, lab in zip(compiled.ellipsoids, compiled.categories, strict=True):
+        ells.append(project_ellipsoid(CAM, T_cw, e))
+        labels.append(lab)
+    return ells, labels
+
+
+def test_ransac_exact_finds_pose_and_all_matches():
+    rng = np.random.default_rng(2)
+    cm = compile_map(synthetic_map(rng))
+    T_cw = invert_pose(look_at(np.array([0.2, -4.0, 0.3]), np.zeros(3)))
+    ells, labels = exact_detections(cm, T_cw)
+    scorer = MatchScorer(cm, CAM, ells, labels, list(range(len(ells))))
+    out = ransac(scorer, UP, inlier_iou=0.2, min_inliers=2, max_hypotheses=500,
+                 rng=np.random.default_rng(0))
+    assert out.camera_from_world is not None
+    # P3P on centres is close to the truth (ellipse centre != projected centre: ~mm level)
+    c_est = invert_pose(out.camera_from_world)[:3, 3]
+    assert np.linalg.norm(c_est - invert_pose(T_cw)[:3, 3]) < 0.05
+    assert sorted((m.detection_index, m.object_index) for m in out.matches) == [
+        (i, i) for i in range(len(ells))]
+    assert all(m.iou > 0.9 for m in out.matches)
+
+
+def test_ransac_with_outliers_and_wrong_labels():
+    rng = np.random.default_rng(3)
+    cm = compile_map(synthetic_map(rng))
+    T_cw = invert_pose(look_at(np.array([-0.3, -4.0, 0.6]), np.zeros(3)))
+    ells, labels = exact_detections(cm, T_cw)
+    noisy = [Ellipse(e.cx + rng.normal(0, 2), e.cy + rng.normal(0, 2), e.a * rng.uniform(.93, 1.07),
+                     e.b * rng.uniform(.93, 1.07), e.angle + rng.normal(0, .05)) for e in ells]
+    labels = list(labels)
+    labels[2] = "e" if labels[2] != "e" else "d"  # a wrong label
+    spurious = [random_ellipse(rng) for _ in range(3)]  # spurious detections
+    all_ells = noisy + spurious
+    all_labels = [*labels, "a", "b", "c"]
+    scorer = MatchScorer(cm, CAM, all_ells, all_labels, list(range(len(all_ells))))
+    out = ransac(scorer, UP, inlier_iou=0.3, min_inliers=3, max_hypotheses=2000,
+                 rng=np.random.default_rng(0))
+    assert out.camera_from_world is not None
+    c_est = invert_pose(out.camera_from_world)[:3, 3]
+    assert np.linalg.norm(c_est - invert_pose(T_cw)[:3, 3]) < 0.3
+    pairs = {(m.detection_index, m.object_index) for m in out.matches}
+    correct = {(i, i) for i in range(len(ells)) if i != 2}
+    assert len(pairs & correct) >= len(correct) - 1
+    assert all(d < len(ells) and d == o for d, o in pairs)  # no outlier matched
+
+
+def test_ransac_sampling_budget_and_determinism():
+    rng = np.random.default_rng(4)
+    labels = ("a",) * 8  # every triple is label-compatible: 8^3 * C(8,3) samples, > budget
+    cm = compile_map(synthetic_map(rng, labels=labels))
+    T_cw = invert_pose(look_at(np.array([0.0, -4.0, 0.2]), np.zeros(3)))
+    ells, labs = exact_detections(cm, T_cw)
+    scorer = MatchScorer(cm, CAM, ells, labs, list(range(len(ells))))
+    outs = [ransac(scorer, UP, inlier_iou=0.2, min_inliers=2, max_hypotheses=300,
+                   rng=np.random.default_rng(7)) for _ in range(2)]
+    assert not outs[0].exhaustive and outs[0].samples_tried <= 300
+    assert np.array_equal(outs[0].camera_from_world, outs[1].camera_from_world)
+    assert outs[0].samples_tried == outs[1].samples_tried
+
+
+def test_ransac_two_detections_uses_p2e():
+    rng = np.random.default_rng(5)
+    E = [Ellipsoid(np.array([-0.5, 0.0, 0.0]), np.array([0.2, 0.15, 0.25])),
+         Ellipsoid(np.array([0.6, 0.3, 0.2]), np.array([0.25, 0.2, 0.15]))]
+    sm = SceneMap("two", "two", (0.0, 0.0, 1.0), ("x", "y"),
+                  (MapObject("A", "x", E[0]), MapObject("B", "y", E[1])))
+    cm = compile_map(sm)
+    T_cw = invert_pose(look_at(np.array([0.3, -4.0, 0.8]), np.array([0.0, 0.0, 0.1])))
+    ells = [project_ellipsoid(CAM, T_cw, e) for e in E]
+    scorer = MatchScorer(cm, CAM, ells, ["x", "y"], [0, 1])
+    out = ransac(scorer, UP, inlier_iou=0.5, min_inliers=2, max_hypotheses=10, rng=rng)
+    assert out.camera_from_world is not None
+    assert np.max(np.abs(out.camera_from_world - T_cw)) < 1e-7
+    # no compatible pair (both detections labelled "x", one "x" object) -> no_label_match
+    scorer2 = MatchScorer(cm, CAM, ells, ["x", "x"], [0, 1])
+    out2 = ransac(scorer2, UP, inlier_iou=0.5, min_inliers=2, max_hypotheses=10, rng=rng)
+    assert out2.camera_from_world is None and out2.reason == "no_label_match"
