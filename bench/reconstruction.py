@@ -75,6 +75,9 @@ def box_noise(sigma_px: float) -> Callable:
     return corrupt
 
 
+#: View sets whose rays through the object span less than this (degrees) are "narrow".
+NARROW_DEG = 15.0
+
 _HEADER = ("| setting | view set | solved | centre err cm (median / p90) "
            "| semi-axes err cm (median / p90) | orientation err deg (median / p90) "
            "| shape rel. err (median) | time ms (median) |\n|---|---|---|---|---|---|---|---|")
@@ -98,6 +101,8 @@ def run(trials: int, n_views: int, seed: int) -> tuple[str, dict]:
         idx = visible_frames(cam, cfw, obj.ellipsoid)
         sel = idx[:: max(1, len(idx) // n_views)][:n_views]
         per_object.append((obj, idx, sel))
+    spreads = {o.object_id: _spread_deg(cam, cfw, sel, o.ellipsoid) for o, _i, sel in per_object}
+    group_of = {k: ("narrow" if v < NARROW_DEG else "wide") for k, v in spreads.items()}
     raw: dict = {"trials": trials, "views": n_views, "seed": seed, "settings": {}}
     rows = []
     for label, corrupt, options in settings:
@@ -115,13 +120,10 @@ def run(trials: int, n_views: int, seed: int) -> tuple[str, dict]:
                     res = reconstruct_ellipsoid(obs, wfc, cam, **options)
                 except ReconstructionError as exc:
                     failures[exc.reason] = failures.get(exc.reason, 0) + 1
-                    key = "narrow" if obj.category == "TV" else "wide"
-                    stats[key].append(None)
+                    stats[group_of[obj.object_id]].append(None)
                     continue
                 times.append(time.perf_counter() - t0)
-                err = ellipsoid_errors(res.ellipsoid, E)
-                key = "narrow" if res.max_ray_angle_deg < 15 else "wide"
-                stats[key].append(err)
+                stats[group_of[obj.object_id]].append(ellipsoid_errors(res.ellipsoid, E))
         raw["settings"][label] = {k: v for k, v in stats.items() if k != "spread"}
         for group in ("wide", "narrow"):
             errs = [e for e in stats[group] if e is not None]
@@ -151,7 +153,15 @@ def run(trials: int, n_views: int, seed: int) -> tuple[str, dict]:
                         f" | | | | | |")
     views_table = "\n".join(
         f"| {o.object_id} | {o.category} | {len(idx)} | {len(sel)} | "
-        f"{_spread_deg(cam, cfw, sel, o.ellipsoid):.1f} |" for o, idx, sel in per_object)
+        f"{spreads[o.object_id]:.1f} |" for o, idx, sel in per_object)
+
+    def describe(group: str) -> str:
+        ids = [k for k, g in group_of.items() if g == group]
+        if not ids:
+            return "none"
+        vals = [spreads[k] for k in ids]
+        return f"objects {', '.join(ids)}: {min(vals):.0f}-{max(vals):.0f} deg"
+
     md = f"""## Reconstruction of the Chess ellipsoids (`bench/reconstruction.py`)
 
 Each of the 11 ellipsoids of the Chess map is reconstructed from {n_views} views at real
@@ -167,8 +177,9 @@ Noise: centre `N(0, sigma_px)` per coordinate, semi-axes `x (1 + N(0, rel))`, an
 `N(0, deg)`; boxes: the projected ellipse's bounding box, corners `+ N(0, 2 px)`, replaced by
 the inscribed axis-aligned ellipse (the paper built its map from such boxes).
 {trials} noise draws per object and setting, seed {seed}. "wide": view sets whose viewing rays
-span >= 15 deg (objects 2-10, 44-101 deg); "narrow": the two TVs, seen only within a 7-10 deg
-cone in these poses (all their failures counted there).
+span >= {NARROW_DEG:g} deg ({describe("wide")}); "narrow": the others ({describe("narrow")}).
+Times: wall clock per object (linear
+estimate + both LM refinements) on the shared 2-core machine, noisy between runs.
 
 | object | category | frames visible | views used | ray spread (deg) |
 |---|---|---|---|---|
@@ -210,7 +221,7 @@ def _findings(raw: dict) -> str:
         f"the linear estimate alone (shape error {s_ref:.3f} vs {s_lin:.3f}). Boxes: median centre "
         f"error {_median(raw, boxes, 'wide', 'center_m') * 100:.2f} cm, shape error "
         f"{_median(raw, boxes, 'wide', 'shape_rel'):.3f} (a box has no image orientation). The "
-        f"narrow TV view sets are ill-posed under noise (depth along the rays and thickness "
+        f"narrow view sets are ill-posed under noise (depth along the rays and thickness "
         f"unobservable): solved {_solved(raw, noisy, 'narrow')}, median centre error "
         f"{_median(raw, noisy, 'narrow', 'center_m') * 100:.1f} cm; the linear estimate is never "
         f"an ellipsoid there ({_solved(raw, linear, 'narrow')}); the opt-in log-axes prior "

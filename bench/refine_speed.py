@@ -238,15 +238,29 @@ def markdown(res: dict, command: str) -> str:
              "Scenes, noise and baseline are described in `bench/refine_speed.py`.", "",
              "### Level-set refinement vs the paper's BFGS baseline (same run)", "",
              "| N | level-set median (ms) | p90 (ms) | CPU median (ms) | LM iterations | "
-             "position error (m) | BFGS median (ms) | BFGS iterations | BFGS position error (m) "
-             "| speed-up |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "position error (m) | BFGS median (ms) | BFGS CPU median (ms) | BFGS iterations | "
+             "BFGS position error (m) | speed-up (wall) | speed-up (CPU) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for n in SIZES:
         r, b = res["refine"]["level_set"][str(n)], res["baseline_bfgs"][str(n)]
         lines.append(f"| {n} | {r['median_ms']:.2f} | {r['p90_ms']:.2f} | "
                      f"{r['cpu_median_ms']:.2f} | {r['iterations']:.1f} | "
                      f"{r['position_error_m']:.4f} | {b['median_ms']:.0f} | "
-                     f"{b['iterations']:.0f} | {b['position_error_m']:.4f} | "
-                     f"{res['speedup_vs_bfgs'][str(n)]:.0f}x |")
+                     f"{b['cpu_median_ms']:.0f} | {b['iterations']:.0f} | "
+                     f"{b['position_error_m']:.4f} | {res['speedup_vs_bfgs'][str(n)]:.0f}x | "
+                     f"{b['cpu_median_ms'] / r['cpu_median_ms']:.0f}x |")
+    ls8, ls16 = res["refine"]["level_set"]["8"], res["refine"]["level_set"]["16"]
+    sp8 = res["speedup_vs_bfgs"]["8"]
+
+    def verdict(ok: bool) -> str:
+        return "met" if ok else "MISSED"
+
+    lines += ["", "Targets (2-core machine): level-set median <= 2 ms at N=8: "
+              f"{ls8['median_ms']:.2f} ms, {verdict(ls8['median_ms'] <= 2.0)}; <= 3 ms at "
+              f"N=16: {ls16['median_ms']:.2f} ms, {verdict(ls16['median_ms'] <= 3.0)}; >= 100x "
+              f"faster than BFGS at N=8: {sp8:.0f}x, {verdict(sp8 >= 100)}. The CPU-time column "
+              "is what the refinement itself costs; wall time above it is time the process "
+              "waited for a core (other jobs on the machine)."]
     lines += ["", "### Every metric: median wall ms / p90 ms / LM iterations / median position "
               "error (m) / converged fraction", "",
               "| metric | " + " | ".join(f"N={n}" for n in SIZES) + " |",
@@ -267,6 +281,28 @@ def markdown(res: dict, command: str) -> str:
                  for k in ("batched_one_factor", "per_detection_shared_cache",
                            "per_detection_separate")]
         lines.append(f"| {n} | " + " | ".join(cells) + " |")
+    lines += ["", "Design chosen (`factors/pose_factors.py`): every detection's residual comes "
+              "from ONE vectorised evaluation of all pairs per pose (`PoseResidualModel`, "
+              "memoised on the pose value, Jacobians computed eagerly for analytic metrics). "
+              "`refine()` wraps it in one batched factor (Diagonal noise with std "
+              "`sqrt(sigma_j)` per detection block: exactly the per-detection weights) when no "
+              "robust kernel is asked for, and in one factor per detection slicing the shared "
+              "evaluation when one is (a robust kernel must see one detection's residual). "
+              "Separate per-detection evaluations (the GUIDE's 'one factor per object') cost "
+              "N times the numpy calls, see the last column.",
+              "", "Notes: the baseline's cost per function evaluation is N projections "
+              "(`project_ellipsoid`, validated `Ellipse`) and N `metrics.cost` calls, and BFGS "
+              "needs 7 evaluations per iteration for its forward-difference gradient; the GUIDE's "
+              "figures (105 / 188 / 382 ms at N = 3 / 8 / 16) were measured on a less loaded "
+              "machine with a leaner cost, the ratio is what this run shows. Position errors "
+              "are dominated by the simulated detection noise (all metrics reach similar "
+              "accuracy; the level set's advantages in the paper concern partially visible "
+              "objects and detector errors, not Gaussian noise). `iou`/`giou` have one "
+              "sqrt-of-area residual per object with a cone-shaped cost (see `factors.metrics`): "
+              "LM crawls and mostly stops at the 50-iteration cap (status `max_iterations`), "
+              "with numerical Jacobians through exact area computations; they are for scoring, "
+              "not refinement. `qbbox`, `iou` and `giou` use central differences (12 extra "
+              "metric evaluations per pair per linearisation), hence their times."]
     return "\n".join(lines)
 
 

@@ -16,24 +16,30 @@ noise (``s_j = 1``). An optional robust kernel (``huber``, ``cauchy``, ``geman_m
 noise model per detection through ``gtsam.noiseModel.Robust``; its threshold ``k`` applies to the
 WHITENED residual norm ``sqrt(Delta_j / sigma_j)``; defaults per metric in
 :data:`DEFAULT_ROBUST_SCALE` (about the residual norm of a clearly wrong match: e.g. for the level
-set, a norm of 1 is an average level discrepancy of 0.2 over 24 samples).
+set, 2.0 is an rms level discrepancy of 0.4 over 24 samples).
 
-Design: per-detection factors over a shared, memoised evaluation
------------------------------------------------------------------
-Per-detection factors are needed for per-detection robust kernels (GTSAM reweights a whole
-factor). But evaluating each pair separately costs one round of numpy calls per pair, which
-dominates in Python (GUIDE section 3: per-object analytic 5.5 ms vs batched 1.3 ms at N = 8).
-So all the factors of one solve share ONE :class:`factors.pose_residuals.PoseResidualModel`: the
-first factor called at a pose evaluates every pair at once (vectorised over objects and samples)
-and memoises the result on the pose value; the other factors only slice their row. GTSAM's
-Python round trip per factor is ~1-3 us, so N factors cost about one batched evaluation plus N
-slices. Measured numbers are in ``docs/results.md`` (section ``refine_speed``) and produced by
-``python -m bench.refine_speed``; :func:`batched_pose_factor` (one factor for all pairs,
-Diagonal noise, no robust kernel) is kept for that comparison.
+Design: one shared, memoised evaluation; batched without robust kernels
+-----------------------------------------------------------------------
+In Python the cost is in numpy calls, not in GTSAM: evaluating each pair separately (the
+GUIDE's "one factor per object") repeats the same dozen numpy calls N times. So all the
+factors of one solve share ONE :class:`factors.pose_residuals.PoseResidualModel`: the first
+factor called at a pose evaluates every pair at once (vectorised over objects and samples,
+analytic Jacobians computed in the same pass) and memoises it on the pose value; the others
+slice their rows. On top of it, two forms (:func:`pose_factors`):
 
-Jacobians: analytic for ``level_set`` (see :mod:`factors.pose_residuals`); central differences
-of ``factors.metrics.residual`` (all pairs and the 12 perturbed poses at once where possible)
-for the others.
+* ``batched=True``: ONE factor for all pairs with a Diagonal noise model whose rows of pair
+  ``j`` have std ``sqrt(sigma_j)``: the same weighted error as N factors, one Python round trip
+  per evaluation. ``service.localization.refine`` uses it when no robust kernel is requested.
+* default: one factor per pair (needed for per-detection robust kernels: GTSAM reweights a
+  whole factor), each slicing the shared evaluation.
+
+Measured (``python -m bench.refine_speed``, level set, LM solve only, CPU ms, one run):
+N=8: batched 1.10, per-detection shared 1.37, per-detection separate 4.55; N=16: 1.36, 2.00,
+8.79. Numbers and the command are in ``docs/results.md`` (section ``refine_speed``).
+
+Jacobians: analytic for ``level_set``, ``algebraic``, ``frobenius``, ``wasserstein``,
+``bhattacharyya`` and ``bbox`` (see :mod:`factors.pose_residuals`); central differences of
+``factors.metrics.residual`` for ``iou``, ``giou`` and ``qbbox``.
 
 Invalid projections (ellipsoid behind the camera, crossing the principal plane, containing the
 camera) give a bounded penalty residual with a Jacobian that restores a positive depth margin;
@@ -43,6 +49,7 @@ see :mod:`factors.pose_residuals`.
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Callable, Mapping, Sequence
 from functools import partial
 from typing import Any
@@ -68,18 +75,27 @@ __all__ = [
 ROBUST_KERNELS: tuple[str, ...] = ("huber", "cauchy", "geman_mcclure")
 
 #: Default robust threshold ``k`` per metric, on the whitened residual norm
-#: ``sqrt(Delta_j / sigma_j)`` (units: those of the metric's residual).
+#: ``sqrt(Delta_j / sigma_j)`` (units: those of the metric's residual). Calibration
+#: (``bench.refine_speed`` scenes: detection noise 1.5 px on the centre, 3 % on the semi-axes,
+#: 1 degree on the angle; N = 8, at the true pose): inlier residual norms have a 90th
+#: percentile of 1.03 (level_set), 0.33 (iou, giou), 3.4 px (bbox, qbbox), 2.5 px
+#: (wasserstein), 0.038 (bhattacharyya), 1400 / 1600 (algebraic / frobenius, px^2). ``k`` is
+#: about twice to three times that: beyond it a detection is treated as an outlier.
 DEFAULT_ROBUST_SCALE: dict[str, float] = {
-    "level_set": 1.0,       # level-function units, 24 samples
-    "iou": 0.5,             # residual of the Jaccard distance (dimensionless)
-    "giou": 0.5,
-    "bbox": 20.0,           # pixels (box corner coordinates)
-    "qbbox": 20.0,
-    "wasserstein": 20.0,    # pixels (W2 distance)
-    "bhattacharyya": 0.5,   # dimensionless
-    "algebraic": 2000.0,    # px^2 (normalised dual-conic entries)
-    "frobenius": 2000.0,    # px^2
+    "level_set": 2.0,
+    "iou": 0.6,
+    "giou": 0.6,
+    "bbox": 10.0,
+    "qbbox": 10.0,
+    "wasserstein": 8.0,
+    "bhattacharyya": 0.1,
+    "algebraic": 4000.0,
+    "frobenius": 5000.0,
 }
+
+
+def _is_real(x: object) -> bool:
+    return isinstance(x, numbers.Real) and not isinstance(x, bool)
 
 
 def make_noise_model(
@@ -97,7 +113,7 @@ def make_noise_model(
     if sigma is None:
         std = 1.0
     else:
-        if not (isinstance(sigma, int | float) and math.isfinite(sigma) and sigma > 0):
+        if not (_is_real(sigma) and math.isfinite(sigma) and sigma > 0):
             raise ValueError(f"sigma must be finite and > 0, got {sigma!r}")
         std = math.sqrt(float(sigma))
     base = gtsam.noiseModel.Isotropic.Sigma(int(dim), std)
@@ -109,7 +125,7 @@ def make_noise_model(
         raise ValueError(f"robust must be one of {', '.join(ROBUST_KERNELS)} or None, "
                          f"got {robust!r}")
     k = DEFAULT_ROBUST_SCALE.get(metric, 1.0) if robust_scale is None else robust_scale
-    if not (isinstance(k, int | float) and math.isfinite(k) and k > 0):
+    if not (_is_real(k) and math.isfinite(k) and k > 0):
         raise ValueError(f"robust_scale must be finite and > 0, got {robust_scale!r}")
     est = {
         "huber": gtsam.noiseModel.mEstimator.Huber,
@@ -174,8 +190,10 @@ def pose_factors(
         raise ValueError(f"sigmas must have one entry per detection ({model.n}), "
                          f"got {len(sigmas)}")
     for j, s in enumerate(sigmas):
-        if s is not None and not (isinstance(s, int | float) and math.isfinite(s) and s > 0):
+        if s is not None and not (_is_real(s) and math.isfinite(s) and s > 0):
             raise ValueError(f"sigmas[{j}] must be finite and > 0, got {s!r}")
+    if robust is None and robust_scale is not None:
+        raise ValueError("robust_scale given without a robust kernel (robust=None)")
     if batched:
         if robust is not None:
             raise ValueError("batched=True cannot carry per-detection robust kernels; "

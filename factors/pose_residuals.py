@@ -26,8 +26,23 @@ section 2 gives ``Phi_proj(x) = 1 - C*[2,2] x~^T C*^-1 x~ = 1 - s n^T A^-1 n`` w
     dr/dw  = 2 g (e3 x A e3) + 2 s (n x u)
     dr/dv  = 2 g z_c e3 - 2 s (c_c . u) u
 
-(using ``A u = n``). One ``np.linalg.solve`` over all objects and samples gives every ``u``; no
-Python loop over samples or objects.
+(using ``A u = n``). One batched 3x3 inverse and one matmul over all objects and samples give
+every ``u``; no Python loop over samples or objects. The samples are those of
+``factors.metrics.level_set_sample_points`` (same layout, tested), fixed at the initial pose.
+
+Conic metrics (analytic)
+------------------------
+``algebraic``, ``frobenius``, ``wasserstein``, ``bhattacharyya`` and ``bbox`` are smooth
+functions of the projection's normalised dual conic ``Cn = C* / (-C*[2,2])`` (centre
+``mu = -Cn[:2, 2]``, ``Sigma = Cn[:2, :2] + mu mu^T``). Their residuals are re-implemented
+here vectorised over the objects (equal to ``factors.metrics.residual``, tested) and
+differentiated through ``dC* = K dA K^T``, ``dCn = (dC* + Cn dC*[2,2]) / (-C*[2,2])``.
+``iou``, ``giou`` and ``qbbox`` (piecewise: clipped at the image border) call
+``factors.metrics.residual`` and use central differences on ``retract`` (step
+:data:`DEFAULT_NUMERIC_STEP`), one-sided where a side is invalid.
+
+Evaluations are memoised on the pose value and their arrays are read-only (shared by the
+factors that slice them).
 
 Invalid projections (penalty)
 -----------------------------
@@ -90,8 +105,11 @@ DEFAULT_NUMERIC_STEP: dict[str, float] = {
     "frobenius": 1e-6, "wasserstein": 1e-6, "bhattacharyya": 1e-6, "level_set": 1e-6,
 }
 #: Metrics whose pose Jacobian is analytic (the others use central differences).
-ANALYTIC_METRICS: tuple[str, ...] = ("level_set", "algebraic", "frobenius", "wasserstein")
-_CONIC_METRICS = ("algebraic", "frobenius", "wasserstein")
+ANALYTIC_METRICS: tuple[str, ...] = (
+    "level_set", "algebraic", "frobenius", "wasserstein", "bhattacharyya", "bbox")
+_CONIC_METRICS = ("algebraic", "frobenius", "wasserstein", "bhattacharyya", "bbox")
+_INV_SQRT8 = 1.0 / math.sqrt(8.0)
+_SQRT2 = math.sqrt(2.0)
 # tangent generators: d(A)/d(omega_k) = G + G^T with G = -[e_k]x A; d(A)/d(v_k) = G + G^T with
 # G = e_k c^T
 _SKEW_BASIS = np.array([[[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]],
@@ -107,6 +125,25 @@ _P2 = np.array([2, 0, 1])
 # e3 x a = (-a_1, a_0, 0)
 _E3X_ROWS = np.array([1, 0, 2])
 _E3X_SIGN = np.array([-1.0, 1.0, 0.0])
+
+
+def _log_cosh(x: np.ndarray) -> np.ndarray:
+    """``ln cosh(x)`` without overflow, accurate near 0 (series), elementwise."""
+    ax = np.abs(x)
+    x2 = ax * ax
+    series = x2 * (0.5 + x2 * (-1.0 / 12.0 + x2 * (1.0 / 45.0)))
+    big = ax + np.log1p(np.exp(-2.0 * ax)) - math.log(2.0)
+    return np.where(ax < 1e-2, series, big)
+
+
+def _dh_dlambda(u: np.ndarray, h: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """``d h(ln lambda) / d lambda`` for ``h(u) = sign(u) sqrt(ln cosh(u / 2) / 2)``:
+    ``h'(u) = tanh(|u| / 2) / (8 |h|)`` (-> 1/4 as u -> 0), divided by ``lambda``."""
+    ah = np.abs(h)
+    small = np.abs(u) < 1e-4
+    dh_du = np.where(small, 0.25,
+                     np.tanh(0.5 * np.abs(u)) / (8.0 * np.where(small, 1.0, ah)))
+    return dh_du / lam
 
 
 @functools.lru_cache(maxsize=32)
@@ -387,6 +424,9 @@ class PoseResidualModel:
             ev = self._evaluate_conic(T, jacobian)
         else:
             ev = self._evaluate_numeric(T, jacobian)
+        for arr in (ev.residuals, ev.jacobians, ev.valid, ev.depth_margins):
+            if arr is not None:
+                arr.setflags(write=False)
         self._cache_key, self._cache_jac, self._cache = key, jacobian, ev
         return ev
 
@@ -446,6 +486,12 @@ class PoseResidualModel:
         """Detection constants of algebraic / frobenius / wasserstein (as factors.metrics)."""
         P = self._det_params
         self._det_vec5 = dual_conics_from_params(P).reshape(self.n, 9)[:, _VEC5]  # (N, 5)
+        self._det_box = np.array([d.bbox() for d in self.detections])  # (N, 4) px
+        c, s = np.cos(P[:, 4]), np.sin(P[:, 4])
+        a2, b2 = P[:, 2] ** 2, P[:, 3] ** 2
+        # S_D = R diag(a^2, b^2) R^T as (s00, s01, s11)
+        self._det_sigma = np.stack([a2 * c * c + b2 * s * s, (a2 - b2) * c * s,
+                                    a2 * s * s + b2 * c * c], axis=1)
         # canonical (a >= b, angle + pi/2 when swapped) semi-axes and angle, as metrics does
         swap = P[:, 3] > P[:, 2]
         self._det_canon = np.stack([np.where(swap, P[:, 3], P[:, 2]),
@@ -489,13 +535,37 @@ class PoseResidualModel:
                 r = r * _FRO_W
                 if J is not None:
                     J = J * _FRO_W[None, :, None]
-        else:
+        elif self.metric == "wasserstein":
             r, J = self._wasserstein(Cn, dCn)
+        elif self.metric == "bbox":
+            r, J = self._bbox(Cn, dCn)
+        else:
+            r, J = self._bhattacharyya(Cn, dCn)
         if J is not None:
             J = np.ascontiguousarray(J)
         if not all_valid:
             self._apply_penalty(r, J, ~valid, c, S, margins)
         return PoseEvaluation(r, J, valid, margins)
+
+    def _bbox(
+        self, Cn: np.ndarray, dCn: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """``r = B_D - B_P``, ``B = [cx - hx, cy - hy, cx + hx, cy + hy]`` with the half-sizes
+        ``hx = sqrt(Sigma00)``, ``hy = sqrt(Sigma11)`` of the axis-aligned box, and d r / d xi."""
+        mu = -Cn[:, :2, 2]
+        hx = np.sqrt(Cn[:, 0, 0] + mu[:, 0] ** 2)
+        hy = np.sqrt(Cn[:, 1, 1] + mu[:, 1] ** 2)
+        box = np.stack([mu[:, 0] - hx, mu[:, 1] - hy, mu[:, 0] + hx, mu[:, 1] + hy], axis=1)
+        r = self._det_box - box
+        if dCn is None:
+            return r, None
+        col = (slice(None), None)
+        dmu = -dCn[:, :, :2, 2]
+        dhx = (dCn[:, :, 0, 0] + 2.0 * mu[:, 0][col] * dmu[..., 0]) / (2.0 * hx[col])
+        dhy = (dCn[:, :, 1, 1] + 2.0 * mu[:, 1][col] * dmu[..., 1]) / (2.0 * hy[col])
+        J = -np.stack([dmu[..., 0] - dhx, dmu[..., 1] - dhy, dmu[..., 0] + dhx,
+                       dmu[..., 1] + dhy], axis=1)  # (N, 4, 6)
+        return r, J
 
     def _wasserstein(
         self, Cn: np.ndarray, dCn: np.ndarray | None
@@ -556,6 +626,82 @@ class PoseResidualModel:
                       (dP / D[col] - P[col] * (dQ + dR) / (D * D)[col]) / ks)
         dks = dk * sn[col] + (k * cs)[col] * ddelta
         J = np.stack([-dmu[..., 0], -dmu[..., 1], -da2, -db2, dks], axis=1)  # (N, 5, 6)
+        return r, J
+
+    def _bhattacharyya(
+        self, Cn: np.ndarray, dCn: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """factors.metrics' Bhattacharyya residual ``[L^-1 dmu / sqrt 8, G00, G11, sqrt2 G01]``
+        (``S = (S_D + S_P) / 2 = L L^T``, ``G = h(log N)``, ``N = S_D^-1/2 S_P S_D^-1/2``,
+        ``h(u) = sign(u) sqrt(ln cosh(u / 2) / 2)``) and its pose Jacobian. The spectral
+        function's derivative is Daleckii-Krein's ``dG = V (F o (V^T dN V)) V^T`` (divided
+        differences of ``h(log lambda)``, its derivative when the eigenvalues coincide).
+        """
+        mu = -Cn[:, :2, 2]
+        q00 = Cn[:, 0, 0] + mu[:, 0] ** 2
+        q01 = Cn[:, 0, 1] + mu[:, 0] * mu[:, 1]
+        q11 = Cn[:, 1, 1] + mu[:, 1] ** 2
+        d00, d01, d11 = self._det_sigma.T
+        s00, s01, s11 = 0.5 * (d00 + q00), 0.5 * (d01 + q01), 0.5 * (d11 + q11)
+        l00 = np.sqrt(s00)
+        l10 = s01 / l00
+        l11 = np.sqrt(np.maximum(s11 - l10 * l10, 0.0))
+        dx = self._det_params[:, 0] - mu[:, 0]
+        dy = self._det_params[:, 1] - mu[:, 1]
+        y0 = dx / l00
+        y1 = (dy - l10 * y0) / l11
+        a, b = self._det_params[:, 2], self._det_params[:, 3]
+        c, s = np.cos(self._det_params[:, 4]), np.sin(self._det_params[:, 4])
+
+        def to_n(x00, x01, x11):  # D^-1 R^T X R D^-1 (detection frame), elementwise
+            t00 = c * (x00 * c + x01 * s) + s * (x01 * c + x11 * s)
+            t01 = c * (-x00 * s + x01 * c) + s * (-x01 * s + x11 * c)
+            t11 = -s * (-x00 * s + x01 * c) + c * (-x01 * s + x11 * c)
+            return t00 / (a * a), t01 / (a * b), t11 / (b * b)
+
+        n00, n01, n11 = to_n(q00, q01, q11)
+        half_tr, half_diff = 0.5 * (n00 + n11), 0.5 * (n00 - n11)
+        rad = np.hypot(half_diff, n01)
+        lam0 = half_tr + rad
+        lam1 = np.maximum(half_tr - rad, 1e-300)
+        u0, u1 = np.log(lam0), np.log(lam1)
+        h0 = np.sign(u0) * np.sqrt(0.5 * _log_cosh(0.5 * u0))
+        h1 = np.sign(u1) * np.sqrt(0.5 * _log_cosh(0.5 * u1))
+        theta = 0.5 * np.arctan2(n01, half_diff)  # N's first eigenvector angle
+        cos2, sin2 = np.cos(2 * theta), np.sin(2 * theta)
+        mean, half = 0.5 * (h0 + h1), 0.5 * (h0 - h1)
+        g00, g11, g01 = mean + half * cos2, mean - half * cos2, half * sin2
+        r = np.stack([_INV_SQRT8 * y0, _INV_SQRT8 * y1, g00, g11, _SQRT2 * g01], axis=1)
+        if dCn is None:
+            return r, None
+        col = (slice(None), None)
+        dmu = -dCn[:, :, :2, 2]
+        m0, m1 = mu[:, 0][col], mu[:, 1][col]
+        dq00 = dCn[:, :, 0, 0] + 2.0 * m0 * dmu[..., 0]
+        dq01 = dCn[:, :, 0, 1] + m0 * dmu[..., 1] + m1 * dmu[..., 0]
+        dq11 = dCn[:, :, 1, 1] + 2.0 * m1 * dmu[..., 1]
+        L00, L10, L11, Y0, Y1 = (v[col] for v in (l00, l10, l11, y0, y1))
+        dl00 = 0.25 * dq00 / L00
+        dl10 = (0.5 * dq01 - L10 * dl00) / L00
+        dl11 = (0.5 * dq11 - 2.0 * L10 * dl10) / (2.0 * L11)
+        dy0 = (-dmu[..., 0] - Y0 * dl00) / L00
+        dy1 = (-dmu[..., 1] - dl10 * Y0 - L10 * dy0 - Y1 * dl11) / L11
+        c, s, a, b = c[col], s[col], a[col], b[col]
+        dn00, dn01, dn11 = to_n(dq00, dq01, dq11)
+        ct, st = np.cos(theta)[col], np.sin(theta)[col]
+        e00 = ct * ct * dn00 + 2 * ct * st * dn01 + st * st * dn11
+        e11 = st * st * dn00 - 2 * ct * st * dn01 + ct * ct * dn11
+        e01 = -ct * st * dn00 + (ct * ct - st * st) * dn01 + st * ct * dn11
+        f0 = _dh_dlambda(u0, h0, lam0)
+        f1 = _dh_dlambda(u1, h1, lam1)
+        gap = lam0 - lam1
+        close = gap <= 1e-7 * lam0
+        f01 = np.where(close, 0.5 * (f0 + f1), (h0 - h1) / np.where(close, 1.0, gap))
+        M00, M01, M11 = f0[col] * e00, f01[col] * e01, f1[col] * e11
+        dg00 = ct * ct * M00 - 2 * ct * st * M01 + st * st * M11
+        dg11 = st * st * M00 + 2 * ct * st * M01 + ct * ct * M11
+        dg01 = ct * st * M00 + (ct * ct - st * st) * M01 - st * ct * M11
+        J = np.stack([_INV_SQRT8 * dy0, _INV_SQRT8 * dy1, dg00, dg11, _SQRT2 * dg01], axis=1)
         return r, J
 
     # ------------------------------------------------------------------ generic metrics

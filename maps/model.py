@@ -23,7 +23,12 @@ from typing import Any
 
 import numpy as np
 
-from factors.geometry import Ellipsoid, rotation_from_quaternion_wxyz, snap_to_rotation
+from factors.geometry import (
+    Ellipsoid,
+    quaternion_wxyz_from_rotation,
+    rotation_from_quaternion_wxyz,
+    snap_to_rotation,
+)
 
 __all__ = [
     "FORMAT",
@@ -235,7 +240,9 @@ class MapObject:
         """Build from centre (m, world), semi-axes (m) and a unit ``(w, x, y, z)`` quaternion
         (ellipsoid frame -> world; renormalised, sign made canonical ``w >= 0``)."""
         q = np.array(quaternion_wxyz, dtype=float)
-        q = q / np.linalg.norm(q)
+        n = float(np.linalg.norm(q))
+        if abs(n - 1.0) > 1e-15:  # leave unit ones bit-for-bit: re-imports stay exact
+            q = q / n
         if q[0] < 0:
             q = -q
         q.setflags(write=False)
@@ -252,13 +259,14 @@ class MapObject:
         return self._quaternion_wxyz  # type: ignore[attr-defined]
 
     def __eq__(self, other: object) -> bool:
-        """Same id, category and ellipsoid (exact array equality)."""
+        """Same id, category, centre, semi-axes and ``quaternion_wxyz`` (exactly: the same
+        exported JSON)."""
         if not isinstance(other, MapObject):
             return NotImplemented
         a, b = self.ellipsoid, other.ellipsoid
         return (self.object_id == other.object_id and self.category == other.category
                 and np.array_equal(a.center, b.center) and np.array_equal(a.axes, b.axes)
-                and np.array_equal(a.rotation, b.rotation))
+                and np.array_equal(self.quaternion_wxyz, other.quaternion_wxyz))
 
     def __hash__(self) -> int:
         return hash((self.object_id, self.category))
@@ -468,7 +476,8 @@ def _parse_object(errors: _Errors, path: str, obj: object) -> MapObject | None:
                 errors.add(f"{path}.rotation", f"must be a proper rotation (det +1), det = "
                                                f"{det:.6g}")
             else:
-                rotation = snap_to_rotation(R)
+                # Stored as its quaternion (the exported form), so that a re-import is exact.
+                quaternion = quaternion_wxyz_from_rotation(snap_to_rotation(R))
     else:
         rotation = np.eye(3)  # documented default: axis-aligned
     if len(errors.items) > n_before or center is None or axes is None:

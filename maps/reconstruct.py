@@ -22,7 +22,10 @@ Method
    ellipse passes through them; dimensionless, a relative level error). Analytic Jacobians:
    ``dr = <dQ*, D[2,2] v v^T - s p3 p3^T>`` with ``u = D^-1 x~``, ``s = x~^T u``, ``v = P^T u``,
    ``p3 = P[2, :]`` and ``dQ*`` the derivative of ``Q*`` along each tangent direction (Pose3 right
-   perturbation ``[omega, v]``: ``R -> R Exp(omega)``, ``c -> c + R v``).
+   perturbation ``[omega, v]``: ``R -> R Exp(omega)``, ``c -> c + R v``). LM runs from the linear
+   estimate and from a sphere at the triangulated centre (radius from the apparent sizes); the
+   valid result (in front of every camera, semi-axes within the map limits) with the lowest
+   residual wins — the linear estimate alone is fragile under noise and narrow baselines.
 
 Conventions: poses are ``world_from_camera`` 4x4 (camera axes OpenCV), ellipses in pixels,
 semi-axes in metres, output rotations ellipsoid frame -> world.
@@ -498,7 +501,7 @@ def reconstruct_ellipsoid(
                                               log_axes_prior=prior)
             _check_in_front(refined, cfw)
             _check_shape(refined)
-        except (ReconstructionError, ValueError) as exc:
+        except (ReconstructionError, ValueError, RuntimeError) as exc:  # RuntimeError: GTSAM
             problems.append(f"{label}: {exc}")
             reasons.add(getattr(exc, "reason", "refinement_failed"))
             continue

@@ -28,6 +28,7 @@ Semantics
 from __future__ import annotations
 
 import builtins
+import hashlib
 import json
 import threading
 from collections import OrderedDict
@@ -41,7 +42,7 @@ from typing import Any
 import sqlalchemy as sa
 from sqlalchemy import event
 from sqlalchemy.engine import Connection, Engine
-from sqlalchemy.exc import IntegrityError, SQLAlchemyError
+from sqlalchemy.exc import IntegrityError, InterfaceError, OperationalError, SQLAlchemyError
 from sqlalchemy.pool import StaticPool
 
 from maps.compiled import CompiledMap, compile_map
@@ -148,9 +149,12 @@ def _now() -> datetime:
 class MapStore:
     """Versioned map store. Thread-safe; one instance per process is enough (it pools).
 
+    Database failures (unreachable server, SQLite busy beyond its timeout) raise
+    :class:`StoreUnavailable`, also from the constructor when it migrates.
+
     Args:
         url: ``sqlite:///path`` (file; WAL mode), ``sqlite://`` (in-memory, one connection;
-            for tests), or ``postgresql://...`` / ``postgresql+psycopg://...``.
+            for tests and one-shot tools, not for concurrent use), or ``postgresql://...`` / ``postgresql+psycopg://...``.
         migrate: run the Alembic migrations up to head at construction (default True).
         engine_options: extra keyword arguments for :func:`sqlalchemy.create_engine`.
     """
@@ -213,20 +217,29 @@ class MapStore:
             with self.engine.connect() as conn:
                 conn.execute(sa.text("SELECT 1")).scalar_one()
         except SQLAlchemyError as exc:
-            raise StoreUnavailable(f"database unreachable: {exc.__class__.__name__}: "
-                                   f"{str(exc).splitlines()[0]}") from exc
+            raise _unavailable(exc) from exc
 
     # ------------------------------------------------------------------ transactions
     @contextmanager
     def _write(self) -> Iterator[Connection]:
-        """A write transaction (SQLite: ``BEGIN IMMEDIATE``, taking the write lock up front)."""
-        with self.engine.connect().execution_options(quadloc_write=True) as conn, conn.begin():
-            yield conn
+        """A write transaction (SQLite: ``BEGIN IMMEDIATE``, taking the write lock up front).
+
+        Connection-level database failures become :class:`StoreUnavailable`.
+        """
+        try:
+            with (self.engine.connect().execution_options(quadloc_write=True) as conn,
+                  conn.begin()):
+                yield conn
+        except (OperationalError, InterfaceError) as exc:
+            raise _unavailable(exc) from exc
 
     @contextmanager
     def _read(self) -> Iterator[Connection]:
-        with self.engine.connect() as conn, conn.begin():
-            yield conn
+        try:
+            with self.engine.connect() as conn, conn.begin():
+                yield conn
+        except (OperationalError, InterfaceError) as exc:
+            raise _unavailable(exc) from exc
 
     # ------------------------------------------------------------------ writes
     def create(self, scene_map: SceneMap) -> StoredMap:
@@ -376,27 +389,29 @@ class MapStore:
         """
         self._check_version(version)
         v = versions_table.c
-        with self._read() as conn:
-            row = conn.execute(self._version_query(map_id, version, v.version,
-                                                   v.content_hash)).first()
-        if row is None:
-            raise MapNotFound(map_id, version)
-        key = (map_id, int(row.version), str(row.content_hash))
-        with self._cache_lock:
-            hit = self._cache.get(key)
-            if hit is not None:
+        for _attempt in range(3):
+            with self._read() as conn:
+                row = conn.execute(self._version_query(map_id, version, v.version,
+                                                       v.content_hash)).first()
+            if row is None:
+                raise MapNotFound(map_id, version)
+            key = (map_id, int(row.version), str(row.content_hash))
+            with self._cache_lock:
+                hit = self._cache.get(key)
+                if hit is not None:
+                    self._cache.move_to_end(key)
+                    return hit
+            stored = self.get(map_id, key[1])
+            if stored.content_hash != key[2]:
+                continue  # deleted and re-created between the two reads: resolve again
+            result = compile_map(stored.scene_map)
+            with self._cache_lock:
+                self._cache[key] = result
                 self._cache.move_to_end(key)
-                return hit
-        stored = self.get(map_id, key[1])
-        if stored.content_hash != key[2]:  # deleted and re-created in between: retry once
-            return self.compiled(map_id, version)
-        result = compile_map(stored.scene_map)
-        with self._cache_lock:
-            self._cache[key] = result
-            self._cache.move_to_end(key)
-            while len(self._cache) > COMPILED_CACHE_SIZE:
-                self._cache.popitem(last=False)
-        return result
+                while len(self._cache) > COMPILED_CACHE_SIZE:
+                    self._cache.popitem(last=False)
+            return result
+        raise MapStoreError(f"map {map_id!r} kept changing while being loaded")
 
     def cache_info(self) -> dict[str, int]:
         """Number of compiled maps currently cached."""
@@ -404,9 +419,12 @@ class MapStore:
             return {"entries": len(self._cache), "capacity": COMPILED_CACHE_SIZE}
 
 
-def _sha256(text: str) -> str:
-    import hashlib
+def _unavailable(exc: Exception) -> StoreUnavailable:
+    first = str(exc).splitlines()[0] if str(exc) else ""
+    return StoreUnavailable(f"database unreachable or busy: {exc.__class__.__name__}: {first}")
 
+
+def _sha256(text: str) -> str:
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 

@@ -45,9 +45,15 @@ def _settings(args: argparse.Namespace) -> Any:
 
 
 def _store(args: argparse.Namespace) -> Any:
+    """The map store of the settings' database, with the demo map seeded like ``serve`` does."""
     from maps.store import MapStore
+    from service.api.app import seed_demo_map
 
-    return MapStore(_settings(args).effective_database_url)
+    settings = _settings(args)
+    store = MapStore(settings.effective_database_url)
+    if settings.seed_demo_map and settings.default_map_id:
+        seed_demo_map(store, settings.default_map_id)
+    return store
 
 
 def _die(message: str, code: int = 2) -> int:

@@ -143,12 +143,20 @@ class Settings(BaseSettings):
         description="Per-frame solve budget; a client may ask for less, never more.",
     )
     max_concurrent_solves: int = Field(
-        default=4, ge=1,
-        description="Solves running at once per process (the GIL serialises them anyway).",
+        default=1, ge=1,
+        description="Frames solved at once per process. The solver holds the GIL, so threads "
+                    "only interleave solves; 1 serves them first-come first-served (lowest "
+                    "mean latency) while the per-frame budget bounds how long one can block.",
     )
     solve_queue_timeout_s: float = Field(
         default=5.0, ge=0,
         description="Longest wait for a solve slot before answering 503 + Retry-After.",
+    )
+
+    map_cache_ttl_s: float = Field(
+        default=1.0, ge=0,
+        description="How long a replica may serve a cached map version (0 = always ask the "
+                    "database); writes through this replica invalidate at once.",
     )
 
     @field_validator("api_keys")

@@ -52,7 +52,7 @@ _finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 def _ellipse() -> st.SearchStrategy[dict]:
     return st.fixed_dictionaries({
         "cx": st.floats(-2000, 2000), "cy": st.floats(-2000, 2000),
-        "a": st.floats(0.01, 5000), "b": st.floats(0.01, 5000), "angle": st.floats(-7, 7)})
+        "a": st.floats(0.5, 3000), "b": st.floats(0.5, 3000), "angle": st.floats(-7, 7)})
 
 
 _detection = st.fixed_dictionaries(

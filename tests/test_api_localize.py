@@ -148,6 +148,8 @@ def test_not_localized_is_a_200(client: TestClient) -> None:
     out = r.json()
     assert out["localized"] is False and out["reason"] == "too_few_detections"
     assert out["world_from_camera"] is None and out["confidence"] == 0
+    out = client.post(URL, json=_frame(detections=[])).json()
+    assert out["localized"] is False and out["reason"] == "too_few_detections"
     unknown = _frame(detections=[{**d, "label": "Sofa"} for d in LOCALIZE_EXAMPLE["detections"]])
     out = client.post(URL, json=unknown).json()
     assert out["localized"] is False and out["reason"] in ("too_few_detections",

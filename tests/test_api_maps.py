@@ -184,3 +184,36 @@ def test_import_chess_format(client: TestClient) -> None:
     assert body["errors"][0]["field"] == "objects[0].ellipsoid.axes"
     _problem(client.post("/v1/maps:import-chess", params={"map_id": "bad id!"},
                          json=CHESS_IMPORT_EXAMPLE), 422, "validation-error")
+
+
+def _map_version_used(c: TestClient) -> int:
+    from service.api.examples import LOCALIZE_EXAMPLE
+
+    frame = {**LOCALIZE_EXAMPLE, "detections": LOCALIZE_EXAMPLE["detections"][:1]}
+    r = c.post("/v1/maps/chess/localize", json=frame)
+    assert r.status_code == 200, r.text
+    return r.json()["map_version"]
+
+
+def test_localize_sees_local_updates_at_once_and_other_replicas_within_the_ttl(
+        tmp_path: Path) -> None:
+    import time
+
+    with TestClient(make_test_app(tmp_path, map_cache_ttl_s=0.3)) as c:
+        assert _map_version_used(c) == 1
+        r = c.get("/v1/maps/chess")
+        assert c.put("/v1/maps/chess", json=r.json()["map"],
+                     headers={"If-Match": r.headers["etag"]}).status_code == 200
+        assert _map_version_used(c) == 2  # written through this app: invalidated at once
+        # Another replica writes straight to the shared database.
+        store = c.app.state.store
+        doc = c.get("/v1/maps/chess").json()["map"]
+        store.update("chess", scene_map_from_dict(doc, version=3), expected_version=2)
+        assert _map_version_used(c) == 2  # cached for at most the TTL
+        time.sleep(0.35)
+        assert _map_version_used(c) == 3
+        assert c.delete("/v1/maps/chess").status_code == 204
+        assert c.post("/v1/maps/chess/localize", json={}).status_code == 422
+        from service.api.examples import LOCALIZE_EXAMPLE
+
+        assert c.post("/v1/maps/chess/localize", json=LOCALIZE_EXAMPLE).status_code == 404

@@ -371,3 +371,46 @@ def test_equality_hash_and_pickle() -> None:
     doc = _doc()
     doc["objects"][0]["center"][0] += 1e-12
     assert scene_map_from_dict(doc) != m
+
+
+def test_docs_example_document_is_valid() -> None:
+    text = (Path(__file__).resolve().parents[1] / "docs" / "maps.md").read_text()
+    example = text.split("```json", 1)[1].split("```", 1)[0]
+    m = scene_map_from_dict(json.loads(example))
+    assert m.map_id == "office-3" and len(m.objects) == 2
+    np.testing.assert_allclose(m.objects[0].ellipsoid.rotation @ [1, 0, 0], [0, 1, 0], atol=1e-15)
+
+
+def _random_doc(seed: int, n: int) -> dict[str, Any]:
+    rng = np.random.default_rng(seed)
+    objects = []
+    for i in range(n):
+        q = rng.normal(size=4)
+        if i % 2:
+            orientation = {"quaternion_wxyz": (q / np.linalg.norm(q)).tolist()}
+        else:
+            u, _, vt = np.linalg.svd(rng.normal(size=(3, 3)))
+            R = u @ vt * np.sign(np.linalg.det(u @ vt))
+            orientation = {"rotation": R.tolist()}
+        objects.append({"object_id": f"o{i}", "category": ["a", "b", "ç"][i % 3],
+                        "center": rng.uniform(-50, 50, 3).tolist(),
+                        "axes": np.exp(rng.uniform(np.log(1e-3), np.log(100), 3)).tolist(),
+                        **orientation})
+    return {"map_id": f"m{seed}", "name": "Café ☕", "categories": ["a", "b", "ç"],
+            "objects": objects, "metadata": {"seed": seed, "ünïcode": True}}
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_random_maps_round_trip_exactly(seed: int) -> None:
+    m = scene_map_from_dict(_random_doc(seed, 12))
+    again = SceneMap.from_json(m.to_json())
+    assert again == m and again.content_hash == m.content_hash
+    third = SceneMap.from_json(again.to_json(indent=None))
+    assert third.to_json() == m.to_json()
+    for a, b in zip(m.objects, third.objects, strict=True):
+        np.testing.assert_array_equal(a.ellipsoid.rotation, b.ellipsoid.rotation)
+        R = a.ellipsoid.rotation
+        np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
+        assert a.quaternion_wxyz[0] >= 0
+        np.testing.assert_allclose(rotation_from_quaternion_wxyz(a.quaternion_wxyz), R,
+                                   atol=1e-12)

@@ -393,11 +393,18 @@ def test_in_memory_sqlite_works(tmp_path: Path) -> None:
         assert s.get("office").version == 1
 
 
-def test_ping_reports_unreachable_database() -> None:
-    s = MapStore("postgresql://postgres@127.0.0.1:1/none?connect_timeout=2", migrate=False)
+def test_unreachable_database_is_store_unavailable() -> None:
+    url = "postgresql://postgres@127.0.0.1:1/none?connect_timeout=2"
+    s = MapStore(url, migrate=False)
     with pytest.raises(StoreUnavailable, match="unreachable"):
         s.ping()
+    with pytest.raises(StoreUnavailable):
+        s.get("chess")
+    with pytest.raises(StoreUnavailable):
+        s.create(_small_map())
     s.close()
+    with pytest.raises(StoreUnavailable):
+        MapStore(url)  # migrating at construction
 
 
 def test_urls() -> None:

@@ -165,19 +165,45 @@ def test_level_set_analytic_jacobian_matches_numerical(seed):
     np.testing.assert_allclose(ev.jacobians, num, atol=1e-6 * scale)
 
 
-@pytest.mark.parametrize("metric", ["algebraic", "frobenius", "wasserstein",  # analytic
-                                    "bhattacharyya", "bbox"])  # numerical path
+@pytest.mark.parametrize("metric", ["algebraic", "frobenius", "wasserstein", "bhattacharyya",
+                                    "bbox", "qbbox"])  # the last one: the numerical path
 def test_smooth_metric_jacobians_match_numerical(scene, metric):
-    assert set(ANALYTIC_METRICS) == {"level_set", "algebraic", "frobenius", "wasserstein"}
+    assert set(ANALYTIC_METRICS) == {"level_set", "algebraic", "frobenius", "wasserstein",
+                                     "bhattacharyya", "bbox"}
     ells, dets, pose = scene
     model = PoseResidualModel(metric, dets, ells, CAMERA, initial_world_from_camera=pose)
     ev = model.evaluate(pose, jacobian=True)
 
     def fn(T):
-        return np.array([metrics.residual(metric, d, project_ellipsoid(CAMERA, invert_pose(T), e))
+        return np.array([metrics.residual(metric, d, project_ellipsoid(CAMERA, invert_pose(T), e),
+                                          **model.options)
                          for d, e in zip(dets, ells, strict=True)])
 
     num = numeric_jacobian(fn, pose, h=1e-5)
+    np.testing.assert_allclose(ev.jacobians, num, rtol=1e-4, atol=1e-5 * np.abs(num).max())
+
+
+@pytest.mark.parametrize("metric", ["level_set", "algebraic", "frobenius", "wasserstein",
+                                    "bhattacharyya", "bbox"])
+def test_analytic_jacobians_at_the_exact_solution(metric):
+    """Zero residual (detection == projection): equal eigenvalues / zero angles, the branch
+    where the covariance is computed."""
+    rng = np.random.default_rng(31)
+    ells = random_scene(rng, 4)
+    truth = retract(np.eye(4), perturbation(rng, 0.02, 0.05))
+    dets = [project_ellipsoid(CAMERA, invert_pose(truth), e) for e in ells]
+    model = PoseResidualModel(metric, dets, ells, CAMERA, initial_world_from_camera=truth)
+    ev = model.evaluate(truth)
+    assert np.abs(ev.residuals).max() < 1e-6 * max(1.0, np.abs(ev.jacobians).max())
+
+    def fn(T):
+        return np.array([metrics.residual(metric, d, project_ellipsoid(CAMERA, invert_pose(T), e),
+                                          **({"scale": s, "adaptive": False}
+                                             if metric == "level_set" else {}))
+                         for d, e, s in zip(dets, ells, getattr(model, "sampling_scale",
+                                                               [0] * 4), strict=True)])
+
+    num = numeric_jacobian(fn, truth, h=1e-5)
     np.testing.assert_allclose(ev.jacobians, num, rtol=1e-4, atol=1e-5 * np.abs(num).max())
 
 

@@ -20,6 +20,7 @@ from maps.demo import DEMO_MAP_ID, load_demo_map
 from maps.errors import MapAlreadyExists, MapNotFound
 from maps.store import MapStore
 from service.api.errors import PROBLEM_MEDIA_TYPE, install_error_handlers
+from service.api.map_cache import MapCache
 from service.api.metrics import ApiMetrics, MetricsAndLimitsMiddleware
 from service.api.routers import health, localize, maps
 from service.api.solver import Solver
@@ -125,6 +126,7 @@ def create_app(settings: Settings | None = None, *, store: MapStore | None = Non
     app.state.api_keys = keys
     app.state.store = store
     app.state.metrics = metrics
+    app.state.map_cache = MapCache(store, settings.map_cache_ttl_s)
     app.state.solver = Solver(metrics, settings.max_concurrent_solves,
                               settings.solve_queue_timeout_s, settings.solve_time_budget_ms,
                               settings.max_detections)

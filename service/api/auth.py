@@ -38,10 +38,10 @@ def authenticate(keys: tuple[ApiKey, ...], presented: str | None, scope: str) ->
     challenge = {"WWW-Authenticate": 'Bearer realm="quadloc"'}
     if not presented:
         raise ProblemError("unauthorized",
-                         "this endpoint needs an API key: 'Authorization: Bearer <key>' or "
-                         "'X-API-Key: <key>'",
-                         errors=[{"field": "header.authorization", "message": "missing"}],
-                         headers=challenge)
+                           "this endpoint needs an API key: 'Authorization: Bearer <key>' or "
+                           "'X-API-Key: <key>'",
+                           errors=[{"field": "header.authorization", "message": "missing"}],
+                           headers=challenge)
     digest = hash_api_key(presented)
     found = None
     for key in keys:  # constant time per key; no early exit
@@ -49,12 +49,12 @@ def authenticate(keys: tuple[ApiKey, ...], presented: str | None, scope: str) ->
             found = key
     if found is None:
         raise ProblemError("unauthorized", "unknown API key",
-                         errors=[{"field": "header.authorization", "message": "unknown key"}],
-                         headers=challenge)
+                           errors=[{"field": "header.authorization", "message": "unknown key"}],
+                           headers=challenge)
     if not found.allows(scope):
         raise ProblemError("forbidden", f"this API key lacks the '{scope}' scope "
-                         f"(it has {sorted(found.scopes)})",
-                         errors=[{"field": "header.authorization",
+                           f"(it has {sorted(found.scopes)})",
+                           errors=[{"field": "header.authorization",
                                   "message": f"scope '{scope}' required"}])
     return found
 
@@ -62,7 +62,7 @@ def authenticate(keys: tuple[ApiKey, ...], presented: str | None, scope: str) ->
 def require_scope(scope: str):
     """FastAPI dependency enforcing ``scope`` for the route."""
 
-    def dependency(
+    async def dependency(
         request: Request,
         bearer: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)],
         api_key: Annotated[str | None, Depends(_api_key_header)],

@@ -28,7 +28,7 @@ from service.api.errors import ProblemError
 from service.api.metrics import ApiMetrics
 from service.api.schemas import LocalizeRequest, LocalizeResponse
 from service.localization.pipeline import localize
-from service.localization.types import LocalizationInputError
+from service.localization.types import LocalizationInputError, LocalizationResult
 
 __all__ = ["Solver"]
 
@@ -65,7 +65,7 @@ class Solver:
         if len(frame.detections) > self.max_detections:
             raise ProblemError("validation-error",
                                f"{prefix}detections: at most {self.max_detections} per frame",
-                             errors=[{"field": f"{prefix}detections",
+                               errors=[{"field": f"{prefix}detections",
                                       "message": f"at most {self.max_detections} detections"}])
         try:
             camera = camera_from_request(frame.camera)
@@ -75,11 +75,18 @@ class Solver:
         except ValueError as exc:  # GeometryError, LocalizationInputError
             field, message = _field_and_message(exc, prefix)
             raise ProblemError("invalid-geometry", f"{field}: {message}",
-                             errors=[{"field": field, "message": message}]) from exc
+                               errors=[{"field": field, "message": message}]) from exc
         start = time.perf_counter()
         self.metrics.in_progress.inc()
         try:
-            result = localize(detections, compiled, camera, options, prior)
+            if not detections:  # an image without detections is a normal "not localized"
+                result = LocalizationResult(
+                    localized=False, reason="too_few_detections", world_from_camera=None,
+                    covariance=None, confidence=0.0, inliers=(), metric=options.metric,
+                    hypotheses_evaluated=0, used_prior=False,
+                    timings_ms={"total": (time.perf_counter() - start) * 1e3})
+            else:
+                result = localize(detections, compiled, camera, options, prior)
             response = response_from_result(
                 result, map_id=compiled.map_id, map_version=compiled.version,
                 convention=frame.options.output_convention, frame_id=frame.frame_id,
@@ -120,7 +127,7 @@ class Solver:
         """
         if not self.slots.acquire(timeout=self.queue_timeout_s):
             raise ProblemError("busy", "all solver slots are busy; retry shortly",
-                             headers={"Retry-After": "1"})
+                               headers={"Retry-After": "1"})
         try:
             return [self._solve_one(compiled, f, f"frames[{i}]." if batch else "")
                     for i, f in enumerate(frames)]

@@ -19,7 +19,7 @@ router = APIRouter(tags=["operations"])
             description="200 while the process serves requests (no dependency checked).",
             responses={200: {"content": {"application/json": {
                 "example": {"status": "ok", "checks": {}}}}}})
-def healthz() -> HealthOut:
+async def healthz() -> HealthOut:
     return HealthOut(status="ok")
 
 
@@ -36,14 +36,14 @@ def readyz(store: StoreDep, settings: SettingsDep) -> HealthOut:
         checks["database"] = "ok"
     except Exception as exc:  # any driver error means not ready
         raise ProblemError("not-ready", f"database unreachable: {type(exc).__name__}",
-                         errors=[{"field": "database", "message": str(exc)[:200]}]) from exc
+                           errors=[{"field": "database", "message": str(exc)[:200]}]) from exc
     if settings.default_map_id:
         try:
             compiled = store.compiled(settings.default_map_id)
             checks["default_map"] = f"{compiled.map_id} v{compiled.version}"
         except Exception as exc:
             raise ProblemError("not-ready", f"default map {settings.default_map_id!r} not loadable",
-                             errors=[{"field": "default_map",
+                               errors=[{"field": "default_map",
                                       "message": str(exc)[:200]}]) from exc
     return HealthOut(status="ready", checks=checks)
 
@@ -55,5 +55,5 @@ def readyz(store: StoreDep, settings: SettingsDep) -> HealthOut:
                 "example": "# TYPE quadloc_localizations_total counter\n"
                            'quadloc_localizations_total{outcome="localized"} 42.0\n'}},
                              "description": "Prometheus text exposition format."}})
-def metrics(m: MetricsDep) -> Response:
+async def metrics(m: MetricsDep) -> Response:
     return Response(generate_latest(m.registry), media_type=CONTENT_TYPE_LATEST)

@@ -8,14 +8,15 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Body, Path, Query
+from fastapi import APIRouter, Body, Path, Query, Response
 
 from maps.compiled import CompiledMap
 from maps.errors import MapNotFound
 from service.api.auth import ReadAccess
-from service.api.deps import SettingsDep, SolverDep, StoreDep
+from service.api.deps import MapCacheDep, SettingsDep, SolverDep
 from service.api.errors import ProblemError
 from service.api.examples import LOCALIZE_EXAMPLE, LOCALIZE_RESPONSE_EXAMPLE
+from service.api.map_cache import MapCache
 from service.api.openapi_docs import problem_responses
 from service.api.schemas import (
     BatchLocalizeRequest,
@@ -35,14 +36,14 @@ VersionQuery = Annotated[int | None, Query(ge=1, le=2**31 - 1,
 MapIdPath = Annotated[str, Path(description="Map id.", examples=["chess"])]
 
 
-def _compiled(store: object, map_id: str, version: int | None) -> CompiledMap:
+def _compiled(cache: MapCache, map_id: str, version: int | None) -> CompiledMap:
     try:
-        return store.compiled(map_id, version)  # type: ignore[attr-defined]
+        return cache.get(map_id, version)
     except MapNotFound as exc:
         field = "path.map_id" if version is None else "query.version"
         what = f"map {map_id!r}" if version is None else f"version {version} of map {map_id!r}"
         raise ProblemError("map-not-found", f"{what} not found",
-                         errors=[{"field": field, "message": "not found"}]) from exc
+                           errors=[{"field": field, "message": "not found"}]) from exc
 
 
 @router.post(
@@ -60,10 +61,12 @@ def localize_frame(
     frame: Annotated[LocalizeRequest, Body(openapi_examples={
         "chess_demo": {"summary": "A simulated frame of the demo Chess map",
                        "value": LOCALIZE_EXAMPLE}})],
-    store: StoreDep, solver: SolverDep, _key: ReadAccess, version: VersionQuery = None,
-) -> LocalizeResponse:
-    compiled = _compiled(store, map_id, version)
-    return solver.localize_frames(compiled, [frame], batch=False)[0]
+    cache: MapCacheDep, solver: SolverDep, _key: ReadAccess, version: VersionQuery = None,
+) -> Response:
+    compiled = _compiled(cache, map_id, version)
+    result = solver.localize_frames(compiled, [frame], batch=False)[0]
+    # Already a validated model: serialise it directly (skips FastAPI's re-validation).
+    return Response(result.model_dump_json(), media_type="application/json")
 
 
 @router.post(
@@ -81,15 +84,16 @@ def localize_batch(
     batch: Annotated[BatchLocalizeRequest, Body(openapi_examples={
         "two_frames": {"summary": "The demo frame twice",
                        "value": {"frames": [LOCALIZE_EXAMPLE, LOCALIZE_EXAMPLE]}}})],
-    store: StoreDep, solver: SolverDep, settings: SettingsDep, _key: ReadAccess,
+    cache: MapCacheDep, solver: SolverDep, settings: SettingsDep, _key: ReadAccess,
     version: VersionQuery = None,
-) -> BatchLocalizeResponse:
+) -> Response:
     if len(batch.frames) > settings.max_batch_frames:
         raise ProblemError("validation-error",
-                         f"frames: at most {settings.max_batch_frames} frames per batch",
-                         errors=[{"field": "frames",
+                           f"frames: at most {settings.max_batch_frames} frames per batch",
+                           errors=[{"field": "frames",
                                   "message": f"at most {settings.max_batch_frames} frames"}])
-    compiled = _compiled(store, map_id, version)
+    compiled = _compiled(cache, map_id, version)
     results = solver.localize_frames(compiled, batch.frames, batch=True)
-    return BatchLocalizeResponse(map_id=compiled.map_id, map_version=compiled.version,
-                                 results=results)
+    out = BatchLocalizeResponse(map_id=compiled.map_id, map_version=compiled.version,
+                                results=results)
+    return Response(out.model_dump_json(), media_type="application/json")

@@ -21,7 +21,7 @@ from maps.model import (
     scene_map_from_dict,
 )
 from service.api.auth import ReadAccess, WriteAccess
-from service.api.deps import SettingsDep, StoreDep
+from service.api.deps import MapCacheDep, SettingsDep, StoreDep
 from service.api.errors import ProblemError
 from service.api.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
 from service.api.openapi_docs import problem_responses
@@ -100,7 +100,7 @@ def _invalid_map(exc: MapValidationError) -> ProblemError:
 def _not_found(map_id: str, version: int | None = None) -> ProblemError:
     what = f"map {map_id!r}" if version is None else f"version {version} of map {map_id!r}"
     return ProblemError("map-not-found", f"{what} not found",
-                      errors=[{"field": "path.map_id" if version is None else "query.version",
+                        errors=[{"field": "path.map_id" if version is None else "query.version",
                                "message": "not found"}])
 
 
@@ -108,17 +108,18 @@ def _check_object_limit(body: Any, settings: Any) -> None:
     objs = body.get("objects") if isinstance(body, dict) else None
     if isinstance(objs, list) and len(objs) > settings.max_map_objects:
         raise ProblemError("invalid-map", f"objects: at most {settings.max_map_objects} objects",
-                         errors=[{"field": "objects",
+                           errors=[{"field": "objects",
                                   "message": f"at most {settings.max_map_objects} objects"}])
 
 
-def _created(store: Any, scene_map: Any, response: Response) -> MapOut:
+def _created(store: Any, cache: Any, scene_map: Any, response: Response) -> MapOut:
     try:
         stored = store.create(scene_map)
     except MapAlreadyExists as exc:
         raise ProblemError("map-exists", f"map {scene_map.map_id!r} already exists; use PUT "
-                         "/v1/maps/{map_id} with If-Match to update it",
-                         errors=[{"field": "map_id", "message": "already exists"}]) from exc
+                           "/v1/maps/{map_id} with If-Match to update it",
+                           errors=[{"field": "map_id", "message": "already exists"}]) from exc
+    cache.invalidate(scene_map.map_id)  # e.g. a 404 cached before the map existed
     response.headers["ETag"] = etag_of(stored.content_hash)
     response.headers["Location"] = f"/v1/maps/{scene_map.map_id}"
     return _map_out(stored)
@@ -134,13 +135,13 @@ def _created(store: Any, scene_map: Any, response: Response) -> MapOut:
     openapi_extra=_body_doc(_MAP_SCHEMA, MAP_EXAMPLE),
 )
 def create_map(body: Annotated[dict[str, Any], Body()], response: Response, store: StoreDep,
-               settings: SettingsDep, _key: WriteAccess) -> MapOut:
+               cache: MapCacheDep, settings: SettingsDep, _key: WriteAccess) -> MapOut:
     _check_object_limit(body, settings)
     try:
         scene_map = scene_map_from_dict(body, version=1)
     except MapValidationError as exc:
         raise _invalid_map(exc) from exc
-    return _created(store, scene_map, response)
+    return _created(store, cache, scene_map, response)
 
 
 @router.post(
@@ -154,7 +155,7 @@ def create_map(body: Annotated[dict[str, Any], Body()], response: Response, stor
 )
 def import_chess_map(
     body: Annotated[dict[str, Any], Body()], response: Response, store: StoreDep,
-    settings: SettingsDep, _key: WriteAccess,
+    cache: MapCacheDep, settings: SettingsDep, _key: WriteAccess,
     map_id: Annotated[str, Query(pattern=MAP_ID_PATTERN, description="Id of the new map.")],
     name: Annotated[str, Query(min_length=1, max_length=256)] = "Chess",
 ) -> MapOut:
@@ -163,7 +164,7 @@ def import_chess_map(
         scene_map = scene_map_from_chess(body, map_id=map_id, name=name)
     except MapValidationError as exc:
         raise _invalid_map(exc) from exc
-    return _created(store, scene_map, response)
+    return _created(store, cache, scene_map, response)
 
 
 @router.get("/maps", response_model=MapListOut, summary="List maps (latest versions)",
@@ -197,14 +198,14 @@ def get_map(map_id: MapIdPath, response: Response, store: StoreDep, _key: ReadAc
 def _parse_if_match(if_match: str | None) -> set[str]:
     if if_match is None or not if_match.strip():
         raise ProblemError("precondition-required",
-                         "PUT needs 'If-Match: \"<ETag>\"' with the ETag of the version you "
-                         "edited (GET /v1/maps/{map_id} returns it)",
-                         errors=[{"field": "header.if-match", "message": "missing"}])
+                           "PUT needs 'If-Match: \"<ETag>\"' with the ETag of the version you "
+                           "edited (GET /v1/maps/{map_id} returns it)",
+                           errors=[{"field": "header.if-match", "message": "missing"}])
     tags = {t.strip() for t in if_match.split(",") if t.strip()}
     if "*" in tags:
         raise ProblemError("precondition-required",
-                         "'If-Match: *' would overwrite blindly; send the map's ETag",
-                         errors=[{"field": "header.if-match", "message": "'*' not accepted"}])
+                           "'If-Match: *' would overwrite blindly; send the map's ETag",
+                           errors=[{"field": "header.if-match", "message": "'*' not accepted"}])
     return {t[2:] if t.startswith("W/") else t for t in tags}
 
 
@@ -219,8 +220,8 @@ def _parse_if_match(if_match: str | None) -> set[str]:
     openapi_extra=_body_doc(_MAP_SCHEMA, MAP_EXAMPLE),
 )
 def update_map(
-    map_id: MapIdPath, body: Annotated[dict[str, Any], Body()], response: Response, store: StoreDep,
-    settings: SettingsDep, _key: WriteAccess,
+    map_id: MapIdPath, body: Annotated[dict[str, Any], Body()], response: Response,
+    store: StoreDep, cache: MapCacheDep, settings: SettingsDep, _key: WriteAccess,
     if_match: Annotated[str | None, Header(description="ETag of the version edited.",
                                            examples=['"d79f785a18e6e97f..."'])] = None,
 ) -> MapOut:
@@ -232,14 +233,14 @@ def update_map(
         raise _not_found(map_id) from exc
     if etag_of(current.content_hash) not in tags:
         raise ProblemError("precondition-failed",
-                         f"map {map_id!r} is at version {current.scene_map.version} with ETag "
-                         f"{etag_of(current.content_hash)}; fetch it, re-apply your change and "
-                         "retry",
-                         errors=[{"field": "header.if-match", "message": "stale ETag"}],
-                         headers={"ETag": etag_of(current.content_hash)})
+                           f"map {map_id!r} is at version {current.scene_map.version} with ETag "
+                           f"{etag_of(current.content_hash)}; fetch it, re-apply your change and "
+                           "retry",
+                           errors=[{"field": "header.if-match", "message": "stale ETag"}],
+                           headers={"ETag": etag_of(current.content_hash)})
     if isinstance(body, dict) and body.get("map_id", map_id) != map_id:
         raise ProblemError("invalid-map", "map_id in the body differs from the path",
-                         errors=[{"field": "map_id", "message": f"must be {map_id!r}"}])
+                           errors=[{"field": "map_id", "message": f"must be {map_id!r}"}])
     expected = current.scene_map.version
     try:
         scene_map = scene_map_from_dict({**body, "map_id": map_id}, version=expected + 1)
@@ -249,11 +250,13 @@ def update_map(
         stored = store.update(map_id, scene_map, expected_version=expected)
     except VersionConflict as exc:
         raise ProblemError("version-conflict",
-                         f"map {map_id!r} changed concurrently (now version "
-                         f"{exc.current_version}); fetch it and retry",
-                         errors=[{"field": "header.if-match", "message": "lost a race"}]) from exc
+                           f"map {map_id!r} changed concurrently (now version "
+                           f"{exc.current_version}); fetch it and retry",
+                           errors=[{"field": "header.if-match", "message": "lost a race"}]) from exc
     except MapNotFound as exc:
         raise _not_found(map_id) from exc
+    finally:
+        cache.invalidate(map_id)  # after the write, so no reader can re-cache the old version
     response.headers["ETag"] = etag_of(stored.content_hash)
     return _map_out(stored)
 
@@ -261,9 +264,12 @@ def update_map(
 @router.delete("/maps/{map_id}", status_code=status.HTTP_204_NO_CONTENT,
                summary="Delete a map (all its versions)",
                responses=problem_responses(401, 403, 404, 422))
-def delete_map(map_id: MapIdPath, store: StoreDep, _key: WriteAccess) -> Response:
+def delete_map(map_id: MapIdPath, store: StoreDep, cache: MapCacheDep,
+               _key: WriteAccess) -> Response:
     try:
         store.delete(map_id)
     except MapNotFound as exc:
         raise _not_found(map_id) from exc
+    finally:
+        cache.invalidate(map_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)

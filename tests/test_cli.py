@@ -1,0 +1,113 @@
+"""The ``quadloc`` CLI: help, maps import/export/list/delete on a database, localize, openapi."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from maps.model import content_hash, scene_map_from_dict
+from service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, MAP_EXAMPLE
+from service.cli import OPENAPI_PATH, main
+from service.settings import hash_api_key
+
+REPO = Path(__file__).resolve().parents[1]
+CHESS_SCENE = REPO.parent / "shared" / "data" / "chess_scene.json"
+EXAMPLE = REPO / "docs" / "examples" / "localize_chess.json"
+
+
+@pytest.fixture
+def db(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    for k in ("QUADLOC_DATABASE_URL", "QUADLOC_API_KEYS", "QUADLOC_DATA_DIR"):
+        monkeypatch.delenv(k, raising=False)
+    return ["--database-url", f"sqlite:///{tmp_path / 'cli.db'}"]
+
+
+def test_help_teaches_with_examples(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(["--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    for command in ("serve", "maps", "localize", "openapi", "hash-key"):
+        assert command in out
+    assert "quadloc localize --map chess docs/examples/localize_chess.json" in out
+    for sub in (["serve"], ["maps"], ["maps", "import"], ["localize"], ["openapi"]):
+        with pytest.raises(SystemExit):
+            main([*sub, "--help"])
+        assert "usage: quadloc" in capsys.readouterr().out
+
+
+def test_maps_import_list_export_delete(db: list[str], tmp_path: Path,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    src = tmp_path / "office.json"
+    src.write_text(json.dumps(MAP_EXAMPLE))
+    assert main(["maps", "import", str(src), *db]) == 0
+    out = capsys.readouterr().out
+    expected_hash = content_hash(scene_map_from_dict(MAP_EXAMPLE, version=1))
+    assert f'office-3 version 1 (3 objects) etag "{expected_hash}"' in out
+    assert main(["maps", "import", str(src), *db]) == 2
+    assert "--update" in capsys.readouterr().err
+    assert main(["maps", "import", str(src), "--update", *db]) == 0
+    assert "office-3 version 2" in capsys.readouterr().out
+    assert main(["maps", "list", "--json", *db]) == 0
+    listed = {m["map_id"]: m for m in json.loads(capsys.readouterr().out)}
+    assert listed["office-3"]["version"] == 2 and "chess" in listed  # demo map seeded
+    assert main(["maps", "export", "office-3", "--version", "1", *db]) == 0
+    exported = json.loads(capsys.readouterr().out)
+    assert scene_map_from_dict(exported).to_dict() == scene_map_from_dict(MAP_EXAMPLE).to_dict()
+    assert main(["maps", "list", *db]) == 0
+    assert re.search(r"office-3\s+2\s", capsys.readouterr().out)
+    assert main(["maps", "delete", "office-3", *db]) == 0
+    assert main(["maps", "export", "office-3", *db]) == 1
+    assert "not found" in capsys.readouterr().err
+
+
+def test_import_errors_name_the_field(db: list[str], tmp_path: Path,
+                                      capsys: pytest.CaptureFixture[str]) -> None:
+    bad = json.loads(json.dumps(MAP_EXAMPLE))
+    bad["objects"][2]["axes"] = [0.1, 0.0, 0.1]
+    src = tmp_path / "bad.json"
+    src.write_text(json.dumps(bad))
+    assert main(["maps", "import", str(src), *db]) == 2
+    assert "objects[2].axes" in capsys.readouterr().err
+    src.write_text("{not json")
+    assert main(["maps", "import", str(src), *db]) == 2
+
+
+def test_import_chess_format(db: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    if not CHESS_SCENE.exists():
+        pytest.skip(f"reference data not found at {CHESS_SCENE}")
+    assert main(["maps", "import", str(CHESS_SCENE), "--chess", "--map-id", "chess2", *db]) == 0
+    assert "chess2 version 1 (11 objects)" in capsys.readouterr().out
+
+
+def test_localize_prints_the_pose(db: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["localize", "--map", "chess", str(EXAMPLE), *db]) == 0
+    out = capsys.readouterr().out
+    t = re.search(r"translation_m\s+= \[([^\]]+)\]", out)
+    assert t, out
+    translation = np.array([float(x) for x in t.group(1).split(",")])
+    assert np.linalg.norm(translation - np.array(EXAMPLE_TRUE_WORLD_FROM_CAMERA)[:3, 3]) < 0.05
+    assert "quaternion_wxyz" in out and "confidence" in out
+    assert main(["localize", "--map", "chess", "--json", "--convention", "opengl", str(EXAMPLE),
+                 *db]) == 0
+    body = json.loads(capsys.readouterr().out)
+    assert body["world_from_camera"]["convention"] == "opengl"
+    assert main(["localize", "--map", "nope", str(EXAMPLE), *db]) == 1
+
+
+def test_openapi_check_and_hash_key(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["openapi", "--check", str(OPENAPI_PATH)]) == 0
+    assert "up to date" in capsys.readouterr().out
+    assert main(["hash-key", "s3cret", "--scopes", "read+write"]) == 0
+    assert capsys.readouterr().out.strip() == f"{hash_api_key('s3cret')}:read+write"
+    assert main(["hash-key", "k", "--scopes", "admin"]) == 2
+
+
+def test_serve_refuses_public_bind_without_keys(db: list[str],
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["serve", "--host", "0.0.0.0", *db]) == 2
+    assert "QUADLOC_API_KEYS" in capsys.readouterr().err
