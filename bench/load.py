@@ -17,8 +17,9 @@ What it does, in one run (so the numbers are comparable on a noisy shared machin
    first come first served: the GIL serialises solves anyway).
 4. For each concurrency ``c``: ``c`` closed-loop asyncio clients (one keep-alive
    ``httpx.AsyncClient`` connection each) post the frames round-robin for ``--duration``
-   seconds (after a short warm-up). Reports requests/s, latency p50/p95/p99 (ms, client-measured), errors (transport
-   errors, non-200 answers, or bodies that do not parse), and the localized fraction.
+   seconds (after a short warm-up). Reports requests/s, latency p50/p95/p99 (ms,
+   client-measured), errors (transport errors, non-200 answers, or bodies that do not parse),
+   and the localized fraction.
 
 HTTP overhead per worker = ``in-process rate / (HTTP rate at concurrency 1)`` - 1: at
 concurrency 1 only one request is in flight, so one worker serves it and the difference is the

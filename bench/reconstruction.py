@@ -22,28 +22,22 @@ from pathlib import Path
 
 import numpy as np
 
+from bench.shared_data import load_chess_poses
 from factors.geometry import (
     Camera,
     Ellipse,
     Ellipsoid,
     ellipsoid_depth_margins,
     invert_pose,
-    pose_matrix,
     project_ellipsoid,
-    snap_to_rotation,
 )
 from maps.demo import load_demo_map
 from maps.reconstruct import ReconstructionError, ellipsoid_errors, reconstruct_ellipsoid
 
-POSES = Path(__file__).resolve().parents[2] / "shared" / "data" / "chess_test_poses.json"
-if not POSES.exists():  # the checkout is /work/main; the data lives in /work/shared
-    POSES = Path("/work/shared/data/chess_test_poses.json")
-
 
 def load_views() -> tuple[Camera, list[np.ndarray]]:
-    d = json.loads(POSES.read_text())
-    cam = Camera.from_matrix(np.array(d["K"]), d["width"], d["height"])
-    return cam, [pose_matrix(snap_to_rotation(np.array(f["R"])), f["t"]) for f in d["frames"]]
+    cam, cfw, _ = load_chess_poses()
+    return cam, cfw
 
 
 def visible_frames(cam: Camera, cfw: list[np.ndarray], ellipsoid: Ellipsoid) -> list[int]:

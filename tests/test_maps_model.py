@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from bench.shared_data import CHESS_SCENE_PATH
 from factors.geometry import Ellipsoid, rotation_from_quaternion_wxyz
 from maps.compiled import compile_map
 from maps.demo import DEMO_MAP_PATH, load_demo_map
@@ -27,7 +28,7 @@ from maps.model import (
     scene_map_from_dict,
 )
 
-CHESS_SOURCE = Path("/work/shared/data/chess_scene.json")
+CHESS_SOURCE = CHESS_SCENE_PATH
 
 
 @pytest.fixture(scope="module")

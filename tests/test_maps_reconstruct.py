@@ -1,19 +1,17 @@
 """Reconstruction of ellipsoids from multi-view ellipses (Rubino linear + GTSAM LM).
 
 Views are synthesised by projecting the Chess map's own ellipsoids with the 108 real
-ground-truth poses of /work/shared/data/chess_test_poses.json (R, t camera_from_world, snapped
+ground-truth poses of ../shared/data/chess_test_poses.json (R, t camera_from_world, snapped
 to rotations).
 """
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
 import gtsam
 import numpy as np
 import pytest
 
+from bench.shared_data import CHESS_POSES_PATH, load_chess_poses
 from factors.geometry import (
     Camera,
     Ellipse,
@@ -39,16 +37,12 @@ from maps.reconstruct import (
     view_residuals,
 )
 
-POSES = Path("/work/shared/data/chess_test_poses.json")
-
 
 @pytest.fixture(scope="module")
 def chess_views() -> tuple[Camera, list[np.ndarray]]:
-    if not POSES.exists():
-        pytest.skip(f"reference data {POSES} not present")
-    d = json.loads(POSES.read_text())
-    cam = Camera.from_matrix(np.array(d["K"]), d["width"], d["height"])
-    cfw = [pose_matrix(snap_to_rotation(np.array(f["R"])), f["t"]) for f in d["frames"]]
+    if not CHESS_POSES_PATH.exists():
+        pytest.skip(f"reference data {CHESS_POSES_PATH} not present")
+    cam, cfw, _ = load_chess_poses()
     return cam, cfw
 
 

@@ -1,0 +1,41 @@
+"""Locate and load the project's read-only reference data (``../shared/data`` beside the repo).
+
+The data is not shipped in the package (except the demo map, ``maps/data/chess.json``): tests and
+benchmarks find it beside the checkout, as on developer machines and in CI. Set
+``QUADLOC_SHARED_DATA`` to point elsewhere.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from factors.geometry import Camera, pose_matrix, snap_to_rotation
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+DATA_DIR = Path(os.environ.get("QUADLOC_SHARED_DATA", REPO_ROOT.parent / "shared" / "data"))
+CHESS_SCENE_PATH = DATA_DIR / "chess_scene.json"
+CHESS_POSES_PATH = DATA_DIR / "chess_test_poses.json"
+
+
+def load_chess_poses(
+    path: Path = CHESS_POSES_PATH,
+) -> tuple[Camera, list[np.ndarray], list[str]]:
+    """The real Chess test poses: ``(camera, camera_from_world 4x4 list, frame names)``.
+
+    The file's ``R, t`` are camera_from_world (``x_cam = R x_world + t``, OpenCV axes); each ``R``
+    is snapped to the nearest rotation (the tracker's matrices are orthonormal only to ~2e-4).
+    """
+    data = json.loads(Path(path).read_text())
+    camera = Camera.from_matrix(np.array(data["K"]), data["width"], data["height"])
+    poses = [pose_matrix(snap_to_rotation(np.array(f["R"])), f["t"]) for f in data["frames"]]
+    names = [f"{f['sequence']}/{f['frame']}" for f in data["frames"]]
+    return camera, poses, names
+
+
+def load_chess_scene_json(path: Path = CHESS_SCENE_PATH) -> dict:
+    """The raw Chess scene document (authors' format; see ``maps.model.scene_map_from_chess``)."""
+    return json.loads(Path(path).read_text())
