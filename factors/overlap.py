@@ -245,9 +245,15 @@ def hull_area(p1: np.ndarray, p2: np.ndarray, n_directions: int = HULL_DIRECTION
         a, b, ang = float(p[2]), float(p[3]), float(p[4])
         _, _, par0 = contact(k, t_start)
         x1, y1, par1 = contact(k, t_end)
+        # The normal -> parametric angle map is monotone and maps half-turns to half-turns, so
+        # the parametric span is on the same side of pi as the normal sweep; fix the 2 pi
+        # wrap-around that rounding can cause for sweeps near 0 or 2 pi.
+        sweep = t_end - t_start
         span = (par1 - par0) % _TWO_PI
-        if t_end - t_start >= math.pi and span < math.pi:
-            span += _TWO_PI  # monotone map: a normal sweep > pi means a parametric sweep > pi
+        if sweep > 1.5 * math.pi and span < 0.5 * math.pi:
+            span += _TWO_PI
+        elif sweep < 0.5 * math.pi and span > 1.5 * math.pi:
+            span -= _TWO_PI
         par1 = par0 + span
         ca, sa = math.cos(ang), math.sin(ang)
         dc, ds = math.cos(par1) - math.cos(par0), math.sin(par1) - math.sin(par0)

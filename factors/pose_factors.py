@@ -33,9 +33,10 @@ slice their rows. On top of it, two forms (:func:`pose_factors`):
 * default: one factor per pair (needed for per-detection robust kernels: GTSAM reweights a
   whole factor), each slicing the shared evaluation.
 
-Measured (``python -m bench.refine_speed``, level set, LM solve only, CPU ms, one run):
-N=8: batched 1.10, per-detection shared 1.37, per-detection separate 4.55; N=16: 1.36, 2.00,
-8.79. Numbers and the command are in ``docs/results.md`` (section ``refine_speed``).
+Measured (``python -m bench.refine_speed``, level set, LM solve only, median CPU ms, one run on
+the loaded 2-core machine): N=8: batched 1.30, per-detection shared 1.76, per-detection
+separate 5.05; N=16: 1.69, 2.42, 11.34. Numbers and the command are in ``docs/results.md``
+(section ``refine_speed``).
 
 Jacobians: analytic for ``level_set``, ``algebraic``, ``frobenius``, ``wasserstein``,
 ``bhattacharyya`` and ``bbox`` (see :mod:`factors.pose_residuals`); central differences of

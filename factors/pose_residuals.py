@@ -66,6 +66,7 @@ from __future__ import annotations
 
 import functools
 import math
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -90,6 +91,7 @@ __all__ = [
     "DEFAULT_PENALTY_COST",
     "PoseEvaluation",
     "PoseResidualModel",
+    "check_pose",
     "expmap_pose3",
     "numerical_pose_jacobian",
 ]
@@ -258,6 +260,7 @@ class PoseResidualModel:
         penalty_cost: float = DEFAULT_PENALTY_COST,
         numeric_step: float | None = None,
         eager_jacobian: bool | None = None,
+        _verify: bool = True,
     ) -> None:
         from factors import metrics
 
@@ -321,6 +324,20 @@ class PoseResidualModel:
             if metric in _CONIC_METRICS:
                 self._init_conic()
         self._pen_amp = math.sqrt(self.penalty_cost / self.dim)
+        # per-pair options of the factors.metrics calls (the level set's samples stay fixed)
+        self._pair_options = [self.options] * self.n
+        if metric == "level_set":
+            self._pair_options = [{**self.options, "scale": float(sc), "adaptive": False}
+                                  for sc in self.sampling_scale]
+        self.analytic = metric in ANALYTIC_METRICS
+        if self.analytic and _verify and not _analytic_agrees(metric, _options_key(self.options)):
+            warnings.warn(
+                f"the vectorised {metric!r} residual disagrees with factors.metrics.residual "
+                "(the metric's definition changed?): falling back to factors.metrics.residual "
+                "with numerical Jacobians", RuntimeWarning, stacklevel=2)
+            self.analytic = False
+            if eager_jacobian is None:
+                self.eager_jacobian = False
 
     # ------------------------------------------------------------------ set-up
     def _projections(self, world_from_camera: np.ndarray) -> list[Ellipse | None]:
@@ -418,12 +435,12 @@ class PoseResidualModel:
         if key == self._cache_key and (self._cache_jac or not jacobian):
             return self._cache  # type: ignore[return-value]
         jacobian = jacobian or self.eager_jacobian
-        if self.metric == "level_set":
-            ev = self._evaluate_level_set(T, jacobian)
-        elif self.metric in _CONIC_METRICS:
-            ev = self._evaluate_conic(T, jacobian)
-        else:
+        if not self.analytic:
             ev = self._evaluate_numeric(T, jacobian)
+        elif self.metric == "level_set":
+            ev = self._evaluate_level_set(T, jacobian)
+        else:
+            ev = self._evaluate_conic(T, jacobian)
         for arr in (ev.residuals, ev.jacobians, ev.valid, ev.depth_margins):
             if arr is not None:
                 arr.setflags(write=False)
@@ -717,7 +734,7 @@ class PoseResidualModel:
                 continue
             try:
                 rj = np.asarray(metrics.residual(self.metric, self.detections[j], p,
-                                                 **self.options), dtype=float)
+                                                 **self._pair_options[j]), dtype=float)
             except (DegenerateProjectionError, GeometryError):
                 continue
             if rj.shape != (self.dim,) or not np.all(np.isfinite(rj)):
@@ -777,3 +794,50 @@ def check_pose(T: object, name: str = "world_from_camera") -> np.ndarray:
     """Validate a 4x4 rigid transform (finite, last row [0,0,0,1], rotation within 1e-6)."""
     return _check_pose(T, name)
 
+
+def _options_key(options: Mapping[str, Any]) -> tuple:
+    """Hashable form of metric options (sequences become tuples)."""
+    return tuple(sorted((k, tuple(v) if isinstance(v, list | np.ndarray) else v)
+                        for k, v in options.items()))
+
+
+@functools.lru_cache(maxsize=64)
+def _analytic_agrees(metric: str, options_key: tuple) -> bool:
+    """Once per process and (metric, options): does the vectorised residual equal
+    ``factors.metrics.residual`` on a fixed scene (a guard against the two drifting apart)?"""
+    from factors import metrics
+
+    options = dict(options_key)
+    camera = Camera(500.0, 510.0, 320.0, 240.0, 640, 480)
+    ells = [Ellipsoid(np.array([-0.6, 0.2, 4.0]), np.array([0.3, 0.2, 0.15]),
+                      _expmap_rotation(np.array([0.3, -0.2, 0.5]))),
+            Ellipsoid(np.array([0.5, -0.3, 5.0]), np.array([0.2, 0.35, 0.25]),
+                      _expmap_rotation(np.array([-0.4, 0.1, 1.2]))),
+            Ellipsoid(np.array([0.1, 0.4, 3.0]), np.array([0.15, 0.15, 0.3]), np.eye(3))]
+    truth = np.eye(4)
+    pose = expmap_pose3(np.array([0.02, -0.03, 0.01, 0.05, 0.02, -0.04]))
+    dets = []
+    for e in ells:
+        d = _project(camera, truth, e)
+        dets.append(Ellipse(d.cx + 7.0, d.cy - 4.0, 1.1 * d.a, 0.95 * d.b, d.angle + 0.1))
+    dets[1] = Ellipse(dets[1].cx, dets[1].cy, dets[1].b, dets[1].a, dets[1].angle + 0.5 * np.pi)
+    try:
+        model = PoseResidualModel(metric, dets, ells, camera, initial_world_from_camera=pose,
+                                  metric_options=options, _verify=False)
+        got = model.evaluate(pose, jacobian=False).residuals
+        want = np.array([metrics.residual(metric, d, _project(camera, pose, e), **options)
+                         for d, e in zip(dets, ells, strict=True)])
+    except (ValueError, TypeError, ArithmeticError):
+        return False
+    return got.shape == want.shape and bool(
+        np.allclose(got, want, rtol=1e-7, atol=1e-9 * max(1.0, float(np.abs(want).max()))))
+
+
+def _expmap_rotation(w: np.ndarray) -> np.ndarray:
+    return expmap_pose3(np.r_[w, 0.0, 0.0, 0.0])[:3, :3]
+
+
+def _project(camera: Camera, world_from_camera: np.ndarray, e: Ellipsoid) -> Ellipse:
+    from factors.geometry import invert_pose, project_ellipsoid
+
+    return project_ellipsoid(camera, invert_pose(world_from_camera), e)

@@ -117,3 +117,33 @@ def test_no_keys_means_open(tmp_path: Path) -> None:
     with TestClient(make_test_app(tmp_path)) as c:
         assert c.get("/v1/maps").status_code == 200
         assert c.post("/v1/maps", json=MAP_EXAMPLE).status_code == 201
+
+
+@pytest.mark.parametrize("host,status", [("127.0.0.1", 200), ("192.168.1.20", 403),
+                                         ("[::1]", 200), ("10.0.0.7", 403)])
+def test_open_server_answers_only_on_loopback(tmp_path: Path, host: str, status: int) -> None:
+    """Even when started with `uvicorn --host 0.0.0.0` directly (bypassing `quadloc serve`),
+    an open server refuses requests that arrive on a non-loopback address."""
+    import asyncio
+
+    import httpx
+
+    app = make_test_app(tmp_path)
+
+    async def get() -> httpx.Response:
+        transport = httpx.ASGITransport(app=app)  # scope["server"] = the URL's host
+        async with httpx.AsyncClient(transport=transport, base_url=f"http://{host}") as c:
+            return await c.get("/v1/maps")
+
+    r = asyncio.run(get())
+    assert r.status_code == status, r.text
+    if status == 403:
+        assert "loopback" in r.json()["detail"]
+    with_keys = make_test_app(tmp_path / "k", api_keys=f"{_sha(READ_KEY)}:read")
+
+    async def get_with_key() -> httpx.Response:
+        transport = httpx.ASGITransport(app=with_keys)
+        async with httpx.AsyncClient(transport=transport, base_url=f"http://{host}") as c:
+            return await c.get("/v1/maps", headers={"X-API-Key": READ_KEY})
+
+    assert asyncio.run(get_with_key()).status_code == 200

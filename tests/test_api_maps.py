@@ -217,3 +217,26 @@ def test_localize_sees_local_updates_at_once_and_other_replicas_within_the_ttl(
         from service.api.examples import LOCALIZE_EXAMPLE
 
         assert c.post("/v1/maps/chess/localize", json=LOCALIZE_EXAMPLE).status_code == 404
+
+
+def test_database_outage_is_a_503_problem(client: TestClient,
+                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    from maps.errors import StoreUnavailable
+
+    def down(*args, **kwargs):
+        raise StoreUnavailable("database unreachable: OperationalError")
+
+    store = client.app.state.store
+    monkeypatch.setattr(store, "list", down)
+    monkeypatch.setattr(store, "ping", down)
+    body = _problem(client.get("/v1/maps"), 503, "database-unavailable")
+    assert client.get("/v1/maps").headers["retry-after"] == "5"
+    assert body["detail"]
+    _problem(client.get("/readyz"), 503, "not-ready")
+
+
+def test_body_without_json_content_type_is_415(client: TestClient) -> None:
+    r = client.post("/v1/maps", content=json.dumps(MAP_EXAMPLE),
+                    headers={"content-type": "text/plain"})
+    body = _problem(r, 415, "unsupported-media-type")
+    assert body["errors"][0]["field"] == "header.content-type"

@@ -8,14 +8,28 @@ from pathlib import Path
 
 import numpy as np
 
+from factors import metrics
+from factors.geometry import (
+    Camera,
+    DegenerateProjectionError,
+    Ellipse,
+    invert_pose,
+    pose_matrix,
+    project_ellipsoid,
+    snap_to_rotation,
+)
+from maps.demo import load_demo_map
 from service.api.examples import (
     EXAMPLE_TRUE_WORLD_FROM_CAMERA,
+    FRAME_INDEX,
     LOCALIZE_EXAMPLE,
-    build_example_frame,
+    MAP_EXAMPLE,
+    POSES_PATH,
 )
 from service.cli import OPENAPI_PATH, openapi_document, openapi_text
 
 REPO = Path(__file__).resolve().parents[1]
+POSES = POSES_PATH
 
 
 def test_committed_openapi_matches_the_app() -> None:
@@ -45,11 +59,36 @@ def test_every_operation_is_documented_with_examples_and_problems() -> None:
                         "$ref": "#/components/schemas/Problem"}
 
 
-def test_demo_example_is_the_simulated_frame_at_a_real_pose() -> None:
-    """The example body is what the simulator produces at the stated ground-truth pose."""
-    poses = REPO.parent / "shared" / "data" / "chess_test_poses.json"
-    body, truth, _ = build_example_frame(poses)
-    assert body == LOCALIZE_EXAMPLE
-    np.testing.assert_allclose(truth, EXAMPLE_TRUE_WORLD_FROM_CAMERA, atol=0)
+def test_demo_example_is_a_frame_seen_from_its_real_ground_truth_pose() -> None:
+    """The example's pose is a real ground-truth pose of the Chess test set, and every
+    detection overlaps the true projection of a map object with its label (the simulator adds
+    noise and truncation, so the overlap is partial). Independent of the simulator's version."""
+    data = json.loads(POSES.read_text())
+    frame = data["frames"][FRAME_INDEX]
+    camera_from_world = pose_matrix(snap_to_rotation(np.array(frame["R"])), frame["t"])
+    np.testing.assert_allclose(EXAMPLE_TRUE_WORLD_FROM_CAMERA, invert_pose(camera_from_world),
+                               atol=1e-12)
+    assert LOCALIZE_EXAMPLE["frame_id"] == f"{frame['sequence']}/frame-{frame['frame']:06d}"
+    cam = LOCALIZE_EXAMPLE["camera"]
+    np.testing.assert_allclose([[cam["fx"], 0, cam["cx"]], [0, cam["fy"], cam["cy"]], [0, 0, 1]],
+                               data["K"])
+    camera = Camera(cam["fx"], cam["fy"], cam["cx"], cam["cy"], cam["width"], cam["height"])
+    scene = load_demo_map()
+    best = []
+    for det in LOCALIZE_EXAMPLE["detections"]:
+        ellipse = Ellipse(**det["ellipse"])
+        ious = []
+        for obj in scene.objects:
+            if obj.category != det["label"]:
+                continue
+            try:
+                projection = project_ellipsoid(camera, camera_from_world, obj.ellipsoid)
+            except DegenerateProjectionError:
+                continue
+            ious.append(1.0 - metrics.cost("iou", ellipse, projection))
+        best.append(max(ious, default=0.0))
+    assert len(best) >= 4
+    assert min(best) >= 0.3 and float(np.median(best)) >= 0.7, best
     doc_example = json.loads((REPO / "docs" / "examples" / "localize_chess.json").read_text())
     assert doc_example == LOCALIZE_EXAMPLE
+    assert json.loads((REPO / "docs" / "examples" / "office_map.json").read_text()) == MAP_EXAMPLE

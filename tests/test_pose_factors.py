@@ -326,3 +326,31 @@ def test_every_metric_factor_survives_invalid_projection(scene, metric):
     assert DEFAULT_PENALTY_COST <= cost0 < 4 * DEFAULT_PENALTY_COST
     # its Jacobian row pushes the depth margin up (d margin / d v_z = -1: move backwards)
     assert np.all(ev.jacobians[0][:, 5] > 0)
+
+
+def test_analytic_path_falls_back_when_metrics_definition_changes(monkeypatch, scene):
+    """If factors.metrics' residual ever differs from the vectorised copy, the model warns and
+    uses factors.metrics.residual itself (numerical Jacobians): still the metric's values."""
+    from factors import pose_residuals
+
+    ells, dets, pose = scene
+    original = metrics.residual
+
+    def changed(name, detection, projection, **options):
+        r = original(name, detection, projection, **options)
+        return 2.0 * r if name == "wasserstein" else r
+
+    pose_residuals._analytic_agrees.cache_clear()
+    monkeypatch.setattr(metrics, "residual", changed)
+    try:
+        with pytest.warns(RuntimeWarning, match="wasserstein"):
+            model = PoseResidualModel("wasserstein", dets, ells, CAMERA)
+        assert not model.analytic
+        ev = model.evaluate(pose)
+        for j, (d, e) in enumerate(zip(dets, ells, strict=True)):
+            proj = project_ellipsoid(CAMERA, invert_pose(pose), e)
+            np.testing.assert_allclose(ev.residuals[j], changed("wasserstein", d, proj))
+        # an unchanged metric keeps its analytic path
+        assert PoseResidualModel("level_set", dets, ells, CAMERA).analytic
+    finally:
+        pose_residuals._analytic_agrees.cache_clear()

@@ -312,6 +312,7 @@ def test_stuck_inside_an_object_reports_invalid_projection():
                  prior_covariance=np.eye(6) * 1e-14)
     assert res.status == "invalid_projection" and not res.converged
     assert not res.valid_projection[0] and np.isinf(res.per_detection_cost[0])
+    assert res.covariance is None and "not an ellipse" in res.covariance_reason
     assert np.all(np.isfinite(res.world_from_camera)) and math.isfinite(res.total_error)
 
 

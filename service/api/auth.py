@@ -4,7 +4,9 @@ update, delete maps; implies ``read``).
 A key is presented as ``Authorization: Bearer <key>`` or ``X-API-Key: <key>``. The service only
 knows the sha256 digests of its keys (``QUADLOC_API_KEYS``, see :mod:`service.settings`); the
 presented key is hashed and compared in constant time against every configured digest.
-With no key configured, every request is allowed (and the server only binds loopback).
+With no key configured, every request arriving on a loopback address is allowed, and
+requests arriving on any other address are refused (403): ``quadloc serve`` refuses to bind a
+public address without keys, and this catches a server started some other way.
 A malformed ``Authorization`` header, or two different keys in the two headers, is refused too.
 Missing or unknown key -> 401 (with ``WWW-Authenticate: Bearer``); known key without the scope
 -> 403.
@@ -13,6 +15,7 @@ Missing or unknown key -> 401 (with ``WWW-Authenticate: Bearer``); known key wit
 from __future__ import annotations
 
 import hmac
+import ipaddress
 from typing import Annotated
 
 from fastapi import Depends, Request
@@ -59,6 +62,29 @@ def authenticate(keys: tuple[ApiKey, ...], presented: str | None, scope: str) ->
     return found
 
 
+def _refuse_non_loopback(request: Request) -> None:
+    """An open server (no keys) answers only on loopback, even if it was started with
+    ``uvicorn --host 0.0.0.0`` directly (``quadloc serve`` refuses that bind up front).
+
+    ``scope["server"]`` is the local address the request arrived on; non-IP names (test
+    clients, Unix sockets) are not network exposure and pass.
+    """
+    server = request.scope.get("server")
+    host = server[0] if server else None
+    if not host:
+        return
+    try:
+        address = ipaddress.ip_address(str(host).strip("[]"))
+    except ValueError:
+        return
+    if not address.is_loopback:
+        raise ProblemError("forbidden",
+                           "this server has no API keys configured (QUADLOC_API_KEYS) and only "
+                           "answers on loopback",
+                           errors=[{"field": "header.authorization",
+                                    "message": "server is open: loopback clients only"}])
+
+
 def require_scope(scope: str):
     """FastAPI dependency enforcing ``scope`` for the route."""
 
@@ -69,6 +95,7 @@ def require_scope(scope: str):
     ) -> ApiKey | None:
         keys = request.app.state.api_keys
         if not keys:
+            _refuse_non_loopback(request)
             return None
         authorization = request.headers.get("authorization")
         if authorization is not None and bearer is None:

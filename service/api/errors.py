@@ -6,9 +6,9 @@ and docs/api.md); ``instance`` is the request path; ``errors`` names each offend
 JSON-path-like string (``detections[2].ellipse.a``; query and header fields are prefixed:
 ``query.version``, ``header.if-match``).
 
-No request may produce a 5xx other than 503 (temporarily unavailable): the handlers here convert
-validation, geometry and storage errors to 4xx, and the last-resort handler still answers in the
-problem format if a bug slips through.
+No request may produce a 5xx other than 503 (solver busy or database unavailable): the handlers
+here convert validation, geometry and storage errors to 4xx, and the last-resort handler still
+answers in the problem format if a bug slips through.
 """
 
 from __future__ import annotations
@@ -20,8 +20,11 @@ from typing import Any
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from sqlalchemy.exc import OperationalError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
+
+from maps.errors import StoreUnavailable
 
 __all__ = [
     "PROBLEM_MEDIA_TYPE",
@@ -56,6 +59,7 @@ PROBLEM_TYPES: dict[str, tuple[int, str]] = {
     "invalid-geometry": (422, "Invalid geometry"),
     "precondition-required": (428, "If-Match header required"),
     "busy": (503, "Solver busy, retry later"),
+    "database-unavailable": (503, "Database unavailable, retry later"),
     "not-ready": (503, "Service not ready"),
     "internal-error": (500, "Internal error"),
 }
@@ -153,6 +157,16 @@ def _validation_errors(exc: RequestValidationError) -> tuple[str, list[dict[str,
 
 
 async def _on_validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:
+    content_type = request.headers.get("content-type", "")
+    has_body = request.headers.get("content-length", "0") != "0" or "transfer-encoding" in \
+        request.headers
+    if has_body and "json" not in content_type.lower() and any(
+            tuple(e.get("loc", ())) == ("body",) for e in exc.errors()):
+        return problem_response(request, "unsupported-media-type",
+                                f"send the body as JSON with 'Content-Type: application/json' "
+                                f"(got {content_type or 'no Content-Type'!r})",
+                                errors=[{"field": "header.content-type",
+                                         "message": "must be application/json"}])
     slug, errors = _validation_errors(exc)
     detail = "; ".join(f"{e['field']}: {e['message']}" for e in errors[:5])
     if len(errors) > 5:
@@ -185,6 +199,9 @@ async def _on_http_exception(request: Request, exc: StarletteHTTPException) -> J
     slug = _HTTP_SLUGS.get(exc.status_code, "bad-request")
     detail = exc.detail if isinstance(exc.detail, str) else str(exc.detail)
     headers = dict(getattr(exc, "headers", None) or {})
+    if exc.status_code == 400 and detail == "There was an error parsing the body":
+        slug, detail = "malformed-json", "the body could not be parsed as JSON (malformed or " \
+            "nested too deeply)"
     if exc.status_code == 404 and detail == "Not Found":
         detail = f"no route {request.method} {request.url.path}"
     if exc.status_code == 405:
@@ -193,6 +210,13 @@ async def _on_http_exception(request: Request, exc: StarletteHTTPException) -> J
         detail = f"{request.method} is not allowed here; allowed: {', '.join(allowed)}"
     return problem_response(request, slug, detail, headers=headers,
                             status=exc.status_code if exc.status_code < 500 else 400)
+
+
+async def _on_database_error(request: Request, exc: Exception) -> JSONResponse:
+    log.error("database error on %s %s: %s", request.method, request.url.path, exc)
+    return problem_response(request, "database-unavailable",
+                            "the map database is unavailable; retry shortly",
+                            headers={"Retry-After": "5"})
 
 
 async def _on_unexpected(request: Request, exc: Exception) -> JSONResponse:  # pragma: no cover
@@ -206,4 +230,6 @@ def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(RequestValidationError, _on_validation_error)  # type: ignore[arg-type]
     app.add_exception_handler(ProblemError, _on_problem)  # type: ignore[arg-type]
     app.add_exception_handler(StarletteHTTPException, _on_http_exception)  # type: ignore[arg-type]
+    app.add_exception_handler(StoreUnavailable, _on_database_error)
+    app.add_exception_handler(OperationalError, _on_database_error)
     app.add_exception_handler(Exception, _on_unexpected)

@@ -11,8 +11,19 @@ __all__ = ["problem_responses"]
 
 _SLUG_FOR_STATUS = {400: "malformed-json", 401: "unauthorized", 403: "forbidden",
                     404: "map-not-found", 409: "version-conflict", 412: "precondition-failed",
-                    413: "payload-too-large", 422: "validation-error",
+                    413: "payload-too-large", 415: "unsupported-media-type",
+                    422: "validation-error",
                     428: "precondition-required", 503: "busy"}
+
+
+_DESCRIPTIONS = {
+    400: "Malformed or unreadable body",
+    404: "Map (or version) not found",
+    409: "Conflict: map id taken, or an update lost a race",
+    422: "Validation failed (validation-error, invalid-geometry or invalid-map); errors name "
+         "the fields",
+    503: "Temporarily unavailable (solver busy or database unavailable); see Retry-After",
+}
 
 
 def _example(status: int) -> dict[str, Any]:
@@ -32,7 +43,7 @@ def problem_responses(*statuses: int) -> dict[int | str, dict[str, Any]]:
     return {
         status: {
             "model": Problem,
-            "description": PROBLEM_TYPES[_SLUG_FOR_STATUS[status]][1],
+            "description": _DESCRIPTIONS.get(status, PROBLEM_TYPES[_SLUG_FOR_STATUS[status]][1]),
             "content": {PROBLEM_MEDIA_TYPE: {"example": _example(status)}},
         }
         for status in statuses

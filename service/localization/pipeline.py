@@ -15,6 +15,8 @@ Stages (wall time of each in ``LocalizationResult.timings_ms``):
    ``options.metric`` (sigma-weighted, robust kernel option), then re-association: the inliers
    are recomputed at the refined pose and, if the set changed, refined once more. The result
    is accepted when it keeps >= ``min_inliers`` inliers; otherwise ``refinement_diverged``.
+   A level-set refinement that moved the pose by more than 1 cm / 0.01 rad is restarted once
+   from its result (:func:`refine_pose`): the level-set sample layout is fixed at the start.
 
 The time budget bounds the hypothesis search (stage 3); a refinement that has started finishes.
 """
@@ -41,7 +43,7 @@ from service.localization.types import (
     PosePrior,
 )
 
-__all__ = ["compiled_map_of", "confidence_of", "localize"]
+__all__ = ["RESTART_MOVE", "compiled_map_of", "confidence_of", "localize", "refine_pose"]
 
 _COMPILED: dict[int, tuple[SceneMap, CompiledMap]] = {}
 _COMPILED_MAX = 16
@@ -114,15 +116,22 @@ def _not_localized(reason: str, metric: str, evaluated: int, timings: dict[str, 
                               timings)
 
 
-def _refine_matches(
-    matches: Sequence[Match], detections: Sequence[Detection], compiled: CompiledMap,
-    camera: Camera, world_from_camera: np.ndarray, options: LocalizationOptions,
-    prior: PosePrior | None,
+#: A level-set refinement that moved the pose by more than this (m or rad) is restarted once
+#: from its result: its sample points are laid out once, at the start, over an area that grows
+#: with the initial misalignment, and a wide layout biases the optimum with noisy detections.
+RESTART_MOVE = 0.01
+
+
+def refine_pose(
+    detections: Sequence[Detection], ellipsoids: Sequence, camera: Camera,
+    initial_world_from_camera: np.ndarray, options: LocalizationOptions,
+    prior: PosePrior | None = None,
 ):
-    return refine(
-        [detections[m.detection_index] for m in matches],
-        [compiled.ellipsoids[m.object_index] for m in matches],
-        camera, world_from_camera, options.metric,
+    """:func:`service.localization.refine.refine` with the options' metric, sigma, kernel,
+    iteration cap and metric options (and the prior as a factor when it has a covariance),
+    restarted once from its result when the level-set pose moved by more than
+    :data:`RESTART_MOVE` (see there). Returns the ``RefinementResult`` of the last pass."""
+    kwargs = dict(
         use_sigma=options.use_sigma, robust=options.robust, robust_scale=options.robust_scale,
         prior_world_from_camera=None if prior is None or prior.covariance is None
         else prior.world_from_camera,
@@ -130,6 +139,26 @@ def _refine_matches(
         max_iterations=options.max_iterations,
         metric_options=dict(options.metric_options) if options.metric_options else None,
     )
+    res = refine(detections, ellipsoids, camera, initial_world_from_camera, options.metric,
+                 **kwargs)
+    if options.metric == "level_set" and res.status not in ("diverged", "invalid_projection"):
+        T0, T1 = np.asarray(initial_world_from_camera), res.world_from_camera
+        moved = float(np.linalg.norm(T1[:3, 3] - T0[:3, 3]))
+        c = (np.trace(T0[:3, :3].T @ T1[:3, :3]) - 1.0) / 2.0
+        turned = float(np.arccos(np.clip(c, -1.0, 1.0)))
+        if max(moved, turned) > RESTART_MOVE:
+            res = refine(detections, ellipsoids, camera, T1, options.metric, **kwargs)
+    return res
+
+
+def _refine_matches(
+    matches: Sequence[Match], detections: Sequence[Detection], compiled: CompiledMap,
+    camera: Camera, world_from_camera: np.ndarray, options: LocalizationOptions,
+    prior: PosePrior | None,
+):
+    return refine_pose([detections[m.detection_index] for m in matches],
+                       [compiled.ellipsoids[m.object_index] for m in matches],
+                       camera, world_from_camera, options, prior)
 
 
 def _refine_and_verify(

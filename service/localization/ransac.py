@@ -1,7 +1,8 @@
 """Label-constrained RANSAC over detection/object correspondences (paper section V-B).
 
 Hypotheses come from :mod:`service.localization.hypotheses` (P3P on centres with >= 3 usable
-detections, P2E with 2, and P2E as a fallback when no P3P pose qualifies). Each candidate pose is
+detections, P2E with 2, and P2E as a fallback — at most :data:`P2E_FALLBACK_BUDGET` samples —
+when no P3P pose qualifies). Each candidate pose is
 scored by the overlap (IoU) between the detections and the projected ellipsoids of the
 label-compatible map objects, each detection taking its best object:
 
@@ -37,6 +38,7 @@ from service.localization.hypotheses import p2e_hypotheses, p3p_hypotheses
 
 __all__ = [
     "EARLY_EXIT_MEAN_IOU",
+    "P2E_FALLBACK_BUDGET",
     "STAGE2_CANDIDATES",
     "Match",
     "MatchScorer",
@@ -53,6 +55,9 @@ EARLY_EXIT_MEAN_IOU = 0.5
 STAGE2_CANDIDATES = 24
 #: Minimal samples per batch (P3P calls between score / budget checks).
 BATCH = 32
+#: At most this many P2E samples when P2E is the fallback of a frame with >= 3 detections
+#: (one P2E solve costs ~10-30 ms in Python, a P3P solve ~0.05 ms).
+P2E_FALLBACK_BUDGET = 24
 
 
 def _sunflower(n: int) -> np.ndarray:
@@ -353,12 +358,12 @@ def ransac(
             best_T, best_score, best_count = poses[i], float(score[i]), int(count[i])
         return best_count >= need and best_score >= EARLY_EXIT_MEAN_IOU * need
 
-    def run(size: int) -> bool:
+    def run(size: int, budget: int) -> bool:
         nonlocal tried, timed_out, exhaustive
-        samples = _enumerate_samples(scorer, size, max_hypotheses)
+        samples = _enumerate_samples(scorer, size, budget)
         if samples is None:
             exhaustive = False
-            samples = _random_samples(scorer, size, max_hypotheses, rng)
+            samples = _random_samples(scorer, size, budget, rng)
         else:
             samples = [samples[i] for i in rng.permutation(len(samples))]
         batch = BATCH if size == 3 else 4
@@ -386,14 +391,14 @@ def ransac(
     has_any = False
     if need >= 3:
         has_any = _has_sample(scorer, 3)
-        stop = run(3) if has_any else False
+        stop = run(3, max_hypotheses) if has_any else False
         if best_T is None and not stop and _has_sample(scorer, 2):
             has_any = True
-            run(2)
+            run(2, min(max_hypotheses, P2E_FALLBACK_BUDGET))
     else:
         has_any = _has_sample(scorer, 2)
         if has_any:
-            run(2)
+            run(2, max_hypotheses)
     if best_T is None:
         if timed_out:
             reason = "time_budget_exceeded"

@@ -96,7 +96,11 @@ class RefinementResult:
             (plus the prior's) at the initial and final pose.
         iterations: LM iterations performed.
         converged: ``status == "converged"``.
-        status: one of :data:`STATUSES`.
+        status: one of :data:`STATUSES`: ``converged`` (LM met a stopping tolerance),
+            ``max_iterations`` (the cap was reached first), ``invalid_projection`` (some
+            ellipsoid's projection is not an ellipse at the final pose: behind the camera,
+            crossing its principal plane or containing it), ``diverged`` (GTSAM failed or
+            the result is not finite; the initial pose is returned).
         time_ms: wall time of the whole call (graph build, LM, covariance), milliseconds.
     """
 
@@ -238,7 +242,7 @@ def refine(
         iterations = int(optimizer.iterations())
         T = result.atPose3(_POSE_KEY).matrix()
         total_error = float(graph.error(result))
-    except RuntimeError:
+    except (RuntimeError, np.linalg.LinAlgError):  # e.g. an indeterminant linear system
         result, iterations, T, total_error = initial, 0, T0, initial_error
         status = "diverged"
     if not (np.all(np.isfinite(T)) and math.isfinite(total_error)):
@@ -253,8 +257,12 @@ def refine(
             status = "invalid_projection"
         elif iterations >= max_iterations:
             status = "max_iterations"
-    covariance, reason = _covariance(graph, result) if status != "diverged" else (
-        None, "refinement diverged")
+    if status == "diverged":
+        covariance, reason = None, "refinement diverged"
+    elif status == "invalid_projection":
+        covariance, reason = None, "a projection is not an ellipse at the final pose"
+    else:
+        covariance, reason = _covariance(graph, result)
     return RefinementResult(
         world_from_camera=T, covariance=covariance, covariance_reason=reason,
         per_detection_cost=costs, valid_projection=valid, initial_error=initial_error,

@@ -53,7 +53,7 @@ def _compiled(cache: MapCache, map_id: str, version: int | None) -> CompiledMap:
                 "RANSAC with P3P/P2E, then refinement with the chosen metric) and returns the "
                 "camera pose `world_from_camera`, its covariance and a confidence. "
                 "`localized: false` with a `reason` is a normal 200 answer.",
-    responses={**problem_responses(400, 401, 403, 404, 413, 422, 503),
+    responses={**problem_responses(400, 401, 403, 404, 413, 415, 422, 503),
                200: {"content": {"application/json": {"example": LOCALIZE_RESPONSE_EXAMPLE}}}},
 )
 def localize_frame(
@@ -74,7 +74,7 @@ def localize_frame(
     summary="Localize several frames",
     description="Frames are solved in order against one map version (bounded count: "
                 "QUADLOC_MAX_BATCH_FRAMES). Errors name the frame: `frames[3].detections[0]...`.",
-    responses={**problem_responses(400, 401, 403, 404, 413, 422, 503),
+    responses={**problem_responses(400, 401, 403, 404, 413, 415, 422, 503),
                200: {"content": {"application/json": {"example": {
                    "map_id": "chess", "map_version": 1,
                    "results": [LOCALIZE_RESPONSE_EXAMPLE, LOCALIZE_RESPONSE_EXAMPLE]}}}}},

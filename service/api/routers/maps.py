@@ -131,7 +131,8 @@ def _created(store: Any, cache: Any, scene_map: Any, response: Response) -> MapO
     description="Body: the map document (docs/maps.md). `version` in the body is ignored: a "
                 "new map is version 1. Answers 201 with the stored map, its `ETag` and "
                 "`Location`; 409 if the id is taken; 422 naming every invalid field.",
-    responses={**problem_responses(400, 401, 403, 409, 413, 422), **_ok(201, _MAP_OUT_EXAMPLE)},
+    responses={**problem_responses(400, 401, 403, 409, 413, 415, 422, 503),
+               **_ok(201, _MAP_OUT_EXAMPLE)},
     openapi_extra=_body_doc(_MAP_SCHEMA, MAP_EXAMPLE),
 )
 def create_map(body: Annotated[dict[str, Any], Body()], response: Response, store: StoreDep,
@@ -150,7 +151,8 @@ def create_map(body: Annotated[dict[str, Any], Body()], response: Response, stor
     description="Body: the Chess format (`category_id_to_label`, `objects[]` with "
                 "`ellipsoid {axes, R, center}`; world +Z up). The map id and name come from "
                 "the query.",
-    responses={**problem_responses(400, 401, 403, 409, 413, 422), **_ok(201, _MAP_OUT_EXAMPLE)},
+    responses={**problem_responses(400, 401, 403, 409, 413, 415, 422, 503),
+               **_ok(201, _MAP_OUT_EXAMPLE)},
     openapi_extra=_body_doc(_CHESS_SCHEMA, CHESS_IMPORT_EXAMPLE),
 )
 def import_chess_map(
@@ -168,7 +170,7 @@ def import_chess_map(
 
 
 @router.get("/maps", response_model=MapListOut, summary="List maps (latest versions)",
-            responses={**problem_responses(401, 403), **_ok(200, _LIST_EXAMPLE, False)})
+            responses={**problem_responses(401, 403, 503), **_ok(200, _LIST_EXAMPLE, False)})
 def list_maps(store: StoreDep, _key: ReadAccess) -> MapListOut:
     out = []
     for s in store.list():
@@ -183,7 +185,7 @@ def list_maps(store: StoreDep, _key: ReadAccess) -> MapListOut:
     "/maps/{map_id}", response_model=MapOut, summary="Get a map (latest or a given version)",
     description="The response carries `ETag: \"<content_hash>\"`; send it back in `If-Match` "
                 "to update. Old versions stay readable with `?version=n`.",
-    responses={**problem_responses(401, 403, 404, 422), **_ok(200, _MAP_OUT_EXAMPLE)},
+    responses={**problem_responses(401, 403, 404, 422, 503), **_ok(200, _MAP_OUT_EXAMPLE)},
 )
 def get_map(map_id: MapIdPath, response: Response, store: StoreDep, _key: ReadAccess,
             version: Annotated[int | None, Query(ge=1, le=2**31 - 1)] = None) -> MapOut:
@@ -215,7 +217,7 @@ def _parse_if_match(if_match: str | None) -> set[str]:
                 "`If-Match` with the latest version's ETag: missing -> 428, stale -> 412 "
                 "(the current ETag is in the response), lost race -> 409. Answers 200 with the "
                 "new version and its ETag.",
-    responses={**problem_responses(400, 401, 403, 404, 409, 412, 413, 422, 428),
+    responses={**problem_responses(400, 401, 403, 404, 409, 412, 413, 415, 422, 428, 503),
                **_ok(200, {**_MAP_OUT_EXAMPLE, "version": 2})},
     openapi_extra=_body_doc(_MAP_SCHEMA, MAP_EXAMPLE),
 )
@@ -263,7 +265,7 @@ def update_map(
 
 @router.delete("/maps/{map_id}", status_code=status.HTTP_204_NO_CONTENT,
                summary="Delete a map (all its versions)",
-               responses=problem_responses(401, 403, 404, 422))
+               responses=problem_responses(401, 403, 404, 422, 503))
 def delete_map(map_id: MapIdPath, store: StoreDep, cache: MapCacheDep,
                _key: WriteAccess) -> Response:
     try:
