@@ -197,11 +197,22 @@ def run(n_pairs: int, seed: int, workers: int, metrics: list[str]) -> dict:
     bounds = np.linspace(0, n_pairs, n_chunks + 1).astype(int)
     chunks = [({k: v[lo:hi] for k, v in pairs.items()}, metrics)
               for lo, hi in itertools.pairwise(bounds) if hi > lo]
+    parts = []
+    t0 = time.perf_counter()
+
+    def progress() -> None:
+        print(f"  {len(parts)}/{len(chunks)} chunks, {time.perf_counter() - t0:.0f} s",
+              file=sys.stderr, flush=True)
+
     if workers > 1:
         with mp.get_context("fork").Pool(workers) as pool:
-            parts = pool.map(run_chunk, chunks, chunksize=1)
+            for part in pool.imap(run_chunk, chunks, chunksize=1):
+                parts.append(part)
+                progress()
     else:
-        parts = [run_chunk(c) for c in chunks]
+        for c in chunks:
+            parts.append(run_chunk(c))
+            progress()
     merged: dict = {}
     for m in metrics:
         merged[m] = {}

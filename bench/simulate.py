@@ -122,7 +122,7 @@ class SimulationConfig:
     min_visible_fraction: float = 0.3
     min_visible_area_px: float = 150.0
     min_depth_m: float = 0.05
-    miss_probability: float = 0.2
+    miss_probability: float = 0.1
     min_detections: int = 2
     wrong_label_probability: float = 0.0
     spurious_rate: float = 0.0

@@ -156,8 +156,8 @@ def rotation_from_quaternion_wxyz(quaternion_wxyz: Sequence[float]) -> np.ndarra
 def quaternion_wxyz_from_rotation(rotation: np.ndarray) -> np.ndarray:
     """Unit quaternion ``(w, x, y, z)`` with ``w >= 0`` of a 3x3 rotation matrix.
 
-    Sign convention: ``w > 0``; for half-turns (``w == 0``) the first non-zero of ``x, y, z``
-    is positive, so the result is unique.
+    Sign convention: ``w > 0``; for half-turns (``|w| <= 1e-12``, returned as exactly 0) the
+    first non-zero of ``x, y, z`` is positive, so the result is unique.
     """
     R = np.asarray(rotation, dtype=float)
     tr = R[0, 0] + R[1, 1] + R[2, 2]
@@ -178,8 +178,11 @@ def quaternion_wxyz_from_rotation(rotation: np.ndarray) -> np.ndarray:
         q = np.array([(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s,
                       (R[1, 2] + R[2, 1]) / s, 0.25 * s])
     q /= np.linalg.norm(q)
-    # Canonical sign: w > 0; for a half-turn (w == 0) the first non-zero of x, y, z is > 0.
-    lead = q[np.flatnonzero(np.abs(q) > 1e-15)[0]]
+    # Canonical sign: w > 0; for a half-turn (|w| <= 1e-12, then set to 0) the first
+    # non-zero of x, y, z is > 0.
+    if abs(q[0]) <= 1e-12:
+        q[0] = 0.0
+    lead = q[np.flatnonzero(np.abs(q) > 1e-12)[0]]
     return -q if lead < 0 else q
 
 

@@ -363,7 +363,8 @@ def level_set_sample_points(
     the ellipse, not on how its axes are labelled. The points are attached to the detection's
     frame, hence move with it under any rigid motion (rotation equivariance; with an even
     ``n_azimuths`` the set is also unchanged by the ellipse's 180-degree symmetry, so the
-    metric is exactly invariant to common rigid motions).
+    metric is exactly invariant to common rigid motions). A circle (``a == b``) has no
+    orientation; its azimuths then start at its ``angle`` as given.
     """
     s_max = level_set_sampling_scale(detection, projection, scale=scale, adaptive=adaptive)
     return _sample_points(detection, s_max, _positive_int("n_azimuths", n_azimuths),

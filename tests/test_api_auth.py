@@ -147,3 +147,21 @@ def test_open_server_answers_only_on_loopback(tmp_path: Path, host: str, status:
             return await c.get("/v1/maps", headers={"X-API-Key": READ_KEY})
 
     assert asyncio.run(get_with_key()).status_code == 200
+
+
+def test_settings_come_from_quadloc_environment(monkeypatch: pytest.MonkeyPatch,
+                                                tmp_path: Path) -> None:
+    monkeypatch.setenv("QUADLOC_DATA_DIR", str(tmp_path))
+    monkeypatch.setenv("QUADLOC_MAX_BATCH_FRAMES", "5")
+    monkeypatch.setenv("QUADLOC_SOLVE_TIME_BUDGET_MS", "250")
+    monkeypatch.setenv("QUADLOC_API_KEYS", f"{_sha('k')}:read+write")
+    monkeypatch.delenv("QUADLOC_DATABASE_URL", raising=False)
+    s = Settings()
+    assert s.max_batch_frames == 5 and s.solve_time_budget_ms == 250.0
+    assert s.effective_database_url == f"sqlite:///{(tmp_path / 'quadloc.db').resolve()}"
+    assert s.auth_enabled and s.keys[0].allows("write")
+    monkeypatch.setenv("QUADLOC_DATABASE_URL", "postgresql://u@db/quadloc")
+    assert Settings().effective_database_url == "postgresql://u@db/quadloc"
+    monkeypatch.setenv("QUADLOC_MAX_BATCH_FRAMES", "zero")
+    with pytest.raises(ValueError, match="max_batch_frames"):
+        Settings()

@@ -86,3 +86,77 @@ def test_real_server_with_keys(live_server_factory) -> None:
         assert client.get("/v1/maps", headers={"X-API-Key": "r"}).status_code == 200
         assert client.delete("/v1/maps/chess", headers={"X-API-Key": "r"}).status_code == 403
         assert client.get("/healthz").status_code == 200
+
+
+def test_solves_do_not_block_the_event_loop(live_server: str) -> None:
+    """A long solve runs in the threadpool: probes keep answering while it runs."""
+    import threading
+    import time
+
+    rng = np.random.default_rng(3)
+    labels = ["Chair", "Xbox", "Timer", "Games", "TV"]
+    heavy = {**LOCALIZE_EXAMPLE,
+             "detections": [{"ellipse": {"cx": float(x), "cy": float(y), "a": 30.0, "b": 20.0,
+                                         "angle": 0.3}, "label": labels[i % len(labels)]}
+                            for i, (x, y) in enumerate(rng.uniform(50, 450, size=(40, 2)))],
+             "options": {"ransac_max_hypotheses": 100000, "time_budget_ms": 1500,
+                         "inlier_iou": 0.99, "min_inliers": 30}}
+    solve: dict[str, float] = {}
+
+    def post() -> None:
+        t0 = time.perf_counter()
+        r = httpx.post(f"{live_server}/v1/maps/chess/localize", json=heavy, timeout=60)
+        solve["status"] = r.status_code
+        solve["seconds"] = time.perf_counter() - t0
+
+    thread = threading.Thread(target=post)
+    thread.start()
+    time.sleep(0.3)  # the solve is running now
+    probes = []
+    with httpx.Client(base_url=live_server, timeout=30) as client:
+        while thread.is_alive() and len(probes) < 20:
+            t0 = time.perf_counter()
+            assert client.get("/healthz").status_code == 200
+            probes.append(time.perf_counter() - t0)
+            time.sleep(0.02)
+    thread.join()
+    assert solve["status"] == 200 and solve["seconds"] > 0.8, solve
+    assert len(probes) >= 5
+    # Each probe waits at most a few GIL switch intervals, never for the whole solve.
+    assert float(np.median(probes)) < 0.25 * solve["seconds"], (probes, solve)
+
+
+def test_quadloc_serve_starts_on_loopback_with_the_demo_map(tmp_path: Path) -> None:
+    """`quadloc serve` (what `make serve` runs): SQLite + demo map, says it is open/loopback."""
+    import os
+    import socket
+    import sys
+    import time
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    env = {k: v for k, v in os.environ.items() if not k.startswith("QUADLOC_")}
+    env["QUADLOC_DATA_DIR"] = str(tmp_path)
+    log = tmp_path / "serve.log"
+    with open(log, "wb") as out:
+        proc = subprocess.Popen([sys.executable, "-m", "service", "serve", "--port", str(port)],
+                                cwd=REPO, env=env, stdout=out, stderr=subprocess.STDOUT)
+    try:
+        deadline = time.monotonic() + 60
+        while True:
+            assert proc.poll() is None, log.read_text()
+            try:
+                r = httpx.get(f"http://127.0.0.1:{port}/readyz", timeout=1)
+                if r.status_code == 200:
+                    break
+            except httpx.TransportError:
+                pass
+            assert time.monotonic() < deadline, log.read_text()
+            time.sleep(0.1)
+        assert r.json()["checks"]["default_map"] == "chess v1"
+        assert (tmp_path / "quadloc.db").exists()  # the default SQLite file under the data dir
+        assert "loopback" in log.read_text()
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)

@@ -321,3 +321,34 @@ def test_metrics_count_outcomes_and_latency(tmp_path: Path) -> None:
     assert ('quadloc_http_request_duration_seconds_count{method="POST",'
             'route="/v1/maps/{map_id}/localize"} 3.0') in text
     assert "quadloc_localization_solve_seconds_count 2.0" in text
+
+
+def test_solver_slots_are_first_come_first_served() -> None:
+    import threading
+    import time
+
+    from service.api.solver import FairSlots
+
+    slots = FairSlots(1)
+    assert slots.acquire(timeout=0)
+    assert not slots.acquire(timeout=0.05)  # timed out: must not leave a ghost waiter
+    order: list[int] = []
+
+    def waiter(k: int) -> None:
+        assert slots.acquire(timeout=10)
+        order.append(k)
+        time.sleep(0.005)
+        slots.release()
+
+    threads = []
+    for k in range(5):
+        t = threading.Thread(target=waiter, args=(k,))
+        t.start()
+        threads.append(t)
+        time.sleep(0.03)  # queue them in a known order
+    slots.release()
+    for t in threads:
+        t.join(timeout=10)
+    assert order == [0, 1, 2, 3, 4]
+    assert slots.acquire(timeout=0)  # the slot came back
+    slots.release()

@@ -221,6 +221,21 @@ def test_giou_closed_form_for_two_equal_circles():
                                                rel=1e-9)
 
 
+@pytest.mark.parametrize("direction", [0.0, 0.3, math.pi / 2, 2.0, math.pi, -0.7])
+@pytest.mark.parametrize("shift", [1e-6, 0.5, 30.0, 200.0])
+def test_hull_of_an_ellipse_and_its_translated_copy(direction, shift):
+    # Closed form: hull(E, E + delta) = area + |delta| * (width of E across delta), the width
+    # being 2 sqrt(m^T Sigma m) for the unit normal m of delta (Minkowski sum with a segment).
+    e = Ellipse(10, 20, 40, 12, 0.4)
+    delta = shift * np.array([math.cos(direction), math.sin(direction)])
+    m = np.array([-math.sin(direction), math.cos(direction)])
+    _, S = e.gaussian()
+    expected = e.area + shift * 2 * math.sqrt(m @ S @ m)
+    moved = Ellipse(e.cx + delta[0], e.cy + delta[1], e.a, e.b, e.angle + math.pi)
+    assert convex_hull_area(e, moved) == pytest.approx(expected, rel=1e-9)
+    assert convex_hull_area(moved, e) == pytest.approx(expected, rel=1e-9)
+
+
 # --------------------------------------------------------------------------- boxes
 
 
@@ -441,6 +456,20 @@ def test_level_set_is_not_flat_when_one_ellipse_contains_the_other():
     big = Ellipse(100, 100, 60, 40, 0.3)
     values = [cost("level_set", big, Ellipse(100 + dx, 100, 10, 6, 0.0)) for dx in (0, 10, 20)]
     assert values[0] < values[1] < values[2]
+
+
+def test_registration_benchmark_recovers_rigid_transforms():
+    from bench.registration_2d import errors, make_pairs, register
+
+    pairs = make_pairs(3, seed=5)
+    for i in range(3):
+        ref_p, th0, t0 = pairs["ref"][i], float(pairs["theta0"][i]), pairs["t0"][i]
+        moving = np.array([ref_p[0] + t0[0], ref_p[1] + t0[1], ref_p[2], ref_p[3],
+                           ref_p[4] + th0])
+        for name in ("level_set", "wasserstein"):
+            pose, _ = register(name, moving, Ellipse(*ref_p))
+            pos, rot = errors(pose, th0, t0)
+            assert pos < 1e-6 and rot < 1e-6, (name, i, pos, rot)
 
 
 def test_nonfinite_free_on_extreme_inputs():

@@ -24,7 +24,7 @@ from sqlalchemy.exc import OperationalError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
 
-from maps.errors import StoreUnavailable
+from maps.errors import MapValidationError, StoreUnavailable
 
 __all__ = [
     "PROBLEM_MEDIA_TYPE",
@@ -212,6 +212,11 @@ async def _on_http_exception(request: Request, exc: StarletteHTTPException) -> J
                             status=exc.status_code if exc.status_code < 500 else 400)
 
 
+async def _on_invalid_map(request: Request, exc: Exception) -> JSONResponse:
+    return problem_response(request, "invalid-map", str(exc),
+                            errors=getattr(exc, "errors", None) or [])
+
+
 async def _on_database_error(request: Request, exc: Exception) -> JSONResponse:
     log.error("database error on %s %s: %s", request.method, request.url.path, exc)
     return problem_response(request, "database-unavailable",
@@ -230,6 +235,7 @@ def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(RequestValidationError, _on_validation_error)  # type: ignore[arg-type]
     app.add_exception_handler(ProblemError, _on_problem)  # type: ignore[arg-type]
     app.add_exception_handler(StarletteHTTPException, _on_http_exception)  # type: ignore[arg-type]
+    app.add_exception_handler(MapValidationError, _on_invalid_map)
     app.add_exception_handler(StoreUnavailable, _on_database_error)
     app.add_exception_handler(OperationalError, _on_database_error)
     app.add_exception_handler(Exception, _on_unexpected)

@@ -214,7 +214,8 @@ class LocalizeOptionsIn(_Model):
     time_budget_ms: float | None = Field(
         default=None, gt=0, le=60_000,
         description="Solve budget (ms); capped by the server's QUADLOC_SOLVE_TIME_BUDGET_MS.")
-    max_iterations: int = Field(default=50, ge=1, le=500)
+    max_iterations: int = Field(default=50, ge=1, le=100,
+                                description="Levenberg-Marquardt iteration cap.")
     output_convention: Convention = Field(
         default="opencv", description="Camera axes of the returned pose and covariance.")
 

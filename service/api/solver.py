@@ -106,7 +106,7 @@ class Solver:
             raise ProblemError("validation-error",
                                f"{prefix}detections: at most {self.max_detections} per frame",
                                errors=[{"field": f"{prefix}detections",
-                                      "message": f"at most {self.max_detections} detections"}])
+                                        "message": f"at most {self.max_detections} detections"}])
         try:
             camera = camera_from_request(frame.camera)
             detections = detections_from_request(frame.detections)
@@ -163,13 +163,17 @@ class Solver:
                         batch: bool) -> list[LocalizeResponse]:
         """Solve ``frames`` in order against ``compiled`` (blocking; call from a thread).
 
-        Field names in errors are prefixed with ``frames[i].`` for batches.
+        Each frame takes a solver slot of its own, so a batch queues behind (and interleaves
+        with) other clients' frames instead of holding a slot for its whole length. Field names
+        in errors are prefixed with ``frames[i].`` for batches.
         """
-        if not self.slots.acquire(timeout=self.queue_timeout_s):
-            raise ProblemError("busy", "all solver slots are busy; retry shortly",
-                               headers={"Retry-After": "1"})
-        try:
-            return [self._solve_one(compiled, f, f"frames[{i}]." if batch else "")
-                    for i, f in enumerate(frames)]
-        finally:
-            self.slots.release()
+        out = []
+        for i, frame in enumerate(frames):
+            if not self.slots.acquire(timeout=self.queue_timeout_s):
+                raise ProblemError("busy", "all solver slots are busy; retry shortly",
+                                   headers={"Retry-After": "1"})
+            try:
+                out.append(self._solve_one(compiled, frame, f"frames[{i}]." if batch else ""))
+            finally:
+                self.slots.release()
+        return out

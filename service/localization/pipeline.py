@@ -28,11 +28,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from factors.geometry import Camera, invert_pose
+from factors.geometry import Camera, Ellipsoid, invert_pose
 from maps.compiled import CompiledMap, compile_map
 from maps.model import SceneMap
 from service.localization.ransac import Match, MatchScorer, ransac
-from service.localization.refine import refine
+from service.localization.refine import RefinementResult, refine
 from service.localization.types import (
     NO_REFINEMENT,
     Detection,
@@ -123,10 +123,10 @@ RESTART_MOVE = 0.01
 
 
 def refine_pose(
-    detections: Sequence[Detection], ellipsoids: Sequence, camera: Camera,
+    detections: Sequence[Detection], ellipsoids: Sequence[Ellipsoid], camera: Camera,
     initial_world_from_camera: np.ndarray, options: LocalizationOptions,
     prior: PosePrior | None = None,
-):
+) -> RefinementResult:
     """:func:`service.localization.refine.refine` with the options' metric, sigma, kernel,
     iteration cap and metric options (and the prior as a factor when it has a covariance),
     restarted once from its result when the level-set pose moved by more than
@@ -155,7 +155,7 @@ def _refine_matches(
     matches: Sequence[Match], detections: Sequence[Detection], compiled: CompiledMap,
     camera: Camera, world_from_camera: np.ndarray, options: LocalizationOptions,
     prior: PosePrior | None,
-):
+) -> RefinementResult:
     return refine_pose([detections[m.detection_index] for m in matches],
                        [compiled.ellipsoids[m.object_index] for m in matches],
                        camera, world_from_camera, options, prior)
