@@ -43,7 +43,7 @@ from service.localization.types import (
     PosePrior,
 )
 
-__all__ = ["RESTART_MOVE", "compiled_map_of", "confidence_of", "localize", "refine_pose"]
+__all__ = ["compiled_map_of", "confidence_of", "localize", "refine_pose"]
 
 _COMPILED: dict[int, tuple[SceneMap, CompiledMap]] = {}
 _COMPILED_MAX = 16
@@ -116,21 +116,13 @@ def _not_localized(reason: str, metric: str, evaluated: int, timings: dict[str, 
                               timings)
 
 
-#: A level-set refinement that moved the pose by more than this (m or rad) is restarted once
-#: from its result: its sample points are laid out once, at the start, over an area that grows
-#: with the initial misalignment, and a wide layout biases the optimum with noisy detections.
-RESTART_MOVE = 0.01
-
-
 def refine_pose(
     detections: Sequence[Detection], ellipsoids: Sequence[Ellipsoid], camera: Camera,
     initial_world_from_camera: np.ndarray, options: LocalizationOptions,
     prior: PosePrior | None = None,
 ) -> RefinementResult:
     """:func:`service.localization.refine.refine` with the options' metric, sigma, kernel,
-    iteration cap and metric options (and the prior as a factor when it has a covariance),
-    restarted once from its result when the level-set pose moved by more than
-    :data:`RESTART_MOVE` (see there). Returns the ``RefinementResult`` of the last pass."""
+    iteration cap and metric options (and the prior as a factor when it has a covariance)."""
     kwargs = dict(
         use_sigma=options.use_sigma, robust=options.robust, robust_scale=options.robust_scale,
         prior_world_from_camera=None if prior is None or prior.covariance is None
@@ -139,16 +131,8 @@ def refine_pose(
         max_iterations=options.max_iterations,
         metric_options=dict(options.metric_options) if options.metric_options else None,
     )
-    res = refine(detections, ellipsoids, camera, initial_world_from_camera, options.metric,
-                 **kwargs)
-    if options.metric == "level_set" and res.status not in ("diverged", "invalid_projection"):
-        T0, T1 = np.asarray(initial_world_from_camera), res.world_from_camera
-        moved = float(np.linalg.norm(T1[:3, 3] - T0[:3, 3]))
-        c = (np.trace(T0[:3, :3].T @ T1[:3, :3]) - 1.0) / 2.0
-        turned = float(np.arccos(np.clip(c, -1.0, 1.0)))
-        if max(moved, turned) > RESTART_MOVE:
-            res = refine(detections, ellipsoids, camera, T1, options.metric, **kwargs)
-    return res
+    return refine(detections, ellipsoids, camera, initial_world_from_camera, options.metric,
+                  **kwargs)
 
 
 def _refine_matches(
