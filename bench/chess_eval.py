@@ -587,9 +587,10 @@ EXPLANATION = """**Reading the results against the paper.**
   from 0.4 m / 20 deg starts; algebraic and frobenius degrade; iou/giou hardly move from
   their start (median error ~ the initial offset). The
   paper also finds level set robust and GIoU / algebraic sensitive, but QBbox sensitive too
-  (here it is not). Level set needs the restart of `pipeline.refine_pose` for this: its sample
-  layout is fixed at the start over an area that grows with the initial misalignment, and a
-  single pass from 0.4 m stops at a biased pose (an earlier run without the restart, with
+  (here it is not). Level set needs `refine()`'s second solve for this: each solve lays its
+  samples over an area that grows with the misalignment at its start, and a single solve from
+  0.4 m stops at a biased pose, so `refine()` re-lays them at the result and solves again (an
+  earlier run without it, with
   10 % instead of 20 % missed detections: 47 % within 10 cm from 0.4 m vs 82 % from 0.1 m).
 * *Time.* The paper reports 0.26 s per pose optimisation with level set (Python BFGS); here a
   whole `localize()` (RANSAC + level-set LM) takes ~10 ms median."""

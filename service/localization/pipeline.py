@@ -15,8 +15,8 @@ Stages (wall time of each in ``LocalizationResult.timings_ms``):
    ``options.metric`` (sigma-weighted, robust kernel option), then re-association: the inliers
    are recomputed at the refined pose and, if the set changed, refined once more. The result
    is accepted when it keeps >= ``min_inliers`` inliers; otherwise ``refinement_diverged``.
-   A level-set refinement that moved the pose by more than 1 cm / 0.01 rad is restarted once
-   from its result (:func:`refine_pose`): the level-set sample layout is fixed at the start.
+   (``refine`` itself re-lays the adaptive level-set samples once at its result when the
+   pose moved by more than ``RESAMPLE_MOVE``.)
 
 The time budget bounds the hypothesis search (stage 3); a refinement that has started finishes.
 """
