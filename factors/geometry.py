@@ -488,7 +488,11 @@ class Camera:
                 raise GeometryError(f"Camera.{name} must be > 0, got {getattr(self, name)}")
         for name in ("width", "height"):
             v = getattr(self, name)
-            if isinstance(v, bool) or not float(v).is_integer() or v <= 0:
+            try:
+                ok = not isinstance(v, bool) and float(v).is_integer() and v > 0
+            except (TypeError, ValueError, OverflowError):
+                ok = False
+            if not ok:
                 raise GeometryError(f"Camera.{name} must be a positive integer, got {v!r}")
             object.__setattr__(self, name, int(v))
 

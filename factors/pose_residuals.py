@@ -397,6 +397,8 @@ class PoseResidualModel:
         pts = np.stack([P[:, 0, None] + ca * u - sa * v, P[:, 1, None] + sa * u + ca * v], -1)
         self.sample_points = pts  # (N, M, 2) px
         self.sampling_scale = s_max  # (N,) outermost level radius per detection
+        #: some detection's sampled area was grown for the misalignment at ``T0``
+        self.sampling_grown = bool(np.any(s_max > scale))
         self._phi0 = np.einsum("mk,mk->m", uv, uv)[None, :] * (s_max**2)[:, None] - 1.0
         cam = self.camera
         nT = np.ones((self.n, 3, self._M))  # normalised camera coordinates K^-1 (x, y, 1)

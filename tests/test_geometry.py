@@ -287,6 +287,8 @@ def test_degenerate_projections_raise_with_reason():
         (lambda: Camera(0.0, 500.0, 320.0, 240.0, 640, 480), "Camera.fx"),
         (lambda: Camera(500.0, 500.0, 320.0, 240.0, 0, 480), "Camera.width"),
         (lambda: Camera(500.0, 500.0, 320.0, 240.0, 640, 480.5), "Camera.height"),
+        (lambda: Camera(500.0, 500.0, 320.0, 240.0, "wide", 480), "Camera.width"),
+        (lambda: Camera(500.0, 500.0, 320.0, 240.0, 640, float("inf")), "Camera.height"),
         (lambda: rotation_from_quaternion_wxyz([1.0, 0.1, 0.0, 0.0]), "quaternion_wxyz"),
         (lambda: Ellipse.from_bbox(10, 0, 5, 10), "xmax > xmin"),
     ],

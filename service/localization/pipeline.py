@@ -15,8 +15,7 @@ Stages (wall time of each in ``LocalizationResult.timings_ms``):
    ``options.metric`` (sigma-weighted, robust kernel option), then re-association: the inliers
    are recomputed at the refined pose and, if the set changed, refined once more. The result
    is accepted when it keeps >= ``min_inliers`` inliers; otherwise ``refinement_diverged``.
-   (``refine`` itself re-lays the adaptive level-set samples once at its result when the
-   pose moved by more than ``RESAMPLE_MOVE``.)
+   (``refine`` itself re-lays grown adaptive level-set samples once at its result.)
 
 The time budget bounds the hypothesis search (stage 3); a refinement that has started finishes.
 """
