@@ -191,14 +191,15 @@ def _dual_vec(e: Ellipse) -> tuple[float, float, float, float, float]:
     return s00 - cx * cx, s01 - cx * cy, -cx, s11 - cy * cy, -cy
 
 
-def _log_cosh(x: np.ndarray) -> np.ndarray:
-    """``ln cosh(x)``, accurate for small ``|x|`` (series) and large ``|x|`` (no overflow)."""
-    ax = np.abs(x)
-    small = ax < 1e-2
-    x2 = ax * ax
-    series = x2 * (0.5 + x2 * (-1.0 / 12.0 + x2 * (1.0 / 45.0)))
-    big = ax + np.log1p(np.exp(-2.0 * ax)) - math.log(2.0)
-    return np.where(small, series, big)
+def _h(u: float) -> float:
+    """``sign(u) sqrt(ln cosh(u / 2) / 2)``: odd, analytic, ``~ u / (2 sqrt 2)`` near 0."""
+    x = abs(0.5 * u)
+    if x < 1e-2:  # series of ln cosh, relative error < 1e-14
+        x2 = x * x
+        lc = x2 * (0.5 + x2 * (-1.0 / 12.0 + x2 * (1.0 / 45.0)))
+    else:  # ln cosh x = x + ln(1 + e^-2x) - ln 2, no overflow
+        lc = x + math.log1p(math.exp(-2.0 * x)) - math.log(2.0)
+    return math.copysign(math.sqrt(0.5 * lc), u)
 
 
 # --------------------------------------------------------------------------- boxes
@@ -465,10 +466,10 @@ def _bhattacharyya_residual(det: Ellipse, proj: Ellipse) -> np.ndarray:
     n00, n01, n11 = t00 / (det.a * det.a), t01 / (det.a * det.b), t11 / (det.b * det.b)
     half_tr, half_diff = 0.5 * (n00 + n11), 0.5 * (n00 - n11)
     rad = math.hypot(half_diff, n01)
-    lam = np.array([half_tr + rad, max(half_tr - rad, 1e-300)])
-    h = np.sign(np.log(lam)) * np.sqrt(0.5 * _log_cosh(0.5 * np.log(lam)))
+    h0 = _h(math.log(half_tr + rad))
+    h1 = _h(math.log(max(half_tr - rad, 1e-300)))
     # G = V diag(h) V^T in N's frame (back in the detection frame; rotation-free norm).
-    mean, half = 0.5 * (h[0] + h[1]), 0.5 * (h[0] - h[1])
+    mean, half = 0.5 * (h0 + h1), 0.5 * (h0 - h1)
     if rad > 0.0:
         cos2, sin2 = half_diff / rad, n01 / rad
     else:

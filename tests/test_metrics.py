@@ -363,6 +363,11 @@ def test_gaussian_closed_forms():
     # Concentric circles: B = ln((r1^2 + r2^2) / (2 r1 r2)).
     d, p = Ellipse(0, 0, 2, 2, 0), Ellipse(0, 0, 3, 3, 0)
     assert cost("bhattacharyya", d, p) == pytest.approx(math.log(13 / 12), rel=1e-12)
+    # Nearly equal circles (series branch): ln((1 + (1+e)^2) / (2 (1+e))) = log1p(e^2/(2(1+e))).
+    for eps in (1e-3, 1e-6, 3e-2):
+        d, p = Ellipse(0, 0, 2, 2, 0), Ellipse(0, 0, 2 * (1 + eps), 2 * (1 + eps), 0)
+        expected = math.log1p(eps * eps / (2 * (1 + eps)))
+        assert cost("bhattacharyya", d, p) == pytest.approx(expected, rel=1e-9)
 
 
 def test_gaussian_residuals_are_smooth_at_the_optimum():
