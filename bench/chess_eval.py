@@ -5,7 +5,8 @@ Usage::
     python -m bench.chess_eval [--frames N] [--draws K] [--seed S] [--json PATH] [--plots DIR]
                                [--metrics m1,m2] [--slow-stride N] [--no-docs]
 
-Data: ``/work/shared/data/chess_scene.json`` (11 ellipsoids, +Z up) through the maps importer,
+Data (read-only, in ``../shared/data`` beside the checkout; located and loaded by
+:mod:`bench.shared_data`): ``chess_scene.json`` (11 ellipsoids, +Z up) through the maps importer,
 and the 108 real ground-truth poses of ``chess_test_poses.json`` (``R, t`` are
 camera_from_world; ``R`` is snapped to the nearest rotation). Detections are simulated from the
 ground truth by :mod:`bench.simulate` (noise, truncation at the image border, occlusion, sigma,
@@ -42,33 +43,21 @@ from pathlib import Path
 
 import numpy as np
 
-from factors.geometry import Camera, invert_pose, pose_matrix, snap_to_rotation
-from maps.model import SceneMap, scene_map_from_chess
+from bench import shared_data
+from bench.shared_data import CHESS_POSES_PATH, load_chess_map
+from factors.geometry import Camera, invert_pose, pose_matrix
 
-DATA_DIR = Path(__file__).resolve().parent.parent.parent / "shared" / "data"
-SCENE_PATH = DATA_DIR / "chess_scene.json"
-POSES_PATH = DATA_DIR / "chess_test_poses.json"
-
-
-def load_chess_map(path: Path = SCENE_PATH) -> SceneMap:
-    """The Chess ellipsoid map (11 objects, +Z up) via the maps importer."""
-    return scene_map_from_chess(json.loads(Path(path).read_text()))
+# ``load_chess_map`` (from bench.shared_data) and ``load_chess_poses`` are imported by tests.
 
 
-def load_chess_poses(path: Path = POSES_PATH) -> tuple[Camera, list[np.ndarray], list[str]]:
-    """(camera, world_from_camera poses (4x4), frame names) of the 108 real test frames.
+def load_chess_poses(path: Path = CHESS_POSES_PATH) -> tuple[Camera, list[np.ndarray], list[str]]:
+    """(camera, **world_from_camera** poses (4x4), frame names) of the 108 real test frames.
 
-    The file's ``R, t`` are camera_from_world (``x_cam = R x_world + t``); ``R`` is snapped to
-    the nearest rotation (SVD) before inverting.
+    Unlike :func:`bench.shared_data.load_chess_poses` (camera_from_world, the file's ``R, t``
+    with ``R`` snapped to the nearest rotation), this returns their inverses.
     """
-    data = json.loads(Path(path).read_text())
-    camera = Camera.from_matrix(np.array(data["K"], dtype=float), data["width"], data["height"])
-    poses, names = [], []
-    for f in data["frames"]:
-        T_cw = pose_matrix(snap_to_rotation(np.array(f["R"], dtype=float)), f["t"])
-        poses.append(invert_pose(T_cw))
-        names.append(f"{f['sequence']}/{f['frame']}")
-    return camera, poses, names
+    camera, camera_from_world, names = shared_data.load_chess_poses(path)
+    return camera, [invert_pose(T) for T in camera_from_world], names
 
 
 # --------------------------------------------------------------------------- evaluation

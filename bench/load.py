@@ -51,13 +51,13 @@ import httpx
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-POSES = REPO.parent / "shared" / "data" / "chess_test_poses.json"
 
 
 def build_frames(n_frames: int, seed: int = 0) -> tuple[list[dict[str, Any]], list[Any]]:
     """``n_frames`` request bodies (and the matching in-process inputs) of simulated frames."""
+    from bench.shared_data import load_chess_poses
     from bench.simulate import simulate_frame
-    from factors.geometry import Camera, invert_pose, pose_matrix, snap_to_rotation
+    from factors.geometry import invert_pose
     from maps.compiled import compile_map
     from maps.demo import load_demo_map
     from service.api.convert import (
@@ -67,15 +67,13 @@ def build_frames(n_frames: int, seed: int = 0) -> tuple[list[dict[str, Any]], li
     )
     from service.api.schemas import LocalizeRequest
 
-    data = json.loads(POSES.read_text())
-    camera = Camera.from_matrix(np.array(data["K"]), data["width"], data["height"])
+    camera, camera_from_world, names = load_chess_poses()
     compiled = compile_map(load_demo_map())
-    picks = np.linspace(0, len(data["frames"]) - 1, n_frames).round().astype(int)
+    picks = np.linspace(0, len(camera_from_world) - 1, n_frames).round().astype(int)
     bodies, inputs = [], []
     for k, i in enumerate(picks):
-        f = data["frames"][int(i)]
-        T = invert_pose(pose_matrix(snap_to_rotation(np.array(f["R"])), f["t"]))
-        sim = simulate_frame(compiled, camera, T, seed + k)
+        world_from_camera = invert_pose(camera_from_world[int(i)])
+        sim = simulate_frame(compiled, camera, world_from_camera, seed + k)
         body = {
             "camera": {"fx": camera.fx, "fy": camera.fy, "cx": camera.cx, "cy": camera.cy,
                        "width": camera.width, "height": camera.height},
@@ -85,7 +83,7 @@ def build_frames(n_frames: int, seed: int = 0) -> tuple[list[dict[str, Any]], li
                             "label": d.label,
                             **({"sigma": d.sigma} if d.sigma is not None else {})}
                            for d in sim.detections],
-            "frame_id": f"{f['sequence']}/{f['frame']}",
+            "frame_id": names[int(i)],
         }
         req = LocalizeRequest.model_validate(body)
         bodies.append(body)

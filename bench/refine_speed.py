@@ -41,6 +41,7 @@ import gtsam
 import numpy as np
 from scipy.optimize import minimize
 
+from bench.shared_data import CHESS_SCENE_PATH, load_chess_poses, load_chess_scene_json
 from factors import metrics
 from factors.geometry import (
     Camera,
@@ -188,30 +189,27 @@ def design_comparison(trials: list[dict]) -> dict[str, dict[str, float]]:
 
 # --------------------------------------------------------------------------- convergence basin
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 BASIN_STARTS = ((5.0, 0.10), (10.0, 0.30), (15.0, 0.40), (20.0, 0.50), (30.0, 0.75))
 
 
 def chess_basin(seed: int) -> dict[str, dict[str, float]] | None:
     """Level-set refinement from exact detections of the real Chess map at its 108 real poses,
     started rot_deg / trans_m away (random directions): fraction back within 1e-6 m."""
-    from factors.geometry import pose_matrix, snap_to_rotation
+    from factors.geometry import snap_to_rotation
 
-    if not (DATA / "chess_scene.json").exists():
+    if not CHESS_SCENE_PATH.exists():
         return None
-    scene = json.loads((DATA / "chess_scene.json").read_text())
-    poses = json.loads((DATA / "chess_test_poses.json").read_text())
+    scene = load_chess_scene_json()
     ells = [Ellipsoid(np.array(o["ellipsoid"]["center"], float),
                       np.array(o["ellipsoid"]["axes"], float),
                       snap_to_rotation(np.array(o["ellipsoid"]["R"], float)))
             for o in scene["objects"]]
-    cam = Camera.from_matrix(np.array(poses["K"]), poses["width"], poses["height"])
+    cam, camera_from_world, _ = load_chess_poses()
     rng = np.random.default_rng(seed)
     out = {}
     for rot, trans in BASIN_STARTS:
         ok, ms = 0, []
-        for f in poses["frames"]:
-            cfw = pose_matrix(snap_to_rotation(np.array(f["R"])), f["t"])
+        for cfw in camera_from_world:
             truth = invert_pose(cfw)
             dets, objs = [], []
             for j, e in enumerate(ells):
@@ -223,9 +221,9 @@ def chess_basin(seed: int) -> dict[str, dict[str, float]] | None:
             res = refine(dets, objs, cam, perturb(rng, truth, rot, trans))
             ok += position_error(res.world_from_camera, truth) < 1e-6
             ms.append(res.time_ms)
-        out[f"{rot:g}deg_{trans:g}m"] = {"success_fraction": ok / len(poses["frames"]),
+        out[f"{rot:g}deg_{trans:g}m"] = {"success_fraction": ok / len(camera_from_world),
                                          "median_ms": float(np.median(ms)),
-                                         "frames": len(poses["frames"])}
+                                         "frames": len(camera_from_world)}
     return out
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from factors.geometry import Camera, pose_matrix, snap_to_rotation
+from maps.model import SceneMap, scene_map_from_chess
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 DATA_DIR = Path(os.environ.get("QUADLOC_SHARED_DATA", REPO_ROOT.parent / "shared" / "data"))
@@ -39,3 +40,8 @@ def load_chess_poses(
 def load_chess_scene_json(path: Path = CHESS_SCENE_PATH) -> dict:
     """The raw Chess scene document (authors' format; see ``maps.model.scene_map_from_chess``)."""
     return json.loads(Path(path).read_text())
+
+
+def load_chess_map(path: Path = CHESS_SCENE_PATH) -> SceneMap:
+    """The Chess ellipsoid map (11 objects, +Z up) via the maps importer."""
+    return scene_map_from_chess(load_chess_scene_json(path))

@@ -101,7 +101,8 @@ DEFAULT_PENALTY_COST = 1e8
 #: A projection counts as valid while the ellipsoid's smallest camera depth exceeds this (m).
 DEFAULT_MIN_DEPTH_MARGIN = 1e-3
 #: Central-difference step on each tangent coordinate (rad or m) for numerical Jacobians.
-#: Larger for the area/box metrics whose polygon approximations have small kinks.
+#: Larger for iou/giou: their residual ``sqrt(Delta)`` has a cone at the optimum, where a wider
+#: central difference still gives a usable slope (the areas themselves are exact and smooth).
 DEFAULT_NUMERIC_STEP: dict[str, float] = {
     "iou": 1e-5, "giou": 1e-5, "bbox": 1e-6, "qbbox": 1e-6, "algebraic": 1e-6,
     "frobenius": 1e-6, "wasserstein": 1e-6, "bhattacharyya": 1e-6, "level_set": 1e-6,

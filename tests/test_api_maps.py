@@ -10,13 +10,14 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
+from bench.shared_data import CHESS_SCENE_PATH, load_chess_scene_json
 from maps.demo import load_demo_map
 from maps.model import content_hash, scene_map_from_dict
 from service.api.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
 from tests.conftest import make_test_app
 
 PROBLEM = "application/problem+json"
-CHESS_SCENE = Path(__file__).resolve().parents[2] / "shared" / "data" / "chess_scene.json"
+CHESS_SCENE = CHESS_SCENE_PATH
 
 
 @pytest.fixture
@@ -174,7 +175,7 @@ def test_import_chess_format(client: TestClient) -> None:
     np.testing.assert_allclose(rotation_from_quaternion_wxyz(objs[0]["quaternion_wxyz"]), R,
                                atol=1e-9)
     if CHESS_SCENE.exists():
-        full = json.loads(CHESS_SCENE.read_text())
+        full = load_chess_scene_json(CHESS_SCENE)
         r = client.post("/v1/maps:import-chess", params={"map_id": "chess2"}, json=full)
         assert r.status_code == 201 and len(r.json()["map"]["objects"]) == 11
     bad = copy.deepcopy(CHESS_IMPORT_EXAMPLE)

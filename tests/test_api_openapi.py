@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bench.shared_data import CHESS_POSES_PATH as POSES_PATH
 from factors import metrics
 from factors.geometry import (
     Camera,
@@ -24,7 +25,6 @@ from service.api.examples import (
     FRAME_INDEX,
     LOCALIZE_EXAMPLE,
     MAP_EXAMPLE,
-    POSES_PATH,
 )
 from service.cli import OPENAPI_PATH, openapi_document, openapi_text
 

@@ -9,13 +9,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bench.shared_data import CHESS_SCENE_PATH
 from maps.model import content_hash, scene_map_from_dict
 from service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, MAP_EXAMPLE
 from service.cli import OPENAPI_PATH, main
 from service.settings import hash_api_key
 
 REPO = Path(__file__).resolve().parents[1]
-CHESS_SCENE = REPO.parent / "shared" / "data" / "chess_scene.json"
+CHESS_SCENE = CHESS_SCENE_PATH
 EXAMPLE = REPO / "docs" / "examples" / "localize_chess.json"
 
 

@@ -20,20 +20,26 @@ import pytest
 from prometheus_client.parser import text_string_to_metric_families
 
 import sdk
+from bench.shared_data import (
+    CHESS_POSES_PATH,
+    CHESS_SCENE_PATH,
+    DATA_DIR,
+    load_chess_poses,
+    load_chess_scene_json,
+)
 from sdk import errors as sdk_errors
 from sdk import geometry as sg
 
 REPO = Path(__file__).resolve().parents[1]
-DATA = REPO.parent / "shared" / "data"
 MAP_ID = "chess-e2e"
 FRAME_STEP = 9  # 12 of the 108 ground-truth frames, spread over the three sequences
 
 
 @pytest.fixture(scope="module")
 def chess_paths() -> tuple[Path, Path]:
-    scene, poses = DATA / "chess_scene.json", DATA / "chess_test_poses.json"
+    scene, poses = CHESS_SCENE_PATH, CHESS_POSES_PATH
     if not (scene.exists() and poses.exists()):
-        pytest.skip(f"reference data not found under {DATA} (expected ../shared/data)")
+        pytest.skip(f"reference data not found under {DATA_DIR} (expected ../shared/data)")
     return scene, poses
 
 
@@ -55,21 +61,17 @@ def uploaded(client: sdk.QuadLocClient, chess_paths) -> sdk.MapRecord:
 def frames(uploaded: sdk.MapRecord, chess_paths):
     """(camera, [(world_from_camera_true, exact SimulatedFrame, noisy SimulatedFrame)])."""
     from bench.simulate import SimulationConfig, simulate_frame
-    from factors.geometry import Camera as GeoCamera
-    from factors.geometry import pose_matrix, snap_to_rotation
     from maps.model import scene_map_from_dict
 
     _, poses_path = chess_paths
-    poses = json.loads(poses_path.read_text())
-    K = np.array(poses["K"])
-    width, height = 640, 480
+    geo_camera, camera_from_world_all, _ = load_chess_poses(poses_path)
+    K = geo_camera.K
+    width, height = geo_camera.width, geo_camera.height  # 640 x 480
     # The map the server stored (as returned through the SDK) is the one we simulate from.
     scene_map = scene_map_from_dict(uploaded.map)
-    geo_camera = GeoCamera.from_matrix(K, width, height)
     out = []
-    for i in range(0, len(poses["frames"]), FRAME_STEP):
-        f = poses["frames"][i]
-        camera_from_world = pose_matrix(snap_to_rotation(np.array(f["R"])), f["t"])
+    for i in range(0, len(camera_from_world_all), FRAME_STEP):
+        camera_from_world = camera_from_world_all[i]
         world_from_camera = sg.to_world_from_camera(camera_from_world)
         exact = simulate_frame(scene_map, geo_camera, world_from_camera, rng=i,
                                config=SimulationConfig.exact(clip_to_image=False))
@@ -112,7 +114,7 @@ def test_health_and_demo_map(client: sdk.QuadLocClient):
 def test_uploaded_map_round_trips(client: sdk.QuadLocClient, uploaded: sdk.MapRecord,
                                   chess_paths):
     scene, _ = chess_paths
-    chess = json.loads(scene.read_text())
+    chess = load_chess_scene_json(scene)
     got = client.get_map(MAP_ID)
     assert got.version == 1 and got.etag == uploaded.etag
     assert len(got.map["objects"]) == len(chess["objects"]) == 11
@@ -291,9 +293,9 @@ def test_docs_quickstart_runs_as_written(live_server: str, capsys):
     doc = json.loads(documented[1].split(":", 1)[1])
     np.testing.assert_allclose(got, doc, atol=0.015)  # rounding to cm + solver tolerance
     # and the documented ground truth of seq-03 frame 22 is what the pose file says
-    poses = json.loads((DATA / "chess_test_poses.json").read_text())
-    frame = next(f for f in poses["frames"] if f["sequence"] == "seq-03" and f["frame"] == 22)
-    R, t = np.array(frame["R"]), np.array(frame["t"])
+    _, camera_from_world_all, names = load_chess_poses()
+    camera_from_world = camera_from_world_all[names.index("seq-03/22")]
+    R, t = camera_from_world[:3, :3], camera_from_world[:3, 3]
     np.testing.assert_allclose(-R.T @ t, got, atol=0.05)
 
 
@@ -309,8 +311,8 @@ def test_docs_demo_request_runs_as_written(live_server: str, capsys, monkeypatch
     translation = json.loads(words[1])
     # The example is a simulated frame at a real ground-truth pose, named by its frame_id.
     sequence, frame_name = json.loads(example.read_text())["frame_id"].split("/")
-    poses = json.loads((DATA / "chess_test_poses.json").read_text())
-    truth = next(f for f in poses["frames"]
-                 if f["sequence"] == sequence and f"frame-{f['frame']:06d}" == frame_name)
-    R, t = np.array(truth["R"]), np.array(truth["t"])
+    _, camera_from_world_all, names = load_chess_poses()
+    name = f"{sequence}/{int(frame_name.removeprefix('frame-'))}"  # frame-000022 -> seq-03/22
+    camera_from_world = camera_from_world_all[names.index(name)]
+    R, t = camera_from_world[:3, :3], camera_from_world[:3, 3]
     assert np.linalg.norm(-R.T @ t - translation) < 0.05

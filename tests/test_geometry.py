@@ -4,15 +4,14 @@ projections and validation messages."""
 
 from __future__ import annotations
 
-import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from bench.shared_data import load_chess_poses, load_chess_scene_json
 from factors.geometry import (
     Camera,
     DegenerateProjectionError,
@@ -30,10 +29,6 @@ from factors.geometry import (
     rotation_from_quaternion_wxyz,
     snap_to_rotation,
 )
-
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
-if not DATA.exists():  # the project may be checked out elsewhere
-    DATA = Path("/work/shared/data")
 
 ellipses = st.builds(
     Ellipse,
@@ -219,13 +214,12 @@ def test_sphere_projection_matches_its_tangent_cone(x, y, z, r, yaw, tx, ty):
 
 
 def _chess():
-    scene = json.loads((DATA / "chess_scene.json").read_text())
-    poses = json.loads((DATA / "chess_test_poses.json").read_text())
+    """(ellipsoids, camera, camera_from_world 4x4 list) of the real Chess data."""
+    scene = load_chess_scene_json()
     ells = [Ellipsoid(np.array(o["ellipsoid"]["center"]), np.array(o["ellipsoid"]["axes"]),
                       np.array(o["ellipsoid"]["R"])) for o in scene["objects"]]
-    cam = Camera.from_matrix(np.array(poses["K"]), poses["width"], poses["height"])
-    frames = [pose_matrix(snap_to_rotation(np.array(f["R"])), f["t"]) for f in poses["frames"]]
-    return ells, cam, frames
+    cam, camera_from_world, _ = load_chess_poses()
+    return ells, cam, camera_from_world
 
 
 def test_chess_projections_bound_and_touch_the_sampled_surfaces():

@@ -10,14 +10,13 @@ covariance against the inverse of ``J^T W J`` built from numerical Jacobians.
 
 from __future__ import annotations
 
-import json
 import math
-from pathlib import Path
 
 import gtsam
 import numpy as np
 import pytest
 
+from bench.shared_data import CHESS_SCENE_PATH, load_chess_poses, load_chess_scene_json
 from factors import metrics
 from factors.geometry import (
     Camera,
@@ -26,7 +25,6 @@ from factors.geometry import (
     Ellipsoid,
     GeometryError,
     invert_pose,
-    pose_matrix,
     project_ellipsoid,
     rotation_from_quaternion_wxyz,
     snap_to_rotation,
@@ -34,7 +32,6 @@ from factors.geometry import (
 from service.localization.refine import STATUSES, RefinementResult, refine
 from service.localization.types import Detection
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 CAMERA = Camera(500.0, 510.0, 320.0, 240.0, 640, 480)
 
 
@@ -101,20 +98,16 @@ def numeric_gradient(fn, T, h=1e-6):
 
 
 def load_chess():
-    if not (DATA / "chess_scene.json").exists():
-        pytest.skip(f"real data not found at {DATA}")
-    scene = json.loads((DATA / "chess_scene.json").read_text())
-    poses = json.loads((DATA / "chess_test_poses.json").read_text())
+    """(ellipsoids, camera, world_from_camera 4x4 list) of the real Chess data."""
+    if not CHESS_SCENE_PATH.exists():
+        pytest.skip(f"real data not found at {CHESS_SCENE_PATH}")
+    scene = load_chess_scene_json()
     ells = [Ellipsoid(np.array(o["ellipsoid"]["center"], float),
                       np.array(o["ellipsoid"]["axes"], float),
                       snap_to_rotation(np.array(o["ellipsoid"]["R"], float)))
             for o in scene["objects"]]
-    cam = Camera.from_matrix(np.array(poses["K"]), poses["width"], poses["height"])
-    frames = []
-    for f in poses["frames"]:
-        camera_from_world = pose_matrix(snap_to_rotation(np.array(f["R"])), f["t"])
-        frames.append(invert_pose(camera_from_world))
-    return ells, cam, frames
+    cam, camera_from_world, _ = load_chess_poses()
+    return ells, cam, [invert_pose(T) for T in camera_from_world]
 
 
 def test_level_set_refinement_is_exact_on_real_chess_poses():

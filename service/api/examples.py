@@ -72,7 +72,6 @@ CHESS_IMPORT_EXAMPLE: dict[str, Any] = {
 _REPO = Path(__file__).resolve().parents[2]
 DOC_EXAMPLE_PATH = _REPO / "docs" / "examples" / "localize_chess.json"
 DOC_MAP_EXAMPLE_PATH = _REPO / "docs" / "examples" / "office_map.json"
-POSES_PATH = _REPO.parent / "shared" / "data" / "chess_test_poses.json"
 FRAME_INDEX = 40
 SEED = 7
 
@@ -81,23 +80,23 @@ def _r(x: float, nd: int = 3) -> float:
     return round(float(x), nd)
 
 
-def build_example_frame(poses_path: Path = POSES_PATH, frame_index: int = FRAME_INDEX,
+def build_example_frame(poses_path: Path | None = None, frame_index: int = FRAME_INDEX,
                         seed: int = SEED) -> tuple[dict[str, Any], list[list[float]], str]:
     """Simulate the demo frame: (request body, true world_from_camera 4x4, source text).
 
-    Needs the source tree (``bench.simulate``) and the reference poses; dev-time only.
+    Needs the source tree (``bench.simulate``, ``bench.shared_data``) and the reference poses
+    (default ``bench.shared_data.CHESS_POSES_PATH``, ``../shared/data`` beside the checkout);
+    dev-time only: ``bench`` is imported here, never when the service imports this module.
     """
-    import numpy as np
-
+    from bench.shared_data import CHESS_POSES_PATH, load_chess_poses
     from bench.simulate import simulate_frame
-    from factors.geometry import Camera, invert_pose, pose_matrix, snap_to_rotation
+    from factors.geometry import invert_pose
     from maps.demo import load_demo_map
 
-    data = json.loads(Path(poses_path).read_text())
-    frame = data["frames"][frame_index]
-    camera = Camera.from_matrix(np.array(data["K"]), data["width"], data["height"])
-    camera_from_world = pose_matrix(snap_to_rotation(np.array(frame["R"])), frame["t"])
-    world_from_camera = invert_pose(camera_from_world)
+    camera, camera_from_world_all, names = load_chess_poses(
+        CHESS_POSES_PATH if poses_path is None else poses_path)
+    sequence, frame_number = names[frame_index].split("/")  # "seq-03/22"
+    world_from_camera = invert_pose(camera_from_world_all[frame_index])
     sim = simulate_frame(load_demo_map(), camera, world_from_camera, seed)
     detections = []
     for d in sim.detections:
@@ -112,13 +111,13 @@ def build_example_frame(poses_path: Path = POSES_PATH, frame_index: int = FRAME_
         "camera": {"fx": camera.fx, "fy": camera.fy, "cx": camera.cx, "cy": camera.cy,
                    "width": camera.width, "height": camera.height},
         "detections": detections,
-        "frame_id": f"{frame['sequence']}/frame-{frame['frame']:06d}",
+        "frame_id": f"{sequence}/frame-{int(frame_number):06d}",
         "timestamp": 1700000000.0 + frame_index / 30.0,
         "options": {"metric": "level_set", "output_convention": "opencv"},
     }
     source = (f"simulated detections (bench.simulate defaults, seed {seed}) of the Chess demo "
               f"map at the ground-truth pose of chess_test_poses.json frames[{frame_index}] "
-              f"({frame['sequence']} frame {frame['frame']})")
+              f"({sequence} frame {frame_number})")
     return body, [[float(x) for x in row] for row in world_from_camera], source
 
 
