@@ -131,6 +131,30 @@ def test_update_requires_a_fresh_etag(client: TestClient) -> None:
     _problem(client.get("/v1/maps/chess", params={"version": "x"}), 422, "validation-error")
 
 
+def test_invalid_update_names_the_field_and_loses_nothing(client: TestClient) -> None:
+    before = client.get("/v1/maps/chess")
+    etag, doc = before.headers["etag"], before.json()["map"]
+    bad = copy.deepcopy(doc)
+    bad["objects"][2]["axes"] = [0.2, float("nan"), 0.3]
+    bad["objects"][4]["category"] = "Sofa"
+    text = json.dumps(bad)  # NaN literal on the wire
+    body = _problem(client.put("/v1/maps/chess", content=text,
+                               headers={"If-Match": etag, "content-type": "application/json"}),
+                    422, "invalid-map")
+    fields = {e["field"] for e in body["errors"]}
+    assert {"objects[2].axes", "objects[4].category"} <= fields
+    _problem(client.put("/v1/maps/chess", content=b'{"objects": [', headers={
+        "If-Match": etag, "content-type": "application/json"}), 400, "malformed-json")
+    after = client.get("/v1/maps/chess")
+    assert after.status_code == 200
+    assert after.headers["etag"] == etag
+    assert after.json() == before.json()
+    assert [m["version"] for m in client.get("/v1/maps").json()["maps"]
+            if m["map_id"] == "chess"] == [before.json()["version"]]
+    # the untouched document still updates normally with the same ETag
+    assert client.put("/v1/maps/chess", json=doc, headers={"If-Match": etag}).status_code == 200
+
+
 def test_update_rejects_a_different_map_id_and_unknown_maps(client: TestClient) -> None:
     r = client.get("/v1/maps/chess")
     doc = {**r.json()["map"], "map_id": "other"}
