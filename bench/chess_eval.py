@@ -46,6 +46,7 @@ import numpy as np
 from bench import shared_data
 from bench.shared_data import CHESS_POSES_PATH, load_chess_map
 from factors.geometry import Camera, invert_pose, pose_matrix
+from factors.metrics import METRIC_NAMES
 
 # ``load_chess_map`` (from bench.shared_data) and ``load_chess_poses`` are imported by tests.
 
@@ -62,8 +63,7 @@ def load_chess_poses(path: Path = CHESS_POSES_PATH) -> tuple[Camera, list[np.nda
 
 # --------------------------------------------------------------------------- evaluation
 
-METRICS = ("iou", "giou", "bbox", "qbbox", "algebraic", "frobenius", "wasserstein",
-           "bhattacharyya", "level_set")
+METRICS = METRIC_NAMES
 SLOW_METRICS = ("iou", "giou")
 NO_REFINEMENT = "no_refinement"
 POSITION_THRESHOLDS_M = np.round(np.linspace(0.0, 0.5, 51), 3)

@@ -27,6 +27,8 @@ from typing import Any
 import numpy as np
 
 from factors.geometry import ORTHONORMAL_TOLERANCE, Ellipse, GeometryError
+from factors.metrics import METRIC_NAMES
+from factors.pose_factors import ROBUST_KERNELS
 
 __all__ = [
     "METRICS",
@@ -43,15 +45,10 @@ __all__ = [
 ]
 
 #: The nine refinement metrics (same names as ``factors.metrics.METRIC_NAMES``).
-METRICS: tuple[str, ...] = (
-    "iou", "giou", "bbox", "qbbox", "algebraic", "frobenius", "wasserstein", "bhattacharyya",
-    "level_set",
-)
+METRICS: tuple[str, ...] = METRIC_NAMES
 #: ``LocalizationOptions.metric`` value that skips refinement (the RANSAC/P3P/P2E pose is
 #: returned as is; useful for evaluation).
 NO_REFINEMENT = "none"
-#: Robust kernels accepted by ``LocalizationOptions.robust`` (``None`` = plain least squares).
-ROBUST_KERNELS: tuple[str, ...] = ("huber", "cauchy", "geman_mcclure")
 #: ``LocalizationOptions.unknown_label_policy`` values, see there.
 UNKNOWN_LABEL_POLICIES: tuple[str, ...] = ("ignore", "error")
 #: Every ``LocalizationResult.reason`` when ``localized`` is false.
