@@ -362,3 +362,30 @@ def test_max_iterations_status():
     res = refine(dets, ells, CAMERA, perturb(rng, np.eye(4), 3.0, 0.1), max_iterations=1)
     assert res.iterations == 1
     assert res.status == "max_iterations" and not res.converged
+
+
+@pytest.mark.parametrize("metric", ["level_set", "wasserstein", "bbox"])
+def test_deadline_loop_reproduces_gtsam_optimize(metric):
+    """With a deadline, LM is stepped from Python; far from the deadline it must take exactly
+    the steps of GTSAM's own optimize() loop (same stopping rules)."""
+    rng, ells, T_true, dets, bad = corrupted_scene(11)
+    dets = [Detection(bad, dets[0].label), *dets[1:]]  # a non-zero-residual problem
+    start = perturb(rng, T_true, 4.0, 0.15)
+    free = refine(dets, ells, CAMERA, start, metric)
+    stepped = refine(dets, ells, CAMERA, start, metric, deadline=math.inf)
+    assert stepped.iterations == free.iterations
+    assert stepped.status == free.status
+    np.testing.assert_allclose(stepped.world_from_camera, free.world_from_camera,
+                               rtol=0, atol=1e-12)
+
+
+def test_a_passed_deadline_stops_before_any_iteration():
+    rng = np.random.default_rng(12)
+    ells = synthetic_scene(rng, 4)
+    dets = exact_detections(ells, np.eye(4))
+    start = perturb(rng, np.eye(4), 3.0, 0.1)
+    res = refine(dets, ells, CAMERA, start, "iou", deadline=0.0)
+    assert res.status == "time_budget" and not res.converged
+    assert res.iterations == 0
+    np.testing.assert_allclose(res.world_from_camera, start, atol=1e-12)
+    assert "time_budget" in STATUSES

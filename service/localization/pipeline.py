@@ -17,7 +17,8 @@ Stages (wall time of each in ``LocalizationResult.timings_ms``):
    is accepted when it keeps >= ``min_inliers`` inliers; otherwise ``refinement_diverged``.
    (``refine`` itself re-lays grown adaptive level-set samples once at its result.)
 
-The time budget bounds the hypothesis search (stage 3); a refinement that has started finishes.
+The time budget bounds the whole call: the hypothesis search stops at it, and no LM iteration
+starts after it (a refinement cut short keeps its last accepted step, status ``time_budget``).
 """
 
 from __future__ import annotations
@@ -118,10 +119,11 @@ def _not_localized(reason: str, metric: str, evaluated: int, timings: dict[str, 
 def refine_pose(
     detections: Sequence[Detection], ellipsoids: Sequence[Ellipsoid], camera: Camera,
     initial_world_from_camera: np.ndarray, options: LocalizationOptions,
-    prior: PosePrior | None = None,
+    prior: PosePrior | None = None, deadline: float | None = None,
 ) -> RefinementResult:
     """:func:`service.localization.refine.refine` with the options' metric, sigma, kernel,
-    iteration cap and metric options (and the prior as a factor when it has a covariance)."""
+    iteration cap and metric options (and the prior as a factor when it has a covariance);
+    ``deadline`` is a ``time.perf_counter()`` instant after which no LM iteration starts."""
     kwargs = dict(
         use_sigma=options.use_sigma, robust=options.robust, robust_scale=options.robust_scale,
         prior_world_from_camera=None if prior is None or prior.covariance is None
@@ -129,6 +131,7 @@ def refine_pose(
         prior_covariance=None if prior is None else prior.covariance,
         max_iterations=options.max_iterations,
         metric_options=dict(options.metric_options) if options.metric_options else None,
+        deadline=deadline,
     )
     return refine(detections, ellipsoids, camera, initial_world_from_camera, options.metric,
                   **kwargs)
@@ -137,17 +140,17 @@ def refine_pose(
 def _refine_matches(
     matches: Sequence[Match], detections: Sequence[Detection], compiled: CompiledMap,
     camera: Camera, world_from_camera: np.ndarray, options: LocalizationOptions,
-    prior: PosePrior | None,
+    prior: PosePrior | None, deadline: float | None,
 ) -> RefinementResult:
     return refine_pose([detections[m.detection_index] for m in matches],
                        [compiled.ellipsoids[m.object_index] for m in matches],
-                       camera, world_from_camera, options, prior)
+                       camera, world_from_camera, options, prior, deadline)
 
 
 def _refine_and_verify(
     matches: Sequence[Match], detections: Sequence[Detection], compiled: CompiledMap,
     camera: Camera, scorer: MatchScorer, world_from_camera: np.ndarray,
-    options: LocalizationOptions, prior: PosePrior | None,
+    options: LocalizationOptions, prior: PosePrior | None, deadline: float | None,
 ) -> tuple[np.ndarray, np.ndarray | None, list[InlierMatch]] | None:
     """Refine on ``matches``, re-associate, refine again if the set changed; None if the
     result fails the inlier check. Returns (world_from_camera, covariance, inliers)."""
@@ -162,7 +165,8 @@ def _refine_and_verify(
     current = list(matches)
     T = world_from_camera
     for round_ in range(2):
-        res = _refine_matches(current, detections, compiled, camera, T, options, prior)
+        res = _refine_matches(current, detections, compiled, camera, T, options, prior,
+                              deadline)
         if res.status in ("diverged", "invalid_projection") or not np.all(
                 np.isfinite(res.world_from_camera)):
             return None
@@ -238,7 +242,7 @@ def localize(
         got = None
         if len(matches) >= options.min_inliers:
             got = _refine_and_verify(matches, detections, compiled, camera, scorer,
-                                     prior.world_from_camera, options, prior)
+                                     prior.world_from_camera, options, prior, deadline)
         timings["prior"] = (time.perf_counter() - tp) * 1e3
         if got is not None:
             return finish(*got, used_prior=True)
@@ -255,7 +259,7 @@ def localize(
                               evaluated, timings, t0)
     tr = time.perf_counter()
     got = _refine_and_verify(list(outcome.matches), detections, compiled, camera, scorer,
-                             invert_pose(outcome.camera_from_world), options, None)
+                             invert_pose(outcome.camera_from_world), options, None, deadline)
     timings["refine"] = (time.perf_counter() - tr) * 1e3
     if got is None:
         return _not_localized("refinement_diverged", metric, evaluated, timings, t0)

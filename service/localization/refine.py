@@ -80,7 +80,7 @@ LAMBDA_UPPER_BOUND = 1e10
 #: The covariance is reported only if cond(information) is below this.
 INFORMATION_CONDITION_LIMIT = 1e12
 #: Possible ``RefinementResult.status`` values.
-STATUSES = ("converged", "max_iterations", "diverged", "invalid_projection")
+STATUSES = ("converged", "max_iterations", "time_budget", "diverged", "invalid_projection")
 
 _POSE_KEY = 0
 
@@ -103,7 +103,8 @@ class RefinementResult:
         iterations: LM iterations performed.
         converged: ``status == "converged"``.
         status: one of :data:`STATUSES`: ``converged`` (LM met a stopping tolerance),
-            ``max_iterations`` (the cap was reached first), ``invalid_projection`` (some
+            ``max_iterations`` (the cap was reached first), ``time_budget`` (the ``deadline``
+            passed first; the pose is the last accepted LM step), ``invalid_projection`` (some
             ellipsoid's projection is not an ellipse at the final pose: behind the camera,
             crossing its principal plane or containing it), ``diverged`` (GTSAM failed or
             the result is not finite; the initial pose is returned).
@@ -172,6 +173,7 @@ def refine(
     prior_covariance: np.ndarray | None = None,
     max_iterations: int = 50,
     metric_options: Mapping[str, Any] | None = None,
+    deadline: float | None = None,
 ) -> RefinementResult:
     """Refine the camera pose by minimising ``sum_j sigma_j^-1 Delta_j`` (paper eq. 8) with LM.
 
@@ -189,6 +191,8 @@ def refine(
         prior_world_from_camera, prior_covariance: optional pose prior (4x4) and its 6x6
             covariance in GTSAM's Pose3 tangent order ``[omega, v]``, body frame; both or neither.
         max_iterations: LM iteration cap (>= 1).
+        deadline: optional ``time.perf_counter()`` instant after which no further LM iteration
+            starts (the per-request solve budget of the service); None = no limit.
         metric_options: options of the metric (e.g. level-set sampling), see
             ``factors.metrics``.
 
@@ -227,18 +231,19 @@ def refine(
     T_start, total_iterations, initial_error = T0, 0, None
     for pass_ in range(2 if resample else 1):
         outcome = _solve(detections, ellipsoids, camera, T_start, metric, sigmas, robust,
-                         robust_scale, prior, max_iterations - total_iterations, metric_options)
+                         robust_scale, prior, max_iterations - total_iterations, metric_options,
+                         deadline)
         total_iterations += outcome.iterations
         if initial_error is None:
             initial_error = outcome.initial_error
-        if pass_ == 1 or outcome.status in ("diverged", "invalid_projection") \
+        if pass_ == 1 or outcome.status in ("diverged", "invalid_projection", "time_budget") \
                 or total_iterations >= max_iterations or not outcome.sampling_grown:
             break
         # Some adaptive level-set sample areas were grown for the misalignment at T_start
         # (factors.metrics.level_set_sampling_scale); re-lay them at the result and solve again.
         T_start = outcome.T
     status = outcome.status
-    if status not in ("diverged", "invalid_projection") and total_iterations >= max_iterations:
+    if status == "converged" and total_iterations >= max_iterations:
         status = "max_iterations"
     if status == "diverged":
         covariance, reason = None, "refinement diverged"
@@ -275,6 +280,7 @@ def _solve(
     T0: np.ndarray, metric: str, sigmas: list[float | None], robust: str | None,
     robust_scale: float | None, prior: tuple[np.ndarray, np.ndarray] | None,
     max_iterations: int, metric_options: Mapping[str, Any] | None,
+    deadline: float | None = None,
 ) -> _SolveOutcome:
     """One LM solve from ``T0`` (level-set samples laid out at ``T0``)."""
     # without robust kernels one batched factor (Diagonal noise = the same per-detection
@@ -297,8 +303,14 @@ def _solve(
     initial_error = float(graph.error(initial))
     status = "converged"
     try:
-        optimizer = gtsam.LevenbergMarquardtOptimizer(graph, initial, _lm_params(max_iterations))
-        result = optimizer.optimize()
+        params = _lm_params(max_iterations)
+        optimizer = gtsam.LevenbergMarquardtOptimizer(graph, initial, params)
+        if deadline is None:
+            result = optimizer.optimize()
+        elif _optimize_until(optimizer, params, deadline):
+            result = optimizer.values()
+        else:
+            result, status = optimizer.values(), "time_budget"
         iterations = int(optimizer.iterations())
         T = result.atPose3(_POSE_KEY).matrix()
         total_error = float(graph.error(result))
@@ -316,6 +328,27 @@ def _solve(
         status = "invalid_projection"
     return _SolveOutcome(T, result, graph, costs, valid, initial_error, total_error,
                          iterations, status, bool(getattr(model, "sampling_grown", False)))
+
+
+def _optimize_until(
+    optimizer: gtsam.LevenbergMarquardtOptimizer, params: gtsam.LevenbergMarquardtParams,
+    deadline: float,
+) -> bool:
+    """GTSAM's ``optimize()`` loop (same stopping rules), stepped from Python so that no
+    iteration starts after ``deadline``. True if it stopped by itself, False at the deadline."""
+    current = optimizer.error()
+    if current <= params.getErrorTol():
+        return True
+    while optimizer.iterations() < params.getMaxIterations():
+        if time.perf_counter() > deadline:
+            return False
+        optimizer.iterate()
+        new = optimizer.error()
+        if not math.isfinite(new) or optimizer.lambda_() > params.getlambdaUpperBound() \
+                or gtsam.checkConvergence(params, current, new):
+            return True
+        current = new
+    return True
 
 
 def _covariance(
