@@ -47,6 +47,7 @@ from bench import shared_data
 from bench.shared_data import CHESS_POSES_PATH, load_chess_map
 from factors.geometry import Camera, invert_pose, pose_matrix
 from factors.metrics import METRIC_NAMES
+from service.localization.types import LocalizationOptions
 
 # ``load_chess_map`` (from bench.shared_data) and ``load_chess_poses`` are imported by tests.
 
@@ -76,6 +77,12 @@ GROUPS = ("2", "3", "4", "5+")
 #: Missed-detection rate of the evaluation's simulated frames (the simulator's default is 0.1;
 #: 0.2 puts frames in every group of the split by number of objects).
 EVAL_MISS_PROBABILITY = 0.2
+
+
+def eval_options(**kwargs: object) -> LocalizationOptions:
+    """Options of the evaluation: no time budget (it measures the method, not a service
+    deadline; RANSAC stays bounded by its hypothesis count)."""
+    return LocalizationOptions(time_budget_ms=None, **kwargs)  # type: ignore[arg-type]
 
 
 def pose_errors(estimate: np.ndarray | None, truth: np.ndarray) -> tuple[float, float]:
@@ -147,7 +154,6 @@ def run(frames: int = 108, draws: int = 1, seed: int = 0, metrics: tuple[str, ..
     from bench.simulate import SimulationConfig, simulate_frame
     from maps.compiled import compile_map
     from service.localization.pipeline import localize, refine_pose
-    from service.localization.types import LocalizationOptions
 
     scene = load_chess_map()
     cm = compile_map(scene)
@@ -165,7 +171,7 @@ def run(frames: int = 108, draws: int = 1, seed: int = 0, metrics: tuple[str, ..
     for i in idx:
         f = simulate_frame(cm, camera, poses[i], int(i), SimulationConfig.exact())
         t = time.perf_counter()
-        r = localize(f.detections, cm, camera, LocalizationOptions(seed=seed))
+        r = localize(f.detections, cm, camera, eval_options(seed=seed))
         exact_ms.append((time.perf_counter() - t) * 1e3)
         exact_err.append(pose_errors(r.world_from_camera if r.localized else None, poses[i]))
     ep = np.array([e[0] for e in exact_err])
@@ -198,7 +204,7 @@ def run(frames: int = 108, draws: int = 1, seed: int = 0, metrics: tuple[str, ..
             grp = group_of(len(f))
             for m in methods:
                 name = "none" if m == NO_REFINEMENT else m
-                opts = LocalizationOptions(metric=name, seed=seed)
+                opts = eval_options(metric=name, seed=seed)
                 t = time.perf_counter()
                 r = localize(f.detections, cm, camera, opts)
                 dt = (time.perf_counter() - t) * 1e3
@@ -213,7 +219,7 @@ def run(frames: int = 108, draws: int = 1, seed: int = 0, metrics: tuple[str, ..
                 if m == NO_REFINEMENT or (m in SLOW_METRICS and k % slow_stride):
                     continue
                 r2 = localize(f.detections, cm, camera,
-                              LocalizationOptions(metric=name, seed=seed, use_sigma=False))
+                              eval_options(metric=name, seed=seed, use_sigma=False))
                 err_nosigma[m].append((*pose_errors(
                     r2.world_from_camera if r2.localized else None, poses[i]), grp))
             if k % 20 == 0:
@@ -257,7 +263,7 @@ def run(frames: int = 108, draws: int = 1, seed: int = 0, metrics: tuple[str, ..
                     continue
                 try:
                     r = refine_pose(dets, ells, camera, start,
-                                    LocalizationOptions(metric=m, seed=seed))
+                                    eval_options(metric=m, seed=seed))
                     T = r.world_from_camera if r.status not in ("diverged",) else None
                 except ValueError:
                     T = None
@@ -285,7 +291,7 @@ def run(frames: int = 108, draws: int = 1, seed: int = 0, metrics: tuple[str, ..
             if m in SLOW_METRICS and n_part % slow_stride:
                 continue
             name = "none" if m == NO_REFINEMENT else m
-            r = localize(f.detections, cm, camera, LocalizationOptions(metric=name, seed=seed))
+            r = localize(f.detections, cm, camera, eval_options(metric=name, seed=seed))
             part[m].append(pose_errors(r.world_from_camera if r.localized else None,
                                        poses[i])[0])
     results["partial_visibility"] = {
