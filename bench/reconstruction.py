@@ -8,8 +8,9 @@ versions; each object is reconstructed with ``maps.reconstruct.reconstruct_ellip
 Rubino estimate + GTSAM LM refinement) and compared with the map's ellipsoid
 (``ellipsoid_errors``: matched over the 24 axis symmetries).
 
-Usage: ``.venv/bin/python -m bench.reconstruction [--trials 10] [--views 10] [--no-write]``;
-writes the "reconstruction" section of docs/results.md.
+Usage: ``.venv/bin/python -m bench.reconstruction [--trials 10] [--views 10] [--seed 0]
+[--json FILE] [--write-results]``: prints the section; only ``--write-results`` writes it into
+the "reconstruction" section of docs/results.md (as ``bench.registration_2d`` does).
 """
 
 from __future__ import annotations
@@ -32,7 +33,13 @@ from factors.geometry import (
     project_ellipsoid,
 )
 from maps.demo import load_demo_map
-from maps.reconstruct import ReconstructionError, ellipsoid_errors, reconstruct_ellipsoid
+from maps.reconstruct import (
+    ReconstructionError,
+    _max_ray_angle_deg,
+    _rays,
+    ellipsoid_errors,
+    reconstruct_ellipsoid,
+)
 
 
 def load_views() -> tuple[Camera, list[np.ndarray]]:
@@ -74,10 +81,11 @@ NARROW_DEG = 15.0
 
 _HEADER = ("| setting | view set | solved | centre err cm (median / p90) "
            "| semi-axes err cm (median / p90) | orientation err deg (median / p90) "
-           "| shape rel. err (median) | time ms (median) |\n|---|---|---|---|---|---|---|---|")
+           "| shape rel. err (median) | time ms (median, this row) |\n"
+           "|---|---|---|---|---|---|---|---|")
 
 
-def run(trials: int, n_views: int, seed: int) -> tuple[str, dict]:
+def run(trials: int, n_views: int, seed: int, command: str = "") -> tuple[str, dict]:
     cam, cfw = load_views()
     scene = load_demo_map()
     rng = np.random.default_rng(seed)
@@ -102,7 +110,7 @@ def run(trials: int, n_views: int, seed: int) -> tuple[str, dict]:
     for label, corrupt, options in settings:
         stats: dict[str, list] = {"spread": [], "wide": [], "narrow": []}
         failures: dict[str, int] = {}
-        times = []
+        times: dict[str, list[float]] = {"wide": [], "narrow": []}
         for obj, _idx, sel in per_object:
             E = obj.ellipsoid
             exact = [project_ellipsoid(cam, cfw[i], E) for i in sel]
@@ -116,7 +124,7 @@ def run(trials: int, n_views: int, seed: int) -> tuple[str, dict]:
                     failures[exc.reason] = failures.get(exc.reason, 0) + 1
                     stats[group_of[obj.object_id]].append(None)
                     continue
-                times.append(time.perf_counter() - t0)
+                times[group_of[obj.object_id]].append(time.perf_counter() - t0)
                 stats[group_of[obj.object_id]].append(ellipsoid_errors(res.ellipsoid, E))
         raw["settings"][label] = {k: v for k, v in stats.items() if k != "spread"}
         for group in ("wide", "narrow"):
@@ -140,7 +148,7 @@ def run(trials: int, n_views: int, seed: int) -> tuple[str, dict]:
                 f"{med('axes_m') * 100:.3g} / {p90('axes_m') * 100:.3g} | "
                 f"{med('orientation_deg'):.3g} / {p90('orientation_deg'):.3g} | "
                 f"{med('shape_rel'):.3g} | "
-                f"{np.median(times) * 1000:.1f} |"
+                f"{np.median(times[group]) * 1000:.1f} |"
             )
         if failures:
             rows.append(f"| ↳ failures | | {', '.join(f'{k}: {v}' for k, v in failures.items())}"
@@ -172,8 +180,10 @@ Noise: centre `N(0, sigma_px)` per coordinate, semi-axes `x (1 + N(0, rel))`, an
 the inscribed axis-aligned ellipse (the paper built its map from such boxes).
 {trials} noise draws per object and setting, seed {seed}. "wide": view sets whose viewing rays
 span >= {NARROW_DEG:g} deg ({describe("wide")}); "narrow": the others ({describe("narrow")}).
-Times: wall clock per object (linear
-estimate + both LM refinements) on the shared 2-core machine, noisy between runs.
+Times: median wall clock per solved
+object of the row's setting and view-set group (linear estimate + both LM refinements) on the
+shared 2-core machine, noisy between runs.
+{f"Command: `{command}`." if command else ""}
 
 | object | category | frames visible | views used | ray spread (deg) |
 |---|---|---|---|---|
@@ -226,16 +236,12 @@ def _findings(raw: dict) -> str:
     )
 
 
-def _spread_deg(cam: Camera, cfw: list[np.ndarray], sel: list[int],
-                E: object) -> float:
-    d = []
-    for i in sel:
-        e = project_ellipsoid(cam, cfw[i], E)
-        ray = np.array([(e.cx - cam.cx) / cam.fx, (e.cy - cam.cy) / cam.fy, 1.0])
-        ray = cfw[i][:3, :3].T @ ray
-        d.append(ray / np.linalg.norm(ray))
-    d = np.array(d)
-    return float(np.degrees(np.arccos(np.clip(d @ d.T, -1, 1).min())))
+def _spread_deg(cam: Camera, cfw: list[np.ndarray], sel: list[int], E: Ellipsoid) -> float:
+    """Largest angle (deg) between the world rays through the exact projections' centres: the
+    same measure (``maps.reconstruct._rays`` / ``_max_ray_angle_deg``) the reconstruction uses
+    to refuse near-parallel views."""
+    ells = [project_ellipsoid(cam, cfw[i], E) for i in sel]
+    return _max_ray_angle_deg(_rays(ells, [cam] * len(sel), np.asarray([cfw[i] for i in sel])))
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -243,14 +249,17 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--trials", type=int, default=10)
     parser.add_argument("--views", type=int, default=10)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--no-write", action="store_true", help="print only")
+    parser.add_argument("--write-results", action="store_true",
+                        help="write the section into docs/results.md (section reconstruction)")
     parser.add_argument("--json", type=Path, help="also write the raw errors here")
     args = parser.parse_args(argv)
-    md, raw = run(args.trials, args.views, args.seed)
+    command = (f"python -m bench.reconstruction --trials {args.trials} --views {args.views} "
+               f"--seed {args.seed} --write-results")
+    md, raw = run(args.trials, args.views, args.seed, command)
     print(md)
     if args.json:
         args.json.write_text(json.dumps(raw, indent=1, default=float))
-    if not args.no_write:
+    if args.write_results:
         from bench.results_doc import update_results_section
 
         update_results_section("reconstruction", md)

@@ -43,6 +43,7 @@ __all__ = [
     "Ellipse",
     "Ellipsoid",
     "GeometryError",
+    "canonical_quaternion_wxyz",
     "dual_conics_from_params",
     "ellipse_params",
     "ellipsoid_depth_margins",
@@ -55,6 +56,7 @@ __all__ = [
     "quaternion_wxyz_from_rotation",
     "rotation_2d",
     "rotation_from_quaternion_wxyz",
+    "sigma_entries",
     "snap_to_rotation",
 ]
 
@@ -121,6 +123,17 @@ def check_rotation(owner: str, name: str, value: object) -> np.ndarray:
 # --------------------------------------------------------------------------- rotations and poses
 
 
+def sigma_entries(a: float, b: float, angle: float) -> tuple[float, float, float]:
+    """``Sigma = R(angle) diag(a^2, b^2) R(angle)^T`` of an ellipse as ``(s00, s01, s11)``.
+
+    Scalar ``math`` (no numpy: the metrics call it per ellipse). ``Sigma = A^-1`` is the
+    ellipse's covariance-like shape (:meth:`Ellipse.gaussian`).
+    """
+    c, s = math.cos(angle), math.sin(angle)
+    a2, b2 = a * a, b * b
+    return a2 * c * c + b2 * s * s, (a2 - b2) * c * s, a2 * s * s + b2 * c * c
+
+
 def rotation_2d(angle: float) -> np.ndarray:
     """2x2 rotation by ``angle`` radians (counter-clockwise in a y-up frame, i.e. from +x to +y)."""
     c, s = math.cos(angle), math.sin(angle)
@@ -178,12 +191,20 @@ def quaternion_wxyz_from_rotation(rotation: np.ndarray) -> np.ndarray:
         q = np.array([(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s,
                       (R[1, 2] + R[2, 1]) / s, 0.25 * s])
     q /= np.linalg.norm(q)
-    # Canonical sign: w > 0; for a half-turn (|w| <= 1e-12, then set to 0) the first
-    # non-zero of x, y, z is > 0.
+    return canonical_quaternion_wxyz(q)
+
+
+def canonical_quaternion_wxyz(q: np.ndarray) -> np.ndarray:
+    """The canonical sign of a unit ``(w, x, y, z)`` quaternion (``q`` and ``-q`` are the same
+    rotation): ``w > 0``; for a half-turn (``|w| <= 1e-12``, then set to exactly 0) the first
+    non-zero (``> 1e-12``) of ``x, y, z`` is positive. Returns a new array."""
+    q = np.array(q, dtype=float)
     if abs(q[0]) <= 1e-12:
         q[0] = 0.0
-    lead = q[np.flatnonzero(np.abs(q) > 1e-12)[0]]
-    return -q if lead < 0 else q
+    nonzero = np.flatnonzero(np.abs(q) > 1e-12)
+    if nonzero.size and q[nonzero[0]] < 0:
+        q = -q
+    return q + 0.0  # -0.0 -> 0.0: equal rotations give equal text (hashes)
 
 
 def pose_matrix(rotation: np.ndarray, translation: Sequence[float]) -> np.ndarray:
@@ -289,8 +310,8 @@ class Ellipse:
     # -- Gaussian
     def gaussian(self) -> tuple[np.ndarray, np.ndarray]:
         """``(mu, Sigma)``: ``mu = c`` (2,), ``Sigma = R diag(a^2, b^2) R^T`` (2x2)."""
-        R = self.rotation
-        return self.center, R @ np.diag([self.a**2, self.b**2]) @ R.T
+        s00, s01, s11 = sigma_entries(self.a, self.b, self.angle)
+        return self.center, np.array([[s00, s01], [s01, s11]])
 
     @classmethod
     def from_gaussian(cls, mu: Sequence[float], sigma: np.ndarray) -> Ellipse:
@@ -498,9 +519,28 @@ class Camera:
 
     @classmethod
     def from_matrix(cls, K: np.ndarray, width: int, height: int) -> Camera:
-        """From a 3x3 intrinsic matrix (zero skew)."""
-        K = np.asarray(K, dtype=float)
-        return cls(K[0, 0], K[1, 1], K[0, 2], K[1, 2], width, height)
+        """From a 3x3 intrinsic matrix ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`` (pixels).
+
+        Raises ``GeometryError`` naming ``K`` for another shape, non-finite entries, a nonzero
+        skew ``K[0, 1]`` (this pinhole model has none: dropping it would move every point) or
+        any other entry off that pattern (``K[1, 0]``, last row ``[0, 0, 1]``).
+        """
+        try:
+            M = np.array(K, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise GeometryError("Camera.from_matrix: K must be a numeric 3x3 matrix") from exc
+        if M.shape != (3, 3) or not np.all(np.isfinite(M)):
+            raise GeometryError(
+                f"Camera.from_matrix: K must be a finite 3x3 matrix, got shape {M.shape}")
+        if M[0, 1] != 0.0:
+            raise GeometryError(
+                f"Camera.from_matrix: K has skew K[0, 1] = {M[0, 1]:g}; only zero skew is "
+                "supported")
+        if M[1, 0] != 0.0 or M[2, 0] != 0.0 or M[2, 1] != 0.0 or M[2, 2] != 1.0:
+            raise GeometryError(
+                "Camera.from_matrix: K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], got "
+                f"{M.tolist()}")
+        return cls(M[0, 0], M[1, 1], M[0, 2], M[1, 2], width, height)
 
     @property
     def K(self) -> np.ndarray:

@@ -83,7 +83,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from factors.geometry import Ellipse
+from factors.geometry import Ellipse, sigma_entries
 from factors.overlap import HULL_DIRECTIONS, hull_area, intersection_area
 
 __all__ = [
@@ -155,6 +155,8 @@ def _positive_int(name: str, value: object) -> int:
 
 
 def _positive_float(name: str, value: object) -> float:
+    if isinstance(value, str | bytes | bool):  # float("2") and float(True) would pass
+        raise ValueError(f"option {name} must be a number, got {value!r}")
     try:
         f = float(value)  # type: ignore[arg-type]
     except (TypeError, ValueError) as exc:
@@ -179,9 +181,7 @@ def _image_size(value: object) -> tuple[float, float]:
 
 def _sigma(e: Ellipse) -> tuple[float, float, float]:
     """``Sigma = R diag(a^2, b^2) R^T`` as ``(s00, s01, s11)``."""
-    c, s = math.cos(e.angle), math.sin(e.angle)
-    a2, b2 = e.a * e.a, e.b * e.b
-    return a2 * c * c + b2 * s * s, (a2 - b2) * c * s, a2 * s * s + b2 * c * c
+    return sigma_entries(e.a, e.b, e.angle)
 
 
 def _dual_vec(e: Ellipse) -> tuple[float, float, float, float, float]:
@@ -302,7 +302,11 @@ def _level_template(n_azimuths: int, n_levels: int) -> tuple[np.ndarray, np.ndar
 
 
 def _canonical_axes(e: Ellipse) -> tuple[float, float, float]:
-    """``(a, b, angle)`` with ``a >= b`` (angle shifted by pi/2 when the axes are swapped)."""
+    """``(a, b, angle)`` with ``a >= b`` (angle shifted by pi/2 when the axes are swapped).
+
+    Unlike :meth:`Ellipse.canonical` the angle is NOT wrapped to ``[-pi/2, pi/2)``: the
+    level-set layout rotates with ``angle``, and a wrap by pi would reflect it through the
+    centre (a different sample order); ``PoseResidualModel`` uses this same rule."""
     if e.b > e.a:
         return e.b, e.a, e.angle + 0.5 * math.pi
     return e.a, e.b, e.angle
@@ -375,11 +379,9 @@ def level_set_sample_points(
 def _level_set_residual(det: Ellipse, proj: Ellipse, n_azimuths: int = 6, n_levels: int = 4,
                         scale: float = DEFAULT_LEVEL_SET_SCALE,
                         adaptive: bool = True) -> np.ndarray:
-    if n_azimuths != 6 or n_levels != 4:
-        n_azimuths = _positive_int("n_azimuths", n_azimuths)
-        n_levels = _positive_int("n_levels", n_levels)
-    if scale != DEFAULT_LEVEL_SET_SCALE:
-        scale = _positive_float("scale", scale)
+    n_azimuths = _positive_int("n_azimuths", n_azimuths)  # always: 6.0 == 6 but is no int
+    n_levels = _positive_int("n_levels", n_levels)
+    scale = _positive_float("scale", scale)
     s_max = _adaptive_scale(det, proj, scale, adaptive)
     pts = _sample_points(det, s_max, n_azimuths, n_levels)
     _, r2 = _level_template(n_azimuths, n_levels)

@@ -32,6 +32,8 @@ import math
 
 import numpy as np
 
+from factors.geometry import sigma_entries
+
 #: Number of parametric angles used to bracket the contour intersections.
 GRID = 128
 #: Default number of normal directions used to bracket the hull's common tangents.
@@ -163,9 +165,8 @@ def _directions(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _sigma_terms(p: np.ndarray) -> tuple[float, float, float]:
-    a2, b2 = float(p[2]) ** 2, float(p[3]) ** 2
-    c, s = math.cos(p[4]), math.sin(p[4])
-    return a2 * c * c + b2 * s * s, (a2 - b2) * c * s, a2 * s * s + b2 * c * c
+    """``(s00, s01, s11)`` of ``Sigma`` for params ``p = (cx, cy, a, b, angle)``."""
+    return sigma_entries(float(p[2]), float(p[3]), float(p[4]))
 
 
 def hull_area(p1: np.ndarray, p2: np.ndarray, n_directions: int = HULL_DIRECTIONS) -> float:

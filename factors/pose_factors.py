@@ -59,6 +59,7 @@ import gtsam
 import numpy as np
 
 from factors.geometry import Camera, Ellipse, Ellipsoid
+from factors.metrics import METRIC_NAMES
 from factors.pose_residuals import PoseResidualModel
 
 __all__ = [
@@ -97,6 +98,14 @@ DEFAULT_ROBUST_SCALE: dict[str, float] = {
 
 def _is_real(x: object) -> bool:
     return isinstance(x, numbers.Real) and not isinstance(x, bool)
+
+
+def _check_sigmas(sigmas: Sequence[float | None], n: int) -> None:
+    if len(sigmas) != n:
+        raise ValueError(f"sigmas must have one entry per detection ({n}), got {len(sigmas)}")
+    for j, s in enumerate(sigmas):
+        if s is not None and not (_is_real(s) and math.isfinite(s) and s > 0):
+            raise ValueError(f"sigmas[{j}] must be finite and > 0, got {s!r}")
 
 
 def make_noise_model(
@@ -187,12 +196,7 @@ def pose_factors(
                               metric_options=metric_options, **model_options)
     if sigmas is None:
         sigmas = [None] * model.n
-    if len(sigmas) != model.n:
-        raise ValueError(f"sigmas must have one entry per detection ({model.n}), "
-                         f"got {len(sigmas)}")
-    for j, s in enumerate(sigmas):
-        if s is not None and not (_is_real(s) and math.isfinite(s) and s > 0):
-            raise ValueError(f"sigmas[{j}] must be finite and > 0, got {s!r}")
+    _check_sigmas(sigmas, model.n)
     if robust is None and robust_scale is not None:
         raise ValueError("robust_scale given without a robust kernel (robust=None)")
     if batched:
@@ -237,9 +241,7 @@ def pose_factor(
 
 #: ``FACTOR_FACTORIES[metric](key, detection, ellipsoid, camera, *, sigma=..., robust=..., ...)``
 FACTOR_FACTORIES: dict[str, Callable[..., gtsam.CustomFactor]] = {
-    name: partial(pose_factor, name)
-    for name in ("iou", "giou", "bbox", "qbbox", "algebraic", "frobenius", "wasserstein",
-                 "bhattacharyya", "level_set")
+    name: partial(pose_factor, name) for name in METRIC_NAMES
 }
 
 
@@ -247,9 +249,16 @@ def batched_pose_factor(
     key: int, model: PoseResidualModel, sigmas: Sequence[float | None] | None = None
 ) -> gtsam.CustomFactor:
     """ONE factor over all pairs of ``model`` (Diagonal noise: pair ``j`` rows std
-    ``sqrt(sigma_j)``). No per-detection robust kernel is possible in this form; it exists to
-    measure the per-detection design against it (``bench.refine_speed``)."""
+    ``sqrt(sigma_j)``, unit where ``sigmas[j]`` is None).
+
+    The same weighted error as one factor per pair with one GTSAM callback instead of N:
+    :func:`pose_factors` returns it for ``batched=True``, which the refinement uses whenever no
+    robust kernel is asked for (a per-detection robust kernel is impossible in this form);
+    ``bench.refine_speed`` measures both designs. ``sigmas`` are validated as in
+    :func:`pose_factors` (one per pair, finite and > 0, or None)."""
     n, m = model.n, model.dim
+    if sigmas is not None:
+        _check_sigmas(sigmas, n)
     stds = np.ones(n) if sigmas is None else np.array(
         [1.0 if s is None else math.sqrt(s) for s in sigmas])
     noise = gtsam.noiseModel.Diagonal.Sigmas(np.repeat(stds, m))

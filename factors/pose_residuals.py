@@ -52,21 +52,35 @@ camera: depth margin ``m = z_c - sqrt(S_c[2,2]) > 0`` (see
 optimisation (ellipsoid behind the camera, crossing its principal plane, or containing it), the
 pair's residual is replaced by the bounded penalty (every one of the ``dim`` components equal)::
 
-    r_k = sqrt(penalty_cost / dim) * (1 + d / (d + d_s)),   d = min_depth_margin - m >= 0
+    r_k = sqrt(P_j / dim) * (1 + d / (d + d_s)),   d = min_depth_margin - m >= 0
 
-so its cost lies in ``[penalty_cost, 4 penalty_cost)`` (finite, never NaN), with ``d_s`` the
-ellipsoid's largest semi-axis (m). Its Jacobian ``-sqrt(penalty_cost/dim) d_s / (d + d_s)^2
-dm/dxi`` points towards a positive margin (``dm/dw = e3 x c_c - (e3 x S_c e3) / sqrt(S_c[2,2])``,
-``dm/dv = -e3``). ``penalty_cost`` (default :data:`DEFAULT_PENALTY_COST`) is far above the cost of
-any sensible valid pair, so Levenberg-Marquardt rejects steps into the invalid region and, from
-an invalid start, is pushed back to valid poses.
+so its cost lies in ``[P_j, 4 P_j)`` (finite, never NaN), with ``d_s`` the ellipsoid's largest
+semi-axis (m). Its Jacobian ``-sqrt(P_j/dim) d_s / (d + d_s)^2 dm/dxi`` points towards a positive
+margin (``dm/dw = e3 x c_c - (e3 x S_c e3) / sqrt(S_c[2,2])``, ``dm/dv = -e3``); a Gauss-Newton
+step on the penalty alone, ``|r| / |dr/dm|``, does not depend on ``P_j``.
+
+A barrier must cost more than the valid poses LM can compare it with, and the metrics' costs
+have different units: ``P_j = penalty_cost * rho_j^2`` (:attr:`PoseResidualModel.penalty_costs`)
+with ``rho_j`` the pair's reference residual magnitude in the metric's own units:
+``L_j`` px for bbox / qbbox / wasserstein, ``L_j^2`` px^2 for algebraic / frobenius (their
+costs grow as px^4), ``max(1, s_max_j)^2`` for level_set (``Phi`` units; ``s_max_j`` its
+sampling scale) and 1 for iou / giou / bhattacharyya; ``L_j = max(image diagonal, |c_D| +
+max(a_D, b_D))`` px is the detection's reference length. With the default ``penalty_cost``
+(:data:`DEFAULT_PENALTY_COST` = 1e8) the penalty exceeds the valid cost of any projection whose
+centre, axes and box stay within ~1e4 reference lengths (bbox, wasserstein; 100 for algebraic,
+frobenius, since their residual is quadratic in px) of the detection: near the principal plane
+the projection of an ellipsoid with ``d_s`` = 1 m at the minimum margin 1 mm and ``f`` = 1000 px
+spans ``f sqrt(d_s / (2 min_depth_margin))`` ~ 2e4 px, ~25 diagonals of a 640x480 image, and
+the bounded metrics (iou, giou, bhattacharyya, level_set) stay orders of magnitude below. So
+Levenberg-Marquardt rejects steps into the invalid region and, from an invalid start, is pushed
+back to valid poses. A robust kernel (``factors.pose_factors``) flattens every large residual,
+the penalty included: with one, the barrier is only as strong as the kernel lets it be.
 """
 
 from __future__ import annotations
 
 import functools
 import math
-import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -74,6 +88,7 @@ from typing import Any
 import numpy as np
 
 from factors.geometry import (
+    ORTHONORMAL_TOLERANCE,
     Camera,
     DegenerateProjectionError,
     Ellipse,
@@ -83,6 +98,7 @@ from factors.geometry import (
     level_values,
     params_from_dual_conics,
 )
+from factors.metrics import METRIC_NAMES
 
 __all__ = [
     "ANALYTIC_METRICS",
@@ -96,7 +112,8 @@ __all__ = [
     "numerical_pose_jacobian",
 ]
 
-#: Cost (unweighted, per pair) of the invalid-projection penalty; the penalty lies in [1x, 4x).
+#: Invalid-projection penalty cost per pair, in units of the pair's reference cost ``rho_j^2``
+#: (see the module docstring); the penalty's cost lies in ``[1x, 4x) penalty_cost rho_j^2``.
 DEFAULT_PENALTY_COST = 1e8
 #: A projection counts as valid while the ellipsoid's smallest camera depth exceeds this (m).
 DEFAULT_MIN_DEPTH_MARGIN = 1e-3
@@ -104,13 +121,17 @@ DEFAULT_MIN_DEPTH_MARGIN = 1e-3
 #: Larger for iou/giou: their residual ``sqrt(Delta)`` has a cone at the optimum, where a wider
 #: central difference still gives a usable slope (the areas themselves are exact and smooth).
 DEFAULT_NUMERIC_STEP: dict[str, float] = {
-    "iou": 1e-5, "giou": 1e-5, "bbox": 1e-6, "qbbox": 1e-6, "algebraic": 1e-6,
-    "frobenius": 1e-6, "wasserstein": 1e-6, "bhattacharyya": 1e-6, "level_set": 1e-6,
-}
+    name: 1e-5 if name in ("iou", "giou") else 1e-6 for name in METRIC_NAMES}
 #: Metrics whose pose Jacobian is analytic (the others use central differences).
 ANALYTIC_METRICS: tuple[str, ...] = (
     "level_set", "algebraic", "frobenius", "wasserstein", "bhattacharyya", "bbox")
 _CONIC_METRICS = ("algebraic", "frobenius", "wasserstein", "bhattacharyya", "bbox")
+#: Power of the reference length ``L_j`` (px) in the metric's residual: the penalty's
+#: reference residual ``rho_j = L_j ** power`` (level_set: ``max(1, s_max_j)^2`` instead).
+_PENALTY_PIXEL_POWER: dict[str, int] = {
+    "iou": 0, "giou": 0, "bhattacharyya": 0, "level_set": 0, "bbox": 1, "qbbox": 1,
+    "wasserstein": 1, "algebraic": 2, "frobenius": 2}
+assert set(_PENALTY_PIXEL_POWER) == set(METRIC_NAMES)
 _INV_SQRT8 = 1.0 / math.sqrt(8.0)
 _SQRT2 = math.sqrt(2.0)
 # tangent generators: d(A)/d(omega_k) = G + G^T with G = -[e_k]x A; d(A)/d(v_k) = G + G^T with
@@ -159,6 +180,14 @@ def _unit_level_set_layout(n_azimuths: int, n_levels: int) -> np.ndarray:
                                          adaptive=False)
     uv.setflags(write=False)
     return uv
+
+
+def _canonical_axes(P: np.ndarray) -> np.ndarray:
+    """``(a, b, angle)`` (N, 3) with ``a >= b`` of ellipse params ``P`` (N, 5): the batched form
+    of ``factors.metrics._canonical_axes`` (angle + pi/2 when swapped, not wrapped)."""
+    swap = P[:, 3] > P[:, 2]
+    return np.stack([np.where(swap, P[:, 3], P[:, 2]), np.where(swap, P[:, 2], P[:, 3]),
+                     P[:, 4] + np.where(swap, 0.5 * np.pi, 0.0)], axis=1)
 
 
 def _skew(w: np.ndarray) -> np.ndarray:
@@ -261,7 +290,6 @@ class PoseResidualModel:
         penalty_cost: float = DEFAULT_PENALTY_COST,
         numeric_step: float | None = None,
         eager_jacobian: bool | None = None,
-        _verify: bool = True,
     ) -> None:
         from factors import metrics
 
@@ -324,23 +352,28 @@ class PoseResidualModel:
             self.dim = self._metric_dim()
             if metric in _CONIC_METRICS:
                 self._init_conic()
-        self._pen_amp = math.sqrt(self.penalty_cost / self.dim)
+        self.penalty_costs = self._penalty_costs()
+        self.penalty_costs.setflags(write=False)
+        self._pen_amp = np.sqrt(self.penalty_costs / self.dim)  # (N,)
         # per-pair options of the factors.metrics calls (the level set's samples stay fixed)
         self._pair_options = [self.options] * self.n
         if metric == "level_set":
             self._pair_options = [{**self.options, "scale": float(sc), "adaptive": False}
                                   for sc in self.sampling_scale]
         self.analytic = metric in ANALYTIC_METRICS
-        if self.analytic and _verify and not _analytic_agrees(metric, _options_key(self.options)):
-            warnings.warn(
-                f"the vectorised {metric!r} residual disagrees with factors.metrics.residual "
-                "(the metric's definition changed?): falling back to factors.metrics.residual "
-                "with numerical Jacobians", RuntimeWarning, stacklevel=2)
-            self.analytic = False
-            if eager_jacobian is None:
-                self.eager_jacobian = False
 
     # ------------------------------------------------------------------ set-up
+    def _penalty_costs(self) -> np.ndarray:
+        """Per-pair penalty cost ``P_j = penalty_cost * rho_j^2`` (N,), see the module doc."""
+        if self.metric == "level_set":
+            rho = np.maximum(1.0, self.sampling_scale) ** 2
+        else:
+            P = self._det_params
+            diag = math.hypot(self.camera.width, self.camera.height)
+            L = np.maximum(diag, np.hypot(P[:, 0], P[:, 1]) + np.maximum(P[:, 2], P[:, 3]))
+            rho = L ** _PENALTY_PIXEL_POWER[self.metric]
+        return self.penalty_cost * rho * rho
+
     def _projections(self, world_from_camera: np.ndarray) -> list[Ellipse | None]:
         """Projected ellipses at a pose (None where the projection is not an ellipse)."""
         A, _, _, margins = self._camera_frame(np.asarray(world_from_camera, dtype=float))
@@ -388,10 +421,7 @@ class PoseResidualModel:
                 d = np.sqrt(level_values(P[ok], centre[:, None, :])[:, 0])
                 s_max[ok] = np.maximum(scale, metrics.LEVEL_SET_ADAPTIVE_GAIN * d)
         # canonical axes a >= b (the metric's layout does not depend on axis labelling)
-        swap = P[:, 3] > P[:, 2]
-        a = np.where(swap, P[:, 3], P[:, 2])
-        b = np.where(swap, P[:, 2], P[:, 3])
-        ang = P[:, 4] + np.where(swap, 0.5 * np.pi, 0.0)
+        a, b, ang = _canonical_axes(P).T
         ca, sa = np.cos(ang)[:, None], np.sin(ang)[:, None]
         u = uv[None, :, 0] * (a * s_max)[:, None]
         v = uv[None, :, 1] * (b * s_max)[:, None]
@@ -489,7 +519,8 @@ class PoseResidualModel:
         idx = np.flatnonzero(bad)
         d = self.min_depth_margin - margins[idx]
         ds = self._d_scale[idx]
-        r[idx] = (self._pen_amp * (1.0 + d / (d + ds)))[:, None]
+        amp = self._pen_amp[idx]
+        r[idx] = (amp * (1.0 + d / (d + ds)))[:, None]
         if J is not None:
             cb = c[idx]
             s3 = S[idx, :, 2]
@@ -498,7 +529,7 @@ class PoseResidualModel:
             dm[:, 0] = -cb[:, 1] + s3[:, 1] / ext
             dm[:, 1] = cb[:, 0] - s3[:, 0] / ext
             dm[:, 5] = -1.0
-            coef = -self._pen_amp * ds / (d + ds) ** 2
+            coef = -amp * ds / (d + ds) ** 2
             J[idx] = (coef[:, None] * dm)[:, None, :]
 
     # ------------------------------------------------------------------ conic metrics
@@ -509,14 +540,11 @@ class PoseResidualModel:
         self._det_box = np.array([d.bbox() for d in self.detections])  # (N, 4) px
         c, s = np.cos(P[:, 4]), np.sin(P[:, 4])
         a2, b2 = P[:, 2] ** 2, P[:, 3] ** 2
-        # S_D = R diag(a^2, b^2) R^T as (s00, s01, s11)
+        # S_D = R diag(a^2, b^2) R^T as (s00, s01, s11): factors.geometry.sigma_entries,
+        # batched over the detections
         self._det_sigma = np.stack([a2 * c * c + b2 * s * s, (a2 - b2) * c * s,
                                     a2 * s * s + b2 * c * c], axis=1)
-        # canonical (a >= b, angle + pi/2 when swapped) semi-axes and angle, as metrics does
-        swap = P[:, 3] > P[:, 2]
-        self._det_canon = np.stack([np.where(swap, P[:, 3], P[:, 2]),
-                                    np.where(swap, P[:, 2], P[:, 3]),
-                                    P[:, 4] + np.where(swap, 0.5 * np.pi, 0.0)], axis=1)
+        self._det_canon = _canonical_axes(P)
 
     def _evaluate_conic(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
         """Analytic residuals/Jacobians of the metrics that are smooth functions of the
@@ -786,7 +814,7 @@ def _check_pose(T: object, name: str) -> np.ndarray:
         raise GeometryError(f"{name} last row must be [0, 0, 0, 1], got {M[3].tolist()}")
     R = M[:3, :3]
     err = float(np.max(np.abs(R @ R.T - np.eye(3))))
-    if err > 1e-6 or np.linalg.det(R) < 0:
+    if err > ORTHONORMAL_TOLERANCE or np.linalg.det(R) < 0:
         raise GeometryError(
             f"{name} rotation block is not a proper rotation (max|R R^T - I| = {err:.3g})"
         )
@@ -794,53 +822,6 @@ def _check_pose(T: object, name: str) -> np.ndarray:
 
 
 def check_pose(T: object, name: str = "world_from_camera") -> np.ndarray:
-    """Validate a 4x4 rigid transform (finite, last row [0,0,0,1], rotation within 1e-6)."""
+    """Validate a 4x4 rigid transform (finite, last row [0,0,0,1], rotation orthonormal within
+    ``factors.geometry.ORTHONORMAL_TOLERANCE``, det > 0)."""
     return _check_pose(T, name)
-
-
-def _options_key(options: Mapping[str, Any]) -> tuple:
-    """Hashable form of metric options (sequences become tuples)."""
-    return tuple(sorted((k, tuple(v) if isinstance(v, list | np.ndarray) else v)
-                        for k, v in options.items()))
-
-
-@functools.lru_cache(maxsize=64)
-def _analytic_agrees(metric: str, options_key: tuple) -> bool:
-    """Once per process and (metric, options): does the vectorised residual equal
-    ``factors.metrics.residual`` on a fixed scene (a guard against the two drifting apart)?"""
-    from factors import metrics
-
-    options = dict(options_key)
-    camera = Camera(500.0, 510.0, 320.0, 240.0, 640, 480)
-    ells = [Ellipsoid(np.array([-0.6, 0.2, 4.0]), np.array([0.3, 0.2, 0.15]),
-                      _expmap_rotation(np.array([0.3, -0.2, 0.5]))),
-            Ellipsoid(np.array([0.5, -0.3, 5.0]), np.array([0.2, 0.35, 0.25]),
-                      _expmap_rotation(np.array([-0.4, 0.1, 1.2]))),
-            Ellipsoid(np.array([0.1, 0.4, 3.0]), np.array([0.15, 0.15, 0.3]), np.eye(3))]
-    truth = np.eye(4)
-    pose = expmap_pose3(np.array([0.02, -0.03, 0.01, 0.05, 0.02, -0.04]))
-    dets = []
-    for e in ells:
-        d = _project(camera, truth, e)
-        dets.append(Ellipse(d.cx + 7.0, d.cy - 4.0, 1.1 * d.a, 0.95 * d.b, d.angle + 0.1))
-    dets[1] = Ellipse(dets[1].cx, dets[1].cy, dets[1].b, dets[1].a, dets[1].angle + 0.5 * np.pi)
-    try:
-        model = PoseResidualModel(metric, dets, ells, camera, initial_world_from_camera=pose,
-                                  metric_options=options, _verify=False)
-        got = model.evaluate(pose, jacobian=False).residuals
-        want = np.array([metrics.residual(metric, d, _project(camera, pose, e), **options)
-                         for d, e in zip(dets, ells, strict=True)])
-    except (ValueError, TypeError, ArithmeticError):
-        return False
-    return got.shape == want.shape and bool(
-        np.allclose(got, want, rtol=1e-7, atol=1e-9 * max(1.0, float(np.abs(want).max()))))
-
-
-def _expmap_rotation(w: np.ndarray) -> np.ndarray:
-    return expmap_pose3(np.r_[w, 0.0, 0.0, 0.0])[:3, :3]
-
-
-def _project(camera: Camera, world_from_camera: np.ndarray, e: Ellipsoid) -> Ellipse:
-    from factors.geometry import invert_pose, project_ellipsoid
-
-    return project_ellipsoid(camera, invert_pose(world_from_camera), e)

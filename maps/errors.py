@@ -57,4 +57,9 @@ class VersionConflict(MapStoreError):  # noqa: N818 (names fixed by the API cont
 
 
 class StoreUnavailable(MapStoreError):  # noqa: N818 (names fixed by the API contract)
-    """The database cannot be reached (raised by ``MapStore.ping``)."""
+    """The database cannot be reached or failed (connection, timeout, lock, disk).
+
+    Raised by every ``MapStore`` operation that touches the database (``create``, ``update``,
+    ``delete``, ``get``, ``versions``, ``list``, ``compiled``, ``migrate``), not only by
+    ``MapStore.ping``: callers map it to HTTP 503.
+    """

@@ -19,12 +19,14 @@ import json
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 
 from factors.geometry import (
     Ellipsoid,
+    canonical_quaternion_wxyz,
     quaternion_wxyz_from_rotation,
     rotation_from_quaternion_wxyz,
     snap_to_rotation,
@@ -170,6 +172,8 @@ def _validate_header(
     fixed["categories"] = cats
     if metadata is None:
         metadata = {}
+    if isinstance(metadata, Mapping):
+        metadata = _thaw(metadata)  # a deep, private copy (frozen below)
     if not isinstance(metadata, dict):
         errors.add("metadata", f"must be a JSON object, got {type(metadata).__name__}")
     else:
@@ -181,8 +185,26 @@ def _validate_header(
             if size > LIMITS["max_metadata_bytes"]:
                 errors.add("metadata", f"at most {int(LIMITS['max_metadata_bytes'])} bytes "
                                        f"of JSON, got {size}")
-        fixed["metadata"] = metadata
+        fixed["metadata"] = _freeze(metadata)
     return fixed
+
+
+def _freeze(value: Any) -> Any:
+    """Read-only deep view of JSON data: objects -> ``MappingProxyType``, arrays -> tuples."""
+    if isinstance(value, Mapping):
+        return MappingProxyType({k: _freeze(v) for k, v in value.items()})
+    if isinstance(value, list | tuple):
+        return tuple(_freeze(v) for v in value)
+    return value
+
+
+def _thaw(value: Any) -> Any:
+    """Plain (mutable, JSON-serialisable) deep copy of :func:`_freeze`'s output."""
+    if isinstance(value, Mapping):
+        return {k: _thaw(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_thaw(v) for v in value]
+    return value
 
 
 def _validate_objects(
@@ -238,13 +260,17 @@ class MapObject:
         quaternion_wxyz: Sequence[float],
     ) -> MapObject:
         """Build from centre (m, world), semi-axes (m) and a unit ``(w, x, y, z)`` quaternion
-        (ellipsoid frame -> world; renormalised, sign made canonical ``w >= 0``)."""
+        (ellipsoid frame -> world; renormalised, sign made canonical as in
+        :func:`factors.geometry.canonical_quaternion_wxyz`: ``w > 0``, and for a half-turn
+        (``w = 0``) the first non-zero of ``x, y, z`` positive, so ``q`` and ``-q`` give equal
+        objects and equal map hashes)."""
         q = np.array(quaternion_wxyz, dtype=float)
         n = float(np.linalg.norm(q))
         if abs(n - 1.0) > 1e-15:  # leave unit ones bit-for-bit: re-imports stay exact
             q = q / n
-        if q[0] < 0:
-            q = -q
+        if q.shape == (4,) and (q[0] < 0 or abs(q[0]) <= 1e-12):  # else q is kept bit for bit
+            q = canonical_quaternion_wxyz(q)
+        q = q + 0.0  # -0.0 -> 0.0 (same rotation, same exported text); other values unchanged
         q.setflags(write=False)
         obj = cls.__new__(cls)
         object.__setattr__(obj, "_quaternion_wxyz", q)
@@ -280,7 +306,10 @@ class SceneMap:
     :data:`MAP_ID_PATTERN`; ``up_axis`` finite and non-zero (stored as given, see :attr:`up`);
     categories unique non-empty strings; object ids unique; each object's category in
     ``categories``; semi-axes and coordinates within :data:`LIMITS`; ``metadata`` a JSON object.
-    ``up_axis``, ``categories`` and ``objects`` are converted to tuples.
+    ``up_axis``, ``categories`` and ``objects`` are converted to tuples; ``metadata`` to a
+    read-only deep copy (``MappingProxyType``, arrays as tuples): maps are shared, e.g. by the
+    compiled-map cache, and must not change under their content hash. ``to_dict`` returns
+    plain, mutable copies.
     """
 
     map_id: str
@@ -289,7 +318,7 @@ class SceneMap:
     categories: tuple[str, ...]
     objects: tuple[MapObject, ...]
     version: int = 1
-    metadata: dict[str, Any] = field(default_factory=dict)
+    metadata: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         errors = _Errors()
@@ -305,6 +334,16 @@ class SceneMap:
         for key, value in fixed.items():
             object.__setattr__(self, key, value)
         object.__setattr__(self, "objects", objs)
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(self.__dict__)  # mappingproxy does not pickle: store plain JSON data
+        state["metadata"] = _thaw(self.metadata)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        state = dict(state)
+        state["metadata"] = _freeze(state["metadata"])
+        self.__dict__.update(state)
 
     def __eq__(self, other: object) -> bool:
         """Equal documents: same :func:`canonical_json` (content and version)."""
@@ -376,7 +415,7 @@ def scene_map_to_dict(scene_map: SceneMap) -> dict[str, Any]:
             }
             for o in scene_map.objects
         ],
-        "metadata": scene_map.metadata,
+        "metadata": _thaw(scene_map.metadata),
     }
 
 
@@ -437,9 +476,7 @@ def _parse_object(errors: _Errors, path: str, obj: object) -> MapObject | None:
     for key in ("object_id", "category", "center", "axes"):
         if key not in obj:
             errors.add(f"{path}.{key}", "required field missing")
-    object_id = obj.get("object_id")
-    if isinstance(object_id, int) and not isinstance(object_id, bool):
-        object_id = str(object_id)  # tolerate integer ids (the Chess format uses them)
+    object_id = obj.get("object_id")  # a string, as MAP_JSON_SCHEMA says (no integers)
     if "object_id" in obj:
         _check_text(errors, f"{path}.object_id", object_id, int(LIMITS["max_id_length"]))
     if "category" in obj:
@@ -524,6 +561,9 @@ def scene_map_from_dict(data: Mapping[str, Any], *, version: int | None = None) 
         raw_objects = []
     objects = [_parse_object(errors, f"objects[{i}]", o) for i, o in enumerate(raw_objects)]
     metadata = data.get("metadata", {})
+    if metadata is None:  # present but null: MAP_JSON_SCHEMA says "object"
+        errors.add("metadata", "must be a JSON object, got null")
+        metadata = {}
     ver = data.get("version", 1) if version is None else version
     fixed = _validate_header(errors, data.get("map_id", ""), data.get("name", ""), ver,
                              up_arr if up_arr is not None else (0.0, 0.0, 1.0), cats, metadata)
@@ -582,7 +622,10 @@ def scene_map_from_chess(
         if not isinstance(ell, Mapping):
             errors.add(f"{path}.ellipsoid", "required object {axes, R, center} missing")
             continue
-        entry: dict[str, Any] = {"object_id": o.get("object_id"), "category": labels[cid],
+        oid = o.get("object_id")
+        if isinstance(oid, int) and not isinstance(oid, bool):
+            oid = str(oid)  # the Chess format's integer ids become their decimal string
+        entry: dict[str, Any] = {"object_id": oid, "category": labels[cid],
                                  "center": ell.get("center"), "axes": ell.get("axes"),
                                  "rotation": ell.get("R")}
         converted.append(entry)

@@ -43,6 +43,7 @@ import gtsam
 import numpy as np
 
 from factors.geometry import (
+    ORTHONORMAL_TOLERANCE,
     Camera,
     Ellipse,
     Ellipsoid,
@@ -160,9 +161,11 @@ def _prepare(
     if poses.shape != (n, 4, 4) or not np.all(np.isfinite(poses)):
         raise ReconstructionError("bad_input", "world_from_camera must be finite 4x4 matrices")
     R = poses[:, :3, :3]
-    if np.max(np.abs(np.einsum("nij,nkj->nik", R, R) - np.eye(3))) > 1e-6:
+    if np.max(np.abs(np.einsum("nij,nkj->nik", R, R) - np.eye(3))) > ORTHONORMAL_TOLERANCE \
+            or np.any(np.linalg.det(R) <= 0):
         raise ReconstructionError("bad_input", "world_from_camera rotations must be orthonormal "
-                                               "(snap them with factors.geometry.snap_to_rotation)")
+                                               "with det +1 (snap them with "
+                                               "factors.geometry.snap_to_rotation)")
     cfw = np.array([invert_pose(T) for T in poses])
     P = np.array([c.projection_matrix(T) for c, T in zip(cams, cfw, strict=True)])
     return ells, cfw, cams, P

@@ -75,6 +75,10 @@ SQLITE_BUSY_TIMEOUT_S = 30.0
 #: Compiled maps kept per store (least recently used evicted first).
 COMPILED_CACHE_SIZE = 64
 
+# Table descriptions for building queries ONLY. The schema itself belongs to the Alembic
+# migrations (maps/migrations/versions/); these declarations mirror it, CHECK constraints
+# included, and are never used to create tables (no metadata.create_all). A schema change is a
+# new migration plus the matching edit here (tests/test_maps_store.py compares the two).
 _metadata = sa.MetaData()
 maps_table = sa.Table(
     "quadloc_maps",
@@ -84,6 +88,7 @@ maps_table = sa.Table(
     sa.Column("latest_version", sa.Integer, nullable=False),
     sa.Column("created_at", sa.DateTime(timezone=True), nullable=False),
     sa.Column("updated_at", sa.DateTime(timezone=True), nullable=False),
+    sa.CheckConstraint("latest_version >= 1", name="ck_quadloc_maps_latest_version"),
 )
 versions_table = sa.Table(
     "quadloc_map_versions",
@@ -94,6 +99,7 @@ versions_table = sa.Table(
     sa.Column("content", sa.Text, nullable=False),
     sa.Column("content_hash", sa.String(64), nullable=False),
     sa.Column("created_at", sa.DateTime(timezone=True), nullable=False),
+    sa.CheckConstraint("version >= 1", name="ck_quadloc_map_versions_version"),
 )
 
 
@@ -270,7 +276,9 @@ class MapStore:
         """Store ``scene_map`` as version ``expected_version + 1`` of ``map_id``.
 
         Raises :class:`MapNotFound`, :class:`VersionConflict` if ``expected_version`` is not the
-        latest version, :class:`MapValidationError` if ``scene_map.map_id != map_id``.
+        latest version, :class:`MapValidationError` if ``scene_map.map_id != map_id``,
+        ``ValueError`` naming ``expected_version`` unless it is an integer >= 1 (no version
+        below 1 ever exists).
         """
         _check_scene_map(scene_map)
         if scene_map.map_id != map_id:
@@ -279,6 +287,9 @@ class MapStore:
                                        f"{scene_map.map_id!r}"}])
         if isinstance(expected_version, bool) or not isinstance(expected_version, int):
             raise ValueError(f"expected_version must be an integer, got {expected_version!r}")
+        if expected_version < 1:
+            raise ValueError(f"expected_version must be >= 1 (versions start at 1), got "
+                             f"{expected_version}")
         new_version = expected_version + 1
         stored = replace(scene_map, version=new_version)
         text = canonical_json(stored)

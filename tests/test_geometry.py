@@ -292,3 +292,39 @@ def test_validation_messages_name_the_field(make, field):
         make()
     assert field in str(exc.value)
     assert isinstance(exc.value, ValueError)
+
+
+# --------------------------------------------------------------------------- Camera.from_matrix
+
+
+def test_camera_from_matrix_round_trip() -> None:
+    K = np.array([[500.0, 0.0, 320.0], [0.0, 510.0, 240.0], [0.0, 0.0, 1.0]])
+    cam = Camera.from_matrix(K, 640, 480)
+    np.testing.assert_array_equal(cam.K, K)
+
+
+@pytest.mark.parametrize("K", [
+    [[500.0, 2.0, 320.0], [0.0, 510.0, 240.0], [0.0, 0.0, 1.0]],  # skew: was dropped silently
+    [[500.0, 0.0, 320.0], [0.0, 510.0, 240.0]],  # 2x3: was read as if 3x3
+    np.eye(4) * 500.0,  # 4x4: was read as if 3x3
+    [[500.0, 0.0, 320.0], [0.0, 510.0, 240.0], [0.0, 0.0, 2.0]],  # not normalised
+    [[500.0, 0.0, 320.0], [0.0, 510.0, math.nan], [0.0, 0.0, 1.0]],
+])
+def test_camera_from_matrix_rejects_what_it_cannot_represent(K) -> None:
+    with pytest.raises(GeometryError, match=r"\bK\b"):
+        Camera.from_matrix(np.asarray(K), 640, 480)
+
+
+def test_canonical_quaternion_tie_break_for_half_turns() -> None:
+    from factors.geometry import canonical_quaternion_wxyz
+
+    q = np.array([0.0, 0.0, -0.6, 0.8])
+    for s in (1.0, -1.0):
+        got = canonical_quaternion_wxyz(s * q)
+        np.testing.assert_array_equal(got, [0.0, 0.0, 0.6, -0.8])
+        assert math.copysign(1.0, got[0]) == 1.0 and math.copysign(1.0, got[1]) == 1.0
+    np.testing.assert_allclose(
+        quaternion_wxyz_from_rotation(rotation_from_quaternion_wxyz(q)), [0, 0, 0.6, -0.8],
+        atol=1e-12)
+    np.testing.assert_array_equal(canonical_quaternion_wxyz([-0.5, 0.5, 0.5, 0.5]),
+                                  [0.5, -0.5, -0.5, -0.5])

@@ -415,3 +415,69 @@ def test_random_maps_round_trip_exactly(seed: int) -> None:
         assert a.quaternion_wxyz[0] >= 0
         np.testing.assert_allclose(rotation_from_quaternion_wxyz(a.quaternion_wxyz), R,
                                    atol=1e-12)
+
+
+# --------------------------------------------------------------------------- review fixes
+
+
+@pytest.mark.parametrize(
+    "mutate",
+    [
+        lambda d: d["objects"][0].update(object_id=7),  # the parser used to accept it
+        lambda d: d.update(metadata=None),  # ditto
+        lambda d: d["objects"][0].update(object_id=""),
+        lambda d: d.update(metadata=[1, 2]),
+    ],
+)
+def test_schema_and_parser_agree_on_ids_and_metadata(mutate: Any) -> None:
+    doc = _doc()
+    mutate(doc)
+    assert _schema_errors(MAP_JSON_SCHEMA, doc)
+    fields = _errors(doc)
+    assert any(f.endswith("object_id") or f == "metadata" for f in fields), fields
+
+
+def test_chess_import_still_converts_integer_ids() -> None:
+    data = {"category_id_to_label": {"0": "TV"},
+            "objects": [{"category_id": 0, "object_id": 12,
+                         "ellipsoid": {"axes": [0.3, 0.2, 0.1], "center": [0, 0, 1],
+                                       "R": np.eye(3).tolist()}}]}
+    m = scene_map_from_chess(data)
+    assert m.objects[0].object_id == "12"
+    assert _schema_errors(MAP_JSON_SCHEMA, m.to_dict()) == []
+
+
+def test_half_turn_quaternions_of_either_sign_give_equal_objects() -> None:
+    """q and -q with w = 0 are the same rotation: equal objects and equal map hashes."""
+    q = np.array([0.0, 0.6, -0.8, 0.0])
+    a = MapObject.from_quaternion_wxyz("a", "chair", [1, 2, 0.5], [0.3, 0.2, 0.4], q)
+    b = MapObject.from_quaternion_wxyz("a", "chair", [1, 2, 0.5], [0.3, 0.2, 0.4], -q)
+    assert a == b
+    np.testing.assert_array_equal(a.quaternion_wxyz, [0.0, 0.6, -0.8, 0.0])  # first x > 0
+    maps = [SceneMap("m", "M", (0.0, 0.0, 1.0), ("chair",), (o,)) for o in (a, b)]
+    assert maps[0].content_hash == maps[1].content_hash
+    # the same tie-break as the rotation -> quaternion conversion
+    from factors.geometry import quaternion_wxyz_from_rotation
+    np.testing.assert_allclose(quaternion_wxyz_from_rotation(a.ellipsoid.rotation),
+                               a.quaternion_wxyz, atol=1e-12)
+
+
+def test_metadata_is_frozen_deeply_and_still_exports() -> None:
+    source = {"note": "x", "nested": {"list": [1, {"k": 2}]}}
+    m = SceneMap("m", "M", (0.0, 0.0, 1.0), ("chair",), (), metadata=source)
+    source["note"] = "changed"  # the caller's dict is not shared
+    source["nested"]["list"].append(3)
+    assert m.metadata["note"] == "x"
+    with pytest.raises(TypeError):
+        m.metadata["note"] = "y"  # type: ignore[index]
+    with pytest.raises(TypeError):
+        m.metadata["nested"]["list2"] = 1  # type: ignore[index]
+    assert m.metadata["nested"]["list"] == (1, {"k": 2})
+    exported = m.to_dict()["metadata"]
+    assert exported == {"note": "x", "nested": {"list": [1, {"k": 2}]}}
+    exported["note"] = "mutated"  # a copy: the map is unchanged
+    assert m.metadata["note"] == "x"
+    again = SceneMap.from_json(m.to_json())
+    assert again == m and again.content_hash == m.content_hash
+    # a map built from another map's (frozen) metadata validates and compares equal
+    assert SceneMap("m", "M", (0.0, 0.0, 1.0), ("chair",), (), metadata=m.metadata) == m

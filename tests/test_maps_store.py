@@ -415,3 +415,26 @@ def test_urls() -> None:
         MapStore("mysql://u@h/db", migrate=False)
     with pytest.raises(ValueError, match="url"):
         normalize_url("")
+
+
+@pytest.mark.parametrize("bad", [0, -3])
+def test_update_rejects_impossible_expected_versions_by_name(store: MapStore, bad: int) -> None:
+    """Before: -3 reached ``replace(scene_map, version=-2)`` and raised a MapValidationError
+    naming the map's ``version`` field, which the caller never set."""
+    store.create(_small_map())
+    with pytest.raises(ValueError, match="expected_version") as exc:
+        store.update("office", _small_map(name="v2"), expected_version=bad)
+    assert not isinstance(exc.value, MapValidationError)
+    assert _count_versions(store, "office") == 1
+
+
+def test_query_tables_mirror_the_migrated_schema(store: MapStore) -> None:
+    """The Table declarations used for queries carry the migration's CHECK constraints."""
+    from maps.store import maps_table
+
+    inspector = sa.inspect(store.engine)
+    for table in (maps_table, versions_table):
+        migrated = {c["name"] for c in inspector.get_check_constraints(table.name)}
+        declared = {c.name for c in table.constraints if isinstance(c, sa.CheckConstraint)}
+        assert declared and declared == migrated, table.name
+        assert {c["name"] for c in inspector.get_columns(table.name)} == set(table.c.keys())

@@ -482,3 +482,17 @@ def test_nonfinite_free_on_extreme_inputs():
     p = Ellipse(1e4, -1e4, 500, 1, 1.0)
     for name in METRIC_NAMES:
         assert math.isfinite(cost(name, d, p, **opts(name))), name
+
+
+@pytest.mark.parametrize("options", [{"n_azimuths": 6.0}, {"n_levels": 4.0},
+                                     {"n_azimuths": True}, {"scale": math.nan},
+                                     {"scale": "2"}, {"n_levels": 0}])
+def test_level_set_options_are_validated_even_when_equal_to_the_defaults(options):
+    """Before: ``n_azimuths=6.0`` (== 6) and ``n_levels=4.0`` skipped validation."""
+    det = Ellipse(100.0, 80.0, 30.0, 20.0, 0.2)
+    proj = Ellipse(104.0, 78.0, 28.0, 21.0, 0.25)
+    name = next(iter(options))
+    with pytest.raises(ValueError, match=name):
+        residual("level_set", det, proj, **options)
+    with pytest.raises(ValueError, match=name):
+        cost("level_set", det, proj, **options)

@@ -166,8 +166,13 @@ def test_level_set_analytic_jacobian_matches_numerical(seed):
 
 
 @pytest.mark.parametrize("metric", ["algebraic", "frobenius", "wasserstein", "bhattacharyya",
-                                    "bbox", "qbbox"])  # the last one: the numerical path
+                                    "bbox", "qbbox"])
 def test_smooth_metric_jacobians_match_numerical(scene, metric):
+    """Analytic Jacobians against central differences of ``factors.metrics.residual``.
+
+    qbbox has no analytic Jacobian: its model uses central differences too, so for it this is
+    only a PLUMBING check (right pose perturbation, step and row order), not a check of
+    derivative formulas."""
     assert set(ANALYTIC_METRICS) == {"level_set", "algebraic", "frobenius", "wasserstein",
                                      "bhattacharyya", "bbox"}
     ells, dets, pose = scene
@@ -301,7 +306,9 @@ def test_invalid_projection_penalty_is_bounded_with_usable_jacobian(scene, case)
     ev = model.evaluate(pose)
     assert not ev.valid[0]
     cost = float(ev.residuals[0] @ ev.residuals[0])
-    assert DEFAULT_PENALTY_COST <= cost < 4 * DEFAULT_PENALTY_COST
+    # level_set: reference residual max(1, s_max)^2 = 4 Phi units (s_max = 2, not adaptive)
+    assert model.penalty_costs[0] == pytest.approx(DEFAULT_PENALTY_COST * 16.0)
+    assert model.penalty_costs[0] <= cost < 4 * model.penalty_costs[0]
     assert np.all(np.isfinite(ev.jacobians))
     num = numeric_jacobian(lambda T: model.evaluate(T, jacobian=False).residuals[0].copy(), pose)
     np.testing.assert_allclose(ev.jacobians[0], num, rtol=1e-5, atol=1e-6 * np.abs(num).max())
@@ -323,34 +330,93 @@ def test_every_metric_factor_survives_invalid_projection(scene, metric):
     assert not ev.valid[0]
     assert np.all(np.isfinite(ev.residuals)) and np.all(np.isfinite(ev.jacobians))
     cost0 = float(ev.residuals[0] @ ev.residuals[0])
-    assert DEFAULT_PENALTY_COST <= cost0 < 4 * DEFAULT_PENALTY_COST
+    # the penalty is scaled to the metric's units (px^4 for algebraic), never below the default
+    assert DEFAULT_PENALTY_COST <= model.penalty_costs[0] <= cost0 < 4 * model.penalty_costs[0]
     # its Jacobian row pushes the depth margin up (d margin / d v_z = -1: move backwards)
     assert np.all(ev.jacobians[0][:, 5] > 0)
 
 
-def test_analytic_path_falls_back_when_metrics_definition_changes(monkeypatch, scene):
-    """If factors.metrics' residual ever differs from the vectorised copy, the model warns and
-    uses factors.metrics.residual itself (numerical Jacobians): still the metric's values."""
-    from factors import pose_residuals
+def _scene_with_a_close_object(rng: np.random.Generator) -> list[Ellipsoid]:
+    """4 objects 3-5 m away plus one 0.2 m in front of the identity camera (semi-axes 8 cm):
+    a 10 cm / 5 degree error can put it across the camera's principal plane."""
+    out = []
+    for _ in range(4):
+        q = rng.normal(size=4)
+        q = q / np.linalg.norm(q) * np.sign(q[0])
+        out.append(Ellipsoid(np.array([rng.uniform(-1, 1), rng.uniform(-0.6, 0.6),
+                                       rng.uniform(3, 5)]),
+                             rng.uniform(0.15, 0.4, 3), rotation_from_quaternion_wxyz(q)))
+    out.append(Ellipsoid(np.array([0.1, 0.05, 0.2]), np.array([0.08, 0.064, 0.08]), np.eye(3)))
+    return out
 
+
+@pytest.mark.parametrize("metric", ["algebraic", "frobenius", "bbox", "wasserstein"])
+def test_lm_never_ends_behind_the_camera_when_the_truth_is_valid(metric):
+    """Regression: with a fixed penalty cost of 1e8, the px^4-scaled algebraic/frobenius costs
+    (~5e10 at these starts) were larger than the penalty, so LM stepped the close object
+    behind the camera and stayed there (seeds 4 and 5 ended 'invalid_projection')."""
+    from service.localization.refine import refine
+    from service.localization.types import Detection
+
+    truth = np.eye(4)  # world_from_camera
+    for seed in range(8):
+        rng = np.random.default_rng(seed)
+        ells = _scene_with_a_close_object(rng)
+        dets = [Detection(project_ellipsoid(CAMERA, invert_pose(truth), e), f"o{j}")
+                for j, e in enumerate(ells)]
+        start = retract(truth, perturbation(rng, math.radians(5.0), 0.10))
+        res = refine(dets, ells, CAMERA, start, metric, max_iterations=50)
+        margins = ellipsoid_depth_margins(invert_pose(res.world_from_camera),
+                                          np.array([e.center for e in ells]),
+                                          np.array([e.shape_matrix() for e in ells]))
+        assert res.valid_projection.all() and np.all(margins > 0), (seed, res.status)
+
+
+@pytest.mark.parametrize("metric", metrics.METRIC_NAMES)
+def test_penalty_exceeds_valid_costs_near_the_principal_plane(metric):
+    """The module docstring's claim: at the smallest valid margin (just above
+    ``min_depth_margin``) the valid cost, from ``factors.metrics.cost`` on the independently
+    projected ellipse, is below the penalty cost of the same pair just across the boundary."""
+    e = Ellipsoid(np.array([0.0, 0.0, 0.0]), np.array([1.0, 0.6, 0.8]), np.eye(3))  # d_s = 1 m
+    camera = Camera(1000.0, 1000.0, 320.0, 240.0, 640, 480)
+    det = Ellipse(300.0, 260.0, 40.0, 25.0, 0.3)
+    # level_set: LM minimises the samples fixed at the start (here s_max = 2), not re-grown
+    opts = {"image_size": (camera.width, camera.height)} if metric == "qbbox" else \
+        {"adaptive": False} if metric == "level_set" else {}
+    model = PoseResidualModel(metric, [det], [e], camera, metric_options=opts)
+    assert model.penalty_costs[0] >= DEFAULT_PENALTY_COST
+    depth = float(np.sqrt(e.shape_matrix()[2, 2]))
+    for lateral in (0.0, 0.3, 1.0):  # m, object centre off the optical axis
+        for margin in (2e-3, 1e-2):  # m, above the default min_depth_margin 1e-3
+            pose = np.eye(4)  # world_from_camera, looking along +Z at the object
+            pose[:3, 3] = [-lateral, 0.0, -(depth + margin)]
+            proj = project_ellipsoid(camera, invert_pose(pose), e)
+            valid_cost = metrics.cost(metric, det, proj, **opts)
+            assert model.evaluate(pose).valid[0]
+            assert model.costs(pose)[0] == pytest.approx(valid_cost, rel=1e-6)
+            pose[2, 3] += 2 * margin  # the same pose just across: margin -> -margin
+            ev = model.evaluate(pose)
+            assert not ev.valid[0]
+            assert valid_cost < model.penalty_costs[0] <= model.costs(pose)[0]
+
+
+@pytest.mark.parametrize("sigmas", [[1.0, -1.0, 1.0, 1.0, 1.0], [1.0, math.nan, 1.0, 1.0, 1.0],
+                                    [1.0, 1.0], [1.0, True, 1.0, 1.0, 1.0]])
+def test_batched_factor_validates_sigmas(scene, sigmas):
+    """Before: batched_pose_factor took sqrt of whatever it got (NaN std for -1)."""
     ells, dets, pose = scene
-    original = metrics.residual
+    model = PoseResidualModel("level_set", dets, ells, CAMERA, initial_world_from_camera=pose)
+    with pytest.raises(ValueError, match="sigmas"):
+        batched_pose_factor(0, model, sigmas)
 
-    def changed(name, detection, projection, **options):
-        r = original(name, detection, projection, **options)
-        return 2.0 * r if name == "wasserstein" else r
 
-    pose_residuals._analytic_agrees.cache_clear()
-    monkeypatch.setattr(metrics, "residual", changed)
-    try:
-        with pytest.warns(RuntimeWarning, match="wasserstein"):
-            model = PoseResidualModel("wasserstein", dets, ells, CAMERA)
-        assert not model.analytic
-        ev = model.evaluate(pose)
-        for j, (d, e) in enumerate(zip(dets, ells, strict=True)):
-            proj = project_ellipsoid(CAMERA, invert_pose(pose), e)
-            np.testing.assert_allclose(ev.residuals[j], changed("wasserstein", d, proj))
-        # an unchanged metric keeps its analytic path
-        assert PoseResidualModel("level_set", dets, ells, CAMERA).analytic
-    finally:
-        pose_residuals._analytic_agrees.cache_clear()
+def test_batched_factor_weights_each_pair_by_its_sigma(scene):
+    ells, dets, pose = scene
+    sigmas = [0.5, None, 2.0, 1.0, 4.0]
+    model = PoseResidualModel("level_set", dets, ells, CAMERA, initial_world_from_camera=pose)
+    values = gtsam.Values()
+    values.insert(0, gtsam.Pose3(pose))
+    costs = model.costs(pose)
+    expected = 0.5 * sum(c / (1.0 if s is None else s) for c, s in zip(costs, sigmas, strict=True))
+    assert batched_pose_factor(0, model, sigmas).error(values) == pytest.approx(expected, rel=1e-9)
+    assert FACTOR_FACTORIES.keys() == set(metrics.METRIC_NAMES)
