@@ -59,6 +59,7 @@ LIMITS: dict[str, float] = {
     "max_id_length": 128,
     "max_name_length": 256,
     "max_metadata_bytes": 65_536,
+    "max_metadata_depth": 32,
     # Tolerances of the JSON importer (looser than factors.geometry's, values are re-normalised):
     "quaternion_norm_tolerance": 1e-4,
     "rotation_orthonormal_tolerance": 1e-4,
@@ -172,7 +173,12 @@ def _validate_header(
     fixed["categories"] = cats
     if metadata is None:
         metadata = {}
-    if isinstance(metadata, Mapping):
+    depth = _nesting_depth(metadata)
+    if depth > LIMITS["max_metadata_depth"]:
+        errors.add("metadata", f"at most {int(LIMITS['max_metadata_depth'])} levels of "
+                               f"nesting, got more than {int(LIMITS['max_metadata_depth'])}")
+        metadata = {}
+    elif isinstance(metadata, Mapping):
         metadata = _thaw(metadata)  # a deep, private copy (frozen below)
     if not isinstance(metadata, dict):
         errors.add("metadata", f"must be a JSON object, got {type(metadata).__name__}")
@@ -196,6 +202,25 @@ def _freeze(value: Any) -> Any:
     if isinstance(value, list | tuple):
         return tuple(_freeze(v) for v in value)
     return value
+
+
+def _nesting_depth(value: Any) -> int:
+    """Nesting depth of JSON-like containers (a scalar is 0, ``{}`` is 1), without recursion;
+    stops counting past ``LIMITS["max_metadata_depth"] + 1``."""
+    limit = int(LIMITS["max_metadata_depth"]) + 1
+    depth, level = 0, [value]
+    while level and depth < limit:
+        children = []
+        for v in level:
+            if isinstance(v, Mapping):
+                children.extend(v.values())
+            elif isinstance(v, list | tuple):
+                children.extend(v)
+        if not children and not any(isinstance(v, Mapping | list | tuple) for v in level):
+            break
+        depth += 1
+        level = children
+    return depth
 
 
 def _thaw(value: Any) -> Any:

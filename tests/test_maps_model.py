@@ -481,3 +481,24 @@ def test_metadata_is_frozen_deeply_and_still_exports() -> None:
     assert again == m and again.content_hash == m.content_hash
     # a map built from another map's (frozen) metadata validates and compares equal
     assert SceneMap("m", "M", (0.0, 0.0, 1.0), ("chair",), (), metadata=m.metadata) == m
+
+
+def _nested(levels: int) -> object:
+    """A JSON value with ``levels`` levels of list nesting (a scalar is 0 levels)."""
+    value: object = 0
+    for _ in range(levels):
+        value = [value]
+    return value
+
+
+def test_metadata_nesting_is_limited_without_recursion() -> None:
+    doc = load_demo_map().to_dict()
+    limit = int(LIMITS["max_metadata_depth"])
+    doc["metadata"] = {"ok": _nested(limit - 1)}  # the object itself is one level
+    assert scene_map_from_dict(doc).metadata["ok"] == _nested(limit - 1)
+    for levels in (limit, 100_000):  # far past Python's recursion limit: no RecursionError
+        doc["metadata"] = {"deep": _nested(levels)}
+        with pytest.raises(MapValidationError) as exc:
+            scene_map_from_dict(doc)
+        assert [e["field"] for e in exc.value.errors] == ["metadata"]
+        assert "nesting" in exc.value.errors[0]["message"]
