@@ -495,7 +495,7 @@ def test_metadata_nesting_is_limited_without_recursion() -> None:
     doc = load_demo_map().to_dict()
     limit = int(LIMITS["max_metadata_depth"])
     doc["metadata"] = {"ok": _nested(limit - 1)}  # the object itself is one level
-    assert scene_map_from_dict(doc).metadata["ok"] == _nested(limit - 1)
+    assert scene_map_from_dict(doc).to_dict()["metadata"]["ok"] == _nested(limit - 1)
     for levels in (limit, 100_000):  # far past Python's recursion limit: no RecursionError
         doc["metadata"] = {"deep": _nested(levels)}
         with pytest.raises(MapValidationError) as exc:
