@@ -210,7 +210,8 @@ async def _run_level(bases: list[str], bodies: list[dict[str, Any]], concurrency
     stop = start + duration_s
     lat: list[float] = []
     pairs: list[tuple[float, float]] = []  # (client latency, server solve time) of OK answers
-    errors: dict[str, int] = {}
+    errors: dict[str, int] = {}  # kind -> count, over every request sent
+    errors_outside = [0]  # of which in the warm-up or straddling the window's edges
     localized = 0
     sent = 0
     n_conn = concurrency * len(urls)
@@ -240,12 +241,16 @@ async def _run_level(bases: list[str], bodies: list[dict[str, Any]], concurrency
             t1 = time.perf_counter()
             i += concurrency
             sent += 1
-            if t0 < start or t1 > stop:  # warm-up or straddling the end: not counted
+            failed = bool(kind) or body is None
+            if failed:  # every error counts, also in the warm-up and across the window edges
+                errors[kind or "no_body"] = errors.get(kind or "no_body", 0) + 1
+            if t0 < start or t1 > stop:  # warm-up or straddling an edge: no latency/throughput
+                if failed:
+                    errors_outside[0] += 1
                 continue
             lat.append(t1 - t0)
-            if kind or body is None:
-                errors[kind or "no_body"] = errors.get(kind or "no_body", 0) + 1
-            else:
+            if not failed:
+                assert body is not None
                 pairs.append((t1 - t0, body["timings_ms"]["total"] / 1e3))
                 localized += int(bool(body.get("localized")))
 
@@ -264,6 +269,7 @@ async def _run_level(bases: list[str], bodies: list[dict[str, Any]], concurrency
             "p95_ms": float(np.percentile(lat_ms, 95)),
             "p99_ms": float(np.percentile(lat_ms, 99)),
             "errors": int(sum(errors.values())), "error_kinds": errors,
+            "errors_outside_window": errors_outside[0],
             "localized_fraction": localized / max(done, 1)}
 
 

@@ -418,7 +418,14 @@ class QuadLocClient(_Base):
         one of ``if_match`` (the ``etag`` of :meth:`get_map`) or ``expected_version`` (checked
         against the latest version, then guarded by its ETag). Stale ->
         :class:`~sdk.errors.PreconditionFailed`; lost race -> :class:`~sdk.errors.Conflict`
-        (``PreconditionFailed`` is a ``Conflict``). Never retried automatically."""
+        (``PreconditionFailed`` is a ``Conflict``).
+
+        Retries (:mod:`sdk.retry`): like every call, retried on 429/503 and on connection
+        failures before the request was sent; never after a failure that may have reached the
+        server. Replaying this PUT is safe only because ``If-Match`` makes it conditional: if
+        an earlier attempt did write, the replay no longer matches the ETag and fails with
+        ``PreconditionFailed`` instead of overwriting (then :meth:`get_map` shows whether the
+        latest version is yours)."""
         self._check_update_args(if_match, expected_version)
         if expected_version is not None:
             if_match = self._etag_for_version(map_id, self.get_map(map_id), expected_version)

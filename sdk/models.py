@@ -22,7 +22,7 @@ newer servers. Numpy scalars and arrays are accepted where floats / lists are ex
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, get_args
 
 import numpy as np
 from pydantic import (
@@ -53,19 +53,16 @@ __all__ = [
     "PosePrior",
 ]
 
-#: The nine refinement metrics the server accepts as ``LocalizeOptions.metric``.
-METRICS = (
-    "iou", "giou", "bbox", "qbbox", "algebraic", "frobenius", "wasserstein", "bhattacharyya",
-    "level_set",
-)
-#: Robust kernels accepted as ``LocalizeOptions.robust``.
-ROBUST_KERNELS = ("huber", "cauchy", "geman_mcclure")
-
 Metric = Literal[
     "iou", "giou", "bbox", "qbbox", "algebraic", "frobenius", "wasserstein", "bhattacharyya",
     "level_set",
 ]
 RobustKernel = Literal["huber", "cauchy", "geman_mcclure"]
+#: The nine refinement metrics the server accepts as ``LocalizeOptions.metric`` (the values of
+#: :data:`Metric`, spelled once).
+METRICS: tuple[str, ...] = get_args(Metric)
+#: Robust kernels accepted as ``LocalizeOptions.robust`` (the values of :data:`RobustKernel`).
+ROBUST_KERNELS: tuple[str, ...] = get_args(RobustKernel)
 Convention = Literal["opencv", "opengl"]
 
 

@@ -66,6 +66,16 @@ def _read_json(path: str) -> Any:
     return json.loads(text)
 
 
+def _json_type(value: Any) -> str:
+    """JSON name of a parsed value's type (for messages)."""
+    if isinstance(value, bool):
+        return "boolean"
+    if isinstance(value, int | float):
+        return "number"
+    return {list: "array", str: "string", dict: "object", type(None): "null"}.get(
+        type(value), type(value).__name__)
+
+
 # ---------------------------------------------------------------------------------- commands
 
 
@@ -111,8 +121,11 @@ def cmd_maps_import(args: argparse.Namespace) -> int:
 
     try:
         data = _read_json(args.file)
-    except (OSError, json.JSONDecodeError) as exc:
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
         return _die(f"{args.file}: {exc}")
+    if not isinstance(data, dict):
+        return _die(f"{args.file}: a map must be a JSON object, got a JSON "
+                    f"{_json_type(data)}")
     store = _store(args)
     try:
         if args.chess:
@@ -363,9 +376,22 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI; returns the exit status."""
+    from pydantic import ValidationError
+
+    from maps.errors import MapStoreError, StoreUnavailable
+
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)
+    except StoreUnavailable as exc:  # database down: a message, not a traceback
+        return _die(f"{exc} (check QUADLOC_DATABASE_URL / --database-url)")
+    except MapStoreError as exc:
+        return _die(str(exc))
+    except ValidationError as exc:  # QUADLOC_* settings out of range or malformed
+        if exc.title != "Settings":
+            raise
+        lines = [f"  {'.'.join(str(p) for p in e['loc'])}: {e['msg']}" for e in exc.errors()]
+        return _die("invalid settings (QUADLOC_* environment):\n" + "\n".join(lines))
     except KeyboardInterrupt:  # pragma: no cover
         return 130
 

@@ -30,6 +30,8 @@ from pathlib import Path
 from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from service.api.schemas import MAX_BATCH_FRAMES, MAX_DETECTIONS
+
 __all__ = [
     "SCOPES",
     "ApiKey",
@@ -135,8 +137,17 @@ class Settings(BaseSettings):
                                 description="Create the demo Chess map at startup if absent.")
     max_body_bytes: int = Field(default=2_000_000, ge=1024,
                                 description="Largest request body; larger -> 413.")
-    max_detections: int = Field(default=256, ge=1, description="Detections per frame.")
-    max_batch_frames: int = Field(default=32, ge=1, description="Frames per batch request.")
+    max_json_depth: int = Field(
+        default=32, ge=8, le=64,
+        description="Deepest nesting of objects/arrays accepted in a JSON request body; deeper "
+                    "-> 422 naming the field (the top-level object is depth 1).",
+    )
+    # The request schema caps these (service.api.schemas); a larger setting would do nothing,
+    # so it is refused at start.
+    max_detections: int = Field(default=MAX_DETECTIONS, ge=1, le=MAX_DETECTIONS,
+                                description="Detections per frame.")
+    max_batch_frames: int = Field(default=32, ge=1, le=MAX_BATCH_FRAMES,
+                                  description="Frames per batch request.")
     max_map_objects: int = Field(default=10_000, ge=1)
     solve_time_budget_ms: float = Field(
         default=1000.0, gt=0,
@@ -147,6 +158,13 @@ class Settings(BaseSettings):
         description="Frames solved at once per process. The solver holds the GIL, so threads "
                     "only interleave solves; 1 serves them first-come first-served (lowest "
                     "mean latency) while the per-frame budget bounds how long one can block.",
+    )
+    batch_time_budget_ms: float = Field(
+        default=20_000.0, gt=0, le=300_000.0,
+        description="Total wall time of one localize:batch request (queue waits included). "
+                    "Frames not started when it runs out answer localized=false with reason "
+                    "time_budget_exceeded; frames already solved are kept. Keep it below the "
+                    "proxy's read timeout (deploy/nginx.conf: 60 s).",
     )
     solve_queue_timeout_s: float = Field(
         default=5.0, ge=0,
@@ -162,7 +180,10 @@ class Settings(BaseSettings):
     @field_validator("api_keys")
     @classmethod
     def _check_keys(cls, value: str) -> str:
-        parse_api_keys(value)
+        if not parse_api_keys(value) and value.strip():
+            # e.g. "," or "[]": the operator meant to configure keys but configured none.
+            raise ValueError("QUADLOC_API_KEYS is set but contains no key; unset it to run "
+                             "open (loopback only) or list '<sha256hex>:<scopes>' entries")
         return value
 
     @property
@@ -179,7 +200,8 @@ class Settings(BaseSettings):
 
     @property
     def auth_enabled(self) -> bool:
-        return bool(self.api_keys.strip())
+        """True when at least one key is configured (based on the parsed keys)."""
+        return bool(self.keys)
 
 
 def is_loopback_host(host: str) -> bool:

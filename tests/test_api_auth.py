@@ -165,3 +165,46 @@ def test_settings_come_from_quadloc_environment(monkeypatch: pytest.MonkeyPatch,
     monkeypatch.setenv("QUADLOC_MAX_BATCH_FRAMES", "zero")
     with pytest.raises(ValueError, match="max_batch_frames"):
         Settings()
+
+
+@pytest.mark.parametrize("value", [",", "[]", " , ", "\n,\t"])
+def test_api_keys_that_hold_no_key_are_refused_at_start(value: str,
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    from pydantic import ValidationError
+
+    with pytest.raises(ValidationError, match="contains no key"):
+        Settings(api_keys=value)
+    monkeypatch.setenv("QUADLOC_API_KEYS", value)
+    with pytest.raises(ValidationError, match="QUADLOC_API_KEYS"):
+        Settings()
+
+
+def test_auth_enabled_follows_the_parsed_keys() -> None:
+    digest = hashlib.sha256(b"k").hexdigest()
+    assert Settings(api_keys="").auth_enabled is False
+    assert Settings(api_keys="   ").auth_enabled is False
+    assert Settings(api_keys=f"{digest}:read").auth_enabled is True
+    assert Settings(api_keys=json.dumps([{"sha256": digest, "scopes": ["read"]}])).auth_enabled
+    # an open server still refuses public binds; a keyed one may bind them
+    with pytest.raises(ValueError):
+        check_bind_allowed(Settings(api_keys=""), "0.0.0.0")
+    check_bind_allowed(Settings(api_keys=f"{digest}:read"), "0.0.0.0")
+
+
+@pytest.mark.parametrize("field,ok,bad", [
+    ("max_detections", 256, 257), ("max_batch_frames", 64, 65), ("max_json_depth", 64, 65),
+    ("max_json_depth", 8, 7),
+])
+def test_settings_beyond_the_schema_caps_fail_at_start(field: str, ok: int, bad: int,
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    from pydantic import ValidationError
+
+    from service.api.schemas import MAX_BATCH_FRAMES, MAX_DETECTIONS
+
+    assert (MAX_DETECTIONS, MAX_BATCH_FRAMES) == (256, 64)  # the caps of the request schema
+    assert getattr(Settings(**{field: ok}), field) == ok
+    with pytest.raises(ValidationError, match=field):
+        Settings(**{field: bad})
+    monkeypatch.setenv(f"QUADLOC_{field.upper()}", str(bad))
+    with pytest.raises(ValidationError):
+        Settings()

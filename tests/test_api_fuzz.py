@@ -7,15 +7,19 @@ the API also enforces semantic rules JSON Schema does not express (a box's xmax 
 one of ellipse/box, unit quaternions, ``robust_scale`` only with ``robust``, known map
 categories), which answer 422 naming the field. The app has a read+write API key, sent with
 every generated request (schemathesis' auth check also replays requests with missing/invalid
-credentials and expects 401/403). The app runs on a temp SQLite DB seeded with the demo map.
+credentials and expects 401/403). The apps run on temp SQLite DBs (pytest's ``tmp_path_factory``,
+cleaned up by pytest) seeded with the demo map; they are built by module-scoped fixtures, not at
+import time, and their stores are closed at teardown.
 """
 
 from __future__ import annotations
 
-import tempfile
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import pytest
 import schemathesis
 from fastapi.testclient import TestClient
 from hypothesis import HealthCheck, given, settings
@@ -27,22 +31,37 @@ from service.localization.types import METRICS, ROBUST_KERNELS
 from service.settings import hash_api_key
 from tests.conftest import make_test_app
 
-_DATA_DIR = Path(tempfile.mkdtemp(prefix="quadloc-fuzz-"))
 _KEY = "fuzz-key"
-app = make_test_app(_DATA_DIR, solve_time_budget_ms=200.0,
-                    api_keys=f"{hash_api_key(_KEY)}:read+write")
-schema = schemathesis.openapi.from_asgi("/openapi.json", app)
+
+
+def _fuzz_app(tmp_path_factory: pytest.TempPathFactory, name: str) -> Any:
+    return make_test_app(tmp_path_factory.mktemp(name), solve_time_budget_ms=200.0,
+                         api_keys=f"{hash_api_key(_KEY)}:read+write")
+
+
+@pytest.fixture(scope="module")
+def fuzz_app(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Any]:
+    app = _fuzz_app(tmp_path_factory, "fuzz")
+    yield app
+    app.state.store.close()
+
+
+# The committed document (a file read, no app at import time); tests/test_api_openapi.py checks
+# that it is the app's. Each case is sent to the fixture's app (``schema.app``) in process.
+schema = schemathesis.openapi.from_path(
+    Path(__file__).resolve().parents[1] / "docs" / "openapi.json")
 
 
 @schema.parametrize()
 @settings(max_examples=12, deadline=None, derandomize=True,
           suppress_health_check=list(HealthCheck))
-def test_api_conforms_and_never_fails(case: schemathesis.Case) -> None:
-    # Generated DELETEs may remove the demo map; /readyz then rightly answers 503 (not ready),
-    # which this check cannot tell from a fault. Re-seed it, as a restart would.
-    seed_demo_map(app.state.store)
-    app.state.map_cache.invalidate("chess")
-    case.call_and_validate(headers={"X-API-Key": _KEY},
+def test_api_conforms_and_never_fails(case: schemathesis.Case, fuzz_app: Any) -> None:
+    # The default map cannot be deleted (409 default-map); re-seed anyway (a no-op while it
+    # exists) so that /readyz's answer never depends on the order of generated requests.
+    seed_demo_map(fuzz_app.state.store)
+    fuzz_app.state.map_cache.invalidate("chess")
+    case.operation.schema.app = fuzz_app  # ASGI transport: no network, no server
+    case.call_and_validate(app=fuzz_app, headers={"X-API-Key": _KEY},
                            excluded_checks=[positive_data_acceptance])
 
 
@@ -86,17 +105,18 @@ _frame = st.fixed_dictionaries(
     optional={"prior": _prior})
 
 
-_wild_app = make_test_app(Path(tempfile.mkdtemp(prefix="quadloc-wild-")),
-                          solve_time_budget_ms=200.0,
-                          api_keys=f"{hash_api_key(_KEY)}:read+write")
+@pytest.fixture(scope="module")
+def wild_client(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
+    """One client (one lifespan) for every generated frame; the store closes at teardown."""
+    with TestClient(_fuzz_app(tmp_path_factory, "wild")) as client:
+        yield client
 
 
 @settings(max_examples=25, deadline=None, derandomize=True,
           suppress_health_check=list(HealthCheck))
 @given(frame=_frame)
-def test_wild_frames_never_fail_the_server(frame: dict) -> None:
-    with TestClient(_wild_app) as client:
-        r = client.post("/v1/maps/chess/localize", json=frame, headers={"X-API-Key": _KEY})
+def test_wild_frames_never_fail_the_server(wild_client: TestClient, frame: dict) -> None:
+    r = wild_client.post("/v1/maps/chess/localize", json=frame, headers={"X-API-Key": _KEY})
     assert r.status_code in (200, 422), r.text
     body = r.json()
     if r.status_code == 422:

@@ -160,3 +160,62 @@ def test_quadloc_serve_starts_on_loopback_with_the_demo_map(tmp_path: Path) -> N
     finally:
         proc.terminate()
         proc.wait(timeout=10)
+
+
+README = REPO / "README.md"
+
+
+def readme_tour_block(step: str, language: str) -> str:
+    """The first ```<language> block after the README tour's ``**<step>.`` heading."""
+    text = README.read_text()
+    after = text.split("## A 5-minute tour", 1)[1].split(f"**{step}.", 1)[1]
+    return after.split(f"```{language}\n", 1)[1].split("```", 1)[0]
+
+
+@pytest.mark.skipif(shutil.which("curl") is None, reason="curl is not installed")
+def test_readme_tour_curl_runs_as_written(live_server: str) -> None:
+    block = readme_tour_block("1", "bash")
+    assert block.count(DOC_BASE) == 1 and block.lstrip().startswith("curl ")
+    proc = subprocess.run(["bash", "-c", "set -eu\n" + block.replace(DOC_BASE, live_server)],
+                          cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    answer = json.loads(proc.stdout)
+    assert answer["localized"] is True and answer["map_id"] == "chess"
+    got = np.array(answer["world_from_camera"]["translation_m"])
+    assert np.linalg.norm(got - np.array(EXAMPLE_TRUE_WORLD_FROM_CAMERA)[:3, 3]) < 0.05
+
+
+def test_readme_tour_commands_name_the_venv() -> None:
+    """Steps 2-3 run from a fresh shell after ``make serve``: the venv is not active."""
+    tour = README.read_text().split("## A 5-minute tour", 1)[1].split("\n## ", 1)[0]
+    step2 = tour.split("**2.", 1)[1].split("```python", 1)[0]
+    assert ".venv/bin/python" in step2
+    step3 = tour.split("**3.", 1)[1].split("**4.", 1)[0]
+    assert re.findall(r"`quadloc ", step3) == [] and "`.venv/bin/quadloc --help`" in step3
+    docker = readme_tour_block("4", "bash")
+    run = next(line for line in docker.splitlines() if line.startswith("docker run"))
+    assert " -d " in run  # detached, so the next line's curl runs
+
+
+def test_load_bench_counts_every_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    """bench/load.py: errors in the warm-up and on requests straddling the window's edges are
+    counted too (latency and throughput stay window-only)."""
+    import asyncio
+
+    from bench import load
+
+    real_client = httpx.AsyncClient
+
+    def refuse(request: httpx.Request) -> httpx.Response:
+        return httpx.Response(503, json={"status": 503})
+
+    class StubClient(real_client):  # type: ignore[misc, valid-type]
+        def __init__(self, **kwargs: object) -> None:
+            super().__init__(transport=httpx.MockTransport(refuse), **kwargs)
+
+    monkeypatch.setattr(load.httpx, "AsyncClient", StubClient)
+    out = asyncio.run(load._run_level(["http://stub"], [LOCALIZE_EXAMPLE], concurrency=2,
+                                      duration_s=0.05, warmup_s=0.05))
+    assert out["sent"] > out["requests"] > 0  # some requests fell in the warm-up
+    assert out["errors"] == out["sent"] == out["error_kinds"]["http_503"]
+    assert out["errors_outside_window"] == out["sent"] - out["requests"]

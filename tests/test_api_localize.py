@@ -352,3 +352,95 @@ def test_solver_slots_are_first_come_first_served() -> None:
     assert order == [0, 1, 2, 3, 4]
     assert slots.acquire(timeout=0)  # the slot came back
     slots.release()
+
+
+# ------------------------------------------------------------ review 6: prior covariance, batch
+
+
+def _full_spd_covariance() -> np.ndarray:
+    """A 6x6 SPD covariance [omega, v] with strong correlations in every block."""
+    rng = np.random.default_rng(7)
+    A = rng.normal(size=(6, 6))
+    scales = np.diag([0.03, 0.03, 0.03, 0.1, 0.1, 0.1])
+    cov = scales @ (A @ A.T + 0.5 * np.eye(6)) @ scales / 6.0
+    assert np.all(np.linalg.eigvalsh(cov) > 0)
+    assert np.min(np.abs(cov[np.triu_indices(6, 1)])) > 1e-6  # no zero off-diagonal term
+    return cov
+
+
+def _opengl_from_opencv_adjoint() -> np.ndarray:
+    """Independent: T_gl = T_cv * F with F = Pose3(diag(1,-1,-1), 0); a right perturbation
+    xi_gl of T_gl is xi_cv = Ad_F xi_gl of T_cv (GTSAM's AdjointMap, [omega, v] order)."""
+    F = gtsam.Pose3(gtsam.Rot3(np.diag([1.0, -1.0, -1.0])), np.zeros(3))
+    return F.AdjointMap()
+
+
+def test_opengl_prior_full_covariance_is_converted_to_opencv(client: TestClient) -> None:
+    from service.api.convert import prior_from_request
+    from service.api.schemas import PosePriorIn
+
+    cov_cv = _full_spd_covariance()
+    Ad = _opengl_from_opencv_adjoint()
+    cov_gl = np.linalg.inv(Ad) @ cov_cv @ np.linalg.inv(Ad).T  # xi_gl = Ad^-1 xi_cv
+    assert not np.allclose(cov_gl, cov_cv)  # the test can tell the conventions apart
+    T_start = TRUTH.copy()
+    T_start[:3, 3] += [0.03, -0.02, 0.01]
+    prior_gl = {"world_from_camera": {"matrix": (T_start @ FLIP).tolist()},
+                "covariance": cov_gl.tolist(), "convention": "opengl"}
+    converted = prior_from_request(PosePriorIn.model_validate(prior_gl))
+    assert converted is not None
+    np.testing.assert_allclose(converted.covariance, cov_cv, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(converted.world_from_camera, T_start, rtol=0, atol=1e-12)
+    # Through the API: the OpenCV and the OpenGL spelling of the same prior give one answer.
+    prior_cv = {"world_from_camera": {"matrix": T_start.tolist()}, "covariance": cov_cv.tolist()}
+    a = client.post(URL, json=_frame(prior=prior_cv)).json()
+    b = client.post(URL, json=_frame(prior=prior_gl)).json()
+    assert a["localized"] and a["used_prior"] and b["used_prior"]
+    np.testing.assert_allclose(a["world_from_camera"]["matrix"], b["world_from_camera"]["matrix"],
+                               atol=1e-9)
+
+
+def test_batch_total_budget_answers_the_rest_not_localized(tmp_path: Path, monkeypatch) -> None:
+    import time
+
+    real = solver_module.localize
+    budgets = []
+
+    def slow(detections, scene_map, camera, options, prior=None):
+        budgets.append(options.time_budget_ms)
+        result = real(detections, scene_map, camera, options, prior)
+        time.sleep(0.2)  # each solve takes at least 200 ms
+        return result
+
+    monkeypatch.setattr(solver_module, "localize", slow)
+    frames = [_frame(frame_id=f"f{i}") for i in range(5)]
+    with TestClient(make_test_app(tmp_path, batch_time_budget_ms=300.0)) as c:
+        start = time.perf_counter()
+        r = c.post(URL + ":batch", json={"frames": frames})
+        elapsed = time.perf_counter() - start
+    assert r.status_code == 200, r.text
+    results = r.json()["results"]
+    assert [x["frame_id"] for x in results] == [f"f{i}" for i in range(5)]
+    assert results[0]["localized"] is True  # solved before the budget ran out: kept
+    assert len(budgets) == 2  # frames 0 and 1 started (1 with what was left), 2-4 never did
+    assert budgets[0] <= 300.0 and budgets[1] <= 300.0 - 200.0
+    for x in results[2:]:
+        assert x["localized"] is False and x["reason"] == "time_budget_exceeded"
+        assert x["world_from_camera"] is None and x["hypotheses_evaluated"] == 0
+    assert elapsed < 0.3 + 0.2 + 0.5  # the budget + at most one solve's overshoot + slack
+    # Without the batch budget pressure every frame is solved.
+    budgets.clear()
+    with TestClient(make_test_app(tmp_path / "b", batch_time_budget_ms=60_000.0)) as c:
+        results = c.post(URL + ":batch", json={"frames": frames[:3]}).json()["results"]
+    assert [x["localized"] for x in results] == [True, True, True] and len(budgets) == 3
+
+
+def test_batch_budget_setting_is_bounded() -> None:
+    from pydantic import ValidationError
+
+    from service.settings import Settings
+
+    assert Settings(batch_time_budget_ms=300_000).batch_time_budget_ms == 300_000
+    for bad in (0, -1, 300_001, float("inf")):
+        with pytest.raises(ValidationError):
+            Settings(batch_time_budget_ms=bad)

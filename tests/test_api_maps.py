@@ -224,7 +224,12 @@ def test_localize_sees_local_updates_at_once_and_other_replicas_within_the_ttl(
         tmp_path: Path) -> None:
     import time
 
-    with TestClient(make_test_app(tmp_path, map_cache_ttl_s=0.3)) as c:
+    from service.api.app import seed_demo_map
+
+    # "chess" is not the default map here: the default map cannot be deleted (409).
+    app = make_test_app(tmp_path, map_cache_ttl_s=0.3, default_map_id="chess-default")
+    assert seed_demo_map(app.state.store, "chess")
+    with TestClient(app) as c:
         assert _map_version_used(c) == 1
         r = c.get("/v1/maps/chess")
         assert c.put("/v1/maps/chess", json=r.json()["map"],
@@ -265,3 +270,219 @@ def test_body_without_json_content_type_is_415(client: TestClient) -> None:
                     headers={"content-type": "text/plain"})
     body = _problem(r, 415, "unsupported-media-type")
     assert body["errors"][0]["field"] == "header.content-type"
+
+
+# ------------------------------------------------------------ review 6: depth, NUL, If-Match
+
+
+def _nested(depth: int) -> dict:
+    """A map-body ``metadata`` value such that the whole body is ``depth`` containers deep
+    (the body object is depth 1, ``metadata``'s object depth 2, ...)."""
+    value: object = 1
+    for _ in range(depth - 1):
+        value = {"k": value}
+    return value  # type: ignore[return-value]
+
+
+def test_json_depth_counts_containers() -> None:
+    from service.api.errors import json_depth_violation
+
+    assert json_depth_violation({"a": 1}, 1) is None
+    assert json_depth_violation({"a": {"b": 1}}, 1) == "a"
+    assert json_depth_violation({"a": [1, {"b": 2}]}, 2) == "a[1]"
+    assert json_depth_violation([[[]]], 3) is None
+    assert json_depth_violation([[[]]], 2) == "[0][0]"
+    deep: object = 0
+    for _ in range(5000):  # far beyond the recursion limit: iterative walk
+        deep = [deep]
+    assert json_depth_violation(deep, 32) is not None
+
+
+def test_over_deep_body_is_refused_before_anything_is_stored(client: TestClient) -> None:
+    ok = {**MAP_EXAMPLE, "map_id": "deep-32", "metadata": _nested(32)}  # body depth 32
+    r = client.post("/v1/maps", json=ok)
+    assert r.status_code == 201, r.text
+    assert client.get("/v1/maps/deep-32").status_code == 200
+    bad = {**MAP_EXAMPLE, "map_id": "deep-33", "metadata": _nested(33)}  # body depth 33
+    body = _problem(client.post("/v1/maps", json=bad), 422, "validation-error")
+    [err] = body["errors"]
+    assert err["field"].startswith("metadata.k.k") and "32" in err["message"]
+    _problem(client.get("/v1/maps/deep-33"), 404, "map-not-found")  # nothing stored
+    # ~250 levels (the reviewer's case) too, and on PUT and localize as well.
+    huge = {**MAP_EXAMPLE, "map_id": "deep-250", "metadata": _nested(250)}
+    _problem(client.post("/v1/maps", json=huge), 422, "validation-error")
+    _problem(client.get("/v1/maps/deep-250"), 404, "map-not-found")
+    etag = client.get("/v1/maps/deep-32").headers["etag"]
+    _problem(client.put("/v1/maps/deep-32", json={**bad, "map_id": "deep-32"},
+                        headers={"If-Match": etag}), 422, "validation-error")
+    assert client.get("/v1/maps/deep-32").json()["version"] == 1
+    from service.api.examples import LOCALIZE_EXAMPLE
+
+    frame = {**LOCALIZE_EXAMPLE, "frame_id": _nested(40)}
+    body = _problem(client.post("/v1/maps/chess/localize", json=frame), 422, "validation-error")
+    assert body["errors"][0]["field"].startswith("frame_id.k")
+
+
+@pytest.mark.parametrize("method,path", [
+    ("GET", "/v1/maps/%00"), ("PUT", "/v1/maps/%00"), ("DELETE", "/v1/maps/%00"),
+    ("POST", "/v1/maps/%00/localize"), ("POST", "/v1/maps/%00/localize:batch"),
+    ("GET", "/v1/maps/a%00b"), ("GET", "/v1/maps/-leading-dash"), ("GET", "/v1/maps/" + "x" * 129),
+])
+def test_path_map_id_outside_the_pattern_is_a_422(client: TestClient, method: str,
+                                                  path: str) -> None:
+    from service.api.examples import LOCALIZE_EXAMPLE
+
+    body = {"frames": [LOCALIZE_EXAMPLE]} if path.endswith(":batch") else (
+        LOCALIZE_EXAMPLE if path.endswith("localize") else MAP_EXAMPLE)
+    r = client.request(method, path, json=None if method in ("GET", "DELETE") else body,
+                       headers={"If-Match": '"x"'} if method == "PUT" else {})
+    problem = _problem(r, 422, "validation-error")
+    assert problem["errors"][0]["field"] == "path.map_id"
+
+
+def test_weak_if_match_never_matches(client: TestClient) -> None:
+    r = client.get("/v1/maps/chess")
+    etag = r.headers["etag"]
+    assert etag.startswith('"')
+    body = _problem(client.put("/v1/maps/chess", json=r.json()["map"],
+                               headers={"If-Match": f"W/{etag}"}), 412, "precondition-failed")
+    assert body["errors"][0]["field"] == "header.if-match"
+    assert client.get("/v1/maps/chess").json()["version"] == 1
+    # a list holding the weak tag and the strong one matches through the strong one
+    r2 = client.put("/v1/maps/chess", json=r.json()["map"],
+                    headers={"If-Match": f'W/{etag}, {etag}'})
+    assert r2.status_code == 200, r2.text
+
+
+def test_default_map_cannot_be_deleted(client: TestClient) -> None:
+    body = _problem(client.delete("/v1/maps/chess"), 409, "default-map")
+    assert "QUADLOC_DEFAULT_MAP_ID" in body["detail"] and body["errors"][0]["field"] == \
+        "path.map_id"
+    assert client.get("/v1/maps/chess").status_code == 200
+    assert client.get("/readyz").status_code == 200
+    # another map is deletable
+    assert client.post("/v1/maps", json=MAP_EXAMPLE).status_code == 201
+    assert client.delete("/v1/maps/office-3").status_code == 204
+
+
+def test_default_map_is_whatever_is_configured(tmp_path: Path) -> None:
+    with TestClient(make_test_app(tmp_path, default_map_id="demo")) as c:
+        assert c.post("/v1/maps", json={**MAP_EXAMPLE, "map_id": "chess"}).status_code == 201
+        assert c.delete("/v1/maps/chess").status_code == 204
+        _problem(c.delete("/v1/maps/demo"), 409, "default-map")
+
+
+# ------------------------------------------------------------ review 6: map cache race
+
+
+class _FakeStore:
+    """``compiled`` returns the version current when the read *started*, and runs ``hook``
+    between reading and returning (where a concurrent PUT can commit and invalidate)."""
+
+    def __init__(self) -> None:
+        self.version = 1
+        self.reads = 0
+        self.hook = None
+
+    def compiled(self, map_id: str, version: int | None = None):
+        self.reads += 1
+        seen = self.version
+        if self.hook is not None:
+            hook, self.hook = self.hook, None
+            hook()
+        return (map_id, seen)
+
+
+def test_map_cache_does_not_store_a_version_read_before_an_invalidation() -> None:
+    from service.api.map_cache import MapCache
+
+    store = _FakeStore()
+    cache = MapCache(store, ttl_s=60.0)
+
+    def concurrent_put() -> None:  # commits version 2 and invalidates, mid-read
+        store.version = 2
+        cache.invalidate("m")
+
+    store.hook = concurrent_put
+    assert cache.get("m") == ("m", 1)  # the racing reader still answers what it read
+    assert cache.get("m") == ("m", 2)  # ... but did not cache it over the invalidation
+    assert store.reads == 2
+    assert cache.get("m") == ("m", 2) and store.reads == 2  # normal caching still works
+    cache.invalidate("other")  # another map's write does not evict this one
+    assert cache.get("m") == ("m", 2) and store.reads == 2
+
+
+# ------------------------------------------------------------ review 6: PostgreSQL
+
+
+PG_BASE = "postgresql+psycopg://postgres@127.0.0.1:5432/test"
+
+
+@pytest.fixture
+def pg_client():
+    """A TestClient on a throw-away PostgreSQL schema (as in tests/test_maps_store.py)."""
+    import uuid
+
+    import sqlalchemy as sa
+
+    from maps.store import MapStore
+    from tests.test_maps_store import _pg_unavailable_reason
+
+    reason = _pg_unavailable_reason()
+    if reason:
+        pytest.skip(reason)
+    from service.api.app import create_app
+    from service.settings import Settings
+
+    schema = f"quadloc_api_{uuid.uuid4().hex[:12]}"
+    admin = sa.create_engine(PG_BASE)
+    with admin.begin() as conn:
+        conn.execute(sa.text(f'CREATE SCHEMA "{schema}"'))
+    store = MapStore(f"{PG_BASE}?options=-csearch_path%3D{schema}")
+    try:
+        with TestClient(create_app(Settings(api_keys=""), store=store),
+                        raise_server_exceptions=False) as c:
+            yield c
+    finally:
+        store.close()
+        with admin.begin() as conn:
+            conn.execute(sa.text(f'DROP SCHEMA "{schema}" CASCADE'))
+        admin.dispose()
+
+
+@pytest.mark.postgres
+def test_nul_characters_on_postgresql_are_4xx(pg_client: TestClient) -> None:
+    from service.api.examples import LOCALIZE_EXAMPLE
+
+    c = pg_client
+    doc = c.get("/v1/maps/chess").json()["map"]
+    for r in (c.get("/v1/maps/%00"), c.delete("/v1/maps/%00"),
+              c.put("/v1/maps/%00", json=doc, headers={"If-Match": '"x"'}),
+              c.post("/v1/maps/%00/localize", json=LOCALIZE_EXAMPLE)):
+        assert _problem(r, 422, "validation-error")["errors"][0]["field"] == "path.map_id"
+    # A NUL inside a name: refused (by the map model or by the DataError backstop), not stored.
+    r = c.post("/v1/maps", json={**doc, "name": "a\u0000b", "map_id": "nul-0"})
+    assert r.status_code == 422 and r.headers["content-type"].startswith(PROBLEM), r.text
+    assert c.get("/v1/maps/nul-0").status_code == 404
+    # (inside metadata it is JSON-escaped, stored and returned as sent)
+    r = c.post("/v1/maps", json={**doc, "metadata": {"k": "a\u0000b"}, "map_id": "nul-1"})
+    assert r.status_code == 201, r.text
+    assert c.get("/v1/maps/nul-1").json()["map"]["metadata"] == {"k": "a\u0000b"}
+    r = c.post("/v1/maps:import-chess?map_id=nul-q&name=a%00b", json=CHESS_IMPORT_EXAMPLE)
+    assert 400 <= r.status_code < 500, r.text
+    assert c.get("/readyz").status_code == 200  # the connection pool survived
+
+
+def test_database_data_error_is_a_422_problem(client: TestClient,
+                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    """Backstop: a value the database refuses (psycopg.DataError, e.g. a NUL in text on
+    PostgreSQL) is the request's fault: 422 problem, not 500."""
+    from sqlalchemy.exc import DataError
+
+    def refuse(*args, **kwargs):
+        raise DataError("INSERT ...", {}, ValueError("PostgreSQL text fields cannot contain "
+                                                     "NUL (0x00) bytes"))
+
+    monkeypatch.setattr(client.app.state.store, "create", refuse)
+    body = _problem(client.post("/v1/maps", json=MAP_EXAMPLE), 422, "validation-error")
+    assert "NUL" in body["detail"]

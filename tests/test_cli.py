@@ -112,3 +112,75 @@ def test_serve_refuses_public_bind_without_keys(db: list[str],
                                                 capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["serve", "--host", "0.0.0.0", *db]) == 2
     assert "QUADLOC_API_KEYS" in capsys.readouterr().err
+
+
+def test_image_command_refuses_public_bind_without_keys_in_a_real_process() -> None:
+    """The image's CMD (``quadloc serve --host 0.0.0.0``) without keys: exit 2 with a message,
+    in a real process with a clean ``QUADLOC_*`` environment (was duplicated in
+    tests/test_dockerfile.py)."""
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if not k.startswith("QUADLOC_")}
+    out = subprocess.run([sys.executable, "-m", "service", "serve", "--host", "0.0.0.0",
+                          "--port", "1"], env=env, cwd=REPO, capture_output=True, text=True,
+                         timeout=60)
+    assert out.returncode == 2
+    assert "QUADLOC_API_KEYS" in out.stderr and "Traceback" not in out.stderr
+
+
+@pytest.mark.parametrize("content,kind", [("[1, 2]", "array"), ('"x"', "string"),
+                                          ("3", "number"), ("null", "null")])
+def test_maps_import_of_a_non_object_is_a_clear_error(content: str, kind: str, db: list[str],
+                                                      tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "not_a_map.json"
+    path.write_text(content)
+    for extra in (["--map-id", "X"], ["--chess", "--map-id", "X"], []):
+        assert main(["maps", "import", str(path), *extra, *db]) == 2
+        err = capsys.readouterr().err
+        assert f"must be a JSON object, got a JSON {kind}" in err and str(path) in err
+
+
+UNREACHABLE = "postgresql://postgres@127.0.0.1:1/none?connect_timeout=2"
+
+
+@pytest.mark.parametrize("argv", [
+    ["maps", "list"], ["maps", "export", "chess"], ["maps", "delete", "chess"],
+    ["maps", "import", str(REPO / "docs" / "examples" / "office_map.json")],
+    ["localize", "--map", "chess", str(EXAMPLE)],
+])
+def test_database_down_is_a_message_not_a_traceback(argv: list[str],
+                                                    monkeypatch: pytest.MonkeyPatch,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    for k in ("QUADLOC_DATABASE_URL", "QUADLOC_API_KEYS"):
+        monkeypatch.delenv(k, raising=False)
+    assert main([*argv, "--database-url", UNREACHABLE]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("quadloc: error: database unreachable") and "--database-url" in err
+
+
+def test_database_down_in_a_real_process_prints_no_traceback() -> None:
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if not k.startswith("QUADLOC_")}
+    out = subprocess.run([sys.executable, "-m", "service", "maps", "list", "--database-url",
+                          UNREACHABLE], env=env, cwd=REPO, capture_output=True, text=True,
+                         timeout=60)
+    assert out.returncode == 2, out.stderr
+    assert "Traceback" not in out.stderr and "database unreachable" in out.stderr
+
+
+@pytest.mark.parametrize("var,value", [("QUADLOC_API_KEYS", ","),
+                                       ("QUADLOC_MAX_DETECTIONS", "300"),
+                                       ("QUADLOC_MAX_BATCH_FRAMES", "65")])
+def test_invalid_settings_are_a_message(var: str, value: str, db: list[str],
+                                        monkeypatch: pytest.MonkeyPatch,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.setenv(var, value)
+    assert main(["maps", "list", *db]) == 2
+    err = capsys.readouterr().err
+    assert "invalid settings" in err and var.removeprefix("QUADLOC_").lower() in err

@@ -316,3 +316,17 @@ def test_docs_demo_request_runs_as_written(live_server: str, capsys, monkeypatch
     camera_from_world = camera_from_world_all[names.index(name)]
     R, t = camera_from_world[:3, :3], camera_from_world[:3, 3]
     assert np.linalg.norm(-R.T @ t - translation) < 0.05
+
+
+def test_readme_tour_sdk_block_runs_as_written(live_server: str, capsys, monkeypatch):
+    from service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA
+    from tests.test_api_live import readme_tour_block
+
+    code = readme_tour_block("2", "python")
+    assert 'QuadLocClient("http://127.0.0.1:8000")' in code  # the `make serve` address
+    monkeypatch.chdir(REPO)  # the tour runs at the repository root
+    exec(compile(code.replace("http://127.0.0.1:8000", live_server), "README.md", "exec"), {})
+    localized, translation = capsys.readouterr().out.strip().split(" ", 1)
+    assert localized == "True"
+    truth = np.array(EXAMPLE_TRUE_WORLD_FROM_CAMERA)[:3, 3]
+    assert np.linalg.norm(np.array(json.loads(translation)) - truth) < 0.05

@@ -522,3 +522,24 @@ def test_every_sdk_route_exists_in_the_servers_openapi(tmp_path):
                                   if p["in"] == "header"}
     for probe in ("/healthz", "/readyz", "/metrics"):
         assert "get" in paths[probe]
+
+
+def test_update_map_retries_as_its_docstring_says():
+    """update_map: retried on 503 (the server did not process it) and always with the same
+    If-Match (so a replay after a write that did land fails with 412, never overwrites); never
+    replayed after a failure that may have reached the server."""
+    doc = sdk.QuadLocClient.update_map.__doc__ or ""
+    assert "Never retried" not in doc and "If-Match" in doc and "429/503" in doc
+    record = {"map_id": "m", "version": 2, "content_hash": "h2", "created_at": None,
+              "map": {"map_id": "m"}}
+    rec = Recorder(_problem(503, "database-unavailable", headers={"Retry-After": "0"}),
+                   httpx.Response(200, json=record, headers={"ETag": '"h2"'}))
+    client, sleeps = _client(rec)
+    assert client.update_map("m", {"map_id": "m"}, if_match='"h1"').version == 2
+    assert [r.method for r in rec.requests] == ["PUT", "PUT"] and len(sleeps) == 1
+    assert {r.headers["if-match"] for r in rec.requests} == {'"h1"'}
+    rec = Recorder(httpx.ReadTimeout("slow"), httpx.Response(200, json=record))
+    client, sleeps = _client(rec)
+    with pytest.raises(errs.TransportError):
+        client.update_map("m", {"map_id": "m"}, if_match='"h1"')
+    assert len(rec.requests) == 1 and sleeps == []

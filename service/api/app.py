@@ -13,12 +13,13 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import Any
 
-from fastapi import FastAPI
+from fastapi import Depends, FastAPI
 from fastapi.openapi.utils import get_openapi
 
 from maps.demo import DEMO_MAP_ID, load_demo_map
 from maps.errors import MapAlreadyExists, MapNotFound
 from maps.store import MapStore
+from service.api.deps import check_body_depth
 from service.api.errors import PROBLEM_MEDIA_TYPE, install_error_handlers
 from service.api.map_cache import MapCache
 from service.api.metrics import ApiMetrics, MetricsAndLimitsMiddleware
@@ -115,6 +116,7 @@ def create_app(settings: Settings | None = None, *, store: MapStore | None = Non
 
     app = FastAPI(
         title="QuadLoc", version=API_VERSION, description=DESCRIPTION, lifespan=lifespan,
+        dependencies=[Depends(check_body_depth)],
         openapi_tags=[
             {"name": "localization", "description": "Camera pose from detected objects."},
             {"name": "maps", "description": "Versioned ellipsoid maps."},
@@ -129,7 +131,7 @@ def create_app(settings: Settings | None = None, *, store: MapStore | None = Non
     app.state.map_cache = MapCache(store, settings.map_cache_ttl_s)
     app.state.solver = Solver(metrics, settings.max_concurrent_solves,
                               settings.solve_queue_timeout_s, settings.solve_time_budget_ms,
-                              settings.max_detections)
+                              settings.max_detections, settings.batch_time_budget_ms)
     install_error_handlers(app)
     app.include_router(localize.router)
     app.include_router(maps.router)

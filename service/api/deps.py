@@ -8,15 +8,18 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import Depends, Request
+from fastapi import Depends, Path, Request
 
+from maps.model import MAP_ID_PATTERN
 from maps.store import MapStore
+from service.api.errors import ProblemError, json_depth_violation
 from service.api.map_cache import MapCache
 from service.api.metrics import ApiMetrics
 from service.api.solver import Solver
 from service.settings import Settings
 
-__all__ = ["MapCacheDep", "MetricsDep", "SettingsDep", "SolverDep", "StoreDep"]
+__all__ = ["MapCacheDep", "MapIdPath", "MetricsDep", "SettingsDep", "SolverDep", "StoreDep",
+           "check_body_depth"]
 
 
 async def get_store(request: Request) -> MapStore:
@@ -44,3 +47,33 @@ SettingsDep = Annotated[Settings, Depends(get_settings)]
 SolverDep = Annotated[Solver, Depends(get_solver)]
 MetricsDep = Annotated[ApiMetrics, Depends(get_metrics)]
 MapCacheDep = Annotated[MapCache, Depends(get_map_cache)]
+
+#: The ``{map_id}`` path parameter of every map route, validated against ``MAP_ID_PATTERN``
+#: (422 ``path.map_id`` otherwise) before it reaches the database: a NUL or other character no
+#: map id can contain never becomes a query (PostgreSQL refuses NUL in text with a DataError).
+MapIdPath = Annotated[str, Path(description="Map id (pattern: maps.model.MAP_ID_PATTERN).",
+                                pattern=MAP_ID_PATTERN, examples=["chess"])]
+
+
+async def check_body_depth(request: Request) -> None:
+    """Refuse (422) a JSON body nested deeper than ``settings.max_json_depth``.
+
+    Runs as an app-wide dependency, i.e. after FastAPI parsed the body (``request.json()`` is
+    cached on the request, so this does not parse it again) and before any route stores
+    anything. Without it a deeply nested map ``metadata`` was stored and then could not be
+    serialised (500 on every later GET).
+    """
+    if request.method in ("GET", "HEAD", "OPTIONS", "DELETE"):
+        return
+    if "json" not in request.headers.get("content-type", "").lower():
+        return
+    try:
+        document = await request.json()
+    except Exception:  # malformed: FastAPI's own body parsing reports it
+        return
+    limit = request.app.state.settings.max_json_depth
+    where = json_depth_violation(document, limit)
+    if where is not None:
+        message = f"nested more than {limit} levels deep (QUADLOC_MAX_JSON_DEPTH)"
+        raise ProblemError("validation-error", f"{where}: {message}",
+                           errors=[{"field": where, "message": message}])

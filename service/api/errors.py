@@ -20,7 +20,7 @@ from typing import Any
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
-from sqlalchemy.exc import OperationalError
+from sqlalchemy.exc import DataError, OperationalError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
 
@@ -32,6 +32,8 @@ __all__ = [
     "ProblemError",
     "field_path",
     "install_error_handlers",
+    "json_depth_violation",
+    "map_not_found",
     "problem_response",
 ]
 
@@ -50,6 +52,7 @@ PROBLEM_TYPES: dict[str, tuple[int, str]] = {
     "method-not-allowed": (405, "Method not allowed"),
     "not-acceptable": (406, "Not acceptable"),
     "map-exists": (409, "Map already exists"),
+    "default-map": (409, "The default map cannot be deleted"),
     "version-conflict": (409, "Map version conflict"),
     "precondition-failed": (412, "Precondition failed: the map changed"),
     "payload-too-large": (413, "Request body too large"),
@@ -111,6 +114,38 @@ def problem_response(
     }
     return JSONResponse(body, status_code=body["status"], headers=dict(headers or {}),
                         media_type=PROBLEM_MEDIA_TYPE)
+
+
+def map_not_found(map_id: str, version: int | None = None) -> ProblemError:
+    """The 404 ``map-not-found`` problem for ``map_id`` (or one of its versions)."""
+    what = f"map {map_id!r}" if version is None else f"version {version} of map {map_id!r}"
+    return ProblemError("map-not-found", f"{what} not found",
+                        errors=[{"field": "path.map_id" if version is None else "query.version",
+                                 "message": "not found"}])
+
+
+def json_depth_violation(document: Any, max_depth: int) -> str | None:
+    """Path (``field_path`` spelling) of the first container nested deeper than ``max_depth``.
+
+    Depth counts containers: the top-level object or array is depth 1, ``{"a": {"b": 1}}`` has
+    depth 2, scalars add nothing. ``None`` when the document is within the limit. Iterative, so
+    a document nested thousands deep cannot exhaust the Python stack here.
+    """
+    stack: list[tuple[Any, int, tuple[Any, ...]]] = [(document, 1, ())]
+    while stack:
+        node, depth, loc = stack.pop()
+        if isinstance(node, dict):
+            children = node.items()
+        elif isinstance(node, list):
+            children = enumerate(node)
+        else:
+            continue
+        if depth > max_depth:
+            return field_path(("body", *loc))
+        for key, child in children:
+            if isinstance(child, dict | list):
+                stack.append((child, depth + 1, (*loc, key)))
+    return None
 
 
 def field_path(loc: Sequence[Any]) -> str:
@@ -224,6 +259,16 @@ async def _on_database_error(request: Request, exc: Exception) -> JSONResponse:
                             headers={"Retry-After": "5"})
 
 
+async def _on_data_error(request: Request, exc: Exception) -> JSONResponse:
+    """The database refused a value of the request (e.g. a NUL character on PostgreSQL)."""
+    log.warning("database refused a value on %s %s: %s", request.method, request.url.path,
+                str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+    return problem_response(request, "validation-error",
+                            "the database refused a value of this request (for example a NUL "
+                            "character in a string); remove control characters and retry",
+                            errors=[{"field": "body", "message": "value refused by the database"}])
+
+
 async def _on_unexpected(request: Request, exc: Exception) -> JSONResponse:  # pragma: no cover
     log.exception("unhandled error on %s %s", request.method, request.url.path)
     return problem_response(request, "internal-error",
@@ -238,4 +283,5 @@ def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(MapValidationError, _on_invalid_map)
     app.add_exception_handler(StoreUnavailable, _on_database_error)
     app.add_exception_handler(OperationalError, _on_database_error)
+    app.add_exception_handler(DataError, _on_data_error)
     app.add_exception_handler(Exception, _on_unexpected)

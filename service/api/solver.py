@@ -6,6 +6,12 @@ Solves are CPU-bound and hold the GIL: routes that call :meth:`Solver.localize_f
 first-served semaphore (:class:`FairSlots`) caps the number of frames solved at once per process
 (``QUADLOC_MAX_CONCURRENT_SOLVES``); a request that waits longer than
 ``QUADLOC_SOLVE_QUEUE_TIMEOUT_S`` for a slot gets 503 + ``Retry-After``.
+
+A batch has a total budget too (``QUADLOC_BATCH_TIME_BUDGET_MS``, queue waits included): without
+it a batch of N frames could hold its request for N x (solve budget + queue wait), past the
+proxy's read timeout. Each frame's solve budget is capped by what is left of the batch's; frames
+not started when it runs out answer ``localized: false`` with reason ``time_budget_exceeded``
+(frames already solved are kept).
 """
 
 from __future__ import annotations
@@ -38,6 +44,8 @@ log = logging.getLogger("quadloc.api")
 
 #: API-level reason (beyond the pipeline's) for a numerical failure deep in the solver.
 NUMERICAL_FAILURE = "numerical_failure"
+#: Reason of a batch frame skipped because the batch's total budget ran out.
+TIME_BUDGET_EXCEEDED = "time_budget_exceeded"
 #: An input error raised inside ``localize`` is the client's when it names a request field.
 _REQUEST_FIELD = re.compile(r"^(detections|camera|prior|options)\b")
 
@@ -93,15 +101,17 @@ class Solver:
     """Per-app localization runner (see the module docstring)."""
 
     def __init__(self, metrics: ApiMetrics, max_concurrent: int, queue_timeout_s: float,
-                 max_budget_ms: float, max_detections: int) -> None:
+                 max_budget_ms: float, max_detections: int,
+                 batch_budget_ms: float = float("inf")) -> None:
         self.metrics = metrics
+        self.batch_budget_ms = batch_budget_ms
         self.slots = FairSlots(max_concurrent)
         self.queue_timeout_s = queue_timeout_s
         self.max_budget_ms = max_budget_ms
         self.max_detections = max_detections
 
     def _solve_one(self, compiled: CompiledMap, frame: LocalizeRequest,
-                   prefix: str) -> LocalizeResponse:
+                   prefix: str, budget_ms: float | None = None) -> LocalizeResponse:
         if len(frame.detections) > self.max_detections:
             raise ProblemError("validation-error",
                                f"{prefix}detections: at most {self.max_detections} per frame",
@@ -111,7 +121,9 @@ class Solver:
             camera = camera_from_request(frame.camera)
             detections = detections_from_request(frame.detections)
             prior = prior_from_request(frame.prior)
-            options = options_from_request(frame.options, self.max_budget_ms)
+            options = options_from_request(
+                frame.options,
+                self.max_budget_ms if budget_ms is None else min(self.max_budget_ms, budget_ms))
         except ValueError as exc:  # GeometryError, LocalizationInputError
             field, message = _field_and_message(exc, prefix)
             raise ProblemError("invalid-geometry", f"{field}: {message}",
@@ -159,21 +171,50 @@ class Solver:
             map_id=compiled.map_id, map_version=compiled.version,
             timings_ms={"total": elapsed_ms}, frame_id=frame.frame_id, timestamp=frame.timestamp)
 
+    def _budget_exceeded(self, compiled: CompiledMap, frame: LocalizeRequest,
+                         prefix: str) -> LocalizeResponse:
+        """The answer for a batch frame not solved because the batch budget ran out."""
+        if len(frame.detections) > self.max_detections:  # still the client's error
+            self._solve_one(compiled, frame, prefix)
+        self.metrics.localizations.labels(TIME_BUDGET_EXCEEDED).inc()
+        return LocalizeResponse(
+            localized=False, reason=TIME_BUDGET_EXCEEDED, world_from_camera=None,
+            covariance=None, confidence=0.0, inliers=[], metric=frame.options.metric,
+            hypotheses_evaluated=0, used_prior=False, map_id=compiled.map_id,
+            map_version=compiled.version, timings_ms={"total": 0.0}, frame_id=frame.frame_id,
+            timestamp=frame.timestamp)
+
     def localize_frames(self, compiled: CompiledMap, frames: Sequence[LocalizeRequest],
                         batch: bool) -> list[LocalizeResponse]:
         """Solve ``frames`` in order against ``compiled`` (blocking; call from a thread).
 
         Each frame takes a solver slot of its own, so a batch queues behind (and interleaves
         with) other clients' frames instead of holding a slot for its whole length. Field names
-        in errors are prefixed with ``frames[i].`` for batches.
+        in errors are prefixed with ``frames[i].`` for batches. A batch stops solving when
+        ``batch_budget_ms`` (measured with ``time.perf_counter`` from this call) runs out.
         """
-        out = []
+        out: list[LocalizeResponse] = []
+        deadline = time.perf_counter() + self.batch_budget_ms / 1e3 if batch else float("inf")
         for i, frame in enumerate(frames):
-            if not self.slots.acquire(timeout=self.queue_timeout_s):
+            prefix = f"frames[{i}]." if batch else ""
+            remaining_s = deadline - time.perf_counter()
+            if remaining_s <= 0:
+                out.append(self._budget_exceeded(compiled, frame, prefix))
+                continue
+            wait_s = min(self.queue_timeout_s, remaining_s)
+            if not self.slots.acquire(timeout=wait_s):
+                if wait_s < self.queue_timeout_s:  # the batch budget, not the queue, ran out
+                    out.append(self._budget_exceeded(compiled, frame, prefix))
+                    continue
                 raise ProblemError("busy", "all solver slots are busy; retry shortly",
                                    headers={"Retry-After": "1"})
             try:
-                out.append(self._solve_one(compiled, frame, f"frames[{i}]." if batch else ""))
+                remaining_ms = (deadline - time.perf_counter()) * 1e3
+                if remaining_ms <= 0:
+                    out.append(self._budget_exceeded(compiled, frame, prefix))
+                else:
+                    out.append(self._solve_one(compiled, frame, prefix,
+                                               remaining_ms if batch else None))
             finally:
                 self.slots.release()
         return out

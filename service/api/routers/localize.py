@@ -8,13 +8,13 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Body, Path, Query, Response
+from fastapi import APIRouter, Body, Query, Response
 
 from maps.compiled import CompiledMap
 from maps.errors import MapNotFound
 from service.api.auth import ReadAccess
-from service.api.deps import MapCacheDep, SettingsDep, SolverDep
-from service.api.errors import ProblemError
+from service.api.deps import MapCacheDep, MapIdPath, SettingsDep, SolverDep
+from service.api.errors import ProblemError, map_not_found
 from service.api.examples import LOCALIZE_EXAMPLE, LOCALIZE_RESPONSE_EXAMPLE
 from service.api.map_cache import MapCache
 from service.api.openapi_docs import problem_responses
@@ -33,17 +33,11 @@ VersionQuery = Annotated[int | None, Query(ge=1, le=2**31 - 1,
                                            description="Map version (default: latest).")]
 
 
-MapIdPath = Annotated[str, Path(description="Map id.", examples=["chess"])]
-
-
 def _compiled(cache: MapCache, map_id: str, version: int | None) -> CompiledMap:
     try:
         return cache.get(map_id, version)
     except MapNotFound as exc:
-        field = "path.map_id" if version is None else "query.version"
-        what = f"map {map_id!r}" if version is None else f"version {version} of map {map_id!r}"
-        raise ProblemError("map-not-found", f"{what} not found",
-                           errors=[{"field": field, "message": "not found"}]) from exc
+        raise map_not_found(map_id, version) from exc
 
 
 @router.post(
@@ -73,7 +67,10 @@ def localize_frame(
     "/maps/{map_id}/localize:batch", response_model=BatchLocalizeResponse,
     summary="Localize several frames",
     description="Frames are solved in order against one map version (bounded count: "
-                "QUADLOC_MAX_BATCH_FRAMES). Errors name the frame: `frames[3].detections[0]...`.",
+                "QUADLOC_MAX_BATCH_FRAMES). Errors name the frame: `frames[3].detections[0]...`. "
+                "The whole batch has a time budget (QUADLOC_BATCH_TIME_BUDGET_MS, queue waits "
+                "included): frames not started when it runs out answer `localized: false` with "
+                "reason `time_budget_exceeded`; frames already solved are kept.",
     responses={**problem_responses(400, 401, 403, 404, 413, 415, 422, 503),
                200: {"content": {"application/json": {"example": {
                    "map_id": "chess", "map_version": 1,

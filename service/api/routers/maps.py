@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Body, Header, Path, Query, Response, status
+from fastapi import APIRouter, Body, Header, Query, Response, status
 
 from maps.errors import MapAlreadyExists, MapNotFound, MapValidationError, VersionConflict
 from maps.model import (
@@ -21,8 +21,8 @@ from maps.model import (
     scene_map_from_dict,
 )
 from service.api.auth import ReadAccess, WriteAccess
-from service.api.deps import MapCacheDep, SettingsDep, StoreDep
-from service.api.errors import ProblemError
+from service.api.deps import MapCacheDep, MapIdPath, SettingsDep, StoreDep
+from service.api.errors import ProblemError, map_not_found
 from service.api.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
 from service.api.openapi_docs import problem_responses
 from service.api.schemas import MapListOut, MapOut, MapSummaryOut
@@ -72,9 +72,6 @@ def _ok(status_code: int, example: dict[str, Any], headers: bool = True) -> dict
     return {status_code: doc}
 
 
-MapIdPath = Annotated[str, Path(description="Map id.", examples=["chess"])]
-
-
 def _body_doc(schema: dict[str, Any], example: dict[str, Any]) -> dict[str, Any]:
     return {"requestBody": {"required": True, "content": {"application/json": {
         "schema": schema, "example": example}}}}
@@ -97,13 +94,6 @@ def _invalid_map(exc: MapValidationError) -> ProblemError:
     return ProblemError("invalid-map", str(exc), errors=exc.errors)
 
 
-def _not_found(map_id: str, version: int | None = None) -> ProblemError:
-    what = f"map {map_id!r}" if version is None else f"version {version} of map {map_id!r}"
-    return ProblemError("map-not-found", f"{what} not found",
-                        errors=[{"field": "path.map_id" if version is None else "query.version",
-                               "message": "not found"}])
-
-
 def _check_object_limit(body: Any, settings: Any) -> None:
     objs = body.get("objects") if isinstance(body, dict) else None
     if isinstance(objs, list) and len(objs) > settings.max_map_objects:
@@ -119,7 +109,9 @@ def _created(store: Any, cache: Any, scene_map: Any, response: Response) -> MapO
         raise ProblemError("map-exists", f"map {scene_map.map_id!r} already exists; use PUT "
                            "/v1/maps/{map_id} with If-Match to update it",
                            errors=[{"field": "map_id", "message": "already exists"}]) from exc
-    cache.invalidate(scene_map.map_id)  # e.g. a 404 cached before the map existed
+    # Nothing of a new map is cached (misses are not cached); invalidating keeps every write
+    # path uniform and bumps the map's generation (service/api/map_cache.py).
+    cache.invalidate(scene_map.map_id)
     response.headers["ETag"] = etag_of(stored.content_hash)
     response.headers["Location"] = f"/v1/maps/{scene_map.map_id}"
     return _map_out(stored)
@@ -192,7 +184,7 @@ def get_map(map_id: MapIdPath, response: Response, store: StoreDep, _key: ReadAc
     try:
         stored = store.get(map_id, version)
     except MapNotFound as exc:
-        raise _not_found(map_id, version) from exc
+        raise map_not_found(map_id, version) from exc
     response.headers["ETag"] = etag_of(stored.content_hash)
     return _map_out(stored)
 
@@ -208,7 +200,9 @@ def _parse_if_match(if_match: str | None) -> set[str]:
         raise ProblemError("precondition-required",
                            "'If-Match: *' would overwrite blindly; send the map's ETag",
                            errors=[{"field": "header.if-match", "message": "'*' not accepted"}])
-    return {t[2:] if t.startswith("W/") else t for t in tags}
+    # RFC 9110 13.1.1: If-Match uses the strong comparison, so a weak tag (W/"...") never
+    # matches; it is kept as is and fails the comparison below (412).
+    return tags
 
 
 @router.put(
@@ -232,7 +226,7 @@ def update_map(
     try:
         current = store.get(map_id)
     except MapNotFound as exc:
-        raise _not_found(map_id) from exc
+        raise map_not_found(map_id) from exc
     if etag_of(current.content_hash) not in tags:
         raise ProblemError("precondition-failed",
                            f"map {map_id!r} is at version {current.scene_map.version} with ETag "
@@ -256,7 +250,7 @@ def update_map(
                            f"{exc.current_version}); fetch it and retry",
                            errors=[{"field": "header.if-match", "message": "lost a race"}]) from exc
     except MapNotFound as exc:
-        raise _not_found(map_id) from exc
+        raise map_not_found(map_id) from exc
     finally:
         cache.invalidate(map_id)  # after the write, so no reader can re-cache the old version
     response.headers["ETag"] = etag_of(stored.content_hash)
@@ -265,13 +259,24 @@ def update_map(
 
 @router.delete("/maps/{map_id}", status_code=status.HTTP_204_NO_CONTENT,
                summary="Delete a map (all its versions)",
-               responses=problem_responses(401, 403, 404, 422, 503))
-def delete_map(map_id: MapIdPath, store: StoreDep, cache: MapCacheDep,
+               description="Deletes every version. The server's default map "
+                           "(QUADLOC_DEFAULT_MAP_ID, `chess` unless configured) is refused with "
+                           "409: /readyz checks it, so deleting it would take every replica out "
+                           "of service. Update it with PUT instead.",
+               responses=problem_responses(401, 403, 404, 409, 422, 503))
+def delete_map(map_id: MapIdPath, store: StoreDep, cache: MapCacheDep, settings: SettingsDep,
                _key: WriteAccess) -> Response:
+    if settings.default_map_id and map_id == settings.default_map_id:
+        raise ProblemError("default-map",
+                           f"map {map_id!r} is this server's default map "
+                           "(QUADLOC_DEFAULT_MAP_ID): the readiness probe needs it, so deleting "
+                           "it would make every replica unready; update it with PUT, or "
+                           "configure another default map first",
+                           errors=[{"field": "path.map_id", "message": "is the default map"}])
     try:
         store.delete(map_id)
     except MapNotFound as exc:
-        raise _not_found(map_id) from exc
+        raise map_not_found(map_id) from exc
     finally:
         cache.invalidate(map_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)
