@@ -16,8 +16,10 @@ misses; see ``docs/simulation.md``). Experiments:
    the largest position error (target: every frame within 1 mm).
 2. **relocalization** (paper fig. 5) — per frame and draw, ``localize()`` from scratch with
    every metric and with ``metric="none"`` (the RANSAC pose, "no_refinement"); % of frames whose
-   camera position (rotation) error is below a threshold, split by the number of detections
-   (2, 3, 4, 5+) and over all frames. A frame that is not localized counts as a failure.
+   camera position (rotation) error is below a threshold, split by the number of objects used
+   (the inliers of the returned pose: 2, 3, 4, 5+; a frame that is not localized goes to the
+   group of its number of detections) and over all frames. A frame that is not localized
+   counts as a failure.
 3. **sigma** (fig. 12) — the same with ``use_sigma=False``.
 4. **convergence** (fig. 10) — refinement (``pipeline.refine_pose``, as ``localize()`` does it,
    with sigma) on the true correspondences from the ground truth perturbed by a fixed position
@@ -44,15 +46,18 @@ from pathlib import Path
 import numpy as np
 
 from bench import shared_data
-from bench.shared_data import CHESS_POSES_PATH, load_chess_map
-from factors.geometry import Camera, invert_pose, pose_matrix
+from bench.shared_data import CHESS_POSES_PATH, load_chess_map, perturb_pose
+from factors.geometry import Camera, invert_pose
 from factors.metrics import METRIC_NAMES
 from service.localization.types import LocalizationOptions
 
-# ``load_chess_map`` (from bench.shared_data) and ``load_chess_poses`` are imported by tests.
+# ``load_chess_map`` (from bench.shared_data) and ``load_chess_world_from_camera`` are imported
+# by tests.
 
 
-def load_chess_poses(path: Path = CHESS_POSES_PATH) -> tuple[Camera, list[np.ndarray], list[str]]:
+def load_chess_world_from_camera(
+    path: Path = CHESS_POSES_PATH,
+) -> tuple[Camera, list[np.ndarray], list[str]]:
     """(camera, **world_from_camera** poses (4x4), frame names) of the 108 real test frames.
 
     Unlike :func:`bench.shared_data.load_chess_poses` (camera_from_world, the file's ``R, t``
@@ -95,8 +100,26 @@ def pose_errors(estimate: np.ndarray | None, truth: np.ndarray) -> tuple[float, 
     return pos, math.degrees(math.acos(min(1.0, max(-1.0, c))))
 
 
-def group_of(n_detections: int) -> str:
-    return "5+" if n_detections >= 5 else str(n_detections)
+def group_of(n_objects: int) -> str:
+    """Fig. 5 group ("2", "3", "4", "5+") of a number of objects."""
+    return "5+" if n_objects >= 5 else str(n_objects)
+
+
+def objects_used(result: object, n_detections: int) -> int:
+    """The number of objects a ``localize()`` result used: its inliers when localized, else
+    the frame's number of detections (the objects it could have used)."""
+    return len(result.inliers) if result.localized else n_detections  # type: ignore[attr-defined]
+
+
+def json_safe(value: object) -> object:
+    """``value`` with every non-finite float replaced by None (JSON has no Infinity/NaN)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    return value
 
 
 def fraction_below(errors: np.ndarray, thresholds: np.ndarray) -> np.ndarray:
@@ -104,19 +127,6 @@ def fraction_below(errors: np.ndarray, thresholds: np.ndarray) -> np.ndarray:
     if e.size == 0:
         return np.full(len(thresholds), np.nan)
     return np.array([float(np.mean(e <= t)) for t in thresholds])
-
-
-def perturb(T: np.ndarray, rng: np.random.Generator, offset_m: float,
-            angle_deg: float) -> np.ndarray:
-    """``T`` moved by ``offset_m`` in a random direction and rotated by ``angle_deg`` about a
-    random axis (in the camera frame)."""
-    axis = rng.normal(size=3)
-    axis /= np.linalg.norm(axis)
-    a = math.radians(angle_deg)
-    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    R = np.eye(3) + math.sin(a) * K + (1 - math.cos(a)) * K @ K
-    d = rng.normal(size=3)
-    return pose_matrix(T[:3, :3] @ R, T[:3, 3] + offset_m * d / np.linalg.norm(d))
 
 
 def _summary(errors: dict[str, list[tuple[float, float, str]]]) -> dict[str, dict]:
@@ -157,7 +167,7 @@ def run(frames: int = 108, draws: int = 1, seed: int = 0, metrics: tuple[str, ..
 
     scene = load_chess_map()
     cm = compile_map(scene)
-    camera, poses, _ = load_chess_poses()
+    camera, poses, _ = load_chess_world_from_camera()
     idx = np.arange(min(frames, len(poses)))
     results: dict = {"config": {"frames": len(idx), "draws": draws, "seed": seed,
                                 "metrics": list(metrics), "slow_metrics_stride": slow_stride,
@@ -201,7 +211,6 @@ def run(frames: int = 108, draws: int = 1, seed: int = 0, metrics: tuple[str, ..
             f = simulate_frame(cm, camera, poses[i], gen, cfg)
             frames_sim.append((i, f))
             counts.append(len(f))
-            grp = group_of(len(f))
             for m in methods:
                 name = "none" if m == NO_REFINEMENT else m
                 opts = eval_options(metric=name, seed=seed)
@@ -215,13 +224,15 @@ def run(frames: int = 108, draws: int = 1, seed: int = 0, metrics: tuple[str, ..
                     if len(f) <= 8:
                         localize_ms_le8.append(dt)
                 err_sigma[m].append((*pose_errors(
-                    r.world_from_camera if r.localized else None, poses[i]), grp))
+                    r.world_from_camera if r.localized else None, poses[i]),
+                    group_of(objects_used(r, len(f)))))
                 if m == NO_REFINEMENT or (m in SLOW_METRICS and k % slow_stride):
                     continue
                 r2 = localize(f.detections, cm, camera,
                               eval_options(metric=name, seed=seed, use_sigma=False))
                 err_nosigma[m].append((*pose_errors(
-                    r2.world_from_camera if r2.localized else None, poses[i]), grp))
+                    r2.world_from_camera if r2.localized else None, poses[i]),
+                    group_of(objects_used(r2, len(f)))))
             if k % 20 == 0:
                 log(f"relocalization draw {draw} frame {k}/{len(idx)} "
                     f"({time.perf_counter() - t_all:.0f} s)")
@@ -255,7 +266,7 @@ def run(frames: int = 108, draws: int = 1, seed: int = 0, metrics: tuple[str, ..
         key = f"{level[0]:g}m_{level[1]:g}deg"
         conv[key] = {m: [] for m in metrics}
         for k, (i, f) in enumerate(frames_sim[: len(idx)]):
-            start = perturb(poses[i], gen, *level)
+            start = perturb_pose(poses[i], gen, *level)
             dets = [d for d, o in zip(f.detections, f.object_ids, strict=True) if o is not None]
             ells = [scene.object_by_id(o).ellipsoid for o in f.object_ids if o is not None]
             for m in metrics:
@@ -344,7 +355,8 @@ def make_plots(results: dict, out_dir: Path) -> list[Path]:
                 n = len(e)
                 ax.plot(thresholds, 100 * fraction_below(np.array(e), thresholds),
                         label=_label(m), **_style(m))
-            ax.set_title(f"{grp} objects ({n} frames)" if grp != "all" else f"all ({n} frames)")
+            ax.set_title(f"{grp} objects used ({n} frames)" if grp != "all"
+                         else f"all ({n} frames)")
             ax.set_xlabel(f"{kind} error threshold ({unit})")
             ax.grid(alpha=0.3)
         axes[0].set_ylabel("% correctly localized")
@@ -497,6 +509,10 @@ def markdown(results: dict, command: str, plots: list[Path]) -> str:
         "",
         "### Relocalization from scratch (fig. 5): % of frames within a position threshold",
         "",
+        "Columns *k obj*: frames whose returned pose uses k objects (its inliers; a frame not "
+        "localized counts in the group of its number of detections), % within 10 cm (frames "
+        "in the group).",
+        "",
         "| method | all @5 cm | @10 cm | @20 cm | rot @5 deg | median err (cm) | "
         "3 obj @10 cm | 4 obj @10 cm | 5+ obj @10 cm | mean localize (ms) | mean refine (ms) |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
@@ -509,8 +525,8 @@ def markdown(results: dict, command: str, plots: list[Path]) -> str:
             f"{_pct(v['localized_fraction_at']['0.2'])} | "
             f"{_pct(v['rotation_fraction_at_deg']['5'])} | "
             f"{100 * v['median_position_error_m']:.1f} | "
-            + " | ".join(_pct(by[g]["localized_fraction_at"]["0.1"]) if g in by else "-"
-                         for g in ("3", "4", "5+"))
+            + " | ".join(f"{_pct(by[g]['localized_fraction_at']['0.1'])} ({by[g]['frames']})"
+                         if g in by else "-" for g in ("3", "4", "5+"))
             + f" | {v['mean_localize_ms']:.1f} | {v['mean_refine_ms']:.1f} |")
     lines += ["", "### Convergence from perturbed ground truth (fig. 10): % within 10 cm "
               "(median error cm)", ""]
@@ -541,54 +557,77 @@ def markdown(results: dict, command: str, plots: list[Path]) -> str:
     lines += ["", "### The paper's claims against our measurements", "",
               "| paper claim | measured here | agrees |", "|---|---|---|"]
     lines += [f"| {a} | {b} | {c} |" for a, b, c in verdicts(results)]
-    lines += ["", EXPLANATION, ""]
+    lines += ["", explanation(results), ""]
+    docs = Path(__file__).resolve().parent.parent / "docs"
     for p in plots:
-        rel = p.resolve().relative_to(Path(__file__).resolve().parent.parent / "docs") \
-            if "docs" in p.resolve().parts else p
+        try:
+            rel = p.resolve().relative_to(docs)  # results.md lives in docs/
+        except ValueError:  # plots written elsewhere: link them by absolute path
+            rel = p.resolve()
         lines.append(f"![{p.stem}]({rel})")
     return "\n".join(lines)
 
 
-#: How to read the tables against the paper (qualitative; the numbers are in the tables above).
-EXPLANATION = """**Reading the results against the paper.**
+def _names(ms: list[str]) -> str:
+    return ", ".join(ms) if ms else "none"
+
+
+def explanation(results: dict) -> str:
+    """How to read the tables against the paper: the mechanisms (fixed text) and every
+    comparative or numeric claim computed from ``results`` (so it cannot go stale)."""
+    at = lambda v, t="0.05": v["localized_fraction_at"][t]  # noqa: E731
+    rel = {m: v for m, v in results["metrics"].items() if m != NO_REFINEMENT}
+    wo, ws = results["sigma"]["without_sigma"], results["sigma"]["with_sigma"]
+    top_wo = sorted(wo, key=lambda m: -at(wo[m]))[:2]
+    top_ws = sorted(rel, key=lambda m: -at(rel[m]))[:2]
+    base = at(results["metrics"][NO_REFINEMENT])
+    below = [m for m in rel if at(rel[m]) < base]
+    helped = [m for m in wo if at(ws[m]) > at(wo[m])]
+    hurt = [m for m in wo if at(ws[m]) < at(wo[m])]
+    sub = {m: wo[m]["frames"] for m in wo if wo[m]["frames"] != results["metrics"][m]["frames"]}
+    part = {m: v["median_position_error_m"] for m, v in
+            results["partial_visibility"]["metrics"].items() if m != NO_REFINEMENT}
+    by_part = sorted(part, key=lambda m: part[m])
+    conv = results["convergence"]
+    far = list(conv)[-1]
+    keep = [m for m, v in conv[far].items() if at(v, "0.1") >= 0.8]
+    lose = [m for m, v in conv[far].items() if at(v, "0.1") < 0.5]
+    n = results["config"]["frames"] * results["config"]["draws"]
+    lm = results["localize_ms"]
+    return f"""**Reading the results against the paper.** Every comparison below is computed from
+the tables above by `bench.chess_eval.explanation`; the text around it explains mechanisms.
 
 * *Setting.* Detections are simulated (`docs/simulation.md`), not produced by the paper's
   network: noise is independent per detection, a truncated/occluded object is detected as the
   ellipse of its visible part, and sigma is the true level-set error times log-normal noise —
   far better informed than a real network's sigma. Every metric is refined with GTSAM
-  Levenberg-Marquardt on the RANSAC inliers (the paper used BFGS). One frame is 0.9 % of the
-  108; differences of a few percent between metrics are within the noise of one draw.
-* *Best metric.* Without sigma (the paper's fig. 5 setting) level set and qbbox are far ahead
-  of every other metric at 5 cm, as the paper finds. With sigma, Wasserstein and Bhattacharyya
-  catch up with (and at some thresholds pass) level set: our sigma almost removes the badly
-  truncated detections, which is exactly what hurts those metrics, so the advantage of level
-  set shrinks to noise. With a real network's sigma we expect the paper's ordering to hold.
-* *Refinement vs no refinement.* Every metric improves on the P3P pose. iou and giou improve
-  least: their residual `sqrt(1 - IoU)` is non-smooth at the optimum and flat for disjoint
-  ellipses, so LM converges slowly (it often stops at the iteration cap) and not at all from
-  starts >= 0.2 m (convergence table). The paper (BFGS) found GIoU good with >= 4 objects; we
-  do not. iou and giou give nearly the same poses because near the optimum the ellipses
-  overlap and GIoU's hull term is ~0.
-* *Sigma weighting* helps every metric except iou/giou (2 frames on a 36-frame subset, noise),
-  and much more for the unnormalised / shape-matching metrics (bbox, algebraic, frobenius,
-  Wasserstein, Bhattacharyya) than for level set and qbbox — the paper's own remark
-  (Wasserstein gains more "because these two metrics naturally deal better with partially
-  visible objects").
-* *Partial visibility.* On exact detections truncated at the image border, Wasserstein and
-  bbox are the worst (tied), level set and qbbox (which clips the projection to the image by
-  design) the best: agrees with the paper. The unrefined P3P pose beats the shape-matching
-  metrics there, because it only uses centres.
-* *Convergence.* Level set, Wasserstein, Bhattacharyya, bbox and qbbox keep their accuracy
-  from 0.4 m / 20 deg starts; algebraic and frobenius degrade; iou/giou hardly move from
-  their start (median error ~ the initial offset). The
-  paper also finds level set robust and GIoU / algebraic sensitive, but QBbox sensitive too
-  (here it is not). Level set needs `refine()`'s second solve for this: each solve lays its
-  samples over an area that grows with the misalignment at its start, and a single solve from
-  0.4 m stops at a biased pose, so `refine()` re-lays them at the result and solves again (an
-  earlier run without it, with
-  10 % instead of 20 % missed detections: 47 % within 10 cm from 0.4 m vs 82 % from 0.1 m).
+  Levenberg-Marquardt on the RANSAC inliers (the paper used BFGS). One frame is
+  {100 / n:.1f} % of the {n}; differences of a few percent between metrics are within the
+  noise of one draw.
+* *Best metric.* Without sigma (the paper's fig. 5 setting) the two best at 5 cm are
+  {_names(top_wo)}; with sigma, {_names(top_ws)}. Sigma mostly removes the badly truncated
+  detections, which is what hurts the shape-matching metrics (Wasserstein, Bhattacharyya),
+  so with sigma their gap to level set shrinks.
+* *Refinement vs no refinement* (P3P/P2E pose, {_pct(base)} % at 5 cm): metrics below it:
+  {_names(below)}. iou and giou have the residual `sqrt(1 - IoU)`, non-smooth at the optimum
+  and flat for disjoint ellipses, so LM converges slowly and hardly moves from far starts;
+  they give nearly the same poses because near the optimum the ellipses overlap and GIoU's
+  hull term is ~0.
+* *Sigma weighting* (same frames with and without sigma{"; " + ", ".join(
+  f"{m} on {k} frames" for m, k in sub.items()) if sub else ""}): better at 5 cm with sigma:
+  {_names(helped)}; worse: {_names(hurt)}.
+  The paper remarks that Wasserstein gains more from sigma "because these two metrics
+  naturally deal better with partially visible objects".
+* *Partial visibility* (exact detections truncated at the image border): worst median
+  error {_names(by_part[-2:][::-1])}, best {_names(by_part[:2])} (qbbox clips the projection
+  to the image by design). The paper finds Wasserstein hurt most.
+* *Convergence* from {far.replace("_", " / ")} starts: >= 80 % within 10 cm: {_names(keep)};
+  < 50 %: {_names(lose)}. Level set needs `refine()`'s second solve for this: each solve lays
+  its samples over an area that grows with the misalignment at its start, and a single solve
+  from far stops at a biased pose, so `refine()` re-lays them at the result and solves again.
 * *Time.* The paper reports 0.26 s per pose optimisation with level set (Python BFGS); here a
-  whole `localize()` (RANSAC + level-set LM) takes ~10 ms median."""
+  whole `localize()` (RANSAC + level-set LM) takes {lm["median"]:.1f} ms median
+  (p90 {lm["p90"]:.1f} ms)."""
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -631,7 +670,8 @@ def main(argv: list[str] | None = None) -> int:
     print(md)
     if args.json:
         public = {k: v for k, v in results.items() if k not in ("_raw", "command")}
-        args.json.write_text(json.dumps(public, indent=2))
+        # a failed frame's error is inf: written as null (JSON has no Infinity)
+        args.json.write_text(json.dumps(json_safe(public), indent=2, allow_nan=False))
     if not args.no_docs:
         from bench.results_doc import update_results_section
 

@@ -41,7 +41,7 @@ import gtsam
 import numpy as np
 from scipy.optimize import minimize
 
-from bench.shared_data import CHESS_SCENE_PATH, load_chess_poses, load_chess_scene_json
+from bench.shared_data import CHESS_SCENE_PATH, load_chess_map, load_chess_poses, perturb_pose
 from factors import metrics
 from factors.geometry import (
     Camera,
@@ -87,16 +87,6 @@ def noisy(rng: np.random.Generator, e: Ellipse) -> Ellipse:
                    e.angle + math.radians(rng.normal(0, 1.0)))
 
 
-def perturb(rng: np.random.Generator, T: np.ndarray, rot_deg: float, trans_m: float
-            ) -> np.ndarray:
-    w, v = rng.normal(size=3), rng.normal(size=3)
-    out = T.copy()
-    out[:3, :3] = T[:3, :3] @ expmap_pose3(np.r_[w / np.linalg.norm(w) *
-                                                 math.radians(rot_deg), 0, 0, 0])[:3, :3]
-    out[:3, 3] = T[:3, 3] + v / np.linalg.norm(v) * trans_m
-    return out
-
-
 def make_trials(seed: int, n: int, count: int) -> list[dict]:
     rng = np.random.default_rng([seed, n])
     trials = []
@@ -106,7 +96,7 @@ def make_trials(seed: int, n: int, count: int) -> list[dict]:
         dets = [Detection(noisy(rng, project_ellipsoid(CAMERA, truth, e)), f"o{j}")
                 for j, e in enumerate(ells)]
         trials.append({"ells": ells, "dets": dets, "truth": truth,
-                       "start": perturb(rng, truth, 5.0, 0.10)})
+                       "start": perturb_pose(truth, rng, 0.10, 5.0)})
     return trials
 
 
@@ -195,15 +185,9 @@ BASIN_STARTS = ((5.0, 0.10), (10.0, 0.30), (15.0, 0.40), (20.0, 0.50), (30.0, 0.
 def chess_basin(seed: int) -> dict[str, dict[str, float]] | None:
     """Level-set refinement from exact detections of the real Chess map at its 108 real poses,
     started rot_deg / trans_m away (random directions): fraction back within 1e-6 m."""
-    from factors.geometry import snap_to_rotation
-
     if not CHESS_SCENE_PATH.exists():
         return None
-    scene = load_chess_scene_json()
-    ells = [Ellipsoid(np.array(o["ellipsoid"]["center"], float),
-                      np.array(o["ellipsoid"]["axes"], float),
-                      snap_to_rotation(np.array(o["ellipsoid"]["R"], float)))
-            for o in scene["objects"]]
+    ells = [o.ellipsoid for o in load_chess_map().objects]
     cam, camera_from_world, _ = load_chess_poses()
     rng = np.random.default_rng(seed)
     out = {}
@@ -218,7 +202,7 @@ def chess_basin(seed: int) -> dict[str, dict[str, float]] | None:
                     objs.append(e)
                 except DegenerateProjectionError:
                     continue
-            res = refine(dets, objs, cam, perturb(rng, truth, rot, trans))
+            res = refine(dets, objs, cam, perturb_pose(truth, rng, trans, rot))
             ok += position_error(res.world_from_camera, truth) < 1e-6
             ms.append(res.time_ms)
         out[f"{rot:g}deg_{trans:g}m"] = {"success_fraction": ok / len(camera_from_world),

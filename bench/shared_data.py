@@ -45,3 +45,23 @@ def load_chess_scene_json(path: Path = CHESS_SCENE_PATH) -> dict:
 def load_chess_map(path: Path = CHESS_SCENE_PATH) -> SceneMap:
     """The Chess ellipsoid map (11 objects, +Z up) via the maps importer."""
     return scene_map_from_chess(load_chess_scene_json(path))
+
+
+def perturb_pose(
+    world_from_camera: np.ndarray, rng: np.random.Generator, offset_m: float, angle_deg: float,
+) -> np.ndarray:
+    """A ``world_from_camera`` pose (4x4) moved away from ``world_from_camera``: the camera
+    centre shifted by ``offset_m`` metres in a uniformly random direction (world frame) and the
+    orientation rotated by ``angle_deg`` degrees about a uniformly random axis expressed in the
+    CAMERA frame (right-multiplied: ``R' = R Exp(angle * axis)``).
+
+    Draws, in order: the axis (3 normals), then the direction (3 normals). The one perturbation
+    of the benches and tests (convergence experiments, refinement starts)."""
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    a = np.radians(angle_deg)
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    R = np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * K @ K
+    d = rng.normal(size=3)
+    T = np.asarray(world_from_camera, dtype=float)
+    return pose_matrix(T[:3, :3] @ R, T[:3, 3] + offset_m * d / np.linalg.norm(d))

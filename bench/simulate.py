@@ -27,7 +27,8 @@ detections of one image. The model (documented with its numbers in ``docs/simula
    but at least ``min_detections`` (the largest) are kept when that many are visible. Optional
    outliers: a detection's label is replaced by another category with probability
    ``wrong_label_probability``; ``Poisson(spurious_rate)`` spurious ellipses with random labels
-   are added.
+   are added, each with a sigma drawn like a true detection's (one of the frame's true sigmas
+   times ``exp(N(0, sigma_log_noise^2))``): sigma carries no hint of which ones are spurious.
 
 Everything is driven by one ``numpy.random.Generator`` (or an integer seed): same seed, same
 frame. ``SimulationConfig.exact()`` gives the exact projections of all objects overlapping the
@@ -53,6 +54,7 @@ from factors.geometry import (
 )
 from maps.compiled import CompiledMap, compile_map
 from maps.model import SceneMap
+from service.localization.ransac import sunflower_disk
 from service.localization.types import Detection
 
 __all__ = [
@@ -64,14 +66,6 @@ __all__ = [
     "simulate_frames",
     "sunflower_disk",
 ]
-
-
-def sunflower_disk(n: int) -> np.ndarray:
-    """``n`` points spread uniformly over the unit disk (Vogel's sunflower), shape (n, 2)."""
-    i = np.arange(n) + 0.5
-    r = np.sqrt(i / n)
-    theta = i * (math.pi * (3.0 - math.sqrt(5.0)))
-    return np.column_stack([r * np.cos(theta), r * np.sin(theta)])
 
 
 def moment_ellipse(points: np.ndarray) -> Ellipse:
@@ -301,11 +295,18 @@ def simulate_frame(
                 others = [c for c in cats if c != d.label]
                 dets[i] = replace(d, label=others[int(gen.integers(len(others)))])
     n_spurious = int(gen.poisson(cfg.spurious_rate)) if cfg.spurious_rate > 0 else 0
+    # A detector cannot tell its false positives: their sigma is drawn like a true
+    # detection's (one of this frame's true sigmas, re-noised), so sigma weighting gets no
+    # free hint about which detections are spurious.
+    true_sigmas = [d.sigma for d in dets if d.sigma is not None] or [cfg.sigma_floor]
     for _ in range(n_spurious):
         a = gen.uniform(15, 80)
         e = Ellipse(gen.uniform(0, W), gen.uniform(0, H), a, a * gen.uniform(0.4, 1.0),
                     gen.uniform(-math.pi / 2, math.pi / 2))
-        sigma = float(math.exp(gen.normal(0.0, 1.0))) if cfg.predict_sigma else None
+        sigma = None
+        if cfg.predict_sigma:
+            sigma = float(true_sigmas[int(gen.integers(len(true_sigmas)))]
+                          * math.exp(gen.normal(0.0, cfg.sigma_log_noise)))
         dets.append(Detection(e, cats[int(gen.integers(len(cats)))], sigma))
         ids.append(None)
         labels.append(None)

@@ -78,13 +78,16 @@ def test_p3p_recovers_exact_pose_and_every_solution_reprojects():
             assert np.allclose(CAM.project_points(S, X), uv, atol=1e-6)
 
 
-def test_p3p_degenerate_input_returns_empty_not_raise():
-    X = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]])  # collinear
+def test_p3p_collinear_points_do_not_raise_and_give_finite_poses():
+    # collinear points do not determine a pose: P3P may return solutions (here 2, which do
+    # not reproject the points), but never raises nor returns NaN / non-rotations
+    X = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]])
     T_cw = invert_pose(look_at(np.array([1.0, -5, 0.3]), np.array([1.0, 0, 0])))
     sols = p3p_hypotheses(CAM.project_points(T_cw, X), X, CAM)
     assert sols.shape[1:] == (4, 4)
     for S in sols:
         assert np.all(np.isfinite(S))
+        assert np.allclose(S[:3, :3] @ S[:3, :3].T, np.eye(3), atol=1e-9)
 
 
 # ----------------------------------------------------------------------------------- P2E

@@ -146,7 +146,7 @@ def test_ransac_with_outliers_and_wrong_labels():
 
 def test_ransac_sampling_budget_and_determinism():
     rng = np.random.default_rng(4)
-    labels = ("a",) * 8  # every triple is label-compatible: 8^3 * C(8,3) samples, > budget
+    labels = ("a",) * 8  # one label: C(8,3) * 8*7*6 = 18816 P3P samples, > budget
     cm = compile_map(synthetic_map(rng, labels=labels))
     T_cw = invert_pose(look_at(np.array([0.0, -4.0, 0.2]), np.zeros(3)))
     ells, labs = exact_detections(cm, T_cw)
@@ -175,3 +175,107 @@ def test_ransac_two_detections_uses_p2e():
     scorer2 = MatchScorer(cm, CAM, ells, ["x", "x"], [0, 1])
     out2 = ransac(scorer2, UP, inlier_iou=0.5, min_inliers=2, max_hypotheses=10, rng=rng)
     assert out2.camera_from_world is None and out2.reason == "no_label_match"
+
+
+def test_sample_counts_are_per_label_and_enumeration_is_complete():
+    """count_samples (closed form per label) == a brute-force walk over detection tuples."""
+    import itertools
+
+    from service.localization.ransac import _enumerate_samples, count_samples
+
+    rng = np.random.default_rng(6)
+    cm = compile_map(synthetic_map(rng))  # labels a a a b b c d e
+    labs = ["a", "a", "b", "c", "a", "e", "a", "b"]
+    ells = [random_ellipse(rng) for _ in labs]
+    scorer = MatchScorer(cm, CAM, ells, labs, list(range(len(labs))))
+    for size in (2, 3):
+        brute = sorted(
+            (dets, objs) for dets in itertools.combinations(range(len(labs)), size)
+            for objs in itertools.product(*(scorer.compatible_objects(d).tolist() for d in dets))
+            if len(set(objs)) == size)
+        assert count_samples(scorer, size) == len(brute)
+        assert _enumerate_samples(scorer, size, len(brute)) == brute
+        assert _enumerate_samples(scorer, size, len(brute) - 1) is None
+
+
+def test_time_budget_holds_with_hundreds_of_same_label_detections():
+    """256 detections all labelled like one of 2 map objects: no P3P sample exists and the
+    P2E samples are too many to list; the search must stop near its deadline (it used to walk
+    all C(256, 3) detection triples first: ~10 s)."""
+    import time
+
+    rng = np.random.default_rng(8)
+    cm = compile_map(synthetic_map(rng, labels=("a", "a", "b", "c", "d", "e", "f", "g")))
+    ells = [random_ellipse(rng) for _ in range(256)]
+    scorer = MatchScorer(cm, CAM, ells, ["a"] * 256, list(range(256)))
+    t0 = time.perf_counter()
+    out = ransac(scorer, UP, inlier_iou=0.2, min_inliers=2, max_hypotheses=300,
+                 rng=np.random.default_rng(0), deadline=t0 + 0.1)
+    assert time.perf_counter() - t0 < 1.0  # budget 0.1 s, generous bound
+    assert not out.exhaustive
+
+
+def test_exhaustive_search_does_not_depend_on_the_seed():
+    rng = np.random.default_rng(3)
+    cm = compile_map(synthetic_map(rng))
+    T_cw = invert_pose(look_at(np.array([-0.3, -4.0, 0.6]), np.zeros(3)))
+    ells, labels = exact_detections(cm, T_cw)
+    noisy = [Ellipse(e.cx + rng.normal(0, 3), e.cy + rng.normal(0, 3), e.a * rng.uniform(.9, 1.1),
+                     e.b * rng.uniform(.9, 1.1), e.angle + rng.normal(0, .05)) for e in ells]
+    scorer = MatchScorer(cm, CAM, noisy, labels, list(range(len(noisy))))
+    outs = [ransac(scorer, UP, inlier_iou=0.2, min_inliers=2, max_hypotheses=2000,
+                   rng=np.random.default_rng(seed)) for seed in range(6)]
+    assert all(o.exhaustive for o in outs)
+    for o in outs[1:]:
+        assert o.samples_tried == outs[0].samples_tried
+        assert np.array_equal(o.camera_from_world, outs[0].camera_from_world)
+
+
+class _FixedIouScorer:
+    """Scorer stand-in with prescribed IoUs (H=2 candidate poses, 3 detections, 3 objects)."""
+
+    def __init__(self, dense: np.ndarray) -> None:
+        self.dense = dense
+        self.n_det = 3
+        self.detection_indices = [0, 1, 2]
+        self.params = np.zeros((3, 5))
+        self.camera = CAM
+        self.compiled = type("C", (), {"centers": np.zeros((3, 3))})()
+
+    def compatible_objects(self, d: int) -> np.ndarray:
+        return np.array([0, 1, 2])
+
+    def dense_iou(self, poses: np.ndarray) -> np.ndarray:
+        return self.dense[np.round(poses[:, 0, 3]).astype(int)]
+
+    def scores(self, dense, threshold):
+        return MatchScorer.scores(self, dense, threshold)
+
+    def matches(self, camera_from_world, threshold):
+        return greedy_assignment(self.dense[round(camera_from_world[0, 3])],
+                                 self.detection_indices, threshold)
+
+
+@pytest.mark.parametrize("case", ["higher_score_fewer_inliers", "shared_object"])
+def test_pose_acceptance_uses_min_inliers_and_one_to_one_counts(monkeypatch, case):
+    """min_inliers=3. Pose 0 outscores pose 1 on the per-detection-best sum but has only 2
+    one-to-one inliers (case 1: the third IoU is below the threshold; case 2: two detections
+    share object 0); pose 1 has 3 one-to-one inliers at a lower score and must be chosen."""
+    import service.localization.ransac as ransac_module
+
+    dense = np.zeros((2, 3, 3))
+    if case == "higher_score_fewer_inliers":
+        dense[0, 0, 0] = dense[0, 1, 1] = 0.95
+        dense[0, 2, 2] = 0.05
+    else:
+        dense[0, 0, 0] = dense[0, 1, 0] = dense[0, 2, 2] = 0.9
+    dense[1, 0, 0] = dense[1, 1, 1] = dense[1, 2, 2] = 0.5
+    poses = np.stack([np.eye(4), np.eye(4)])
+    poses[1, 0, 3] = 1.0  # pose k's IoUs are dense[k]
+    monkeypatch.setattr(ransac_module, "p3p_hypotheses", lambda *a: poses)
+    out = ransac(_FixedIouScorer(dense), UP, inlier_iou=0.2, min_inliers=3, max_hypotheses=10,
+                 rng=np.random.default_rng(0))
+    assert out.camera_from_world is not None, out.reason
+    assert out.camera_from_world[0, 3] == 1.0
+    assert len(out.matches) == 3
+    assert out.score == pytest.approx(1.5)

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from bench.chess_eval import load_chess_map, load_chess_poses
+from bench.chess_eval import load_chess_map, load_chess_world_from_camera
 from bench.simulate import (
     SimulationConfig,
     level_set_distance,
@@ -21,7 +21,7 @@ from maps.compiled import compile_map
 
 MAP = load_chess_map()
 CM = compile_map(MAP)
-CAMERA, POSES, _ = load_chess_poses()
+CAMERA, POSES, _ = load_chess_world_from_camera()  # POSES: world_from_camera
 
 
 def raster_moment_ellipse(full: Ellipse, width: int, height: int, step: float = 0.25):
@@ -140,6 +140,21 @@ def test_outliers_wrong_labels_and_spurious():
                 assert d.label in MAP.categories
     assert 0.15 < wrong / (total - spurious) < 0.45
     assert 1.3 < spurious / len(frames) < 2.7
+
+
+def test_spurious_sigma_is_distributed_like_true_sigma():
+    """Spurious detections must not be recognisable by their sigma (used to be exp(N(0, 1)),
+    median ~1, against ~0.07 for true detections)."""
+    cfg = SimulationConfig(spurious_rate=2.0)
+    frames = simulate_frames(MAP, CAMERA, POSES[:40], seed=1, config=cfg)
+    true = [d.sigma for f in frames for d, o in zip(f.detections, f.object_ids, strict=True)
+            if o is not None]
+    spur = [d.sigma for f in frames for d, o in zip(f.detections, f.object_ids, strict=True)
+            if o is None]
+    assert len(spur) > 40
+    for q in (25, 50, 75):
+        t, s_ = np.percentile(true, q), np.percentile(spur, q)
+        assert 0.5 < s_ / t < 2.0, (q, t, s_)
 
 
 def test_config_validation():

@@ -18,7 +18,8 @@ Stages (wall time of each in ``LocalizationResult.timings_ms``):
    (``refine`` itself re-lays grown adaptive level-set samples once at its result.)
 
 The time budget bounds the whole call: the hypothesis search stops at it, and no LM iteration
-starts after it (a refinement cut short keeps its last accepted step, status ``time_budget``).
+(nor level-set re-lay, nor re-association refinement) starts after it. A refinement cut short
+keeps its last accepted step and the result says so: ``refinement_status == "time_budget"``.
 """
 
 from __future__ import annotations
@@ -110,10 +111,10 @@ def _validate(
 
 
 def _not_localized(reason: str, metric: str, evaluated: int, timings: dict[str, float],
-                   t0: float) -> LocalizationResult:
+                   t0: float, refinement_status: str | None = None) -> LocalizationResult:
     timings["total"] = (time.perf_counter() - t0) * 1e3
     return LocalizationResult(False, reason, None, None, 0.0, (), metric, evaluated, False,
-                              timings)
+                              timings, refinement_status)
 
 
 def refine_pose(
@@ -151,30 +152,36 @@ def _refine_and_verify(
     matches: Sequence[Match], detections: Sequence[Detection], compiled: CompiledMap,
     camera: Camera, scorer: MatchScorer, world_from_camera: np.ndarray,
     options: LocalizationOptions, prior: PosePrior | None, deadline: float | None,
-) -> tuple[np.ndarray, np.ndarray | None, list[InlierMatch]] | None:
-    """Refine on ``matches``, re-associate, refine again if the set changed; None if the
-    result fails the inlier check. Returns (world_from_camera, covariance, inliers)."""
+) -> tuple[tuple[np.ndarray, np.ndarray | None, list[InlierMatch]] | None, str | None]:
+    """Refine on ``matches``, re-associate, refine again if the set changed (and the deadline
+    has not passed). Returns ((world_from_camera, covariance, inliers) or None if the result
+    fails the inlier check, the refinement status — see ``LocalizationResult.refinement_status``
+    — or None with ``metric="none"``)."""
     thr = options.inlier_iou
     if options.metric == NO_REFINEMENT:
         final = scorer.matches(invert_pose(world_from_camera), thr)
         if len(final) < options.min_inliers:
-            return None
-        return world_from_camera, None, [
+            return None, None
+        return (world_from_camera, None, [
             InlierMatch(m.detection_index, compiled.object_ids[m.object_index], m.iou,
-                        1.0 - m.iou) for m in final]
+                        1.0 - m.iou) for m in final]), None
     current = list(matches)
     T = world_from_camera
     for round_ in range(2):
         res = _refine_matches(current, detections, compiled, camera, T, options, prior,
                               deadline)
+        status = "time_budget" if res.resample_skipped else res.status
         if res.status in ("diverged", "invalid_projection") or not np.all(
                 np.isfinite(res.world_from_camera)):
-            return None
+            return None, status
         T = res.world_from_camera
         new = scorer.matches(invert_pose(T), thr)
         same = {(m.detection_index, m.object_index) for m in new} == {
             (m.detection_index, m.object_index) for m in current}
         if same or len(new) < options.min_inliers or round_ == 1:
+            break
+        if deadline is not None and time.perf_counter() > deadline:
+            status = "time_budget"  # the changed inlier set is not refined again
             break
         current = new
     cost = {(m.detection_index, m.object_index): float(c)
@@ -183,8 +190,8 @@ def _refine_and_verify(
                            cost[(m.detection_index, m.object_index)])
                for m in new if (m.detection_index, m.object_index) in cost]
     if len(inliers) < options.min_inliers:
-        return None
-    return T, res.covariance, inliers
+        return None, status
+    return (T, res.covariance, inliers), status
 
 
 def localize(
@@ -226,14 +233,14 @@ def localize(
     evaluated = 0
 
     def finish(T: np.ndarray, cov: np.ndarray | None, inliers: list[InlierMatch],
-               used_prior: bool) -> LocalizationResult:
+               used_prior: bool, refinement_status: str | None) -> LocalizationResult:
         timings["total"] = (time.perf_counter() - t0) * 1e3
         mean_iou = float(np.mean([m.iou for m in inliers]))
         return LocalizationResult(
             True, None, np.array(T, dtype=float), cov,
             confidence_of(len(inliers), len(usable), mean_iou),
             tuple(sorted(inliers, key=lambda m: m.detection_index)), metric, evaluated,
-            used_prior, timings)
+            used_prior, timings, refinement_status)
 
     if prior is not None:
         evaluated += 1
@@ -241,11 +248,11 @@ def localize(
         matches = scorer.matches(invert_pose(prior.world_from_camera), options.inlier_iou)
         got = None
         if len(matches) >= options.min_inliers:
-            got = _refine_and_verify(matches, detections, compiled, camera, scorer,
-                                     prior.world_from_camera, options, prior, deadline)
+            got, status = _refine_and_verify(matches, detections, compiled, camera, scorer,
+                                             prior.world_from_camera, options, prior, deadline)
         timings["prior"] = (time.perf_counter() - tp) * 1e3
         if got is not None:
-            return finish(*got, used_prior=True)
+            return finish(*got, used_prior=True, refinement_status=status)
 
     th = time.perf_counter()
     rng = np.random.default_rng(options.seed)
@@ -258,9 +265,10 @@ def localize(
         return _not_localized(outcome.reason or "no_hypothesis_above_inlier_threshold", metric,
                               evaluated, timings, t0)
     tr = time.perf_counter()
-    got = _refine_and_verify(list(outcome.matches), detections, compiled, camera, scorer,
-                             invert_pose(outcome.camera_from_world), options, None, deadline)
+    got, status = _refine_and_verify(list(outcome.matches), detections, compiled, camera,
+                                     scorer, invert_pose(outcome.camera_from_world), options,
+                                     None, deadline)
     timings["refine"] = (time.perf_counter() - tr) * 1e3
     if got is None:
-        return _not_localized("refinement_diverged", metric, evaluated, timings, t0)
-    return finish(*got, used_prior=False)
+        return _not_localized("refinement_diverged", metric, evaluated, timings, t0, status)
+    return finish(*got, used_prior=False, refinement_status=status)

@@ -14,12 +14,20 @@ label-compatible map objects, each detection taking its best object:
   inside each detection; relative area error ~1/n_points, checked against
   ``factors.metrics`` in the tests). A pair is an inlier when IoU >= ``inlier_iou``; the
   score of a pose is the sum of its inliers' IoUs (so both the number of explained detections
-  and how well they overlap count). The final assignment is one-to-one (greedy by IoU).
+  and how well they overlap count). Candidates are ranked by the per-detection-best sum (an
+  upper bound); a pose is accepted on its one-to-one assignment (greedy by IoU,
+  :func:`greedy_assignment`): its score and its >= ``min_inliers`` count are the one-to-one
+  ones, so the returned matches always reach ``min_inliers``.
 
-Exhaustive over the label-compatible minimal samples when there are at most
-``max_hypotheses`` of them, else ``max_hypotheses`` random samples (seeded); early exit once a
-pose explains every usable detection with mean IoU >= :data:`EARLY_EXIT_MEAN_IOU`, and when the
-time budget runs out. All poses here are ``camera_from_world`` (4x4, OpenCV ``[R | t]``).
+Minimal samples are counted and listed per label group (a map object has one category), never
+by walking all detection tuples, so hundreds of same-label detections cost nothing before the
+first time-budget check. Exhaustive over the label-compatible minimal samples when there are at
+most ``max_hypotheses`` of them (in a fixed order: the result does not depend on the seed),
+else ``max_hypotheses`` random samples (seeded, uniform over the label-compatible samples);
+early exit once a pose explains every usable detection with mean IoU >=
+:data:`EARLY_EXIT_MEAN_IOU`, and when the time budget runs out (checked before every batch of
+:data:`BATCH` P3P or 4 P2E samples). All poses here are ``camera_from_world`` (4x4, OpenCV
+``[R | t]``).
 """
 
 from __future__ import annotations
@@ -47,6 +55,7 @@ __all__ = [
     "greedy_assignment",
     "iou_estimates",
     "ransac",
+    "sunflower_disk",
 ]
 
 #: Stop sampling once a pose explains every usable detection with this mean IoU.
@@ -60,7 +69,8 @@ BATCH = 32
 P2E_FALLBACK_BUDGET = 24
 
 
-def _sunflower(n: int) -> np.ndarray:
+def sunflower_disk(n: int) -> np.ndarray:
+    """``n`` points spread uniformly over the unit disk (Vogel's sunflower), shape (n, 2)."""
     i = np.arange(n) + 0.5
     r = np.sqrt(i / n)
     th = i * (math.pi * (3.0 - math.sqrt(5.0)))
@@ -146,7 +156,7 @@ def iou_estimates(
 def estimate_iou(detection: Ellipse, projection: Ellipse, n_points: int = 256) -> float:
     """Scalar :func:`iou_estimates` of two ellipses (for checks and reporting)."""
     p = detection.params()[None]
-    pts = _ellipse_points(p, _sunflower(n_points))[0]
+    pts = _ellipse_points(p, sunflower_disk(n_points))[0]
     _, S = projection.gaussian()
     return float(iou_estimates(pts, np.array(detection.area), projection.center, S))
 
@@ -208,7 +218,7 @@ class MatchScorer:
         self.objects = np.unique(self.pair_o)
         # Position of each pair's object within self.objects.
         self.pair_s = np.searchsorted(self.objects, self.pair_o)
-        self.unit = _sunflower(n_points)
+        self.unit = sunflower_disk(n_points)
         self.points = _ellipse_points(self.params, self.unit)
         self.areas = math.pi * self.params[:, 2] * self.params[:, 3]
         c, s = np.cos(self.params[:, 4]), np.sin(self.params[:, 4])
@@ -250,7 +260,8 @@ class MatchScorer:
         return out
 
     def scores(self, dense: np.ndarray, threshold: float) -> tuple[np.ndarray, np.ndarray]:
-        """(score (H,), inlier count (H,)) with each detection taking its best object."""
+        """(score (H,), inlier count (H,)) with each detection taking its best object (several
+    detections may take the same object: an upper bound of the one-to-one assignment's)."""
         best = dense.max(axis=2)
         inl = best >= threshold
         return np.where(inl, best, 0.0).sum(axis=1), inl.sum(axis=1)
@@ -258,7 +269,7 @@ class MatchScorer:
     def matches(self, camera_from_world: np.ndarray, threshold: float,
                 n_points: int = 256) -> list[Match]:
         """One-to-one inlier matches at one pose (IoU with ``n_points`` per detection)."""
-        pts = _ellipse_points(self.params, _sunflower(n_points))
+        pts = _ellipse_points(self.params, sunflower_disk(n_points))
         dense = self.dense_iou(np.asarray(camera_from_world)[None], pts)[0]
         return greedy_assignment(dense, self.detection_indices, threshold)
 
@@ -279,36 +290,95 @@ class RansacOutcome:
     reason: str | None
 
 
-def _enumerate_samples(scorer: MatchScorer, size: int, cap: int) -> list[tuple] | None:
-    """All label-compatible minimal samples ((d...), (o...)) with distinct objects, or None if
-    there are more than ``cap``."""
-    out: list[tuple] = []
-    compat = [scorer.compatible_objects(d) for d in range(scorer.n_det)]
-    for dets in itertools.combinations(range(scorer.n_det), size):
-        for objs in itertools.product(*(compat[d] for d in dets)):
-            if len(set(objs)) == size:
-                out.append((dets, objs))
-                if len(out) > cap:
-                    return None
+def _label_groups(scorer: MatchScorer) -> list[tuple[list[int], np.ndarray]]:
+    """Usable detections grouped by their compatible objects (= by label, since a map object
+    has one category): ``[(detection rows, compatible object indices), ...]`` in order of first
+    detection. Groups of different labels have disjoint objects."""
+    groups: dict[tuple[int, ...], list[int]] = {}
+    for d in range(scorer.n_det):
+        groups.setdefault(tuple(int(o) for o in scorer.compatible_objects(d)), []).append(d)
+    return [(dets, np.array(objs, dtype=int)) for objs, dets in groups.items()]
+
+
+def _compositions(groups: list[tuple[list[int], np.ndarray]], size: int) -> list[tuple[int, ...]]:
+    """Ways to split a sample of ``size`` among the groups: ``m_g`` detections (and as many
+    distinct objects) from group g, ``m_g <= min(#detections, #objects)``."""
+    caps = [min(len(d), len(o), size) for d, o in groups]
+    out: list[tuple[int, ...]] = []
+
+    def rec(g: int, left: int, acc: tuple[int, ...]) -> None:
+        if g == len(groups):
+            if left == 0:
+                out.append(acc)
+            return
+        for m in range(min(caps[g], left) + 1):
+            rec(g + 1, left - m, (*acc, m))
+
+    rec(0, size, ())
     return out
+
+
+def _composition_count(groups: list[tuple[list[int], np.ndarray]], comp: tuple[int, ...]) -> int:
+    return math.prod(math.comb(len(d), m) * math.perm(len(o), m)
+                     for (d, o), m in zip(groups, comp, strict=True))
+
+
+def count_samples(scorer: MatchScorer, size: int) -> int:
+    """Number of label-compatible minimal samples of ``size`` (distinct detections, distinct
+    objects), from per-label counts: ``sum over splits of prod_g C(n_det_g, m_g) P(n_obj_g, m_g)``
+    (no walk over detection tuples, so it costs nothing with hundreds of detections)."""
+    groups = _label_groups(scorer)
+    return sum(_composition_count(groups, c) for c in _compositions(groups, size))
+
+
+def _enumerate_samples(scorer: MatchScorer, size: int, cap: int) -> list[tuple] | None:
+    """All label-compatible minimal samples ((d...), (o...)) with distinct objects, in a fixed
+    order (sorted by detection rows, then objects), or None if there are more than ``cap``.
+    Only the samples themselves are generated (per label group), never all detection tuples."""
+    groups = _label_groups(scorer)
+    comps = _compositions(groups, size)
+    if sum(_composition_count(groups, c) for c in comps) > cap:
+        return None
+    out: list[tuple] = []
+    for comp in comps:
+        per_group = [
+            [(dets, objs) for dets in itertools.combinations(d, m)
+             for objs in itertools.permutations(o.tolist(), m)]
+            for (d, o), m in zip(groups, comp, strict=True)]
+        for parts in itertools.product(*per_group):
+            pairs = sorted((dd, oo) for dets, objs in parts for dd, oo in zip(dets, objs,
+                                                                               strict=True))
+            out.append((tuple(dd for dd, _ in pairs), tuple(int(oo) for _, oo in pairs)))
+    return sorted(out)
 
 
 def _has_sample(scorer: MatchScorer, size: int) -> bool:
     """Whether at least one label-compatible minimal sample of ``size`` exists."""
-    return _enumerate_samples(scorer, size, 0) is None
+    return count_samples(scorer, size) > 0
 
 
 def _random_samples(scorer: MatchScorer, size: int, count: int,
                     rng: np.random.Generator) -> list[tuple]:
-    compat = [scorer.compatible_objects(d) for d in range(scorer.n_det)]
+    """``count`` label-compatible samples drawn uniformly (with repetition) over all of them:
+    a split among the label groups with probability proportional to its number of samples,
+    then distinct detections and distinct objects within each group."""
+    groups = _label_groups(scorer)
+    comps = _compositions(groups, size)
+    weights = np.array([_composition_count(groups, c) for c in comps], dtype=float)
+    if len(comps) == 0 or weights.sum() == 0:
+        return []
+    picks = rng.choice(len(comps), size=count, p=weights / weights.sum())
     out: list[tuple] = []
-    attempts = 0
-    while len(out) < count and attempts < 20 * count:
-        attempts += 1
-        dets = tuple(sorted(rng.choice(scorer.n_det, size, replace=False).tolist()))
-        objs = tuple(int(compat[d][rng.integers(len(compat[d]))]) for d in dets)
-        if len(set(objs)) == size:
-            out.append((dets, objs))
+    for k in picks:
+        pairs = []
+        for (d, o), m in zip(groups, comps[int(k)], strict=True):
+            if m == 0:
+                continue
+            dd = rng.choice(len(d), m, replace=False)
+            oo = rng.choice(len(o), m, replace=False)
+            pairs += [(d[int(i)], int(o[int(j)])) for i, j in zip(dd, oo, strict=True)]
+        pairs.sort()
+        out.append((tuple(p[0] for p in pairs), tuple(p[1] for p in pairs)))
     return out
 
 
@@ -329,12 +399,13 @@ def ransac(
         up_world: the map's up axis (P2E's zero-roll assumption).
         inlier_iou, min_inliers: acceptance of a pose.
         max_hypotheses: budget of minimal samples per solver (P3P, then P2E).
-        rng: sampler (only used when not exhaustive).
+        rng: sampler (only used when not exhaustive: exhaustive runs do not depend on it).
         deadline: ``time.perf_counter()`` value after which the search stops.
     """
     cm = scorer.compiled
     best_T: np.ndarray | None = None
     best_score, best_count = -1.0, 0
+    best_matches: list[Match] = []
     evaluated = 0
     tried = 0
     timed_out = False
@@ -343,7 +414,7 @@ def ransac(
 
     def consider(poses: np.ndarray) -> bool:
         """Score candidate poses; returns True to stop early."""
-        nonlocal best_T, best_score, best_count, evaluated
+        nonlocal best_T, best_score, best_count, best_matches, evaluated
         if len(poses) == 0:
             return False
         evaluated += len(poses)
@@ -352,10 +423,18 @@ def ransac(
             keep = np.argsort(-hits, kind="stable")[:STAGE2_CANDIDATES]
             poses = poses[keep]
         dense = scorer.dense_iou(poses)
-        score, count = scorer.scores(dense, inlier_iou)
-        i = int(np.argmax(score))
-        if count[i] >= min_inliers and score[i] > best_score:
-            best_T, best_score, best_count = poses[i], float(score[i]), int(count[i])
+        # per-detection best object: an upper bound of the one-to-one score and count
+        bound, count = scorer.scores(dense, inlier_iou)
+        for i in np.argsort(-bound, kind="stable"):
+            if bound[i] <= best_score:
+                break
+            if count[i] < min_inliers:
+                continue
+            # one-to-one (greedy) assignment, as in the final matches
+            m = greedy_assignment(dense[i], scorer.detection_indices, inlier_iou)
+            score = float(sum(x.iou for x in m))
+            if len(m) >= min_inliers and score > best_score:
+                best_T, best_score, best_count, best_matches = poses[i], score, len(m), m
         return best_count >= need and best_score >= EARLY_EXIT_MEAN_IOU * need
 
     def run(size: int, budget: int) -> bool:
@@ -364,8 +443,7 @@ def ransac(
         if samples is None:
             exhaustive = False
             samples = _random_samples(scorer, size, budget, rng)
-        else:
-            samples = [samples[i] for i in rng.permutation(len(samples))]
+        # exhaustive: every sample in a fixed order (the seed plays no part)
         batch = BATCH if size == 3 else 4
         for start in range(0, len(samples), batch):
             if deadline is not None and time.perf_counter() > deadline:
@@ -408,5 +486,9 @@ def ransac(
             reason = "no_hypothesis_above_inlier_threshold"
         return RansacOutcome(None, (), 0.0, evaluated, tried, exhaustive, timed_out, reason)
     matches = tuple(scorer.matches(best_T, inlier_iou))
+    if len(matches) < min_inliers:
+        # the finer IoU estimate (256 points) lost an inlier at the threshold: keep the
+        # assignment the pose was accepted with (96 points)
+        matches = tuple(best_matches)
     return RansacOutcome(best_T, matches, best_score, evaluated, tried, exhaustive, timed_out,
                          None)

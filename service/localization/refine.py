@@ -14,6 +14,8 @@ an area grown with the misalignment there (``factors.metrics.level_set_sampling_
 some area was grown, a single solve stops at a pose biased by that wide layout, so ``refine``
 re-lays the samples at the result and solves once more (``bench.chess_eval``: from 0.4 m /
 20 deg starts, 47 % -> 77 % of noisy frames within 10 cm). ``iterations`` counts both solves.
+The second solve is skipped when the ``deadline`` has already passed
+(``RefinementResult.resample_skipped``).
 
 Stopping tolerances (deliberate, see GUIDE section 3)
 -----------------------------------------------------
@@ -58,7 +60,7 @@ import numpy as np
 from factors.geometry import Camera, Ellipsoid, GeometryError, snap_to_rotation
 from factors.pose_factors import ROBUST_KERNELS, pose_factors
 from factors.pose_residuals import check_pose
-from service.localization.types import Detection
+from service.localization.types import Detection, check_covariance
 
 __all__ = [
     "ABSOLUTE_ERROR_TOL",
@@ -99,7 +101,13 @@ class RefinementResult:
             projection is not an ellipse.
         valid_projection: (N,) bool, the projection of pair ``j`` is an ellipse at the final pose.
         initial_error, total_error: GTSAM's weighted error ``0.5 sum_j ||r_j||^2 / sigma_j``
-            (plus the prior's) at the initial and final pose.
+            (plus the prior's) at the initial and final pose. Each is measured with the
+            level-set sample layout of its own solve: ``initial_error`` with the samples laid
+            out at the initial pose, ``total_error`` with those of the last solve (re-laid at
+            the first solve's result when adaptive level-set sampling was re-laid), so with a
+            re-lay the two are costs of *different* functions and need not decrease; compare
+            ``factors.metrics`` costs with one fixed layout instead. Without a re-lay
+            (other metrics, ``adaptive=False``, no grown area) they share one layout.
         iterations: LM iterations performed.
         converged: ``status == "converged"``.
         status: one of :data:`STATUSES`: ``converged`` (LM met a stopping tolerance),
@@ -109,6 +117,9 @@ class RefinementResult:
             crossing its principal plane or containing it), ``diverged`` (GTSAM failed or
             the result is not finite; the initial pose is returned).
         time_ms: wall time of the whole call (graph build, LM, covariance), milliseconds.
+        resample_skipped: the first solve grew adaptive level-set samples but the
+            ``deadline`` had passed, so the re-laid second solve was not run (the status is
+            the first solve's).
     """
 
     world_from_camera: np.ndarray
@@ -122,6 +133,7 @@ class RefinementResult:
     converged: bool
     status: str
     time_ms: float
+    resample_skipped: bool = False
 
 
 def _lm_params(max_iterations: int) -> gtsam.LevenbergMarquardtParams:
@@ -146,16 +158,7 @@ def _check_prior(
     if prior_world_from_camera is None or prior_covariance is None:
         raise GeometryError("prior_world_from_camera and prior_covariance must be given together")
     T = check_pose(prior_world_from_camera, "prior_world_from_camera")
-    try:
-        S = np.array(prior_covariance, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise GeometryError("prior_covariance must be a numeric 6x6 matrix") from exc
-    if S.shape != (6, 6) or not np.all(np.isfinite(S)):
-        raise GeometryError(f"prior_covariance must be a finite 6x6 matrix, got shape {S.shape}")
-    if np.max(np.abs(S - S.T)) > 1e-9 * max(1.0, float(np.max(np.abs(S)))):
-        raise GeometryError("prior_covariance must be symmetric")
-    if float(np.linalg.eigvalsh(S).min()) <= 0.0:
-        raise GeometryError("prior_covariance must be positive definite")
+    S = check_covariance("prior_covariance", prior_covariance, GeometryError)
     return T, S
 
 
@@ -214,9 +217,10 @@ def refine(
         raise GeometryError(f"ellipsoids must match detections one to one: got "
                             f"{len(ellipsoids)} ellipsoids for {len(detections)} detections")
     T0 = check_pose(initial_world_from_camera, "initial_world_from_camera")
-    if isinstance(max_iterations, bool) or not isinstance(max_iterations, int) \
+    if isinstance(max_iterations, bool) or not isinstance(max_iterations, (int, np.integer)) \
             or max_iterations < 1:
         raise GeometryError(f"max_iterations must be an integer >= 1, got {max_iterations!r}")
+    max_iterations = int(max_iterations)
     if not isinstance(use_sigma, bool):
         raise GeometryError(f"use_sigma must be a bool, got {use_sigma!r}")
     if robust is not None and robust not in ROBUST_KERNELS:
@@ -229,6 +233,7 @@ def refine(
     sigmas = [d.sigma if use_sigma else None for d in detections]
     resample = metric == "level_set" and bool((metric_options or {}).get("adaptive", True))
     T_start, total_iterations, initial_error = T0, 0, None
+    relaid_skipped = False
     for pass_ in range(2 if resample else 1):
         outcome = _solve(detections, ellipsoids, camera, T_start, metric, sigmas, robust,
                          robust_scale, prior, max_iterations - total_iterations, metric_options,
@@ -238,6 +243,11 @@ def refine(
             initial_error = outcome.initial_error
         if pass_ == 1 or outcome.status in ("diverged", "invalid_projection", "time_budget") \
                 or total_iterations >= max_iterations or not outcome.sampling_grown:
+            break
+        if deadline is not None and time.perf_counter() > deadline:
+            # no time for the re-laid solve (it would rebuild every factor only to stop at
+            # once): keep the first solve and its status, and say the re-lay was skipped
+            relaid_skipped = True
             break
         # Some adaptive level-set sample areas were grown for the misalignment at T_start
         # (factors.metrics.level_set_sampling_scale); re-lay them at the result and solve again.
@@ -258,6 +268,7 @@ def refine(
         total_error=outcome.total_error, iterations=total_iterations,
         converged=status == "converged", status=status,
         time_ms=(time.perf_counter() - t_start) * 1e3,
+        resample_skipped=relaid_skipped,
     )
 
 

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from factors.geometry import ORTHONORMAL_TOLERANCE, Ellipse, GeometryError
-from factors.metrics import METRIC_NAMES
+from factors.metrics import METRIC_NAMES, residual
 from factors.pose_factors import ROBUST_KERNELS
 
 __all__ = [
@@ -115,16 +115,24 @@ class LocalizationOptions:
         robust_scale: kernel scale (in units of the metric's residual); ``None`` = the
             refinement module's documented default. Only allowed with ``robust``.
         unknown_label_policy: what to do with a detection whose label is not a category of
-            the map: ``"ignore"`` (default) drops it from matching (it is never an inlier, and
-            does not count towards ``too_few_detections``); ``"error"`` raises
+            the map: ``"ignore"`` (default) drops it from matching (it is never an inlier;
+            with fewer than 2 detections left the reason is ``no_label_match``); ``"error"``
+            raises
             :class:`LocalizationInputError` naming ``detections[i].label``.
         seed: seed of the hypothesis sampler (``None`` = nondeterministic). Exhaustive runs do
             not depend on it.
-        time_budget_ms: wall-clock budget (ms) of the hypothesis search; when it runs out the
-            best hypothesis so far is used (or ``reason="time_budget_exceeded"`` if none
-            qualifies). ``None`` = unbounded.
+        time_budget_ms: wall-clock budget (ms) of the whole ``localize`` call, from its start
+            (validation, prior, hypothesis search and refinement). The hypothesis search stops
+            at it and the best hypothesis so far is used (or ``reason="time_budget_exceeded"``
+            if none qualifies); no refinement iteration starts after it (the result then has
+            ``refinement_status="time_budget"``). Overshoot is bounded by one batch of
+            hypotheses or one LM iteration. ``None`` = unbounded.
         max_iterations: Levenberg-Marquardt iteration cap of the refinement.
-        metric_options: extra keyword options of the metric (e.g. level-set sampling).
+        metric_options: extra keyword options of the metric (e.g. level-set sampling),
+            validated on construction (an unknown key or bad value raises naming
+            ``options.metric_options.<key>``).
+
+    Integer fields accept any integral number (numpy integers too) and store a Python int.
     """
 
     metric: str = "level_set"
@@ -181,6 +189,11 @@ class LocalizationOptions:
         if not _is_int(self.max_iterations) or self.max_iterations < 1:
             raise _bad("options.max_iterations",
                        f"must be an integer >= 1, got {self.max_iterations!r}")
+        # integral numbers (numpy ints too) are accepted and stored as Python ints
+        for name in ("ransac_max_hypotheses", "min_inliers", "max_iterations", "seed"):
+            value = getattr(self, name)
+            if value is not None:
+                object.__setattr__(self, name, int(value))
         if self.metric_options is not None:
             if not isinstance(self.metric_options, Mapping):
                 raise _bad("options.metric_options",
@@ -188,7 +201,24 @@ class LocalizationOptions:
             for key in self.metric_options:
                 if not isinstance(key, str):
                     raise _bad("options.metric_options", f"keys must be strings, got {key!r}")
+            _check_metric_options(self.metric, self.metric_options)
             object.__setattr__(self, "metric_options", MappingProxyType(dict(self.metric_options)))
+
+
+_PROBES = (Ellipse(100.0, 80.0, 20.0, 10.0, 0.3), Ellipse(104.0, 82.0, 22.0, 11.0, 0.35))
+
+
+def _check_metric_options(metric: str, options: Mapping[str, Any]) -> None:
+    """Each metric option is valid for ``metric`` (name and value): checked here, before any
+    work, by evaluating the metric once on a fixed ellipse pair with that option alone."""
+    for key, value in options.items():
+        if metric == NO_REFINEMENT:
+            raise _bad(f"options.metric_options.{key}",
+                       f"metric {NO_REFINEMENT!r} takes no options")
+        try:
+            residual(metric, *_PROBES, **{key: value})
+        except (TypeError, ValueError) as exc:
+            raise _bad(f"options.metric_options.{key}", str(exc)) from exc
 
 
 def _check_pose(field_name: str, value: object) -> np.ndarray:
@@ -211,19 +241,23 @@ def _check_pose(field_name: str, value: object) -> np.ndarray:
     return T
 
 
-def _check_covariance(field_name: str, value: object) -> np.ndarray:
+def check_covariance(field_name: str, value: object,
+                     error: type[ValueError] = LocalizationInputError) -> np.ndarray:
+    """A 6x6 pose covariance (finite, symmetric to rtol 1e-9, positive definite) as a read-only
+    float array; otherwise raises ``error`` with a message starting with ``field_name``.
+    Shared by :class:`PosePrior` and :func:`service.localization.refine.refine`."""
     try:
         S = np.array(value, dtype=float)
     except (TypeError, ValueError) as exc:
-        raise _bad(field_name, "must be a numeric 6x6 matrix") from exc
+        raise error(f"{field_name}: must be a numeric 6x6 matrix") from exc
     if S.shape != (6, 6):
-        raise _bad(field_name, f"must have shape (6, 6), got {S.shape}")
+        raise error(f"{field_name}: must have shape (6, 6), got {S.shape}")
     if not np.all(np.isfinite(S)):
-        raise _bad(field_name, "must be finite")
+        raise error(f"{field_name}: must be finite")
     if not np.allclose(S, S.T, rtol=1e-9, atol=1e-12 * max(1.0, float(np.abs(S).max()))):
-        raise _bad(field_name, "must be symmetric")
+        raise error(f"{field_name}: must be symmetric")
     if float(np.linalg.eigvalsh(0.5 * (S + S.T)).min()) <= 0.0:
-        raise _bad(field_name, "must be positive definite")
+        raise error(f"{field_name}: must be positive definite")
     S.setflags(write=False)
     return S
 
@@ -247,7 +281,7 @@ class PosePrior:
                            _check_pose("prior.world_from_camera", self.world_from_camera))
         if self.covariance is not None:
             object.__setattr__(self, "covariance",
-                               _check_covariance("prior.covariance", self.covariance))
+                               check_covariance("prior.covariance", self.covariance))
 
 
 @dataclass(frozen=True)
@@ -276,8 +310,10 @@ class LocalizationResult:
     Attributes:
         localized: whether a pose is returned.
         reason: ``None`` when localized, else one of :data:`REASONS`:
-            ``too_few_detections`` (fewer than 2 usable detections), ``no_label_match`` (fewer
-            than 2 detections whose label exists in the map, or no label-compatible sample),
+            ``too_few_detections`` (the request has fewer than 2 detections, whatever their
+            labels), ``no_label_match`` (at least 2 detections, but fewer than 2 whose label
+            is a category of the map, or no label-compatible minimal sample: e.g. two
+            detections labelled like the map's single object of that category),
             ``no_hypothesis_above_inlier_threshold`` (no pose with ``min_inliers`` detections at
             IoU >= ``inlier_iou``), ``refinement_diverged`` (the refined pose lost its inliers
             or the solver failed), ``time_budget_exceeded`` (the budget ran out before any
@@ -296,6 +332,12 @@ class LocalizationResult:
         used_prior: whether the returned pose comes from refining the client's prior.
         timings_ms: wall time per stage in ms (``validate``, ``prior``, ``hypotheses``,
             ``refine``, ``total``; stages not run are absent).
+        refinement_status: ``None`` when no refinement ran (``metric="none"`` or stopped
+            before), else the last refinement's ``RefinementResult.status`` (``converged``,
+            ``max_iterations``, ``time_budget``, ``diverged``, ``invalid_projection``);
+            ``time_budget`` also when the budget ran out before the level-set re-lay or the
+            re-association refinement, i.e. the pose is returned less refined than it would
+            be without the budget.
     """
 
     localized: bool
@@ -308,6 +350,7 @@ class LocalizationResult:
     hypotheses_evaluated: int
     used_prior: bool
     timings_ms: dict[str, float] = field(default_factory=dict)
+    refinement_status: str | None = None
 
     def __post_init__(self) -> None:
         if self.localized:
