@@ -298,6 +298,7 @@ class LocalizeResponse(BaseModel):
     metric: str | None = None
     hypotheses_evaluated: int | None = None
     used_prior: bool | None = None
+    refinement_status: str | None = None
     map_id: str
     map_version: int
     timings_ms: dict[str, float] = Field(default_factory=dict)

@@ -53,6 +53,7 @@ def test_demo_frame_localizes_near_the_ground_truth(client: TestClient) -> None:
     assert r.status_code == 200, r.text
     out = r.json()
     assert out["localized"] and out["reason"] is None
+    assert out["refinement_status"] == "converged"
     pose = out["world_from_camera"]
     T = np.array(pose["matrix"])
     assert np.linalg.norm(T[:3, 3] - TRUTH[:3, 3]) < 0.05
@@ -148,6 +149,7 @@ def test_not_localized_is_a_200(client: TestClient) -> None:
     out = r.json()
     assert out["localized"] is False and out["reason"] == "too_few_detections"
     assert out["world_from_camera"] is None and out["confidence"] == 0
+    assert out["refinement_status"] is None
     out = client.post(URL, json=_frame(detections=[])).json()
     assert out["localized"] is False and out["reason"] == "too_few_detections"
     unknown = _frame(detections=[{**d, "label": "Sofa"} for d in LOCALIZE_EXAMPLE["detections"]])

@@ -186,6 +186,7 @@ def response_from_result(
         metric=result.metric,
         hypotheses_evaluated=result.hypotheses_evaluated,
         used_prior=result.used_prior,
+        refinement_status=result.refinement_status,
         map_id=map_id,
         map_version=map_version,
         timings_ms={k: _finite(v) for k, v in result.timings_ms.items()},

@@ -284,6 +284,11 @@ class LocalizeResponse(BaseModel):
     metric: str
     hypotheses_evaluated: int
     used_prior: bool
+    refinement_status: str | None = Field(
+        default=None,
+        description="Status of the last pose refinement: converged, max_iterations, "
+                    "time_budget (the solve budget cut it short: the pose is less refined), "
+                    "diverged, invalid_projection; null when no refinement ran.")
     map_id: str
     map_version: int
     timings_ms: dict[str, float]
