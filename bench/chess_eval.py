@@ -3,7 +3,7 @@
 Usage::
 
     python -m bench.chess_eval [--frames N] [--draws K] [--seed S] [--json PATH] [--plots DIR]
-                               [--metrics m1,m2] [--slow-stride N] [--no-docs]
+                               [--metrics m1,m2] [--slow-stride N] [--write-results]
 
 Data (read-only, in ``../shared/data`` beside the checkout; located and loaded by
 :mod:`bench.shared_data`): ``chess_scene.json`` (11 ellipsoids, +Z up) through the maps importer,
@@ -30,8 +30,8 @@ misses; see ``docs/simulation.md``). Experiments:
 
 ``iou`` and ``giou`` refinements cost ~0.5-1 s each here (exact areas with numerical
 Jacobians), so experiments 3-5 use every ``--slow-stride``-th frame for them (stated in the
-output). Writes JSON (``--json``), PNG plots (``--plots``, default ``docs/img``) and the
-``chess_eval`` section of ``docs/results.md`` (unless ``--no-docs``).
+output). Writes JSON (``--json``), PNG plots (``--plots``) and, with ``--write-results``, the
+``chess_eval`` section of ``docs/results.md`` and its plots in ``docs/img``.
 """
 
 from __future__ import annotations
@@ -636,12 +636,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--draws", type=int, default=1)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", type=Path, default=None)
-    parser.add_argument("--plots", type=Path,
-                        default=Path(__file__).resolve().parent.parent / "docs" / "img")
+    parser.add_argument("--plots", type=Path, default=None,
+                        help="write PNG plots here (default with --write-results: docs/img)")
     parser.add_argument("--metrics", type=str, default=",".join(METRICS))
     parser.add_argument("--slow-stride", type=int, default=3)
-    parser.add_argument("--no-docs", action="store_true",
-                        help="do not write the chess_eval section of docs/results.md")
+    parser.add_argument("--write-results", action="store_true",
+                        help="write the chess_eval section of docs/results.md")
     parser.add_argument("--save-raw", type=Path, default=None,
                         help="also save every per-frame error (JSON) to this path")
     parser.add_argument("--report-from", type=Path, default=None,
@@ -665,6 +665,8 @@ def main(argv: list[str] | None = None) -> int:
         results["command"] = command.strip()
     if args.save_raw and not args.report_from:
         args.save_raw.write_text(json.dumps(results))
+    if args.plots is None and args.write_results:
+        args.plots = Path(__file__).resolve().parent.parent / "docs" / "img"
     plots = make_plots(results, args.plots) if args.plots else []
     md = markdown(results, command.strip(), plots)
     print(md)
@@ -672,7 +674,7 @@ def main(argv: list[str] | None = None) -> int:
         public = {k: v for k, v in results.items() if k not in ("_raw", "command")}
         # a failed frame's error is inf: written as null (JSON has no Infinity)
         args.json.write_text(json.dumps(json_safe(public), indent=2, allow_nan=False))
-    if not args.no_docs:
+    if args.write_results:
         from bench.results_doc import update_results_section
 
         update_results_section("chess_eval", md)

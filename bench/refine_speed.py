@@ -1,6 +1,6 @@
 """Speed and accuracy of the pose refinement, every metric, against the paper's BFGS baseline.
 
-``python -m bench.refine_speed [--json PATH] [--trials T] [--seed S] [--no-docs]``
+``python -m bench.refine_speed [--json PATH] [--trials T] [--seed S] [--write-results]``
 
 Scenes (synthetic, seeded): N = 3, 5, 8, 16 ellipsoids (semi-axes 0.08-0.35 m, random
 orientations) 2-6 m in front of a camera with the Chess intrinsics (640 x 480), each fully in
@@ -362,18 +362,18 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--trials", type=int, default=None,
                     help="trials per (metric, N) (default: 40 level set, 5 iou/giou, 10 others)")
-    ap.add_argument("--no-docs", action="store_true",
-                    help="do not write the refine_speed section of docs/results.md")
+    ap.add_argument("--write-results", action="store_true",
+                    help="write the refine_speed section of docs/results.md")
     args = ap.parse_args(argv)
     command = "python -m bench.refine_speed" + (f" --seed {args.seed}" if args.seed else "") + (
-        f" --trials {args.trials}" if args.trials else "")
+        f" --trials {args.trials}" if args.trials else "") + " --write-results"
     res = run(args.seed, args.trials)
     res["command"] = command
     md = markdown(res, command)
     print(md)
     if args.json:
         args.json.write_text(json.dumps(res, indent=2))
-    if not args.no_docs:
+    if args.write_results:
         from bench.results_doc import update_results_section
 
         update_results_section("refine_speed", md)
