@@ -352,15 +352,29 @@ class PoseResidualModel:
             self.dim = self._metric_dim()
             if metric in _CONIC_METRICS:
                 self._init_conic()
+        self._set_layout_dependents()
+        self.analytic = metric in ANALYTIC_METRICS
+
+    def relayout(self, world_from_camera: np.ndarray) -> None:
+        """Level set: lay the samples out again for the misalignment at ``world_from_camera``
+        (4x4, e.g. an LM result; not re-validated) and forget the memoised evaluation. The
+        residual size is unchanged, so factors built on this model stay valid."""
+        if self.metric != "level_set":
+            raise ValueError(f"relayout applies to the level_set metric, not {self.metric!r}")
+        self._init_level_set(np.asarray(world_from_camera, dtype=float))
+        self._set_layout_dependents()
+        self._cache_key, self._cache_jac, self._cache = None, False, None
+
+    def _set_layout_dependents(self) -> None:
+        """Penalty costs and per-pair metric options, which depend on the level-set layout."""
         self.penalty_costs = self._penalty_costs()
         self.penalty_costs.setflags(write=False)
         self._pen_amp = np.sqrt(self.penalty_costs / self.dim)  # (N,)
         # per-pair options of the factors.metrics calls (the level set's samples stay fixed)
         self._pair_options = [self.options] * self.n
-        if metric == "level_set":
+        if self.metric == "level_set":
             self._pair_options = [{**self.options, "scale": float(sc), "adaptive": False}
                                   for sc in self.sampling_scale]
-        self.analytic = metric in ANALYTIC_METRICS
 
     # ------------------------------------------------------------------ set-up
     def _penalty_costs(self) -> np.ndarray:
@@ -808,17 +822,25 @@ def _check_pose(T: object, name: str) -> np.ndarray:
         M = np.array(T, dtype=float)
     except (TypeError, ValueError) as exc:
         raise GeometryError(f"{name} must be a numeric 4x4 matrix") from exc
-    if M.shape != (4, 4) or not np.all(np.isfinite(M)):
+    if M.shape != (4, 4) or not np.isfinite(M).all():
         raise GeometryError(f"{name} must be a finite 4x4 matrix, got shape {M.shape}")
-    if np.max(np.abs(M[3] - [0, 0, 0, 1])) > 1e-9:
-        raise GeometryError(f"{name} last row must be [0, 0, 0, 1], got {M[3].tolist()}")
+    rows = M.tolist()  # scalar checks in plain floats: this runs on every refine() call
+    x, y, z, w = rows[3]
+    if max(abs(x), abs(y), abs(z), abs(w - 1.0)) > 1e-9:
+        raise GeometryError(f"{name} last row must be [0, 0, 0, 1], got {rows[3]}")
     R = M[:3, :3]
-    err = float(np.max(np.abs(R @ R.T - np.eye(3))))
-    if err > ORTHONORMAL_TOLERANCE or np.linalg.det(R) < 0:
+    err = float(np.abs(R @ R.T - _I3).max())
+    (a, b, c, _), (d, e, f, _), (g, h, i, _) = rows[:3]
+    det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+    if err > ORTHONORMAL_TOLERANCE or det < 0:
         raise GeometryError(
-            f"{name} rotation block is not a proper rotation (max|R R^T - I| = {err:.3g})"
+            f"{name} rotation block is not a proper rotation (max|R R^T - I| = {err:.3g}, "
+            f"det = {det:.6g})"
         )
     return M
+
+
+_I3 = np.eye(3)
 
 
 def check_pose(T: object, name: str = "world_from_camera") -> np.ndarray:

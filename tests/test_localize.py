@@ -214,7 +214,7 @@ def test_level_set_resampling_reaches_the_optimum_from_far():
     """The adaptive level-set samples are laid out for the misalignment at the start of a
     solve; from a far start one solve stops at a biased pose, and refine()'s second solve with
     the samples re-laid at its result reaches the optimum found from the ground truth."""
-    from service.localization.refine import _solve, refine
+    from service.localization.refine import _build_graph, _solve, refine
 
     rng = np.random.default_rng(1)
     gaps_single, gaps_resampled = [], []
@@ -224,8 +224,9 @@ def test_level_set_resampling_reaches_the_optimum_from_far():
         ells = [MAP.object_by_id(o).ellipsoid for o in frame.object_ids]
         optimum = refine(dets, ells, CAMERA, POSES[i], "level_set").world_from_camera
         start = perturb_pose(POSES[i], rng, 0.4, 20.0)
-        single = _solve(dets, ells, CAMERA, start, "level_set", [d.sigma for d in dets], None,
-                        None, None, 50, None).T
+        graph, model = _build_graph(dets, ells, CAMERA, start, "level_set",
+                                    [d.sigma for d in dets], None, None, None, None)
+        single = _solve(graph, model, start, 50).T
         resampled = refine(dets, ells, CAMERA, start, "level_set").world_from_camera
         gaps_single.append(np.linalg.norm(single[:3, 3] - optimum[:3, 3]))
         gaps_resampled.append(np.linalg.norm(resampled[:3, 3] - optimum[:3, 3]))

@@ -420,3 +420,24 @@ def test_batched_factor_weights_each_pair_by_its_sigma(scene):
     expected = 0.5 * sum(c / (1.0 if s is None else s) for c, s in zip(costs, sigmas, strict=True))
     assert batched_pose_factor(0, model, sigmas).error(values) == pytest.approx(expected, rel=1e-9)
     assert FACTOR_FACTORIES.keys() == set(metrics.METRIC_NAMES)
+
+
+def test_relayout_equals_a_model_built_at_that_pose(scene):
+    """refine() re-lays the level-set samples in place; it must equal a fresh model."""
+    ells, dets, pose = scene
+    rng = np.random.default_rng(5)
+    far = retract(pose, perturbation(rng, 0.3, 0.6))  # grows the adaptive sampling areas
+    near = retract(pose, perturbation(rng, 0.01, 0.02))
+    relaid = PoseResidualModel("level_set", dets, ells, CAMERA, initial_world_from_camera=far)
+    relaid.evaluate(near)  # fill the memo, which relayout must drop
+    relaid.relayout(near)
+    fresh = PoseResidualModel("level_set", dets, ells, CAMERA, initial_world_from_camera=near)
+    assert not np.allclose(relaid.sampling_scale, PoseResidualModel(
+        "level_set", dets, ells, CAMERA, initial_world_from_camera=far).sampling_scale)
+    np.testing.assert_array_equal(relaid.sample_points, fresh.sample_points)
+    np.testing.assert_array_equal(relaid.penalty_costs, fresh.penalty_costs)
+    a, b = relaid.evaluate(pose), fresh.evaluate(pose)
+    np.testing.assert_array_equal(a.residuals, b.residuals)
+    np.testing.assert_array_equal(a.jacobians, b.jacobians)
+    with pytest.raises(ValueError, match="level_set"):
+        PoseResidualModel("wasserstein", dets, ells, CAMERA).relayout(near)

@@ -407,8 +407,8 @@ def test_numpy_integer_max_iterations():
 
 def test_deadline_passed_before_the_relaid_solve_skips_it(monkeypatch):
     """Far start: the first level-set solve grows its sample areas, so refine re-lays them and
-    solves again -- unless the deadline has passed by then: no second solve (which would
-    rebuild every factor only to stop at once, mislabelled ``time_budget``)."""
+    solves again -- unless the deadline has passed by then: no second solve (which would stop
+    at once and be mislabelled ``time_budget``)."""
     import sys
     import time
 

@@ -59,7 +59,7 @@ import numpy as np
 
 from factors.geometry import Camera, Ellipsoid, GeometryError, snap_to_rotation
 from factors.pose_factors import ROBUST_KERNELS, pose_factors
-from factors.pose_residuals import check_pose
+from factors.pose_residuals import PoseResidualModel, check_pose
 from service.localization.types import Detection, check_covariance
 
 __all__ = [
@@ -232,12 +232,12 @@ def refine(
 
     sigmas = [d.sigma if use_sigma else None for d in detections]
     resample = metric == "level_set" and bool((metric_options or {}).get("adaptive", True))
+    graph, model = _build_graph(detections, ellipsoids, camera, T0, metric, sigmas, robust,
+                                robust_scale, prior, metric_options)
     T_start, total_iterations, initial_error = T0, 0, None
     relaid_skipped = False
     for pass_ in range(2 if resample else 1):
-        outcome = _solve(detections, ellipsoids, camera, T_start, metric, sigmas, robust,
-                         robust_scale, prior, max_iterations - total_iterations, metric_options,
-                         deadline)
+        outcome = _solve(graph, model, T_start, max_iterations - total_iterations, deadline)
         total_iterations += outcome.iterations
         if initial_error is None:
             initial_error = outcome.initial_error
@@ -245,13 +245,15 @@ def refine(
                 or total_iterations >= max_iterations or not outcome.sampling_grown:
             break
         if deadline is not None and time.perf_counter() > deadline:
-            # no time for the re-laid solve (it would rebuild every factor only to stop at
-            # once): keep the first solve and its status, and say the re-lay was skipped
+            # no time for the re-laid solve: keep the first solve and its status, and say the
+            # re-lay was skipped
             relaid_skipped = True
             break
         # Some adaptive level-set sample areas were grown for the misalignment at T_start
-        # (factors.metrics.level_set_sampling_scale); re-lay them at the result and solve again.
+        # (factors.metrics.level_set_sampling_scale); re-lay them at the result and solve
+        # again (same factors: the model's samples change in place).
         T_start = outcome.T
+        model.relayout(T_start)
     status = outcome.status
     if status == "converged" and total_iterations >= max_iterations:
         status = "max_iterations"
@@ -286,14 +288,14 @@ class _SolveOutcome:
     sampling_grown: bool
 
 
-def _solve(
+def _build_graph(
     detections: Sequence[Detection], ellipsoids: Sequence[Ellipsoid], camera: Camera,
     T0: np.ndarray, metric: str, sigmas: list[float | None], robust: str | None,
     robust_scale: float | None, prior: tuple[np.ndarray, np.ndarray] | None,
-    max_iterations: int, metric_options: Mapping[str, Any] | None,
-    deadline: float | None = None,
-) -> _SolveOutcome:
-    """One LM solve from ``T0`` (level-set samples laid out at ``T0``)."""
+    metric_options: Mapping[str, Any] | None,
+) -> tuple[gtsam.NonlinearFactorGraph, PoseResidualModel]:
+    """The factor graph of one refinement and its shared residual model (level-set samples
+    laid out at ``T0``)."""
     # without robust kernels one batched factor (Diagonal noise = the same per-detection
     # weights) saves N-1 Python round trips per evaluation; with them, one factor per
     # detection, all slicing one shared evaluation (see factors.pose_factors)
@@ -308,6 +310,14 @@ def _solve(
     if prior is not None:
         graph.add(gtsam.PriorFactorPose3(_POSE_KEY, _pose3(prior[0]),
                                          gtsam.noiseModel.Gaussian.Covariance(prior[1])))
+    return graph, model
+
+
+def _solve(
+    graph: gtsam.NonlinearFactorGraph, model: PoseResidualModel, T0: np.ndarray,
+    max_iterations: int, deadline: float | None = None,
+) -> _SolveOutcome:
+    """One LM solve of ``graph`` from ``T0``; final costs from ``model``."""
     initial = gtsam.Values()
     initial.insert(_POSE_KEY, _pose3(T0))
 
