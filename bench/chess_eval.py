@@ -342,7 +342,14 @@ def make_plots(results: dict, out_dir: Path) -> list[Path]:
 
     out_dir.mkdir(parents=True, exist_ok=True)
     raw = results["_raw"]
-    written = []
+    written: list[Path] = []
+
+    def save(fig: object, name: str) -> None:
+        fig.tight_layout()  # type: ignore[attr-defined]
+        path = out_dir / name
+        fig.savefig(path, dpi=90)  # type: ignore[attr-defined]
+        plt.close(fig)
+        written.append(path)
 
     for kind, thresholds, col, unit in (
             ("position", POSITION_THRESHOLDS_M, 0, "m"),
@@ -362,11 +369,7 @@ def make_plots(results: dict, out_dir: Path) -> list[Path]:
         axes[0].set_ylabel("% correctly localized")
         axes[-1].legend(fontsize=8, loc="lower right")
         fig.suptitle(f"Chess: relocalization from scratch, {kind} error (paper fig. 5)")
-        fig.tight_layout()
-        path = out_dir / f"chess_localized_vs_{kind}.png"
-        fig.savefig(path, dpi=90)
-        plt.close(fig)
-        written.append(path)
+        save(fig, f"chess_localized_vs_{kind}.png")
 
     conv = raw["convergence"]
     fig, axes = plt.subplots(1, len(conv), figsize=(6 * len(conv), 4.2), sharey=True)
@@ -381,11 +384,7 @@ def make_plots(results: dict, out_dir: Path) -> list[Path]:
     np.atleast_1d(axes)[0].set_ylabel("% correctly localized")
     np.atleast_1d(axes)[-1].legend(fontsize=8, loc="lower right")
     fig.suptitle("Chess: convergence from noisy initial poses (paper fig. 10)")
-    fig.tight_layout()
-    path = out_dir / "chess_convergence.png"
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    written.append(path)
+    save(fig, "chess_convergence.png")
 
     ms = list(raw["no_sigma"])
     ncol = 3
@@ -403,11 +402,7 @@ def make_plots(results: dict, out_dir: Path) -> list[Path]:
     for ax in axes.ravel()[len(ms):]:
         ax.axis("off")
     fig.suptitle("Chess: sigma weighting (paper eq. 8, fig. 12); x: position threshold (m)")
-    fig.tight_layout()
-    path = out_dir / "chess_sigma.png"
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    written.append(path)
+    save(fig, "chess_sigma.png")
 
     part = results["partial_visibility"]["metrics"]
     fig, ax = plt.subplots(figsize=(9, 4))
@@ -417,11 +412,7 @@ def make_plots(results: dict, out_dir: Path) -> list[Path]:
     ax.set_ylabel("median position error (cm)")
     ax.set_title("Exact detections truncated at the image border "
                  f"({results['partial_visibility']['frames']} frames)")
-    fig.tight_layout()
-    path = out_dir / "chess_partial_visibility.png"
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    written.append(path)
+    save(fig, "chess_partial_visibility.png")
     return written
 
 

@@ -343,7 +343,10 @@ class PoseResidualModel:
         self._cache_key: bytes | None = None
         self._cache_jac = False
         self._cache: PoseEvaluation | None = None
-        T0 = None if initial_world_from_camera is None else _check_pose(
+        #: level set: some detection's sampled area was grown for the misalignment at the
+        #: initial pose (see :meth:`relayout`); always False for the other metrics
+        self.sampling_grown = False
+        T0 = None if initial_world_from_camera is None else check_pose(
             initial_world_from_camera, "initial_world_from_camera")
         if metric == "level_set":
             self._init_level_set(T0)
@@ -442,7 +445,6 @@ class PoseResidualModel:
         pts = np.stack([P[:, 0, None] + ca * u - sa * v, P[:, 1, None] + sa * u + ca * v], -1)
         self.sample_points = pts  # (N, M, 2) px
         self.sampling_scale = s_max  # (N,) outermost level radius per detection
-        #: some detection's sampled area was grown for the misalignment at ``T0``
         self.sampling_grown = bool(np.any(s_max > scale))
         self._phi0 = np.einsum("mk,mk->m", uv, uv)[None, :] * (s_max**2)[:, None] - 1.0
         cam = self.camera
@@ -817,24 +819,26 @@ class PoseResidualModel:
         return np.einsum("nm,nm->n", ev.residuals, ev.residuals)
 
 
-def _check_pose(T: object, name: str) -> np.ndarray:
+def check_pose(T: object, name: str = "world_from_camera") -> np.ndarray:
+    """Validate a 4x4 rigid transform (finite, last row [0,0,0,1], rotation orthonormal within
+    ``factors.geometry.ORTHONORMAL_TOLERANCE``, det > 0); errors read ``"<name>: <problem>"``."""
     try:
         M = np.array(T, dtype=float)
     except (TypeError, ValueError) as exc:
-        raise GeometryError(f"{name} must be a numeric 4x4 matrix") from exc
+        raise GeometryError(f"{name}: must be a numeric 4x4 matrix") from exc
     if M.shape != (4, 4) or not np.isfinite(M).all():
-        raise GeometryError(f"{name} must be a finite 4x4 matrix, got shape {M.shape}")
+        raise GeometryError(f"{name}: must be a finite 4x4 matrix, got shape {M.shape}")
     rows = M.tolist()  # scalar checks in plain floats: this runs on every refine() call
     x, y, z, w = rows[3]
     if max(abs(x), abs(y), abs(z), abs(w - 1.0)) > 1e-9:
-        raise GeometryError(f"{name} last row must be [0, 0, 0, 1], got {rows[3]}")
+        raise GeometryError(f"{name}: last row must be [0, 0, 0, 1], got {rows[3]}")
     R = M[:3, :3]
     err = float(np.abs(R @ R.T - _I3).max())
     (a, b, c, _), (d, e, f, _), (g, h, i, _) = rows[:3]
     det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
     if err > ORTHONORMAL_TOLERANCE or det < 0:
         raise GeometryError(
-            f"{name} rotation block is not a proper rotation (max|R R^T - I| = {err:.3g}, "
+            f"{name}: rotation block is not a proper rotation (max|R R^T - I| = {err:.3g}, "
             f"det = {det:.6g})"
         )
     return M
@@ -843,7 +847,3 @@ def _check_pose(T: object, name: str) -> np.ndarray:
 _I3 = np.eye(3)
 
 
-def check_pose(T: object, name: str = "world_from_camera") -> np.ndarray:
-    """Validate a 4x4 rigid transform (finite, last row [0,0,0,1], rotation orthonormal within
-    ``factors.geometry.ORTHONORMAL_TOLERANCE``, det > 0)."""
-    return _check_pose(T, name)

@@ -194,10 +194,10 @@ def refine(
         prior_world_from_camera, prior_covariance: optional pose prior (4x4) and its 6x6
             covariance in GTSAM's Pose3 tangent order ``[omega, v]``, body frame; both or neither.
         max_iterations: LM iteration cap (>= 1).
-        deadline: optional ``time.perf_counter()`` instant after which no further LM iteration
-            starts (the per-request solve budget of the service); None = no limit.
         metric_options: options of the metric (e.g. level-set sampling), see
             ``factors.metrics``.
+        deadline: optional ``time.perf_counter()`` instant after which no further LM iteration
+            starts (the per-request solve budget of the service); None = no limit.
 
     Returns:
         :class:`RefinementResult`.
@@ -242,7 +242,7 @@ def refine(
         if initial_error is None:
             initial_error = outcome.initial_error
         if pass_ == 1 or outcome.status in ("diverged", "invalid_projection", "time_budget") \
-                or total_iterations >= max_iterations or not outcome.sampling_grown:
+                or total_iterations >= max_iterations or not model.sampling_grown:
             break
         if deadline is not None and time.perf_counter() > deadline:
             # no time for the re-laid solve: keep the first solve and its status, and say the
@@ -262,7 +262,7 @@ def refine(
     elif status == "invalid_projection":
         covariance, reason = None, "a projection is not an ellipse at the final pose"
     else:
-        covariance, reason = _covariance(outcome.graph, outcome.result)
+        covariance, reason = _covariance(graph, outcome.result)
     return RefinementResult(
         world_from_camera=outcome.T, covariance=covariance, covariance_reason=reason,
         per_detection_cost=outcome.costs, valid_projection=outcome.valid,
@@ -278,14 +278,12 @@ def refine(
 class _SolveOutcome:
     T: np.ndarray
     result: gtsam.Values
-    graph: gtsam.NonlinearFactorGraph
     costs: np.ndarray
     valid: np.ndarray
     initial_error: float
     total_error: float
     iterations: int
     status: str
-    sampling_grown: bool
 
 
 def _build_graph(
@@ -347,8 +345,8 @@ def _solve(
     costs[~valid] = np.inf
     if status != "diverged" and not valid.all():
         status = "invalid_projection"
-    return _SolveOutcome(T, result, graph, costs, valid, initial_error, total_error,
-                         iterations, status, bool(getattr(model, "sampling_grown", False)))
+    return _SolveOutcome(T, result, costs, valid, initial_error, total_error, iterations,
+                         status)
 
 
 def _optimize_until(

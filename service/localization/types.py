@@ -26,9 +26,10 @@ from typing import Any
 
 import numpy as np
 
-from factors.geometry import ORTHONORMAL_TOLERANCE, Ellipse, GeometryError
+from factors.geometry import Ellipse, GeometryError
 from factors.metrics import METRIC_NAMES, residual
 from factors.pose_factors import ROBUST_KERNELS
+from factors.pose_residuals import check_pose
 
 __all__ = [
     "METRICS",
@@ -223,20 +224,9 @@ def _check_metric_options(metric: str, options: Mapping[str, Any]) -> None:
 
 def _check_pose(field_name: str, value: object) -> np.ndarray:
     try:
-        T = np.array(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise _bad(field_name, "must be a numeric 4x4 matrix") from exc
-    if T.shape != (4, 4):
-        raise _bad(field_name, f"must have shape (4, 4), got {T.shape}")
-    if not np.all(np.isfinite(T)):
-        raise _bad(field_name, "must be finite")
-    if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
-        raise _bad(field_name, f"last row must be [0, 0, 0, 1], got {T[3].tolist()}")
-    R = T[:3, :3]
-    err = float(np.max(np.abs(R @ R.T - np.eye(3))))
-    if err > ORTHONORMAL_TOLERANCE or abs(float(np.linalg.det(R)) - 1.0) > ORTHONORMAL_TOLERANCE:
-        raise _bad(field_name, f"rotation block is not a proper rotation (max|R R^T - I| = "
-                   f"{err:.3g}, det = {float(np.linalg.det(R)):.6g})")
+        T = check_pose(value, field_name)
+    except GeometryError as exc:
+        raise LocalizationInputError(str(exc)) from exc
     T.setflags(write=False)
     return T
 
