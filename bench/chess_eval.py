@@ -5,8 +5,8 @@ Usage::
     python -m bench.chess_eval [--frames N] [--draws K] [--seed S] [--json PATH] [--plots DIR]
                                [--metrics m1,m2] [--slow-stride N] [--write-results]
 
-Data (read-only, in ``../shared/data`` beside the checkout; located and loaded by
-:mod:`bench.shared_data`): ``chess_scene.json`` (11 ellipsoids, +Z up) through the maps importer,
+Data (read-only, shipped in ``bench/data``; located and loaded by
+:mod:`bench.reference_data`): ``chess_scene.json`` (11 ellipsoids, +Z up) through the maps importer,
 and the 108 real ground-truth poses of ``chess_test_poses.json`` (``R, t`` are
 camera_from_world; ``R`` is snapped to the nearest rotation). Detections are simulated from the
 ground truth by :mod:`bench.simulate` (noise, truncation at the image border, occlusion, sigma,
@@ -45,13 +45,13 @@ from pathlib import Path
 
 import numpy as np
 
-from bench import shared_data
-from bench.shared_data import CHESS_POSES_PATH, load_chess_map, perturb_pose
+from bench import reference_data
+from bench.reference_data import CHESS_POSES_PATH, load_chess_map, perturb_pose
 from factors.geometry import Camera, invert_pose
 from factors.metrics import METRIC_NAMES
 from service.localization.types import LocalizationOptions
 
-# ``load_chess_map`` (from bench.shared_data) and ``load_chess_world_from_camera`` are imported
+# ``load_chess_map`` (from bench.reference_data) and ``load_chess_world_from_camera`` are imported
 # by tests.
 
 
@@ -60,10 +60,10 @@ def load_chess_world_from_camera(
 ) -> tuple[Camera, list[np.ndarray], list[str]]:
     """(camera, **world_from_camera** poses (4x4), frame names) of the 108 real test frames.
 
-    Unlike :func:`bench.shared_data.load_chess_poses` (camera_from_world, the file's ``R, t``
+    Unlike :func:`bench.reference_data.load_chess_poses` (camera_from_world, the file's ``R, t``
     with ``R`` snapped to the nearest rotation), this returns their inverses.
     """
-    camera, camera_from_world, names = shared_data.load_chess_poses(path)
+    camera, camera_from_world, names = reference_data.load_chess_poses(path)
     return camera, [invert_pose(T) for T in camera_from_world], names
 
 

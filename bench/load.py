@@ -55,7 +55,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 def build_frames(n_frames: int, seed: int = 0) -> tuple[list[dict[str, Any]], list[Any]]:
     """``n_frames`` request bodies (and the matching in-process inputs) of simulated frames."""
-    from bench.shared_data import load_chess_poses
+    from bench.reference_data import load_chess_poses
     from bench.simulate import simulate_frame
     from factors.geometry import invert_pose
     from maps.compiled import compile_map

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.shared_data import load_chess_poses
+from bench.reference_data import load_chess_poses
 from factors.geometry import (
     Camera,
     Ellipse,

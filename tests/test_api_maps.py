@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from bench.shared_data import CHESS_SCENE_PATH, load_chess_scene_json
+from bench.reference_data import CHESS_SCENE_PATH, load_chess_scene_json
 from maps.demo import load_demo_map
 from maps.model import content_hash, scene_map_from_dict
 from service.api.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE

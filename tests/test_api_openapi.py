@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.shared_data import CHESS_POSES_PATH as POSES_PATH
+from bench.reference_data import CHESS_POSES_PATH as POSES_PATH
 from factors import metrics
 from factors.geometry import (
     Camera,

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.shared_data import CHESS_SCENE_PATH
+from bench.reference_data import CHESS_SCENE_PATH
 from maps.model import content_hash, scene_map_from_dict
 from service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, MAP_EXAMPLE
 from service.cli import OPENAPI_PATH, main

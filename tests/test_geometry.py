@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bench.shared_data import load_chess_poses, load_chess_scene_json
+from bench.reference_data import load_chess_poses, load_chess_scene_json
 from factors.geometry import (
     Camera,
     DegenerateProjectionError,

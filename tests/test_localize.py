@@ -10,7 +10,7 @@ import pytest
 
 import service.localization.pipeline as pipeline
 from bench.chess_eval import load_chess_map, load_chess_world_from_camera
-from bench.shared_data import perturb_pose
+from bench.reference_data import perturb_pose
 from bench.simulate import SimulationConfig, simulate_frame
 from factors.geometry import Ellipse, GeometryError
 from maps.compiled import compile_map

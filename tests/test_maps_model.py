@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from bench.shared_data import CHESS_SCENE_PATH
+from bench.reference_data import CHESS_SCENE_PATH
 from factors.geometry import Ellipsoid, rotation_from_quaternion_wxyz
 from maps.compiled import compile_map
 from maps.demo import DEMO_MAP_PATH, load_demo_map

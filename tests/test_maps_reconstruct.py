@@ -1,7 +1,7 @@
 """Reconstruction of ellipsoids from multi-view ellipses (Rubino linear + GTSAM LM).
 
 Views are synthesised by projecting the Chess map's own ellipsoids with the 108 real
-ground-truth poses of ../shared/data/chess_test_poses.json (R, t camera_from_world, snapped
+ground-truth poses of bench/data/chess_test_poses.json (R, t camera_from_world, snapped
 to rotations).
 """
 
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from bench.reconstruction import visible_frames
-from bench.shared_data import CHESS_POSES_PATH, load_chess_poses
+from bench.reference_data import load_chess_poses
 from factors.geometry import (
     Camera,
     Ellipse,
@@ -40,8 +40,6 @@ from maps.reconstruct import (
 
 @pytest.fixture(scope="module")
 def chess_views() -> tuple[Camera, list[np.ndarray]]:
-    if not CHESS_POSES_PATH.exists():
-        pytest.skip(f"reference data {CHESS_POSES_PATH} not present")
     cam, cfw, _ = load_chess_poses()
     return cam, cfw
 

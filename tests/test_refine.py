@@ -16,7 +16,7 @@ import gtsam
 import numpy as np
 import pytest
 
-from bench.shared_data import CHESS_SCENE_PATH, load_chess_map, load_chess_poses, perturb_pose
+from bench.reference_data import CHESS_SCENE_PATH, load_chess_map, load_chess_poses, perturb_pose
 from factors import metrics
 from factors.geometry import (
     Camera,

@@ -84,11 +84,11 @@ def build_example_frame(poses_path: Path | None = None, frame_index: int = FRAME
                         seed: int = SEED) -> tuple[dict[str, Any], list[list[float]], str]:
     """Simulate the demo frame: (request body, true world_from_camera 4x4, source text).
 
-    Needs the source tree (``bench.simulate``, ``bench.shared_data``) and the reference poses
-    (default ``bench.shared_data.CHESS_POSES_PATH``, ``../shared/data`` beside the checkout);
+    Needs the source tree (``bench.simulate``, ``bench.reference_data``) and the reference poses
+    (default ``bench.reference_data.CHESS_POSES_PATH``, ``bench/data`` in the checkout);
     dev-time only: ``bench`` is imported here, never when the service imports this module.
     """
-    from bench.shared_data import CHESS_POSES_PATH, load_chess_poses
+    from bench.reference_data import CHESS_POSES_PATH, load_chess_poses
     from bench.simulate import simulate_frame
     from factors.geometry import invert_pose
     from maps.demo import load_demo_map

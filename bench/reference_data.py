@@ -1,14 +1,13 @@
-"""Locate and load the project's read-only reference data (``../shared/data`` beside the repo).
+"""Load the project's real reference data, shipped in the checkout under ``bench/data/``.
 
-The data is not shipped in the package (except the demo map, ``maps/data/chess.json``): tests and
-benchmarks find it beside the checkout, as on developer machines and in CI. Set
-``QUADLOC_SHARED_DATA`` to point elsewhere.
+``bench/data/README.md`` gives the provenance of each file. The data is not part of the installed
+package (the demo map ``maps/data/chess.json`` is): tests, benchmarks and docs examples read it from
+the source tree, never from outside the checkout.
 """
 
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +16,7 @@ from factors.geometry import Camera, pose_matrix, snap_to_rotation
 from maps.model import SceneMap, scene_map_from_chess
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
-DATA_DIR = Path(os.environ.get("QUADLOC_SHARED_DATA", REPO_ROOT.parent / "shared" / "data"))
+DATA_DIR = REPO_ROOT / "bench" / "data"
 CHESS_SCENE_PATH = DATA_DIR / "chess_scene.json"
 CHESS_POSES_PATH = DATA_DIR / "chess_test_poses.json"
 
