@@ -21,8 +21,12 @@ The support functions ``h_i(theta) = n . c_i + sqrt(n^T Sigma_i n)`` are compare
 ``n_directions`` normal directions (default 128) to find where the supporting ellipse switches
 (a common tangent), each switch is refined by Newton steps, then the area is the sum of the
 closed-form Green integrals of the supporting arcs plus ``1/2 p × q`` for each tangent segment.
-Two switches closer than one direction step (an ellipse that almost contains the other) can be
-missed; the hull is then the larger ellipse and loses a sliver.
+Two switches closer than one direction step (an ellipse that pokes out of the other over a narrow
+range of normals) leave no sign change on the grid; they are found from the derivative of
+``h_1 - h_2``: on an interval where the grid winner does not change but the difference has an
+interior extremum towards zero (its derivative changes sign), the extremum is located by bisection
+on the derivative and, if the winner changes there, the two switches are bracketed on either side.
+The result no longer depends on how the direction grid happens to fall (rigid-motion invariant).
 """
 
 from __future__ import annotations
@@ -66,6 +70,33 @@ def _quad(A: tuple[float, float, float], x: float, y: float) -> float:
     return A[0] * x * x + 2.0 * A[1] * x * y + A[2] * y * y
 
 
+def _bracketed_root(fn, lo: float, hi: float, f0: float, f1: float, neg_lo: bool) -> float:
+    """The root in ``[lo, hi]`` of a smooth ``fn(t) -> (f, df/dt)`` that changes sign there,
+    negative at ``lo`` iff ``neg_lo`` (a rounding-level ``f0`` counts as its grid class).
+
+    Newton steps from the secant guess ``f0``/``f1``, safeguarded by bisection: the bracket
+    shrinks around the root at every step, so a step never leaves it (a plain clamped Newton
+    can stall on the bracket's end and report it as the root).
+    """
+    t = lo + (hi - lo) * f0 / (f0 - f1) if f0 != f1 else 0.5 * (lo + hi)
+    t = min(max(t, lo), hi)
+    for _ in range(100):
+        f, df = fn(t)
+        if f == 0.0:
+            return t
+        if (f < 0.0) == neg_lo:
+            lo = t
+        else:
+            hi = t
+        t_new = t - f / df if df != 0.0 else lo - 1.0
+        if not lo < t_new < hi:
+            t_new = 0.5 * (lo + hi)
+        if abs(t_new - t) < 1e-15 or hi - lo < 1e-15:
+            return t_new
+        t = t_new
+    return t
+
+
 def intersection_area(p1: np.ndarray, p2: np.ndarray) -> float:
     """Area (px^2) of the intersection of two filled ellipses given as params (5,)."""
     P1x, P1y, Q1x, Q1y, *A1l = _ellipse_terms(p1)
@@ -98,26 +129,19 @@ def intersection_area(p1: np.ndarray, p2: np.ndarray) -> float:
         if _quad(A1, -dx, -dy) < 1.0:
             return math.pi * ab2
         return 0.0
+    def f_and_df(t: float) -> tuple[float, float]:
+        ct, st = math.cos(t), math.sin(t)
+        c2t, s2t = ct * ct - st * st, 2.0 * st * ct
+        return (k0 + k1 * ct + k2 * st + k3 * c2t + k4 * s2t,
+                -k1 * st + k2 * ct - 2.0 * k3 * s2t + 2.0 * k4 * c2t)
+
     h = _TWO_PI / GRID
     fl = f.tolist()
     roots1 = []
     for i in idx:
         lo = i * h
-        hi = lo + h
-        f0, f1 = fl[i], fl[(i + 1) % GRID]
-        t = lo + h * f0 / (f0 - f1)
-        for _ in range(4):  # Newton, kept inside the bracket
-            ct, st = math.cos(t), math.sin(t)
-            c2t, s2t = ct * ct - st * st, 2.0 * st * ct
-            ft = k0 + k1 * ct + k2 * st + k3 * c2t + k4 * s2t
-            dft = -k1 * st + k2 * ct - 2.0 * k3 * s2t + 2.0 * k4 * c2t
-            if dft == 0.0:
-                break
-            step = ft / dft
-            t = min(max(t - step, lo), hi)
-            if abs(step) < 1e-14:
-                break
-        roots1.append(t % _TWO_PI)
+        roots1.append(_bracketed_root(f_and_df, lo, lo + h, fl[i], fl[(i + 1) % GRID],
+                                      not sign[i]) % _TWO_PI)
     roots1.sort()
     # The same intersection points on E2: x - c2 = cos t P2 + sin t Q2.
     roots2 = []
@@ -184,16 +208,17 @@ def hull_area(p1: np.ndarray, p2: np.ndarray, n_directions: int = HULL_DIRECTION
     c2x, c2y = float(p2[0] - p1[0]), float(p2[1] - p1[1])
     q1 = S1[0] * nx * nx + 2.0 * S1[1] * nx * ny + S1[2] * ny * ny
     q2 = S2[0] * nx * nx + 2.0 * S2[1] * nx * ny + S2[2] * ny * ny
-    diff = np.sqrt(q1) - (nx * c2x + ny * c2y) - np.sqrt(q2)  # h1 - h2
+    sq1, sq2 = np.sqrt(q1), np.sqrt(q2)
+    diff = sq1 - (nx * c2x + ny * c2y) - sq2  # h1 - h2
+    # d(h1 - h2)/dtheta with dn = (-sin, cos): dn^T S n / sqrt(n^T S n) - dn . c2.
+    ddiff = ((-ny * (S1[0] * nx + S1[1] * ny) + nx * (S1[1] * nx + S1[2] * ny)) / sq1
+             - (-ny * c2x + nx * c2y)
+             - (-ny * (S2[0] * nx + S2[1] * ny) + nx * (S2[1] * nx + S2[2] * ny)) / sq2)
     # Ties (|h1 - h2| at rounding level: identical ellipses, internal tangency) go to the
     # ellipse that dominates overall, so they never create spurious switches.
     tol = 1e-10 * (float(p1[2]) + float(p2[2]) + abs(c2x) + abs(c2y))
     dominant_first = float(np.sum(diff)) >= 0.0
     first = np.where(np.abs(diff) <= tol, dominant_first, diff > 0.0)
-    idx = _sign_changes(first)
-    if not idx:  # one ellipse supports every direction: it contains the other
-        p = p1 if first[0] else p2
-        return math.pi * float(p[2] * p[3])
 
     def hdiff(t: float) -> tuple[float, float]:
         c, s = math.cos(t), math.sin(t)
@@ -205,23 +230,42 @@ def hull_area(p1: np.ndarray, p2: np.ndarray, n_directions: int = HULL_DIRECTION
             dout += sg * (-s * cx + c * cy + (-s * sn_x + c * sn_y) / q)
         return out, dout
 
-    h = _TWO_PI / len(th)
-    dl = diff.tolist()
-    switches = []
-    for i in idx:
+    n_dir = len(th)
+    h = _TWO_PI / n_dir
+    dl, dd = diff.tolist(), ddiff.tolist()
+    switches = []  # (normal angle, index of the supporting ellipse after the switch)
+    for i in range(n_dir):
+        j = (i + 1) % n_dir
         lo, hi = i * h, (i + 1) * h
-        f0, f1 = dl[i], dl[(i + 1) % len(dl)]
-        t = lo + h * f0 / (f0 - f1)
-        for _ in range(5):
-            f, df = hdiff(t)
-            if df == 0.0:
+        if first[i] != first[j]:
+            t = _bracketed_root(hdiff, lo, hi, dl[i], dl[j], not first[i])
+            switches.append((t, 0 if first[j] else 1))
+            continue
+        # Same winner at both ends: look for an interior extremum towards zero (the loser
+        # poking out between two grid directions).
+        sign = 1.0 if first[i] else -1.0
+        if not (sign * dd[i] < 0.0 < sign * dd[j]):
+            continue
+        a_, b_ = lo, hi
+        for _ in range(60):  # bisection on the derivative
+            m = 0.5 * (a_ + b_)
+            if sign * hdiff(m)[1] < 0.0:
+                a_ = m
+            else:
+                b_ = m
+            if b_ - a_ < 1e-15:
                 break
-            step = f / df
-            t = min(max(t - step, lo), hi)
-            if abs(step) < 1e-14:
-                break
-        # winner after the switch: the grid winner at i + 1
-        switches.append((t, 0 if first[(i + 1) % len(dl)] else 1))
+        t_min = 0.5 * (a_ + b_)
+        f_min = hdiff(t_min)[0]
+        if sign * f_min >= -tol:
+            continue
+        loser = 1 if first[i] else 0
+        up, down = not first[i], bool(first[i])
+        switches.append((_bracketed_root(hdiff, lo, t_min, dl[i], f_min, up), loser))
+        switches.append((_bracketed_root(hdiff, t_min, hi, f_min, dl[j], down), 1 - loser))
+    if not switches:  # one ellipse supports every direction: it contains the other
+        p = p1 if first[0] else p2
+        return math.pi * float(p[2] * p[3])
     switches.sort()
     ells = ((p1, 0.0, 0.0), (p2, c2x, c2y))
 
