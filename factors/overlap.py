@@ -232,9 +232,15 @@ def hull_area(p1: np.ndarray, p2: np.ndarray, n_directions: int = HULL_DIRECTION
 
     n_dir = len(th)
     h = _TWO_PI / n_dir
-    dl, dd = diff.tolist(), ddiff.tolist()
+    dl = diff.tolist()
+    # Intervals to look at: a change of winner, or the same winner with the difference turning
+    # back towards zero inside (derivative from towards-zero to away-from-zero).
+    nxt = np.roll(np.arange(n_dir), -1)
+    sgn = np.where(first, 1.0, -1.0)
+    candidates = np.flatnonzero((first != first[nxt])
+                                | ((sgn * ddiff < 0.0) & (sgn * ddiff[nxt] > 0.0)))
     switches = []  # (normal angle, index of the supporting ellipse after the switch)
-    for i in range(n_dir):
+    for i in candidates.tolist():
         j = (i + 1) % n_dir
         lo, hi = i * h, (i + 1) * h
         if first[i] != first[j]:
@@ -244,8 +250,6 @@ def hull_area(p1: np.ndarray, p2: np.ndarray, n_directions: int = HULL_DIRECTION
         # Same winner at both ends: look for an interior extremum towards zero (the loser
         # poking out between two grid directions).
         sign = 1.0 if first[i] else -1.0
-        if not (sign * dd[i] < 0.0 < sign * dd[j]):
-            continue
         a_, b_ = lo, hi
         for _ in range(60):  # bisection on the derivative
             m = 0.5 * (a_ + b_)
