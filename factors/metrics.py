@@ -16,18 +16,22 @@ are pixels, angles radians (see :mod:`factors.geometry` for the ellipse conventi
 Metrics, costs and residuals (``r``, length in brackets)
 --------------------------------------------------------
 ``iou`` [1]
-    Jaccard distance ``1 - |D ∩ P| / |D ∪ P|`` in ``[0, 1]``; ``r = [sqrt(cost)]``. Areas are
-    exact (closed-form arc integrals, :mod:`factors.overlap`). Flat (== 1) for disjoint
-    ellipses. Near the optimum ``cost ~ k |delta|`` (symmetric-difference area grows linearly
-    with a displacement ``delta``), so ``r ~ sqrt(|delta|)`` has an unbounded derivative at 0:
-    Gauss-Newton steps overshoot by a factor ~2 and LM's damping is what makes it converge,
-    linearly. Use it for scoring more than for refinement.
+    Jaccard distance ``Delta = 1 - |D ∩ P| / |D ∪ P|`` in ``[0, 1]``; ``r = [sqrt(Delta)]``.
+    Areas are exact (closed-form arc integrals, :mod:`factors.overlap`), and so are their
+    derivatives (boundary integrals over the same arcs), which :func:`overlap_delta` returns
+    for the pose factors' analytic Jacobians. Flat (== 1) for disjoint ellipses. Near the
+    optimum ``Delta ~ k |delta|`` (symmetric-difference area grows linearly with a displacement
+    ``delta``), so ``r ~ sqrt(|delta|)`` has an unbounded derivative at 0: Gauss-Newton steps
+    overshoot by a factor ~2 and LM's damping is what makes it converge, linearly; and one
+    scalar row per object gives a rank-deficient Gauss-Newton system below 6 objects. Use it
+    for scoring more than for refinement.
 ``giou`` [1]
-    ``1 - GIoU``, ``GIoU = IoU - |C \\ (D ∪ P)| / |C|`` (Rezatofighi et al.), ``C`` the convex
-    hull of the two ellipses; cost in ``[0, 2]``, ``r = [sqrt(cost)]`` (same remark as iou).
-    Exactly flat when one ellipse contains the other (``C`` is then the larger one). The hull
-    area is exact (arcs + common tangents, :mod:`factors.overlap`); option ``hull_directions``
-    (default 128) is the number of normal directions used to bracket the common tangents.
+    ``Delta = 1 - GIoU``, ``GIoU = IoU - |C \\ (D ∪ P)| / |C|`` (Rezatofighi et al.), ``C`` the
+    convex hull of the two ellipses; in ``[0, 2]``, ``r = [sqrt(Delta)]`` (same remarks as
+    iou). Exactly flat when one ellipse contains the other (``C`` is then the larger one). The
+    hull area and its derivative are exact (arcs + common tangents, :mod:`factors.overlap`);
+    option ``hull_directions`` (default 128) is the number of normal directions used to
+    bracket the common tangents.
 ``bbox`` [4]
     ``r = B_D - B_P`` with ``B = [xmin, ymin, xmax, ymax]`` the axis-aligned boxes; cost is the
     squared norm. Not rotation invariant (boxes follow the image axes).
@@ -84,7 +88,13 @@ from collections.abc import Sequence
 import numpy as np
 
 from factors.geometry import Ellipse, sigma_entries
-from factors.overlap import HULL_DIRECTIONS, hull_area, intersection_area
+from factors.overlap import (
+    HULL_DIRECTIONS,
+    hull_area,
+    hull_area_and_gradient,
+    intersection_area,
+    intersection_area_and_gradient,
+)
 
 __all__ = [
     "DEFAULT_LEVEL_SET_SCALE",
@@ -396,21 +406,75 @@ def _level_set_residual(det: Ellipse, proj: Ellipse, n_azimuths: int = 6, n_leve
 # --------------------------------------------------------------------------- residuals
 
 
+def _hull_directions(value: object) -> int:
+    n = _positive_int("hull_directions", value)
+    if n < 8:
+        raise ValueError(f"option hull_directions must be >= 8, got {n}")
+    return n
+
+
+def overlap_delta(
+    name: str, detection_params: np.ndarray, projection_params: np.ndarray,
+    hull_directions: int = HULL_DIRECTIONS, gradient: bool = False,
+) -> tuple[float, np.ndarray | None]:
+    """``Delta`` of ``iou`` (``1 - IoU``) or ``giou`` (``1 - GIoU``) between a detection and a
+    projection given as params ``(cx, cy, a, b, angle)`` (px, rad), and, if ``gradient``, its
+    gradient (5,) w.r.t. the projection's Gaussian parameters ``(mu_x, mu_y, s00, s01, s11)``
+    (px, px^2; :mod:`factors.overlap`, "Derivatives"). The one place of both formulas: the
+    scalar metrics and the pose factors call it.
+
+    ``I, U = A_D + A_P - I, C = max(hull, U)``; ``Delta_iou = 1 - I/U`` (clamped to [0, 1]),
+    ``Delta_giou = 2 - I/U - U/C`` (clamped to [0, 2]); where a clamp binds the gradient is 0.
+    """
+    if gradient:
+        inter, d_inter = intersection_area_and_gradient(detection_params, projection_params)
+    else:
+        inter, d_inter = intersection_area(detection_params, projection_params), None
+    a_det = math.pi * float(detection_params[2] * detection_params[3])
+    a_proj = math.pi * float(projection_params[2] * projection_params[3])
+    union = a_det + a_proj - inter
+    ratio = inter / union
+    d_ratio = d_union = None
+    if d_inter is not None:
+        d_area = math.pi * 0.5 * float(projection_params[2] * projection_params[3]) * _inv_sigma(
+            projection_params)
+        d_union = d_area - d_inter
+        d_ratio = (d_inter * union - inter * d_union) / (union * union)
+    if name == "iou":
+        delta = 1.0 - ratio
+        inside = 0.0 <= delta <= 1.0
+        return min(max(delta, 0.0), 1.0), (
+            None if d_ratio is None else (-d_ratio if inside else np.zeros(5)))
+    if gradient:
+        hull, d_hull = hull_area_and_gradient(detection_params, projection_params,
+                                              hull_directions)
+    else:
+        hull, d_hull = hull_area(detection_params, projection_params, hull_directions), None
+    if hull < union:
+        hull, d_hull = union, d_union
+    delta = 2.0 - ratio - union / hull
+    if d_ratio is None:
+        return min(max(delta, 0.0), 2.0), None
+    if not 0.0 <= delta <= 2.0:
+        return min(max(delta, 0.0), 2.0), np.zeros(5)
+    return delta, -d_ratio - (d_union * hull - union * d_hull) / (hull * hull)
+
+
+def _inv_sigma(params: np.ndarray) -> np.ndarray:
+    """``(0, 0, S00, 2 S01, S11)`` of ``S = Sigma^-1`` for params: the gradient of
+    ``sqrt(det Sigma)`` w.r.t. ``(mu, s00, s01, s11)`` is ``sqrt(det Sigma) / 2`` times this."""
+    a, b, ang = float(params[2]), float(params[3]), float(params[4])
+    i00, i01, i11 = sigma_entries(1.0 / a, 1.0 / b, ang)
+    return np.array([0.0, 0.0, i00, 2.0 * i01, i11])
+
+
 def _iou_cost(det: Ellipse, proj: Ellipse) -> float:
-    inter = ellipse_intersection_area(det, proj)
-    union = det.area + proj.area - inter
-    return min(max(1.0 - inter / union, 0.0), 1.0)
+    return overlap_delta("iou", det.params(), proj.params())[0]
 
 
 def _giou_cost(det: Ellipse, proj: Ellipse, hull_directions: int = HULL_DIRECTIONS) -> float:
-    hull_directions = _positive_int("hull_directions", hull_directions)
-    if hull_directions < 8:
-        raise ValueError(f"option hull_directions must be >= 8, got {hull_directions}")
-    inter = ellipse_intersection_area(det, proj)
-    union = det.area + proj.area - inter
-    hull = max(hull_area(det.params(), proj.params(), hull_directions), union)
-    giou = inter / union - (hull - union) / hull
-    return min(max(1.0 - giou, 0.0), 2.0)
+    return overlap_delta("giou", det.params(), proj.params(),
+                         _hull_directions(hull_directions))[0]
 
 
 def _bbox_residual(det: Ellipse, proj: Ellipse) -> np.ndarray:

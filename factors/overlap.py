@@ -27,6 +27,19 @@ range of normals) leave no sign change on the grid; they are found from the deri
 interior extremum towards zero (its derivative changes sign), the extremum is located by bisection
 on the derivative and, if the winner changes there, the two switches are bracketed on either side.
 The result no longer depends on how the direction grid happens to fall (rigid-motion invariant).
+
+Derivatives (exact, for the pose factors)
+-----------------------------------------
+Both areas are differentiated with respect to the second ellipse's Gaussian parameters
+``g2 = (mu_x, mu_y, s00, s01, s11)`` (``Sigma = A^-1``, px^2) by the first-order area change of
+a region whose boundary moves by ``dx``: ``dA = ∮ dx × dx/dt dt`` over the boundary traversed
+counter-clockwise. Only the second ellipse's boundary moves (``_Boundary``), so
+``dI = ∫ over its arcs inside E1``, in closed form per arc (``∫ u``, ``∫ u u^T`` of
+``u = (cos t, sin t)``), and ``dH`` = the same over its arcs on the hull plus
+``1/2 dx(q) × (end - start)`` for each common tangent segment touching it at ``q`` (the
+contact points slide along the segment, and the first ellipse's end does not move). The end
+points of the arcs need no derivative (the integrand is continuous across them). Gradients are
+checked against central differences in the tests.
 """
 
 from __future__ import annotations
@@ -97,8 +110,77 @@ def _bracketed_root(fn, lo: float, hi: float, f0: float, f1: float, neg_lo: bool
     return t
 
 
+class _Boundary:
+    """First-order motion of an ellipse's boundary with its Gaussian parameters.
+
+    The boundary is ``x(t) = mu + L u(t)``, ``u = (cos t, sin t)``, ``L = R(angle) diag(a, b)``
+    (the parametric angle used throughout this module). A change ``(d mu, d Sigma)`` of
+    ``g = (mu_x, mu_y, s00, s01, s11)`` (``s01`` both off-diagonal entries) moves it by
+    ``dx(t) = d mu + 1/2 d Sigma L^-T u(t)`` (one choice of ``dL`` with ``L dL^T + dL L^T =
+    d Sigma``; other choices differ by a tangential motion, which changes no area). Each method
+    returns a gradient over ``g`` (list of 5 floats).
+    """
+
+    __slots__ = ("ab", "m00", "m01", "m10", "m11")
+
+    def __init__(self, p: np.ndarray) -> None:
+        a, b = float(p[2]), float(p[3])
+        c, s = math.cos(float(p[4])), math.sin(float(p[4]))
+        self.m00, self.m01, self.m10, self.m11 = c / a, -s / b, s / a, c / b  # M = L^-T
+        self.ab = a * b
+
+    def arc(self, t0: float, t1: float) -> list[float]:
+        """Gradient of ``∫_t0^t1 dx × x'(t) dt`` (the area swept by the arc, CCW outward).
+
+        ``dx × x' = det(L) [(L^-1 d mu) . u + 1/2 u^T L^-1 d Sigma L^-T u]`` (``J^T L J =
+        det(L) L^-T`` for 2x2), integrated in closed form: ``∫u``, ``∫u u^T``."""
+        s0, c0, s1, c1 = math.sin(t0), math.cos(t0), math.sin(t1), math.cos(t1)
+        iu0, iu1 = s1 - s0, c0 - c1
+        half = 0.5 * (t1 - t0)
+        q = 0.25 * (math.sin(2.0 * t1) - math.sin(2.0 * t0))
+        cc, ss, cs = half + q, half - q, 0.5 * (s1 * s1 - s0 * s0)
+        m00, m01, m10, m11 = self.m00, self.m01, self.m10, self.m11
+        ab = self.ab
+        # M Iuu (rows), then G = 1/2 ab M Iuu M^T
+        r00, r01 = m00 * cc + m01 * cs, m00 * cs + m01 * ss
+        r10, r11 = m10 * cc + m11 * cs, m10 * cs + m11 * ss
+        g00 = 0.5 * ab * (r00 * m00 + r01 * m01)
+        g01 = 0.5 * ab * (r00 * m10 + r01 * m11)
+        g11 = 0.5 * ab * (r10 * m10 + r11 * m11)
+        return [ab * (m00 * iu0 + m01 * iu1), ab * (m10 * iu0 + m11 * iu1),
+                g00, 2.0 * g01, g11]
+
+    def point(self, t: float, wx: float, wy: float) -> list[float]:
+        """Gradient of ``dx(t) × w`` for a fixed vector ``w``."""
+        p0, p1 = wy, -wx  # a × w = a . (w_y, -w_x)
+        u0, u1 = math.cos(t), math.sin(t)
+        v0, v1 = self.m00 * u0 + self.m01 * u1, self.m10 * u0 + self.m11 * u1  # L^-T u
+        return [p0, p1, 0.5 * v0 * p0, 0.5 * (v1 * p0 + v0 * p1), 0.5 * v1 * p1]
+
+    def area(self) -> list[float]:
+        """Gradient of the ellipse's own area ``pi sqrt(det Sigma)``: ``pi ab / 2 Sigma^-1``."""
+        m00, m01, m10, m11 = self.m00, self.m01, self.m10, self.m11
+        k = 0.5 * math.pi * self.ab
+        # Sigma^-1 = L^-T L^-1 = M M^T
+        return [0.0, 0.0, k * (m00 * m00 + m01 * m01), 2.0 * k * (m00 * m10 + m01 * m11),
+                k * (m10 * m10 + m11 * m11)]
+
+
 def intersection_area(p1: np.ndarray, p2: np.ndarray) -> float:
     """Area (px^2) of the intersection of two filled ellipses given as params (5,)."""
+    return _intersection(p1, p2, False)[0]
+
+
+def intersection_area_and_gradient(p1: np.ndarray, p2: np.ndarray) -> tuple[float, np.ndarray]:
+    """Intersection area (px^2) and its gradient (5,) with respect to the second ellipse's
+    Gaussian parameters ``g2 = (mu_x, mu_y, s00, s01, s11)`` (module docstring, "Derivatives")."""
+    area, grad = _intersection(p1, p2, True)
+    return area, np.asarray(grad)
+
+
+def _intersection(p1: np.ndarray, p2: np.ndarray, grad: bool) -> tuple[float, list[float]]:
+    """Intersection area and, if ``grad``, its gradient w.r.t. ``g2`` (else zeros)."""
+    zero = [0.0] * 5
     P1x, P1y, Q1x, Q1y, *A1l = _ellipse_terms(p1)
     P2x, P2y, Q2x, Q2y, *A2l = _ellipse_terms(p2)
     A1, A2 = tuple(A1l), tuple(A2l)
@@ -117,7 +199,9 @@ def intersection_area(p1: np.ndarray, p2: np.ndarray) -> float:
     # f is dimensionless; identical contours give f = 0 up to rounding amplified by the
     # eccentricity, so anything below 1e-9 is treated as the same ellipse (area error <= 1e-9).
     if abs(k0) + abs(k1) + abs(k2) + abs(k3) + abs(k4) <= 1e-9:
-        return math.pi * ab1
+        # the same ellipse: the area is not differentiable (a kink of min(A1, A2)); half of
+        # dA2 is the average of its one-sided derivatives for a change of size
+        return math.pi * ab1, ([0.5 * g for g in _Boundary(p2).area()] if grad else zero)
     f = k0 + k1 * _COS_GRID + k2 * _SIN_GRID + k3 * _COS2_GRID + k4 * _SIN2_GRID
     sign = f > 1e-12  # rounding-level values (tangency) count as inside
     idx = _sign_changes(sign)
@@ -125,10 +209,11 @@ def intersection_area(p1: np.ndarray, p2: np.ndarray) -> float:
         # No crossing: E1 inside E2 (f <= 0, decided where |f| is largest, so internal
         # tangency does not matter), else E2 inside E1 iff its centre is in E1, else disjoint.
         if f[int(np.argmax(np.abs(f)))] < 0.0:
-            return math.pi * ab1
+            return math.pi * ab1, zero
         if _quad(A1, -dx, -dy) < 1.0:
-            return math.pi * ab2
-        return 0.0
+            return math.pi * ab2, (_Boundary(p2).area() if grad else zero)
+        return 0.0, zero
+
     def f_and_df(t: float) -> tuple[float, float]:
         ct, st = math.cos(t), math.sin(t)
         c2t, s2t = ct * ct - st * st, 2.0 * st * ct
@@ -152,18 +237,33 @@ def intersection_area(p1: np.ndarray, p2: np.ndarray) -> float:
         roots2.append(math.atan2((rx * Q2x + ry * Q2y) * ib2, (rx * P2x + ry * P2y) * ia2)
                       % _TWO_PI)
     roots2.sort()
+    arcs2: list[tuple[float, float]] | None = [] if grad else None
     area = _inside_arcs_area(roots1, (P1x, P1y, Q1x, Q1y), ab1, dx, dy, A2, 0.0, 0.0)
-    area += _inside_arcs_area(roots2, (P2x, P2y, Q2x, Q2y), ab2, -dx, -dy, A1, -dx, -dy)
-    return min(max(area, 0.0), math.pi * min(ab1, ab2))
+    area += _inside_arcs_area(roots2, (P2x, P2y, Q2x, Q2y), ab2, -dx, -dy, A1, -dx, -dy,
+                              arcs2)
+    clamped = min(max(area, 0.0), math.pi * min(ab1, ab2))
+    if not grad:
+        return clamped, zero
+    if clamped != area:  # rounding put it outside [0, min(A1, A2)]: the bound's derivative
+        return clamped, (_Boundary(p2).area() if clamped > 0.0 and ab2 <= ab1 else zero)
+    # Only E2's arcs move: dI = sum over E2's arcs inside E1 of  ∫ dx × x'(t) dt.
+    bnd = _Boundary(p2)
+    g = zero[:]
+    for t0, t1 in arcs2:  # type: ignore[union-attr]
+        for k, v in enumerate(bnd.arc(t0, t1)):
+            g[k] += v
+    return clamped, g
 
 
 def _inside_arcs_area(t: list[float], PQ: tuple[float, float, float, float], ab: float,
                       ox: float, oy: float, A_other: tuple[float, float, float],
-                      cx: float, cy: float) -> float:
+                      cx: float, cy: float,
+                      arcs: list[tuple[float, float]] | None = None) -> float:
     """Green's integral ``1/2 ∫ x × dx`` over the arcs of one ellipse (between consecutive
     sorted angles ``t``) lying inside the other one (``Phi_other < 1`` at the arc's middle).
     ``(ox, oy)`` is this ellipse's centre minus the other's; ``(cx, cy)`` is this centre
     relative to the integration origin. Closed form per arc (see the module docstring).
+    The kept arcs ``(t0, t1)`` are appended to ``arcs`` when given.
     """
     Px, Py, Qx, Qy = PQ
     n = len(t)
@@ -179,6 +279,8 @@ def _inside_arcs_area(t: list[float], PQ: tuple[float, float, float, float], ab:
             continue
         dc, ds = math.cos(t1) - math.cos(t0), math.sin(t1) - math.sin(t0)
         area += 0.5 * (ab * (t1 - t0) + cx * (dc * Py + ds * Qy) - cy * (dc * Px + ds * Qx))
+        if arcs is not None:
+            arcs.append((t0, t1))
     return area
 
 
@@ -194,7 +296,21 @@ def _sigma_terms(p: np.ndarray) -> tuple[float, float, float]:
 
 
 def hull_area(p1: np.ndarray, p2: np.ndarray, n_directions: int = HULL_DIRECTIONS) -> float:
-    """Area (px^2) of the convex hull of two ellipses, exact (see the module docstring).
+    """Area (px^2) of the convex hull of two ellipses, exact (see the module docstring)."""
+    return _hull(p1, p2, n_directions, False)[0]
+
+
+def hull_area_and_gradient(p1: np.ndarray, p2: np.ndarray,
+                           n_directions: int = HULL_DIRECTIONS) -> tuple[float, np.ndarray]:
+    """Hull area (px^2) and its gradient (5,) w.r.t. the second ellipse's Gaussian parameters
+    ``g2 = (mu_x, mu_y, s00, s01, s11)`` (module docstring, "Derivatives")."""
+    area, grad = _hull(p1, p2, n_directions, True)
+    return area, np.asarray(grad)
+
+
+def _hull(p1: np.ndarray, p2: np.ndarray, n_directions: int,
+          grad: bool) -> tuple[float, list[float]]:
+    """Hull area and, if ``grad``, its gradient w.r.t. ``g2`` (else zeros).
 
     The support functions ``h_i(theta) = n . c_i + sqrt(n^T Sigma_i n)`` are compared on
     ``n_directions`` normal directions to find where the supporting ellipse switches; each
@@ -267,9 +383,11 @@ def hull_area(p1: np.ndarray, p2: np.ndarray, n_directions: int = HULL_DIRECTION
         up, down = not first[i], bool(first[i])
         switches.append((_bracketed_root(hdiff, lo, t_min, dl[i], f_min, up), loser))
         switches.append((_bracketed_root(hdiff, t_min, hi, f_min, dl[j], down), 1 - loser))
+    zero = [0.0] * 5
     if not switches:  # one ellipse supports every direction: it contains the other
-        p = p1 if first[0] else p2
-        return math.pi * float(p[2] * p[3])
+        if first[0]:
+            return math.pi * float(p1[2] * p1[3]), zero
+        return math.pi * float(p2[2] * p2[3]), (_Boundary(p2).area() if grad else zero)
     switches.sort()
     ells = ((p1, 0.0, 0.0), (p2, c2x, c2y))
 
@@ -284,6 +402,8 @@ def hull_area(p1: np.ndarray, p2: np.ndarray, n_directions: int = HULL_DIRECTION
         return cx + ca * x_loc - sa * y_loc, cy + sa * x_loc + ca * y_loc, par
 
     area = 0.0
+    g = zero[:]
+    bnd = _Boundary(p2) if grad else None
     n_sw = len(switches)
     for j in range(n_sw):
         t_start, k = switches[j]
@@ -310,6 +430,16 @@ def hull_area(p1: np.ndarray, p2: np.ndarray, n_directions: int = HULL_DIRECTION
         wy = a * dc * sa + b * ds * ca
         area += 0.5 * (a * b * span + cx * wy - cy * wx)
         # Common tangent segment from this arc's end to the next arc's start.
-        xn, yn, _ = contact(k_next, t_end)
+        xn, yn, par_next = contact(k_next, t_end)
         area += 0.5 * (x1 * yn - y1 * xn)
-    return area
+        if bnd is not None:
+            # dH = ∫ over E2's hull arcs of dx × x' dt, plus 1/2 dx(q) × (end - start) for
+            # each tangent segment touching E2 at q (the contact points slide along the
+            # segment, and E1's end does not move).
+            parts = [bnd.point(par1 if k == 1 else par_next, xn - x1, yn - y1)]
+            if k == 1:
+                parts.append(bnd.arc(par0, par1))
+            for part, w in zip(parts, (0.5, 1.0), strict=False):
+                for i, v in enumerate(part):
+                    g[i] += w * v
+    return area, g

@@ -23,9 +23,11 @@ from factors.metrics import (
     ellipse_intersection_area,
     level_set_sample_points,
     level_set_sampling_scale,
+    overlap_delta,
     residual,
     residual_size,
 )
+from factors.overlap import hull_area_and_gradient, intersection_area_and_gradient
 
 IMAGE = (640, 480)
 ellipses = st.builds(
@@ -496,3 +498,52 @@ def test_level_set_options_are_validated_even_when_equal_to_the_defaults(options
         residual("level_set", det, proj, **options)
     with pytest.raises(ValueError, match=name):
         cost("level_set", det, proj, **options)
+
+
+# --------------------------------------------------------------------------- area derivatives
+
+
+def _gaussian_vector(e: Ellipse) -> np.ndarray:
+    mu, S = e.gaussian()
+    return np.array([mu[0], mu[1], S[0, 0], S[0, 1], S[1, 1]])
+
+
+def _from_gaussian_vector(g: np.ndarray) -> Ellipse:
+    return Ellipse.from_gaussian(g[:2], np.array([[g[2], g[3]], [g[3], g[4]]]))
+
+
+def _values_and_gradients(d: Ellipse, p: Ellipse) -> list[tuple[float, np.ndarray]]:
+    pd, pp = d.params(), p.params()
+    return [intersection_area_and_gradient(pd, pp), hull_area_and_gradient(pd, pp),
+            overlap_delta("iou", pd, pp, gradient=True),
+            overlap_delta("giou", pd, pp, gradient=True)]
+
+
+def _values(d: Ellipse, p: Ellipse) -> np.ndarray:
+    return np.array([ellipse_intersection_area(d, p), convex_hull_area(d, p),
+                     cost("iou", d, p), cost("giou", d, p)])
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_area_and_delta_gradients_match_central_differences(seed):
+    """The exact boundary-integral gradients (factors.overlap "Derivatives") of the
+    intersection and hull areas and of the iou / giou Delta, against central differences of
+    the exact values w.r.t. the second ellipse's (mu_x, mu_y, s00, s01, s11): random pairs
+    (crossing, contained, disjoint, hulls with tangent segments)."""
+    rng = np.random.default_rng(seed)
+    for _ in range(20):
+        d = Ellipse(*rng.uniform(-40, 40, 2), *rng.uniform(5, 60, 2), rng.uniform(-3, 3))
+        p = Ellipse(*rng.uniform(-40, 40, 2), *rng.uniform(5, 60, 2), rng.uniform(-3, 3))
+        g = _gaussian_vector(p)
+        num = np.zeros((4, 5))
+        for k in range(5):
+            h = 1e-6 * max(1.0, abs(g[k]))
+            step = np.zeros(5)
+            step[k] = h
+            num[:, k] = (_values(d, _from_gaussian_vector(g + step))
+                         - _values(d, _from_gaussian_vector(g - step))) / (2 * h)
+        exact = _values(d, p)
+        for i, (value, grad) in enumerate(_values_and_gradients(d, p)):
+            assert value == pytest.approx(exact[i], rel=1e-12, abs=1e-12)
+            scale = max(np.abs(num[i]).max(), 1e-12)
+            np.testing.assert_allclose(grad, num[i], atol=1e-6 * scale + 1e-8)

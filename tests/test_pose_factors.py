@@ -166,7 +166,7 @@ def test_level_set_analytic_jacobian_matches_numerical(seed):
 
 
 @pytest.mark.parametrize("metric", ["algebraic", "frobenius", "wasserstein", "bhattacharyya",
-                                    "bbox", "qbbox"])
+                                    "bbox", "qbbox", "iou", "giou"])
 def test_smooth_metric_jacobians_match_numerical(scene, metric):
     """Analytic Jacobians against central differences of ``factors.metrics.residual``.
 
@@ -174,7 +174,7 @@ def test_smooth_metric_jacobians_match_numerical(scene, metric):
     only a PLUMBING check (right pose perturbation, step and row order), not a check of
     derivative formulas."""
     assert set(ANALYTIC_METRICS) == {"level_set", "algebraic", "frobenius", "wasserstein",
-                                     "bhattacharyya", "bbox"}
+                                     "bhattacharyya", "bbox", "iou", "giou"}
     ells, dets, pose = scene
     model = PoseResidualModel(metric, dets, ells, CAMERA, initial_world_from_camera=pose)
     ev = model.evaluate(pose, jacobian=True)
