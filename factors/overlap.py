@@ -45,6 +45,7 @@ checked against central differences in the tests.
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 
 import numpy as np
@@ -166,29 +167,66 @@ class _Boundary:
                 k * (m10 * m10 + m11 * m11)]
 
 
-def intersection_area(p1: np.ndarray, p2: np.ndarray) -> float:
-    """Area (px^2) of the intersection of two filled ellipses given as params (5,)."""
-    return _intersection(p1, p2, False)[0]
+class _Ell:
+    """One ellipse of a pair, relative to the integration origin ``c1`` (the first ellipse's
+    centre): ``x(t) = c + cos t P + sin t Q`` with ``P = a u``, ``Q = b v``."""
+
+    __slots__ = ("A", "P", "Q", "ab", "bnd", "c")
+
+    def __init__(self, p: np.ndarray, origin: np.ndarray, moving: bool) -> None:
+        Px, Py, Qx, Qy, *A = _ellipse_terms(p)
+        self.P, self.Q, self.A = (Px, Py), (Qx, Qy), tuple(A)
+        self.ab = float(p[2] * p[3])
+        self.c = (float(p[0] - origin[0]), float(p[1] - origin[1]))
+        self.bnd = _Boundary(p) if moving else None
+
+    def point(self, t: float) -> tuple[float, float]:
+        ct, st = math.cos(t), math.sin(t)
+        return (self.c[0] + ct * self.P[0] + st * self.Q[0],
+                self.c[1] + ct * self.P[1] + st * self.Q[1])
+
+    def arc_area(self, t0: float, t1: float) -> float:
+        """``1/2 ∫_t0^t1 x × dx`` (origin ``c1``), closed form (module docstring)."""
+        dc, ds = math.cos(t1) - math.cos(t0), math.sin(t1) - math.sin(t0)
+        (Px, Py), (Qx, Qy), (cx, cy) = self.P, self.Q, self.c
+        return 0.5 * (self.ab * (t1 - t0) + cx * (dc * Py + ds * Qy) - cy * (dc * Px + ds * Qx))
+
+    def inside(self, x: float, y: float) -> bool:
+        """Is the point (origin ``c1``) strictly inside this ellipse?"""
+        return _quad(self.A, x - self.c[0], y - self.c[1]) < 1.0
+
+    def line_crossings(self, nx: float, ny: float) -> list[float]:
+        """Parametric angles where the boundary meets the line ``n . x = 0`` through ``c1``."""
+        alpha = nx * self.P[0] + ny * self.P[1]
+        beta = nx * self.Q[0] + ny * self.Q[1]
+        gamma = nx * self.c[0] + ny * self.c[1]
+        rad = math.hypot(alpha, beta)
+        if rad == 0.0 or abs(gamma) > rad:
+            return []
+        phi, dphi = math.atan2(beta, alpha), math.acos(max(-1.0, min(1.0, -gamma / rad)))
+        return [(phi + dphi) % _TWO_PI, (phi - dphi) % _TWO_PI]
 
 
-def intersection_area_and_gradient(p1: np.ndarray, p2: np.ndarray) -> tuple[float, np.ndarray]:
-    """Intersection area (px^2) and its gradient (5,) with respect to the second ellipse's
-    Gaussian parameters ``g2 = (mu_x, mu_y, s00, s01, s11)`` (module docstring, "Derivatives")."""
-    area, grad = _intersection(p1, p2, True)
-    return area, np.asarray(grad)
+# A closed boundary as pieces, traversed counter-clockwise, origin c1:
+#   ("arc", k, t0, t1): ellipse k (0: the first, fixed; 1: the second, moving) from t0 to t1;
+#   ("seg", x0, y0, x1, y1, end, par): a common tangent segment; ``end`` is 0 if its start, 1 if
+#   its end lies on the moving ellipse (at parametric angle ``par``), the other end on the
+#   fixed one.
+_Piece = tuple
 
 
-def _intersection(p1: np.ndarray, p2: np.ndarray, grad: bool) -> tuple[float, list[float]]:
-    """Intersection area and, if ``grad``, its gradient w.r.t. ``g2`` (else zeros)."""
-    zero = [0.0] * 5
-    P1x, P1y, Q1x, Q1y, *A1l = _ellipse_terms(p1)
-    P2x, P2y, Q2x, Q2y, *A2l = _ellipse_terms(p2)
-    A1, A2 = tuple(A1l), tuple(A2l)
-    ab1, ab2 = float(p1[2] * p1[3]), float(p2[2] * p2[3])
-    # Origin of the integration at c1; d = c1 - c2.
-    dx, dy = float(p1[0] - p2[0]), float(p1[1] - p2[1])
+def _crossing_roots(e1: _Ell, e2: _Ell) -> tuple[str, list[float], list[float]]:
+    """Where the two contours cross: ``("same" | "first_inside" | "second_inside" |
+    "disjoint" | "crossing", roots on e1, roots on e2)`` (parametric angles, sorted).
 
-    def bil(A: tuple[float, float, float], x: float, y: float, u: float, v: float) -> float:
+    ``f(t) = Phi_2(x_1(t)) - 1`` is a trigonometric quadratic; its roots are bracketed on a
+    grid of ``GRID`` angles and refined by :func:`_bracketed_root`, then mapped to e2's angle.
+    """
+    A2 = e2.A
+    (P1x, P1y), (Q1x, Q1y) = e1.P, e1.Q
+    dx, dy = e1.c[0] - e2.c[0], e1.c[1] - e2.c[1]  # c1 - c2
+
+    def bil(A: tuple[float, ...], x: float, y: float, u: float, v: float) -> float:
         return A[0] * x * u + A[1] * (x * v + y * u) + A[2] * y * v
 
     pap, qaq = _quad(A2, P1x, P1y), _quad(A2, Q1x, Q1y)
@@ -199,9 +237,7 @@ def _intersection(p1: np.ndarray, p2: np.ndarray, grad: bool) -> tuple[float, li
     # f is dimensionless; identical contours give f = 0 up to rounding amplified by the
     # eccentricity, so anything below 1e-9 is treated as the same ellipse (area error <= 1e-9).
     if abs(k0) + abs(k1) + abs(k2) + abs(k3) + abs(k4) <= 1e-9:
-        # the same ellipse: the area is not differentiable (a kink of min(A1, A2)); half of
-        # dA2 is the average of its one-sided derivatives for a change of size
-        return math.pi * ab1, ([0.5 * g for g in _Boundary(p2).area()] if grad else zero)
+        return "same", [], []
     f = k0 + k1 * _COS_GRID + k2 * _SIN_GRID + k3 * _COS2_GRID + k4 * _SIN2_GRID
     sign = f > 1e-12  # rounding-level values (tangency) count as inside
     idx = _sign_changes(sign)
@@ -209,10 +245,8 @@ def _intersection(p1: np.ndarray, p2: np.ndarray, grad: bool) -> tuple[float, li
         # No crossing: E1 inside E2 (f <= 0, decided where |f| is largest, so internal
         # tangency does not matter), else E2 inside E1 iff its centre is in E1, else disjoint.
         if f[int(np.argmax(np.abs(f)))] < 0.0:
-            return math.pi * ab1, zero
-        if _quad(A1, -dx, -dy) < 1.0:
-            return math.pi * ab2, (_Boundary(p2).area() if grad else zero)
-        return 0.0, zero
+            return "first_inside", [], []
+        return ("second_inside" if e1.inside(*e2.c) else "disjoint"), [], []
 
     def f_and_df(t: float) -> tuple[float, float]:
         ct, st = math.cos(t), math.sin(t)
@@ -222,106 +256,57 @@ def _intersection(p1: np.ndarray, p2: np.ndarray, grad: bool) -> tuple[float, li
 
     h = _TWO_PI / GRID
     fl = f.tolist()
-    roots1 = []
-    for i in idx:
-        lo = i * h
-        roots1.append(_bracketed_root(f_and_df, lo, lo + h, fl[i], fl[(i + 1) % GRID],
-                                      not sign[i]) % _TWO_PI)
-    roots1.sort()
-    # The same intersection points on E2: x - c2 = cos t P2 + sin t Q2.
+    roots1 = sorted(_bracketed_root(f_and_df, i * h, (i + 1) * h, fl[i], fl[(i + 1) % GRID],
+                                    not sign[i]) % _TWO_PI for i in idx)
+    # The same points on E2: x - c2 = cos t P2 + sin t Q2.
+    (P2x, P2y), (Q2x, Q2y) = e2.P, e2.Q
+    ia2, ib2 = 1.0 / _quad((1.0, 0.0, 1.0), P2x, P2y), 1.0 / _quad((1.0, 0.0, 1.0), Q2x, Q2y)
     roots2 = []
-    ia2, ib2 = 1.0 / float(p2[2]) ** 2, 1.0 / float(p2[3]) ** 2
     for t in roots1:
-        rx = math.cos(t) * P1x + math.sin(t) * Q1x + dx
-        ry = math.cos(t) * P1y + math.sin(t) * Q1y + dy
+        x, y = e1.point(t)
+        rx, ry = x - e2.c[0], y - e2.c[1]
         roots2.append(math.atan2((rx * Q2x + ry * Q2y) * ib2, (rx * P2x + ry * P2y) * ia2)
                       % _TWO_PI)
-    roots2.sort()
-    arcs2: list[tuple[float, float]] | None = [] if grad else None
-    area = _inside_arcs_area(roots1, (P1x, P1y, Q1x, Q1y), ab1, dx, dy, A2, 0.0, 0.0)
-    area += _inside_arcs_area(roots2, (P2x, P2y, Q2x, Q2y), ab2, -dx, -dy, A1, -dx, -dy,
-                              arcs2)
-    clamped = min(max(area, 0.0), math.pi * min(ab1, ab2))
-    if not grad:
-        return clamped, zero
-    if clamped != area:  # rounding put it outside [0, min(A1, A2)]: the bound's derivative
-        return clamped, (_Boundary(p2).area() if clamped > 0.0 and ab2 <= ab1 else zero)
-    # Only E2's arcs move: dI = sum over E2's arcs inside E1 of  ∫ dx × x'(t) dt.
-    bnd = _Boundary(p2)
-    g = zero[:]
-    for t0, t1 in arcs2:  # type: ignore[union-attr]
-        for k, v in enumerate(bnd.arc(t0, t1)):
-            g[k] += v
-    return clamped, g
+    return "crossing", roots1, sorted(roots2)
 
 
-def _inside_arcs_area(t: list[float], PQ: tuple[float, float, float, float], ab: float,
-                      ox: float, oy: float, A_other: tuple[float, float, float],
-                      cx: float, cy: float,
-                      arcs: list[tuple[float, float]] | None = None) -> float:
-    """Green's integral ``1/2 ∫ x × dx`` over the arcs of one ellipse (between consecutive
-    sorted angles ``t``) lying inside the other one (``Phi_other < 1`` at the arc's middle).
-    ``(ox, oy)`` is this ellipse's centre minus the other's; ``(cx, cy)`` is this centre
-    relative to the integration origin. Closed form per arc (see the module docstring).
-    The kept arcs ``(t0, t1)`` are appended to ``arcs`` when given.
-    """
-    Px, Py, Qx, Qy = PQ
-    n = len(t)
-    area = 0.0
+def _inside_arcs(e: _Ell, k: int, roots: list[float], other: _Ell) -> list[_Piece]:
+    """Arcs of ellipse ``e`` (index ``k``) between consecutive ``roots`` lying inside
+    ``other`` (tested at the arc's middle)."""
+    out = []
+    n = len(roots)
     for i in range(n):
-        t0 = t[i]
-        t1 = t[i + 1] if i + 1 < n else t[0] + _TWO_PI
-        if not t1 > t0:
-            continue
-        tm = 0.5 * (t0 + t1)
-        cm, sm = math.cos(tm), math.sin(tm)
-        if _quad(A_other, cm * Px + sm * Qx + ox, cm * Py + sm * Qy + oy) >= 1.0:
-            continue
-        dc, ds = math.cos(t1) - math.cos(t0), math.sin(t1) - math.sin(t0)
-        area += 0.5 * (ab * (t1 - t0) + cx * (dc * Py + ds * Qy) - cy * (dc * Px + ds * Qx))
-        if arcs is not None:
-            arcs.append((t0, t1))
-    return area
+        t0 = roots[i]
+        t1 = roots[i + 1] if i + 1 < n else roots[0] + _TWO_PI
+        if t1 > t0 and other.inside(*e.point(0.5 * (t0 + t1))):
+            out.append(("arc", k, t0, t1))
+    return out
 
 
-@functools.lru_cache(maxsize=8)
-def _directions(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    th = np.linspace(0.0, _TWO_PI, n, endpoint=False)
-    return th, np.cos(th), np.sin(th)
+def _intersection_pieces(e1: _Ell, e2: _Ell) -> list[_Piece]:
+    """The boundary of ``E1 ∩ E2``: E1's arcs inside E2 and E2's arcs inside E1."""
+    kind, roots1, roots2 = _crossing_roots(e1, e2)
+    if kind == "disjoint":
+        return []
+    if kind in ("same", "second_inside"):
+        return [("arc", 1, 0.0, _TWO_PI)]
+    if kind == "first_inside":
+        return [("arc", 0, 0.0, _TWO_PI)]
+    return _inside_arcs(e1, 0, roots1, e2) + _inside_arcs(e2, 1, roots2, e1)
 
 
-def _sigma_terms(p: np.ndarray) -> tuple[float, float, float]:
-    """``(s00, s01, s11)`` of ``Sigma`` for params ``p = (cx, cy, a, b, angle)``."""
-    return sigma_entries(float(p[2]), float(p[3]), float(p[4]))
-
-
-def hull_area(p1: np.ndarray, p2: np.ndarray, n_directions: int = HULL_DIRECTIONS) -> float:
-    """Area (px^2) of the convex hull of two ellipses, exact (see the module docstring)."""
-    return _hull(p1, p2, n_directions, False)[0]
-
-
-def hull_area_and_gradient(p1: np.ndarray, p2: np.ndarray,
-                           n_directions: int = HULL_DIRECTIONS) -> tuple[float, np.ndarray]:
-    """Hull area (px^2) and its gradient (5,) w.r.t. the second ellipse's Gaussian parameters
-    ``g2 = (mu_x, mu_y, s00, s01, s11)`` (module docstring, "Derivatives")."""
-    area, grad = _hull(p1, p2, n_directions, True)
-    return area, np.asarray(grad)
-
-
-def _hull(p1: np.ndarray, p2: np.ndarray, n_directions: int,
-          grad: bool) -> tuple[float, list[float]]:
-    """Hull area and, if ``grad``, its gradient w.r.t. ``g2`` (else zeros).
+def _hull_pieces(p1: np.ndarray, p2: np.ndarray, e1: _Ell, e2: _Ell,
+                 n_directions: int) -> list[_Piece]:
+    """The boundary of the convex hull of the two ellipses.
 
     The support functions ``h_i(theta) = n . c_i + sqrt(n^T Sigma_i n)`` are compared on
-    ``n_directions`` normal directions to find where the supporting ellipse switches; each
-    switch direction (a common tangent) is refined by Newton steps on ``h_1 - h_2``. The hull
-    boundary is then the supporting arcs (closed-form Green integrals) joined by the common
-    tangent segments (``1/2 p × q`` each).
+    ``n_directions`` normal directions to find where the supporting ellipse switches (module
+    docstring); each switch (a common tangent) is refined by :func:`_bracketed_root`. The hull
+    boundary is then the supporting arcs joined by the common tangent segments.
     """
     th, nx, ny = _directions(int(n_directions))
     S1, S2 = _sigma_terms(p1), _sigma_terms(p2)
-    # Origin at c1.
-    c2x, c2y = float(p2[0] - p1[0]), float(p2[1] - p1[1])
+    c2x, c2y = e2.c
     q1 = S1[0] * nx * nx + 2.0 * S1[1] * nx * ny + S1[2] * ny * ny
     q2 = S2[0] * nx * nx + 2.0 * S2[1] * nx * ny + S2[2] * ny * ny
     sq1, sq2 = np.sqrt(q1), np.sqrt(q2)
@@ -383,37 +368,26 @@ def _hull(p1: np.ndarray, p2: np.ndarray, n_directions: int,
         up, down = not first[i], bool(first[i])
         switches.append((_bracketed_root(hdiff, lo, t_min, dl[i], f_min, up), loser))
         switches.append((_bracketed_root(hdiff, t_min, hi, f_min, dl[j], down), 1 - loser))
-    zero = [0.0] * 5
     if not switches:  # one ellipse supports every direction: it contains the other
-        if first[0]:
-            return math.pi * float(p1[2] * p1[3]), zero
-        return math.pi * float(p2[2] * p2[3]), (_Boundary(p2).area() if grad else zero)
+        return [("arc", 0 if first[0] else 1, 0.0, _TWO_PI)]
     switches.sort()
-    ells = ((p1, 0.0, 0.0), (p2, c2x, c2y))
+    ells = (e1, e2)
 
-    def contact(k: int, t: float) -> tuple[float, float, float]:
-        """Contact point (origin c1) and parametric angle of ellipse ``k`` for normal ``t``."""
-        p, cx, cy = ells[k]
-        a, b, ang = float(p[2]), float(p[3]), float(p[4])
-        ca, sa = math.cos(ang), math.sin(ang)
-        nu, nv = math.cos(t - ang), math.sin(t - ang)  # normal in the ellipse frame
-        par = math.atan2(b * nv, a * nu)
-        x_loc, y_loc = a * math.cos(par), b * math.sin(par)
-        return cx + ca * x_loc - sa * y_loc, cy + sa * x_loc + ca * y_loc, par
+    def contact(k: int, t: float) -> float:
+        """Parametric angle of the contact point of ellipse ``k`` for the normal angle ``t``."""
+        e = ells[k]
+        # normal n in the ellipse frame (u, v): (n.u, n.v); contact at atan2(b n.v, a n.u)
+        n0, n1 = math.cos(t), math.sin(t)
+        return math.atan2(n0 * e.Q[0] + n1 * e.Q[1], n0 * e.P[0] + n1 * e.P[1])
 
-    area = 0.0
-    g = zero[:]
-    bnd = _Boundary(p2) if grad else None
+    pieces: list[_Piece] = []
     n_sw = len(switches)
     for j in range(n_sw):
         t_start, k = switches[j]
         t_end, k_next = switches[(j + 1) % n_sw]
         if j + 1 == n_sw:
             t_end += _TWO_PI
-        p, cx, cy = ells[k]
-        a, b, ang = float(p[2]), float(p[3]), float(p[4])
-        _, _, par0 = contact(k, t_start)
-        x1, y1, par1 = contact(k, t_end)
+        par0, par1 = contact(k, t_start), contact(k, t_end)
         # The normal -> parametric angle map is monotone and maps half-turns to half-turns, so
         # the parametric span is on the same side of pi as the normal sweep; fix the 2 pi
         # wrap-around that rounding can cause for sweeps near 0 or 2 pi.
@@ -423,23 +397,154 @@ def _hull(p1: np.ndarray, p2: np.ndarray, n_directions: int,
             span += _TWO_PI
         elif sweep < 0.5 * math.pi and span > 1.5 * math.pi:
             span -= _TWO_PI
-        par1 = par0 + span
-        ca, sa = math.cos(ang), math.sin(ang)
-        dc, ds = math.cos(par1) - math.cos(par0), math.sin(par1) - math.sin(par0)
-        wx = a * dc * ca - b * ds * sa
-        wy = a * dc * sa + b * ds * ca
-        area += 0.5 * (a * b * span + cx * wy - cy * wx)
+        pieces.append(("arc", k, par0, par0 + span))
         # Common tangent segment from this arc's end to the next arc's start.
-        xn, yn, par_next = contact(k_next, t_end)
-        area += 0.5 * (x1 * yn - y1 * xn)
-        if bnd is not None:
-            # dH = ∫ over E2's hull arcs of dx × x' dt, plus 1/2 dx(q) × (end - start) for
-            # each tangent segment touching E2 at q (the contact points slide along the
-            # segment, and E1's end does not move).
-            parts = [bnd.point(par1 if k == 1 else par_next, xn - x1, yn - y1)]
-            if k == 1:
-                parts.append(bnd.arc(par0, par1))
-            for part, w in zip(parts, (0.5, 1.0), strict=False):
-                for i, v in enumerate(part):
-                    g[i] += w * v
-    return area, g
+        par_next = contact(k_next, t_end)
+        x0, y0 = ells[k].point(par0 + span)
+        x1, y1 = ells[k_next].point(par_next)
+        pieces.append(("seg", x0, y0, x1, y1, 0 if k == 1 else 1,
+                       par0 + span if k == 1 else par_next))
+    return pieces
+
+
+def _piece_sums(pieces: list[_Piece], ells: tuple[_Ell, _Ell], grad: bool,
+                axes: tuple[float, float] | None = None) -> tuple[list[float], list[list[float]]]:
+    """Area ``1/2 ∮ x × dx`` of the region bounded by ``pieces`` and, if ``grad``, its
+    gradient w.r.t. the moving ellipse's ``g2`` (module docstring, "Derivatives").
+
+    With ``axes = (cos, sin)`` of the first ellipse's angle, the region is split into the four
+    quadrants of the first ellipse's frame (centred on it, along its axes; counter-clockwise
+    from ``+u, +v``): ``1/2 ∫ x × dx`` vanishes along rays from the origin, so each quadrant's
+    area is the sum over the pieces' parts inside it. Returns lists of 1 or 4 areas and
+    gradients.
+    """
+    n_out = 1 if axes is None else 4
+    areas = [0.0] * n_out
+    grads = [[0.0] * 5 for _ in range(n_out)]
+    if axes is not None:
+        ca, sa = axes
+        lines = ((-sa, ca), (ca, sa))  # normals of the +u axis line and of the +v axis line
+        cuts_by_ellipse: list[list[float] | None] = [None, None]
+
+    def quadrant(x: float, y: float) -> int:
+        xl, yl = ca * x + sa * y, -sa * x + ca * y
+        if yl >= 0.0:
+            return 0 if xl >= 0.0 else 1
+        return 2 if xl < 0.0 else 3
+
+    def add(q: int, area: float, g: list[float] | None, w: float = 1.0) -> None:
+        areas[q] += area
+        if g is not None:
+            row = grads[q]
+            for i in range(5):
+                row[i] += w * g[i]
+
+    for piece in pieces:
+        if piece[0] == "arc":
+            _, k, t0, t1 = piece
+            e = ells[k]
+            if axes is None:
+                add(0, e.arc_area(t0, t1), e.bnd.arc(t0, t1) if grad and k == 1 else None)
+                continue
+            if cuts_by_ellipse[k] is None:
+                cuts_by_ellipse[k] = sorted(c for n in lines for c in e.line_crossings(*n))
+            base = math.floor(t0 / _TWO_PI) * _TWO_PI
+            inner = sorted(c + base + m * _TWO_PI for c in cuts_by_ellipse[k]  # type: ignore[union-attr]
+                           for m in (0, 1, 2) if t0 < c + base + m * _TWO_PI < t1)
+            bounds = [t0, *inner, t1]
+            for a_, b_ in itertools.pairwise(bounds):
+                q = quadrant(*e.point(0.5 * (a_ + b_)))
+                add(q, e.arc_area(a_, b_), e.bnd.arc(a_, b_) if grad and k == 1 else None)
+            continue
+        _, x0, y0, x1, y1, end, par = piece
+        wx, wy = x1 - x0, y1 - y0
+        g_full = None
+        if grad:  # 1/2 dx(q) × (end - start), q on the moving ellipse
+            g_full = ells[1].bnd.point(par, wx, wy)
+        if axes is None:
+            add(0, 0.5 * (x0 * y1 - y0 * x1), g_full, 0.5)
+            continue
+        inner = []
+        for nx_, ny_ in lines:
+            den = nx_ * wx + ny_ * wy
+            if den != 0.0:
+                s = -(nx_ * x0 + ny_ * y0) / den
+                if 0.0 < s < 1.0:
+                    inner.append(s)
+        bounds = [0.0, *sorted(inner), 1.0]
+        for s0, s1 in itertools.pairwise(bounds):
+            xa, ya, xb, yb = x0 + s0 * wx, y0 + s0 * wy, x0 + s1 * wx, y0 + s1 * wy
+            q = quadrant(0.5 * (xa + xb), 0.5 * (ya + yb))
+            # the normal motion is linear along the segment, 0 at its fixed end: this part
+            # carries (sigma1^2 - sigma0^2) of it, sigma the fraction from the fixed end
+            share = s1 * s1 - s0 * s0 if end == 1 else (1 - s0) ** 2 - (1 - s1) ** 2
+            add(q, 0.5 * (xa * yb - ya * xb), g_full, 0.5 * share)
+    return areas, grads
+
+
+def _pair(p1: np.ndarray, p2: np.ndarray, grad: bool) -> tuple[_Ell, _Ell]:
+    origin = np.asarray(p1[:2], dtype=float)
+    return _Ell(p1, origin, False), _Ell(p2, origin, grad)
+
+
+def intersection_area(p1: np.ndarray, p2: np.ndarray) -> float:
+    """Area (px^2) of the intersection of two filled ellipses given as params (5,)."""
+    e1, e2 = _pair(p1, p2, False)
+    area = _piece_sums(_intersection_pieces(e1, e2), (e1, e2), False)[0][0]
+    return min(max(area, 0.0), math.pi * min(e1.ab, e2.ab))
+
+
+def intersection_area_and_gradient(p1: np.ndarray, p2: np.ndarray) -> tuple[float, np.ndarray]:
+    """Intersection area (px^2) and its gradient (5,) with respect to the second ellipse's
+    Gaussian parameters ``g2 = (mu_x, mu_y, s00, s01, s11)`` (module docstring, "Derivatives")."""
+    e1, e2 = _pair(p1, p2, True)
+    areas, grads = _piece_sums(_intersection_pieces(e1, e2), (e1, e2), True)
+    return areas[0], np.asarray(grads[0])
+
+
+def hull_area(p1: np.ndarray, p2: np.ndarray, n_directions: int = HULL_DIRECTIONS) -> float:
+    """Area (px^2) of the convex hull of two ellipses, exact (see the module docstring)."""
+    e1, e2 = _pair(p1, p2, False)
+    return _piece_sums(_hull_pieces(p1, p2, e1, e2, n_directions), (e1, e2), False)[0][0]
+
+
+def hull_area_and_gradient(p1: np.ndarray, p2: np.ndarray,
+                           n_directions: int = HULL_DIRECTIONS) -> tuple[float, np.ndarray]:
+    """Hull area (px^2) and its gradient (5,) w.r.t. the second ellipse's Gaussian parameters
+    ``g2 = (mu_x, mu_y, s00, s01, s11)`` (module docstring, "Derivatives")."""
+    e1, e2 = _pair(p1, p2, True)
+    areas, grads = _piece_sums(_hull_pieces(p1, p2, e1, e2, n_directions), (e1, e2), True)
+    return areas[0], np.asarray(grads[0])
+
+
+def quadrant_areas(
+    p1: np.ndarray, p2: np.ndarray, hull: bool, n_directions: int = HULL_DIRECTIONS,
+    gradient: bool = False,
+) -> dict[str, tuple[np.ndarray, np.ndarray | None]]:
+    """Areas (px^2) in the four quadrants of the first ellipse's frame (module docstring,
+    "Quadrants") of the second ellipse (``"second"``), of the intersection (``"intersection"``)
+    and, if ``hull``, of the convex hull (``"hull"``): each ``(areas (4,), gradients (4, 5) or
+    None)``, gradients w.r.t. the second ellipse's ``g2``. The first ellipse has ``A1 / 4`` in
+    each quadrant."""
+    e1, e2 = _pair(p1, p2, gradient)
+    ells = (e1, e2)
+    axes = (math.cos(float(p1[4])), math.sin(float(p1[4])))
+    regions = {"second": [("arc", 1, 0.0, _TWO_PI)], "intersection": _intersection_pieces(e1, e2)}
+    if hull:
+        regions["hull"] = _hull_pieces(p1, p2, e1, e2, n_directions)
+    out = {}
+    for name, pieces in regions.items():
+        areas, grads = _piece_sums(pieces, ells, gradient, axes)
+        out[name] = (np.asarray(areas), np.asarray(grads) if gradient else None)
+    return out
+
+
+@functools.lru_cache(maxsize=8)
+def _directions(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    th = np.linspace(0.0, _TWO_PI, n, endpoint=False)
+    return th, np.cos(th), np.sin(th)
+
+
+def _sigma_terms(p: np.ndarray) -> tuple[float, float, float]:
+    """``(s00, s01, s11)`` of ``Sigma`` for params ``p = (cx, cy, a, b, angle)``."""
+    return sigma_entries(float(p[2]), float(p[3]), float(p[4]))

@@ -37,8 +37,8 @@ functions of the projection's normalised dual conic ``Cn = C* / (-C*[2,2])`` (ce
 ``mu = -Cn[:2, 2]``, ``Sigma = Cn[:2, :2] + mu mu^T``). Their residuals are re-implemented
 here vectorised over the objects (equal to ``factors.metrics.residual``, tested) and
 differentiated through ``dC* = K dA K^T``, ``dCn = (dC* + Cn dC*[2,2]) / (-C*[2,2])``.
-``iou`` and ``giou`` evaluate ``r_j = [sqrt(Delta_j)]`` per pair with
-:func:`factors.metrics.overlap_delta` (exact areas and their exact gradient w.r.t. the
+``iou`` and ``giou`` evaluate their quadrant rows per pair with
+:func:`factors.metrics.overlap_residual` (exact areas and their exact gradient w.r.t. the
 projection's ``(mu, Sigma)``, :mod:`factors.overlap`), chained through the same ``dCn``.
 ``qbbox`` (piecewise: clipped at the image border) calls ``factors.metrics.residual`` and uses
 central differences on ``retract`` (step :data:`DEFAULT_NUMERIC_STEP`), one-sided where a side
@@ -592,11 +592,10 @@ class PoseResidualModel:
         return Cn, (dCs + Cn[:, None] * dCs[:, :, 2, 2, None, None]) / w[:, None, None, None]
 
     def _evaluate_overlap(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
-        """iou / giou: ``r_j = [sqrt(Delta_j)]`` from the exact areas (:func:`factors.metrics.
-        overlap_delta`, one scalar call per pair) and its analytic pose Jacobian, the area
-        gradient w.r.t. the projection's ``(mu, Sigma)`` chained through ``dCn``
-        (``d sqrt(Delta) = dDelta / (2 sqrt(Delta))``, set to 0 at ``Delta = 0`` where the
-        residual has no derivative)."""
+        """iou / giou: the quadrant rows ``r_j`` (4,) of :func:`factors.metrics.
+        overlap_residual` (exact areas, one scalar call per pair) and their analytic pose
+        Jacobian: the exact area gradients w.r.t. the projection's ``(mu, Sigma)``, chained
+        through ``dCn``."""
         from factors import metrics
 
         A, c, S, margins = self._camera_frame(T)
@@ -611,8 +610,8 @@ class PoseResidualModel:
                     + mu[:, None, :, None] * dmu[..., None, :])
             dg = np.concatenate([dmu, dsig[..., 0, 0, None], dsig[..., 0, 1, None],
                                  dsig[..., 1, 1, None]], axis=-1)
-        r = np.zeros((self.n, 1))
-        J = None if dg is None else np.zeros((self.n, 1, 6))
+        r = np.zeros((self.n, self.dim))
+        J = None if dg is None else np.zeros((self.n, self.dim, 6))
         hull_directions = self.options.get("hull_directions", HULL_DIRECTIONS)
         for j in np.flatnonzero(valid):
             try:
@@ -620,11 +619,10 @@ class PoseResidualModel:
             except DegenerateProjectionError:
                 valid[j] = False
                 continue
-            delta, grad = metrics.overlap_delta(self.metric, self._det_params[j], proj,
-                                                hull_directions, gradient=J is not None)
-            r[j, 0] = math.sqrt(delta)
-            if J is not None and delta > 0.0:
-                J[j, 0] = (dg[j] @ grad) / (2.0 * r[j, 0])
+            r[j], grad = metrics.overlap_residual(self.metric, self._det_params[j], proj,
+                                                  hull_directions, gradient=J is not None)
+            if J is not None:
+                J[j] = grad @ dg[j].T
         if not valid.all():
             self._apply_penalty(r, J, ~valid, c, S, margins)
         return PoseEvaluation(r, J, valid, margins)
