@@ -180,7 +180,7 @@ _STYLE = """
 .detection.inlier{stroke:#3fb950}
 .detection.outlier{stroke:#f85149;stroke-dasharray:3 3}
 .match{stroke:#d29922;stroke-width:1.5}
-text{font-family:sans-serif;font-size:12px;fill:#e6edf3;paint-order:stroke;stroke:#0d1117;
+text{font-family:sans-serif;font-size:11px;fill:#e6edf3;paint-order:stroke;stroke:#0d1117;
 stroke-width:3px}
 text.pid{fill:#79c0ff}
 text.summary{font-size:14px}
@@ -224,8 +224,9 @@ def render_overlay_svg(
             continue
         cls = "projection matched" if p.object_id in matched else "projection"
         out.append(_ellipse_svg(p.ellipse, cls, f" data-object-id={quoteattr(p.object_id)}"))
-        out.append(f'<text class="pid" x="{p.ellipse.cx + 4:.1f}" y="{p.ellipse.cy - 4:.1f}">'
-                   f"{escape(p.object_id)} {escape(p.category)}</text>")
+        if p.object_id not in matched:  # a matched object is named by its detection's label
+            out.append(f'<text class="pid" x="{p.ellipse.cx:.1f}" y="{p.ellipse.cy:.1f}" '
+                       f'text-anchor="middle">{escape(p.object_id)} {escape(p.category)}</text>')
     for d in detections:
         inlier = d.object_id is not None
         cls = "detection inlier" if inlier else "detection outlier"
@@ -239,8 +240,11 @@ def render_overlay_svg(
             label += f" -> {d.object_id}  IoU {d.iou:.2f}  cost {d.cost:.3g}"
         else:
             label += "  (outlier)"
-        out.append(f'<text x="{d.ellipse.cx + 4:.1f}" y="{d.ellipse.cy + d.ellipse.b / 2 + 14:.1f}"'
-                   f">{escape(label)}</text>")
+        # under the ellipse: its vertical half-extent is sqrt(a^2 sin^2 + b^2 cos^2)
+        e = d.ellipse
+        below = math.hypot(e.a * math.sin(e.angle), e.b * math.cos(e.angle)) + 13
+        out.append(f'<text x="{e.cx:.1f}" y="{e.cy + below:.1f}" text-anchor="middle">'
+                   f"{escape(label)}</text>")
     out.append("</g>")
     out.append(f'<text class="summary" x="6" y="{height + band - 9}">{escape(summary)}</text>')
     out.append("</svg>")
