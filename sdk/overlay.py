@@ -220,7 +220,11 @@ def render_overlay_svg(
     out.append(f'<clipPath id="image"><rect x="0" y="0" width="{width}" height="{height}"/>'
                "</clipPath><g clip-path=\"url(#image)\">")
     for p in projections:
-        if p.ellipse is None:
+        e = p.ellipse
+        # not an ellipse at that pose, or wholly outside the frame (its circumscribed circle,
+        # radius a, misses the image): not drawn, so a large map gives a small drawing
+        if e is None or (e.cx + e.a < 0 or e.cy + e.a < 0 or e.cx - e.a > width
+                          or e.cy - e.a > height):
             continue
         cls = "projection matched" if p.object_id in matched else "projection"
         out.append(_ellipse_svg(p.ellipse, cls, f" data-object-id={quoteattr(p.object_id)}"))

@@ -169,3 +169,21 @@ def test_offline_docs_pages_point_at_local_assets(client: TestClient) -> None:
         assert not re.search(r"(src|href)=\"https?://", page.text), page.text
         assert client.get(f"/static/docs/{asset}").status_code == 200
         assert "default-src 'self'" in page.headers["content-security-policy"]
+
+
+def test_drawing_escapes_text_and_skips_what_is_off_frame() -> None:
+    from sdk.overlay import DrawnDetection, DrawnProjection, ImageEllipse, render_overlay_svg
+
+    inside = DrawnProjection("in", "chair", ImageEllipse(100, 100, 20, 10, 0.3))
+    outside = DrawnProjection("out", "chair", ImageEllipse(900, 100, 20, 10, 0.0))
+    behind = DrawnProjection("behind", "chair", None)
+    det = DrawnDetection(0, "<script>alert(1)</script>", ImageEllipse(100, 100, 20, 10, 0.3),
+                         "in", 0.9, 0.01)
+    svg = render_overlay_svg(640, 480, [det], [inside, outside, behind], 'a "summary" & <b>',
+                             metadata={"x": "</metadata><script>"})
+    assert 'data-object-id="in"' in svg
+    assert 'data-object-id="out"' not in svg and 'data-object-id="behind"' not in svg
+    assert "<script>" not in svg and "&lt;script&gt;" in svg
+    import xml.etree.ElementTree as ET
+
+    ET.fromstring(svg)  # well-formed XML

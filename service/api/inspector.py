@@ -31,7 +31,6 @@ from sdk.overlay import (
     render_overlay_svg,
 )
 from service.api.convert import convert_pose
-from service.api.docs_pages import SAME_ORIGIN_ONLY_CSP
 from service.api.examples import LOCALIZE_EXAMPLE
 from service.api.schemas import LocalizeRequest, LocalizeResponse
 
@@ -40,6 +39,10 @@ __all__ = ["SVG_MEDIA_TYPE", "install_inspector", "render_localization_svg", "wa
 SVG_MEDIA_TYPE = "image/svg+xml"
 STATIC_DIR = Path(__file__).resolve().parent / "static" / "inspector"
 STATIC_URL = "/static/inspector"
+#: The inspector page's Content-Security-Policy: nothing from another origin, and no inline
+#: script at all (the SVG answers it inserts carry only an inline <style>).
+INSPECTOR_CSP = ("default-src 'self'; script-src 'self'; style-src 'self' 'unsafe-inline'; "
+                 "img-src 'self' data:; font-src 'self'; connect-src 'self'")
 
 
 def _media_ranges(accept: str) -> dict[str, float]:
@@ -108,7 +111,7 @@ def install_inspector(app: FastAPI) -> None:
     @router.get("/inspector")
     def inspector_page() -> FileResponse:
         return FileResponse(STATIC_DIR / "index.html", media_type="text/html",
-                            headers={"Content-Security-Policy": SAME_ORIGIN_ONLY_CSP})
+                            headers={"Content-Security-Policy": INSPECTOR_CSP})
 
     @router.get("/inspector/example.json")
     def inspector_example() -> JSONResponse:
