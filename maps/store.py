@@ -42,7 +42,13 @@ from typing import Any
 import sqlalchemy as sa
 from sqlalchemy import event
 from sqlalchemy.engine import Connection, Engine
-from sqlalchemy.exc import IntegrityError, InterfaceError, OperationalError, SQLAlchemyError
+from sqlalchemy.exc import (
+    IntegrityError,
+    InterfaceError,
+    OperationalError,
+    ProgrammingError,
+    SQLAlchemyError,
+)
 from sqlalchemy.pool import StaticPool
 
 from maps.compiled import CompiledMap, compile_map
@@ -50,6 +56,7 @@ from maps.errors import (
     MapAlreadyExists,
     MapNotFound,
     MapStoreError,
+    SchemaNotMigrated,
     StoreUnavailable,
     VersionConflict,
 )
@@ -61,6 +68,7 @@ __all__ = [
     "MapStore",
     "MapStoreError",
     "MapSummary",
+    "SchemaNotMigrated",
     "StoreUnavailable",
     "StoredMap",
     "VersionConflict",
@@ -238,6 +246,10 @@ class MapStore:
                 yield conn
         except (OperationalError, InterfaceError) as exc:
             raise _unavailable(exc) from exc
+        except ProgrammingError as exc:
+            if _schema_missing(exc):
+                raise _unavailable(exc) from exc
+            raise
 
     @contextmanager
     def _read(self) -> Iterator[Connection]:
@@ -246,6 +258,10 @@ class MapStore:
                 yield conn
         except (OperationalError, InterfaceError) as exc:
             raise _unavailable(exc) from exc
+        except ProgrammingError as exc:
+            if _schema_missing(exc):
+                raise _unavailable(exc) from exc
+            raise
 
     # ------------------------------------------------------------------ writes
     def create(self, scene_map: SceneMap) -> StoredMap:
@@ -430,8 +446,18 @@ class MapStore:
             return {"entries": len(self._cache), "capacity": COMPILED_CACHE_SIZE}
 
 
+def _schema_missing(exc: Exception) -> bool:
+    """A missing table or column: PostgreSQL SQLSTATE 42P01 / 42703, SQLite "no such ..."."""
+    code = getattr(getattr(exc, "orig", None), "sqlstate", None)
+    return code in ("42P01", "42703") or "no such table" in str(exc) \
+        or "no such column" in str(exc)
+
+
 def _unavailable(exc: Exception) -> StoreUnavailable:
     first = str(exc).splitlines()[0] if str(exc) else ""
+    if _schema_missing(exc):
+        return SchemaNotMigrated(f"database schema not migrated: {exc.__class__.__name__}: "
+                                 f"{first}")
     return StoreUnavailable(f"database unreachable or busy: {exc.__class__.__name__}: {first}")
 
 

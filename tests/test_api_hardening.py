@@ -1,0 +1,136 @@
+"""Hostile map writes and database states (issue 11), on SQLite and PostgreSQL.
+
+Each case used to answer 500: lone surrogates in map strings (no UTF-8 encoding, so neither
+hashable nor storable), containers inside ``categories`` or as Chess labels (unhashable), an
+unmigrated database (``ProgrammingError`` on PostgreSQL). ``/readyz`` (no key needed) used to
+echo the driver's error text (host, port, database, SQL).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from fastapi.testclient import TestClient
+
+from maps.store import MapStore
+from service.api.app import create_app
+from service.api.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
+from service.settings import Settings
+from tests.test_maps_store import store_url  # noqa: F401 (fixture: sqlite + postgresql)
+
+PROBLEM = "application/problem+json"
+
+
+def _client(url: str, **settings: object) -> TestClient:
+    store = MapStore(url, migrate=settings.pop("migrate", True))  # type: ignore[arg-type]
+    app = create_app(Settings(api_keys="", **settings), store=store)  # type: ignore[arg-type]
+    return TestClient(app, raise_server_exceptions=False)
+
+
+@pytest.fixture
+def client(store_url: str) -> Iterator[TestClient]:  # noqa: F811
+    with _client(store_url) as c:
+        yield c
+        c.app.state.store.close()
+
+
+def _post(c: TestClient, path: str, body: object):
+    # json.dumps escapes a lone surrogate as "\ud800", which the server's JSON parser accepts
+    return c.post(path, content=json.dumps(body), headers={"content-type": "application/json"})
+
+
+def _refused(r, field_prefix: str) -> None:
+    assert r.status_code == 422, r.text
+    assert r.headers["content-type"].startswith(PROBLEM)
+    fields = [e["field"] for e in r.json()["errors"]]
+    assert any(f.startswith(field_prefix) for f in fields), fields
+
+
+_OBJ = MAP_EXAMPLE["objects"][0]
+_BAD_MAPS = {
+    "surrogate in name": ({"name": "x\ud800"}, "name"),
+    "surrogate in a category": ({"categories": ["a\udfff", *MAP_EXAMPLE["categories"]]},
+                                "categories[0]"),
+    "surrogate in an object id": ({"objects": [{**_OBJ, "object_id": "o\ud800"}]},
+                                  "objects[0].object_id"),
+    "surrogate in metadata": ({"metadata": {"note\ud800": "x"}}, "metadata"),
+    "list inside categories": ({"categories": [["TV"], *MAP_EXAMPLE["categories"]]},
+                               "categories[0]"),
+    "dict inside categories": ({"categories": [{"TV": 1}, *MAP_EXAMPLE["categories"]]},
+                               "categories[0]"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(_BAD_MAPS))
+def test_hostile_map_strings_and_categories_are_422_and_store_nothing(
+        client: TestClient, case: str) -> None:
+    change, field = _BAD_MAPS[case]
+    body = {**MAP_EXAMPLE, "map_id": "hostile", **change}
+    _refused(_post(client, "/v1/maps", body), field)
+    assert client.get("/v1/maps/hostile").status_code == 404
+    # the same body as an update of an existing map: refused, the map is unchanged
+    current = client.get("/v1/maps/chess")
+    r = client.put("/v1/maps/chess", content=json.dumps({**body, "map_id": "chess"}),
+                   headers={"content-type": "application/json", "If-Match": current.headers[
+                       "etag"]})
+    _refused(r, field)
+    assert client.get("/v1/maps/chess").headers["etag"] == current.headers["etag"]
+
+
+@pytest.mark.parametrize("label", [["TV"], {"x": 1}, "TV\ud800"])
+def test_hostile_chess_labels_are_422(client: TestClient, label: object) -> None:
+    body = {**CHESS_IMPORT_EXAMPLE, "category_id_to_label": {
+        **CHESS_IMPORT_EXAMPLE["category_id_to_label"],
+        next(iter(CHESS_IMPORT_EXAMPLE["category_id_to_label"])): label}}
+    r = _post(client, "/v1/maps:import-chess?map_id=hostile-chess", body)
+    assert r.status_code == 422, r.text
+    assert r.json()["errors"]
+    assert client.get("/v1/maps/hostile-chess").status_code == 404
+
+
+def test_readyz_names_the_check_without_driver_text(caplog: pytest.LogCaptureFixture) -> None:
+    url = "postgresql://postgres@127.0.0.1:1/secretdb?connect_timeout=2"
+    with _client(url, migrate=False, seed_demo_map=False) as c, caplog.at_level(logging.ERROR):
+        r = c.get("/readyz")
+        assert r.status_code == 503 and r.headers["content-type"].startswith(PROBLEM)
+        body = r.json()
+        assert body["detail"] == "database: unavailable"
+        assert body["errors"] == [{"field": "database", "message": "unavailable"}]
+        for secret in ("127.0.0.1", "secretdb", "Error", "connect"):
+            assert secret not in r.text
+        assert "secretdb" in caplog.text or "127.0.0.1" in caplog.text  # the operator's log
+        r = c.get("/v1/maps")
+        assert r.status_code == 503 and "127.0.0.1" not in r.text
+        c.app.state.store.close()
+
+
+def test_unmigrated_database_is_503_with_a_migrate_log_line(
+        store_url: str, caplog: pytest.LogCaptureFixture) -> None:  # noqa: F811
+    with _client(store_url, migrate=False, seed_demo_map=False) as c, \
+            caplog.at_level(logging.ERROR, logger="quadloc.api"):
+        for r in (c.get("/v1/maps"), c.get("/v1/maps/chess"), _post(c, "/v1/maps", MAP_EXAMPLE),
+                  c.post("/v1/maps/chess/localize", json={"camera": {}, "detections": []})):
+            if r.status_code == 422:  # the request itself was invalid: refused first
+                continue
+            assert r.status_code == 503, r.text
+            assert r.json()["type"] == "urn:quadloc:problem:database-unavailable"
+            assert r.headers["retry-after"]
+        r = c.get("/readyz")
+        assert r.status_code == 503 and r.json()["detail"] == "database: unavailable"
+        assert "upgrade head" in caplog.text and "not migrated" in caplog.text
+        c.app.state.store.migrate()  # the operator migrates: the same process recovers
+        assert c.get("/v1/maps").status_code == 200
+        c.app.state.store.close()
+
+
+def test_readyz_names_a_missing_default_map(tmp_path: Path) -> None:
+    """A missing default map is named as such (not as a database failure)."""
+    with _client(f"sqlite:///{tmp_path / 'q.db'}", seed_demo_map=False) as c:
+        r = c.get("/readyz")
+        assert r.status_code == 503
+        assert r.json()["errors"] == [{"field": "default_map", "message": "not found"}]
+        c.app.state.store.close()
