@@ -171,6 +171,21 @@ class Settings(BaseSettings):
         description="Longest wait for a solve slot before answering 503 + Retry-After.",
     )
 
+    max_header_bytes: int = Field(
+        default=32_768, ge=1024, le=1_048_576,
+        description="Largest request line + headers (bytes); larger -> 400 and the connection "
+                    "is closed (quadloc serve; service/api/server.py).",
+    )
+    request_read_timeout_s: float = Field(
+        default=10.0, gt=0, le=300,
+        description="A request (line, headers, body) must be received within this many seconds "
+                    "of its first byte, else 408 and the connection is closed (slowloris guard).",
+    )
+    keep_alive_timeout_s: float = Field(
+        default=5.0, gt=0, le=300,
+        description="Idle keep-alive connections are closed after this many seconds.",
+    )
+
     map_cache_ttl_s: float = Field(
         default=1.0, ge=0,
         description="How long a replica may serve a cached map version (0 = always ask the "
