@@ -624,6 +624,11 @@ def scene_map_from_dict(data: Mapping[str, Any], *, version: int | None = None) 
     )
 
 
+def _integral(value: Any) -> Any:
+    """An integral float (``3.0``: JSON Schema's ``integer`` allows it) as an int."""
+    return int(value) if isinstance(value, float) and value.is_integer() else value
+
+
 def scene_map_from_chess(
     data: Mapping[str, Any], *, map_id: str = "chess", name: str = "Chess",
     metadata: Mapping[str, Any] | None = None,
@@ -657,7 +662,7 @@ def scene_map_from_chess(
         if not isinstance(o, Mapping):
             errors.add(path, "must be an object")
             continue
-        cid = str(o.get("category_id"))
+        cid = str(_integral(o.get("category_id")))
         if cid not in labels:
             errors.add(f"{path}.category_id", f"unknown category id {o.get('category_id')!r}")
             continue
@@ -665,7 +670,7 @@ def scene_map_from_chess(
         if not isinstance(ell, Mapping):
             errors.add(f"{path}.ellipsoid", "required object {axes, R, center} missing")
             continue
-        oid = o.get("object_id")
+        oid = _integral(o.get("object_id"))
         if isinstance(oid, int) and not isinstance(oid, bool):
             oid = str(oid)  # the Chess format's integer ids become their decimal string
         entry: dict[str, Any] = {"object_id": oid, "category": labels[cid],
