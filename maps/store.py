@@ -380,11 +380,29 @@ class MapStore:
         v = versions_table.c
         with self._read() as conn:
             row = conn.execute(self._version_query(
-                map_id, version, v.version, v.content, v.content_hash, v.created_at)).first()
+                map_id, version, v.version, v.content_hash, v.created_at)).first()
         if row is None:
             raise MapNotFound(map_id, version)
-        scene_map = scene_map_from_dict(json.loads(row.content), version=int(row.version))
+        key = (map_id, int(row.version), str(row.content_hash))
+        with self._cache_lock:
+            hit = self._cache.get(key)
+        if hit is not None:  # versions are immutable: reuse the parsed map (10,000 objects
+            return StoredMap(hit.scene_map, row.content_hash, _utc(row.created_at))  # ~3 s)
+        with self._read() as conn:
+            content = conn.execute(self._version_query(map_id, key[1], v.content,
+                                                       v.content_hash)).first()
+        if content is None or content.content_hash != key[2]:
+            raise MapNotFound(map_id, version)  # deleted (and maybe re-created) meanwhile
+        scene_map = scene_map_from_dict(json.loads(content.content), version=key[1])
+        self._remember(key, compile_map(scene_map))
         return StoredMap(scene_map, row.content_hash, _utc(row.created_at))
+
+    def _remember(self, key: tuple[str, int, str], compiled: CompiledMap) -> None:
+        with self._cache_lock:
+            self._cache[key] = compiled
+            self._cache.move_to_end(key)
+            while len(self._cache) > COMPILED_CACHE_SIZE:
+                self._cache.popitem(last=False)
 
     def versions(self, map_id: str) -> builtins.list[int]:
         """All stored version numbers of a map, ascending. :class:`MapNotFound`."""
@@ -428,15 +446,17 @@ class MapStore:
                 if hit is not None:
                     self._cache.move_to_end(key)
                     return hit
-            stored = self.get(map_id, key[1])
+            try:
+                stored = self.get(map_id, key[1])  # parses, compiles and caches the version
+            except MapNotFound:
+                continue  # deleted between the two reads: resolve again
             if stored.content_hash != key[2]:
                 continue  # deleted and re-created between the two reads: resolve again
-            result = compile_map(stored.scene_map)
             with self._cache_lock:
-                self._cache[key] = result
-                self._cache.move_to_end(key)
-                while len(self._cache) > COMPILED_CACHE_SIZE:
-                    self._cache.popitem(last=False)
+                result = self._cache.get(key)
+            if result is None:  # evicted at once by other maps: compile this one again
+                result = compile_map(stored.scene_map)
+                self._remember(key, result)
             return result
         raise MapStoreError(f"map {map_id!r} kept changing while being loaded")
 

@@ -215,7 +215,7 @@ def localize(
 
     Raises:
         LocalizationInputError: (a ``ValueError``) bad input, the message names the field.
-        ScoringTimeoutError: scoring ran past 1.1 x ``time_budget_ms`` (huge map x detections).
+        ScoringTimeoutError: scoring ran past 1.05 x ``time_budget_ms`` (huge map x detections).
     """
     t0 = time.perf_counter()
     timings: dict[str, float] = {}

@@ -88,7 +88,7 @@ POINT_BLOCK = 1 << 17
 #: Most pose x object projections per block (each holds a few 3x3 / 4x4 float arrays).
 PROJECT_BLOCK = 1 << 13
 #: The scorer's hard stop, as a multiple of the time budget (:func:`hard_deadline`).
-HARD_STOP_FACTOR = 1.1
+HARD_STOP_FACTOR = 1.05
 
 
 class ScoringTimeoutError(RuntimeError):
@@ -102,7 +102,7 @@ def _check(stop_at: float | None) -> None:
 
 def hard_deadline(start: float, time_budget_ms: float | None) -> float | None:
     """The scorer's hard stop of a call started at ``start`` (``time.perf_counter()``) with a
-    budget: ``start + 1.1 x budget``. The search stops at the budget itself; this bounds the
+    budget: ``start + 1.05 x budget``. The search stops at the budget itself; this bounds the
     scoring after it (final matches, re-association after refinement)."""
     return None if time_budget_ms is None else start + HARD_STOP_FACTOR * time_budget_ms / 1e3
 
