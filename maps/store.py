@@ -82,6 +82,9 @@ _PG_MIGRATION_LOCK = 0x51_4C_4F_43_4D_41_50  # "QLOCMAP"
 SQLITE_BUSY_TIMEOUT_S = 30.0
 #: Compiled maps kept per store (least recently used evicted first).
 COMPILED_CACHE_SIZE = 64
+#: ... and at most this many objects in all (a parsed + compiled map costs ~2.5 KB per object:
+#: ~60 MB of a replica's memory here; docs/deployment.md, "Worst-case cost of a request").
+COMPILED_CACHE_MAX_OBJECTS = 25_000
 
 # Table descriptions for building queries ONLY. The schema itself belongs to the Alembic
 # migrations (maps/migrations/versions/); these declarations mirror it, CHECK constraints
@@ -401,8 +404,10 @@ class MapStore:
         with self._cache_lock:
             self._cache[key] = compiled
             self._cache.move_to_end(key)
-            while len(self._cache) > COMPILED_CACHE_SIZE:
-                self._cache.popitem(last=False)
+            total = sum(len(c) for c in self._cache.values())
+            while len(self._cache) > 1 and (len(self._cache) > COMPILED_CACHE_SIZE
+                                            or total > COMPILED_CACHE_MAX_OBJECTS):
+                total -= len(self._cache.popitem(last=False)[1])
 
     def versions(self, map_id: str) -> builtins.list[int]:
         """All stored version numbers of a map, ascending. :class:`MapNotFound`."""

@@ -134,3 +134,34 @@ def test_readyz_names_a_missing_default_map(tmp_path: Path) -> None:
         assert r.status_code == 503
         assert r.json()["errors"] == [{"field": "default_map", "message": "not found"}]
         c.app.state.store.close()
+
+
+def test_store_reuses_parsed_versions_within_an_object_bound(
+        store_url: str, monkeypatch: pytest.MonkeyPatch) -> None:  # noqa: F811
+    """GET of an unchanged version does not re-parse it (a 10,000-object map costs seconds to
+    parse); the cache holds at most COMPILED_CACHE_MAX_OBJECTS objects (the newest map always)."""
+    import maps.store as store_module
+    from maps.model import scene_map_from_dict
+
+    store = MapStore(store_url)
+    try:
+        for k in range(3):
+            store.create(scene_map_from_dict({**MAP_EXAMPLE, "map_id": f"m{k}"}, version=1))
+        n = len(MAP_EXAMPLE["objects"])
+        a, b = store.get("m0"), store.get("m0")
+        assert a.scene_map is b.scene_map and a.content_hash == b.content_hash
+        parsed = []
+        monkeypatch.setattr(store_module, "scene_map_from_dict",
+                            lambda *args, **kw: parsed.append(1) or scene_map_from_dict(*args,
+                                                                                        **kw))
+        monkeypatch.setattr(store_module, "COMPILED_CACHE_MAX_OBJECTS", 2 * n)
+        store.get("m1")
+        store.get("m2")  # evicts m0 (3 maps > 2 maps' worth of objects)
+        assert len(parsed) == 2 and store.cache_info()["entries"] == 2
+        store.get("m1")
+        store.compiled("m2")
+        assert len(parsed) == 2  # still cached
+        store.get("m0")
+        assert len(parsed) == 3  # parsed again after eviction
+    finally:
+        store.close()
