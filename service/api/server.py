@@ -11,7 +11,11 @@ connection on which nothing is sent, is kept open forever: "slowloris"). Here:
   and body) is not completely received ``QUADLOC_REQUEST_READ_TIMEOUT_S`` seconds after its
   first byte (or after the connection opened, if nothing was sent), answering
   ``408 Request Timeout`` when no response has started;
-* idle keep-alive connections are closed after ``QUADLOC_KEEP_ALIVE_TIMEOUT_S``.
+* idle keep-alive connections are closed after ``QUADLOC_KEEP_ALIVE_TIMEOUT_S``;
+* glibc's malloc keeps at most :data:`MALLOC_ARENAS` arenas (``mallopt(M_ARENA_MAX)``, unless
+  ``MALLOC_ARENA_MAX`` is set): with one arena per thread (up to 8 x cores), memory freed by
+  one solver thread is not reused by the next and the RSS ratchets up (measured with
+  bench/adversarial.py: 440 MB after the run with the default, 284 MB with 2).
 
 While the app handles a request (all of it received) the read timer is off: the solve budget
 bounds that time. ``uvicorn service.api.app:create_app --factory`` still works but without
@@ -21,6 +25,9 @@ these guards; deployments use ``quadloc serve`` (the Dockerfile does).
 from __future__ import annotations
 
 import asyncio
+import ctypes
+import ctypes.util
+import os
 from typing import Any
 
 import h11
@@ -29,7 +36,11 @@ from uvicorn.protocols.http.h11_impl import H11Protocol
 
 from service.settings import Settings
 
-__all__ = ["GuardedH11Protocol", "serve", "uvicorn_config"]
+__all__ = ["GuardedH11Protocol", "limit_malloc_arenas", "serve", "uvicorn_config"]
+
+#: glibc malloc arenas of a server process (see the module docstring).
+MALLOC_ARENAS = 2
+_M_ARENA_MAX = -8  # glibc <malloc.h>
 
 #: Used when the Uvicorn config carries no ``request_read_timeout_s`` (plain Uvicorn config).
 DEFAULT_REQUEST_READ_TIMEOUT_S = 10.0
@@ -107,8 +118,24 @@ def uvicorn_config(settings: Settings, host: str, port: int, *, workers: int = 1
     return config
 
 
+def limit_malloc_arenas(arenas: int = MALLOC_ARENAS) -> bool:
+    """``mallopt(M_ARENA_MAX, arenas)`` on glibc unless ``MALLOC_ARENA_MAX`` is set (then glibc
+    already applied it); False where there is no glibc (nothing to do)."""
+    if os.environ.get("MALLOC_ARENA_MAX"):
+        return False
+    name = ctypes.util.find_library("c")
+    try:
+        libc = ctypes.CDLL(name) if name else None
+        return bool(libc is not None and libc.mallopt(_M_ARENA_MAX, int(arenas)) == 1)
+    except (OSError, AttributeError):
+        return False
+
+
 def serve(config: uvicorn.Config) -> None:
-    """Run the server like ``uvicorn.run`` (several worker processes when configured)."""
+    """Run the server like ``uvicorn.run`` (several worker processes when configured), with
+    :func:`limit_malloc_arenas` (inherited by worker processes through the environment)."""
+    if limit_malloc_arenas():
+        os.environ["MALLOC_ARENA_MAX"] = str(MALLOC_ARENAS)  # for spawned worker processes
     server = uvicorn.Server(config)
     if config.workers > 1:
         from uvicorn.supervisors import Multiprocess
