@@ -165,3 +165,45 @@ def test_store_reuses_parsed_versions_within_an_object_bound(
         assert len(parsed) == 3  # parsed again after eviction
     finally:
         store.close()
+
+
+def test_a_slow_map_load_answers_503_within_the_budget_then_serves(tmp_path: Path) -> None:
+    """The first use of a big map version takes seconds to parse: the localization waits at
+    most the solve budget, answers 503 map-loading + Retry-After, and a retry after the load
+    (which went on in the background, once for all waiting requests) is served."""
+    import threading
+    import time
+
+    from service.api.examples import LOCALIZE_EXAMPLE
+
+    with _client(f"sqlite:///{tmp_path / 'q.db'}", solve_time_budget_ms=300.0) as c:
+        store = c.app.state.store
+        real = store.compiled
+        release = threading.Event()
+        calls = []
+
+        def slow(*args, **kwargs):
+            calls.append(1)
+            release.wait(10)
+            return real(*args, **kwargs)
+
+        store.compiled = slow
+        c.app.state.map_cache.invalidate("chess")
+        t0 = time.perf_counter()
+        r = c.post("/v1/maps/chess/localize", json=LOCALIZE_EXAMPLE)
+        waited = time.perf_counter() - t0
+        assert r.status_code == 503 and r.headers["retry-after"], r.text
+        assert r.json()["type"] == "urn:quadloc:problem:map-loading"
+        assert 0.3 <= waited < 3.0, waited
+        r2 = c.post("/v1/maps/chess/localize", json=LOCALIZE_EXAMPLE)  # joins the same load
+        assert r2.status_code == 503 and len(calls) == 1
+        release.set()
+        for _ in range(50):
+            r3 = c.post("/v1/maps/chess/localize", json=LOCALIZE_EXAMPLE)
+            if r3.status_code == 200:
+                break
+            time.sleep(0.1)
+        assert r3.status_code == 200 and r3.json()["localized"], r3.text
+        assert len(calls) == 1
+        store.compiled = real
+        store.close()

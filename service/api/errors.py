@@ -63,6 +63,7 @@ PROBLEM_TYPES: dict[str, tuple[int, str]] = {
     "precondition-required": (428, "If-Match header required"),
     "busy": (503, "Solver busy, retry later"),
     "database-unavailable": (503, "Database unavailable, retry later"),
+    "map-loading": (503, "Map version loading, retry shortly"),
     "not-ready": (503, "Service not ready"),
     "internal-error": (500, "Internal error"),
 }
