@@ -391,7 +391,9 @@ def to_markdown(report: dict[str, Any]) -> str:
         f"{inter['under_attack']['p50_ms']} / {inter['under_attack']['p99_ms']} ms "
         f"({inter['under_attack']['requests']} requests, errors "
         f"{inter['under_attack']['errors'] or 'none'}). p99 ratio **{inter['p99_ratio']}** "
-        f"(target <= {P99_FACTOR:.0f}).",
+        f"(target <= {P99_FACTOR:.0f}). The attacker's own slowest request while sharing the "
+        f"CPU with them: {inter['under_attack'].get('attack_wall_ms_max')} ms (limit "
+        f"{SLOW_FACTOR * report['solve_budget_ms'] + SLACK_MS:.0f} ms).",
     ]
     return "\n".join(lines)
 
