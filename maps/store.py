@@ -83,8 +83,8 @@ SQLITE_BUSY_TIMEOUT_S = 30.0
 #: Compiled maps kept per store (least recently used evicted first).
 COMPILED_CACHE_SIZE = 64
 #: ... and at most this many objects in all (a parsed + compiled map costs ~2.5 KB per object:
-#: ~60 MB of a replica's memory here; docs/deployment.md, "Worst-case cost of a request").
-COMPILED_CACHE_MAX_OBJECTS = 25_000
+#: ~120 MB of a replica's memory here; docs/deployment.md, "Worst-case cost of a request").
+COMPILED_CACHE_MAX_OBJECTS = 50_000
 
 # Table descriptions for building queries ONLY. The schema itself belongs to the Alembic
 # migrations (maps/migrations/versions/); these declarations mirror it, CHECK constraints
