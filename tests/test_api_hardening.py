@@ -207,3 +207,37 @@ def test_a_slow_map_load_answers_503_within_the_budget_then_serves(tmp_path: Pat
         assert len(calls) == 1
         store.compiled = real
         store.close()
+
+
+def test_integral_floats_are_integers_and_the_schema_says_what_is_enforced(
+        tmp_path: Path) -> None:
+    """JSON Schema's ``integer`` includes 640.0: the server accepts it; 640.5 / "640" / true
+    are refused naming the field. robust_scale without robust: the schema's if/then says it."""
+    from service.api.examples import LOCALIZE_EXAMPLE
+    from service.cli import openapi_document
+
+    with _client(f"sqlite:///{tmp_path / 'q.db'}") as c:
+        def frame(**camera_and_options):
+            opts = camera_and_options.pop("options", {})
+            return {**LOCALIZE_EXAMPLE, "camera": {**LOCALIZE_EXAMPLE["camera"],
+                                                   **camera_and_options},
+                    "options": {**LOCALIZE_EXAMPLE.get("options", {}), **opts}}
+
+        ok = c.post("/v1/maps/chess/localize", json=frame(width=640.0, height=480.0,
+                                                          options={"seed": 3.0,
+                                                                   "max_iterations": 20.0}))
+        assert ok.status_code == 200, ok.text
+        for bad, field in ((frame(width=640.5), "camera.width"),
+                           (frame(width="640"), "camera.width"),
+                           (frame(width=True), "camera.width"),
+                           (frame(options={"seed": 1.5}), "options.seed"),
+                           (frame(options={"robust_scale": 2.0}), "options")):
+            r = c.post("/v1/maps/chess/localize", json=bad)
+            assert r.status_code == 422, (bad, r.text)
+            assert any(e["field"].startswith(field) for e in r.json()["errors"]), r.text
+        c.app.state.store.close()
+    options = openapi_document()["components"]["schemas"]["LocalizeOptionsIn"]
+    assert options["then"]["required"] == ["robust"]
+    assert options["if"]["required"] == ["robust_scale"]
+    put = openapi_document()["paths"]["/v1/maps/{map_id}"]["put"]
+    assert any(p["name"] == "If-Match" and p["required"] for p in put["parameters"])
