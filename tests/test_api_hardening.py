@@ -241,3 +241,33 @@ def test_integral_floats_are_integers_and_the_schema_says_what_is_enforced(
     assert options["if"]["required"] == ["robust_scale"]
     put = openapi_document()["paths"]["/v1/maps/{map_id}"]["put"]
     assert any(p["name"] == "If-Match" and p["required"] for p in put["parameters"])
+
+
+def test_map_loader_returns_when_the_load_finishes_before_it_is_tracked() -> None:
+    """A load that completes before its done-callback is attached runs the callback in the
+    caller's thread: it must not wait for the loader's own lock (it used to deadlock the
+    request thread when a cache hit was fast)."""
+    import threading
+    from concurrent.futures import Future
+
+    from service.api.map_loader import MapLoader
+
+    class Cache:
+        def get(self, map_id, version=None):
+            return f"{map_id}@{version}"
+
+    loader = MapLoader(Cache(), max_wait_s=1.0)  # type: ignore[arg-type]
+
+    def done_at_once(fn, *args):
+        f: Future = Future()
+        f.set_result(fn(*args))
+        return f
+
+    loader._pool.submit = done_at_once  # type: ignore[method-assign]
+    out: list[str] = []
+    t = threading.Thread(target=lambda: out.append(loader.get("m", 2)), daemon=True)
+    t.start()
+    t.join(5)
+    assert out == ["m@2"], "MapLoader.get deadlocked"
+    assert loader._pending == {}
+    loader.close()

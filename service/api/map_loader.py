@@ -42,10 +42,12 @@ class MapLoader:
         key = (map_id, version)
         with self._lock:
             future = self._pending.get(key)
+            fresh = future is None
             if future is None:
                 future = self._pool.submit(self.cache.get, map_id, version)
                 self._pending[key] = future
-                future.add_done_callback(lambda f, k=key: self._forget(k, f))
+        if fresh:  # outside the lock: a future already done runs the callback right here
+            future.add_done_callback(lambda f, k=key: self._forget(k, f))
         try:
             return future.result(timeout=self.max_wait_s)
         except FutureTimeout as exc:
