@@ -335,7 +335,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             final_rss = _status(proc.pid)["VmRSS"]
         finally:
             proc.terminate()
-            proc.wait(timeout=30)
+            try:
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
             if drop is not None:
                 drop()
     timed = [r for r in requests if "within_budget" in r]
@@ -349,7 +353,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "all_within_budget": all(r["within_budget"] for r in timed),
         "worst_peak_rss_above_idle_mb": worst_rss,
         "rss_within_target": worst_rss <= RSS_TARGET_MB,
-        "no_5xx": all(r["status"] < 500 for r in requests),
+        "no_5xx_but_503": all(r["status"] < 500 or r["status"] == 503 for r in requests),
         "interference": inter,
     }
 
@@ -382,7 +386,7 @@ def to_markdown(report: dict[str, Any]) -> str:
         "",
         f"Every timed request within its limit: **{report['all_within_budget']}**; worst peak "
         f"RSS above idle **{report['worst_peak_rss_above_idle_mb']:.0f} MB** (target <= "
-        f"{RSS_TARGET_MB:.0f}); no 5xx: **{report['no_5xx']}**.",
+        f"{RSS_TARGET_MB:.0f}); no 5xx other than 503: **{report['no_5xx_but_503']}**.",
         "",
         f"Interference: {inter['clients']} closed-loop clients posting demo-map frames; quiet "
         f"p50 / p99 {inter['quiet']['p50_ms']} / {inter['quiet']['p99_ms']} ms "

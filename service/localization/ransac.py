@@ -266,9 +266,11 @@ class MatchScorer:
         self.compat = compat
         # int32 indices (maps hold <= QUADLOC_MAX_MAP_OBJECTS objects): 12 bytes per pair
         self.pair_d, self.pair_o = (i.astype(np.int32) for i in np.nonzero(compat))
-        self.objects = np.unique(self.pair_o)
-        # Position of each pair's object within self.objects.
-        self.pair_s = np.searchsorted(self.objects, self.pair_o).astype(np.int32)
+        self.objects = np.flatnonzero(compat.any(axis=0))  # sorted, like np.unique(pair_o)
+        # Position of each pair's object within self.objects (a gather: no sort of the pairs).
+        position = np.zeros(self.n_obj, dtype=np.int32)
+        position[self.objects] = np.arange(len(self.objects), dtype=np.int32)
+        self.pair_s = position[self.pair_o]
         self.unit = sunflower_disk(n_points)
         self.points = _ellipse_points(self.params, self.unit)
         self.areas = math.pi * self.params[:, 2] * self.params[:, 3]
