@@ -32,7 +32,8 @@ class MapLoader:
     def __init__(self, cache: MapCache, max_wait_s: float, workers: int = 2) -> None:
         self.cache = cache
         self.max_wait_s = max_wait_s
-        self._pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="map-load")
+        self._workers = workers
+        self._pool: ThreadPoolExecutor | None = self._new_pool()
         self._pending: dict[tuple[str, int | None], Future[CompiledMap]] = {}
         self._lock = threading.Lock()
 
@@ -44,6 +45,8 @@ class MapLoader:
             future = self._pending.get(key)
             fresh = future is None
             if future is None:
+                if self._pool is None:  # closed by an app shutdown, then used again (tests)
+                    self._pool = self._new_pool()
                 future = self._pool.submit(self.cache.get, map_id, version)
                 self._pending[key] = future
         if fresh:  # outside the lock: a future already done runs the callback right here
@@ -58,6 +61,12 @@ class MapLoader:
             if self._pending.get(key) is future:
                 del self._pending[key]
 
+    def _new_pool(self) -> ThreadPoolExecutor:
+        return ThreadPoolExecutor(max_workers=self._workers, thread_name_prefix="map-load")
+
     def close(self) -> None:
-        """Stop the loader threads (pending loads finish)."""
-        self._pool.shutdown(wait=False, cancel_futures=True)
+        """Stop the loader threads (pending loads finish); a later ``get`` starts new ones."""
+        with self._lock:
+            pool, self._pool = self._pool, None
+        if pool is not None:
+            pool.shutdown(wait=False, cancel_futures=True)
