@@ -114,6 +114,22 @@ def _check_text(errors: _Errors, path: str, value: object, max_len: int) -> bool
     if any(ord(ch) < 32 for ch in value):
         errors.add(path, "must not contain control characters")
         return False
+    if not _is_utf8(value):
+        errors.add(path, _SURROGATE_MESSAGE)
+        return False
+    return True
+
+
+_SURROGATE_MESSAGE = "must be valid Unicode text (a lone surrogate such as \\ud800 is not)"
+
+
+def _is_utf8(text: str) -> bool:
+    """False for text with a lone surrogate (it has no UTF-8 encoding: cannot be hashed or
+    stored)."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
     return True
 
 
@@ -170,7 +186,7 @@ def _validate_header(
             if c in seen:
                 errors.add(f"categories[{i}]", f"duplicate category {c!r}")
             seen.add(c)
-    fixed["categories"] = cats
+    fixed["categories"] = tuple(c for c in cats if isinstance(c, str))  # others reported
     if metadata is None:
         metadata = {}
     depth = _nesting_depth(metadata)
@@ -191,6 +207,8 @@ def _validate_header(
             if size > LIMITS["max_metadata_bytes"]:
                 errors.add("metadata", f"at most {int(LIMITS['max_metadata_bytes'])} bytes "
                                        f"of JSON, got {size}")
+            if not _is_utf8(json.dumps(metadata, ensure_ascii=False)):
+                errors.add("metadata", f"keys and strings {_SURROGATE_MESSAGE}")
         fixed["metadata"] = _freeze(metadata)
     return fixed
 
@@ -606,6 +624,11 @@ def scene_map_from_dict(data: Mapping[str, Any], *, version: int | None = None) 
     )
 
 
+def _integral(value: Any) -> Any:
+    """An integral float (``3.0``: JSON Schema's ``integer`` allows it) as an int."""
+    return int(value) if isinstance(value, float) and value.is_integer() else value
+
+
 def scene_map_from_chess(
     data: Mapping[str, Any], *, map_id: str = "chess", name: str = "Chess",
     metadata: Mapping[str, Any] | None = None,
@@ -639,7 +662,7 @@ def scene_map_from_chess(
         if not isinstance(o, Mapping):
             errors.add(path, "must be an object")
             continue
-        cid = str(o.get("category_id"))
+        cid = str(_integral(o.get("category_id")))
         if cid not in labels:
             errors.add(f"{path}.category_id", f"unknown category id {o.get('category_id')!r}")
             continue
@@ -647,7 +670,7 @@ def scene_map_from_chess(
         if not isinstance(ell, Mapping):
             errors.add(f"{path}.ellipsoid", "required object {axes, R, center} missing")
             continue
-        oid = o.get("object_id")
+        oid = _integral(o.get("object_id"))
         if isinstance(oid, int) and not isinstance(oid, bool):
             oid = str(oid)  # the Chess format's integer ids become their decimal string
         entry: dict[str, Any] = {"object_id": oid, "category": labels[cid],

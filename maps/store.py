@@ -42,7 +42,13 @@ from typing import Any
 import sqlalchemy as sa
 from sqlalchemy import event
 from sqlalchemy.engine import Connection, Engine
-from sqlalchemy.exc import IntegrityError, InterfaceError, OperationalError, SQLAlchemyError
+from sqlalchemy.exc import (
+    IntegrityError,
+    InterfaceError,
+    OperationalError,
+    ProgrammingError,
+    SQLAlchemyError,
+)
 from sqlalchemy.pool import StaticPool
 
 from maps.compiled import CompiledMap, compile_map
@@ -50,6 +56,7 @@ from maps.errors import (
     MapAlreadyExists,
     MapNotFound,
     MapStoreError,
+    SchemaNotMigrated,
     StoreUnavailable,
     VersionConflict,
 )
@@ -62,6 +69,7 @@ __all__ = [
     "MapStoreError",
     "MapSummary",
     "MapVersionInfo",
+    "SchemaNotMigrated",
     "StoreUnavailable",
     "StoredMap",
     "VersionConflict",
@@ -75,6 +83,9 @@ _PG_MIGRATION_LOCK = 0x51_4C_4F_43_4D_41_50  # "QLOCMAP"
 SQLITE_BUSY_TIMEOUT_S = 30.0
 #: Compiled maps kept per store (least recently used evicted first).
 COMPILED_CACHE_SIZE = 64
+#: ... and at most this many objects in all (a parsed + compiled map costs ~2.5 KB per object:
+#: ~120 MB of a replica's memory here; docs/deployment.md, "Worst-case cost of a request").
+COMPILED_CACHE_MAX_OBJECTS = 50_000
 
 # Table descriptions for building queries ONLY. The schema itself belongs to the Alembic
 # migrations (maps/migrations/versions/); these declarations mirror it, CHECK constraints
@@ -249,6 +260,10 @@ class MapStore:
                 yield conn
         except (OperationalError, InterfaceError) as exc:
             raise _unavailable(exc) from exc
+        except ProgrammingError as exc:
+            if _schema_missing(exc):
+                raise _unavailable(exc) from exc
+            raise
 
     @contextmanager
     def _read(self) -> Iterator[Connection]:
@@ -257,6 +272,10 @@ class MapStore:
                 yield conn
         except (OperationalError, InterfaceError) as exc:
             raise _unavailable(exc) from exc
+        except ProgrammingError as exc:
+            if _schema_missing(exc):
+                raise _unavailable(exc) from exc
+            raise
 
     # ------------------------------------------------------------------ writes
     def create(self, scene_map: SceneMap) -> StoredMap:
@@ -375,11 +394,31 @@ class MapStore:
         v = versions_table.c
         with self._read() as conn:
             row = conn.execute(self._version_query(
-                map_id, version, v.version, v.content, v.content_hash, v.created_at)).first()
+                map_id, version, v.version, v.content_hash, v.created_at)).first()
         if row is None:
             raise MapNotFound(map_id, version)
-        scene_map = scene_map_from_dict(json.loads(row.content), version=int(row.version))
+        key = (map_id, int(row.version), str(row.content_hash))
+        with self._cache_lock:
+            hit = self._cache.get(key)
+        if hit is not None:  # versions are immutable: reuse the parsed map (10,000 objects
+            return StoredMap(hit.scene_map, row.content_hash, _utc(row.created_at))  # ~3 s)
+        with self._read() as conn:
+            content = conn.execute(self._version_query(map_id, key[1], v.content,
+                                                       v.content_hash)).first()
+        if content is None or content.content_hash != key[2]:
+            raise MapNotFound(map_id, version)  # deleted (and maybe re-created) meanwhile
+        scene_map = scene_map_from_dict(json.loads(content.content), version=key[1])
+        self._remember(key, compile_map(scene_map))
         return StoredMap(scene_map, row.content_hash, _utc(row.created_at))
+
+    def _remember(self, key: tuple[str, int, str], compiled: CompiledMap) -> None:
+        with self._cache_lock:
+            self._cache[key] = compiled
+            self._cache.move_to_end(key)
+            total = sum(len(c) for c in self._cache.values())
+            while len(self._cache) > 1 and (len(self._cache) > COMPILED_CACHE_SIZE
+                                            or total > COMPILED_CACHE_MAX_OBJECTS):
+                total -= len(self._cache.popitem(last=False)[1])
 
     def versions(self, map_id: str) -> builtins.list[int]:
         """All stored version numbers of a map, ascending. :class:`MapNotFound`."""
@@ -434,15 +473,17 @@ class MapStore:
                 if hit is not None:
                     self._cache.move_to_end(key)
                     return hit
-            stored = self.get(map_id, key[1])
+            try:
+                stored = self.get(map_id, key[1])  # parses, compiles and caches the version
+            except MapNotFound:
+                continue  # deleted between the two reads: resolve again
             if stored.content_hash != key[2]:
                 continue  # deleted and re-created between the two reads: resolve again
-            result = compile_map(stored.scene_map)
             with self._cache_lock:
-                self._cache[key] = result
-                self._cache.move_to_end(key)
-                while len(self._cache) > COMPILED_CACHE_SIZE:
-                    self._cache.popitem(last=False)
+                result = self._cache.get(key)
+            if result is None:  # evicted at once by other maps: compile this one again
+                result = compile_map(stored.scene_map)
+                self._remember(key, result)
             return result
         raise MapStoreError(f"map {map_id!r} kept changing while being loaded")
 
@@ -452,8 +493,18 @@ class MapStore:
             return {"entries": len(self._cache), "capacity": COMPILED_CACHE_SIZE}
 
 
+def _schema_missing(exc: Exception) -> bool:
+    """A missing table or column: PostgreSQL SQLSTATE 42P01 / 42703, SQLite "no such ..."."""
+    code = getattr(getattr(exc, "orig", None), "sqlstate", None)
+    return code in ("42P01", "42703") or "no such table" in str(exc) \
+        or "no such column" in str(exc)
+
+
 def _unavailable(exc: Exception) -> StoreUnavailable:
     first = str(exc).splitlines()[0] if str(exc) else ""
+    if _schema_missing(exc):
+        return SchemaNotMigrated(f"database schema not migrated: {exc.__class__.__name__}: "
+                                 f"{first}")
     return StoreUnavailable(f"database unreachable or busy: {exc.__class__.__name__}: {first}")
 
 

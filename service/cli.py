@@ -181,8 +181,7 @@ def _table_time(value: Any) -> str:
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
-    import uvicorn
-
+    from service.api.server import serve, uvicorn_config
     from service.settings import check_bind_allowed
 
     if args.database_url:
@@ -198,8 +197,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
     if not settings.auth_enabled:
         print(f"quadloc: no API key configured: the API is open, listening on loopback only "
               f"({host}:{port})", file=sys.stderr)
-    uvicorn.run("service.api.app:create_app", factory=True, host=host, port=port,
-                workers=workers, log_level=settings.log_level, access_log=args.access_log)
+    serve(uvicorn_config(settings, host, port, workers=workers, access_log=args.access_log))
     return 0
 
 

@@ -3,7 +3,8 @@
 ``create_app(settings)`` builds a self-contained app: its own map store (migrated at creation,
 demo Chess map seeded as ``settings.default_map_id`` when absent), its own Prometheus registry,
 its own solver slots. Run it with ``quadloc serve`` or
-``uvicorn service.api.app:create_app --factory`` (settings from ``QUADLOC_*`` variables).
+``uvicorn service.api.app:create_app --factory`` (settings from ``QUADLOC_*`` variables; plain
+Uvicorn lacks ``quadloc serve``'s header-size and request-read limits: service/api/server.py).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from service.api.docs_pages import install_offline_docs
 from service.api.errors import PROBLEM_MEDIA_TYPE, install_error_handlers
 from service.api.inspector import install_inspector
 from service.api.map_cache import MapCache
+from service.api.map_loader import MapLoader
 from service.api.metrics import ApiMetrics, MetricsAndLimitsMiddleware
 from service.api.routers import health, localize, maps
 from service.api.solver import Solver
@@ -114,6 +116,7 @@ def create_app(settings: Settings | None = None, *, store: MapStore | None = Non
             log.warning("no API key configured (QUADLOC_API_KEYS): the API is OPEN and must "
                         "only listen on loopback")
         yield
+        app.state.map_loader.close()
         store.close()
 
     app = FastAPI(
@@ -132,6 +135,7 @@ def create_app(settings: Settings | None = None, *, store: MapStore | None = Non
     app.state.store = store
     app.state.metrics = metrics
     app.state.map_cache = MapCache(store, settings.map_cache_ttl_s)
+    app.state.map_loader = MapLoader(app.state.map_cache, settings.solve_time_budget_ms / 1e3)
     app.state.solver = Solver(metrics, settings.max_concurrent_solves,
                               settings.solve_queue_timeout_s, settings.solve_time_budget_ms,
                               settings.max_detections, settings.batch_time_budget_ms)

@@ -23,9 +23,16 @@ are rejected (typos would otherwise be silently ignored).
 from __future__ import annotations
 
 import math
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    field_validator,
+    model_validator,
+)
 
 from service.localization.types import METRICS, ROBUST_KERNELS
 
@@ -66,6 +73,21 @@ COVARIANCE_ORDER = ("omega_x", "omega_y", "omega_z", "v_x", "v_y", "v_z")
 COVARIANCE_FRAME = "camera (body) frame, right perturbation T*exp(xi), omega in rad, v in m"
 
 Convention = Literal["opencv", "opengl"]
+
+
+def _integral(value: Any) -> Any:
+    """JSON Schema's ``integer`` includes integral floats (``640.0``): accept them as ints
+    (other floats, strings and booleans still fail the strict check, naming the field)."""
+    if isinstance(value, float) and value.is_integer() and abs(value) <= 2**53:
+        return int(value)
+    return value
+
+
+#: An integer field that also accepts integral JSON numbers such as ``640.0``.
+Int = Annotated[int, BeforeValidator(_integral)]
+#: Rows of a pose matrix / covariance (the shapes are in the schema).
+_Row4 = Annotated[list[float], Field(min_length=4, max_length=4)]
+_Row6 = Annotated[list[float], Field(min_length=6, max_length=6)]
 
 
 class _Model(BaseModel):
@@ -147,22 +169,27 @@ class CameraIn(_Model):
     fy: float = Field(gt=0, le=1e7)
     cx: float = Field(ge=-MAX_PIXELS, le=MAX_PIXELS)
     cy: float = Field(ge=-MAX_PIXELS, le=MAX_PIXELS)
-    width: int = Field(ge=1, le=100_000)
-    height: int = Field(ge=1, le=100_000)
+    width: Int = Field(ge=1, le=100_000)
+    height: Int = Field(ge=1, le=100_000)
 
 
 class PoseIn(_Model):
     """A ``world_from_camera`` pose: `quaternion_wxyz` (or `quaternion_xyzw`) + `translation_m`,
     or a 4x4 `matrix` given as a list of ROWS (row-major)."""
 
-    quaternion_wxyz: list[float] | None = Field(default=None, min_length=4, max_length=4)
+    quaternion_wxyz: list[float] | None = Field(
+        default=None, min_length=4, max_length=4,
+        description="Unit quaternion (w, x, y, z): |q| = 1 within 1e-6, else 422.")
     quaternion_xyzw: list[float] | None = Field(
         default=None, min_length=4, max_length=4,
         description="The same unit quaternion scalar LAST (ARKit/ARCore/Unity order); give "
                     "it instead of `quaternion_wxyz`.")
     translation_m: list[float] | None = Field(default=None, min_length=3, max_length=3)
-    matrix: list[list[float]] | None = Field(default=None, min_length=4, max_length=4,
-                                             description="4x4, row-major: a list of 4 rows.")
+    matrix: list[_Row4] | None = Field(
+        default=None, min_length=4, max_length=4,
+        description="4x4 homogeneous matrix [[R, t], [0, 0, 0, 1]] given as a list of 4 ROWS "
+                    "(row-major): R orthonormal within 1e-6 with det +1, last row [0, 0, 0, 1], "
+                    "else 422.")
 
     @model_validator(mode="after")
     def _one_form(self) -> PoseIn:
@@ -191,7 +218,7 @@ class PosePriorIn(_Model):
     """Optional pose prior (e.g. from the AR session's tracking)."""
 
     world_from_camera: PoseIn
-    covariance: list[list[float]] | None = Field(
+    covariance: list[_Row6] | None = Field(
         default=None, min_length=6, max_length=6,
         description="Optional 6x6 covariance in GTSAM Pose3 tangent order [omega_x, omega_y, "
                     "omega_z, v_x, v_y, v_z], " + COVARIANCE_FRAME + ". Symmetric positive "
@@ -210,24 +237,31 @@ class PosePriorIn(_Model):
 class LocalizeOptionsIn(_Model):
     """Solver options; omitted fields take the server defaults (shown)."""
 
+    # `robust_scale` (a number) requires `robust` (a kernel): said in the schema as well.
+    model_config = ConfigDict(json_schema_extra={
+        "if": {"required": ["robust_scale"],
+               "properties": {"robust_scale": {"type": "number"}}},
+        "then": {"required": ["robust"],
+                 "properties": {"robust": {"type": "string"}}}})
+
     metric: Literal[METRICS] = Field(  # type: ignore[valid-type]
         default="level_set", description="Refinement metric (one of the nine).")
-    ransac_max_hypotheses: int = Field(default=300, ge=1, le=100_000,
+    ransac_max_hypotheses: Int = Field(default=300, ge=1, le=100_000,
                                        description="RANSAC budget of minimal samples.")
     inlier_iou: float = Field(default=0.2, gt=0, le=1,
                               description="IoU threshold for a detection to be an inlier.")
-    min_inliers: int = Field(default=2, ge=2, le=MAX_DETECTIONS)
+    min_inliers: Int = Field(default=2, ge=2, le=MAX_DETECTIONS)
     use_sigma: bool = Field(default=True, description="Weight costs by 1/sigma (paper eq. 8).")
     robust: Literal[ROBUST_KERNELS] | None = Field(  # type: ignore[valid-type]
         default=None, description="Robust kernel of the refinement.")
     robust_scale: float | None = Field(default=None, gt=0, le=1e6,
                                        description="Kernel scale (needs `robust`).")
     unknown_label_policy: Literal["ignore", "error"] = "ignore"
-    seed: int | None = Field(default=0, ge=0, le=2**32 - 1)
+    seed: Annotated[int, Field(ge=0, le=2**32 - 1), BeforeValidator(_integral)] | None = 0
     time_budget_ms: float | None = Field(
         default=None, gt=0, le=60_000,
         description="Solve budget (ms); capped by the server's QUADLOC_SOLVE_TIME_BUDGET_MS.")
-    max_iterations: int = Field(default=50, ge=1, le=100,
+    max_iterations: Int = Field(default=50, ge=1, le=100,
                                 description="Levenberg-Marquardt iteration cap.")
     output_convention: Convention = Field(
         default="opencv", description="Camera axes of the returned pose and covariance.")

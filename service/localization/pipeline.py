@@ -32,7 +32,7 @@ import numpy as np
 from factors.geometry import Camera, Ellipsoid, invert_pose
 from maps.compiled import CompiledMap, compile_map
 from maps.model import SceneMap
-from service.localization.ransac import Match, MatchScorer, ransac
+from service.localization.ransac import Match, MatchScorer, hard_deadline, ransac
 from service.localization.refine import RefinementResult, refine
 from service.localization.types import (
     NO_REFINEMENT,
@@ -215,6 +215,7 @@ def localize(
 
     Raises:
         LocalizationInputError: (a ``ValueError``) bad input, the message names the field.
+        ScoringTimeoutError: scoring ran past 1.05 x ``time_budget_ms`` (huge map x detections).
     """
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
@@ -230,6 +231,7 @@ def localize(
     scorer = MatchScorer(compiled, camera, [detections[i].ellipse for i in usable],
                          [detections[i].label for i in usable], usable)
     deadline = None if options.time_budget_ms is None else t0 + options.time_budget_ms / 1e3
+    scorer.deadline = hard_deadline(t0, options.time_budget_ms)  # ScoringTimeoutError past it
     evaluated = 0
 
     def finish(T: np.ndarray, cov: np.ndarray | None, inliers: list[InlierMatch],
