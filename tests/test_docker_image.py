@@ -377,7 +377,8 @@ def test_two_replicas_share_postgres_behind_nginx_with_host_networking(image: st
     conf = re.sub(r"server quadloc-2:8000", f"server 127.0.0.1:{replicas[1].port}", conf)
     conf = conf.replace("listen 8080;", f"listen 127.0.0.1:{proxy_port};")
     conf = conf.replace("/tmp/", f"{tmp_path}/")
-    conf = conf.replace("access_log /dev/stdout quadloc;", f"access_log {tmp_path}/access.log quadloc;")
+    conf = conf.replace("access_log /dev/stdout quadloc;",
+                        f"access_log {tmp_path}/access.log quadloc;")
     conf = conf.replace("error_log /dev/stderr warn;", f"error_log {tmp_path}/error.log warn;")
     (tmp_path / "nginx.conf").write_text(conf)
     proxy = None
@@ -424,3 +425,42 @@ def test_two_replicas_share_postgres_behind_nginx_with_host_networking(image: st
             r.remove()
         conn.execute(f'DROP DATABASE IF EXISTS "{db}" WITH (FORCE)')
         conn.close()
+
+
+def test_compose_stack_with_docker_compose(image: str) -> None:
+    """docker-compose.yml itself (bridge network, service names, PostgreSQL, nginx), with local
+    stand-ins for the registry images (deploy/compose-local.sh)."""
+    if shutil.which("docker-compose") is None and _docker("compose", "version", check=False,
+                                                          timeout=20).returncode != 0:
+        pytest.skip("no docker-compose / docker compose installed")
+    port = _free_port()
+    env = {**os.environ, "QUADLOC_API_KEYS": API_KEYS, "QUADLOC_PROXY_PORT": str(port),
+           "QUADLOC_COMPOSE_PROJECT": f"quadloctest{RUN_ID}"}
+    script = ["bash", str(REPO / "deploy" / "compose-local.sh")]
+
+    def compose(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
+        return subprocess.run([*script, *args], env=env, capture_output=True, text=True,
+                              timeout=timeout)
+
+    t0 = time.monotonic()
+    up = compose("up")
+    try:
+        assert up.returncode == 0, up.stdout[-2000:] + up.stderr[-3000:]
+        REPORT["compose_up_seconds"] = round(time.monotonic() - t0, 1)
+        front = f"http://127.0.0.1:{port}"
+        with sdk.QuadLocClient(front, api_key=READ_WRITE_KEY) as client:
+            assert client.readyz()
+            created = client.create_map(_office(f"compose-{RUN_ID}"))
+            for _ in range(20):
+                assert client.get_map(created.map_id).content_hash == created.content_hash
+            body = json.loads((REPO / "docs" / "examples" / "localize_chess.json").read_text())
+            assert client.localize("chess", body).localized
+        logs = compose("compose", "logs", "--no-color", "proxy", timeout=60).stdout
+        upstreams = set(re.findall(r"upstream=([\d.]+:8000)", logs))
+        assert len(upstreams) == 2, f"requests did not reach both replicas: {upstreams}"
+        assert compose("compose", "stop", "quadloc-1", timeout=60).returncode == 0
+        with sdk.QuadLocClient(front, api_key=READ_KEY) as client:
+            for _ in range(5):  # the other replica serves, from the shared database
+                assert client.get_map(created.map_id).content_hash == created.content_hash
+    finally:
+        compose("down", timeout=120)
