@@ -452,8 +452,13 @@ def canonical_json(scene_map: SceneMap) -> str:
     Floats go through Python's ``repr`` (round-trip exact), so the same map always gives the
     same text, and parsing it back gives the same map bit for bit.
     """
-    return json.dumps(scene_map_to_dict(scene_map), sort_keys=True, separators=(",", ":"),
-                      ensure_ascii=False, allow_nan=False)
+    return _canonical_text(scene_map_to_dict(scene_map))
+
+
+def _canonical_text(document: dict[str, Any]) -> str:
+    """The one canonical serialisation (stored content and hashed form)."""
+    return json.dumps(document, sort_keys=True, separators=(",", ":"), ensure_ascii=False,
+                      allow_nan=False)
 
 
 #: Decimal places kept of the geometric numbers (``up_axis``; ``center`` and ``axes`` in metres;
@@ -482,9 +487,7 @@ def content_hash(scene_map: SceneMap) -> str:
     for obj in doc["objects"]:
         for key in ("center", "axes", "quaternion_wxyz"):
             obj[key] = _hash_numbers(obj[key])
-    text = json.dumps(doc, sort_keys=True, separators=(",", ":"), ensure_ascii=False,
-                      allow_nan=False)
-    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+    return hashlib.sha256(_canonical_text(doc).encode("utf-8")).hexdigest()
 
 
 _TOP_KEYS = {"format", "map_id", "name", "version", "up_axis", "categories", "objects",
