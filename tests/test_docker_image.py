@@ -166,7 +166,7 @@ class Container:
         _docker(*args, *extra, self.image)
 
     def remove(self) -> None:
-        _docker("rm", "-f", self.name, check=False)
+        _docker("rm", "-f", "-v", self.name, check=False)  # -v: its anonymous /data volume
 
 
 @pytest.fixture(scope="module")
