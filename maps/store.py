@@ -18,8 +18,9 @@ Semantics
 * Atomicity: every write is one transaction, so a crash mid-write leaves nothing visible.
 * ``delete(map_id)`` deletes the map and **all** its versions. A later ``create`` with the same
   id starts again at version 1 (its content hash differs unless the content is identical).
-* ``content_hash`` is the hex sha256 of the version's canonical JSON (see
-  :func:`maps.model.canonical_json`; it covers ``map_id`` and ``version``) — the HTTP ETag.
+* ``content_hash`` is :func:`maps.model.content_hash` of the version (sha256 of its canonical
+  JSON, geometric numbers rounded to 1e-12; it covers ``map_id`` and ``version``) — the HTTP
+  ETag. The stored content keeps every bit.
 * ``compiled(map_id, version)`` returns the solver arrays (:class:`maps.compiled.CompiledMap`),
   cached per process by ``(map_id, version, content_hash)``: one small indexed query per call
   to resolve the version (so replicas see each other's updates), no JSON parsing on a hit.
@@ -28,7 +29,6 @@ Semantics
 from __future__ import annotations
 
 import builtins
-import hashlib
 import json
 import threading
 from collections import OrderedDict
@@ -60,7 +60,13 @@ from maps.errors import (
     StoreUnavailable,
     VersionConflict,
 )
-from maps.model import MapValidationError, SceneMap, canonical_json, scene_map_from_dict
+from maps.model import (
+    MapValidationError,
+    SceneMap,
+    canonical_json,
+    content_hash,
+    scene_map_from_dict,
+)
 
 __all__ = [
     "MapAlreadyExists",
@@ -286,7 +292,7 @@ class MapStore:
         _check_scene_map(scene_map)
         stored = replace(scene_map, version=1)
         text = canonical_json(stored)
-        digest = _sha256(text)
+        digest = content_hash(stored)
         now = _now()
         try:
             with self._write() as conn:
@@ -323,7 +329,7 @@ class MapStore:
         new_version = expected_version + 1
         stored = replace(scene_map, version=new_version)
         text = canonical_json(stored)
-        digest = _sha256(text)
+        digest = content_hash(stored)
         now = _now()
         try:
             with self._write() as conn:
@@ -506,10 +512,6 @@ def _unavailable(exc: Exception) -> StoreUnavailable:
         return SchemaNotMigrated(f"database schema not migrated: {exc.__class__.__name__}: "
                                  f"{first}")
     return StoreUnavailable(f"database unreachable or busy: {exc.__class__.__name__}: {first}")
-
-
-def _sha256(text: str) -> str:
-    return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 
 def _check_scene_map(scene_map: object) -> None:
