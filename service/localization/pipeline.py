@@ -24,18 +24,39 @@ keeps its last accepted step and the result says so: ``refinement_status == "tim
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from factors.geometry import Camera, Ellipsoid, invert_pose
+from factors.pose_residuals import expmap_pose3
 from maps.compiled import CompiledMap, compile_map
 from maps.model import SceneMap
-from service.localization.ransac import Match, MatchScorer, ransac
+from service.localization.confidence import (
+    calibrated_covariance,
+    confidence_probability,
+    evidence_features,
+    is_ambiguous,
+    residual_variance,
+)
+from service.localization.ransac import (
+    Hypothesis,
+    Match,
+    MatchScorer,
+    _ellipse_points,
+    count_samples,
+    distinct_poses,
+    greedy_assignment,
+    ransac,
+    sunflower_disk,
+)
 from service.localization.refine import RefinementResult, refine
 from service.localization.types import (
     NO_REFINEMENT,
+    Alternative,
     Detection,
     InlierMatch,
     LocalizationInputError,
@@ -152,19 +173,19 @@ def _refine_and_verify(
     matches: Sequence[Match], detections: Sequence[Detection], compiled: CompiledMap,
     camera: Camera, scorer: MatchScorer, world_from_camera: np.ndarray,
     options: LocalizationOptions, prior: PosePrior | None, deadline: float | None,
-) -> tuple[tuple[np.ndarray, np.ndarray | None, list[InlierMatch]] | None, str | None]:
+) -> tuple[_Answer | None, str | None]:
     """Refine on ``matches``, re-associate, refine again if the set changed (and the deadline
-    has not passed). Returns ((world_from_camera, covariance, inliers) or None if the result
-    fails the inlier check, the refinement status — see ``LocalizationResult.refinement_status``
-    — or None with ``metric="none"``)."""
+    has not passed). Returns (the answer, or None if the result fails the inlier check; the
+    refinement status — see ``LocalizationResult.refinement_status`` — or None with
+    ``metric="none"``)."""
     thr = options.inlier_iou
     if options.metric == NO_REFINEMENT:
         final = scorer.matches(invert_pose(world_from_camera), thr)
         if len(final) < options.min_inliers:
             return None, None
-        return (world_from_camera, None, [
+        return _Answer(world_from_camera, None, [
             InlierMatch(m.detection_index, compiled.object_ids[m.object_index], m.iou,
-                        1.0 - m.iou) for m in final]), None
+                        1.0 - m.iou) for m in final], None, None), None
     current = list(matches)
     T = world_from_camera
     for round_ in range(2):
@@ -191,7 +212,64 @@ def _refine_and_verify(
                for m in new if (m.detection_index, m.object_index) in cost]
     if len(inliers) < options.min_inliers:
         return None, status
-    return (T, res.covariance, inliers), status
+    return _Answer(T, res.covariance, inliers, res, status), status
+
+
+@dataclass
+class _Answer:
+    """A verified pose: ``world_from_camera``, raw covariance, inliers, the refinement (None
+    with ``metric="none"``) and its status; ``source`` is set by ``localize``."""
+
+    world_from_camera: np.ndarray
+    raw_covariance: np.ndarray | None
+    inliers: list[InlierMatch]
+    refinement: RefinementResult | None
+    status: str | None
+    source: str = "ransac"
+
+    @property
+    def score(self) -> float:
+        """Sum of the inliers' IoUs (the RANSAC score, at the verified pose)."""
+        return float(sum(m.iou for m in self.inliers))
+
+    def support(self) -> tuple[int, float]:
+        """(inlier count, score): the order in which answers are compared."""
+        return len(self.inliers), self.score
+
+
+#: Alternatives (beyond the best) refined for the ambiguity check, and the RANSAC score ratio
+#: below which an alternative is not worth refining (a refinement changes the sum of IoUs by
+#: far less than this).
+REFINED_ALTERNATIVES = 2
+ALTERNATIVE_PREFILTER_RATIO = 0.5
+#: Prior gating: the association at the prior pose also tries the poses at +-
+#: ``PRIOR_GATE_SIGMAS`` standard deviations along each principal axis of the prior's
+#: covariance (a pair is kept at its best IoU over these poses).
+PRIOR_GATE_SIGMAS = 2.0
+
+
+def prior_gate_poses(prior: PosePrior) -> np.ndarray:
+    """``world_from_camera`` poses (H, 4, 4) at which the prior's associations are gated: the
+    prior pose, and with a covariance the poses ``T Exp(+-g sqrt(lambda_k) e_k)`` along each
+    principal axis (eigenvector ``e_k``, eigenvalue ``lambda_k``; tangent ``[omega, v]``, body
+    frame, right perturbation) with ``g = PRIOR_GATE_SIGMAS``."""
+    T = np.asarray(prior.world_from_camera, dtype=float)
+    poses = [T]
+    if prior.covariance is not None:
+        lam, vec = np.linalg.eigh(np.asarray(prior.covariance, dtype=float))
+        for k in range(6):
+            step = PRIOR_GATE_SIGMAS * math.sqrt(max(float(lam[k]), 0.0)) * vec[:, k]
+            poses += [T @ expmap_pose3(step), T @ expmap_pose3(-step)]
+    return np.array(poses)
+
+
+def _prior_matches(scorer: MatchScorer, prior: PosePrior, threshold: float) -> list[Match]:
+    """One-to-one matches gated by the prior: each pair's best IoU over
+    :func:`prior_gate_poses` (projected-ellipse gating under the prior's uncertainty)."""
+    cw = np.array([invert_pose(T) for T in prior_gate_poses(prior)])
+    pts = _ellipse_points(scorer.params, sunflower_disk(256))
+    dense = scorer.dense_iou(cw, pts).max(axis=0)
+    return greedy_assignment(dense, scorer.detection_indices, threshold)
 
 
 def localize(
@@ -231,28 +309,54 @@ def localize(
                          [detections[i].label for i in usable], usable)
     deadline = None if options.time_budget_ms is None else t0 + options.time_budget_ms / 1e3
     evaluated = 0
+    n_samples = count_samples(scorer, 2)
 
-    def finish(T: np.ndarray, cov: np.ndarray | None, inliers: list[InlierMatch],
-               used_prior: bool, refinement_status: str | None) -> LocalizationResult:
+    def assess(a: _Answer, runner_up: _Answer | None) -> tuple[float, dict[str, float],
+                                                              np.ndarray | None]:
+        """(confidence, evidence, calibrated covariance) of an answer."""
+        res = a.refinement
+        s2 = math.nan if res is None else residual_variance(res.chi2, res.n_residuals)
+        prior_cov = None if a.source != "prior" or prior is None else prior.covariance
+        cov = None if res is None else calibrated_covariance(
+            metric, a.raw_covariance, res.chi2, res.n_residuals, prior_cov)
+        margin = 0.0 if runner_up is None else min(1.0, runner_up.score / max(a.score, 1e-12))
+        ev = evidence_features(n_inliers=len(a.inliers), n_usable=len(usable),
+                               ious=np.array([m.iou for m in a.inliers]), s2=s2,
+                               covariance=cov, margin=margin, n_samples=n_samples)
+        return confidence_probability(metric, ev), {**ev, "s2": s2}, cov
+
+    def finish(a: _Answer, ranked: list[_Answer], ambiguous: bool) -> LocalizationResult:
+        runner_up = next((b for b in ranked if b is not a), None)
+        conf, ev, cov = assess(a, runner_up)
+        alternatives: tuple[Alternative, ...] = ()
+        if ambiguous:
+            alternatives = tuple(
+                Alternative(b.world_from_camera, assess(b, a if b is not a else runner_up)[0],
+                            len(b.inliers), b.score) for b in ranked)
         timings["total"] = (time.perf_counter() - t0) * 1e3
-        mean_iou = float(np.mean([m.iou for m in inliers]))
+        if ambiguous and options.on_ambiguity == "not_localized":
+            return LocalizationResult(False, "ambiguous", None, None, 0.0, (), metric,
+                                      evaluated, False, timings, a.status, None, alternatives,
+                                      ev)
         return LocalizationResult(
-            True, None, np.array(T, dtype=float), cov,
-            confidence_of(len(inliers), len(usable), mean_iou),
-            tuple(sorted(inliers, key=lambda m: m.detection_index)), metric, evaluated,
-            used_prior, timings, refinement_status)
+            True, None, np.array(a.world_from_camera, dtype=float), cov, conf,
+            tuple(sorted(a.inliers, key=lambda m: m.detection_index)), metric, evaluated,
+            a.source == "prior", timings, a.status, a.source, alternatives, ev)
 
+    prior_answer: _Answer | None = None
     if prior is not None:
         evaluated += 1
         tp = time.perf_counter()
-        matches = scorer.matches(invert_pose(prior.world_from_camera), options.inlier_iou)
-        got = None
+        matches = _prior_matches(scorer, prior, options.inlier_iou)
         if len(matches) >= options.min_inliers:
-            got, status = _refine_and_verify(matches, detections, compiled, camera, scorer,
-                                             prior.world_from_camera, options, prior, deadline)
+            prior_answer, _ = _refine_and_verify(matches, detections, compiled, camera, scorer,
+                                                 prior.world_from_camera, options, prior,
+                                                 deadline)
         timings["prior"] = (time.perf_counter() - tp) * 1e3
-        if got is not None:
-            return finish(*got, used_prior=True, refinement_status=status)
+        if prior_answer is not None:
+            prior_answer.source = "prior"
+            if len(prior_answer.inliers) >= len(usable):  # every usable detection explained
+                return finish(prior_answer, [prior_answer], False)
 
     th = time.perf_counter()
     rng = np.random.default_rng(options.seed)
@@ -262,13 +366,40 @@ def localize(
     evaluated += outcome.hypotheses_evaluated
     timings["hypotheses"] = (time.perf_counter() - th) * 1e3
     if outcome.camera_from_world is None:
+        if prior_answer is not None:
+            return finish(prior_answer, [prior_answer], False)
         return _not_localized(outcome.reason or "no_hypothesis_above_inlier_threshold", metric,
                               evaluated, timings, t0)
     tr = time.perf_counter()
-    got, status = _refine_and_verify(list(outcome.matches), detections, compiled, camera,
-                                     scorer, invert_pose(outcome.camera_from_world), options,
-                                     None, deadline)
+    hyps = list(outcome.alternatives) or [
+        Hypothesis(outcome.camera_from_world, outcome.matches, outcome.score)]
+    answers: list[_Answer] = []
+    first_status: str | None = None
+    for k, h in enumerate(hyps[:1 + REFINED_ALTERNATIVES]):
+        if k > 0 and (h.score < ALTERNATIVE_PREFILTER_RATIO * hyps[0].score or (
+                deadline is not None and time.perf_counter() > deadline)):
+            break
+        got, status = _refine_and_verify(
+            list(outcome.matches if k == 0 else h.matches), detections, compiled, camera,
+            scorer, invert_pose(h.camera_from_world), options, None, deadline)
+        if k == 0:
+            first_status = status
+        if got is not None:
+            answers.append(got)
     timings["refine"] = (time.perf_counter() - tr) * 1e3
-    if got is None:
-        return _not_localized("refinement_diverged", metric, evaluated, timings, t0, status)
-    return finish(*got, used_prior=False, refinement_status=status)
+    if prior_answer is not None:
+        answers.append(prior_answer)
+    if not answers:
+        return _not_localized("refinement_diverged", metric, evaluated, timings, t0,
+                              first_status)
+    # best-supported first (inliers, then the sum of their IoUs; the prior wins ties); then
+    # keep only answers distinct from every better one (the ambiguity candidates)
+    answers.sort(key=lambda a: (*a.support(), a.source == "prior"), reverse=True)
+    ranked: list[_Answer] = []
+    for a in answers:
+        if all(distinct_poses(invert_pose(a.world_from_camera), invert_pose(b.world_from_camera))
+               for b in ranked):
+            ranked.append(a)
+    best = ranked[0]
+    ambiguous = len(ranked) > 1 and is_ambiguous(best.score, ranked[1].score)
+    return finish(best, ranked, ambiguous)
