@@ -105,8 +105,9 @@ def reduce_frame(detections, object_ids, n: int, rng: np.random.Generator):
 
 
 def run_frames(seed: int, metrics: tuple[str, ...], stride: int, slow_stride: int,
-               config: SimulationConfig, log=print) -> dict:
-    """Experiments 1-3 on one seed: records per metric, and the reduced frames."""
+               config: SimulationConfig, log=print, min_confidence: float | None = None) -> dict:
+    """Experiments 1-3 on one seed: records per metric, and the reduced frames
+    (``min_confidence``: the option used, 0 when tuning so every verified pose is seen)."""
     cm = compile_map(load_chess_map())
     camera, poses, _ = load_chess_world_from_camera()
     out: dict = {"frames": {m: [] for m in metrics}, "reduced": {"2": [], "3": []}}
@@ -116,15 +117,16 @@ def run_frames(seed: int, metrics: tuple[str, ...], stride: int, slow_stride: in
         for m in metrics:
             if m in SLOW and (i // stride) % slow_stride:
                 continue
-            r = localize(f.detections, cm, camera, options(m))
+            r = localize(f.detections, cm, camera, options(m, min_confidence=min_confidence))
             out["frames"][m].append(_record(r, poses[i], frame=i, metric=m))
         rng = np.random.default_rng(seed * 100_000 + 50_000 + i)
         for n in (2, 3):
             dets = reduce_frame(f.detections, f.object_ids, n, rng)
             if dets is None:
                 continue
-            r = localize(dets, cm, camera, options("level_set"))
-            rb = localize(dets, cm, camera, options("level_set", on_ambiguity="best"))
+            r = localize(dets, cm, camera, options("level_set", min_confidence=min_confidence))
+            rb = localize(dets, cm, camera, options("level_set", on_ambiguity="best",
+                                                    min_confidence=0.0))
             rec = _record(r, poses[i], frame=i, metric="level_set")
             rec["best_pos"] = pose_errors(rb.world_from_camera if rb.localized else None,
                                           poses[i])[0]
@@ -335,13 +337,27 @@ def fit(data: dict, seeds: list[int], command: str) -> str:
         w = _fit_logistic(X, y)
         models[name] = {"intercept": round(float(w[0]), 6),
                         "coef": {f: round(float(c), 6) for f, c in zip(use, w[1:], strict=True)}}
-    text = f'''"""Calibration constants of :mod:`service.localization.confidence` (generated: do not edit).
+    # the smallest min_confidence whose false accepts (> 0.5 m) on the reduced tuning frames
+    # are <= 1 % at 2 and at 3 detections
+    min_confidence = 0.0
+    for rr in data["reduced"].values():
+        loc = [r for r in rr if r["localized"]]
+        z = np.array([models["refined"]["intercept"] + sum(
+            models["refined"]["coef"].get(f, 0.0) * r["evidence"][f] for f in feats)
+            for r in loc])
+        p = 1.0 / (1.0 + np.exp(-z))
+        wrong = np.array([r["pos"] > 0.5 for r in loc])
+        for t in np.round(np.arange(0.0, 0.61, 0.01), 2):
+            if np.sum(wrong & (p >= t)) <= 0.01 * len(rr):
+                min_confidence = max(min_confidence, float(t))
+                break
+    text = f'''"""Calibration constants of :mod:`service.localization.confidence` (generated).
 
 Provenance: written by ``python -m bench.trust --fit`` (see that module); the fit uses
 only the tuning seeds named in :data:`PROVENANCE`, the bench reports on other seeds.
 """
 
-PROVENANCE = {{'command': {command!r}, 'tuning_seeds': {seeds!r}}}
+PROVENANCE = {pprint.pformat({"command": command, "tuning_seeds": seeds}, width=96)}
 
 #: k_metric of ``cov = k * s^2 * (J^T W J)^-1`` (mean NEES = 6 on the tuning frames: the
 #: geometric mean of the mean NEES at the 5 / 10 / 20 cm operating points).
@@ -350,6 +366,9 @@ COVARIANCE_SCALE = {pprint.pformat({m: round(v, 6) for m, v in scale.items()},
 
 #: Runner-up / best score (sum of inlier IoUs) at and above which an answer is ambiguous.
 AMBIGUITY_RATIO = {calibration.AMBIGUITY_RATIO!r}
+
+#: Default ``LocalizationOptions.min_confidence``.
+MIN_CONFIDENCE = {min_confidence!r}
 
 #: Features of the confidence model (``confidence.evidence_features``), in order.
 CONFIDENCE_FEATURES = {pprint.pformat(feats, width=96)}
@@ -458,7 +477,7 @@ def main(argv: list[str] | None = None) -> int:
         seeds = [int(s) for s in args.tune_seeds.split(",")]
         data = {"frames": {m: [] for m in metrics}, "reduced": {"2": [], "3": []}}
         for s in seeds:
-            d = run_frames(s, metrics, args.stride, args.slow_stride, cfg)
+            d = run_frames(s, metrics, args.stride, args.slow_stride, cfg, min_confidence=0.0)
             for m in metrics:
                 data["frames"][m] += d["frames"][m]
             for n in ("2", "3"):

@@ -26,7 +26,9 @@ from sdk.errors import (
 )
 from sdk.models import (
     METRICS,
+    NO_REFINEMENT,
     ROBUST_KERNELS,
+    Alternative,
     BatchLocalizeResponse,
     Box,
     Camera,
@@ -50,8 +52,10 @@ __version__ = SDK_VERSION
 __all__ = [
     "DEFAULT_BASE_URL",
     "METRICS",
+    "NO_REFINEMENT",
     "ROBUST_KERNELS",
     "APIError",
+    "Alternative",
     "AsyncQuadLocClient",
     "BatchLocalizeResponse",
     "Box",

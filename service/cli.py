@@ -194,7 +194,12 @@ def cmd_localize(args: argparse.Namespace) -> int:
     from service.api.solver import Solver
 
     try:
-        request = LocalizeRequest.model_validate(_read_json(args.file))
+        body = _read_json(args.file)
+        if args.metric and isinstance(body, dict):
+            options = body.setdefault("options", {})
+            if isinstance(options, dict):
+                options["metric"] = args.metric  # validated with the request below
+        request = LocalizeRequest.model_validate(body)
     except (OSError, json.JSONDecodeError) as exc:
         return _die(f"{args.file}: {exc}")
     except ValidationError as exc:
@@ -204,6 +209,7 @@ def cmd_localize(args: argparse.Namespace) -> int:
     if args.convention:
         request = request.model_copy(update={"options": request.options.model_copy(
             update={"output_convention": args.convention})})
+
     settings = _settings(args)
     try:
         compiled = _store(args).compiled(args.map, args.version)
@@ -355,6 +361,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", type=int, help="map version (default: latest)")
     p.add_argument("--convention", choices=["opencv", "opengl"],
                    help="camera axes of the printed pose (overrides the file's options)")
+    p.add_argument("--metric", metavar="METRIC",
+                   help="refinement metric ('none': the P3P/P2E pose unrefined; overrides the "
+                        "file's options)")
     p.add_argument("--json", action="store_true", help="print the full JSON response")
     db(p)
     p.set_defaults(func=cmd_localize)

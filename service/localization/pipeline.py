@@ -35,6 +35,7 @@ from factors.geometry import Camera, Ellipsoid, invert_pose
 from factors.pose_residuals import expmap_pose3
 from maps.compiled import CompiledMap, compile_map
 from maps.model import SceneMap
+from service.localization.calibration import MIN_CONFIDENCE
 from service.localization.confidence import (
     calibrated_covariance,
     confidence_probability,
@@ -338,6 +339,11 @@ def localize(
             return LocalizationResult(False, "ambiguous", None, None, 0.0, (), metric,
                                       evaluated, False, timings, a.status, None, alternatives,
                                       ev)
+        floor = MIN_CONFIDENCE if options.min_confidence is None else options.min_confidence
+        if conf < floor:
+            return LocalizationResult(False, "low_confidence", None, None, 0.0, (), metric,
+                                      evaluated, False, timings, a.status, None, alternatives,
+                                      {**ev, "confidence": conf})
         return LocalizationResult(
             True, None, np.array(a.world_from_camera, dtype=float), cov, conf,
             tuple(sorted(a.inliers, key=lambda m: m.detection_index)), metric, evaluated,

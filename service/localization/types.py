@@ -66,6 +66,7 @@ REASONS: tuple[str, ...] = (
     "no_hypothesis_above_inlier_threshold",
     "refinement_diverged",
     "ambiguous",
+    "low_confidence",
     "time_budget_exceeded",
 )
 
@@ -145,6 +146,11 @@ class LocalizationOptions:
             (default: ``localized=False, reason="ambiguous"``, the hypotheses listed in
             ``alternatives``) or ``"best"`` (the best pose, localized, with the others in
             ``alternatives``; each with its probability).
+        min_confidence: answers whose ``confidence`` is below this are returned as
+            ``localized=False, reason="low_confidence"``; ``None`` = the calibrated default
+            ``service.localization.calibration.MIN_CONFIDENCE`` (chosen on the tuning seeds so
+            that 2-3 detection frames are not answered with a wrong pose); 0 accepts every
+            verified pose.
 
     Integer fields accept any integral number (numpy integers too) and store a Python int.
     """
@@ -162,8 +168,15 @@ class LocalizationOptions:
     max_iterations: int = 50
     metric_options: Mapping[str, Any] | None = None
     on_ambiguity: str = "not_localized"
+    min_confidence: float | None = None
 
     def __post_init__(self) -> None:
+        if self.min_confidence is not None and (
+                isinstance(self.min_confidence, bool)
+                or not isinstance(self.min_confidence, (int, float))
+                or not (0.0 <= self.min_confidence <= 1.0)):
+            raise _bad("options.min_confidence",
+                       f"must be in [0, 1] or None, got {self.min_confidence!r}")
         if self.on_ambiguity not in AMBIGUITY_POLICIES:
             raise _bad("options.on_ambiguity",
                        f"must be one of {AMBIGUITY_POLICIES}, got {self.on_ambiguity!r}")
@@ -341,7 +354,10 @@ class LocalizationResult:
             ``no_hypothesis_above_inlier_threshold`` (no pose with ``min_inliers`` detections at
             IoU >= ``inlier_iou``), ``refinement_diverged`` (the refined pose lost its inliers
             or the solver failed), ``time_budget_exceeded`` (the budget ran out before any
-            hypothesis qualified).
+            hypothesis qualified), ``ambiguous`` (a distinct pose explains the detections
+            comparably well; see ``alternatives``), ``low_confidence`` (the best pose's
+            ``confidence`` is below ``options.min_confidence``; its value is kept in
+            ``evidence``).
         world_from_camera: 4x4 camera pose in the map frame, or ``None``.
         covariance: 6x6 pose covariance, order ``[omega, v]``, body frame, or ``None`` (not
             localized, ``metric="none"``, or a singular information matrix). Calibrated
