@@ -78,18 +78,19 @@ and costs (:attr:`PoseEvaluation.residuals`, :meth:`PoseResidualModel.costs`, th
 The penalty is kept small enough for the other pairs' information to survive in double
 precision next to it (a penalty of ~4e19 for algebraic/frobenius hid every other residual).
 The metrics' costs have different units: ``P_j = penalty_cost * rho_j^2``
-(:attr:`PoseResidualModel.penalty_costs`)
-with ``rho_j`` the pair's reference residual magnitude in the metric's own units:
-``L_j`` px for bbox / qbbox / wasserstein and for algebraic / frobenius (see below), ``max(1, s_max_j)^2`` for level_set (``Phi`` units; ``s_max_j`` its
-sampling scale) and 1 for iou / giou / bhattacharyya; ``L_j = max(image diagonal, |c_D| +
-max(a_D, b_D))`` px is the detection's reference length. With the default ``penalty_cost``
+(:attr:`PoseResidualModel.penalty_costs`) with ``rho_j`` the pair's reference residual
+magnitude: ``L_j`` px for bbox / qbbox / wasserstein and for algebraic / frobenius (see
+below), ``max(1, s_max_j)^2`` for level_set (``Phi`` units; ``s_max_j`` its sampling scale)
+and 1 for iou / giou / bhattacharyya; ``L_j = max(image diagonal, |c_D| + max(a_D, b_D))`` px
+is the detection's reference length. With the default ``penalty_cost``
 (:data:`DEFAULT_PENALTY_COST` = 1e8) the saturation starts only beyond ~7000 reference lengths
-of misfit (bbox, wasserstein; algebraic / frobenius, whose residual is quadratic in px, use
-``rho_j = L_j`` too, so ~7000 px^2 per reference length: P_j ~ 6e13 px^4 on a 640x480 image
-instead of the 4e19 of ``rho_j = L_j^2``, leaving ~1e-8 relative precision to the other pairs'
-costs of ~1e6 px^4). So Levenberg-Marquardt rejects steps into the invalid region and, from an
-invalid start, is pushed back to valid poses. A robust kernel (``factors.pose_factors``) flattens every large residual,
-the penalty included: with one, the barrier is only as strong as the kernel lets it be.
+of misfit (bbox, wasserstein). Algebraic / frobenius, whose residual is quadratic in px, use
+``rho_j = L_j`` too: ``P_j`` ~ 6e13 px^4 on a 640x480 image instead of the 4e19 of
+``rho_j = L_j^2``, which leaves ~1e-8 relative precision to the other pairs' costs (~1e6
+px^4). So Levenberg-Marquardt rejects steps into the invalid region and, from an invalid
+start, is pushed back to valid poses. A robust kernel (``factors.pose_factors``) flattens
+every large residual, the penalty included: with one, the barrier is only as strong as the
+kernel lets it be.
 """
 
 from __future__ import annotations
