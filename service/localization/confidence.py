@@ -40,8 +40,9 @@ minimal samples). Coefficients: :data:`service.localization.calibration.CONFIDEN
 Ambiguity
 ---------
 RANSAC keeps its best distinct hypotheses; the pipeline refines the best few. When the runner-up
-explains the detections comparably well (sum of inlier IoUs >= :data:`AMBIGUITY_RATIO` x the
-best's after refinement, the two poses distinct), the answer is ambiguous.
+explains the detections comparably well (as many inliers, and a sum of inlier IoUs >=
+:data:`AMBIGUITY_RATIO` x the best's after refinement, the two poses distinct), the answer is
+ambiguous.
 """
 
 from __future__ import annotations
@@ -184,6 +185,10 @@ def confidence_probability(metric: str, features: dict[str, float]) -> float:
     return float(1.0 / (1.0 + math.exp(-min(max(z, -50.0), 50.0))))
 
 
-def is_ambiguous(best_score: float, runner_up_score: float) -> bool:
-    """Whether a distinct runner-up explains the detections comparably well."""
-    return best_score > 0 and runner_up_score >= AMBIGUITY_RATIO * best_score
+def is_ambiguous(best_inliers: int, best_score: float, runner_up_inliers: int,
+                 runner_up_score: float) -> bool:
+    """Whether a distinct runner-up explains the detections comparably well: as many inliers,
+    and a sum of inlier IoUs >= :data:`AMBIGUITY_RATIO` x the best's. (A runner-up that leaves
+    a detection unexplained is not a competitor: the best explains strictly more.)"""
+    return (best_score > 0 and runner_up_inliers >= best_inliers
+            and runner_up_score >= AMBIGUITY_RATIO * best_score)

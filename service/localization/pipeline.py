@@ -407,5 +407,6 @@ def localize(
                for b in ranked):
             ranked.append(a)
     best = ranked[0]
-    ambiguous = len(ranked) > 1 and is_ambiguous(best.score, ranked[1].score)
+    ambiguous = len(ranked) > 1 and is_ambiguous(len(best.inliers), best.score,
+                                                 len(ranked[1].inliers), ranked[1].score)
     return finish(best, ranked, ambiguous)

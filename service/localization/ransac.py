@@ -70,8 +70,8 @@ BATCH = 32
 #: "distinct" means: camera centres further apart than this (m) or orientations differing by
 #: more than this (deg). Used by the ambiguity check of ``service.localization.confidence``.
 KEEP_DISTINCT = 4
-DISTINCT_POSITION_M = 0.25
-DISTINCT_ANGLE_DEG = 10.0
+DISTINCT_POSITION_M = 0.5
+DISTINCT_ANGLE_DEG = 20.0
 #: Early exit (see the module docstring) only with at least this many usable detections: with
 #: 2-3 the search is small and must go on to find competing hypotheses (ambiguity check).
 EARLY_EXIT_MIN_DETECTIONS = 4
