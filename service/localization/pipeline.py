@@ -66,7 +66,7 @@ from service.localization.types import (
     PosePrior,
 )
 
-__all__ = ["compiled_map_of", "confidence_of", "localize", "refine_pose"]
+__all__ = ["compiled_map_of", "localize", "prior_gate_poses", "refine_pose"]
 
 _COMPILED: dict[int, tuple[SceneMap, CompiledMap]] = {}
 _COMPILED_MAX = 16
@@ -84,15 +84,6 @@ def compiled_map_of(scene_map: SceneMap | CompiledMap) -> CompiledMap:
         _COMPILED.pop(next(iter(_COMPILED)))
     _COMPILED[id(scene_map)] = (scene_map, compiled)
     return compiled
-
-
-def confidence_of(n_inliers: int, n_usable: int, mean_iou: float) -> float:
-    """``(n_inliers / n_usable) * mean_iou * (1 - 0.5 ** (n_inliers - 1))`` in [0, 1] (see
-    :class:`~service.localization.types.LocalizationResult`)."""
-    if n_inliers <= 0 or n_usable <= 0:
-        return 0.0
-    value = (n_inliers / n_usable) * mean_iou * (1.0 - 0.5 ** (n_inliers - 1))
-    return float(min(1.0, max(0.0, value)))
 
 
 def _validate(
