@@ -157,18 +157,22 @@ def test_two_xboxes_are_ambiguous_not_a_confident_wrong_pose():
     assert wrong == 0 and ambiguous >= 1
 
 
-@pytest.mark.parametrize("n_objects", [100, 10_000])
-def test_random_detections_on_large_maps_are_never_localized(n_objects):
+@pytest.mark.parametrize(("n_objects", "trials"), [(100, 4), (1000, 2), (10_000, 1)])
+def test_random_detections_on_large_maps_are_never_localized(n_objects, trials):
+    """Four made-up ellipses: chance matches on a large map are ambiguous or improbable (the
+    confidence model counts the label-compatible minimal samples); no time budget, so the
+    acceptance test decides, not the clock. More trials in ``bench.trust``."""
     sm = synthetic_map(n_objects, seed=n_objects)
     cm = compile_map(sm)
     rng = np.random.default_rng(n_objects)
-    for _ in range(3):
+    for _ in range(trials):
         dets = [Detection(Ellipse(rng.uniform(0, 640), rng.uniform(0, 480), a, 0.6 * a,
                                   rng.uniform(-1.5, 1.5)),
                           sm.categories[int(rng.integers(len(sm.categories)))], 0.05)
                 for a in rng.uniform(15, 80, 4)]
         r = localize(dets, cm, CAMERA, LocalizationOptions(time_budget_ms=None))
         assert not r.localized, (r.confidence, r.evidence)
+        assert r.reason != "time_budget_exceeded"
 
 
 def test_prior_gating_uses_the_covariance_and_reports_the_path():
