@@ -212,3 +212,22 @@ def test_low_confidence_answers_say_so():
     r = localize(f.detections, CM, CAMERA, LocalizationOptions(min_confidence=1.0))
     assert not r.localized and r.reason == "low_confidence"
     assert 0.0 <= r.evidence["confidence"] < 1.0
+
+
+def test_ransac_keeps_mutually_distinct_hypotheses_best_first():
+    from service.localization.ransac import KEEP_DISTINCT, MatchScorer, ransac
+
+    f = simulate_frame(CM, CAMERA, POSES[24], 24, EVAL)
+    dets = reduce_frame(f.detections, f.object_ids, 2, np.random.default_rng(24))
+    scorer = MatchScorer(CM, CAMERA, [d.ellipse for d in dets], [d.label for d in dets],
+                         list(range(len(dets))))
+    out = ransac(scorer, CM.scene_map.up, inlier_iou=0.2, min_inliers=2, max_hypotheses=300,
+                 rng=np.random.default_rng(0))
+    alts = out.alternatives
+    assert 2 <= len(alts) <= KEEP_DISTINCT  # this 2-detection frame has competitors
+    np.testing.assert_array_equal(alts[0].camera_from_world, out.camera_from_world)
+    assert all(a.score >= b.score for a, b in zip(alts, alts[1:]))
+    for i, a in enumerate(alts):
+        assert a.score == pytest.approx(sum(m.iou for m in a.matches))
+        for b in alts[i + 1:]:
+            assert distinct_poses(a.camera_from_world, b.camera_from_world)

@@ -5,16 +5,26 @@ Stages (wall time of each in ``LocalizationResult.timings_ms``):
 1. ``validate`` — check the input (errors name the field), compile the map (cached per map
    object), keep the *usable* detections: those whose label is a category with objects in the
    map (``options.unknown_label_policy``: ``"ignore"`` drops the others, ``"error"`` raises).
-2. ``prior`` (only with a :class:`PosePrior`) — match detections to objects by IoU at the prior
-   pose (one-to-one, IoU >= ``inlier_iou``); with >= ``min_inliers`` matches, refine from the
-   prior (the prior's covariance, if any, becomes a prior factor) and keep the result if it
-   still has >= ``min_inliers`` inliers; otherwise fall back to RANSAC.
+2. ``prior`` (only with a :class:`PosePrior`) — match detections to objects one-to-one with
+   IoU >= ``inlier_iou``, each pair at its best IoU over the prior pose and, with a
+   covariance, the poses 2 sigma along its principal axes (:func:`prior_gate_poses`:
+   projected-ellipse gating); with >= ``min_inliers`` matches, refine from the prior (the
+   prior's covariance, if any, becomes a prior factor). If the result explains every usable
+   detection it is returned; otherwise RANSAC runs too and the better-supported answer wins
+   (more inliers, then a larger sum of IoUs; the prior wins ties): ``pose_source`` says which.
 3. ``hypotheses`` — :func:`service.localization.ransac.ransac`: P3P / P2E over label-compatible
-   samples, IoU scoring, bounded by ``ransac_max_hypotheses`` and ``time_budget_ms``.
-4. ``refine`` — :func:`service.localization.refine.refine` on the best hypothesis' inliers with
-   ``options.metric`` (sigma-weighted, robust kernel option), then re-association: the inliers
-   are recomputed at the refined pose and, if the set changed, refined once more. The result
-   is accepted when it keeps >= ``min_inliers`` inliers; otherwise ``refinement_diverged``.
+   samples, IoU scoring, bounded by ``ransac_max_hypotheses`` and ``time_budget_ms``; it keeps
+   its best distinct hypotheses.
+4. ``refine`` — :func:`service.localization.refine.refine` on the best hypothesis' inliers
+   (and on up to :data:`REFINED_ALTERNATIVES` distinct runners-up scoring at least
+   :data:`ALTERNATIVE_PREFILTER_RATIO` of the best) with ``options.metric`` (sigma-weighted,
+   robust kernel option), then re-association: the inliers are recomputed at the refined pose
+   and, if the set changed, refined once more. A result is kept when it has >= ``min_inliers``
+   inliers; none kept: ``refinement_diverged``.
+5. ``assess`` — :mod:`service.localization.confidence`: the calibrated covariance, the
+   confidence (a probability), and the ambiguity check against the best distinct runner-up
+   (``reason="ambiguous"`` or, with ``on_ambiguity="best"``, the best pose with its
+   ``alternatives``); a confidence below ``min_confidence`` gives ``low_confidence``.
    (``refine`` itself re-lays grown adaptive level-set samples once at its result.)
 
 The time budget bounds the whole call: the hypothesis search stops at it, and no LM iteration
