@@ -71,10 +71,15 @@ def test_chi2_cdf_and_residual_variance():
 def test_calibrated_covariance_scales_and_keeps_the_prior_information():
     raw = np.diag([1e-4] * 3 + [1e-3] * 3)
     k = calibration.COVARIANCE_SCALE["level_set"]
+    floor = calibration.S2_FLOOR["level_set"]
+    assert 0 < floor < 2.0
     cov = calibrated_covariance("level_set", raw, chi2=40.0, n_residuals=26)  # s^2 = 2
     np.testing.assert_allclose(cov, raw * 2.0 * k, rtol=1e-12)
     assert calibrated_covariance("level_set", None, 1.0, 50) is None
     assert calibrated_covariance("level_set", raw, 1.0, 6) is None  # m - 6 = 0: no s^2
+    # a small s^2 is floored: never more precise than a typical frame
+    small = calibrated_covariance("level_set", raw, chi2=0.02, n_residuals=26)
+    np.testing.assert_allclose(small, raw * floor * k, rtol=1e-12)
     # with a prior factor only the detections' information is rescaled
     prior = np.diag([1e-2] * 6)
     total = np.linalg.inv(np.linalg.inv(raw) + np.linalg.inv(prior))
@@ -85,9 +90,10 @@ def test_calibrated_covariance_scales_and_keeps_the_prior_information():
 
 def test_covariance_does_not_depend_on_the_sigma_scale():
     """The a-posteriori scaling cancels a global scale error of the detector's sigma (why s^2
-    and not the raw J^T W J inverse); the pose itself is unchanged too."""
+    and not the raw J^T W J inverse) as long as s^2 stays above its floor (sigmas scaled
+    down); scaled up past the floor, the covariance only grows (conservative)."""
     frame = simulate_frame(CM, CAMERA, POSES[10], 10, SimulationConfig())
-    scaled = [dataclasses.replace(d, sigma=d.sigma * 10.0) for d in frame.detections]
+    scaled = [dataclasses.replace(d, sigma=d.sigma * 0.1) for d in frame.detections]
     opts = LocalizationOptions(time_budget_ms=None, min_confidence=0.0)
     a = localize(frame.detections, CM, CAMERA, opts)
     b = localize(scaled, CM, CAMERA, opts)
@@ -96,6 +102,9 @@ def test_covariance_does_not_depend_on_the_sigma_scale():
     np.testing.assert_allclose(b.covariance, a.covariance, rtol=1e-3,
                                atol=1e-6 * np.abs(a.covariance).max())
     assert b.confidence == pytest.approx(a.confidence, abs=1e-3)
+    up = [dataclasses.replace(d, sigma=d.sigma * 1e3) for d in frame.detections]
+    c = localize(up, CM, CAMERA, opts)
+    assert c.localized and np.trace(c.covariance) > 10 * np.trace(a.covariance)
 
 
 def test_calibration_does_not_regress_on_held_out_frames():

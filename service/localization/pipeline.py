@@ -49,6 +49,7 @@ from service.localization.calibration import MIN_CONFIDENCE
 from service.localization.confidence import (
     calibrated_covariance,
     confidence_probability,
+    covariance_scale,
     evidence_features,
     is_ambiguous,
     residual_variance,
@@ -325,7 +326,8 @@ def localize(
         ev = evidence_features(n_inliers=len(a.inliers), n_usable=len(usable),
                                ious=np.array([m.iou for m in a.inliers]), s2=s2,
                                covariance=cov, margin=margin, n_samples=n_samples)
-        return confidence_probability(metric, ev), {**ev, "s2": s2}, cov
+        scale = math.nan if res is None else covariance_scale(metric, res.chi2, res.n_residuals)
+        return confidence_probability(metric, ev), {**ev, "s2": s2, "cov_scale": scale}, cov
 
     def finish(a: _Answer, ranked: list[_Answer], ambiguous: bool) -> LocalizationResult:
         runner_up = next((b for b in ranked if b is not a), None)
