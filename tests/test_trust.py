@@ -5,6 +5,7 @@ priors that never hurt, random detections never localized (``service.localizatio
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 
 import numpy as np
@@ -235,7 +236,7 @@ def test_ransac_keeps_mutually_distinct_hypotheses_best_first():
     alts = out.alternatives
     assert 2 <= len(alts) <= KEEP_DISTINCT  # this 2-detection frame has competitors
     np.testing.assert_array_equal(alts[0].camera_from_world, out.camera_from_world)
-    assert all(a.score >= b.score for a, b in zip(alts, alts[1:]))
+    assert all(a.score >= b.score for a, b in itertools.pairwise(alts))
     for i, a in enumerate(alts):
         assert a.score == pytest.approx(sum(m.iou for m in a.matches))
         for b in alts[i + 1:]:
