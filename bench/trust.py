@@ -427,6 +427,13 @@ def markdown(res: dict, command: str) -> str:
              f"report seeds {res['config']['seeds']} (default detector) and "
              f"{res['config']['noisy_seed']} (second noise setting: twice the detector noise, "
              "not used for tuning).", "",
+             "Method (`service/localization/confidence.py`): covariance = `k_metric * max(s^2, "
+             "f_metric) * (J^T W J)^-1` with the a-posteriori residual variance `s^2 = r^T W r / "
+             "(m - 6)` floored at its tuning median `f_metric`; confidence = a logistic model of "
+             "the solver's evidence; ambiguity = a distinct runner-up with as many inliers and "
+             ">= 0.8 of the best's IoU sum; `min_confidence` default "
+             f"{calibration.MIN_CONFIDENCE} (<= 1 % false accepts at 2 and 3 detections on the "
+             "tuning frames).", "",
              "### Mean NEES (6-DoF, consistent = 6; target [4, 9]) over frames localized within "
              "5 / 10 / 20 cm", "",
              "| metric | " + " | ".join(f"{t:g} m (n)" for t in OPERATING_POINTS_M)

@@ -88,7 +88,9 @@ def test_two_detections_localize_with_p2e():
         cats.setdefault(d.label, []).append(i)
     singles = [v[0] for k, v in cats.items() if len(v) == 1 and len(CM.indices_for(k)) == 1]
     dets = [frame.detections[i] for i in singles[:2]]  # Games and Timer
-    r = localize(dets, MAP, CAMERA)
+    # the geometry, not the acceptance policy: two detections alone are rarely trusted by the
+    # calibrated confidence (tests/test_trust.py), so accept any verified pose here
+    r = localize(dets, MAP, CAMERA, LocalizationOptions(min_confidence=0.0))
     assert r.hypotheses_evaluated >= 1
     # P2E (zero roll; the Chess frames have ~3 deg) + level-set refinement of two exact
     # ellipses: this pair gives the true pose (98.6 % of exact Chess pairs localize)
