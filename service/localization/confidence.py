@@ -193,10 +193,10 @@ def confidence_probability(metric: str, features: dict[str, float]) -> float:
     """The calibrated probability (logistic model) that the pose is within the tolerance.
 
     ``metric`` picks the coefficient set: ``"none"`` (unrefined poses: no residual variance or
-    covariance features) or the refined model (shared by the nine metrics: the calibrated
-    covariance carries the metric's accuracy)."""
+    covariance features) or the refined model (shared by the nine metrics, with a per-metric
+    intercept offset; the calibrated covariance carries the rest of the metric's accuracy)."""
     model = CONFIDENCE_MODELS["none" if metric == "none" else "refined"]
-    z = model["intercept"]
+    z = model["intercept"] + model.get("metric_offset", {}).get(metric, 0.0)
     for name in CONFIDENCE_FEATURES:
         z += model["coef"].get(name, 0.0) * features[name]
     return float(1.0 / (1.0 + math.exp(-min(max(z, -50.0), 50.0))))
