@@ -325,8 +325,11 @@ def fit(data: dict, seeds: list[int], command: str) -> str:
         if means:  # geometric mean of the mean NEES at the 5 and 20 cm points -> 6
             scale[m] = math.exp(float(np.mean(np.log(means)))) / 6.0
     rows = [r for r in confidence_rows(data) if r["localized"]]
-    for r in rows:  # the covariance feature with the new scale
+    for r in rows:  # the residual and covariance features with the new floor and scale
         m = r["metric"]
+        s2 = r["evidence"].get("s2", math.nan)
+        if m in floor and math.isfinite(s2):
+            r["evidence"]["log_s2"] = math.log(max(s2, floor[m]) / floor[m])
         if "cov" in r and m in floor:
             new = scale[m] * max(r["evidence"]["s2"], floor[m])
             cov = np.asarray(r["cov"]) * new / r["evidence"]["cov_scale"]

@@ -33,7 +33,7 @@ S2_FLOOR = {'iou': 21.206645,
 AMBIGUITY_RATIO = 0.8
 
 #: Default ``LocalizationOptions.min_confidence``.
-MIN_CONFIDENCE = 0.13
+MIN_CONFIDENCE = 0.15
 
 #: Features of the confidence model (``confidence.evidence_features``), in order.
 CONFIDENCE_FEATURES = ('inliers_ge3',
@@ -48,25 +48,25 @@ CONFIDENCE_FEATURES = ('inliers_ge3',
  'log_samples')
 
 #: Logistic models: P = 1 / (1 + exp(-(intercept + sum coef * feature))).
-CONFIDENCE_MODELS = {'refined': {'intercept': -13.222662,
-             'coef': {'inliers_ge3': 0.525365,
-                      'inliers_ge4': -0.163794,
-                      'log_inliers': 3.495976,
-                      'inlier_fraction': 6.917628,
-                      'mean_iou': 2.237458,
-                      'min_iou': 2.452558,
-                      'log_s2': 0.156666,
-                      'logit_gauss': 0.304759,
-                      'margin': -0.534471,
-                      'log_samples': -0.52992},
-             'metric_offset': {'algebraic': -1.838485,
-                               'bbox': -0.618709,
-                               'bhattacharyya': 0.727155,
-                               'frobenius': -2.073087,
-                               'giou': 0.686989,
-                               'iou': 0.685725,
-                               'qbbox': -0.403586,
-                               'wasserstein': -0.593941}},
+CONFIDENCE_MODELS = {'refined': {'intercept': -13.510085,
+             'coef': {'inliers_ge3': 0.520809,
+                      'inliers_ge4': -0.165326,
+                      'log_inliers': 3.597462,
+                      'inlier_fraction': 6.783252,
+                      'mean_iou': 2.481203,
+                      'min_iou': 2.420872,
+                      'log_s2': 0.453324,
+                      'logit_gauss': 0.304448,
+                      'margin': -0.46548,
+                      'log_samples': -0.515702},
+             'metric_offset': {'algebraic': 0.386239,
+                               'bbox': 0.162951,
+                               'bhattacharyya': 0.024713,
+                               'frobenius': 0.174707,
+                               'giou': 0.796752,
+                               'iou': 0.794928,
+                               'qbbox': 0.307062,
+                               'wasserstein': 0.080119}},
  'none': {'intercept': -5.782306,
           'coef': {'inliers_ge3': 2.185712,
                    'inliers_ge4': 1.571655,

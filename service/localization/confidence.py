@@ -155,7 +155,7 @@ def _chi2_3_cdf(x: float) -> float:
 
 def evidence_features(
     *, n_inliers: int, n_usable: int, ious: np.ndarray, s2: float, covariance: np.ndarray | None,
-    margin: float, n_samples: int,
+    margin: float, n_samples: int, s2_floor: float = 0.0,
 ) -> dict[str, float]:
     """The evidence the confidence model uses (names in
     :data:`service.localization.calibration.CONFIDENCE_FEATURES`).
@@ -164,6 +164,9 @@ def evidence_features(
         n_inliers, n_usable: inliers of the returned pose, detections with a map label.
         ious: the inliers' IoUs at the returned pose.
         s2: a-posteriori residual variance (NaN without refinement).
+        s2_floor: the metric's typical ``s^2`` (:data:`S2_FLOOR`): the feature is the excess
+            ``log(max(s2, s2_floor) / s2_floor)`` >= 0 (residuals smaller than typical, e.g.
+            exact detections, carry no extra evidence; as for the covariance).
         covariance: the calibrated covariance (None without).
         margin: runner-up score / best score (0 without a distinct runner-up), in [0, 1].
         n_samples: number of label-compatible minimal samples (chance matches the map allows).
@@ -177,7 +180,8 @@ def evidence_features(
         "inlier_fraction": n_inliers / max(n_usable, 1),
         "mean_iou": float(ious.mean()) if ious.size else 0.0,
         "min_iou": float(ious.min()) if ious.size else 0.0,
-        "log_s2": math.log(s2) if math.isfinite(s2) else 0.0,
+        "log_s2": (math.log(max(s2, s2_floor) / s2_floor)
+                   if math.isfinite(s2) and s2_floor > 0 else 0.0),
         "logit_gauss": _logit(p_gauss) if math.isfinite(p_gauss) else 0.0,
         "margin": float(min(max(margin, 0.0), 1.0)),
         "log_samples": math.log(max(n_samples, 1)),

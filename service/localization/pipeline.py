@@ -45,7 +45,7 @@ from factors.geometry import Camera, Ellipsoid, invert_pose
 from factors.pose_residuals import expmap_pose3
 from maps.compiled import CompiledMap, compile_map
 from maps.model import SceneMap
-from service.localization.calibration import MIN_CONFIDENCE
+from service.localization.calibration import MIN_CONFIDENCE, S2_FLOOR
 from service.localization.confidence import (
     calibrated_covariance,
     confidence_probability,
@@ -325,7 +325,8 @@ def localize(
         margin = 0.0 if runner_up is None else min(1.0, runner_up.score / max(a.score, 1e-12))
         ev = evidence_features(n_inliers=len(a.inliers), n_usable=len(usable),
                                ious=np.array([m.iou for m in a.inliers]), s2=s2,
-                               covariance=cov, margin=margin, n_samples=n_samples)
+                               covariance=cov, margin=margin, n_samples=n_samples,
+                               s2_floor=S2_FLOOR.get(metric, 0.0))
         scale = math.nan if res is None else covariance_scale(metric, res.chi2, res.n_residuals)
         return confidence_probability(metric, ev), {**ev, "s2": s2, "cov_scale": scale}, cov
 
