@@ -62,22 +62,38 @@ semi-axis (m). Its Jacobian ``-sqrt(P_j/dim) d_s / (d + d_s)^2 dm/dxi`` points t
 margin (``dm/dw = e3 x c_c - (e3 x S_c e3) / sqrt(S_c[2,2])``, ``dm/dv = -e3``); a Gauss-Newton
 step on the penalty alone, ``|r| / |dr/dm|``, does not depend on ``P_j``.
 
-A barrier must cost more than the valid poses LM can compare it with, and the metrics' costs
-have different units: ``P_j = penalty_cost * rho_j^2`` (:attr:`PoseResidualModel.penalty_costs`)
-with ``rho_j`` the pair's reference residual magnitude in the metric's own units:
-``L_j`` px for bbox / qbbox / wasserstein, ``L_j^2`` px^2 for algebraic / frobenius (their
-costs grow as px^4), ``max(1, s_max_j)^2`` for level_set (``Phi`` units; ``s_max_j`` its
-sampling scale) and 1 for iou / giou / bhattacharyya; ``L_j = max(image diagonal, |c_D| +
-max(a_D, b_D))`` px is the detection's reference length. With the default ``penalty_cost``
-(:data:`DEFAULT_PENALTY_COST` = 1e8) the penalty exceeds the valid cost of any projection whose
-centre, axes and box stay within ~1e4 reference lengths (bbox, wasserstein; 100 for algebraic,
-frobenius, since their residual is quadratic in px) of the detection: near the principal plane
-the projection of an ellipsoid with ``d_s`` = 1 m at the minimum margin 1 mm and ``f`` = 1000 px
-spans ``f sqrt(d_s / (2 min_depth_margin))`` ~ 2e4 px, ~25 diagonals of a 640x480 image, and
-the bounded metrics (iou, giou, bhattacharyya, level_set) stay orders of magnitude below. So
-Levenberg-Marquardt rejects steps into the invalid region and, from an invalid start, is pushed
-back to valid poses. A robust kernel (``factors.pose_factors``) flattens every large residual,
-the penalty included: with one, the barrier is only as strong as the kernel lets it be.
+A barrier must cost more than the valid poses LM can compare it with. A valid projection can
+cost arbitrarily much (a very thin projection near the principal plane: level-set costs of
+1e10-1e12 were measured against a penalty of 3.9e9), so the residual LM sees for a VALID pair
+is saturated above half the penalty (``c = ||r||^2`` the metric's cost, ``c_0 = P_j / 2``)::
+
+    h(c) = c                                               for c <= c_0
+    h(c) = c_0 + w (1 - exp(-(c - c_0) / w)),  w = 0.4 P_j   above (C^1, h < 0.9 P_j)
+    r_sat = r sqrt(h(c) / c)
+
+Hence every valid cost LM compares is below ``P_j`` and every penalty is at least ``P_j``: the
+barrier holds whatever the metric, and below ``c_0`` (every pose LM meets in practice) the
+factor is exactly the metric. The reported residuals
+and costs (:attr:`PoseEvaluation.residuals`, :meth:`PoseResidualModel.costs`, the refinement's
+``per_detection_cost``) are the metric's own, unsaturated; the GTSAM factors use
+:attr:`PoseEvaluation.factor_residuals`.
+
+The penalty is kept small enough for the other pairs' information to survive in double
+precision next to it (a penalty of ~4e19 for algebraic/frobenius hid every other residual).
+The metrics' costs have different units: ``P_j = penalty_cost * rho_j^2``
+(:attr:`PoseResidualModel.penalty_costs`) with ``rho_j`` the pair's reference residual
+magnitude: ``L_j`` px for bbox / qbbox / wasserstein and for algebraic / frobenius (see
+below), ``max(1, s_max_j)^2`` for level_set (``Phi`` units; ``s_max_j`` its sampling scale)
+and 1 for iou / giou / bhattacharyya; ``L_j = max(image diagonal, |c_D| + max(a_D, b_D))`` px
+is the detection's reference length. With the default ``penalty_cost``
+(:data:`DEFAULT_PENALTY_COST` = 1e8) the saturation starts only beyond ~7000 reference lengths
+of misfit (bbox, wasserstein). Algebraic / frobenius, whose residual is quadratic in px, use
+``rho_j = L_j`` too: ``P_j`` ~ 6e13 px^4 on a 640x480 image instead of the 4e19 of
+``rho_j = L_j^2``, which leaves ~1e-8 relative precision to the other pairs' costs (~1e6
+px^4). So Levenberg-Marquardt rejects steps into the invalid region and, from an invalid
+start, is pushed back to valid poses. A robust kernel (``factors.pose_factors``) flattens
+every large residual, the penalty included: with one, the barrier is only as strong as the
+kernel lets it be.
 """
 
 from __future__ import annotations
@@ -133,7 +149,7 @@ _CONIC_METRICS = ("algebraic", "frobenius", "wasserstein", "bhattacharyya", "bbo
 #: reference residual ``rho_j = L_j ** power`` (level_set: ``max(1, s_max_j)^2`` instead).
 _PENALTY_PIXEL_POWER: dict[str, int] = {
     "iou": 0, "giou": 0, "bhattacharyya": 0, "level_set": 0, "bbox": 1, "qbbox": 1,
-    "wasserstein": 1, "algebraic": 2, "frobenius": 2}
+    "wasserstein": 1, "algebraic": 1, "frobenius": 1}
 assert set(_PENALTY_PIXEL_POWER) == set(METRIC_NAMES)
 _INV_SQRT8 = 1.0 / math.sqrt(8.0)
 _SQRT2 = math.sqrt(2.0)
@@ -239,15 +255,20 @@ def numerical_pose_jacobian(
 class PoseEvaluation:
     """Residuals of all pairs at one pose.
 
-    ``residuals`` (N, dim); ``jacobians`` (N, dim, 6) or None (w.r.t. ``xi = [omega, v]``, right
-    perturbation of ``world_from_camera``); ``valid`` (N,) bool: projection is an ellipse (else
-    the row holds the penalty); ``depth_margins`` (N,) metres.
+    ``residuals`` (N, dim): the metric's residuals (rows of invalid pairs hold the penalty);
+    ``jacobians`` (N, dim, 6) or None (w.r.t. ``xi = [omega, v]``, right perturbation of
+    ``world_from_camera``); ``valid`` (N,) bool: projection is an ellipse (else the row holds
+    the penalty); ``depth_margins`` (N,) metres; ``factor_residuals`` / ``factor_jacobians``:
+    what the GTSAM factors minimise, the valid rows saturated (module docstring; equal to
+    ``residuals`` / ``jacobians`` to ``c / (2 P_j)`` relative near the optimum).
     """
 
     residuals: np.ndarray
     jacobians: np.ndarray | None
     valid: np.ndarray
     depth_margins: np.ndarray
+    factor_residuals: np.ndarray | None = None
+    factor_jacobians: np.ndarray | None = None
 
 
 class PoseResidualModel:
@@ -495,11 +516,37 @@ class PoseResidualModel:
             ev = self._evaluate_overlap(T, jacobian)
         else:
             ev = self._evaluate_conic(T, jacobian)
-        for arr in (ev.residuals, ev.jacobians, ev.valid, ev.depth_margins):
+        ev = self._saturate(ev)
+        for arr in (ev.residuals, ev.jacobians, ev.valid, ev.depth_margins,
+                    ev.factor_residuals, ev.factor_jacobians):
             if arr is not None:
                 arr.setflags(write=False)
         self._cache_key, self._cache_jac, self._cache = key, jacobian, ev
         return ev
+
+    def _saturate(self, ev: PoseEvaluation) -> PoseEvaluation:
+        """Add the factors' residuals: the valid rows saturated (``r / sqrt(1 + c / P_j)``,
+        module docstring)."""
+        r = ev.residuals
+        c = np.einsum("nm,nm->n", r, r)
+        P = self.penalty_costs
+        c0 = 0.5 * P
+        big = ev.valid & (c > c0)
+        if not big.any():
+            return PoseEvaluation(r, ev.jacobians, ev.valid, ev.depth_margins, r, ev.jacobians)
+        span = 0.4 * P  # h < c0 + span = 0.9 P
+        e = np.exp(-np.where(big, c - c0, 0.0) / span)
+        h = np.where(big, c0 + span * (1.0 - e), c)
+        g = np.sqrt(h / np.where(big, c, 1.0))
+        rs = np.where(big[:, None], r * g[:, None], r)
+        J = ev.jacobians
+        if J is not None:
+            # d g / d c = (h' c - h) / (2 c^2 g), h' = e; dc = 2 r^T dr
+            dg = np.where(big, (e * c - h) / (2.0 * np.where(big, c, 1.0) ** 2 * g), 0.0)
+            rJ = np.einsum("nm,nmk->nk", r, J)
+            Js = J * g[:, None, None] + (2.0 * dg[:, None] * r)[:, :, None] * rJ[:, None, :]
+            J = np.where(big[:, None, None], Js, J)
+        return PoseEvaluation(r, ev.jacobians, ev.valid, ev.depth_margins, rs, J)
 
     def _evaluate_level_set(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
         A, c, S, margins = self._camera_frame(T)
@@ -863,7 +910,8 @@ class PoseResidualModel:
 
     # ------------------------------------------------------------------ reporting
     def costs(self, world_from_camera: np.ndarray) -> np.ndarray:
-        """Unweighted cost ``||r_j||^2`` of each pair at a pose (N,); penalty cost if invalid."""
+        """The metric's unweighted cost ``||r_j||^2`` of each pair at a pose (N,), unsaturated;
+        the penalty's cost where the projection is invalid."""
         ev = self.evaluate(world_from_camera, jacobian=False)
         return np.einsum("nm,nm->n", ev.residuals, ev.residuals)
 

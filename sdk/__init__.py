@@ -28,7 +28,9 @@ from sdk.errors import (
 )
 from sdk.models import (
     METRICS,
+    NO_REFINEMENT,
     ROBUST_KERNELS,
+    Alternative,
     BatchLocalizeResponse,
     Box,
     Camera,
@@ -53,8 +55,10 @@ __version__ = SDK_VERSION
 __all__ = [
     "DEFAULT_BASE_URL",
     "METRICS",
+    "NO_REFINEMENT",
     "ROBUST_KERNELS",
     "APIError",
+    "Alternative",
     "AsyncQuadLocClient",
     "BatchLocalizeResponse",
     "Box",

@@ -36,7 +36,9 @@ from pydantic import (
 
 __all__ = [
     "METRICS",
+    "NO_REFINEMENT",
     "ROBUST_KERNELS",
+    "Alternative",
     "BatchLocalizeResponse",
     "Box",
     "Camera",
@@ -66,6 +68,8 @@ METRICS: tuple[str, ...] = get_args(Metric)
 #: Robust kernels accepted as ``LocalizeOptions.robust`` (the values of :data:`RobustKernel`).
 ROBUST_KERNELS: tuple[str, ...] = get_args(RobustKernel)
 Convention = Literal["opencv", "opengl"]
+#: ``LocalizeOptions.metric`` value for the unrefined P3P/P2E pose (no covariance).
+NO_REFINEMENT = "none"
 
 
 def _plain(value: Any) -> Any:
@@ -231,7 +235,7 @@ class LocalizeOptions(BaseModel):
     output axes -- see docs/api.md)."""
 
     model_config = _REQUEST
-    metric: Metric | None = None
+    metric: Metric | Literal["none"] | None = None
     ransac_max_hypotheses: int | None = Field(default=None, ge=1)
     inlier_iou: Float | None = Field(default=None, gt=0, le=1)
     min_inliers: int | None = Field(default=None, ge=2)
@@ -243,6 +247,8 @@ class LocalizeOptions(BaseModel):
     time_budget_ms: Float | None = Field(default=None, gt=0)
     max_iterations: int | None = Field(default=None, ge=1)
     output_convention: Convention | None = None
+    on_ambiguity: Literal["not_localized", "best"] | None = None
+    min_confidence: Float | None = Field(default=None, ge=0, le=1)
 
 
 class LocalizeRequest(BaseModel):
@@ -322,8 +328,20 @@ class Inlier(BaseModel):
     cost: float
 
 
+class Alternative(BaseModel):
+    """A distinct candidate pose of an ambiguous frame (``confidence``: its probability of
+    being within 10 cm and 5 deg)."""
+
+    model_config = _RESPONSE
+    world_from_camera: Pose
+    confidence: float
+    n_inliers: int
+    score: float
+
+
 class LocalizeResponse(BaseModel):
-    """Answer for one frame. ``localized: false`` with a ``reason`` is a normal answer."""
+    """Answer for one frame. ``localized: false`` with a ``reason`` is a normal answer.
+    ``confidence`` is the probability that the pose is within 10 cm and 5 deg."""
 
     model_config = _RESPONSE
     localized: bool
@@ -336,6 +354,8 @@ class LocalizeResponse(BaseModel):
     hypotheses_evaluated: int | None = None
     used_prior: bool | None = None
     refinement_status: str | None = None
+    pose_source: str | None = None
+    alternatives: list[Alternative] = Field(default_factory=list)
     map_id: str
     map_version: int
     timings_ms: dict[str, float] = Field(default_factory=dict)

@@ -371,7 +371,12 @@ def cmd_localize(args: argparse.Namespace) -> int:
     requests = []
     for path in args.file:
         try:
-            request = LocalizeRequest.model_validate(_read_json(path))
+            body = _read_json(path)
+            if args.metric and isinstance(body, dict):
+                options = body.setdefault("options", {})
+                if isinstance(options, dict):
+                    options["metric"] = args.metric  # validated with the request below
+            request = LocalizeRequest.model_validate(body)
         except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
             return _die(f"{path}: {exc}")
         except ValidationError as exc:
@@ -608,6 +613,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", type=int, help="map version (default: latest)")
     p.add_argument("--convention", choices=["opencv", "opengl"],
                    help="camera axes of the printed pose (overrides the file's options)")
+    p.add_argument("--metric", metavar="METRIC",
+                   help="refinement metric ('none': the P3P/P2E pose unrefined; overrides the "
+                        "file's options)")
     p.add_argument("--json", action="store_true", help="print the full JSON response")
     db(p)
     p.set_defaults(func=cmd_localize)

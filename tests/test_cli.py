@@ -98,6 +98,14 @@ def test_localize_prints_the_pose(db: list[str], capsys: pytest.CaptureFixture[s
     body = json.loads(capsys.readouterr().out)
     assert body["world_from_camera"]["convention"] == "opengl"
     assert main(["localize", "--map", "nope", str(EXAMPLE), *db]) == 1
+    # metric "none": the P3P/P2E pose, unrefined, no covariance; a bad metric names the field
+    assert main(["localize", "--map", "chess", "--json", "--metric", "none", str(EXAMPLE),
+                 *db]) == 0
+    body = json.loads(capsys.readouterr().out)
+    assert body["metric"] == "none" and body["covariance"] is None
+    assert body["pose_source"] == "ransac"
+    assert main(["localize", "--map", "chess", "--metric", "nope", str(EXAMPLE), *db]) == 2
+    assert "options.metric" in capsys.readouterr().err
 
 
 def test_openapi_check_and_hash_key(capsys: pytest.CaptureFixture[str]) -> None:

@@ -22,6 +22,7 @@ from factors.geometry import (
     rotation_from_quaternion_wxyz,
 )
 from service.api.schemas import (
+    AlternativeOut,
     CameraIn,
     CovarianceOut,
     DetectionIn,
@@ -139,6 +140,8 @@ def options_from_request(options: LocalizeOptionsIn, max_budget_ms: float) -> Lo
         seed=options.seed,
         time_budget_ms=float(budget),
         max_iterations=options.max_iterations,
+        on_ambiguity=options.on_ambiguity,
+        min_confidence=options.min_confidence,
     )
 
 
@@ -188,6 +191,10 @@ def response_from_result(
         hypotheses_evaluated=result.hypotheses_evaluated,
         used_prior=result.used_prior,
         refinement_status=result.refinement_status,
+        pose_source=result.pose_source,
+        alternatives=[AlternativeOut(world_from_camera=pose_out(a.world_from_camera, convention),
+                                     confidence=_finite(a.confidence), n_inliers=a.n_inliers,
+                                     score=_finite(a.score)) for a in result.alternatives],
         map_id=map_id,
         map_version=map_version,
         timings_ms={k: _finite(v) for k, v in result.timings_ms.items()},

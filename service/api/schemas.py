@@ -34,12 +34,19 @@ from pydantic import (
     model_validator,
 )
 
-from service.localization.types import METRICS, ROBUST_KERNELS
+from service.localization.types import (
+    AMBIGUITY_POLICIES,
+    METRICS,
+    NO_REFINEMENT,
+    POSE_SOURCES,
+    ROBUST_KERNELS,
+)
 
 __all__ = [
     "COVARIANCE_ORDER",
     "MAX_BATCH_FRAMES",
     "MAX_DETECTIONS",
+    "AlternativeOut",
     "BatchLocalizeRequest",
     "BatchLocalizeResponse",
     "BoxIn",
@@ -244,8 +251,10 @@ class LocalizeOptionsIn(_Model):
         "then": {"required": ["robust"],
                  "properties": {"robust": {"type": "string"}}}})
 
-    metric: Literal[METRICS] = Field(  # type: ignore[valid-type]
-        default="level_set", description="Refinement metric (one of the nine).")
+    metric: Literal[(*METRICS, NO_REFINEMENT)] = Field(  # type: ignore[valid-type]
+        default="level_set",
+        description="Refinement metric (one of the nine), or 'none': the P3P/P2E pose "
+                    "unrefined (no covariance).")
     ransac_max_hypotheses: Int = Field(default=300, ge=1, le=100_000,
                                        description="RANSAC budget of minimal samples.")
     inlier_iou: float = Field(default=0.2, gt=0, le=1,
@@ -265,6 +274,15 @@ class LocalizeOptionsIn(_Model):
                                 description="Levenberg-Marquardt iteration cap.")
     output_convention: Convention = Field(
         default="opencv", description="Camera axes of the returned pose and covariance.")
+    on_ambiguity: Literal[AMBIGUITY_POLICIES] = Field(  # type: ignore[valid-type]
+        default="not_localized",
+        description="When a distinct pose explains the detections comparably well: "
+                    "'not_localized' (reason 'ambiguous') or 'best' (the best pose, localized); "
+                    "both list the candidates in `alternatives` with their probabilities.")
+    min_confidence: float | None = Field(
+        default=None, ge=0, le=1,
+        description="Answers with a lower confidence are returned as not localized (reason "
+                    "'low_confidence'); null = the calibrated default (docs/api.md).")
 
     @model_validator(mode="after")
     def _scale_needs_kernel(self) -> LocalizeOptionsIn:
@@ -325,6 +343,15 @@ class InlierOut(BaseModel):
     cost: float
 
 
+class AlternativeOut(BaseModel):
+    """A distinct candidate pose of an ambiguous frame."""
+
+    world_from_camera: PoseOut
+    confidence: float = Field(ge=0, le=1, description="P(within 10 cm and 5 deg).")
+    n_inliers: int
+    score: float = Field(description="Sum of the inliers' IoUs.")
+
+
 class LocalizeResponse(BaseModel):
     """`localized: false` with a `reason` is a normal answer (HTTP 200), not an error."""
 
@@ -332,10 +359,13 @@ class LocalizeResponse(BaseModel):
     reason: str | None = Field(
         description="Why not localized: too_few_detections, no_label_match, "
                     "no_hypothesis_above_inlier_threshold, refinement_diverged, "
-                    "time_budget_exceeded, numerical_failure; null when localized.")
+                    "time_budget_exceeded, ambiguous, low_confidence, numerical_failure; "
+                    "null when localized.")
     world_from_camera: PoseOut | None
     covariance: CovarianceOut | None
-    confidence: float = Field(ge=0, le=1)
+    confidence: float = Field(
+        ge=0, le=1, description="Probability that the pose is within 0.10 m and 5 deg of the "
+                                "truth (calibrated on simulated frames, docs/api.md).")
     inliers: list[InlierOut]
     metric: str
     hypotheses_evaluated: int
@@ -345,6 +375,11 @@ class LocalizeResponse(BaseModel):
         description="Status of the last pose refinement: converged, max_iterations, "
                     "time_budget (the solve budget cut it short: the pose is less refined), "
                     "diverged, invalid_projection; null when no refinement ran.")
+    pose_source: Literal[POSE_SOURCES] | None = Field(  # type: ignore[valid-type]
+        default=None, description="Which path won: 'prior' (the refined client prior) or "
+                                  "'ransac'; null when not localized.")
+    alternatives: list[AlternativeOut] = Field(
+        default_factory=list, description="Ambiguous frames: the distinct candidate poses.")
     map_id: str
     map_version: int
     timings_ms: dict[str, float]

@@ -60,10 +60,12 @@ __all__ = [
     "EARLY_EXIT_MEAN_IOU",
     "P2E_FALLBACK_BUDGET",
     "STAGE2_CANDIDATES",
+    "Hypothesis",
     "Match",
     "MatchScorer",
     "RansacOutcome",
     "ScoringTimeoutError",
+    "distinct_poses",
     "estimate_iou",
     "greedy_assignment",
     "hard_deadline",
@@ -78,6 +80,15 @@ EARLY_EXIT_MEAN_IOU = 0.5
 STAGE2_CANDIDATES = 24
 #: Minimal samples per batch (P3P calls between score / budget checks).
 BATCH = 32
+#: Number of distinct hypotheses kept (:attr:`RansacOutcome.alternatives`), and what
+#: "distinct" means: camera centres further apart than this (m) or orientations differing by
+#: more than this (deg). Used by the ambiguity check of ``service.localization.confidence``.
+KEEP_DISTINCT = 4
+DISTINCT_POSITION_M = 0.5
+DISTINCT_ANGLE_DEG = 20.0
+#: Early exit (see the module docstring) only with at least this many usable detections: with
+#: 2-3 the search is small and must go on to find competing hypotheses (ambiguity check).
+EARLY_EXIT_MIN_DETECTIONS = 4
 #: At most this many P2E samples when P2E is the fallback of a frame with >= 3 detections
 #: (one P2E solve costs ~10-30 ms in Python, a P3P solve ~0.05 ms).
 P2E_FALLBACK_BUDGET = 24
@@ -381,10 +392,32 @@ class MatchScorer:
 
 
 @dataclass(frozen=True)
+class Hypothesis:
+    """A qualified pose (``camera_from_world`` 4x4), its one-to-one matches and score (sum of
+    the matches' IoUs)."""
+
+    camera_from_world: np.ndarray
+    matches: tuple[Match, ...]
+    score: float
+
+
+def distinct_poses(camera_from_world_a: np.ndarray, camera_from_world_b: np.ndarray) -> bool:
+    """Whether two poses differ by more than :data:`DISTINCT_POSITION_M` (camera centres) or
+    :data:`DISTINCT_ANGLE_DEG` (rotation angle)."""
+    Ra, Rb = camera_from_world_a[:3, :3], camera_from_world_b[:3, :3]
+    ca, cb = -Ra.T @ camera_from_world_a[:3, 3], -Rb.T @ camera_from_world_b[:3, 3]
+    cos = (np.trace(Ra @ Rb.T) - 1.0) / 2.0
+    angle = math.degrees(math.acos(min(1.0, max(-1.0, cos))))
+    return bool(np.linalg.norm(ca - cb) > DISTINCT_POSITION_M or angle > DISTINCT_ANGLE_DEG)
+
+
+@dataclass(frozen=True)
 class RansacOutcome:
     """Best pose found. ``camera_from_world`` is None when nothing qualified; then ``reason`` is
     ``"no_label_match"``, ``"no_hypothesis_above_inlier_threshold"`` or
-    ``"time_budget_exceeded"``."""
+    ``"time_budget_exceeded"``. ``alternatives``: up to :data:`KEEP_DISTINCT` qualified,
+    mutually distinct hypotheses (:func:`distinct_poses`), best first (the first is the
+    returned pose, with the 96-point matches it was accepted with)."""
 
     camera_from_world: np.ndarray | None
     matches: tuple[Match, ...]
@@ -394,6 +427,7 @@ class RansacOutcome:
     exhaustive: bool
     timed_out: bool
     reason: str | None
+    alternatives: tuple[Hypothesis, ...] = ()
 
 
 def _label_groups(scorer: MatchScorer) -> list[tuple[list[int], np.ndarray]]:
@@ -526,6 +560,7 @@ def ransac(
     best_T: np.ndarray | None = None
     best_score, best_count = -1.0, 0
     best_matches: list[Match] = []
+    kept: list[Hypothesis] = []  # distinct qualified hypotheses, best first
     evaluated = 0
     tried = 0
     timed_out = False
@@ -533,8 +568,9 @@ def ransac(
     need = scorer.n_det
 
     def consider(poses: np.ndarray) -> bool:
-        """Score candidate poses (one at a time); returns True to stop early."""
-        nonlocal best_T, best_score, best_count, best_matches, evaluated
+        """Score candidate poses (one at a time, memory bounded); keeps the best distinct
+        hypotheses; returns True to stop early."""
+        nonlocal best_T, best_score, best_count, best_matches, evaluated, kept
         if len(poses) == 0:
             return False
         evaluated += len(poses)
@@ -543,17 +579,22 @@ def ransac(
             keep = np.argsort(-hits, kind="stable")[:STAGE2_CANDIDATES]
             poses = poses[keep]
         for pose in poses:
+            bar = kept[-1].score if len(kept) >= KEEP_DISTINCT else -1.0
             dense = scorer.dense_iou(pose[None], floor=inlier_iou, stop_at=deadline)
             # per-detection best object: an upper bound of the one-to-one score and count
             bound, count = scorer.scores(dense, inlier_iou)
-            if bound[0] <= best_score or count[0] < min_inliers:
+            if bound[0] <= bar or count[0] < min_inliers:
                 continue
             # one-to-one (greedy) assignment, as in the final matches
             m = greedy_assignment(dense[0], scorer.detection_indices, inlier_iou)
             score = float(sum(x.iou for x in m))
-            if len(m) >= min_inliers and score > best_score:
-                best_T, best_score, best_count, best_matches = pose, score, len(m), m
-        return best_count >= need and best_score >= EARLY_EXIT_MEAN_IOU * need
+            if len(m) >= min_inliers and score > bar:
+                kept = _keep_distinct(kept, Hypothesis(pose, tuple(m), score))
+        if kept and kept[0].score > best_score:
+            best_T, best_score = kept[0].camera_from_world, kept[0].score
+            best_matches, best_count = list(kept[0].matches), len(kept[0].matches)
+        return (need >= EARLY_EXIT_MIN_DETECTIONS and best_count >= need
+                and best_score >= EARLY_EXIT_MEAN_IOU * need)
 
     def run(size: int, budget: int) -> bool:
         nonlocal tried, timed_out, exhaustive
@@ -618,4 +659,16 @@ def ransac(
         # assignment the pose was accepted with (96 points)
         matches = tuple(best_matches)
     return RansacOutcome(best_T, matches, best_score, evaluated, tried, exhaustive, timed_out,
-                         None)
+                         None, tuple(kept))
+
+
+def _keep_distinct(kept: list[Hypothesis], new: Hypothesis) -> list[Hypothesis]:
+    """``kept`` (best first, mutually distinct) with ``new`` inserted: it replaces the kept
+    hypotheses it is not distinct from if it scores better than all of them, is dropped if one
+    of them scores at least as well; at most :data:`KEEP_DISTINCT` are kept."""
+    close = [h for h in kept if not distinct_poses(h.camera_from_world, new.camera_from_world)]
+    if any(h.score >= new.score for h in close):
+        return kept
+    out = [h for h in kept if all(h is not c for c in close)] + [new]
+    out.sort(key=lambda h: -h.score)
+    return out[:KEEP_DISTINCT]
