@@ -42,6 +42,12 @@ from typing import Any
 import gtsam
 import numpy as np
 
+from factors.ellipsoid_residuals import (
+    LevelSetSamples,
+    dual_quadric_jacobians,
+    level_set_residual_and_gradient,
+)
+from factors.ellipsoid_residuals import dual_quadric as shared_dual_quadric
 from factors.geometry import (
     ORTHONORMAL_TOLERANCE,
     Camera,
@@ -81,10 +87,6 @@ _W3 = np.where(_TRIU3[0] == _TRIU3[1], 1.0, math.sqrt(2.0))
 _BASIS4 = np.zeros((10, 4, 4))
 for _k, (_i, _j) in enumerate(zip(*_TRIU4, strict=True)):
     _BASIS4[_k, _i, _j] = _BASIS4[_k, _j, _i] = 1.0 / _W4[_k]
-_SKEW = np.array([[[0, 0, 0], [0, 0, -1], [0, 1, 0]],
-                  [[0, 0, 1], [0, 0, 0], [-1, 0, 0]],
-                  [[0, -1, 0], [1, 0, 0], [0, 0, 0]]], dtype=float)
-
 
 class ReconstructionError(ValueError):
     """The views do not determine an ellipsoid. ``reason`` is a machine-readable code:
@@ -255,50 +257,24 @@ def ellipsoid_from_dual_quadric(dual_quadric: np.ndarray) -> Ellipsoid:
 
 
 def _dual_quadric(R: np.ndarray, center: np.ndarray, axes: np.ndarray) -> np.ndarray:
-    Q = np.empty((4, 4))
-    Q[:3, :3] = (R * axes**2) @ R.T - np.outer(center, center)
-    Q[:3, 3] = Q[3, :3] = -center
-    Q[3, 3] = -1.0
-    return Q
-
-
-def dual_quadric_jacobians(R: np.ndarray, center: np.ndarray, axes: np.ndarray) -> np.ndarray:
-    """``dQ*/d theta`` (9, 4, 4) for ``theta = [omega (3), v (3), d log axes (3)]``.
-
-    ``omega, v``: the Pose3 right perturbation of the ellipsoid pose (rotation ellipsoid ->
-    world, translation = centre): ``R -> R Exp(omega)``, ``center -> center + R v``.
-    """
-    D = np.diag(axes**2)
-    dQ = np.zeros((9, 4, 4))
-    # rotation: dM = R (E_k D - D E_k) R^T
-    inner = np.einsum("kij,jl->kil", _SKEW, D) - np.einsum("ij,kjl->kil", D, _SKEW)
-    dQ[0:3, :3, :3] = np.einsum("ij,kjl,ml->kim", R, inner, R)
-    # translation: dc = r_k
-    for k in range(3):
-        r = R[:, k]
-        dQ[3 + k, :3, :3] = -(np.outer(r, center) + np.outer(center, r))
-        dQ[3 + k, :3, 3] = dQ[3 + k, 3, :3] = -r
-        dQ[6 + k, :3, :3] = 2.0 * axes[k] ** 2 * np.outer(r, r)
-    return dQ
+    return shared_dual_quadric(R, center, axes)
 
 
 def _level_residual_and_grad(
     P: np.ndarray, Q: np.ndarray, xh: np.ndarray, dQ: np.ndarray | None
 ) -> tuple[np.ndarray, np.ndarray | None]:
-    """``r = -D[2,2] x~^T D^-1 x~`` (m,) and ``dr/dtheta`` (m, 9) if ``dQ`` is given."""
+    """``r = Phi_pred(x) - 1 = -D[2,2] x~^T D^-1 x~`` (m,) at observed contour points
+    ``x~`` (m, 3, homogeneous px), ``D = P Q* P^T``, and ``dr/dtheta`` (m, 9) if ``dQ`` is given.
+
+    The shared level-set residual of :mod:`factors.ellipsoid_residuals` with ``K`` folded into
+    ``P`` (``Phi_det = 1`` on the contour, so ``r`` is minus its residual there)."""
     D = P @ Q @ P.T
-    Dinv = np.linalg.inv(D)
-    u = xh @ Dinv  # (m, 3); D symmetric
-    s = np.einsum("mi,mi->m", u, xh)
-    w = D[2, 2]
-    r = -w * s
+    samples = LevelSetSamples(None, np.ascontiguousarray(xh.T), np.zeros(len(xh)))
+    r, G = level_set_residual_and_gradient(D, samples, dQ is not None)
     if dQ is None:
-        return r, None
-    v = u @ P  # (m, 4) = (P^T u)^T
-    p3 = P[2]
-    # dr = w v^T dQ v - s p3^T dQ p3
-    J = w * np.einsum("mi,kij,mj->mk", v, dQ, v) - np.outer(s, np.einsum("i,kij,j->k", p3, dQ, p3))
-    return r, J
+        return -r, None
+    dD = np.einsum("ai,kij,bj->kab", P, dQ, P)
+    return -r, -np.einsum("mab,kab->mk", G, dD)
 
 
 def _contour_samples(ellipse: Ellipse, n: int) -> np.ndarray:
