@@ -38,6 +38,7 @@ __all__ = [
     "level_set_residual_and_gradient",
     "level_set_samples",
     "observation_residual",
+    "stack_samples",
 ]
 
 _SKEW = np.array([[[0, 0, 0], [0, 0, -1], [0, 1, 0]],
@@ -115,16 +116,25 @@ def camera_frame_dual_conic(camera_from_world: np.ndarray, Q: np.ndarray) -> np.
 def level_set_residual_and_gradient(
     A: np.ndarray, samples: LevelSetSamples, gradient: bool = True,
 ) -> tuple[np.ndarray, np.ndarray | None]:
-    """Residuals ``r`` (M,) and gradients ``dr/dA`` (M, 3, 3) (None if not ``gradient``)."""
-    u = np.linalg.solve(A, samples.n)  # (3, M)
-    g = np.einsum("km,km->m", samples.n, u)
-    s = A[2, 2]
-    r = samples.phi_det_minus_1 + s * g
+    """Residuals ``r`` (M,) and gradients ``dr/dA`` (M, 3, 3) (None if not ``gradient``).
+
+    Batched: ``A`` (V, 3, 3) with ``samples.n`` (V, 3, M) and ``samples.phi_det_minus_1``
+    (V, M) give ``r`` (V, M) and gradients (V, M, 3, 3)."""
+    u = np.linalg.solve(A, samples.n)  # (..., 3, M)
+    g = np.einsum("...km,...km->...m", samples.n, u)
+    s = A[..., 2, 2]
+    r = samples.phi_det_minus_1 + s[..., None] * g
     if not gradient:
         return r, None
-    G = -s * np.einsum("im,jm->mij", u, u)
-    G[:, 2, 2] += g
+    G = -s[..., None, None, None] * np.einsum("...im,...jm->...mij", u, u)
+    G[..., 2, 2] += g
     return r, G
+
+
+def stack_samples(samples: list[LevelSetSamples]) -> LevelSetSamples:
+    """Samples of V detections with the same layout stacked for the batched evaluation."""
+    return LevelSetSamples(None, np.stack([s.n for s in samples]),
+                           np.stack([s.phi_det_minus_1 for s in samples]))
 
 
 def observation_residual(
@@ -135,24 +145,27 @@ def observation_residual(
     Jacobians w.r.t. the ellipsoid ``[omega, v, d log axes]`` (M, 9) and w.r.t. the camera's
     ``world_from_camera`` Pose3 tangent ``[omega, v]`` (M, 6) when ``jacobians``.
 
+    Batched over V views of the same ellipsoid: ``camera_from_world`` (V, 4, 4) with
+    :func:`stack_samples` give (V, M), (V, M, 9), (V, M, 6).
+
     The caller must ensure the ellipsoid is in front of the camera (positive depth margin,
     :func:`factors.geometry.ellipsoid_depth_margins`): otherwise ``A`` is no ellipse's conic.
     """
     Q = dual_quadric(rotation, center, axes)
-    P = camera_from_world[:3, :]
-    A = P @ Q @ P.T
+    P = camera_from_world[..., :3, :]
+    A = P @ Q @ np.swapaxes(P, -1, -2)
     r, G = level_set_residual_and_gradient(A, samples, jacobians)
     if not jacobians:
         return r, None, None
     dQ = dual_quadric_jacobians(rotation, center, axes)
-    dA = np.einsum("ai,kij,bj->kab", P, dQ, P)  # (9, 3, 3)
-    J_ell = np.einsum("mab,kab->mk", G, dA)
+    dA = np.einsum("...ai,kij,...bj->...kab", P, dQ, P)  # (..., 9, 3, 3)
+    J_ell = np.einsum("...mab,...kab->...mk", G, dA)
     # camera: dA = -[w]x A - A [w]x^T + v c^T + c v^T, c = centre in the camera frame
-    c = P @ np.append(center, 1.0)
-    dAc = np.empty((6, 3, 3))
-    SA = np.einsum("kij,jl->kil", _SKEW, A)
-    dAc[:3] = -SA - SA.transpose(0, 2, 1)
+    c = P @ np.append(center, 1.0)  # (..., 3)
+    SA = np.einsum("kij,...jl->...kil", _SKEW, A)  # (..., 3, 3, 3)
+    dAc = np.empty(A.shape[:-2] + (6, 3, 3))
+    dAc[..., :3, :, :] = -SA - np.swapaxes(SA, -1, -2)
     E = np.eye(3)
-    dAc[3:] = E[:, :, None] * c[None, None, :] + c[None, :, None] * E[:, None, :]
-    J_cam = np.einsum("mab,kab->mk", G, dAc)
+    dAc[..., 3:, :, :] = E[:, :, None] * c[..., None, None, :] + c[..., None, :, None] * E[:, None, :]
+    J_cam = np.einsum("...mab,...kab->...mk", G, dAc)
     return r, J_ell, J_cam

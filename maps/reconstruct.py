@@ -218,7 +218,7 @@ def linear_dual_quadric(dual_conics: np.ndarray, projections: np.ndarray) -> np.
     for i in range(n):
         A[6 * i:6 * i + 6, :10] = G[i]
         A[6 * i:6 * i + 6, 10 + i] = -c[i]
-    _, _, Vt = np.linalg.svd(A)
+    _, _, Vt = np.linalg.svd(A, full_matrices=False)
     q = Vt[-1, :10] / _W4
     Q = np.zeros((4, 4))
     Q[_TRIU4] = q

@@ -80,3 +80,23 @@ def test_zero_at_exact_projection() -> None:
     r, _, _ = observation_residual(invert_pose(T_wc), ell.rotation, ell.center, ell.axes,
                                    level_set_samples(proj, CAM))
     assert np.abs(r).max() < 1e-8
+
+
+def test_batched_equals_single() -> None:
+    from factors.ellipsoid_residuals import stack_samples
+
+    ell, T0, det0 = _setup(6)
+    Ts, ss = [], []
+    for k in range(4):
+        T = T0.copy()
+        T[:3, 3] += np.array([0.1 * k, -0.05 * k, 0.02 * k])
+        Ts.append(invert_pose(T))
+        ss.append(level_set_samples(Ellipse(det0.cx + 3 * k, det0.cy, det0.a, det0.b, det0.angle),
+                                    CAM))
+    r, Je, Jc = observation_residual(np.array(Ts), ell.rotation, ell.center, ell.axes,
+                                     stack_samples(ss))
+    for k in range(4):
+        r1, Je1, Jc1 = observation_residual(Ts[k], ell.rotation, ell.center, ell.axes, ss[k])
+        np.testing.assert_allclose(r[k], r1, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(Je[k], Je1, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(Jc[k], Jc1, rtol=1e-10, atol=1e-12)

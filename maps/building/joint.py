@@ -1,0 +1,293 @@
+"""Joint refinement of all ellipsoids (and optionally the camera poses) in ONE GTSAM graph.
+
+Variables: per object ``E_k`` (``Pose3``: ellipsoid frame -> world, translation = centre) and
+``L_k`` (``Vector3``: log semi-axes, metres); with ``refine_cameras`` also per frame ``X_f``
+(``Pose3`` ``world_from_camera``, OpenCV camera axes).
+
+Factors:
+
+* one per object over all its observations: the level-set residual of localization
+  (:func:`factors.ellipsoid_residuals.observation_residual`, batched over the views, the
+  samples of ``factors.metrics.level_set_sample_points``), each view weighted as localization
+  weights a detection (whitened by ``sqrt(sigma)``, the std of
+  ``factors.pose_factors.make_noise_model``) under a Huber kernel per view (threshold
+  ``factors.pose_factors.DEFAULT_ROBUST_SCALE["level_set"]``): the view's rows are scaled so that
+  half their squared norm is the Huber cost of the view's whitened residual norm (the Jacobian
+  gets the same scale, as in iteratively reweighted least squares). One factor per object
+  instead of one per view: the Python round trips, not the arithmetic, dominate (GUIDE 3).
+  Where the ellipsoid is not entirely in front of a camera (depth margin <=
+  ``factors.pose_residuals.DEFAULT_MIN_DEPTH_MARGIN``) that view's rows are a constant
+  (cost ``PENALTY_COST / sigma``, zero Jacobian), so LM rejects steps there;
+* ``size_priors``: ``PriorFactorVector`` on ``L_k`` (``N(log semi_axis_m, log_sigma^2)`` per
+  axis);
+* with ``refine_cameras``: ``PriorFactorPose3`` on the first frame (gauge) and
+  ``BetweenFactorPose3`` between consecutive frames with the app's relative poses
+  (``odometry_sigmas``: rotation rad, translation m, per step) — object-level bundle
+  adjustment.
+
+Quality of each object (:class:`ObjectQuality`): views, spread of the viewing directions (the
+largest angle between two rays from the camera centres to the refined centre), residual cost
+(GTSAM's ``0.5 sum |whitened r|^2`` of its observation factors, after the kernel) and RMS level
+residual, and the semi-axes the views do not constrain: the marginal standard deviation of
+each log semi-axis from the object's own 9x9 Gauss-Newton information (cameras held fixed);
+an axis with a std above ``unconstrained_log_std`` (default 0.3, i.e. +-35 %) is flagged.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import gtsam
+import numpy as np
+
+from factors.ellipsoid_residuals import (
+    LevelSetSamples,
+    dual_quadric,
+    level_set_samples,
+    observation_residual,
+    stack_samples,
+)
+from factors.geometry import Camera, Ellipsoid, ellipsoid_depth_margins, invert_pose
+from factors.pose_factors import DEFAULT_ROBUST_SCALE
+from factors.pose_residuals import DEFAULT_MIN_DEPTH_MARGIN
+from maps.building.recording import Observation, SizePrior
+from maps.reconstruct import ellipsoid_from_dual_quadric
+
+__all__ = ["JointResult", "ObjectQuality", "refine_jointly"]
+
+#: Penalty cost of one observation whose ellipsoid is not in front of its camera.
+PENALTY_COST = 1e6
+#: Marginal std of a log semi-axis above which the axis is reported unconstrained.
+UNCONSTRAINED_LOG_STD = 0.3
+#: Default odometry noise per frame step: rotation (rad), translation (m).
+ODOMETRY_SIGMAS = (0.005, 0.01)
+
+
+@dataclass(frozen=True)
+class ObjectQuality:
+    """Per-object quality (see the module docstring); angles in degrees."""
+
+    n_views: int
+    view_spread_deg: float
+    residual_cost: float
+    rms_level_residual: float
+    log_axis_std: tuple[float, float, float]
+    unconstrained_axes: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class JointResult:
+    ellipsoids: list[Ellipsoid]
+    quality: list[ObjectQuality]
+    world_from_camera: np.ndarray
+    iterations: int
+    initial_error: float
+    final_error: float
+    stopped_early: bool
+
+
+def _pose3(T: np.ndarray) -> gtsam.Pose3:
+    return gtsam.Pose3(gtsam.Rot3(T[:3, :3]), np.asarray(T[:3, 3], float))
+
+
+def _huber_scale(norms: np.ndarray, k: float) -> np.ndarray:
+    """Row scale so that ``0.5 (scale |w|)^2`` is Huber's cost of ``|w|`` (threshold ``k``)."""
+    big = norms > k
+    out = np.ones_like(norms)
+    out[big] = np.sqrt(2.0 * k * (norms[big] - 0.5 * k)) / norms[big]
+    return out
+
+
+def _object_factor(samples: LevelSetSamples, weights: np.ndarray, e_key: int, l_key: int,
+                   view_frames: np.ndarray, x_keys: list[int] | None,
+                   T_cw_fixed: np.ndarray | None) -> gtsam.CustomFactor:
+    """All views of one object. ``weights`` (V,) = 1/sqrt(sigma_v); ``view_frames`` (V,) the
+    index of each view's camera in ``x_keys`` (refined cameras) or into ``T_cw_fixed``."""
+    V, M = samples.phi_det_minus_1.shape
+    pen = np.sqrt(2.0 * PENALTY_COST / M) * weights  # per view
+    k = DEFAULT_ROBUST_SCALE["level_set"]
+    keys = [e_key, l_key] + (list(x_keys) if x_keys is not None else [])
+    noise = gtsam.noiseModel.Unit.Create(V * M)
+
+    def error_fn(this: gtsam.CustomFactor, values: gtsam.Values,
+                 H: list[np.ndarray] | None) -> np.ndarray:
+        pose = values.atPose3(e_key)
+        R = pose.rotation().matrix()
+        c = np.asarray(pose.translation(), dtype=float)
+        axes = np.exp(values.atVector(l_key))
+        if x_keys is None:
+            T_cw = T_cw_fixed
+        else:
+            cams = np.array([invert_pose(values.atPose3(x).matrix()) for x in x_keys])
+            T_cw = cams[view_frames]
+        S = (R * axes**2) @ R.T
+        margins = T_cw[:, 2, :3] @ c + T_cw[:, 2, 3] - np.sqrt(
+            np.einsum("vi,ij,vj->v", T_cw[:, 2, :3], S, T_cw[:, 2, :3]))
+        ok = margins > DEFAULT_MIN_DEPTH_MARGIN
+        out = np.empty((V, M))
+        out[~ok] = pen[~ok, None]
+        want = H is not None
+        if want:
+            Je = np.zeros((V, M, 9))
+            Jc = np.zeros((V, M, 6)) if x_keys is not None else None
+        if ok.any():
+            sub = LevelSetSamples(None, samples.n[ok], samples.phi_det_minus_1[ok])
+            r, J_e, J_c = observation_residual(T_cw[ok], R, c, axes, sub, want)
+            w = r * weights[ok, None]
+            scale = (weights[ok] * _huber_scale(np.linalg.norm(w, axis=1), k))[:, None]
+            out[ok] = r * scale
+            if want:
+                Je[ok] = J_e * scale[..., None]
+                if Jc is not None:
+                    Jc[ok] = J_c * scale[..., None]
+        if want:
+            Je = Je.reshape(V * M, 9)
+            H[0] = np.ascontiguousarray(Je[:, :6])
+            H[1] = np.ascontiguousarray(Je[:, 6:])
+            if x_keys is not None:
+                Jc = Jc.reshape(V, M, 6)
+                for j in range(len(x_keys)):
+                    Hj = np.zeros((V, M, 6))
+                    sel = view_frames == j
+                    Hj[sel] = Jc[sel]
+                    H[2 + j] = Hj.reshape(V * M, 6)
+        return out.reshape(-1)
+
+    return gtsam.CustomFactor(noise, keys, error_fn)
+
+
+def refine_jointly(
+    camera: Camera, world_from_camera: np.ndarray, observations: Sequence[Observation],
+    objects: Sequence[tuple[str, Sequence[int], Ellipsoid]], *,
+    size_priors: Mapping[str, SizePrior] | None = None, refine_cameras: bool = False,
+    odometry_sigmas: tuple[float, float] = ODOMETRY_SIGMAS, max_iterations: int = 30,
+    deadline: float | None = None,
+    progress: Callable[[int, float], None] | None = None,
+    unconstrained_log_std: float = UNCONSTRAINED_LOG_STD,
+) -> JointResult:
+    """Refine ``objects`` = ``(label, observation indices, initial ellipsoid)`` jointly.
+
+    ``world_from_camera`` (F, 4, 4): the frames' poses (app's world frame). ``deadline``: a
+    ``time.monotonic()`` value after which LM stops (the result so far is kept;
+    ``stopped_early``). ``progress(iteration, error)`` after each LM iteration.
+    """
+    T_wc = np.asarray(world_from_camera, dtype=float)
+    graph = gtsam.NonlinearFactorGraph()
+    values = gtsam.Values()
+    E = [gtsam.symbol("e", k) for k in range(len(objects))]
+    L = [gtsam.symbol("l", k) for k in range(len(objects))]
+    used_frames = sorted({observations[i].frame for _, idx, _ in objects for i in idx})
+    X = {f: gtsam.symbol("x", f) for f in used_frames} if refine_cameras else {}
+    samples: dict[int, LevelSetSamples] = {}
+    for k, (label, idx, ell) in enumerate(objects):
+        values.insert(E[k], _pose3(np.block([[ell.rotation, ell.center[:, None]],
+                                             [np.zeros((1, 3)), np.ones((1, 1))]])))
+        values.insert(L[k], np.log(ell.axes))
+        for i in idx:
+            samples[i] = level_set_samples(observations[i].ellipse, camera)
+        stacked = stack_samples([samples[i] for i in idx])
+        weights = np.array([1.0 / math.sqrt(observations[i].sigma)
+                            if observations[i].sigma is not None else 1.0 for i in idx])
+        frames_k = [observations[i].frame for i in idx]
+        if refine_cameras:
+            uniq = sorted(set(frames_k))
+            pos = {f: j for j, f in enumerate(uniq)}
+            graph.add(_object_factor(stacked, weights, E[k], L[k],
+                                     np.array([pos[f] for f in frames_k]),
+                                     [X[f] for f in uniq], None))
+        else:
+            graph.add(_object_factor(stacked, weights, E[k], L[k], np.arange(len(idx)), None,
+                                     np.array([invert_pose(T_wc[f]) for f in frames_k])))
+        prior = (size_priors or {}).get(label)
+        if prior is not None:
+            graph.add(gtsam.PriorFactorVector(
+                L[k], np.full(3, math.log(prior.semi_axis_m)),
+                gtsam.noiseModel.Isotropic.Sigma(3, prior.log_sigma)))
+    if refine_cameras and used_frames:
+        for f in used_frames:
+            values.insert(X[f], _pose3(T_wc[f]))
+        graph.add(gtsam.PriorFactorPose3(X[used_frames[0]], _pose3(T_wc[used_frames[0]]),
+                                         gtsam.noiseModel.Isotropic.Sigma(6, 1e-6)))
+        for a, b in itertools.pairwise(used_frames):
+            steps = b - a
+            rel = invert_pose(T_wc[a]) @ T_wc[b]
+            sig = np.array([odometry_sigmas[0]] * 3 + [odometry_sigmas[1]] * 3) * math.sqrt(steps)
+            graph.add(gtsam.BetweenFactorPose3(X[a], X[b], _pose3(rel),
+                                               gtsam.noiseModel.Diagonal.Sigmas(sig)))
+    params = gtsam.LevenbergMarquardtParams()
+    params.setMaxIterations(max_iterations)
+    params.setRelativeErrorTol(1e-5)
+    params.setAbsoluteErrorTol(1e-9)
+    opt = gtsam.LevenbergMarquardtOptimizer(graph, values, params)
+    initial_error = float(graph.error(values))
+    err = initial_error
+    it = 0
+    stopped = False
+    while it < max_iterations:
+        if deadline is not None and time.monotonic() > deadline:
+            stopped = True
+            break
+        opt.iterate()
+        it += 1
+        new_err = float(opt.error())
+        if progress is not None:
+            progress(it, new_err)
+        converged = err - new_err <= max(1e-5 * err, 1e-9)
+        err = new_err
+        if converged:
+            break
+    result = opt.values()
+    ells: list[Ellipsoid] = []
+    T_out = T_wc.copy()
+    for f, key in X.items():
+        T_out[f] = result.atPose3(key).matrix()
+    quality = []
+    for k, (_label, idx, _ell) in enumerate(objects):
+        pose = result.atPose3(E[k])
+        R = pose.rotation().matrix()
+        c = np.asarray(pose.translation(), dtype=float)
+        axes = np.exp(result.atVector(L[k]))
+        # canonical form (descending semi-axes, proper rotation) via the dual quadric
+        ell = ellipsoid_from_dual_quadric(dual_quadric(R, c, axes))
+        ells.append(ell)
+        H = np.zeros((9, 9))
+        rs = []
+        cost = 0.0
+        for i in idx:
+            o = observations[i]
+            T_cw = invert_pose(T_out[o.frame])
+            margin = ellipsoid_depth_margins(T_cw, c[None], ((R * axes**2) @ R.T)[None])[0]
+            if not margin > DEFAULT_MIN_DEPTH_MARGIN:
+                continue
+            r, J_e, _ = observation_residual(T_cw, R, c, axes, samples[i])
+            w = 1.0 / (o.sigma if o.sigma is not None else 1.0)
+            H += w * J_e.T @ J_e
+            rs.append(r)
+            cost += 0.5 * w * float(r @ r)
+        prior = (size_priors or {}).get(_label)
+        if prior is not None:
+            H[6:, 6:] += np.eye(3) / prior.log_sigma**2
+        try:
+            cov = np.linalg.inv(H + 1e-12 * np.trace(H) * np.eye(9))
+            std = np.sqrt(np.maximum(np.diag(cov)[6:], 0.0))
+        except np.linalg.LinAlgError:
+            std = np.full(3, np.inf)
+        centres = np.array([T_out[observations[i].frame][:3, 3] for i in idx])
+        rays = c - centres
+        rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+        spread = float(np.degrees(np.arccos(np.clip((rays @ rays.T).min(), -1.0, 1.0))))
+        allr = np.concatenate(rs) if rs else np.zeros(1)
+        # std per axis of the refined frame; report in the canonical (descending) order
+        order = np.argsort(axes)[::-1]
+        std_c = std[order]
+        quality.append(ObjectQuality(
+            n_views=len(idx), view_spread_deg=spread, residual_cost=cost,
+            rms_level_residual=float(np.sqrt(np.mean(allr**2))),
+            log_axis_std=tuple(float(x) for x in std_c),
+            unconstrained_axes=tuple(int(a) for a in np.flatnonzero(
+                ~(std_c <= unconstrained_log_std)))))
+    return JointResult(ells, quality, T_out, it, initial_error, err, stopped)
