@@ -49,15 +49,15 @@ __all__ = ["AssociationOptions", "ObjectHypothesis", "associate", "ellipse_iou"]
 class AssociationOptions:
     """Thresholds of :func:`associate` (module docstring); angles in degrees."""
 
-    min_views: int = 3
+    min_views: int = 5
     min_pair_angle_deg: float = 3.0
     min_spread_deg: float = 3.0
     ray_tolerance: float = 0.5
     size_ratio: float = 2.0
     min_iou: float = 0.3
     recruit_iou: float = 0.5
-    max_candidates: int = 3000
-    max_init_views: int = 40
+    max_candidates: int = 1500
+    max_init_views: int = 15
     seed: int = 0
 
 
@@ -155,7 +155,8 @@ def _spread_deg(d: np.ndarray) -> float:
 
 
 def _geometric_clusters(o: np.ndarray, d: np.ndarray, rho: np.ndarray, frames: np.ndarray,
-                        opt: AssociationOptions, rng: np.random.Generator) -> list[np.ndarray]:
+                        opt: AssociationOptions, rng: np.random.Generator,
+                        tick: Callable[[], None] | None = None) -> list[np.ndarray]:
     X, S = _pair_candidates(o, d, rho, frames, opt, rng)
     free = np.ones(len(o), dtype=bool)
     clusters: list[np.ndarray] = []
@@ -191,7 +192,7 @@ def _geometric_clusters(o: np.ndarray, d: np.ndarray, rho: np.ndarray, frames: n
         # drop the used candidate whatever happens, and the candidates it explains
         near = np.linalg.norm(X - x, axis=1) <= opt.ray_tolerance * s
         near[best] = True
-        X, S = X[~near], S[~near]
+        alive &= ~near
         if len(members) >= opt.min_views and _spread_deg(d[members]) >= opt.min_spread_deg:
             clusters.append(members)
             free[members] = False
@@ -228,15 +229,21 @@ def associate(
 
     ``world_from_camera`` (F, 4x4) are the frames' poses. Returns the objects (each with an
     initial ellipsoid) and the rejected observations ``{index: reason}``. ``progress(label,
-    fraction)`` is called after each label.
+    fraction)`` is called within and after each label (at least once per hypothesis).
     """
     opt = options or AssociationOptions()
     rng = np.random.default_rng(opt.seed)
+    labels = sorted({o.label for o in observations})
+    state = {"label": "", "fraction": 0.0}
+
+    def tick() -> None:
+        if progress is not None:
+            progress(str(state["label"]), float(state["fraction"]))
     T_wc = np.asarray(world_from_camera, dtype=float)
     objects: list[ObjectHypothesis] = []
     rejected: dict[int, str] = {}
-    labels = sorted({o.label for o in observations})
     for li, label in enumerate(labels):
+        state["label"], state["fraction"] = label, li / max(1, len(labels))
         idx_all = np.array([k for k, o in enumerate(observations) if o.label == label])
         tracked: dict[str, list[int]] = {}
         untracked = []
@@ -256,13 +263,14 @@ def associate(
             sub = [observations[k] for k in un]
             o, d, rho = _rays(sub, camera, T_wc)
             frames = np.array([s.frame for s in sub])
-            clusters = _geometric_clusters(o, d, rho, frames, opt, rng)
+            clusters = _geometric_clusters(o, d, rho, frames, opt, rng, tick)
             assigned = np.zeros(len(un), dtype=bool)
             for members in clusters:
                 assigned[members] = True
             label_objs = []
             for members in clusters:
                 glob = [int(un[m]) for m in members]
+                tick()
                 ell = _reconstruct(glob, observations, T_wc, camera, opt)
                 if ell is None:
                     assigned[members] = False
