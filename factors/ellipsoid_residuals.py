@@ -163,9 +163,10 @@ def observation_residual(
     # camera: dA = -[w]x A - A [w]x^T + v c^T + c v^T, c = centre in the camera frame
     c = P @ np.append(center, 1.0)  # (..., 3)
     SA = np.einsum("kij,...jl->...kil", _SKEW, A)  # (..., 3, 3, 3)
-    dAc = np.empty(A.shape[:-2] + (6, 3, 3))
+    dAc = np.empty((*A.shape[:-2], 6, 3, 3))
     dAc[..., :3, :, :] = -SA - np.swapaxes(SA, -1, -2)
     E = np.eye(3)
-    dAc[..., 3:, :, :] = E[:, :, None] * c[..., None, None, :] + c[..., None, :, None] * E[:, None, :]
+    dAc[..., 3:, :, :] = (E[:, :, None] * c[..., None, None, :]
+                          + c[..., None, :, None] * E[:, None, :])
     J_cam = np.einsum("...mab,...kab->...mk", G, dAc)
     return r, J_ell, J_cam

@@ -4,7 +4,7 @@ refinement -> :class:`maps.model.SceneMap` plus a JSON-ready report.
 Progress is reported as ``progress(stage, percent, objects_found)`` with ``stage`` in
 ``associating`` (0-50 %), ``refining`` (50-95 %), ``saving`` (95 %); callbacks come at least after
 every label and every LM iteration. A ``deadline`` (``time.monotonic()``) bounds the whole build:
-association raises :class:`BuildTimeout` when it passes, the refinement stops early and keeps
+association raises :class:`BuildTimeoutError` when it passes, the refinement stops early and keeps
 its current estimate (reported as ``refinement.stopped_early``).
 """
 
@@ -21,12 +21,12 @@ from maps.building.joint import refine_jointly
 from maps.building.recording import Recording
 from maps.model import LIMITS, MapObject, SceneMap
 
-__all__ = ["BuildTimeout", "build_map"]
+__all__ = ["BuildTimeoutError", "build_map"]
 
 Progress = Callable[[str, float, int], None]
 
 
-class BuildTimeout(RuntimeError):
+class BuildTimeoutError(RuntimeError):
     """The build ran out of its time budget before a map existed."""
 
 
@@ -45,7 +45,7 @@ def build_map(
 
     def on_label(_label: str, fraction: float) -> None:
         if deadline is not None and time.monotonic() > deadline:
-            raise BuildTimeout("time budget exhausted during association")
+            raise BuildTimeoutError("time budget exhausted during association")
         report_progress("associating", 50.0 * fraction, found[0])
 
     objects, rejected = associate(obs, T_wc, recording.camera, association, on_label)
