@@ -42,7 +42,7 @@ from factors.overlap import intersection_area
 from maps.building.recording import Observation
 from maps.reconstruct import ReconstructionError, reconstruct_ellipsoid
 
-__all__ = ["AssociationOptions", "ObjectHypothesis", "associate", "ellipse_iou"]
+__all__ = ["AssociationOptions", "ObjectHypothesis", "associate", "ellipse_iou", "touches_border"]
 
 
 @dataclass(frozen=True)
@@ -58,6 +58,10 @@ class AssociationOptions:
     recruit_iou: float = 0.5
     max_candidates: int = 1500
     max_init_views: int = 15
+    init_log_axes_prior_sigma: float = 1.0
+    merge_factor: float = 1.0
+    max_shared_frames: float = 0.1
+    ghost_ratio: float = 3.0
     seed: int = 0
 
 
@@ -199,18 +203,43 @@ def _geometric_clusters(o: np.ndarray, d: np.ndarray, rho: np.ndarray, frames: n
     return clusters
 
 
+def touches_border(ellipse: Ellipse, camera: Camera, margin_px: float = 4.0) -> bool:
+    """True if the ellipse's bounding box comes within ``margin_px`` of the image border (or
+    crosses it): the object is probably truncated, and its ellipse is that of the visible part."""
+    x0, y0, x1, y1 = ellipse.bbox()
+    return bool(x0 < margin_px or y0 < margin_px or x1 > camera.width - margin_px
+                or y1 > camera.height - margin_px)
+
+
 def _reconstruct(idx: Sequence[int], obs: Sequence[Observation], T_wc: np.ndarray,
                  camera: Camera, opt: AssociationOptions) -> Ellipsoid | None:
-    sel = list(idx)
+    """Initial ellipsoid: Rubino + LM (``reconstruct_ellipsoid``, weak log-axes prior against
+    flat collapse) from an evenly spread subset of the untruncated views (all views if fewer
+    than ``min_views`` are untruncated); a sphere at the triangulated centre if that fails."""
+    sel = [k for k in idx if not touches_border(obs[k].ellipse, camera)]
+    if len(sel) < opt.min_views:
+        sel = list(idx)
     if len(sel) > opt.max_init_views:  # evenly spread subset: the init need not see them all
         sel = [sel[k] for k in np.linspace(0, len(sel) - 1, opt.max_init_views).astype(int)]
     try:
         res = reconstruct_ellipsoid([obs[k].ellipse for k in sel],
                                     [T_wc[obs[k].frame] for k in sel], camera,
-                                    min_ray_angle_deg=opt.min_spread_deg)
+                                    min_ray_angle_deg=opt.min_spread_deg,
+                                    log_axes_prior_sigma=opt.init_log_axes_prior_sigma)
+        return res.ellipsoid
     except (ReconstructionError, ValueError, RuntimeError):
+        pass
+    sub = [obs[k] for k in idx]
+    o, d, rho = _rays(sub, camera, T_wc)
+    try:
+        x = _triangulate(o, d)
+    except np.linalg.LinAlgError:
         return None
-    return res.ellipsoid
+    t = np.einsum("nk,nk->n", x - o, d)
+    if np.any(t <= 0):
+        return None
+    r = float(np.median(t * rho))
+    return Ellipsoid(x, np.full(3, r))
 
 
 def _projection(ell: Ellipsoid, T_wc: np.ndarray, camera: Camera) -> Ellipse | None:
@@ -319,4 +348,68 @@ def associate(
                 rejected[int(un[m])] = "fits_no_object"
         if progress is not None:
             progress(label, (li + 1) / len(labels))
+    objects = _merge_duplicates(objects, observations, T_wc, camera, opt, tick)
+    objects = _drop_label_ghosts(objects, rejected, opt)
     return objects, rejected
+
+
+def _overlapping(a: Ellipsoid, b: Ellipsoid, factor: float) -> bool:
+    return float(np.linalg.norm(a.center - b.center)) <= factor * max(a.axes.max(), b.axes.max())
+
+
+def _merge_duplicates(objects: list[ObjectHypothesis], obs: Sequence[Observation],
+                      T_wc: np.ndarray, camera: Camera, opt: AssociationOptions,
+                      tick: Callable[[], None]) -> list[ObjectHypothesis]:
+    """Merge same-label objects whose centres lie within ``merge_factor`` x the larger one's
+    largest semi-axis and that (almost) never appear in the same frame: one physical object split
+    in two (typically by pose drift between two passes). In a shared frame the larger object's
+    detection is kept."""
+    merged = True
+    while merged:
+        merged = False
+        order = sorted(range(len(objects)), key=lambda k: -len(objects[k].observations))
+        for ia in order:
+            a = objects[ia]
+            fa = {obs[k].frame for k in a.observations}
+            for ib in order:
+                b = objects[ib]
+                if ib == ia or b.label != a.label or len(b.observations) > len(a.observations):
+                    continue
+                if not _overlapping(a.ellipsoid, b.ellipsoid, opt.merge_factor):
+                    continue
+                fb = {obs[k].frame for k in b.observations}
+                if len(fa & fb) > opt.max_shared_frames * min(len(fa), len(fb)):
+                    continue
+                union = sorted(a.observations + [k for k in b.observations
+                                                 if obs[k].frame not in fa])
+                tick()
+                ell = _reconstruct(union, obs, T_wc, camera, opt)
+                if ell is None:
+                    continue
+                objects[ia] = ObjectHypothesis(a.label, union, ell, a.source,
+                                               {**b.ious, **a.ious})
+                del objects[ib]
+                merged = True
+                break
+            if merged:
+                break
+    return objects
+
+
+def _drop_label_ghosts(objects: list[ObjectHypothesis], rejected: dict[int, str],
+                       opt: AssociationOptions) -> list[ObjectHypothesis]:
+    """Dissolve an object overlapping an object of ANOTHER label with ``ghost_ratio`` x more
+    views: two objects cannot occupy the same space, so the few views are wrong labels of the
+    other object (their detections are rejected as ``label_conflict``)."""
+    keep = []
+    for a in objects:
+        ghost = any(b is not a and b.label != a.label
+                    and len(b.observations) >= opt.ghost_ratio * len(a.observations)
+                    and _overlapping(a.ellipsoid, b.ellipsoid, opt.merge_factor)
+                    for b in objects)
+        if ghost:
+            for k in a.observations:
+                rejected[k] = "label_conflict"
+        else:
+            keep.append(a)
+    return keep

@@ -24,6 +24,8 @@ from maps.model import LIMITS, MapObject, SceneMap
 __all__ = ["BuildTimeoutError", "build_map"]
 
 Progress = Callable[[str, float, int], None]
+#: Objects with all axes unconstrained need at least this many views to enter the map.
+MIN_VIEWS_UNCONSTRAINED = 15
 
 
 class BuildTimeoutError(RuntimeError):
@@ -34,8 +36,15 @@ def build_map(
     recording: Recording, *, map_id: str, progress: Progress | None = None,
     deadline: float | None = None, association: AssociationOptions | None = None,
     max_iterations: int = 30, metadata: Mapping[str, Any] | None = None,
+    min_views_unconstrained: int = MIN_VIEWS_UNCONSTRAINED,
 ) -> tuple[SceneMap, dict[str, Any]]:
-    """The map (version 1, ``map_id``) and the report (module docstring)."""
+    """The map (version 1, ``map_id``) and the report (module docstring).
+
+    Objects are left out of the map (listed in ``report["dropped_objects"]``, their detections
+    rejected) when their semi-axes leave the map limits (``degenerate_shape``) or when none of
+    their three axes is constrained by the views and fewer than ``min_views_unconstrained``
+    views support them (``unconstrained``: a handful of mislabelled or inconsistent views).
+    """
     t0 = time.perf_counter()
     report_progress: Progress = progress or (lambda *_: None)
     T_wc = np.array([f.world_from_camera for f in recording.frames])
@@ -75,10 +84,16 @@ def build_map(
         q = joint.quality[k]
         counters[h.label] = counters.get(h.label, 0) + 1
         oid = f"{h.label}_{counters[h.label]}"
+        reason = None
         if ell.axes.min() < LIMITS["min_semi_axis_m"] or ell.axes.max() > LIMITS["max_semi_axis_m"]:
-            dropped.append({"object_id": oid, "label": h.label, "reason": "degenerate_shape"})
+            reason = "degenerate_shape"
+        elif len(q.unconstrained_axes) == 3 and q.n_views < min_views_unconstrained:
+            reason = "unconstrained"
+        if reason is not None:
+            dropped.append({"object_id": oid, "label": h.label, "reason": reason,
+                            "n_views": q.n_views})
             for i in h.observations:
-                rejected[i] = "object_degenerate"
+                rejected[i] = f"object_{reason}"
             continue
         map_objects.append(MapObject(oid, h.label, ell))
         obj_reports.append({

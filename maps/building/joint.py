@@ -54,6 +54,7 @@ from factors.ellipsoid_residuals import (
 from factors.geometry import Camera, Ellipsoid, ellipsoid_depth_margins, invert_pose
 from factors.pose_factors import DEFAULT_ROBUST_SCALE
 from factors.pose_residuals import DEFAULT_MIN_DEPTH_MARGIN
+from maps.building.association import touches_border
 from maps.building.recording import Observation, SizePrior
 from maps.reconstruct import ellipsoid_from_dual_quadric
 
@@ -63,6 +64,12 @@ __all__ = ["JointResult", "ObjectQuality", "refine_jointly"]
 PENALTY_COST = 1e6
 #: Marginal std of a log semi-axis above which the axis is reported unconstrained.
 UNCONSTRAINED_LOG_STD = 0.3
+#: Residual weight of a detection touching the image border (probably truncated: its ellipse is
+#: that of the visible part, not of the object's projection).
+TRUNCATED_WEIGHT = 0.3
+#: Std (log metres) of the weak default prior pulling each log semi-axis towards the initial
+#: estimate's mean log semi-axis (replaced by the label's size prior when one is given).
+DEFAULT_LOG_AXES_SIGMA = 1.0
 #: Default odometry noise per frame step: rotation (rad), translation (m).
 ODOMETRY_SIGMAS = (0.005, 0.01)
 
@@ -168,6 +175,8 @@ def refine_jointly(
     deadline: float | None = None,
     progress: Callable[[int, float], None] | None = None,
     unconstrained_log_std: float = UNCONSTRAINED_LOG_STD,
+    truncated_weight: float = TRUNCATED_WEIGHT,
+    default_log_axes_sigma: float = DEFAULT_LOG_AXES_SIGMA,
 ) -> JointResult:
     """Refine ``objects`` = ``(label, observation indices, initial ellipsoid)`` jointly.
 
@@ -183,6 +192,7 @@ def refine_jointly(
     used_frames = sorted({observations[i].frame for _, idx, _ in objects for i in idx})
     X = {f: gtsam.symbol("x", f) for f in used_frames} if refine_cameras else {}
     samples: dict[int, LevelSetSamples] = {}
+    priors_used: list[SizePrior] = []
     for k, (label, idx, ell) in enumerate(objects):
         values.insert(E[k], _pose3(np.block([[ell.rotation, ell.center[:, None]],
                                              [np.zeros((1, 3)), np.ones((1, 1))]])))
@@ -192,6 +202,8 @@ def refine_jointly(
         stacked = stack_samples([samples[i] for i in idx])
         weights = np.array([1.0 / math.sqrt(observations[i].sigma)
                             if observations[i].sigma is not None else 1.0 for i in idx])
+        weights *= np.array([truncated_weight if touches_border(observations[i].ellipse, camera)
+                             else 1.0 for i in idx])
         frames_k = [observations[i].frame for i in idx]
         if refine_cameras:
             uniq = sorted(set(frames_k))
@@ -203,10 +215,12 @@ def refine_jointly(
             graph.add(_object_factor(stacked, weights, E[k], L[k], np.arange(len(idx)), None,
                                      np.array([invert_pose(T_wc[f]) for f in frames_k])))
         prior = (size_priors or {}).get(label)
-        if prior is not None:
-            graph.add(gtsam.PriorFactorVector(
-                L[k], np.full(3, math.log(prior.semi_axis_m)),
-                gtsam.noiseModel.Isotropic.Sigma(3, prior.log_sigma)))
+        if prior is None:  # weak default: keeps unconstrained axes from collapsing
+            prior = SizePrior(float(np.exp(np.mean(np.log(ell.axes)))), default_log_axes_sigma)
+        graph.add(gtsam.PriorFactorVector(
+            L[k], np.full(3, math.log(prior.semi_axis_m)),
+            gtsam.noiseModel.Isotropic.Sigma(3, prior.log_sigma)))
+        priors_used.append(prior)
     if refine_cameras and used_frames:
         for f in used_frames:
             values.insert(X[f], _pose3(T_wc[f]))
@@ -265,12 +279,12 @@ def refine_jointly(
                 continue
             r, J_e, _ = observation_residual(T_cw, R, c, axes, samples[i])
             w = 1.0 / (o.sigma if o.sigma is not None else 1.0)
+            if touches_border(o.ellipse, camera):
+                w *= truncated_weight**2
             H += w * J_e.T @ J_e
             rs.append(r)
             cost += 0.5 * w * float(r @ r)
-        prior = (size_priors or {}).get(_label)
-        if prior is not None:
-            H[6:, 6:] += np.eye(3) / prior.log_sigma**2
+        # the views' information only: a prior does not make an axis observed
         try:
             cov = np.linalg.inv(H + 1e-12 * np.trace(H) * np.eye(9))
             std = np.sqrt(np.maximum(np.diag(cov)[6:], 0.0))
