@@ -205,12 +205,12 @@ def refine_jointly(
         weights *= np.array([truncated_weight if touches_border(observations[i].ellipse, camera)
                              else 1.0 for i in idx])
         frames_k = [observations[i].frame for i in idx]
-        if refine_cameras:
-            uniq = sorted(set(frames_k))
-            pos = {f: j for j, f in enumerate(uniq)}
-            graph.add(_object_factor(stacked, weights, E[k], L[k],
-                                     np.array([pos[f] for f in frames_k]),
-                                     [X[f] for f in uniq], None))
+        if refine_cameras:  # one factor per view: each touches one camera
+            for v, f in enumerate(frames_k):
+                one = LevelSetSamples(None, stacked.n[v:v + 1],
+                                      stacked.phi_det_minus_1[v:v + 1])
+                graph.add(_object_factor(one, weights[v:v + 1], E[k], L[k], np.zeros(1, int),
+                                         [X[f]], None))
         else:
             graph.add(_object_factor(stacked, weights, E[k], L[k], np.arange(len(idx)), None,
                                      np.array([invert_pose(T_wc[f]) for f in frames_k])))
