@@ -29,6 +29,7 @@ examples:
   quadloc maps export chess --version 1 > chess_v1.json
   quadloc localize --map chess docs/examples/localize_chess.json
   quadloc openapi --output docs/openapi.json     # regenerate the published schema
+  quadloc maps build recording.json --map-id room   # build a map from posed detections
 
 settings come from QUADLOC_* environment variables (see service/settings.py), e.g.
 QUADLOC_DATABASE_URL, QUADLOC_API_KEYS, QUADLOC_DATA_DIR; flags override them.
@@ -343,6 +344,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("map_id", metavar="ID")
     db(p)
     p.set_defaults(func=cmd_maps_delete)
+    from service.cli_build import add_build_parser  # issue 16: quadloc maps build
+
+    add_build_parser(msub, db, _store, _settings)
 
     p = sub.add_parser("localize", formatter_class=fmt, help="localize one frame (prints the pose)",
                        description="Localize the frame in FILE (the body of POST "
