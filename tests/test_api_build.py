@@ -125,8 +125,10 @@ def test_build_limits(tmp_path: Path) -> None:
 
 
 def test_unknown_job_is_404(client: TestClient) -> None:
-    r = client.get("/v1/build-jobs/nope")
+    r = client.get("/v1/build-jobs/0000-1111")
     assert r.status_code == 404
+    r = client.get("/v1/build-jobs/not%00an-id")
+    assert r.status_code == 422 and r.json()["errors"][0]["field"] == "path.job_id"
 
 
 def test_stale_running_job_is_marked_failed(tmp_path: Path) -> None:

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Body, Header, Query, Request, Response, status
+from fastapi import APIRouter, Body, Header, Path, Query, Request, Response, status
 from pydantic import BaseModel, Field
 
 from maps.building.jobs import BuildJob, JobNotFoundError
@@ -37,6 +37,9 @@ __all__ = ["BuildJobOut", "job_out", "router"]
 
 router = APIRouter(prefix="/v1", tags=["maps"])
 
+#: Job ids are UUIDs; anything else is refused (422 ``path.job_id``) before reaching the database.
+JOB_ID_PATTERN = r"^[0-9a-fA-F-]{1,64}$"
+
 _RECORDING_EXAMPLE: dict[str, Any] = {
     "intrinsics": {"fx": 585.0, "fy": 585.0, "cx": 320.0, "cy": 240.0, "width": 640,
                    "height": 480},
@@ -49,6 +52,32 @@ _RECORDING_EXAMPLE: dict[str, Any] = {
                                 "sigma": 0.02},
                                {"label": "Chair", "box": [10.0, 200.0, 110.0, 420.0]}]}],
 }
+
+
+_JOB_EXAMPLE: dict[str, Any] = {
+    "job_id": "5f0c3c1e-8a53-4b7c-9a56-0f1f7e3f2b11", "map_id": "my-room", "status": "running",
+    "stage": "refining", "percent": 62.5, "objects_found": 9, "base_version": None,
+    "map_version": None, "error": None, "report": None,
+    "created_at": "2026-11-23T20:00:00+00:00", "updated_at": "2026-11-23T20:00:04+00:00"}
+_DONE_EXAMPLE: dict[str, Any] = {
+    **_JOB_EXAMPLE, "status": "succeeded", "stage": "done", "percent": 100.0, "map_version": 1,
+    "report": {"objects": [{"object_id": "TV_1", "label": "TV", "association": "geometric",
+                            "detections": [{"frame_id": "0001", "frame_index": 0,
+                                            "detection_index": 0}],
+                            "quality": {"n_views": 69, "view_spread_deg": 27.0,
+                                        "residual_cost": 12.3, "rms_level_residual": 0.21,
+                                        "log_semi_axis_std": [0.05, 0.4, 0.6],
+                                        "unconstrained_axes": [1, 2],
+                                        "semi_axes_m": [0.42, 0.34, 0.18]}}],
+               "rejected_detections": [{"frame_id": "0003", "frame_index": 2,
+                                        "detection_index": 1, "label": "Chair",
+                                        "reason": "fits_no_object"}],
+               "dropped_objects": [], "counts": {"frames": 300, "detections": 1855,
+                                                 "objects": 10, "rejected_detections": 64}}}
+
+
+def _ok(code: int, example: dict[str, Any]) -> dict[int | str, Any]:
+    return {code: {"content": {"application/json": {"example": example}}}}
 
 
 class BuildJobOut(BaseModel):
@@ -111,7 +140,9 @@ def _base_version(store: Any, map_id: str, if_match: str | None) -> int | None:
                 "`Location: /v1/build-jobs/{job_id}`; poll it for progress and the result. "
                 "422 names every invalid field; 428/412 for If-Match on an existing map; 503 "
                 "+ Retry-After when this replica has too many builds queued.",
-    responses=problem_responses(400, 401, 403, 412, 413, 415, 422, 428, 503),
+    responses={**problem_responses(400, 401, 403, 412, 413, 415, 422, 428, 503),
+               **_ok(202, {**_JOB_EXAMPLE, "status": "queued", "stage": "queued",
+                           "percent": 0.0, "objects_found": 0})},
     openapi_extra={"requestBody": {"required": True, "content": {"application/json": {
         "schema": {"type": "object", "required": ["intrinsics", "frames"]},
         "example": _RECORDING_EXAMPLE}}}},
@@ -150,9 +181,10 @@ def start_build(
     description="Status, stage, percent, objects found; the map version and the report when "
                 "it succeeded, `error {reason, detail}` when it failed. A job whose runner "
                 "stopped reporting (replica restarted) is marked failed (`runner_lost`).",
-    responses=problem_responses(401, 403, 404, 503),
+    responses={**problem_responses(401, 403, 404, 422, 503), **_ok(200, _DONE_EXAMPLE)},
 )
-def get_build_job(job_id: str, request: Request, settings: SettingsDep,
+def get_build_job(job_id: Annotated[str, Path(pattern=JOB_ID_PATTERN, description="Job id.")],
+                  request: Request, settings: SettingsDep,
                   _key: ReadAccess) -> BuildJobOut:
     jobs = request.app.state.build_jobs
     jobs.fail_stale(settings.build_stale_after_s)
