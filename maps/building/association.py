@@ -357,6 +357,11 @@ def _overlapping(a: Ellipsoid, b: Ellipsoid, factor: float) -> bool:
     return float(np.linalg.norm(a.center - b.center)) <= factor * max(a.axes.max(), b.axes.max())
 
 
+def _inside(point: np.ndarray, ell: Ellipsoid) -> bool:
+    d = ell.rotation.T @ (point - ell.center)
+    return float(np.sum((d / ell.axes) ** 2)) <= 1.0
+
+
 def _merge_duplicates(objects: list[ObjectHypothesis], obs: Sequence[Observation],
                       T_wc: np.ndarray, camera: Camera, opt: AssociationOptions,
                       tick: Callable[[], None]) -> list[ObjectHypothesis]:
@@ -398,14 +403,14 @@ def _merge_duplicates(objects: list[ObjectHypothesis], obs: Sequence[Observation
 
 def _drop_label_ghosts(objects: list[ObjectHypothesis], rejected: dict[int, str],
                        opt: AssociationOptions) -> list[ObjectHypothesis]:
-    """Dissolve an object overlapping an object of ANOTHER label with ``ghost_ratio`` x more
-    views: two objects cannot occupy the same space, so the few views are wrong labels of the
-    other object (their detections are rejected as ``label_conflict``)."""
+    """Dissolve an object whose centre lies inside an object of ANOTHER label with
+    ``ghost_ratio`` x more views: two objects cannot occupy the same space, so the few views are
+    wrong labels of the other object (their detections are rejected as ``label_conflict``)."""
     keep = []
     for a in objects:
         ghost = any(b is not a and b.label != a.label
                     and len(b.observations) >= opt.ghost_ratio * len(a.observations)
-                    and _overlapping(a.ellipsoid, b.ellipsoid, opt.merge_factor)
+                    and _inside(a.ellipsoid.center, b.ellipsoid)
                     for b in objects)
         if ghost:
             for k in a.observations:

@@ -24,7 +24,7 @@ from maps.model import LIMITS, MapObject, SceneMap
 __all__ = ["BuildTimeoutError", "build_map"]
 
 Progress = Callable[[str, float, int], None]
-#: Objects with all axes unconstrained need at least this many views to enter the map.
+#: Objects with an unconstrained axis need at least this many views to enter the map.
 MIN_VIEWS_UNCONSTRAINED = 15
 
 
@@ -41,9 +41,9 @@ def build_map(
     """The map (version 1, ``map_id``) and the report (module docstring).
 
     Objects are left out of the map (listed in ``report["dropped_objects"]``, their detections
-    rejected) when their semi-axes leave the map limits (``degenerate_shape``) or when none of
-    their three axes is constrained by the views and fewer than ``min_views_unconstrained``
-    views support them (``unconstrained``: a handful of mislabelled or inconsistent views).
+    rejected) when their semi-axes leave the map limits (``degenerate_shape``) or when an axis
+    is not constrained by the views and fewer than ``min_views_unconstrained`` views support
+    them (``unconstrained``: a handful of mislabelled or inconsistent views).
     """
     t0 = time.perf_counter()
     report_progress: Progress = progress or (lambda *_: None)
@@ -87,7 +87,7 @@ def build_map(
         reason = None
         if ell.axes.min() < LIMITS["min_semi_axis_m"] or ell.axes.max() > LIMITS["max_semi_axis_m"]:
             reason = "degenerate_shape"
-        elif len(q.unconstrained_axes) == 3 and q.n_views < min_views_unconstrained:
+        elif q.unconstrained_axes and q.n_views < min_views_unconstrained:
             reason = "unconstrained"
         if reason is not None:
             dropped.append({"object_id": oid, "label": h.label, "reason": reason,
