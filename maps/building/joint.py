@@ -19,11 +19,11 @@ Factors:
   ``factors.pose_residuals.DEFAULT_MIN_DEPTH_MARGIN``) that view's rows are a constant
   (cost ``PENALTY_COST / sigma``, zero Jacobian), so LM rejects steps there;
 * ``size_priors``: ``PriorFactorVector`` on ``L_k`` (``N(log semi_axis_m, log_sigma^2)`` per
-  axis). Optionally (``default_prior_relative_info``, off by default: it biases observed axes,
-  measured ~0.7 % at 1e-3 in tests/test_map_building.py) a weak prior for labels without a size
-  prior pulls each log semi-axis to the initial estimate's mean log semi-axis, with an
-  information that fraction of the one the views give that axis at the initial estimate (std
-  at most 3);
+  axis). For labels without one, the log semi-axes that the views leave unconstrained at the
+  initial estimate (marginal std above ``unconstrained_log_std``, computed as in the quality
+  report) get a weak prior (std ``UNCONSTRAINED_PRIOR_SIGMA`` = 1, a factor e) towards the
+  object's mean log semi-axis, so that they cannot collapse; constrained axes get none (no bias
+  where the views decide);
 * with ``refine_cameras``: ``PriorFactorPose3`` on the first frame (gauge) and
   ``BetweenFactorPose3`` between consecutive frames with the app's relative poses
   (``odometry_sigmas``: rotation rad, translation m, per step) — object-level bundle
@@ -31,7 +31,7 @@ Factors:
 
 Quality of each object (:class:`ObjectQuality`): views, spread of the viewing directions (the
 largest angle between two rays from the camera centres to the refined centre), residual cost
-(GTSAM's ``0.5 sum |whitened r|^2`` of its observation factors, after the kernel) and RMS level
+(``0.5 sum_v |r_v|^2 / sigma_v`` over its views, without kernel or truncation weight) and RMS level
 residual, and the semi-axes the views do not constrain: the marginal standard deviation of
 each log semi-axis from the object's own 9x9 Gauss-Newton information (cameras held fixed;
 views weighted by ``1/sigma``, ``QUALITY_DEFAULT_SIGMA`` for detections without one);
@@ -51,17 +51,15 @@ import numpy as np
 
 from factors.ellipsoid_residuals import (
     LevelSetSamples,
-    dual_quadric,
     level_set_samples,
     observation_residual,
     stack_samples,
 )
-from factors.geometry import Camera, Ellipsoid, ellipsoid_depth_margins, invert_pose
+from factors.geometry import Camera, Ellipsoid, invert_pose
 from factors.pose_factors import DEFAULT_ROBUST_SCALE
 from factors.pose_residuals import DEFAULT_MIN_DEPTH_MARGIN
 from maps.building.association import touches_border
 from maps.building.recording import Observation, SizePrior
-from maps.reconstruct import ellipsoid_from_dual_quadric
 
 __all__ = ["JointResult", "ObjectQuality", "refine_jointly"]
 
@@ -72,11 +70,9 @@ UNCONSTRAINED_LOG_STD = 0.3
 #: Residual weight of a detection touching the image border (probably truncated: its ellipse is
 #: that of the visible part, not of the object's projection).
 TRUNCATED_WEIGHT = 0.3
-#: Information of the optional weak log-axes prior relative to the information the views give
-#: each log semi-axis of the object at its initial estimate (module doc); None = no prior.
-DEFAULT_PRIOR_RELATIVE_INFO: float | None = None
-#: The default prior's std (log metres) is never larger than this.
-DEFAULT_PRIOR_MAX_SIGMA = 3.0
+#: Std (log metres) of the prior on the log semi-axes that the views leave unconstrained at the
+#: initial estimate (towards the object's mean log semi-axis); None disables it.
+UNCONSTRAINED_PRIOR_SIGMA: float | None = 1.0
 #: ``sigma`` assumed for detections without one in the quality report's axis uncertainty (a
 #: level-set residual std of ``sqrt(2.5e-3) = 0.05``, typical of a fine-tuned detector; the
 #: optimisation itself weights them 1, as localization does).
@@ -112,21 +108,39 @@ def _pose3(T: np.ndarray) -> gtsam.Pose3:
     return gtsam.Pose3(gtsam.Rot3(T[:3, :3]), np.asarray(T[:3, 3], float))
 
 
-def _log_axes_information(T_wc: np.ndarray, ell: Ellipsoid, samples: LevelSetSamples,
-                          weights: np.ndarray) -> np.ndarray:
-    """Diagonal (3,) of the views' Gauss-Newton information on the log semi-axes of ``ell``
-    (views whose camera does not see the ellipsoid in front are skipped)."""
-    T_cw = np.array([invert_pose(T) for T in T_wc])
-    S = ell.shape_matrix()
-    margins = T_cw[:, 2, :3] @ ell.center + T_cw[:, 2, 3] - np.sqrt(
+def _log_axis_std(T_cw: np.ndarray, R: np.ndarray, center: np.ndarray, axes: np.ndarray,
+                  samples: LevelSetSamples, info_weights: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Marginal std (3,) of the log semi-axes (in the order of ``axes``) from the views'
+    Gauss-Newton information on ``[omega, v, log axes]`` (cameras fixed), each view weighted by
+    ``info_weights`` (1/sigma); also the residuals (V', M) of the views in front and their mask.
+    Views whose camera does not see the ellipsoid in front are skipped."""
+    S = (R * axes**2) @ R.T
+    margins = T_cw[:, 2, :3] @ center + T_cw[:, 2, 3] - np.sqrt(
         np.einsum("vi,ij,vj->v", T_cw[:, 2, :3], S, T_cw[:, 2, :3]))
     ok = margins > DEFAULT_MIN_DEPTH_MARGIN
     if not ok.any():
-        return np.zeros(3)
+        return np.full(3, np.inf), np.zeros((0, samples.n.shape[-1])), ok
     sub = LevelSetSamples(None, samples.n[ok], samples.phi_det_minus_1[ok])
-    _, J, _ = observation_residual(T_cw[ok], ell.rotation, ell.center, ell.axes, sub)
-    Jl = J[..., 6:] * weights[ok, None, None]
-    return np.einsum("vmi,vmi->i", Jl, Jl)
+    r, J, _ = observation_residual(T_cw[ok], R, center, axes, sub)
+    H = np.einsum("v,vmi,vmj->ij", info_weights[ok], J, J)
+    try:
+        cov = np.linalg.inv(H + 1e-12 * np.trace(H) * np.eye(9))
+        std = np.sqrt(np.maximum(np.diag(cov)[6:], 0.0))
+    except np.linalg.LinAlgError:
+        std = np.full(3, np.inf)
+    return std, r, ok
+
+
+def _canonical(R: np.ndarray, center: np.ndarray, axes: np.ndarray) -> Ellipsoid:
+    """The ellipsoid with its semi-axes in descending order (rotation columns permuted alike,
+    handedness kept). Semi-axes that underflowed are kept tiny, not zero: the caller checks
+    them against the map limits (a collapsed axis is reported, not raised)."""
+    order = np.argsort(axes)[::-1]
+    R2 = R[:, order].copy()
+    if np.linalg.det(R2) < 0:
+        R2[:, 2] = -R2[:, 2]
+    return Ellipsoid(center, np.maximum(axes[order], 1e-300), R2)
 
 
 def _huber_scale(norms: np.ndarray, k: float) -> np.ndarray:
@@ -204,7 +218,7 @@ def refine_jointly(
     progress: Callable[[int, float], None] | None = None,
     unconstrained_log_std: float = UNCONSTRAINED_LOG_STD,
     truncated_weight: float = TRUNCATED_WEIGHT,
-    default_prior_relative_info: float | None = DEFAULT_PRIOR_RELATIVE_INFO,
+    unconstrained_prior_sigma: float | None = UNCONSTRAINED_PRIOR_SIGMA,
 ) -> JointResult:
     """Refine ``objects`` = ``(label, observation indices, initial ellipsoid)`` jointly.
 
@@ -220,6 +234,7 @@ def refine_jointly(
     used_frames = sorted({observations[i].frame for _, idx, _ in objects for i in idx})
     X = {f: gtsam.symbol("x", f) for f in used_frames} if refine_cameras else {}
     samples: dict[int, LevelSetSamples] = {}
+    info_w: list[np.ndarray] = []
     for k, (label, idx, ell) in enumerate(objects):
         values.insert(E[k], _pose3(np.block([[ell.rotation, ell.center[:, None]],
                                              [np.zeros((1, 3)), np.ones((1, 1))]])))
@@ -232,6 +247,10 @@ def refine_jointly(
         weights *= np.array([truncated_weight if touches_border(observations[i].ellipse, camera)
                              else 1.0 for i in idx])
         frames_k = [observations[i].frame for i in idx]
+        info_w.append(np.array([
+            (truncated_weight**2 if touches_border(observations[i].ellipse, camera) else 1.0)
+            / (observations[i].sigma if observations[i].sigma is not None
+               else QUALITY_DEFAULT_SIGMA) for i in idx]))
         if refine_cameras:  # one factor per view: each touches one camera
             for v, f in enumerate(frames_k):
                 one = LevelSetSamples(None, stacked.n[v:v + 1],
@@ -242,18 +261,21 @@ def refine_jointly(
             graph.add(_object_factor(stacked, weights, E[k], L[k], np.arange(len(idx)), None,
                                      np.array([invert_pose(T_wc[f]) for f in frames_k])))
         prior = (size_priors or {}).get(label)
-        if prior is None and default_prior_relative_info is not None:
-            # optional weak prior: keeps unconstrained axes from running off (module doc)
-            info = _log_axes_information(T_wc[frames_k], ell, stacked, weights)
-            sigmas = 1.0 / np.sqrt(np.maximum(default_prior_relative_info * info,
-                                              1.0 / DEFAULT_PRIOR_MAX_SIGMA**2))
-            graph.add(gtsam.PriorFactorVector(
-                L[k], np.full(3, float(np.mean(np.log(ell.axes)))),
-                gtsam.noiseModel.Diagonal.Sigmas(sigmas)))
-        elif prior is not None:
+        if prior is not None:
             graph.add(gtsam.PriorFactorVector(
                 L[k], np.full(3, math.log(prior.semi_axis_m)),
                 gtsam.noiseModel.Isotropic.Sigma(3, prior.log_sigma)))
+        elif unconstrained_prior_sigma is not None:
+            # axes the views do not constrain at the initial estimate: a weak prior towards the
+            # object's mean log semi-axis keeps them from collapsing (module doc)
+            std, _, _ = _log_axis_std(np.array([invert_pose(T_wc[f]) for f in frames_k]),
+                                      ell.rotation, ell.center, ell.axes, stacked, info_w[k])
+            loose = ~(std <= unconstrained_log_std)
+            if loose.any():
+                sig = np.where(loose, unconstrained_prior_sigma, 1e6)
+                graph.add(gtsam.PriorFactorVector(
+                    L[k], np.full(3, float(np.mean(np.log(ell.axes)))),
+                    gtsam.noiseModel.Diagonal.Sigmas(sig)))
     if refine_cameras and used_frames:
         for f in used_frames:
             values.insert(X[f], _pose3(T_wc[f]))
@@ -298,31 +320,16 @@ def refine_jointly(
         R = pose.rotation().matrix()
         c = np.asarray(pose.translation(), dtype=float)
         axes = np.exp(result.atVector(L[k]))
-        # canonical form (descending semi-axes, proper rotation) via the dual quadric
-        ell = ellipsoid_from_dual_quadric(dual_quadric(R, c, axes))
+        # canonical form: descending semi-axes, proper rotation
+        ell = _canonical(R, c, axes)
         ells.append(ell)
-        H = np.zeros((9, 9))
-        rs = []
-        cost = 0.0
-        for i in idx:
-            o = observations[i]
-            T_cw = invert_pose(T_out[o.frame])
-            margin = ellipsoid_depth_margins(T_cw, c[None], ((R * axes**2) @ R.T)[None])[0]
-            if not margin > DEFAULT_MIN_DEPTH_MARGIN:
-                continue
-            r, J_e, _ = observation_residual(T_cw, R, c, axes, samples[i])
-            w = 1.0 / (o.sigma if o.sigma is not None else QUALITY_DEFAULT_SIGMA)
-            if touches_border(o.ellipse, camera):
-                w *= truncated_weight**2
-            H += w * J_e.T @ J_e
-            rs.append(r)
-            cost += 0.5 * w * float(r @ r)
-        # the views' information only: a prior does not make an axis observed
-        try:
-            cov = np.linalg.inv(H + 1e-12 * np.trace(H) * np.eye(9))
-            std = np.sqrt(np.maximum(np.diag(cov)[6:], 0.0))
-        except np.linalg.LinAlgError:
-            std = np.full(3, np.inf)
+        T_cw_all = np.array([invert_pose(T_out[observations[i].frame]) for i in idx])
+        stacked = stack_samples([samples[i] for i in idx])
+        std, r_ok, ok = _log_axis_std(T_cw_all, R, c, axes, stacked, info_w[k])
+        w_cost = np.array([1.0 / observations[i].sigma if observations[i].sigma is not None
+                           else 1.0 for i in idx])[ok]
+        cost = 0.5 * float(np.sum(w_cost[:, None] * r_ok**2))
+        rs = [r_ok.reshape(-1)] if r_ok.size else []
         centres = np.array([T_out[observations[i].frame][:3, 3] for i in idx])
         rays = c - centres
         rays /= np.linalg.norm(rays, axis=1, keepdims=True)
