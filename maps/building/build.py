@@ -26,6 +26,10 @@ __all__ = ["BuildTimeoutError", "build_map"]
 Progress = Callable[[str, float, int], None]
 #: Objects with an unconstrained axis need at least this many views to enter the map.
 MIN_VIEWS_UNCONSTRAINED = 15
+#: Objects whose centre std (quality report) exceeds this (m) are left out of the map; None
+#: keeps them (the default: on the Chess bench, leaving out the TVs, whose centre std is
+#: 0.6-0.9 m, did not change relocalization at 10 cm and lost their detections).
+MAX_CENTER_STD_M: float | None = None
 
 
 class BuildTimeoutError(RuntimeError):
@@ -37,13 +41,17 @@ def build_map(
     deadline: float | None = None, association: AssociationOptions | None = None,
     max_iterations: int = 30, metadata: Mapping[str, Any] | None = None,
     min_views_unconstrained: int = MIN_VIEWS_UNCONSTRAINED,
+    max_center_std_m: float | None = MAX_CENTER_STD_M,
 ) -> tuple[SceneMap, dict[str, Any]]:
     """The map (version 1, ``map_id``) and the report (module docstring).
 
     Objects are left out of the map (listed in ``report["dropped_objects"]``, their detections
     rejected) when their semi-axes leave the map limits (``degenerate_shape``) or when an axis
     is not constrained by the views and fewer than ``min_views_unconstrained`` views support
-    them (``unconstrained``: a handful of mislabelled or inconsistent views).
+    them (``unconstrained``: a handful of mislabelled or inconsistent views), or, if
+    ``max_center_std_m`` is given, when the views leave their centre uncertain by more than that
+    along some direction (``center_unconstrained``, e.g. a large object seen truncated from a
+    narrow cone).
     """
     t0 = time.perf_counter()
     report_progress: Progress = progress or (lambda *_: None)
@@ -89,6 +97,8 @@ def build_map(
             reason = "degenerate_shape"
         elif q.unconstrained_axes and q.n_views < min_views_unconstrained:
             reason = "unconstrained"
+        elif max_center_std_m is not None and not q.center_std_m <= max_center_std_m:
+            reason = "center_unconstrained"
         if reason is not None:
             dropped.append({"object_id": oid, "label": h.label, "reason": reason,
                             "n_views": q.n_views})
@@ -105,6 +115,7 @@ def build_map(
                         "residual_cost": q.residual_cost,
                         "rms_level_residual": q.rms_level_residual,
                         "log_semi_axis_std": list(q.log_axis_std),
+                        "center_std_m": q.center_std_m,
                         "unconstrained_axes": list(q.unconstrained_axes),
                         "semi_axes_m": ell.axes.tolist()},
         })

@@ -35,7 +35,9 @@ largest angle between two rays from the camera centres to the refined centre), r
 residual, and the semi-axes the views do not constrain: the marginal standard deviation of
 each log semi-axis from the object's own 9x9 Gauss-Newton information (cameras held fixed;
 views weighted by ``1/sigma``, ``QUALITY_DEFAULT_SIGMA`` for detections without one);
-an axis with a std above ``unconstrained_log_std`` (default 0.3, i.e. +-35 %) is flagged.
+an axis with a std above ``unconstrained_log_std`` (default 0.3, i.e. +-35 %) is flagged; and
+the largest standard deviation of the centre along any direction (``center_std_m``, same
+information).
 """
 
 from __future__ import annotations
@@ -91,6 +93,7 @@ class ObjectQuality:
     rms_level_residual: float
     log_axis_std: tuple[float, float, float]
     unconstrained_axes: tuple[int, ...]
+    center_std_m: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -110,26 +113,29 @@ def _pose3(T: np.ndarray) -> gtsam.Pose3:
 
 def _log_axis_std(T_cw: np.ndarray, R: np.ndarray, center: np.ndarray, axes: np.ndarray,
                   samples: LevelSetSamples, info_weights: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """Marginal std (3,) of the log semi-axes (in the order of ``axes``) from the views'
     Gauss-Newton information on ``[omega, v, log axes]`` (cameras fixed), each view weighted by
-    ``info_weights`` (1/sigma); also the residuals (V', M) of the views in front and their mask.
+    ``info_weights`` (1/sigma); also the residuals (V', M) of the views in front, their mask and
+    the largest std (m) of the centre along any direction.
     Views whose camera does not see the ellipsoid in front are skipped."""
     S = (R * axes**2) @ R.T
     margins = T_cw[:, 2, :3] @ center + T_cw[:, 2, 3] - np.sqrt(
         np.einsum("vi,ij,vj->v", T_cw[:, 2, :3], S, T_cw[:, 2, :3]))
     ok = margins > DEFAULT_MIN_DEPTH_MARGIN
     if not ok.any():
-        return np.full(3, np.inf), np.zeros((0, samples.n.shape[-1])), ok
+        return np.full(3, np.inf), np.zeros((0, samples.n.shape[-1])), ok, math.inf
     sub = LevelSetSamples(None, samples.n[ok], samples.phi_det_minus_1[ok])
     r, J, _ = observation_residual(T_cw[ok], R, center, axes, sub)
     H = np.einsum("v,vmi,vmj->ij", info_weights[ok], J, J)
     try:
         cov = np.linalg.inv(H + 1e-12 * np.trace(H) * np.eye(9))
         std = np.sqrt(np.maximum(np.diag(cov)[6:], 0.0))
+        # centre: c -> c + R v, so its covariance is R cov_v R^T; largest std of any direction
+        center_std = float(np.sqrt(max(np.linalg.eigvalsh(R @ cov[3:6, 3:6] @ R.T).max(), 0)))
     except np.linalg.LinAlgError:
-        std = np.full(3, np.inf)
-    return std, r, ok
+        std, center_std = np.full(3, np.inf), math.inf
+    return std, r, ok, center_std
 
 
 def _canonical(R: np.ndarray, center: np.ndarray, axes: np.ndarray) -> Ellipsoid:
@@ -268,7 +274,7 @@ def refine_jointly(
         elif unconstrained_prior_sigma is not None:
             # axes the views do not constrain at the initial estimate: a weak prior towards the
             # object's mean log semi-axis keeps them from collapsing (module doc)
-            std, _, _ = _log_axis_std(np.array([invert_pose(T_wc[f]) for f in frames_k]),
+            std, _, _, _ = _log_axis_std(np.array([invert_pose(T_wc[f]) for f in frames_k]),
                                       ell.rotation, ell.center, ell.axes, stacked, info_w[k])
             loose = ~(std <= unconstrained_log_std)
             if loose.any():
@@ -325,7 +331,7 @@ def refine_jointly(
         ells.append(ell)
         T_cw_all = np.array([invert_pose(T_out[observations[i].frame]) for i in idx])
         stacked = stack_samples([samples[i] for i in idx])
-        std, r_ok, ok = _log_axis_std(T_cw_all, R, c, axes, stacked, info_w[k])
+        std, r_ok, ok, center_std = _log_axis_std(T_cw_all, R, c, axes, stacked, info_w[k])
         w_cost = np.array([1.0 / observations[i].sigma if observations[i].sigma is not None
                            else 1.0 for i in idx])[ok]
         cost = 0.5 * float(np.sum(w_cost[:, None] * r_ok**2))
@@ -341,7 +347,7 @@ def refine_jointly(
         quality.append(ObjectQuality(
             n_views=len(idx), view_spread_deg=spread, residual_cost=cost,
             rms_level_residual=float(np.sqrt(np.mean(allr**2))),
-            log_axis_std=tuple(float(x) for x in std_c),
+            log_axis_std=tuple(float(x) for x in std_c), center_std_m=center_std,
             unconstrained_axes=tuple(int(a) for a in np.flatnonzero(
                 ~(std_c <= unconstrained_log_std)))))
     return JointResult(ells, quality, T_out, it, initial_error, err, stopped)
