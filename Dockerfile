@@ -28,9 +28,11 @@ COPY service/ service/
 COPY sdk/ sdk/
 
 # The README's install (`make serve` -> Makefile target `install`), run with the image's Python:
-# the same two pip commands, minus the `-e` and the `[dev]` extra that only tests need.
+# the same pip commands, minus the `-e` and the `[dev]` extra that only tests need. The light SDK
+# distribution (sdk/) goes first: the server distribution depends on it.
 # hadolint ignore=DL3013
 RUN python -m pip install --upgrade pip \
+    && python -m pip install ./sdk \
     && python -m pip install .
 
 USER 10001:10001

@@ -50,6 +50,7 @@ __all__ = [
     "invert_pose",
     "level_values",
     "params_from_dual_conics",
+    "params_from_gaussians",
     "pose_matrix",
     "project_ellipsoid",
     "project_ellipsoids_dual",
@@ -318,7 +319,7 @@ class Ellipse:
         """Inverse of :meth:`gaussian` (``sigma`` symmetric positive definite)."""
         mu = _finite_array("Ellipse.from_gaussian", "mu", mu, (2,))
         S = _finite_array("Ellipse.from_gaussian", "sigma", sigma, (2, 2))
-        return cls(*_params_from_center_and_inverse_shape(mu[None], S[None])[0])
+        return cls(*params_from_gaussians(mu[None], S[None])[0])
 
     # -- boxes, levels, contour
     def bbox(self) -> np.ndarray:
@@ -386,8 +387,10 @@ def dual_conics_from_params(params: np.ndarray) -> np.ndarray:
     return out
 
 
-def _params_from_center_and_inverse_shape(center: np.ndarray, sigma: np.ndarray) -> np.ndarray:
-    """(N, 5) canonical params (a >= b, angle in [-pi/2, pi/2)) from centres and ``A^-1``."""
+def params_from_gaussians(center: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """(N, 5) canonical params (a >= b, angle in [-pi/2, pi/2)) from centres (N, 2) px and
+    ``Sigma = A^-1`` (N, 2, 2) px^2. Raises ``DegenerateProjectionError`` if a ``Sigma`` is not
+    positive definite."""
     sxx, syy, sxy = sigma[:, 0, 0], sigma[:, 1, 1], 0.5 * (sigma[:, 0, 1] + sigma[:, 1, 0])
     half_tr = 0.5 * (sxx + syy)
     disc = np.sqrt(np.maximum((0.5 * (sxx - syy)) ** 2 + sxy**2, 0.0))
@@ -419,7 +422,7 @@ def params_from_dual_conics(dual_conics: np.ndarray) -> np.ndarray:
     Cn = C / (-w)[:, None, None]
     center = -Cn[:, :2, 2]
     sigma = Cn[:, :2, :2] + center[:, :, None] * center[:, None, :]
-    return _params_from_center_and_inverse_shape(center, sigma)
+    return params_from_gaussians(center, sigma)
 
 
 def level_values(params: np.ndarray, points: np.ndarray) -> np.ndarray:

@@ -37,9 +37,12 @@ functions of the projection's normalised dual conic ``Cn = C* / (-C*[2,2])`` (ce
 ``mu = -Cn[:2, 2]``, ``Sigma = Cn[:2, :2] + mu mu^T``). Their residuals are re-implemented
 here vectorised over the objects (equal to ``factors.metrics.residual``, tested) and
 differentiated through ``dC* = K dA K^T``, ``dCn = (dC* + Cn dC*[2,2]) / (-C*[2,2])``.
-``iou``, ``giou`` and ``qbbox`` (piecewise: clipped at the image border) call
-``factors.metrics.residual`` and use central differences on ``retract`` (step
-:data:`DEFAULT_NUMERIC_STEP`), one-sided where a side is invalid.
+``iou`` and ``giou`` evaluate their quadrant rows per pair with
+:func:`factors.metrics.overlap_residual` (exact areas and their exact gradient w.r.t. the
+projection's ``(mu, Sigma)``, :mod:`factors.overlap`), chained through the same ``dCn``.
+``qbbox`` (piecewise: clipped at the image border) calls ``factors.metrics.residual`` and uses
+central differences on ``retract`` (step :data:`DEFAULT_NUMERIC_STEP`), one-sided where a side
+is invalid.
 
 Evaluations are memoised on the pose value and their arrays are read-only (shared by the
 factors that slice them).
@@ -97,8 +100,10 @@ from factors.geometry import (
     dual_conics_from_params,
     level_values,
     params_from_dual_conics,
+    params_from_gaussians,
 )
 from factors.metrics import METRIC_NAMES
+from factors.overlap import HULL_DIRECTIONS
 
 __all__ = [
     "ANALYTIC_METRICS",
@@ -118,13 +123,11 @@ DEFAULT_PENALTY_COST = 1e8
 #: A projection counts as valid while the ellipsoid's smallest camera depth exceeds this (m).
 DEFAULT_MIN_DEPTH_MARGIN = 1e-3
 #: Central-difference step on each tangent coordinate (rad or m) for numerical Jacobians.
-#: Larger for iou/giou: their residual ``sqrt(Delta)`` has a cone at the optimum, where a wider
-#: central difference still gives a usable slope (the areas themselves are exact and smooth).
-DEFAULT_NUMERIC_STEP: dict[str, float] = {
-    name: 1e-5 if name in ("iou", "giou") else 1e-6 for name in METRIC_NAMES}
+DEFAULT_NUMERIC_STEP: dict[str, float] = dict.fromkeys(METRIC_NAMES, 1e-6)
 #: Metrics whose pose Jacobian is analytic (the others use central differences).
 ANALYTIC_METRICS: tuple[str, ...] = (
-    "level_set", "algebraic", "frobenius", "wasserstein", "bhattacharyya", "bbox")
+    "level_set", "algebraic", "frobenius", "wasserstein", "bhattacharyya", "bbox", "iou",
+    "giou")
 _CONIC_METRICS = ("algebraic", "frobenius", "wasserstein", "bhattacharyya", "bbox")
 #: Power of the reference length ``L_j`` (px) in the metric's residual: the penalty's
 #: reference residual ``rho_j = L_j ** power`` (level_set: ``max(1, s_max_j)^2`` instead).
@@ -488,6 +491,8 @@ class PoseResidualModel:
             ev = self._evaluate_numeric(T, jacobian)
         elif self.metric == "level_set":
             ev = self._evaluate_level_set(T, jacobian)
+        elif self.metric in ("iou", "giou"):
+            ev = self._evaluate_overlap(T, jacobian)
         else:
             ev = self._evaluate_conic(T, jacobian)
         for arr in (ev.residuals, ev.jacobians, ev.valid, ev.depth_margins):
@@ -562,6 +567,66 @@ class PoseResidualModel:
                                     a2 * s * s + b2 * c * c], axis=1)
         self._det_canon = _canonical_axes(P)
 
+    def _normalised_dual_conics(
+        self, A: np.ndarray, c: np.ndarray, valid: np.ndarray, jacobian: bool,
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """``Cn = C* / (-C*[2,2])`` (N, 3, 3) of the projections and, if ``jacobian``, its
+        derivative (N, 6, 3, 3) along the 6 tangent directions ``[omega, v]`` (module doc).
+        Invalid rows (``~valid``) hold a stand-in ellipse, to be replaced by the penalty."""
+        if not valid.all():
+            A = A.copy()
+            A[~valid] = np.diag([1.0, 1.0, -1.0])
+        K = self._K
+        Cs = K @ A @ K.T  # (N, 3, 3) C*
+        w = -Cs[:, 2, 2]
+        Cn = Cs / w[:, None, None]
+        if not jacobian:
+            return Cn, None
+        G = np.empty((self.n, 6, 3, 3))
+        G[:, :3] = -np.einsum("kij,njl->nkil", _SKEW_BASIS, A)
+        G[:, 3:] = 0.0
+        idx = np.arange(3)
+        G[:, 3 + idx, idx, :] = c[:, None, :]
+        dA = G + G.transpose(0, 1, 3, 2)
+        dCs = K @ dA @ K.T  # (N, 6, 3, 3)
+        return Cn, (dCs + Cn[:, None] * dCs[:, :, 2, 2, None, None]) / w[:, None, None, None]
+
+    def _evaluate_overlap(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
+        """iou / giou: the quadrant rows ``r_j`` (4,) of :func:`factors.metrics.
+        overlap_residual` (exact areas, one scalar call per pair) and their analytic pose
+        Jacobian: the exact area gradients w.r.t. the projection's ``(mu, Sigma)``, chained
+        through ``dCn``."""
+        from factors import metrics
+
+        A, c, S, margins = self._camera_frame(T)
+        valid = margins > self.min_depth_margin
+        Cn, dCn = self._normalised_dual_conics(A, c, valid, jacobian)
+        mu = -Cn[:, :2, 2]
+        sigma = Cn[:, :2, :2] + mu[:, :, None] * mu[:, None, :]
+        dg = None
+        if dCn is not None:  # d(mu_x, mu_y, s00, s01, s11) / d xi, (N, 6, 5)
+            dmu = -dCn[:, :, :2, 2]
+            dsig = (dCn[:, :, :2, :2] + dmu[..., :, None] * mu[:, None, None, :]
+                    + mu[:, None, :, None] * dmu[..., None, :])
+            dg = np.concatenate([dmu, dsig[..., 0, 0, None], dsig[..., 0, 1, None],
+                                 dsig[..., 1, 1, None]], axis=-1)
+        r = np.zeros((self.n, self.dim))
+        J = None if dg is None else np.zeros((self.n, self.dim, 6))
+        hull_directions = self.options.get("hull_directions", HULL_DIRECTIONS)
+        for j in np.flatnonzero(valid):
+            try:
+                proj = params_from_gaussians(mu[j:j + 1], sigma[j:j + 1])[0]
+            except DegenerateProjectionError:
+                valid[j] = False
+                continue
+            r[j], grad = metrics.overlap_residual(self.metric, self._det_params[j], proj,
+                                                  hull_directions, gradient=J is not None)
+            if J is not None:
+                J[j] = grad @ dg[j].T
+        if not valid.all():
+            self._apply_penalty(r, J, ~valid, c, S, margins)
+        return PoseEvaluation(r, J, valid, margins)
+
     def _evaluate_conic(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
         """Analytic residuals/Jacobians of the metrics that are smooth functions of the
         normalised dual conic ``Cn = C* / (-C*[2,2])`` of the projection.
@@ -573,23 +638,7 @@ class PoseResidualModel:
         A, c, S, margins = self._camera_frame(T)
         valid = margins > self.min_depth_margin
         all_valid = bool(valid.all())
-        if not all_valid:
-            A = A.copy()
-            A[~valid] = np.diag([1.0, 1.0, -1.0])  # stand-in ellipse, rows replaced below
-        K = self._K
-        Cs = K @ A @ K.T  # (N, 3, 3) C*
-        w = -Cs[:, 2, 2]
-        Cn = Cs / w[:, None, None]
-        dCn: np.ndarray | None = None
-        if jacobian:
-            G = np.empty((self.n, 6, 3, 3))
-            G[:, :3] = -np.einsum("kij,njl->nkil", _SKEW_BASIS, A)
-            G[:, 3:] = 0.0
-            idx = np.arange(3)
-            G[:, 3 + idx, idx, :] = c[:, None, :]
-            dA = G + G.transpose(0, 1, 3, 2)
-            dCs = K @ dA @ K.T  # (N, 6, 3, 3)
-            dCn = (dCs + Cn[:, None] * dCs[:, :, 2, 2, None, None]) / w[:, None, None, None]
+        Cn, dCn = self._normalised_dual_conics(A, c, valid, jacobian)
         if self.metric in ("algebraic", "frobenius"):
             r = self._det_vec5 - Cn.reshape(self.n, 9)[:, _VEC5]
             J = None

@@ -61,6 +61,7 @@ __all__ = [
     "MapStore",
     "MapStoreError",
     "MapSummary",
+    "MapVersionInfo",
     "StoreUnavailable",
     "StoredMap",
     "VersionConflict",
@@ -129,6 +130,16 @@ class MapSummary:
     latest_version: int
     content_hash: str
     updated_at: datetime
+    created_at: datetime
+
+
+@dataclass(frozen=True)
+class MapVersionInfo:
+    """One stored version in :meth:`MapStore.version_history`: number, content hash, creation
+    time (UTC)."""
+
+    version: int
+    content_hash: str
     created_at: datetime
 
 
@@ -379,6 +390,17 @@ class MapStore:
         if not rows:
             raise MapNotFound(map_id)
         return [int(r) for r in rows]
+
+    def version_history(self, map_id: str) -> builtins.list[MapVersionInfo]:
+        """Every stored version of a map with its content hash and creation time, ascending.
+        :class:`MapNotFound`."""
+        v = versions_table.c
+        with self._read() as conn:
+            rows = conn.execute(sa.select(v.version, v.content_hash, v.created_at)
+                                .where(v.map_id == map_id).order_by(v.version)).all()
+        if not rows:
+            raise MapNotFound(map_id)
+        return [MapVersionInfo(int(r.version), r.content_hash, _utc(r.created_at)) for r in rows]
 
     def list(self) -> builtins.list[MapSummary]:
         """Every map with its latest version, ordered by ``map_id``."""

@@ -111,6 +111,13 @@ def parse_api_keys(text: str) -> tuple[ApiKey, ...]:
 
 
 def _default_data_dir() -> Path:
+    """``<checkout>/var`` when running from a source checkout (an editable install, as ``make
+    serve`` does: the package sits next to ``pyproject.toml`` and ``.git``), so every clone has
+    its own database; otherwise (an installed wheel) ``~/.local/share/quadloc``. The container
+    image sets ``QUADLOC_DATA_DIR=/data``."""
+    checkout = Path(__file__).resolve().parents[1]
+    if (checkout / "pyproject.toml").is_file() and (checkout / ".git").exists():
+        return checkout / "var"
     return Path.home() / ".local" / "share" / "quadloc"
 
 

@@ -91,7 +91,9 @@ def test_install_steps_are_the_readmes():
         return [re.sub(r"\[dev\]$", "", a.strip("'\"")) for a in args if a != "-e"]
 
     assert [normalise(c) for c in docker_cmds] == [normalise(c) for c in make_cmds]
-    assert all(" ".join(c) in {"--upgrade pip", "."} for c in map(normalise, docker_cmds))
+    # ./sdk first: the server distribution depends on the light SDK distribution (issue 13)
+    assert all(" ".join(c) in {"--upgrade pip", "./sdk", "."}
+               for c in map(normalise, docker_cmds))
     # No other download: no curl/wget/apt-get installs, no extra pip packages.
     text = "\n".join(f"{w} {r}" for w, r in _instructions())  # comments excluded
     assert not re.search(r"\b(curl|wget|apt-get install|apk add)\b", text)

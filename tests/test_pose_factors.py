@@ -145,9 +145,12 @@ def test_factor_residual_equals_metric_residual(scene, metric):
         expected = np.asarray(metrics.residual(metric, d, proj, **opts))
         got = f.unwhitenedError(values)
         np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-9)
-        # unit noise: GTSAM error = 0.5 * metric cost
-        assert f.error(values) == pytest.approx(0.5 * metrics.cost(metric, d, proj, **opts),
+        # unit noise: GTSAM error = 0.5 ||r||^2 (= 0.5 * metric cost but for iou / giou)
+        assert f.error(values) == pytest.approx(0.5 * float(expected @ expected),
                                                 rel=1e-9, abs=1e-12)
+        if metric not in ("iou", "giou"):
+            assert f.error(values) == pytest.approx(
+                0.5 * metrics.cost(metric, d, proj, **opts), rel=1e-9, abs=1e-12)
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
@@ -166,7 +169,7 @@ def test_level_set_analytic_jacobian_matches_numerical(seed):
 
 
 @pytest.mark.parametrize("metric", ["algebraic", "frobenius", "wasserstein", "bhattacharyya",
-                                    "bbox", "qbbox"])
+                                    "bbox", "qbbox", "iou", "giou"])
 def test_smooth_metric_jacobians_match_numerical(scene, metric):
     """Analytic Jacobians against central differences of ``factors.metrics.residual``.
 
@@ -174,7 +177,7 @@ def test_smooth_metric_jacobians_match_numerical(scene, metric):
     only a PLUMBING check (right pose perturbation, step and row order), not a check of
     derivative formulas."""
     assert set(ANALYTIC_METRICS) == {"level_set", "algebraic", "frobenius", "wasserstein",
-                                     "bhattacharyya", "bbox"}
+                                     "bhattacharyya", "bbox", "iou", "giou"}
     ells, dets, pose = scene
     model = PoseResidualModel(metric, dets, ells, CAMERA, initial_world_from_camera=pose)
     ev = model.evaluate(pose, jacobian=True)
@@ -391,7 +394,8 @@ def test_penalty_exceeds_valid_costs_near_the_principal_plane(metric):
             pose = np.eye(4)  # world_from_camera, looking along +Z at the object
             pose[:3, 3] = [-lateral, 0.0, -(depth + margin)]
             proj = project_ellipsoid(camera, invert_pose(pose), e)
-            valid_cost = metrics.cost(metric, det, proj, **opts)
+            r = metrics.residual(metric, det, proj, **opts)
+            valid_cost = float(r @ r)
             assert model.evaluate(pose).valid[0]
             assert model.costs(pose)[0] == pytest.approx(valid_cost, rel=1e-6)
             pose[2, 3] += 2 * margin  # the same pose just across: margin -> -margin

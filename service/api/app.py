@@ -21,7 +21,9 @@ from maps.errors import MapAlreadyExists, MapNotFound
 from maps.store import MapStore
 from service.api.build_jobs import install_map_building
 from service.api.deps import check_body_depth
+from service.api.docs_pages import install_offline_docs
 from service.api.errors import PROBLEM_MEDIA_TYPE, install_error_handlers
+from service.api.inspector import install_inspector
 from service.api.map_cache import MapCache
 from service.api.metrics import ApiMetrics, MetricsAndLimitsMiddleware
 from service.api.routers import health, localize, maps
@@ -118,6 +120,7 @@ def create_app(settings: Settings | None = None, *, store: MapStore | None = Non
     app = FastAPI(
         title="QuadLoc", version=API_VERSION, description=DESCRIPTION, lifespan=lifespan,
         dependencies=[Depends(check_body_depth)],
+        docs_url=None, redoc_url=None,  # served offline by install_offline_docs below
         openapi_tags=[
             {"name": "localization", "description": "Camera pose from detected objects."},
             {"name": "maps", "description": "Versioned ellipsoid maps."},
@@ -138,6 +141,8 @@ def create_app(settings: Settings | None = None, *, store: MapStore | None = Non
     app.include_router(maps.router)
     install_map_building(app, store, settings, app.state.map_cache)
     app.include_router(health.router)
+    install_offline_docs(app)
+    install_inspector(app)
     app.add_middleware(MetricsAndLimitsMiddleware, metrics=metrics,
                        max_body_bytes=settings.max_body_bytes)
     app.openapi = lambda: build_openapi(app)  # type: ignore[method-assign]

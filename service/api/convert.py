@@ -145,10 +145,11 @@ def options_from_request(options: LocalizeOptionsIn, max_budget_ms: float) -> Lo
 def pose_out(world_from_camera_cv: np.ndarray, convention: str) -> PoseOut:
     """4x4 OpenCV-axes ``world_from_camera`` -> wire pose in ``convention`` axes."""
     T = convert_pose(world_from_camera_cv, "opencv", convention)
-    q = quaternion_wxyz_from_rotation(T[:3, :3])
-    return PoseOut(quaternion_wxyz=[float(x) for x in q],
+    q = [float(x) for x in quaternion_wxyz_from_rotation(T[:3, :3])]
+    return PoseOut(quaternion_wxyz=q, quaternion_xyzw=q[1:] + q[:1],
                    translation_m=[float(x) for x in T[:3, 3]],
                    matrix=[[float(x) for x in row] for row in T],
+                   matrix_column_major=[float(x) for x in T.T.reshape(16)],
                    convention=convention)  # type: ignore[arg-type]
 
 

@@ -48,6 +48,8 @@ __all__ = [
     "MapListOut",
     "MapOut",
     "MapSummaryOut",
+    "MapVersionOut",
+    "MapVersionsOut",
     "PoseIn",
     "PoseOut",
     "PosePriorIn",
@@ -150,14 +152,25 @@ class CameraIn(_Model):
 
 
 class PoseIn(_Model):
-    """A ``world_from_camera`` pose: `quaternion_wxyz` + `translation_m`, or a 4x4 `matrix`."""
+    """A ``world_from_camera`` pose: `quaternion_wxyz` (or `quaternion_xyzw`) + `translation_m`,
+    or a 4x4 `matrix` given as a list of ROWS (row-major)."""
 
     quaternion_wxyz: list[float] | None = Field(default=None, min_length=4, max_length=4)
+    quaternion_xyzw: list[float] | None = Field(
+        default=None, min_length=4, max_length=4,
+        description="The same unit quaternion scalar LAST (ARKit/ARCore/Unity order); give "
+                    "it instead of `quaternion_wxyz`.")
     translation_m: list[float] | None = Field(default=None, min_length=3, max_length=3)
-    matrix: list[list[float]] | None = Field(default=None, min_length=4, max_length=4)
+    matrix: list[list[float]] | None = Field(default=None, min_length=4, max_length=4,
+                                             description="4x4, row-major: a list of 4 rows.")
 
     @model_validator(mode="after")
     def _one_form(self) -> PoseIn:
+        if self.quaternion_xyzw is not None:
+            if self.quaternion_wxyz is not None:
+                raise ValueError("give one of 'quaternion_wxyz' or 'quaternion_xyzw'")
+            x, y, z, w = self.quaternion_xyzw
+            self.quaternion_wxyz, self.quaternion_xyzw = [w, x, y, z], None
         has_q = self.quaternion_wxyz is not None or self.translation_m is not None
         if has_q == (self.matrix is not None):
             raise ValueError("give either 'quaternion_wxyz' + 'translation_m' or 'matrix'")
@@ -250,8 +263,17 @@ class PoseOut(BaseModel):
     """The camera's pose in the map frame (``world_from_camera``)."""
 
     quaternion_wxyz: list[float] = Field(description="Unit quaternion (w, x, y, z), w >= 0.")
+    quaternion_xyzw: list[float] = Field(
+        description="The same quaternion scalar LAST (x, y, z, w): the order of "
+                                  "ARKit/simd, ARCore, Unity and ROS.")
     translation_m: list[float] = Field(description="Camera centre in the map frame (m).")
-    matrix: list[list[float]] = Field(description="4x4 homogeneous world_from_camera.")
+    matrix: list[list[float]] = Field(
+        description="4x4 homogeneous world_from_camera, ROW-major: a list of 4 rows, "
+                    "`matrix[r][c]`.")
+    matrix_column_major: list[float] = Field(
+        description="The same 4x4 as 16 numbers in COLUMN-major order (column 0 "
+                                  "top to bottom, then column 1...): simd_float4x4(columns:), "
+                                  "Unity Matrix4x4, OpenGL/glm, three.js Matrix4.fromArray.")
     convention: Convention = Field(description="Camera axes of this pose.")
 
 
@@ -322,6 +344,19 @@ class MapOut(BaseModel):
     content_hash: str = Field(description="sha256 of the canonical map content (the ETag).")
     created_at: str | None = None
     map: dict[str, Any] = Field(description="The map in the documented JSON format.")
+
+
+class MapVersionOut(BaseModel):
+    version: int
+    content_hash: str = Field(description="sha256 of the version's canonical content (its ETag).")
+    created_at: str | None = None
+
+
+class MapVersionsOut(BaseModel):
+    """Every stored version of a map, ascending (the last one is the latest)."""
+
+    map_id: str
+    versions: list[MapVersionOut]
 
 
 class HealthOut(BaseModel):

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Body, Query, Response
+from fastapi import APIRouter, Body, Header, Query, Response
 
 from maps.compiled import CompiledMap
 from maps.errors import MapNotFound
@@ -16,6 +16,7 @@ from service.api.auth import ReadAccess
 from service.api.deps import MapCacheDep, MapIdPath, SettingsDep, SolverDep
 from service.api.errors import ProblemError, map_not_found
 from service.api.examples import LOCALIZE_EXAMPLE, LOCALIZE_RESPONSE_EXAMPLE
+from service.api.inspector import SVG_MEDIA_TYPE, render_localization_svg, wants_svg
 from service.api.map_cache import MapCache
 from service.api.openapi_docs import problem_responses
 from service.api.schemas import (
@@ -46,9 +47,13 @@ def _compiled(cache: MapCache, map_id: str, version: int | None) -> CompiledMap:
     description="Matches the frame's detections to the map's ellipsoids (label-constrained "
                 "RANSAC with P3P/P2E, then refinement with the chosen metric) and returns the "
                 "camera pose `world_from_camera`, its covariance and a confidence. "
-                "`localized: false` with a `reason` is a normal 200 answer.",
+                "`localized: false` with a `reason` is a normal 200 answer. With "
+                "`Accept: image/svg+xml` the answer is the frame drawn instead (detections, "
+                "the map's ellipsoids projected at the returned pose, inliers vs outliers, "
+                "IoU and cost per match; the JSON answer inside `<metadata>`).",
     responses={**problem_responses(400, 401, 403, 404, 413, 415, 422, 503),
-               200: {"content": {"application/json": {"example": LOCALIZE_RESPONSE_EXAMPLE}}}},
+               200: {"content": {"application/json": {"example": LOCALIZE_RESPONSE_EXAMPLE},
+                                 SVG_MEDIA_TYPE: {"schema": {"type": "string"}}}}},
 )
 def localize_frame(
     map_id: MapIdPath,
@@ -56,9 +61,14 @@ def localize_frame(
         "chess_demo": {"summary": "A simulated frame of the demo Chess map",
                        "value": LOCALIZE_EXAMPLE}})],
     cache: MapCacheDep, solver: SolverDep, _key: ReadAccess, version: VersionQuery = None,
+    accept: Annotated[str | None, Header(
+        description="`image/svg+xml` for the frame drawn (see above)")] = None,
 ) -> Response:
     compiled = _compiled(cache, map_id, version)
     result = solver.localize_frames(compiled, [frame], batch=False)[0]
+    if wants_svg(accept):
+        return Response(render_localization_svg(compiled, frame, result),
+                        media_type=SVG_MEDIA_TYPE)
     # Already a validated model: serialise it directly (skips FastAPI's re-validation).
     return Response(result.model_dump_json(), media_type="application/json")
 

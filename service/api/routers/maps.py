@@ -25,7 +25,13 @@ from service.api.deps import MapCacheDep, MapIdPath, SettingsDep, StoreDep
 from service.api.errors import ProblemError, map_not_found
 from service.api.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
 from service.api.openapi_docs import problem_responses
-from service.api.schemas import MapListOut, MapOut, MapSummaryOut
+from service.api.schemas import (
+    MapListOut,
+    MapOut,
+    MapSummaryOut,
+    MapVersionOut,
+    MapVersionsOut,
+)
 
 __all__ = ["router"]
 
@@ -187,6 +193,25 @@ def get_map(map_id: MapIdPath, response: Response, store: StoreDep, _key: ReadAc
         raise map_not_found(map_id, version) from exc
     response.headers["ETag"] = etag_of(stored.content_hash)
     return _map_out(stored)
+
+
+@router.get(
+    "/maps/{map_id}/versions", response_model=MapVersionsOut, summary="List a map's versions",
+    description="Every stored version (immutable, readable with `GET /v1/maps/{map_id}"
+                "?version=n`), ascending, with its content hash (the ETag) and creation time.",
+    responses={**problem_responses(401, 403, 404, 422, 503),
+               **_ok(200, {"map_id": _EXAMPLE_MAP.map_id, "versions": [
+                   {"version": 1, "content_hash": content_hash(_EXAMPLE_MAP),
+                    "created_at": "2026-01-05T10:00:00+00:00"}]}, False)},
+)
+def list_map_versions(map_id: MapIdPath, store: StoreDep, _key: ReadAccess) -> MapVersionsOut:
+    try:
+        history = store.version_history(map_id)
+    except MapNotFound as exc:
+        raise map_not_found(map_id) from exc
+    return MapVersionsOut(map_id=map_id, versions=[
+        MapVersionOut(version=h.version, content_hash=h.content_hash,
+                      created_at=h.created_at.isoformat()) for h in history])
 
 
 def _parse_if_match(if_match: str | None) -> set[str]:
