@@ -27,8 +27,8 @@ class ProgressBar:
     """``[#####.....]  45% refining (7 objects)`` redrawn in place on a terminal, one line per
     stage change otherwise (logs stay readable)."""
 
-    def __init__(self, stream: TextIO = sys.stderr, width: int = 30) -> None:
-        self.stream = stream
+    def __init__(self, stream: TextIO | None = None, width: int = 30) -> None:
+        self.stream = stream if stream is not None else sys.stderr
         self.width = width
         self.tty = bool(getattr(stream, "isatty", lambda: False)())
         self._stage = ""

@@ -71,3 +71,18 @@ def test_sdk_build_map_waits_and_reports_progress(live_server: str) -> None:
         with pytest.raises(BuildFailedError) as exc:
             client.build_map(empty, map_id="sdk-empty", poll_interval_s=0.1)
         assert exc.value.job.error["reason"] == "no_objects"
+
+
+def test_cli_maps_build_remote(live_server: str, tmp_path: Path,
+                               capsys: pytest.CaptureFixture[str]) -> None:
+    rec, _ = _recording()
+    src = tmp_path / "recording.json"
+    src.write_text(json.dumps(rec))
+    assert main(["--url", live_server, "maps", "build", str(src), "--map-id", "cli-remote"]) == 0
+    assert "cli-remote version 1 (3 objects" in capsys.readouterr().out
+    # exists: refused without --update (the server wants If-Match), then a new version
+    assert main(["--url", live_server, "maps", "build", str(src), "--map-id", "cli-remote"]) == 2
+    assert "--update" in capsys.readouterr().err
+    assert main(["--url", live_server, "maps", "build", str(src), "--map-id", "cli-remote",
+                 "--update"]) == 0
+    assert "cli-remote version 2" in capsys.readouterr().out
