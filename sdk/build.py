@@ -1,5 +1,6 @@
 """Map building through the API: ``client.build_map(recording, map_id=..., wait=True,
-on_progress=...)`` (:class:`sdk.QuadLocClient`).
+on_progress=...)`` (:class:`sdk.QuadLocClient`; ``await client.build_map(...)`` on
+:class:`sdk.AsyncQuadLocClient`).
 
 ``POST /v1/maps:build?map_id=...`` starts a job (202 + ``Location``); with ``wait=True`` the job
 resource is polled every ``poll_interval_s`` until it succeeds (the :class:`BuildJob` is
@@ -23,7 +24,8 @@ from typing import Any
 
 from sdk.errors import QuadLocError
 
-__all__ = ["BuildFailedError", "BuildJob", "build_map", "get_build_job"]
+__all__ = ["BuildFailedError", "BuildJob", "abuild_map", "aget_build_job", "build_map",
+           "get_build_job"]
 
 Recording = Mapping[str, Any] | str | Path
 
@@ -75,25 +77,54 @@ def get_build_job(client: Any, job_id_or_location: str) -> BuildJob:
     """The current state of a job (by id or by the ``Location`` path)."""
     from sdk.client import _Call
 
-    path = job_id_or_location if job_id_or_location.startswith("/") \
-        else f"/v1/build-jobs/{job_id_or_location}"
-    return BuildJob.from_wire(client._json(client._send(_Call("GET", path, idempotent=True))))
+    return BuildJob.from_wire(client._json(client._send(
+        _Call("GET", _job_path(job_id_or_location), idempotent=True))))
 
 
-def build_map(
-    client: Any, recording: Recording, *, map_id: str, if_match: str | None = None,
-    wait: bool = True, on_progress: Callable[[BuildJob], None] | None = None,
-    poll_interval_s: float = 0.5, timeout_s: float = 600.0,
-) -> BuildJob:
-    """Start a build (and wait for it unless ``wait=False``); see the module docstring."""
+def _start_call(recording: Recording, map_id: str, if_match: str | None) -> Any:
     from sdk.client import _Call
 
     headers = {"Content-Type": "application/json"}
     if if_match is not None:
         headers["If-Match"] = if_match if if_match.startswith(('"', "W/")) else f'"{if_match}"'
     # Not idempotent: a replay after a lost answer would start a second job.
-    response = client._send(_Call("POST", "/v1/maps:build", params={"map_id": map_id},
-                                  body=_load(recording), headers=headers))
+    return _Call("POST", "/v1/maps:build", params={"map_id": map_id}, body=_load(recording),
+                 headers=headers)
+
+
+def _job_path(job_id_or_location: str) -> str:
+    return job_id_or_location if job_id_or_location.startswith("/") \
+        else f"/v1/build-jobs/{job_id_or_location}"
+
+
+def _failed(job: BuildJob) -> BuildFailedError:
+    err = job.error or {}
+    return BuildFailedError(f"build job {job.job_id} failed: {err.get('reason')}: "
+                            f"{err.get('detail')}", job)
+
+
+def _timed_out(job: BuildJob, timeout_s: float) -> BuildFailedError:
+    return BuildFailedError(f"build job {job.job_id} not finished after {timeout_s:g} s "
+                            f"(still {job.status}); poll it with get_build_job", job)
+
+
+async def aget_build_job(client: Any, job_id_or_location: str) -> BuildJob:
+    """:func:`get_build_job` for :class:`sdk.AsyncQuadLocClient`."""
+    from sdk.client import _Call
+
+    response = await client._send(_Call("GET", _job_path(job_id_or_location), idempotent=True))
+    return BuildJob.from_wire(client._json(response))
+
+
+async def abuild_map(
+    client: Any, recording: Recording, *, map_id: str, if_match: str | None = None,
+    wait: bool = True, on_progress: Callable[[BuildJob], None] | None = None,
+    poll_interval_s: float = 0.5, timeout_s: float = 600.0,
+) -> BuildJob:
+    """:func:`build_map` for :class:`sdk.AsyncQuadLocClient` (polls with ``asyncio.sleep``)."""
+    import asyncio
+
+    response = await client._send(_start_call(recording, map_id, if_match))
     job = BuildJob.from_wire(client._json(response))
     location = response.headers.get("location") or f"/v1/build-jobs/{job.job_id}"
     if on_progress is not None:
@@ -104,8 +135,36 @@ def build_map(
     last = (job.stage, job.percent, job.objects_found)
     while not job.done:
         if time.monotonic() - t0 > timeout_s:
-            raise BuildFailedError(f"build job {job.job_id} not finished after {timeout_s:g} s "
-                                   f"(still {job.status}); poll it with get_build_job", job)
+            raise _timed_out(job, timeout_s)
+        await asyncio.sleep(poll_interval_s)
+        job = await aget_build_job(client, location)
+        now = (job.stage, job.percent, job.objects_found)
+        if on_progress is not None and now != last:
+            on_progress(job)
+        last = now
+    if job.status == "failed":
+        raise _failed(job)
+    return job
+
+
+def build_map(
+    client: Any, recording: Recording, *, map_id: str, if_match: str | None = None,
+    wait: bool = True, on_progress: Callable[[BuildJob], None] | None = None,
+    poll_interval_s: float = 0.5, timeout_s: float = 600.0,
+) -> BuildJob:
+    """Start a build (and wait for it unless ``wait=False``); see the module docstring."""
+    response = client._send(_start_call(recording, map_id, if_match))
+    job = BuildJob.from_wire(client._json(response))
+    location = response.headers.get("location") or f"/v1/build-jobs/{job.job_id}"
+    if on_progress is not None:
+        on_progress(job)
+    if not wait:
+        return job
+    t0 = time.monotonic()
+    last = (job.stage, job.percent, job.objects_found)
+    while not job.done:
+        if time.monotonic() - t0 > timeout_s:
+            raise _timed_out(job, timeout_s)
         time.sleep(poll_interval_s)
         job = get_build_job(client, location)
         now = (job.stage, job.percent, job.objects_found)
@@ -113,7 +172,5 @@ def build_map(
             on_progress(job)
         last = now
     if job.status == "failed":
-        err = job.error or {}
-        raise BuildFailedError(f"build job {job.job_id} failed: {err.get('reason')}: "
-                               f"{err.get('detail')}", job)
+        raise _failed(job)
     return job

@@ -86,3 +86,17 @@ def test_cli_maps_build_remote(live_server: str, tmp_path: Path,
     assert main(["--url", live_server, "maps", "build", str(src), "--map-id", "cli-remote",
                  "--update"]) == 0
     assert "cli-remote version 2" in capsys.readouterr().out
+
+
+def test_async_sdk_build_map(live_server: str) -> None:
+    import asyncio
+
+    rec, _ = _recording(12)
+
+    async def go() -> sdk.build.BuildJob:
+        async with sdk.AsyncQuadLocClient(live_server) as client:
+            return await client.build_map(rec, map_id="async-room", poll_interval_s=0.1)
+
+    job = asyncio.run(go())
+    assert job.status == "succeeded" and job.map_version == 1
+    assert job.report["counts"]["objects"] == 3
