@@ -132,6 +132,8 @@ def run_seed(seed: int, n_frames: int, n_test: int, log=print,
     truth_label_ok = [frames[o.frame].true_labels[o.index] == o.label
                       for o in rec.observations]
     drift = float(np.linalg.norm(app[-1][:3, 3] - truth_walk[-1][:3, 3]))
+    walk_length = float(sum(np.linalg.norm(a[:3, 3] - b[:3, 3])
+                            for a, b in itertools.pairwise(truth_walk)))
 
     stamps: list[float] = []
 
@@ -210,7 +212,7 @@ def run_seed(seed: int, n_frames: int, n_test: int, log=print,
     er, eb, ea = np.array(err_real), np.array(err_built), np.array(err_aligned)
     out = {
         "seed": seed, "frames": n_frames, "detections": len(rec.observations),
-        "app_pose_drift_end_m": drift,
+        "app_pose_drift_end_m": drift, "walk_length_m": walk_length,
         "build_s": build_s, "max_progress_gap_s": max_gap,
         "timings_s": report["timings_s"], "refinement": report["refinement"],
         "objects_built": len(scene.objects), "real_objects": len(real.objects),
@@ -302,15 +304,17 @@ def _pct2(d: dict) -> str:
 
 
 def markdown(results: dict, command: str, plot: Path | None) -> str:
-    header = ["seed", "frames", "detections", "app drift at end (m)", "assoc. precision",
-              "assoc. recall", "real objects found (built)", "median centre err (cm)",
+    header = ["seed", "frames", "detections", "walk (m)", "app drift at end (m)",
+              "assoc. precision", "assoc. recall", "real objects found (built)",
+              "median centre err (cm)",
               "median centre err after alignment (cm)", "median max semi-axis err (cm)",
               "reloc real map 5/10 cm", "reloc built map 5/10 cm",
               "reloc built map aligned 5/10 cm", "build (s)", "max progress gap (s)"]
     rows = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for r in results["seeds"]:
         a, rl, po = r["association"], r["relocalization"], r["per_object"]
-        cells = [r["seed"], r["frames"], r["detections"], f"{r['app_pose_drift_end_m']:.3f}",
+        cells = [r["seed"], r["frames"], r["detections"], f"{r['walk_length_m']:.1f}",
+                 f"{r['app_pose_drift_end_m']:.3f}",
                  f"{a['precision']:.3f}", f"{a['recall']:.3f}",
                  f"{r['real_objects_found']}/{r['real_objects']} ({r['objects_built']})",
                  f"{np.median([o['center_m'] for o in po]) * 100:.1f}",
