@@ -299,6 +299,34 @@ def make_plot(result: dict, out_dir: Path) -> Path:
     return path
 
 
+def verdicts(results: dict) -> str:
+    """The issue's targets, checked on every seed (computed, not written by hand)."""
+    seeds = results["seeds"]
+    pr = all(r["association"]["precision"] >= 0.95 and r["association"]["recall"] >= 0.95
+             for r in seeds)
+    gaps = [100 * (r["relocalization"]["real_map"]["within_10cm"]
+                   - r["relocalization"]["built_map"]["within_10cm"]) for r in seeds]
+    gaps_al = [100 * (r["relocalization"]["real_map"]["within_10cm"]
+                      - r["relocalization"]["built_map_aligned"]["within_10cm"]) for r in seeds]
+    t = max(r["build_s"] for r in seeds)
+    gap = max(r["max_progress_gap_s"] for r in seeds)
+
+    def ok(flag: bool) -> str:
+        return "met" if flag else "NOT met"
+
+    return "\n".join([
+        "Targets (issue 16), over these seeds:",
+        f"- association precision and recall >= 0.95: {ok(pr)}.",
+        f"- relocalization with the built map within 5 points of the real map at 10 cm: as "
+        f"built {ok(max(gaps) <= 5)} (real minus built: "
+        f"{', '.join(f'{g:+.1f}' for g in gaps)} points), after the rigid alignment "
+        f"{ok(max(gaps_al) <= 5)} ({', '.join(f'{g:+.1f}' for g in gaps_al)} points).",
+        f"- 300 frames built in <= 30 s with progress at least every 2 s: "
+        f"{ok(t <= 30 and gap <= 2)} (slowest {t:.1f} s, largest gap between progress "
+        f"reports {gap:.2f} s).",
+    ])
+
+
 def _pct2(d: dict) -> str:
     return f"{d['within_5cm']:.0%} / {d['within_10cm']:.0%}"
 
@@ -344,6 +372,7 @@ other engineers' jobs.
 
 {chr(10).join(rows)}
 """
+    text += "\n" + verdicts(results) + "\n"
     for r in results["seeds"]:
         per = "; ".join(
             f"{o['built']}->{o['real']}: {o['center_m'] * 100:.1f} cm "
