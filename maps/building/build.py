@@ -71,7 +71,7 @@ def build_map(
     report_progress("refining", 50.0, len(objects))
     max_it = max_iterations
 
-    def on_iter(it: int, _err: float) -> None:
+    def on_iter(it: float, _err: float) -> None:
         report_progress("refining", 50.0 + 45.0 * min(1.0, it / max_it), len(objects))
 
     joint = None

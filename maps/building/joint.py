@@ -157,9 +157,42 @@ def _huber_scale(norms: np.ndarray, k: float) -> np.ndarray:
     return out
 
 
+class _Ticker:
+    """Counts factor evaluations and reports fractional LM progress at most every
+    ``interval_s`` from inside an iteration (one iteration of a large graph, e.g. with camera
+    poses, can take seconds): ``progress(iteration + fraction, last error)`` with ``fraction``
+    the evaluations so far over about three per factor and iteration (a linearisation and two
+    error evaluations), capped below 1."""
+
+    def __init__(self, progress: Callable[[float, float], None] | None,
+                 interval_s: float = 0.5) -> None:
+        self.progress = progress
+        self.interval_s = interval_s
+        self.n_factors = 1
+        self.iteration = 0
+        self.error = math.nan
+        self.count = 0
+        self.last = time.monotonic()
+
+    def new_iteration(self, iteration: int, error: float) -> None:
+        self.iteration, self.error, self.count = iteration, error, 0
+        self.last = time.monotonic()
+
+    def __call__(self) -> None:
+        self.count += 1
+        if self.progress is None:
+            return
+        now = time.monotonic()
+        if now - self.last >= self.interval_s:
+            self.last = now
+            frac = min(0.95, self.count / (3.0 * self.n_factors))
+            self.progress(self.iteration + frac, self.error)
+
+
 def _object_factor(samples: LevelSetSamples, weights: np.ndarray, e_key: int, l_key: int,
                    view_frames: np.ndarray, x_keys: list[int] | None,
-                   T_cw_fixed: np.ndarray | None) -> gtsam.CustomFactor:
+                   T_cw_fixed: np.ndarray | None,
+                   tick: Callable[[], None] | None = None) -> gtsam.CustomFactor:
     """All views of one object. ``weights`` (V,) = 1/sqrt(sigma_v); ``view_frames`` (V,) the
     index of each view's camera in ``x_keys`` (refined cameras) or into ``T_cw_fixed``."""
     V, M = samples.phi_det_minus_1.shape
@@ -170,6 +203,8 @@ def _object_factor(samples: LevelSetSamples, weights: np.ndarray, e_key: int, l_
 
     def error_fn(this: gtsam.CustomFactor, values: gtsam.Values,
                  H: list[np.ndarray] | None) -> np.ndarray:
+        if tick is not None:
+            tick()
         pose = values.atPose3(e_key)
         R = pose.rotation().matrix()
         c = np.asarray(pose.translation(), dtype=float)
@@ -221,7 +256,7 @@ def refine_jointly(
     size_priors: Mapping[str, SizePrior] | None = None, refine_cameras: bool = False,
     odometry_sigmas: tuple[float, float] = ODOMETRY_SIGMAS, max_iterations: int = 30,
     deadline: float | None = None,
-    progress: Callable[[int, float], None] | None = None,
+    progress: Callable[[float, float], None] | None = None,
     unconstrained_log_std: float = UNCONSTRAINED_LOG_STD,
     truncated_weight: float = TRUNCATED_WEIGHT,
     unconstrained_prior_sigma: float | None = UNCONSTRAINED_PRIOR_SIGMA,
@@ -230,7 +265,8 @@ def refine_jointly(
 
     ``world_from_camera`` (F, 4, 4): the frames' poses (app's world frame). ``deadline``: a
     ``time.monotonic()`` value after which LM stops (the result so far is kept;
-    ``stopped_early``). ``progress(iteration, error)`` after each LM iteration.
+    ``stopped_early``). ``progress(iteration, error)`` after each LM iteration, and with a
+    fractional iteration at least every 0.5 s during one (see ``_Ticker``).
     """
     T_wc = np.asarray(world_from_camera, dtype=float)
     graph = gtsam.NonlinearFactorGraph()
@@ -241,6 +277,7 @@ def refine_jointly(
     X = {f: gtsam.symbol("x", f) for f in used_frames} if refine_cameras else {}
     samples: dict[int, LevelSetSamples] = {}
     info_w: list[np.ndarray] = []
+    ticker = _Ticker(progress)
     for k, (label, idx, ell) in enumerate(objects):
         values.insert(E[k], _pose3(np.block([[ell.rotation, ell.center[:, None]],
                                              [np.zeros((1, 3)), np.ones((1, 1))]])))
@@ -262,10 +299,11 @@ def refine_jointly(
                 one = LevelSetSamples(None, stacked.n[v:v + 1],
                                       stacked.phi_det_minus_1[v:v + 1])
                 graph.add(_object_factor(one, weights[v:v + 1], E[k], L[k], np.zeros(1, int),
-                                         [X[f]], None))
+                                         [X[f]], None, ticker))
         else:
             graph.add(_object_factor(stacked, weights, E[k], L[k], np.arange(len(idx)), None,
-                                     np.array([invert_pose(T_wc[f]) for f in frames_k])))
+                                     np.array([invert_pose(T_wc[f]) for f in frames_k]),
+                                     ticker))
         prior = (size_priors or {}).get(label)
         if prior is not None:
             graph.add(gtsam.PriorFactorVector(
@@ -299,6 +337,7 @@ def refine_jointly(
     params.setAbsoluteErrorTol(1e-9)
     opt = gtsam.LevenbergMarquardtOptimizer(graph, values, params)
     initial_error = float(graph.error(values))
+    ticker.n_factors = max(1, graph.size())
     err = initial_error
     it = 0
     stopped = False
@@ -306,6 +345,7 @@ def refine_jointly(
         if deadline is not None and time.monotonic() > deadline:
             stopped = True
             break
+        ticker.new_iteration(it, err)
         opt.iterate()
         it += 1
         new_err = float(opt.error())
