@@ -23,8 +23,11 @@ time (median, p99, CPU process time), memory per session (tracemalloc peak growt
 from __future__ import annotations
 
 import argparse
+import gc
+import itertools
 import json
 import math
+import os
 import time
 import tracemalloc
 from pathlib import Path
@@ -64,7 +67,7 @@ def _exp_so3(w: np.ndarray) -> np.ndarray:
 def make_walk(keyposes: list[np.ndarray]) -> list[np.ndarray]:
     """30 Hz world_from_camera poses through the key poses (module docstring)."""
     out: list[np.ndarray] = []
-    for a, b in zip(keyposes[:-1], keyposes[1:], strict=True):
+    for a, b in itertools.pairwise(keyposes):
         d = float(np.linalg.norm(b[:3, 3] - a[:3, 3]))
         ang = float(np.linalg.norm(_log_so3(a[:3, :3].T @ b[:3, :3])))
         dur = max(0.1, d / 0.4, ang / math.radians(45))
@@ -88,7 +91,7 @@ def simulate_odometry(walk: list[np.ndarray], rng: np.random.Generator) -> list[
     scale = 1.0 + 0.01 * (1 if rng.random() < 0.5 else -1)
     dt = 1.0 / HZ
     odom = [offset @ walk[0]]
-    for a, b in zip(walk[:-1], walk[1:], strict=True):
+    for a, b in itertools.pairwise(walk):
         rel = invert_pose(a) @ b
         d = float(np.linalg.norm(rel[:3, 3]))
         R = rel[:3, :3] @ _exp_so3(bias * dt + rng.normal(size=3) * math.radians(0.1)
@@ -120,9 +123,7 @@ def run_seed(seed: int, max_frames: int | None, options: SessionOptions,
     session = TrackingSession(cm, camera, options)
     rows = []
     cpu_ms = []
-    tracemalloc.start()
-    base = tracemalloc.get_traced_memory()[0]
-    peak_growth = 0
+    inputs = []
     for i, (T, To) in enumerate(zip(walk, odom, strict=True)):
         f = simulate_frame(cm, camera, T, rng, cfg)
         dets = list(f.detections)
@@ -130,10 +131,10 @@ def run_seed(seed: int, max_frames: int | None, options: SessionOptions,
         if sparse and dets:
             keep = int(rng.integers(0, 3))
             dets = [dets[j] for j in rng.permutation(len(dets))[:keep]]
+        inputs.append(FrameInput(dets, To, i / HZ, str(i)))
         c0 = time.process_time()
-        res = session.add_frame(FrameInput(dets, To, i / HZ, str(i)))
+        res = session.add_frame(inputs[-1])
         cpu_ms.append((time.process_time() - c0) * 1e3)
-        peak_growth = max(peak_growth, tracemalloc.get_traced_memory()[0] - base)
         e_s = pose_error(res.world_from_camera, T)
         wo_err = None
         if res.world_from_odom is not None:
@@ -147,8 +148,52 @@ def run_seed(seed: int, max_frames: int | None, options: SessionOptions,
                          s_pos=e_s[0], s_rot=e_s[1], l_pos=e_l[0], l_rot=e_l[1],
                          wo=wo_err, conf=res.confidence, cpu_ms=cpu_ms[-1],
                          init=res.timings_ms.get("multi_frame_ransac") is not None))
+    return dict(seed=seed, rows=rows, n_frames=len(rows),
+                memory=session_memory(cm, camera, options, inputs))
+
+
+def _rss_bytes() -> int:
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+
+
+def session_memory(cm: object, camera: object, options: SessionOptions,
+                   inputs: list[FrameInput], minutes: float = 0.0) -> dict:
+    """Python heap held by one session after replaying ``inputs`` (tracemalloc: numpy arrays
+    and Python objects; GTSAM's C++ graph is not traced, so also the process RSS growth), and,
+    with ``minutes``, the RSS / heap every simulated minute of a 30 Hz session replaying the walk
+    back and forth with continuous odometry (timestamps keep increasing)."""
+    gc.collect()
+    tracemalloc.start()
+    h0, r0 = tracemalloc.get_traced_memory()[0], _rss_bytes()
+    session = TrackingSession(cm, camera, options)
+    for f in inputs:
+        session.add_frame(f)
+    gc.collect()
+    out = {"frames": len(inputs), "heap_bytes": tracemalloc.get_traced_memory()[0] - h0,
+           "rss_growth_bytes": _rss_bytes() - r0}
+    if minutes:
+        n = int(minutes * 60 * HZ)
+        seq = inputs + inputs[::-1]
+        # odometry continuity on the way back: re-anchor each pass at the last pose sent
+        samples = []
+        last_T, last_src = None, None
+        for k in range(n):
+            f = seq[k % len(seq)]
+            if last_T is None:
+                T = f.odom_from_camera
+            else:
+                T = last_T @ invert_pose(last_src) @ f.odom_from_camera
+            last_T, last_src = T, f.odom_from_camera
+            session.add_frame(FrameInput(f.detections, T, (len(inputs) + k) / HZ, None))
+            if (k + 1) % int(60 * HZ) == 0:
+                gc.collect()
+                samples.append({"minute": (k + 1) / (60 * HZ),
+                                "heap_bytes": tracemalloc.get_traced_memory()[0] - h0,
+                                "rss_bytes": _rss_bytes() - r0, "state": session.state})
+        out["long_session"] = samples
     tracemalloc.stop()
-    return dict(seed=seed, rows=rows, n_frames=len(rows), memory_growth_bytes=peak_growth)
+    return out
 
 
 def summarize(rows: list[dict]) -> dict:
@@ -244,6 +289,8 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--smoother", default="isam2")
     ap.add_argument("--window", type=int, default=30)
     ap.add_argument("--no-localize", action="store_true")
+    ap.add_argument("--long-minutes", type=float, default=0.0,
+                    help="also replay a session of this many minutes (memory flatness)")
     ap.add_argument("--json", type=Path)
     ap.add_argument("--write-results", action="store_true")
     args = ap.parse_args(argv)
@@ -254,7 +301,16 @@ def main(argv: list[str] | None = None) -> dict:
            "smoother": args.smoother, "window_frames": args.window,
            "per_seed": {r["seed"]: summarize(r["rows"]) for r in results},
            "pooled": pooled,
-           "memory_growth_bytes_max": max(r["memory_growth_bytes"] for r in results)}
+           "memory_per_seed": {r["seed"]: r["memory"] for r in results}}
+    if args.long_minutes:
+        cm = compile_map(load_chess_map())
+        camera, cfw, _ = load_chess_poses()
+        walk = make_walk([invert_pose(T) for T in cfw])[:args.max_frames]
+        rng = np.random.default_rng(args.seeds[0])
+        odom = simulate_odometry(walk, rng)
+        inputs = [FrameInput(list(simulate_frame(cm, camera, T, rng).detections), To, i / HZ)
+                  for i, (T, To) in enumerate(zip(walk, odom, strict=True))]
+        out["long_session"] = session_memory(cm, camera, opts, inputs, args.long_minutes)
     print(json.dumps(out, indent=1, default=float))
     if args.json:
         args.json.write_text(json.dumps(out, indent=1, default=float))

@@ -23,7 +23,7 @@ from service.api.deps import check_body_depth
 from service.api.errors import PROBLEM_MEDIA_TYPE, install_error_handlers
 from service.api.map_cache import MapCache
 from service.api.metrics import ApiMetrics, MetricsAndLimitsMiddleware
-from service.api.routers import health, localize, maps
+from service.api.routers import health, localize, maps, sessions
 from service.api.solver import Solver
 from service.settings import Settings
 
@@ -136,6 +136,8 @@ def create_app(settings: Settings | None = None, *, store: MapStore | None = Non
     app.include_router(localize.router)
     app.include_router(maps.router)
     app.include_router(health.router)
+    app.state.sessions = sessions.session_store_from_env()
+    app.include_router(sessions.router)
     app.add_middleware(MetricsAndLimitsMiddleware, metrics=metrics,
                        max_body_bytes=settings.max_body_bytes)
     app.openapi = lambda: build_openapi(app)  # type: ignore[method-assign]
