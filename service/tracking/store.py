@@ -2,9 +2,11 @@
 
 Sessions live in the serving process (their factor graph is not serialisable cheaply and a
 frame needs the previous one's state within milliseconds). With several replicas, the proxy
-routes every request of one session to one replica by hashing the session id (``deploy/
-nginx.conf``: ``hash $quadloc_session consistent``); a replica that restarted has lost its
-sessions and answers 404 ``session-not-found`` (the client starts a new session).
+routes every request of one session to the replica that created it: the id carries that
+replica's tag (:func:`replica_id`) and ``deploy/nginx.conf`` maps it to the replica (a plain
+hash of the id cannot work: the id does not exist yet when the creation request is routed). A
+replica that restarted has lost its sessions and answers 404 ``session-not-found`` (the client
+starts a new session).
 
 Bounds: at most ``max_sessions`` live sessions (a new one beyond that first evicts sessions idle
 for more than ``idle_timeout_s``, then is refused: :class:`SessionCapacityError`, 503); each
@@ -14,7 +16,10 @@ session's memory is bounded by its window (``SessionOptions.window_frames``) and
 
 from __future__ import annotations
 
+import os
+import re
 import secrets
+import socket
 import threading
 import time
 from dataclasses import dataclass, field
@@ -22,6 +27,14 @@ from dataclasses import dataclass, field
 from service.tracking.session import TrackingSession
 
 __all__ = ["SessionCapacityError", "SessionEntry", "SessionNotFound", "SessionStore"]
+
+
+def replica_id() -> str:
+    """This replica's tag in session ids: ``QUADLOC_REPLICA_ID``, else the hostname (the
+    compose stack names its replicas ``quadloc-1``, ``quadloc-2``), reduced to ``[a-z0-9-]``.
+    The proxy routes ``/v1/sessions/s-<tag>.<random>`` to that replica."""
+    tag = (os.environ.get("QUADLOC_REPLICA_ID") or socket.gethostname()).lower()
+    return re.sub(r"[^a-z0-9-]", "-", tag)[:40] or "local"
 
 
 class SessionNotFound(KeyError):  # noqa: N818 (like maps.errors.MapNotFound)
@@ -76,14 +89,14 @@ class SessionStore:
 
     def create(self, map_id: str, map_version: int, session: TrackingSession,
                convention: str) -> SessionEntry:
-        """Register a new session under a fresh random id (``s_`` + 22 url-safe chars)."""
+        """Register a new session under a fresh id ``s-<replica_id()>.<22 url-safe chars>``."""
         self.expire()
         now = self._clock()  # type: ignore[operator]
         with self._lock:
             if len(self._entries) >= self.max_sessions:
                 raise SessionCapacityError(
                     f"{len(self._entries)} live sessions (max {self.max_sessions})")
-            sid = "s_" + secrets.token_urlsafe(16)
+            sid = f"s-{replica_id()}." + secrets.token_urlsafe(16)
             entry = SessionEntry(sid, map_id, map_version, session, convention, time.time(), now)
             self._entries[sid] = entry
             return entry

@@ -63,7 +63,7 @@ __all__ = ["router", "session_store_from_env"]
 
 router = APIRouter(prefix="/v1", tags=["tracking"])
 
-SessionIdPath = Annotated[str, Path(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_-]+$",
+SessionIdPath = Annotated[str, Path(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$",
                                     description="Session id returned at creation.")]
 
 

@@ -1,0 +1,246 @@
+"""Tracking sessions: geometry checks against numerical/closed forms, the session on a short
+simulated walk, input errors, the store's bounds, memory flatness, the API and the proxy routing
+rule."""
+
+from __future__ import annotations
+
+import math
+import re
+import tracemalloc
+from pathlib import Path
+
+import gtsam
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+from scipy.stats import chi
+
+from bench.reference_data import load_chess_map, load_chess_poses
+from bench.simulate import SimulationConfig, simulate_frame
+from bench.tracking import make_walk, pose_error, simulate_odometry
+from factors.geometry import invert_pose
+from factors.pose_residuals import expmap_pose3
+from maps.compiled import compile_map
+from service.tracking.association import centre_jacobians
+from service.tracking.confidence import session_confidence
+from service.tracking.session import (
+    FrameInput,
+    SessionOptions,
+    TrackingInputError,
+    TrackingSession,
+    pose_adjoint,
+)
+from service.tracking.store import SessionCapacityError, SessionNotFound, SessionStore
+from tests.conftest import make_test_app
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="module")
+def walk() -> dict:
+    cm = compile_map(load_chess_map())
+    camera, cfw, _ = load_chess_poses()
+    poses = make_walk([invert_pose(T) for T in cfw])[:120]
+    rng = np.random.default_rng(7)
+    odom = simulate_odometry(poses, rng)
+    frames = []
+    for i, (T, To) in enumerate(zip(poses, odom, strict=True)):
+        dets = list(simulate_frame(cm, camera, T, rng, SimulationConfig()).detections)
+        if 30 <= i < 90:  # a sparse stretch: at most 2 detections per frame
+            dets = dets[:2]
+        frames.append(FrameInput(dets, To, i / 30.0, str(i)))
+    return dict(cm=cm, camera=camera, poses=poses, frames=frames)
+
+
+def test_centre_jacobian_matches_central_differences(walk: dict) -> None:
+    cam, T = walk["camera"], walk["poses"][10]
+    pts = walk["cm"].centers
+    u, J = centre_jacobians(cam, T, pts)
+    h = 1e-6
+    for k in range(6):
+        xi = np.zeros(6)
+        xi[k] = h
+        up, _ = centre_jacobians(cam, T @ expmap_pose3(xi), pts)
+        um, _ = centre_jacobians(cam, T @ expmap_pose3(-xi), pts)
+        np.testing.assert_allclose(J[:, :, k], (up - um) / (2 * h), rtol=1e-4, atol=1e-3)
+
+
+def test_pose_adjoint_moves_a_perturbation_across_a_composition() -> None:
+    rng = np.random.default_rng(0)
+    A = expmap_pose3(rng.normal(size=6))
+    B = expmap_pose3(rng.normal(size=6))
+    xi = rng.normal(size=6) * 0.1
+    # A Exp(xi) B == A B Exp(Ad_{B^-1} xi)  (the world_from_odom covariance uses this)
+    lhs = A @ expmap_pose3(xi) @ B
+    rhs = A @ B @ expmap_pose3(pose_adjoint(invert_pose(B)) @ xi)
+    np.testing.assert_allclose(lhs, rhs, atol=1e-9)
+
+
+def test_confidence_matches_the_closed_form_for_isotropic_covariances() -> None:
+    for s_rot, s_pos in [(math.radians(2), 0.04), (math.radians(3), 0.08), (0.01, 0.2)]:
+        cov = np.diag([s_rot ** 2] * 3 + [s_pos ** 2] * 3)
+        exact = chi.cdf(math.radians(5) / s_rot, 3) * chi.cdf(0.1 / s_pos, 3)
+        assert session_confidence("tracking", cov) == pytest.approx(exact, abs=0.05)
+    assert session_confidence("lost", np.eye(6) * 1e-6) == 0.0
+    assert session_confidence("tracking", None) == 0.0
+
+
+def test_session_initializes_and_tracks_through_a_sparse_stretch(walk: dict) -> None:
+    s = TrackingSession(walk["cm"], walk["camera"], SessionOptions())
+    results = [s.add_frame(f) for f in walk["frames"]]
+    first = next(r.frame_index for r in results if r.state == "tracking")
+    assert first < 30
+    sparse = [r for r in results[30:90] if r.state == "tracking"]
+    assert len(sparse) >= 50
+    errs = [pose_error(r.world_from_camera, walk["poses"][r.frame_index]) for r in sparse]
+    assert np.mean([e[0] <= 0.10 and e[1] <= 5 for e in errs]) >= 0.8
+    r = results[-1]
+    # world_from_odom maps this frame's odometry pose onto its world pose
+    np.testing.assert_allclose(r.world_from_odom @ walk["frames"][-1].odom_from_camera,
+                               r.world_from_camera, atol=1e-9)
+    assert r.covariance.shape == (6, 6) and 0.0 <= r.confidence <= 1.0
+    # the window is bounded
+    assert len(s._smoother.timestamps()) <= SessionOptions().window_frames
+
+
+def test_frames_with_two_objects_each_do_not_initialize_alone(walk: dict) -> None:
+    # the same frame repeated (no motion, 2 objects): never three distinct objects -> no pose
+    f = next(f for f in walk["frames"] if len(f.detections) == 2)
+    s = TrackingSession(walk["cm"], walk["camera"], SessionOptions())
+    rs = [s.add_frame(FrameInput(f.detections, f.odom_from_camera, k / 30.0))
+          for k in range(20)]
+    assert all(r.state == "initializing" and r.world_from_camera is None for r in rs)
+
+
+def test_bad_frames_name_the_field_and_leave_the_session_unchanged(walk: dict) -> None:
+    s = TrackingSession(walk["cm"], walk["camera"], SessionOptions())
+    s.add_frame(walk["frames"][0])
+    bad = np.eye(4)
+    bad[0, 0] = 2.0
+    with pytest.raises(TrackingInputError, match="^odom_from_camera: must be a rigid"):
+        s.add_frame(FrameInput([], bad, 1.0))
+    with pytest.raises(TrackingInputError, match="^timestamp: .* before"):
+        s.add_frame(FrameInput([], np.eye(4), -1.0))
+    assert s.frame_count == 1
+    with pytest.raises(TrackingInputError, match="^options.smoother"):
+        SessionOptions(smoother="kalman")
+
+
+def test_store_bounds_count_and_expires_idle_sessions(walk: dict) -> None:
+    now = [0.0]
+    store = SessionStore(max_sessions=2, idle_timeout_s=10.0, clock=lambda: now[0])
+    mk = lambda: TrackingSession(walk["cm"], walk["camera"])  # noqa: E731
+    a = store.create("chess", 1, mk(), "opencv")
+    store.create("chess", 1, mk(), "opencv")
+    with pytest.raises(SessionCapacityError):
+        store.create("chess", 1, mk(), "opencv")
+    now[0] = 5.0
+    store.get(a.session_id)  # touched: stays alive
+    now[0] = 12.0
+    store.create("chess", 1, mk(), "opencv")  # the idle one was expired
+    assert len(store) == 2
+    now[0] = 30.0
+    with pytest.raises(SessionNotFound):
+        store.get(a.session_id)
+
+
+def test_long_session_memory_is_flat(walk: dict) -> None:
+    """3000 frames (100 s at 30 Hz, the walk replayed): Python heap and the graph stay bounded
+    (bench.tracking --long-minutes 10 runs the 10-minute version, docs/tracking.md)."""
+    frames = walk["frames"]
+    s = TrackingSession(walk["cm"], walk["camera"], SessionOptions())
+    seq = frames + frames[::-1]
+    last_T = last_src = None
+    tracemalloc.start()
+    heap = []
+    for k in range(3000):
+        f = seq[k % len(seq)]
+        T = f.odom_from_camera if last_T is None else last_T @ invert_pose(last_src) \
+            @ f.odom_from_camera
+        last_T, last_src = T, f.odom_from_camera
+        s.add_frame(FrameInput(f.detections, T, k / 30.0))
+        if k in (999, 2999):
+            heap.append(tracemalloc.get_traced_memory()[0])
+    tracemalloc.stop()
+    assert heap[1] - heap[0] < 300_000, heap
+    if s._smoother is not None:
+        assert len(s._smoother.timestamps()) <= 30
+        assert s._smoother.getFactors().size() < 400
+
+
+# ----------------------------------------------------------------------------- API
+
+@pytest.fixture(scope="module")
+def client(tmp_path_factory: pytest.TempPathFactory):
+    with TestClient(make_test_app(tmp_path_factory.mktemp("trk"))) as c:
+        yield c
+
+
+def _frame_json(f: FrameInput) -> dict:
+    return {"detections": [{"ellipse": {"cx": d.ellipse.cx, "cy": d.ellipse.cy,
+                                        "a": d.ellipse.a, "b": d.ellipse.b,
+                                        "angle": d.ellipse.angle},
+                            "label": d.label, "sigma": d.sigma} for d in f.detections],
+            "odom_from_camera": {"matrix": f.odom_from_camera.tolist()},
+            "timestamp": f.timestamp, "frame_id": f.frame_id}
+
+
+def test_api_session_lifecycle(client: TestClient, walk: dict) -> None:
+    cam = walk["camera"]
+    r = client.post("/v1/maps/chess/sessions", json={"camera": {
+        "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy, "width": cam.width,
+        "height": cam.height}})
+    assert r.status_code == 201, r.text
+    sid = r.json()["session_id"]
+    assert r.headers["location"] == f"/v1/sessions/{sid}"
+    frames = [_frame_json(f) for f in walk["frames"][:40]]
+    # a bad frame in a batch: 422 naming it, nothing fused
+    bad = [*frames[:3], {**frames[3], "odom_from_camera": {"matrix": [[2, 0, 0, 0], [0, 1, 0, 0],
+                                                                      [0, 0, 1, 0],
+                                                                      [0, 0, 0, 1]]}}]
+    r = client.post(f"/v1/sessions/{sid}/frames", json={"frames": bad})
+    assert r.status_code == 422
+    assert r.json()["errors"][0]["field"] == "frames[3].odom_from_camera"
+    assert client.get(f"/v1/sessions/{sid}").json()["frames"] == 0
+    r = client.post(f"/v1/sessions/{sid}/frames", json={"frames": frames[:39]})
+    assert r.status_code == 200, r.text
+    r = client.post(f"/v1/sessions/{sid}/frames", json=frames[39])
+    out = r.json()["results"][0]
+    assert out["state"] == "tracking"
+    T = np.array(out["world_from_camera"]["matrix"])
+    assert pose_error(T, walk["poses"][39])[0] < 0.1
+    assert len(out["covariance"]["matrix"]) == 6 and out["world_from_odom"] is not None
+    assert client.get(f"/v1/sessions/{sid}").json()["state"] == "tracking"
+    assert client.delete(f"/v1/sessions/{sid}").status_code == 204
+    r = client.get(f"/v1/sessions/{sid}")
+    assert r.status_code == 404 and r.json()["type"] == "urn:quadloc:problem:session-not-found"
+
+
+def test_api_unknown_session_after_restart_is_404(tmp_path: Path) -> None:
+    with TestClient(make_test_app(tmp_path)) as c:
+        r = c.post("/v1/sessions/s-quadloc-1.abcdef/frames",
+                   json={"odom_from_camera": {"matrix": np.eye(4).tolist()}, "timestamp": 0})
+        assert r.status_code == 404
+        assert r.json()["type"] == "urn:quadloc:problem:session-not-found"
+
+
+def test_nginx_routes_a_session_to_the_replica_that_created_it(monkeypatch, walk) -> None:
+    conf = (ROOT / "deploy" / "nginx.conf").read_text()
+    block = re.search(r"map \$uri \$quadloc_session_upstream \{(.*?)\}", conf, re.S).group(1)
+    rules = [(re.compile(m.group(1)), m.group(2))
+             for m in re.finditer(r"~(\S+)\s+(\S+);", block)]
+    default = re.search(r"default\s+(\S+);", block).group(1)
+    upstreams = set(re.findall(r"upstream (\S+) \{", conf))
+
+    def route(uri: str) -> str:
+        return next((u for rx, u in rules if rx.search(uri)), default)
+
+    for replica in ("quadloc-1", "quadloc-2"):
+        monkeypatch.setenv("QUADLOC_REPLICA_ID", replica)
+        sid = SessionStore().create("chess", 1, TrackingSession(walk["cm"], walk["camera"]),
+                                    "opencv").session_id
+        up = route(f"/v1/sessions/{sid}/frames")
+        assert up in upstreams and f"server {replica}:8000" in conf.split(
+            f"upstream {up} {{")[1].split("}")[0]
+    assert route("/v1/maps/chess/sessions") == "quadloc"
+    assert route("/v1/sessions/s-other.x") == "quadloc"
