@@ -250,6 +250,31 @@ def _by_second(wo: list[tuple[float, float]]) -> dict[str, float]:
     return {f"{k}-{k + 5}s": float(np.median(v)) for k, v in sorted(out.items())}
 
 
+def recording(seed: int, n_frames: int) -> dict:
+    """A recording for ``quadloc track`` (docs/tracking.md format): the first ``n_frames`` of
+    the walk of ``seed``, detections simulated, drifting odometry, ground truth included."""
+    cm = compile_map(load_chess_map())
+    camera, cfw, _ = load_chess_poses()
+    walk = make_walk([invert_pose(T) for T in cfw])[:n_frames]
+    rng = np.random.default_rng(seed)
+    odom = simulate_odometry(walk, rng)
+    frames = []
+    for i, (T, To) in enumerate(zip(walk, odom, strict=True)):
+        dets = simulate_frame(cm, camera, T, rng).detections
+        frames.append({
+            "detections": [{"ellipse": {"cx": round(d.ellipse.cx, 3),
+                                        "cy": round(d.ellipse.cy, 3),
+                                        "a": round(d.ellipse.a, 3), "b": round(d.ellipse.b, 3),
+                                        "angle": round(d.ellipse.angle, 5)},
+                            "label": d.label, "sigma": float(f"{d.sigma:.4g}")} for d in dets],
+            "odom_from_camera": {"matrix": np.round(To, 7).tolist()},
+            "timestamp": round(i / HZ, 4), "frame_id": str(i)})
+    return {"camera": {"fx": camera.fx, "fy": camera.fy, "cx": camera.cx, "cy": camera.cy,
+                       "width": camera.width, "height": camera.height},
+            "convention": "opencv", "frames": frames,
+            "ground_truth_world_from_camera": [np.round(T, 7).tolist() for T in walk]}
+
+
 def make_plots(results: list[dict], out_dir: Path) -> list[Path]:
     import matplotlib
 
@@ -292,9 +317,15 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--long-minutes", type=float, default=0.0,
                     help="also replay a session of this many minutes (memory flatness)")
     ap.add_argument("--json", type=Path)
+    ap.add_argument("--write-recording", type=Path, metavar="PATH",
+                    help="only write a recording of --max-frames frames (seed: first of --seeds)")
     ap.add_argument("--write-results", action="store_true")
     args = ap.parse_args(argv)
     opts = SessionOptions(window_frames=args.window, smoother=args.smoother)
+    if args.write_recording:
+        rec = recording(args.seeds[0], args.max_frames or 90)
+        args.write_recording.write_text(json.dumps(rec, separators=(",", ":")))
+        return rec
     results = [run_seed(s, args.max_frames, opts, not args.no_localize) for s in args.seeds]
     pooled = summarize([x for r in results for x in r["rows"]])
     out = {"command": "python -m bench.tracking " + " ".join(argv or []),

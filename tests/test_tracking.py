@@ -4,12 +4,12 @@ rule."""
 
 from __future__ import annotations
 
+import gc
 import math
 import re
 import tracemalloc
 from pathlib import Path
 
-import gtsam
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
@@ -55,7 +55,7 @@ def walk() -> dict:
 def test_centre_jacobian_matches_central_differences(walk: dict) -> None:
     cam, T = walk["camera"], walk["poses"][10]
     pts = walk["cm"].centers
-    u, J = centre_jacobians(cam, T, pts)
+    _, J = centre_jacobians(cam, T, pts)
     h = 1e-6
     for k in range(6):
         xi = np.zeros(6)
@@ -117,12 +117,12 @@ def test_bad_frames_name_the_field_and_leave_the_session_unchanged(walk: dict) -
     s.add_frame(walk["frames"][0])
     bad = np.eye(4)
     bad[0, 0] = 2.0
-    with pytest.raises(TrackingInputError, match="^odom_from_camera: must be a rigid"):
+    with pytest.raises(TrackingInputError, match=r"^odom_from_camera: must be a rigid"):
         s.add_frame(FrameInput([], bad, 1.0))
-    with pytest.raises(TrackingInputError, match="^timestamp: .* before"):
+    with pytest.raises(TrackingInputError, match=r"^timestamp: .* before"):
         s.add_frame(FrameInput([], np.eye(4), -1.0))
     assert s.frame_count == 1
-    with pytest.raises(TrackingInputError, match="^options.smoother"):
+    with pytest.raises(TrackingInputError, match=r"^options\.smoother"):
         SessionOptions(smoother="kalman")
 
 
@@ -145,27 +145,29 @@ def test_store_bounds_count_and_expires_idle_sessions(walk: dict) -> None:
 
 
 def test_long_session_memory_is_flat(walk: dict) -> None:
-    """3000 frames (100 s at 30 Hz, the walk replayed): Python heap and the graph stay bounded
-    (bench.tracking --long-minutes 10 runs the 10-minute version, docs/tracking.md)."""
+    """900 frames (30 s at 30 Hz, the walk replayed back and forth): the graph stays within its
+    window and the Python heap does not grow with the frame count (``bench.tracking
+    --long-minutes 10`` runs the 10-minute version: docs/tracking.md)."""
     frames = walk["frames"]
     s = TrackingSession(walk["cm"], walk["camera"], SessionOptions())
     seq = frames + frames[::-1]
     last_T = last_src = None
     tracemalloc.start()
     heap = []
-    for k in range(3000):
+    for k in range(900):
         f = seq[k % len(seq)]
         T = f.odom_from_camera if last_T is None else last_T @ invert_pose(last_src) \
             @ f.odom_from_camera
         last_T, last_src = T, f.odom_from_camera
         s.add_frame(FrameInput(f.detections, T, k / 30.0))
-        if k in (999, 2999):
+        if (k + 1) % 150 == 0:
+            gc.collect()
             heap.append(tracemalloc.get_traced_memory()[0])
+            assert s.state != "tracking" or len(s._smoother.timestamps()) <= 30
     tracemalloc.stop()
-    assert heap[1] - heap[0] < 300_000, heap
-    if s._smoother is not None:
-        assert len(s._smoother.timestamps()) <= 30
-        assert s._smoother.getFactors().size() < 400
+    # a leak of even 100 B per frame would add 45 kB per 450 frames on top of the noise
+    # (the window's factors and memoised evaluations vary with the detections: ~0.5 MB)
+    assert max(heap[3:]) < max(heap[:3]) + 300_000, heap
 
 
 # ----------------------------------------------------------------------------- API
