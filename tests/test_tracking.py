@@ -103,6 +103,22 @@ def test_session_initializes_and_tracks_through_a_sparse_stretch(walk: dict) -> 
     assert len(s._smoother.timestamps()) <= SessionOptions().window_frames
 
 
+def test_one_detection_per_frame_initializes_once_the_frames_see_three_objects(
+        walk: dict) -> None:
+    # single-frame localize cannot use any of these frames (one detection each)
+    rng = np.random.default_rng(11)
+    s = TrackingSession(walk["cm"], walk["camera"], SessionOptions())
+    out = []
+    for f, T in zip(walk["frames"][:45], walk["poses"][:45], strict=True):
+        one = [f.detections[int(rng.integers(len(f.detections)))]] if f.detections else []
+        r = s.add_frame(FrameInput(one, f.odom_from_camera, f.timestamp))
+        out.append((r, T))
+    tracked = [(r, T) for r, T in out if r.state == "tracking"]
+    assert tracked and tracked[0][0].frame_index < 30
+    errs = [pose_error(r.world_from_camera, T) for r, T in tracked]
+    assert max(e[0] for e in errs) < 0.10 and max(e[1] for e in errs) < 5.0
+
+
 def test_frames_with_two_objects_each_do_not_initialize_alone(walk: dict) -> None:
     # the same frame repeated (no motion, 2 objects): never three distinct objects -> no pose
     f = next(f for f in walk["frames"] if len(f.detections) == 2)
@@ -145,7 +161,7 @@ def test_store_bounds_count_and_expires_idle_sessions(walk: dict) -> None:
 
 
 def test_long_session_memory_is_flat(walk: dict) -> None:
-    """600 frames (20 s at 30 Hz, the walk replayed back and forth): the graph stays within its
+    """450 frames (15 s at 30 Hz, the walk replayed back and forth): the graph stays within its
     window and the Python heap does not grow with the frame count (``bench.tracking
     --long-minutes 10`` runs the 10-minute version: docs/tracking.md)."""
     frames = walk["frames"]
@@ -153,19 +169,19 @@ def test_long_session_memory_is_flat(walk: dict) -> None:
     seq = frames + frames[::-1]
     last_T = last_src = None
     blocks = []
-    for k in range(600):
+    for k in range(450):
         f = seq[k % len(seq)]
         T = f.odom_from_camera if last_T is None else last_T @ invert_pose(last_src) \
             @ f.odom_from_camera
         last_T, last_src = T, f.odom_from_camera
         s.add_frame(FrameInput(f.detections, T, k / 30.0))
-        if (k + 1) % 100 == 0:
+        if (k + 1) % 75 == 0:
             gc.collect()
             blocks.append(sys.getallocatedblocks())
             assert s.state != "tracking" or len(s._smoother.timestamps()) <= 30
     # Python objects alive (pymalloc blocks; tracemalloc would make this test 20x slower):
     # flat after the first window. Leaking one frame's factor (a closure, its residual model
-    # and its arrays: > 50 blocks) would add > 15000 blocks over the last 300 frames.
+    # and its arrays: > 50 blocks) would add > 10000 blocks over the last 225 frames.
     assert max(blocks[3:]) < max(blocks[:3]) + 3000, blocks
 
 
