@@ -131,14 +131,14 @@ def create_session(map_id: MapIdPath, body: SessionCreate, request: Request,
 
 
 @router.get("/sessions/{session_id}", response_model=SessionOut, summary="Describe a session",
-            responses=problem_responses(401, 403, 404))
+            responses=problem_responses(401, 403, 404, 422))
 def get_session(session_id: SessionIdPath, request: Request, _key: ReadAccess) -> SessionOut:
     store = _store(request)
     return _out(_entry(store, session_id), store)
 
 
 @router.delete("/sessions/{session_id}", status_code=204, summary="End a session",
-               responses=problem_responses(401, 403, 404))
+               responses=problem_responses(401, 403, 404, 422))
 def delete_session(session_id: SessionIdPath, request: Request, _key: ReadAccess) -> Response:
     try:
         _store(request).delete(session_id)
