@@ -303,3 +303,24 @@ def test_sdk_session_sync_and_async(client: TestClient, walk: dict) -> None:
             return out[-1]
 
     assert asyncio.run(run())["state"] == "tracking"
+
+
+# ----------------------------------------------------------------------------- CLI
+
+def test_cli_track_replays_the_example_recording(tmp_path: Path, capsys) -> None:
+    import json
+
+    from service.cli import main
+
+    db = f"sqlite:///{tmp_path / 'maps.db'}"
+    rec = ROOT / "docs" / "examples" / "track_chess.json"
+    assert main(["track", "--map", "chess", str(rec), "--database-url", db]) == 0
+    out = capsys.readouterr().out
+    m = re.search(r"within 10 cm and 5 deg ([0-9.]+) %", out)
+    assert m and float(m.group(1)) >= 90.0, out[-500:]
+    doc = json.loads(rec.read_text())
+    doc["ground_truth_world_from_camera"] = doc["ground_truth_world_from_camera"][:3]
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(doc))
+    assert main(["track", "--map", "chess", str(bad), "--database-url", db]) == 2
+    assert "one entry per frame" in capsys.readouterr().err
