@@ -174,12 +174,15 @@ def session_memory(cm: object, camera: object, options: SessionOptions,
     gc.collect()
     out = {"frames": len(inputs), "heap_bytes": tracemalloc.get_traced_memory()[0] - h0,
            "rss_growth_bytes": _rss_bytes() - r0}
+    tracemalloc.stop()
     if minutes:
+        # tracemalloc would slow this 20-fold: Python object count (pymalloc blocks) and RSS
         n = int(minutes * 60 * HZ)
         seq = inputs + inputs[::-1]
         # odometry continuity on the way back: re-anchor each pass at the last pose sent
         samples = []
         last_T, last_src = None, None
+        b0 = sys.getallocatedblocks()
         for k in range(n):
             f = seq[k % len(seq)]
             if last_T is None:
@@ -191,10 +194,9 @@ def session_memory(cm: object, camera: object, options: SessionOptions,
             if (k + 1) % int(60 * HZ) == 0:
                 gc.collect()
                 samples.append({"minute": (k + 1) / (60 * HZ),
-                                "heap_bytes": tracemalloc.get_traced_memory()[0] - h0,
+                                "pymalloc_blocks": sys.getallocatedblocks() - b0,
                                 "rss_bytes": _rss_bytes() - r0, "state": session.state})
         out["long_session"] = samples
-    tracemalloc.stop()
     return out
 
 
@@ -363,11 +365,14 @@ def results_markdown(out: dict, batch: dict | None = None) -> str:
                   "process RSS growth includes GTSAM's C++ graph): " + "; ".join(
                       f"seed {k}: heap {v['heap_bytes'] / 1e6:.2f} MB, RSS +"
                       f"{v['rss_growth_bytes'] / 1e6:.2f} MB" for k, v in mem.items()) + "."]
-    long = out.get("long_session", {}).get("long_session")
+    long = (out.get("long_session") or {}).get("long_session")
     if long:
-        lines += ["", "10-minute session at 30 Hz (walk replayed back and forth, 18000 frames): "
-                  "heap / RSS growth per minute: " + ", ".join(
-                      f"{x['heap_bytes'] / 1e6:.2f}/{x['rss_bytes'] / 1e6:.2f} MB"
+        cmd = out["long_session"].get("command", out["command"])
+        lines += ["", f"{len(long)}-minute session at 30 Hz (`{cmd}`: the walk "
+                  "replayed back and forth with continuous odometry): at each minute, Python "
+                  "objects alive (pymalloc blocks, relative to the session's start) and process "
+                  "RSS growth: " + ", ".join(
+                      f"{x['pymalloc_blocks']:+d} blocks / {x['rss_bytes'] / 1e6:+.1f} MB"
                       for x in long) + f" (state at the end: {long[-1]['state']})."]
     return "\n".join(lines)
 
@@ -392,9 +397,14 @@ def main(argv: list[str] | None = None) -> dict:
     opts = SessionOptions(window_frames=args.window, smoother=args.smoother)
     if args.render:
         runs = [json.loads(p.read_text()) for p in args.render]
-        update_results_section("tracking", results_markdown(runs[0], runs[1] if len(runs) > 1
-                                                            else None))
-        return runs[0]
+        main_run = runs[0]
+        batch = next((r for r in runs[1:] if r["smoother"] == "batch"), None)
+        long = next((r for r in runs[1:] if r.get("long_session")), None)
+        if long is not None:
+            main_run = {**main_run, "long_session": {**long["long_session"],
+                                                     "command": long["command"]}}
+        update_results_section("tracking", results_markdown(main_run, batch))
+        return main_run
     if args.write_recording:
         rec = recording(args.seeds[0], args.max_frames or 90)
         args.write_recording.write_text(json.dumps(rec, separators=(",", ":")))
