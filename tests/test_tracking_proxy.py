@@ -1,7 +1,7 @@
 """The real nginx with deploy/nginx.conf in front of two real replicas (skipped without an
-``nginx`` binary): every request of a session reaches the replica that created it, and a
-restarted replica's 404 ``session-not-found`` is tested in process (tests/test_tracking.py). Only the upstream addresses, the listen
-port and the temp paths of the config are rewritten for loopback."""
+``nginx`` binary): every request of a session reaches the replica that created it (a restarted
+replica's 404 ``session-not-found`` is tested in process, tests/test_tracking.py). Only the
+upstream addresses, the listen port and the temp paths of the config are rewritten."""
 
 from __future__ import annotations
 
