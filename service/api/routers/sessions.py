@@ -17,7 +17,7 @@ import os
 from typing import Annotated
 
 import numpy as np
-from fastapi import APIRouter, Path, Request, Response
+from fastapi import APIRouter, Body, Path, Request, Response
 
 from factors.geometry import GeometryError
 from maps.errors import MapNotFound
@@ -35,6 +35,12 @@ from service.api.deps import MapCacheDep, MapIdPath
 from service.api.errors import ProblemError, map_not_found
 from service.api.openapi_docs import problem_responses
 from service.api.schemas import CovarianceOut, InlierOut
+from service.api.session_examples import (
+    FRAME_EXAMPLE,
+    FRAME_RESPONSE_EXAMPLE,
+    SESSION_CREATE_EXAMPLE,
+    SESSION_EXAMPLE,
+)
 from service.api.session_schemas import (
     SessionCreate,
     SessionFrameIn,
@@ -101,8 +107,12 @@ def _out(entry: SessionEntry, store: SessionStore) -> SessionOut:
 
 @router.post("/maps/{map_id}/sessions", response_model=SessionOut, status_code=201,
              summary="Start a tracking session",
-             responses=problem_responses(400, 401, 403, 404, 413, 415, 422, 503))
-def create_session(map_id: MapIdPath, body: SessionCreate, request: Request,
+             responses={**problem_responses(400, 401, 403, 404, 413, 415, 422, 503),
+                        201: {"content": {"application/json": {"example": SESSION_EXAMPLE}}}})
+def create_session(map_id: MapIdPath,
+                   body: Annotated[SessionCreate, Body(openapi_examples={"chess": {
+                       "summary": "Chess camera", "value": SESSION_CREATE_EXAMPLE}})],
+                   request: Request,
                    cache: MapCacheDep, _key: ReadAccess, response: Response) -> SessionOut:
     try:
         compiled = cache.get(map_id, None)
@@ -131,7 +141,8 @@ def create_session(map_id: MapIdPath, body: SessionCreate, request: Request,
 
 
 @router.get("/sessions/{session_id}", response_model=SessionOut, summary="Describe a session",
-            responses=problem_responses(401, 403, 404, 422))
+            responses={**problem_responses(401, 403, 404, 422),
+                       200: {"content": {"application/json": {"example": SESSION_EXAMPLE}}}})
 def get_session(session_id: SessionIdPath, request: Request, _key: ReadAccess) -> SessionOut:
     store = _store(request)
     return _out(_entry(store, session_id), store)
@@ -152,8 +163,14 @@ def delete_session(session_id: SessionIdPath, request: Request, _key: ReadAccess
              description="Body: one frame object, or `{\"frames\": [...]}` (batch, at most "
                          "900). Frames are validated all before any is fused: an error names "
                          "`frames[i]....` and leaves the session unchanged.",
-             responses=problem_responses(400, 401, 403, 404, 413, 415, 422))
-def add_frames(session_id: SessionIdPath, body: SessionFramesIn | SessionFrameIn,
+             responses={**problem_responses(400, 401, 403, 404, 413, 415, 422),
+                        200: {"content": {"application/json": {
+                            "example": FRAME_RESPONSE_EXAMPLE}}}})
+def add_frames(session_id: SessionIdPath,
+               body: Annotated[SessionFramesIn | SessionFrameIn, Body(openapi_examples={
+                   "one_frame": {"summary": "One frame", "value": FRAME_EXAMPLE},
+                   "batch": {"summary": "A recording (batch)",
+                             "value": {"frames": [FRAME_EXAMPLE]}}})],
                request: Request, _key: ReadAccess) -> SessionFramesOut:
     store = _store(request)
     entry = _entry(store, session_id)
