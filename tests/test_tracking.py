@@ -119,6 +119,35 @@ def test_one_detection_per_frame_initializes_once_the_frames_see_three_objects(
     assert max(e[0] for e in errs) < 0.10 and max(e[1] for e in errs) < 5.0
 
 
+def test_a_kidnapped_session_goes_lost_then_relocalizes(walk: dict) -> None:
+    """Track 40 frames, then the camera is elsewhere in the room while the odometry claims a
+    continuous motion (a different odometry frame): the detections stop matching, the session
+    says ``lost`` (no pose) and relocalizes with multi-frame RANSAC."""
+    cm, camera = walk["cm"], walk["camera"]
+    s = TrackingSession(cm, camera, SessionOptions())
+    for f in walk["frames"][:40]:
+        s.add_frame(f)
+    assert s.state == "tracking"
+    _, cfw, _ = load_chess_poses()
+    far = make_walk([invert_pose(T) for T in cfw])[600:700]
+    rng = np.random.default_rng(3)
+    odom = simulate_odometry(far, rng)
+    # continue the first odometry smoothly: the kidnapping is invisible to the odometry
+    bridge = walk["frames"][39].odom_from_camera @ invert_pose(odom[0])
+    states, errs = [], []
+    for k, (T, To) in enumerate(zip(far, odom, strict=True)):
+        dets = simulate_frame(cm, camera, T, rng).detections
+        r = s.add_frame(FrameInput(dets, bridge @ To, 40 / 30.0 + (k + 1) / 30.0))
+        states.append(r.state)
+        if r.state == "tracking" and "lost" in states:
+            errs.append(pose_error(r.world_from_camera, T))
+    assert "lost" in states
+    first_lost = states.index("lost")
+    assert first_lost < 30
+    assert errs, states
+    assert np.mean([e[0] <= 0.10 and e[1] <= 5 for e in errs]) >= 0.95
+
+
 def test_frames_with_two_objects_each_do_not_initialize_alone(walk: dict) -> None:
     # the same frame repeated (no motion, 2 objects): never three distinct objects -> no pose
     f = next(f for f in walk["frames"] if len(f.detections) == 2)

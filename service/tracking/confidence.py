@@ -7,7 +7,8 @@ Gaussian posterior: tangent error ``xi = [omega, v] ~ N(0, s^2 * Sigma)`` (``Sig
 marginal covariance of the frame's pose, GTSAM order, body frame; ``s`` =
 :data:`COVARIANCE_SCALE`, a calibration factor fitted with ``bench.tracking`` on tuning seeds and
 checked on held-out seeds), probability estimated from :data:`N_SAMPLES` fixed quasi-random
-normal draws (deterministic). It is 0 whenever the session is not ``tracking``.
+normal draws (deterministic). It is 0 whenever the session is not ``tracking`` and on a tracking
+frame whose usable detections are all unexplained by the pose (``detections_unexplained``).
 
 When ``service.localization.confidence`` (issue 12) lands, :func:`session_confidence` is the one
 function to point at it.
@@ -31,14 +32,17 @@ _DRAWS = np.random.default_rng(20261123).standard_normal((N_SAMPLES, 6))
 _DRAWS.setflags(write=False)
 
 
-def session_confidence(state: str, covariance: np.ndarray | None) -> float:
+def session_confidence(state: str, covariance: np.ndarray | None,
+                       contradicted: bool = False) -> float:
     """P(position error <= 10 cm and rotation error <= 5 deg) in [0, 1] (module docstring).
 
     Args:
         state: the session state of the frame (``"tracking"`` gives a non-zero value).
         covariance: 6x6 covariance ``[omega (rad), v (m)]``, body frame, or None (-> 0).
+        contradicted: the frame's detections are all unexplained at the pose (-> 0: the
+            Gaussian posterior no longer describes the error).
     """
-    if state != "tracking" or covariance is None:
+    if state != "tracking" or covariance is None or contradicted:
         return 0.0
     S = 0.5 * (np.asarray(covariance, dtype=float) + np.asarray(covariance, dtype=float).T)
     try:

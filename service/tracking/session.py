@@ -18,8 +18,10 @@ both marginalise frames older than ``window_frames`` into a Gaussian prior on th
 
 States: ``initializing`` (no pose yet: frames are buffered and multi-frame RANSAC,
 :mod:`service.tracking.multiframe`, runs every ``init_interval_frames``), ``tracking``, ``lost``
-(the estimate is no longer supported: position std above ``lost_position_std_m`` or
-``lost_after_misses`` consecutive frames whose detections all failed association/verification;
+(the estimate is no longer supported: position std above ``lost_position_std_m``, a frame with
+>= :data:`LOST_UNEXPLAINED_DETECTIONS` usable detections none of which is an inlier, or
+``lost_after_misses`` consecutive frames whose detections are all unexplained; such a frame,
+while still ``tracking``, has ``reason="detections_unexplained"`` and confidence 0;
 the graph is dropped and multi-frame RANSAC relocalizes, the state stays ``lost`` until then).
 Poses are returned only while ``tracking``.
 """
@@ -57,6 +59,10 @@ __all__ = [
 ]
 
 STATES = ("initializing", "tracking", "lost")
+#: A tracking frame with at least this many usable detections, none of them explained by the
+#: estimate (no inlier), sends the session to ``lost`` at once (fewer: after
+#: ``lost_after_misses`` such frames in a row).
+LOST_UNEXPLAINED_DETECTIONS = 3
 SMOOTHERS = ("isam2", "batch")
 
 
@@ -116,7 +122,7 @@ class SessionOptions:
     init_max_samples: int = 300
     init_time_budget_ms: float = 60.0
     lost_position_std_m: float = 0.5
-    lost_after_misses: int = 15
+    lost_after_misses: int = 10
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -164,7 +170,8 @@ class FrameResult:
     ``inliers``: detections whose IoU with their object's projection at the returned pose is >=
     ``inlier_iou`` (one-to-one). ``confidence``: :func:`service.tracking.confidence.
     session_confidence`. ``reason``: why there is no pose (``waiting_for_constraints``,
-    ``ambiguous``, ``lost``), else None."""
+    ``ambiguous``, ``lost``), ``detections_unexplained`` for a tracking frame whose usable
+    detections are all unexplained by its (odometry-predicted) pose, else None."""
 
     frame_index: int
     frame_id: str | None
@@ -333,7 +340,8 @@ class TrackingSession:
 
     def _result(self, index: int, frame: FrameInput, T_oc: np.ndarray, T: np.ndarray | None,
                 cov: np.ndarray | None, inliers: list[InlierMatch], n_usable: int,
-                reason: str | None, timings: dict[str, float]) -> FrameResult:
+                reason: str | None, timings: dict[str, float],
+                contradicted: bool = False) -> FrameResult:
         T_wo = cov_wo = None
         if T is not None:
             T_wo = T @ invert_pose(T_oc)
@@ -342,7 +350,8 @@ class TrackingSession:
                 cov_wo = Ad @ cov @ Ad.T
         return FrameResult(index, frame.frame_id, float(frame.timestamp), self.state, T, cov,
                            T_wo, cov_wo, tuple(inliers),
-                           session_confidence(self.state, cov), n_usable, reason, timings)
+                           session_confidence(self.state, cov, contradicted), n_usable, reason,
+                           timings)
 
     def _track(self, index: int, frame: FrameInput, T_oc: np.ndarray, usable: list[int],
                timings: dict[str, float]) -> FrameResult:
@@ -388,20 +397,21 @@ class TrackingSession:
             return self._result(index, frame, T_oc, None, None, [], len(usable), "lost",
                                 timings)
         inliers = self._verify(frame.detections, usable, T)
-        if usable and assoc and not inliers:
-            self._misses += 1
-        elif usable and not assoc:
-            self._misses += 1 if self._predicted_visible(T_pred) else 0
-        else:
-            self._misses = 0
+        # a frame whose usable detections are all unexplained contradicts the estimate
+        contradicted = bool(usable) and not inliers and (
+            bool(assoc) or self._predicted_visible(T_pred))
+        self._misses = self._misses + 1 if contradicted else 0
         pos_std = math.sqrt(max(float(np.linalg.eigvalsh(cov[3:, 3:]).max()), 0.0))
         if pos_std > self.options.lost_position_std_m \
-                or self._misses >= self.options.lost_after_misses:
+                or self._misses >= self.options.lost_after_misses \
+                or (contradicted and len(usable) >= LOST_UNEXPLAINED_DETECTIONS):
             self.reset()
             return self._result(index, frame, T_oc, None, None, [], len(usable), "lost",
                                 timings)
         self._last = (index, float(frame.timestamp), T_oc, T, cov)
-        return self._result(index, frame, T_oc, T, cov, inliers, len(usable), None, timings)
+        return self._result(index, frame, T_oc, T, cov, inliers, len(usable),
+                            "detections_unexplained" if contradicted else None, timings,
+                            contradicted)
 
     def _predicted_visible(self, world_from_camera: np.ndarray) -> bool:
         cfw = invert_pose(world_from_camera)
