@@ -93,7 +93,9 @@ class SessionFrameOut(BaseModel):
     timestamp: float
     state: str = Field(description="initializing, tracking or lost.")
     reason: str | None = Field(description="Why no pose: waiting_for_constraints, ambiguous, "
-                                           "lost (None when tracking).")
+                                           "lost; with a pose: detections_unexplained (the "
+                                           "frame's detections contradict the pose; confidence "
+                                           "0); else None.")
     world_from_camera: PoseOut | None
     covariance: CovarianceOut | None
     world_from_odom: PoseOut | None = Field(
@@ -103,7 +105,8 @@ class SessionFrameOut(BaseModel):
         description="6x6 [omega, v], right perturbation, in the ODOMETRY frame's axes, given "
                     "this frame's odometry pose.")
     confidence: float = Field(ge=0, le=1, description="P(pose within 10 cm and 5 deg) under "
-                                                      "the pose posterior; 0 unless tracking.")
+                                                      "the pose posterior; 0 unless tracking "
+                                                      "and 0 when detections_unexplained.")
     inliers: list[InlierOut]
     n_usable_detections: int
     timings_ms: dict[str, float]
