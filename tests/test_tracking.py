@@ -139,6 +139,9 @@ def test_a_kidnapped_session_goes_lost_then_relocalizes(walk: dict) -> None:
         dets = simulate_frame(cm, camera, T, rng).detections
         r = s.add_frame(FrameInput(dets, bridge @ To, 40 / 30.0 + (k + 1) / 30.0))
         states.append(r.state)
+        # never a wrong pose with a confidence
+        if r.world_from_camera is not None and pose_error(r.world_from_camera, T)[0] > 0.1:
+            assert r.confidence == 0.0 and r.reason == "detections_unexplained"
         if r.state == "tracking" and "lost" in states:
             errs.append(pose_error(r.world_from_camera, T))
     assert "lost" in states
