@@ -112,7 +112,7 @@ def pose_error(T: np.ndarray | None, truth: np.ndarray) -> tuple[float, float]:
 
 
 def run_seed(seed: int, max_frames: int | None, options: SessionOptions,
-             with_localize: bool = True) -> dict:
+             with_localize: bool = True, max_detections: int | None = None) -> dict:
     scene = load_chess_map()
     cm = compile_map(scene)
     camera, cfw, _ = load_chess_poses()
@@ -133,6 +133,8 @@ def run_seed(seed: int, max_frames: int | None, options: SessionOptions,
         if sparse and dets:
             keep = int(rng.integers(0, 3))
             dets = [dets[j] for j in rng.permutation(len(dets))[:keep]]
+        if max_detections is not None and len(dets) > max_detections:
+            dets = [dets[j] for j in rng.permutation(len(dets))[:max_detections]]
         inputs.append(FrameInput(dets, To, i / HZ, str(i)))
         c0 = time.process_time()
         res = session.add_frame(inputs[-1])
@@ -338,7 +340,7 @@ def _f(x: object, digits: int = 1) -> str:
     return f"{x:.{digits}f}" if isinstance(x, float) else str(x)
 
 
-def results_markdown(out: dict, batch: dict | None = None) -> str:
+def results_markdown(out: dict, batch: dict | None = None, capped: dict | None = None) -> str:
     """The ``tracking`` section of docs/results.md from a run's JSON (and optionally the
     ``--smoother batch`` run's, for the smoother comparison)."""
     lines = ["## tracking (bench/tracking.py)", "",
@@ -374,6 +376,15 @@ def results_markdown(out: dict, batch: dict | None = None) -> str:
         lines.append(f"Same frames with `--smoother batch` (`{batch['command']}`): tracking "
                      f"frames median {_f(b['tracking_update_cpu_ms_median'], 2)} ms, p99 "
                      f"{_f(b['tracking_update_cpu_ms_p99'], 2)} ms.")
+    if capped:
+        lines += ["", f"Every frame limited to {capped['max_detections']} detection(s) "
+                  f"(`{capped['command']}`; single-frame localize cannot use any frame): "
+                  + "; ".join(
+                      f"seed {k}: first fix after {_f(r['time_to_first_fix_s'], 2)} s, "
+                      f"{_f(r['session_within_10cm_5deg_pct'])} % of all frames within 10 cm "
+                      f"and 5°, {r['after_first_fix']['session_error_gt_10cm']} of "
+                      f"{r['after_first_fix']['frames']} frames after the first fix beyond "
+                      f"10 cm" for k, r in capped["per_seed"].items()) + "."]
     lines += ["", "Confidence (P within 10 cm and 5° under the posterior) vs outcome, tracking "
               f"frames: mean confidence {_f(p['mean_confidence_tracking'], 3)}, fraction "
               f"actually within {_f(p['fraction_within_10cm_5deg_tracking'], 3)}.", "",
@@ -408,6 +419,8 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--long-minutes", type=float, default=0.0,
                     help="also replay a session of this many minutes (memory flatness)")
     ap.add_argument("--json", type=Path)
+    ap.add_argument("--max-detections", type=int, default=None,
+                    help="keep at most this many detections in EVERY frame (e.g. 1)")
     ap.add_argument("--render", type=Path, nargs="+", metavar="JSON",
                     help="only write the docs/results.md section from saved --json outputs "
                          "(the main run, then optionally the --smoother batch run)")
@@ -420,21 +433,24 @@ def main(argv: list[str] | None = None) -> dict:
         runs = [json.loads(p.read_text()) for p in args.render]
         main_run = runs[0]
         batch = next((r for r in runs[1:] if r["smoother"] == "batch"), None)
+        capped = next((r for r in runs[1:] if r.get("max_detections")), None)
         long = next((r for r in runs[1:] if r.get("long_session")), None)
         if long is not None:
             main_run = {**main_run, "long_session": {**long["long_session"],
                                                      "command": long["command"]}}
-        update_results_section("tracking", results_markdown(main_run, batch))
+        update_results_section("tracking", results_markdown(main_run, batch, capped))
         return main_run
     if args.write_recording:
         rec = recording(args.seeds[0], args.max_frames or 90)
         args.write_recording.write_text(json.dumps(rec, separators=(",", ":")))
         return rec
-    results = [run_seed(s, args.max_frames, opts, not args.no_localize) for s in args.seeds]
+    results = [run_seed(s, args.max_frames, opts, not args.no_localize, args.max_detections)
+               for s in args.seeds]
     pooled = summarize([x for r in results for x in r["rows"]])
     out = {"command": "python -m bench.tracking " + " ".join(
         sys.argv[1:] if argv is None else argv),
            "smoother": args.smoother, "window_frames": args.window,
+           "max_detections": args.max_detections,
            "per_seed": {r["seed"]: summarize(r["rows"]) for r in results},
            "pooled": pooled,
            "memory_per_seed": {r["seed"]: r["memory"] for r in results}}
