@@ -373,9 +373,19 @@ def results_markdown(out: dict, batch: dict | None = None, capped: dict | None =
               f"{_f(p['tracking_update_cpu_ms_p99'], 2)}."]
     if batch:
         b = batch["pooled"]
-        lines.append(f"Same frames with `--smoother batch` (`{batch['command']}`): tracking "
-                     f"frames median {_f(b['tracking_update_cpu_ms_median'], 2)} ms, p99 "
-                     f"{_f(b['tracking_update_cpu_ms_p99'], 2)} ms.")
+        lines.append(f"Smoothers on the same 300 frames (seed 1): `--smoother batch` "
+                     f"(`{batch['command']}`): tracking frames median "
+                     f"{_f(b['tracking_update_cpu_ms_median'], 2)} ms, p99 "
+                     f"{_f(b['tracking_update_cpu_ms_p99'], 2)} ms, "
+                     f"{b['after_first_fix']['session_error_gt_10cm']} frames beyond 10 cm")
+        same = out.get("long_session", {}).get("pooled")
+        if same:
+            lines[-1] += (f"; `isam2` (first pass of the 10-minute run below): median "
+                          f"{_f(same['tracking_update_cpu_ms_median'], 2)} ms, p99 "
+                          f"{_f(same['tracking_update_cpu_ms_p99'], 2)} ms, "
+                          f"{same['after_first_fix']['session_error_gt_10cm']} frames beyond "
+                          "10 cm")
+        lines[-1] += "."
     if capped:
         lines += ["", f"Every frame limited to {capped['max_detections']} detection(s) "
                   f"(`{capped['command']}`; single-frame localize cannot use any frame): "
@@ -437,8 +447,11 @@ def main(argv: list[str] | None = None) -> dict:
         long = next((r for r in runs[1:] if r.get("long_session")), None)
         if long is not None:
             main_run = {**main_run, "long_session": {**long["long_session"],
-                                                     "command": long["command"]}}
-        update_results_section("tracking", results_markdown(main_run, batch, capped))
+                                                     "command": long["command"],
+                                                     "pooled": long["pooled"]}}
+        update_results_section("tracking", results_markdown(main_run, batch, capped) + (
+            "\n\nSection assembled from those runs' JSON by `python -m bench.tracking --render "
+            + " ".join(str(p) for p in args.render) + "`."))
         return main_run
     if args.write_recording:
         rec = recording(args.seeds[0], args.max_frames or 90)
