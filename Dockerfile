@@ -6,12 +6,38 @@
 # The server refuses to listen on 0.0.0.0 without API keys: set QUADLOC_API_KEYS to the sha256
 # hex digest(s) of your key(s) with their scopes (see docs/deployment.md). Maps live in SQLite
 # under the /data volume, or in PostgreSQL with QUADLOC_DATABASE_URL=postgresql://user:pw@host/db.
-FROM python:3.11-slim
+#
+# BASE: any Debian-based image with python3.11 and its venv module. Real deployments use the
+# default; where no registry is reachable, deploy/build-base-image.sh builds one from Debian
+# packages (then: docker build --network host --build-arg BASE=quadloc-base:bookworm .).
+ARG BASE=python:3.11-slim
 
+# ---- build stage: the exact versions of requirements.lock (hash-checked), then the project.
+FROM ${BASE} AS build
+ENV PIP_NO_CACHE_DIR=1 \
+    PIP_DISABLE_PIP_VERSION_CHECK=1 \
+    PYTHONDONTWRITEBYTECODE=1
+WORKDIR /src
+COPY requirements.lock ./
+# --no-deps: the lock is the complete list (minus the test tools gtsam declares but never imports).
+RUN python3 -m venv /opt/quadloc \
+    && /opt/quadloc/bin/python -m pip install --require-hashes --no-deps -r requirements.lock
+COPY pyproject.toml README.md ./
+COPY factors/ factors/
+COPY maps/ maps/
+COPY service/ service/
+COPY sdk/ sdk/
+# The light SDK distribution (sdk/, which the server depends on) and the project from the
+# checkout (build backend from the lock); then a smoke test of the imports.
+RUN /opt/quadloc/bin/python -m pip install --no-deps --no-build-isolation ./sdk . \
+    && /opt/quadloc/bin/python -c "import cv2, gtsam, psycopg, service.api.app, maps.store" \
+    && /opt/quadloc/bin/python -m pip uninstall --yes setuptools wheel
+
+# ---- runtime stage: the base + the venv, no compilers, no test tools, no build backend.
+FROM ${BASE}
 ENV PYTHONDONTWRITEBYTECODE=1 \
     PYTHONUNBUFFERED=1 \
-    PIP_NO_CACHE_DIR=1 \
-    PIP_DISABLE_PIP_VERSION_CHECK=1
+    PATH=/opt/quadloc/bin:$PATH
 
 # Unprivileged runtime user with a fixed uid/gid (volume permissions are predictable).
 RUN groupadd --system --gid 10001 quadloc \
@@ -20,20 +46,10 @@ RUN groupadd --system --gid 10001 quadloc \
     && mkdir -p /data \
     && chown quadloc:quadloc /data
 
-WORKDIR /app
-COPY pyproject.toml README.md ./
-COPY factors/ factors/
-COPY maps/ maps/
-COPY service/ service/
-COPY sdk/ sdk/
-
-# The README's install (`make serve` -> Makefile target `install`), run with the image's Python:
-# the same two pip commands, minus the `-e` and the `[dev]` extra that only tests need.
-# hadolint ignore=DL3013
-RUN python -m pip install --upgrade pip \
-    && python -m pip install .
+COPY --from=build /opt/quadloc /opt/quadloc
 
 USER 10001:10001
+WORKDIR /home/quadloc
 ENV QUADLOC_DATA_DIR=/data \
     QUADLOC_PORT=8000 \
     QUADLOC_WORKERS=1
@@ -44,5 +60,6 @@ EXPOSE 8000
 HEALTHCHECK --interval=15s --timeout=5s --start-period=30s --retries=3 \
     CMD ["python", "-c", "import os, sys, urllib.request; port = os.environ.get('QUADLOC_PORT', '8000'); sys.exit(0 if urllib.request.urlopen(f'http://127.0.0.1:{port}/healthz', timeout=4).status == 200 else 1)"]
 
-# One Uvicorn process per container; settings come from QUADLOC_* variables.
+# One Uvicorn process per container; settings come from QUADLOC_* variables. Exec form: the
+# server is PID 1 and gets docker stop's SIGTERM (graceful shutdown, docs/deployment.md).
 CMD ["quadloc", "serve", "--host", "0.0.0.0"]

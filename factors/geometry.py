@@ -38,6 +38,7 @@ __all__ = [
     "MIN_DEPTH",
     "ORTHONORMAL_TOLERANCE",
     "QUATERNION_NORM_TOLERANCE",
+    "ROTATION_EXACT_TOLERANCE",
     "Camera",
     "DegenerateProjectionError",
     "Ellipse",
@@ -47,9 +48,11 @@ __all__ = [
     "dual_conics_from_params",
     "ellipse_params",
     "ellipsoid_depth_margins",
+    "exact_norm",
     "invert_pose",
     "level_values",
     "params_from_dual_conics",
+    "params_from_gaussians",
     "pose_matrix",
     "project_ellipsoid",
     "project_ellipsoids_dual",
@@ -140,9 +143,39 @@ def rotation_2d(angle: float) -> np.ndarray:
     return np.array([[c, -s], [s, c]])
 
 
+#: A 3x3 matrix this close to a rotation (``max|R R^T - I|``) is already one for
+#: :func:`snap_to_rotation`, which then returns it unchanged instead of running an SVD.
+ROTATION_EXACT_TOLERANCE = 1e-12
+
+
+def exact_norm(values: Sequence[float]) -> float:
+    """Euclidean norm of a short vector, the same bits on every machine: squares summed with
+    ``math.fsum`` (correctly rounded), unlike ``np.linalg.norm`` whose BLAS dot product may
+    round differently on another CPU. Used where the result is hashed (map content hashes)."""
+    return math.sqrt(math.fsum(float(v) * float(v) for v in values))
+
+
+def _is_rotation(rows: list[list[float]], tol: float) -> bool:
+    """``max|R R^T - I| <= tol`` and ``det R > 0``, in plain float arithmetic (no BLAS)."""
+    err = max(abs(math.fsum(a * b for a, b in zip(rows[i], rows[j], strict=True))
+                  - (1.0 if i == j else 0.0)) for i in range(3) for j in range(3))
+    (a, b, c), (d, e, f), (g, h, k) = rows
+    det = a * (e * k - f * h) - b * (d * k - f * g) + c * (d * h - e * g)
+    return err <= tol and det > 0  # False for NaN
+
+
 def snap_to_rotation(matrix: np.ndarray) -> np.ndarray:
-    """Nearest rotation matrix (Frobenius norm) to a 3x3 ``matrix``, via SVD, det forced to +1."""
-    U, _, Vt = np.linalg.svd(np.asarray(matrix, dtype=float))
+    """Nearest rotation matrix (Frobenius norm) to a 3x3 ``matrix``, via SVD, det forced to +1.
+
+    A matrix that is already a rotation to :data:`ROTATION_EXACT_TOLERANCE` (1e-12) is returned
+    unchanged (as a new float array): the SVD would only move its last bits, and differently
+    with another LAPACK build, which must not change what is stored or hashed (maps imported
+    from rotation matrices get the same quaternion, and content hash, on every machine).
+    """
+    M = np.asarray(matrix, dtype=float)
+    if M.shape == (3, 3) and _is_rotation(M.tolist(), ROTATION_EXACT_TOLERANCE):
+        return M.copy()
+    U, _, Vt = np.linalg.svd(M)
     D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
     return U @ D @ Vt
 
@@ -190,7 +223,7 @@ def quaternion_wxyz_from_rotation(rotation: np.ndarray) -> np.ndarray:
         s = 2.0 * math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
         q = np.array([(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s,
                       (R[1, 2] + R[2, 1]) / s, 0.25 * s])
-    q /= np.linalg.norm(q)
+    q /= exact_norm(q)  # no BLAS: the same bits on every machine (map hashes)
     return canonical_quaternion_wxyz(q)
 
 
@@ -318,7 +351,7 @@ class Ellipse:
         """Inverse of :meth:`gaussian` (``sigma`` symmetric positive definite)."""
         mu = _finite_array("Ellipse.from_gaussian", "mu", mu, (2,))
         S = _finite_array("Ellipse.from_gaussian", "sigma", sigma, (2, 2))
-        return cls(*_params_from_center_and_inverse_shape(mu[None], S[None])[0])
+        return cls(*params_from_gaussians(mu[None], S[None])[0])
 
     # -- boxes, levels, contour
     def bbox(self) -> np.ndarray:
@@ -386,8 +419,10 @@ def dual_conics_from_params(params: np.ndarray) -> np.ndarray:
     return out
 
 
-def _params_from_center_and_inverse_shape(center: np.ndarray, sigma: np.ndarray) -> np.ndarray:
-    """(N, 5) canonical params (a >= b, angle in [-pi/2, pi/2)) from centres and ``A^-1``."""
+def params_from_gaussians(center: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """(N, 5) canonical params (a >= b, angle in [-pi/2, pi/2)) from centres (N, 2) px and
+    ``Sigma = A^-1`` (N, 2, 2) px^2. Raises ``DegenerateProjectionError`` if a ``Sigma`` is not
+    positive definite."""
     sxx, syy, sxy = sigma[:, 0, 0], sigma[:, 1, 1], 0.5 * (sigma[:, 0, 1] + sigma[:, 1, 0])
     half_tr = 0.5 * (sxx + syy)
     disc = np.sqrt(np.maximum((0.5 * (sxx - syy)) ** 2 + sxy**2, 0.0))
@@ -419,7 +454,7 @@ def params_from_dual_conics(dual_conics: np.ndarray) -> np.ndarray:
     Cn = C / (-w)[:, None, None]
     center = -Cn[:, :2, 2]
     sigma = Cn[:, :2, :2] + center[:, :, None] * center[:, None, :]
-    return _params_from_center_and_inverse_shape(center, sigma)
+    return params_from_gaussians(center, sigma)
 
 
 def level_values(params: np.ndarray, points: np.ndarray) -> np.ndarray:

@@ -4,7 +4,8 @@ Public entry points
 -------------------
 * ``cost(name, detection, projection, **options) -> float``
 * ``residual(name, detection, projection, **options) -> np.ndarray`` (1-D, fixed length per
-  metric and options) with ``cost == ||residual||^2`` (to rounding, ~1e-12 relative).
+  metric and options) with ``cost == ||residual||^2`` (to rounding, ~1e-12 relative), except
+  iou / giou: ``cost == sum(residual)`` (non-negative rows, see below).
 * ``residual_size(name, **options) -> int``.
 * ``level_set_sample_points(...)`` / ``level_set_sampling_scale(...)``: the level-set sampling
   layout, shared with the GTSAM factors.
@@ -15,19 +16,29 @@ are pixels, angles radians (see :mod:`factors.geometry` for the ellipse conventi
 
 Metrics, costs and residuals (``r``, length in brackets)
 --------------------------------------------------------
-``iou`` [1]
-    Jaccard distance ``1 - |D ∩ P| / |D ∪ P|`` in ``[0, 1]``; ``r = [sqrt(cost)]``. Areas are
+``iou`` [4]
+    Jaccard distance ``Delta = 1 - |D ∩ P| / |D ∪ P|`` in ``[0, 1]`` (the cost). Areas are
     exact (closed-form arc integrals, :mod:`factors.overlap`). Flat (== 1) for disjoint
-    ellipses. Near the optimum ``cost ~ k |delta|`` (symmetric-difference area grows linearly
-    with a displacement ``delta``), so ``r ~ sqrt(|delta|)`` has an unbounded derivative at 0:
-    Gauss-Newton steps overshoot by a factor ~2 and LM's damping is what makes it converge,
-    linearly. Use it for scoring more than for refinement.
-``giou`` [1]
-    ``1 - GIoU``, ``GIoU = IoU - |C \\ (D ∪ P)| / |C|`` (Rezatofighi et al.), ``C`` the convex
-    hull of the two ellipses; cost in ``[0, 2]``, ``r = [sqrt(cost)]`` (same remark as iou).
-    Exactly flat when one ellipse contains the other (``C`` is then the larger one). The hull
-    area is exact (arcs + common tangents, :mod:`factors.overlap`); option ``hull_directions``
-    (default 128) is the number of normal directions used to bracket the common tangents.
+    ellipses. The residual splits ``Delta`` over the four quadrants ``Q_k`` of the detection's
+    frame (centred on it, along its axes): ``r_k = |(D △ P) ∩ Q_k| / |D ∪ P| >= 0``,
+    ``sum_k r_k = Delta``, so the refinement minimises ``sum_j sigma_j^-1 sum_k r_jk^2``, which
+    lies in ``[Delta_j^2 / 4, Delta_j^2]`` per pair and vanishes exactly where ``Delta_j`` does.
+    Why not one row: ``Delta ~ k(direction) |delta|`` near the optimum (the symmetric
+    difference grows linearly with a displacement ``delta``), a cone, and one scalar row per
+    object gives a rank-deficient Gauss-Newton system below 6 objects (and ``sqrt(Delta)``
+    adds an unbounded slope): LM crawled, capped. Each ``r_k`` is such a cone too, but for a
+    degree-1 cone the Gauss-Newton step ``-J^+ r`` is exactly ``-delta`` once the stacked
+    rows have full rank (Euler: ``J delta = r``), which 4 rows per object give from 2 objects.
+    The rows and their exact gradient are :func:`overlap_residual`. For disjoint ellipses the
+    rows still sum to 1 but their squares are not flat: smallest when the projection spreads
+    evenly over the detection's quadrants, a mild pull towards it.
+``giou`` [4]
+    ``Delta = 1 - GIoU``, ``GIoU = IoU - |C \\ (D ∪ P)| / |C|`` (Rezatofighi et al.), ``C`` the
+    convex hull of the two ellipses; in ``[0, 2]`` (the cost). Exactly flat when one ellipse
+    contains the other (``C`` is then the larger one). The hull area is exact (arcs + common
+    tangents, :mod:`factors.overlap`); option ``hull_directions`` (default 128) is the number of
+    normal directions used to bracket the common tangents. Residual as iou, per quadrant:
+    ``r_k = |(D △ P) ∩ Q_k| / |D ∪ P| + |(C \\ (D ∪ P)) ∩ Q_k| / |C|``, ``sum_k r_k = Delta``.
 ``bbox`` [4]
     ``r = B_D - B_P`` with ``B = [xmin, ymin, xmax, ymax]`` the axis-aligned boxes; cost is the
     squared norm. Not rotation invariant (boxes follow the image axes).
@@ -84,7 +95,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from factors.geometry import Ellipse, sigma_entries
-from factors.overlap import HULL_DIRECTIONS, hull_area, intersection_area
+from factors.overlap import HULL_DIRECTIONS, hull_area, intersection_area, quadrant_areas
 
 __all__ = [
     "DEFAULT_LEVEL_SET_SCALE",
@@ -396,21 +407,85 @@ def _level_set_residual(det: Ellipse, proj: Ellipse, n_azimuths: int = 6, n_leve
 # --------------------------------------------------------------------------- residuals
 
 
+def _hull_directions(value: object) -> int:
+    n = _positive_int("hull_directions", value)
+    if n < 8:
+        raise ValueError(f"option hull_directions must be >= 8, got {n}")
+    return n
+
+
+def overlap_delta(
+    name: str, detection_params: np.ndarray, projection_params: np.ndarray,
+    hull_directions: int = HULL_DIRECTIONS,
+) -> float:
+    """``Delta`` of ``iou`` (``1 - IoU``) or ``giou`` (``1 - GIoU``) between a detection and a
+    projection given as params ``(cx, cy, a, b, angle)`` (px, rad): ``I``, ``U = A_D + A_P -
+    I``, ``C = max(hull, U)``; ``Delta_iou = 1 - I/U`` in [0, 1], ``Delta_giou = 2 - I/U - U/C``
+    in [0, 2] (clamped against rounding)."""
+    inter = intersection_area(detection_params, projection_params)
+    union = (math.pi * float(detection_params[2] * detection_params[3])
+             + math.pi * float(projection_params[2] * projection_params[3]) - inter)
+    if name == "iou":
+        return min(max(1.0 - inter / union, 0.0), 1.0)
+    hull = max(hull_area(detection_params, projection_params, hull_directions), union)
+    return min(max(2.0 - inter / union - union / hull, 0.0), 2.0)
+
+
+def overlap_residual(
+    name: str, detection_params: np.ndarray, projection_params: np.ndarray,
+    hull_directions: int = HULL_DIRECTIONS, gradient: bool = False,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """The iou / giou residual: ``Delta`` split over the four quadrants ``Q_k`` of the
+    detection's frame (module docstring), ``r_k >= 0``, ``sum_k r_k = Delta``; and, if
+    ``gradient``, ``dr / dg`` (4, 5) w.r.t. the projection's Gaussian parameters ``g = (mu_x,
+    mu_y, s00, s01, s11)`` (px, px^2), exact (:func:`factors.overlap.quadrant_areas`).
+
+    ``r_k = |(D △ P) ∩ Q_k| / U`` (iou) ``+ |(C \\ (D ∪ P)) ∩ Q_k| / C`` (giou), with
+    ``|(D △ P) ∩ Q_k| = A_D / 4 + |P ∩ Q_k| - 2 |D ∩ P ∩ Q_k|``. The one place of these
+    formulas: the scalar metric and the pose factors call it.
+    """
+    q = quadrant_areas(detection_params, projection_params, name == "giou", hull_directions,
+                       gradient)
+    a_det = math.pi * float(detection_params[2] * detection_params[3])
+    proj_k, d_proj_k = q["second"]
+    inter_k, d_inter_k = q["intersection"]
+    union = a_det + float(proj_k.sum()) - float(inter_k.sum())
+    union_k = 0.25 * a_det + proj_k - inter_k
+    r = (union_k - inter_k) / union
+    d_r = None
+    if gradient:
+        d_union_k = d_proj_k - d_inter_k
+        d_union = d_union_k.sum(axis=0)
+        d_r = (d_union_k - d_inter_k) / union - np.outer(r, d_union) / union
+    if name == "iou":
+        return r, d_r
+    hull_k, d_hull_k = q["hull"]
+    hull = float(hull_k.sum())
+    if hull < union:  # rounding: the hull is the union (one ellipse contains the other)
+        return r, d_r
+    gap = (hull_k - union_k) / hull
+    if gradient:
+        d_gap = (d_hull_k - d_union_k) / hull - np.outer(gap, d_hull_k.sum(axis=0)) / hull
+        d_r = d_r + d_gap
+    return r + gap, d_r
+
+
 def _iou_cost(det: Ellipse, proj: Ellipse) -> float:
-    inter = ellipse_intersection_area(det, proj)
-    union = det.area + proj.area - inter
-    return min(max(1.0 - inter / union, 0.0), 1.0)
+    return overlap_delta("iou", det.params(), proj.params())
 
 
 def _giou_cost(det: Ellipse, proj: Ellipse, hull_directions: int = HULL_DIRECTIONS) -> float:
-    hull_directions = _positive_int("hull_directions", hull_directions)
-    if hull_directions < 8:
-        raise ValueError(f"option hull_directions must be >= 8, got {hull_directions}")
-    inter = ellipse_intersection_area(det, proj)
-    union = det.area + proj.area - inter
-    hull = max(hull_area(det.params(), proj.params(), hull_directions), union)
-    giou = inter / union - (hull - union) / hull
-    return min(max(1.0 - giou, 0.0), 2.0)
+    return overlap_delta("giou", det.params(), proj.params(), _hull_directions(hull_directions))
+
+
+def _iou_residual(det: Ellipse, proj: Ellipse) -> np.ndarray:
+    return overlap_residual("iou", det.params(), proj.params())[0]
+
+
+def _giou_residual(det: Ellipse, proj: Ellipse,
+                   hull_directions: int = HULL_DIRECTIONS) -> np.ndarray:
+    return overlap_residual("giou", det.params(), proj.params(),
+                            _hull_directions(hull_directions))[0]
 
 
 def _bbox_residual(det: Ellipse, proj: Ellipse) -> np.ndarray:
@@ -488,6 +563,8 @@ _RESIDUALS = {
     "wasserstein": _wasserstein_residual,
     "bhattacharyya": _bhattacharyya_residual,
     "level_set": _level_set_residual,
+    "iou": _iou_residual,
+    "giou": _giou_residual,
 }
 _SCALAR_COSTS = {"iou": _iou_cost, "giou": _giou_cost}
 
@@ -495,16 +572,15 @@ _SCALAR_COSTS = {"iou": _iou_cost, "giou": _giou_cost}
 def residual(name: str, detection: Ellipse, projection: Ellipse, **options: object) -> np.ndarray:
     """Residual vector of metric ``name`` (1-D float array, length :func:`residual_size`).
 
-    ``cost(name, ...) == ||residual(name, ...)||^2``. See the module docstring for each
-    metric's residual, units and options. Unknown ``name`` -> ``ValueError`` listing the valid
-    names; unknown option -> ``TypeError`` naming it; bad option value -> ``ValueError``.
+    ``cost(name, ...) == ||residual(name, ...)||^2``, except iou / giou (``cost ==
+    sum(residual)``). See the module docstring for each metric's residual, units and
+    options. Unknown ``name`` -> ``ValueError`` listing the valid names; unknown option ->
+    ``TypeError`` naming it; bad option value -> ``ValueError``.
     """
     _check_name(name)
     _check_options(name, options)
     _check_ellipse("detection", detection)
     _check_ellipse("projection", projection)
-    if name in _SCALAR_COSTS:
-        return np.array([math.sqrt(_SCALAR_COSTS[name](detection, projection, **options))])
     return _RESIDUALS[name](detection, projection, **options)
 
 
@@ -531,5 +607,5 @@ def residual_size(name: str, **options: object) -> int:
     if name == "level_set":
         return (_positive_int("n_azimuths", options.get("n_azimuths", 6))
                 * _positive_int("n_levels", options.get("n_levels", 4)))
-    return {"iou": 1, "giou": 1, "bbox": 4, "qbbox": 4, "algebraic": 5, "frobenius": 5,
+    return {"iou": 4, "giou": 4, "bbox": 4, "qbbox": 4, "algebraic": 5, "frobenius": 5,
             "wasserstein": 5, "bhattacharyya": 5}[name]

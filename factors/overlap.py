@@ -27,11 +27,25 @@ range of normals) leave no sign change on the grid; they are found from the deri
 interior extremum towards zero (its derivative changes sign), the extremum is located by bisection
 on the derivative and, if the winner changes there, the two switches are bracketed on either side.
 The result no longer depends on how the direction grid happens to fall (rigid-motion invariant).
+
+Derivatives (exact, for the pose factors)
+-----------------------------------------
+Both areas are differentiated with respect to the second ellipse's Gaussian parameters
+``g2 = (mu_x, mu_y, s00, s01, s11)`` (``Sigma = A^-1``, px^2) by the first-order area change of
+a region whose boundary moves by ``dx``: ``dA = ∮ dx × dx/dt dt`` over the boundary traversed
+counter-clockwise. Only the second ellipse's boundary moves (``_Boundary``), so
+``dI = ∫ over its arcs inside E1``, in closed form per arc (``∫ u``, ``∫ u u^T`` of
+``u = (cos t, sin t)``), and ``dH`` = the same over its arcs on the hull plus
+``1/2 dx(q) × (end - start)`` for each common tangent segment touching it at ``q`` (the
+contact points slide along the segment, and the first ellipse's end does not move). The end
+points of the arcs need no derivative (the integrand is continuous across them). Gradients are
+checked against central differences in the tests.
 """
 
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 
 import numpy as np
@@ -97,16 +111,122 @@ def _bracketed_root(fn, lo: float, hi: float, f0: float, f1: float, neg_lo: bool
     return t
 
 
-def intersection_area(p1: np.ndarray, p2: np.ndarray) -> float:
-    """Area (px^2) of the intersection of two filled ellipses given as params (5,)."""
-    P1x, P1y, Q1x, Q1y, *A1l = _ellipse_terms(p1)
-    P2x, P2y, Q2x, Q2y, *A2l = _ellipse_terms(p2)
-    A1, A2 = tuple(A1l), tuple(A2l)
-    ab1, ab2 = float(p1[2] * p1[3]), float(p2[2] * p2[3])
-    # Origin of the integration at c1; d = c1 - c2.
-    dx, dy = float(p1[0] - p2[0]), float(p1[1] - p2[1])
+class _Boundary:
+    """First-order motion of an ellipse's boundary with its Gaussian parameters.
 
-    def bil(A: tuple[float, float, float], x: float, y: float, u: float, v: float) -> float:
+    The boundary is ``x(t) = mu + L u(t)``, ``u = (cos t, sin t)``, ``L = R(angle) diag(a, b)``
+    (the parametric angle used throughout this module). A change ``(d mu, d Sigma)`` of
+    ``g = (mu_x, mu_y, s00, s01, s11)`` (``s01`` both off-diagonal entries) moves it by
+    ``dx(t) = d mu + 1/2 d Sigma L^-T u(t)`` (one choice of ``dL`` with ``L dL^T + dL L^T =
+    d Sigma``; other choices differ by a tangential motion, which changes no area). Each method
+    returns a gradient over ``g`` (list of 5 floats).
+    """
+
+    __slots__ = ("ab", "m00", "m01", "m10", "m11")
+
+    def __init__(self, p: np.ndarray) -> None:
+        a, b = float(p[2]), float(p[3])
+        c, s = math.cos(float(p[4])), math.sin(float(p[4]))
+        self.m00, self.m01, self.m10, self.m11 = c / a, -s / b, s / a, c / b  # M = L^-T
+        self.ab = a * b
+
+    def arc(self, t0: float, t1: float) -> list[float]:
+        """Gradient of ``∫_t0^t1 dx × x'(t) dt`` (the area swept by the arc, CCW outward).
+
+        ``dx × x' = det(L) [(L^-1 d mu) . u + 1/2 u^T L^-1 d Sigma L^-T u]`` (``J^T L J =
+        det(L) L^-T`` for 2x2), integrated in closed form: ``∫u``, ``∫u u^T``."""
+        s0, c0, s1, c1 = math.sin(t0), math.cos(t0), math.sin(t1), math.cos(t1)
+        iu0, iu1 = s1 - s0, c0 - c1
+        half = 0.5 * (t1 - t0)
+        q = 0.25 * (math.sin(2.0 * t1) - math.sin(2.0 * t0))
+        cc, ss, cs = half + q, half - q, 0.5 * (s1 * s1 - s0 * s0)
+        m00, m01, m10, m11 = self.m00, self.m01, self.m10, self.m11
+        ab = self.ab
+        # M Iuu (rows), then G = 1/2 ab M Iuu M^T
+        r00, r01 = m00 * cc + m01 * cs, m00 * cs + m01 * ss
+        r10, r11 = m10 * cc + m11 * cs, m10 * cs + m11 * ss
+        g00 = 0.5 * ab * (r00 * m00 + r01 * m01)
+        g01 = 0.5 * ab * (r00 * m10 + r01 * m11)
+        g11 = 0.5 * ab * (r10 * m10 + r11 * m11)
+        return [ab * (m00 * iu0 + m01 * iu1), ab * (m10 * iu0 + m11 * iu1),
+                g00, 2.0 * g01, g11]
+
+    def point(self, t: float, wx: float, wy: float) -> list[float]:
+        """Gradient of ``dx(t) × w`` for a fixed vector ``w``."""
+        p0, p1 = wy, -wx  # a × w = a . (w_y, -w_x)
+        u0, u1 = math.cos(t), math.sin(t)
+        v0, v1 = self.m00 * u0 + self.m01 * u1, self.m10 * u0 + self.m11 * u1  # L^-T u
+        return [p0, p1, 0.5 * v0 * p0, 0.5 * (v1 * p0 + v0 * p1), 0.5 * v1 * p1]
+
+    def area(self) -> list[float]:
+        """Gradient of the ellipse's own area ``pi sqrt(det Sigma)``: ``pi ab / 2 Sigma^-1``."""
+        m00, m01, m10, m11 = self.m00, self.m01, self.m10, self.m11
+        k = 0.5 * math.pi * self.ab
+        # Sigma^-1 = L^-T L^-1 = M M^T
+        return [0.0, 0.0, k * (m00 * m00 + m01 * m01), 2.0 * k * (m00 * m10 + m01 * m11),
+                k * (m10 * m10 + m11 * m11)]
+
+
+class _Ell:
+    """One ellipse of a pair, relative to the integration origin ``c1`` (the first ellipse's
+    centre): ``x(t) = c + cos t P + sin t Q`` with ``P = a u``, ``Q = b v``."""
+
+    __slots__ = ("A", "P", "Q", "ab", "bnd", "c")
+
+    def __init__(self, p: np.ndarray, origin: np.ndarray, moving: bool) -> None:
+        Px, Py, Qx, Qy, *A = _ellipse_terms(p)
+        self.P, self.Q, self.A = (Px, Py), (Qx, Qy), tuple(A)
+        self.ab = float(p[2] * p[3])
+        self.c = (float(p[0] - origin[0]), float(p[1] - origin[1]))
+        self.bnd = _Boundary(p) if moving else None
+
+    def point(self, t: float) -> tuple[float, float]:
+        ct, st = math.cos(t), math.sin(t)
+        return (self.c[0] + ct * self.P[0] + st * self.Q[0],
+                self.c[1] + ct * self.P[1] + st * self.Q[1])
+
+    def arc_area(self, t0: float, t1: float) -> float:
+        """``1/2 ∫_t0^t1 x × dx`` (origin ``c1``), closed form (module docstring)."""
+        dc, ds = math.cos(t1) - math.cos(t0), math.sin(t1) - math.sin(t0)
+        (Px, Py), (Qx, Qy), (cx, cy) = self.P, self.Q, self.c
+        return 0.5 * (self.ab * (t1 - t0) + cx * (dc * Py + ds * Qy) - cy * (dc * Px + ds * Qx))
+
+    def inside(self, x: float, y: float) -> bool:
+        """Is the point (origin ``c1``) strictly inside this ellipse?"""
+        return _quad(self.A, x - self.c[0], y - self.c[1]) < 1.0
+
+    def line_crossings(self, nx: float, ny: float) -> list[float]:
+        """Parametric angles where the boundary meets the line ``n . x = 0`` through ``c1``."""
+        alpha = nx * self.P[0] + ny * self.P[1]
+        beta = nx * self.Q[0] + ny * self.Q[1]
+        gamma = nx * self.c[0] + ny * self.c[1]
+        rad = math.hypot(alpha, beta)
+        if rad == 0.0 or abs(gamma) > rad:
+            return []
+        phi, dphi = math.atan2(beta, alpha), math.acos(max(-1.0, min(1.0, -gamma / rad)))
+        return [(phi + dphi) % _TWO_PI, (phi - dphi) % _TWO_PI]
+
+
+# A closed boundary as pieces, traversed counter-clockwise, origin c1:
+#   ("arc", k, t0, t1): ellipse k (0: the first, fixed; 1: the second, moving) from t0 to t1;
+#   ("seg", x0, y0, x1, y1, end, par): a common tangent segment; ``end`` is 0 if its start, 1 if
+#   its end lies on the moving ellipse (at parametric angle ``par``), the other end on the
+#   fixed one.
+_Piece = tuple
+
+
+def _crossing_roots(e1: _Ell, e2: _Ell) -> tuple[str, list[float], list[float]]:
+    """Where the two contours cross: ``("same" | "first_inside" | "second_inside" |
+    "disjoint" | "crossing", roots on e1, roots on e2)`` (parametric angles, sorted).
+
+    ``f(t) = Phi_2(x_1(t)) - 1`` is a trigonometric quadratic; its roots are bracketed on a
+    grid of ``GRID`` angles and refined by :func:`_bracketed_root`, then mapped to e2's angle.
+    """
+    A2 = e2.A
+    (P1x, P1y), (Q1x, Q1y) = e1.P, e1.Q
+    dx, dy = e1.c[0] - e2.c[0], e1.c[1] - e2.c[1]  # c1 - c2
+
+    def bil(A: tuple[float, ...], x: float, y: float, u: float, v: float) -> float:
         return A[0] * x * u + A[1] * (x * v + y * u) + A[2] * y * v
 
     pap, qaq = _quad(A2, P1x, P1y), _quad(A2, Q1x, Q1y)
@@ -117,7 +237,7 @@ def intersection_area(p1: np.ndarray, p2: np.ndarray) -> float:
     # f is dimensionless; identical contours give f = 0 up to rounding amplified by the
     # eccentricity, so anything below 1e-9 is treated as the same ellipse (area error <= 1e-9).
     if abs(k0) + abs(k1) + abs(k2) + abs(k3) + abs(k4) <= 1e-9:
-        return math.pi * ab1
+        return "same", [], []
     f = k0 + k1 * _COS_GRID + k2 * _SIN_GRID + k3 * _COS2_GRID + k4 * _SIN2_GRID
     sign = f > 1e-12  # rounding-level values (tangency) count as inside
     idx = _sign_changes(sign)
@@ -125,10 +245,9 @@ def intersection_area(p1: np.ndarray, p2: np.ndarray) -> float:
         # No crossing: E1 inside E2 (f <= 0, decided where |f| is largest, so internal
         # tangency does not matter), else E2 inside E1 iff its centre is in E1, else disjoint.
         if f[int(np.argmax(np.abs(f)))] < 0.0:
-            return math.pi * ab1
-        if _quad(A1, -dx, -dy) < 1.0:
-            return math.pi * ab2
-        return 0.0
+            return "first_inside", [], []
+        return ("second_inside" if e1.inside(*e2.c) else "disjoint"), [], []
+
     def f_and_df(t: float) -> tuple[float, float]:
         ct, st = math.cos(t), math.sin(t)
         c2t, s2t = ct * ct - st * st, 2.0 * st * ct
@@ -137,75 +256,57 @@ def intersection_area(p1: np.ndarray, p2: np.ndarray) -> float:
 
     h = _TWO_PI / GRID
     fl = f.tolist()
-    roots1 = []
-    for i in idx:
-        lo = i * h
-        roots1.append(_bracketed_root(f_and_df, lo, lo + h, fl[i], fl[(i + 1) % GRID],
-                                      not sign[i]) % _TWO_PI)
-    roots1.sort()
-    # The same intersection points on E2: x - c2 = cos t P2 + sin t Q2.
+    roots1 = sorted(_bracketed_root(f_and_df, i * h, (i + 1) * h, fl[i], fl[(i + 1) % GRID],
+                                    not sign[i]) % _TWO_PI for i in idx)
+    # The same points on E2: x - c2 = cos t P2 + sin t Q2.
+    (P2x, P2y), (Q2x, Q2y) = e2.P, e2.Q
+    ia2, ib2 = 1.0 / _quad((1.0, 0.0, 1.0), P2x, P2y), 1.0 / _quad((1.0, 0.0, 1.0), Q2x, Q2y)
     roots2 = []
-    ia2, ib2 = 1.0 / float(p2[2]) ** 2, 1.0 / float(p2[3]) ** 2
     for t in roots1:
-        rx = math.cos(t) * P1x + math.sin(t) * Q1x + dx
-        ry = math.cos(t) * P1y + math.sin(t) * Q1y + dy
+        x, y = e1.point(t)
+        rx, ry = x - e2.c[0], y - e2.c[1]
         roots2.append(math.atan2((rx * Q2x + ry * Q2y) * ib2, (rx * P2x + ry * P2y) * ia2)
                       % _TWO_PI)
-    roots2.sort()
-    area = _inside_arcs_area(roots1, (P1x, P1y, Q1x, Q1y), ab1, dx, dy, A2, 0.0, 0.0)
-    area += _inside_arcs_area(roots2, (P2x, P2y, Q2x, Q2y), ab2, -dx, -dy, A1, -dx, -dy)
-    return min(max(area, 0.0), math.pi * min(ab1, ab2))
+    return "crossing", roots1, sorted(roots2)
 
 
-def _inside_arcs_area(t: list[float], PQ: tuple[float, float, float, float], ab: float,
-                      ox: float, oy: float, A_other: tuple[float, float, float],
-                      cx: float, cy: float) -> float:
-    """Green's integral ``1/2 ∫ x × dx`` over the arcs of one ellipse (between consecutive
-    sorted angles ``t``) lying inside the other one (``Phi_other < 1`` at the arc's middle).
-    ``(ox, oy)`` is this ellipse's centre minus the other's; ``(cx, cy)`` is this centre
-    relative to the integration origin. Closed form per arc (see the module docstring).
-    """
-    Px, Py, Qx, Qy = PQ
-    n = len(t)
-    area = 0.0
+def _inside_arcs(e: _Ell, k: int, roots: list[float], other: _Ell) -> list[_Piece]:
+    """Arcs of ellipse ``e`` (index ``k``) between consecutive ``roots`` lying inside
+    ``other`` (tested at the arc's middle)."""
+    out = []
+    n = len(roots)
     for i in range(n):
-        t0 = t[i]
-        t1 = t[i + 1] if i + 1 < n else t[0] + _TWO_PI
-        if not t1 > t0:
-            continue
-        tm = 0.5 * (t0 + t1)
-        cm, sm = math.cos(tm), math.sin(tm)
-        if _quad(A_other, cm * Px + sm * Qx + ox, cm * Py + sm * Qy + oy) >= 1.0:
-            continue
-        dc, ds = math.cos(t1) - math.cos(t0), math.sin(t1) - math.sin(t0)
-        area += 0.5 * (ab * (t1 - t0) + cx * (dc * Py + ds * Qy) - cy * (dc * Px + ds * Qx))
-    return area
+        t0 = roots[i]
+        t1 = roots[i + 1] if i + 1 < n else roots[0] + _TWO_PI
+        if t1 > t0 and other.inside(*e.point(0.5 * (t0 + t1))):
+            out.append(("arc", k, t0, t1))
+    return out
 
 
-@functools.lru_cache(maxsize=8)
-def _directions(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    th = np.linspace(0.0, _TWO_PI, n, endpoint=False)
-    return th, np.cos(th), np.sin(th)
+def _intersection_pieces(e1: _Ell, e2: _Ell) -> list[_Piece]:
+    """The boundary of ``E1 ∩ E2``: E1's arcs inside E2 and E2's arcs inside E1."""
+    kind, roots1, roots2 = _crossing_roots(e1, e2)
+    if kind == "disjoint":
+        return []
+    if kind in ("same", "second_inside"):
+        return [("arc", 1, 0.0, _TWO_PI)]
+    if kind == "first_inside":
+        return [("arc", 0, 0.0, _TWO_PI)]
+    return _inside_arcs(e1, 0, roots1, e2) + _inside_arcs(e2, 1, roots2, e1)
 
 
-def _sigma_terms(p: np.ndarray) -> tuple[float, float, float]:
-    """``(s00, s01, s11)`` of ``Sigma`` for params ``p = (cx, cy, a, b, angle)``."""
-    return sigma_entries(float(p[2]), float(p[3]), float(p[4]))
-
-
-def hull_area(p1: np.ndarray, p2: np.ndarray, n_directions: int = HULL_DIRECTIONS) -> float:
-    """Area (px^2) of the convex hull of two ellipses, exact (see the module docstring).
+def _hull_pieces(p1: np.ndarray, p2: np.ndarray, e1: _Ell, e2: _Ell,
+                 n_directions: int) -> list[_Piece]:
+    """The boundary of the convex hull of the two ellipses.
 
     The support functions ``h_i(theta) = n . c_i + sqrt(n^T Sigma_i n)`` are compared on
-    ``n_directions`` normal directions to find where the supporting ellipse switches; each
-    switch direction (a common tangent) is refined by Newton steps on ``h_1 - h_2``. The hull
-    boundary is then the supporting arcs (closed-form Green integrals) joined by the common
-    tangent segments (``1/2 p × q`` each).
+    ``n_directions`` normal directions to find where the supporting ellipse switches (module
+    docstring); each switch (a common tangent) is refined by :func:`_bracketed_root`. The hull
+    boundary is then the supporting arcs joined by the common tangent segments.
     """
     th, nx, ny = _directions(int(n_directions))
     S1, S2 = _sigma_terms(p1), _sigma_terms(p2)
-    # Origin at c1.
-    c2x, c2y = float(p2[0] - p1[0]), float(p2[1] - p1[1])
+    c2x, c2y = e2.c
     q1 = S1[0] * nx * nx + 2.0 * S1[1] * nx * ny + S1[2] * ny * ny
     q2 = S2[0] * nx * nx + 2.0 * S2[1] * nx * ny + S2[2] * ny * ny
     sq1, sq2 = np.sqrt(q1), np.sqrt(q2)
@@ -268,32 +369,25 @@ def hull_area(p1: np.ndarray, p2: np.ndarray, n_directions: int = HULL_DIRECTION
         switches.append((_bracketed_root(hdiff, lo, t_min, dl[i], f_min, up), loser))
         switches.append((_bracketed_root(hdiff, t_min, hi, f_min, dl[j], down), 1 - loser))
     if not switches:  # one ellipse supports every direction: it contains the other
-        p = p1 if first[0] else p2
-        return math.pi * float(p[2] * p[3])
+        return [("arc", 0 if first[0] else 1, 0.0, _TWO_PI)]
     switches.sort()
-    ells = ((p1, 0.0, 0.0), (p2, c2x, c2y))
+    ells = (e1, e2)
 
-    def contact(k: int, t: float) -> tuple[float, float, float]:
-        """Contact point (origin c1) and parametric angle of ellipse ``k`` for normal ``t``."""
-        p, cx, cy = ells[k]
-        a, b, ang = float(p[2]), float(p[3]), float(p[4])
-        ca, sa = math.cos(ang), math.sin(ang)
-        nu, nv = math.cos(t - ang), math.sin(t - ang)  # normal in the ellipse frame
-        par = math.atan2(b * nv, a * nu)
-        x_loc, y_loc = a * math.cos(par), b * math.sin(par)
-        return cx + ca * x_loc - sa * y_loc, cy + sa * x_loc + ca * y_loc, par
+    def contact(k: int, t: float) -> float:
+        """Parametric angle of the contact point of ellipse ``k`` for the normal angle ``t``."""
+        e = ells[k]
+        # normal n in the ellipse frame (u, v): (n.u, n.v); contact at atan2(b n.v, a n.u)
+        n0, n1 = math.cos(t), math.sin(t)
+        return math.atan2(n0 * e.Q[0] + n1 * e.Q[1], n0 * e.P[0] + n1 * e.P[1])
 
-    area = 0.0
+    pieces: list[_Piece] = []
     n_sw = len(switches)
     for j in range(n_sw):
         t_start, k = switches[j]
         t_end, k_next = switches[(j + 1) % n_sw]
         if j + 1 == n_sw:
             t_end += _TWO_PI
-        p, cx, cy = ells[k]
-        a, b, ang = float(p[2]), float(p[3]), float(p[4])
-        _, _, par0 = contact(k, t_start)
-        x1, y1, par1 = contact(k, t_end)
+        par0, par1 = contact(k, t_start), contact(k, t_end)
         # The normal -> parametric angle map is monotone and maps half-turns to half-turns, so
         # the parametric span is on the same side of pi as the normal sweep; fix the 2 pi
         # wrap-around that rounding can cause for sweeps near 0 or 2 pi.
@@ -303,13 +397,154 @@ def hull_area(p1: np.ndarray, p2: np.ndarray, n_directions: int = HULL_DIRECTION
             span += _TWO_PI
         elif sweep < 0.5 * math.pi and span > 1.5 * math.pi:
             span -= _TWO_PI
-        par1 = par0 + span
-        ca, sa = math.cos(ang), math.sin(ang)
-        dc, ds = math.cos(par1) - math.cos(par0), math.sin(par1) - math.sin(par0)
-        wx = a * dc * ca - b * ds * sa
-        wy = a * dc * sa + b * ds * ca
-        area += 0.5 * (a * b * span + cx * wy - cy * wx)
+        pieces.append(("arc", k, par0, par0 + span))
         # Common tangent segment from this arc's end to the next arc's start.
-        xn, yn, _ = contact(k_next, t_end)
-        area += 0.5 * (x1 * yn - y1 * xn)
-    return area
+        par_next = contact(k_next, t_end)
+        x0, y0 = ells[k].point(par0 + span)
+        x1, y1 = ells[k_next].point(par_next)
+        pieces.append(("seg", x0, y0, x1, y1, 0 if k == 1 else 1,
+                       par0 + span if k == 1 else par_next))
+    return pieces
+
+
+def _piece_sums(pieces: list[_Piece], ells: tuple[_Ell, _Ell], grad: bool,
+                axes: tuple[float, float] | None = None) -> tuple[list[float], list[list[float]]]:
+    """Area ``1/2 ∮ x × dx`` of the region bounded by ``pieces`` and, if ``grad``, its
+    gradient w.r.t. the moving ellipse's ``g2`` (module docstring, "Derivatives").
+
+    With ``axes = (cos, sin)`` of the first ellipse's angle, the region is split into the four
+    quadrants of the first ellipse's frame (centred on it, along its axes; counter-clockwise
+    from ``+u, +v``): ``1/2 ∫ x × dx`` vanishes along rays from the origin, so each quadrant's
+    area is the sum over the pieces' parts inside it. Returns lists of 1 or 4 areas and
+    gradients.
+    """
+    n_out = 1 if axes is None else 4
+    areas = [0.0] * n_out
+    grads = [[0.0] * 5 for _ in range(n_out)]
+    if axes is not None:
+        ca, sa = axes
+        lines = ((-sa, ca), (ca, sa))  # normals of the +u axis line and of the +v axis line
+        cuts_by_ellipse: list[list[float] | None] = [None, None]
+
+    def quadrant(x: float, y: float) -> int:
+        xl, yl = ca * x + sa * y, -sa * x + ca * y
+        if yl >= 0.0:
+            return 0 if xl >= 0.0 else 1
+        return 2 if xl < 0.0 else 3
+
+    def add(q: int, area: float, g: list[float] | None, w: float = 1.0) -> None:
+        areas[q] += area
+        if g is not None:
+            row = grads[q]
+            for i in range(5):
+                row[i] += w * g[i]
+
+    for piece in pieces:
+        if piece[0] == "arc":
+            _, k, t0, t1 = piece
+            e = ells[k]
+            if axes is None:
+                add(0, e.arc_area(t0, t1), e.bnd.arc(t0, t1) if grad and k == 1 else None)
+                continue
+            if cuts_by_ellipse[k] is None:
+                cuts_by_ellipse[k] = sorted(c for n in lines for c in e.line_crossings(*n))
+            base = math.floor(t0 / _TWO_PI) * _TWO_PI
+            inner = sorted(c + base + m * _TWO_PI for c in cuts_by_ellipse[k]  # type: ignore[union-attr]
+                           for m in (0, 1, 2) if t0 < c + base + m * _TWO_PI < t1)
+            bounds = [t0, *inner, t1]
+            for a_, b_ in itertools.pairwise(bounds):
+                q = quadrant(*e.point(0.5 * (a_ + b_)))
+                add(q, e.arc_area(a_, b_), e.bnd.arc(a_, b_) if grad and k == 1 else None)
+            continue
+        _, x0, y0, x1, y1, end, par = piece
+        wx, wy = x1 - x0, y1 - y0
+        g_full = None
+        if grad:  # 1/2 dx(q) × (end - start), q on the moving ellipse
+            g_full = ells[1].bnd.point(par, wx, wy)
+        if axes is None:
+            add(0, 0.5 * (x0 * y1 - y0 * x1), g_full, 0.5)
+            continue
+        inner = []
+        for nx_, ny_ in lines:
+            den = nx_ * wx + ny_ * wy
+            if den != 0.0:
+                s = -(nx_ * x0 + ny_ * y0) / den
+                if 0.0 < s < 1.0:
+                    inner.append(s)
+        bounds = [0.0, *sorted(inner), 1.0]
+        for s0, s1 in itertools.pairwise(bounds):
+            xa, ya, xb, yb = x0 + s0 * wx, y0 + s0 * wy, x0 + s1 * wx, y0 + s1 * wy
+            q = quadrant(0.5 * (xa + xb), 0.5 * (ya + yb))
+            # the normal motion is linear along the segment, 0 at its fixed end: this part
+            # carries (sigma1^2 - sigma0^2) of it, sigma the fraction from the fixed end
+            share = s1 * s1 - s0 * s0 if end == 1 else (1 - s0) ** 2 - (1 - s1) ** 2
+            add(q, 0.5 * (xa * yb - ya * xb), g_full, 0.5 * share)
+    return areas, grads
+
+
+def _pair(p1: np.ndarray, p2: np.ndarray, grad: bool) -> tuple[_Ell, _Ell]:
+    origin = np.asarray(p1[:2], dtype=float)
+    return _Ell(p1, origin, False), _Ell(p2, origin, grad)
+
+
+def intersection_area(p1: np.ndarray, p2: np.ndarray) -> float:
+    """Area (px^2) of the intersection of two filled ellipses given as params (5,)."""
+    e1, e2 = _pair(p1, p2, False)
+    area = _piece_sums(_intersection_pieces(e1, e2), (e1, e2), False)[0][0]
+    return min(max(area, 0.0), math.pi * min(e1.ab, e2.ab))
+
+
+def intersection_area_and_gradient(p1: np.ndarray, p2: np.ndarray) -> tuple[float, np.ndarray]:
+    """Intersection area (px^2) and its gradient (5,) with respect to the second ellipse's
+    Gaussian parameters ``g2 = (mu_x, mu_y, s00, s01, s11)`` (module docstring, "Derivatives")."""
+    e1, e2 = _pair(p1, p2, True)
+    areas, grads = _piece_sums(_intersection_pieces(e1, e2), (e1, e2), True)
+    return areas[0], np.asarray(grads[0])
+
+
+def hull_area(p1: np.ndarray, p2: np.ndarray, n_directions: int = HULL_DIRECTIONS) -> float:
+    """Area (px^2) of the convex hull of two ellipses, exact (see the module docstring)."""
+    e1, e2 = _pair(p1, p2, False)
+    return _piece_sums(_hull_pieces(p1, p2, e1, e2, n_directions), (e1, e2), False)[0][0]
+
+
+def hull_area_and_gradient(p1: np.ndarray, p2: np.ndarray,
+                           n_directions: int = HULL_DIRECTIONS) -> tuple[float, np.ndarray]:
+    """Hull area (px^2) and its gradient (5,) w.r.t. the second ellipse's Gaussian parameters
+    ``g2 = (mu_x, mu_y, s00, s01, s11)`` (module docstring, "Derivatives")."""
+    e1, e2 = _pair(p1, p2, True)
+    areas, grads = _piece_sums(_hull_pieces(p1, p2, e1, e2, n_directions), (e1, e2), True)
+    return areas[0], np.asarray(grads[0])
+
+
+def quadrant_areas(
+    p1: np.ndarray, p2: np.ndarray, hull: bool, n_directions: int = HULL_DIRECTIONS,
+    gradient: bool = False,
+) -> dict[str, tuple[np.ndarray, np.ndarray | None]]:
+    """Areas (px^2) in the four quadrants of the first ellipse's frame (module docstring,
+    "Quadrants") of the second ellipse (``"second"``), of the intersection (``"intersection"``)
+    and, if ``hull``, of the convex hull (``"hull"``): each ``(areas (4,), gradients (4, 5) or
+    None)``, gradients w.r.t. the second ellipse's ``g2``. The first ellipse has ``A1 / 4`` in
+    each quadrant."""
+    e1, e2 = _pair(p1, p2, gradient)
+    ells = (e1, e2)
+    axes = (math.cos(float(p1[4])), math.sin(float(p1[4])))
+    regions = {"second": [("arc", 1, 0.0, _TWO_PI)], "intersection": _intersection_pieces(e1, e2)}
+    if hull:
+        regions["hull"] = _hull_pieces(p1, p2, e1, e2, n_directions)
+    out = {}
+    for name, pieces in regions.items():
+        areas, grads = _piece_sums(pieces, ells, gradient, axes)
+        out[name] = (np.asarray(areas), np.asarray(grads) if gradient else None)
+    return out
+
+
+@functools.lru_cache(maxsize=8)
+def _directions(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    th = np.linspace(0.0, _TWO_PI, n, endpoint=False)
+    return th, np.cos(th), np.sin(th)
+
+
+def _sigma_terms(p: np.ndarray) -> tuple[float, float, float]:
+    """``(s00, s01, s11)`` of ``Sigma`` for params ``p = (cx, cy, a, b, angle)``."""
+    return sigma_entries(float(p[2]), float(p[3]), float(p[4]))

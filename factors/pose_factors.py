@@ -158,10 +158,10 @@ def shared_pose_factor(
     def error_fn(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
         T = values.atPose3(key).matrix()
         if H is None:
-            return evaluate(T, False).residuals[index]
+            return evaluate(T, False).factor_residuals[index]
         ev = evaluate(T, True)
-        H[0] = ev.jacobians[index]  # type: ignore[index]
-        return ev.residuals[index]
+        H[0] = ev.factor_jacobians[index]  # type: ignore[index]
+        return ev.factor_residuals[index]
 
     return gtsam.CustomFactor(noise_model, [key], error_fn)
 
@@ -267,9 +267,9 @@ def batched_pose_factor(
     def error_fn(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
         T = values.atPose3(key).matrix()
         if H is None:
-            return evaluate(T, False).residuals.reshape(-1)
+            return evaluate(T, False).factor_residuals.reshape(-1)
         ev = evaluate(T, True)
-        H[0] = ev.jacobians.reshape(n * m, 6)  # type: ignore[union-attr]
-        return ev.residuals.reshape(-1)
+        H[0] = ev.factor_jacobians.reshape(n * m, 6)  # type: ignore[union-attr]
+        return ev.factor_residuals.reshape(-1)
 
     return gtsam.CustomFactor(noise, [key], error_fn)

@@ -37,9 +37,12 @@ functions of the projection's normalised dual conic ``Cn = C* / (-C*[2,2])`` (ce
 ``mu = -Cn[:2, 2]``, ``Sigma = Cn[:2, :2] + mu mu^T``). Their residuals are re-implemented
 here vectorised over the objects (equal to ``factors.metrics.residual``, tested) and
 differentiated through ``dC* = K dA K^T``, ``dCn = (dC* + Cn dC*[2,2]) / (-C*[2,2])``.
-``iou``, ``giou`` and ``qbbox`` (piecewise: clipped at the image border) call
-``factors.metrics.residual`` and use central differences on ``retract`` (step
-:data:`DEFAULT_NUMERIC_STEP`), one-sided where a side is invalid.
+``iou`` and ``giou`` evaluate their quadrant rows per pair with
+:func:`factors.metrics.overlap_residual` (exact areas and their exact gradient w.r.t. the
+projection's ``(mu, Sigma)``, :mod:`factors.overlap`), chained through the same ``dCn``.
+``qbbox`` (piecewise: clipped at the image border) calls ``factors.metrics.residual`` and uses
+central differences on ``retract`` (step :data:`DEFAULT_NUMERIC_STEP`), one-sided where a side
+is invalid.
 
 Evaluations are memoised on the pose value and their arrays are read-only (shared by the
 factors that slice them).
@@ -59,22 +62,38 @@ semi-axis (m). Its Jacobian ``-sqrt(P_j/dim) d_s / (d + d_s)^2 dm/dxi`` points t
 margin (``dm/dw = e3 x c_c - (e3 x S_c e3) / sqrt(S_c[2,2])``, ``dm/dv = -e3``); a Gauss-Newton
 step on the penalty alone, ``|r| / |dr/dm|``, does not depend on ``P_j``.
 
-A barrier must cost more than the valid poses LM can compare it with, and the metrics' costs
-have different units: ``P_j = penalty_cost * rho_j^2`` (:attr:`PoseResidualModel.penalty_costs`)
-with ``rho_j`` the pair's reference residual magnitude in the metric's own units:
-``L_j`` px for bbox / qbbox / wasserstein, ``L_j^2`` px^2 for algebraic / frobenius (their
-costs grow as px^4), ``max(1, s_max_j)^2`` for level_set (``Phi`` units; ``s_max_j`` its
-sampling scale) and 1 for iou / giou / bhattacharyya; ``L_j = max(image diagonal, |c_D| +
-max(a_D, b_D))`` px is the detection's reference length. With the default ``penalty_cost``
-(:data:`DEFAULT_PENALTY_COST` = 1e8) the penalty exceeds the valid cost of any projection whose
-centre, axes and box stay within ~1e4 reference lengths (bbox, wasserstein; 100 for algebraic,
-frobenius, since their residual is quadratic in px) of the detection: near the principal plane
-the projection of an ellipsoid with ``d_s`` = 1 m at the minimum margin 1 mm and ``f`` = 1000 px
-spans ``f sqrt(d_s / (2 min_depth_margin))`` ~ 2e4 px, ~25 diagonals of a 640x480 image, and
-the bounded metrics (iou, giou, bhattacharyya, level_set) stay orders of magnitude below. So
-Levenberg-Marquardt rejects steps into the invalid region and, from an invalid start, is pushed
-back to valid poses. A robust kernel (``factors.pose_factors``) flattens every large residual,
-the penalty included: with one, the barrier is only as strong as the kernel lets it be.
+A barrier must cost more than the valid poses LM can compare it with. A valid projection can
+cost arbitrarily much (a very thin projection near the principal plane: level-set costs of
+1e10-1e12 were measured against a penalty of 3.9e9), so the residual LM sees for a VALID pair
+is saturated above half the penalty (``c = ||r||^2`` the metric's cost, ``c_0 = P_j / 2``)::
+
+    h(c) = c                                               for c <= c_0
+    h(c) = c_0 + w (1 - exp(-(c - c_0) / w)),  w = 0.4 P_j   above (C^1, h < 0.9 P_j)
+    r_sat = r sqrt(h(c) / c)
+
+Hence every valid cost LM compares is below ``P_j`` and every penalty is at least ``P_j``: the
+barrier holds whatever the metric, and below ``c_0`` (every pose LM meets in practice) the
+factor is exactly the metric. The reported residuals
+and costs (:attr:`PoseEvaluation.residuals`, :meth:`PoseResidualModel.costs`, the refinement's
+``per_detection_cost``) are the metric's own, unsaturated; the GTSAM factors use
+:attr:`PoseEvaluation.factor_residuals`.
+
+The penalty is kept small enough for the other pairs' information to survive in double
+precision next to it (a penalty of ~4e19 for algebraic/frobenius hid every other residual).
+The metrics' costs have different units: ``P_j = penalty_cost * rho_j^2``
+(:attr:`PoseResidualModel.penalty_costs`) with ``rho_j`` the pair's reference residual
+magnitude: ``L_j`` px for bbox / qbbox / wasserstein and for algebraic / frobenius (see
+below), ``max(1, s_max_j)^2`` for level_set (``Phi`` units; ``s_max_j`` its sampling scale)
+and 1 for iou / giou / bhattacharyya; ``L_j = max(image diagonal, |c_D| + max(a_D, b_D))`` px
+is the detection's reference length. With the default ``penalty_cost``
+(:data:`DEFAULT_PENALTY_COST` = 1e8) the saturation starts only beyond ~7000 reference lengths
+of misfit (bbox, wasserstein). Algebraic / frobenius, whose residual is quadratic in px, use
+``rho_j = L_j`` too: ``P_j`` ~ 6e13 px^4 on a 640x480 image instead of the 4e19 of
+``rho_j = L_j^2``, which leaves ~1e-8 relative precision to the other pairs' costs (~1e6
+px^4). So Levenberg-Marquardt rejects steps into the invalid region and, from an invalid
+start, is pushed back to valid poses. A robust kernel (``factors.pose_factors``) flattens
+every large residual, the penalty included: with one, the barrier is only as strong as the
+kernel lets it be.
 """
 
 from __future__ import annotations
@@ -97,8 +116,10 @@ from factors.geometry import (
     dual_conics_from_params,
     level_values,
     params_from_dual_conics,
+    params_from_gaussians,
 )
 from factors.metrics import METRIC_NAMES
+from factors.overlap import HULL_DIRECTIONS
 
 __all__ = [
     "ANALYTIC_METRICS",
@@ -118,19 +139,17 @@ DEFAULT_PENALTY_COST = 1e8
 #: A projection counts as valid while the ellipsoid's smallest camera depth exceeds this (m).
 DEFAULT_MIN_DEPTH_MARGIN = 1e-3
 #: Central-difference step on each tangent coordinate (rad or m) for numerical Jacobians.
-#: Larger for iou/giou: their residual ``sqrt(Delta)`` has a cone at the optimum, where a wider
-#: central difference still gives a usable slope (the areas themselves are exact and smooth).
-DEFAULT_NUMERIC_STEP: dict[str, float] = {
-    name: 1e-5 if name in ("iou", "giou") else 1e-6 for name in METRIC_NAMES}
+DEFAULT_NUMERIC_STEP: dict[str, float] = dict.fromkeys(METRIC_NAMES, 1e-6)
 #: Metrics whose pose Jacobian is analytic (the others use central differences).
 ANALYTIC_METRICS: tuple[str, ...] = (
-    "level_set", "algebraic", "frobenius", "wasserstein", "bhattacharyya", "bbox")
+    "level_set", "algebraic", "frobenius", "wasserstein", "bhattacharyya", "bbox", "iou",
+    "giou")
 _CONIC_METRICS = ("algebraic", "frobenius", "wasserstein", "bhattacharyya", "bbox")
 #: Power of the reference length ``L_j`` (px) in the metric's residual: the penalty's
 #: reference residual ``rho_j = L_j ** power`` (level_set: ``max(1, s_max_j)^2`` instead).
 _PENALTY_PIXEL_POWER: dict[str, int] = {
     "iou": 0, "giou": 0, "bhattacharyya": 0, "level_set": 0, "bbox": 1, "qbbox": 1,
-    "wasserstein": 1, "algebraic": 2, "frobenius": 2}
+    "wasserstein": 1, "algebraic": 1, "frobenius": 1}
 assert set(_PENALTY_PIXEL_POWER) == set(METRIC_NAMES)
 _INV_SQRT8 = 1.0 / math.sqrt(8.0)
 _SQRT2 = math.sqrt(2.0)
@@ -236,15 +255,20 @@ def numerical_pose_jacobian(
 class PoseEvaluation:
     """Residuals of all pairs at one pose.
 
-    ``residuals`` (N, dim); ``jacobians`` (N, dim, 6) or None (w.r.t. ``xi = [omega, v]``, right
-    perturbation of ``world_from_camera``); ``valid`` (N,) bool: projection is an ellipse (else
-    the row holds the penalty); ``depth_margins`` (N,) metres.
+    ``residuals`` (N, dim): the metric's residuals (rows of invalid pairs hold the penalty);
+    ``jacobians`` (N, dim, 6) or None (w.r.t. ``xi = [omega, v]``, right perturbation of
+    ``world_from_camera``); ``valid`` (N,) bool: projection is an ellipse (else the row holds
+    the penalty); ``depth_margins`` (N,) metres; ``factor_residuals`` / ``factor_jacobians``:
+    what the GTSAM factors minimise, the valid rows saturated (module docstring; equal to
+    ``residuals`` / ``jacobians`` to ``c / (2 P_j)`` relative near the optimum).
     """
 
     residuals: np.ndarray
     jacobians: np.ndarray | None
     valid: np.ndarray
     depth_margins: np.ndarray
+    factor_residuals: np.ndarray | None = None
+    factor_jacobians: np.ndarray | None = None
 
 
 class PoseResidualModel:
@@ -488,13 +512,41 @@ class PoseResidualModel:
             ev = self._evaluate_numeric(T, jacobian)
         elif self.metric == "level_set":
             ev = self._evaluate_level_set(T, jacobian)
+        elif self.metric in ("iou", "giou"):
+            ev = self._evaluate_overlap(T, jacobian)
         else:
             ev = self._evaluate_conic(T, jacobian)
-        for arr in (ev.residuals, ev.jacobians, ev.valid, ev.depth_margins):
+        ev = self._saturate(ev)
+        for arr in (ev.residuals, ev.jacobians, ev.valid, ev.depth_margins,
+                    ev.factor_residuals, ev.factor_jacobians):
             if arr is not None:
                 arr.setflags(write=False)
         self._cache_key, self._cache_jac, self._cache = key, jacobian, ev
         return ev
+
+    def _saturate(self, ev: PoseEvaluation) -> PoseEvaluation:
+        """Add the factors' residuals: the valid rows saturated (``r / sqrt(1 + c / P_j)``,
+        module docstring)."""
+        r = ev.residuals
+        c = np.einsum("nm,nm->n", r, r)
+        P = self.penalty_costs
+        c0 = 0.5 * P
+        big = ev.valid & (c > c0)
+        if not big.any():
+            return PoseEvaluation(r, ev.jacobians, ev.valid, ev.depth_margins, r, ev.jacobians)
+        span = 0.4 * P  # h < c0 + span = 0.9 P
+        e = np.exp(-np.where(big, c - c0, 0.0) / span)
+        h = np.where(big, c0 + span * (1.0 - e), c)
+        g = np.sqrt(h / np.where(big, c, 1.0))
+        rs = np.where(big[:, None], r * g[:, None], r)
+        J = ev.jacobians
+        if J is not None:
+            # d g / d c = (h' c - h) / (2 c^2 g), h' = e; dc = 2 r^T dr
+            dg = np.where(big, (e * c - h) / (2.0 * np.where(big, c, 1.0) ** 2 * g), 0.0)
+            rJ = np.einsum("nm,nmk->nk", r, J)
+            Js = J * g[:, None, None] + (2.0 * dg[:, None] * r)[:, :, None] * rJ[:, None, :]
+            J = np.where(big[:, None, None], Js, J)
+        return PoseEvaluation(r, ev.jacobians, ev.valid, ev.depth_margins, rs, J)
 
     def _evaluate_level_set(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
         A, c, S, margins = self._camera_frame(T)
@@ -562,6 +614,66 @@ class PoseResidualModel:
                                     a2 * s * s + b2 * c * c], axis=1)
         self._det_canon = _canonical_axes(P)
 
+    def _normalised_dual_conics(
+        self, A: np.ndarray, c: np.ndarray, valid: np.ndarray, jacobian: bool,
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """``Cn = C* / (-C*[2,2])`` (N, 3, 3) of the projections and, if ``jacobian``, its
+        derivative (N, 6, 3, 3) along the 6 tangent directions ``[omega, v]`` (module doc).
+        Invalid rows (``~valid``) hold a stand-in ellipse, to be replaced by the penalty."""
+        if not valid.all():
+            A = A.copy()
+            A[~valid] = np.diag([1.0, 1.0, -1.0])
+        K = self._K
+        Cs = K @ A @ K.T  # (N, 3, 3) C*
+        w = -Cs[:, 2, 2]
+        Cn = Cs / w[:, None, None]
+        if not jacobian:
+            return Cn, None
+        G = np.empty((self.n, 6, 3, 3))
+        G[:, :3] = -np.einsum("kij,njl->nkil", _SKEW_BASIS, A)
+        G[:, 3:] = 0.0
+        idx = np.arange(3)
+        G[:, 3 + idx, idx, :] = c[:, None, :]
+        dA = G + G.transpose(0, 1, 3, 2)
+        dCs = K @ dA @ K.T  # (N, 6, 3, 3)
+        return Cn, (dCs + Cn[:, None] * dCs[:, :, 2, 2, None, None]) / w[:, None, None, None]
+
+    def _evaluate_overlap(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
+        """iou / giou: the quadrant rows ``r_j`` (4,) of :func:`factors.metrics.
+        overlap_residual` (exact areas, one scalar call per pair) and their analytic pose
+        Jacobian: the exact area gradients w.r.t. the projection's ``(mu, Sigma)``, chained
+        through ``dCn``."""
+        from factors import metrics
+
+        A, c, S, margins = self._camera_frame(T)
+        valid = margins > self.min_depth_margin
+        Cn, dCn = self._normalised_dual_conics(A, c, valid, jacobian)
+        mu = -Cn[:, :2, 2]
+        sigma = Cn[:, :2, :2] + mu[:, :, None] * mu[:, None, :]
+        dg = None
+        if dCn is not None:  # d(mu_x, mu_y, s00, s01, s11) / d xi, (N, 6, 5)
+            dmu = -dCn[:, :, :2, 2]
+            dsig = (dCn[:, :, :2, :2] + dmu[..., :, None] * mu[:, None, None, :]
+                    + mu[:, None, :, None] * dmu[..., None, :])
+            dg = np.concatenate([dmu, dsig[..., 0, 0, None], dsig[..., 0, 1, None],
+                                 dsig[..., 1, 1, None]], axis=-1)
+        r = np.zeros((self.n, self.dim))
+        J = None if dg is None else np.zeros((self.n, self.dim, 6))
+        hull_directions = self.options.get("hull_directions", HULL_DIRECTIONS)
+        for j in np.flatnonzero(valid):
+            try:
+                proj = params_from_gaussians(mu[j:j + 1], sigma[j:j + 1])[0]
+            except DegenerateProjectionError:
+                valid[j] = False
+                continue
+            r[j], grad = metrics.overlap_residual(self.metric, self._det_params[j], proj,
+                                                  hull_directions, gradient=J is not None)
+            if J is not None:
+                J[j] = grad @ dg[j].T
+        if not valid.all():
+            self._apply_penalty(r, J, ~valid, c, S, margins)
+        return PoseEvaluation(r, J, valid, margins)
+
     def _evaluate_conic(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
         """Analytic residuals/Jacobians of the metrics that are smooth functions of the
         normalised dual conic ``Cn = C* / (-C*[2,2])`` of the projection.
@@ -573,23 +685,7 @@ class PoseResidualModel:
         A, c, S, margins = self._camera_frame(T)
         valid = margins > self.min_depth_margin
         all_valid = bool(valid.all())
-        if not all_valid:
-            A = A.copy()
-            A[~valid] = np.diag([1.0, 1.0, -1.0])  # stand-in ellipse, rows replaced below
-        K = self._K
-        Cs = K @ A @ K.T  # (N, 3, 3) C*
-        w = -Cs[:, 2, 2]
-        Cn = Cs / w[:, None, None]
-        dCn: np.ndarray | None = None
-        if jacobian:
-            G = np.empty((self.n, 6, 3, 3))
-            G[:, :3] = -np.einsum("kij,njl->nkil", _SKEW_BASIS, A)
-            G[:, 3:] = 0.0
-            idx = np.arange(3)
-            G[:, 3 + idx, idx, :] = c[:, None, :]
-            dA = G + G.transpose(0, 1, 3, 2)
-            dCs = K @ dA @ K.T  # (N, 6, 3, 3)
-            dCn = (dCs + Cn[:, None] * dCs[:, :, 2, 2, None, None]) / w[:, None, None, None]
+        Cn, dCn = self._normalised_dual_conics(A, c, valid, jacobian)
         if self.metric in ("algebraic", "frobenius"):
             r = self._det_vec5 - Cn.reshape(self.n, 9)[:, _VEC5]
             J = None
@@ -814,7 +910,8 @@ class PoseResidualModel:
 
     # ------------------------------------------------------------------ reporting
     def costs(self, world_from_camera: np.ndarray) -> np.ndarray:
-        """Unweighted cost ``||r_j||^2`` of each pair at a pose (N,); penalty cost if invalid."""
+        """The metric's unweighted cost ``||r_j||^2`` of each pair at a pose (N,), unsaturated;
+        the penalty's cost where the projection is invalid."""
         ev = self.evaluate(world_from_camera, jacobian=False)
         return np.einsum("nm,nm->n", ev.residuals, ev.residuals)
 

@@ -63,3 +63,8 @@ class StoreUnavailable(MapStoreError):  # noqa: N818 (names fixed by the API con
     ``delete``, ``get``, ``versions``, ``list``, ``compiled``, ``migrate``), not only by
     ``MapStore.ping``: callers map it to HTTP 503.
     """
+
+
+class SchemaNotMigrated(StoreUnavailable):
+    """The database answers but lacks the map tables or columns (schema not migrated to this
+    version): an operator must run the migrations (the service runs them at start)."""

@@ -27,6 +27,7 @@ import numpy as np
 from factors.geometry import (
     Ellipsoid,
     canonical_quaternion_wxyz,
+    exact_norm,
     quaternion_wxyz_from_rotation,
     rotation_from_quaternion_wxyz,
     snap_to_rotation,
@@ -34,6 +35,7 @@ from factors.geometry import (
 
 __all__ = [
     "FORMAT",
+    "HASH_DECIMALS",
     "LIMITS",
     "MAP_JSON_SCHEMA",
     "MapObject",
@@ -114,6 +116,22 @@ def _check_text(errors: _Errors, path: str, value: object, max_len: int) -> bool
     if any(ord(ch) < 32 for ch in value):
         errors.add(path, "must not contain control characters")
         return False
+    if not _is_utf8(value):
+        errors.add(path, _SURROGATE_MESSAGE)
+        return False
+    return True
+
+
+_SURROGATE_MESSAGE = "must be valid Unicode text (a lone surrogate such as \\ud800 is not)"
+
+
+def _is_utf8(text: str) -> bool:
+    """False for text with a lone surrogate (it has no UTF-8 encoding: cannot be hashed or
+    stored)."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
     return True
 
 
@@ -170,7 +188,7 @@ def _validate_header(
             if c in seen:
                 errors.add(f"categories[{i}]", f"duplicate category {c!r}")
             seen.add(c)
-    fixed["categories"] = cats
+    fixed["categories"] = tuple(c for c in cats if isinstance(c, str))  # others reported
     if metadata is None:
         metadata = {}
     depth = _nesting_depth(metadata)
@@ -191,6 +209,8 @@ def _validate_header(
             if size > LIMITS["max_metadata_bytes"]:
                 errors.add("metadata", f"at most {int(LIMITS['max_metadata_bytes'])} bytes "
                                        f"of JSON, got {size}")
+            if not _is_utf8(json.dumps(metadata, ensure_ascii=False)):
+                errors.add("metadata", f"keys and strings {_SURROGATE_MESSAGE}")
         fixed["metadata"] = _freeze(metadata)
     return fixed
 
@@ -290,7 +310,7 @@ class MapObject:
         (``w = 0``) the first non-zero of ``x, y, z`` positive, so ``q`` and ``-q`` give equal
         objects and equal map hashes)."""
         q = np.array(quaternion_wxyz, dtype=float)
-        n = float(np.linalg.norm(q))
+        n = exact_norm(q.ravel())  # no BLAS: the same bits on every machine
         if abs(n - 1.0) > 1e-15:  # leave unit ones bit-for-bit: re-imports stay exact
             q = q / n
         if q.shape == (4,) and (q[0] < 0 or abs(q[0]) <= 1e-12):  # else q is kept bit for bit
@@ -450,16 +470,42 @@ def canonical_json(scene_map: SceneMap) -> str:
     Floats go through Python's ``repr`` (round-trip exact), so the same map always gives the
     same text, and parsing it back gives the same map bit for bit.
     """
-    return json.dumps(scene_map_to_dict(scene_map), sort_keys=True, separators=(",", ":"),
-                      ensure_ascii=False, allow_nan=False)
+    return _canonical_text(scene_map_to_dict(scene_map))
+
+
+def _canonical_text(document: dict[str, Any]) -> str:
+    """The one canonical serialisation (stored content and hashed form)."""
+    return json.dumps(document, sort_keys=True, separators=(",", ":"), ensure_ascii=False,
+                      allow_nan=False)
+
+
+#: Decimal places kept of the geometric numbers (``up_axis``; ``center`` and ``axes`` in metres;
+#: ``quaternion_wxyz``) in the document that :func:`content_hash` hashes: 1e-12 m and 1e-12 per
+#: quaternion component, far below any geometric meaning and far above the last-bit (~1e-16)
+#: differences between CPUs and LAPACK builds. The stored document keeps every bit.
+HASH_DECIMALS = 12
+
+
+def _hash_numbers(values: Sequence[float]) -> list[float]:
+    return [round(float(v), HASH_DECIMALS) + 0.0 for v in values]  # + 0.0: -0.0 -> 0.0
 
 
 def content_hash(scene_map: SceneMap) -> str:
-    """Hex sha256 of :func:`canonical_json` (the HTTP ETag of a map version).
+    """Hex sha256 of :func:`canonical_json` with the geometric numbers rounded to
+    :data:`HASH_DECIMALS` decimals (the HTTP ETag of a map version).
 
-    The hashed document includes ``map_id`` and ``version``: two versions never share a hash.
+    So a map re-imported on another machine or through another route (rotation matrix or
+    quaternion) hashes the same when its numbers agree to 1e-12; the import itself avoids
+    LAPACK for rotations that are already orthonormal (:func:`factors.geometry.snap_to_rotation`),
+    so such maps agree bit for bit. The hashed document includes ``map_id`` and ``version``:
+    two versions never share a hash.
     """
-    return hashlib.sha256(canonical_json(scene_map).encode("utf-8")).hexdigest()
+    doc = scene_map_to_dict(scene_map)
+    doc["up_axis"] = _hash_numbers(doc["up_axis"])
+    for obj in doc["objects"]:
+        for key in ("center", "axes", "quaternion_wxyz"):
+            obj[key] = _hash_numbers(obj[key])
+    return hashlib.sha256(_canonical_text(doc).encode("utf-8")).hexdigest()
 
 
 _TOP_KEYS = {"format", "map_id", "name", "version", "up_axis", "categories", "objects",
@@ -606,11 +652,16 @@ def scene_map_from_dict(data: Mapping[str, Any], *, version: int | None = None) 
     )
 
 
+def _integral(value: Any) -> Any:
+    """An integral float (``3.0``: JSON Schema's ``integer`` allows it) as an int."""
+    return int(value) if isinstance(value, float) and value.is_integer() else value
+
+
 def scene_map_from_chess(
     data: Mapping[str, Any], *, map_id: str = "chess", name: str = "Chess",
     metadata: Mapping[str, Any] | None = None,
 ) -> SceneMap:
-    """Import the Chess scene format (``/work/shared/data/chess_scene.json``).
+    """Import the Chess scene format (``bench/data/chess_scene.json``).
 
     Format: ``category_id_to_label`` ``{"0": "TV", ...}``; ``objects[]`` with ``category_id``,
     ``object_id`` (integer, kept as its decimal string) and ``ellipsoid {axes (semi-axes, m),
@@ -639,7 +690,7 @@ def scene_map_from_chess(
         if not isinstance(o, Mapping):
             errors.add(path, "must be an object")
             continue
-        cid = str(o.get("category_id"))
+        cid = str(_integral(o.get("category_id")))
         if cid not in labels:
             errors.add(f"{path}.category_id", f"unknown category id {o.get('category_id')!r}")
             continue
@@ -647,7 +698,7 @@ def scene_map_from_chess(
         if not isinstance(ell, Mapping):
             errors.add(f"{path}.ellipsoid", "required object {axes, R, center} missing")
             continue
-        oid = o.get("object_id")
+        oid = _integral(o.get("object_id"))
         if isinstance(oid, int) and not isinstance(oid, bool):
             oid = str(oid)  # the Chess format's integer ids become their decimal string
         entry: dict[str, Any] = {"object_id": oid, "category": labels[cid],

@@ -18,8 +18,9 @@ Semantics
 * Atomicity: every write is one transaction, so a crash mid-write leaves nothing visible.
 * ``delete(map_id)`` deletes the map and **all** its versions. A later ``create`` with the same
   id starts again at version 1 (its content hash differs unless the content is identical).
-* ``content_hash`` is the hex sha256 of the version's canonical JSON (see
-  :func:`maps.model.canonical_json`; it covers ``map_id`` and ``version``) — the HTTP ETag.
+* ``content_hash`` is :func:`maps.model.content_hash` of the version (sha256 of its canonical
+  JSON, geometric numbers rounded to 1e-12; it covers ``map_id`` and ``version``) — the HTTP
+  ETag. The stored content keeps every bit.
 * ``compiled(map_id, version)`` returns the solver arrays (:class:`maps.compiled.CompiledMap`),
   cached per process by ``(map_id, version, content_hash)``: one small indexed query per call
   to resolve the version (so replicas see each other's updates), no JSON parsing on a hit.
@@ -28,7 +29,6 @@ Semantics
 from __future__ import annotations
 
 import builtins
-import hashlib
 import json
 import threading
 from collections import OrderedDict
@@ -42,7 +42,13 @@ from typing import Any
 import sqlalchemy as sa
 from sqlalchemy import event
 from sqlalchemy.engine import Connection, Engine
-from sqlalchemy.exc import IntegrityError, InterfaceError, OperationalError, SQLAlchemyError
+from sqlalchemy.exc import (
+    IntegrityError,
+    InterfaceError,
+    OperationalError,
+    ProgrammingError,
+    SQLAlchemyError,
+)
 from sqlalchemy.pool import StaticPool
 
 from maps.compiled import CompiledMap, compile_map
@@ -50,10 +56,17 @@ from maps.errors import (
     MapAlreadyExists,
     MapNotFound,
     MapStoreError,
+    SchemaNotMigrated,
     StoreUnavailable,
     VersionConflict,
 )
-from maps.model import MapValidationError, SceneMap, canonical_json, scene_map_from_dict
+from maps.model import (
+    MapValidationError,
+    SceneMap,
+    canonical_json,
+    content_hash,
+    scene_map_from_dict,
+)
 
 __all__ = [
     "MapAlreadyExists",
@@ -61,6 +74,8 @@ __all__ = [
     "MapStore",
     "MapStoreError",
     "MapSummary",
+    "MapVersionInfo",
+    "SchemaNotMigrated",
     "StoreUnavailable",
     "StoredMap",
     "VersionConflict",
@@ -74,6 +89,9 @@ _PG_MIGRATION_LOCK = 0x51_4C_4F_43_4D_41_50  # "QLOCMAP"
 SQLITE_BUSY_TIMEOUT_S = 30.0
 #: Compiled maps kept per store (least recently used evicted first).
 COMPILED_CACHE_SIZE = 64
+#: ... and at most this many objects in all (a parsed + compiled map costs ~2.5 KB per object:
+#: ~120 MB of a replica's memory here; docs/deployment.md, "Worst-case cost of a request").
+COMPILED_CACHE_MAX_OBJECTS = 50_000
 
 # Table descriptions for building queries ONLY. The schema itself belongs to the Alembic
 # migrations (maps/migrations/versions/); these declarations mirror it, CHECK constraints
@@ -129,6 +147,16 @@ class MapSummary:
     latest_version: int
     content_hash: str
     updated_at: datetime
+    created_at: datetime
+
+
+@dataclass(frozen=True)
+class MapVersionInfo:
+    """One stored version in :meth:`MapStore.version_history`: number, content hash, creation
+    time (UTC)."""
+
+    version: int
+    content_hash: str
     created_at: datetime
 
 
@@ -238,6 +266,10 @@ class MapStore:
                 yield conn
         except (OperationalError, InterfaceError) as exc:
             raise _unavailable(exc) from exc
+        except ProgrammingError as exc:
+            if _schema_missing(exc):
+                raise _unavailable(exc) from exc
+            raise
 
     @contextmanager
     def _read(self) -> Iterator[Connection]:
@@ -246,6 +278,10 @@ class MapStore:
                 yield conn
         except (OperationalError, InterfaceError) as exc:
             raise _unavailable(exc) from exc
+        except ProgrammingError as exc:
+            if _schema_missing(exc):
+                raise _unavailable(exc) from exc
+            raise
 
     # ------------------------------------------------------------------ writes
     def create(self, scene_map: SceneMap) -> StoredMap:
@@ -256,7 +292,7 @@ class MapStore:
         _check_scene_map(scene_map)
         stored = replace(scene_map, version=1)
         text = canonical_json(stored)
-        digest = _sha256(text)
+        digest = content_hash(stored)
         now = _now()
         try:
             with self._write() as conn:
@@ -293,7 +329,7 @@ class MapStore:
         new_version = expected_version + 1
         stored = replace(scene_map, version=new_version)
         text = canonical_json(stored)
-        digest = _sha256(text)
+        digest = content_hash(stored)
         now = _now()
         try:
             with self._write() as conn:
@@ -364,11 +400,31 @@ class MapStore:
         v = versions_table.c
         with self._read() as conn:
             row = conn.execute(self._version_query(
-                map_id, version, v.version, v.content, v.content_hash, v.created_at)).first()
+                map_id, version, v.version, v.content_hash, v.created_at)).first()
         if row is None:
             raise MapNotFound(map_id, version)
-        scene_map = scene_map_from_dict(json.loads(row.content), version=int(row.version))
+        key = (map_id, int(row.version), str(row.content_hash))
+        with self._cache_lock:
+            hit = self._cache.get(key)
+        if hit is not None:  # versions are immutable: reuse the parsed map (10,000 objects
+            return StoredMap(hit.scene_map, row.content_hash, _utc(row.created_at))  # ~3 s)
+        with self._read() as conn:
+            content = conn.execute(self._version_query(map_id, key[1], v.content,
+                                                       v.content_hash)).first()
+        if content is None or content.content_hash != key[2]:
+            raise MapNotFound(map_id, version)  # deleted (and maybe re-created) meanwhile
+        scene_map = scene_map_from_dict(json.loads(content.content), version=key[1])
+        self._remember(key, compile_map(scene_map))
         return StoredMap(scene_map, row.content_hash, _utc(row.created_at))
+
+    def _remember(self, key: tuple[str, int, str], compiled: CompiledMap) -> None:
+        with self._cache_lock:
+            self._cache[key] = compiled
+            self._cache.move_to_end(key)
+            total = sum(len(c) for c in self._cache.values())
+            while len(self._cache) > 1 and (len(self._cache) > COMPILED_CACHE_SIZE
+                                            or total > COMPILED_CACHE_MAX_OBJECTS):
+                total -= len(self._cache.popitem(last=False)[1])
 
     def versions(self, map_id: str) -> builtins.list[int]:
         """All stored version numbers of a map, ascending. :class:`MapNotFound`."""
@@ -379,6 +435,17 @@ class MapStore:
         if not rows:
             raise MapNotFound(map_id)
         return [int(r) for r in rows]
+
+    def version_history(self, map_id: str) -> builtins.list[MapVersionInfo]:
+        """Every stored version of a map with its content hash and creation time, ascending.
+        :class:`MapNotFound`."""
+        v = versions_table.c
+        with self._read() as conn:
+            rows = conn.execute(sa.select(v.version, v.content_hash, v.created_at)
+                                .where(v.map_id == map_id).order_by(v.version)).all()
+        if not rows:
+            raise MapNotFound(map_id)
+        return [MapVersionInfo(int(r.version), r.content_hash, _utc(r.created_at)) for r in rows]
 
     def list(self) -> builtins.list[MapSummary]:
         """Every map with its latest version, ordered by ``map_id``."""
@@ -412,15 +479,17 @@ class MapStore:
                 if hit is not None:
                     self._cache.move_to_end(key)
                     return hit
-            stored = self.get(map_id, key[1])
+            try:
+                stored = self.get(map_id, key[1])  # parses, compiles and caches the version
+            except MapNotFound:
+                continue  # deleted between the two reads: resolve again
             if stored.content_hash != key[2]:
                 continue  # deleted and re-created between the two reads: resolve again
-            result = compile_map(stored.scene_map)
             with self._cache_lock:
-                self._cache[key] = result
-                self._cache.move_to_end(key)
-                while len(self._cache) > COMPILED_CACHE_SIZE:
-                    self._cache.popitem(last=False)
+                result = self._cache.get(key)
+            if result is None:  # evicted at once by other maps: compile this one again
+                result = compile_map(stored.scene_map)
+                self._remember(key, result)
             return result
         raise MapStoreError(f"map {map_id!r} kept changing while being loaded")
 
@@ -430,13 +499,19 @@ class MapStore:
             return {"entries": len(self._cache), "capacity": COMPILED_CACHE_SIZE}
 
 
+def _schema_missing(exc: Exception) -> bool:
+    """A missing table or column: PostgreSQL SQLSTATE 42P01 / 42703, SQLite "no such ..."."""
+    code = getattr(getattr(exc, "orig", None), "sqlstate", None)
+    return code in ("42P01", "42703") or "no such table" in str(exc) \
+        or "no such column" in str(exc)
+
+
 def _unavailable(exc: Exception) -> StoreUnavailable:
     first = str(exc).splitlines()[0] if str(exc) else ""
+    if _schema_missing(exc):
+        return SchemaNotMigrated(f"database schema not migrated: {exc.__class__.__name__}: "
+                                 f"{first}")
     return StoreUnavailable(f"database unreachable or busy: {exc.__class__.__name__}: {first}")
-
-
-def _sha256(text: str) -> str:
-    return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 
 def _check_scene_map(scene_map: object) -> None:

@@ -1,8 +1,10 @@
 """QuadLoc Python SDK: a typed client of the relocalization service for AR apps.
 
-Imports neither gtsam nor the server (``service``, ``factors``, ``maps``): it needs httpx,
-pydantic and numpy (OpenCV only for the contour helpers of :mod:`sdk.geometry`, imported lazily).
-See docs/sdk.md.
+Imports neither gtsam nor the server (``service``, ``factors``, ``maps``). ``import sdk`` needs
+only httpx and pydantic (the ``quadloc-sdk`` distribution in ``sdk/``); :mod:`sdk.overlay`
+(SVG drawing of a localization) is pure Python; :mod:`sdk.geometry` needs numpy (extra
+``quadloc-sdk[geometry]``) and OpenCV for its contour helpers (extra ``[contours]``, imported
+lazily). See docs/sdk.md.
 """
 
 from sdk.client import DEFAULT_BASE_URL, SDK_VERSION, AsyncQuadLocClient, QuadLocClient
@@ -26,7 +28,9 @@ from sdk.errors import (
 )
 from sdk.models import (
     METRICS,
+    NO_REFINEMENT,
     ROBUST_KERNELS,
+    Alternative,
     BatchLocalizeResponse,
     Box,
     Camera,
@@ -39,6 +43,7 @@ from sdk.models import (
     LocalizeResponse,
     MapRecord,
     MapSummary,
+    MapVersion,
     Pose,
     PoseInput,
     PosePrior,
@@ -50,8 +55,10 @@ __version__ = SDK_VERSION
 __all__ = [
     "DEFAULT_BASE_URL",
     "METRICS",
+    "NO_REFINEMENT",
     "ROBUST_KERNELS",
     "APIError",
+    "Alternative",
     "AsyncQuadLocClient",
     "BatchLocalizeResponse",
     "Box",
@@ -69,6 +76,7 @@ __all__ = [
     "LocalizeResponse",
     "MapRecord",
     "MapSummary",
+    "MapVersion",
     "NotFound",
     "PayloadTooLarge",
     "Pose",

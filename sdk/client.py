@@ -43,6 +43,7 @@ from sdk.models import (
     LocalizeResponse,
     MapRecord,
     MapSummary,
+    MapVersion,
     PosePrior,
 )
 from sdk.retry import RetryPolicy
@@ -154,6 +155,13 @@ class _Base:
                 raise ValueError(f"version: must be an integer >= 1, got {version!r}")
             params = {"version": version}
         return _Call("GET", self._map_path(map_id), params=params, idempotent=True)
+
+    def _versions_call(self, map_id: str) -> _Call:
+        return _Call("GET", f"{self._map_path(map_id)}/versions", idempotent=True)
+
+    def _map_versions(self, response: httpx.Response) -> list[MapVersion]:
+        data = self._json(response)
+        return [MapVersion.model_validate(v) for v in data["versions"]]
 
     def _create_map_call(self, document: MapDocument) -> _Call:
         return self._json_call("POST", self.MAPS, "map", _load_document("map", document))
@@ -401,6 +409,10 @@ class QuadLocClient(_Base):
         """The latest (or the given) version of a map, with its ``etag``."""
         return self._map_record(self._send(self._get_map_call(map_id, version)))
 
+    def list_versions(self, map_id: str) -> list[MapVersion]:
+        """Every stored version of a map, ascending (``GET /v1/maps/{id}/versions``)."""
+        return self._map_versions(self._send(self._versions_call(map_id)))
+
     def create_map(self, document: MapDocument) -> MapRecord:
         """Create a map (version 1) from a document in the docs/maps.md format (a dict, or a
         path to a JSON file). :class:`~sdk.errors.Conflict` if the id exists."""
@@ -547,6 +559,9 @@ class AsyncQuadLocClient(_Base):
 
     async def get_map(self, map_id: str, version: int | None = None) -> MapRecord:
         return self._map_record(await self._send(self._get_map_call(map_id, version)))
+
+    async def list_versions(self, map_id: str) -> list[MapVersion]:
+        return self._map_versions(await self._send(self._versions_call(map_id)))
 
     async def create_map(self, document: MapDocument) -> MapRecord:
         return self._map_record(await self._send(self._create_map_call(document)))

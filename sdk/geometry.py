@@ -36,21 +36,27 @@ from sdk.models import Box, Ellipse
 
 __all__ = [
     "OPENCV_FROM_OPENGL",
+    "UNITY_CAMERA_FROM_OPENCV",
     "canonical_ellipse",
+    "column_major_from_matrix",
     "covariance_opencv_to_opengl",
     "ellipse_from_box",
     "ellipse_from_contour",
     "ellipse_from_mask",
     "invert_pose",
     "log_variance_from_sigma",
+    "matrix_from_column_major",
     "matrix_from_quaternion_wxyz",
     "pose_matrix_from_quaternion_wxyz",
     "quaternion_wxyz_from_matrix",
+    "quaternion_wxyz_from_xyzw",
     "quaternion_wxyz_translation_from_pose",
+    "quaternion_xyzw_from_wxyz",
     "session_from_map",
     "sigma_from_log_variance",
     "to_camera_from_world",
     "to_world_from_camera",
+    "unity_pose_from_world_from_camera",
     "world_from_camera_opencv_to_opengl",
     "world_from_camera_opengl_to_opencv",
 ]
@@ -402,3 +408,89 @@ def quaternion_wxyz_translation_from_pose(pose: np.ndarray) -> tuple[np.ndarray,
     :func:`pose_matrix_from_quaternion_wxyz`."""
     T = _check_pose("pose", pose)
     return quaternion_wxyz_from_matrix(T[..., :3, :3]), T[..., :3, 3].copy()
+
+
+# --------------------------------------------------------------------------- other layouts
+
+
+def quaternion_xyzw_from_wxyz(quaternion_wxyz: np.ndarray) -> np.ndarray:
+    """``(x, y, z, w)`` (scalar LAST: ARKit/simd, ARCore, Unity, Eigen's coeffs(), ROS) from
+    ``(w, x, y, z)`` (scalar first: QuadLoc, GTSAM, Eigen's constructor), shape (..., 4)."""
+    q = np.asarray(quaternion_wxyz, dtype=float)
+    if q.shape[-1:] != (4,):
+        raise ValueError(f"quaternion_wxyz: expected shape (..., 4), got {q.shape}")
+    return np.concatenate([q[..., 1:], q[..., :1]], axis=-1)
+
+
+def quaternion_wxyz_from_xyzw(quaternion_xyzw: np.ndarray) -> np.ndarray:
+    """``(w, x, y, z)`` from ``(x, y, z, w)``; inverse of :func:`quaternion_xyzw_from_wxyz`."""
+    q = np.asarray(quaternion_xyzw, dtype=float)
+    if q.shape[-1:] != (4,):
+        raise ValueError(f"quaternion_xyzw: expected shape (..., 4), got {q.shape}")
+    return np.concatenate([q[..., 3:], q[..., :3]], axis=-1)
+
+
+def column_major_from_matrix(matrix: np.ndarray) -> list[float]:
+    """The 16 entries of a 4x4 matrix in column-major order (column 0 top to bottom, then
+    column 1, ...): what ``simd_float4x4(columns:)``, Unity's ``Matrix4x4`` (m00, m10, m20,
+    m30, m01, ...), OpenGL/glm and three.js ``Matrix4.fromArray`` expect. QuadLoc's ``matrix``
+    field is row-major (a list of rows): ``matrix[r][c]`` is row ``r``, column ``c``."""
+    M = np.asarray(matrix, dtype=float)
+    if M.shape != (4, 4):
+        raise ValueError(f"matrix: expected shape (4, 4), got {M.shape}")
+    return [float(x) for x in M.T.reshape(16)]
+
+
+def matrix_from_column_major(values: np.ndarray) -> np.ndarray:
+    """4x4 matrix from its 16 entries in column-major order (inverse of
+    :func:`column_major_from_matrix`)."""
+    v = np.asarray(values, dtype=float)
+    if v.shape != (16,):
+        raise ValueError(f"values: expected 16 numbers, got shape {v.shape}")
+    return v.reshape(4, 4).T.copy()
+
+
+#: Unity camera axes (+X right, +Y up, +Z forward, left-handed) from OpenCV camera axes
+#: (+X right, +Y down, +Z forward): a reflection of Y.
+UNITY_CAMERA_FROM_OPENCV = np.diag([1.0, -1.0, 1.0])
+_UNITY_WORLD_FROM_MAP = {
+    # right-handed Y-up world (ARKit/ARCore session, glTF): mirror Z (what AR Foundation does)
+    "y": np.diag([1.0, 1.0, -1.0]),
+    # right-handed Z-up world (the demo Chess map, ROS, Blender): swap Y and Z
+    "z": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]]),
+}
+
+
+def unity_pose_from_world_from_camera(
+    world_from_camera: np.ndarray,
+    convention: Literal["opencv", "opengl"] = "opencv",
+    world_up: Literal["y", "z"] = "z",
+) -> tuple[np.ndarray, np.ndarray]:
+    """A QuadLoc ``world_from_camera`` as a Unity ``Transform``: ``(position (3,),
+    rotation_xyzw (4,))`` for ``transform.localPosition`` / ``transform.localRotation =
+    new Quaternion(x, y, z, w)`` of a camera object parented to the map's root.
+
+    Unity is LEFT-handed (+X right, +Y up, +Z forward for both the world and a camera), QuadLoc
+    right-handed, so no rotation converts them: two reflections do. With ``M_w`` the world-side
+    reflection (``world_up="y"``: ``(x, y, z) -> (x, y, -z)``, as AR Foundation does for the AR
+    session; ``world_up="z"``: ``(x, y, z) -> (x, z, y)``, for a Z-up map such as the demo) and
+    ``M_c = diag(1, -1, 1)`` from OpenCV camera axes to Unity's::
+
+        R_unity = M_w R_cv M_c,   position = M_w t
+
+    so that a camera-frame point ``p`` lands where the map point ``world_from_camera @ p`` lands
+    after ``M_w``. ``convention`` is the camera axes of the given pose (``opengl`` poses are
+    first turned back to OpenCV axes). Units stay metres (Unity's default unit).
+    """
+    if world_up not in _UNITY_WORLD_FROM_MAP:
+        raise ValueError(f"world_up: must be 'y' or 'z', got {world_up!r}")
+    if convention not in ("opencv", "opengl"):
+        raise ValueError(f"convention: must be 'opencv' or 'opengl', got {convention!r}")
+    T = _check_pose("world_from_camera", world_from_camera)
+    if T.shape != (4, 4):
+        raise ValueError(f"world_from_camera: expected one 4x4 pose, got {T.shape}")
+    if convention == "opengl":
+        T = T @ _FLIP4
+    M_w = _UNITY_WORLD_FROM_MAP[world_up]
+    R_unity = M_w @ T[:3, :3] @ UNITY_CAMERA_FROM_OPENCV
+    return M_w @ T[:3, 3], quaternion_xyzw_from_wxyz(quaternion_wxyz_from_matrix(R_unity))

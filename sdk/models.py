@@ -17,14 +17,15 @@ They mirror the server's wire format (``docs/openapi.json``):
 
 Request models reject unknown fields and non-finite numbers *before* anything is sent (so a
 typo such as ``sigm=`` fails at once, naming the field). Response models accept fields added by
-newer servers. Numpy scalars and arrays are accepted where floats / lists are expected.
+newer servers. Numpy scalars and arrays are accepted where floats / lists are expected, but numpy
+is not needed: this module imports only pydantic (``as_matrix`` / ``as_array`` import numpy on
+use).
 """
 
 from __future__ import annotations
 
 from typing import Annotated, Any, Literal, get_args
 
-import numpy as np
 from pydantic import (
     BaseModel,
     BeforeValidator,
@@ -35,7 +36,9 @@ from pydantic import (
 
 __all__ = [
     "METRICS",
+    "NO_REFINEMENT",
     "ROBUST_KERNELS",
+    "Alternative",
     "BatchLocalizeResponse",
     "Box",
     "Camera",
@@ -48,6 +51,7 @@ __all__ = [
     "LocalizeResponse",
     "MapRecord",
     "MapSummary",
+    "MapVersion",
     "Pose",
     "PoseInput",
     "PosePrior",
@@ -64,14 +68,18 @@ METRICS: tuple[str, ...] = get_args(Metric)
 #: Robust kernels accepted as ``LocalizeOptions.robust`` (the values of :data:`RobustKernel`).
 ROBUST_KERNELS: tuple[str, ...] = get_args(RobustKernel)
 Convention = Literal["opencv", "opengl"]
+#: ``LocalizeOptions.metric`` value for the unrefined P3P/P2E pose (no covariance).
+NO_REFINEMENT = "none"
 
 
 def _plain(value: Any) -> Any:
-    """numpy scalars/arrays -> Python floats/lists (so ``np.float32`` and ``T[:3, 3]`` work)."""
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
+    """numpy scalars/arrays -> Python floats/lists (so ``np.float32`` and ``T[:3, 3]`` work),
+    recognised without importing numpy."""
+    if type(value).__module__ == "numpy":
+        if hasattr(value, "tolist") and getattr(value, "ndim", 0) > 0:
+            return value.tolist()
+        if hasattr(value, "item"):
+            return value.item()
     return value
 
 
@@ -150,8 +158,10 @@ class Camera(BaseModel):
     height: int = Field(ge=1)
 
     @classmethod
-    def from_matrix(cls, K: np.ndarray, width: int, height: int) -> Camera:
+    def from_matrix(cls, K: Any, width: int, height: int) -> Camera:
         """From a 3x3 intrinsic matrix ``K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]``."""
+        import numpy as np
+
         K = np.asarray(K, dtype=float)
         if K.shape != (3, 3):
             raise ValueError(f"K: expected shape (3, 3), got {K.shape}")
@@ -159,21 +169,27 @@ class Camera(BaseModel):
 
 
 class PoseInput(BaseModel):
-    """A ``world_from_camera`` pose sent to the server: a 4x4 ``matrix`` OR ``quaternion_wxyz``
-    (scalar first) + ``translation_m`` (metres)."""
+    """A ``world_from_camera`` pose sent to the server: a 4x4 ``matrix`` (a list of ROWS,
+    row-major) OR ``quaternion_wxyz`` (scalar first) or ``quaternion_xyzw`` (scalar last) +
+    ``translation_m`` (metres)."""
 
     model_config = _REQUEST
     quaternion_wxyz: FloatList | None = Field(default=None, min_length=4, max_length=4)
+    quaternion_xyzw: FloatList | None = Field(default=None, min_length=4, max_length=4)
     translation_m: FloatList | None = Field(default=None, min_length=3, max_length=3)
     matrix: Matrix | None = Field(default=None, min_length=4, max_length=4)
 
     @model_validator(mode="after")
     def _one_form(self) -> PoseInput:
-        has_q = self.quaternion_wxyz is not None or self.translation_m is not None
+        if self.quaternion_wxyz is not None and self.quaternion_xyzw is not None:
+            raise ValueError("give one of 'quaternion_wxyz' or 'quaternion_xyzw'")
+        q = self.quaternion_wxyz if self.quaternion_wxyz is not None else self.quaternion_xyzw
+        has_q = q is not None or self.translation_m is not None
         if has_q == (self.matrix is not None):
             raise ValueError("give either 'quaternion_wxyz' + 'translation_m' or 'matrix'")
-        if has_q and (self.quaternion_wxyz is None or self.translation_m is None):
-            raise ValueError("'quaternion_wxyz' and 'translation_m' go together")
+        if has_q and (q is None or self.translation_m is None):
+            raise ValueError("'quaternion_wxyz' (or 'quaternion_xyzw') and 'translation_m' go "
+                             "together")
         if self.matrix is not None and any(len(row) != 4 for row in self.matrix):
             raise ValueError("'matrix' must be 4x4")
         return self
@@ -192,10 +208,14 @@ class PosePrior(BaseModel):
     @classmethod
     def from_matrix(
         cls,
-        world_from_camera: np.ndarray,
-        covariance: np.ndarray | None = None,
+        world_from_camera: Any,
+        covariance: Any | None = None,
         convention: Convention = "opencv",
     ) -> PosePrior:
+        """From a 4x4 ``world_from_camera`` array (row-major, numpy or nested lists) and an
+        optional 6x6 covariance."""
+        import numpy as np
+
         T = np.asarray(world_from_camera, dtype=float)
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise ValueError("world_from_camera: expected a finite 4x4 matrix")
@@ -215,7 +235,7 @@ class LocalizeOptions(BaseModel):
     output axes -- see docs/api.md)."""
 
     model_config = _REQUEST
-    metric: Metric | None = None
+    metric: Metric | Literal["none"] | None = None
     ransac_max_hypotheses: int | None = Field(default=None, ge=1)
     inlier_iou: Float | None = Field(default=None, gt=0, le=1)
     min_inliers: int | None = Field(default=None, ge=2)
@@ -227,6 +247,8 @@ class LocalizeOptions(BaseModel):
     time_budget_ms: Float | None = Field(default=None, gt=0)
     max_iterations: int | None = Field(default=None, ge=1)
     output_convention: Convention | None = None
+    on_ambiguity: Literal["not_localized", "best"] | None = None
+    min_confidence: Float | None = Field(default=None, ge=0, le=1)
 
 
 class LocalizeRequest(BaseModel):
@@ -250,16 +272,34 @@ class LocalizeRequest(BaseModel):
 
 class Pose(BaseModel):
     """``world_from_camera``: the camera's pose in the map frame, with the camera axes
-    ``convention``. :meth:`as_matrix` gives the 4x4 numpy array."""
+    ``convention``. ``matrix`` is ROW-major (a list of rows, ``matrix[r][c]``);
+    ``matrix_column_major`` the same 16 numbers column by column (simd, Unity, OpenGL);
+    ``quaternion_xyzw`` the quaternion scalar last. :meth:`as_matrix` gives the 4x4 numpy array;
+    for Unity see :func:`sdk.geometry.unity_pose_from_world_from_camera`."""
 
     model_config = _RESPONSE
     quaternion_wxyz: list[float]
+    quaternion_xyzw: list[float] | None = None
     translation_m: list[float]
     matrix: list[list[float]]
+    matrix_column_major: list[float] | None = None
     convention: Convention = "opencv"
 
-    def as_matrix(self) -> np.ndarray:
-        """4x4 ``world_from_camera`` (float64)."""
+    @model_validator(mode="after")
+    def _derived_layouts(self) -> Pose:
+        # Older servers send only quaternion_wxyz and matrix: derive the other layouts.
+        if self.quaternion_xyzw is None and len(self.quaternion_wxyz) == 4:
+            w, x, y, z = self.quaternion_wxyz
+            object.__setattr__(self, "quaternion_xyzw", [x, y, z, w])
+        if self.matrix_column_major is None and len(self.matrix) == 4:
+            object.__setattr__(self, "matrix_column_major",
+                               [self.matrix[r][c] for c in range(4) for r in range(4)])
+        return self
+
+    def as_matrix(self) -> Any:
+        """4x4 ``world_from_camera`` as a float64 numpy array (needs numpy)."""
+        import numpy as np
+
         return np.asarray(self.matrix, dtype=float)
 
 
@@ -271,7 +311,10 @@ class Covariance(BaseModel):
     frame: str = ""
     matrix: list[list[float]]
 
-    def as_array(self) -> np.ndarray:
+    def as_array(self) -> Any:
+        """6x6 float64 numpy array (needs numpy)."""
+        import numpy as np
+
         return np.asarray(self.matrix, dtype=float)
 
 
@@ -285,8 +328,20 @@ class Inlier(BaseModel):
     cost: float
 
 
+class Alternative(BaseModel):
+    """A distinct candidate pose of an ambiguous frame (``confidence``: its probability of
+    being within 10 cm and 5 deg)."""
+
+    model_config = _RESPONSE
+    world_from_camera: Pose
+    confidence: float
+    n_inliers: int
+    score: float
+
+
 class LocalizeResponse(BaseModel):
-    """Answer for one frame. ``localized: false`` with a ``reason`` is a normal answer."""
+    """Answer for one frame. ``localized: false`` with a ``reason`` is a normal answer.
+    ``confidence`` is the probability that the pose is within 10 cm and 5 deg."""
 
     model_config = _RESPONSE
     localized: bool
@@ -299,6 +354,8 @@ class LocalizeResponse(BaseModel):
     hypotheses_evaluated: int | None = None
     used_prior: bool | None = None
     refinement_status: str | None = None
+    pose_source: str | None = None
+    alternatives: list[Alternative] = Field(default_factory=list)
     map_id: str
     map_version: int
     timings_ms: dict[str, float] = Field(default_factory=dict)
@@ -322,6 +379,15 @@ class MapSummary(BaseModel):
     version: int
     content_hash: str
     updated_at: str | None = None
+
+
+class MapVersion(BaseModel):
+    """One stored version of a map (``GET /v1/maps/{id}/versions``)."""
+
+    model_config = _RESPONSE
+    version: int
+    content_hash: str
+    created_at: str | None = None
 
 
 class MapRecord(BaseModel):

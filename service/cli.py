@@ -1,12 +1,15 @@
 """The ``quadloc`` command line (entry point ``quadloc = service.cli:main``).
 
-Map commands work directly on the database (no server needed); ``serve`` runs the REST API.
+Map commands and ``localize`` talk to a running server through the SDK when a server URL is
+given (``--url`` or ``QUADLOC_URL``, with ``--api-key`` / ``QUADLOC_API_KEY``); without one they
+work directly on the local database (no server needed). ``serve`` runs the REST API.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import secrets
 import sys
@@ -19,7 +22,7 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 OPENAPI_PATH = REPO_ROOT / "docs" / "openapi.json"
 
 EPILOG = """\
-examples:
+examples (local database):
   quadloc serve                                  # http://127.0.0.1:8000, SQLite, demo map "chess"
   quadloc serve --port 9000 --database-url sqlite:////tmp/q.db
   QUADLOC_API_KEYS="$(quadloc hash-key s3cret --scopes read+write)" quadloc serve --host 0.0.0.0
@@ -30,9 +33,84 @@ examples:
   quadloc localize --map chess docs/examples/localize_chess.json
   quadloc openapi --output docs/openapi.json     # regenerate the published schema
 
+examples (a running server, through the SDK):
+  quadloc --url http://127.0.0.1:8000 maps list
+  export QUADLOC_URL=https://quadloc.example.com QUADLOC_API_KEY=s3cret
+  quadloc maps import office.json --update       # create, or add a new version
+  quadloc maps versions office-3
+  quadloc localize --map chess frames/*.json     # one line per frame, progress on stderr
+
 settings come from QUADLOC_* environment variables (see service/settings.py), e.g.
-QUADLOC_DATABASE_URL, QUADLOC_API_KEYS, QUADLOC_DATA_DIR; flags override them.
+QUADLOC_DATABASE_URL, QUADLOC_API_KEYS, QUADLOC_DATA_DIR; QUADLOC_URL and QUADLOC_API_KEY
+select a server for the map commands and localize; flags override them.
 """
+
+
+def _version_text() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    from service.api.app import API_VERSION
+
+    def installed(name: str) -> str:
+        try:
+            return version(name)
+        except PackageNotFoundError:  # pragma: no cover - running from a bare checkout
+            return "not installed"
+
+    return (f"quadloc {installed('quadloc')} (REST API {API_VERSION}, "
+            f"quadloc-sdk {installed('quadloc-sdk')})")
+
+
+class _VersionAction(argparse.Action):
+    """``--version``: computed only when asked (it imports the app for the API version)."""
+
+    def __init__(self, option_strings: list[str], dest: str, **kwargs: Any) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS,
+                         help="print the versions of quadloc, its REST API and the SDK; exit")
+
+    def __call__(self, parser: argparse.ArgumentParser, *args: Any, **kwargs: Any) -> None:
+        print(_version_text())
+        parser.exit()
+
+
+# ---------------------------------------------------------------------------------- output
+
+
+def format_table(headers: list[str], rows: list[list[str]], right: set[int] = frozenset()) -> str:
+    """Plain-text table: columns as wide as their widest cell, two spaces apart; ``right``
+    holds the indices of right-aligned (numeric) columns."""
+    cells = [headers, *rows]
+    widths = [max(len(str(r[i])) for r in cells) for i in range(len(headers))]
+    lines = []
+    for r in cells:
+        parts = [str(v).rjust(w) if i in right else str(v).ljust(w)
+                 for i, (v, w) in enumerate(zip(r, widths, strict=True))]
+        lines.append("  ".join(parts).rstrip())
+    return "\n".join(lines)
+
+
+class Progress:
+    """A one-line progress bar on stderr (only when stderr is a terminal, so logs and pipes
+    stay clean): ``[#####.....]  5/10  frame_005.json``."""
+
+    def __init__(self, total: int, stream: Any = None) -> None:
+        self.total = total
+        self.stream = stream or sys.stderr
+        self.enabled = total > 1 and bool(getattr(self.stream, "isatty", lambda: False)())
+
+    def update(self, done: int, label: str = "") -> None:
+        if not self.enabled:
+            return
+        width = 30
+        filled = int(width * done / max(self.total, 1))
+        count = f"{done:>{len(str(self.total))}}/{self.total}"
+        self.stream.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {count}  {label[:40]:<40}")
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.enabled:
+            self.stream.write("\n")
+            self.stream.flush()
 
 
 def _settings(args: argparse.Namespace) -> Any:
@@ -76,12 +154,34 @@ def _json_type(value: Any) -> str:
         type(value), type(value).__name__)
 
 
+def _server(args: argparse.Namespace) -> str | None:
+    """The server URL of ``--url`` or ``QUADLOC_URL`` (None: work on the local database)."""
+    url = getattr(args, "url", None) or os.environ.get("QUADLOC_URL") or None
+    return url.strip() if url and url.strip() else None
+
+
+def _client(args: argparse.Namespace) -> Any:
+    """An SDK client for ``--url`` / ``QUADLOC_URL`` with ``--api-key`` / ``QUADLOC_API_KEY``."""
+    from sdk import QuadLocClient
+
+    key = getattr(args, "api_key", None) or os.environ.get("QUADLOC_API_KEY") or None
+    try:
+        return QuadLocClient(_server(args) or "", api_key=key)
+    except ValueError as exc:  # e.g. a URL without http:// or https://
+        raise _CliError(f"--url / QUADLOC_URL / --api-key: {exc}") from exc
+
+
+def _table_time(value: Any) -> str:
+    """ISO timestamps (datetime or str) trimmed to seconds for tables."""
+    text = value.isoformat() if hasattr(value, "isoformat") else str(value or "-")
+    return text.split(".")[0].replace("+00:00", "") + ("Z" if "+00:00" in text else "")
+
+
 # ---------------------------------------------------------------------------------- commands
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
-    import uvicorn
-
+    from service.api.server import serve, uvicorn_config
     from service.settings import check_bind_allowed
 
     if args.database_url:
@@ -97,21 +197,46 @@ def cmd_serve(args: argparse.Namespace) -> int:
     if not settings.auth_enabled:
         print(f"quadloc: no API key configured: the API is open, listening on loopback only "
               f"({host}:{port})", file=sys.stderr)
-    uvicorn.run("service.api.app:create_app", factory=True, host=host, port=port,
-                workers=workers, log_level=settings.log_level, access_log=args.access_log)
+    serve(uvicorn_config(settings, host, port, workers=workers, access_log=args.access_log))
     return 0
 
 
 def cmd_maps_list(args: argparse.Namespace) -> int:
-    rows = _store(args).list()
+    if _server(args):
+        with _client(args) as client:
+            items = [m.model_dump(mode="json") for m in client.list_maps()]
+    else:
+        items = [{"map_id": r.map_id, "name": r.name, "version": r.latest_version,
+                  "content_hash": r.content_hash, "updated_at": r.updated_at.isoformat()}
+                 for r in _store(args).list()]
     if args.json:
-        print(json.dumps([{"map_id": r.map_id, "name": r.name, "version": r.latest_version,
-                           "content_hash": r.content_hash,
-                           "updated_at": r.updated_at.isoformat()} for r in rows], indent=2))
+        print(json.dumps(items, indent=2))
         return 0
-    print(f"{'MAP_ID':<24} {'VERSION':>7}  {'UPDATED':<25} NAME")
-    for r in rows:
-        print(f"{r.map_id:<24} {r.latest_version:>7}  {r.updated_at.isoformat():<25} {r.name}")
+    print(format_table(["MAP_ID", "VERSION", "UPDATED", "NAME"],
+                       [[m["map_id"], str(m["version"]), _table_time(m.get("updated_at")),
+                         m["name"]] for m in items], right={1}))
+    return 0
+
+
+def cmd_maps_versions(args: argparse.Namespace) -> int:
+    from maps.errors import MapNotFound
+
+    if _server(args):
+        with _client(args) as client:
+            items = [v.model_dump(mode="json") for v in client.list_versions(args.map_id)]
+    else:
+        try:
+            history = _store(args).version_history(args.map_id)
+        except MapNotFound as exc:
+            return _die(str(exc), 1)
+        items = [{"version": h.version, "content_hash": h.content_hash,
+                  "created_at": h.created_at.isoformat()} for h in history]
+    if args.json:
+        print(json.dumps(items, indent=2))
+        return 0
+    print(format_table(["VERSION", "CREATED", "ETAG"],
+                       [[str(v["version"]), _table_time(v.get("created_at")),
+                         f'"{v["content_hash"]}"'] for v in items], right={0}))
     return 0
 
 
@@ -126,7 +251,6 @@ def cmd_maps_import(args: argparse.Namespace) -> int:
     if not isinstance(data, dict):
         return _die(f"{args.file}: a map must be a JSON object, got a JSON "
                     f"{_json_type(data)}")
-    store = _store(args)
     try:
         if args.chess:
             scene_map = scene_map_from_chess(data, map_id=args.map_id or "chess",
@@ -141,6 +265,9 @@ def cmd_maps_import(args: argparse.Namespace) -> int:
         for e in exc.errors:
             print(f"  {e['field']}: {e['message']}", file=sys.stderr)
         return _die(f"{args.file}: invalid map ({len(exc.errors)} problem(s))")
+    if _server(args):
+        return _remote_import(args, scene_map.to_dict())
+    store = _store(args)
     try:
         stored = store.create(scene_map)
     except MapAlreadyExists:
@@ -158,14 +285,41 @@ def cmd_maps_import(args: argparse.Namespace) -> int:
     return 0
 
 
+def _remote_import(args: argparse.Namespace, document: dict[str, Any]) -> int:
+    """``maps import`` against a server: create the (locally validated) map, or with
+    ``--update`` add a version guarded by the ETag just read, so a concurrent writer gets a
+    refusal (412/409), never a silent overwrite."""
+    from sdk import Conflict
+
+    map_id = str(document["map_id"])
+    with _client(args) as client:
+        try:
+            record = client.create_map(document)
+        except Conflict as exc:
+            if not exc.type.endswith("map-exists"):
+                raise
+            if not args.update:
+                return _die(f"map {map_id!r} exists; pass --update to add a new version")
+            current = client.get_map(map_id)
+            record = client.update_map(map_id, document,
+                                       if_match=current.etag or current.content_hash)
+    print(f"{record.map_id} version {record.version} ({len(record.map.get('objects', []))} "
+          f"objects) etag \"{record.content_hash}\"")
+    return 0
+
+
 def cmd_maps_export(args: argparse.Namespace) -> int:
     from maps.errors import MapNotFound
 
-    try:
-        stored = _store(args).get(args.map_id, args.version)
-    except MapNotFound as exc:
-        return _die(str(exc), 1)
-    text = json.dumps(stored.scene_map.to_dict(), indent=2) + "\n"
+    if _server(args):
+        with _client(args) as client:
+            document = client.get_map(args.map_id, args.version).map
+    else:
+        try:
+            document = _store(args).get(args.map_id, args.version).scene_map.to_dict()
+        except MapNotFound as exc:
+            return _die(str(exc), 1)
+    text = json.dumps(document, indent=2) + "\n"
     if args.output:
         Path(args.output).write_text(text)
     else:
@@ -176,6 +330,11 @@ def cmd_maps_export(args: argparse.Namespace) -> int:
 def cmd_maps_delete(args: argparse.Namespace) -> int:
     from maps.errors import MapNotFound
 
+    if _server(args):
+        with _client(args) as client:
+            client.delete_map(args.map_id)
+        print(f"deleted {args.map_id} (all versions)")
+        return 0
     try:
         _store(args).delete(args.map_id)
     except MapNotFound as exc:
@@ -184,57 +343,130 @@ def cmd_maps_delete(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_localize(args: argparse.Namespace) -> int:
-    from pydantic import ValidationError
-
-    from maps.errors import MapNotFound
-    from service.api.errors import ProblemError, field_path
-    from service.api.metrics import ApiMetrics
-    from service.api.schemas import LocalizeRequest
-    from service.api.solver import Solver
-
-    try:
-        request = LocalizeRequest.model_validate(_read_json(args.file))
-    except (OSError, json.JSONDecodeError) as exc:
-        return _die(f"{args.file}: {exc}")
-    except ValidationError as exc:
-        for e in exc.errors():
-            print(f"  {field_path(e['loc'])}: {e['msg']}", file=sys.stderr)
-        return _die(f"{args.file}: invalid request")
-    if args.convention:
-        request = request.model_copy(update={"options": request.options.model_copy(
-            update={"output_convention": args.convention})})
-    settings = _settings(args)
-    try:
-        compiled = _store(args).compiled(args.map, args.version)
-    except MapNotFound as exc:
-        return _die(str(exc), 1)
-    solver = Solver(ApiMetrics(), 1, 0.0, settings.solve_time_budget_ms, settings.max_detections)
-    try:
-        result = solver.localize_frames(compiled, [request], batch=False)[0]
-    except ProblemError as exc:
-        return _die(exc.detail)
-    if args.json:
-        print(result.model_dump_json(indent=2))
-        return 0 if result.localized else 1
+def _print_answer(result: Any) -> None:
+    """Human-readable answer (server schema or SDK model: same fields)."""
     print(f"map {result.map_id} v{result.map_version}  frame {result.frame_id or '-'}")
     if not result.localized:
         print(f"NOT LOCALIZED: {result.reason}")
-        return 1
+        return
     pose = result.world_from_camera
-    assert pose is not None
     print(f"world_from_camera ({pose.convention} camera axes):")
     print("  quaternion_wxyz = [" + ", ".join(f"{v:+.6f}" for v in pose.quaternion_wxyz) + "]")
     print("  translation_m   = [" + ", ".join(f"{v:+.4f}" for v in pose.translation_m) + "]")
     print(f"confidence {result.confidence:.3f}  inliers {len(result.inliers)}  "
           f"metric {result.metric}  total {result.timings_ms.get('total', float('nan')):.1f} ms")
     if result.covariance is not None:
-        import numpy as np
+        diag = [max(float(result.covariance.matrix[i][i]), 0.0) for i in range(6)]
+        rot = [round(math.degrees(math.sqrt(d)), 3) for d in diag[:3]]
+        trans = [round(math.sqrt(d), 4) for d in diag[3:]]
+        print(f"std: rotation [deg] {rot}  translation [m] {trans}")
 
-        sd = np.sqrt(np.clip(np.diag(np.array(result.covariance.matrix)), 0, None))
-        print(f"std: rotation [deg] {np.degrees(sd[:3]).round(3).tolist()}  "
-              f"translation [m] {sd[3:].round(4).tolist()}")
-    return 0
+
+def cmd_localize(args: argparse.Namespace) -> int:
+    from pydantic import ValidationError
+
+    from service.api.errors import field_path
+    from service.api.schemas import LocalizeRequest
+
+    requests = []
+    for path in args.file:
+        try:
+            body = _read_json(path)
+            if args.metric and isinstance(body, dict):
+                options = body.setdefault("options", {})
+                if isinstance(options, dict):
+                    options["metric"] = args.metric  # validated with the request below
+            request = LocalizeRequest.model_validate(body)
+        except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+            return _die(f"{path}: {exc}")
+        except ValidationError as exc:
+            for e in exc.errors():
+                print(f"  {field_path(e['loc'])}: {e['msg']}", file=sys.stderr)
+            return _die(f"{path}: invalid request")
+        if args.convention:
+            request = request.model_copy(update={"options": request.options.model_copy(
+                update={"output_convention": args.convention})})
+        requests.append(request)
+    solve = _remote_solver(args) if _server(args) else _local_solver(args)
+    if isinstance(solve, int):
+        return solve
+    progress = Progress(len(requests))
+    results = []
+    try:
+        for i, (path, request) in enumerate(zip(args.file, requests, strict=True)):
+            progress.update(i, path)
+            results.append(solve(request))
+        progress.update(len(requests))
+    finally:
+        progress.close()
+        close = getattr(solve, "close", None)
+        if close is not None:
+            close()
+    if args.json:
+        if len(results) == 1:
+            print(results[0].model_dump_json(indent=2))
+        else:
+            print(json.dumps([r.model_dump(mode="json") for r in results], indent=2))
+    elif len(results) == 1:
+        _print_answer(results[0])
+    else:
+        rows = []
+        for path, r in zip(args.file, results, strict=True):
+            t = r.world_from_camera.translation_m if r.localized else None
+            rows.append([path, "yes" if r.localized else f"no ({r.reason})",
+                         f"{r.confidence:.2f}", str(len(r.inliers)),
+                         "-" if t is None else " ".join(f"{v:+.3f}" for v in t)])
+        print(format_table(["FILE", "LOCALIZED", "CONF", "INLIERS", "TRANSLATION_M"], rows,
+                           right={2, 3}))
+    return 0 if all(r.localized for r in results) else 1
+
+
+class _RemoteSolve:
+    """Localize through the SDK (``POST /v1/maps/{map}/localize`` on the server)."""
+
+    def __init__(self, args: argparse.Namespace) -> None:
+        self.client = _client(args)
+        self.map_id = args.map
+        self.version = args.version
+
+    def __call__(self, request: Any) -> Any:
+        return self.client.localize(self.map_id, request.model_dump(mode="json",
+                                                                    exclude_none=True),
+                                    map_version=self.version)
+
+    def close(self) -> None:
+        self.client.close()
+
+
+def _remote_solver(args: argparse.Namespace) -> Any:
+    return _RemoteSolve(args)
+
+
+def _local_solver(args: argparse.Namespace) -> Any:
+    """Localize in process against the local database (the server's solver and settings)."""
+    from maps.errors import MapNotFound
+    from service.api.errors import ProblemError
+    from service.api.metrics import ApiMetrics
+    from service.api.solver import Solver
+
+    settings = _settings(args)
+    try:
+        compiled = _store(args).compiled(args.map, args.version)
+    except MapNotFound as exc:
+        return _die(str(exc), 1)
+    solver = Solver(ApiMetrics(), 1, 0.0, settings.solve_time_budget_ms, settings.max_detections)
+
+    def solve(request: Any) -> Any:
+        try:
+            return solver.localize_frames(compiled, [request], batch=False)[0]
+        except ProblemError as exc:
+            raise _CliError(exc.detail) from exc
+
+    return solve
+
+
+class _CliError(Exception):
+    """A message for the user (exit status 2)."""
 
 
 def openapi_document() -> dict[str, Any]:
@@ -292,12 +524,26 @@ def build_parser() -> argparse.ArgumentParser:
         prog="quadloc", formatter_class=fmt, epilog=EPILOG,
         description="QuadLoc: camera relocalization from object detections (ellipses) and a "
                     "map of 3D ellipsoids. Serve the REST API, manage maps, localize frames.")
+    parser.add_argument("--version", action=_VersionAction)
+
+    def remote(p: argparse.ArgumentParser, suppress: bool = True) -> None:
+        default = argparse.SUPPRESS if suppress else None
+        p.add_argument("--url", metavar="URL", default=default,
+                       help="QuadLoc server to talk to, e.g. http://127.0.0.1:8000 (default: "
+                            "QUADLOC_URL; unset = work on the local database)")
+        p.add_argument("--api-key", metavar="KEY", default=default,
+                       help="API key sent as 'Authorization: Bearer KEY' (default: "
+                            "QUADLOC_API_KEY)")
+
+    remote(parser, suppress=False)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
-    def db(p: argparse.ArgumentParser) -> None:
+    def db(p: argparse.ArgumentParser, server: bool = True) -> None:
         p.add_argument("--database-url", metavar="URL",
                        help="sqlite:///path or postgresql://... (default: QUADLOC_DATABASE_URL "
                             "or SQLite under QUADLOC_DATA_DIR)")
+        if server:
+            remote(p)
 
     p = sub.add_parser("serve", formatter_class=fmt, help="run the REST API (Uvicorn)",
                        description="Run the REST API. Without QUADLOC_API_KEYS the API is open "
@@ -310,20 +556,27 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, help="worker processes (default 1; one per core "
                                                "at most, the solver is CPU-bound)")
     p.add_argument("--access-log", action="store_true", help="log every request")
-    db(p)
+    db(p, server=False)
     p.set_defaults(func=cmd_serve)
 
     maps_p = sub.add_parser("maps", formatter_class=fmt, help="list, import, export, delete maps",
-                            description="Manage maps directly in the database (no server).",
+                            description="Manage maps on a server (--url / QUADLOC_URL, through "
+                                        "the SDK) or directly in the local database.",
                             epilog="examples:\n  quadloc maps list\n"
                                    "  quadloc maps import office.json\n"
                                    "  quadloc maps import chess_scene.json --chess "
-                                   "--map-id chess2\n  quadloc maps export chess > chess.json\n")
+                                   "--map-id chess2\n  quadloc maps export chess > chess.json\n"
+                                   "  quadloc --url http://127.0.0.1:8000 maps versions chess\n")
     msub = maps_p.add_subparsers(dest="maps_command", metavar="ACTION", required=True)
     p = msub.add_parser("list", help="list maps with their latest version")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     db(p)
     p.set_defaults(func=cmd_maps_list)
+    p = msub.add_parser("versions", help="list a map's stored versions")
+    p.add_argument("map_id", metavar="ID")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    db(p)
+    p.set_defaults(func=cmd_maps_versions)
     p = msub.add_parser("import", help="create a map from a JSON file ('-' = stdin)")
     p.add_argument("file", help="map JSON (docs/maps.md format, or the Chess format with --chess)")
     p.add_argument("--chess", action="store_true", help="the file is in the Chess scene format")
@@ -344,17 +597,25 @@ def build_parser() -> argparse.ArgumentParser:
     db(p)
     p.set_defaults(func=cmd_maps_delete)
 
-    p = sub.add_parser("localize", formatter_class=fmt, help="localize one frame (prints the pose)",
-                       description="Localize the frame in FILE (the body of POST "
-                                   "/v1/maps/{id}/localize) against a stored map, in process. "
-                                   "Exit status 0 when localized, 1 when not.",
-                       epilog="example:\n  quadloc localize --map chess "
-                              "docs/examples/localize_chess.json\n")
-    p.add_argument("file", help="request JSON ('-' = stdin)")
+    p = sub.add_parser("localize", formatter_class=fmt, help="localize frames (prints the pose)",
+                       description="Localize the frame in each FILE (the body of POST "
+                                   "/v1/maps/{id}/localize) against a map: on the server of "
+                                   "--url / QUADLOC_URL, or in process on the local database. "
+                                   "Several files: one table row per frame and a progress bar "
+                                   "on stderr. Exit status 0 when every frame localized, 1 "
+                                   "when one did not.",
+                       epilog="examples:\n  quadloc localize --map chess "
+                              "docs/examples/localize_chess.json\n"
+                              "  quadloc --url http://127.0.0.1:8000 localize --map chess "
+                              "frames/*.json\n")
+    p.add_argument("file", nargs="+", help="request JSON ('-' = stdin)")
     p.add_argument("--map", required=True, metavar="ID", help="map id")
     p.add_argument("--version", type=int, help="map version (default: latest)")
     p.add_argument("--convention", choices=["opencv", "opengl"],
                    help="camera axes of the printed pose (overrides the file's options)")
+    p.add_argument("--metric", metavar="METRIC",
+                   help="refinement metric ('none': the P3P/P2E pose unrefined; overrides the "
+                        "file's options)")
     p.add_argument("--json", action="store_true", help="print the full JSON response")
     db(p)
     p.set_defaults(func=cmd_localize)
@@ -383,12 +644,21 @@ def main(argv: list[str] | None = None) -> int:
     from pydantic import ValidationError
 
     from maps.errors import MapStoreError, StoreUnavailable
+    from sdk import NotFound, QuadLocError, TransportError
 
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)
     except StoreUnavailable as exc:  # database down: a message, not a traceback
         return _die(f"{exc} (check QUADLOC_DATABASE_URL / --database-url)")
+    except _CliError as exc:
+        return _die(str(exc))
+    except TransportError as exc:
+        return _die(f"cannot reach the server: {exc} (check --url / QUADLOC_URL)")
+    except NotFound as exc:
+        return _die(str(exc), 1)
+    except QuadLocError as exc:  # the server's problem document: status, title, fields
+        return _die(str(exc))
     except MapStoreError as exc:
         return _die(str(exc))
     except ValidationError as exc:  # QUADLOC_* settings out of range or malformed

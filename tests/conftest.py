@@ -33,7 +33,8 @@ def _free_port() -> int:
 @contextmanager
 def run_live_server(data_dir: Path, env: dict[str, str] | None = None,
                     startup_timeout_s: float = 60.0) -> Iterator[str]:
-    """Run ``uvicorn service.api.app:create_app --factory`` on a free loopback port.
+    """Run ``quadloc serve`` (``python -m service serve``: Uvicorn with the connection limits
+    of service/api/server.py) on a free loopback port (log level warning unless ``env`` says).
 
     The database is ``sqlite:///<data_dir>/quadloc.db`` unless ``env`` sets
     ``QUADLOC_DATABASE_URL``. Yields the base URL; terminates the process on exit.
@@ -43,13 +44,13 @@ def run_live_server(data_dir: Path, env: dict[str, str] | None = None,
     full_env = {k: v for k, v in os.environ.items() if not k.startswith("QUADLOC_")}
     full_env.update({"QUADLOC_DATA_DIR": str(data_dir),
                      "QUADLOC_DATABASE_URL": f"sqlite:///{data_dir / 'quadloc.db'}",
-                     "PYTHONPATH": str(REPO_ROOT)})
+                     "QUADLOC_LOG_LEVEL": "warning", "PYTHONPATH": str(REPO_ROOT)})
     full_env.update(env or {})
     log_path = data_dir / f"uvicorn-{port}.log"
     with open(log_path, "wb") as log:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "uvicorn", "service.api.app:create_app", "--factory",
-             "--host", "127.0.0.1", "--port", str(port), "--log-level", "warning"],
+            [sys.executable, "-m", "service", "serve", "--host", "127.0.0.1", "--port",
+             str(port)],
             cwd=REPO_ROOT, env=full_env, stdout=log, stderr=subprocess.STDOUT)
     base = f"http://127.0.0.1:{port}"
     try:

@@ -186,13 +186,14 @@ def test_readme_tour_curl_runs_as_written(live_server: str) -> None:
 
 
 def test_readme_tour_commands_name_the_venv() -> None:
-    """Steps 2-3 run from a fresh shell after ``make serve``: the venv is not active."""
+    """Steps 2-4 run from a fresh shell after ``make serve``: the venv is not active."""
     tour = README.read_text().split("## A 5-minute tour", 1)[1].split("\n## ", 1)[0]
     step2 = tour.split("**2.", 1)[1].split("```python", 1)[0]
     assert ".venv/bin/python" in step2
-    step3 = tour.split("**3.", 1)[1].split("**4.", 1)[0]
-    assert re.findall(r"`quadloc ", step3) == [] and "`.venv/bin/quadloc --help`" in step3
-    docker = readme_tour_block("4", "bash")
+    step4 = tour.split("**4.", 1)[1].split("**5.", 1)[0]
+    assert re.findall(r"`quadloc ", step4) == [] and "`.venv/bin/quadloc --help`" in step4
+    assert re.findall(r"^quadloc ", step4, flags=re.M) == []
+    docker = readme_tour_block("5", "bash")
     run = next(line for line in docker.splitlines() if line.startswith("docker run"))
     assert " -d " in run  # detached, so the next line's curl runs
 

@@ -454,3 +454,20 @@ def test_batch_budget_setting_is_bounded() -> None:
     for bad in (0, -1, 300_001, float("inf")):
         with pytest.raises(ValidationError):
             Settings(batch_time_budget_ms=bad)
+
+
+def test_metric_none_and_trust_fields_over_http(client: TestClient) -> None:
+    """metric "none" is accepted (pose unrefined, no covariance); the response says which path
+    won and what the confidence is a probability of; the new options are validated."""
+    body = _frame(options={**LOCALIZE_EXAMPLE.get("options", {}), "metric": "none"})
+    r = client.post(URL, json=body)
+    assert r.status_code == 200, r.text
+    out = r.json()
+    assert out["localized"] and out["metric"] == "none" and out["covariance"] is None
+    assert out["pose_source"] == "ransac" and out["alternatives"] == []
+    r = client.post(URL, json=_frame(options={"on_ambiguity": "best", "min_confidence": 0.0}))
+    assert r.status_code == 200 and r.json()["localized"]
+    for bad in ({"on_ambiguity": "maybe"}, {"min_confidence": 2.0}, {"metric": "nope"}):
+        field = next(iter(bad))
+        problem = _problem(client.post(URL, json=_frame(options=bad)), 422, "validation-error")
+        assert any(e["field"] == f"options.{field}" for e in problem["errors"]), problem

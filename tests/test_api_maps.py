@@ -161,8 +161,13 @@ def test_update_rejects_a_different_map_id_and_unknown_maps(client: TestClient) 
     body = _problem(client.put("/v1/maps/chess", json=doc, headers={"If-Match": r.headers["etag"]}),
                     422, "invalid-map")
     assert body["errors"][0]["field"] == "map_id"
-    _problem(client.put("/v1/maps/nope", json=MAP_EXAMPLE, headers={"If-Match": '"x"'}),
-             404, "map-not-found")
+    _problem(client.put("/v1/maps/nope", json={**MAP_EXAMPLE, "map_id": "nope"},
+                        headers={"If-Match": '"x"'}), 404, "map-not-found")
+    # the documented order: the body (422), then If-Match (428), then the map (404), the ETag
+    bad = {**MAP_EXAMPLE, "map_id": "nope", "objects": [{"object_id": "x"}]}
+    _problem(client.put("/v1/maps/nope", json=bad), 422, "invalid-map")
+    _problem(client.put("/v1/maps/nope", json={**MAP_EXAMPLE, "map_id": "nope"}), 428,
+             "precondition-required")
 
 
 def test_lost_race_is_a_409(client: TestClient, monkeypatch: pytest.MonkeyPatch) -> None:

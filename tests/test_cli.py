@@ -98,6 +98,14 @@ def test_localize_prints_the_pose(db: list[str], capsys: pytest.CaptureFixture[s
     body = json.loads(capsys.readouterr().out)
     assert body["world_from_camera"]["convention"] == "opengl"
     assert main(["localize", "--map", "nope", str(EXAMPLE), *db]) == 1
+    # metric "none": the P3P/P2E pose, unrefined, no covariance; a bad metric names the field
+    assert main(["localize", "--map", "chess", "--json", "--metric", "none", str(EXAMPLE),
+                 *db]) == 0
+    body = json.loads(capsys.readouterr().out)
+    assert body["metric"] == "none" and body["covariance"] is None
+    assert body["pose_source"] == "ransac"
+    assert main(["localize", "--map", "chess", "--metric", "nope", str(EXAMPLE), *db]) == 2
+    assert "options.metric" in capsys.readouterr().err
 
 
 def test_openapi_check_and_hash_key(capsys: pytest.CaptureFixture[str]) -> None:
@@ -184,3 +192,21 @@ def test_invalid_settings_are_a_message(var: str, value: str, db: list[str],
     assert main(["maps", "list", *db]) == 2
     err = capsys.readouterr().err
     assert "invalid settings" in err and var.removeprefix("QUADLOC_").lower() in err
+
+
+def test_maps_versions_on_the_local_database(db: list[str], tmp_path: Path,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    src = tmp_path / "office.json"
+    src.write_text(json.dumps(MAP_EXAMPLE))
+    assert main(["maps", "import", str(src), *db]) == 0
+    assert main(["maps", "import", str(src), "--update", "--name", "v2", *db]) == 0
+    capsys.readouterr()
+    assert main(["maps", "versions", "office-3", *db]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert lines[0].split() == ["VERSION", "CREATED", "ETAG"]
+    assert [line.split()[0] for line in lines[1:]] == ["1", "2"]
+    assert main(["maps", "versions", "no-such-map", *db]) == 1
+    assert "no-such-map" in capsys.readouterr().err
+    # a server URL without a scheme is refused with a message naming the option
+    assert main(["--url", "127.0.0.1:8000", "maps", "list"]) == 2
+    assert "--url" in capsys.readouterr().err

@@ -53,13 +53,17 @@ def _pip_commands(shell: str) -> list[list[str]]:
 
 
 def _makefile_install_commands() -> list[list[str]]:
+    """The pip commands of the Makefile's locked install (``_install_locked``), make variables
+    substituted."""
     text = (REPO / "Makefile").read_text()
-    recipe = re.search(r"^\$\(STAMP\):.*\n((?:\t.*\n)+)", text, re.MULTILINE)
-    assert recipe, "Makefile: no $(STAMP) recipe (the README's install)"
-    cmds = []
-    for line in recipe.group(1).splitlines():
-        cmds += _pip_commands(line.strip())
-    return cmds
+    recipe = re.search(r"^_install_locked:\n((?:\t.*\n)+)", text, re.MULTILINE)
+    assert recipe, "Makefile: no _install_locked recipe (the README's install)"
+    variables = dict(re.findall(r"^(\w+)\s*:?=\s*(.*?)\s*$", text, re.MULTILINE))
+    body = recipe.group(1).replace("\\\n", " ")
+    body = body.replace("$(foreach p,$(LOCAL_PKGS),-e $(p))",
+                        " ".join(f"-e {p}" for p in variables["LOCAL_PKGS"].split()))
+    body = re.sub(r"\$\((\w+)\)", lambda m: variables.get(m.group(1), m.group(0)), body)
+    return [c for line in body.splitlines() for c in _pip_commands(line.strip())]
 
 
 def _hadolint() -> str | None:
@@ -78,30 +82,68 @@ def test_hadolint_passes():
 
 
 def test_install_steps_are_the_readmes():
+    """The image installs as `make serve`/`make test` do: exact hashed versions from the lock,
+    then the project without dependencies (the image: runtime lock, not editable, --no-deps
+    because the lock omits the test tools gtsam declares)."""
     readme = (REPO / "README.md").read_text()
     assert "make serve" in readme and "make test" in readme
     make_cmds = _makefile_install_commands()
     docker_cmds = [c for word, rest in _instructions() if word == "RUN"
                    for c in _pip_commands(rest)]
     assert make_cmds, "no pip install in the Makefile"
-
-    def normalise(args: list[str]) -> list[str]:
-        # The image installs the project as the Makefile does, without `-e` (no source tree
-        # to edit) and without the `[dev]` extra (tests and benchmarks only).
-        return [re.sub(r"\[dev\]$", "", a.strip("'\"")) for a in args if a != "-e"]
-
-    assert [normalise(c) for c in docker_cmds] == [normalise(c) for c in make_cmds]
-    assert all(" ".join(c) in {"--upgrade pip", "."} for c in map(normalise, docker_cmds))
+    assert make_cmds[0] == ["--require-hashes", "-r", "requirements-dev.lock"]
+    # the project and the light SDK distribution it depends on (issue 13), from the checkout
+    assert make_cmds[1] == ["--no-deps", "--no-build-isolation", "-e", ".", "-e", "sdk"]
+    assert docker_cmds[0] == ["--require-hashes", "--no-deps", "-r", "requirements.lock"]
+    assert docker_cmds[1] == ["--no-deps", "--no-build-isolation", "./sdk", "."]
+    assert len(docker_cmds) == 2  # (plus the uninstall of the build backend)
     # No other download: no curl/wget/apt-get installs, no extra pip packages.
     text = "\n".join(f"{w} {r}" for w, r in _instructions())  # comments excluded
     assert not re.search(r"\b(curl|wget|apt-get install|apk add)\b", text)
+
+
+def _lock_pins(path: Path) -> dict[str, str]:
+    pins = re.findall(r"^([A-Za-z0-9._-]+)==([^\s;]+)", path.read_text(), re.MULTILINE)
+    return {name.lower().replace("_", "-"): version for name, version in pins}
+
+
+def _requirement_names(reqs: list[str]) -> set[str]:
+    return {re.split(r"[<>=!~;\[ ]", r, maxsplit=1)[0].lower().replace("_", "-") for r in reqs}
+
+
+def test_lock_files_pin_everything_pyproject_asks_for():
+    """Both locks pin (with sha256 hashes) every dependency of pyproject.toml, the runtime lock
+    with the dev lock's versions; the build backend pinned is the one [build-system] names."""
+    pyproject = tomllib.loads((REPO / "pyproject.toml").read_text())
+    dev = _lock_pins(REPO / "requirements-dev.lock")
+    run = _lock_pins(REPO / "requirements.lock")
+    sdk = tomllib.loads((REPO / "sdk" / "pyproject.toml").read_text())["project"]
+    # the checkout's own distributions are installed from the working tree, never pinned
+    local = _requirement_names([pyproject["project"]["name"], sdk["name"]])
+    runtime = _requirement_names(pyproject["project"]["dependencies"] + sdk["dependencies"])
+    runtime -= local
+    extras = _requirement_names(pyproject["project"]["optional-dependencies"]["dev"])
+    assert runtime <= set(run), runtime - set(run)
+    assert runtime | extras <= set(dev), (runtime | extras) - set(dev)
+    assert all(dev[name] == version for name, version in run.items()), "locks disagree"
+    assert not {"pytest", "hypothesis", "ruff", "schemathesis"} & set(run)
+    build = _requirement_names(pyproject["build-system"]["requires"])
+    tools = _requirement_names([line for line in (REPO / "lock" / "tools.in").read_text()
+                                .splitlines() if line.strip() and not line.startswith("#")])
+    assert tools == build | {"pip"}
+    for path in ("requirements-dev.lock", "requirements.lock"):
+        text = (REPO / path).read_text()
+        blocks = re.split(r"^(?=[A-Za-z0-9])", text, flags=re.MULTILINE)[1:]
+        assert all("--hash=sha256:" in b for b in blocks), f"{path}: a pin without hashes"
+        assert not re.search(r"file:/|/opt/", text), f"{path}: machine-local paths"
 
 
 def test_dockerfile_runtime_contract():
     ins = _instructions()
     words = [w for w, _ in ins]
     froms = [rest for w, rest in ins if w == "FROM"]
-    assert froms == ["python:3.11-slim"]
+    assert froms == ["${BASE} AS build", "${BASE}"]
+    assert ins[0] == ("ARG", "BASE=python:3.11-slim")  # real deployments: the official image
     users = [rest for w, rest in ins if w == "USER"]
     assert users and users[-1].split(":")[0] not in ("root", "0")
     assert words.index("USER") < words.index("CMD")
@@ -114,15 +156,16 @@ def test_dockerfile_runtime_contract():
     # every package pyproject installs is copied into the image
     pyproject = tomllib.loads((REPO / "pyproject.toml").read_text())
     includes = pyproject["tool"]["setuptools"]["packages"]["find"]["include"]
-    copied = {rest.split()[0].rstrip("/") for w, rest in ins if w == "COPY"}
+    copied = {rest.split()[0].rstrip("/") for w, rest in ins
+              if w == "COPY" and not rest.startswith("--from")}
     for pattern in includes:
         assert pattern.rstrip("*") in copied, f"package {pattern} not copied"
-    assert {"pyproject.toml", "README.md"} <= {p for w, r in ins if w == "COPY"
-                                              for p in r.split()[:-1]}
+    assert {"pyproject.toml", "README.md", "requirements.lock"} <= {
+        p for w, r in ins if w == "COPY" for p in r.split()[:-1]}
     # .dockerignore must not hide what the Dockerfile copies
     ignored = {line.strip() for line in (REPO / ".dockerignore").read_text().splitlines()
                if line.strip() and not line.startswith("#")}
-    assert not ignored & (copied | {"pyproject.toml", "README.md"})
+    assert not ignored & (copied | {"pyproject.toml", "README.md", "requirements.lock"})
 
 
 def _healthcheck_code() -> str:
@@ -170,17 +213,24 @@ def test_compose_stack_postgres_two_replicas_and_proxy():
     compose = yaml.safe_load((REPO / "docker-compose.yml").read_text())
     services = compose["services"]
     assert set(services) == {"db", "quadloc-1", "quadloc-2", "proxy"}
-    assert services["db"]["image"].startswith("postgres:")
+    assert "name" not in compose, "Debian's docker-compose 1.29 (v1) rejects a top-level name:"
+
+    def default(value: str) -> str:  # "${VAR:-default}" -> "default" (what compose uses)
+        m = re.fullmatch(r"\$\{\w+:-(.*)\}", value)
+        return m.group(1) if m else value
+
+    assert default(services["db"]["image"]).startswith("postgres:")
     replicas = [services["quadloc-1"], services["quadloc-2"]]
     for svc in replicas:
-        assert svc["build"] == "."
+        assert svc["build"]["context"] == "."
+        assert default(svc["build"]["args"]["BASE"]) == "python:3.11-slim"
         env = svc["environment"]
         assert re.match(r"postgresql://\w+:.+@db:5432/\w+$", env["QUADLOC_DATABASE_URL"])
         assert ":?" in env["QUADLOC_API_KEYS"], "API keys must be required, not defaulted"
         assert env["QUADLOC_WORKERS"] == "1"
         assert svc["depends_on"]["db"]["condition"] == "service_healthy"
     proxy = services["proxy"]
-    assert proxy["image"].startswith("nginx:")
+    assert default(proxy["image"]).startswith("nginx:")
     mount = next(v for v in proxy["volumes"] if "nginx.conf" in v)
     conf_path = REPO / mount.split(":")[0]
     assert conf_path.exists()
@@ -189,7 +239,8 @@ def test_compose_stack_postgres_two_replicas_and_proxy():
     servers = re.findall(r"^\s*server\s+([\w.-]+):(\d+)", upstream, re.MULTILINE)
     assert sorted(servers) == [("quadloc-1", "8000"), ("quadloc-2", "8000")]
     listen = re.search(r"listen\s+(\d+);", conf).group(1)
-    assert any(p.endswith(f":{listen}") for p in proxy["ports"])
+    assert any(p.endswith(f":{listen}") and default(p.rsplit(":", 1)[0]).isdigit()
+               for p in proxy["ports"])
     assert set(proxy["depends_on"]) == {"quadloc-1", "quadloc-2"}
 
 

@@ -14,7 +14,7 @@ from bench.reference_data import perturb_pose
 from bench.simulate import SimulationConfig, simulate_frame
 from factors.geometry import Ellipse, GeometryError
 from maps.compiled import compile_map
-from service.localization.pipeline import confidence_of, localize
+from service.localization.pipeline import localize
 from service.localization.types import (
     Detection,
     LocalizationInputError,
@@ -88,7 +88,9 @@ def test_two_detections_localize_with_p2e():
         cats.setdefault(d.label, []).append(i)
     singles = [v[0] for k, v in cats.items() if len(v) == 1 and len(CM.indices_for(k)) == 1]
     dets = [frame.detections[i] for i in singles[:2]]  # Games and Timer
-    r = localize(dets, MAP, CAMERA)
+    # the geometry, not the acceptance policy: two detections alone are rarely trusted by the
+    # calibrated confidence (tests/test_trust.py), so accept any verified pose here
+    r = localize(dets, MAP, CAMERA, LocalizationOptions(min_confidence=0.0))
     assert r.hypotheses_evaluated >= 1
     # P2E (zero roll; the Chess frames have ~3 deg) + level-set refinement of two exact
     # ellipses: this pair gives the true pose (98.6 % of exact Chess pairs localize)
@@ -204,10 +206,7 @@ def test_determinism_and_confidence():
     b = localize(frame.detections, MAP, CAMERA, opts)
     assert a.localized and b.localized
     assert np.array_equal(a.world_from_camera, b.world_from_camera)
-    assert confidence_of(0, 5, 0.9) == 0.0
-    assert confidence_of(2, 2, 1.0) == pytest.approx(0.5)
-    assert confidence_of(3, 4, 0.8) == pytest.approx(0.75 * 0.8 * 0.75)
-    assert confidence_of(4, 4, 0.8) > confidence_of(3, 4, 0.8) > confidence_of(2, 4, 0.8)
+    assert a.confidence == b.confidence and 0.0 < a.confidence <= 1.0
 
 
 def test_level_set_resampling_reaches_the_optimum_from_far():

@@ -93,7 +93,18 @@ def _small_map(map_id: str = "office", name: str = "Office", shift: float = 0.0)
 
 
 def _independent_hash(scene_map: SceneMap) -> str:
-    text = json.dumps(scene_map.to_dict(), sort_keys=True, separators=(",", ":"),
+    """sha256 of the exported document, geometric numbers rounded to 12 decimals (the documented
+    hashed form, maps.model.HASH_DECIMALS), written independently of maps.model."""
+    doc = scene_map.to_dict()
+
+    def r12(values: list[float]) -> list[float]:
+        return [float(f"{v:.12f}") + 0.0 for v in values]
+
+    doc["up_axis"] = r12(doc["up_axis"])
+    for o in doc["objects"]:
+        o["center"], o["axes"] = r12(o["center"]), r12(o["axes"])
+        o["quaternion_wxyz"] = r12(o["quaternion_wxyz"])
+    text = json.dumps(doc, sort_keys=True, separators=(",", ":"),
                       ensure_ascii=False, allow_nan=False)
     return hashlib.sha256(text.encode()).hexdigest()
 

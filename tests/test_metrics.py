@@ -23,9 +23,11 @@ from factors.metrics import (
     ellipse_intersection_area,
     level_set_sample_points,
     level_set_sampling_scale,
+    overlap_residual,
     residual,
     residual_size,
 )
+from factors.overlap import quadrant_areas
 
 IMAGE = (640, 480)
 ellipses = st.builds(
@@ -60,7 +62,10 @@ def test_cost_is_squared_residual_norm_with_fixed_length(d: Ellipse, p: Ellipse)
         c = cost(name, d, p, **opts(name))
         assert r.ndim == 1 and r.shape == (residual_size(name, **opts(name)),)
         assert np.all(np.isfinite(r)) and c >= 0.0
-        assert abs(float(r @ r) - c) <= 1e-12 * max(c, 1e-300) + 1e-300, name
+        if name in ("iou", "giou"):  # non-negative quadrant rows summing to Delta
+            assert np.all(r >= -1e-12) and abs(float(r.sum()) - c) <= 1e-9, name
+        else:
+            assert abs(float(r @ r) - c) <= 1e-12 * max(c, 1e-300) + 1e-300, name
 
 
 @settings(max_examples=40, deadline=None)
@@ -102,7 +107,7 @@ def test_residual_sizes():
     assert residual_size("level_set") == 24
     assert residual_size("level_set", n_azimuths=40, n_levels=40) == 1600
     sizes = {n: residual_size(n, **opts(n)) for n in METRIC_NAMES if n != "level_set"}
-    assert sizes == {"iou": 1, "giou": 1, "bbox": 4, "qbbox": 4, "algebraic": 5,
+    assert sizes == {"iou": 4, "giou": 4, "bbox": 4, "qbbox": 4, "algebraic": 5,
                      "frobenius": 5, "wasserstein": 5, "bhattacharyya": 5}
 
 
@@ -180,7 +185,9 @@ def test_iou_is_flat_for_disjoint_ellipses():
     ref = Ellipse(0, 0, 20, 10, 0.2)
     values = [cost("iou", ref, Ellipse(x, 5, 15, 8, 1.0)) for x in (60.0, 100.0, 500.0)]
     assert values == [1.0, 1.0, 1.0]
-    assert np.all(residual("iou", ref, Ellipse(60, 5, 15, 8, 1.0)) == 1.0)
+    # the quadrant rows still sum to Delta = 1 (their squares are not flat: they are smallest
+    # when the projection spreads evenly over the detection's quadrants, factors.metrics)
+    assert residual("iou", ref, Ellipse(60, 5, 15, 8, 1.0)).sum() == pytest.approx(1.0)
 
 
 def test_giou_grows_with_distance_for_disjoint_ellipses():
@@ -496,3 +503,79 @@ def test_level_set_options_are_validated_even_when_equal_to_the_defaults(options
         residual("level_set", det, proj, **options)
     with pytest.raises(ValueError, match=name):
         cost("level_set", det, proj, **options)
+
+
+# --------------------------------------------------------------------------- area derivatives
+
+
+def _gaussian_vector(e: Ellipse) -> np.ndarray:
+    mu, S = e.gaussian()
+    return np.array([mu[0], mu[1], S[0, 0], S[0, 1], S[1, 1]])
+
+
+def _from_gaussian_vector(g: np.ndarray) -> Ellipse:
+    return Ellipse.from_gaussian(g[:2], np.array([[g[2], g[3]], [g[3], g[4]]]))
+
+
+def _quadrant_rows(d: Ellipse, p: Ellipse) -> np.ndarray:
+    """(quadrant areas of P, of D ∩ P, of the hull; iou rows; giou rows), stacked (5, 4)."""
+    q = quadrant_areas(d.params(), p.params(), True)
+    return np.stack([q["second"][0], q["intersection"][0], q["hull"][0],
+                     residual("iou", d, p), residual("giou", d, p)])
+
+
+def test_quadrant_areas_against_monte_carlo():
+    """Quadrant areas (first ellipse's frame) against uniform samples, and their sums against
+    the whole areas."""
+    rng = np.random.default_rng(3)
+    for _ in range(6):
+        d = Ellipse(*rng.uniform(-30, 30, 2), *rng.uniform(5, 50, 2), rng.uniform(-3, 3))
+        p = Ellipse(*rng.uniform(-30, 30, 2), *rng.uniform(5, 50, 2), rng.uniform(-3, 3))
+        q = quadrant_areas(d.params(), p.params(), True)
+        assert q["second"][0].sum() == pytest.approx(p.area, rel=1e-9)
+        assert q["intersection"][0].sum() == pytest.approx(ellipse_intersection_area(d, p),
+                                                           rel=1e-9, abs=1e-9)
+        assert q["hull"][0].sum() == pytest.approx(convex_hull_area(d, p), rel=1e-9)
+        n, half = 400_000, 120.0
+        pts = rng.uniform(-half, half, (n, 2))
+        local = (pts - d.center) @ d.rotation  # coordinates along the detection's axes
+        quad = np.where(local[:, 1] >= 0, np.where(local[:, 0] >= 0, 0, 1),
+                        np.where(local[:, 0] < 0, 2, 3))
+        in_d, in_p = d.level(pts) <= 1, p.level(pts) <= 1
+        cell = (2 * half) ** 2 / n
+        for k in range(4):
+            for mask, name in ((in_p, "second"), (in_d & in_p, "intersection")):
+                mc = np.sum(mask & (quad == k)) * cell
+                # binomial standard error of the estimate, 5 sigma
+                assert abs(mc - q[name][0][k]) <= 5 * math.sqrt(max(mc, 50.0) * cell), name
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_quadrant_gradients_match_central_differences(seed):
+    """The exact boundary-integral gradients (factors.overlap "Derivatives") of the quadrant
+    areas and of the iou / giou rows, against central differences of the exact values w.r.t.
+    the second ellipse's (mu_x, mu_y, s00, s01, s11): random pairs (crossing, contained,
+    disjoint, hulls with tangent segments)."""
+    rng = np.random.default_rng(seed)
+    for _ in range(10):
+        d = Ellipse(*rng.uniform(-40, 40, 2), *rng.uniform(5, 60, 2), rng.uniform(-3, 3))
+        p = Ellipse(*rng.uniform(-40, 40, 2), *rng.uniform(5, 60, 2), rng.uniform(-3, 3))
+        mu, S = p.gaussian()
+        g = np.array([mu[0], mu[1], S[0, 0], S[0, 1], S[1, 1]])
+        num = np.zeros((5, 4, 5))
+        for k in range(5):
+            h = 1e-6 * max(1.0, abs(g[k]))
+            rows = []
+            for sgn in (1.0, -1.0):
+                gk = g.copy()
+                gk[k] += sgn * h
+                moved = Ellipse.from_gaussian(gk[:2], np.array([[gk[2], gk[3]], [gk[3], gk[4]]]))
+                rows.append(_quadrant_rows(d, moved))
+            num[:, :, k] = (rows[0] - rows[1]) / (2 * h)
+        q = quadrant_areas(d.params(), p.params(), True, gradient=True)
+        exact = [q["second"][1], q["intersection"][1], q["hull"][1],
+                 overlap_residual("iou", d.params(), p.params(), gradient=True)[1],
+                 overlap_residual("giou", d.params(), p.params(), gradient=True)[1]]
+        for i, grad in enumerate(exact):
+            scale = max(np.abs(num[i]).max(), 1e-12)
+            np.testing.assert_allclose(grad, num[i], atol=1e-6 * scale + 1e-8)

@@ -145,9 +145,12 @@ def test_factor_residual_equals_metric_residual(scene, metric):
         expected = np.asarray(metrics.residual(metric, d, proj, **opts))
         got = f.unwhitenedError(values)
         np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-9)
-        # unit noise: GTSAM error = 0.5 * metric cost
-        assert f.error(values) == pytest.approx(0.5 * metrics.cost(metric, d, proj, **opts),
+        # unit noise: GTSAM error = 0.5 ||r||^2 (= 0.5 * metric cost but for iou / giou)
+        assert f.error(values) == pytest.approx(0.5 * float(expected @ expected),
                                                 rel=1e-9, abs=1e-12)
+        if metric not in ("iou", "giou"):
+            assert f.error(values) == pytest.approx(
+                0.5 * metrics.cost(metric, d, proj, **opts), rel=1e-9, abs=1e-12)
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
@@ -166,7 +169,7 @@ def test_level_set_analytic_jacobian_matches_numerical(seed):
 
 
 @pytest.mark.parametrize("metric", ["algebraic", "frobenius", "wasserstein", "bhattacharyya",
-                                    "bbox", "qbbox"])
+                                    "bbox", "qbbox", "iou", "giou"])
 def test_smooth_metric_jacobians_match_numerical(scene, metric):
     """Analytic Jacobians against central differences of ``factors.metrics.residual``.
 
@@ -174,7 +177,7 @@ def test_smooth_metric_jacobians_match_numerical(scene, metric):
     only a PLUMBING check (right pose perturbation, step and row order), not a check of
     derivative formulas."""
     assert set(ANALYTIC_METRICS) == {"level_set", "algebraic", "frobenius", "wasserstein",
-                                     "bhattacharyya", "bbox"}
+                                     "bhattacharyya", "bbox", "iou", "giou"}
     ells, dets, pose = scene
     model = PoseResidualModel(metric, dets, ells, CAMERA, initial_world_from_camera=pose)
     ev = model.evaluate(pose, jacobian=True)
@@ -391,13 +394,86 @@ def test_penalty_exceeds_valid_costs_near_the_principal_plane(metric):
             pose = np.eye(4)  # world_from_camera, looking along +Z at the object
             pose[:3, 3] = [-lateral, 0.0, -(depth + margin)]
             proj = project_ellipsoid(camera, invert_pose(pose), e)
-            valid_cost = metrics.cost(metric, det, proj, **opts)
+            r = metrics.residual(metric, det, proj, **opts)
+            valid_cost = float(r @ r)
             assert model.evaluate(pose).valid[0]
             assert model.costs(pose)[0] == pytest.approx(valid_cost, rel=1e-6)
+            # what LM minimises (saturated above P_j / 2) is below the penalty
+            fr = model.evaluate(pose).factor_residuals[0]
+            assert float(fr @ fr) < model.penalty_costs[0]
             pose[2, 3] += 2 * margin  # the same pose just across: margin -> -margin
             ev = model.evaluate(pose)
             assert not ev.valid[0]
-            assert valid_cost < model.penalty_costs[0] <= model.costs(pose)[0]
+            assert model.penalty_costs[0] <= model.costs(pose)[0]
+
+
+def _thin_projection_case() -> tuple[PoseResidualModel, np.ndarray]:
+    """Level set (s_max = 2, not adaptive): a flat ellipsoid (0.1 mm thick) seen edge-on
+    projects to a valid but very thin ellipse (~0.03 px wide): its level-set cost far exceeds
+    the penalty (the issue measured 1e10-1e12 against 3.9e9)."""
+    e = Ellipsoid(np.array([0.0, 0.0, 3.0]), np.array([0.5, 1e-4, 0.3]), np.eye(3))
+    camera = Camera(1000.0, 1000.0, 320.0, 240.0, 640, 480)
+    det = Ellipse(300.0, 260.0, 40.0, 25.0, 0.3)
+    model = PoseResidualModel("level_set", [det], [e], camera,
+                              metric_options={"adaptive": False})
+    return model, np.eye(4)
+
+
+def test_saturated_valid_cost_stays_below_the_penalty_and_reports_the_metric_cost():
+    model, pose = _thin_projection_case()
+    ev = model.evaluate(pose)
+    assert ev.valid[0]
+    cost = float(ev.residuals[0] @ ev.residuals[0])
+    assert cost > model.penalty_costs[0]  # the case the barrier claim used to miss
+    # reported: the metric's own cost; minimised: the saturated one, below the penalty
+    assert model.costs(pose)[0] == pytest.approx(cost, rel=1e-12)
+    fr = ev.factor_residuals[0]
+    assert model.penalty_costs[0] / 2 < float(fr @ fr) < 0.9 * model.penalty_costs[0]
+    # the saturated Jacobian is the derivative of the saturated residual
+    num = numeric_jacobian(
+        lambda T: model.evaluate(T, jacobian=False).factor_residuals[0].copy(), pose, 1e-7)
+    np.testing.assert_allclose(ev.factor_jacobians[0], num, rtol=1e-4,
+                               atol=1e-5 * np.abs(num).max())
+    # in the transition (c = 0.8 P): h(c) = c0 + 0.4 P (1 - exp(-(c - c0) / (0.4 P))), and
+    # its Jacobian, with the penalty cost chosen to put the pair there
+    det, e = model.detections[0], model.ellipsoids[0]
+    ref = model.penalty_costs[0] / DEFAULT_PENALTY_COST  # rho^2 = 16
+    mid = PoseResidualModel("level_set", [det], [e], model.camera,
+                            metric_options={"adaptive": False},
+                            penalty_cost=cost / (0.8 * ref))
+    P = mid.penalty_costs[0]
+    ev = mid.evaluate(pose)
+    fr = ev.factor_residuals[0]
+    assert float(fr @ fr) == pytest.approx(
+        0.5 * P + 0.4 * P * (1 - math.exp(-(cost - 0.5 * P) / (0.4 * P))), rel=1e-9)
+    num = numeric_jacobian(
+        lambda T: mid.evaluate(T, jacobian=False).factor_residuals[0].copy(), pose, 1e-8)
+    np.testing.assert_allclose(ev.factor_jacobians[0], num, rtol=1e-4,
+                               atol=1e-5 * np.abs(num).max())
+
+
+@pytest.mark.parametrize("metric", ["algebraic", "frobenius"])
+def test_an_invalid_pair_does_not_hide_the_other_pairs(scene, metric):
+    """Before: one invalid pair cost ~4e19 (px^4 reference), so the other pairs' costs (~1e6)
+    were below double precision in the total. Now the change of a valid pair's cost is seen
+    in the factor graph's error to 1e-6 relative."""
+    ells, dets, _ = scene
+    pose = np.eye(4)
+    pose[:3, 3] = ells[0].center + np.array([0.0, 0.0, 1.0])  # object 0 behind the camera
+    moved = Ellipse(dets[1].cx + 3.0, dets[1].cy, dets[1].a, dets[1].b, dets[1].angle)
+    errors, costs = [], []
+    for d1 in (dets[1], moved):
+        model = PoseResidualModel(metric, [dets[0], d1], ells[:2], CAMERA)
+        ev = model.evaluate(pose)
+        assert not ev.valid[0] and ev.valid[1]
+        factors_, _ = pose_factors(metric, 0, [dets[0], d1], ells[:2], CAMERA, batched=True)
+        values = gtsam.Values()
+        values.insert(0, gtsam.Pose3(pose))
+        errors.append(sum(f.error(values) for f in factors_))
+        costs.append(model.costs(pose))
+    assert costs[0][0] == costs[1][0]  # the same penalty
+    assert costs[1][1] != pytest.approx(costs[0][1], rel=1e-3)
+    assert 2 * (errors[1] - errors[0]) == pytest.approx(costs[1][1] - costs[0][1], rel=1e-6)
 
 
 @pytest.mark.parametrize("sigmas", [[1.0, -1.0, 1.0, 1.0, 1.0], [1.0, math.nan, 1.0, 1.0, 1.0],

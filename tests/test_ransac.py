@@ -194,7 +194,7 @@ def test_sample_counts_are_per_label_and_enumeration_is_complete():
             for objs in itertools.product(*(scorer.compatible_objects(d).tolist() for d in dets))
             if len(set(objs)) == size)
         assert count_samples(scorer, size) == len(brute)
-        assert _enumerate_samples(scorer, size, len(brute)) == brute
+        assert sorted(_enumerate_samples(scorer, size, len(brute))) == brute
         assert _enumerate_samples(scorer, size, len(brute) - 1) is None
 
 
@@ -238,6 +238,7 @@ class _FixedIouScorer:
         self.dense = dense
         self.n_det = 3
         self.detection_indices = [0, 1, 2]
+        self.labels = ["x", "x", "x"]
         self.params = np.zeros((3, 5))
         self.camera = CAM
         self.compiled = type("C", (), {"centers": np.zeros((3, 3))})()
@@ -245,7 +246,7 @@ class _FixedIouScorer:
     def compatible_objects(self, d: int) -> np.ndarray:
         return np.array([0, 1, 2])
 
-    def dense_iou(self, poses: np.ndarray) -> np.ndarray:
+    def dense_iou(self, poses: np.ndarray, **_: object) -> np.ndarray:
         return self.dense[np.round(poses[:, 0, 3]).astype(int)]
 
     def scores(self, dense, threshold):
@@ -279,3 +280,78 @@ def test_pose_acceptance_uses_min_inliers_and_one_to_one_counts(monkeypatch, cas
     assert out.camera_from_world[0, 3] == 1.0
     assert len(out.matches) == 3
     assert out.score == pytest.approx(1.5)
+
+
+# ------------------------------------------------------------------ bounded cost (issue 11)
+
+
+def _crowded(n: int, n_det: int, seed: int = 11):
+    """A map of ``n`` same-label objects crowded in front of the camera and ``n_det`` detections
+    of that label spread over the image: every detection overlaps many projections."""
+    rng = np.random.default_rng(seed)
+    objs = tuple(MapObject(f"o{i}", "a", Ellipsoid(rng.uniform([-1.5, -0.6, -1], [1.5, 0.6, 1]),
+                                                     rng.uniform(0.1, 0.4, 3))) for i in range(n))
+    cm = compile_map(SceneMap("crowd", "crowd", (0.0, 0.0, 1.0), ("a",), objs))
+    ells = [random_ellipse(rng) for _ in range(n_det)]
+    return cm, MatchScorer(cm, CAM, ells, ["a"] * n_det, list(range(n_det)))
+
+
+def test_blocked_and_pruned_iou_equals_the_direct_estimate(monkeypatch):
+    """dense_iou (blocks, bounding-circle and area pruning) == iou_estimates of every pair at
+    once (the unblocked formula), wherever the value can reach the floor."""
+    import service.localization.ransac as rm
+
+    cm, scorer = _crowded(40, 12)
+    poses = np.array([invert_pose(look_at(np.array([x, -4.0, 0.2]), np.zeros(3)))
+                      for x in (-0.5, 0.0, 0.7)])
+    cen, inv_shape, valid, _ = project_objects(CAM, poses, cm.centers, cm.shape_matrices,
+                                               cm.dual_quadrics)
+    direct = rm.iou_estimates(scorer.points[:, None][None], scorer.areas[None, :, None],
+                              cen[:, None], inv_shape[:, None])
+    direct = np.where(valid[:, None, :], direct, 0.0)
+    assert (direct > 0.2).sum() > 10  # the comparison covers real overlaps
+    monkeypatch.setattr(rm, "PAIR_BLOCK", 7)
+    monkeypatch.setattr(rm, "POINT_BLOCK", 96 * 5)
+    monkeypatch.setattr(rm, "PROJECT_BLOCK", 30)
+    np.testing.assert_allclose(scorer.dense_iou(poses), direct, atol=1e-12)
+    floored = scorer.dense_iou(poses, floor=0.2)
+    np.testing.assert_allclose(floored[direct >= 0.2], direct[direct >= 0.2], atol=1e-12)
+    assert np.all(floored[direct < 0.2] <= direct[direct < 0.2] + 1e-12)
+    # stage 1 by blocks == the direct centre test
+    _, _, _, pc = project_objects(CAM, poses, cm.centers, cm.shape_matrices, cm.dual_quadrics)
+    pc_minus = pc[:, None, :, :] - scorer.params[None, :, None, :2]
+    phi = np.einsum("hdsi,dij,hdsj->hds", pc_minus, scorer.shape, pc_minus)
+    expected = ((phi <= 4.0) & valid[:, None, :]).any(axis=2).sum(axis=1)
+    np.testing.assert_array_equal(scorer.centre_hits(poses), expected)
+
+
+def test_search_memory_does_not_grow_with_hypotheses_or_candidates():
+    """Peak traced memory of a search on 2,000 objects x 128 same-label detections stays within
+    a small multiple of detections x objects (it used to hold candidates x pairs x points
+    arrays: ~10 GB here), and 100,000 hypotheses cost no more memory than 300."""
+    import time
+    import tracemalloc
+
+    _, scorer = _crowded(2000, 128)
+    pairs = 2000 * 128
+    peaks = []
+    for budget in (300, 100_000):
+        tracemalloc.start()
+        t0 = time.perf_counter()
+        ransac(scorer, UP, inlier_iou=0.2, min_inliers=2, max_hypotheses=budget,
+               rng=np.random.default_rng(0), deadline=t0 + 0.3)
+        peaks.append(tracemalloc.get_traced_memory()[1])
+        tracemalloc.stop()
+        assert time.perf_counter() - t0 < 3.0  # deadline 0.3 s; generous bound (shared CI)
+    assert max(peaks) < 40 * pairs + 40e6, peaks
+    assert peaks[1] < 1.5 * peaks[0] + 5e6, peaks
+
+
+def test_scoring_past_the_scorers_deadline_raises():
+    from service.localization.ransac import ScoringTimeoutError
+
+    _, scorer = _crowded(50, 10)
+    scorer.deadline = 0.0  # long past
+    pose = invert_pose(look_at(np.array([0.0, -4.0, 0.2]), np.zeros(3)))
+    with pytest.raises(ScoringTimeoutError):
+        scorer.matches(pose, 0.2)

@@ -38,8 +38,10 @@ def _response_body(map_id: str = "chess", version: int = 1, **kw) -> dict:
     T[:3, 3] = [0.1, 0.2, 0.3]
     body = {
         "localized": True, "reason": None,
-        "world_from_camera": {"quaternion_wxyz": [1, 0, 0, 0], "translation_m": [0.1, 0.2, 0.3],
-                              "matrix": T.tolist(), "convention": "opencv"},
+        "world_from_camera": {"quaternion_wxyz": [1, 0, 0, 0], "quaternion_xyzw": [0, 0, 0, 1],
+                              "translation_m": [0.1, 0.2, 0.3], "matrix": T.tolist(),
+                              "matrix_column_major": T.T.reshape(16).tolist(),
+                              "convention": "opencv"},
         "covariance": {"order": ["omega_x", "omega_y", "omega_z", "v_x", "v_y", "v_z"],
                        "frame": "body", "matrix": (np.eye(6) * 1e-4).tolist()},
         "confidence": 0.9, "inliers": [{"detection_index": 0, "object_id": "3", "iou": 0.8,

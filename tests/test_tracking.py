@@ -80,7 +80,7 @@ def test_confidence_matches_the_closed_form_for_isotropic_covariances() -> None:
     for s_rot, s_pos in [(math.radians(2), 0.04), (math.radians(3), 0.08), (0.01, 0.2)]:
         cov = np.diag([s_rot ** 2] * 3 + [s_pos ** 2] * 3)
         exact = chi.cdf(math.radians(5) / s_rot, 3) * chi.cdf(0.1 / s_pos, 3)
-        assert session_confidence("tracking", cov) == pytest.approx(exact, abs=0.05)
+        assert session_confidence("tracking", cov) == pytest.approx(exact, abs=1e-9)
     assert session_confidence("lost", np.eye(6) * 1e-6) == 0.0
     assert session_confidence("tracking", None) == 0.0
 

@@ -3,7 +3,8 @@
 ``create_app(settings)`` builds a self-contained app: its own map store (migrated at creation,
 demo Chess map seeded as ``settings.default_map_id`` when absent), its own Prometheus registry,
 its own solver slots. Run it with ``quadloc serve`` or
-``uvicorn service.api.app:create_app --factory`` (settings from ``QUADLOC_*`` variables).
+``uvicorn service.api.app:create_app --factory`` (settings from ``QUADLOC_*`` variables; plain
+Uvicorn lacks ``quadloc serve``'s header-size and request-read limits: service/api/server.py).
 """
 
 from __future__ import annotations
@@ -20,8 +21,11 @@ from maps.demo import DEMO_MAP_ID, load_demo_map
 from maps.errors import MapAlreadyExists, MapNotFound
 from maps.store import MapStore
 from service.api.deps import check_body_depth
+from service.api.docs_pages import install_offline_docs
 from service.api.errors import PROBLEM_MEDIA_TYPE, install_error_handlers
+from service.api.inspector import install_inspector
 from service.api.map_cache import MapCache
+from service.api.map_loader import MapLoader
 from service.api.metrics import ApiMetrics, MetricsAndLimitsMiddleware
 from service.api.routers import health, localize, maps, sessions
 from service.api.solver import Solver
@@ -112,11 +116,13 @@ def create_app(settings: Settings | None = None, *, store: MapStore | None = Non
             log.warning("no API key configured (QUADLOC_API_KEYS): the API is OPEN and must "
                         "only listen on loopback")
         yield
+        app.state.map_loader.close()
         store.close()
 
     app = FastAPI(
         title="QuadLoc", version=API_VERSION, description=DESCRIPTION, lifespan=lifespan,
         dependencies=[Depends(check_body_depth)],
+        docs_url=None, redoc_url=None,  # served offline by install_offline_docs below
         openapi_tags=[
             {"name": "localization", "description": "Camera pose from detected objects."},
             {"name": "maps", "description": "Versioned ellipsoid maps."},
@@ -129,6 +135,7 @@ def create_app(settings: Settings | None = None, *, store: MapStore | None = Non
     app.state.store = store
     app.state.metrics = metrics
     app.state.map_cache = MapCache(store, settings.map_cache_ttl_s)
+    app.state.map_loader = MapLoader(app.state.map_cache, settings.solve_time_budget_ms / 1e3)
     app.state.solver = Solver(metrics, settings.max_concurrent_solves,
                               settings.solve_queue_timeout_s, settings.solve_time_budget_ms,
                               settings.max_detections, settings.batch_time_budget_ms)
@@ -138,6 +145,8 @@ def create_app(settings: Settings | None = None, *, store: MapStore | None = Non
     app.include_router(health.router)
     app.state.sessions = sessions.session_store_from_env()
     app.include_router(sessions.router)
+    install_offline_docs(app)
+    install_inspector(app)
     app.add_middleware(MetricsAndLimitsMiddleware, metrics=metrics,
                        max_body_bytes=settings.max_body_bytes)
     app.openapi = lambda: build_openapi(app)  # type: ignore[method-assign]

@@ -22,6 +22,7 @@ from factors.geometry import (
     rotation_from_quaternion_wxyz,
 )
 from service.api.schemas import (
+    AlternativeOut,
     CameraIn,
     CovarianceOut,
     DetectionIn,
@@ -139,16 +140,19 @@ def options_from_request(options: LocalizeOptionsIn, max_budget_ms: float) -> Lo
         seed=options.seed,
         time_budget_ms=float(budget),
         max_iterations=options.max_iterations,
+        on_ambiguity=options.on_ambiguity,
+        min_confidence=options.min_confidence,
     )
 
 
 def pose_out(world_from_camera_cv: np.ndarray, convention: str) -> PoseOut:
     """4x4 OpenCV-axes ``world_from_camera`` -> wire pose in ``convention`` axes."""
     T = convert_pose(world_from_camera_cv, "opencv", convention)
-    q = quaternion_wxyz_from_rotation(T[:3, :3])
-    return PoseOut(quaternion_wxyz=[float(x) for x in q],
+    q = [float(x) for x in quaternion_wxyz_from_rotation(T[:3, :3])]
+    return PoseOut(quaternion_wxyz=q, quaternion_xyzw=q[1:] + q[:1],
                    translation_m=[float(x) for x in T[:3, 3]],
                    matrix=[[float(x) for x in row] for row in T],
+                   matrix_column_major=[float(x) for x in T.T.reshape(16)],
                    convention=convention)  # type: ignore[arg-type]
 
 
@@ -187,6 +191,10 @@ def response_from_result(
         hypotheses_evaluated=result.hypotheses_evaluated,
         used_prior=result.used_prior,
         refinement_status=result.refinement_status,
+        pose_source=result.pose_source,
+        alternatives=[AlternativeOut(world_from_camera=pose_out(a.world_from_camera, convention),
+                                     confidence=_finite(a.confidence), n_inliers=a.n_inliers,
+                                     score=_finite(a.score)) for a in result.alternatives],
         map_id=map_id,
         map_version=map_version,
         timings_ms={k: _finite(v) for k, v in result.timings_ms.items()},

@@ -14,12 +14,21 @@ from maps.model import MAP_ID_PATTERN
 from maps.store import MapStore
 from service.api.errors import ProblemError, json_depth_violation
 from service.api.map_cache import MapCache
+from service.api.map_loader import MapLoader
 from service.api.metrics import ApiMetrics
 from service.api.solver import Solver
 from service.settings import Settings
 
-__all__ = ["MapCacheDep", "MapIdPath", "MetricsDep", "SettingsDep", "SolverDep", "StoreDep",
-           "check_body_depth"]
+__all__ = [
+    "MapCacheDep",
+    "MapIdPath",
+    "MapLoaderDep",
+    "MetricsDep",
+    "SettingsDep",
+    "SolverDep",
+    "StoreDep",
+    "check_body_depth",
+]
 
 
 async def get_store(request: Request) -> MapStore:
@@ -38,6 +47,10 @@ async def get_map_cache(request: Request) -> MapCache:
     return request.app.state.map_cache
 
 
+async def get_map_loader(request: Request) -> MapLoader:
+    return request.app.state.map_loader  # type: ignore[no-any-return]
+
+
 async def get_metrics(request: Request) -> ApiMetrics:
     return request.app.state.metrics
 
@@ -47,6 +60,7 @@ SettingsDep = Annotated[Settings, Depends(get_settings)]
 SolverDep = Annotated[Solver, Depends(get_solver)]
 MetricsDep = Annotated[ApiMetrics, Depends(get_metrics)]
 MapCacheDep = Annotated[MapCache, Depends(get_map_cache)]
+MapLoaderDep = Annotated[MapLoader, Depends(get_map_loader)]
 
 #: The ``{map_id}`` path parameter of every map route, validated against ``MAP_ID_PATTERN``
 #: (422 ``path.map_id`` otherwise) before it reaches the database: a NUL or other character no

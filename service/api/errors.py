@@ -20,11 +20,11 @@ from typing import Any
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
-from sqlalchemy.exc import DataError, OperationalError
+from sqlalchemy.exc import DataError, OperationalError, ProgrammingError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
 
-from maps.errors import MapValidationError, StoreUnavailable
+from maps.errors import MapValidationError, SchemaNotMigrated, StoreUnavailable
 
 __all__ = [
     "PROBLEM_MEDIA_TYPE",
@@ -65,6 +65,7 @@ PROBLEM_TYPES: dict[str, tuple[int, str]] = {
     "busy": (503, "Solver busy, retry later"),
     "session-capacity": (503, "Too many tracking sessions on this replica, retry later"),
     "database-unavailable": (503, "Database unavailable, retry later"),
+    "map-loading": (503, "Map version loading, retry shortly"),
     "not-ready": (503, "Service not ready"),
     "internal-error": (500, "Internal error"),
 }
@@ -254,8 +255,18 @@ async def _on_invalid_map(request: Request, exc: Exception) -> JSONResponse:
                             errors=getattr(exc, "errors", None) or [])
 
 
+#: Logged when the database lacks the map tables (the answer is a 503 like any outage).
+MIGRATE_HINT = ("the map database schema is missing or not migrated to this version: restart "
+                "the service (it migrates at start) or run 'alembic -c "
+                "maps/migrations/alembic.ini -x url=<database url> upgrade head'")
+
+
 async def _on_database_error(request: Request, exc: Exception) -> JSONResponse:
-    log.error("database error on %s %s: %s", request.method, request.url.path, exc)
+    if isinstance(exc, SchemaNotMigrated | ProgrammingError):
+        log.error("database error on %s %s: %s (%s)", request.method, request.url.path,
+                  MIGRATE_HINT, str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+    else:
+        log.error("database error on %s %s: %s", request.method, request.url.path, exc)
     return problem_response(request, "database-unavailable",
                             "the map database is unavailable; retry shortly",
                             headers={"Retry-After": "5"})
@@ -285,5 +296,6 @@ def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(MapValidationError, _on_invalid_map)
     app.add_exception_handler(StoreUnavailable, _on_database_error)
     app.add_exception_handler(OperationalError, _on_database_error)
+    app.add_exception_handler(ProgrammingError, _on_database_error)
     app.add_exception_handler(DataError, _on_data_error)
     app.add_exception_handler(Exception, _on_unexpected)

@@ -23,16 +23,30 @@ are rejected (typos would otherwise be silently ignored).
 from __future__ import annotations
 
 import math
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    field_validator,
+    model_validator,
+)
 
-from service.localization.types import METRICS, ROBUST_KERNELS
+from service.localization.types import (
+    AMBIGUITY_POLICIES,
+    METRICS,
+    NO_REFINEMENT,
+    POSE_SOURCES,
+    ROBUST_KERNELS,
+)
 
 __all__ = [
     "COVARIANCE_ORDER",
     "MAX_BATCH_FRAMES",
     "MAX_DETECTIONS",
+    "AlternativeOut",
     "BatchLocalizeRequest",
     "BatchLocalizeResponse",
     "BoxIn",
@@ -48,6 +62,8 @@ __all__ = [
     "MapListOut",
     "MapOut",
     "MapSummaryOut",
+    "MapVersionOut",
+    "MapVersionsOut",
     "PoseIn",
     "PoseOut",
     "PosePriorIn",
@@ -64,6 +80,21 @@ COVARIANCE_ORDER = ("omega_x", "omega_y", "omega_z", "v_x", "v_y", "v_z")
 COVARIANCE_FRAME = "camera (body) frame, right perturbation T*exp(xi), omega in rad, v in m"
 
 Convention = Literal["opencv", "opengl"]
+
+
+def _integral(value: Any) -> Any:
+    """JSON Schema's ``integer`` includes integral floats (``640.0``): accept them as ints
+    (other floats, strings and booleans still fail the strict check, naming the field)."""
+    if isinstance(value, float) and value.is_integer() and abs(value) <= 2**53:
+        return int(value)
+    return value
+
+
+#: An integer field that also accepts integral JSON numbers such as ``640.0``.
+Int = Annotated[int, BeforeValidator(_integral)]
+#: Rows of a pose matrix / covariance (the shapes are in the schema).
+_Row4 = Annotated[list[float], Field(min_length=4, max_length=4)]
+_Row6 = Annotated[list[float], Field(min_length=6, max_length=6)]
 
 
 class _Model(BaseModel):
@@ -145,19 +176,35 @@ class CameraIn(_Model):
     fy: float = Field(gt=0, le=1e7)
     cx: float = Field(ge=-MAX_PIXELS, le=MAX_PIXELS)
     cy: float = Field(ge=-MAX_PIXELS, le=MAX_PIXELS)
-    width: int = Field(ge=1, le=100_000)
-    height: int = Field(ge=1, le=100_000)
+    width: Int = Field(ge=1, le=100_000)
+    height: Int = Field(ge=1, le=100_000)
 
 
 class PoseIn(_Model):
-    """A ``world_from_camera`` pose: `quaternion_wxyz` + `translation_m`, or a 4x4 `matrix`."""
+    """A ``world_from_camera`` pose: `quaternion_wxyz` (or `quaternion_xyzw`) + `translation_m`,
+    or a 4x4 `matrix` given as a list of ROWS (row-major)."""
 
-    quaternion_wxyz: list[float] | None = Field(default=None, min_length=4, max_length=4)
+    quaternion_wxyz: list[float] | None = Field(
+        default=None, min_length=4, max_length=4,
+        description="Unit quaternion (w, x, y, z): |q| = 1 within 1e-6, else 422.")
+    quaternion_xyzw: list[float] | None = Field(
+        default=None, min_length=4, max_length=4,
+        description="The same unit quaternion scalar LAST (ARKit/ARCore/Unity order); give "
+                    "it instead of `quaternion_wxyz`.")
     translation_m: list[float] | None = Field(default=None, min_length=3, max_length=3)
-    matrix: list[list[float]] | None = Field(default=None, min_length=4, max_length=4)
+    matrix: list[_Row4] | None = Field(
+        default=None, min_length=4, max_length=4,
+        description="4x4 homogeneous matrix [[R, t], [0, 0, 0, 1]] given as a list of 4 ROWS "
+                    "(row-major): R orthonormal within 1e-6 with det +1, last row [0, 0, 0, 1], "
+                    "else 422.")
 
     @model_validator(mode="after")
     def _one_form(self) -> PoseIn:
+        if self.quaternion_xyzw is not None:
+            if self.quaternion_wxyz is not None:
+                raise ValueError("give one of 'quaternion_wxyz' or 'quaternion_xyzw'")
+            x, y, z, w = self.quaternion_xyzw
+            self.quaternion_wxyz, self.quaternion_xyzw = [w, x, y, z], None
         has_q = self.quaternion_wxyz is not None or self.translation_m is not None
         if has_q == (self.matrix is not None):
             raise ValueError("give either 'quaternion_wxyz' + 'translation_m' or 'matrix'")
@@ -178,7 +225,7 @@ class PosePriorIn(_Model):
     """Optional pose prior (e.g. from the AR session's tracking)."""
 
     world_from_camera: PoseIn
-    covariance: list[list[float]] | None = Field(
+    covariance: list[_Row6] | None = Field(
         default=None, min_length=6, max_length=6,
         description="Optional 6x6 covariance in GTSAM Pose3 tangent order [omega_x, omega_y, "
                     "omega_z, v_x, v_y, v_z], " + COVARIANCE_FRAME + ". Symmetric positive "
@@ -197,27 +244,45 @@ class PosePriorIn(_Model):
 class LocalizeOptionsIn(_Model):
     """Solver options; omitted fields take the server defaults (shown)."""
 
-    metric: Literal[METRICS] = Field(  # type: ignore[valid-type]
-        default="level_set", description="Refinement metric (one of the nine).")
-    ransac_max_hypotheses: int = Field(default=300, ge=1, le=100_000,
+    # `robust_scale` (a number) requires `robust` (a kernel): said in the schema as well.
+    model_config = ConfigDict(json_schema_extra={
+        "if": {"required": ["robust_scale"],
+               "properties": {"robust_scale": {"type": "number"}}},
+        "then": {"required": ["robust"],
+                 "properties": {"robust": {"type": "string"}}}})
+
+    metric: Literal[(*METRICS, NO_REFINEMENT)] = Field(  # type: ignore[valid-type]
+        default="level_set",
+        description="Refinement metric (one of the nine), or 'none': the P3P/P2E pose "
+                    "unrefined (no covariance).")
+    ransac_max_hypotheses: Int = Field(default=300, ge=1, le=100_000,
                                        description="RANSAC budget of minimal samples.")
     inlier_iou: float = Field(default=0.2, gt=0, le=1,
                               description="IoU threshold for a detection to be an inlier.")
-    min_inliers: int = Field(default=2, ge=2, le=MAX_DETECTIONS)
+    min_inliers: Int = Field(default=2, ge=2, le=MAX_DETECTIONS)
     use_sigma: bool = Field(default=True, description="Weight costs by 1/sigma (paper eq. 8).")
     robust: Literal[ROBUST_KERNELS] | None = Field(  # type: ignore[valid-type]
         default=None, description="Robust kernel of the refinement.")
     robust_scale: float | None = Field(default=None, gt=0, le=1e6,
                                        description="Kernel scale (needs `robust`).")
     unknown_label_policy: Literal["ignore", "error"] = "ignore"
-    seed: int | None = Field(default=0, ge=0, le=2**32 - 1)
+    seed: Annotated[int, Field(ge=0, le=2**32 - 1), BeforeValidator(_integral)] | None = 0
     time_budget_ms: float | None = Field(
         default=None, gt=0, le=60_000,
         description="Solve budget (ms); capped by the server's QUADLOC_SOLVE_TIME_BUDGET_MS.")
-    max_iterations: int = Field(default=50, ge=1, le=100,
+    max_iterations: Int = Field(default=50, ge=1, le=100,
                                 description="Levenberg-Marquardt iteration cap.")
     output_convention: Convention = Field(
         default="opencv", description="Camera axes of the returned pose and covariance.")
+    on_ambiguity: Literal[AMBIGUITY_POLICIES] = Field(  # type: ignore[valid-type]
+        default="not_localized",
+        description="When a distinct pose explains the detections comparably well: "
+                    "'not_localized' (reason 'ambiguous') or 'best' (the best pose, localized); "
+                    "both list the candidates in `alternatives` with their probabilities.")
+    min_confidence: float | None = Field(
+        default=None, ge=0, le=1,
+        description="Answers with a lower confidence are returned as not localized (reason "
+                    "'low_confidence'); null = the calibrated default (docs/api.md).")
 
     @model_validator(mode="after")
     def _scale_needs_kernel(self) -> LocalizeOptionsIn:
@@ -250,8 +315,17 @@ class PoseOut(BaseModel):
     """The camera's pose in the map frame (``world_from_camera``)."""
 
     quaternion_wxyz: list[float] = Field(description="Unit quaternion (w, x, y, z), w >= 0.")
+    quaternion_xyzw: list[float] = Field(
+        description="The same quaternion scalar LAST (x, y, z, w): the order of "
+                                  "ARKit/simd, ARCore, Unity and ROS.")
     translation_m: list[float] = Field(description="Camera centre in the map frame (m).")
-    matrix: list[list[float]] = Field(description="4x4 homogeneous world_from_camera.")
+    matrix: list[list[float]] = Field(
+        description="4x4 homogeneous world_from_camera, ROW-major: a list of 4 rows, "
+                    "`matrix[r][c]`.")
+    matrix_column_major: list[float] = Field(
+        description="The same 4x4 as 16 numbers in COLUMN-major order (column 0 "
+                                  "top to bottom, then column 1...): simd_float4x4(columns:), "
+                                  "Unity Matrix4x4, OpenGL/glm, three.js Matrix4.fromArray.")
     convention: Convention = Field(description="Camera axes of this pose.")
 
 
@@ -269,6 +343,15 @@ class InlierOut(BaseModel):
     cost: float
 
 
+class AlternativeOut(BaseModel):
+    """A distinct candidate pose of an ambiguous frame."""
+
+    world_from_camera: PoseOut
+    confidence: float = Field(ge=0, le=1, description="P(within 10 cm and 5 deg).")
+    n_inliers: int
+    score: float = Field(description="Sum of the inliers' IoUs.")
+
+
 class LocalizeResponse(BaseModel):
     """`localized: false` with a `reason` is a normal answer (HTTP 200), not an error."""
 
@@ -276,10 +359,13 @@ class LocalizeResponse(BaseModel):
     reason: str | None = Field(
         description="Why not localized: too_few_detections, no_label_match, "
                     "no_hypothesis_above_inlier_threshold, refinement_diverged, "
-                    "time_budget_exceeded, numerical_failure; null when localized.")
+                    "time_budget_exceeded, ambiguous, low_confidence, numerical_failure; "
+                    "null when localized.")
     world_from_camera: PoseOut | None
     covariance: CovarianceOut | None
-    confidence: float = Field(ge=0, le=1)
+    confidence: float = Field(
+        ge=0, le=1, description="Probability that the pose is within 0.10 m and 5 deg of the "
+                                "truth (calibrated on simulated frames, docs/api.md).")
     inliers: list[InlierOut]
     metric: str
     hypotheses_evaluated: int
@@ -289,6 +375,11 @@ class LocalizeResponse(BaseModel):
         description="Status of the last pose refinement: converged, max_iterations, "
                     "time_budget (the solve budget cut it short: the pose is less refined), "
                     "diverged, invalid_projection; null when no refinement ran.")
+    pose_source: Literal[POSE_SOURCES] | None = Field(  # type: ignore[valid-type]
+        default=None, description="Which path won: 'prior' (the refined client prior) or "
+                                  "'ransac'; null when not localized.")
+    alternatives: list[AlternativeOut] = Field(
+        default_factory=list, description="Ambiguous frames: the distinct candidate poses.")
     map_id: str
     map_version: int
     timings_ms: dict[str, float]
@@ -322,6 +413,19 @@ class MapOut(BaseModel):
     content_hash: str = Field(description="sha256 of the canonical map content (the ETag).")
     created_at: str | None = None
     map: dict[str, Any] = Field(description="The map in the documented JSON format.")
+
+
+class MapVersionOut(BaseModel):
+    version: int
+    content_hash: str = Field(description="sha256 of the version's canonical content (its ETag).")
+    created_at: str | None = None
+
+
+class MapVersionsOut(BaseModel):
+    """Every stored version of a map, ascending (the last one is the latest)."""
+
+    map_id: str
+    versions: list[MapVersionOut]
 
 
 class HealthOut(BaseModel):

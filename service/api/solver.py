@@ -36,6 +36,7 @@ from service.api.errors import ProblemError
 from service.api.metrics import ApiMetrics
 from service.api.schemas import LocalizeRequest, LocalizeResponse
 from service.localization.pipeline import localize
+from service.localization.ransac import ScoringTimeoutError
 from service.localization.types import LocalizationInputError, LocalizationResult
 
 __all__ = ["Solver"]
@@ -149,6 +150,14 @@ class Solver:
                 raise ProblemError("invalid-geometry", f"{field}: {message}",
                                    errors=[{"field": field, "message": message}]) from exc
             response = self._failed(compiled, frame, options.metric, start)
+        except ScoringTimeoutError:  # scoring a huge map x detections ran past the hard stop
+            elapsed_ms = (time.perf_counter() - start) * 1e3
+            response = LocalizeResponse(
+                localized=False, reason=TIME_BUDGET_EXCEEDED, world_from_camera=None,
+                covariance=None, confidence=0.0, inliers=[], metric=options.metric,
+                hypotheses_evaluated=0, used_prior=False, map_id=compiled.map_id,
+                map_version=compiled.version, timings_ms={"total": elapsed_ms},
+                frame_id=frame.frame_id, timestamp=frame.timestamp)
         except Exception:  # a numerical failure deep in the solver is "not localized", not 5xx
             response = self._failed(compiled, frame, options.metric, start)
         finally:

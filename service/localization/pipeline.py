@@ -5,16 +5,26 @@ Stages (wall time of each in ``LocalizationResult.timings_ms``):
 1. ``validate`` — check the input (errors name the field), compile the map (cached per map
    object), keep the *usable* detections: those whose label is a category with objects in the
    map (``options.unknown_label_policy``: ``"ignore"`` drops the others, ``"error"`` raises).
-2. ``prior`` (only with a :class:`PosePrior`) — match detections to objects by IoU at the prior
-   pose (one-to-one, IoU >= ``inlier_iou``); with >= ``min_inliers`` matches, refine from the
-   prior (the prior's covariance, if any, becomes a prior factor) and keep the result if it
-   still has >= ``min_inliers`` inliers; otherwise fall back to RANSAC.
+2. ``prior`` (only with a :class:`PosePrior`) — match detections to objects one-to-one with
+   IoU >= ``inlier_iou``, each pair at its best IoU over the prior pose and, with a
+   covariance, the poses 2 sigma along its principal axes (:func:`prior_gate_poses`:
+   projected-ellipse gating); with >= ``min_inliers`` matches, refine from the prior (the
+   prior's covariance, if any, becomes a prior factor). If the result explains every usable
+   detection it is returned; otherwise RANSAC runs too and the better-supported answer wins
+   (more inliers, then a larger sum of IoUs; the prior wins ties): ``pose_source`` says which.
 3. ``hypotheses`` — :func:`service.localization.ransac.ransac`: P3P / P2E over label-compatible
-   samples, IoU scoring, bounded by ``ransac_max_hypotheses`` and ``time_budget_ms``.
-4. ``refine`` — :func:`service.localization.refine.refine` on the best hypothesis' inliers with
-   ``options.metric`` (sigma-weighted, robust kernel option), then re-association: the inliers
-   are recomputed at the refined pose and, if the set changed, refined once more. The result
-   is accepted when it keeps >= ``min_inliers`` inliers; otherwise ``refinement_diverged``.
+   samples, IoU scoring, bounded by ``ransac_max_hypotheses`` and ``time_budget_ms``; it keeps
+   its best distinct hypotheses.
+4. ``refine`` — :func:`service.localization.refine.refine` on the best hypothesis' inliers
+   (and on up to :data:`REFINED_ALTERNATIVES` distinct runners-up scoring at least
+   :data:`ALTERNATIVE_PREFILTER_RATIO` of the best) with ``options.metric`` (sigma-weighted,
+   robust kernel option), then re-association: the inliers are recomputed at the refined pose
+   and, if the set changed, refined once more. A result is kept when it has >= ``min_inliers``
+   inliers; none kept: ``refinement_diverged``.
+5. ``assess`` — :mod:`service.localization.confidence`: the calibrated covariance, the
+   confidence (a probability), and the ambiguity check against the best distinct runner-up
+   (``reason="ambiguous"`` or, with ``on_ambiguity="best"``, the best pose with its
+   ``alternatives``); a confidence below ``min_confidence`` gives ``low_confidence``.
    (``refine`` itself re-lays grown adaptive level-set samples once at its result.)
 
 The time budget bounds the whole call: the hypothesis search stops at it, and no LM iteration
@@ -24,18 +34,42 @@ keeps its last accepted step and the result says so: ``refinement_status == "tim
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from factors.geometry import Camera, Ellipsoid, invert_pose
+from factors.pose_residuals import expmap_pose3
 from maps.compiled import CompiledMap, compile_map
 from maps.model import SceneMap
-from service.localization.ransac import Match, MatchScorer, ransac
+from service.localization.calibration import MIN_CONFIDENCE, S2_FLOOR
+from service.localization.confidence import (
+    calibrated_covariance,
+    confidence_probability,
+    covariance_scale,
+    evidence_features,
+    is_ambiguous,
+    residual_variance,
+)
+from service.localization.ransac import (
+    Hypothesis,
+    Match,
+    MatchScorer,
+    _ellipse_points,
+    count_samples,
+    distinct_poses,
+    greedy_assignment,
+    hard_deadline,
+    ransac,
+    sunflower_disk,
+)
 from service.localization.refine import RefinementResult, refine
 from service.localization.types import (
     NO_REFINEMENT,
+    Alternative,
     Detection,
     InlierMatch,
     LocalizationInputError,
@@ -44,7 +78,7 @@ from service.localization.types import (
     PosePrior,
 )
 
-__all__ = ["compiled_map_of", "confidence_of", "localize", "refine_pose"]
+__all__ = ["compiled_map_of", "localize", "prior_gate_poses", "refine_pose"]
 
 _COMPILED: dict[int, tuple[SceneMap, CompiledMap]] = {}
 _COMPILED_MAX = 16
@@ -62,15 +96,6 @@ def compiled_map_of(scene_map: SceneMap | CompiledMap) -> CompiledMap:
         _COMPILED.pop(next(iter(_COMPILED)))
     _COMPILED[id(scene_map)] = (scene_map, compiled)
     return compiled
-
-
-def confidence_of(n_inliers: int, n_usable: int, mean_iou: float) -> float:
-    """``(n_inliers / n_usable) * mean_iou * (1 - 0.5 ** (n_inliers - 1))`` in [0, 1] (see
-    :class:`~service.localization.types.LocalizationResult`)."""
-    if n_inliers <= 0 or n_usable <= 0:
-        return 0.0
-    value = (n_inliers / n_usable) * mean_iou * (1.0 - 0.5 ** (n_inliers - 1))
-    return float(min(1.0, max(0.0, value)))
 
 
 def _validate(
@@ -152,19 +177,19 @@ def _refine_and_verify(
     matches: Sequence[Match], detections: Sequence[Detection], compiled: CompiledMap,
     camera: Camera, scorer: MatchScorer, world_from_camera: np.ndarray,
     options: LocalizationOptions, prior: PosePrior | None, deadline: float | None,
-) -> tuple[tuple[np.ndarray, np.ndarray | None, list[InlierMatch]] | None, str | None]:
+) -> tuple[_Answer | None, str | None]:
     """Refine on ``matches``, re-associate, refine again if the set changed (and the deadline
-    has not passed). Returns ((world_from_camera, covariance, inliers) or None if the result
-    fails the inlier check, the refinement status — see ``LocalizationResult.refinement_status``
-    — or None with ``metric="none"``)."""
+    has not passed). Returns (the answer, or None if the result fails the inlier check; the
+    refinement status — see ``LocalizationResult.refinement_status`` — or None with
+    ``metric="none"``)."""
     thr = options.inlier_iou
     if options.metric == NO_REFINEMENT:
         final = scorer.matches(invert_pose(world_from_camera), thr)
         if len(final) < options.min_inliers:
             return None, None
-        return (world_from_camera, None, [
+        return _Answer(world_from_camera, None, [
             InlierMatch(m.detection_index, compiled.object_ids[m.object_index], m.iou,
-                        1.0 - m.iou) for m in final]), None
+                        1.0 - m.iou) for m in final], None, None), None
     current = list(matches)
     T = world_from_camera
     for round_ in range(2):
@@ -191,7 +216,64 @@ def _refine_and_verify(
                for m in new if (m.detection_index, m.object_index) in cost]
     if len(inliers) < options.min_inliers:
         return None, status
-    return (T, res.covariance, inliers), status
+    return _Answer(T, res.covariance, inliers, res, status), status
+
+
+@dataclass
+class _Answer:
+    """A verified pose: ``world_from_camera``, raw covariance, inliers, the refinement (None
+    with ``metric="none"``) and its status; ``source`` is set by ``localize``."""
+
+    world_from_camera: np.ndarray
+    raw_covariance: np.ndarray | None
+    inliers: list[InlierMatch]
+    refinement: RefinementResult | None
+    status: str | None
+    source: str = "ransac"
+
+    @property
+    def score(self) -> float:
+        """Sum of the inliers' IoUs (the RANSAC score, at the verified pose)."""
+        return float(sum(m.iou for m in self.inliers))
+
+    def support(self) -> tuple[int, float]:
+        """(inlier count, score): the order in which answers are compared."""
+        return len(self.inliers), self.score
+
+
+#: Alternatives (beyond the best) refined for the ambiguity check, and the RANSAC score ratio
+#: below which an alternative is not worth refining (a refinement changes the sum of IoUs by
+#: far less than this).
+REFINED_ALTERNATIVES = 2
+ALTERNATIVE_PREFILTER_RATIO = 0.5
+#: Prior gating: the association at the prior pose also tries the poses at +-
+#: ``PRIOR_GATE_SIGMAS`` standard deviations along each principal axis of the prior's
+#: covariance (a pair is kept at its best IoU over these poses).
+PRIOR_GATE_SIGMAS = 2.0
+
+
+def prior_gate_poses(prior: PosePrior) -> np.ndarray:
+    """``world_from_camera`` poses (H, 4, 4) at which the prior's associations are gated: the
+    prior pose, and with a covariance the poses ``T Exp(+-g sqrt(lambda_k) e_k)`` along each
+    principal axis (eigenvector ``e_k``, eigenvalue ``lambda_k``; tangent ``[omega, v]``, body
+    frame, right perturbation) with ``g = PRIOR_GATE_SIGMAS``."""
+    T = np.asarray(prior.world_from_camera, dtype=float)
+    poses = [T]
+    if prior.covariance is not None:
+        lam, vec = np.linalg.eigh(np.asarray(prior.covariance, dtype=float))
+        for k in range(6):
+            step = PRIOR_GATE_SIGMAS * math.sqrt(max(float(lam[k]), 0.0)) * vec[:, k]
+            poses += [T @ expmap_pose3(step), T @ expmap_pose3(-step)]
+    return np.array(poses)
+
+
+def _prior_matches(scorer: MatchScorer, prior: PosePrior, threshold: float) -> list[Match]:
+    """One-to-one matches gated by the prior: each pair's best IoU over
+    :func:`prior_gate_poses` (projected-ellipse gating under the prior's uncertainty)."""
+    cw = np.array([invert_pose(T) for T in prior_gate_poses(prior)])
+    pts = _ellipse_points(scorer.params, sunflower_disk(256))
+    dense = scorer.dense_iou(cw, pts).max(axis=0)
+    return greedy_assignment(dense, scorer.detection_indices, threshold)
 
 
 def localize(
@@ -215,6 +297,7 @@ def localize(
 
     Raises:
         LocalizationInputError: (a ``ValueError``) bad input, the message names the field.
+        ScoringTimeoutError: scoring ran past 1.05 x ``time_budget_ms`` (huge map x detections).
     """
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
@@ -230,29 +313,63 @@ def localize(
     scorer = MatchScorer(compiled, camera, [detections[i].ellipse for i in usable],
                          [detections[i].label for i in usable], usable)
     deadline = None if options.time_budget_ms is None else t0 + options.time_budget_ms / 1e3
+    scorer.deadline = hard_deadline(t0, options.time_budget_ms)  # ScoringTimeoutError past it
     evaluated = 0
+    n_samples = count_samples(scorer, 2)
 
-    def finish(T: np.ndarray, cov: np.ndarray | None, inliers: list[InlierMatch],
-               used_prior: bool, refinement_status: str | None) -> LocalizationResult:
+    def assess(a: _Answer, runner_up: _Answer | None) -> tuple[float, dict[str, float],
+                                                              np.ndarray | None]:
+        """(confidence, evidence, calibrated covariance) of an answer."""
+        res = a.refinement
+        s2 = math.nan if res is None else residual_variance(res.chi2, res.n_residuals)
+        prior_cov = None if a.source != "prior" or prior is None else prior.covariance
+        cov = None if res is None else calibrated_covariance(
+            metric, a.raw_covariance, res.chi2, res.n_residuals, prior_cov)
+        margin = 0.0 if runner_up is None else min(1.0, runner_up.score / max(a.score, 1e-12))
+        ev = evidence_features(n_inliers=len(a.inliers), n_usable=len(usable),
+                               ious=np.array([m.iou for m in a.inliers]), s2=s2,
+                               covariance=cov, margin=margin, n_samples=n_samples,
+                               s2_floor=S2_FLOOR.get(metric, 0.0))
+        scale = math.nan if res is None else covariance_scale(metric, res.chi2, res.n_residuals)
+        return confidence_probability(metric, ev), {**ev, "s2": s2, "cov_scale": scale}, cov
+
+    def finish(a: _Answer, ranked: list[_Answer], ambiguous: bool) -> LocalizationResult:
+        runner_up = next((b for b in ranked if b is not a), None)
+        conf, ev, cov = assess(a, runner_up)
+        alternatives: tuple[Alternative, ...] = ()
+        if ambiguous:
+            alternatives = tuple(
+                Alternative(b.world_from_camera, assess(b, a if b is not a else runner_up)[0],
+                            len(b.inliers), b.score) for b in ranked)
         timings["total"] = (time.perf_counter() - t0) * 1e3
-        mean_iou = float(np.mean([m.iou for m in inliers]))
+        if ambiguous and options.on_ambiguity == "not_localized":
+            return LocalizationResult(False, "ambiguous", None, None, 0.0, (), metric,
+                                      evaluated, False, timings, a.status, None, alternatives,
+                                      ev)
+        floor = MIN_CONFIDENCE if options.min_confidence is None else options.min_confidence
+        if conf < floor:
+            return LocalizationResult(False, "low_confidence", None, None, 0.0, (), metric,
+                                      evaluated, False, timings, a.status, None, alternatives,
+                                      {**ev, "confidence": conf})
         return LocalizationResult(
-            True, None, np.array(T, dtype=float), cov,
-            confidence_of(len(inliers), len(usable), mean_iou),
-            tuple(sorted(inliers, key=lambda m: m.detection_index)), metric, evaluated,
-            used_prior, timings, refinement_status)
+            True, None, np.array(a.world_from_camera, dtype=float), cov, conf,
+            tuple(sorted(a.inliers, key=lambda m: m.detection_index)), metric, evaluated,
+            a.source == "prior", timings, a.status, a.source, alternatives, ev)
 
+    prior_answer: _Answer | None = None
     if prior is not None:
         evaluated += 1
         tp = time.perf_counter()
-        matches = scorer.matches(invert_pose(prior.world_from_camera), options.inlier_iou)
-        got = None
+        matches = _prior_matches(scorer, prior, options.inlier_iou)
         if len(matches) >= options.min_inliers:
-            got, status = _refine_and_verify(matches, detections, compiled, camera, scorer,
-                                             prior.world_from_camera, options, prior, deadline)
+            prior_answer, _ = _refine_and_verify(matches, detections, compiled, camera, scorer,
+                                                 prior.world_from_camera, options, prior,
+                                                 deadline)
         timings["prior"] = (time.perf_counter() - tp) * 1e3
-        if got is not None:
-            return finish(*got, used_prior=True, refinement_status=status)
+        if prior_answer is not None:
+            prior_answer.source = "prior"
+            if len(prior_answer.inliers) >= len(usable):  # every usable detection explained
+                return finish(prior_answer, [prior_answer], False)
 
     th = time.perf_counter()
     rng = np.random.default_rng(options.seed)
@@ -262,13 +379,41 @@ def localize(
     evaluated += outcome.hypotheses_evaluated
     timings["hypotheses"] = (time.perf_counter() - th) * 1e3
     if outcome.camera_from_world is None:
+        if prior_answer is not None:
+            return finish(prior_answer, [prior_answer], False)
         return _not_localized(outcome.reason or "no_hypothesis_above_inlier_threshold", metric,
                               evaluated, timings, t0)
     tr = time.perf_counter()
-    got, status = _refine_and_verify(list(outcome.matches), detections, compiled, camera,
-                                     scorer, invert_pose(outcome.camera_from_world), options,
-                                     None, deadline)
+    hyps = list(outcome.alternatives) or [
+        Hypothesis(outcome.camera_from_world, outcome.matches, outcome.score)]
+    answers: list[_Answer] = []
+    first_status: str | None = None
+    for k, h in enumerate(hyps[:1 + REFINED_ALTERNATIVES]):
+        if k > 0 and (h.score < ALTERNATIVE_PREFILTER_RATIO * hyps[0].score or (
+                deadline is not None and time.perf_counter() > deadline)):
+            break
+        got, status = _refine_and_verify(
+            list(outcome.matches if k == 0 else h.matches), detections, compiled, camera,
+            scorer, invert_pose(h.camera_from_world), options, None, deadline)
+        if k == 0:
+            first_status = status
+        if got is not None:
+            answers.append(got)
     timings["refine"] = (time.perf_counter() - tr) * 1e3
-    if got is None:
-        return _not_localized("refinement_diverged", metric, evaluated, timings, t0, status)
-    return finish(*got, used_prior=False, refinement_status=status)
+    if prior_answer is not None:
+        answers.append(prior_answer)
+    if not answers:
+        return _not_localized("refinement_diverged", metric, evaluated, timings, t0,
+                              first_status)
+    # best-supported first (inliers, then the sum of their IoUs; the prior wins ties); then
+    # keep only answers distinct from every better one (the ambiguity candidates)
+    answers.sort(key=lambda a: (*a.support(), a.source == "prior"), reverse=True)
+    ranked: list[_Answer] = []
+    for a in answers:
+        if all(distinct_poses(invert_pose(a.world_from_camera), invert_pose(b.world_from_camera))
+               for b in ranked):
+            ranked.append(a)
+    best = ranked[0]
+    ambiguous = len(ranked) > 1 and is_ambiguous(len(best.inliers), best.score,
+                                                 len(ranked[1].inliers), ranked[1].score)
+    return finish(best, ranked, ambiguous)

@@ -26,8 +26,20 @@ most ``max_hypotheses`` of them (in a fixed order: the result does not depend on
 else ``max_hypotheses`` random samples (seeded, uniform over the label-compatible samples);
 early exit once a pose explains every usable detection with mean IoU >=
 :data:`EARLY_EXIT_MEAN_IOU`, and when the time budget runs out (checked before every batch of
-:data:`BATCH` P3P or 4 P2E samples). All poses here are ``camera_from_world`` (4x4, OpenCV
-``[R | t]``).
+:data:`BATCH` P3P or 4 P2E samples, and inside the scoring of every batch).
+
+Bounded cost (whatever the request): samples are generated lazily, one batch at a time, so
+nothing is built before the first deadline check and memory never grows with
+``max_hypotheses``. Candidate poses are scored one at a time (stage 2) or a few at a time
+(stage 1, :data:`PROJECT_BLOCK` pose x object projections), and the label-compatible
+(detection, object) pairs in blocks of at most :data:`PAIR_BLOCK` pairs (stage 1) or
+:data:`POINT_BLOCK` pair x point evaluations (stage 2), checking the deadline between blocks
+(:class:`ScoringTimeoutError`). Pairs whose bounding circles are disjoint (IoU exactly 0) or whose
+area ratio bounds the IoU estimate below the inlier threshold are skipped before the point
+test, which does not change any result. So the largest arrays of one request are the
+(detections x objects) pair index and one pose's (detections x objects) IoU matrix, ~45 bytes
+per compatible pair (docs/deployment.md, "Worst-case cost of a request"). All poses here are
+``camera_from_world`` (4x4, OpenCV ``[R | t]``).
 """
 
 from __future__ import annotations
@@ -35,7 +47,7 @@ from __future__ import annotations
 import itertools
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,11 +60,15 @@ __all__ = [
     "EARLY_EXIT_MEAN_IOU",
     "P2E_FALLBACK_BUDGET",
     "STAGE2_CANDIDATES",
+    "Hypothesis",
     "Match",
     "MatchScorer",
     "RansacOutcome",
+    "ScoringTimeoutError",
+    "distinct_poses",
     "estimate_iou",
     "greedy_assignment",
+    "hard_deadline",
     "iou_estimates",
     "ransac",
     "sunflower_disk",
@@ -64,9 +80,47 @@ EARLY_EXIT_MEAN_IOU = 0.5
 STAGE2_CANDIDATES = 24
 #: Minimal samples per batch (P3P calls between score / budget checks).
 BATCH = 32
+#: Number of distinct hypotheses kept (:attr:`RansacOutcome.alternatives`), and what
+#: "distinct" means: camera centres further apart than this (m) or orientations differing by
+#: more than this (deg). Used by the ambiguity check of ``service.localization.confidence``.
+KEEP_DISTINCT = 4
+DISTINCT_POSITION_M = 0.5
+DISTINCT_ANGLE_DEG = 20.0
+#: Early exit (see the module docstring) only with at least this many usable detections: with
+#: 2-3 the search is small and must go on to find competing hypotheses (ambiguity check).
+EARLY_EXIT_MIN_DETECTIONS = 4
 #: At most this many P2E samples when P2E is the fallback of a frame with >= 3 detections
 #: (one P2E solve costs ~10-30 ms in Python, a P3P solve ~0.05 ms).
 P2E_FALLBACK_BUDGET = 24
+#: Most (detection, object) pairs per block of the cheap per-pair tests (stage 1, pruning).
+PAIR_BLOCK = 1 << 16
+#: Most pair x point evaluations per block of the IoU estimate (stage 2): ~16 MB of temporaries.
+POINT_BLOCK = 1 << 17
+#: Most pose x object projections per block (each holds a few 3x3 / 4x4 float arrays).
+PROJECT_BLOCK = 1 << 13
+#: The scorer's hard stop, as a multiple of the time budget (:func:`hard_deadline`).
+HARD_STOP_FACTOR = 1.05
+
+
+class ScoringTimeoutError(RuntimeError):
+    """The scorer's deadline passed in the middle of scoring (see :class:`MatchScorer`)."""
+
+
+def _check(stop_at: float | None) -> None:
+    if stop_at is not None and time.perf_counter() > stop_at:
+        raise ScoringTimeoutError("time budget exceeded while scoring poses")
+
+
+def hard_deadline(start: float, time_budget_ms: float | None) -> float | None:
+    """The scorer's hard stop of a call started at ``start`` (``time.perf_counter()``) with a
+    budget: ``start + 1.05 x budget``. The search stops at the budget itself; this bounds the
+    scoring after it (final matches, re-association after refinement)."""
+    return None if time_budget_ms is None else start + HARD_STOP_FACTOR * time_budget_ms / 1e3
+
+
+def _blocks(n: int, size: int) -> Iterator[slice]:
+    for start in range(0, n, max(1, size)):
+        yield slice(start, min(n, start + max(1, size)))
 
 
 def sunflower_disk(n: int) -> np.ndarray:
@@ -175,15 +229,16 @@ def greedy_assignment(
 ) -> list[Match]:
     """One-to-one matches from a dense IoU matrix (D, N), greedily by decreasing IoU, keeping
     pairs with IoU >= ``threshold``. ``detection_indices[d]`` is row d's original index."""
-    order = np.argsort(iou, axis=None)[::-1]
+    # only the entries at or above the threshold are sorted (the matrix may be large)
+    flat_iou = np.ravel(iou)
+    cand = np.flatnonzero(flat_iou >= threshold)
+    order = cand[np.argsort(flat_iou[cand], kind="stable")[::-1]]
     used_d: set[int] = set()
     used_o: set[int] = set()
     out = []
     n = iou.shape[1]
     for flat in order:
-        value = float(iou.flat[flat])
-        if value < threshold:
-            break
+        value = float(flat_iou[flat])
         d, o = divmod(int(flat), n)
         if d in used_d or o in used_o:
             continue
@@ -197,16 +252,22 @@ class MatchScorer:
     """Scores candidate poses against a fixed set of detections and a compiled map.
 
     ``detection_indices`` are the original indices of the usable detections (labels in the
-    map); ``ellipses`` / ``labels`` are theirs. Only label-compatible pairs are evaluated.
+    map); ``ellipses`` / ``labels`` are theirs. Only label-compatible pairs are evaluated, in
+    bounded blocks (module docstring). ``deadline`` (a ``time.perf_counter()`` instant, or
+    None) is a hard stop for every scoring call: past it they raise :class:`ScoringTimeoutError`
+    (a search passes its own, earlier, stop to the calls it makes).
     """
 
     def __init__(
         self, compiled: CompiledMap, camera: Camera, ellipses: Sequence[Ellipse],
         labels: Sequence[str], detection_indices: Sequence[int], n_points: int = 96,
+        deadline: float | None = None,
     ) -> None:
         self.compiled = compiled
         self.camera = camera
+        self.deadline = deadline
         self.detection_indices = list(detection_indices)
+        self.labels = list(labels)
         self.params = ellipse_params(ellipses)
         self.n_det = len(ellipses)
         self.n_obj = len(compiled)
@@ -214,13 +275,17 @@ class MatchScorer:
         for d, label in enumerate(labels):
             compat[d, compiled.indices_for(label)] = True
         self.compat = compat
-        self.pair_d, self.pair_o = np.nonzero(compat)
-        self.objects = np.unique(self.pair_o)
-        # Position of each pair's object within self.objects.
-        self.pair_s = np.searchsorted(self.objects, self.pair_o)
+        # int32 indices (maps hold <= QUADLOC_MAX_MAP_OBJECTS objects): 12 bytes per pair
+        self.pair_d, self.pair_o = (i.astype(np.int32) for i in np.nonzero(compat))
+        self.objects = np.flatnonzero(compat.any(axis=0))  # sorted, like np.unique(pair_o)
+        # Position of each pair's object within self.objects (a gather: no sort of the pairs).
+        position = np.zeros(self.n_obj, dtype=np.int32)
+        position[self.objects] = np.arange(len(self.objects), dtype=np.int32)
+        self.pair_s = position[self.pair_o]
         self.unit = sunflower_disk(n_points)
         self.points = _ellipse_points(self.params, self.unit)
         self.areas = math.pi * self.params[:, 2] * self.params[:, 3]
+        self.radii = np.max(self.params[:, 2:4], axis=1)
         c, s = np.cos(self.params[:, 4]), np.sin(self.params[:, 4])
         R = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
         self.shape = np.einsum("dij,dj,dkj->dik", R, self.params[:, 2:4] ** -2.0, R)
@@ -229,34 +294,85 @@ class MatchScorer:
         """Object indices compatible with usable detection row ``d``."""
         return np.flatnonzero(self.compat[d])
 
-    def _project(self, camera_from_world: np.ndarray) -> tuple[np.ndarray, ...]:
+    def _stop(self, stop_at: float | None) -> float | None:
+        if stop_at is None:
+            return self.deadline
+        return stop_at if self.deadline is None else min(stop_at, self.deadline)
+
+    def _project(self, camera_from_world: np.ndarray,
+                 stop_at: float | None = None) -> tuple[np.ndarray, ...]:
+        """:func:`project_objects` of the compatible objects, in blocks of poses."""
         cm = self.compiled
         o = self.objects
-        return project_objects(self.camera, camera_from_world, cm.centers[o],
-                               cm.shape_matrices[o], cm.dual_quadrics[o])
+        T = np.asarray(camera_from_world, dtype=float)
+        step = max(1, PROJECT_BLOCK // max(1, len(o)))
+        if len(T) <= step:
+            return project_objects(self.camera, T, cm.centers[o], cm.shape_matrices[o],
+                                   cm.dual_quadrics[o])
+        parts = []
+        for blk in _blocks(len(T), step):
+            _check(stop_at)
+            parts.append(project_objects(self.camera, T[blk], cm.centers[o],
+                                         cm.shape_matrices[o], cm.dual_quadrics[o]))
+        return tuple(np.concatenate(p) for p in zip(*parts, strict=True))
 
-    def centre_hits(self, camera_from_world: np.ndarray) -> np.ndarray:
+    def centre_hits(self, camera_from_world: np.ndarray,
+                    stop_at: float | None = None) -> np.ndarray:
         """Stage 1: number of detections hit by a compatible valid object's centre, (H,)."""
-        _, _, valid, pc = self._project(camera_from_world)
-        d = pc[:, self.pair_s, :] - self.params[self.pair_d, :2]
-        A = self.shape[self.pair_d]
-        phi = np.einsum("hpi,pij,hpj->hp", d, A, d)
-        hit = (phi <= 4.0) & valid[:, self.pair_s]
-        per_det = np.zeros((hit.shape[0], self.n_det))
-        np.maximum.at(per_det.T, self.pair_d, hit.T.astype(float))
-        return per_det.sum(axis=1)
+        stop_at = self._stop(stop_at)
+        T = np.asarray(camera_from_world, dtype=float)
+        out = np.zeros(len(T))
+        step = max(1, PROJECT_BLOCK // max(1, len(self.objects)))
+        for hb in _blocks(len(T), step):
+            _check(stop_at)
+            _, _, valid, pc = self._project(T[hb], stop_at)
+            for h in range(len(pc)):
+                per_det = np.zeros(self.n_det, dtype=bool)
+                for blk in _blocks(len(self.pair_d), PAIR_BLOCK):
+                    _check(stop_at)
+                    pd, ps = self.pair_d[blk], self.pair_s[blk]
+                    d = pc[h, ps] - self.params[pd, :2]
+                    phi = np.einsum("pi,pij,pj->p", d, self.shape[pd], d)
+                    per_det[pd[(phi <= 4.0) & valid[h, ps]]] = True
+                out[hb.start + h] = per_det.sum()
+        return out
 
-    def dense_iou(self, camera_from_world: np.ndarray,
-                  points: np.ndarray | None = None) -> np.ndarray:
+    def dense_iou(self, camera_from_world: np.ndarray, points: np.ndarray | None = None,
+                  floor: float = 0.0, stop_at: float | None = None) -> np.ndarray:
         """IoU (H, D, N) of every usable detection with every map object (0 if incompatible or
-        the projection is invalid)."""
-        cen, inv_shape, valid, _ = self._project(camera_from_world)
+        the projection is invalid, and 0 where the estimate cannot reach ``floor``: callers
+        that only use IoUs >= a threshold get the same results). Memory: the output plus
+        bounded blocks; call it with few poses (H) on large maps."""
+        stop_at = self._stop(stop_at)
+        T = np.asarray(camera_from_world, dtype=float)
         pts = self.points if points is None else points
-        iou = iou_estimates(pts[self.pair_d][None], self.areas[self.pair_d][None],
-                            cen[:, self.pair_s], inv_shape[:, self.pair_s])
-        iou = np.where(valid[:, self.pair_s], iou, 0.0)
-        out = np.zeros((iou.shape[0], self.n_det, self.n_obj))
-        out[:, self.pair_d, self.pair_o] = iou
+        n_pts = pts.shape[1]
+        out = np.zeros((len(T), self.n_det, self.n_obj))
+        for h in range(len(T)):
+            _check(stop_at)
+            cen, inv_shape, valid, _ = self._project(T[h:h + 1], stop_at)
+            cen, inv_shape, valid = cen[0], inv_shape[0], valid[0]
+            det = inv_shape[:, 0, 0] * inv_shape[:, 1, 1] - inv_shape[:, 0, 1] ** 2
+            half_tr = 0.5 * (inv_shape[:, 0, 0] + inv_shape[:, 1, 1])
+            # largest semi-axis of each projection: sqrt of the largest eigenvalue of A^-1
+            r_proj = np.sqrt(np.maximum(
+                half_tr + np.sqrt(np.maximum(half_tr ** 2 - det, 0.0)), 0.0))
+            area_proj = math.pi * np.sqrt(np.maximum(det, 0.0))
+            for blk in _blocks(len(self.pair_d), PAIR_BLOCK):
+                _check(stop_at)
+                pd, ps = self.pair_d[blk], self.pair_s[blk]
+                gap = np.hypot(*(cen[ps] - self.params[pd, :2]).T)
+                # disjoint bounding circles: no point inside; the estimate is <= area_d/area_p
+                keep = valid[ps] & (gap <= (self.radii[pd] + r_proj[ps]) * (1 + 1e-9) + 1e-9)
+                if floor > 0:
+                    keep &= self.areas[pd] >= floor * area_proj[ps]
+                idx = np.flatnonzero(keep)
+                for sub in _blocks(len(idx), POINT_BLOCK // n_pts):
+                    _check(stop_at)
+                    k = idx[sub]
+                    kd, ks = pd[k], ps[k]
+                    out[h, kd, self.objects[ks]] = iou_estimates(
+                        pts[kd], self.areas[kd], cen[ks], inv_shape[ks])
         return out
 
     def scores(self, dense: np.ndarray, threshold: float) -> tuple[np.ndarray, np.ndarray]:
@@ -268,17 +384,40 @@ class MatchScorer:
 
     def matches(self, camera_from_world: np.ndarray, threshold: float,
                 n_points: int = 256) -> list[Match]:
-        """One-to-one inlier matches at one pose (IoU with ``n_points`` per detection)."""
+        """One-to-one inlier matches at one pose (IoU with ``n_points`` per detection).
+        Raises :class:`ScoringTimeoutError` past ``self.deadline``."""
         pts = _ellipse_points(self.params, sunflower_disk(n_points))
-        dense = self.dense_iou(np.asarray(camera_from_world)[None], pts)[0]
+        dense = self.dense_iou(np.asarray(camera_from_world)[None], pts, floor=threshold)[0]
         return greedy_assignment(dense, self.detection_indices, threshold)
+
+
+@dataclass(frozen=True)
+class Hypothesis:
+    """A qualified pose (``camera_from_world`` 4x4), its one-to-one matches and score (sum of
+    the matches' IoUs)."""
+
+    camera_from_world: np.ndarray
+    matches: tuple[Match, ...]
+    score: float
+
+
+def distinct_poses(camera_from_world_a: np.ndarray, camera_from_world_b: np.ndarray) -> bool:
+    """Whether two poses differ by more than :data:`DISTINCT_POSITION_M` (camera centres) or
+    :data:`DISTINCT_ANGLE_DEG` (rotation angle)."""
+    Ra, Rb = camera_from_world_a[:3, :3], camera_from_world_b[:3, :3]
+    ca, cb = -Ra.T @ camera_from_world_a[:3, 3], -Rb.T @ camera_from_world_b[:3, 3]
+    cos = (np.trace(Ra @ Rb.T) - 1.0) / 2.0
+    angle = math.degrees(math.acos(min(1.0, max(-1.0, cos))))
+    return bool(np.linalg.norm(ca - cb) > DISTINCT_POSITION_M or angle > DISTINCT_ANGLE_DEG)
 
 
 @dataclass(frozen=True)
 class RansacOutcome:
     """Best pose found. ``camera_from_world`` is None when nothing qualified; then ``reason`` is
     ``"no_label_match"``, ``"no_hypothesis_above_inlier_threshold"`` or
-    ``"time_budget_exceeded"``."""
+    ``"time_budget_exceeded"``. ``alternatives``: up to :data:`KEEP_DISTINCT` qualified,
+    mutually distinct hypotheses (:func:`distinct_poses`), best first (the first is the
+    returned pose, with the 96-point matches it was accepted with)."""
 
     camera_from_world: np.ndarray | None
     matches: tuple[Match, ...]
@@ -288,16 +427,17 @@ class RansacOutcome:
     exhaustive: bool
     timed_out: bool
     reason: str | None
+    alternatives: tuple[Hypothesis, ...] = ()
 
 
 def _label_groups(scorer: MatchScorer) -> list[tuple[list[int], np.ndarray]]:
     """Usable detections grouped by their compatible objects (= by label, since a map object
     has one category): ``[(detection rows, compatible object indices), ...]`` in order of first
     detection. Groups of different labels have disjoint objects."""
-    groups: dict[tuple[int, ...], list[int]] = {}
-    for d in range(scorer.n_det):
-        groups.setdefault(tuple(int(o) for o in scorer.compatible_objects(d)), []).append(d)
-    return [(dets, np.array(objs, dtype=int)) for objs, dets in groups.items()]
+    groups: dict[str, list[int]] = {}
+    for d, label in enumerate(scorer.labels):
+        groups.setdefault(label, []).append(d)
+    return [(dets, scorer.compatible_objects(dets[0]).astype(int)) for dets in groups.values()]
 
 
 def _compositions(groups: list[tuple[list[int], np.ndarray]], size: int) -> list[tuple[int, ...]]:
@@ -331,25 +471,39 @@ def count_samples(scorer: MatchScorer, size: int) -> int:
     return sum(_composition_count(groups, c) for c in _compositions(groups, size))
 
 
-def _enumerate_samples(scorer: MatchScorer, size: int, cap: int) -> list[tuple] | None:
-    """All label-compatible minimal samples ((d...), (o...)) with distinct objects, in a fixed
-    order (sorted by detection rows, then objects), or None if there are more than ``cap``.
-    Only the samples themselves are generated (per label group), never all detection tuples."""
+def _iter_samples(groups: list[tuple[list[int], np.ndarray]],
+                  size: int) -> Iterator[tuple[tuple[int, ...], tuple[int, ...]]]:
+    """Every label-compatible minimal sample ((d...), (o...)) (detections ascending), lazily,
+    in a fixed order: split among the groups, then itertools' combinations of each group's
+    detections and permutations of its objects. Nothing is materialised."""
+    def rec(g: int, comp: tuple[int, ...],
+            acc: list[tuple[int, int]]) -> Iterator[list[tuple[int, int]]]:
+        if g == len(groups):
+            yield acc
+            return
+        (d, o), m = groups[g], comp[g]
+        if m == 0:
+            yield from rec(g + 1, comp, acc)
+            return
+        for dets in itertools.combinations(d, m):
+            for objs in itertools.permutations(o.tolist(), m):
+                yield from rec(g + 1, comp, acc + list(zip(dets, objs, strict=True)))
+
+    for comp in _compositions(groups, size):
+        for pairs in rec(0, comp, []):
+            pairs = sorted(pairs)
+            yield tuple(dd for dd, _ in pairs), tuple(int(oo) for _, oo in pairs)
+
+
+def _enumerate_samples(scorer: MatchScorer, size: int,
+                       cap: int) -> Iterator[tuple[tuple[int, ...], tuple[int, ...]]] | None:
+    """All label-compatible minimal samples (lazily, :func:`_iter_samples`' fixed order), or
+    None if there are more than ``cap``. Only the samples themselves are generated (per label
+    group), never all detection tuples."""
     groups = _label_groups(scorer)
-    comps = _compositions(groups, size)
-    if sum(_composition_count(groups, c) for c in comps) > cap:
+    if sum(_composition_count(groups, c) for c in _compositions(groups, size)) > cap:
         return None
-    out: list[tuple] = []
-    for comp in comps:
-        per_group = [
-            [(dets, objs) for dets in itertools.combinations(d, m)
-             for objs in itertools.permutations(o.tolist(), m)]
-            for (d, o), m in zip(groups, comp, strict=True)]
-        for parts in itertools.product(*per_group):
-            pairs = sorted((dd, oo) for dets, objs in parts for dd, oo in zip(dets, objs,
-                                                                               strict=True))
-            out.append((tuple(dd for dd, _ in pairs), tuple(int(oo) for _, oo in pairs)))
-    return sorted(out)
+    return _iter_samples(groups, size)
 
 
 def _has_sample(scorer: MatchScorer, size: int) -> bool:
@@ -358,28 +512,27 @@ def _has_sample(scorer: MatchScorer, size: int) -> bool:
 
 
 def _random_samples(scorer: MatchScorer, size: int, count: int,
-                    rng: np.random.Generator) -> list[tuple]:
-    """``count`` label-compatible samples drawn uniformly (with repetition) over all of them:
-    a split among the label groups with probability proportional to its number of samples,
-    then distinct detections and distinct objects within each group."""
+                    rng: np.random.Generator) -> Iterator[tuple[tuple[int, ...], tuple[int, ...]]]:
+    """``count`` label-compatible samples drawn uniformly (with repetition) over all of them,
+    lazily (one at a time): a split among the label groups with probability proportional to
+    its number of samples, then distinct detections and distinct objects within each group."""
     groups = _label_groups(scorer)
     comps = _compositions(groups, size)
-    weights = np.array([_composition_count(groups, c) for c in comps], dtype=float)
+    weights = np.array([float(_composition_count(groups, c)) for c in comps])
     if len(comps) == 0 or weights.sum() == 0:
-        return []
-    picks = rng.choice(len(comps), size=count, p=weights / weights.sum())
-    out: list[tuple] = []
-    for k in picks:
+        return
+    p = weights / weights.sum()
+    for _ in range(count):
+        k = int(rng.choice(len(comps), p=p))
         pairs = []
-        for (d, o), m in zip(groups, comps[int(k)], strict=True):
+        for (d, o), m in zip(groups, comps[k], strict=True):
             if m == 0:
                 continue
             dd = rng.choice(len(d), m, replace=False)
             oo = rng.choice(len(o), m, replace=False)
             pairs += [(d[int(i)], int(o[int(j)])) for i, j in zip(dd, oo, strict=True)]
         pairs.sort()
-        out.append((tuple(p[0] for p in pairs), tuple(p[1] for p in pairs)))
-    return out
+        yield tuple(q[0] for q in pairs), tuple(q[1] for q in pairs)
 
 
 def ransac(
@@ -400,12 +553,14 @@ def ransac(
         inlier_iou, min_inliers: acceptance of a pose.
         max_hypotheses: budget of minimal samples per solver (P3P, then P2E).
         rng: sampler (only used when not exhaustive: exhaustive runs do not depend on it).
-        deadline: ``time.perf_counter()`` value after which the search stops.
+        deadline: ``time.perf_counter()`` value after which the search stops (also checked
+            inside the scoring of a batch).
     """
     cm = scorer.compiled
     best_T: np.ndarray | None = None
     best_score, best_count = -1.0, 0
     best_matches: list[Match] = []
+    kept: list[Hypothesis] = []  # distinct qualified hypotheses, best first
     evaluated = 0
     tried = 0
     timed_out = False
@@ -413,29 +568,33 @@ def ransac(
     need = scorer.n_det
 
     def consider(poses: np.ndarray) -> bool:
-        """Score candidate poses; returns True to stop early."""
-        nonlocal best_T, best_score, best_count, best_matches, evaluated
+        """Score candidate poses (one at a time, memory bounded); keeps the best distinct
+        hypotheses; returns True to stop early."""
+        nonlocal best_T, best_score, best_count, best_matches, evaluated, kept
         if len(poses) == 0:
             return False
         evaluated += len(poses)
         if len(poses) > STAGE2_CANDIDATES:
-            hits = scorer.centre_hits(poses)
+            hits = scorer.centre_hits(poses, stop_at=deadline)
             keep = np.argsort(-hits, kind="stable")[:STAGE2_CANDIDATES]
             poses = poses[keep]
-        dense = scorer.dense_iou(poses)
-        # per-detection best object: an upper bound of the one-to-one score and count
-        bound, count = scorer.scores(dense, inlier_iou)
-        for i in np.argsort(-bound, kind="stable"):
-            if bound[i] <= best_score:
-                break
-            if count[i] < min_inliers:
+        for pose in poses:
+            bar = kept[-1].score if len(kept) >= KEEP_DISTINCT else -1.0
+            dense = scorer.dense_iou(pose[None], floor=inlier_iou, stop_at=deadline)
+            # per-detection best object: an upper bound of the one-to-one score and count
+            bound, count = scorer.scores(dense, inlier_iou)
+            if bound[0] <= bar or count[0] < min_inliers:
                 continue
             # one-to-one (greedy) assignment, as in the final matches
-            m = greedy_assignment(dense[i], scorer.detection_indices, inlier_iou)
+            m = greedy_assignment(dense[0], scorer.detection_indices, inlier_iou)
             score = float(sum(x.iou for x in m))
-            if len(m) >= min_inliers and score > best_score:
-                best_T, best_score, best_count, best_matches = poses[i], score, len(m), m
-        return best_count >= need and best_score >= EARLY_EXIT_MEAN_IOU * need
+            if len(m) >= min_inliers and score > bar:
+                kept = _keep_distinct(kept, Hypothesis(pose, tuple(m), score))
+        if kept and kept[0].score > best_score:
+            best_T, best_score = kept[0].camera_from_world, kept[0].score
+            best_matches, best_count = list(kept[0].matches), len(kept[0].matches)
+        return (need >= EARLY_EXIT_MIN_DETECTIONS and best_count >= need
+                and best_score >= EARLY_EXIT_MEAN_IOU * need)
 
     def run(size: int, budget: int) -> bool:
         nonlocal tried, timed_out, exhaustive
@@ -445,12 +604,15 @@ def ransac(
             samples = _random_samples(scorer, size, budget, rng)
         # exhaustive: every sample in a fixed order (the seed plays no part)
         batch = BATCH if size == 3 else 4
-        for start in range(0, len(samples), batch):
+        while True:
             if deadline is not None and time.perf_counter() > deadline:
                 timed_out = True
                 return True
+            chunk = list(itertools.islice(samples, batch))
+            if not chunk:
+                return False
             poses = []
-            for dets, objs in samples[start:start + batch]:
+            for dets, objs in chunk:
                 tried += 1
                 if size == 3:
                     sols = p3p_hypotheses(scorer.params[list(dets), :2],
@@ -460,9 +622,12 @@ def ransac(
                     sols = p2e_hypotheses(ells, [cm.ellipsoids[o] for o in objs],
                                           scorer.camera, up_world)
                 poses.extend(sols)
-            if consider(np.array(poses).reshape(-1, 4, 4)):
+            try:
+                if consider(np.array(poses).reshape(-1, 4, 4)):
+                    return True
+            except ScoringTimeoutError:
+                timed_out = True
                 return True
-        return False
 
     if need < 2:
         return RansacOutcome(None, (), 0.0, 0, 0, True, False, "no_label_match")
@@ -485,10 +650,25 @@ def ransac(
         else:
             reason = "no_hypothesis_above_inlier_threshold"
         return RansacOutcome(None, (), 0.0, evaluated, tried, exhaustive, timed_out, reason)
-    matches = tuple(scorer.matches(best_T, inlier_iou))
+    try:
+        matches = tuple(scorer.matches(best_T, inlier_iou))
+    except ScoringTimeoutError:  # past the scorer's hard stop: keep the accepted assignment
+        matches = ()
     if len(matches) < min_inliers:
         # the finer IoU estimate (256 points) lost an inlier at the threshold: keep the
         # assignment the pose was accepted with (96 points)
         matches = tuple(best_matches)
     return RansacOutcome(best_T, matches, best_score, evaluated, tried, exhaustive, timed_out,
-                         None)
+                         None, tuple(kept))
+
+
+def _keep_distinct(kept: list[Hypothesis], new: Hypothesis) -> list[Hypothesis]:
+    """``kept`` (best first, mutually distinct) with ``new`` inserted: it replaces the kept
+    hypotheses it is not distinct from if it scores better than all of them, is dropped if one
+    of them scores at least as well; at most :data:`KEEP_DISTINCT` are kept."""
+    close = [h for h in kept if not distinct_poses(h.camera_from_world, new.camera_from_world)]
+    if any(h.score >= new.score for h in close):
+        return kept
+    out = [h for h in kept if all(h is not c for c in close)] + [new]
+    out.sort(key=lambda h: -h.score)
+    return out[:KEEP_DISTINCT]

@@ -120,6 +120,11 @@ class RefinementResult:
         resample_skipped: the first solve grew adaptive level-set samples but the
             ``deadline`` had passed, so the re-laid second solve was not run (the status is
             the first solve's).
+        chi2: ``sum_j ||r_j||^2 / w_j`` at the final pose over the pairs with a valid
+            projection (``w_j = sigma_j`` with sigma weighting, else 1; no robust kernel, no
+            prior): the weighted residual sum of squares ``r^T W r`` of the metric factors.
+        n_residuals: number of scalar residuals of the metric factors (N x the metric's
+            residual size), the ``m`` of ``s^2 = chi2 / (m - 6)``.
     """
 
     world_from_camera: np.ndarray
@@ -134,6 +139,8 @@ class RefinementResult:
     status: str
     time_ms: float
     resample_skipped: bool = False
+    chi2: float = math.nan
+    n_residuals: int = 0
 
 
 def _lm_params(max_iterations: int) -> gtsam.LevenbergMarquardtParams:
@@ -263,6 +270,9 @@ def refine(
         covariance, reason = None, "a projection is not an ellipse at the final pose"
     else:
         covariance, reason = _covariance(graph, outcome.result)
+    weights = np.array([s if s is not None else 1.0 for s in sigmas])
+    ok = outcome.valid
+    chi2 = float(np.sum(outcome.costs[ok] / weights[ok])) if ok.any() else math.inf
     return RefinementResult(
         world_from_camera=outcome.T, covariance=covariance, covariance_reason=reason,
         per_detection_cost=outcome.costs, valid_projection=outcome.valid,
@@ -270,7 +280,7 @@ def refine(
         total_error=outcome.total_error, iterations=total_iterations,
         converged=status == "converged", status=status,
         time_ms=(time.perf_counter() - t_start) * 1e3,
-        resample_skipped=relaid_skipped,
+        resample_skipped=relaid_skipped, chi2=chi2, n_residuals=len(detections) * model.dim,
     )
 
 

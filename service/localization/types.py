@@ -32,11 +32,14 @@ from factors.pose_factors import ROBUST_KERNELS
 from factors.pose_residuals import check_pose
 
 __all__ = [
+    "AMBIGUITY_POLICIES",
     "METRICS",
     "NO_REFINEMENT",
+    "POSE_SOURCES",
     "REASONS",
     "ROBUST_KERNELS",
     "UNKNOWN_LABEL_POLICIES",
+    "Alternative",
     "Detection",
     "InlierMatch",
     "LocalizationInputError",
@@ -52,12 +55,18 @@ METRICS: tuple[str, ...] = METRIC_NAMES
 NO_REFINEMENT = "none"
 #: ``LocalizationOptions.unknown_label_policy`` values, see there.
 UNKNOWN_LABEL_POLICIES: tuple[str, ...] = ("ignore", "error")
+#: ``LocalizationOptions.on_ambiguity`` values, see there.
+AMBIGUITY_POLICIES: tuple[str, ...] = ("not_localized", "best")
+#: ``LocalizationResult.pose_source`` values: the refined client prior or the RANSAC search.
+POSE_SOURCES: tuple[str, ...] = ("prior", "ransac")
 #: Every ``LocalizationResult.reason`` when ``localized`` is false.
 REASONS: tuple[str, ...] = (
     "too_few_detections",
     "no_label_match",
     "no_hypothesis_above_inlier_threshold",
     "refinement_diverged",
+    "ambiguous",
+    "low_confidence",
     "time_budget_exceeded",
 )
 
@@ -132,6 +141,16 @@ class LocalizationOptions:
         metric_options: extra keyword options of the metric (e.g. level-set sampling),
             validated on construction (an unknown key or bad value raises naming
             ``options.metric_options.<key>``).
+        on_ambiguity: what to answer when a distinct hypothesis explains the detections
+            comparably well (``service.localization.confidence``): ``"not_localized"``
+            (default: ``localized=False, reason="ambiguous"``, the hypotheses listed in
+            ``alternatives``) or ``"best"`` (the best pose, localized, with the others in
+            ``alternatives``; each with its probability).
+        min_confidence: answers whose ``confidence`` is below this are returned as
+            ``localized=False, reason="low_confidence"``; ``None`` = the calibrated default
+            ``service.localization.calibration.MIN_CONFIDENCE`` (chosen on the tuning seeds so
+            that 2-3 detection frames are not answered with a wrong pose); 0 accepts every
+            verified pose.
 
     Integer fields accept any integral number (numpy integers too) and store a Python int.
     """
@@ -148,8 +167,19 @@ class LocalizationOptions:
     time_budget_ms: float | None = 1000.0
     max_iterations: int = 50
     metric_options: Mapping[str, Any] | None = None
+    on_ambiguity: str = "not_localized"
+    min_confidence: float | None = None
 
     def __post_init__(self) -> None:
+        if self.min_confidence is not None and (
+                isinstance(self.min_confidence, bool)
+                or not isinstance(self.min_confidence, (int, float))
+                or not (0.0 <= self.min_confidence <= 1.0)):
+            raise _bad("options.min_confidence",
+                       f"must be in [0, 1] or None, got {self.min_confidence!r}")
+        if self.on_ambiguity not in AMBIGUITY_POLICIES:
+            raise _bad("options.on_ambiguity",
+                       f"must be one of {AMBIGUITY_POLICIES}, got {self.on_ambiguity!r}")
         if self.metric not in METRICS and self.metric != NO_REFINEMENT:
             raise _bad("options.metric",
                        f"unknown metric {self.metric!r}; valid: {', '.join(METRICS)} "
@@ -294,6 +324,23 @@ class InlierMatch:
 
 
 @dataclass(frozen=True, eq=False)
+class Alternative:
+    """A distinct candidate pose of an ambiguous frame.
+
+    Attributes:
+        world_from_camera: 4x4 camera pose in the map frame.
+        confidence: probability that this pose is within the confidence tolerance
+            (``service.localization.confidence``).
+        n_inliers: its inlier count; score: the sum of its inliers' IoUs.
+    """
+
+    world_from_camera: np.ndarray
+    confidence: float
+    n_inliers: int
+    score: float
+
+
+@dataclass(frozen=True, eq=False)
 class LocalizationResult:
     """The answer of ``localize``.
 
@@ -307,15 +354,18 @@ class LocalizationResult:
             ``no_hypothesis_above_inlier_threshold`` (no pose with ``min_inliers`` detections at
             IoU >= ``inlier_iou``), ``refinement_diverged`` (the refined pose lost its inliers
             or the solver failed), ``time_budget_exceeded`` (the budget ran out before any
-            hypothesis qualified).
+            hypothesis qualified), ``ambiguous`` (a distinct pose explains the detections
+            comparably well; see ``alternatives``), ``low_confidence`` (the best pose's
+            ``confidence`` is below ``options.min_confidence``; its value is kept in
+            ``evidence``).
         world_from_camera: 4x4 camera pose in the map frame, or ``None``.
         covariance: 6x6 pose covariance, order ``[omega, v]``, body frame, or ``None`` (not
-            localized, ``metric="none"``, or a singular information matrix).
-        confidence: in [0, 1]; 0 when not localized. Defined as
-            ``(n_inliers / n_usable) * mean_inlier_iou * (1 - 0.5 ** (n_inliers - 1))``:
-            the fraction of usable detections explained, how well they overlap, and a factor
-            that grows with the number of inliers (2 -> 0.5, 3 -> 0.75, 4 -> 0.875, ...)
-            because few objects constrain a pose weakly.
+            localized, ``metric="none"``, or a singular information matrix). Calibrated
+            (``service.localization.confidence``): conditioned on the inlier associations and
+            the detection noise, scaled by the frame's residual level.
+        confidence: in [0, 1]; 0 when not localized. The probability that the returned pose
+            is within 0.10 m and 5 deg of the truth, from a logistic model of the solver's
+            evidence, calibrated on simulated frames (``service.localization.confidence``).
         inliers: the inlier matches (sorted by detection index).
         metric: the refinement metric used (``"none"`` when unrefined).
         hypotheses_evaluated: number of candidate poses scored (P3P/P2E solutions + prior).
@@ -328,6 +378,10 @@ class LocalizationResult:
             ``time_budget`` also when the budget ran out before the level-set re-lay or the
             re-association refinement, i.e. the pose is returned less refined than it would
             be without the budget.
+        pose_source: ``"prior"`` (the refined client prior won) or ``"ransac"``; None when
+            not localized.
+        alternatives: with an ambiguous frame, the distinct candidate poses (best first).
+        evidence: the confidence model's features and ``s2`` (for diagnostics and the bench).
     """
 
     localized: bool
@@ -341,6 +395,9 @@ class LocalizationResult:
     used_prior: bool
     timings_ms: dict[str, float] = field(default_factory=dict)
     refinement_status: str | None = None
+    pose_source: str | None = None
+    alternatives: tuple[Alternative, ...] = ()
+    evidence: Mapping[str, float] | None = None
 
     def __post_init__(self) -> None:
         if self.localized:

@@ -2,15 +2,21 @@
 
 from __future__ import annotations
 
+import logging
+
 from fastapi import APIRouter, Response
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
+from sqlalchemy.exc import ProgrammingError, SQLAlchemyError
 
+from maps.errors import MapNotFound, SchemaNotMigrated, StoreUnavailable
 from service.api.deps import MetricsDep, SettingsDep, StoreDep
-from service.api.errors import ProblemError
+from service.api.errors import MIGRATE_HINT, ProblemError
 from service.api.openapi_docs import problem_responses
 from service.api.schemas import HealthOut
 
 __all__ = ["router"]
+
+log = logging.getLogger("quadloc.api")
 
 router = APIRouter(tags=["operations"])
 
@@ -31,20 +37,28 @@ async def healthz() -> HealthOut:
                             "checks": {"database": "ok", "default_map": "chess v1"}}}}}})
 def readyz(store: StoreDep, settings: SettingsDep) -> HealthOut:
     checks: dict[str, str] = {}
+    # The probe needs no key: its answer names the failing check only; the driver's text (host,
+    # database, SQL) goes to the log.
     try:
         store.ping()
         checks["database"] = "ok"
-    except Exception as exc:  # any driver error means not ready
-        raise ProblemError("not-ready", f"database unreachable: {type(exc).__name__}",
-                           errors=[{"field": "database", "message": str(exc)[:200]}]) from exc
-    if settings.default_map_id:
-        try:
+        if settings.default_map_id:
             compiled = store.compiled(settings.default_map_id)
             checks["default_map"] = f"{compiled.map_id} v{compiled.version}"
-        except Exception as exc:
-            raise ProblemError("not-ready", f"default map {settings.default_map_id!r} not loadable",
-                               errors=[{"field": "default_map",
-                                      "message": str(exc)[:200]}]) from exc
+    except MapNotFound as exc:
+        raise ProblemError("not-ready", "default_map: not found",
+                           errors=[{"field": "default_map", "message": "not found"}]) from exc
+    except (StoreUnavailable, SQLAlchemyError) as exc:  # any driver error means not ready
+        if isinstance(exc, SchemaNotMigrated | ProgrammingError):
+            log.error("readiness: %s (%s)", MIGRATE_HINT, exc)
+        else:
+            log.error("readiness: database unavailable: %s", exc)
+        raise ProblemError("not-ready", "database: unavailable",
+                           errors=[{"field": "database", "message": "unavailable"}]) from exc
+    except Exception as exc:  # the stored default map does not load (logged)
+        log.exception("readiness: default map %r not loadable", settings.default_map_id)
+        raise ProblemError("not-ready", "default_map: not loadable",
+                           errors=[{"field": "default_map", "message": "not loadable"}]) from exc
     return HealthOut(status="ready", checks=checks)
 
 

@@ -8,6 +8,7 @@ check and the write gets 409 (the store's version conflict) - never a silent ove
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Header, Query, Response, status
@@ -25,13 +26,21 @@ from service.api.deps import MapCacheDep, MapIdPath, SettingsDep, StoreDep
 from service.api.errors import ProblemError, map_not_found
 from service.api.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
 from service.api.openapi_docs import problem_responses
-from service.api.schemas import MapListOut, MapOut, MapSummaryOut
+from service.api.schemas import (
+    MapListOut,
+    MapOut,
+    MapSummaryOut,
+    MapVersionOut,
+    MapVersionsOut,
+)
 
 __all__ = ["router"]
 
 router = APIRouter(prefix="/v1", tags=["maps"])
 
 _MAP_SCHEMA = {k: v for k, v in MAP_JSON_SCHEMA.items() if not k.startswith("$")}
+_VEC3: dict[str, Any] = {"type": "array", "minItems": 3, "maxItems": 3,
+                         "items": {"type": "number"}}
 _CHESS_SCHEMA: dict[str, Any] = {
     "type": "object",
     "required": ["category_id_to_label", "objects"],
@@ -45,11 +54,12 @@ _CHESS_SCHEMA: dict[str, Any] = {
                 "object_id": {"type": "integer"},
                 "ellipsoid": {"type": "object", "required": ["axes", "R", "center"],
                               "properties": {
-                                  "axes": {"type": "array", "items": {"type": "number"}},
-                                  "R": {"type": "array",
-                                        "items": {"type": "array",
-                                                  "items": {"type": "number"}}},
-                                  "center": {"type": "array", "items": {"type": "number"}}}},
+                                  "axes": {**_VEC3, "description": "Semi-axes (m), > 0."},
+                                  "R": {"type": "array", "minItems": 3, "maxItems": 3,
+                                        "items": _VEC3,
+                                        "description": "3x3 rotation ellipsoid -> world: "
+                                                       "orthonormal within 1e-4, det +1."},
+                                  "center": _VEC3}},
             }}},
     },
 }
@@ -64,11 +74,27 @@ _LIST_EXAMPLE = {"maps": [{"map_id": _EXAMPLE_MAP.map_id, "name": _EXAMPLE_MAP.n
                            "updated_at": "2026-01-05T10:00:00+00:00"}]}
 
 
+#: OpenAPI links from a response carrying a stored map (``MapOut`` + ETag) to what a client
+#: does next with it (clients and stateful fuzzers follow them).
+_MAP_LINKS: dict[str, Any] = {
+    "GetMap": {"operationId": "get_map_v1_maps__map_id__get",
+               "parameters": {"path.map_id": "$response.body#/map_id"}},
+    "UpdateMap": {"operationId": "update_map_v1_maps__map_id__put",
+                  "parameters": {"path.map_id": "$response.body#/map_id",
+                                 "header.If-Match": "$response.header.ETag"}},
+    "DeleteMap": {"operationId": "delete_map_v1_maps__map_id__delete",
+                  "parameters": {"path.map_id": "$response.body#/map_id"}},
+    "LocalizeFrame": {"operationId": "localize_frame_v1_maps__map_id__localize_post",
+                      "parameters": {"path.map_id": "$response.body#/map_id"}},
+}
+
+
 def _ok(status_code: int, example: dict[str, Any], headers: bool = True) -> dict[int, Any]:
     doc: dict[str, Any] = {"content": {"application/json": {"example": example}}}
     if headers:
         doc["headers"] = {"ETag": {"description": "Strong ETag: the version's content hash.",
                                    "schema": {"type": "string"}}}
+        doc["links"] = _MAP_LINKS
     return {status_code: doc}
 
 
@@ -189,6 +215,25 @@ def get_map(map_id: MapIdPath, response: Response, store: StoreDep, _key: ReadAc
     return _map_out(stored)
 
 
+@router.get(
+    "/maps/{map_id}/versions", response_model=MapVersionsOut, summary="List a map's versions",
+    description="Every stored version (immutable, readable with `GET /v1/maps/{map_id}"
+                "?version=n`), ascending, with its content hash (the ETag) and creation time.",
+    responses={**problem_responses(401, 403, 404, 422, 503),
+               **_ok(200, {"map_id": _EXAMPLE_MAP.map_id, "versions": [
+                   {"version": 1, "content_hash": content_hash(_EXAMPLE_MAP),
+                    "created_at": "2026-01-05T10:00:00+00:00"}]}, False)},
+)
+def list_map_versions(map_id: MapIdPath, store: StoreDep, _key: ReadAccess) -> MapVersionsOut:
+    try:
+        history = store.version_history(map_id)
+    except MapNotFound as exc:
+        raise map_not_found(map_id) from exc
+    return MapVersionsOut(map_id=map_id, versions=[
+        MapVersionOut(version=h.version, content_hash=h.content_hash,
+                      created_at=h.created_at.isoformat()) for h in history])
+
+
 def _parse_if_match(if_match: str | None) -> set[str]:
     if if_match is None or not if_match.strip():
         raise ProblemError("precondition-required",
@@ -208,21 +253,33 @@ def _parse_if_match(if_match: str | None) -> set[str]:
 @router.put(
     "/maps/{map_id}", response_model=MapOut, summary="Update a map (new version)",
     description="Body: the full map document (its `map_id` must equal the path's). Requires "
-                "`If-Match` with the latest version's ETag: missing -> 428, stale -> 412 "
-                "(the current ETag is in the response), lost race -> 409. Answers 200 with the "
-                "new version and its ETag.",
+                "`If-Match` with the latest version's ETag. Checked in this order: the body "
+                "(invalid -> 422 naming the fields), then `If-Match` (missing or `*` -> 428), "
+                "the map (absent -> 404), the ETag (stale -> 412, the current ETag is in the "
+                "response); a lost race -> 409. Answers 200 with the new version and its ETag.",
     responses={**problem_responses(400, 401, 403, 404, 409, 412, 413, 415, 422, 428, 503),
                **_ok(200, {**_MAP_OUT_EXAMPLE, "version": 2})},
-    openapi_extra=_body_doc(_MAP_SCHEMA, MAP_EXAMPLE),
+    openapi_extra={**_body_doc(_MAP_SCHEMA, MAP_EXAMPLE), "parameters": [{
+        # Required (428 when missing); declared here because the route answers 428 itself
+        # rather than FastAPI's 422 for a missing header.
+        "name": "If-Match", "in": "header", "required": True,
+        "description": "ETag of the version edited (strong, as returned by GET).",
+        "schema": {"type": "string", "minLength": 1}, "example": '"d79f785a18e6e97f..."'}]},
 )
 def update_map(
     map_id: MapIdPath, body: Annotated[dict[str, Any], Body()], response: Response,
     store: StoreDep, cache: MapCacheDep, settings: SettingsDep, _key: WriteAccess,
-    if_match: Annotated[str | None, Header(description="ETag of the version edited.",
-                                           examples=['"d79f785a18e6e97f..."'])] = None,
+    if_match: Annotated[str | None, Header(include_in_schema=False)] = None,
 ) -> MapOut:
-    tags = _parse_if_match(if_match)
     _check_object_limit(body, settings)
+    if body.get("map_id", map_id) != map_id:
+        raise ProblemError("invalid-map", "map_id in the body differs from the path",
+                           errors=[{"field": "map_id", "message": f"must be {map_id!r}"}])
+    try:  # the body first: an invalid document is the client's error whatever If-Match says
+        scene_map = scene_map_from_dict({**body, "map_id": map_id}, version=1)
+    except MapValidationError as exc:
+        raise _invalid_map(exc) from exc
+    tags = _parse_if_match(if_match)
     try:
         current = store.get(map_id)
     except MapNotFound as exc:
@@ -234,14 +291,8 @@ def update_map(
                            "retry",
                            errors=[{"field": "header.if-match", "message": "stale ETag"}],
                            headers={"ETag": etag_of(current.content_hash)})
-    if isinstance(body, dict) and body.get("map_id", map_id) != map_id:
-        raise ProblemError("invalid-map", "map_id in the body differs from the path",
-                           errors=[{"field": "map_id", "message": f"must be {map_id!r}"}])
     expected = current.scene_map.version
-    try:
-        scene_map = scene_map_from_dict({**body, "map_id": map_id}, version=expected + 1)
-    except MapValidationError as exc:
-        raise _invalid_map(exc) from exc
+    scene_map = dataclasses.replace(scene_map, version=expected + 1)
     try:
         stored = store.update(map_id, scene_map, expected_version=expected)
     except VersionConflict as exc:

@@ -1,0 +1,445 @@
+"""The worst requests the schema allows, against a real server on loopback (issue 11).
+
+Run::
+
+    .venv/bin/python -m bench.adversarial [--objects 10000] [--quiet 8] [--attack 8]
+        [--clients 4] [--postgres] [--json out.json] [--write-results]
+
+What it does, in one run:
+
+1. Starts ``quadloc serve`` (``python -m service serve``: the deployed server, default
+   settings, open on loopback) in a subprocess on a temporary SQLite database (``--postgres``:
+   a throw-away schema of 127.0.0.1:5432/test), and creates two maps of ``--objects`` ellipsoids
+   crowded in front of one camera: ``crowd1`` (every object the same label: every detection is
+   compatible with every object) and ``crowd8`` (8 labels).
+2. Measures the server's idle RSS (``/proc/<pid>/status`` ``VmRSS``), then sends each worst
+   request alone: before each, the process's peak-RSS mark is reset (``/proc/<pid>/clear_refs``
+   ``5``) and after it ``VmHWM`` is the request's peak. Requests: 256 detections (the schema's
+   maximum) of one label, ``ransac_max_hypotheses`` 100,000, the smallest ``inlier_iou``, 100
+   LM iterations, each of the nine metrics, with and without a prior, on ``crowd1`` / ``crowd8``
+   / the demo map; a batch of ``QUADLOC_MAX_BATCH_FRAMES`` such frames; create / get / update
+   of a ``--objects`` map. Each has a budget (the solve budget, or the batch budget; none for
+   map writes) and passes when its wall time <= 1.2 x budget + 50 ms.
+3. Interference: ``--clients`` closed-loop clients post simulated demo-map frames
+   (``bench.load.build_frames``) for ``--quiet`` seconds (their quiet p99), then again for
+   ``--attack`` seconds while one more client posts worst-case frames back to back; target:
+   p99 under attack <= 3 x quiet p99.
+
+Prints JSON. Targets (issue 11): every request within 1.2 x its budget + 50 ms; peak RSS of the
+worst request <= 300 MB above idle on the 10,000-object map; normal clients' p99 <= 3 x quiet.
+The machine may be shared: the report carries the load average at start and end.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+import uuid
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+
+from bench.load import _free_port, build_frames
+
+REPO = Path(__file__).resolve().parents[1]
+PG_BASE = "postgresql+psycopg://postgres@127.0.0.1:5432/test"
+#: Target of issue 11: wall time <= SLOW_FACTOR x budget + SLACK_MS.
+SLOW_FACTOR, SLACK_MS = 1.2, 50.0
+RSS_TARGET_MB = 300.0
+P99_FACTOR = 3.0
+CAMERA = {"fx": 500.0, "fy": 500.0, "cx": 320.0, "cy": 240.0, "width": 640, "height": 480}
+
+
+# ------------------------------------------------------------------------------- the inputs
+
+
+def crowd_map(map_id: str, n: int, n_labels: int, seed: int = 0) -> dict[str, Any]:
+    """``n`` ellipsoids in a 4 x 4 x 2 m box 5 m in front of :data:`CAMERA`'s pose
+    (:func:`crowd_pose`), labels ``L0..L{n_labels-1}`` in turn: every projection overlaps many
+    detections. Coordinates rounded to mm so that 10,000 objects fit the 2 MB body limit."""
+    rng = np.random.default_rng(seed)
+    centers = rng.uniform([-2, -1, -2], [2, 1, 2], (n, 3)).round(3)
+    axes = rng.uniform(0.2, 0.5, (n, 3)).round(3)
+    labels = [f"L{i}" for i in range(n_labels)]
+    return {"map_id": map_id, "name": f"crowd of {n}", "categories": labels,
+            "objects": [{"object_id": f"o{i}", "category": labels[i % n_labels],
+                         "center": centers[i].tolist(), "axes": axes[i].tolist()}
+                        for i in range(n)]}
+
+
+def crowd_pose() -> dict[str, Any]:
+    """A ``world_from_camera`` prior looking at the crowd (camera at y = -6 m, +Z forward ->
+    world +Y, OpenCV axes)."""
+    return {"world_from_camera": {"matrix": [[1, 0, 0, 0], [0, 0, 1, -6], [0, -1, 0, 0],
+                                             [0, 0, 0, 1]]},
+            "covariance": (np.eye(6) * 0.01).tolist()}
+
+
+def worst_frame(labels: list[str], n_det: int = 256, metric: str = "level_set",
+                prior: bool = False, seed: int = 1) -> dict[str, Any]:
+    """``n_det`` large overlapping detections over the whole image, labels in turn, the
+    largest search budget and the loosest acceptance the schema allows."""
+    rng = np.random.default_rng(seed)
+    dets = [{"ellipse": {"cx": float(rng.uniform(0, 640)), "cy": float(rng.uniform(0, 480)),
+                         "a": float(rng.uniform(20, 120)), "b": float(rng.uniform(20, 120)),
+                         "angle": float(rng.uniform(-3, 3))},
+             "label": labels[i % len(labels)], "sigma": 1.0} for i in range(n_det)]
+    body: dict[str, Any] = {
+        "camera": CAMERA, "detections": dets,
+        "options": {"metric": metric, "ransac_max_hypotheses": 100_000, "inlier_iou": 1e-6,
+                    "min_inliers": 2, "max_iterations": 100, "robust": "huber",
+                    "time_budget_ms": 60_000}}
+    if prior:
+        body["prior"] = crowd_pose()
+    return body
+
+
+# --------------------------------------------------------------------------- the server
+
+
+def _status(pid: int) -> dict[str, float]:
+    out = {}
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        key, _, value = line.partition(":")
+        if key in ("VmRSS", "VmHWM"):
+            out[key] = float(value.split()[0]) / 1024.0  # MB
+    return out
+
+
+def reset_peak(pid: int) -> bool:
+    """Reset the process's peak-RSS mark (``VmHWM``); False if the kernel refuses."""
+    try:
+        Path(f"/proc/{pid}/clear_refs").write_text("5")
+        return True
+    except OSError:
+        return False
+
+
+def start_server(data_dir: Path, database_url: str,
+                 extra_env: dict[str, str] | None = None) -> tuple[subprocess.Popen, str]:
+    port = _free_port()
+    env = {k: v for k, v in os.environ.items() if not k.startswith("QUADLOC_")}
+    env.update({"QUADLOC_DATABASE_URL": database_url, "QUADLOC_DATA_DIR": str(data_dir),
+                "QUADLOC_LOG_LEVEL": "warning", "PYTHONPATH": str(REPO)})
+    env.update(extra_env or {})
+    log = open(data_dir / "server.log", "wb")  # noqa: SIM115 - lives with the server
+    proc = subprocess.Popen([sys.executable, "-m", "service", "serve", "--host", "127.0.0.1",
+                             "--port", str(port)], cwd=REPO, env=env, stdout=log,
+                            stderr=subprocess.STDOUT)
+    base = f"http://127.0.0.1:{port}"
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            raise RuntimeError((data_dir / "server.log").read_text()[-3000:])
+        try:
+            if httpx.get(f"{base}/readyz", timeout=2).status_code == 200:
+                return proc, base
+        except httpx.TransportError:
+            pass
+        time.sleep(0.2)
+    proc.terminate()
+    raise RuntimeError("server did not become ready")
+
+
+# ------------------------------------------------------------------------ the measurements
+
+
+def one_request(client: httpx.Client, pid: int, idle_mb: float, name: str, method: str,
+                path: str, body: Any, budget_ms: float | None,
+                headers: dict[str, str] | None = None) -> dict[str, Any]:
+    """Send one request alone; wall time, status, the server's peak RSS above idle."""
+    reset_peak(pid)
+    t0 = time.perf_counter()
+    r = client.request(method, path, content=json.dumps(body).encode() if body is not None
+                       else None, headers={"content-type": "application/json", **(headers or {})})
+    wall_ms = (time.perf_counter() - t0) * 1e3
+    peak = _status(pid)["VmHWM"]
+    out: dict[str, Any] = {"name": name, "status": r.status_code, "wall_ms": round(wall_ms, 1),
+                           "budget_ms": budget_ms,
+                           "peak_rss_above_idle_mb": round(peak - idle_mb, 1)}
+    if budget_ms is not None:
+        out["limit_ms"] = SLOW_FACTOR * budget_ms + SLACK_MS
+        out["within_budget"] = wall_ms <= out["limit_ms"]
+    if r.headers.get("content-type", "").startswith("application/json") and "localize" in path:
+        doc = r.json()
+        results = doc.get("results", [doc])
+        out["localized"] = sum(bool(x.get("localized")) for x in results)
+        out["reasons"] = sorted({str(x.get("reason")) for x in results})
+        out["server_total_ms_max"] = round(max(x["timings_ms"]["total"] for x in results), 1)
+    return out
+
+
+async def _clients(base: str, bodies: list[dict[str, Any]], n: int, duration_s: float,
+                   attacker: dict[str, Any] | None) -> dict[str, Any]:
+    payloads = [json.dumps(b).encode() for b in bodies]
+    stop = time.perf_counter() + duration_s
+    lat: list[float] = []
+    errors: dict[str, int] = {}
+    attack: list[float] = []
+    hdr = {"content-type": "application/json"}
+
+    async def normal(client: httpx.AsyncClient, k: int) -> None:
+        i = k
+        while time.perf_counter() < stop:
+            t0 = time.perf_counter()
+            try:
+                r = await client.post(f"{base}/v1/maps/chess/localize",
+                                      content=payloads[i % len(payloads)], headers=hdr)
+                if r.status_code != 200:
+                    errors[f"http_{r.status_code}"] = errors.get(f"http_{r.status_code}", 0) + 1
+            except httpx.HTTPError as exc:
+                errors[type(exc).__name__] = errors.get(type(exc).__name__, 0) + 1
+            lat.append(time.perf_counter() - t0)
+            i += n
+
+    async def bad(client: httpx.AsyncClient) -> None:
+        assert attacker is not None
+        payload = json.dumps(attacker["body"]).encode()
+        while time.perf_counter() < stop:
+            t0 = time.perf_counter()
+            with contextlib.suppress(httpx.HTTPError):
+                await client.post(f"{base}{attacker['path']}", content=payload, headers=hdr)
+            attack.append(time.perf_counter() - t0)
+
+    limits = httpx.Limits(max_connections=n + 2, max_keepalive_connections=n + 2)
+    async with httpx.AsyncClient(timeout=60.0, limits=limits) as client:
+        tasks = [normal(client, k) for k in range(n)]
+        if attacker is not None:
+            tasks.append(bad(client))
+        await asyncio.gather(*tasks)
+    ms = np.array(lat) * 1e3
+    out = {"requests": len(lat), "errors": errors,
+           "p50_ms": round(float(np.percentile(ms, 50)), 1),
+           "p99_ms": round(float(np.percentile(ms, 99)), 1)}
+    if attacker is not None:
+        out["attack_requests"] = len(attack)
+        out["attack_wall_ms_max"] = round(max(attack) * 1e3, 1) if attack else None
+    return out
+
+
+def interference(base: str, n_clients: int, quiet_s: float, attack_s: float,
+                 attacker: dict[str, Any]) -> dict[str, Any]:
+    bodies, _ = build_frames(24)
+    asyncio.run(_clients(base, bodies, n_clients, 2.0, None))  # warm-up
+    quiet = asyncio.run(_clients(base, bodies, n_clients, quiet_s, None))
+    loaded = asyncio.run(_clients(base, bodies, n_clients, attack_s, attacker))
+    ratio = loaded["p99_ms"] / quiet["p99_ms"]
+    return {"clients": n_clients, "quiet": quiet, "under_attack": loaded,
+            "p99_ratio": round(ratio, 2), "within_target": ratio <= P99_FACTOR}
+
+
+# ---------------------------------------------------------------------------------- main
+
+
+def _pg_schema() -> tuple[str, Any]:
+    import sqlalchemy as sa
+
+    name = f"quadloc_adv_{uuid.uuid4().hex[:10]}"
+    admin = sa.create_engine(PG_BASE)
+    with admin.begin() as conn:
+        conn.execute(sa.text(f'CREATE SCHEMA "{name}"'))
+
+    def drop() -> None:
+        with admin.begin() as conn:
+            conn.execute(sa.text(f'DROP SCHEMA "{name}" CASCADE'))
+        admin.dispose()
+
+    return f"{PG_BASE}?options=-csearch_path%3D{name}", drop
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    from maps.demo import load_demo_map
+    from service.localization.types import METRICS
+    from service.settings import Settings
+
+    defaults = Settings()
+    solve_ms = defaults.solve_time_budget_ms
+    batch_ms = defaults.batch_time_budget_ms
+    requests: list[dict[str, Any]] = []
+    with tempfile.TemporaryDirectory(prefix="quadloc-adv-") as tmp:
+        drop = None
+        url = f"sqlite:///{Path(tmp) / 'adv.db'}"
+        if args.postgres:
+            url, drop = _pg_schema()
+        extra = dict(kv.split("=", 1) for kv in args.env)
+        proc, base = start_server(Path(tmp), url, extra)
+        try:
+            with httpx.Client(base_url=base, timeout=120.0) as c:
+                crowd1 = crowd_map("crowd1", args.objects, 1)
+                crowd8 = crowd_map("crowd8", args.objects, 8)
+                warm = worst_frame(["L0"], n_det=4)
+                c.post("/v1/maps/chess/localize", json=build_frames(1)[0][0])
+                idle = _status(proc.pid)["VmRSS"]
+                pid = proc.pid
+                body_kb = len(json.dumps(crowd1)) / 1024
+                requests.append(one_request(c, pid, idle, f"create map of {args.objects} "
+                                            f"objects ({body_kb:.0f} KB)", "POST", "/v1/maps",
+                                            crowd1, None))
+                c.post("/v1/maps", json=crowd8)
+                for map_id in ("crowd1", "crowd8"):  # load, compile + cache the maps
+                    while c.post(f"/v1/maps/{map_id}/localize", json=warm).status_code == 503:
+                        time.sleep(0.2)  # 503 map-loading while the replica loads it
+                idle_loaded = _status(pid)["VmRSS"]
+                etag = c.get("/v1/maps/crowd1").headers["etag"]
+                requests.append(one_request(c, pid, idle, "get the map", "GET", "/v1/maps/crowd1",
+                                            None, None))
+                requests.append(one_request(c, pid, idle, "update the map (PUT)", "PUT",
+                                            "/v1/maps/crowd1", {**crowd1, "name": "v2"}, None,
+                                            {"If-Match": etag}))
+                t_put = time.perf_counter()
+                requests.append(one_request(
+                    c, pid, idle, "first localize on the new version (503 map-loading while it "
+                    "is parsed + compiled, once per version and replica)", "POST",
+                    "/v1/maps/crowd1/localize", warm, solve_ms))
+                while c.post("/v1/maps/crowd1/localize", json=warm).status_code == 503:
+                    time.sleep(0.2)
+                requests.append({"name": "... the new version served after (background load)",
+                                 "status": 200, "wall_ms": round((time.perf_counter() - t_put)
+                                                                 * 1e3, 1), "budget_ms": None,
+                                 "peak_rss_above_idle_mb": round(_status(pid)["VmHWM"] - idle,
+                                                                 1)})
+                requests.append(one_request(c, pid, idle, "get the new version (cached)", "GET",
+                                            "/v1/maps/crowd1", None, None))
+                one_label = ["L0"]
+                eight = [f"L{i}" for i in range(8)]
+                chess_labels = list(load_demo_map().categories)
+                cases = [("crowd1", one_label, "level_set", False),
+                         ("crowd1", one_label, "level_set", True),
+                         ("crowd8", eight, "level_set", False),
+                         ("chess", chess_labels, "level_set", False)]
+                cases += [("crowd1", one_label, m, False) for m in METRICS if m != "level_set"]
+                for map_id, labels, metric, prior in cases:
+                    name = (f"localize {map_id}: 256 detections of {len(labels)} label(s), "
+                            f"{metric}{', prior' if prior else ''}")
+                    requests.append(one_request(
+                        c, pid, idle, name, "POST", f"/v1/maps/{map_id}/localize",
+                        worst_frame(labels, metric=metric, prior=prior), solve_ms))
+                    print(json.dumps(requests[-1]), file=sys.stderr)
+                frames = [worst_frame(one_label, seed=k) for k in range(defaults.max_batch_frames)]
+                requests.append(one_request(
+                    c, pid, idle, f"batch of {len(frames)} worst frames on crowd1", "POST",
+                    "/v1/maps/crowd1/localize:batch", {"frames": frames}, batch_ms))
+                print(json.dumps(requests[-1]), file=sys.stderr)
+            attacker = {"path": "/v1/maps/crowd1/localize", "body": worst_frame(one_label)}
+            inter = interference(base, args.clients, args.quiet, args.attack, attacker)
+            final_rss = _status(proc.pid)["VmRSS"]
+        finally:
+            proc.terminate()
+            try:
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+            if drop is not None:
+                drop()
+    timed = [r for r in requests if "within_budget" in r]
+    worst_rss = max(r["peak_rss_above_idle_mb"] for r in requests)
+    return {
+        "store": "postgresql" if args.postgres else "sqlite",
+        "objects": args.objects, "solve_budget_ms": solve_ms, "batch_budget_ms": batch_ms,
+        "idle_rss_mb": round(idle, 1), "idle_rss_with_maps_loaded_mb": round(idle_loaded, 1),
+        "final_rss_mb": round(final_rss, 1),
+        "requests": requests,
+        "all_within_budget": all(r["within_budget"] for r in timed),
+        "worst_peak_rss_above_idle_mb": worst_rss,
+        "rss_within_target": worst_rss <= RSS_TARGET_MB,
+        "no_5xx_but_503": all(r["status"] < 500 or r["status"] == 503 for r in requests),
+        "interference": inter,
+    }
+
+
+def to_markdown(report: dict[str, Any]) -> str:
+    lines = [
+        f"## Hostile and heavy requests, {report['store']} (`bench/adversarial.py`)",
+        "",
+        f"Command: `{report['command']}` ({report['machine']}; load average "
+        f"{report['load_average_start']} at start, {report['load_average_end']} at end: the "
+        "machine was shared with other engineers' jobs, so wall times are taken under load).",
+        "",
+        f"One `quadloc serve` process (default settings: solve budget "
+        f"{report['solve_budget_ms']:.0f} ms, batch budget {report['batch_budget_ms']:.0f} ms), "
+        f"{report['store']} store, maps of {report['objects']} objects crowded in front of the "
+        f"camera. Idle RSS {report['idle_rss_mb']} MB ({report['idle_rss_with_maps_loaded_mb']}"
+        " MB with both crowd maps compiled and cached). Each request alone; peak RSS = the "
+        "server's `VmHWM` after the request with the mark reset before it, minus idle.",
+        "",
+        "| request | status | wall ms | limit ms (1.2 x budget + 50) | slowest solve ms "
+        "(server's `timings_ms.total`) | peak RSS above idle MB |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in report["requests"]:
+        limit = f"{r['limit_ms']:.0f}" if "limit_ms" in r else "(no budget)"
+        mark = "" if r.get("within_budget", True) else " **over**"
+        solve = f"{r['server_total_ms_max']:.0f}" if "server_total_ms_max" in r else ""
+        lines.append(f"| {r['name']} | {r['status']} | {r['wall_ms']:.0f}{mark} | {limit} | "
+                     f"{solve} | {r['peak_rss_above_idle_mb']:.0f} |")
+    inter = report["interference"]
+    lines += [
+        "",
+        f"Every timed request within its limit: **{report['all_within_budget']}**; worst peak "
+        f"RSS above idle **{report['worst_peak_rss_above_idle_mb']:.0f} MB** (target <= "
+        f"{RSS_TARGET_MB:.0f}); no 5xx other than 503: **{report['no_5xx_but_503']}**.",
+        "",
+        f"Interference: {inter['clients']} closed-loop clients posting demo-map frames; quiet "
+        f"p50 / p99 {inter['quiet']['p50_ms']} / {inter['quiet']['p99_ms']} ms "
+        f"({inter['quiet']['requests']} requests); with one client posting worst-case frames "
+        f"back to back ({inter['under_attack'].get('attack_requests')} of them, slowest "
+        f"{inter['under_attack'].get('attack_wall_ms_max')} ms): p50 / p99 "
+        f"{inter['under_attack']['p50_ms']} / {inter['under_attack']['p99_ms']} ms "
+        f"({inter['under_attack']['requests']} requests, errors "
+        f"{inter['under_attack']['errors'] or 'none'}). p99 ratio **{inter['p99_ratio']}** "
+        f"(target <= {P99_FACTOR:.0f}). The attacker's own slowest request while sharing the "
+        f"CPU with them: {inter['under_attack'].get('attack_wall_ms_max')} ms (limit "
+        f"{SLOW_FACTOR * report['solve_budget_ms'] + SLACK_MS:.0f} ms).",
+    ]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--objects", type=int, default=10_000, help="objects per crowd map")
+    parser.add_argument("--clients", type=int, default=4, help="normal closed-loop clients")
+    parser.add_argument("--quiet", type=float, default=8.0, help="seconds without attacker")
+    parser.add_argument("--attack", type=float, default=8.0, help="seconds with attacker")
+    parser.add_argument("--postgres", action="store_true",
+                        help="PostgreSQL at 127.0.0.1:5432/test (a throw-away schema)")
+    parser.add_argument("--env", nargs="*", default=[], metavar="QUADLOC_X=V",
+                        help="extra server settings (default: none, the defaults)")
+    parser.add_argument("--json", help="write the JSON report here")
+    parser.add_argument("--write-results", action="store_true",
+                        help="write the 'adversarial' section of docs/results.md")
+    args = parser.parse_args(argv)
+    load_start = ", ".join(f"{x:.1f}" for x in os.getloadavg())
+    report = run(args)
+    command = "python -m bench.adversarial " + " ".join(argv if argv is not None
+                                                         else sys.argv[1:])
+    report = {"command": command.strip(),
+              "machine": f"{os.cpu_count()} CPUs, {platform.python_implementation()} "
+                         f"{platform.python_version()}",
+              "load_average_start": load_start,
+              "load_average_end": ", ".join(f"{x:.1f}" for x in os.getloadavg()), **report}
+    text = json.dumps(report, indent=2)
+    if args.json:
+        Path(args.json).write_text(text + "\n")
+    print(text)
+    if args.write_results:
+        from bench.results_doc import update_results_section
+
+        section = "adversarial-postgresql" if args.postgres else "adversarial"
+        update_results_section(section, to_markdown(report))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,120 @@
+"""The visual inspector: a localization drawn as SVG, and the ``/inspector`` web page.
+
+* ``POST /v1/maps/{map_id}/localize`` with ``Accept: image/svg+xml`` answers the frame drawn
+  (:func:`render_localization_svg`): the detections (green inliers, red outliers), the map's
+  ellipsoids projected at the returned pose with the solver's own projection
+  (``factors.geometry.project_ellipsoid``), a line from each inlier to its object with IoU and
+  metric cost, and the JSON response embedded as ``<metadata id="quadloc-result">``. The drawing
+  itself is the SDK's :func:`sdk.overlay.render_overlay_svg` (one drawing for server and client).
+* ``GET /inspector``: a page (assets in ``service/api/static/inspector``, no CDN) to pick a map,
+  paste or upload a request, and see the overlay and a 3D view of the map's ellipsoids with the
+  camera frustum at the returned pose.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from fastapi import APIRouter, FastAPI
+from fastapi.responses import FileResponse, JSONResponse
+from fastapi.staticfiles import StaticFiles
+
+from factors.geometry import Camera, DegenerateProjectionError, invert_pose, project_ellipsoid
+from maps.compiled import CompiledMap
+from sdk.overlay import (
+    DrawnProjection,
+    ImageEllipse,
+    drawn_detections,
+    overlay_summary,
+    render_overlay_svg,
+)
+from service.api.convert import convert_pose
+from service.api.examples import LOCALIZE_EXAMPLE
+from service.api.schemas import LocalizeRequest, LocalizeResponse
+
+__all__ = ["SVG_MEDIA_TYPE", "install_inspector", "render_localization_svg", "wants_svg"]
+
+SVG_MEDIA_TYPE = "image/svg+xml"
+STATIC_DIR = Path(__file__).resolve().parent / "static" / "inspector"
+STATIC_URL = "/static/inspector"
+#: The inspector page's Content-Security-Policy: nothing from another origin, and no inline
+#: script at all (the SVG answers it inserts carry only an inline <style>).
+INSPECTOR_CSP = ("default-src 'self'; script-src 'self'; style-src 'self' 'unsafe-inline'; "
+                 "img-src 'self' data:; font-src 'self'; connect-src 'self'")
+
+
+def _media_ranges(accept: str) -> dict[str, float]:
+    """``{media type: q}`` of an ``Accept`` header (parameters other than ``q`` ignored)."""
+    out: dict[str, float] = {}
+    for part in accept.split(","):
+        fields = [f.strip() for f in part.split(";")]
+        if not fields[0]:
+            continue
+        q = 1.0
+        for f in fields[1:]:
+            if f.lower().startswith("q="):
+                try:
+                    q = float(f[2:])
+                except ValueError:
+                    q = 0.0
+        out[fields[0].lower()] = max(q, out.get(fields[0].lower(), 0.0))
+    return out
+
+
+def wants_svg(accept: str | None) -> bool:
+    """True when the ``Accept`` header asks for ``image/svg+xml`` (q > 0) at least as much as
+    for JSON (``application/json``, ``application/*`` or ``*/*``)."""
+    if not accept:
+        return False
+    ranges = _media_ranges(accept)
+    svg = ranges.get(SVG_MEDIA_TYPE, 0.0)
+    json_q = max(ranges.get("application/json", 0.0), ranges.get("application/*", 0.0))
+    return svg > 0.0 and svg >= json_q
+
+
+def _image_ellipse(e: Any) -> ImageEllipse:
+    return ImageEllipse(float(e.cx), float(e.cy), float(e.a), float(e.b), float(e.angle))
+
+
+def render_localization_svg(compiled: CompiledMap, request: LocalizeRequest,
+                            response: LocalizeResponse) -> str:
+    """The frame of ``request`` drawn with the answer ``response`` against ``compiled`` (the map
+    version the answer used); see the module docstring."""
+    req: dict[str, Any] = request.model_dump(mode="json")
+    resp: dict[str, Any] = response.model_dump(mode="json")
+    c = request.camera
+    projections: list[DrawnProjection] = []
+    pose = response.world_from_camera
+    if response.localized and pose is not None:
+        world_from_camera = convert_pose(np.array(pose.matrix), pose.convention, "opencv")
+        camera = Camera(c.fx, c.fy, c.cx, c.cy, c.width, c.height)
+        camera_from_world = invert_pose(world_from_camera)
+        for object_id, category, ellipsoid in zip(compiled.object_ids, compiled.categories,
+                                                  compiled.ellipsoids, strict=True):
+            try:
+                ellipse = _image_ellipse(project_ellipsoid(camera, camera_from_world, ellipsoid))
+            except DegenerateProjectionError:
+                ellipse = None
+            projections.append(DrawnProjection(object_id, category, ellipse))
+    detections = drawn_detections(req, resp)
+    return render_overlay_svg(c.width, c.height, detections, projections,
+                              overlay_summary(resp, len(detections)), metadata=resp)
+
+
+def install_inspector(app: FastAPI) -> None:
+    """Add ``/inspector``, its example request and its static assets to ``app``."""
+    app.mount(STATIC_URL, StaticFiles(directory=STATIC_DIR), name="inspector-static")
+    router = APIRouter(include_in_schema=False)
+
+    @router.get("/inspector")
+    def inspector_page() -> FileResponse:
+        return FileResponse(STATIC_DIR / "index.html", media_type="text/html",
+                            headers={"Content-Security-Policy": INSPECTOR_CSP})
+
+    @router.get("/inspector/example.json")
+    def inspector_example() -> JSONResponse:
+        return JSONResponse(LOCALIZE_EXAMPLE)
+
+    app.include_router(router)

@@ -1,0 +1,72 @@
+"""Loading a map version for a localization without exceeding the request's time budget.
+
+The first use of a map version on a replica parses and validates its stored document and
+compiles it (~0.3-0.5 ms per object: seconds for a 10,000-object map, more on a loaded machine;
+docs/deployment.md, "Worst-case cost of a request"). Later requests hit the store's cache. So
+that this one-off cost never holds a localization past its budget, :class:`MapLoader` runs the
+load in a background thread, shared by every request that wants the same map version at the
+same time (single flight), and waits for it at most ``max_wait_s`` (the solve budget). A request
+that gives up answers 503 ``map-loading`` with ``Retry-After``; the load goes on, and a retry
+finds the map ready.
+"""
+
+from __future__ import annotations
+
+import threading
+from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import TimeoutError as FutureTimeout
+
+from maps.compiled import CompiledMap
+from service.api.map_cache import MapCache
+
+__all__ = ["MapLoader", "MapStillLoading"]
+
+
+class MapStillLoading(Exception):  # noqa: N818 (a state, not a failure)
+    """The map version is still being loaded after the request's wait."""
+
+
+class MapLoader:
+    """Single-flight, time-bounded ``cache.get(map_id, version)`` (thread-safe)."""
+
+    def __init__(self, cache: MapCache, max_wait_s: float, workers: int = 2) -> None:
+        self.cache = cache
+        self.max_wait_s = max_wait_s
+        self._workers = workers
+        self._pool: ThreadPoolExecutor | None = self._new_pool()
+        self._pending: dict[tuple[str, int | None], Future[CompiledMap]] = {}
+        self._lock = threading.Lock()
+
+    def get(self, map_id: str, version: int | None = None) -> CompiledMap:
+        """The compiled map; raises the store's errors (``MapNotFound``...) or
+        :class:`MapStillLoading` after ``max_wait_s``."""
+        key = (map_id, version)
+        with self._lock:
+            future = self._pending.get(key)
+            fresh = future is None
+            if future is None:
+                if self._pool is None:  # closed by an app shutdown, then used again (tests)
+                    self._pool = self._new_pool()
+                future = self._pool.submit(self.cache.get, map_id, version)
+                self._pending[key] = future
+        if fresh:  # outside the lock: a future already done runs the callback right here
+            future.add_done_callback(lambda f, k=key: self._forget(k, f))
+        try:
+            return future.result(timeout=self.max_wait_s)
+        except FutureTimeout as exc:
+            raise MapStillLoading(f"map {map_id!r} is being loaded") from exc
+
+    def _forget(self, key: tuple[str, int | None], future: Future[CompiledMap]) -> None:
+        with self._lock:
+            if self._pending.get(key) is future:
+                del self._pending[key]
+
+    def _new_pool(self) -> ThreadPoolExecutor:
+        return ThreadPoolExecutor(max_workers=self._workers, thread_name_prefix="map-load")
+
+    def close(self) -> None:
+        """Stop the loader threads (pending loads finish); a later ``get`` starts new ones."""
+        with self._lock:
+            pool, self._pool = self._pool, None
+        if pool is not None:
+            pool.shutdown(wait=False, cancel_futures=True)

@@ -1,0 +1,146 @@
+"""Running the app under Uvicorn with connection-level limits (``quadloc serve``).
+
+Uvicorn alone bounds neither the size of request headers (its default ``httptools`` parser reads
+a 16 MB header) nor the time a client may take to send a request (a half-sent request, or a
+connection on which nothing is sent, is kept open forever: "slowloris"). Here:
+
+* the HTTP/1.1 parser is h11 with ``h11_max_incomplete_event_size =
+  QUADLOC_MAX_HEADER_BYTES``: a request line + headers larger than that is answered 400 and the
+  connection closed;
+* :class:`GuardedH11Protocol` closes a connection whose current request (request line, headers
+  and body) is not completely received ``QUADLOC_REQUEST_READ_TIMEOUT_S`` seconds after its
+  first byte (or after the connection opened, if nothing was sent), answering
+  ``408 Request Timeout`` when no response has started;
+* idle keep-alive connections are closed after ``QUADLOC_KEEP_ALIVE_TIMEOUT_S``;
+* glibc's malloc keeps at most :data:`MALLOC_ARENAS` arenas (``mallopt(M_ARENA_MAX)``, unless
+  ``MALLOC_ARENA_MAX`` is set): with one arena per thread (up to 8 x cores), memory freed by
+  one solver thread is not reused by the next and the RSS ratchets up (measured with
+  bench/adversarial.py: 440 MB after the run with the default, 284 MB with 2).
+
+While the app handles a request (all of it received) the read timer is off: the solve budget
+bounds that time. ``uvicorn service.api.app:create_app --factory`` still works but without
+these guards; deployments use ``quadloc serve`` (the Dockerfile does).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import ctypes
+import ctypes.util
+import os
+from typing import Any
+
+import h11
+import uvicorn
+from uvicorn.protocols.http.h11_impl import H11Protocol
+
+from service.settings import Settings
+
+__all__ = ["GuardedH11Protocol", "limit_malloc_arenas", "serve", "uvicorn_config"]
+
+#: glibc malloc arenas of a server process (see the module docstring).
+MALLOC_ARENAS = 2
+_M_ARENA_MAX = -8  # glibc <malloc.h>
+
+#: Used when the Uvicorn config carries no ``request_read_timeout_s`` (plain Uvicorn config).
+DEFAULT_REQUEST_READ_TIMEOUT_S = 10.0
+_RECEIVED = (h11.DONE, h11.MUST_CLOSE, h11.CLOSED, h11.ERROR, h11.SWITCHED_PROTOCOL)
+_TIMEOUT_RESPONSE = (b"HTTP/1.1 408 Request Timeout\r\ncontent-type: text/plain\r\n"
+                     b"connection: close\r\ncontent-length: 36\r\n\r\n"
+                     b"request not received in time; closed")
+
+
+class GuardedH11Protocol(H11Protocol):
+    """Uvicorn's h11 protocol with a deadline for receiving each complete request."""
+
+    def __init__(self, config: uvicorn.Config, *args: Any, **kwargs: Any) -> None:
+        super().__init__(config, *args, **kwargs)
+        self.request_read_timeout_s = float(getattr(config, "request_read_timeout_s",
+                                                    DEFAULT_REQUEST_READ_TIMEOUT_S))
+        self._read_timer: asyncio.TimerHandle | None = None
+
+    def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
+        super().connection_made(transport)
+        self._arm()  # a connection on which nothing is ever sent is closed too
+
+    def data_received(self, data: bytes) -> None:
+        super().data_received(data)
+        self._update()
+
+    def on_response_complete(self) -> None:
+        super().on_response_complete()
+        self._update()  # next request: idle (keep-alive timer) or already started (armed)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self._disarm()
+        super().connection_lost(exc)
+
+    def _update(self) -> None:
+        state = self.conn.their_state
+        if state in _RECEIVED or (state is h11.IDLE and not self.conn.trailing_data[0]):
+            self._disarm()  # the request is in (the app runs) or the connection is idle
+        else:
+            self._arm()  # a request is partly received: its deadline runs from its first byte
+
+    def _arm(self) -> None:
+        if self._read_timer is None:
+            self._read_timer = self.loop.call_later(self.request_read_timeout_s,
+                                                    self._read_timed_out)
+
+    def _disarm(self) -> None:
+        if self._read_timer is not None:
+            self._read_timer.cancel()
+            self._read_timer = None
+
+    def _read_timed_out(self) -> None:
+        self._read_timer = None
+        if self.transport.is_closing() or self.conn.their_state in _RECEIVED:
+            return
+        if self.cycle is None or not self.cycle.response_started:
+            self.transport.write(_TIMEOUT_RESPONSE)
+        if self.cycle is not None:
+            self.cycle.keep_alive = False
+        self.logger.info("closed a connection: request not received within %.1f s",
+                         self.request_read_timeout_s)
+        self.transport.close()
+
+
+def uvicorn_config(settings: Settings, host: str, port: int, *, workers: int = 1,
+                   log_level: str | None = None, access_log: bool = True) -> uvicorn.Config:
+    """The Uvicorn config of ``quadloc serve``: the app factory, h11 with the header limit,
+    the keep-alive timeout and :class:`GuardedH11Protocol` with the request read timeout."""
+    config = uvicorn.Config(
+        "service.api.app:create_app", factory=True, host=host, port=port, workers=workers,
+        log_level=log_level or settings.log_level, access_log=access_log,
+        http=GuardedH11Protocol, h11_max_incomplete_event_size=settings.max_header_bytes,
+        timeout_keep_alive=settings.keep_alive_timeout_s)  # type: ignore[arg-type] (float ok)
+    config.request_read_timeout_s = settings.request_read_timeout_s  # type: ignore[attr-defined]
+    return config
+
+
+def limit_malloc_arenas(arenas: int = MALLOC_ARENAS) -> bool:
+    """``mallopt(M_ARENA_MAX, arenas)`` on glibc unless ``MALLOC_ARENA_MAX`` is set (then glibc
+    already applied it); False where there is no glibc (nothing to do)."""
+    if os.environ.get("MALLOC_ARENA_MAX"):
+        return False
+    name = ctypes.util.find_library("c")
+    try:
+        libc = ctypes.CDLL(name) if name else None
+        return bool(libc is not None and libc.mallopt(_M_ARENA_MAX, int(arenas)) == 1)
+    except (OSError, AttributeError):
+        return False
+
+
+def serve(config: uvicorn.Config) -> None:
+    """Run the server like ``uvicorn.run`` (several worker processes when configured), with
+    :func:`limit_malloc_arenas` (inherited by worker processes through the environment)."""
+    if limit_malloc_arenas():
+        os.environ["MALLOC_ARENA_MAX"] = str(MALLOC_ARENAS)  # for spawned worker processes
+    server = uvicorn.Server(config)
+    if config.workers > 1:
+        from uvicorn.supervisors import Multiprocess
+
+        sock = config.bind_socket()
+        Multiprocess(config, target=server.run, sockets=[sock]).run()
+    else:
+        server.run()
