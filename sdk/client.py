@@ -452,6 +452,17 @@ class QuadLocClient(_Base):
         assert if_match is not None
         return self._map_record(self._send(self._update_map_call(map_id, document, if_match)))
 
+    def build_map(self, recording: Any, *, map_id: str, if_match: str | None = None,
+                  wait: bool = True, on_progress: Callable[..., None] | None = None,
+                  poll_interval_s: float = 0.5, timeout_s: float = 600.0) -> Any:
+        """Build a map from a recording (``POST /v1/maps:build``); see :mod:`sdk.build`.
+        Returns the :class:`sdk.build.BuildJob` (finished unless ``wait=False``)."""
+        from sdk.build import build_map
+
+        return build_map(self, recording, map_id=map_id, if_match=if_match, wait=wait,
+                         on_progress=on_progress, poll_interval_s=poll_interval_s,
+                         timeout_s=timeout_s)
+
     def delete_map(self, map_id: str) -> None:
         """Delete a map and all its versions."""
         self._send(self._delete_map_call(map_id))
@@ -587,6 +598,16 @@ class AsyncQuadLocClient(_Base):
         return self._map_record(
             await self._send(self._update_map_call(map_id, document, if_match))
         )
+
+    async def build_map(self, recording: Any, *, map_id: str, if_match: str | None = None,
+                        wait: bool = True, on_progress: Callable[..., None] | None = None,
+                        poll_interval_s: float = 0.5, timeout_s: float = 600.0) -> Any:
+        """Build a map from a recording (``POST /v1/maps:build``); see :mod:`sdk.build`."""
+        from sdk.build import abuild_map
+
+        return await abuild_map(self, recording, map_id=map_id, if_match=if_match, wait=wait,
+                                on_progress=on_progress, poll_interval_s=poll_interval_s,
+                                timeout_s=timeout_s)
 
     async def delete_map(self, map_id: str) -> None:
         await self._send(self._delete_map_call(map_id))

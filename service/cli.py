@@ -32,6 +32,7 @@ examples (local database):
   quadloc maps export chess --version 1 > chess_v1.json
   quadloc localize --map chess docs/examples/localize_chess.json
   quadloc openapi --output docs/openapi.json     # regenerate the published schema
+  quadloc maps build recording.json --map-id room   # build a map from posed detections
 
 examples (a running server, through the SDK):
   quadloc --url http://127.0.0.1:8000 maps list
@@ -596,6 +597,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("map_id", metavar="ID")
     db(p)
     p.set_defaults(func=cmd_maps_delete)
+    from service.cli_build import add_build_parser  # issue 16: quadloc maps build
+
+    add_build_parser(msub, db, _store, _settings, lambda a: _client(a) if _server(a) else None)
 
     p = sub.add_parser("localize", formatter_class=fmt, help="localize frames (prints the pose)",
                        description="Localize the frame in each FILE (the body of POST "

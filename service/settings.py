@@ -195,6 +195,27 @@ class Settings(BaseSettings):
         default=5.0, gt=0, le=300,
         description="Idle keep-alive connections are closed after this many seconds.",
     )
+    max_build_frames: int = Field(default=2000, ge=1, le=100_000,
+                                  description="Frames per map-building recording.")
+    max_build_detections: int = Field(default=20_000, ge=1,
+                                      description="Detections per map-building recording.")
+    build_time_budget_s: float = Field(
+        default=120.0, gt=0, le=3600.0,
+        description="Wall time of one map build; association past it fails the job "
+                    "(time_budget_exceeded), refinement past it keeps its estimate so far.",
+    )
+    max_concurrent_builds: int = Field(
+        default=1, ge=1, le=16,
+        description="Builds run at once per process (threads: they share the GIL with the "
+                    "solves; scale builds out with replicas).",
+    )
+    max_queued_builds: int = Field(default=4, ge=0, le=1000,
+                                   description="Builds waiting per process; more -> 503.")
+    build_stale_after_s: float = Field(
+        default=30.0, ge=5.0,
+        description="A queued/running build job silent this long lost its runner (replica "
+                    "restarted) and is marked failed (runner_lost).",
+    )
 
     map_cache_ttl_s: float = Field(
         default=1.0, ge=0,

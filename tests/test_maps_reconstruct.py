@@ -83,7 +83,7 @@ def test_factor_jacobian_matches_numerical_derivative() -> None:
     observed = project_ellipsoid(cam, cfw, Ellipsoid(c + 0.05, axes * 1.1, R))
     xh = np.column_stack([observed.contour_points(7), np.ones(7)])
     pk, ak = gtsam.symbol("e", 0), gtsam.symbol("a", 0)
-    factor = _make_factor(P, xh, gtsam.noiseModel.Isotropic.Sigma(7, 1.0), pk, ak)
+    factor = _make_factor(P[None], xh[None], np.ones(1), pk, ak)  # one view, unit weight
     values = gtsam.Values()
     values.insert(pk, gtsam.Pose3(gtsam.Rot3(R), c))
     values.insert(ak, np.log(axes))

@@ -20,6 +20,7 @@ from fastapi.openapi.utils import get_openapi
 from maps.demo import DEMO_MAP_ID, load_demo_map
 from maps.errors import MapAlreadyExists, MapNotFound
 from maps.store import MapStore
+from service.api.build_jobs import install_map_building
 from service.api.deps import check_body_depth
 from service.api.docs_pages import install_offline_docs
 from service.api.errors import PROBLEM_MEDIA_TYPE, install_error_handlers
@@ -142,6 +143,7 @@ def create_app(settings: Settings | None = None, *, store: MapStore | None = Non
     install_error_handlers(app)
     app.include_router(localize.router)
     app.include_router(maps.router)
+    install_map_building(app, store, settings, app.state.map_cache)
     app.include_router(health.router)
     app.state.sessions = sessions.session_store_from_env()
     app.include_router(sessions.router)

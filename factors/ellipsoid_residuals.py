@@ -1,0 +1,172 @@
+"""The level-set residual as a function of BOTH the camera pose and the ellipsoid (pure numpy).
+
+Localization (:mod:`factors.pose_residuals`, metric ``level_set``) moves only the camera; map
+building moves the ellipsoids (and optionally the cameras). Both minimise the same residual at
+the same samples of the detection (``factors.metrics.level_set_sample_points``, non-adaptive
+layout; equality with :class:`factors.pose_residuals.PoseResidualModel` is tested)::
+
+    r(x) = Phi_det(x) - Phi_proj(x),   Phi_proj(x) = 1 - s n^T A^-1 n
+
+with ``n = K^-1 (x, y, 1)``, ``A = [R|t]_camera_from_world Q* [R|t]^T`` (3x3, the projected
+dual conic up to ``K``: ``C* = K A K^T``) and ``s = A[2, 2]``. The one derivative this module
+computes is the gradient w.r.t. ``A``::
+
+    dr = <G, dA>,   G = g e3 e3^T - s u u^T,   u = A^-1 n,  g = n . u
+
+and every Jacobian is that gradient contracted with ``dA`` along a tangent direction:
+
+* camera pose ``world_from_camera`` (GTSAM Pose3 right perturbation ``xi = [omega, v]``):
+  ``dA = -[w]x A - A [w]x^T + v c^T + c v^T`` (``c`` the ellipsoid centre in the camera frame);
+* ellipsoid pose (ellipsoid frame -> world, right perturbation ``[omega, v]``) and log
+  semi-axes: ``dA = P dQ* P^T`` with :func:`dual_quadric_jacobians` and ``P = [R|t]_cw``.
+
+Residuals are dimensionless (``Phi`` units). The factor weighting is that of localization:
+``factors.pose_factors.make_noise_model`` (isotropic std ``sqrt(sigma)``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from factors.geometry import Camera, Ellipse, level_values
+
+__all__ = [
+    "LevelSetSamples",
+    "camera_frame_dual_conic",
+    "dual_quadric",
+    "dual_quadric_jacobians",
+    "level_set_residual_and_gradient",
+    "level_set_samples",
+    "observation_residual",
+    "stack_samples",
+]
+
+_SKEW = np.array([[[0, 0, 0], [0, 0, -1], [0, 1, 0]],
+                  [[0, 0, 1], [0, 0, 0], [-1, 0, 0]],
+                  [[0, -1, 0], [1, 0, 0], [0, 0, 0]]], dtype=float)
+
+
+class LevelSetSamples:
+    """Fixed samples of one detection: normalised rays ``n`` (3, M) and ``Phi_det - 1`` (M,).
+
+    Built by :func:`level_set_samples` from ``factors.metrics.level_set_sample_points`` (the
+    localization layout, ``adaptive=False``) so both problems sample identically.
+    """
+
+    __slots__ = ("n", "phi_det_minus_1", "points")
+
+    def __init__(self, points: np.ndarray, n: np.ndarray, phi_det_minus_1: np.ndarray) -> None:
+        self.points = points
+        self.n = n
+        self.phi_det_minus_1 = phi_det_minus_1
+
+
+def level_set_samples(detection: Ellipse, camera: Camera,
+                      metric_options: dict | None = None) -> LevelSetSamples:
+    """The level-set samples of ``detection`` (px) for ``camera``; ``metric_options`` as for the
+    ``level_set`` metric (``n_azimuths``, ``n_levels``, ``scale``; ``adaptive`` is forced off:
+    without a pose there is no misalignment to adapt to)."""
+    from factors import metrics
+
+    opts = {k: v for k, v in (metric_options or {}).items() if k != "adaptive"}
+    pts = metrics.level_set_sample_points(detection, None, adaptive=False, **opts)
+    n = np.ones((3, len(pts)))
+    n[0] = (pts[:, 0] - camera.cx) / camera.fx
+    n[1] = (pts[:, 1] - camera.cy) / camera.fy
+    phi = level_values(np.array([detection.params()]), pts[None])[0] - 1.0
+    return LevelSetSamples(pts, n, phi)
+
+
+def dual_quadric(rotation: np.ndarray, center: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """``Q* = T diag(a^2, b^2, c^2, -1) T^T`` (4x4) of an ellipsoid (rotation ellipsoid ->
+    world, centre m, semi-axes m)."""
+    Q = np.empty((4, 4))
+    Q[:3, :3] = (rotation * axes**2) @ rotation.T - np.outer(center, center)
+    Q[:3, 3] = Q[3, :3] = -center
+    Q[3, 3] = -1.0
+    return Q
+
+
+def dual_quadric_jacobians(rotation: np.ndarray, center: np.ndarray,
+                           axes: np.ndarray) -> np.ndarray:
+    """``dQ*/d theta`` (9, 4, 4) for ``theta = [omega (3), v (3), d log axes (3)]``.
+
+    ``omega, v``: the Pose3 right perturbation of the ellipsoid pose (rotation ellipsoid ->
+    world, translation = centre): ``R -> R Exp(omega)``, ``center -> center + R v``.
+    """
+    R = rotation
+    D = np.diag(axes**2)
+    dQ = np.zeros((9, 4, 4))
+    inner = np.einsum("kij,jl->kil", _SKEW, D) - np.einsum("ij,kjl->kil", D, _SKEW)
+    dQ[0:3, :3, :3] = np.einsum("ij,kjl,ml->kim", R, inner, R)
+    for k in range(3):
+        r = R[:, k]
+        dQ[3 + k, :3, :3] = -(np.outer(r, center) + np.outer(center, r))
+        dQ[3 + k, :3, 3] = dQ[3 + k, 3, :3] = -r
+        dQ[6 + k, :3, :3] = 2.0 * axes[k] ** 2 * np.outer(r, r)
+    return dQ
+
+
+def camera_frame_dual_conic(camera_from_world: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """``A = [R|t] Q* [R|t]^T`` (3x3): the projected dual conic without ``K``."""
+    P = camera_from_world[:3, :]
+    return P @ Q @ P.T
+
+
+def level_set_residual_and_gradient(
+    A: np.ndarray, samples: LevelSetSamples, gradient: bool = True,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Residuals ``r`` (M,) and gradients ``dr/dA`` (M, 3, 3) (None if not ``gradient``).
+
+    Batched: ``A`` (V, 3, 3) with ``samples.n`` (V, 3, M) and ``samples.phi_det_minus_1``
+    (V, M) give ``r`` (V, M) and gradients (V, M, 3, 3)."""
+    u = np.linalg.solve(A, samples.n)  # (..., 3, M)
+    g = np.einsum("...km,...km->...m", samples.n, u)
+    s = A[..., 2, 2]
+    r = samples.phi_det_minus_1 + s[..., None] * g
+    if not gradient:
+        return r, None
+    G = -s[..., None, None, None] * np.einsum("...im,...jm->...mij", u, u)
+    G[..., 2, 2] += g
+    return r, G
+
+
+def stack_samples(samples: list[LevelSetSamples]) -> LevelSetSamples:
+    """Samples of V detections with the same layout stacked for the batched evaluation."""
+    return LevelSetSamples(None, np.stack([s.n for s in samples]),
+                           np.stack([s.phi_det_minus_1 for s in samples]))
+
+
+def observation_residual(
+    camera_from_world: np.ndarray, rotation: np.ndarray, center: np.ndarray, axes: np.ndarray,
+    samples: LevelSetSamples, jacobians: bool = True,
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """Residual (M,) of one detection against one ellipsoid seen from one camera, with the
+    Jacobians w.r.t. the ellipsoid ``[omega, v, d log axes]`` (M, 9) and w.r.t. the camera's
+    ``world_from_camera`` Pose3 tangent ``[omega, v]`` (M, 6) when ``jacobians``.
+
+    Batched over V views of the same ellipsoid: ``camera_from_world`` (V, 4, 4) with
+    :func:`stack_samples` give (V, M), (V, M, 9), (V, M, 6).
+
+    The caller must ensure the ellipsoid is in front of the camera (positive depth margin,
+    :func:`factors.geometry.ellipsoid_depth_margins`): otherwise ``A`` is no ellipse's conic.
+    """
+    Q = dual_quadric(rotation, center, axes)
+    P = camera_from_world[..., :3, :]
+    A = P @ Q @ np.swapaxes(P, -1, -2)
+    r, G = level_set_residual_and_gradient(A, samples, jacobians)
+    if not jacobians:
+        return r, None, None
+    dQ = dual_quadric_jacobians(rotation, center, axes)
+    dA = np.einsum("...ai,kij,...bj->...kab", P, dQ, P)  # (..., 9, 3, 3)
+    J_ell = np.einsum("...mab,...kab->...mk", G, dA)
+    # camera: dA = -[w]x A - A [w]x^T + v c^T + c v^T, c = centre in the camera frame
+    c = P @ np.append(center, 1.0)  # (..., 3)
+    SA = np.einsum("kij,...jl->...kil", _SKEW, A)  # (..., 3, 3, 3)
+    dAc = np.empty((*A.shape[:-2], 6, 3, 3))
+    dAc[..., :3, :, :] = -SA - np.swapaxes(SA, -1, -2)
+    E = np.eye(3)
+    dAc[..., 3:, :, :] = (E[:, :, None] * c[..., None, None, :]
+                          + c[..., None, :, None] * E[:, None, :])
+    J_cam = np.einsum("...mab,...kab->...mk", G, dAc)
+    return r, J_ell, J_cam

@@ -1,0 +1,420 @@
+"""Association of detections across posed views into objects, without track ids.
+
+Per label (detections of different labels never share an object):
+
+1. **Rays.** Each detection ``i`` gives the ray ``o_i + t d_i`` (world) from its camera centre
+   through its ellipse centre, and its angular size ``rho_i = sqrt(a b) / f`` (rad), so an
+   object on the ray at depth ``t`` has a size of about ``t rho_i`` m.
+2. **Hypotheses from pairs.** For every pair of detections in different frames whose rays
+   diverge by at least ``min_pair_angle_deg``, the closest points of the two rays
+   (``t_i, t_j > 0``) are a candidate object centre when the rays pass within
+   ``ray_tolerance`` x the implied size of each other and the two implied sizes agree within a
+   factor ``size_ratio``.
+3. **Support and greedy clustering.** A candidate's support is the number of frames with a
+   detection whose ray passes within ``ray_tolerance x size`` of it with a consistent implied
+   size (at most one detection per frame: the closest). The best-supported candidate is
+   re-triangulated from its supporters (twice), accepted if it has ``min_views`` supporters
+   whose rays spread by at least ``min_spread_deg``, and its supporters are removed; repeat.
+4. **Verification by reprojection.** Each hypothesis is reconstructed
+   (:func:`maps.reconstruct.reconstruct_ellipsoid`, Rubino's linear estimate + LM) and
+   projected into every frame of the label's detections: supporters whose IoU with the
+   projection is below ``min_iou`` are dropped, unassigned detections of the label whose IoU is at
+   least ``recruit_iou`` are added (one per frame), and the object is reconstructed again.
+   An object left with fewer than ``min_views`` views is dissolved.
+5. Detections in no object are **rejected** (returned with the reason ``fits_no_object``).
+
+With track ids (:attr:`Observation.track_id`), detections are grouped by ``(label,
+track_id)`` directly; detections without one go through the steps above.
+
+Coordinates: world frame of the recording's ``world_from_camera`` poses, metres.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from factors.geometry import Camera, Ellipse, Ellipsoid, invert_pose, project_ellipsoid
+from factors.overlap import intersection_area
+from maps.building.recording import Observation
+from maps.reconstruct import ReconstructionError, reconstruct_ellipsoid
+
+__all__ = ["AssociationOptions", "ObjectHypothesis", "associate", "ellipse_iou", "touches_border"]
+
+
+@dataclass(frozen=True)
+class AssociationOptions:
+    """Thresholds of :func:`associate` (module docstring); angles in degrees."""
+
+    min_views: int = 5
+    min_pair_angle_deg: float = 3.0
+    min_spread_deg: float = 3.0
+    ray_tolerance: float = 0.5
+    size_ratio: float = 2.0
+    min_iou: float = 0.3
+    recruit_iou: float = 0.5
+    max_candidates: int = 1500
+    max_init_views: int = 15
+    init_log_axes_prior_sigma: float = 1.0
+    merge_factor: float = 1.0
+    max_shared_frames: float = 0.1
+    ghost_ratio: float = 3.0
+    seed: int = 0
+
+
+@dataclass
+class ObjectHypothesis:
+    """An associated object: its ``label``, observation indices (into the recording's
+    ``observations``), the initial ellipsoid and how it was associated (``geometric`` or
+    ``track:<id>``)."""
+
+    label: str
+    observations: list[int]
+    ellipsoid: Ellipsoid | None = None
+    source: str = "geometric"
+    ious: dict[int, float] = field(default_factory=dict)
+
+
+def ellipse_iou(e1: Ellipse, e2: Ellipse) -> float:
+    """Intersection over union of two filled ellipses (exact areas, ``factors.overlap``)."""
+    inter = intersection_area(e1.params(), e2.params())
+    union = e1.area + e2.area - inter
+    return float(inter / union) if union > 0 else 0.0
+
+
+def _rays(obs: Sequence[Observation], camera: Camera, T_wc: np.ndarray
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Origins (n, 3), unit directions (n, 3) and angular sizes (n,) of the detections."""
+    f = np.array([o.frame for o in obs])
+    d = np.stack([np.array([(o.ellipse.cx - camera.cx) / camera.fx,
+                            (o.ellipse.cy - camera.cy) / camera.fy, 1.0]) for o in obs])
+    d = np.einsum("nij,nj->ni", T_wc[f, :3, :3], d)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    rho = np.array([math.sqrt(o.ellipse.a * o.ellipse.b) for o in obs]) / math.sqrt(
+        camera.fx * camera.fy)
+    return T_wc[f, :3, 3], d, rho
+
+
+def _pair_candidates(o: np.ndarray, d: np.ndarray, rho: np.ndarray, frames: np.ndarray,
+                     opt: AssociationOptions, rng: np.random.Generator
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    n = len(o)
+    i, j = np.triu_indices(n, 1)
+    keep = frames[i] != frames[j]
+    i, j = i[keep], j[keep]
+    cos = np.einsum("ij,ij->i", d[i], d[j])
+    keep = cos < math.cos(math.radians(opt.min_pair_angle_deg))
+    i, j, cos = i[keep], j[keep], cos[keep]
+    w = o[i] - o[j]
+    a_dw = np.einsum("ij,ij->i", d[i], w)
+    b_dw = np.einsum("ij,ij->i", d[j], w)
+    den = 1.0 - cos * cos
+    ti = (cos * b_dw - a_dw) / den
+    tj = (b_dw - cos * a_dw) / den
+    pi = o[i] + ti[:, None] * d[i]
+    pj = o[j] + tj[:, None] * d[j]
+    si, sj = ti * rho[i], tj * rho[j]
+    gap = np.linalg.norm(pi - pj, axis=1)
+    size = 0.5 * (si + sj)
+    ok = (ti > 0.05) & (tj > 0.05) & (gap <= opt.ray_tolerance * size) \
+        & (np.abs(np.log(np.maximum(si, 1e-9) / np.maximum(sj, 1e-9))) <= math.log(opt.size_ratio))
+    X, S = 0.5 * (pi[ok] + pj[ok]), size[ok]
+    if len(X) > opt.max_candidates:
+        sel = rng.choice(len(X), opt.max_candidates, replace=False)
+        X, S = X[sel], S[sel]
+    return X, S
+
+
+def _support(X: np.ndarray, S: np.ndarray, o: np.ndarray, d: np.ndarray, rho: np.ndarray,
+             opt: AssociationOptions) -> tuple[np.ndarray, np.ndarray]:
+    """Consistency (m, n) bool and normalised ray distance (m, n) of candidates vs detections."""
+    v = X[:, None, :] - o[None, :, :]  # (m, n, 3)
+    t = np.einsum("mnk,nk->mn", v, d)
+    perp = np.linalg.norm(v - t[..., None] * d[None], axis=2)
+    implied = np.maximum(t, 1e-9) * rho[None]
+    dist = perp / S[:, None]
+    ok = (t > 0.05) & (dist <= opt.ray_tolerance) \
+        & (np.abs(np.log(implied / S[:, None])) <= math.log(opt.size_ratio))
+    return ok, dist
+
+
+def _one_per_frame(idx: np.ndarray, dist: np.ndarray, frames: np.ndarray) -> np.ndarray:
+    """Of detections ``idx`` keep the closest (smallest ``dist``) per frame."""
+    best: dict[int, int] = {}
+    for k in idx[np.argsort(dist[idx])]:
+        best.setdefault(int(frames[k]), int(k))
+    return np.array(sorted(best.values()), dtype=int)
+
+
+def _triangulate(o: np.ndarray, d: np.ndarray) -> np.ndarray:
+    proj = np.eye(3) - d[:, :, None] * d[:, None, :]
+    return np.linalg.solve(proj.sum(0), np.einsum("nij,nj->i", proj, o))
+
+
+def _spread_deg(d: np.ndarray) -> float:
+    return float(np.degrees(np.arccos(np.clip((d @ d.T).min(), -1.0, 1.0))))
+
+
+def _geometric_clusters(o: np.ndarray, d: np.ndarray, rho: np.ndarray, frames: np.ndarray,
+                        opt: AssociationOptions, rng: np.random.Generator,
+                        tick: Callable[[], None] | None = None) -> list[np.ndarray]:
+    X, S = _pair_candidates(o, d, rho, frames, opt, rng)
+    free = np.ones(len(o), dtype=bool)
+    clusters: list[np.ndarray] = []
+    if not len(X):
+        return clusters
+    ok_all, dist_all = _support(X, S, o, d, rho, opt)  # once per label; masked below
+    alive = np.ones(len(X), dtype=bool)
+    while alive.any() and free.sum() >= opt.min_views:
+        if tick is not None:
+            tick()
+        # support counted in detections of free rays (one per frame is enforced on members)
+        counts = np.where(alive, (ok_all & free[None]).sum(axis=1), -1)
+        best = int(np.argmax(counts))
+        if counts[best] < opt.min_views:
+            break
+        x, s = X[best], S[best]
+        ok = ok_all & free[None]
+        dist = dist_all
+        members = np.flatnonzero(ok[best])
+        dist_row = dist[best]
+        for _ in range(2):
+            members = _one_per_frame(members, dist_row, frames)
+            if len(members) < 2:
+                break
+            x = _triangulate(o[members], d[members])
+            t = np.einsum("nk,nk->n", x - o[members], d[members])
+            s = float(np.median(np.maximum(t, 1e-9) * rho[members]))
+            ok1, dist1 = _support(x[None], np.array([s]), o, d, rho, opt)
+            dist_row = dist1[0]
+            members = np.flatnonzero(ok1[0] & free)
+        if len(members):
+            members = _one_per_frame(members, dist_row, frames)
+        # drop the used candidate whatever happens, and the candidates it explains
+        near = np.linalg.norm(X - x, axis=1) <= opt.ray_tolerance * s
+        near[best] = True
+        alive &= ~near
+        if len(members) >= opt.min_views and _spread_deg(d[members]) >= opt.min_spread_deg:
+            clusters.append(members)
+            free[members] = False
+    return clusters
+
+
+def touches_border(ellipse: Ellipse, camera: Camera, margin_px: float = 4.0) -> bool:
+    """True if the ellipse's bounding box comes within ``margin_px`` of the image border (or
+    crosses it): the object is probably truncated, and its ellipse is that of the visible part."""
+    x0, y0, x1, y1 = ellipse.bbox()
+    return bool(x0 < margin_px or y0 < margin_px or x1 > camera.width - margin_px
+                or y1 > camera.height - margin_px)
+
+
+def _reconstruct(idx: Sequence[int], obs: Sequence[Observation], T_wc: np.ndarray,
+                 camera: Camera, opt: AssociationOptions) -> Ellipsoid | None:
+    """Initial ellipsoid: Rubino + LM (``reconstruct_ellipsoid``, weak log-axes prior against
+    flat collapse) from an evenly spread subset of the untruncated views (all views if fewer
+    than ``min_views`` are untruncated); a sphere at the triangulated centre if that fails."""
+    sel = [k for k in idx if not touches_border(obs[k].ellipse, camera)]
+    if len(sel) < opt.min_views:
+        sel = list(idx)
+    if len(sel) > opt.max_init_views:  # evenly spread subset: the init need not see them all
+        sel = [sel[k] for k in np.linspace(0, len(sel) - 1, opt.max_init_views).astype(int)]
+    try:
+        res = reconstruct_ellipsoid([obs[k].ellipse for k in sel],
+                                    [T_wc[obs[k].frame] for k in sel], camera,
+                                    min_ray_angle_deg=opt.min_spread_deg,
+                                    log_axes_prior_sigma=opt.init_log_axes_prior_sigma)
+        return res.ellipsoid
+    except (ReconstructionError, ValueError, RuntimeError):
+        pass
+    sub = [obs[k] for k in idx]
+    o, d, rho = _rays(sub, camera, T_wc)
+    try:
+        x = _triangulate(o, d)
+    except np.linalg.LinAlgError:
+        return None
+    t = np.einsum("nk,nk->n", x - o, d)
+    if np.any(t <= 0):
+        return None
+    r = float(np.median(t * rho))
+    return Ellipsoid(x, np.full(3, r))
+
+
+def _projection(ell: Ellipsoid, T_wc: np.ndarray, camera: Camera) -> Ellipse | None:
+    try:
+        return project_ellipsoid(camera, invert_pose(T_wc), ell)
+    except ValueError:
+        return None
+
+
+def associate(
+    observations: Sequence[Observation], world_from_camera: np.ndarray, camera: Camera,
+    options: AssociationOptions | None = None,
+    progress: Callable[[str, float], None] | None = None,
+) -> tuple[list[ObjectHypothesis], dict[int, str]]:
+    """Group ``observations`` into objects (module docstring).
+
+    ``world_from_camera`` (F, 4x4) are the frames' poses. Returns the objects (each with an
+    initial ellipsoid) and the rejected observations ``{index: reason}``. ``progress(label,
+    fraction)`` is called within and after each label (at least once per hypothesis).
+    """
+    opt = options or AssociationOptions()
+    rng = np.random.default_rng(opt.seed)
+    labels = sorted({o.label for o in observations})
+    state = {"label": "", "fraction": 0.0}
+
+    def tick() -> None:
+        if progress is not None:
+            progress(str(state["label"]), float(state["fraction"]))
+    T_wc = np.asarray(world_from_camera, dtype=float)
+    objects: list[ObjectHypothesis] = []
+    rejected: dict[int, str] = {}
+    for li, label in enumerate(labels):
+        state["label"], state["fraction"] = label, li / max(1, len(labels))
+        idx_all = np.array([k for k, o in enumerate(observations) if o.label == label])
+        tracked: dict[str, list[int]] = {}
+        untracked = []
+        for k in idx_all:
+            t = observations[k].track_id
+            (tracked.setdefault(t, []) if t is not None else untracked).append(int(k))
+        for tid, members in tracked.items():
+            ell = _reconstruct(members, observations, T_wc, camera, opt) \
+                if len(members) >= opt.min_views else None
+            if ell is None:
+                for k in members:
+                    rejected[k] = "track_not_reconstructible"
+                continue
+            objects.append(ObjectHypothesis(label, sorted(members), ell, f"track:{tid}"))
+        if untracked:
+            un = np.array(untracked)
+            sub = [observations[k] for k in un]
+            o, d, rho = _rays(sub, camera, T_wc)
+            frames = np.array([s.frame for s in sub])
+            clusters = _geometric_clusters(o, d, rho, frames, opt, rng, tick)
+            assigned = np.zeros(len(un), dtype=bool)
+            for members in clusters:
+                assigned[members] = True
+            label_objs = []
+            for members in clusters:
+                glob = [int(un[m]) for m in members]
+                tick()
+                ell = _reconstruct(glob, observations, T_wc, camera, opt)
+                if ell is None:
+                    assigned[members] = False
+                    continue
+                label_objs.append([glob, ell])
+            # verification: drop poor fits, recruit good unassigned ones, reconstruct again
+            for entry in label_objs:
+                glob, ell = entry
+                ious = {}
+                for k in glob:
+                    p = _projection(ell, T_wc[observations[k].frame], camera)
+                    ious[k] = ellipse_iou(p, observations[k].ellipse) if p is not None else 0.0
+                keep = [k for k in glob if ious[k] >= opt.min_iou]
+                dropped = set(glob) - set(keep)
+                for k in dropped:
+                    assigned[np.flatnonzero(un == k)] = False
+                used_frames = {observations[k].frame for k in keep}
+                best_new: dict[int, tuple[float, int]] = {}
+                for m in np.flatnonzero(~assigned):
+                    k = int(un[m])
+                    if k in dropped:
+                        continue
+                    fr = observations[k].frame
+                    if fr in used_frames:
+                        continue
+                    p = _projection(ell, T_wc[fr], camera)
+                    if p is None:
+                        continue
+                    iou = ellipse_iou(p, observations[k].ellipse)
+                    if iou >= opt.recruit_iou and iou > best_new.get(fr, (0.0, -1))[0]:
+                        best_new[fr] = (iou, k)
+                for iou, k in best_new.values():
+                    keep.append(k)
+                    ious[k] = iou
+                    assigned[np.flatnonzero(un == k)] = True
+                if len(keep) < opt.min_views:
+                    for k in keep:
+                        assigned[np.flatnonzero(un == k)] = False
+                    continue
+                if set(keep) != set(glob):
+                    ell2 = _reconstruct(sorted(keep), observations, T_wc, camera, opt)
+                    ell = ell2 if ell2 is not None else ell
+                objects.append(ObjectHypothesis(label, sorted(keep), ell, "geometric",
+                                                {k: ious[k] for k in keep}))
+            for m in np.flatnonzero(~assigned):
+                rejected[int(un[m])] = "fits_no_object"
+        if progress is not None:
+            progress(label, (li + 1) / len(labels))
+    objects = _merge_duplicates(objects, observations, T_wc, camera, opt, tick)
+    objects = _drop_label_ghosts(objects, rejected, opt)
+    return objects, rejected
+
+
+def _overlapping(a: Ellipsoid, b: Ellipsoid, factor: float) -> bool:
+    return float(np.linalg.norm(a.center - b.center)) <= factor * max(a.axes.max(), b.axes.max())
+
+
+def _inside(point: np.ndarray, ell: Ellipsoid) -> bool:
+    d = ell.rotation.T @ (point - ell.center)
+    return float(np.sum((d / ell.axes) ** 2)) <= 1.0
+
+
+def _merge_duplicates(objects: list[ObjectHypothesis], obs: Sequence[Observation],
+                      T_wc: np.ndarray, camera: Camera, opt: AssociationOptions,
+                      tick: Callable[[], None]) -> list[ObjectHypothesis]:
+    """Merge same-label objects whose centres lie within ``merge_factor`` x the larger one's
+    largest semi-axis and that (almost) never appear in the same frame: one physical object split
+    in two (typically by pose drift between two passes). In a shared frame the larger object's
+    detection is kept."""
+    merged = True
+    while merged:
+        merged = False
+        order = sorted(range(len(objects)), key=lambda k: -len(objects[k].observations))
+        for ia in order:
+            a = objects[ia]
+            fa = {obs[k].frame for k in a.observations}
+            for ib in order:
+                b = objects[ib]
+                if ib == ia or b.label != a.label or len(b.observations) > len(a.observations):
+                    continue
+                if not _overlapping(a.ellipsoid, b.ellipsoid, opt.merge_factor):
+                    continue
+                fb = {obs[k].frame for k in b.observations}
+                if len(fa & fb) > opt.max_shared_frames * min(len(fa), len(fb)):
+                    continue
+                union = sorted(a.observations + [k for k in b.observations
+                                                 if obs[k].frame not in fa])
+                tick()
+                ell = _reconstruct(union, obs, T_wc, camera, opt)
+                if ell is None:
+                    continue
+                objects[ia] = ObjectHypothesis(a.label, union, ell, a.source,
+                                               {**b.ious, **a.ious})
+                del objects[ib]
+                merged = True
+                break
+            if merged:
+                break
+    return objects
+
+
+def _drop_label_ghosts(objects: list[ObjectHypothesis], rejected: dict[int, str],
+                       opt: AssociationOptions) -> list[ObjectHypothesis]:
+    """Dissolve an object whose centre lies inside an object of ANOTHER label with
+    ``ghost_ratio`` x more views: two objects cannot occupy the same space, so the few views are
+    wrong labels of the other object (their detections are rejected as ``label_conflict``)."""
+    keep = []
+    for a in objects:
+        ghost = any(b is not a and b.label != a.label
+                    and len(b.observations) >= opt.ghost_ratio * len(a.observations)
+                    and _inside(a.ellipsoid.center, b.ellipsoid)
+                    for b in objects)
+        if ghost:
+            for k in a.observations:
+                rejected[k] = "label_conflict"
+        else:
+            keep.append(a)
+    return keep

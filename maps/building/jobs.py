@@ -1,0 +1,143 @@
+"""Map-building jobs as rows of the map store's database (table ``quadloc_build_jobs``, created by
+the Alembic migration ``0002_build_jobs``).
+
+A job is ``queued`` -> ``running`` -> ``succeeded`` | ``failed``. A running job's row is its
+heartbeat: the runner updates ``updated_at`` with every progress report (at least every 2 s). A job
+that is queued or running but whose heartbeat is older than ``stale_after_s`` lost its runner (the
+replica restarted or died): :meth:`JobStore.fail_stale` marks it ``failed`` with the error
+``runner_lost``; the API calls it at startup and before answering a job's status, so no job stays
+"running" forever. Times are UTC.
+"""
+
+from __future__ import annotations
+
+import json
+import uuid
+from dataclasses import dataclass
+from datetime import UTC, datetime, timedelta
+from typing import Any
+
+import sqlalchemy as sa
+from sqlalchemy.engine import Engine
+
+__all__ = ["BuildJob", "JobNotFoundError", "JobStore", "jobs_table"]
+
+_metadata = sa.MetaData()
+#: Query description only; the schema belongs to the migration (a test compares them).
+jobs_table = sa.Table(
+    "quadloc_build_jobs",
+    _metadata,
+    sa.Column("job_id", sa.String(36), primary_key=True),
+    sa.Column("map_id", sa.String(128), nullable=False),
+    sa.Column("base_version", sa.Integer, nullable=True),
+    sa.Column("status", sa.String(16), nullable=False),
+    sa.Column("stage", sa.String(32), nullable=False),
+    sa.Column("percent", sa.Float, nullable=False),
+    sa.Column("objects_found", sa.Integer, nullable=False),
+    sa.Column("map_version", sa.Integer, nullable=True),
+    sa.Column("error", sa.Text, nullable=True),
+    sa.Column("report", sa.Text, nullable=True),
+    sa.Column("created_at", sa.DateTime(timezone=True), nullable=False),
+    sa.Column("updated_at", sa.DateTime(timezone=True), nullable=False),
+    sa.CheckConstraint("status IN ('queued', 'running', 'succeeded', 'failed')",
+                       name="ck_quadloc_build_jobs_status"),
+)
+
+ACTIVE = ("queued", "running")
+
+
+class JobNotFoundError(KeyError):
+    """No job with this id."""
+
+
+@dataclass(frozen=True)
+class BuildJob:
+    job_id: str
+    map_id: str
+    base_version: int | None
+    status: str
+    stage: str
+    percent: float
+    objects_found: int
+    map_version: int | None
+    error: dict[str, Any] | None
+    report: dict[str, Any] | None
+    created_at: datetime
+    updated_at: datetime
+
+
+def _now() -> datetime:
+    return datetime.now(UTC)
+
+
+def _utc(value: datetime) -> datetime:
+    return value if value.tzinfo is not None else value.replace(tzinfo=UTC)
+
+
+class JobStore:
+    """Build-job rows over the map store's engine (``MapStore.engine``)."""
+
+    def __init__(self, engine: Engine) -> None:
+        self.engine = engine
+
+    def create(self, map_id: str, base_version: int | None) -> BuildJob:
+        now = _now()
+        job_id = str(uuid.uuid4())
+        with self.engine.begin() as conn:
+            conn.execute(jobs_table.insert().values(
+                job_id=job_id, map_id=map_id, base_version=base_version, status="queued",
+                stage="queued", percent=0.0, objects_found=0, created_at=now, updated_at=now))
+        return self.get(job_id)
+
+    def get(self, job_id: str) -> BuildJob:
+        with self.engine.connect() as conn:
+            row = conn.execute(sa.select(jobs_table).where(jobs_table.c.job_id == job_id)).first()
+        if row is None:
+            raise JobNotFoundError(job_id)
+        m = row._mapping
+        return BuildJob(
+            job_id=m["job_id"], map_id=m["map_id"], base_version=m["base_version"],
+            status=m["status"], stage=m["stage"], percent=float(m["percent"]),
+            objects_found=int(m["objects_found"]), map_version=m["map_version"],
+            error=json.loads(m["error"]) if m["error"] else None,
+            report=json.loads(m["report"]) if m["report"] else None,
+            created_at=_utc(m["created_at"]), updated_at=_utc(m["updated_at"]))
+
+    def _update(self, job_id: str, only_active: bool = True, **values: Any) -> bool:
+        stmt = jobs_table.update().where(jobs_table.c.job_id == job_id)
+        if only_active:
+            stmt = stmt.where(jobs_table.c.status.in_(ACTIVE))
+        with self.engine.begin() as conn:
+            return conn.execute(stmt.values(updated_at=_now(), **values)).rowcount == 1
+
+    def progress(self, job_id: str, stage: str, percent: float, objects_found: int) -> bool:
+        """Heartbeat + progress of a running job; False if the job is no longer active (e.g.
+        marked failed as stale): the runner should stop."""
+        return self._update(job_id, status="running", stage=stage,
+                            percent=float(min(100.0, max(0.0, percent))),
+                            objects_found=int(objects_found))
+
+    def succeed(self, job_id: str, map_version: int, report: dict[str, Any],
+                objects_found: int) -> bool:
+        return self._update(job_id, status="succeeded", stage="done", percent=100.0,
+                            map_version=map_version, objects_found=objects_found,
+                            report=json.dumps(report))
+
+    def fail(self, job_id: str, reason: str, detail: str,
+             report: dict[str, Any] | None = None) -> bool:
+        return self._update(job_id, status="failed", stage="failed",
+                            error=json.dumps({"reason": reason, "detail": detail}),
+                            report=None if report is None else json.dumps(report))
+
+    def fail_stale(self, stale_after_s: float) -> int:
+        """Mark queued/running jobs without a heartbeat for ``stale_after_s`` as failed."""
+        cutoff = _now() - timedelta(seconds=stale_after_s)
+        err = json.dumps({"reason": "runner_lost",
+                          "detail": f"no progress for {stale_after_s:g} s: the replica running "
+                                    f"the job restarted or died; submit the recording again"})
+        with self.engine.begin() as conn:
+            return conn.execute(
+                jobs_table.update()
+                .where(jobs_table.c.status.in_(ACTIVE), jobs_table.c.updated_at < cutoff)
+                .values(status="failed", stage="failed", error=err, updated_at=_now())
+            ).rowcount

@@ -1,0 +1,393 @@
+"""Joint refinement of all ellipsoids (and optionally the camera poses) in ONE GTSAM graph.
+
+Variables: per object ``E_k`` (``Pose3``: ellipsoid frame -> world, translation = centre) and
+``L_k`` (``Vector3``: log semi-axes, metres); with ``refine_cameras`` also per frame ``X_f``
+(``Pose3`` ``world_from_camera``, OpenCV camera axes).
+
+Factors:
+
+* one per object over all its observations: the level-set residual of localization
+  (:func:`factors.ellipsoid_residuals.observation_residual`, batched over the views, the
+  samples of ``factors.metrics.level_set_sample_points``), each view weighted as localization
+  weights a detection (whitened by ``sqrt(sigma)``, the std of
+  ``factors.pose_factors.make_noise_model``) under a Huber kernel per view (threshold
+  ``factors.pose_factors.DEFAULT_ROBUST_SCALE["level_set"]``): the view's rows are scaled so that
+  half their squared norm is the Huber cost of the view's whitened residual norm (the Jacobian
+  gets the same scale, as in iteratively reweighted least squares). One factor per object
+  instead of one per view: the Python round trips, not the arithmetic, dominate (GUIDE 3).
+  Where the ellipsoid is not entirely in front of a camera (depth margin <=
+  ``factors.pose_residuals.DEFAULT_MIN_DEPTH_MARGIN``) that view's rows are a constant
+  (cost ``PENALTY_COST / sigma``, zero Jacobian), so LM rejects steps there;
+* ``size_priors``: ``PriorFactorVector`` on ``L_k`` (``N(log semi_axis_m, log_sigma^2)`` per
+  axis). For labels without one, the log semi-axes that the views leave unconstrained at the
+  initial estimate (marginal std above ``unconstrained_log_std``, computed as in the quality
+  report) get a weak prior (std ``UNCONSTRAINED_PRIOR_SIGMA`` = 1, a factor e) towards the
+  object's mean log semi-axis, so that they cannot collapse; constrained axes get none (no bias
+  where the views decide);
+* with ``refine_cameras``: ``PriorFactorPose3`` on the first frame (gauge) and
+  ``BetweenFactorPose3`` between consecutive frames with the app's relative poses
+  (``odometry_sigmas``: rotation rad, translation m, per step) — object-level bundle
+  adjustment.
+
+Quality of each object (:class:`ObjectQuality`): views, spread of the viewing directions (the
+largest angle between two rays from the camera centres to the refined centre), residual cost
+(``0.5 sum_v |r_v|^2 / sigma_v`` over its views, without kernel or truncation weight) and RMS level
+residual, and the semi-axes the views do not constrain: the marginal standard deviation of
+each log semi-axis from the object's own 9x9 Gauss-Newton information (cameras held fixed;
+views weighted by ``1/sigma``, ``QUALITY_DEFAULT_SIGMA`` for detections without one);
+an axis with a std above ``unconstrained_log_std`` (default 0.3, i.e. +-35 %) is flagged; and
+the largest standard deviation of the centre along any direction (``center_std_m``, same
+information).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import gtsam
+import numpy as np
+
+from factors.ellipsoid_residuals import (
+    LevelSetSamples,
+    level_set_samples,
+    observation_residual,
+    stack_samples,
+)
+from factors.geometry import Camera, Ellipsoid, invert_pose
+from factors.pose_factors import DEFAULT_ROBUST_SCALE
+from factors.pose_residuals import DEFAULT_MIN_DEPTH_MARGIN
+from maps.building.association import touches_border
+from maps.building.recording import Observation, SizePrior
+
+__all__ = ["JointResult", "ObjectQuality", "refine_jointly"]
+
+#: Penalty cost of one observation whose ellipsoid is not in front of its camera.
+PENALTY_COST = 1e6
+#: Marginal std of a log semi-axis above which the axis is reported unconstrained.
+UNCONSTRAINED_LOG_STD = 0.3
+#: Residual weight of a detection touching the image border (probably truncated: its ellipse is
+#: that of the visible part, not of the object's projection).
+TRUNCATED_WEIGHT = 0.3
+#: Std (log metres) of the prior on the log semi-axes that the views leave unconstrained at the
+#: initial estimate (towards the object's mean log semi-axis); None disables it.
+UNCONSTRAINED_PRIOR_SIGMA: float | None = 1.0
+#: ``sigma`` assumed for detections without one in the quality report's axis uncertainty (a
+#: level-set residual std of ``sqrt(2.5e-3) = 0.05``, typical of a fine-tuned detector; the
+#: optimisation itself weights them 1, as localization does).
+QUALITY_DEFAULT_SIGMA = 2.5e-3
+#: Default odometry noise per frame step: rotation (rad), translation (m).
+ODOMETRY_SIGMAS = (0.005, 0.01)
+
+
+@dataclass(frozen=True)
+class ObjectQuality:
+    """Per-object quality (see the module docstring); angles in degrees."""
+
+    n_views: int
+    view_spread_deg: float
+    residual_cost: float
+    rms_level_residual: float
+    log_axis_std: tuple[float, float, float]
+    unconstrained_axes: tuple[int, ...]
+    center_std_m: float = math.nan
+
+
+@dataclass(frozen=True)
+class JointResult:
+    ellipsoids: list[Ellipsoid]
+    quality: list[ObjectQuality]
+    world_from_camera: np.ndarray
+    iterations: int
+    initial_error: float
+    final_error: float
+    stopped_early: bool
+
+
+def _pose3(T: np.ndarray) -> gtsam.Pose3:
+    return gtsam.Pose3(gtsam.Rot3(T[:3, :3]), np.asarray(T[:3, 3], float))
+
+
+def _log_axis_std(T_cw: np.ndarray, R: np.ndarray, center: np.ndarray, axes: np.ndarray,
+                  samples: LevelSetSamples, info_weights: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Marginal std (3,) of the log semi-axes (in the order of ``axes``) from the views'
+    Gauss-Newton information on ``[omega, v, log axes]`` (cameras fixed), each view weighted by
+    ``info_weights`` (1/sigma); also the residuals (V', M) of the views in front, their mask and
+    the largest std (m) of the centre along any direction.
+    Views whose camera does not see the ellipsoid in front are skipped."""
+    S = (R * axes**2) @ R.T
+    margins = T_cw[:, 2, :3] @ center + T_cw[:, 2, 3] - np.sqrt(
+        np.einsum("vi,ij,vj->v", T_cw[:, 2, :3], S, T_cw[:, 2, :3]))
+    ok = margins > DEFAULT_MIN_DEPTH_MARGIN
+    if not ok.any():
+        return np.full(3, np.inf), np.zeros((0, samples.n.shape[-1])), ok, math.inf
+    sub = LevelSetSamples(None, samples.n[ok], samples.phi_det_minus_1[ok])
+    r, J, _ = observation_residual(T_cw[ok], R, center, axes, sub)
+    H = np.einsum("v,vmi,vmj->ij", info_weights[ok], J, J)
+    try:
+        cov = np.linalg.inv(H + 1e-12 * np.trace(H) * np.eye(9))
+        std = np.sqrt(np.maximum(np.diag(cov)[6:], 0.0))
+        # centre: c -> c + R v, so its covariance is R cov_v R^T; largest std of any direction
+        center_std = float(np.sqrt(max(np.linalg.eigvalsh(R @ cov[3:6, 3:6] @ R.T).max(), 0)))
+    except np.linalg.LinAlgError:
+        std, center_std = np.full(3, np.inf), math.inf
+    return std, r, ok, center_std
+
+
+def _canonical(R: np.ndarray, center: np.ndarray, axes: np.ndarray) -> Ellipsoid:
+    """The ellipsoid with its semi-axes in descending order (rotation columns permuted alike,
+    handedness kept). Semi-axes that underflowed are kept tiny, not zero: the caller checks
+    them against the map limits (a collapsed axis is reported, not raised)."""
+    order = np.argsort(axes)[::-1]
+    R2 = R[:, order].copy()
+    if np.linalg.det(R2) < 0:
+        R2[:, 2] = -R2[:, 2]
+    return Ellipsoid(center, np.maximum(axes[order], 1e-300), R2)
+
+
+def _huber_scale(norms: np.ndarray, k: float) -> np.ndarray:
+    """Row scale so that ``0.5 (scale |w|)^2`` is Huber's cost of ``|w|`` (threshold ``k``)."""
+    big = norms > k
+    out = np.ones_like(norms)
+    out[big] = np.sqrt(2.0 * k * (norms[big] - 0.5 * k)) / norms[big]
+    return out
+
+
+class _Ticker:
+    """Counts factor evaluations and reports fractional LM progress at most every
+    ``interval_s`` from inside an iteration (one iteration of a large graph, e.g. with camera
+    poses, can take seconds): ``progress(iteration + fraction, last error)`` with ``fraction``
+    the evaluations so far over about three per factor and iteration (a linearisation and two
+    error evaluations), capped below 1."""
+
+    def __init__(self, progress: Callable[[float, float], None] | None,
+                 interval_s: float = 0.5) -> None:
+        self.progress = progress
+        self.interval_s = interval_s
+        self.n_factors = 1
+        self.iteration = 0
+        self.error = math.nan
+        self.count = 0
+        self.last = time.monotonic()
+
+    def new_iteration(self, iteration: int, error: float) -> None:
+        self.iteration, self.error, self.count = iteration, error, 0
+        self.last = time.monotonic()
+
+    def __call__(self) -> None:
+        self.count += 1
+        if self.progress is None:
+            return
+        now = time.monotonic()
+        if now - self.last >= self.interval_s:
+            self.last = now
+            frac = min(0.95, self.count / (3.0 * self.n_factors))
+            self.progress(self.iteration + frac, self.error)
+
+
+def _object_factor(samples: LevelSetSamples, weights: np.ndarray, e_key: int, l_key: int,
+                   view_frames: np.ndarray, x_keys: list[int] | None,
+                   T_cw_fixed: np.ndarray | None,
+                   tick: Callable[[], None] | None = None) -> gtsam.CustomFactor:
+    """All views of one object. ``weights`` (V,) = 1/sqrt(sigma_v); ``view_frames`` (V,) the
+    index of each view's camera in ``x_keys`` (refined cameras) or into ``T_cw_fixed``."""
+    V, M = samples.phi_det_minus_1.shape
+    pen = np.sqrt(2.0 * PENALTY_COST / M) * weights  # per view
+    k = DEFAULT_ROBUST_SCALE["level_set"]
+    keys = [e_key, l_key] + (list(x_keys) if x_keys is not None else [])
+    noise = gtsam.noiseModel.Unit.Create(V * M)
+
+    def error_fn(this: gtsam.CustomFactor, values: gtsam.Values,
+                 H: list[np.ndarray] | None) -> np.ndarray:
+        if tick is not None:
+            tick()
+        pose = values.atPose3(e_key)
+        R = pose.rotation().matrix()
+        c = np.asarray(pose.translation(), dtype=float)
+        axes = np.exp(values.atVector(l_key))
+        if x_keys is None:
+            T_cw = T_cw_fixed
+        else:
+            cams = np.array([invert_pose(values.atPose3(x).matrix()) for x in x_keys])
+            T_cw = cams[view_frames]
+        S = (R * axes**2) @ R.T
+        margins = T_cw[:, 2, :3] @ c + T_cw[:, 2, 3] - np.sqrt(
+            np.einsum("vi,ij,vj->v", T_cw[:, 2, :3], S, T_cw[:, 2, :3]))
+        ok = margins > DEFAULT_MIN_DEPTH_MARGIN
+        out = np.empty((V, M))
+        out[~ok] = pen[~ok, None]
+        want = H is not None
+        if want:
+            Je = np.zeros((V, M, 9))
+            Jc = np.zeros((V, M, 6)) if x_keys is not None else None
+        if ok.any():
+            sub = LevelSetSamples(None, samples.n[ok], samples.phi_det_minus_1[ok])
+            r, J_e, J_c = observation_residual(T_cw[ok], R, c, axes, sub, want)
+            w = r * weights[ok, None]
+            scale = (weights[ok] * _huber_scale(np.linalg.norm(w, axis=1), k))[:, None]
+            out[ok] = r * scale
+            if want:
+                Je[ok] = J_e * scale[..., None]
+                if Jc is not None:
+                    Jc[ok] = J_c * scale[..., None]
+        if want:
+            Je = Je.reshape(V * M, 9)
+            H[0] = np.ascontiguousarray(Je[:, :6])
+            H[1] = np.ascontiguousarray(Je[:, 6:])
+            if x_keys is not None:
+                Jc = Jc.reshape(V, M, 6)
+                for j in range(len(x_keys)):
+                    Hj = np.zeros((V, M, 6))
+                    sel = view_frames == j
+                    Hj[sel] = Jc[sel]
+                    H[2 + j] = Hj.reshape(V * M, 6)
+        return out.reshape(-1)
+
+    return gtsam.CustomFactor(noise, keys, error_fn)
+
+
+def refine_jointly(
+    camera: Camera, world_from_camera: np.ndarray, observations: Sequence[Observation],
+    objects: Sequence[tuple[str, Sequence[int], Ellipsoid]], *,
+    size_priors: Mapping[str, SizePrior] | None = None, refine_cameras: bool = False,
+    odometry_sigmas: tuple[float, float] = ODOMETRY_SIGMAS, max_iterations: int = 30,
+    deadline: float | None = None,
+    progress: Callable[[float, float], None] | None = None,
+    unconstrained_log_std: float = UNCONSTRAINED_LOG_STD,
+    truncated_weight: float = TRUNCATED_WEIGHT,
+    unconstrained_prior_sigma: float | None = UNCONSTRAINED_PRIOR_SIGMA,
+) -> JointResult:
+    """Refine ``objects`` = ``(label, observation indices, initial ellipsoid)`` jointly.
+
+    ``world_from_camera`` (F, 4, 4): the frames' poses (app's world frame). ``deadline``: a
+    ``time.monotonic()`` value after which LM stops (the result so far is kept;
+    ``stopped_early``). ``progress(iteration, error)`` after each LM iteration, and with a
+    fractional iteration at least every 0.5 s during one (see ``_Ticker``).
+    """
+    T_wc = np.asarray(world_from_camera, dtype=float)
+    graph = gtsam.NonlinearFactorGraph()
+    values = gtsam.Values()
+    E = [gtsam.symbol("e", k) for k in range(len(objects))]
+    L = [gtsam.symbol("l", k) for k in range(len(objects))]
+    used_frames = sorted({observations[i].frame for _, idx, _ in objects for i in idx})
+    X = {f: gtsam.symbol("x", f) for f in used_frames} if refine_cameras else {}
+    samples: dict[int, LevelSetSamples] = {}
+    info_w: list[np.ndarray] = []
+    ticker = _Ticker(progress)
+    for k, (label, idx, ell) in enumerate(objects):
+        values.insert(E[k], _pose3(np.block([[ell.rotation, ell.center[:, None]],
+                                             [np.zeros((1, 3)), np.ones((1, 1))]])))
+        values.insert(L[k], np.log(ell.axes))
+        for i in idx:
+            samples[i] = level_set_samples(observations[i].ellipse, camera)
+        stacked = stack_samples([samples[i] for i in idx])
+        weights = np.array([1.0 / math.sqrt(observations[i].sigma)
+                            if observations[i].sigma is not None else 1.0 for i in idx])
+        weights *= np.array([truncated_weight if touches_border(observations[i].ellipse, camera)
+                             else 1.0 for i in idx])
+        frames_k = [observations[i].frame for i in idx]
+        info_w.append(np.array([
+            (truncated_weight**2 if touches_border(observations[i].ellipse, camera) else 1.0)
+            / (observations[i].sigma if observations[i].sigma is not None
+               else QUALITY_DEFAULT_SIGMA) for i in idx]))
+        if refine_cameras:  # one factor per view: each touches one camera
+            for v, f in enumerate(frames_k):
+                one = LevelSetSamples(None, stacked.n[v:v + 1],
+                                      stacked.phi_det_minus_1[v:v + 1])
+                graph.add(_object_factor(one, weights[v:v + 1], E[k], L[k], np.zeros(1, int),
+                                         [X[f]], None, ticker))
+        else:
+            graph.add(_object_factor(stacked, weights, E[k], L[k], np.arange(len(idx)), None,
+                                     np.array([invert_pose(T_wc[f]) for f in frames_k]),
+                                     ticker))
+        prior = (size_priors or {}).get(label)
+        if prior is not None:
+            graph.add(gtsam.PriorFactorVector(
+                L[k], np.full(3, math.log(prior.semi_axis_m)),
+                gtsam.noiseModel.Isotropic.Sigma(3, prior.log_sigma)))
+        elif unconstrained_prior_sigma is not None:
+            # axes the views do not constrain at the initial estimate: a weak prior towards the
+            # object's mean log semi-axis keeps them from collapsing (module doc)
+            std, _, _, _ = _log_axis_std(np.array([invert_pose(T_wc[f]) for f in frames_k]),
+                                      ell.rotation, ell.center, ell.axes, stacked, info_w[k])
+            loose = ~(std <= unconstrained_log_std)
+            if loose.any():
+                sig = np.where(loose, unconstrained_prior_sigma, 1e6)
+                graph.add(gtsam.PriorFactorVector(
+                    L[k], np.full(3, float(np.mean(np.log(ell.axes)))),
+                    gtsam.noiseModel.Diagonal.Sigmas(sig)))
+    if refine_cameras and used_frames:
+        for f in used_frames:
+            values.insert(X[f], _pose3(T_wc[f]))
+        graph.add(gtsam.PriorFactorPose3(X[used_frames[0]], _pose3(T_wc[used_frames[0]]),
+                                         gtsam.noiseModel.Isotropic.Sigma(6, 1e-6)))
+        for a, b in itertools.pairwise(used_frames):
+            steps = b - a
+            rel = invert_pose(T_wc[a]) @ T_wc[b]
+            sig = np.array([odometry_sigmas[0]] * 3 + [odometry_sigmas[1]] * 3) * math.sqrt(steps)
+            graph.add(gtsam.BetweenFactorPose3(X[a], X[b], _pose3(rel),
+                                               gtsam.noiseModel.Diagonal.Sigmas(sig)))
+    params = gtsam.LevenbergMarquardtParams()
+    params.setMaxIterations(max_iterations)
+    params.setRelativeErrorTol(1e-5)
+    params.setAbsoluteErrorTol(1e-9)
+    opt = gtsam.LevenbergMarquardtOptimizer(graph, values, params)
+    initial_error = float(graph.error(values))
+    ticker.n_factors = max(1, graph.size())
+    err = initial_error
+    it = 0
+    stopped = False
+    while it < max_iterations:
+        if deadline is not None and time.monotonic() > deadline:
+            stopped = True
+            break
+        ticker.new_iteration(it, err)
+        opt.iterate()
+        it += 1
+        new_err = float(opt.error())
+        if progress is not None:
+            progress(it, new_err)
+        converged = err - new_err <= max(1e-5 * err, 1e-9)
+        err = new_err
+        if converged:
+            break
+    result = opt.values()
+    ells: list[Ellipsoid] = []
+    T_out = T_wc.copy()
+    for f, key in X.items():
+        T_out[f] = result.atPose3(key).matrix()
+    quality = []
+    for k, (_label, idx, _ell) in enumerate(objects):
+        pose = result.atPose3(E[k])
+        R = pose.rotation().matrix()
+        c = np.asarray(pose.translation(), dtype=float)
+        axes = np.exp(result.atVector(L[k]))
+        # canonical form: descending semi-axes, proper rotation
+        ell = _canonical(R, c, axes)
+        ells.append(ell)
+        T_cw_all = np.array([invert_pose(T_out[observations[i].frame]) for i in idx])
+        stacked = stack_samples([samples[i] for i in idx])
+        std, r_ok, ok, center_std = _log_axis_std(T_cw_all, R, c, axes, stacked, info_w[k])
+        w_cost = np.array([1.0 / observations[i].sigma if observations[i].sigma is not None
+                           else 1.0 for i in idx])[ok]
+        cost = 0.5 * float(np.sum(w_cost[:, None] * r_ok**2))
+        rs = [r_ok.reshape(-1)] if r_ok.size else []
+        centres = np.array([T_out[observations[i].frame][:3, 3] for i in idx])
+        rays = c - centres
+        rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+        spread = float(np.degrees(np.arccos(np.clip((rays @ rays.T).min(), -1.0, 1.0))))
+        allr = np.concatenate(rs) if rs else np.zeros(1)
+        # std per axis of the refined frame; report in the canonical (descending) order
+        order = np.argsort(axes)[::-1]
+        std_c = std[order]
+        quality.append(ObjectQuality(
+            n_views=len(idx), view_spread_deg=spread, residual_cost=cost,
+            rms_level_residual=float(np.sqrt(np.mean(allr**2))),
+            log_axis_std=tuple(float(x) for x in std_c), center_std_m=center_std,
+            unconstrained_axes=tuple(int(a) for a in np.flatnonzero(
+                ~(std_c <= unconstrained_log_std)))))
+    return JointResult(ells, quality, T_out, it, initial_error, err, stopped)

@@ -1,0 +1,159 @@
+"""Runs map-building jobs for the API: a bounded pool, a time budget, heartbeats in the store.
+
+One :class:`BuildRunner` per app. ``submit`` queues a job (at most ``max_queued_builds``
+waiting, else :class:`RunnerBusyError` -> 503 + Retry-After) on a pool of ``max_concurrent_builds``
+threads. The build holds the GIL while it runs, like a localize solve: keep
+``max_concurrent_builds`` at 1 (default) and scale builds out with replicas. Each job:
+
+1. marks the row ``running`` and reports progress (stage, percent, objects found) through
+   :meth:`maps.building.jobs.JobStore.progress` at most every ``HEARTBEAT_S`` and at every stage
+   change (the build's callbacks come at least every 2 s);
+2. builds with a deadline ``build_time_budget_s`` after it started;
+3. stores the map: ``create`` (new map id) or ``update(expected_version=base_version)`` (the
+   version whose ETag the client sent in ``If-Match``); a concurrent change fails the job with
+   ``version_conflict``, an id taken meanwhile with ``map_exists``: nothing is overwritten;
+4. ends ``succeeded`` with the map version and the report, or ``failed`` with a reason:
+   ``invalid_recording``, ``time_budget_exceeded``, ``no_objects``, ``version_conflict``,
+   ``map_exists``, ``map_not_found``, ``store_unavailable``, ``internal_error``.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
+
+from maps.building.build import BuildTimeoutError, build_map
+from maps.building.jobs import JobStore
+from maps.building.recording import Recording
+from maps.errors import MapAlreadyExists, MapNotFound, StoreUnavailable, VersionConflict
+from maps.model import MapValidationError
+from maps.store import MapStore
+
+__all__ = ["HEARTBEAT_S", "BuildRunner", "RunnerBusyError", "install_map_building"]
+
+log = logging.getLogger("quadloc.build")
+
+#: Longest interval between two progress writes of a running job (s).
+HEARTBEAT_S = 1.0
+
+
+class RunnerBusyError(RuntimeError):
+    """Too many builds queued on this replica."""
+
+
+class BuildRunner:
+    def __init__(self, store: MapStore, jobs: JobStore, *, max_concurrent: int, max_queued: int,
+                 time_budget_s: float, on_stored: Any = None) -> None:
+        self.store = store
+        self.jobs = jobs
+        self.time_budget_s = float(time_budget_s)
+        self.max_pending = int(max_concurrent) + int(max_queued)
+        self._pool = ThreadPoolExecutor(max_workers=int(max_concurrent),
+                                        thread_name_prefix="quadloc-build")
+        self._pending = 0
+        self._lock = threading.Lock()
+        self._on_stored = on_stored
+
+    def submit(self, job_id: str, recording: Recording) -> None:
+        with self._lock:
+            if self._pending >= self.max_pending:
+                raise RunnerBusyError(f"{self._pending} builds running or queued on this replica")
+            self._pending += 1
+        try:
+            self._pool.submit(self._run, job_id, recording)
+        except RuntimeError:  # pool shut down
+            with self._lock:
+                self._pending -= 1
+            raise
+
+    def shutdown(self) -> None:
+        self._pool.shutdown(wait=False, cancel_futures=True)
+
+    def _run(self, job_id: str, recording: Recording) -> None:
+        try:
+            self._build(job_id, recording)
+        except Exception as exc:
+            log.exception("build job %s failed", job_id)
+            try:
+                self.jobs.fail(job_id, "internal_error", f"{type(exc).__name__}: {exc}")
+            except Exception:
+                log.exception("could not mark job %s failed", job_id)
+        finally:
+            with self._lock:
+                self._pending -= 1
+
+    def _build(self, job_id: str, recording: Recording) -> None:
+        job = self.jobs.get(job_id)
+        deadline = time.monotonic() + self.time_budget_s
+        last = [0.0, ""]
+
+        def progress(stage: str, percent: float, objects: int) -> None:
+            now = time.monotonic()
+            if stage != last[1] or now - last[0] >= HEARTBEAT_S:
+                last[0], last[1] = now, stage
+                self.jobs.progress(job_id, stage, percent, objects)
+
+        progress("associating", 0.0, 0)
+        try:
+            scene, report = build_map(recording, map_id=job.map_id, progress=progress,
+                                      deadline=deadline)
+        except BuildTimeoutError as exc:
+            self.jobs.fail(job_id, "time_budget_exceeded",
+                           f"{exc} (budget {self.time_budget_s:g} s); send fewer frames")
+            return
+        except MapValidationError as exc:
+            self.jobs.fail(job_id, "invalid_map", str(exc))
+            return
+        if report["refinement"] is not None and report["refinement"]["stopped_early"]:
+            report["warnings"] = ["time budget reached during refinement: the map holds the "
+                                  "estimate at that point"]
+        if not scene.objects:
+            self.jobs.fail(job_id, "no_objects", "no object could be associated and "
+                           "reconstructed from the recording (see the report)", report)
+            return
+        progress("saving", 95.0, len(scene.objects))
+        try:
+            if job.base_version is None:
+                stored = self.store.create(scene)
+            else:
+                stored = self.store.update(job.map_id, scene,
+                                           expected_version=job.base_version)
+        except MapAlreadyExists:
+            self.jobs.fail(job_id, "map_exists", f"map {job.map_id!r} was created meanwhile; "
+                           "submit again with If-Match to add a version", report)
+            return
+        except VersionConflict as exc:
+            self.jobs.fail(job_id, "version_conflict",
+                           f"map {job.map_id!r} changed meanwhile (now version "
+                           f"{exc.current_version}); nothing was overwritten", report)
+            return
+        except MapNotFound:
+            self.jobs.fail(job_id, "map_not_found", f"map {job.map_id!r} was deleted meanwhile",
+                           report)
+            return
+        except StoreUnavailable as exc:
+            self.jobs.fail(job_id, "store_unavailable", str(exc), report)
+            return
+        if self._on_stored is not None:
+            self._on_stored(job.map_id)
+        self.jobs.succeed(job_id, stored.scene_map.version, report, len(scene.objects))
+
+
+def install_map_building(app: Any, store: MapStore, settings: Any, cache: Any) -> None:
+    """Wire map building into ``app``: the job store (jobs left running by a previous instance
+    and silent for ``build_stale_after_s`` are marked failed now), the runner, the router."""
+    from service.api.routers import build
+
+    jobs = JobStore(store.engine)
+    stale = jobs.fail_stale(settings.build_stale_after_s)
+    if stale:
+        log.warning("marked %d build job(s) failed: their runner stopped reporting", stale)
+    app.state.build_jobs = jobs
+    app.state.build_runner = BuildRunner(
+        store, jobs, max_concurrent=settings.max_concurrent_builds,
+        max_queued=settings.max_queued_builds, time_budget_s=settings.build_time_budget_s,
+        on_stored=cache.invalidate)
+    app.include_router(build.router)

@@ -1,0 +1,177 @@
+"""``quadloc maps build recording.json --map-id ID``: build a map from a recording.
+
+With ``--url`` / ``QUADLOC_URL``: a ``POST /v1/maps:build`` job on that server through the SDK
+(``client.build_map``), its progress polled. Without: the same build
+(``maps.building.build.build_map``) in this process against the local database, like the other
+``quadloc maps`` commands. A progress bar goes to stderr either way. An existing map id needs
+``--update`` (stored as its next version; refused if the map changed during the build).
+``--report PATH`` writes the build report (which detections built which object, per-object
+quality, rejected detections) as JSON. Exit codes: 0 built, 1 no map (nothing associated, time
+budget, job failed), 2 bad input or store / server error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, TextIO
+
+__all__ = ["ProgressBar", "add_build_parser", "cmd_maps_build"]
+
+
+class ProgressBar:
+    """``[#####.....]  45% refining (7 objects)`` redrawn in place on a terminal, one line per
+    stage change otherwise (logs stay readable)."""
+
+    def __init__(self, stream: TextIO | None = None, width: int = 30) -> None:
+        self.stream = stream if stream is not None else sys.stderr
+        self.width = width
+        self.tty = bool(getattr(stream, "isatty", lambda: False)())
+        self._stage = ""
+
+    def __call__(self, stage: str, percent: float, objects: int) -> None:
+        filled = round(self.width * max(0.0, min(100.0, percent)) / 100.0)
+        line = (f"[{'#' * filled}{'.' * (self.width - filled)}] {percent:5.1f}% {stage} "
+                f"({objects} objects)")
+        if self.tty:
+            self.stream.write("\r" + line)
+            self.stream.flush()
+        elif stage != self._stage:
+            self.stream.write(line + "\n")
+        self._stage = stage
+
+    def close(self) -> None:
+        if self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def _die(msg: str, code: int = 2) -> int:
+    print(f"quadloc: error: {msg}", file=sys.stderr)
+    return code
+
+
+def _print_objects(report: dict[str, Any]) -> None:
+    for o in report["objects"]:
+        q = o["quality"]
+        flag = f", unconstrained axes {q['unconstrained_axes']}" if q["unconstrained_axes"] else ""
+        print(f"  {o['object_id']:<20} {q['n_views']:>4} views, spread "
+              f"{q['view_spread_deg']:5.1f} deg{flag}", file=sys.stderr)
+
+
+def _remote_build(args: argparse.Namespace, client: Any, data: Any) -> int:
+    from sdk import errors as sdk_errors
+    from sdk.build import BuildFailedError
+
+    bar = ProgressBar()
+    t0 = time.monotonic()
+    try:
+        if_match = None
+        if args.update:
+            try:
+                if_match = client.get_map(args.map_id).etag
+            except sdk_errors.QuadLocError as exc:
+                if getattr(exc, "status", None) != 404:
+                    raise
+        job = client.build_map(data, map_id=args.map_id, if_match=if_match,
+                               on_progress=lambda j: bar(j.stage, j.percent, j.objects_found))
+    except BuildFailedError as exc:
+        bar.close()
+        if args.report and exc.job.report is not None:
+            Path(args.report).write_text(json.dumps(exc.job.report, indent=2) + "\n", "utf-8")
+        return _die(str(exc), 1)
+    except sdk_errors.QuadLocError as exc:
+        bar.close()
+        hint = " (pass --update to build its next version)" \
+            if "If-Match" in str(exc) and not args.update else ""
+        return _die(f"{exc}{hint}")
+    bar.close()
+    if args.report:
+        Path(args.report).write_text(json.dumps(job.report, indent=2) + "\n", "utf-8")
+    _print_objects(job.report)
+    c = job.report["counts"]
+    print(f"{job.map_id} version {job.map_version} ({c['objects']} objects from "
+          f"{c['detections']} detections in {c['frames']} frames, "
+          f"{c['rejected_detections']} rejected, {time.monotonic() - t0:.1f} s)")
+    return 0
+
+
+def cmd_maps_build(args: argparse.Namespace, store_factory: Callable[[argparse.Namespace], Any],
+                   settings_factory: Callable[[argparse.Namespace], Any],
+                   client_factory: Callable[[argparse.Namespace], Any] | None = None) -> int:
+    from maps.building.build import BuildTimeoutError, build_map
+    from maps.building.recording import BuildLimits, RecordingError, parse_recording
+    from maps.errors import MapNotFound, VersionConflict
+
+    die = _die
+    try:
+        text = sys.stdin.read() if args.file == "-" else Path(args.file).read_text("utf-8")
+        data = json.loads(text)
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+        return die(f"{args.file}: {exc}")
+    client = client_factory(args) if client_factory is not None else None
+    if client is not None:
+        return _remote_build(args, client, data)
+    settings = settings_factory(args)
+    try:
+        recording = parse_recording(data, BuildLimits(
+            max_frames=settings.max_build_frames, max_detections_per_frame=settings.max_detections,
+            max_detections=settings.max_build_detections))
+    except RecordingError as exc:
+        for e in exc.errors:
+            print(f"  {e['field']}: {e['message']}", file=sys.stderr)
+        return die(f"{args.file}: invalid recording ({len(exc.errors)} problem(s))")
+    store = store_factory(args)
+    try:
+        base = store.get(args.map_id).scene_map.version
+    except MapNotFound:
+        base = None
+    if base is not None and not args.update:
+        return die(f"map {args.map_id!r} exists; pass --update to store the build as its next "
+                   "version")
+    bar = ProgressBar()
+    t0 = time.monotonic()
+    try:
+        scene, report = build_map(recording, map_id=args.map_id, progress=bar,
+                                  deadline=t0 + settings.build_time_budget_s)
+    except BuildTimeoutError as exc:
+        bar.close()
+        return die(f"{exc} (QUADLOC_BUILD_TIME_BUDGET_S={settings.build_time_budget_s:g})", 1)
+    bar.close()
+    if args.report:
+        Path(args.report).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    if not scene.objects:
+        return die("no object could be associated and reconstructed (see --report)", 1)
+    try:
+        stored = store.create(scene) if base is None else store.update(args.map_id, scene, base)
+    except VersionConflict as exc:
+        return die(f"map {args.map_id!r} changed during the build (now version "
+                   f"{exc.current_version}); nothing was overwritten")
+    _print_objects(report)
+    c = report["counts"]
+    print(f"{stored.scene_map.map_id} version {stored.scene_map.version} "
+          f"({len(stored.scene_map.objects)} objects from {c['detections']} detections in "
+          f"{c['frames']} frames, {c['rejected_detections']} rejected, "
+          f"{time.monotonic() - t0:.1f} s) etag \"{stored.content_hash}\"")
+    return 0
+
+
+def add_build_parser(msub: Any, db: Callable[[argparse.ArgumentParser], None],
+                     store_factory: Callable[[argparse.Namespace], Any],
+                     settings_factory: Callable[[argparse.Namespace], Any],
+                     client_factory: Callable[[argparse.Namespace], Any] | None = None) -> None:
+    """Register ``maps build`` on the ``maps`` sub-command parser."""
+    p = msub.add_parser("build", help="build a map from a recording (posed frames + detections)",
+                        description=__doc__.split("\n\n")[1])
+    p.add_argument("file", help="recording JSON (docs/map_building.md; '-' = stdin)")
+    p.add_argument("--map-id", required=True, help="id of the map to create (or update)")
+    p.add_argument("--update", action="store_true",
+                   help="if the id exists, store the build as its next version")
+    p.add_argument("--report", metavar="PATH", help="write the build report (JSON) here")
+    db(p)
+    p.set_defaults(func=lambda a: cmd_maps_build(a, store_factory, settings_factory,
+                                                 client_factory))

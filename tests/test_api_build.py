@@ -1,0 +1,165 @@
+"""``POST /v1/maps:build`` and ``GET /v1/build-jobs/{id}``: a real build from a small synthetic
+recording, field-named errors, If-Match rules, stale jobs marked failed."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from factors.geometry import Camera, Ellipsoid, invert_pose, pose_matrix, project_ellipsoid
+from maps.building.jobs import JobStore
+from maps.building.recording import recording_to_dict
+from tests.conftest import make_test_app
+
+CAM = Camera(500.0, 500.0, 320.0, 240.0, 640, 480)
+# two objects of one label and one of another, 1.5-2.5 m in front of a camera arc
+OBJECTS = {"a": ("Box", Ellipsoid(np.array([0.3, 0.0, 2.0]), np.array([0.15, 0.1, 0.08]))),
+           "b": ("Box", Ellipsoid(np.array([-0.4, 0.1, 2.3]), np.array([0.12, 0.12, 0.1]))),
+           "c": ("Lamp", Ellipsoid(np.array([0.0, -0.3, 2.6]), np.array([0.08, 0.2, 0.08])))}
+
+
+def _look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
+    z = target - eye
+    z /= np.linalg.norm(z)
+    x = np.cross(np.array([0.0, -1.0, 0.0]), z)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    return pose_matrix(np.column_stack([x, y, z]), eye)
+
+
+def _recording(n: int = 24) -> tuple[dict[str, Any], list[list[str]]]:
+    frames, truth = [], []
+    for i in range(n):
+        ang = np.radians(-35 + 70 * i / (n - 1))
+        eye = np.array([2.2 * np.sin(ang), 0.1 * np.cos(3 * ang), 2.2 - 2.2 * np.cos(ang)])
+        T = _look_at(eye, np.array([0.0, 0.0, 2.2]))
+        dets, ids = [], []
+        for oid, (label, ell) in OBJECTS.items():
+            e = project_ellipsoid(CAM, invert_pose(T), ell)
+            dets.append({"label": label, "ellipse": {"cx": e.cx, "cy": e.cy, "a": e.a,
+                                                     "b": e.b, "angle": e.angle}})
+            ids.append(oid)
+        frames.append((f"f{i}", T, dets))
+        truth.append(ids)
+    return recording_to_dict(CAM, frames, name="test room"), truth
+
+
+@pytest.fixture
+def client(tmp_path: Path):
+    with TestClient(make_test_app(tmp_path)) as c:
+        yield c
+
+
+def _wait(client: TestClient, location: str, timeout_s: float = 120.0) -> dict[str, Any]:
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout_s:
+        job = client.get(location).json()
+        if job["status"] in ("succeeded", "failed"):
+            return job
+        time.sleep(0.2)
+    raise AssertionError("job did not finish")
+
+
+def test_build_new_map_then_new_version_with_if_match(client: TestClient) -> None:
+    rec, truth = _recording()
+    r = client.post("/v1/maps:build", params={"map_id": "room"}, json=rec)
+    assert r.status_code == 202, r.text
+    loc = r.headers["Location"]
+    assert loc == f"/v1/build-jobs/{r.json()['job_id']}"
+    job = _wait(client, loc)
+    assert job["status"] == "succeeded", job
+    assert job["map_version"] == 1 and job["percent"] == 100.0
+    m = client.get("/v1/maps/room").json()["map"]
+    assert len(m["objects"]) == 3
+    # every object is within 2 cm of a true one, of the right label
+    for obj in m["objects"]:
+        c = np.array(obj["center"] if "center" in obj else obj["ellipsoid"]["center"])
+        d = {k: np.linalg.norm(c - e.center) for k, (_, e) in OBJECTS.items()}
+        best = min(d, key=d.get)
+        assert d[best] < 0.02 and OBJECTS[best][0] == obj["category"]
+    # the report says which detections built which object: exact association here
+    for o in job["report"]["objects"]:
+        ids = {truth[d["frame_index"]][d["detection_index"]] for d in o["detections"]}
+        assert len(ids) == 1 and len(o["detections"]) == len(truth)
+        assert o["quality"]["n_views"] == len(truth)
+    # an existing map needs If-Match
+    r = client.post("/v1/maps:build", params={"map_id": "room"}, json=rec)
+    assert r.status_code == 428
+    assert r.json()["errors"][0]["field"] == "header.if-match"
+    r = client.post("/v1/maps:build", params={"map_id": "room"}, json=rec,
+                    headers={"If-Match": '"stale"'})
+    assert r.status_code == 412
+    etag = client.get("/v1/maps/room").headers["ETag"]
+    r = client.post("/v1/maps:build", params={"map_id": "room"}, json=rec,
+                    headers={"If-Match": etag})
+    assert r.status_code == 202
+    job = _wait(client, r.headers["Location"])
+    assert job["status"] == "succeeded" and job["map_version"] == 2
+
+
+def test_invalid_recording_names_fields_and_stores_nothing(client: TestClient) -> None:
+    rec, _ = _recording(4)
+    rec["frames"][1]["detections"][0]["ellipse"]["a"] = -3
+    rec["frames"][2]["world_from_camera"]["quaternion_wxyz"] = [2, 0, 0, 0]
+    del rec["intrinsics"]["fx"]
+    r = client.post("/v1/maps:build", params={"map_id": "bad"}, json=rec)
+    assert r.status_code == 422
+    fields = {e["field"] for e in r.json()["errors"]}
+    assert {"frames[1].detections[0].ellipse.a", "frames[2].world_from_camera.quaternion_wxyz",
+            "intrinsics.fx"} <= fields
+    assert client.get("/v1/maps/bad").status_code == 404
+    r = client.post("/v1/maps:build", params={"map_id": "bad map!"}, json=_recording(4)[0])
+    assert r.status_code == 422
+
+
+def test_build_limits(tmp_path: Path) -> None:
+    with TestClient(make_test_app(tmp_path, max_build_frames=3)) as c:
+        r = c.post("/v1/maps:build", params={"map_id": "x"}, json=_recording(4)[0])
+        assert r.status_code == 422
+        assert r.json()["errors"][0]["field"] == "frames"
+
+
+def test_unknown_job_is_404(client: TestClient) -> None:
+    r = client.get("/v1/build-jobs/0000-1111")
+    assert r.status_code == 404
+    r = client.get("/v1/build-jobs/not%00an-id")
+    assert r.status_code == 422 and r.json()["errors"][0]["field"] == "path.job_id"
+
+
+def test_stale_running_job_is_marked_failed(tmp_path: Path) -> None:
+    app = make_test_app(tmp_path)
+    with TestClient(app) as c:
+        jobs: JobStore = app.state.build_jobs
+        job = jobs.create("lost", None)
+        jobs.progress(job.job_id, "associating", 10.0, 0)
+        assert jobs.fail_stale(3600.0) == 0  # fresh heartbeat: left alone
+        # pretend the heartbeat stopped long ago (the replica died)
+        from maps.building.jobs import jobs_table
+
+        with app.state.store.engine.begin() as conn:
+            conn.execute(jobs_table.update().values(
+                updated_at=job.updated_at.replace(year=2000)))
+        out = c.get(f"/v1/build-jobs/{job.job_id}").json()
+        assert out["status"] == "failed" and out["error"]["reason"] == "runner_lost"
+        # a late heartbeat from the lost runner does not revive it
+        assert jobs.progress(job.job_id, "refining", 60.0, 1) is False
+        assert jobs.get(job.job_id).status == "failed"
+
+
+def test_jobs_table_mirrors_the_migration(tmp_path: Path) -> None:
+    import sqlalchemy as sa
+
+    from maps.building.jobs import jobs_table
+    from maps.store import MapStore
+
+    with MapStore(f"sqlite:///{tmp_path / 'j.db'}") as store:
+        insp = sa.inspect(store.engine)
+        assert {c["name"] for c in insp.get_columns(jobs_table.name)} == set(jobs_table.c.keys())
+        migrated = {c["name"] for c in insp.get_check_constraints(jobs_table.name)}
+        declared = {c.name for c in jobs_table.constraints if isinstance(c, sa.CheckConstraint)}
+        assert declared == migrated == {"ck_quadloc_build_jobs_status"}
