@@ -357,6 +357,14 @@ class QuadLocClient(_Base):
     def close(self) -> None:
         self._http.close()
 
+    def start_session(self, map_id: str, *, camera: dict[str, Any], convention: str = "opencv",
+                      options: dict[str, Any] | None = None) -> Any:
+        """Start a tracking session (:class:`sdk.session.TrackingSession`, docs/tracking.md)."""
+        from sdk.session import start_session
+
+        return start_session(self, map_id, camera=camera, convention=convention,
+                             options=options)
+
     def __enter__(self) -> QuadLocClient:
         return self
 
@@ -517,6 +525,15 @@ class AsyncQuadLocClient(_Base):
 
     async def aclose(self) -> None:
         await self._http.aclose()
+
+    async def start_session(self, map_id: str, *, camera: dict[str, Any],
+                            convention: str = "opencv",
+                            options: dict[str, Any] | None = None) -> Any:
+        """Start a tracking session (:class:`sdk.session.AsyncTrackingSession`)."""
+        from sdk.session import start_session_async
+
+        return await start_session_async(self, map_id, camera=camera, convention=convention,
+                                         options=options)
 
     async def __aenter__(self) -> AsyncQuadLocClient:
         return self

@@ -636,6 +636,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("key", nargs="?", help="the key (default: generate one)")
     p.add_argument("--scopes", default="read", help="read, write or read+write (default read)")
     p.set_defaults(func=cmd_hash_key)
+
+    from service.tracking.cli_track import add_track_parser
+
+    add_track_parser(sub, db)
     return parser
 
 

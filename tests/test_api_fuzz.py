@@ -185,6 +185,12 @@ def test_the_schemas_own_examples_get_the_documented_success(
             if c.get(f"/v1/maps/{map_id}", headers=headers).status_code == 404:
                 c.post("/v1/maps", json=example, headers=headers)
             headers["If-Match"] = c.get(f"/v1/maps/{map_id}", headers=headers).headers["etag"]
+        if "{session_id}" in url:  # a tracking session to send the frames to
+            from service.api.session_examples import SESSION_CREATE_EXAMPLE
+
+            created = c.post("/v1/maps/chess/sessions", json=SESSION_CREATE_EXAMPLE,
+                             headers=headers)
+            url = url.replace("{session_id}", created.json()["session_id"])
         r = c.request(method.upper(), url, json=example, headers=headers)
         assert r.status_code in ok, (method, path, r.status_code, r.text[:500])
 

@@ -28,7 +28,7 @@ from service.api.inspector import install_inspector
 from service.api.map_cache import MapCache
 from service.api.map_loader import MapLoader
 from service.api.metrics import ApiMetrics, MetricsAndLimitsMiddleware
-from service.api.routers import health, localize, maps
+from service.api.routers import health, localize, maps, sessions
 from service.api.solver import Solver
 from service.settings import Settings
 
@@ -145,6 +145,8 @@ def create_app(settings: Settings | None = None, *, store: MapStore | None = Non
     app.include_router(maps.router)
     install_map_building(app, store, settings, app.state.map_cache)
     app.include_router(health.router)
+    app.state.sessions = sessions.session_store_from_env()
+    app.include_router(sessions.router)
     install_offline_docs(app)
     install_inspector(app)
     app.add_middleware(MetricsAndLimitsMiddleware, metrics=metrics,

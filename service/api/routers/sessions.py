@@ -1,0 +1,247 @@
+"""Tracking sessions: ``POST /v1/maps/{map_id}/sessions``, ``POST /v1/sessions/{id}/frames``,
+``GET`` / ``DELETE /v1/sessions/{id}``.
+
+Sessions live in this process (:class:`service.tracking.store.SessionStore`; bounds from
+``QUADLOC_MAX_SESSIONS``, default 200, and ``QUADLOC_SESSION_IDLE_TIMEOUT_S``, default 300).
+With several replicas the proxy must send every request of a session to one replica
+(``deploy/nginx.conf`` hashes the session id); an unknown id (expired, deleted, or the replica
+restarted) is 404 ``session-not-found``: start a new session. Plain ``def`` routes: the
+threadpool runs the CPU-bound updates off the event loop; one lock per session serialises its
+frames.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from typing import Annotated
+
+import numpy as np
+from fastapi import APIRouter, Body, Path, Request, Response
+
+from factors.geometry import GeometryError
+from maps.errors import MapNotFound
+from service.api.auth import ReadAccess
+from service.api.convert import (
+    _pose_matrix_in,
+    camera_from_request,
+    convert_covariance,
+    convert_pose,
+    detections_from_request,
+    pose_out,
+    prior_from_request,
+)
+from service.api.deps import MapCacheDep, MapIdPath
+from service.api.errors import ProblemError, map_not_found
+from service.api.openapi_docs import problem_responses
+from service.api.schemas import CovarianceOut, InlierOut
+from service.api.session_examples import (
+    FRAME_EXAMPLE,
+    FRAME_RESPONSE_EXAMPLE,
+    SESSION_CREATE_EXAMPLE,
+    SESSION_EXAMPLE,
+)
+from service.api.session_schemas import (
+    SessionCreate,
+    SessionFrameIn,
+    SessionFrameOut,
+    SessionFramesIn,
+    SessionFramesOut,
+    SessionOut,
+)
+from service.localization.types import LocalizationInputError
+from service.tracking.session import (
+    DriftModel,
+    FrameInput,
+    FrameResult,
+    SessionOptions,
+    TrackingInputError,
+    TrackingSession,
+)
+from service.tracking.store import (
+    SessionCapacityError,
+    SessionEntry,
+    SessionNotFound,
+    SessionStore,
+)
+
+__all__ = ["router", "session_store_from_env"]
+
+router = APIRouter(prefix="/v1", tags=["tracking"])
+
+SessionIdPath = Annotated[str, Path(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$",
+                                    description="Session id returned at creation.")]
+
+
+def session_store_from_env() -> SessionStore:
+    """The app's session store, bounds from ``QUADLOC_MAX_SESSIONS`` and
+    ``QUADLOC_SESSION_IDLE_TIMEOUT_S``."""
+    return SessionStore(int(os.environ.get("QUADLOC_MAX_SESSIONS", "200")),
+                        float(os.environ.get("QUADLOC_SESSION_IDLE_TIMEOUT_S", "300")))
+
+
+def _store(request: Request) -> SessionStore:
+    store = getattr(request.app.state, "sessions", None)
+    if store is None:
+        store = request.app.state.sessions = session_store_from_env()
+    return store
+
+
+def _entry(store: SessionStore, session_id: str) -> SessionEntry:
+    try:
+        return store.get(session_id)
+    except SessionNotFound as exc:
+        raise ProblemError("session-not-found",
+                           f"session {session_id!r} not found: it expired, was deleted, or its "
+                           "server restarted; start a new session",
+                           errors=[{"field": "path.session_id", "message": "not found"}]) from exc
+
+
+def _out(entry: SessionEntry, store: SessionStore) -> SessionOut:
+    return SessionOut(session_id=entry.session_id, url=f"/v1/sessions/{entry.session_id}",
+                      map_id=entry.map_id, map_version=entry.map_version,
+                      convention=entry.convention,  # type: ignore[arg-type]
+                      state=entry.session.state, frames=entry.session.frame_count,
+                      idle_timeout_s=store.idle_timeout_s)
+
+
+@router.post("/maps/{map_id}/sessions", response_model=SessionOut, status_code=201,
+             summary="Start a tracking session",
+             responses={**problem_responses(400, 401, 403, 404, 413, 415, 422, 503),
+                        201: {"content": {"application/json": {"example": SESSION_EXAMPLE}}}})
+def create_session(map_id: MapIdPath,
+                   body: Annotated[SessionCreate, Body(openapi_examples={"chess": {
+                       "summary": "Chess camera", "value": SESSION_CREATE_EXAMPLE}})],
+                   request: Request,
+                   cache: MapCacheDep, _key: ReadAccess, response: Response) -> SessionOut:
+    try:
+        compiled = cache.get(map_id, None)
+    except MapNotFound as exc:
+        raise map_not_found(map_id) from exc
+    o = body.options
+    try:
+        camera = camera_from_request(body.camera)
+        options = SessionOptions(
+            window_frames=o.window_frames, smoother=o.smoother, inlier_iou=o.inlier_iou,
+            drift=DriftModel(
+                translation_m_per_sqrt_m=o.odometry_translation_m_per_sqrt_m,
+                translation_m_per_sqrt_s=o.odometry_translation_m_per_sqrt_s,
+                rotation_rad_per_sqrt_m=math.radians(o.odometry_rotation_deg_per_sqrt_m),
+                rotation_rad_per_sqrt_s=math.radians(o.odometry_rotation_deg_per_sqrt_s)))
+    except (GeometryError, TrackingInputError) as exc:
+        raise _unprocessable(str(exc), "") from exc
+    store = _store(request)
+    try:
+        entry = store.create(map_id, compiled.scene_map.version,
+                             TrackingSession(compiled, camera, options), body.convention)
+    except SessionCapacityError as exc:
+        raise ProblemError("session-capacity", str(exc), headers={"Retry-After": "30"}) from exc
+    response.headers["Location"] = f"/v1/sessions/{entry.session_id}"
+    return _out(entry, store)
+
+
+@router.get("/sessions/{session_id}", response_model=SessionOut, summary="Describe a session",
+            responses={**problem_responses(401, 403, 404, 422),
+                       200: {"content": {"application/json": {"example": SESSION_EXAMPLE}}}})
+def get_session(session_id: SessionIdPath, request: Request, _key: ReadAccess) -> SessionOut:
+    store = _store(request)
+    return _out(_entry(store, session_id), store)
+
+
+@router.delete("/sessions/{session_id}", status_code=204, summary="End a session",
+               responses=problem_responses(401, 403, 404, 422))
+def delete_session(session_id: SessionIdPath, request: Request, _key: ReadAccess) -> Response:
+    try:
+        _store(request).delete(session_id)
+    except SessionNotFound:
+        _entry(_store(request), session_id)  # raises the 404 problem
+    return Response(status_code=204)
+
+
+@router.post("/sessions/{session_id}/frames", response_model=SessionFramesOut,
+             summary="Add frames to a session (one, or a recording in time order)",
+             description="Body: one frame object, or `{\"frames\": [...]}` (batch, at most "
+                         "900). Frames are validated all before any is fused: an error names "
+                         "`frames[i]....` and leaves the session unchanged.",
+             responses={**problem_responses(400, 401, 403, 404, 413, 415, 422),
+                        200: {"content": {"application/json": {
+                            "example": FRAME_RESPONSE_EXAMPLE}}}})
+def add_frames(session_id: SessionIdPath,
+               body: Annotated[SessionFramesIn | SessionFrameIn, Body(openapi_examples={
+                   "one_frame": {"summary": "One frame", "value": FRAME_EXAMPLE},
+                   "batch": {"summary": "A recording (batch)",
+                             "value": {"frames": [FRAME_EXAMPLE]}}})],
+               request: Request, _key: ReadAccess) -> SessionFramesOut:
+    store = _store(request)
+    entry = _entry(store, session_id)
+    frames = body.frames if isinstance(body, SessionFramesIn) else [body]
+    prefix = (lambda i: f"frames[{i}].") if isinstance(body, SessionFramesIn) else (lambda i: "")
+    with entry.lock:
+        session = entry.session
+        inputs = []
+        last_ts = session._last_timestamp
+        for i, f in enumerate(frames):
+            inp = _frame_input(f, entry.convention, prefix(i))
+            if last_ts is not None and inp.timestamp < last_ts:
+                raise _unprocessable(f"timestamp: {inp.timestamp} is before the previous "
+                                     f"frame's {last_ts}", prefix(i))
+            last_ts = inp.timestamp
+            inputs.append(inp)
+        results = []
+        for i, inp in enumerate(inputs):
+            try:
+                results.append(_frame_out(session.add_frame(inp), entry.convention))
+            except (TrackingInputError, GeometryError) as exc:
+                raise _unprocessable(str(exc), prefix(i)) from exc
+        entry.frames = session.frame_count
+    return SessionFramesOut(session_id=session_id, results=results)
+
+
+def _unprocessable(message: str, prefix: str) -> ProblemError:
+    head, sep, tail = message.partition(": ")
+    field = prefix + head if sep and " " not in head else (prefix + "body" if prefix else "body")
+    return ProblemError("validation-error", message,
+                        errors=[{"field": field, "message": tail if sep else message}])
+
+
+def _frame_input(f: SessionFrameIn, convention: str, prefix: str) -> FrameInput:
+    try:
+        dets = detections_from_request(f.detections)
+        T = _pose_matrix_in(f.odom_from_camera, "odom_from_camera")
+        if not np.all(np.isfinite(T)):
+            raise TrackingInputError("odom_from_camera: must be finite")
+        T = convert_pose(T, convention, "opencv")
+        R = T[:3, :3]
+        if not np.allclose(R.T @ R, np.eye(3), atol=1e-4) or np.linalg.det(R) < 0 \
+                or not np.allclose(T[3], [0, 0, 0, 1], atol=1e-9):
+            raise TrackingInputError("odom_from_camera: must be a rigid transform (rotation "
+                                     "orthonormal to 1e-4, det +1, last row [0, 0, 0, 1])")
+        prior = prior_from_request(f.prior)
+    except (GeometryError, LocalizationInputError, TrackingInputError) as exc:
+        raise _unprocessable(str(exc), prefix) from exc
+    return FrameInput(dets, T, float(f.timestamp), f.frame_id, prior)
+
+
+def _cov(S: np.ndarray | None, convention: str, camera_side: bool) -> CovarianceOut | None:
+    if S is None or not np.all(np.isfinite(S)):
+        return None
+    if camera_side:
+        S = convert_covariance(S, "opencv", convention)
+    return CovarianceOut(matrix=[[float(x) for x in row] for row in S])
+
+
+def _frame_out(r: FrameResult, convention: str) -> SessionFrameOut:
+    return SessionFrameOut(
+        frame_index=r.frame_index, frame_id=r.frame_id, timestamp=r.timestamp, state=r.state,
+        reason=r.reason,
+        world_from_camera=None if r.world_from_camera is None
+        else pose_out(r.world_from_camera, convention),
+        covariance=_cov(r.covariance, convention, True),
+        world_from_odom=None if r.world_from_odom is None
+        else pose_out(r.world_from_odom, "opencv").model_copy(update={"convention": convention}),
+        world_from_odom_covariance=_cov(r.world_from_odom_covariance, convention, False),
+        confidence=r.confidence,
+        inliers=[InlierOut(detection_index=m.detection_index, object_id=m.object_id,
+                           iou=float(m.iou), cost=float(m.cost)) for m in r.inliers],
+        n_usable_detections=r.n_usable_detections,
+        timings_ms={k: float(v) for k, v in r.timings_ms.items()})

@@ -1,0 +1,117 @@
+"""Wire models of the tracking-session endpoints (``/v1/maps/{map_id}/sessions``,
+``/v1/sessions/{id}...``). Shared pieces (camera, detections, poses, covariances) come from
+:mod:`service.api.schemas`; conventions are the same (OpenCV camera axes unless
+``convention: "opengl"``; covariances 6x6 ``[omega, v]``, body frame, right perturbation)."""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, Field
+
+from service.api.schemas import (
+    MAX_DETECTIONS,
+    CameraIn,
+    Convention,
+    CovarianceOut,
+    DetectionIn,
+    InlierOut,
+    PoseIn,
+    PoseOut,
+    PosePriorIn,
+    _Model,
+)
+
+__all__ = ["MAX_SESSION_BATCH_FRAMES", "SessionCreate", "SessionFrameIn", "SessionFrameOut",
+           "SessionFramesIn", "SessionFramesOut", "SessionOptionsIn", "SessionOut"]
+
+#: Frames per batch upload request (an offline recording is sent in chunks of this size).
+MAX_SESSION_BATCH_FRAMES = 900
+
+
+class SessionOptionsIn(_Model):
+    """Session options; omitted fields take the defaults shown."""
+
+    window_frames: int = Field(default=30, ge=2, le=300,
+                               description="Camera poses kept in the sliding window.")
+    smoother: str = Field(default="isam2", pattern="^(isam2|batch)$",
+                          description="isam2 (incremental fixed-lag) or batch (LM per frame).")
+    inlier_iou: float = Field(default=0.2, gt=0, le=1)
+    odometry_translation_m_per_sqrt_m: float = Field(
+        default=0.02, ge=0, le=10, description="Odometry random-walk translation std after 1 m "
+                                               "travelled (m); variance grows per metre.")
+    odometry_translation_m_per_sqrt_s: float = Field(
+        default=0.003, ge=0, le=10, description="... after 1 s (m); variance grows per second.")
+    odometry_rotation_deg_per_sqrt_m: float = Field(default=0.5, ge=0, le=90)
+    odometry_rotation_deg_per_sqrt_s: float = Field(default=0.05, ge=0, le=90)
+
+
+class SessionCreate(_Model):
+    """Start a tracking session on a map."""
+
+    camera: CameraIn
+    convention: Convention = Field(
+        default="opencv", description="Camera axes of every odom_from_camera, prior and "
+                                      "returned world_from_camera of the session (opengl = "
+                                      "ARKit/ARCore).")
+    options: SessionOptionsIn = Field(default_factory=SessionOptionsIn)
+
+
+class SessionOut(BaseModel):
+    """A session's description."""
+
+    session_id: str
+    url: str = Field(description="The session's resource path.")
+    map_id: str
+    map_version: int
+    convention: Convention
+    state: str = Field(description="initializing, tracking or lost.")
+    frames: int = Field(description="Frames received so far.")
+    idle_timeout_s: float = Field(description="The session expires after this idle time.")
+
+
+class SessionFrameIn(_Model):
+    """One frame: detections as for localize plus the app's odometry pose."""
+
+    detections: list[DetectionIn] = Field(default_factory=list, max_length=MAX_DETECTIONS)
+    odom_from_camera: PoseIn = Field(description="Camera pose in the app's odometry (session) "
+                                                 "frame, in the session's convention.")
+    timestamp: float = Field(ge=-1e12, le=1e12, description="Client clock (s), non-decreasing.")
+    frame_id: str | None = Field(default=None, max_length=256)
+    prior: PosePriorIn | None = None
+
+
+class SessionFramesIn(_Model):
+    """Several frames in time order (offline recording)."""
+
+    frames: list[SessionFrameIn] = Field(min_length=1, max_length=MAX_SESSION_BATCH_FRAMES)
+
+
+class SessionFrameOut(BaseModel):
+    """A frame's answer."""
+
+    frame_index: int
+    frame_id: str | None
+    timestamp: float
+    state: str = Field(description="initializing, tracking or lost.")
+    reason: str | None = Field(description="Why no pose: waiting_for_constraints, ambiguous, "
+                                           "lost; with a pose: detections_unexplained (the "
+                                           "frame's detections contradict the pose; confidence "
+                                           "0); else None.")
+    world_from_camera: PoseOut | None
+    covariance: CovarianceOut | None
+    world_from_odom: PoseOut | None = Field(
+        description="Alignment of the app's odometry frame to the map (same in both camera "
+                    "conventions); apply it once to the app's scene.")
+    world_from_odom_covariance: CovarianceOut | None = Field(
+        description="6x6 [omega, v], right perturbation, in the ODOMETRY frame's axes, given "
+                    "this frame's odometry pose.")
+    confidence: float = Field(ge=0, le=1, description="P(pose within 10 cm and 5 deg) under "
+                                                      "the pose posterior; 0 unless tracking "
+                                                      "and 0 when detections_unexplained.")
+    inliers: list[InlierOut]
+    n_usable_detections: int
+    timings_ms: dict[str, float]
+
+
+class SessionFramesOut(BaseModel):
+    session_id: str
+    results: list[SessionFrameOut]

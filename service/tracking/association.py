@@ -1,0 +1,113 @@
+"""Data association of a new frame at its predicted pose, gated by the predicted covariance.
+
+For each usable detection and each label-compatible map object whose projection is valid at the
+predicted ``world_from_camera`` ``T`` (OpenCV camera axes), the innovation is the detection's
+ellipse centre minus the projected ellipse centre (px). Its covariance is
+``S = J Sigma J^T + R``: ``Sigma`` the predicted 6x6 pose covariance (GTSAM order
+``[omega, v]``, body frame, right perturbation), ``J`` the 2x6 Jacobian of the projected
+object centre w.r.t. that tangent (:func:`centre_jacobians`), and ``R = s_d^2 I`` the detection
+centre noise with ``s_d = DETECTION_CENTRE_FRACTION * sqrt(a b) + DETECTION_CENTRE_FLOOR_PX``
+(it covers truncation at the image border, which moves the visible part's centre). A pair is a
+candidate when its squared Mahalanobis distance is <= :data:`GATE_CHI2` (chi-square, 2 dof,
+99.7 %) and the size ratio ``sqrt(a b)_det / sqrt(a b)_proj`` is within
+:data:`SIZE_RATIO_GATE`; candidates are assigned one-to-one greedily by increasing distance.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from factors.geometry import Camera, invert_pose
+from maps.compiled import CompiledMap
+from service.localization.ransac import project_objects
+
+__all__ = ["GATE_CHI2", "Association", "associate", "centre_jacobians"]
+
+GATE_CHI2 = 11.6
+DETECTION_CENTRE_FRACTION = 0.25
+DETECTION_CENTRE_FLOOR_PX = 3.0
+SIZE_RATIO_GATE = (0.4, 2.5)
+
+
+@dataclass(frozen=True)
+class Association:
+    """Detection ``detection_index`` (index into the frame's detections) -> map object index,
+    with its squared Mahalanobis distance at the predicted pose."""
+
+    detection_index: int
+    object_index: int
+    mahalanobis2: float
+
+
+def centre_jacobians(camera: Camera, world_from_camera: np.ndarray,
+                     points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel projections (N, 2) of world points (N, 3) and their Jacobians (N, 2, 6) w.r.t. the
+    pose tangent ``[omega, v]`` (right perturbation: ``T @ Exp(xi)``).
+
+    In the camera frame ``p(xi) = Exp(-omega) (p - v)`` to first order ``p + [p]x omega - v``;
+    ``u = (fx x / z + cx, fy y / z + cy)``."""
+    T = np.asarray(world_from_camera, dtype=float)
+    p = (points_world - T[:3, 3]) @ T[:3, :3]
+    x, y, z = p[:, 0], p[:, 1], p[:, 2]
+    fx, fy = camera.fx, camera.fy
+    u = np.column_stack([fx * x / z + camera.cx, fy * y / z + camera.cy])
+    du_dp = np.zeros((len(p), 2, 3))
+    du_dp[:, 0, 0] = fx / z
+    du_dp[:, 0, 2] = -fx * x / z ** 2
+    du_dp[:, 1, 1] = fy / z
+    du_dp[:, 1, 2] = -fy * y / z ** 2
+    skew = np.zeros((len(p), 3, 3))
+    skew[:, 0, 1], skew[:, 0, 2] = -z, y
+    skew[:, 1, 0], skew[:, 1, 2] = z, -x
+    skew[:, 2, 0], skew[:, 2, 1] = -y, x
+    dp = np.concatenate([skew, -np.broadcast_to(np.eye(3), (len(p), 3, 3))], axis=2)
+    return u, du_dp @ dp
+
+
+def associate(
+    compiled: CompiledMap, camera: Camera, world_from_camera: np.ndarray,
+    covariance: np.ndarray, ellipses: np.ndarray, labels: list[str],
+    detection_indices: list[int],
+) -> list[Association]:
+    """One-to-one gated associations (module docstring).
+
+    Args:
+        ellipses: (D, 5) detection params ``(cx, cy, a, b, angle)`` px / rad.
+        labels: the D labels; detection_indices: their indices in the frame.
+        covariance: predicted 6x6 pose covariance (``[omega, v]``, body frame).
+    """
+    cands: list[tuple[float, int, int]] = []
+    cfw = invert_pose(world_from_camera)[None]
+    for d, label in enumerate(labels):
+        objs = compiled.indices_for(label)
+        if len(objs) == 0:
+            continue
+        cen, inv_shape, valid, _ = project_objects(
+            camera, cfw, compiled.centers[objs], compiled.shape_matrices[objs],
+            compiled.dual_quadrics[objs])
+        _, J = centre_jacobians(camera, world_from_camera, compiled.centers[objs])
+        e = ellipses[d]
+        s_d = DETECTION_CENTRE_FRACTION * np.sqrt(e[2] * e[3]) + DETECTION_CENTRE_FLOOR_PX
+        S = J @ covariance @ J.transpose(0, 2, 1) + (s_d ** 2) * np.eye(2)
+        r = e[:2] - cen[0]
+        m2 = np.einsum("ni,ni->n", r, np.linalg.solve(S, r[..., None])[..., 0])
+        det = np.maximum(inv_shape[0, :, 0, 0] * inv_shape[0, :, 1, 1]
+                         - inv_shape[0, :, 0, 1] ** 2, 1e-300)
+        ratio = np.sqrt(e[2] * e[3]) / det ** 0.25
+        ok = valid[0] & (m2 <= GATE_CHI2) & (ratio >= SIZE_RATIO_GATE[0]) \
+            & (ratio <= SIZE_RATIO_GATE[1])
+        for k in np.flatnonzero(ok):
+            cands.append((float(m2[k]), d, int(objs[k])))
+    cands.sort()
+    used_d: set[int] = set()
+    used_o: set[int] = set()
+    out = []
+    for m2, d, o in cands:
+        if d in used_d or o in used_o:
+            continue
+        used_d.add(d)
+        used_o.add(o)
+        out.append(Association(detection_indices[d], o, m2))
+    return sorted(out, key=lambda a: a.detection_index)

@@ -1,0 +1,176 @@
+"""Multi-frame RANSAC: initialize (or relocalize) a session from several frames' detections.
+
+A walk that sees one or two objects per frame cannot be localized frame by frame, but a few
+frames together, tied by the client's odometry, see three or more objects. The frames'
+detections are mapped into the reference frame ``r`` (the newest) with the odometry
+``camera_r_from_camera_k``; a minimal sample is three detections (from any of the frames) of
+three distinct, label-compatible map objects. Each detection becomes a *virtual image point* of
+the reference camera: the ray through its ellipse centre in camera ``k``, at the depth where
+the object's size matches the ellipse's (``z = f r_obj / sqrt(a b)``, ``r_obj`` the geometric
+mean of the ellipsoid's semi-axes), transformed to camera ``r`` and projected. The existing P3P
+machinery (:func:`service.localization.hypotheses.p3p_hypotheses`) turns the three virtual
+points into ``camera_r_from_world`` hypotheses (exact when the three come from one frame, up to
+the depth guess otherwise); each hypothesis is propagated to every frame with the odometry and
+scored there with the single-frame :class:`service.localization.ransac.MatchScorer` (IoU,
+one-to-one greedy assignment per frame); the scores add up over frames.
+
+Acceptance (honest "not yet" rather than a wrong pose): the best hypothesis must explain at
+least :data:`MIN_DISTINCT_OBJECTS` distinct map objects with at least :data:`MIN_TOTAL_INLIERS`
+inlier detections in total, and no hypothesis more than :data:`AMBIGUITY_DISTANCE_M` away may
+score within :data:`AMBIGUITY_RATIO` of it. All poses here are ``camera_from_world`` unless
+named otherwise.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from factors.geometry import Camera, Ellipse, invert_pose
+from maps.compiled import CompiledMap
+from service.localization.hypotheses import p3p_hypotheses
+from service.localization.ransac import Match, MatchScorer, greedy_assignment
+
+__all__ = ["AMBIGUITY_RATIO", "MIN_DISTINCT_OBJECTS", "MIN_TOTAL_INLIERS", "InitFrame",
+           "MultiFrameOutcome", "multi_frame_ransac"]
+
+MIN_DISTINCT_OBJECTS = 3
+MIN_TOTAL_INLIERS = 4
+AMBIGUITY_RATIO = 0.85
+AMBIGUITY_DISTANCE_M = 0.3
+STAGE2 = 24
+
+
+@dataclass(frozen=True)
+class InitFrame:
+    """One buffered frame: its usable detections and the odometry pose.
+
+    Attributes:
+        odom_from_camera: 4x4 (OpenCV camera axes).
+        ellipses: (D, 5) ``(cx, cy, a, b, angle)`` of the usable detections.
+        labels: their D labels; detection_indices: their indices in the frame's request.
+    """
+
+    odom_from_camera: np.ndarray
+    ellipses: np.ndarray
+    labels: tuple[str, ...]
+    detection_indices: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class MultiFrameOutcome:
+    """``camera_from_world`` of every input frame (or None) and each frame's inlier matches."""
+
+    camera_from_world: list[np.ndarray] | None
+    matches: list[list[Match]]
+    n_objects: int
+    n_inliers: int
+    hypotheses: int
+    reason: str | None
+
+
+def _virtual_points(frames: Sequence[InitFrame], ref_from_k: list[np.ndarray],
+                    camera: Camera, sample: list[tuple[int, int, int]],
+                    compiled: CompiledMap) -> np.ndarray | None:
+    pts = []
+    Kinv = np.linalg.inv(camera.K)
+    for k, d, o in sample:
+        e = frames[k].ellipses[d]
+        r_obj = float(np.prod(compiled.axes[o]) ** (1.0 / 3.0))
+        z = 0.5 * (camera.fx + camera.fy) * r_obj / np.sqrt(e[2] * e[3])
+        p = ref_from_k[k][:3, :3] @ (z * (Kinv @ np.array([e[0], e[1], 1.0]))) \
+            + ref_from_k[k][:3, 3]
+        if p[2] <= 0.05:
+            return None
+        uv = camera.K @ (p / p[2])
+        pts.append(uv[:2])
+    return np.array(pts)
+
+
+def multi_frame_ransac(
+    frames: Sequence[InitFrame], compiled: CompiledMap, camera: Camera, *,
+    inlier_iou: float = 0.2, max_samples: int = 300, rng: np.random.Generator | None = None,
+    deadline: float | None = None, extra_hypotheses: Sequence[np.ndarray] = (),
+) -> MultiFrameOutcome:
+    """Search a pose of the newest frame explaining the detections of all ``frames``.
+
+    Args:
+        frames: buffered frames, the last one is the reference (its pose is the hypothesis).
+        extra_hypotheses: ``camera_from_world`` poses of the reference frame to score as well
+            (e.g. a client prior).
+        max_samples: minimal samples drawn (uniform over frames' detections and compatible
+            objects, seeded by ``rng``).
+    """
+    rng = rng or np.random.default_rng(0)
+    ref = frames[-1].odom_from_camera
+    ref_inv = invert_pose(ref)
+    ref_from_k = [ref_inv @ f.odom_from_camera for f in frames]
+    k_from_ref = [invert_pose(T) for T in ref_from_k]
+    scorers = [MatchScorer(compiled, camera, [_ell(e) for e in f.ellipses], list(f.labels),
+                           list(f.detection_indices)) if len(f.labels) else None
+               for f in frames]
+    pool = [(k, d, compiled.indices_for(lab)) for k, f in enumerate(frames)
+            for d, lab in enumerate(f.labels) if len(compiled.indices_for(lab))]
+    hyps: list[np.ndarray] = [np.asarray(h, float) for h in extra_hypotheses]
+    if len(pool) >= 3:
+        for _ in range(max_samples):
+            if deadline is not None and time.perf_counter() > deadline:
+                break
+            idx = rng.choice(len(pool), 3, replace=False)
+            sample, used = [], set()
+            for i in idx:
+                k, d, objs = pool[int(i)]
+                free = [int(o) for o in objs if int(o) not in used]
+                if not free:
+                    break
+                o = free[int(rng.integers(len(free)))]
+                used.add(o)
+                sample.append((k, d, o))
+            if len(sample) < 3:
+                continue
+            vp = _virtual_points(frames, ref_from_k, camera, sample, compiled)
+            if vp is None:
+                continue
+            sols = p3p_hypotheses(vp, compiled.centers[[s[2] for s in sample]], camera)
+            hyps.extend(sols)
+    if not hyps:
+        return MultiFrameOutcome(None, [], 0, 0, 0, "too_few_objects")
+    H = np.array(hyps).reshape(-1, 4, 4)
+    # stage 1: centre hits summed over frames; stage 2: IoU scores on the best STAGE2
+    hits = np.zeros(len(H))
+    for k, sc in enumerate(scorers):
+        if sc is not None:
+            hits += sc.centre_hits(np.einsum("ij,hjk->hik", k_from_ref[k], H))
+    keep = np.argsort(-hits, kind="stable")[:STAGE2]
+    H = H[keep]
+    score = np.zeros(len(H))
+    per_frame: list[list[list[Match]]] = [[[] for _ in frames] for _ in range(len(H))]
+    for k, sc in enumerate(scorers):
+        if sc is None:
+            continue
+        dense = sc.dense_iou(np.einsum("ij,hjk->hik", k_from_ref[k], H))
+        for h in range(len(H)):
+            m = greedy_assignment(dense[h], sc.detection_indices, inlier_iou)
+            per_frame[h][k] = m
+            score[h] += sum(x.iou for x in m)
+    order = np.argsort(-score, kind="stable")
+    best = int(order[0])
+    objs = {m.object_index for ms in per_frame[best] for m in ms}
+    n_inl = sum(len(ms) for ms in per_frame[best])
+    if len(objs) < MIN_DISTINCT_OBJECTS or n_inl < MIN_TOTAL_INLIERS:
+        return MultiFrameOutcome(None, [], len(objs), n_inl, len(hyps), "too_few_objects")
+    c_best = invert_pose(H[best])[:3, 3]
+    for h in order[1:]:
+        if score[h] < AMBIGUITY_RATIO * score[best]:
+            break
+        if np.linalg.norm(invert_pose(H[h])[:3, 3] - c_best) > AMBIGUITY_DISTANCE_M:
+            return MultiFrameOutcome(None, [], len(objs), n_inl, len(hyps), "ambiguous")
+    poses = [k_from_ref[k] @ H[best] for k in range(len(frames))]
+    return MultiFrameOutcome(poses, per_frame[best], len(objs), n_inl, len(hyps), None)
+
+
+def _ell(params: np.ndarray) -> Ellipse:
+    return Ellipse(*[float(x) for x in params])

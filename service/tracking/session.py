@@ -1,0 +1,531 @@
+"""A tracking session: camera poses of a walk in a sliding-window factor graph.
+
+Variables: one GTSAM ``Pose3`` per frame, the camera's ``world_from_camera`` (OpenCV camera
+axes), key ``x<frame index>``. Factors per frame:
+
+* the EXISTING metric factors of :func:`factors.pose_factors.pose_factors` (level set by
+  default, noise std ``sqrt(sigma_j)``, per-detection robust kernel) for each detection
+  associated at the predicted pose (:mod:`service.tracking.association`);
+* ``BetweenFactorPose3`` from the client's odometry, ``camera_{i}_from_camera_{i+1} =
+  inv(odom_from_camera_i) @ odom_from_camera_{i+1}``, noise :class:`DriftModel` (a random walk:
+  variance per metre travelled and per second, stated in ``docs/tracking.md``);
+* ``PriorFactorPose3`` where the client sends a prior with a covariance.
+
+The window is bounded: :data:`SMOOTHERS` ``"isam2"`` (``gtsam.IncrementalFixedLagSmoother``,
+the default) or ``"batch"`` (``gtsam.BatchFixedLagSmoother``, LM over the window each frame);
+both marginalise frames older than ``window_frames`` into a Gaussian prior on the rest
+(``bench.tracking`` measures both: docs/results.md).
+
+States: ``initializing`` (no pose yet: frames are buffered and multi-frame RANSAC,
+:mod:`service.tracking.multiframe`, runs every ``init_interval_frames``), ``tracking``, ``lost``
+(the estimate is no longer supported: position std above ``lost_position_std_m``, a frame with
+>= :data:`LOST_UNEXPLAINED_DETECTIONS` usable detections none of which is an inlier, or
+``lost_after_misses`` consecutive frames whose detections are all unexplained; such a frame,
+while still ``tracking``, has ``reason="detections_unexplained"`` and confidence 0;
+the graph is dropped and multi-frame RANSAC relocalizes, the state stays ``lost`` until then).
+Poses are returned only while ``tracking``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import gtsam
+import numpy as np
+
+from factors.geometry import Camera, ellipse_params, invert_pose, snap_to_rotation
+from factors.pose_factors import pose_factors
+from maps.compiled import CompiledMap
+from service.localization.ransac import MatchScorer
+from service.localization.types import Detection, InlierMatch, PosePrior
+from service.tracking.association import associate
+from service.tracking.confidence import session_confidence
+from service.tracking.multiframe import InitFrame, multi_frame_ransac
+
+__all__ = [
+    "SMOOTHERS",
+    "STATES",
+    "DriftModel",
+    "FrameInput",
+    "FrameResult",
+    "SessionOptions",
+    "TrackingInputError",
+    "TrackingSession",
+    "pose_adjoint",
+]
+
+STATES = ("initializing", "tracking", "lost")
+#: A tracking frame with at least this many usable detections, none of them explained by the
+#: estimate (no inlier), sends the session to ``lost`` at once (fewer: after
+#: ``lost_after_misses`` such frames in a row).
+LOST_UNEXPLAINED_DETECTIONS = 3
+SMOOTHERS = ("isam2", "batch")
+
+
+class TrackingInputError(ValueError):
+    """Bad frame input; the message starts with the offending field."""
+
+
+@dataclass(frozen=True)
+class DriftModel:
+    """Odometry noise as a random walk (documented in docs/tracking.md).
+
+    Between two frames ``d`` metres and ``dt`` seconds apart the relative pose has independent
+    per-axis std ``sqrt(q_d d + q_t dt + floor^2)`` with, for rotation (rad) and translation
+    (m): ``q_d = (x_per_sqrt_m)^2`` per metre and ``q_t = (x_per_sqrt_s)^2`` per second. So the
+    defaults mean 2 cm and 0.5 deg of std after 1 m, 0.3 cm and 0.05 deg after 1 s standing.
+    """
+
+    translation_m_per_sqrt_m: float = 0.02
+    translation_m_per_sqrt_s: float = 0.003
+    rotation_rad_per_sqrt_m: float = math.radians(0.5)
+    rotation_rad_per_sqrt_s: float = math.radians(0.05)
+    translation_floor_m: float = 1e-4
+    rotation_floor_rad: float = math.radians(0.01)
+
+    def __post_init__(self) -> None:
+        for name, value in self.__dict__.items():
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise TrackingInputError(f"options.drift.{name}: must be finite and >= 0")
+
+    def sigmas(self, distance_m: float, dt_s: float) -> np.ndarray:
+        """Per-axis stds ``[omega (3) rad, v (3) m]`` of one odometry step."""
+        dt_s = max(dt_s, 0.0)
+        r = math.sqrt(self.rotation_rad_per_sqrt_m ** 2 * distance_m
+                      + self.rotation_rad_per_sqrt_s ** 2 * dt_s + self.rotation_floor_rad ** 2)
+        t = math.sqrt(self.translation_m_per_sqrt_m ** 2 * distance_m
+                      + self.translation_m_per_sqrt_s ** 2 * dt_s
+                      + self.translation_floor_m ** 2)
+        return np.array([r, r, r, t, t, t])
+
+
+@dataclass(frozen=True)
+class SessionOptions:
+    """Knobs of a session (validated). ``window_frames``: poses kept in the graph;
+    ``metric``/``robust``: the factors' metric and kernel; ``inlier_iou``: a detection is an
+    inlier of a frame's pose when its IoU with its object's projection is >= this."""
+
+    window_frames: int = 30
+    smoother: str = "isam2"
+    metric: str = "level_set"
+    robust: str | None = "huber"
+    use_sigma: bool = True
+    inlier_iou: float = 0.2
+    drift: DriftModel = field(default_factory=DriftModel)
+    init_buffer_frames: int = 60
+    init_max_frames: int = 8
+    init_interval_frames: int = 5
+    init_max_samples: int = 300
+    init_time_budget_ms: float = 60.0
+    lost_position_std_m: float = 0.5
+    lost_after_misses: int = 10
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        def bad(name: str, problem: str) -> TrackingInputError:
+            return TrackingInputError(f"options.{name}: {problem}")
+        if not (isinstance(self.window_frames, int) and 2 <= self.window_frames <= 300):
+            raise bad("window_frames", f"must be an integer in [2, 300], got "
+                      f"{self.window_frames!r}")
+        if self.smoother not in SMOOTHERS:
+            raise bad("smoother", f"must be one of {SMOOTHERS}, got {self.smoother!r}")
+        if not (0 < self.inlier_iou <= 1):
+            raise bad("inlier_iou", f"must be in (0, 1], got {self.inlier_iou!r}")
+        if not (isinstance(self.init_max_frames, int) and 1 <= self.init_max_frames
+                <= self.init_buffer_frames <= 600):
+            raise bad("init_max_frames", "must satisfy 1 <= init_max_frames <= "
+                      "init_buffer_frames <= 600")
+
+
+@dataclass(frozen=True)
+class FrameInput:
+    """One frame of a session.
+
+    Attributes:
+        detections: as for ``localize``.
+        odom_from_camera: 4x4 pose of the camera in the client's odometry frame, OpenCV camera
+            axes (convert ARKit/ARCore with ``@ diag(1, -1, -1, 1)`` first).
+        timestamp: client clock, seconds, non-decreasing within a session.
+        frame_id: echoed back.
+        prior: optional client prior on ``world_from_camera`` (a factor when it has a
+            covariance).
+    """
+
+    detections: Sequence[Detection]
+    odom_from_camera: np.ndarray
+    timestamp: float
+    frame_id: str | None = None
+    prior: PosePrior | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class FrameResult:
+    """A frame's answer. Poses are OpenCV camera axes; covariances 6x6 ``[omega, v]`` (rad, m),
+    right perturbation, body frame of the pose they belong to (``world_from_odom``'s: the odometry
+    frame). ``world_from_camera``/``world_from_odom`` are None unless ``state == "tracking"``.
+    ``inliers``: detections whose IoU with their object's projection at the returned pose is >=
+    ``inlier_iou`` (one-to-one). ``confidence``: :func:`service.tracking.confidence.
+    session_confidence`. ``reason``: why there is no pose (``waiting_for_constraints``,
+    ``ambiguous``, ``lost``), ``detections_unexplained`` for a tracking frame whose usable
+    detections are all unexplained by its (odometry-predicted) pose, else None."""
+
+    frame_index: int
+    frame_id: str | None
+    timestamp: float
+    state: str
+    world_from_camera: np.ndarray | None
+    covariance: np.ndarray | None
+    world_from_odom: np.ndarray | None
+    world_from_odom_covariance: np.ndarray | None
+    inliers: tuple[InlierMatch, ...]
+    confidence: float
+    n_usable_detections: int
+    reason: str | None
+    timings_ms: dict[str, float]
+
+
+def pose_adjoint(T: np.ndarray) -> np.ndarray:
+    """6x6 adjoint of a 4x4 pose in GTSAM's ``[omega, v]`` order:
+    ``T Exp(xi) T^-1 = Exp(Ad_T xi)``."""
+    return gtsam.Pose3(gtsam.Rot3(snap_to_rotation(T[:3, :3])),
+                       np.ascontiguousarray(T[:3, 3])).AdjointMap()
+
+
+def _pose3(T: np.ndarray) -> gtsam.Pose3:
+    return gtsam.Pose3(gtsam.Rot3(snap_to_rotation(T[:3, :3])), np.ascontiguousarray(T[:3, 3]))
+
+
+def _key(i: int) -> int:
+    return gtsam.symbol("x", i)
+
+
+@dataclass
+class _Buffered:
+    index: int
+    timestamp: float
+    frame: InitFrame
+    detections: tuple[Detection, ...]
+    prior: PosePrior | None
+
+
+class TrackingSession:
+    """The state of one session (not thread-safe: the store serialises calls per session)."""
+
+    def __init__(self, compiled: CompiledMap, camera: Camera,
+                 options: SessionOptions | None = None) -> None:
+        self.compiled = compiled
+        self.camera = camera
+        self.options = options or SessionOptions()
+        self.state = "initializing"
+        self.frame_count = 0
+        self._rng = np.random.default_rng(self.options.seed)
+        self._buffer: deque[_Buffered] = deque(maxlen=self.options.init_buffer_frames)
+        self._last_attempt = -10 ** 9
+        self._smoother: gtsam.FixedLagSmoother | None = None
+        self._last: tuple[int, float, np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._misses = 0
+        self._last_timestamp: float | None = None
+        self._t0 = time.perf_counter()
+
+    # ------------------------------------------------------------------ public
+    def add_frame(self, frame: FrameInput) -> FrameResult:
+        """Fuse one frame; returns its :class:`FrameResult`. Raises
+        :class:`TrackingInputError` naming the field on bad input (the session is unchanged)."""
+        t0 = time.perf_counter()
+        T_oc = self._check(frame)
+        index = self.frame_count
+        usable = [i for i, d in enumerate(frame.detections)
+                  if len(self.compiled.indices_for(d.label)) > 0]
+        self.frame_count += 1
+        self._last_timestamp = float(frame.timestamp)
+        timings: dict[str, float] = {}
+        if self.state == "tracking":
+            result = self._track(index, frame, T_oc, usable, timings)
+        else:
+            result = self._initialize(index, frame, T_oc, usable, timings)
+        timings["total"] = (time.perf_counter() - t0) * 1e3
+        return result
+
+    def reset(self) -> None:
+        """Drop the graph; the next frames relocalize (state ``lost``)."""
+        self._smoother = None
+        self._last = None
+        self._misses = 0
+        self._buffer.clear()
+        self.state = "lost"
+
+    # ------------------------------------------------------------------ input
+    def _check(self, frame: FrameInput) -> np.ndarray:
+        if not isinstance(frame, FrameInput):
+            raise TrackingInputError(f"frame: must be a FrameInput, got {type(frame).__name__}")
+        for i, d in enumerate(frame.detections):
+            if not isinstance(d, Detection):
+                raise TrackingInputError(f"detections[{i}]: must be a Detection")
+        T = np.asarray(frame.odom_from_camera, dtype=float)
+        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+            raise TrackingInputError("odom_from_camera: must be a finite 4x4 matrix")
+        R = T[:3, :3]
+        if not np.allclose(R.T @ R, np.eye(3), atol=1e-4) or np.linalg.det(R) < 0 \
+                or not np.allclose(T[3], [0, 0, 0, 1], atol=1e-9):
+            raise TrackingInputError("odom_from_camera: must be a rigid transform (rotation "
+                                     "orthonormal to 1e-4, det +1, last row [0, 0, 0, 1])")
+        ts = frame.timestamp
+        if isinstance(ts, bool) or not isinstance(ts, (int, float)) or not math.isfinite(ts):
+            raise TrackingInputError(f"timestamp: must be a finite number, got {ts!r}")
+        if self._last_timestamp is not None and ts < self._last_timestamp:
+            raise TrackingInputError(
+                f"timestamp: {ts} is before the previous frame's {self._last_timestamp} "
+                "(frames must be sent in time order)")
+        T = T.copy()
+        T[:3, :3] = snap_to_rotation(R)
+        return T
+
+    # ------------------------------------------------------------------ tracking
+    def _factors_for(self, key: int, T_pred: np.ndarray, detections: Sequence[Detection],
+                     objects: Sequence[int]) -> list[gtsam.NonlinearFactor]:
+        if not objects:
+            return []
+        opts = self.options
+        factors, _ = pose_factors(
+            opts.metric, key, [d.ellipse for d in detections],
+            [self.compiled.ellipsoids[o] for o in objects], self.camera,
+            sigmas=[d.sigma if opts.use_sigma else None for d in detections],
+            robust=opts.robust, initial_world_from_camera=T_pred,
+            batched=opts.robust is None)
+        return factors
+
+    def _between(self, key_a: int, key_b: int, T_oa: np.ndarray, T_ob: np.ndarray,
+                 dt: float) -> tuple[gtsam.BetweenFactorPose3, np.ndarray, np.ndarray]:
+        rel = invert_pose(T_oa) @ T_ob
+        sig = self.options.drift.sigmas(float(np.linalg.norm(rel[:3, 3])), dt)
+        noise = gtsam.noiseModel.Diagonal.Sigmas(sig)
+        return gtsam.BetweenFactorPose3(key_a, key_b, _pose3(rel), noise), rel, np.diag(sig ** 2)
+
+    def _new_smoother(self) -> gtsam.FixedLagSmoother:
+        lag = float(self.options.window_frames - 1)
+        if self.options.smoother == "batch":
+            return gtsam.BatchFixedLagSmoother(lag)
+        params = gtsam.ISAM2Params()
+        params.setRelinearizeThreshold(0.01)
+        params.relinearizeSkip = 1
+        params.findUnusedFactorSlots = True
+        return gtsam.IncrementalFixedLagSmoother(lag, params)
+
+    def _marginal(self, key: int) -> np.ndarray | None:
+        try:
+            if self.options.smoother == "batch":
+                sm = self._smoother
+                cov = gtsam.Marginals(sm.getFactors(), sm.calculateEstimate()) \
+                    .marginalCovariance(key)
+            else:
+                cov = self._smoother.marginalCovariance(key)
+        except RuntimeError:
+            return None
+        cov = 0.5 * (np.asarray(cov) + np.asarray(cov).T)
+        return cov if np.all(np.isfinite(cov)) else None
+
+    def _verify(self, detections: Sequence[Detection], usable: list[int],
+                world_from_camera: np.ndarray) -> list[InlierMatch]:
+        if not usable:
+            return []
+        sc = MatchScorer(self.compiled, self.camera, [detections[i].ellipse for i in usable],
+                         [detections[i].label for i in usable], usable)
+        ms = sc.matches(invert_pose(world_from_camera), self.options.inlier_iou)
+        return [InlierMatch(m.detection_index, self.compiled.object_ids[m.object_index],
+                            float(m.iou), 1.0 - float(m.iou)) for m in ms]
+
+    def _result(self, index: int, frame: FrameInput, T_oc: np.ndarray, T: np.ndarray | None,
+                cov: np.ndarray | None, inliers: list[InlierMatch], n_usable: int,
+                reason: str | None, timings: dict[str, float],
+                contradicted: bool = False) -> FrameResult:
+        T_wo = cov_wo = None
+        if T is not None:
+            T_wo = T @ invert_pose(T_oc)
+            if cov is not None:
+                Ad = pose_adjoint(T_oc)
+                cov_wo = Ad @ cov @ Ad.T
+        return FrameResult(index, frame.frame_id, float(frame.timestamp), self.state, T, cov,
+                           T_wo, cov_wo, tuple(inliers),
+                           session_confidence(self.state, cov, contradicted), n_usable, reason,
+                           timings)
+
+    def _track(self, index: int, frame: FrameInput, T_oc: np.ndarray, usable: list[int],
+               timings: dict[str, float]) -> FrameResult:
+        assert self._last is not None and self._smoother is not None
+        t = time.perf_counter()
+        last_index, last_ts, T_oc_last, T_last, cov_last = self._last
+        key, key_last = _key(index), _key(last_index)
+        between, rel, Q = self._between(key_last, key, T_oc_last, T_oc,
+                                        float(frame.timestamp) - last_ts)
+        T_pred = T_last @ rel
+        Ad = pose_adjoint(invert_pose(rel))
+        cov_pred = Ad @ cov_last @ Ad.T + Q
+        graph = gtsam.NonlinearFactorGraph()
+        graph.add(between)
+        assoc = []
+        if usable:
+            dets = frame.detections
+            assoc = associate(self.compiled, self.camera, T_pred, cov_pred,
+                              ellipse_params([dets[i].ellipse for i in usable]),
+                              [dets[i].label for i in usable], usable)
+            for f in self._factors_for(key, T_pred, [dets[a.detection_index] for a in assoc],
+                                       [a.object_index for a in assoc]):
+                graph.add(f)
+        if frame.prior is not None and frame.prior.covariance is not None:
+            graph.add(gtsam.PriorFactorPose3(key, _pose3(frame.prior.world_from_camera),
+                                             gtsam.noiseModel.Gaussian.Covariance(
+                                                 np.asarray(frame.prior.covariance))))
+        values = gtsam.Values()
+        values.insert(key, _pose3(T_pred))
+        stamps = gtsam.FixedLagSmootherKeyTimestampMap()
+        stamps.insert((key, float(index)))
+        timings["associate"] = (time.perf_counter() - t) * 1e3
+        t = time.perf_counter()
+        try:
+            self._smoother.update(graph, values, stamps)
+            T = self._smoother.calculateEstimatePose3(key).matrix()
+            cov = self._marginal(key)
+        except RuntimeError:
+            T, cov = None, None
+        timings["update"] = (time.perf_counter() - t) * 1e3
+        if T is None or cov is None or not np.all(np.isfinite(T)):
+            self.reset()
+            return self._result(index, frame, T_oc, None, None, [], len(usable), "lost",
+                                timings)
+        inliers = self._verify(frame.detections, usable, T)
+        # a frame whose usable detections are all unexplained contradicts the estimate
+        contradicted = bool(usable) and not inliers and (
+            bool(assoc) or self._predicted_visible(T_pred))
+        self._misses = self._misses + 1 if contradicted else 0
+        pos_std = math.sqrt(max(float(np.linalg.eigvalsh(cov[3:, 3:]).max()), 0.0))
+        if pos_std > self.options.lost_position_std_m \
+                or self._misses >= self.options.lost_after_misses \
+                or (contradicted and len(usable) >= LOST_UNEXPLAINED_DETECTIONS):
+            self.reset()
+            return self._result(index, frame, T_oc, None, None, [], len(usable), "lost",
+                                timings)
+        self._last = (index, float(frame.timestamp), T_oc, T, cov)
+        return self._result(index, frame, T_oc, T, cov, inliers, len(usable),
+                            "detections_unexplained" if contradicted else None, timings,
+                            contradicted)
+
+    def _predicted_visible(self, world_from_camera: np.ndarray) -> bool:
+        cfw = invert_pose(world_from_camera)
+        pc = self.compiled.centers @ cfw[:3, :3].T + cfw[:3, 3]
+        z = pc[:, 2]
+        ok = z > 0.1
+        u = self.camera.fx * pc[ok, 0] / z[ok] + self.camera.cx
+        v = self.camera.fy * pc[ok, 1] / z[ok] + self.camera.cy
+        return bool(np.any((u >= 0) & (u < self.camera.width) & (v >= 0)
+                           & (v < self.camera.height)))
+
+    # ------------------------------------------------------------------ (re)initialization
+    def _initialize(self, index: int, frame: FrameInput, T_oc: np.ndarray, usable: list[int],
+                    timings: dict[str, float]) -> FrameResult:
+        opts = self.options
+        dets = tuple(frame.detections)
+        ell = ellipse_params([dets[i].ellipse for i in usable]) if usable else np.zeros((0, 5))
+        self._buffer.append(_Buffered(index, float(frame.timestamp), InitFrame(
+            T_oc, ell, tuple(dets[i].label for i in usable), tuple(usable)), dets, frame.prior))
+        waiting = "lost" if self.state == "lost" else "waiting_for_constraints"
+        with_dets = [b for b in list(self._buffer)[:-1] if len(b.frame.labels)]
+        chosen = [*_spread(with_dets, opts.init_max_frames - 1), self._buffer[-1]]
+        n_pool = sum(len(b.frame.labels) for b in chosen)
+        if n_pool < 3 or index - self._last_attempt < opts.init_interval_frames \
+                or not usable:
+            return self._result(index, frame, T_oc, None, None, [], len(usable), waiting,
+                                timings)
+        self._last_attempt = index
+        t = time.perf_counter()
+        extra = [invert_pose(frame.prior.world_from_camera)] if frame.prior is not None else []
+        out = multi_frame_ransac([b.frame for b in chosen], self.compiled, self.camera,
+                                 inlier_iou=opts.inlier_iou, max_samples=opts.init_max_samples,
+                                 rng=self._rng, extra_hypotheses=extra,
+                                 deadline=time.perf_counter() + opts.init_time_budget_ms / 1e3)
+        timings["multi_frame_ransac"] = (time.perf_counter() - t) * 1e3
+        if out.camera_from_world is None:
+            reason = "ambiguous" if out.reason == "ambiguous" else waiting
+            return self._result(index, frame, T_oc, None, None, [], len(usable), reason,
+                                timings)
+        t = time.perf_counter()
+        started = self._start_graph(chosen, [invert_pose(P) for P in out.camera_from_world],
+                                    out.matches)
+        timings["init_refine"] = (time.perf_counter() - t) * 1e3
+        if started is None:
+            return self._result(index, frame, T_oc, None, None, [], len(usable), waiting,
+                                timings)
+        T, cov = started
+        self.state = "tracking"
+        self._buffer.clear()
+        self._misses = 0
+        inliers = self._verify(dets, usable, T)
+        return self._result(index, frame, T_oc, T, cov, inliers, len(usable), None, timings)
+
+    def _start_graph(self, chosen: list[_Buffered], poses: list[np.ndarray],
+                     matches: list) -> tuple[np.ndarray, np.ndarray] | None:
+        """Joint LM over the chosen frames (odometry between consecutive ones, detection
+        factors of the RANSAC inliers, a weak prior on the first), then seed the smoother."""
+        graph = gtsam.NonlinearFactorGraph()
+        values = gtsam.Values()
+        stamps = gtsam.FixedLagSmootherKeyTimestampMap()
+        weak = gtsam.noiseModel.Diagonal.Sigmas(np.array([3.0] * 3 + [10.0] * 3))
+        graph.add(gtsam.PriorFactorPose3(_key(chosen[0].index), _pose3(poses[0]), weak))
+        for j, (b, T, ms) in enumerate(zip(chosen, poses, matches, strict=True)):
+            key = _key(b.index)
+            values.insert(key, _pose3(T))
+            stamps.insert((key, float(b.index)))
+            by_det = {m.detection_index: m.object_index for m in ms}
+            det_idx = sorted(by_det)
+            for f in self._factors_for(key, T, [b.detections[i] for i in det_idx],
+                                       [by_det[i] for i in det_idx]):
+                graph.add(f)
+            if b.prior is not None and b.prior.covariance is not None:
+                graph.add(gtsam.PriorFactorPose3(key, _pose3(b.prior.world_from_camera),
+                                                 gtsam.noiseModel.Gaussian.Covariance(
+                                                     np.asarray(b.prior.covariance))))
+            if j:
+                a = chosen[j - 1]
+                between, _, _ = self._between(_key(a.index), key, a.frame.odom_from_camera,
+                                              b.frame.odom_from_camera, b.timestamp - a.timestamp)
+                graph.add(between)
+        try:
+            params = gtsam.LevenbergMarquardtParams()
+            params.setMaxIterations(30)
+            result = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
+        except RuntimeError:
+            return None
+        refined = [result.atPose3(_key(b.index)).matrix() for b in chosen]
+        objs: set[str] = set()
+        for b, T in zip(chosen, refined, strict=True):
+            objs |= {m.object_id for m in self._verify(b.detections,
+                                                       list(b.frame.detection_indices), T)}
+        if len(objs) < 3:
+            return None
+        self._smoother = self._new_smoother()
+        try:
+            self._smoother.update(graph, result, stamps)
+            last = chosen[-1]
+            T = self._smoother.calculateEstimatePose3(_key(last.index)).matrix()
+            cov = self._marginal(_key(last.index))
+        except RuntimeError:
+            self._smoother = None
+            return None
+        if cov is None:
+            self._smoother = None
+            return None
+        self._last = (last.index, last.timestamp, last.frame.odom_from_camera, T, cov)
+        return T, cov
+
+
+def _spread(items: list, n: int) -> list:
+    """At most ``n`` items evenly spread over ``items`` (keeping the newest)."""
+    if n <= 0:
+        return []
+    if len(items) <= n:
+        return list(items)
+    idx = np.unique(np.round(np.linspace(len(items) - 1, 0, n)).astype(int))
+    return [items[i] for i in sorted(idx)]

@@ -1,0 +1,118 @@
+"""In-process store of tracking sessions: bounded in count, idle expiry, one lock per session.
+
+Sessions live in the serving process (their factor graph is not serialisable cheaply and a
+frame needs the previous one's state within milliseconds). With several replicas, the proxy
+routes every request of one session to the replica that created it: the id carries that
+replica's tag (:func:`replica_id`) and ``deploy/nginx.conf`` maps it to the replica (a plain
+hash of the id cannot work: the id does not exist yet when the creation request is routed). A
+replica that restarted has lost its sessions and answers 404 ``session-not-found`` (the client
+starts a new session).
+
+Bounds: at most ``max_sessions`` live sessions (a new one beyond that first evicts sessions idle
+for more than ``idle_timeout_s``, then is refused: :class:`SessionCapacityError`, 503); each
+session's memory is bounded by its window (``SessionOptions.window_frames``) and init buffer
+(``init_buffer_frames``), measured in docs/tracking.md.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import secrets
+import socket
+import threading
+import time
+from dataclasses import dataclass, field
+
+from service.tracking.session import TrackingSession
+
+__all__ = ["SessionCapacityError", "SessionEntry", "SessionNotFound", "SessionStore"]
+
+
+def replica_id() -> str:
+    """This replica's tag in session ids: ``QUADLOC_REPLICA_ID``, else the hostname (the
+    compose stack names its replicas ``quadloc-1``, ``quadloc-2``), reduced to ``[a-z0-9-]``.
+    The proxy routes ``/v1/sessions/s-<tag>.<random>`` to that replica."""
+    tag = (os.environ.get("QUADLOC_REPLICA_ID") or socket.gethostname()).lower()
+    return re.sub(r"[^a-z0-9-]", "-", tag)[:40] or "local"
+
+
+class SessionNotFound(KeyError):  # noqa: N818 (like maps.errors.MapNotFound)
+    """No live session with that id (never created, deleted, expired, or replica restarted)."""
+
+
+class SessionCapacityError(RuntimeError):
+    """The store is full of non-idle sessions."""
+
+
+@dataclass
+class SessionEntry:
+    """A live session and its bookkeeping (``last_used`` is ``time.monotonic()``)."""
+
+    session_id: str
+    map_id: str
+    map_version: int
+    session: TrackingSession
+    convention: str
+    created_unix: float
+    last_used: float
+    frames: int = 0
+    lock: threading.Lock = field(default_factory=threading.Lock)
+
+
+class SessionStore:
+    """Thread-safe registry of :class:`SessionEntry` (see the module docstring)."""
+
+    def __init__(self, max_sessions: int = 200, idle_timeout_s: float = 300.0,
+                 clock: object = time.monotonic) -> None:
+        if max_sessions < 1 or not idle_timeout_s > 0:
+            raise ValueError("max_sessions must be >= 1 and idle_timeout_s > 0")
+        self.max_sessions = int(max_sessions)
+        self.idle_timeout_s = float(idle_timeout_s)
+        self._clock = clock
+        self._lock = threading.Lock()
+        self._entries: dict[str, SessionEntry] = {}
+
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self._entries)
+
+    def expire(self) -> int:
+        """Drop sessions idle for more than ``idle_timeout_s``; returns how many."""
+        now = self._clock()  # type: ignore[operator]
+        with self._lock:
+            dead = [k for k, e in self._entries.items()
+                    if now - e.last_used > self.idle_timeout_s and not e.lock.locked()]
+            for k in dead:
+                del self._entries[k]
+        return len(dead)
+
+    def create(self, map_id: str, map_version: int, session: TrackingSession,
+               convention: str) -> SessionEntry:
+        """Register a new session under a fresh id ``s-<replica_id()>.<22 url-safe chars>``."""
+        self.expire()
+        now = self._clock()  # type: ignore[operator]
+        with self._lock:
+            if len(self._entries) >= self.max_sessions:
+                raise SessionCapacityError(
+                    f"{len(self._entries)} live sessions (max {self.max_sessions})")
+            sid = f"s-{replica_id()}." + secrets.token_urlsafe(16)
+            entry = SessionEntry(sid, map_id, map_version, session, convention, time.time(), now)
+            self._entries[sid] = entry
+            return entry
+
+    def get(self, session_id: str) -> SessionEntry:
+        """The live entry (touching its idle clock) or :class:`SessionNotFound`."""
+        now = self._clock()  # type: ignore[operator]
+        with self._lock:
+            entry = self._entries.get(session_id)
+            if entry is None or now - entry.last_used > self.idle_timeout_s:
+                self._entries.pop(session_id, None)
+                raise SessionNotFound(session_id)
+            entry.last_used = now
+            return entry
+
+    def delete(self, session_id: str) -> None:
+        with self._lock:
+            if self._entries.pop(session_id, None) is None:
+                raise SessionNotFound(session_id)
