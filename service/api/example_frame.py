@@ -362,9 +362,9 @@ LOCALIZE_RESPONSE_EXAMPLE: dict[str, Any] = json.loads(
  "map_version": 1,
  "timings_ms": {
   "validate": 0.02,
-  "hypotheses": 18.96,
-  "refine": 2.98,
-  "total": 22.5
+  "hypotheses": 16.7,
+  "refine": 3.12,
+  "total": 20.39
  },
  "frame_id": "seq-03/frame-000022",
  "timestamp": 1700000001.3333333
