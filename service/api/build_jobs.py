@@ -25,6 +25,8 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
+from sqlalchemy.exc import SQLAlchemyError
+
 from maps.building.build import BuildTimeoutError, build_map
 from maps.building.jobs import JobStore
 from maps.building.recording import Recording
@@ -148,9 +150,15 @@ def install_map_building(app: Any, store: MapStore, settings: Any, cache: Any) -
     from service.api.routers import build
 
     jobs = JobStore(store.engine)
-    stale = jobs.fail_stale(settings.build_stale_after_s)
-    if stale:
-        log.warning("marked %d build job(s) failed: their runner stopped reporting", stale)
+    try:
+        stale = jobs.fail_stale(settings.build_stale_after_s)
+    except SQLAlchemyError as exc:  # unmigrated / unreachable: the app still starts (503s)
+        log.error("build jobs not swept at startup (%s): the database is unavailable or not "
+                  "migrated; they are swept again before any job's status is answered",
+                  type(exc).__name__)
+    else:
+        if stale:
+            log.warning("marked %d build job(s) failed: their runner stopped reporting", stale)
     app.state.build_jobs = jobs
     app.state.build_runner = BuildRunner(
         store, jobs, max_concurrent=settings.max_concurrent_builds,
