@@ -281,7 +281,8 @@ def to_markdown(report: dict[str, Any]) -> str:
         "",
         f"`{report['command']}` - {report['frames']} simulated Chess frames (real ground-truth "
         f"poses, default detector noise, level-set refinement) posted to {w} real single-worker "
-        "Uvicorn replica(s) (shared SQLite, default settings: `QUADLOC_MAX_CONCURRENT_SOLVES` = 2 solves at a time per process) "
+        "Uvicorn replica(s) (shared SQLite, default settings: `QUADLOC_MAX_CONCURRENT_SOLVES` = "
+        "2 solves at a time per process) "
         "by closed-loop asyncio httpx clients on the same machine, each request to the replica "
         "with the fewest in flight (least-connections balancing), "
         f"{report['duration_s']:g} s per level after {report['warmup_s']:g} s warm-up. "
