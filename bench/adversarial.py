@@ -49,7 +49,7 @@ from typing import Any
 import httpx
 import numpy as np
 
-from bench.load import _free_port, build_frames
+from bench.load import _free_port, build_frames, wait_until_ready
 
 REPO = Path(__file__).resolve().parents[1]
 PG_BASE = "postgresql+psycopg://postgres@127.0.0.1:5432/test"
@@ -137,18 +137,8 @@ def start_server(data_dir: Path, database_url: str,
                              "--port", str(port)], cwd=REPO, env=env, stdout=log,
                             stderr=subprocess.STDOUT)
     base = f"http://127.0.0.1:{port}"
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            raise RuntimeError((data_dir / "server.log").read_text()[-3000:])
-        try:
-            if httpx.get(f"{base}/readyz", timeout=2).status_code == 200:
-                return proc, base
-        except httpx.TransportError:
-            pass
-        time.sleep(0.2)
-    proc.terminate()
-    raise RuntimeError("server did not become ready")
+    wait_until_ready(proc, base, data_dir / "server.log")
+    return proc, base
 
 
 # ------------------------------------------------------------------------ the measurements

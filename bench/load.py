@@ -144,13 +144,21 @@ def start_server(data_dir: Path, port: int | None = None) -> tuple[subprocess.Po
          "--no-access-log"],
         cwd=REPO, env=env, stdout=log, stderr=subprocess.STDOUT)
     base = f"http://127.0.0.1:{port}"
-    deadline = time.monotonic() + 120
+    wait_until_ready(proc, base, data_dir / f"uvicorn-{port}.log")
+    return proc, base
+
+
+def wait_until_ready(proc: subprocess.Popen, base: str, log_path: Path,
+                     timeout_s: float = 120.0) -> None:
+    """Poll ``{base}/readyz`` until 200; raise with the log's tail if the server exits, and
+    terminate it if it is not ready within ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         if proc.poll() is not None:
-            raise RuntimeError((data_dir / f"uvicorn-{port}.log").read_text()[-3000:])
+            raise RuntimeError(log_path.read_text()[-3000:])
         try:
             if httpx.get(f"{base}/readyz", timeout=2).status_code == 200:
-                return proc, base
+                return
         except httpx.TransportError:
             pass
         time.sleep(0.2)
