@@ -95,6 +95,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from factors.geometry import Ellipse, sigma_entries
+from factors.names import METRIC_NAMES
 from factors.overlap import HULL_DIRECTIONS, hull_area, intersection_area, quadrant_areas
 
 __all__ = [
@@ -111,10 +112,6 @@ __all__ = [
     "residual_size",
 ]
 
-METRIC_NAMES: tuple[str, ...] = (
-    "iou", "giou", "bbox", "qbbox", "algebraic", "frobenius", "wasserstein", "bhattacharyya",
-    "level_set",
-)
 
 #: Default outermost sampled level "radius" ``s_max`` (the curve ``Phi_D = s_max^2``).
 DEFAULT_LEVEL_SET_SCALE = 2.0

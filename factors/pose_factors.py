@@ -59,7 +59,7 @@ import gtsam
 import numpy as np
 
 from factors.geometry import Camera, Ellipse, Ellipsoid
-from factors.metrics import METRIC_NAMES
+from factors.names import METRIC_NAMES, ROBUST_KERNELS
 from factors.pose_residuals import PoseResidualModel
 
 __all__ = [
@@ -73,8 +73,6 @@ __all__ = [
     "shared_pose_factor",
 ]
 
-#: Robust kernels accepted by name.
-ROBUST_KERNELS: tuple[str, ...] = ("huber", "cauchy", "geman_mcclure")
 
 #: Default robust threshold ``k`` per metric, on the whitened residual norm
 #: ``sqrt(Delta_j / sigma_j)`` (units: those of the metric's residual). Calibration

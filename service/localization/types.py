@@ -27,9 +27,17 @@ from typing import Any
 import numpy as np
 
 from factors.geometry import Ellipse, GeometryError
-from factors.metrics import METRIC_NAMES, residual
-from factors.pose_factors import ROBUST_KERNELS
+from factors.metrics import residual
 from factors.pose_residuals import check_pose
+from service.limits import (
+    AMBIGUITY_POLICIES,
+    METRICS,
+    NO_REFINEMENT,
+    POSE_SOURCES,
+    REASONS,
+    ROBUST_KERNELS,
+    UNKNOWN_LABEL_POLICIES,
+)
 
 __all__ = [
     "AMBIGUITY_POLICIES",
@@ -47,29 +55,6 @@ __all__ = [
     "LocalizationResult",
     "PosePrior",
 ]
-
-#: The nine refinement metrics (same names as ``factors.metrics.METRIC_NAMES``).
-METRICS: tuple[str, ...] = METRIC_NAMES
-#: ``LocalizationOptions.metric`` value that skips refinement (the RANSAC/P3P/P2E pose is
-#: returned as is; useful for evaluation).
-NO_REFINEMENT = "none"
-#: ``LocalizationOptions.unknown_label_policy`` values, see there.
-UNKNOWN_LABEL_POLICIES: tuple[str, ...] = ("ignore", "error")
-#: ``LocalizationOptions.on_ambiguity`` values, see there.
-AMBIGUITY_POLICIES: tuple[str, ...] = ("not_localized", "best")
-#: ``LocalizationResult.pose_source`` values: the refined client prior or the RANSAC search.
-POSE_SOURCES: tuple[str, ...] = ("prior", "ransac")
-#: Every ``LocalizationResult.reason`` when ``localized`` is false.
-REASONS: tuple[str, ...] = (
-    "too_few_detections",
-    "no_label_match",
-    "no_hypothesis_above_inlier_threshold",
-    "refinement_diverged",
-    "ambiguous",
-    "low_confidence",
-    "time_budget_exceeded",
-)
-
 
 class LocalizationInputError(ValueError):
     """Invalid input to :func:`localize`; the message starts with the offending field, e.g.
