@@ -307,18 +307,6 @@ class Ellipse:
         return np.array([self.cx, self.cy, self.a, self.b, self.angle])
 
     # -- conics
-    def primal_conic(self) -> np.ndarray:
-        """Point conic ``C`` (3x3): ``x~^T C x~ = 0`` on the contour, ``< 0`` inside."""
-        A = self.shape_matrix()
-        c = self.center
-        Ac = A @ c
-        C = np.empty((3, 3))
-        C[:2, :2] = A
-        C[:2, 2] = -Ac
-        C[2, :2] = -Ac
-        C[2, 2] = c @ Ac - 1.0
-        return C
-
     def dual_conic(self) -> np.ndarray:
         """Dual conic ``C* = C^-1`` normalised so that ``C*[2, 2] = -1`` (3x3, px^2)."""
         return dual_conics_from_params(self.params()[None])[0]
@@ -327,18 +315,6 @@ class Ellipse:
     def from_dual_conic(cls, dual_conic: np.ndarray) -> Ellipse:
         """Ellipse of a dual conic of any scale; raises ``DegenerateProjectionError`` if none."""
         return cls(*params_from_dual_conics(np.asarray(dual_conic, dtype=float)[None])[0])
-
-    @classmethod
-    def from_primal_conic(cls, conic: np.ndarray) -> Ellipse:
-        """Ellipse of a point conic of any scale and sign."""
-        C = np.asarray(conic, dtype=float)
-        if C.shape != (3, 3) or not np.all(np.isfinite(C)):
-            raise GeometryError("conic must be a finite 3x3 matrix")
-        try:
-            Cd = np.linalg.inv(C)
-        except np.linalg.LinAlgError as exc:
-            raise DegenerateProjectionError("degenerate_conic", "singular conic") from exc
-        return cls.from_dual_conic(Cd)
 
     # -- Gaussian
     def gaussian(self) -> tuple[np.ndarray, np.ndarray]:
@@ -370,21 +346,11 @@ class Ellipse:
             )
         return cls((xmin + xmax) / 2, (ymin + ymax) / 2, (xmax - xmin) / 2, (ymax - ymin) / 2, 0.0)
 
-    def level(self, points: np.ndarray) -> np.ndarray:
-        """``Phi`` at ``points`` of shape (..., 2) px; returns shape (...,). 1 on the contour."""
-        d = np.asarray(points, dtype=float) - self.center
-        return np.einsum("...i,ij,...j->...", d, self.shape_matrix(), d)
-
     def contour_points(self, n: int = 64) -> np.ndarray:
         """``n`` points on the contour at equal parametric angles, shape (n, 2) px."""
         t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
         local = np.stack([self.a * np.cos(t), self.b * np.sin(t)], axis=-1)
         return local @ self.rotation.T + self.center
-
-    def transformed(self, angle: float, translation: Sequence[float]) -> Ellipse:
-        """Image of the ellipse under ``x -> R(angle) x + translation`` (rotation about (0, 0))."""
-        c = rotation_2d(angle) @ self.center + np.asarray(translation, dtype=float)
-        return Ellipse(c[0], c[1], self.a, self.b, self.angle + angle)
 
     def canonical(self) -> Ellipse:
         """Same set of points with ``a >= b`` and ``angle`` in ``[-pi/2, pi/2)``."""
@@ -512,14 +478,6 @@ class Ellipsoid:
     def shape_matrix(self) -> np.ndarray:
         """``M = rotation diag(axes^2) rotation^T`` (3x3, m^2): the quadric's inverse shape."""
         return self.rotation @ np.diag(self.axes**2) @ self.rotation.T
-
-    def surface_points(self, n_azimuth: int = 32, n_polar: int = 16) -> np.ndarray:
-        """Points on the surface (world metres), shape (n_azimuth * n_polar, 3)."""
-        az = np.linspace(0, 2 * np.pi, n_azimuth, endpoint=False)
-        po = np.linspace(0, np.pi, n_polar)
-        A, P = np.meshgrid(az, po, indexing="ij")
-        unit = np.stack([np.sin(P) * np.cos(A), np.sin(P) * np.sin(A), np.cos(P)], -1)
-        return (unit.reshape(-1, 3) * self.axes) @ self.rotation.T + self.center
 
 
 # --------------------------------------------------------------------------- camera

@@ -51,20 +51,18 @@ from __future__ import annotations
 
 import math
 import numbers
-from collections.abc import Callable, Mapping, Sequence
-from functools import partial
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import gtsam
 import numpy as np
 
 from factors.geometry import Camera, Ellipse, Ellipsoid
-from factors.names import METRIC_NAMES, ROBUST_KERNELS
+from factors.names import ROBUST_KERNELS
 from factors.pose_residuals import PoseResidualModel
 
 __all__ = [
     "DEFAULT_ROBUST_SCALE",
-    "FACTOR_FACTORIES",
     "ROBUST_KERNELS",
     "batched_pose_factor",
     "make_noise_model",
@@ -235,12 +233,6 @@ def pose_factor(
                               initial_world_from_camera=initial_world_from_camera,
                               metric_options=metric_options, **model_options)
     return factors[0]
-
-
-#: ``FACTOR_FACTORIES[metric](key, detection, ellipsoid, camera, *, sigma=..., robust=..., ...)``
-FACTOR_FACTORIES: dict[str, Callable[..., gtsam.CustomFactor]] = {
-    name: partial(pose_factor, name) for name in METRIC_NAMES
-}
 
 
 def batched_pose_factor(

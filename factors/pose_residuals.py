@@ -130,7 +130,6 @@ __all__ = [
     "PoseResidualModel",
     "check_pose",
     "expmap_pose3",
-    "numerical_pose_jacobian",
 ]
 
 #: Invalid-projection penalty cost per pair, in units of the pair's reference cost ``rho_j^2``
@@ -232,23 +231,6 @@ def expmap_pose3(xi: np.ndarray) -> np.ndarray:
     T[:3, :3] = R
     T[:3, 3] = V @ v
     return T
-
-
-def numerical_pose_jacobian(
-    fn: Any, world_from_camera: np.ndarray, step: float = 1e-6
-) -> np.ndarray:
-    """Central-difference ``d fn(world_from_camera @ Exp(xi)) / d xi`` at 0: shape (m, 6).
-
-    ``fn`` maps a 4x4 ``world_from_camera`` to a 1-D residual of length ``m``.
-    """
-    T = np.asarray(world_from_camera, dtype=float)
-    cols = []
-    for k in range(6):
-        e = np.zeros(6)
-        e[k] = step
-        cols.append((np.asarray(fn(T @ expmap_pose3(e))) -
-                     np.asarray(fn(T @ expmap_pose3(-e)))) / (2 * step))
-    return np.stack(cols, axis=-1)
 
 
 @dataclass(frozen=True)

@@ -382,6 +382,7 @@ class SceneMap:
 
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)  # mappingproxy does not pickle: store plain JSON data
+        state.pop("_compiled", None)  # the memoised CompiledMap (maps.compiled.compile_map)
         state["metadata"] = _thaw(self.metadata)
         return state
 

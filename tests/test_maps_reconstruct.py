@@ -36,6 +36,7 @@ from maps.reconstruct import (
     refine_ellipsoid,
     view_residuals,
 )
+from tests.helpers import level, surface_points
 
 
 @pytest.fixture(scope="module")
@@ -123,9 +124,9 @@ def test_exact_views_recover_every_chess_ellipsoid(chess_views) -> None:
         assert res.rms_level_residual < 1e-9
         # Independent check: sampled surface points project inside every observed ellipse,
         # and the silhouette touches it (max level ~ 1).
-        X = res.ellipsoid.surface_points(24, 12)
+        X = surface_points(res.ellipsoid, 24, 12)
         for i, e in zip(sel[:3], ellipses[:3], strict=True):
-            levels = e.level(cam.project_points(cfw[i], X))
+            levels = level(e, cam.project_points(cfw[i], X))
             assert levels.max() <= 1 + 1e-6 and levels.max() > 0.95
 
 

@@ -20,6 +20,7 @@ from sdk.overlay import overlay_svg, project_ellipsoid
 from service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, LOCALIZE_EXAMPLE
 from service.api.inspector import wants_svg
 from tests.conftest import make_test_app
+from tests.helpers import surface_points
 
 
 def _angle_diff(a: float, b: float) -> float:
@@ -68,7 +69,7 @@ def test_projection_touches_the_projected_surface_points() -> None:
     T = np.eye(4)
     e = project_ellipsoid(center, axes, q, T.tolist(), 500.0, 480.0, 320.0, 240.0)
     assert e is not None
-    pts = Ellipsoid.from_quaternion_wxyz(center, axes, q).surface_points(64, 32)
+    pts = surface_points(Ellipsoid.from_quaternion_wxyz(center, axes, q), 64, 32)
     uv = np.c_[500.0 * pts[:, 0] / pts[:, 2] + 320.0, 480.0 * pts[:, 1] / pts[:, 2] + 240.0]
     R = np.array([[math.cos(e.angle), -math.sin(e.angle)], [math.sin(e.angle), math.cos(e.angle)]])
     local = (uv - [e.cx, e.cy]) @ R

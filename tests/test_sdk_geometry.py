@@ -15,6 +15,7 @@ from scipy.spatial.transform import Rotation
 from factors.geometry import Ellipse as RefEllipse
 from sdk import geometry as g
 from sdk.models import Box, Ellipse
+from tests.helpers import level
 
 RNG = np.random.default_rng(20261121)
 
@@ -33,7 +34,7 @@ def _raster(e: RefEllipse, shape: tuple[int, int]) -> np.ndarray:
     """Pixels whose CENTRE (j + 0.5, i + 0.5) lies inside the ellipse (independent of the SDK)."""
     ii, jj = np.mgrid[0 : shape[0], 0 : shape[1]]
     centres = np.stack([jj + 0.5, ii + 0.5], axis=-1)
-    return (e.level(centres) <= 1.0).astype(np.uint8)
+    return (level(e, centres) <= 1.0).astype(np.uint8)
 
 
 def _random_pose() -> np.ndarray:

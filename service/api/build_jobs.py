@@ -48,7 +48,7 @@ class RunnerBusyError(RuntimeError):
 
 class BuildRunner:
     def __init__(self, store: MapStore, jobs: JobStore, *, max_concurrent: int, max_queued: int,
-                 time_budget_s: float, on_stored: Any = None) -> None:
+                 time_budget_s: float) -> None:
         self.store = store
         self.jobs = jobs
         self.time_budget_s = float(time_budget_s)
@@ -57,7 +57,6 @@ class BuildRunner:
                                         thread_name_prefix="quadloc-build")
         self._pending = 0
         self._lock = threading.Lock()
-        self._on_stored = on_stored
 
     def submit(self, job_id: str, recording: Recording) -> None:
         with self._lock:
@@ -139,12 +138,10 @@ class BuildRunner:
         except StoreUnavailable as exc:
             self.jobs.fail(job_id, "store_unavailable", str(exc), report)
             return
-        if self._on_stored is not None:
-            self._on_stored(job.map_id)
         self.jobs.succeed(job_id, stored.scene_map.version, report, len(scene.objects))
 
 
-def install_map_building(app: Any, store: MapStore, settings: Any, cache: Any) -> None:
+def install_map_building(app: Any, store: MapStore, settings: Any) -> None:
     """Wire map building into ``app``: the job store (jobs left running by a previous instance
     and silent for ``build_stale_after_s`` are marked failed now), the runner, the router."""
     from service.api.routers import build
@@ -162,6 +159,5 @@ def install_map_building(app: Any, store: MapStore, settings: Any, cache: Any) -
     app.state.build_jobs = jobs
     app.state.build_runner = BuildRunner(
         store, jobs, max_concurrent=settings.max_concurrent_builds,
-        max_queued=settings.max_queued_builds, time_budget_s=settings.build_time_budget_s,
-        on_stored=cache.invalidate)
+        max_queued=settings.max_queued_builds, time_budget_s=settings.build_time_budget_s)
     app.include_router(build.router)

@@ -78,25 +78,7 @@ from service.localization.types import (
     PosePrior,
 )
 
-__all__ = ["compiled_map_of", "localize", "prior_gate_poses", "refine_pose"]
-
-_COMPILED: dict[int, tuple[SceneMap, CompiledMap]] = {}
-_COMPILED_MAX = 16
-
-
-def compiled_map_of(scene_map: SceneMap | CompiledMap) -> CompiledMap:
-    """The :class:`CompiledMap` of a map (cached by object identity, a few entries)."""
-    if isinstance(scene_map, CompiledMap):
-        return scene_map
-    hit = _COMPILED.get(id(scene_map))
-    if hit is not None and hit[0] is scene_map:
-        return hit[1]
-    compiled = compile_map(scene_map)
-    if len(_COMPILED) >= _COMPILED_MAX:
-        _COMPILED.pop(next(iter(_COMPILED)))
-    _COMPILED[id(scene_map)] = (scene_map, compiled)
-    return compiled
-
+__all__ = ["localize", "prior_gate_poses", "refine_pose"]
 
 def _validate(
     detections: Sequence[Detection], scene_map: SceneMap | CompiledMap, camera: Camera,
@@ -122,7 +104,7 @@ def _validate(
     if prior is not None and not isinstance(prior, PosePrior):
         raise LocalizationInputError(
             f"prior: must be a PosePrior or None, got {type(prior).__name__}")
-    compiled = compiled_map_of(scene_map)
+    compiled = compile_map(scene_map)
     if len(compiled) == 0:
         raise LocalizationInputError("scene_map: the map has no objects")
     if options.unknown_label_policy == "error":

@@ -66,7 +66,6 @@ __all__ = [
     "RansacOutcome",
     "ScoringTimeoutError",
     "distinct_poses",
-    "estimate_iou",
     "greedy_assignment",
     "hard_deadline",
     "iou_estimates",
@@ -205,14 +204,6 @@ def iou_estimates(
     area_proj = math.pi * np.sqrt(np.maximum(det, 0.0))
     iou = inter / np.maximum(det_areas + area_proj - inter, 1e-300)
     return np.where(det > 0, np.clip(iou, 0.0, 1.0), 0.0)
-
-
-def estimate_iou(detection: Ellipse, projection: Ellipse, n_points: int = 256) -> float:
-    """Scalar :func:`iou_estimates` of two ellipses (for checks and reporting)."""
-    p = detection.params()[None]
-    pts = _ellipse_points(p, sunflower_disk(n_points))[0]
-    _, S = projection.gaussian()
-    return float(iou_estimates(pts, np.array(detection.area), projection.center, S))
 
 
 @dataclass(frozen=True)

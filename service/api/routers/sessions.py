@@ -31,7 +31,7 @@ from service.api.convert import (
     pose_out,
     prior_from_request,
 )
-from service.api.deps import MapCacheDep, MapIdPath
+from service.api.deps import MapIdPath, StoreDep
 from service.api.errors import ProblemError, map_not_found
 from service.api.openapi_docs import problem_responses
 from service.api.schemas import CovarianceOut, InlierOut
@@ -113,9 +113,9 @@ def create_session(map_id: MapIdPath,
                    body: Annotated[SessionCreate, Body(openapi_examples={"chess": {
                        "summary": "Chess camera", "value": SESSION_CREATE_EXAMPLE}})],
                    request: Request,
-                   cache: MapCacheDep, _key: ReadAccess, response: Response) -> SessionOut:
+                   store: StoreDep, _key: ReadAccess, response: Response) -> SessionOut:
     try:
-        compiled = cache.get(map_id, None)
+        compiled = store.compiled(map_id, None)
     except MapNotFound as exc:
         raise map_not_found(map_id) from exc
     o = body.options
