@@ -5,12 +5,14 @@
   :func:`surface_points`.
 * Pose helpers: :func:`retract` (GTSAM's own retraction), :func:`angle_diff`.
 * API helpers: :func:`assert_problem` (an RFC 9457 problem+json answer).
-* :class:`FakeClock`: an injectable clock, so that tests advance time instead of sleeping.
+* :class:`FakeClock`: an injectable clock, so that tests advance time instead of sleeping;
+  :class:`PerfCounterJump` for code that reads ``time.perf_counter`` deadlines.
 """
 
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -22,6 +24,7 @@ from factors.geometry import Ellipse, Ellipsoid
 __all__ = [
     "PROBLEM_MEDIA_TYPE",
     "FakeClock",
+    "PerfCounterJump",
     "angle_diff",
     "assert_problem",
     "ellipse_from_primal_conic",
@@ -120,3 +123,20 @@ class FakeClock:
 
     def advance(self, seconds: float) -> None:
         self.now += float(seconds)
+
+
+class PerfCounterJump:
+    """Patches ``time.perf_counter`` (for the test's duration) to the real counter plus an
+    offset the test advances: a deadline is passed at once instead of by sleeping until it."""
+
+    def __init__(self, monkeypatch: Any) -> None:
+        self.offset = 0.0
+        real = time.perf_counter
+        monkeypatch.setattr(time, "perf_counter", lambda: real() + self.offset)
+
+    def advance(self, seconds: float) -> None:
+        self.offset += float(seconds)
+
+    def past(self, deadline: float) -> None:
+        """Jump just past ``deadline`` (a ``time.perf_counter()`` instant)."""
+        self.advance(max(0.0, deadline - time.perf_counter()) + 1e-3)

@@ -16,6 +16,7 @@ from maps.model import content_hash, scene_map_from_dict
 from service.api.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
 from tests.conftest import make_test_app
 from tests.helpers import FakeClock
+from tests.helpers import assert_problem as _problem
 
 PROBLEM = "application/problem+json"
 CHESS_SCENE = CHESS_SCENE_PATH
@@ -25,16 +26,6 @@ CHESS_SCENE = CHESS_SCENE_PATH
 def client(tmp_path: Path):
     with TestClient(make_test_app(tmp_path)) as c:
         yield c
-
-
-def _problem(r, status: int, slug: str) -> dict:
-    assert r.status_code == status, r.text
-    assert r.headers["content-type"].startswith(PROBLEM)
-    body = r.json()
-    assert body["type"] == f"urn:quadloc:problem:{slug}"
-    assert body["status"] == status
-    assert set(body) >= {"type", "title", "status", "detail", "instance", "errors"}
-    return body
 
 
 def test_demo_map_is_seeded_and_matches_the_shipped_file(client: TestClient) -> None:

@@ -20,12 +20,7 @@ from sdk.overlay import overlay_svg, project_ellipsoid
 from service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, LOCALIZE_EXAMPLE
 from service.api.inspector import wants_svg
 from tests.conftest import make_test_app
-from tests.helpers import surface_points
-
-
-def _angle_diff(a: float, b: float) -> float:
-    """Difference of two ellipse angles modulo pi (an ellipse is symmetric)."""
-    return abs((a - b + math.pi / 2) % math.pi - math.pi / 2)
+from tests.helpers import angle_diff, surface_points
 
 
 def test_sdk_projection_matches_the_solver_on_the_chess_map() -> None:
@@ -56,7 +51,7 @@ def test_sdk_projection_matches_the_solver_on_the_chess_map() -> None:
             np.testing.assert_allclose([mine.cx, mine.cy, mine.a, mine.b],
                                        [ref.cx, ref.cy, ref.a, ref.b], rtol=1e-7, atol=1e-6)
             if ref.a - ref.b > 1e-6 * ref.a:  # angle undefined for a circle
-                assert _angle_diff(mine.angle, ref.angle) < 1e-7
+                assert angle_diff(mine.angle, ref.angle) < 1e-7
             compared += 1
     assert compared > 30 and degenerate > 0, (compared, degenerate)
 

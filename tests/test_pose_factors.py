@@ -37,7 +37,7 @@ from factors.pose_residuals import (
     PoseResidualModel,
     expmap_pose3,
 )
-from tests.helpers import level, transformed
+from tests.helpers import level, retract, transformed
 
 CAMERA = Camera(500.0, 510.0, 320.0, 240.0, 640, 480)
 
@@ -58,11 +58,6 @@ def perturbation(rng: np.random.Generator, rot: float, trans: float) -> np.ndarr
     """Pose3 tangent [omega, v] with |omega| = rot rad, |v| = trans m, random directions."""
     w, v = rng.normal(size=3), rng.normal(size=3)
     return np.r_[w / np.linalg.norm(w) * rot, v / np.linalg.norm(v) * trans]
-
-
-def retract(T: np.ndarray, xi: np.ndarray) -> np.ndarray:
-    """world_from_camera.retract(xi) computed by GTSAM (independent of expmap_pose3)."""
-    return gtsam.Pose3(T).retract(np.asarray(xi, dtype=float)).matrix()
 
 
 def numeric_jacobian(fn, T: np.ndarray, h: float = 1e-6) -> np.ndarray:
