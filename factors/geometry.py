@@ -31,10 +31,15 @@ import numpy as np
 ORTHONORMAL_TOLERANCE = 1e-6
 #: Largest ``| |q| - 1 |`` accepted for a unit quaternion.
 QUATERNION_NORM_TOLERANCE = 1e-6
+#: The same two tolerances for numbers read from a document (a map file, a request's
+#: odometry): JSON writers round, so looser; the value is re-normalised / snapped after the check.
+DOCUMENT_ROTATION_TOLERANCE = 1e-4
+_I3 = np.eye(3)
 #: Smallest depth (metres, camera Z) a point of an ellipsoid may have for a valid projection.
 MIN_DEPTH = 1e-6
 
 __all__ = [
+    "DOCUMENT_ROTATION_TOLERANCE",
     "MIN_DEPTH",
     "ORTHONORMAL_TOLERANCE",
     "QUATERNION_NORM_TOLERANCE",
@@ -43,8 +48,10 @@ __all__ = [
     "DegenerateProjectionError",
     "Ellipse",
     "Ellipsoid",
+    "FieldError",
     "GeometryError",
     "canonical_quaternion_wxyz",
+    "check_pose",
     "dual_conics_from_params",
     "ellipse_params",
     "ellipsoid_depth_margins",
@@ -64,8 +71,20 @@ __all__ = [
 ]
 
 
-class GeometryError(ValueError):
-    """Invalid geometric input; the message names the field and the problem."""
+class FieldError(ValueError):
+    """Invalid input naming its field. ``field`` is a path into the caller's input (e.g.
+    ``"detections[2].label"``, ``"prior.world_from_camera"``) or None when unknown; ``problem``
+    is the rule broken; ``str()`` is ``"<field>: <problem>"`` (or ``problem`` alone). The HTTP
+    layer reads ``field`` (never parses the message) to fill a problem's ``errors[].field``."""
+
+    def __init__(self, problem: str, *, field: str | None = None) -> None:
+        super().__init__(f"{field}: {problem}" if field else problem)
+        self.field = field
+        self.problem = problem
+
+
+class GeometryError(FieldError):
+    """Invalid geometric input (a :class:`FieldError`)."""
 
 
 class DegenerateProjectionError(ValueError):
@@ -121,6 +140,34 @@ def check_rotation(owner: str, name: str, value: object) -> np.ndarray:
     if abs(det - 1.0) > ORTHONORMAL_TOLERANCE:
         raise GeometryError(f"{owner}.{name} must be a proper rotation (det +1), det = {det:.6g}")
     return R
+
+
+def check_pose(T: object, name: str = "world_from_camera",
+               tolerance: float = ORTHONORMAL_TOLERANCE) -> np.ndarray:
+    """THE rule for a 4x4 rigid transform: finite, last row [0, 0, 0, 1] (within 1e-9),
+    rotation block orthonormal within ``tolerance`` (:data:`ORTHONORMAL_TOLERANCE` in process,
+    :data:`DOCUMENT_ROTATION_TOLERANCE` for numbers read from a document), det > 0. Raises
+    :class:`GeometryError` with ``field=name``; returns the matrix as float (4, 4)."""
+    try:
+        M = np.array(T, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise GeometryError("must be a numeric 4x4 matrix", field=name) from exc
+    if M.shape != (4, 4) or not np.isfinite(M).all():
+        raise GeometryError(f"must be a finite 4x4 matrix, got shape {M.shape}", field=name)
+    rows = M.tolist()  # scalar checks in plain floats: this runs on every refine() call
+    x, y, z, w = rows[3]
+    if max(abs(x), abs(y), abs(z), abs(w - 1.0)) > 1e-9:
+        raise GeometryError(f"last row must be [0, 0, 0, 1], got {rows[3]}", field=name)
+    R = M[:3, :3]
+    err = float(np.abs(R @ R.T - _I3).max())
+    (a, b, c, _), (d, e, f, _), (g, h, i, _) = rows[:3]
+    det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+    if err > tolerance or det < 0:
+        raise GeometryError(
+            f"rotation block is not a proper rotation (max|R R^T - I| = {err:.3g}, "
+            f"det = {det:.6g})", field=name)
+    return M
+
 
 
 # --------------------------------------------------------------------------- rotations and poses

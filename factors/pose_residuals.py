@@ -107,12 +107,12 @@ from typing import Any
 import numpy as np
 
 from factors.geometry import (
-    ORTHONORMAL_TOLERANCE,
     Camera,
     DegenerateProjectionError,
     Ellipse,
     Ellipsoid,
     GeometryError,
+    check_pose,
     dual_conics_from_params,
     level_values,
     params_from_dual_conics,
@@ -128,7 +128,6 @@ __all__ = [
     "DEFAULT_PENALTY_COST",
     "PoseEvaluation",
     "PoseResidualModel",
-    "check_pose",
     "expmap_pose3",
 ]
 
@@ -896,31 +895,6 @@ class PoseResidualModel:
         the penalty's cost where the projection is invalid."""
         ev = self.evaluate(world_from_camera, jacobian=False)
         return np.einsum("nm,nm->n", ev.residuals, ev.residuals)
-
-
-def check_pose(T: object, name: str = "world_from_camera") -> np.ndarray:
-    """Validate a 4x4 rigid transform (finite, last row [0,0,0,1], rotation orthonormal within
-    ``factors.geometry.ORTHONORMAL_TOLERANCE``, det > 0); errors read ``"<name>: <problem>"``."""
-    try:
-        M = np.array(T, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise GeometryError(f"{name}: must be a numeric 4x4 matrix") from exc
-    if M.shape != (4, 4) or not np.isfinite(M).all():
-        raise GeometryError(f"{name}: must be a finite 4x4 matrix, got shape {M.shape}")
-    rows = M.tolist()  # scalar checks in plain floats: this runs on every refine() call
-    x, y, z, w = rows[3]
-    if max(abs(x), abs(y), abs(z), abs(w - 1.0)) > 1e-9:
-        raise GeometryError(f"{name}: last row must be [0, 0, 0, 1], got {rows[3]}")
-    R = M[:3, :3]
-    err = float(np.abs(R @ R.T - _I3).max())
-    (a, b, c, _), (d, e, f, _), (g, h, i, _) = rows[:3]
-    det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
-    if err > ORTHONORMAL_TOLERANCE or det < 0:
-        raise GeometryError(
-            f"{name}: rotation block is not a proper rotation (max|R R^T - I| = {err:.3g}, "
-            f"det = {det:.6g})"
-        )
-    return M
 
 
 _I3 = np.eye(3)

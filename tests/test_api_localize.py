@@ -229,7 +229,7 @@ def test_malformed_json_unknown_map_and_wrong_media(client: TestClient) -> None:
 
 def test_errors_from_deep_in_the_pipeline(client: TestClient, monkeypatch) -> None:
     def geometry_error(*a, **k):
-        raise GeometryError("detections[2].ellipse: projection is not an ellipse")
+        raise GeometryError("projection is not an ellipse", field="detections[2].ellipse")
 
     monkeypatch.setattr(solver_module, "localize", geometry_error)
     body = _problem(client.post(URL, json=LOCALIZE_EXAMPLE), 422, "invalid-geometry")

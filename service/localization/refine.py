@@ -57,9 +57,9 @@ from typing import Any
 import gtsam
 import numpy as np
 
-from factors.geometry import Camera, Ellipsoid, GeometryError, snap_to_rotation
+from factors.geometry import Camera, Ellipsoid, GeometryError, check_pose, snap_to_rotation
 from factors.pose_factors import ROBUST_KERNELS, pose_factors
-from factors.pose_residuals import PoseResidualModel, check_pose
+from factors.pose_residuals import PoseResidualModel
 from service.localization.types import Detection, check_covariance
 
 __all__ = [

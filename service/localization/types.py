@@ -26,9 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from factors.geometry import Ellipse, GeometryError
+from factors.geometry import Ellipse, FieldError, GeometryError, check_pose
 from factors.metrics import residual
-from factors.pose_residuals import check_pose
 from service.limits import (
     AMBIGUITY_POLICIES,
     METRICS,
@@ -56,9 +55,9 @@ __all__ = [
     "PosePrior",
 ]
 
-class LocalizationInputError(ValueError):
-    """Invalid input to :func:`localize`; the message starts with the offending field, e.g.
-    ``"detections[2].label: 'Sofa' is not a category of the map (policy 'error')"``."""
+class LocalizationInputError(FieldError):
+    """Invalid input to :func:`localize`, naming its ``field`` (a :class:`FieldError`); the
+    message reads e.g. ``"detections[2].label: 'Sofa' is not a category of the map ..."``."""
 
 
 @dataclass(frozen=True)
@@ -84,7 +83,7 @@ class Detection:
 
 
 def _bad(field_name: str, problem: str) -> LocalizationInputError:
-    return LocalizationInputError(f"{field_name}: {problem}")
+    return LocalizationInputError(problem, field=field_name)
 
 
 def _is_int(value: object) -> bool:
@@ -241,28 +240,28 @@ def _check_pose(field_name: str, value: object) -> np.ndarray:
     try:
         T = check_pose(value, field_name)
     except GeometryError as exc:
-        raise LocalizationInputError(str(exc)) from exc
+        raise LocalizationInputError(exc.problem, field=exc.field) from exc
     T.setflags(write=False)
     return T
 
 
 def check_covariance(field_name: str, value: object,
-                     error: type[ValueError] = LocalizationInputError) -> np.ndarray:
+                     error: type[FieldError] = LocalizationInputError) -> np.ndarray:
     """A 6x6 pose covariance (finite, symmetric to rtol 1e-9, positive definite) as a read-only
-    float array; otherwise raises ``error`` with a message starting with ``field_name``.
+    float array; otherwise raises ``error`` (a :class:`FieldError`) with ``field=field_name``.
     Shared by :class:`PosePrior` and :func:`service.localization.refine.refine`."""
     try:
         S = np.array(value, dtype=float)
     except (TypeError, ValueError) as exc:
-        raise error(f"{field_name}: must be a numeric 6x6 matrix") from exc
+        raise error("must be a numeric 6x6 matrix", field=field_name) from exc
     if S.shape != (6, 6):
-        raise error(f"{field_name}: must have shape (6, 6), got {S.shape}")
+        raise error(f"must have shape (6, 6), got {S.shape}", field=field_name)
     if not np.all(np.isfinite(S)):
-        raise error(f"{field_name}: must be finite")
+        raise error("must be finite", field=field_name)
     if not np.allclose(S, S.T, rtol=1e-9, atol=1e-12 * max(1.0, float(np.abs(S).max()))):
-        raise error(f"{field_name}: must be symmetric")
+        raise error("must be symmetric", field=field_name)
     if float(np.linalg.eigvalsh(0.5 * (S + S.T)).min()) <= 0.0:
-        raise error(f"{field_name}: must be positive definite")
+        raise error("must be positive definite", field=field_name)
     S.setflags(write=False)
     return S
 

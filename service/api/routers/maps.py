@@ -57,6 +57,7 @@ _CHESS_SCHEMA: dict[str, Any] = {
                                   "axes": {**_VEC3, "description": "Semi-axes (m), > 0."},
                                   "R": {"type": "array", "minItems": 3, "maxItems": 3,
                                         "items": _VEC3,
+                                        # the tolerance is DOCUMENT_ROTATION_TOLERANCE
                                         "description": "3x3 rotation ellipsoid -> world: "
                                                        "orthonormal within 1e-4, det +1."},
                                   "center": _VEC3}},
