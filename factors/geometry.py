@@ -27,6 +27,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from factors.names import FieldError
+
 #: Largest ``max|R R^T - I|`` accepted for a rotation matrix (and ``|det R - 1|``).
 ORTHONORMAL_TOLERANCE = 1e-6
 #: Largest ``| |q| - 1 |`` accepted for a unit quaternion.
@@ -69,18 +71,6 @@ __all__ = [
     "sigma_entries",
     "snap_to_rotation",
 ]
-
-
-class FieldError(ValueError):
-    """Invalid input naming its field. ``field`` is a path into the caller's input (e.g.
-    ``"detections[2].label"``, ``"prior.world_from_camera"``) or None when unknown; ``problem``
-    is the rule broken; ``str()`` is ``"<field>: <problem>"`` (or ``problem`` alone). The HTTP
-    layer reads ``field`` (never parses the message) to fill a problem's ``errors[].field``."""
-
-    def __init__(self, problem: str, *, field: str | None = None) -> None:
-        super().__init__(f"{field}: {problem}" if field else problem)
-        self.field = field
-        self.problem = problem
 
 
 class GeometryError(FieldError):

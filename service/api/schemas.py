@@ -34,6 +34,7 @@ from pydantic import (
     model_validator,
 )
 
+from factors.names import check_robust
 from service.limits import (
     AMBIGUITY_POLICIES,
     COVARIANCE_ORDER,
@@ -285,8 +286,7 @@ class LocalizeOptionsIn(_Model):
 
     @model_validator(mode="after")
     def _scale_needs_kernel(self) -> LocalizeOptionsIn:
-        if self.robust_scale is not None and self.robust is None:
-            raise ValueError("'robust_scale' needs 'robust'")
+        check_robust(self.robust, self.robust_scale)  # the rule of every layer
         return self
 
 

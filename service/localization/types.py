@@ -28,6 +28,7 @@ import numpy as np
 
 from factors.geometry import Ellipse, FieldError, GeometryError, check_pose
 from factors.metrics import residual
+from factors.names import check_robust
 from service.limits import (
     AMBIGUITY_POLICIES,
     METRICS,
@@ -178,17 +179,8 @@ class LocalizationOptions:
             raise _bad("options.min_inliers", f"must be an integer >= 2, got {self.min_inliers!r}")
         if not isinstance(self.use_sigma, bool):
             raise _bad("options.use_sigma", f"must be a bool, got {self.use_sigma!r}")
-        if self.robust is not None and self.robust not in ROBUST_KERNELS:
-            raise _bad("options.robust", f"unknown kernel {self.robust!r}; valid: None, "
-                       f"{', '.join(ROBUST_KERNELS)}")
-        if self.robust_scale is not None:
-            if self.robust is None:
-                raise _bad("options.robust_scale", "given without options.robust")
-            if (isinstance(self.robust_scale, bool)
-                    or not isinstance(self.robust_scale, (int, float))
-                    or not (math.isfinite(self.robust_scale) and self.robust_scale > 0)):
-                raise _bad("options.robust_scale",
-                           f"must be finite and > 0, got {self.robust_scale!r}")
+        check_robust(self.robust, self.robust_scale, prefix="options.",
+                     error=LocalizationInputError)
         if self.unknown_label_policy not in UNKNOWN_LABEL_POLICIES:
             raise _bad("options.unknown_label_policy",
                        f"must be one of {UNKNOWN_LABEL_POLICIES}, "
