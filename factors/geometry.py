@@ -58,6 +58,7 @@ __all__ = [
     "ellipse_params",
     "ellipsoid_depth_margins",
     "exact_norm",
+    "gaussians_from_dual_conics",
     "invert_pose",
     "level_values",
     "params_from_dual_conics",
@@ -441,6 +442,14 @@ def params_from_gaussians(center: np.ndarray, sigma: np.ndarray) -> np.ndarray:
                             np.sqrt(lam_minor), angle])
 
 
+def gaussians_from_dual_conics(Cn: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """THE centre and Sigma of NORMALISED dual conics ``Cn`` (..., 3, 3), ``Cn[2, 2] = -1``:
+    ``mu = -Cn[:2, 2]`` (..., 2) px and ``Sigma = Cn[:2, :2] + mu mu^T`` (..., 2, 2) px^2
+    (``Sigma = R diag(a^2, b^2) R^T`` for an ellipse; not positive definite otherwise)."""
+    mu = -Cn[..., :2, 2]
+    return mu, Cn[..., :2, :2] + mu[..., :, None] * mu[..., None, :]
+
+
 def params_from_dual_conics(dual_conics: np.ndarray) -> np.ndarray:
     """Ellipse params (N, 5) from dual conics (N, 3, 3) of any scale.
 
@@ -454,10 +463,7 @@ def params_from_dual_conics(dual_conics: np.ndarray) -> np.ndarray:
     if np.any(~(np.abs(w) > 0.0)):
         raise DegenerateProjectionError("degenerate_conic", "dual conic with C*[2, 2] = 0 "
                                         "(a parabola or a conic through infinity)")
-    Cn = C / (-w)[:, None, None]
-    center = -Cn[:, :2, 2]
-    sigma = Cn[:, :2, :2] + center[:, :, None] * center[:, None, :]
-    return params_from_gaussians(center, sigma)
+    return params_from_gaussians(*gaussians_from_dual_conics(C / (-w)[:, None, None]))
 
 
 def level_values(params: np.ndarray, points: np.ndarray) -> np.ndarray:

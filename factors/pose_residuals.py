@@ -114,6 +114,7 @@ from factors.geometry import (
     GeometryError,
     check_pose,
     dual_conics_from_params,
+    gaussians_from_dual_conics,
     level_values,
     params_from_dual_conics,
     params_from_gaussians,
@@ -693,9 +694,9 @@ class PoseResidualModel:
     ) -> tuple[np.ndarray, np.ndarray | None]:
         """``r = B_D - B_P``, ``B = [cx - hx, cy - hy, cx + hx, cy + hy]`` with the half-sizes
         ``hx = sqrt(Sigma00)``, ``hy = sqrt(Sigma11)`` of the axis-aligned box, and d r / d xi."""
-        mu = -Cn[:, :2, 2]
-        hx = np.sqrt(Cn[:, 0, 0] + mu[:, 0] ** 2)
-        hy = np.sqrt(Cn[:, 1, 1] + mu[:, 1] ** 2)
+        mu, S = gaussians_from_dual_conics(Cn)
+        hx = np.sqrt(S[:, 0, 0])
+        hy = np.sqrt(S[:, 1, 1])
         box = np.stack([mu[:, 0] - hx, mu[:, 1] - hy, mu[:, 0] + hx, mu[:, 1] + hy], axis=1)
         r = self._det_box - box
         if dCn is None:
@@ -720,10 +721,8 @@ class PoseResidualModel:
         (``k = 0``) the angle terms of the Jacobian are set to 0 (the metric is not
         differentiable there).
         """
-        mu = -Cn[:, :2, 2]
-        s00 = Cn[:, 0, 0] + mu[:, 0] ** 2
-        s01 = Cn[:, 0, 1] + mu[:, 0] * mu[:, 1]
-        s11 = Cn[:, 1, 1] + mu[:, 1] ** 2
+        mu, S = gaussians_from_dual_conics(Cn)
+        s00, s01, s11 = S[:, 0, 0], S[:, 0, 1], S[:, 1, 1]
         h, m = 0.5 * (s00 - s11), 0.5 * (s00 + s11)
         rho = np.sqrt(h * h + s01 * s01)
         a2, b2 = np.sqrt(m + rho), np.sqrt(np.maximum(m - rho, 0.0))
@@ -778,10 +777,8 @@ class PoseResidualModel:
         function's derivative is Daleckii-Krein's ``dG = V (F o (V^T dN V)) V^T`` (divided
         differences of ``h(log lambda)``, its derivative when the eigenvalues coincide).
         """
-        mu = -Cn[:, :2, 2]
-        q00 = Cn[:, 0, 0] + mu[:, 0] ** 2
-        q01 = Cn[:, 0, 1] + mu[:, 0] * mu[:, 1]
-        q11 = Cn[:, 1, 1] + mu[:, 1] ** 2
+        mu, Q = gaussians_from_dual_conics(Cn)
+        q00, q01, q11 = Q[:, 0, 0], Q[:, 0, 1], Q[:, 1, 1]
         d00, d01, d11 = self._det_sigma.T
         s00, s01, s11 = 0.5 * (d00 + q00), 0.5 * (d01 + q01), 0.5 * (d11 + q11)
         l00 = np.sqrt(s00)

@@ -52,7 +52,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from factors.geometry import Camera, Ellipse, ellipse_params
+from factors.geometry import Camera, Ellipse, ellipse_params, gaussians_from_dual_conics
 from maps.compiled import CompiledMap
 from service.localization.hypotheses import p2e_hypotheses, p3p_hypotheses
 
@@ -167,8 +167,7 @@ def project_objects(
     ok = np.abs(w) > 0
     w = np.where(ok, w, 1.0)
     Cn = C / w[..., None, None]
-    cen = -Cn[..., :2, 2]
-    inv_shape = Cn[..., :2, :2] + cen[..., :, None] * cen[..., None, :]
+    cen, inv_shape = gaussians_from_dual_conics(Cn)
     det = inv_shape[..., 0, 0] * inv_shape[..., 1, 1] - inv_shape[..., 0, 1] ** 2
     valid &= ok & (det > 0) & (inv_shape[..., 0, 0] > 0)
     hom = np.einsum("hij,sj->hsi", P[:, :, :3], centers) + P[:, None, :, 3]
