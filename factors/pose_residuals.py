@@ -106,6 +106,7 @@ from typing import Any
 
 import numpy as np
 
+from factors import metrics
 from factors.geometry import (
     Camera,
     DegenerateProjectionError,
@@ -191,8 +192,6 @@ def _dh_dlambda(u: np.ndarray, h: np.ndarray, lam: np.ndarray) -> np.ndarray:
 @functools.lru_cache(maxsize=32)
 def _unit_level_set_layout(n_azimuths: int, n_levels: int) -> np.ndarray:
     """``(u, v)`` (M, 2) of ``factors.metrics``' level-set layout for a unit circle, s_max = 1."""
-    from factors import metrics
-
     uv = metrics.level_set_sample_points(Ellipse(0.0, 0.0, 1.0, 1.0, 0.0), None,
                                          n_azimuths=n_azimuths, n_levels=n_levels, scale=1.0,
                                          adaptive=False)
@@ -297,8 +296,6 @@ class PoseResidualModel:
         numeric_step: float | None = None,
         eager_jacobian: bool | None = None,
     ) -> None:
-        from factors import metrics
-
         if metric not in metrics.METRIC_NAMES:
             raise ValueError(
                 f"metric must be one of {', '.join(metrics.METRIC_NAMES)}; got {metric!r}"
@@ -421,8 +418,6 @@ class PoseResidualModel:
     def _init_level_set(self, T0: np.ndarray | None) -> None:
         """Fix the level-set samples: ``factors.metrics.level_set_sample_points``' layout,
         computed for all detections at once (equality with it is tested)."""
-        from factors import metrics
-
         self._M = int(metrics.residual_size("level_set", **self.options))  # validates options
         n_az = self.options.get("n_azimuths", 6)
         n_lv = self.options.get("n_levels", 4)
@@ -462,8 +457,6 @@ class PoseResidualModel:
         self._n_p2 = self._nT[:, _P2]
 
     def _metric_dim(self) -> int:
-        from factors import metrics
-
         return int(metrics.residual_size(self.metric, **self.options))
 
     # ------------------------------------------------------------------ evaluation
@@ -845,8 +838,6 @@ class PoseResidualModel:
     # ------------------------------------------------------------------ generic metrics
     def _metric_rows(self, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Residual rows (N, dim) via factors.metrics.residual, and validity (N,)."""
-        from factors import metrics
-
         projs = self._projections(T)
         r = np.empty((self.n, self.dim))
         valid = np.zeros(self.n, dtype=bool)
