@@ -16,6 +16,9 @@ import pytest
 
 from tests.conftest import run_live_server
 
+#: Starts real servers / subprocesses: left out of the inner loop (pytest -m "not slow").
+pytestmark = pytest.mark.slow
+
 READ_TIMEOUT_S = 1.0
 KEEP_ALIVE_S = 1.0
 MAX_HEADER = 8192

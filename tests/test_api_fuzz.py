@@ -46,6 +46,9 @@ from service.settings import Settings, hash_api_key
 from tests.conftest import make_test_app
 from tests.test_maps_store import PG_BASE, _pg_unavailable_reason
 
+#: Schemathesis / hypothesis fuzzing (minutes): left out of the inner loop (pytest -m "not slow").
+pytestmark = pytest.mark.slow
+
 _KEY = "fuzz-key"
 _FUZZ_SETTINGS = {"solve_time_budget_ms": 200.0, "api_keys": f"{hash_api_key(_KEY)}:read+write"}
 #: Generated requests per operation and store (positive and negative data together).

@@ -17,6 +17,9 @@ import pytest
 from service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, LOCALIZE_EXAMPLE
 from service.settings import hash_api_key
 
+#: Starts real servers / subprocesses: left out of the inner loop (pytest -m "not slow").
+pytestmark = pytest.mark.slow
+
 REPO = Path(__file__).resolve().parents[1]
 DOC = REPO / "docs" / "api.md"
 DOC_BASE = "http://127.0.0.1:8000"

@@ -26,6 +26,7 @@ CHROMIUM_ARGS = ["--no-sandbox", "--headless", "--disable-gpu", "--no-first-run"
                  "--disable-sync", "--disable-dev-shm-usage"]
 
 pytestmark = [
+    pytest.mark.slow,
     pytest.mark.browser,
     pytest.mark.skipif(CHROMIUM is None,
                        reason="chromium is not installed (apt-get install -y chromium)"),

@@ -12,6 +12,9 @@ from sdk.build import BuildFailedError
 from service.cli import main
 from tests.test_api_build import _recording
 
+#: Starts real servers / subprocesses: left out of the inner loop (pytest -m "not slow").
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture
 def db(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> list[str]:

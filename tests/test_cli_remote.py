@@ -16,6 +16,9 @@ from service.api.examples import MAP_EXAMPLE
 from service.cli import Progress, format_table
 from service.settings import hash_api_key
 
+#: Starts real servers / subprocesses: left out of the inner loop (pytest -m "not slow").
+pytestmark = pytest.mark.slow
+
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE = REPO / "docs" / "examples" / "localize_chess.json"
 WRITE_KEY, READ_KEY = "cli-writer-key", "cli-reader-key"

@@ -40,7 +40,7 @@ import pytest
 import sdk
 from sdk import errors as sdk_errors
 
-pytestmark = pytest.mark.docker
+pytestmark = [pytest.mark.docker, pytest.mark.slow]
 
 REPO = Path(__file__).resolve().parents[1]
 LOCAL_BASE = "quadloc-base:bookworm"

@@ -29,6 +29,9 @@ from bench.reference_data import (
 from sdk import errors as sdk_errors
 from sdk import geometry as sg
 
+#: Starts real servers / subprocesses: left out of the inner loop (pytest -m "not slow").
+pytestmark = pytest.mark.slow
+
 REPO = Path(__file__).resolve().parents[1]
 MAP_ID = "chess-e2e"
 FRAME_STEP = 9  # 12 of the 108 ground-truth frames, spread over the three sequences

@@ -192,6 +192,7 @@ def test_store_bounds_count_and_expires_idle_sessions(walk: dict) -> None:
         store.get(a.session_id)
 
 
+@pytest.mark.slow
 def test_long_session_memory_is_flat(walk: dict) -> None:
     """450 frames (15 s at 30 Hz, the walk replayed back and forth): the graph stays within its
     window and the Python heap does not grow with the frame count (``bench.tracking
