@@ -14,7 +14,7 @@ from factors.geometry import Ellipse, Ellipsoid, invert_pose, project_ellipsoid
 from maps.building.association import associate
 from maps.building.build import BuildTimeoutError, build_map
 from maps.building.joint import refine_jointly
-from maps.building.recording import Observation, parse_recording
+from maps.building.recording import Observation, OdometryNoise, parse_recording
 from maps.reconstruct import ellipsoid_errors
 from tests.test_api_build import CAM, OBJECTS, _look_at, _recording
 
@@ -135,7 +135,7 @@ def test_camera_refinement_moves_noisy_app_poses_towards_the_truth() -> None:
     init = [(h.label, h.observations, h.ellipsoid) for h in objects]
     fixed = refine_jointly(CAM, np.array(noisy), rec_noisy.observations, init)
     ba = refine_jointly(CAM, np.array(noisy), rec_noisy.observations, init, refine_cameras=True,
-                        odometry_sigmas=(math.radians(0.5), 0.01))
+                        odometry=OdometryNoise(0.0, 0.0, math.radians(0.5), 0.01))
 
     def cam_err(poses: np.ndarray) -> float:
         return float(np.mean([np.linalg.norm(P[:3, 3] - T[:3, 3])
