@@ -15,17 +15,23 @@ Method
    ``M = Q*[:3, :3] + c c^T = R diag(axes^2) R^T``; ``M`` must be positive definite (else
    ``not_an_ellipsoid``).
 3. **Refinement**: Levenberg-Marquardt in GTSAM over a ``Pose3`` (ellipsoid frame -> world:
-   rotation and centre) and a ``Vector3`` of log semi-axes, one ``gtsam.CustomFactor`` per view.
-   Residual: the level-set residual of the paper without decomposing the projected conic,
-   ``r_j = Phi_pred(x_j) - 1 = -D[2,2] x~_j^T D^-1 x~_j`` with ``D = P Q* P^T`` (any scale),
-   at points ``x_j`` sampled on the *observed* ellipse (zero for every j iff the predicted
-   ellipse passes through them; dimensionless, a relative level error). Analytic Jacobians:
-   ``dr = <dQ*, D[2,2] v v^T - s p3 p3^T>`` with ``u = D^-1 x~``, ``s = x~^T u``, ``v = P^T u``,
-   ``p3 = P[2, :]`` and ``dQ*`` the derivative of ``Q*`` along each tangent direction (Pose3 right
-   perturbation ``[omega, v]``: ``R -> R Exp(omega)``, ``c -> c + R v``). LM runs from the linear
-   estimate and from a sphere at the triangulated centre (radius from the apparent sizes); the
-   valid result (in front of every camera, semi-axes within the map limits) with the lowest
-   residual wins — the linear estimate alone is fragile under noise and narrow baselines.
+   rotation and centre) and a ``Vector3`` of log semi-axes, with the ellipsoid factor shared
+   with map building, :func:`factors.ellipsoid_factors.ellipsoid_views_factor` (the level-set
+   residual of localization, :func:`factors.ellipsoid_residuals.observation_residual`, and its
+   analytic Jacobians; one factor over all views, no robust kernel). Samples: ``samples_per_view``
+   points on each *observed* ellipse (``Phi_det = 1`` there), so each residual is
+   ``1 - Phi_pred(x_j)`` (zero for every j iff the predicted ellipse passes through them;
+   dimensionless, a relative level error), each view's divided by its sigma. The camera enters
+   as its projection ``K [R|t]`` with the samples in homogeneous pixels (the residual is
+   invariant to that change of image coordinates). LM runs from the linear estimate and from a
+   sphere at the triangulated centre (radius from the apparent sizes); the valid result (in
+   front of every camera, a plausible shape, reproducing the views) with the lowest residual
+   wins — the linear estimate alone is fragile under noise and narrow baselines.
+4. **Checks**: every result must be entirely in front of every camera (``not_in_front``), a
+   plausible shape (:func:`degenerate_shape_reason`: semi-axes within the map limits and not
+   flatter than ``MIN_AXIS_RATIO``, else ``degenerate_shape``) and reproduce the views (RMS
+   level residual at most ``MAX_RMS_LEVEL_RESIDUAL``, else ``inconsistent_views``: e.g. views of
+   different objects, where LM may shrink the ellipsoid to a few millimetres).
 
 Conventions: poses are ``world_from_camera`` 4x4 (camera axes OpenCV), ellipses in pixels,
 semi-axes in metres, output rotations ellipsoid frame -> world.
