@@ -167,3 +167,28 @@ def test_box_detections_are_accepted() -> None:
     rec = parse_recording(rec_doc)
     assert rec.observations[0].ellipse.angle == 0.0
     assert math.isclose(rec.observations[0].ellipse.a, (x1 - x0) / 2)
+
+
+def test_axis_floor_is_one_sided_with_the_right_jacobian() -> None:
+    import gtsam
+
+    from maps.building.joint import _floor_factor
+
+    key = gtsam.symbol("l", 0)
+    f = _floor_factor(key, math.log(0.01), 0.1)
+    v = gtsam.Values()
+    v.insert(key, np.log(np.array([0.2, 0.05, 0.002])))  # only the last axis is below 1 cm
+    r = f.unwhitenedError(v)
+    np.testing.assert_allclose(r, [0.0, 0.0, math.log(0.01) - math.log(0.002)], rtol=1e-12)
+    A, _ = f.linearize(v).jacobian()
+    h = 1e-6
+    numeric = []
+    for e in np.eye(3):
+        vp, vm = gtsam.Values(), gtsam.Values()
+        vp.insert(key, v.atVector(key) + h * e)
+        vm.insert(key, v.atVector(key) - h * e)
+        numeric.append((f.unwhitenedError(vp) - f.unwhitenedError(vm)) / (2 * h) / 0.1)
+    np.testing.assert_allclose(A, np.column_stack(numeric), atol=1e-6)
+    above = gtsam.Values()
+    above.insert(key, np.log(np.array([0.2, 0.05, 0.02])))
+    assert f.error(above) == 0.0

@@ -21,9 +21,11 @@ Factors:
   axis). For labels without one, the log semi-axes that the views leave unconstrained at the
   initial estimate (marginal std above ``unconstrained_log_std``, computed as in the quality
   report) get a weak prior (std ``UNCONSTRAINED_PRIOR_SIGMA`` = 0.5, a factor 1.65) towards the
-  object's mean log semi-axis, so that they cannot collapse; the constrained axes a very weak
-  one (std ``SHAPE_PRIOR_SIGMA`` = 2, a factor 7.4: an axis constrained at the start may not be
-  at the end, when the object and the cameras have moved);
+  object's mean log semi-axis, so that they cannot collapse; constrained axes get none (no bias
+  where the views decide);
+* a floor on every semi-axis (``AXIS_FLOOR_FRACTION`` = 1/20 of the object's initial mean
+  semi-axis), a one-sided prior: an axis constrained at the start may not be at the end, once
+  the object and the cameras have moved; no cost above the floor;
 * with ``refine_cameras``: ``PriorFactorPose3`` on the first frame (gauge) and
   ``BetweenFactorPose3`` between consecutive frames with the app's relative poses
   (noise ``odometry``, :class:`maps.building.recording.OdometryNoise`) — object-level bundle
@@ -81,14 +83,14 @@ UNCONSTRAINED_PRIOR_SIGMA: float | None = 0.5
 #: level-set residual std of ``sqrt(2.5e-3) = 0.05``, typical of a fine-tuned detector; the
 #: optimisation itself weights them 1, as localization does).
 QUALITY_DEFAULT_SIGMA = 2.5e-3
-#: Std (log metres) of a very weak prior on the log semi-axes the views DO constrain at the
-#: initial estimate (towards the object's mean log semi-axis); None: no prior there. An axis
-#: constrained at the start can lose its constraint as the refinement moves the object and the
-#: cameras (a TV seen truncated within a narrow cone collapsed to a disc of 1e-159 m): this
-#: keeps such axes finite; where the views decide (log std <= 0.3) its pull is about 2 % of
-#: the axis' log distance to the mean. 2 (a factor 7.4): on the tuning seed 0, 1 and 2
-#: relocalize alike (and as without it).
-SHAPE_PRIOR_SIGMA: float | None = 2.0
+#: Floor of every semi-axis, as a fraction of the object's initial mean semi-axis (geometric),
+#: held by a one-sided prior (zero cost above it, std ``AXIS_FLOOR_LOG_SIGMA`` in log below;
+#: None: no floor). An axis the views constrain at the start may not be constrained at the end,
+#: once the object and the cameras have moved (a TV seen truncated within a narrow cone
+#: collapsed to a disc of 1e-159 m); the floor stops such collapses without biasing any axis
+#: above it (a Gaussian prior on every axis would).
+AXIS_FLOOR_FRACTION: float | None = 0.05
+AXIS_FLOOR_LOG_SIGMA = 0.1
 #: With ``refine_cameras``: consecutive frames whose views share one factor.
 FRAMES_PER_FACTOR = 3
 
@@ -156,6 +158,21 @@ def _canonical(R: np.ndarray, center: np.ndarray, axes: np.ndarray) -> Ellipsoid
     return Ellipsoid(center, np.maximum(axes[order], 1e-300), R2)
 
 
+def _floor_factor(key: int, floor: float, sigma: float) -> gtsam.CustomFactor:
+    """One-sided prior on a ``Vector3`` (log semi-axes): residual ``max(0, floor - x_i)``,
+    std ``sigma``: no cost at or above ``floor``."""
+
+    def error_fn(this: gtsam.CustomFactor, values: gtsam.Values,
+                 H: list[np.ndarray] | None) -> np.ndarray:
+        x = values.atVector(key)
+        below = x < floor
+        if H is not None:
+            H[0] = np.diag(np.where(below, -1.0, 0.0))
+        return np.where(below, floor - x, 0.0)
+
+    return gtsam.CustomFactor(gtsam.noiseModel.Isotropic.Sigma(3, sigma), [key], error_fn)
+
+
 class _Ticker:
     """Counts factor evaluations and reports fractional LM progress at most every
     ``interval_s`` from inside an iteration (one iteration of a large graph, e.g. with camera
@@ -199,7 +216,7 @@ def refine_jointly(
     truncated_weight: float = TRUNCATED_WEIGHT,
     unconstrained_prior_sigma: float | None = UNCONSTRAINED_PRIOR_SIGMA,
     frames_per_factor: int = FRAMES_PER_FACTOR,
-    shape_prior_sigma: float | None = SHAPE_PRIOR_SIGMA,
+    axis_floor_fraction: float | None = AXIS_FLOOR_FRACTION,
 ) -> JointResult:
     """Refine ``objects`` = ``(label, observation indices, initial ellipsoid)`` jointly.
 
@@ -255,12 +272,14 @@ def refine_jointly(
             std, _, _, _ = _log_axis_std(np.array([invert_pose(T_wc[f]) for f in frames_k]),
                                       ell.rotation, ell.center, ell.axes, stacked, info_w[k])
             loose = ~(std <= unconstrained_log_std)
-            if loose.any() or shape_prior_sigma is not None:
-                sig = np.where(loose, unconstrained_prior_sigma,
-                               1e6 if shape_prior_sigma is None else shape_prior_sigma)
+            if loose.any():
+                sig = np.where(loose, unconstrained_prior_sigma, 1e6)
                 graph.add(gtsam.PriorFactorVector(
                     L[k], np.full(3, float(np.mean(np.log(ell.axes)))),
                     gtsam.noiseModel.Diagonal.Sigmas(sig)))
+        if axis_floor_fraction is not None:
+            graph.add(_floor_factor(L[k], float(np.mean(np.log(ell.axes)))
+                                    + math.log(axis_floor_fraction), AXIS_FLOOR_LOG_SIGMA))
     if refine_cameras and used_frames:
         for f in used_frames:
             values.insert(X[f], _pose3(T_wc[f]))
