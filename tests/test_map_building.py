@@ -192,3 +192,30 @@ def test_axis_floor_is_one_sided_with_the_right_jacobian() -> None:
     above = gtsam.Values()
     above.insert(key, np.log(np.array([0.2, 0.05, 0.02])))
     assert f.error(above) == 0.0
+
+
+def test_odometry_noise_is_parsed_validated_and_a_random_walk() -> None:
+    from maps.building.recording import RecordingError
+
+    doc, _ = _recording(4)
+    rec = parse_recording(doc)
+    assert rec.refine_camera_poses is True and rec.odometry_noise == OdometryNoise()
+    rec = parse_recording({**doc, "odometry_noise": {"translation_m_per_sqrt_m": 0.03}})
+    assert rec.odometry_noise.translation_m_per_sqrt_m == 0.03
+    assert rec.odometry_noise.rotation_rad_per_sqrt_m == OdometryNoise().rotation_rad_per_sqrt_m
+    with pytest.raises(RecordingError) as exc:
+        parse_recording({**doc, "odometry_noise": {"translation_m_per_sqrt_m": -1, "bogus": 1,
+                                                   "rotation_rad_per_step": "x"}})
+    fields = {e["field"] for e in exc.value.errors}
+    assert fields == {"odometry_noise.translation_m_per_sqrt_m", "odometry_noise.bogus",
+                      "odometry_noise.rotation_rad_per_step"}
+    with pytest.raises(RecordingError) as exc:
+        parse_recording({**doc, "odometry_noise": {"translation_m_per_step": 0}})
+    assert exc.value.errors[0]["field"] == "odometry_noise"
+    # variances add over path length and steps: two halves compose to the whole
+    n = OdometryNoise(0.01, 0.02, 0.003, 0.004)
+    whole = n.sigmas(2.0, 6)
+    half = n.sigmas(1.0, 3)
+    np.testing.assert_allclose(whole**2, 2 * half**2, rtol=1e-12)
+    np.testing.assert_allclose(whole[:3], math.sqrt(0.01**2 * 2 + 0.003**2 * 6), rtol=1e-12)
+    np.testing.assert_allclose(whole[3:], math.sqrt(0.02**2 * 2 + 0.004**2 * 6), rtol=1e-12)
