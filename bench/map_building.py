@@ -18,7 +18,8 @@ Per seed:
    detections per frame; no track ids.
 4. **Build** with :func:`maps.building.build.build_map` from the drifting poses (association
    not given; the recording's defaults: camera poses refined with the default odometry noise,
-   or not refined with ``--fixed-cameras``) and time it (progress callbacks' largest gap is reported).
+   or not refined with ``--fixed-cameras``) and time it (progress callbacks' largest gap is
+   reported).
 5. **Scores.** Association precision / recall over detections: a built object is matched to the
    real object most of its detections come from; a detection is correct when it was assigned
    to the object matched to its true object. Recall's denominator: every correctly labelled
