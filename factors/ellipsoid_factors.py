@@ -99,7 +99,11 @@ def ellipsoid_views_factor(
         camera_keys: ``Pose3`` keys (``world_from_camera``) of refined cameras; empty for fixed
             cameras.
         view_cameras: (V,) camera slot of each view (with ``camera_keys``).
-        camera_from_world: (V, 4, 4) fixed cameras (without ``camera_keys``).
+        camera_from_world: (V, 4, 4) fixed cameras (without ``camera_keys``). Its top 3x4
+            may also be a projection ``K [R|t]`` (``K``'s last row ``(0, 0, 1)``) when the
+            samples' rays are in homogeneous pixels (``K n``): the residual, the ellipsoid
+            Jacobians and the depth margin are unchanged by that change of image coordinates
+            (``maps.reconstruct`` samples the observed contour in pixels this way).
         robust_scale: Huber threshold on each view's weighted residual norm; None: quadratic.
         penalty_cost, min_depth_margin: see the module docstring.
         on_evaluate: called at every evaluation (progress reporting).
