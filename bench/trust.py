@@ -54,6 +54,7 @@ from service.localization import calibration
 from service.localization.confidence import (
     TOLERANCE_POSITION_M,
     TOLERANCE_ROTATION_DEG,
+    confidence_probability,
     gaussian_tolerance_probability,
 )
 from service.localization.pipeline import localize
@@ -106,9 +107,11 @@ def reduce_frame(detections, object_ids, n: int, rng: np.random.Generator):
 
 
 def run_frames(seed: int, metrics: tuple[str, ...], stride: int, slow_stride: int,
-               config: SimulationConfig, log=print, min_confidence: float | None = None) -> dict:
+               config: SimulationConfig, log=print, min_confidence: float | None = None,
+               setting: str = "default") -> dict:
     """Experiments 1-3 on one seed: records per metric, and the reduced frames
-    (``min_confidence``: the option used, 0 when tuning so every verified pose is seen)."""
+    (``min_confidence``: the option used, 0 when tuning so every verified pose is seen;
+    ``setting``: the detector setting's name, kept in each record)."""
     cm = compile_map(load_chess_map())
     camera, poses, _ = load_chess_world_from_camera()
     out: dict = {"frames": {m: [] for m in metrics}, "reduced": {"2": [], "3": []}}
@@ -119,7 +122,7 @@ def run_frames(seed: int, metrics: tuple[str, ...], stride: int, slow_stride: in
             if m in SLOW and (i // stride) % slow_stride:
                 continue
             r = localize(f.detections, cm, camera, options(m, min_confidence=min_confidence))
-            out["frames"][m].append(_record(r, poses[i], frame=i, metric=m))
+            out["frames"][m].append(_record(r, poses[i], frame=i, metric=m, setting=setting))
         rng = np.random.default_rng(seed * 100_000 + 50_000 + i)
         for n in (2, 3):
             dets = reduce_frame(f.detections, f.object_ids, n, rng)
@@ -128,9 +131,14 @@ def run_frames(seed: int, metrics: tuple[str, ...], stride: int, slow_stride: in
             r = localize(dets, cm, camera, options("level_set", min_confidence=min_confidence))
             rb = localize(dets, cm, camera, options("level_set", on_ambiguity="best",
                                                     min_confidence=0.0))
-            rec = _record(r, poses[i], frame=i, metric="level_set")
+            rec = _record(r, poses[i], frame=i, metric="level_set", setting=setting)
             rec["best_pos"] = pose_errors(rb.world_from_camera if rb.localized else None,
                                           poses[i])[0]
+            # the answer's most probable candidate when not localized (its alternatives)
+            top = r.alternatives[0] if (not r.localized and r.alternatives) else None
+            rec["candidate_pos"] = pose_errors(None if top is None else top.world_from_camera,
+                                               poses[i])[0]
+            rec["candidate_confidence"] = None if top is None else top.confidence
             out["reduced"][str(n)].append(rec)
     log(f"seed {seed}: {len(poses[::stride])} frames in {time.perf_counter() - t0:.0f} s")
     return out
@@ -275,6 +283,11 @@ def reduced_table(reduced: dict) -> dict:
             if rows else None,
             "kept_of_good": float(np.mean([r["localized"] for r in good_before]))
             if good_before else None,
+            # localized, or not localized with the pose within 10 cm as its top candidate
+            # (alternatives[0], with its probability): the client can still take it
+            "kept_of_good_as_candidate": float(np.mean(
+                [r["localized"] or r.get("candidate_pos", math.inf) <= 0.10
+                 for r in good_before])) if good_before else None,
             "ambiguous": sum(r["reason"] == "ambiguous" for r in rows),
         }
     return out
@@ -305,8 +318,54 @@ def _fit_logistic(X: np.ndarray, y: np.ndarray, ridge: float = 1e-2) -> np.ndarr
     return w
 
 
-def fit(data: dict, seeds: list[int], command: str) -> str:
-    """New calibration constants from tuning data recorded with the current constants."""
+def _scale_for(rows: list[dict], floor: float) -> float | None:
+    """``k`` centring the tuning frames' mean NEES in [4, 9]: each detector setting's mean raw
+    NEES (covariance ``max(s^2, f) (J^T W J)^-1``) over the frames within 5, 10 and 20 cm (cells
+    with >= 5 frames) is a cell; ``k`` puts the geometric mean of the smallest and largest cell
+    at 6, the geometric centre of [4, 9] (the cells grow with the operating point: a wider
+    error bound keeps frames further in the tail)."""
+    cells = []
+    for setting in sorted({r.get("setting", "default") for r in rows}):
+        for t in OPERATING_POINTS_M:
+            v = [r["nees"] * r["evidence"]["cov_scale"] / max(r["evidence"]["s2"], floor)
+                 for r in rows if "nees" in r and r["pos"] <= t
+                 and r.get("setting", "default") == setting]
+            if len(v) >= 5:
+                cells.append(float(np.mean(v)))
+    if not cells:
+        return None
+    return math.sqrt(min(cells) * max(cells)) / 6.0
+
+
+def refeature(rows: list[dict], scale: dict, floor: dict) -> None:
+    """Recompute the records' residual (``log_s2``) and covariance (``logit_gauss``) features
+    and their ``cov`` / ``nees`` for new constants ``scale`` / ``floor`` (in place)."""
+    for r in rows:
+        m = r["metric"]
+        ev = r["evidence"]
+        s2 = ev.get("s2", math.nan)
+        if m not in floor or s2 is None or not math.isfinite(s2):
+            continue
+        ev["log_s2"] = math.log(max(s2, floor[m]) / floor[m])
+        if "cov" in r:
+            new = scale[m] * max(s2, floor[m])
+            ratio = new / ev["cov_scale"]
+            cov = np.asarray(r["cov"]) * ratio
+            r["cov"], r["nees"] = cov.tolist(), r["nees"] / ratio
+            ev["cov_scale"] = new
+            p = gaussian_tolerance_probability(cov)
+            p = min(max(p, 1e-6), 1 - 1e-6)
+            ev["logit_gauss"] = math.log(p / (1 - p))
+
+
+def fit_constants(data: dict, metric_offsets: bool = False,
+                  features: tuple[str, ...] | None = None) -> dict:
+    """New calibration constants (``scale``, ``floor``, ``models``, ``min_confidence``) from
+    tuning records made with the current constants (updates the records' residual and
+    covariance features in place). ``metric_offsets``: a per-metric intercept in the
+    confidence model (off by default: the calibrated covariance carries the metric's accuracy,
+    and per-metric offsets fitted on few frames do not transfer to another noise level);
+    ``features``: default :data:`calibration.CONFIDENCE_FEATURES`."""
     scale = dict(calibration.COVARIANCE_SCALE)
     floor = dict(calibration.S2_FLOOR)
     for m, rows in data["frames"].items():
@@ -315,28 +374,12 @@ def fit(data: dict, seeds: list[int], command: str) -> str:
         if m == "none" or not s2:
             continue
         floor[m] = float(np.median(s2))
-        # the raw NEES (covariance (J^T W J)^-1) from the scale the run used
-        means = []
-        for t in (OPERATING_POINTS_M[0], OPERATING_POINTS_M[-1]):
-            v = [r["nees"] * r["evidence"]["cov_scale"] / max(r["evidence"]["s2"], floor[m])
-                 for r in rows if "nees" in r and r["pos"] <= t]
-            if v:
-                means.append(float(np.mean(v)))
-        if means:  # geometric mean of the mean NEES at the 5 and 20 cm points -> 6
-            scale[m] = math.exp(float(np.mean(np.log(means)))) / 6.0
+        k = _scale_for(rows, floor[m])
+        if k is not None:
+            scale[m] = k
     rows = [r for r in confidence_rows(data) if r["localized"]]
-    for r in rows:  # the residual and covariance features with the new floor and scale
-        m = r["metric"]
-        s2 = r["evidence"].get("s2", math.nan)
-        if m in floor and math.isfinite(s2):
-            r["evidence"]["log_s2"] = math.log(max(s2, floor[m]) / floor[m])
-        if "cov" in r and m in floor:
-            new = scale[m] * max(r["evidence"]["s2"], floor[m])
-            cov = np.asarray(r["cov"]) * new / r["evidence"]["cov_scale"]
-            p = gaussian_tolerance_probability(cov)
-            p = min(max(p, 1e-6), 1 - 1e-6)
-            r["evidence"]["logit_gauss"] = math.log(p / (1 - p))
-    feats = calibration.CONFIDENCE_FEATURES
+    refeature(rows, scale, floor)
+    feats = calibration.CONFIDENCE_FEATURES if features is None else features
     models = {}
     for name, sel in (("refined", lambda r: r["metric"] != "none"),
                       ("none", lambda r: r["metric"] == "none")):
@@ -346,7 +389,8 @@ def fit(data: dict, seeds: list[int], command: str) -> str:
             continue
         use = [f for f in feats if not (name == "none" and f in ("log_s2", "logit_gauss"))]
         # per-metric intercept offsets (level set, the default, is the reference)
-        offsets = sorted({r["metric"] for r in rr} - {"level_set", "none"})
+        offsets = sorted({r["metric"] for r in rr} - {"level_set", "none"}) \
+            if metric_offsets else []
         X = np.array([[r["evidence"][f] for f in use] + [float(r["metric"] == m) for m in offsets]
                       for r in rr])
         y = np.array([_success(r) for r in rr], dtype=float)
@@ -362,15 +406,24 @@ def fit(data: dict, seeds: list[int], command: str) -> str:
     min_confidence = 0.0
     for rr in data["reduced"].values():
         loc = [r for r in rr if r["localized"]]
-        z = np.array([models["refined"]["intercept"] + sum(
-            models["refined"]["coef"].get(f, 0.0) * r["evidence"][f] for f in feats)
-            for r in loc])
-        p = 1.0 / (1.0 + np.exp(-z))
+        if not loc:
+            continue
+        p = np.array([confidence_probability(r["metric"], r["evidence"], models)
+                      for r in loc])
         wrong = np.array([r["pos"] > 0.5 for r in loc])
         for t in np.round(np.arange(0.0, 0.61, 0.01), 2):
             if np.sum(wrong & (p >= t)) <= 0.01 * len(rr):
                 min_confidence = max(min_confidence, float(t))
                 break
+    return {"scale": scale, "floor": floor, "models": models, "min_confidence": min_confidence,
+            "features": tuple(feats)}
+
+
+def fit(data: dict, seeds: list[int], command: str, metric_offsets: bool = False) -> str:
+    """The text of ``calibration.py`` with the constants of :func:`fit_constants`."""
+    c = fit_constants(data, metric_offsets)
+    scale, floor, models = c["scale"], c["floor"], c["models"]
+    min_confidence, feats = c["min_confidence"], c["features"]
     text = f'''"""Calibration constants of :mod:`service.localization.confidence` (generated).
 
 Provenance: written by ``python -m bench.trust --fit`` (see that module); the fit uses
@@ -379,8 +432,9 @@ only the tuning seeds named in :data:`PROVENANCE`, the bench reports on other se
 
 PROVENANCE = {pprint.pformat({"command": command, "tuning_seeds": seeds}, width=96)}
 
-#: k_metric of ``cov = k * max(s^2, f) * (J^T W J)^-1`` (the geometric mean of the mean NEES
-#: at the 5 and 20 cm operating points = 6 on the tuning frames).
+#: k_metric of ``cov = k * max(s^2, f) * (J^T W J)^-1`` (``bench.trust._scale_for``: the
+#: smallest and largest mean NEES over the 5 / 10 / 20 cm operating points and the two detector
+#: settings of the tuning frames centred on 6).
 COVARIANCE_SCALE = {pprint.pformat({m: round(v, 6) for m, v in scale.items()},
                                     width=96, sort_dicts=False)}
 
@@ -390,6 +444,9 @@ S2_FLOOR = {pprint.pformat({m: round(v, 6) for m, v in floor.items()},
 
 #: Runner-up / best score (sum of inlier IoUs) at and above which an answer is ambiguous.
 AMBIGUITY_RATIO = {calibration.AMBIGUITY_RATIO!r}
+
+#: The same ratio for a runner-up matching the same map objects (``confidence.is_ambiguous``).
+AMBIGUITY_RATIO_SAME_OBJECTS = {calibration.AMBIGUITY_RATIO_SAME_OBJECTS!r}
 
 #: Default ``LocalizationOptions.min_confidence``.
 MIN_CONFIDENCE = {min_confidence!r}
@@ -490,10 +547,10 @@ def markdown(res: dict, command: str) -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--fit", action="store_true", help="tune and rewrite calibration.py")
-    ap.add_argument("--tune-seeds", default="100")
+    ap.add_argument("--tune-seeds", default="100,102")
     ap.add_argument("--tune-noisy-seed", type=int, default=101,
                     help="tuning seed with the second noise setting (every --noisy-stride pose)")
-    ap.add_argument("--seeds", default="200")
+    ap.add_argument("--seeds", default="200,202")
     ap.add_argument("--noisy-seed", type=int, default=201)
     ap.add_argument("--stride", type=int, default=1, help="use every N-th of the 108 poses")
     ap.add_argument("--slow-stride", type=int, default=4, help="iou/giou on every N-th frame")
@@ -503,6 +560,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--random-trials", default="10,10,5",
                     help="trials against the 100 / 1,000 / 10,000-object maps")
     ap.add_argument("--json", type=Path)
+    ap.add_argument("--save-data", type=Path,
+                    help="with --fit: also write the tuning records (JSON) to this path")
+    ap.add_argument("--load-data", type=Path,
+                    help="with --fit: fit from records saved by --save-data (no simulation)")
+    ap.add_argument("--metric-offsets", action="store_true",
+                    help="with --fit: per-metric intercepts in the confidence model")
     ap.add_argument("--write-results", action="store_true")
     args = ap.parse_args(argv)
     metrics = tuple(args.metrics.split(","))
@@ -511,18 +574,25 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     if args.fit:
         seeds = [int(s) for s in args.tune_seeds.split(",")]
-        data = {"frames": {m: [] for m in metrics}, "reduced": {"2": [], "3": []}}
-        runs = [(s, args.stride, cfg) for s in seeds]
-        runs.append((args.tune_noisy_seed, args.noisy_stride, cfg.with_(**NOISY)))
-        for s, stride, config in runs:
-            d = run_frames(s, metrics, stride, args.slow_stride, config, min_confidence=0.0)
-            for m in metrics:
-                data["frames"][m] += d["frames"][m]
-            for n in ("2", "3"):
-                data["reduced"][n] += d["reduced"][n]
+        if args.load_data:
+            data = json.loads(args.load_data.read_text())
+        else:
+            data = {"frames": {m: [] for m in metrics}, "reduced": {"2": [], "3": []}}
+            runs = [(s, args.stride, cfg, "default") for s in seeds]
+            runs.append((args.tune_noisy_seed, args.noisy_stride, cfg.with_(**NOISY), "noisy"))
+            for s, stride, config, setting in runs:
+                d = run_frames(s, metrics, stride, args.slow_stride, config, min_confidence=0.0,
+                               setting=setting)
+                for m in metrics:
+                    data["frames"][m] += d["frames"][m]
+                for n in ("2", "3"):
+                    data["reduced"][n] += d["reduced"][n]
+            if args.save_data:
+                args.save_data.write_text(json.dumps(data, default=float))  # keeps inf/NaN
         print(json.dumps(json_safe(nees_table(data["frames"])), indent=1))
         print(json.dumps(json_safe(reduced_table(data["reduced"])), indent=1))
-        CALIBRATION_PATH.write_text(fit(data, [*seeds, args.tune_noisy_seed], command))
+        CALIBRATION_PATH.write_text(fit(data, [*seeds, args.tune_noisy_seed], command,
+                                        metric_offsets=args.metric_offsets))
         print(f"wrote {CALIBRATION_PATH}")
         return 0
     seeds = [int(s) for s in args.seeds.split(",")]
@@ -534,7 +604,7 @@ def main(argv: list[str] | None = None) -> int:
         for n in ("2", "3"):
             data["reduced"][n] += d["reduced"][n]
     noisy = run_frames(args.noisy_seed, metrics, args.noisy_stride, args.slow_stride,
-                       cfg.with_(**NOISY))
+                       cfg.with_(**NOISY), setting="noisy")
     camera, _, _ = load_chess_world_from_camera()
     rows = confidence_rows(data)
     rel = {"pooled": reliability(rows), "noisy (pooled)": reliability(confidence_rows(noisy))}

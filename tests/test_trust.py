@@ -133,9 +133,14 @@ def test_calibration_does_not_regress_on_held_out_frames():
 
 
 def test_ambiguity_rule_and_distinct_poses():
-    assert is_ambiguous(2, 1.8, 2, 1.8 * calibration.AMBIGUITY_RATIO)
-    assert not is_ambiguous(2, 1.8, 2, 1.8 * calibration.AMBIGUITY_RATIO - 1e-6)
+    r, r_same = calibration.AMBIGUITY_RATIO, calibration.AMBIGUITY_RATIO_SAME_OBJECTS
+    assert 0 < r <= r_same <= 1
+    assert is_ambiguous(2, 1.8, 2, 1.8 * r)
+    assert not is_ambiguous(2, 1.8, 2, 1.8 * r - 1e-6)
     assert not is_ambiguous(3, 2.4, 2, 2.4)  # the best explains one more detection
+    # the same objects under another pose: only a near tie is ambiguous
+    assert is_ambiguous(2, 1.8, 2, 1.8 * r_same, same_objects=True)
+    assert not is_ambiguous(2, 1.8, 2, 1.8 * r_same - 1e-6, same_objects=True)
     T = np.eye(4)
     assert not distinct_poses(T, T @ expmap_pose3([0, 0, 0.1, 0.2, 0, 0]))
     assert distinct_poses(T, T @ expmap_pose3([0, 0, 0, 0.6, 0, 0]))
@@ -219,11 +224,18 @@ def test_options_validation_names_the_field():
         LocalizationOptions(min_confidence=True)
 
 
-def test_low_confidence_answers_say_so():
+def test_low_confidence_answers_say_so_and_keep_the_candidate():
+    """A verified pose below ``min_confidence`` is not localized, but it comes back as the
+    first alternative with the same probability: the client may still take it."""
     f = simulate_frame(CM, CAMERA, POSES[5], 5, SimulationConfig())
     r = localize(f.detections, CM, CAMERA, LocalizationOptions(min_confidence=1.0))
     assert not r.localized and r.reason == "low_confidence"
     assert 0.0 <= r.evidence["confidence"] < 1.0
+    ok = localize(f.detections, CM, CAMERA, LocalizationOptions(min_confidence=0.0))
+    assert ok.localized and not ok.alternatives  # nothing to choose between
+    assert len(r.alternatives) >= 1
+    assert r.alternatives[0].confidence == pytest.approx(ok.confidence, abs=1e-12)
+    np.testing.assert_allclose(r.alternatives[0].world_from_camera, ok.world_from_camera)
 
 
 def test_ransac_keeps_mutually_distinct_hypotheses_best_first():

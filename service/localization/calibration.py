@@ -31,7 +31,10 @@ S2_FLOOR = {'iou': 0.019277,
  'level_set': 1.446626}
 
 #: Runner-up / best score (sum of inlier IoUs) at and above which an answer is ambiguous.
-AMBIGUITY_RATIO = 0.8
+AMBIGUITY_RATIO = 0.9
+
+#: The same ratio for a runner-up matching the same map objects (``confidence.is_ambiguous``).
+AMBIGUITY_RATIO_SAME_OBJECTS = 0.95
 
 #: Default ``LocalizationOptions.min_confidence``.
 MIN_CONFIDENCE = 0.13

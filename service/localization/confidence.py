@@ -46,21 +46,29 @@ minimal samples). Coefficients: :data:`service.localization.calibration.CONFIDEN
 
 Ambiguity
 ---------
-RANSAC keeps its best distinct hypotheses; the pipeline refines the best few. When the runner-up
-explains the detections comparably well (as many inliers, and a sum of inlier IoUs >=
-:data:`AMBIGUITY_RATIO` x the best's after refinement, the two poses distinct), the answer is
-ambiguous.
+RANSAC keeps its best distinct hypotheses; the pipeline refines the best few. A distinct
+runner-up (camera centres > 0.5 m or orientations > 20 deg apart) with as many inliers is a
+competitor when its sum of inlier IoUs (after refinement) is >= :data:`AMBIGUITY_RATIO` x the
+best's and it assigns the detections to *other* map objects (same-label objects: two Xboxes,
+three chairs, two TVs — the evidence cannot tell them apart), or >=
+:data:`AMBIGUITY_RATIO_SAME_OBJECTS` x the best's with the *same* objects (a near tie between two
+poses of the same correspondences). Then the answer is ambiguous (:func:`is_ambiguous`).
+Weaker runners-up are not hidden either: their score ratio is the confidence model's
+``margin`` feature. Every answer that was verified but is not localized (ambiguous or low
+confidence) lists the candidate poses with their probabilities in ``alternatives``.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
 from service.localization.calibration import (
     AMBIGUITY_RATIO,
-    CONFIDENCE_FEATURES,
+    AMBIGUITY_RATIO_SAME_OBJECTS,
     CONFIDENCE_MODELS,
     COVARIANCE_SCALE,
     S2_FLOOR,
@@ -68,6 +76,7 @@ from service.localization.calibration import (
 
 __all__ = [
     "AMBIGUITY_RATIO",
+    "AMBIGUITY_RATIO_SAME_OBJECTS",
     "TOLERANCE_POSITION_M",
     "TOLERANCE_ROTATION_DEG",
     "calibrated_covariance",
@@ -193,23 +202,33 @@ def _logit(p: float) -> float:
     return math.log(p / (1.0 - p))
 
 
-def confidence_probability(metric: str, features: dict[str, float]) -> float:
+def confidence_probability(metric: str, features: Mapping[str, float],
+                           models: Mapping[str, Any] | None = None) -> float:
     """The calibrated probability (logistic model) that the pose is within the tolerance.
 
     ``metric`` picks the coefficient set: ``"none"`` (unrefined poses: no residual variance or
-    covariance features) or the refined model (shared by the nine metrics, with a per-metric
-    intercept offset; the calibrated covariance carries the rest of the metric's accuracy)."""
-    model = CONFIDENCE_MODELS["none" if metric == "none" else "refined"]
+    covariance features) or the refined model (shared by the nine metrics, optionally with a
+    per-metric intercept offset; the calibrated covariance carries the metric's accuracy).
+    ``models``: the coefficient sets (default :data:`CONFIDENCE_MODELS`; the bench passes
+    candidates while fitting)."""
+    model = (CONFIDENCE_MODELS if models is None else models)[
+        "none" if metric == "none" else "refined"]
     z = model["intercept"] + model.get("metric_offset", {}).get(metric, 0.0)
-    for name in CONFIDENCE_FEATURES:
-        z += model["coef"].get(name, 0.0) * features[name]
+    for name, coef in model["coef"].items():
+        z += coef * features[name]
     return float(1.0 / (1.0 + math.exp(-min(max(z, -50.0), 50.0))))
 
 
 def is_ambiguous(best_inliers: int, best_score: float, runner_up_inliers: int,
-                 runner_up_score: float) -> bool:
+                 runner_up_score: float, same_objects: bool = False) -> bool:
     """Whether a distinct runner-up explains the detections comparably well: as many inliers,
-    and a sum of inlier IoUs >= :data:`AMBIGUITY_RATIO` x the best's. (A runner-up that leaves
-    a detection unexplained is not a competitor: the best explains strictly more.)"""
+    and a sum of inlier IoUs >= :data:`AMBIGUITY_RATIO` x the best's when it assigns the
+    detections to other map objects (``same_objects=False``: e.g. the other Xbox, a label
+    ambiguity), >= :data:`AMBIGUITY_RATIO_SAME_OBJECTS` x when it matches the same objects
+    (another pose of the same correspondences: the refinement already chose between them by
+    their fit, so only a near tie is ambiguous; a weaker one lowers ``confidence`` through its
+    ``margin`` feature). A runner-up that leaves a detection unexplained is not a competitor:
+    the best explains strictly more."""
+    ratio = AMBIGUITY_RATIO_SAME_OBJECTS if same_objects else AMBIGUITY_RATIO
     return (best_score > 0 and runner_up_inliers >= best_inliers
-            and runner_up_score >= AMBIGUITY_RATIO * best_score)
+            and runner_up_score >= ratio * best_score)
