@@ -4,8 +4,7 @@ Provenance: written by ``python -m bench.trust --fit`` (see that module); the fi
 only the tuning seeds named in :data:`PROVENANCE`, the bench reports on other seeds.
 """
 
-PROVENANCE = {'command': 'python -m bench.trust --fit --load-data /tmp/i12/tune.json',
- 'tuning_seeds': [100, 102, 101]}
+PROVENANCE = {'command': 'python -m bench.trust --fit', 'tuning_seeds': [100, 102, 101]}
 
 #: k_metric of ``cov = k * max(s^2, f) * (J^T W J)^-1`` (``bench.trust._scale_for``: the
 #: smallest and largest mean NEES over the 5 / 10 / 20 cm operating points and the two detector
