@@ -56,6 +56,7 @@ from service.localization.confidence import (
     TOLERANCE_ROTATION_DEG,
     confidence_probability,
     gaussian_tolerance_probability,
+    student_t_factor,
 )
 from service.localization.pipeline import localize
 from service.localization.types import METRICS, Detection, LocalizationOptions, PosePrior
@@ -146,8 +147,8 @@ def run_frames(seed: int, metrics: tuple[str, ...], stride: int, slow_stride: in
                                           poses[i])[0]
             # the answer's most probable candidate when not localized (its alternatives)
             top = r.alternatives[0] if (not r.localized and r.alternatives) else None
-            rec["candidate_pos"] = pose_errors(None if top is None else top.world_from_camera,
-                                               poses[i])[0]
+            rec["candidate_pos"], rec["candidate_rot"] = pose_errors(
+                None if top is None else top.world_from_camera, poses[i])
             rec["candidate_confidence"] = None if top is None else top.confidence
             out["reduced"][str(n)].append(rec)
     log(f"seed {seed}: {len(poses[::stride])} frames in {time.perf_counter() - t0:.0f} s")
@@ -304,6 +305,16 @@ def reduced_table(reduced: dict) -> dict:
     return out
 
 
+def candidate_rows(data: dict) -> list[dict]:
+    """The top candidates (``alternatives[0]``) of the reduced frames answered ``localized:
+    false`` after verification, as rows for :func:`reliability` (is the probability a client
+    would act on calibrated?)."""
+    return [{"localized": True, "confidence": r["candidate_confidence"],
+             "pos": r["candidate_pos"], "rot": r["candidate_rot"]}
+            for rr in data["reduced"].values() for r in rr
+            if r.get("candidate_confidence") is not None]
+
+
 def confidence_rows(data: dict) -> list[dict]:
     rows = [r for m, rr in data["frames"].items() for r in rr]
     return rows + [r for rr in data["reduced"].values() for r in rr]
@@ -331,14 +342,14 @@ def _fit_logistic(X: np.ndarray, y: np.ndarray, ridge: float = 1e-2) -> np.ndarr
 
 def _scale_for(rows: list[dict], floor: float) -> float | None:
     """``k`` centring the tuning frames' mean NEES in [4, 9]: each detector setting's mean raw
-    NEES (covariance ``max(s^2, f) (J^T W J)^-1``) over the frames within 5, 10 and 20 cm (cells
-    with >= 5 frames) is a cell; ``k`` puts the geometric mean of the smallest and largest cell
-    at 6, the geometric centre of [4, 9] (the cells grow with the operating point: a wider
-    error bound keeps frames further in the tail)."""
+    NEES (covariance ``max(s^2, f) t(n) (J^T W J)^-1``) over the frames within 5, 10 and 20 cm
+    (cells with >= 5 frames) is a cell; ``k`` puts the geometric mean of the smallest and
+    largest cell at 6, the geometric centre of [4, 9] (the cells grow with the operating point:
+    a wider error bound keeps frames further in the tail)."""
     cells = []
     for setting in sorted({r.get("setting", "default") for r in rows}):
         for t in OPERATING_POINTS_M:
-            v = [r["nees"] * r["evidence"]["cov_scale"] / max(r["evidence"]["s2"], floor)
+            v = [r["nees"] * r["evidence"]["cov_scale"] / _factor(r, floor)
                  for r in rows if "nees" in r and r["pos"] <= t
                  and r.get("setting", "default") == setting]
             if len(v) >= 5:
@@ -346,6 +357,13 @@ def _scale_for(rows: list[dict], floor: float) -> float | None:
     if not cells:
         return None
     return math.sqrt(min(cells) * max(cells)) / 6.0
+
+
+def _factor(r: dict, floor: float) -> float:
+    """The record's ``max(s^2, f) t(n)`` for the floor ``f`` (``confidence.variance_factor``)."""
+    ev = r["evidence"]
+    n = ev.get("n_refined") or round(math.exp(ev["log_inliers"]))
+    return max(ev["s2"], floor) * student_t_factor(int(n))
 
 
 def refeature(rows: list[dict], scale: dict, floor: dict) -> None:
@@ -359,7 +377,7 @@ def refeature(rows: list[dict], scale: dict, floor: dict) -> None:
             continue
         ev["log_s2"] = math.log(max(s2, floor[m]) / floor[m])
         if "cov" in r:
-            new = scale[m] * max(s2, floor[m])
+            new = scale[m] * _factor(r, floor[m])
             ratio = new / ev["cov_scale"]
             cov = np.asarray(r["cov"]) * ratio
             r["cov"], r["nees"] = cov.tolist(), r["nees"] / ratio
@@ -507,7 +525,8 @@ def markdown(res: dict, command: str) -> str:
              f"{res['config']['noisy_seed']} (second noise setting: twice the detector noise, "
              "not used for tuning).", "",
              "Method (`service/localization/confidence.py`): covariance = `k_metric * max(s^2, "
-             "f_metric) * (J^T W J)^-1` with the a-posteriori residual variance `s^2 = r^T W r / "
+             "f_metric) * t(n) * (J^T W J)^-1` (`t(n)`: Student-t factor for `n` refined "
+             "detections) with the a-posteriori residual variance `s^2 = r^T W r / "
              "(m - 6)` floored at `f_metric` (its 90th percentile on the tuning frames) and "
              "`k_metric` centring the tuning frames' smallest and largest mean NEES (two noise "
              "settings x three operating points) on 6; confidence = a logistic model of the "
@@ -635,7 +654,9 @@ def main(argv: list[str] | None = None) -> int:
                        cfg.with_(**NOISY), setting="noisy")
     camera, _, _ = load_chess_world_from_camera()
     rows = confidence_rows(data)
-    rel = {"pooled": reliability(rows), "noisy (pooled)": reliability(confidence_rows(noisy))}
+    rel = {"pooled": reliability(rows), "noisy (pooled)": reliability(confidence_rows(noisy)),
+           "candidates of unlocalized 2-3 detection frames": reliability(
+               candidate_rows(data) + candidate_rows(noisy))}
     for m in metrics:
         rel[m] = reliability(data["frames"][m])
     res = {
@@ -659,7 +680,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.write_results:
         from bench.results_doc import update_results_section
 
-        reliability_plot({k: rel[k] for k in ("pooled", "noisy (pooled)", "level_set")},
+        reliability_plot({k: rel[k] for k in ("pooled", "noisy (pooled)", "level_set",
+                                              "candidates of unlocalized 2-3 detection frames")},
                          RELIABILITY_PNG)
         update_results_section("trust", markdown(res, command))
     return 0

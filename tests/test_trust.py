@@ -27,6 +27,7 @@ from service.localization.confidence import (
     gaussian_tolerance_probability,
     is_ambiguous,
     residual_variance,
+    student_t_factor,
 )
 from service.localization.pipeline import localize, prior_gate_poses
 from service.localization.ransac import distinct_poses
@@ -75,19 +76,29 @@ def test_calibrated_covariance_scales_and_keeps_the_prior_information():
     floor = calibration.S2_FLOOR["level_set"]
     assert 0 < floor < 10.0
     s2 = 2.0 * floor  # above the floor: chi2 / (m - 6) with m = 26
-    cov = calibrated_covariance("level_set", raw, chi2=20.0 * s2, n_residuals=26)
-    np.testing.assert_allclose(cov, raw * s2 * k, rtol=1e-12)
-    assert calibrated_covariance("level_set", None, 1.0, 50) is None
-    assert calibrated_covariance("level_set", raw, 1.0, 6) is None  # m - 6 = 0: no s^2
+    t = student_t_factor(4)
+    cov = calibrated_covariance("level_set", raw, chi2=20.0 * s2, n_residuals=26, n_detections=4)
+    np.testing.assert_allclose(cov, raw * s2 * t * k, rtol=1e-12)
+    assert calibrated_covariance("level_set", None, 1.0, 50, 4) is None
+    assert calibrated_covariance("level_set", raw, 1.0, 6, 4) is None  # m - 6 = 0: no s^2
     # a small s^2 is floored: never more precise than the floor allows
-    small = calibrated_covariance("level_set", raw, chi2=0.02, n_residuals=26)
-    np.testing.assert_allclose(small, raw * floor * k, rtol=1e-12)
+    small = calibrated_covariance("level_set", raw, chi2=0.02, n_residuals=26, n_detections=4)
+    np.testing.assert_allclose(small, raw * floor * t * k, rtol=1e-12)
     # with a prior factor only the detections' information is rescaled
     prior = np.diag([1e-2] * 6)
     total = np.linalg.inv(np.linalg.inv(raw) + np.linalg.inv(prior))
-    got = calibrated_covariance("level_set", total, 20.0 * s2, 26, prior)
-    want = np.linalg.inv(np.linalg.inv(raw) / (s2 * k) + np.linalg.inv(prior))
+    got = calibrated_covariance("level_set", total, 20.0 * s2, 26, 4, prior)
+    want = np.linalg.inv(np.linalg.inv(raw) / (s2 * t * k) + np.linalg.inv(prior))
     np.testing.assert_allclose(got, want, rtol=1e-9)
+
+
+def test_student_t_factor_is_the_t_covariance():
+    """``nu / (nu - 2)`` is the variance of a unit Student-t with ``nu`` DoF (scipy), and the
+    factor falls to 1 with many detections."""
+    for n in (2, 3, 4, 6, 10):
+        nu = max(3.0 * n - 6.0, 3.0)
+        assert student_t_factor(n) == pytest.approx(stats.t(nu).var(), rel=1e-12)
+    assert student_t_factor(2) == pytest.approx(3.0) and student_t_factor(100) < 1.01
 
 
 def test_covariance_does_not_depend_on_the_sigma_scale():

@@ -7,7 +7,7 @@ The refinement's raw covariance is ``(J^T W J)^-1`` at the solution (``refine`` 
 ``sqrt(sigma_j)``; they do not (the metrics have different units: px, px^2, unitless; the
 level-set samples of one detection are strongly correlated). The reported covariance is::
 
-    cov = k_metric * max(s^2, f_metric) * (J^T W J)^-1,      s^2 = r^T W r / (m - 6)
+    cov = k_metric * max(s^2, f_metric) * t(n) * (J^T W J)^-1,      s^2 = r^T W r / (m - 6)
 
 * ``s^2`` (a-posteriori residual variance, ``RefinementResult.chi2 / (n_residuals - 6)``)
   rescales the information to the residual level actually seen in this frame: it removes the
@@ -27,6 +27,13 @@ level-set samples of one detection are strongly correlated). The reported covari
   set: 152 -> 22 with the median as floor); the 90th percentile narrows the spread between
   noise settings further. Scaling every ``sigma`` down leaves the covariance unchanged;
   scaling them up past the floor makes it larger (conservative).
+
+* ``t(n) = nu / (nu - 2)``, ``nu = 3 n - 6`` (>= 3) for ``n`` refined detections
+  (:func:`student_t_factor`): with ``s^2`` estimated from few detections the error is
+  Student-t rather than Gaussian, and its covariance is larger by this factor. On the tuning
+  frames the mean NEES fell with the number of inliers (algebraic: 11.6 with 3, 4.6 with 7+);
+  the factor narrowed the spread of the mean NEES over operating points and noise settings
+  for every metric (qbbox: ratio 1.92 -> 1.69) and its 99th percentile.
 
 With a client prior (a ``PriorFactorPose3`` in the graph) only the detections' information is
 rescaled: ``cov = (I_det / (k s^2) + Sigma_prior^-1)^-1`` with ``I_det = cov_raw^-1 -
@@ -89,6 +96,8 @@ __all__ = [
     "gaussian_tolerance_probability",
     "is_ambiguous",
     "residual_variance",
+    "student_t_factor",
+    "variance_factor",
 ]
 
 #: The tolerance of ``confidence``: P(position error <= 0.10 m and rotation error <= 5 deg).
@@ -107,14 +116,15 @@ def residual_variance(chi2: float, n_residuals: int) -> float:
 
 def calibrated_covariance(
     metric: str, raw_covariance: np.ndarray | None, chi2: float, n_residuals: int,
-    prior_covariance: np.ndarray | None = None,
+    n_detections: int, prior_covariance: np.ndarray | None = None,
 ) -> np.ndarray | None:
     """The reported 6x6 covariance (order ``[omega, v]``, rad/m, body frame, right
-    perturbation) from the refinement's raw one (see the module docstring); None when the raw
-    covariance is None, ``s^2`` is undefined (``m <= 6``) or the metric has no calibration."""
+    perturbation) from the refinement's raw one (see the module docstring; ``n_detections``
+    refined, ``n_residuals`` scalar residuals); None when the raw covariance is None, ``s^2``
+    is undefined (``m <= 6``) or the metric has no calibration."""
     if raw_covariance is None:
         return None
-    scale = covariance_scale(metric, chi2, n_residuals)
+    scale = covariance_scale(metric, chi2, n_residuals, n_detections)
     if not math.isfinite(scale):
         return None
     raw = np.asarray(raw_covariance, dtype=float)
@@ -131,13 +141,35 @@ def calibrated_covariance(
     return cov
 
 
-def covariance_scale(metric: str, chi2: float, n_residuals: int) -> float:
-    """``k_metric * max(s^2, f_metric)`` (module docstring); NaN when undefined (no ``s^2``, or
-    a metric without calibration constants)."""
+#: Effective independent measurements per detection in the Student-t factor
+#: (:func:`student_t_factor`): an ellipse's centre and size are well determined, its
+#: orientation and aspect (small, roundish objects) much less.
+DOF_PER_DETECTION = 3.0
+
+
+def student_t_factor(n_detections: int) -> float:
+    """``nu / (nu - 2)`` with ``nu = max(DOF_PER_DETECTION * n - 6, 3)``: the covariance of the
+    Student-t error distribution when the variance factor ``s^2`` is itself estimated from
+    ``nu`` effective degrees of freedom (few detections: ``s^2`` is uncertain, the error's tail
+    heavier). 3 for 2-3 detections, 1.29 for 5, 1.13 for 8, -> 1 for many."""
+    nu = max(DOF_PER_DETECTION * n_detections - 6.0, 3.0)
+    return nu / (nu - 2.0)
+
+
+def variance_factor(metric: str, chi2: float, n_residuals: int, n_detections: int) -> float:
+    """``max(s^2, f_metric) * student_t_factor(n_detections)``; NaN without ``s^2``."""
     s2 = residual_variance(chi2, n_residuals)
-    if not math.isfinite(s2) or metric not in COVARIANCE_SCALE:
+    if not math.isfinite(s2):
         return math.nan
-    return COVARIANCE_SCALE[metric] * max(s2, S2_FLOOR.get(metric, 0.0))
+    return max(s2, S2_FLOOR.get(metric, 0.0)) * student_t_factor(n_detections)
+
+
+def covariance_scale(metric: str, chi2: float, n_residuals: int, n_detections: int) -> float:
+    """``k_metric * max(s^2, f_metric) * t(n)`` (module docstring); NaN when undefined (no
+    ``s^2``, or a metric without calibration constants)."""
+    if metric not in COVARIANCE_SCALE:
+        return math.nan
+    return COVARIANCE_SCALE[metric] * variance_factor(metric, chi2, n_residuals, n_detections)
 
 
 def gaussian_tolerance_probability(covariance: np.ndarray | None, n: int = 2) -> float:

@@ -336,15 +336,18 @@ def localize(
         res = a.refinement
         s2 = math.nan if res is None else residual_variance(res.chi2, res.n_residuals)
         prior_cov = None if a.source != "prior" or prior is None else prior.covariance
+        n_refined = 0 if res is None else len(res.per_detection_cost)
         cov = None if res is None else calibrated_covariance(
-            metric, a.raw_covariance, res.chi2, res.n_residuals, prior_cov)
+            metric, a.raw_covariance, res.chi2, res.n_residuals, n_refined, prior_cov)
         margin = 0.0 if runner_up is None else min(1.0, runner_up.score / max(a.score, 1e-12))
         ev = evidence_features(n_inliers=len(a.inliers), n_usable=len(usable),
                                ious=np.array([m.iou for m in a.inliers]), s2=s2,
                                covariance=cov, margin=margin, n_samples=n_samples,
                                s2_floor=S2_FLOOR.get(metric, 0.0))
-        scale = math.nan if res is None else covariance_scale(metric, res.chi2, res.n_residuals)
-        return confidence_probability(metric, ev), {**ev, "s2": s2, "cov_scale": scale}, cov
+        scale = math.nan if res is None else covariance_scale(metric, res.chi2, res.n_residuals,
+                                                              n_refined)
+        return confidence_probability(metric, ev), {**ev, "s2": s2, "cov_scale": scale,
+                                                    "n_refined": float(n_refined)}, cov
 
     def finish(a: _Answer, ranked: list[_Answer], ambiguous: bool) -> LocalizationResult:
         runner_up = next((b for b in ranked if b is not a), None)
