@@ -567,7 +567,11 @@ def markdown(res: dict, command: str) -> str:
               "frames answered `localized: true` by default. *Kept (localized or top "
               "candidate)*: share of the good frames answered `localized: true`, or "
               "`localized: false` (`ambiguous` / `low_confidence`) with that pose as "
-              "`alternatives[0]` within 10 cm, returned with its probability.", "",
+              "`alternatives[0]` within 10 cm, returned with its probability. That column is "
+              "1 by construction (the top candidate is the pose the unchecked answer returns): "
+              "it says that the checks lose no good pose, only move it from `localized: true` "
+              "to a candidate; whether a client can act on the candidate's probability is the "
+              "reliability row *candidates of unlocalized 2-3 detection frames* above.", "",
               "| set | detections | frames | localized | ambiguous | false accepts (> 0.5 m) | "
               "without the checks | good frames | kept (localized) | kept (localized or top "
               "candidate) |",

@@ -4,32 +4,33 @@ Provenance: written by ``python -m bench.trust --fit`` (see that module); the fi
 only the tuning seeds named in :data:`PROVENANCE`, the bench reports on other seeds.
 """
 
-PROVENANCE = {'command': 'python -m bench.trust --fit', 'tuning_seeds': [100, 102, 101]}
+PROVENANCE = {'command': 'python -m bench.trust --fit --save-data /tmp/i12/tune2.json',
+ 'tuning_seeds': [100, 102, 101]}
 
 #: k_metric of ``cov = k * max(s^2, f) * (J^T W J)^-1`` (``bench.trust._scale_for``: the
 #: smallest and largest mean NEES over the 5 / 10 / 20 cm operating points and the two detector
 #: settings of the tuning frames centred on 6).
-COVARIANCE_SCALE = {'level_set': 4.077697,
- 'algebraic': 3.237079,
- 'frobenius': 3.269273,
- 'wasserstein': 0.641465,
- 'bhattacharyya': 0.502162,
- 'bbox': 0.59496,
- 'qbbox': 0.771878,
- 'iou': 0.475954,
- 'giou': 0.467138}
+COVARIANCE_SCALE = {'level_set': 2.848089,
+ 'algebraic': 3.058089,
+ 'frobenius': 3.025348,
+ 'wasserstein': 0.457819,
+ 'bhattacharyya': 0.386441,
+ 'bbox': 0.447184,
+ 'qbbox': 0.578376,
+ 'iou': 0.435593,
+ 'giou': 0.433231}
 
 #: f_metric: floor of the a-posteriori variance factor (``bench.trust.S2_FLOOR_QUANTILE`` of
 #: the tuning frames' s^2).
-S2_FLOOR = {'iou': 0.029444,
- 'giou': 0.030112,
- 'bbox': 546.522045,
- 'qbbox': 386.320362,
- 'algebraic': 17713676.513669,
- 'frobenius': 20735939.208033,
- 'wasserstein': 259.601351,
- 'bhattacharyya': 0.021914,
- 'level_set': 2.750088}
+S2_FLOOR = {'iou': 0.028949,
+ 'giou': 0.029401,
+ 'bbox': 557.708739,
+ 'qbbox': 409.402733,
+ 'algebraic': 18052346.834494,
+ 'frobenius': 21528570.091641,
+ 'wasserstein': 269.81267,
+ 'bhattacharyya': 0.022029,
+ 'level_set': 3.010206}
 
 #: Runner-up / best score (sum of inlier IoUs) at and above which an answer is ambiguous.
 AMBIGUITY_RATIO = 0.9
@@ -38,7 +39,7 @@ AMBIGUITY_RATIO = 0.9
 AMBIGUITY_RATIO_SAME_OBJECTS = 0.95
 
 #: Default ``LocalizationOptions.min_confidence``.
-MIN_CONFIDENCE = 0.18
+MIN_CONFIDENCE = 0.21
 
 #: Features of the confidence model (``confidence.evidence_features``), in order.
 CONFIDENCE_FEATURES = ('inliers_ge3',
@@ -52,29 +53,29 @@ CONFIDENCE_FEATURES = ('inliers_ge3',
  'log_samples')
 
 #: Logistic models: P = 1 / (1 + exp(-(intercept + sum coef * feature))).
-CONFIDENCE_MODELS = {'refined': {'intercept': -12.30847,
-             'coef': {'inliers_ge3': -0.267415,
-                      'inliers_ge4': -0.683153,
-                      'log_inliers': 1.522423,
-                      'inlier_fraction': 10.294868,
-                      'mean_iou': 1.216119,
-                      'log_s2': -1.207037,
-                      'logit_gauss': 0.394416,
-                      'margin': -0.117969,
-                      'log_samples': -0.019709},
-             'metric_offset': {'algebraic': 0.801962,
-                               'bbox': 0.052568,
-                               'bhattacharyya': -0.29054,
-                               'frobenius': 0.771076,
-                               'giou': 1.520247,
-                               'iou': 1.485833,
-                               'qbbox': 0.23828,
-                               'wasserstein': 0.299362}},
- 'none': {'intercept': -14.047648,
-          'coef': {'inliers_ge3': 3.053772,
-                   'inliers_ge4': 1.95452,
-                   'log_inliers': 2.050158,
-                   'inlier_fraction': 0.009025,
-                   'mean_iou': 12.360766,
-                   'margin': -1.857544,
-                   'log_samples': -0.532135}}}
+CONFIDENCE_MODELS = {'refined': {'intercept': -12.113509,
+             'coef': {'inliers_ge3': 0.131051,
+                      'inliers_ge4': -1.246913,
+                      'log_inliers': 1.548832,
+                      'inlier_fraction': 10.639834,
+                      'mean_iou': 1.474241,
+                      'log_s2': -0.982249,
+                      'logit_gauss': 0.396646,
+                      'margin': -0.03977,
+                      'log_samples': -0.217721},
+             'metric_offset': {'algebraic': 0.999418,
+                               'bbox': -0.006818,
+                               'bhattacharyya': -0.209461,
+                               'frobenius': 0.99872,
+                               'giou': 1.461059,
+                               'iou': 1.444145,
+                               'qbbox': 0.13409,
+                               'wasserstein': 0.137442}},
+ 'none': {'intercept': -14.639233,
+          'coef': {'inliers_ge3': 3.654261,
+                   'inliers_ge4': 2.042006,
+                   'log_inliers': 2.045277,
+                   'inlier_fraction': 0.013314,
+                   'mean_iou': 12.370887,
+                   'margin': -2.001905,
+                   'log_samples': -0.508047}}}
