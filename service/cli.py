@@ -349,6 +349,7 @@ def _print_answer(result: Any) -> None:
     print(f"map {result.map_id} v{result.map_version}  frame {result.frame_id or '-'}")
     if not result.localized:
         print(f"NOT LOCALIZED: {result.reason}")
+        _print_alternatives(result)
         return
     pose = result.world_from_camera
     print(f"world_from_camera ({pose.convention} camera axes):")
@@ -361,6 +362,15 @@ def _print_answer(result: Any) -> None:
         rot = [round(math.degrees(math.sqrt(d)), 3) for d in diag[:3]]
         trans = [round(math.sqrt(d), 4) for d in diag[3:]]
         print(f"std: rotation [deg] {rot}  translation [m] {trans}")
+    _print_alternatives(result)
+
+
+def _print_alternatives(result: Any) -> None:
+    """The candidate poses of an ambiguous or low-confidence answer, with their probabilities."""
+    for k, a in enumerate(result.alternatives):
+        t = " ".join(f"{v:+.3f}" for v in a.world_from_camera.translation_m)
+        print(f"candidate {k}: confidence {a.confidence:.3f}  inliers {a.n_inliers}  "
+              f"score {a.score:.2f}  translation_m [{t}]")
 
 
 def cmd_localize(args: argparse.Namespace) -> int:
@@ -373,10 +383,14 @@ def cmd_localize(args: argparse.Namespace) -> int:
     for path in args.file:
         try:
             body = _read_json(path)
-            if args.metric and isinstance(body, dict):
+            overrides = {k: v for k, v in (
+                ("metric", args.metric),
+                ("on_ambiguity", getattr(args, "on_ambiguity", None)),
+                ("min_confidence", getattr(args, "min_confidence", None))) if v is not None}
+            if overrides and isinstance(body, dict):
                 options = body.setdefault("options", {})
                 if isinstance(options, dict):
-                    options["metric"] = args.metric  # validated with the request below
+                    options.update(overrides)  # validated with the request below
             request = LocalizeRequest.model_validate(body)
         except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
             return _die(f"{path}: {exc}")
@@ -620,6 +634,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--metric", metavar="METRIC",
                    help="refinement metric ('none': the P3P/P2E pose unrefined; overrides the "
                         "file's options)")
+    p.add_argument("--on-ambiguity", choices=["not_localized", "best"],
+                   help="ambiguous frames: not localized (default) or the best pose; both "
+                        "print the candidates with their probabilities")
+    p.add_argument("--min-confidence", type=float, metavar="P",
+                   help="answers below this confidence are not localized (their candidates "
+                        "are printed); default: the calibrated one")
     p.add_argument("--json", action="store_true", help="print the full JSON response")
     db(p)
     p.set_defaults(func=cmd_localize)

@@ -106,6 +106,18 @@ def test_localize_prints_the_pose(db: list[str], capsys: pytest.CaptureFixture[s
     assert body["pose_source"] == "ransac"
     assert main(["localize", "--map", "chess", "--metric", "nope", str(EXAMPLE), *db]) == 2
     assert "options.metric" in capsys.readouterr().err
+    # min_confidence 1: not localized, the verified pose printed as a candidate with its
+    # probability; a bad value names the field
+    assert main(["localize", "--map", "chess", "--min-confidence", "1", str(EXAMPLE),
+                 *db]) == 1
+    out = capsys.readouterr().out
+    assert "NOT LOCALIZED: low_confidence" in out and "candidate 0: confidence" in out
+    assert main(["localize", "--map", "chess", "--json", "--on-ambiguity", "best",
+                 str(EXAMPLE), *db]) == 0
+    assert json.loads(capsys.readouterr().out)["localized"]
+    assert main(["localize", "--map", "chess", "--min-confidence", "2", str(EXAMPLE),
+                 *db]) == 2
+    assert "options.min_confidence" in capsys.readouterr().err
 
 
 def test_openapi_check_and_hash_key(capsys: pytest.CaptureFixture[str]) -> None:

@@ -15,7 +15,7 @@ from scipy import stats
 from bench.chess_eval import load_chess_map, load_chess_world_from_camera, pose_errors
 from bench.reference_data import perturb_pose
 from bench.simulate import SimulationConfig, simulate_frame
-from bench.trust import nees, pose_error_tangent, reduce_frame, synthetic_map
+from bench.trust import NOISY, nees, pose_error_tangent, reduce_frame, synthetic_map
 from factors.geometry import Ellipse
 from factors.pose_residuals import expmap_pose3
 from maps.compiled import compile_map
@@ -27,6 +27,7 @@ from service.localization.confidence import (
     gaussian_tolerance_probability,
     is_ambiguous,
     residual_variance,
+    student_t_factor,
 )
 from service.localization.pipeline import localize, prior_gate_poses
 from service.localization.ransac import distinct_poses
@@ -73,69 +74,98 @@ def test_calibrated_covariance_scales_and_keeps_the_prior_information():
     raw = np.diag([1e-4] * 3 + [1e-3] * 3)
     k = calibration.COVARIANCE_SCALE["level_set"]
     floor = calibration.S2_FLOOR["level_set"]
-    assert 0 < floor < 2.0
-    cov = calibrated_covariance("level_set", raw, chi2=40.0, n_residuals=26)  # s^2 = 2
-    np.testing.assert_allclose(cov, raw * 2.0 * k, rtol=1e-12)
-    assert calibrated_covariance("level_set", None, 1.0, 50) is None
-    assert calibrated_covariance("level_set", raw, 1.0, 6) is None  # m - 6 = 0: no s^2
-    # a small s^2 is floored: never more precise than a typical frame
-    small = calibrated_covariance("level_set", raw, chi2=0.02, n_residuals=26)
-    np.testing.assert_allclose(small, raw * floor * k, rtol=1e-12)
+    assert 0 < floor < 10.0
+    s2 = 2.0 * floor  # above the floor: chi2 / (m - 6) with m = 26
+    t = student_t_factor(4)
+    cov = calibrated_covariance("level_set", raw, chi2=20.0 * s2, n_residuals=26, n_detections=4)
+    np.testing.assert_allclose(cov, raw * s2 * t * k, rtol=1e-12)
+    assert calibrated_covariance("level_set", None, 1.0, 50, 4) is None
+    assert calibrated_covariance("level_set", raw, 1.0, 6, 4) is None  # m - 6 = 0: no s^2
+    # a small s^2 is floored: never more precise than the floor allows
+    small = calibrated_covariance("level_set", raw, chi2=0.02, n_residuals=26, n_detections=4)
+    np.testing.assert_allclose(small, raw * floor * t * k, rtol=1e-12)
     # with a prior factor only the detections' information is rescaled
     prior = np.diag([1e-2] * 6)
     total = np.linalg.inv(np.linalg.inv(raw) + np.linalg.inv(prior))
-    got = calibrated_covariance("level_set", total, 40.0, 26, prior)
-    want = np.linalg.inv(np.linalg.inv(raw) / (2.0 * k) + np.linalg.inv(prior))
+    got = calibrated_covariance("level_set", total, 20.0 * s2, 26, 4, prior)
+    want = np.linalg.inv(np.linalg.inv(raw) / (s2 * t * k) + np.linalg.inv(prior))
     np.testing.assert_allclose(got, want, rtol=1e-9)
+
+
+def test_student_t_factor_is_the_t_covariance():
+    """``nu / (nu - 2)`` is the variance of a unit Student-t with ``nu`` DoF (scipy), and the
+    factor falls to 1 with many detections."""
+    for n in (2, 3, 4, 6, 10):
+        nu = max(3.0 * n - 6.0, 3.0)
+        assert student_t_factor(n) == pytest.approx(stats.t(nu).var(), rel=1e-12)
+    assert student_t_factor(2) == pytest.approx(3.0) and student_t_factor(100) < 1.01
 
 
 def test_covariance_does_not_depend_on_the_sigma_scale():
     """The a-posteriori scaling cancels a global scale error of the detector's sigma (why s^2
     and not the raw J^T W J inverse) as long as s^2 stays above its floor (sigmas scaled
-    down); scaled up past the floor, the covariance only grows (conservative)."""
+    down 10 and 100 times: same covariance); at or below the floor (the frame as simulated,
+    sigmas scaled up) the covariance is only larger (conservative)."""
     frame = simulate_frame(CM, CAMERA, POSES[10], 10, SimulationConfig())
-    scaled = [dataclasses.replace(d, sigma=d.sigma * 0.1) for d in frame.detections]
     opts = LocalizationOptions(time_budget_ms=None, min_confidence=0.0)
-    a = localize(frame.detections, CM, CAMERA, opts)
-    b = localize(scaled, CM, CAMERA, opts)
-    assert a.localized and b.localized and a.covariance is not None
-    np.testing.assert_allclose(b.world_from_camera, a.world_from_camera, atol=1e-6)
-    np.testing.assert_allclose(b.covariance, a.covariance, rtol=1e-3,
-                               atol=1e-6 * np.abs(a.covariance).max())
-    assert b.confidence == pytest.approx(a.confidence, abs=1e-3)
-    up = [dataclasses.replace(d, sigma=d.sigma * 1e3) for d in frame.detections]
-    c = localize(up, CM, CAMERA, opts)
-    assert c.localized and np.trace(c.covariance) > 10 * np.trace(a.covariance)
+
+    def run(factor: float):
+        dets = [dataclasses.replace(d, sigma=d.sigma * factor) for d in frame.detections]
+        r = localize(dets, CM, CAMERA, opts)
+        assert r.localized and r.covariance is not None
+        return r
+
+    a, b, c = run(1.0), run(0.1), run(0.01)
+    assert b.evidence["s2"] > calibration.S2_FLOOR["level_set"]
+    np.testing.assert_allclose(c.world_from_camera, b.world_from_camera, atol=1e-6)
+    np.testing.assert_allclose(c.covariance, b.covariance, rtol=1e-3,
+                               atol=1e-6 * np.abs(b.covariance).max())
+    # (confidence is not invariant: its residual feature compares s^2 with the metric's
+    # typical level, and residuals 100x larger than the claimed sigmas are evidence)
+    np.testing.assert_allclose(a.world_from_camera, b.world_from_camera, atol=1e-6)
+    # a's s^2 is 100x smaller: floored or equal, never smaller
+    assert np.linalg.eigvalsh(a.covariance - b.covariance).min() >= -1e-9 * np.trace(
+        b.covariance)
+    up = run(1e3)
+    assert np.trace(up.covariance) > 10 * np.trace(a.covariance)
 
 
-def test_calibration_does_not_regress_on_held_out_frames():
-    """Guard (small sample, seed 7 never used for tuning): 24 frames, level set and bbox.
-    Tolerances are wide for the sample size: mean NEES over frames within 20 cm in [2.5, 14]
-    (the bench reports [4, 9] on 108 frames), and the confidence's mean over localized answers
-    within 0.2 of the observed success rate."""
-    for metric in ("level_set", "bbox"):
-        ne, conf, ok = [], [], []
-        for i in range(0, 108, 9):
-            for seed in (7, 8):
-                f = simulate_frame(CM, CAMERA, POSES[i], seed * 1000 + i, EVAL)
-                r = localize(f.detections, CM, CAMERA,
-                             LocalizationOptions(metric=metric, time_budget_ms=None))
-                if not r.localized:
-                    continue
-                pos, rot = pose_errors(r.world_from_camera, POSES[i])
-                conf.append(r.confidence)
-                ok.append(pos <= 0.1 and rot <= 5.0)
-                if r.covariance is not None and pos <= 0.2:
-                    ne.append(nees(r.world_from_camera, POSES[i], r.covariance))
-        assert len(ne) >= 12, metric
-        assert 2.5 <= float(np.mean(ne)) <= 14.0, (metric, np.mean(ne))
-        assert abs(float(np.mean(conf)) - float(np.mean(ok))) <= 0.2, metric
+@pytest.mark.parametrize(("metric", "noisy"), [("level_set", False), ("bbox", False),
+                                             ("algebraic", False), ("level_set", True)])
+def test_calibration_does_not_regress_on_held_out_frames(metric, noisy):
+    """Guard (small sample, seeds 7/8 never used for tuning): 24 frames per case, the default
+    detector and the bench's second noise setting. Tolerances are wide for the sample size:
+    mean NEES over frames within 20 cm in [2.5, 14] (the bench reports [4, 9] on 100+ frames),
+    and the confidence's mean over localized answers within 0.2 of the observed success rate
+    (10 cm and 5 deg)."""
+    config = EVAL.with_(**NOISY) if noisy else EVAL
+    ne, conf, ok = [], [], []
+    for i in range(0, 108, 9):
+        for seed in (7, 8):
+            f = simulate_frame(CM, CAMERA, POSES[i], seed * 1000 + i, config)
+            r = localize(f.detections, CM, CAMERA,
+                         LocalizationOptions(metric=metric, time_budget_ms=None))
+            if not r.localized:
+                continue
+            pos, rot = pose_errors(r.world_from_camera, POSES[i])
+            conf.append(r.confidence)
+            ok.append(pos <= 0.1 and rot <= 5.0)
+            if r.covariance is not None and pos <= 0.2:
+                ne.append(nees(r.world_from_camera, POSES[i], r.covariance))
+    assert len(ne) >= 10, len(ne)
+    assert 2.5 <= float(np.mean(ne)) <= 14.0, np.mean(ne)
+    assert abs(float(np.mean(conf)) - float(np.mean(ok))) <= 0.2, (np.mean(conf), np.mean(ok))
 
 
 def test_ambiguity_rule_and_distinct_poses():
-    assert is_ambiguous(2, 1.8, 2, 1.8 * calibration.AMBIGUITY_RATIO)
-    assert not is_ambiguous(2, 1.8, 2, 1.8 * calibration.AMBIGUITY_RATIO - 1e-6)
+    r, r_same = calibration.AMBIGUITY_RATIO, calibration.AMBIGUITY_RATIO_SAME_OBJECTS
+    assert 0 < r <= r_same <= 1
+    assert is_ambiguous(2, 1.8, 2, 1.8 * r)
+    assert not is_ambiguous(2, 1.8, 2, 1.8 * r - 1e-6)
     assert not is_ambiguous(3, 2.4, 2, 2.4)  # the best explains one more detection
+    # the same objects under another pose: only a near tie is ambiguous
+    assert is_ambiguous(2, 1.8, 2, 1.8 * r_same, same_objects=True)
+    assert not is_ambiguous(2, 1.8, 2, 1.8 * r_same - 1e-6, same_objects=True)
     T = np.eye(4)
     assert not distinct_poses(T, T @ expmap_pose3([0, 0, 0.1, 0.2, 0, 0]))
     assert distinct_poses(T, T @ expmap_pose3([0, 0, 0, 0.6, 0, 0]))
@@ -219,11 +249,18 @@ def test_options_validation_names_the_field():
         LocalizationOptions(min_confidence=True)
 
 
-def test_low_confidence_answers_say_so():
+def test_low_confidence_answers_say_so_and_keep_the_candidate():
+    """A verified pose below ``min_confidence`` is not localized, but it comes back as the
+    first alternative with the same probability: the client may still take it."""
     f = simulate_frame(CM, CAMERA, POSES[5], 5, SimulationConfig())
     r = localize(f.detections, CM, CAMERA, LocalizationOptions(min_confidence=1.0))
     assert not r.localized and r.reason == "low_confidence"
     assert 0.0 <= r.evidence["confidence"] < 1.0
+    ok = localize(f.detections, CM, CAMERA, LocalizationOptions(min_confidence=0.0))
+    assert ok.localized and not ok.alternatives  # nothing to choose between
+    assert len(r.alternatives) >= 1
+    assert r.alternatives[0].confidence == pytest.approx(ok.confidence, abs=1e-12)
+    np.testing.assert_allclose(r.alternatives[0].world_from_camera, ok.world_from_camera)
 
 
 def test_ransac_keeps_mutually_distinct_hypotheses_best_first():

@@ -378,7 +378,10 @@ class LocalizeResponse(BaseModel):
         default=None, description="Which path won: 'prior' (the refined client prior) or "
                                   "'ransac'; null when not localized.")
     alternatives: list[AlternativeOut] = Field(
-        default_factory=list, description="Ambiguous frames: the distinct candidate poses.")
+        default_factory=list,
+        description="Verified but not localized (ambiguous, low_confidence), or localized with "
+                    "on_ambiguity 'best' on an ambiguous frame: the distinct candidate poses, "
+                    "most probable first, each with its probability (`confidence`).")
     map_id: str
     map_version: int
     timings_ms: dict[str, float]

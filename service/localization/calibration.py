@@ -4,37 +4,42 @@ Provenance: written by ``python -m bench.trust --fit`` (see that module); the fi
 only the tuning seeds named in :data:`PROVENANCE`, the bench reports on other seeds.
 """
 
-PROVENANCE = {'command': 'python -m bench.trust --fit --tune-seeds 100',
- 'tuning_seeds': [100, 101]}
+PROVENANCE = {'command': 'python -m bench.trust --fit --save-data /tmp/i12/tune2.json',
+ 'tuning_seeds': [100, 102, 101]}
 
-#: k_metric of ``cov = k * max(s^2, f) * (J^T W J)^-1`` (the geometric mean of the mean NEES
-#: at the 5 and 20 cm operating points = 6 on the tuning frames).
-COVARIANCE_SCALE = {'level_set': 6.37024,
- 'algebraic': 9.321284,
- 'frobenius': 9.20828,
- 'wasserstein': 1.185678,
- 'bhattacharyya': 0.808934,
- 'bbox': 1.092337,
- 'qbbox': 1.438357,
- 'iou': 0.7332,
- 'giou': 0.731347}
+#: k_metric of ``cov = k * max(s^2, f) * (J^T W J)^-1`` (``bench.trust._scale_for``: the
+#: smallest and largest mean NEES over the 5 / 10 / 20 cm operating points and the two detector
+#: settings of the tuning frames centred on 6).
+COVARIANCE_SCALE = {'level_set': 2.848089,
+ 'algebraic': 3.058089,
+ 'frobenius': 3.025348,
+ 'wasserstein': 0.457819,
+ 'bhattacharyya': 0.386441,
+ 'bbox': 0.447184,
+ 'qbbox': 0.578376,
+ 'iou': 0.435593,
+ 'giou': 0.433231}
 
-#: f_metric: floor of the a-posteriori variance factor (median s^2 of the tuning frames).
-S2_FLOOR = {'iou': 0.019277,
- 'giou': 0.019462,
- 'bbox': 251.030989,
- 'qbbox': 168.0113,
- 'algebraic': 4596144.574886,
- 'frobenius': 5351577.932133,
- 'wasserstein': 119.829156,
- 'bhattacharyya': 0.013419,
- 'level_set': 1.446626}
+#: f_metric: floor of the a-posteriori variance factor (``bench.trust.S2_FLOOR_QUANTILE`` of
+#: the tuning frames' s^2).
+S2_FLOOR = {'iou': 0.028949,
+ 'giou': 0.029401,
+ 'bbox': 557.708739,
+ 'qbbox': 409.402733,
+ 'algebraic': 18052346.834494,
+ 'frobenius': 21528570.091641,
+ 'wasserstein': 269.81267,
+ 'bhattacharyya': 0.022029,
+ 'level_set': 3.010206}
 
 #: Runner-up / best score (sum of inlier IoUs) at and above which an answer is ambiguous.
-AMBIGUITY_RATIO = 0.8
+AMBIGUITY_RATIO = 0.9
+
+#: The same ratio for a runner-up matching the same map objects (``confidence.is_ambiguous``).
+AMBIGUITY_RATIO_SAME_OBJECTS = 0.95
 
 #: Default ``LocalizationOptions.min_confidence``.
-MIN_CONFIDENCE = 0.13
+MIN_CONFIDENCE = 0.21
 
 #: Features of the confidence model (``confidence.evidence_features``), in order.
 CONFIDENCE_FEATURES = ('inliers_ge3',
@@ -42,38 +47,35 @@ CONFIDENCE_FEATURES = ('inliers_ge3',
  'log_inliers',
  'inlier_fraction',
  'mean_iou',
- 'min_iou',
  'log_s2',
  'logit_gauss',
  'margin',
  'log_samples')
 
 #: Logistic models: P = 1 / (1 + exp(-(intercept + sum coef * feature))).
-CONFIDENCE_MODELS = {'refined': {'intercept': -10.103105,
-             'coef': {'inliers_ge3': 0.44362,
-                      'inliers_ge4': -0.365015,
-                      'log_inliers': 2.995112,
-                      'inlier_fraction': 7.795619,
-                      'mean_iou': -2.643759,
-                      'min_iou': 3.785315,
-                      'log_s2': 0.503594,
-                      'logit_gauss': 0.430409,
-                      'margin': -0.237263,
-                      'log_samples': -0.703955},
-             'metric_offset': {'algebraic': 0.914615,
-                               'bbox': 0.415134,
-                               'bhattacharyya': 0.165222,
-                               'frobenius': 0.676074,
-                               'giou': 1.096554,
-                               'iou': 1.197268,
-                               'qbbox': 0.504601,
-                               'wasserstein': 0.296244}},
- 'none': {'intercept': -11.285213,
-          'coef': {'inliers_ge3': 1.039887,
-                   'inliers_ge4': 3.245157,
-                   'log_inliers': -0.040024,
-                   'inlier_fraction': 0.060969,
-                   'mean_iou': 9.276003,
-                   'min_iou': 1.279301,
-                   'margin': -1.055971,
-                   'log_samples': 0.26382}}}
+CONFIDENCE_MODELS = {'refined': {'intercept': -12.113509,
+             'coef': {'inliers_ge3': 0.131051,
+                      'inliers_ge4': -1.246913,
+                      'log_inliers': 1.548832,
+                      'inlier_fraction': 10.639834,
+                      'mean_iou': 1.474241,
+                      'log_s2': -0.982249,
+                      'logit_gauss': 0.396646,
+                      'margin': -0.03977,
+                      'log_samples': -0.217721},
+             'metric_offset': {'algebraic': 0.999418,
+                               'bbox': -0.006818,
+                               'bhattacharyya': -0.209461,
+                               'frobenius': 0.99872,
+                               'giou': 1.461059,
+                               'iou': 1.444145,
+                               'qbbox': 0.13409,
+                               'wasserstein': 0.137442}},
+ 'none': {'intercept': -14.639233,
+          'coef': {'inliers_ge3': 3.654261,
+                   'inliers_ge4': 2.042006,
+                   'log_inliers': 2.045277,
+                   'inlier_fraction': 0.013314,
+                   'mean_iou': 12.370887,
+                   'margin': -2.001905,
+                   'log_samples': -0.508047}}}

@@ -24,7 +24,9 @@ Stages (wall time of each in ``LocalizationResult.timings_ms``):
 5. ``assess`` — :mod:`service.localization.confidence`: the calibrated covariance, the
    confidence (a probability), and the ambiguity check against the best distinct runner-up
    (``reason="ambiguous"`` or, with ``on_ambiguity="best"``, the best pose with its
-   ``alternatives``); a confidence below ``min_confidence`` gives ``low_confidence``.
+   ``alternatives``); a confidence below ``min_confidence`` gives ``low_confidence``. A
+   verified answer that is not localized (ambiguous, low confidence) lists its candidate poses
+   with their probabilities in ``alternatives``: the client decides.
    (``refine`` itself re-lays grown adaptive level-set samples once at its result.)
 
 The time budget bounds the whole call: the hypothesis search stops at it, and no LM iteration
@@ -226,6 +228,17 @@ class _Answer:
         return len(self.inliers), self.score
 
 
+def _is_ambiguous_answer(ranked: Sequence[_Answer]) -> bool:
+    """Whether some distinct runner-up of ``ranked`` (best first, mutually distinct) competes
+    with the best (:func:`service.localization.confidence.is_ambiguous`, told whether it
+    matches the same map objects)."""
+    best = ranked[0]
+    objects = {m.object_id for m in best.inliers}
+    return any(is_ambiguous(len(best.inliers), best.score, len(b.inliers), b.score,
+                            same_objects={m.object_id for m in b.inliers} == objects)
+               for b in ranked[1:])
+
+
 #: Alternatives (beyond the best) refined for the ambiguity check, and the RANSAC score ratio
 #: below which an alternative is not worth refining (a refinement changes the sum of IoUs by
 #: far less than this).
@@ -308,21 +321,25 @@ def localize(
         res = a.refinement
         s2 = math.nan if res is None else residual_variance(res.chi2, res.n_residuals)
         prior_cov = None if a.source != "prior" or prior is None else prior.covariance
+        n_refined = 0 if res is None else len(res.per_detection_cost)
         cov = None if res is None else calibrated_covariance(
-            metric, a.raw_covariance, res.chi2, res.n_residuals, prior_cov)
+            metric, a.raw_covariance, res.chi2, res.n_residuals, n_refined, prior_cov)
         margin = 0.0 if runner_up is None else min(1.0, runner_up.score / max(a.score, 1e-12))
         ev = evidence_features(n_inliers=len(a.inliers), n_usable=len(usable),
                                ious=np.array([m.iou for m in a.inliers]), s2=s2,
                                covariance=cov, margin=margin, n_samples=n_samples,
                                s2_floor=S2_FLOOR.get(metric, 0.0))
-        scale = math.nan if res is None else covariance_scale(metric, res.chi2, res.n_residuals)
-        return confidence_probability(metric, ev), {**ev, "s2": s2, "cov_scale": scale}, cov
+        scale = math.nan if res is None else covariance_scale(metric, res.chi2, res.n_residuals,
+                                                              n_refined)
+        return confidence_probability(metric, ev), {**ev, "s2": s2, "cov_scale": scale,
+                                                    "n_refined": float(n_refined)}, cov
 
     def finish(a: _Answer, ranked: list[_Answer], ambiguous: bool) -> LocalizationResult:
         runner_up = next((b for b in ranked if b is not a), None)
         conf, ev, cov = assess(a, runner_up)
         alternatives: tuple[Alternative, ...] = ()
-        if ambiguous:
+        floor = MIN_CONFIDENCE if options.min_confidence is None else options.min_confidence
+        if ambiguous or conf < floor:  # the candidates, each with its probability
             alternatives = tuple(
                 Alternative(b.world_from_camera, assess(b, a if b is not a else runner_up)[0],
                             len(b.inliers), b.score) for b in ranked)
@@ -331,7 +348,6 @@ def localize(
             return LocalizationResult(False, "ambiguous", None, None, 0.0, (), metric,
                                       evaluated, False, timings, a.status, None, alternatives,
                                       ev)
-        floor = MIN_CONFIDENCE if options.min_confidence is None else options.min_confidence
         if conf < floor:
             return LocalizationResult(False, "low_confidence", None, None, 0.0, (), metric,
                                       evaluated, False, timings, a.status, None, alternatives,
@@ -398,7 +414,4 @@ def localize(
         if all(distinct_poses(invert_pose(a.world_from_camera), invert_pose(b.world_from_camera))
                for b in ranked):
             ranked.append(a)
-    best = ranked[0]
-    ambiguous = len(ranked) > 1 and is_ambiguous(len(best.inliers), best.score,
-                                                 len(ranked[1].inliers), ranked[1].score)
-    return finish(best, ranked, ambiguous)
+    return finish(ranked[0], ranked, _is_ambiguous_answer(ranked))
