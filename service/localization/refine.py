@@ -242,9 +242,11 @@ def refine(
     graph, model = _build_graph(detections, ellipsoids, camera, T0, metric, sigmas, robust,
                                 robust_scale, prior, metric_options)
     T_start, total_iterations, initial_error = T0, 0, None
+    start_pose: gtsam.Pose3 | None = None
     relaid_skipped = False
     for pass_ in range(2 if resample else 1):
-        outcome = _solve(graph, model, T_start, max_iterations - total_iterations, deadline)
+        outcome = _solve(graph, model, T_start, max_iterations - total_iterations, deadline,
+                         start_pose)
         total_iterations += outcome.iterations
         if initial_error is None:
             initial_error = outcome.initial_error
@@ -260,6 +262,7 @@ def refine(
         # (factors.metrics.level_set_sampling_scale); re-lay them at the result and solve
         # again (same factors: the model's samples change in place).
         T_start = outcome.T
+        start_pose = outcome.result.atPose3(_POSE_KEY)
         model.relayout(T_start)
     status = outcome.status
     if status == "converged" and total_iterations >= max_iterations:
@@ -324,25 +327,33 @@ def _build_graph(
 def _solve(
     graph: gtsam.NonlinearFactorGraph, model: PoseResidualModel, T0: np.ndarray,
     max_iterations: int, deadline: float | None = None,
+    start_pose: gtsam.Pose3 | None = None,
 ) -> _SolveOutcome:
-    """One LM solve of ``graph`` from ``T0``; final costs from ``model``."""
+    """One LM solve of ``graph`` from ``T0`` (``start_pose``: the same pose as a ``Pose3``, e.g.
+    a previous solve's result, which saves re-snapping its rotation); final costs from
+    ``model``."""
     initial = gtsam.Values()
-    initial.insert(_POSE_KEY, _pose3(T0))
+    initial.insert(_POSE_KEY, start_pose if start_pose is not None else _pose3(T0))
 
     initial_error = float(graph.error(initial))
     status = "converged"
     try:
-        params = _lm_params(max_iterations)
-        optimizer = gtsam.LevenbergMarquardtOptimizer(graph, initial, params)
-        if deadline is None:
-            result = optimizer.optimize()
-        elif _optimize_until(optimizer, params, deadline):
-            result = optimizer.values()
+        if initial_error <= ERROR_TOL:
+            # what GTSAM's optimize() does first (no iteration below errorTol), without
+            # building an optimizer (e.g. the re-laid solve of exact detections)
+            result, iterations, T, total_error = initial, 0, T0, initial_error
         else:
-            result, status = optimizer.values(), "time_budget"
-        iterations = int(optimizer.iterations())
-        T = result.atPose3(_POSE_KEY).matrix()
-        total_error = float(graph.error(result))
+            params = _lm_params(max_iterations)
+            optimizer = gtsam.LevenbergMarquardtOptimizer(graph, initial, params)
+            if deadline is None:
+                result = optimizer.optimize()
+            elif _optimize_until(optimizer, params, deadline):
+                result = optimizer.values()
+            else:
+                result, status = optimizer.values(), "time_budget"
+            iterations = int(optimizer.iterations())
+            T = result.atPose3(_POSE_KEY).matrix()
+            total_error = float(optimizer.error())  # the error of ``result``
     except (RuntimeError, np.linalg.LinAlgError):  # e.g. an indeterminant linear system
         result, iterations, T, total_error = initial, 0, T0, initial_error
         status = "diverged"
