@@ -21,7 +21,8 @@ refined and true camera centre.
 Every timed solver runs in its own subprocess, once per round, the rounds interleaved so that
 the shared machine's load hits them alike; a problem's time is its median over all calls.
 
-Building the peer (outside the repository; ~15-30 min on 2 cores; nothing of it is committed)::
+Building the peer (outside the repository; nothing of it is committed; GTSAM 4.2's C++ library is
+most of it: ~15 min on 2 idle cores, far longer on a loaded machine)::
 
     apt-get install libboost-all-dev libeigen3-dev cmake g++
     pip download gtsam-quadrics==0.3.0 --no-binary :all: --no-deps -d /work/peer
@@ -31,7 +32,7 @@ Building the peer (outside the repository; ~15-30 min on 2 cores; nothing of it 
         -DGTSAM_USE_SYSTEM_EIGEN=ON -DGTSAM_BUILD_WITH_MARCH_NATIVE=OFF -DGTSAM_BUILD_PYTHON=OFF
     make -j2 gtsam_quadrics
     # the driver: the C++ program in PEER_DRIVER_SOURCE below, saved as peer_refine.cpp
-    g++ -O3 -DNDEBUG -std=c++17 peer_refine.cpp -I../gtsam_quadrics-0.3.0 \\
+    g++ -O3 -DNDEBUG -std=c++11 peer_refine.cpp -I../gtsam_quadrics-0.3.0 \\
         -I../gtsam_quadrics-0.3.0/gtsam -Igtsam -I/usr/include/eigen3 \\
         -L. -Lgtsam/gtsam -lgtsam_quadrics -lgtsam -lboost_serialization -lboost_timer \\
         -lboost_chrono -Wl,-rpath,$PWD/gtsam/gtsam -o peer_refine
