@@ -162,12 +162,9 @@ _SKEW_BASIS = np.array([[[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]],
 _VEC5 = np.array([0, 1, 2, 4, 5])
 _FRO_W = np.array([1.0, math.sqrt(2.0), math.sqrt(2.0), 1.0, math.sqrt(2.0)])
 
-# index helpers for cross products: (a x b)_i = a[P1]_i b[P2]_i - a[P2]_i b[P1]_i
-_P1 = np.array([1, 2, 0])
-_P2 = np.array([2, 0, 1])
-# e3 x a = (-a_1, a_0, 0)
-_E3X_ROWS = np.array([1, 0, 2])
-_E3X_SIGN = np.array([-1.0, 1.0, 0.0])
+# e3 x a = (-a_1, a_0, 0):
+#: ``a @ _E3X_MATRIX = e3 x a`` for row vectors ``a`` (3,)
+_E3X_MATRIX = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
 
 
 def _log_cosh(x: np.ndarray) -> np.ndarray:
@@ -375,6 +372,7 @@ class PoseResidualModel:
         """Penalty costs and per-pair metric options, which depend on the level-set layout."""
         self.penalty_costs = self._penalty_costs()
         self.penalty_costs.setflags(write=False)
+        self._half_penalty = 0.5 * self.penalty_costs  # where the saturation starts
         self._pen_amp = np.sqrt(self.penalty_costs / self.dim)  # (N,)
         # per-pair options of the factors.metrics calls (the level set's samples stay fixed)
         self._pair_options = [self.options] * self.n
@@ -417,16 +415,24 @@ class PoseResidualModel:
 
     def _init_level_set(self, T0: np.ndarray | None) -> None:
         """Fix the level-set samples: ``factors.metrics.level_set_sample_points``' layout,
-        computed for all detections at once (equality with it is tested)."""
-        self._M = int(metrics.residual_size("level_set", **self.options))  # validates options
-        n_az = self.options.get("n_azimuths", 6)
-        n_lv = self.options.get("n_levels", 4)
+        computed for all detections at once (equality with it is tested). The parts that do
+        not depend on ``T0`` (validated options, unit layout, detection axes) are computed on
+        the first call only and reused by :meth:`relayout`."""
+        if not hasattr(self, "_ls_const"):
+            M = int(metrics.residual_size("level_set", **self.options))  # validates options
+            scale = self.options.get("scale", metrics.DEFAULT_LEVEL_SET_SCALE)
+            if isinstance(scale, bool) or not isinstance(scale, int | float) \
+                    or not (math.isfinite(scale) and scale > 0):
+                raise ValueError(
+                    f"option scale must be a positive finite number, got {scale!r}")
+            uv = _unit_level_set_layout(self.options.get("n_azimuths", 6),
+                                        self.options.get("n_levels", 4))
+            # canonical axes a >= b (the metric's layout does not depend on axis labelling)
+            a, b, ang = _canonical_axes(self._det_params).T
+            self._ls_const = (M, float(scale), uv, np.einsum("mk,mk->m", uv, uv)[None, :],
+                              a, b, np.cos(ang)[:, None], np.sin(ang)[:, None])
+        self._M, scale, uv, uv2, a, b, ca, sa = self._ls_const
         adaptive = bool(self.options.get("adaptive", True))
-        scale = self.options.get("scale", metrics.DEFAULT_LEVEL_SET_SCALE)
-        if isinstance(scale, bool) or not isinstance(scale, int | float) \
-                or not (math.isfinite(scale) and scale > 0):
-            raise ValueError(f"option scale must be a positive finite number, got {scale!r}")
-        uv = _unit_level_set_layout(n_az, n_lv)
         P = self._det_params  # (N, 5)
         s_max = np.full(self.n, scale)
         if adaptive and T0 is not None:
@@ -438,23 +444,19 @@ class PoseResidualModel:
                 centre = C[:, :2, 2] / C[:, 2, 2, None]
                 d = np.sqrt(level_values(P[ok], centre[:, None, :])[:, 0])
                 s_max[ok] = np.maximum(scale, metrics.LEVEL_SET_ADAPTIVE_GAIN * d)
-        # canonical axes a >= b (the metric's layout does not depend on axis labelling)
-        a, b, ang = _canonical_axes(P).T
-        ca, sa = np.cos(ang)[:, None], np.sin(ang)[:, None]
         u = uv[None, :, 0] * (a * s_max)[:, None]
         v = uv[None, :, 1] * (b * s_max)[:, None]
-        pts = np.stack([P[:, 0, None] + ca * u - sa * v, P[:, 1, None] + sa * u + ca * v], -1)
-        self.sample_points = pts  # (N, M, 2) px
+        px = P[:, 0, None] + ca * u - sa * v
+        py = P[:, 1, None] + sa * u + ca * v
+        self.sample_points = np.stack([px, py], -1)  # (N, M, 2) px
         self.sampling_scale = s_max  # (N,) outermost level radius per detection
         self.sampling_grown = bool(np.any(s_max > scale))
-        self._phi0 = np.einsum("mk,mk->m", uv, uv)[None, :] * (s_max**2)[:, None] - 1.0
+        self._phi0 = uv2 * (s_max**2)[:, None] - 1.0
         cam = self.camera
         nT = np.ones((self.n, 3, self._M))  # normalised camera coordinates K^-1 (x, y, 1)
-        nT[:, 0] = (pts[..., 0] - cam.cx) / cam.fx
-        nT[:, 1] = (pts[..., 1] - cam.cy) / cam.fy
+        nT[:, 0] = (px - cam.cx) / cam.fx
+        nT[:, 1] = (py - cam.cy) / cam.fy
         self._nT = nT
-        self._n_p1 = self._nT[:, _P1]
-        self._n_p2 = self._nT[:, _P2]
 
     def _metric_dim(self) -> int:
         return int(metrics.residual_size(self.metric, **self.options))
@@ -503,10 +505,13 @@ class PoseResidualModel:
         """Add the factors' residuals: the valid rows saturated (``r / sqrt(1 + c / P_j)``,
         module docstring)."""
         r = ev.residuals
-        c = np.einsum("nm,nm->n", r, r)
+        c = (r * r).sum(axis=1)
         P = self.penalty_costs
-        c0 = 0.5 * P
-        big = ev.valid & (c > c0)
+        c0 = self._half_penalty
+        big = c > c0
+        if not big.any():
+            return PoseEvaluation(r, ev.jacobians, ev.valid, ev.depth_margins, r, ev.jacobians)
+        big &= ev.valid
         if not big.any():
             return PoseEvaluation(r, ev.jacobians, ev.valid, ev.depth_margins, r, ev.jacobians)
         span = 0.4 * P  # h < c0 + span = 0.9 P
@@ -532,7 +537,9 @@ class PoseResidualModel:
             A[~valid] = -np.eye(3)  # any invertible stand-in, rows replaced below
         nT = self._nT
         u = np.linalg.inv(A) @ nT  # (N, 3, M): A^-1 n
-        g = np.einsum("nkm,nkm->nm", nT, u)
+        # (small arrays: elementwise products and sums cost fewer numpy calls than einsum or
+        # fancy indexing; this runs on every LM evaluation)
+        g = (nT * u).sum(axis=1)  # n^T A^-1 n, (N, M)
         s = A[:, 2, 2]
         r = self._phi0 + s[:, None] * g
         J = None
@@ -540,11 +547,15 @@ class PoseResidualModel:
             # rows of d r / d xi, laid out (N, 6, M) then viewed as (N, M, 6)
             Jt = np.empty((self.n, 6, self._M))
             g2 = 2.0 * g
-            s2 = 2.0 * s
-            e3xa3 = A[:, _E3X_ROWS, 2] * _E3X_SIGN  # e3 x (A e3), (N, 3)
-            n_x_u = self._n_p1 * u[:, _P2] - self._n_p2 * u[:, _P1]  # n x u, (N, 3, M)
-            Jt[:, :3] = g2[:, None, :] * e3xa3[:, :, None] + s2[:, None, None] * n_x_u
-            cu = np.einsum("nk,nkm->nm", c, u) * s2[:, None]
+            s2 = 2.0 * s[:, None]
+            e3xa3 = A[:, :, 2] @ _E3X_MATRIX  # e3 x (A e3), (N, 3)
+            n0, n1 = nT[:, 0], nT[:, 1]  # n2 = 1
+            u0, u1, u2 = u[:, 0], u[:, 1], u[:, 2]
+            # rotation rows: 2 g (e3 x A e3) + 2 s (n x u)
+            Jt[:, 0] = g2 * e3xa3[:, 0, None] + s2 * (n1 * u2 - u1)
+            Jt[:, 1] = g2 * e3xa3[:, 1, None] + s2 * (u0 - n0 * u2)
+            Jt[:, 2] = s2 * (n0 * u1 - n1 * u0)  # (e3 x A e3)_z = 0
+            cu = (c[:, :, None] * u).sum(axis=1) * s2
             Jt[:, 3:] = -cu[:, None, :] * u
             Jt[:, 5] += g2 * c[:, 2, None]
             J = Jt.transpose(0, 2, 1)
