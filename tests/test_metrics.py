@@ -9,7 +9,7 @@ import math
 import cv2
 import numpy as np
 import pytest
-from hypothesis import assume, given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 from scipy.linalg import sqrtm
 
@@ -57,6 +57,8 @@ def test_metric_names_are_the_contract():
 
 @settings(max_examples=40, deadline=None)
 @given(ellipses, ellipses)
+@example(Ellipse(cx=0.0, cy=0.0, a=4.0, b=5.0, angle=0.0),  # tangent contact at (+-4, 0)
+         Ellipse(cx=0.0, cy=0.0, a=4.0, b=4.0, angle=3.0))
 def test_cost_is_squared_residual_norm_with_fixed_length(d: Ellipse, p: Ellipse):
     for name in METRIC_NAMES:
         r = residual(name, d, p, **opts(name))
@@ -64,7 +66,11 @@ def test_cost_is_squared_residual_norm_with_fixed_length(d: Ellipse, p: Ellipse)
         assert r.ndim == 1 and r.shape == (residual_size(name, **opts(name)),)
         assert np.all(np.isfinite(r)) and c >= 0.0
         if name in ("iou", "giou"):  # non-negative quadrant rows summing to Delta
-            assert np.all(r >= -1e-12) and abs(float(r.sum()) - c) <= 1e-9, name
+            # 1e-7, not 1e-9: where the two boundaries touch (tangent contact, e.g. a circle of
+            # radius 4 inside a 4 x 5 ellipse, found by hypothesis) the contact points are double
+            # roots, located only to ~sqrt(machine eps); the quadrant split then moves ~1e-8 of
+            # Delta between the quadrant path and the whole-area path.
+            assert np.all(r >= -1e-12) and abs(float(r.sum()) - c) <= 1e-7, name
         else:
             assert abs(float(r @ r) - c) <= 1e-12 * max(c, 1e-300) + 1e-300, name
 
