@@ -242,15 +242,21 @@ class _FixedIouScorer:
         self.params = np.zeros((3, 5))
         self.camera = CAM
         self.compiled = type("C", (), {"centers": np.zeros((3, 3))})()
+        # every (detection, object) pair is compatible, in row-major order
+        self.pair_d, self.pair_o = (i.ravel() for i in np.indices((3, 3)))
+        self.pair_starts = np.array([0, 3, 6])
 
     def compatible_objects(self, d: int) -> np.ndarray:
         return np.array([0, 1, 2])
 
-    def dense_iou(self, poses: np.ndarray, **_: object) -> np.ndarray:
-        return self.dense[np.round(poses[:, 0, 3]).astype(int)]
+    def pair_iou(self, poses: np.ndarray, **_: object) -> np.ndarray:
+        return self.dense[np.round(poses[:, 0, 3]).astype(int)].reshape(len(poses), 9)
 
-    def scores(self, dense, threshold):
-        return MatchScorer.scores(self, dense, threshold)
+    def pair_scores(self, iou, threshold):
+        return MatchScorer.pair_scores(self, iou, threshold)
+
+    def pair_assignment(self, iou, threshold):
+        return MatchScorer.pair_assignment(self, iou, threshold)
 
     def matches(self, camera_from_world, threshold):
         return greedy_assignment(self.dense[round(camera_from_world[0, 3])],
@@ -273,7 +279,8 @@ def test_pose_acceptance_uses_min_inliers_and_one_to_one_counts(monkeypatch, cas
     dense[1, 0, 0] = dense[1, 1, 1] = dense[1, 2, 2] = 0.5
     poses = np.stack([np.eye(4), np.eye(4)])
     poses[1, 0, 3] = 1.0  # pose k's IoUs are dense[k]
-    monkeypatch.setattr(ransac_module, "p3p_hypotheses", lambda *a: poses)
+    monkeypatch.setattr(ransac_module, "p3p_hypotheses_batch",
+                        lambda *a: (poses, np.zeros(len(poses), dtype=int)))
     out = ransac(_FixedIouScorer(dense), UP, inlier_iou=0.2, min_inliers=3, max_hypotheses=10,
                  rng=np.random.default_rng(0))
     assert out.camera_from_world is not None, out.reason

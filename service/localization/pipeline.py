@@ -252,6 +252,24 @@ ALTERNATIVE_PREFILTER_RATIO = 0.5
 PRIOR_GATE_SIGMAS = 2.0
 
 
+#: An alternative whose matches are a subset of the best hypothesis' is not refined when the
+#: best has at least this many matches (``_same_explanation``).
+SAME_EXPLANATION_MIN_MATCHES = 4
+
+
+def _same_explanation(alternative: Hypothesis, best: Hypothesis) -> bool:
+    """Whether ``alternative`` only re-uses the best hypothesis' correspondences (its matches
+    are a subset of the best's) while the best has >= :data:`SAME_EXPLANATION_MIN_MATCHES`:
+    the correspondences over-determine the pose, so its refinement converges to the best's
+    pose (measured on the tuning frames of ``bench.chess_eval``: every such alternative did)
+    and is dropped as not distinct. With fewer matches (2-3 correspondences admit several
+    poses) every alternative is refined."""
+    if len(best.matches) < SAME_EXPLANATION_MIN_MATCHES:
+        return False
+    pairs = {(m.detection_index, m.object_index) for m in best.matches}
+    return all((m.detection_index, m.object_index) in pairs for m in alternative.matches)
+
+
 def prior_gate_poses(prior: PosePrior) -> np.ndarray:
     """``world_from_camera`` poses (H, 4, 4) at which the prior's associations are gated: the
     prior pose, and with a covariance the poses ``T Exp(+-g sqrt(lambda_k) e_k)`` along each
@@ -392,6 +410,8 @@ def localize(
         if k > 0 and (h.score < ALTERNATIVE_PREFILTER_RATIO * hyps[0].score or (
                 deadline is not None and time.perf_counter() > deadline)):
             break
+        if k > 0 and _same_explanation(h, hyps[0]):
+            continue  # refines to the best's pose: not a competitor (see _same_explanation)
         got, status = _refine_and_verify(
             list(outcome.matches if k == 0 else h.matches), detections, compiled, camera,
             scorer, invert_pose(h.camera_from_world), options, None, deadline)

@@ -54,7 +54,7 @@ import numpy as np
 
 from factors.geometry import Camera, Ellipse, ellipse_params
 from maps.compiled import CompiledMap
-from service.localization.hypotheses import p2e_hypotheses, p3p_hypotheses
+from service.localization.hypotheses import p2e_hypotheses, p3p_hypotheses_batch
 
 __all__ = [
     "EARLY_EXIT_MEAN_IOU",
@@ -78,6 +78,9 @@ __all__ = [
 EARLY_EXIT_MEAN_IOU = 0.5
 #: Candidates per batch whose IoUs are computed (the best by the stage-1 centre test).
 STAGE2_CANDIDATES = 24
+#: Stage 1 (the centre test keeping :data:`STAGE2_CANDIDATES` poses of a batch) only when a
+#: batch has more (pose, pair) tests than this: below, every pose is scored (vectorised).
+STAGE1_MIN_WORK = 1 << 14
 #: Minimal samples per batch (P3P calls between score / budget checks).
 BATCH = 32
 #: Number of distinct hypotheses kept (:attr:`RansacOutcome.alternatives`), and what
@@ -282,6 +285,9 @@ class MatchScorer:
         position = np.zeros(self.n_obj, dtype=np.int32)
         position[self.objects] = np.arange(len(self.objects), dtype=np.int32)
         self.pair_s = position[self.pair_o]
+        # first pair of each detection (pairs are sorted by detection; every usable detection
+        # has a compatible object): the segments of np.maximum.reduceat
+        self.pair_starts = np.searchsorted(self.pair_d, np.arange(self.n_det)).astype(np.intp)
         self.unit = sunflower_disk(n_points)
         self.points = _ellipse_points(self.params, self.unit)
         self.areas = math.pi * self.params[:, 2] * self.params[:, 3]
@@ -337,43 +343,95 @@ class MatchScorer:
                 out[hb.start + h] = per_det.sum()
         return out
 
-    def dense_iou(self, camera_from_world: np.ndarray, points: np.ndarray | None = None,
-                  floor: float = 0.0, stop_at: float | None = None) -> np.ndarray:
-        """IoU (H, D, N) of every usable detection with every map object (0 if incompatible or
-        the projection is invalid, and 0 where the estimate cannot reach ``floor``: callers
-        that only use IoUs >= a threshold get the same results). Memory: the output plus
-        bounded blocks; call it with few poses (H) on large maps."""
+    def pair_iou(self, camera_from_world: np.ndarray, points: np.ndarray | None = None,
+                 floor: float = 0.0, stop_at: float | None = None) -> np.ndarray:
+        """IoU (H, P) of every label-compatible pair (``pair_d[p]``, ``pair_o[p]``) at H poses,
+        vectorised over poses and pairs (0 where the projection is invalid, and 0 where the
+        estimate cannot reach ``floor``: callers that only use IoUs >= a threshold get the same
+        results). Cheap closed-form pre-filters run first on every (pose, pair): disjoint
+        bounding circles (the IoU is exactly 0) and the area ratio (the estimate is at most
+        ``area_det / area_proj``); only the survivors get the point test. Memory: the output
+        plus blocks of at most :data:`PAIR_BLOCK` (pose, pair) tests and :data:`POINT_BLOCK`
+        point evaluations; keep ``H x P`` bounded (callers pass
+        ``max(1, PAIR_BLOCK // P)`` poses at a time)."""
         stop_at = self._stop(stop_at)
         T = np.asarray(camera_from_world, dtype=float)
         pts = self.points if points is None else points
         n_pts = pts.shape[1]
-        out = np.zeros((len(T), self.n_det, self.n_obj))
-        for h in range(len(T)):
+        n_pairs = len(self.pair_d)
+        out = np.zeros((len(T), n_pairs))
+        if n_pairs == 0:
+            return out
+        step = max(1, min(PROJECT_BLOCK // max(1, len(self.objects)),
+                          PAIR_BLOCK // n_pairs))
+        for hb in _blocks(len(T), step):
             _check(stop_at)
-            cen, inv_shape, valid, _ = self._project(T[h:h + 1], stop_at)
-            cen, inv_shape, valid = cen[0], inv_shape[0], valid[0]
-            det = inv_shape[:, 0, 0] * inv_shape[:, 1, 1] - inv_shape[:, 0, 1] ** 2
-            half_tr = 0.5 * (inv_shape[:, 0, 0] + inv_shape[:, 1, 1])
+            cen, inv_shape, valid, _ = self._project(T[hb], stop_at)
+            n_h = len(cen)
+            det = inv_shape[..., 0, 0] * inv_shape[..., 1, 1] - inv_shape[..., 0, 1] ** 2
+            half_tr = 0.5 * (inv_shape[..., 0, 0] + inv_shape[..., 1, 1])
             # largest semi-axis of each projection: sqrt of the largest eigenvalue of A^-1
             r_proj = np.sqrt(np.maximum(
                 half_tr + np.sqrt(np.maximum(half_tr ** 2 - det, 0.0)), 0.0))
             area_proj = math.pi * np.sqrt(np.maximum(det, 0.0))
-            for blk in _blocks(len(self.pair_d), PAIR_BLOCK):
+            for blk in _blocks(n_pairs, max(1, PAIR_BLOCK // n_h)):
                 _check(stop_at)
                 pd, ps = self.pair_d[blk], self.pair_s[blk]
-                gap = np.hypot(*(cen[ps] - self.params[pd, :2]).T)
-                # disjoint bounding circles: no point inside; the estimate is <= area_d/area_p
-                keep = valid[ps] & (gap <= (self.radii[pd] + r_proj[ps]) * (1 + 1e-9) + 1e-9)
-                if floor > 0:
-                    keep &= self.areas[pd] >= floor * area_proj[ps]
-                idx = np.flatnonzero(keep)
-                for sub in _blocks(len(idx), POINT_BLOCK // n_pts):
+                gap = np.hypot(cen[:, ps, 0] - self.params[pd, 0],
+                               cen[:, ps, 1] - self.params[pd, 1])
+                # disjoint bounding circles: no point inside
+                keep = valid[:, ps] & (gap <= (self.radii[pd] + r_proj[:, ps]) * (1 + 1e-9)
+                                       + 1e-9)
+                if floor > 0:  # the estimate is <= area_d / area_p
+                    keep &= self.areas[pd] >= floor * area_proj[:, ps]
+                kh, kp = np.nonzero(keep)
+                for sub in _blocks(len(kh), POINT_BLOCK // n_pts):
                     _check(stop_at)
-                    k = idx[sub]
+                    h, k = kh[sub], kp[sub]
                     kd, ks = pd[k], ps[k]
-                    out[h, kd, self.objects[ks]] = iou_estimates(
-                        pts[kd], self.areas[kd], cen[ks], inv_shape[ks])
+                    out[hb.start + h, blk.start + k] = iou_estimates(
+                        pts[kd], self.areas[kd], cen[h, ks], inv_shape[h, ks])
         return out
+
+    def dense_iou(self, camera_from_world: np.ndarray, points: np.ndarray | None = None,
+                  floor: float = 0.0, stop_at: float | None = None) -> np.ndarray:
+        """IoU (H, D, N) of every usable detection with every map object: :meth:`pair_iou`
+        scattered into the (detections x objects) matrix (0 if incompatible). Memory: the
+        output plus bounded blocks; call it with few poses (H) on large maps."""
+        T = np.asarray(camera_from_world, dtype=float)
+        out = np.zeros((len(T), self.n_det, self.n_obj))
+        for h in range(len(T)):
+            out[h, self.pair_d, self.pair_o] = self.pair_iou(T[h:h + 1], points, floor,
+                                                             stop_at)[0]
+        return out
+
+    def pair_scores(self, iou: np.ndarray, threshold: float) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`scores` from pair IoUs (H, P) (:meth:`pair_iou`): (score (H,), inlier count
+        (H,)) with each detection taking its best compatible object (an upper bound of the
+        one-to-one assignment's)."""
+        if iou.shape[1] == 0:
+            return np.zeros(len(iou)), np.zeros(len(iou), dtype=int)
+        best = np.maximum.reduceat(iou, self.pair_starts, axis=1)
+        inl = best >= threshold
+        return np.where(inl, best, 0.0).sum(axis=1), inl.sum(axis=1)
+
+    def pair_assignment(self, iou: np.ndarray, threshold: float) -> list[Match]:
+        """:func:`greedy_assignment` of one pose's pair IoUs (P,) (:meth:`pair_iou`): the same
+        matches as on the dense (detections x objects) matrix (pairs are in its row-major
+        order, so ties break the same way)."""
+        cand = np.flatnonzero(iou >= threshold)
+        order = cand[np.argsort(iou[cand], kind="stable")[::-1]]
+        used_d: set[int] = set()
+        used_o: set[int] = set()
+        out = []
+        for p in order.tolist():
+            d, o = int(self.pair_d[p]), int(self.pair_o[p])
+            if d in used_d or o in used_o:
+                continue
+            used_d.add(d)
+            used_o.add(o)
+            out.append(Match(int(self.detection_indices[d]), o, float(iou[p])))
+        return sorted(out, key=lambda m: m.detection_index)
 
     def scores(self, dense: np.ndarray, threshold: float) -> tuple[np.ndarray, np.ndarray]:
         """(score (H,), inlier count (H,)) with each detection taking its best object (several
@@ -387,8 +445,8 @@ class MatchScorer:
         """One-to-one inlier matches at one pose (IoU with ``n_points`` per detection).
         Raises :class:`ScoringTimeoutError` past ``self.deadline``."""
         pts = _ellipse_points(self.params, sunflower_disk(n_points))
-        dense = self.dense_iou(np.asarray(camera_from_world)[None], pts, floor=threshold)[0]
-        return greedy_assignment(dense, self.detection_indices, threshold)
+        iou = self.pair_iou(np.asarray(camera_from_world)[None], pts, floor=threshold)[0]
+        return self.pair_assignment(iou, threshold)
 
 
 @dataclass(frozen=True)
@@ -405,10 +463,15 @@ def distinct_poses(camera_from_world_a: np.ndarray, camera_from_world_b: np.ndar
     """Whether two poses differ by more than :data:`DISTINCT_POSITION_M` (camera centres) or
     :data:`DISTINCT_ANGLE_DEG` (rotation angle)."""
     Ra, Rb = camera_from_world_a[:3, :3], camera_from_world_b[:3, :3]
-    ca, cb = -Ra.T @ camera_from_world_a[:3, 3], -Rb.T @ camera_from_world_b[:3, 3]
-    cos = (np.trace(Ra @ Rb.T) - 1.0) / 2.0
-    angle = math.degrees(math.acos(min(1.0, max(-1.0, cos))))
-    return bool(np.linalg.norm(ca - cb) > DISTINCT_POSITION_M or angle > DISTINCT_ANGLE_DEG)
+    # camera centres -R^T t; cos of the relative angle from trace(Ra Rb^T) = sum(Ra * Rb)
+    dc = Rb.T @ camera_from_world_b[:3, 3] - Ra.T @ camera_from_world_a[:3, 3]
+    if float(dc @ dc) > DISTINCT_POSITION_M ** 2:
+        return True
+    cos = (float(np.sum(Ra * Rb)) - 1.0) / 2.0
+    return cos < _COS_DISTINCT
+
+
+_COS_DISTINCT = math.cos(math.radians(DISTINCT_ANGLE_DEG))
 
 
 @dataclass(frozen=True)
@@ -567,29 +630,34 @@ def ransac(
     exhaustive = True
     need = scorer.n_det
 
+    n_pairs = len(scorer.pair_d)
+
     def consider(poses: np.ndarray) -> bool:
-        """Score candidate poses (one at a time, memory bounded); keeps the best distinct
-        hypotheses; returns True to stop early."""
+        """Score candidate poses (vectorised over poses and pairs, memory bounded); keeps the
+        best distinct hypotheses; returns True to stop early."""
         nonlocal best_T, best_score, best_count, best_matches, evaluated, kept
         if len(poses) == 0:
             return False
         evaluated += len(poses)
-        if len(poses) > STAGE2_CANDIDATES:
+        if len(poses) > STAGE2_CANDIDATES and len(poses) * n_pairs > STAGE1_MIN_WORK:
+            # large problems only: the cheap centre test picks the candidates worth an IoU
             hits = scorer.centre_hits(poses, stop_at=deadline)
             keep = np.argsort(-hits, kind="stable")[:STAGE2_CANDIDATES]
             poses = poses[keep]
-        for pose in poses:
-            bar = kept[-1].score if len(kept) >= KEEP_DISTINCT else -1.0
-            dense = scorer.dense_iou(pose[None], floor=inlier_iou, stop_at=deadline)
+        for blk in _blocks(len(poses), max(1, PAIR_BLOCK // max(1, n_pairs))):
+            iou = scorer.pair_iou(poses[blk], floor=inlier_iou, stop_at=deadline)
             # per-detection best object: an upper bound of the one-to-one score and count
-            bound, count = scorer.scores(dense, inlier_iou)
-            if bound[0] <= bar or count[0] < min_inliers:
-                continue
-            # one-to-one (greedy) assignment, as in the final matches
-            m = greedy_assignment(dense[0], scorer.detection_indices, inlier_iou)
-            score = float(sum(x.iou for x in m))
-            if len(m) >= min_inliers and score > bar:
-                kept = _keep_distinct(kept, Hypothesis(pose, tuple(m), score))
+            bound, count = scorer.pair_scores(iou, inlier_iou)
+            # best bound first: the bar rises early and fewer assignments are needed
+            for h in np.argsort(-bound, kind="stable").tolist():
+                bar = kept[-1].score if len(kept) >= KEEP_DISTINCT else -1.0
+                if bound[h] <= bar or count[h] < min_inliers:
+                    continue
+                # one-to-one (greedy) assignment, as in the final matches
+                m = scorer.pair_assignment(iou[h], inlier_iou)
+                score = float(sum(x.iou for x in m))
+                if len(m) >= min_inliers and score > bar:
+                    kept = _keep_distinct(kept, Hypothesis(poses[blk][h], tuple(m), score))
         if kept and kept[0].score > best_score:
             best_T, best_score = kept[0].camera_from_world, kept[0].score
             best_matches, best_count = list(kept[0].matches), len(kept[0].matches)
@@ -611,19 +679,21 @@ def ransac(
             chunk = list(itertools.islice(samples, batch))
             if not chunk:
                 return False
-            poses = []
-            for dets, objs in chunk:
-                tried += 1
-                if size == 3:
-                    sols = p3p_hypotheses(scorer.params[list(dets), :2],
-                                          cm.centers[list(objs)], scorer.camera)
-                else:
+            tried += len(chunk)
+            if size == 3:  # one vectorised call for the batch
+                dets_b = np.array([c[0] for c in chunk])
+                objs_b = np.array([c[1] for c in chunk])
+                poses, _ = p3p_hypotheses_batch(scorer.params[dets_b, :2], cm.centers[objs_b],
+                                                scorer.camera)
+            else:
+                found = []
+                for dets, objs in chunk:
                     ells = [Ellipse(*scorer.params[d]) for d in dets]
-                    sols = p2e_hypotheses(ells, [cm.ellipsoids[o] for o in objs],
-                                          scorer.camera, up_world)
-                poses.extend(sols)
+                    found.extend(p2e_hypotheses(ells, [cm.ellipsoids[o] for o in objs],
+                                                scorer.camera, up_world))
+                poses = np.array(found).reshape(-1, 4, 4)
             try:
-                if consider(np.array(poses).reshape(-1, 4, 4)):
+                if consider(poses):
                     return True
             except ScoringTimeoutError:
                 timed_out = True
