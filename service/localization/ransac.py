@@ -44,6 +44,7 @@ per compatible pair (docs/deployment.md, "Worst-case cost of a request"). All po
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 import time
@@ -81,6 +82,12 @@ STAGE2_CANDIDATES = 24
 #: Stage 1 (the centre test keeping :data:`STAGE2_CANDIDATES` poses of a batch) only when a
 #: batch has more (pose, pair) tests than this: below, every pose is scored (vectorised).
 STAGE1_MIN_WORK = 1 << 14
+#: Minimal samples of the first P3P batch (a frame explained by it stops the search early).
+FIRST_BATCH = 8
+#: Competitor sweep after an early exit (:func:`_sweep_samples`): detections considered and
+#: most samples.
+SWEEP_CANDIDATES = 8
+SWEEP_MAX_SAMPLES = 24
 #: Minimal samples per batch (P3P calls between score / budget checks).
 BATCH = 32
 #: Number of distinct hypotheses kept (:attr:`RansacOutcome.alternatives`), and what
@@ -126,12 +133,16 @@ def _blocks(n: int, size: int) -> Iterator[slice]:
         yield slice(start, min(n, start + max(1, size)))
 
 
+@functools.lru_cache(maxsize=8)
 def sunflower_disk(n: int) -> np.ndarray:
-    """``n`` points spread uniformly over the unit disk (Vogel's sunflower), shape (n, 2)."""
+    """``n`` points spread uniformly over the unit disk (Vogel's sunflower), shape (n, 2),
+    read-only (computed once per ``n``)."""
     i = np.arange(n) + 0.5
     r = np.sqrt(i / n)
     th = i * (math.pi * (3.0 - math.sqrt(5.0)))
-    return np.column_stack([r * np.cos(th), r * np.sin(th)])
+    out = np.column_stack([r * np.cos(th), r * np.sin(th)])
+    out.setflags(write=False)
+    return out
 
 
 def _ellipse_points(params: np.ndarray, unit: np.ndarray) -> np.ndarray:
@@ -285,6 +296,12 @@ class MatchScorer:
         position = np.zeros(self.n_obj, dtype=np.int32)
         position[self.objects] = np.arange(len(self.objects), dtype=np.int32)
         self.pair_s = position[self.pair_o]
+        # the compatible objects' arrays, gathered once per call (not per projection)
+        o = self.objects
+        self._object_arrays = (compiled.centers[o], compiled.shape_matrices[o],
+                               compiled.dual_quadrics[o])
+        self._label_groups: list[tuple[list[int], np.ndarray]] | None = None
+        self._sample_counts: dict[int, int] = {}  # count_samples, once per size
         # first pair of each detection (pairs are sorted by detection; every usable detection
         # has a compatible object): the segments of np.maximum.reduceat
         self.pair_starts = np.searchsorted(self.pair_d, np.arange(self.n_det)).astype(np.intp)
@@ -308,18 +325,15 @@ class MatchScorer:
     def _project(self, camera_from_world: np.ndarray,
                  stop_at: float | None = None) -> tuple[np.ndarray, ...]:
         """:func:`project_objects` of the compatible objects, in blocks of poses."""
-        cm = self.compiled
         o = self.objects
         T = np.asarray(camera_from_world, dtype=float)
         step = max(1, PROJECT_BLOCK // max(1, len(o)))
         if len(T) <= step:
-            return project_objects(self.camera, T, cm.centers[o], cm.shape_matrices[o],
-                                   cm.dual_quadrics[o])
+            return project_objects(self.camera, T, *self._object_arrays)
         parts = []
         for blk in _blocks(len(T), step):
             _check(stop_at)
-            parts.append(project_objects(self.camera, T[blk], cm.centers[o],
-                                         cm.shape_matrices[o], cm.dual_quadrics[o]))
+            parts.append(project_objects(self.camera, T[blk], *self._object_arrays))
         return tuple(np.concatenate(p) for p in zip(*parts, strict=True))
 
     def centre_hits(self, camera_from_world: np.ndarray,
@@ -497,10 +511,16 @@ def _label_groups(scorer: MatchScorer) -> list[tuple[list[int], np.ndarray]]:
     """Usable detections grouped by their compatible objects (= by label, since a map object
     has one category): ``[(detection rows, compatible object indices), ...]`` in order of first
     detection. Groups of different labels have disjoint objects."""
+    cached = getattr(scorer, "_label_groups", None)
+    if cached is not None:
+        return cached
     groups: dict[str, list[int]] = {}
     for d, label in enumerate(scorer.labels):
         groups.setdefault(label, []).append(d)
-    return [(dets, scorer.compatible_objects(dets[0]).astype(int)) for dets in groups.values()]
+    out = [(dets, scorer.compatible_objects(dets[0]).astype(int)) for dets in groups.values()]
+    if hasattr(scorer, "_label_groups"):  # computed once per scorer (= per call)
+        scorer._label_groups = out
+    return out
 
 
 def _compositions(groups: list[tuple[list[int], np.ndarray]], size: int) -> list[tuple[int, ...]]:
@@ -530,8 +550,18 @@ def count_samples(scorer: MatchScorer, size: int) -> int:
     """Number of label-compatible minimal samples of ``size`` (distinct detections, distinct
     objects), from per-label counts: ``sum over splits of prod_g C(n_det_g, m_g) P(n_obj_g, m_g)``
     (no walk over detection tuples, so it costs nothing with hundreds of detections)."""
-    groups = _label_groups(scorer)
-    return sum(_composition_count(groups, c) for c in _compositions(groups, size))
+    cache = getattr(scorer, "_sample_counts", None)
+    if cache is not None and size in cache:
+        return cache[size]
+    # the coefficient of x^size in prod_g sum_m C(n_det_g, m) P(n_obj_g, m) x^m (exact ints):
+    # the same sum as over the splits (_compositions), in O(groups x size)
+    coeffs = [1] + [0] * size
+    for d, o in _label_groups(scorer):
+        term = [math.comb(len(d), m) * math.perm(len(o), m) for m in range(size + 1)]
+        coeffs = [sum(coeffs[i] * term[k - i] for i in range(k + 1)) for k in range(size + 1)]
+    if cache is not None:
+        cache[size] = coeffs[size]
+    return coeffs[size]
 
 
 def _iter_samples(groups: list[tuple[list[int], np.ndarray]],
@@ -563,10 +593,9 @@ def _enumerate_samples(scorer: MatchScorer, size: int,
     """All label-compatible minimal samples (lazily, :func:`_iter_samples`' fixed order), or
     None if there are more than ``cap``. Only the samples themselves are generated (per label
     group), never all detection tuples."""
-    groups = _label_groups(scorer)
-    if sum(_composition_count(groups, c) for c in _compositions(groups, size)) > cap:
+    if count_samples(scorer, size) > cap:
         return None
-    return _iter_samples(groups, size)
+    return _iter_samples(_label_groups(scorer), size)
 
 
 def _has_sample(scorer: MatchScorer, size: int) -> bool:
@@ -596,6 +625,42 @@ def _random_samples(scorer: MatchScorer, size: int, count: int,
             pairs += [(d[int(i)], int(o[int(j)])) for i, j in zip(dd, oo, strict=True)]
         pairs.sort()
         yield tuple(q[0] for q in pairs), tuple(q[1] for q in pairs)
+
+
+def _sweep_samples(scorer: MatchScorer) -> list[tuple[tuple[int, ...], tuple[int, ...]]]:
+    """The minimal samples of the competitor sweep run after an early exit: every
+    label-compatible assignment (distinct objects) of ONE detection triple. A competing pose
+    that explains every usable detection (what the ambiguity check looks for) also explains
+    these three, with one of these assignments, so P3P on them finds it whatever the rest of
+    the search skipped. The triple: among the :data:`SWEEP_CANDIDATES` detections with the
+    fewest compatible objects, the one with the largest image triangle (P3P conditioning) of
+    those with at most :data:`SWEEP_MAX_SAMPLES` assignments; none (empty list) if no triple
+    qualifies (many same-label objects: the search then stops as it did without the sweep)."""
+    groups = _label_groups(scorer)
+    objects_of = {d: objs for dets, objs in groups for d in dets}
+    label_of = {d: g for g, (dets, _) in enumerate(groups) for d in dets}
+    order = sorted(range(scorer.n_det), key=lambda d: (len(objects_of[d]), d))
+    centres = scorer.params[:, :2]
+    best: tuple[float, tuple[int, ...]] | None = None
+    for tri in itertools.combinations(sorted(order[:SWEEP_CANDIDATES]), 3):
+        per_group: dict[int, int] = {}
+        for d in tri:
+            per_group[label_of[d]] = per_group.get(label_of[d], 0) + 1
+        count = math.prod(math.perm(len(groups[g][1]), m) for g, m in per_group.items())
+        if count == 0 or count > SWEEP_MAX_SAMPLES:
+            continue
+        (ax, ay), (bx, by), (cx, cy) = centres[list(tri)]
+        area = abs((bx - ax) * (cy - ay) - (cx - ax) * (by - ay))
+        if best is None or area > best[0]:
+            best = (area, tri)
+    if best is None:
+        return []
+    tri = best[1]
+    out = []
+    for objs in itertools.product(*(objects_of[d].tolist() for d in tri)):
+        if len(set(objs)) == 3:
+            out.append((tri, tuple(int(o) for o in objs)))
+    return out
 
 
 def ransac(
@@ -664,6 +729,20 @@ def ransac(
         return (need >= EARLY_EXIT_MIN_DETECTIONS and best_count >= need
                 and best_score >= EARLY_EXIT_MEAN_IOU * need)
 
+    def solve(chunk: list[tuple[tuple[int, ...], tuple[int, ...]]], size: int) -> np.ndarray:
+        """Candidate poses (M, 4, 4) of minimal samples: one vectorised P3P call, or P2E."""
+        if size == 3:
+            poses, _ = p3p_hypotheses_batch(scorer.params[np.array([c[0] for c in chunk]), :2],
+                                            cm.centers[np.array([c[1] for c in chunk])],
+                                            scorer.camera)
+            return poses
+        found = []
+        for dets, objs in chunk:
+            ells = [Ellipse(*scorer.params[d]) for d in dets]
+            found.extend(p2e_hypotheses(ells, [cm.ellipsoids[o] for o in objs], scorer.camera,
+                                        up_world))
+        return np.array(found).reshape(-1, 4, 4)
+
     def run(size: int, budget: int) -> bool:
         nonlocal tried, timed_out, exhaustive
         samples = _enumerate_samples(scorer, size, budget)
@@ -671,7 +750,7 @@ def ransac(
             exhaustive = False
             samples = _random_samples(scorer, size, budget, rng)
         # exhaustive: every sample in a fixed order (the seed plays no part)
-        batch = BATCH if size == 3 else 4
+        batch = FIRST_BATCH if size == 3 else 4
         while True:
             if deadline is not None and time.perf_counter() > deadline:
                 timed_out = True
@@ -680,20 +759,15 @@ def ransac(
             if not chunk:
                 return False
             tried += len(chunk)
-            if size == 3:  # one vectorised call for the batch
-                dets_b = np.array([c[0] for c in chunk])
-                objs_b = np.array([c[1] for c in chunk])
-                poses, _ = p3p_hypotheses_batch(scorer.params[dets_b, :2], cm.centers[objs_b],
-                                                scorer.camera)
-            else:
-                found = []
-                for dets, objs in chunk:
-                    ells = [Ellipse(*scorer.params[d]) for d in dets]
-                    found.extend(p2e_hypotheses(ells, [cm.ellipsoids[o] for o in objs],
-                                                scorer.camera, up_world))
-                poses = np.array(found).reshape(-1, 4, 4)
+            batch = BATCH if size == 3 else 4
             try:
-                if consider(poses):
+                if consider(solve(chunk, size)):
+                    # the frame is explained: before stopping, look for the competitors the
+                    # ambiguity check needs (every other explanation of one detection triple)
+                    sweep = _sweep_samples(scorer) if size == 3 else []
+                    tried += len(sweep)
+                    if sweep:
+                        consider(solve(sweep, size))
                     return True
             except ScoringTimeoutError:
                 timed_out = True
