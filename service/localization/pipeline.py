@@ -45,6 +45,7 @@ from factors.geometry import Camera, Ellipsoid, invert_pose
 from factors.pose_residuals import expmap_pose3
 from maps.compiled import CompiledMap, compile_map
 from maps.model import SceneMap
+from service.localization.budget import Deadline, deadline_passed
 from service.localization.calibration import MIN_CONFIDENCE, S2_FLOOR
 from service.localization.confidence import (
     calibrated_covariance,
@@ -145,11 +146,12 @@ def _not_localized(reason: str, metric: str, evaluated: int, timings: dict[str, 
 def refine_pose(
     detections: Sequence[Detection], ellipsoids: Sequence[Ellipsoid], camera: Camera,
     initial_world_from_camera: np.ndarray, options: LocalizationOptions,
-    prior: PosePrior | None = None, deadline: float | None = None,
+    prior: PosePrior | None = None, deadline: Deadline | float | None = None,
 ) -> RefinementResult:
     """:func:`service.localization.refine.refine` with the options' metric, sigma, kernel,
     iteration cap and metric options (and the prior as a factor when it has a covariance);
-    ``deadline`` is a ``time.perf_counter()`` instant after which no LM iteration starts."""
+    after ``deadline`` (a :class:`service.localization.budget.Deadline` or a
+    ``time.perf_counter()`` instant) no LM iteration starts."""
     kwargs = dict(
         use_sigma=options.use_sigma, robust=options.robust, robust_scale=options.robust_scale,
         prior_world_from_camera=None if prior is None or prior.covariance is None
@@ -166,7 +168,7 @@ def refine_pose(
 def _refine_matches(
     matches: Sequence[Match], detections: Sequence[Detection], compiled: CompiledMap,
     camera: Camera, world_from_camera: np.ndarray, options: LocalizationOptions,
-    prior: PosePrior | None, deadline: float | None,
+    prior: PosePrior | None, deadline: Deadline | float | None,
 ) -> RefinementResult:
     return refine_pose([detections[m.detection_index] for m in matches],
                        [compiled.ellipsoids[m.object_index] for m in matches],
@@ -205,7 +207,7 @@ def _refine_and_verify(
             (m.detection_index, m.object_index) for m in current}
         if same or len(new) < options.min_inliers or round_ == 1:
             break
-        if deadline is not None and time.perf_counter() > deadline:
+        if deadline_passed(deadline):
             status = "time_budget"  # the changed inlier set is not refined again
             break
         current = new
@@ -318,6 +320,7 @@ def localize(
         ScoringTimeoutError: scoring ran past 1.05 x ``time_budget_ms`` (huge map x detections).
     """
     t0 = time.perf_counter()
+    cpu0 = time.thread_time()  # the budget counts this thread's CPU time (budget module)
     timings: dict[str, float] = {}
     compiled = _validate(detections, scene_map, camera, options, prior)
     metric = options.metric
@@ -330,8 +333,10 @@ def localize(
         return _not_localized("no_label_match", metric, 0, timings, t0)
     scorer = MatchScorer(compiled, camera, [detections[i].ellipse for i in usable],
                          [detections[i].label for i in usable], usable)
-    deadline = None if options.time_budget_ms is None else t0 + options.time_budget_ms / 1e3
-    scorer.deadline = hard_deadline(t0, options.time_budget_ms)  # ScoringTimeoutError past it
+    # CPU time of this thread, with a wall-clock hard limit (service.localization.budget)
+    deadline = Deadline.after(options.time_budget_ms, cpu_start=cpu0, wall_start=t0)
+    scorer.deadline = hard_deadline(t0, options.time_budget_ms, cpu_start=cpu0)  # past it:
+    # ScoringTimeoutError
     evaluated = 0
     n_samples = count_samples(scorer, 2)
 
@@ -407,8 +412,8 @@ def localize(
     answers: list[_Answer] = []
     first_status: str | None = None
     for k, h in enumerate(hyps[:1 + REFINED_ALTERNATIVES]):
-        if k > 0 and (h.score < ALTERNATIVE_PREFILTER_RATIO * hyps[0].score or (
-                deadline is not None and time.perf_counter() > deadline)):
+        if k > 0 and (h.score < ALTERNATIVE_PREFILTER_RATIO * hyps[0].score
+                      or deadline_passed(deadline)):
             break
         if k > 0 and _same_explanation(h, hyps[0]):
             continue  # refines to the best's pose: not a competitor (see _same_explanation)

@@ -47,7 +47,6 @@ from __future__ import annotations
 import functools
 import itertools
 import math
-import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
@@ -55,6 +54,7 @@ import numpy as np
 
 from factors.geometry import Camera, Ellipse, ellipse_params
 from maps.compiled import CompiledMap
+from service.localization.budget import Deadline, deadline_passed, earliest
 from service.localization.hypotheses import p2e_hypotheses, p3p_hypotheses_batch
 
 __all__ = [
@@ -116,16 +116,20 @@ class ScoringTimeoutError(RuntimeError):
     """The scorer's deadline passed in the middle of scoring (see :class:`MatchScorer`)."""
 
 
-def _check(stop_at: float | None) -> None:
-    if stop_at is not None and time.perf_counter() > stop_at:
+def _check(stop_at: Deadline | float | None) -> None:
+    if deadline_passed(stop_at):
         raise ScoringTimeoutError("time budget exceeded while scoring poses")
 
 
-def hard_deadline(start: float, time_budget_ms: float | None) -> float | None:
-    """The scorer's hard stop of a call started at ``start`` (``time.perf_counter()``) with a
-    budget: ``start + 1.05 x budget``. The search stops at the budget itself; this bounds the
+def hard_deadline(start: float, time_budget_ms: float | None, *,
+                  cpu_start: float | None = None) -> Deadline | None:
+    """The scorer's hard stop of a call started at ``start`` (``time.perf_counter()``; and
+    ``cpu_start``, ``time.thread_time()``, default now) with a budget: 1.05 x the budget on
+    each clock of :class:`service.localization.budget.Deadline` (CPU time of the solving thread,
+    and its wall-clock hard limit). The search stops at the budget itself; this bounds the
     scoring after it (final matches, re-association after refinement)."""
-    return None if time_budget_ms is None else start + HARD_STOP_FACTOR * time_budget_ms / 1e3
+    return Deadline.after(time_budget_ms, HARD_STOP_FACTOR, cpu_start=cpu_start,
+                          wall_start=start)
 
 
 def _blocks(n: int, size: int) -> Iterator[slice]:
@@ -267,7 +271,8 @@ class MatchScorer:
 
     ``detection_indices`` are the original indices of the usable detections (labels in the
     map); ``ellipses`` / ``labels`` are theirs. Only label-compatible pairs are evaluated, in
-    bounded blocks (module docstring). ``deadline`` (a ``time.perf_counter()`` instant, or
+    bounded blocks (module docstring). ``deadline`` (a
+    :class:`service.localization.budget.Deadline`, a ``time.perf_counter()`` instant, or
     None) is a hard stop for every scoring call: past it they raise :class:`ScoringTimeoutError`
     (a search passes its own, earlier, stop to the calls it makes).
     """
@@ -275,7 +280,7 @@ class MatchScorer:
     def __init__(
         self, compiled: CompiledMap, camera: Camera, ellipses: Sequence[Ellipse],
         labels: Sequence[str], detection_indices: Sequence[int], n_points: int = 96,
-        deadline: float | None = None,
+        deadline: Deadline | float | None = None,
     ) -> None:
         self.compiled = compiled
         self.camera = camera
@@ -317,13 +322,11 @@ class MatchScorer:
         """Object indices compatible with usable detection row ``d``."""
         return np.flatnonzero(self.compat[d])
 
-    def _stop(self, stop_at: float | None) -> float | None:
-        if stop_at is None:
-            return self.deadline
-        return stop_at if self.deadline is None else min(stop_at, self.deadline)
+    def _stop(self, stop_at: Deadline | float | None) -> Deadline | None:
+        return earliest(stop_at, self.deadline)
 
     def _project(self, camera_from_world: np.ndarray,
-                 stop_at: float | None = None) -> tuple[np.ndarray, ...]:
+                 stop_at: Deadline | float | None = None) -> tuple[np.ndarray, ...]:
         """:func:`project_objects` of the compatible objects, in blocks of poses."""
         o = self.objects
         T = np.asarray(camera_from_world, dtype=float)
@@ -337,7 +340,7 @@ class MatchScorer:
         return tuple(np.concatenate(p) for p in zip(*parts, strict=True))
 
     def centre_hits(self, camera_from_world: np.ndarray,
-                    stop_at: float | None = None) -> np.ndarray:
+                    stop_at: Deadline | float | None = None) -> np.ndarray:
         """Stage 1: number of detections hit by a compatible valid object's centre, (H,)."""
         stop_at = self._stop(stop_at)
         T = np.asarray(camera_from_world, dtype=float)
@@ -358,7 +361,7 @@ class MatchScorer:
         return out
 
     def pair_iou(self, camera_from_world: np.ndarray, points: np.ndarray | None = None,
-                 floor: float = 0.0, stop_at: float | None = None) -> np.ndarray:
+                 floor: float = 0.0, stop_at: Deadline | float | None = None) -> np.ndarray:
         """IoU (H, P) of every label-compatible pair (``pair_d[p]``, ``pair_o[p]``) at H poses,
         vectorised over poses and pairs (0 where the projection is invalid, and 0 where the
         estimate cannot reach ``floor``: callers that only use IoUs >= a threshold get the same
@@ -408,7 +411,7 @@ class MatchScorer:
         return out
 
     def dense_iou(self, camera_from_world: np.ndarray, points: np.ndarray | None = None,
-                  floor: float = 0.0, stop_at: float | None = None) -> np.ndarray:
+                  floor: float = 0.0, stop_at: Deadline | float | None = None) -> np.ndarray:
         """IoU (H, D, N) of every usable detection with every map object: :meth:`pair_iou`
         scattered into the (detections x objects) matrix (0 if incompatible). Memory: the
         output plus bounded blocks; call it with few poses (H) on large maps."""
@@ -671,7 +674,7 @@ def ransac(
     min_inliers: int,
     max_hypotheses: int,
     rng: np.random.Generator,
-    deadline: float | None = None,
+    deadline: Deadline | float | None = None,
 ) -> RansacOutcome:
     """Search poses from minimal samples (see the module docstring).
 
@@ -681,8 +684,9 @@ def ransac(
         inlier_iou, min_inliers: acceptance of a pose.
         max_hypotheses: budget of minimal samples per solver (P3P, then P2E).
         rng: sampler (only used when not exhaustive: exhaustive runs do not depend on it).
-        deadline: ``time.perf_counter()`` value after which the search stops (also checked
-            inside the scoring of a batch).
+        deadline: when the search stops (a :class:`service.localization.budget.Deadline`:
+            CPU time of this thread and a wall-clock hard limit; or a ``time.perf_counter()``
+            instant), checked before every batch and inside the scoring of a batch.
     """
     cm = scorer.compiled
     best_T: np.ndarray | None = None
@@ -752,7 +756,7 @@ def ransac(
         # exhaustive: every sample in a fixed order (the seed plays no part)
         batch = FIRST_BATCH if size == 3 else 4
         while True:
-            if deadline is not None and time.perf_counter() > deadline:
+            if deadline_passed(deadline):
                 timed_out = True
                 return True
             chunk = list(itertools.islice(samples, batch))

@@ -60,6 +60,7 @@ import numpy as np
 from factors.geometry import Camera, Ellipsoid, GeometryError, snap_to_rotation
 from factors.pose_factors import ROBUST_KERNELS, pose_factors
 from factors.pose_residuals import PoseResidualModel, check_pose
+from service.localization.budget import Deadline, deadline_passed
 from service.localization.types import Detection, check_covariance
 
 __all__ = [
@@ -183,7 +184,7 @@ def refine(
     prior_covariance: np.ndarray | None = None,
     max_iterations: int = 50,
     metric_options: Mapping[str, Any] | None = None,
-    deadline: float | None = None,
+    deadline: Deadline | float | None = None,
 ) -> RefinementResult:
     """Refine the camera pose by minimising ``sum_j sigma_j^-1 Delta_j`` (paper eq. 8) with LM.
 
@@ -203,8 +204,10 @@ def refine(
         max_iterations: LM iteration cap (>= 1).
         metric_options: options of the metric (e.g. level-set sampling), see
             ``factors.metrics``.
-        deadline: optional ``time.perf_counter()`` instant after which no further LM iteration
-            starts (the per-request solve budget of the service); None = no limit.
+        deadline: optional stop after which no further LM iteration starts (the per-request
+            solve budget of the service): a :class:`service.localization.budget.Deadline`
+            (CPU time of this thread with a wall-clock hard limit) or a ``time.perf_counter()``
+            instant; None = no limit.
 
     Returns:
         :class:`RefinementResult`.
@@ -251,7 +254,7 @@ def refine(
         if pass_ == 1 or outcome.status in ("diverged", "invalid_projection", "time_budget") \
                 or total_iterations >= max_iterations or not model.sampling_grown:
             break
-        if deadline is not None and time.perf_counter() > deadline:
+        if deadline_passed(deadline):
             # no time for the re-laid solve: keep the first solve and its status, and say the
             # re-lay was skipped
             relaid_skipped = True
@@ -323,7 +326,7 @@ def _build_graph(
 
 def _solve(
     graph: gtsam.NonlinearFactorGraph, model: PoseResidualModel, T0: np.ndarray,
-    max_iterations: int, deadline: float | None = None,
+    max_iterations: int, deadline: Deadline | float | None = None,
 ) -> _SolveOutcome:
     """One LM solve of ``graph`` from ``T0``; final costs from ``model``."""
     initial = gtsam.Values()
@@ -361,7 +364,7 @@ def _solve(
 
 def _optimize_until(
     optimizer: gtsam.LevenbergMarquardtOptimizer, params: gtsam.LevenbergMarquardtParams,
-    deadline: float,
+    deadline: Deadline | float,
 ) -> bool:
     """GTSAM's ``optimize()`` loop (same stopping rules), stepped from Python so that no
     iteration starts after ``deadline``. True if it stopped by itself, False at the deadline."""
@@ -369,7 +372,7 @@ def _optimize_until(
     if current <= params.getErrorTol():
         return True
     while optimizer.iterations() < params.getMaxIterations():
-        if time.perf_counter() > deadline:
+        if deadline_passed(deadline):
             return False
         optimizer.iterate()
         new = optimizer.error()
