@@ -14,7 +14,10 @@ A CPU budget alone does not bound the answer's latency (a thread starved of CPU 
 spend it), so every :class:`Deadline` also has a **wall-clock hard limit**:
 :data:`WALL_LIMIT_FACTOR` x the budget after the start. It is the service's latency guarantee
 (the request answers ``time_budget_exceeded`` / a cut-short refinement by then at the latest)
-and only binds when the thread got less than ``1 / WALL_LIMIT_FACTOR`` of a core.
+and only binds when the thread got less than ``1 / WALL_LIMIT_FACTOR`` of a core. The factor is
+2: the deployment runs one process per core with ``QUADLOC_MAX_CONCURRENT_SOLVES`` = 2 solves
+interleaving in it, so a solve is entitled to at least half a core; results are independent of
+load as long as it gets that share.
 
 Checks are cheap (two clock reads). Deadlines are passed down as :class:`Deadline` objects;
 a bare ``float`` is still accepted everywhere a deadline is (a ``time.perf_counter()``
@@ -30,7 +33,7 @@ from dataclasses import dataclass
 __all__ = ["WALL_LIMIT_FACTOR", "Deadline", "as_deadline", "deadline_passed", "earliest"]
 
 #: Wall-clock hard limit of a solve, as a multiple of its CPU budget.
-WALL_LIMIT_FACTOR = 3.0
+WALL_LIMIT_FACTOR = 2.0
 
 
 @dataclass(frozen=True)
