@@ -82,6 +82,9 @@ STAGE2_CANDIDATES = 24
 #: Stage 1 (the centre test keeping :data:`STAGE2_CANDIDATES` poses of a batch) only when a
 #: batch has more (pose, pair) tests than this: below, every pose is scored (vectorised).
 STAGE1_MIN_WORK = 1 << 14
+#: Exhaustive P3P searches with at most this many samples try them most promising first
+#: (:func:`_most_promising_first`; larger ones keep the lazy fixed order: bounded memory).
+ORDER_CAP = 4096
 #: Minimal samples of the first P3P batch (a frame explained by it stops the search early).
 FIRST_BATCH = 8
 #: Competitor sweep after an early exit (:func:`_sweep_samples`): detections considered and
@@ -630,6 +633,25 @@ def _random_samples(scorer: MatchScorer, size: int, count: int,
         yield tuple(q[0] for q in pairs), tuple(q[1] for q in pairs)
 
 
+def _most_promising_first(
+    scorer: MatchScorer, samples: list[tuple[tuple[int, ...], tuple[int, ...]]],
+) -> Iterator[tuple[tuple[int, ...], tuple[int, ...]]]:
+    """``samples`` (all of an exhaustive search) reordered so that the ones most likely to give
+    the right pose come first, which lets the early exit happen after the first batch: fewest
+    label-compatible alternatives first (the product over the sample's detections of their
+    numbers of compatible objects: a detection whose label has one object in the map can only
+    be matched to it), then the largest image triangle of the detection centres (P3P's
+    conditioning). A stable sort on fixed keys: still independent of the seed."""
+    n_compat = np.array([len(scorer.compatible_objects(d)) for d in range(scorer.n_det)],
+                        dtype=float)
+    dets = np.array([sm[0] for sm in samples]).reshape(-1, 3)
+    c = scorer.params[dets, :2]  # (S, 3, 2)
+    area = np.abs((c[:, 1, 0] - c[:, 0, 0]) * (c[:, 2, 1] - c[:, 0, 1])
+                  - (c[:, 2, 0] - c[:, 0, 0]) * (c[:, 1, 1] - c[:, 0, 1]))
+    order = np.lexsort((-area, np.prod(n_compat[dets], axis=1)))
+    return iter([samples[k] for k in order.tolist()])
+
+
 def _sweep_samples(scorer: MatchScorer) -> list[tuple[tuple[int, ...], tuple[int, ...]]]:
     """The minimal samples of the competitor sweep run after an early exit: every
     label-compatible assignment (distinct objects) of ONE detection triple. A competing pose
@@ -753,6 +775,8 @@ def ransac(
         if samples is None:
             exhaustive = False
             samples = _random_samples(scorer, size, budget, rng)
+        elif size == 3 and count_samples(scorer, size) <= ORDER_CAP:
+            samples = _most_promising_first(scorer, list(samples))
         # exhaustive: every sample in a fixed order (the seed plays no part)
         batch = FIRST_BATCH if size == 3 else 4
         while True:
