@@ -575,23 +575,23 @@ def _iter_samples(groups: list[tuple[list[int], np.ndarray]],
     """Every label-compatible minimal sample ((d...), (o...)) (detections ascending), lazily,
     in a fixed order: split among the groups, then itertools' combinations of each group's
     detections and permutations of its objects. Nothing is materialised."""
-    def rec(g: int, comp: tuple[int, ...],
+    def rec(active: list[tuple[list[int], list[int], int]], k: int,
             acc: list[tuple[int, int]]) -> Iterator[list[tuple[int, int]]]:
-        if g == len(groups):
+        if k == len(active):
             yield acc
             return
-        (d, o), m = groups[g], comp[g]
-        if m == 0:
-            yield from rec(g + 1, comp, acc)
-            return
+        d, o, m = active[k]
         for dets in itertools.combinations(d, m):
-            for objs in itertools.permutations(o.tolist(), m):
-                yield from rec(g + 1, comp, acc + list(zip(dets, objs, strict=True)))
+            for objs in itertools.permutations(o, m):
+                yield from rec(active, k + 1, acc + list(zip(dets, objs, strict=True)))
 
     for comp in _compositions(groups, size):
-        for pairs in rec(0, comp, []):
-            pairs = sorted(pairs)
-            yield tuple(dd for dd, _ in pairs), tuple(int(oo) for _, oo in pairs)
+        # only the groups the split draws from (the others contribute nothing)
+        active = [(d, [int(x) for x in o], m) for (d, o), m in zip(groups, comp, strict=True)
+                  if m]
+        for pairs in rec(active, 0, []):
+            pairs.sort()
+            yield tuple(dd for dd, _ in pairs), tuple(oo for _, oo in pairs)
 
 
 def _enumerate_samples(scorer: MatchScorer, size: int,
