@@ -6,12 +6,16 @@ when no P3P pose qualifies). Each candidate pose is
 scored by the overlap (IoU) between the detections and the projected ellipsoids of the
 label-compatible map objects, each detection taking its best object:
 
-* **stage 1** (all candidates, cheap): a detection is "hit" when the projection of a compatible
+* **stage 1** (only for large problems: a batch with more than :data:`STAGE1_MIN_WORK`
+  (pose, pair) tests; cheap): a detection is "hit" when the projection of a compatible
   object's centre lies within twice its ellipse (``Phi_det <= 4``) and that object's projection
-  is valid (ellipsoid entirely in front of the camera);
-* **stage 2** (the :data:`STAGE2_CANDIDATES` best of stage 1 in each batch): IoU of every
-  compatible pair, estimated by :func:`iou_estimates` (a fixed sunflower pattern of points
-  inside each detection; relative area error ~1/n_points, checked against
+  is valid (ellipsoid entirely in front of the camera); the :data:`STAGE2_CANDIDATES` best
+  poses of the batch go on to stage 2;
+* **stage 2** (every candidate of a batch at once, vectorised over poses and pairs,
+  :meth:`MatchScorer.pair_iou`): IoU of every compatible pair, after closed-form pre-filters
+  that cannot change a result (disjoint bounding circles: IoU 0; the area ratio bounds the
+  estimate below the inlier threshold), estimated by :func:`iou_estimates` (a fixed sunflower
+  pattern of points inside each detection; relative area error ~1/n_points, checked against
   ``factors.metrics`` in the tests). A pair is an inlier when IoU >= ``inlier_iou``; the
   score of a pose is the sum of its inliers' IoUs (so both the number of explained detections
   and how well they overlap count). Candidates are ranked by the per-detection-best sum (an
@@ -19,26 +23,33 @@ label-compatible map objects, each detection taking its best object:
   :func:`greedy_assignment`): its score and its >= ``min_inliers`` count are the one-to-one
   ones, so the returned matches always reach ``min_inliers``.
 
-Minimal samples are counted and listed per label group (a map object has one category), never
-by walking all detection tuples, so hundreds of same-label detections cost nothing before the
-first time-budget check. Exhaustive over the label-compatible minimal samples when there are at
-most ``max_hypotheses`` of them (in a fixed order: the result does not depend on the seed),
-else ``max_hypotheses`` random samples (seeded, uniform over the label-compatible samples);
-early exit once a pose explains every usable detection with mean IoU >=
-:data:`EARLY_EXIT_MEAN_IOU`, and when the time budget runs out (checked before every batch of
-:data:`BATCH` P3P or 4 P2E samples, and inside the scoring of every batch).
+Minimal samples are counted (a generating polynomial over the label groups, once per call)
+and listed per label group (a map object has one category), never by walking all detection
+tuples, so hundreds of same-label detections cost nothing before the first time-budget check.
+Exhaustive over the label-compatible minimal samples when there are at most ``max_hypotheses``
+of them (in a fixed order: the result does not depend on the seed; P3P samples most promising
+first, :func:`_most_promising_first`, when there are at most :data:`ORDER_CAP`), else
+``max_hypotheses`` random samples (seeded, uniform over the label-compatible samples). The
+first P3P batch has :data:`FIRST_BATCH` samples, the next :data:`BATCH` (P2E: 4).
+
+Early exit (issue 14) once a pose explains every usable detection (at least
+:data:`EARLY_EXIT_MIN_DETECTIONS`) with mean IoU >= :data:`EARLY_EXIT_MEAN_IOU`, but only after
+the **competitor sweep** (:func:`_sweep_samples`): every label-compatible assignment of one
+well-spread detection triple is tried, so any distinct pose that also explains every detection
+(what the ambiguity check of ``service.localization.confidence`` needs) is found although the
+rest of the search is skipped. The search also stops when the time budget runs out (checked
+before every batch and inside the scoring of every batch).
 
 Bounded cost (whatever the request): samples are generated lazily, one batch at a time, so
 nothing is built before the first deadline check and memory never grows with
-``max_hypotheses``. Candidate poses are scored one at a time (stage 2) or a few at a time
-(stage 1, :data:`PROJECT_BLOCK` pose x object projections), and the label-compatible
-(detection, object) pairs in blocks of at most :data:`PAIR_BLOCK` pairs (stage 1) or
-:data:`POINT_BLOCK` pair x point evaluations (stage 2), checking the deadline between blocks
-(:class:`ScoringTimeoutError`). Pairs whose bounding circles are disjoint (IoU exactly 0) or whose
-area ratio bounds the IoU estimate below the inlier threshold are skipped before the point
-test, which does not change any result. So the largest arrays of one request are the
-(detections x objects) pair index and one pose's (detections x objects) IoU matrix, ~45 bytes
-per compatible pair (docs/deployment.md, "Worst-case cost of a request"). All poses here are
+``max_hypotheses`` (the most-promising-first order materialises at most :data:`ORDER_CAP`
+samples). Candidate poses are scored a few at a time (at most :data:`PAIR_BLOCK` (pose, pair)
+tests and :data:`PROJECT_BLOCK` pose x object projections per block), and the
+label-compatible (detection, object) pairs in blocks of at most :data:`PAIR_BLOCK` tests or
+:data:`POINT_BLOCK` pair x point evaluations, checking the deadline between blocks
+(:class:`ScoringTimeoutError`). So the largest arrays of one request are the
+(detections x objects) pair index and one pose's pair IoUs, ~45 bytes per compatible pair
+(docs/deployment.md, "Worst-case cost of a request"). All poses here are
 ``camera_from_world`` (4x4, OpenCV ``[R | t]``).
 """
 
