@@ -17,7 +17,8 @@ Stages (wall time of each in ``LocalizationResult.timings_ms``):
    its best distinct hypotheses.
 4. ``refine`` — :func:`service.localization.refine.refine` on the best hypothesis' inliers
    (and on up to :data:`REFINED_ALTERNATIVES` distinct runners-up scoring at least
-   :data:`ALTERNATIVE_PREFILTER_RATIO` of the best) with ``options.metric`` (sigma-weighted,
+   :data:`ALTERNATIVE_PREFILTER_RATIO` of the best, except those that only re-use the best's
+   correspondences: ``_same_explanation``) with ``options.metric`` (sigma-weighted,
    robust kernel option), then re-association: the inliers are recomputed at the refined pose
    and, if the set changed, refined once more. A result is kept when it has >= ``min_inliers``
    inliers; none kept: ``refinement_diverged``.
@@ -27,7 +28,9 @@ Stages (wall time of each in ``LocalizationResult.timings_ms``):
    ``alternatives``); a confidence below ``min_confidence`` gives ``low_confidence``.
    (``refine`` itself re-lays grown adaptive level-set samples once at its result.)
 
-The time budget bounds the whole call: the hypothesis search stops at it, and no LM iteration
+The time budget (CPU time of the solving thread, with a wall-clock hard limit:
+:mod:`service.localization.budget`) bounds the whole call: the hypothesis search stops at it,
+and no LM iteration
 (nor level-set re-lay, nor re-association refinement) starts after it. A refinement cut short
 keeps its last accepted step and the result says so: ``refinement_status == "time_budget"``.
 """
