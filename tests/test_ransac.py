@@ -427,3 +427,18 @@ def test_pair_scoring_equals_the_dense_matrix_forms():
     for h in range(len(poses)):
         assert scorer.pair_assignment(pair[h], 0.2) == greedy_assignment(
             dense[h], scorer.detection_indices, 0.2)
+
+
+def test_pair_scores_with_a_detection_without_compatible_objects():
+    """A detection whose label has no object (not possible in localize(), possible for other
+    users of the scorer) scores 0, as in the dense form, and does not shift the others."""
+    cm, _ = _crowded(10, 3)
+    ells = [Ellipse(100, 100, 20, 10, 0), Ellipse(200, 200, 20, 10, 0),
+            Ellipse(300, 200, 20, 10, 0)]
+    for labels in (["a", "zz", "a"], ["a", "a", "zz"], ["zz", "a", "a"]):
+        scorer = MatchScorer(cm, CAM, ells, labels, [0, 1, 2])
+        iou = np.random.default_rng(0).uniform(0, 1, (2, len(scorer.pair_d)))
+        dense = np.zeros((2, 3, len(cm)))
+        dense[:, scorer.pair_d, scorer.pair_o] = iou
+        for a, b in zip(scorer.pair_scores(iou, 0.2), scorer.scores(dense, 0.2), strict=True):
+            np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)

@@ -445,7 +445,10 @@ class MatchScorer:
         one-to-one assignment's)."""
         if iou.shape[1] == 0:
             return np.zeros(len(iou)), np.zeros(len(iou), dtype=int)
-        best = np.maximum.reduceat(iou, self.pair_starts, axis=1)
+        # detections without a compatible object (not in a localize() scorer) score 0
+        has = np.diff(np.append(self.pair_starts, iou.shape[1])) > 0
+        best = np.zeros((len(iou), len(self.pair_starts)))
+        best[:, has] = np.maximum.reduceat(iou, self.pair_starts[has], axis=1)
         inl = best >= threshold
         return np.where(inl, best, 0.0).sum(axis=1), inl.sum(axis=1)
 
