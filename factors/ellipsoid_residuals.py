@@ -79,11 +79,17 @@ def level_set_samples(detection: Ellipse, camera: Camera,
 
 def dual_quadric(rotation: np.ndarray, center: np.ndarray, axes: np.ndarray) -> np.ndarray:
     """``Q* = T diag(a^2, b^2, c^2, -1) T^T`` (4x4) of an ellipsoid (rotation ellipsoid ->
-    world, centre m, semi-axes m)."""
-    Q = np.empty((4, 4))
-    Q[:3, :3] = (rotation * axes**2) @ rotation.T - np.outer(center, center)
-    Q[:3, 3] = Q[3, :3] = -center
-    Q[3, 3] = -1.0
+    world, centre m, semi-axes m). Batched: ``rotation`` (..., 3, 3), ``center`` and ``axes``
+    (..., 3) give (..., 4, 4)."""
+    R = np.asarray(rotation, dtype=float)
+    c = np.asarray(center, dtype=float)
+    a2 = np.asarray(axes, dtype=float) ** 2
+    Q = np.empty((*R.shape[:-2], 4, 4))
+    Q[..., :3, :3] = (R * a2[..., None, :]) @ np.swapaxes(R, -1, -2) \
+        - c[..., :, None] * c[..., None, :]
+    Q[..., :3, 3] = -c
+    Q[..., 3, :3] = -c
+    Q[..., 3, 3] = -1.0
     return Q
 
 
@@ -93,17 +99,23 @@ def dual_quadric_jacobians(rotation: np.ndarray, center: np.ndarray,
 
     ``omega, v``: the Pose3 right perturbation of the ellipsoid pose (rotation ellipsoid ->
     world, translation = centre): ``R -> R Exp(omega)``, ``center -> center + R v``.
+    Batched like :func:`dual_quadric`: (..., 9, 4, 4).
     """
-    R = rotation
-    D = np.diag(axes**2)
-    dQ = np.zeros((9, 4, 4))
-    inner = np.einsum("kij,jl->kil", _SKEW, D) - np.einsum("ij,kjl->kil", D, _SKEW)
-    dQ[0:3, :3, :3] = np.einsum("ij,kjl,ml->kim", R, inner, R)
-    for k in range(3):
-        r = R[:, k]
-        dQ[3 + k, :3, :3] = -(np.outer(r, center) + np.outer(center, r))
-        dQ[3 + k, :3, 3] = dQ[3 + k, 3, :3] = -r
-        dQ[6 + k, :3, :3] = 2.0 * axes[k] ** 2 * np.outer(r, r)
+    R = np.asarray(rotation, dtype=float)
+    c = np.asarray(center, dtype=float)
+    a2 = np.asarray(axes, dtype=float) ** 2
+    lead = R.shape[:-2]
+    dQ = np.zeros((*lead, 9, 4, 4))
+    # d(R D R^T) along omega_k = R ([e_k]x D - D [e_k]x) R^T, D = diag(a^2)
+    inner = _SKEW * a2[..., None, None, :] - a2[..., None, :, None] * _SKEW  # (..., 3, 3, 3)
+    dQ[..., 0:3, :3, :3] = np.einsum("...ij,...kjl,...ml->...kim", R, inner, R)
+    Rt = np.swapaxes(R, -1, -2)  # rows: the columns r_k of R
+    rc = Rt[..., :, :, None] * c[..., None, None, :]  # (..., 3, 3, 3): r_k c^T
+    dQ[..., 3:6, :3, :3] = -(rc + np.swapaxes(rc, -1, -2))
+    dQ[..., 3:6, :3, 3] = -Rt
+    dQ[..., 3:6, 3, :3] = -Rt
+    dQ[..., 6:9, :3, :3] = 2.0 * a2[..., :, None, None] * (
+        Rt[..., :, :, None] * Rt[..., :, None, :])
     return dQ
 
 
@@ -145,23 +157,24 @@ def observation_residual(
     Jacobians w.r.t. the ellipsoid ``[omega, v, d log axes]`` (M, 9) and w.r.t. the camera's
     ``world_from_camera`` Pose3 tangent ``[omega, v]`` (M, 6) when ``jacobians``.
 
-    Batched over V views of the same ellipsoid: ``camera_from_world`` (V, 4, 4) with
-    :func:`stack_samples` give (V, M), (V, M, 9), (V, M, 6).
+    Batched over V views: ``camera_from_world`` (V, 4, 4) with :func:`stack_samples` give
+    (V, M), (V, M, 9), (V, M, 6); the ellipsoid is shared (``rotation`` (3, 3)) or one per view
+    (``rotation`` (V, 3, 3), ``center`` and ``axes`` (V, 3)).
 
     The caller must ensure the ellipsoid is in front of the camera (positive depth margin,
     :func:`factors.geometry.ellipsoid_depth_margins`): otherwise ``A`` is no ellipse's conic.
     """
     Q = dual_quadric(rotation, center, axes)
-    P = camera_from_world[..., :3, :]
+    P = np.asarray(camera_from_world, dtype=float)[..., :3, :]
     A = P @ Q @ np.swapaxes(P, -1, -2)
     r, G = level_set_residual_and_gradient(A, samples, jacobians)
     if not jacobians:
         return r, None, None
     dQ = dual_quadric_jacobians(rotation, center, axes)
-    dA = np.einsum("...ai,kij,...bj->...kab", P, dQ, P)  # (..., 9, 3, 3)
+    dA = np.einsum("...ai,...kij,...bj->...kab", P, dQ, P)  # (..., 9, 3, 3)
     J_ell = np.einsum("...mab,...kab->...mk", G, dA)
     # camera: dA = -[w]x A - A [w]x^T + v c^T + c v^T, c = centre in the camera frame
-    c = P @ np.append(center, 1.0)  # (..., 3)
+    c = np.einsum("...ij,...j->...i", P[..., :3], np.asarray(center, dtype=float)) + P[..., 3]
     SA = np.einsum("kij,...jl->...kil", _SKEW, A)  # (..., 3, 3, 3)
     dAc = np.empty((*A.shape[:-2], 6, 3, 3))
     dAc[..., :3, :, :] = -SA - np.swapaxes(SA, -1, -2)

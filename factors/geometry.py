@@ -27,14 +27,21 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from factors.names import FieldError
+
 #: Largest ``max|R R^T - I|`` accepted for a rotation matrix (and ``|det R - 1|``).
 ORTHONORMAL_TOLERANCE = 1e-6
 #: Largest ``| |q| - 1 |`` accepted for a unit quaternion.
 QUATERNION_NORM_TOLERANCE = 1e-6
+#: The same two tolerances for numbers read from a document (a map file, a request's
+#: odometry): JSON writers round, so looser; the value is re-normalised / snapped after the check.
+DOCUMENT_ROTATION_TOLERANCE = 1e-4
+_I3 = np.eye(3)
 #: Smallest depth (metres, camera Z) a point of an ellipsoid may have for a valid projection.
 MIN_DEPTH = 1e-6
 
 __all__ = [
+    "DOCUMENT_ROTATION_TOLERANCE",
     "MIN_DEPTH",
     "ORTHONORMAL_TOLERANCE",
     "QUATERNION_NORM_TOLERANCE",
@@ -43,12 +50,15 @@ __all__ = [
     "DegenerateProjectionError",
     "Ellipse",
     "Ellipsoid",
+    "FieldError",
     "GeometryError",
     "canonical_quaternion_wxyz",
+    "check_pose",
     "dual_conics_from_params",
     "ellipse_params",
     "ellipsoid_depth_margins",
     "exact_norm",
+    "gaussians_from_dual_conics",
     "invert_pose",
     "level_values",
     "params_from_dual_conics",
@@ -64,8 +74,8 @@ __all__ = [
 ]
 
 
-class GeometryError(ValueError):
-    """Invalid geometric input; the message names the field and the problem."""
+class GeometryError(FieldError):
+    """Invalid geometric input (a :class:`FieldError`)."""
 
 
 class DegenerateProjectionError(ValueError):
@@ -121,6 +131,34 @@ def check_rotation(owner: str, name: str, value: object) -> np.ndarray:
     if abs(det - 1.0) > ORTHONORMAL_TOLERANCE:
         raise GeometryError(f"{owner}.{name} must be a proper rotation (det +1), det = {det:.6g}")
     return R
+
+
+def check_pose(T: object, name: str = "world_from_camera",
+               tolerance: float = ORTHONORMAL_TOLERANCE) -> np.ndarray:
+    """THE rule for a 4x4 rigid transform: finite, last row [0, 0, 0, 1] (within 1e-9),
+    rotation block orthonormal within ``tolerance`` (:data:`ORTHONORMAL_TOLERANCE` in process,
+    :data:`DOCUMENT_ROTATION_TOLERANCE` for numbers read from a document), det > 0. Raises
+    :class:`GeometryError` with ``field=name``; returns the matrix as float (4, 4)."""
+    try:
+        M = np.array(T, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise GeometryError("must be a numeric 4x4 matrix", field=name) from exc
+    if M.shape != (4, 4) or not np.isfinite(M).all():
+        raise GeometryError(f"must be a finite 4x4 matrix, got shape {M.shape}", field=name)
+    rows = M.tolist()  # scalar checks in plain floats: this runs on every refine() call
+    x, y, z, w = rows[3]
+    if max(abs(x), abs(y), abs(z), abs(w - 1.0)) > 1e-9:
+        raise GeometryError(f"last row must be [0, 0, 0, 1], got {rows[3]}", field=name)
+    R = M[:3, :3]
+    err = float(np.abs(R @ R.T - _I3).max())
+    (a, b, c, _), (d, e, f, _), (g, h, i, _) = rows[:3]
+    det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+    if err > tolerance or det < 0:
+        raise GeometryError(
+            f"rotation block is not a proper rotation (max|R R^T - I| = {err:.3g}, "
+            f"det = {det:.6g})", field=name)
+    return M
+
 
 
 # --------------------------------------------------------------------------- rotations and poses
@@ -307,18 +345,6 @@ class Ellipse:
         return np.array([self.cx, self.cy, self.a, self.b, self.angle])
 
     # -- conics
-    def primal_conic(self) -> np.ndarray:
-        """Point conic ``C`` (3x3): ``x~^T C x~ = 0`` on the contour, ``< 0`` inside."""
-        A = self.shape_matrix()
-        c = self.center
-        Ac = A @ c
-        C = np.empty((3, 3))
-        C[:2, :2] = A
-        C[:2, 2] = -Ac
-        C[2, :2] = -Ac
-        C[2, 2] = c @ Ac - 1.0
-        return C
-
     def dual_conic(self) -> np.ndarray:
         """Dual conic ``C* = C^-1`` normalised so that ``C*[2, 2] = -1`` (3x3, px^2)."""
         return dual_conics_from_params(self.params()[None])[0]
@@ -327,18 +353,6 @@ class Ellipse:
     def from_dual_conic(cls, dual_conic: np.ndarray) -> Ellipse:
         """Ellipse of a dual conic of any scale; raises ``DegenerateProjectionError`` if none."""
         return cls(*params_from_dual_conics(np.asarray(dual_conic, dtype=float)[None])[0])
-
-    @classmethod
-    def from_primal_conic(cls, conic: np.ndarray) -> Ellipse:
-        """Ellipse of a point conic of any scale and sign."""
-        C = np.asarray(conic, dtype=float)
-        if C.shape != (3, 3) or not np.all(np.isfinite(C)):
-            raise GeometryError("conic must be a finite 3x3 matrix")
-        try:
-            Cd = np.linalg.inv(C)
-        except np.linalg.LinAlgError as exc:
-            raise DegenerateProjectionError("degenerate_conic", "singular conic") from exc
-        return cls.from_dual_conic(Cd)
 
     # -- Gaussian
     def gaussian(self) -> tuple[np.ndarray, np.ndarray]:
@@ -370,21 +384,11 @@ class Ellipse:
             )
         return cls((xmin + xmax) / 2, (ymin + ymax) / 2, (xmax - xmin) / 2, (ymax - ymin) / 2, 0.0)
 
-    def level(self, points: np.ndarray) -> np.ndarray:
-        """``Phi`` at ``points`` of shape (..., 2) px; returns shape (...,). 1 on the contour."""
-        d = np.asarray(points, dtype=float) - self.center
-        return np.einsum("...i,ij,...j->...", d, self.shape_matrix(), d)
-
     def contour_points(self, n: int = 64) -> np.ndarray:
         """``n`` points on the contour at equal parametric angles, shape (n, 2) px."""
         t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
         local = np.stack([self.a * np.cos(t), self.b * np.sin(t)], axis=-1)
         return local @ self.rotation.T + self.center
-
-    def transformed(self, angle: float, translation: Sequence[float]) -> Ellipse:
-        """Image of the ellipse under ``x -> R(angle) x + translation`` (rotation about (0, 0))."""
-        c = rotation_2d(angle) @ self.center + np.asarray(translation, dtype=float)
-        return Ellipse(c[0], c[1], self.a, self.b, self.angle + angle)
 
     def canonical(self) -> Ellipse:
         """Same set of points with ``a >= b`` and ``angle`` in ``[-pi/2, pi/2)``."""
@@ -438,6 +442,14 @@ def params_from_gaussians(center: np.ndarray, sigma: np.ndarray) -> np.ndarray:
                             np.sqrt(lam_minor), angle])
 
 
+def gaussians_from_dual_conics(Cn: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """THE centre and Sigma of NORMALISED dual conics ``Cn`` (..., 3, 3), ``Cn[2, 2] = -1``:
+    ``mu = -Cn[:2, 2]`` (..., 2) px and ``Sigma = Cn[:2, :2] + mu mu^T`` (..., 2, 2) px^2
+    (``Sigma = R diag(a^2, b^2) R^T`` for an ellipse; not positive definite otherwise)."""
+    mu = -Cn[..., :2, 2]
+    return mu, Cn[..., :2, :2] + mu[..., :, None] * mu[..., None, :]
+
+
 def params_from_dual_conics(dual_conics: np.ndarray) -> np.ndarray:
     """Ellipse params (N, 5) from dual conics (N, 3, 3) of any scale.
 
@@ -451,10 +463,7 @@ def params_from_dual_conics(dual_conics: np.ndarray) -> np.ndarray:
     if np.any(~(np.abs(w) > 0.0)):
         raise DegenerateProjectionError("degenerate_conic", "dual conic with C*[2, 2] = 0 "
                                         "(a parabola or a conic through infinity)")
-    Cn = C / (-w)[:, None, None]
-    center = -Cn[:, :2, 2]
-    sigma = Cn[:, :2, :2] + center[:, :, None] * center[:, None, :]
-    return params_from_gaussians(center, sigma)
+    return params_from_gaussians(*gaussians_from_dual_conics(C / (-w)[:, None, None]))
 
 
 def level_values(params: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -512,14 +521,6 @@ class Ellipsoid:
     def shape_matrix(self) -> np.ndarray:
         """``M = rotation diag(axes^2) rotation^T`` (3x3, m^2): the quadric's inverse shape."""
         return self.rotation @ np.diag(self.axes**2) @ self.rotation.T
-
-    def surface_points(self, n_azimuth: int = 32, n_polar: int = 16) -> np.ndarray:
-        """Points on the surface (world metres), shape (n_azimuth * n_polar, 3)."""
-        az = np.linspace(0, 2 * np.pi, n_azimuth, endpoint=False)
-        po = np.linspace(0, np.pi, n_polar)
-        A, P = np.meshgrid(az, po, indexing="ij")
-        unit = np.stack([np.sin(P) * np.cos(A), np.sin(P) * np.sin(A), np.cos(P)], -1)
-        return (unit.reshape(-1, 3) * self.axes) @ self.rotation.T + self.center
 
 
 # --------------------------------------------------------------------------- camera

@@ -10,6 +10,18 @@ Public entry points
 * ``level_set_sample_points(...)`` / ``level_set_sampling_scale(...)``: the level-set sampling
   layout, shared with the GTSAM factors.
 
+Scalar forms and the batched implementation (decided, issue 10)
+----------------------------------------------------------------
+The functions here are the metrics' REFERENCE definitions, one pair of ellipses at a time, and
+the tests' independent oracle. The ONE production implementation of the smooth metrics
+(``level_set``, ``algebraic``, ``frobenius``, ``wasserstein``, ``bhattacharyya``, ``bbox``) and
+of their pose Jacobians is the batched :class:`factors.pose_residuals.PoseResidualModel`;
+``tests/test_pose_factors.py`` checks that it equals :func:`residual` pair by pair. Production
+code calls the scalar forms only where there is no batched form: ``qbbox`` (piecewise, numeric
+Jacobian), the per-pair exact overlap of ``iou`` / ``giou`` (:func:`overlap_residual`), the
+level-set sampling layout (shared by both), and the one-off validation of
+``LocalizationOptions.metric_options`` on a fixed probe pair.
+
 Argument order: the **detection** (fixed, measured) comes first, the **projection** (the
 moving, predicted ellipse) second. Every residual is "detection minus projection". All lengths
 are pixels, angles radians (see :mod:`factors.geometry` for the ellipse conventions).
@@ -95,6 +107,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from factors.geometry import Ellipse, sigma_entries
+from factors.names import METRIC_NAMES
 from factors.overlap import HULL_DIRECTIONS, hull_area, intersection_area, quadrant_areas
 
 __all__ = [
@@ -111,10 +124,6 @@ __all__ = [
     "residual_size",
 ]
 
-METRIC_NAMES: tuple[str, ...] = (
-    "iou", "giou", "bbox", "qbbox", "algebraic", "frobenius", "wasserstein", "bhattacharyya",
-    "level_set",
-)
 
 #: Default outermost sampled level "radius" ``s_max`` (the curve ``Phi_D = s_max^2``).
 DEFAULT_LEVEL_SET_SCALE = 2.0

@@ -50,21 +50,18 @@ see :mod:`factors.pose_residuals`.
 from __future__ import annotations
 
 import math
-import numbers
-from collections.abc import Callable, Mapping, Sequence
-from functools import partial
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import gtsam
 import numpy as np
 
 from factors.geometry import Camera, Ellipse, Ellipsoid
-from factors.metrics import METRIC_NAMES
+from factors.names import ROBUST_KERNELS, check_robust, is_real
 from factors.pose_residuals import PoseResidualModel
 
 __all__ = [
     "DEFAULT_ROBUST_SCALE",
-    "FACTOR_FACTORIES",
     "ROBUST_KERNELS",
     "batched_pose_factor",
     "make_noise_model",
@@ -73,8 +70,6 @@ __all__ = [
     "shared_pose_factor",
 ]
 
-#: Robust kernels accepted by name.
-ROBUST_KERNELS: tuple[str, ...] = ("huber", "cauchy", "geman_mcclure")
 
 #: Default robust threshold ``k`` per metric, on the whitened residual norm
 #: ``sqrt(Delta_j / sigma_j)`` (units: those of the metric's residual). Calibration
@@ -96,15 +91,11 @@ DEFAULT_ROBUST_SCALE: dict[str, float] = {
 }
 
 
-def _is_real(x: object) -> bool:
-    return isinstance(x, numbers.Real) and not isinstance(x, bool)
-
-
 def _check_sigmas(sigmas: Sequence[float | None], n: int) -> None:
     if len(sigmas) != n:
         raise ValueError(f"sigmas must have one entry per detection ({n}), got {len(sigmas)}")
     for j, s in enumerate(sigmas):
-        if s is not None and not (_is_real(s) and math.isfinite(s) and s > 0):
+        if s is not None and not (is_real(s) and math.isfinite(s) and s > 0):
             raise ValueError(f"sigmas[{j}] must be finite and > 0, got {s!r}")
 
 
@@ -123,20 +114,14 @@ def make_noise_model(
     if sigma is None:
         std = 1.0
     else:
-        if not (_is_real(sigma) and math.isfinite(sigma) and sigma > 0):
+        if not (is_real(sigma) and math.isfinite(sigma) and sigma > 0):
             raise ValueError(f"sigma must be finite and > 0, got {sigma!r}")
         std = math.sqrt(float(sigma))
+    check_robust(robust, robust_scale)
     base = gtsam.noiseModel.Isotropic.Sigma(int(dim), std)
     if robust is None:
-        if robust_scale is not None:
-            raise ValueError("robust_scale given without a robust kernel (robust=None)")
         return base
-    if robust not in ROBUST_KERNELS:
-        raise ValueError(f"robust must be one of {', '.join(ROBUST_KERNELS)} or None, "
-                         f"got {robust!r}")
     k = DEFAULT_ROBUST_SCALE.get(metric, 1.0) if robust_scale is None else robust_scale
-    if not (_is_real(k) and math.isfinite(k) and k > 0):
-        raise ValueError(f"robust_scale must be finite and > 0, got {robust_scale!r}")
     est = {
         "huber": gtsam.noiseModel.mEstimator.Huber,
         "cauchy": gtsam.noiseModel.mEstimator.Cauchy,
@@ -197,8 +182,7 @@ def pose_factors(
     if sigmas is None:
         sigmas = [None] * model.n
     _check_sigmas(sigmas, model.n)
-    if robust is None and robust_scale is not None:
-        raise ValueError("robust_scale given without a robust kernel (robust=None)")
+    check_robust(robust, robust_scale)
     if batched:
         if robust is not None:
             raise ValueError("batched=True cannot carry per-detection robust kernels; "
@@ -237,12 +221,6 @@ def pose_factor(
                               initial_world_from_camera=initial_world_from_camera,
                               metric_options=metric_options, **model_options)
     return factors[0]
-
-
-#: ``FACTOR_FACTORIES[metric](key, detection, ellipsoid, camera, *, sigma=..., robust=..., ...)``
-FACTOR_FACTORIES: dict[str, Callable[..., gtsam.CustomFactor]] = {
-    name: partial(pose_factor, name) for name in METRIC_NAMES
-}
 
 
 def batched_pose_factor(

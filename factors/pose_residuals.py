@@ -106,14 +106,16 @@ from typing import Any
 
 import numpy as np
 
+from factors import metrics
 from factors.geometry import (
-    ORTHONORMAL_TOLERANCE,
     Camera,
     DegenerateProjectionError,
     Ellipse,
     Ellipsoid,
     GeometryError,
+    check_pose,
     dual_conics_from_params,
+    gaussians_from_dual_conics,
     level_values,
     params_from_dual_conics,
     params_from_gaussians,
@@ -128,9 +130,7 @@ __all__ = [
     "DEFAULT_PENALTY_COST",
     "PoseEvaluation",
     "PoseResidualModel",
-    "check_pose",
     "expmap_pose3",
-    "numerical_pose_jacobian",
 ]
 
 #: Invalid-projection penalty cost per pair, in units of the pair's reference cost ``rho_j^2``
@@ -192,8 +192,6 @@ def _dh_dlambda(u: np.ndarray, h: np.ndarray, lam: np.ndarray) -> np.ndarray:
 @functools.lru_cache(maxsize=32)
 def _unit_level_set_layout(n_azimuths: int, n_levels: int) -> np.ndarray:
     """``(u, v)`` (M, 2) of ``factors.metrics``' level-set layout for a unit circle, s_max = 1."""
-    from factors import metrics
-
     uv = metrics.level_set_sample_points(Ellipse(0.0, 0.0, 1.0, 1.0, 0.0), None,
                                          n_azimuths=n_azimuths, n_levels=n_levels, scale=1.0,
                                          adaptive=False)
@@ -232,23 +230,6 @@ def expmap_pose3(xi: np.ndarray) -> np.ndarray:
     T[:3, :3] = R
     T[:3, 3] = V @ v
     return T
-
-
-def numerical_pose_jacobian(
-    fn: Any, world_from_camera: np.ndarray, step: float = 1e-6
-) -> np.ndarray:
-    """Central-difference ``d fn(world_from_camera @ Exp(xi)) / d xi`` at 0: shape (m, 6).
-
-    ``fn`` maps a 4x4 ``world_from_camera`` to a 1-D residual of length ``m``.
-    """
-    T = np.asarray(world_from_camera, dtype=float)
-    cols = []
-    for k in range(6):
-        e = np.zeros(6)
-        e[k] = step
-        cols.append((np.asarray(fn(T @ expmap_pose3(e))) -
-                     np.asarray(fn(T @ expmap_pose3(-e)))) / (2 * step))
-    return np.stack(cols, axis=-1)
 
 
 @dataclass(frozen=True)
@@ -315,8 +296,6 @@ class PoseResidualModel:
         numeric_step: float | None = None,
         eager_jacobian: bool | None = None,
     ) -> None:
-        from factors import metrics
-
         if metric not in metrics.METRIC_NAMES:
             raise ValueError(
                 f"metric must be one of {', '.join(metrics.METRIC_NAMES)}; got {metric!r}"
@@ -439,8 +418,6 @@ class PoseResidualModel:
     def _init_level_set(self, T0: np.ndarray | None) -> None:
         """Fix the level-set samples: ``factors.metrics.level_set_sample_points``' layout,
         computed for all detections at once (equality with it is tested)."""
-        from factors import metrics
-
         self._M = int(metrics.residual_size("level_set", **self.options))  # validates options
         n_az = self.options.get("n_azimuths", 6)
         n_lv = self.options.get("n_levels", 4)
@@ -480,8 +457,6 @@ class PoseResidualModel:
         self._n_p2 = self._nT[:, _P2]
 
     def _metric_dim(self) -> int:
-        from factors import metrics
-
         return int(metrics.residual_size(self.metric, **self.options))
 
     # ------------------------------------------------------------------ evaluation
@@ -712,9 +687,9 @@ class PoseResidualModel:
     ) -> tuple[np.ndarray, np.ndarray | None]:
         """``r = B_D - B_P``, ``B = [cx - hx, cy - hy, cx + hx, cy + hy]`` with the half-sizes
         ``hx = sqrt(Sigma00)``, ``hy = sqrt(Sigma11)`` of the axis-aligned box, and d r / d xi."""
-        mu = -Cn[:, :2, 2]
-        hx = np.sqrt(Cn[:, 0, 0] + mu[:, 0] ** 2)
-        hy = np.sqrt(Cn[:, 1, 1] + mu[:, 1] ** 2)
+        mu, S = gaussians_from_dual_conics(Cn)
+        hx = np.sqrt(S[:, 0, 0])
+        hy = np.sqrt(S[:, 1, 1])
         box = np.stack([mu[:, 0] - hx, mu[:, 1] - hy, mu[:, 0] + hx, mu[:, 1] + hy], axis=1)
         r = self._det_box - box
         if dCn is None:
@@ -739,10 +714,8 @@ class PoseResidualModel:
         (``k = 0``) the angle terms of the Jacobian are set to 0 (the metric is not
         differentiable there).
         """
-        mu = -Cn[:, :2, 2]
-        s00 = Cn[:, 0, 0] + mu[:, 0] ** 2
-        s01 = Cn[:, 0, 1] + mu[:, 0] * mu[:, 1]
-        s11 = Cn[:, 1, 1] + mu[:, 1] ** 2
+        mu, S = gaussians_from_dual_conics(Cn)
+        s00, s01, s11 = S[:, 0, 0], S[:, 0, 1], S[:, 1, 1]
         h, m = 0.5 * (s00 - s11), 0.5 * (s00 + s11)
         rho = np.sqrt(h * h + s01 * s01)
         a2, b2 = np.sqrt(m + rho), np.sqrt(np.maximum(m - rho, 0.0))
@@ -797,10 +770,8 @@ class PoseResidualModel:
         function's derivative is Daleckii-Krein's ``dG = V (F o (V^T dN V)) V^T`` (divided
         differences of ``h(log lambda)``, its derivative when the eigenvalues coincide).
         """
-        mu = -Cn[:, :2, 2]
-        q00 = Cn[:, 0, 0] + mu[:, 0] ** 2
-        q01 = Cn[:, 0, 1] + mu[:, 0] * mu[:, 1]
-        q11 = Cn[:, 1, 1] + mu[:, 1] ** 2
+        mu, Q = gaussians_from_dual_conics(Cn)
+        q00, q01, q11 = Q[:, 0, 0], Q[:, 0, 1], Q[:, 1, 1]
         d00, d01, d11 = self._det_sigma.T
         s00, s01, s11 = 0.5 * (d00 + q00), 0.5 * (d01 + q01), 0.5 * (d11 + q11)
         l00 = np.sqrt(s00)
@@ -867,8 +838,6 @@ class PoseResidualModel:
     # ------------------------------------------------------------------ generic metrics
     def _metric_rows(self, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Residual rows (N, dim) via factors.metrics.residual, and validity (N,)."""
-        from factors import metrics
-
         projs = self._projections(T)
         r = np.empty((self.n, self.dim))
         valid = np.zeros(self.n, dtype=bool)
@@ -914,31 +883,6 @@ class PoseResidualModel:
         the penalty's cost where the projection is invalid."""
         ev = self.evaluate(world_from_camera, jacobian=False)
         return np.einsum("nm,nm->n", ev.residuals, ev.residuals)
-
-
-def check_pose(T: object, name: str = "world_from_camera") -> np.ndarray:
-    """Validate a 4x4 rigid transform (finite, last row [0,0,0,1], rotation orthonormal within
-    ``factors.geometry.ORTHONORMAL_TOLERANCE``, det > 0); errors read ``"<name>: <problem>"``."""
-    try:
-        M = np.array(T, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise GeometryError(f"{name}: must be a numeric 4x4 matrix") from exc
-    if M.shape != (4, 4) or not np.isfinite(M).all():
-        raise GeometryError(f"{name}: must be a finite 4x4 matrix, got shape {M.shape}")
-    rows = M.tolist()  # scalar checks in plain floats: this runs on every refine() call
-    x, y, z, w = rows[3]
-    if max(abs(x), abs(y), abs(z), abs(w - 1.0)) > 1e-9:
-        raise GeometryError(f"{name}: last row must be [0, 0, 0, 1], got {rows[3]}")
-    R = M[:3, :3]
-    err = float(np.abs(R @ R.T - _I3).max())
-    (a, b, c, _), (d, e, f, _), (g, h, i, _) = rows[:3]
-    det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
-    if err > ORTHONORMAL_TOLERANCE or det < 0:
-        raise GeometryError(
-            f"{name}: rotation block is not a proper rotation (max|R R^T - I| = {err:.3g}, "
-            f"det = {det:.6g})"
-        )
-    return M
 
 
 _I3 = np.eye(3)

@@ -81,8 +81,24 @@ class CompiledMap:
         return {"map_id": self.map_id, "version": self.version, "objects": len(self)}
 
 
-def compile_map(scene_map: SceneMap) -> CompiledMap:
-    """Precompute the solver's per-object arrays for ``scene_map`` (vectorised, O(N))."""
+#: Attribute of a :class:`SceneMap` holding its compiled form (see :func:`compile_map`).
+_MEMO = "_compiled"
+
+
+def compile_map(scene_map: SceneMap | CompiledMap) -> CompiledMap:
+    """The solver's per-object arrays of ``scene_map`` (vectorised, O(N)); a
+    :class:`CompiledMap` is returned as is.
+
+    Computed once per map object: the result is memoised on the (immutable) ``SceneMap``
+    itself, so every caller holding the same map shares one ``CompiledMap``. This is not a
+    cache (nothing to evict or invalidate: it lives and dies with the map); the process's one
+    cache of compiled map *versions* is :class:`maps.cache.CompiledMapCache`.
+    """
+    if isinstance(scene_map, CompiledMap):
+        return scene_map
+    memo = scene_map.__dict__.get(_MEMO)
+    if memo is not None:
+        return memo
     objects = scene_map.objects
     n = len(objects)
     ellipsoids = tuple(o.ellipsoid for o in objects)
@@ -104,7 +120,7 @@ def compile_map(scene_map: SceneMap) -> CompiledMap:
         idx = np.flatnonzero(cats == category).astype(np.intp)
         idx.setflags(write=False)
         indices_by_category[category] = idx
-    return CompiledMap(
+    compiled = CompiledMap(
         scene_map=scene_map,
         object_ids=tuple(o.object_id for o in objects),
         categories=categories,
@@ -116,3 +132,5 @@ def compile_map(scene_map: SceneMap) -> CompiledMap:
         dual_quadrics=_frozen(dual_quadrics),
         indices_by_category=indices_by_category,
     )
+    object.__setattr__(scene_map, _MEMO, compiled)
+    return compiled

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from factors.geometry import (
+    DOCUMENT_ROTATION_TOLERANCE,
     Ellipsoid,
     canonical_quaternion_wxyz,
     exact_norm,
@@ -62,9 +63,10 @@ LIMITS: dict[str, float] = {
     "max_name_length": 256,
     "max_metadata_bytes": 65_536,
     "max_metadata_depth": 32,
-    # Tolerances of the JSON importer (looser than factors.geometry's, values are re-normalised):
-    "quaternion_norm_tolerance": 1e-4,
-    "rotation_orthonormal_tolerance": 1e-4,
+    # Tolerances of the JSON importer (factors.geometry.DOCUMENT_ROTATION_TOLERANCE: looser than
+    # the in-process ones, values are re-normalised / snapped):
+    "quaternion_norm_tolerance": DOCUMENT_ROTATION_TOLERANCE,
+    "rotation_orthonormal_tolerance": DOCUMENT_ROTATION_TOLERANCE,
 }
 
 #: ``map_id`` must be URL-path safe: letters, digits, ``_ . -``; first char a letter or digit.
@@ -382,6 +384,7 @@ class SceneMap:
 
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)  # mappingproxy does not pickle: store plain JSON data
+        state.pop("_compiled", None)  # the memoised CompiledMap (maps.compiled.compile_map)
         state["metadata"] = _thaw(self.metadata)
         return state
 

@@ -15,17 +15,23 @@ Method
    ``M = Q*[:3, :3] + c c^T = R diag(axes^2) R^T``; ``M`` must be positive definite (else
    ``not_an_ellipsoid``).
 3. **Refinement**: Levenberg-Marquardt in GTSAM over a ``Pose3`` (ellipsoid frame -> world:
-   rotation and centre) and a ``Vector3`` of log semi-axes, one ``gtsam.CustomFactor`` per view.
-   Residual: the level-set residual of the paper without decomposing the projected conic,
-   ``r_j = Phi_pred(x_j) - 1 = -D[2,2] x~_j^T D^-1 x~_j`` with ``D = P Q* P^T`` (any scale),
-   at points ``x_j`` sampled on the *observed* ellipse (zero for every j iff the predicted
-   ellipse passes through them; dimensionless, a relative level error). Analytic Jacobians:
-   ``dr = <dQ*, D[2,2] v v^T - s p3 p3^T>`` with ``u = D^-1 x~``, ``s = x~^T u``, ``v = P^T u``,
-   ``p3 = P[2, :]`` and ``dQ*`` the derivative of ``Q*`` along each tangent direction (Pose3 right
-   perturbation ``[omega, v]``: ``R -> R Exp(omega)``, ``c -> c + R v``). LM runs from the linear
-   estimate and from a sphere at the triangulated centre (radius from the apparent sizes); the
-   valid result (in front of every camera, semi-axes within the map limits) with the lowest
-   residual wins — the linear estimate alone is fragile under noise and narrow baselines.
+   rotation and centre) and a ``Vector3`` of log semi-axes, with the ellipsoid factor shared
+   with map building, :func:`factors.ellipsoid_factors.ellipsoid_views_factor` (the level-set
+   residual of localization, :func:`factors.ellipsoid_residuals.observation_residual`, and its
+   analytic Jacobians; one factor over all views, no robust kernel). Samples: ``samples_per_view``
+   points on each *observed* ellipse (``Phi_det = 1`` there), so each residual is
+   ``1 - Phi_pred(x_j)`` (zero for every j iff the predicted ellipse passes through them;
+   dimensionless, a relative level error), each view's divided by its sigma. The camera enters
+   as its projection ``K [R|t]`` with the samples in homogeneous pixels (the residual is
+   invariant to that change of image coordinates). LM runs from the linear estimate and from a
+   sphere at the triangulated centre (radius from the apparent sizes); the valid result (in
+   front of every camera, a plausible shape, reproducing the views) with the lowest residual
+   wins — the linear estimate alone is fragile under noise and narrow baselines.
+4. **Checks**: every result must be entirely in front of every camera (``not_in_front``), a
+   plausible shape (:func:`degenerate_shape_reason`: semi-axes within the map limits and not
+   flatter than ``MIN_AXIS_RATIO``, else ``degenerate_shape``) and reproduce the views (RMS
+   level residual at most ``MAX_RMS_LEVEL_RESIDUAL``, else ``inconsistent_views``: e.g. views of
+   different objects, where LM may shrink the ellipsoid to a few millimetres).
 
 Conventions: poses are ``world_from_camera`` 4x4 (camera axes OpenCV), ellipses in pixels,
 semi-axes in metres, output rotations ellipsoid frame -> world.
@@ -42,12 +48,14 @@ from typing import Any
 import gtsam
 import numpy as np
 
+from factors.ellipsoid_factors import ellipsoid_views_factor
 from factors.ellipsoid_residuals import (
     LevelSetSamples,
+    dual_quadric,
     dual_quadric_jacobians,
-    level_set_residual_and_gradient,
+    observation_residual,
+    stack_samples,
 )
-from factors.ellipsoid_residuals import dual_quadric as shared_dual_quadric
 from factors.geometry import (
     ORTHONORMAL_TOLERANCE,
     Camera,
@@ -65,6 +73,8 @@ __all__ = [
     "ReconstructionError",
     "ReconstructionResult",
     "build_scene_map",
+    "contour_samples",
+    "degenerate_shape_reason",
     "dual_quadric_jacobians",
     "ellipsoid_errors",
     "ellipsoid_from_dual_quadric",
@@ -78,6 +88,15 @@ __all__ = [
 MIN_RAY_ANGLE_DEG = 2.0
 #: Default number of points sampled on each observed ellipse for the refinement residual.
 SAMPLES_PER_VIEW = 16
+#: Smallest accepted ratio of the smallest to the largest semi-axis (1:100; the flattest Chess
+#: object is 1:3.5): flatter results are reconstructions collapsed along an axis the views do
+#: not constrain (``degenerate_shape``).
+MIN_AXIS_RATIO = 0.01
+#: Largest accepted RMS of the (unweighted) level residual ``Phi_pred - 1`` at the observed
+#: contours. 1 means the observed contour points lie, on average, at the predicted ellipse's
+#: centre level or twice its boundary level: no ellipse of the views is reproduced
+#: (``inconsistent_views``). Noisy views of one object stay below 0.2 on the bench.
+MAX_RMS_LEVEL_RESIDUAL = 1.0
 
 _TRIU4 = np.triu_indices(4)
 _TRIU3 = np.triu_indices(3)
@@ -92,8 +111,10 @@ class ReconstructionError(ValueError):
     """The views do not determine an ellipsoid. ``reason`` is a machine-readable code:
 
     ``too_few_views``, ``bad_input``, ``near_parallel_rays``, ``not_an_ellipsoid``,
-    ``not_in_front`` (the estimate is not in front of every camera), ``refinement_failed`` or
-    ``degenerate_shape`` (semi-axes outside the map limits: the shape is not constrained).
+    ``not_in_front`` (the estimate is not in front of every camera), ``refinement_failed``,
+    ``degenerate_shape`` (semi-axes outside the map limits or flatter than ``MIN_AXIS_RATIO``:
+    the shape is not constrained) or ``inconsistent_views`` (no ellipsoid reproduces the
+    views: RMS level residual above ``MAX_RMS_LEVEL_RESIDUAL``).
     """
 
     def __init__(self, reason: str, message: str) -> None:
@@ -256,33 +277,22 @@ def ellipsoid_from_dual_quadric(dual_quadric: np.ndarray) -> Ellipsoid:
 # --------------------------------------------------------------------------- refinement
 
 
-def _dual_quadric(R: np.ndarray, center: np.ndarray, axes: np.ndarray) -> np.ndarray:
-    return shared_dual_quadric(R, center, axes)
-
-
-def _level_residual_and_grad(
-    P: np.ndarray, Q: np.ndarray, xh: np.ndarray, dQ: np.ndarray | None
-) -> tuple[np.ndarray, np.ndarray | None]:
-    """``r = Phi_pred(x) - 1 = -D[2,2] x~^T D^-1 x~`` (m,) at observed contour points
-    ``x~`` (m, 3, homogeneous px), ``D = P Q* P^T``, and ``dr/dtheta`` (m, 9) if ``dQ`` is given.
-    Batched over views: ``P`` (n, 3, 4), ``xh`` (n, m, 3) give (n, m) and (n, m, 9).
-
-    The shared level-set residual of :mod:`factors.ellipsoid_residuals` with ``K`` folded into
-    ``P`` (``Phi_det = 1`` on the contour, so ``r`` is minus its residual there)."""
-    Pt = np.swapaxes(P, -1, -2)
-    D = P @ Q @ Pt
-    samples = LevelSetSamples(None, np.ascontiguousarray(np.swapaxes(xh, -1, -2)),
-                              np.zeros(xh.shape[:-1]))
-    r, G = level_set_residual_and_gradient(D, samples, dQ is not None)
-    if dQ is None:
-        return -r, None
-    dD = np.einsum("...ai,kij,...bj->...kab", P, dQ, P)
-    return -r, -np.einsum("...mab,...kab->...mk", G, dD)
-
-
-def _contour_samples(ellipse: Ellipse, n: int) -> np.ndarray:
+def contour_samples(ellipse: Ellipse, n: int) -> LevelSetSamples:
+    """``n`` points on the observed ellipse as level-set samples in homogeneous pixels
+    (``Phi_det = 1`` there), for a camera given by its projection ``K [R|t]`` (see
+    :func:`factors.ellipsoid_factors.ellipsoid_views_factor`)."""
     pts = ellipse.contour_points(n)
-    return np.column_stack([pts, np.ones(n)])
+    return LevelSetSamples(pts, np.vstack([pts.T, np.ones((1, n))]), np.zeros(n))
+
+
+def _projection_rows(projections: np.ndarray) -> np.ndarray:
+    """``K [R|t]`` (n, 3, 4) padded to (n, 4, 4): the factor's ``camera_from_world`` for
+    samples in homogeneous pixels."""
+    P = np.asarray(projections, dtype=float)
+    out = np.zeros((P.shape[0], 4, 4))
+    out[:, :3, :] = P
+    out[:, 3, 3] = 1.0
+    return out
 
 
 def view_residuals(
@@ -290,37 +300,13 @@ def view_residuals(
     samples_per_view: int = SAMPLES_PER_VIEW,
 ) -> np.ndarray:
     """Level residuals ``Phi_pred - 1`` (n, samples) of ``ellipsoid`` against observed ellipses,
-    with ``projections`` the views' ``P = K [R|t]_camera_from_world`` (n, 3, 4)."""
-    Q = ellipsoid.dual_quadric()
-    xh = np.array([_contour_samples(e, samples_per_view) for e in ellipses])
-    return _level_residual_and_grad(np.asarray(projections, dtype=float), Q, xh, None)[0]
-
-
-def _make_factor(P: np.ndarray, xh: np.ndarray, weights: np.ndarray, pose_key: int,
-                 axes_key: int) -> gtsam.CustomFactor:
-    """All views in one factor (residual rows of view ``i`` divided by its sigma: the same
-    cost as one isotropic factor per view, without a Python round trip per view)."""
-    P = np.array(P, dtype=float)
-    xh = np.array(xh, dtype=float)
-    w = np.asarray(weights, dtype=float)[:, None]
-    noise = gtsam.noiseModel.Unit.Create(int(xh.shape[0] * xh.shape[1]))
-
-    def error_fn(this: gtsam.CustomFactor, values: gtsam.Values,
-                 H: list[np.ndarray] | None) -> np.ndarray:
-        pose = values.atPose3(pose_key)
-        R = pose.rotation().matrix()
-        c = np.asarray(pose.translation(), dtype=float)
-        axes = np.exp(values.atVector(axes_key))
-        Q = _dual_quadric(R, c, axes)
-        if H is None:
-            return (_level_residual_and_grad(P, Q, xh, None)[0] * w).reshape(-1)
-        r, J = _level_residual_and_grad(P, Q, xh, dual_quadric_jacobians(R, c, axes))
-        J = (J * w[..., None]).reshape(-1, 9)
-        H[0] = np.ascontiguousarray(J[:, :6])
-        H[1] = np.ascontiguousarray(J[:, 6:])
-        return (r * w).reshape(-1)
-
-    return gtsam.CustomFactor(noise, [pose_key, axes_key], error_fn)
+    with ``projections`` the views' ``P = K [R|t]_camera_from_world`` (n, 3, 4): minus the
+    shared level-set residual (:func:`factors.ellipsoid_residuals.observation_residual`) at
+    ``samples_per_view`` contour points of each observed ellipse."""
+    samples = stack_samples([contour_samples(e, samples_per_view) for e in ellipses])
+    r, _, _ = observation_residual(_projection_rows(projections), ellipsoid.rotation,
+                                   ellipsoid.center, ellipsoid.axes, samples, False)
+    return -r
 
 
 def refine_ellipsoid(
@@ -339,9 +325,10 @@ def refine_ellipsoid(
     pose_key, axes_key = gtsam.symbol("e", 0), gtsam.symbol("a", 0)
     graph = gtsam.NonlinearFactorGraph()
     sig = [1.0] * len(ellipses) if sigmas is None else list(sigmas)
-    graph.add(_make_factor(np.asarray(projections, dtype=float),
-                           np.array([_contour_samples(e, samples_per_view) for e in ellipses]),
-                           1.0 / np.asarray(sig, dtype=float), pose_key, axes_key))
+    graph.add(ellipsoid_views_factor(
+        stack_samples([contour_samples(e, samples_per_view) for e in ellipses]),
+        1.0 / np.asarray(sig, dtype=float), [(pose_key, axes_key)],
+        np.zeros(len(ellipses), int), camera_from_world=_projection_rows(projections)))
     if log_axes_prior is not None:
         mean, prior_sigma = log_axes_prior
         graph.add(gtsam.PriorFactorVector(
@@ -362,7 +349,7 @@ def refine_ellipsoid(
     if not np.all(np.isfinite(axes)) or not np.all(np.isfinite(pose.matrix())):
         raise ReconstructionError("refinement_failed", "refinement diverged (non-finite result)")
     refined = ellipsoid_from_dual_quadric(
-        _dual_quadric(pose.rotation().matrix(), np.asarray(pose.translation()), axes))
+        dual_quadric(pose.rotation().matrix(), np.asarray(pose.translation()), axes))
     return refined, int(optimizer.iterations())
 
 
@@ -398,12 +385,14 @@ def reconstruct_ellipsoid(
             log semi-axes towards the apparent size ``median(depth * sqrt(ab) / f)``: keeps
             narrow-baseline reconstructions from collapsing to flat ellipsoids (biased, opt-in).
 
-    The result's smallest semi-axis must be at least the map limit (1 mm), else
-    ``degenerate_shape``: the views do not constrain the shape (typically a narrow baseline).
+    The result must be a plausible shape (:func:`degenerate_shape_reason`: semi-axes within
+    the map limits, not flatter than ``MIN_AXIS_RATIO``), else ``degenerate_shape``: the views
+    do not constrain the shape (typically a narrow baseline); and it must reproduce the views
+    (RMS level residual at most ``MAX_RMS_LEVEL_RESIDUAL``), else ``inconsistent_views``.
 
     Raises ``ReconstructionError`` (``reason`` in ``too_few_views``, ``bad_input``,
     ``near_parallel_rays``, ``not_an_ellipsoid``, ``not_in_front``, ``refinement_failed``,
-    ``degenerate_shape``).
+    ``degenerate_shape``, ``inconsistent_views``).
     """
     ells, cfw, cams, P = _prepare(ellipses, world_from_camera, camera, min_views)
     if sigmas is not None:
@@ -466,6 +455,7 @@ def reconstruct_ellipsoid(
         if linear is None:
             raise ReconstructionError("not_an_ellipsoid", f"linear estimate: {linear_problem}")
         _check_shape(linear)
+        _check_fit(linear, ells, P, samples_per_view)
         return ReconstructionResult(linear, linear, len(ells), lin_rms, lin_rms, spread, 0,
                                     "linear")
     # Refine from the linear estimate and from a sphere at the triangulated centre (radius from
@@ -485,6 +475,7 @@ def reconstruct_ellipsoid(
                                               log_axes_prior=prior)
             _check_in_front(refined, cfw)
             _check_shape(refined)
+            _check_fit(refined, ells, P, samples_per_view)
         except (ReconstructionError, ValueError, RuntimeError) as exc:  # RuntimeError: GTSAM
             problems.append(f"{label}: {exc}")
             reasons.add(getattr(exc, "reason", "refinement_failed"))
@@ -500,24 +491,53 @@ def reconstruct_ellipsoid(
         # if it is a valid shape.
         try:
             _check_shape(linear)
+            _check_fit(linear, ells, P, samples_per_view)
             best = (lin_rms, linear, 0, "linear")
         except ReconstructionError as exc:
             problems.append(f"linear: {exc}")
     if best is None:
-        reason = "degenerate_shape" if "degenerate_shape" in reasons else "refinement_failed"
+        reason = next((r for r in ("degenerate_shape", "inconsistent_views") if r in reasons),
+                      "refinement_failed")
         raise ReconstructionError(reason, "no valid ellipsoid: " + "; ".join(problems))
     rms, refined, iters, label = best
     return ReconstructionResult(refined, linear, len(ells), rms, lin_rms, spread, iters, label)
 
 
-def _check_shape(ellipsoid: Ellipsoid) -> None:
+def degenerate_shape_reason(ellipsoid: Ellipsoid) -> str | None:
+    """Why ``ellipsoid`` is not an object's shape, or None: semi-axes outside the map limits
+    (``LIMITS``), or flatter than ``MIN_AXIS_RATIO`` (smallest / largest semi-axis: a
+    reconstruction collapsed along an axis the views do not constrain, not a real object)."""
     lo, hi = LIMITS["min_semi_axis_m"], LIMITS["max_semi_axis_m"]
-    if ellipsoid.axes.min() < lo or ellipsoid.axes.max() > hi:
+    axes = np.asarray(ellipsoid.axes, dtype=float)
+    if not (axes.min() >= lo and axes.max() <= hi):
+        return (f"semi-axes {np.array2string(axes, precision=4)} m outside [{lo:g}, {hi:g}] m")
+    if axes.min() < MIN_AXIS_RATIO * axes.max():
+        return (f"semi-axes {np.array2string(axes, precision=4)} m: smallest below "
+                f"{MIN_AXIS_RATIO:g} x the largest (collapsed along an unconstrained axis)")
+    return None
+
+
+def _check_shape(ellipsoid: Ellipsoid) -> None:
+    problem = degenerate_shape_reason(ellipsoid)
+    if problem is not None:
         raise ReconstructionError(
-            "degenerate_shape", f"the views do not constrain the shape: semi-axes "
-                                f"{np.array2string(ellipsoid.axes, precision=4)} m outside "
-                                f"[{lo:g}, {hi:g}] m (narrow baseline? try more spread views or "
-                                f"log_axes_prior_sigma)")
+            "degenerate_shape", f"the views do not constrain the shape: {problem} (narrow "
+                                f"baseline? try more spread views or log_axes_prior_sigma)")
+
+
+def _check_fit(ellipsoid: Ellipsoid, ells: Sequence[Ellipse], P: np.ndarray,
+               samples_per_view: int) -> float:
+    """The unweighted RMS level residual of ``ellipsoid``; ``inconsistent_views`` above
+    ``MAX_RMS_LEVEL_RESIDUAL`` (the views are not of one ellipsoid, e.g. mixed objects: a
+    tiny ellipsoid that fits none of them may be all LM finds)."""
+    rms = float(np.sqrt(np.mean(view_residuals(ellipsoid, ells, P, samples_per_view) ** 2)))
+    if not rms <= MAX_RMS_LEVEL_RESIDUAL:
+        raise ReconstructionError(
+            "inconsistent_views", f"the best ellipsoid (semi-axes "
+                                  f"{np.array2string(ellipsoid.axes, precision=4)} m) misses "
+                                  f"the observed ellipses: RMS level residual {rms:.3g} > "
+                                  f"{MAX_RMS_LEVEL_RESIDUAL:g} (views of different objects?)")
+    return rms
 
 
 def _check_in_front(ellipsoid: Ellipsoid, cfw: np.ndarray) -> None:

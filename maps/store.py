@@ -22,16 +22,16 @@ Semantics
   JSON, geometric numbers rounded to 1e-12; it covers ``map_id`` and ``version``) — the HTTP
   ETag. The stored content keeps every bit.
 * ``compiled(map_id, version)`` returns the solver arrays (:class:`maps.compiled.CompiledMap`),
-  cached per process by ``(map_id, version, content_hash)``: one small indexed query per call
-  to resolve the version (so replicas see each other's updates), no JSON parsing on a hit.
+  held in the store's :class:`maps.cache.CompiledMapCache` (THE compiled-map cache) by
+  ``(map_id, version, content_hash)``: one small indexed query per call to resolve the version
+  (so replicas see each other's updates; skipped for the cache's ``resolve_ttl_s`` after a
+  resolution), no JSON parsing on a hit. Writes through the store invalidate at once.
 """
 
 from __future__ import annotations
 
 import builtins
 import json
-import threading
-from collections import OrderedDict
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
@@ -51,6 +51,7 @@ from sqlalchemy.exc import (
 )
 from sqlalchemy.pool import StaticPool
 
+from maps.cache import CompiledMapCache
 from maps.compiled import CompiledMap, compile_map
 from maps.errors import (
     MapAlreadyExists,
@@ -87,11 +88,6 @@ MIGRATIONS_DIR = Path(__file__).resolve().parent / "migrations"
 _PG_MIGRATION_LOCK = 0x51_4C_4F_43_4D_41_50  # "QLOCMAP"
 #: SQLite busy timeout (seconds): how long a writer waits for another writer's lock.
 SQLITE_BUSY_TIMEOUT_S = 30.0
-#: Compiled maps kept per store (least recently used evicted first).
-COMPILED_CACHE_SIZE = 64
-#: ... and at most this many objects in all (a parsed + compiled map costs ~2.5 KB per object:
-#: ~120 MB of a replica's memory here; docs/deployment.md, "Worst-case cost of a request").
-COMPILED_CACHE_MAX_OBJECTS = 50_000
 
 # Table descriptions for building queries ONLY. The schema itself belongs to the Alembic
 # migrations (maps/migrations/versions/); these declarations mirror it, CHECK constraints
@@ -194,7 +190,8 @@ class MapStore:
     """
 
     def __init__(self, url: str, *, migrate: bool = True,
-                 engine_options: dict[str, Any] | None = None) -> None:
+                 engine_options: dict[str, Any] | None = None,
+                 cache: CompiledMapCache | None = None) -> None:
         self.url = normalize_url(url)
         parsed = sa.engine.make_url(self.url)
         self.dialect = parsed.get_backend_name()
@@ -215,8 +212,8 @@ class MapStore:
         self.engine: Engine = sa.create_engine(self.url, **options)
         if self.dialect == "sqlite":
             _configure_sqlite(self.engine, wal=not in_memory)
-        self._cache: OrderedDict[tuple[str, int, str], CompiledMap] = OrderedDict()
-        self._cache_lock = threading.Lock()
+        #: THE compiled-map cache of this store (module docstring).
+        self.cache = CompiledMapCache() if cache is None else cache
         if migrate:
             self.migrate()
 
@@ -306,6 +303,8 @@ class MapStore:
                 self._insert_version(conn, stored.map_id, 1, text, digest, now)
         except IntegrityError as exc:  # a concurrent create won the race
             raise MapAlreadyExists(stored.map_id) from exc
+        finally:  # after the write, so that no reader re-caches what it read before
+            self.cache.invalidate(stored.map_id)
         return StoredMap(stored, digest, now)
 
     def update(self, map_id: str, scene_map: SceneMap, expected_version: int) -> StoredMap:
@@ -350,6 +349,8 @@ class MapStore:
             if current is None:
                 raise MapNotFound(map_id) from exc
             raise VersionConflict(map_id, expected_version, current) from exc
+        finally:  # also on a conflict: the map changed (maybe through another replica)
+            self.cache.invalidate(map_id)
         return StoredMap(stored, digest, now)
 
     def _insert_version(self, conn: Connection, map_id: str, version: int, content: str,
@@ -361,14 +362,14 @@ class MapStore:
 
     def delete(self, map_id: str) -> None:
         """Delete the map and all its versions. Raises :class:`MapNotFound`."""
-        with self._write() as conn:
-            conn.execute(versions_table.delete().where(versions_table.c.map_id == map_id))
-            result = conn.execute(maps_table.delete().where(maps_table.c.map_id == map_id))
-            if result.rowcount != 1:
-                raise MapNotFound(map_id)
-        with self._cache_lock:
-            for key in [k for k in self._cache if k[0] == map_id]:
-                del self._cache[key]
+        try:
+            with self._write() as conn:
+                conn.execute(versions_table.delete().where(versions_table.c.map_id == map_id))
+                result = conn.execute(maps_table.delete().where(maps_table.c.map_id == map_id))
+                if result.rowcount != 1:
+                    raise MapNotFound(map_id)
+        finally:
+            self.cache.forget(map_id)
 
     # ------------------------------------------------------------------ reads
     def _latest_version(self, map_id: str) -> int | None:
@@ -404,8 +405,7 @@ class MapStore:
         if row is None:
             raise MapNotFound(map_id, version)
         key = (map_id, int(row.version), str(row.content_hash))
-        with self._cache_lock:
-            hit = self._cache.get(key)
+        hit = self.cache.get(key)
         if hit is not None:  # versions are immutable: reuse the parsed map (10,000 objects
             return StoredMap(hit.scene_map, row.content_hash, _utc(row.created_at))  # ~3 s)
         with self._read() as conn:
@@ -414,17 +414,8 @@ class MapStore:
         if content is None or content.content_hash != key[2]:
             raise MapNotFound(map_id, version)  # deleted (and maybe re-created) meanwhile
         scene_map = scene_map_from_dict(json.loads(content.content), version=key[1])
-        self._remember(key, compile_map(scene_map))
+        self.cache.put(key, compile_map(scene_map))
         return StoredMap(scene_map, row.content_hash, _utc(row.created_at))
-
-    def _remember(self, key: tuple[str, int, str], compiled: CompiledMap) -> None:
-        with self._cache_lock:
-            self._cache[key] = compiled
-            self._cache.move_to_end(key)
-            total = sum(len(c) for c in self._cache.values())
-            while len(self._cache) > 1 and (len(self._cache) > COMPILED_CACHE_SIZE
-                                            or total > COMPILED_CACHE_MAX_OBJECTS):
-                total -= len(self._cache.popitem(last=False)[1])
 
     def versions(self, map_id: str) -> builtins.list[int]:
         """All stored version numbers of a map, ascending. :class:`MapNotFound`."""
@@ -466,6 +457,10 @@ class MapStore:
         Raises :class:`MapNotFound`.
         """
         self._check_version(version)
+        hit = self.cache.resolution(map_id, version)
+        if hit is not None:
+            return hit
+        generation = self.cache.generation(map_id)
         v = versions_table.c
         for _attempt in range(3):
             with self._read() as conn:
@@ -474,29 +469,23 @@ class MapStore:
             if row is None:
                 raise MapNotFound(map_id, version)
             key = (map_id, int(row.version), str(row.content_hash))
-            with self._cache_lock:
-                hit = self._cache.get(key)
-                if hit is not None:
-                    self._cache.move_to_end(key)
-                    return hit
+            result = self.cache.get(key)
+            if result is not None:
+                self.cache.resolved_as(map_id, version, key, generation)
+                return result
             try:
                 stored = self.get(map_id, key[1])  # parses, compiles and caches the version
             except MapNotFound:
                 continue  # deleted between the two reads: resolve again
             if stored.content_hash != key[2]:
                 continue  # deleted and re-created between the two reads: resolve again
-            with self._cache_lock:
-                result = self._cache.get(key)
+            result = self.cache.get(key)
             if result is None:  # evicted at once by other maps: compile this one again
                 result = compile_map(stored.scene_map)
-                self._remember(key, result)
+                self.cache.put(key, result)
+            self.cache.resolved_as(map_id, version, key, generation)
             return result
         raise MapStoreError(f"map {map_id!r} kept changing while being loaded")
-
-    def cache_info(self) -> dict[str, int]:
-        """Number of compiled maps currently cached."""
-        with self._cache_lock:
-            return {"entries": len(self._cache), "capacity": COMPILED_CACHE_SIZE}
 
 
 def _schema_missing(exc: Exception) -> bool:

@@ -163,3 +163,108 @@ def test_jobs_table_mirrors_the_migration(tmp_path: Path) -> None:
         migrated = {c["name"] for c in insp.get_check_constraints(jobs_table.name)}
         declared = {c.name for c in jobs_table.constraints if isinstance(c, sa.CheckConstraint)}
         assert declared == migrated == {"ck_quadloc_build_jobs_status"}
+
+
+def _old_heartbeat(app: Any, job_id: str) -> None:
+    """Pretend the job's heartbeat stopped long ago."""
+    from maps.building.jobs import jobs_table
+
+    with app.state.store.engine.begin() as conn:
+        conn.execute(jobs_table.update().where(jobs_table.c.job_id == job_id).values(
+            updated_at=app.state.build_jobs.get(job_id).updated_at.replace(year=2000)))
+
+
+def test_a_restarted_replica_marks_the_running_job_failed_at_startup(tmp_path: Path) -> None:
+    app = make_test_app(tmp_path)
+    with TestClient(app):
+        job = app.state.build_jobs.create("lost", None)
+        app.state.build_jobs.progress(job.job_id, "refining", 60.0, 3)
+        _old_heartbeat(app, job.job_id)  # the replica died mid-build
+    restarted = make_test_app(tmp_path)  # same database
+    with TestClient(restarted):
+        out = restarted.state.build_jobs.get(job.job_id)  # no status read needed
+        assert out.status == "failed" and out.error["reason"] == "runner_lost"
+
+
+class _BlockedBuild:
+    """Stands in for ``build_map``: reports progress until released, then fails the build
+    cleanly (no map), so that tests control how long a build runs."""
+
+    def __init__(self) -> None:
+        import threading
+
+        self.release = threading.Event()
+        self.started = threading.Event()
+
+    def __call__(self, recording: Any, *, map_id: str, progress: Any, deadline: float) -> Any:
+        from maps.building.build import BuildTimeoutError
+
+        self.started.set()
+        while not self.release.wait(0.01):
+            progress("associating", 10.0, 0)
+        raise BuildTimeoutError("released by the test")
+
+
+def test_a_full_build_queue_answers_503_with_retry_after(tmp_path: Path,
+                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    import service.api.build_jobs as bj
+
+    blocked = _BlockedBuild()
+    monkeypatch.setattr(bj, "build_map", blocked)
+    app = make_test_app(tmp_path, max_concurrent_builds=1, max_queued_builds=1)
+    rec = _recording(6)[0]
+    with TestClient(app) as c:
+        first = c.post("/v1/maps:build", params={"map_id": "one"}, json=rec)
+        assert first.status_code == 202
+        assert blocked.started.wait(10)
+        queued = c.post("/v1/maps:build", params={"map_id": "two"}, json=rec)
+        assert queued.status_code == 202 and queued.json()["status"] == "queued"
+        full = c.post("/v1/maps:build", params={"map_id": "three"}, json=rec)
+        assert full.status_code == 503
+        assert int(full.headers["Retry-After"]) == bj.RETRY_AFTER_S
+        assert full.json()["type"].endswith("busy")
+        # the request thread answered at once; the builds run in the runner's thread
+        assert sorted(app.state.build_runner.pending()) == sorted(
+            [first.json()["job_id"], queued.json()["job_id"]])
+        blocked.release.set()
+        for r in (first, queued):
+            job = _wait(c, r.headers["Location"], 30)
+            assert job["error"]["reason"] == "time_budget_exceeded"
+        # room again
+        again = c.post("/v1/maps:build", params={"map_id": "four"}, json=rec)
+        assert again.status_code == 202
+        _wait(c, again.headers["Location"], 30)
+
+
+def test_queued_jobs_beat_while_waiting_and_a_lost_job_stores_nothing(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import service.api.build_jobs as bj
+
+    blocked = _BlockedBuild()
+    monkeypatch.setattr(bj, "build_map", blocked)
+    monkeypatch.setattr(bj, "HEARTBEAT_S", 0.0)
+    app = make_test_app(tmp_path, max_concurrent_builds=1, max_queued_builds=1)
+    rec = _recording(6)[0]
+    with TestClient(app) as c:
+        jobs: JobStore = app.state.build_jobs
+        first = c.post("/v1/maps:build", params={"map_id": "one"}, json=rec).json()["job_id"]
+        assert blocked.started.wait(10)
+        second = c.post("/v1/maps:build", params={"map_id": "two"}, json=rec).json()["job_id"]
+        _old_heartbeat(app, second)
+        t0 = time.monotonic()
+        while jobs.get(second).updated_at.year == 2000 and time.monotonic() - t0 < 10:
+            time.sleep(0.02)
+        assert jobs.get(second).updated_at.year > 2000  # refreshed by the running build
+        assert jobs.fail_stale(3600.0) == 0
+        # another replica's sweep marks the running job failed: its runner stops
+        _old_heartbeat(app, first)
+        assert jobs.fail_stale(60.0) == 1
+        t0 = time.monotonic()
+        while first in app.state.build_runner.pending() and time.monotonic() - t0 < 10:
+            time.sleep(0.02)
+        assert first not in app.state.build_runner.pending()
+        out = jobs.get(first)
+        assert out.status == "failed" and out.error["reason"] == "runner_lost"
+        blocked.release.set()
+        _wait(c, f"/v1/build-jobs/{second}", 30)
+        assert c.get("/v1/maps/one").status_code == 404

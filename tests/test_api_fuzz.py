@@ -101,7 +101,7 @@ def _reset(app: Any) -> None:
     # The default map cannot be deleted (409 default-map); re-seed anyway (a no-op while it
     # exists) so that /readyz's answer never depends on the order of generated requests.
     seed_demo_map(app.state.store)
-    app.state.map_cache.invalidate("chess")
+    app.state.store.cache.invalidate("chess")
 
 
 @schema.parametrize()
@@ -130,8 +130,7 @@ def test_stateful_workflows_follow_the_links(fuzz_app: Any) -> None:
             store = fuzz_app.state.store
             for summary in store.list():
                 if summary.map_id != "chess":
-                    store.delete(summary.map_id)
-                    fuzz_app.state.map_cache.invalidate(summary.map_id)
+                    store.delete(summary.map_id)  # invalidates the store's cache
             _reset(fuzz_app)
 
         def get_call_kwargs(self, case: schemathesis.Case) -> dict[str, Any]:

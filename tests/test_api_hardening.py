@@ -139,25 +139,25 @@ def test_readyz_names_a_missing_default_map(tmp_path: Path) -> None:
 def test_store_reuses_parsed_versions_within_an_object_bound(
         store_url: str, monkeypatch: pytest.MonkeyPatch) -> None:  # noqa: F811
     """GET of an unchanged version does not re-parse it (a 10,000-object map costs seconds to
-    parse); the cache holds at most COMPILED_CACHE_MAX_OBJECTS objects (the newest map always)."""
+    parse); the cache holds at most ``max_objects`` objects (the newest map always)."""
     import maps.store as store_module
+    from maps.cache import CompiledMapCache
     from maps.model import scene_map_from_dict
 
-    store = MapStore(store_url)
+    n = len(MAP_EXAMPLE["objects"])
+    store = MapStore(store_url, cache=CompiledMapCache(max_objects=2 * n))
     try:
         for k in range(3):
             store.create(scene_map_from_dict({**MAP_EXAMPLE, "map_id": f"m{k}"}, version=1))
-        n = len(MAP_EXAMPLE["objects"])
         a, b = store.get("m0"), store.get("m0")
         assert a.scene_map is b.scene_map and a.content_hash == b.content_hash
         parsed = []
         monkeypatch.setattr(store_module, "scene_map_from_dict",
                             lambda *args, **kw: parsed.append(1) or scene_map_from_dict(*args,
                                                                                         **kw))
-        monkeypatch.setattr(store_module, "COMPILED_CACHE_MAX_OBJECTS", 2 * n)
         store.get("m1")
         store.get("m2")  # evicts m0 (3 maps > 2 maps' worth of objects)
-        assert len(parsed) == 2 and store.cache_info()["entries"] == 2
+        assert len(parsed) == 2 and len(store.cache) == 2
         store.get("m1")
         store.compiled("m2")
         assert len(parsed) == 2  # still cached
@@ -167,28 +167,30 @@ def test_store_reuses_parsed_versions_within_an_object_bound(
         store.close()
 
 
-def test_a_slow_map_load_answers_503_within_the_budget_then_serves(tmp_path: Path) -> None:
+def test_a_slow_map_load_answers_503_within_the_budget_then_serves(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """The first use of a big map version takes seconds to parse: the localization waits at
     most the solve budget, answers 503 map-loading + Retry-After, and a retry after the load
     (which went on in the background, once for all waiting requests) is served."""
     import threading
     import time
 
+    import maps.store as store_module
     from service.api.examples import LOCALIZE_EXAMPLE
 
     with _client(f"sqlite:///{tmp_path / 'q.db'}", solve_time_budget_ms=300.0) as c:
         store = c.app.state.store
-        real = store.compiled
+        real = store_module.scene_map_from_dict
         release = threading.Event()
         calls = []
 
-        def slow(*args, **kwargs):
+        def slow_parse(*args, **kwargs):  # the expensive step of a first load
             calls.append(1)
             release.wait(10)
             return real(*args, **kwargs)
 
-        store.compiled = slow
-        c.app.state.map_cache.invalidate("chess")
+        monkeypatch.setattr(store_module, "scene_map_from_dict", slow_parse)
+        store.cache.forget("chess")  # as on a replica that never loaded this version
         t0 = time.perf_counter()
         r = c.post("/v1/maps/chess/localize", json=LOCALIZE_EXAMPLE)
         waited = time.perf_counter() - t0
@@ -204,8 +206,7 @@ def test_a_slow_map_load_answers_503_within_the_budget_then_serves(tmp_path: Pat
                 break
             time.sleep(0.1)
         assert r3.status_code == 200 and r3.json()["localized"], r3.text
-        assert len(calls) == 1
-        store.compiled = real
+        assert len(calls) == 1  # parsed once: the retries hit the store's cache
         store.close()
 
 
@@ -252,11 +253,11 @@ def test_map_loader_returns_when_the_load_finishes_before_it_is_tracked() -> Non
 
     from service.api.map_loader import MapLoader
 
-    class Cache:
-        def get(self, map_id, version=None):
+    class Store:
+        def compiled(self, map_id, version=None):
             return f"{map_id}@{version}"
 
-    loader = MapLoader(Cache(), max_wait_s=1.0)  # type: ignore[arg-type]
+    loader = MapLoader(Store(), max_wait_s=1.0)  # type: ignore[arg-type]
 
     def done_at_once(fn, *args):
         f: Future = Future()

@@ -109,11 +109,17 @@ def test_solves_do_not_block_the_event_loop(live_server: str) -> None:
         solve["status"] = r.status_code
         solve["seconds"] = time.perf_counter() - t0
 
+    def solving(client: httpx.Client) -> bool:
+        """The server's own gauge says a frame is being solved (no guessing with a sleep)."""
+        return any(line.startswith("quadloc_solves_in_progress ") and float(line.split()[-1]) > 0
+                   for line in client.get("/metrics").text.splitlines())
+
     thread = threading.Thread(target=post)
     thread.start()
-    time.sleep(0.3)  # the solve is running now
     probes = []
     with httpx.Client(base_url=live_server, timeout=30) as client:
+        while thread.is_alive() and not solving(client):
+            pass  # wait for the solve to start (each probe is a real request)
         while thread.is_alive() and len(probes) < 20:
             t0 = time.perf_counter()
             assert client.get("/healthz").status_code == 200

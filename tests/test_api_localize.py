@@ -17,6 +17,7 @@ from factors.geometry import Ellipse, GeometryError, rotation_from_quaternion_wx
 from service.api import solver as solver_module
 from service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, LOCALIZE_EXAMPLE
 from tests.conftest import make_test_app
+from tests.helpers import assert_problem as _problem
 
 URL = "/v1/maps/chess/localize"
 TRUTH = np.array(EXAMPLE_TRUE_WORLD_FROM_CAMERA)
@@ -38,14 +39,6 @@ def _frame(**changes: object) -> dict:
 def _rot_err_deg(A: np.ndarray, B: np.ndarray) -> float:
     c = (np.trace(A[:3, :3].T @ B[:3, :3]) - 1) / 2
     return math.degrees(math.acos(min(1.0, max(-1.0, c))))
-
-
-def _problem(r, status: int, slug: str) -> dict:
-    assert r.status_code == status, r.text
-    assert r.headers["content-type"].startswith("application/problem+json")
-    body = r.json()
-    assert body["type"] == f"urn:quadloc:problem:{slug}", body
-    return body
 
 
 def test_demo_frame_localizes_near_the_ground_truth(client: TestClient) -> None:
@@ -236,7 +229,7 @@ def test_malformed_json_unknown_map_and_wrong_media(client: TestClient) -> None:
 
 def test_errors_from_deep_in_the_pipeline(client: TestClient, monkeypatch) -> None:
     def geometry_error(*a, **k):
-        raise GeometryError("detections[2].ellipse: projection is not an ellipse")
+        raise GeometryError("projection is not an ellipse", field="detections[2].ellipse")
 
     monkeypatch.setattr(solver_module, "localize", geometry_error)
     body = _problem(client.post(URL, json=LOCALIZE_EXAMPLE), 422, "invalid-geometry")

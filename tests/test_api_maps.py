@@ -15,6 +15,8 @@ from maps.demo import load_demo_map
 from maps.model import content_hash, scene_map_from_dict
 from service.api.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
 from tests.conftest import make_test_app
+from tests.helpers import FakeClock
+from tests.helpers import assert_problem as _problem
 
 PROBLEM = "application/problem+json"
 CHESS_SCENE = CHESS_SCENE_PATH
@@ -24,16 +26,6 @@ CHESS_SCENE = CHESS_SCENE_PATH
 def client(tmp_path: Path):
     with TestClient(make_test_app(tmp_path)) as c:
         yield c
-
-
-def _problem(r, status: int, slug: str) -> dict:
-    assert r.status_code == status, r.text
-    assert r.headers["content-type"].startswith(PROBLEM)
-    body = r.json()
-    assert body["type"] == f"urn:quadloc:problem:{slug}"
-    assert body["status"] == status
-    assert set(body) >= {"type", "title", "status", "detail", "instance", "errors"}
-    return body
 
 
 def test_demo_map_is_seeded_and_matches_the_shipped_file(client: TestClient) -> None:
@@ -227,12 +219,14 @@ def _map_version_used(c: TestClient) -> int:
 
 def test_localize_sees_local_updates_at_once_and_other_replicas_within_the_ttl(
         tmp_path: Path) -> None:
-    import time
-
+    from maps.store import MapStore
     from service.api.app import seed_demo_map
+    from service.api.examples import LOCALIZE_EXAMPLE
 
     # "chess" is not the default map here: the default map cannot be deleted (409).
     app = make_test_app(tmp_path, map_cache_ttl_s=0.3, default_map_id="chess-default")
+    clock = FakeClock()
+    app.state.store.cache.clock = clock  # the TTL runs on the fake clock: no sleeping
     assert seed_demo_map(app.state.store, "chess")
     with TestClient(app) as c:
         assert _map_version_used(c) == 1
@@ -240,17 +234,20 @@ def test_localize_sees_local_updates_at_once_and_other_replicas_within_the_ttl(
         assert c.put("/v1/maps/chess", json=r.json()["map"],
                      headers={"If-Match": r.headers["etag"]}).status_code == 200
         assert _map_version_used(c) == 2  # written through this app: invalidated at once
-        # Another replica writes straight to the shared database.
-        store = c.app.state.store
-        doc = c.get("/v1/maps/chess").json()["map"]
-        store.update("chess", scene_map_from_dict(doc, version=3), expected_version=2)
+        # Another replica (its own store and cache) writes to the shared database.
+        other = MapStore(app.state.settings.effective_database_url)
+        try:
+            doc = c.get("/v1/maps/chess").json()["map"]
+            other.update("chess", scene_map_from_dict(doc, version=3), expected_version=2)
+        finally:
+            other.close()
         assert _map_version_used(c) == 2  # cached for at most the TTL
-        time.sleep(0.35)
+        clock.advance(0.29)
+        assert _map_version_used(c) == 2
+        clock.advance(0.02)
         assert _map_version_used(c) == 3
         assert c.delete("/v1/maps/chess").status_code == 204
         assert c.post("/v1/maps/chess/localize", json={}).status_code == 422
-        from service.api.examples import LOCALIZE_EXAMPLE
-
         assert c.post("/v1/maps/chess/localize", json=LOCALIZE_EXAMPLE).status_code == 404
 
 
@@ -380,41 +377,30 @@ def test_default_map_is_whatever_is_configured(tmp_path: Path) -> None:
 # ------------------------------------------------------------ review 6: map cache race
 
 
-class _FakeStore:
-    """``compiled`` returns the version current when the read *started*, and runs ``hook``
-    between reading and returning (where a concurrent PUT can commit and invalidate)."""
-
-    def __init__(self) -> None:
-        self.version = 1
-        self.reads = 0
-        self.hook = None
-
-    def compiled(self, map_id: str, version: int | None = None):
-        self.reads += 1
-        seen = self.version
-        if self.hook is not None:
-            hook, self.hook = self.hook, None
-            hook()
-        return (map_id, seen)
-
-
 def test_map_cache_does_not_store_a_version_read_before_an_invalidation() -> None:
-    from service.api.map_cache import MapCache
+    """A reader resolves version 1, a concurrent write commits version 2 and invalidates, and
+    only then the reader remembers its resolution: it must not be remembered."""
+    from maps.cache import CompiledMapCache
 
-    store = _FakeStore()
-    cache = MapCache(store, ttl_s=60.0)
-
-    def concurrent_put() -> None:  # commits version 2 and invalidates, mid-read
-        store.version = 2
-        cache.invalidate("m")
-
-    store.hook = concurrent_put
-    assert cache.get("m") == ("m", 1)  # the racing reader still answers what it read
-    assert cache.get("m") == ("m", 2)  # ... but did not cache it over the invalidation
-    assert store.reads == 2
-    assert cache.get("m") == ("m", 2) and store.reads == 2  # normal caching still works
+    clock = FakeClock()
+    cache = CompiledMapCache(resolve_ttl_s=60.0, clock=clock)
+    v1, v2 = ("m", 1, "h1"), ("m", 2, "h2")
+    c1, c2 = ["compiled v1"], ["compiled v2"]  # stand-ins with a len() (object count)
+    cache.put(v1, c1)  # type: ignore[arg-type]
+    seen = cache.generation("m")  # the reader starts, reads version 1 from the database
+    cache.invalidate("m")  # a concurrent PUT commits version 2
+    cache.resolved_as("m", None, v1, seen)  # the racing reader still answers what it read...
+    assert cache.resolution("m", None) is None  # ... but did not cache it over the write
+    cache.put(v2, c2)  # type: ignore[arg-type]
+    cache.resolved_as("m", None, v2, cache.generation("m"))
+    assert cache.resolution("m", None) is c2  # normal caching still works
     cache.invalidate("other")  # another map's write does not evict this one
-    assert cache.get("m") == ("m", 2) and store.reads == 2
+    assert cache.resolution("m", None) is c2
+    clock.advance(59.9)
+    assert cache.resolution("m", None) is c2
+    clock.advance(0.2)
+    assert cache.resolution("m", None) is None  # past the TTL: ask the database again
+    assert cache.get(v1) is c1 and len(cache) == 2  # versions are immutable: still held
 
 
 # ------------------------------------------------------------ review 6: PostgreSQL

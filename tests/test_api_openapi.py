@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bench.examples import FRAME_INDEX
 from bench.reference_data import CHESS_POSES_PATH as POSES_PATH
 from factors import metrics
 from factors.geometry import (
@@ -22,7 +23,6 @@ from factors.geometry import (
 from maps.demo import load_demo_map
 from service.api.examples import (
     EXAMPLE_TRUE_WORLD_FROM_CAMERA,
-    FRAME_INDEX,
     LOCALIZE_EXAMPLE,
     MAP_EXAMPLE,
 )

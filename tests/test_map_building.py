@@ -14,7 +14,7 @@ from factors.geometry import Ellipse, Ellipsoid, invert_pose, project_ellipsoid
 from maps.building.association import associate
 from maps.building.build import BuildTimeoutError, build_map
 from maps.building.joint import refine_jointly
-from maps.building.recording import Observation, parse_recording
+from maps.building.recording import Observation, OdometryNoise, parse_recording
 from maps.reconstruct import ellipsoid_errors
 from tests.test_api_build import CAM, OBJECTS, _look_at, _recording
 
@@ -135,7 +135,7 @@ def test_camera_refinement_moves_noisy_app_poses_towards_the_truth() -> None:
     init = [(h.label, h.observations, h.ellipsoid) for h in objects]
     fixed = refine_jointly(CAM, np.array(noisy), rec_noisy.observations, init)
     ba = refine_jointly(CAM, np.array(noisy), rec_noisy.observations, init, refine_cameras=True,
-                        odometry_sigmas=(math.radians(0.5), 0.01))
+                        odometry=OdometryNoise(0.0, 0.0, math.radians(0.5), 0.01))
 
     def cam_err(poses: np.ndarray) -> float:
         return float(np.mean([np.linalg.norm(P[:3, 3] - T[:3, 3])
@@ -167,3 +167,55 @@ def test_box_detections_are_accepted() -> None:
     rec = parse_recording(rec_doc)
     assert rec.observations[0].ellipse.angle == 0.0
     assert math.isclose(rec.observations[0].ellipse.a, (x1 - x0) / 2)
+
+
+def test_axis_floor_is_one_sided_with_the_right_jacobian() -> None:
+    import gtsam
+
+    from maps.building.joint import _floor_factor
+
+    key = gtsam.symbol("l", 0)
+    f = _floor_factor(key, math.log(0.01), 0.1)
+    v = gtsam.Values()
+    v.insert(key, np.log(np.array([0.2, 0.05, 0.002])))  # only the last axis is below 1 cm
+    r = f.unwhitenedError(v)
+    np.testing.assert_allclose(r, [0.0, 0.0, math.log(0.01) - math.log(0.002)], rtol=1e-12)
+    A, _ = f.linearize(v).jacobian()
+    h = 1e-6
+    numeric = []
+    for e in np.eye(3):
+        vp, vm = gtsam.Values(), gtsam.Values()
+        vp.insert(key, v.atVector(key) + h * e)
+        vm.insert(key, v.atVector(key) - h * e)
+        numeric.append((f.unwhitenedError(vp) - f.unwhitenedError(vm)) / (2 * h) / 0.1)
+    np.testing.assert_allclose(A, np.column_stack(numeric), atol=1e-6)
+    above = gtsam.Values()
+    above.insert(key, np.log(np.array([0.2, 0.05, 0.02])))
+    assert f.error(above) == 0.0
+
+
+def test_odometry_noise_is_parsed_validated_and_a_random_walk() -> None:
+    from maps.building.recording import RecordingError
+
+    doc, _ = _recording(4)
+    rec = parse_recording(doc)
+    assert rec.refine_camera_poses is True and rec.odometry_noise == OdometryNoise()
+    rec = parse_recording({**doc, "odometry_noise": {"translation_m_per_sqrt_m": 0.03}})
+    assert rec.odometry_noise.translation_m_per_sqrt_m == 0.03
+    assert rec.odometry_noise.rotation_rad_per_sqrt_m == OdometryNoise().rotation_rad_per_sqrt_m
+    with pytest.raises(RecordingError) as exc:
+        parse_recording({**doc, "odometry_noise": {"translation_m_per_sqrt_m": -1, "bogus": 1,
+                                                   "rotation_rad_per_step": "x"}})
+    fields = {e["field"] for e in exc.value.errors}
+    assert fields == {"odometry_noise.translation_m_per_sqrt_m", "odometry_noise.bogus",
+                      "odometry_noise.rotation_rad_per_step"}
+    with pytest.raises(RecordingError) as exc:
+        parse_recording({**doc, "odometry_noise": {"translation_m_per_step": 0}})
+    assert exc.value.errors[0]["field"] == "odometry_noise"
+    # variances add over path length and steps: two halves compose to the whole
+    n = OdometryNoise(0.01, 0.02, 0.003, 0.004)
+    whole = n.sigmas(2.0, 6)
+    half = n.sigmas(1.0, 3)
+    np.testing.assert_allclose(whole**2, 2 * half**2, rtol=1e-12)
+    np.testing.assert_allclose(whole[:3], math.sqrt(0.01**2 * 2 + 0.003**2 * 6), rtol=1e-12)
+    np.testing.assert_allclose(whole[3:], math.sqrt(0.02**2 * 2 + 0.004**2 * 6), rtol=1e-12)

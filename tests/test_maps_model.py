@@ -28,6 +28,7 @@ from maps.model import (
     scene_map_from_chess,
     scene_map_from_dict,
 )
+from tests.helpers import surface_points
 
 CHESS_SOURCE = CHESS_SCENE_PATH
 
@@ -330,7 +331,7 @@ def test_compiled_arrays_against_sampled_surfaces() -> None:
     assert c.object_ids == tuple(o.object_id for o in demo.objects)
     for i, obj in enumerate(demo.objects):
         E = obj.ellipsoid
-        X = E.surface_points(12, 7)
+        X = surface_points(E, 12, 7)
         Xh = np.column_stack([X, np.ones(len(X))])
         # Surface points satisfy the primal quadric Q = (Q*)^-1: X~^T Q X~ = 0.
         Q = np.linalg.inv(c.dual_quadrics[i])

@@ -13,6 +13,8 @@ import pytest
 
 from bench.reconstruction import visible_frames
 from bench.reference_data import load_chess_poses
+from factors.ellipsoid_factors import ellipsoid_views_factor
+from factors.ellipsoid_residuals import dual_quadric, stack_samples
 from factors.geometry import (
     Camera,
     Ellipse,
@@ -27,15 +29,16 @@ from maps.reconstruct import (
     FrameObservations,
     LabelledEllipse,
     ReconstructionError,
-    _dual_quadric,
-    _make_factor,
     build_scene_map,
+    contour_samples,
+    degenerate_shape_reason,
     dual_quadric_jacobians,
     ellipsoid_errors,
     reconstruct_ellipsoid,
     refine_ellipsoid,
     view_residuals,
 )
+from tests.helpers import level, surface_points
 
 
 @pytest.fixture(scope="module")
@@ -68,7 +71,7 @@ def test_dual_quadric_jacobians_match_central_differences() -> None:
 
         def q(delta: np.ndarray) -> np.ndarray:
             p = pose.retract(delta[:6])
-            return _dual_quadric(p.rotation().matrix(), np.asarray(p.translation()),
+            return dual_quadric(p.rotation().matrix(), np.asarray(p.translation()),
                                  axes * np.exp(delta[6:]))
 
         numeric = (q(d) - q(-d)) / (2 * h)
@@ -81,9 +84,12 @@ def test_factor_jacobian_matches_numerical_derivative() -> None:
     cfw = pose_matrix(np.eye(3), -c + np.array([0.1, -0.2, 3.0]))  # ellipsoid ~3 m ahead
     P = cam.projection_matrix(cfw)
     observed = project_ellipsoid(cam, cfw, Ellipsoid(c + 0.05, axes * 1.1, R))
-    xh = np.column_stack([observed.contour_points(7), np.ones(7)])
     pk, ak = gtsam.symbol("e", 0), gtsam.symbol("a", 0)
-    factor = _make_factor(P[None], xh[None], np.ones(1), pk, ak)  # one view, unit weight
+    # the reconstruction's factor: the shared one, samples in homogeneous pixels, the camera
+    # given by its projection K [R|t] (one view, unit weight)
+    padded = np.vstack([P, [0.0, 0.0, 0.0, 1.0]])[None]
+    factor = ellipsoid_views_factor(stack_samples([contour_samples(observed, 7)]), np.ones(1),
+                                    [(pk, ak)], [0], camera_from_world=padded)
     values = gtsam.Values()
     values.insert(pk, gtsam.Pose3(gtsam.Rot3(R), c))
     values.insert(ak, np.log(axes))
@@ -92,6 +98,14 @@ def test_factor_jacobian_matches_numerical_derivative() -> None:
     r0 = factor.unwhitenedError(values)
     np.testing.assert_allclose(-b, r0, rtol=1e-12)
     assert np.abs(r0).max() > 1e-3  # not at the optimum: a meaningful derivative
+    # the rows are minus Phi_pred - 1 at the contour points, computed independently: the
+    # predicted dual conic C* = P Q* P^T, Phi_pred(x) = 1 - C*[2,2] x~^T C*^-1 x~
+    C = P @ dual_quadric(R, c, axes) @ P.T
+    xh = np.column_stack([observed.contour_points(7), np.ones(7)])
+    phi_pred = 1.0 - C[2, 2] * np.einsum("mi,ij,mj->m", xh, np.linalg.inv(C), xh)
+    np.testing.assert_allclose(r0, -(phi_pred - 1.0), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(view_residuals(Ellipsoid(c, axes, R), [observed], P[None], 7)[0],
+                               phi_pred - 1.0, rtol=1e-9, atol=1e-12)
 
     def residual(delta: np.ndarray) -> np.ndarray:
         v = gtsam.Values()
@@ -123,9 +137,9 @@ def test_exact_views_recover_every_chess_ellipsoid(chess_views) -> None:
         assert res.rms_level_residual < 1e-9
         # Independent check: sampled surface points project inside every observed ellipse,
         # and the silhouette touches it (max level ~ 1).
-        X = res.ellipsoid.surface_points(24, 12)
+        X = surface_points(res.ellipsoid, 24, 12)
         for i, e in zip(sel[:3], ellipses[:3], strict=True):
-            levels = e.level(cam.project_points(cfw[i], X))
+            levels = level(e, cam.project_points(cfw[i], X))
             assert levels.max() <= 1 + 1e-6 and levels.max() > 0.95
 
 
@@ -187,11 +201,32 @@ def test_degenerate_view_sets_fail_clearly(chess_views) -> None:
         i = visible_frames(cam, cfw, obj.ellipsoid)[0]
         mixed.append(project_ellipsoid(cam, cfw[i], obj.ellipsoid))
         mixed_poses.append(invert_pose(cfw[i]))
-    # Neither start yields an ellipsoid (the linear quadric is not one, the sphere start
-    # ends behind a camera): refused, naming both attempts.
-    with pytest.raises(ReconstructionError, match=r"linear: .*sphere: ") as exc:
+    # Neither start yields an ellipsoid of the views (the linear quadric is not one; from the
+    # sphere, LM shrinks it to a ~2 mm ellipsoid that reproduces none of the ellipses): refused,
+    # naming both attempts.
+    with pytest.raises(ReconstructionError, match=r"linear: .*sphere: .*misses") as exc:
         reconstruct_ellipsoid(mixed, mixed_poses, cam)
-    assert exc.value.reason == "refinement_failed"
+    assert exc.value.reason == "inconsistent_views"
+    # ... and reported per object by build_scene_map (skip mode), the map keeps the others
+    frames = [FrameObservations(T, cam, [LabelledEllipse("mix", "Chair", e)])
+              for T, e in zip(mixed_poses, mixed, strict=True)]
+    frames += [FrameObservations(wfc[k], cam, [LabelledEllipse("chair", "Chair", ells[k])])
+               for k in range(len(ells))]
+    scene, report = build_scene_map(frames, map_id="m", name="m", on_failure="skip")
+    assert [o.object_id for o in scene.objects] == ["chair"]
+    reason, message = report.failures["mix"]
+    assert reason == "inconsistent_views" and "RMS level residual" in message
+
+
+def test_degenerate_shapes_are_named() -> None:
+    """A 1.7 mm-thin ellipsoid (inside the map's 1 mm limit) is no object's shape."""
+    thin = Ellipsoid(np.zeros(3), np.array([0.25, 0.15, 0.0017]))
+    assert "smallest below" in degenerate_shape_reason(thin)
+    assert degenerate_shape_reason(Ellipsoid(np.zeros(3), np.array([0.25, 0.15, 0.003]))) is None
+    assert "outside" in degenerate_shape_reason(Ellipsoid(np.zeros(3), np.full(3, 5e-4)))
+    # the flattest Chess object passes
+    for obj in load_demo_map().objects:
+        assert degenerate_shape_reason(obj.ellipsoid) is None
 
 
 # --------------------------------------------------------------------------- noisy views

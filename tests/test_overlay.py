@@ -20,11 +20,7 @@ from sdk.overlay import overlay_svg, project_ellipsoid
 from service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, LOCALIZE_EXAMPLE
 from service.api.inspector import wants_svg
 from tests.conftest import make_test_app
-
-
-def _angle_diff(a: float, b: float) -> float:
-    """Difference of two ellipse angles modulo pi (an ellipse is symmetric)."""
-    return abs((a - b + math.pi / 2) % math.pi - math.pi / 2)
+from tests.helpers import angle_diff, surface_points
 
 
 def test_sdk_projection_matches_the_solver_on_the_chess_map() -> None:
@@ -55,7 +51,7 @@ def test_sdk_projection_matches_the_solver_on_the_chess_map() -> None:
             np.testing.assert_allclose([mine.cx, mine.cy, mine.a, mine.b],
                                        [ref.cx, ref.cy, ref.a, ref.b], rtol=1e-7, atol=1e-6)
             if ref.a - ref.b > 1e-6 * ref.a:  # angle undefined for a circle
-                assert _angle_diff(mine.angle, ref.angle) < 1e-7
+                assert angle_diff(mine.angle, ref.angle) < 1e-7
             compared += 1
     assert compared > 30 and degenerate > 0, (compared, degenerate)
 
@@ -68,7 +64,7 @@ def test_projection_touches_the_projected_surface_points() -> None:
     T = np.eye(4)
     e = project_ellipsoid(center, axes, q, T.tolist(), 500.0, 480.0, 320.0, 240.0)
     assert e is not None
-    pts = Ellipsoid.from_quaternion_wxyz(center, axes, q).surface_points(64, 32)
+    pts = surface_points(Ellipsoid.from_quaternion_wxyz(center, axes, q), 64, 32)
     uv = np.c_[500.0 * pts[:, 0] / pts[:, 2] + 320.0, 480.0 * pts[:, 1] / pts[:, 2] + 240.0]
     R = np.array([[math.cos(e.angle), -math.sin(e.angle)], [math.sin(e.angle), math.cos(e.angle)]])
     local = (uv - [e.cx, e.cy]) @ R

@@ -18,10 +18,12 @@ from maps.compiled import compile_map
 from maps.model import MapObject, SceneMap
 from service.localization.ransac import (
     MatchScorer,
-    estimate_iou,
+    _ellipse_points,
     greedy_assignment,
+    iou_estimates,
     project_objects,
     ransac,
+    sunflower_disk,
 )
 from tests.test_hypotheses import BACK, CAM, UP, look_at
 
@@ -29,6 +31,13 @@ from tests.test_hypotheses import BACK, CAM, UP, look_at
 def random_ellipse(rng: np.random.Generator) -> Ellipse:
     return Ellipse(rng.uniform(100, 500), rng.uniform(100, 400), rng.uniform(10, 80),
                    rng.uniform(10, 80), rng.uniform(-math.pi, math.pi))
+
+
+def estimate_iou(detection: Ellipse, projection: Ellipse, n_points: int = 256) -> float:
+    """The production estimator (:func:`iou_estimates`) on one pair of ellipses."""
+    pts = _ellipse_points(detection.params()[None], sunflower_disk(n_points))[0]
+    _, S = projection.gaussian()
+    return float(iou_estimates(pts, np.array(detection.area), projection.center, S))
 
 
 def test_estimate_iou_matches_exact_metric():

@@ -15,14 +15,9 @@ from scipy.spatial.transform import Rotation
 from factors.geometry import Ellipse as RefEllipse
 from sdk import geometry as g
 from sdk.models import Box, Ellipse
+from tests.helpers import angle_diff, level
 
 RNG = np.random.default_rng(20261121)
-
-
-def _angle_diff(a: float, b: float) -> float:
-    """Difference of two ellipse angles modulo the ellipse's 180-degree symmetry, radians."""
-    d = (a - b + math.pi / 2) % math.pi - math.pi / 2
-    return abs(d)
 
 
 def _dual_conic(e: Ellipse | RefEllipse) -> np.ndarray:
@@ -33,7 +28,7 @@ def _raster(e: RefEllipse, shape: tuple[int, int]) -> np.ndarray:
     """Pixels whose CENTRE (j + 0.5, i + 0.5) lies inside the ellipse (independent of the SDK)."""
     ii, jj = np.mgrid[0 : shape[0], 0 : shape[1]]
     centres = np.stack([jj + 0.5, ii + 0.5], axis=-1)
-    return (e.level(centres) <= 1.0).astype(np.uint8)
+    return (level(e, centres) <= 1.0).astype(np.uint8)
 
 
 def _random_pose() -> np.ndarray:
@@ -85,7 +80,7 @@ def test_mask_moments_recovers_rasterized_ellipse(ref):
     e = g.ellipse_from_mask(mask, method="moments")
     assert math.hypot(e.cx - ref.cx, e.cy - ref.cy) < 0.1  # a 0.5 px shift would fail
     assert abs(e.a - ref.a) < 0.3 and abs(e.b - ref.b) < 0.3
-    assert _angle_diff(e.angle, ref.angle) < math.radians(0.5)
+    assert angle_diff(e.angle, ref.angle) < math.radians(0.5)
     # Area of the moment ellipse equals the pixel count (a uniform ellipse's moments are exact).
     assert abs(math.pi * e.a * e.b - mask.sum()) / mask.sum() < 0.01
 
@@ -97,14 +92,14 @@ def test_mask_fit_and_contour_fit_follow_opencv_conventions(ref):
     # Boundary-pixel centres are inset by ~0.5 px: the fit is at most ~1 px small, never larger.
     assert math.hypot(e.cx - ref.cx, e.cy - ref.cy) < 0.15
     assert -1.2 < e.a - ref.a < 0.2 and -1.2 < e.b - ref.b < 0.2
-    assert _angle_diff(e.angle, ref.angle) < math.radians(1.0)
+    assert angle_diff(e.angle, ref.angle) < math.radians(1.0)
     contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     e2 = g.ellipse_from_contour(contours[0], method="fit")
     assert e2 == e
     e3 = g.ellipse_from_contour(contours[0], method="moments")
     assert math.hypot(e3.cx - ref.cx, e3.cy - ref.cy) < 0.15
     assert abs(e3.a - ref.a) < 1.2 and abs(e3.b - ref.b) < 1.2
-    assert _angle_diff(e3.angle, ref.angle) < math.radians(1.0)
+    assert angle_diff(e3.angle, ref.angle) < math.radians(1.0)
 
 
 @pytest.mark.parametrize("ref", ELLIPSES)
@@ -116,7 +111,7 @@ def test_contour_of_exact_points_is_recovered_exactly(ref):
     # A 720-gon inscribed in the ellipse: area/moment deficit ~ (2 pi / 720)^2 / 6 ~ 1e-5.
     assert abs(mom.a - ref.a) / ref.a < 1e-4 and abs(mom.b - ref.b) / ref.b < 1e-4
     assert math.hypot(mom.cx - ref.cx, mom.cy - ref.cy) < 1e-3
-    assert _angle_diff(mom.angle, ref.angle) < 1e-4
+    assert angle_diff(mom.angle, ref.angle) < 1e-4
     # The OpenCV-coordinates flag shifts by exactly half a pixel.
     shifted = g.ellipse_from_contour(pts - 0.5, method="fit", opencv_pixel_coordinates=True)
     assert math.isclose(shifted.cx, fit.cx, abs_tol=1e-3)
@@ -302,7 +297,7 @@ def test_fit_recovers_any_exact_ellipse(cx, cy, a, ratio, angle):
     assert abs(fit.a - ref.canonical().a) < 1e-3 * scale
     assert abs(fit.b - ref.canonical().b) < 1e-3 * scale
     if ratio < 0.95:  # the angle of a near-circle is meaningless
-        assert _angle_diff(fit.angle, angle) < 1e-3
+        assert angle_diff(fit.angle, angle) < 1e-3
 
 
 @settings(max_examples=100, deadline=None)

@@ -18,6 +18,7 @@ from bench.simulate import (
 )
 from factors.geometry import Ellipse, invert_pose, project_ellipsoid
 from maps.compiled import compile_map
+from tests.helpers import level
 
 MAP = load_chess_map()
 CM = compile_map(MAP)
@@ -31,7 +32,7 @@ def raster_moment_ellipse(full: Ellipse, width: int, height: int, step: float = 
     ys = np.arange(max(y0, 0.0), min(y1, height), step) + step / 2
     X, Y = np.meshgrid(xs, ys)
     pts = np.column_stack([X.ravel(), Y.ravel()])
-    pts = pts[full.level(pts) <= 1.0]
+    pts = pts[level(full, pts) <= 1.0]
     mu = pts.mean(axis=0)
     cov = np.cov(pts.T, bias=True)
     return Ellipse.from_gaussian(mu, 4.0 * cov), len(pts) * step * step

@@ -19,7 +19,8 @@ import numpy as np
 from maps.building.association import AssociationOptions, associate
 from maps.building.joint import refine_jointly
 from maps.building.recording import Recording
-from maps.model import LIMITS, MapObject, SceneMap
+from maps.model import MapObject, SceneMap
+from maps.reconstruct import degenerate_shape_reason
 
 __all__ = ["BuildTimeoutError", "build_map"]
 
@@ -30,6 +31,16 @@ MIN_VIEWS_UNCONSTRAINED = 15
 #: keeps them (the default: on the Chess bench, leaving out the TVs, whose centre std is
 #: 0.6-0.9 m, did not change relocalization at 10 cm and lost their detections).
 MAX_CENTER_STD_M: float | None = None
+
+
+def _drop_detail(reason: str, shape_problem: str | None, q: Any) -> str:
+    """A sentence for the report on why an object was left out of the map."""
+    if reason == "degenerate_shape":
+        return f"not an object's shape: {shape_problem}"
+    if reason == "unconstrained":
+        return (f"semi-axes {list(q.unconstrained_axes)} not constrained by the views and only "
+                f"{q.n_views} views")
+    return f"centre uncertain by {q.center_std_m:.3g} m along some direction"
 
 
 class BuildTimeoutError(RuntimeError):
@@ -80,6 +91,7 @@ def build_map(
             recording.camera, T_wc, obs,
             [(h.label, h.observations, h.ellipsoid) for h in objects],
             size_priors=recording.size_priors, refine_cameras=recording.refine_camera_poses,
+            odometry=recording.odometry_noise,
             max_iterations=max_iterations, deadline=deadline, progress=on_iter)
     t_refine = time.perf_counter() - t0 - t_assoc
     report_progress("saving", 95.0, len(objects))
@@ -93,7 +105,8 @@ def build_map(
         counters[h.label] = counters.get(h.label, 0) + 1
         oid = f"{h.label}_{counters[h.label]}"
         reason = None
-        if ell.axes.min() < LIMITS["min_semi_axis_m"] or ell.axes.max() > LIMITS["max_semi_axis_m"]:
+        shape_problem = degenerate_shape_reason(ell)
+        if shape_problem is not None:
             reason = "degenerate_shape"
         elif q.unconstrained_axes and q.n_views < min_views_unconstrained:
             reason = "unconstrained"
@@ -101,7 +114,8 @@ def build_map(
             reason = "center_unconstrained"
         if reason is not None:
             dropped.append({"object_id": oid, "label": h.label, "reason": reason,
-                            "n_views": q.n_views})
+                            "detail": _drop_detail(reason, shape_problem, q),
+                            "n_views": q.n_views, "semi_axes_m": ell.axes.tolist()})
             for i in h.observations:
                 rejected[i] = f"object_{reason}"
             continue

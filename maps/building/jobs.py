@@ -1,8 +1,9 @@
 """Map-building jobs as rows of the map store's database (table ``quadloc_build_jobs``, created by
 the Alembic migration ``0002_build_jobs``).
 
-A job is ``queued`` -> ``running`` -> ``succeeded`` | ``failed``. A running job's row is its
-heartbeat: the runner updates ``updated_at`` with every progress report (at least every 2 s). A job
+A job is ``queued`` -> ``running`` -> ``succeeded`` | ``failed``. An active job's row is its
+heartbeat: the runner updates ``updated_at`` with every progress report of the running job (at
+least every 2 s), and the queued jobs' rows with it (:meth:`JobStore.heartbeat`). A job
 that is queued or running but whose heartbeat is older than ``stale_after_s`` lost its runner (the
 replica restarted or died): :meth:`JobStore.fail_stale` marks it ``failed`` with the error
 ``runner_lost``; the API calls it at startup and before answering a job's status, so no job stays
@@ -116,6 +117,17 @@ class JobStore:
         return self._update(job_id, status="running", stage=stage,
                             percent=float(min(100.0, max(0.0, percent))),
                             objects_found=int(objects_found))
+
+    def heartbeat(self, job_ids: list[str]) -> int:
+        """Refresh the heartbeat (``updated_at``) of the listed jobs that are still active
+        (e.g. queued behind a running build on the same replica); returns how many."""
+        if not job_ids:
+            return 0
+        with self.engine.begin() as conn:
+            return conn.execute(
+                jobs_table.update()
+                .where(jobs_table.c.job_id.in_(job_ids), jobs_table.c.status.in_(ACTIVE))
+                .values(updated_at=_now())).rowcount
 
     def succeed(self, job_id: str, map_version: int, report: dict[str, Any],
                 objects_found: int) -> bool:

@@ -6,27 +6,29 @@ Variables: per object ``E_k`` (``Pose3``: ellipsoid frame -> world, translation 
 
 Factors:
 
-* one per object over all its observations: the level-set residual of localization
-  (:func:`factors.ellipsoid_residuals.observation_residual`, batched over the views, the
-  samples of ``factors.metrics.level_set_sample_points``), each view weighted as localization
-  weights a detection (whitened by ``sqrt(sigma)``, the std of
-  ``factors.pose_factors.make_noise_model``) under a Huber kernel per view (threshold
-  ``factors.pose_factors.DEFAULT_ROBUST_SCALE["level_set"]``): the view's rows are scaled so that
-  half their squared norm is the Huber cost of the view's whitened residual norm (the Jacobian
-  gets the same scale, as in iteratively reweighted least squares). One factor per object
-  instead of one per view: the Python round trips, not the arithmetic, dominate (GUIDE 3).
-  Where the ellipsoid is not entirely in front of a camera (depth margin <=
-  ``factors.pose_residuals.DEFAULT_MIN_DEPTH_MARGIN``) that view's rows are a constant
-  (cost ``PENALTY_COST / sigma``, zero Jacobian), so LM rejects steps there;
+* the level-set residual of localization over the observations
+  (:func:`factors.ellipsoid_factors.ellipsoid_views_factor`, the factor
+  ``maps.reconstruct`` uses too; residual :func:`factors.ellipsoid_residuals.observation_residual`,
+  the samples of ``factors.metrics.level_set_sample_points``), each view weighted as
+  localization weights a detection (whitened by ``sqrt(sigma)``, the std of
+  ``factors.pose_factors.make_noise_model``; truncated detections by ``truncated_weight`` more)
+  under a Huber kernel per view (threshold ``factors.pose_factors.DEFAULT_ROBUST_SCALE
+  ["level_set"]``); views not in front of their camera get a constant penalty. Cameras fixed:
+  one factor per object over all its views. Cameras refined: one factor per run of
+  ``frames_per_factor`` consecutive frames over all their views (each view touches one
+  camera; fewer, larger factors: the Python round trips, not the arithmetic, dominate, GUIDE 3);
 * ``size_priors``: ``PriorFactorVector`` on ``L_k`` (``N(log semi_axis_m, log_sigma^2)`` per
   axis). For labels without one, the log semi-axes that the views leave unconstrained at the
   initial estimate (marginal std above ``unconstrained_log_std``, computed as in the quality
-  report) get a weak prior (std ``UNCONSTRAINED_PRIOR_SIGMA`` = 1, a factor e) towards the
+  report) get a weak prior (std ``UNCONSTRAINED_PRIOR_SIGMA`` = 0.5, a factor 1.65) towards the
   object's mean log semi-axis, so that they cannot collapse; constrained axes get none (no bias
   where the views decide);
+* a floor on every semi-axis (``AXIS_FLOOR_FRACTION`` = 1/20 of the object's initial mean
+  semi-axis), a one-sided prior: an axis constrained at the start may not be at the end, once
+  the object and the cameras have moved; no cost above the floor;
 * with ``refine_cameras``: ``PriorFactorPose3`` on the first frame (gauge) and
   ``BetweenFactorPose3`` between consecutive frames with the app's relative poses
-  (``odometry_sigmas``: rotation rad, translation m, per step) — object-level bundle
+  (noise ``odometry``, :class:`maps.building.recording.OdometryNoise`) — object-level bundle
   adjustment.
 
 Quality of each object (:class:`ObjectQuality`): views, spread of the viewing directions (the
@@ -51,6 +53,7 @@ from dataclasses import dataclass
 import gtsam
 import numpy as np
 
+from factors.ellipsoid_factors import depth_margins, ellipsoid_views_factor
 from factors.ellipsoid_residuals import (
     LevelSetSamples,
     level_set_samples,
@@ -61,26 +64,35 @@ from factors.geometry import Camera, Ellipsoid, invert_pose
 from factors.pose_factors import DEFAULT_ROBUST_SCALE
 from factors.pose_residuals import DEFAULT_MIN_DEPTH_MARGIN
 from maps.building.association import touches_border
-from maps.building.recording import Observation, SizePrior
+from maps.building.recording import Observation, OdometryNoise, SizePrior
 
 __all__ = ["JointResult", "ObjectQuality", "refine_jointly"]
 
-#: Penalty cost of one observation whose ellipsoid is not in front of its camera.
-PENALTY_COST = 1e6
 #: Marginal std of a log semi-axis above which the axis is reported unconstrained.
 UNCONSTRAINED_LOG_STD = 0.3
 #: Residual weight of a detection touching the image border (probably truncated: its ellipse is
 #: that of the visible part, not of the object's projection).
 TRUNCATED_WEIGHT = 0.3
 #: Std (log metres) of the prior on the log semi-axes that the views leave unconstrained at the
-#: initial estimate (towards the object's mean log semi-axis); None disables it.
-UNCONSTRAINED_PRIOR_SIGMA: float | None = 1.0
+#: initial estimate (towards the object's mean log semi-axis); None disables it. 0.5 (a factor
+#: 1.65): on the bench's tuning seed 0, 0.3, 0.5 and 1 relocalize alike and 0.5 converges in
+#: the fewest LM iterations (9 vs 17 at 1); at 1, a TV seen within a narrow cone collapsed to a
+#: 1.2 m x 1 cm disc on another seed (left out as degenerate by ``maps.reconstruct``).
+UNCONSTRAINED_PRIOR_SIGMA: float | None = 0.5
 #: ``sigma`` assumed for detections without one in the quality report's axis uncertainty (a
 #: level-set residual std of ``sqrt(2.5e-3) = 0.05``, typical of a fine-tuned detector; the
 #: optimisation itself weights them 1, as localization does).
 QUALITY_DEFAULT_SIGMA = 2.5e-3
-#: Default odometry noise per frame step: rotation (rad), translation (m).
-ODOMETRY_SIGMAS = (0.005, 0.01)
+#: Floor of every semi-axis, as a fraction of the object's initial mean semi-axis (geometric),
+#: held by a one-sided prior (zero cost above it, std ``AXIS_FLOOR_LOG_SIGMA`` in log below;
+#: None: no floor). An axis the views constrain at the start may not be constrained at the end,
+#: once the object and the cameras have moved (a TV seen truncated within a narrow cone
+#: collapsed to a disc of 1e-159 m); the floor stops such collapses without biasing any axis
+#: above it (a Gaussian prior on every axis would).
+AXIS_FLOOR_FRACTION: float | None = 0.05
+AXIS_FLOOR_LOG_SIGMA = 0.1
+#: With ``refine_cameras``: consecutive frames whose views share one factor.
+FRAMES_PER_FACTOR = 3
 
 
 @dataclass(frozen=True)
@@ -119,10 +131,7 @@ def _log_axis_std(T_cw: np.ndarray, R: np.ndarray, center: np.ndarray, axes: np.
     ``info_weights`` (1/sigma); also the residuals (V', M) of the views in front, their mask and
     the largest std (m) of the centre along any direction.
     Views whose camera does not see the ellipsoid in front are skipped."""
-    S = (R * axes**2) @ R.T
-    margins = T_cw[:, 2, :3] @ center + T_cw[:, 2, 3] - np.sqrt(
-        np.einsum("vi,ij,vj->v", T_cw[:, 2, :3], S, T_cw[:, 2, :3]))
-    ok = margins > DEFAULT_MIN_DEPTH_MARGIN
+    ok = depth_margins(T_cw, R, center, axes) > DEFAULT_MIN_DEPTH_MARGIN
     if not ok.any():
         return np.full(3, np.inf), np.zeros((0, samples.n.shape[-1])), ok, math.inf
     sub = LevelSetSamples(None, samples.n[ok], samples.phi_det_minus_1[ok])
@@ -149,12 +158,19 @@ def _canonical(R: np.ndarray, center: np.ndarray, axes: np.ndarray) -> Ellipsoid
     return Ellipsoid(center, np.maximum(axes[order], 1e-300), R2)
 
 
-def _huber_scale(norms: np.ndarray, k: float) -> np.ndarray:
-    """Row scale so that ``0.5 (scale |w|)^2`` is Huber's cost of ``|w|`` (threshold ``k``)."""
-    big = norms > k
-    out = np.ones_like(norms)
-    out[big] = np.sqrt(2.0 * k * (norms[big] - 0.5 * k)) / norms[big]
-    return out
+def _floor_factor(key: int, floor: float, sigma: float) -> gtsam.CustomFactor:
+    """One-sided prior on a ``Vector3`` (log semi-axes): residual ``max(0, floor - x_i)``,
+    std ``sigma``: no cost at or above ``floor``."""
+
+    def error_fn(this: gtsam.CustomFactor, values: gtsam.Values,
+                 H: list[np.ndarray] | None) -> np.ndarray:
+        x = values.atVector(key)
+        below = x < floor
+        if H is not None:
+            H[0] = np.diag(np.where(below, -1.0, 0.0))
+        return np.where(below, floor - x, 0.0)
+
+    return gtsam.CustomFactor(gtsam.noiseModel.Isotropic.Sigma(3, sigma), [key], error_fn)
 
 
 class _Ticker:
@@ -189,77 +205,18 @@ class _Ticker:
             self.progress(self.iteration + frac, self.error)
 
 
-def _object_factor(samples: LevelSetSamples, weights: np.ndarray, e_key: int, l_key: int,
-                   view_frames: np.ndarray, x_keys: list[int] | None,
-                   T_cw_fixed: np.ndarray | None,
-                   tick: Callable[[], None] | None = None) -> gtsam.CustomFactor:
-    """All views of one object. ``weights`` (V,) = 1/sqrt(sigma_v); ``view_frames`` (V,) the
-    index of each view's camera in ``x_keys`` (refined cameras) or into ``T_cw_fixed``."""
-    V, M = samples.phi_det_minus_1.shape
-    pen = np.sqrt(2.0 * PENALTY_COST / M) * weights  # per view
-    k = DEFAULT_ROBUST_SCALE["level_set"]
-    keys = [e_key, l_key] + (list(x_keys) if x_keys is not None else [])
-    noise = gtsam.noiseModel.Unit.Create(V * M)
-
-    def error_fn(this: gtsam.CustomFactor, values: gtsam.Values,
-                 H: list[np.ndarray] | None) -> np.ndarray:
-        if tick is not None:
-            tick()
-        pose = values.atPose3(e_key)
-        R = pose.rotation().matrix()
-        c = np.asarray(pose.translation(), dtype=float)
-        axes = np.exp(values.atVector(l_key))
-        if x_keys is None:
-            T_cw = T_cw_fixed
-        else:
-            cams = np.array([invert_pose(values.atPose3(x).matrix()) for x in x_keys])
-            T_cw = cams[view_frames]
-        S = (R * axes**2) @ R.T
-        margins = T_cw[:, 2, :3] @ c + T_cw[:, 2, 3] - np.sqrt(
-            np.einsum("vi,ij,vj->v", T_cw[:, 2, :3], S, T_cw[:, 2, :3]))
-        ok = margins > DEFAULT_MIN_DEPTH_MARGIN
-        out = np.empty((V, M))
-        out[~ok] = pen[~ok, None]
-        want = H is not None
-        if want:
-            Je = np.zeros((V, M, 9))
-            Jc = np.zeros((V, M, 6)) if x_keys is not None else None
-        if ok.any():
-            sub = LevelSetSamples(None, samples.n[ok], samples.phi_det_minus_1[ok])
-            r, J_e, J_c = observation_residual(T_cw[ok], R, c, axes, sub, want)
-            w = r * weights[ok, None]
-            scale = (weights[ok] * _huber_scale(np.linalg.norm(w, axis=1), k))[:, None]
-            out[ok] = r * scale
-            if want:
-                Je[ok] = J_e * scale[..., None]
-                if Jc is not None:
-                    Jc[ok] = J_c * scale[..., None]
-        if want:
-            Je = Je.reshape(V * M, 9)
-            H[0] = np.ascontiguousarray(Je[:, :6])
-            H[1] = np.ascontiguousarray(Je[:, 6:])
-            if x_keys is not None:
-                Jc = Jc.reshape(V, M, 6)
-                for j in range(len(x_keys)):
-                    Hj = np.zeros((V, M, 6))
-                    sel = view_frames == j
-                    Hj[sel] = Jc[sel]
-                    H[2 + j] = Hj.reshape(V * M, 6)
-        return out.reshape(-1)
-
-    return gtsam.CustomFactor(noise, keys, error_fn)
-
-
 def refine_jointly(
     camera: Camera, world_from_camera: np.ndarray, observations: Sequence[Observation],
     objects: Sequence[tuple[str, Sequence[int], Ellipsoid]], *,
     size_priors: Mapping[str, SizePrior] | None = None, refine_cameras: bool = False,
-    odometry_sigmas: tuple[float, float] = ODOMETRY_SIGMAS, max_iterations: int = 30,
+    odometry: OdometryNoise | None = None, max_iterations: int = 30,
     deadline: float | None = None,
     progress: Callable[[float, float], None] | None = None,
     unconstrained_log_std: float = UNCONSTRAINED_LOG_STD,
     truncated_weight: float = TRUNCATED_WEIGHT,
     unconstrained_prior_sigma: float | None = UNCONSTRAINED_PRIOR_SIGMA,
+    frames_per_factor: int = FRAMES_PER_FACTOR,
+    axis_floor_fraction: float | None = AXIS_FLOOR_FRACTION,
 ) -> JointResult:
     """Refine ``objects`` = ``(label, observation indices, initial ellipsoid)`` jointly.
 
@@ -277,6 +234,8 @@ def refine_jointly(
     X = {f: gtsam.symbol("x", f) for f in used_frames} if refine_cameras else {}
     samples: dict[int, LevelSetSamples] = {}
     info_w: list[np.ndarray] = []
+    view_rows: list[tuple[int, int, int, float]] = []  # (frame, object, observation, weight)
+    robust = DEFAULT_ROBUST_SCALE["level_set"]
     ticker = _Ticker(progress)
     for k, (label, idx, ell) in enumerate(objects):
         values.insert(E[k], _pose3(np.block([[ell.rotation, ell.center[:, None]],
@@ -294,16 +253,14 @@ def refine_jointly(
             (truncated_weight**2 if touches_border(observations[i].ellipse, camera) else 1.0)
             / (observations[i].sigma if observations[i].sigma is not None
                else QUALITY_DEFAULT_SIGMA) for i in idx]))
-        if refine_cameras:  # one factor per view: each touches one camera
-            for v, f in enumerate(frames_k):
-                one = LevelSetSamples(None, stacked.n[v:v + 1],
-                                      stacked.phi_det_minus_1[v:v + 1])
-                graph.add(_object_factor(one, weights[v:v + 1], E[k], L[k], np.zeros(1, int),
-                                         [X[f]], None, ticker))
+        if not refine_cameras:  # one factor per object over all its views
+            graph.add(ellipsoid_views_factor(
+                stacked, weights, [(E[k], L[k])], np.zeros(len(idx), int),
+                camera_from_world=np.array([invert_pose(T_wc[f]) for f in frames_k]),
+                robust_scale=robust, on_evaluate=ticker))
         else:
-            graph.add(_object_factor(stacked, weights, E[k], L[k], np.arange(len(idx)), None,
-                                     np.array([invert_pose(T_wc[f]) for f in frames_k]),
-                                     ticker))
+            for v, i in enumerate(idx):
+                view_rows.append((observations[i].frame, k, i, weights[v]))
         prior = (size_priors or {}).get(label)
         if prior is not None:
             graph.add(gtsam.PriorFactorVector(
@@ -320,15 +277,37 @@ def refine_jointly(
                 graph.add(gtsam.PriorFactorVector(
                     L[k], np.full(3, float(np.mean(np.log(ell.axes)))),
                     gtsam.noiseModel.Diagonal.Sigmas(sig)))
+        if axis_floor_fraction is not None:
+            graph.add(_floor_factor(L[k], float(np.mean(np.log(ell.axes)))
+                                    + math.log(axis_floor_fraction), AXIS_FLOOR_LOG_SIGMA))
     if refine_cameras and used_frames:
         for f in used_frames:
             values.insert(X[f], _pose3(T_wc[f]))
+        # one factor per run of `frames_per_factor` consecutive used frames, over their views
+        # of every object: few Python round trips, small dense Jacobian blocks
+        by_frame: dict[int, list[tuple[int, int, float]]] = {}
+        for f, k, i, wv in view_rows:
+            by_frame.setdefault(f, []).append((k, i, wv))
+        chunk = max(1, int(frames_per_factor))
+        for start in range(0, len(used_frames), chunk):
+            fs = used_frames[start:start + chunk]
+            rows = [(fi, k, i, wv) for fi, f in enumerate(fs) for k, i, wv in by_frame[f]]
+            objs = sorted({k for _, k, _, _ in rows})
+            slot = {k: s for s, k in enumerate(objs)}
+            graph.add(ellipsoid_views_factor(
+                stack_samples([samples[i] for _, _, i, _ in rows]),
+                np.array([wv for *_, wv in rows]), [(E[k], L[k]) for k in objs],
+                [slot[k] for _, k, _, _ in rows], camera_keys=[X[f] for f in fs],
+                view_cameras=[fi for fi, _, _, _ in rows], robust_scale=robust,
+                on_evaluate=ticker))
         graph.add(gtsam.PriorFactorPose3(X[used_frames[0]], _pose3(T_wc[used_frames[0]]),
                                          gtsam.noiseModel.Isotropic.Sigma(6, 1e-6)))
+        noise = odometry or OdometryNoise()
+        path = np.concatenate([[0.0], np.cumsum(np.linalg.norm(
+            np.diff(T_wc[:, :3, 3], axis=0), axis=1))])  # app's path length to each frame (m)
         for a, b in itertools.pairwise(used_frames):
-            steps = b - a
             rel = invert_pose(T_wc[a]) @ T_wc[b]
-            sig = np.array([odometry_sigmas[0]] * 3 + [odometry_sigmas[1]] * 3) * math.sqrt(steps)
+            sig = noise.sigmas(float(path[b] - path[a]), b - a)
             graph.add(gtsam.BetweenFactorPose3(X[a], X[b], _pose3(rel),
                                                gtsam.noiseModel.Diagonal.Sigmas(sig)))
     params = gtsam.LevenbergMarquardtParams()

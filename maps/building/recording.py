@@ -14,7 +14,8 @@ JSON document (what ``POST /v1/maps:build``, ``quadloc maps build`` and the SDK 
       ],
       "name": "My room", "up_axis": [0, 0, 1],
       "size_priors": {"Chair": {"semi_axis_m": 0.4, "log_sigma": 0.5}},
-      "refine_camera_poses": false
+      "refine_camera_poses": true,
+      "odometry_noise": {"translation_m_per_sqrt_m": 0.01, "rotation_rad_per_sqrt_m": 0.005}
     }
 
 Conventions: ``world_from_camera`` is the camera's pose in the app's world frame (its own
@@ -24,7 +25,9 @@ first. Ellipses: centre px (origin top-left pixel corner), SEMI-axes px, angle r
 boxes ``[xmin, ymin, xmax, ymax]`` px become their inscribed axis-aligned ellipse. ``sigma``
 is the detector's uncertainty as in localize (factor std ``sqrt(sigma)``). ``track_id``: the
 app's tracker id; detections that carry one are grouped by it (per label) instead of being
-associated geometrically.
+associated geometrically. ``refine_camera_poses`` (default true): refine the camera poses
+too, tied by the app's relative poses with the noise ``odometry_noise`` (:class:`OdometryNoise`,
+every field optional).
 
 :func:`parse_recording` validates everything and raises :class:`RecordingError` listing every
 problem as ``{"field": "frames[3].detections[0].ellipse.a", "message": ...}``.
@@ -45,6 +48,7 @@ __all__ = [
     "BuildLimits",
     "FrameRecord",
     "Observation",
+    "OdometryNoise",
     "Recording",
     "RecordingError",
     "SizePrior",
@@ -99,6 +103,31 @@ class SizePrior:
 
 
 @dataclass(frozen=True)
+class OdometryNoise:
+    """Noise of the app's poses between two recorded frames, a random walk: over a path of
+    ``d`` metres and ``n`` frame steps the relative pose has the std ``sqrt(r_m^2 d + r_s^2 n)``
+    (rad, per rotation axis) and ``sqrt(t_m^2 d + t_s^2 n)`` (m, per translation axis), with
+    ``r_m = rotation_rad_per_sqrt_m``, ``r_s = rotation_rad_per_step`` (the floor while turning
+    on the spot), ``t_m = translation_m_per_sqrt_m``, ``t_s = translation_m_per_step``. The
+    path-length terms make it independent of the frame rate. Defaults: a VIO drifting about
+    1 cm and 0.3 deg over a metre (tuned on the bench's seed 0, bench/map_building.py)."""
+
+    rotation_rad_per_sqrt_m: float = 0.005
+    translation_m_per_sqrt_m: float = 0.01
+    rotation_rad_per_step: float = 0.0005
+    translation_m_per_step: float = 0.001
+
+    def sigmas(self, distance_m: float, steps: int) -> np.ndarray:
+        """Between-factor stds ``[rotation x3 (rad), translation x3 (m)]`` (GTSAM Pose3 tangent
+        order) over ``distance_m`` and ``steps``."""
+        r = math.sqrt(self.rotation_rad_per_sqrt_m ** 2 * distance_m
+                      + self.rotation_rad_per_step ** 2 * steps)
+        t = math.sqrt(self.translation_m_per_sqrt_m ** 2 * distance_m
+                      + self.translation_m_per_step ** 2 * steps)
+        return np.array([r, r, r, t, t, t])
+
+
+@dataclass(frozen=True)
 class Recording:
     camera: Camera
     frames: tuple[FrameRecord, ...]
@@ -106,7 +135,8 @@ class Recording:
     name: str = "Built map"
     up_axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
     size_priors: Mapping[str, SizePrior] = field(default_factory=dict)
-    refine_camera_poses: bool = False
+    refine_camera_poses: bool = True
+    odometry_noise: OdometryNoise = field(default_factory=OdometryNoise)
 
 
 def _num(errors: list, path: str, value: Any, positive: bool = False) -> float | None:
@@ -258,14 +288,34 @@ def parse_recording(data: Any, limits: BuildLimits | None = None) -> Recording:
         s = _num(errors, f"{path}.log_sigma", p.get("log_sigma", 0.5), positive=True)
         if a is not None and s is not None:
             priors[str(label)] = SizePrior(a, s)
-    refine = data.get("refine_camera_poses", False)
+    refine = data.get("refine_camera_poses", True)
     if not isinstance(refine, bool):
         errors.append({"field": "refine_camera_poses", "message": "must be a boolean"})
+    odo = data.get("odometry_noise", {}) or {}
+    noise = OdometryNoise()
+    if not isinstance(odo, Mapping):
+        errors.append({"field": "odometry_noise", "message": "must be an object"})
+    else:
+        known = set(OdometryNoise.__dataclass_fields__)
+        for key in sorted(set(odo) - known):
+            errors.append({"field": f"odometry_noise.{key}",
+                           "message": f"unknown; expected one of {sorted(known)}"})
+        vals = {}
+        for key in known & set(odo):
+            v = _num(errors, f"odometry_noise.{key}", odo[key])
+            if v is not None and not 0 <= v <= 10:
+                errors.append({"field": f"odometry_noise.{key}", "message": "must be in [0, 10]"})
+            elif v is not None:
+                vals[key] = v
+        noise = OdometryNoise(**{**noise.__dict__, **vals})
+        if not errors and (noise.rotation_rad_per_step <= 0 or noise.translation_m_per_step <= 0):
+            errors.append({"field": "odometry_noise", "message": "the per-step floors "
+                           "rotation_rad_per_step and translation_m_per_step must be > 0"})
     if errors:
         raise RecordingError(errors)
     assert camera is not None and upv is not None
     return Recording(camera, tuple(frames), tuple(obs), name, tuple(upv.tolist()), priors,
-                     bool(refine))
+                     bool(refine), noise)
 
 
 def recording_to_dict(camera: Camera, frames: Sequence[tuple[str, np.ndarray, Sequence[dict]]],

@@ -17,6 +17,7 @@ from typing import Any
 from fastapi import Depends, FastAPI
 from fastapi.openapi.utils import get_openapi
 
+from maps.cache import CompiledMapCache
 from maps.demo import DEMO_MAP_ID, load_demo_map
 from maps.errors import MapAlreadyExists, MapNotFound
 from maps.store import MapStore
@@ -25,7 +26,6 @@ from service.api.deps import check_body_depth
 from service.api.docs_pages import install_offline_docs
 from service.api.errors import PROBLEM_MEDIA_TYPE, install_error_handlers
 from service.api.inspector import install_inspector
-from service.api.map_cache import MapCache
 from service.api.map_loader import MapLoader
 from service.api.metrics import ApiMetrics, MetricsAndLimitsMiddleware
 from service.api.routers import health, localize, maps, sessions
@@ -106,7 +106,8 @@ def create_app(settings: Settings | None = None, *, store: MapStore | None = Non
     settings = settings or Settings()
     keys = settings.keys
     if store is None:
-        store = MapStore(settings.effective_database_url)
+        store = MapStore(settings.effective_database_url,
+                         cache=CompiledMapCache(settings.map_cache_ttl_s))
     if (settings.seed_demo_map and settings.default_map_id
             and seed_demo_map(store, settings.default_map_id)):
         log.info("seeded the demo Chess map as %r", settings.default_map_id)
@@ -135,15 +136,14 @@ def create_app(settings: Settings | None = None, *, store: MapStore | None = Non
     app.state.api_keys = keys
     app.state.store = store
     app.state.metrics = metrics
-    app.state.map_cache = MapCache(store, settings.map_cache_ttl_s)
-    app.state.map_loader = MapLoader(app.state.map_cache, settings.solve_time_budget_ms / 1e3)
+    app.state.map_loader = MapLoader(store, settings.solve_time_budget_ms / 1e3)
     app.state.solver = Solver(metrics, settings.max_concurrent_solves,
                               settings.solve_queue_timeout_s, settings.solve_time_budget_ms,
                               settings.max_detections, settings.batch_time_budget_ms)
     install_error_handlers(app)
     app.include_router(localize.router)
     app.include_router(maps.router)
-    install_map_building(app, store, settings, app.state.map_cache)
+    install_map_building(app, store, settings)
     app.include_router(health.router)
     app.state.sessions = sessions.session_store_from_env()
     app.include_router(sessions.router)

@@ -1,13 +1,18 @@
 """Runs map-building jobs for the API: a bounded pool, a time budget, heartbeats in the store.
 
-One :class:`BuildRunner` per app. ``submit`` queues a job (at most ``max_queued_builds``
-waiting, else :class:`RunnerBusyError` -> 503 + Retry-After) on a pool of ``max_concurrent_builds``
-threads. The build holds the GIL while it runs, like a localize solve: keep
-``max_concurrent_builds`` at 1 (default) and scale builds out with replicas. Each job:
+One :class:`BuildRunner` per app: builds never run in request threads. ``submit`` queues a
+job on a pool of ``max_concurrent_builds`` background threads, at most ``max_queued_builds``
+waiting behind them; beyond, :class:`RunnerBusyError` -> 503 + ``Retry-After``
+(``RETRY_AFTER_S``) and the job row is marked failed (``busy``). The build holds the GIL while it
+runs, like a localize solve: keep ``max_concurrent_builds`` at 1 (default) and scale builds out
+with replicas. Each job:
 
 1. marks the row ``running`` and reports progress (stage, percent, objects found) through
    :meth:`maps.building.jobs.JobStore.progress` at most every ``HEARTBEAT_S`` and at every stage
-   change (the build's callbacks come at least every 2 s);
+   change (the build's callbacks come at least every 2 s); each write is also the heartbeat
+   of the jobs queued behind it on this replica (:meth:`maps.building.jobs.JobStore.heartbeat`),
+   so a long queue is not mistaken for a lost runner. If the row is no longer active (another
+   replica's sweep marked it failed as stale), the build stops and stores nothing;
 2. builds with a deadline ``build_time_budget_s`` after it started;
 3. stores the map: ``create`` (new map id) or ``update(expected_version=base_version)`` (the
    version whose ETag the client sent in ``If-Match``); a concurrent change fails the job with
@@ -34,7 +39,8 @@ from maps.errors import MapAlreadyExists, MapNotFound, StoreUnavailable, Version
 from maps.model import MapValidationError
 from maps.store import MapStore
 
-__all__ = ["HEARTBEAT_S", "BuildRunner", "RunnerBusyError", "install_map_building"]
+__all__ = ["HEARTBEAT_S", "RETRY_AFTER_S", "BuildRunner", "JobLostError", "RunnerBusyError",
+           "install_map_building"]
 
 log = logging.getLogger("quadloc.build")
 
@@ -42,34 +48,49 @@ log = logging.getLogger("quadloc.build")
 HEARTBEAT_S = 1.0
 
 
+#: ``Retry-After`` (s) of the 503 answered when this replica's build queue is full.
+RETRY_AFTER_S = 10
+
+
 class RunnerBusyError(RuntimeError):
     """Too many builds queued on this replica."""
 
 
+class JobLostError(RuntimeError):
+    """The job's row is no longer active (marked failed, e.g. as stale): stop, store nothing."""
+
+
 class BuildRunner:
     def __init__(self, store: MapStore, jobs: JobStore, *, max_concurrent: int, max_queued: int,
-                 time_budget_s: float, on_stored: Any = None) -> None:
+                 time_budget_s: float) -> None:
         self.store = store
         self.jobs = jobs
         self.time_budget_s = float(time_budget_s)
         self.max_pending = int(max_concurrent) + int(max_queued)
         self._pool = ThreadPoolExecutor(max_workers=int(max_concurrent),
                                         thread_name_prefix="quadloc-build")
-        self._pending = 0
+        self._pending: set[str] = set()  # job ids queued or running here
         self._lock = threading.Lock()
-        self._on_stored = on_stored
 
     def submit(self, job_id: str, recording: Recording) -> None:
+        """Queue the job, or :class:`RunnerBusyError` when ``max_concurrent + max_queued``
+        jobs are already running or queued on this replica."""
         with self._lock:
-            if self._pending >= self.max_pending:
-                raise RunnerBusyError(f"{self._pending} builds running or queued on this replica")
-            self._pending += 1
+            if len(self._pending) >= self.max_pending:
+                raise RunnerBusyError(f"{len(self._pending)} builds running or queued on this "
+                                      "replica")
+            self._pending.add(job_id)
         try:
             self._pool.submit(self._run, job_id, recording)
         except RuntimeError:  # pool shut down
             with self._lock:
-                self._pending -= 1
+                self._pending.discard(job_id)
             raise
+
+    def pending(self) -> list[str]:
+        """Ids of the jobs running or queued on this replica."""
+        with self._lock:
+            return sorted(self._pending)
 
     def shutdown(self) -> None:
         self._pool.shutdown(wait=False, cancel_futures=True)
@@ -77,6 +98,9 @@ class BuildRunner:
     def _run(self, job_id: str, recording: Recording) -> None:
         try:
             self._build(job_id, recording)
+        except JobLostError:
+            log.warning("build job %s stopped: its row is no longer active (marked failed "
+                        "meanwhile); nothing stored", job_id)
         except Exception as exc:
             log.exception("build job %s failed", job_id)
             try:
@@ -85,7 +109,7 @@ class BuildRunner:
                 log.exception("could not mark job %s failed", job_id)
         finally:
             with self._lock:
-                self._pending -= 1
+                self._pending.discard(job_id)
 
     def _build(self, job_id: str, recording: Recording) -> None:
         job = self.jobs.get(job_id)
@@ -96,7 +120,12 @@ class BuildRunner:
             now = time.monotonic()
             if stage != last[1] or now - last[0] >= HEARTBEAT_S:
                 last[0], last[1] = now, stage
-                self.jobs.progress(job_id, stage, percent, objects)
+                if not self.jobs.progress(job_id, stage, percent, objects):
+                    raise JobLostError(job_id)
+                # the jobs waiting behind this one are alive too: their heartbeat
+                waiting = [j for j in self.pending() if j != job_id]
+                if waiting:
+                    self.jobs.heartbeat(waiting)
 
         progress("associating", 0.0, 0)
         try:
@@ -117,6 +146,8 @@ class BuildRunner:
                            "reconstructed from the recording (see the report)", report)
             return
         progress("saving", 95.0, len(scene.objects))
+        if self.jobs.get(job_id).status != "running":
+            raise JobLostError(job_id)
         try:
             if job.base_version is None:
                 stored = self.store.create(scene)
@@ -139,12 +170,10 @@ class BuildRunner:
         except StoreUnavailable as exc:
             self.jobs.fail(job_id, "store_unavailable", str(exc), report)
             return
-        if self._on_stored is not None:
-            self._on_stored(job.map_id)
         self.jobs.succeed(job_id, stored.scene_map.version, report, len(scene.objects))
 
 
-def install_map_building(app: Any, store: MapStore, settings: Any, cache: Any) -> None:
+def install_map_building(app: Any, store: MapStore, settings: Any) -> None:
     """Wire map building into ``app``: the job store (jobs left running by a previous instance
     and silent for ``build_stale_after_s`` are marked failed now), the runner, the router."""
     from service.api.routers import build
@@ -162,6 +191,5 @@ def install_map_building(app: Any, store: MapStore, settings: Any, cache: Any) -
     app.state.build_jobs = jobs
     app.state.build_runner = BuildRunner(
         store, jobs, max_concurrent=settings.max_concurrent_builds,
-        max_queued=settings.max_queued_builds, time_budget_s=settings.build_time_budget_s,
-        on_stored=cache.invalidate)
+        max_queued=settings.max_queued_builds, time_budget_s=settings.build_time_budget_s)
     app.include_router(build.router)

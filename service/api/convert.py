@@ -16,6 +16,7 @@ import math
 import numpy as np
 
 from factors.geometry import (
+    QUATERNION_NORM_TOLERANCE,
     Camera,
     Ellipse,
     quaternion_wxyz_from_rotation,
@@ -35,6 +36,7 @@ from service.api.schemas import (
 )
 from service.localization.types import (
     Detection,
+    LocalizationInputError,
     LocalizationOptions,
     LocalizationResult,
     PosePrior,
@@ -52,7 +54,8 @@ __all__ = [
     "response_from_result",
 ]
 
-#: ``diag(1, -1, -1)``: camera-side flip between OpenCV and OpenGL axes (its own inverse).
+#: ``diag(1, -1, -1)``: camera-side flip between OpenCV and OpenGL axes (its own inverse). The
+#: server's one copy; ``sdk/geometry.py`` keeps its own (the SDK imports nothing of the server).
 OPENGL_FROM_OPENCV = np.diag([1.0, -1.0, -1.0])
 
 
@@ -95,14 +98,13 @@ def detections_from_request(detections: list[DetectionIn]) -> list[Detection]:
 
 
 def _pose_matrix_in(pose: PoseIn, field: str) -> np.ndarray:
-    from service.localization.types import LocalizationInputError
-
     if pose.matrix is not None:
         return np.array(pose.matrix, dtype=float)
     q = np.array(pose.quaternion_wxyz, dtype=float)
     n = float(np.linalg.norm(q))
-    if not abs(n - 1.0) <= 1e-6:
-        raise LocalizationInputError(f"{field}.quaternion_wxyz: must have unit norm, |q| = {n:.9g}")
+    if not abs(n - 1.0) <= QUATERNION_NORM_TOLERANCE:
+        raise LocalizationInputError(f"must have unit norm, |q| = {n:.9g}",
+                                     field=f"{field}.quaternion_wxyz")
     T = np.eye(4)
     T[:3, :3] = rotation_from_quaternion_wxyz(q / n)
     T[:3, 3] = pose.translation_m

@@ -13,14 +13,12 @@ from fastapi import Depends, Path, Request
 from maps.model import MAP_ID_PATTERN
 from maps.store import MapStore
 from service.api.errors import ProblemError, json_depth_violation
-from service.api.map_cache import MapCache
 from service.api.map_loader import MapLoader
 from service.api.metrics import ApiMetrics
 from service.api.solver import Solver
 from service.settings import Settings
 
 __all__ = [
-    "MapCacheDep",
     "MapIdPath",
     "MapLoaderDep",
     "MetricsDep",
@@ -43,10 +41,6 @@ async def get_solver(request: Request) -> Solver:
     return request.app.state.solver
 
 
-async def get_map_cache(request: Request) -> MapCache:
-    return request.app.state.map_cache
-
-
 async def get_map_loader(request: Request) -> MapLoader:
     return request.app.state.map_loader  # type: ignore[no-any-return]
 
@@ -59,7 +53,6 @@ StoreDep = Annotated[MapStore, Depends(get_store)]
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 SolverDep = Annotated[Solver, Depends(get_solver)]
 MetricsDep = Annotated[ApiMetrics, Depends(get_metrics)]
-MapCacheDep = Annotated[MapCache, Depends(get_map_cache)]
 MapLoaderDep = Annotated[MapLoader, Depends(get_map_loader)]
 
 #: The ``{map_id}`` path parameter of every map route, validated against ``MAP_ID_PATTERN``

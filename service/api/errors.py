@@ -30,6 +30,7 @@ __all__ = [
     "PROBLEM_MEDIA_TYPE",
     "PROBLEM_TYPES",
     "ProblemError",
+    "field_and_problem",
     "field_path",
     "install_error_handlers",
     "json_depth_violation",
@@ -38,6 +39,23 @@ __all__ = [
 ]
 
 log = logging.getLogger("quadloc.api")
+
+def field_and_problem(exc: Exception, prefix: str = "") -> tuple[str, str]:
+    """``(field, problem)`` of an input error, ``prefix`` prepended to the field.
+
+    The field is the error's structured ``field`` (:class:`factors.geometry.FieldError`:
+    ``GeometryError``, ``LocalizationInputError``); errors raised without one answer ``"body"``.
+    ``service.tracking``'s ``TrackingInputError`` is not structured yet: its messages read
+    ``"<field>: <problem>"`` and are split here, the only place that reads a message.
+    """
+    field = getattr(exc, "field", None)
+    if field:
+        return prefix + field, str(getattr(exc, "problem", exc))
+    head, sep, tail = str(exc).partition(": ")
+    if type(exc).__name__ == "TrackingInputError" and sep and head and " " not in head:
+        return prefix + head, tail
+    return prefix + "body", str(exc)
+
 
 PROBLEM_MEDIA_TYPE = "application/problem+json"
 

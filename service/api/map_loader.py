@@ -17,7 +17,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
 
 from maps.compiled import CompiledMap
-from service.api.map_cache import MapCache
+from maps.store import MapStore
 
 __all__ = ["MapLoader", "MapStillLoading"]
 
@@ -27,10 +27,10 @@ class MapStillLoading(Exception):  # noqa: N818 (a state, not a failure)
 
 
 class MapLoader:
-    """Single-flight, time-bounded ``cache.get(map_id, version)`` (thread-safe)."""
+    """Single-flight, time-bounded ``store.compiled(map_id, version)`` (thread-safe)."""
 
-    def __init__(self, cache: MapCache, max_wait_s: float, workers: int = 2) -> None:
-        self.cache = cache
+    def __init__(self, store: MapStore, max_wait_s: float, workers: int = 2) -> None:
+        self.store = store
         self.max_wait_s = max_wait_s
         self._workers = workers
         self._pool: ThreadPoolExecutor | None = self._new_pool()
@@ -47,7 +47,7 @@ class MapLoader:
             if future is None:
                 if self._pool is None:  # closed by an app shutdown, then used again (tests)
                     self._pool = self._new_pool()
-                future = self._pool.submit(self.cache.get, map_id, version)
+                future = self._pool.submit(self.store.compiled, map_id, version)
                 self._pending[key] = future
         if fresh:  # outside the lock: a future already done runs the callback right here
             future.add_done_callback(lambda f, k=key: self._forget(k, f))

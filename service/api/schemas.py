@@ -34,12 +34,18 @@ from pydantic import (
     model_validator,
 )
 
-from service.localization.types import (
+from factors.names import check_robust
+from service.limits import (
     AMBIGUITY_POLICIES,
+    COVARIANCE_ORDER,
+    MAX_BATCH_FRAMES,
+    MAX_DETECTIONS,
+    MAX_PIXELS,
     METRICS,
     NO_REFINEMENT,
     POSE_SOURCES,
     ROBUST_KERNELS,
+    UNKNOWN_LABEL_POLICIES,
 )
 
 __all__ = [
@@ -71,12 +77,6 @@ __all__ = [
     "ProblemField",
 ]
 
-#: Static upper bounds published in the schema; the server's settings may be lower.
-MAX_DETECTIONS = 256
-MAX_BATCH_FRAMES = 64
-#: Largest |coordinate| in pixels accepted anywhere (keeps the solver's numbers sane).
-MAX_PIXELS = 1e6
-COVARIANCE_ORDER = ("omega_x", "omega_y", "omega_z", "v_x", "v_y", "v_z")
 COVARIANCE_FRAME = "camera (body) frame, right perturbation T*exp(xi), omega in rad, v in m"
 
 Convention = Literal["opencv", "opengl"]
@@ -265,7 +265,7 @@ class LocalizeOptionsIn(_Model):
         default=None, description="Robust kernel of the refinement.")
     robust_scale: float | None = Field(default=None, gt=0, le=1e6,
                                        description="Kernel scale (needs `robust`).")
-    unknown_label_policy: Literal["ignore", "error"] = "ignore"
+    unknown_label_policy: Literal[UNKNOWN_LABEL_POLICIES] = "ignore"  # type: ignore[valid-type]
     seed: Annotated[int, Field(ge=0, le=2**32 - 1), BeforeValidator(_integral)] | None = 0
     time_budget_ms: float | None = Field(
         default=None, gt=0, le=60_000,
@@ -286,8 +286,7 @@ class LocalizeOptionsIn(_Model):
 
     @model_validator(mode="after")
     def _scale_needs_kernel(self) -> LocalizeOptionsIn:
-        if self.robust_scale is not None and self.robust is None:
-            raise ValueError("'robust_scale' needs 'robust'")
+        check_robust(self.robust, self.robust_scale)  # the rule of every layer
         return self
 
 

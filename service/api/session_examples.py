@@ -1,5 +1,5 @@
 """OpenAPI examples of the tracking-session endpoints. Requests reuse the REAL localize example
-frame (:mod:`service.api.example_frame`: simulated detections at a real Chess ground-truth pose)
+frame (:mod:`service.api.examples`: simulated detections at a real Chess ground-truth pose)
 with an identity odometry pose; the response examples show the documents' shape (a session's
 first frame is ``initializing`` unless that one frame already sees three objects)."""
 
@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from service.api.example_frame import LOCALIZE_EXAMPLE
+from service.api.examples import LOCALIZE_EXAMPLE
 
 __all__ = ["FRAME_EXAMPLE", "FRAME_RESPONSE_EXAMPLE", "SESSION_CREATE_EXAMPLE",
            "SESSION_EXAMPLE"]

@@ -17,7 +17,6 @@ not started when it runs out answer ``localized: false`` with reason ``time_budg
 from __future__ import annotations
 
 import logging
-import re
 import threading
 import time
 from collections import deque
@@ -32,7 +31,7 @@ from service.api.convert import (
     prior_from_request,
     response_from_result,
 )
-from service.api.errors import ProblemError
+from service.api.errors import ProblemError, field_and_problem
 from service.api.metrics import ApiMetrics
 from service.api.schemas import LocalizeRequest, LocalizeResponse
 from service.localization.pipeline import localize
@@ -48,16 +47,12 @@ NUMERICAL_FAILURE = "numerical_failure"
 #: Reason of a batch frame skipped because the batch's total budget ran out.
 TIME_BUDGET_EXCEEDED = "time_budget_exceeded"
 #: An input error raised inside ``localize`` is the client's when it names a request field.
-_REQUEST_FIELD = re.compile(r"^(detections|camera|prior|options)\b")
+_REQUEST_FIELDS = ("detections", "camera", "prior", "options")
 
 
-def _field_and_message(exc: Exception, prefix: str) -> tuple[str, str]:
-    """Split ``"detections[2].label: problem"`` into field and message (prefix prepended)."""
-    text = str(exc)
-    head, sep, tail = text.partition(": ")
-    if sep and " " not in head and head:
-        return prefix + head, tail
-    return prefix + "body", text
+def _is_request_field(exc: Exception) -> bool:
+    field = getattr(exc, "field", None) or ""
+    return field.split(".")[0].split("[")[0] in _REQUEST_FIELDS
 
 
 class FairSlots:
@@ -126,7 +121,7 @@ class Solver:
                 frame.options,
                 self.max_budget_ms if budget_ms is None else min(self.max_budget_ms, budget_ms))
         except ValueError as exc:  # GeometryError, LocalizationInputError
-            field, message = _field_and_message(exc, prefix)
+            field, message = field_and_problem(exc, prefix)
             raise ProblemError("invalid-geometry", f"{field}: {message}",
                                errors=[{"field": field, "message": message}]) from exc
         start = time.perf_counter()
@@ -145,8 +140,8 @@ class Solver:
                 convention=frame.options.output_convention, frame_id=frame.frame_id,
                 timestamp=frame.timestamp)
         except (GeometryError, LocalizationInputError) as exc:
-            field, message = _field_and_message(exc, prefix)
-            if _REQUEST_FIELD.match(field[len(prefix):]):
+            if _is_request_field(exc):
+                field, message = field_and_problem(exc, prefix)
                 raise ProblemError("invalid-geometry", f"{field}: {message}",
                                    errors=[{"field": field, "message": message}]) from exc
             response = self._failed(compiled, frame, options.metric, start)

@@ -27,7 +27,7 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-from factors.geometry import Camera, Ellipse, Ellipsoid
+from factors.geometry import Camera, Ellipse, Ellipsoid, gaussians_from_dual_conics
 
 __all__ = ["p2e_hypotheses", "p3p_hypotheses", "p3p_hypotheses_batch",
            "rotation_from_two_directions"]
@@ -149,8 +149,7 @@ def _project_two(
     if np.any(~(np.abs(w) > 0)):
         return None
     Cn = C / w[:, None, None]
-    c = -Cn[:, :2, 2]
-    S = Cn[:, :2, :2] + c[:, :, None] * c[:, None, :]
+    c, S = gaussians_from_dual_conics(Cn)
     det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] * S[:, 1, 0]
     if np.any(~(det > 0)) or np.any(~(S[:, 0, 0] > 0)):
         return None

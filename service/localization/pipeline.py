@@ -82,60 +82,45 @@ from service.localization.types import (
     PosePrior,
 )
 
-__all__ = ["compiled_map_of", "localize", "prior_gate_poses", "refine_pose"]
-
-_COMPILED: dict[int, tuple[SceneMap, CompiledMap]] = {}
-_COMPILED_MAX = 16
-
-
-def compiled_map_of(scene_map: SceneMap | CompiledMap) -> CompiledMap:
-    """The :class:`CompiledMap` of a map (cached by object identity, a few entries)."""
-    if isinstance(scene_map, CompiledMap):
-        return scene_map
-    hit = _COMPILED.get(id(scene_map))
-    if hit is not None and hit[0] is scene_map:
-        return hit[1]
-    compiled = compile_map(scene_map)
-    if len(_COMPILED) >= _COMPILED_MAX:
-        _COMPILED.pop(next(iter(_COMPILED)))
-    _COMPILED[id(scene_map)] = (scene_map, compiled)
-    return compiled
-
+__all__ = ["localize", "prior_gate_poses", "refine_pose"]
 
 def _validate(
     detections: Sequence[Detection], scene_map: SceneMap | CompiledMap, camera: Camera,
     options: LocalizationOptions, prior: PosePrior | None,
 ) -> CompiledMap:
     if isinstance(detections, (str, bytes, Detection)) or not isinstance(detections, Sequence):
-        raise LocalizationInputError("detections: must be a sequence of Detection, got "
-                                     f"{type(detections).__name__}")
+        raise LocalizationInputError("must be a sequence of Detection, got "
+                                     f"{type(detections).__name__}", field="detections")
     if len(detections) == 0:
-        raise LocalizationInputError("detections: must not be empty")
+        raise LocalizationInputError("must not be empty", field="detections")
     for i, d in enumerate(detections):
         if not isinstance(d, Detection):
             raise LocalizationInputError(
-                f"detections[{i}]: must be a Detection, got {type(d).__name__}")
+                f"must be a Detection, got {type(d).__name__}", field=f"detections[{i}]")
     if not isinstance(scene_map, (SceneMap, CompiledMap)):
         raise LocalizationInputError(
-            f"scene_map: must be a SceneMap or CompiledMap, got {type(scene_map).__name__}")
+            f"must be a SceneMap or CompiledMap, got {type(scene_map).__name__}",
+            field="scene_map")
     if not isinstance(camera, Camera):
-        raise LocalizationInputError(f"camera: must be a Camera, got {type(camera).__name__}")
+        raise LocalizationInputError(f"must be a Camera, got {type(camera).__name__}",
+                                     field="camera")
     if not isinstance(options, LocalizationOptions):
         raise LocalizationInputError(
-            f"options: must be LocalizationOptions, got {type(options).__name__}")
+            f"must be LocalizationOptions, got {type(options).__name__}", field="options")
     if prior is not None and not isinstance(prior, PosePrior):
         raise LocalizationInputError(
-            f"prior: must be a PosePrior or None, got {type(prior).__name__}")
-    compiled = compiled_map_of(scene_map)
+            f"must be a PosePrior or None, got {type(prior).__name__}", field="prior")
+    compiled = compile_map(scene_map)
     if len(compiled) == 0:
-        raise LocalizationInputError("scene_map: the map has no objects")
+        raise LocalizationInputError("the map has no objects", field="scene_map")
     if options.unknown_label_policy == "error":
         for i, d in enumerate(detections):
             if len(compiled.indices_for(d.label)) == 0:
                 raise LocalizationInputError(
-                    f"detections[{i}].label: {d.label!r} is not a category of the map "
+                    f"{d.label!r} is not a category of the map "
                     f"(unknown_label_policy 'error'; map categories: "
-                    f"{', '.join(sorted(set(compiled.categories)))})")
+                    f"{', '.join(sorted(set(compiled.categories)))})",
+                    field=f"detections[{i}].label")
     return compiled
 
 

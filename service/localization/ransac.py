@@ -63,7 +63,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from factors.geometry import Camera, Ellipse, ellipse_params
+from factors.geometry import Camera, Ellipse, ellipse_params, gaussians_from_dual_conics
 from maps.compiled import CompiledMap
 from service.localization.budget import Deadline, deadline_passed, earliest
 from service.localization.hypotheses import p2e_hypotheses, p3p_hypotheses_batch
@@ -78,7 +78,6 @@ __all__ = [
     "RansacOutcome",
     "ScoringTimeoutError",
     "distinct_poses",
-    "estimate_iou",
     "greedy_assignment",
     "hard_deadline",
     "iou_estimates",
@@ -200,8 +199,7 @@ def project_objects(
     ok = np.abs(w) > 0
     w = np.where(ok, w, 1.0)
     Cn = C / w[..., None, None]
-    cen = -Cn[..., :2, 2]
-    inv_shape = Cn[..., :2, :2] + cen[..., :, None] * cen[..., None, :]
+    cen, inv_shape = gaussians_from_dual_conics(Cn)
     det = inv_shape[..., 0, 0] * inv_shape[..., 1, 1] - inv_shape[..., 0, 1] ** 2
     valid &= ok & (det > 0) & (inv_shape[..., 0, 0] > 0)
     hom = np.einsum("hij,sj->hsi", P[:, :, :3], centers) + P[:, None, :, 3]
@@ -237,14 +235,6 @@ def iou_estimates(
     area_proj = math.pi * np.sqrt(np.maximum(det, 0.0))
     iou = inter / np.maximum(det_areas + area_proj - inter, 1e-300)
     return np.where(det > 0, np.clip(iou, 0.0, 1.0), 0.0)
-
-
-def estimate_iou(detection: Ellipse, projection: Ellipse, n_points: int = 256) -> float:
-    """Scalar :func:`iou_estimates` of two ellipses (for checks and reporting)."""
-    p = detection.params()[None]
-    pts = _ellipse_points(p, sunflower_disk(n_points))[0]
-    _, S = projection.gaussian()
-    return float(iou_estimates(pts, np.array(detection.area), projection.center, S))
 
 
 @dataclass(frozen=True)

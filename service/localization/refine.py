@@ -57,9 +57,10 @@ from typing import Any
 import gtsam
 import numpy as np
 
-from factors.geometry import Camera, Ellipsoid, GeometryError, snap_to_rotation
-from factors.pose_factors import ROBUST_KERNELS, pose_factors
-from factors.pose_residuals import PoseResidualModel, check_pose
+from factors.geometry import Camera, Ellipsoid, GeometryError, check_pose, snap_to_rotation
+from factors.names import check_robust
+from factors.pose_factors import pose_factors
+from factors.pose_residuals import PoseResidualModel
 from service.localization.budget import Deadline, deadline_passed
 from service.localization.types import Detection, check_covariance
 
@@ -233,11 +234,7 @@ def refine(
     max_iterations = int(max_iterations)
     if not isinstance(use_sigma, bool):
         raise GeometryError(f"use_sigma must be a bool, got {use_sigma!r}")
-    if robust is not None and robust not in ROBUST_KERNELS:
-        raise GeometryError(f"robust must be one of {', '.join(ROBUST_KERNELS)} or None, "
-                            f"got {robust!r}")
-    if robust is None and robust_scale is not None:
-        raise GeometryError("robust_scale is only allowed with a robust kernel (robust=None)")
+    check_robust(robust, robust_scale, error=GeometryError)
     prior = _check_prior(prior_world_from_camera, prior_covariance)
 
     sigmas = [d.sigma if use_sigma else None for d in detections]

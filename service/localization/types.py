@@ -26,10 +26,18 @@ from typing import Any
 
 import numpy as np
 
-from factors.geometry import Ellipse, GeometryError
-from factors.metrics import METRIC_NAMES, residual
-from factors.pose_factors import ROBUST_KERNELS
-from factors.pose_residuals import check_pose
+from factors.geometry import Ellipse, FieldError, GeometryError, check_pose
+from factors.metrics import residual
+from factors.names import check_robust
+from service.limits import (
+    AMBIGUITY_POLICIES,
+    METRICS,
+    NO_REFINEMENT,
+    POSE_SOURCES,
+    REASONS,
+    ROBUST_KERNELS,
+    UNKNOWN_LABEL_POLICIES,
+)
 
 __all__ = [
     "AMBIGUITY_POLICIES",
@@ -48,32 +56,9 @@ __all__ = [
     "PosePrior",
 ]
 
-#: The nine refinement metrics (same names as ``factors.metrics.METRIC_NAMES``).
-METRICS: tuple[str, ...] = METRIC_NAMES
-#: ``LocalizationOptions.metric`` value that skips refinement (the RANSAC/P3P/P2E pose is
-#: returned as is; useful for evaluation).
-NO_REFINEMENT = "none"
-#: ``LocalizationOptions.unknown_label_policy`` values, see there.
-UNKNOWN_LABEL_POLICIES: tuple[str, ...] = ("ignore", "error")
-#: ``LocalizationOptions.on_ambiguity`` values, see there.
-AMBIGUITY_POLICIES: tuple[str, ...] = ("not_localized", "best")
-#: ``LocalizationResult.pose_source`` values: the refined client prior or the RANSAC search.
-POSE_SOURCES: tuple[str, ...] = ("prior", "ransac")
-#: Every ``LocalizationResult.reason`` when ``localized`` is false.
-REASONS: tuple[str, ...] = (
-    "too_few_detections",
-    "no_label_match",
-    "no_hypothesis_above_inlier_threshold",
-    "refinement_diverged",
-    "ambiguous",
-    "low_confidence",
-    "time_budget_exceeded",
-)
-
-
-class LocalizationInputError(ValueError):
-    """Invalid input to :func:`localize`; the message starts with the offending field, e.g.
-    ``"detections[2].label: 'Sofa' is not a category of the map (policy 'error')"``."""
+class LocalizationInputError(FieldError):
+    """Invalid input to :func:`localize`, naming its ``field`` (a :class:`FieldError`); the
+    message reads e.g. ``"detections[2].label: 'Sofa' is not a category of the map ..."``."""
 
 
 @dataclass(frozen=True)
@@ -99,7 +84,7 @@ class Detection:
 
 
 def _bad(field_name: str, problem: str) -> LocalizationInputError:
-    return LocalizationInputError(f"{field_name}: {problem}")
+    return LocalizationInputError(problem, field=field_name)
 
 
 def _is_int(value: object) -> bool:
@@ -198,17 +183,8 @@ class LocalizationOptions:
             raise _bad("options.min_inliers", f"must be an integer >= 2, got {self.min_inliers!r}")
         if not isinstance(self.use_sigma, bool):
             raise _bad("options.use_sigma", f"must be a bool, got {self.use_sigma!r}")
-        if self.robust is not None and self.robust not in ROBUST_KERNELS:
-            raise _bad("options.robust", f"unknown kernel {self.robust!r}; valid: None, "
-                       f"{', '.join(ROBUST_KERNELS)}")
-        if self.robust_scale is not None:
-            if self.robust is None:
-                raise _bad("options.robust_scale", "given without options.robust")
-            if (isinstance(self.robust_scale, bool)
-                    or not isinstance(self.robust_scale, (int, float))
-                    or not (math.isfinite(self.robust_scale) and self.robust_scale > 0)):
-                raise _bad("options.robust_scale",
-                           f"must be finite and > 0, got {self.robust_scale!r}")
+        check_robust(self.robust, self.robust_scale, prefix="options.",
+                     error=LocalizationInputError)
         if self.unknown_label_policy not in UNKNOWN_LABEL_POLICIES:
             raise _bad("options.unknown_label_policy",
                        f"must be one of {UNKNOWN_LABEL_POLICIES}, "
@@ -260,28 +236,28 @@ def _check_pose(field_name: str, value: object) -> np.ndarray:
     try:
         T = check_pose(value, field_name)
     except GeometryError as exc:
-        raise LocalizationInputError(str(exc)) from exc
+        raise LocalizationInputError(exc.problem, field=exc.field) from exc
     T.setflags(write=False)
     return T
 
 
 def check_covariance(field_name: str, value: object,
-                     error: type[ValueError] = LocalizationInputError) -> np.ndarray:
+                     error: type[FieldError] = LocalizationInputError) -> np.ndarray:
     """A 6x6 pose covariance (finite, symmetric to rtol 1e-9, positive definite) as a read-only
-    float array; otherwise raises ``error`` with a message starting with ``field_name``.
+    float array; otherwise raises ``error`` (a :class:`FieldError`) with ``field=field_name``.
     Shared by :class:`PosePrior` and :func:`service.localization.refine.refine`."""
     try:
         S = np.array(value, dtype=float)
     except (TypeError, ValueError) as exc:
-        raise error(f"{field_name}: must be a numeric 6x6 matrix") from exc
+        raise error("must be a numeric 6x6 matrix", field=field_name) from exc
     if S.shape != (6, 6):
-        raise error(f"{field_name}: must have shape (6, 6), got {S.shape}")
+        raise error(f"must have shape (6, 6), got {S.shape}", field=field_name)
     if not np.all(np.isfinite(S)):
-        raise error(f"{field_name}: must be finite")
+        raise error("must be finite", field=field_name)
     if not np.allclose(S, S.T, rtol=1e-9, atol=1e-12 * max(1.0, float(np.abs(S).max()))):
-        raise error(f"{field_name}: must be symmetric")
+        raise error("must be symmetric", field=field_name)
     if float(np.linalg.eigvalsh(0.5 * (S + S.T)).min()) <= 0.0:
-        raise error(f"{field_name}: must be positive definite")
+        raise error("must be positive definite", field=field_name)
     S.setflags(write=False)
     return S
 

@@ -37,7 +37,15 @@ from dataclasses import dataclass, field
 import gtsam
 import numpy as np
 
-from factors.geometry import Camera, ellipse_params, invert_pose, snap_to_rotation
+from factors.geometry import (
+    DOCUMENT_ROTATION_TOLERANCE,
+    Camera,
+    GeometryError,
+    check_pose,
+    ellipse_params,
+    invert_pose,
+    snap_to_rotation,
+)
 from factors.pose_factors import pose_factors
 from maps.compiled import CompiledMap
 from service.localization.ransac import MatchScorer
@@ -265,14 +273,13 @@ class TrackingSession:
         for i, d in enumerate(frame.detections):
             if not isinstance(d, Detection):
                 raise TrackingInputError(f"detections[{i}]: must be a Detection")
-        T = np.asarray(frame.odom_from_camera, dtype=float)
-        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-            raise TrackingInputError("odom_from_camera: must be a finite 4x4 matrix")
+        try:
+            T = check_pose(frame.odom_from_camera, "odom_from_camera",
+                           DOCUMENT_ROTATION_TOLERANCE)
+        except GeometryError as exc:
+            raise TrackingInputError(
+                f"odom_from_camera: must be a rigid transform ({exc.problem})") from exc
         R = T[:3, :3]
-        if not np.allclose(R.T @ R, np.eye(3), atol=1e-4) or np.linalg.det(R) < 0 \
-                or not np.allclose(T[3], [0, 0, 0, 1], atol=1e-9):
-            raise TrackingInputError("odom_from_camera: must be a rigid transform (rotation "
-                                     "orthonormal to 1e-4, det +1, last row [0, 0, 0, 1])")
         ts = frame.timestamp
         if isinstance(ts, bool) or not isinstance(ts, (int, float)) or not math.isfinite(ts):
             raise TrackingInputError(f"timestamp: must be a finite number, got {ts!r}")

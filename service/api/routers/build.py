@@ -28,7 +28,7 @@ from maps.building.recording import BuildLimits, RecordingError, parse_recording
 from maps.errors import MapNotFound
 from maps.model import MAP_ID_PATTERN
 from service.api.auth import ReadAccess, WriteAccess
-from service.api.build_jobs import RunnerBusyError
+from service.api.build_jobs import RETRY_AFTER_S, RunnerBusyError
 from service.api.deps import SettingsDep, StoreDep
 from service.api.errors import ProblemError
 from service.api.openapi_docs import problem_responses
@@ -171,7 +171,7 @@ def start_build(
     except (RunnerBusyError, RuntimeError) as exc:
         jobs.fail(job.job_id, "busy", str(exc))
         raise ProblemError("busy", f"too many map builds on this replica ({exc}); retry later",
-                           headers={"Retry-After": "10"}) from exc
+                           headers={"Retry-After": str(RETRY_AFTER_S)}) from exc
     response.headers["Location"] = f"/v1/build-jobs/{job.job_id}"
     return job_out(jobs.get(job.job_id))
 

@@ -22,7 +22,7 @@ from maps.model import (
     scene_map_from_dict,
 )
 from service.api.auth import ReadAccess, WriteAccess
-from service.api.deps import MapCacheDep, MapIdPath, SettingsDep, StoreDep
+from service.api.deps import MapIdPath, SettingsDep, StoreDep
 from service.api.errors import ProblemError, map_not_found
 from service.api.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
 from service.api.openapi_docs import problem_responses
@@ -57,6 +57,7 @@ _CHESS_SCHEMA: dict[str, Any] = {
                                   "axes": {**_VEC3, "description": "Semi-axes (m), > 0."},
                                   "R": {"type": "array", "minItems": 3, "maxItems": 3,
                                         "items": _VEC3,
+                                        # the tolerance is DOCUMENT_ROTATION_TOLERANCE
                                         "description": "3x3 rotation ellipsoid -> world: "
                                                        "orthonormal within 1e-4, det +1."},
                                   "center": _VEC3}},
@@ -128,16 +129,13 @@ def _check_object_limit(body: Any, settings: Any) -> None:
                                   "message": f"at most {settings.max_map_objects} objects"}])
 
 
-def _created(store: Any, cache: Any, scene_map: Any, response: Response) -> MapOut:
+def _created(store: Any, scene_map: Any, response: Response) -> MapOut:
     try:
         stored = store.create(scene_map)
     except MapAlreadyExists as exc:
         raise ProblemError("map-exists", f"map {scene_map.map_id!r} already exists; use PUT "
                            "/v1/maps/{map_id} with If-Match to update it",
                            errors=[{"field": "map_id", "message": "already exists"}]) from exc
-    # Nothing of a new map is cached (misses are not cached); invalidating keeps every write
-    # path uniform and bumps the map's generation (service/api/map_cache.py).
-    cache.invalidate(scene_map.map_id)
     response.headers["ETag"] = etag_of(stored.content_hash)
     response.headers["Location"] = f"/v1/maps/{scene_map.map_id}"
     return _map_out(stored)
@@ -154,13 +152,13 @@ def _created(store: Any, cache: Any, scene_map: Any, response: Response) -> MapO
     openapi_extra=_body_doc(_MAP_SCHEMA, MAP_EXAMPLE),
 )
 def create_map(body: Annotated[dict[str, Any], Body()], response: Response, store: StoreDep,
-               cache: MapCacheDep, settings: SettingsDep, _key: WriteAccess) -> MapOut:
+               settings: SettingsDep, _key: WriteAccess) -> MapOut:
     _check_object_limit(body, settings)
     try:
         scene_map = scene_map_from_dict(body, version=1)
     except MapValidationError as exc:
         raise _invalid_map(exc) from exc
-    return _created(store, cache, scene_map, response)
+    return _created(store, scene_map, response)
 
 
 @router.post(
@@ -175,7 +173,7 @@ def create_map(body: Annotated[dict[str, Any], Body()], response: Response, stor
 )
 def import_chess_map(
     body: Annotated[dict[str, Any], Body()], response: Response, store: StoreDep,
-    cache: MapCacheDep, settings: SettingsDep, _key: WriteAccess,
+    settings: SettingsDep, _key: WriteAccess,
     map_id: Annotated[str, Query(pattern=MAP_ID_PATTERN, description="Id of the new map.")],
     name: Annotated[str, Query(min_length=1, max_length=256)] = "Chess",
 ) -> MapOut:
@@ -184,7 +182,7 @@ def import_chess_map(
         scene_map = scene_map_from_chess(body, map_id=map_id, name=name)
     except MapValidationError as exc:
         raise _invalid_map(exc) from exc
-    return _created(store, cache, scene_map, response)
+    return _created(store, scene_map, response)
 
 
 @router.get("/maps", response_model=MapListOut, summary="List maps (latest versions)",
@@ -268,7 +266,7 @@ def _parse_if_match(if_match: str | None) -> set[str]:
 )
 def update_map(
     map_id: MapIdPath, body: Annotated[dict[str, Any], Body()], response: Response,
-    store: StoreDep, cache: MapCacheDep, settings: SettingsDep, _key: WriteAccess,
+    store: StoreDep, settings: SettingsDep, _key: WriteAccess,
     if_match: Annotated[str | None, Header(include_in_schema=False)] = None,
 ) -> MapOut:
     _check_object_limit(body, settings)
@@ -302,8 +300,6 @@ def update_map(
                            errors=[{"field": "header.if-match", "message": "lost a race"}]) from exc
     except MapNotFound as exc:
         raise map_not_found(map_id) from exc
-    finally:
-        cache.invalidate(map_id)  # after the write, so no reader can re-cache the old version
     response.headers["ETag"] = etag_of(stored.content_hash)
     return _map_out(stored)
 
@@ -315,7 +311,7 @@ def update_map(
                            "409: /readyz checks it, so deleting it would take every replica out "
                            "of service. Update it with PUT instead.",
                responses=problem_responses(401, 403, 404, 409, 422, 503))
-def delete_map(map_id: MapIdPath, store: StoreDep, cache: MapCacheDep, settings: SettingsDep,
+def delete_map(map_id: MapIdPath, store: StoreDep, settings: SettingsDep,
                _key: WriteAccess) -> Response:
     if settings.default_map_id and map_id == settings.default_map_id:
         raise ProblemError("default-map",
@@ -328,6 +324,4 @@ def delete_map(map_id: MapIdPath, store: StoreDep, cache: MapCacheDep, settings:
         store.delete(map_id)
     except MapNotFound as exc:
         raise map_not_found(map_id) from exc
-    finally:
-        cache.invalidate(map_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)

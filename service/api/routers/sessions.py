@@ -19,7 +19,7 @@ from typing import Annotated
 import numpy as np
 from fastapi import APIRouter, Body, Path, Request, Response
 
-from factors.geometry import GeometryError
+from factors.geometry import DOCUMENT_ROTATION_TOLERANCE, GeometryError, check_pose
 from maps.errors import MapNotFound
 from service.api.auth import ReadAccess
 from service.api.convert import (
@@ -31,8 +31,8 @@ from service.api.convert import (
     pose_out,
     prior_from_request,
 )
-from service.api.deps import MapCacheDep, MapIdPath
-from service.api.errors import ProblemError, map_not_found
+from service.api.deps import MapIdPath, StoreDep
+from service.api.errors import ProblemError, field_and_problem, map_not_found
 from service.api.openapi_docs import problem_responses
 from service.api.schemas import CovarianceOut, InlierOut
 from service.api.session_examples import (
@@ -113,9 +113,9 @@ def create_session(map_id: MapIdPath,
                    body: Annotated[SessionCreate, Body(openapi_examples={"chess": {
                        "summary": "Chess camera", "value": SESSION_CREATE_EXAMPLE}})],
                    request: Request,
-                   cache: MapCacheDep, _key: ReadAccess, response: Response) -> SessionOut:
+                   store: StoreDep, _key: ReadAccess, response: Response) -> SessionOut:
     try:
-        compiled = cache.get(map_id, None)
+        compiled = store.compiled(map_id, None)
     except MapNotFound as exc:
         raise map_not_found(map_id) from exc
     o = body.options
@@ -129,7 +129,7 @@ def create_session(map_id: MapIdPath,
                 rotation_rad_per_sqrt_m=math.radians(o.odometry_rotation_deg_per_sqrt_m),
                 rotation_rad_per_sqrt_s=math.radians(o.odometry_rotation_deg_per_sqrt_s)))
     except (GeometryError, TrackingInputError) as exc:
-        raise _unprocessable(str(exc), "") from exc
+        raise _unprocessable(exc, "") from exc
     store = _store(request)
     try:
         entry = store.create(map_id, compiled.scene_map.version,
@@ -183,8 +183,9 @@ def add_frames(session_id: SessionIdPath,
         for i, f in enumerate(frames):
             inp = _frame_input(f, entry.convention, prefix(i))
             if last_ts is not None and inp.timestamp < last_ts:
-                raise _unprocessable(f"timestamp: {inp.timestamp} is before the previous "
-                                     f"frame's {last_ts}", prefix(i))
+                raise _unprocessable(TrackingInputError(
+                    f"timestamp: {inp.timestamp} is before the previous frame's {last_ts}"),
+                    prefix(i))
             last_ts = inp.timestamp
             inputs.append(inp)
         results = []
@@ -192,33 +193,26 @@ def add_frames(session_id: SessionIdPath,
             try:
                 results.append(_frame_out(session.add_frame(inp), entry.convention))
             except (TrackingInputError, GeometryError) as exc:
-                raise _unprocessable(str(exc), prefix(i)) from exc
+                raise _unprocessable(exc, prefix(i)) from exc
         entry.frames = session.frame_count
     return SessionFramesOut(session_id=session_id, results=results)
 
 
-def _unprocessable(message: str, prefix: str) -> ProblemError:
-    head, sep, tail = message.partition(": ")
-    field = prefix + head if sep and " " not in head else (prefix + "body" if prefix else "body")
-    return ProblemError("validation-error", message,
-                        errors=[{"field": field, "message": tail if sep else message}])
+def _unprocessable(exc: Exception, prefix: str) -> ProblemError:
+    field, problem = field_and_problem(exc, prefix)
+    return ProblemError("validation-error", str(exc),
+                        errors=[{"field": field, "message": problem}])
 
 
 def _frame_input(f: SessionFrameIn, convention: str, prefix: str) -> FrameInput:
     try:
         dets = detections_from_request(f.detections)
         T = _pose_matrix_in(f.odom_from_camera, "odom_from_camera")
-        if not np.all(np.isfinite(T)):
-            raise TrackingInputError("odom_from_camera: must be finite")
-        T = convert_pose(T, convention, "opencv")
-        R = T[:3, :3]
-        if not np.allclose(R.T @ R, np.eye(3), atol=1e-4) or np.linalg.det(R) < 0 \
-                or not np.allclose(T[3], [0, 0, 0, 1], atol=1e-9):
-            raise TrackingInputError("odom_from_camera: must be a rigid transform (rotation "
-                                     "orthonormal to 1e-4, det +1, last row [0, 0, 0, 1])")
+        T = check_pose(convert_pose(T, convention, "opencv"), "odom_from_camera",
+                       DOCUMENT_ROTATION_TOLERANCE)
         prior = prior_from_request(f.prior)
     except (GeometryError, LocalizationInputError, TrackingInputError) as exc:
-        raise _unprocessable(str(exc), prefix) from exc
+        raise _unprocessable(exc, prefix) from exc
     return FrameInput(dets, T, float(f.timestamp), f.frame_id, prior)
 
 

@@ -1,0 +1,219 @@
+"""GTSAM factor of the level-set residual over ellipsoids (and optionally camera poses).
+
+ONE factor type for everything that moves ellipsoids: the reconstruction of one object from
+known views (``maps.reconstruct``) and the joint refinement of a whole map, with or without the
+camera poses (``maps.building.joint``). The residual and its Jacobians are those of
+:func:`factors.ellipsoid_residuals.observation_residual` (the level-set residual of localization,
+tested equal to :class:`factors.pose_residuals.PoseResidualModel`).
+
+A factor holds V observations (views). View ``v`` is a detection (its fixed samples, a row of a
+:func:`factors.ellipsoid_residuals.stack_samples` stack) of the ellipsoid in object slot
+``view_objects[v]`` seen by the camera in camera slot ``view_cameras[v]`` (a refined ``Pose3``
+key, ``world_from_camera``, OpenCV axes) or by a fixed camera (``camera_from_world[v]``).
+
+Variables per object slot: ``(pose key, log-axes key)``: a ``Pose3`` (ellipsoid frame -> world,
+translation = centre, m) and a ``Vector3`` of log semi-axes (log m). Keys of the factor, in
+order: ``E_0, L_0, E_1, L_1, ..., X_0, X_1, ...``.
+
+Rows (V * M, dimensionless, view-major): view ``v``'s residual times ``weights[v]`` (e.g.
+``1 / sqrt(sigma)``, localization's whitening, ``factors.pose_factors.make_noise_model``), then,
+with ``robust_scale`` ``k``, scaled per view so that half its squared norm is Huber's cost of the
+view's weighted residual norm (the Jacobian gets the same scale, as iteratively reweighted least
+squares does; GTSAM's robust noise models reweight a whole factor, so a factor over many views
+needs its kernel inside). A view whose ellipsoid is not entirely in front of its camera (depth
+margin <= ``min_depth_margin`` m) gives constant rows (total cost ``penalty_cost * weight^2``,
+zero Jacobian): LM rejects steps that go there. The noise model is unit.
+
+Why many views per factor: in Python the cost is in numpy calls and factor round trips, not in
+the arithmetic (GUIDE 3); a factor over V views costs about as much as a factor over one.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import gtsam
+import numpy as np
+
+from factors.ellipsoid_residuals import LevelSetSamples, observation_residual
+from factors.pose_residuals import DEFAULT_MIN_DEPTH_MARGIN
+
+__all__ = ["PENALTY_COST", "depth_margins", "ellipsoid_views_factor", "huber_row_scale",
+           "invert_poses"]
+
+#: Cost of one view whose ellipsoid is not in front of its camera (before the view's weight).
+PENALTY_COST = 1e6
+
+
+def huber_row_scale(norms: np.ndarray, k: float) -> np.ndarray:
+    """Row scale (same shape as ``norms``) so that ``0.5 (scale |w|)^2`` is Huber's cost of
+    ``|w|`` with threshold ``k``: 1 inside, ``sqrt(2 k (|w| - k / 2)) / |w|`` outside."""
+    norms = np.asarray(norms, dtype=float)
+    out = np.ones_like(norms)
+    big = norms > k
+    out[big] = np.sqrt(2.0 * k * (norms[big] - 0.5 * k)) / norms[big]
+    return out
+
+
+def invert_poses(a_from_b: np.ndarray) -> np.ndarray:
+    """``b_from_a`` of rigid 4x4 transforms, batched (..., 4, 4)."""
+    T = np.asarray(a_from_b, dtype=float)
+    Rt = np.swapaxes(T[..., :3, :3], -1, -2)
+    out = np.zeros(T.shape)
+    out[..., :3, :3] = Rt
+    out[..., :3, 3] = -np.einsum("...ij,...j->...i", Rt, T[..., :3, 3])
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def depth_margins(camera_from_world: np.ndarray, rotation: np.ndarray, center: np.ndarray,
+                  axes: np.ndarray) -> np.ndarray:
+    """Smallest depth (m) of the ellipsoid in each camera (batched like
+    :func:`factors.ellipsoid_residuals.observation_residual`): ``d . c + t_z - sqrt(d^T S d)``
+    with ``d`` the camera's optical axis in the world (third row of ``R_cw``) and ``S`` the
+    shape matrix ``R diag(axes^2) R^T`` (the same quantity as
+    ``factors.geometry.ellipsoid_depth_margins``)."""
+    R = np.asarray(rotation, dtype=float)
+    S = (R * (np.asarray(axes, dtype=float) ** 2)[..., None, :]) @ np.swapaxes(R, -1, -2)
+    d = camera_from_world[..., 2, :3]
+    spread = np.einsum("...i,...ij,...j->...", d, S, d)
+    return (np.einsum("...i,...i->...", d, center) + camera_from_world[..., 2, 3]
+            - np.sqrt(np.maximum(spread, 0.0)))
+
+
+def ellipsoid_views_factor(
+    samples: LevelSetSamples, weights: np.ndarray,
+    object_keys: Sequence[tuple[int, int]], view_objects: Sequence[int] | np.ndarray, *,
+    camera_keys: Sequence[int] = (), view_cameras: Sequence[int] | np.ndarray | None = None,
+    camera_from_world: np.ndarray | None = None, robust_scale: float | None = None,
+    penalty_cost: float = PENALTY_COST, min_depth_margin: float = DEFAULT_MIN_DEPTH_MARGIN,
+    on_evaluate: Callable[[], None] | None = None,
+) -> gtsam.CustomFactor:
+    """The factor of the module docstring.
+
+    Args:
+        samples: the V detections' samples stacked (``n`` (V, 3, M), ``phi_det_minus_1`` (V, M)).
+        weights: (V,) row scale of each view (1 / std of its residual).
+        object_keys: ``(Pose3 key, log-axes key)`` per object slot.
+        view_objects: (V,) object slot of each view.
+        camera_keys: ``Pose3`` keys (``world_from_camera``) of refined cameras; empty for fixed
+            cameras.
+        view_cameras: (V,) camera slot of each view (with ``camera_keys``).
+        camera_from_world: (V, 4, 4) fixed cameras (without ``camera_keys``). Its top 3x4
+            may also be a projection ``K [R|t]`` (``K``'s last row ``(0, 0, 1)``) when the
+            samples' rays are in homogeneous pixels (``K n``): the residual, the ellipsoid
+            Jacobians and the depth margin are unchanged by that change of image coordinates
+            (``maps.reconstruct`` samples the observed contour in pixels this way).
+        robust_scale: Huber threshold on each view's weighted residual norm; None: quadratic.
+        penalty_cost, min_depth_margin: see the module docstring.
+        on_evaluate: called at every evaluation (progress reporting).
+    """
+    n = np.asarray(samples.n, dtype=float)
+    phi = np.asarray(samples.phi_det_minus_1, dtype=float)
+    V, M = phi.shape
+    w = np.asarray(weights, dtype=float).reshape(V)
+    obj = np.asarray(view_objects, dtype=int).reshape(V)
+    n_obj = len(object_keys)
+    if obj.min(initial=0) < 0 or obj.max(initial=0) >= n_obj:
+        raise ValueError("view_objects must index object_keys")
+    cam_keys = list(camera_keys)
+    if cam_keys:
+        if view_cameras is None:
+            raise ValueError("view_cameras is required with camera_keys")
+        cam = np.asarray(view_cameras, dtype=int).reshape(V)
+        if cam.min(initial=0) < 0 or cam.max(initial=0) >= len(cam_keys):
+            raise ValueError("view_cameras must index camera_keys")
+        fixed = None
+    else:
+        if camera_from_world is None or np.shape(camera_from_world) != (V, 4, 4):
+            raise ValueError("give camera_keys or camera_from_world (V, 4, 4)")
+        cam = None
+        fixed = np.array(camera_from_world, dtype=float)
+    pen = np.sqrt(2.0 * penalty_cost / M) * np.abs(w)
+    obj_sel = None if n_obj == 1 else [obj == s for s in range(n_obj)]
+    cam_sel = None if cam is None or len(cam_keys) == 1 else [cam == s for s in
+                                                               range(len(cam_keys))]
+    keys = [k for pair in object_keys for k in pair] + cam_keys
+    noise = gtsam.noiseModel.Unit.Create(V * M)
+    all_samples = LevelSetSamples(None, n, phi)
+
+    def blocks(J: np.ndarray, sel: list[np.ndarray] | None, count: int) -> list[np.ndarray]:
+        """Per-slot Jacobian blocks (V * M, d): rows of other slots' views are zero."""
+        d = J.shape[-1]
+        if sel is None:
+            return [np.ascontiguousarray(J.reshape(V * M, d))]
+        out = []
+        for s in range(count):
+            B = np.zeros((V, M, d))
+            B[sel[s]] = J[sel[s]]
+            out.append(B.reshape(V * M, d))
+        return out
+
+    def error_fn(this: gtsam.CustomFactor, values: gtsam.Values,
+                 H: list[np.ndarray] | None) -> np.ndarray:
+        if on_evaluate is not None:
+            on_evaluate()
+        Rs = np.empty((n_obj, 3, 3))
+        cs = np.empty((n_obj, 3))
+        la = np.empty((n_obj, 3))
+        for s, (ek, lk) in enumerate(object_keys):
+            pose = values.atPose3(ek)
+            Rs[s] = pose.rotation().matrix()
+            cs[s] = pose.translation()
+            la[s] = values.atVector(lk)
+        axes_s = np.exp(la)
+        if n_obj == 1:
+            R, c, axes = Rs[0], cs[0], axes_s[0]
+        else:
+            R, c, axes = Rs[obj], cs[obj], axes_s[obj]
+        if fixed is not None:
+            T_cw = fixed
+        else:
+            T_cw = invert_poses(np.array([values.atPose3(x).matrix() for x in cam_keys]))[cam]
+        ok = depth_margins(T_cw, R, c, axes) > min_depth_margin
+        want = H is not None
+        all_ok = bool(ok.all())
+        if all_ok:
+            sub, Rv, cv, av, T = all_samples, R, c, axes, T_cw
+        else:
+            sub = LevelSetSamples(None, n[ok], phi[ok])
+            Rv, cv, av = ((R, c, axes) if n_obj == 1 else (R[ok], c[ok], axes[ok]))
+            T = T_cw[ok]
+        out = np.empty((V, M))
+        if not all_ok:
+            out[~ok] = pen[~ok, None]
+        J_e = J_c = None
+        if ok.any():
+            r, Je, Jc = observation_residual(T, Rv, cv, av, sub, want)
+            scale = w[ok] if not all_ok else w
+            if robust_scale is not None:
+                scale = scale * huber_row_scale(np.abs(scale) * np.sqrt((r * r).sum(axis=1)),
+                                                robust_scale)
+            out[ok] = r * scale[:, None]
+            if want:
+                if all_ok:
+                    J_e = Je * scale[:, None, None]
+                    J_c = Jc * scale[:, None, None] if cam is not None else None
+                else:
+                    J_e = np.zeros((V, M, 9))
+                    J_e[ok] = Je * scale[:, None, None]
+                    if cam is not None:
+                        J_c = np.zeros((V, M, 6))
+                        J_c[ok] = Jc * scale[:, None, None]
+        if want:
+            if J_e is None:
+                J_e = np.zeros((V, M, 9))
+                J_c = np.zeros((V, M, 6)) if cam is not None else None
+            i = 0
+            for B in blocks(J_e, obj_sel, n_obj):
+                H[i] = np.ascontiguousarray(B[:, :6])
+                H[i + 1] = np.ascontiguousarray(B[:, 6:])
+                i += 2
+            if cam is not None:
+                for B in blocks(J_c, cam_sel, len(cam_keys)):
+                    H[i] = B
+                    i += 1
+        return out.reshape(-1)
+
+    return gtsam.CustomFactor(noise, keys, error_fn)
+

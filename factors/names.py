@@ -1,0 +1,61 @@
+"""Names and rules shared by the math layer and everything above it; dependency-free (stdlib).
+
+Importing this module loads neither numpy nor gtsam, so the service's settings and wire schemas
+can publish the valid names and apply the same rules without loading the solver
+(``service.limits`` re-exports the names).
+
+* :data:`METRIC_NAMES`, :data:`ROBUST_KERNELS`: the valid names.
+* :class:`FieldError`: THE error of invalid input, with a structured ``field``.
+* :func:`is_real`, :func:`check_robust`: rules used by every layer that takes these inputs.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+
+__all__ = ["METRIC_NAMES", "ROBUST_KERNELS", "FieldError", "check_robust", "is_real"]
+
+#: The nine ellipse metrics (``factors.metrics.residual``, ``factors.pose_factors``).
+METRIC_NAMES: tuple[str, ...] = (
+    "iou", "giou", "bbox", "qbbox", "algebraic", "frobenius", "wasserstein", "bhattacharyya",
+    "level_set",
+)
+
+#: Robust kernels accepted by name (``factors.pose_factors.make_noise_model``).
+ROBUST_KERNELS: tuple[str, ...] = ("huber", "cauchy", "geman_mcclure")
+
+
+class FieldError(ValueError):
+    """Invalid input naming its field. ``field`` is a path into the caller's input (e.g.
+    ``"detections[2].label"``, ``"prior.world_from_camera"``) or None when unknown; ``problem``
+    is the rule broken; ``str()`` is ``"<field>: <problem>"`` (or ``problem`` alone). The HTTP
+    layer reads ``field`` (never parses the message) to fill a problem's ``errors[].field``."""
+
+    def __init__(self, problem: str, *, field: str | None = None) -> None:
+        super().__init__(f"{field}: {problem}" if field else problem)
+        self.field = field
+        self.problem = problem
+
+
+def is_real(x: object) -> bool:
+    """A real number (Python or numpy scalar), not a bool."""
+    return isinstance(x, numbers.Real) and not isinstance(x, bool)
+
+
+def check_robust(robust: object, robust_scale: object, *, prefix: str = "",
+                 error: type[FieldError] = FieldError) -> None:
+    """THE rule of the robust-kernel options: ``robust`` is one of :data:`ROBUST_KERNELS` or
+    None; ``robust_scale`` is None or finite and > 0, and only given with a kernel. Raises
+    ``error`` with ``field = prefix + "robust"`` / ``prefix + "robust_scale"``."""
+    if robust is not None and robust not in ROBUST_KERNELS:
+        raise error(f"unknown kernel {robust!r}; valid: None, {', '.join(ROBUST_KERNELS)}",
+                    field=prefix + "robust")
+    if robust_scale is None:
+        return
+    if robust is None:
+        raise error(f"given without {prefix}robust (a robust kernel)",
+                    field=prefix + "robust_scale")
+    if not (is_real(robust_scale) and math.isfinite(robust_scale) and robust_scale > 0):
+        raise error(f"must be finite and > 0, got {robust_scale!r}",
+                    field=prefix + "robust_scale")
