@@ -4,6 +4,10 @@ Run::
 
     .venv/bin/python -m bench.load [--duration 10] [--concurrency 1 8 32] [--workers 2]
                                    [--frames 48] [--json out.json] [--write-results]
+                                   [--baseline DIR]
+
+``--baseline DIR`` serves another checkout (e.g. ``git worktree add DIR main``) the same way and
+runs every level against both, in alternation, so the comparison shares the machine's load.
 
 What it does, in one run (so the numbers are comparable on a noisy shared machine):
 
@@ -131,18 +135,20 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def start_server(data_dir: Path, port: int | None = None) -> tuple[subprocess.Popen, str]:
-    """One real Uvicorn process (one worker) on a loopback port; returns (process, base URL)."""
+def start_server(data_dir: Path, port: int | None = None,
+                 tree: Path = REPO) -> tuple[subprocess.Popen, str]:
+    """One real Uvicorn process (one worker) on a loopback port, running the code of ``tree``
+    (this checkout by default); returns (process, base URL)."""
     port = port or _free_port()
     env = {k: v for k, v in os.environ.items() if not k.startswith("QUADLOC_")}
     env.update({"QUADLOC_DATABASE_URL": f"sqlite:///{data_dir / 'load.db'}",
-                "QUADLOC_DATA_DIR": str(data_dir), "PYTHONPATH": str(REPO)})
+                "QUADLOC_DATA_DIR": str(data_dir), "PYTHONPATH": str(tree)})
     log = open(data_dir / f"uvicorn-{port}.log", "wb")  # noqa: SIM115 - lives with the server
     proc = subprocess.Popen(
         [sys.executable, "-m", "uvicorn", "service.api.app:create_app", "--factory",
          "--host", "127.0.0.1", "--port", str(port), "--log-level", "warning",
          "--no-access-log"],
-        cwd=REPO, env=env, stdout=log, stderr=subprocess.STDOUT)
+        cwd=tree, env=env, stdout=log, stderr=subprocess.STDOUT)
     base = f"http://127.0.0.1:{port}"
     wait_until_ready(proc, base, data_dir / f"uvicorn-{port}.log")
     return proc, base
@@ -166,12 +172,13 @@ def wait_until_ready(proc: subprocess.Popen, base: str, log_path: Path,
     raise RuntimeError("server did not become ready")
 
 
-def start_replicas(n: int, data_dir: Path) -> tuple[list[subprocess.Popen], list[str]]:
-    """``n`` single-worker Uvicorn replicas sharing one SQLite database."""
+def start_replicas(n: int, data_dir: Path,
+                   tree: Path = REPO) -> tuple[list[subprocess.Popen], list[str]]:
+    """``n`` single-worker Uvicorn replicas (code of ``tree``) sharing one SQLite database."""
     procs, bases = [], []
     try:
         for _ in range(n):
-            proc, base = start_server(data_dir)
+            proc, base = start_server(data_dir, tree=tree)
             procs.append(proc)
             bases.append(base)
     except Exception:
@@ -322,6 +329,27 @@ def to_markdown(report: dict[str, Any]) -> str:
                      f"{lvl.get('server_cpu_ms_per_request', float('nan')):.2f} | "
                      f"{lvl['client_cpu_ms_per_request']:.2f} | "
                      f"{lvl.get('cores_obtained', float('nan')):.2f} |")
+    if report.get("baseline_levels"):
+        lines += ["", f"Baseline in the same run (`--baseline {report['baseline']}`, served the "
+                      "same way, each level right before or after this checkout's):", "",
+                  "| concurrency | baseline requests/s | this requests/s | ratio | baseline "
+                  "p99 ms | this p99 ms | baseline server CPU ms/request | this server CPU "
+                  "ms/request |", "|---|---|---|---|---|---|---|---|"]
+        for b, t in zip(report["baseline_levels"], report["levels"], strict=True):
+            lines.append(
+                f"| {t['concurrency']} | {b['requests_per_s']:.1f} | {t['requests_per_s']:.1f} "
+                f"| x{t['requests_per_s'] / max(b['requests_per_s'], 1e-9):.2f} | "
+                f"{b['p99_ms']:.1f} | {t['p99_ms']:.1f} | "
+                f"{b.get('server_cpu_ms_per_request', float('nan')):.2f} | "
+                f"{t.get('server_cpu_ms_per_request', float('nan')):.2f} |")
+        t8 = next((lv for lv in report["levels"] if lv["concurrency"] == 8), None)
+        b8 = next((lv for lv in report["baseline_levels"] if lv["concurrency"] == 8), None)
+        if t8 and b8:
+            ratio = t8["requests_per_s"] / max(b8["requests_per_s"], 1e-9)
+            met = ratio >= 2.0 and t8["p99_ms"] <= 60.0 and t8["errors"] == 0
+            lines += ["", f"Issue 14 target at concurrency 8 (>= 2 x the baseline's throughput "
+                          f"in the same run, p99 <= 60 ms): **{'met' if met else 'not met'}** "
+                          f"(x{ratio:.2f}, p99 {t8['p99_ms']:.0f} ms)."]
     c1 = next((lv for lv in report["levels"] if lv["concurrency"] == 1), None)
     c8 = next((lv for lv in report["levels"] if lv["concurrency"] == 8), None)
     lines.append("")
@@ -362,6 +390,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", help="write the JSON report here")
     parser.add_argument("--write-results", action="store_true",
                         help="write the 'load' section of docs/results.md")
+    parser.add_argument("--baseline", type=Path,
+                        help="another checkout (e.g. a git worktree of main) served the same "
+                             "way, level by level in alternation with this one")
     args = parser.parse_args(argv)
 
     load_average = ", ".join(f"{x:.1f}" for x in os.getloadavg())
@@ -369,21 +400,33 @@ def main(argv: list[str] | None = None) -> int:
     inproc = in_process_rate(inputs, args.duration)
     print(f"in-process: {inproc['rate_per_s']:.1f}/s p50 {inproc['p50_ms']:.1f} ms",
           file=sys.stderr)
-    levels = []
+    levels: list[dict[str, Any]] = []
+    baseline_levels: list[dict[str, Any]] = []
+    trees = [(REPO, levels)] + ([(args.baseline.resolve(), baseline_levels)]
+                               if args.baseline else [])
     with tempfile.TemporaryDirectory(prefix="quadloc-load-") as tmp:
-        procs, bases = start_replicas(args.workers, Path(tmp))
+        servers = []
         try:
-            for c in args.concurrency:
-                lvl = run_level(bases, bodies, c, args.duration, args.warmup,
-                                [p.pid for p in procs])
-                levels.append(lvl)
-                print(f"c={c}: {lvl['requests_per_s']:.1f}/s p50 {lvl['p50_ms']:.1f} "
-                      f"p99 {lvl['p99_ms']:.1f} ms errors {lvl['errors']}", file=sys.stderr)
+            for k, (tree, _) in enumerate(trees):
+                (Path(tmp) / str(k)).mkdir()
+                servers.append(start_replicas(args.workers, Path(tmp) / str(k), tree))
+            for i, c in enumerate(args.concurrency):
+                # with a baseline: both trees at each level, in alternating order
+                order = list(zip(trees, servers, strict=True))
+                for (tree, out), (procs, bases) in (order if i % 2 == 0 else order[::-1]):
+                    lvl = run_level(bases, bodies, c, args.duration, args.warmup,
+                                    [p.pid for p in procs])
+                    out.append(lvl)
+                    print(f"{tree.name} c={c}: {lvl['requests_per_s']:.1f}/s p50 "
+                          f"{lvl['p50_ms']:.1f} p99 {lvl['p99_ms']:.1f} ms errors "
+                          f"{lvl['errors']}", file=sys.stderr)
         finally:
-            for proc in procs:
-                proc.terminate()
-            for proc in procs:
-                proc.wait(timeout=30)
+            for procs, _ in servers:
+                for proc in procs:
+                    proc.terminate()
+            for procs, _ in servers:
+                for proc in procs:
+                    proc.wait(timeout=30)
     c1 = next((lv for lv in levels if lv["concurrency"] == 1), None)
     overhead = (inproc["rate_per_s"] / c1["requests_per_s"] - 1) if c1 else None
     cpu_overhead = (c1["server_cpu_ms_per_request"] / inproc["cpu_ms_per_call"] - 1
@@ -394,6 +437,8 @@ def main(argv: list[str] | None = None) -> int:
               "machine": f"{os.cpu_count()} CPUs, {platform.python_implementation()} "
                          f"{platform.python_version()}",
               "load_average": load_average, "in_process": inproc, "levels": levels,
+              **({"baseline": str(args.baseline), "baseline_levels": baseline_levels}
+                 if args.baseline else {}),
               "http_overhead_per_worker": overhead,
               "http_cpu_overhead_per_worker": cpu_overhead}
     text = json.dumps(report, indent=2)

@@ -163,3 +163,35 @@ def test_p2e_rejects_vertical_pair_and_bad_count():
     assert len(p2e_hypotheses(ells, [e1, e2], CAM, UP)) == 0
     with pytest.raises(ValueError, match="exactly two"):
         p2e_hypotheses(ells[:1], [e1], CAM, UP)
+
+
+def test_p3p_batch_equals_opencv_per_sample():
+    """p3p_hypotheses_batch (one vectorised Rodrigues / depth check for all samples) == each
+    sample's cv2.solveP3P solutions converted by cv2.Rodrigues and filtered by depth."""
+    import cv2
+
+    from service.localization.hypotheses import p3p_hypotheses_batch
+
+    rng = np.random.default_rng(5)
+    img, obj, expected = [], [], []
+    for b in range(12):
+        X = rng.uniform(-1, 1, (3, 3))
+        T_cw = invert_pose(look_at(BACK + rng.uniform(-1, 1, 3), np.zeros(3)))
+        uv = CAM.project_points(T_cw, X)
+        if b % 4 == 3:
+            X = X[[1, 0, 2]]  # a wrong correspondence: fewer or other solutions
+        img.append(uv)
+        obj.append(X)
+        _, rvecs, tvecs = cv2.solveP3P(X, uv, CAM.K, None, flags=cv2.SOLVEPNP_P3P)
+        for rv, tv in zip(rvecs, tvecs, strict=True):
+            R = cv2.Rodrigues(rv)[0]
+            t = np.asarray(tv, float).ravel()
+            if np.all(X @ R[2] + t[2] > 0):
+                expected.append((b, R, t))
+    poses, sample = p3p_hypotheses_batch(np.array(img), np.array(obj), CAM)
+    assert len(poses) == len(expected) > 12
+    for (b, R, t), T, s in zip(expected, poses, sample, strict=True):
+        assert s == b
+        np.testing.assert_allclose(T[:3, :3], R, atol=1e-12)
+        np.testing.assert_allclose(T[:3, 3], t, atol=1e-12)
+        np.testing.assert_array_equal(T[3], [0, 0, 0, 1])

@@ -251,15 +251,21 @@ class _FixedIouScorer:
         self.params = np.zeros((3, 5))
         self.camera = CAM
         self.compiled = type("C", (), {"centers": np.zeros((3, 3))})()
+        # every (detection, object) pair is compatible, in row-major order
+        self.pair_d, self.pair_o = (i.ravel() for i in np.indices((3, 3)))
+        self.pair_starts = np.array([0, 3, 6])
 
     def compatible_objects(self, d: int) -> np.ndarray:
         return np.array([0, 1, 2])
 
-    def dense_iou(self, poses: np.ndarray, **_: object) -> np.ndarray:
-        return self.dense[np.round(poses[:, 0, 3]).astype(int)]
+    def pair_iou(self, poses: np.ndarray, **_: object) -> np.ndarray:
+        return self.dense[np.round(poses[:, 0, 3]).astype(int)].reshape(len(poses), 9)
 
-    def scores(self, dense, threshold):
-        return MatchScorer.scores(self, dense, threshold)
+    def pair_scores(self, iou, threshold):
+        return MatchScorer.pair_scores(self, iou, threshold)
+
+    def pair_assignment(self, iou, threshold):
+        return MatchScorer.pair_assignment(self, iou, threshold)
 
     def matches(self, camera_from_world, threshold):
         return greedy_assignment(self.dense[round(camera_from_world[0, 3])],
@@ -282,7 +288,8 @@ def test_pose_acceptance_uses_min_inliers_and_one_to_one_counts(monkeypatch, cas
     dense[1, 0, 0] = dense[1, 1, 1] = dense[1, 2, 2] = 0.5
     poses = np.stack([np.eye(4), np.eye(4)])
     poses[1, 0, 3] = 1.0  # pose k's IoUs are dense[k]
-    monkeypatch.setattr(ransac_module, "p3p_hypotheses", lambda *a: poses)
+    monkeypatch.setattr(ransac_module, "p3p_hypotheses_batch",
+                        lambda *a: (poses, np.zeros(len(poses), dtype=int)))
     out = ransac(_FixedIouScorer(dense), UP, inlier_iou=0.2, min_inliers=3, max_hypotheses=10,
                  rng=np.random.default_rng(0))
     assert out.camera_from_world is not None, out.reason
@@ -364,3 +371,83 @@ def test_scoring_past_the_scorers_deadline_raises():
     pose = invert_pose(look_at(np.array([0.0, -4.0, 0.2]), np.zeros(3)))
     with pytest.raises(ScoringTimeoutError):
         scorer.matches(pose, 0.2)
+
+
+def _square_of_spheres():
+    """Four same-label spheres on a square facing a camera on its axis: rolling the camera by
+    90, 180 or 270 deg about the optical axis gives the same image (the objects relabelled),
+    so four distinct poses explain all four detections exactly."""
+    centres = [(-0.5, 0.0, -0.5), (0.5, 0.0, -0.5), (0.5, 0.0, 0.5), (-0.5, 0.0, 0.5)]
+    objs = tuple(MapObject(f"s{i}", "a", Ellipsoid(np.array(c), np.full(3, 0.15)))
+                 for i, c in enumerate(centres))
+    cm = compile_map(SceneMap("square", "square", (0.0, 0.0, 1.0), ("a",), objs))
+    camera_from_world = invert_pose(look_at(np.array([0.0, -4.0, 0.0]), np.zeros(3)))
+    ells = [project_ellipsoid(CAM, camera_from_world, o.ellipsoid) for o in objs]
+    return cm, MatchScorer(cm, CAM, ells, ["a"] * 4, list(range(4))), camera_from_world
+
+
+def test_early_exit_still_finds_every_competitor_that_explains_the_frame():
+    """The first batch explains the frame (early exit), and the search still returns the rolled
+    poses that explain it too (the competitor sweep runs every assignment of one detection
+    triple): the ambiguity check gets them."""
+    from service.localization.ransac import _sweep_samples, distinct_poses
+
+    _cm, scorer, _ = _square_of_spheres()
+
+    def explaining(out):
+        full = [h for h in out.alternatives if len(h.matches) == 4]
+        distinct = []
+        for h in full:
+            if all(distinct_poses(h.camera_from_world, g.camera_from_world) for g in distinct):
+                distinct.append(h)
+        return out, distinct
+
+    out, full = explaining(ransac(scorer, UP, inlier_iou=0.2, min_inliers=2,
+                                  max_hypotheses=300, rng=np.random.default_rng(0)))
+    assert out.samples_tried < 96  # the early exit happened (96 samples in all)
+    assert len(_sweep_samples(scorer)) == 24  # one triple, every assignment to 4 objects
+    assert len(full) >= 2
+    for h in full:  # each is an exact explanation
+        assert all(m.iou > 0.9 for m in h.matches)
+
+
+def test_symmetric_map_is_ambiguous_not_a_confident_pose():
+    from service.localization.pipeline import localize
+    from service.localization.types import Detection, LocalizationOptions
+
+    cm, _scorer, camera_from_world = _square_of_spheres()
+    dets = [Detection(project_ellipsoid(CAM, camera_from_world, e), "a", None)
+            for e in cm.ellipsoids]
+    r = localize(dets, cm, CAM, LocalizationOptions(time_budget_ms=None))
+    assert not r.localized and r.reason == "ambiguous", (r.reason, r.confidence)
+
+
+def test_pair_scoring_equals_the_dense_matrix_forms():
+    """pair_scores / pair_assignment on the pair IoUs == scores / greedy_assignment on the dense
+    (detections x objects) matrix, on a crowded same-label map (many ties and conflicts)."""
+    _cm, scorer = _crowded(40, 12)
+    poses = np.array([invert_pose(look_at(np.array([x, -4.0, 0.2]), np.zeros(3)))
+                      for x in (-0.5, 0.0, 0.7)])
+    pair = scorer.pair_iou(poses, floor=0.2)
+    dense = scorer.dense_iou(poses, floor=0.2)
+    np.testing.assert_array_equal(dense[:, scorer.pair_d, scorer.pair_o], pair)
+    for a, b in zip(scorer.pair_scores(pair, 0.2), scorer.scores(dense, 0.2), strict=True):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+    for h in range(len(poses)):
+        assert scorer.pair_assignment(pair[h], 0.2) == greedy_assignment(
+            dense[h], scorer.detection_indices, 0.2)
+
+
+def test_pair_scores_with_a_detection_without_compatible_objects():
+    """A detection whose label has no object (not possible in localize(), possible for other
+    users of the scorer) scores 0, as in the dense form, and does not shift the others."""
+    cm, _ = _crowded(10, 3)
+    ells = [Ellipse(100, 100, 20, 10, 0), Ellipse(200, 200, 20, 10, 0),
+            Ellipse(300, 200, 20, 10, 0)]
+    for labels in (["a", "zz", "a"], ["a", "a", "zz"], ["zz", "a", "a"]):
+        scorer = MatchScorer(cm, CAM, ells, labels, [0, 1, 2])
+        iou = np.random.default_rng(0).uniform(0, 1, (2, len(scorer.pair_d)))
+        dense = np.zeros((2, 3, len(cm)))
+        dense[:, scorer.pair_d, scorer.pair_o] = iou
+        for a, b in zip(scorer.pair_scores(iou, 0.2), scorer.scores(dense, 0.2), strict=True):
+            np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)

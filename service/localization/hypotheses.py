@@ -29,7 +29,8 @@ import numpy as np
 
 from factors.geometry import Camera, Ellipse, Ellipsoid, gaussians_from_dual_conics
 
-__all__ = ["p2e_hypotheses", "p3p_hypotheses", "rotation_from_two_directions"]
+__all__ = ["p2e_hypotheses", "p3p_hypotheses", "p3p_hypotheses_batch",
+           "rotation_from_two_directions"]
 
 _EMPTY = np.zeros((0, 4, 4))
 
@@ -47,27 +48,59 @@ def p3p_hypotheses(
     Solutions placing any of the three points at depth <= 0 are dropped. Degenerate input
     (collinear points, coincident rays) gives an empty array, never an exception.
     """
-    img = np.ascontiguousarray(np.asarray(image_points, dtype=np.float64).reshape(3, 2))
-    obj = np.ascontiguousarray(np.asarray(world_points, dtype=np.float64).reshape(3, 3))
-    try:
-        n, rvecs, tvecs = cv2.solveP3P(obj, img, camera.K, None, flags=cv2.SOLVEPNP_P3P)
-    except cv2.error:
-        return _EMPTY
-    if not n:
-        return _EMPTY
-    out = []
-    for rvec, tvec in zip(rvecs, tvecs, strict=False):
-        R, _ = cv2.Rodrigues(rvec)
-        t = np.asarray(tvec, dtype=float).reshape(3)
-        if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
+    return p3p_hypotheses_batch(np.asarray(image_points, dtype=np.float64).reshape(1, 3, 2),
+                                np.asarray(world_points, dtype=np.float64).reshape(1, 3, 3),
+                                camera)[0]
+
+
+def p3p_hypotheses_batch(
+    image_points: np.ndarray, world_points: np.ndarray, camera: Camera
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`p3p_hypotheses` of B samples at once: ``cv2.solveP3P`` per sample, the rotation
+    vectors converted and the depths checked for all solutions together (Rodrigues' formula,
+    vectorised).
+
+    Args:
+        image_points: (B, 3, 2) pixels; world_points: (B, 3, 3) world metres.
+
+    Returns:
+        ``(poses (M, 4, 4), sample (M,))``: the ``camera_from_world`` solutions of every
+        sample, in sample order, and the sample each came from.
+    """
+    img = np.ascontiguousarray(np.asarray(image_points, dtype=np.float64).reshape(-1, 3, 2))
+    obj = np.ascontiguousarray(np.asarray(world_points, dtype=np.float64).reshape(-1, 3, 3))
+    K = camera.K
+    rv, tv, owner = [], [], []
+    for b in range(len(img)):
+        try:
+            n, rvecs, tvecs = cv2.solveP3P(obj[b], img[b], K, None, flags=cv2.SOLVEPNP_P3P)
+        except cv2.error:
             continue
-        if np.any(obj @ R[2] + t[2] <= 0.0):
-            continue
-        T = np.eye(4)
-        T[:3, :3] = R
-        T[:3, 3] = t
-        out.append(T)
-    return np.array(out).reshape(-1, 4, 4)
+        for k in range(n or 0):
+            rv.append(rvecs[k])
+            tv.append(tvecs[k])
+            owner.append(b)
+    if not rv:
+        return _EMPTY, np.zeros(0, dtype=int)
+    r = np.asarray(rv, dtype=float).reshape(-1, 3)
+    t = np.asarray(tv, dtype=float).reshape(-1, 3)
+    sample = np.asarray(owner, dtype=int)
+    # Rodrigues: R = I + sin(th) [k]x + (1 - cos(th)) [k]x^2, k = r / th (R = I at th = 0)
+    th = np.linalg.norm(r, axis=1)
+    k = r / np.where(th > 0, th, 1.0)[:, None]
+    Kx = np.zeros((len(r), 3, 3))
+    Kx[:, 0, 1], Kx[:, 0, 2], Kx[:, 1, 2] = -k[:, 2], k[:, 1], -k[:, 0]
+    Kx[:, 1, 0], Kx[:, 2, 0], Kx[:, 2, 1] = k[:, 2], -k[:, 1], k[:, 0]
+    R = (np.eye(3) + np.sin(th)[:, None, None] * Kx
+         + (1.0 - np.cos(th))[:, None, None] * (Kx @ Kx))
+    depth = np.einsum("mpj,mj->mp", obj[sample], R[:, 2]) + t[:, 2, None]
+    ok = (np.all(np.isfinite(R), axis=(1, 2)) & np.all(np.isfinite(t), axis=1)
+          & np.all(depth > 0.0, axis=1))
+    T = np.zeros((int(ok.sum()), 4, 4))
+    T[:, :3, :3] = R[ok]
+    T[:, :3, 3] = t[ok]
+    T[:, 3, 3] = 1.0
+    return T, sample[ok]
 
 
 def rotation_from_two_directions(

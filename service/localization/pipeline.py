@@ -17,7 +17,8 @@ Stages (wall time of each in ``LocalizationResult.timings_ms``):
    its best distinct hypotheses.
 4. ``refine`` — :func:`service.localization.refine.refine` on the best hypothesis' inliers
    (and on up to :data:`REFINED_ALTERNATIVES` distinct runners-up scoring at least
-   :data:`ALTERNATIVE_PREFILTER_RATIO` of the best) with ``options.metric`` (sigma-weighted,
+   :data:`ALTERNATIVE_PREFILTER_RATIO` of the best, except those that only re-use the best's
+   correspondences: ``_same_explanation``) with ``options.metric`` (sigma-weighted,
    robust kernel option), then re-association: the inliers are recomputed at the refined pose
    and, if the set changed, refined once more. A result is kept when it has >= ``min_inliers``
    inliers; none kept: ``refinement_diverged``.
@@ -29,7 +30,9 @@ Stages (wall time of each in ``LocalizationResult.timings_ms``):
    with their probabilities in ``alternatives``: the client decides.
    (``refine`` itself re-lays grown adaptive level-set samples once at its result.)
 
-The time budget bounds the whole call: the hypothesis search stops at it, and no LM iteration
+The time budget (CPU time of the solving thread, with a wall-clock hard limit:
+:mod:`service.localization.budget`) bounds the whole call: the hypothesis search stops at it,
+and no LM iteration
 (nor level-set re-lay, nor re-association refinement) starts after it. A refinement cut short
 keeps its last accepted step and the result says so: ``refinement_status == "time_budget"``.
 """
@@ -47,6 +50,7 @@ from factors.geometry import Camera, Ellipsoid, invert_pose
 from factors.pose_residuals import expmap_pose3
 from maps.compiled import CompiledMap, compile_map
 from maps.model import SceneMap
+from service.localization.budget import Deadline, deadline_passed
 from service.localization.calibration import MIN_CONFIDENCE, S2_FLOOR
 from service.localization.confidence import (
     calibrated_covariance,
@@ -132,11 +136,12 @@ def _not_localized(reason: str, metric: str, evaluated: int, timings: dict[str, 
 def refine_pose(
     detections: Sequence[Detection], ellipsoids: Sequence[Ellipsoid], camera: Camera,
     initial_world_from_camera: np.ndarray, options: LocalizationOptions,
-    prior: PosePrior | None = None, deadline: float | None = None,
+    prior: PosePrior | None = None, deadline: Deadline | float | None = None,
 ) -> RefinementResult:
     """:func:`service.localization.refine.refine` with the options' metric, sigma, kernel,
     iteration cap and metric options (and the prior as a factor when it has a covariance);
-    ``deadline`` is a ``time.perf_counter()`` instant after which no LM iteration starts."""
+    after ``deadline`` (a :class:`service.localization.budget.Deadline` or a
+    ``time.perf_counter()`` instant) no LM iteration starts."""
     kwargs = dict(
         use_sigma=options.use_sigma, robust=options.robust, robust_scale=options.robust_scale,
         prior_world_from_camera=None if prior is None or prior.covariance is None
@@ -153,7 +158,7 @@ def refine_pose(
 def _refine_matches(
     matches: Sequence[Match], detections: Sequence[Detection], compiled: CompiledMap,
     camera: Camera, world_from_camera: np.ndarray, options: LocalizationOptions,
-    prior: PosePrior | None, deadline: float | None,
+    prior: PosePrior | None, deadline: Deadline | float | None,
 ) -> RefinementResult:
     return refine_pose([detections[m.detection_index] for m in matches],
                        [compiled.ellipsoids[m.object_index] for m in matches],
@@ -192,7 +197,7 @@ def _refine_and_verify(
             (m.detection_index, m.object_index) for m in current}
         if same or len(new) < options.min_inliers or round_ == 1:
             break
-        if deadline is not None and time.perf_counter() > deadline:
+        if deadline_passed(deadline):
             status = "time_budget"  # the changed inlier set is not refined again
             break
         current = new
@@ -250,6 +255,24 @@ ALTERNATIVE_PREFILTER_RATIO = 0.5
 PRIOR_GATE_SIGMAS = 2.0
 
 
+#: An alternative whose matches are a subset of the best hypothesis' is not refined when the
+#: best has at least this many matches (``_same_explanation``).
+SAME_EXPLANATION_MIN_MATCHES = 4
+
+
+def _same_explanation(alternative: Hypothesis, best: Hypothesis) -> bool:
+    """Whether ``alternative`` only re-uses the best hypothesis' correspondences (its matches
+    are a subset of the best's) while the best has >= :data:`SAME_EXPLANATION_MIN_MATCHES`:
+    the correspondences over-determine the pose, so its refinement converges to the best's
+    pose (measured on the tuning frames of ``bench.chess_eval``: every such alternative did)
+    and is dropped as not distinct. With fewer matches (2-3 correspondences admit several
+    poses) every alternative is refined."""
+    if len(best.matches) < SAME_EXPLANATION_MIN_MATCHES:
+        return False
+    pairs = {(m.detection_index, m.object_index) for m in best.matches}
+    return all((m.detection_index, m.object_index) in pairs for m in alternative.matches)
+
+
 def prior_gate_poses(prior: PosePrior) -> np.ndarray:
     """``world_from_camera`` poses (H, 4, 4) at which the prior's associations are gated: the
     prior pose, and with a covariance the poses ``T Exp(+-g sqrt(lambda_k) e_k)`` along each
@@ -298,6 +321,7 @@ def localize(
         ScoringTimeoutError: scoring ran past 1.05 x ``time_budget_ms`` (huge map x detections).
     """
     t0 = time.perf_counter()
+    cpu0 = time.thread_time()  # the budget counts this thread's CPU time (budget module)
     timings: dict[str, float] = {}
     compiled = _validate(detections, scene_map, camera, options, prior)
     metric = options.metric
@@ -310,8 +334,10 @@ def localize(
         return _not_localized("no_label_match", metric, 0, timings, t0)
     scorer = MatchScorer(compiled, camera, [detections[i].ellipse for i in usable],
                          [detections[i].label for i in usable], usable)
-    deadline = None if options.time_budget_ms is None else t0 + options.time_budget_ms / 1e3
-    scorer.deadline = hard_deadline(t0, options.time_budget_ms)  # ScoringTimeoutError past it
+    # CPU time of this thread, with a wall-clock hard limit (service.localization.budget)
+    deadline = Deadline.after(options.time_budget_ms, cpu_start=cpu0, wall_start=t0)
+    scorer.deadline = hard_deadline(t0, options.time_budget_ms, cpu_start=cpu0)  # past it:
+    # ScoringTimeoutError
     evaluated = 0
     n_samples = count_samples(scorer, 2)
 
@@ -390,9 +416,11 @@ def localize(
     answers: list[_Answer] = []
     first_status: str | None = None
     for k, h in enumerate(hyps[:1 + REFINED_ALTERNATIVES]):
-        if k > 0 and (h.score < ALTERNATIVE_PREFILTER_RATIO * hyps[0].score or (
-                deadline is not None and time.perf_counter() > deadline)):
+        if k > 0 and (h.score < ALTERNATIVE_PREFILTER_RATIO * hyps[0].score
+                      or deadline_passed(deadline)):
             break
+        if k > 0 and _same_explanation(h, hyps[0]):
+            continue  # refines to the best's pose: not a competitor (see _same_explanation)
         got, status = _refine_and_verify(
             list(outcome.matches if k == 0 else h.matches), detections, compiled, camera,
             scorer, invert_pose(h.camera_from_world), options, None, deadline)

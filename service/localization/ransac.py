@@ -6,12 +6,16 @@ when no P3P pose qualifies). Each candidate pose is
 scored by the overlap (IoU) between the detections and the projected ellipsoids of the
 label-compatible map objects, each detection taking its best object:
 
-* **stage 1** (all candidates, cheap): a detection is "hit" when the projection of a compatible
+* **stage 1** (only for large problems: a batch with more than :data:`STAGE1_MIN_WORK`
+  (pose, pair) tests; cheap): a detection is "hit" when the projection of a compatible
   object's centre lies within twice its ellipse (``Phi_det <= 4``) and that object's projection
-  is valid (ellipsoid entirely in front of the camera);
-* **stage 2** (the :data:`STAGE2_CANDIDATES` best of stage 1 in each batch): IoU of every
-  compatible pair, estimated by :func:`iou_estimates` (a fixed sunflower pattern of points
-  inside each detection; relative area error ~1/n_points, checked against
+  is valid (ellipsoid entirely in front of the camera); the :data:`STAGE2_CANDIDATES` best
+  poses of the batch go on to stage 2;
+* **stage 2** (every candidate of a batch at once, vectorised over poses and pairs,
+  :meth:`MatchScorer.pair_iou`): IoU of every compatible pair, after closed-form pre-filters
+  that cannot change a result (disjoint bounding circles: IoU 0; the area ratio bounds the
+  estimate below the inlier threshold), estimated by :func:`iou_estimates` (a fixed sunflower
+  pattern of points inside each detection; relative area error ~1/n_points, checked against
   ``factors.metrics`` in the tests). A pair is an inlier when IoU >= ``inlier_iou``; the
   score of a pose is the sum of its inliers' IoUs (so both the number of explained detections
   and how well they overlap count). Candidates are ranked by the per-detection-best sum (an
@@ -19,34 +23,41 @@ label-compatible map objects, each detection taking its best object:
   :func:`greedy_assignment`): its score and its >= ``min_inliers`` count are the one-to-one
   ones, so the returned matches always reach ``min_inliers``.
 
-Minimal samples are counted and listed per label group (a map object has one category), never
-by walking all detection tuples, so hundreds of same-label detections cost nothing before the
-first time-budget check. Exhaustive over the label-compatible minimal samples when there are at
-most ``max_hypotheses`` of them (in a fixed order: the result does not depend on the seed),
-else ``max_hypotheses`` random samples (seeded, uniform over the label-compatible samples);
-early exit once a pose explains every usable detection with mean IoU >=
-:data:`EARLY_EXIT_MEAN_IOU`, and when the time budget runs out (checked before every batch of
-:data:`BATCH` P3P or 4 P2E samples, and inside the scoring of every batch).
+Minimal samples are counted (a generating polynomial over the label groups, once per call)
+and listed per label group (a map object has one category), never by walking all detection
+tuples, so hundreds of same-label detections cost nothing before the first time-budget check.
+Exhaustive over the label-compatible minimal samples when there are at most ``max_hypotheses``
+of them (in a fixed order: the result does not depend on the seed; P3P samples most promising
+first, :func:`_most_promising_first`, when there are at most :data:`ORDER_CAP`), else
+``max_hypotheses`` random samples (seeded, uniform over the label-compatible samples). The
+first P3P batch has :data:`FIRST_BATCH` samples, the next :data:`BATCH` (P2E: 4).
+
+Early exit (issue 14) once a pose explains every usable detection (at least
+:data:`EARLY_EXIT_MIN_DETECTIONS`) with mean IoU >= :data:`EARLY_EXIT_MEAN_IOU`, but only after
+the **competitor sweep** (:func:`_sweep_samples`): every label-compatible assignment of one
+well-spread detection triple is tried, so any distinct pose that also explains every detection
+(what the ambiguity check of ``service.localization.confidence`` needs) is found although the
+rest of the search is skipped. The search also stops when the time budget runs out (checked
+before every batch and inside the scoring of every batch).
 
 Bounded cost (whatever the request): samples are generated lazily, one batch at a time, so
 nothing is built before the first deadline check and memory never grows with
-``max_hypotheses``. Candidate poses are scored one at a time (stage 2) or a few at a time
-(stage 1, :data:`PROJECT_BLOCK` pose x object projections), and the label-compatible
-(detection, object) pairs in blocks of at most :data:`PAIR_BLOCK` pairs (stage 1) or
-:data:`POINT_BLOCK` pair x point evaluations (stage 2), checking the deadline between blocks
-(:class:`ScoringTimeoutError`). Pairs whose bounding circles are disjoint (IoU exactly 0) or whose
-area ratio bounds the IoU estimate below the inlier threshold are skipped before the point
-test, which does not change any result. So the largest arrays of one request are the
-(detections x objects) pair index and one pose's (detections x objects) IoU matrix, ~45 bytes
-per compatible pair (docs/deployment.md, "Worst-case cost of a request"). All poses here are
+``max_hypotheses`` (the most-promising-first order materialises at most :data:`ORDER_CAP`
+samples). Candidate poses are scored a few at a time (at most :data:`PAIR_BLOCK` (pose, pair)
+tests and :data:`PROJECT_BLOCK` pose x object projections per block), and the
+label-compatible (detection, object) pairs in blocks of at most :data:`PAIR_BLOCK` tests or
+:data:`POINT_BLOCK` pair x point evaluations, checking the deadline between blocks
+(:class:`ScoringTimeoutError`). So the largest arrays of one request are the
+(detections x objects) pair index and one pose's pair IoUs, ~45 bytes per compatible pair
+(docs/deployment.md, "Worst-case cost of a request"). All poses here are
 ``camera_from_world`` (4x4, OpenCV ``[R | t]``).
 """
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
-import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
@@ -54,7 +65,8 @@ import numpy as np
 
 from factors.geometry import Camera, Ellipse, ellipse_params, gaussians_from_dual_conics
 from maps.compiled import CompiledMap
-from service.localization.hypotheses import p2e_hypotheses, p3p_hypotheses
+from service.localization.budget import Deadline, deadline_passed, earliest
+from service.localization.hypotheses import p2e_hypotheses, p3p_hypotheses_batch
 
 __all__ = [
     "EARLY_EXIT_MEAN_IOU",
@@ -77,6 +89,18 @@ __all__ = [
 EARLY_EXIT_MEAN_IOU = 0.5
 #: Candidates per batch whose IoUs are computed (the best by the stage-1 centre test).
 STAGE2_CANDIDATES = 24
+#: Stage 1 (the centre test keeping :data:`STAGE2_CANDIDATES` poses of a batch) only when a
+#: batch has more (pose, pair) tests than this: below, every pose is scored (vectorised).
+STAGE1_MIN_WORK = 1 << 14
+#: Exhaustive P3P searches with at most this many samples try them most promising first
+#: (:func:`_most_promising_first`; larger ones keep the lazy fixed order: bounded memory).
+ORDER_CAP = 4096
+#: Minimal samples of the first P3P batch (a frame explained by it stops the search early).
+FIRST_BATCH = 8
+#: Competitor sweep after an early exit (:func:`_sweep_samples`): detections considered and
+#: most samples.
+SWEEP_CANDIDATES = 8
+SWEEP_MAX_SAMPLES = 24
 #: Minimal samples per batch (P3P calls between score / budget checks).
 BATCH = 32
 #: Number of distinct hypotheses kept (:attr:`RansacOutcome.alternatives`), and what
@@ -105,16 +129,20 @@ class ScoringTimeoutError(RuntimeError):
     """The scorer's deadline passed in the middle of scoring (see :class:`MatchScorer`)."""
 
 
-def _check(stop_at: float | None) -> None:
-    if stop_at is not None and time.perf_counter() > stop_at:
+def _check(stop_at: Deadline | float | None) -> None:
+    if deadline_passed(stop_at):
         raise ScoringTimeoutError("time budget exceeded while scoring poses")
 
 
-def hard_deadline(start: float, time_budget_ms: float | None) -> float | None:
-    """The scorer's hard stop of a call started at ``start`` (``time.perf_counter()``) with a
-    budget: ``start + 1.05 x budget``. The search stops at the budget itself; this bounds the
+def hard_deadline(start: float, time_budget_ms: float | None, *,
+                  cpu_start: float | None = None) -> Deadline | None:
+    """The scorer's hard stop of a call started at ``start`` (``time.perf_counter()``; and
+    ``cpu_start``, ``time.thread_time()``, default now) with a budget: 1.05 x the budget on
+    each clock of :class:`service.localization.budget.Deadline` (CPU time of the solving thread,
+    and its wall-clock hard limit). The search stops at the budget itself; this bounds the
     scoring after it (final matches, re-association after refinement)."""
-    return None if time_budget_ms is None else start + HARD_STOP_FACTOR * time_budget_ms / 1e3
+    return Deadline.after(time_budget_ms, HARD_STOP_FACTOR, cpu_start=cpu_start,
+                          wall_start=start)
 
 
 def _blocks(n: int, size: int) -> Iterator[slice]:
@@ -122,12 +150,16 @@ def _blocks(n: int, size: int) -> Iterator[slice]:
         yield slice(start, min(n, start + max(1, size)))
 
 
+@functools.lru_cache(maxsize=8)
 def sunflower_disk(n: int) -> np.ndarray:
-    """``n`` points spread uniformly over the unit disk (Vogel's sunflower), shape (n, 2)."""
+    """``n`` points spread uniformly over the unit disk (Vogel's sunflower), shape (n, 2),
+    read-only (computed once per ``n``)."""
     i = np.arange(n) + 0.5
     r = np.sqrt(i / n)
     th = i * (math.pi * (3.0 - math.sqrt(5.0)))
-    return np.column_stack([r * np.cos(th), r * np.sin(th)])
+    out = np.column_stack([r * np.cos(th), r * np.sin(th)])
+    out.setflags(write=False)
+    return out
 
 
 def _ellipse_points(params: np.ndarray, unit: np.ndarray) -> np.ndarray:
@@ -243,7 +275,8 @@ class MatchScorer:
 
     ``detection_indices`` are the original indices of the usable detections (labels in the
     map); ``ellipses`` / ``labels`` are theirs. Only label-compatible pairs are evaluated, in
-    bounded blocks (module docstring). ``deadline`` (a ``time.perf_counter()`` instant, or
+    bounded blocks (module docstring). ``deadline`` (a
+    :class:`service.localization.budget.Deadline`, a ``time.perf_counter()`` instant, or
     None) is a hard stop for every scoring call: past it they raise :class:`ScoringTimeoutError`
     (a search passes its own, earlier, stop to the calls it makes).
     """
@@ -251,7 +284,7 @@ class MatchScorer:
     def __init__(
         self, compiled: CompiledMap, camera: Camera, ellipses: Sequence[Ellipse],
         labels: Sequence[str], detection_indices: Sequence[int], n_points: int = 96,
-        deadline: float | None = None,
+        deadline: Deadline | float | None = None,
     ) -> None:
         self.compiled = compiled
         self.camera = camera
@@ -272,6 +305,18 @@ class MatchScorer:
         position = np.zeros(self.n_obj, dtype=np.int32)
         position[self.objects] = np.arange(len(self.objects), dtype=np.int32)
         self.pair_s = position[self.pair_o]
+        # the compatible objects' arrays, gathered once per call (not per projection); the
+        # compiled map's own (read-only) arrays when every object is compatible
+        o = self.objects
+        self._object_arrays = (
+            (compiled.centers, compiled.shape_matrices, compiled.dual_quadrics)
+            if len(o) == self.n_obj else
+            (compiled.centers[o], compiled.shape_matrices[o], compiled.dual_quadrics[o]))
+        self._label_groups: list[tuple[list[int], np.ndarray]] | None = None
+        self._sample_counts: dict[int, int] = {}  # count_samples, once per size
+        # first pair of each detection (pairs are sorted by detection; every usable detection
+        # has a compatible object): the segments of np.maximum.reduceat
+        self.pair_starts = np.searchsorted(self.pair_d, np.arange(self.n_det)).astype(np.intp)
         self.unit = sunflower_disk(n_points)
         self.points = _ellipse_points(self.params, self.unit)
         self.areas = math.pi * self.params[:, 2] * self.params[:, 3]
@@ -284,30 +329,25 @@ class MatchScorer:
         """Object indices compatible with usable detection row ``d``."""
         return np.flatnonzero(self.compat[d])
 
-    def _stop(self, stop_at: float | None) -> float | None:
-        if stop_at is None:
-            return self.deadline
-        return stop_at if self.deadline is None else min(stop_at, self.deadline)
+    def _stop(self, stop_at: Deadline | float | None) -> Deadline | None:
+        return earliest(stop_at, self.deadline)
 
     def _project(self, camera_from_world: np.ndarray,
-                 stop_at: float | None = None) -> tuple[np.ndarray, ...]:
+                 stop_at: Deadline | float | None = None) -> tuple[np.ndarray, ...]:
         """:func:`project_objects` of the compatible objects, in blocks of poses."""
-        cm = self.compiled
         o = self.objects
         T = np.asarray(camera_from_world, dtype=float)
         step = max(1, PROJECT_BLOCK // max(1, len(o)))
         if len(T) <= step:
-            return project_objects(self.camera, T, cm.centers[o], cm.shape_matrices[o],
-                                   cm.dual_quadrics[o])
+            return project_objects(self.camera, T, *self._object_arrays)
         parts = []
         for blk in _blocks(len(T), step):
             _check(stop_at)
-            parts.append(project_objects(self.camera, T[blk], cm.centers[o],
-                                         cm.shape_matrices[o], cm.dual_quadrics[o]))
+            parts.append(project_objects(self.camera, T[blk], *self._object_arrays))
         return tuple(np.concatenate(p) for p in zip(*parts, strict=True))
 
     def centre_hits(self, camera_from_world: np.ndarray,
-                    stop_at: float | None = None) -> np.ndarray:
+                    stop_at: Deadline | float | None = None) -> np.ndarray:
         """Stage 1: number of detections hit by a compatible valid object's centre, (H,)."""
         stop_at = self._stop(stop_at)
         T = np.asarray(camera_from_world, dtype=float)
@@ -327,43 +367,98 @@ class MatchScorer:
                 out[hb.start + h] = per_det.sum()
         return out
 
-    def dense_iou(self, camera_from_world: np.ndarray, points: np.ndarray | None = None,
-                  floor: float = 0.0, stop_at: float | None = None) -> np.ndarray:
-        """IoU (H, D, N) of every usable detection with every map object (0 if incompatible or
-        the projection is invalid, and 0 where the estimate cannot reach ``floor``: callers
-        that only use IoUs >= a threshold get the same results). Memory: the output plus
-        bounded blocks; call it with few poses (H) on large maps."""
+    def pair_iou(self, camera_from_world: np.ndarray, points: np.ndarray | None = None,
+                 floor: float = 0.0, stop_at: Deadline | float | None = None) -> np.ndarray:
+        """IoU (H, P) of every label-compatible pair (``pair_d[p]``, ``pair_o[p]``) at H poses,
+        vectorised over poses and pairs (0 where the projection is invalid, and 0 where the
+        estimate cannot reach ``floor``: callers that only use IoUs >= a threshold get the same
+        results). Cheap closed-form pre-filters run first on every (pose, pair): disjoint
+        bounding circles (the IoU is exactly 0) and the area ratio (the estimate is at most
+        ``area_det / area_proj``); only the survivors get the point test. Memory: the output
+        plus blocks of at most :data:`PAIR_BLOCK` (pose, pair) tests and :data:`POINT_BLOCK`
+        point evaluations; keep ``H x P`` bounded (callers pass
+        ``max(1, PAIR_BLOCK // P)`` poses at a time)."""
         stop_at = self._stop(stop_at)
         T = np.asarray(camera_from_world, dtype=float)
         pts = self.points if points is None else points
         n_pts = pts.shape[1]
-        out = np.zeros((len(T), self.n_det, self.n_obj))
-        for h in range(len(T)):
+        n_pairs = len(self.pair_d)
+        out = np.zeros((len(T), n_pairs))
+        if n_pairs == 0:
+            return out
+        step = max(1, min(PROJECT_BLOCK // max(1, len(self.objects)),
+                          PAIR_BLOCK // n_pairs))
+        for hb in _blocks(len(T), step):
             _check(stop_at)
-            cen, inv_shape, valid, _ = self._project(T[h:h + 1], stop_at)
-            cen, inv_shape, valid = cen[0], inv_shape[0], valid[0]
-            det = inv_shape[:, 0, 0] * inv_shape[:, 1, 1] - inv_shape[:, 0, 1] ** 2
-            half_tr = 0.5 * (inv_shape[:, 0, 0] + inv_shape[:, 1, 1])
+            cen, inv_shape, valid, _ = self._project(T[hb], stop_at)
+            n_h = len(cen)
+            det = inv_shape[..., 0, 0] * inv_shape[..., 1, 1] - inv_shape[..., 0, 1] ** 2
+            half_tr = 0.5 * (inv_shape[..., 0, 0] + inv_shape[..., 1, 1])
             # largest semi-axis of each projection: sqrt of the largest eigenvalue of A^-1
             r_proj = np.sqrt(np.maximum(
                 half_tr + np.sqrt(np.maximum(half_tr ** 2 - det, 0.0)), 0.0))
             area_proj = math.pi * np.sqrt(np.maximum(det, 0.0))
-            for blk in _blocks(len(self.pair_d), PAIR_BLOCK):
+            for blk in _blocks(n_pairs, max(1, PAIR_BLOCK // n_h)):
                 _check(stop_at)
                 pd, ps = self.pair_d[blk], self.pair_s[blk]
-                gap = np.hypot(*(cen[ps] - self.params[pd, :2]).T)
-                # disjoint bounding circles: no point inside; the estimate is <= area_d/area_p
-                keep = valid[ps] & (gap <= (self.radii[pd] + r_proj[ps]) * (1 + 1e-9) + 1e-9)
-                if floor > 0:
-                    keep &= self.areas[pd] >= floor * area_proj[ps]
-                idx = np.flatnonzero(keep)
-                for sub in _blocks(len(idx), POINT_BLOCK // n_pts):
+                gap = np.hypot(cen[:, ps, 0] - self.params[pd, 0],
+                               cen[:, ps, 1] - self.params[pd, 1])
+                # disjoint bounding circles: no point inside
+                keep = valid[:, ps] & (gap <= (self.radii[pd] + r_proj[:, ps]) * (1 + 1e-9)
+                                       + 1e-9)
+                if floor > 0:  # the estimate is <= area_d / area_p
+                    keep &= self.areas[pd] >= floor * area_proj[:, ps]
+                kh, kp = np.nonzero(keep)
+                for sub in _blocks(len(kh), POINT_BLOCK // n_pts):
                     _check(stop_at)
-                    k = idx[sub]
+                    h, k = kh[sub], kp[sub]
                     kd, ks = pd[k], ps[k]
-                    out[h, kd, self.objects[ks]] = iou_estimates(
-                        pts[kd], self.areas[kd], cen[ks], inv_shape[ks])
+                    out[hb.start + h, blk.start + k] = iou_estimates(
+                        pts[kd], self.areas[kd], cen[h, ks], inv_shape[h, ks])
         return out
+
+    def dense_iou(self, camera_from_world: np.ndarray, points: np.ndarray | None = None,
+                  floor: float = 0.0, stop_at: Deadline | float | None = None) -> np.ndarray:
+        """IoU (H, D, N) of every usable detection with every map object: :meth:`pair_iou`
+        scattered into the (detections x objects) matrix (0 if incompatible). Memory: the
+        output plus bounded blocks; call it with few poses (H) on large maps."""
+        T = np.asarray(camera_from_world, dtype=float)
+        out = np.zeros((len(T), self.n_det, self.n_obj))
+        for h in range(len(T)):
+            out[h, self.pair_d, self.pair_o] = self.pair_iou(T[h:h + 1], points, floor,
+                                                             stop_at)[0]
+        return out
+
+    def pair_scores(self, iou: np.ndarray, threshold: float) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`scores` from pair IoUs (H, P) (:meth:`pair_iou`): (score (H,), inlier count
+        (H,)) with each detection taking its best compatible object (an upper bound of the
+        one-to-one assignment's)."""
+        if iou.shape[1] == 0:
+            return np.zeros(len(iou)), np.zeros(len(iou), dtype=int)
+        # detections without a compatible object (not in a localize() scorer) score 0
+        has = np.diff(np.append(self.pair_starts, iou.shape[1])) > 0
+        best = np.zeros((len(iou), len(self.pair_starts)))
+        best[:, has] = np.maximum.reduceat(iou, self.pair_starts[has], axis=1)
+        inl = best >= threshold
+        return np.where(inl, best, 0.0).sum(axis=1), inl.sum(axis=1)
+
+    def pair_assignment(self, iou: np.ndarray, threshold: float) -> list[Match]:
+        """:func:`greedy_assignment` of one pose's pair IoUs (P,) (:meth:`pair_iou`): the same
+        matches as on the dense (detections x objects) matrix (pairs are in its row-major
+        order, so ties break the same way)."""
+        cand = np.flatnonzero(iou >= threshold)
+        order = cand[np.argsort(iou[cand], kind="stable")[::-1]]
+        used_d: set[int] = set()
+        used_o: set[int] = set()
+        out = []
+        for p in order.tolist():
+            d, o = int(self.pair_d[p]), int(self.pair_o[p])
+            if d in used_d or o in used_o:
+                continue
+            used_d.add(d)
+            used_o.add(o)
+            out.append(Match(int(self.detection_indices[d]), o, float(iou[p])))
+        return sorted(out, key=lambda m: m.detection_index)
 
     def scores(self, dense: np.ndarray, threshold: float) -> tuple[np.ndarray, np.ndarray]:
         """(score (H,), inlier count (H,)) with each detection taking its best object (several
@@ -377,8 +472,8 @@ class MatchScorer:
         """One-to-one inlier matches at one pose (IoU with ``n_points`` per detection).
         Raises :class:`ScoringTimeoutError` past ``self.deadline``."""
         pts = _ellipse_points(self.params, sunflower_disk(n_points))
-        dense = self.dense_iou(np.asarray(camera_from_world)[None], pts, floor=threshold)[0]
-        return greedy_assignment(dense, self.detection_indices, threshold)
+        iou = self.pair_iou(np.asarray(camera_from_world)[None], pts, floor=threshold)[0]
+        return self.pair_assignment(iou, threshold)
 
 
 @dataclass(frozen=True)
@@ -395,10 +490,15 @@ def distinct_poses(camera_from_world_a: np.ndarray, camera_from_world_b: np.ndar
     """Whether two poses differ by more than :data:`DISTINCT_POSITION_M` (camera centres) or
     :data:`DISTINCT_ANGLE_DEG` (rotation angle)."""
     Ra, Rb = camera_from_world_a[:3, :3], camera_from_world_b[:3, :3]
-    ca, cb = -Ra.T @ camera_from_world_a[:3, 3], -Rb.T @ camera_from_world_b[:3, 3]
-    cos = (np.trace(Ra @ Rb.T) - 1.0) / 2.0
-    angle = math.degrees(math.acos(min(1.0, max(-1.0, cos))))
-    return bool(np.linalg.norm(ca - cb) > DISTINCT_POSITION_M or angle > DISTINCT_ANGLE_DEG)
+    # camera centres -R^T t; cos of the relative angle from trace(Ra Rb^T) = sum(Ra * Rb)
+    dc = Rb.T @ camera_from_world_b[:3, 3] - Ra.T @ camera_from_world_a[:3, 3]
+    if float(dc @ dc) > DISTINCT_POSITION_M ** 2:
+        return True
+    cos = (float(np.sum(Ra * Rb)) - 1.0) / 2.0
+    return cos < _COS_DISTINCT
+
+
+_COS_DISTINCT = math.cos(math.radians(DISTINCT_ANGLE_DEG))
 
 
 @dataclass(frozen=True)
@@ -424,10 +524,16 @@ def _label_groups(scorer: MatchScorer) -> list[tuple[list[int], np.ndarray]]:
     """Usable detections grouped by their compatible objects (= by label, since a map object
     has one category): ``[(detection rows, compatible object indices), ...]`` in order of first
     detection. Groups of different labels have disjoint objects."""
+    cached = getattr(scorer, "_label_groups", None)
+    if cached is not None:
+        return cached
     groups: dict[str, list[int]] = {}
     for d, label in enumerate(scorer.labels):
         groups.setdefault(label, []).append(d)
-    return [(dets, scorer.compatible_objects(dets[0]).astype(int)) for dets in groups.values()]
+    out = [(dets, scorer.compatible_objects(dets[0]).astype(int)) for dets in groups.values()]
+    if hasattr(scorer, "_label_groups"):  # computed once per scorer (= per call)
+        scorer._label_groups = out
+    return out
 
 
 def _compositions(groups: list[tuple[list[int], np.ndarray]], size: int) -> list[tuple[int, ...]]:
@@ -457,8 +563,18 @@ def count_samples(scorer: MatchScorer, size: int) -> int:
     """Number of label-compatible minimal samples of ``size`` (distinct detections, distinct
     objects), from per-label counts: ``sum over splits of prod_g C(n_det_g, m_g) P(n_obj_g, m_g)``
     (no walk over detection tuples, so it costs nothing with hundreds of detections)."""
-    groups = _label_groups(scorer)
-    return sum(_composition_count(groups, c) for c in _compositions(groups, size))
+    cache = getattr(scorer, "_sample_counts", None)
+    if cache is not None and size in cache:
+        return cache[size]
+    # the coefficient of x^size in prod_g sum_m C(n_det_g, m) P(n_obj_g, m) x^m (exact ints):
+    # the same sum as over the splits (_compositions), in O(groups x size)
+    coeffs = [1] + [0] * size
+    for d, o in _label_groups(scorer):
+        term = [math.comb(len(d), m) * math.perm(len(o), m) for m in range(size + 1)]
+        coeffs = [sum(coeffs[i] * term[k - i] for i in range(k + 1)) for k in range(size + 1)]
+    if cache is not None:
+        cache[size] = coeffs[size]
+    return coeffs[size]
 
 
 def _iter_samples(groups: list[tuple[list[int], np.ndarray]],
@@ -466,23 +582,23 @@ def _iter_samples(groups: list[tuple[list[int], np.ndarray]],
     """Every label-compatible minimal sample ((d...), (o...)) (detections ascending), lazily,
     in a fixed order: split among the groups, then itertools' combinations of each group's
     detections and permutations of its objects. Nothing is materialised."""
-    def rec(g: int, comp: tuple[int, ...],
+    def rec(active: list[tuple[list[int], list[int], int]], k: int,
             acc: list[tuple[int, int]]) -> Iterator[list[tuple[int, int]]]:
-        if g == len(groups):
+        if k == len(active):
             yield acc
             return
-        (d, o), m = groups[g], comp[g]
-        if m == 0:
-            yield from rec(g + 1, comp, acc)
-            return
+        d, o, m = active[k]
         for dets in itertools.combinations(d, m):
-            for objs in itertools.permutations(o.tolist(), m):
-                yield from rec(g + 1, comp, acc + list(zip(dets, objs, strict=True)))
+            for objs in itertools.permutations(o, m):
+                yield from rec(active, k + 1, acc + list(zip(dets, objs, strict=True)))
 
     for comp in _compositions(groups, size):
-        for pairs in rec(0, comp, []):
-            pairs = sorted(pairs)
-            yield tuple(dd for dd, _ in pairs), tuple(int(oo) for _, oo in pairs)
+        # only the groups the split draws from (the others contribute nothing)
+        active = [(d, [int(x) for x in o], m) for (d, o), m in zip(groups, comp, strict=True)
+                  if m]
+        for pairs in rec(active, 0, []):
+            pairs.sort()
+            yield tuple(dd for dd, _ in pairs), tuple(oo for _, oo in pairs)
 
 
 def _enumerate_samples(scorer: MatchScorer, size: int,
@@ -490,10 +606,9 @@ def _enumerate_samples(scorer: MatchScorer, size: int,
     """All label-compatible minimal samples (lazily, :func:`_iter_samples`' fixed order), or
     None if there are more than ``cap``. Only the samples themselves are generated (per label
     group), never all detection tuples."""
-    groups = _label_groups(scorer)
-    if sum(_composition_count(groups, c) for c in _compositions(groups, size)) > cap:
+    if count_samples(scorer, size) > cap:
         return None
-    return _iter_samples(groups, size)
+    return _iter_samples(_label_groups(scorer), size)
 
 
 def _has_sample(scorer: MatchScorer, size: int) -> bool:
@@ -525,6 +640,61 @@ def _random_samples(scorer: MatchScorer, size: int, count: int,
         yield tuple(q[0] for q in pairs), tuple(q[1] for q in pairs)
 
 
+def _most_promising_first(
+    scorer: MatchScorer, samples: list[tuple[tuple[int, ...], tuple[int, ...]]],
+) -> Iterator[tuple[tuple[int, ...], tuple[int, ...]]]:
+    """``samples`` (all of an exhaustive search) reordered so that the ones most likely to give
+    the right pose come first, which lets the early exit happen after the first batch: fewest
+    label-compatible alternatives first (the product over the sample's detections of their
+    numbers of compatible objects: a detection whose label has one object in the map can only
+    be matched to it), then the largest image triangle of the detection centres (P3P's
+    conditioning). A stable sort on fixed keys: still independent of the seed."""
+    n_compat = np.array([len(scorer.compatible_objects(d)) for d in range(scorer.n_det)],
+                        dtype=float)
+    dets = np.array([sm[0] for sm in samples]).reshape(-1, 3)
+    c = scorer.params[dets, :2]  # (S, 3, 2)
+    area = np.abs((c[:, 1, 0] - c[:, 0, 0]) * (c[:, 2, 1] - c[:, 0, 1])
+                  - (c[:, 2, 0] - c[:, 0, 0]) * (c[:, 1, 1] - c[:, 0, 1]))
+    order = np.lexsort((-area, np.prod(n_compat[dets], axis=1)))
+    return iter([samples[k] for k in order.tolist()])
+
+
+def _sweep_samples(scorer: MatchScorer) -> list[tuple[tuple[int, ...], tuple[int, ...]]]:
+    """The minimal samples of the competitor sweep run after an early exit: every
+    label-compatible assignment (distinct objects) of ONE detection triple. A competing pose
+    that explains every usable detection (what the ambiguity check looks for) also explains
+    these three, with one of these assignments, so P3P on them finds it whatever the rest of
+    the search skipped. The triple: among the :data:`SWEEP_CANDIDATES` detections with the
+    fewest compatible objects, the one with the largest image triangle (P3P conditioning) of
+    those with at most :data:`SWEEP_MAX_SAMPLES` assignments; none (empty list) if no triple
+    qualifies (many same-label objects: the search then stops as it did without the sweep)."""
+    groups = _label_groups(scorer)
+    objects_of = {d: objs for dets, objs in groups for d in dets}
+    label_of = {d: g for g, (dets, _) in enumerate(groups) for d in dets}
+    order = sorted(range(scorer.n_det), key=lambda d: (len(objects_of[d]), d))
+    centres = scorer.params[:, :2]
+    best: tuple[float, tuple[int, ...]] | None = None
+    for tri in itertools.combinations(sorted(order[:SWEEP_CANDIDATES]), 3):
+        per_group: dict[int, int] = {}
+        for d in tri:
+            per_group[label_of[d]] = per_group.get(label_of[d], 0) + 1
+        count = math.prod(math.perm(len(groups[g][1]), m) for g, m in per_group.items())
+        if count == 0 or count > SWEEP_MAX_SAMPLES:
+            continue
+        (ax, ay), (bx, by), (cx, cy) = centres[list(tri)]
+        area = abs((bx - ax) * (cy - ay) - (cx - ax) * (by - ay))
+        if best is None or area > best[0]:
+            best = (area, tri)
+    if best is None:
+        return []
+    tri = best[1]
+    out = []
+    for objs in itertools.product(*(objects_of[d].tolist() for d in tri)):
+        if len(set(objs)) == 3:
+            out.append((tri, tuple(int(o) for o in objs)))
+    return out
+
+
 def ransac(
     scorer: MatchScorer,
     up_world: np.ndarray,
@@ -533,7 +703,7 @@ def ransac(
     min_inliers: int,
     max_hypotheses: int,
     rng: np.random.Generator,
-    deadline: float | None = None,
+    deadline: Deadline | float | None = None,
 ) -> RansacOutcome:
     """Search poses from minimal samples (see the module docstring).
 
@@ -543,8 +713,9 @@ def ransac(
         inlier_iou, min_inliers: acceptance of a pose.
         max_hypotheses: budget of minimal samples per solver (P3P, then P2E).
         rng: sampler (only used when not exhaustive: exhaustive runs do not depend on it).
-        deadline: ``time.perf_counter()`` value after which the search stops (also checked
-            inside the scoring of a batch).
+        deadline: when the search stops (a :class:`service.localization.budget.Deadline`:
+            CPU time of this thread and a wall-clock hard limit; or a ``time.perf_counter()``
+            instant), checked before every batch and inside the scoring of a batch.
     """
     cm = scorer.compiled
     best_T: np.ndarray | None = None
@@ -557,34 +728,53 @@ def ransac(
     exhaustive = True
     need = scorer.n_det
 
+    n_pairs = len(scorer.pair_d)
+
     def consider(poses: np.ndarray) -> bool:
-        """Score candidate poses (one at a time, memory bounded); keeps the best distinct
-        hypotheses; returns True to stop early."""
+        """Score candidate poses (vectorised over poses and pairs, memory bounded); keeps the
+        best distinct hypotheses; returns True to stop early."""
         nonlocal best_T, best_score, best_count, best_matches, evaluated, kept
         if len(poses) == 0:
             return False
         evaluated += len(poses)
-        if len(poses) > STAGE2_CANDIDATES:
+        if len(poses) > STAGE2_CANDIDATES and len(poses) * n_pairs > STAGE1_MIN_WORK:
+            # large problems only: the cheap centre test picks the candidates worth an IoU
             hits = scorer.centre_hits(poses, stop_at=deadline)
             keep = np.argsort(-hits, kind="stable")[:STAGE2_CANDIDATES]
             poses = poses[keep]
-        for pose in poses:
-            bar = kept[-1].score if len(kept) >= KEEP_DISTINCT else -1.0
-            dense = scorer.dense_iou(pose[None], floor=inlier_iou, stop_at=deadline)
+        for blk in _blocks(len(poses), max(1, PAIR_BLOCK // max(1, n_pairs))):
+            iou = scorer.pair_iou(poses[blk], floor=inlier_iou, stop_at=deadline)
             # per-detection best object: an upper bound of the one-to-one score and count
-            bound, count = scorer.scores(dense, inlier_iou)
-            if bound[0] <= bar or count[0] < min_inliers:
-                continue
-            # one-to-one (greedy) assignment, as in the final matches
-            m = greedy_assignment(dense[0], scorer.detection_indices, inlier_iou)
-            score = float(sum(x.iou for x in m))
-            if len(m) >= min_inliers and score > bar:
-                kept = _keep_distinct(kept, Hypothesis(pose, tuple(m), score))
+            bound, count = scorer.pair_scores(iou, inlier_iou)
+            # best bound first: the bar rises early and fewer assignments are needed
+            for h in np.argsort(-bound, kind="stable").tolist():
+                bar = kept[-1].score if len(kept) >= KEEP_DISTINCT else -1.0
+                if bound[h] <= bar or count[h] < min_inliers:
+                    continue
+                # one-to-one (greedy) assignment, as in the final matches
+                m = scorer.pair_assignment(iou[h], inlier_iou)
+                score = float(sum(x.iou for x in m))
+                if len(m) >= min_inliers and score > bar:
+                    kept = _keep_distinct(kept, Hypothesis(poses[blk][h], tuple(m), score))
         if kept and kept[0].score > best_score:
             best_T, best_score = kept[0].camera_from_world, kept[0].score
             best_matches, best_count = list(kept[0].matches), len(kept[0].matches)
         return (need >= EARLY_EXIT_MIN_DETECTIONS and best_count >= need
                 and best_score >= EARLY_EXIT_MEAN_IOU * need)
+
+    def solve(chunk: list[tuple[tuple[int, ...], tuple[int, ...]]], size: int) -> np.ndarray:
+        """Candidate poses (M, 4, 4) of minimal samples: one vectorised P3P call, or P2E."""
+        if size == 3:
+            poses, _ = p3p_hypotheses_batch(scorer.params[np.array([c[0] for c in chunk]), :2],
+                                            cm.centers[np.array([c[1] for c in chunk])],
+                                            scorer.camera)
+            return poses
+        found = []
+        for dets, objs in chunk:
+            ells = [Ellipse(*scorer.params[d]) for d in dets]
+            found.extend(p2e_hypotheses(ells, [cm.ellipsoids[o] for o in objs], scorer.camera,
+                                        up_world))
+        return np.array(found).reshape(-1, 4, 4)
 
     def run(size: int, budget: int) -> bool:
         nonlocal tried, timed_out, exhaustive
@@ -592,28 +782,27 @@ def ransac(
         if samples is None:
             exhaustive = False
             samples = _random_samples(scorer, size, budget, rng)
+        elif size == 3 and count_samples(scorer, size) <= ORDER_CAP:
+            samples = _most_promising_first(scorer, list(samples))
         # exhaustive: every sample in a fixed order (the seed plays no part)
-        batch = BATCH if size == 3 else 4
+        batch = FIRST_BATCH if size == 3 else 4
         while True:
-            if deadline is not None and time.perf_counter() > deadline:
+            if deadline_passed(deadline):
                 timed_out = True
                 return True
             chunk = list(itertools.islice(samples, batch))
             if not chunk:
                 return False
-            poses = []
-            for dets, objs in chunk:
-                tried += 1
-                if size == 3:
-                    sols = p3p_hypotheses(scorer.params[list(dets), :2],
-                                          cm.centers[list(objs)], scorer.camera)
-                else:
-                    ells = [Ellipse(*scorer.params[d]) for d in dets]
-                    sols = p2e_hypotheses(ells, [cm.ellipsoids[o] for o in objs],
-                                          scorer.camera, up_world)
-                poses.extend(sols)
+            tried += len(chunk)
+            batch = BATCH if size == 3 else 4
             try:
-                if consider(np.array(poses).reshape(-1, 4, 4)):
+                if consider(solve(chunk, size)):
+                    # the frame is explained: before stopping, look for the competitors the
+                    # ambiguity check needs (every other explanation of one detection triple)
+                    sweep = _sweep_samples(scorer) if size == 3 else []
+                    tried += len(sweep)
+                    if sweep:
+                        consider(solve(sweep, size))
                     return True
             except ScoringTimeoutError:
                 timed_out = True

@@ -72,6 +72,7 @@ from factors.geometry import Camera, Ellipsoid, GeometryError, check_pose, snap_
 from factors.names import check_robust
 from factors.pose_factors import pose_factors
 from factors.pose_residuals import PoseResidualModel
+from service.localization.budget import Deadline, deadline_passed
 from service.localization.types import Detection, check_covariance
 
 __all__ = [
@@ -200,7 +201,7 @@ def refine(
     prior_covariance: np.ndarray | None = None,
     max_iterations: int = 50,
     metric_options: Mapping[str, Any] | None = None,
-    deadline: float | None = None,
+    deadline: Deadline | float | None = None,
 ) -> RefinementResult:
     """Refine the camera pose by minimising ``sum_j sigma_j^-1 Delta_j`` (paper eq. 8) with LM.
 
@@ -220,8 +221,10 @@ def refine(
         max_iterations: LM iteration cap (>= 1).
         metric_options: options of the metric (e.g. level-set sampling), see
             ``factors.metrics``.
-        deadline: optional ``time.perf_counter()`` instant after which no further LM iteration
-            starts (the per-request solve budget of the service); None = no limit.
+        deadline: optional stop after which no further LM iteration starts (the per-request
+            solve budget of the service): a :class:`service.localization.budget.Deadline`
+            (CPU time of this thread with a wall-clock hard limit) or a ``time.perf_counter()``
+            instant; None = no limit.
 
     Returns:
         :class:`RefinementResult`.
@@ -266,7 +269,7 @@ def refine(
         if pass_ == 1 or outcome.status in ("diverged", "invalid_projection", "time_budget") \
                 or total_iterations >= max_iterations or not model.sampling_grown:
             break
-        if deadline is not None and time.perf_counter() > deadline:
+        if deadline_passed(deadline):
             # no time for the re-laid solve: keep the first solve and its status, and say the
             # re-lay was skipped
             relaid_skipped = True
@@ -339,7 +342,7 @@ def _build_graph(
 
 def _solve(
     graph: gtsam.NonlinearFactorGraph, model: PoseResidualModel, T0: np.ndarray,
-    max_iterations: int, deadline: float | None = None,
+    max_iterations: int, deadline: Deadline | float | None = None,
     start_pose: gtsam.Pose3 | None = None,
 ) -> _SolveOutcome:
     """One LM solve of ``graph`` from ``T0`` (``start_pose``: the same pose as a ``Pose3``, e.g.
@@ -387,7 +390,7 @@ def _solve(
 
 def _optimize_until(
     optimizer: gtsam.LevenbergMarquardtOptimizer, params: gtsam.LevenbergMarquardtParams,
-    deadline: float | None, accepted_relative_tol: float | None = None,
+    deadline: Deadline | float | None, accepted_relative_tol: float | None = None,
 ) -> bool:
     """GTSAM's ``optimize()`` loop (same stopping rules), stepped from Python so that no
     iteration starts after ``deadline`` (None: no deadline). With ``accepted_relative_tol`` it
@@ -400,7 +403,7 @@ def _optimize_until(
     if current <= params.getErrorTol():
         return True
     while optimizer.iterations() < params.getMaxIterations():
-        if deadline is not None and time.perf_counter() > deadline:
+        if deadline_passed(deadline):
             return False
         optimizer.iterate()
         new = optimizer.error()

@@ -116,8 +116,12 @@ class LocalizationOptions:
             :class:`LocalizationInputError` naming ``detections[i].label``.
         seed: seed of the hypothesis sampler (``None`` = nondeterministic). Exhaustive runs do
             not depend on it.
-        time_budget_ms: wall-clock budget (ms) of the whole ``localize`` call, from its start
-            (validation, prior, hypothesis search and refinement). The hypothesis search stops
+        time_budget_ms: budget (ms) of the whole ``localize`` call, from its start
+            (validation, prior, hypothesis search and refinement), counted in **CPU time of
+            the solving thread** (``time.thread_time``), so that a busy machine does not change
+            the result when the budget is not binding; a wall-clock hard limit of
+            ``service.localization.budget.WALL_LIMIT_FACTOR`` x the budget bounds the latency
+            (module ``service.localization.budget``). The hypothesis search stops
             at it and the best hypothesis so far is used (or ``reason="time_budget_exceeded"``
             if none qualifies); no refinement iteration starts after it (the result then has
             ``refinement_status="time_budget"``). Overshoot is bounded by one batch of

@@ -1,0 +1,190 @@
+"""CPU time and accuracy of ``localize()`` on the ``bench.chess_eval`` frames, optionally against
+a baseline checkout in the same run (issue 14: before/after on one noisy machine).
+
+Run::
+
+    .venv/bin/python -m bench.localize_speed [--seeds 1 2] [--baseline DIR] [--rounds 2]
+                                             [--json out.json] [--write-results]
+
+Frames: the relocalization frames of :mod:`bench.chess_eval` (108 real ground-truth poses,
+simulated detections with ``EVAL_MISS_PROBABILITY``, generator ``default_rng([seed, 0])``),
+level-set refinement, no time budget (``bench.chess_eval.eval_options``). Each code tree (this
+checkout and, with ``--baseline``, another checkout such as a ``git worktree`` of main) is run in
+its own subprocess (``PYTHONPATH`` = the tree), alternately for ``--rounds`` rounds, so both see
+the same machine load; per frame the best (smallest) CPU time over the rounds is kept. CPU time
+is ``time.thread_time()`` around the call (unlike wall time, it does not count waiting for a
+core). ``timings_ms`` (wall) give the split into hypothesis search and refinement. Accuracy:
+fraction localized, within 5 / 10 / 20 cm, and *wrong*: localized with a position error above
+0.5 m or a rotation error above 20 deg (the worst output).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+WRONG_POSITION_M = 0.5
+WRONG_ROTATION_DEG = 20.0
+
+
+def worker(seeds: list[int]) -> dict[str, Any]:
+    """Per-frame CPU ms, wall split and errors of this tree's ``localize()`` (run in a
+    subprocess whose ``PYTHONPATH`` is the tree)."""
+    from bench.chess_eval import (
+        EVAL_MISS_PROBABILITY,
+        eval_options,
+        load_chess_world_from_camera,
+        pose_errors,
+    )
+    from bench.reference_data import load_chess_map
+    from bench.simulate import SimulationConfig, simulate_frame
+    from maps.compiled import compile_map
+    from service.localization.pipeline import localize
+
+    cm = compile_map(load_chess_map())
+    camera, poses, _ = load_chess_world_from_camera()
+    cfg = SimulationConfig(miss_probability=EVAL_MISS_PROBABILITY)
+    rows = []
+    for seed in seeds:
+        gen = np.random.default_rng([seed, 0])
+        frames = [(i, simulate_frame(cm, camera, poses[i], gen, cfg)) for i in range(len(poses))]
+        for _, f in frames[:3]:  # warm caches
+            localize(f.detections, cm, camera, eval_options(seed=0))
+        for i, f in frames:
+            c0 = time.thread_time()
+            r = localize(f.detections, cm, camera, eval_options(seed=0))
+            cpu = (time.thread_time() - c0) * 1e3
+            pos, rot = pose_errors(r.world_from_camera if r.localized else None, poses[i])
+            rows.append({"seed": seed, "frame": i, "detections": len(f), "cpu_ms": cpu,
+                         "hypotheses_ms": r.timings_ms.get("hypotheses", 0.0),
+                         "refine_ms": r.timings_ms.get("refine", 0.0),
+                         "total_ms": r.timings_ms.get("total", 0.0),
+                         "localized": bool(r.localized), "reason": r.reason,
+                         "position_error_m": pos if np.isfinite(pos) else None,
+                         "rotation_error_deg": rot if np.isfinite(rot) else None})
+    return {"rows": rows}
+
+
+def _run_tree(tree: Path, seeds: list[int]) -> dict[str, Any]:
+    with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as tmp:
+        out = Path(tmp.name)
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    # this file's worker, with the tree's packages (a baseline need not have this bench)
+    subprocess.run([sys.executable, str(Path(__file__).resolve()), "--worker", "--seeds",
+                    *map(str, seeds), "--json", str(out)], cwd=tree, env=env, check=True)
+    data = json.loads(out.read_text())
+    out.unlink()
+    return data
+
+
+def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    cpu = np.array([r["cpu_ms"] for r in rows])
+    wall_h = np.array([r["hypotheses_ms"] for r in rows])
+    wall_r = np.array([r["refine_ms"] for r in rows])
+    wall_t = np.array([r["total_ms"] for r in rows])
+    pos = np.array([np.inf if r["position_error_m"] is None else r["position_error_m"]
+                    for r in rows])
+    rot = np.array([np.inf if r["rotation_error_deg"] is None else r["rotation_error_deg"]
+                    for r in rows])
+    loc = np.array([r["localized"] for r in rows])
+    return {
+        "frames": len(rows),
+        "cpu_ms": {"median": float(np.median(cpu)), "p90": float(np.percentile(cpu, 90)),
+                   "mean": float(np.mean(cpu)), "max": float(np.max(cpu))},
+        # share of the wall time per stage (wall times are noisy; the shares are what counts)
+        "hypotheses_share": float(wall_h.sum() / max(wall_t.sum(), 1e-12)),
+        "refine_share": float(wall_r.sum() / max(wall_t.sum(), 1e-12)),
+        "localized": float(np.mean(loc)),
+        "within_m": {f"{t:g}": float(np.mean(pos <= t)) for t in (0.05, 0.1, 0.2)},
+        "wrong": int(np.sum(loc & ((pos > WRONG_POSITION_M) | (rot > WRONG_ROTATION_DEG)))),
+        "median_position_error_m": float(np.median(pos)),
+    }
+
+
+def run(seeds: list[int], baseline: Path | None, rounds: int) -> dict[str, Any]:
+    trees = {"this": REPO, **({"baseline": baseline} if baseline else {})}
+    per: dict[str, list[list[dict[str, Any]]]] = {k: [] for k in trees}
+    for k in range(rounds):
+        for name, tree in (trees.items() if k % 2 == 0 else reversed(trees.items())):
+            per[name].append(_run_tree(tree, seeds)["rows"])
+            print(f"round {k} {name} done", file=sys.stderr)
+    out: dict[str, Any] = {"seeds": seeds, "rounds": rounds,
+                           "load_average": ", ".join(f"{x:.1f}" for x in os.getloadavg())}
+    for name, runs in per.items():
+        rows = [dict(r, cpu_ms=min(run[i]["cpu_ms"] for run in runs))
+                for i, r in enumerate(runs[0])]
+        out[name] = summarise(rows)
+    return out
+
+
+def to_markdown(report: dict[str, Any], command: str) -> str:
+    names = [n for n in ("baseline", "this") if n in report]
+    lines = [
+        "## localize() CPU time on the Chess evaluation frames (`bench/localize_speed.py`)",
+        "",
+        f"Command: `{command}`. Frames: the `bench.chess_eval` relocalization frames "
+        f"(108 real poses x seeds {report['seeds']}, level set, no time budget); each tree in "
+        f"its own process, alternately, {report['rounds']} round(s), per frame the smallest "
+        "CPU time (`time.thread_time`) over the rounds; load average at the end "
+        f"{report['load_average']} (2 shared cores). *wrong*: localized with an error above "
+        f"{WRONG_POSITION_M} m or {WRONG_ROTATION_DEG:g} deg.",
+        "",
+        "| code | frames | CPU median ms | CPU p90 ms | CPU mean ms | hypotheses / refine "
+        "(share of wall) | localized | @5 cm | @10 cm | @20 cm | wrong | median err (cm) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for n in names:
+        s = report[n]
+        lines.append(
+            f"| {n} | {s['frames']} | {s['cpu_ms']['median']:.2f} | {s['cpu_ms']['p90']:.2f} | "
+            f"{s['cpu_ms']['mean']:.2f} | {s['hypotheses_share']:.0%} / {s['refine_share']:.0%}"
+            f" | {s['localized']:.1%} | {s['within_m']['0.05']:.1%} | "
+            f"{s['within_m']['0.1']:.1%} | {s['within_m']['0.2']:.1%} | {s['wrong']} | "
+            f"{100 * s['median_position_error_m']:.1f} |")
+    if "baseline" in report:
+        b, t = report["baseline"]["cpu_ms"], report["this"]["cpu_ms"]
+        lines += ["", f"Speed-up in this run: median x{b['median'] / t['median']:.1f}, p90 "
+                      f"x{b['p90'] / t['p90']:.1f}, mean x{b['mean'] / t['mean']:.1f}."]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2],
+                        help="simulation seeds (0 was used for tuning)")
+    parser.add_argument("--baseline", type=Path, help="another checkout to compare with")
+    parser.add_argument("--rounds", type=int, default=2)
+    parser.add_argument("--json", help="write the JSON report here")
+    parser.add_argument("--write-results", action="store_true",
+                        help="write the 'localize_speed' section of docs/results.md")
+    parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.worker:
+        Path(args.json).write_text(json.dumps(worker(args.seeds)))
+        return 0
+    report = run(args.seeds, args.baseline, args.rounds)
+    text = json.dumps(report, indent=2)
+    if args.json:
+        Path(args.json).write_text(text + "\n")
+    print(text)
+    if args.write_results:
+        from bench.results_doc import update_results_section
+
+        command = "python -m bench.localize_speed " + " ".join(
+            argv if argv is not None else sys.argv[1:])
+        update_results_section("localize_speed", to_markdown(report, command.strip()))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

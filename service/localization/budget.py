@@ -1,0 +1,90 @@
+"""What a solve budget counts: CPU time of the solving thread, plus a wall-clock hard limit.
+
+Decision (issue 14, part 4). ``LocalizationOptions.time_budget_ms`` (and the server's
+``QUADLOC_SOLVE_TIME_BUDGET_MS``) is a budget of **CPU time of the thread that runs the solve**
+(``time.thread_time()``), not of wall time. Wall time includes the time the thread waits for a
+core: on a busy machine (other requests, other processes) a wall-clock budget cuts the same
+computation short at a different point, so the result (the number of hypotheses tried, the LM
+iterations of an ``iou``/``giou`` refinement) depended on the machine's load. With a CPU
+budget the same input gives the same result on a quiet and on a busy machine whenever the
+budget is not binding, and the point where a binding budget cuts depends on the work done, not
+on the neighbours.
+
+A CPU budget alone does not bound the answer's latency (a thread starved of CPU would never
+spend it), so every :class:`Deadline` also has a **wall-clock hard limit**:
+:data:`WALL_LIMIT_FACTOR` x the budget after the start. It is the service's latency guarantee
+(the request answers ``time_budget_exceeded`` / a cut-short refinement by then at the latest)
+and only binds when the thread got less than ``1 / WALL_LIMIT_FACTOR`` of a core. The factor is
+2: the deployment runs one process per core with ``QUADLOC_MAX_CONCURRENT_SOLVES`` = 2 solves
+interleaving in it, so a solve is entitled to at least half a core; results are independent of
+load as long as it gets that share.
+
+Checks are cheap (two clock reads). Deadlines are passed down as :class:`Deadline` objects;
+a bare ``float`` is still accepted everywhere a deadline is (a ``time.perf_counter()``
+instant: a wall-clock-only deadline, as the tracking session uses).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+__all__ = ["WALL_LIMIT_FACTOR", "Deadline", "as_deadline", "deadline_passed", "earliest"]
+
+#: Wall-clock hard limit of a solve, as a multiple of its CPU budget.
+WALL_LIMIT_FACTOR = 2.0
+
+
+@dataclass(frozen=True)
+class Deadline:
+    """A stop instant on two clocks: ``cpu`` (``time.thread_time()`` of the solving thread,
+    seconds; ``inf`` = none) and ``wall`` (``time.perf_counter()``, seconds; ``inf`` = none).
+    It has passed when either has. Only meaningful in the thread that created it (the CPU
+    clock is per thread)."""
+
+    cpu: float = math.inf
+    wall: float = math.inf
+
+    @classmethod
+    def after(cls, budget_ms: float | None, factor: float = 1.0, *,
+              cpu_start: float | None = None, wall_start: float | None = None
+              ) -> Deadline | None:
+        """The deadline ``factor x budget_ms`` of CPU time after ``cpu_start`` (default: now,
+        this thread) with the wall-clock hard limit ``WALL_LIMIT_FACTOR x factor x budget_ms``
+        after ``wall_start`` (default: now); None without a budget."""
+        if budget_ms is None:
+            return None
+        cpu0 = time.thread_time() if cpu_start is None else cpu_start
+        wall0 = time.perf_counter() if wall_start is None else wall_start
+        budget_s = factor * float(budget_ms) / 1e3
+        return cls(cpu0 + budget_s, wall0 + WALL_LIMIT_FACTOR * budget_s)
+
+    def passed(self) -> bool:
+        """Whether either clock is past its stop."""
+        return time.thread_time() > self.cpu or time.perf_counter() > self.wall
+
+
+def as_deadline(deadline: Deadline | float | None) -> Deadline | None:
+    """``deadline`` as a :class:`Deadline` (a float is a ``time.perf_counter()`` instant)."""
+    if deadline is None or isinstance(deadline, Deadline):
+        return deadline
+    return Deadline(math.inf, float(deadline))
+
+
+def deadline_passed(deadline: Deadline | float | None) -> bool:
+    """Whether ``deadline`` (a :class:`Deadline`, a ``time.perf_counter()`` instant, or None =
+    never) has passed."""
+    if deadline is None:
+        return False
+    if isinstance(deadline, Deadline):
+        return deadline.passed()
+    return time.perf_counter() > deadline
+
+
+def earliest(a: Deadline | float | None, b: Deadline | float | None) -> Deadline | None:
+    """The deadline that passes as soon as either ``a`` or ``b`` has (None = never)."""
+    da, db = as_deadline(a), as_deadline(b)
+    if da is None or db is None:
+        return da if db is None else db
+    return Deadline(min(da.cpu, db.cpu), min(da.wall, db.wall))
