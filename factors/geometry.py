@@ -450,6 +450,19 @@ def gaussians_from_dual_conics(Cn: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return mu, Cn[..., :2, :2] + mu[..., :, None] * mu[..., None, :]
 
 
+def gaussian_derivatives_from_dual_conics(mu: np.ndarray, dCn: np.ndarray
+                                          ) -> tuple[np.ndarray, np.ndarray]:
+    """Derivatives of :func:`gaussians_from_dual_conics` along K directions: given the centres
+    ``mu`` (N, 2) px and the derivatives ``dCn`` (N, K, 3, 3) of the normalised dual conics
+    (e.g. K = 6 pose tangent directions), return ``dmu`` (N, K, 2) px and ``dSigma``
+    (N, K, 2, 2) px^2 (``dSigma = dCn[:2, :2] + dmu mu^T + mu dmu^T``)."""
+    dmu = -dCn[..., :2, 2]
+    m = mu[:, None, :]
+    dsigma = (dCn[..., :2, :2] + dmu[..., :, None] * m[..., None, :]
+              + m[..., :, None] * dmu[..., None, :])
+    return dmu, dsigma
+
+
 def params_from_dual_conics(dual_conics: np.ndarray) -> np.ndarray:
     """Ellipse params (N, 5) from dual conics (N, 3, 3) of any scale.
 

@@ -115,6 +115,7 @@ from factors.geometry import (
     GeometryError,
     check_pose,
     dual_conics_from_params,
+    gaussian_derivatives_from_dual_conics,
     gaussians_from_dual_conics,
     level_values,
     params_from_dual_conics,
@@ -629,18 +630,13 @@ class PoseResidualModel:
         overlap_residual` (exact areas, one scalar call per pair) and their analytic pose
         Jacobian: the exact area gradients w.r.t. the projection's ``(mu, Sigma)``, chained
         through ``dCn``."""
-        from factors import metrics
-
         A, c, S, margins = self._camera_frame(T)
         valid = margins > self.min_depth_margin
         Cn, dCn = self._normalised_dual_conics(A, c, valid, jacobian)
-        mu = -Cn[:, :2, 2]
-        sigma = Cn[:, :2, :2] + mu[:, :, None] * mu[:, None, :]
+        mu, sigma = gaussians_from_dual_conics(Cn)
         dg = None
         if dCn is not None:  # d(mu_x, mu_y, s00, s01, s11) / d xi, (N, 6, 5)
-            dmu = -dCn[:, :, :2, 2]
-            dsig = (dCn[:, :, :2, :2] + dmu[..., :, None] * mu[:, None, None, :]
-                    + mu[:, None, :, None] * dmu[..., None, :])
+            dmu, dsig = gaussian_derivatives_from_dual_conics(mu, dCn)
             dg = np.concatenate([dmu, dsig[..., 0, 0, None], dsig[..., 0, 1, None],
                                  dsig[..., 1, 1, None]], axis=-1)
         r = np.zeros((self.n, self.dim))
@@ -706,9 +702,9 @@ class PoseResidualModel:
         if dCn is None:
             return r, None
         col = (slice(None), None)
-        dmu = -dCn[:, :, :2, 2]
-        dhx = (dCn[:, :, 0, 0] + 2.0 * mu[:, 0][col] * dmu[..., 0]) / (2.0 * hx[col])
-        dhy = (dCn[:, :, 1, 1] + 2.0 * mu[:, 1][col] * dmu[..., 1]) / (2.0 * hy[col])
+        dmu, dsig = gaussian_derivatives_from_dual_conics(mu, dCn)
+        dhx = dsig[..., 0, 0] / (2.0 * hx[col])
+        dhy = dsig[..., 1, 1] / (2.0 * hy[col])
         J = -np.stack([dmu[..., 0] - dhx, dmu[..., 1] - dhy, dmu[..., 0] + dhx,
                        dmu[..., 1] + dhy], axis=1)  # (N, 4, 6)
         return r, J
@@ -745,11 +741,8 @@ class PoseResidualModel:
         if dCn is None:
             return r, None
         col = (slice(None), None)  # (N,) -> (N, 1) against the 6 tangent directions
-        dmu = -dCn[:, :, :2, 2]
-        m0, m1 = mu[:, 0][col], mu[:, 1][col]
-        ds00 = dCn[:, :, 0, 0] + 2.0 * m0 * dmu[..., 0]
-        ds01 = dCn[:, :, 0, 1] + m0 * dmu[..., 1] + m1 * dmu[..., 0]
-        ds11 = dCn[:, :, 1, 1] + 2.0 * m1 * dmu[..., 1]
+        dmu, dsig = gaussian_derivatives_from_dual_conics(mu, dCn)
+        ds00, ds01, ds11 = dsig[..., 0, 0], dsig[..., 0, 1], dsig[..., 1, 1]
         dh, dm = 0.5 * (ds00 - ds11), 0.5 * (ds00 + ds11)
         tiny = 1e-12 * m
         round_proj = rho <= tiny
@@ -817,11 +810,8 @@ class PoseResidualModel:
         if dCn is None:
             return r, None
         col = (slice(None), None)
-        dmu = -dCn[:, :, :2, 2]
-        m0, m1 = mu[:, 0][col], mu[:, 1][col]
-        dq00 = dCn[:, :, 0, 0] + 2.0 * m0 * dmu[..., 0]
-        dq01 = dCn[:, :, 0, 1] + m0 * dmu[..., 1] + m1 * dmu[..., 0]
-        dq11 = dCn[:, :, 1, 1] + 2.0 * m1 * dmu[..., 1]
+        dmu, dsig = gaussian_derivatives_from_dual_conics(mu, dCn)
+        dq00, dq01, dq11 = dsig[..., 0, 0], dsig[..., 0, 1], dsig[..., 1, 1]
         L00, L10, L11, Y0, Y1 = (v[col] for v in (l00, l10, l11, y0, y1))
         dl00 = 0.25 * dq00 / L00
         dl10 = (0.5 * dq01 - L10 * dl00) / L00
