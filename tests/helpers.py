@@ -84,6 +84,12 @@ def surface_points(E: Ellipsoid, n_azimuth: int = 32, n_polar: int = 16) -> np.n
 # ----------------------------------------------------------------------------- poses
 
 
+def random_rotation(rng: np.random.Generator) -> np.ndarray:
+    """A random proper rotation (3, 3) (QR of a Gaussian matrix, determinant +1)."""
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    return q * np.sign(np.linalg.det(q))
+
+
 def retract(T: np.ndarray, xi: np.ndarray) -> np.ndarray:
     """``world_from_camera.retract(xi)`` computed by GTSAM (independent of our expmap)."""
     return gtsam.Pose3(T).retract(np.asarray(xi, dtype=float)).matrix()

@@ -24,20 +24,16 @@ from factors.geometry import (
     project_ellipsoid,
 )
 from factors.pose_residuals import expmap_pose3
+from tests.helpers import random_rotation
 
 CAM = Camera(500.0, 520.0, 320.0, 240.0, 640, 480)
-
-
-def _rot(rng: np.random.Generator) -> np.ndarray:
-    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
-    return q * np.sign(np.linalg.det(q))
 
 
 def _scene(seed: int):
     """Two ellipsoids, two cameras ~2.5 m behind them, three views (noisy detections)."""
     rng = np.random.default_rng(seed)
     ells = [Ellipsoid(np.array([0.3 * k, 0.1, 0.0]) + rng.normal(0, 0.05, 3),
-                      rng.uniform(0.1, 0.3, 3), _rot(rng)) for k in range(2)]
+                      rng.uniform(0.1, 0.3, 3), random_rotation(rng)) for k in range(2)]
     cams = []
     for k in range(2):
         T = np.eye(4)

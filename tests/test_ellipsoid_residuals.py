@@ -9,18 +9,14 @@ import pytest
 from factors.ellipsoid_residuals import level_set_samples, observation_residual
 from factors.geometry import Camera, Ellipse, Ellipsoid, invert_pose, project_ellipsoid
 from factors.pose_residuals import PoseResidualModel, expmap_pose3
+from tests.helpers import random_rotation
 
 CAM = Camera(500.0, 520.0, 320.0, 240.0, 640, 480)
 
 
-def _rot(rng: np.random.Generator) -> np.ndarray:
-    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
-    return q * np.sign(np.linalg.det(q))
-
-
 def _setup(seed: int):
     rng = np.random.default_rng(seed)
-    ell = Ellipsoid(rng.normal(0, 0.2, 3), rng.uniform(0.1, 0.4, 3), _rot(rng))
+    ell = Ellipsoid(rng.normal(0, 0.2, 3), rng.uniform(0.1, 0.4, 3), random_rotation(rng))
     T_wc = np.eye(4)
     T_wc[:3, 3] = ell.center + np.array([0.2, -0.1, -2.5]) + rng.normal(0, 0.1, 3)
     proj = project_ellipsoid(CAM, invert_pose(T_wc), ell)
