@@ -168,6 +168,43 @@ _FRO_W = np.array([1.0, math.sqrt(2.0), math.sqrt(2.0), 1.0, math.sqrt(2.0)])
 _E3X_MATRIX = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
 
 
+def _level_set_forms(f: np.ndarray, Ai: np.ndarray) -> np.ndarray:
+    """The 7 quadratic forms ``Q_k`` (7, 3, 3) of one object whose values ``n^T Q_k n`` at a
+    sample's normalised ray ``n`` are ``r - Phi_det + 1 = s g`` (k = 0) and ``d r / d xi``
+    (k = 1..6, ``xi = [omega, v]``); module docstring, "Level-set residual":
+    with ``u = A^-1 n``: ``g = n^T A^-1 n``, ``(n x u)_k = -n^T [e_k]x A^-1 n`` and
+    ``(c_c . u) u_k = n^T (A^-1 c_c) (A^-1 e_k)^T n``.
+
+    ``f = [(A e3)_0, (A e3)_1, s, z_c, s (A^-1 c_c)_0..2]`` (7,), ``Ai = A^-1`` (3, 3). The
+    forms are bilinear in ``(f, Ai)``: :data:`_LEVEL_SET_FORMS` is this map as one matrix."""
+    a0, a1, s, z = f[:4]
+    sw = f[4:]
+    Q = np.empty((7, 3, 3))
+    Q[0] = s * Ai
+    Q[1] = -2.0 * a1 * Ai - 2.0 * s * (_SKEW_BASIS[0] @ Ai)  # e3 x A e3 = (-a1, a0, 0)
+    Q[2] = 2.0 * a0 * Ai - 2.0 * s * (_SKEW_BASIS[1] @ Ai)
+    Q[3] = -2.0 * s * (_SKEW_BASIS[2] @ Ai)
+    for k in range(3):
+        Q[4 + k] = -2.0 * np.outer(sw, Ai[k])
+    Q[6] += 2.0 * z * Ai
+    return Q
+
+
+def _level_set_form_matrix() -> np.ndarray:
+    """(63, 63): ``(f (x) A^-1).ravel() @ this = forms.ravel()`` (:func:`_level_set_forms` on
+    the basis of ``f`` and of the 9 entries of ``A^-1``)."""
+    G = np.empty((7, 9, 63))
+    for a in range(7):
+        for k in range(9):
+            G[a, k] = _level_set_forms(np.eye(7)[a], np.eye(9)[k].reshape(3, 3)).ravel()
+    G = G.reshape(63, 63)
+    G.setflags(write=False)
+    return G
+
+
+_LEVEL_SET_FORMS = _level_set_form_matrix()
+
+
 def _log_cosh(x: np.ndarray) -> np.ndarray:
     """``ln cosh(x)`` without overflow, accurate near 0 (series), elementwise."""
     ax = np.abs(x)
@@ -340,6 +377,11 @@ class PoseResidualModel:
         # S = R diag(axes^2) R^T = L L^T with L = R diag(axes)
         self._L = np.array([q.rotation for q in self.ellipsoids]) * axes[:, None, :]
         self._d_scale = axes.max(axis=1)  # (N,) m, penalty length scale
+        if metric == "level_set":
+            rot = np.array([q.rotation for q in self.ellipsoids])
+            # world-frame shape matrix S_w = L L^T and its inverse R diag(axes^-2) R^T
+            self._S_world = self._L @ self._L.transpose(0, 2, 1)
+            self._S_world_inv = (rot / (axes * axes)[:, None, :]) @ rot.transpose(0, 2, 1)
         self._det_params = np.array([(d.cx, d.cy, d.a, d.b, d.angle) for d in self.detections])
         self._cache_key: bytes | None = None
         self._cache_jac = False
@@ -458,6 +500,9 @@ class PoseResidualModel:
         nT[:, 0] = (px - cam.cx) / cam.fx
         nT[:, 1] = (py - cam.cy) / cam.fy
         self._nT = nT
+        # the monomials n_i n_j of every sample (N, 9, M): each residual / Jacobian row is a
+        # quadratic form n^T Q n, i.e. Q.ravel() @ this (see _evaluate_level_set)
+        self._n_monomials = (nT[:, :, None, :] * nT[:, None, :, :]).reshape(self.n, 9, self._M)
 
     def _metric_dim(self) -> int:
         return int(metrics.residual_size(self.metric, **self.options))
@@ -530,39 +575,42 @@ class PoseResidualModel:
         return PoseEvaluation(r, ev.jacobians, ev.valid, ev.depth_margins, rs, J)
 
     def _evaluate_level_set(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
-        A, c, S, margins = self._camera_frame(T)
+        """Level-set residuals and Jacobians of all pairs: ONE batched matmul of per-object
+        quadratic forms against the samples' monomials (module docstring, "Level-set residual").
+
+        ``A^-1`` comes from the world frame by Sherman-Morrison, ``A_w = S_w - d d^T`` (``d``
+        the centre seen from the camera, world axes): ``A_w^-1 = S_w^-1 + e e^T / (1 - d.e)``,
+        ``e = S_w^-1 d``, and ``A^-1 = R^T A_w^-1 R`` (``R`` = ``world_from_camera``'s rotation).
+        The Jacobian is always computed with the residual (the same matmul)."""
+        R = T[:3, :3]
+        d = self._centers - T[:3, 3]  # (N, 3) world axes, camera -> centre, m
+        z = d @ R[:, 2]  # camera-frame depth of the centres c_c[2]
+        # A e3 = R^T (S_w R e3 - d z) in camera axes; s = A[2, 2]
+        sr3 = self._S_world @ R[:, 2]  # S_w R e3 (N, 3)
+        a3 = (sr3 - d * z[:, None]) @ R
+        s = a3[:, 2]
+        margins = z - np.sqrt(sr3 @ R[:, 2])  # z_c - sqrt(S_c[2, 2])
         valid = margins > self.min_depth_margin
         all_valid = bool(valid.all())
+        e = self._S_world_inv @ d[:, :, None]  # (N, 3, 1)
+        den = 1.0 - d[:, None, :] @ e  # (N, 1, 1), 1 - d^T S_w^-1 d (0 only on the surface)
         if not all_valid:
-            A = A.copy()
-            A[~valid] = -np.eye(3)  # any invertible stand-in, rows replaced below
-        nT = self._nT
-        u = np.linalg.inv(A) @ nT  # (N, 3, M): A^-1 n
-        # (small arrays: elementwise products and sums cost fewer numpy calls than einsum or
-        # fancy indexing; this runs on every LM evaluation)
-        g = (nT * u).sum(axis=1)  # n^T A^-1 n, (N, M)
-        s = A[:, 2, 2]
-        r = self._phi0 + s[:, None] * g
-        J = None
-        if jacobian:
-            # rows of d r / d xi, laid out (N, 6, M) then viewed as (N, M, 6)
-            Jt = np.empty((self.n, 6, self._M))
-            g2 = 2.0 * g
-            s2 = 2.0 * s[:, None]
-            e3xa3 = A[:, :, 2] @ _E3X_MATRIX  # e3 x (A e3), (N, 3)
-            n0, n1 = nT[:, 0], nT[:, 1]  # n2 = 1
-            u0, u1, u2 = u[:, 0], u[:, 1], u[:, 2]
-            # rotation rows: 2 g (e3 x A e3) + 2 s (n x u)
-            Jt[:, 0] = g2 * e3xa3[:, 0, None] + s2 * (n1 * u2 - u1)
-            Jt[:, 1] = g2 * e3xa3[:, 1, None] + s2 * (u0 - n0 * u2)
-            Jt[:, 2] = s2 * (n0 * u1 - n1 * u0)  # (e3 x A e3)_z = 0
-            cu = (c[:, :, None] * u).sum(axis=1) * s2
-            Jt[:, 3:] = -cu[:, None, :] * u
-            Jt[:, 5] += g2 * c[:, 2, None]
-            J = Jt.transpose(0, 2, 1)
+            den[~valid] = 1.0  # rows replaced by the penalty below
+        e = e / den
+        Ai = R.T @ (self._S_world_inv + e @ (e * den).transpose(0, 2, 1)) @ R  # A^-1
+        # features f of the forms (_LEVEL_SET_FORMS): [a3_0, a3_1, s, z, s A^-1 c_c]
+        f = np.empty((self.n, 7))
+        f[:, :3] = a3
+        f[:, 3] = z
+        f[:, 4:] = (R.T @ e)[:, :, 0] * s[:, None]  # A^-1 c_c = R^T A_w^-1 d = R^T e / den
+        forms = ((f[:, :, None] * Ai.reshape(self.n, 1, 9)).reshape(self.n, 63)
+                 @ _LEVEL_SET_FORMS).reshape(self.n, 7, 9)
+        rows = forms @ self._n_monomials  # (N, 7, M): residual - phi0, then d r / d xi
+        r = rows[:, 0] + self._phi0
+        J = rows[:, 1:].transpose(0, 2, 1)  # (N, M, 6)
         if not all_valid:
-            if J is not None:
-                J = np.ascontiguousarray(J)
+            J = np.ascontiguousarray(J)
+            _, c, S, _ = self._camera_frame(T)
             self._apply_penalty(r, J, ~valid, c, S, margins)
         return PoseEvaluation(r, J, valid, margins)
 
