@@ -417,11 +417,19 @@ class PoseResidualModel:
         self.penalty_costs.setflags(write=False)
         self._half_penalty = 0.5 * self.penalty_costs  # where the saturation starts
         self._pen_amp = np.sqrt(self.penalty_costs / self.dim)  # (N,)
-        # per-pair options of the factors.metrics calls (the level set's samples stay fixed)
-        self._pair_options = [self.options] * self.n
-        if self.metric == "level_set":
-            self._pair_options = [{**self.options, "scale": float(sc), "adaptive": False}
-                                  for sc in self.sampling_scale]
+        self._pair_options_cache: list[dict[str, Any]] | None = None
+
+    @property
+    def _pair_options(self) -> list[dict[str, Any]]:
+        """Per-pair options of the ``factors.metrics`` calls (the level set's samples stay
+        fixed at the current layout); built on first use."""
+        if self._pair_options_cache is None:
+            self._pair_options_cache = [self.options] * self.n
+            if self.metric == "level_set":
+                self._pair_options_cache = [
+                    {**self.options, "scale": float(sc), "adaptive": False}
+                    for sc in self.sampling_scale]
+        return self._pair_options_cache
 
     # ------------------------------------------------------------------ set-up
     def _penalty_costs(self) -> np.ndarray:
@@ -460,7 +468,11 @@ class PoseResidualModel:
         """Fix the level-set samples: ``factors.metrics.level_set_sample_points``' layout,
         computed for all detections at once (equality with it is tested). The parts that do
         not depend on ``T0`` (validated options, unit layout, detection axes) are computed on
-        the first call only and reused by :meth:`relayout`."""
+        the first call only and reused by :meth:`relayout`.
+
+        Sample ``m`` of detection ``j`` is the affine image ``x = c_D + R_D diag(a, b) s_max
+        (u_m, v_m)`` of the unit layout ``(u_m, v_m)``, so its normalised ray ``n = K^-1 (x,
+        y, 1) = H_j (u_m, v_m, 1)`` with a per-object 3x3 ``H_j``: one matmul lays out all."""
         if not hasattr(self, "_ls_const"):
             M = int(metrics.residual_size("level_set", **self.options))  # validates options
             scale = self.options.get("scale", metrics.DEFAULT_LEVEL_SET_SCALE)
@@ -470,39 +482,50 @@ class PoseResidualModel:
                     f"option scale must be a positive finite number, got {scale!r}")
             uv = _unit_level_set_layout(self.options.get("n_azimuths", 6),
                                         self.options.get("n_levels", 4))
+            uv1 = np.ones((3, M))  # homogeneous unit layout (3, M)
+            uv1[:2] = uv.T
             # canonical axes a >= b (the metric's layout does not depend on axis labelling)
             a, b, ang = _canonical_axes(self._det_params).T
-            self._ls_const = (M, float(scale), uv, np.einsum("mk,mk->m", uv, uv)[None, :],
-                              a, b, np.cos(ang)[:, None], np.sin(ang)[:, None])
-        self._M, scale, uv, uv2, a, b, ca, sa = self._ls_const
+            cam = self.camera
+            # H without s_max: columns 0, 1 scale with s_max, column 2 is K^-1 (c_D, 1)
+            H = np.zeros((self.n, 3, 3))
+            H[:, 0, 0] = np.cos(ang) * a / cam.fx
+            H[:, 0, 1] = -np.sin(ang) * b / cam.fx
+            H[:, 1, 0] = np.sin(ang) * a / cam.fy
+            H[:, 1, 1] = np.cos(ang) * b / cam.fy
+            H[:, 0, 2] = (self._det_params[:, 0] - cam.cx) / cam.fx
+            H[:, 1, 2] = (self._det_params[:, 1] - cam.cy) / cam.fy
+            H[:, 2, 2] = 1.0
+            self._ls_const = (M, float(scale), uv1, (uv * uv).sum(axis=1)[None, :], H)
+        self._M, scale, uv1, uv2, H = self._ls_const
         adaptive = bool(self.options.get("adaptive", True))
-        P = self._det_params  # (N, 5)
         s_max = np.full(self.n, scale)
         if adaptive and T0 is not None:
-            A, _, _, margins = self._camera_frame(T0)
+            _, _, a3, margins = self._level_set_frame(T0)
             ok = margins > self.min_depth_margin
-            if np.any(ok):
-                # projected centre c_P = C*[:2, 2] / C*[2, 2] with C* = K A K^T
-                C = self._K @ A[ok] @ self._K.T
-                centre = C[:, :2, 2] / C[:, 2, 2, None]
-                d = np.sqrt(level_values(P[ok], centre[:, None, :])[:, 0])
+            if ok.any():
+                # projected centre: C* e3 = K A K^T e3 = K A e3 (homogeneous), C*[2, 2] = s
+                ch = a3[ok] @ self._K.T
+                centre = ch[:, :2] / ch[:, 2, None]
+                d = np.sqrt(level_values(self._det_params[ok], centre[:, None, :])[:, 0])
                 s_max[ok] = np.maximum(scale, metrics.LEVEL_SET_ADAPTIVE_GAIN * d)
-        u = uv[None, :, 0] * (a * s_max)[:, None]
-        v = uv[None, :, 1] * (b * s_max)[:, None]
-        px = P[:, 0, None] + ca * u - sa * v
-        py = P[:, 1, None] + sa * u + ca * v
-        self.sample_points = np.stack([px, py], -1)  # (N, M, 2) px
         self.sampling_scale = s_max  # (N,) outermost level radius per detection
         self.sampling_grown = bool(np.any(s_max > scale))
         self._phi0 = uv2 * (s_max**2)[:, None] - 1.0
-        cam = self.camera
-        nT = np.ones((self.n, 3, self._M))  # normalised camera coordinates K^-1 (x, y, 1)
-        nT[:, 0] = (px - cam.cx) / cam.fx
-        nT[:, 1] = (py - cam.cy) / cam.fy
+        Hs = H.copy()
+        Hs[:, :, :2] *= s_max[:, None, None]
+        nT = Hs @ uv1  # (N, 3, M) normalised camera coordinates K^-1 (x, y, 1)
         self._nT = nT
         # the monomials n_i n_j of every sample (N, 9, M): each residual / Jacobian row is a
         # quadratic form n^T Q n, i.e. Q.ravel() @ this (see _evaluate_level_set)
         self._n_monomials = (nT[:, :, None, :] * nT[:, None, :, :]).reshape(self.n, 9, self._M)
+
+    @property
+    def sample_points(self) -> np.ndarray:
+        """Level set: the fixed sample points (N, M, 2), pixels (``K n``)."""
+        cam = self.camera
+        return np.stack([cam.fx * self._nT[:, 0] + cam.cx, cam.fy * self._nT[:, 1] + cam.cy],
+                        axis=-1)
 
     def _metric_dim(self) -> int:
         return int(metrics.residual_size(self.metric, **self.options))
@@ -574,6 +597,19 @@ class PoseResidualModel:
             J = np.where(big[:, None, None], Js, J)
         return PoseEvaluation(r, ev.jacobians, ev.valid, ev.depth_margins, rs, J)
 
+    def _level_set_frame(
+        self, T: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """What the level set needs of the camera frame at ``T`` (``world_from_camera``):
+        ``d`` (N, 3) camera -> centre in world axes (m), the centres' depths ``z = c_c[2]``
+        (N,) m, ``A e3`` (N, 3) in camera axes (``A = S_c - c_c c_c^T``), depth margins (N,)."""
+        R = T[:3, :3]
+        d = self._centers - T[:3, 3]
+        z = d @ R[:, 2]
+        sr3 = self._S_world @ R[:, 2]  # S_w R e3 (N, 3)
+        a3 = (sr3 - d * z[:, None]) @ R  # R^T (S_w R e3 - d z)
+        return d, z, a3, z - np.sqrt(sr3 @ R[:, 2])  # margin z_c - sqrt(S_c[2, 2])
+
     def _evaluate_level_set(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
         """Level-set residuals and Jacobians of all pairs: ONE batched matmul of per-object
         quadratic forms against the samples' monomials (module docstring, "Level-set residual").
@@ -583,13 +619,8 @@ class PoseResidualModel:
         ``e = S_w^-1 d``, and ``A^-1 = R^T A_w^-1 R`` (``R`` = ``world_from_camera``'s rotation).
         The Jacobian is always computed with the residual (the same matmul)."""
         R = T[:3, :3]
-        d = self._centers - T[:3, 3]  # (N, 3) world axes, camera -> centre, m
-        z = d @ R[:, 2]  # camera-frame depth of the centres c_c[2]
-        # A e3 = R^T (S_w R e3 - d z) in camera axes; s = A[2, 2]
-        sr3 = self._S_world @ R[:, 2]  # S_w R e3 (N, 3)
-        a3 = (sr3 - d * z[:, None]) @ R
+        d, z, a3, margins = self._level_set_frame(T)
         s = a3[:, 2]
-        margins = z - np.sqrt(sr3 @ R[:, 2])  # z_c - sqrt(S_c[2, 2])
         valid = margins > self.min_depth_margin
         all_valid = bool(valid.all())
         e = self._S_world_inv @ d[:, :, None]  # (N, 3, 1)
