@@ -375,10 +375,10 @@ class PoseResidualModel:
         self._centers = np.array([q.center for q in self.ellipsoids])  # (N, 3) m
         axes = np.array([q.axes for q in self.ellipsoids])  # (N, 3) m
         # S = R diag(axes^2) R^T = L L^T with L = R diag(axes)
-        self._L = np.array([q.rotation for q in self.ellipsoids]) * axes[:, None, :]
+        rot = np.array([q.rotation for q in self.ellipsoids])  # (N, 3, 3) object -> world
+        self._L = rot * axes[:, None, :]
         self._d_scale = axes.max(axis=1)  # (N,) m, penalty length scale
         if metric == "level_set":
-            rot = np.array([q.rotation for q in self.ellipsoids])
             # world-frame shape matrix S_w = L L^T and its inverse R diag(axes^-2) R^T
             self._S_world = self._L @ self._L.transpose(0, 2, 1)
             self._S_world_inv = (rot / (axes * axes)[:, None, :]) @ rot.transpose(0, 2, 1)
@@ -416,6 +416,7 @@ class PoseResidualModel:
         self.penalty_costs = self._penalty_costs()
         self.penalty_costs.setflags(write=False)
         self._half_penalty = 0.5 * self.penalty_costs  # where the saturation starts
+        self._saturation_floor = float(self._half_penalty.min())
         self._pen_amp = np.sqrt(self.penalty_costs / self.dim)  # (N,)
         self._pair_options_cache: list[dict[str, Any]] | None = None
 
@@ -574,6 +575,8 @@ class PoseResidualModel:
         """Add the factors' residuals: the valid rows saturated (``r / sqrt(1 + c / P_j)``,
         module docstring)."""
         r = ev.residuals
+        if float(np.vdot(r, r)) <= self._saturation_floor:  # no pair's cost reaches its c_0
+            return PoseEvaluation(r, ev.jacobians, ev.valid, ev.depth_margins, r, ev.jacobians)
         c = (r * r).sum(axis=1)
         P = self.penalty_costs
         c0 = self._half_penalty
@@ -627,13 +630,11 @@ class PoseResidualModel:
         den = 1.0 - d[:, None, :] @ e  # (N, 1, 1), 1 - d^T S_w^-1 d (0 only on the surface)
         if not all_valid:
             den[~valid] = 1.0  # rows replaced by the penalty below
-        e = e / den
-        Ai = R.T @ (self._S_world_inv + e @ (e * den).transpose(0, 2, 1)) @ R  # A^-1
-        # features f of the forms (_LEVEL_SET_FORMS): [a3_0, a3_1, s, z, s A^-1 c_c]
-        f = np.empty((self.n, 7))
-        f[:, :3] = a3
-        f[:, 3] = z
-        f[:, 4:] = (R.T @ e)[:, :, 0] * s[:, None]  # A^-1 c_c = R^T A_w^-1 d = R^T e / den
+        e_den = e / den
+        Ai = R.T @ (self._S_world_inv + e_den @ e.transpose(0, 2, 1)) @ R  # A^-1
+        # features f of the forms (_LEVEL_SET_FORMS): [a3_0, a3_1, s, z, s A^-1 c_c], with
+        # A^-1 c_c = R^T A_w^-1 d = R^T e / den
+        f = np.concatenate((a3, z[:, None], (e_den[:, :, 0] @ R) * s[:, None]), axis=1)
         forms = ((f[:, :, None] * Ai.reshape(self.n, 1, 9)).reshape(self.n, 63)
                  @ _LEVEL_SET_FORMS).reshape(self.n, 7, 9)
         rows = forms @ self._n_monomials  # (N, 7, M): residual - phi0, then d r / d xi
