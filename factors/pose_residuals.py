@@ -117,7 +117,6 @@ from factors.geometry import (
     dual_conics_from_params,
     gaussian_derivatives_from_dual_conics,
     gaussians_from_dual_conics,
-    level_values,
     params_from_dual_conics,
     params_from_gaussians,
 )
@@ -497,21 +496,26 @@ class PoseResidualModel:
             H[:, 0, 2] = (self._det_params[:, 0] - cam.cx) / cam.fx
             H[:, 1, 2] = (self._det_params[:, 1] - cam.cy) / cam.fy
             H[:, 2, 2] = 1.0
-            self._ls_const = (M, float(scale), uv1, (uv * uv).sum(axis=1)[None, :], H)
-        self._M, scale, uv1, uv2, H = self._ls_const
+            self._ls_const = (M, float(scale), uv1, (uv * uv).sum(axis=1)[None, :], H,
+                              np.linalg.inv(H))
+        self._M, scale, uv1, uv2, H, H_inv = self._ls_const
         adaptive = bool(self.options.get("adaptive", True))
-        s_max = np.full(self.n, scale)
         if adaptive and T0 is not None:
             _, _, a3, margins = self._level_set_frame(T0)
             ok = margins > self.min_depth_margin
-            if ok.any():
-                # projected centre: C* e3 = K A K^T e3 = K A e3 (homogeneous), C*[2, 2] = s
-                ch = a3[ok] @ self._K.T
-                centre = ch[:, :2] / ch[:, 2, None]
-                d = np.sqrt(level_values(self._det_params[ok], centre[:, None, :])[:, 0])
-                s_max[ok] = np.maximum(scale, metrics.LEVEL_SET_ADAPTIVE_GAIN * d)
+            # The projected centre c_P is the point of C* e3 = K A K^T e3 = K A e3, so its ray is
+            # n = A e3 / s, and H^-1 n = (u, v, 1) are its coordinates in the detection's
+            # axes over its semi-axes: Phi_D(c_P) = u^2 + v^2 = |(H^-1 A e3)[:2]|^2 / s^2
+            # (factors.geometry.level_values; the same layout as factors.metrics, tested).
+            p = (H_inv @ a3[:, :, None])[:, :, 0]
+            w = np.where(ok, p[:, 2], 1.0)
+            phi = (p[:, 0] * p[:, 0] + p[:, 1] * p[:, 1]) / (w * w)
+            s_max = np.where(ok, np.maximum(scale, metrics.LEVEL_SET_ADAPTIVE_GAIN
+                                            * np.sqrt(phi)), scale)
+        else:
+            s_max = np.full(self.n, scale)
         self.sampling_scale = s_max  # (N,) outermost level radius per detection
-        self.sampling_grown = bool(np.any(s_max > scale))
+        self.sampling_grown = bool((s_max > scale).any())
         self._phi0 = uv2 * (s_max**2)[:, None] - 1.0
         Hs = H.copy()
         Hs[:, :, :2] *= s_max[:, None, None]
