@@ -356,16 +356,17 @@ def _solve(
     initial = gtsam.Values()
     initial.insert(_POSE_KEY, start_pose if start_pose is not None else _pose3(T0))
 
-    initial_error = float(graph.error(initial))
     status = "converged"
+    initial_error = math.nan
     try:
+        params = _lm_params(max_iterations)
+        optimizer = gtsam.LevenbergMarquardtOptimizer(graph, initial, params)
+        initial_error = float(optimizer.error())  # the graph's error at ``initial``
         if initial_error <= ERROR_TOL:
-            # what GTSAM's optimize() does first (no iteration below errorTol), without
-            # building an optimizer (e.g. the re-laid solve of exact detections)
+            # what GTSAM's optimize() does first (no iteration below errorTol), e.g. the
+            # re-laid solve of exact detections
             result, iterations, T, total_error = initial, 0, T0, initial_error
         else:
-            params = _lm_params(max_iterations)
-            optimizer = gtsam.LevenbergMarquardtOptimizer(graph, initial, params)
             accepted_tol = OVERLAP_RELATIVE_ERROR_TOL if model.metric in ("iou", "giou") \
                 else None
             if deadline is None and accepted_tol is None:
@@ -378,6 +379,8 @@ def _solve(
             T = result.atPose3(_POSE_KEY).matrix()
             total_error = float(optimizer.error())  # the error of ``result``
     except (RuntimeError, np.linalg.LinAlgError):  # e.g. an indeterminant linear system
+        if math.isnan(initial_error):
+            initial_error = float(graph.error(initial))
         result, iterations, T, total_error = initial, 0, T0, initial_error
         status = "diverged"
     if not (np.all(np.isfinite(T)) and math.isfinite(total_error)):
@@ -385,7 +388,7 @@ def _solve(
 
     ev = model.evaluate(T, jacobian=False)
     valid = ev.valid.copy()
-    costs = np.einsum("nm,nm->n", ev.residuals, ev.residuals)
+    costs = (ev.residuals * ev.residuals).sum(axis=1)
     costs[~valid] = np.inf
     if status != "diverged" and not valid.all():
         status = "invalid_projection"
