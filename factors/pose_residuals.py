@@ -521,9 +521,11 @@ class PoseResidualModel:
         Hs[:, :, :2] *= s_max[:, None, None]
         nT = Hs @ uv1  # (N, 3, M) normalised camera coordinates K^-1 (x, y, 1)
         self._nT = nT
-        # the monomials n_i n_j of every sample (N, 9, M): each residual / Jacobian row is a
-        # quadratic form n^T Q n, i.e. Q.ravel() @ this (see _evaluate_level_set)
-        self._n_monomials = (nT[:, :, None, :] * nT[:, None, :, :]).reshape(self.n, 9, self._M)
+        # the monomials n_i n_j of every sample (N, M, 9): each residual / Jacobian row is a
+        # quadratic form n^T Q n, i.e. this @ Q.ravel() (see _evaluate_level_set)
+        n_rows = nT.transpose(0, 2, 1)  # (N, M, 3)
+        self._n_monomials_t = (n_rows[:, :, :, None] * n_rows[:, :, None, :]).reshape(
+            self.n, self._M, 9)
 
     @property
     def sample_points(self) -> np.ndarray:
@@ -641,9 +643,11 @@ class PoseResidualModel:
         f = np.concatenate((a3, z[:, None], (e_den[:, :, 0] @ R) * s[:, None]), axis=1)
         forms = ((f[:, :, None] * Ai.reshape(self.n, 1, 9)).reshape(self.n, 63)
                  @ _LEVEL_SET_FORMS).reshape(self.n, 7, 9)
-        rows = forms @ self._n_monomials  # (N, 7, M): residual - phi0, then d r / d xi
-        r = rows[:, 0] + self._phi0
-        J = rows[:, 1:].transpose(0, 2, 1)  # (N, M, 6)
+        # (N, M, 7): residual - phi0, then d r / d xi; laid out so that J (N, M, 6) is a view
+        # whose (N * M, 6) reshape (the batched factor's H) is one too
+        rows = self._n_monomials_t @ forms.transpose(0, 2, 1)
+        r = rows[:, :, 0] + self._phi0
+        J = rows[:, :, 1:]
         if not all_valid:
             J = np.ascontiguousarray(J)
             _, c, S, _ = self._camera_frame(T)
