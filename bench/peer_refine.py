@@ -35,13 +35,15 @@ most of it: ~15 min on 2 idle cores, far longer on a loaded machine)::
     g++ -O3 -DNDEBUG -std=c++11 peer_refine.cpp -I../gtsam_quadrics-0.3.0 \\
         -I../gtsam_quadrics-0.3.0/gtsam -Igtsam -I/usr/include/eigen3 \\
         -L. -Lgtsam/gtsam -lgtsam_quadrics -lgtsam -lboost_serialization -lboost_timer \\
-        -lboost_chrono -Wl,-rpath,$PWD/gtsam/gtsam -o peer_refine
+        -lboost_chrono -Wl,-rpath,$PWD:$PWD/gtsam/gtsam -o peer_refine
     python -m bench.peer_refine --peer /work/peer/build/peer_refine
 
 The driver reads the problems on stdin (``fx fy skew cx cy``, the problem count, then per
 problem the start and true ``world_from_camera`` 4x4 row-major, the object count and per
 object its ``world_from_object`` 4x4, semi-axes and measured box ``xmin ymin xmax ymax``) and
-prints per problem ``cpu_ms wall_ms position_error_m iterations``.
+prints per problem ``cpu_ms wall_ms position_error_m iterations``. A peer solve counts as
+converged only if LM iterated (``0 < iterations < 100``, GTSAM's default cap): from starts
+0.1 m off, 0 iterations means that LM rejected its first step and gave up.
 """
 
 from __future__ import annotations
@@ -228,7 +230,19 @@ def run_peer(binary: Path, data: dict, repeats: int) -> list[dict]:
                          capture_output=True, check=True).stdout.split("\n")
     rows = [line.split() for line in out if line.strip()]
     return [{"cpu_ms": [float(r[0])], "error_m": float(r[2]), "iterations": int(r[3]),
-             "status": "converged"} for r in rows]
+             "status": peer_status(int(r[3]))} for r in rows]
+
+
+#: GTSAM's default ``LevenbergMarquardtParams.maxIterations`` (the peer's LM cap).
+PEER_MAX_ITERATIONS = 100
+
+
+def peer_status(iterations: int) -> str:
+    """The peer LM's outcome from its iteration count: ``converged`` only if it iterated and
+    stopped by itself (``0 < iterations < PEER_MAX_ITERATIONS``)."""
+    if iterations <= 0:
+        return "no_iteration"
+    return "max_iterations" if iterations >= PEER_MAX_ITERATIONS else "converged"
 
 
 def run_worker(tree: Path, problems: Path, metric: str, repeats: int) -> list[dict]:
