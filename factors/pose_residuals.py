@@ -370,6 +370,8 @@ class PoseResidualModel:
             else bool(eager_jacobian)
         self.n = len(self.detections)
         self._K = camera.K
+        # X (3x3) -> K X K^T as a 9x9 matrix on the raveled X: ravel(K X K^T) = ravel(X) @ this
+        self._KXKt = (self._K.T[:, None, :, None] * self._K.T[None, :, None, :]).reshape(9, 9)
         # per-object constants (world frame)
         self._centers = np.array([q.center for q in self.ellipsoids])  # (N, 3) m
         axes = np.array([q.axes for q in self.ellipsoids])  # (N, 3) m
@@ -698,19 +700,20 @@ class PoseResidualModel:
         if not valid.all():
             A = A.copy()
             A[~valid] = np.diag([1.0, 1.0, -1.0])
-        K = self._K
-        Cs = K @ A @ K.T  # (N, 3, 3) C*
+        KXKt = self._KXKt
+        Cs = (A.reshape(self.n, 9) @ KXKt).reshape(self.n, 3, 3)  # C* = K A K^T
         w = -Cs[:, 2, 2]
         Cn = Cs / w[:, None, None]
         if not jacobian:
             return Cn, None
         G = np.empty((self.n, 6, 3, 3))
-        G[:, :3] = -np.einsum("kij,njl->nkil", _SKEW_BASIS, A)
+        G[:, :3] = _SKEW_BASIS @ A[:, None]
+        G[:, :3] *= -1.0
         G[:, 3:] = 0.0
         idx = np.arange(3)
         G[:, 3 + idx, idx, :] = c[:, None, :]
         dA = G + G.transpose(0, 1, 3, 2)
-        dCs = K @ dA @ K.T  # (N, 6, 3, 3)
+        dCs = (dA.reshape(6 * self.n, 9) @ KXKt).reshape(self.n, 6, 3, 3)  # K dA K^T
         return Cn, (dCs + Cn[:, None] * dCs[:, :, 2, 2, None, None]) / w[:, None, None, None]
 
     def _evaluate_overlap(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
