@@ -26,9 +26,19 @@ section 2 gives ``Phi_proj(x) = 1 - C*[2,2] x~^T C*^-1 x~ = 1 - s n^T A^-1 n`` w
     dr/dw  = 2 g (e3 x A e3) + 2 s (n x u)
     dr/dv  = 2 g z_c e3 - 2 s (c_c . u) u
 
-(using ``A u = n``). One batched 3x3 inverse and one matmul over all objects and samples give
-every ``u``; no Python loop over samples or objects. The samples are those of
-``factors.metrics.level_set_sample_points`` (same layout, tested), fixed at the initial pose.
+(using ``A u = n``). Each of the 7 rows (``r - Phi_det + 1`` and the 6 Jacobian columns) is a
+quadratic form ``n^T Q n`` in the sample's ray, with ``Q`` a per-object 3x3 matrix bilinear in
+``A^-1`` and the features ``[A e3, z_c, s A^-1 c_c]`` (``(n x u)_k = -n^T [e_k]x A^-1 n``,
+``(c_c . u) u_k = n^T (A^-1 c_c)(A^-1 e_k)^T n``; :func:`_level_set_forms`). So one evaluation
+is: ``A^-1`` of every object by Sherman-Morrison from the world frame
+(``A_w^-1 = S_w^-1 + e e^T / (1 - d . e)``, ``e = S_w^-1 d``, ``d`` the camera-to-centre vector,
+``S_w^-1`` precomputed; ``A^-1 = R^T A_w^-1 R``), the 7 forms of all objects by one (N, 63) x
+(63, 63) matmul (:data:`_LEVEL_SET_FORMS`), and ONE batched matmul of the forms against the
+samples' monomials ``n_i n_j`` (N, M, 9), precomputed per layout: no Python loop over samples or
+objects, and no 3x3 inverse per evaluation. The samples are those of
+``factors.metrics.level_set_sample_points`` (same layout, tested), fixed at the initial pose;
+they are the affine image ``n = H_j (u, v, 1)`` of the unit layout, so laying them out is one
+matmul too.
 
 Conic metrics (analytic)
 ------------------------
