@@ -254,6 +254,19 @@ def run_worker(tree: Path, problems: Path, metric: str, repeats: int) -> list[di
     return json.loads(out.stdout)
 
 
+def tree_version(tree: Path) -> str:
+    """``branch at <short commit>`` of a git checkout (worktree), else its path."""
+    try:
+        def git(*args: str) -> str:
+            return subprocess.run(["git", "-C", str(tree), *args], capture_output=True,
+                                  text=True, check=True).stdout.strip()
+
+        return f"{git('rev-parse', '--abbrev-ref', 'HEAD')} at " \
+               f"{git('rev-parse', '--short', 'HEAD')}"
+    except (OSError, subprocess.CalledProcessError):
+        return str(tree)
+
+
 def summarise(rounds: list[list[dict]]) -> dict:
     n = len(rounds[0])
     per_problem = [float(np.median([t for r in rounds for t in r[i]["cpu_ms"]]))
@@ -265,6 +278,7 @@ def summarise(rounds: list[list[dict]]) -> dict:
             "median_error_m": float(np.median([r["error_m"] for r in last])),
             "mean_iterations": float(np.mean([r["iterations"] for r in last])),
             "converged": float(np.mean([r["status"] == "converged" for r in last])),
+            "not_iterated": int(sum(r["iterations"] == 0 for r in last)),
             "problems": n}
 
 
@@ -273,8 +287,9 @@ def run(seed: int, rounds: int, repeats: int, peer: Path | None,
     data = make_problems(seed)
     solvers: dict[str, object] = {}
     if compare_tree is not None:
+        label = f"before ({tree_version(compare_tree)})"
         for m in METRICS:
-            solvers[f"before {m}"] = (compare_tree, m)
+            solvers[f"{label} {m}"] = (compare_tree, m)
     for m in METRICS:
         solvers[f"QuadLoc {m}"] = (REPO, m)
     if peer is not None:
@@ -320,7 +335,32 @@ def markdown(res: dict, command: str) -> str:
         if peer:
             row += f" {v['x_peer']:.2f} |"
         lines.append(row)
+    lines += ["", *summary_lines(res)]
     return "\n".join(lines)
+
+
+def summary_lines(res: dict) -> list[str]:
+    """Sentences computed from the table: QuadLoc's level set against the peer and against the
+    compared tree, and the peer's solves that did not iterate."""
+    solvers = res["solvers"]
+    ours = solvers["QuadLoc level_set"]["cpu_median_ms"]
+    out = []
+    before = [k for k in solvers if k.startswith("before") and k.endswith("level_set")]
+    if before:
+        b = solvers[before[0]]["cpu_median_ms"]
+        out.append(f"Level set, this tree against {before[0][:-len(' level_set')]}: median "
+                   f"{ours:.2f} ms against {b:.2f} ms ({b / ours:.2f}x faster).")
+    peer = solvers.get("peer BoundingBoxFactor (C++)")
+    if peer is not None:
+        p = peer["cpu_median_ms"]
+        verdict = "met" if ours <= p else "not met"
+        out.append(f"Target (level-set refinement no slower than the C++ peer): {verdict}, "
+                   f"{ours:.2f} ms against {p:.2f} ms ({ours / p:.2f}x the peer's time).")
+        if peer["not_iterated"]:
+            out.append(f"The peer did not iterate on {peer['not_iterated']} of "
+                       f"{peer['problems']} problems (GTSAM's LM gave up at its first step; "
+                       "counted as not converged, their error is the start's).")
+    return out
 
 
 def main(argv: list[str] | None = None) -> None:
