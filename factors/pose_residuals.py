@@ -234,13 +234,18 @@ def _dh_dlambda(u: np.ndarray, h: np.ndarray, lam: np.ndarray) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=32)
-def _unit_level_set_layout(n_azimuths: int, n_levels: int) -> np.ndarray:
-    """``(u, v)`` (M, 2) of ``factors.metrics``' level-set layout for a unit circle, s_max = 1."""
+def _unit_level_set_layout(n_azimuths: int, n_levels: int) -> tuple[np.ndarray, np.ndarray]:
+    """``factors.metrics``' level-set layout for a unit circle, s_max = 1: the homogeneous
+    points ``(u, v, 1)`` as columns (3, M) and ``u^2 + v^2`` (1, M), read-only."""
     uv = metrics.level_set_sample_points(Ellipse(0.0, 0.0, 1.0, 1.0, 0.0), None,
                                          n_azimuths=n_azimuths, n_levels=n_levels, scale=1.0,
                                          adaptive=False)
-    uv.setflags(write=False)
-    return uv
+    uv1 = np.ones((3, len(uv)))
+    uv1[:2] = uv.T
+    uv2 = (uv * uv).sum(axis=1)[None, :]
+    for arr in (uv1, uv2):
+        arr.setflags(write=False)
+    return uv1, uv2
 
 
 def _canonical_axes(P: np.ndarray) -> np.ndarray:
@@ -380,8 +385,10 @@ class PoseResidualModel:
             else bool(eager_jacobian)
         self.n = len(self.detections)
         self._K = camera.K
-        # X (3x3) -> K X K^T as a 9x9 matrix on the raveled X: ravel(K X K^T) = ravel(X) @ this
-        self._KXKt = (self._K.T[:, None, :, None] * self._K.T[None, :, None, :]).reshape(9, 9)
+        if metric != "level_set":  # the dual-conic metrics
+            # X (3x3) -> K X K^T as a 9x9 matrix on raveled X: ravel(K X K^T) = ravel(X) @ this
+            self._KXKt = (self._K.T[:, None, :, None] * self._K.T[None, :, None, :]).reshape(
+                9, 9)
         # per-object constants (world frame)
         self._centers = np.array([q.center for q in self.ellipsoids])  # (N, 3) m
         axes = np.array([q.axes for q in self.ellipsoids])  # (N, 3) m
@@ -492,24 +499,22 @@ class PoseResidualModel:
                     or not (math.isfinite(scale) and scale > 0):
                 raise ValueError(
                     f"option scale must be a positive finite number, got {scale!r}")
-            uv = _unit_level_set_layout(self.options.get("n_azimuths", 6),
-                                        self.options.get("n_levels", 4))
-            uv1 = np.ones((3, M))  # homogeneous unit layout (3, M)
-            uv1[:2] = uv.T
+            uv1, uv2 = _unit_level_set_layout(self.options.get("n_azimuths", 6),
+                                              self.options.get("n_levels", 4))
             # canonical axes a >= b (the metric's layout does not depend on axis labelling)
             a, b, ang = _canonical_axes(self._det_params).T
+            ca, sa = np.cos(ang), np.sin(ang)
             cam = self.camera
             # H without s_max: columns 0, 1 scale with s_max, column 2 is K^-1 (c_D, 1)
             H = np.zeros((self.n, 3, 3))
-            H[:, 0, 0] = np.cos(ang) * a / cam.fx
-            H[:, 0, 1] = -np.sin(ang) * b / cam.fx
-            H[:, 1, 0] = np.sin(ang) * a / cam.fy
-            H[:, 1, 1] = np.cos(ang) * b / cam.fy
+            H[:, 0, 0] = ca * a / cam.fx
+            H[:, 0, 1] = -sa * b / cam.fx
+            H[:, 1, 0] = sa * a / cam.fy
+            H[:, 1, 1] = ca * b / cam.fy
             H[:, 0, 2] = (self._det_params[:, 0] - cam.cx) / cam.fx
             H[:, 1, 2] = (self._det_params[:, 1] - cam.cy) / cam.fy
             H[:, 2, 2] = 1.0
-            self._ls_const = (M, float(scale), uv1, (uv * uv).sum(axis=1)[None, :], H,
-                              np.linalg.inv(H))
+            self._ls_const = (M, float(scale), uv1, uv2, H, np.linalg.inv(H))
         self._M, scale, uv1, uv2, H, H_inv = self._ls_const
         adaptive = bool(self.options.get("adaptive", True))
         if adaptive and T0 is not None:
