@@ -251,9 +251,11 @@ def _unit_level_set_layout(n_azimuths: int, n_levels: int) -> tuple[np.ndarray, 
 def _canonical_axes(P: np.ndarray) -> np.ndarray:
     """``(a, b, angle)`` (N, 3) with ``a >= b`` of ellipse params ``P`` (N, 5): the batched form
     of ``factors.metrics._canonical_axes`` (angle + pi/2 when swapped, not wrapped)."""
-    swap = P[:, 3] > P[:, 2]
-    return np.stack([np.where(swap, P[:, 3], P[:, 2]), np.where(swap, P[:, 2], P[:, 3]),
-                     P[:, 4] + np.where(swap, 0.5 * np.pi, 0.0)], axis=1)
+    out = np.empty((len(P), 3))
+    np.maximum(P[:, 2], P[:, 3], out=out[:, 0])
+    np.minimum(P[:, 2], P[:, 3], out=out[:, 1])
+    np.add(P[:, 4], (P[:, 3] > P[:, 2]) * (0.5 * np.pi), out=out[:, 2])
+    return out
 
 
 def _skew(w: np.ndarray) -> np.ndarray:
