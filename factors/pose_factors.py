@@ -38,9 +38,9 @@ the loaded 2-core machine): N=8: batched 1.30, per-detection shared 1.76, per-de
 separate 5.05; N=16: 1.69, 2.42, 11.34. Numbers and the command are in ``docs/results.md``
 (section ``refine_speed``).
 
-Jacobians: analytic for ``level_set``, ``algebraic``, ``frobenius``, ``wasserstein``,
-``bhattacharyya`` and ``bbox`` (see :mod:`factors.pose_residuals`); central differences of
-``factors.metrics.residual`` for ``iou``, ``giou`` and ``qbbox``.
+Jacobians: analytic for the metrics in ``factors.pose_residuals.ANALYTIC_METRICS`` (every
+metric but ``qbbox``, see :mod:`factors.pose_residuals`); central differences of
+``factors.metrics.residual`` for ``qbbox``.
 
 Invalid projections (ellipsoid behind the camera, crossing the principal plane, containing the
 camera) give a bounded penalty residual with a Jacobian that restores a positive depth margin;
