@@ -172,10 +172,6 @@ _SKEW_BASIS = np.array([[[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]],
 _VEC5 = np.array([0, 1, 2, 4, 5])
 _FRO_W = np.array([1.0, math.sqrt(2.0), math.sqrt(2.0), 1.0, math.sqrt(2.0)])
 
-# e3 x a = (-a_1, a_0, 0):
-#: ``a @ _E3X_MATRIX = e3 x a`` for row vectors ``a`` (3,)
-_E3X_MATRIX = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
-
 
 def _level_set_forms(f: np.ndarray, Ai: np.ndarray) -> np.ndarray:
     """The 7 quadratic forms ``Q_k`` (7, 3, 3) of one object whose values ``n^T Q_k n`` at a
