@@ -387,6 +387,8 @@ class PoseResidualModel:
             # X (3x3) -> K X K^T as a 9x9 matrix on raveled X: ravel(K X K^T) = ravel(X) @ this
             self._KXKt = (self._K.T[:, None, :, None] * self._K.T[None, :, None, :]).reshape(
                 9, 9)
+            # -K [e_k]x K^-1 (3, 3, 3): K (-[e_k]x A) K^T = this_k @ C* (C* = K A K^T)
+            self._neg_KSKinv = -(self._K @ _SKEW_BASIS @ np.linalg.inv(self._K))
         # per-object constants (world frame)
         self._centers = np.array([q.center for q in self.ellipsoids])  # (N, 3) m
         axes = np.array([q.axes for q in self.ellipsoids])  # (N, 3) m
@@ -719,14 +721,14 @@ class PoseResidualModel:
         Cn = Cs / w[:, None, None]
         if not jacobian:
             return Cn, None
-        G = np.empty((self.n, 6, 3, 3))
-        G[:, :3] = _SKEW_BASIS @ A[:, None]
-        G[:, :3] *= -1.0
-        G[:, 3:] = 0.0
-        idx = np.arange(3)
-        G[:, 3 + idx, idx, :] = c[:, None, :]
-        dA = G + G.transpose(0, 1, 3, 2)
-        dCs = (dA.reshape(6 * self.n, 9) @ KXKt).reshape(self.n, 6, 3, 3)  # K dA K^T
+        # dC* = K dA K^T = KG + KG^T with KG = K G K^T for the generators G of the module
+        # docstring: -[e_k]x A (rotation k) -> -K [e_k]x K^-1 C*; e_k c^T (translation k) ->
+        # K e_k (K c)^T
+        KG = np.empty((self.n, 6, 3, 3))
+        np.matmul(self._neg_KSKinv, Cs[:, None], out=KG[:, :3])
+        np.multiply(self._K.T[None, :, :, None], (c @ self._K.T)[:, None, None, :],
+                    out=KG[:, 3:])
+        dCs = KG + KG.transpose(0, 1, 3, 2)  # (N, 6, 3, 3)
         return Cn, (dCs + Cn[:, None] * dCs[:, :, 2, 2, None, None]) / w[:, None, None, None]
 
     def _evaluate_overlap(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
