@@ -801,18 +801,13 @@ class PoseResidualModel:
         """``r = B_D - B_P``, ``B = [cx - hx, cy - hy, cx + hx, cy + hy]`` with the half-sizes
         ``hx = sqrt(Sigma00)``, ``hy = sqrt(Sigma11)`` of the axis-aligned box, and d r / d xi."""
         mu, S = gaussians_from_dual_conics(Cn)
-        hx = np.sqrt(S[:, 0, 0])
-        hy = np.sqrt(S[:, 1, 1])
-        box = np.stack([mu[:, 0] - hx, mu[:, 1] - hy, mu[:, 0] + hx, mu[:, 1] + hy], axis=1)
-        r = self._det_box - box
+        h = np.sqrt(np.diagonal(S, axis1=1, axis2=2))  # (N, 2) half-sizes (hx, hy)
+        r = self._det_box - np.concatenate((mu - h, mu + h), axis=1)
         if dCn is None:
             return r, None
-        col = (slice(None), None)
-        dmu, dsig = gaussian_derivatives_from_dual_conics(mu, dCn)
-        dhx = dsig[..., 0, 0] / (2.0 * hx[col])
-        dhy = dsig[..., 1, 1] / (2.0 * hy[col])
-        J = -np.stack([dmu[..., 0] - dhx, dmu[..., 1] - dhy, dmu[..., 0] + dhx,
-                       dmu[..., 1] + dhy], axis=1)  # (N, 4, 6)
+        dmu, dsig = gaussian_derivatives_from_dual_conics(mu, dCn)  # (N, 6, 2), (N, 6, 2, 2)
+        dh = np.diagonal(dsig, axis1=2, axis2=3) / (2.0 * h[:, None, :])  # (N, 6, 2)
+        J = np.concatenate((dh - dmu, -dmu - dh), axis=2).transpose(0, 2, 1)  # (N, 4, 6)
         return r, J
 
     def _wasserstein(
