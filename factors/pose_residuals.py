@@ -694,17 +694,23 @@ class PoseResidualModel:
 
     # ------------------------------------------------------------------ conic metrics
     def _init_conic(self) -> None:
-        """Detection constants of algebraic / frobenius / wasserstein (as factors.metrics)."""
+        """The detection constants the conic metric uses (as factors.metrics): the dual conic's
+        upper elements (algebraic / frobenius), the box (bbox), ``S_D`` (bhattacharyya),
+        canonical axes (wasserstein)."""
         P = self._det_params
-        self._det_vec5 = dual_conics_from_params(P).reshape(self.n, 9)[:, _VEC5]  # (N, 5)
-        self._det_box = np.array([d.bbox() for d in self.detections])  # (N, 4) px
-        c, s = np.cos(P[:, 4]), np.sin(P[:, 4])
-        a2, b2 = P[:, 2] ** 2, P[:, 3] ** 2
-        # S_D = R diag(a^2, b^2) R^T as (s00, s01, s11): factors.geometry.sigma_entries,
-        # batched over the detections
-        self._det_sigma = np.stack([a2 * c * c + b2 * s * s, (a2 - b2) * c * s,
-                                    a2 * s * s + b2 * c * c], axis=1)
-        self._det_canon = _canonical_axes(P)
+        if self.metric in ("algebraic", "frobenius"):
+            self._det_vec5 = dual_conics_from_params(P).reshape(self.n, 9)[:, _VEC5]  # (N, 5)
+        elif self.metric == "bbox":
+            self._det_box = np.array([d.bbox() for d in self.detections])  # (N, 4) px
+        elif self.metric == "bhattacharyya":
+            c, s = np.cos(P[:, 4]), np.sin(P[:, 4])
+            a2, b2 = P[:, 2] ** 2, P[:, 3] ** 2
+            # S_D = R diag(a^2, b^2) R^T as (s00, s01, s11): factors.geometry.sigma_entries,
+            # batched over the detections
+            self._det_sigma = np.stack([a2 * c * c + b2 * s * s, (a2 - b2) * c * s,
+                                        a2 * s * s + b2 * c * c], axis=1)
+        else:
+            self._det_canon = _canonical_axes(P)
 
     def _normalised_dual_conics(
         self, A: np.ndarray, c: np.ndarray, valid: np.ndarray, jacobian: bool,
