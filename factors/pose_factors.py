@@ -34,8 +34,8 @@ slice their rows. On top of it, two forms (:func:`pose_factors`):
   whole factor), each slicing the shared evaluation.
 
 Measured (``python -m bench.refine_speed``, level set, LM solve only, median CPU ms, one run on
-the loaded 2-core machine): N=8: batched 0.74, per-detection shared 1.02, per-detection
-separate 3.17; N=16: 0.97, 1.65, 6.96. Numbers and the command are in ``docs/results.md``
+the loaded 2-core machine): N=8: batched 0.71, per-detection shared 1.01, per-detection
+separate 3.11; N=16: 0.88, 1.53, 6.45. Numbers and the command are in ``docs/results.md``
 (section ``refine_speed``).
 
 Jacobians: analytic for the metrics in ``factors.pose_residuals.ANALYTIC_METRICS`` (every
