@@ -435,6 +435,8 @@ def _batched_covariance(
     J = model.evaluate(T, jacobian=True).factor_jacobians
     Jw = J / weights[:, None, None]
     info = Jw.reshape(-1, 6).T @ J.reshape(-1, 6)
+    if not np.isfinite(info).all():
+        return None, "information matrix is not finite"
     eig, V = np.linalg.eigh(0.5 * (info + info.T))
     reason = _singular_reason(eig)
     if reason is not None:
