@@ -35,13 +35,15 @@ most of it: ~15 min on 2 idle cores, far longer on a loaded machine)::
     g++ -O3 -DNDEBUG -std=c++11 peer_refine.cpp -I../gtsam_quadrics-0.3.0 \\
         -I../gtsam_quadrics-0.3.0/gtsam -Igtsam -I/usr/include/eigen3 \\
         -L. -Lgtsam/gtsam -lgtsam_quadrics -lgtsam -lboost_serialization -lboost_timer \\
-        -lboost_chrono -Wl,-rpath,$PWD/gtsam/gtsam -o peer_refine
+        -lboost_chrono -Wl,-rpath,$PWD:$PWD/gtsam/gtsam -o peer_refine
     python -m bench.peer_refine --peer /work/peer/build/peer_refine
 
 The driver reads the problems on stdin (``fx fy skew cx cy``, the problem count, then per
 problem the start and true ``world_from_camera`` 4x4 row-major, the object count and per
 object its ``world_from_object`` 4x4, semi-axes and measured box ``xmin ymin xmax ymax``) and
-prints per problem ``cpu_ms wall_ms position_error_m iterations``.
+prints per problem ``cpu_ms wall_ms position_error_m iterations``. A peer solve counts as
+converged only if LM iterated (``0 < iterations < 100``, GTSAM's default cap): from starts
+0.1 m off, 0 iterations means that LM rejected its first step and gave up.
 """
 
 from __future__ import annotations
@@ -228,7 +230,19 @@ def run_peer(binary: Path, data: dict, repeats: int) -> list[dict]:
                          capture_output=True, check=True).stdout.split("\n")
     rows = [line.split() for line in out if line.strip()]
     return [{"cpu_ms": [float(r[0])], "error_m": float(r[2]), "iterations": int(r[3]),
-             "status": "converged"} for r in rows]
+             "status": peer_status(int(r[3]))} for r in rows]
+
+
+#: GTSAM's default ``LevenbergMarquardtParams.maxIterations`` (the peer's LM cap).
+PEER_MAX_ITERATIONS = 100
+
+
+def peer_status(iterations: int) -> str:
+    """The peer LM's outcome from its iteration count: ``converged`` only if it iterated and
+    stopped by itself (``0 < iterations < PEER_MAX_ITERATIONS``)."""
+    if iterations <= 0:
+        return "no_iteration"
+    return "max_iterations" if iterations >= PEER_MAX_ITERATIONS else "converged"
 
 
 def run_worker(tree: Path, problems: Path, metric: str, repeats: int) -> list[dict]:
@@ -238,6 +252,19 @@ def run_worker(tree: Path, problems: Path, metric: str, repeats: int) -> list[di
          "--metric", metric, "--repeats", str(repeats)],
         env=env, cwd=str(tree), text=True, capture_output=True, check=True)
     return json.loads(out.stdout)
+
+
+def tree_version(tree: Path) -> str:
+    """``branch at <short commit>`` of a git checkout (worktree), else its path."""
+    try:
+        def git(*args: str) -> str:
+            return subprocess.run(["git", "-C", str(tree), *args], capture_output=True,
+                                  text=True, check=True).stdout.strip()
+
+        return f"{git('rev-parse', '--abbrev-ref', 'HEAD')} at " \
+               f"{git('rev-parse', '--short', 'HEAD')}"
+    except (OSError, subprocess.CalledProcessError):
+        return str(tree)
 
 
 def summarise(rounds: list[list[dict]]) -> dict:
@@ -251,6 +278,7 @@ def summarise(rounds: list[list[dict]]) -> dict:
             "median_error_m": float(np.median([r["error_m"] for r in last])),
             "mean_iterations": float(np.mean([r["iterations"] for r in last])),
             "converged": float(np.mean([r["status"] == "converged" for r in last])),
+            "not_iterated": int(sum(r["iterations"] == 0 for r in last)),
             "problems": n}
 
 
@@ -259,8 +287,9 @@ def run(seed: int, rounds: int, repeats: int, peer: Path | None,
     data = make_problems(seed)
     solvers: dict[str, object] = {}
     if compare_tree is not None:
+        label = f"before ({tree_version(compare_tree)})"
         for m in METRICS:
-            solvers[f"before {m}"] = (compare_tree, m)
+            solvers[f"{label} {m}"] = (compare_tree, m)
     for m in METRICS:
         solvers[f"QuadLoc {m}"] = (REPO, m)
     if peer is not None:
@@ -306,7 +335,32 @@ def markdown(res: dict, command: str) -> str:
         if peer:
             row += f" {v['x_peer']:.2f} |"
         lines.append(row)
+    lines += ["", *summary_lines(res)]
     return "\n".join(lines)
+
+
+def summary_lines(res: dict) -> list[str]:
+    """Sentences computed from the table: QuadLoc's level set against the peer and against the
+    compared tree, and the peer's solves that did not iterate."""
+    solvers = res["solvers"]
+    ours = solvers["QuadLoc level_set"]["cpu_median_ms"]
+    out = []
+    before = [k for k in solvers if k.startswith("before") and k.endswith("level_set")]
+    if before:
+        b = solvers[before[0]]["cpu_median_ms"]
+        out.append(f"Level set, this tree against {before[0][:-len(' level_set')]}: median "
+                   f"{ours:.2f} ms against {b:.2f} ms ({b / ours:.2f}x faster).")
+    peer = solvers.get("peer BoundingBoxFactor (C++)")
+    if peer is not None:
+        p = peer["cpu_median_ms"]
+        verdict = "met" if ours <= p else "not met"
+        out.append(f"Target (level-set refinement no slower than the C++ peer): {verdict}, "
+                   f"{ours:.2f} ms against {p:.2f} ms ({ours / p:.2f}x the peer's time).")
+        if peer["not_iterated"]:
+            out.append(f"The peer did not iterate on {peer['not_iterated']} of "
+                       f"{peer['problems']} problems (GTSAM's LM gave up at its first step; "
+                       "counted as not converged, their error is the start's).")
+    return out
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -347,12 +347,10 @@ def markdown(res: dict, command: str) -> str:
               "machine with a leaner cost, the ratio is what this run shows. Position errors "
               "are dominated by the simulated detection noise (all metrics reach similar "
               "accuracy; the level set's advantages in the paper concern partially visible "
-              "objects and detector errors, not Gaussian noise). `iou`/`giou` have one "
-              "sqrt-of-area residual per object with a cone-shaped cost (see `factors.metrics`): "
-              "LM crawls and mostly stops at the 50-iteration cap (status `max_iterations`), "
-              "with numerical Jacobians through exact area computations; they are for scoring, "
-              "not refinement. `qbbox`, `iou` and `giou` use central differences (12 extra "
-              "metric evaluations per pair per linearisation), hence their times."]
+              "objects and detector errors, not Gaussian noise). `iou`/`giou` compute exact "
+              "areas with one scalar call per pair per evaluation "
+              "(`factors.metrics.overlap_residual`) and `qbbox` uses central differences (12 "
+              "extra metric evaluations per pair per linearisation), hence their times."]
     return "\n".join(lines)
 
 

@@ -34,13 +34,13 @@ slice their rows. On top of it, two forms (:func:`pose_factors`):
   whole factor), each slicing the shared evaluation.
 
 Measured (``python -m bench.refine_speed``, level set, LM solve only, median CPU ms, one run on
-the loaded 2-core machine): N=8: batched 1.30, per-detection shared 1.76, per-detection
-separate 5.05; N=16: 1.69, 2.42, 11.34. Numbers and the command are in ``docs/results.md``
+the loaded 2-core machine): N=8: batched 0.71, per-detection shared 1.01, per-detection
+separate 3.11; N=16: 0.88, 1.53, 6.45. Numbers and the command are in ``docs/results.md``
 (section ``refine_speed``).
 
-Jacobians: analytic for ``level_set``, ``algebraic``, ``frobenius``, ``wasserstein``,
-``bhattacharyya`` and ``bbox`` (see :mod:`factors.pose_residuals`); central differences of
-``factors.metrics.residual`` for ``iou``, ``giou`` and ``qbbox``.
+Jacobians: analytic for the metrics in ``factors.pose_residuals.ANALYTIC_METRICS`` (every
+metric but ``qbbox``, see :mod:`factors.pose_residuals`); central differences of
+``factors.metrics.residual`` for ``qbbox``.
 
 Invalid projections (ellipsoid behind the camera, crossing the principal plane, containing the
 camera) give a bounded penalty residual with a Jacobian that restores a positive depth margin;

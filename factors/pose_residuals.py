@@ -26,9 +26,19 @@ section 2 gives ``Phi_proj(x) = 1 - C*[2,2] x~^T C*^-1 x~ = 1 - s n^T A^-1 n`` w
     dr/dw  = 2 g (e3 x A e3) + 2 s (n x u)
     dr/dv  = 2 g z_c e3 - 2 s (c_c . u) u
 
-(using ``A u = n``). One batched 3x3 inverse and one matmul over all objects and samples give
-every ``u``; no Python loop over samples or objects. The samples are those of
-``factors.metrics.level_set_sample_points`` (same layout, tested), fixed at the initial pose.
+(using ``A u = n``). Each of the 7 rows (``r - Phi_det + 1`` and the 6 Jacobian columns) is a
+quadratic form ``n^T Q n`` in the sample's ray, with ``Q`` a per-object 3x3 matrix bilinear in
+``A^-1`` and the features ``[A e3, z_c, s A^-1 c_c]`` (``(n x u)_k = -n^T [e_k]x A^-1 n``,
+``(c_c . u) u_k = n^T (A^-1 c_c)(A^-1 e_k)^T n``; :func:`_level_set_forms`). So one evaluation
+is: ``A^-1`` of every object by Sherman-Morrison from the world frame
+(``A_w^-1 = S_w^-1 + e e^T / (1 - d . e)``, ``e = S_w^-1 d``, ``d`` the camera-to-centre vector,
+``S_w^-1`` precomputed; ``A^-1 = R^T A_w^-1 R``), the 7 forms of all objects by one (N, 63) x
+(63, 63) matmul (:data:`_LEVEL_SET_FORMS`), and ONE batched matmul of the forms against the
+samples' monomials ``n_i n_j`` (N, M, 9), precomputed per layout: no Python loop over samples or
+objects, and no 3x3 inverse per evaluation. The samples are those of
+``factors.metrics.level_set_sample_points`` (same layout, tested), fixed at the initial pose;
+they are the affine image ``n = H_j (u, v, 1)`` of the unit layout, so laying them out is one
+matmul too.
 
 Conic metrics (analytic)
 ------------------------
@@ -117,7 +127,6 @@ from factors.geometry import (
     dual_conics_from_params,
     gaussian_derivatives_from_dual_conics,
     gaussians_from_dual_conics,
-    level_values,
     params_from_dual_conics,
     params_from_gaussians,
 )
@@ -163,9 +172,42 @@ _SKEW_BASIS = np.array([[[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]],
 _VEC5 = np.array([0, 1, 2, 4, 5])
 _FRO_W = np.array([1.0, math.sqrt(2.0), math.sqrt(2.0), 1.0, math.sqrt(2.0)])
 
-# e3 x a = (-a_1, a_0, 0):
-#: ``a @ _E3X_MATRIX = e3 x a`` for row vectors ``a`` (3,)
-_E3X_MATRIX = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+
+def _level_set_forms(f: np.ndarray, Ai: np.ndarray) -> np.ndarray:
+    """The 7 quadratic forms ``Q_k`` (7, 3, 3) of one object whose values ``n^T Q_k n`` at a
+    sample's normalised ray ``n`` are ``r - Phi_det + 1 = s g`` (k = 0) and ``d r / d xi``
+    (k = 1..6, ``xi = [omega, v]``); module docstring, "Level-set residual":
+    with ``u = A^-1 n``: ``g = n^T A^-1 n``, ``(n x u)_k = -n^T [e_k]x A^-1 n`` and
+    ``(c_c . u) u_k = n^T (A^-1 c_c) (A^-1 e_k)^T n``.
+
+    ``f = [(A e3)_0, (A e3)_1, s, z_c, s (A^-1 c_c)_0..2]`` (7,), ``Ai = A^-1`` (3, 3). The
+    forms are bilinear in ``(f, Ai)``: :data:`_LEVEL_SET_FORMS` is this map as one matrix."""
+    a0, a1, s, z = f[:4]
+    sw = f[4:]
+    Q = np.empty((7, 3, 3))
+    Q[0] = s * Ai
+    Q[1] = -2.0 * a1 * Ai - 2.0 * s * (_SKEW_BASIS[0] @ Ai)  # e3 x A e3 = (-a1, a0, 0)
+    Q[2] = 2.0 * a0 * Ai - 2.0 * s * (_SKEW_BASIS[1] @ Ai)
+    Q[3] = -2.0 * s * (_SKEW_BASIS[2] @ Ai)
+    for k in range(3):
+        Q[4 + k] = -2.0 * np.outer(sw, Ai[k])
+    Q[6] += 2.0 * z * Ai
+    return Q
+
+
+def _level_set_form_matrix() -> np.ndarray:
+    """(63, 63): ``(f (x) A^-1).ravel() @ this = forms.ravel()`` (:func:`_level_set_forms` on
+    the basis of ``f`` and of the 9 entries of ``A^-1``)."""
+    G = np.empty((7, 9, 63))
+    for a in range(7):
+        for k in range(9):
+            G[a, k] = _level_set_forms(np.eye(7)[a], np.eye(9)[k].reshape(3, 3)).ravel()
+    G = G.reshape(63, 63)
+    G.setflags(write=False)
+    return G
+
+
+_LEVEL_SET_FORMS = _level_set_form_matrix()
 
 
 def _log_cosh(x: np.ndarray) -> np.ndarray:
@@ -188,21 +230,28 @@ def _dh_dlambda(u: np.ndarray, h: np.ndarray, lam: np.ndarray) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=32)
-def _unit_level_set_layout(n_azimuths: int, n_levels: int) -> np.ndarray:
-    """``(u, v)`` (M, 2) of ``factors.metrics``' level-set layout for a unit circle, s_max = 1."""
+def _unit_level_set_layout(n_azimuths: int, n_levels: int) -> tuple[np.ndarray, np.ndarray]:
+    """``factors.metrics``' level-set layout for a unit circle, s_max = 1: the homogeneous
+    points ``(u, v, 1)`` as columns (3, M) and ``u^2 + v^2`` (1, M), read-only."""
     uv = metrics.level_set_sample_points(Ellipse(0.0, 0.0, 1.0, 1.0, 0.0), None,
                                          n_azimuths=n_azimuths, n_levels=n_levels, scale=1.0,
                                          adaptive=False)
-    uv.setflags(write=False)
-    return uv
+    uv1 = np.ones((3, len(uv)))
+    uv1[:2] = uv.T
+    uv2 = (uv * uv).sum(axis=1)[None, :]
+    for arr in (uv1, uv2):
+        arr.setflags(write=False)
+    return uv1, uv2
 
 
 def _canonical_axes(P: np.ndarray) -> np.ndarray:
     """``(a, b, angle)`` (N, 3) with ``a >= b`` of ellipse params ``P`` (N, 5): the batched form
     of ``factors.metrics._canonical_axes`` (angle + pi/2 when swapped, not wrapped)."""
-    swap = P[:, 3] > P[:, 2]
-    return np.stack([np.where(swap, P[:, 3], P[:, 2]), np.where(swap, P[:, 2], P[:, 3]),
-                     P[:, 4] + np.where(swap, 0.5 * np.pi, 0.0)], axis=1)
+    out = np.empty((len(P), 3))
+    np.maximum(P[:, 2], P[:, 3], out=out[:, 0])
+    np.minimum(P[:, 2], P[:, 3], out=out[:, 1])
+    np.add(P[:, 4], (P[:, 3] > P[:, 2]) * (0.5 * np.pi), out=out[:, 2])
+    return out
 
 
 def _skew(w: np.ndarray) -> np.ndarray:
@@ -334,12 +383,23 @@ class PoseResidualModel:
             else bool(eager_jacobian)
         self.n = len(self.detections)
         self._K = camera.K
+        if metric != "level_set":  # the dual-conic metrics
+            # X (3x3) -> K X K^T as a 9x9 matrix on raveled X: ravel(K X K^T) = ravel(X) @ this
+            self._KXKt = (self._K.T[:, None, :, None] * self._K.T[None, :, None, :]).reshape(
+                9, 9)
+            # -K [e_k]x K^-1 (3, 3, 3): K (-[e_k]x A) K^T = this_k @ C* (C* = K A K^T)
+            self._neg_KSKinv = -(self._K @ _SKEW_BASIS @ np.linalg.inv(self._K))
         # per-object constants (world frame)
         self._centers = np.array([q.center for q in self.ellipsoids])  # (N, 3) m
         axes = np.array([q.axes for q in self.ellipsoids])  # (N, 3) m
         # S = R diag(axes^2) R^T = L L^T with L = R diag(axes)
-        self._L = np.array([q.rotation for q in self.ellipsoids]) * axes[:, None, :]
+        rot = np.array([q.rotation for q in self.ellipsoids])  # (N, 3, 3) object -> world
+        self._L = rot * axes[:, None, :]
         self._d_scale = axes.max(axis=1)  # (N,) m, penalty length scale
+        if metric == "level_set":
+            # world-frame shape matrix S_w = L L^T and its inverse R diag(axes^-2) R^T
+            self._S_world = self._L @ self._L.transpose(0, 2, 1)
+            self._S_world_inv = (rot / (axes * axes)[:, None, :]) @ rot.transpose(0, 2, 1)
         self._det_params = np.array([(d.cx, d.cy, d.a, d.b, d.angle) for d in self.detections])
         self._cache_key: bytes | None = None
         self._cache_jac = False
@@ -374,12 +434,21 @@ class PoseResidualModel:
         self.penalty_costs = self._penalty_costs()
         self.penalty_costs.setflags(write=False)
         self._half_penalty = 0.5 * self.penalty_costs  # where the saturation starts
+        self._saturation_floor = float(self._half_penalty.min())
         self._pen_amp = np.sqrt(self.penalty_costs / self.dim)  # (N,)
-        # per-pair options of the factors.metrics calls (the level set's samples stay fixed)
-        self._pair_options = [self.options] * self.n
-        if self.metric == "level_set":
-            self._pair_options = [{**self.options, "scale": float(sc), "adaptive": False}
-                                  for sc in self.sampling_scale]
+        self._pair_options_cache: list[dict[str, Any]] | None = None
+
+    @property
+    def _pair_options(self) -> list[dict[str, Any]]:
+        """Per-pair options of the ``factors.metrics`` calls (the level set's samples stay
+        fixed at the current layout); built on first use."""
+        if self._pair_options_cache is None:
+            self._pair_options_cache = [self.options] * self.n
+            if self.metric == "level_set":
+                self._pair_options_cache = [
+                    {**self.options, "scale": float(sc), "adaptive": False}
+                    for sc in self.sampling_scale]
+        return self._pair_options_cache
 
     # ------------------------------------------------------------------ set-up
     def _penalty_costs(self) -> np.ndarray:
@@ -418,7 +487,11 @@ class PoseResidualModel:
         """Fix the level-set samples: ``factors.metrics.level_set_sample_points``' layout,
         computed for all detections at once (equality with it is tested). The parts that do
         not depend on ``T0`` (validated options, unit layout, detection axes) are computed on
-        the first call only and reused by :meth:`relayout`."""
+        the first call only and reused by :meth:`relayout`.
+
+        Sample ``m`` of detection ``j`` is the affine image ``x = c_D + R_D diag(a, b) s_max
+        (u_m, v_m)`` of the unit layout ``(u_m, v_m)``, so its normalised ray ``n = K^-1 (x,
+        y, 1) = H_j (u_m, v_m, 1)`` with a per-object 3x3 ``H_j``: one matmul lays out all."""
         if not hasattr(self, "_ls_const"):
             M = int(metrics.residual_size("level_set", **self.options))  # validates options
             scale = self.options.get("scale", metrics.DEFAULT_LEVEL_SET_SCALE)
@@ -426,38 +499,57 @@ class PoseResidualModel:
                     or not (math.isfinite(scale) and scale > 0):
                 raise ValueError(
                     f"option scale must be a positive finite number, got {scale!r}")
-            uv = _unit_level_set_layout(self.options.get("n_azimuths", 6),
-                                        self.options.get("n_levels", 4))
+            uv1, uv2 = _unit_level_set_layout(self.options.get("n_azimuths", 6),
+                                              self.options.get("n_levels", 4))
             # canonical axes a >= b (the metric's layout does not depend on axis labelling)
             a, b, ang = _canonical_axes(self._det_params).T
-            self._ls_const = (M, float(scale), uv, np.einsum("mk,mk->m", uv, uv)[None, :],
-                              a, b, np.cos(ang)[:, None], np.sin(ang)[:, None])
-        self._M, scale, uv, uv2, a, b, ca, sa = self._ls_const
+            ca, sa = np.cos(ang), np.sin(ang)
+            cam = self.camera
+            # H without s_max: columns 0, 1 scale with s_max, column 2 is K^-1 (c_D, 1)
+            H = np.zeros((self.n, 3, 3))
+            H[:, 0, 0] = ca * a / cam.fx
+            H[:, 0, 1] = -sa * b / cam.fx
+            H[:, 1, 0] = sa * a / cam.fy
+            H[:, 1, 1] = ca * b / cam.fy
+            H[:, 0, 2] = (self._det_params[:, 0] - cam.cx) / cam.fx
+            H[:, 1, 2] = (self._det_params[:, 1] - cam.cy) / cam.fy
+            H[:, 2, 2] = 1.0
+            self._ls_const = (M, float(scale), uv1, uv2, H, np.linalg.inv(H))
+        self._M, scale, uv1, uv2, H, H_inv = self._ls_const
         adaptive = bool(self.options.get("adaptive", True))
-        P = self._det_params  # (N, 5)
-        s_max = np.full(self.n, scale)
         if adaptive and T0 is not None:
-            A, _, _, margins = self._camera_frame(T0)
+            _, _, a3, margins = self._level_set_frame(T0)
             ok = margins > self.min_depth_margin
-            if np.any(ok):
-                # projected centre c_P = C*[:2, 2] / C*[2, 2] with C* = K A K^T
-                C = self._K @ A[ok] @ self._K.T
-                centre = C[:, :2, 2] / C[:, 2, 2, None]
-                d = np.sqrt(level_values(P[ok], centre[:, None, :])[:, 0])
-                s_max[ok] = np.maximum(scale, metrics.LEVEL_SET_ADAPTIVE_GAIN * d)
-        u = uv[None, :, 0] * (a * s_max)[:, None]
-        v = uv[None, :, 1] * (b * s_max)[:, None]
-        px = P[:, 0, None] + ca * u - sa * v
-        py = P[:, 1, None] + sa * u + ca * v
-        self.sample_points = np.stack([px, py], -1)  # (N, M, 2) px
+            # The projected centre c_P is the point of C* e3 = K A K^T e3 = K A e3, so its ray is
+            # n = A e3 / s, and H^-1 n = (u, v, 1) are its coordinates in the detection's
+            # axes over its semi-axes: Phi_D(c_P) = u^2 + v^2 = |(H^-1 A e3)[:2]|^2 / s^2
+            # (factors.geometry.level_values; the same layout as factors.metrics, tested).
+            p = (H_inv @ a3[:, :, None])[:, :, 0]
+            w = np.where(ok, p[:, 2], 1.0)
+            phi = (p[:, 0] * p[:, 0] + p[:, 1] * p[:, 1]) / (w * w)
+            s_max = np.where(ok, np.maximum(scale, metrics.LEVEL_SET_ADAPTIVE_GAIN
+                                            * np.sqrt(phi)), scale)
+        else:
+            s_max = np.full(self.n, scale)
         self.sampling_scale = s_max  # (N,) outermost level radius per detection
-        self.sampling_grown = bool(np.any(s_max > scale))
+        self.sampling_grown = bool((s_max > scale).any())
         self._phi0 = uv2 * (s_max**2)[:, None] - 1.0
-        cam = self.camera
-        nT = np.ones((self.n, 3, self._M))  # normalised camera coordinates K^-1 (x, y, 1)
-        nT[:, 0] = (px - cam.cx) / cam.fx
-        nT[:, 1] = (py - cam.cy) / cam.fy
+        Hs = H.copy()
+        Hs[:, :, :2] *= s_max[:, None, None]
+        nT = Hs @ uv1  # (N, 3, M) normalised camera coordinates K^-1 (x, y, 1)
         self._nT = nT
+        # the monomials n_i n_j of every sample (N, M, 9): each residual / Jacobian row is a
+        # quadratic form n^T Q n, i.e. this @ Q.ravel() (see _evaluate_level_set)
+        n_rows = nT.transpose(0, 2, 1)  # (N, M, 3)
+        self._n_monomials_t = (n_rows[:, :, :, None] * n_rows[:, :, None, :]).reshape(
+            self.n, self._M, 9)
+
+    @property
+    def sample_points(self) -> np.ndarray:
+        """Level set: the fixed sample points (N, M, 2), pixels (``K n``)."""
+        cam = self.camera
+        return np.stack([cam.fx * self._nT[:, 0] + cam.cx, cam.fy * self._nT[:, 1] + cam.cy],
+                        axis=-1)
 
     def _metric_dim(self) -> int:
         return int(metrics.residual_size(self.metric, **self.options))
@@ -506,6 +598,8 @@ class PoseResidualModel:
         """Add the factors' residuals: the valid rows saturated (``r / sqrt(1 + c / P_j)``,
         module docstring)."""
         r = ev.residuals
+        if float(np.vdot(r, r)) <= self._saturation_floor:  # no pair's cost reaches its c_0
+            return PoseEvaluation(r, ev.jacobians, ev.valid, ev.depth_margins, r, ev.jacobians)
         c = (r * r).sum(axis=1)
         P = self.penalty_costs
         c0 = self._half_penalty
@@ -529,40 +623,51 @@ class PoseResidualModel:
             J = np.where(big[:, None, None], Js, J)
         return PoseEvaluation(r, ev.jacobians, ev.valid, ev.depth_margins, rs, J)
 
+    def _level_set_frame(
+        self, T: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """What the level set needs of the camera frame at ``T`` (``world_from_camera``):
+        ``d`` (N, 3) camera -> centre in world axes (m), the centres' depths ``z = c_c[2]``
+        (N,) m, ``A e3`` (N, 3) in camera axes (``A = S_c - c_c c_c^T``), depth margins (N,)."""
+        R = T[:3, :3]
+        d = self._centers - T[:3, 3]
+        z = d @ R[:, 2]
+        sr3 = self._S_world @ R[:, 2]  # S_w R e3 (N, 3)
+        a3 = (sr3 - d * z[:, None]) @ R  # R^T (S_w R e3 - d z)
+        return d, z, a3, z - np.sqrt(sr3 @ R[:, 2])  # margin z_c - sqrt(S_c[2, 2])
+
     def _evaluate_level_set(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
-        A, c, S, margins = self._camera_frame(T)
+        """Level-set residuals and Jacobians of all pairs: ONE batched matmul of per-object
+        quadratic forms against the samples' monomials (module docstring, "Level-set residual").
+
+        ``A^-1`` comes from the world frame by Sherman-Morrison, ``A_w = S_w - d d^T`` (``d``
+        the centre seen from the camera, world axes): ``A_w^-1 = S_w^-1 + e e^T / (1 - d.e)``,
+        ``e = S_w^-1 d``, and ``A^-1 = R^T A_w^-1 R`` (``R`` = ``world_from_camera``'s rotation).
+        The Jacobian is always computed with the residual (the same matmul)."""
+        R = T[:3, :3]
+        d, z, a3, margins = self._level_set_frame(T)
+        s = a3[:, 2]
         valid = margins > self.min_depth_margin
         all_valid = bool(valid.all())
+        e = self._S_world_inv @ d[:, :, None]  # (N, 3, 1)
+        den = 1.0 - d[:, None, :] @ e  # (N, 1, 1), 1 - d^T S_w^-1 d (0 only on the surface)
         if not all_valid:
-            A = A.copy()
-            A[~valid] = -np.eye(3)  # any invertible stand-in, rows replaced below
-        nT = self._nT
-        u = np.linalg.inv(A) @ nT  # (N, 3, M): A^-1 n
-        # (small arrays: elementwise products and sums cost fewer numpy calls than einsum or
-        # fancy indexing; this runs on every LM evaluation)
-        g = (nT * u).sum(axis=1)  # n^T A^-1 n, (N, M)
-        s = A[:, 2, 2]
-        r = self._phi0 + s[:, None] * g
-        J = None
-        if jacobian:
-            # rows of d r / d xi, laid out (N, 6, M) then viewed as (N, M, 6)
-            Jt = np.empty((self.n, 6, self._M))
-            g2 = 2.0 * g
-            s2 = 2.0 * s[:, None]
-            e3xa3 = A[:, :, 2] @ _E3X_MATRIX  # e3 x (A e3), (N, 3)
-            n0, n1 = nT[:, 0], nT[:, 1]  # n2 = 1
-            u0, u1, u2 = u[:, 0], u[:, 1], u[:, 2]
-            # rotation rows: 2 g (e3 x A e3) + 2 s (n x u)
-            Jt[:, 0] = g2 * e3xa3[:, 0, None] + s2 * (n1 * u2 - u1)
-            Jt[:, 1] = g2 * e3xa3[:, 1, None] + s2 * (u0 - n0 * u2)
-            Jt[:, 2] = s2 * (n0 * u1 - n1 * u0)  # (e3 x A e3)_z = 0
-            cu = (c[:, :, None] * u).sum(axis=1) * s2
-            Jt[:, 3:] = -cu[:, None, :] * u
-            Jt[:, 5] += g2 * c[:, 2, None]
-            J = Jt.transpose(0, 2, 1)
+            den[~valid] = 1.0  # rows replaced by the penalty below
+        e_den = e / den
+        Ai = R.T @ (self._S_world_inv + e_den @ e.transpose(0, 2, 1)) @ R  # A^-1
+        # features f of the forms (_LEVEL_SET_FORMS): [a3_0, a3_1, s, z, s A^-1 c_c], with
+        # A^-1 c_c = R^T A_w^-1 d = R^T e / den
+        f = np.concatenate((a3, z[:, None], (e_den[:, :, 0] @ R) * s[:, None]), axis=1)
+        forms = ((f[:, :, None] * Ai.reshape(self.n, 1, 9)).reshape(self.n, 63)
+                 @ _LEVEL_SET_FORMS).reshape(self.n, 7, 9)
+        # (N, M, 7): residual - phi0, then d r / d xi; laid out so that J (N, M, 6) is a view
+        # whose (N * M, 6) reshape (the batched factor's H) is one too
+        rows = self._n_monomials_t @ forms.transpose(0, 2, 1)
+        r = rows[:, :, 0] + self._phi0
+        J = rows[:, :, 1:]
         if not all_valid:
-            if J is not None:
-                J = np.ascontiguousarray(J)
+            J = np.ascontiguousarray(J)
+            _, c, S, _ = self._camera_frame(T)
             self._apply_penalty(r, J, ~valid, c, S, margins)
         return PoseEvaluation(r, J, valid, margins)
 
@@ -589,17 +694,23 @@ class PoseResidualModel:
 
     # ------------------------------------------------------------------ conic metrics
     def _init_conic(self) -> None:
-        """Detection constants of algebraic / frobenius / wasserstein (as factors.metrics)."""
+        """The detection constants the conic metric uses (as factors.metrics): the dual conic's
+        upper elements (algebraic / frobenius), the box (bbox), ``S_D`` (bhattacharyya),
+        canonical axes (wasserstein)."""
         P = self._det_params
-        self._det_vec5 = dual_conics_from_params(P).reshape(self.n, 9)[:, _VEC5]  # (N, 5)
-        self._det_box = np.array([d.bbox() for d in self.detections])  # (N, 4) px
-        c, s = np.cos(P[:, 4]), np.sin(P[:, 4])
-        a2, b2 = P[:, 2] ** 2, P[:, 3] ** 2
-        # S_D = R diag(a^2, b^2) R^T as (s00, s01, s11): factors.geometry.sigma_entries,
-        # batched over the detections
-        self._det_sigma = np.stack([a2 * c * c + b2 * s * s, (a2 - b2) * c * s,
-                                    a2 * s * s + b2 * c * c], axis=1)
-        self._det_canon = _canonical_axes(P)
+        if self.metric in ("algebraic", "frobenius"):
+            self._det_vec5 = dual_conics_from_params(P).reshape(self.n, 9)[:, _VEC5]  # (N, 5)
+        elif self.metric == "bbox":
+            self._det_box = np.array([d.bbox() for d in self.detections])  # (N, 4) px
+        elif self.metric == "bhattacharyya":
+            c, s = np.cos(P[:, 4]), np.sin(P[:, 4])
+            a2, b2 = P[:, 2] ** 2, P[:, 3] ** 2
+            # S_D = R diag(a^2, b^2) R^T as (s00, s01, s11): factors.geometry.sigma_entries,
+            # batched over the detections
+            self._det_sigma = np.stack([a2 * c * c + b2 * s * s, (a2 - b2) * c * s,
+                                        a2 * s * s + b2 * c * c], axis=1)
+        else:
+            self._det_canon = _canonical_axes(P)
 
     def _normalised_dual_conics(
         self, A: np.ndarray, c: np.ndarray, valid: np.ndarray, jacobian: bool,
@@ -610,19 +721,20 @@ class PoseResidualModel:
         if not valid.all():
             A = A.copy()
             A[~valid] = np.diag([1.0, 1.0, -1.0])
-        K = self._K
-        Cs = K @ A @ K.T  # (N, 3, 3) C*
+        KXKt = self._KXKt
+        Cs = (A.reshape(self.n, 9) @ KXKt).reshape(self.n, 3, 3)  # C* = K A K^T
         w = -Cs[:, 2, 2]
         Cn = Cs / w[:, None, None]
         if not jacobian:
             return Cn, None
-        G = np.empty((self.n, 6, 3, 3))
-        G[:, :3] = -np.einsum("kij,njl->nkil", _SKEW_BASIS, A)
-        G[:, 3:] = 0.0
-        idx = np.arange(3)
-        G[:, 3 + idx, idx, :] = c[:, None, :]
-        dA = G + G.transpose(0, 1, 3, 2)
-        dCs = K @ dA @ K.T  # (N, 6, 3, 3)
+        # dC* = K dA K^T = KG + KG^T with KG = K G K^T for the generators G of the module
+        # docstring: -[e_k]x A (rotation k) -> -K [e_k]x K^-1 C*; e_k c^T (translation k) ->
+        # K e_k (K c)^T
+        KG = np.empty((self.n, 6, 3, 3))
+        np.matmul(self._neg_KSKinv, Cs[:, None], out=KG[:, :3])
+        np.multiply(self._K.T[None, :, :, None], (c @ self._K.T)[:, None, None, :],
+                    out=KG[:, 3:])
+        dCs = KG + KG.transpose(0, 1, 3, 2)  # (N, 6, 3, 3)
         return Cn, (dCs + Cn[:, None] * dCs[:, :, 2, 2, None, None]) / w[:, None, None, None]
 
     def _evaluate_overlap(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
@@ -695,18 +807,13 @@ class PoseResidualModel:
         """``r = B_D - B_P``, ``B = [cx - hx, cy - hy, cx + hx, cy + hy]`` with the half-sizes
         ``hx = sqrt(Sigma00)``, ``hy = sqrt(Sigma11)`` of the axis-aligned box, and d r / d xi."""
         mu, S = gaussians_from_dual_conics(Cn)
-        hx = np.sqrt(S[:, 0, 0])
-        hy = np.sqrt(S[:, 1, 1])
-        box = np.stack([mu[:, 0] - hx, mu[:, 1] - hy, mu[:, 0] + hx, mu[:, 1] + hy], axis=1)
-        r = self._det_box - box
+        h = np.sqrt(np.diagonal(S, axis1=1, axis2=2))  # (N, 2) half-sizes (hx, hy)
+        r = self._det_box - np.concatenate((mu - h, mu + h), axis=1)
         if dCn is None:
             return r, None
-        col = (slice(None), None)
-        dmu, dsig = gaussian_derivatives_from_dual_conics(mu, dCn)
-        dhx = dsig[..., 0, 0] / (2.0 * hx[col])
-        dhy = dsig[..., 1, 1] / (2.0 * hy[col])
-        J = -np.stack([dmu[..., 0] - dhx, dmu[..., 1] - dhy, dmu[..., 0] + dhx,
-                       dmu[..., 1] + dhy], axis=1)  # (N, 4, 6)
+        dmu, dsig = gaussian_derivatives_from_dual_conics(mu, dCn)  # (N, 6, 2), (N, 6, 2, 2)
+        dh = np.diagonal(dsig, axis1=2, axis2=3) / (2.0 * h[:, None, :])  # (N, 6, 2)
+        J = np.concatenate((dh - dmu, -dmu - dh), axis=2).transpose(0, 2, 1)  # (N, 4, 6)
         return r, J
 
     def _wasserstein(

@@ -37,7 +37,7 @@ from factors.pose_residuals import (
     PoseResidualModel,
     expmap_pose3,
 )
-from tests.helpers import level, retract, transformed
+from tests.helpers import level, random_rotation, retract, transformed
 
 CAMERA = Camera(500.0, 510.0, 320.0, 240.0, 640, 480)
 
@@ -161,6 +161,59 @@ def test_level_set_analytic_jacobian_matches_numerical(seed):
     num = numeric_jacobian(lambda T: model.evaluate(T, jacobian=False).residuals.copy(), pose)
     scale = np.abs(num).max()
     np.testing.assert_allclose(ev.jacobians, num, atol=1e-6 * scale)
+
+
+@pytest.mark.parametrize("seed", [4, 5])
+def test_level_set_is_invariant_to_the_world_frame_and_matches_the_metric(seed):
+    """The level set's evaluation runs in the world frame (A^-1 by Sherman-Morrison, then
+    rotated into the camera): re-expressing the map and the pose in another world frame (large
+    rotation and translation) must not change the residuals nor the Jacobians (camera-frame
+    tangent), and the Jacobians equal central differences of ``factors.metrics.residual`` with
+    the model's (grown) sample layout."""
+    rng = np.random.default_rng(seed)
+    ells = random_scene(rng, 6)
+    dets = [transformed(project_ellipsoid(CAMERA, np.eye(4), e), 0.05, [25.0, -10.0])
+            for e in ells]
+    pose = retract(np.eye(4), perturbation(rng, 0.05, 0.2))
+    W = np.eye(4)
+    W[:3, :3] = random_rotation(rng)
+    W[:3, 3] = rng.uniform(-5.0, 5.0, 3)
+    moved_ells = [Ellipsoid(W[:3, :3] @ e.center + W[:3, 3], e.axes, W[:3, :3] @ e.rotation)
+                  for e in ells]
+    moved_pose = W @ pose
+    ref = PoseResidualModel("level_set", dets, ells, CAMERA, initial_world_from_camera=pose)
+    model = PoseResidualModel("level_set", dets, moved_ells, CAMERA,
+                              initial_world_from_camera=moved_pose)
+    assert model.sampling_grown
+    np.testing.assert_allclose(model.sampling_scale, ref.sampling_scale, rtol=1e-12)
+    ev, ev_ref = model.evaluate(moved_pose), ref.evaluate(pose)
+    assert ev.valid.all()
+    np.testing.assert_allclose(ev.residuals, ev_ref.residuals, atol=1e-9)
+    np.testing.assert_allclose(ev.jacobians, ev_ref.jacobians,
+                               atol=1e-9 * np.abs(ev_ref.jacobians).max())
+
+    def fn(T):
+        cfw = invert_pose(T)
+        return np.array([metrics.residual("level_set", d, project_ellipsoid(CAMERA, cfw, e),
+                                          scale=s, adaptive=False)
+                         for d, e, s in zip(dets, moved_ells, model.sampling_scale,
+                                            strict=True)])
+
+    np.testing.assert_allclose(ev.residuals, fn(moved_pose), atol=1e-9)
+    num = numeric_jacobian(fn, moved_pose, h=1e-6)
+    np.testing.assert_allclose(ev.jacobians, num, atol=1e-6 * np.abs(num).max())
+
+
+def test_level_set_form_matrix_is_the_bilinear_map_of_the_forms():
+    """``_LEVEL_SET_FORMS`` (built on basis vectors) reproduces :func:`_level_set_forms` for
+    arbitrary features and (non-symmetric) matrices: the forms are bilinear in them."""
+    from factors.pose_residuals import _LEVEL_SET_FORMS, _level_set_forms
+
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        f, Ai = rng.normal(size=7), rng.normal(size=(3, 3))
+        np.testing.assert_allclose((np.outer(f, Ai.ravel()).ravel() @ _LEVEL_SET_FORMS),
+                                   _level_set_forms(f, Ai).ravel(), rtol=1e-13, atol=1e-13)
 
 
 @pytest.mark.parametrize("metric", ["algebraic", "frobenius", "wasserstein", "bhattacharyya",

@@ -467,3 +467,37 @@ def test_overlap_metrics_stop_on_a_small_accepted_decrease(monkeypatch):
     gap = np.linalg.norm(res.world_from_camera[:3, 3] - long.world_from_camera[:3, 3])
     assert moved > 0.01  # the start is 5 cm off
     assert gap < 0.01, (gap, long.status, long.iterations)  # the noise error is ~cm
+
+
+@pytest.mark.parametrize("metric", ["level_set", "bbox", "wasserstein", "algebraic"])
+def test_batched_covariance_equals_gtsam_marginals(metric):
+    """Without robust kernel and prior, refine inverts the batched factor's J^T W J itself:
+    the same matrix as gtsam.Marginals on an independent graph of one factor per detection
+    (noisy detections: a non-zero residual at the solution; level set with a fixed layout)."""
+    import gtsam
+
+    from factors.pose_factors import pose_factors
+
+    rng = np.random.default_rng(21)
+    ells = synthetic_scene(rng, 6)
+    T_true = np.eye(4)
+    sigmas = [1.0, 2.0, 0.5, 4.0, 1.0, 3.0]
+    dets = [Detection(Ellipse(d.ellipse.cx + rng.normal(0, 1.5), d.ellipse.cy + rng.normal(0, 1.5),
+                              d.ellipse.a * 1.02, d.ellipse.b * 0.98, d.ellipse.angle + 0.01),
+                      d.label, sigma=d.sigma)
+            for d in exact_detections(ells, T_true, sigmas)]
+    options = {"adaptive": False} if metric == "level_set" else None
+    res = refine(dets, ells, CAMERA, perturb_pose(T_true, rng, 0.05, 1.0), metric,
+                 metric_options=options)
+    assert res.covariance is not None and res.covariance_reason is None
+    factors, _ = pose_factors(metric, 0, [d.ellipse for d in dets], ells, CAMERA, sigmas=sigmas,
+                              metric_options=options)
+    graph = gtsam.NonlinearFactorGraph()
+    for f in factors:
+        graph.add(f)
+    values = gtsam.Values()
+    T = res.world_from_camera
+    values.insert(0, gtsam.Pose3(gtsam.Rot3(T[:3, :3]), T[:3, 3]))
+    expected = gtsam.Marginals(graph, values).marginalCovariance(0)
+    np.testing.assert_allclose(res.covariance, expected, rtol=1e-8,
+                               atol=1e-8 * np.abs(expected).max())
