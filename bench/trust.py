@@ -52,6 +52,7 @@ from maps.compiled import compile_map
 from maps.model import MapObject, SceneMap
 from service.localization import calibration
 from service.localization.confidence import (
+    AMBIGUITY_CHI2_RATIO,
     TOLERANCE_POSITION_M,
     TOLERANCE_ROTATION_DEG,
     confidence_probability,
@@ -68,7 +69,9 @@ NEES_RANGE = (4.0, 9.0)
 #: ``min_iou``: its distribution shifts with the detector's noise, and leaving it out transfers
 #: better between the two noise settings (tuning seeds, each setting fitted on the other).
 FEATURES = ("inliers_ge3", "inliers_ge4", "log_inliers", "inlier_fraction", "mean_iou",
-            "log_s2", "logit_gauss", "margin", "log_samples")
+            "log_s2", "logit_gauss", "margin", "log_samples", "chi2_competitor")
+#: Features that need a refinement (not in the ``none`` model).
+REFINED_ONLY = ("log_s2", "logit_gauss", "chi2_competitor")
 #: ``f_metric``, the floor of the a-posteriori variance factor: this quantile of the tuning
 #: frames' ``s^2`` (0.9 rather than the median: fewer default-noise frames claim the precision
 #: of a lucky small residual, which narrows the NEES spread between the two noise settings).
@@ -415,7 +418,7 @@ def fit_constants(data: dict, metric_offsets: bool = True,
         if not rr:
             models[name] = calibration.CONFIDENCE_MODELS[name]
             continue
-        use = [f for f in feats if not (name == "none" and f in ("log_s2", "logit_gauss"))]
+        use = [f for f in feats if not (name == "none" and f in REFINED_ONLY)]
         # per-metric intercept offsets (level set, the default, is the reference)
         offsets = sorted({r["metric"] for r in rr} - {"level_set", "none"}) \
             if metric_offsets else []
@@ -533,7 +536,9 @@ def markdown(res: dict, command: str) -> str:
              "solver's evidence (no per-frame IoU minimum: it does not transfer across noise "
              "levels); ambiguity = a distinct runner-up with as many inliers and >= "
              f"{calibration.AMBIGUITY_RATIO} of the best's IoU sum on other map objects (>= "
-             f"{calibration.AMBIGUITY_RATIO_SAME_OBJECTS} on the same objects); "
+             f"{calibration.AMBIGUITY_RATIO_SAME_OBJECTS} on the same objects), or a refined "
+             f"chi2 within {AMBIGUITY_CHI2_RATIO:g} x the best's (its log ratio is also the "
+             "confidence feature `chi2_competitor`); "
              f"`min_confidence` default {calibration.MIN_CONFIDENCE} (<= 1 % false accepts at "
              "2 and 3 detections on the tuning frames). Refit (tuning seeds only): "
              "`python -m bench.trust --fit`.", "",
