@@ -4,33 +4,33 @@ Provenance: written by ``python -m bench.trust --fit`` (see that module); the fi
 only the tuning seeds named in :data:`PROVENANCE`, the bench reports on other seeds.
 """
 
-PROVENANCE = {'command': 'python -m bench.trust --fit --save-data /tmp/tune_merged.json',
+PROVENANCE = {'command': 'python -m bench.trust --fit --save-data /tmp/i12_tune.json',
  'tuning_seeds': [100, 102, 101]}
 
 #: k_metric of ``cov = k * max(s^2, f) * (J^T W J)^-1`` (``bench.trust._scale_for``: the
 #: smallest and largest mean NEES over the 5 / 10 / 20 cm operating points and the two detector
 #: settings of the tuning frames centred on 6).
-COVARIANCE_SCALE = {'level_set': 2.846795,
- 'algebraic': 3.058089,
- 'frobenius': 3.025347,
- 'wasserstein': 0.457436,
- 'bhattacharyya': 0.38358,
- 'bbox': 0.445323,
- 'qbbox': 0.569374,
- 'iou': 0.457738,
- 'giou': 0.447407}
+COVARIANCE_SCALE = {'level_set': 2.848978,
+ 'algebraic': 3.015399,
+ 'frobenius': 2.991939,
+ 'wasserstein': 0.457207,
+ 'bhattacharyya': 0.382418,
+ 'bbox': 0.448892,
+ 'qbbox': 0.579907,
+ 'iou': 0.452446,
+ 'giou': 0.444485}
 
 #: f_metric: floor of the a-posteriori variance factor (``bench.trust.S2_FLOOR_QUANTILE`` of
 #: the tuning frames' s^2).
-S2_FLOOR = {'iou': 0.029512,
- 'giou': 0.029843,
- 'bbox': 560.571326,
- 'qbbox': 418.231977,
- 'algebraic': 18052346.834332,
- 'frobenius': 21528570.24772,
+S2_FLOOR = {'iou': 0.02987,
+ 'giou': 0.030047,
+ 'bbox': 558.695241,
+ 'qbbox': 414.453205,
+ 'algebraic': 18526189.938227,
+ 'frobenius': 21995197.715379,
  'wasserstein': 270.064654,
- 'bhattacharyya': 0.022235,
- 'level_set': 3.010206}
+ 'bhattacharyya': 0.022344,
+ 'level_set': 3.007476}
 
 #: Runner-up / best score (sum of inlier IoUs) at and above which an answer is ambiguous.
 AMBIGUITY_RATIO = 0.9
@@ -50,32 +50,34 @@ CONFIDENCE_FEATURES = ('inliers_ge3',
  'log_s2',
  'logit_gauss',
  'margin',
- 'log_samples')
+ 'log_samples',
+ 'chi2_competitor')
 
 #: Logistic models: P = 1 / (1 + exp(-(intercept + sum coef * feature))).
-CONFIDENCE_MODELS = {'refined': {'intercept': -10.936253,
-             'coef': {'inliers_ge3': 0.183011,
-                      'inliers_ge4': -1.232462,
-                      'log_inliers': 1.287528,
-                      'inlier_fraction': 9.451509,
-                      'mean_iou': 1.737371,
-                      'log_s2': -1.33794,
-                      'logit_gauss': 0.392944,
-                      'margin': -0.265231,
-                      'log_samples': -0.155184},
-             'metric_offset': {'algebraic': 1.020932,
-                               'bbox': -0.009809,
-                               'bhattacharyya': -0.222781,
-                               'frobenius': 1.025181,
-                               'giou': 1.122934,
-                               'iou': 1.333697,
-                               'qbbox': 0.138632,
-                               'wasserstein': 0.128527}},
- 'none': {'intercept': -16.11952,
-          'coef': {'inliers_ge3': 3.545587,
-                   'inliers_ge4': 1.905246,
-                   'log_inliers': 3.871776,
-                   'inlier_fraction': 0.004988,
-                   'mean_iou': 11.03755,
-                   'margin': 0.229605,
-                   'log_samples': -0.966141}}}
+CONFIDENCE_MODELS = {'refined': {'intercept': -10.967971,
+             'coef': {'inliers_ge3': 0.059068,
+                      'inliers_ge4': -1.353871,
+                      'log_inliers': 1.094245,
+                      'inlier_fraction': 9.49429,
+                      'mean_iou': 1.71832,
+                      'log_s2': -1.280838,
+                      'logit_gauss': 0.398779,
+                      'margin': -0.336503,
+                      'log_samples': -0.082821,
+                      'chi2_competitor': 0.054717},
+             'metric_offset': {'algebraic': 1.098857,
+                               'bbox': 0.060149,
+                               'bhattacharyya': -0.169245,
+                               'frobenius': 1.080103,
+                               'giou': 1.206331,
+                               'iou': 1.42106,
+                               'qbbox': 0.21966,
+                               'wasserstein': 0.218367}},
+ 'none': {'intercept': -16.363322,
+          'coef': {'inliers_ge3': 3.785562,
+                   'inliers_ge4': 1.906768,
+                   'log_inliers': 3.881419,
+                   'inlier_fraction': 0.003912,
+                   'mean_iou': 11.037241,
+                   'margin': 0.231842,
+                   'log_samples': -0.969745}}}
