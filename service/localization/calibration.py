@@ -4,7 +4,7 @@ Provenance: written by ``python -m bench.trust --fit`` (see that module); the fi
 only the tuning seeds named in :data:`PROVENANCE`, the bench reports on other seeds.
 """
 
-PROVENANCE = {'command': 'python -m bench.trust --fit --save-data /tmp/i12_tune.json',
+PROVENANCE = {'command': 'python -m bench.trust --fit --slow-stride 1 --save-data /tmp/i12_tune_s1.json',
  'tuning_seeds': [100, 102, 101]}
 
 #: k_metric of ``cov = k * max(s^2, f) * (J^T W J)^-1`` (``bench.trust._scale_for``: the
@@ -17,13 +17,13 @@ COVARIANCE_SCALE = {'level_set': 2.848978,
  'bhattacharyya': 0.382418,
  'bbox': 0.448892,
  'qbbox': 0.579907,
- 'iou': 0.452446,
- 'giou': 0.444485}
+ 'iou': 0.379732,
+ 'giou': 0.364594}
 
 #: f_metric: floor of the a-posteriori variance factor (``bench.trust.S2_FLOOR_QUANTILE`` of
 #: the tuning frames' s^2).
-S2_FLOOR = {'iou': 0.02987,
- 'giou': 0.030047,
+S2_FLOOR = {'iou': 0.033622,
+ 'giou': 0.034747,
  'bbox': 558.695241,
  'qbbox': 414.453205,
  'algebraic': 18526189.938227,
@@ -39,7 +39,7 @@ AMBIGUITY_RATIO = 0.9
 AMBIGUITY_RATIO_SAME_OBJECTS = 0.95
 
 #: Default ``LocalizationOptions.min_confidence``.
-MIN_CONFIDENCE = 0.17
+MIN_CONFIDENCE = 0.16
 
 #: Features of the confidence model (``confidence.evidence_features``), in order.
 CONFIDENCE_FEATURES = ('inliers_ge3',
@@ -54,25 +54,25 @@ CONFIDENCE_FEATURES = ('inliers_ge3',
  'chi2_competitor')
 
 #: Logistic models: P = 1 / (1 + exp(-(intercept + sum coef * feature))).
-CONFIDENCE_MODELS = {'refined': {'intercept': -10.967971,
-             'coef': {'inliers_ge3': 0.059068,
-                      'inliers_ge4': -1.353871,
-                      'log_inliers': 1.094245,
-                      'inlier_fraction': 9.49429,
-                      'mean_iou': 1.71832,
-                      'log_s2': -1.280838,
-                      'logit_gauss': 0.398779,
-                      'margin': -0.336503,
-                      'log_samples': -0.082821,
-                      'chi2_competitor': 0.054717},
-             'metric_offset': {'algebraic': 1.098857,
-                               'bbox': 0.060149,
-                               'bhattacharyya': -0.169245,
-                               'frobenius': 1.080103,
-                               'giou': 1.206331,
-                               'iou': 1.42106,
-                               'qbbox': 0.21966,
-                               'wasserstein': 0.218367}},
+CONFIDENCE_MODELS = {'refined': {'intercept': -9.734932,
+             'coef': {'inliers_ge3': 0.000527,
+                      'inliers_ge4': -1.308263,
+                      'log_inliers': 0.853441,
+                      'inlier_fraction': 8.354629,
+                      'mean_iou': 1.839118,
+                      'log_s2': -1.165828,
+                      'logit_gauss': 0.41015,
+                      'margin': -0.488576,
+                      'log_samples': -0.09021,
+                      'chi2_competitor': 0.106407},
+             'metric_offset': {'algebraic': 1.154759,
+                               'bbox': 0.082036,
+                               'bhattacharyya': -0.154024,
+                               'frobenius': 1.134789,
+                               'giou': 1.160445,
+                               'iou': 1.172629,
+                               'qbbox': 0.242912,
+                               'wasserstein': 0.231601}},
  'none': {'intercept': -16.363322,
           'coef': {'inliers_ge3': 3.785562,
                    'inliers_ge4': 1.906768,
