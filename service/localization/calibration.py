@@ -4,7 +4,8 @@ Provenance: written by ``python -m bench.trust --fit`` (see that module); the fi
 only the tuning seeds named in :data:`PROVENANCE`, the bench reports on other seeds.
 """
 
-PROVENANCE = {'command': 'python -m bench.trust --fit --slow-stride 1 --save-data /tmp/i12_tune_s1.json',
+PROVENANCE = {'command': 'python -m bench.trust --fit --slow-stride 1 --save-data '
+            '/tmp/i12_tune_s1.json',
  'tuning_seeds': [100, 102, 101]}
 
 #: k_metric of ``cov = k * max(s^2, f) * (J^T W J)^-1`` (``bench.trust._scale_for``: the
