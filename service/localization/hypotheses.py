@@ -102,16 +102,7 @@ def rotation_from_two_directions(
     """The rotation ``R`` with ``R a_from = a_to`` exactly and ``R b_from`` as close as possible
     to ``b_to`` (exact when the angles between the pairs agree). Inputs are 3-vectors; ``a`` and
     ``b`` must not be parallel. Built from Gram-Schmidt frames: ``R = F_to F_from^T``."""
-
-    def frame(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        e1 = a / math.sqrt(a @ a)
-        e2 = b - (b @ e1) * e1
-        e2 /= math.sqrt(e2 @ e2)
-        e3 = np.array([e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
-                       e1[0] * e2[1] - e1[1] * e2[0]])
-        return np.column_stack([e1, e2, e3])
-
-    return frame(np.asarray(a_to, float), np.asarray(b_to, float)) @ frame(
+    return _frames(np.asarray(a_to, float), np.asarray(b_to, float)) @ _frames(
         np.asarray(a_from, float), np.asarray(b_from, float)).T
 
 
@@ -152,7 +143,7 @@ def _rodrigues(r: np.ndarray) -> np.ndarray:
 
 def _frames(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Orthonormal frames ``[a, b_perp, a x b_perp]`` (..., 3, 3) (columns) of direction pairs
-    (..., 3) (Gram-Schmidt; the batched form of :func:`rotation_from_two_directions`)."""
+    (..., 3) (Gram-Schmidt), as used by :func:`rotation_from_two_directions`."""
     e1 = a / np.linalg.norm(a, axis=-1, keepdims=True)
     e2 = b - np.sum(b * e1, axis=-1, keepdims=True) * e1
     e2 = e2 / np.linalg.norm(e2, axis=-1, keepdims=True)
