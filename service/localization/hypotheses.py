@@ -27,7 +27,13 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-from factors.geometry import Camera, Ellipse, Ellipsoid, gaussians_from_dual_conics
+from factors.geometry import (
+    MIN_DEPTH,
+    Camera,
+    Ellipse,
+    Ellipsoid,
+    gaussians_from_dual_conics,
+)
 
 __all__ = ["p2e_hypotheses", "p3p_hypotheses", "p3p_hypotheses_batch",
            "rotation_from_two_directions"]
@@ -123,9 +129,6 @@ MAX_P2E_HYPOTHESES = 4
 #: Two refined starts are one hypothesis when no entry of their ``[R | t]`` differs by more
 #: than this (rotation entries unitless, translation metres).
 DEDUPE_TOLERANCE = 1e-4
-#: Smallest depth (m) of an ellipsoid for its projection to count (as ``MIN_DEPTH`` in spirit,
-#: looser: a start may pass close to the camera on its way).
-_MIN_MARGIN = 1e-6
 _FD_STEP = 1e-7  # forward-difference step of the LM Jacobian (rad, m)
 
 
@@ -177,7 +180,7 @@ class _PairProblem:
         r3 = R[:, 2]
         zc = r3 @ self.X.T + t[:, 2, None]
         ext = np.sqrt(np.maximum(np.sum((r3 @ self.M) * r3, axis=-1).T, 0.0))
-        valid = np.all(zc - ext > _MIN_MARGIN, axis=1)
+        valid = np.all(zc - ext > MIN_DEPTH, axis=1)
         P = self.K @ np.concatenate([R, t[:, :, None]], axis=2)
         P = P[:, None]
         C = P @ self.Q @ P.transpose(0, 1, 3, 2)
