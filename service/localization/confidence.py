@@ -62,16 +62,22 @@ competitor when its sum of inlier IoUs (after refinement) is >= :data:`AMBIGUITY
 best's and it assigns the detections to *other* map objects (same-label objects: two Xboxes,
 three chairs, two TVs — the evidence cannot tell them apart), or >=
 :data:`AMBIGUITY_RATIO_SAME_OBJECTS` x the best's with the *same* objects (a near tie between two
-poses of the same correspondences). Then the answer is ambiguous (:func:`is_ambiguous`).
-Weaker runners-up are not hidden either: their score ratio is the confidence model's
-``margin`` feature. Every answer that was verified but is not localized (ambiguous or low
-confidence) lists the candidate poses with their probabilities in ``alternatives``.
+poses of the same correspondences). A runner-up with as many inliers is also a competitor when
+its *refined* residual ``chi2`` (the metric's weighted cost at its refined pose, over the same
+number of detections) is within :data:`AMBIGUITY_CHI2_RATIO` of the best's: the IoU sum is a
+coarse score (with 2-3 detections, a wrong pose can overlap the detections almost as well),
+the refined fit is the evidence the solver actually has about which pose explains the ellipses.
+Then the answer is ambiguous (:func:`is_ambiguous`). Weaker runners-up are not hidden either:
+their score ratio and their log chi2 ratio (:func:`chi2_competitor`) are the confidence model's
+``margin`` and ``chi2_competitor`` features. Every answer that was verified but is not
+localized (ambiguous or low confidence) lists the candidate poses with their probabilities
+in ``alternatives``.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -85,11 +91,14 @@ from service.localization.calibration import (
 )
 
 __all__ = [
+    "AMBIGUITY_CHI2_RATIO",
     "AMBIGUITY_RATIO",
     "AMBIGUITY_RATIO_SAME_OBJECTS",
+    "CHI2_COMPETITOR_CAP",
     "TOLERANCE_POSITION_M",
     "TOLERANCE_ROTATION_DEG",
     "calibrated_covariance",
+    "chi2_competitor",
     "confidence_probability",
     "covariance_scale",
     "evidence_features",
@@ -99,6 +108,13 @@ __all__ = [
     "student_t_factor",
     "variance_factor",
 ]
+
+#: A distinct runner-up with as many inliers whose refined chi2 is at most this multiple of the
+#: best's is a competitor (:func:`is_ambiguous`): the detections do not tell the two apart.
+AMBIGUITY_CHI2_RATIO = 2.0
+#: ``chi2_competitor`` feature without a comparable runner-up (and its largest value): the log
+#: of a chi2 ratio of 100, far beyond any competitor.
+CHI2_COMPETITOR_CAP = math.log(100.0)
 
 #: The tolerance of ``confidence``: P(position error <= 0.10 m and rotation error <= 5 deg).
 TOLERANCE_POSITION_M = 0.10
@@ -200,6 +216,7 @@ def _chi2_3_cdf(x: float) -> float:
 def evidence_features(
     *, n_inliers: int, n_usable: int, ious: np.ndarray, s2: float, covariance: np.ndarray | None,
     margin: float, n_samples: int, s2_floor: float = 0.0,
+    chi2_ratio_log: float = CHI2_COMPETITOR_CAP,
 ) -> dict[str, float]:
     """The evidence the confidence model uses (names in
     :data:`service.localization.calibration.CONFIDENCE_FEATURES`).
@@ -214,6 +231,7 @@ def evidence_features(
         covariance: the calibrated covariance (None without).
         margin: runner-up score / best score (0 without a distinct runner-up), in [0, 1].
         n_samples: number of label-compatible minimal samples (chance matches the map allows).
+        chi2_ratio_log: :func:`chi2_competitor` of the answer (the cap without a competitor).
     """
     ious = np.asarray(ious, dtype=float)
     p_gauss = gaussian_tolerance_probability(covariance)
@@ -229,6 +247,8 @@ def evidence_features(
         "logit_gauss": _logit(p_gauss) if math.isfinite(p_gauss) else 0.0,
         "margin": float(min(max(margin, 0.0), 1.0)),
         "log_samples": math.log(max(n_samples, 1)),
+        "chi2_competitor": float(min(max(chi2_ratio_log, -CHI2_COMPETITOR_CAP),
+                                     CHI2_COMPETITOR_CAP)),
     }
 
 
@@ -254,16 +274,35 @@ def confidence_probability(metric: str, features: Mapping[str, float],
     return float(1.0 / (1.0 + math.exp(-min(max(z, -50.0), 50.0))))
 
 
+def chi2_competitor(best_chi2: float, best_inliers: int,
+                    runners_up: Sequence[tuple[float, int]]) -> float:
+    """``log(chi2_runner / chi2_best)`` of the closest runner-up with at least as many inliers
+    (``runners_up``: (refined chi2, inliers) of the distinct alternatives), clipped to
+    ``+-CHI2_COMPETITOR_CAP``; the cap when there is none or a chi2 is not finite (no
+    refinement). Small or negative: a distinct pose fits the detections about as well."""
+    ratios = [math.log(max(c, 1e-300) / max(best_chi2, 1e-300)) for c, n in runners_up
+              if n >= best_inliers and math.isfinite(c) and math.isfinite(best_chi2)]
+    if not ratios:
+        return CHI2_COMPETITOR_CAP
+    return float(min(max(min(ratios), -CHI2_COMPETITOR_CAP), CHI2_COMPETITOR_CAP))
+
+
 def is_ambiguous(best_inliers: int, best_score: float, runner_up_inliers: int,
-                 runner_up_score: float, same_objects: bool = False) -> bool:
+                 runner_up_score: float, same_objects: bool = False,
+                 best_chi2: float = math.nan, runner_up_chi2: float = math.nan) -> bool:
     """Whether a distinct runner-up explains the detections comparably well: as many inliers,
     and a sum of inlier IoUs >= :data:`AMBIGUITY_RATIO` x the best's when it assigns the
     detections to other map objects (``same_objects=False``: e.g. the other Xbox, a label
     ambiguity), >= :data:`AMBIGUITY_RATIO_SAME_OBJECTS` x when it matches the same objects
     (another pose of the same correspondences: the refinement already chose between them by
     their fit, so only a near tie is ambiguous; a weaker one lowers ``confidence`` through its
-    ``margin`` feature). A runner-up that leaves a detection unexplained is not a competitor:
-    the best explains strictly more."""
+    ``margin`` feature) — or a refined ``runner_up_chi2 <= AMBIGUITY_CHI2_RATIO x best_chi2``
+    (both finite: refined with the same metric). A runner-up that leaves a detection
+    unexplained is not a competitor: the best explains strictly more."""
+    if runner_up_inliers < best_inliers:
+        return False
+    if (math.isfinite(best_chi2) and math.isfinite(runner_up_chi2)
+            and runner_up_chi2 <= AMBIGUITY_CHI2_RATIO * best_chi2):
+        return True
     ratio = AMBIGUITY_RATIO_SAME_OBJECTS if same_objects else AMBIGUITY_RATIO
-    return (best_score > 0 and runner_up_inliers >= best_inliers
-            and runner_up_score >= ratio * best_score)
+    return best_score > 0 and runner_up_score >= ratio * best_score

@@ -25,10 +25,11 @@ Stages (wall time of each in ``LocalizationResult.timings_ms``):
    inliers; none kept: ``refinement_diverged``.
 5. ``assess`` — :mod:`service.localization.confidence`: the calibrated covariance, the
    confidence (a probability), and the ambiguity check against the best distinct runner-up
-   (``reason="ambiguous"`` or, with ``on_ambiguity="best"``, the best pose with its
-   ``alternatives``); a confidence below ``min_confidence`` gives ``low_confidence``. A
-   verified answer that is not localized (ambiguous, low confidence) lists its candidate poses
-   with their probabilities in ``alternatives``: the client decides.
+   (IoU sums and refined chi2: ``confidence.is_ambiguous``; ``reason="ambiguous"`` or, with
+   ``on_ambiguity="best"``, the best pose with its ``alternatives``); a confidence below
+   ``min_confidence`` gives ``low_confidence``. A verified answer that is not localized
+   (ambiguous, low confidence) lists its candidate poses with their probabilities in
+   ``alternatives``: the client decides.
    (``refine`` itself re-lays grown adaptive level-set samples once at its result.)
 
 The time budget (CPU time of the solving thread, with a wall-clock hard limit:
@@ -55,6 +56,7 @@ from service.localization.budget import Deadline, deadline_passed
 from service.localization.calibration import MIN_CONFIDENCE, S2_FLOOR
 from service.localization.confidence import (
     calibrated_covariance,
+    chi2_competitor,
     confidence_probability,
     covariance_scale,
     evidence_features,
@@ -230,6 +232,11 @@ class _Answer:
         """Sum of the inliers' IoUs (the RANSAC score, at the verified pose)."""
         return float(sum(m.iou for m in self.inliers))
 
+    @property
+    def chi2(self) -> float:
+        """The refinement's chi2 (NaN without refinement)."""
+        return math.nan if self.refinement is None else float(self.refinement.chi2)
+
     def support(self) -> tuple[int, float]:
         """(inlier count, score): the order in which answers are compared."""
         return len(self.inliers), self.score
@@ -242,7 +249,8 @@ def _is_ambiguous_answer(ranked: Sequence[_Answer]) -> bool:
     best = ranked[0]
     objects = {m.object_id for m in best.inliers}
     return any(is_ambiguous(len(best.inliers), best.score, len(b.inliers), b.score,
-                            same_objects={m.object_id for m in b.inliers} == objects)
+                            same_objects={m.object_id for m in b.inliers} == objects,
+                            best_chi2=best.chi2, runner_up_chi2=b.chi2)
                for b in ranked[1:])
 
 
@@ -350,9 +358,10 @@ def localize(
     evaluated = 0
     n_samples = count_samples(scorer, 2)
 
-    def assess(a: _Answer, runner_up: _Answer | None) -> tuple[float, dict[str, float],
-                                                              np.ndarray | None]:
-        """(confidence, evidence, calibrated covariance) of an answer."""
+    def assess(a: _Answer, runner_up: _Answer | None, others: Sequence[_Answer] = ()
+               ) -> tuple[float, dict[str, float], np.ndarray | None]:
+        """(confidence, evidence, calibrated covariance) of an answer (``others``: the distinct
+        alternatives, for its ``chi2_competitor``)."""
         res = a.refinement
         s2 = math.nan if res is None else residual_variance(res.chi2, res.n_residuals)
         prior_cov = None if a.source != "prior" or prior is None else prior.covariance
@@ -363,7 +372,10 @@ def localize(
         ev = evidence_features(n_inliers=len(a.inliers), n_usable=len(usable),
                                ious=np.array([m.iou for m in a.inliers]), s2=s2,
                                covariance=cov, margin=margin, n_samples=n_samples,
-                               s2_floor=S2_FLOOR.get(metric, 0.0))
+                               s2_floor=S2_FLOOR.get(metric, 0.0),
+                               chi2_ratio_log=chi2_competitor(
+                                   a.chi2, len(a.inliers),
+                                   [(b.chi2, len(b.inliers)) for b in others if b is not a]))
         scale = math.nan if res is None else covariance_scale(metric, res.chi2, res.n_residuals,
                                                               n_refined)
         return confidence_probability(metric, ev), {**ev, "s2": s2, "cov_scale": scale,
@@ -371,12 +383,13 @@ def localize(
 
     def finish(a: _Answer, ranked: list[_Answer], ambiguous: bool) -> LocalizationResult:
         runner_up = next((b for b in ranked if b is not a), None)
-        conf, ev, cov = assess(a, runner_up)
+        conf, ev, cov = assess(a, runner_up, ranked)
         alternatives: tuple[Alternative, ...] = ()
         floor = MIN_CONFIDENCE if options.min_confidence is None else options.min_confidence
         if ambiguous or conf < floor:  # the candidates, each with its probability
             alternatives = tuple(
-                Alternative(b.world_from_camera, assess(b, a if b is not a else runner_up)[0],
+                Alternative(b.world_from_camera,
+                            assess(b, a if b is not a else runner_up, ranked)[0],
                             len(b.inliers), b.score) for b in ranked)
         timings["total"] = (time.perf_counter() - t0) * 1e3
         if ambiguous and options.on_ambiguity == "not_localized":
