@@ -101,7 +101,7 @@ def test_two_detections_localize_with_p2e():
     # calibrated confidence (tests/test_trust.py), so accept any verified pose here
     r = localize(dets, MAP, CAMERA, LocalizationOptions(min_confidence=0.0))
     assert r.hypotheses_evaluated >= 1
-    # P2E (zero roll; the Chess frames have ~3 deg) + level-set refinement of two exact
+    # P2E (6-DoF, starts at rolls around the up axis) + level-set refinement of two exact
     # ellipses: this pair gives the true pose (98.6 % of exact Chess pairs localize)
     assert r.localized, r.reason
     assert len(r.inliers) == 2

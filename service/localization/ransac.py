@@ -709,7 +709,7 @@ def ransac(
 
     Args:
         scorer: detections + map + camera.
-        up_world: the map's up axis (P2E's zero-roll assumption).
+        up_world: the map's up axis (P2E starts its searches at camera rolls around it).
         inlier_iou, min_inliers: acceptance of a pose.
         max_hypotheses: budget of minimal samples per solver (P3P, then P2E).
         rng: sampler (only used when not exhaustive: exhaustive runs do not depend on it).
