@@ -581,24 +581,19 @@ def _iter_samples(groups: list[tuple[list[int], np.ndarray]],
                   size: int) -> Iterator[tuple[tuple[int, ...], tuple[int, ...]]]:
     """Every label-compatible minimal sample ((d...), (o...)) (detections ascending), lazily,
     in a fixed order: split among the groups, then itertools' combinations of each group's
-    detections and permutations of its objects. Nothing is materialised."""
-    def rec(active: list[tuple[list[int], list[int], int]], k: int,
-            acc: list[tuple[int, int]]) -> Iterator[list[tuple[int, int]]]:
-        if k == len(active):
-            yield acc
-            return
-        d, o, m = active[k]
-        for dets in itertools.combinations(d, m):
-            for objs in itertools.permutations(o, m):
-                yield from rec(active, k + 1, acc + list(zip(dets, objs, strict=True)))
-
+    detections and permutations of its objects. Materialised per split: each drawn group's
+    (combination, permutation) list, none longer than the split's sample count (callers list
+    at most ``cap`` samples, :func:`_enumerate_samples`)."""
     for comp in _compositions(groups, size):
-        # only the groups the split draws from (the others contribute nothing)
-        active = [(d, [int(x) for x in o], m) for (d, o), m in zip(groups, comp, strict=True)
-                  if m]
-        for pairs in rec(active, 0, []):
-            pairs.sort()
-            yield tuple(dd for dd, _ in pairs), tuple(oo for _, oo in pairs)
+        # per group the split draws from: its (detection, object) pair lists, combinations of
+        # detections outer, permutations of objects inner; their product in group order
+        per_group = [[list(zip(dets, objs, strict=True))
+                      for dets in itertools.combinations(d, m)
+                      for objs in itertools.permutations([int(x) for x in o], m)]
+                     for (d, o), m in zip(groups, comp, strict=True) if m]
+        for parts in itertools.product(*per_group):
+            dets, objs = zip(*sorted(itertools.chain.from_iterable(parts)), strict=True)
+            yield dets, objs
 
 
 def _enumerate_samples(scorer: MatchScorer, size: int,
