@@ -29,8 +29,10 @@ tuples, so hundreds of same-label detections cost nothing before the first time-
 Exhaustive over the label-compatible minimal samples when there are at most ``max_hypotheses``
 of them (in a fixed order: the result does not depend on the seed; P3P samples most promising
 first, :func:`_most_promising_first`, when there are at most :data:`ORDER_CAP`), else
-``max_hypotheses`` random samples (seeded, uniform over the label-compatible samples). The
-first P3P batch has :data:`FIRST_BATCH` samples, the next :data:`BATCH` (P2E: 4).
+``max_hypotheses`` samples: the competitor sweep's (:func:`_sweep_samples`, the most
+promising detection triple's assignments, found without listing every sample), then random
+ones (seeded, uniform over the label-compatible samples). The first P3P batch has
+:data:`FIRST_BATCH` samples, the next :data:`BATCH` (P2E: 4).
 
 Early exit (issue 14) once a pose explains every usable detection (at least
 :data:`EARLY_EXIT_MIN_DETECTIONS`) with mean IoU >= :data:`EARLY_EXIT_MEAN_IOU`, but only after
@@ -774,13 +776,19 @@ def ransac(
     def run(size: int, budget: int) -> bool:
         nonlocal tried, timed_out, exhaustive
         samples = _enumerate_samples(scorer, size, budget)
+        sweep_first: list[tuple[tuple[int, ...], tuple[int, ...]]] = []
         if samples is None:
             exhaustive = False
-            samples = _random_samples(scorer, size, budget, rng)
+            # the competitor sweep's samples first (the most promising triple, found without
+            # listing every sample), then random ones (seeded) up to the budget
+            sweep_first = _sweep_samples(scorer)[:budget] if size == 3 else []
+            samples = itertools.chain(sweep_first, _random_samples(
+                scorer, size, budget - len(sweep_first), rng))
         elif size == 3 and count_samples(scorer, size) <= ORDER_CAP:
             samples = _most_promising_first(scorer, list(samples))
         # exhaustive: every sample in a fixed order (the seed plays no part)
         batch = FIRST_BATCH if size == 3 else 4
+        start = tried
         while True:
             if deadline_passed(deadline):
                 timed_out = True
@@ -793,8 +801,10 @@ def ransac(
             try:
                 if consider(solve(chunk, size)):
                     # the frame is explained: before stopping, look for the competitors the
-                    # ambiguity check needs (every other explanation of one detection triple)
-                    sweep = _sweep_samples(scorer) if size == 3 else []
+                    # ambiguity check needs (every other explanation of one detection triple;
+                    # those not tried yet when the sweep came first)
+                    sweep = (sweep_first[tried - start:] if sweep_first
+                             else _sweep_samples(scorer) if size == 3 else [])
                     tried += len(sweep)
                     if sweep:
                         consider(solve(sweep, size))
