@@ -108,7 +108,12 @@ import numpy as np
 
 from factors.geometry import Ellipse, sigma_entries
 from factors.names import METRIC_NAMES
-from factors.overlap import HULL_DIRECTIONS, hull_area, intersection_area, quadrant_areas
+from factors.overlap import (
+    HULL_DIRECTIONS,
+    hull_area,
+    intersection_area,
+    quadrant_areas_batch,
+)
 
 __all__ = [
     "DEFAULT_LEVEL_SET_SCALE",
@@ -446,37 +451,46 @@ def overlap_residual(
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """The iou / giou residual: ``Delta`` split over the four quadrants ``Q_k`` of the
     detection's frame (module docstring), ``r_k >= 0``, ``sum_k r_k = Delta``; and, if
-    ``gradient``, ``dr / dg`` (4, 5) w.r.t. the projection's Gaussian parameters ``g = (mu_x,
-    mu_y, s00, s01, s11)`` (px, px^2), exact (:func:`factors.overlap.quadrant_areas`).
+    ``gradient``, ``dr / dg`` w.r.t. the projection's Gaussian parameters ``g = (mu_x,
+    mu_y, s00, s01, s11)`` (px, px^2), exact (:func:`factors.overlap.quadrant_areas_batch`).
 
+    Params are one pair ``(5,)`` each (returns ``r`` (4,), ``dr/dg`` (4, 5)) or N pairs
+    ``(N, 5)`` (returns (N, 4), (N, 4, 5); the pose factors evaluate all objects in one call).
     ``r_k = |(D △ P) ∩ Q_k| / U`` (iou) ``+ |(C \\ (D ∪ P)) ∩ Q_k| / C`` (giou), with
     ``|(D △ P) ∩ Q_k| = A_D / 4 + |P ∩ Q_k| - 2 |D ∩ P ∩ Q_k|``. The one place of these
     formulas: the scalar metric and the pose factors call it.
     """
-    q = quadrant_areas(detection_params, projection_params, name == "giou", hull_directions,
-                       gradient)
-    a_det = math.pi * float(detection_params[2] * detection_params[3])
+    det = np.asarray(detection_params, dtype=float)
+    single = det.ndim == 1
+    det = det.reshape(-1, 5)
+    q = quadrant_areas_batch(det, projection_params, name == "giou", hull_directions, gradient)
+    a_det = math.pi * det[:, 2] * det[:, 3]
     proj_k, d_proj_k = q["second"]
     inter_k, d_inter_k = q["intersection"]
-    union = a_det + float(proj_k.sum()) - float(inter_k.sum())
-    union_k = 0.25 * a_det + proj_k - inter_k
-    r = (union_k - inter_k) / union
+    union = a_det + proj_k.sum(axis=1) - inter_k.sum(axis=1)  # (N,)
+    union_k = 0.25 * a_det[:, None] + proj_k - inter_k
+    r = (union_k - inter_k) / union[:, None]
     d_r = None
     if gradient:
         d_union_k = d_proj_k - d_inter_k
-        d_union = d_union_k.sum(axis=0)
-        d_r = (d_union_k - d_inter_k) / union - np.outer(r, d_union) / union
-    if name == "iou":
-        return r, d_r
-    hull_k, d_hull_k = q["hull"]
-    hull = float(hull_k.sum())
-    if hull < union:  # rounding: the hull is the union (one ellipse contains the other)
-        return r, d_r
-    gap = (hull_k - union_k) / hull
-    if gradient:
-        d_gap = (d_hull_k - d_union_k) / hull - np.outer(gap, d_hull_k.sum(axis=0)) / hull
-        d_r = d_r + d_gap
-    return r + gap, d_r
+        d_union = d_union_k.sum(axis=1)  # (N, 5)
+        d_r = ((d_union_k - d_inter_k) - r[:, :, None] * d_union[:, None, :]) / union[:, None, None]
+    if name == "giou":
+        hull_k, d_hull_k = q["hull"]
+        hull = hull_k.sum(axis=1)
+        # rounding: a hull below the union means the hull IS the union (one ellipse contains
+        # the other), whose gap term is zero
+        use = hull >= union
+        hull_s = np.where(use, hull, 1.0)
+        gap = np.where(use[:, None], (hull_k - union_k) / hull_s[:, None], 0.0)
+        r = r + gap
+        if gradient:
+            d_gap = ((d_hull_k - d_union_k) - gap[:, :, None] * d_hull_k.sum(axis=1)[:, None, :]
+                     ) / hull_s[:, None, None]
+            d_r = d_r + np.where(use[:, None, None], d_gap, 0.0)
+    if single:
+        return r[0], None if d_r is None else d_r[0]
+    return r, d_r
 
 
 def _iou_cost(det: Ellipse, proj: Ellipse) -> float:
