@@ -798,7 +798,7 @@ def _hull_batch(b: _Batch, p1: np.ndarray, p2: np.ndarray, n_directions: int
     if pair.size:
         a1, a2, ax, ay = sub(pair)
         t = _newton_bracketed(lambda t: _hdiff_batch(a1, a2, ax, ay, t), i * h, (i + 1) * h,
-                              diff[pair, i], diff_n[pair, i], ~first[pair, i], 1e-5 * tol[pair])
+                              diff[pair, i], diff_n[pair, i], ~first[pair, i], 1e-7 * tol[pair])
         sw_pair.append(pair)
         sw_t.append(t)
         sw_k.append(np.where(first_n[pair, i], 0, 1))
@@ -825,9 +825,9 @@ def _hull_batch(b: _Batch, p1: np.ndarray, p2: np.ndarray, n_directions: int
             fi = first[pair, i]
             loser = np.where(fi, 1, 0)
             fn = lambda t: _hdiff_batch(a1, a2, ax, ay, t)  # noqa: E731
-            t_a = _newton_bracketed(fn, i * h, t_min, diff[pair, i], f_min, ~fi, 1e-5 * tol[pair])
+            t_a = _newton_bracketed(fn, i * h, t_min, diff[pair, i], f_min, ~fi, 1e-7 * tol[pair])
             t_b = _newton_bracketed(fn, t_min, (i + 1) * h, f_min, diff_n[pair, i], fi,
-                                    1e-5 * tol[pair])
+                                    1e-7 * tol[pair])
             sw_pair += [pair, pair]
             sw_t += [t_a, t_b]
             sw_k += [loser, 1 - loser]
