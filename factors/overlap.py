@@ -564,9 +564,10 @@ _NEWTON_MAX_ITER = 100
 #: quadratic convergence the error is then at rounding level.
 _NEWTON_STEP_TOL = 1e-11
 #: Sub-grid points per level (and levels) used to locate an interior extremum of ``h1 - h2``
-#: between two hull directions (the scalar path bisects on the derivative): 32^4 ~ 1e6
-#: sub-intervals, i.e. ~5e-8 of the direction step, ample for the sign test at ``tol``.
-_EXTREMUM_SUBGRID, _EXTREMUM_LEVELS = 32, 4
+#: between two hull directions (the scalar path bisects on the derivative): 128^2 ~ 1.6e4
+#: sub-intervals, i.e. ~3e-6 rad: the extremum value is then off by ~|f''| 1e-11 (~1e-9 px),
+#: well below the sign test's ``tol`` (1e-10 of the ellipses' size and distance, ~1e-7 px).
+_EXTREMUM_SUBGRID, _EXTREMUM_LEVELS = 128, 2
 
 
 class _Batch:
@@ -591,16 +592,23 @@ class _Batch:
         a, b, c, s = p2[:, 2], p2[:, 3], np.cos(p2[:, 4]), np.sin(p2[:, 4])
         self.M = (c / a, -s / b, s / a, c / b)
         self.axes = (np.cos(p1[:, 4]), np.sin(p1[:, 4]))
+        # n^T Sigma n = (s00 + s11) / 2 + (s00 - s11) / 2 cos 2t + s01 sin 2t, both ellipses
+        self.support = np.stack([x for S in self.S
+                                 for x in (0.5 * (S[0] + S[2]), 0.5 * (S[0] - S[2]), S[1])])
+        # packed (2, n, 7): cx, cy, Px, Py, Qx, Qy, ab of each ellipse (one gather per use)
+        self.E = np.stack([np.stack([*self.c[k], *self.P[k], *self.Q[k], self.ab[k]], axis=1)
+                           for k in (0, 1)])
+
+    def geometry(self, k: np.ndarray, pair: np.ndarray) -> np.ndarray:
+        """Columns ``cx, cy, Px, Py, Qx, Qy, ab`` (7, m) of ellipse ``k`` (0/1) of ``pair``."""
+        return self.E[k, pair].T
 
     def point(self, k: np.ndarray, pair: np.ndarray, t: np.ndarray
               ) -> tuple[np.ndarray, np.ndarray]:
         """Boundary points of ellipse ``k`` (0/1 per element) of pairs ``pair`` at angles ``t``."""
+        cx, cy, Px, Py, Qx, Qy, _ = self.geometry(k, pair)
         ct, st = np.cos(t), np.sin(t)
-        out = []
-        for i in (0, 1):
-            sel = [np.where(k == 1, v[1][i][pair], v[0][i][pair]) for v in (self.c, self.P, self.Q)]
-            out.append(sel[0] + ct * sel[1] + st * sel[2])
-        return out[0], out[1]
+        return cx + ct * Px + st * Qx, cy + ct * Py + st * Qy
 
 
 def _newton_bracketed(fn, lo: np.ndarray, hi: np.ndarray, f0: np.ndarray, f1: np.ndarray,
@@ -619,23 +627,21 @@ def _newton_bracketed(fn, lo: np.ndarray, hi: np.ndarray, f0: np.ndarray, f1: np
     safe = np.where(den != 0.0, den, 1.0)
     t = np.where(den != 0.0, lo + (hi - lo) * f0 / safe, 0.5 * (lo + hi))
     t = np.minimum(np.maximum(t, lo), hi)
-    done = np.zeros(t.shape, dtype=bool)
-    for _ in range(_NEWTON_MAX_ITER):
-        f, df = fn(t)
-        zero = f == 0.0
-        left = (f < 0.0) == neg_lo
-        lo = np.where(left & ~done, t, lo)
-        hi = np.where(~left & ~done, t, hi)
-        t_new = np.where(df != 0.0, t - f / np.where(df != 0.0, df, 1.0), lo - 1.0)
-        newton = (lo < t_new) & (t_new < hi)
-        t_new = np.where(newton, t_new, 0.5 * (lo + hi))
-        at_root = zero | (np.abs(f) <= f_tol)
-        conv = (at_root | (newton & (np.abs(t_new - t) < _NEWTON_STEP_TOL))
-                | (hi - lo < 4e-15))
-        t = np.where(done | at_root, t, t_new)
-        done |= conv
-        if done.all():
-            break
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for _ in range(_NEWTON_MAX_ITER):
+            f, df = fn(t)
+            left = (f < 0.0) == neg_lo
+            lo = np.where(left, t, lo)
+            hi = np.where(left, hi, t)
+            t_new = t - f / df  # df == 0: inf / nan, not inside the bracket -> bisection
+            newton = (lo < t_new) & (t_new < hi)
+            t_new = np.where(newton, t_new, 0.5 * (lo + hi))
+            at_root = np.abs(f) <= f_tol  # (f == 0 included) keep t, as the scalar path
+            t_new = np.where(at_root, t, t_new)
+            if np.all(at_root | (newton & (np.abs(t_new - t) < _NEWTON_STEP_TOL))
+                      | (hi - lo < 4e-15)):
+                return t_new
+            t = t_new
     return t
 
 
@@ -749,18 +755,26 @@ def _intersection_arcs_batch(b: _Batch) -> tuple[np.ndarray, ...]:
     return tuple(np.concatenate(x) for x in zip(*pieces, strict=True))
 
 
-def _hdiff_batch(S1, S2, c2x, c2y, t):
-    """Vectorised ``h1 - h2`` and its derivative in the normal angle ``t`` (as in
-    :func:`_hull_pieces`)."""
+def _support_coefficients(b: _Batch, pair: np.ndarray) -> np.ndarray:
+    """Per element of ``pair``: (6, m) ``alpha_k, beta_k, gamma_k`` of ``n^T Sigma_k n = alpha +
+    beta cos 2t + gamma sin 2t`` (k = 1, 2, rows 0-2 and 3-5) for :func:`_hdiff_batch`."""
+    return b.support[:, pair]
+
+
+def _hdiff_batch(coef: np.ndarray, c2x: np.ndarray, c2y: np.ndarray, t: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Vectorised ``h1 - h2`` and its derivative in the normal angle ``t`` (as ``hdiff`` in
+    :func:`_hull_pieces`): ``h_k = n . c_k + sqrt(n^T Sigma_k n)``, ``c_1 = 0``; ``coef`` from
+    :func:`_support_coefficients` (broadcast against ``t``)."""
     c, s = np.cos(t), np.sin(t)
-    out = np.zeros(t.shape)
-    dout = np.zeros(t.shape)
-    for S, cx, cy, sg in ((S1, 0.0, 0.0, 1.0), (S2, c2x, c2y, -1.0)):
-        sn_x, sn_y = S[0] * c + S[1] * s, S[1] * c + S[2] * s
-        q = np.sqrt(c * sn_x + s * sn_y)
-        out += sg * (c * cx + s * cy + q)
-        dout += sg * (-s * cx + c * cy + (-s * sn_x + c * sn_y) / q)
-    return out, dout
+    c2, s2 = c * c - s * s, 2.0 * c * s
+    q1 = coef[0] + coef[1] * c2 + coef[2] * s2
+    q2 = coef[3] + coef[4] * c2 + coef[5] * s2
+    r1, r2 = np.sqrt(q1), np.sqrt(q2)
+    dq1 = coef[2] * c2 - coef[1] * s2  # (d q / dt) / 2
+    dq2 = coef[5] * c2 - coef[4] * s2
+    return (r1 - r2 - (c * c2x + s * c2y),
+            dq1 / r1 - dq2 / r2 - (c * c2y - s * c2x))
 
 
 def _hull_batch(b: _Batch, p1: np.ndarray, p2: np.ndarray, n_directions: int
@@ -791,40 +805,40 @@ def _hull_batch(b: _Batch, p1: np.ndarray, p2: np.ndarray, n_directions: int
     turn = ~change & (sgn * ddiff < 0.0) & (sgn * ddiff_n > 0.0)
 
     def sub(pair):
-        return [x[pair] for x in S1], [x[pair] for x in S2], c2x[pair], c2y[pair]
+        return _support_coefficients(b, pair), c2x[pair], c2y[pair]
 
     sw_pair, sw_t, sw_k = [], [], []
     pair, i = np.nonzero(change)
     if pair.size:
-        a1, a2, ax, ay = sub(pair)
-        t = _newton_bracketed(lambda t: _hdiff_batch(a1, a2, ax, ay, t), i * h, (i + 1) * h,
+        co, ax, ay = sub(pair)
+        t = _newton_bracketed(lambda t: _hdiff_batch(co, ax, ay, t), i * h, (i + 1) * h,
                               diff[pair, i], diff_n[pair, i], ~first[pair, i], 1e-7 * tol[pair])
         sw_pair.append(pair)
         sw_t.append(t)
         sw_k.append(np.where(first_n[pair, i], 0, 1))
     pair, i = np.nonzero(turn)
     if pair.size:
-        a1, a2, ax, ay = sub(pair)
+        co, ax, ay = sub(pair)
         sign = np.where(first[pair, i], 1.0, -1.0)
         lo, width = i * h, np.full(pair.size, h)
         frac = np.linspace(0.0, 1.0, _EXTREMUM_SUBGRID + 1)
+        co_col, ax_col, ay_col = co[:, :, None], ax[:, None], ay[:, None]
         for _ in range(_EXTREMUM_LEVELS):
             ts = lo[:, None] + width[:, None] * frac[None, :]
-            d = sign[:, None] * _hdiff_batch([x[:, None] for x in a1], [x[:, None] for x in a2],
-                                             ax[:, None], ay[:, None], ts)[1]
-            # first sub-point where the derivative is no longer towards zero
+            d = sign[:, None] * _hdiff_batch(co_col, ax_col, ay_col, ts)[1]
+            # the sub-interval where the derivative turns from towards zero to away from it
             j = np.clip(np.argmax(d >= 0.0, axis=1) - 1, 0, _EXTREMUM_SUBGRID - 1)
             width = width / _EXTREMUM_SUBGRID
             lo = lo + j * width
         t_min = lo + 0.5 * width
-        f_min = _hdiff_batch(a1, a2, ax, ay, t_min)[0]
+        f_min = _hdiff_batch(co, ax, ay, t_min)[0]
         pokes = sign * f_min < -tol[pair]
         if pokes.any():
             pair, i, t_min, f_min = pair[pokes], i[pokes], t_min[pokes], f_min[pokes]
-            a1, a2, ax, ay = sub(pair)
+            co, ax, ay = sub(pair)
             fi = first[pair, i]
             loser = np.where(fi, 1, 0)
-            fn = lambda t: _hdiff_batch(a1, a2, ax, ay, t)  # noqa: E731
+            fn = lambda t: _hdiff_batch(co, ax, ay, t)  # noqa: E731
             t_a = _newton_bracketed(fn, i * h, t_min, diff[pair, i], f_min, ~fi, 1e-7 * tol[pair])
             t_b = _newton_bracketed(fn, t_min, (i + 1) * h, f_min, diff_n[pair, i], fi,
                                     1e-7 * tol[pair])
@@ -851,11 +865,8 @@ def _hull_batch(b: _Batch, p1: np.ndarray, p2: np.ndarray, n_directions: int
     k_next = np.take_along_axis(K, nxt, axis=1)[pair, j].astype(int)
 
     def contact(kk, t):
+        _, _, Px, Py, Qx, Qy, _ = b.geometry(kk, pair)
         n0, n1 = np.cos(t), np.sin(t)
-        Px = np.where(kk == 1, b.P[1][0][pair], b.P[0][0][pair])
-        Py = np.where(kk == 1, b.P[1][1][pair], b.P[0][1][pair])
-        Qx = np.where(kk == 1, b.Q[1][0][pair], b.Q[0][0][pair])
-        Qy = np.where(kk == 1, b.Q[1][1][pair], b.Q[0][1][pair])
         return np.arctan2(n0 * Qx + n1 * Qy, n0 * Px + n1 * Py)
 
     par0, par1 = contact(k, t_start), contact(k, t_end)
@@ -883,98 +894,75 @@ def _quadrant_sums_batch(b: _Batch, region: np.ndarray, arcs: tuple[np.ndarray, 
     ca, sa = b.axes
     arc_region, seg_region = region
     a_pair, a_k, t0, t1 = arcs
-    is1 = a_k == 1
-
-    def sel(v):
-        return np.where(is1, v[1][a_pair], v[0][a_pair])
-
-    # cuts of each arc's ellipse by the two axis lines through c1 (Ell.line_crossings)
-    Px, Py = sel([x[0] for x in b.P]), sel([x[1] for x in b.P])
-    Qx, Qy = sel([x[0] for x in b.Q]), sel([x[1] for x in b.Q])
-    cx, cy = sel([x[0] for x in b.c]), sel([x[1] for x in b.c])
+    cx, cy, Px, Py, Qx, Qy, ab = b.geometry(a_k, a_pair)
     cal, sal = ca[a_pair], sa[a_pair]
-    cuts = []
-    for nx_, ny_ in ((-sal, cal), (cal, sal)):
-        alpha, beta, gamma = nx_ * Px + ny_ * Py, nx_ * Qx + ny_ * Qy, nx_ * cx + ny_ * cy
-        rad = np.hypot(alpha, beta)
-        ok = (rad != 0.0) & (np.abs(gamma) <= rad)
-        phi = np.arctan2(beta, alpha)
-        dphi = np.arccos(np.clip(-gamma / np.where(rad != 0.0, rad, 1.0), -1.0, 1.0))
-        for c in ((phi + dphi) % _TWO_PI, (phi - dphi) % _TWO_PI):
-            cs = t0 + (c - t0) % _TWO_PI
-            cuts.append(np.where(ok & (t0 < cs) & (cs < t1), cs, t1))
-    bounds = np.sort(np.stack([t0, *cuts, t1], axis=1), axis=1)  # (m, 6)
-    lo, hi = bounds[:, :-1], bounds[:, 1:]
+    # cuts of each arc's ellipse by the two axis lines through c1 (_Ell.line_crossings), both
+    # lines at once: normals (-sin, cos) and (cos, sin) of the first ellipse's angle
+    nx_, ny_ = np.stack([-sal, cal]), np.stack([cal, sal])  # (2, m)
+    alpha, beta, gamma = nx_ * Px + ny_ * Py, nx_ * Qx + ny_ * Qy, nx_ * cx + ny_ * cy
+    rad = np.hypot(alpha, beta)
+    ok = (rad != 0.0) & (np.abs(gamma) <= rad)
+    phi = np.arctan2(beta, alpha)
+    dphi = np.arccos(np.clip(-gamma / np.where(rad != 0.0, rad, 1.0), -1.0, 1.0))
+    c = np.concatenate([phi + dphi, phi - dphi])  # (4, m)
+    cs = t0 + (c - t0) % _TWO_PI
+    ok4 = np.concatenate([ok, ok])
+    cuts = np.where(ok4 & (t0 < cs) & (cs < t1), cs, t1)
+    bounds = np.sort(np.concatenate([t0[None], cuts, t1[None]]), axis=0)  # (6, m)
+    cb, sb = np.cos(bounds), np.sin(bounds)
+    lo, hi = bounds[:-1], bounds[1:]
+    cl, sl, ch, sh = cb[:-1], sb[:-1], cb[1:], sb[1:]
     mid = 0.5 * (lo + hi)
     cm, sm = np.cos(mid), np.sin(mid)
-    X = cx[:, None] + cm * Px[:, None] + sm * Qx[:, None]
-    Y = cy[:, None] + cm * Py[:, None] + sm * Qy[:, None]
-    quad = _quadrant_index(cal[:, None] * X + sal[:, None] * Y,
-                           -sal[:, None] * X + cal[:, None] * Y)
-    cl, sl, ch, sh = np.cos(lo), np.sin(lo), np.cos(hi), np.sin(hi)
+    X = cx + cm * Px + sm * Qx
+    Y = cy + cm * Py + sm * Qy
+    quad = _quadrant_index(cal * X + sal * Y, cal * Y - sal * X)
     dc, ds = ch - cl, sh - sl
-    ab = sel(b.ab)[:, None]
-    area = 0.5 * (ab * (hi - lo) + cx[:, None] * (dc * Py[:, None] + ds * Qy[:, None])
-                  - cy[:, None] * (dc * Px[:, None] + ds * Qx[:, None]))
-    index = ((arc_region * n + a_pair) * 4)[:, None] + quad
+    vals = [0.5 * (ab * (hi - lo) + cx * (dc * Py + ds * Qy) - cy * (dc * Px + ds * Qx))]
+    if grad:  # only the second ellipse's arcs move (_Boundary.arc)
+        w = (a_k == 1) * ab
+        m00, m01, m10, m11 = (x[a_pair] for x in b.M)
+        iu0, iu1 = sh - sl, cl - ch
+        half = 0.5 * (hi - lo)
+        q = 0.5 * (sh * ch - sl * cl)  # 1/4 (sin 2 t1 - sin 2 t0)
+        cc, ss, cs_ = half + q, half - q, 0.5 * (sh * sh - sl * sl)
+        r00, r01 = m00 * cc + m01 * cs_, m00 * cs_ + m01 * ss
+        r10, r11 = m10 * cc + m11 * cs_, m10 * cs_ + m11 * ss
+        vals += [w * (m00 * iu0 + m01 * iu1), w * (m10 * iu0 + m11 * iu1),
+                 0.5 * w * (r00 * m00 + r01 * m01), w * (r00 * m10 + r01 * m11),
+                 0.5 * w * (r10 * m10 + r11 * m11)]
     size = n_regions * n * 4
-    areas = np.bincount(index.ravel(), area.ravel(), size)
-    grads = None
-    if grad:
-        g = np.zeros((size, 5))
-        m = np.flatnonzero(is1)
-        if m.size:
-            gp = a_pair[m]
-            m00, m01, m10, m11 = (x[gp][:, None] for x in b.M)
-            abm = ab[m]
-            l, u = lo[m], hi[m]
-            s0, c0, s1, c1 = sl[m], cl[m], sh[m], ch[m]
-            iu0, iu1 = s1 - s0, c0 - c1
-            half = 0.5 * (u - l)
-            q = 0.5 * (s1 * c1 - s0 * c0)  # 1/4 (sin 2 t1 - sin 2 t0)
-            cc, ss, cs = half + q, half - q, 0.5 * (s1 * s1 - s0 * s0)
-            r00, r01 = m00 * cc + m01 * cs, m00 * cs + m01 * ss
-            r10, r11 = m10 * cc + m11 * cs, m10 * cs + m11 * ss
-            cols = [abm * (m00 * iu0 + m01 * iu1), abm * (m10 * iu0 + m11 * iu1),
-                    0.5 * abm * (r00 * m00 + r01 * m01),
-                    abm * (r00 * m10 + r01 * m11),
-                    0.5 * abm * (r10 * m10 + r11 * m11)]
-            idx = index[m].ravel()
-            for i, v in enumerate(cols):
-                g[:, i] += np.bincount(idx, v.ravel(), size)
-        grads = g
+    width = len(vals)
+    acc = np.zeros((size, width))
+    index = (arc_region * n + a_pair) * 4 + quad  # (5, m)
+    np.add.at(acc, index.ravel(), np.stack(vals, axis=-1).reshape(-1, width))
     if segs is not None and segs[0].size:
         s_pair, x0, y0, x1, y1, end, par = segs
         wx, wy = x1 - x0, y1 - y0
         cal, sal = ca[s_pair], sa[s_pair]
-        inner = []
-        for nx_, ny_ in ((-sal, cal), (cal, sal)):
-            den = nx_ * wx + ny_ * wy
-            s = -(nx_ * x0 + ny_ * y0) / np.where(den != 0.0, den, 1.0)
-            inner.append(np.where((den != 0.0) & (s > 0.0) & (s < 1.0), s, 1.0))
-        zeros, ones = np.zeros(s_pair.size), np.ones(s_pair.size)
-        sb = np.sort(np.stack([zeros, *inner, ones], axis=1), axis=1)  # (m, 4)
-        s0, s1 = sb[:, :-1], sb[:, 1:]
-        xa, ya = x0[:, None] + s0 * wx[:, None], y0[:, None] + s0 * wy[:, None]
-        xb, yb = x0[:, None] + s1 * wx[:, None], y0[:, None] + s1 * wy[:, None]
+        nx_, ny_ = np.stack([-sal, cal]), np.stack([cal, sal])
+        den = nx_ * wx + ny_ * wy
+        sv = -(nx_ * x0 + ny_ * y0) / np.where(den != 0.0, den, 1.0)
+        inner = np.where((den != 0.0) & (sv > 0.0) & (sv < 1.0), sv, 1.0)
+        sb = np.sort(np.concatenate([np.zeros((1, s_pair.size)), inner,
+                                     np.ones((1, s_pair.size))]), axis=0)  # (4, m)
+        s0, s1 = sb[:-1], sb[1:]
+        xa, ya, xb, yb = x0 + s0 * wx, y0 + s0 * wy, x0 + s1 * wx, y0 + s1 * wy
         mx, my = 0.5 * (xa + xb), 0.5 * (ya + yb)
-        quad = _quadrant_index(cal[:, None] * mx + sal[:, None] * my,
-                               -sal[:, None] * mx + cal[:, None] * my)
-        index = ((seg_region * n + s_pair) * 4)[:, None] + quad
-        areas += np.bincount(index.ravel(), (0.5 * (xa * yb - ya * xb)).ravel(), size)
-        if grad:
-            share = np.where(end[:, None] == 1, s1 * s1 - s0 * s0,
-                             (1 - s0) ** 2 - (1 - s1) ** 2)
+        quad = _quadrant_index(cal * mx + sal * my, cal * my - sal * mx)
+        vals = [0.5 * (xa * yb - ya * xb)]
+        if grad:  # 1/2 dx(q) x (end - start) shared along the segment (_piece_sums)
+            share = 0.5 * np.where(end == 1, s1 * s1 - s0 * s0, (1 - s0) ** 2 - (1 - s1) ** 2)
             m00, m01, m10, m11 = (x[s_pair] for x in b.M)
             u0, u1 = np.cos(par), np.sin(par)
             v0, v1 = m00 * u0 + m01 * u1, m10 * u0 + m11 * u1
             p0, p1 = wy, -wx
-            gfull = [p0, p1, 0.5 * v0 * p0, 0.5 * (v1 * p0 + v0 * p1), 0.5 * v1 * p1]
-            idx = index.ravel()
-            for i, v in enumerate(gfull):
-                grads[:, i] += np.bincount(idx, (0.5 * share * v[:, None]).ravel(), size)
-    areas = areas.reshape(n_regions, n, 4)
-    return areas, None if grads is None else grads.reshape(n_regions, n, 4, 5)
+            vals += [share * p0, share * p1, share * (0.5 * v0 * p0),
+                     share * (0.5 * (v1 * p0 + v0 * p1)), share * (0.5 * v1 * p1)]
+        index = (seg_region * n + s_pair) * 4 + quad
+        np.add.at(acc, index.ravel(), np.stack(vals, axis=-1).reshape(-1, width))
+    areas = acc[:, 0].reshape(n_regions, n, 4)
+    return areas, acc[:, 1:].reshape(n_regions, n, 4, 5) if grad else None
 
 
 def _quadrant_index(xl: np.ndarray, yl: np.ndarray) -> np.ndarray:
