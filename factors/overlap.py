@@ -707,7 +707,7 @@ def _crossing_roots_batch(b: _Batch) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
     roots1 = _newton_bracketed(f_and_df, i * h, (i + 1) * h, f[pair, i],
                                f[pair, (i + 1) % GRID], ~sign[pair, i],
-                               1e-15 * ksum[pair]) % _TWO_PI
+                               1e-15 * np.maximum(ksum[pair], 1.0)) % _TWO_PI
     x, y = b.point(np.zeros_like(pair), pair, roots1)
     (P2x, P2y), (Q2x, Q2y) = (v[pair] for v in b.P[1]), (v[pair] for v in b.Q[1])
     rx, ry = x - b.c[1][0][pair], y - b.c[1][1][pair]
@@ -812,7 +812,7 @@ def _hull_batch(b: _Batch, p1: np.ndarray, p2: np.ndarray, n_directions: int
     if pair.size:
         co, ax, ay = sub(pair)
         t = _newton_bracketed(lambda t: _hdiff_batch(co, ax, ay, t), i * h, (i + 1) * h,
-                              diff[pair, i], diff_n[pair, i], ~first[pair, i], 1e-7 * tol[pair])
+                              diff[pair, i], diff_n[pair, i], ~first[pair, i], 1e-5 * tol[pair])
         sw_pair.append(pair)
         sw_t.append(t)
         sw_k.append(np.where(first_n[pair, i], 0, 1))
@@ -839,9 +839,9 @@ def _hull_batch(b: _Batch, p1: np.ndarray, p2: np.ndarray, n_directions: int
             fi = first[pair, i]
             loser = np.where(fi, 1, 0)
             fn = lambda t: _hdiff_batch(co, ax, ay, t)  # noqa: E731
-            t_a = _newton_bracketed(fn, i * h, t_min, diff[pair, i], f_min, ~fi, 1e-7 * tol[pair])
+            t_a = _newton_bracketed(fn, i * h, t_min, diff[pair, i], f_min, ~fi, 1e-5 * tol[pair])
             t_b = _newton_bracketed(fn, t_min, (i + 1) * h, f_min, diff_n[pair, i], fi,
-                                    1e-7 * tol[pair])
+                                    1e-5 * tol[pair])
             sw_pair += [pair, pair]
             sw_t += [t_a, t_b]
             sw_k += [loser, 1 - loser]
