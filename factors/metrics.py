@@ -43,7 +43,14 @@ Metrics, costs and residuals (``r``, length in brackets)
     rows have full rank (Euler: ``J delta = r``), which 4 rows per object give from 2 objects.
     The rows and their exact gradient are :func:`overlap_residual`. For disjoint ellipses the
     rows still sum to 1 but their squares are not flat: smallest when the projection spreads
-    evenly over the detection's quadrants, a mild pull towards it.
+    evenly over the detection's quadrants, a mild pull towards it, too weak in practice (a
+    Chess start that separated a small object's projection from its detection diverged to
+    4.5 m). The pose factors therefore evaluate iou with ``disjoint_hull``: a DISJOINT pair
+    gets the giou rows (IoU + the hull gap ``|C \\ (D ∪ P)| / |C|``, which shrinks as the
+    ellipses approach). On first contact the rows drop by the gap term (the cost only
+    decreases into overlap, so no step towards the detection is held back), and every
+    overlapping pair, hence the optimum, keeps the iou rows. ``residual("iou")`` and
+    ``cost("iou")`` are the metric itself (no fallback).
 ``giou`` [4]
     ``Delta = 1 - GIoU``, ``GIoU = IoU - |C \\ (D ∪ P)| / |C|`` (Rezatofighi et al.), ``C`` the
     convex hull of the two ellipses; in ``[0, 2]`` (the cost). Exactly flat when one ellipse
@@ -448,6 +455,7 @@ def overlap_delta(
 def overlap_residual(
     name: str, detection_params: np.ndarray, projection_params: np.ndarray,
     hull_directions: int = HULL_DIRECTIONS, gradient: bool = False,
+    disjoint_hull: bool = False,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """The iou / giou residual: ``Delta`` split over the four quadrants ``Q_k`` of the
     detection's frame (module docstring), ``r_k >= 0``, ``sum_k r_k = Delta``; and, if
@@ -459,14 +467,49 @@ def overlap_residual(
     ``r_k = |(D △ P) ∩ Q_k| / U`` (iou) ``+ |(C \\ (D ∪ P)) ∩ Q_k| / C`` (giou), with
     ``|(D △ P) ∩ Q_k| = A_D / 4 + |P ∩ Q_k| - 2 |D ∩ P ∩ Q_k|``. The one place of these
     formulas: the scalar metric and the pose factors call it.
+
+    ``disjoint_hull`` (iou only; the pose factors' refinement rows, module docstring "iou"):
+    a pair whose ellipses do not intersect gets the giou rows instead (``sum_k r_k = 2 - U/C``
+    instead of the flat 1), so the refinement is pulled towards the detection.
     """
     det = np.asarray(detection_params, dtype=float)
     single = det.ndim == 1
     det = det.reshape(-1, 5)
-    q = quadrant_areas_batch(det, projection_params, name == "giou", hull_directions, gradient)
+    proj = np.asarray(projection_params, dtype=float).reshape(-1, 5)
+    q = quadrant_areas_batch(det, proj, name == "giou", hull_directions, gradient)
+    r, d_r = _overlap_rows(name, det, q, gradient)
+    if name == "iou" and disjoint_hull:
+        disjoint = q["intersection"][0].sum(axis=1) <= 0.0
+        if disjoint.any():
+            q_h = quadrant_areas_batch(det[disjoint], proj[disjoint], True, hull_directions,
+                                       gradient)
+            r[disjoint], d_h = _overlap_rows("giou", det[disjoint], q_h, gradient)
+            if gradient:
+                d_r[disjoint] = d_h
+    if single:
+        return r[0], None if d_r is None else d_r[0]
+    return r, d_r
+
+
+def _overlap_rows(
+    name: str, det: np.ndarray, q: dict[str, tuple[np.ndarray, np.ndarray | None]],
+    gradient: bool,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """:func:`overlap_residual`'s rows (N, 4) and gradients (N, 4, 5) from the quadrant areas
+    ``q`` of :func:`factors.overlap.quadrant_areas_batch` (detections ``det`` (N, 5))."""
     a_det = math.pi * det[:, 2] * det[:, 3]
     proj_k, d_proj_k = q["second"]
     inter_k, d_inter_k = q["intersection"]
+    # |D ∩ P ∩ Q_k| <= min(|D ∩ Q_k|, |P ∩ Q_k|): enforced against rounding and the "same
+    # ellipse" shortcut of factors.overlap (contours closer than 1e-9 count as identical, the
+    # intersection as the whole second ellipse), so the rows stay >= 0
+    cap = np.minimum(0.25 * a_det[:, None], proj_k)
+    capped = inter_k > cap
+    if capped.any():
+        inter_k = np.where(capped, cap, inter_k)
+        if gradient:
+            d_cap = np.where((proj_k < 0.25 * a_det[:, None])[:, :, None], d_proj_k, 0.0)
+            d_inter_k = np.where(capped[:, :, None], d_cap, d_inter_k)
     union = a_det + proj_k.sum(axis=1) - inter_k.sum(axis=1)  # (N,)
     union_k = 0.25 * a_det[:, None] + proj_k - inter_k
     r = (union_k - inter_k) / union[:, None]
@@ -488,8 +531,6 @@ def overlap_residual(
             d_gap = ((d_hull_k - d_union_k) - gap[:, :, None] * d_hull_k.sum(axis=1)[:, None, :]
                      ) / hull_s[:, None, None]
             d_r = d_r + np.where(use[:, None, None], d_gap, 0.0)
-    if single:
-        return r[0], None if d_r is None else d_r[0]
     return r, d_r
 
 

@@ -707,7 +707,7 @@ def _crossing_roots_batch(b: _Batch) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
     roots1 = _newton_bracketed(f_and_df, i * h, (i + 1) * h, f[pair, i],
                                f[pair, (i + 1) % GRID], ~sign[pair, i],
-                               1e-15 * np.maximum(ksum[pair], 1.0)) % _TWO_PI
+                               1e-15 * ksum[pair]) % _TWO_PI
     x, y = b.point(np.zeros_like(pair), pair, roots1)
     (P2x, P2y), (Q2x, Q2y) = (v[pair] for v in b.P[1]), (v[pair] for v in b.Q[1])
     rx, ry = x - b.c[1][0][pair], y - b.c[1][1][pair]

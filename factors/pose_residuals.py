@@ -37,9 +37,10 @@ functions of the projection's normalised dual conic ``Cn = C* / (-C*[2,2])`` (ce
 ``mu = -Cn[:2, 2]``, ``Sigma = Cn[:2, :2] + mu mu^T``). Their residuals are re-implemented
 here vectorised over the objects (equal to ``factors.metrics.residual``, tested) and
 differentiated through ``dC* = K dA K^T``, ``dCn = (dC* + Cn dC*[2,2]) / (-C*[2,2])``.
-``iou`` and ``giou`` evaluate their quadrant rows per pair with
+``iou`` and ``giou`` evaluate the quadrant rows of all pairs in one vectorised call of
 :func:`factors.metrics.overlap_residual` (exact areas and their exact gradient w.r.t. the
-projection's ``(mu, Sigma)``, :mod:`factors.overlap`), chained through the same ``dCn``.
+projection's ``(mu, Sigma)``, :mod:`factors.overlap`), chained through the same ``dCn``;
+iou with ``disjoint_hull`` (disjoint pairs get the giou rows, see ``factors.metrics``).
 ``qbbox`` (piecewise: clipped at the image border) calls ``factors.metrics.residual`` and uses
 central differences on ``retract`` (step :data:`DEFAULT_NUMERIC_STEP`), one-sided where a side
 is invalid.
@@ -661,7 +662,8 @@ class PoseResidualModel:
         if idx.size:
             hull_directions = self.options.get("hull_directions", HULL_DIRECTIONS)
             rows, grad = metrics.overlap_residual(self.metric, self._det_params[idx], proj,
-                                                  hull_directions, gradient=J is not None)
+                                                  hull_directions, gradient=J is not None,
+                                                  disjoint_hull=True)
             r[idx] = rows
             if J is not None:
                 J[idx] = grad @ dg[idx].transpose(0, 2, 1)

@@ -113,3 +113,34 @@ def test_batched_overlap_residual_equals_pairwise_calls():
 def test_batch_rejects_mismatched_shapes():
     with pytest.raises(ValueError, match="p1 and p2"):
         quadrant_areas_batch(np.zeros((2, 5)), np.zeros((3, 5)), False)
+
+
+def test_disjoint_hull_rows_are_giou_rows_only_for_disjoint_pairs():
+    """``overlap_residual("iou", ..., disjoint_hull=True)`` (the pose factors' iou rows):
+    disjoint pairs get the giou rows and gradients, every other pair the iou rows."""
+    p1, p2 = _cases()
+    inter = quadrant_areas_batch(p1, p2, False)["intersection"][0].sum(axis=1)
+    disjoint = inter <= 0.0
+    assert 5 <= disjoint.sum() < p1.shape[0] - 5  # both kinds are covered
+    rows, grads = overlap_residual("iou", p1, p2, gradient=True, disjoint_hull=True)
+    iou = overlap_residual("iou", p1, p2, gradient=True)
+    giou = overlap_residual("giou", p1, p2, gradient=True)
+    for got, i_ref, g_ref in ((rows, iou[0], giou[0]), (grads, iou[1], giou[1])):
+        np.testing.assert_allclose(got[disjoint], g_ref[disjoint], rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(got[~disjoint], i_ref[~disjoint], rtol=1e-12, atol=1e-15)
+    # disjoint: the iou rows sum to 1 (flat); the giou rows to 2 - U / C > 1, decreasing as
+    # the ellipses approach
+    assert np.allclose(iou[0][disjoint].sum(axis=1), 1.0)
+    assert np.all(rows[disjoint].sum(axis=1) > 1.0)
+
+
+def test_iou_rows_stay_non_negative_for_nearly_identical_ellipses():
+    """Contours closer than 1e-9 count as identical in factors.overlap (the intersection is
+    then the whole second ellipse); the rows cap the intersection per quadrant at both
+    ellipses' quadrant areas, so they stay >= 0 and sum to ~Delta (~6e-10 here: a 1e-8 px
+    shift of a 3 x 20 px ellipse)."""
+    d = np.array([0.0, 0.0, 3.0, 20.0, 0.0])
+    p = np.array([0.0, 1e-8, 3.0, 20.0, 0.0])
+    r, g = overlap_residual("iou", d, p, gradient=True)
+    assert np.all(r >= 0.0) and r.sum() < 1e-9
+    assert np.all(np.isfinite(g))
