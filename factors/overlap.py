@@ -60,6 +60,10 @@ HULL_DIRECTIONS = 128
 _T_GRID = np.linspace(0.0, 2.0 * np.pi, GRID, endpoint=False)
 _COS_GRID, _SIN_GRID = np.cos(_T_GRID), np.sin(_T_GRID)
 _COS2_GRID, _SIN2_GRID = np.cos(2 * _T_GRID), np.sin(2 * _T_GRID)
+#: (5, GRID): rows 1, cos t, sin t, cos 2t, sin 2t (the contour function on the grid is one
+#: matmul with its coefficients), and the cyclic next index on the grid
+_GRID_BASIS = np.stack([np.ones(GRID), _COS_GRID, _SIN_GRID, _COS2_GRID, _SIN2_GRID])
+_GRID_NEXT = np.roll(np.arange(GRID), -1)
 _TWO_PI = 2.0 * math.pi
 
 
@@ -540,6 +544,20 @@ def quadrant_areas(
 
 
 @functools.lru_cache(maxsize=8)
+def _direction_basis(n: int) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
+    """Bases over the n hull directions ``t`` for :func:`_hull_batch`: (3, 2n) rows ``[1,
+    cos 2t, sin 2t]`` then ``[0, -sin 2t, cos 2t]`` (``n^T Sigma n`` and half its derivative
+    from the coefficients of ``_Batch.support``), (2, 2n) rows ``[cos t, sin t]`` then ``[-sin
+    t, cos t]`` (``n . c`` and its derivative); and the cyclic next index (n,)."""
+    th = np.linspace(0.0, _TWO_PI, n, endpoint=False)
+    c, s, c2, s2 = np.cos(th), np.sin(th), np.cos(2 * th), np.sin(2 * th)
+    quad_rows = np.stack([np.concatenate([np.ones(n), np.zeros(n)]),
+                          np.concatenate([c2, -s2]), np.concatenate([s2, c2])])
+    centre_rows = np.stack([np.concatenate([c, -s]), np.concatenate([s, c])])
+    return (quad_rows, centre_rows), np.roll(np.arange(n), -1)
+
+
+@functools.lru_cache(maxsize=8)
 def _directions(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     th = np.linspace(0.0, _TWO_PI, n, endpoint=False)
     return th, np.cos(th), np.sin(th)
@@ -685,10 +703,9 @@ def _crossing_roots_batch(b: _Batch) -> tuple[np.ndarray, np.ndarray, np.ndarray
     k3, k4 = 0.5 * (pap - qaq), paq
     ksum = np.abs(k0) + np.abs(k1) + np.abs(k2) + np.abs(k3) + np.abs(k4)
     same = ksum <= 1e-9
-    f = (k0[:, None] + k1[:, None] * _COS_GRID + k2[:, None] * _SIN_GRID
-         + k3[:, None] * _COS2_GRID + k4[:, None] * _SIN2_GRID)
+    f = np.stack([k0, k1, k2, k3, k4], axis=1) @ _GRID_BASIS  # (n, GRID)
     sign = f > 1e-12
-    change = sign != np.roll(sign, -1, axis=1)
+    change = sign != sign[:, _GRID_NEXT]
     change[same] = False
     crossing = change.any(axis=1)
     f_max = f[np.arange(b.n), np.argmax(np.abs(f), axis=1)]
@@ -782,24 +799,23 @@ def _hull_batch(b: _Batch, p1: np.ndarray, p2: np.ndarray, n_directions: int
     """Vectorised :func:`_hull_pieces`: arcs (pair, k, t0, t1) and common tangent segments
     (pair, x0, y0, x1, y1, end, par) of the hulls' boundaries."""
     n = b.n
-    th, nx, ny = _directions(int(n_directions))
-    S1, S2 = b.S
+    n_dir = int(n_directions)
+    basis, nxt = _direction_basis(n_dir)
     c2x, c2y = b.c[1]
-    col = [x[:, None] for x in (*S1, *S2, c2x, c2y)]
-    s1, s2, cx, cy = col[0:3], col[3:6], col[6], col[7]
-    q1 = s1[0] * nx * nx + 2.0 * s1[1] * nx * ny + s1[2] * ny * ny
-    q2 = s2[0] * nx * nx + 2.0 * s2[1] * nx * ny + s2[2] * ny * ny
-    sq1, sq2 = np.sqrt(q1), np.sqrt(q2)
-    diff = sq1 - (nx * cx + ny * cy) - sq2
-    ddiff = ((-ny * (s1[0] * nx + s1[1] * ny) + nx * (s1[1] * nx + s1[2] * ny)) / sq1
-             - (-ny * cx + nx * cy)
-             - (-ny * (s2[0] * nx + s2[1] * ny) + nx * (s2[1] * nx + s2[2] * ny)) / sq2)
+    # per direction: n^T Sigma_k n and half its derivative (n, 2, 2 n_dir), n . c2 and its
+    # derivative (n, 2 n_dir): two matmuls with the cached bases
+    quad_rows, centre_rows = basis
+    v = b.support.T.reshape(n, 2, 3) @ quad_rows
+    vc = np.stack([c2x, c2y], axis=1) @ centre_rows
+    sq = np.sqrt(v[:, :, :n_dir])
+    dsq = v[:, :, n_dir:] / sq
+    diff = sq[:, 0] - sq[:, 1] - vc[:, :n_dir]
+    ddiff = dsq[:, 0] - dsq[:, 1] - vc[:, n_dir:]
     tol = 1e-10 * (p1[:, 2] + p2[:, 2] + np.abs(c2x) + np.abs(c2y))
     dominant_first = diff.sum(axis=1) >= 0.0
     first = np.where(np.abs(diff) <= tol[:, None], dominant_first[:, None], diff > 0.0)
-    n_dir = th.size
     h = _TWO_PI / n_dir
-    first_n, ddiff_n, diff_n = (np.roll(x, -1, axis=1) for x in (first, ddiff, diff))
+    first_n, ddiff_n, diff_n = first[:, nxt], ddiff[:, nxt], diff[:, nxt]
     sgn = np.where(first, 1.0, -1.0)
     change = first != first_n
     turn = ~change & (sgn * ddiff < 0.0) & (sgn * ddiff_n > 0.0)
