@@ -119,6 +119,7 @@ from factors.overlap import (
     HULL_DIRECTIONS,
     hull_area,
     intersection_area,
+    quadrant_areas,
     quadrant_areas_batch,
 )
 
@@ -460,7 +461,8 @@ def overlap_residual(
     """The iou / giou residual: ``Delta`` split over the four quadrants ``Q_k`` of the
     detection's frame (module docstring), ``r_k >= 0``, ``sum_k r_k = Delta``; and, if
     ``gradient``, ``dr / dg`` w.r.t. the projection's Gaussian parameters ``g = (mu_x,
-    mu_y, s00, s01, s11)`` (px, px^2), exact (:func:`factors.overlap.quadrant_areas_batch`).
+    mu_y, s00, s01, s11)`` (px, px^2), exact (:func:`factors.overlap.quadrant_areas_batch`;
+    one pair: the scalar :func:`factors.overlap.quadrant_areas`).
 
     Params are one pair ``(5,)`` each (returns ``r`` (4,), ``dr/dg`` (4, 5)) or N pairs
     ``(N, 5)`` (returns (N, 4), (N, 4, 5); the pose factors evaluate all objects in one call).
@@ -476,19 +478,32 @@ def overlap_residual(
     single = det.ndim == 1
     det = det.reshape(-1, 5)
     proj = np.asarray(projection_params, dtype=float).reshape(-1, 5)
-    q = quadrant_areas_batch(det, proj, name == "giou", hull_directions, gradient)
+    q = _quadrant_areas(det, proj, name == "giou", hull_directions, gradient)
     r, d_r = _overlap_rows(name, det, q, gradient)
     if name == "iou" and disjoint_hull:
         disjoint = q["intersection"][0].sum(axis=1) <= 0.0
         if disjoint.any():
-            q_h = quadrant_areas_batch(det[disjoint], proj[disjoint], True, hull_directions,
-                                       gradient)
+            q_h = _quadrant_areas(det[disjoint], proj[disjoint], True, hull_directions,
+                                  gradient)
             r[disjoint], d_h = _overlap_rows("giou", det[disjoint], q_h, gradient)
             if gradient:
                 d_r[disjoint] = d_h
     if single:
         return r[0], None if d_r is None else d_r[0]
     return r, d_r
+
+
+def _quadrant_areas(
+    det: np.ndarray, proj: np.ndarray, hull: bool, hull_directions: int, gradient: bool,
+) -> dict[str, tuple[np.ndarray, np.ndarray | None]]:
+    """The quadrant areas of (N, 5) pairs: :func:`factors.overlap.quadrant_areas_batch`, or for
+    ONE pair the scalar reference :func:`factors.overlap.quadrant_areas` (equal to ~1e-9,
+    tested; a few times cheaper than the vectorised path's fixed numpy overhead for one pair,
+    e.g. ``residual("iou")`` in Table I), reshaped to (1, 4) / (1, 4, 5)."""
+    if det.shape[0] != 1:
+        return quadrant_areas_batch(det, proj, hull, hull_directions, gradient)
+    q = quadrant_areas(det[0], proj[0], hull, hull_directions, gradient)
+    return {k: (a[None], None if g is None else g[None]) for k, (a, g) in q.items()}
 
 
 def _overlap_rows(
