@@ -15,7 +15,8 @@ Frames with fewer than 3 detections are skipped (a pose is not determined). Prin
 and JSON (``--json PATH``); ``--write-results`` replaces its section of ``docs/results.md``.
 ``--from-json PATH`` re-renders an earlier run without solving; ``--before-json PATH`` adds
 the table of another run (e.g. the same command on an earlier commit, started together) as
-"before".
+"before"; ``--notes PATH`` appends a markdown file (observations from other benches of the
+same session, each stating its command) to the section.
 """
 
 from __future__ import annotations
@@ -177,6 +178,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="also render this run's JSON as 'before' (e.g. an earlier commit)")
     ap.add_argument("--before-label", default="an earlier commit",
                     help="what the --before-json run was (shown in the table heading)")
+    ap.add_argument("--notes", default=None,
+                    help="append this markdown file to the section (runs of other benches)")
     ap.add_argument("--command", default=None,
                     help="with --from-json: the command line of that run, for the results text")
     args = ap.parse_args(argv)
@@ -192,6 +195,9 @@ def main(argv: list[str] | None = None) -> int:
         with open(args.before_json) as fh:
             before = json.load(fh)
     table = markdown(result, command, before, args.before_label)
+    if args.notes:
+        with open(args.notes) as fh:
+            table += "\n\n" + fh.read().strip()
     print(table)
     print(json.dumps(result["summary"], indent=2))
     if args.json and not args.from_json:
