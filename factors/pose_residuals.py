@@ -47,9 +47,10 @@ functions of the projection's normalised dual conic ``Cn = C* / (-C*[2,2])`` (ce
 ``mu = -Cn[:2, 2]``, ``Sigma = Cn[:2, :2] + mu mu^T``). Their residuals are re-implemented
 here vectorised over the objects (equal to ``factors.metrics.residual``, tested) and
 differentiated through ``dC* = K dA K^T``, ``dCn = (dC* + Cn dC*[2,2]) / (-C*[2,2])``.
-``iou`` and ``giou`` evaluate their quadrant rows per pair with
+``iou`` and ``giou`` evaluate the quadrant rows of all pairs in one vectorised call of
 :func:`factors.metrics.overlap_residual` (exact areas and their exact gradient w.r.t. the
-projection's ``(mu, Sigma)``, :mod:`factors.overlap`), chained through the same ``dCn``.
+projection's ``(mu, Sigma)``, :mod:`factors.overlap`), chained through the same ``dCn``;
+iou with ``disjoint_hull`` (disjoint pairs get the giou rows, see ``factors.metrics``).
 ``qbbox`` (piecewise: clipped at the image border) calls ``factors.metrics.residual`` and uses
 central differences on ``retract`` (step :data:`DEFAULT_NUMERIC_STEP`), one-sided where a side
 is invalid.
@@ -739,9 +740,9 @@ class PoseResidualModel:
 
     def _evaluate_overlap(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
         """iou / giou: the quadrant rows ``r_j`` (4,) of :func:`factors.metrics.
-        overlap_residual` (exact areas, one scalar call per pair) and their analytic pose
-        Jacobian: the exact area gradients w.r.t. the projection's ``(mu, Sigma)``, chained
-        through ``dCn``."""
+        overlap_residual` (exact areas, all pairs in one vectorised call) and their analytic
+        pose Jacobian: the exact area gradients w.r.t. the projection's ``(mu, Sigma)``,
+        chained through ``dCn``."""
         A, c, S, margins = self._camera_frame(T)
         valid = margins > self.min_depth_margin
         Cn, dCn = self._normalised_dual_conics(A, c, valid, jacobian)
@@ -753,17 +754,31 @@ class PoseResidualModel:
                                  dsig[..., 1, 1, None]], axis=-1)
         r = np.zeros((self.n, self.dim))
         J = None if dg is None else np.zeros((self.n, self.dim, 6))
-        hull_directions = self.options.get("hull_directions", HULL_DIRECTIONS)
-        for j in np.flatnonzero(valid):
+        # a projection whose Sigma is not positive definite is invalid (penalty rows)
+        s00, s01, s11 = sigma[:, 0, 0], 0.5 * (sigma[:, 0, 1] + sigma[:, 1, 0]), sigma[:, 1, 1]
+        valid &= (s00 > 0.0) & (s00 * s11 - s01 * s01 > 0.0)
+        idx = np.flatnonzero(valid)
+        if idx.size:
             try:
-                proj = params_from_gaussians(mu[j:j + 1], sigma[j:j + 1])[0]
-            except DegenerateProjectionError:
-                valid[j] = False
-                continue
-            r[j], grad = metrics.overlap_residual(self.metric, self._det_params[j], proj,
-                                                  hull_directions, gradient=J is not None)
+                proj = params_from_gaussians(mu[idx], sigma[idx])
+            except DegenerateProjectionError:  # rounding at the positive-definite border
+                ok = np.ones(idx.size, dtype=bool)
+                for i, j in enumerate(idx):
+                    try:
+                        params_from_gaussians(mu[j:j + 1], sigma[j:j + 1])
+                    except DegenerateProjectionError:
+                        ok[i] = False
+                valid[idx[~ok]] = False
+                idx = idx[ok]
+                proj = params_from_gaussians(mu[idx], sigma[idx])
+        if idx.size:
+            hull_directions = self.options.get("hull_directions", HULL_DIRECTIONS)
+            rows, grad = metrics.overlap_residual(self.metric, self._det_params[idx], proj,
+                                                  hull_directions, gradient=J is not None,
+                                                  disjoint_hull=True)
+            r[idx] = rows
             if J is not None:
-                J[j] = grad @ dg[j].T
+                J[idx] = grad @ dg[idx].transpose(0, 2, 1)
         if not valid.all():
             self._apply_penalty(r, J, ~valid, c, S, margins)
         return PoseEvaluation(r, J, valid, margins)

@@ -291,11 +291,13 @@ def test_budget_exhausted_at_the_refine_stage_is_reported(monkeypatch):
 def test_budget_counts_the_solving_threads_cpu_time_so_load_does_not_change_the_result(
         monkeypatch):
     """Issue 14 part 4: ``time_budget_ms`` counts CPU time of the solving thread. The same iou
-    solve with a budget of 3x its CPU cost gives the identical result quietly and while another
-    threads of this process burn CPU (holding the GIL most of the time, so the solve gets about a
-    fifth of the wall clock: a wall-clock budget of the same size would have cut it, which the
-    test checks from the measured wall time). The wall-clock hard limit is widened here: it
-    is the latency guarantee, tested in ``test_deadline_clocks``."""
+    solve with a budget of 10x its CPU cost gives the identical result quietly and while two
+    other threads of this process burn CPU holding the GIL: the solve then gets a small
+    fraction of the wall clock (measured: wall ~70x its quiet CPU time, so a wall-clock budget
+    of the same size would have cut it, which the test checks from the measured wall time),
+    and its own CPU time grows too (GIL hand-offs: ~3-5x), hence the 10x budget. The
+    wall-clock hard limit is widened here: it is the latency guarantee, tested in
+    ``test_deadline_clocks``."""
     import threading
     import time
 
@@ -313,7 +315,7 @@ def test_budget_counts_the_solving_threads_cpu_time_so_load_does_not_change_the_
 
     ref, cpu, _ = solve(unbounded)
     assert ref.localized and ref.refinement_status != "time_budget"
-    budget_ms = 3e3 * cpu
+    budget_ms = 10e3 * cpu
     opts = dataclasses.replace(unbounded, time_budget_ms=budget_ms)
     quiet, _, _ = solve(opts)
     stop = threading.Event()
@@ -323,7 +325,7 @@ def test_budget_counts_the_solving_threads_cpu_time_so_load_does_not_change_the_
         while not stop.is_set():
             x = (x * 31 + 7) % 1_000_003  # pure Python: holds the GIL
 
-    burners = [threading.Thread(target=burn, daemon=True) for _ in range(4)]
+    burners = [threading.Thread(target=burn, daemon=True) for _ in range(2)]
     for t in burners:
         t.start()
     try:

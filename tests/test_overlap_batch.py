@@ -1,0 +1,187 @@
+"""The vectorised exact overlap areas (``factors.overlap.quadrant_areas_batch``, the pose
+factors' path) against the scalar reference construction (``factors.overlap.quadrant_areas``,
+itself checked against Monte Carlo, rasters and central differences in ``test_metrics.py``),
+pair by pair, on the configurations that exercise every branch: crossing contours (2 and 4
+roots), containment either way, disjoint ellipses, identical and nearly identical ellipses
+(the regime at a refinement's optimum), a tangent contact, and hulls with and without tangent
+segments (including an ellipse poking out of the other between two hull directions)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from factors.metrics import overlap_residual
+from factors.overlap import quadrant_areas, quadrant_areas_batch
+
+
+def _random_params(rng: np.random.Generator, n: int) -> np.ndarray:
+    return np.column_stack([rng.uniform(-40, 40, (n, 2)), rng.uniform(4, 60, (n, 2)),
+                            rng.uniform(-3, 3, n)])
+
+
+def _cases() -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(11)
+    p1 = [_random_params(rng, 40)]
+    p2 = [_random_params(rng, 40)]  # crossing, contained, disjoint
+    base = _random_params(rng, 40)
+    for noise in (1.0, 1e-3, 1e-7):  # close to identical (the optimum of a refinement)
+        p1.append(base)
+        p2.append(base + rng.normal(0.0, noise, base.shape))
+    fixed = np.array([
+        [0.0, 0.0, 4.0, 5.0, 0.0], [0.0, 0.0, 4.0, 4.0, 3.0],  # tangent contact at (+-4, 0)
+        [0.0, 0.0, 30.0, 10.0, 0.3], [0.0, 0.0, 30.0, 10.0, 0.3],  # identical
+        [0.0, 0.0, 50.0, 40.0, 0.0], [5.0, 0.0, 10.0, 8.0, 1.0],  # second inside first
+        [5.0, 0.0, 10.0, 8.0, 1.0], [0.0, 0.0, 50.0, 40.0, 0.0],  # first inside second
+        [0.0, 0.0, 10.0, 5.0, 0.0], [100.0, 30.0, 8.0, 6.0, 0.5],  # disjoint
+        [0.0, 0.0, 40.0, 39.9, 0.0], [0.0, 0.0, 40.2, 1.0, 0.7],  # a thin needle pokes out
+    ]).reshape(-1, 2, 5)
+    p1.append(fixed[:, 0])
+    p2.append(fixed[:, 1])
+    return np.concatenate(p1), np.concatenate(p2)
+
+
+@pytest.mark.parametrize("gradient", [False, True])
+def test_batch_equals_the_scalar_reference(gradient):
+    p1, p2 = _cases()
+    batch = quadrant_areas_batch(p1, p2, True, gradient=gradient)
+    tangent = _tangent_index(p1, p2)
+    # the tangent contact: its double roots are located only to ~sqrt(eps), and the scalar
+    # path is ~1e-8 off there (test_metrics.py); compare with the closed form instead: the
+    # circle of radius 4 lies in the 4 x 5 ellipse, a quarter of it per quadrant
+    np.testing.assert_allclose(batch["intersection"][0][tangent], 4.0 * math.pi, rtol=1e-9)
+    for j in range(p1.shape[0]):
+        if j == tangent:
+            continue
+        ref = quadrant_areas(p1[j], p2[j], True, gradient=gradient)
+        for name, (areas, grads) in ref.items():
+            b_areas, b_grads = batch[name][0][j], batch[name][1]
+            scale = max(float(np.abs(areas).sum()), math.pi * p1[j, 2] * p1[j, 3])
+            np.testing.assert_allclose(b_areas, areas, rtol=0, atol=1e-9 * scale,
+                                       err_msg=f"{name} pair {j}")
+            if gradient:
+                g_scale = max(float(np.abs(grads).max()), 1.0)
+                np.testing.assert_allclose(b_grads[j], grads, rtol=0,
+                                           atol=_gradient_tol(j, 1e-9) * g_scale,
+                                           err_msg=f"{name} gradient pair {j}")
+            else:
+                assert b_grads is None
+
+
+def _gradient_tol(j: int, tol: float) -> float:
+    """Ellipses 1e-7 apart (pairs 120-159 of :func:`_cases`): the hull's common tangents are
+    zeros of a support-function difference of size ~1e-7 of the ellipses' size, which both
+    paths resolve only to its rounding level (the batch stops at 1e-15 of the size, the scalar
+    path bisects further into rounding noise), i.e. to ~1e-8 rad, and the gradients' split
+    into quadrants moves with them: 1e-5 relative there (areas still agree to 1e-9), ``tol``
+    elsewhere."""
+    return 1e-5 if 120 <= j < 160 else tol
+
+
+def _tangent_index(p1: np.ndarray, p2: np.ndarray) -> int:
+    return int(np.flatnonzero((p1[:, 2] == 4.0) & (p1[:, 3] == 5.0) & (p2[:, 2] == 4.0))[0])
+
+
+def test_batch_without_hull_and_empty_batch():
+    p1, p2 = _cases()
+    with_hull = quadrant_areas_batch(p1, p2, True)
+    without = quadrant_areas_batch(p1, p2, False)
+    assert set(without) == {"second", "intersection"}
+    for name in without:
+        np.testing.assert_array_equal(without[name][0], with_hull[name][0])
+    empty = quadrant_areas_batch(np.zeros((0, 5)), np.zeros((0, 5)), True, gradient=True)
+    assert all(v[0].shape == (0, 4) and v[1].shape == (0, 4, 5) for v in empty.values())
+
+
+def test_batched_overlap_residual_equals_pairwise_calls():
+    """``overlap_residual`` on (N, 5) arrays (the vectorised areas) equals N one-pair calls
+    (which use the scalar reference areas), rows and gradients; the tangent contact, where the
+    scalar path is ~1e-8 off (see above), is left out."""
+    p1, p2 = _cases()
+    tangent = _tangent_index(p1, p2)
+    for name in ("iou", "giou"):
+        rows, grads = overlap_residual(name, p1, p2, gradient=True)
+        assert rows.shape == (p1.shape[0], 4) and grads.shape == (p1.shape[0], 4, 5)
+        for j in range(p1.shape[0]):
+            if j == tangent:
+                continue
+            r, g = overlap_residual(name, p1[j], p2[j], gradient=True)
+            np.testing.assert_allclose(rows[j], r, rtol=0, atol=1e-10)
+            # 1e-7 apart: the giou gap rows take hull_k - union_k, nearly equal, which
+            # amplifies the tangents' placement (_gradient_tol) another ~10x
+            tol = 10.0 * _gradient_tol(j, 1e-10)
+            np.testing.assert_allclose(grads[j], g, rtol=0, atol=tol * np.abs(g).max())
+
+
+def test_batch_rejects_mismatched_shapes():
+    with pytest.raises(ValueError, match="p1 and p2"):
+        quadrant_areas_batch(np.zeros((2, 5)), np.zeros((3, 5)), False)
+
+
+def test_disjoint_hull_rows_are_giou_rows_only_for_disjoint_pairs():
+    """``overlap_residual("iou", ..., disjoint_hull=True)`` (the pose factors' iou rows):
+    disjoint pairs get the giou rows and gradients, every other pair the iou rows."""
+    p1, p2 = _cases()
+    inter = quadrant_areas_batch(p1, p2, False)["intersection"][0].sum(axis=1)
+    disjoint = inter <= 0.0
+    assert 5 <= disjoint.sum() < p1.shape[0] - 5  # both kinds are covered
+    rows, grads = overlap_residual("iou", p1, p2, gradient=True, disjoint_hull=True)
+    iou = overlap_residual("iou", p1, p2, gradient=True)
+    giou = overlap_residual("giou", p1, p2, gradient=True)
+    for got, i_ref, g_ref in ((rows, iou[0], giou[0]), (grads, iou[1], giou[1])):
+        np.testing.assert_allclose(got[disjoint], g_ref[disjoint], rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(got[~disjoint], i_ref[~disjoint], rtol=1e-12, atol=1e-15)
+    # disjoint: the iou rows sum to 1 (flat); the giou rows to 2 - U / C > 1, decreasing as
+    # the ellipses approach
+    assert np.allclose(iou[0][disjoint].sum(axis=1), 1.0)
+    assert np.all(rows[disjoint].sum(axis=1) > 1.0)
+
+
+def test_iou_rows_stay_non_negative_for_nearly_identical_ellipses():
+    """Contours closer than 1e-9 count as identical in factors.overlap (the intersection is
+    then the whole second ellipse); the rows cap the intersection per quadrant at both
+    ellipses' quadrant areas, so they stay >= 0 and sum to ~Delta (~6e-10 here: a 1e-8 px
+    shift of a 3 x 20 px ellipse)."""
+    d = np.array([0.0, 0.0, 3.0, 20.0, 0.0])
+    p = np.array([0.0, 1e-8, 3.0, 20.0, 0.0])
+    r, g = overlap_residual("iou", d, p, gradient=True)
+    assert np.all(r >= 0.0) and r.sum() < 1e-9
+    assert np.all(np.isfinite(g))
+
+
+def _params_from_gaussian(g: np.ndarray) -> np.ndarray:
+    """Ellipse params (5,) from ``g = (mu_x, mu_y, s00, s01, s11)`` (closed-form eigen)."""
+    s00, s01, s11 = g[2], g[3], g[4]
+    half, disc = 0.5 * (s00 + s11), math.hypot(0.5 * (s00 - s11), s01)
+    return np.array([g[0], g[1], math.sqrt(half + disc), math.sqrt(half - disc),
+                     0.5 * math.atan2(2.0 * s01, s00 - s11)])
+
+
+@pytest.mark.parametrize("name", ["iou", "giou"])
+def test_batched_gradients_match_central_differences(name):
+    """The vectorised rows' gradients (iou with ``disjoint_hull``, as the pose factors use it)
+    w.r.t. the projection's ``g = (mu, Sigma)``, against central differences of the batched
+    rows themselves, on crossing, contained and disjoint pairs."""
+    rng = np.random.default_rng(23)
+    p1, p2 = _random_params(rng, 12), _random_params(rng, 12)
+    p1[0], p2[0] = [0.0, 0.0, 10.0, 5.0, 0.0], [60.0, 20.0, 8.0, 6.0, 0.5]  # disjoint
+    rows, grads = overlap_residual(name, p1, p2, gradient=True, disjoint_hull=True)
+    c, s = np.cos(p2[:, 4]), np.sin(p2[:, 4])
+    a2, b2 = p2[:, 2] ** 2, p2[:, 3] ** 2
+    g = np.column_stack([p2[:, 0], p2[:, 1], a2 * c * c + b2 * s * s, (a2 - b2) * c * s,
+                         a2 * s * s + b2 * c * c])
+    for k in range(5):
+        h = 1e-6 * np.maximum(1.0, np.abs(g[:, k]))
+        moved = []
+        for sgn in (1.0, -1.0):
+            gk = g.copy()
+            gk[:, k] += sgn * h
+            p = np.array([_params_from_gaussian(x) for x in gk])
+            moved.append(overlap_residual(name, p1, p, disjoint_hull=True)[0])
+        num = (moved[0] - moved[1]) / (2.0 * h[:, None])
+        scale = np.maximum(np.abs(num).max(axis=1, keepdims=True), 1e-12)
+        np.testing.assert_allclose(grads[:, :, k], num, rtol=0, atol=1e-5 * scale.max() + 1e-9,
+                                   err_msg=f"component {k}")
+    assert rows[0].sum() > 1.0  # the disjoint pair carries the hull term
