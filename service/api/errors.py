@@ -43,17 +43,13 @@ log = logging.getLogger("quadloc.api")
 def field_and_problem(exc: Exception, prefix: str = "") -> tuple[str, str]:
     """``(field, problem)`` of an input error, ``prefix`` prepended to the field.
 
-    The field is the error's structured ``field`` (:class:`factors.geometry.FieldError`:
-    ``GeometryError``, ``LocalizationInputError``); errors raised without one answer ``"body"``.
-    ``service.tracking``'s ``TrackingInputError`` is not structured yet: its messages read
-    ``"<field>: <problem>"`` and are split here, the only place that reads a message.
+    The field is the error's structured ``field`` (:class:`factors.names.FieldError`:
+    ``GeometryError``, ``LocalizationInputError``, ``TrackingInputError``); errors raised
+    without one answer ``"body"``. The message is never parsed.
     """
     field = getattr(exc, "field", None)
     if field:
         return prefix + field, str(getattr(exc, "problem", exc))
-    head, sep, tail = str(exc).partition(": ")
-    if type(exc).__name__ == "TrackingInputError" and sep and head and " " not in head:
-        return prefix + head, tail
     return prefix + "body", str(exc)
 
 
