@@ -164,7 +164,7 @@ def test_chess_importer_names_fields_in_its_own_format(chess_source: dict[str, A
         scene_map_from_chess(bad)
     fields = {e["field"]: e["message"] for e in exc.value.errors}
     assert "orthonormal" in fields["objects[2].ellipsoid.R"]
-    assert "> 0" in fields["objects[3].ellipsoid.axes"]
+    assert "greater than or equal to 0.001" in fields["objects[3].ellipsoid.axes[1]"]
 
 
 # --------------------------------------------------------------------------- validation
@@ -173,15 +173,21 @@ def test_chess_importer_names_fields_in_its_own_format(chess_source: dict[str, A
 @pytest.mark.parametrize(
     ("mutate", "field", "fragment"),
     [
-        (lambda d: d["objects"][0].update(axes=[0.3, 0.0, 0.4]), "objects[0].axes", "> 0"),
-        (lambda d: d["objects"][0].update(axes=[0.3, 1e-4, 0.4]), "objects[0].axes",
-         "[0.001, 100]"),
-        (lambda d: d["objects"][0].update(axes=[300, 1, 1]), "objects[0].axes", "[0.001, 100]"),
-        (lambda d: d["objects"][0].update(center=[1, float("nan"), 0]), "objects[0].center",
+        (lambda d: d["objects"][0].update(axes=[0.3, 0.0, 0.4]), "objects[0].axes[1]",
+         "greater than or equal to 0.001"),
+        (lambda d: d["objects"][0].update(axes=[0.3, 1e-4, 0.4]), "objects[0].axes[1]",
+         "greater than or equal to 0.001"),
+        (lambda d: d["objects"][0].update(axes=[300, 1, 1]), "objects[0].axes[0]",
+         "less than or equal to 100"),
+        (lambda d: d["objects"][0].update(center=[1, float("nan"), 0]), "objects[0].center[1]",
          "finite"),
-        (lambda d: d["objects"][0].update(center=[1, 2e5, 0]), "objects[0].center", "within"),
-        (lambda d: d["objects"][0].update(center=[1, 2]), "objects[0].center", "shape [3]"),
-        (lambda d: d["objects"][0].update(center=[1, True, 0]), "objects[0].center", "booleans"),
+        (lambda d: d["objects"][0].update(center=[1, 2e5, 0]), "objects[0].center[1]",
+         "less than or equal to 10000"),
+        (lambda d: d["objects"][0].update(center=[1, 2]), "objects[0].center", "at least 3 items"),
+        (lambda d: d["objects"][0].update(center=[1, True, 0]), "objects[0].center[1]",
+         "valid number"),
+        (lambda d: d["objects"][0].update(quaternion_wxyz=None), "objects[0].quaternion_wxyz",
+         "valid list"),
         (lambda d: d["objects"][0].update(quaternion_wxyz=[1, 1, 0, 0]),
          "objects[0].quaternion_wxyz", "unit norm"),
         (lambda d: d["objects"][1].update(rotation=[[1, 0, 0], [0, 1, 0], [0, 0, -1]]),
@@ -194,15 +200,18 @@ def test_chess_importer_names_fields_in_its_own_format(chess_source: dict[str, A
         (lambda d: d["objects"][1].update(category="sofa"), "objects[1].category", "unknown"),
         (lambda d: d["objects"][1].update(colour="red"), "objects[1].colour", "unknown field"),
         (lambda d: d["objects"][1].pop("axes"), "objects[1].axes", "missing"),
-        (lambda d: d.update(map_id="has space"), "map_id", "URL-safe"),
+        (lambda d: d.update(map_id="has space"), "map_id", "match pattern"),
         (lambda d: d.update(map_id=7), "map_id", "string"),
-        (lambda d: d.update(name=""), "name", "non-empty"),
+        (lambda d: d.update(name=""), "name", "at least 1 character"),
+        (lambda d: d.update(name=" \t"), "name", "non-empty"),
+        (lambda d: d.update(name="a\nb"), "name", "control characters"),
         (lambda d: d.update(up_axis=[0, 0, 0]), "up_axis", "non-zero"),
         (lambda d: d.update(categories=["chair", "tv", "chair"]), "categories[2]", "duplicate"),
         (lambda d: d.update(metadata=[1]), "metadata", "JSON object"),
         (lambda d: d.update(metadata={"x": "y" * 70_000}), "metadata", "bytes"),
         (lambda d: d.update(format="other/9"), "format", "quadloc.map/1"),
-        (lambda d: d.update(version=0), "version", ">= 1"),
+        (lambda d: d.update(version=0), "version", "greater than or equal to 1"),
+        (lambda d: d.update(version=True), "version", "valid integer"),
         (lambda d: d.pop("objects"), "objects", "missing"),
     ],
 )
@@ -220,7 +229,7 @@ def test_all_problems_are_reported_at_once() -> None:
     doc["objects"][1]["category"] = "sofa"
     doc["name"] = ""
     errors = _errors(doc)
-    assert {"objects[0].axes", "objects[1].category", "name"} <= set(errors)
+    assert {"objects[0].axes[0]", "objects[1].category", "name"} <= set(errors)
 
 
 def test_object_count_limit() -> None:

@@ -15,6 +15,7 @@ from fastapi import APIRouter, Body, Header, Query, Response, status
 
 from maps.errors import MapAlreadyExists, MapNotFound, MapValidationError, VersionConflict
 from maps.model import (
+    CHESS_JSON_SCHEMA,
     MAP_ID_PATTERN,
     MAP_JSON_SCHEMA,
     content_hash,
@@ -38,32 +39,9 @@ __all__ = ["router"]
 
 router = APIRouter(prefix="/v1", tags=["maps"])
 
+#: Request-body schemas, generated from the pydantic document models that validate the bodies
+#: (maps.model.MapDocument / ChessDocument), without the standalone document's ``$schema``/``$id``.
 _MAP_SCHEMA = {k: v for k, v in MAP_JSON_SCHEMA.items() if not k.startswith("$")}
-_VEC3: dict[str, Any] = {"type": "array", "minItems": 3, "maxItems": 3,
-                         "items": {"type": "number"}}
-_CHESS_SCHEMA: dict[str, Any] = {
-    "type": "object",
-    "required": ["category_id_to_label", "objects"],
-    "properties": {
-        "category_id_to_label": {"type": "object", "additionalProperties": {"type": "string"}},
-        "objects": {"type": "array", "items": {
-            "type": "object",
-            "required": ["category_id", "object_id", "ellipsoid"],
-            "properties": {
-                "category_id": {"type": "integer"},
-                "object_id": {"type": "integer"},
-                "ellipsoid": {"type": "object", "required": ["axes", "R", "center"],
-                              "properties": {
-                                  "axes": {**_VEC3, "description": "Semi-axes (m), > 0."},
-                                  "R": {"type": "array", "minItems": 3, "maxItems": 3,
-                                        "items": _VEC3,
-                                        # the tolerance is DOCUMENT_ROTATION_TOLERANCE
-                                        "description": "3x3 rotation ellipsoid -> world: "
-                                                       "orthonormal within 1e-4, det +1."},
-                                  "center": _VEC3}},
-            }}},
-    },
-}
 
 
 _EXAMPLE_MAP = scene_map_from_dict(MAP_EXAMPLE, version=1)
@@ -169,7 +147,7 @@ def create_map(body: Annotated[dict[str, Any], Body()], response: Response, stor
                 "the query.",
     responses={**problem_responses(400, 401, 403, 409, 413, 415, 422, 503),
                **_ok(201, _MAP_OUT_EXAMPLE)},
-    openapi_extra=_body_doc(_CHESS_SCHEMA, CHESS_IMPORT_EXAMPLE),
+    openapi_extra=_body_doc(CHESS_JSON_SCHEMA, CHESS_IMPORT_EXAMPLE),
 )
 def import_chess_map(
     body: Annotated[dict[str, Any], Body()], response: Response, store: StoreDep,
