@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -135,6 +136,7 @@ def _fail(message: str, error_type: str = "map_rule") -> PydanticCustomError:
     return PydanticCustomError(error_type, "{message}", {"message": message})
 
 
+_CONTROL = re.compile(r"[\x00-\x1f]")
 _SURROGATE_MESSAGE = "must be valid Unicode text (a lone surrogate such as \\ud800 is not)"
 
 
@@ -152,7 +154,7 @@ def _printable(text: str) -> str:
     """Text rule beyond the length limits: not blank, no control characters, valid Unicode."""
     if not text.strip():
         raise _fail("must be a non-empty string (not only whitespace)")
-    if any(ord(ch) < 32 for ch in text):
+    if _CONTROL.search(text):
         raise _fail("must not contain control characters")
     if not _is_utf8(text):
         raise _fail(_SURROGATE_MESSAGE)
@@ -335,12 +337,11 @@ _MESSAGES = {"missing": "required field missing", "extra_forbidden": "unknown fi
              "mapping_type": "must be a JSON object"}
 
 
-def _validated(model: Any, data: Any) -> Any:
-    """``model.model_validate(data)`` (a model class or TypeAdapter), every error as one
-    :class:`MapValidationError` naming each field by its :func:`json_path`."""
+def _validated(model: type[BaseModel], data: Any) -> Any:
+    """``model.model_validate(data)``, every error as one :class:`MapValidationError` naming
+    each field by its :func:`json_path`."""
     try:
-        return (model.model_validate(data) if isinstance(model, type)
-                else model.validate_python(data))
+        return model.model_validate(data)
     except ValidationError as exc:
         raise MapValidationError([{"field": json_path(e["loc"]),
                                    "message": _MESSAGES.get(e["type"], e["msg"])}
@@ -368,17 +369,13 @@ class ObjectDocument(_Document):
     quaternion_wxyz: Quaternion = None  # type: ignore[assignment]
     rotation: Rotation = None  # type: ignore[assignment]
 
-    @model_validator(mode="wrap")
-    @classmethod
-    def _one_orientation(cls, data: Any, handler: Any) -> Any:
-        both = isinstance(data, Mapping) and "quaternion_wxyz" in data and "rotation" in data
-        return _with_problems(handler, data, [(("rotation",), "give either quaternion_wxyz or "
-                                                              "rotation, not both")] if both
-                              else [], cls.__name__)
-
-    def to_object(self) -> MapObject:
-        return _map_object(self.object_id, self.category, self.center, self.axes,
-                           self.quaternion_wxyz, self.rotation)
+    @model_validator(mode="after")
+    def _one_orientation(self) -> ObjectDocument:
+        if self.quaternion_wxyz is not None and self.rotation is not None:
+            raise ValidationError.from_exception_data(type(self).__name__, [InitErrorDetails(
+                type=_fail("give either quaternion_wxyz or rotation, not both"),
+                loc=("rotation",), input=self.rotation)])
+        return self
 
 
 class MapDocument(_Document):
@@ -404,9 +401,16 @@ class MapDocument(_Document):
         return _with_problems(handler, data, problems, cls.__name__)
 
     def to_scene_map(self) -> SceneMap:
-        return SceneMap(self.map_id, self.name, tuple(self.up_axis), tuple(self.categories),
-                        tuple(o.to_object() for o in self.objects), self.version,
-                        self.metadata)
+        """The map of this (validated) document; built without validating it a second time."""
+        scene = object.__new__(SceneMap)
+        for key, value in (("map_id", self.map_id), ("name", self.name),
+                           ("up_axis", tuple(self.up_axis)), ("categories", tuple(self.categories)),
+                           ("objects", tuple(_map_object(o.object_id, o.category, o.center, o.axes,
+                                                    o.quaternion_wxyz, o.rotation)
+                                        for o in self.objects)),
+                           ("version", self.version), ("metadata", _freeze(self.metadata))):
+            object.__setattr__(scene, key, value)
+        return scene
 
 
 class _ChessEllipsoid(BaseModel):
