@@ -402,15 +402,18 @@ class MapDocument(_Document):
 
     def to_scene_map(self) -> SceneMap:
         """The map of this (validated) document; built without validating it a second time."""
-        scene = object.__new__(SceneMap)
-        for key, value in (("map_id", self.map_id), ("name", self.name),
-                           ("up_axis", tuple(self.up_axis)), ("categories", tuple(self.categories)),
-                           ("objects", tuple(_map_object(o.object_id, o.category, o.center, o.axes,
-                                                    o.quaternion_wxyz, o.rotation)
-                                        for o in self.objects)),
-                           ("version", self.version), ("metadata", _freeze(self.metadata))):
-            object.__setattr__(scene, key, value)
-        return scene
+        return _set_fields(object.__new__(SceneMap), self, tuple(
+            _map_object(o.object_id, o.category, o.center, o.axes, o.quaternion_wxyz, o.rotation)
+            for o in self.objects))
+
+
+def _set_fields(scene: SceneMap, doc: MapDocument, objects: tuple[MapObject, ...]) -> SceneMap:
+    """Fill the frozen ``scene`` from its validated document: tuples, read-only metadata."""
+    for key, value in (("map_id", doc.map_id), ("name", doc.name), ("version", doc.version),
+                       ("up_axis", tuple(doc.up_axis)), ("categories", tuple(doc.categories)),
+                       ("objects", objects), ("metadata", _freeze(doc.metadata))):
+        object.__setattr__(scene, key, value)
+    return scene
 
 
 class _ChessEllipsoid(BaseModel):
@@ -434,17 +437,14 @@ class ChessDocument(BaseModel):
     @model_validator(mode="wrap")
     @classmethod
     def _known_categories(cls, data: Any, handler: Any) -> Any:
-        problems = []
-        labels, objs = (data.get("category_id_to_label"), data.get("objects")) \
-            if isinstance(data, Mapping) else (None, None)
-        if isinstance(labels, Mapping) and isinstance(objs, list):
-            for i, o in enumerate(objs):
-                cid = o.get("category_id") if isinstance(o, Mapping) else None
-                if isinstance(cid, int | float | str) and not isinstance(cid, bool) \
-                        and str(_integral(cid)) not in labels:
-                    problems.append(((("objects", i, "category_id")),
-                                     f"unknown category id {cid!r}"))
-        return _with_problems(handler, data, problems, cls.__name__)
+        labels = data.get("category_id_to_label") if isinstance(data, Mapping) else None
+        objs = data.get("objects") if isinstance(labels, Mapping) else None
+        ids = [(i, o.get("category_id")) for i, o in enumerate(objs or ())
+               if isinstance(objs, list) and isinstance(o, Mapping)]
+        return _with_problems(handler, data, [
+            (("objects", i, "category_id"), f"unknown category id {cid!r}") for i, cid in ids
+            if isinstance(cid, int | float | str) and not isinstance(cid, bool)
+            and str(_integral(cid)) not in labels], cls.__name__)
 
 
 class _MapObjectLabels(_Document):
@@ -557,11 +557,7 @@ class SceneMap:
             "up_axis": _plain(self.up_axis), "categories": _plain(self.categories),
             "objects": [_object_dict(o) for o in objs],
             "metadata": {} if self.metadata is None else self.metadata})
-        object.__setattr__(self, "version", doc.version)
-        object.__setattr__(self, "up_axis", tuple(doc.up_axis))
-        object.__setattr__(self, "categories", tuple(doc.categories))
-        object.__setattr__(self, "objects", objs)
-        object.__setattr__(self, "metadata", _freeze(doc.metadata))
+        _set_fields(self, doc, objs)
 
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)  # mappingproxy does not pickle: store plain JSON data

@@ -13,7 +13,7 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Header, Query, Response, status
 
-from maps.errors import MapAlreadyExists, MapNotFound, MapValidationError, VersionConflict
+from maps.errors import MapAlreadyExists, MapNotFound, VersionConflict
 from maps.model import (
     CHESS_JSON_SCHEMA,
     MAP_ID_PATTERN,
@@ -95,10 +95,6 @@ def _map_out(stored: Any) -> MapOut:
                   map=sm.to_dict())
 
 
-def _invalid_map(exc: MapValidationError) -> ProblemError:
-    return ProblemError("invalid-map", str(exc), errors=exc.errors)
-
-
 def _check_object_limit(body: Any, settings: Any) -> None:
     objs = body.get("objects") if isinstance(body, dict) else None
     if isinstance(objs, list) and len(objs) > settings.max_map_objects:
@@ -132,10 +128,7 @@ def _created(store: Any, scene_map: Any, response: Response) -> MapOut:
 def create_map(body: Annotated[dict[str, Any], Body()], response: Response, store: StoreDep,
                settings: SettingsDep, _key: WriteAccess) -> MapOut:
     _check_object_limit(body, settings)
-    try:
-        scene_map = scene_map_from_dict(body, version=1)
-    except MapValidationError as exc:
-        raise _invalid_map(exc) from exc
+    scene_map = scene_map_from_dict(body, version=1)  # invalid: 422 (errors.py's handler)
     return _created(store, scene_map, response)
 
 
@@ -156,10 +149,7 @@ def import_chess_map(
     name: Annotated[str, Query(min_length=1, max_length=256)] = "Chess",
 ) -> MapOut:
     _check_object_limit(body, settings)
-    try:
-        scene_map = scene_map_from_chess(body, map_id=map_id, name=name)
-    except MapValidationError as exc:
-        raise _invalid_map(exc) from exc
+    scene_map = scene_map_from_chess(body, map_id=map_id, name=name)
     return _created(store, scene_map, response)
 
 
@@ -251,10 +241,8 @@ def update_map(
     if body.get("map_id", map_id) != map_id:
         raise ProblemError("invalid-map", "map_id in the body differs from the path",
                            errors=[{"field": "map_id", "message": f"must be {map_id!r}"}])
-    try:  # the body first: an invalid document is the client's error whatever If-Match says
-        scene_map = scene_map_from_dict({**body, "map_id": map_id}, version=1)
-    except MapValidationError as exc:
-        raise _invalid_map(exc) from exc
+    # the body first: an invalid document is the client's error whatever If-Match says
+    scene_map = scene_map_from_dict({**body, "map_id": map_id}, version=1)
     tags = _parse_if_match(if_match)
     try:
         current = store.get(map_id)
