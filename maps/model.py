@@ -439,8 +439,8 @@ class ChessDocument(BaseModel):
     def _known_categories(cls, data: Any, handler: Any) -> Any:
         labels = data.get("category_id_to_label") if isinstance(data, Mapping) else None
         objs = data.get("objects") if isinstance(labels, Mapping) else None
-        ids = [(i, o.get("category_id")) for i, o in enumerate(objs or ())
-               if isinstance(objs, list) and isinstance(o, Mapping)]
+        ids = [(i, o.get("category_id")) for i, o in
+               enumerate(objs if isinstance(objs, list) else ()) if isinstance(o, Mapping)]
         return _with_problems(handler, data, [
             (("objects", i, "category_id"), f"unknown category id {cid!r}") for i, cid in ids
             if isinstance(cid, int | float | str) and not isinstance(cid, bool)

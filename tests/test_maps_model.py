@@ -581,5 +581,12 @@ def test_chess_ids_integral_floats_and_strings() -> None:
         with pytest.raises(MapValidationError) as exc:
             scene_map_from_chess(doc(cid, oid))
         assert any(e["field"].startswith(field) for e in exc.value.errors), exc.value.errors
+    for labels, objects, field in (({"0": "TV"}, 1.5, "objects"),
+                                   ({"0": "TV"}, [7], "objects[0]"),
+                                   ([], [], "category_id_to_label"),
+                                   ({}, [], "category_id_to_label")):
+        with pytest.raises(MapValidationError) as exc:  # not a TypeError: a 422 naming the field
+            scene_map_from_chess({"category_id_to_label": labels, "objects": objects})
+        assert [e["field"] for e in exc.value.errors] == [field], exc.value.errors
     assert CHESS_JSON_SCHEMA["required"] == ["category_id_to_label", "objects"]
     assert "$defs" not in json.dumps(CHESS_JSON_SCHEMA) + json.dumps(MAP_JSON_SCHEMA)
