@@ -201,8 +201,7 @@ class FrameResult:
 def pose_adjoint(T: np.ndarray) -> np.ndarray:
     """6x6 adjoint of a 4x4 pose in GTSAM's ``[omega, v]`` order:
     ``T Exp(xi) T^-1 = Exp(Ad_T xi)``."""
-    return gtsam.Pose3(gtsam.Rot3(snap_to_rotation(T[:3, :3])),
-                       np.ascontiguousarray(T[:3, 3])).AdjointMap()
+    return _pose3(T).AdjointMap()
 
 
 def _pose3(T: np.ndarray) -> gtsam.Pose3:
