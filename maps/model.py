@@ -523,11 +523,12 @@ class MapObject:
 class SceneMap:
     """A versioned ellipsoid map. ``version`` is 1 for a new map and grows by one per update.
 
-    Validated on construction (raises :class:`MapValidationError`): ``map_id`` matches
-    :data:`MAP_ID_PATTERN`; ``up_axis`` finite and non-zero (stored as given, see :attr:`up`);
-    categories unique non-empty strings; object ids unique; each object's category in
-    ``categories``; semi-axes and coordinates within :data:`LIMITS`; ``metadata`` a JSON object.
-    ``up_axis``, ``categories`` and ``objects`` are converted to tuples; ``metadata`` to a
+    Validated on construction through :class:`MapDocument` (raises
+    :class:`MapValidationError`): ``map_id`` matches :data:`MAP_ID_PATTERN`; ``up_axis`` finite
+    and non-zero (stored as given, see :attr:`up`); categories unique non-empty strings; object
+    ids unique; each object's category in ``categories``; semi-axes and coordinates within
+    :data:`LIMITS`; ``metadata`` a JSON object (``None``: empty). ``up_axis``, ``categories``
+    and ``objects`` are converted to tuples; ``metadata`` to a
     read-only deep copy (``MappingProxyType``, arrays as tuples): maps are shared, e.g. by the
     compiled-map cache, and must not change under their content hash. ``to_dict`` returns
     plain, mutable copies.
