@@ -39,6 +39,7 @@ from bench.reference_data import load_chess_map, load_chess_poses
 from bench.results_doc import update_results_section
 from bench.simulate import SimulationConfig, simulate_frame
 from factors.geometry import invert_pose, pose_matrix, snap_to_rotation
+from factors.pose_residuals import expmap_pose3
 from maps.compiled import compile_map
 from service.localization.pipeline import localize
 from service.localization.types import LocalizationOptions
@@ -58,12 +59,8 @@ def _log_so3(R: np.ndarray) -> np.ndarray:
 
 
 def _exp_so3(w: np.ndarray) -> np.ndarray:
-    a = float(np.linalg.norm(w))
-    if a < 1e-12:
-        return np.eye(3)
-    k = w / a
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + math.sin(a) * K + (1 - math.cos(a)) * K @ K
+    """Rotation ``exp([w]x)`` (rad): the rotation block of the shared SE(3) exponential."""
+    return expmap_pose3(np.concatenate([w, np.zeros(3)]))[:3, :3]
 
 
 def make_walk(keyposes: list[np.ndarray]) -> list[np.ndarray]:

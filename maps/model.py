@@ -6,10 +6,14 @@ up direction (the Chess demo map has +Z up). Orientation of each ellipsoid is a 
 
 (Owned by the maps issue; the field names below are the contract other modules rely on.)
 
-Every :class:`SceneMap` is validated when it is built (see :data:`LIMITS`); a problem raises one
-:class:`MapValidationError` listing every problem found as ``{"field", "message"}`` entries, with
-fields as JSON paths such as ``objects[3].axes``. The JSON format (``to_dict`` / ``from_dict``)
-is documented in ``docs/maps.md``; :data:`MAP_JSON_SCHEMA` is its JSON Schema.
+Validation, once: the pydantic models :class:`MapDocument` (the JSON document, ``docs/maps.md``)
+and :class:`ChessDocument` (the Chess import format) hold every rule (see :data:`LIMITS`) and
+parse documents into the in-process types :class:`SceneMap` / :class:`MapObject`, frozen
+dataclasses whose constructors validate through the same model (so maps built in code obey the
+same rules). A problem raises one :class:`MapValidationError` listing every problem found as
+``{"field", "message"}`` entries, fields as JSON paths such as ``objects[3].axes[1]``.
+:data:`MAP_JSON_SCHEMA` and :data:`CHESS_JSON_SCHEMA` are generated from the models
+(``model_json_schema``), so the published schema and the validator cannot disagree.
 """
 
 from __future__ import annotations
@@ -20,9 +24,22 @@ import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    Strict,
+    StrictStr,
+    ValidationError,
+    model_validator,
+)
+from pydantic.json_schema import GenerateJsonSchema
+from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from factors.geometry import (
     DOCUMENT_ROTATION_TOLERANCE,
@@ -35,15 +52,19 @@ from factors.geometry import (
 )
 
 __all__ = [
+    "CHESS_JSON_SCHEMA",
     "FORMAT",
     "HASH_DECIMALS",
     "LIMITS",
     "MAP_JSON_SCHEMA",
+    "ChessDocument",
+    "MapDocument",
     "MapObject",
     "MapValidationError",
     "SceneMap",
     "canonical_json",
     "content_hash",
+    "json_path",
     "scene_map_from_chess",
     "scene_map_from_dict",
     "scene_map_to_dict",
@@ -71,13 +92,13 @@ LIMITS: dict[str, float] = {
 
 #: ``map_id`` must be URL-path safe: letters, digits, ``_ . -``; first char a letter or digit.
 MAP_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,127}$"
-_MAP_ID_RE = re.compile(MAP_ID_PATTERN)
 
 
 class MapValidationError(ValueError):
     """A map is invalid. ``errors`` lists every problem as ``{"field": ..., "message": ...}``.
 
-    ``field`` is a JSON path into the map document, e.g. ``"objects[3].axes"`` or ``"map_id"``.
+    ``field`` is a JSON path into the map document, e.g. ``"objects[3].axes[1]"`` or
+    ``"map_id"`` (``"$"``: the document itself).
     """
 
     def __init__(self, errors: Sequence[Mapping[str, str]]) -> None:
@@ -91,39 +112,31 @@ class MapValidationError(ValueError):
         super().__init__(f"invalid map: {shown}{more}")
 
 
-class _Errors:
-    """Collects validation problems; ``raise_if_any`` raises one MapValidationError."""
+def json_path(loc: Sequence[str | int], root: str = "$") -> str:
+    """``("objects", 3, "axes", 1)`` -> ``"objects[3].axes[1]"``; ``root`` for an empty path.
 
-    def __init__(self) -> None:
-        self.items: list[dict[str, str]] = []
-
-    def add(self, field_path: str, message: str) -> None:
-        self.items.append({"field": field_path, "message": message})
-
-    def raise_if_any(self) -> None:
-        if self.items:
-            raise MapValidationError(self.items)
-
-
-def _check_text(errors: _Errors, path: str, value: object, max_len: int) -> bool:
-    if not isinstance(value, str):
-        errors.add(path, f"must be a string, got {type(value).__name__}")
-        return False
-    if not value or not value.strip():
-        errors.add(path, "must be a non-empty string")
-        return False
-    if len(value) > max_len:
-        errors.add(path, f"must be at most {max_len} characters, got {len(value)}")
-        return False
-    if any(ord(ch) < 32 for ch in value):
-        errors.add(path, "must not contain control characters")
-        return False
-    if not _is_utf8(value):
-        errors.add(path, _SURROGATE_MESSAGE)
-        return False
-    return True
+    Pydantic's validator tags (``function-after[...]``, ``model-...``) are skipped.
+    """
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        elif not str(part).startswith(("function-", "model-")):
+            out += ("." if out else "") + str(part)
+    return out or root
 
 
+# --------------------------------------------------------------------------- rules
+# Each rule once: the document models below (the JSON boundary) are built from these types and
+# functions, and the dataclass constructors (the in-process API) validate through the same
+# models, so the published JSON Schema, the importer and the constructors cannot disagree.
+
+def _fail(message: str, error_type: str = "map_rule") -> PydanticCustomError:
+    """A rule's error (raise it in a validator: pydantic reports it at the field validated)."""
+    return PydanticCustomError(error_type, "{message}", {"message": message})
+
+
+_CONTROL = re.compile(r"[\x00-\x1f]")
 _SURROGATE_MESSAGE = "must be valid Unicode text (a lone surrogate such as \\ud800 is not)"
 
 
@@ -137,84 +150,100 @@ def _is_utf8(text: str) -> bool:
     return True
 
 
-def _check_ellipsoid(errors: _Errors, path: str, ellipsoid: Ellipsoid) -> None:
-    axes = ellipsoid.axes
-    lo, hi = LIMITS["min_semi_axis_m"], LIMITS["max_semi_axis_m"]
-    if np.any(axes < lo) or np.any(axes > hi):
-        errors.add(f"{path}.axes", f"semi-axes must be in [{lo:g}, {hi:g}] m, got "
-                                   f"{[round(float(a), 6) for a in axes]}")
-    lim = LIMITS["max_abs_coordinate_m"]
-    if np.any(np.abs(ellipsoid.center) > lim):
-        errors.add(f"{path}.center", f"coordinates must be within +-{lim:g} m, got "
-                                     f"{ellipsoid.center.tolist()}")
+def _printable(text: str) -> str:
+    """Text rule beyond the length limits: not blank, no control characters, valid Unicode."""
+    if not text.strip():
+        raise _fail("must be a non-empty string (not only whitespace)")
+    if _CONTROL.search(text):
+        raise _fail("must not contain control characters")
+    if not _is_utf8(text):
+        raise _fail(_SURROGATE_MESSAGE)
+    return text
 
 
-def _validate_header(
-    errors: _Errors, map_id: object, name: object, version: object, up_axis: object,
-    categories: object, metadata: object,
-) -> dict[str, Any]:
-    """Check the map-level fields; returns their normalised values (tuples, floats)."""
-    fixed: dict[str, Any] = {}
-    if not isinstance(map_id, str):
-        errors.add("map_id", f"must be a string, got {type(map_id).__name__}")
-    elif not _MAP_ID_RE.match(map_id):
-        errors.add("map_id", f"must match {MAP_ID_PATTERN} (URL-safe, at most 128 "
-                             f"characters), got {map_id!r}")
-    _check_text(errors, "name", name, int(LIMITS["max_name_length"]))
-    if isinstance(version, bool) or not isinstance(version, int | np.integer):
-        errors.add("version", f"must be an integer, got {version!r}")
-    elif version < 1:
-        errors.add("version", f"must be >= 1, got {version}")
-    else:
-        fixed["version"] = int(version)
+def _text(max_length: float) -> Any:
+    return Annotated[StrictStr, Field(min_length=1, max_length=int(max_length)),
+                     AfterValidator(_printable)]
+
+
+#: Ids and category labels; the map's display name.
+Label = _text(LIMITS["max_id_length"])
+Name = _text(LIMITS["max_name_length"])
+#: A finite JSON number (booleans refused).
+Number = Annotated[float, Field(strict=True, allow_inf_nan=False)]
+
+
+def _vector(n: int, item: Any = Number, **constraints: Any) -> Any:
+    return Annotated[list[item], Field(min_length=n, max_length=n, **constraints)]
+
+
+def _nonzero(v: list[float]) -> list[float]:
+    if not float(np.linalg.norm(v)) > 1e-9:
+        raise _fail("must be a non-zero vector")
+    return v
+
+
+def _unit_quaternion(q: list[float]) -> list[float]:
+    n, tol = float(np.linalg.norm(q)), LIMITS["quaternion_norm_tolerance"]
+    if abs(n - 1.0) > tol:
+        raise _fail(f"must have unit norm (within {tol:g}), |q| = {n:.9g}")
+    return q
+
+
+def _proper_rotation(rows: list[list[float]]) -> list[list[float]]:
+    R, tol = np.array(rows, dtype=float), LIMITS["rotation_orthonormal_tolerance"]
+    err = float(np.max(np.abs(R @ R.T - np.eye(3))))
+    if err > tol:
+        raise _fail(f"must be orthonormal (within {tol:g}): max|R R^T - I| = {err:.3g}")
+    det = float(np.linalg.det(R))
+    if det < 0:
+        raise _fail(f"must be a proper rotation (det +1), det = {det:.6g}")
+    return rows
+
+
+_lim = LIMITS["max_abs_coordinate_m"]
+#: World metres, each coordinate within +-LIMITS["max_abs_coordinate_m"].
+Center = _vector(3, Annotated[Number, Field(ge=-_lim, le=_lim)], description="World metres.")
+#: Semi-axes (metres) in [LIMITS["min_semi_axis_m"], LIMITS["max_semi_axis_m"]].
+SemiAxes = _vector(3, Annotated[Number, Field(ge=LIMITS["min_semi_axis_m"],
+                                              le=LIMITS["max_semi_axis_m"])],
+                   description="Semi-axes in metres.")
+Quaternion = Annotated[_vector(4, description="Unit quaternion (w, x, y, z), ellipsoid frame "
+                                              "-> world."), AfterValidator(_unit_quaternion)]
+Rotation = Annotated[_vector(3, _vector(3), description="3x3 rotation, ellipsoid frame -> world "
+                                                        "(alternative to quaternion_wxyz)."),
+                     AfterValidator(_proper_rotation)]
+UpAxis = Annotated[_vector(3, description="World up direction (default [0, 0, 1])."),
+                   AfterValidator(_nonzero)]
+
+
+def _metadata(value: Mapping[str, Any]) -> dict[str, Any]:
+    """A JSON object within the size and nesting limits: returns a plain deep copy."""
+    limit = int(LIMITS["max_metadata_depth"])
+    if _nesting_depth(value) > limit:  # before any recursion: no RecursionError
+        raise _fail(f"at most {limit} levels of nesting, got more than {limit}")
+    value = _thaw(value)
     try:
-        up = np.asarray(up_axis, dtype=float)
-    except (TypeError, ValueError):
-        up = np.full(1, np.nan)
-    if up.shape != (3,) or not np.all(np.isfinite(up)):
-        errors.add("up_axis", f"must be 3 finite numbers, got {up_axis!r}")
-    elif not np.linalg.norm(up) > 1e-9:
-        errors.add("up_axis", "must be a non-zero vector")
-    else:
-        fixed["up_axis"] = tuple(float(v) for v in up)
-    if isinstance(categories, str) or not isinstance(categories, Sequence):
-        errors.add("categories", "must be a list of strings")
-        categories = ()
-    cats = tuple(categories)
-    if len(cats) > LIMITS["max_categories"]:
-        errors.add("categories", f"at most {int(LIMITS['max_categories'])} categories, "
-                                 f"got {len(cats)}")
-    seen: set[str] = set()
-    for i, c in enumerate(cats):
-        if _check_text(errors, f"categories[{i}]", c, int(LIMITS["max_id_length"])):
-            if c in seen:
-                errors.add(f"categories[{i}]", f"duplicate category {c!r}")
-            seen.add(c)
-    fixed["categories"] = tuple(c for c in cats if isinstance(c, str))  # others reported
-    if metadata is None:
-        metadata = {}
-    depth = _nesting_depth(metadata)
-    if depth > LIMITS["max_metadata_depth"]:
-        errors.add("metadata", f"at most {int(LIMITS['max_metadata_depth'])} levels of "
-                               f"nesting, got more than {int(LIMITS['max_metadata_depth'])}")
-        metadata = {}
-    elif isinstance(metadata, Mapping):
-        metadata = _thaw(metadata)  # a deep, private copy (frozen below)
-    if not isinstance(metadata, dict):
-        errors.add("metadata", f"must be a JSON object, got {type(metadata).__name__}")
-    else:
-        try:
-            size = len(json.dumps(metadata, allow_nan=False, sort_keys=True))
-        except (TypeError, ValueError) as exc:
-            errors.add("metadata", f"must be JSON-serialisable (finite numbers): {exc}")
-        else:
-            if size > LIMITS["max_metadata_bytes"]:
-                errors.add("metadata", f"at most {int(LIMITS['max_metadata_bytes'])} bytes "
-                                       f"of JSON, got {size}")
-            if not _is_utf8(json.dumps(metadata, ensure_ascii=False)):
-                errors.add("metadata", f"keys and strings {_SURROGATE_MESSAGE}")
-        fixed["metadata"] = _freeze(metadata)
-    return fixed
+        size = len(json.dumps(value, allow_nan=False, sort_keys=True))
+    except (TypeError, ValueError) as exc:
+        raise _fail(f"must be JSON-serialisable (finite numbers): {exc}") from None
+    if size > LIMITS["max_metadata_bytes"]:
+        raise _fail(f"at most {int(LIMITS['max_metadata_bytes'])} bytes of JSON, got {size}")
+    if not _is_utf8(json.dumps(value, ensure_ascii=False)):
+        raise _fail(f"keys and strings {_SURROGATE_MESSAGE}")
+    return value
+
+
+Metadata = Annotated[Mapping[str, Any], AfterValidator(_metadata)]
+
+
+def _integral(value: Any) -> Any:
+    """An integral float (``3.0``: JSON Schema's ``integer`` allows it) as an int."""
+    return int(value) if isinstance(value, float) and value.is_integer() else value
+
+
+#: The Chess format's integer ids (integral floats accepted; decimal strings kept as they are).
+ChessId = Annotated[int, BeforeValidator(_integral), Strict()] | StrictStr
 
 
 def _freeze(value: Any) -> Any:
@@ -254,26 +283,173 @@ def _thaw(value: Any) -> Any:
     return value
 
 
-def _validate_objects(
-    errors: _Errors, indexed: Sequence[tuple[int, object]], categories: set[str]
-) -> None:
-    """Check objects given with their index in the document: ids, categories, sizes."""
-    if len(indexed) > LIMITS["max_objects"]:
-        errors.add("objects", f"at most {int(LIMITS['max_objects'])} objects, got {len(indexed)}")
-    seen_ids: dict[str, int] = {}
-    for i, o in indexed:
-        path = f"objects[{i}]"
-        if not isinstance(o, MapObject):
-            errors.add(path, f"must be a MapObject, got {type(o).__name__}")
+def _with_problems(handler: Any, data: Any, problems: list[tuple[tuple[str | int, ...], str]],
+                   title: str) -> Any:
+    """Run pydantic's ``handler`` and report its errors together with ``problems`` (rules that
+    span fields, found on the raw input), so that every problem is reported at once."""
+    errors: list[InitErrorDetails] = []
+    try:
+        result = handler(data)
+    except ValidationError as exc:
+        errors = [InitErrorDetails(type=_fail(e["msg"], e["type"]), loc=e["loc"],
+                                   input=e["input"]) for e in exc.errors()]
+    errors += [InitErrorDetails(type=_fail(message), loc=loc, input=data)
+               for loc, message in problems]
+    if errors:
+        raise ValidationError.from_exception_data(title, errors)
+    return result
+
+
+def _reference_problems(data: Mapping[str, Any]) -> list[tuple[tuple[str | int, ...], str]]:
+    """Rules across fields: categories unique, object ids unique, each object's category one of
+    ``categories`` (checked on the entries that are strings; the others have their own error)."""
+    cats, objs = data.get("categories"), data.get("objects")
+    problems: list[tuple[tuple[str | int, ...], str]] = []
+    known: set[str] = set()
+    if isinstance(cats, list | tuple):
+        for i, c in enumerate(cats):
+            if isinstance(c, str):
+                if c in known:
+                    problems.append((("categories", i), f"duplicate category {c!r}"))
+                known.add(c)
+    if not isinstance(objs, list | tuple) or len(objs) > LIMITS["max_objects"]:
+        return problems
+    seen: dict[str, int] = {}
+    for i, o in enumerate(objs):
+        if not isinstance(o, Mapping):
             continue
-        if o.object_id in seen_ids:
-            errors.add(f"{path}.object_id", f"duplicate object id {o.object_id!r} "
-                                            f"(also objects[{seen_ids[o.object_id]}])")
-        else:
-            seen_ids[o.object_id] = i
-        if o.category not in categories:
-            errors.add(f"{path}.category", f"unknown category {o.category!r} (not in categories)")
-        _check_ellipsoid(errors, path, o.ellipsoid)
+        oid, cat = o.get("object_id"), o.get("category")
+        if isinstance(oid, str):
+            if oid in seen:
+                problems.append((("objects", i, "object_id"), f"duplicate object id {oid!r} "
+                                                              f"(also objects[{seen[oid]}])"))
+            else:
+                seen[oid] = i
+        if isinstance(cat, str) and isinstance(cats, list | tuple) and cat not in known:
+            problems.append((("objects", i, "category"),
+                             f"unknown category {cat!r} (not in categories)"))
+    return problems
+
+
+#: Messages of pydantic's error types, in the document's terms (others are pydantic's own).
+_MESSAGES = {"missing": "required field missing", "extra_forbidden": "unknown field",
+             "dict_type": "must be a JSON object", "model_type": "must be a JSON object",
+             "mapping_type": "must be a JSON object"}
+
+
+def _validated(model: type[BaseModel], data: Any) -> Any:
+    """``model.model_validate(data)``, every error as one :class:`MapValidationError` naming
+    each field by its :func:`json_path`."""
+    try:
+        return model.model_validate(data)
+    except ValidationError as exc:
+        raise MapValidationError([{"field": json_path(e["loc"]),
+                                   "message": _MESSAGES.get(e["type"], e["msg"])}
+                                  for e in exc.errors()]) from None
+
+
+# --------------------------------------------------------------------------- documents
+
+
+class _Document(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class ObjectDocument(_Document):
+    """One object of the map document (objects[i])."""
+
+    model_config = ConfigDict(json_schema_extra={"not": {"required": ["quaternion_wxyz",
+                                                                      "rotation"]}})
+
+    object_id: Label
+    category: Label
+    center: Center
+    axes: SemiAxes
+    # Optional, but not nullable: absent means "not given" (the default is not validated).
+    quaternion_wxyz: Quaternion = None  # type: ignore[assignment]
+    rotation: Rotation = None  # type: ignore[assignment]
+
+    @model_validator(mode="after")
+    def _one_orientation(self) -> ObjectDocument:
+        if self.quaternion_wxyz is not None and self.rotation is not None:
+            raise ValidationError.from_exception_data(type(self).__name__, [InitErrorDetails(
+                type=_fail("give either quaternion_wxyz or rotation, not both"),
+                loc=("rotation",), input=self.rotation)])
+        return self
+
+
+class MapDocument(_Document):
+    """The map document, format quadloc.map/1 (docs/maps.md)."""
+
+    model_config = ConfigDict(title="QuadLoc ellipsoid map")
+
+    format: Literal["quadloc.map/1"] = FORMAT
+    map_id: Annotated[StrictStr, Field(pattern=MAP_ID_PATTERN)]
+    name: Name
+    version: Annotated[int, Field(strict=True, ge=1, description="Set by the store; ignored "
+                                                                   "on create/update.")] = 1
+    up_axis: UpAxis = [0.0, 0.0, 1.0]
+    categories: Annotated[list[Label], Field(max_length=int(LIMITS["max_categories"]),
+                                             json_schema_extra={"uniqueItems": True})]
+    objects: Annotated[list[ObjectDocument], Field(max_length=int(LIMITS["max_objects"]))]
+    metadata: Metadata = {}
+
+    @model_validator(mode="wrap")
+    @classmethod
+    def _references(cls, data: Any, handler: Any) -> Any:
+        problems = _reference_problems(data) if isinstance(data, Mapping) else []
+        return _with_problems(handler, data, problems, cls.__name__)
+
+    def to_scene_map(self) -> SceneMap:
+        """The map of this (validated) document; built without validating it a second time."""
+        return _set_fields(object.__new__(SceneMap), self, tuple(
+            _map_object(o.object_id, o.category, o.center, o.axes, o.quaternion_wxyz, o.rotation)
+            for o in self.objects))
+
+
+def _set_fields(scene: SceneMap, doc: MapDocument, objects: tuple[MapObject, ...]) -> SceneMap:
+    """Fill the frozen ``scene`` from its validated document: tuples, read-only metadata."""
+    for key, value in (("map_id", doc.map_id), ("name", doc.name), ("version", doc.version),
+                       ("up_axis", tuple(doc.up_axis)), ("categories", tuple(doc.categories)),
+                       ("objects", objects), ("metadata", _freeze(doc.metadata))):
+        object.__setattr__(scene, key, value)
+    return scene
+
+
+class _ChessEllipsoid(BaseModel):
+    axes: SemiAxes
+    R: Rotation  # the Chess format's name
+    center: Center
+
+
+class _ChessObject(BaseModel):
+    category_id: ChessId
+    object_id: Annotated[int, BeforeValidator(_integral), Strict()] | Label
+    ellipsoid: _ChessEllipsoid
+
+
+class ChessDocument(BaseModel):
+    """The Chess scene format (bench/data/chess_scene.json); unknown fields are ignored."""
+
+    category_id_to_label: Annotated[dict[str, Label], Field(min_length=1)]
+    objects: Annotated[list[_ChessObject], Field(max_length=int(LIMITS["max_objects"]))]
+
+    @model_validator(mode="wrap")
+    @classmethod
+    def _known_categories(cls, data: Any, handler: Any) -> Any:
+        labels = data.get("category_id_to_label") if isinstance(data, Mapping) else None
+        objs = data.get("objects") if isinstance(labels, Mapping) else None
+        ids = [(i, o.get("category_id")) for i, o in
+               enumerate(objs if isinstance(objs, list) else ()) if isinstance(o, Mapping)]
+        return _with_problems(handler, data, [
+            (("objects", i, "category_id"), f"unknown category id {cid!r}") for i, cid in ids
+            if isinstance(cid, int | float | str) and not isinstance(cid, bool)
+            and str(_integral(cid)) not in labels], cls.__name__)
+
+
+class _MapObjectLabels(_Document):
+    object_id: Label
+    category: Label
 
 
 # --------------------------------------------------------------------------- model
@@ -288,12 +464,10 @@ class MapObject:
     ellipsoid: Ellipsoid
 
     def __post_init__(self) -> None:
-        errors = _Errors()
-        _check_text(errors, "object_id", self.object_id, int(LIMITS["max_id_length"]))
-        _check_text(errors, "category", self.category, int(LIMITS["max_id_length"]))
+        _validated(_MapObjectLabels, {"object_id": self.object_id, "category": self.category})
         if not isinstance(self.ellipsoid, Ellipsoid):
-            errors.add("ellipsoid", f"must be an Ellipsoid, got {type(self.ellipsoid).__name__}")
-        errors.raise_if_any()
+            raise MapValidationError([{"field": "ellipsoid", "message": "must be an Ellipsoid, "
+                                       f"got {type(self.ellipsoid).__name__}"}])
         # The orientation as exported. Kept (not recomputed) when the object was built from a
         # quaternion, so that JSON export -> import -> export is bit-exact (stable hashes).
         if getattr(self, "_quaternion_wxyz", None) is None:
@@ -349,11 +523,12 @@ class MapObject:
 class SceneMap:
     """A versioned ellipsoid map. ``version`` is 1 for a new map and grows by one per update.
 
-    Validated on construction (raises :class:`MapValidationError`): ``map_id`` matches
-    :data:`MAP_ID_PATTERN`; ``up_axis`` finite and non-zero (stored as given, see :attr:`up`);
-    categories unique non-empty strings; object ids unique; each object's category in
-    ``categories``; semi-axes and coordinates within :data:`LIMITS`; ``metadata`` a JSON object.
-    ``up_axis``, ``categories`` and ``objects`` are converted to tuples; ``metadata`` to a
+    Validated on construction through :class:`MapDocument` (raises
+    :class:`MapValidationError`): ``map_id`` matches :data:`MAP_ID_PATTERN`; ``up_axis`` finite
+    and non-zero (stored as given, see :attr:`up`); categories unique non-empty strings; object
+    ids unique; each object's category in ``categories``; semi-axes and coordinates within
+    :data:`LIMITS`; ``metadata`` a JSON object (``None``: empty). ``up_axis``, ``categories``
+    and ``objects`` are converted to tuples; ``metadata`` to a
     read-only deep copy (``MappingProxyType``, arrays as tuples): maps are shared, e.g. by the
     compiled-map cache, and must not change under their content hash. ``to_dict`` returns
     plain, mutable copies.
@@ -368,19 +543,22 @@ class SceneMap:
     metadata: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        errors = _Errors()
-        fixed = _validate_header(errors, self.map_id, self.name, self.version, self.up_axis,
-                                 self.categories, self.metadata)
         objs = self.objects
         if isinstance(objs, str) or not isinstance(objs, Sequence):
-            errors.add("objects", "must be a list of MapObject")
-            objs = ()
+            raise MapValidationError([{"field": "objects", "message": "must be a list of "
+                                                                      "MapObject"}])
         objs = tuple(objs)
-        _validate_objects(errors, list(enumerate(objs)), set(fixed["categories"]))
-        errors.raise_if_any()
-        for key, value in fixed.items():
-            object.__setattr__(self, key, value)
-        object.__setattr__(self, "objects", objs)
+        wrong = [{"field": f"objects[{i}]", "message": f"must be a MapObject, got "
+                                                       f"{type(o).__name__}"}
+                 for i, o in enumerate(objs) if not isinstance(o, MapObject)]
+        if wrong:
+            raise MapValidationError(wrong)
+        doc = _validated(MapDocument, {
+            "map_id": self.map_id, "name": self.name, "version": _plain(self.version),
+            "up_axis": _plain(self.up_axis), "categories": _plain(self.categories),
+            "objects": [_object_dict(o) for o in objs],
+            "metadata": {} if self.metadata is None else self.metadata})
+        _set_fields(self, doc, objs)
 
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)  # mappingproxy does not pickle: store plain JSON data
@@ -453,18 +631,29 @@ def scene_map_to_dict(scene_map: SceneMap) -> dict[str, Any]:
         "version": scene_map.version,
         "up_axis": [float(v) for v in scene_map.up_axis],
         "categories": list(scene_map.categories),
-        "objects": [
-            {
-                "object_id": o.object_id,
-                "category": o.category,
-                "center": [float(v) for v in o.ellipsoid.center],
-                "axes": [float(v) for v in o.ellipsoid.axes],
-                "quaternion_wxyz": [float(v) for v in o.quaternion_wxyz],
-            }
-            for o in scene_map.objects
-        ],
+        "objects": [_object_dict(o) for o in scene_map.objects],
         "metadata": _thaw(scene_map.metadata),
     }
+
+
+def _object_dict(obj: MapObject) -> dict[str, Any]:
+    """One object as exported (orientation as ``quaternion_wxyz``, ``w >= 0``)."""
+    e = obj.ellipsoid
+    return {"object_id": obj.object_id, "category": obj.category,
+            "center": [float(v) for v in e.center], "axes": [float(v) for v in e.axes],
+            "quaternion_wxyz": [float(v) for v in obj.quaternion_wxyz]}
+
+
+def _plain(value: Any) -> Any:
+    """numpy arrays and scalars of the in-process API as plain Python values (lists, floats,
+    ints) for the document model; anything else unchanged (and judged by the model)."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    return value
 
 
 def canonical_json(scene_map: SceneMap) -> str:
@@ -511,282 +700,99 @@ def content_hash(scene_map: SceneMap) -> str:
     return hashlib.sha256(_canonical_text(doc).encode("utf-8")).hexdigest()
 
 
-_TOP_KEYS = {"format", "map_id", "name", "version", "up_axis", "categories", "objects",
-             "metadata"}
-_OBJECT_KEYS = {"object_id", "category", "center", "axes", "quaternion_wxyz", "rotation"}
 
-
-def _numbers(
-    errors: _Errors, path: str, value: object, shape: tuple[int, ...]
-) -> np.ndarray | None:
-    if isinstance(value, str | bytes | Mapping) or value is None:
-        errors.add(path, f"must be an array of numbers with shape {list(shape)}")
-        return None
-    try:
-        arr = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        errors.add(path, f"must be an array of numbers with shape {list(shape)}")
-        return None
-    if arr.shape != shape:
-        errors.add(path, f"must have shape {list(shape)}, got {list(arr.shape)}")
-        return None
-    flat = np.array(value, dtype=object).reshape(-1)
-    if any(isinstance(v, bool) for v in flat):
-        errors.add(path, "must contain numbers, not booleans")
-        return None
-    if not np.all(np.isfinite(arr)):
-        errors.add(path, f"must be finite, got {arr.tolist()}")
-        return None
-    return arr
-
-
-def _parse_object(errors: _Errors, path: str, obj: object) -> MapObject | None:
-    if not isinstance(obj, Mapping):
-        errors.add(path, f"must be an object, got {type(obj).__name__}")
-        return None
-    n_before = len(errors.items)
-    for key in sorted(set(obj) - _OBJECT_KEYS):
-        errors.add(f"{path}.{key}", "unknown field")
-    for key in ("object_id", "category", "center", "axes"):
-        if key not in obj:
-            errors.add(f"{path}.{key}", "required field missing")
-    object_id = obj.get("object_id")  # a string, as MAP_JSON_SCHEMA says (no integers)
-    if "object_id" in obj:
-        _check_text(errors, f"{path}.object_id", object_id, int(LIMITS["max_id_length"]))
-    if "category" in obj:
-        _check_text(errors, f"{path}.category", obj["category"], int(LIMITS["max_id_length"]))
-    center = _numbers(errors, f"{path}.center", obj["center"], (3,)) if "center" in obj else None
-    axes = _numbers(errors, f"{path}.axes", obj["axes"], (3,)) if "axes" in obj else None
-    if axes is not None and np.any(axes <= 0):
-        errors.add(f"{path}.axes", f"semi-axes must be > 0, got {axes.tolist()}")
-        axes = None
-    rotation = quaternion = None
-    has_q, has_r = "quaternion_wxyz" in obj, "rotation" in obj
-    if has_q and has_r:
-        errors.add(f"{path}.rotation", "give either quaternion_wxyz or rotation, not both")
-    elif has_q:
-        q = _numbers(errors, f"{path}.quaternion_wxyz", obj["quaternion_wxyz"], (4,))
-        if q is not None:
-            n = float(np.linalg.norm(q))
-            tol = LIMITS["quaternion_norm_tolerance"]
-            if abs(n - 1.0) > tol:
-                errors.add(f"{path}.quaternion_wxyz",
-                           f"must have unit norm (within {tol:g}), |q| = {n:.9g}")
-            else:
-                quaternion = q
-    elif has_r:
-        R = _numbers(errors, f"{path}.rotation", obj["rotation"], (3, 3))
-        if R is not None:
-            tol = LIMITS["rotation_orthonormal_tolerance"]
-            err = float(np.max(np.abs(R @ R.T - np.eye(3))))
-            det = float(np.linalg.det(R))
-            if err > tol:
-                errors.add(f"{path}.rotation", f"must be orthonormal (within {tol:g}): "
-                                               f"max|R R^T - I| = {err:.3g}")
-            elif det < 0:
-                errors.add(f"{path}.rotation", f"must be a proper rotation (det +1), det = "
-                                               f"{det:.6g}")
-            else:
-                # Stored as its quaternion (the exported form), so that a re-import is exact.
-                quaternion = quaternion_wxyz_from_rotation(snap_to_rotation(R))
-    else:
-        rotation = np.eye(3)  # documented default: axis-aligned
-    if len(errors.items) > n_before or center is None or axes is None:
-        return None
-    if quaternion is not None:
-        return MapObject.from_quaternion_wxyz(object_id, obj["category"], center, axes, quaternion)
-    if rotation is None:
-        return None
-    return MapObject(object_id, obj["category"], Ellipsoid(center, axes, rotation))
+def _map_object(object_id: str, category: str, center: Sequence[float], axes: Sequence[float],
+                quaternion_wxyz: Sequence[float] | None, rotation: Any | None) -> MapObject:
+    """The object of a validated document entry; a ``rotation`` is stored as its quaternion
+    (the exported form, so that a re-import is exact); neither means axis-aligned."""
+    if rotation is not None:
+        quaternion_wxyz = quaternion_wxyz_from_rotation(
+            snap_to_rotation(np.array(rotation, dtype=float)))
+    if quaternion_wxyz is not None:
+        return MapObject.from_quaternion_wxyz(object_id, category, center, axes, quaternion_wxyz)
+    return MapObject(object_id, category, Ellipsoid(np.array(center, dtype=float),
+                                                    np.array(axes, dtype=float), np.eye(3)))
 
 
 def scene_map_from_dict(data: Mapping[str, Any], *, version: int | None = None) -> SceneMap:
-    """Parse and validate the documented JSON document (``docs/maps.md``) into a SceneMap.
+    """Parse and validate the documented JSON document (``docs/maps.md``, :class:`MapDocument`)
+    into a SceneMap.
 
     Each object gives its orientation as ``quaternion_wxyz`` (unit within 1e-4, renormalised)
     or a 3x3 ``rotation`` (orthonormal within 1e-4, snapped to the nearest rotation); neither
     means axis-aligned. ``version`` defaults to 1 when absent; the ``version`` argument, if
     given, overrides it. Every problem found is reported in one :class:`MapValidationError`.
     """
-    errors = _Errors()
-    if not isinstance(data, Mapping):
-        errors.add("$", f"the map must be a JSON object, got {type(data).__name__}")
-        errors.raise_if_any()
-    for key in sorted(set(data) - _TOP_KEYS):
-        errors.add(key, "unknown field")
-    if "format" in data and data["format"] != FORMAT:
-        errors.add("format", f"must be {FORMAT!r}, got {data['format']!r}")
-    for key in ("map_id", "name", "categories", "objects"):
-        if key not in data:
-            errors.add(key, "required field missing")
-    up = data.get("up_axis", [0.0, 0.0, 1.0])
-    up_arr = _numbers(errors, "up_axis", up, (3,))
-    cats = data.get("categories", [])
-    if not isinstance(cats, list):
-        errors.add("categories", "must be an array of strings")
-        cats = []
-    raw_objects = data.get("objects", [])
-    if not isinstance(raw_objects, list):
-        errors.add("objects", "must be an array")
-        raw_objects = []
-    if len(raw_objects) > LIMITS["max_objects"]:
-        errors.add("objects", f"at most {int(LIMITS['max_objects'])} objects, got "
-                              f"{len(raw_objects)}")
-        raw_objects = []
-    objects = [_parse_object(errors, f"objects[{i}]", o) for i, o in enumerate(raw_objects)]
-    metadata = data.get("metadata", {})
-    if metadata is None:  # present but null: MAP_JSON_SCHEMA says "object"
-        errors.add("metadata", "must be a JSON object, got null")
-        metadata = {}
-    ver = data.get("version", 1) if version is None else version
-    fixed = _validate_header(errors, data.get("map_id", ""), data.get("name", ""), ver,
-                             up_arr if up_arr is not None else (0.0, 0.0, 1.0), cats, metadata)
-    _validate_objects(errors, [(i, o) for i, o in enumerate(objects) if o is not None],
-                      set(fixed["categories"]))
-    # Missing required fields were already reported once: drop the echo from the header check.
-    missing = {e["field"] for e in errors.items if e["message"] == "required field missing"}
-    errors.items = [e for e in errors.items
-                    if e["field"] not in missing or e["message"] == "required field missing"]
-    errors.raise_if_any()
-    return SceneMap(
-        map_id=data["map_id"], name=data["name"], up_axis=fixed["up_axis"],
-        categories=fixed["categories"], objects=tuple(objects), version=fixed["version"],
-        metadata=fixed["metadata"],
-    )
-
-
-def _integral(value: Any) -> Any:
-    """An integral float (``3.0``: JSON Schema's ``integer`` allows it) as an int."""
-    return int(value) if isinstance(value, float) and value.is_integer() else value
+    if version is not None and isinstance(data, Mapping):
+        data = {**data, "version": version}
+    return _validated(MapDocument, data).to_scene_map()
 
 
 def scene_map_from_chess(
     data: Mapping[str, Any], *, map_id: str = "chess", name: str = "Chess",
     metadata: Mapping[str, Any] | None = None,
 ) -> SceneMap:
-    """Import the Chess scene format (``bench/data/chess_scene.json``).
+    """Import the Chess scene format (``bench/data/chess_scene.json``, :class:`ChessDocument`).
 
     Format: ``category_id_to_label`` ``{"0": "TV", ...}``; ``objects[]`` with ``category_id``,
     ``object_id`` (integer, kept as its decimal string) and ``ellipsoid {axes (semi-axes, m),
     R (3x3, ellipsoid -> world), center (m)}``. World +Z is up. Categories are ordered by id.
+    Errors name the Chess fields (``objects[2].ellipsoid.R``).
     """
-    errors = _Errors()
-    if not isinstance(data, Mapping):
-        errors.add("$", f"the map must be a JSON object, got {type(data).__name__}")
-        errors.raise_if_any()
-    labels = data.get("category_id_to_label")
-    if not isinstance(labels, Mapping) or not labels:
-        errors.add("category_id_to_label", "required object {id: label} missing or empty")
-        labels = {}
-    raw = data.get("objects")
-    if not isinstance(raw, list):
-        errors.add("objects", "required array missing")
-        raw = []
+    doc = _validated(ChessDocument, data)
+    labels = doc.category_id_to_label
 
     def _key(k: str) -> tuple[int, Any]:
         return (0, int(k)) if str(k).lstrip("-").isdigit() else (1, str(k))
 
     ordered = sorted(labels, key=_key)
-    converted = []
-    for i, o in enumerate(raw):
-        path = f"objects[{i}]"
-        if not isinstance(o, Mapping):
-            errors.add(path, "must be an object")
-            continue
-        cid = str(_integral(o.get("category_id")))
-        if cid not in labels:
-            errors.add(f"{path}.category_id", f"unknown category id {o.get('category_id')!r}")
-            continue
-        ell = o.get("ellipsoid")
-        if not isinstance(ell, Mapping):
-            errors.add(f"{path}.ellipsoid", "required object {axes, R, center} missing")
-            continue
-        oid = _integral(o.get("object_id"))
-        if isinstance(oid, int) and not isinstance(oid, bool):
-            oid = str(oid)  # the Chess format's integer ids become their decimal string
-        entry: dict[str, Any] = {"object_id": oid, "category": labels[cid],
-                                 "center": ell.get("center"), "axes": ell.get("axes"),
-                                 "rotation": ell.get("R")}
-        converted.append(entry)
-    errors.raise_if_any()
+    objects = tuple(_map_object(str(o.object_id), labels[str(o.category_id)], o.ellipsoid.center,
+                                o.ellipsoid.axes, None, o.ellipsoid.R) for o in doc.objects)
     meta: dict[str, Any] = {
         "source_format": "chess_scene",
         "category_id_to_label": {str(k): labels[k] for k in ordered},
     }
     meta.update(metadata or {})
-    doc = {"map_id": map_id, "name": name, "up_axis": [0.0, 0.0, 1.0],
-           "categories": [labels[k] for k in ordered], "objects": converted, "metadata": meta}
-    try:
-        return scene_map_from_dict(doc)
-    except MapValidationError as exc:
-        # Report the Chess field names (R instead of rotation, under ellipsoid).
-        renamed = []
-        for e in exc.errors:
-            f = e["field"]
-            for ours, theirs in ((".rotation", ".ellipsoid.R"), (".center", ".ellipsoid.center"),
-                                 (".axes", ".ellipsoid.axes")):
-                if f.endswith(ours):
-                    f = f[: -len(ours)] + theirs
-            renamed.append({"field": f, "message": e["message"]})
-        raise MapValidationError(renamed) from None
+    return SceneMap(map_id, name, (0.0, 0.0, 1.0), tuple(labels[k] for k in ordered), objects,
+                    metadata=meta)
 
 
 # --------------------------------------------------------------------------- JSON Schema
 
-_NUM = {"type": "number"}
-_VEC3 = {"type": "array", "items": _NUM, "minItems": 3, "maxItems": 3}
 
-#: JSON Schema (draft 2020-12) of the map document. Semantic checks (unit norm, orthonormality,
-#: unique ids, known categories) are done by :func:`scene_map_from_dict`.
-MAP_JSON_SCHEMA: dict[str, Any] = {
-    "$schema": "https://json-schema.org/draft/2020-12/schema",
-    "$id": "https://quadloc.example/schemas/map-1.json",
-    "title": "QuadLoc ellipsoid map",
-    "type": "object",
-    "additionalProperties": False,
-    "required": ["map_id", "name", "categories", "objects"],
-    "properties": {
-        "format": {"const": FORMAT},
-        "map_id": {"type": "string", "pattern": MAP_ID_PATTERN},
-        "name": {"type": "string", "minLength": 1, "maxLength": int(LIMITS["max_name_length"])},
-        "version": {"type": "integer", "minimum": 1,
-                    "description": "Set by the store; ignored on create/update."},
-        "up_axis": {**_VEC3, "description": "World up direction (default [0, 0, 1])."},
-        "categories": {"type": "array", "uniqueItems": True,
-                       "maxItems": int(LIMITS["max_categories"]),
-                       "items": {"type": "string", "minLength": 1,
-                                 "maxLength": int(LIMITS["max_id_length"])}},
-        "objects": {
-            "type": "array",
-            "maxItems": int(LIMITS["max_objects"]),
-            "items": {
-                "type": "object",
-                "additionalProperties": False,
-                "required": ["object_id", "category", "center", "axes"],
-                "properties": {
-                    "object_id": {"type": "string", "minLength": 1,
-                                  "maxLength": int(LIMITS["max_id_length"])},
-                    "category": {"type": "string", "minLength": 1,
-                                 "maxLength": int(LIMITS["max_id_length"])},
-                    "center": {**_VEC3, "description": "World metres.",
-                               "items": {"type": "number",
-                                         "minimum": -LIMITS["max_abs_coordinate_m"],
-                                         "maximum": LIMITS["max_abs_coordinate_m"]}},
-                    "axes": {**_VEC3, "description": "Semi-axes in metres.",
-                             "items": {"type": "number", "minimum": LIMITS["min_semi_axis_m"],
-                                       "maximum": LIMITS["max_semi_axis_m"]}},
-                    "quaternion_wxyz": {"type": "array", "items": _NUM, "minItems": 4,
-                                        "maxItems": 4,
-                                        "description": "Unit quaternion (w, x, y, z), "
-                                                       "ellipsoid frame -> world."},
-                    "rotation": {"type": "array", "minItems": 3, "maxItems": 3,
-                                 "items": _VEC3,
-                                 "description": "3x3 rotation, ellipsoid frame -> world "
-                                                "(alternative to quaternion_wxyz)."},
-                },
-                "not": {"required": ["quaternion_wxyz", "rotation"]},
-            },
-        },
-        "metadata": {"type": "object"},
-    },
-}
+class _SchemaGenerator(GenerateJsonSchema):
+    def field_title_should_be_set(self, schema: Any) -> bool:
+        return False  # the property names say it
+
+
+def _json_schema(model: type[BaseModel], **head: Any) -> dict[str, Any]:
+    """``model.model_json_schema()`` with its ``$defs`` inlined (it is embedded in the OpenAPI
+    document as is) and the ``null`` defaults of optional fields (absent = not given)
+    dropped."""
+    schema = model.model_json_schema(schema_generator=_SchemaGenerator)
+    defs = schema.pop("$defs", {})
+
+    def inline(node: Any) -> Any:
+        if isinstance(node, list):
+            return [inline(v) for v in node]
+        if not isinstance(node, dict):
+            return node
+        if "$ref" in node:
+            target = {k: v for k, v in defs[node["$ref"].rsplit("/", 1)[-1]].items()
+                      if k != "title"}
+            node = {**target, **{k: v for k, v in node.items() if k != "$ref"}}
+        return {k: inline(v) for k, v in node.items()
+                if not (k == "default" and v is None)}
+
+    return {**head, **inline(schema)}
+
+
+#: JSON Schema (draft 2020-12) of the map document, generated from :class:`MapDocument`. The
+#: rules JSON Schema cannot state (unit norm, orthonormality, unique ids, known categories,
+#: metadata size) are checked by the same model.
+MAP_JSON_SCHEMA: dict[str, Any] = _json_schema(
+    MapDocument, **{"$schema": "https://json-schema.org/draft/2020-12/schema",
+                    "$id": "https://quadloc.example/schemas/map-1.json"})
+
+#: JSON Schema of the Chess scene format, generated from :class:`ChessDocument`.
+CHESS_JSON_SCHEMA: dict[str, Any] = _json_schema(ChessDocument)

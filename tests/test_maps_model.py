@@ -18,6 +18,7 @@ from factors.geometry import Ellipsoid, rotation_from_quaternion_wxyz
 from maps.compiled import compile_map
 from maps.demo import DEMO_MAP_PATH, load_demo_map
 from maps.model import (
+    CHESS_JSON_SCHEMA,
     LIMITS,
     MAP_JSON_SCHEMA,
     MapObject,
@@ -25,6 +26,7 @@ from maps.model import (
     SceneMap,
     canonical_json,
     content_hash,
+    json_path,
     scene_map_from_chess,
     scene_map_from_dict,
 )
@@ -164,7 +166,7 @@ def test_chess_importer_names_fields_in_its_own_format(chess_source: dict[str, A
         scene_map_from_chess(bad)
     fields = {e["field"]: e["message"] for e in exc.value.errors}
     assert "orthonormal" in fields["objects[2].ellipsoid.R"]
-    assert "> 0" in fields["objects[3].ellipsoid.axes"]
+    assert "greater than or equal to 0.001" in fields["objects[3].ellipsoid.axes[1]"]
 
 
 # --------------------------------------------------------------------------- validation
@@ -173,15 +175,21 @@ def test_chess_importer_names_fields_in_its_own_format(chess_source: dict[str, A
 @pytest.mark.parametrize(
     ("mutate", "field", "fragment"),
     [
-        (lambda d: d["objects"][0].update(axes=[0.3, 0.0, 0.4]), "objects[0].axes", "> 0"),
-        (lambda d: d["objects"][0].update(axes=[0.3, 1e-4, 0.4]), "objects[0].axes",
-         "[0.001, 100]"),
-        (lambda d: d["objects"][0].update(axes=[300, 1, 1]), "objects[0].axes", "[0.001, 100]"),
-        (lambda d: d["objects"][0].update(center=[1, float("nan"), 0]), "objects[0].center",
+        (lambda d: d["objects"][0].update(axes=[0.3, 0.0, 0.4]), "objects[0].axes[1]",
+         "greater than or equal to 0.001"),
+        (lambda d: d["objects"][0].update(axes=[0.3, 1e-4, 0.4]), "objects[0].axes[1]",
+         "greater than or equal to 0.001"),
+        (lambda d: d["objects"][0].update(axes=[300, 1, 1]), "objects[0].axes[0]",
+         "less than or equal to 100"),
+        (lambda d: d["objects"][0].update(center=[1, float("nan"), 0]), "objects[0].center[1]",
          "finite"),
-        (lambda d: d["objects"][0].update(center=[1, 2e5, 0]), "objects[0].center", "within"),
-        (lambda d: d["objects"][0].update(center=[1, 2]), "objects[0].center", "shape [3]"),
-        (lambda d: d["objects"][0].update(center=[1, True, 0]), "objects[0].center", "booleans"),
+        (lambda d: d["objects"][0].update(center=[1, 2e5, 0]), "objects[0].center[1]",
+         "less than or equal to 10000"),
+        (lambda d: d["objects"][0].update(center=[1, 2]), "objects[0].center", "at least 3 items"),
+        (lambda d: d["objects"][0].update(center=[1, True, 0]), "objects[0].center[1]",
+         "valid number"),
+        (lambda d: d["objects"][0].update(quaternion_wxyz=None), "objects[0].quaternion_wxyz",
+         "valid list"),
         (lambda d: d["objects"][0].update(quaternion_wxyz=[1, 1, 0, 0]),
          "objects[0].quaternion_wxyz", "unit norm"),
         (lambda d: d["objects"][1].update(rotation=[[1, 0, 0], [0, 1, 0], [0, 0, -1]]),
@@ -194,15 +202,18 @@ def test_chess_importer_names_fields_in_its_own_format(chess_source: dict[str, A
         (lambda d: d["objects"][1].update(category="sofa"), "objects[1].category", "unknown"),
         (lambda d: d["objects"][1].update(colour="red"), "objects[1].colour", "unknown field"),
         (lambda d: d["objects"][1].pop("axes"), "objects[1].axes", "missing"),
-        (lambda d: d.update(map_id="has space"), "map_id", "URL-safe"),
+        (lambda d: d.update(map_id="has space"), "map_id", "match pattern"),
         (lambda d: d.update(map_id=7), "map_id", "string"),
-        (lambda d: d.update(name=""), "name", "non-empty"),
+        (lambda d: d.update(name=""), "name", "at least 1 character"),
+        (lambda d: d.update(name=" \t"), "name", "non-empty"),
+        (lambda d: d.update(name="a\nb"), "name", "control characters"),
         (lambda d: d.update(up_axis=[0, 0, 0]), "up_axis", "non-zero"),
         (lambda d: d.update(categories=["chair", "tv", "chair"]), "categories[2]", "duplicate"),
         (lambda d: d.update(metadata=[1]), "metadata", "JSON object"),
         (lambda d: d.update(metadata={"x": "y" * 70_000}), "metadata", "bytes"),
         (lambda d: d.update(format="other/9"), "format", "quadloc.map/1"),
-        (lambda d: d.update(version=0), "version", ">= 1"),
+        (lambda d: d.update(version=0), "version", "greater than or equal to 1"),
+        (lambda d: d.update(version=True), "version", "valid integer"),
         (lambda d: d.pop("objects"), "objects", "missing"),
     ],
 )
@@ -220,7 +231,7 @@ def test_all_problems_are_reported_at_once() -> None:
     doc["objects"][1]["category"] = "sofa"
     doc["name"] = ""
     errors = _errors(doc)
-    assert {"objects[0].axes", "objects[1].category", "name"} <= set(errors)
+    assert {"objects[0].axes[0]", "objects[1].category", "name"} <= set(errors)
 
 
 def test_object_count_limit() -> None:
@@ -309,6 +320,11 @@ def test_schema_accepts_valid_documents() -> None:
         lambda d: d.update(categories=["chair", "chair"]),
         lambda d: d.pop("name"),
         lambda d: d.update(extra=1),
+        # numeric strings: the hand-written parser used to accept them (numpy converted "2"),
+        # the schema did not; both come from MapDocument now
+        lambda d: d["objects"][0].update(center=[1, "2", 0]),
+        lambda d: d.update(up_axis=[0, 0, "1"]),
+        lambda d: d["objects"][0].update(quaternion_wxyz=None),
     ],
 )
 def test_schema_and_parser_both_reject(mutate: Any) -> None:
@@ -510,3 +526,67 @@ def test_metadata_nesting_is_limited_without_recursion() -> None:
             scene_map_from_dict(doc)
         assert [e["field"] for e in exc.value.errors] == ["metadata"]
         assert "nesting" in exc.value.errors[0]["message"]
+
+
+# --------------------------------------------------------------------------- pydantic models
+
+
+def test_errors_name_the_element_and_all_are_reported() -> None:
+    """Field paths go down to the array element, in documents and in code, and every problem of
+    the document is reported (per-field rules and the rules across fields together)."""
+    doc = _doc()
+    doc["objects"][0]["axes"] = [0.3, 1e-4, 400]
+    doc["objects"][1]["center"][2] = float("inf")
+    doc["objects"][1]["object_id"] = "a"  # duplicate, reported with the geometry errors
+    doc["categories"].append("tv")
+    errors = _errors(doc)
+    assert set(errors) == {"objects[0].axes[1]", "objects[0].axes[2]", "objects[1].center[2]",
+                           "objects[1].object_id", "categories[2]"}, errors
+    assert "0.001" in errors["objects[0].axes[1]"] and "100" in errors["objects[0].axes[2]"]
+    assert "also objects[0]" in errors["objects[1].object_id"]
+    e = Ellipsoid(np.zeros(3), np.array([0.5, 0.5, 200.0]))  # a valid ellipsoid, too large a map
+    with pytest.raises(MapValidationError) as exc:
+        SceneMap("m", "M", (0, 0, 1), ("a",), (MapObject("1", "a", e),))
+    assert [x["field"] for x in exc.value.errors] == ["objects[0].axes[2]"]
+    assert json_path(("objects", 3, "axes", 1)) == "objects[3].axes[1]" and json_path(()) == "$"
+
+
+def test_chess_errors_name_the_chess_fields_all_at_once(chess_source: dict[str, Any]) -> None:
+    bad = copy.deepcopy(chess_source)
+    bad["objects"][1]["category_id"] = 99
+    bad["objects"][2]["ellipsoid"]["R"] = [[1, 0, 0], [0, 1, 0]]
+    bad["objects"][3]["ellipsoid"].pop("center")
+    bad["category_id_to_label"]["0"] = ""
+    with pytest.raises(MapValidationError) as exc:
+        scene_map_from_chess(bad)
+    fields = {e["field"]: e["message"] for e in exc.value.errors}
+    assert set(fields) == {"objects[1].category_id", "objects[2].ellipsoid.R",
+                           "objects[3].ellipsoid.center", "category_id_to_label.0"}, fields
+    assert "unknown category id 99" in fields["objects[1].category_id"]
+    assert fields["objects[3].ellipsoid.center"] == "required field missing"
+
+
+def test_chess_ids_integral_floats_and_strings() -> None:
+    """As before the models: integral floats are integers, decimal strings are kept; a
+    fractional or boolean id is refused."""
+    def doc(category_id: Any, object_id: Any) -> dict[str, Any]:
+        return {"category_id_to_label": {"0": "TV"}, "extra": "ignored",
+                "objects": [{"category_id": category_id, "object_id": object_id,
+                             "ellipsoid": {"axes": [0.3, 0.2, 0.1], "center": [0, 0, 1],
+                                           "R": np.eye(3).tolist()}}]}
+    for cid, oid in ((0.0, 12.0), ("0", "12"), (0, 12)):
+        assert scene_map_from_chess(doc(cid, oid)).objects[0].object_id == "12"
+    for cid, oid, field in ((0.5, 1, "objects[0].category_id"), (True, 1,
+                            "objects[0].category_id"), (0, 1.5, "objects[0].object_id")):
+        with pytest.raises(MapValidationError) as exc:
+            scene_map_from_chess(doc(cid, oid))
+        assert any(e["field"].startswith(field) for e in exc.value.errors), exc.value.errors
+    for labels, objects, field in (({"0": "TV"}, 1.5, "objects"),
+                                   ({"0": "TV"}, [7], "objects[0]"),
+                                   ([], [], "category_id_to_label"),
+                                   ({}, [], "category_id_to_label")):
+        with pytest.raises(MapValidationError) as exc:  # not a TypeError: a 422 naming the field
+            scene_map_from_chess({"category_id_to_label": labels, "objects": objects})
+        assert [e["field"] for e in exc.value.errors] == [field], exc.value.errors
+    assert CHESS_JSON_SCHEMA["required"] == ["category_id_to_label", "objects"]
+    assert "$defs" not in json.dumps(CHESS_JSON_SCHEMA) + json.dumps(MAP_JSON_SCHEMA)

@@ -19,8 +19,10 @@ from bench.reference_data import load_chess_map, load_chess_poses
 from bench.simulate import SimulationConfig, simulate_frame
 from bench.tracking import make_walk, pose_error, simulate_odometry
 from factors.geometry import invert_pose
+from factors.names import FieldError
 from factors.pose_residuals import expmap_pose3
 from maps.compiled import compile_map
+from service.api.errors import field_and_problem
 from service.tracking.association import centre_jacobians
 from service.tracking.confidence import session_confidence
 from service.tracking.session import (
@@ -170,8 +172,16 @@ def test_bad_frames_name_the_field_and_leave_the_session_unchanged(walk: dict) -
     with pytest.raises(TrackingInputError, match=r"^timestamp: .* before"):
         s.add_frame(FrameInput([], np.eye(4), -1.0))
     assert s.frame_count == 1
-    with pytest.raises(TrackingInputError, match=r"^options\.smoother"):
+    with pytest.raises(TrackingInputError, match=r"^options\.smoother") as exc:
         SessionOptions(smoother="kalman")
+    # structured, a FieldError like the localization's errors: the API reads exc.field
+    assert isinstance(exc.value, FieldError) and exc.value.field == "options.smoother"
+    assert exc.value.problem.startswith("must be one of")
+    with pytest.raises(TrackingInputError) as exc:
+        s.add_frame(FrameInput([], np.eye(4), float("nan")))
+    assert (exc.value.field, exc.value.problem) == ("timestamp", "must be a finite number, got nan")
+    assert field_and_problem(exc.value, "frames[3].") == ("frames[3].timestamp",
+                                                          exc.value.problem)
 
 
 def test_store_bounds_count_and_expires_idle_sessions(walk: dict) -> None:

@@ -25,6 +25,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
 
 from maps.errors import MapValidationError, SchemaNotMigrated, StoreUnavailable
+from maps.model import json_path
 
 __all__ = [
     "PROBLEM_MEDIA_TYPE",
@@ -43,17 +44,13 @@ log = logging.getLogger("quadloc.api")
 def field_and_problem(exc: Exception, prefix: str = "") -> tuple[str, str]:
     """``(field, problem)`` of an input error, ``prefix`` prepended to the field.
 
-    The field is the error's structured ``field`` (:class:`factors.geometry.FieldError`:
-    ``GeometryError``, ``LocalizationInputError``); errors raised without one answer ``"body"``.
-    ``service.tracking``'s ``TrackingInputError`` is not structured yet: its messages read
-    ``"<field>: <problem>"`` and are split here, the only place that reads a message.
+    The field is the error's structured ``field`` (:class:`factors.names.FieldError`:
+    ``GeometryError``, ``LocalizationInputError``, ``TrackingInputError``); errors raised
+    without one answer ``"body"``. The message is never parsed.
     """
     field = getattr(exc, "field", None)
     if field:
         return prefix + field, str(getattr(exc, "problem", exc))
-    head, sep, tail = str(exc).partition(": ")
-    if type(exc).__name__ == "TrackingInputError" and sep and head and " " not in head:
-        return prefix + head, tail
     return prefix + "body", str(exc)
 
 
@@ -172,24 +169,13 @@ def json_depth_violation(document: Any, max_depth: int) -> str | None:
 def field_path(loc: Sequence[Any]) -> str:
     """``('body', 'detections', 2, 'ellipse', 'a')`` -> ``'detections[2].ellipse.a'``.
 
-    Body locations drop the ``body`` prefix; ``query``/``header``/``path`` keep it.
+    Body locations drop the ``body`` prefix; ``query``/``header``/``path`` keep it (the path
+    spelling is :func:`maps.model.json_path`'s, the map documents' own).
     """
     parts = list(loc)
-    prefix = ""
-    if parts and parts[0] == "body":
-        parts = parts[1:]
-    elif parts and parts[0] in ("query", "header", "path", "cookie"):
-        prefix = f"{parts[0]}."
-        parts = parts[1:]
-    out = ""
-    for p in parts:
-        if isinstance(p, int):
-            out += f"[{p}]"
-        elif str(p).startswith(("function-", "model-")):  # pydantic validator tags
-            continue
-        else:
-            out += ("." if out else "") + str(p)
-    return prefix + (out or "body")
+    if parts and parts[0] in ("query", "header", "path", "cookie"):
+        return f"{parts[0]}.{json_path(parts[1:], 'body')}"
+    return json_path(parts[1:] if parts and parts[0] == "body" else parts, "body")
 
 
 def _validation_errors(exc: RequestValidationError) -> tuple[str, list[dict[str, str]]]:

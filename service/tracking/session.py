@@ -46,6 +46,7 @@ from factors.geometry import (
     invert_pose,
     snap_to_rotation,
 )
+from factors.names import FieldError
 from factors.pose_factors import pose_factors
 from maps.compiled import CompiledMap
 from service.localization.ransac import MatchScorer
@@ -74,8 +75,9 @@ LOST_UNEXPLAINED_DETECTIONS = 3
 SMOOTHERS = ("isam2", "batch")
 
 
-class TrackingInputError(ValueError):
-    """Bad frame input; the message starts with the offending field."""
+class TrackingInputError(FieldError):
+    """Bad session or frame input naming its ``field`` (a :class:`factors.names.FieldError`);
+    ``str()`` reads ``"<field>: <problem>"``, e.g. ``"timestamp: must be a finite number ..."``."""
 
 
 @dataclass(frozen=True)
@@ -98,7 +100,7 @@ class DriftModel:
     def __post_init__(self) -> None:
         for name, value in self.__dict__.items():
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-                raise TrackingInputError(f"options.drift.{name}: must be finite and >= 0")
+                raise TrackingInputError("must be finite and >= 0", field=f"options.drift.{name}")
 
     def sigmas(self, distance_m: float, dt_s: float) -> np.ndarray:
         """Per-axis stds ``[omega (3) rad, v (3) m]`` of one odometry step."""
@@ -135,7 +137,7 @@ class SessionOptions:
 
     def __post_init__(self) -> None:
         def bad(name: str, problem: str) -> TrackingInputError:
-            return TrackingInputError(f"options.{name}: {problem}")
+            return TrackingInputError(problem, field=f"options.{name}")
         if not (isinstance(self.window_frames, int) and 2 <= self.window_frames <= 300):
             raise bad("window_frames", f"must be an integer in [2, 300], got "
                       f"{self.window_frames!r}")
@@ -199,8 +201,7 @@ class FrameResult:
 def pose_adjoint(T: np.ndarray) -> np.ndarray:
     """6x6 adjoint of a 4x4 pose in GTSAM's ``[omega, v]`` order:
     ``T Exp(xi) T^-1 = Exp(Ad_T xi)``."""
-    return gtsam.Pose3(gtsam.Rot3(snap_to_rotation(T[:3, :3])),
-                       np.ascontiguousarray(T[:3, 3])).AdjointMap()
+    return _pose3(T).AdjointMap()
 
 
 def _pose3(T: np.ndarray) -> gtsam.Pose3:
@@ -269,24 +270,25 @@ class TrackingSession:
     # ------------------------------------------------------------------ input
     def _check(self, frame: FrameInput) -> np.ndarray:
         if not isinstance(frame, FrameInput):
-            raise TrackingInputError(f"frame: must be a FrameInput, got {type(frame).__name__}")
+            raise TrackingInputError(f"must be a FrameInput, got {type(frame).__name__}",
+                                     field="frame")
         for i, d in enumerate(frame.detections):
             if not isinstance(d, Detection):
-                raise TrackingInputError(f"detections[{i}]: must be a Detection")
+                raise TrackingInputError("must be a Detection", field=f"detections[{i}]")
         try:
             T = check_pose(frame.odom_from_camera, "odom_from_camera",
                            DOCUMENT_ROTATION_TOLERANCE)
         except GeometryError as exc:
-            raise TrackingInputError(
-                f"odom_from_camera: must be a rigid transform ({exc.problem})") from exc
+            raise TrackingInputError(f"must be a rigid transform ({exc.problem})",
+                                     field="odom_from_camera") from exc
         R = T[:3, :3]
         ts = frame.timestamp
         if isinstance(ts, bool) or not isinstance(ts, (int, float)) or not math.isfinite(ts):
-            raise TrackingInputError(f"timestamp: must be a finite number, got {ts!r}")
+            raise TrackingInputError(f"must be a finite number, got {ts!r}", field="timestamp")
         if self._last_timestamp is not None and ts < self._last_timestamp:
             raise TrackingInputError(
-                f"timestamp: {ts} is before the previous frame's {self._last_timestamp} "
-                "(frames must be sent in time order)")
+                f"{ts} is before the previous frame's {self._last_timestamp} "
+                "(frames must be sent in time order)", field="timestamp")
         T = T.copy()
         T[:3, :3] = snap_to_rotation(R)
         return T

@@ -13,8 +13,9 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Header, Query, Response, status
 
-from maps.errors import MapAlreadyExists, MapNotFound, MapValidationError, VersionConflict
+from maps.errors import MapAlreadyExists, MapNotFound, VersionConflict
 from maps.model import (
+    CHESS_JSON_SCHEMA,
     MAP_ID_PATTERN,
     MAP_JSON_SCHEMA,
     content_hash,
@@ -38,32 +39,9 @@ __all__ = ["router"]
 
 router = APIRouter(prefix="/v1", tags=["maps"])
 
+#: Request-body schemas, generated from the pydantic document models that validate the bodies
+#: (maps.model.MapDocument / ChessDocument), without the standalone document's ``$schema``/``$id``.
 _MAP_SCHEMA = {k: v for k, v in MAP_JSON_SCHEMA.items() if not k.startswith("$")}
-_VEC3: dict[str, Any] = {"type": "array", "minItems": 3, "maxItems": 3,
-                         "items": {"type": "number"}}
-_CHESS_SCHEMA: dict[str, Any] = {
-    "type": "object",
-    "required": ["category_id_to_label", "objects"],
-    "properties": {
-        "category_id_to_label": {"type": "object", "additionalProperties": {"type": "string"}},
-        "objects": {"type": "array", "items": {
-            "type": "object",
-            "required": ["category_id", "object_id", "ellipsoid"],
-            "properties": {
-                "category_id": {"type": "integer"},
-                "object_id": {"type": "integer"},
-                "ellipsoid": {"type": "object", "required": ["axes", "R", "center"],
-                              "properties": {
-                                  "axes": {**_VEC3, "description": "Semi-axes (m), > 0."},
-                                  "R": {"type": "array", "minItems": 3, "maxItems": 3,
-                                        "items": _VEC3,
-                                        # the tolerance is DOCUMENT_ROTATION_TOLERANCE
-                                        "description": "3x3 rotation ellipsoid -> world: "
-                                                       "orthonormal within 1e-4, det +1."},
-                                  "center": _VEC3}},
-            }}},
-    },
-}
 
 
 _EXAMPLE_MAP = scene_map_from_dict(MAP_EXAMPLE, version=1)
@@ -117,10 +95,6 @@ def _map_out(stored: Any) -> MapOut:
                   map=sm.to_dict())
 
 
-def _invalid_map(exc: MapValidationError) -> ProblemError:
-    return ProblemError("invalid-map", str(exc), errors=exc.errors)
-
-
 def _check_object_limit(body: Any, settings: Any) -> None:
     objs = body.get("objects") if isinstance(body, dict) else None
     if isinstance(objs, list) and len(objs) > settings.max_map_objects:
@@ -154,10 +128,7 @@ def _created(store: Any, scene_map: Any, response: Response) -> MapOut:
 def create_map(body: Annotated[dict[str, Any], Body()], response: Response, store: StoreDep,
                settings: SettingsDep, _key: WriteAccess) -> MapOut:
     _check_object_limit(body, settings)
-    try:
-        scene_map = scene_map_from_dict(body, version=1)
-    except MapValidationError as exc:
-        raise _invalid_map(exc) from exc
+    scene_map = scene_map_from_dict(body, version=1)  # invalid: 422 (errors.py's handler)
     return _created(store, scene_map, response)
 
 
@@ -169,7 +140,7 @@ def create_map(body: Annotated[dict[str, Any], Body()], response: Response, stor
                 "the query.",
     responses={**problem_responses(400, 401, 403, 409, 413, 415, 422, 503),
                **_ok(201, _MAP_OUT_EXAMPLE)},
-    openapi_extra=_body_doc(_CHESS_SCHEMA, CHESS_IMPORT_EXAMPLE),
+    openapi_extra=_body_doc(CHESS_JSON_SCHEMA, CHESS_IMPORT_EXAMPLE),
 )
 def import_chess_map(
     body: Annotated[dict[str, Any], Body()], response: Response, store: StoreDep,
@@ -178,10 +149,7 @@ def import_chess_map(
     name: Annotated[str, Query(min_length=1, max_length=256)] = "Chess",
 ) -> MapOut:
     _check_object_limit(body, settings)
-    try:
-        scene_map = scene_map_from_chess(body, map_id=map_id, name=name)
-    except MapValidationError as exc:
-        raise _invalid_map(exc) from exc
+    scene_map = scene_map_from_chess(body, map_id=map_id, name=name)
     return _created(store, scene_map, response)
 
 
@@ -273,10 +241,8 @@ def update_map(
     if body.get("map_id", map_id) != map_id:
         raise ProblemError("invalid-map", "map_id in the body differs from the path",
                            errors=[{"field": "map_id", "message": f"must be {map_id!r}"}])
-    try:  # the body first: an invalid document is the client's error whatever If-Match says
-        scene_map = scene_map_from_dict({**body, "map_id": map_id}, version=1)
-    except MapValidationError as exc:
-        raise _invalid_map(exc) from exc
+    # the body first: an invalid document is the client's error whatever If-Match says
+    scene_map = scene_map_from_dict({**body, "map_id": map_id}, version=1)
     tags = _parse_if_match(if_match)
     try:
         current = store.get(map_id)

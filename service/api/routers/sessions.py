@@ -184,8 +184,8 @@ def add_frames(session_id: SessionIdPath,
             inp = _frame_input(f, entry.convention, prefix(i))
             if last_ts is not None and inp.timestamp < last_ts:
                 raise _unprocessable(TrackingInputError(
-                    f"timestamp: {inp.timestamp} is before the previous frame's {last_ts}"),
-                    prefix(i))
+                    f"{inp.timestamp} is before the previous frame's {last_ts}",
+                    field="timestamp"), prefix(i))
             last_ts = inp.timestamp
             inputs.append(inp)
         results = []
