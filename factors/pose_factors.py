@@ -56,7 +56,7 @@ from typing import Any
 import gtsam
 import numpy as np
 
-from factors.geometry import Camera, Ellipse, Ellipsoid
+from factors.geometry import Camera, Ellipse, Ellipsoid, snap_to_rotation
 from factors.names import ROBUST_KERNELS, check_robust, is_real
 from factors.pose_residuals import PoseResidualModel
 
@@ -65,10 +65,18 @@ __all__ = [
     "ROBUST_KERNELS",
     "batched_pose_factor",
     "make_noise_model",
+    "pose3",
     "pose_factor",
     "pose_factors",
     "shared_pose_factor",
 ]
+
+
+def pose3(T: np.ndarray) -> gtsam.Pose3:
+    """A 4x4 rigid transform (any direction: ``world_from_camera``, ``odom_from_camera``...) as
+    a ``gtsam.Pose3`` of the same direction; the rotation block is snapped to the nearest
+    rotation (:func:`factors.geometry.snap_to_rotation`: unchanged when already orthonormal)."""
+    return gtsam.Pose3(gtsam.Rot3(snap_to_rotation(T[:3, :3])), np.ascontiguousarray(T[:3, 3]))
 
 
 #: Default robust threshold ``k`` per metric, on the whitened residual norm

@@ -61,7 +61,7 @@ from factors.ellipsoid_residuals import (
     stack_samples,
 )
 from factors.geometry import Camera, Ellipsoid, invert_pose
-from factors.pose_factors import DEFAULT_ROBUST_SCALE
+from factors.pose_factors import DEFAULT_ROBUST_SCALE, pose3
 from factors.pose_residuals import DEFAULT_MIN_DEPTH_MARGIN
 from maps.building.association import touches_border
 from maps.building.recording import Observation, OdometryNoise, SizePrior
@@ -118,9 +118,6 @@ class JointResult:
     final_error: float
     stopped_early: bool
 
-
-def _pose3(T: np.ndarray) -> gtsam.Pose3:
-    return gtsam.Pose3(gtsam.Rot3(T[:3, :3]), np.asarray(T[:3, 3], float))
 
 
 def _log_axis_std(T_cw: np.ndarray, R: np.ndarray, center: np.ndarray, axes: np.ndarray,
@@ -238,7 +235,7 @@ def refine_jointly(
     robust = DEFAULT_ROBUST_SCALE["level_set"]
     ticker = _Ticker(progress)
     for k, (label, idx, ell) in enumerate(objects):
-        values.insert(E[k], _pose3(np.block([[ell.rotation, ell.center[:, None]],
+        values.insert(E[k], pose3(np.block([[ell.rotation, ell.center[:, None]],
                                              [np.zeros((1, 3)), np.ones((1, 1))]])))
         values.insert(L[k], np.log(ell.axes))
         for i in idx:
@@ -282,7 +279,7 @@ def refine_jointly(
                                     + math.log(axis_floor_fraction), AXIS_FLOOR_LOG_SIGMA))
     if refine_cameras and used_frames:
         for f in used_frames:
-            values.insert(X[f], _pose3(T_wc[f]))
+            values.insert(X[f], pose3(T_wc[f]))
         # one factor per run of `frames_per_factor` consecutive used frames, over their views
         # of every object: few Python round trips, small dense Jacobian blocks
         by_frame: dict[int, list[tuple[int, int, float]]] = {}
@@ -300,7 +297,7 @@ def refine_jointly(
                 [slot[k] for _, k, _, _ in rows], camera_keys=[X[f] for f in fs],
                 view_cameras=[fi for fi, _, _, _ in rows], robust_scale=robust,
                 on_evaluate=ticker))
-        graph.add(gtsam.PriorFactorPose3(X[used_frames[0]], _pose3(T_wc[used_frames[0]]),
+        graph.add(gtsam.PriorFactorPose3(X[used_frames[0]], pose3(T_wc[used_frames[0]]),
                                          gtsam.noiseModel.Isotropic.Sigma(6, 1e-6)))
         noise = odometry or OdometryNoise()
         path = np.concatenate([[0.0], np.cumsum(np.linalg.norm(
@@ -308,7 +305,7 @@ def refine_jointly(
         for a, b in itertools.pairwise(used_frames):
             rel = invert_pose(T_wc[a]) @ T_wc[b]
             sig = noise.sigmas(float(path[b] - path[a]), b - a)
-            graph.add(gtsam.BetweenFactorPose3(X[a], X[b], _pose3(rel),
+            graph.add(gtsam.BetweenFactorPose3(X[a], X[b], pose3(rel),
                                                gtsam.noiseModel.Diagonal.Sigmas(sig)))
     params = gtsam.LevenbergMarquardtParams()
     params.setMaxIterations(max_iterations)

@@ -20,9 +20,9 @@ Stages (wall time of each in ``LocalizationResult.timings_ms``):
    :data:`ALTERNATIVE_PREFILTER_RATIO` of the best, except those that only re-use the best's
    correspondences: ``_same_explanation``; runners-up with at most
    :data:`ALTERNATIVE_MAX_ITERATIONS` LM iterations, continued in full if one ranks first) with
-   ``options.metric`` (sigma-weighted, robust kernel option), then re-association: the inliers are recomputed at the refined pose
-   and, if the set changed, refined once more. A result is kept when it has >= ``min_inliers``
-   inliers; none kept: ``refinement_diverged``.
+   ``options.metric`` (sigma-weighted, robust kernel option), then re-association: the
+   inliers are recomputed at the refined pose and, if the set changed, refined once more. A
+   result is kept when it has >= ``min_inliers`` inliers; none kept: ``refinement_diverged``.
 5. ``assess`` — :mod:`service.localization.confidence`: the calibrated covariance, the
    confidence (a probability), and the ambiguity check against the best distinct runner-up
    (IoU sums and refined chi2: ``confidence.is_ambiguous``; ``reason="ambiguous"`` or, with

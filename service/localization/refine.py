@@ -71,9 +71,9 @@ from typing import Any
 import gtsam
 import numpy as np
 
-from factors.geometry import Camera, Ellipsoid, GeometryError, check_pose, snap_to_rotation
+from factors.geometry import Camera, Ellipsoid, GeometryError, check_pose
 from factors.names import check_robust
-from factors.pose_factors import pose_factors
+from factors.pose_factors import pose3, pose_factors
 from factors.pose_residuals import PoseResidualModel
 from service.localization.budget import Deadline, deadline_passed
 from service.localization.types import Detection, check_covariance
@@ -173,9 +173,6 @@ def _lm_params(max_iterations: int) -> gtsam.LevenbergMarquardtParams:
     params.setlambdaUpperBound(LAMBDA_UPPER_BOUND)
     return params
 
-
-def _pose3(T: np.ndarray) -> gtsam.Pose3:
-    return gtsam.Pose3(gtsam.Rot3(snap_to_rotation(T[:3, :3])), np.ascontiguousarray(T[:3, 3]))
 
 
 def _check_prior(
@@ -340,7 +337,7 @@ def _build_graph(
     for f in factors:
         graph.add(f)
     if prior is not None:
-        graph.add(gtsam.PriorFactorPose3(_POSE_KEY, _pose3(prior[0]),
+        graph.add(gtsam.PriorFactorPose3(_POSE_KEY, pose3(prior[0]),
                                          gtsam.noiseModel.Gaussian.Covariance(prior[1])))
     return graph, model
 
@@ -354,7 +351,7 @@ def _solve(
     a previous solve's result, which saves re-snapping its rotation); final costs from
     ``model``."""
     initial = gtsam.Values()
-    initial.insert(_POSE_KEY, start_pose if start_pose is not None else _pose3(T0))
+    initial.insert(_POSE_KEY, start_pose if start_pose is not None else pose3(T0))
 
     status = "converged"
     initial_error = math.nan

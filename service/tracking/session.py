@@ -47,7 +47,7 @@ from factors.geometry import (
     snap_to_rotation,
 )
 from factors.names import FieldError
-from factors.pose_factors import pose_factors
+from factors.pose_factors import pose3, pose_factors
 from maps.compiled import CompiledMap
 from service.localization.ransac import MatchScorer
 from service.localization.types import Detection, InlierMatch, PosePrior
@@ -201,11 +201,8 @@ class FrameResult:
 def pose_adjoint(T: np.ndarray) -> np.ndarray:
     """6x6 adjoint of a 4x4 pose in GTSAM's ``[omega, v]`` order:
     ``T Exp(xi) T^-1 = Exp(Ad_T xi)``."""
-    return _pose3(T).AdjointMap()
+    return pose3(T).AdjointMap()
 
-
-def _pose3(T: np.ndarray) -> gtsam.Pose3:
-    return gtsam.Pose3(gtsam.Rot3(snap_to_rotation(T[:3, :3])), np.ascontiguousarray(T[:3, 3]))
 
 
 def _key(i: int) -> int:
@@ -312,7 +309,7 @@ class TrackingSession:
         rel = invert_pose(T_oa) @ T_ob
         sig = self.options.drift.sigmas(float(np.linalg.norm(rel[:3, 3])), dt)
         noise = gtsam.noiseModel.Diagonal.Sigmas(sig)
-        return gtsam.BetweenFactorPose3(key_a, key_b, _pose3(rel), noise), rel, np.diag(sig ** 2)
+        return gtsam.BetweenFactorPose3(key_a, key_b, pose3(rel), noise), rel, np.diag(sig ** 2)
 
     def _new_smoother(self) -> gtsam.FixedLagSmoother:
         lag = float(self.options.window_frames - 1)
@@ -385,11 +382,11 @@ class TrackingSession:
                                        [a.object_index for a in assoc]):
                 graph.add(f)
         if frame.prior is not None and frame.prior.covariance is not None:
-            graph.add(gtsam.PriorFactorPose3(key, _pose3(frame.prior.world_from_camera),
+            graph.add(gtsam.PriorFactorPose3(key, pose3(frame.prior.world_from_camera),
                                              gtsam.noiseModel.Gaussian.Covariance(
                                                  np.asarray(frame.prior.covariance))))
         values = gtsam.Values()
-        values.insert(key, _pose3(T_pred))
+        values.insert(key, pose3(T_pred))
         stamps = gtsam.FixedLagSmootherKeyTimestampMap()
         stamps.insert((key, float(index)))
         timings["associate"] = (time.perf_counter() - t) * 1e3
@@ -482,10 +479,10 @@ class TrackingSession:
         values = gtsam.Values()
         stamps = gtsam.FixedLagSmootherKeyTimestampMap()
         weak = gtsam.noiseModel.Diagonal.Sigmas(np.array([3.0] * 3 + [10.0] * 3))
-        graph.add(gtsam.PriorFactorPose3(_key(chosen[0].index), _pose3(poses[0]), weak))
+        graph.add(gtsam.PriorFactorPose3(_key(chosen[0].index), pose3(poses[0]), weak))
         for j, (b, T, ms) in enumerate(zip(chosen, poses, matches, strict=True)):
             key = _key(b.index)
-            values.insert(key, _pose3(T))
+            values.insert(key, pose3(T))
             stamps.insert((key, float(b.index)))
             by_det = {m.detection_index: m.object_index for m in ms}
             det_idx = sorted(by_det)
@@ -493,7 +490,7 @@ class TrackingSession:
                                        [by_det[i] for i in det_idx]):
                 graph.add(f)
             if b.prior is not None and b.prior.covariance is not None:
-                graph.add(gtsam.PriorFactorPose3(key, _pose3(b.prior.world_from_camera),
+                graph.add(gtsam.PriorFactorPose3(key, pose3(b.prior.world_from_camera),
                                                  gtsam.noiseModel.Gaussian.Covariance(
                                                      np.asarray(b.prior.covariance))))
             if j:
