@@ -29,10 +29,11 @@ misses; see ``docs/simulation.md``). Experiments:
 6. **timing** — ``localize()`` wall and CPU time (level set) and the mean time per pose per
    metric.
 
-``iou`` and ``giou`` refinements cost ~0.5-1 s each here (exact areas with numerical
-Jacobians), so experiments 3-5 use every ``--slow-stride``-th frame for them (stated in the
-output). Writes JSON (``--json``), PNG plots (``--plots``) and, with ``--write-results``, the
-``chess_eval`` section of ``docs/results.md`` and its plots in ``docs/img``.
+``iou`` and ``giou`` refinements cost ~10-30 x level set's (exact areas and their analytic
+gradients, ``factors.overlap``); ``--slow-stride N`` > 1 makes experiments 3-5 use every N-th
+frame for them (stated in the output; default 1: every frame). Writes JSON (``--json``), PNG
+plots (``--plots``) and, with ``--write-results``, the ``chess_eval`` section of
+``docs/results.md`` and its plots in ``docs/img``.
 """
 
 from __future__ import annotations
@@ -159,7 +160,7 @@ def _summary(errors: dict[str, list[tuple[float, float, str]]]) -> dict[str, dic
 
 
 def run(frames: int = 108, draws: int = 1, seed: int = 0, metrics: tuple[str, ...] = METRICS,
-        slow_stride: int = 3, log=print) -> dict:
+        slow_stride: int = 1, log=print) -> dict:
     """Run every experiment; returns the JSON-ready results (raw errors under ``_raw``)."""
     # Imported here so that ``load_chess_*`` stay importable without the solver stack.
     from bench.simulate import SimulationConfig, simulate_frame
@@ -490,9 +491,9 @@ def markdown(results: dict, command: str, plots: list[Path]) -> str:
         f"Command: `{command}` ({cfg['frames']} real ground-truth frames x {cfg['draws']} "
         f"draw(s), seed {cfg['seed']}, {results['elapsed_s']:.0f} s on the shared 2-core "
         "machine). Detections simulated as in `docs/simulation.md`; frames per number of "
-        f"detections: {results['detections_per_frame']}. iou/giou use one frame in "
-        f"{cfg['slow_metrics_stride']} in the sigma, convergence and partial-visibility "
-        "experiments (0.5-1 s per refinement).",
+        f"detections: {results['detections_per_frame']}."
+        + (f" iou/giou use one frame in {cfg['slow_metrics_stride']} in the sigma, convergence "
+           "and partial-visibility experiments." if cfg["slow_metrics_stride"] > 1 else ""),
         "",
         f"**Exact detections** (exact projections, level set): {ex['frames']} frames, "
         f"localized {_pct(ex['localized_fraction'])} %, max position error "
@@ -639,7 +640,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--plots", type=Path, default=None,
                         help="write PNG plots here (default with --write-results: docs/img)")
     parser.add_argument("--metrics", type=str, default=",".join(METRICS))
-    parser.add_argument("--slow-stride", type=int, default=3)
+    parser.add_argument("--slow-stride", type=int, default=1)
     parser.add_argument("--write-results", action="store_true",
                         help="write the chess_eval section of docs/results.md")
     parser.add_argument("--save-raw", type=Path, default=None,
