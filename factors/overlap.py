@@ -85,7 +85,26 @@ def _ellipse_terms(p: np.ndarray) -> tuple[float, ...]:
 
 
 def _quad(A: tuple[float, float, float], x: float, y: float) -> float:
+    """The quadratic form of the symmetric ``A = (a, b, c)`` (``[[a, b], [b, c]]``) at
+    ``(x, y)``; floats or arrays (elementwise) alike."""
     return A[0] * x * x + 2.0 * A[1] * x * y + A[2] * y * y
+
+
+def _bilinear(A: tuple[float, float, float], x: float, y: float, u: float, v: float) -> float:
+    """The bilinear form of the symmetric ``A = (a, b, c)`` at ``(x, y), (u, v)``."""
+    return A[0] * x * u + A[1] * (x * v + y * u) + A[2] * y * v
+
+
+def _crossing_coefficients(A2: tuple, P1: tuple, Q1: tuple, dx: float,
+                           dy: float) -> tuple[float, float, float, float, float]:
+    """``(k0, k1, k2, k3, k4)`` of ``f(t) = Phi_2(x_1(t)) - 1 = k0 + k1 cos t + k2 sin t +
+    k3 cos 2t + k4 sin 2t``: ellipse 1's boundary ``c1 + P1 cos t + Q1 sin t`` in ellipse 2's
+    implicit form (``A2``: its shape matrix, ``(dx, dy) = c1 - c2``); floats or arrays."""
+    (P1x, P1y), (Q1x, Q1y) = P1, Q1
+    pap, qaq = _quad(A2, P1x, P1y), _quad(A2, Q1x, Q1y)
+    return (_quad(A2, dx, dy) + 0.5 * (pap + qaq) - 1.0,
+            2.0 * _bilinear(A2, dx, dy, P1x, P1y), 2.0 * _bilinear(A2, dx, dy, Q1x, Q1y),
+            0.5 * (pap - qaq), _bilinear(A2, P1x, P1y, Q1x, Q1y))
 
 
 def _bracketed_root(fn, lo: float, hi: float, f0: float, f1: float, neg_lo: bool) -> float:
@@ -226,18 +245,8 @@ def _crossing_roots(e1: _Ell, e2: _Ell) -> tuple[str, list[float], list[float]]:
     ``f(t) = Phi_2(x_1(t)) - 1`` is a trigonometric quadratic; its roots are bracketed on a
     grid of ``GRID`` angles and refined by :func:`_bracketed_root`, then mapped to e2's angle.
     """
-    A2 = e2.A
-    (P1x, P1y), (Q1x, Q1y) = e1.P, e1.Q
-    dx, dy = e1.c[0] - e2.c[0], e1.c[1] - e2.c[1]  # c1 - c2
-
-    def bil(A: tuple[float, ...], x: float, y: float, u: float, v: float) -> float:
-        return A[0] * x * u + A[1] * (x * v + y * u) + A[2] * y * v
-
-    pap, qaq = _quad(A2, P1x, P1y), _quad(A2, Q1x, Q1y)
-    paq = bil(A2, P1x, P1y, Q1x, Q1y)
-    k0 = _quad(A2, dx, dy) + 0.5 * (pap + qaq) - 1.0
-    k1, k2 = 2.0 * bil(A2, dx, dy, P1x, P1y), 2.0 * bil(A2, dx, dy, Q1x, Q1y)
-    k3, k4 = 0.5 * (pap - qaq), paq
+    k0, k1, k2, k3, k4 = _crossing_coefficients(e2.A, e1.P, e1.Q, e1.c[0] - e2.c[0],
+                                                 e1.c[1] - e2.c[1])
     # f is dimensionless; identical contours give f = 0 up to rounding amplified by the
     # eccentricity, so anything below 1e-9 is treated as the same ellipse (area error <= 1e-9).
     if abs(k0) + abs(k1) + abs(k2) + abs(k3) + abs(k4) <= 1e-9:
@@ -686,21 +695,8 @@ def _crossing_roots_batch(b: _Batch) -> tuple[np.ndarray, np.ndarray, np.ndarray
     """Vectorised :func:`_crossing_roots`: ``kind`` (n,) (0 same, 1 first_inside, 2
     second_inside, 3 disjoint, 4 crossing), the counts (n,) and the sorted roots on e1 and on e2
     (n, K), ``inf``-padded."""
-    A2 = b.A[1]
-    (P1x, P1y), (Q1x, Q1y) = b.P[0], b.Q[0]
-    dx, dy = -b.c[1][0], -b.c[1][1]
-
-    def quad(A, x, y):
-        return A[0] * x * x + 2.0 * A[1] * x * y + A[2] * y * y
-
-    def bil(A, x, y, u, v):
-        return A[0] * x * u + A[1] * (x * v + y * u) + A[2] * y * v
-
-    pap, qaq = quad(A2, P1x, P1y), quad(A2, Q1x, Q1y)
-    paq = bil(A2, P1x, P1y, Q1x, Q1y)
-    k0 = quad(A2, dx, dy) + 0.5 * (pap + qaq) - 1.0
-    k1, k2 = 2.0 * bil(A2, dx, dy, P1x, P1y), 2.0 * bil(A2, dx, dy, Q1x, Q1y)
-    k3, k4 = 0.5 * (pap - qaq), paq
+    k0, k1, k2, k3, k4 = _crossing_coefficients(b.A[1], b.P[0], b.Q[0], -b.c[1][0],
+                                                 -b.c[1][1])
     ksum = np.abs(k0) + np.abs(k1) + np.abs(k2) + np.abs(k3) + np.abs(k4)
     same = ksum <= 1e-9
     f = np.stack([k0, k1, k2, k3, k4], axis=1) @ _GRID_BASIS  # (n, GRID)
@@ -709,7 +705,7 @@ def _crossing_roots_batch(b: _Batch) -> tuple[np.ndarray, np.ndarray, np.ndarray
     change[same] = False
     crossing = change.any(axis=1)
     f_max = f[np.arange(b.n), np.argmax(np.abs(f), axis=1)]
-    second_in = quad(b.A[0], b.c[1][0], b.c[1][1]) < 1.0
+    second_in = _quad(b.A[0], b.c[1][0], b.c[1][1]) < 1.0
     kind = np.where(same, 0, np.where(crossing, 4, np.where(
         f_max < 0.0, 1, np.where(second_in, 2, 3))))
     pair, i = np.nonzero(change)
