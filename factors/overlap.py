@@ -507,27 +507,10 @@ def intersection_area(p1: np.ndarray, p2: np.ndarray) -> float:
     return min(max(area, 0.0), math.pi * min(e1.ab, e2.ab))
 
 
-def intersection_area_and_gradient(p1: np.ndarray, p2: np.ndarray) -> tuple[float, np.ndarray]:
-    """Intersection area (px^2) and its gradient (5,) with respect to the second ellipse's
-    Gaussian parameters ``g2 = (mu_x, mu_y, s00, s01, s11)`` (module docstring, "Derivatives")."""
-    e1, e2 = _pair(p1, p2, True)
-    areas, grads = _piece_sums(_intersection_pieces(e1, e2), (e1, e2), True)
-    return areas[0], np.asarray(grads[0])
-
-
 def hull_area(p1: np.ndarray, p2: np.ndarray, n_directions: int = HULL_DIRECTIONS) -> float:
     """Area (px^2) of the convex hull of two ellipses, exact (see the module docstring)."""
     e1, e2 = _pair(p1, p2, False)
     return _piece_sums(_hull_pieces(p1, p2, e1, e2, n_directions), (e1, e2), False)[0][0]
-
-
-def hull_area_and_gradient(p1: np.ndarray, p2: np.ndarray,
-                           n_directions: int = HULL_DIRECTIONS) -> tuple[float, np.ndarray]:
-    """Hull area (px^2) and its gradient (5,) w.r.t. the second ellipse's Gaussian parameters
-    ``g2 = (mu_x, mu_y, s00, s01, s11)`` (module docstring, "Derivatives")."""
-    e1, e2 = _pair(p1, p2, True)
-    areas, grads = _piece_sums(_hull_pieces(p1, p2, e1, e2, n_directions), (e1, e2), True)
-    return areas[0], np.asarray(grads[0])
 
 
 def quadrant_areas(

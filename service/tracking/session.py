@@ -235,7 +235,6 @@ class TrackingSession:
         self._last: tuple[int, float, np.ndarray, np.ndarray, np.ndarray] | None = None
         self._misses = 0
         self._last_timestamp: float | None = None
-        self._t0 = time.perf_counter()
 
     # ------------------------------------------------------------------ public
     def add_frame(self, frame: FrameInput) -> FrameResult:
