@@ -432,13 +432,15 @@ def main(argv: list[str] | None = None) -> int:
     cpu_overhead = (c1["server_cpu_ms_per_request"] / inproc["cpu_ms_per_call"] - 1
                     if c1 and "server_cpu_ms_per_request" in c1 else None)
     command = "python -m bench.load " + " ".join(argv if argv is not None else sys.argv[1:])
+    from bench.results_doc import tree_version
+
     report = {"command": command.strip(), "frames": args.frames, "workers": args.workers,
               "duration_s": args.duration, "warmup_s": args.warmup,
               "machine": f"{os.cpu_count()} CPUs, {platform.python_implementation()} "
                          f"{platform.python_version()}",
               "load_average": load_average, "in_process": inproc, "levels": levels,
-              **({"baseline": str(args.baseline), "baseline_levels": baseline_levels}
-                 if args.baseline else {}),
+              **({"baseline": f"{args.baseline} ({tree_version(Path(args.baseline))})",
+                  "baseline_levels": baseline_levels} if args.baseline else {}),
               "http_overhead_per_worker": overhead,
               "http_cpu_overhead_per_worker": cpu_overhead}
     text = json.dumps(report, indent=2)

@@ -120,6 +120,10 @@ def run(seeds: list[int], baseline: Path | None, rounds: int) -> dict[str, Any]:
             print(f"round {k} {name} done", file=sys.stderr)
     out: dict[str, Any] = {"seeds": seeds, "rounds": rounds,
                            "load_average": ", ".join(f"{x:.1f}" for x in os.getloadavg())}
+    if baseline is not None:
+        from bench.results_doc import tree_version
+
+        out["baseline_version"] = tree_version(baseline)
     for name, runs in per.items():
         rows = [dict(r, cpu_ms=min(run[i]["cpu_ms"] for run in runs))
                 for i, r in enumerate(runs[0])]
@@ -137,7 +141,8 @@ def to_markdown(report: dict[str, Any], command: str) -> str:
         f"its own process, alternately, {report['rounds']} round(s), per frame the smallest "
         "CPU time (`time.thread_time`) over the rounds; load average at the end "
         f"{report['load_average']} (2 shared cores). *wrong*: localized with an error above "
-        f"{WRONG_POSITION_M} m or {WRONG_ROTATION_DEG:g} deg.",
+        f"{WRONG_POSITION_M} m or {WRONG_ROTATION_DEG:g} deg."
+        + (f" Baseline: {report['baseline_version']}." if "baseline_version" in report else ""),
         "",
         "| code | frames | CPU median ms | CPU p90 ms | CPU mean ms | hypotheses / refine "
         "(share of wall) | localized | @5 cm | @10 cm | @20 cm | wrong | median err (cm) |",

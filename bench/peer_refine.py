@@ -254,19 +254,6 @@ def run_worker(tree: Path, problems: Path, metric: str, repeats: int) -> list[di
     return json.loads(out.stdout)
 
 
-def tree_version(tree: Path) -> str:
-    """``branch at <short commit>`` of a git checkout (worktree), else its path."""
-    try:
-        def git(*args: str) -> str:
-            return subprocess.run(["git", "-C", str(tree), *args], capture_output=True,
-                                  text=True, check=True).stdout.strip()
-
-        return f"{git('rev-parse', '--abbrev-ref', 'HEAD')} at " \
-               f"{git('rev-parse', '--short', 'HEAD')}"
-    except (OSError, subprocess.CalledProcessError):
-        return str(tree)
-
-
 def summarise(rounds: list[list[dict]]) -> dict:
     n = len(rounds[0])
     per_problem = [float(np.median([t for r in rounds for t in r[i]["cpu_ms"]]))
@@ -287,6 +274,8 @@ def run(seed: int, rounds: int, repeats: int, peer: Path | None,
     data = make_problems(seed)
     solvers: dict[str, object] = {}
     if compare_tree is not None:
+        from bench.results_doc import tree_version
+
         label = f"before ({tree_version(compare_tree)})"
         for m in METRICS:
             solvers[f"{label} {m}"] = (compare_tree, m)

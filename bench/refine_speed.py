@@ -60,7 +60,7 @@ from service.localization.types import Detection
 
 SIZES = (3, 5, 8, 16)
 CAMERA = Camera(532.57, 531.54, 320.0, 240.0, 640, 480)
-#: trials per (metric, N); the slow numerical-Jacobian area metrics get fewer
+#: trials per (metric, N); the slow exact-area metrics get fewer
 TRIALS = {"level_set": 40, "iou": 5, "giou": 5}
 DEFAULT_TRIALS = 10
 BFGS_TRIALS = 8

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import fcntl
 import os
+import subprocess
 from pathlib import Path
 
 RESULTS_PATH = Path(__file__).resolve().parent.parent / "docs" / "results.md"
@@ -31,3 +32,17 @@ def update_results_section(name: str, markdown: str, path: Path = RESULTS_PATH) 
         tmp = path.with_suffix(".tmp")
         tmp.write_text(text)
         os.replace(tmp, path)
+
+
+def tree_version(tree: Path) -> str:
+    """``branch at <short commit>`` of a git checkout (worktree; ``HEAD at ...`` when
+    detached), else its path: names a compared tree in a results section."""
+    try:
+        def git(*args: str) -> str:
+            return subprocess.run(["git", "-C", str(tree), *args], capture_output=True,
+                                  text=True, check=True).stdout.strip()
+
+        return f"{git('rev-parse', '--abbrev-ref', 'HEAD')} at " \
+               f"{git('rev-parse', '--short', 'HEAD')}"
+    except (OSError, subprocess.CalledProcessError):
+        return str(tree)

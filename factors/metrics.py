@@ -18,9 +18,10 @@ the tests' independent oracle. The ONE production implementation of the smooth m
 of their pose Jacobians is the batched :class:`factors.pose_residuals.PoseResidualModel`;
 ``tests/test_pose_factors.py`` checks that it equals :func:`residual` pair by pair. Production
 code calls the scalar forms only where there is no batched form: ``qbbox`` (piecewise, numeric
-Jacobian), the per-pair exact overlap of ``iou`` / ``giou`` (:func:`overlap_residual`), the
-level-set sampling layout (shared by both), and the one-off validation of
-``LocalizationOptions.metric_options`` on a fixed probe pair.
+Jacobian), the level-set sampling layout (shared by both), the one-off validation of
+``LocalizationOptions.metric_options`` on a fixed probe pair, and single pairs of ``iou`` /
+``giou`` (:func:`overlap_residual` with one pair uses the scalar exact areas; several pairs,
+e.g. the pose factors', the batched :func:`factors.overlap.quadrant_areas_batch`).
 
 Argument order: the **detection** (fixed, measured) comes first, the **projection** (the
 moving, predicted ellipse) second. Every residual is "detection minus projection". All lengths

@@ -214,7 +214,7 @@ def _refine_and_verify(
     return _Answer(T, res.covariance, inliers, res, status), status
 
 
-@dataclass
+@dataclass(eq=False)
 class _Answer:
     """A verified pose: ``world_from_camera``, raw covariance, inliers, the refinement (None
     with ``metric="none"``) and its status; ``source`` is set by ``localize``."""
@@ -237,6 +237,16 @@ class _Answer:
         """The refinement's chi2 (NaN without refinement)."""
         return math.nan if self.refinement is None else float(self.refinement.chi2)
 
+    @property
+    def n_refined(self) -> int:
+        """Number of detections the refinement's chi2 sums over (0 without refinement)."""
+        return 0 if self.refinement is None else len(self.refinement.per_detection_cost)
+
+    def chi2_against(self, best: _Answer) -> float:
+        """This answer's chi2 where it compares with ``best``'s (refined over as many
+        detections, the same metric); NaN otherwise (the chi2 rules then do not apply)."""
+        return self.chi2 if self.n_refined == best.n_refined else math.nan
+
     def support(self) -> tuple[int, float]:
         """(inlier count, score): the order in which answers are compared."""
         return len(self.inliers), self.score
@@ -250,7 +260,7 @@ def _is_ambiguous_answer(ranked: Sequence[_Answer]) -> bool:
     objects = {m.object_id for m in best.inliers}
     return any(is_ambiguous(len(best.inliers), best.score, len(b.inliers), b.score,
                             same_objects={m.object_id for m in b.inliers} == objects,
-                            best_chi2=best.chi2, runner_up_chi2=b.chi2)
+                            best_chi2=best.chi2, runner_up_chi2=b.chi2_against(best))
                for b in ranked[1:])
 
 
@@ -260,11 +270,10 @@ def _is_ambiguous_answer(ranked: Sequence[_Answer]) -> bool:
 REFINED_ALTERNATIVES = 2
 ALTERNATIVE_PREFILTER_RATIO = 0.5
 #: LM iteration cap of an alternative's refinement (the ambiguity check needs its support, not
-#: its last millimetre; a capped alternative that ranks first is then refined in full from where
-#: it stopped, ``_finish_capped``). Measured on the tuning seeds 100/102 of ``bench.trust``
-#: (full, 2- and 3-detection frames, level set): alternatives need a median 9, p90 24, p95 34
-#: iterations; with the cap the answers are the same (localized / false accepts / within 10 cm
-#: identical on full and 3-detection frames, 71 -> 70 localized on 2-detection frames).
+#: its last millimetre; a capped alternative that competes, i.e. has as many inliers as the
+#: first answer, is then refined in full from where it stopped, in ``localize``). Measured on
+#: the tuning seeds 100/102 of ``bench.trust`` (full, 2- and 3-detection frames, level set):
+#: alternatives need a median 9, p90 24, p95 34 iterations.
 ALTERNATIVE_MAX_ITERATIONS = 15
 #: Prior gating: the association at the prior pose also tries the poses at +-
 #: ``PRIOR_GATE_SIGMAS`` standard deviations along each principal axis of the prior's
@@ -375,7 +384,8 @@ def localize(
                                s2_floor=S2_FLOOR.get(metric, 0.0),
                                chi2_ratio_log=chi2_competitor(
                                    a.chi2, len(a.inliers),
-                                   [(b.chi2, len(b.inliers)) for b in others if b is not a]))
+                                   [(b.chi2_against(a), len(b.inliers))
+                                    for b in others if b is not a]))
         scale = math.nan if res is None else covariance_scale(metric, res.chi2, res.n_residuals,
                                                               n_refined)
         return confidence_probability(metric, ev), {**ev, "s2": s2, "cov_scale": scale,
@@ -451,9 +461,9 @@ def localize(
             None, deadline)
         if k == 0:
             first_status = status
-        elif got is not None and status == "max_iterations":
-            got.capped = True
         if got is not None:
+            got.capped = (k > 0 and status == "max_iterations"
+                          and alternative_options.max_iterations < options.max_iterations)
             answers.append(got)
     if prior_answer is not None:
         answers.append(prior_answer)
@@ -463,15 +473,20 @@ def localize(
         candidates.sort(key=lambda a: (*a.support(), a.source == "prior"), reverse=True)
 
     order(answers)
-    if answers and answers[0].capped:  # an alternative stopped at its cap ranks first:
-        capped = answers.pop(0)        # refine it in full from where it stopped
-        full, _ = _refine_and_verify(
-            [Match(m.detection_index, compiled.index_of(m.object_id), m.iou)
-             for m in capped.inliers], detections, compiled, camera, scorer,
-            capped.world_from_camera, options, None, deadline)
-        if full is not None:
-            answers.append(full)
-            order(answers)
+    # capped alternatives that compete (as many inliers as the first answer: they may rank
+    # first, and they are the only runners-up the ambiguity check weighs) are refined in full
+    # from where they stopped; one that then fails verification keeps its capped result
+    while pending := [a for a in answers
+                      if a.capped and len(a.inliers) >= len(answers[0].inliers)]:
+        answers = [a for a in answers if all(a is not p for p in pending)]
+        for a in pending:
+            full, _ = _refine_and_verify(
+                [Match(m.detection_index, compiled.index_of(m.object_id), m.iou)
+                 for m in a.inliers], detections, compiled, camera, scorer,
+                a.world_from_camera, options, None, deadline)
+            a.capped = False
+            answers.append(a if full is None else full)
+        order(answers)
     timings["refine"] = (time.perf_counter() - tr) * 1e3
     if not answers:
         return _not_localized("refinement_diverged", metric, evaluated, timings, t0,

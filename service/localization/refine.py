@@ -118,7 +118,8 @@ class RefinementResult:
             camera (body) frame; None when the information matrix is singular.
         covariance_reason: why ``covariance`` is None (else None).
         per_detection_cost: (N,) the metric's unweighted cost ``Delta_j = ||r_j||^2`` at the
-            final pose (level set: on the sample points fixed at the start); ``inf`` where the
+            final pose (level set: on the sample points fixed at the start; iou: a pair whose
+            ellipses are disjoint has the giou rows, ``Delta_j`` > 1); ``inf`` where the
             projection is not an ellipse.
         valid_projection: (N,) bool, the projection of pair ``j`` is an ellipse at the final pose.
         initial_error, total_error: GTSAM's weighted error ``0.5 sum_j ||r_j||^2 / sigma_j``
@@ -377,7 +378,10 @@ def _solve(
             total_error = float(optimizer.error())  # the error of ``result``
     except (RuntimeError, np.linalg.LinAlgError):  # e.g. an indeterminant linear system
         if math.isnan(initial_error):
-            initial_error = float(graph.error(initial))
+            try:
+                initial_error = float(graph.error(initial))
+            except (RuntimeError, np.linalg.LinAlgError):  # the start itself cannot be scored
+                initial_error = math.inf
         result, iterations, T, total_error = initial, 0, T0, initial_error
         status = "diverged"
     if not (np.all(np.isfinite(T)) and math.isfinite(total_error)):
