@@ -751,17 +751,12 @@ def _intersection_arcs_batch(b: _Batch) -> tuple[np.ndarray, ...]:
     return tuple(np.concatenate(x) for x in zip(*pieces, strict=True))
 
 
-def _support_coefficients(b: _Batch, pair: np.ndarray) -> np.ndarray:
-    """Per element of ``pair``: (6, m) ``alpha_k, beta_k, gamma_k`` of ``n^T Sigma_k n = alpha +
-    beta cos 2t + gamma sin 2t`` (k = 1, 2, rows 0-2 and 3-5) for :func:`_hdiff_batch`."""
-    return b.support[:, pair]
-
-
 def _hdiff_batch(coef: np.ndarray, c2x: np.ndarray, c2y: np.ndarray, t: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray]:
     """Vectorised ``h1 - h2`` and its derivative in the normal angle ``t`` (as ``hdiff`` in
     :func:`_hull_pieces`): ``h_k = n . c_k + sqrt(n^T Sigma_k n)``, ``c_1 = 0``; ``coef`` from
-    :func:`_support_coefficients` (broadcast against ``t``)."""
+    ``b.support[:, pair]``: per pair (6, m) ``alpha_k, beta_k, gamma_k`` of ``n^T Sigma_k n
+    = alpha + beta cos 2t + gamma sin 2t`` (broadcast against ``t``)."""
     c, s = np.cos(t), np.sin(t)
     c2, s2 = c * c - s * s, 2.0 * c * s
     q1 = coef[0] + coef[1] * c2 + coef[2] * s2
@@ -800,7 +795,7 @@ def _hull_batch(b: _Batch, p1: np.ndarray, p2: np.ndarray, n_directions: int
     turn = ~change & (sgn * ddiff < 0.0) & (sgn * ddiff_n > 0.0)
 
     def sub(pair):
-        return _support_coefficients(b, pair), c2x[pair], c2y[pair]
+        return b.support[:, pair], c2x[pair], c2y[pair]
 
     sw_pair, sw_t, sw_k = [], [], []
     pair, i = np.nonzero(change)

@@ -599,17 +599,13 @@ class PoseResidualModel:
         """Add the factors' residuals: the valid rows saturated (``r / sqrt(1 + c / P_j)``,
         module docstring)."""
         r = ev.residuals
-        if float(np.vdot(r, r)) <= self._saturation_floor:  # no pair's cost reaches its c_0
+        # fast path: the total cost is below every pair's c_0, so none can reach it
+        c = None if float(np.vdot(r, r)) <= self._saturation_floor else (r * r).sum(axis=1)
+        big = None if c is None else (c > self._half_penalty) & ev.valid
+        if big is None or not big.any():
             return PoseEvaluation(r, ev.jacobians, ev.valid, ev.depth_margins, r, ev.jacobians)
-        c = (r * r).sum(axis=1)
         P = self.penalty_costs
         c0 = self._half_penalty
-        big = c > c0
-        if not big.any():
-            return PoseEvaluation(r, ev.jacobians, ev.valid, ev.depth_margins, r, ev.jacobians)
-        big &= ev.valid
-        if not big.any():
-            return PoseEvaluation(r, ev.jacobians, ev.valid, ev.depth_margins, r, ev.jacobians)
         span = 0.4 * P  # h < c0 + span = 0.9 P
         e = np.exp(-np.where(big, c - c0, 0.0) / span)
         h = np.where(big, c0 + span * (1.0 - e), c)

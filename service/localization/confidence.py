@@ -247,8 +247,7 @@ def evidence_features(
         "logit_gauss": _logit(p_gauss) if math.isfinite(p_gauss) else 0.0,
         "margin": float(min(max(margin, 0.0), 1.0)),
         "log_samples": math.log(max(n_samples, 1)),
-        "chi2_competitor": float(min(max(chi2_ratio_log, -CHI2_COMPETITOR_CAP),
-                                     CHI2_COMPETITOR_CAP)),
+        "chi2_competitor": float(chi2_ratio_log),  # clipped by chi2_competitor
     }
 
 
