@@ -43,21 +43,30 @@ CAM = Camera(500.0, 520.0, 320.0, 240.0, 640, 480)
 UP = np.array([0.0, 0.0, 1.0])
 
 
-def rolled_scene(rng: np.random.Generator, roll: float):
+def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = UP,
+            roll: float = 0.0) -> np.ndarray:
+    """world_from_camera of a camera at ``eye`` looking at ``target`` with +X horizontal
+    (zero roll) then rolled by ``roll`` radians about its optical axis."""
+    z = target - eye
+    z /= np.linalg.norm(z)
+    x = np.cross(z, up)
+    x /= np.linalg.norm(x)
+    c, s = math.cos(roll), math.sin(roll)
+    R = np.column_stack([x, np.cross(z, x), z]) @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    return pose_matrix(R, eye)
+
+
+def random_pair_scene(rng: np.random.Generator, axes_range: tuple[float, float] = (0.1, 0.4),
+                      roll: float = 0.0):
     """(ellipsoids, exact ellipses, camera_from_world) of a camera ~4 m from two random
-    ellipsoids, looking at their midpoint, rolled by ``roll`` radians about its optical axis."""
+    ellipsoids (semi-axes in ``axes_range`` m), looking near their midpoint, rolled by ``roll``
+    radians about its optical axis (also the tests' scene generator)."""
     while True:
-        E = [Ellipsoid(rng.uniform(-1, 1, 3), rng.uniform(0.1, 0.4, 3),
+        E = [Ellipsoid(rng.uniform(-1, 1, 3), rng.uniform(*axes_range, 3),
                        snap_to_rotation(rng.normal(size=(3, 3)))) for _ in range(2)]
         eye = rng.uniform(-1, 1, 3) + np.array([0.0, -4.0, 0.5])
-        z = (E[0].center + E[1].center) / 2 + rng.normal(0, 0.2, 3) - eye
-        z /= np.linalg.norm(z)
-        x = np.cross(z, UP)
-        x /= np.linalg.norm(x)
-        c, s = math.cos(roll), math.sin(roll)
-        R = np.column_stack([x, np.cross(z, x), z]) @ np.array([[c, -s, 0], [s, c, 0],
-                                                                 [0, 0, 1]])
-        T_cw = invert_pose(pose_matrix(R, eye))
+        T_cw = invert_pose(look_at(eye, (E[0].center + E[1].center) / 2
+                                   + rng.normal(0, 0.2, 3), roll=roll))
         try:
             return E, [project_ellipsoid(CAM, T_cw, e) for e in E], T_cw
         except DegenerateProjectionError:
@@ -80,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
     rng = np.random.default_rng(args.seed)
     stats = {k: {"found": 0, "time": 0.0, "hyps": 0, "noisy_err": []} for k in solvers}
     for _ in range(args.scenes):
-        E, ells, T_cw = rolled_scene(rng, math.radians(rng.uniform(-args.max_roll,
+        E, ells, T_cw = random_pair_scene(rng, roll=math.radians(rng.uniform(-args.max_roll,
                                                                    args.max_roll)))
         noisy = [Ellipse(e.cx + rng.normal(0, 1), e.cy + rng.normal(0, 1), e.a * 1.02,
                          e.b * 0.99, e.angle) for e in ells]

@@ -7,13 +7,11 @@ import math
 import numpy as np
 import pytest
 
+from bench.p2e import CAM, UP, look_at, random_pair_scene
 from factors.geometry import (
-    Camera,
-    DegenerateProjectionError,
     Ellipse,
     Ellipsoid,
     invert_pose,
-    pose_matrix,
     project_ellipsoid,
     snap_to_rotation,
 )
@@ -24,38 +22,7 @@ from service.localization.hypotheses import (
     rotation_from_two_directions,
 )
 
-CAM = Camera(500.0, 520.0, 320.0, 240.0, 640, 480)
-UP = np.array([0.0, 0.0, 1.0])
 BACK = np.array([0.0, -5.0, 0.0])  # a camera position offset 5 m behind the scene
-
-
-def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = UP,
-            roll: float = 0.0) -> np.ndarray:
-    """world_from_camera of a camera at ``eye`` looking at ``target`` with +X horizontal
-    (zero roll) then rolled by ``roll`` radians about its optical axis."""
-    z = target - eye
-    z /= np.linalg.norm(z)
-    x = np.cross(z, up)
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    R = np.column_stack([x, y, z])
-    c, s = math.cos(roll), math.sin(roll)
-    R = R @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
-    return pose_matrix(R, eye)
-
-
-def random_pair_scene(rng: np.random.Generator, axes_range=(0.1, 0.4), roll: float = 0.0):
-    while True:
-        E = [Ellipsoid(rng.uniform(-1, 1, 3), rng.uniform(*axes_range, 3),
-                       snap_to_rotation(rng.normal(size=(3, 3)))) for _ in range(2)]
-        eye = rng.uniform(-1, 1, 3) + np.array([0.0, -4.0, 0.5])
-        T_wc = look_at(eye, (E[0].center + E[1].center) / 2 + rng.normal(0, 0.2, 3), roll=roll)
-        T_cw = invert_pose(T_wc)
-        try:
-            ells = [project_ellipsoid(CAM, T_cw, e) for e in E]
-        except DegenerateProjectionError:
-            continue
-        return E, ells, T_cw
 
 
 # ----------------------------------------------------------------------------------- P3P
