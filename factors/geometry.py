@@ -70,7 +70,9 @@ __all__ = [
     "rotation_2d",
     "rotation_from_quaternion_wxyz",
     "sigma_entries",
+    "skew",
     "snap_to_rotation",
+    "so3_exp",
 ]
 
 
@@ -200,6 +202,29 @@ def _is_rotation(rows: list[list[float]], tol: float) -> bool:
     (a, b, c), (d, e, f), (g, h, k) = rows
     det = a * (e * k - f * h) - b * (d * k - f * g) + c * (d * h - e * g)
     return err <= tol and det > 0  # False for NaN
+
+
+def skew(w: np.ndarray) -> np.ndarray:
+    """Cross-product matrices ``[w]x`` (..., 3, 3) of vectors ``w`` (..., 3):
+    ``[w]x @ u = w x u``."""
+    w = np.asarray(w, dtype=float)
+    z = np.zeros(w.shape[:-1])
+    return np.stack([np.stack([z, -w[..., 2], w[..., 1]], -1),
+                     np.stack([w[..., 2], z, -w[..., 0]], -1),
+                     np.stack([-w[..., 1], w[..., 0], z], -1)], -2)
+
+
+def so3_exp(omega: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) of rotation vectors ``omega`` (..., 3) rad:
+    ``exp([omega]x) = I + (sin th / th) W + ((1 - cos th) / th^2) W^2`` (Rodrigues, ``W =
+    [omega]x``, ``th = |omega|``; the second-order series below 1e-8 rad)."""
+    W = skew(omega)
+    th = np.linalg.norm(np.asarray(omega, dtype=float), axis=-1)
+    small = th < 1e-8
+    t = np.where(small, 1.0, th)
+    a = np.where(small, 1.0, np.sin(t) / t)[..., None, None]
+    b = np.where(small, 0.5, (1.0 - np.cos(t)) / t**2)[..., None, None]
+    return np.eye(3) + a * W + b * (W @ W)
 
 
 def snap_to_rotation(matrix: np.ndarray) -> np.ndarray:

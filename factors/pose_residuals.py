@@ -130,6 +130,8 @@ from factors.geometry import (
     gaussians_from_dual_conics,
     params_from_dual_conics,
     params_from_gaussians,
+    skew,
+    so3_exp,
 )
 from factors.metrics import METRIC_NAMES
 from factors.overlap import HULL_DIRECTIONS
@@ -255,27 +257,19 @@ def _canonical_axes(P: np.ndarray) -> np.ndarray:
     return out
 
 
-def _skew(w: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-
-
 def expmap_pose3(xi: np.ndarray) -> np.ndarray:
-    """4x4 matrix of GTSAM's ``Pose3.Expmap(xi)``, ``xi = [omega (rad), v (m)]`` (SE(3) exp)."""
+    """4x4 matrix of GTSAM's ``Pose3.Expmap(xi)``, ``xi = [omega (rad), v (m)]`` (SE(3) exp:
+    rotation :func:`factors.geometry.so3_exp`, translation ``V v``)."""
     xi = np.asarray(xi, dtype=float)
     w, v = xi[:3], xi[3:]
     th = float(np.linalg.norm(w))
-    W = _skew(w)
+    W = skew(w)
     if th < 1e-8:
-        R = np.eye(3) + W + 0.5 * W @ W
         V = np.eye(3) + 0.5 * W + W @ W / 6.0
     else:
-        a = math.sin(th) / th
-        b = (1.0 - math.cos(th)) / th**2
-        c = (th - math.sin(th)) / th**3
-        R = np.eye(3) + a * W + b * W @ W
-        V = np.eye(3) + b * W + c * W @ W
+        V = np.eye(3) + (1.0 - math.cos(th)) / th**2 * W + (th - math.sin(th)) / th**3 * W @ W
     T = np.eye(4)
-    T[:3, :3] = R
+    T[:3, :3] = so3_exp(w)
     T[:3, 3] = V @ v
     return T
 

@@ -329,3 +329,21 @@ def test_canonical_quaternion_tie_break_for_half_turns() -> None:
         atol=1e-12)
     np.testing.assert_array_equal(canonical_quaternion_wxyz([-0.5, 0.5, 0.5, 0.5]),
                                   [0.5, -0.5, -0.5, -0.5])
+
+
+def test_so3_exp_is_gtsams_rot3_expmap_batched():
+    """factors.geometry.so3_exp (batched Rodrigues, series below 1e-8 rad) against GTSAM's
+    Rot3.Expmap, for random, tiny (1e-10 rad) and zero rotation vectors; skew(w) @ u = w x u."""
+    import gtsam
+
+    from factors.geometry import skew, so3_exp
+
+    rng = np.random.default_rng(3)
+    w = np.vstack([rng.normal(0, 1.5, (20, 3)), rng.normal(0, 1e-10, (3, 3)), np.zeros((1, 3))])
+    R = so3_exp(w)
+    assert R.shape == (24, 3, 3)
+    for wi, Ri in zip(w, R, strict=True):
+        np.testing.assert_allclose(Ri, gtsam.Rot3.Expmap(wi).matrix(), atol=1e-14)
+    u = rng.normal(size=(24, 3))
+    np.testing.assert_allclose(np.einsum("nij,nj->ni", skew(w), u), np.cross(w, u), atol=1e-15)
+    np.testing.assert_allclose(so3_exp(w[0]), R[0], atol=1e-15)  # one vector: (3, 3)

@@ -33,6 +33,7 @@ from factors.geometry import (
     Ellipse,
     Ellipsoid,
     gaussians_from_dual_conics,
+    so3_exp,
 )
 
 __all__ = ["p2e_hypotheses", "p3p_hypotheses", "p3p_hypotheses_batch",
@@ -91,7 +92,7 @@ def p3p_hypotheses_batch(
     r = np.asarray(rv, dtype=float).reshape(-1, 3)
     t = np.asarray(tv, dtype=float).reshape(-1, 3)
     sample = np.asarray(owner, dtype=int)
-    R = _rodrigues(r)
+    R = so3_exp(r)
     depth = np.einsum("mpj,mj->mp", obj[sample], R[:, 2]) + t[:, 2, None]
     ok = (np.all(np.isfinite(R), axis=(1, 2)) & np.all(np.isfinite(t), axis=1)
           & np.all(depth > 0.0, axis=1))
@@ -130,18 +131,6 @@ MAX_P2E_HYPOTHESES = 4
 #: than this (rotation entries unitless, translation metres).
 DEDUPE_TOLERANCE = 1e-4
 _FD_STEP = 1e-7  # forward-difference step of the LM Jacobian (rad, m)
-
-
-def _rodrigues(r: np.ndarray) -> np.ndarray:
-    """Rotation matrices (N, 3, 3) of rotation vectors (N, 3) rad (Rodrigues' formula
-    ``R = I + sin(th) [k]x + (1 - cos(th)) [k]x^2``, ``k = r / th``; ``R = I`` at ``th = 0``)."""
-    th = np.linalg.norm(r, axis=1)
-    k = r / np.where(th > 0, th, 1.0)[:, None]
-    Kx = np.zeros((len(r), 3, 3))
-    Kx[:, 0, 1], Kx[:, 0, 2], Kx[:, 1, 2] = -k[:, 2], k[:, 1], -k[:, 0]
-    Kx[:, 1, 0], Kx[:, 2, 0], Kx[:, 2, 1] = k[:, 2], -k[:, 1], k[:, 0]
-    return (np.eye(3) + np.sin(th)[:, None, None] * Kx
-            + (1.0 - np.cos(th))[:, None, None] * (Kx @ Kx))
 
 
 def _frames(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -220,7 +209,7 @@ def _lm_batch(problem: _PairProblem, R: np.ndarray, t: np.ndarray, iterations: i
     need_jac = ok.copy()
     J = np.zeros((n, 10, 6))
     h = _FD_STEP
-    E = _rodrigues(h * np.eye(3))
+    E = so3_exp(h * np.eye(3))
     for _ in range(iterations):
         idx = np.flatnonzero(active & need_jac)
         if idx.size:
@@ -242,7 +231,7 @@ def _lm_batch(problem: _PairProblem, R: np.ndarray, t: np.ndarray, iterations: i
         diag = np.diagonal(A, axis1=1, axis2=2) + 1e-12
         step = -np.linalg.solve(A + (lam[a, None] * diag)[:, :, None] * np.eye(6),
                                 g[:, :, None])[:, :, 0]
-        Ea = _rodrigues(step[:, :3])
+        Ea = so3_exp(step[:, :3])
         Rn = Ea @ R[a]
         tn = (Ea @ t[a][:, :, None])[:, :, 0] + step[:, 3:]
         rn, okn = problem.residuals(Rn, tn)
