@@ -639,16 +639,17 @@ class Camera:
 def ellipsoid_depth_margins(
     camera_from_world: np.ndarray, centers: np.ndarray, shape_matrices: np.ndarray
 ) -> np.ndarray:
-    """Smallest camera-frame depth (m) of each ellipsoid: ``z_c - sqrt(n^T M n)``, shape (N,).
+    """Smallest camera-frame depth (m) of each ellipsoid: ``z_c - sqrt(n^T M n)``, shape
+    (..., N) for poses (..., 4, 4) (or ``[R | t]`` (..., 3, 4)).
 
     The projection is an ellipse exactly when this is positive (the whole ellipsoid is in front
     of the camera's principal plane, which also puts the camera outside it).
     ``centers`` (N, 3) world metres; ``shape_matrices`` (N, 3, 3) = ``R diag(axes^2) R^T``.
     """
     T = np.asarray(camera_from_world, dtype=float)
-    r3 = T[2, :3]
-    zc = np.asarray(centers) @ r3 + T[2, 3]
-    extent = np.sqrt(np.maximum(np.einsum("i,nij,j->n", r3, shape_matrices, r3), 0.0))
+    r3 = T[..., 2, :3]
+    zc = r3 @ np.asarray(centers).T + T[..., 2, 3, None]
+    extent = np.sqrt(np.maximum(np.einsum("...i,nij,...j->...n", r3, shape_matrices, r3), 0.0))
     return zc - extent
 
 

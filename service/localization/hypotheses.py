@@ -32,6 +32,7 @@ from factors.geometry import (
     Camera,
     Ellipse,
     Ellipsoid,
+    ellipsoid_depth_margins,
     gaussians_from_dual_conics,
     so3_exp,
 )
@@ -166,11 +167,9 @@ class _PairProblem:
         """Residuals (N, 10) of ``camera_from_world = [R | t]`` (R (N, 3, 3), t (N, 3)) and
         their validity (N,): both ellipsoids entirely in front of the camera (rows of invalid
         poses are not meaningful)."""
-        r3 = R[:, 2]
-        zc = r3 @ self.X.T + t[:, 2, None]
-        ext = np.sqrt(np.maximum(np.sum((r3 @ self.M) * r3, axis=-1).T, 0.0))
-        valid = np.all(zc - ext > MIN_DEPTH, axis=1)
-        P = self.K @ np.concatenate([R, t[:, :, None]], axis=2)
+        Rt = np.concatenate([R, t[:, :, None]], axis=2)  # camera_from_world (N, 3, 4)
+        valid = np.all(ellipsoid_depth_margins(Rt, self.X, self.M) > MIN_DEPTH, axis=1)
+        P = self.K @ Rt
         P = P[:, None]
         C = P @ self.Q @ P.transpose(0, 1, 3, 2)
         w = np.where(valid[:, None], -C[:, :, 2, 2], 1.0)

@@ -65,7 +65,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from factors.geometry import Camera, Ellipse, ellipse_params, gaussians_from_dual_conics
+from factors.geometry import (
+    Camera,
+    Ellipse,
+    ellipse_params,
+    ellipsoid_depth_margins,
+    gaussians_from_dual_conics,
+)
 from maps.compiled import CompiledMap
 from service.localization.budget import Deadline, deadline_passed, earliest
 from service.localization.hypotheses import p2e_hypotheses, p3p_hypotheses_batch
@@ -191,10 +197,7 @@ def project_objects(
         of the ellipsoid centres (garbage where the centre is behind the camera).
     """
     T = np.asarray(camera_from_world, dtype=float)
-    r3 = T[:, 2, :3]
-    zc = r3 @ centers.T + T[:, 2, 3, None]
-    extent = np.sqrt(np.maximum(np.einsum("hi,sij,hj->hs", r3, shape_matrices, r3), 0.0))
-    valid = zc - extent > min_depth
+    valid = ellipsoid_depth_margins(T, centers, shape_matrices) > min_depth
     P = np.einsum("ij,hjk->hik", camera.K, T[:, :3, :])
     C = np.einsum("hij,sjk,hlk->hsil", P, dual_quadrics, P)
     w = -C[..., 2, 2]
