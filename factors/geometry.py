@@ -166,13 +166,16 @@ def check_pose(T: object, name: str = "world_from_camera",
 # --------------------------------------------------------------------------- rotations and poses
 
 
-def sigma_entries(a: float, b: float, angle: float) -> tuple[float, float, float]:
-    """``Sigma = R(angle) diag(a^2, b^2) R(angle)^T`` of an ellipse as ``(s00, s01, s11)``.
+def sigma_entries(a: float | np.ndarray, b: float | np.ndarray, angle: float | np.ndarray
+                  ) -> tuple[float, float, float] | tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``Sigma = R(angle) diag(a^2, b^2) R(angle)^T`` of an ellipse as ``(s00, s01, s11)``;
+    with ``(1 / a, 1 / b)`` the entries of its implicit form ``A = Sigma^-1``.
 
-    Scalar ``math`` (no numpy: the metrics call it per ellipse). ``Sigma = A^-1`` is the
-    ellipse's covariance-like shape (:meth:`Ellipse.gaussian`).
+    Floats (``math``, cheap per ellipse: the metrics) or arrays (elementwise: the batched
+    paths). ``Sigma`` is the ellipse's covariance-like shape (:meth:`Ellipse.gaussian`).
     """
-    c, s = math.cos(angle), math.sin(angle)
+    trig = (math.cos, math.sin) if isinstance(angle, float | int) else (np.cos, np.sin)
+    c, s = trig[0](angle), trig[1](angle)
     a2, b2 = a * a, b * b
     return a2 * c * c + b2 * s * s, (a2 - b2) * c * s, a2 * s * s + b2 * c * c
 

@@ -77,11 +77,9 @@ def _sign_changes(positive: np.ndarray) -> list[int]:
 
 def _ellipse_terms(p: np.ndarray) -> tuple[float, ...]:
     """``(Px, Py, Qx, Qy, A00, A01, A11)``: axis vectors ``P = a u``, ``Q = b v`` and ``A``."""
-    a, b = float(p[2]), float(p[3])
-    c, s = math.cos(p[4]), math.sin(p[4])
-    ia, ib = 1.0 / (a * a), 1.0 / (b * b)
-    return (a * c, a * s, -b * s, b * c,
-            ia * c * c + ib * s * s, (ia - ib) * c * s, ia * s * s + ib * c * c)
+    a, b, angle = float(p[2]), float(p[3]), float(p[4])
+    c, s = math.cos(angle), math.sin(angle)
+    return (a * c, a * s, -b * s, b * c, *sigma_entries(1.0 / a, 1.0 / b, angle))
 
 
 def _quad(A: tuple[float, float, float], x: float, y: float) -> float:
@@ -590,13 +588,11 @@ class _Batch:
         self.P, self.Q, self.A, self.ab, self.S = [], [], [], [], []
         for p in (p1, p2):
             a, b, c, s = p[:, 2], p[:, 3], np.cos(p[:, 4]), np.sin(p[:, 4])
-            ia, ib = 1.0 / (a * a), 1.0 / (b * b)
             self.P.append((a * c, a * s))
             self.Q.append((-b * s, b * c))
-            self.A.append((ia * c * c + ib * s * s, (ia - ib) * c * s, ia * s * s + ib * c * c))
+            self.A.append(sigma_entries(1.0 / a, 1.0 / b, p[:, 4]))
             self.ab.append(a * b)
-            a2, b2 = a * a, b * b
-            self.S.append((a2 * c * c + b2 * s * s, (a2 - b2) * c * s, a2 * s * s + b2 * c * c))
+            self.S.append(sigma_entries(a, b, p[:, 4]))
         zero = np.zeros(self.n)
         self.c = [(zero, zero), (p2[:, 0] - p1[:, 0], p2[:, 1] - p1[:, 1])]
         a, b, c, s = p2[:, 2], p2[:, 3], np.cos(p2[:, 4]), np.sin(p2[:, 4])

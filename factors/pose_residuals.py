@@ -130,6 +130,7 @@ from factors.geometry import (
     gaussians_from_dual_conics,
     params_from_dual_conics,
     params_from_gaussians,
+    sigma_entries,
     skew,
     so3_exp,
 )
@@ -694,12 +695,8 @@ class PoseResidualModel:
         elif self.metric == "bbox":
             self._det_box = np.array([d.bbox() for d in self.detections])  # (N, 4) px
         elif self.metric == "bhattacharyya":
-            c, s = np.cos(P[:, 4]), np.sin(P[:, 4])
-            a2, b2 = P[:, 2] ** 2, P[:, 3] ** 2
-            # S_D = R diag(a^2, b^2) R^T as (s00, s01, s11): factors.geometry.sigma_entries,
-            # batched over the detections
-            self._det_sigma = np.stack([a2 * c * c + b2 * s * s, (a2 - b2) * c * s,
-                                        a2 * s * s + b2 * c * c], axis=1)
+            # S_D = R diag(a^2, b^2) R^T as (s00, s01, s11), batched over the detections
+            self._det_sigma = np.stack(sigma_entries(P[:, 2], P[:, 3], P[:, 4]), axis=1)
         else:
             self._det_canon = _canonical_axes(P)
 
