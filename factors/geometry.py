@@ -211,18 +211,19 @@ def skew(w: np.ndarray) -> np.ndarray:
     """Cross-product matrices ``[w]x`` (..., 3, 3) of vectors ``w`` (..., 3):
     ``[w]x @ u = w x u``."""
     w = np.asarray(w, dtype=float)
-    z = np.zeros(w.shape[:-1])
-    return np.stack([np.stack([z, -w[..., 2], w[..., 1]], -1),
-                     np.stack([w[..., 2], z, -w[..., 0]], -1),
-                     np.stack([-w[..., 1], w[..., 0], z], -1)], -2)
+    out = np.zeros((*w.shape[:-1], 3, 3))
+    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -w[..., 2], w[..., 1], -w[..., 0]
+    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = w[..., 2], -w[..., 1], w[..., 0]
+    return out
 
 
 def so3_exp(omega: np.ndarray) -> np.ndarray:
     """Rotation matrices (..., 3, 3) of rotation vectors ``omega`` (..., 3) rad:
     ``exp([omega]x) = I + (sin th / th) W + ((1 - cos th) / th^2) W^2`` (Rodrigues, ``W =
     [omega]x``, ``th = |omega|``; the second-order series below 1e-8 rad)."""
-    W = skew(omega)
-    th = np.linalg.norm(np.asarray(omega, dtype=float), axis=-1)
+    w = np.asarray(omega, dtype=float)
+    W = skew(w)
+    th = np.sqrt(np.sum(w * w, axis=-1))
     small = th < 1e-8
     t = np.where(small, 1.0, th)
     a = np.where(small, 1.0, np.sin(t) / t)[..., None, None]
