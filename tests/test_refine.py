@@ -522,3 +522,32 @@ def test_iou_recovers_from_a_start_where_a_projection_misses_its_detection(seed,
     assert metrics.cost("iou", dets[0].ellipse, proj0) == 1.0  # disjoint at the start
     res = refine(dets, ells, CAMERA, T0, "iou", max_iterations=50)
     assert pose_errors(res.world_from_camera, T_true)[0] < 1e-6, res.status
+
+
+def test_batched_covariance_reasons_for_rank_deficient_and_non_finite_information():
+    """refine's own covariance (no robust kernel, no prior) names why there is none: a
+    Jacobian of rank 5 (the numerical rank is stated) and a non-finite one; a full-rank one
+    gives (J^T W J)^-1 (checked against numpy's inverse)."""
+    from types import SimpleNamespace
+
+    from service.localization.refine import _batched_covariance
+
+    rng = np.random.default_rng(4)
+
+    def model(J: np.ndarray) -> SimpleNamespace:
+        return SimpleNamespace(evaluate=lambda T, jacobian: SimpleNamespace(factor_jacobians=J))
+
+    weights = np.array([1.0, 2.0, 0.5])
+    J = rng.normal(size=(3, 4, 6))  # 3 detections x 4 rows x 6 DoF
+    cov, reason = _batched_covariance(model(J), np.eye(4), weights)
+    info = sum(J[j].T @ J[j] / weights[j] for j in range(3))
+    assert reason is None
+    np.testing.assert_allclose(cov, np.linalg.inv(info), rtol=1e-10)
+    low = J.copy()
+    low[..., 5] = low[..., 4]  # two identical columns: rank 5
+    cov, reason = _batched_covariance(model(low), np.eye(4), weights)
+    assert cov is None and "numerical rank 5 < 6" in reason
+    bad = J.copy()
+    bad[1, 2, 3] = np.nan
+    cov, reason = _batched_covariance(model(bad), np.eye(4), weights)
+    assert cov is None and "not finite" in reason
