@@ -56,6 +56,7 @@ __all__ = [
     "check_pose",
     "dual_conics_from_params",
     "ellipse_params",
+    "ellipse_params_and_validity",
     "ellipsoid_depth_margins",
     "exact_norm",
     "gaussians_from_dual_conics",
@@ -452,23 +453,32 @@ def dual_conics_from_params(params: np.ndarray) -> np.ndarray:
     return out
 
 
-def params_from_gaussians(center: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+def ellipse_params_and_validity(center: np.ndarray, sigma: np.ndarray
+                                ) -> tuple[np.ndarray, np.ndarray]:
     """(N, 5) canonical params (a >= b, angle in [-pi/2, pi/2)) from centres (N, 2) px and
-    ``Sigma = A^-1`` (N, 2, 2) px^2. Raises ``DegenerateProjectionError`` if a ``Sigma`` is not
-    positive definite."""
+    ``Sigma = A^-1`` (N, 2, 2) px^2, and (N,) bool: ``Sigma`` positive definite (its smaller
+    eigenvalue > 0; the rows where it is not are NaN or meaningless)."""
     sxx, syy, sxy = sigma[:, 0, 0], sigma[:, 1, 1], 0.5 * (sigma[:, 0, 1] + sigma[:, 1, 0])
     half_tr = 0.5 * (sxx + syy)
     disc = np.sqrt(np.maximum((0.5 * (sxx - syy)) ** 2 + sxy**2, 0.0))
     lam_major, lam_minor = half_tr + disc, half_tr - disc
-    if np.any(~(lam_minor > 0.0)):
-        bad = int(np.argmax(~(lam_minor > 0.0)))
-        raise DegenerateProjectionError(
-            "degenerate_conic", f"conic {bad} is not an ellipse (shape not positive definite)"
-        )
+    ok = lam_minor > 0.0
     angle = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
     angle = (angle + np.pi / 2) % np.pi - np.pi / 2
-    return np.column_stack([center[:, 0], center[:, 1], np.sqrt(lam_major),
-                            np.sqrt(lam_minor), angle])
+    params = np.column_stack([center[:, 0], center[:, 1], np.sqrt(np.maximum(lam_major, 0.0)),
+                              np.sqrt(np.maximum(lam_minor, 0.0)), angle])
+    return params, ok
+
+
+def params_from_gaussians(center: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """:func:`ellipse_params_and_validity`'s params; raises ``DegenerateProjectionError`` if a
+    ``Sigma`` is not positive definite."""
+    params, ok = ellipse_params_and_validity(center, sigma)
+    if not ok.all():
+        raise DegenerateProjectionError(
+            "degenerate_conic",
+            f"conic {int(np.argmin(ok))} is not an ellipse (shape not positive definite)")
+    return params
 
 
 def gaussians_from_dual_conics(Cn: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

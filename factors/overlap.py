@@ -539,8 +539,8 @@ def _direction_basis(n: int) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]
     cos 2t, sin 2t]`` then ``[0, -sin 2t, cos 2t]`` (``n^T Sigma n`` and half its derivative
     from the coefficients of ``_Batch.support``), (2, 2n) rows ``[cos t, sin t]`` then ``[-sin
     t, cos t]`` (``n . c`` and its derivative); and the cyclic next index (n,)."""
-    th = np.linspace(0.0, _TWO_PI, n, endpoint=False)
-    c, s, c2, s2 = np.cos(th), np.sin(th), np.cos(2 * th), np.sin(2 * th)
+    th, c, s = _directions(n)
+    c2, s2 = np.cos(2 * th), np.sin(2 * th)
     quad_rows = np.stack([np.concatenate([np.ones(n), np.zeros(n)]),
                           np.concatenate([c2, -s2]), np.concatenate([s2, c2])])
     centre_rows = np.stack([np.concatenate([c, -s]), np.concatenate([s, c])])

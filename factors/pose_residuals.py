@@ -126,10 +126,10 @@ from factors.geometry import (
     GeometryError,
     check_pose,
     dual_conics_from_params,
+    ellipse_params_and_validity,
     gaussian_derivatives_from_dual_conics,
     gaussians_from_dual_conics,
     params_from_dual_conics,
-    params_from_gaussians,
     sigma_entries,
     skew,
     so3_exp,
@@ -742,22 +742,10 @@ class PoseResidualModel:
         r = np.zeros((self.n, self.dim))
         J = None if dg is None else np.zeros((self.n, self.dim, 6))
         # a projection whose Sigma is not positive definite is invalid (penalty rows)
-        s00, s01, s11 = sigma[:, 0, 0], 0.5 * (sigma[:, 0, 1] + sigma[:, 1, 0]), sigma[:, 1, 1]
-        valid &= (s00 > 0.0) & (s00 * s11 - s01 * s01 > 0.0)
+        params, ellipse = ellipse_params_and_validity(mu, sigma)
+        valid &= ellipse
         idx = np.flatnonzero(valid)
-        if idx.size:
-            try:
-                proj = params_from_gaussians(mu[idx], sigma[idx])
-            except DegenerateProjectionError:  # rounding at the positive-definite border
-                ok = np.ones(idx.size, dtype=bool)
-                for i, j in enumerate(idx):
-                    try:
-                        params_from_gaussians(mu[j:j + 1], sigma[j:j + 1])
-                    except DegenerateProjectionError:
-                        ok[i] = False
-                valid[idx[~ok]] = False
-                idx = idx[ok]
-                proj = params_from_gaussians(mu[idx], sigma[idx])
+        proj = params[idx]
         if idx.size:
             hull_directions = self.options.get("hull_directions", HULL_DIRECTIONS)
             rows, grad = metrics.overlap_residual(self.metric, self._det_params[idx], proj,

@@ -172,16 +172,22 @@ def test_ambiguity_rule_and_distinct_poses():
     assert distinct_poses(T, T @ expmap_pose3([0, 0, math.radians(25), 0, 0, 0]))
 
 
+def _two_detection_frames(step: int, seed_base: int):
+    """(pose index, 2 of the frame's true detections) of every ``step``-th real Chess pose
+    (simulated frame seed ``seed_base + i``, subset drawn with ``default_rng(i)``)."""
+    for i in range(0, len(POSES), step):
+        f = simulate_frame(CM, CAMERA, POSES[i], seed_base + i, EVAL)
+        dets = reduce_frame(f.detections, f.object_ids, 2, np.random.default_rng(i))
+        if dets is not None:
+            yield i, dets
+
+
 def test_two_xboxes_are_ambiguous_not_a_confident_wrong_pose():
     """Two detections of the two same-label objects' kind: every reduced 2-detection frame
     either answers within 0.5 m or says it is not localized; with on_ambiguity="best" the
     ambiguous ones come back localized with alternatives and probabilities."""
     wrong, ambiguous = 0, 0
-    for i in range(0, 108, 6):
-        f = simulate_frame(CM, CAMERA, POSES[i], 900_000 + i, EVAL)
-        dets = reduce_frame(f.detections, f.object_ids, 2, np.random.default_rng(i))
-        if dets is None:
-            continue
+    for i, dets in _two_detection_frames(6, 900_000):
         r = localize(dets, CM, CAMERA, LocalizationOptions(time_budget_ms=None))
         if r.localized:
             wrong += pose_errors(r.world_from_camera, POSES[i])[0] > 0.5
@@ -317,11 +323,7 @@ def test_localized_answers_have_no_chi2_competitor_within_the_ratio():
     from service.localization.confidence import AMBIGUITY_CHI2_RATIO, CHI2_COMPETITOR_CAP
 
     localized, close = 0, 0
-    for i in range(0, 108, 8):
-        f = simulate_frame(CM, CAMERA, POSES[i], 910_000 + i, EVAL)
-        dets = reduce_frame(f.detections, f.object_ids, 2, np.random.default_rng(i))
-        if dets is None:
-            continue
+    for _, dets in _two_detection_frames(8, 910_000):
         r = localize(dets, CM, CAMERA, LocalizationOptions(time_budget_ms=None,
                                                            min_confidence=0.0))
         if r.localized:

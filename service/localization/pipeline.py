@@ -19,7 +19,7 @@ Stages (wall time of each in ``LocalizationResult.timings_ms``):
    (and on up to :data:`REFINED_ALTERNATIVES` distinct runners-up scoring at least
    :data:`ALTERNATIVE_PREFILTER_RATIO` of the best, except those that only re-use the best's
    correspondences: ``_same_explanation``; runners-up with at most
-   :data:`ALTERNATIVE_MAX_ITERATIONS` LM iterations, continued in full if one ranks first) with
+   :data:`ALTERNATIVE_MAX_ITERATIONS` LM iterations, continued in full if one competes) with
    ``options.metric`` (sigma-weighted, robust kernel option), then re-association: the
    inliers are recomputed at the refined pose and, if the set changed, refined once more. A
    result is kept when it has >= ``min_inliers`` inliers; none kept: ``refinement_diverged``.
@@ -478,7 +478,7 @@ def localize(
     # from where they stopped; one that then fails verification keeps its capped result
     while pending := [a for a in answers
                       if a.capped and len(a.inliers) >= len(answers[0].inliers)]:
-        answers = [a for a in answers if all(a is not p for p in pending)]
+        answers = [a for a in answers if a not in pending]  # identity (eq=False)
         for a in pending:
             full, _ = _refine_and_verify(
                 [Match(m.detection_index, compiled.index_of(m.object_id), m.iou)
