@@ -12,6 +12,7 @@ covariance in tangent order ``[omega, v]`` transforms with the adjoint of ``F``:
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -19,6 +20,7 @@ from factors.geometry import (
     QUATERNION_NORM_TOLERANCE,
     Camera,
     Ellipse,
+    pose_matrix,
     quaternion_wxyz_from_rotation,
     rotation_from_quaternion_wxyz,
 )
@@ -36,6 +38,7 @@ from service.api.schemas import (
 )
 from service.localization.types import (
     Detection,
+    InlierMatch,
     LocalizationInputError,
     LocalizationOptions,
     LocalizationResult,
@@ -47,7 +50,9 @@ __all__ = [
     "camera_from_request",
     "convert_covariance",
     "convert_pose",
+    "covariance_out",
     "detections_from_request",
+    "inliers_out",
     "options_from_request",
     "pose_out",
     "prior_from_request",
@@ -105,10 +110,7 @@ def _pose_matrix_in(pose: PoseIn, field: str) -> np.ndarray:
     if not abs(n - 1.0) <= QUATERNION_NORM_TOLERANCE:
         raise LocalizationInputError(f"must have unit norm, |q| = {n:.9g}",
                                      field=f"{field}.quaternion_wxyz")
-    T = np.eye(4)
-    T[:3, :3] = rotation_from_quaternion_wxyz(q / n)
-    T[:3, 3] = pose.translation_m
-    return T
+    return pose_matrix(rotation_from_quaternion_wxyz(q / n), pose.translation_m)
 
 
 def prior_from_request(prior: PosePriorIn | None) -> PosePrior | None:
@@ -162,6 +164,22 @@ def _finite(x: float) -> float:
     return float(x) if math.isfinite(float(x)) else 0.0
 
 
+def covariance_out(covariance: np.ndarray | None, source: str,
+                   target: str) -> CovarianceOut | None:
+    """6x6 ``[omega, v]`` covariance in ``source`` camera axes -> wire covariance in ``target``
+    axes; None when absent or not finite."""
+    if covariance is None or not np.all(np.isfinite(covariance)):
+        return None
+    S = convert_covariance(covariance, source, target)
+    return CovarianceOut(matrix=[[float(x) for x in row] for row in S])
+
+
+def inliers_out(inliers: Sequence[InlierMatch]) -> list[InlierOut]:
+    """Solver inlier matches -> wire inliers (non-finite IoU / cost as 0)."""
+    return [InlierOut(detection_index=m.detection_index, object_id=m.object_id,
+                      iou=_finite(m.iou), cost=_finite(m.cost)) for m in inliers]
+
+
 def response_from_result(
     result: LocalizationResult,
     *,
@@ -172,23 +190,19 @@ def response_from_result(
     timestamp: float | None,
 ) -> LocalizeResponse:
     """Solver result -> wire response (pose and covariance in ``convention`` camera axes)."""
-    pose = None
-    cov = None
+    pose = cov = None
     if result.localized and not np.all(np.isfinite(result.world_from_camera)):
         raise FloatingPointError("localize() returned a non-finite pose")
     if result.localized and result.world_from_camera is not None:
         pose = pose_out(result.world_from_camera, convention)
-        if result.covariance is not None and np.all(np.isfinite(result.covariance)):
-            S = convert_covariance(result.covariance, "opencv", convention)
-            cov = CovarianceOut(matrix=[[float(x) for x in row] for row in S])
+        cov = covariance_out(result.covariance, "opencv", convention)
     return LocalizeResponse(
         localized=result.localized,
         reason=result.reason,
         world_from_camera=pose,
         covariance=cov,
         confidence=_finite(result.confidence),
-        inliers=[InlierOut(detection_index=m.detection_index, object_id=m.object_id,
-                           iou=_finite(m.iou), cost=_finite(m.cost)) for m in result.inliers],
+        inliers=inliers_out(result.inliers),
         metric=result.metric,
         hypotheses_evaluated=result.hypotheses_evaluated,
         used_prior=result.used_prior,

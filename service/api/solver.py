@@ -36,7 +36,7 @@ from service.api.metrics import ApiMetrics
 from service.api.schemas import LocalizeRequest, LocalizeResponse
 from service.localization.pipeline import localize
 from service.localization.ransac import ScoringTimeoutError
-from service.localization.types import LocalizationInputError, LocalizationResult
+from service.localization.types import LocalizationInputError
 
 __all__ = ["Solver"]
 
@@ -53,6 +53,25 @@ _REQUEST_FIELDS = ("detections", "camera", "prior", "options")
 def _is_request_field(exc: Exception) -> bool:
     field = getattr(exc, "field", None) or ""
     return field.split(".")[0].split("[")[0] in _REQUEST_FIELDS
+
+
+def _invalid_geometry(exc: Exception, prefix: str) -> ProblemError:
+    """The 422 ``invalid-geometry`` problem of an input error naming its field."""
+    field, message = field_and_problem(exc, prefix)
+    return ProblemError("invalid-geometry", f"{field}: {message}",
+                        errors=[{"field": field, "message": message}])
+
+
+def _not_localized(compiled: CompiledMap, frame: LocalizeRequest, reason: str, metric: str,
+                   start: float | None) -> LocalizeResponse:
+    """A "not localized" answer with ``reason``; ``timings_ms.total`` is the time since
+    ``start`` (``time.perf_counter()``; None: 0, the frame was not started)."""
+    elapsed_ms = 0.0 if start is None else (time.perf_counter() - start) * 1e3
+    return LocalizeResponse(
+        localized=False, reason=reason, world_from_camera=None, covariance=None,
+        confidence=0.0, inliers=[], metric=metric, hypotheses_evaluated=0, used_prior=False,
+        map_id=compiled.map_id, map_version=compiled.version, timings_ms={"total": elapsed_ms},
+        frame_id=frame.frame_id, timestamp=frame.timestamp)
 
 
 class FairSlots:
@@ -121,38 +140,26 @@ class Solver:
                 frame.options,
                 self.max_budget_ms if budget_ms is None else min(self.max_budget_ms, budget_ms))
         except ValueError as exc:  # GeometryError, LocalizationInputError
-            field, message = field_and_problem(exc, prefix)
-            raise ProblemError("invalid-geometry", f"{field}: {message}",
-                               errors=[{"field": field, "message": message}]) from exc
+            raise _invalid_geometry(exc, prefix) from exc
         start = time.perf_counter()
         self.metrics.in_progress.inc()
         try:
             if not detections:  # an image without detections is a normal "not localized"
-                result = LocalizationResult(
-                    localized=False, reason="too_few_detections", world_from_camera=None,
-                    covariance=None, confidence=0.0, inliers=(), metric=options.metric,
-                    hypotheses_evaluated=0, used_prior=False,
-                    timings_ms={"total": (time.perf_counter() - start) * 1e3})
+                response = _not_localized(compiled, frame, "too_few_detections", options.metric,
+                                          start)
             else:
-                result = localize(detections, compiled, camera, options, prior)
-            response = response_from_result(
-                result, map_id=compiled.map_id, map_version=compiled.version,
-                convention=frame.options.output_convention, frame_id=frame.frame_id,
-                timestamp=frame.timestamp)
+                response = response_from_result(
+                    localize(detections, compiled, camera, options, prior),
+                    map_id=compiled.map_id, map_version=compiled.version,
+                    convention=frame.options.output_convention, frame_id=frame.frame_id,
+                    timestamp=frame.timestamp)
         except (GeometryError, LocalizationInputError) as exc:
             if _is_request_field(exc):
-                field, message = field_and_problem(exc, prefix)
-                raise ProblemError("invalid-geometry", f"{field}: {message}",
-                                   errors=[{"field": field, "message": message}]) from exc
+                raise _invalid_geometry(exc, prefix) from exc
             response = self._failed(compiled, frame, options.metric, start)
         except ScoringTimeoutError:  # scoring a huge map x detections ran past the hard stop
-            elapsed_ms = (time.perf_counter() - start) * 1e3
-            response = LocalizeResponse(
-                localized=False, reason=TIME_BUDGET_EXCEEDED, world_from_camera=None,
-                covariance=None, confidence=0.0, inliers=[], metric=options.metric,
-                hypotheses_evaluated=0, used_prior=False, map_id=compiled.map_id,
-                map_version=compiled.version, timings_ms={"total": elapsed_ms},
-                frame_id=frame.frame_id, timestamp=frame.timestamp)
+            response = _not_localized(compiled, frame, TIME_BUDGET_EXCEEDED, options.metric,
+                                      start)
         except Exception:  # a numerical failure deep in the solver is "not localized", not 5xx
             response = self._failed(compiled, frame, options.metric, start)
         finally:
@@ -166,14 +173,10 @@ class Solver:
     def _failed(compiled: CompiledMap, frame: LocalizeRequest, metric: str,
                 start: float) -> LocalizeResponse:
         """The "not localized" answer for an unexpected solver failure (logged with traceback)."""
-        elapsed_ms = (time.perf_counter() - start) * 1e3
         log.exception("solver failure in localize() for frame %r after %.1f ms; answered "
-                      "localized=false reason=%s", frame.frame_id, elapsed_ms, NUMERICAL_FAILURE)
-        return LocalizeResponse(
-            localized=False, reason=NUMERICAL_FAILURE, world_from_camera=None, covariance=None,
-            confidence=0.0, inliers=[], metric=metric, hypotheses_evaluated=0, used_prior=False,
-            map_id=compiled.map_id, map_version=compiled.version,
-            timings_ms={"total": elapsed_ms}, frame_id=frame.frame_id, timestamp=frame.timestamp)
+                      "localized=false reason=%s", frame.frame_id,
+                      (time.perf_counter() - start) * 1e3, NUMERICAL_FAILURE)
+        return _not_localized(compiled, frame, NUMERICAL_FAILURE, metric, start)
 
     def _budget_exceeded(self, compiled: CompiledMap, frame: LocalizeRequest,
                          prefix: str) -> LocalizeResponse:
@@ -181,12 +184,7 @@ class Solver:
         if len(frame.detections) > self.max_detections:  # still the client's error
             self._solve_one(compiled, frame, prefix)
         self.metrics.localizations.labels(TIME_BUDGET_EXCEEDED).inc()
-        return LocalizeResponse(
-            localized=False, reason=TIME_BUDGET_EXCEEDED, world_from_camera=None,
-            covariance=None, confidence=0.0, inliers=[], metric=frame.options.metric,
-            hypotheses_evaluated=0, used_prior=False, map_id=compiled.map_id,
-            map_version=compiled.version, timings_ms={"total": 0.0}, frame_id=frame.frame_id,
-            timestamp=frame.timestamp)
+        return _not_localized(compiled, frame, TIME_BUDGET_EXCEEDED, frame.options.metric, None)
 
     def localize_frames(self, compiled: CompiledMap, frames: Sequence[LocalizeRequest],
                         batch: bool) -> list[LocalizeResponse]:
