@@ -26,6 +26,8 @@ from service.settings import ApiKey, hash_api_key
 
 __all__ = ["ReadAccess", "WriteAccess", "authenticate", "require_scope"]
 
+#: The ``WWW-Authenticate`` header of every 401.
+_CHALLENGE = {"WWW-Authenticate": 'Bearer realm="quadloc"'}
 _bearer = HTTPBearer(auto_error=False, description="API key as a bearer token.")
 _api_key_header = APIKeyHeader(name="X-API-Key", auto_error=False,
                                description="API key in the X-API-Key header.")
@@ -38,13 +40,12 @@ def authenticate(keys: tuple[ApiKey, ...], presented: str | None, scope: str) ->
     """
     if not keys:
         return None
-    challenge = {"WWW-Authenticate": 'Bearer realm="quadloc"'}
     if not presented:
         raise ProblemError("unauthorized",
                            "this endpoint needs an API key: 'Authorization: Bearer <key>' or "
                            "'X-API-Key: <key>'",
-                           errors=[{"field": "header.authorization", "message": "missing"}],
-                           headers=challenge)
+                           field="header.authorization", message="missing",
+                           headers=_CHALLENGE)
     digest = hash_api_key(presented)
     found = None
     for key in keys:  # constant time per key; no early exit
@@ -52,13 +53,12 @@ def authenticate(keys: tuple[ApiKey, ...], presented: str | None, scope: str) ->
             found = key
     if found is None:
         raise ProblemError("unauthorized", "unknown API key",
-                           errors=[{"field": "header.authorization", "message": "unknown key"}],
-                           headers=challenge)
+                           field="header.authorization", message="unknown key",
+                           headers=_CHALLENGE)
     if not found.allows(scope):
         raise ProblemError("forbidden", f"this API key lacks the '{scope}' scope "
                            f"(it has {sorted(found.scopes)})",
-                           errors=[{"field": "header.authorization",
-                                  "message": f"scope '{scope}' required"}])
+                           field="header.authorization", message=f"scope '{scope}' required")
     return found
 
 
@@ -81,8 +81,8 @@ def _refuse_non_loopback(request: Request) -> None:
         raise ProblemError("forbidden",
                            "this server has no API keys configured (QUADLOC_API_KEYS) and only "
                            "answers on loopback",
-                           errors=[{"field": "header.authorization",
-                                    "message": "server is open: loopback clients only"}])
+                           field="header.authorization",
+                           message="server is open: loopback clients only")
 
 
 def require_scope(scope: str):
@@ -101,16 +101,14 @@ def require_scope(scope: str):
         if authorization is not None and bearer is None:
             raise ProblemError("unauthorized", "the Authorization header must be "
                                "'Bearer <key>'",
-                               errors=[{"field": "header.authorization",
-                                        "message": "not a bearer token"}],
-                               headers={"WWW-Authenticate": 'Bearer realm="quadloc"'})
+                               field="header.authorization", message="not a bearer token",
+                               headers=_CHALLENGE)
         presented = [c for c in (bearer.credentials if bearer else None, api_key) if c]
         if len(set(presented)) > 1:
             raise ProblemError("unauthorized", "Authorization and X-API-Key carry different "
                                "keys; send one",
-                               errors=[{"field": "header.x-api-key",
-                                        "message": "conflicts with Authorization"}],
-                               headers={"WWW-Authenticate": 'Bearer realm="quadloc"'})
+                               field="header.x-api-key", message="conflicts with Authorization",
+                               headers=_CHALLENGE)
         return authenticate(keys, presented[0] if presented else None, scope)
 
     dependency.__name__ = f"require_{scope}"

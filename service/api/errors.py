@@ -36,6 +36,7 @@ __all__ = [
     "install_error_handlers",
     "json_depth_violation",
     "map_not_found",
+    "problem_body",
     "problem_response",
 ]
 
@@ -91,7 +92,8 @@ def problem_type(slug: str) -> str:
 
 
 class ProblemError(Exception):
-    """Raise from a route to answer with a problem document (``slug`` from PROBLEM_TYPES)."""
+    """Raise from a route to answer with a problem document (``slug`` from PROBLEM_TYPES);
+    ``field`` and ``message`` spell a one-entry ``errors``."""
 
     def __init__(
         self,
@@ -101,13 +103,16 @@ class ProblemError(Exception):
         errors: Sequence[Mapping[str, str]] = (),
         headers: Mapping[str, str] | None = None,
         status: int | None = None,
+        field: str | None = None,
+        message: str = "",
     ) -> None:
         super().__init__(detail)
         default_status, self.title = PROBLEM_TYPES[slug]
         self.slug = slug
         self.status = status or default_status
         self.detail = detail
-        self.errors = [dict(e) for e in errors]
+        self.errors = [dict(e) for e in errors] if field is None else [
+            {"field": field, "message": message}]
         self.headers = dict(headers or {})
 
 
@@ -121,25 +126,28 @@ def problem_response(
     status: int | None = None,
 ) -> JSONResponse:
     """Build the ``application/problem+json`` response for ``slug``."""
-    default_status, title = PROBLEM_TYPES[slug]
-    body: dict[str, Any] = {
-        "type": problem_type(slug),
-        "title": title,
-        "status": status or default_status,
-        "detail": detail,
-        "instance": request.url.path if request is not None else None,
-        "errors": [{"field": str(e["field"]), "message": str(e["message"])} for e in errors],
-    }
+    body = problem_body(slug, detail, request.url.path if request is not None else None,
+                        errors, status)
     return JSONResponse(body, status_code=body["status"], headers=dict(headers or {}),
                         media_type=PROBLEM_MEDIA_TYPE)
+
+
+def problem_body(slug: str, detail: str, instance: str | None,
+                 errors: Iterable[Mapping[str, str]] = (),
+                 status: int | None = None) -> dict[str, Any]:
+    """The problem document ``{type, title, status, detail, instance, errors}`` of ``slug``."""
+    default_status, title = PROBLEM_TYPES[slug]
+    return {"type": problem_type(slug), "title": title, "status": status or default_status,
+            "detail": detail, "instance": instance,
+            "errors": [{"field": str(e["field"]), "message": str(e["message"])} for e in errors]}
 
 
 def map_not_found(map_id: str, version: int | None = None) -> ProblemError:
     """The 404 ``map-not-found`` problem for ``map_id`` (or one of its versions)."""
     what = f"map {map_id!r}" if version is None else f"version {version} of map {map_id!r}"
     return ProblemError("map-not-found", f"{what} not found",
-                        errors=[{"field": "path.map_id" if version is None else "query.version",
-                                 "message": "not found"}])
+                        field="path.map_id" if version is None else "query.version",
+                        message="not found")
 
 
 def json_depth_violation(document: Any, max_depth: int) -> str | None:

@@ -22,7 +22,7 @@ from typing import Any
 
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
 
-from service.api.errors import PROBLEM_MEDIA_TYPE, problem_type
+from service.api.errors import PROBLEM_MEDIA_TYPE, problem_body
 
 __all__ = ["ApiMetrics", "MetricsAndLimitsMiddleware"]
 
@@ -51,11 +51,9 @@ class ApiMetrics:
 
 
 def _problem_413(path: str, limit: int) -> bytes:
-    return json.dumps({
-        "type": problem_type("payload-too-large"), "title": "Request body too large",
-        "status": 413, "detail": f"request body exceeds {limit} bytes", "instance": path,
-        "errors": [{"field": "body", "message": f"larger than {limit} bytes"}],
-    }).encode()
+    return json.dumps(problem_body("payload-too-large", f"request body exceeds {limit} bytes",
+                                   path, [{"field": "body",
+                                           "message": f"larger than {limit} bytes"}])).encode()
 
 
 class MetricsAndLimitsMiddleware:

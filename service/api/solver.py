@@ -59,7 +59,7 @@ def _invalid_geometry(exc: Exception, prefix: str) -> ProblemError:
     """The 422 ``invalid-geometry`` problem of an input error naming its field."""
     field, message = field_and_problem(exc, prefix)
     return ProblemError("invalid-geometry", f"{field}: {message}",
-                        errors=[{"field": field, "message": message}])
+                        field=field, message=message)
 
 
 def _not_localized(compiled: CompiledMap, frame: LocalizeRequest, reason: str, metric: str,
@@ -130,8 +130,8 @@ class Solver:
         if len(frame.detections) > self.max_detections:
             raise ProblemError("validation-error",
                                f"{prefix}detections: at most {self.max_detections} per frame",
-                               errors=[{"field": f"{prefix}detections",
-                                        "message": f"at most {self.max_detections} detections"}])
+                               field=f"{prefix}detections",
+                               message=f"at most {self.max_detections} detections")
         try:
             camera = camera_from_request(frame.camera)
             detections = detections_from_request(frame.detections)

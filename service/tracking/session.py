@@ -358,6 +358,10 @@ class TrackingSession:
                            session_confidence(self.state, cov, contradicted), n_usable, reason,
                            timings)
 
+    def _no_pose(self, index: int, frame: FrameInput, T_oc: np.ndarray, usable: list[int],
+                 reason: str, timings: dict[str, float]) -> FrameResult:
+        return self._result(index, frame, T_oc, None, None, [], len(usable), reason, timings)
+
     def _track(self, index: int, frame: FrameInput, T_oc: np.ndarray, usable: list[int],
                timings: dict[str, float]) -> FrameResult:
         assert self._last is not None and self._smoother is not None
@@ -380,10 +384,7 @@ class TrackingSession:
             for f in self._factors_for(key, T_pred, [dets[a.detection_index] for a in assoc],
                                        [a.object_index for a in assoc]):
                 graph.add(f)
-        if frame.prior is not None and frame.prior.covariance is not None:
-            graph.add(gtsam.PriorFactorPose3(key, pose3(frame.prior.world_from_camera),
-                                             gtsam.noiseModel.Gaussian.Covariance(
-                                                 np.asarray(frame.prior.covariance))))
+        _add_prior(graph, key, frame.prior)
         values = gtsam.Values()
         values.insert(key, pose3(T_pred))
         stamps = gtsam.FixedLagSmootherKeyTimestampMap()
@@ -399,8 +400,7 @@ class TrackingSession:
         timings["update"] = (time.perf_counter() - t) * 1e3
         if T is None or cov is None or not np.all(np.isfinite(T)):
             self.reset()
-            return self._result(index, frame, T_oc, None, None, [], len(usable), "lost",
-                                timings)
+            return self._no_pose(index, frame, T_oc, usable, "lost", timings)
         inliers = self._verify(frame.detections, usable, T)
         # a frame whose usable detections are all unexplained contradicts the estimate
         contradicted = bool(usable) and not inliers and (
@@ -411,8 +411,7 @@ class TrackingSession:
                 or self._misses >= self.options.lost_after_misses \
                 or (contradicted and len(usable) >= LOST_UNEXPLAINED_DETECTIONS):
             self.reset()
-            return self._result(index, frame, T_oc, None, None, [], len(usable), "lost",
-                                timings)
+            return self._no_pose(index, frame, T_oc, usable, "lost", timings)
         self._last = (index, float(frame.timestamp), T_oc, T, cov)
         return self._result(index, frame, T_oc, T, cov, inliers, len(usable),
                             "detections_unexplained" if contradicted else None, timings,
@@ -442,8 +441,7 @@ class TrackingSession:
         n_pool = sum(len(b.frame.labels) for b in chosen)
         if n_pool < 3 or index - self._last_attempt < opts.init_interval_frames \
                 or not usable:
-            return self._result(index, frame, T_oc, None, None, [], len(usable), waiting,
-                                timings)
+            return self._no_pose(index, frame, T_oc, usable, waiting, timings)
         self._last_attempt = index
         t = time.perf_counter()
         extra = [invert_pose(frame.prior.world_from_camera)] if frame.prior is not None else []
@@ -454,15 +452,13 @@ class TrackingSession:
         timings["multi_frame_ransac"] = (time.perf_counter() - t) * 1e3
         if out.camera_from_world is None:
             reason = "ambiguous" if out.reason == "ambiguous" else waiting
-            return self._result(index, frame, T_oc, None, None, [], len(usable), reason,
-                                timings)
+            return self._no_pose(index, frame, T_oc, usable, reason, timings)
         t = time.perf_counter()
         started = self._start_graph(chosen, [invert_pose(P) for P in out.camera_from_world],
                                     out.matches)
         timings["init_refine"] = (time.perf_counter() - t) * 1e3
         if started is None:
-            return self._result(index, frame, T_oc, None, None, [], len(usable), waiting,
-                                timings)
+            return self._no_pose(index, frame, T_oc, usable, waiting, timings)
         T, cov = started
         self.state = "tracking"
         self._buffer.clear()
@@ -488,10 +484,7 @@ class TrackingSession:
             for f in self._factors_for(key, T, [b.detections[i] for i in det_idx],
                                        [by_det[i] for i in det_idx]):
                 graph.add(f)
-            if b.prior is not None and b.prior.covariance is not None:
-                graph.add(gtsam.PriorFactorPose3(key, pose3(b.prior.world_from_camera),
-                                                 gtsam.noiseModel.Gaussian.Covariance(
-                                                     np.asarray(b.prior.covariance))))
+            _add_prior(graph, key, b.prior)
             if j:
                 a = chosen[j - 1]
                 between, _, _ = self._between(_key(a.index), key, a.frame.odom_from_camera,
@@ -524,6 +517,14 @@ class TrackingSession:
             return None
         self._last = (last.index, last.timestamp, last.frame.odom_from_camera, T, cov)
         return T, cov
+
+
+def _add_prior(graph: gtsam.NonlinearFactorGraph, key: int, prior: PosePrior | None) -> None:
+    """The client's prior on ``world_from_camera`` as a factor, when it has a covariance."""
+    if prior is not None and prior.covariance is not None:
+        graph.add(gtsam.PriorFactorPose3(key, pose3(prior.world_from_camera),
+                                         gtsam.noiseModel.Gaussian.Covariance(
+                                             np.asarray(prior.covariance))))
 
 
 def _spread(items: list, n: int) -> list:

@@ -106,7 +106,7 @@ def job_out(job: BuildJob) -> BuildJobOut:
 
 
 def _base_version(store: Any, map_id: str, if_match: str | None) -> int | None:
-    from service.api.routers.maps import etag_of
+    from service.api.routers.maps import check_etag
 
     try:
         current = store.get(map_id)
@@ -115,21 +115,14 @@ def _base_version(store: Any, map_id: str, if_match: str | None) -> int | None:
             raise ProblemError("precondition-failed",
                                f"map {map_id!r} does not exist, so If-Match cannot match; omit "
                                "it to build a new map",
-                               errors=[{"field": "header.if-match",
-                                        "message": "map does not exist"}]) from None
+                               field="header.if-match", message="map does not exist") from None
         return None
     if if_match is None or not if_match.strip():
         raise ProblemError("precondition-required",
                            f"map {map_id!r} exists: building a new version needs 'If-Match: "
                            "\"<ETag>\"' with its latest ETag (GET /v1/maps/{map_id})",
-                           errors=[{"field": "header.if-match", "message": "missing"}])
-    tags = {t.strip() for t in if_match.split(",") if t.strip()}
-    if etag_of(current.content_hash) not in tags:
-        raise ProblemError("precondition-failed",
-                           f"map {map_id!r} is at version {current.scene_map.version} with ETag "
-                           f"{etag_of(current.content_hash)}",
-                           errors=[{"field": "header.if-match", "message": "stale ETag"}],
-                           headers={"ETag": etag_of(current.content_hash)})
+                           field="header.if-match", message="missing")
+    check_etag(map_id, current, {t.strip() for t in if_match.split(",") if t.strip()})
     return int(current.scene_map.version)
 
 
@@ -192,4 +185,4 @@ def get_build_job(job_id: Annotated[str, Path(pattern=JOB_ID_PATTERN, descriptio
         return job_out(jobs.get(job_id))
     except JobNotFoundError as exc:
         raise ProblemError("not-found", f"no build job {job_id!r}",
-                           errors=[{"field": "path.job_id", "message": "not found"}]) from exc
+                           field="path.job_id", message="not found") from exc

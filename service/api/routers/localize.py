@@ -101,8 +101,7 @@ def localize_batch(
     if len(batch.frames) > settings.max_batch_frames:
         raise ProblemError("validation-error",
                            f"frames: at most {settings.max_batch_frames} frames per batch",
-                           errors=[{"field": "frames",
-                                  "message": f"at most {settings.max_batch_frames} frames"}])
+                           field="frames", message=f"at most {settings.max_batch_frames} frames")
     compiled = _compiled(loader, map_id, version)
     results = solver.localize_frames(compiled, batch.frames, batch=True)
     out = BatchLocalizeResponse(map_id=compiled.map_id, map_version=compiled.version,

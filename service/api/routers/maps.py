@@ -99,8 +99,7 @@ def _check_object_limit(body: Any, settings: Any) -> None:
     objs = body.get("objects") if isinstance(body, dict) else None
     if isinstance(objs, list) and len(objs) > settings.max_map_objects:
         raise ProblemError("invalid-map", f"objects: at most {settings.max_map_objects} objects",
-                           errors=[{"field": "objects",
-                                  "message": f"at most {settings.max_map_objects} objects"}])
+                           field="objects", message=f"at most {settings.max_map_objects} objects")
 
 
 def _created(store: Any, scene_map: Any, response: Response) -> MapOut:
@@ -109,7 +108,7 @@ def _created(store: Any, scene_map: Any, response: Response) -> MapOut:
     except MapAlreadyExists as exc:
         raise ProblemError("map-exists", f"map {scene_map.map_id!r} already exists; use PUT "
                            "/v1/maps/{map_id} with If-Match to update it",
-                           errors=[{"field": "map_id", "message": "already exists"}]) from exc
+                           field="map_id", message="already exists") from exc
     response.headers["ETag"] = etag_of(stored.content_hash)
     response.headers["Location"] = f"/v1/maps/{scene_map.map_id}"
     return _map_out(stored)
@@ -205,15 +204,26 @@ def _parse_if_match(if_match: str | None) -> set[str]:
         raise ProblemError("precondition-required",
                            "PUT needs 'If-Match: \"<ETag>\"' with the ETag of the version you "
                            "edited (GET /v1/maps/{map_id} returns it)",
-                           errors=[{"field": "header.if-match", "message": "missing"}])
+                           field="header.if-match", message="missing")
     tags = {t.strip() for t in if_match.split(",") if t.strip()}
     if "*" in tags:
         raise ProblemError("precondition-required",
                            "'If-Match: *' would overwrite blindly; send the map's ETag",
-                           errors=[{"field": "header.if-match", "message": "'*' not accepted"}])
+                           field="header.if-match", message="'*' not accepted")
     # RFC 9110 13.1.1: If-Match uses the strong comparison, so a weak tag (W/"...") never
     # matches; it is kept as is and fails the comparison below (412).
     return tags
+
+
+def check_etag(map_id: str, current: Any, tags: set[str], hint: str = "") -> None:
+    """412 ``precondition-failed`` (with the current ETag) unless ``current`` (the stored
+    latest version) has one of the If-Match ``tags``; ``hint`` ends the detail."""
+    etag = etag_of(current.content_hash)
+    if etag not in tags:
+        raise ProblemError("precondition-failed",
+                           f"map {map_id!r} is at version {current.scene_map.version} with ETag "
+                           f"{etag}{hint}", field="header.if-match", message="stale ETag",
+                           headers={"ETag": etag})
 
 
 @router.put(
@@ -240,7 +250,7 @@ def update_map(
     _check_object_limit(body, settings)
     if body.get("map_id", map_id) != map_id:
         raise ProblemError("invalid-map", "map_id in the body differs from the path",
-                           errors=[{"field": "map_id", "message": f"must be {map_id!r}"}])
+                           field="map_id", message=f"must be {map_id!r}")
     # the body first: an invalid document is the client's error whatever If-Match says
     scene_map = scene_map_from_dict({**body, "map_id": map_id}, version=1)
     tags = _parse_if_match(if_match)
@@ -248,13 +258,7 @@ def update_map(
         current = store.get(map_id)
     except MapNotFound as exc:
         raise map_not_found(map_id) from exc
-    if etag_of(current.content_hash) not in tags:
-        raise ProblemError("precondition-failed",
-                           f"map {map_id!r} is at version {current.scene_map.version} with ETag "
-                           f"{etag_of(current.content_hash)}; fetch it, re-apply your change and "
-                           "retry",
-                           errors=[{"field": "header.if-match", "message": "stale ETag"}],
-                           headers={"ETag": etag_of(current.content_hash)})
+    check_etag(map_id, current, tags, "; fetch it, re-apply your change and retry")
     expected = current.scene_map.version
     scene_map = dataclasses.replace(scene_map, version=expected + 1)
     try:
@@ -263,7 +267,7 @@ def update_map(
         raise ProblemError("version-conflict",
                            f"map {map_id!r} changed concurrently (now version "
                            f"{exc.current_version}); fetch it and retry",
-                           errors=[{"field": "header.if-match", "message": "lost a race"}]) from exc
+                           field="header.if-match", message="lost a race") from exc
     except MapNotFound as exc:
         raise map_not_found(map_id) from exc
     response.headers["ETag"] = etag_of(stored.content_hash)
@@ -285,7 +289,7 @@ def delete_map(map_id: MapIdPath, store: StoreDep, settings: SettingsDep,
                            "(QUADLOC_DEFAULT_MAP_ID): the readiness probe needs it, so deleting "
                            "it would make every replica unready; update it with PUT, or "
                            "configure another default map first",
-                           errors=[{"field": "path.map_id", "message": "is the default map"}])
+                           field="path.map_id", message="is the default map")
     try:
         store.delete(map_id)
     except MapNotFound as exc:

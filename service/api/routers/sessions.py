@@ -107,7 +107,7 @@ def _entry(store: SessionStore, session_id: str) -> SessionEntry:
         raise ProblemError("session-not-found",
                            f"session {session_id!r} not found: it expired, was deleted, or its "
                            "server restarted; start a new session",
-                           errors=[{"field": "path.session_id", "message": "not found"}]) from exc
+                           field="path.session_id", message="not found") from exc
 
 
 def _out(entry: SessionEntry, store: SessionStore) -> SessionOut:
@@ -205,7 +205,7 @@ def add_frames(session_id: SessionIdPath,
 def _unprocessable(exc: Exception, prefix: str) -> ProblemError:
     field, problem = field_and_problem(exc, prefix)
     return ProblemError("validation-error", str(exc),
-                        errors=[{"field": field, "message": problem}])
+                        field=field, message=problem)
 
 
 def _frame_input(f: SessionFrameIn, convention: str, prefix: str) -> FrameInput:
