@@ -77,24 +77,23 @@ class MetricsAndLimitsMiddleware:
             await self.app(scope, receive, send)
             return
         start = time.perf_counter()
-        status_holder = {"status": 500}
+        status = 500
         limit = self.max_body_bytes
 
         async def send_wrapper(message: dict) -> None:
+            nonlocal status
             if message["type"] == "http.response.start":
-                status_holder["status"] = message["status"]
+                status = message["status"]
             await send(message)
 
         try:
-            declared = None
-            for name, value in scope.get("headers", ()):
-                if name == b"content-length":
-                    try:
-                        declared = int(value)
-                    except ValueError:
-                        declared = None
-            if declared is not None and declared > limit:
-                status_holder["status"] = 413
+            declared = [v for k, v in scope.get("headers", ()) if k == b"content-length"]
+            try:
+                too_large = bool(declared) and int(declared[-1]) > limit
+            except ValueError:
+                too_large = False
+            if too_large:
+                status = 413
                 await self._reject(scope, send)
                 return
             # Buffer the body (bounded) so chunked uploads are limited too, then replay it.
@@ -110,7 +109,7 @@ class MetricsAndLimitsMiddleware:
                 chunk = message.get("body", b"")
                 size += len(chunk)
                 if size > limit:
-                    status_holder["status"] = 413
+                    status = 413
                     await self._reject(scope, send)
                     return
                 chunks.append(chunk)
@@ -132,5 +131,5 @@ class MetricsAndLimitsMiddleware:
             route = scope.get("route")
             template = getattr(route, "path", None) or "<unmatched>"
             method = scope.get("method", "")
-            self.metrics.requests.labels(method, template, str(status_holder["status"])).inc()
+            self.metrics.requests.labels(method, template, str(status)).inc()
             self.metrics.latency.labels(method, template).observe(time.perf_counter() - start)

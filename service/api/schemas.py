@@ -30,7 +30,6 @@ from pydantic import (
     BeforeValidator,
     ConfigDict,
     Field,
-    field_validator,
     model_validator,
 )
 
@@ -210,14 +209,11 @@ class PoseIn(_Model):
             raise ValueError("give either 'quaternion_wxyz' + 'translation_m' or 'matrix'")
         if has_q and (self.quaternion_wxyz is None or self.translation_m is None):
             raise ValueError("'quaternion_wxyz' and 'translation_m' go together")
-        if self.matrix is not None and any(len(row) != 4 for row in self.matrix):
-            raise ValueError("'matrix' must be 4x4")
-        for name in ("quaternion_wxyz", "translation_m"):
+        for name in ("quaternion_wxyz", "translation_m", "matrix"):  # (matrix: 4x4 by type)
             v = getattr(self, name)
-            if v is not None and any(abs(x) > 1e6 for x in v):
+            rows = [v] if name != "matrix" else v
+            if v is not None and any(abs(x) > 1e6 for row in rows for x in row):
                 raise ValueError(f"'{name}' entries must be within +-1e6")
-        if self.matrix is not None and any(abs(x) > 1e6 for row in self.matrix for x in row):
-            raise ValueError("'matrix' entries must be within +-1e6")
         return self
 
 
@@ -232,13 +228,6 @@ class PosePriorIn(_Model):
                     "definite. With it the prior is also a soft factor of the refinement.")
     convention: Convention = Field(default="opencv",
                                    description="Camera axes of this prior (opencv or opengl).")
-
-    @field_validator("covariance")
-    @classmethod
-    def _six_by_six(cls, value: list[list[float]] | None) -> list[list[float]] | None:
-        if value is not None and any(len(row) != 6 for row in value):
-            raise ValueError("covariance must be 6x6")
-        return value
 
 
 class LocalizeOptionsIn(_Model):

@@ -277,7 +277,6 @@ class TrackingSession:
         except GeometryError as exc:
             raise TrackingInputError(f"must be a rigid transform ({exc.problem})",
                                      field="odom_from_camera") from exc
-        R = T[:3, :3]
         ts = frame.timestamp
         if isinstance(ts, bool) or not isinstance(ts, (int, float)) or not math.isfinite(ts):
             raise TrackingInputError(f"must be a finite number, got {ts!r}", field="timestamp")
@@ -285,8 +284,7 @@ class TrackingSession:
             raise TrackingInputError(
                 f"{ts} is before the previous frame's {self._last_timestamp} "
                 "(frames must be sent in time order)", field="timestamp")
-        T = T.copy()
-        T[:3, :3] = snap_to_rotation(R)
+        T[:3, :3] = snap_to_rotation(T[:3, :3])  # T is check_pose's own copy
         return T
 
     # ------------------------------------------------------------------ tracking
@@ -510,8 +508,7 @@ class TrackingSession:
             T = self._smoother.calculateEstimatePose3(_key(last.index)).matrix()
             cov = self._marginal(_key(last.index))
         except RuntimeError:
-            self._smoother = None
-            return None
+            cov = None
         if cov is None:
             self._smoother = None
             return None
