@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from factors.geometry import Camera, invert_pose
+from factors.geometry import Camera, invert_pose, skew
 from maps.compiled import CompiledMap
 from service.localization.ransac import project_objects
 
@@ -58,11 +58,7 @@ def centre_jacobians(camera: Camera, world_from_camera: np.ndarray,
     du_dp[:, 0, 2] = -fx * x / z ** 2
     du_dp[:, 1, 1] = fy / z
     du_dp[:, 1, 2] = -fy * y / z ** 2
-    skew = np.zeros((len(p), 3, 3))
-    skew[:, 0, 1], skew[:, 0, 2] = -z, y
-    skew[:, 1, 0], skew[:, 1, 2] = z, -x
-    skew[:, 2, 0], skew[:, 2, 1] = -y, x
-    dp = np.concatenate([skew, -np.broadcast_to(np.eye(3), (len(p), 3, 3))], axis=2)
+    dp = np.concatenate([skew(p), -np.broadcast_to(np.eye(3), (len(p), 3, 3))], axis=2)
     return u, du_dp @ dp
 
 

@@ -109,8 +109,8 @@ def multi_frame_ransac(
     ref_inv = invert_pose(ref)
     ref_from_k = [ref_inv @ f.odom_from_camera for f in frames]
     k_from_ref = [invert_pose(T) for T in ref_from_k]
-    scorers = [MatchScorer(compiled, camera, [_ell(e) for e in f.ellipses], list(f.labels),
-                           list(f.detection_indices)) if len(f.labels) else None
+    scorers = [MatchScorer(compiled, camera, [Ellipse(*map(float, e)) for e in f.ellipses],
+                           list(f.labels), list(f.detection_indices)) if len(f.labels) else None
                for f in frames]
     pool = [(k, d, compiled.indices_for(lab)) for k, f in enumerate(frames)
             for d, lab in enumerate(f.labels) if len(compiled.indices_for(lab))]
@@ -170,7 +170,3 @@ def multi_frame_ransac(
             return MultiFrameOutcome(None, [], len(objs), n_inl, len(hyps), "ambiguous")
     poses = [k_from_ref[k] @ H[best] for k in range(len(frames))]
     return MultiFrameOutcome(poses, per_frame[best], len(objs), n_inl, len(hyps), None)
-
-
-def _ell(params: np.ndarray) -> Ellipse:
-    return Ellipse(*[float(x) for x in params])
