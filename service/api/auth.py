@@ -1,15 +1,9 @@
-"""API-key access control: scopes ``read`` (localize, get/list maps) and ``write`` (create,
-update, delete maps; implies ``read``).
+"""API-key access control: scopes ``read`` and ``write`` (implies ``read``).
 
-A key is presented as ``Authorization: Bearer <key>`` or ``X-API-Key: <key>``. The service only
-knows the sha256 digests of its keys (``QUADLOC_API_KEYS``, see :mod:`service.settings`); the
-presented key is hashed and compared in constant time against every configured digest.
-With no key configured, every request arriving on a loopback address is allowed, and
-requests arriving on any other address are refused (403): ``quadloc serve`` refuses to bind a
-public address without keys, and this catches a server started some other way.
-A malformed ``Authorization`` header, or two different keys in the two headers, is refused too.
-Missing or unknown key -> 401 (with ``WWW-Authenticate: Bearer``); known key without the scope
--> 403.
+A key comes as ``Authorization: Bearer <key>`` or ``X-API-Key: <key>``; its sha256 is compared
+in constant time with ``QUADLOC_API_KEYS``. Missing or unknown key -> 401, key without the
+scope -> 403; without keys only loopback is served. Rules:
+docs/design/service.md#api-key-access-control.
 """
 
 from __future__ import annotations

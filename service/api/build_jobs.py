@@ -1,25 +1,10 @@
 """Runs map-building jobs for the API: a bounded pool, a time budget, heartbeats in the store.
 
-One :class:`BuildRunner` per app: builds never run in request threads. ``submit`` queues a
-job on a pool of ``max_concurrent_builds`` background threads, at most ``max_queued_builds``
-waiting behind them; beyond, :class:`RunnerBusyError` -> 503 + ``Retry-After``
-(``RETRY_AFTER_S``) and the job row is marked failed (``busy``). The build holds the GIL while it
-runs, like a localize solve: keep ``max_concurrent_builds`` at 1 (default) and scale builds out
-with replicas. Each job:
-
-1. marks the row ``running`` and reports progress (stage, percent, objects found) through
-   :meth:`maps.building.jobs.JobStore.progress` at most every ``HEARTBEAT_S`` and at every stage
-   change (the build's callbacks come at least every 2 s); each write is also the heartbeat
-   of the jobs queued behind it on this replica (:meth:`maps.building.jobs.JobStore.heartbeat`),
-   so a long queue is not mistaken for a lost runner. If the row is no longer active (another
-   replica's sweep marked it failed as stale), the build stops and stores nothing;
-2. builds with a deadline ``build_time_budget_s`` after it started;
-3. stores the map: ``create`` (new map id) or ``update(expected_version=base_version)`` (the
-   version whose ETag the client sent in ``If-Match``); a concurrent change fails the job with
-   ``version_conflict``, an id taken meanwhile with ``map_exists``: nothing is overwritten;
-4. ends ``succeeded`` with the map version and the report, or ``failed`` with a reason:
-   ``invalid_recording``, ``time_budget_exceeded``, ``no_objects``, ``version_conflict``,
-   ``map_exists``, ``map_not_found``, ``store_unavailable``, ``internal_error``.
+One :class:`BuildRunner` per app; beyond ``max_concurrent_builds + max_queued_builds`` jobs,
+:class:`RunnerBusyError` (503 + ``Retry-After`` :data:`RETRY_AFTER_S`). A job ends
+``succeeded`` or ``failed`` with a reason: ``invalid_recording``, ``time_budget_exceeded``,
+``no_objects``, ``version_conflict``, ``map_exists``, ``map_not_found``, ``store_unavailable``,
+``internal_error``. A job's steps: docs/design/service.md#map-building-jobs.
 """
 
 from __future__ import annotations

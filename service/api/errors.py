@@ -1,14 +1,9 @@
 """RFC 9457 ``application/problem+json`` errors for every request failure.
 
-Body: ``{type, title, status, detail, instance, errors: [{field, message}]}``. ``type`` is a
-stable machine-readable URN ``urn:quadloc:problem:<slug>`` (slugs listed in :data:`PROBLEM_TYPES`
-and docs/api.md); ``instance`` is the request path; ``errors`` names each offending field with a
-JSON-path-like string (``detections[2].ellipse.a``; query and header fields are prefixed:
-``query.version``, ``header.if-match``).
-
-No request may produce a 5xx other than 503 (solver busy or database unavailable): the handlers
-here convert validation, geometry and storage errors to 4xx, and the last-resort handler still
-answers in the problem format if a bug slips through.
+Body: ``{type, title, status, detail, instance, errors: [{field, message}]}``; ``type`` is
+``urn:quadloc:problem:<slug>`` (:data:`PROBLEM_TYPES`); fields are spelled like
+``detections[2].ellipse.a``, ``query.version``, ``header.if-match``. No 5xx but 503 (and a
+logged 500 for bugs): docs/design/service.md#problem-documents.
 """
 
 from __future__ import annotations

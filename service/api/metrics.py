@@ -1,17 +1,10 @@
 """Prometheus metrics (one registry per app) and the ASGI middleware that records them and
 enforces the request-body size limit.
 
-Series:
-* ``quadloc_http_requests_total{method, route, status}`` - requests answered.
-* ``quadloc_http_request_duration_seconds{method, route}`` - latency histogram (seconds).
-* ``quadloc_localizations_total{outcome}`` - frames localized (``outcome="localized"``) or not
-  (``outcome`` = the reason, e.g. ``too_few_detections``).
-* ``quadloc_localization_solve_seconds`` - solve time per frame (seconds, histogram).
-* ``quadloc_solves_in_progress`` - frames being solved now.
-
-``route`` is the route template (``/v1/maps/{map_id}``), never the raw path, so cardinality is
-bounded; unmatched paths count as ``route="<unmatched>"``. With several Uvicorn workers each
-process has its own registry (one process per container is the supported layout).
+Series: ``quadloc_http_requests_total{method, route, status}``,
+``quadloc_http_request_duration_seconds{method, route}``, ``quadloc_localizations_total{outcome}``,
+``quadloc_localization_solve_seconds``, ``quadloc_solves_in_progress``; ``route`` is the route
+template. Details: docs/design/service.md#metrics.
 """
 
 from __future__ import annotations

@@ -1,17 +1,8 @@
-"""Running localizations for the API: bounded concurrency, time budget, outcome metrics, and
-conversion of every solver failure into either a 4xx problem or a normal "not localized" answer.
-
-Solves are CPU-bound and hold the GIL: routes that call :meth:`Solver.localize_frames` are plain
-``def`` routes, which FastAPI runs in its threadpool, never on the event loop. A first-come,
-first-served semaphore (:class:`FairSlots`) caps the number of frames solved at once per process
-(``QUADLOC_MAX_CONCURRENT_SOLVES``); a request that waits longer than
-``QUADLOC_SOLVE_QUEUE_TIMEOUT_S`` for a slot gets 503 + ``Retry-After``.
-
-A batch has a total budget too (``QUADLOC_BATCH_TIME_BUDGET_MS``, queue waits included): without
-it a batch of N frames could hold its request for N x (solve budget + queue wait), past the
-proxy's read timeout. Each frame's solve budget is capped by what is left of the batch's; frames
-not started when it runs out answer ``localized: false`` with reason ``time_budget_exceeded``
-(frames already solved are kept).
+"""Running localizations for the API: bounded concurrency (:class:`FairSlots`,
+``QUADLOC_MAX_CONCURRENT_SOLVES``; 503 + ``Retry-After`` after ``QUADLOC_SOLVE_QUEUE_TIMEOUT_S``),
+per-frame and per-batch time budgets (frames not started answer ``time_budget_exceeded``),
+outcome metrics, and every solver failure as a 4xx problem or a "not localized" answer.
+Design: docs/design/service.md#solver-concurrency-and-budgets.
 """
 
 from __future__ import annotations

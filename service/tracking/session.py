@@ -1,29 +1,10 @@
 """A tracking session: camera poses of a walk in a sliding-window factor graph.
 
-Variables: one GTSAM ``Pose3`` per frame, the camera's ``world_from_camera`` (OpenCV camera
-axes), key ``x<frame index>``. Factors per frame:
-
-* the EXISTING metric factors of :func:`factors.pose_factors.pose_factors` (level set by
-  default, noise std ``sqrt(sigma_j)``, per-detection robust kernel) for each detection
-  associated at the predicted pose (:mod:`service.tracking.association`);
-* ``BetweenFactorPose3`` from the client's odometry, ``camera_{i}_from_camera_{i+1} =
-  inv(odom_from_camera_i) @ odom_from_camera_{i+1}``, noise :class:`DriftModel` (a random walk:
-  variance per metre travelled and per second, stated in ``docs/tracking.md``);
-* ``PriorFactorPose3`` where the client sends a prior with a covariance.
-
-The window is bounded: :data:`SMOOTHERS` ``"isam2"`` (``gtsam.IncrementalFixedLagSmoother``,
-the default) or ``"batch"`` (``gtsam.BatchFixedLagSmoother``, LM over the window each frame);
-both marginalise frames older than ``window_frames`` into a Gaussian prior on the rest
-(``bench.tracking`` measures both: docs/results.md).
-
-States: ``initializing`` (no pose yet: frames are buffered and multi-frame RANSAC,
-:mod:`service.tracking.multiframe`, runs every ``init_interval_frames``), ``tracking``, ``lost``
-(the estimate is no longer supported: position std above ``lost_position_std_m``, a frame with
->= :data:`LOST_UNEXPLAINED_DETECTIONS` usable detections none of which is an inlier, or
-``lost_after_misses`` consecutive frames whose detections are all unexplained; such a frame,
-while still ``tracking``, has ``reason="detections_unexplained"`` and confidence 0;
-the graph is dropped and multi-frame RANSAC relocalizes, the state stays ``lost`` until then).
-Poses are returned only while ``tracking``.
+One GTSAM ``Pose3`` per frame, the camera's ``world_from_camera`` (OpenCV camera axes), key
+``x<frame index>``; factors: the metric factors of the detections associated at the predicted
+pose, odometry ``BetweenFactorPose3`` (noise :class:`DriftModel`) and client priors with a
+covariance. States :data:`STATES`; poses are returned only while ``tracking``. Factors,
+smoothers and the ``lost`` rules: docs/design/service.md#tracking-session.
 """
 
 from __future__ import annotations

@@ -1,19 +1,9 @@
 """``POST /v1/maps:build`` (start a map-building job) and ``GET /v1/build-jobs/{job_id}``.
 
-The body is a recording (``maps.building.recording``: intrinsics, frames with the app's
-``world_from_camera`` and detections). The map id is the ``map_id`` query parameter:
-
-* new id: the job ends with version 1 of a new map; an ``If-Match`` header is refused (412:
-  there is no version to match);
-* existing id: ``If-Match`` with the latest version's ETag is required (428 if missing, 412 if
-  stale, as for ``PUT /v1/maps/{map_id}``); the job ends with the next version, or fails with
-  ``version_conflict`` if the map changed meanwhile (nothing is overwritten).
-
-Answers 202 with ``Location: /v1/build-jobs/{job_id}``. Building needs the ``write`` scope,
-reading a job ``read``. The job resource reports ``status`` (queued, running, succeeded,
-failed), ``stage``, ``percent``, ``objects_found``, and at the end ``map_version`` and the
-``report`` (which detections built which object, per-object quality, rejected detections), or
-``error {reason, detail}``.
+The body is a recording (``maps.building.recording``); the map id is the ``map_id`` query
+parameter; an existing map needs ``If-Match`` (428 / 412 as for ``PUT /v1/maps/{map_id}``).
+Answers 202 with ``Location: /v1/build-jobs/{job_id}``. Details:
+docs/design/service.md#post-v1mapsbuild.
 """
 
 from __future__ import annotations

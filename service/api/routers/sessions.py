@@ -1,13 +1,6 @@
 """Tracking sessions: ``POST /v1/maps/{map_id}/sessions``, ``POST /v1/sessions/{id}/frames``,
-``GET`` / ``DELETE /v1/sessions/{id}``.
-
-Sessions live in this process (:class:`service.tracking.store.SessionStore`; bounds from
-``QUADLOC_MAX_SESSIONS``, default 200, and ``QUADLOC_SESSION_IDLE_TIMEOUT_S``, default 300).
-With several replicas the proxy must send every request of a session to one replica
-(``deploy/nginx.conf`` hashes the session id); an unknown id (expired, deleted, or the replica
-restarted) is 404 ``session-not-found``: start a new session. Plain ``def`` routes: the
-threadpool runs the CPU-bound updates off the event loop; one lock per session serialises its
-frames.
+``GET`` / ``DELETE /v1/sessions/{id}``. Sessions live in this process; an unknown id is 404
+``session-not-found``. Replicas and locking: docs/design/service.md#tracking-session-routes.
 """
 
 from __future__ import annotations
