@@ -162,12 +162,8 @@ class Settings(BaseSettings):
     )
     max_concurrent_solves: int = Field(
         default=2, ge=1,
-        description="Frames solved at once per process. The solver holds the GIL, so threads "
-                    "only interleave solves; 1 serves them first-come first-served (lowest "
-                    "mean latency under uniform load) but then one client sending worst-case "
-                    "frames back to back holds the only slot for a whole budget at a time; "
-                    "with 2 the other clients' frames interleave with it (p99 x1.75 instead "
-                    "of x3.6 in bench/adversarial.py).",
+        description="Frames solved at once per process (why 2: docs/design/service.md, "
+                    "solver concurrency).",
     )
     batch_time_budget_ms: float = Field(
         default=20_000.0, gt=0, le=300_000.0,

@@ -11,6 +11,7 @@ covariance in tangent order ``[omega, v]`` transforms with the adjoint of ``F``:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 
@@ -128,25 +129,17 @@ def prior_from_request(prior: PosePriorIn | None) -> PosePrior | None:
     return PosePrior(T, cov)
 
 
+#: The wire options that are :class:`LocalizationOptions` fields of the same name and meaning.
+_SHARED_OPTIONS = tuple(sorted({f.name for f in dataclasses.fields(LocalizationOptions)}
+                               & set(LocalizeOptionsIn.model_fields)))
+
+
 def options_from_request(options: LocalizeOptionsIn, max_budget_ms: float) -> LocalizationOptions:
     """Wire options -> :class:`LocalizationOptions`; the time budget is capped by the server."""
     budget = max_budget_ms if options.time_budget_ms is None else min(options.time_budget_ms,
                                                                       max_budget_ms)
-    return LocalizationOptions(
-        metric=options.metric,
-        ransac_max_hypotheses=options.ransac_max_hypotheses,
-        inlier_iou=options.inlier_iou,
-        min_inliers=options.min_inliers,
-        use_sigma=options.use_sigma,
-        robust=options.robust,
-        robust_scale=options.robust_scale,
-        unknown_label_policy=options.unknown_label_policy,
-        seed=options.seed,
-        time_budget_ms=float(budget),
-        max_iterations=options.max_iterations,
-        on_ambiguity=options.on_ambiguity,
-        min_confidence=options.min_confidence,
-    )
+    return LocalizationOptions(**{**{k: getattr(options, k) for k in _SHARED_OPTIONS},
+                                  "time_budget_ms": float(budget)})
 
 
 def pose_out(world_from_camera_cv: np.ndarray, convention: str) -> PoseOut:

@@ -66,12 +66,8 @@ def _not_localized(compiled: CompiledMap, frame: LocalizeRequest, reason: str, m
 
 
 class FairSlots:
-    """A counting semaphore that serves waiters first come, first served.
-
-    ``threading.Semaphore`` lets a newly arriving thread take a freed slot before the threads
-    already waiting (barging), which starves some requests under load (p99 latencies of seconds
-    at 32 concurrent clients). Here ``release`` hands the slot directly to the oldest waiter.
-    """
+    """A counting semaphore that serves waiters first come, first served: ``release`` hands the
+    slot to the oldest waiter (no barging; why: docs/design/service.md, solver concurrency)."""
 
     def __init__(self, slots: int) -> None:
         self._free = slots

@@ -8,6 +8,7 @@ docs/design/service.md#post-v1mapsbuild.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Header, Path, Query, Request, Response, status
@@ -87,12 +88,9 @@ class BuildJobOut(BaseModel):
 
 
 def job_out(job: BuildJob) -> BuildJobOut:
-    return BuildJobOut(job_id=job.job_id, map_id=job.map_id, status=job.status, stage=job.stage,
-                       percent=job.percent, objects_found=job.objects_found,
-                       base_version=job.base_version, map_version=job.map_version,
-                       error=job.error, report=job.report,
-                       created_at=job.created_at.isoformat(),
-                       updated_at=job.updated_at.isoformat())
+    """The wire form of ``job`` (the same fields; times as ISO 8601 text)."""
+    return BuildJobOut(**{**dataclasses.asdict(job), "created_at": job.created_at.isoformat(),
+                          "updated_at": job.updated_at.isoformat()})
 
 
 def _base_version(store: Any, map_id: str, if_match: str | None) -> int | None:
