@@ -20,19 +20,19 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TextIO
 
-from service.cli import _client, _die, _invalid, _read_json, _server, _settings, _store
+from service import cli
 
 __all__ = ["ProgressBar", "add_build_parser", "cmd_maps_build"]
 
 
-class ProgressBar:
+class ProgressBar(cli.Progress):
     """``[#####.....]  45% refining (7 objects)`` redrawn in place on a terminal, one line per
     stage change otherwise (logs stay readable)."""
 
     def __init__(self, stream: TextIO | None = None, width: int = 30) -> None:
         self.stream = stream if stream is not None else sys.stderr
         self.width = width
-        self.tty = bool(getattr(stream, "isatty", lambda: False)())
+        self.tty = self.enabled = bool(getattr(stream, "isatty", lambda: False)())
         self._stage = ""
 
     def __call__(self, stage: str, percent: float, objects: int) -> None:
@@ -45,11 +45,6 @@ class ProgressBar:
         elif stage != self._stage:
             self.stream.write(line + "\n")
         self._stage = stage
-
-    def close(self) -> None:
-        if self.tty:
-            self.stream.write("\n")
-            self.stream.flush()
 
 
 def _print_objects(report: dict[str, Any]) -> None:
@@ -80,12 +75,12 @@ def _remote_build(args: argparse.Namespace, client: Any, data: Any) -> int:
         bar.close()
         if exc.job.report is not None:
             _write_report(args.report, exc.job.report)
-        return _die(str(exc), 1)
+        return cli._die(str(exc), 1)
     except sdk_errors.QuadLocError as exc:
         bar.close()
         hint = " (pass --update to build its next version)" \
             if "If-Match" in str(exc) and not args.update else ""
-        return _die(f"{exc}{hint}")
+        return cli._die(f"{exc}{hint}")
     bar.close()
     _write_report(args.report, job.report)
     _print_objects(job.report)
@@ -106,24 +101,24 @@ def cmd_maps_build(args: argparse.Namespace) -> int:
     from maps.building.recording import BuildLimits, RecordingError, parse_recording
     from maps.errors import MapNotFound, VersionConflict
 
-    data = _read_json(args.file)
-    if _server(args):
-        return _remote_build(args, _client(args), data)
-    settings = _settings(args)
+    data = cli._read_json(args.file)
+    if cli._server(args):
+        return _remote_build(args, cli._client(args), data)
+    settings = cli._settings(args)
     try:
         recording = parse_recording(data, BuildLimits(
             max_frames=settings.max_build_frames, max_detections_per_frame=settings.max_detections,
             max_detections=settings.max_build_detections))
     except RecordingError as exc:
-        return _invalid([(e["field"], e["message"]) for e in exc.errors],
+        return cli._invalid([(e["field"], e["message"]) for e in exc.errors],
                         f"{args.file}: invalid recording ({len(exc.errors)} problem(s))")
-    store = _store(args)
+    store = cli._store(args)
     try:
         base = store.get(args.map_id).scene_map.version
     except MapNotFound:
         base = None
     if base is not None and not args.update:
-        return _die(f"map {args.map_id!r} exists; pass --update to store the build as its next "
+        return cli._die(f"map {args.map_id!r} exists; pass --update to store the build as its next "
                    "version")
     bar = ProgressBar()
     t0 = time.monotonic()
@@ -132,15 +127,15 @@ def cmd_maps_build(args: argparse.Namespace) -> int:
                                   deadline=t0 + settings.build_time_budget_s)
     except BuildTimeoutError as exc:
         bar.close()
-        return _die(f"{exc} (QUADLOC_BUILD_TIME_BUDGET_S={settings.build_time_budget_s:g})", 1)
+        return cli._die(f"{exc} (QUADLOC_BUILD_TIME_BUDGET_S={settings.build_time_budget_s:g})", 1)
     bar.close()
     _write_report(args.report, report)
     if not scene.objects:
-        return _die("no object could be associated and reconstructed (see --report)", 1)
+        return cli._die("no object could be associated and reconstructed (see --report)", 1)
     try:
         stored = store.create(scene) if base is None else store.update(args.map_id, scene, base)
     except VersionConflict as exc:
-        return _die(f"map {args.map_id!r} changed during the build (now version "
+        return cli._die(f"map {args.map_id!r} changed during the build (now version "
                    f"{exc.current_version}); nothing was overwritten")
     _print_objects(report)
     c = report["counts"]
