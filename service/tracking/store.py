@@ -46,9 +46,7 @@ class SessionEntry:
     map_version: int
     session: TrackingSession
     convention: str
-    created_unix: float
     last_used: float
-    frames: int = 0
     lock: threading.Lock = field(default_factory=threading.Lock)
 
 
@@ -89,7 +87,7 @@ class SessionStore:
                 raise SessionCapacityError(
                     f"{len(self._entries)} live sessions (max {self.max_sessions})")
             sid = f"s-{replica_id()}." + secrets.token_urlsafe(16)
-            entry = SessionEntry(sid, map_id, map_version, session, convention, time.time(), now)
+            entry = SessionEntry(sid, map_id, map_version, session, convention, now)
             self._entries[sid] = entry
             return entry
 

@@ -191,7 +191,6 @@ def add_frames(session_id: SessionIdPath,
                 results.append(_frame_out(session.add_frame(inp), entry.convention))
             except (TrackingInputError, GeometryError) as exc:
                 raise _unprocessable(exc, prefix(i)) from exc
-        entry.frames = session.frame_count
     return SessionFramesOut(session_id=session_id, results=results)
 
 
