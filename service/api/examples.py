@@ -14,9 +14,13 @@ __all__ = [
     "EXAMPLE_FRAME_PATH",
     "EXAMPLE_FRAME_SOURCE",
     "EXAMPLE_TRUE_WORLD_FROM_CAMERA",
+    "FRAME_EXAMPLE",
+    "FRAME_RESPONSE_EXAMPLE",
     "LOCALIZE_EXAMPLE",
     "LOCALIZE_RESPONSE_EXAMPLE",
     "MAP_EXAMPLE",
+    "SESSION_CREATE_EXAMPLE",
+    "SESSION_EXAMPLE",
 ]
 
 #: The generated example frame (``bench/examples.py``; data, package data of ``service.api``).
@@ -63,3 +67,31 @@ CHESS_IMPORT_EXAMPLE: dict[str, Any] = {
             "center": [0.5, 1.0, 0.45]}},
     ],
 }
+
+# ------------------------------------------------------------------- tracking sessions
+# Requests reuse the REAL localize example frame with an identity odometry pose; the response
+# examples show the documents' shape (a session's first frame is ``initializing``).
+
+_EYE = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
+
+SESSION_CREATE_EXAMPLE: dict[str, Any] = {
+    "camera": LOCALIZE_EXAMPLE["camera"], "convention": "opencv",
+    "options": {"window_frames": 30}}
+
+SESSION_EXAMPLE: dict[str, Any] = {
+    "session_id": "s-quadloc-1.Yk3v0cQ2c1xQm8Xo7b9m1g", "url":
+    "/v1/sessions/s-quadloc-1.Yk3v0cQ2c1xQm8Xo7b9m1g", "map_id": "chess", "map_version": 1,
+    "convention": "opencv", "state": "initializing", "frames": 0, "idle_timeout_s": 300.0}
+
+FRAME_EXAMPLE: dict[str, Any] = {
+    "detections": LOCALIZE_EXAMPLE["detections"],
+    "odom_from_camera": {"matrix": _EYE}, "timestamp": 0.0, "frame_id": "0"}
+
+FRAME_RESPONSE_EXAMPLE: dict[str, Any] = {
+    "session_id": SESSION_EXAMPLE["session_id"],
+    "results": [{
+        "frame_index": 0, "frame_id": "0", "timestamp": 0.0, "state": "initializing",
+        "reason": "waiting_for_constraints", "world_from_camera": None, "covariance": None,
+        "world_from_odom": None, "world_from_odom_covariance": None, "confidence": 0.0,
+        "inliers": [], "n_usable_detections": len(LOCALIZE_EXAMPLE["detections"]),
+        "timings_ms": {"total": 0.4}}]}

@@ -21,8 +21,7 @@ from maps.model import MAP_ID_PATTERN
 from service.api.auth import ReadAccess, WriteAccess
 from service.api.build_jobs import RETRY_AFTER_S, RunnerBusyError
 from service.api.deps import SettingsDep, StoreDep
-from service.api.errors import ProblemError
-from service.api.openapi_docs import problem_responses
+from service.api.errors import ProblemError, problem_responses
 
 __all__ = ["BuildJobOut", "job_out", "router"]
 

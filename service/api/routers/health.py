@@ -10,8 +10,7 @@ from sqlalchemy.exc import ProgrammingError, SQLAlchemyError
 
 from maps.errors import MapNotFound, SchemaNotMigrated, StoreUnavailable
 from service.api.deps import MetricsDep, SettingsDep, StoreDep
-from service.api.errors import MIGRATE_HINT, ProblemError
-from service.api.openapi_docs import problem_responses
+from service.api.errors import MIGRATE_HINT, ProblemError, problem_responses
 from service.api.schemas import HealthOut
 
 __all__ = ["router"]

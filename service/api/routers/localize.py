@@ -14,11 +14,10 @@ from maps.compiled import CompiledMap
 from maps.errors import MapNotFound
 from service.api.auth import ReadAccess
 from service.api.deps import MapIdPath, MapLoaderDep, SettingsDep, SolverDep
-from service.api.errors import ProblemError, map_not_found
+from service.api.errors import ProblemError, map_not_found, problem_responses
 from service.api.examples import LOCALIZE_EXAMPLE, LOCALIZE_RESPONSE_EXAMPLE
 from service.api.inspector import SVG_MEDIA_TYPE, render_localization_svg, wants_svg
 from service.api.map_loader import MapLoader, MapStillLoading
-from service.api.openapi_docs import problem_responses
 from service.api.schemas import (
     BatchLocalizeRequest,
     BatchLocalizeResponse,

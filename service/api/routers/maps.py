@@ -24,9 +24,8 @@ from maps.model import (
 )
 from service.api.auth import ReadAccess, WriteAccess
 from service.api.deps import MapIdPath, SettingsDep, StoreDep
-from service.api.errors import ProblemError, map_not_found
+from service.api.errors import ProblemError, map_not_found, problem_responses
 from service.api.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
-from service.api.openapi_docs import problem_responses
 from service.api.schemas import (
     MapListOut,
     MapOut,

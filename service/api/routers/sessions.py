@@ -26,9 +26,8 @@ from service.api.convert import (
     prior_from_request,
 )
 from service.api.deps import MapIdPath, StoreDep
-from service.api.errors import ProblemError, field_and_problem, map_not_found
-from service.api.openapi_docs import problem_responses
-from service.api.session_examples import (
+from service.api.errors import ProblemError, field_and_problem, map_not_found, problem_responses
+from service.api.examples import (
     FRAME_EXAMPLE,
     FRAME_RESPONSE_EXAMPLE,
     SESSION_CREATE_EXAMPLE,
