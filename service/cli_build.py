@@ -98,17 +98,16 @@ def _write_report(path: str | None, report: Any) -> None:
 
 def cmd_maps_build(args: argparse.Namespace) -> int:
     from maps.building.build import BuildTimeoutError, build_map
-    from maps.building.recording import BuildLimits, RecordingError, parse_recording
+    from maps.building.recording import RecordingError, parse_recording
     from maps.errors import MapNotFound, VersionConflict
+    from service.api.build_jobs import build_limits
 
     data = cli._read_json(args.file)
     if cli._server(args):
         return _remote_build(args, cli._client(args), data)
     settings = cli._settings(args)
     try:
-        recording = parse_recording(data, BuildLimits(
-            max_frames=settings.max_build_frames, max_detections_per_frame=settings.max_detections,
-            max_detections=settings.max_build_detections))
+        recording = parse_recording(data, build_limits(settings))
     except RecordingError as exc:
         return cli._invalid([(e["field"], e["message"]) for e in exc.errors],
                         f"{args.file}: invalid recording ({len(exc.errors)} problem(s))")

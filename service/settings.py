@@ -1,21 +1,12 @@
-"""Service settings, read from the environment (prefix ``QUADLOC_``) with pydantic-settings.
+"""Service settings, read from the environment (``QUADLOC_<FIELD>``, case-insensitive) with
+pydantic-settings.
 
-Every field can be set as ``QUADLOC_<FIELD>`` (case-insensitive), e.g.
-``QUADLOC_DATABASE_URL=postgresql://user@db/quadloc`` or ``QUADLOC_PORT=9000``.
-
-API keys (``QUADLOC_API_KEYS``) are never stored in clear: each entry is the **sha256 hex digest**
-of the key and its scopes. Two accepted spellings:
-
-* compact: ``"<sha256hex>:read,<sha256hex>:read+write"`` (entries separated by ``,`` or
-  whitespace, scopes joined by ``+``);
-* JSON: ``[{"sha256": "<hex>", "scopes": ["read", "write"], "name": "ci"}]``.
-
-Scopes: ``read`` (localize, get and list maps) and ``write`` (create, update, delete maps).
-``write`` implies ``read``. Hash a key with ``quadloc hash-key`` or
-``python -c "import hashlib,sys; print(hashlib.sha256(sys.argv[1].encode()).hexdigest())" KEY``.
-
-With no key configured the service is open, and therefore refuses to bind anything but a
-loopback address (see :func:`check_bind_allowed`).
+API keys (``QUADLOC_API_KEYS``) are sha256 hex digests with scopes, never keys in clear:
+compact ``"<sha256hex>:read,<sha256hex>:read+write"`` (entries separated by ``,`` or whitespace,
+scopes joined by ``+``) or JSON ``[{"sha256": "<hex>", "scopes": ["read", "write"], "name":
+"ci"}]``. Scopes: ``read`` (localize, get and list maps), ``write`` (create, update, delete
+maps; implies ``read``); hash a key with ``quadloc hash-key``. With no key the service is open
+and binds only loopback (:func:`check_bind_allowed`).
 """
 
 from __future__ import annotations

@@ -57,12 +57,8 @@ def authenticate(keys: tuple[ApiKey, ...], presented: str | None, scope: str) ->
 
 
 def _refuse_non_loopback(request: Request) -> None:
-    """An open server (no keys) answers only on loopback, even if it was started with
-    ``uvicorn --host 0.0.0.0`` directly (``quadloc serve`` refuses that bind up front).
-
-    ``scope["server"]`` is the local address the request arrived on; non-IP names (test
-    clients, Unix sockets) are not network exposure and pass.
-    """
+    """403 unless the request arrived on a loopback address (``scope["server"]``; non-IP
+    names such as test clients and Unix sockets pass): an open server answers only there."""
     server = request.scope.get("server")
     host = server[0] if server else None
     if not host:

@@ -19,13 +19,13 @@ from sqlalchemy.exc import SQLAlchemyError
 
 from maps.building.build import BuildTimeoutError, build_map
 from maps.building.jobs import JobStore
-from maps.building.recording import Recording
+from maps.building.recording import BuildLimits, Recording
 from maps.errors import MapAlreadyExists, MapNotFound, StoreUnavailable, VersionConflict
 from maps.model import MapValidationError
 from maps.store import MapStore
 
 __all__ = ["HEARTBEAT_S", "RETRY_AFTER_S", "BuildRunner", "JobLostError", "RunnerBusyError",
-           "install_map_building"]
+           "build_limits", "install_map_building"]
 
 log = logging.getLogger("quadloc.build")
 
@@ -35,6 +35,13 @@ HEARTBEAT_S = 1.0
 
 #: ``Retry-After`` (s) of the 503 answered when this replica's build queue is full.
 RETRY_AFTER_S = 10
+
+
+def build_limits(settings: Any) -> BuildLimits:
+    """The recording limits of the settings (``QUADLOC_MAX_BUILD_*``, ``MAX_DETECTIONS``)."""
+    return BuildLimits(max_frames=settings.max_build_frames,
+                       max_detections_per_frame=settings.max_detections,
+                       max_detections=settings.max_build_detections)
 
 
 class RunnerBusyError(RuntimeError):

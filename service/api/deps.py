@@ -53,13 +53,9 @@ MapIdPath = Annotated[str, Path(description="Map id (pattern: maps.model.MAP_ID_
 
 
 async def check_body_depth(request: Request) -> None:
-    """Refuse (422) a JSON body nested deeper than ``settings.max_json_depth``.
-
-    Runs as an app-wide dependency, i.e. after FastAPI parsed the body (``request.json()`` is
-    cached on the request, so this does not parse it again) and before any route stores
-    anything. Without it a deeply nested map ``metadata`` was stored and then could not be
-    serialised (500 on every later GET).
-    """
+    """Refuse (422) a JSON body nested deeper than ``settings.max_json_depth`` (an app-wide
+    dependency: after FastAPI parsed the body, before any route stores anything; why:
+    docs/design/service.md#problem-documents)."""
     if request.method in ("GET", "HEAD", "OPTIONS", "DELETE"):
         return
     if "json" not in request.headers.get("content-type", "").lower():

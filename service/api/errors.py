@@ -31,6 +31,7 @@ __all__ = [
     "field_path",
     "install_error_handlers",
     "json_depth_violation",
+    "log_database_error",
     "map_not_found",
     "problem_body",
     "problem_response",
@@ -270,12 +271,21 @@ MIGRATE_HINT = ("the map database schema is missing or not migrated to this vers
                 "maps/migrations/alembic.ini -x url=<database url> upgrade head'")
 
 
-async def _on_database_error(request: Request, exc: Exception) -> JSONResponse:
+def log_database_error(where: str, exc: Exception) -> None:
+    """Log a database failure ``where`` (with :data:`MIGRATE_HINT` when the schema is missing;
+    the driver's text goes to the log, never to a client)."""
     if isinstance(exc, SchemaNotMigrated | ProgrammingError):
-        log.error("database error on %s %s: %s (%s)", request.method, request.url.path,
-                  MIGRATE_HINT, str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+        log.error("%s: %s (%s)", where, MIGRATE_HINT, _first_line(exc))
     else:
-        log.error("database error on %s %s: %s", request.method, request.url.path, exc)
+        log.error("%s: %s", where, exc)
+
+
+def _first_line(exc: Exception) -> str:
+    return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+
+
+async def _on_database_error(request: Request, exc: Exception) -> JSONResponse:
+    log_database_error(f"database error on {request.method} {request.url.path}", exc)
     return problem_response(request, "database-unavailable",
                             "the map database is unavailable; retry shortly",
                             headers={"Retry-After": "5"})
@@ -284,7 +294,7 @@ async def _on_database_error(request: Request, exc: Exception) -> JSONResponse:
 async def _on_data_error(request: Request, exc: Exception) -> JSONResponse:
     """The database refused a value of the request (e.g. a NUL character on PostgreSQL)."""
     log.warning("database refused a value on %s %s: %s", request.method, request.url.path,
-                str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+                _first_line(exc))
     return problem_response(request, "validation-error",
                             "the database refused a value of this request (for example a NUL "
                             "character in a string); remove control characters and retry",

@@ -1,23 +1,13 @@
 """Wire format of the REST API (pydantic v2 models; the OpenAPI document is generated from them).
 
-Conventions (also stated in the OpenAPI descriptions):
-* Pixels with origin at the top-left pixel corner, +x right, +y down. Ellipses are
-  ``{cx, cy, a, b, angle}``: centre px, **semi**-axes px (``a`` along ``angle``), ``angle`` in
-  **radians** from +x towards +y. A box ``{xmin, ymin, xmax, ymax}`` (px) becomes its inscribed
-  axis-aligned ellipse.
-* ``sigma`` is the detector's predicted uncertainty (> 0); ``log_variance`` is
-  ``alpha = log sigma^2``, converted as ``sigma = exp(alpha / 2)``. Give at most one.
-* Poses are ``world_from_camera`` (the camera's pose in the map frame, metres), as a unit
-  ``quaternion_wxyz`` (scalar first, ``w >= 0``) + ``translation_m``, and as a 4x4 matrix.
-  Camera axes are OpenCV's (+X right, +Y down, +Z forward) unless ``output_convention`` is
-  ``"opengl"`` (ARKit/ARCore: +X right, +Y up, -Z forward), i.e.
-  ``world_from_camera_gl = world_from_camera_cv @ diag(1, -1, -1, 1)``.
-* Covariances are 6x6 in GTSAM Pose3 tangent order ``[omega_x, omega_y, omega_z, v_x, v_y, v_z]``
-  (radians, metres), right perturbation ``T exp(xi)``, in the camera (body) frame of the stated
-  convention.
-
-Every float must be finite (NaN/Infinity are rejected with 422 naming the field); unknown fields
-are rejected (typos would otherwise be silently ignored).
+Conventions (also in the OpenAPI descriptions and docs/api.md): pixels from the top-left pixel
+corner, +x right, +y down; ellipses ``{cx, cy, a, b, angle}``: centre px, SEMI-axes px (``a``
+along ``angle``), ``angle`` in radians from +x towards +y; a box becomes its inscribed ellipse;
+``sigma = exp(alpha / 2)`` for ``log_variance = alpha``. Poses ``world_from_camera`` (m) as unit
+``quaternion_wxyz`` (``w >= 0``) + ``translation_m`` and a 4x4, OpenCV camera axes unless
+``"opengl"`` (``world_from_camera_gl = world_from_camera_cv @ diag(1, -1, -1, 1)``).
+Covariances 6x6 ``[omega_x, omega_y, omega_z, v_x, v_y, v_z]`` (rad, m), right perturbation,
+camera (body) frame. Floats must be finite and unknown fields are rejected (422 naming the field).
 """
 
 from __future__ import annotations

@@ -175,13 +175,9 @@ class Solver:
 
     def localize_frames(self, compiled: CompiledMap, frames: Sequence[LocalizeRequest],
                         batch: bool) -> list[LocalizeResponse]:
-        """Solve ``frames`` in order against ``compiled`` (blocking; call from a thread).
-
-        Each frame takes a solver slot of its own, so a batch queues behind (and interleaves
-        with) other clients' frames instead of holding a slot for its whole length. Field names
-        in errors are prefixed with ``frames[i].`` for batches. A batch stops solving when
-        ``batch_budget_ms`` (measured with ``time.perf_counter`` from this call) runs out.
-        """
+        """Solve ``frames`` in order against ``compiled`` (blocking; call from a thread), one
+        solver slot per frame; batch errors name ``frames[i]....``; a batch stops solving when
+        ``batch_budget_ms`` (``time.perf_counter``, from this call) runs out."""
         out: list[LocalizeResponse] = []
         deadline = time.perf_counter() + self.batch_budget_ms / 1e3 if batch else float("inf")
         for i, frame in enumerate(frames):

@@ -15,11 +15,11 @@ from fastapi import APIRouter, Body, Header, Path, Query, Request, Response, sta
 from pydantic import BaseModel, Field
 
 from maps.building.jobs import BuildJob, JobNotFoundError
-from maps.building.recording import BuildLimits, RecordingError, parse_recording
+from maps.building.recording import RecordingError, parse_recording
 from maps.errors import MapNotFound
 from maps.model import MAP_ID_PATTERN
 from service.api.auth import ReadAccess, WriteAccess
-from service.api.build_jobs import RETRY_AFTER_S, RunnerBusyError
+from service.api.build_jobs import RETRY_AFTER_S, RunnerBusyError, build_limits
 from service.api.deps import SettingsDep, StoreDep
 from service.api.errors import ProblemError, problem_responses
 
@@ -135,11 +135,8 @@ def start_build(
     if_match: Annotated[str | None, Header(description="ETag of the map's latest version "
                                                        "(only when the map exists).")] = None,
 ) -> BuildJobOut:
-    limits = BuildLimits(max_frames=settings.max_build_frames,
-                         max_detections_per_frame=settings.max_detections,
-                         max_detections=settings.max_build_detections)
     try:
-        recording = parse_recording(body, limits)
+        recording = parse_recording(body, build_limits(settings))
     except RecordingError as exc:
         raise ProblemError("validation-error", f"invalid recording: {exc}",
                            errors=exc.errors) from exc
