@@ -90,17 +90,12 @@ def camera_from_request(camera: CameraIn) -> Camera:
 
 def detections_from_request(detections: list[DetectionIn]) -> list[Detection]:
     """Wire detections -> :class:`Detection` (boxes become inscribed ellipses)."""
-    out = []
-    for d in detections:
-        if d.ellipse is not None:
-            e = d.ellipse
-            ellipse = Ellipse(e.cx, e.cy, e.a, e.b, e.angle)
-        else:
-            b = d.box
-            assert b is not None  # guaranteed by DetectionIn's validator
-            ellipse = Ellipse.from_bbox(b.xmin, b.ymin, b.xmax, b.ymax)
-        out.append(Detection(ellipse, d.label, d.effective_sigma(), d.score))
-    return out
+    def ellipse(d: DetectionIn) -> Ellipse:
+        e, b = d.ellipse, d.box  # exactly one of them (DetectionIn's validator)
+        return (Ellipse(e.cx, e.cy, e.a, e.b, e.angle) if e is not None
+                else Ellipse.from_bbox(b.xmin, b.ymin, b.xmax, b.ymax))  # type: ignore[union-attr]
+
+    return [Detection(ellipse(d), d.label, d.effective_sigma(), d.score) for d in detections]
 
 
 def _pose_matrix_in(pose: PoseIn, field: str) -> np.ndarray:

@@ -185,7 +185,6 @@ def pose_adjoint(T: np.ndarray) -> np.ndarray:
     return pose3(T).AdjointMap()
 
 
-
 def _key(i: int) -> int:
     return gtsam.symbol("x", i)
 

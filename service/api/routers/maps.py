@@ -86,12 +86,14 @@ def etag_of(content_hash: str) -> str:
     return f'"{content_hash}"'
 
 
+def _iso(when: Any) -> str | None:
+    return when.isoformat() if when is not None else None
+
+
 def _map_out(stored: Any) -> MapOut:
     sm = stored.scene_map
-    created = getattr(stored, "created_at", None)
     return MapOut(map_id=sm.map_id, version=sm.version, content_hash=stored.content_hash,
-                  created_at=created.isoformat() if created is not None else None,
-                  map=sm.to_dict())
+                  created_at=_iso(getattr(stored, "created_at", None)), map=sm.to_dict())
 
 
 def _check_object_limit(body: Any, settings: Any) -> None:
@@ -154,13 +156,10 @@ def import_chess_map(
 @router.get("/maps", response_model=MapListOut, summary="List maps (latest versions)",
             responses={**problem_responses(401, 403, 503), **_ok(200, _LIST_EXAMPLE, False)})
 def list_maps(store: StoreDep, _key: ReadAccess) -> MapListOut:
-    out = []
-    for s in store.list():
-        updated = getattr(s, "updated_at", None)
-        out.append(MapSummaryOut(map_id=s.map_id, name=s.name, version=s.latest_version,
-                                 content_hash=s.content_hash,
-                                 updated_at=updated.isoformat() if updated is not None else None))
-    return MapListOut(maps=out)
+    return MapListOut(maps=[
+        MapSummaryOut(map_id=s.map_id, name=s.name, version=s.latest_version,
+                      content_hash=s.content_hash, updated_at=_iso(getattr(s, "updated_at", None)))
+        for s in store.list()])
 
 
 @router.get(
