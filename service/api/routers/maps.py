@@ -81,6 +81,10 @@ def _body_doc(schema: dict[str, Any], example: dict[str, Any]) -> dict[str, Any]
         "schema": schema, "example": example}}}}
 
 
+_CREATED_RESPONSES = {**problem_responses(400, 401, 403, 409, 413, 415, 422, 503),
+                      **_ok(201, _MAP_OUT_EXAMPLE)}
+
+
 def etag_of(content_hash: str) -> str:
     """Strong ETag of a map version."""
     return f'"{content_hash}"'
@@ -121,8 +125,7 @@ def _created(store: Any, scene_map: Any, response: Response) -> MapOut:
     description="Body: the map document (docs/maps.md). `version` in the body is ignored: a "
                 "new map is version 1. Answers 201 with the stored map, its `ETag` and "
                 "`Location`; 409 if the id is taken; 422 naming every invalid field.",
-    responses={**problem_responses(400, 401, 403, 409, 413, 415, 422, 503),
-               **_ok(201, _MAP_OUT_EXAMPLE)},
+    responses=_CREATED_RESPONSES,
     openapi_extra=_body_doc(_MAP_SCHEMA, MAP_EXAMPLE),
 )
 def create_map(body: Annotated[dict[str, Any], Body()], response: Response, store: StoreDep,
@@ -138,8 +141,7 @@ def create_map(body: Annotated[dict[str, Any], Body()], response: Response, stor
     description="Body: the Chess format (`category_id_to_label`, `objects[]` with "
                 "`ellipsoid {axes, R, center}`; world +Z up). The map id and name come from "
                 "the query.",
-    responses={**problem_responses(400, 401, 403, 409, 413, 415, 422, 503),
-               **_ok(201, _MAP_OUT_EXAMPLE)},
+    responses=_CREATED_RESPONSES,
     openapi_extra=_body_doc(CHESS_JSON_SCHEMA, CHESS_IMPORT_EXAMPLE),
 )
 def import_chess_map(

@@ -73,10 +73,7 @@ def session_store_from_env() -> SessionStore:
 
 
 def _store(request: Request) -> SessionStore:
-    store = getattr(request.app.state, "sessions", None)
-    if store is None:
-        store = request.app.state.sessions = session_store_from_env()
-    return store
+    return request.app.state.sessions  # type: ignore[no-any-return] (set by create_app)
 
 
 def new_session(compiled: CompiledMap, body: SessionCreate) -> TrackingSession:
