@@ -66,8 +66,7 @@ def cmd_track(args: argparse.Namespace) -> int:
             r = session.add_frame(_frame_input(f, conv, f"frames[{i}]."))
         except ProblemError as exc:
             return _die(f"{args.file}: {exc.errors[0]['field']}: {exc.detail}")
-        res = _frame_out(r, conv)
-        out.append(res.model_dump())
+        out.append(_frame_out(r, conv).model_dump())
         line = f"{i:5d} {r.state:12s}"
         if r.world_from_camera is not None:
             tracked += 1
@@ -82,15 +81,15 @@ def cmd_track(args: argparse.Namespace) -> int:
                 line += f" err={dp * 100:.1f}cm/{da:.1f}deg"
         if not args.json:
             print(line)
+    summary = sys.stderr if args.json else sys.stdout
     if args.json:
         print(json.dumps(out, indent=1))
-    print(f"frames {len(frames.frames)}, tracked {tracked}", file=sys.stderr if args.json
-          else sys.stdout)
+    print(f"frames {len(frames.frames)}, tracked {tracked}", file=summary)
     if errors:
         e = np.array(errors)
         msg = (f"trajectory error over {len(e)} frames: position median "
                f"{np.median(e[:, 0]) * 100:.1f} cm, p90 {np.percentile(e[:, 0], 90) * 100:.1f} "
                f"cm; rotation median {np.median(e[:, 1]):.2f} deg; within 10 cm and 5 deg "
                f"{100 * np.mean((e[:, 0] <= 0.1) & (e[:, 1] <= 5)):.1f} %")
-        print(msg, file=sys.stderr if args.json else sys.stdout)
+        print(msg, file=summary)
     return 0 if tracked else 1
