@@ -117,10 +117,8 @@ class Progress:
 def _settings(args: argparse.Namespace) -> Any:
     from service.settings import Settings
 
-    overrides: dict[str, Any] = {}
-    if getattr(args, "database_url", None):
-        overrides["database_url"] = args.database_url
-    return Settings(**overrides)
+    url = getattr(args, "database_url", None)
+    return Settings(**({"database_url": url} if url else {}))
 
 
 def _store(args: argparse.Namespace) -> Any:
@@ -140,9 +138,21 @@ def _die(message: str, code: int = 2) -> int:
     return code
 
 
+def _invalid(problems: Any, message: str) -> int:
+    """Print each ``(field, problem)`` on stderr, then :func:`_die` with ``message``."""
+    for field, problem in problems:
+        print(f"  {field}: {problem}", file=sys.stderr)
+    return _die(message)
+
+
 def _read_json(path: str) -> Any:
-    text = sys.stdin.read() if path == "-" else Path(path).read_text(encoding="utf-8")
-    return json.loads(text)
+    """The JSON document of ``path`` (``-``: stdin); unreadable or malformed: :class:`_CliError`
+    ``"<path>: <problem>"``."""
+    try:
+        text = sys.stdin.read() if path == "-" else Path(path).read_text(encoding="utf-8")
+        return json.loads(text)
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise _CliError(f"{path}: {exc}") from exc
 
 
 def _json_type(value: Any) -> str:
@@ -178,6 +188,16 @@ def _table_time(value: Any) -> str:
     return text.split(".")[0].replace("+00:00", "") + ("Z" if "+00:00" in text else "")
 
 
+def _show(args: argparse.Namespace, items: list[dict[str, Any]], headers: list[str],
+          row: Any, right: set[int]) -> int:
+    """``items`` as JSON (``--json``) or as a table of ``row(item)`` rows."""
+    if args.json:
+        print(json.dumps(items, indent=2))
+    else:
+        print(format_table(headers, [row(m) for m in items], right=right))
+    return 0
+
+
 # ---------------------------------------------------------------------------------- commands
 
 
@@ -190,7 +210,6 @@ def cmd_serve(args: argparse.Namespace) -> int:
     settings = _settings(args)
     host = args.host or settings.host
     port = settings.port if args.port is None else args.port
-    workers = args.workers or settings.workers
     try:
         check_bind_allowed(settings, host)
     except ValueError as exc:
@@ -198,7 +217,8 @@ def cmd_serve(args: argparse.Namespace) -> int:
     if not settings.auth_enabled:
         print(f"quadloc: no API key configured: the API is open, listening on loopback only "
               f"({host}:{port})", file=sys.stderr)
-    serve(uvicorn_config(settings, host, port, workers=workers, access_log=args.access_log))
+    serve(uvicorn_config(settings, host, port, workers=args.workers or settings.workers,
+                         access_log=args.access_log))
     return 0
 
 
@@ -210,34 +230,30 @@ def cmd_maps_list(args: argparse.Namespace) -> int:
         items = [{"map_id": r.map_id, "name": r.name, "version": r.latest_version,
                   "content_hash": r.content_hash, "updated_at": r.updated_at.isoformat()}
                  for r in _store(args).list()]
-    if args.json:
-        print(json.dumps(items, indent=2))
-        return 0
-    print(format_table(["MAP_ID", "VERSION", "UPDATED", "NAME"],
-                       [[m["map_id"], str(m["version"]), _table_time(m.get("updated_at")),
-                         m["name"]] for m in items], right={1}))
-    return 0
+    return _show(args, items, ["MAP_ID", "VERSION", "UPDATED", "NAME"],
+                 lambda m: [m["map_id"], str(m["version"]), _table_time(m.get("updated_at")),
+                            m["name"]], {1})
 
 
 def cmd_maps_versions(args: argparse.Namespace) -> int:
-    from maps.errors import MapNotFound
-
     if _server(args):
         with _client(args) as client:
             items = [v.model_dump(mode="json") for v in client.list_versions(args.map_id)]
     else:
-        try:
-            history = _store(args).version_history(args.map_id)
-        except MapNotFound as exc:
-            return _die(str(exc), 1)
         items = [{"version": h.version, "content_hash": h.content_hash,
-                  "created_at": h.created_at.isoformat()} for h in history]
-    if args.json:
-        print(json.dumps(items, indent=2))
-        return 0
-    print(format_table(["VERSION", "CREATED", "ETAG"],
-                       [[str(v["version"]), _table_time(v.get("created_at")),
-                         f'"{v["content_hash"]}"'] for v in items], right={0}))
+                  "created_at": h.created_at.isoformat()}
+                 for h in _store(args).version_history(args.map_id)]
+    return _show(args, items, ["VERSION", "CREATED", "ETAG"],
+                 lambda v: [str(v["version"]), _table_time(v.get("created_at")),
+                            f'"{v["content_hash"]}"'], {0})
+
+
+def _exists(map_id: str) -> int:
+    return _die(f"map {map_id!r} exists; pass --update to add a new version")
+
+
+def _print_stored(map_id: str, version: int, n_objects: int, content_hash: str) -> int:
+    print(f"{map_id} version {version} ({n_objects} objects) etag \"{content_hash}\"")
     return 0
 
 
@@ -245,10 +261,7 @@ def cmd_maps_import(args: argparse.Namespace) -> int:
     from maps.errors import MapAlreadyExists, MapNotFound, VersionConflict
     from maps.model import MapValidationError, scene_map_from_chess, scene_map_from_dict
 
-    try:
-        data = _read_json(args.file)
-    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
-        return _die(f"{args.file}: {exc}")
+    data = _read_json(args.file)
     if not isinstance(data, dict):
         return _die(f"{args.file}: a map must be a JSON object, got a JSON "
                     f"{_json_type(data)}")
@@ -257,15 +270,12 @@ def cmd_maps_import(args: argparse.Namespace) -> int:
             scene_map = scene_map_from_chess(data, map_id=args.map_id or "chess",
                                              name=args.name or "Chess")
         else:
-            if args.map_id:
-                data = {**data, "map_id": args.map_id}
-            if args.name:
-                data = {**data, "name": args.name}
+            overrides = {"map_id": args.map_id, "name": args.name}
+            data = {**data, **{k: v for k, v in overrides.items() if v}}
             scene_map = scene_map_from_dict(data, version=1)
     except MapValidationError as exc:
-        for e in exc.errors:
-            print(f"  {e['field']}: {e['message']}", file=sys.stderr)
-        return _die(f"{args.file}: invalid map ({len(exc.errors)} problem(s))")
+        return _invalid([(e["field"], e["message"]) for e in exc.errors],
+                        f"{args.file}: invalid map ({len(exc.errors)} problem(s))")
     if _server(args):
         return _remote_import(args, scene_map.to_dict())
     store = _store(args)
@@ -273,7 +283,7 @@ def cmd_maps_import(args: argparse.Namespace) -> int:
         stored = store.create(scene_map)
     except MapAlreadyExists:
         if not args.update:
-            return _die(f"map {scene_map.map_id!r} exists; pass --update to add a new version")
+            return _exists(scene_map.map_id)
         try:
             current = store.get(scene_map.map_id)
             new = type(scene_map).from_dict({**scene_map.to_dict(),
@@ -281,9 +291,8 @@ def cmd_maps_import(args: argparse.Namespace) -> int:
             stored = store.update(scene_map.map_id, new, current.scene_map.version)
         except (VersionConflict, MapNotFound) as exc:
             return _die(str(exc))
-    print(f"{stored.scene_map.map_id} version {stored.scene_map.version} "
-          f"({len(stored.scene_map.objects)} objects) etag \"{stored.content_hash}\"")
-    return 0
+    sm = stored.scene_map
+    return _print_stored(sm.map_id, sm.version, len(sm.objects), stored.content_hash)
 
 
 def _remote_import(args: argparse.Namespace, document: dict[str, Any]) -> int:
@@ -300,26 +309,20 @@ def _remote_import(args: argparse.Namespace, document: dict[str, Any]) -> int:
             if not exc.type.endswith("map-exists"):
                 raise
             if not args.update:
-                return _die(f"map {map_id!r} exists; pass --update to add a new version")
+                return _exists(map_id)
             current = client.get_map(map_id)
             record = client.update_map(map_id, document,
                                        if_match=current.etag or current.content_hash)
-    print(f"{record.map_id} version {record.version} ({len(record.map.get('objects', []))} "
-          f"objects) etag \"{record.content_hash}\"")
-    return 0
+    return _print_stored(record.map_id, record.version, len(record.map.get("objects", [])),
+                         record.content_hash)
 
 
 def cmd_maps_export(args: argparse.Namespace) -> int:
-    from maps.errors import MapNotFound
-
     if _server(args):
         with _client(args) as client:
             document = client.get_map(args.map_id, args.version).map
     else:
-        try:
-            document = _store(args).get(args.map_id, args.version).scene_map.to_dict()
-        except MapNotFound as exc:
-            return _die(str(exc), 1)
+        document = _store(args).get(args.map_id, args.version).scene_map.to_dict()
     text = json.dumps(document, indent=2) + "\n"
     if args.output:
         Path(args.output).write_text(text)
@@ -329,17 +332,11 @@ def cmd_maps_export(args: argparse.Namespace) -> int:
 
 
 def cmd_maps_delete(args: argparse.Namespace) -> int:
-    from maps.errors import MapNotFound
-
     if _server(args):
         with _client(args) as client:
             client.delete_map(args.map_id)
-        print(f"deleted {args.map_id} (all versions)")
-        return 0
-    try:
+    else:
         _store(args).delete(args.map_id)
-    except MapNotFound as exc:
-        return _die(str(exc), 1)
     print(f"deleted {args.map_id} (all versions)")
     return 0
 
@@ -349,24 +346,21 @@ def _print_answer(result: Any) -> None:
     print(f"map {result.map_id} v{result.map_version}  frame {result.frame_id or '-'}")
     if not result.localized:
         print(f"NOT LOCALIZED: {result.reason}")
-        _print_alternatives(result)
-        return
-    pose = result.world_from_camera
-    print(f"world_from_camera ({pose.convention} camera axes):")
-    print("  quaternion_wxyz = [" + ", ".join(f"{v:+.6f}" for v in pose.quaternion_wxyz) + "]")
-    print("  translation_m   = [" + ", ".join(f"{v:+.4f}" for v in pose.translation_m) + "]")
-    print(f"confidence {result.confidence:.3f}  inliers {len(result.inliers)}  "
-          f"metric {result.metric}  total {result.timings_ms.get('total', float('nan')):.1f} ms")
-    if result.covariance is not None:
-        diag = [max(float(result.covariance.matrix[i][i]), 0.0) for i in range(6)]
-        rot = [round(math.degrees(math.sqrt(d)), 3) for d in diag[:3]]
-        trans = [round(math.sqrt(d), 4) for d in diag[3:]]
-        print(f"std: rotation [deg] {rot}  translation [m] {trans}")
-    _print_alternatives(result)
-
-
-def _print_alternatives(result: Any) -> None:
-    """The candidate poses of an ambiguous or low-confidence answer, with their probabilities."""
+    else:
+        pose = result.world_from_camera
+        print(f"world_from_camera ({pose.convention} camera axes):")
+        print("  quaternion_wxyz = [" + ", ".join(f"{v:+.6f}" for v in pose.quaternion_wxyz)
+              + "]")
+        print("  translation_m   = [" + ", ".join(f"{v:+.4f}" for v in pose.translation_m) + "]")
+        print(f"confidence {result.confidence:.3f}  inliers {len(result.inliers)}  "
+              f"metric {result.metric}  total "
+              f"{result.timings_ms.get('total', float('nan')):.1f} ms")
+        if result.covariance is not None:
+            diag = [max(float(result.covariance.matrix[i][i]), 0.0) for i in range(6)]
+            rot = [round(math.degrees(math.sqrt(d)), 3) for d in diag[:3]]
+            trans = [round(math.sqrt(d), 4) for d in diag[3:]]
+            print(f"std: rotation [deg] {rot}  translation [m] {trans}")
+    # the candidate poses of an ambiguous or low-confidence answer, with their probabilities
     for k, a in enumerate(result.alternatives):
         t = " ".join(f"{v:+.3f}" for v in a.world_from_camera.translation_m)
         print(f"candidate {k}: confidence {a.confidence:.3f}  inliers {a.n_inliers}  "
@@ -379,32 +373,26 @@ def cmd_localize(args: argparse.Namespace) -> int:
     from service.api.errors import field_path
     from service.api.schemas import LocalizeRequest
 
+    overrides = {k: v for k, v in (
+        ("metric", args.metric), ("on_ambiguity", getattr(args, "on_ambiguity", None)),
+        ("min_confidence", getattr(args, "min_confidence", None))) if v is not None}
     requests = []
     for path in args.file:
+        body = _read_json(path)
+        if overrides and isinstance(body, dict):
+            options = body.setdefault("options", {})
+            if isinstance(options, dict):
+                options.update(overrides)  # validated with the request below
         try:
-            body = _read_json(path)
-            overrides = {k: v for k, v in (
-                ("metric", args.metric),
-                ("on_ambiguity", getattr(args, "on_ambiguity", None)),
-                ("min_confidence", getattr(args, "min_confidence", None))) if v is not None}
-            if overrides and isinstance(body, dict):
-                options = body.setdefault("options", {})
-                if isinstance(options, dict):
-                    options.update(overrides)  # validated with the request below
             request = LocalizeRequest.model_validate(body)
-        except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
-            return _die(f"{path}: {exc}")
         except ValidationError as exc:
-            for e in exc.errors():
-                print(f"  {field_path(e['loc'])}: {e['msg']}", file=sys.stderr)
-            return _die(f"{path}: invalid request")
+            return _invalid([(field_path(e["loc"]), e["msg"]) for e in exc.errors()],
+                            f"{path}: invalid request")
         if args.convention:
             request = request.model_copy(update={"options": request.options.model_copy(
                 update={"output_convention": args.convention})})
         requests.append(request)
-    solve = _remote_solver(args) if _server(args) else _local_solver(args)
-    if isinstance(solve, int):
-        return solve
+    solve, close = _solver(args)
     progress = Progress(len(requests))
     results = []
     try:
@@ -414,9 +402,7 @@ def cmd_localize(args: argparse.Namespace) -> int:
         progress.update(len(requests))
     finally:
         progress.close()
-        close = getattr(solve, "close", None)
-        if close is not None:
-            close()
+        close()
     if args.json:
         if len(results) == 1:
             print(results[0].model_dump_json(indent=2))
@@ -436,39 +422,21 @@ def cmd_localize(args: argparse.Namespace) -> int:
     return 0 if all(r.localized for r in results) else 1
 
 
-class _RemoteSolve:
-    """Localize through the SDK (``POST /v1/maps/{map}/localize`` on the server)."""
-
-    def __init__(self, args: argparse.Namespace) -> None:
-        self.client = _client(args)
-        self.map_id = args.map
-        self.version = args.version
-
-    def __call__(self, request: Any) -> Any:
-        return self.client.localize(self.map_id, request.model_dump(mode="json",
-                                                                    exclude_none=True),
-                                    map_version=self.version)
-
-    def close(self) -> None:
-        self.client.close()
-
-
-def _remote_solver(args: argparse.Namespace) -> Any:
-    return _RemoteSolve(args)
-
-
-def _local_solver(args: argparse.Namespace) -> Any:
-    """Localize in process against the local database (the server's solver and settings)."""
-    from maps.errors import MapNotFound
+def _solver(args: argparse.Namespace) -> tuple[Any, Any]:
+    """``(solve, close)``: localize a request through the SDK on the server
+    (``POST /v1/maps/{map}/localize``), or in process against the local database (the server's
+    solver and settings)."""
+    if _server(args):
+        client = _client(args)
+        return (lambda request: client.localize(
+            args.map, request.model_dump(mode="json", exclude_none=True),
+            map_version=args.version)), client.close
     from service.api.errors import ProblemError
     from service.api.metrics import ApiMetrics
     from service.api.solver import Solver
 
     settings = _settings(args)
-    try:
-        compiled = _store(args).compiled(args.map, args.version)
-    except MapNotFound as exc:
-        return _die(str(exc), 1)
+    compiled = _store(args).compiled(args.map, args.version)
     solver = Solver(ApiMetrics(), 1, 0.0, settings.solve_time_budget_ms, settings.max_detections)
 
     def solve(request: Any) -> Any:
@@ -477,7 +445,7 @@ def _local_solver(args: argparse.Namespace) -> Any:
         except ProblemError as exc:
             raise _CliError(exc.detail) from exc
 
-    return solve
+    return solve, lambda: None
 
 
 class _CliError(Exception):
@@ -613,7 +581,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_maps_delete)
     from service.cli_build import add_build_parser  # issue 16: quadloc maps build
 
-    add_build_parser(msub, db, _store, _settings, lambda a: _client(a) if _server(a) else None)
+    add_build_parser(msub, db)
 
     p = sub.add_parser("localize", formatter_class=fmt, help="localize frames (prints the pose)",
                        description="Localize the frame in each FILE (the body of POST "
@@ -667,7 +635,7 @@ def main(argv: list[str] | None = None) -> int:
     """Run the CLI; returns the exit status."""
     from pydantic import ValidationError
 
-    from maps.errors import MapStoreError, StoreUnavailable
+    from maps.errors import MapNotFound, MapStoreError, StoreUnavailable
     from sdk import NotFound, QuadLocError, TransportError
 
     args = build_parser().parse_args(argv)
@@ -679,7 +647,7 @@ def main(argv: list[str] | None = None) -> int:
         return _die(str(exc))
     except TransportError as exc:
         return _die(f"cannot reach the server: {exc} (check --url / QUADLOC_URL)")
-    except NotFound as exc:
+    except (NotFound, MapNotFound) as exc:
         return _die(str(exc), 1)
     except QuadLocError as exc:  # the server's problem document: status, title, fields
         return _die(str(exc))

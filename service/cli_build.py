@@ -20,17 +20,19 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TextIO
 
+from service import cli
+
 __all__ = ["ProgressBar", "add_build_parser", "cmd_maps_build"]
 
 
-class ProgressBar:
+class ProgressBar(cli.Progress):
     """``[#####.....]  45% refining (7 objects)`` redrawn in place on a terminal, one line per
     stage change otherwise (logs stay readable)."""
 
     def __init__(self, stream: TextIO | None = None, width: int = 30) -> None:
         self.stream = stream if stream is not None else sys.stderr
         self.width = width
-        self.tty = bool(getattr(stream, "isatty", lambda: False)())
+        self.tty = self.enabled = bool(getattr(stream, "isatty", lambda: False)())
         self._stage = ""
 
     def __call__(self, stage: str, percent: float, objects: int) -> None:
@@ -43,16 +45,6 @@ class ProgressBar:
         elif stage != self._stage:
             self.stream.write(line + "\n")
         self._stage = stage
-
-    def close(self) -> None:
-        if self.tty:
-            self.stream.write("\n")
-            self.stream.flush()
-
-
-def _die(msg: str, code: int = 2) -> int:
-    print(f"quadloc: error: {msg}", file=sys.stderr)
-    return code
 
 
 def _print_objects(report: dict[str, Any]) -> None:
@@ -81,17 +73,16 @@ def _remote_build(args: argparse.Namespace, client: Any, data: Any) -> int:
                                on_progress=lambda j: bar(j.stage, j.percent, j.objects_found))
     except BuildFailedError as exc:
         bar.close()
-        if args.report and exc.job.report is not None:
-            Path(args.report).write_text(json.dumps(exc.job.report, indent=2) + "\n", "utf-8")
-        return _die(str(exc), 1)
+        if exc.job.report is not None:
+            _write_report(args.report, exc.job.report)
+        return cli._die(str(exc), 1)
     except sdk_errors.QuadLocError as exc:
         bar.close()
         hint = " (pass --update to build its next version)" \
             if "If-Match" in str(exc) and not args.update else ""
-        return _die(f"{exc}{hint}")
+        return cli._die(f"{exc}{hint}")
     bar.close()
-    if args.report:
-        Path(args.report).write_text(json.dumps(job.report, indent=2) + "\n", "utf-8")
+    _write_report(args.report, job.report)
     _print_objects(job.report)
     c = job.report["counts"]
     print(f"{job.map_id} version {job.map_version} ({c['objects']} objects from "
@@ -100,38 +91,33 @@ def _remote_build(args: argparse.Namespace, client: Any, data: Any) -> int:
     return 0
 
 
-def cmd_maps_build(args: argparse.Namespace, store_factory: Callable[[argparse.Namespace], Any],
-                   settings_factory: Callable[[argparse.Namespace], Any],
-                   client_factory: Callable[[argparse.Namespace], Any] | None = None) -> int:
-    from maps.building.build import BuildTimeoutError, build_map
-    from maps.building.recording import BuildLimits, RecordingError, parse_recording
-    from maps.errors import MapNotFound, VersionConflict
+def _write_report(path: str | None, report: Any) -> None:
+    if path:
+        Path(path).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
 
-    die = _die
+
+def cmd_maps_build(args: argparse.Namespace) -> int:
+    from maps.building.build import BuildTimeoutError, build_map
+    from maps.building.recording import RecordingError, parse_recording
+    from maps.errors import MapNotFound, VersionConflict
+    from service.api.build_jobs import build_limits
+
+    data = cli._read_json(args.file)
+    if cli._server(args):
+        return _remote_build(args, cli._client(args), data)
+    settings = cli._settings(args)
     try:
-        text = sys.stdin.read() if args.file == "-" else Path(args.file).read_text("utf-8")
-        data = json.loads(text)
-    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
-        return die(f"{args.file}: {exc}")
-    client = client_factory(args) if client_factory is not None else None
-    if client is not None:
-        return _remote_build(args, client, data)
-    settings = settings_factory(args)
-    try:
-        recording = parse_recording(data, BuildLimits(
-            max_frames=settings.max_build_frames, max_detections_per_frame=settings.max_detections,
-            max_detections=settings.max_build_detections))
+        recording = parse_recording(data, build_limits(settings))
     except RecordingError as exc:
-        for e in exc.errors:
-            print(f"  {e['field']}: {e['message']}", file=sys.stderr)
-        return die(f"{args.file}: invalid recording ({len(exc.errors)} problem(s))")
-    store = store_factory(args)
+        return cli._invalid([(e["field"], e["message"]) for e in exc.errors],
+                        f"{args.file}: invalid recording ({len(exc.errors)} problem(s))")
+    store = cli._store(args)
     try:
         base = store.get(args.map_id).scene_map.version
     except MapNotFound:
         base = None
     if base is not None and not args.update:
-        return die(f"map {args.map_id!r} exists; pass --update to store the build as its next "
+        return cli._die(f"map {args.map_id!r} exists; pass --update to store the build as its next "
                    "version")
     bar = ProgressBar()
     t0 = time.monotonic()
@@ -140,16 +126,15 @@ def cmd_maps_build(args: argparse.Namespace, store_factory: Callable[[argparse.N
                                   deadline=t0 + settings.build_time_budget_s)
     except BuildTimeoutError as exc:
         bar.close()
-        return die(f"{exc} (QUADLOC_BUILD_TIME_BUDGET_S={settings.build_time_budget_s:g})", 1)
+        return cli._die(f"{exc} (QUADLOC_BUILD_TIME_BUDGET_S={settings.build_time_budget_s:g})", 1)
     bar.close()
-    if args.report:
-        Path(args.report).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    _write_report(args.report, report)
     if not scene.objects:
-        return die("no object could be associated and reconstructed (see --report)", 1)
+        return cli._die("no object could be associated and reconstructed (see --report)", 1)
     try:
         stored = store.create(scene) if base is None else store.update(args.map_id, scene, base)
     except VersionConflict as exc:
-        return die(f"map {args.map_id!r} changed during the build (now version "
+        return cli._die(f"map {args.map_id!r} changed during the build (now version "
                    f"{exc.current_version}); nothing was overwritten")
     _print_objects(report)
     c = report["counts"]
@@ -160,10 +145,7 @@ def cmd_maps_build(args: argparse.Namespace, store_factory: Callable[[argparse.N
     return 0
 
 
-def add_build_parser(msub: Any, db: Callable[[argparse.ArgumentParser], None],
-                     store_factory: Callable[[argparse.Namespace], Any],
-                     settings_factory: Callable[[argparse.Namespace], Any],
-                     client_factory: Callable[[argparse.Namespace], Any] | None = None) -> None:
+def add_build_parser(msub: Any, db: Callable[[argparse.ArgumentParser], None]) -> None:
     """Register ``maps build`` on the ``maps`` sub-command parser."""
     p = msub.add_parser("build", help="build a map from a recording (posed frames + detections)",
                         description=__doc__.split("\n\n")[1])
@@ -173,5 +155,4 @@ def add_build_parser(msub: Any, db: Callable[[argparse.ArgumentParser], None],
                    help="if the id exists, store the build as its next version")
     p.add_argument("--report", metavar="PATH", help="write the build report (JSON) here")
     db(p)
-    p.set_defaults(func=lambda a: cmd_maps_build(a, store_factory, settings_factory,
-                                                 client_factory))
+    p.set_defaults(func=cmd_maps_build)

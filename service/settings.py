@@ -1,21 +1,12 @@
-"""Service settings, read from the environment (prefix ``QUADLOC_``) with pydantic-settings.
+"""Service settings, read from the environment (``QUADLOC_<FIELD>``, case-insensitive) with
+pydantic-settings.
 
-Every field can be set as ``QUADLOC_<FIELD>`` (case-insensitive), e.g.
-``QUADLOC_DATABASE_URL=postgresql://user@db/quadloc`` or ``QUADLOC_PORT=9000``.
-
-API keys (``QUADLOC_API_KEYS``) are never stored in clear: each entry is the **sha256 hex digest**
-of the key and its scopes. Two accepted spellings:
-
-* compact: ``"<sha256hex>:read,<sha256hex>:read+write"`` (entries separated by ``,`` or
-  whitespace, scopes joined by ``+``);
-* JSON: ``[{"sha256": "<hex>", "scopes": ["read", "write"], "name": "ci"}]``.
-
-Scopes: ``read`` (localize, get and list maps) and ``write`` (create, update, delete maps).
-``write`` implies ``read``. Hash a key with ``quadloc hash-key`` or
-``python -c "import hashlib,sys; print(hashlib.sha256(sys.argv[1].encode()).hexdigest())" KEY``.
-
-With no key configured the service is open, and therefore refuses to bind anything but a
-loopback address (see :func:`check_bind_allowed`).
+API keys (``QUADLOC_API_KEYS``) are sha256 hex digests with scopes, never keys in clear:
+compact ``"<sha256hex>:read,<sha256hex>:read+write"`` (entries separated by ``,`` or whitespace,
+scopes joined by ``+``) or JSON ``[{"sha256": "<hex>", "scopes": ["read", "write"], "name":
+"ci"}]``. Scopes: ``read`` (localize, get and list maps), ``write`` (create, update, delete
+maps; implies ``read``); hash a key with ``quadloc hash-key``. With no key the service is open
+and binds only loopback (:func:`check_bind_allowed`).
 """
 
 from __future__ import annotations
@@ -162,12 +153,8 @@ class Settings(BaseSettings):
     )
     max_concurrent_solves: int = Field(
         default=2, ge=1,
-        description="Frames solved at once per process. The solver holds the GIL, so threads "
-                    "only interleave solves; 1 serves them first-come first-served (lowest "
-                    "mean latency under uniform load) but then one client sending worst-case "
-                    "frames back to back holds the only slot for a whole budget at a time; "
-                    "with 2 the other clients' frames interleave with it (p99 x1.75 instead "
-                    "of x3.6 in bench/adversarial.py).",
+        description="Frames solved at once per process (why 2: docs/design/service.md, "
+                    "solver concurrency).",
     )
     batch_time_budget_ms: float = Field(
         default=20_000.0, gt=0, le=300_000.0,

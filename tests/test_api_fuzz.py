@@ -191,7 +191,7 @@ def test_the_schemas_own_examples_get_the_documented_success(
                 c.post("/v1/maps", json=example, headers=headers)
             headers["If-Match"] = c.get(f"/v1/maps/{map_id}", headers=headers).headers["etag"]
         if "{session_id}" in url:  # a tracking session to send the frames to
-            from service.api.session_examples import SESSION_CREATE_EXAMPLE
+            from service.api.examples import SESSION_CREATE_EXAMPLE
 
             created = c.post("/v1/maps/chess/sessions", json=SESSION_CREATE_EXAMPLE,
                              headers=headers)

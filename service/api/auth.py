@@ -1,15 +1,9 @@
-"""API-key access control: scopes ``read`` (localize, get/list maps) and ``write`` (create,
-update, delete maps; implies ``read``).
+"""API-key access control: scopes ``read`` and ``write`` (implies ``read``).
 
-A key is presented as ``Authorization: Bearer <key>`` or ``X-API-Key: <key>``. The service only
-knows the sha256 digests of its keys (``QUADLOC_API_KEYS``, see :mod:`service.settings`); the
-presented key is hashed and compared in constant time against every configured digest.
-With no key configured, every request arriving on a loopback address is allowed, and
-requests arriving on any other address are refused (403): ``quadloc serve`` refuses to bind a
-public address without keys, and this catches a server started some other way.
-A malformed ``Authorization`` header, or two different keys in the two headers, is refused too.
-Missing or unknown key -> 401 (with ``WWW-Authenticate: Bearer``); known key without the scope
--> 403.
+A key comes as ``Authorization: Bearer <key>`` or ``X-API-Key: <key>``; its sha256 is compared
+in constant time with ``QUADLOC_API_KEYS``. Missing or unknown key -> 401, key without the
+scope -> 403; without keys only loopback is served. Rules:
+docs/design/service.md#api-key-access-control.
 """
 
 from __future__ import annotations
@@ -26,6 +20,8 @@ from service.settings import ApiKey, hash_api_key
 
 __all__ = ["ReadAccess", "WriteAccess", "authenticate", "require_scope"]
 
+#: The ``WWW-Authenticate`` header of every 401.
+_CHALLENGE = {"WWW-Authenticate": 'Bearer realm="quadloc"'}
 _bearer = HTTPBearer(auto_error=False, description="API key as a bearer token.")
 _api_key_header = APIKeyHeader(name="X-API-Key", auto_error=False,
                                description="API key in the X-API-Key header.")
@@ -38,13 +34,12 @@ def authenticate(keys: tuple[ApiKey, ...], presented: str | None, scope: str) ->
     """
     if not keys:
         return None
-    challenge = {"WWW-Authenticate": 'Bearer realm="quadloc"'}
     if not presented:
         raise ProblemError("unauthorized",
                            "this endpoint needs an API key: 'Authorization: Bearer <key>' or "
                            "'X-API-Key: <key>'",
-                           errors=[{"field": "header.authorization", "message": "missing"}],
-                           headers=challenge)
+                           field="header.authorization", message="missing",
+                           headers=_CHALLENGE)
     digest = hash_api_key(presented)
     found = None
     for key in keys:  # constant time per key; no early exit
@@ -52,23 +47,18 @@ def authenticate(keys: tuple[ApiKey, ...], presented: str | None, scope: str) ->
             found = key
     if found is None:
         raise ProblemError("unauthorized", "unknown API key",
-                           errors=[{"field": "header.authorization", "message": "unknown key"}],
-                           headers=challenge)
+                           field="header.authorization", message="unknown key",
+                           headers=_CHALLENGE)
     if not found.allows(scope):
         raise ProblemError("forbidden", f"this API key lacks the '{scope}' scope "
                            f"(it has {sorted(found.scopes)})",
-                           errors=[{"field": "header.authorization",
-                                  "message": f"scope '{scope}' required"}])
+                           field="header.authorization", message=f"scope '{scope}' required")
     return found
 
 
 def _refuse_non_loopback(request: Request) -> None:
-    """An open server (no keys) answers only on loopback, even if it was started with
-    ``uvicorn --host 0.0.0.0`` directly (``quadloc serve`` refuses that bind up front).
-
-    ``scope["server"]`` is the local address the request arrived on; non-IP names (test
-    clients, Unix sockets) are not network exposure and pass.
-    """
+    """403 unless the request arrived on a loopback address (``scope["server"]``; non-IP
+    names such as test clients and Unix sockets pass): an open server answers only there."""
     server = request.scope.get("server")
     host = server[0] if server else None
     if not host:
@@ -81,8 +71,8 @@ def _refuse_non_loopback(request: Request) -> None:
         raise ProblemError("forbidden",
                            "this server has no API keys configured (QUADLOC_API_KEYS) and only "
                            "answers on loopback",
-                           errors=[{"field": "header.authorization",
-                                    "message": "server is open: loopback clients only"}])
+                           field="header.authorization",
+                           message="server is open: loopback clients only")
 
 
 def require_scope(scope: str):
@@ -101,16 +91,14 @@ def require_scope(scope: str):
         if authorization is not None and bearer is None:
             raise ProblemError("unauthorized", "the Authorization header must be "
                                "'Bearer <key>'",
-                               errors=[{"field": "header.authorization",
-                                        "message": "not a bearer token"}],
-                               headers={"WWW-Authenticate": 'Bearer realm="quadloc"'})
+                               field="header.authorization", message="not a bearer token",
+                               headers=_CHALLENGE)
         presented = [c for c in (bearer.credentials if bearer else None, api_key) if c]
         if len(set(presented)) > 1:
             raise ProblemError("unauthorized", "Authorization and X-API-Key carry different "
                                "keys; send one",
-                               errors=[{"field": "header.x-api-key",
-                                        "message": "conflicts with Authorization"}],
-                               headers={"WWW-Authenticate": 'Bearer realm="quadloc"'})
+                               field="header.x-api-key", message="conflicts with Authorization",
+                               headers=_CHALLENGE)
         return authenticate(keys, presented[0] if presented else None, scope)
 
     dependency.__name__ = f"require_{scope}"

@@ -1,25 +1,10 @@
 """Runs map-building jobs for the API: a bounded pool, a time budget, heartbeats in the store.
 
-One :class:`BuildRunner` per app: builds never run in request threads. ``submit`` queues a
-job on a pool of ``max_concurrent_builds`` background threads, at most ``max_queued_builds``
-waiting behind them; beyond, :class:`RunnerBusyError` -> 503 + ``Retry-After``
-(``RETRY_AFTER_S``) and the job row is marked failed (``busy``). The build holds the GIL while it
-runs, like a localize solve: keep ``max_concurrent_builds`` at 1 (default) and scale builds out
-with replicas. Each job:
-
-1. marks the row ``running`` and reports progress (stage, percent, objects found) through
-   :meth:`maps.building.jobs.JobStore.progress` at most every ``HEARTBEAT_S`` and at every stage
-   change (the build's callbacks come at least every 2 s); each write is also the heartbeat
-   of the jobs queued behind it on this replica (:meth:`maps.building.jobs.JobStore.heartbeat`),
-   so a long queue is not mistaken for a lost runner. If the row is no longer active (another
-   replica's sweep marked it failed as stale), the build stops and stores nothing;
-2. builds with a deadline ``build_time_budget_s`` after it started;
-3. stores the map: ``create`` (new map id) or ``update(expected_version=base_version)`` (the
-   version whose ETag the client sent in ``If-Match``); a concurrent change fails the job with
-   ``version_conflict``, an id taken meanwhile with ``map_exists``: nothing is overwritten;
-4. ends ``succeeded`` with the map version and the report, or ``failed`` with a reason:
-   ``invalid_recording``, ``time_budget_exceeded``, ``no_objects``, ``version_conflict``,
-   ``map_exists``, ``map_not_found``, ``store_unavailable``, ``internal_error``.
+One :class:`BuildRunner` per app; beyond ``max_concurrent_builds + max_queued_builds`` jobs,
+:class:`RunnerBusyError` (503 + ``Retry-After`` :data:`RETRY_AFTER_S`). A job ends
+``succeeded`` or ``failed`` with a reason: ``invalid_recording``, ``time_budget_exceeded``,
+``no_objects``, ``version_conflict``, ``map_exists``, ``map_not_found``, ``store_unavailable``,
+``internal_error``. A job's steps: docs/design/service.md#map-building-jobs.
 """
 
 from __future__ import annotations
@@ -34,13 +19,13 @@ from sqlalchemy.exc import SQLAlchemyError
 
 from maps.building.build import BuildTimeoutError, build_map
 from maps.building.jobs import JobStore
-from maps.building.recording import Recording
+from maps.building.recording import BuildLimits, Recording
 from maps.errors import MapAlreadyExists, MapNotFound, StoreUnavailable, VersionConflict
 from maps.model import MapValidationError
 from maps.store import MapStore
 
 __all__ = ["HEARTBEAT_S", "RETRY_AFTER_S", "BuildRunner", "JobLostError", "RunnerBusyError",
-           "install_map_building"]
+           "build_limits", "install_map_building"]
 
 log = logging.getLogger("quadloc.build")
 
@@ -50,6 +35,13 @@ HEARTBEAT_S = 1.0
 
 #: ``Retry-After`` (s) of the 503 answered when this replica's build queue is full.
 RETRY_AFTER_S = 10
+
+
+def build_limits(settings: Any) -> BuildLimits:
+    """The recording limits of the settings (``QUADLOC_MAX_BUILD_*``, ``MAX_DETECTIONS``)."""
+    return BuildLimits(max_frames=settings.max_build_frames,
+                       max_detections_per_frame=settings.max_detections,
+                       max_detections=settings.max_build_detections)
 
 
 class RunnerBusyError(RuntimeError):

@@ -11,7 +11,9 @@ covariance in tangent order ``[omega, v]`` transforms with the adjoint of ``F``:
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -19,6 +21,7 @@ from factors.geometry import (
     QUATERNION_NORM_TOLERANCE,
     Camera,
     Ellipse,
+    pose_matrix,
     quaternion_wxyz_from_rotation,
     rotation_from_quaternion_wxyz,
 )
@@ -36,6 +39,7 @@ from service.api.schemas import (
 )
 from service.localization.types import (
     Detection,
+    InlierMatch,
     LocalizationInputError,
     LocalizationOptions,
     LocalizationResult,
@@ -47,7 +51,9 @@ __all__ = [
     "camera_from_request",
     "convert_covariance",
     "convert_pose",
+    "covariance_out",
     "detections_from_request",
+    "inliers_out",
     "options_from_request",
     "pose_out",
     "prior_from_request",
@@ -84,17 +90,12 @@ def camera_from_request(camera: CameraIn) -> Camera:
 
 def detections_from_request(detections: list[DetectionIn]) -> list[Detection]:
     """Wire detections -> :class:`Detection` (boxes become inscribed ellipses)."""
-    out = []
-    for d in detections:
-        if d.ellipse is not None:
-            e = d.ellipse
-            ellipse = Ellipse(e.cx, e.cy, e.a, e.b, e.angle)
-        else:
-            b = d.box
-            assert b is not None  # guaranteed by DetectionIn's validator
-            ellipse = Ellipse.from_bbox(b.xmin, b.ymin, b.xmax, b.ymax)
-        out.append(Detection(ellipse, d.label, d.effective_sigma(), d.score))
-    return out
+    def ellipse(d: DetectionIn) -> Ellipse:
+        e, b = d.ellipse, d.box  # exactly one of them (DetectionIn's validator)
+        return (Ellipse(e.cx, e.cy, e.a, e.b, e.angle) if e is not None
+                else Ellipse.from_bbox(b.xmin, b.ymin, b.xmax, b.ymax))  # type: ignore[union-attr]
+
+    return [Detection(ellipse(d), d.label, d.effective_sigma(), d.score) for d in detections]
 
 
 def _pose_matrix_in(pose: PoseIn, field: str) -> np.ndarray:
@@ -105,10 +106,7 @@ def _pose_matrix_in(pose: PoseIn, field: str) -> np.ndarray:
     if not abs(n - 1.0) <= QUATERNION_NORM_TOLERANCE:
         raise LocalizationInputError(f"must have unit norm, |q| = {n:.9g}",
                                      field=f"{field}.quaternion_wxyz")
-    T = np.eye(4)
-    T[:3, :3] = rotation_from_quaternion_wxyz(q / n)
-    T[:3, 3] = pose.translation_m
-    return T
+    return pose_matrix(rotation_from_quaternion_wxyz(q / n), pose.translation_m)
 
 
 def prior_from_request(prior: PosePriorIn | None) -> PosePrior | None:
@@ -126,25 +124,17 @@ def prior_from_request(prior: PosePriorIn | None) -> PosePrior | None:
     return PosePrior(T, cov)
 
 
+#: The wire options that are :class:`LocalizationOptions` fields of the same name and meaning.
+_SHARED_OPTIONS = tuple(sorted({f.name for f in dataclasses.fields(LocalizationOptions)}
+                               & set(LocalizeOptionsIn.model_fields)))
+
+
 def options_from_request(options: LocalizeOptionsIn, max_budget_ms: float) -> LocalizationOptions:
     """Wire options -> :class:`LocalizationOptions`; the time budget is capped by the server."""
     budget = max_budget_ms if options.time_budget_ms is None else min(options.time_budget_ms,
                                                                       max_budget_ms)
-    return LocalizationOptions(
-        metric=options.metric,
-        ransac_max_hypotheses=options.ransac_max_hypotheses,
-        inlier_iou=options.inlier_iou,
-        min_inliers=options.min_inliers,
-        use_sigma=options.use_sigma,
-        robust=options.robust,
-        robust_scale=options.robust_scale,
-        unknown_label_policy=options.unknown_label_policy,
-        seed=options.seed,
-        time_budget_ms=float(budget),
-        max_iterations=options.max_iterations,
-        on_ambiguity=options.on_ambiguity,
-        min_confidence=options.min_confidence,
-    )
+    return LocalizationOptions(**{**{k: getattr(options, k) for k in _SHARED_OPTIONS},
+                                  "time_budget_ms": float(budget)})
 
 
 def pose_out(world_from_camera_cv: np.ndarray, convention: str) -> PoseOut:
@@ -162,6 +152,22 @@ def _finite(x: float) -> float:
     return float(x) if math.isfinite(float(x)) else 0.0
 
 
+def covariance_out(covariance: np.ndarray | None, source: str,
+                   target: str) -> CovarianceOut | None:
+    """6x6 ``[omega, v]`` covariance in ``source`` camera axes -> wire covariance in ``target``
+    axes; None when absent or not finite."""
+    if covariance is None or not np.all(np.isfinite(covariance)):
+        return None
+    S = convert_covariance(covariance, source, target)
+    return CovarianceOut(matrix=[[float(x) for x in row] for row in S])
+
+
+def inliers_out(inliers: Sequence[InlierMatch]) -> list[InlierOut]:
+    """Solver inlier matches -> wire inliers (non-finite IoU / cost as 0)."""
+    return [InlierOut(detection_index=m.detection_index, object_id=m.object_id,
+                      iou=_finite(m.iou), cost=_finite(m.cost)) for m in inliers]
+
+
 def response_from_result(
     result: LocalizationResult,
     *,
@@ -172,23 +178,19 @@ def response_from_result(
     timestamp: float | None,
 ) -> LocalizeResponse:
     """Solver result -> wire response (pose and covariance in ``convention`` camera axes)."""
-    pose = None
-    cov = None
+    pose = cov = None
     if result.localized and not np.all(np.isfinite(result.world_from_camera)):
         raise FloatingPointError("localize() returned a non-finite pose")
     if result.localized and result.world_from_camera is not None:
         pose = pose_out(result.world_from_camera, convention)
-        if result.covariance is not None and np.all(np.isfinite(result.covariance)):
-            S = convert_covariance(result.covariance, "opencv", convention)
-            cov = CovarianceOut(matrix=[[float(x) for x in row] for row in S])
+        cov = covariance_out(result.covariance, "opencv", convention)
     return LocalizeResponse(
         localized=result.localized,
         reason=result.reason,
         world_from_camera=pose,
         covariance=cov,
         confidence=_finite(result.confidence),
-        inliers=[InlierOut(detection_index=m.detection_index, object_id=m.object_id,
-                           iou=_finite(m.iou), cost=_finite(m.cost)) for m in result.inliers],
+        inliers=inliers_out(result.inliers),
         metric=result.metric,
         hypotheses_evaluated=result.hypotheses_evaluated,
         used_prior=result.used_prior,

@@ -6,7 +6,7 @@ costs a threadpool round trip per request.
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import Depends, Path, Request
 
@@ -29,31 +29,21 @@ __all__ = [
 ]
 
 
-async def get_store(request: Request) -> MapStore:
-    return request.app.state.store
+def _state(name: str) -> Any:
+    """A dependency returning ``request.app.state.<name>``."""
+
+    async def dependency(request: Request) -> Any:
+        return getattr(request.app.state, name)
+
+    dependency.__name__ = f"get_{name}"
+    return Depends(dependency)
 
 
-async def get_settings(request: Request) -> Settings:
-    return request.app.state.settings
-
-
-async def get_solver(request: Request) -> Solver:
-    return request.app.state.solver
-
-
-async def get_map_loader(request: Request) -> MapLoader:
-    return request.app.state.map_loader  # type: ignore[no-any-return]
-
-
-async def get_metrics(request: Request) -> ApiMetrics:
-    return request.app.state.metrics
-
-
-StoreDep = Annotated[MapStore, Depends(get_store)]
-SettingsDep = Annotated[Settings, Depends(get_settings)]
-SolverDep = Annotated[Solver, Depends(get_solver)]
-MetricsDep = Annotated[ApiMetrics, Depends(get_metrics)]
-MapLoaderDep = Annotated[MapLoader, Depends(get_map_loader)]
+StoreDep = Annotated[MapStore, _state("store")]
+SettingsDep = Annotated[Settings, _state("settings")]
+SolverDep = Annotated[Solver, _state("solver")]
+MetricsDep = Annotated[ApiMetrics, _state("metrics")]
+MapLoaderDep = Annotated[MapLoader, _state("map_loader")]
 
 #: The ``{map_id}`` path parameter of every map route, validated against ``MAP_ID_PATTERN``
 #: (422 ``path.map_id`` otherwise) before it reaches the database: a NUL or other character no
@@ -63,13 +53,9 @@ MapIdPath = Annotated[str, Path(description="Map id (pattern: maps.model.MAP_ID_
 
 
 async def check_body_depth(request: Request) -> None:
-    """Refuse (422) a JSON body nested deeper than ``settings.max_json_depth``.
-
-    Runs as an app-wide dependency, i.e. after FastAPI parsed the body (``request.json()`` is
-    cached on the request, so this does not parse it again) and before any route stores
-    anything. Without it a deeply nested map ``metadata`` was stored and then could not be
-    serialised (500 on every later GET).
-    """
+    """Refuse (422) a JSON body nested deeper than ``settings.max_json_depth`` (an app-wide
+    dependency: after FastAPI parsed the body, before any route stores anything; why:
+    docs/design/service.md#problem-documents)."""
     if request.method in ("GET", "HEAD", "OPTIONS", "DELETE"):
         return
     if "json" not in request.headers.get("content-type", "").lower():
@@ -83,4 +69,4 @@ async def check_body_depth(request: Request) -> None:
     if where is not None:
         message = f"nested more than {limit} levels deep (QUADLOC_MAX_JSON_DEPTH)"
         raise ProblemError("validation-error", f"{where}: {message}",
-                           errors=[{"field": where, "message": message}])
+                           field=where, message=message)

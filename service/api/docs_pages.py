@@ -1,12 +1,6 @@
-"""Offline API documentation: ``/docs`` (Swagger UI) and ``/redoc`` (ReDoc) served with assets
-from the installed ``fastapi-offline`` package, never from a CDN, and without external fonts.
-
-FastAPI's default pages load Swagger UI and ReDoc from cdn.jsdelivr.net and fonts from Google:
-on a machine without internet they are blank. ``fastapi-offline`` (PyPI, MIT) ships the built
-``swagger-ui-bundle.js``, ``swagger-ui.css``, ``redoc.standalone.js`` and a favicon; they are
-mounted at :data:`DOCS_STATIC_URL` and the pages are FastAPI's own HTML
-(``get_swagger_ui_html`` / ``get_redoc_html``) pointed at them. Swagger UI's online validator
-badge (validator.swagger.io) is switched off.
+"""Offline API documentation: ``/docs`` (Swagger UI) and ``/redoc`` (ReDoc) with the assets of
+the installed ``fastapi-offline`` package, never a CDN. Why:
+docs/design/service.md#offline-api-docs.
 """
 
 from __future__ import annotations

@@ -1,14 +1,9 @@
 """RFC 9457 ``application/problem+json`` errors for every request failure.
 
-Body: ``{type, title, status, detail, instance, errors: [{field, message}]}``. ``type`` is a
-stable machine-readable URN ``urn:quadloc:problem:<slug>`` (slugs listed in :data:`PROBLEM_TYPES`
-and docs/api.md); ``instance`` is the request path; ``errors`` names each offending field with a
-JSON-path-like string (``detections[2].ellipse.a``; query and header fields are prefixed:
-``query.version``, ``header.if-match``).
-
-No request may produce a 5xx other than 503 (solver busy or database unavailable): the handlers
-here convert validation, geometry and storage errors to 4xx, and the last-resort handler still
-answers in the problem format if a bug slips through.
+Body: ``{type, title, status, detail, instance, errors: [{field, message}]}``; ``type`` is
+``urn:quadloc:problem:<slug>`` (:data:`PROBLEM_TYPES`); fields are spelled like
+``detections[2].ellipse.a``, ``query.version``, ``header.if-match``. No 5xx but 503 (and a
+logged 500 for bugs): docs/design/service.md#problem-documents.
 """
 
 from __future__ import annotations
@@ -26,6 +21,7 @@ from starlette.routing import Match
 
 from maps.errors import MapValidationError, SchemaNotMigrated, StoreUnavailable
 from maps.model import json_path
+from service.api.schemas import Problem
 
 __all__ = [
     "PROBLEM_MEDIA_TYPE",
@@ -35,8 +31,11 @@ __all__ = [
     "field_path",
     "install_error_handlers",
     "json_depth_violation",
+    "log_database_error",
     "map_not_found",
+    "problem_body",
     "problem_response",
+    "problem_responses",
 ]
 
 log = logging.getLogger("quadloc.api")
@@ -91,7 +90,8 @@ def problem_type(slug: str) -> str:
 
 
 class ProblemError(Exception):
-    """Raise from a route to answer with a problem document (``slug`` from PROBLEM_TYPES)."""
+    """Raise from a route to answer with a problem document (``slug`` from PROBLEM_TYPES);
+    ``field`` and ``message`` spell a one-entry ``errors``."""
 
     def __init__(
         self,
@@ -101,13 +101,16 @@ class ProblemError(Exception):
         errors: Sequence[Mapping[str, str]] = (),
         headers: Mapping[str, str] | None = None,
         status: int | None = None,
+        field: str | None = None,
+        message: str = "",
     ) -> None:
         super().__init__(detail)
         default_status, self.title = PROBLEM_TYPES[slug]
         self.slug = slug
         self.status = status or default_status
         self.detail = detail
-        self.errors = [dict(e) for e in errors]
+        self.errors = [dict(e) for e in errors] if field is None else [
+            {"field": field, "message": message}]
         self.headers = dict(headers or {})
 
 
@@ -121,25 +124,28 @@ def problem_response(
     status: int | None = None,
 ) -> JSONResponse:
     """Build the ``application/problem+json`` response for ``slug``."""
-    default_status, title = PROBLEM_TYPES[slug]
-    body: dict[str, Any] = {
-        "type": problem_type(slug),
-        "title": title,
-        "status": status or default_status,
-        "detail": detail,
-        "instance": request.url.path if request is not None else None,
-        "errors": [{"field": str(e["field"]), "message": str(e["message"])} for e in errors],
-    }
+    body = problem_body(slug, detail, request.url.path if request is not None else None,
+                        errors, status)
     return JSONResponse(body, status_code=body["status"], headers=dict(headers or {}),
                         media_type=PROBLEM_MEDIA_TYPE)
+
+
+def problem_body(slug: str, detail: str, instance: str | None,
+                 errors: Iterable[Mapping[str, str]] = (),
+                 status: int | None = None) -> dict[str, Any]:
+    """The problem document ``{type, title, status, detail, instance, errors}`` of ``slug``."""
+    default_status, title = PROBLEM_TYPES[slug]
+    return {"type": problem_type(slug), "title": title, "status": status or default_status,
+            "detail": detail, "instance": instance,
+            "errors": [{"field": str(e["field"]), "message": str(e["message"])} for e in errors]}
 
 
 def map_not_found(map_id: str, version: int | None = None) -> ProblemError:
     """The 404 ``map-not-found`` problem for ``map_id`` (or one of its versions)."""
     what = f"map {map_id!r}" if version is None else f"version {version} of map {map_id!r}"
     return ProblemError("map-not-found", f"{what} not found",
-                        errors=[{"field": "path.map_id" if version is None else "query.version",
-                                 "message": "not found"}])
+                        field="path.map_id" if version is None else "query.version",
+                        message="not found")
 
 
 def json_depth_violation(document: Any, max_depth: int) -> str | None:
@@ -265,12 +271,21 @@ MIGRATE_HINT = ("the map database schema is missing or not migrated to this vers
                 "maps/migrations/alembic.ini -x url=<database url> upgrade head'")
 
 
-async def _on_database_error(request: Request, exc: Exception) -> JSONResponse:
+def log_database_error(where: str, exc: Exception) -> None:
+    """Log a database failure ``where`` (with :data:`MIGRATE_HINT` when the schema is missing;
+    the driver's text goes to the log, never to a client)."""
     if isinstance(exc, SchemaNotMigrated | ProgrammingError):
-        log.error("database error on %s %s: %s (%s)", request.method, request.url.path,
-                  MIGRATE_HINT, str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+        log.error("%s: %s (%s)", where, MIGRATE_HINT, _first_line(exc))
     else:
-        log.error("database error on %s %s: %s", request.method, request.url.path, exc)
+        log.error("%s: %s", where, exc)
+
+
+def _first_line(exc: Exception) -> str:
+    return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+
+
+async def _on_database_error(request: Request, exc: Exception) -> JSONResponse:
+    log_database_error(f"database error on {request.method} {request.url.path}", exc)
     return problem_response(request, "database-unavailable",
                             "the map database is unavailable; retry shortly",
                             headers={"Retry-After": "5"})
@@ -279,7 +294,7 @@ async def _on_database_error(request: Request, exc: Exception) -> JSONResponse:
 async def _on_data_error(request: Request, exc: Exception) -> JSONResponse:
     """The database refused a value of the request (e.g. a NUL character on PostgreSQL)."""
     log.warning("database refused a value on %s %s: %s", request.method, request.url.path,
-                str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+                _first_line(exc))
     return problem_response(request, "validation-error",
                             "the database refused a value of this request (for example a NUL "
                             "character in a string); remove control characters and retry",
@@ -303,3 +318,46 @@ def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(ProgrammingError, _on_database_error)
     app.add_exception_handler(DataError, _on_data_error)
     app.add_exception_handler(Exception, _on_unexpected)
+
+
+# ----------------------------------------------------------------------- OpenAPI documentation
+
+_SLUG_FOR_STATUS = {400: "malformed-json", 401: "unauthorized", 403: "forbidden",
+                    404: "map-not-found", 409: "version-conflict", 412: "precondition-failed",
+                    413: "payload-too-large", 415: "unsupported-media-type",
+                    422: "validation-error",
+                    428: "precondition-required", 503: "busy"}
+
+
+_DESCRIPTIONS = {
+    400: "Malformed or unreadable body",
+    404: "Map (or version) not found",
+    409: "Conflict: map id taken, or an update lost a race",
+    422: "Validation failed (validation-error, invalid-geometry or invalid-map); errors name "
+         "the fields",
+    503: "Temporarily unavailable (solver busy or database unavailable); see Retry-After",
+}
+
+
+def _example(status: int) -> dict[str, Any]:
+    slug = _SLUG_FOR_STATUS[status]
+    title = PROBLEM_TYPES[slug][1]
+    example: dict[str, Any] = {"type": problem_type(slug), "title": title, "status": status,
+                               "detail": title, "instance": "/v1/maps/chess", "errors": []}
+    if status == 422:
+        example["detail"] = "detections[0].ellipse.a: Input should be greater than 0"
+        example["errors"] = [{"field": "detections[0].ellipse.a",
+                              "message": "Input should be greater than 0"}]
+    return example
+
+
+def problem_responses(*statuses: int) -> dict[int | str, dict[str, Any]]:
+    """``responses=`` entry documenting problem+json bodies for ``statuses``."""
+    return {
+        status: {
+            "model": Problem,
+            "description": _DESCRIPTIONS.get(status, PROBLEM_TYPES[_SLUG_FOR_STATUS[status]][1]),
+            "content": {PROBLEM_MEDIA_TYPE: {"example": _example(status)}},
+        }
+        for status in statuses
+    }

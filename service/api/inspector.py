@@ -1,14 +1,7 @@
-"""The visual inspector: a localization drawn as SVG, and the ``/inspector`` web page.
-
-* ``POST /v1/maps/{map_id}/localize`` with ``Accept: image/svg+xml`` answers the frame drawn
-  (:func:`render_localization_svg`): the detections (green inliers, red outliers), the map's
-  ellipsoids projected at the returned pose with the solver's own projection
-  (``factors.geometry.project_ellipsoid``), a line from each inlier to its object with IoU and
-  metric cost, and the JSON response embedded as ``<metadata id="quadloc-result">``. The drawing
-  itself is the SDK's :func:`sdk.overlay.render_overlay_svg` (one drawing for server and client).
-* ``GET /inspector``: a page (assets in ``service/api/static/inspector``, no CDN) to pick a map,
-  paste or upload a request, and see the overlay and a 3D view of the map's ellipsoids with the
-  camera frustum at the returned pose.
+"""The visual inspector: a localization drawn as SVG (``Accept: image/svg+xml`` on ``POST
+/v1/maps/{map_id}/localize``, :func:`render_localization_svg`) and the ``/inspector`` page
+(assets in ``service/api/static/inspector``). What is drawn:
+docs/design/service.md#visual-inspector.
 """
 
 from __future__ import annotations
@@ -81,7 +74,7 @@ def _image_ellipse(e: Any) -> ImageEllipse:
 def render_localization_svg(compiled: CompiledMap, request: LocalizeRequest,
                             response: LocalizeResponse) -> str:
     """The frame of ``request`` drawn with the answer ``response`` against ``compiled`` (the map
-    version the answer used); see the module docstring."""
+    version the answer used); what is drawn: docs/design/service.md#visual-inspector."""
     req: dict[str, Any] = request.model_dump(mode="json")
     resp: dict[str, Any] = response.model_dump(mode="json")
     c = request.camera

@@ -1,13 +1,7 @@
-"""Loading a map version for a localization without exceeding the request's time budget.
-
-The first use of a map version on a replica parses and validates its stored document and
-compiles it (~0.3-0.5 ms per object: seconds for a 10,000-object map, more on a loaded machine;
-docs/deployment.md, "Worst-case cost of a request"). Later requests hit the store's cache. So
-that this one-off cost never holds a localization past its budget, :class:`MapLoader` runs the
-load in a background thread, shared by every request that wants the same map version at the
-same time (single flight), and waits for it at most ``max_wait_s`` (the solve budget). A request
-that gives up answers 503 ``map-loading`` with ``Retry-After``; the load goes on, and a retry
-finds the map ready.
+"""Loading a map version for a localization without exceeding the request's time budget:
+:class:`MapLoader` compiles it in a background thread (single flight) and waits at most
+``max_wait_s``; a request that gives up answers 503 ``map-loading``. Why:
+docs/design/service.md#map-loader.
 """
 
 from __future__ import annotations

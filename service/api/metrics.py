@@ -1,17 +1,10 @@
 """Prometheus metrics (one registry per app) and the ASGI middleware that records them and
 enforces the request-body size limit.
 
-Series:
-* ``quadloc_http_requests_total{method, route, status}`` - requests answered.
-* ``quadloc_http_request_duration_seconds{method, route}`` - latency histogram (seconds).
-* ``quadloc_localizations_total{outcome}`` - frames localized (``outcome="localized"``) or not
-  (``outcome`` = the reason, e.g. ``too_few_detections``).
-* ``quadloc_localization_solve_seconds`` - solve time per frame (seconds, histogram).
-* ``quadloc_solves_in_progress`` - frames being solved now.
-
-``route`` is the route template (``/v1/maps/{map_id}``), never the raw path, so cardinality is
-bounded; unmatched paths count as ``route="<unmatched>"``. With several Uvicorn workers each
-process has its own registry (one process per container is the supported layout).
+Series: ``quadloc_http_requests_total{method, route, status}``,
+``quadloc_http_request_duration_seconds{method, route}``, ``quadloc_localizations_total{outcome}``,
+``quadloc_localization_solve_seconds``, ``quadloc_solves_in_progress``; ``route`` is the route
+template. Details: docs/design/service.md#metrics.
 """
 
 from __future__ import annotations
@@ -22,7 +15,7 @@ from typing import Any
 
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
 
-from service.api.errors import PROBLEM_MEDIA_TYPE, problem_type
+from service.api.errors import PROBLEM_MEDIA_TYPE, problem_body
 
 __all__ = ["ApiMetrics", "MetricsAndLimitsMiddleware"]
 
@@ -51,11 +44,9 @@ class ApiMetrics:
 
 
 def _problem_413(path: str, limit: int) -> bytes:
-    return json.dumps({
-        "type": problem_type("payload-too-large"), "title": "Request body too large",
-        "status": 413, "detail": f"request body exceeds {limit} bytes", "instance": path,
-        "errors": [{"field": "body", "message": f"larger than {limit} bytes"}],
-    }).encode()
+    return json.dumps(problem_body("payload-too-large", f"request body exceeds {limit} bytes",
+                                   path, [{"field": "body",
+                                           "message": f"larger than {limit} bytes"}])).encode()
 
 
 class MetricsAndLimitsMiddleware:
@@ -79,24 +70,23 @@ class MetricsAndLimitsMiddleware:
             await self.app(scope, receive, send)
             return
         start = time.perf_counter()
-        status_holder = {"status": 500}
+        status = 500
         limit = self.max_body_bytes
 
         async def send_wrapper(message: dict) -> None:
+            nonlocal status
             if message["type"] == "http.response.start":
-                status_holder["status"] = message["status"]
+                status = message["status"]
             await send(message)
 
         try:
-            declared = None
-            for name, value in scope.get("headers", ()):
-                if name == b"content-length":
-                    try:
-                        declared = int(value)
-                    except ValueError:
-                        declared = None
-            if declared is not None and declared > limit:
-                status_holder["status"] = 413
+            declared = [v for k, v in scope.get("headers", ()) if k == b"content-length"]
+            try:
+                too_large = bool(declared) and int(declared[-1]) > limit
+            except ValueError:
+                too_large = False
+            if too_large:
+                status = 413
                 await self._reject(scope, send)
                 return
             # Buffer the body (bounded) so chunked uploads are limited too, then replay it.
@@ -112,7 +102,7 @@ class MetricsAndLimitsMiddleware:
                 chunk = message.get("body", b"")
                 size += len(chunk)
                 if size > limit:
-                    status_holder["status"] = 413
+                    status = 413
                     await self._reject(scope, send)
                     return
                 chunks.append(chunk)
@@ -134,5 +124,5 @@ class MetricsAndLimitsMiddleware:
             route = scope.get("route")
             template = getattr(route, "path", None) or "<unmatched>"
             method = scope.get("method", "")
-            self.metrics.requests.labels(method, template, str(status_holder["status"])).inc()
+            self.metrics.requests.labels(method, template, str(status)).inc()
             self.metrics.latency.labels(method, template).observe(time.perf_counter() - start)

@@ -1,23 +1,13 @@
 """Wire format of the REST API (pydantic v2 models; the OpenAPI document is generated from them).
 
-Conventions (also stated in the OpenAPI descriptions):
-* Pixels with origin at the top-left pixel corner, +x right, +y down. Ellipses are
-  ``{cx, cy, a, b, angle}``: centre px, **semi**-axes px (``a`` along ``angle``), ``angle`` in
-  **radians** from +x towards +y. A box ``{xmin, ymin, xmax, ymax}`` (px) becomes its inscribed
-  axis-aligned ellipse.
-* ``sigma`` is the detector's predicted uncertainty (> 0); ``log_variance`` is
-  ``alpha = log sigma^2``, converted as ``sigma = exp(alpha / 2)``. Give at most one.
-* Poses are ``world_from_camera`` (the camera's pose in the map frame, metres), as a unit
-  ``quaternion_wxyz`` (scalar first, ``w >= 0``) + ``translation_m``, and as a 4x4 matrix.
-  Camera axes are OpenCV's (+X right, +Y down, +Z forward) unless ``output_convention`` is
-  ``"opengl"`` (ARKit/ARCore: +X right, +Y up, -Z forward), i.e.
-  ``world_from_camera_gl = world_from_camera_cv @ diag(1, -1, -1, 1)``.
-* Covariances are 6x6 in GTSAM Pose3 tangent order ``[omega_x, omega_y, omega_z, v_x, v_y, v_z]``
-  (radians, metres), right perturbation ``T exp(xi)``, in the camera (body) frame of the stated
-  convention.
-
-Every float must be finite (NaN/Infinity are rejected with 422 naming the field); unknown fields
-are rejected (typos would otherwise be silently ignored).
+Conventions (also in the OpenAPI descriptions and docs/api.md): pixels from the top-left pixel
+corner, +x right, +y down; ellipses ``{cx, cy, a, b, angle}``: centre px, SEMI-axes px (``a``
+along ``angle``), ``angle`` in radians from +x towards +y; a box becomes its inscribed ellipse;
+``sigma = exp(alpha / 2)`` for ``log_variance = alpha``. Poses ``world_from_camera`` (m) as unit
+``quaternion_wxyz`` (``w >= 0``) + ``translation_m`` and a 4x4, OpenCV camera axes unless
+``"opengl"`` (``world_from_camera_gl = world_from_camera_cv @ diag(1, -1, -1, 1)``).
+Covariances 6x6 ``[omega_x, omega_y, omega_z, v_x, v_y, v_z]`` (rad, m), right perturbation,
+camera (body) frame. Floats must be finite and unknown fields are rejected (422 naming the field).
 """
 
 from __future__ import annotations
@@ -30,7 +20,6 @@ from pydantic import (
     BeforeValidator,
     ConfigDict,
     Field,
-    field_validator,
     model_validator,
 )
 
@@ -210,14 +199,11 @@ class PoseIn(_Model):
             raise ValueError("give either 'quaternion_wxyz' + 'translation_m' or 'matrix'")
         if has_q and (self.quaternion_wxyz is None or self.translation_m is None):
             raise ValueError("'quaternion_wxyz' and 'translation_m' go together")
-        if self.matrix is not None and any(len(row) != 4 for row in self.matrix):
-            raise ValueError("'matrix' must be 4x4")
-        for name in ("quaternion_wxyz", "translation_m"):
+        for name in ("quaternion_wxyz", "translation_m", "matrix"):  # (matrix: 4x4 by type)
             v = getattr(self, name)
-            if v is not None and any(abs(x) > 1e6 for x in v):
+            rows = [v] if name != "matrix" else v
+            if v is not None and any(abs(x) > 1e6 for row in rows for x in row):
                 raise ValueError(f"'{name}' entries must be within +-1e6")
-        if self.matrix is not None and any(abs(x) > 1e6 for row in self.matrix for x in row):
-            raise ValueError("'matrix' entries must be within +-1e6")
         return self
 
 
@@ -232,13 +218,6 @@ class PosePriorIn(_Model):
                     "definite. With it the prior is also a soft factor of the refinement.")
     convention: Convention = Field(default="opencv",
                                    description="Camera axes of this prior (opencv or opengl).")
-
-    @field_validator("covariance")
-    @classmethod
-    def _six_by_six(cls, value: list[list[float]] | None) -> list[list[float]] | None:
-        if value is not None and any(len(row) != 6 for row in value):
-            raise ValueError("covariance must be 6x6")
-        return value
 
 
 class LocalizeOptionsIn(_Model):

@@ -1,25 +1,7 @@
-"""Running the app under Uvicorn with connection-level limits (``quadloc serve``).
-
-Uvicorn alone bounds neither the size of request headers (its default ``httptools`` parser reads
-a 16 MB header) nor the time a client may take to send a request (a half-sent request, or a
-connection on which nothing is sent, is kept open forever: "slowloris"). Here:
-
-* the HTTP/1.1 parser is h11 with ``h11_max_incomplete_event_size =
-  QUADLOC_MAX_HEADER_BYTES``: a request line + headers larger than that is answered 400 and the
-  connection closed;
-* :class:`GuardedH11Protocol` closes a connection whose current request (request line, headers
-  and body) is not completely received ``QUADLOC_REQUEST_READ_TIMEOUT_S`` seconds after its
-  first byte (or after the connection opened, if nothing was sent), answering
-  ``408 Request Timeout`` when no response has started;
-* idle keep-alive connections are closed after ``QUADLOC_KEEP_ALIVE_TIMEOUT_S``;
-* glibc's malloc keeps at most :data:`MALLOC_ARENAS` arenas (``mallopt(M_ARENA_MAX)``, unless
-  ``MALLOC_ARENA_MAX`` is set): with one arena per thread (up to 8 x cores), memory freed by
-  one solver thread is not reused by the next and the RSS ratchets up (measured with
-  bench/adversarial.py: 440 MB after the run with the default, 284 MB with 2).
-
-While the app handles a request (all of it received) the read timer is off: the solve budget
-bounds that time. ``uvicorn service.api.app:create_app --factory`` still works but without
-these guards; deployments use ``quadloc serve`` (the Dockerfile does).
+"""Running the app under Uvicorn with connection-level limits (``quadloc serve``): h11 with
+``QUADLOC_MAX_HEADER_BYTES``, a request read deadline (:class:`GuardedH11Protocol`, 408), the
+keep-alive timeout and at most :data:`MALLOC_ARENAS` glibc arenas. Why each limit:
+docs/design/service.md#connection-limits-of-quadloc-serve.
 """
 
 from __future__ import annotations
@@ -38,7 +20,7 @@ from service.settings import Settings
 
 __all__ = ["GuardedH11Protocol", "limit_malloc_arenas", "serve", "uvicorn_config"]
 
-#: glibc malloc arenas of a server process (see the module docstring).
+#: glibc malloc arenas of a server process (docs/design/service.md, connection limits).
 MALLOC_ARENAS = 2
 _M_ARENA_MAX = -8  # glibc <malloc.h>
 

@@ -1,17 +1,8 @@
-"""Running localizations for the API: bounded concurrency, time budget, outcome metrics, and
-conversion of every solver failure into either a 4xx problem or a normal "not localized" answer.
-
-Solves are CPU-bound and hold the GIL: routes that call :meth:`Solver.localize_frames` are plain
-``def`` routes, which FastAPI runs in its threadpool, never on the event loop. A first-come,
-first-served semaphore (:class:`FairSlots`) caps the number of frames solved at once per process
-(``QUADLOC_MAX_CONCURRENT_SOLVES``); a request that waits longer than
-``QUADLOC_SOLVE_QUEUE_TIMEOUT_S`` for a slot gets 503 + ``Retry-After``.
-
-A batch has a total budget too (``QUADLOC_BATCH_TIME_BUDGET_MS``, queue waits included): without
-it a batch of N frames could hold its request for N x (solve budget + queue wait), past the
-proxy's read timeout. Each frame's solve budget is capped by what is left of the batch's; frames
-not started when it runs out answer ``localized: false`` with reason ``time_budget_exceeded``
-(frames already solved are kept).
+"""Running localizations for the API: bounded concurrency (:class:`FairSlots`,
+``QUADLOC_MAX_CONCURRENT_SOLVES``; 503 + ``Retry-After`` after ``QUADLOC_SOLVE_QUEUE_TIMEOUT_S``),
+per-frame and per-batch time budgets (frames not started answer ``time_budget_exceeded``),
+outcome metrics, and every solver failure as a 4xx problem or a "not localized" answer.
+Design: docs/design/service.md#solver-concurrency-and-budgets.
 """
 
 from __future__ import annotations
@@ -36,7 +27,7 @@ from service.api.metrics import ApiMetrics
 from service.api.schemas import LocalizeRequest, LocalizeResponse
 from service.localization.pipeline import localize
 from service.localization.ransac import ScoringTimeoutError
-from service.localization.types import LocalizationInputError, LocalizationResult
+from service.localization.types import LocalizationInputError
 
 __all__ = ["Solver"]
 
@@ -55,13 +46,28 @@ def _is_request_field(exc: Exception) -> bool:
     return field.split(".")[0].split("[")[0] in _REQUEST_FIELDS
 
 
-class FairSlots:
-    """A counting semaphore that serves waiters first come, first served.
+def _invalid_geometry(exc: Exception, prefix: str) -> ProblemError:
+    """The 422 ``invalid-geometry`` problem of an input error naming its field."""
+    field, message = field_and_problem(exc, prefix)
+    return ProblemError("invalid-geometry", f"{field}: {message}",
+                        field=field, message=message)
 
-    ``threading.Semaphore`` lets a newly arriving thread take a freed slot before the threads
-    already waiting (barging), which starves some requests under load (p99 latencies of seconds
-    at 32 concurrent clients). Here ``release`` hands the slot directly to the oldest waiter.
-    """
+
+def _not_localized(compiled: CompiledMap, frame: LocalizeRequest, reason: str, metric: str,
+                   start: float | None) -> LocalizeResponse:
+    """A "not localized" answer with ``reason``; ``timings_ms.total`` is the time since
+    ``start`` (``time.perf_counter()``; None: 0, the frame was not started)."""
+    elapsed_ms = 0.0 if start is None else (time.perf_counter() - start) * 1e3
+    return LocalizeResponse(
+        localized=False, reason=reason, world_from_camera=None, covariance=None,
+        confidence=0.0, inliers=[], metric=metric, hypotheses_evaluated=0, used_prior=False,
+        map_id=compiled.map_id, map_version=compiled.version, timings_ms={"total": elapsed_ms},
+        frame_id=frame.frame_id, timestamp=frame.timestamp)
+
+
+class FairSlots:
+    """A counting semaphore that serves waiters first come, first served: ``release`` hands the
+    slot to the oldest waiter (no barging; why: docs/design/service.md, solver concurrency)."""
 
     def __init__(self, slots: int) -> None:
         self._free = slots
@@ -111,8 +117,8 @@ class Solver:
         if len(frame.detections) > self.max_detections:
             raise ProblemError("validation-error",
                                f"{prefix}detections: at most {self.max_detections} per frame",
-                               errors=[{"field": f"{prefix}detections",
-                                        "message": f"at most {self.max_detections} detections"}])
+                               field=f"{prefix}detections",
+                               message=f"at most {self.max_detections} detections")
         try:
             camera = camera_from_request(frame.camera)
             detections = detections_from_request(frame.detections)
@@ -121,38 +127,26 @@ class Solver:
                 frame.options,
                 self.max_budget_ms if budget_ms is None else min(self.max_budget_ms, budget_ms))
         except ValueError as exc:  # GeometryError, LocalizationInputError
-            field, message = field_and_problem(exc, prefix)
-            raise ProblemError("invalid-geometry", f"{field}: {message}",
-                               errors=[{"field": field, "message": message}]) from exc
+            raise _invalid_geometry(exc, prefix) from exc
         start = time.perf_counter()
         self.metrics.in_progress.inc()
         try:
             if not detections:  # an image without detections is a normal "not localized"
-                result = LocalizationResult(
-                    localized=False, reason="too_few_detections", world_from_camera=None,
-                    covariance=None, confidence=0.0, inliers=(), metric=options.metric,
-                    hypotheses_evaluated=0, used_prior=False,
-                    timings_ms={"total": (time.perf_counter() - start) * 1e3})
+                response = _not_localized(compiled, frame, "too_few_detections", options.metric,
+                                          start)
             else:
-                result = localize(detections, compiled, camera, options, prior)
-            response = response_from_result(
-                result, map_id=compiled.map_id, map_version=compiled.version,
-                convention=frame.options.output_convention, frame_id=frame.frame_id,
-                timestamp=frame.timestamp)
+                response = response_from_result(
+                    localize(detections, compiled, camera, options, prior),
+                    map_id=compiled.map_id, map_version=compiled.version,
+                    convention=frame.options.output_convention, frame_id=frame.frame_id,
+                    timestamp=frame.timestamp)
         except (GeometryError, LocalizationInputError) as exc:
             if _is_request_field(exc):
-                field, message = field_and_problem(exc, prefix)
-                raise ProblemError("invalid-geometry", f"{field}: {message}",
-                                   errors=[{"field": field, "message": message}]) from exc
+                raise _invalid_geometry(exc, prefix) from exc
             response = self._failed(compiled, frame, options.metric, start)
         except ScoringTimeoutError:  # scoring a huge map x detections ran past the hard stop
-            elapsed_ms = (time.perf_counter() - start) * 1e3
-            response = LocalizeResponse(
-                localized=False, reason=TIME_BUDGET_EXCEEDED, world_from_camera=None,
-                covariance=None, confidence=0.0, inliers=[], metric=options.metric,
-                hypotheses_evaluated=0, used_prior=False, map_id=compiled.map_id,
-                map_version=compiled.version, timings_ms={"total": elapsed_ms},
-                frame_id=frame.frame_id, timestamp=frame.timestamp)
+            response = _not_localized(compiled, frame, TIME_BUDGET_EXCEEDED, options.metric,
+                                      start)
         except Exception:  # a numerical failure deep in the solver is "not localized", not 5xx
             response = self._failed(compiled, frame, options.metric, start)
         finally:
@@ -166,14 +160,10 @@ class Solver:
     def _failed(compiled: CompiledMap, frame: LocalizeRequest, metric: str,
                 start: float) -> LocalizeResponse:
         """The "not localized" answer for an unexpected solver failure (logged with traceback)."""
-        elapsed_ms = (time.perf_counter() - start) * 1e3
         log.exception("solver failure in localize() for frame %r after %.1f ms; answered "
-                      "localized=false reason=%s", frame.frame_id, elapsed_ms, NUMERICAL_FAILURE)
-        return LocalizeResponse(
-            localized=False, reason=NUMERICAL_FAILURE, world_from_camera=None, covariance=None,
-            confidence=0.0, inliers=[], metric=metric, hypotheses_evaluated=0, used_prior=False,
-            map_id=compiled.map_id, map_version=compiled.version,
-            timings_ms={"total": elapsed_ms}, frame_id=frame.frame_id, timestamp=frame.timestamp)
+                      "localized=false reason=%s", frame.frame_id,
+                      (time.perf_counter() - start) * 1e3, NUMERICAL_FAILURE)
+        return _not_localized(compiled, frame, NUMERICAL_FAILURE, metric, start)
 
     def _budget_exceeded(self, compiled: CompiledMap, frame: LocalizeRequest,
                          prefix: str) -> LocalizeResponse:
@@ -181,22 +171,13 @@ class Solver:
         if len(frame.detections) > self.max_detections:  # still the client's error
             self._solve_one(compiled, frame, prefix)
         self.metrics.localizations.labels(TIME_BUDGET_EXCEEDED).inc()
-        return LocalizeResponse(
-            localized=False, reason=TIME_BUDGET_EXCEEDED, world_from_camera=None,
-            covariance=None, confidence=0.0, inliers=[], metric=frame.options.metric,
-            hypotheses_evaluated=0, used_prior=False, map_id=compiled.map_id,
-            map_version=compiled.version, timings_ms={"total": 0.0}, frame_id=frame.frame_id,
-            timestamp=frame.timestamp)
+        return _not_localized(compiled, frame, TIME_BUDGET_EXCEEDED, frame.options.metric, None)
 
     def localize_frames(self, compiled: CompiledMap, frames: Sequence[LocalizeRequest],
                         batch: bool) -> list[LocalizeResponse]:
-        """Solve ``frames`` in order against ``compiled`` (blocking; call from a thread).
-
-        Each frame takes a solver slot of its own, so a batch queues behind (and interleaves
-        with) other clients' frames instead of holding a slot for its whole length. Field names
-        in errors are prefixed with ``frames[i].`` for batches. A batch stops solving when
-        ``batch_budget_ms`` (measured with ``time.perf_counter`` from this call) runs out.
-        """
+        """Solve ``frames`` in order against ``compiled`` (blocking; call from a thread), one
+        solver slot per frame; batch errors name ``frames[i]....``; a batch stops solving when
+        ``batch_budget_ms`` (``time.perf_counter``, from this call) runs out."""
         out: list[LocalizeResponse] = []
         deadline = time.perf_counter() + self.batch_budget_ms / 1e3 if batch else float("inf")
         for i, frame in enumerate(frames):

@@ -1,16 +1,10 @@
 """Data association of a new frame at its predicted pose, gated by the predicted covariance.
 
-For each usable detection and each label-compatible map object whose projection is valid at the
-predicted ``world_from_camera`` ``T`` (OpenCV camera axes), the innovation is the detection's
-ellipse centre minus the projected ellipse centre (px). Its covariance is
-``S = J Sigma J^T + R``: ``Sigma`` the predicted 6x6 pose covariance (GTSAM order
-``[omega, v]``, body frame, right perturbation), ``J`` the 2x6 Jacobian of the projected
-object centre w.r.t. that tangent (:func:`centre_jacobians`), and ``R = s_d^2 I`` the detection
-centre noise with ``s_d = DETECTION_CENTRE_FRACTION * sqrt(a b) + DETECTION_CENTRE_FLOOR_PX``
-(it covers truncation at the image border, which moves the visible part's centre). A pair is a
-candidate when its squared Mahalanobis distance is <= :data:`GATE_CHI2` (chi-square, 2 dof,
-99.7 %) and the size ratio ``sqrt(a b)_det / sqrt(a b)_proj`` is within
-:data:`SIZE_RATIO_GATE`; candidates are assigned one-to-one greedily by increasing distance.
+Innovation: detection ellipse centre minus projected object centre (px), covariance
+``S = J Sigma J^T + s_d^2 I`` (``Sigma`` the 6x6 ``[omega, v]`` pose covariance, body frame,
+right perturbation; ``J`` from :func:`centre_jacobians`); gates :data:`GATE_CHI2` and
+:data:`SIZE_RATIO_GATE`; one-to-one greedy by distance. Details:
+docs/design/service.md#data-association.
 """
 
 from __future__ import annotations
@@ -19,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from factors.geometry import Camera, invert_pose
+from factors.geometry import Camera, invert_pose, skew
 from maps.compiled import CompiledMap
 from service.localization.ransac import project_objects
 
@@ -58,11 +52,7 @@ def centre_jacobians(camera: Camera, world_from_camera: np.ndarray,
     du_dp[:, 0, 2] = -fx * x / z ** 2
     du_dp[:, 1, 1] = fy / z
     du_dp[:, 1, 2] = -fy * y / z ** 2
-    skew = np.zeros((len(p), 3, 3))
-    skew[:, 0, 1], skew[:, 0, 2] = -z, y
-    skew[:, 1, 0], skew[:, 1, 2] = z, -x
-    skew[:, 2, 0], skew[:, 2, 1] = -y, x
-    dp = np.concatenate([skew, -np.broadcast_to(np.eye(3), (len(p), 3, 3))], axis=2)
+    dp = np.concatenate([skew(p), -np.broadcast_to(np.eye(3), (len(p), 3, 3))], axis=2)
     return u, du_dp @ dp
 
 

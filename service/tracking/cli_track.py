@@ -38,41 +38,25 @@ def cmd_track(args: argparse.Namespace) -> int:
     import numpy as np
     from pydantic import ValidationError
 
-    from maps.errors import MapNotFound
+    from service.api.convert import convert_pose
     from service.api.errors import ProblemError, field_path
-    from service.api.routers.sessions import _frame_input, _frame_out
+    from service.api.routers.sessions import _frame_input, _frame_out, new_session
     from service.api.session_schemas import SessionCreate, SessionFramesIn
-    from service.cli import _die, _read_json, _store
-    from service.tracking.session import DriftModel, SessionOptions, TrackingSession
+    from service.cli import _die, _invalid, _read_json, _store
 
+    doc = _read_json(args.file)
+    if not isinstance(doc, dict):
+        return _die(f"{args.file}: must be a JSON object")
+    truth = doc.pop("ground_truth_world_from_camera", None)
     try:
-        doc = _read_json(args.file)
-        if not isinstance(doc, dict):
-            return _die(f"{args.file}: must be a JSON object")
-        truth = doc.pop("ground_truth_world_from_camera", None)
         frames = SessionFramesIn.model_validate({"frames": doc.pop("frames", [])})
         create = SessionCreate.model_validate(doc)
-    except (OSError, json.JSONDecodeError) as exc:
-        return _die(f"{args.file}: {exc}")
     except ValidationError as exc:
-        for e in exc.errors():
-            print(f"  {field_path(e['loc'])}: {e['msg']}", file=sys.stderr)
-        return _die(f"{args.file}: invalid recording")
+        return _invalid([(field_path(e["loc"]), e["msg"]) for e in exc.errors()],
+                        f"{args.file}: invalid recording")
     if truth is not None and (not isinstance(truth, list) or len(truth) != len(frames.frames)):
         return _die(f"{args.file}: ground_truth_world_from_camera must have one entry per frame")
-    try:
-        compiled = _store(args).compiled(args.map, None)
-    except MapNotFound as exc:
-        return _die(str(exc), 1)
-    from service.api.convert import camera_from_request, convert_pose
-
-    o = create.options
-    session = TrackingSession(compiled, camera_from_request(create.camera), SessionOptions(
-        window_frames=o.window_frames, smoother=o.smoother, inlier_iou=o.inlier_iou,
-        drift=DriftModel(o.odometry_translation_m_per_sqrt_m,
-                         o.odometry_translation_m_per_sqrt_s,
-                         math.radians(o.odometry_rotation_deg_per_sqrt_m),
-                         math.radians(o.odometry_rotation_deg_per_sqrt_s))))
+    session = new_session(_store(args).compiled(args.map, None), create)
     conv = create.convention
     errors: list[tuple[float, float]] = []
     tracked = 0
@@ -82,8 +66,7 @@ def cmd_track(args: argparse.Namespace) -> int:
             r = session.add_frame(_frame_input(f, conv, f"frames[{i}]."))
         except ProblemError as exc:
             return _die(f"{args.file}: {exc.errors[0]['field']}: {exc.detail}")
-        res = _frame_out(r, conv)
-        out.append(res.model_dump())
+        out.append(_frame_out(r, conv).model_dump())
         line = f"{i:5d} {r.state:12s}"
         if r.world_from_camera is not None:
             tracked += 1
@@ -98,15 +81,15 @@ def cmd_track(args: argparse.Namespace) -> int:
                 line += f" err={dp * 100:.1f}cm/{da:.1f}deg"
         if not args.json:
             print(line)
+    summary = sys.stderr if args.json else sys.stdout
     if args.json:
         print(json.dumps(out, indent=1))
-    print(f"frames {len(frames.frames)}, tracked {tracked}", file=sys.stderr if args.json
-          else sys.stdout)
+    print(f"frames {len(frames.frames)}, tracked {tracked}", file=summary)
     if errors:
         e = np.array(errors)
         msg = (f"trajectory error over {len(e)} frames: position median "
                f"{np.median(e[:, 0]) * 100:.1f} cm, p90 {np.percentile(e[:, 0], 90) * 100:.1f} "
                f"cm; rotation median {np.median(e[:, 1]):.2f} deg; within 10 cm and 5 deg "
                f"{100 * np.mean((e[:, 0] <= 0.1) & (e[:, 1] <= 5)):.1f} %")
-        print(msg, file=sys.stderr if args.json else sys.stdout)
+        print(msg, file=summary)
     return 0 if tracked else 1

@@ -1,20 +1,9 @@
-"""The ONE place where a tracking frame's ``confidence`` is computed.
-
-Definition (the meaning ``localize``'s confidence has, :mod:`service.localization.confidence`):
-the probability that the returned ``world_from_camera`` is within 10 cm
-(``TOLERANCE_POSITION_M``) AND 5 degrees (``TOLERANCE_ROTATION_DEG``) of the truth. For a
-session it is evaluated under the pose's Gaussian posterior: tangent error
-``xi = [omega, v] ~ N(0, s^2 Sigma)`` (``Sigma`` the frame's 6x6 marginal covariance from the
-smoother, GTSAM order, body frame; ``s`` = :data:`COVARIANCE_SCALE`), with
-:func:`service.localization.confidence.gaussian_tolerance_probability` (the shared formula:
-chi-square with 3 DoF of each block's isotropic equivalent). Unlike a single frame's, the
-session's answer has no logistic evidence model: the window's odometry and many frames make the
-posterior the evidence; ``bench.tracking`` reports mean confidence against the observed fraction
-within tolerance (docs/results.md, section tracking).
-
-It is 0 whenever the session is not ``tracking`` and on a tracking frame whose usable detections
-are all unexplained by its pose (``reason="detections_unexplained"``): the posterior then no
-longer describes the error.
+"""The ONE place where a tracking frame's ``confidence`` is computed: P(within 10 cm and 5 deg of
+the truth) under the pose's Gaussian posterior (6x6 ``[omega, v]`` marginal, body frame, scaled
+by :data:`COVARIANCE_SCALE`), with
+:func:`service.localization.confidence.gaussian_tolerance_probability`; 0 unless ``tracking``
+and on a ``detections_unexplained`` frame. Rationale:
+docs/design/service.md#tracking-confidence.
 """
 
 from __future__ import annotations

@@ -1,24 +1,11 @@
 """Multi-frame RANSAC: initialize (or relocalize) a session from several frames' detections.
 
-A walk that sees one or two objects per frame cannot be localized frame by frame, but a few
-frames together, tied by the client's odometry, see three or more objects. The frames'
-detections are mapped into the reference frame ``r`` (the newest) with the odometry
-``camera_r_from_camera_k``; a minimal sample is three detections (from any of the frames) of
-three distinct, label-compatible map objects. Each detection becomes a *virtual image point* of
-the reference camera: the ray through its ellipse centre in camera ``k``, at the depth where
-the object's size matches the ellipse's (``z = f r_obj / sqrt(a b)``, ``r_obj`` the geometric
-mean of the ellipsoid's semi-axes), transformed to camera ``r`` and projected. The existing P3P
-machinery (:func:`service.localization.hypotheses.p3p_hypotheses`) turns the three virtual
-points into ``camera_r_from_world`` hypotheses (exact when the three come from one frame, up to
-the depth guess otherwise); each hypothesis is propagated to every frame with the odometry and
-scored there with the single-frame :class:`service.localization.ransac.MatchScorer` (IoU,
-one-to-one greedy assignment per frame); the scores add up over frames.
-
-Acceptance (honest "not yet" rather than a wrong pose): the best hypothesis must explain at
-least :data:`MIN_DISTINCT_OBJECTS` distinct map objects with at least :data:`MIN_TOTAL_INLIERS`
-inlier detections in total, and no hypothesis more than :data:`AMBIGUITY_DISTANCE_M` away may
-score within :data:`AMBIGUITY_RATIO` of it. All poses here are ``camera_from_world`` unless
-named otherwise.
+Detections of the buffered frames become virtual image points of the newest (reference) frame
+through the odometry; P3P on three of them gives ``camera_r_from_world`` hypotheses, scored on
+every frame with :class:`service.localization.ransac.MatchScorer`. Accepted with at least
+:data:`MIN_DISTINCT_OBJECTS` objects and :data:`MIN_TOTAL_INLIERS` inliers and no distinct rival
+within :data:`AMBIGUITY_RATIO`. Poses are ``camera_from_world`` unless named otherwise. The
+method: docs/design/service.md#multi-frame-ransac.
 """
 
 from __future__ import annotations
@@ -109,8 +96,8 @@ def multi_frame_ransac(
     ref_inv = invert_pose(ref)
     ref_from_k = [ref_inv @ f.odom_from_camera for f in frames]
     k_from_ref = [invert_pose(T) for T in ref_from_k]
-    scorers = [MatchScorer(compiled, camera, [_ell(e) for e in f.ellipses], list(f.labels),
-                           list(f.detection_indices)) if len(f.labels) else None
+    scorers = [MatchScorer(compiled, camera, [Ellipse(*map(float, e)) for e in f.ellipses],
+                           list(f.labels), list(f.detection_indices)) if len(f.labels) else None
                for f in frames]
     pool = [(k, d, compiled.indices_for(lab)) for k, f in enumerate(frames)
             for d, lab in enumerate(f.labels) if len(compiled.indices_for(lab))]
@@ -170,7 +157,3 @@ def multi_frame_ransac(
             return MultiFrameOutcome(None, [], len(objs), n_inl, len(hyps), "ambiguous")
     poses = [k_from_ref[k] @ H[best] for k in range(len(frames))]
     return MultiFrameOutcome(poses, per_frame[best], len(objs), n_inl, len(hyps), None)
-
-
-def _ell(params: np.ndarray) -> Ellipse:
-    return Ellipse(*[float(x) for x in params])

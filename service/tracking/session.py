@@ -1,29 +1,10 @@
 """A tracking session: camera poses of a walk in a sliding-window factor graph.
 
-Variables: one GTSAM ``Pose3`` per frame, the camera's ``world_from_camera`` (OpenCV camera
-axes), key ``x<frame index>``. Factors per frame:
-
-* the EXISTING metric factors of :func:`factors.pose_factors.pose_factors` (level set by
-  default, noise std ``sqrt(sigma_j)``, per-detection robust kernel) for each detection
-  associated at the predicted pose (:mod:`service.tracking.association`);
-* ``BetweenFactorPose3`` from the client's odometry, ``camera_{i}_from_camera_{i+1} =
-  inv(odom_from_camera_i) @ odom_from_camera_{i+1}``, noise :class:`DriftModel` (a random walk:
-  variance per metre travelled and per second, stated in ``docs/tracking.md``);
-* ``PriorFactorPose3`` where the client sends a prior with a covariance.
-
-The window is bounded: :data:`SMOOTHERS` ``"isam2"`` (``gtsam.IncrementalFixedLagSmoother``,
-the default) or ``"batch"`` (``gtsam.BatchFixedLagSmoother``, LM over the window each frame);
-both marginalise frames older than ``window_frames`` into a Gaussian prior on the rest
-(``bench.tracking`` measures both: docs/results.md).
-
-States: ``initializing`` (no pose yet: frames are buffered and multi-frame RANSAC,
-:mod:`service.tracking.multiframe`, runs every ``init_interval_frames``), ``tracking``, ``lost``
-(the estimate is no longer supported: position std above ``lost_position_std_m``, a frame with
->= :data:`LOST_UNEXPLAINED_DETECTIONS` usable detections none of which is an inlier, or
-``lost_after_misses`` consecutive frames whose detections are all unexplained; such a frame,
-while still ``tracking``, has ``reason="detections_unexplained"`` and confidence 0;
-the graph is dropped and multi-frame RANSAC relocalizes, the state stays ``lost`` until then).
-Poses are returned only while ``tracking``.
+One GTSAM ``Pose3`` per frame, the camera's ``world_from_camera`` (OpenCV camera axes), key
+``x<frame index>``; factors: the metric factors of the detections associated at the predicted
+pose, odometry ``BetweenFactorPose3`` (noise :class:`DriftModel`) and client priors with a
+covariance. States :data:`STATES`; poses are returned only while ``tracking``. Factors,
+smoothers and the ``lost`` rules: docs/design/service.md#tracking-session.
 """
 
 from __future__ import annotations
@@ -204,7 +185,6 @@ def pose_adjoint(T: np.ndarray) -> np.ndarray:
     return pose3(T).AdjointMap()
 
 
-
 def _key(i: int) -> int:
     return gtsam.symbol("x", i)
 
@@ -277,7 +257,6 @@ class TrackingSession:
         except GeometryError as exc:
             raise TrackingInputError(f"must be a rigid transform ({exc.problem})",
                                      field="odom_from_camera") from exc
-        R = T[:3, :3]
         ts = frame.timestamp
         if isinstance(ts, bool) or not isinstance(ts, (int, float)) or not math.isfinite(ts):
             raise TrackingInputError(f"must be a finite number, got {ts!r}", field="timestamp")
@@ -285,8 +264,7 @@ class TrackingSession:
             raise TrackingInputError(
                 f"{ts} is before the previous frame's {self._last_timestamp} "
                 "(frames must be sent in time order)", field="timestamp")
-        T = T.copy()
-        T[:3, :3] = snap_to_rotation(R)
+        T[:3, :3] = snap_to_rotation(T[:3, :3])  # T is check_pose's own copy
         return T
 
     # ------------------------------------------------------------------ tracking
@@ -358,6 +336,10 @@ class TrackingSession:
                            session_confidence(self.state, cov, contradicted), n_usable, reason,
                            timings)
 
+    def _no_pose(self, index: int, frame: FrameInput, T_oc: np.ndarray, usable: list[int],
+                 reason: str, timings: dict[str, float]) -> FrameResult:
+        return self._result(index, frame, T_oc, None, None, [], len(usable), reason, timings)
+
     def _track(self, index: int, frame: FrameInput, T_oc: np.ndarray, usable: list[int],
                timings: dict[str, float]) -> FrameResult:
         assert self._last is not None and self._smoother is not None
@@ -380,10 +362,7 @@ class TrackingSession:
             for f in self._factors_for(key, T_pred, [dets[a.detection_index] for a in assoc],
                                        [a.object_index for a in assoc]):
                 graph.add(f)
-        if frame.prior is not None and frame.prior.covariance is not None:
-            graph.add(gtsam.PriorFactorPose3(key, pose3(frame.prior.world_from_camera),
-                                             gtsam.noiseModel.Gaussian.Covariance(
-                                                 np.asarray(frame.prior.covariance))))
+        _add_prior(graph, key, frame.prior)
         values = gtsam.Values()
         values.insert(key, pose3(T_pred))
         stamps = gtsam.FixedLagSmootherKeyTimestampMap()
@@ -399,8 +378,7 @@ class TrackingSession:
         timings["update"] = (time.perf_counter() - t) * 1e3
         if T is None or cov is None or not np.all(np.isfinite(T)):
             self.reset()
-            return self._result(index, frame, T_oc, None, None, [], len(usable), "lost",
-                                timings)
+            return self._no_pose(index, frame, T_oc, usable, "lost", timings)
         inliers = self._verify(frame.detections, usable, T)
         # a frame whose usable detections are all unexplained contradicts the estimate
         contradicted = bool(usable) and not inliers and (
@@ -411,8 +389,7 @@ class TrackingSession:
                 or self._misses >= self.options.lost_after_misses \
                 or (contradicted and len(usable) >= LOST_UNEXPLAINED_DETECTIONS):
             self.reset()
-            return self._result(index, frame, T_oc, None, None, [], len(usable), "lost",
-                                timings)
+            return self._no_pose(index, frame, T_oc, usable, "lost", timings)
         self._last = (index, float(frame.timestamp), T_oc, T, cov)
         return self._result(index, frame, T_oc, T, cov, inliers, len(usable),
                             "detections_unexplained" if contradicted else None, timings,
@@ -442,8 +419,7 @@ class TrackingSession:
         n_pool = sum(len(b.frame.labels) for b in chosen)
         if n_pool < 3 or index - self._last_attempt < opts.init_interval_frames \
                 or not usable:
-            return self._result(index, frame, T_oc, None, None, [], len(usable), waiting,
-                                timings)
+            return self._no_pose(index, frame, T_oc, usable, waiting, timings)
         self._last_attempt = index
         t = time.perf_counter()
         extra = [invert_pose(frame.prior.world_from_camera)] if frame.prior is not None else []
@@ -454,15 +430,13 @@ class TrackingSession:
         timings["multi_frame_ransac"] = (time.perf_counter() - t) * 1e3
         if out.camera_from_world is None:
             reason = "ambiguous" if out.reason == "ambiguous" else waiting
-            return self._result(index, frame, T_oc, None, None, [], len(usable), reason,
-                                timings)
+            return self._no_pose(index, frame, T_oc, usable, reason, timings)
         t = time.perf_counter()
         started = self._start_graph(chosen, [invert_pose(P) for P in out.camera_from_world],
                                     out.matches)
         timings["init_refine"] = (time.perf_counter() - t) * 1e3
         if started is None:
-            return self._result(index, frame, T_oc, None, None, [], len(usable), waiting,
-                                timings)
+            return self._no_pose(index, frame, T_oc, usable, waiting, timings)
         T, cov = started
         self.state = "tracking"
         self._buffer.clear()
@@ -488,10 +462,7 @@ class TrackingSession:
             for f in self._factors_for(key, T, [b.detections[i] for i in det_idx],
                                        [by_det[i] for i in det_idx]):
                 graph.add(f)
-            if b.prior is not None and b.prior.covariance is not None:
-                graph.add(gtsam.PriorFactorPose3(key, pose3(b.prior.world_from_camera),
-                                                 gtsam.noiseModel.Gaussian.Covariance(
-                                                     np.asarray(b.prior.covariance))))
+            _add_prior(graph, key, b.prior)
             if j:
                 a = chosen[j - 1]
                 between, _, _ = self._between(_key(a.index), key, a.frame.odom_from_camera,
@@ -517,13 +488,20 @@ class TrackingSession:
             T = self._smoother.calculateEstimatePose3(_key(last.index)).matrix()
             cov = self._marginal(_key(last.index))
         except RuntimeError:
-            self._smoother = None
-            return None
+            cov = None
         if cov is None:
             self._smoother = None
             return None
         self._last = (last.index, last.timestamp, last.frame.odom_from_camera, T, cov)
         return T, cov
+
+
+def _add_prior(graph: gtsam.NonlinearFactorGraph, key: int, prior: PosePrior | None) -> None:
+    """The client's prior on ``world_from_camera`` as a factor, when it has a covariance."""
+    if prior is not None and prior.covariance is not None:
+        graph.add(gtsam.PriorFactorPose3(key, pose3(prior.world_from_camera),
+                                         gtsam.noiseModel.Gaussian.Covariance(
+                                             np.asarray(prior.covariance))))
 
 
 def _spread(items: list, n: int) -> list:

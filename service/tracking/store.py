@@ -1,17 +1,9 @@
 """In-process store of tracking sessions: bounded in count, idle expiry, one lock per session.
 
-Sessions live in the serving process (their factor graph is not serialisable cheaply and a
-frame needs the previous one's state within milliseconds). With several replicas, the proxy
-routes every request of one session to the replica that created it: the id carries that
-replica's tag (:func:`replica_id`) and ``deploy/nginx.conf`` maps it to the replica (a plain
-hash of the id cannot work: the id does not exist yet when the creation request is routed). A
-replica that restarted has lost its sessions and answers 404 ``session-not-found`` (the client
-starts a new session).
-
-Bounds: at most ``max_sessions`` live sessions (a new one beyond that first evicts sessions idle
-for more than ``idle_timeout_s``, then is refused: :class:`SessionCapacityError`, 503); each
-session's memory is bounded by its window (``SessionOptions.window_frames``) and init buffer
-(``init_buffer_frames``), measured in docs/tracking.md.
+Session ids carry this replica's tag (:func:`replica_id`) so the proxy routes a session to its
+replica; beyond ``max_sessions`` live sessions (after evicting idle ones):
+:class:`SessionCapacityError` (503). Why sessions live in process:
+docs/design/service.md#session-store.
 """
 
 from __future__ import annotations
@@ -54,9 +46,7 @@ class SessionEntry:
     map_version: int
     session: TrackingSession
     convention: str
-    created_unix: float
     last_used: float
-    frames: int = 0
     lock: threading.Lock = field(default_factory=threading.Lock)
 
 
@@ -97,7 +87,7 @@ class SessionStore:
                 raise SessionCapacityError(
                     f"{len(self._entries)} live sessions (max {self.max_sessions})")
             sid = f"s-{replica_id()}." + secrets.token_urlsafe(16)
-            entry = SessionEntry(sid, map_id, map_version, session, convention, time.time(), now)
+            entry = SessionEntry(sid, map_id, map_version, session, convention, now)
             self._entries[sid] = entry
             return entry
 

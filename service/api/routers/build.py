@@ -1,37 +1,27 @@
 """``POST /v1/maps:build`` (start a map-building job) and ``GET /v1/build-jobs/{job_id}``.
 
-The body is a recording (``maps.building.recording``: intrinsics, frames with the app's
-``world_from_camera`` and detections). The map id is the ``map_id`` query parameter:
-
-* new id: the job ends with version 1 of a new map; an ``If-Match`` header is refused (412:
-  there is no version to match);
-* existing id: ``If-Match`` with the latest version's ETag is required (428 if missing, 412 if
-  stale, as for ``PUT /v1/maps/{map_id}``); the job ends with the next version, or fails with
-  ``version_conflict`` if the map changed meanwhile (nothing is overwritten).
-
-Answers 202 with ``Location: /v1/build-jobs/{job_id}``. Building needs the ``write`` scope,
-reading a job ``read``. The job resource reports ``status`` (queued, running, succeeded,
-failed), ``stage``, ``percent``, ``objects_found``, and at the end ``map_version`` and the
-``report`` (which detections built which object, per-object quality, rejected detections), or
-``error {reason, detail}``.
+The body is a recording (``maps.building.recording``); the map id is the ``map_id`` query
+parameter; an existing map needs ``If-Match`` (428 / 412 as for ``PUT /v1/maps/{map_id}``).
+Answers 202 with ``Location: /v1/build-jobs/{job_id}``. Details:
+docs/design/service.md#post-v1mapsbuild.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Header, Path, Query, Request, Response, status
 from pydantic import BaseModel, Field
 
 from maps.building.jobs import BuildJob, JobNotFoundError
-from maps.building.recording import BuildLimits, RecordingError, parse_recording
+from maps.building.recording import RecordingError, parse_recording
 from maps.errors import MapNotFound
 from maps.model import MAP_ID_PATTERN
 from service.api.auth import ReadAccess, WriteAccess
-from service.api.build_jobs import RETRY_AFTER_S, RunnerBusyError
+from service.api.build_jobs import RETRY_AFTER_S, RunnerBusyError, build_limits
 from service.api.deps import SettingsDep, StoreDep
-from service.api.errors import ProblemError
-from service.api.openapi_docs import problem_responses
+from service.api.errors import ProblemError, problem_responses
 
 __all__ = ["BuildJobOut", "job_out", "router"]
 
@@ -97,16 +87,13 @@ class BuildJobOut(BaseModel):
 
 
 def job_out(job: BuildJob) -> BuildJobOut:
-    return BuildJobOut(job_id=job.job_id, map_id=job.map_id, status=job.status, stage=job.stage,
-                       percent=job.percent, objects_found=job.objects_found,
-                       base_version=job.base_version, map_version=job.map_version,
-                       error=job.error, report=job.report,
-                       created_at=job.created_at.isoformat(),
-                       updated_at=job.updated_at.isoformat())
+    """The wire form of ``job`` (the same fields; times as ISO 8601 text)."""
+    return BuildJobOut(**{**dataclasses.asdict(job), "created_at": job.created_at.isoformat(),
+                          "updated_at": job.updated_at.isoformat()})
 
 
 def _base_version(store: Any, map_id: str, if_match: str | None) -> int | None:
-    from service.api.routers.maps import etag_of
+    from service.api.routers.maps import check_etag
 
     try:
         current = store.get(map_id)
@@ -115,21 +102,14 @@ def _base_version(store: Any, map_id: str, if_match: str | None) -> int | None:
             raise ProblemError("precondition-failed",
                                f"map {map_id!r} does not exist, so If-Match cannot match; omit "
                                "it to build a new map",
-                               errors=[{"field": "header.if-match",
-                                        "message": "map does not exist"}]) from None
+                               field="header.if-match", message="map does not exist") from None
         return None
     if if_match is None or not if_match.strip():
         raise ProblemError("precondition-required",
                            f"map {map_id!r} exists: building a new version needs 'If-Match: "
                            "\"<ETag>\"' with its latest ETag (GET /v1/maps/{map_id})",
-                           errors=[{"field": "header.if-match", "message": "missing"}])
-    tags = {t.strip() for t in if_match.split(",") if t.strip()}
-    if etag_of(current.content_hash) not in tags:
-        raise ProblemError("precondition-failed",
-                           f"map {map_id!r} is at version {current.scene_map.version} with ETag "
-                           f"{etag_of(current.content_hash)}",
-                           errors=[{"field": "header.if-match", "message": "stale ETag"}],
-                           headers={"ETag": etag_of(current.content_hash)})
+                           field="header.if-match", message="missing")
+    check_etag(map_id, current, {t.strip() for t in if_match.split(",") if t.strip()})
     return int(current.scene_map.version)
 
 
@@ -155,11 +135,8 @@ def start_build(
     if_match: Annotated[str | None, Header(description="ETag of the map's latest version "
                                                        "(only when the map exists).")] = None,
 ) -> BuildJobOut:
-    limits = BuildLimits(max_frames=settings.max_build_frames,
-                         max_detections_per_frame=settings.max_detections,
-                         max_detections=settings.max_build_detections)
     try:
-        recording = parse_recording(body, limits)
+        recording = parse_recording(body, build_limits(settings))
     except RecordingError as exc:
         raise ProblemError("validation-error", f"invalid recording: {exc}",
                            errors=exc.errors) from exc
@@ -192,4 +169,4 @@ def get_build_job(job_id: Annotated[str, Path(pattern=JOB_ID_PATTERN, descriptio
         return job_out(jobs.get(job_id))
     except JobNotFoundError as exc:
         raise ProblemError("not-found", f"no build job {job_id!r}",
-                           errors=[{"field": "path.job_id", "message": "not found"}]) from exc
+                           field="path.job_id", message="not found") from exc

@@ -6,12 +6,11 @@ import logging
 
 from fastapi import APIRouter, Response
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
-from sqlalchemy.exc import ProgrammingError, SQLAlchemyError
+from sqlalchemy.exc import SQLAlchemyError
 
-from maps.errors import MapNotFound, SchemaNotMigrated, StoreUnavailable
+from maps.errors import MapNotFound, StoreUnavailable
 from service.api.deps import MetricsDep, SettingsDep, StoreDep
-from service.api.errors import MIGRATE_HINT, ProblemError
-from service.api.openapi_docs import problem_responses
+from service.api.errors import ProblemError, log_database_error, problem_responses
 from service.api.schemas import HealthOut
 
 __all__ = ["router"]
@@ -47,18 +46,15 @@ def readyz(store: StoreDep, settings: SettingsDep) -> HealthOut:
             checks["default_map"] = f"{compiled.map_id} v{compiled.version}"
     except MapNotFound as exc:
         raise ProblemError("not-ready", "default_map: not found",
-                           errors=[{"field": "default_map", "message": "not found"}]) from exc
+                           field="default_map", message="not found") from exc
     except (StoreUnavailable, SQLAlchemyError) as exc:  # any driver error means not ready
-        if isinstance(exc, SchemaNotMigrated | ProgrammingError):
-            log.error("readiness: %s (%s)", MIGRATE_HINT, exc)
-        else:
-            log.error("readiness: database unavailable: %s", exc)
+        log_database_error("readiness: database unavailable", exc)
         raise ProblemError("not-ready", "database: unavailable",
-                           errors=[{"field": "database", "message": "unavailable"}]) from exc
+                           field="database", message="unavailable") from exc
     except Exception as exc:  # the stored default map does not load (logged)
         log.exception("readiness: default map %r not loadable", settings.default_map_id)
         raise ProblemError("not-ready", "default_map: not loadable",
-                           errors=[{"field": "default_map", "message": "not loadable"}]) from exc
+                           field="default_map", message="not loadable") from exc
     return HealthOut(status="ready", checks=checks)
 
 

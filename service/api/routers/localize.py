@@ -14,11 +14,10 @@ from maps.compiled import CompiledMap
 from maps.errors import MapNotFound
 from service.api.auth import ReadAccess
 from service.api.deps import MapIdPath, MapLoaderDep, SettingsDep, SolverDep
-from service.api.errors import ProblemError, map_not_found
+from service.api.errors import ProblemError, map_not_found, problem_responses
 from service.api.examples import LOCALIZE_EXAMPLE, LOCALIZE_RESPONSE_EXAMPLE
 from service.api.inspector import SVG_MEDIA_TYPE, render_localization_svg, wants_svg
 from service.api.map_loader import MapLoader, MapStillLoading
-from service.api.openapi_docs import problem_responses
 from service.api.schemas import (
     BatchLocalizeRequest,
     BatchLocalizeResponse,
@@ -101,8 +100,7 @@ def localize_batch(
     if len(batch.frames) > settings.max_batch_frames:
         raise ProblemError("validation-error",
                            f"frames: at most {settings.max_batch_frames} frames per batch",
-                           errors=[{"field": "frames",
-                                  "message": f"at most {settings.max_batch_frames} frames"}])
+                           field="frames", message=f"at most {settings.max_batch_frames} frames")
     compiled = _compiled(loader, map_id, version)
     results = solver.localize_frames(compiled, batch.frames, batch=True)
     out = BatchLocalizeResponse(map_id=compiled.map_id, map_version=compiled.version,

@@ -24,9 +24,8 @@ from maps.model import (
 )
 from service.api.auth import ReadAccess, WriteAccess
 from service.api.deps import MapIdPath, SettingsDep, StoreDep
-from service.api.errors import ProblemError, map_not_found
+from service.api.errors import ProblemError, map_not_found, problem_responses
 from service.api.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
-from service.api.openapi_docs import problem_responses
 from service.api.schemas import (
     MapListOut,
     MapOut,
@@ -82,25 +81,30 @@ def _body_doc(schema: dict[str, Any], example: dict[str, Any]) -> dict[str, Any]
         "schema": schema, "example": example}}}}
 
 
+_CREATED_RESPONSES = {**problem_responses(400, 401, 403, 409, 413, 415, 422, 503),
+                      **_ok(201, _MAP_OUT_EXAMPLE)}
+
+
 def etag_of(content_hash: str) -> str:
     """Strong ETag of a map version."""
     return f'"{content_hash}"'
 
 
+def _iso(when: Any) -> str | None:
+    return when.isoformat() if when is not None else None
+
+
 def _map_out(stored: Any) -> MapOut:
     sm = stored.scene_map
-    created = getattr(stored, "created_at", None)
     return MapOut(map_id=sm.map_id, version=sm.version, content_hash=stored.content_hash,
-                  created_at=created.isoformat() if created is not None else None,
-                  map=sm.to_dict())
+                  created_at=_iso(getattr(stored, "created_at", None)), map=sm.to_dict())
 
 
 def _check_object_limit(body: Any, settings: Any) -> None:
     objs = body.get("objects") if isinstance(body, dict) else None
     if isinstance(objs, list) and len(objs) > settings.max_map_objects:
         raise ProblemError("invalid-map", f"objects: at most {settings.max_map_objects} objects",
-                           errors=[{"field": "objects",
-                                  "message": f"at most {settings.max_map_objects} objects"}])
+                           field="objects", message=f"at most {settings.max_map_objects} objects")
 
 
 def _created(store: Any, scene_map: Any, response: Response) -> MapOut:
@@ -109,7 +113,7 @@ def _created(store: Any, scene_map: Any, response: Response) -> MapOut:
     except MapAlreadyExists as exc:
         raise ProblemError("map-exists", f"map {scene_map.map_id!r} already exists; use PUT "
                            "/v1/maps/{map_id} with If-Match to update it",
-                           errors=[{"field": "map_id", "message": "already exists"}]) from exc
+                           field="map_id", message="already exists") from exc
     response.headers["ETag"] = etag_of(stored.content_hash)
     response.headers["Location"] = f"/v1/maps/{scene_map.map_id}"
     return _map_out(stored)
@@ -121,8 +125,7 @@ def _created(store: Any, scene_map: Any, response: Response) -> MapOut:
     description="Body: the map document (docs/maps.md). `version` in the body is ignored: a "
                 "new map is version 1. Answers 201 with the stored map, its `ETag` and "
                 "`Location`; 409 if the id is taken; 422 naming every invalid field.",
-    responses={**problem_responses(400, 401, 403, 409, 413, 415, 422, 503),
-               **_ok(201, _MAP_OUT_EXAMPLE)},
+    responses=_CREATED_RESPONSES,
     openapi_extra=_body_doc(_MAP_SCHEMA, MAP_EXAMPLE),
 )
 def create_map(body: Annotated[dict[str, Any], Body()], response: Response, store: StoreDep,
@@ -138,8 +141,7 @@ def create_map(body: Annotated[dict[str, Any], Body()], response: Response, stor
     description="Body: the Chess format (`category_id_to_label`, `objects[]` with "
                 "`ellipsoid {axes, R, center}`; world +Z up). The map id and name come from "
                 "the query.",
-    responses={**problem_responses(400, 401, 403, 409, 413, 415, 422, 503),
-               **_ok(201, _MAP_OUT_EXAMPLE)},
+    responses=_CREATED_RESPONSES,
     openapi_extra=_body_doc(CHESS_JSON_SCHEMA, CHESS_IMPORT_EXAMPLE),
 )
 def import_chess_map(
@@ -156,13 +158,10 @@ def import_chess_map(
 @router.get("/maps", response_model=MapListOut, summary="List maps (latest versions)",
             responses={**problem_responses(401, 403, 503), **_ok(200, _LIST_EXAMPLE, False)})
 def list_maps(store: StoreDep, _key: ReadAccess) -> MapListOut:
-    out = []
-    for s in store.list():
-        updated = getattr(s, "updated_at", None)
-        out.append(MapSummaryOut(map_id=s.map_id, name=s.name, version=s.latest_version,
-                                 content_hash=s.content_hash,
-                                 updated_at=updated.isoformat() if updated is not None else None))
-    return MapListOut(maps=out)
+    return MapListOut(maps=[
+        MapSummaryOut(map_id=s.map_id, name=s.name, version=s.latest_version,
+                      content_hash=s.content_hash, updated_at=_iso(getattr(s, "updated_at", None)))
+        for s in store.list()])
 
 
 @router.get(
@@ -205,15 +204,26 @@ def _parse_if_match(if_match: str | None) -> set[str]:
         raise ProblemError("precondition-required",
                            "PUT needs 'If-Match: \"<ETag>\"' with the ETag of the version you "
                            "edited (GET /v1/maps/{map_id} returns it)",
-                           errors=[{"field": "header.if-match", "message": "missing"}])
+                           field="header.if-match", message="missing")
     tags = {t.strip() for t in if_match.split(",") if t.strip()}
     if "*" in tags:
         raise ProblemError("precondition-required",
                            "'If-Match: *' would overwrite blindly; send the map's ETag",
-                           errors=[{"field": "header.if-match", "message": "'*' not accepted"}])
+                           field="header.if-match", message="'*' not accepted")
     # RFC 9110 13.1.1: If-Match uses the strong comparison, so a weak tag (W/"...") never
     # matches; it is kept as is and fails the comparison below (412).
     return tags
+
+
+def check_etag(map_id: str, current: Any, tags: set[str], hint: str = "") -> None:
+    """412 ``precondition-failed`` (with the current ETag) unless ``current`` (the stored
+    latest version) has one of the If-Match ``tags``; ``hint`` ends the detail."""
+    etag = etag_of(current.content_hash)
+    if etag not in tags:
+        raise ProblemError("precondition-failed",
+                           f"map {map_id!r} is at version {current.scene_map.version} with ETag "
+                           f"{etag}{hint}", field="header.if-match", message="stale ETag",
+                           headers={"ETag": etag})
 
 
 @router.put(
@@ -240,7 +250,7 @@ def update_map(
     _check_object_limit(body, settings)
     if body.get("map_id", map_id) != map_id:
         raise ProblemError("invalid-map", "map_id in the body differs from the path",
-                           errors=[{"field": "map_id", "message": f"must be {map_id!r}"}])
+                           field="map_id", message=f"must be {map_id!r}")
     # the body first: an invalid document is the client's error whatever If-Match says
     scene_map = scene_map_from_dict({**body, "map_id": map_id}, version=1)
     tags = _parse_if_match(if_match)
@@ -248,13 +258,7 @@ def update_map(
         current = store.get(map_id)
     except MapNotFound as exc:
         raise map_not_found(map_id) from exc
-    if etag_of(current.content_hash) not in tags:
-        raise ProblemError("precondition-failed",
-                           f"map {map_id!r} is at version {current.scene_map.version} with ETag "
-                           f"{etag_of(current.content_hash)}; fetch it, re-apply your change and "
-                           "retry",
-                           errors=[{"field": "header.if-match", "message": "stale ETag"}],
-                           headers={"ETag": etag_of(current.content_hash)})
+    check_etag(map_id, current, tags, "; fetch it, re-apply your change and retry")
     expected = current.scene_map.version
     scene_map = dataclasses.replace(scene_map, version=expected + 1)
     try:
@@ -263,7 +267,7 @@ def update_map(
         raise ProblemError("version-conflict",
                            f"map {map_id!r} changed concurrently (now version "
                            f"{exc.current_version}); fetch it and retry",
-                           errors=[{"field": "header.if-match", "message": "lost a race"}]) from exc
+                           field="header.if-match", message="lost a race") from exc
     except MapNotFound as exc:
         raise map_not_found(map_id) from exc
     response.headers["ETag"] = etag_of(stored.content_hash)
@@ -285,7 +289,7 @@ def delete_map(map_id: MapIdPath, store: StoreDep, settings: SettingsDep,
                            "(QUADLOC_DEFAULT_MAP_ID): the readiness probe needs it, so deleting "
                            "it would make every replica unready; update it with PUT, or "
                            "configure another default map first",
-                           errors=[{"field": "path.map_id", "message": "is the default map"}])
+                           field="path.map_id", message="is the default map")
     try:
         store.delete(map_id)
     except MapNotFound as exc:

@@ -1,13 +1,6 @@
 """Tracking sessions: ``POST /v1/maps/{map_id}/sessions``, ``POST /v1/sessions/{id}/frames``,
-``GET`` / ``DELETE /v1/sessions/{id}``.
-
-Sessions live in this process (:class:`service.tracking.store.SessionStore`; bounds from
-``QUADLOC_MAX_SESSIONS``, default 200, and ``QUADLOC_SESSION_IDLE_TIMEOUT_S``, default 300).
-With several replicas the proxy must send every request of a session to one replica
-(``deploy/nginx.conf`` hashes the session id); an unknown id (expired, deleted, or the replica
-restarted) is 404 ``session-not-found``: start a new session. Plain ``def`` routes: the
-threadpool runs the CPU-bound updates off the event loop; one lock per session serialises its
-frames.
+``GET`` / ``DELETE /v1/sessions/{id}``. Sessions live in this process; an unknown id is 404
+``session-not-found``. Replicas and locking: docs/design/service.md#tracking-session-routes.
 """
 
 from __future__ import annotations
@@ -16,26 +9,25 @@ import math
 import os
 from typing import Annotated
 
-import numpy as np
 from fastapi import APIRouter, Body, Path, Request, Response
 
 from factors.geometry import DOCUMENT_ROTATION_TOLERANCE, GeometryError, check_pose
+from maps.compiled import CompiledMap
 from maps.errors import MapNotFound
 from service.api.auth import ReadAccess
 from service.api.convert import (
     _pose_matrix_in,
     camera_from_request,
-    convert_covariance,
     convert_pose,
+    covariance_out,
     detections_from_request,
+    inliers_out,
     pose_out,
     prior_from_request,
 )
 from service.api.deps import MapIdPath, StoreDep
-from service.api.errors import ProblemError, field_and_problem, map_not_found
-from service.api.openapi_docs import problem_responses
-from service.api.schemas import CovarianceOut, InlierOut
-from service.api.session_examples import (
+from service.api.errors import ProblemError, field_and_problem, map_not_found, problem_responses
+from service.api.examples import (
     FRAME_EXAMPLE,
     FRAME_RESPONSE_EXAMPLE,
     SESSION_CREATE_EXAMPLE,
@@ -65,7 +57,7 @@ from service.tracking.store import (
     SessionStore,
 )
 
-__all__ = ["router", "session_store_from_env"]
+__all__ = ["new_session", "router", "session_store_from_env"]
 
 router = APIRouter(prefix="/v1", tags=["tracking"])
 
@@ -81,10 +73,20 @@ def session_store_from_env() -> SessionStore:
 
 
 def _store(request: Request) -> SessionStore:
-    store = getattr(request.app.state, "sessions", None)
-    if store is None:
-        store = request.app.state.sessions = session_store_from_env()
-    return store
+    return request.app.state.sessions  # type: ignore[no-any-return] (set by create_app)
+
+
+def new_session(compiled: CompiledMap, body: SessionCreate) -> TrackingSession:
+    """A :class:`TrackingSession` on ``compiled`` for the wire ``body`` (odometry rotation
+    noise from degrees to radians); raises ``GeometryError`` / ``TrackingInputError``."""
+    o = body.options
+    return TrackingSession(compiled, camera_from_request(body.camera), SessionOptions(
+        window_frames=o.window_frames, smoother=o.smoother, inlier_iou=o.inlier_iou,
+        drift=DriftModel(
+            translation_m_per_sqrt_m=o.odometry_translation_m_per_sqrt_m,
+            translation_m_per_sqrt_s=o.odometry_translation_m_per_sqrt_s,
+            rotation_rad_per_sqrt_m=math.radians(o.odometry_rotation_deg_per_sqrt_m),
+            rotation_rad_per_sqrt_s=math.radians(o.odometry_rotation_deg_per_sqrt_s))))
 
 
 def _entry(store: SessionStore, session_id: str) -> SessionEntry:
@@ -94,7 +96,7 @@ def _entry(store: SessionStore, session_id: str) -> SessionEntry:
         raise ProblemError("session-not-found",
                            f"session {session_id!r} not found: it expired, was deleted, or its "
                            "server restarted; start a new session",
-                           errors=[{"field": "path.session_id", "message": "not found"}]) from exc
+                           field="path.session_id", message="not found") from exc
 
 
 def _out(entry: SessionEntry, store: SessionStore) -> SessionOut:
@@ -118,22 +120,13 @@ def create_session(map_id: MapIdPath,
         compiled = store.compiled(map_id, None)
     except MapNotFound as exc:
         raise map_not_found(map_id) from exc
-    o = body.options
     try:
-        camera = camera_from_request(body.camera)
-        options = SessionOptions(
-            window_frames=o.window_frames, smoother=o.smoother, inlier_iou=o.inlier_iou,
-            drift=DriftModel(
-                translation_m_per_sqrt_m=o.odometry_translation_m_per_sqrt_m,
-                translation_m_per_sqrt_s=o.odometry_translation_m_per_sqrt_s,
-                rotation_rad_per_sqrt_m=math.radians(o.odometry_rotation_deg_per_sqrt_m),
-                rotation_rad_per_sqrt_s=math.radians(o.odometry_rotation_deg_per_sqrt_s)))
+        session = new_session(compiled, body)
     except (GeometryError, TrackingInputError) as exc:
         raise _unprocessable(exc, "") from exc
     store = _store(request)
     try:
-        entry = store.create(map_id, compiled.scene_map.version,
-                             TrackingSession(compiled, camera, options), body.convention)
+        entry = store.create(map_id, compiled.scene_map.version, session, body.convention)
     except SessionCapacityError as exc:
         raise ProblemError("session-capacity", str(exc), headers={"Retry-After": "30"}) from exc
     response.headers["Location"] = f"/v1/sessions/{entry.session_id}"
@@ -194,14 +187,13 @@ def add_frames(session_id: SessionIdPath,
                 results.append(_frame_out(session.add_frame(inp), entry.convention))
             except (TrackingInputError, GeometryError) as exc:
                 raise _unprocessable(exc, prefix(i)) from exc
-        entry.frames = session.frame_count
     return SessionFramesOut(session_id=session_id, results=results)
 
 
 def _unprocessable(exc: Exception, prefix: str) -> ProblemError:
     field, problem = field_and_problem(exc, prefix)
     return ProblemError("validation-error", str(exc),
-                        errors=[{"field": field, "message": problem}])
+                        field=field, message=problem)
 
 
 def _frame_input(f: SessionFrameIn, convention: str, prefix: str) -> FrameInput:
@@ -216,26 +208,18 @@ def _frame_input(f: SessionFrameIn, convention: str, prefix: str) -> FrameInput:
     return FrameInput(dets, T, float(f.timestamp), f.frame_id, prior)
 
 
-def _cov(S: np.ndarray | None, convention: str, camera_side: bool) -> CovarianceOut | None:
-    if S is None or not np.all(np.isfinite(S)):
-        return None
-    if camera_side:
-        S = convert_covariance(S, "opencv", convention)
-    return CovarianceOut(matrix=[[float(x) for x in row] for row in S])
-
-
 def _frame_out(r: FrameResult, convention: str) -> SessionFrameOut:
     return SessionFrameOut(
         frame_index=r.frame_index, frame_id=r.frame_id, timestamp=r.timestamp, state=r.state,
         reason=r.reason,
         world_from_camera=None if r.world_from_camera is None
         else pose_out(r.world_from_camera, convention),
-        covariance=_cov(r.covariance, convention, True),
+        covariance=covariance_out(r.covariance, "opencv", convention),
         world_from_odom=None if r.world_from_odom is None
         else pose_out(r.world_from_odom, "opencv").model_copy(update={"convention": convention}),
-        world_from_odom_covariance=_cov(r.world_from_odom_covariance, convention, False),
+        world_from_odom_covariance=covariance_out(r.world_from_odom_covariance, "opencv",
+                                                  "opencv"),
         confidence=r.confidence,
-        inliers=[InlierOut(detection_index=m.detection_index, object_id=m.object_id,
-                           iou=float(m.iou), cost=float(m.cost)) for m in r.inliers],
+        inliers=inliers_out(r.inliers),
         n_usable_detections=r.n_usable_detections,
         timings_ms={k: float(v) for k, v in r.timings_ms.items()})
