@@ -445,12 +445,14 @@ def overlap_delta(
     projection given as params ``(cx, cy, a, b, angle)`` (px, rad): ``I``, ``U = A_D + A_P -
     I``, ``C = max(hull, U)``; ``Delta_iou = 1 - I/U`` in [0, 1], ``Delta_giou = 2 - I/U - U/C``
     in [0, 2] (clamped against rounding)."""
-    inter = intersection_area(detection_params, projection_params)
-    union = (math.pi * float(detection_params[2] * detection_params[3])
-             + math.pi * float(projection_params[2] * projection_params[3]) - inter)
+    det, proj = np.asarray(detection_params, float), np.asarray(projection_params, float)
+    q = quadrant_areas(det, proj, name == "giou", hull_directions)
+    a_det, a_proj = math.pi * float(det[2] * det[3]), math.pi * float(proj[2] * proj[3])
+    inter = min(max(float(q["intersection"][0].sum()), 0.0), min(a_det, a_proj))
+    union = a_det + a_proj - inter
     if name == "iou":
         return min(max(1.0 - inter / union, 0.0), 1.0)
-    hull = max(hull_area(detection_params, projection_params, hull_directions), union)
+    hull = max(float(q["hull"][0].sum()), union)
     return min(max(2.0 - inter / union - union / hull, 0.0), 2.0)
 
 
@@ -462,8 +464,7 @@ def overlap_residual(
     """The iou / giou residual: ``Delta`` split over the four quadrants ``Q_k`` of the
     detection's frame (module docstring), ``r_k >= 0``, ``sum_k r_k = Delta``; and, if
     ``gradient``, ``dr / dg`` w.r.t. the projection's Gaussian parameters ``g = (mu_x,
-    mu_y, s00, s01, s11)`` (px, px^2), exact (:func:`factors.overlap.quadrant_areas_batch`;
-    one pair: the scalar :func:`factors.overlap.quadrant_areas`).
+    mu_y, s00, s01, s11)`` (px, px^2), exact (:func:`factors.overlap.quadrant_areas_batch`).
 
     Params are one pair ``(5,)`` each (returns ``r`` (4,), ``dr/dg`` (4, 5)) or N pairs
     ``(N, 5)`` (returns (N, 4), (N, 4, 5); the pose factors evaluate all objects in one call).
@@ -479,32 +480,19 @@ def overlap_residual(
     single = det.ndim == 1
     det = det.reshape(-1, 5)
     proj = np.asarray(projection_params, dtype=float).reshape(-1, 5)
-    q = _quadrant_areas(det, proj, name == "giou", hull_directions, gradient)
+    q = quadrant_areas_batch(det, proj, name == "giou", hull_directions, gradient)
     r, d_r = _overlap_rows(name, det, q, gradient)
     if name == "iou" and disjoint_hull:
         disjoint = q["intersection"][0].sum(axis=1) <= 0.0
         if disjoint.any():
-            q_h = _quadrant_areas(det[disjoint], proj[disjoint], True, hull_directions,
-                                  gradient)
+            q_h = quadrant_areas_batch(det[disjoint], proj[disjoint], True, hull_directions,
+                                       gradient)
             r[disjoint], d_h = _overlap_rows("giou", det[disjoint], q_h, gradient)
             if gradient:
                 d_r[disjoint] = d_h
     if single:
         return r[0], None if d_r is None else d_r[0]
     return r, d_r
-
-
-def _quadrant_areas(
-    det: np.ndarray, proj: np.ndarray, hull: bool, hull_directions: int, gradient: bool,
-) -> dict[str, tuple[np.ndarray, np.ndarray | None]]:
-    """The quadrant areas of (N, 5) pairs: :func:`factors.overlap.quadrant_areas_batch`, or for
-    ONE pair the scalar reference :func:`factors.overlap.quadrant_areas` (equal to ~1e-9,
-    tested; a few times cheaper than the vectorised path's fixed numpy overhead for one pair,
-    e.g. ``residual("iou")`` in Table I), reshaped to (1, 4) / (1, 4, 5)."""
-    if det.shape[0] != 1:
-        return quadrant_areas_batch(det, proj, hull, hull_directions, gradient)
-    q = quadrant_areas(det[0], proj[0], hull, hull_directions, gradient)
-    return {k: (a[None], None if g is None else g[None]) for k, (a, g) in q.items()}
 
 
 def _overlap_rows(
