@@ -114,7 +114,13 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from factors.geometry import Ellipse, sigma_entries
+from factors.geometry import (
+    Ellipse,
+    dual_conics_from_params,
+    gaussian_derivatives_from_dual_conics,
+    gaussians_from_dual_conics,
+    sigma_entries,
+)
 from factors.names import METRIC_NAMES
 from factors.overlap import (
     HULL_DIRECTIONS,
@@ -146,6 +152,10 @@ LEVEL_SET_ADAPTIVE_GAIN = 1.0
 
 _SQRT2 = math.sqrt(2.0)
 _INV_SQRT8 = 1.0 / math.sqrt(8.0)
+#: The metrics that are smooth functions of the projection's dual conic (:func:`conic_residuals`).
+CONIC_METRICS = ("algebraic", "frobenius", "wasserstein", "bhattacharyya", "bbox")
+_VEC5 = np.array([0, 1, 2, 4, 5])  # upper elements [C00, C01, C02, C11, C12], flat indices
+_FRO_W = np.array([1.0, _SQRT2, _SQRT2, 1.0, _SQRT2])
 
 _OPTIONS: dict[str, tuple[str, ...]] = {
     "iou": (),
@@ -216,24 +226,6 @@ def _image_size(value: object) -> tuple[float, float]:
 def _sigma(e: Ellipse) -> tuple[float, float, float]:
     """``Sigma = R diag(a^2, b^2) R^T`` as ``(s00, s01, s11)``."""
     return sigma_entries(e.a, e.b, e.angle)
-
-
-def _dual_vec(e: Ellipse) -> tuple[float, float, float, float, float]:
-    """Upper elements ``[C00, C01, C02, C11, C12]`` of the normalised dual conic."""
-    s00, s01, s11 = _sigma(e)
-    cx, cy = e.cx, e.cy
-    return s00 - cx * cx, s01 - cx * cy, -cx, s11 - cy * cy, -cy
-
-
-def _h(u: float) -> float:
-    """``sign(u) sqrt(ln cosh(u / 2) / 2)``: odd, analytic, ``~ u / (2 sqrt 2)`` near 0."""
-    x = abs(0.5 * u)
-    if x < 1e-2:  # series of ln cosh, relative error < 1e-14
-        x2 = x * x
-        lc = x2 * (0.5 + x2 * (-1.0 / 12.0 + x2 * (1.0 / 45.0)))
-    else:  # ln cosh x = x + ln(1 + e^-2x) - ln 2, no overflow
-        lc = x + math.log1p(math.exp(-2.0 * x)) - math.log(2.0)
-    return math.copysign(math.sqrt(0.5 * lc), u)
 
 
 # --------------------------------------------------------------------------- boxes
@@ -335,17 +327,6 @@ def _level_template(n_azimuths: int, n_levels: int) -> tuple[np.ndarray, np.ndar
     return uv, r2
 
 
-def _canonical_axes(e: Ellipse) -> tuple[float, float, float]:
-    """``(a, b, angle)`` with ``a >= b`` (angle shifted by pi/2 when the axes are swapped).
-
-    Unlike :meth:`Ellipse.canonical` the angle is NOT wrapped to ``[-pi/2, pi/2)``: the
-    level-set layout rotates with ``angle``, and a wrap by pi would reflect it through the
-    centre (a different sample order); ``PoseResidualModel`` uses this same rule."""
-    if e.b > e.a:
-        return e.b, e.a, e.angle + 0.5 * math.pi
-    return e.a, e.b, e.angle
-
-
 def _adaptive_scale(det: Ellipse, proj: Ellipse | None, scale: float, adaptive: bool) -> float:
     if not adaptive or proj is None:
         return scale
@@ -377,7 +358,7 @@ def level_set_sampling_scale(
 
 def _sample_points(det: Ellipse, s_max: float, n_azimuths: int, n_levels: int) -> np.ndarray:
     uv, _ = _level_template(n_azimuths, n_levels)
-    a, b, ang = _canonical_axes(det)
+    a, b, ang = canonical_axes(det.params()[None])[0]
     c, s = math.cos(ang), math.sin(ang)
     # x = c_D + uv @ (s_max R diag(a, b))^T
     Mt = np.array([[a * c * s_max, a * s * s_max], [-b * s * s_max, b * c * s_max]])
@@ -425,6 +406,221 @@ def _level_set_residual(det: Ellipse, proj: Ellipse, n_azimuths: int = 6, n_leve
     uv = (pts - (proj.cx, proj.cy)) @ np.array([[c / proj.a, -s / proj.b],
                                                 [s / proj.a, c / proj.b]])
     return phi_det - np.einsum("ij,ij->i", uv, uv)
+
+
+# --------------------------------------------------------------------------- smooth metrics
+
+
+def canonical_axes(P: np.ndarray) -> np.ndarray:
+    """``(a, b, angle)`` (N, 3) with ``a >= b`` of ellipse params ``P`` (N, 5), the angle
+    shifted by pi/2 where the axes are swapped. Unlike :meth:`Ellipse.canonical` it is NOT
+    wrapped to ``[-pi/2, pi/2)``: the level-set layout rotates with ``angle``, and a wrap by pi
+    would reflect it through the centre (a different sample order)."""
+    out = np.empty((len(P), 3))
+    np.maximum(P[:, 2], P[:, 3], out=out[:, 0])
+    np.minimum(P[:, 2], P[:, 3], out=out[:, 1])
+    np.add(P[:, 4], (P[:, 3] > P[:, 2]) * (0.5 * np.pi), out=out[:, 2])
+    return out
+
+
+def conic_residuals(
+    name: str, detections: np.ndarray, Cn: np.ndarray, dCn: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Residual rows (N, dim) of the smooth metric ``name`` (one of :data:`CONIC_METRICS`)
+    between detections given as params ``detections`` (N, 5) (px, rad) and projections given
+    as normalised dual conics ``Cn`` (N, 3, 3) (``Cn[2, 2] = -1``); with ``dCn`` (N, K, 3, 3),
+    derivatives of ``Cn`` along K directions (e.g. the 6 pose tangents), also ``dr`` (N, dim,
+    K) along them, else None.
+
+    The one implementation of these metrics: :func:`residual` is its N = 1 view and
+    :class:`factors.pose_residuals.PoseResidualModel` chains it to the pose (the scalar forms
+    are the tests' oracle, ``tests/oracles/metrics_reference.py``).
+    """
+    n = Cn.shape[0]
+    if name in ("algebraic", "frobenius"):
+        r = dual_conics_from_params(detections).reshape(n, 9)[:, _VEC5] - Cn.reshape(n, 9)[
+            :, _VEC5]
+        J = None if dCn is None else -dCn.reshape(n, -1, 9)[:, :, _VEC5].transpose(0, 2, 1)
+        if name == "frobenius":
+            r = r * _FRO_W
+            J = None if J is None else J * _FRO_W[None, :, None]
+        return r, J
+    mu, S = gaussians_from_dual_conics(Cn)
+    d = None if dCn is None else gaussian_derivatives_from_dual_conics(mu, dCn)
+    rows = {"bbox": _bbox_rows, "wasserstein": _wasserstein_rows,
+            "bhattacharyya": _bhattacharyya_rows}[name]
+    return rows(detections, mu, S, d)
+
+
+def _conic_residual(name: str, det: Ellipse, proj: Ellipse) -> np.ndarray:
+    return conic_residuals(name, det.params()[None], proj.dual_conic()[None])[0][0]
+
+
+def _bbox_rows(P: np.ndarray, mu: np.ndarray, S: np.ndarray,
+               d: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray | None]:
+    """``r = B_D - B_P``, ``B = [cx - hx, cy - hy, cx + hx, cy + hy]`` with the half-sizes
+    ``hx = sqrt(Sigma00)``, ``hy = sqrt(Sigma11)`` of the axis-aligned box (module docstring
+    of :func:`conic_residuals` for the arguments)."""
+    c, s = np.cos(P[:, 4]), np.sin(P[:, 4])
+    hd = np.stack([np.hypot(P[:, 2] * c, P[:, 3] * s), np.hypot(P[:, 2] * s, P[:, 3] * c)], 1)
+    h = np.sqrt(np.diagonal(S, axis1=1, axis2=2))  # (N, 2) half-sizes (hx, hy)
+    r = np.concatenate((P[:, :2] - hd, P[:, :2] + hd), axis=1) - np.concatenate(
+        (mu - h, mu + h), axis=1)
+    if d is None:
+        return r, None
+    dmu, dsig = d  # (N, K, 2), (N, K, 2, 2)
+    dh = np.diagonal(dsig, axis1=2, axis2=3) / (2.0 * h[:, None, :])  # (N, K, 2)
+    return r, np.concatenate((dh - dmu, -dmu - dh), axis=2).transpose(0, 2, 1)
+
+
+def _wasserstein_rows(det: np.ndarray, mu: np.ndarray, S: np.ndarray,
+                      d: tuple[np.ndarray, np.ndarray] | None
+                      ) -> tuple[np.ndarray, np.ndarray | None]:
+    """The W2 residual ``[mu_D - mu_P, a_D - a_P, b_D - b_P, k sin(delta)]``
+    (canonical semi-axes ``a >= b``, ``delta`` the angle between the major axes mod pi,
+    ``k = sqrt(2 P / (Q + sqrt(Q^2 - P sin^2 delta)))``, ``P = (a_D^2 - b_D^2)(a_P^2 -
+    b_P^2)``, ``Q = a_D a_P + b_D b_P``) and its derivative through ``Sigma_P``.
+
+    At a circular projection (the major-axis angle is undefined) or a circular detection
+    (``k = 0``) the angle terms of the Jacobian are set to 0 (the metric is not
+    differentiable there).
+    """
+    s00, s01, s11 = S[:, 0, 0], S[:, 0, 1], S[:, 1, 1]
+    h, m = 0.5 * (s00 - s11), 0.5 * (s00 + s11)
+    rho = np.sqrt(h * h + s01 * s01)
+    a2, b2 = np.sqrt(m + rho), np.sqrt(np.maximum(m - rho, 0.0))
+    t2 = 0.5 * np.arctan2(s01, h)
+    a1, b1, t1 = canonical_axes(det).T
+    delta = (t1 - t2 + 0.5 * np.pi) % np.pi - 0.5 * np.pi
+    sn, cs = np.sin(delta), np.cos(delta)
+    P = (a1 * a1 - b1 * b1) * (a2 * a2 - b2 * b2)
+    Q = a1 * a2 + b1 * b2
+    Rq = np.sqrt(np.maximum(Q * Q - P * sn * sn, 0.0))
+    D = Q + Rq
+    k = np.sqrt(2.0 * P / D)
+    mu_d = det[:, :2]
+    r = np.stack([mu_d[:, 0] - mu[:, 0], mu_d[:, 1] - mu[:, 1], a1 - a2, b1 - b2, k * sn],
+                 axis=1)
+    if d is None:
+        return r, None
+    col = (slice(None), None)  # (N,) -> (N, 1) against the K directions
+    dmu, dsig = d
+    ds00, ds01, ds11 = dsig[..., 0, 0], dsig[..., 0, 1], dsig[..., 1, 1]
+    dh, dm = 0.5 * (ds00 - ds11), 0.5 * (ds00 + ds11)
+    tiny = 1e-12 * m
+    round_proj = rho <= tiny
+    rho_s = np.where(round_proj, 1.0, rho)[col]
+    drho = (h[col] * dh + s01[col] * ds01) / rho_s
+    da2 = (dm + drho) / (2.0 * a2[col])
+    db2 = (dm - drho) / (2.0 * np.maximum(b2, 1e-300)[col])
+    dt2 = np.where(round_proj[col], 0.0, 0.5 * (h[col] * ds01 - s01[col] * dh) / rho_s**2)
+    ddelta = -dt2
+    dP = ((a1 * a1 - b1 * b1)[col]) * (2.0 * a2[col] * da2 - 2.0 * b2[col] * db2)
+    dQ = a1[col] * da2 + b1[col] * db2
+    Rs = np.where(Rq > 0, Rq, 1.0)[col]
+    dR = (2.0 * Q[col] * dQ - dP * (sn * sn)[col] - 2.0 * (P * sn * cs)[col] * ddelta) / (
+        2.0 * Rs)
+    zero_k = k <= 1e-150
+    ks = np.where(zero_k, 1.0, k)[col]
+    dk = np.where(zero_k[col], 0.0,
+                  (dP / D[col] - P[col] * (dQ + dR) / (D * D)[col]) / ks)
+    dks = dk * sn[col] + (k * cs)[col] * ddelta
+    J = np.stack([-dmu[..., 0], -dmu[..., 1], -da2, -db2, dks], axis=1)  # (N, 5, 6)
+    return r, J
+
+
+def _bhattacharyya_rows(P: np.ndarray, mu: np.ndarray, Q: np.ndarray,
+                        d: tuple[np.ndarray, np.ndarray] | None
+                        ) -> tuple[np.ndarray, np.ndarray | None]:
+    """The Bhattacharyya residual ``[L^-1 dmu / sqrt 8, G00, G11, sqrt2 G01]``
+    (``S = (S_D + S_P) / 2 = L L^T``, ``G = h(log N)``, ``N = S_D^-1/2 S_P S_D^-1/2``,
+    ``h(u) = sign(u) sqrt(ln cosh(u / 2) / 2)``) and its derivative. The spectral
+    function's derivative is Daleckii-Krein's ``dG = V (F o (V^T dN V)) V^T`` (divided
+    differences of ``h(log lambda)``, its derivative when the eigenvalues coincide).
+    """
+    q00, q01, q11 = Q[:, 0, 0], Q[:, 0, 1], Q[:, 1, 1]
+    d00, d01, d11 = sigma_entries(P[:, 2], P[:, 3], P[:, 4])
+    s00, s01, s11 = 0.5 * (d00 + q00), 0.5 * (d01 + q01), 0.5 * (d11 + q11)
+    l00 = np.sqrt(s00)
+    l10 = s01 / l00
+    l11 = np.sqrt(np.maximum(s11 - l10 * l10, 0.0))
+    dx = P[:, 0] - mu[:, 0]
+    dy = P[:, 1] - mu[:, 1]
+    y0 = dx / l00
+    y1 = (dy - l10 * y0) / l11
+    a, b = P[:, 2], P[:, 3]
+    c, s = np.cos(P[:, 4]), np.sin(P[:, 4])
+
+    def to_n(x00, x01, x11):  # D^-1 R^T X R D^-1 (detection frame), elementwise
+        t00 = c * (x00 * c + x01 * s) + s * (x01 * c + x11 * s)
+        t01 = c * (-x00 * s + x01 * c) + s * (-x01 * s + x11 * c)
+        t11 = -s * (-x00 * s + x01 * c) + c * (-x01 * s + x11 * c)
+        return t00 / (a * a), t01 / (a * b), t11 / (b * b)
+
+    n00, n01, n11 = to_n(q00, q01, q11)
+    half_tr, half_diff = 0.5 * (n00 + n11), 0.5 * (n00 - n11)
+    rad = np.hypot(half_diff, n01)
+    lam0 = half_tr + rad
+    lam1 = np.maximum(half_tr - rad, 1e-300)
+    u0, u1 = np.log(lam0), np.log(lam1)
+    h0, h1 = _h(u0), _h(u1)
+    theta = 0.5 * np.arctan2(n01, half_diff)  # N's first eigenvector angle
+    cos2, sin2 = np.cos(2 * theta), np.sin(2 * theta)
+    mean, half = 0.5 * (h0 + h1), 0.5 * (h0 - h1)
+    g00, g11, g01 = mean + half * cos2, mean - half * cos2, half * sin2
+    r = np.stack([_INV_SQRT8 * y0, _INV_SQRT8 * y1, g00, g11, _SQRT2 * g01], axis=1)
+    if d is None:
+        return r, None
+    col = (slice(None), None)
+    dmu, dsig = d
+    dq00, dq01, dq11 = dsig[..., 0, 0], dsig[..., 0, 1], dsig[..., 1, 1]
+    L00, L10, L11, Y0, Y1 = (v[col] for v in (l00, l10, l11, y0, y1))
+    dl00 = 0.25 * dq00 / L00
+    dl10 = (0.5 * dq01 - L10 * dl00) / L00
+    dl11 = (0.5 * dq11 - 2.0 * L10 * dl10) / (2.0 * L11)
+    dy0 = (-dmu[..., 0] - Y0 * dl00) / L00
+    dy1 = (-dmu[..., 1] - dl10 * Y0 - L10 * dy0 - Y1 * dl11) / L11
+    c, s, a, b = c[col], s[col], a[col], b[col]
+    dn00, dn01, dn11 = to_n(dq00, dq01, dq11)
+    ct, st = np.cos(theta)[col], np.sin(theta)[col]
+    e00 = ct * ct * dn00 + 2 * ct * st * dn01 + st * st * dn11
+    e11 = st * st * dn00 - 2 * ct * st * dn01 + ct * ct * dn11
+    e01 = -ct * st * dn00 + (ct * ct - st * st) * dn01 + st * ct * dn11
+    f0 = _dh_dlambda(u0, h0, lam0)
+    f1 = _dh_dlambda(u1, h1, lam1)
+    gap = lam0 - lam1
+    close = gap <= 1e-7 * lam0
+    f01 = np.where(close, 0.5 * (f0 + f1), (h0 - h1) / np.where(close, 1.0, gap))
+    M00, M01, M11 = f0[col] * e00, f01[col] * e01, f1[col] * e11
+    dg00 = ct * ct * M00 - 2 * ct * st * M01 + st * st * M11
+    dg11 = st * st * M00 + 2 * ct * st * M01 + ct * ct * M11
+    dg01 = ct * st * M00 + (ct * ct - st * st) * M01 - st * ct * M11
+    J = np.stack([_INV_SQRT8 * dy0, _INV_SQRT8 * dy1, dg00, dg11, _SQRT2 * dg01], axis=1)
+    return r, J
+
+
+def _log_cosh(x: np.ndarray) -> np.ndarray:
+    """``ln cosh(x)`` without overflow, accurate near 0 (series), elementwise."""
+    ax = np.abs(x)
+    x2 = ax * ax
+    series = x2 * (0.5 + x2 * (-1.0 / 12.0 + x2 * (1.0 / 45.0)))
+    big = ax + np.log1p(np.exp(-2.0 * ax)) - math.log(2.0)
+    return np.where(ax < 1e-2, series, big)
+
+
+def _h(u: np.ndarray) -> np.ndarray:
+    """``sign(u) sqrt(ln cosh(u / 2) / 2)``: odd, analytic, ``~ u / (2 sqrt 2)`` near 0."""
+    return np.sign(u) * np.sqrt(0.5 * _log_cosh(0.5 * u))
+
+
+def _dh_dlambda(u: np.ndarray, h: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """``d h(ln lambda) / d lambda`` for ``h(u) = sign(u) sqrt(ln cosh(u / 2) / 2)``:
+    ``h'(u) = tanh(|u| / 2) / (8 |h|)`` (-> 1/4 as u -> 0), divided by ``lambda``."""
+    ah = np.abs(h)
+    small = np.abs(u) < 1e-4
+    dh_du = np.where(small, 0.25,
+                     np.tanh(0.5 * np.abs(u)) / (8.0 * np.where(small, 1.0, ah)))
+    return dh_du / lam
 
 
 # --------------------------------------------------------------------------- residuals
@@ -556,10 +752,6 @@ def _giou_residual(det: Ellipse, proj: Ellipse,
                             _hull_directions(hull_directions))[0]
 
 
-def _bbox_residual(det: Ellipse, proj: Ellipse) -> np.ndarray:
-    return det.bbox() - proj.bbox()
-
-
 def _qbbox_residual(det: Ellipse, proj: Ellipse, image_size: object = None) -> np.ndarray:
     W, H = _image_size(image_size)
     return _truncated_box(det, W, H) - _truncated_box(proj, W, H)
@@ -570,66 +762,9 @@ def _truncated_box(e: Ellipse, W: float, H: float) -> np.ndarray:
     return _clamped_box(e.bbox(), W, H) if box is None else box
 
 
-def _algebraic_residual(det: Ellipse, proj: Ellipse) -> np.ndarray:
-    return np.subtract(_dual_vec(det), _dual_vec(proj))
-
-
-def _frobenius_residual(det: Ellipse, proj: Ellipse) -> np.ndarray:
-    d = np.subtract(_dual_vec(det), _dual_vec(proj))
-    d[[1, 2, 4]] *= _SQRT2
-    return d
-
-
-def _wasserstein_residual(det: Ellipse, proj: Ellipse) -> np.ndarray:
-    a1, b1, t1 = _canonical_axes(det)
-    a2, b2, t2 = _canonical_axes(proj)
-    # Angle between the major axes, reduced to [-pi/2, pi/2) (ellipses are pi-symmetric).
-    delta = (t1 - t2 + 0.5 * math.pi) % math.pi - 0.5 * math.pi
-    s = math.sin(delta)
-    P = (a1 * a1 - b1 * b1) * (a2 * a2 - b2 * b2)  # >= 0 with a >= b
-    Q = a1 * a2 + b1 * b2
-    k = math.sqrt(2.0 * P / (Q + math.sqrt(max(Q * Q - P * s * s, 0.0))))
-    return np.array([det.cx - proj.cx, det.cy - proj.cy, a1 - a2, b1 - b2, k * s])
-
-
-def _bhattacharyya_residual(det: Ellipse, proj: Ellipse) -> np.ndarray:
-    d00, d01, d11 = _sigma(det)
-    q00, q01, q11 = _sigma(proj)
-    # Mahalanobis part with the Cholesky factor of S = (S_D + S_P) / 2.
-    s00, s01, s11 = 0.5 * (d00 + q00), 0.5 * (d01 + q01), 0.5 * (d11 + q11)
-    l00 = math.sqrt(s00)
-    l10 = s01 / l00
-    l11 = math.sqrt(max(s11 - l10 * l10, 0.0))
-    dx, dy = det.cx - proj.cx, det.cy - proj.cy
-    y0 = dx / l00
-    y1 = (dy - l10 * y0) / l11
-    # N = S_D^-1/2 S_P S_D^-1/2 computed in the detection's frame: D^-1 R^T S_P R D^-1.
-    c, s = math.cos(det.angle), math.sin(det.angle)
-    t00 = c * (q00 * c + q01 * s) + s * (q01 * c + q11 * s)
-    t01 = c * (-q00 * s + q01 * c) + s * (-q01 * s + q11 * c)
-    t11 = -s * (-q00 * s + q01 * c) + c * (-q01 * s + q11 * c)
-    n00, n01, n11 = t00 / (det.a * det.a), t01 / (det.a * det.b), t11 / (det.b * det.b)
-    half_tr, half_diff = 0.5 * (n00 + n11), 0.5 * (n00 - n11)
-    rad = math.hypot(half_diff, n01)
-    h0 = _h(math.log(half_tr + rad))
-    h1 = _h(math.log(max(half_tr - rad, 1e-300)))
-    # G = V diag(h) V^T in N's frame (back in the detection frame; rotation-free norm).
-    mean, half = 0.5 * (h0 + h1), 0.5 * (h0 - h1)
-    if rad > 0.0:
-        cos2, sin2 = half_diff / rad, n01 / rad
-    else:
-        cos2, sin2 = 1.0, 0.0
-    g00, g11, g01 = mean + half * cos2, mean - half * cos2, half * sin2
-    return np.array([_INV_SQRT8 * y0, _INV_SQRT8 * y1, g00, g11, _SQRT2 * g01])
-
-
 _RESIDUALS = {
-    "bbox": _bbox_residual,
+    **{m: functools.partial(_conic_residual, m) for m in CONIC_METRICS},
     "qbbox": _qbbox_residual,
-    "algebraic": _algebraic_residual,
-    "frobenius": _frobenius_residual,
-    "wasserstein": _wasserstein_residual,
-    "bhattacharyya": _bhattacharyya_residual,
     "level_set": _level_set_residual,
     "iou": _iou_residual,
     "giou": _giou_residual,

@@ -125,12 +125,10 @@ from factors.geometry import (
     Ellipsoid,
     GeometryError,
     check_pose,
-    dual_conics_from_params,
     ellipse_params_and_validity,
     gaussian_derivatives_from_dual_conics,
     gaussians_from_dual_conics,
     params_from_dual_conics,
-    sigma_entries,
     skew,
     so3_exp,
 )
@@ -158,23 +156,17 @@ DEFAULT_NUMERIC_STEP: dict[str, float] = dict.fromkeys(METRIC_NAMES, 1e-6)
 ANALYTIC_METRICS: tuple[str, ...] = (
     "level_set", "algebraic", "frobenius", "wasserstein", "bhattacharyya", "bbox", "iou",
     "giou")
-_CONIC_METRICS = ("algebraic", "frobenius", "wasserstein", "bhattacharyya", "bbox")
 #: Power of the reference length ``L_j`` (px) in the metric's residual: the penalty's
 #: reference residual ``rho_j = L_j ** power`` (level_set: ``max(1, s_max_j)^2`` instead).
 _PENALTY_PIXEL_POWER: dict[str, int] = {
     "iou": 0, "giou": 0, "bhattacharyya": 0, "level_set": 0, "bbox": 1, "qbbox": 1,
     "wasserstein": 1, "algebraic": 1, "frobenius": 1}
 assert set(_PENALTY_PIXEL_POWER) == set(METRIC_NAMES)
-_INV_SQRT8 = 1.0 / math.sqrt(8.0)
-_SQRT2 = math.sqrt(2.0)
 # tangent generators: d(A)/d(omega_k) = G + G^T with G = -[e_k]x A; d(A)/d(v_k) = G + G^T with
 # G = e_k c^T
 _SKEW_BASIS = np.array([[[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]],
                         [[0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [-1.0, 0.0, 0.0]],
                         [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]])
-# upper elements [C00, C01, C02, C11, C12] of a 3x3 matrix, flat indices
-_VEC5 = np.array([0, 1, 2, 4, 5])
-_FRO_W = np.array([1.0, math.sqrt(2.0), math.sqrt(2.0), 1.0, math.sqrt(2.0)])
 
 
 def _level_set_forms(f: np.ndarray, Ai: np.ndarray) -> np.ndarray:
@@ -214,25 +206,6 @@ def _level_set_form_matrix() -> np.ndarray:
 _LEVEL_SET_FORMS = _level_set_form_matrix()
 
 
-def _log_cosh(x: np.ndarray) -> np.ndarray:
-    """``ln cosh(x)`` without overflow, accurate near 0 (series), elementwise."""
-    ax = np.abs(x)
-    x2 = ax * ax
-    series = x2 * (0.5 + x2 * (-1.0 / 12.0 + x2 * (1.0 / 45.0)))
-    big = ax + np.log1p(np.exp(-2.0 * ax)) - math.log(2.0)
-    return np.where(ax < 1e-2, series, big)
-
-
-def _dh_dlambda(u: np.ndarray, h: np.ndarray, lam: np.ndarray) -> np.ndarray:
-    """``d h(ln lambda) / d lambda`` for ``h(u) = sign(u) sqrt(ln cosh(u / 2) / 2)``:
-    ``h'(u) = tanh(|u| / 2) / (8 |h|)`` (-> 1/4 as u -> 0), divided by ``lambda``."""
-    ah = np.abs(h)
-    small = np.abs(u) < 1e-4
-    dh_du = np.where(small, 0.25,
-                     np.tanh(0.5 * np.abs(u)) / (8.0 * np.where(small, 1.0, ah)))
-    return dh_du / lam
-
-
 @functools.lru_cache(maxsize=32)
 def _unit_level_set_layout(n_azimuths: int, n_levels: int) -> tuple[np.ndarray, np.ndarray]:
     """``factors.metrics``' level-set layout for a unit circle, s_max = 1: the homogeneous
@@ -246,16 +219,6 @@ def _unit_level_set_layout(n_azimuths: int, n_levels: int) -> tuple[np.ndarray, 
     for arr in (uv1, uv2):
         arr.setflags(write=False)
     return uv1, uv2
-
-
-def _canonical_axes(P: np.ndarray) -> np.ndarray:
-    """``(a, b, angle)`` (N, 3) with ``a >= b`` of ellipse params ``P`` (N, 5): the batched form
-    of ``factors.metrics._canonical_axes`` (angle + pi/2 when swapped, not wrapped)."""
-    out = np.empty((len(P), 3))
-    np.maximum(P[:, 2], P[:, 3], out=out[:, 0])
-    np.minimum(P[:, 2], P[:, 3], out=out[:, 1])
-    np.add(P[:, 4], (P[:, 3] > P[:, 2]) * (0.5 * np.pi), out=out[:, 2])
-    return out
 
 
 def expmap_pose3(xi: np.ndarray) -> np.ndarray:
@@ -410,8 +373,6 @@ class PoseResidualModel:
             self.dim = self._M
         else:
             self.dim = self._metric_dim()
-            if metric in _CONIC_METRICS:
-                self._init_conic()
         self._set_layout_dependents()
         self.analytic = metric in ANALYTIC_METRICS
 
@@ -498,7 +459,7 @@ class PoseResidualModel:
             uv1, uv2 = _unit_level_set_layout(self.options.get("n_azimuths", 6),
                                               self.options.get("n_levels", 4))
             # canonical axes a >= b (the metric's layout does not depend on axis labelling)
-            a, b, ang = _canonical_axes(self._det_params).T
+            a, b, ang = metrics.canonical_axes(self._det_params).T
             ca, sa = np.cos(ang), np.sin(ang)
             cam = self.camera
             # H without s_max: columns 0, 1 scale with s_max, column 2 is K^-1 (c_D, 1)
@@ -684,22 +645,6 @@ class PoseResidualModel:
             coef = -amp * ds / (d + ds) ** 2
             J[idx] = (coef[:, None] * dm)[:, None, :]
 
-    # ------------------------------------------------------------------ conic metrics
-    def _init_conic(self) -> None:
-        """The detection constants the conic metric uses (as factors.metrics): the dual conic's
-        upper elements (algebraic / frobenius), the box (bbox), ``S_D`` (bhattacharyya),
-        canonical axes (wasserstein)."""
-        P = self._det_params
-        if self.metric in ("algebraic", "frobenius"):
-            self._det_vec5 = dual_conics_from_params(P).reshape(self.n, 9)[:, _VEC5]  # (N, 5)
-        elif self.metric == "bbox":
-            self._det_box = np.array([d.bbox() for d in self.detections])  # (N, 4) px
-        elif self.metric == "bhattacharyya":
-            # S_D = R diag(a^2, b^2) R^T as (s00, s01, s11), batched over the detections
-            self._det_sigma = np.stack(sigma_entries(P[:, 2], P[:, 3], P[:, 4]), axis=1)
-        else:
-            self._det_canon = _canonical_axes(P)
-
     def _normalised_dual_conics(
         self, A: np.ndarray, c: np.ndarray, valid: np.ndarray, jacobian: bool,
     ) -> tuple[np.ndarray, np.ndarray | None]:
@@ -759,179 +704,18 @@ class PoseResidualModel:
         return PoseEvaluation(r, J, valid, margins)
 
     def _evaluate_conic(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
-        """Analytic residuals/Jacobians of the metrics that are smooth functions of the
-        normalised dual conic ``Cn = C* / (-C*[2,2])`` of the projection.
-
-        ``dC* = K dA K^T``; ``dCn = (dC* + Cn dC*[2,2]) / w`` with ``w = -C*[2,2]``;
-        ``mu = -Cn[:2, 2]``, ``Sigma = Cn[:2, :2] + mu mu^T``. Wasserstein uses the 2x2 closed
-        form ``Sigma^1/2 = (Sigma + d I) / t`` (``d = sqrt(det)``, ``t = sqrt(tr + 2 d)``).
-        """
+        """The smooth metrics: :func:`factors.metrics.conic_residuals` of the projections'
+        normalised dual conics ``Cn`` and their derivatives ``dCn`` along the 6 tangents."""
         A, c, S, margins = self._camera_frame(T)
         valid = margins > self.min_depth_margin
         all_valid = bool(valid.all())
         Cn, dCn = self._normalised_dual_conics(A, c, valid, jacobian)
-        if self.metric in ("algebraic", "frobenius"):
-            r = self._det_vec5 - Cn.reshape(self.n, 9)[:, _VEC5]
-            J = None
-            if dCn is not None:
-                J = -dCn.reshape(self.n, 6, 9)[:, :, _VEC5].transpose(0, 2, 1)
-            if self.metric == "frobenius":
-                r = r * _FRO_W
-                if J is not None:
-                    J = J * _FRO_W[None, :, None]
-        elif self.metric == "wasserstein":
-            r, J = self._wasserstein(Cn, dCn)
-        elif self.metric == "bbox":
-            r, J = self._bbox(Cn, dCn)
-        else:
-            r, J = self._bhattacharyya(Cn, dCn)
+        r, J = metrics.conic_residuals(self.metric, self._det_params, Cn, dCn)
         if J is not None:
             J = np.ascontiguousarray(J)
         if not all_valid:
             self._apply_penalty(r, J, ~valid, c, S, margins)
         return PoseEvaluation(r, J, valid, margins)
-
-    def _bbox(
-        self, Cn: np.ndarray, dCn: np.ndarray | None
-    ) -> tuple[np.ndarray, np.ndarray | None]:
-        """``r = B_D - B_P``, ``B = [cx - hx, cy - hy, cx + hx, cy + hy]`` with the half-sizes
-        ``hx = sqrt(Sigma00)``, ``hy = sqrt(Sigma11)`` of the axis-aligned box, and d r / d xi."""
-        mu, S = gaussians_from_dual_conics(Cn)
-        h = np.sqrt(np.diagonal(S, axis1=1, axis2=2))  # (N, 2) half-sizes (hx, hy)
-        r = self._det_box - np.concatenate((mu - h, mu + h), axis=1)
-        if dCn is None:
-            return r, None
-        dmu, dsig = gaussian_derivatives_from_dual_conics(mu, dCn)  # (N, 6, 2), (N, 6, 2, 2)
-        dh = np.diagonal(dsig, axis1=2, axis2=3) / (2.0 * h[:, None, :])  # (N, 6, 2)
-        J = np.concatenate((dh - dmu, -dmu - dh), axis=2).transpose(0, 2, 1)  # (N, 4, 6)
-        return r, J
-
-    def _wasserstein(
-        self, Cn: np.ndarray, dCn: np.ndarray | None
-    ) -> tuple[np.ndarray, np.ndarray | None]:
-        """factors.metrics' W2 residual ``[mu_D - mu_P, a_D - a_P, b_D - b_P, k sin(delta)]``
-        (canonical semi-axes ``a >= b``, ``delta`` the angle between the major axes mod pi,
-        ``k = sqrt(2 P / (Q + sqrt(Q^2 - P sin^2 delta)))``, ``P = (a_D^2 - b_D^2)(a_P^2 -
-        b_P^2)``, ``Q = a_D a_P + b_D b_P``) and its pose Jacobian through ``Sigma_P``.
-
-        At a circular projection (the major-axis angle is undefined) or a circular detection
-        (``k = 0``) the angle terms of the Jacobian are set to 0 (the metric is not
-        differentiable there).
-        """
-        mu, S = gaussians_from_dual_conics(Cn)
-        s00, s01, s11 = S[:, 0, 0], S[:, 0, 1], S[:, 1, 1]
-        h, m = 0.5 * (s00 - s11), 0.5 * (s00 + s11)
-        rho = np.sqrt(h * h + s01 * s01)
-        a2, b2 = np.sqrt(m + rho), np.sqrt(np.maximum(m - rho, 0.0))
-        t2 = 0.5 * np.arctan2(s01, h)
-        a1, b1, t1 = self._det_canon.T
-        delta = (t1 - t2 + 0.5 * np.pi) % np.pi - 0.5 * np.pi
-        sn, cs = np.sin(delta), np.cos(delta)
-        P = (a1 * a1 - b1 * b1) * (a2 * a2 - b2 * b2)
-        Q = a1 * a2 + b1 * b2
-        Rq = np.sqrt(np.maximum(Q * Q - P * sn * sn, 0.0))
-        D = Q + Rq
-        k = np.sqrt(2.0 * P / D)
-        mu_d = self._det_params[:, :2]
-        r = np.stack([mu_d[:, 0] - mu[:, 0], mu_d[:, 1] - mu[:, 1], a1 - a2, b1 - b2, k * sn],
-                     axis=1)
-        if dCn is None:
-            return r, None
-        col = (slice(None), None)  # (N,) -> (N, 1) against the 6 tangent directions
-        dmu, dsig = gaussian_derivatives_from_dual_conics(mu, dCn)
-        ds00, ds01, ds11 = dsig[..., 0, 0], dsig[..., 0, 1], dsig[..., 1, 1]
-        dh, dm = 0.5 * (ds00 - ds11), 0.5 * (ds00 + ds11)
-        tiny = 1e-12 * m
-        round_proj = rho <= tiny
-        rho_s = np.where(round_proj, 1.0, rho)[col]
-        drho = (h[col] * dh + s01[col] * ds01) / rho_s
-        da2 = (dm + drho) / (2.0 * a2[col])
-        db2 = (dm - drho) / (2.0 * np.maximum(b2, 1e-300)[col])
-        dt2 = np.where(round_proj[col], 0.0, 0.5 * (h[col] * ds01 - s01[col] * dh) / rho_s**2)
-        ddelta = -dt2
-        dP = ((a1 * a1 - b1 * b1)[col]) * (2.0 * a2[col] * da2 - 2.0 * b2[col] * db2)
-        dQ = a1[col] * da2 + b1[col] * db2
-        Rs = np.where(Rq > 0, Rq, 1.0)[col]
-        dR = (2.0 * Q[col] * dQ - dP * (sn * sn)[col] - 2.0 * (P * sn * cs)[col] * ddelta) / (
-            2.0 * Rs)
-        zero_k = k <= 1e-150
-        ks = np.where(zero_k, 1.0, k)[col]
-        dk = np.where(zero_k[col], 0.0,
-                      (dP / D[col] - P[col] * (dQ + dR) / (D * D)[col]) / ks)
-        dks = dk * sn[col] + (k * cs)[col] * ddelta
-        J = np.stack([-dmu[..., 0], -dmu[..., 1], -da2, -db2, dks], axis=1)  # (N, 5, 6)
-        return r, J
-
-    def _bhattacharyya(
-        self, Cn: np.ndarray, dCn: np.ndarray | None
-    ) -> tuple[np.ndarray, np.ndarray | None]:
-        """factors.metrics' Bhattacharyya residual ``[L^-1 dmu / sqrt 8, G00, G11, sqrt2 G01]``
-        (``S = (S_D + S_P) / 2 = L L^T``, ``G = h(log N)``, ``N = S_D^-1/2 S_P S_D^-1/2``,
-        ``h(u) = sign(u) sqrt(ln cosh(u / 2) / 2)``) and its pose Jacobian. The spectral
-        function's derivative is Daleckii-Krein's ``dG = V (F o (V^T dN V)) V^T`` (divided
-        differences of ``h(log lambda)``, its derivative when the eigenvalues coincide).
-        """
-        mu, Q = gaussians_from_dual_conics(Cn)
-        q00, q01, q11 = Q[:, 0, 0], Q[:, 0, 1], Q[:, 1, 1]
-        d00, d01, d11 = self._det_sigma.T
-        s00, s01, s11 = 0.5 * (d00 + q00), 0.5 * (d01 + q01), 0.5 * (d11 + q11)
-        l00 = np.sqrt(s00)
-        l10 = s01 / l00
-        l11 = np.sqrt(np.maximum(s11 - l10 * l10, 0.0))
-        dx = self._det_params[:, 0] - mu[:, 0]
-        dy = self._det_params[:, 1] - mu[:, 1]
-        y0 = dx / l00
-        y1 = (dy - l10 * y0) / l11
-        a, b = self._det_params[:, 2], self._det_params[:, 3]
-        c, s = np.cos(self._det_params[:, 4]), np.sin(self._det_params[:, 4])
-
-        def to_n(x00, x01, x11):  # D^-1 R^T X R D^-1 (detection frame), elementwise
-            t00 = c * (x00 * c + x01 * s) + s * (x01 * c + x11 * s)
-            t01 = c * (-x00 * s + x01 * c) + s * (-x01 * s + x11 * c)
-            t11 = -s * (-x00 * s + x01 * c) + c * (-x01 * s + x11 * c)
-            return t00 / (a * a), t01 / (a * b), t11 / (b * b)
-
-        n00, n01, n11 = to_n(q00, q01, q11)
-        half_tr, half_diff = 0.5 * (n00 + n11), 0.5 * (n00 - n11)
-        rad = np.hypot(half_diff, n01)
-        lam0 = half_tr + rad
-        lam1 = np.maximum(half_tr - rad, 1e-300)
-        u0, u1 = np.log(lam0), np.log(lam1)
-        h0 = np.sign(u0) * np.sqrt(0.5 * _log_cosh(0.5 * u0))
-        h1 = np.sign(u1) * np.sqrt(0.5 * _log_cosh(0.5 * u1))
-        theta = 0.5 * np.arctan2(n01, half_diff)  # N's first eigenvector angle
-        cos2, sin2 = np.cos(2 * theta), np.sin(2 * theta)
-        mean, half = 0.5 * (h0 + h1), 0.5 * (h0 - h1)
-        g00, g11, g01 = mean + half * cos2, mean - half * cos2, half * sin2
-        r = np.stack([_INV_SQRT8 * y0, _INV_SQRT8 * y1, g00, g11, _SQRT2 * g01], axis=1)
-        if dCn is None:
-            return r, None
-        col = (slice(None), None)
-        dmu, dsig = gaussian_derivatives_from_dual_conics(mu, dCn)
-        dq00, dq01, dq11 = dsig[..., 0, 0], dsig[..., 0, 1], dsig[..., 1, 1]
-        L00, L10, L11, Y0, Y1 = (v[col] for v in (l00, l10, l11, y0, y1))
-        dl00 = 0.25 * dq00 / L00
-        dl10 = (0.5 * dq01 - L10 * dl00) / L00
-        dl11 = (0.5 * dq11 - 2.0 * L10 * dl10) / (2.0 * L11)
-        dy0 = (-dmu[..., 0] - Y0 * dl00) / L00
-        dy1 = (-dmu[..., 1] - dl10 * Y0 - L10 * dy0 - Y1 * dl11) / L11
-        c, s, a, b = c[col], s[col], a[col], b[col]
-        dn00, dn01, dn11 = to_n(dq00, dq01, dq11)
-        ct, st = np.cos(theta)[col], np.sin(theta)[col]
-        e00 = ct * ct * dn00 + 2 * ct * st * dn01 + st * st * dn11
-        e11 = st * st * dn00 - 2 * ct * st * dn01 + ct * ct * dn11
-        e01 = -ct * st * dn00 + (ct * ct - st * st) * dn01 + st * ct * dn11
-        f0 = _dh_dlambda(u0, h0, lam0)
-        f1 = _dh_dlambda(u1, h1, lam1)
-        gap = lam0 - lam1
-        close = gap <= 1e-7 * lam0
-        f01 = np.where(close, 0.5 * (f0 + f1), (h0 - h1) / np.where(close, 1.0, gap))
-        M00, M01, M11 = f0[col] * e00, f01[col] * e01, f1[col] * e11
-        dg00 = ct * ct * M00 - 2 * ct * st * M01 + st * st * M11
-        dg11 = st * st * M00 + 2 * ct * st * M01 + ct * ct * M11
-        dg01 = ct * st * M00 + (ct * ct - st * st) * M01 - st * ct * M11
-        J = np.stack([_INV_SQRT8 * dy0, _INV_SQRT8 * dy1, dg00, dg11, _SQRT2 * dg01], axis=1)
-        return r, J
 
     # ------------------------------------------------------------------ generic metrics
     def _metric_rows(self, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
