@@ -9,101 +9,66 @@ Public entry points
 * ``residual_size(name, **options) -> int``.
 * ``level_set_sample_points(...)`` / ``level_set_sampling_scale(...)``: the level-set sampling
   layout, shared with the GTSAM factors.
+* ``conic_residuals`` / ``overlap_residual``: the batched (N pairs) implementations.
 
-Scalar forms and the batched implementation (decided, issue 10)
-----------------------------------------------------------------
-The functions here are the metrics' REFERENCE definitions, one pair of ellipses at a time, and
-the tests' independent oracle. The ONE production implementation of the smooth metrics
-(``level_set``, ``algebraic``, ``frobenius``, ``wasserstein``, ``bhattacharyya``, ``bbox``) and
-of their pose Jacobians is the batched :class:`factors.pose_residuals.PoseResidualModel`;
-``tests/test_pose_factors.py`` checks that it equals :func:`residual` pair by pair. Production
-code calls the scalar forms only where there is no batched form: ``qbbox`` (piecewise, numeric
-Jacobian), the level-set sampling layout (shared by both), the one-off validation of
-``LocalizationOptions.metric_options`` on a fixed probe pair, and single pairs of ``iou`` /
-``giou`` (:func:`overlap_residual` with one pair uses the scalar exact areas; several pairs,
-e.g. the pose factors', the batched :func:`factors.overlap.quadrant_areas_batch`).
+One implementation per metric (decided, issue 10): the smooth metrics (bbox, algebraic,
+frobenius, wasserstein, bhattacharyya) are :func:`conic_residuals`, iou / giou are
+:func:`overlap_residual` (exact areas of :mod:`factors.overlap`), both batched; ``residual``
+and ``cost`` are their N = 1 views and :mod:`factors.pose_residuals` chains them to the pose.
+The former scalar forms are the tests' oracle (``tests/oracles/metrics_reference.py``).
+``qbbox`` and ``level_set`` exist here one pair at a time (the pose factors' level set is its
+own quadratic-form evaluation in the camera rays, tested equal to :func:`residual`).
 
 Argument order: the **detection** (fixed, measured) comes first, the **projection** (the
 moving, predicted ellipse) second. Every residual is "detection minus projection". All lengths
-are pixels, angles radians (see :mod:`factors.geometry` for the ellipse conventions).
+are pixels, angles radians (see :mod:`factors.geometry` for the ellipse conventions). Design
+rationale: ``docs/design/factors.md`` ("Metrics").
 
 Metrics, costs and residuals (``r``, length in brackets)
 --------------------------------------------------------
 ``iou`` [4]
-    Jaccard distance ``Delta = 1 - |D ∩ P| / |D ∪ P|`` in ``[0, 1]`` (the cost). Areas are
-    exact (closed-form arc integrals, :mod:`factors.overlap`). Flat (== 1) for disjoint
-    ellipses. The residual splits ``Delta`` over the four quadrants ``Q_k`` of the detection's
-    frame (centred on it, along its axes): ``r_k = |(D △ P) ∩ Q_k| / |D ∪ P| >= 0``,
-    ``sum_k r_k = Delta``, so the refinement minimises ``sum_j sigma_j^-1 sum_k r_jk^2``, which
-    lies in ``[Delta_j^2 / 4, Delta_j^2]`` per pair and vanishes exactly where ``Delta_j`` does.
-    Why not one row: ``Delta ~ k(direction) |delta|`` near the optimum (the symmetric
-    difference grows linearly with a displacement ``delta``), a cone, and one scalar row per
-    object gives a rank-deficient Gauss-Newton system below 6 objects (and ``sqrt(Delta)``
-    adds an unbounded slope): LM crawled, capped. Each ``r_k`` is such a cone too, but for a
-    degree-1 cone the Gauss-Newton step ``-J^+ r`` is exactly ``-delta`` once the stacked
-    rows have full rank (Euler: ``J delta = r``), which 4 rows per object give from 2 objects.
-    The rows and their exact gradient are :func:`overlap_residual`. For disjoint ellipses the
-    rows still sum to 1 but their squares are not flat: smallest when the projection spreads
-    evenly over the detection's quadrants, a mild pull towards it, too weak in practice (a
-    Chess start that separated a small object's projection from its detection diverged to
-    4.5 m). The pose factors therefore evaluate iou with ``disjoint_hull``: a DISJOINT pair
-    gets the giou rows (IoU + the hull gap ``|C \\ (D ∪ P)| / |C|``, which shrinks as the
-    ellipses approach). On first contact the rows drop by the gap term (the cost only
-    decreases into overlap, so no step towards the detection is held back), and every
-    overlapping pair, hence the optimum, keeps the iou rows. ``residual("iou")`` and
-    ``cost("iou")`` are the metric itself (no fallback).
+    Jaccard distance ``Delta = 1 - |D ∩ P| / |D ∪ P|`` in ``[0, 1]`` (the cost); flat (== 1)
+    for disjoint ellipses. ``r_k = |(D △ P) ∩ Q_k| / |D ∪ P| >= 0`` over the four quadrants
+    ``Q_k`` of the detection's frame (centred on it, along its axes), ``sum_k r_k = Delta``.
+    With ``disjoint_hull`` (the pose factors) a DISJOINT pair gets the giou rows instead;
+    ``residual("iou")`` and ``cost("iou")`` are the metric itself.
 ``giou`` [4]
-    ``Delta = 1 - GIoU``, ``GIoU = IoU - |C \\ (D ∪ P)| / |C|`` (Rezatofighi et al.), ``C`` the
-    convex hull of the two ellipses; in ``[0, 2]`` (the cost). Exactly flat when one ellipse
-    contains the other (``C`` is then the larger one). The hull area is exact (arcs + common
-    tangents, :mod:`factors.overlap`); option ``hull_directions`` (default 128) is the number of
-    normal directions used to bracket the common tangents. Residual as iou, per quadrant:
+    ``Delta = 1 - GIoU``, ``GIoU = IoU - |C \\ (D ∪ P)| / |C|``, ``C`` the convex hull of the
+    two ellipses; in ``[0, 2]`` (the cost), flat when one ellipse contains the other. Option
+    ``hull_directions`` (default 128, >= 8): normals bracketing the common tangents.
     ``r_k = |(D △ P) ∩ Q_k| / |D ∪ P| + |(C \\ (D ∪ P)) ∩ Q_k| / |C|``, ``sum_k r_k = Delta``.
 ``bbox`` [4]
-    ``r = B_D - B_P`` with ``B = [xmin, ymin, xmax, ymax]`` the axis-aligned boxes; cost is the
-    squared norm. Not rotation invariant (boxes follow the image axes).
+    ``r = B_D - B_P``, ``B = [xmin, ymin, xmax, ymax]`` the axis-aligned boxes; cost the
+    squared norm (not rotation invariant).
 ``qbbox`` [4]
-    QuadricSLAM's truncated box: ``r = B_D^trunc - B_P^trunc`` where ``B^trunc`` is the exact
-    box of the part of an ellipse inside the image ``[0, W] x [0, H]`` (:func:`clipped_bbox`;
-    the detection's box is clipped the same way, so identical ellipses give 0). Requires
-    ``image_size=(W, H)`` (pixels). If an ellipse does not meet the image at all, its full box
-    clamped to the image is used (a degenerate box on the border, so the residual stays finite
-    and points back inside). Equal to ``bbox`` when both ellipses are inside the image.
+    ``r = B_D^trunc - B_P^trunc``, ``B^trunc`` the exact box of the part of an ellipse inside
+    the image ``[0, W] x [0, H]`` (:func:`clipped_bbox`); requires ``image_size=(W, H)`` px. An
+    ellipse that misses the image uses its full box clamped to the image. Equal to ``bbox``
+    when both ellipses are inside the image.
 ``algebraic`` [5]
     ``r = vec(Cn_D) - vec(Cn_P)``, ``vec`` = the 5 upper elements ``[C00, C01, C02, C11, C12]``
     of the normalised dual conics (``C*[2,2] = -1``); units px^2 (C00, C01, C11) and px.
 ``frobenius`` [5]
-    The paper's ``Delta_fro = ||Cn_D - Cn_P||_F`` is a norm. A least-squares solver needs a
-    smooth residual, so here **cost = Delta_fro^2** (squared Frobenius norm, same minimiser for
-    one pair) and ``r = [d00, sqrt2 d01, sqrt2 d02, d11, sqrt2 d12]`` with ``d = Cn_D - Cn_P``
-    (``d22 = 0``). ``Delta_fro = sqrt(cost)``. It differs from ``algebraic`` only by the
-    sqrt(2) weight of the off-diagonal elements.
+    cost = ``Delta_fro^2`` (the paper's ``Delta_fro = ||Cn_D - Cn_P||_F`` squared),
+    ``r = [d00, sqrt2 d01, sqrt2 d02, d11, sqrt2 d12]``, ``d = Cn_D - Cn_P``.
 ``wasserstein`` [5]
-    Squared 2-Wasserstein distance of the Gaussians ``N(c, Sigma = R diag(a^2, b^2) R^T)``:
-    ``|mu_D - mu_P|^2 + tr(S_D + S_P - 2 (S_D^1/2 S_P S_D^1/2)^1/2)``. For 2x2 covariances with
-    semi-axes ``a_i >= b_i`` and major axes at an angle ``delta``, the trace term is exactly
-    ``(a_D - a_P)^2 + (b_D - b_P)^2 + 2 P sin^2(delta) / (Q + sqrt(Q^2 - P sin^2(delta)))``
-    with ``P = (a_D^2 - b_D^2)(a_P^2 - b_P^2)``, ``Q = a_D a_P + b_D b_P`` (expand
-    ``tr(S_D S_P) + 2 sqrt(det S_D S_P) = Q^2 - P sin^2(delta)``). Residual
-    ``r = [mu_D - mu_P, a_D - a_P, b_D - b_P, k sin(delta)]``, ``k`` the square root of the
-    fraction: smooth at the optimum, and its Gauss-Newton Hessian in the angle equals the true
-    curvature ``2 P / Q`` (``delta`` reduced to ``[-pi/2, pi/2)``; ``r[4]`` flips sign only at
-    perpendicular axes, where the cost is continuous). An earlier polar-factor form
-    ``vec(S_D^1/2 - S_P^1/2 U)`` had half the true curvature, so LM oscillated.
+    Squared 2-Wasserstein distance of the Gaussians ``N(c, Sigma = R diag(a^2, b^2) R^T)``;
+    ``r = [mu_D - mu_P, a_D - a_P, b_D - b_P, k sin(delta)]`` with canonical semi-axes
+    ``a >= b``, ``delta`` the angle between the major axes reduced to ``[-pi/2, pi/2)``,
+    ``k = sqrt(2 P / (Q + sqrt(Q^2 - P sin^2 delta)))``, ``P = (a_D^2 - b_D^2)(a_P^2 - b_P^2)``,
+    ``Q = a_D a_P + b_D b_P`` (``r[4]`` flips sign only at perpendicular axes).
 ``bhattacharyya`` [5]
-    ``1/8 dmu^T S^-1 dmu + 1/2 ln(det S / sqrt(det S_D det S_P))``, ``S = (S_D + S_P) / 2``.
-    ``r = [L^-1 dmu / sqrt(8), G00, G11, sqrt2 G01]`` with ``S = L L^T`` (Cholesky) and
-    ``G = h(log N)`` the spectral function ``h(u) = sign(u) sqrt(ln cosh(u / 2) / 2)`` of
-    ``N = S_D^-1/2 S_P S_D^-1/2``: the shape term equals ``sum_i ln cosh(ln(lambda_i) / 2) / 2``
-    over N's eigenvalues, and ``h`` is odd and analytic, so ``r`` is smooth at the optimum.
+    ``1/8 dmu^T S^-1 dmu + 1/2 ln(det S / sqrt(det S_D det S_P))``, ``S = (S_D + S_P) / 2``;
+    ``r = [L^-1 dmu / sqrt(8), G00, G11, sqrt2 G01]``, ``S = L L^T`` (Cholesky), ``G = h(log N)``
+    with ``h(u) = sign(u) sqrt(ln cosh(u / 2) / 2)`` and ``N = S_D^-1/2 S_P S_D^-1/2``.
 ``level_set`` [n_azimuths * n_levels]
     ``r_i = Phi_D(x_i) - Phi_P(x_i)`` at the sample points of :func:`level_set_sample_points`
-    (on the level curves of the DETECTION); cost ``sum r_i^2`` (the paper's Delta_lvs).
-    Options ``n_azimuths`` (6), ``n_levels`` (4), ``scale`` (2.0), ``adaptive`` (True).
+    (on the level curves of the DETECTION); cost ``sum r_i^2``. Options ``n_azimuths`` (6),
+    ``n_levels`` (4), ``scale`` (2.0), ``adaptive`` (True).
 
 Invariances: iou, giou, wasserstein, bhattacharyya and level_set are invariant to a common
-rigid motion of both ellipses (level_set needs an even ``n_azimuths``, see the sampling);
-bbox/qbbox change with rotations; algebraic/frobenius change with rotations and translations.
+rigid motion of both ellipses (level_set needs an even ``n_azimuths``); bbox/qbbox change with
+rotations; algebraic/frobenius change with rotations and translations.
 """
 
 from __future__ import annotations

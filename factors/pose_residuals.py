@@ -1,8 +1,9 @@
 """Residuals and Jacobians of the ellipse metrics w.r.t. the camera pose, batched over objects.
 
-This module is pure numpy (no GTSAM). It evaluates, for ONE camera pose and ALL
-detection/ellipsoid pairs of a refinement at once, the metric residual of every pair and its
-Jacobian with respect to the pose; :mod:`factors.pose_factors` wraps it in GTSAM factors.
+Pure numpy (no GTSAM): for ONE camera pose and ALL detection/ellipsoid pairs of a refinement
+at once, the metric residual of every pair and its Jacobian with respect to the pose;
+:mod:`factors.pose_factors` wraps it in GTSAM factors. Derivations and the reasons behind the
+penalty's constants: ``docs/design/factors.md`` ("Pose residuals").
 
 Conventions
 -----------
@@ -13,98 +14,50 @@ Conventions
 * In the camera frame a world point moves as ``X_c(xi) = X_c - omega x X_c - v`` (first order).
 * The projected dual conic is ``C* = K A K^T`` with ``A = S_c - c_c c_c^T`` (3x3), ``c_c`` the
   ellipsoid centre and ``S_c = R S R^T`` its shape matrix (``S = R_e diag(axes^2) R_e^T``), both in
-  the camera frame. ``A`` equals ``P Q* P^T`` up to ``K``: ``C* = P Q* P^T`` exactly.
-  Its first-order change is ``dA = -[w]x A - A [w]x^T + v c_c^T + c_c v^T``.
+  the camera frame (``C* = P Q* P^T`` exactly). Its first-order change is
+  ``dA = -[w]x A - A [w]x^T + v c_c^T + c_c v^T``.
 
-Level-set residual (analytic, the product's hot path)
------------------------------------------------------
-For a sample ``x`` (pixels) of the detection, ``n = K^-1 (x, y, 1)`` (normalised, fixed), GUIDE
-section 2 gives ``Phi_proj(x) = 1 - C*[2,2] x~^T C*^-1 x~ = 1 - s n^T A^-1 n`` with
-``s = A[2,2]`` (``K``'s last row is ``e3``). With ``u = A^-1 n`` and ``g = n . u``::
-
-    r      = Phi_det(x) - Phi_proj(x) = (Phi_det(x) - 1) + s g
-    dr/dw  = 2 g (e3 x A e3) + 2 s (n x u)
-    dr/dv  = 2 g z_c e3 - 2 s (c_c . u) u
-
-(using ``A u = n``). Each of the 7 rows (``r - Phi_det + 1`` and the 6 Jacobian columns) is a
-quadratic form ``n^T Q n`` in the sample's ray, with ``Q`` a per-object 3x3 matrix bilinear in
-``A^-1`` and the features ``[A e3, z_c, s A^-1 c_c]`` (``(n x u)_k = -n^T [e_k]x A^-1 n``,
-``(c_c . u) u_k = n^T (A^-1 c_c)(A^-1 e_k)^T n``; :func:`_level_set_forms`). So one evaluation
-is: ``A^-1`` of every object by Sherman-Morrison from the world frame
-(``A_w^-1 = S_w^-1 + e e^T / (1 - d . e)``, ``e = S_w^-1 d``, ``d`` the camera-to-centre vector,
-``S_w^-1`` precomputed; ``A^-1 = R^T A_w^-1 R``), the 7 forms of all objects by one (N, 63) x
-(63, 63) matmul (:data:`_LEVEL_SET_FORMS`), and ONE batched matmul of the forms against the
-samples' monomials ``n_i n_j`` (N, M, 9), precomputed per layout: no Python loop over samples or
-objects, and no 3x3 inverse per evaluation. The samples are those of
-``factors.metrics.level_set_sample_points`` (same layout, tested), fixed at the initial pose;
-they are the affine image ``n = H_j (u, v, 1)`` of the unit layout, so laying them out is one
-matmul too.
-
-Conic metrics (analytic)
-------------------------
-``algebraic``, ``frobenius``, ``wasserstein``, ``bhattacharyya`` and ``bbox`` are smooth
-functions of the projection's normalised dual conic ``Cn = C* / (-C*[2,2])`` (centre
-``mu = -Cn[:2, 2]``, ``Sigma = Cn[:2, :2] + mu mu^T``). Their residuals are re-implemented
-here vectorised over the objects (equal to ``factors.metrics.residual``, tested) and
-differentiated through ``dC* = K dA K^T``, ``dCn = (dC* + Cn dC*[2,2]) / (-C*[2,2])``.
-``iou`` and ``giou`` evaluate the quadrant rows of all pairs in one vectorised call of
-:func:`factors.metrics.overlap_residual` (exact areas and their exact gradient w.r.t. the
-projection's ``(mu, Sigma)``, :mod:`factors.overlap`), chained through the same ``dCn``;
-iou with ``disjoint_hull`` (disjoint pairs get the giou rows, see ``factors.metrics``).
-``qbbox`` (piecewise: clipped at the image border) calls ``factors.metrics.residual`` and uses
-central differences on ``retract`` (step :data:`DEFAULT_NUMERIC_STEP`), one-sided where a side
-is invalid.
+Metrics
+-------
+* ``level_set`` (analytic): ``r = Phi_det(x) - Phi_proj(x) = (Phi_det(x) - 1) + s n^T A^-1 n``
+  at the detection's samples ``x`` (rays ``n = K^-1 (x, y, 1)``, ``s = A[2,2]``), fixed at the
+  initial pose (the layout of ``factors.metrics.level_set_sample_points``); residual and
+  Jacobian rows are quadratic forms in ``n`` (:func:`_level_set_forms`).
+* ``algebraic``, ``frobenius``, ``wasserstein``, ``bhattacharyya``, ``bbox`` (analytic):
+  :func:`factors.metrics.conic_residuals` of the normalised dual conic
+  ``Cn = C* / (-C*[2,2])``, differentiated through ``dC* = K dA K^T``,
+  ``dCn = (dC* + Cn dC*[2,2]) / (-C*[2,2])``.
+* ``iou``, ``giou`` (analytic): :func:`factors.metrics.overlap_residual` of all pairs in one
+  call (exact area gradients w.r.t. the projection's ``(mu, Sigma)``, chained through ``dCn``),
+  with ``disjoint_hull`` (disjoint pairs get the giou rows).
+* ``qbbox``: ``factors.metrics.residual`` and central differences on ``retract`` (step
+  :data:`DEFAULT_NUMERIC_STEP`), one-sided where a side is invalid.
 
 Evaluations are memoised on the pose value and their arrays are read-only (shared by the
 factors that slice them).
 
-Invalid projections (penalty)
------------------------------
-The projection of an ellipsoid is an ellipse only while the whole ellipsoid is in front of the
-camera: depth margin ``m = z_c - sqrt(S_c[2,2]) > 0`` (see
-:func:`factors.geometry.ellipsoid_depth_margins`). When ``m <= min_depth_margin`` during an
-optimisation (ellipsoid behind the camera, crossing its principal plane, or containing it), the
-pair's residual is replaced by the bounded penalty (every one of the ``dim`` components equal)::
+Invalid projections (penalty) and saturation
+--------------------------------------------
+A projection is valid while the whole ellipsoid is in front of the camera: depth margin
+``m = z_c - sqrt(S_c[2,2]) > min_depth_margin`` (m; as
+:func:`factors.geometry.ellipsoid_depth_margins`). Otherwise the pair's ``dim`` residual
+components all equal ``sqrt(P_j / dim) * (1 + d / (d + d_s))``, ``d = min_depth_margin - m``,
+``d_s`` the ellipsoid's largest semi-axis (m): cost in ``[P_j, 4 P_j)``, Jacobian
+``-sqrt(P_j/dim) d_s / (d + d_s)^2 dm/dxi`` (``dm/dw = e3 x c_c - (e3 x S_c e3) /
+sqrt(S_c[2,2])``, ``dm/dv = -e3``).
 
-    r_k = sqrt(P_j / dim) * (1 + d / (d + d_s)),   d = min_depth_margin - m >= 0
+``P_j = penalty_cost * rho_j^2`` (:attr:`PoseResidualModel.penalty_costs`), ``rho_j`` the
+pair's reference residual magnitude: ``L_j`` px for bbox / qbbox / wasserstein / algebraic /
+frobenius, ``max(1, s_max_j)^2`` for level_set (``s_max_j`` its sampling scale), 1 for iou /
+giou / bhattacharyya; ``L_j = max(image diagonal, |c_D| + max(a_D, b_D))`` px.
 
-so its cost lies in ``[P_j, 4 P_j)`` (finite, never NaN), with ``d_s`` the ellipsoid's largest
-semi-axis (m). Its Jacobian ``-sqrt(P_j/dim) d_s / (d + d_s)^2 dm/dxi`` points towards a positive
-margin (``dm/dw = e3 x c_c - (e3 x S_c e3) / sqrt(S_c[2,2])``, ``dm/dv = -e3``); a Gauss-Newton
-step on the penalty alone, ``|r| / |dr/dm|``, does not depend on ``P_j``.
-
-A barrier must cost more than the valid poses LM can compare it with. A valid projection can
-cost arbitrarily much (a very thin projection near the principal plane: level-set costs of
-1e10-1e12 were measured against a penalty of 3.9e9), so the residual LM sees for a VALID pair
-is saturated above half the penalty (``c = ||r||^2`` the metric's cost, ``c_0 = P_j / 2``)::
-
-    h(c) = c                                               for c <= c_0
-    h(c) = c_0 + w (1 - exp(-(c - c_0) / w)),  w = 0.4 P_j   above (C^1, h < 0.9 P_j)
-    r_sat = r sqrt(h(c) / c)
-
-Hence every valid cost LM compares is below ``P_j`` and every penalty is at least ``P_j``: the
-barrier holds whatever the metric, and below ``c_0`` (every pose LM meets in practice) the
-factor is exactly the metric. The reported residuals
-and costs (:attr:`PoseEvaluation.residuals`, :meth:`PoseResidualModel.costs`, the refinement's
-``per_detection_cost``) are the metric's own, unsaturated; the GTSAM factors use
-:attr:`PoseEvaluation.factor_residuals`.
-
-The penalty is kept small enough for the other pairs' information to survive in double
-precision next to it (a penalty of ~4e19 for algebraic/frobenius hid every other residual).
-The metrics' costs have different units: ``P_j = penalty_cost * rho_j^2``
-(:attr:`PoseResidualModel.penalty_costs`) with ``rho_j`` the pair's reference residual
-magnitude: ``L_j`` px for bbox / qbbox / wasserstein and for algebraic / frobenius (see
-below), ``max(1, s_max_j)^2`` for level_set (``Phi`` units; ``s_max_j`` its sampling scale)
-and 1 for iou / giou / bhattacharyya; ``L_j = max(image diagonal, |c_D| + max(a_D, b_D))`` px
-is the detection's reference length. With the default ``penalty_cost``
-(:data:`DEFAULT_PENALTY_COST` = 1e8) the saturation starts only beyond ~7000 reference lengths
-of misfit (bbox, wasserstein). Algebraic / frobenius, whose residual is quadratic in px, use
-``rho_j = L_j`` too: ``P_j`` ~ 6e13 px^4 on a 640x480 image instead of the 4e19 of
-``rho_j = L_j^2``, which leaves ~1e-8 relative precision to the other pairs' costs (~1e6
-px^4). So Levenberg-Marquardt rejects steps into the invalid region and, from an invalid
-start, is pushed back to valid poses. A robust kernel (``factors.pose_factors``) flattens
-every large residual, the penalty included: with one, the barrier is only as strong as the
-kernel lets it be.
+The GTSAM factors see each VALID pair's residual saturated above half the penalty (``c =
+||r||^2``, ``c_0 = P_j / 2``): ``h(c) = c`` for ``c <= c_0``, else ``c_0 + w (1 - exp(-(c -
+c_0) / w))`` with ``w = 0.4 P_j`` (C^1, ``h < 0.9 P_j``), ``r_sat = r sqrt(h(c) / c)``; so every
+valid cost is below every penalty. Reported residuals and costs
+(:attr:`PoseEvaluation.residuals`, :meth:`PoseResidualModel.costs`) are the metric's own; the
+factors use :attr:`PoseEvaluation.factor_residuals`. A robust kernel
+(``factors.pose_factors``) flattens the penalty too.
 """
 
 from __future__ import annotations
