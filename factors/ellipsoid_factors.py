@@ -23,9 +23,6 @@ squares does; GTSAM's robust noise models reweight a whole factor, so a factor o
 needs its kernel inside). A view whose ellipsoid is not entirely in front of its camera (depth
 margin <= ``min_depth_margin`` m) gives constant rows (total cost ``penalty_cost * weight^2``,
 zero Jacobian): LM rejects steps that go there. The noise model is unit.
-
-Why many views per factor: in Python the cost is in numpy calls and factor round trips, not in
-the arithmetic (GUIDE 3); a factor over V views costs about as much as a factor over one.
 """
 
 from __future__ import annotations

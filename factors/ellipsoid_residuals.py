@@ -28,11 +28,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from factors.geometry import Camera, Ellipse, level_values
+from factors.geometry import Camera, Ellipse, level_values, skew
 
 __all__ = [
     "LevelSetSamples",
-    "camera_frame_dual_conic",
     "dual_quadric",
     "dual_quadric_jacobians",
     "level_set_residual_and_gradient",
@@ -41,9 +40,7 @@ __all__ = [
     "stack_samples",
 ]
 
-_SKEW = np.array([[[0, 0, 0], [0, 0, -1], [0, 1, 0]],
-                  [[0, 0, 1], [0, 0, 0], [-1, 0, 0]],
-                  [[0, -1, 0], [1, 0, 0], [0, 0, 0]]], dtype=float)
+_SKEW = skew(np.eye(3)) + 0.0  # [e_k]x, k = 0, 1, 2 (+ 0.0: no -0.0 entries)
 
 
 class LevelSetSamples:
@@ -117,12 +114,6 @@ def dual_quadric_jacobians(rotation: np.ndarray, center: np.ndarray,
     dQ[..., 6:9, :3, :3] = 2.0 * a2[..., :, None, None] * (
         Rt[..., :, :, None] * Rt[..., :, None, :])
     return dQ
-
-
-def camera_frame_dual_conic(camera_from_world: np.ndarray, Q: np.ndarray) -> np.ndarray:
-    """``A = [R|t] Q* [R|t]^T`` (3x3): the projected dual conic without ``K``."""
-    P = camera_from_world[:3, :]
-    return P @ Q @ P.T
 
 
 def level_set_residual_and_gradient(

@@ -699,22 +699,13 @@ def _overlap_rows(
     return r, d_r
 
 
-def _iou_cost(det: Ellipse, proj: Ellipse) -> float:
-    return overlap_delta("iou", det.params(), proj.params())
-
-
-def _giou_cost(det: Ellipse, proj: Ellipse, hull_directions: int = HULL_DIRECTIONS) -> float:
-    return overlap_delta("giou", det.params(), proj.params(), _hull_directions(hull_directions))
-
-
-def _iou_residual(det: Ellipse, proj: Ellipse) -> np.ndarray:
-    return overlap_residual("iou", det.params(), proj.params())[0]
-
-
-def _giou_residual(det: Ellipse, proj: Ellipse,
-                   hull_directions: int = HULL_DIRECTIONS) -> np.ndarray:
-    return overlap_residual("giou", det.params(), proj.params(),
-                            _hull_directions(hull_directions))[0]
+def _overlap(name: str, det: Ellipse, proj: Ellipse, hull_directions: int = HULL_DIRECTIONS,
+             as_cost: bool = False) -> np.ndarray | float:
+    """iou / giou of one pair: the residual rows (4,), or the cost ``Delta`` if ``as_cost``."""
+    n = _hull_directions(hull_directions)
+    if as_cost:
+        return overlap_delta(name, det.params(), proj.params(), n)
+    return overlap_residual(name, det.params(), proj.params(), n)[0]
 
 
 def _qbbox_residual(det: Ellipse, proj: Ellipse, image_size: object = None) -> np.ndarray:
@@ -731,10 +722,9 @@ _RESIDUALS = {
     **{m: functools.partial(_conic_residual, m) for m in CONIC_METRICS},
     "qbbox": _qbbox_residual,
     "level_set": _level_set_residual,
-    "iou": _iou_residual,
-    "giou": _giou_residual,
+    **{m: functools.partial(_overlap, m) for m in ("iou", "giou")},
 }
-_SCALAR_COSTS = {"iou": _iou_cost, "giou": _giou_cost}
+_SCALAR_COSTS = {m: functools.partial(_overlap, m, as_cost=True) for m in ("iou", "giou")}
 
 
 def residual(name: str, detection: Ellipse, projection: Ellipse, **options: object) -> np.ndarray:

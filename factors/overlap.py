@@ -139,15 +139,10 @@ class _Batch:
 
 def _newton_bracketed(fn, lo: np.ndarray, hi: np.ndarray, f0: np.ndarray, f1: np.ndarray,
                       neg_lo: np.ndarray, f_tol: np.ndarray) -> np.ndarray:
-    """Roots (oracle: ``_bracketed_root``): roots of ``fn(t) -> (f, df)`` (elementwise) in
-    brackets ``[lo, hi]``, safeguarded Newton from the secant guess.
-
-    An element stops when ``|f| <= f_tol`` (rounding level of ``f``), when a Newton step is
-    below :data:`_NEWTON_STEP_TOL` (the next step would be at rounding level: quadratic
-    convergence) or when the bracket is that small. The oracle instead iterates until
-    the step is below 1e-15, which near a double root (two contours almost tangent) takes ~40
-    linearly converging steps; there the root is only determined to ~sqrt(eps) by ``f``
-    anyway, and an area depends on it to second order (both boundaries meet at the root)."""
+    """Roots of ``fn(t) -> (f, df)`` (elementwise) in brackets ``[lo, hi]``, safeguarded Newton
+    from the secant guess (oracle: ``_bracketed_root``). An element stops when ``|f| <=
+    f_tol``, after a Newton step below :data:`_NEWTON_STEP_TOL`, or when its bracket is that
+    small (why this suffices: ``docs/design/factors.md``)."""
     lo, hi = lo.copy(), hi.copy()
     den = f0 - f1
     safe = np.where(den != 0.0, den, 1.0)

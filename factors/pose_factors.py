@@ -18,25 +18,12 @@ WHITENED residual norm ``sqrt(Delta_j / sigma_j)``; defaults per metric in
 :data:`DEFAULT_ROBUST_SCALE` (about the residual norm of a clearly wrong match: e.g. for the level
 set, 2.0 is an rms level discrepancy of 0.4 over 24 samples).
 
-Design: one shared, memoised evaluation; batched without robust kernels
------------------------------------------------------------------------
-In Python the cost is in numpy calls, not in GTSAM: evaluating each pair separately (the
-GUIDE's "one factor per object") repeats the same dozen numpy calls N times. So all the
-factors of one solve share ONE :class:`factors.pose_residuals.PoseResidualModel`: the first
-factor called at a pose evaluates every pair at once (vectorised over objects and samples,
-analytic Jacobians computed in the same pass) and memoises it on the pose value; the others
-slice their rows. On top of it, two forms (:func:`pose_factors`):
-
-* ``batched=True``: ONE factor for all pairs with a Diagonal noise model whose rows of pair
-  ``j`` have std ``sqrt(sigma_j)``: the same weighted error as N factors, one Python round trip
-  per evaluation. ``service.localization.refine`` uses it when no robust kernel is requested.
-* default: one factor per pair (needed for per-detection robust kernels: GTSAM reweights a
-  whole factor), each slicing the shared evaluation.
-
-Measured (``python -m bench.refine_speed``, level set, LM solve only, median CPU ms, one run on
-the loaded 2-core machine): N=8: batched 0.71, per-detection shared 1.01, per-detection
-separate 3.11; N=16: 0.88, 1.53, 6.45. Numbers and the command are in ``docs/results.md``
-(section ``refine_speed``).
+One shared, memoised evaluation: all the factors of one solve share ONE
+:class:`factors.pose_residuals.PoseResidualModel` (every pair evaluated at once per pose, the
+factors slice their rows). Two forms (:func:`pose_factors`): ``batched=True``, ONE factor for
+all pairs with a Diagonal noise model (pair ``j``'s rows std ``sqrt(sigma_j)``; the same
+weighted error, one Python round trip; impossible with per-detection robust kernels), and the
+default, one factor per pair. Why and measurements: ``docs/design/factors.md`` ("Pose factors").
 
 Jacobians: analytic for the metrics in ``factors.pose_residuals.ANALYTIC_METRICS`` (every
 metric but ``qbbox``, see :mod:`factors.pose_residuals`); central differences of
@@ -80,12 +67,8 @@ def pose3(T: np.ndarray) -> gtsam.Pose3:
 
 
 #: Default robust threshold ``k`` per metric, on the whitened residual norm
-#: ``sqrt(Delta_j / sigma_j)`` (units: those of the metric's residual). Calibration
-#: (``bench.refine_speed`` scenes: detection noise 1.5 px on the centre, 3 % on the semi-axes,
-#: 1 degree on the angle; N = 8, at the true pose): inlier residual norms have a 90th
-#: percentile of 1.03 (level_set), 0.33 (iou, giou), 3.4 px (bbox, qbbox), 2.5 px
-#: (wasserstein), 0.038 (bhattacharyya), 1400 / 1600 (algebraic / frobenius, px^2). ``k`` is
-#: about twice to three times that: beyond it a detection is treated as an outlier.
+#: ``sqrt(Delta_j / sigma_j)`` (units: those of the metric's residual); about twice to three
+#: times the inliers' 90th percentile (calibration: ``docs/design/factors.md``).
 DEFAULT_ROBUST_SCALE: dict[str, float] = {
     "level_set": 2.0,
     "iou": 0.6,

@@ -117,9 +117,7 @@ _PENALTY_PIXEL_POWER: dict[str, int] = {
 assert set(_PENALTY_PIXEL_POWER) == set(METRIC_NAMES)
 # tangent generators: d(A)/d(omega_k) = G + G^T with G = -[e_k]x A; d(A)/d(v_k) = G + G^T with
 # G = e_k c^T
-_SKEW_BASIS = np.array([[[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]],
-                        [[0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [-1.0, 0.0, 0.0]],
-                        [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]])
+_SKEW_BASIS = skew(np.eye(3)) + 0.0  # [e_k]x, k = 0, 1, 2
 
 
 def _level_set_forms(f: np.ndarray, Ai: np.ndarray) -> np.ndarray:
@@ -325,7 +323,7 @@ class PoseResidualModel:
             self._init_level_set(T0)
             self.dim = self._M
         else:
-            self.dim = self._metric_dim()
+            self.dim = int(metrics.residual_size(self.metric, **self.options))
         self._set_layout_dependents()
         self.analytic = metric in ANALYTIC_METRICS
 
@@ -404,11 +402,8 @@ class PoseResidualModel:
         y, 1) = H_j (u_m, v_m, 1)`` with a per-object 3x3 ``H_j``: one matmul lays out all."""
         if not hasattr(self, "_ls_const"):
             M = int(metrics.residual_size("level_set", **self.options))  # validates options
-            scale = self.options.get("scale", metrics.DEFAULT_LEVEL_SET_SCALE)
-            if isinstance(scale, bool) or not isinstance(scale, int | float) \
-                    or not (math.isfinite(scale) and scale > 0):
-                raise ValueError(
-                    f"option scale must be a positive finite number, got {scale!r}")
+            scale = metrics._positive_float(  # validated as by the metric
+                "scale", self.options.get("scale", metrics.DEFAULT_LEVEL_SET_SCALE))
             uv1, uv2 = _unit_level_set_layout(self.options.get("n_azimuths", 6),
                                               self.options.get("n_levels", 4))
             # canonical axes a >= b (the metric's layout does not depend on axis labelling)
@@ -460,9 +455,6 @@ class PoseResidualModel:
         cam = self.camera
         return np.stack([cam.fx * self._nT[:, 0] + cam.cx, cam.fy * self._nT[:, 1] + cam.cy],
                         axis=-1)
-
-    def _metric_dim(self) -> int:
-        return int(metrics.residual_size(self.metric, **self.options))
 
     # ------------------------------------------------------------------ evaluation
     def _camera_frame(
@@ -718,8 +710,3 @@ class PoseResidualModel:
         the penalty's cost where the projection is invalid."""
         ev = self.evaluate(world_from_camera, jacobian=False)
         return np.einsum("nm,nm->n", ev.residuals, ev.residuals)
-
-
-_I3 = np.eye(3)
-
-
