@@ -169,38 +169,28 @@ def ellipsoid_views_factor(
             T_cw = invert_poses(np.array([values.atPose3(x).matrix() for x in cam_keys]))[cam]
         ok = depth_margins(T_cw, R, c, axes) > min_depth_margin
         want = H is not None
-        all_ok = bool(ok.all())
-        if all_ok:
-            sub, Rv, cv, av, T = all_samples, R, c, axes, T_cw
-        else:
-            sub = LevelSetSamples(None, n[ok], phi[ok])
-            Rv, cv, av = ((R, c, axes) if n_obj == 1 else (R[ok], c[ok], axes[ok]))
-            T = T_cw[ok]
         out = np.empty((V, M))
-        if not all_ok:
-            out[~ok] = pen[~ok, None]
-        J_e = J_c = None
+        out[~ok] = pen[~ok, None]
+        J_e = np.zeros((V, M, 9)) if want else None
+        J_c = np.zeros((V, M, 6)) if want and cam is not None else None
         if ok.any():
+            if ok.all():
+                sub, Rv, cv, av, T = all_samples, R, c, axes, T_cw
+            else:
+                sub = LevelSetSamples(None, n[ok], phi[ok])
+                Rv, cv, av = ((R, c, axes) if n_obj == 1 else (R[ok], c[ok], axes[ok]))
+                T = T_cw[ok]
             r, Je, Jc = observation_residual(T, Rv, cv, av, sub, want)
-            scale = w[ok] if not all_ok else w
+            scale = w[ok]
             if robust_scale is not None:
                 scale = scale * huber_row_scale(np.abs(scale) * np.sqrt((r * r).sum(axis=1)),
                                                 robust_scale)
             out[ok] = r * scale[:, None]
             if want:
-                if all_ok:
-                    J_e = Je * scale[:, None, None]
-                    J_c = Jc * scale[:, None, None] if cam is not None else None
-                else:
-                    J_e = np.zeros((V, M, 9))
-                    J_e[ok] = Je * scale[:, None, None]
-                    if cam is not None:
-                        J_c = np.zeros((V, M, 6))
-                        J_c[ok] = Jc * scale[:, None, None]
+                J_e[ok] = Je * scale[:, None, None]
+                if J_c is not None:
+                    J_c[ok] = Jc * scale[:, None, None]
         if want:
-            if J_e is None:
-                J_e = np.zeros((V, M, 9))
-                J_c = np.zeros((V, M, 6)) if cam is not None else None
             i = 0
             for B in blocks(J_e, obj_sel, n_obj):
                 H[i] = np.ascontiguousarray(B[:, :6])

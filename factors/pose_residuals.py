@@ -81,7 +81,6 @@ from factors.geometry import (
     ellipse_params_and_validity,
     gaussian_derivatives_from_dual_conics,
     gaussians_from_dual_conics,
-    params_from_dual_conics,
     skew,
     so3_exp,
 )
@@ -373,23 +372,12 @@ class PoseResidualModel:
     def _projections(self, world_from_camera: np.ndarray) -> list[Ellipse | None]:
         """Projected ellipses at a pose (None where the projection is not an ellipse)."""
         A, _, _, margins = self._camera_frame(np.asarray(world_from_camera, dtype=float))
-        out: list[Ellipse | None] = [None] * self.n
-        ok = np.flatnonzero(margins > self.min_depth_margin)
-        if ok.size == 0:
-            return out
-        C = self._K @ A[ok] @ self._K.T
-        try:
-            params = params_from_dual_conics(C)
-        except (DegenerateProjectionError, GeometryError):  # one bad conic: go one by one
-            for i, j in enumerate(ok):
-                try:
-                    out[j] = Ellipse(*params_from_dual_conics(C[i : i + 1])[0])
-                except (DegenerateProjectionError, GeometryError):
-                    out[j] = None
-            return out
-        for i, j in enumerate(ok):
-            out[j] = Ellipse(*params[i])
-        return out
+        C = self._K @ A @ self._K.T
+        with np.errstate(divide="ignore", invalid="ignore"):  # invalid rows: not used
+            params, ellipse = ellipse_params_and_validity(
+                *gaussians_from_dual_conics(C / -C[:, 2:, 2:]))
+        ok = (margins > self.min_depth_margin) & ellipse
+        return [Ellipse(*params[j]) if ok[j] else None for j in range(self.n)]
 
     def _init_level_set(self, T0: np.ndarray | None) -> None:
         """Fix the level-set samples: ``factors.metrics.level_set_sample_points``' layout,
