@@ -122,7 +122,7 @@ _SKEW_BASIS = skew(np.eye(3)) + 0.0  # [e_k]x, k = 0, 1, 2
 def _level_set_forms(f: np.ndarray, Ai: np.ndarray) -> np.ndarray:
     """The 7 quadratic forms ``Q_k`` (7, 3, 3) of one object whose values ``n^T Q_k n`` at a
     sample's normalised ray ``n`` are ``r - Phi_det + 1 = s g`` (k = 0) and ``d r / d xi``
-    (k = 1..6, ``xi = [omega, v]``); module docstring, "Level-set residual":
+    (k = 1..6, ``xi = [omega, v]``); docs/design/factors.md, "Level-set residual":
     with ``u = A^-1 n``: ``g = n^T A^-1 n``, ``(n x u)_k = -n^T [e_k]x A^-1 n`` and
     ``(c_c . u) u_k = n^T (A^-1 c_c) (A^-1 e_k)^T n``.
 
@@ -472,8 +472,6 @@ class PoseResidualModel:
             ev = self._evaluate_numeric(T, jacobian)
         elif self.metric == "level_set":
             ev = self._evaluate_level_set(T, jacobian)
-        elif self.metric in ("iou", "giou"):
-            ev = self._evaluate_overlap(T, jacobian)
         else:
             ev = self._evaluate_conic(T, jacobian)
         ev = self._saturate(ev)
@@ -524,7 +522,8 @@ class PoseResidualModel:
 
     def _evaluate_level_set(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
         """Level-set residuals and Jacobians of all pairs: ONE batched matmul of per-object
-        quadratic forms against the samples' monomials (module docstring, "Level-set residual").
+        quadratic forms against the samples' monomials (docs/design/factors.md, "Level-set
+        residual").
 
         ``A^-1`` comes from the world frame by Sherman-Morrison, ``A_w = S_w - d d^T`` (``d``
         the centre seen from the camera, world axes): ``A_w^-1 = S_w^-1 + e e^T / (1 - d.e)``,
@@ -603,52 +602,47 @@ class PoseResidualModel:
         dCs = KG + KG.transpose(0, 1, 3, 2)  # (N, 6, 3, 3)
         return Cn, (dCs + Cn[:, None] * dCs[:, :, 2, 2, None, None]) / w[:, None, None, None]
 
-    def _evaluate_overlap(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
-        """iou / giou: the quadrant rows ``r_j`` (4,) of :func:`factors.metrics.
-        overlap_residual` (exact areas, all pairs in one vectorised call) and their analytic
-        pose Jacobian: the exact area gradients w.r.t. the projection's ``(mu, Sigma)``,
-        chained through ``dCn``."""
+    def _evaluate_conic(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
+        """The metrics of the projections' normalised dual conics ``Cn`` (with their
+        derivatives ``dCn`` along the 6 tangents): :func:`factors.metrics.conic_residuals`,
+        or for iou / giou :meth:`_overlap_rows`."""
         A, c, S, margins = self._camera_frame(T)
         valid = margins > self.min_depth_margin
         Cn, dCn = self._normalised_dual_conics(A, c, valid, jacobian)
-        mu, sigma = gaussians_from_dual_conics(Cn)
-        dg = None
-        if dCn is not None:  # d(mu_x, mu_y, s00, s01, s11) / d xi, (N, 6, 5)
-            dmu, dsig = gaussian_derivatives_from_dual_conics(mu, dCn)
-            dg = np.concatenate([dmu, dsig[..., 0, 0, None], dsig[..., 0, 1, None],
-                                 dsig[..., 1, 1, None]], axis=-1)
-        r = np.zeros((self.n, self.dim))
-        J = None if dg is None else np.zeros((self.n, self.dim, 6))
-        # a projection whose Sigma is not positive definite is invalid (penalty rows)
-        params, ellipse = ellipse_params_and_validity(mu, sigma)
-        valid &= ellipse
-        idx = np.flatnonzero(valid)
-        proj = params[idx]
-        if idx.size:
-            hull_directions = self.options.get("hull_directions", HULL_DIRECTIONS)
-            rows, grad = metrics.overlap_residual(self.metric, self._det_params[idx], proj,
-                                                  hull_directions, gradient=J is not None,
-                                                  disjoint_hull=True)
-            r[idx] = rows
-            if J is not None:
-                J[idx] = grad @ dg[idx].transpose(0, 2, 1)
+        if self.metric in ("iou", "giou"):
+            r, J = self._overlap_rows(Cn, dCn, valid)
+        else:
+            r, J = metrics.conic_residuals(self.metric, self._det_params, Cn, dCn)
+            J = None if J is None else np.ascontiguousarray(J)
         if not valid.all():
             self._apply_penalty(r, J, ~valid, c, S, margins)
         return PoseEvaluation(r, J, valid, margins)
 
-    def _evaluate_conic(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
-        """The smooth metrics: :func:`factors.metrics.conic_residuals` of the projections'
-        normalised dual conics ``Cn`` and their derivatives ``dCn`` along the 6 tangents."""
-        A, c, S, margins = self._camera_frame(T)
-        valid = margins > self.min_depth_margin
-        all_valid = bool(valid.all())
-        Cn, dCn = self._normalised_dual_conics(A, c, valid, jacobian)
-        r, J = metrics.conic_residuals(self.metric, self._det_params, Cn, dCn)
-        if J is not None:
-            J = np.ascontiguousarray(J)
-        if not all_valid:
-            self._apply_penalty(r, J, ~valid, c, S, margins)
-        return PoseEvaluation(r, J, valid, margins)
+    def _overlap_rows(self, Cn: np.ndarray, dCn: np.ndarray | None, valid: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray | None]:
+        """iou / giou rows (N, 4) of :func:`factors.metrics.overlap_residual` (all pairs in one
+        call, ``disjoint_hull``) and their pose Jacobian: the exact area gradients w.r.t. the
+        projection's ``g = (mu_x, mu_y, s00, s01, s11)`` chained through ``dg / dxi``. A
+        projection whose Sigma is not positive definite is invalid: ``valid`` is updated in
+        place (its rows stay 0 for the penalty)."""
+        mu, sigma = gaussians_from_dual_conics(Cn)
+        params, ellipse = ellipse_params_and_validity(mu, sigma)
+        valid &= ellipse
+        r = np.zeros((self.n, self.dim))
+        J = None if dCn is None else np.zeros((self.n, self.dim, 6))
+        idx = np.flatnonzero(valid)
+        if idx.size:
+            rows, grad = metrics.overlap_residual(
+                self.metric, self._det_params[idx], params[idx],
+                self.options.get("hull_directions", HULL_DIRECTIONS), gradient=J is not None,
+                disjoint_hull=True)
+            r[idx] = rows
+            if J is not None:
+                dmu, dsig = gaussian_derivatives_from_dual_conics(mu[idx], dCn[idx])
+                dg = np.concatenate([dmu, dsig[..., 0, 0, None], dsig[..., 0, 1, None],
+                                     dsig[..., 1, 1, None]], axis=-1)  # (n, 6, 5)
+                J[idx] = grad @ dg.transpose(0, 2, 1)
+        return r, J
 
     # ------------------------------------------------------------------ generic metrics
     def _metric_rows(self, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
