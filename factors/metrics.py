@@ -138,12 +138,10 @@ _OPTIONS: dict[str, tuple[str, ...]] = {
 # --------------------------------------------------------------------------- validation
 
 
-def _check_name(name: str) -> None:
+def _check_options(name: str, options: dict) -> None:
+    """Known metric ``name`` (``ValueError``), known ``options`` (``TypeError``)."""
     if name not in _OPTIONS:
         raise ValueError(f"unknown metric {name!r}; valid names: {', '.join(METRIC_NAMES)}")
-
-
-def _check_options(name: str, options: dict) -> None:
     allowed = _OPTIONS[name]
     for key in options:
         if key not in allowed:
@@ -735,7 +733,6 @@ def residual(name: str, detection: Ellipse, projection: Ellipse, **options: obje
     options. Unknown ``name`` -> ``ValueError`` listing the valid names; unknown option ->
     ``TypeError`` naming it; bad option value -> ``ValueError``.
     """
-    _check_name(name)
     _check_options(name, options)
     _check_ellipse("detection", detection)
     _check_ellipse("projection", projection)
@@ -748,7 +745,6 @@ def cost(name: str, detection: Ellipse, projection: Ellipse, **options: object) 
     iou / giou return ``1 - IoU`` / ``1 - GIoU``; the others ``||residual||^2`` (frobenius is
     the *squared* Frobenius norm, wasserstein the *squared* W2 distance).
     """
-    _check_name(name)
     _check_options(name, options)
     _check_ellipse("detection", detection)
     _check_ellipse("projection", projection)
@@ -760,7 +756,6 @@ def cost(name: str, detection: Ellipse, projection: Ellipse, **options: object) 
 
 def residual_size(name: str, **options: object) -> int:
     """Length of :func:`residual` for metric ``name`` with these options."""
-    _check_name(name)
     _check_options(name, options)
     if name == "level_set":
         return (_positive_int("n_azimuths", options.get("n_azimuths", 6))
