@@ -337,25 +337,12 @@ class PoseResidualModel:
         self._cache_key, self._cache_jac, self._cache = None, False, None
 
     def _set_layout_dependents(self) -> None:
-        """Penalty costs and per-pair metric options, which depend on the level-set layout."""
+        """The penalty costs, which depend on the level-set layout."""
         self.penalty_costs = self._penalty_costs()
         self.penalty_costs.setflags(write=False)
         self._half_penalty = 0.5 * self.penalty_costs  # where the saturation starts
         self._saturation_floor = float(self._half_penalty.min())
         self._pen_amp = np.sqrt(self.penalty_costs / self.dim)  # (N,)
-        self._pair_options_cache: list[dict[str, Any]] | None = None
-
-    @property
-    def _pair_options(self) -> list[dict[str, Any]]:
-        """Per-pair options of the ``factors.metrics`` calls (the level set's samples stay
-        fixed at the current layout); built on first use."""
-        if self._pair_options_cache is None:
-            self._pair_options_cache = [self.options] * self.n
-            if self.metric == "level_set":
-                self._pair_options_cache = [
-                    {**self.options, "scale": float(sc), "adaptive": False}
-                    for sc in self.sampling_scale]
-        return self._pair_options_cache
 
     # ------------------------------------------------------------------ set-up
     def _penalty_costs(self) -> np.ndarray:
@@ -655,7 +642,7 @@ class PoseResidualModel:
                 continue
             try:
                 rj = np.asarray(metrics.residual(self.metric, self.detections[j], p,
-                                                 **self._pair_options[j]), dtype=float)
+                                                 **self.options), dtype=float)
             except (DegenerateProjectionError, GeometryError):
                 continue
             if rj.shape != (self.dim,) or not np.all(np.isfinite(rj)):
