@@ -388,12 +388,14 @@ def canonical_axes(P: np.ndarray) -> np.ndarray:
 
 def conic_residuals(
     name: str, detections: np.ndarray, Cn: np.ndarray, dCn: np.ndarray | None = None,
+    gaussians: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Residual rows (N, dim) of the smooth metric ``name`` (one of :data:`CONIC_METRICS`)
     between detections given as params ``detections`` (N, 5) (px, rad) and projections given
     as normalised dual conics ``Cn`` (N, 3, 3) (``Cn[2, 2] = -1``); with ``dCn`` (N, K, 3, 3),
     derivatives of ``Cn`` along K directions (e.g. the 6 pose tangents), also ``dr`` (N, dim,
-    K) along them, else None.
+    K) along them, else None. ``gaussians``: the projections' ``(mu (N, 2), Sigma (N, 2, 2))``
+    if known more precisely than from ``Cn`` (whose entries carry ~eps |mu|^2 of rounding).
 
     The one implementation of these metrics: :func:`residual` is its N = 1 view and
     :class:`factors.pose_residuals.PoseResidualModel` chains it to the pose (the scalar forms
@@ -408,7 +410,7 @@ def conic_residuals(
             r = r * _FRO_W
             J = None if J is None else J * _FRO_W[None, :, None]
         return r, J
-    mu, S = gaussians_from_dual_conics(Cn)
+    mu, S = gaussians_from_dual_conics(Cn) if gaussians is None else gaussians
     d = None if dCn is None else gaussian_derivatives_from_dual_conics(mu, dCn)
     rows = {"bbox": _bbox_rows, "wasserstein": _wasserstein_rows,
             "bhattacharyya": _bhattacharyya_rows}[name]
@@ -416,7 +418,9 @@ def conic_residuals(
 
 
 def _conic_residual(name: str, det: Ellipse, proj: Ellipse) -> np.ndarray:
-    return conic_residuals(name, det.params()[None], proj.dual_conic()[None])[0][0]
+    mu, S = proj.gaussian()
+    return conic_residuals(name, det.params()[None], proj.dual_conic()[None],
+                           gaussians=(mu[None], S[None]))[0][0]
 
 
 def _bbox_rows(P: np.ndarray, mu: np.ndarray, S: np.ndarray,

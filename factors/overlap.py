@@ -60,25 +60,18 @@ def _crossing_coefficients(A2: tuple, P1: tuple, Q1: tuple, dx: float,
             0.5 * (pap - qaq), _bilinear(A2, P1x, P1y, Q1x, Q1y))
 
 
-
 @functools.lru_cache(maxsize=8)
 def _direction_basis(n: int) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
     """Bases over the n hull directions ``t`` for :func:`_hull_batch`: (3, 2n) rows ``[1,
     cos 2t, sin 2t]`` then ``[0, -sin 2t, cos 2t]`` (``n^T Sigma n`` and half its derivative
     from the coefficients of ``_Batch.support``), (2, 2n) rows ``[cos t, sin t]`` then ``[-sin
     t, cos t]`` (``n . c`` and its derivative); and the cyclic next index (n,)."""
-    th, c, s = _directions(n)
-    c2, s2 = np.cos(2 * th), np.sin(2 * th)
+    th = np.linspace(0.0, _TWO_PI, n, endpoint=False)
+    c, s, c2, s2 = np.cos(th), np.sin(th), np.cos(2 * th), np.sin(2 * th)
     quad_rows = np.stack([np.concatenate([np.ones(n), np.zeros(n)]),
                           np.concatenate([c2, -s2]), np.concatenate([s2, c2])])
     centre_rows = np.stack([np.concatenate([c, -s]), np.concatenate([s, c])])
     return (quad_rows, centre_rows), np.roll(np.arange(n), -1)
-
-
-@functools.lru_cache(maxsize=8)
-def _directions(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    th = np.linspace(0.0, _TWO_PI, n, endpoint=False)
-    return th, np.cos(th), np.sin(th)
 
 
 
@@ -444,7 +437,8 @@ def _quadrant_sums_batch(b: _Batch, region: np.ndarray, arcs: tuple[np.ndarray, 
         cal, sal = ca[s_pair], sa[s_pair]
         nx_, ny_ = np.stack([-sal, cal]), np.stack([cal, sal])
         den = nx_ * wx + ny_ * wy
-        sv = -(nx_ * x0 + ny_ * y0) / np.where(den != 0.0, den, 1.0)
+        with np.errstate(over="ignore"):  # a tiny den: a cut far outside (0, 1), dropped
+            sv = -(nx_ * x0 + ny_ * y0) / np.where(den != 0.0, den, 1.0)
         inner = np.where((den != 0.0) & (sv > 0.0) & (sv < 1.0), sv, 1.0)
         sb = np.sort(np.concatenate([np.zeros((1, s_pair.size)), inner,
                                      np.ones((1, s_pair.size))]), axis=0)  # (4, m)

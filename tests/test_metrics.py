@@ -80,11 +80,13 @@ def test_cost_is_squared_residual_norm_with_fixed_length(d: Ellipse, p: Ellipse)
 @given(ellipses, ellipses)
 def test_smooth_metrics_equal_the_scalar_oracle(d: Ellipse, p: Ellipse):
     """The batched smooth metrics (``conic_residuals``, N = 1 through ``residual``) equal their
-    former scalar forms (``tests/oracles/metrics_reference.py``), pair by pair."""
+    former scalar forms (``tests/oracles/metrics_reference.py``), pair by pair, to 1e-9 of the
+    residual's size (the batched wasserstein reads the semi-axes and angle from ``Sigma``: a
+    nearly circular projection's angle is ill-conditioned there, its ``k sin(delta)`` ~1e-10
+    off)."""
     for name in ("bbox", "algebraic", "frobenius", "wasserstein", "bhattacharyya"):
         got, want = residual(name, d, p), metrics_reference.residual(name, d, p)
-        scale = 1.0 + (d.cx**2 + d.cy**2 + p.cx**2 + p.cy**2 if name in ("algebraic",
-                                                                      "frobenius") else 0.0)
+        scale = 1.0 + float(np.abs(want).max())
         if name == "wasserstein":
             # r[4] = k sin(delta) flips sign at perpendicular major axes (delta = -pi/2 or
             # pi/2, the same cost): rounding may pick either branch there
