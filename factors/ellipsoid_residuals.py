@@ -2,26 +2,14 @@
 
 Localization (:mod:`factors.pose_residuals`, metric ``level_set``) moves only the camera; map
 building moves the ellipsoids (and optionally the cameras). Both minimise the same residual at
-the same samples of the detection (``factors.metrics.level_set_sample_points``, non-adaptive
-layout; equality with :class:`factors.pose_residuals.PoseResidualModel` is tested)::
-
-    r(x) = Phi_det(x) - Phi_proj(x),   Phi_proj(x) = 1 - s n^T A^-1 n
-
-with ``n = K^-1 (x, y, 1)``, ``A = [R|t]_camera_from_world Q* [R|t]^T`` (3x3, the projected
-dual conic up to ``K``: ``C* = K A K^T``) and ``s = A[2, 2]``. The one derivative this module
-computes is the gradient w.r.t. ``A``::
-
-    dr = <G, dA>,   G = g e3 e3^T - s u u^T,   u = A^-1 n,  g = n . u
-
-and every Jacobian is that gradient contracted with ``dA`` along a tangent direction:
-
-* camera pose ``world_from_camera`` (GTSAM Pose3 right perturbation ``xi = [omega, v]``):
-  ``dA = -[w]x A - A [w]x^T + v c^T + c v^T`` (``c`` the ellipsoid centre in the camera frame);
-* ellipsoid pose (ellipsoid frame -> world, right perturbation ``[omega, v]``) and log
-  semi-axes: ``dA = P dQ* P^T`` with :func:`dual_quadric_jacobians` and ``P = [R|t]_cw``.
-
-Residuals are dimensionless (``Phi`` units). The factor weighting is that of localization:
-``factors.pose_factors.make_noise_model`` (isotropic std ``sqrt(sigma)``).
+the same samples of the detection (``factors.metrics.level_set_sample_points``, non-adaptive;
+equality with :class:`factors.pose_residuals.PoseResidualModel` is tested):
+``r(x) = Phi_det(x) - Phi_proj(x)``, ``Phi_proj(x) = 1 - s n^T A^-1 n`` with ``n = K^-1 (x,
+y, 1)``, ``A = [R|t]_camera_from_world Q* [R|t]^T`` (3x3; ``C* = K A K^T``), ``s = A[2, 2]``.
+Its gradient w.r.t. ``A`` is contracted with ``dA`` along the camera's Pose3 tangent (right
+perturbation of ``world_from_camera``) and the ellipsoid's ``[omega, v, d log axes]``
+(derivation: ``docs/design/factors.md``, "Ellipsoid residuals"). Residuals are dimensionless
+(``Phi`` units).
 """
 
 from __future__ import annotations

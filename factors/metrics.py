@@ -84,6 +84,7 @@ from factors.geometry import (
     dual_conics_from_params,
     gaussian_derivatives_from_dual_conics,
     gaussians_from_dual_conics,
+    level_values,
     sigma_entries,
 )
 from factors.names import METRIC_NAMES
@@ -293,10 +294,8 @@ def _level_template(n_azimuths: int, n_levels: int) -> tuple[np.ndarray, np.ndar
 def _adaptive_scale(det: Ellipse, proj: Ellipse | None, scale: float, adaptive: bool) -> float:
     if not adaptive or proj is None:
         return scale
-    c, s = math.cos(det.angle), math.sin(det.angle)
-    dx, dy = proj.cx - det.cx, proj.cy - det.cy
-    u, v = (dx * c + dy * s) / det.a, (dy * c - dx * s) / det.b
-    return max(scale, LEVEL_SET_ADAPTIVE_GAIN * math.sqrt(u * u + v * v))
+    phi = float(level_values(det.params()[None], proj.center[None, None])[0, 0])  # Phi_D(c_P)
+    return max(scale, LEVEL_SET_ADAPTIVE_GAIN * math.sqrt(phi))
 
 
 def level_set_sampling_scale(
@@ -364,11 +363,7 @@ def _level_set_residual(det: Ellipse, proj: Ellipse, n_azimuths: int = 6, n_leve
     pts = _sample_points(det, s_max, n_azimuths, n_levels)
     _, r2 = _level_template(n_azimuths, n_levels)
     phi_det = r2 * (s_max * s_max)  # exact Phi_D on the sampled level curves
-    c, s = math.cos(proj.angle), math.sin(proj.angle)
-    # Phi_P(x) = |diag(1/a, 1/b) R^T (x - c_P)|^2
-    uv = (pts - (proj.cx, proj.cy)) @ np.array([[c / proj.a, -s / proj.b],
-                                                [s / proj.a, c / proj.b]])
-    return phi_det - np.einsum("ij,ij->i", uv, uv)
+    return phi_det - level_values(proj.params()[None], pts[None])[0]
 
 
 # --------------------------------------------------------------------------- smooth metrics

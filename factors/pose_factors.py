@@ -7,37 +7,25 @@ unwhitened error is the metric residual ``r_j`` (``factors.metrics.residual``: c
 Jacobians are w.r.t. GTSAM's tangent ``xi = [omega, v]`` with right perturbation
 (``pose.retract(xi) = pose.compose(Pose3.Expmap(xi))``).
 
-Noise model and the paper's equation 8
---------------------------------------
-GTSAM minimises ``sum_j 0.5 ||r_j||^2 / s_j^2`` for an isotropic noise of std ``s_j``. With
-``s_j = sqrt(sigma_j)`` (``sigma_j`` the detector's predicted uncertainty) this is
-``0.5 sum_j sigma_j^-1 Delta_j``: the argmin of the paper's equation 8. Without ``sigma``, unit
-noise (``s_j = 1``). An optional robust kernel (``huber``, ``cauchy``, ``geman_mcclure``) wraps that
-noise model per detection through ``gtsam.noiseModel.Robust``; its threshold ``k`` applies to the
-WHITENED residual norm ``sqrt(Delta_j / sigma_j)``; defaults per metric in
-:data:`DEFAULT_ROBUST_SCALE` (about the residual norm of a clearly wrong match: e.g. for the level
-set, 2.0 is an rms level discrepancy of 0.4 over 24 samples).
+Noise: isotropic std ``s_j = sqrt(sigma_j)`` (``sigma_j`` the detector's predicted
+uncertainty; unit without it), so GTSAM minimises ``0.5 sum_j sigma_j^-1 Delta_j``, the argmin of
+the paper's equation 8. An optional robust kernel (:data:`ROBUST_KERNELS`) wraps it per
+detection (``gtsam.noiseModel.Robust``), threshold ``k`` on the WHITENED residual norm
+``sqrt(Delta_j / sigma_j)``, defaults in :data:`DEFAULT_ROBUST_SCALE`.
 
-One shared, memoised evaluation: all the factors of one solve share ONE
+All the factors of one solve share ONE memoised
 :class:`factors.pose_residuals.PoseResidualModel` (every pair evaluated at once per pose, the
-factors slice their rows). Two forms (:func:`pose_factors`): ``batched=True``, ONE factor for
-all pairs with a Diagonal noise model (pair ``j``'s rows std ``sqrt(sigma_j)``; the same
-weighted error, one Python round trip; impossible with per-detection robust kernels), and the
-default, one factor per pair. Why and measurements: ``docs/design/factors.md`` ("Pose factors").
-
-Jacobians: analytic for the metrics in ``factors.pose_residuals.ANALYTIC_METRICS`` (every
-metric but ``qbbox``, see :mod:`factors.pose_residuals`); central differences of
-``factors.metrics.residual`` for ``qbbox``.
-
-Invalid projections (ellipsoid behind the camera, crossing the principal plane, containing the
-camera) give a bounded penalty residual with a Jacobian that restores a positive depth margin;
-see :mod:`factors.pose_residuals`.
+factors slice their rows). :func:`pose_factors` returns one factor per pair (default; needed for
+per-detection robust kernels), or with ``batched=True`` ONE factor over all pairs with a
+Diagonal noise model (the same weighted error, one Python round trip). Jacobians, invalid
+projections (a bounded penalty) and the saturation: :mod:`factors.pose_residuals`. Why and
+measurements: ``docs/design/factors.md`` ("Pose factors").
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import gtsam
@@ -129,17 +117,7 @@ def shared_pose_factor(
         raise IndexError(f"index {index} out of range for a model of {model.n} pairs")
     if noise_model.dim() != model.dim:
         raise ValueError(f"noise_model dim {noise_model.dim()} != residual dim {model.dim}")
-    evaluate = model.evaluate
-
-    def error_fn(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
-        T = values.atPose3(key).matrix()
-        if H is None:
-            return evaluate(T, False).factor_residuals[index]
-        ev = evaluate(T, True)
-        H[0] = ev.factor_jacobians[index]  # type: ignore[index]
-        return ev.factor_residuals[index]
-
-    return gtsam.CustomFactor(noise_model, [key], error_fn)
+    return _model_factor(key, model, noise_model, lambda a: a[index])
 
 
 def pose_factors(
@@ -231,14 +209,21 @@ def batched_pose_factor(
     stds = np.ones(n) if sigmas is None else np.array(
         [1.0 if s is None else math.sqrt(s) for s in sigmas])
     noise = gtsam.noiseModel.Diagonal.Sigmas(np.repeat(stds, m))
+    return _model_factor(key, model, noise, lambda a: a.reshape(n * m, *a.shape[2:]))
+
+
+def _model_factor(key: int, model: PoseResidualModel, noise: gtsam.noiseModel.Base,
+                  rows: Callable[[np.ndarray], np.ndarray]) -> gtsam.CustomFactor:
+    """A ``CustomFactor`` on ``key`` whose error and Jacobian are ``rows`` of the model's
+    memoised (N, dim) factor residuals and (N, dim, 6) factor Jacobians."""
     evaluate = model.evaluate
 
     def error_fn(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
         T = values.atPose3(key).matrix()
         if H is None:
-            return evaluate(T, False).factor_residuals.reshape(-1)
+            return rows(evaluate(T, False).factor_residuals)
         ev = evaluate(T, True)
-        H[0] = ev.factor_jacobians.reshape(n * m, 6)  # type: ignore[union-attr]
-        return ev.factor_residuals.reshape(-1)
+        H[0] = rows(ev.factor_jacobians)
+        return rows(ev.factor_residuals)
 
     return gtsam.CustomFactor(noise, [key], error_fn)
