@@ -184,14 +184,6 @@ def _image_size(value: object) -> tuple[float, float]:
     return _positive_float("image_size[0] (width)", w), _positive_float("image_size[1] (height)", h)
 
 
-# --------------------------------------------------------------------------- small closed forms
-
-
-def _sigma(e: Ellipse) -> tuple[float, float, float]:
-    """``Sigma = R diag(a^2, b^2) R^T`` as ``(s00, s01, s11)``."""
-    return sigma_entries(e.a, e.b, e.angle)
-
-
 # --------------------------------------------------------------------------- boxes
 
 
@@ -204,7 +196,7 @@ def clipped_bbox(ellipse: Ellipse, image_size: Sequence[float]) -> np.ndarray | 
     Returns ``None`` when the ellipse does not meet the image.
     """
     W, H = _image_size(image_size)
-    s00, s01, s11 = _sigma(ellipse)
+    s00, s01, s11 = sigma_entries(ellipse.a, ellipse.b, ellipse.angle)
     cx, cy = ellipse.cx, ellipse.cy
     # Inverse shape matrix A = Sigma^-1.
     det = s00 * s11 - s01 * s01
@@ -223,21 +215,17 @@ def clipped_bbox(ellipse: Ellipse, image_size: Sequence[float]) -> np.ndarray | 
     for sg in (-1.0, 1.0):
         keep(cx + sg * rx, cy + sg * s01 / rx)
         keep(cx + sg * s01 / ry, cy + sg * ry)
-    # Contour ∩ vertical borders x = x0: a00 dx^2 + 2 a01 dx dy + a11 dy^2 = 1.
-    for x0 in (0.0, W):
-        dx = x0 - cx
-        disc = (a01 * dx) ** 2 - a11 * (a00 * dx * dx - 1.0)
-        if disc >= 0.0:
-            r = math.sqrt(disc)
-            for dy in ((-a01 * dx - r) / a11, (-a01 * dx + r) / a11):
-                keep(x0, cy + dy)
-    for y0 in (0.0, H):
-        dy = y0 - cy
-        disc = (a01 * dy) ** 2 - a00 * (a11 * dy * dy - 1.0)
-        if disc >= 0.0:
-            r = math.sqrt(disc)
-            for dx in ((-a01 * dy - r) / a00, (-a01 * dy + r) / a00):
-                keep(cx + dx, y0)
+    # Contour ∩ border lines x = x0 (k = 0) and y = y0 (k = 1), in the offsets d across and
+    # e along the border: a_dd d^2 + 2 a01 d e + a_ee e^2 = 1.
+    for k, (a_dd, a_ee, c_d, c_e, ends) in enumerate(((a00, a11, cx, cy, (0.0, W)),
+                                                       (a11, a00, cy, cx, (0.0, H)))):
+        for b0 in ends:
+            d = b0 - c_d
+            disc = (a01 * d) ** 2 - a_ee * (a_dd * d * d - 1.0)
+            if disc >= 0.0:
+                r = math.sqrt(disc)
+                for e in ((-a01 * d - r) / a_ee, (-a01 * d + r) / a_ee):
+                    keep(*((b0, c_e + e) if k == 0 else (c_e + e, b0)))
     for x0 in (0.0, W):
         for y0 in (0.0, H):
             dx, dy = x0 - cx, y0 - cy
@@ -246,10 +234,6 @@ def clipped_bbox(ellipse: Ellipse, image_size: Sequence[float]) -> np.ndarray | 
     if not xs:
         return None
     return np.array([min(xs), min(ys), max(xs), max(ys)])
-
-
-def _clamped_box(box: np.ndarray, W: float, H: float) -> np.ndarray:
-    return np.clip(box, 0.0, [W, H, W, H])
 
 
 # --------------------------------------------------------------------------- areas
@@ -712,7 +696,7 @@ def _qbbox_residual(det: Ellipse, proj: Ellipse, image_size: object = None) -> n
 
 def _truncated_box(e: Ellipse, W: float, H: float) -> np.ndarray:
     box = clipped_bbox(e, (W, H))
-    return _clamped_box(e.bbox(), W, H) if box is None else box
+    return np.clip(e.bbox(), 0.0, [W, H, W, H]) if box is None else box
 
 
 _RESIDUALS = {
