@@ -191,15 +191,12 @@ def ellipsoid_views_factor(
                 if J_c is not None:
                     J_c[ok] = Jc * scale[:, None, None]
         if want:
-            i = 0
-            for B in blocks(J_e, obj_sel, n_obj):
-                H[i] = np.ascontiguousarray(B[:, :6])
-                H[i + 1] = np.ascontiguousarray(B[:, 6:])
-                i += 2
+            Hs = [np.ascontiguousarray(B[:, part]) for B in blocks(J_e, obj_sel, n_obj)
+                  for part in (slice(0, 6), slice(6, 9))]  # pose, log-axes of each object
             if cam is not None:
-                for B in blocks(J_c, cam_sel, len(cam_keys)):
-                    H[i] = B
-                    i += 1
+                Hs += blocks(J_c, cam_sel, len(cam_keys))
+            for i, B in enumerate(Hs):
+                H[i] = B
         return out.reshape(-1)
 
     return gtsam.CustomFactor(noise, keys, error_fn)

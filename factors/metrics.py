@@ -97,15 +97,19 @@ from factors.overlap import (
 )
 
 __all__ = [
+    "CONIC_METRICS",
     "DEFAULT_LEVEL_SET_SCALE",
     "LEVEL_SET_ADAPTIVE_GAIN",
     "METRIC_NAMES",
+    "canonical_axes",
     "clipped_bbox",
+    "conic_residuals",
     "convex_hull_area",
     "cost",
     "ellipse_intersection_area",
     "level_set_sample_points",
     "level_set_sampling_scale",
+    "overlap_residual",
     "residual",
     "residual_size",
 ]
@@ -123,16 +127,17 @@ CONIC_METRICS = ("algebraic", "frobenius", "wasserstein", "bhattacharyya", "bbox
 _VEC5 = np.array([0, 1, 2, 4, 5])  # upper elements [C00, C01, C02, C11, C12], flat indices
 _FRO_W = np.array([1.0, _SQRT2, _SQRT2, 1.0, _SQRT2])
 
-_OPTIONS: dict[str, tuple[str, ...]] = {
-    "iou": (),
-    "giou": ("hull_directions",),
-    "bbox": (),
-    "qbbox": ("image_size",),
-    "algebraic": (),
-    "frobenius": (),
-    "wasserstein": (),
-    "bhattacharyya": (),
-    "level_set": ("n_azimuths", "n_levels", "scale", "adaptive"),
+#: Per metric: its options and its residual length (level_set: ``n_azimuths * n_levels``).
+_OPTIONS: dict[str, tuple[tuple[str, ...], int]] = {
+    "iou": ((), 4),
+    "giou": (("hull_directions",), 4),
+    "bbox": ((), 4),
+    "qbbox": (("image_size",), 4),
+    "algebraic": ((), 5),
+    "frobenius": ((), 5),
+    "wasserstein": ((), 5),
+    "bhattacharyya": ((), 5),
+    "level_set": (("n_azimuths", "n_levels", "scale", "adaptive"), 0),
 }
 
 
@@ -143,7 +148,7 @@ def _check_options(name: str, options: dict) -> None:
     """Known metric ``name`` (``ValueError``), known ``options`` (``TypeError``)."""
     if name not in _OPTIONS:
         raise ValueError(f"unknown metric {name!r}; valid names: {', '.join(METRIC_NAMES)}")
-    allowed = _OPTIONS[name]
+    allowed = _OPTIONS[name][0]
     for key in options:
         if key not in allowed:
             valid = ", ".join(allowed) if allowed else "none"
@@ -405,8 +410,8 @@ def _conic_residual(name: str, det: Ellipse, proj: Ellipse) -> np.ndarray:
 def _bbox_rows(P: np.ndarray, mu: np.ndarray, S: np.ndarray,
                d: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray | None]:
     """``r = B_D - B_P``, ``B = [cx - hx, cy - hy, cx + hx, cy + hy]`` with the half-sizes
-    ``hx = sqrt(Sigma00)``, ``hy = sqrt(Sigma11)`` of the axis-aligned box (module docstring
-    of :func:`conic_residuals` for the arguments)."""
+    ``hx = sqrt(Sigma00)``, ``hy = sqrt(Sigma11)`` of the axis-aligned box (arguments as
+    passed by :func:`conic_residuals`)."""
     c, s = np.cos(P[:, 4]), np.sin(P[:, 4])
     hd = np.stack([np.hypot(P[:, 2] * c, P[:, 3] * s), np.hypot(P[:, 2] * s, P[:, 3] * c)], 1)
     h = np.sqrt(np.diagonal(S, axis1=1, axis2=2))  # (N, 2) half-sizes (hx, hy)
@@ -743,5 +748,4 @@ def residual_size(name: str, **options: object) -> int:
     if name == "level_set":
         return (_positive_int("n_azimuths", options.get("n_azimuths", 6))
                 * _positive_int("n_levels", options.get("n_levels", 4)))
-    return {"iou": 4, "giou": 4, "bbox": 4, "qbbox": 4, "algebraic": 5, "frobenius": 5,
-            "wasserstein": 5, "bhattacharyya": 5}[name]
+    return _OPTIONS[name][1]

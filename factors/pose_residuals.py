@@ -263,13 +263,12 @@ class PoseResidualModel:
             )
         if len(detections) == 0:
             raise ValueError("detections must not be empty")
-        for j, (d, q) in enumerate(zip(detections, ellipsoids, strict=True)):
-            if not isinstance(d, Ellipse):
-                raise GeometryError(f"detections[{j}] must be an Ellipse, got {type(d).__name__}")
-            if not isinstance(q, Ellipsoid):
-                raise GeometryError(
-                    f"ellipsoids[{j}] must be an Ellipsoid, got {type(q).__name__}"
-                )
+        for j, pair in enumerate(zip(detections, ellipsoids, strict=True)):
+            for what, v, kind in zip(("detections", "ellipsoids"), pair, (Ellipse, Ellipsoid),
+                                     strict=True):
+                if not isinstance(v, kind):
+                    raise GeometryError(
+                        f"{what}[{j}] must be an {kind.__name__}, got {type(v).__name__}")
         if not isinstance(camera, Camera):
             raise GeometryError(f"camera must be a Camera, got {type(camera).__name__}")
         if not (math.isfinite(penalty_cost) and penalty_cost > 0):
