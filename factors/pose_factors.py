@@ -70,12 +70,20 @@ DEFAULT_ROBUST_SCALE: dict[str, float] = {
 }
 
 
-def _check_sigmas(sigmas: Sequence[float | None], n: int) -> None:
+def _std(sigma: float | None, name: str = "sigma") -> float:
+    """The noise std ``sqrt(sigma)`` (1 for None); ``sigma`` must be finite and > 0."""
+    if sigma is None:
+        return 1.0
+    if not (is_real(sigma) and math.isfinite(sigma) and sigma > 0):
+        raise ValueError(f"{name} must be finite and > 0, got {sigma!r}")
+    return math.sqrt(float(sigma))
+
+
+def _check_sigmas(sigmas: Sequence[float | None], n: int) -> np.ndarray:
+    """The stds (n,) of ``sigmas`` (one per detection)."""
     if len(sigmas) != n:
         raise ValueError(f"sigmas must have one entry per detection ({n}), got {len(sigmas)}")
-    for j, s in enumerate(sigmas):
-        if s is not None and not (is_real(s) and math.isfinite(s) and s > 0):
-            raise ValueError(f"sigmas[{j}] must be finite and > 0, got {s!r}")
+    return np.array([_std(s, f"sigmas[{j}]") for j, s in enumerate(sigmas)])
 
 
 def make_noise_model(
@@ -90,12 +98,7 @@ def make_noise_model(
     ``robust`` in :data:`ROBUST_KERNELS` (or None) wraps it in ``gtsam.noiseModel.Robust`` with
     threshold ``robust_scale`` (default ``DEFAULT_ROBUST_SCALE[metric]``).
     """
-    if sigma is None:
-        std = 1.0
-    else:
-        if not (is_real(sigma) and math.isfinite(sigma) and sigma > 0):
-            raise ValueError(f"sigma must be finite and > 0, got {sigma!r}")
-        std = math.sqrt(float(sigma))
+    std = _std(sigma)
     check_robust(robust, robust_scale)
     base = gtsam.noiseModel.Isotropic.Sigma(int(dim), std)
     if robust is None:
@@ -204,10 +207,7 @@ def batched_pose_factor(
     ``bench.refine_speed`` measures both designs. ``sigmas`` are validated as in
     :func:`pose_factors` (one per pair, finite and > 0, or None)."""
     n, m = model.n, model.dim
-    if sigmas is not None:
-        _check_sigmas(sigmas, n)
-    stds = np.ones(n) if sigmas is None else np.array(
-        [1.0 if s is None else math.sqrt(s) for s in sigmas])
+    stds = np.ones(n) if sigmas is None else _check_sigmas(sigmas, n)
     noise = gtsam.noiseModel.Diagonal.Sigmas(np.repeat(stds, m))
     return _model_factor(key, model, noise, lambda a: a.reshape(n * m, *a.shape[2:]))
 
