@@ -233,9 +233,8 @@ def _inside_arcs_batch(b: _Batch, k: int, counts: np.ndarray, roots: np.ndarray
     t0, t1 = t0[pair, j], t1[pair, j]
     mx, my = b.point(np.full(pair.size, k), pair, 0.5 * (t0 + t1))
     o = 1 - k
-    Ao = [a[pair] for a in b.A[o]]
     rx, ry = mx - b.c[o][0][pair], my - b.c[o][1][pair]
-    inside = Ao[0] * rx * rx + 2.0 * Ao[1] * rx * ry + Ao[2] * ry * ry < 1.0
+    inside = _quad([a[pair] for a in b.A[o]], rx, ry) < 1.0
     keep = (t1 > t0) & inside
     return pair[keep], t0[keep], t1[keep]
 
