@@ -23,9 +23,6 @@ squares does; GTSAM's robust noise models reweight a whole factor, so a factor o
 needs its kernel inside). A view whose ellipsoid is not entirely in front of its camera (depth
 margin <= ``min_depth_margin`` m) gives constant rows (total cost ``penalty_cost * weight^2``,
 zero Jacobian): LM rejects steps that go there. The noise model is unit.
-
-Why many views per factor: in Python the cost is in numpy calls and factor round trips, not in
-the arithmetic (GUIDE 3); a factor over V views costs about as much as a factor over one.
 """
 
 from __future__ import annotations
@@ -172,47 +169,34 @@ def ellipsoid_views_factor(
             T_cw = invert_poses(np.array([values.atPose3(x).matrix() for x in cam_keys]))[cam]
         ok = depth_margins(T_cw, R, c, axes) > min_depth_margin
         want = H is not None
-        all_ok = bool(ok.all())
-        if all_ok:
-            sub, Rv, cv, av, T = all_samples, R, c, axes, T_cw
-        else:
-            sub = LevelSetSamples(None, n[ok], phi[ok])
-            Rv, cv, av = ((R, c, axes) if n_obj == 1 else (R[ok], c[ok], axes[ok]))
-            T = T_cw[ok]
         out = np.empty((V, M))
-        if not all_ok:
-            out[~ok] = pen[~ok, None]
-        J_e = J_c = None
+        out[~ok] = pen[~ok, None]
+        J_e = np.zeros((V, M, 9)) if want else None
+        J_c = np.zeros((V, M, 6)) if want and cam is not None else None
         if ok.any():
+            if ok.all():
+                sub, Rv, cv, av, T = all_samples, R, c, axes, T_cw
+            else:
+                sub = LevelSetSamples(None, n[ok], phi[ok])
+                Rv, cv, av = ((R, c, axes) if n_obj == 1 else (R[ok], c[ok], axes[ok]))
+                T = T_cw[ok]
             r, Je, Jc = observation_residual(T, Rv, cv, av, sub, want)
-            scale = w[ok] if not all_ok else w
+            scale = w[ok]
             if robust_scale is not None:
                 scale = scale * huber_row_scale(np.abs(scale) * np.sqrt((r * r).sum(axis=1)),
                                                 robust_scale)
             out[ok] = r * scale[:, None]
             if want:
-                if all_ok:
-                    J_e = Je * scale[:, None, None]
-                    J_c = Jc * scale[:, None, None] if cam is not None else None
-                else:
-                    J_e = np.zeros((V, M, 9))
-                    J_e[ok] = Je * scale[:, None, None]
-                    if cam is not None:
-                        J_c = np.zeros((V, M, 6))
-                        J_c[ok] = Jc * scale[:, None, None]
+                J_e[ok] = Je * scale[:, None, None]
+                if J_c is not None:
+                    J_c[ok] = Jc * scale[:, None, None]
         if want:
-            if J_e is None:
-                J_e = np.zeros((V, M, 9))
-                J_c = np.zeros((V, M, 6)) if cam is not None else None
-            i = 0
-            for B in blocks(J_e, obj_sel, n_obj):
-                H[i] = np.ascontiguousarray(B[:, :6])
-                H[i + 1] = np.ascontiguousarray(B[:, 6:])
-                i += 2
+            Hs = [np.ascontiguousarray(B[:, part]) for B in blocks(J_e, obj_sel, n_obj)
+                  for part in (slice(0, 6), slice(6, 9))]  # pose, log-axes of each object
             if cam is not None:
-                for B in blocks(J_c, cam_sel, len(cam_keys)):
-                    H[i] = B
-                    i += 1
+                Hs += blocks(J_c, cam_sel, len(cam_keys))
+            for i, B in enumerate(Hs):
+                H[i] = B
         return out.reshape(-1)
 
     return gtsam.CustomFactor(noise, keys, error_fn)

@@ -2,37 +2,24 @@
 
 Localization (:mod:`factors.pose_residuals`, metric ``level_set``) moves only the camera; map
 building moves the ellipsoids (and optionally the cameras). Both minimise the same residual at
-the same samples of the detection (``factors.metrics.level_set_sample_points``, non-adaptive
-layout; equality with :class:`factors.pose_residuals.PoseResidualModel` is tested)::
-
-    r(x) = Phi_det(x) - Phi_proj(x),   Phi_proj(x) = 1 - s n^T A^-1 n
-
-with ``n = K^-1 (x, y, 1)``, ``A = [R|t]_camera_from_world Q* [R|t]^T`` (3x3, the projected
-dual conic up to ``K``: ``C* = K A K^T``) and ``s = A[2, 2]``. The one derivative this module
-computes is the gradient w.r.t. ``A``::
-
-    dr = <G, dA>,   G = g e3 e3^T - s u u^T,   u = A^-1 n,  g = n . u
-
-and every Jacobian is that gradient contracted with ``dA`` along a tangent direction:
-
-* camera pose ``world_from_camera`` (GTSAM Pose3 right perturbation ``xi = [omega, v]``):
-  ``dA = -[w]x A - A [w]x^T + v c^T + c v^T`` (``c`` the ellipsoid centre in the camera frame);
-* ellipsoid pose (ellipsoid frame -> world, right perturbation ``[omega, v]``) and log
-  semi-axes: ``dA = P dQ* P^T`` with :func:`dual_quadric_jacobians` and ``P = [R|t]_cw``.
-
-Residuals are dimensionless (``Phi`` units). The factor weighting is that of localization:
-``factors.pose_factors.make_noise_model`` (isotropic std ``sqrt(sigma)``).
+the same samples of the detection (``factors.metrics.level_set_sample_points``, non-adaptive;
+equality with :class:`factors.pose_residuals.PoseResidualModel` is tested):
+``r(x) = Phi_det(x) - Phi_proj(x)``, ``Phi_proj(x) = 1 - s n^T A^-1 n`` with ``n = K^-1 (x,
+y, 1)``, ``A = [R|t]_camera_from_world Q* [R|t]^T`` (3x3; ``C* = K A K^T``), ``s = A[2, 2]``.
+Its gradient w.r.t. ``A`` is contracted with ``dA`` along the camera's Pose3 tangent (right
+perturbation of ``world_from_camera``) and the ellipsoid's ``[omega, v, d log axes]``
+(derivation: ``docs/design/factors.md``, "Ellipsoid residuals"). Residuals are dimensionless
+(``Phi`` units).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from factors.geometry import Camera, Ellipse, level_values
+from factors.geometry import Camera, Ellipse, level_values, skew
 
 __all__ = [
     "LevelSetSamples",
-    "camera_frame_dual_conic",
     "dual_quadric",
     "dual_quadric_jacobians",
     "level_set_residual_and_gradient",
@@ -41,9 +28,7 @@ __all__ = [
     "stack_samples",
 ]
 
-_SKEW = np.array([[[0, 0, 0], [0, 0, -1], [0, 1, 0]],
-                  [[0, 0, 1], [0, 0, 0], [-1, 0, 0]],
-                  [[0, -1, 0], [1, 0, 0], [0, 0, 0]]], dtype=float)
+_SKEW = skew(np.eye(3)) + 0.0  # [e_k]x, k = 0, 1, 2 (+ 0.0: no -0.0 entries)
 
 
 class LevelSetSamples:
@@ -117,12 +102,6 @@ def dual_quadric_jacobians(rotation: np.ndarray, center: np.ndarray,
     dQ[..., 6:9, :3, :3] = 2.0 * a2[..., :, None, None] * (
         Rt[..., :, :, None] * Rt[..., :, None, :])
     return dQ
-
-
-def camera_frame_dual_conic(camera_from_world: np.ndarray, Q: np.ndarray) -> np.ndarray:
-    """``A = [R|t] Q* [R|t]^T`` (3x3): the projected dual conic without ``K``."""
-    P = camera_from_world[:3, :]
-    return P @ Q @ P.T
 
 
 def level_set_residual_and_gradient(

@@ -68,7 +68,6 @@ __all__ = [
     "project_ellipsoid",
     "project_ellipsoids_dual",
     "quaternion_wxyz_from_rotation",
-    "rotation_2d",
     "rotation_from_quaternion_wxyz",
     "sigma_entries",
     "skew",
@@ -179,12 +178,6 @@ def sigma_entries(a: float | np.ndarray, b: float | np.ndarray, angle: float | n
     c, s = trig[0](angle), trig[1](angle)
     a2, b2 = a * a, b * b
     return a2 * c * c + b2 * s * s, (a2 - b2) * c * s, a2 * s * s + b2 * c * c
-
-
-def rotation_2d(angle: float) -> np.ndarray:
-    """2x2 rotation by ``angle`` radians (counter-clockwise in a y-up frame, i.e. from +x to +y)."""
-    c, s = math.cos(angle), math.sin(angle)
-    return np.array([[c, -s], [s, c]])
 
 
 #: A 3x3 matrix this close to a rotation (``max|R R^T - I|``) is already one for
@@ -357,8 +350,10 @@ class Ellipse:
 
     @property
     def rotation(self) -> np.ndarray:
-        """2x2 rotation whose first column is the direction of semi-axis ``a``."""
-        return rotation_2d(self.angle)
+        """2x2 rotation by ``angle`` (from +x towards +y): its first column is the direction of
+        semi-axis ``a``."""
+        c, s = math.cos(self.angle), math.sin(self.angle)
+        return np.array([[c, -s], [s, c]])
 
     @property
     def area(self) -> float:
@@ -440,13 +435,12 @@ def ellipse_params(ellipses: Sequence[Ellipse]) -> np.ndarray:
 def dual_conics_from_params(params: np.ndarray) -> np.ndarray:
     """Normalised dual conics (N, 3, 3), ``C*[2, 2] = -1``, from ellipse params (N, 5)."""
     p = np.asarray(params, dtype=float)
-    c, s = np.cos(p[:, 4]), np.sin(p[:, 4])
-    a2, b2 = p[:, 2] ** 2, p[:, 3] ** 2
+    s00, s01, s11 = sigma_entries(p[:, 2], p[:, 3], p[:, 4])
     cx, cy = p[:, 0], p[:, 1]
     out = np.empty((p.shape[0], 3, 3))
-    out[:, 0, 0] = a2 * c * c + b2 * s * s - cx * cx
-    out[:, 1, 1] = a2 * s * s + b2 * c * c - cy * cy
-    out[:, 0, 1] = out[:, 1, 0] = (a2 - b2) * c * s - cx * cy
+    out[:, 0, 0] = s00 - cx * cx
+    out[:, 1, 1] = s11 - cy * cy
+    out[:, 0, 1] = out[:, 1, 0] = s01 - cx * cy
     out[:, 0, 2] = out[:, 2, 0] = -cx
     out[:, 1, 2] = out[:, 2, 1] = -cy
     out[:, 2, 2] = -1.0

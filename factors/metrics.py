@@ -9,101 +9,66 @@ Public entry points
 * ``residual_size(name, **options) -> int``.
 * ``level_set_sample_points(...)`` / ``level_set_sampling_scale(...)``: the level-set sampling
   layout, shared with the GTSAM factors.
+* ``conic_residuals`` / ``overlap_residual``: the batched (N pairs) implementations.
 
-Scalar forms and the batched implementation (decided, issue 10)
-----------------------------------------------------------------
-The functions here are the metrics' REFERENCE definitions, one pair of ellipses at a time, and
-the tests' independent oracle. The ONE production implementation of the smooth metrics
-(``level_set``, ``algebraic``, ``frobenius``, ``wasserstein``, ``bhattacharyya``, ``bbox``) and
-of their pose Jacobians is the batched :class:`factors.pose_residuals.PoseResidualModel`;
-``tests/test_pose_factors.py`` checks that it equals :func:`residual` pair by pair. Production
-code calls the scalar forms only where there is no batched form: ``qbbox`` (piecewise, numeric
-Jacobian), the level-set sampling layout (shared by both), the one-off validation of
-``LocalizationOptions.metric_options`` on a fixed probe pair, and single pairs of ``iou`` /
-``giou`` (:func:`overlap_residual` with one pair uses the scalar exact areas; several pairs,
-e.g. the pose factors', the batched :func:`factors.overlap.quadrant_areas_batch`).
+One implementation per metric (decided, issue 10): the smooth metrics (bbox, algebraic,
+frobenius, wasserstein, bhattacharyya) are :func:`conic_residuals`, iou / giou are
+:func:`overlap_residual` (exact areas of :mod:`factors.overlap`), both batched; ``residual``
+and ``cost`` are their N = 1 views and :mod:`factors.pose_residuals` chains them to the pose.
+The former scalar forms are the tests' oracle (``tests/oracles/metrics_reference.py``).
+``qbbox`` and ``level_set`` exist here one pair at a time (the pose factors' level set is its
+own quadratic-form evaluation in the camera rays, tested equal to :func:`residual`).
 
 Argument order: the **detection** (fixed, measured) comes first, the **projection** (the
 moving, predicted ellipse) second. Every residual is "detection minus projection". All lengths
-are pixels, angles radians (see :mod:`factors.geometry` for the ellipse conventions).
+are pixels, angles radians (see :mod:`factors.geometry` for the ellipse conventions). Design
+rationale: ``docs/design/factors.md`` ("Metrics").
 
 Metrics, costs and residuals (``r``, length in brackets)
 --------------------------------------------------------
 ``iou`` [4]
-    Jaccard distance ``Delta = 1 - |D ∩ P| / |D ∪ P|`` in ``[0, 1]`` (the cost). Areas are
-    exact (closed-form arc integrals, :mod:`factors.overlap`). Flat (== 1) for disjoint
-    ellipses. The residual splits ``Delta`` over the four quadrants ``Q_k`` of the detection's
-    frame (centred on it, along its axes): ``r_k = |(D △ P) ∩ Q_k| / |D ∪ P| >= 0``,
-    ``sum_k r_k = Delta``, so the refinement minimises ``sum_j sigma_j^-1 sum_k r_jk^2``, which
-    lies in ``[Delta_j^2 / 4, Delta_j^2]`` per pair and vanishes exactly where ``Delta_j`` does.
-    Why not one row: ``Delta ~ k(direction) |delta|`` near the optimum (the symmetric
-    difference grows linearly with a displacement ``delta``), a cone, and one scalar row per
-    object gives a rank-deficient Gauss-Newton system below 6 objects (and ``sqrt(Delta)``
-    adds an unbounded slope): LM crawled, capped. Each ``r_k`` is such a cone too, but for a
-    degree-1 cone the Gauss-Newton step ``-J^+ r`` is exactly ``-delta`` once the stacked
-    rows have full rank (Euler: ``J delta = r``), which 4 rows per object give from 2 objects.
-    The rows and their exact gradient are :func:`overlap_residual`. For disjoint ellipses the
-    rows still sum to 1 but their squares are not flat: smallest when the projection spreads
-    evenly over the detection's quadrants, a mild pull towards it, too weak in practice (a
-    Chess start that separated a small object's projection from its detection diverged to
-    4.5 m). The pose factors therefore evaluate iou with ``disjoint_hull``: a DISJOINT pair
-    gets the giou rows (IoU + the hull gap ``|C \\ (D ∪ P)| / |C|``, which shrinks as the
-    ellipses approach). On first contact the rows drop by the gap term (the cost only
-    decreases into overlap, so no step towards the detection is held back), and every
-    overlapping pair, hence the optimum, keeps the iou rows. ``residual("iou")`` and
-    ``cost("iou")`` are the metric itself (no fallback).
+    Jaccard distance ``Delta = 1 - |D ∩ P| / |D ∪ P|`` in ``[0, 1]`` (the cost); flat (== 1)
+    for disjoint ellipses. ``r_k = |(D △ P) ∩ Q_k| / |D ∪ P| >= 0`` over the four quadrants
+    ``Q_k`` of the detection's frame (centred on it, along its axes), ``sum_k r_k = Delta``.
+    With ``disjoint_hull`` (the pose factors) a DISJOINT pair gets the giou rows instead;
+    ``residual("iou")`` and ``cost("iou")`` are the metric itself.
 ``giou`` [4]
-    ``Delta = 1 - GIoU``, ``GIoU = IoU - |C \\ (D ∪ P)| / |C|`` (Rezatofighi et al.), ``C`` the
-    convex hull of the two ellipses; in ``[0, 2]`` (the cost). Exactly flat when one ellipse
-    contains the other (``C`` is then the larger one). The hull area is exact (arcs + common
-    tangents, :mod:`factors.overlap`); option ``hull_directions`` (default 128) is the number of
-    normal directions used to bracket the common tangents. Residual as iou, per quadrant:
+    ``Delta = 1 - GIoU``, ``GIoU = IoU - |C \\ (D ∪ P)| / |C|``, ``C`` the convex hull of the
+    two ellipses; in ``[0, 2]`` (the cost), flat when one ellipse contains the other. Option
+    ``hull_directions`` (default 128, >= 8): normals bracketing the common tangents.
     ``r_k = |(D △ P) ∩ Q_k| / |D ∪ P| + |(C \\ (D ∪ P)) ∩ Q_k| / |C|``, ``sum_k r_k = Delta``.
 ``bbox`` [4]
-    ``r = B_D - B_P`` with ``B = [xmin, ymin, xmax, ymax]`` the axis-aligned boxes; cost is the
-    squared norm. Not rotation invariant (boxes follow the image axes).
+    ``r = B_D - B_P``, ``B = [xmin, ymin, xmax, ymax]`` the axis-aligned boxes; cost the
+    squared norm (not rotation invariant).
 ``qbbox`` [4]
-    QuadricSLAM's truncated box: ``r = B_D^trunc - B_P^trunc`` where ``B^trunc`` is the exact
-    box of the part of an ellipse inside the image ``[0, W] x [0, H]`` (:func:`clipped_bbox`;
-    the detection's box is clipped the same way, so identical ellipses give 0). Requires
-    ``image_size=(W, H)`` (pixels). If an ellipse does not meet the image at all, its full box
-    clamped to the image is used (a degenerate box on the border, so the residual stays finite
-    and points back inside). Equal to ``bbox`` when both ellipses are inside the image.
+    ``r = B_D^trunc - B_P^trunc``, ``B^trunc`` the exact box of the part of an ellipse inside
+    the image ``[0, W] x [0, H]`` (:func:`clipped_bbox`); requires ``image_size=(W, H)`` px. An
+    ellipse that misses the image uses its full box clamped to the image. Equal to ``bbox``
+    when both ellipses are inside the image.
 ``algebraic`` [5]
     ``r = vec(Cn_D) - vec(Cn_P)``, ``vec`` = the 5 upper elements ``[C00, C01, C02, C11, C12]``
     of the normalised dual conics (``C*[2,2] = -1``); units px^2 (C00, C01, C11) and px.
 ``frobenius`` [5]
-    The paper's ``Delta_fro = ||Cn_D - Cn_P||_F`` is a norm. A least-squares solver needs a
-    smooth residual, so here **cost = Delta_fro^2** (squared Frobenius norm, same minimiser for
-    one pair) and ``r = [d00, sqrt2 d01, sqrt2 d02, d11, sqrt2 d12]`` with ``d = Cn_D - Cn_P``
-    (``d22 = 0``). ``Delta_fro = sqrt(cost)``. It differs from ``algebraic`` only by the
-    sqrt(2) weight of the off-diagonal elements.
+    cost = ``Delta_fro^2`` (the paper's ``Delta_fro = ||Cn_D - Cn_P||_F`` squared),
+    ``r = [d00, sqrt2 d01, sqrt2 d02, d11, sqrt2 d12]``, ``d = Cn_D - Cn_P``.
 ``wasserstein`` [5]
-    Squared 2-Wasserstein distance of the Gaussians ``N(c, Sigma = R diag(a^2, b^2) R^T)``:
-    ``|mu_D - mu_P|^2 + tr(S_D + S_P - 2 (S_D^1/2 S_P S_D^1/2)^1/2)``. For 2x2 covariances with
-    semi-axes ``a_i >= b_i`` and major axes at an angle ``delta``, the trace term is exactly
-    ``(a_D - a_P)^2 + (b_D - b_P)^2 + 2 P sin^2(delta) / (Q + sqrt(Q^2 - P sin^2(delta)))``
-    with ``P = (a_D^2 - b_D^2)(a_P^2 - b_P^2)``, ``Q = a_D a_P + b_D b_P`` (expand
-    ``tr(S_D S_P) + 2 sqrt(det S_D S_P) = Q^2 - P sin^2(delta)``). Residual
-    ``r = [mu_D - mu_P, a_D - a_P, b_D - b_P, k sin(delta)]``, ``k`` the square root of the
-    fraction: smooth at the optimum, and its Gauss-Newton Hessian in the angle equals the true
-    curvature ``2 P / Q`` (``delta`` reduced to ``[-pi/2, pi/2)``; ``r[4]`` flips sign only at
-    perpendicular axes, where the cost is continuous). An earlier polar-factor form
-    ``vec(S_D^1/2 - S_P^1/2 U)`` had half the true curvature, so LM oscillated.
+    Squared 2-Wasserstein distance of the Gaussians ``N(c, Sigma = R diag(a^2, b^2) R^T)``;
+    ``r = [mu_D - mu_P, a_D - a_P, b_D - b_P, k sin(delta)]`` with canonical semi-axes
+    ``a >= b``, ``delta`` the angle between the major axes reduced to ``[-pi/2, pi/2)``,
+    ``k = sqrt(2 P / (Q + sqrt(Q^2 - P sin^2 delta)))``, ``P = (a_D^2 - b_D^2)(a_P^2 - b_P^2)``,
+    ``Q = a_D a_P + b_D b_P`` (``r[4]`` flips sign only at perpendicular axes).
 ``bhattacharyya`` [5]
-    ``1/8 dmu^T S^-1 dmu + 1/2 ln(det S / sqrt(det S_D det S_P))``, ``S = (S_D + S_P) / 2``.
-    ``r = [L^-1 dmu / sqrt(8), G00, G11, sqrt2 G01]`` with ``S = L L^T`` (Cholesky) and
-    ``G = h(log N)`` the spectral function ``h(u) = sign(u) sqrt(ln cosh(u / 2) / 2)`` of
-    ``N = S_D^-1/2 S_P S_D^-1/2``: the shape term equals ``sum_i ln cosh(ln(lambda_i) / 2) / 2``
-    over N's eigenvalues, and ``h`` is odd and analytic, so ``r`` is smooth at the optimum.
+    ``1/8 dmu^T S^-1 dmu + 1/2 ln(det S / sqrt(det S_D det S_P))``, ``S = (S_D + S_P) / 2``;
+    ``r = [L^-1 dmu / sqrt(8), G00, G11, sqrt2 G01]``, ``S = L L^T`` (Cholesky), ``G = h(log N)``
+    with ``h(u) = sign(u) sqrt(ln cosh(u / 2) / 2)`` and ``N = S_D^-1/2 S_P S_D^-1/2``.
 ``level_set`` [n_azimuths * n_levels]
     ``r_i = Phi_D(x_i) - Phi_P(x_i)`` at the sample points of :func:`level_set_sample_points`
-    (on the level curves of the DETECTION); cost ``sum r_i^2`` (the paper's Delta_lvs).
-    Options ``n_azimuths`` (6), ``n_levels`` (4), ``scale`` (2.0), ``adaptive`` (True).
+    (on the level curves of the DETECTION); cost ``sum r_i^2``. Options ``n_azimuths`` (6),
+    ``n_levels`` (4), ``scale`` (2.0), ``adaptive`` (True).
 
 Invariances: iou, giou, wasserstein, bhattacharyya and level_set are invariant to a common
-rigid motion of both ellipses (level_set needs an even ``n_azimuths``, see the sampling);
-bbox/qbbox change with rotations; algebraic/frobenius change with rotations and translations.
+rigid motion of both ellipses (level_set needs an even ``n_azimuths``); bbox/qbbox change with
+rotations; algebraic/frobenius change with rotations and translations.
 """
 
 from __future__ import annotations
@@ -114,7 +79,14 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from factors.geometry import Ellipse, sigma_entries
+from factors.geometry import (
+    Ellipse,
+    dual_conics_from_params,
+    gaussian_derivatives_from_dual_conics,
+    gaussians_from_dual_conics,
+    level_values,
+    sigma_entries,
+)
 from factors.names import METRIC_NAMES
 from factors.overlap import (
     HULL_DIRECTIONS,
@@ -125,15 +97,19 @@ from factors.overlap import (
 )
 
 __all__ = [
+    "CONIC_METRICS",
     "DEFAULT_LEVEL_SET_SCALE",
     "LEVEL_SET_ADAPTIVE_GAIN",
     "METRIC_NAMES",
+    "canonical_axes",
     "clipped_bbox",
+    "conic_residuals",
     "convex_hull_area",
     "cost",
     "ellipse_intersection_area",
     "level_set_sample_points",
     "level_set_sampling_scale",
+    "overlap_residual",
     "residual",
     "residual_size",
 ]
@@ -146,30 +122,33 @@ LEVEL_SET_ADAPTIVE_GAIN = 1.0
 
 _SQRT2 = math.sqrt(2.0)
 _INV_SQRT8 = 1.0 / math.sqrt(8.0)
+#: The metrics that are smooth functions of the projection's dual conic (:func:`conic_residuals`).
+CONIC_METRICS = ("algebraic", "frobenius", "wasserstein", "bhattacharyya", "bbox")
+_VEC5 = np.array([0, 1, 2, 4, 5])  # upper elements [C00, C01, C02, C11, C12], flat indices
+_FRO_W = np.array([1.0, _SQRT2, _SQRT2, 1.0, _SQRT2])
 
-_OPTIONS: dict[str, tuple[str, ...]] = {
-    "iou": (),
-    "giou": ("hull_directions",),
-    "bbox": (),
-    "qbbox": ("image_size",),
-    "algebraic": (),
-    "frobenius": (),
-    "wasserstein": (),
-    "bhattacharyya": (),
-    "level_set": ("n_azimuths", "n_levels", "scale", "adaptive"),
+#: Per metric: its options and its residual length (level_set: ``n_azimuths * n_levels``).
+_OPTIONS: dict[str, tuple[tuple[str, ...], int]] = {
+    "iou": ((), 4),
+    "giou": (("hull_directions",), 4),
+    "bbox": ((), 4),
+    "qbbox": (("image_size",), 4),
+    "algebraic": ((), 5),
+    "frobenius": ((), 5),
+    "wasserstein": ((), 5),
+    "bhattacharyya": ((), 5),
+    "level_set": (("n_azimuths", "n_levels", "scale", "adaptive"), 0),
 }
 
 
 # --------------------------------------------------------------------------- validation
 
 
-def _check_name(name: str) -> None:
+def _check_options(name: str, options: dict) -> None:
+    """Known metric ``name`` (``ValueError``), known ``options`` (``TypeError``)."""
     if name not in _OPTIONS:
         raise ValueError(f"unknown metric {name!r}; valid names: {', '.join(METRIC_NAMES)}")
-
-
-def _check_options(name: str, options: dict) -> None:
-    allowed = _OPTIONS[name]
+    allowed = _OPTIONS[name][0]
     for key in options:
         if key not in allowed:
             valid = ", ".join(allowed) if allowed else "none"
@@ -210,32 +189,6 @@ def _image_size(value: object) -> tuple[float, float]:
     return _positive_float("image_size[0] (width)", w), _positive_float("image_size[1] (height)", h)
 
 
-# --------------------------------------------------------------------------- small closed forms
-
-
-def _sigma(e: Ellipse) -> tuple[float, float, float]:
-    """``Sigma = R diag(a^2, b^2) R^T`` as ``(s00, s01, s11)``."""
-    return sigma_entries(e.a, e.b, e.angle)
-
-
-def _dual_vec(e: Ellipse) -> tuple[float, float, float, float, float]:
-    """Upper elements ``[C00, C01, C02, C11, C12]`` of the normalised dual conic."""
-    s00, s01, s11 = _sigma(e)
-    cx, cy = e.cx, e.cy
-    return s00 - cx * cx, s01 - cx * cy, -cx, s11 - cy * cy, -cy
-
-
-def _h(u: float) -> float:
-    """``sign(u) sqrt(ln cosh(u / 2) / 2)``: odd, analytic, ``~ u / (2 sqrt 2)`` near 0."""
-    x = abs(0.5 * u)
-    if x < 1e-2:  # series of ln cosh, relative error < 1e-14
-        x2 = x * x
-        lc = x2 * (0.5 + x2 * (-1.0 / 12.0 + x2 * (1.0 / 45.0)))
-    else:  # ln cosh x = x + ln(1 + e^-2x) - ln 2, no overflow
-        lc = x + math.log1p(math.exp(-2.0 * x)) - math.log(2.0)
-    return math.copysign(math.sqrt(0.5 * lc), u)
-
-
 # --------------------------------------------------------------------------- boxes
 
 
@@ -248,7 +201,7 @@ def clipped_bbox(ellipse: Ellipse, image_size: Sequence[float]) -> np.ndarray | 
     Returns ``None`` when the ellipse does not meet the image.
     """
     W, H = _image_size(image_size)
-    s00, s01, s11 = _sigma(ellipse)
+    s00, s01, s11 = sigma_entries(ellipse.a, ellipse.b, ellipse.angle)
     cx, cy = ellipse.cx, ellipse.cy
     # Inverse shape matrix A = Sigma^-1.
     det = s00 * s11 - s01 * s01
@@ -267,21 +220,17 @@ def clipped_bbox(ellipse: Ellipse, image_size: Sequence[float]) -> np.ndarray | 
     for sg in (-1.0, 1.0):
         keep(cx + sg * rx, cy + sg * s01 / rx)
         keep(cx + sg * s01 / ry, cy + sg * ry)
-    # Contour ∩ vertical borders x = x0: a00 dx^2 + 2 a01 dx dy + a11 dy^2 = 1.
-    for x0 in (0.0, W):
-        dx = x0 - cx
-        disc = (a01 * dx) ** 2 - a11 * (a00 * dx * dx - 1.0)
-        if disc >= 0.0:
-            r = math.sqrt(disc)
-            for dy in ((-a01 * dx - r) / a11, (-a01 * dx + r) / a11):
-                keep(x0, cy + dy)
-    for y0 in (0.0, H):
-        dy = y0 - cy
-        disc = (a01 * dy) ** 2 - a00 * (a11 * dy * dy - 1.0)
-        if disc >= 0.0:
-            r = math.sqrt(disc)
-            for dx in ((-a01 * dy - r) / a00, (-a01 * dy + r) / a00):
-                keep(cx + dx, y0)
+    # Contour ∩ border lines x = x0 (k = 0) and y = y0 (k = 1), in the offsets d across and
+    # e along the border: a_dd d^2 + 2 a01 d e + a_ee e^2 = 1.
+    for k, (a_dd, a_ee, c_d, c_e, ends) in enumerate(((a00, a11, cx, cy, (0.0, W)),
+                                                       (a11, a00, cy, cx, (0.0, H)))):
+        for b0 in ends:
+            d = b0 - c_d
+            disc = (a01 * d) ** 2 - a_ee * (a_dd * d * d - 1.0)
+            if disc >= 0.0:
+                r = math.sqrt(disc)
+                for e in ((-a01 * d - r) / a_ee, (-a01 * d + r) / a_ee):
+                    keep(*((b0, c_e + e) if k == 0 else (c_e + e, b0)))
     for x0 in (0.0, W):
         for y0 in (0.0, H):
             dx, dy = x0 - cx, y0 - cy
@@ -290,10 +239,6 @@ def clipped_bbox(ellipse: Ellipse, image_size: Sequence[float]) -> np.ndarray | 
     if not xs:
         return None
     return np.array([min(xs), min(ys), max(xs), max(ys)])
-
-
-def _clamped_box(box: np.ndarray, W: float, H: float) -> np.ndarray:
-    return np.clip(box, 0.0, [W, H, W, H])
 
 
 # --------------------------------------------------------------------------- areas
@@ -335,24 +280,11 @@ def _level_template(n_azimuths: int, n_levels: int) -> tuple[np.ndarray, np.ndar
     return uv, r2
 
 
-def _canonical_axes(e: Ellipse) -> tuple[float, float, float]:
-    """``(a, b, angle)`` with ``a >= b`` (angle shifted by pi/2 when the axes are swapped).
-
-    Unlike :meth:`Ellipse.canonical` the angle is NOT wrapped to ``[-pi/2, pi/2)``: the
-    level-set layout rotates with ``angle``, and a wrap by pi would reflect it through the
-    centre (a different sample order); ``PoseResidualModel`` uses this same rule."""
-    if e.b > e.a:
-        return e.b, e.a, e.angle + 0.5 * math.pi
-    return e.a, e.b, e.angle
-
-
 def _adaptive_scale(det: Ellipse, proj: Ellipse | None, scale: float, adaptive: bool) -> float:
     if not adaptive or proj is None:
         return scale
-    c, s = math.cos(det.angle), math.sin(det.angle)
-    dx, dy = proj.cx - det.cx, proj.cy - det.cy
-    u, v = (dx * c + dy * s) / det.a, (dy * c - dx * s) / det.b
-    return max(scale, LEVEL_SET_ADAPTIVE_GAIN * math.sqrt(u * u + v * v))
+    phi = float(level_values(det.params()[None], proj.center[None, None])[0, 0])  # Phi_D(c_P)
+    return max(scale, LEVEL_SET_ADAPTIVE_GAIN * math.sqrt(phi))
 
 
 def level_set_sampling_scale(
@@ -377,7 +309,7 @@ def level_set_sampling_scale(
 
 def _sample_points(det: Ellipse, s_max: float, n_azimuths: int, n_levels: int) -> np.ndarray:
     uv, _ = _level_template(n_azimuths, n_levels)
-    a, b, ang = _canonical_axes(det)
+    a, b, ang = canonical_axes(det.params()[None])[0]
     c, s = math.cos(ang), math.sin(ang)
     # x = c_D + uv @ (s_max R diag(a, b))^T
     Mt = np.array([[a * c * s_max, a * s * s_max], [-b * s * s_max, b * c * s_max]])
@@ -420,11 +352,226 @@ def _level_set_residual(det: Ellipse, proj: Ellipse, n_azimuths: int = 6, n_leve
     pts = _sample_points(det, s_max, n_azimuths, n_levels)
     _, r2 = _level_template(n_azimuths, n_levels)
     phi_det = r2 * (s_max * s_max)  # exact Phi_D on the sampled level curves
-    c, s = math.cos(proj.angle), math.sin(proj.angle)
-    # Phi_P(x) = |diag(1/a, 1/b) R^T (x - c_P)|^2
-    uv = (pts - (proj.cx, proj.cy)) @ np.array([[c / proj.a, -s / proj.b],
-                                                [s / proj.a, c / proj.b]])
-    return phi_det - np.einsum("ij,ij->i", uv, uv)
+    return phi_det - level_values(proj.params()[None], pts[None])[0]
+
+
+# --------------------------------------------------------------------------- smooth metrics
+
+
+def canonical_axes(P: np.ndarray) -> np.ndarray:
+    """``(a, b, angle)`` (N, 3) with ``a >= b`` of ellipse params ``P`` (N, 5), the angle
+    shifted by pi/2 where the axes are swapped. Unlike :meth:`Ellipse.canonical` it is NOT
+    wrapped to ``[-pi/2, pi/2)``: the level-set layout rotates with ``angle``, and a wrap by pi
+    would reflect it through the centre (a different sample order)."""
+    out = np.empty((len(P), 3))
+    np.maximum(P[:, 2], P[:, 3], out=out[:, 0])
+    np.minimum(P[:, 2], P[:, 3], out=out[:, 1])
+    np.add(P[:, 4], (P[:, 3] > P[:, 2]) * (0.5 * np.pi), out=out[:, 2])
+    return out
+
+
+def conic_residuals(
+    name: str, detections: np.ndarray, Cn: np.ndarray, dCn: np.ndarray | None = None,
+    gaussians: tuple[np.ndarray, np.ndarray] | None = None,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Residual rows (N, dim) of the smooth metric ``name`` (one of :data:`CONIC_METRICS`)
+    between detections given as params ``detections`` (N, 5) (px, rad) and projections given
+    as normalised dual conics ``Cn`` (N, 3, 3) (``Cn[2, 2] = -1``); with ``dCn`` (N, K, 3, 3),
+    derivatives of ``Cn`` along K directions (e.g. the 6 pose tangents), also ``dr`` (N, dim,
+    K) along them, else None. ``gaussians``: the projections' ``(mu (N, 2), Sigma (N, 2, 2))``
+    if known more precisely than from ``Cn`` (whose entries carry ~eps |mu|^2 of rounding).
+
+    The one implementation of these metrics: :func:`residual` is its N = 1 view and
+    :class:`factors.pose_residuals.PoseResidualModel` chains it to the pose (the scalar forms
+    are the tests' oracle, ``tests/oracles/metrics_reference.py``).
+    """
+    n = Cn.shape[0]
+    if name in ("algebraic", "frobenius"):
+        r = dual_conics_from_params(detections).reshape(n, 9)[:, _VEC5] - Cn.reshape(n, 9)[
+            :, _VEC5]
+        J = None if dCn is None else -dCn.reshape(n, -1, 9)[:, :, _VEC5].transpose(0, 2, 1)
+        if name == "frobenius":
+            r = r * _FRO_W
+            J = None if J is None else J * _FRO_W[None, :, None]
+        return r, J
+    mu, S = gaussians_from_dual_conics(Cn) if gaussians is None else gaussians
+    d = None if dCn is None else gaussian_derivatives_from_dual_conics(mu, dCn)
+    rows = {"bbox": _bbox_rows, "wasserstein": _wasserstein_rows,
+            "bhattacharyya": _bhattacharyya_rows}[name]
+    return rows(detections, mu, S, d)
+
+
+def _conic_residual(name: str, det: Ellipse, proj: Ellipse) -> np.ndarray:
+    mu, S = proj.gaussian()
+    return conic_residuals(name, det.params()[None], proj.dual_conic()[None],
+                           gaussians=(mu[None], S[None]))[0][0]
+
+
+def _bbox_rows(P: np.ndarray, mu: np.ndarray, S: np.ndarray,
+               d: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray | None]:
+    """``r = B_D - B_P``, ``B = [cx - hx, cy - hy, cx + hx, cy + hy]`` with the half-sizes
+    ``hx = sqrt(Sigma00)``, ``hy = sqrt(Sigma11)`` of the axis-aligned box (arguments as
+    passed by :func:`conic_residuals`)."""
+    c, s = np.cos(P[:, 4]), np.sin(P[:, 4])
+    hd = np.stack([np.hypot(P[:, 2] * c, P[:, 3] * s), np.hypot(P[:, 2] * s, P[:, 3] * c)], 1)
+    h = np.sqrt(np.diagonal(S, axis1=1, axis2=2))  # (N, 2) half-sizes (hx, hy)
+    r = np.concatenate((P[:, :2] - hd, P[:, :2] + hd), axis=1) - np.concatenate(
+        (mu - h, mu + h), axis=1)
+    if d is None:
+        return r, None
+    dmu, dsig = d  # (N, K, 2), (N, K, 2, 2)
+    dh = np.diagonal(dsig, axis1=2, axis2=3) / (2.0 * h[:, None, :])  # (N, K, 2)
+    return r, np.concatenate((dh - dmu, -dmu - dh), axis=2).transpose(0, 2, 1)
+
+
+def _wasserstein_rows(det: np.ndarray, mu: np.ndarray, S: np.ndarray,
+                      d: tuple[np.ndarray, np.ndarray] | None
+                      ) -> tuple[np.ndarray, np.ndarray | None]:
+    """The W2 residual ``[mu_D - mu_P, a_D - a_P, b_D - b_P, k sin(delta)]``
+    (canonical semi-axes ``a >= b``, ``delta`` the angle between the major axes mod pi,
+    ``k = sqrt(2 P / (Q + sqrt(Q^2 - P sin^2 delta)))``, ``P = (a_D^2 - b_D^2)(a_P^2 -
+    b_P^2)``, ``Q = a_D a_P + b_D b_P``) and its derivative through ``Sigma_P``.
+
+    At a circular projection (the major-axis angle is undefined) or a circular detection
+    (``k = 0``) the angle terms of the Jacobian are set to 0 (the metric is not
+    differentiable there).
+    """
+    s00, s01, s11 = S[:, 0, 0], S[:, 0, 1], S[:, 1, 1]
+    h, m = 0.5 * (s00 - s11), 0.5 * (s00 + s11)
+    rho = np.sqrt(h * h + s01 * s01)
+    a2, b2 = np.sqrt(m + rho), np.sqrt(np.maximum(m - rho, 0.0))
+    t2 = 0.5 * np.arctan2(s01, h)
+    a1, b1, t1 = canonical_axes(det).T
+    delta = (t1 - t2 + 0.5 * np.pi) % np.pi - 0.5 * np.pi
+    sn, cs = np.sin(delta), np.cos(delta)
+    P = (a1 * a1 - b1 * b1) * (a2 * a2 - b2 * b2)
+    Q = a1 * a2 + b1 * b2
+    Rq = np.sqrt(np.maximum(Q * Q - P * sn * sn, 0.0))
+    D = Q + Rq
+    k = np.sqrt(2.0 * P / D)
+    mu_d = det[:, :2]
+    r = np.stack([mu_d[:, 0] - mu[:, 0], mu_d[:, 1] - mu[:, 1], a1 - a2, b1 - b2, k * sn],
+                 axis=1)
+    if d is None:
+        return r, None
+    col = (slice(None), None)  # (N,) -> (N, 1) against the K directions
+    dmu, dsig = d
+    ds00, ds01, ds11 = dsig[..., 0, 0], dsig[..., 0, 1], dsig[..., 1, 1]
+    dh, dm = 0.5 * (ds00 - ds11), 0.5 * (ds00 + ds11)
+    tiny = 1e-12 * m
+    round_proj = rho <= tiny
+    rho_s = np.where(round_proj, 1.0, rho)[col]
+    drho = (h[col] * dh + s01[col] * ds01) / rho_s
+    da2 = (dm + drho) / (2.0 * a2[col])
+    db2 = (dm - drho) / (2.0 * np.maximum(b2, 1e-300)[col])
+    dt2 = np.where(round_proj[col], 0.0, 0.5 * (h[col] * ds01 - s01[col] * dh) / rho_s**2)
+    ddelta = -dt2
+    dP = ((a1 * a1 - b1 * b1)[col]) * (2.0 * a2[col] * da2 - 2.0 * b2[col] * db2)
+    dQ = a1[col] * da2 + b1[col] * db2
+    Rs = np.where(Rq > 0, Rq, 1.0)[col]
+    dR = (2.0 * Q[col] * dQ - dP * (sn * sn)[col] - 2.0 * (P * sn * cs)[col] * ddelta) / (
+        2.0 * Rs)
+    zero_k = k <= 1e-150
+    ks = np.where(zero_k, 1.0, k)[col]
+    dk = np.where(zero_k[col], 0.0,
+                  (dP / D[col] - P[col] * (dQ + dR) / (D * D)[col]) / ks)
+    dks = dk * sn[col] + (k * cs)[col] * ddelta
+    J = np.stack([-dmu[..., 0], -dmu[..., 1], -da2, -db2, dks], axis=1)  # (N, 5, 6)
+    return r, J
+
+
+def _bhattacharyya_rows(P: np.ndarray, mu: np.ndarray, Q: np.ndarray,
+                        d: tuple[np.ndarray, np.ndarray] | None
+                        ) -> tuple[np.ndarray, np.ndarray | None]:
+    """The Bhattacharyya residual ``[L^-1 dmu / sqrt 8, G00, G11, sqrt2 G01]``
+    (``S = (S_D + S_P) / 2 = L L^T``, ``G = h(log N)``, ``N = S_D^-1/2 S_P S_D^-1/2``,
+    ``h(u) = sign(u) sqrt(ln cosh(u / 2) / 2)``) and its derivative. The spectral
+    function's derivative is Daleckii-Krein's ``dG = V (F o (V^T dN V)) V^T`` (divided
+    differences of ``h(log lambda)``, its derivative when the eigenvalues coincide).
+    """
+    q00, q01, q11 = Q[:, 0, 0], Q[:, 0, 1], Q[:, 1, 1]
+    d00, d01, d11 = sigma_entries(P[:, 2], P[:, 3], P[:, 4])
+    s00, s01, s11 = 0.5 * (d00 + q00), 0.5 * (d01 + q01), 0.5 * (d11 + q11)
+    l00 = np.sqrt(s00)
+    l10 = s01 / l00
+    l11 = np.sqrt(np.maximum(s11 - l10 * l10, 0.0))
+    dx = P[:, 0] - mu[:, 0]
+    dy = P[:, 1] - mu[:, 1]
+    y0 = dx / l00
+    y1 = (dy - l10 * y0) / l11
+    a, b = P[:, 2], P[:, 3]
+    c, s = np.cos(P[:, 4]), np.sin(P[:, 4])
+
+    def to_n(x00, x01, x11):  # D^-1 R^T X R D^-1 (detection frame), elementwise
+        t00 = c * (x00 * c + x01 * s) + s * (x01 * c + x11 * s)
+        t01 = c * (-x00 * s + x01 * c) + s * (-x01 * s + x11 * c)
+        t11 = -s * (-x00 * s + x01 * c) + c * (-x01 * s + x11 * c)
+        return t00 / (a * a), t01 / (a * b), t11 / (b * b)
+
+    n00, n01, n11 = to_n(q00, q01, q11)
+    half_tr, half_diff = 0.5 * (n00 + n11), 0.5 * (n00 - n11)
+    rad = np.hypot(half_diff, n01)
+    lam0 = half_tr + rad
+    lam1 = np.maximum(half_tr - rad, 1e-300)
+    u0, u1 = np.log(lam0), np.log(lam1)
+    h0, h1 = _h(u0), _h(u1)
+    theta = 0.5 * np.arctan2(n01, half_diff)  # N's first eigenvector angle
+    cos2, sin2 = np.cos(2 * theta), np.sin(2 * theta)
+    mean, half = 0.5 * (h0 + h1), 0.5 * (h0 - h1)
+    g00, g11, g01 = mean + half * cos2, mean - half * cos2, half * sin2
+    r = np.stack([_INV_SQRT8 * y0, _INV_SQRT8 * y1, g00, g11, _SQRT2 * g01], axis=1)
+    if d is None:
+        return r, None
+    col = (slice(None), None)
+    dmu, dsig = d
+    dq00, dq01, dq11 = dsig[..., 0, 0], dsig[..., 0, 1], dsig[..., 1, 1]
+    L00, L10, L11, Y0, Y1 = (v[col] for v in (l00, l10, l11, y0, y1))
+    dl00 = 0.25 * dq00 / L00
+    dl10 = (0.5 * dq01 - L10 * dl00) / L00
+    dl11 = (0.5 * dq11 - 2.0 * L10 * dl10) / (2.0 * L11)
+    dy0 = (-dmu[..., 0] - Y0 * dl00) / L00
+    dy1 = (-dmu[..., 1] - dl10 * Y0 - L10 * dy0 - Y1 * dl11) / L11
+    c, s, a, b = c[col], s[col], a[col], b[col]
+    dn00, dn01, dn11 = to_n(dq00, dq01, dq11)
+    ct, st = np.cos(theta)[col], np.sin(theta)[col]
+    e00 = ct * ct * dn00 + 2 * ct * st * dn01 + st * st * dn11
+    e11 = st * st * dn00 - 2 * ct * st * dn01 + ct * ct * dn11
+    e01 = -ct * st * dn00 + (ct * ct - st * st) * dn01 + st * ct * dn11
+    f0 = _dh_dlambda(u0, h0, lam0)
+    f1 = _dh_dlambda(u1, h1, lam1)
+    gap = lam0 - lam1
+    close = gap <= 1e-7 * lam0
+    f01 = np.where(close, 0.5 * (f0 + f1), (h0 - h1) / np.where(close, 1.0, gap))
+    M00, M01, M11 = f0[col] * e00, f01[col] * e01, f1[col] * e11
+    dg00 = ct * ct * M00 - 2 * ct * st * M01 + st * st * M11
+    dg11 = st * st * M00 + 2 * ct * st * M01 + ct * ct * M11
+    dg01 = ct * st * M00 + (ct * ct - st * st) * M01 - st * ct * M11
+    J = np.stack([_INV_SQRT8 * dy0, _INV_SQRT8 * dy1, dg00, dg11, _SQRT2 * dg01], axis=1)
+    return r, J
+
+
+def _log_cosh(x: np.ndarray) -> np.ndarray:
+    """``ln cosh(x)`` without overflow, accurate near 0 (series), elementwise."""
+    ax = np.abs(x)
+    x2 = ax * ax
+    series = x2 * (0.5 + x2 * (-1.0 / 12.0 + x2 * (1.0 / 45.0)))
+    big = ax + np.log1p(np.exp(-2.0 * ax)) - math.log(2.0)
+    return np.where(ax < 1e-2, series, big)
+
+
+def _h(u: np.ndarray) -> np.ndarray:
+    """``sign(u) sqrt(ln cosh(u / 2) / 2)``: odd, analytic, ``~ u / (2 sqrt 2)`` near 0."""
+    return np.sign(u) * np.sqrt(0.5 * _log_cosh(0.5 * u))
+
+
+def _dh_dlambda(u: np.ndarray, h: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """``d h(ln lambda) / d lambda`` for ``h(u) = sign(u) sqrt(ln cosh(u / 2) / 2)``:
+    ``h'(u) = tanh(|u| / 2) / (8 |h|)`` (-> 1/4 as u -> 0), divided by ``lambda``."""
+    ah = np.abs(h)
+    small = np.abs(u) < 1e-4
+    dh_du = np.where(small, 0.25,
+                     np.tanh(0.5 * np.abs(u)) / (8.0 * np.where(small, 1.0, ah)))
+    return dh_du / lam
 
 
 # --------------------------------------------------------------------------- residuals
@@ -445,12 +592,14 @@ def overlap_delta(
     projection given as params ``(cx, cy, a, b, angle)`` (px, rad): ``I``, ``U = A_D + A_P -
     I``, ``C = max(hull, U)``; ``Delta_iou = 1 - I/U`` in [0, 1], ``Delta_giou = 2 - I/U - U/C``
     in [0, 2] (clamped against rounding)."""
-    inter = intersection_area(detection_params, projection_params)
-    union = (math.pi * float(detection_params[2] * detection_params[3])
-             + math.pi * float(projection_params[2] * projection_params[3]) - inter)
+    det, proj = np.asarray(detection_params, float), np.asarray(projection_params, float)
+    q = quadrant_areas(det, proj, name == "giou", hull_directions)
+    a_det, a_proj = math.pi * float(det[2] * det[3]), math.pi * float(proj[2] * proj[3])
+    inter = min(max(float(q["intersection"][0].sum()), 0.0), min(a_det, a_proj))
+    union = a_det + a_proj - inter
     if name == "iou":
         return min(max(1.0 - inter / union, 0.0), 1.0)
-    hull = max(hull_area(detection_params, projection_params, hull_directions), union)
+    hull = max(float(q["hull"][0].sum()), union)
     return min(max(2.0 - inter / union - union / hull, 0.0), 2.0)
 
 
@@ -462,8 +611,7 @@ def overlap_residual(
     """The iou / giou residual: ``Delta`` split over the four quadrants ``Q_k`` of the
     detection's frame (module docstring), ``r_k >= 0``, ``sum_k r_k = Delta``; and, if
     ``gradient``, ``dr / dg`` w.r.t. the projection's Gaussian parameters ``g = (mu_x,
-    mu_y, s00, s01, s11)`` (px, px^2), exact (:func:`factors.overlap.quadrant_areas_batch`;
-    one pair: the scalar :func:`factors.overlap.quadrant_areas`).
+    mu_y, s00, s01, s11)`` (px, px^2), exact (:func:`factors.overlap.quadrant_areas_batch`).
 
     Params are one pair ``(5,)`` each (returns ``r`` (4,), ``dr/dg`` (4, 5)) or N pairs
     ``(N, 5)`` (returns (N, 4), (N, 4, 5); the pose factors evaluate all objects in one call).
@@ -479,32 +627,19 @@ def overlap_residual(
     single = det.ndim == 1
     det = det.reshape(-1, 5)
     proj = np.asarray(projection_params, dtype=float).reshape(-1, 5)
-    q = _quadrant_areas(det, proj, name == "giou", hull_directions, gradient)
+    q = quadrant_areas_batch(det, proj, name == "giou", hull_directions, gradient)
     r, d_r = _overlap_rows(name, det, q, gradient)
     if name == "iou" and disjoint_hull:
         disjoint = q["intersection"][0].sum(axis=1) <= 0.0
         if disjoint.any():
-            q_h = _quadrant_areas(det[disjoint], proj[disjoint], True, hull_directions,
-                                  gradient)
+            q_h = quadrant_areas_batch(det[disjoint], proj[disjoint], True, hull_directions,
+                                       gradient)
             r[disjoint], d_h = _overlap_rows("giou", det[disjoint], q_h, gradient)
             if gradient:
                 d_r[disjoint] = d_h
     if single:
         return r[0], None if d_r is None else d_r[0]
     return r, d_r
-
-
-def _quadrant_areas(
-    det: np.ndarray, proj: np.ndarray, hull: bool, hull_directions: int, gradient: bool,
-) -> dict[str, tuple[np.ndarray, np.ndarray | None]]:
-    """The quadrant areas of (N, 5) pairs: :func:`factors.overlap.quadrant_areas_batch`, or for
-    ONE pair the scalar reference :func:`factors.overlap.quadrant_areas` (equal to ~1e-9,
-    tested; a few times cheaper than the vectorised path's fixed numpy overhead for one pair,
-    e.g. ``residual("iou")`` in Table I), reshaped to (1, 4) / (1, 4, 5)."""
-    if det.shape[0] != 1:
-        return quadrant_areas_batch(det, proj, hull, hull_directions, gradient)
-    q = quadrant_areas(det[0], proj[0], hull, hull_directions, gradient)
-    return {k: (a[None], None if g is None else g[None]) for k, (a, g) in q.items()}
 
 
 def _overlap_rows(
@@ -550,26 +685,13 @@ def _overlap_rows(
     return r, d_r
 
 
-def _iou_cost(det: Ellipse, proj: Ellipse) -> float:
-    return overlap_delta("iou", det.params(), proj.params())
-
-
-def _giou_cost(det: Ellipse, proj: Ellipse, hull_directions: int = HULL_DIRECTIONS) -> float:
-    return overlap_delta("giou", det.params(), proj.params(), _hull_directions(hull_directions))
-
-
-def _iou_residual(det: Ellipse, proj: Ellipse) -> np.ndarray:
-    return overlap_residual("iou", det.params(), proj.params())[0]
-
-
-def _giou_residual(det: Ellipse, proj: Ellipse,
-                   hull_directions: int = HULL_DIRECTIONS) -> np.ndarray:
-    return overlap_residual("giou", det.params(), proj.params(),
-                            _hull_directions(hull_directions))[0]
-
-
-def _bbox_residual(det: Ellipse, proj: Ellipse) -> np.ndarray:
-    return det.bbox() - proj.bbox()
+def _overlap(name: str, det: Ellipse, proj: Ellipse, hull_directions: int = HULL_DIRECTIONS,
+             as_cost: bool = False) -> np.ndarray | float:
+    """iou / giou of one pair: the residual rows (4,), or the cost ``Delta`` if ``as_cost``."""
+    n = _hull_directions(hull_directions)
+    if as_cost:
+        return overlap_delta(name, det.params(), proj.params(), n)
+    return overlap_residual(name, det.params(), proj.params(), n)[0]
 
 
 def _qbbox_residual(det: Ellipse, proj: Ellipse, image_size: object = None) -> np.ndarray:
@@ -579,74 +701,16 @@ def _qbbox_residual(det: Ellipse, proj: Ellipse, image_size: object = None) -> n
 
 def _truncated_box(e: Ellipse, W: float, H: float) -> np.ndarray:
     box = clipped_bbox(e, (W, H))
-    return _clamped_box(e.bbox(), W, H) if box is None else box
-
-
-def _algebraic_residual(det: Ellipse, proj: Ellipse) -> np.ndarray:
-    return np.subtract(_dual_vec(det), _dual_vec(proj))
-
-
-def _frobenius_residual(det: Ellipse, proj: Ellipse) -> np.ndarray:
-    d = np.subtract(_dual_vec(det), _dual_vec(proj))
-    d[[1, 2, 4]] *= _SQRT2
-    return d
-
-
-def _wasserstein_residual(det: Ellipse, proj: Ellipse) -> np.ndarray:
-    a1, b1, t1 = _canonical_axes(det)
-    a2, b2, t2 = _canonical_axes(proj)
-    # Angle between the major axes, reduced to [-pi/2, pi/2) (ellipses are pi-symmetric).
-    delta = (t1 - t2 + 0.5 * math.pi) % math.pi - 0.5 * math.pi
-    s = math.sin(delta)
-    P = (a1 * a1 - b1 * b1) * (a2 * a2 - b2 * b2)  # >= 0 with a >= b
-    Q = a1 * a2 + b1 * b2
-    k = math.sqrt(2.0 * P / (Q + math.sqrt(max(Q * Q - P * s * s, 0.0))))
-    return np.array([det.cx - proj.cx, det.cy - proj.cy, a1 - a2, b1 - b2, k * s])
-
-
-def _bhattacharyya_residual(det: Ellipse, proj: Ellipse) -> np.ndarray:
-    d00, d01, d11 = _sigma(det)
-    q00, q01, q11 = _sigma(proj)
-    # Mahalanobis part with the Cholesky factor of S = (S_D + S_P) / 2.
-    s00, s01, s11 = 0.5 * (d00 + q00), 0.5 * (d01 + q01), 0.5 * (d11 + q11)
-    l00 = math.sqrt(s00)
-    l10 = s01 / l00
-    l11 = math.sqrt(max(s11 - l10 * l10, 0.0))
-    dx, dy = det.cx - proj.cx, det.cy - proj.cy
-    y0 = dx / l00
-    y1 = (dy - l10 * y0) / l11
-    # N = S_D^-1/2 S_P S_D^-1/2 computed in the detection's frame: D^-1 R^T S_P R D^-1.
-    c, s = math.cos(det.angle), math.sin(det.angle)
-    t00 = c * (q00 * c + q01 * s) + s * (q01 * c + q11 * s)
-    t01 = c * (-q00 * s + q01 * c) + s * (-q01 * s + q11 * c)
-    t11 = -s * (-q00 * s + q01 * c) + c * (-q01 * s + q11 * c)
-    n00, n01, n11 = t00 / (det.a * det.a), t01 / (det.a * det.b), t11 / (det.b * det.b)
-    half_tr, half_diff = 0.5 * (n00 + n11), 0.5 * (n00 - n11)
-    rad = math.hypot(half_diff, n01)
-    h0 = _h(math.log(half_tr + rad))
-    h1 = _h(math.log(max(half_tr - rad, 1e-300)))
-    # G = V diag(h) V^T in N's frame (back in the detection frame; rotation-free norm).
-    mean, half = 0.5 * (h0 + h1), 0.5 * (h0 - h1)
-    if rad > 0.0:
-        cos2, sin2 = half_diff / rad, n01 / rad
-    else:
-        cos2, sin2 = 1.0, 0.0
-    g00, g11, g01 = mean + half * cos2, mean - half * cos2, half * sin2
-    return np.array([_INV_SQRT8 * y0, _INV_SQRT8 * y1, g00, g11, _SQRT2 * g01])
+    return np.clip(e.bbox(), 0.0, [W, H, W, H]) if box is None else box
 
 
 _RESIDUALS = {
-    "bbox": _bbox_residual,
+    **{m: functools.partial(_conic_residual, m) for m in CONIC_METRICS},
     "qbbox": _qbbox_residual,
-    "algebraic": _algebraic_residual,
-    "frobenius": _frobenius_residual,
-    "wasserstein": _wasserstein_residual,
-    "bhattacharyya": _bhattacharyya_residual,
     "level_set": _level_set_residual,
-    "iou": _iou_residual,
-    "giou": _giou_residual,
+    **{m: functools.partial(_overlap, m) for m in ("iou", "giou")},
 }
-_SCALAR_COSTS = {"iou": _iou_cost, "giou": _giou_cost}
+_SCALAR_COSTS = {m: functools.partial(_overlap, m, as_cost=True) for m in ("iou", "giou")}
 
 
 def residual(name: str, detection: Ellipse, projection: Ellipse, **options: object) -> np.ndarray:
@@ -657,7 +721,6 @@ def residual(name: str, detection: Ellipse, projection: Ellipse, **options: obje
     options. Unknown ``name`` -> ``ValueError`` listing the valid names; unknown option ->
     ``TypeError`` naming it; bad option value -> ``ValueError``.
     """
-    _check_name(name)
     _check_options(name, options)
     _check_ellipse("detection", detection)
     _check_ellipse("projection", projection)
@@ -670,7 +733,6 @@ def cost(name: str, detection: Ellipse, projection: Ellipse, **options: object) 
     iou / giou return ``1 - IoU`` / ``1 - GIoU``; the others ``||residual||^2`` (frobenius is
     the *squared* Frobenius norm, wasserstein the *squared* W2 distance).
     """
-    _check_name(name)
     _check_options(name, options)
     _check_ellipse("detection", detection)
     _check_ellipse("projection", projection)
@@ -682,10 +744,8 @@ def cost(name: str, detection: Ellipse, projection: Ellipse, **options: object) 
 
 def residual_size(name: str, **options: object) -> int:
     """Length of :func:`residual` for metric ``name`` with these options."""
-    _check_name(name)
     _check_options(name, options)
     if name == "level_set":
         return (_positive_int("n_azimuths", options.get("n_azimuths", 6))
                 * _positive_int("n_levels", options.get("n_levels", 4)))
-    return {"iou": 4, "giou": 4, "bbox": 4, "qbbox": 4, "algebraic": 5, "frobenius": 5,
-            "wasserstein": 5, "bhattacharyya": 5}[name]
+    return _OPTIONS[name][1]

@@ -7,50 +7,25 @@ unwhitened error is the metric residual ``r_j`` (``factors.metrics.residual``: c
 Jacobians are w.r.t. GTSAM's tangent ``xi = [omega, v]`` with right perturbation
 (``pose.retract(xi) = pose.compose(Pose3.Expmap(xi))``).
 
-Noise model and the paper's equation 8
---------------------------------------
-GTSAM minimises ``sum_j 0.5 ||r_j||^2 / s_j^2`` for an isotropic noise of std ``s_j``. With
-``s_j = sqrt(sigma_j)`` (``sigma_j`` the detector's predicted uncertainty) this is
-``0.5 sum_j sigma_j^-1 Delta_j``: the argmin of the paper's equation 8. Without ``sigma``, unit
-noise (``s_j = 1``). An optional robust kernel (``huber``, ``cauchy``, ``geman_mcclure``) wraps that
-noise model per detection through ``gtsam.noiseModel.Robust``; its threshold ``k`` applies to the
-WHITENED residual norm ``sqrt(Delta_j / sigma_j)``; defaults per metric in
-:data:`DEFAULT_ROBUST_SCALE` (about the residual norm of a clearly wrong match: e.g. for the level
-set, 2.0 is an rms level discrepancy of 0.4 over 24 samples).
+Noise: isotropic std ``s_j = sqrt(sigma_j)`` (``sigma_j`` the detector's predicted
+uncertainty; unit without it), so GTSAM minimises ``0.5 sum_j sigma_j^-1 Delta_j``, the argmin of
+the paper's equation 8. An optional robust kernel (:data:`ROBUST_KERNELS`) wraps it per
+detection (``gtsam.noiseModel.Robust``), threshold ``k`` on the WHITENED residual norm
+``sqrt(Delta_j / sigma_j)``, defaults in :data:`DEFAULT_ROBUST_SCALE`.
 
-Design: one shared, memoised evaluation; batched without robust kernels
------------------------------------------------------------------------
-In Python the cost is in numpy calls, not in GTSAM: evaluating each pair separately (the
-GUIDE's "one factor per object") repeats the same dozen numpy calls N times. So all the
-factors of one solve share ONE :class:`factors.pose_residuals.PoseResidualModel`: the first
-factor called at a pose evaluates every pair at once (vectorised over objects and samples,
-analytic Jacobians computed in the same pass) and memoises it on the pose value; the others
-slice their rows. On top of it, two forms (:func:`pose_factors`):
-
-* ``batched=True``: ONE factor for all pairs with a Diagonal noise model whose rows of pair
-  ``j`` have std ``sqrt(sigma_j)``: the same weighted error as N factors, one Python round trip
-  per evaluation. ``service.localization.refine`` uses it when no robust kernel is requested.
-* default: one factor per pair (needed for per-detection robust kernels: GTSAM reweights a
-  whole factor), each slicing the shared evaluation.
-
-Measured (``python -m bench.refine_speed``, level set, LM solve only, median CPU ms, one run on
-the loaded 2-core machine): N=8: batched 0.71, per-detection shared 1.01, per-detection
-separate 3.11; N=16: 0.88, 1.53, 6.45. Numbers and the command are in ``docs/results.md``
-(section ``refine_speed``).
-
-Jacobians: analytic for the metrics in ``factors.pose_residuals.ANALYTIC_METRICS`` (every
-metric but ``qbbox``, see :mod:`factors.pose_residuals`); central differences of
-``factors.metrics.residual`` for ``qbbox``.
-
-Invalid projections (ellipsoid behind the camera, crossing the principal plane, containing the
-camera) give a bounded penalty residual with a Jacobian that restores a positive depth margin;
-see :mod:`factors.pose_residuals`.
+All the factors of one solve share ONE memoised
+:class:`factors.pose_residuals.PoseResidualModel` (every pair evaluated at once per pose, the
+factors slice their rows). :func:`pose_factors` returns one factor per pair (default; needed for
+per-detection robust kernels), or with ``batched=True`` ONE factor over all pairs with a
+Diagonal noise model (the same weighted error, one Python round trip). Jacobians, invalid
+projections (a bounded penalty) and the saturation: :mod:`factors.pose_residuals`. Why and
+measurements: ``docs/design/factors.md`` ("Pose factors").
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import gtsam
@@ -80,12 +55,8 @@ def pose3(T: np.ndarray) -> gtsam.Pose3:
 
 
 #: Default robust threshold ``k`` per metric, on the whitened residual norm
-#: ``sqrt(Delta_j / sigma_j)`` (units: those of the metric's residual). Calibration
-#: (``bench.refine_speed`` scenes: detection noise 1.5 px on the centre, 3 % on the semi-axes,
-#: 1 degree on the angle; N = 8, at the true pose): inlier residual norms have a 90th
-#: percentile of 1.03 (level_set), 0.33 (iou, giou), 3.4 px (bbox, qbbox), 2.5 px
-#: (wasserstein), 0.038 (bhattacharyya), 1400 / 1600 (algebraic / frobenius, px^2). ``k`` is
-#: about twice to three times that: beyond it a detection is treated as an outlier.
+#: ``sqrt(Delta_j / sigma_j)`` (units: those of the metric's residual); about twice to three
+#: times the inliers' 90th percentile (calibration: ``docs/design/factors.md``).
 DEFAULT_ROBUST_SCALE: dict[str, float] = {
     "level_set": 2.0,
     "iou": 0.6,
@@ -99,12 +70,20 @@ DEFAULT_ROBUST_SCALE: dict[str, float] = {
 }
 
 
-def _check_sigmas(sigmas: Sequence[float | None], n: int) -> None:
+def _std(sigma: float | None, name: str = "sigma") -> float:
+    """The noise std ``sqrt(sigma)`` (1 for None); ``sigma`` must be finite and > 0."""
+    if sigma is None:
+        return 1.0
+    if not (is_real(sigma) and math.isfinite(sigma) and sigma > 0):
+        raise ValueError(f"{name} must be finite and > 0, got {sigma!r}")
+    return math.sqrt(float(sigma))
+
+
+def _check_sigmas(sigmas: Sequence[float | None], n: int) -> np.ndarray:
+    """The stds (n,) of ``sigmas`` (one per detection)."""
     if len(sigmas) != n:
         raise ValueError(f"sigmas must have one entry per detection ({n}), got {len(sigmas)}")
-    for j, s in enumerate(sigmas):
-        if s is not None and not (is_real(s) and math.isfinite(s) and s > 0):
-            raise ValueError(f"sigmas[{j}] must be finite and > 0, got {s!r}")
+    return np.array([_std(s, f"sigmas[{j}]") for j, s in enumerate(sigmas)])
 
 
 def make_noise_model(
@@ -119,12 +98,7 @@ def make_noise_model(
     ``robust`` in :data:`ROBUST_KERNELS` (or None) wraps it in ``gtsam.noiseModel.Robust`` with
     threshold ``robust_scale`` (default ``DEFAULT_ROBUST_SCALE[metric]``).
     """
-    if sigma is None:
-        std = 1.0
-    else:
-        if not (is_real(sigma) and math.isfinite(sigma) and sigma > 0):
-            raise ValueError(f"sigma must be finite and > 0, got {sigma!r}")
-        std = math.sqrt(float(sigma))
+    std = _std(sigma)
     check_robust(robust, robust_scale)
     base = gtsam.noiseModel.Isotropic.Sigma(int(dim), std)
     if robust is None:
@@ -146,17 +120,7 @@ def shared_pose_factor(
         raise IndexError(f"index {index} out of range for a model of {model.n} pairs")
     if noise_model.dim() != model.dim:
         raise ValueError(f"noise_model dim {noise_model.dim()} != residual dim {model.dim}")
-    evaluate = model.evaluate
-
-    def error_fn(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
-        T = values.atPose3(key).matrix()
-        if H is None:
-            return evaluate(T, False).factor_residuals[index]
-        ev = evaluate(T, True)
-        H[0] = ev.factor_jacobians[index]  # type: ignore[index]
-        return ev.factor_residuals[index]
-
-    return gtsam.CustomFactor(noise_model, [key], error_fn)
+    return _model_factor(key, model, noise_model, lambda a: a[index])
 
 
 def pose_factors(
@@ -243,19 +207,23 @@ def batched_pose_factor(
     ``bench.refine_speed`` measures both designs. ``sigmas`` are validated as in
     :func:`pose_factors` (one per pair, finite and > 0, or None)."""
     n, m = model.n, model.dim
-    if sigmas is not None:
-        _check_sigmas(sigmas, n)
-    stds = np.ones(n) if sigmas is None else np.array(
-        [1.0 if s is None else math.sqrt(s) for s in sigmas])
+    stds = np.ones(n) if sigmas is None else _check_sigmas(sigmas, n)
     noise = gtsam.noiseModel.Diagonal.Sigmas(np.repeat(stds, m))
+    return _model_factor(key, model, noise, lambda a: a.reshape(n * m, *a.shape[2:]))
+
+
+def _model_factor(key: int, model: PoseResidualModel, noise: gtsam.noiseModel.Base,
+                  rows: Callable[[np.ndarray], np.ndarray]) -> gtsam.CustomFactor:
+    """A ``CustomFactor`` on ``key`` whose error and Jacobian are ``rows`` of the model's
+    memoised (N, dim) factor residuals and (N, dim, 6) factor Jacobians."""
     evaluate = model.evaluate
 
     def error_fn(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
         T = values.atPose3(key).matrix()
         if H is None:
-            return evaluate(T, False).factor_residuals.reshape(-1)
+            return rows(evaluate(T, False).factor_residuals)
         ev = evaluate(T, True)
-        H[0] = ev.factor_jacobians.reshape(n * m, 6)  # type: ignore[union-attr]
-        return ev.factor_residuals.reshape(-1)
+        H[0] = rows(ev.factor_jacobians)
+        return rows(ev.factor_residuals)
 
     return gtsam.CustomFactor(noise, [key], error_fn)

@@ -1,8 +1,9 @@
 """Residuals and Jacobians of the ellipse metrics w.r.t. the camera pose, batched over objects.
 
-This module is pure numpy (no GTSAM). It evaluates, for ONE camera pose and ALL
-detection/ellipsoid pairs of a refinement at once, the metric residual of every pair and its
-Jacobian with respect to the pose; :mod:`factors.pose_factors` wraps it in GTSAM factors.
+Pure numpy (no GTSAM): for ONE camera pose and ALL detection/ellipsoid pairs of a refinement
+at once, the metric residual of every pair and its Jacobian with respect to the pose;
+:mod:`factors.pose_factors` wraps it in GTSAM factors. Derivations and the reasons behind the
+penalty's constants: ``docs/design/factors.md`` ("Pose residuals").
 
 Conventions
 -----------
@@ -13,98 +14,50 @@ Conventions
 * In the camera frame a world point moves as ``X_c(xi) = X_c - omega x X_c - v`` (first order).
 * The projected dual conic is ``C* = K A K^T`` with ``A = S_c - c_c c_c^T`` (3x3), ``c_c`` the
   ellipsoid centre and ``S_c = R S R^T`` its shape matrix (``S = R_e diag(axes^2) R_e^T``), both in
-  the camera frame. ``A`` equals ``P Q* P^T`` up to ``K``: ``C* = P Q* P^T`` exactly.
-  Its first-order change is ``dA = -[w]x A - A [w]x^T + v c_c^T + c_c v^T``.
+  the camera frame (``C* = P Q* P^T`` exactly). Its first-order change is
+  ``dA = -[w]x A - A [w]x^T + v c_c^T + c_c v^T``.
 
-Level-set residual (analytic, the product's hot path)
------------------------------------------------------
-For a sample ``x`` (pixels) of the detection, ``n = K^-1 (x, y, 1)`` (normalised, fixed), GUIDE
-section 2 gives ``Phi_proj(x) = 1 - C*[2,2] x~^T C*^-1 x~ = 1 - s n^T A^-1 n`` with
-``s = A[2,2]`` (``K``'s last row is ``e3``). With ``u = A^-1 n`` and ``g = n . u``::
-
-    r      = Phi_det(x) - Phi_proj(x) = (Phi_det(x) - 1) + s g
-    dr/dw  = 2 g (e3 x A e3) + 2 s (n x u)
-    dr/dv  = 2 g z_c e3 - 2 s (c_c . u) u
-
-(using ``A u = n``). Each of the 7 rows (``r - Phi_det + 1`` and the 6 Jacobian columns) is a
-quadratic form ``n^T Q n`` in the sample's ray, with ``Q`` a per-object 3x3 matrix bilinear in
-``A^-1`` and the features ``[A e3, z_c, s A^-1 c_c]`` (``(n x u)_k = -n^T [e_k]x A^-1 n``,
-``(c_c . u) u_k = n^T (A^-1 c_c)(A^-1 e_k)^T n``; :func:`_level_set_forms`). So one evaluation
-is: ``A^-1`` of every object by Sherman-Morrison from the world frame
-(``A_w^-1 = S_w^-1 + e e^T / (1 - d . e)``, ``e = S_w^-1 d``, ``d`` the camera-to-centre vector,
-``S_w^-1`` precomputed; ``A^-1 = R^T A_w^-1 R``), the 7 forms of all objects by one (N, 63) x
-(63, 63) matmul (:data:`_LEVEL_SET_FORMS`), and ONE batched matmul of the forms against the
-samples' monomials ``n_i n_j`` (N, M, 9), precomputed per layout: no Python loop over samples or
-objects, and no 3x3 inverse per evaluation. The samples are those of
-``factors.metrics.level_set_sample_points`` (same layout, tested), fixed at the initial pose;
-they are the affine image ``n = H_j (u, v, 1)`` of the unit layout, so laying them out is one
-matmul too.
-
-Conic metrics (analytic)
-------------------------
-``algebraic``, ``frobenius``, ``wasserstein``, ``bhattacharyya`` and ``bbox`` are smooth
-functions of the projection's normalised dual conic ``Cn = C* / (-C*[2,2])`` (centre
-``mu = -Cn[:2, 2]``, ``Sigma = Cn[:2, :2] + mu mu^T``). Their residuals are re-implemented
-here vectorised over the objects (equal to ``factors.metrics.residual``, tested) and
-differentiated through ``dC* = K dA K^T``, ``dCn = (dC* + Cn dC*[2,2]) / (-C*[2,2])``.
-``iou`` and ``giou`` evaluate the quadrant rows of all pairs in one vectorised call of
-:func:`factors.metrics.overlap_residual` (exact areas and their exact gradient w.r.t. the
-projection's ``(mu, Sigma)``, :mod:`factors.overlap`), chained through the same ``dCn``;
-iou with ``disjoint_hull`` (disjoint pairs get the giou rows, see ``factors.metrics``).
-``qbbox`` (piecewise: clipped at the image border) calls ``factors.metrics.residual`` and uses
-central differences on ``retract`` (step :data:`DEFAULT_NUMERIC_STEP`), one-sided where a side
-is invalid.
+Metrics
+-------
+* ``level_set`` (analytic): ``r = Phi_det(x) - Phi_proj(x) = (Phi_det(x) - 1) + s n^T A^-1 n``
+  at the detection's samples ``x`` (rays ``n = K^-1 (x, y, 1)``, ``s = A[2,2]``), fixed at the
+  initial pose (the layout of ``factors.metrics.level_set_sample_points``); residual and
+  Jacobian rows are quadratic forms in ``n`` (:func:`_level_set_forms`).
+* ``algebraic``, ``frobenius``, ``wasserstein``, ``bhattacharyya``, ``bbox`` (analytic):
+  :func:`factors.metrics.conic_residuals` of the normalised dual conic
+  ``Cn = C* / (-C*[2,2])``, differentiated through ``dC* = K dA K^T``,
+  ``dCn = (dC* + Cn dC*[2,2]) / (-C*[2,2])``.
+* ``iou``, ``giou`` (analytic): :func:`factors.metrics.overlap_residual` of all pairs in one
+  call (exact area gradients w.r.t. the projection's ``(mu, Sigma)``, chained through ``dCn``),
+  with ``disjoint_hull`` (disjoint pairs get the giou rows).
+* ``qbbox``: ``factors.metrics.residual`` and central differences on ``retract`` (step
+  :data:`DEFAULT_NUMERIC_STEP`), one-sided where a side is invalid.
 
 Evaluations are memoised on the pose value and their arrays are read-only (shared by the
 factors that slice them).
 
-Invalid projections (penalty)
------------------------------
-The projection of an ellipsoid is an ellipse only while the whole ellipsoid is in front of the
-camera: depth margin ``m = z_c - sqrt(S_c[2,2]) > 0`` (see
-:func:`factors.geometry.ellipsoid_depth_margins`). When ``m <= min_depth_margin`` during an
-optimisation (ellipsoid behind the camera, crossing its principal plane, or containing it), the
-pair's residual is replaced by the bounded penalty (every one of the ``dim`` components equal)::
+Invalid projections (penalty) and saturation
+--------------------------------------------
+A projection is valid while the whole ellipsoid is in front of the camera: depth margin
+``m = z_c - sqrt(S_c[2,2]) > min_depth_margin`` (m; as
+:func:`factors.geometry.ellipsoid_depth_margins`). Otherwise the pair's ``dim`` residual
+components all equal ``sqrt(P_j / dim) * (1 + d / (d + d_s))``, ``d = min_depth_margin - m``,
+``d_s`` the ellipsoid's largest semi-axis (m): cost in ``[P_j, 4 P_j)``, Jacobian
+``-sqrt(P_j/dim) d_s / (d + d_s)^2 dm/dxi`` (``dm/dw = e3 x c_c - (e3 x S_c e3) /
+sqrt(S_c[2,2])``, ``dm/dv = -e3``).
 
-    r_k = sqrt(P_j / dim) * (1 + d / (d + d_s)),   d = min_depth_margin - m >= 0
+``P_j = penalty_cost * rho_j^2`` (:attr:`PoseResidualModel.penalty_costs`), ``rho_j`` the
+pair's reference residual magnitude: ``L_j`` px for bbox / qbbox / wasserstein / algebraic /
+frobenius, ``max(1, s_max_j)^2`` for level_set (``s_max_j`` its sampling scale), 1 for iou /
+giou / bhattacharyya; ``L_j = max(image diagonal, |c_D| + max(a_D, b_D))`` px.
 
-so its cost lies in ``[P_j, 4 P_j)`` (finite, never NaN), with ``d_s`` the ellipsoid's largest
-semi-axis (m). Its Jacobian ``-sqrt(P_j/dim) d_s / (d + d_s)^2 dm/dxi`` points towards a positive
-margin (``dm/dw = e3 x c_c - (e3 x S_c e3) / sqrt(S_c[2,2])``, ``dm/dv = -e3``); a Gauss-Newton
-step on the penalty alone, ``|r| / |dr/dm|``, does not depend on ``P_j``.
-
-A barrier must cost more than the valid poses LM can compare it with. A valid projection can
-cost arbitrarily much (a very thin projection near the principal plane: level-set costs of
-1e10-1e12 were measured against a penalty of 3.9e9), so the residual LM sees for a VALID pair
-is saturated above half the penalty (``c = ||r||^2`` the metric's cost, ``c_0 = P_j / 2``)::
-
-    h(c) = c                                               for c <= c_0
-    h(c) = c_0 + w (1 - exp(-(c - c_0) / w)),  w = 0.4 P_j   above (C^1, h < 0.9 P_j)
-    r_sat = r sqrt(h(c) / c)
-
-Hence every valid cost LM compares is below ``P_j`` and every penalty is at least ``P_j``: the
-barrier holds whatever the metric, and below ``c_0`` (every pose LM meets in practice) the
-factor is exactly the metric. The reported residuals
-and costs (:attr:`PoseEvaluation.residuals`, :meth:`PoseResidualModel.costs`, the refinement's
-``per_detection_cost``) are the metric's own, unsaturated; the GTSAM factors use
-:attr:`PoseEvaluation.factor_residuals`.
-
-The penalty is kept small enough for the other pairs' information to survive in double
-precision next to it (a penalty of ~4e19 for algebraic/frobenius hid every other residual).
-The metrics' costs have different units: ``P_j = penalty_cost * rho_j^2``
-(:attr:`PoseResidualModel.penalty_costs`) with ``rho_j`` the pair's reference residual
-magnitude: ``L_j`` px for bbox / qbbox / wasserstein and for algebraic / frobenius (see
-below), ``max(1, s_max_j)^2`` for level_set (``Phi`` units; ``s_max_j`` its sampling scale)
-and 1 for iou / giou / bhattacharyya; ``L_j = max(image diagonal, |c_D| + max(a_D, b_D))`` px
-is the detection's reference length. With the default ``penalty_cost``
-(:data:`DEFAULT_PENALTY_COST` = 1e8) the saturation starts only beyond ~7000 reference lengths
-of misfit (bbox, wasserstein). Algebraic / frobenius, whose residual is quadratic in px, use
-``rho_j = L_j`` too: ``P_j`` ~ 6e13 px^4 on a 640x480 image instead of the 4e19 of
-``rho_j = L_j^2``, which leaves ~1e-8 relative precision to the other pairs' costs (~1e6
-px^4). So Levenberg-Marquardt rejects steps into the invalid region and, from an invalid
-start, is pushed back to valid poses. A robust kernel (``factors.pose_factors``) flattens
-every large residual, the penalty included: with one, the barrier is only as strong as the
-kernel lets it be.
+The GTSAM factors see each VALID pair's residual saturated above half the penalty (``c =
+||r||^2``, ``c_0 = P_j / 2``): ``h(c) = c`` for ``c <= c_0``, else ``c_0 + w (1 - exp(-(c -
+c_0) / w))`` with ``w = 0.4 P_j`` (C^1, ``h < 0.9 P_j``), ``r_sat = r sqrt(h(c) / c)``; so every
+valid cost is below every penalty. Reported residuals and costs
+(:attr:`PoseEvaluation.residuals`, :meth:`PoseResidualModel.costs`) are the metric's own; the
+factors use :attr:`PoseEvaluation.factor_residuals`. A robust kernel
+(``factors.pose_factors``) flattens the penalty too.
 """
 
 from __future__ import annotations
@@ -125,12 +78,9 @@ from factors.geometry import (
     Ellipsoid,
     GeometryError,
     check_pose,
-    dual_conics_from_params,
     ellipse_params_and_validity,
     gaussian_derivatives_from_dual_conics,
     gaussians_from_dual_conics,
-    params_from_dual_conics,
-    sigma_entries,
     skew,
     so3_exp,
 )
@@ -158,29 +108,21 @@ DEFAULT_NUMERIC_STEP: dict[str, float] = dict.fromkeys(METRIC_NAMES, 1e-6)
 ANALYTIC_METRICS: tuple[str, ...] = (
     "level_set", "algebraic", "frobenius", "wasserstein", "bhattacharyya", "bbox", "iou",
     "giou")
-_CONIC_METRICS = ("algebraic", "frobenius", "wasserstein", "bhattacharyya", "bbox")
 #: Power of the reference length ``L_j`` (px) in the metric's residual: the penalty's
 #: reference residual ``rho_j = L_j ** power`` (level_set: ``max(1, s_max_j)^2`` instead).
 _PENALTY_PIXEL_POWER: dict[str, int] = {
     "iou": 0, "giou": 0, "bhattacharyya": 0, "level_set": 0, "bbox": 1, "qbbox": 1,
     "wasserstein": 1, "algebraic": 1, "frobenius": 1}
 assert set(_PENALTY_PIXEL_POWER) == set(METRIC_NAMES)
-_INV_SQRT8 = 1.0 / math.sqrt(8.0)
-_SQRT2 = math.sqrt(2.0)
 # tangent generators: d(A)/d(omega_k) = G + G^T with G = -[e_k]x A; d(A)/d(v_k) = G + G^T with
 # G = e_k c^T
-_SKEW_BASIS = np.array([[[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]],
-                        [[0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [-1.0, 0.0, 0.0]],
-                        [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]])
-# upper elements [C00, C01, C02, C11, C12] of a 3x3 matrix, flat indices
-_VEC5 = np.array([0, 1, 2, 4, 5])
-_FRO_W = np.array([1.0, math.sqrt(2.0), math.sqrt(2.0), 1.0, math.sqrt(2.0)])
+_SKEW_BASIS = skew(np.eye(3)) + 0.0  # [e_k]x, k = 0, 1, 2
 
 
 def _level_set_forms(f: np.ndarray, Ai: np.ndarray) -> np.ndarray:
     """The 7 quadratic forms ``Q_k`` (7, 3, 3) of one object whose values ``n^T Q_k n`` at a
     sample's normalised ray ``n`` are ``r - Phi_det + 1 = s g`` (k = 0) and ``d r / d xi``
-    (k = 1..6, ``xi = [omega, v]``); module docstring, "Level-set residual":
+    (k = 1..6, ``xi = [omega, v]``); docs/design/factors.md, "Level-set residual":
     with ``u = A^-1 n``: ``g = n^T A^-1 n``, ``(n x u)_k = -n^T [e_k]x A^-1 n`` and
     ``(c_c . u) u_k = n^T (A^-1 c_c) (A^-1 e_k)^T n``.
 
@@ -214,25 +156,6 @@ def _level_set_form_matrix() -> np.ndarray:
 _LEVEL_SET_FORMS = _level_set_form_matrix()
 
 
-def _log_cosh(x: np.ndarray) -> np.ndarray:
-    """``ln cosh(x)`` without overflow, accurate near 0 (series), elementwise."""
-    ax = np.abs(x)
-    x2 = ax * ax
-    series = x2 * (0.5 + x2 * (-1.0 / 12.0 + x2 * (1.0 / 45.0)))
-    big = ax + np.log1p(np.exp(-2.0 * ax)) - math.log(2.0)
-    return np.where(ax < 1e-2, series, big)
-
-
-def _dh_dlambda(u: np.ndarray, h: np.ndarray, lam: np.ndarray) -> np.ndarray:
-    """``d h(ln lambda) / d lambda`` for ``h(u) = sign(u) sqrt(ln cosh(u / 2) / 2)``:
-    ``h'(u) = tanh(|u| / 2) / (8 |h|)`` (-> 1/4 as u -> 0), divided by ``lambda``."""
-    ah = np.abs(h)
-    small = np.abs(u) < 1e-4
-    dh_du = np.where(small, 0.25,
-                     np.tanh(0.5 * np.abs(u)) / (8.0 * np.where(small, 1.0, ah)))
-    return dh_du / lam
-
-
 @functools.lru_cache(maxsize=32)
 def _unit_level_set_layout(n_azimuths: int, n_levels: int) -> tuple[np.ndarray, np.ndarray]:
     """``factors.metrics``' level-set layout for a unit circle, s_max = 1: the homogeneous
@@ -246,16 +169,6 @@ def _unit_level_set_layout(n_azimuths: int, n_levels: int) -> tuple[np.ndarray, 
     for arr in (uv1, uv2):
         arr.setflags(write=False)
     return uv1, uv2
-
-
-def _canonical_axes(P: np.ndarray) -> np.ndarray:
-    """``(a, b, angle)`` (N, 3) with ``a >= b`` of ellipse params ``P`` (N, 5): the batched form
-    of ``factors.metrics._canonical_axes`` (angle + pi/2 when swapped, not wrapped)."""
-    out = np.empty((len(P), 3))
-    np.maximum(P[:, 2], P[:, 3], out=out[:, 0])
-    np.minimum(P[:, 2], P[:, 3], out=out[:, 1])
-    np.add(P[:, 4], (P[:, 3] > P[:, 2]) * (0.5 * np.pi), out=out[:, 2])
-    return out
 
 
 def expmap_pose3(xi: np.ndarray) -> np.ndarray:
@@ -350,13 +263,12 @@ class PoseResidualModel:
             )
         if len(detections) == 0:
             raise ValueError("detections must not be empty")
-        for j, (d, q) in enumerate(zip(detections, ellipsoids, strict=True)):
-            if not isinstance(d, Ellipse):
-                raise GeometryError(f"detections[{j}] must be an Ellipse, got {type(d).__name__}")
-            if not isinstance(q, Ellipsoid):
-                raise GeometryError(
-                    f"ellipsoids[{j}] must be an Ellipsoid, got {type(q).__name__}"
-                )
+        for j, pair in enumerate(zip(detections, ellipsoids, strict=True)):
+            for what, v, kind in zip(("detections", "ellipsoids"), pair, (Ellipse, Ellipsoid),
+                                     strict=True):
+                if not isinstance(v, kind):
+                    raise GeometryError(
+                        f"{what}[{j}] must be an {kind.__name__}, got {type(v).__name__}")
         if not isinstance(camera, Camera):
             raise GeometryError(f"camera must be a Camera, got {type(camera).__name__}")
         if not (math.isfinite(penalty_cost) and penalty_cost > 0):
@@ -409,9 +321,7 @@ class PoseResidualModel:
             self._init_level_set(T0)
             self.dim = self._M
         else:
-            self.dim = self._metric_dim()
-            if metric in _CONIC_METRICS:
-                self._init_conic()
+            self.dim = int(metrics.residual_size(self.metric, **self.options))
         self._set_layout_dependents()
         self.analytic = metric in ANALYTIC_METRICS
 
@@ -426,25 +336,12 @@ class PoseResidualModel:
         self._cache_key, self._cache_jac, self._cache = None, False, None
 
     def _set_layout_dependents(self) -> None:
-        """Penalty costs and per-pair metric options, which depend on the level-set layout."""
+        """The penalty costs, which depend on the level-set layout."""
         self.penalty_costs = self._penalty_costs()
         self.penalty_costs.setflags(write=False)
         self._half_penalty = 0.5 * self.penalty_costs  # where the saturation starts
         self._saturation_floor = float(self._half_penalty.min())
         self._pen_amp = np.sqrt(self.penalty_costs / self.dim)  # (N,)
-        self._pair_options_cache: list[dict[str, Any]] | None = None
-
-    @property
-    def _pair_options(self) -> list[dict[str, Any]]:
-        """Per-pair options of the ``factors.metrics`` calls (the level set's samples stay
-        fixed at the current layout); built on first use."""
-        if self._pair_options_cache is None:
-            self._pair_options_cache = [self.options] * self.n
-            if self.metric == "level_set":
-                self._pair_options_cache = [
-                    {**self.options, "scale": float(sc), "adaptive": False}
-                    for sc in self.sampling_scale]
-        return self._pair_options_cache
 
     # ------------------------------------------------------------------ set-up
     def _penalty_costs(self) -> np.ndarray:
@@ -461,23 +358,12 @@ class PoseResidualModel:
     def _projections(self, world_from_camera: np.ndarray) -> list[Ellipse | None]:
         """Projected ellipses at a pose (None where the projection is not an ellipse)."""
         A, _, _, margins = self._camera_frame(np.asarray(world_from_camera, dtype=float))
-        out: list[Ellipse | None] = [None] * self.n
-        ok = np.flatnonzero(margins > self.min_depth_margin)
-        if ok.size == 0:
-            return out
-        C = self._K @ A[ok] @ self._K.T
-        try:
-            params = params_from_dual_conics(C)
-        except (DegenerateProjectionError, GeometryError):  # one bad conic: go one by one
-            for i, j in enumerate(ok):
-                try:
-                    out[j] = Ellipse(*params_from_dual_conics(C[i : i + 1])[0])
-                except (DegenerateProjectionError, GeometryError):
-                    out[j] = None
-            return out
-        for i, j in enumerate(ok):
-            out[j] = Ellipse(*params[i])
-        return out
+        C = self._K @ A @ self._K.T
+        with np.errstate(divide="ignore", invalid="ignore"):  # invalid rows: not used
+            params, ellipse = ellipse_params_and_validity(
+                *gaussians_from_dual_conics(C / -C[:, 2:, 2:]))
+        ok = (margins > self.min_depth_margin) & ellipse
+        return [Ellipse(*params[j]) if ok[j] else None for j in range(self.n)]
 
     def _init_level_set(self, T0: np.ndarray | None) -> None:
         """Fix the level-set samples: ``factors.metrics.level_set_sample_points``' layout,
@@ -490,15 +376,12 @@ class PoseResidualModel:
         y, 1) = H_j (u_m, v_m, 1)`` with a per-object 3x3 ``H_j``: one matmul lays out all."""
         if not hasattr(self, "_ls_const"):
             M = int(metrics.residual_size("level_set", **self.options))  # validates options
-            scale = self.options.get("scale", metrics.DEFAULT_LEVEL_SET_SCALE)
-            if isinstance(scale, bool) or not isinstance(scale, int | float) \
-                    or not (math.isfinite(scale) and scale > 0):
-                raise ValueError(
-                    f"option scale must be a positive finite number, got {scale!r}")
+            scale = metrics._positive_float(  # validated as by the metric
+                "scale", self.options.get("scale", metrics.DEFAULT_LEVEL_SET_SCALE))
             uv1, uv2 = _unit_level_set_layout(self.options.get("n_azimuths", 6),
                                               self.options.get("n_levels", 4))
             # canonical axes a >= b (the metric's layout does not depend on axis labelling)
-            a, b, ang = _canonical_axes(self._det_params).T
+            a, b, ang = metrics.canonical_axes(self._det_params).T
             ca, sa = np.cos(ang), np.sin(ang)
             cam = self.camera
             # H without s_max: columns 0, 1 scale with s_max, column 2 is K^-1 (c_D, 1)
@@ -547,9 +430,6 @@ class PoseResidualModel:
         return np.stack([cam.fx * self._nT[:, 0] + cam.cx, cam.fy * self._nT[:, 1] + cam.cy],
                         axis=-1)
 
-    def _metric_dim(self) -> int:
-        return int(metrics.residual_size(self.metric, **self.options))
-
     # ------------------------------------------------------------------ evaluation
     def _camera_frame(
         self, world_from_camera: np.ndarray
@@ -578,8 +458,6 @@ class PoseResidualModel:
             ev = self._evaluate_numeric(T, jacobian)
         elif self.metric == "level_set":
             ev = self._evaluate_level_set(T, jacobian)
-        elif self.metric in ("iou", "giou"):
-            ev = self._evaluate_overlap(T, jacobian)
         else:
             ev = self._evaluate_conic(T, jacobian)
         ev = self._saturate(ev)
@@ -630,7 +508,8 @@ class PoseResidualModel:
 
     def _evaluate_level_set(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
         """Level-set residuals and Jacobians of all pairs: ONE batched matmul of per-object
-        quadratic forms against the samples' monomials (module docstring, "Level-set residual").
+        quadratic forms against the samples' monomials (docs/design/factors.md, "Level-set
+        residual").
 
         ``A^-1`` comes from the world frame by Sherman-Morrison, ``A_w = S_w - d d^T`` (``d``
         the centre seen from the camera, world axes): ``A_w^-1 = S_w^-1 + e e^T / (1 - d.e)``,
@@ -684,22 +563,6 @@ class PoseResidualModel:
             coef = -amp * ds / (d + ds) ** 2
             J[idx] = (coef[:, None] * dm)[:, None, :]
 
-    # ------------------------------------------------------------------ conic metrics
-    def _init_conic(self) -> None:
-        """The detection constants the conic metric uses (as factors.metrics): the dual conic's
-        upper elements (algebraic / frobenius), the box (bbox), ``S_D`` (bhattacharyya),
-        canonical axes (wasserstein)."""
-        P = self._det_params
-        if self.metric in ("algebraic", "frobenius"):
-            self._det_vec5 = dual_conics_from_params(P).reshape(self.n, 9)[:, _VEC5]  # (N, 5)
-        elif self.metric == "bbox":
-            self._det_box = np.array([d.bbox() for d in self.detections])  # (N, 4) px
-        elif self.metric == "bhattacharyya":
-            # S_D = R diag(a^2, b^2) R^T as (s00, s01, s11), batched over the detections
-            self._det_sigma = np.stack(sigma_entries(P[:, 2], P[:, 3], P[:, 4]), axis=1)
-        else:
-            self._det_canon = _canonical_axes(P)
-
     def _normalised_dual_conics(
         self, A: np.ndarray, c: np.ndarray, valid: np.ndarray, jacobian: bool,
     ) -> tuple[np.ndarray, np.ndarray | None]:
@@ -725,212 +588,46 @@ class PoseResidualModel:
         dCs = KG + KG.transpose(0, 1, 3, 2)  # (N, 6, 3, 3)
         return Cn, (dCs + Cn[:, None] * dCs[:, :, 2, 2, None, None]) / w[:, None, None, None]
 
-    def _evaluate_overlap(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
-        """iou / giou: the quadrant rows ``r_j`` (4,) of :func:`factors.metrics.
-        overlap_residual` (exact areas, all pairs in one vectorised call) and their analytic
-        pose Jacobian: the exact area gradients w.r.t. the projection's ``(mu, Sigma)``,
-        chained through ``dCn``."""
+    def _evaluate_conic(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
+        """The metrics of the projections' normalised dual conics ``Cn`` (with their
+        derivatives ``dCn`` along the 6 tangents): :func:`factors.metrics.conic_residuals`,
+        or for iou / giou :meth:`_overlap_rows`."""
         A, c, S, margins = self._camera_frame(T)
         valid = margins > self.min_depth_margin
         Cn, dCn = self._normalised_dual_conics(A, c, valid, jacobian)
-        mu, sigma = gaussians_from_dual_conics(Cn)
-        dg = None
-        if dCn is not None:  # d(mu_x, mu_y, s00, s01, s11) / d xi, (N, 6, 5)
-            dmu, dsig = gaussian_derivatives_from_dual_conics(mu, dCn)
-            dg = np.concatenate([dmu, dsig[..., 0, 0, None], dsig[..., 0, 1, None],
-                                 dsig[..., 1, 1, None]], axis=-1)
-        r = np.zeros((self.n, self.dim))
-        J = None if dg is None else np.zeros((self.n, self.dim, 6))
-        # a projection whose Sigma is not positive definite is invalid (penalty rows)
-        params, ellipse = ellipse_params_and_validity(mu, sigma)
-        valid &= ellipse
-        idx = np.flatnonzero(valid)
-        proj = params[idx]
-        if idx.size:
-            hull_directions = self.options.get("hull_directions", HULL_DIRECTIONS)
-            rows, grad = metrics.overlap_residual(self.metric, self._det_params[idx], proj,
-                                                  hull_directions, gradient=J is not None,
-                                                  disjoint_hull=True)
-            r[idx] = rows
-            if J is not None:
-                J[idx] = grad @ dg[idx].transpose(0, 2, 1)
+        if self.metric in ("iou", "giou"):
+            r, J = self._overlap_rows(Cn, dCn, valid)
+        else:
+            r, J = metrics.conic_residuals(self.metric, self._det_params, Cn, dCn)
+            J = None if J is None else np.ascontiguousarray(J)
         if not valid.all():
             self._apply_penalty(r, J, ~valid, c, S, margins)
         return PoseEvaluation(r, J, valid, margins)
 
-    def _evaluate_conic(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
-        """Analytic residuals/Jacobians of the metrics that are smooth functions of the
-        normalised dual conic ``Cn = C* / (-C*[2,2])`` of the projection.
-
-        ``dC* = K dA K^T``; ``dCn = (dC* + Cn dC*[2,2]) / w`` with ``w = -C*[2,2]``;
-        ``mu = -Cn[:2, 2]``, ``Sigma = Cn[:2, :2] + mu mu^T``. Wasserstein uses the 2x2 closed
-        form ``Sigma^1/2 = (Sigma + d I) / t`` (``d = sqrt(det)``, ``t = sqrt(tr + 2 d)``).
-        """
-        A, c, S, margins = self._camera_frame(T)
-        valid = margins > self.min_depth_margin
-        all_valid = bool(valid.all())
-        Cn, dCn = self._normalised_dual_conics(A, c, valid, jacobian)
-        if self.metric in ("algebraic", "frobenius"):
-            r = self._det_vec5 - Cn.reshape(self.n, 9)[:, _VEC5]
-            J = None
-            if dCn is not None:
-                J = -dCn.reshape(self.n, 6, 9)[:, :, _VEC5].transpose(0, 2, 1)
-            if self.metric == "frobenius":
-                r = r * _FRO_W
-                if J is not None:
-                    J = J * _FRO_W[None, :, None]
-        elif self.metric == "wasserstein":
-            r, J = self._wasserstein(Cn, dCn)
-        elif self.metric == "bbox":
-            r, J = self._bbox(Cn, dCn)
-        else:
-            r, J = self._bhattacharyya(Cn, dCn)
-        if J is not None:
-            J = np.ascontiguousarray(J)
-        if not all_valid:
-            self._apply_penalty(r, J, ~valid, c, S, margins)
-        return PoseEvaluation(r, J, valid, margins)
-
-    def _bbox(
-        self, Cn: np.ndarray, dCn: np.ndarray | None
-    ) -> tuple[np.ndarray, np.ndarray | None]:
-        """``r = B_D - B_P``, ``B = [cx - hx, cy - hy, cx + hx, cy + hy]`` with the half-sizes
-        ``hx = sqrt(Sigma00)``, ``hy = sqrt(Sigma11)`` of the axis-aligned box, and d r / d xi."""
-        mu, S = gaussians_from_dual_conics(Cn)
-        h = np.sqrt(np.diagonal(S, axis1=1, axis2=2))  # (N, 2) half-sizes (hx, hy)
-        r = self._det_box - np.concatenate((mu - h, mu + h), axis=1)
-        if dCn is None:
-            return r, None
-        dmu, dsig = gaussian_derivatives_from_dual_conics(mu, dCn)  # (N, 6, 2), (N, 6, 2, 2)
-        dh = np.diagonal(dsig, axis1=2, axis2=3) / (2.0 * h[:, None, :])  # (N, 6, 2)
-        J = np.concatenate((dh - dmu, -dmu - dh), axis=2).transpose(0, 2, 1)  # (N, 4, 6)
-        return r, J
-
-    def _wasserstein(
-        self, Cn: np.ndarray, dCn: np.ndarray | None
-    ) -> tuple[np.ndarray, np.ndarray | None]:
-        """factors.metrics' W2 residual ``[mu_D - mu_P, a_D - a_P, b_D - b_P, k sin(delta)]``
-        (canonical semi-axes ``a >= b``, ``delta`` the angle between the major axes mod pi,
-        ``k = sqrt(2 P / (Q + sqrt(Q^2 - P sin^2 delta)))``, ``P = (a_D^2 - b_D^2)(a_P^2 -
-        b_P^2)``, ``Q = a_D a_P + b_D b_P``) and its pose Jacobian through ``Sigma_P``.
-
-        At a circular projection (the major-axis angle is undefined) or a circular detection
-        (``k = 0``) the angle terms of the Jacobian are set to 0 (the metric is not
-        differentiable there).
-        """
-        mu, S = gaussians_from_dual_conics(Cn)
-        s00, s01, s11 = S[:, 0, 0], S[:, 0, 1], S[:, 1, 1]
-        h, m = 0.5 * (s00 - s11), 0.5 * (s00 + s11)
-        rho = np.sqrt(h * h + s01 * s01)
-        a2, b2 = np.sqrt(m + rho), np.sqrt(np.maximum(m - rho, 0.0))
-        t2 = 0.5 * np.arctan2(s01, h)
-        a1, b1, t1 = self._det_canon.T
-        delta = (t1 - t2 + 0.5 * np.pi) % np.pi - 0.5 * np.pi
-        sn, cs = np.sin(delta), np.cos(delta)
-        P = (a1 * a1 - b1 * b1) * (a2 * a2 - b2 * b2)
-        Q = a1 * a2 + b1 * b2
-        Rq = np.sqrt(np.maximum(Q * Q - P * sn * sn, 0.0))
-        D = Q + Rq
-        k = np.sqrt(2.0 * P / D)
-        mu_d = self._det_params[:, :2]
-        r = np.stack([mu_d[:, 0] - mu[:, 0], mu_d[:, 1] - mu[:, 1], a1 - a2, b1 - b2, k * sn],
-                     axis=1)
-        if dCn is None:
-            return r, None
-        col = (slice(None), None)  # (N,) -> (N, 1) against the 6 tangent directions
-        dmu, dsig = gaussian_derivatives_from_dual_conics(mu, dCn)
-        ds00, ds01, ds11 = dsig[..., 0, 0], dsig[..., 0, 1], dsig[..., 1, 1]
-        dh, dm = 0.5 * (ds00 - ds11), 0.5 * (ds00 + ds11)
-        tiny = 1e-12 * m
-        round_proj = rho <= tiny
-        rho_s = np.where(round_proj, 1.0, rho)[col]
-        drho = (h[col] * dh + s01[col] * ds01) / rho_s
-        da2 = (dm + drho) / (2.0 * a2[col])
-        db2 = (dm - drho) / (2.0 * np.maximum(b2, 1e-300)[col])
-        dt2 = np.where(round_proj[col], 0.0, 0.5 * (h[col] * ds01 - s01[col] * dh) / rho_s**2)
-        ddelta = -dt2
-        dP = ((a1 * a1 - b1 * b1)[col]) * (2.0 * a2[col] * da2 - 2.0 * b2[col] * db2)
-        dQ = a1[col] * da2 + b1[col] * db2
-        Rs = np.where(Rq > 0, Rq, 1.0)[col]
-        dR = (2.0 * Q[col] * dQ - dP * (sn * sn)[col] - 2.0 * (P * sn * cs)[col] * ddelta) / (
-            2.0 * Rs)
-        zero_k = k <= 1e-150
-        ks = np.where(zero_k, 1.0, k)[col]
-        dk = np.where(zero_k[col], 0.0,
-                      (dP / D[col] - P[col] * (dQ + dR) / (D * D)[col]) / ks)
-        dks = dk * sn[col] + (k * cs)[col] * ddelta
-        J = np.stack([-dmu[..., 0], -dmu[..., 1], -da2, -db2, dks], axis=1)  # (N, 5, 6)
-        return r, J
-
-    def _bhattacharyya(
-        self, Cn: np.ndarray, dCn: np.ndarray | None
-    ) -> tuple[np.ndarray, np.ndarray | None]:
-        """factors.metrics' Bhattacharyya residual ``[L^-1 dmu / sqrt 8, G00, G11, sqrt2 G01]``
-        (``S = (S_D + S_P) / 2 = L L^T``, ``G = h(log N)``, ``N = S_D^-1/2 S_P S_D^-1/2``,
-        ``h(u) = sign(u) sqrt(ln cosh(u / 2) / 2)``) and its pose Jacobian. The spectral
-        function's derivative is Daleckii-Krein's ``dG = V (F o (V^T dN V)) V^T`` (divided
-        differences of ``h(log lambda)``, its derivative when the eigenvalues coincide).
-        """
-        mu, Q = gaussians_from_dual_conics(Cn)
-        q00, q01, q11 = Q[:, 0, 0], Q[:, 0, 1], Q[:, 1, 1]
-        d00, d01, d11 = self._det_sigma.T
-        s00, s01, s11 = 0.5 * (d00 + q00), 0.5 * (d01 + q01), 0.5 * (d11 + q11)
-        l00 = np.sqrt(s00)
-        l10 = s01 / l00
-        l11 = np.sqrt(np.maximum(s11 - l10 * l10, 0.0))
-        dx = self._det_params[:, 0] - mu[:, 0]
-        dy = self._det_params[:, 1] - mu[:, 1]
-        y0 = dx / l00
-        y1 = (dy - l10 * y0) / l11
-        a, b = self._det_params[:, 2], self._det_params[:, 3]
-        c, s = np.cos(self._det_params[:, 4]), np.sin(self._det_params[:, 4])
-
-        def to_n(x00, x01, x11):  # D^-1 R^T X R D^-1 (detection frame), elementwise
-            t00 = c * (x00 * c + x01 * s) + s * (x01 * c + x11 * s)
-            t01 = c * (-x00 * s + x01 * c) + s * (-x01 * s + x11 * c)
-            t11 = -s * (-x00 * s + x01 * c) + c * (-x01 * s + x11 * c)
-            return t00 / (a * a), t01 / (a * b), t11 / (b * b)
-
-        n00, n01, n11 = to_n(q00, q01, q11)
-        half_tr, half_diff = 0.5 * (n00 + n11), 0.5 * (n00 - n11)
-        rad = np.hypot(half_diff, n01)
-        lam0 = half_tr + rad
-        lam1 = np.maximum(half_tr - rad, 1e-300)
-        u0, u1 = np.log(lam0), np.log(lam1)
-        h0 = np.sign(u0) * np.sqrt(0.5 * _log_cosh(0.5 * u0))
-        h1 = np.sign(u1) * np.sqrt(0.5 * _log_cosh(0.5 * u1))
-        theta = 0.5 * np.arctan2(n01, half_diff)  # N's first eigenvector angle
-        cos2, sin2 = np.cos(2 * theta), np.sin(2 * theta)
-        mean, half = 0.5 * (h0 + h1), 0.5 * (h0 - h1)
-        g00, g11, g01 = mean + half * cos2, mean - half * cos2, half * sin2
-        r = np.stack([_INV_SQRT8 * y0, _INV_SQRT8 * y1, g00, g11, _SQRT2 * g01], axis=1)
-        if dCn is None:
-            return r, None
-        col = (slice(None), None)
-        dmu, dsig = gaussian_derivatives_from_dual_conics(mu, dCn)
-        dq00, dq01, dq11 = dsig[..., 0, 0], dsig[..., 0, 1], dsig[..., 1, 1]
-        L00, L10, L11, Y0, Y1 = (v[col] for v in (l00, l10, l11, y0, y1))
-        dl00 = 0.25 * dq00 / L00
-        dl10 = (0.5 * dq01 - L10 * dl00) / L00
-        dl11 = (0.5 * dq11 - 2.0 * L10 * dl10) / (2.0 * L11)
-        dy0 = (-dmu[..., 0] - Y0 * dl00) / L00
-        dy1 = (-dmu[..., 1] - dl10 * Y0 - L10 * dy0 - Y1 * dl11) / L11
-        c, s, a, b = c[col], s[col], a[col], b[col]
-        dn00, dn01, dn11 = to_n(dq00, dq01, dq11)
-        ct, st = np.cos(theta)[col], np.sin(theta)[col]
-        e00 = ct * ct * dn00 + 2 * ct * st * dn01 + st * st * dn11
-        e11 = st * st * dn00 - 2 * ct * st * dn01 + ct * ct * dn11
-        e01 = -ct * st * dn00 + (ct * ct - st * st) * dn01 + st * ct * dn11
-        f0 = _dh_dlambda(u0, h0, lam0)
-        f1 = _dh_dlambda(u1, h1, lam1)
-        gap = lam0 - lam1
-        close = gap <= 1e-7 * lam0
-        f01 = np.where(close, 0.5 * (f0 + f1), (h0 - h1) / np.where(close, 1.0, gap))
-        M00, M01, M11 = f0[col] * e00, f01[col] * e01, f1[col] * e11
-        dg00 = ct * ct * M00 - 2 * ct * st * M01 + st * st * M11
-        dg11 = st * st * M00 + 2 * ct * st * M01 + ct * ct * M11
-        dg01 = ct * st * M00 + (ct * ct - st * st) * M01 - st * ct * M11
-        J = np.stack([_INV_SQRT8 * dy0, _INV_SQRT8 * dy1, dg00, dg11, _SQRT2 * dg01], axis=1)
+    def _overlap_rows(self, Cn: np.ndarray, dCn: np.ndarray | None, valid: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray | None]:
+        """iou / giou rows (N, 4) of :func:`factors.metrics.overlap_residual` (all pairs in one
+        call, ``disjoint_hull``) and their pose Jacobian: the exact area gradients w.r.t. the
+        projection's ``g = (mu_x, mu_y, s00, s01, s11)`` chained through ``dg / dxi``. A
+        projection whose Sigma is not positive definite is invalid: ``valid`` is updated in
+        place (its rows stay 0 for the penalty)."""
+        mu, sigma = gaussians_from_dual_conics(Cn)
+        params, ellipse = ellipse_params_and_validity(mu, sigma)
+        valid &= ellipse
+        r = np.zeros((self.n, self.dim))
+        J = None if dCn is None else np.zeros((self.n, self.dim, 6))
+        idx = np.flatnonzero(valid)
+        if idx.size:
+            rows, grad = metrics.overlap_residual(
+                self.metric, self._det_params[idx], params[idx],
+                self.options.get("hull_directions", HULL_DIRECTIONS), gradient=J is not None,
+                disjoint_hull=True)
+            r[idx] = rows
+            if J is not None:
+                dmu, dsig = gaussian_derivatives_from_dual_conics(mu[idx], dCn[idx])
+                dg = np.concatenate([dmu, dsig[..., 0, 0, None], dsig[..., 0, 1, None],
+                                     dsig[..., 1, 1, None]], axis=-1)  # (n, 6, 5)
+                J[idx] = grad @ dg.transpose(0, 2, 1)
         return r, J
 
     # ------------------------------------------------------------------ generic metrics
@@ -944,7 +641,7 @@ class PoseResidualModel:
                 continue
             try:
                 rj = np.asarray(metrics.residual(self.metric, self.detections[j], p,
-                                                 **self._pair_options[j]), dtype=float)
+                                                 **self.options), dtype=float)
             except (DegenerateProjectionError, GeometryError):
                 continue
             if rj.shape != (self.dim,) or not np.all(np.isfinite(rj)):
@@ -981,8 +678,3 @@ class PoseResidualModel:
         the penalty's cost where the projection is invalid."""
         ev = self.evaluate(world_from_camera, jacobian=False)
         return np.einsum("nm,nm->n", ev.residuals, ev.residuals)
-
-
-_I3 = np.eye(3)
-
-

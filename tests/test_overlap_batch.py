@@ -1,6 +1,7 @@
 """The vectorised exact overlap areas (``factors.overlap.quadrant_areas_batch``, the pose
-factors' path) against the scalar reference construction (``factors.overlap.quadrant_areas``,
-itself checked against Monte Carlo, rasters and central differences in ``test_metrics.py``),
+factors' path) against the scalar reference construction (the oracle
+``tests.oracles.overlap_reference.quadrant_areas``; the production areas are also checked against
+Monte Carlo, rasters and central differences in ``test_metrics.py``),
 pair by pair, on the configurations that exercise every branch: crossing contours (2 and 4
 roots), containment either way, disjoint ellipses, identical and nearly identical ellipses
 (the regime at a refinement's optimum), a tangent contact, and hulls with and without tangent
@@ -14,7 +15,8 @@ import numpy as np
 import pytest
 
 from factors.metrics import overlap_residual
-from factors.overlap import quadrant_areas, quadrant_areas_batch
+from factors.overlap import quadrant_areas_batch
+from tests.oracles.overlap_reference import quadrant_areas
 
 
 def _random_params(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -97,8 +99,8 @@ def test_batch_without_hull_and_empty_batch():
 
 def test_batched_overlap_residual_equals_pairwise_calls():
     """``overlap_residual`` on (N, 5) arrays (the vectorised areas) equals N one-pair calls
-    (which use the scalar reference areas), rows and gradients; the tangent contact, where the
-    scalar path is ~1e-8 off (see above), is left out."""
+    (N = 1 batches), rows and gradients; the tangent contact, where the areas are only ~1e-8
+    determined (see above), is left out."""
     p1, p2 = _cases()
     tangent = _tangent_index(p1, p2)
     for name in ("iou", "giou"):

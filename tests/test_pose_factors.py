@@ -1,6 +1,8 @@
 """The metric GTSAM factors on the camera pose: residuals, Jacobians, noise, penalty.
 
-Independent references: residuals against ``factors.metrics.residual`` on ellipses projected by
+Independent references: residuals against the scalar oracle (``tests.oracles.metrics_reference``,
+which is ``factors.metrics.residual`` for the metrics without a second implementation) on
+ellipses projected by
 ``factors.geometry.project_ellipsoid`` (and the level set against ``Ellipse.level`` directly);
 Jacobians against central differences through ``gtsam.Pose3.retract``; GTSAM's weighted error
 against ``0.5 * cost / sigma``.
@@ -38,6 +40,7 @@ from factors.pose_residuals import (
     expmap_pose3,
 )
 from tests.helpers import level, random_rotation, retract, transformed
+from tests.oracles import metrics_reference
 
 CAMERA = Camera(500.0, 510.0, 320.0, 240.0, 640, 480)
 
@@ -137,7 +140,7 @@ def test_factor_residual_equals_metric_residual(scene, metric):
         f = pose_factor(metric, 7, d, e, CAMERA, initial_world_from_camera=pose,
                         metric_options=opts)
         proj = project_ellipsoid(CAMERA, invert_pose(pose), e)
-        expected = np.asarray(metrics.residual(metric, d, proj, **opts))
+        expected = np.asarray(metrics_reference.residual(metric, d, proj, **opts))
         got = f.unwhitenedError(values)
         np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-9)
         # unit noise: GTSAM error = 0.5 ||r||^2 (= 0.5 * metric cost but for iou / giou)
