@@ -4,19 +4,10 @@ Both return **camera_from_world** poses as an array of shape (S, 4, 4) (S may be
 OpenCV ``[R | t]`` direction, ``x_cam = R x_world + t``, camera axes +X right, +Y down,
 +Z forward. Invert with :func:`factors.geometry.invert_pose` for ``world_from_camera``.
 
-* :func:`p3p_hypotheses` — ``cv2.solveP3P`` (Ding et al. 2023, ``SOLVEPNP_P3P``) on three
-  ellipse centres (px) vs the three ellipsoid centres (world m); up to 4 solutions. The centre of
-  a projected ellipsoid is not exactly the projection of its centre (perspective), so on exact
-  detections the hypothesis is close but not exact; refinement removes the bias.
-* :func:`p2e_hypotheses` — two ellipse/ellipsoid pairs, 6 DoF (no zero-roll assumption).
-  Derivation in ``docs/p2e.md``: the two centre rays and the known distance between the
-  ellipsoid centres fix the camera-frame centres up to the ratio of their depths; a camera
-  roll and the map's up direction then fix the rotation (two pitch branches). Starts at rolls
-  -30..30 deg x both branches x 13 depth ratios (the best two ratios per roll and branch) are
-  refined together by a batched 6-DoF Levenberg-Marquardt on the 10 ellipse residuals (both
-  detections' centre and shape against the projected ellipsoids), then merged. Exact on exact
-  data: the true pose is found on 60/60 random scenes with rolls up to +-30 deg (the former
-  zero-roll solver: 0/60), ~8 ms per call against its ~15 ms (``python -m bench.p2e``).
+* :func:`p3p_hypotheses` — ``cv2.solveP3P`` on three ellipse centres (px) vs the three
+  ellipsoid centres (world m); up to 4 solutions (biased by perspective: refinement removes it).
+* :func:`p2e_hypotheses` — two ellipse/ellipsoid pairs, 6 DoF (derivation in ``docs/p2e.md``;
+  starts and measurements in ``docs/design/localization.md``).
 """
 
 from __future__ import annotations

@@ -1,42 +1,15 @@
 """``localize()``: relocalization from scratch (paper section V-B) or from a client prior.
 
-Stages (wall time of each in ``LocalizationResult.timings_ms``):
-
-1. ``validate`` — check the input (errors name the field), compile the map (cached per map
-   object), keep the *usable* detections: those whose label is a category with objects in the
-   map (``options.unknown_label_policy``: ``"ignore"`` drops the others, ``"error"`` raises).
-2. ``prior`` (only with a :class:`PosePrior`) — match detections to objects one-to-one with
-   IoU >= ``inlier_iou``, each pair at its best IoU over the prior pose and, with a
-   covariance, the poses 2 sigma along its principal axes (:func:`prior_gate_poses`:
-   projected-ellipse gating); with >= ``min_inliers`` matches, refine from the prior (the
-   prior's covariance, if any, becomes a prior factor). If the result explains every usable
-   detection it is returned; otherwise RANSAC runs too and the better-supported answer wins
-   (more inliers, then a larger sum of IoUs; the prior wins ties): ``pose_source`` says which.
-3. ``hypotheses`` — :func:`service.localization.ransac.ransac`: P3P / P2E over label-compatible
-   samples, IoU scoring, bounded by ``ransac_max_hypotheses`` and ``time_budget_ms``; it keeps
-   its best distinct hypotheses.
-4. ``refine`` — :func:`service.localization.refine.refine` on the best hypothesis' inliers
-   (and on up to :data:`REFINED_ALTERNATIVES` distinct runners-up scoring at least
-   :data:`ALTERNATIVE_PREFILTER_RATIO` of the best, except those that only re-use the best's
-   correspondences: ``_same_explanation``; runners-up with at most
-   :data:`ALTERNATIVE_MAX_ITERATIONS` LM iterations, continued in full if one competes) with
-   ``options.metric`` (sigma-weighted, robust kernel option), then re-association: the
-   inliers are recomputed at the refined pose and, if the set changed, refined once more. A
-   result is kept when it has >= ``min_inliers`` inliers; none kept: ``refinement_diverged``.
-5. ``assess`` — :mod:`service.localization.confidence`: the calibrated covariance, the
-   confidence (a probability), and the ambiguity check against the best distinct runner-up
-   (IoU sums and refined chi2: ``confidence.is_ambiguous``; ``reason="ambiguous"`` or, with
-   ``on_ambiguity="best"``, the best pose with its ``alternatives``); a confidence below
-   ``min_confidence`` gives ``low_confidence``. A verified answer that is not localized
-   (ambiguous, low confidence) lists its candidate poses with their probabilities in
-   ``alternatives``: the client decides.
-   (``refine`` itself re-lays grown adaptive level-set samples once at its result.)
-
-The time budget (CPU time of the solving thread, with a wall-clock hard limit:
-:mod:`service.localization.budget`) bounds the whole call: the hypothesis search stops at it,
-and no LM iteration
-(nor level-set re-lay, nor re-association refinement) starts after it. A refinement cut short
-keeps its last accepted step and the result says so: ``refinement_status == "time_budget"``.
+Stages (wall time of each in ``LocalizationResult.timings_ms``): ``validate`` (input, compiled
+map, usable detections), ``prior`` (only with a :class:`PosePrior`: gated association and
+refinement from it; an answer explaining every usable detection is returned at once),
+``hypotheses`` (:func:`service.localization.ransac.ransac`), ``refine``
+(:func:`service.localization.refine.refine` of the best hypothesis and up to
+:data:`REFINED_ALTERNATIVES` distinct runners-up, with re-association) and ``assess``
+(:mod:`service.localization.confidence`: calibrated covariance, confidence, ambiguity).
+The time budget (:mod:`service.localization.budget`) bounds the whole call: no LM iteration
+starts after it (``refinement_status == "time_budget"``). Each stage's rules in detail:
+``docs/design/localization.md``.
 """
 
 from __future__ import annotations

@@ -3,61 +3,17 @@
 :func:`refine` takes matched detections and map ellipsoids (same order), the camera
 intrinsics and an initial ``world_from_camera`` pose (4x4, OpenCV camera axes) and minimises
 the paper's equation 8, ``sum_j sigma_j^-1 Delta_j``, over the pose with
-``gtsam.LevenbergMarquardtOptimizer``. The factors come from
-:func:`factors.pose_factors.pose_factors` (one vectorised evaluation of all pairs per pose):
-one batched factor with a Diagonal noise model (std ``sqrt(sigma_j)`` on detection ``j``'s rows)
-without robust kernel; one factor per detection, each with its own robust kernel, otherwise.
-An optional ``PriorFactorPose3`` carries a client's pose prior.
+``gtsam.LevenbergMarquardtOptimizer`` on the factors of :func:`factors.pose_factors.pose_factors`
+(one batched factor without robust kernel, one per detection with one), plus an optional
+``PriorFactorPose3``. Adaptive level-set samples grown at the start are re-laid once at the
+result and solved again (``iterations`` counts both solves; skipped past the ``deadline``:
+``RefinementResult.resample_skipped``).
 
-Level-set sampling: the samples of each detection are laid out at the start of a solve, over
-an area grown with the misalignment there (``factors.metrics.level_set_sampling_scale``). When
-some area was grown, a single solve stops at a pose biased by that wide layout, so ``refine``
-re-lays the samples at the result and solves once more (``bench.chess_eval``: from 0.4 m /
-20 deg starts, 47 % -> 77 % of noisy frames within 10 cm). ``iterations`` counts both solves.
-The second solve is skipped when the ``deadline`` has already passed
-(``RefinementResult.resample_skipped``).
-
-Stopping tolerances (deliberate, see GUIDE section 3)
------------------------------------------------------
-* ``errorTol = 1e-20`` (:data:`ERROR_TOL`): stop when the weighted error itself is ~0 (exact
-  detections: the residual is then at floating-point level and no step can decrease it; without
-  it LM would spend ~10 error evaluations raising lambda to its bound).
-* ``relativeErrorTol = 1e-6`` (:data:`RELATIVE_ERROR_TOL`): stop when an iteration decreases the
-  error by less than this fraction. Zero-residual problems converge quadratically, so the
-  relative decrease stays ~1 until ``ERROR_TOL`` is reached (the exact-detection accuracy test:
-  < 1e-6 m, 1e-4 deg). With noisy detections (bench scenes, 2-5 cm pose error from the noise)
-  the pose differs from a 1e-7 run by <= 1.2e-5 m while saving ~0.4 iterations; GTSAM's 1e-5
-  default left up to 4e-5 m.
-* ``iou`` / ``giou`` also stop after an ACCEPTED iteration that decreased the error by less
-  than 1e-3 of it (:data:`OVERLAP_RELATIVE_ERROR_TOL`; GTSAM's ``relativeErrorTol`` stays 1e-6,
-  because GTSAM also applies it to end the lambda search of a rejected step, which at 1e-3
-  stopped an exact giou solve before its first step): their
-  residual (areas of symmetric differences) is not smooth at a noisy optimum, so LM keeps
-  decreasing the error by tiny fractions: with 1e-6 alone, 39 % of noisy Chess solves hit the
-  50-iteration cap, and 400 iterations at 1e-12 still do not stop on half of them. With the rule
-  (tuning seed 3, 18 noisy Chess frames, giou) every solve stopped by itself after a median 10.5
-  iterations, a median 2.8 mm (max 8.6 cm) from where 400 iterations end, against ~2-3 cm of
-  error from the detection noise; exact detections still reach their zero-residual optimum
-  (``bench.overlap_refinement``, held-out seeds 7 and 1).
-* ``absoluteErrorTol = 0`` (:data:`ABSOLUTE_ERROR_TOL`): disabled, because the error's scale
-  depends on the metric and on sigma (an absolute threshold would stop at a different accuracy
-  for every metric).
-* ``maxIterations = max_iterations`` (default 50); lambda starts at 1e-5 (GTSAM default) and
-  LM gives up an iteration when lambda exceeds ``LAMBDA_UPPER_BOUND = 1e10`` (GTSAM's 1e5
-  stalls iou/giou, whose sqrt-of-area residuals have very steep Jacobians near the optimum).
-
-Covariance
-----------
-``covariance`` is the pose's marginal covariance: 6x6, order
-``[omega_x, omega_y, omega_z, v_x, v_y, v_z]`` (rad, m), right perturbation, expressed in the
-CAMERA (body) frame. It is the inverse of the Gauss-Newton information ``J^T W J`` at the solution
-(W from the sigma-scaled, robust-reweighted noise models, plus the prior). Without robust kernel
-and prior the graph is the one batched factor, and ``refine`` inverts its ``J^T W J`` from the
-memoised final evaluation directly (equal to ``gtsam.Marginals``, tested to 1e-8, at a fraction
-of its cost); otherwise ``gtsam.Marginals(graph, pose).marginalCovariance(key)``. Calibrated
-only as far as the metric residuals really have std ``sqrt(sigma_j)``. It is None, with
-``covariance_reason``, when that information matrix is singular or ill conditioned (e.g. one
-object only: an ellipse constrains 5 of the 6 DoF).
+``covariance``: 6x6, order ``[omega_x, omega_y, omega_z, v_x, v_y, v_z]`` (rad, m), right
+perturbation, CAMERA (body) frame: the inverse of the Gauss-Newton information ``J^T W J`` at
+the solution (None with ``covariance_reason`` when singular or ill conditioned). Why the
+stopping tolerances are what they are, and how the covariance is computed:
+``docs/design/localization.md``.
 """
 
 from __future__ import annotations
