@@ -75,19 +75,14 @@ def _validate(
         if not isinstance(d, Detection):
             raise LocalizationInputError(
                 f"must be a Detection, got {type(d).__name__}", field=f"detections[{i}]")
-    if not isinstance(scene_map, (SceneMap, CompiledMap)):
-        raise LocalizationInputError(
-            f"must be a SceneMap or CompiledMap, got {type(scene_map).__name__}",
-            field="scene_map")
-    if not isinstance(camera, Camera):
-        raise LocalizationInputError(f"must be a Camera, got {type(camera).__name__}",
-                                     field="camera")
-    if not isinstance(options, LocalizationOptions):
-        raise LocalizationInputError(
-            f"must be LocalizationOptions, got {type(options).__name__}", field="options")
-    if prior is not None and not isinstance(prior, PosePrior):
-        raise LocalizationInputError(
-            f"must be a PosePrior or None, got {type(prior).__name__}", field="prior")
+    for name, value, types, what in (
+            ("scene_map", scene_map, (SceneMap, CompiledMap), "a SceneMap or CompiledMap"),
+            ("camera", camera, Camera, "a Camera"),
+            ("options", options, LocalizationOptions, "LocalizationOptions"),
+            ("prior", prior, (PosePrior, type(None)), "a PosePrior or None")):
+        if not isinstance(value, types):
+            raise LocalizationInputError(f"must be {what}, got {type(value).__name__}",
+                                         field=name)
     compiled = compile_map(scene_map)
     if len(compiled) == 0:
         raise LocalizationInputError("the map has no objects", field="scene_map")
@@ -118,27 +113,15 @@ def refine_pose(
     iteration cap and metric options (and the prior as a factor when it has a covariance);
     after ``deadline`` (a :class:`service.localization.budget.Deadline` or a
     ``time.perf_counter()`` instant) no LM iteration starts."""
-    kwargs = dict(
+    return refine(
+        detections, ellipsoids, camera, initial_world_from_camera, options.metric,
         use_sigma=options.use_sigma, robust=options.robust, robust_scale=options.robust_scale,
         prior_world_from_camera=None if prior is None or prior.covariance is None
         else prior.world_from_camera,
         prior_covariance=None if prior is None else prior.covariance,
         max_iterations=options.max_iterations,
         metric_options=dict(options.metric_options) if options.metric_options else None,
-        deadline=deadline,
-    )
-    return refine(detections, ellipsoids, camera, initial_world_from_camera, options.metric,
-                  **kwargs)
-
-
-def _refine_matches(
-    matches: Sequence[Match], detections: Sequence[Detection], compiled: CompiledMap,
-    camera: Camera, world_from_camera: np.ndarray, options: LocalizationOptions,
-    prior: PosePrior | None, deadline: Deadline | float | None,
-) -> RefinementResult:
-    return refine_pose([detections[m.detection_index] for m in matches],
-                       [compiled.ellipsoids[m.object_index] for m in matches],
-                       camera, world_from_camera, options, prior, deadline)
+        deadline=deadline)
 
 
 def _refine_and_verify(
@@ -161,8 +144,9 @@ def _refine_and_verify(
     current = list(matches)
     T = world_from_camera
     for round_ in range(2):
-        res = _refine_matches(current, detections, compiled, camera, T, options, prior,
-                              deadline)
+        res = refine_pose([detections[m.detection_index] for m in current],
+                          [compiled.ellipsoids[m.object_index] for m in current],
+                          camera, T, options, prior, deadline)
         status = "time_budget" if res.resample_skipped else res.status
         if res.status in ("diverged", "invalid_projection") or not np.all(
                 np.isfinite(res.world_from_camera)):
@@ -242,18 +226,13 @@ def _is_ambiguous_answer(ranked: Sequence[_Answer]) -> bool:
 #: far less than this).
 REFINED_ALTERNATIVES = 2
 ALTERNATIVE_PREFILTER_RATIO = 0.5
-#: LM iteration cap of an alternative's refinement (the ambiguity check needs its support, not
-#: its last millimetre; a capped alternative that competes, i.e. has as many inliers as the
-#: first answer, is then refined in full from where it stopped, in ``localize``). Measured on
-#: the tuning seeds 100/102 of ``bench.trust`` (full, 2- and 3-detection frames, level set):
-#: alternatives need a median 9, p90 24, p95 34 iterations.
+#: LM iteration cap of an alternative's refinement (a capped alternative that competes is then
+#: refined in full from where it stopped; measurements: ``docs/design/localization.md``).
 ALTERNATIVE_MAX_ITERATIONS = 15
 #: Prior gating: the association at the prior pose also tries the poses at +-
 #: ``PRIOR_GATE_SIGMAS`` standard deviations along each principal axis of the prior's
 #: covariance (a pair is kept at its best IoU over these poses).
 PRIOR_GATE_SIGMAS = 2.0
-
-
 #: An alternative whose matches are a subset of the best hypothesis' is not refined when the
 #: best has at least this many matches (``_same_explanation``).
 SAME_EXPLANATION_MIN_MATCHES = 4
@@ -261,11 +240,8 @@ SAME_EXPLANATION_MIN_MATCHES = 4
 
 def _same_explanation(alternative: Hypothesis, best: Hypothesis) -> bool:
     """Whether ``alternative`` only re-uses the best hypothesis' correspondences (its matches
-    are a subset of the best's) while the best has >= :data:`SAME_EXPLANATION_MIN_MATCHES`:
-    the correspondences over-determine the pose, so its refinement converges to the best's
-    pose (measured on the tuning frames of ``bench.chess_eval``: every such alternative did)
-    and is dropped as not distinct. With fewer matches (2-3 correspondences admit several
-    poses) every alternative is refined."""
+    are a subset of the best's) while the best has >= :data:`SAME_EXPLANATION_MIN_MATCHES`
+    (its refinement then converges to the best's pose: not distinct)."""
     if len(best.matches) < SAME_EXPLANATION_MIN_MATCHES:
         return False
     pairs = {(m.detection_index, m.object_index) for m in best.matches}

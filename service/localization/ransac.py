@@ -18,6 +18,7 @@ from __future__ import annotations
 import functools
 import itertools
 import math
+from collections import Counter
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
@@ -577,11 +578,16 @@ def _most_promising_first(
     conditioning). A stable sort on fixed keys: still independent of the seed."""
     n_compat = scorer.compat.sum(axis=1).astype(float)
     dets = np.array([sm[0] for sm in samples]).reshape(-1, 3)
-    c = scorer.params[dets, :2]  # (S, 3, 2)
-    area = np.abs((c[:, 1, 0] - c[:, 0, 0]) * (c[:, 2, 1] - c[:, 0, 1])
-                  - (c[:, 2, 0] - c[:, 0, 0]) * (c[:, 1, 1] - c[:, 0, 1]))
-    order = np.lexsort((-area, np.prod(n_compat[dets], axis=1)))
+    order = np.lexsort((-_triangle_areas(scorer, dets), np.prod(n_compat[dets], axis=1)))
     return iter([samples[k] for k in order.tolist()])
+
+
+def _triangle_areas(scorer: MatchScorer, dets: np.ndarray) -> np.ndarray:
+    """Twice the image areas (S,) px^2 of the triangles of detection centres ``dets`` (S, 3)
+    (P3P's conditioning)."""
+    c = scorer.params[dets, :2]  # (S, 3, 2)
+    return np.abs((c[:, 1, 0] - c[:, 0, 0]) * (c[:, 2, 1] - c[:, 0, 1])
+                  - (c[:, 2, 0] - c[:, 0, 0]) * (c[:, 1, 1] - c[:, 0, 1]))
 
 
 def _sweep_samples(scorer: MatchScorer) -> list[tuple[tuple[int, ...], tuple[int, ...]]]:
@@ -597,27 +603,17 @@ def _sweep_samples(scorer: MatchScorer) -> list[tuple[tuple[int, ...], tuple[int
     objects_of = {d: objs for dets, objs in groups for d in dets}
     label_of = {d: g for g, (dets, _) in enumerate(groups) for d in dets}
     order = sorted(range(scorer.n_det), key=lambda d: (len(objects_of[d]), d))
-    centres = scorer.params[:, :2]
-    best: tuple[float, tuple[int, ...]] | None = None
-    for tri in itertools.combinations(sorted(order[:SWEEP_CANDIDATES]), 3):
-        per_group: dict[int, int] = {}
-        for d in tri:
-            per_group[label_of[d]] = per_group.get(label_of[d], 0) + 1
-        count = math.prod(math.perm(len(groups[g][1]), m) for g, m in per_group.items())
-        if count == 0 or count > SWEEP_MAX_SAMPLES:
-            continue
-        (ax, ay), (bx, by), (cx, cy) = centres[list(tri)]
-        area = abs((bx - ax) * (cy - ay) - (cx - ax) * (by - ay))
-        if best is None or area > best[0]:
-            best = (area, tri)
-    if best is None:
+    tris = list(itertools.combinations(sorted(order[:SWEEP_CANDIDATES]), 3))
+    counts = np.array([math.prod(math.perm(len(groups[g][1]), m)
+                                 for g, m in Counter(label_of[d] for d in tri).items())
+                       for tri in tris])
+    ok = np.flatnonzero((counts > 0) & (counts <= SWEEP_MAX_SAMPLES))
+    if len(ok) == 0:
         return []
-    tri = best[1]
-    out = []
-    for objs in itertools.product(*(objects_of[d].tolist() for d in tri)):
-        if len(set(objs)) == 3:
-            out.append((tri, tuple(int(o) for o in objs)))
-    return out
+    tri = tris[ok[np.argmax(_triangle_areas(scorer, np.array(tris)[ok]))]]
+    return [(tri, tuple(int(o) for o in objs))
+            for objs in itertools.product(*(objects_of[d].tolist() for d in tri))
+            if len(set(objs)) == 3]
 
 
 def ransac(

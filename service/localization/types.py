@@ -91,6 +91,10 @@ def _is_int(value: object) -> bool:
     return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
 
 
+def _number(value: object) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
 @dataclass(frozen=True)
 class LocalizationOptions:
     """Options of :func:`service.localization.pipeline.localize` (validated on construction).
@@ -160,46 +164,36 @@ class LocalizationOptions:
     min_confidence: float | None = None
 
     def __post_init__(self) -> None:
-        if self.min_confidence is not None and (
-                isinstance(self.min_confidence, bool)
-                or not isinstance(self.min_confidence, (int, float))
-                or not (0.0 <= self.min_confidence <= 1.0)):
-            raise _bad("options.min_confidence",
-                       f"must be in [0, 1] or None, got {self.min_confidence!r}")
-        if self.on_ambiguity not in AMBIGUITY_POLICIES:
-            raise _bad("options.on_ambiguity",
-                       f"must be one of {AMBIGUITY_POLICIES}, got {self.on_ambiguity!r}")
         if self.metric not in METRICS and self.metric != NO_REFINEMENT:
             raise _bad("options.metric",
                        f"unknown metric {self.metric!r}; valid: {', '.join(METRICS)} "
                        f"or {NO_REFINEMENT!r}")
-        if not _is_int(self.ransac_max_hypotheses) or self.ransac_max_hypotheses < 1:
-            raise _bad("options.ransac_max_hypotheses",
-                       f"must be an integer >= 1, got {self.ransac_max_hypotheses!r}")
-        if (isinstance(self.inlier_iou, bool) or not isinstance(self.inlier_iou, (int, float))
-                or not (0.0 < float(self.inlier_iou) <= 1.0)):
-            raise _bad("options.inlier_iou", f"must be in (0, 1], got {self.inlier_iou!r}")
-        if not _is_int(self.min_inliers) or self.min_inliers < 2:
-            raise _bad("options.min_inliers", f"must be an integer >= 2, got {self.min_inliers!r}")
-        if not isinstance(self.use_sigma, bool):
-            raise _bad("options.use_sigma", f"must be a bool, got {self.use_sigma!r}")
         check_robust(self.robust, self.robust_scale, prefix="options.",
                      error=LocalizationInputError)
-        if self.unknown_label_policy not in UNKNOWN_LABEL_POLICIES:
-            raise _bad("options.unknown_label_policy",
-                       f"must be one of {UNKNOWN_LABEL_POLICIES}, "
-                       f"got {self.unknown_label_policy!r}")
-        if self.seed is not None and not _is_int(self.seed):
-            raise _bad("options.seed", f"must be an integer or None, got {self.seed!r}")
-        if self.time_budget_ms is not None and (
-                isinstance(self.time_budget_ms, bool)
-                or not isinstance(self.time_budget_ms, (int, float))
-                or not (self.time_budget_ms > 0) or math.isnan(self.time_budget_ms)):
-            raise _bad("options.time_budget_ms",
-                       f"must be > 0 or None, got {self.time_budget_ms!r}")
-        if not _is_int(self.max_iterations) or self.max_iterations < 1:
-            raise _bad("options.max_iterations",
-                       f"must be an integer >= 1, got {self.max_iterations!r}")
+        for name, ok, rule in (
+            ("min_confidence", self.min_confidence is None
+             or (_number(self.min_confidence) and 0.0 <= self.min_confidence <= 1.0),
+             "must be in [0, 1] or None"),
+            ("on_ambiguity", self.on_ambiguity in AMBIGUITY_POLICIES,
+             f"must be one of {AMBIGUITY_POLICIES}"),
+            ("ransac_max_hypotheses", _is_int(self.ransac_max_hypotheses)
+             and self.ransac_max_hypotheses >= 1, "must be an integer >= 1"),
+            ("inlier_iou", _number(self.inlier_iou) and 0.0 < self.inlier_iou <= 1.0,
+             "must be in (0, 1]"),
+            ("min_inliers", _is_int(self.min_inliers) and self.min_inliers >= 2,
+             "must be an integer >= 2"),
+            ("use_sigma", isinstance(self.use_sigma, bool), "must be a bool"),
+            ("unknown_label_policy", self.unknown_label_policy in UNKNOWN_LABEL_POLICIES,
+             f"must be one of {UNKNOWN_LABEL_POLICIES}"),
+            ("seed", self.seed is None or _is_int(self.seed), "must be an integer or None"),
+            ("time_budget_ms", self.time_budget_ms is None
+             or (_number(self.time_budget_ms) and self.time_budget_ms > 0),
+             "must be > 0 or None"),
+            ("max_iterations", _is_int(self.max_iterations) and self.max_iterations >= 1,
+             "must be an integer >= 1"),
+        ):
+            if not ok:
+                raise _bad(f"options.{name}", f"{rule}, got {getattr(self, name)!r}")
         # integral numbers (numpy ints too) are accepted and stored as Python ints
         for name in ("ransac_max_hypotheses", "min_inliers", "max_iterations", "seed"):
             value = getattr(self, name)
@@ -230,15 +224,6 @@ def _check_metric_options(metric: str, options: Mapping[str, Any]) -> None:
             residual(metric, *_PROBES, **{key: value})
         except (TypeError, ValueError) as exc:
             raise _bad(f"options.metric_options.{key}", str(exc)) from exc
-
-
-def _check_pose(field_name: str, value: object) -> np.ndarray:
-    try:
-        T = check_pose(value, field_name)
-    except GeometryError as exc:
-        raise LocalizationInputError(exc.problem, field=exc.field) from exc
-    T.setflags(write=False)
-    return T
 
 
 def check_covariance(field_name: str, value: object,
@@ -277,8 +262,12 @@ class PosePrior:
     covariance: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "world_from_camera",
-                           _check_pose("prior.world_from_camera", self.world_from_camera))
+        try:
+            T = check_pose(self.world_from_camera, "prior.world_from_camera")
+        except GeometryError as exc:
+            raise LocalizationInputError(exc.problem, field=exc.field) from exc
+        T.setflags(write=False)
+        object.__setattr__(self, "world_from_camera", T)
         if self.covariance is not None:
             object.__setattr__(self, "covariance",
                                check_covariance("prior.covariance", self.covariance))
