@@ -28,10 +28,43 @@ from factors.geometry import (
     so3_exp,
 )
 
-__all__ = ["p2e_hypotheses", "p3p_hypotheses", "p3p_hypotheses_batch",
+__all__ = ["p2e_hypotheses", "p3p_hypotheses", "p3p_hypotheses_batch", "project_objects",
            "rotation_from_two_directions"]
 
 _EMPTY = np.zeros((0, 4, 4))
+
+
+def project_objects(
+    camera: Camera, camera_from_world: np.ndarray, centers: np.ndarray,
+    shape_matrices: np.ndarray, dual_quadrics: np.ndarray, min_depth: float = MIN_DEPTH,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Projections of S ellipsoids at H poses, vectorised (THE batched projection of the RANSAC
+    scorer and of the P2E residuals).
+
+    Args:
+        camera_from_world: (H, 4, 4), or ``[R | t]`` (H, 3, 4).
+        centers, shape_matrices, dual_quadrics: (S, 3), (S, 3, 3), (S, 4, 4) world frame.
+
+    Returns:
+        ``centres`` (H, S, 2) px of the projected ellipses, ``inv_shape`` (H, S, 2, 2) their
+        ``A^-1 = R diag(a^2, b^2) R^T`` (px^2), ``valid`` (H, S) bool (ellipsoid entirely at
+        depth > ``min_depth`` and a real ellipse), ``point_centres`` (H, S, 2) px: projections
+        of the ellipsoid centres (garbage where the centre is behind the camera).
+    """
+    T = np.asarray(camera_from_world, dtype=float)
+    valid = ellipsoid_depth_margins(T, centers, shape_matrices) > min_depth
+    P = np.einsum("ij,hjk->hik", camera.K, T[:, :3, :])
+    C = np.einsum("hij,sjk,hlk->hsil", P, dual_quadrics, P)
+    w = -C[..., 2, 2]
+    ok = np.abs(w) > 0
+    w = np.where(ok, w, 1.0)
+    Cn = C / w[..., None, None]
+    cen, inv_shape = gaussians_from_dual_conics(Cn)
+    det = inv_shape[..., 0, 0] * inv_shape[..., 1, 1] - inv_shape[..., 0, 1] ** 2
+    valid &= ok & (det > 0) & (inv_shape[..., 0, 0] > 0)
+    hom = np.einsum("hij,sj->hsi", P[:, :, :3], centers) + P[:, None, :, 3]
+    zh = np.where(np.abs(hom[..., 2]) > 1e-12, hom[..., 2], 1e-12)
+    return cen, inv_shape, valid, hom[..., :2] / zh[..., None]
 
 
 def p3p_hypotheses(
@@ -145,7 +178,7 @@ class _PairProblem:
 
     def __init__(self, ellipses: Sequence[Ellipse], ellipsoids: Sequence[Ellipsoid],
                  camera: Camera) -> None:
-        self.K = camera.K
+        self.camera = camera
         self.X = np.array([e.center for e in ellipsoids])
         self.Q = np.array([e.dual_quadric() for e in ellipsoids])
         self.M = np.array([e.shape_matrix() for e in ellipsoids])
@@ -159,12 +192,8 @@ class _PairProblem:
         their validity (N,): both ellipsoids entirely in front of the camera (rows of invalid
         poses are not meaningful)."""
         Rt = np.concatenate([R, t[:, :, None]], axis=2)  # camera_from_world (N, 3, 4)
-        valid = np.all(ellipsoid_depth_margins(Rt, self.X, self.M) > MIN_DEPTH, axis=1)
-        P = self.K @ Rt
-        P = P[:, None]
-        C = P @ self.Q @ P.transpose(0, 1, 3, 2)
-        w = np.where(valid[:, None], -C[:, :, 2, 2], 1.0)
-        mu, S = gaussians_from_dual_conics(C / w[:, :, None, None])
+        mu, S, valid, _ = project_objects(self.camera, Rt, self.X, self.M, self.Q, MIN_DEPTH)
+        valid = np.all(valid, axis=1)
         rc = (mu - self.c_det) / self.size[:, None]
         W = self.L_inv @ S @ self.L_inv.transpose(0, 2, 1)
         m = 0.5 * (W[..., 0, 0] + W[..., 1, 1])

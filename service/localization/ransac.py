@@ -28,12 +28,14 @@ from factors.geometry import (
     Camera,
     Ellipse,
     ellipse_params,
-    ellipsoid_depth_margins,
-    gaussians_from_dual_conics,
 )
 from maps.compiled import CompiledMap
 from service.localization.budget import Deadline, deadline_passed, earliest
-from service.localization.hypotheses import p2e_hypotheses, p3p_hypotheses_batch
+from service.localization.hypotheses import (
+    p2e_hypotheses,
+    p3p_hypotheses_batch,
+    project_objects,
+)
 
 __all__ = [
     "EARLY_EXIT_MEAN_IOU",
@@ -137,38 +139,6 @@ def _ellipse_points(params: np.ndarray, unit: np.ndarray) -> np.ndarray:
     x = params[:, 0, None] + c[:, None] * u - s[:, None] * v
     y = params[:, 1, None] + s[:, None] * u + c[:, None] * v
     return np.stack([x, y], axis=-1)
-
-
-def project_objects(
-    camera: Camera, camera_from_world: np.ndarray, centers: np.ndarray,
-    shape_matrices: np.ndarray, dual_quadrics: np.ndarray, min_depth: float = 1e-6,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Projections of S ellipsoids at H poses, vectorised.
-
-    Args:
-        camera_from_world: (H, 4, 4).
-        centers, shape_matrices, dual_quadrics: (S, 3), (S, 3, 3), (S, 4, 4) world frame.
-
-    Returns:
-        ``centres`` (H, S, 2) px of the projected ellipses, ``inv_shape`` (H, S, 2, 2) their
-        ``A^-1 = R diag(a^2, b^2) R^T`` (px^2), ``valid`` (H, S) bool (ellipsoid entirely at
-        depth > ``min_depth`` and a real ellipse), ``point_centres`` (H, S, 2) px: projections
-        of the ellipsoid centres (garbage where the centre is behind the camera).
-    """
-    T = np.asarray(camera_from_world, dtype=float)
-    valid = ellipsoid_depth_margins(T, centers, shape_matrices) > min_depth
-    P = np.einsum("ij,hjk->hik", camera.K, T[:, :3, :])
-    C = np.einsum("hij,sjk,hlk->hsil", P, dual_quadrics, P)
-    w = -C[..., 2, 2]
-    ok = np.abs(w) > 0
-    w = np.where(ok, w, 1.0)
-    Cn = C / w[..., None, None]
-    cen, inv_shape = gaussians_from_dual_conics(Cn)
-    det = inv_shape[..., 0, 0] * inv_shape[..., 1, 1] - inv_shape[..., 0, 1] ** 2
-    valid &= ok & (det > 0) & (inv_shape[..., 0, 0] > 0)
-    hom = np.einsum("hij,sj->hsi", P[:, :, :3], centers) + P[:, None, :, 3]
-    zh = np.where(np.abs(hom[..., 2]) > 1e-12, hom[..., 2], 1e-12)
-    return cen, inv_shape, valid, hom[..., :2] / zh[..., None]
 
 
 def iou_estimates(
