@@ -37,6 +37,7 @@ from service.localization.confidence import (
     residual_variance,
 )
 from service.localization.ransac import (
+    HARD_STOP_FACTOR,
     Hypothesis,
     Match,
     MatchScorer,
@@ -44,7 +45,6 @@ from service.localization.ransac import (
     count_samples,
     distinct_poses,
     greedy_assignment,
-    hard_deadline,
     ransac,
     sunflower_disk,
 )
@@ -58,6 +58,7 @@ from service.localization.types import (
     LocalizationOptions,
     LocalizationResult,
     PosePrior,
+    check_detections,
 )
 
 __all__ = ["localize", "prior_gate_poses", "refine_pose"]
@@ -66,15 +67,7 @@ def _validate(
     detections: Sequence[Detection], scene_map: SceneMap | CompiledMap, camera: Camera,
     options: LocalizationOptions, prior: PosePrior | None,
 ) -> CompiledMap:
-    if isinstance(detections, (str, bytes, Detection)) or not isinstance(detections, Sequence):
-        raise LocalizationInputError("must be a sequence of Detection, got "
-                                     f"{type(detections).__name__}", field="detections")
-    if len(detections) == 0:
-        raise LocalizationInputError("must not be empty", field="detections")
-    for i, d in enumerate(detections):
-        if not isinstance(d, Detection):
-            raise LocalizationInputError(
-                f"must be a Detection, got {type(d).__name__}", field=f"detections[{i}]")
+    check_detections(detections)
     for name, value, types, what in (
             ("scene_map", scene_map, (SceneMap, CompiledMap), "a SceneMap or CompiledMap"),
             ("camera", camera, Camera, "a Camera"),
@@ -307,12 +300,13 @@ def localize(
         return _not_localized("too_few_detections", metric, 0, timings, t0)
     if len(usable) < 2:
         return _not_localized("no_label_match", metric, 0, timings, t0)
-    scorer = MatchScorer(compiled, camera, [detections[i].ellipse for i in usable],
-                         [detections[i].label for i in usable], usable)
-    # CPU time of this thread, with a wall-clock hard limit (service.localization.budget)
+    # CPU time of this thread, with a wall-clock hard limit (service.localization.budget); the
+    # scorer raises ScoringTimeoutError past HARD_STOP_FACTOR x the budget
     deadline = Deadline.after(options.time_budget_ms, cpu_start=cpu0, wall_start=t0)
-    scorer.deadline = hard_deadline(t0, options.time_budget_ms, cpu_start=cpu0)  # past it:
-    # ScoringTimeoutError
+    scorer = MatchScorer(compiled, camera, [detections[i].ellipse for i in usable],
+                         [detections[i].label for i in usable], usable,
+                         deadline=Deadline.after(options.time_budget_ms, HARD_STOP_FACTOR,
+                                                 cpu_start=cpu0, wall_start=t0))
     evaluated = 0
     n_samples = count_samples(scorer, 2)
 

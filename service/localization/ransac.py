@@ -24,11 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from factors.geometry import (
-    Camera,
-    Ellipse,
-    ellipse_params,
-)
+from factors.geometry import Camera, Ellipse, ellipse_params
 from maps.compiled import CompiledMap
 from service.localization.budget import Deadline, deadline_passed, earliest
 from service.localization.hypotheses import (
@@ -48,7 +44,6 @@ __all__ = [
     "ScoringTimeoutError",
     "distinct_poses",
     "greedy_assignment",
-    "hard_deadline",
     "iou_estimates",
     "ransac",
     "sunflower_disk",
@@ -90,7 +85,9 @@ PAIR_BLOCK = 1 << 16
 POINT_BLOCK = 1 << 17
 #: Most pose x object projections per block (each holds a few 3x3 / 4x4 float arrays).
 PROJECT_BLOCK = 1 << 13
-#: The scorer's hard stop, as a multiple of the time budget (:func:`hard_deadline`).
+#: The scorer's hard stop (``MatchScorer.deadline`` in ``localize``), as a multiple of the time
+#: budget on both clocks of a :class:`service.localization.budget.Deadline`: the search stops
+#: at the budget itself, this bounds the scoring after it (final matches, re-association).
 HARD_STOP_FACTOR = 1.05
 
 
@@ -101,17 +98,6 @@ class ScoringTimeoutError(RuntimeError):
 def _check(stop_at: Deadline | float | None) -> None:
     if deadline_passed(stop_at):
         raise ScoringTimeoutError("time budget exceeded while scoring poses")
-
-
-def hard_deadline(start: float, time_budget_ms: float | None, *,
-                  cpu_start: float | None = None) -> Deadline | None:
-    """The scorer's hard stop of a call started at ``start`` (``time.perf_counter()``; and
-    ``cpu_start``, ``time.thread_time()``, default now) with a budget: 1.05 x the budget on
-    each clock of :class:`service.localization.budget.Deadline` (CPU time of the solving thread,
-    and its wall-clock hard limit). The search stops at the budget itself; this bounds the
-    scoring after it (final matches, re-association after refinement)."""
-    return Deadline.after(time_budget_ms, HARD_STOP_FACTOR, cpu_start=cpu_start,
-                          wall_start=start)
 
 
 def _blocks(n: int, size: int) -> Iterator[slice]:

@@ -32,7 +32,7 @@ from factors.names import check_robust
 from factors.pose_factors import pose3, pose_factors
 from factors.pose_residuals import PoseResidualModel
 from service.localization.budget import Deadline, deadline_passed
-from service.localization.types import Detection, check_covariance
+from service.localization.types import Detection, check_covariance, check_detections
 
 __all__ = [
     "ABSOLUTE_ERROR_TOL",
@@ -131,19 +131,6 @@ def _lm_params(max_iterations: int) -> gtsam.LevenbergMarquardtParams:
     return params
 
 
-
-def _check_prior(
-    prior_world_from_camera: np.ndarray | None, prior_covariance: np.ndarray | None
-) -> tuple[np.ndarray, np.ndarray] | None:
-    if prior_world_from_camera is None and prior_covariance is None:
-        return None
-    if prior_world_from_camera is None or prior_covariance is None:
-        raise GeometryError("prior_world_from_camera and prior_covariance must be given together")
-    T = check_pose(prior_world_from_camera, "prior_world_from_camera")
-    S = check_covariance("prior_covariance", prior_covariance, GeometryError)
-    return T, S
-
-
 def refine(
     detections: Sequence[Detection],
     ellipsoids: Sequence[Ellipsoid],
@@ -190,13 +177,7 @@ def refine(
         ValueError (``GeometryError``): bad input, the message names the field.
     """
     t_start = time.perf_counter()
-    if isinstance(detections, Detection) or not isinstance(detections, Sequence):
-        raise GeometryError("detections must be a sequence of Detection")
-    for j, d in enumerate(detections):
-        if not isinstance(d, Detection):
-            raise GeometryError(f"detections[{j}] must be a Detection, got {type(d).__name__}")
-    if len(detections) == 0:
-        raise GeometryError("detections must not be empty")
+    check_detections(detections, GeometryError)
     if len(ellipsoids) != len(detections):
         raise GeometryError(f"ellipsoids must match detections one to one: got "
                             f"{len(ellipsoids)} ellipsoids for {len(detections)} detections")
@@ -208,7 +189,11 @@ def refine(
     if not isinstance(use_sigma, bool):
         raise GeometryError(f"use_sigma must be a bool, got {use_sigma!r}")
     check_robust(robust, robust_scale, error=GeometryError)
-    prior = _check_prior(prior_world_from_camera, prior_covariance)
+    if (prior_world_from_camera is None) != (prior_covariance is None):
+        raise GeometryError("prior_world_from_camera and prior_covariance must be given together")
+    prior = None if prior_covariance is None else (
+        check_pose(prior_world_from_camera, "prior_world_from_camera"),
+        check_covariance("prior_covariance", prior_covariance, GeometryError))
 
     sigmas = [d.sigma if use_sigma else None for d in detections]
     resample = metric == "level_set" and bool((metric_options or {}).get("adaptive", True))

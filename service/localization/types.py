@@ -19,7 +19,7 @@ Public names:
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
@@ -81,6 +81,21 @@ class Detection:
             raise GeometryError(f"Detection.sigma must be finite and > 0, got {self.sigma}")
         if self.score is not None and not (math.isfinite(self.score) and 0 <= self.score <= 1):
             raise GeometryError(f"Detection.score must be in [0, 1], got {self.score}")
+
+
+def check_detections(detections: object,
+                     error: type[FieldError] = LocalizationInputError) -> None:
+    """THE rule of a request's detections: a non-empty sequence of :class:`Detection`;
+    otherwise raises ``error`` with ``field`` ``"detections"`` or ``"detections[i]"``. Shared by
+    ``localize`` and :func:`service.localization.refine.refine`."""
+    if isinstance(detections, (str, bytes, Detection)) or not isinstance(detections, Sequence):
+        raise error(f"must be a sequence of Detection, got {type(detections).__name__}",
+                    field="detections")
+    if len(detections) == 0:
+        raise error("must not be empty", field="detections")
+    for i, d in enumerate(detections):
+        if not isinstance(d, Detection):
+            raise error(f"must be a Detection, got {type(d).__name__}", field=f"detections[{i}]")
 
 
 def _bad(field_name: str, problem: str) -> LocalizationInputError:
