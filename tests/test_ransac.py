@@ -347,7 +347,8 @@ def test_blocked_and_pruned_iou_equals_the_direct_estimate(monkeypatch):
     # stage 1 by blocks == the direct centre test
     _, _, _, pc = project_objects(CAM, poses, cm.centers, cm.shape_matrices, cm.dual_quadrics)
     pc_minus = pc[:, None, :, :] - scorer.params[None, :, None, :2]
-    phi = np.einsum("hdsi,dij,hdsj->hds", pc_minus, scorer.shape, pc_minus)
+    shape = np.array([Ellipse(*p).shape_matrix() for p in scorer.params])
+    phi = np.einsum("hdsi,dij,hdsj->hds", pc_minus, shape, pc_minus)
     expected = ((phi <= 4.0) & valid[:, None, :]).any(axis=2).sum(axis=1)
     np.testing.assert_array_equal(scorer.centre_hits(poses), expected)
 

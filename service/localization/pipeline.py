@@ -345,14 +345,12 @@ def localize(
                             assess(b, a if b is not a else runner_up, ranked)[0],
                             len(b.inliers), b.score) for b in ranked)
         timings["total"] = (time.perf_counter() - t0) * 1e3
-        if ambiguous and options.on_ambiguity == "not_localized":
-            return LocalizationResult(False, "ambiguous", None, None, 0.0, (), metric,
-                                      evaluated, False, timings, a.status, None, alternatives,
-                                      ev)
-        if conf < floor:
-            return LocalizationResult(False, "low_confidence", None, None, 0.0, (), metric,
-                                      evaluated, False, timings, a.status, None, alternatives,
-                                      {**ev, "confidence": conf})
+        reason = ("ambiguous" if ambiguous and options.on_ambiguity == "not_localized"
+                  else "low_confidence" if conf < floor else None)
+        if reason is not None:
+            return LocalizationResult(False, reason, None, None, 0.0, (), metric, evaluated,
+                                      False, timings, a.status, None, alternatives,
+                                      ev if reason == "ambiguous" else {**ev, "confidence": conf})
         return LocalizationResult(
             True, None, np.array(a.world_from_camera, dtype=float), cov, conf,
             tuple(sorted(a.inliers, key=lambda m: m.detection_index)), metric, evaluated,

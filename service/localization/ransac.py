@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from factors.geometry import Camera, Ellipse, ellipse_params
+from factors.geometry import Camera, Ellipse, ellipse_params, level_values
 from maps.compiled import CompiledMap
 from service.localization.budget import Deadline, deadline_passed, earliest
 from service.localization.hypotheses import (
@@ -244,9 +244,6 @@ class MatchScorer:
         self.points = _ellipse_points(self.params, sunflower_disk(n_points))
         self.areas = math.pi * self.params[:, 2] * self.params[:, 3]
         self.radii = np.max(self.params[:, 2:4], axis=1)
-        c, s = np.cos(self.params[:, 4]), np.sin(self.params[:, 4])
-        R = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
-        self.shape = np.einsum("dij,dj,dkj->dik", R, self.params[:, 2:4] ** -2.0, R)
 
     def compatible_objects(self, d: int) -> np.ndarray:
         """Object indices compatible with usable detection row ``d``."""
@@ -265,19 +262,10 @@ class MatchScorer:
     def _stop(self, stop_at: Deadline | float | None) -> Deadline | None:
         return earliest(stop_at, self.deadline)
 
-    def _project(self, camera_from_world: np.ndarray,
-                 stop_at: Deadline | float | None = None) -> tuple[np.ndarray, ...]:
-        """:func:`project_objects` of the compatible objects, in blocks of poses."""
-        o = self.objects
-        T = np.asarray(camera_from_world, dtype=float)
-        step = max(1, PROJECT_BLOCK // max(1, len(o)))
-        if len(T) <= step:
-            return project_objects(self.camera, T, *self._object_arrays)
-        parts = []
-        for blk in _blocks(len(T), step):
-            _check(stop_at)
-            parts.append(project_objects(self.camera, T[blk], *self._object_arrays))
-        return tuple(np.concatenate(p) for p in zip(*parts, strict=True))
+    def _project(self, camera_from_world: np.ndarray) -> tuple[np.ndarray, ...]:
+        """:func:`project_objects` of the compatible objects (callers pass at most
+        ``PROJECT_BLOCK // len(objects)`` poses)."""
+        return project_objects(self.camera, camera_from_world, *self._object_arrays)
 
     def centre_hits(self, camera_from_world: np.ndarray,
                     stop_at: Deadline | float | None = None) -> np.ndarray:
@@ -288,14 +276,13 @@ class MatchScorer:
         step = max(1, PROJECT_BLOCK // max(1, len(self.objects)))
         for hb in _blocks(len(T), step):
             _check(stop_at)
-            _, _, valid, pc = self._project(T[hb], stop_at)
+            _, _, valid, pc = self._project(T[hb])
             for h in range(len(pc)):
                 per_det = np.zeros(self.n_det, dtype=bool)
                 for blk in _blocks(len(self.pair_d), PAIR_BLOCK):
                     _check(stop_at)
                     pd, ps = self.pair_d[blk], self.pair_s[blk]
-                    d = pc[h, ps] - self.params[pd, :2]
-                    phi = np.einsum("pi,pij,pj->p", d, self.shape[pd], d)
+                    phi = level_values(self.params[pd], pc[h, ps][:, None])[:, 0]
                     per_det[pd[(phi <= 4.0) & valid[h, ps]]] = True
                 out[hb.start + h] = per_det.sum()
         return out
@@ -323,7 +310,7 @@ class MatchScorer:
                           PAIR_BLOCK // n_pairs))
         for hb in _blocks(len(T), step):
             _check(stop_at)
-            cen, inv_shape, valid, _ = self._project(T[hb], stop_at)
+            cen, inv_shape, valid, _ = self._project(T[hb])
             n_h = len(cen)
             det = inv_shape[..., 0, 0] * inv_shape[..., 1, 1] - inv_shape[..., 0, 1] ** 2
             half_tr = 0.5 * (inv_shape[..., 0, 0] + inv_shape[..., 1, 1])
