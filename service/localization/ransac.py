@@ -582,22 +582,18 @@ def ransac(
             instant), checked before every batch and inside the scoring of a batch.
     """
     cm = scorer.compiled
-    best_T: np.ndarray | None = None
-    best_score, best_count = -1.0, 0
-    best_matches: list[Match] = []
-    kept: list[Hypothesis] = []  # distinct qualified hypotheses, best first
-    evaluated = 0
-    tried = 0
-    timed_out = False
-    exhaustive = True
+    # distinct qualified hypotheses, best first: kept[0] only ever changes to a better one
+    # (_keep_distinct), so it is the best pose found
+    kept: list[Hypothesis] = []
+    evaluated = tried = 0
+    timed_out, exhaustive = False, True
     need = scorer.n_det
-
     n_pairs = len(scorer.pair_d)
 
     def consider(poses: np.ndarray) -> bool:
         """Score candidate poses (vectorised over poses and pairs, memory bounded); keeps the
         best distinct hypotheses; returns True to stop early."""
-        nonlocal best_T, best_score, best_count, best_matches, evaluated, kept
+        nonlocal evaluated, kept
         if len(poses) == 0:
             return False
         evaluated += len(poses)
@@ -620,11 +616,8 @@ def ransac(
                 score = float(sum(x.iou for x in m))
                 if len(m) >= min_inliers and score > bar:
                     kept = _keep_distinct(kept, Hypothesis(poses[blk][h], tuple(m), score))
-        if kept and kept[0].score > best_score:
-            best_T, best_score = kept[0].camera_from_world, kept[0].score
-            best_matches, best_count = list(kept[0].matches), len(kept[0].matches)
-        return (need >= EARLY_EXIT_MIN_DETECTIONS and best_count >= need
-                and best_score >= EARLY_EXIT_MEAN_IOU * need)
+        return (need >= EARLY_EXIT_MIN_DETECTIONS and bool(kept)
+                and len(kept[0].matches) >= need and kept[0].score >= EARLY_EXIT_MEAN_IOU * need)
 
     def solve(chunk: list[tuple[tuple[int, ...], tuple[int, ...]]], size: int) -> np.ndarray:
         """Candidate poses (M, 4, 4) of minimal samples: one vectorised P3P call, or P2E."""
@@ -685,22 +678,23 @@ def ransac(
     has3 = need >= 3 and count_samples(scorer, 3) > 0
     has2 = count_samples(scorer, 2) > 0
     stop = run(3, max_hypotheses) if has3 else False
-    if best_T is None and not stop and has2:  # P2E: alone, or the fallback of P3P
+    if not kept and not stop and has2:  # P2E: alone, or the fallback of P3P
         run(2, max_hypotheses if need < 3 else min(max_hypotheses, P2E_FALLBACK_BUDGET))
-    if best_T is None:
+    if not kept:
         reason = ("time_budget_exceeded" if timed_out else "no_label_match"
                   if not (has3 or has2) else "no_hypothesis_above_inlier_threshold")
         return RansacOutcome(None, (), 0.0, evaluated, tried, exhaustive, timed_out, reason)
+    best = kept[0]
     try:
-        matches = tuple(scorer.matches(best_T, inlier_iou))
+        matches = tuple(scorer.matches(best.camera_from_world, inlier_iou))
     except ScoringTimeoutError:  # past the scorer's hard stop: keep the accepted assignment
         matches = ()
     if len(matches) < min_inliers:
         # the finer IoU estimate (256 points) lost an inlier at the threshold: keep the
         # assignment the pose was accepted with (96 points)
-        matches = tuple(best_matches)
-    return RansacOutcome(best_T, matches, best_score, evaluated, tried, exhaustive, timed_out,
-                         None, tuple(kept))
+        matches = best.matches
+    return RansacOutcome(best.camera_from_world, matches, best.score, evaluated, tried,
+                         exhaustive, timed_out, None, tuple(kept))
 
 
 def _keep_distinct(kept: list[Hypothesis], new: Hypothesis) -> list[Hypothesis]:
