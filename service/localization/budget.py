@@ -58,11 +58,7 @@ def as_deadline(deadline: Deadline | float | None) -> Deadline | None:
 def deadline_passed(deadline: Deadline | float | None) -> bool:
     """Whether ``deadline`` (a :class:`Deadline`, a ``time.perf_counter()`` instant, or None =
     never) has passed."""
-    if deadline is None:
-        return False
-    if isinstance(deadline, Deadline):
-        return deadline.passed()
-    return time.perf_counter() > deadline
+    return deadline is not None and as_deadline(deadline).passed()
 
 
 def earliest(a: Deadline | float | None, b: Deadline | float | None) -> Deadline | None:

@@ -282,13 +282,10 @@ def p2e_hypotheses(
 ) -> np.ndarray:
     """Camera poses from two ellipse/ellipsoid pairs (6 DoF; derivation in ``docs/p2e.md``).
 
-    Starts: the two centre rays and the known distance between the ellipsoid centres fix the
-    camera-frame centres up to the ratio of their depths (``n_ratio_samples`` ratios); for each
-    ratio, camera roll in ``rolls_deg`` and both pitch branches, the map's up direction and the
-    centre-to-centre direction fix the rotation. Every start is then refined by a batched 6-DoF
-    Levenberg-Marquardt (``iterations``) on the 10 ellipse residuals (:class:`_PairProblem`:
-    both detections' centres and shapes against the projected ellipsoids), so the roll is only
-    a starting point, not an assumption; converged starts are merged (:data:`DEDUPE_TOLERANCE`).
+    Starts at ``n_ratio_samples`` depth ratios x camera rolls ``rolls_deg`` x both pitch
+    branches (the best ``starts_per_group`` per roll and branch), each refined by a batched
+    6-DoF LM (``iterations``) on the 10 ellipse residuals of :class:`_PairProblem`; converged
+    starts are merged (:data:`DEDUPE_TOLERANCE`).
 
     Args:
         ellipses: two detected ellipses (px).

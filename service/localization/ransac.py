@@ -534,14 +534,11 @@ def _triangle_areas(scorer: MatchScorer, dets: np.ndarray) -> np.ndarray:
 
 
 def _sweep_samples(scorer: MatchScorer) -> list[tuple[tuple[int, ...], tuple[int, ...]]]:
-    """The minimal samples of the competitor sweep run after an early exit: every
-    label-compatible assignment (distinct objects) of ONE detection triple. A competing pose
-    that explains every usable detection (what the ambiguity check looks for) also explains
-    these three, with one of these assignments, so P3P on them finds it whatever the rest of
-    the search skipped. The triple: among the :data:`SWEEP_CANDIDATES` detections with the
-    fewest compatible objects, the one with the largest image triangle (P3P conditioning) of
-    those with at most :data:`SWEEP_MAX_SAMPLES` assignments; none (empty list) if no triple
-    qualifies (many same-label objects: the search then stops as it did without the sweep)."""
+    """The minimal samples of the competitor sweep: every label-compatible assignment
+    (distinct objects) of ONE detection triple, the one with the largest image triangle among
+    the :data:`SWEEP_CANDIDATES` detections with the fewest compatible objects and at most
+    :data:`SWEEP_MAX_SAMPLES` assignments; empty if none qualifies (why:
+    ``docs/design/localization.md``)."""
     groups = scorer.label_groups
     objects_of = {d: objs for dets, objs in groups for d in dets}
     label_of = {d: g for g, (dets, _) in enumerate(groups) for d in dets}

@@ -79,13 +79,9 @@ class RefinementResult:
             projection is not an ellipse.
         valid_projection: (N,) bool, the projection of pair ``j`` is an ellipse at the final pose.
         initial_error, total_error: GTSAM's weighted error ``0.5 sum_j ||r_j||^2 / sigma_j``
-            (plus the prior's) at the initial and final pose. Each is measured with the
-            level-set sample layout of its own solve: ``initial_error`` with the samples laid
-            out at the initial pose, ``total_error`` with those of the last solve (re-laid at
-            the first solve's result when adaptive level-set sampling was re-laid), so with a
-            re-lay the two are costs of *different* functions and need not decrease; compare
-            ``factors.metrics`` costs with one fixed layout instead. Without a re-lay
-            (other metrics, ``adaptive=False``, no grown area) they share one layout.
+            (plus the prior's) at the initial and final pose, each with the level-set sample
+            layout of its own solve: after a re-lay they are costs of different functions and
+            need not decrease.
         iterations: LM iterations performed.
         converged: ``status == "converged"``.
         status: one of :data:`STATUSES`: ``converged`` (LM met a stopping tolerance),

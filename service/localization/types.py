@@ -1,19 +1,11 @@
-"""Inputs and outputs of the localization pipeline (owned by the relocalization issue).
+"""Inputs and outputs of :func:`service.localization.pipeline.localize`, validated on
+construction (bad input raises :class:`LocalizationInputError` or
+:class:`factors.geometry.GeometryError`, both ``ValueError``, naming the field).
 
 Frames: ``world_from_camera`` is the camera's pose in the map (4x4, camera axes OpenCV:
 +X right, +Y down, +Z forward). Covariances are 6x6 in GTSAM's Pose3 tangent order
 ``[omega_x, omega_y, omega_z, v_x, v_y, v_z]`` (radians, metres), right perturbation, expressed
 in the camera (body) frame.
-
-Public names:
-
-* :class:`Detection` — one detected object (ellipse px, label, optional sigma / score).
-* :class:`LocalizationOptions` — every knob of :func:`service.localization.pipeline.localize`.
-* :class:`PosePrior` — an optional client pose prior (e.g. from the AR session's tracking).
-* :class:`InlierMatch` — one detection -> map object assignment of the returned pose.
-* :class:`LocalizationResult` — the answer; ``localized=False`` with a ``reason`` is a normal
-  answer, not an error. Bad input raises :class:`LocalizationInputError` (a ``ValueError``) or
-  :class:`factors.geometry.GeometryError` (also a ``ValueError``) naming the field.
 """
 
 from __future__ import annotations
@@ -33,20 +25,14 @@ from service.limits import (
     AMBIGUITY_POLICIES,
     METRICS,
     NO_REFINEMENT,
-    POSE_SOURCES,
     REASONS,
     ROBUST_KERNELS,
     UNKNOWN_LABEL_POLICIES,
 )
 
-__all__ = [
-    "AMBIGUITY_POLICIES",
+__all__ = [  # METRICS and ROBUST_KERNELS: service.limits' names, re-exported for callers
     "METRICS",
-    "NO_REFINEMENT",
-    "POSE_SOURCES",
-    "REASONS",
     "ROBUST_KERNELS",
-    "UNKNOWN_LABEL_POLICIES",
     "Alternative",
     "Detection",
     "InlierMatch",
@@ -135,16 +121,12 @@ class LocalizationOptions:
             :class:`LocalizationInputError` naming ``detections[i].label``.
         seed: seed of the hypothesis sampler (``None`` = nondeterministic). Exhaustive runs do
             not depend on it.
-        time_budget_ms: budget (ms) of the whole ``localize`` call, from its start
-            (validation, prior, hypothesis search and refinement), counted in **CPU time of
-            the solving thread** (``time.thread_time``), so that a busy machine does not change
-            the result when the budget is not binding; a wall-clock hard limit of
-            ``service.localization.budget.WALL_LIMIT_FACTOR`` x the budget bounds the latency
-            (module ``service.localization.budget``). The hypothesis search stops
-            at it and the best hypothesis so far is used (or ``reason="time_budget_exceeded"``
-            if none qualifies); no refinement iteration starts after it (the result then has
-            ``refinement_status="time_budget"``). Overshoot is bounded by one batch of
-            hypotheses or one LM iteration. ``None`` = unbounded.
+        time_budget_ms: budget (ms) of the whole ``localize`` call, from its start, in CPU
+            time of the solving thread with a wall-clock hard limit
+            (:mod:`service.localization.budget`). The hypothesis search stops at it (the best
+            hypothesis so far is used, or ``reason="time_budget_exceeded"``); no refinement
+            iteration starts after it (``refinement_status="time_budget"``). ``None`` =
+            unbounded.
         max_iterations: Levenberg-Marquardt iteration cap of the refinement.
         metric_options: extra keyword options of the metric (e.g. level-set sampling),
             validated on construction (an unknown key or bad value raises naming
