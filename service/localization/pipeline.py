@@ -117,16 +117,20 @@ def refine_pose(
         deadline=deadline)
 
 
+def _pairs(matches: Sequence[Match]) -> set[tuple[int, int]]:
+    return {(m.detection_index, m.object_index) for m in matches}
+
+
 def _refine_and_verify(
-    matches: Sequence[Match], detections: Sequence[Detection], compiled: CompiledMap,
-    camera: Camera, scorer: MatchScorer, world_from_camera: np.ndarray,
-    options: LocalizationOptions, prior: PosePrior | None, deadline: float | None,
+    matches: Sequence[Match], detections: Sequence[Detection], scorer: MatchScorer,
+    world_from_camera: np.ndarray, options: LocalizationOptions, prior: PosePrior | None,
+    deadline: Deadline | float | None,
 ) -> tuple[_Answer | None, str | None]:
-    """Refine on ``matches``, re-associate, refine again if the set changed (and the deadline
-    has not passed). Returns (the answer, or None if the result fails the inlier check; the
-    refinement status — see ``LocalizationResult.refinement_status`` — or None with
-    ``metric="none"``)."""
-    thr = options.inlier_iou
+    """Refine on ``matches`` (with the scorer's map and camera), re-associate, refine again if
+    the set changed (and the deadline has not passed). Returns (the answer, or None if the
+    result fails the inlier check; the refinement status — see
+    ``LocalizationResult.refinement_status`` — or None with ``metric="none"``)."""
+    thr, compiled = options.inlier_iou, scorer.compiled
     if options.metric == NO_REFINEMENT:
         final = scorer.matches(invert_pose(world_from_camera), thr)
         if len(final) < options.min_inliers:
@@ -139,16 +143,14 @@ def _refine_and_verify(
     for round_ in range(2):
         res = refine_pose([detections[m.detection_index] for m in current],
                           [compiled.ellipsoids[m.object_index] for m in current],
-                          camera, T, options, prior, deadline)
+                          scorer.camera, T, options, prior, deadline)
         status = "time_budget" if res.resample_skipped else res.status
         if res.status in ("diverged", "invalid_projection") or not np.all(
                 np.isfinite(res.world_from_camera)):
             return None, status
         T = res.world_from_camera
         new = scorer.matches(invert_pose(T), thr)
-        same = {(m.detection_index, m.object_index) for m in new} == {
-            (m.detection_index, m.object_index) for m in current}
-        if same or len(new) < options.min_inliers or round_ == 1:
+        if _pairs(new) == _pairs(current) or len(new) < options.min_inliers or round_ == 1:
             break
         if deadline_passed(deadline):
             status = "time_budget"  # the changed inlier set is not refined again
@@ -237,8 +239,7 @@ def _same_explanation(alternative: Hypothesis, best: Hypothesis) -> bool:
     (its refinement then converges to the best's pose: not distinct)."""
     if len(best.matches) < SAME_EXPLANATION_MIN_MATCHES:
         return False
-    pairs = {(m.detection_index, m.object_index) for m in best.matches}
-    return all((m.detection_index, m.object_index) in pairs for m in alternative.matches)
+    return _pairs(alternative.matches) <= _pairs(best.matches)
 
 
 def prior_gate_poses(prior: PosePrior) -> np.ndarray:
@@ -362,9 +363,8 @@ def localize(
         tp = time.perf_counter()
         matches = _prior_matches(scorer, prior, options.inlier_iou)
         if len(matches) >= options.min_inliers:
-            prior_answer, _ = _refine_and_verify(matches, detections, compiled, camera, scorer,
-                                                 prior.world_from_camera, options, prior,
-                                                 deadline)
+            prior_answer, _ = _refine_and_verify(matches, detections, scorer,
+                                                 prior.world_from_camera, options, prior, deadline)
         timings["prior"] = (time.perf_counter() - tp) * 1e3
         if prior_answer is not None:
             prior_answer.source = "prior"
@@ -397,9 +397,9 @@ def localize(
         if k > 0 and _same_explanation(h, hyps[0]):
             continue  # refines to the best's pose: not a competitor (see _same_explanation)
         got, status = _refine_and_verify(
-            list(outcome.matches if k == 0 else h.matches), detections, compiled, camera,
-            scorer, invert_pose(h.camera_from_world), options if k == 0 else alternative_options,
-            None, deadline)
+            list(outcome.matches if k == 0 else h.matches), detections, scorer,
+            invert_pose(h.camera_from_world), options if k == 0 else alternative_options, None,
+            deadline)
         if k == 0:
             first_status = status
         if got is not None:
@@ -423,8 +423,8 @@ def localize(
         for a in pending:
             full, _ = _refine_and_verify(
                 [Match(m.detection_index, compiled.index_of(m.object_id), m.iou)
-                 for m in a.inliers], detections, compiled, camera, scorer,
-                a.world_from_camera, options, None, deadline)
+                 for m in a.inliers], detections, scorer, a.world_from_camera, options, None,
+                deadline)
             a.capped = False
             answers.append(a if full is None else full)
         order(answers)
