@@ -435,8 +435,8 @@ def test_symmetric_map_is_ambiguous_not_a_confident_pose():
 
 
 def test_pair_scoring_equals_the_dense_matrix_forms():
-    """pair_scores / pair_assignment on the pair IoUs == dense_scores / greedy_assignment on the dense
-    (detections x objects) matrix, on a crowded same-label map (many ties and conflicts)."""
+    """pair_scores / pair_assignment on the pair IoUs == dense_scores / greedy_assignment on the
+    dense (detections x objects) matrix, on a crowded same-label map (many ties and conflicts)."""
     _cm, scorer = _crowded(40, 12)
     poses = np.array([invert_pose(look_at(np.array([x, -4.0, 0.2]), np.zeros(3)))
                       for x in (-0.5, 0.0, 0.7)])

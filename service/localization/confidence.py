@@ -127,7 +127,7 @@ def covariance_scale(metric: str, chi2: float, n_residuals: int, n_detections: i
     return COVARIANCE_SCALE[metric] * variance_factor(metric, chi2, n_residuals, n_detections)
 
 
-def gaussian_tolerance_probability(covariance: np.ndarray | None, n: int = 2) -> float:
+def gaussian_tolerance_probability(covariance: np.ndarray | None) -> float:
     """P(|position error| <= TOLERANCE_POSITION_M and |rotation| <= TOLERANCE_ROTATION_DEG)
     for a zero-mean Gaussian error with this covariance, approximated per block by the
     chi-square with 3 DoF of the isotropic equivalent (``sigma^2 = trace / 3``); NaN without a

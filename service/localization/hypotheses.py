@@ -28,8 +28,7 @@ from factors.geometry import (
     so3_exp,
 )
 
-__all__ = ["p2e_hypotheses", "p3p_hypotheses", "p3p_hypotheses_batch", "project_objects",
-           "rotation_from_two_directions"]
+__all__ = ["p2e_hypotheses", "p3p_hypotheses", "p3p_hypotheses_batch", "project_objects"]
 
 _EMPTY = np.zeros((0, 4, 4))
 
@@ -128,16 +127,6 @@ def p3p_hypotheses_batch(
     return T, sample[ok]
 
 
-def rotation_from_two_directions(
-    a_from: np.ndarray, b_from: np.ndarray, a_to: np.ndarray, b_to: np.ndarray
-) -> np.ndarray:
-    """The rotation ``R`` with ``R a_from = a_to`` exactly and ``R b_from`` as close as possible
-    to ``b_to`` (exact when the angles between the pairs agree). Inputs are 3-vectors; ``a`` and
-    ``b`` must not be parallel. Built from Gram-Schmidt frames: ``R = F_to F_from^T``."""
-    return _frames(np.asarray(a_to, float), np.asarray(b_to, float)) @ _frames(
-        np.asarray(a_from, float), np.asarray(b_from, float)).T
-
-
 # ----------------------------------------------------------------------------------- P2E
 
 #: Camera rolls (degrees, about the optical axis, relative to a camera whose +X axis is
@@ -160,7 +149,8 @@ _FD_STEP = 1e-7  # forward-difference step of the LM Jacobian (rad, m)
 
 def _frames(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Orthonormal frames ``[a, b_perp, a x b_perp]`` (..., 3, 3) (columns) of direction pairs
-    (..., 3) (Gram-Schmidt), as used by :func:`rotation_from_two_directions`."""
+    (..., 3) (Gram-Schmidt): ``R = F(a_to, b_to) F(a_from, b_from)^T`` maps ``a_from`` to
+    ``a_to`` exactly and ``b_from`` as close as possible to ``b_to``."""
     e1 = a / np.linalg.norm(a, axis=-1, keepdims=True)
     e2 = b - np.sum(b * e1, axis=-1, keepdims=True) * e1
     e2 = e2 / np.linalg.norm(e2, axis=-1, keepdims=True)

@@ -230,13 +230,9 @@ class MatchScorer:
         position = np.zeros(self.n_obj, dtype=np.int32)
         position[self.objects] = np.arange(len(self.objects), dtype=np.int32)
         self.pair_s = position[self.pair_o]
-        # the compatible objects' arrays, gathered once per call (not per projection); the
-        # compiled map's own (read-only) arrays when every object is compatible
-        o = self.objects
-        self._object_arrays = (
-            (compiled.centers, compiled.shape_matrices, compiled.dual_quadrics)
-            if len(o) == self.n_obj else
-            (compiled.centers[o], compiled.shape_matrices[o], compiled.dual_quadrics[o]))
+        # the compatible objects' arrays, gathered once per call (not per projection)
+        self._object_arrays = tuple(a[self.objects] for a in (
+            compiled.centers, compiled.shape_matrices, compiled.dual_quadrics))
         self._sample_counts: dict[int, int] = {}  # count_samples, once per size
         # first pair of each detection (pairs are sorted by detection; every usable detection
         # has a compatible object): the segments of np.maximum.reduceat
