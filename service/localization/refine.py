@@ -32,7 +32,12 @@ from factors.names import check_robust
 from factors.pose_factors import pose3, pose_factors
 from factors.pose_residuals import PoseResidualModel
 from service.localization.budget import Deadline, deadline_passed
-from service.localization.types import Detection, check_covariance, check_detections
+from service.localization.types import (
+    Detection,
+    check_covariance,
+    check_detections,
+    check_options,
+)
 
 __all__ = [
     "ABSOLUTE_ERROR_TOL",
@@ -178,12 +183,8 @@ def refine(
         raise GeometryError(f"ellipsoids must match detections one to one: got "
                             f"{len(ellipsoids)} ellipsoids for {len(detections)} detections")
     T0 = check_pose(initial_world_from_camera, "initial_world_from_camera")
-    if isinstance(max_iterations, bool) or not isinstance(max_iterations, (int, np.integer)) \
-            or max_iterations < 1:
-        raise GeometryError(f"max_iterations must be an integer >= 1, got {max_iterations!r}")
+    check_options({"max_iterations": max_iterations, "use_sigma": use_sigma}, GeometryError, "")
     max_iterations = int(max_iterations)
-    if not isinstance(use_sigma, bool):
-        raise GeometryError(f"use_sigma must be a bool, got {use_sigma!r}")
     check_robust(robust, robust_scale, error=GeometryError)
     if (prior_world_from_camera is None) != (prior_covariance is None):
         raise GeometryError("prior_world_from_camera and prior_covariance must be given together")

@@ -11,7 +11,7 @@ in the camera (body) frame.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
@@ -96,6 +96,34 @@ def _number(value: object) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
+#: THE rules of the scalar options: name -> (test, rule), shared by
+#: :class:`LocalizationOptions` and :func:`service.localization.refine.refine`.
+_OPTION_RULES: dict[str, tuple[Callable[[Any], bool], str]] = {
+    "min_confidence": (lambda v: v is None or (_number(v) and 0.0 <= v <= 1.0),
+                       "must be in [0, 1] or None"),
+    "on_ambiguity": (lambda v: v in AMBIGUITY_POLICIES, f"must be one of {AMBIGUITY_POLICIES}"),
+    "ransac_max_hypotheses": (lambda v: _is_int(v) and v >= 1, "must be an integer >= 1"),
+    "inlier_iou": (lambda v: _number(v) and 0.0 < v <= 1.0, "must be in (0, 1]"),
+    "min_inliers": (lambda v: _is_int(v) and v >= 2, "must be an integer >= 2"),
+    "use_sigma": (lambda v: isinstance(v, bool), "must be a bool"),
+    "unknown_label_policy": (lambda v: v in UNKNOWN_LABEL_POLICIES,
+                             f"must be one of {UNKNOWN_LABEL_POLICIES}"),
+    "seed": (lambda v: v is None or _is_int(v), "must be an integer or None"),
+    "time_budget_ms": (lambda v: v is None or (_number(v) and v > 0), "must be > 0 or None"),
+    "max_iterations": (lambda v: _is_int(v) and v >= 1, "must be an integer >= 1"),
+}
+
+
+def check_options(values: Mapping[str, object], error: type[FieldError] = LocalizationInputError,
+                  prefix: str = "options.") -> None:
+    """Each ``values[name]`` obeys :data:`_OPTION_RULES` ``[name]``; otherwise raises ``error``
+    with ``field = prefix + name``."""
+    for name, value in values.items():
+        test, rule = _OPTION_RULES[name]
+        if not test(value):
+            raise error(f"{rule}, got {value!r}", field=prefix + name)
+
+
 @dataclass(frozen=True)
 class LocalizationOptions:
     """Options of :func:`service.localization.pipeline.localize` (validated on construction).
@@ -167,30 +195,7 @@ class LocalizationOptions:
                        f"or {NO_REFINEMENT!r}")
         check_robust(self.robust, self.robust_scale, prefix="options.",
                      error=LocalizationInputError)
-        for name, ok, rule in (
-            ("min_confidence", self.min_confidence is None
-             or (_number(self.min_confidence) and 0.0 <= self.min_confidence <= 1.0),
-             "must be in [0, 1] or None"),
-            ("on_ambiguity", self.on_ambiguity in AMBIGUITY_POLICIES,
-             f"must be one of {AMBIGUITY_POLICIES}"),
-            ("ransac_max_hypotheses", _is_int(self.ransac_max_hypotheses)
-             and self.ransac_max_hypotheses >= 1, "must be an integer >= 1"),
-            ("inlier_iou", _number(self.inlier_iou) and 0.0 < self.inlier_iou <= 1.0,
-             "must be in (0, 1]"),
-            ("min_inliers", _is_int(self.min_inliers) and self.min_inliers >= 2,
-             "must be an integer >= 2"),
-            ("use_sigma", isinstance(self.use_sigma, bool), "must be a bool"),
-            ("unknown_label_policy", self.unknown_label_policy in UNKNOWN_LABEL_POLICIES,
-             f"must be one of {UNKNOWN_LABEL_POLICIES}"),
-            ("seed", self.seed is None or _is_int(self.seed), "must be an integer or None"),
-            ("time_budget_ms", self.time_budget_ms is None
-             or (_number(self.time_budget_ms) and self.time_budget_ms > 0),
-             "must be > 0 or None"),
-            ("max_iterations", _is_int(self.max_iterations) and self.max_iterations >= 1,
-             "must be an integer >= 1"),
-        ):
-            if not ok:
-                raise _bad(f"options.{name}", f"{rule}, got {getattr(self, name)!r}")
+        check_options({name: getattr(self, name) for name in _OPTION_RULES})
         # integral numbers (numpy ints too) are accepted and stored as Python ints
         for name in ("ransac_max_hypotheses", "min_inliers", "max_iterations", "seed"):
             value = getattr(self, name)
