@@ -17,9 +17,9 @@ from factors.geometry import (
 )
 from service.localization.hypotheses import (
     DEDUPE_TOLERANCE,
+    _frames,
     p2e_hypotheses,
     p3p_hypotheses,
-    rotation_from_two_directions,
 )
 
 BACK = np.array([0.0, -5.0, 0.0])  # a camera position offset 5 m behind the scene
@@ -62,6 +62,10 @@ def test_p3p_collinear_points_do_not_raise_and_give_finite_poses():
 
 
 def test_rotation_from_two_directions():
+    """P2E's rotation from two direction pairs, ``F(a_to, b_to) F(a_from, b_from)^T``."""
+    def rotation_from_two_directions(a_from, b_from, a_to, b_to):
+        return _frames(a_to, b_to) @ _frames(a_from, b_from).T
+
     rng = np.random.default_rng(1)
     R_true = snap_to_rotation(rng.normal(size=(3, 3)))
     a, b = rng.normal(size=3), rng.normal(size=3)

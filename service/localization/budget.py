@@ -1,27 +1,10 @@
 """What a solve budget counts: CPU time of the solving thread, plus a wall-clock hard limit.
 
-Decision (issue 14, part 4). ``LocalizationOptions.time_budget_ms`` (and the server's
-``QUADLOC_SOLVE_TIME_BUDGET_MS``) is a budget of **CPU time of the thread that runs the solve**
-(``time.thread_time()``), not of wall time. Wall time includes the time the thread waits for a
-core: on a busy machine (other requests, other processes) a wall-clock budget cuts the same
-computation short at a different point, so the result (the number of hypotheses tried, the LM
-iterations of an ``iou``/``giou`` refinement) depended on the machine's load. With a CPU
-budget the same input gives the same result on a quiet and on a busy machine whenever the
-budget is not binding, and the point where a binding budget cuts depends on the work done, not
-on the neighbours.
-
-A CPU budget alone does not bound the answer's latency (a thread starved of CPU would never
-spend it), so every :class:`Deadline` also has a **wall-clock hard limit**:
-:data:`WALL_LIMIT_FACTOR` x the budget after the start. It is the service's latency guarantee
-(the request answers ``time_budget_exceeded`` / a cut-short refinement by then at the latest)
-and only binds when the thread got less than ``1 / WALL_LIMIT_FACTOR`` of a core. The factor is
-2: the deployment runs one process per core with ``QUADLOC_MAX_CONCURRENT_SOLVES`` = 2 solves
-interleaving in it, so a solve is entitled to at least half a core; results are independent of
-load as long as it gets that share.
-
-Checks are cheap (two clock reads). Deadlines are passed down as :class:`Deadline` objects;
-a bare ``float`` is still accepted everywhere a deadline is (a ``time.perf_counter()``
-instant: a wall-clock-only deadline, as the tracking session uses).
+``LocalizationOptions.time_budget_ms`` is a budget of CPU time of the thread that runs the
+solve (``time.thread_time()``); every :class:`Deadline` also has a wall-clock hard limit of
+:data:`WALL_LIMIT_FACTOR` x the budget (the latency guarantee). A bare ``float`` is accepted
+everywhere a deadline is (a ``time.perf_counter()`` instant: wall clock only). Why (issue 14,
+part 4): ``docs/design/localization.md``.
 """
 
 from __future__ import annotations
@@ -75,11 +58,7 @@ def as_deadline(deadline: Deadline | float | None) -> Deadline | None:
 def deadline_passed(deadline: Deadline | float | None) -> bool:
     """Whether ``deadline`` (a :class:`Deadline`, a ``time.perf_counter()`` instant, or None =
     never) has passed."""
-    if deadline is None:
-        return False
-    if isinstance(deadline, Deadline):
-        return deadline.passed()
-    return time.perf_counter() > deadline
+    return deadline is not None and as_deadline(deadline).passed()
 
 
 def earliest(a: Deadline | float | None, b: Deadline | float | None) -> Deadline | None:

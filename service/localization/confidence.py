@@ -1,77 +1,16 @@
 """What a localized answer means: calibrated covariance, confidence as a probability, ambiguity.
 
-Covariance (every metric)
--------------------------
-The refinement's raw covariance is ``(J^T W J)^-1`` at the solution (``refine`` module), with
-``W`` the sigma weights. It is exact only if the metric residuals really have standard deviation
-``sqrt(sigma_j)``; they do not (the metrics have different units: px, px^2, unitless; the
-level-set samples of one detection are strongly correlated). The reported covariance is::
+* covariance: ``cov = k_metric * max(s^2, f_metric) * t(n) * (J^T W J)^-1`` with
+  ``s^2 = r^T W r / (m - 6)`` (:func:`calibrated_covariance`; with a prior only the detections'
+  information is rescaled); constants in :mod:`service.localization.calibration`. Conditioned
+  on the inlier associations and the detection noise model.
+* confidence: ``P(position error <= TOLERANCE_POSITION_M and rotation error <=
+  TOLERANCE_ROTATION_DEG)`` from a logistic model of :func:`evidence_features`
+  (:func:`confidence_probability`).
+* ambiguity: a distinct runner-up with as many inliers competes by its IoU sum or its refined
+  chi2 (:func:`is_ambiguous`).
 
-    cov = k_metric * max(s^2, f_metric) * t(n) * (J^T W J)^-1,      s^2 = r^T W r / (m - 6)
-
-* ``s^2`` (a-posteriori residual variance, ``RefinementResult.chi2 / (n_residuals - 6)``)
-  rescales the information to the residual level actually seen in this frame: it removes the
-  metric's units and adapts to the detections' true noise level (measured in the bench with two
-  noise settings of the simulator).
-* ``k_metric`` (:data:`service.localization.calibration.COVARIANCE_SCALE`) corrects what ``s^2``
-  cannot: correlated residuals (``m`` counts 24 level-set samples per detection, not 24
-  independent measurements) and the metric's non-Gaussian noise. It is fitted offline by
-  ``bench.trust --fit``: over the tuning frames of both detector noise settings and the 5 / 10
-  / 20 cm operating points, the smallest and largest mean NEES are centred on 6 (the geometric
-  centre of the target [4, 9]); it is reported on other seeds.
-* ``f_metric`` (:data:`service.localization.calibration.S2_FLOOR`, the 90th percentile of the
-  tuning frames' ``s^2``): the a-posteriori factor is applied one-sided, as in geodetic
-  adjustment practice — a frame whose residuals happen to be small (few effective degrees of
-  freedom: the level-set samples of one detection are correlated) never claims more precision
-  than the floor allows. This removed the NEES tail (largest NEES on the tuning frames, level
-  set: 152 -> 22 with the median as floor); the 90th percentile narrows the spread between
-  noise settings further. Scaling every ``sigma`` down leaves the covariance unchanged;
-  scaling them up past the floor makes it larger (conservative).
-
-* ``t(n) = nu / (nu - 2)``, ``nu = 3 n - 6`` (>= 3) for ``n`` refined detections
-  (:func:`student_t_factor`): with ``s^2`` estimated from few detections the error is
-  Student-t rather than Gaussian, and its covariance is larger by this factor. On the tuning
-  frames the mean NEES fell with the number of inliers (algebraic: 11.6 with 3, 4.6 with 7+);
-  the factor narrowed the spread of the mean NEES over operating points and noise settings
-  for every metric (qbbox: ratio 1.92 -> 1.69) and its 99th percentile.
-
-With a client prior (a ``PriorFactorPose3`` in the graph) only the detections' information is
-rescaled: ``cov = (I_det / (k s^2) + Sigma_prior^-1)^-1`` with ``I_det = cov_raw^-1 -
-Sigma_prior^-1``.
-
-The covariance is conditioned on the associations (the inliers) and on the detection noise
-model: it describes the spread of the estimate around the pose those associations imply, not
-the chance that an association is wrong — that is what ``confidence`` and the ambiguity check
-are for.
-
-Confidence (a probability)
---------------------------
-``confidence = P(position error <= TOLERANCE_POSITION_M and rotation error <=
-TOLERANCE_ROTATION_DEG)`` estimated by a logistic model on the solver's evidence
-(:func:`evidence_features`): number of inliers and the fraction of usable detections explained,
-their IoUs, the residual level against its expected distribution (``log s^2``), the calibrated
-covariance (Gaussian probability of the tolerance box), the margin to the next-best distinct
-hypothesis, and how many chance matches the map allows (log of the number of label-compatible
-minimal samples). Coefficients: :data:`service.localization.calibration.CONFIDENCE_MODELS`.
-
-Ambiguity
----------
-RANSAC keeps its best distinct hypotheses; the pipeline refines the best few. A distinct
-runner-up (camera centres > 0.5 m or orientations > 20 deg apart) with as many inliers is a
-competitor when its sum of inlier IoUs (after refinement) is >= :data:`AMBIGUITY_RATIO` x the
-best's and it assigns the detections to *other* map objects (same-label objects: two Xboxes,
-three chairs, two TVs — the evidence cannot tell them apart), or >=
-:data:`AMBIGUITY_RATIO_SAME_OBJECTS` x the best's with the *same* objects (a near tie between two
-poses of the same correspondences). A runner-up with as many inliers is also a competitor when
-its *refined* residual ``chi2`` (the metric's weighted cost at its refined pose, over the same
-number of detections) is within :data:`AMBIGUITY_CHI2_RATIO` of the best's: the IoU sum is a
-coarse score (with 2-3 detections, a wrong pose can overlap the detections almost as well),
-the refined fit is the evidence the solver actually has about which pose explains the ellipses.
-Then the answer is ambiguous (:func:`is_ambiguous`). Weaker runners-up are not hidden either:
-their score ratio and their log chi2 ratio (:func:`chi2_competitor`) are the confidence model's
-``margin`` and ``chi2_competitor`` features. Every answer that was verified but is not
-localized (ambiguous or low confidence) lists the candidate poses with their probabilities
-in ``alternatives``.
+Rationale and measurements: ``docs/design/localization.md``.
 """
 
 from __future__ import annotations
@@ -188,7 +127,7 @@ def covariance_scale(metric: str, chi2: float, n_residuals: int, n_detections: i
     return COVARIANCE_SCALE[metric] * variance_factor(metric, chi2, n_residuals, n_detections)
 
 
-def gaussian_tolerance_probability(covariance: np.ndarray | None, n: int = 2) -> float:
+def gaussian_tolerance_probability(covariance: np.ndarray | None) -> float:
     """P(|position error| <= TOLERANCE_POSITION_M and |rotation| <= TOLERANCE_ROTATION_DEG)
     for a zero-mean Gaussian error with this covariance, approximated per block by the
     chi-square with 3 DoF of the isotropic equivalent (``sigma^2 = trace / 3``); NaN without a

@@ -4,19 +4,10 @@ Both return **camera_from_world** poses as an array of shape (S, 4, 4) (S may be
 OpenCV ``[R | t]`` direction, ``x_cam = R x_world + t``, camera axes +X right, +Y down,
 +Z forward. Invert with :func:`factors.geometry.invert_pose` for ``world_from_camera``.
 
-* :func:`p3p_hypotheses` — ``cv2.solveP3P`` (Ding et al. 2023, ``SOLVEPNP_P3P``) on three
-  ellipse centres (px) vs the three ellipsoid centres (world m); up to 4 solutions. The centre of
-  a projected ellipsoid is not exactly the projection of its centre (perspective), so on exact
-  detections the hypothesis is close but not exact; refinement removes the bias.
-* :func:`p2e_hypotheses` — two ellipse/ellipsoid pairs, 6 DoF (no zero-roll assumption).
-  Derivation in ``docs/p2e.md``: the two centre rays and the known distance between the
-  ellipsoid centres fix the camera-frame centres up to the ratio of their depths; a camera
-  roll and the map's up direction then fix the rotation (two pitch branches). Starts at rolls
-  -30..30 deg x both branches x 13 depth ratios (the best two ratios per roll and branch) are
-  refined together by a batched 6-DoF Levenberg-Marquardt on the 10 ellipse residuals (both
-  detections' centre and shape against the projected ellipsoids), then merged. Exact on exact
-  data: the true pose is found on 60/60 random scenes with rolls up to +-30 deg (the former
-  zero-roll solver: 0/60), ~8 ms per call against its ~15 ms (``python -m bench.p2e``).
+* :func:`p3p_hypotheses` — ``cv2.solveP3P`` on three ellipse centres (px) vs the three
+  ellipsoid centres (world m); up to 4 solutions (biased by perspective: refinement removes it).
+* :func:`p2e_hypotheses` — two ellipse/ellipsoid pairs, 6 DoF (derivation in ``docs/p2e.md``;
+  starts and measurements in ``docs/design/localization.md``).
 """
 
 from __future__ import annotations
@@ -37,10 +28,42 @@ from factors.geometry import (
     so3_exp,
 )
 
-__all__ = ["p2e_hypotheses", "p3p_hypotheses", "p3p_hypotheses_batch",
-           "rotation_from_two_directions"]
+__all__ = ["p2e_hypotheses", "p3p_hypotheses", "p3p_hypotheses_batch", "project_objects"]
 
 _EMPTY = np.zeros((0, 4, 4))
+
+
+def project_objects(
+    camera: Camera, camera_from_world: np.ndarray, centers: np.ndarray,
+    shape_matrices: np.ndarray, dual_quadrics: np.ndarray, min_depth: float = MIN_DEPTH,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Projections of S ellipsoids at H poses, vectorised (THE batched projection of the RANSAC
+    scorer and of the P2E residuals).
+
+    Args:
+        camera_from_world: (H, 4, 4), or ``[R | t]`` (H, 3, 4).
+        centers, shape_matrices, dual_quadrics: (S, 3), (S, 3, 3), (S, 4, 4) world frame.
+
+    Returns:
+        ``centres`` (H, S, 2) px of the projected ellipses, ``inv_shape`` (H, S, 2, 2) their
+        ``A^-1 = R diag(a^2, b^2) R^T`` (px^2), ``valid`` (H, S) bool (ellipsoid entirely at
+        depth > ``min_depth`` and a real ellipse), ``point_centres`` (H, S, 2) px: projections
+        of the ellipsoid centres (garbage where the centre is behind the camera).
+    """
+    T = np.asarray(camera_from_world, dtype=float)
+    valid = ellipsoid_depth_margins(T, centers, shape_matrices) > min_depth
+    P = np.einsum("ij,hjk->hik", camera.K, T[:, :3, :])
+    C = np.einsum("hij,sjk,hlk->hsil", P, dual_quadrics, P)
+    w = -C[..., 2, 2]
+    ok = np.abs(w) > 0
+    w = np.where(ok, w, 1.0)
+    Cn = C / w[..., None, None]
+    cen, inv_shape = gaussians_from_dual_conics(Cn)
+    det = inv_shape[..., 0, 0] * inv_shape[..., 1, 1] - inv_shape[..., 0, 1] ** 2
+    valid &= ok & (det > 0) & (inv_shape[..., 0, 0] > 0)
+    hom = np.einsum("hij,sj->hsi", P[:, :, :3], centers) + P[:, None, :, 3]
+    zh = np.where(np.abs(hom[..., 2]) > 1e-12, hom[..., 2], 1e-12)
+    return cen, inv_shape, valid, hom[..., :2] / zh[..., None]
 
 
 def p3p_hypotheses(
@@ -104,16 +127,6 @@ def p3p_hypotheses_batch(
     return T, sample[ok]
 
 
-def rotation_from_two_directions(
-    a_from: np.ndarray, b_from: np.ndarray, a_to: np.ndarray, b_to: np.ndarray
-) -> np.ndarray:
-    """The rotation ``R`` with ``R a_from = a_to`` exactly and ``R b_from`` as close as possible
-    to ``b_to`` (exact when the angles between the pairs agree). Inputs are 3-vectors; ``a`` and
-    ``b`` must not be parallel. Built from Gram-Schmidt frames: ``R = F_to F_from^T``."""
-    return _frames(np.asarray(a_to, float), np.asarray(b_to, float)) @ _frames(
-        np.asarray(a_from, float), np.asarray(b_from, float)).T
-
-
 # ----------------------------------------------------------------------------------- P2E
 
 #: Camera rolls (degrees, about the optical axis, relative to a camera whose +X axis is
@@ -136,7 +149,8 @@ _FD_STEP = 1e-7  # forward-difference step of the LM Jacobian (rad, m)
 
 def _frames(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Orthonormal frames ``[a, b_perp, a x b_perp]`` (..., 3, 3) (columns) of direction pairs
-    (..., 3) (Gram-Schmidt), as used by :func:`rotation_from_two_directions`."""
+    (..., 3) (Gram-Schmidt): ``R = F(a_to, b_to) F(a_from, b_from)^T`` maps ``a_from`` to
+    ``a_to`` exactly and ``b_from`` as close as possible to ``b_to``."""
     e1 = a / np.linalg.norm(a, axis=-1, keepdims=True)
     e2 = b - np.sum(b * e1, axis=-1, keepdims=True) * e1
     e2 = e2 / np.linalg.norm(e2, axis=-1, keepdims=True)
@@ -154,7 +168,7 @@ class _PairProblem:
 
     def __init__(self, ellipses: Sequence[Ellipse], ellipsoids: Sequence[Ellipsoid],
                  camera: Camera) -> None:
-        self.K = camera.K
+        self.camera = camera
         self.X = np.array([e.center for e in ellipsoids])
         self.Q = np.array([e.dual_quadric() for e in ellipsoids])
         self.M = np.array([e.shape_matrix() for e in ellipsoids])
@@ -168,12 +182,8 @@ class _PairProblem:
         their validity (N,): both ellipsoids entirely in front of the camera (rows of invalid
         poses are not meaningful)."""
         Rt = np.concatenate([R, t[:, :, None]], axis=2)  # camera_from_world (N, 3, 4)
-        valid = np.all(ellipsoid_depth_margins(Rt, self.X, self.M) > MIN_DEPTH, axis=1)
-        P = self.K @ Rt
-        P = P[:, None]
-        C = P @ self.Q @ P.transpose(0, 1, 3, 2)
-        w = np.where(valid[:, None], -C[:, :, 2, 2], 1.0)
-        mu, S = gaussians_from_dual_conics(C / w[:, :, None, None])
+        mu, S, valid, _ = project_objects(self.camera, Rt, self.X, self.M, self.Q, MIN_DEPTH)
+        valid = np.all(valid, axis=1)
         rc = (mu - self.c_det) / self.size[:, None]
         W = self.L_inv @ S @ self.L_inv.transpose(0, 2, 1)
         m = 0.5 * (W[..., 0, 0] + W[..., 1, 1])
@@ -262,13 +272,10 @@ def p2e_hypotheses(
 ) -> np.ndarray:
     """Camera poses from two ellipse/ellipsoid pairs (6 DoF; derivation in ``docs/p2e.md``).
 
-    Starts: the two centre rays and the known distance between the ellipsoid centres fix the
-    camera-frame centres up to the ratio of their depths (``n_ratio_samples`` ratios); for each
-    ratio, camera roll in ``rolls_deg`` and both pitch branches, the map's up direction and the
-    centre-to-centre direction fix the rotation. Every start is then refined by a batched 6-DoF
-    Levenberg-Marquardt (``iterations``) on the 10 ellipse residuals (:class:`_PairProblem`:
-    both detections' centres and shapes against the projected ellipsoids), so the roll is only
-    a starting point, not an assumption; converged starts are merged (:data:`DEDUPE_TOLERANCE`).
+    Starts at ``n_ratio_samples`` depth ratios x camera rolls ``rolls_deg`` x both pitch
+    branches (the best ``starts_per_group`` per roll and branch), each refined by a batched
+    6-DoF LM (``iterations``) on the 10 ellipse residuals of :class:`_PairProblem`; converged
+    starts are merged (:data:`DEDUPE_TOLERANCE`).
 
     Args:
         ellipses: two detected ellipses (px).

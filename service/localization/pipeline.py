@@ -1,42 +1,15 @@
 """``localize()``: relocalization from scratch (paper section V-B) or from a client prior.
 
-Stages (wall time of each in ``LocalizationResult.timings_ms``):
-
-1. ``validate`` — check the input (errors name the field), compile the map (cached per map
-   object), keep the *usable* detections: those whose label is a category with objects in the
-   map (``options.unknown_label_policy``: ``"ignore"`` drops the others, ``"error"`` raises).
-2. ``prior`` (only with a :class:`PosePrior`) — match detections to objects one-to-one with
-   IoU >= ``inlier_iou``, each pair at its best IoU over the prior pose and, with a
-   covariance, the poses 2 sigma along its principal axes (:func:`prior_gate_poses`:
-   projected-ellipse gating); with >= ``min_inliers`` matches, refine from the prior (the
-   prior's covariance, if any, becomes a prior factor). If the result explains every usable
-   detection it is returned; otherwise RANSAC runs too and the better-supported answer wins
-   (more inliers, then a larger sum of IoUs; the prior wins ties): ``pose_source`` says which.
-3. ``hypotheses`` — :func:`service.localization.ransac.ransac`: P3P / P2E over label-compatible
-   samples, IoU scoring, bounded by ``ransac_max_hypotheses`` and ``time_budget_ms``; it keeps
-   its best distinct hypotheses.
-4. ``refine`` — :func:`service.localization.refine.refine` on the best hypothesis' inliers
-   (and on up to :data:`REFINED_ALTERNATIVES` distinct runners-up scoring at least
-   :data:`ALTERNATIVE_PREFILTER_RATIO` of the best, except those that only re-use the best's
-   correspondences: ``_same_explanation``; runners-up with at most
-   :data:`ALTERNATIVE_MAX_ITERATIONS` LM iterations, continued in full if one competes) with
-   ``options.metric`` (sigma-weighted, robust kernel option), then re-association: the
-   inliers are recomputed at the refined pose and, if the set changed, refined once more. A
-   result is kept when it has >= ``min_inliers`` inliers; none kept: ``refinement_diverged``.
-5. ``assess`` — :mod:`service.localization.confidence`: the calibrated covariance, the
-   confidence (a probability), and the ambiguity check against the best distinct runner-up
-   (IoU sums and refined chi2: ``confidence.is_ambiguous``; ``reason="ambiguous"`` or, with
-   ``on_ambiguity="best"``, the best pose with its ``alternatives``); a confidence below
-   ``min_confidence`` gives ``low_confidence``. A verified answer that is not localized
-   (ambiguous, low confidence) lists its candidate poses with their probabilities in
-   ``alternatives``: the client decides.
-   (``refine`` itself re-lays grown adaptive level-set samples once at its result.)
-
-The time budget (CPU time of the solving thread, with a wall-clock hard limit:
-:mod:`service.localization.budget`) bounds the whole call: the hypothesis search stops at it,
-and no LM iteration
-(nor level-set re-lay, nor re-association refinement) starts after it. A refinement cut short
-keeps its last accepted step and the result says so: ``refinement_status == "time_budget"``.
+Stages (wall time of each in ``LocalizationResult.timings_ms``): ``validate`` (input, compiled
+map, usable detections), ``prior`` (only with a :class:`PosePrior`: gated association and
+refinement from it; an answer explaining every usable detection is returned at once),
+``hypotheses`` (:func:`service.localization.ransac.ransac`), ``refine``
+(:func:`service.localization.refine.refine` of the best hypothesis and up to
+:data:`REFINED_ALTERNATIVES` distinct runners-up, with re-association) and ``assess``
+(:mod:`service.localization.confidence`: calibrated covariance, confidence, ambiguity).
+The time budget (:mod:`service.localization.budget`) bounds the whole call: no LM iteration
+starts after it (``refinement_status == "time_budget"``). Each stage's rules in detail:
+``docs/design/localization.md``.
 """
 
 from __future__ import annotations
@@ -64,6 +37,7 @@ from service.localization.confidence import (
     residual_variance,
 )
 from service.localization.ransac import (
+    HARD_STOP_FACTOR,
     Hypothesis,
     Match,
     MatchScorer,
@@ -71,7 +45,6 @@ from service.localization.ransac import (
     count_samples,
     distinct_poses,
     greedy_assignment,
-    hard_deadline,
     ransac,
     sunflower_disk,
 )
@@ -85,6 +58,7 @@ from service.localization.types import (
     LocalizationOptions,
     LocalizationResult,
     PosePrior,
+    check_detections,
 )
 
 __all__ = ["localize", "prior_gate_poses", "refine_pose"]
@@ -93,28 +67,15 @@ def _validate(
     detections: Sequence[Detection], scene_map: SceneMap | CompiledMap, camera: Camera,
     options: LocalizationOptions, prior: PosePrior | None,
 ) -> CompiledMap:
-    if isinstance(detections, (str, bytes, Detection)) or not isinstance(detections, Sequence):
-        raise LocalizationInputError("must be a sequence of Detection, got "
-                                     f"{type(detections).__name__}", field="detections")
-    if len(detections) == 0:
-        raise LocalizationInputError("must not be empty", field="detections")
-    for i, d in enumerate(detections):
-        if not isinstance(d, Detection):
-            raise LocalizationInputError(
-                f"must be a Detection, got {type(d).__name__}", field=f"detections[{i}]")
-    if not isinstance(scene_map, (SceneMap, CompiledMap)):
-        raise LocalizationInputError(
-            f"must be a SceneMap or CompiledMap, got {type(scene_map).__name__}",
-            field="scene_map")
-    if not isinstance(camera, Camera):
-        raise LocalizationInputError(f"must be a Camera, got {type(camera).__name__}",
-                                     field="camera")
-    if not isinstance(options, LocalizationOptions):
-        raise LocalizationInputError(
-            f"must be LocalizationOptions, got {type(options).__name__}", field="options")
-    if prior is not None and not isinstance(prior, PosePrior):
-        raise LocalizationInputError(
-            f"must be a PosePrior or None, got {type(prior).__name__}", field="prior")
+    check_detections(detections)
+    for name, value, types, what in (
+            ("scene_map", scene_map, (SceneMap, CompiledMap), "a SceneMap or CompiledMap"),
+            ("camera", camera, Camera, "a Camera"),
+            ("options", options, LocalizationOptions, "LocalizationOptions"),
+            ("prior", prior, (PosePrior, type(None)), "a PosePrior or None")):
+        if not isinstance(value, types):
+            raise LocalizationInputError(f"must be {what}, got {type(value).__name__}",
+                                         field=name)
     compiled = compile_map(scene_map)
     if len(compiled) == 0:
         raise LocalizationInputError("the map has no objects", field="scene_map")
@@ -145,39 +106,31 @@ def refine_pose(
     iteration cap and metric options (and the prior as a factor when it has a covariance);
     after ``deadline`` (a :class:`service.localization.budget.Deadline` or a
     ``time.perf_counter()`` instant) no LM iteration starts."""
-    kwargs = dict(
+    return refine(
+        detections, ellipsoids, camera, initial_world_from_camera, options.metric,
         use_sigma=options.use_sigma, robust=options.robust, robust_scale=options.robust_scale,
         prior_world_from_camera=None if prior is None or prior.covariance is None
         else prior.world_from_camera,
         prior_covariance=None if prior is None else prior.covariance,
         max_iterations=options.max_iterations,
         metric_options=dict(options.metric_options) if options.metric_options else None,
-        deadline=deadline,
-    )
-    return refine(detections, ellipsoids, camera, initial_world_from_camera, options.metric,
-                  **kwargs)
+        deadline=deadline)
 
 
-def _refine_matches(
-    matches: Sequence[Match], detections: Sequence[Detection], compiled: CompiledMap,
-    camera: Camera, world_from_camera: np.ndarray, options: LocalizationOptions,
-    prior: PosePrior | None, deadline: Deadline | float | None,
-) -> RefinementResult:
-    return refine_pose([detections[m.detection_index] for m in matches],
-                       [compiled.ellipsoids[m.object_index] for m in matches],
-                       camera, world_from_camera, options, prior, deadline)
+def _pairs(matches: Sequence[Match]) -> set[tuple[int, int]]:
+    return {(m.detection_index, m.object_index) for m in matches}
 
 
 def _refine_and_verify(
-    matches: Sequence[Match], detections: Sequence[Detection], compiled: CompiledMap,
-    camera: Camera, scorer: MatchScorer, world_from_camera: np.ndarray,
-    options: LocalizationOptions, prior: PosePrior | None, deadline: float | None,
+    matches: Sequence[Match], detections: Sequence[Detection], scorer: MatchScorer,
+    world_from_camera: np.ndarray, options: LocalizationOptions, prior: PosePrior | None,
+    deadline: Deadline | float | None,
 ) -> tuple[_Answer | None, str | None]:
-    """Refine on ``matches``, re-associate, refine again if the set changed (and the deadline
-    has not passed). Returns (the answer, or None if the result fails the inlier check; the
-    refinement status — see ``LocalizationResult.refinement_status`` — or None with
-    ``metric="none"``)."""
-    thr = options.inlier_iou
+    """Refine on ``matches`` (with the scorer's map and camera), re-associate, refine again if
+    the set changed (and the deadline has not passed). Returns (the answer, or None if the
+    result fails the inlier check; the refinement status — see
+    ``LocalizationResult.refinement_status`` — or None with ``metric="none"``)."""
+    thr, compiled = options.inlier_iou, scorer.compiled
     if options.metric == NO_REFINEMENT:
         final = scorer.matches(invert_pose(world_from_camera), thr)
         if len(final) < options.min_inliers:
@@ -188,17 +141,16 @@ def _refine_and_verify(
     current = list(matches)
     T = world_from_camera
     for round_ in range(2):
-        res = _refine_matches(current, detections, compiled, camera, T, options, prior,
-                              deadline)
+        res = refine_pose([detections[m.detection_index] for m in current],
+                          [compiled.ellipsoids[m.object_index] for m in current],
+                          scorer.camera, T, options, prior, deadline)
         status = "time_budget" if res.resample_skipped else res.status
         if res.status in ("diverged", "invalid_projection") or not np.all(
                 np.isfinite(res.world_from_camera)):
             return None, status
         T = res.world_from_camera
         new = scorer.matches(invert_pose(T), thr)
-        same = {(m.detection_index, m.object_index) for m in new} == {
-            (m.detection_index, m.object_index) for m in current}
-        if same or len(new) < options.min_inliers or round_ == 1:
+        if _pairs(new) == _pairs(current) or len(new) < options.min_inliers or round_ == 1:
             break
         if deadline_passed(deadline):
             status = "time_budget"  # the changed inlier set is not refined again
@@ -269,18 +221,13 @@ def _is_ambiguous_answer(ranked: Sequence[_Answer]) -> bool:
 #: far less than this).
 REFINED_ALTERNATIVES = 2
 ALTERNATIVE_PREFILTER_RATIO = 0.5
-#: LM iteration cap of an alternative's refinement (the ambiguity check needs its support, not
-#: its last millimetre; a capped alternative that competes, i.e. has as many inliers as the
-#: first answer, is then refined in full from where it stopped, in ``localize``). Measured on
-#: the tuning seeds 100/102 of ``bench.trust`` (full, 2- and 3-detection frames, level set):
-#: alternatives need a median 9, p90 24, p95 34 iterations.
+#: LM iteration cap of an alternative's refinement (a capped alternative that competes is then
+#: refined in full from where it stopped; measurements: ``docs/design/localization.md``).
 ALTERNATIVE_MAX_ITERATIONS = 15
 #: Prior gating: the association at the prior pose also tries the poses at +-
 #: ``PRIOR_GATE_SIGMAS`` standard deviations along each principal axis of the prior's
 #: covariance (a pair is kept at its best IoU over these poses).
 PRIOR_GATE_SIGMAS = 2.0
-
-
 #: An alternative whose matches are a subset of the best hypothesis' is not refined when the
 #: best has at least this many matches (``_same_explanation``).
 SAME_EXPLANATION_MIN_MATCHES = 4
@@ -288,15 +235,11 @@ SAME_EXPLANATION_MIN_MATCHES = 4
 
 def _same_explanation(alternative: Hypothesis, best: Hypothesis) -> bool:
     """Whether ``alternative`` only re-uses the best hypothesis' correspondences (its matches
-    are a subset of the best's) while the best has >= :data:`SAME_EXPLANATION_MIN_MATCHES`:
-    the correspondences over-determine the pose, so its refinement converges to the best's
-    pose (measured on the tuning frames of ``bench.chess_eval``: every such alternative did)
-    and is dropped as not distinct. With fewer matches (2-3 correspondences admit several
-    poses) every alternative is refined."""
+    are a subset of the best's) while the best has >= :data:`SAME_EXPLANATION_MIN_MATCHES`
+    (its refinement then converges to the best's pose: not distinct)."""
     if len(best.matches) < SAME_EXPLANATION_MIN_MATCHES:
         return False
-    pairs = {(m.detection_index, m.object_index) for m in best.matches}
-    return all((m.detection_index, m.object_index) in pairs for m in alternative.matches)
+    return _pairs(alternative.matches) <= _pairs(best.matches)
 
 
 def prior_gate_poses(prior: PosePrior) -> np.ndarray:
@@ -358,12 +301,13 @@ def localize(
         return _not_localized("too_few_detections", metric, 0, timings, t0)
     if len(usable) < 2:
         return _not_localized("no_label_match", metric, 0, timings, t0)
-    scorer = MatchScorer(compiled, camera, [detections[i].ellipse for i in usable],
-                         [detections[i].label for i in usable], usable)
-    # CPU time of this thread, with a wall-clock hard limit (service.localization.budget)
+    # CPU time of this thread, with a wall-clock hard limit (service.localization.budget); the
+    # scorer raises ScoringTimeoutError past HARD_STOP_FACTOR x the budget
     deadline = Deadline.after(options.time_budget_ms, cpu_start=cpu0, wall_start=t0)
-    scorer.deadline = hard_deadline(t0, options.time_budget_ms, cpu_start=cpu0)  # past it:
-    # ScoringTimeoutError
+    scorer = MatchScorer(compiled, camera, [detections[i].ellipse for i in usable],
+                         [detections[i].label for i in usable], usable,
+                         deadline=Deadline.after(options.time_budget_ms, HARD_STOP_FACTOR,
+                                                 cpu_start=cpu0, wall_start=t0))
     evaluated = 0
     n_samples = count_samples(scorer, 2)
 
@@ -402,14 +346,12 @@ def localize(
                             assess(b, a if b is not a else runner_up, ranked)[0],
                             len(b.inliers), b.score) for b in ranked)
         timings["total"] = (time.perf_counter() - t0) * 1e3
-        if ambiguous and options.on_ambiguity == "not_localized":
-            return LocalizationResult(False, "ambiguous", None, None, 0.0, (), metric,
-                                      evaluated, False, timings, a.status, None, alternatives,
-                                      ev)
-        if conf < floor:
-            return LocalizationResult(False, "low_confidence", None, None, 0.0, (), metric,
-                                      evaluated, False, timings, a.status, None, alternatives,
-                                      {**ev, "confidence": conf})
+        reason = ("ambiguous" if ambiguous and options.on_ambiguity == "not_localized"
+                  else "low_confidence" if conf < floor else None)
+        if reason is not None:
+            return LocalizationResult(False, reason, None, None, 0.0, (), metric, evaluated,
+                                      False, timings, a.status, None, alternatives,
+                                      ev if reason == "ambiguous" else {**ev, "confidence": conf})
         return LocalizationResult(
             True, None, np.array(a.world_from_camera, dtype=float), cov, conf,
             tuple(sorted(a.inliers, key=lambda m: m.detection_index)), metric, evaluated,
@@ -421,9 +363,8 @@ def localize(
         tp = time.perf_counter()
         matches = _prior_matches(scorer, prior, options.inlier_iou)
         if len(matches) >= options.min_inliers:
-            prior_answer, _ = _refine_and_verify(matches, detections, compiled, camera, scorer,
-                                                 prior.world_from_camera, options, prior,
-                                                 deadline)
+            prior_answer, _ = _refine_and_verify(matches, detections, scorer,
+                                                 prior.world_from_camera, options, prior, deadline)
         timings["prior"] = (time.perf_counter() - tp) * 1e3
         if prior_answer is not None:
             prior_answer.source = "prior"
@@ -456,9 +397,9 @@ def localize(
         if k > 0 and _same_explanation(h, hyps[0]):
             continue  # refines to the best's pose: not a competitor (see _same_explanation)
         got, status = _refine_and_verify(
-            list(outcome.matches if k == 0 else h.matches), detections, compiled, camera,
-            scorer, invert_pose(h.camera_from_world), options if k == 0 else alternative_options,
-            None, deadline)
+            list(outcome.matches if k == 0 else h.matches), detections, scorer,
+            invert_pose(h.camera_from_world), options if k == 0 else alternative_options, None,
+            deadline)
         if k == 0:
             first_status = status
         if got is not None:
@@ -482,8 +423,8 @@ def localize(
         for a in pending:
             full, _ = _refine_and_verify(
                 [Match(m.detection_index, compiled.index_of(m.object_id), m.iou)
-                 for m in a.inliers], detections, compiled, camera, scorer,
-                a.world_from_camera, options, None, deadline)
+                 for m in a.inliers], detections, scorer, a.world_from_camera, options, None,
+                deadline)
             a.capped = False
             answers.append(a if full is None else full)
         order(answers)

@@ -1,58 +1,16 @@
 """Label-constrained RANSAC over detection/object correspondences (paper section V-B).
 
-Hypotheses come from :mod:`service.localization.hypotheses` (P3P on centres with >= 3 usable
-detections, P2E with 2, and P2E as a fallback — at most :data:`P2E_FALLBACK_BUDGET` samples —
-when no P3P pose qualifies). Each candidate pose is
-scored by the overlap (IoU) between the detections and the projected ellipsoids of the
-label-compatible map objects, each detection taking its best object:
-
-* **stage 1** (only for large problems: a batch with more than :data:`STAGE1_MIN_WORK`
-  (pose, pair) tests; cheap): a detection is "hit" when the projection of a compatible
-  object's centre lies within twice its ellipse (``Phi_det <= 4``) and that object's projection
-  is valid (ellipsoid entirely in front of the camera); the :data:`STAGE2_CANDIDATES` best
-  poses of the batch go on to stage 2;
-* **stage 2** (every candidate of a batch at once, vectorised over poses and pairs,
-  :meth:`MatchScorer.pair_iou`): IoU of every compatible pair, after closed-form pre-filters
-  that cannot change a result (disjoint bounding circles: IoU 0; the area ratio bounds the
-  estimate below the inlier threshold), estimated by :func:`iou_estimates` (a fixed sunflower
-  pattern of points inside each detection; relative area error ~1/n_points, checked against
-  ``factors.metrics`` in the tests). A pair is an inlier when IoU >= ``inlier_iou``; the
-  score of a pose is the sum of its inliers' IoUs (so both the number of explained detections
-  and how well they overlap count). Candidates are ranked by the per-detection-best sum (an
-  upper bound); a pose is accepted on its one-to-one assignment (greedy by IoU,
-  :func:`greedy_assignment`): its score and its >= ``min_inliers`` count are the one-to-one
-  ones, so the returned matches always reach ``min_inliers``.
-
-Minimal samples are counted (a generating polynomial over the label groups, once per call)
-and listed per label group (a map object has one category), never by walking all detection
-tuples, so hundreds of same-label detections cost nothing before the first time-budget check.
-Exhaustive over the label-compatible minimal samples when there are at most ``max_hypotheses``
-of them (in a fixed order: the result does not depend on the seed; P3P samples most promising
-first, :func:`_most_promising_first`, when there are at most :data:`ORDER_CAP`), else
-``max_hypotheses`` samples: the competitor sweep's (:func:`_sweep_samples`, the most
-promising detection triple's assignments, found without listing every sample), then random
-ones (seeded, uniform over the label-compatible samples). The first P3P batch has
-:data:`FIRST_BATCH` samples, the next :data:`BATCH` (P2E: 4).
-
-Early exit (issue 14) once a pose explains every usable detection (at least
-:data:`EARLY_EXIT_MIN_DETECTIONS`) with mean IoU >= :data:`EARLY_EXIT_MEAN_IOU`, but only after
-the **competitor sweep** (:func:`_sweep_samples`): every label-compatible assignment of one
-well-spread detection triple is tried, so any distinct pose that also explains every detection
-(what the ambiguity check of ``service.localization.confidence`` needs) is found although the
-rest of the search is skipped. The search also stops when the time budget runs out (checked
-before every batch and inside the scoring of every batch).
-
-Bounded cost (whatever the request): samples are generated lazily, one batch at a time, so
-nothing is built before the first deadline check and memory never grows with
-``max_hypotheses`` (the most-promising-first order materialises at most :data:`ORDER_CAP`
-samples). Candidate poses are scored a few at a time (at most :data:`PAIR_BLOCK` (pose, pair)
-tests and :data:`PROJECT_BLOCK` pose x object projections per block), and the
-label-compatible (detection, object) pairs in blocks of at most :data:`PAIR_BLOCK` tests or
-:data:`POINT_BLOCK` pair x point evaluations, checking the deadline between blocks
-(:class:`ScoringTimeoutError`). So the largest arrays of one request are the
-(detections x objects) pair index and one pose's pair IoUs, ~45 bytes per compatible pair
-(docs/deployment.md, "Worst-case cost of a request"). All poses here are
-``camera_from_world`` (4x4, OpenCV ``[R | t]``).
+Candidate poses come from :mod:`service.localization.hypotheses` (P3P on centres with >= 3
+usable detections, P2E with 2, P2E as a fallback of at most :data:`P2E_FALLBACK_BUDGET`
+samples). A pose is scored by the IoU of each detection with the projections of its
+label-compatible objects (:meth:`MatchScorer.pair_iou`, estimated by :func:`iou_estimates`); a
+pair is an inlier when IoU >= ``inlier_iou``, a pose's score is the sum of its one-to-one
+(:func:`greedy_assignment`) inliers' IoUs. Exhaustive over the label-compatible minimal
+samples when there are at most ``max_hypotheses`` (the seed plays no part), else seeded random
+ones after the competitor sweep (:func:`_sweep_samples`); early exit once a pose explains every
+usable detection; memory and time bounded by blocks with deadline checks
+(:class:`ScoringTimeoutError`). All poses here are ``camera_from_world`` (4x4, OpenCV
+``[R | t]``). Stages, ordering and bounds in detail: ``docs/design/localization.md``.
 """
 
 from __future__ import annotations
@@ -60,21 +18,20 @@ from __future__ import annotations
 import functools
 import itertools
 import math
+from collections import Counter
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from factors.geometry import (
-    Camera,
-    Ellipse,
-    ellipse_params,
-    ellipsoid_depth_margins,
-    gaussians_from_dual_conics,
-)
+from factors.geometry import Camera, Ellipse, ellipse_params, level_values
 from maps.compiled import CompiledMap
 from service.localization.budget import Deadline, deadline_passed, earliest
-from service.localization.hypotheses import p2e_hypotheses, p3p_hypotheses_batch
+from service.localization.hypotheses import (
+    p2e_hypotheses,
+    p3p_hypotheses_batch,
+    project_objects,
+)
 
 __all__ = [
     "EARLY_EXIT_MEAN_IOU",
@@ -87,7 +44,6 @@ __all__ = [
     "ScoringTimeoutError",
     "distinct_poses",
     "greedy_assignment",
-    "hard_deadline",
     "iou_estimates",
     "ransac",
     "sunflower_disk",
@@ -129,7 +85,9 @@ PAIR_BLOCK = 1 << 16
 POINT_BLOCK = 1 << 17
 #: Most pose x object projections per block (each holds a few 3x3 / 4x4 float arrays).
 PROJECT_BLOCK = 1 << 13
-#: The scorer's hard stop, as a multiple of the time budget (:func:`hard_deadline`).
+#: The scorer's hard stop (``MatchScorer.deadline`` in ``localize``), as a multiple of the time
+#: budget on both clocks of a :class:`service.localization.budget.Deadline`: the search stops
+#: at the budget itself, this bounds the scoring after it (final matches, re-association).
 HARD_STOP_FACTOR = 1.05
 
 
@@ -140,17 +98,6 @@ class ScoringTimeoutError(RuntimeError):
 def _check(stop_at: Deadline | float | None) -> None:
     if deadline_passed(stop_at):
         raise ScoringTimeoutError("time budget exceeded while scoring poses")
-
-
-def hard_deadline(start: float, time_budget_ms: float | None, *,
-                  cpu_start: float | None = None) -> Deadline | None:
-    """The scorer's hard stop of a call started at ``start`` (``time.perf_counter()``; and
-    ``cpu_start``, ``time.thread_time()``, default now) with a budget: 1.05 x the budget on
-    each clock of :class:`service.localization.budget.Deadline` (CPU time of the solving thread,
-    and its wall-clock hard limit). The search stops at the budget itself; this bounds the
-    scoring after it (final matches, re-association after refinement)."""
-    return Deadline.after(time_budget_ms, HARD_STOP_FACTOR, cpu_start=cpu_start,
-                          wall_start=start)
 
 
 def _blocks(n: int, size: int) -> Iterator[slice]:
@@ -178,38 +125,6 @@ def _ellipse_points(params: np.ndarray, unit: np.ndarray) -> np.ndarray:
     x = params[:, 0, None] + c[:, None] * u - s[:, None] * v
     y = params[:, 1, None] + s[:, None] * u + c[:, None] * v
     return np.stack([x, y], axis=-1)
-
-
-def project_objects(
-    camera: Camera, camera_from_world: np.ndarray, centers: np.ndarray,
-    shape_matrices: np.ndarray, dual_quadrics: np.ndarray, min_depth: float = 1e-6,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Projections of S ellipsoids at H poses, vectorised.
-
-    Args:
-        camera_from_world: (H, 4, 4).
-        centers, shape_matrices, dual_quadrics: (S, 3), (S, 3, 3), (S, 4, 4) world frame.
-
-    Returns:
-        ``centres`` (H, S, 2) px of the projected ellipses, ``inv_shape`` (H, S, 2, 2) their
-        ``A^-1 = R diag(a^2, b^2) R^T`` (px^2), ``valid`` (H, S) bool (ellipsoid entirely at
-        depth > ``min_depth`` and a real ellipse), ``point_centres`` (H, S, 2) px: projections
-        of the ellipsoid centres (garbage where the centre is behind the camera).
-    """
-    T = np.asarray(camera_from_world, dtype=float)
-    valid = ellipsoid_depth_margins(T, centers, shape_matrices) > min_depth
-    P = np.einsum("ij,hjk->hik", camera.K, T[:, :3, :])
-    C = np.einsum("hij,sjk,hlk->hsil", P, dual_quadrics, P)
-    w = -C[..., 2, 2]
-    ok = np.abs(w) > 0
-    w = np.where(ok, w, 1.0)
-    Cn = C / w[..., None, None]
-    cen, inv_shape = gaussians_from_dual_conics(Cn)
-    det = inv_shape[..., 0, 0] * inv_shape[..., 1, 1] - inv_shape[..., 0, 1] ** 2
-    valid &= ok & (det > 0) & (inv_shape[..., 0, 0] > 0)
-    hom = np.einsum("hij,sj->hsi", P[:, :, :3], centers) + P[:, None, :, 3]
-    zh = np.where(np.abs(hom[..., 2]) > 1e-12, hom[..., 2], 1e-12)
-    return cen, inv_shape, valid, hom[..., :2] / zh[..., None]
 
 
 def iou_estimates(
@@ -256,22 +171,27 @@ def greedy_assignment(
 ) -> list[Match]:
     """One-to-one matches from a dense IoU matrix (D, N), greedily by decreasing IoU, keeping
     pairs with IoU >= ``threshold``. ``detection_indices[d]`` is row d's original index."""
-    # only the entries at or above the threshold are sorted (the matrix may be large)
+    # only the entries at or above the threshold are listed (the matrix may be large)
     flat_iou = np.ravel(iou)
     cand = np.flatnonzero(flat_iou >= threshold)
-    order = cand[np.argsort(flat_iou[cand], kind="stable")[::-1]]
+    return _greedy(*np.divmod(cand, iou.shape[1]), flat_iou[cand], threshold, detection_indices)
+
+
+def _greedy(pair_d: np.ndarray, pair_o: np.ndarray, iou: np.ndarray, threshold: float,
+            detection_indices: Sequence[int]) -> list[Match]:
+    """THE greedy one-to-one assignment of pairs (``pair_d[p]``, ``pair_o[p]``) with
+    ``iou[p] >= threshold``, by decreasing IoU (ties: the later pair first), sorted by
+    detection index."""
+    cand = np.flatnonzero(iou >= threshold)
     used_d: set[int] = set()
     used_o: set[int] = set()
     out = []
-    n = iou.shape[1]
-    for flat in order:
-        value = float(flat_iou[flat])
-        d, o = divmod(int(flat), n)
-        if d in used_d or o in used_o:
-            continue
-        used_d.add(d)
-        used_o.add(o)
-        out.append(Match(int(detection_indices[d]), o, value))
+    for p in cand[np.argsort(iou[cand], kind="stable")[::-1]].tolist():
+        d, o = int(pair_d[p]), int(pair_o[p])
+        if d not in used_d and o not in used_o:
+            used_d.add(d)
+            used_o.add(o)
+            out.append(Match(int(detection_indices[d]), o, float(iou[p])))
     return sorted(out, key=lambda m: m.detection_index)
 
 
@@ -310,46 +230,38 @@ class MatchScorer:
         position = np.zeros(self.n_obj, dtype=np.int32)
         position[self.objects] = np.arange(len(self.objects), dtype=np.int32)
         self.pair_s = position[self.pair_o]
-        # the compatible objects' arrays, gathered once per call (not per projection); the
-        # compiled map's own (read-only) arrays when every object is compatible
-        o = self.objects
-        self._object_arrays = (
-            (compiled.centers, compiled.shape_matrices, compiled.dual_quadrics)
-            if len(o) == self.n_obj else
-            (compiled.centers[o], compiled.shape_matrices[o], compiled.dual_quadrics[o]))
-        self._label_groups: list[tuple[list[int], np.ndarray]] | None = None
+        # the compatible objects' arrays, gathered once per call (not per projection)
+        self._object_arrays = tuple(a[self.objects] for a in (
+            compiled.centers, compiled.shape_matrices, compiled.dual_quadrics))
         self._sample_counts: dict[int, int] = {}  # count_samples, once per size
         # first pair of each detection (pairs are sorted by detection; every usable detection
         # has a compatible object): the segments of np.maximum.reduceat
         self.pair_starts = np.searchsorted(self.pair_d, np.arange(self.n_det)).astype(np.intp)
-        self.unit = sunflower_disk(n_points)
-        self.points = _ellipse_points(self.params, self.unit)
+        self.points = _ellipse_points(self.params, sunflower_disk(n_points))
         self.areas = math.pi * self.params[:, 2] * self.params[:, 3]
         self.radii = np.max(self.params[:, 2:4], axis=1)
-        c, s = np.cos(self.params[:, 4]), np.sin(self.params[:, 4])
-        R = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
-        self.shape = np.einsum("dij,dj,dkj->dik", R, self.params[:, 2:4] ** -2.0, R)
 
     def compatible_objects(self, d: int) -> np.ndarray:
         """Object indices compatible with usable detection row ``d``."""
         return np.flatnonzero(self.compat[d])
 
+    @functools.cached_property
+    def label_groups(self) -> list[tuple[list[int], np.ndarray]]:
+        """Usable detections grouped by their compatible objects (= by label, since a map
+        object has one category): ``[(detection rows, compatible object indices), ...]`` in
+        order of first detection. Groups of different labels have disjoint objects."""
+        groups: dict[str, list[int]] = {}
+        for d, label in enumerate(self.labels):
+            groups.setdefault(label, []).append(d)
+        return [(dets, self.compatible_objects(dets[0]).astype(int)) for dets in groups.values()]
+
     def _stop(self, stop_at: Deadline | float | None) -> Deadline | None:
         return earliest(stop_at, self.deadline)
 
-    def _project(self, camera_from_world: np.ndarray,
-                 stop_at: Deadline | float | None = None) -> tuple[np.ndarray, ...]:
-        """:func:`project_objects` of the compatible objects, in blocks of poses."""
-        o = self.objects
-        T = np.asarray(camera_from_world, dtype=float)
-        step = max(1, PROJECT_BLOCK // max(1, len(o)))
-        if len(T) <= step:
-            return project_objects(self.camera, T, *self._object_arrays)
-        parts = []
-        for blk in _blocks(len(T), step):
-            _check(stop_at)
-            parts.append(project_objects(self.camera, T[blk], *self._object_arrays))
-        return tuple(np.concatenate(p) for p in zip(*parts, strict=True))
+    def _project(self, camera_from_world: np.ndarray) -> tuple[np.ndarray, ...]:
+        """:func:`project_objects` of the compatible objects (callers pass at most
+        ``PROJECT_BLOCK // len(objects)`` poses)."""
+        return project_objects(self.camera, camera_from_world, *self._object_arrays)
 
     def centre_hits(self, camera_from_world: np.ndarray,
                     stop_at: Deadline | float | None = None) -> np.ndarray:
@@ -360,14 +272,13 @@ class MatchScorer:
         step = max(1, PROJECT_BLOCK // max(1, len(self.objects)))
         for hb in _blocks(len(T), step):
             _check(stop_at)
-            _, _, valid, pc = self._project(T[hb], stop_at)
+            _, _, valid, pc = self._project(T[hb])
             for h in range(len(pc)):
                 per_det = np.zeros(self.n_det, dtype=bool)
                 for blk in _blocks(len(self.pair_d), PAIR_BLOCK):
                     _check(stop_at)
                     pd, ps = self.pair_d[blk], self.pair_s[blk]
-                    d = pc[h, ps] - self.params[pd, :2]
-                    phi = np.einsum("pi,pij,pj->p", d, self.shape[pd], d)
+                    phi = level_values(self.params[pd], pc[h, ps][:, None])[:, 0]
                     per_det[pd[(phi <= 4.0) & valid[h, ps]]] = True
                 out[hb.start + h] = per_det.sum()
         return out
@@ -395,7 +306,7 @@ class MatchScorer:
                           PAIR_BLOCK // n_pairs))
         for hb in _blocks(len(T), step):
             _check(stop_at)
-            cen, inv_shape, valid, _ = self._project(T[hb], stop_at)
+            cen, inv_shape, valid, _ = self._project(T[hb])
             n_h = len(cen)
             det = inv_shape[..., 0, 0] * inv_shape[..., 1, 1] - inv_shape[..., 0, 1] ** 2
             half_tr = 0.5 * (inv_shape[..., 0, 0] + inv_shape[..., 1, 1])
@@ -435,9 +346,9 @@ class MatchScorer:
         return out
 
     def pair_scores(self, iou: np.ndarray, threshold: float) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`scores` from pair IoUs (H, P) (:meth:`pair_iou`): (score (H,), inlier count
-        (H,)) with each detection taking its best compatible object (an upper bound of the
-        one-to-one assignment's)."""
+        """(score (H,), inlier count (H,)) from pair IoUs (H, P) (:meth:`pair_iou`), each
+        detection taking its best compatible object (an upper bound of the one-to-one
+        assignment's)."""
         if iou.shape[1] == 0:
             return np.zeros(len(iou)), np.zeros(len(iou), dtype=int)
         # detections without a compatible object (not in a localize() scorer) score 0
@@ -451,26 +362,7 @@ class MatchScorer:
         """:func:`greedy_assignment` of one pose's pair IoUs (P,) (:meth:`pair_iou`): the same
         matches as on the dense (detections x objects) matrix (pairs are in its row-major
         order, so ties break the same way)."""
-        cand = np.flatnonzero(iou >= threshold)
-        order = cand[np.argsort(iou[cand], kind="stable")[::-1]]
-        used_d: set[int] = set()
-        used_o: set[int] = set()
-        out = []
-        for p in order.tolist():
-            d, o = int(self.pair_d[p]), int(self.pair_o[p])
-            if d in used_d or o in used_o:
-                continue
-            used_d.add(d)
-            used_o.add(o)
-            out.append(Match(int(self.detection_indices[d]), o, float(iou[p])))
-        return sorted(out, key=lambda m: m.detection_index)
-
-    def scores(self, dense: np.ndarray, threshold: float) -> tuple[np.ndarray, np.ndarray]:
-        """(score (H,), inlier count (H,)) with each detection taking its best object (several
-    detections may take the same object: an upper bound of the one-to-one assignment's)."""
-        best = dense.max(axis=2)
-        inl = best >= threshold
-        return np.where(inl, best, 0.0).sum(axis=1), inl.sum(axis=1)
+        return _greedy(self.pair_d, self.pair_o, iou, threshold, self.detection_indices)
 
     def matches(self, camera_from_world: np.ndarray, threshold: float,
                 n_points: int = 256) -> list[Match]:
@@ -525,22 +417,6 @@ class RansacOutcome:
     alternatives: tuple[Hypothesis, ...] = ()
 
 
-def _label_groups(scorer: MatchScorer) -> list[tuple[list[int], np.ndarray]]:
-    """Usable detections grouped by their compatible objects (= by label, since a map object
-    has one category): ``[(detection rows, compatible object indices), ...]`` in order of first
-    detection. Groups of different labels have disjoint objects."""
-    cached = getattr(scorer, "_label_groups", None)
-    if cached is not None:
-        return cached
-    groups: dict[str, list[int]] = {}
-    for d, label in enumerate(scorer.labels):
-        groups.setdefault(label, []).append(d)
-    out = [(dets, scorer.compatible_objects(dets[0]).astype(int)) for dets in groups.values()]
-    if hasattr(scorer, "_label_groups"):  # computed once per scorer (= per call)
-        scorer._label_groups = out
-    return out
-
-
 def _compositions(groups: list[tuple[list[int], np.ndarray]], size: int) -> list[tuple[int, ...]]:
     """Ways to split a sample of ``size`` among the groups: ``m_g`` detections (and as many
     distinct objects) from group g, ``m_g <= min(#detections, #objects)``."""
@@ -559,27 +435,20 @@ def _compositions(groups: list[tuple[list[int], np.ndarray]], size: int) -> list
     return out
 
 
-def _composition_count(groups: list[tuple[list[int], np.ndarray]], comp: tuple[int, ...]) -> int:
-    return math.prod(math.comb(len(d), m) * math.perm(len(o), m)
-                     for (d, o), m in zip(groups, comp, strict=True))
-
-
 def count_samples(scorer: MatchScorer, size: int) -> int:
     """Number of label-compatible minimal samples of ``size`` (distinct detections, distinct
     objects), from per-label counts: ``sum over splits of prod_g C(n_det_g, m_g) P(n_obj_g, m_g)``
     (no walk over detection tuples, so it costs nothing with hundreds of detections)."""
-    cache = getattr(scorer, "_sample_counts", None)
-    if cache is not None and size in cache:
-        return cache[size]
-    # the coefficient of x^size in prod_g sum_m C(n_det_g, m) P(n_obj_g, m) x^m (exact ints):
-    # the same sum as over the splits (_compositions), in O(groups x size)
-    coeffs = [1] + [0] * size
-    for d, o in _label_groups(scorer):
-        term = [math.comb(len(d), m) * math.perm(len(o), m) for m in range(size + 1)]
-        coeffs = [sum(coeffs[i] * term[k - i] for i in range(k + 1)) for k in range(size + 1)]
-    if cache is not None:
-        cache[size] = coeffs[size]
-    return coeffs[size]
+    if size not in scorer._sample_counts:  # once per scorer (= per call) and size
+        # the coefficient of x^size in prod_g sum_m C(n_det_g, m) P(n_obj_g, m) x^m (exact
+        # ints): the same sum as over the splits (_compositions), in O(groups x size)
+        coeffs = [1] + [0] * size
+        for d, o in scorer.label_groups:
+            term = [math.comb(len(d), m) * math.perm(len(o), m) for m in range(size + 1)]
+            coeffs = [sum(coeffs[i] * term[k - i] for i in range(k + 1))
+                      for k in range(size + 1)]
+        scorer._sample_counts[size] = coeffs[size]
+    return scorer._sample_counts[size]
 
 
 def _iter_samples(groups: list[tuple[list[int], np.ndarray]],
@@ -608,12 +477,7 @@ def _enumerate_samples(scorer: MatchScorer, size: int,
     group), never all detection tuples."""
     if count_samples(scorer, size) > cap:
         return None
-    return _iter_samples(_label_groups(scorer), size)
-
-
-def _has_sample(scorer: MatchScorer, size: int) -> bool:
-    """Whether at least one label-compatible minimal sample of ``size`` exists."""
-    return count_samples(scorer, size) > 0
+    return _iter_samples(scorer.label_groups, size)
 
 
 def _random_samples(scorer: MatchScorer, size: int, count: int,
@@ -621,9 +485,11 @@ def _random_samples(scorer: MatchScorer, size: int, count: int,
     """``count`` label-compatible samples drawn uniformly (with repetition) over all of them,
     lazily (one at a time): a split among the label groups with probability proportional to
     its number of samples, then distinct detections and distinct objects within each group."""
-    groups = _label_groups(scorer)
+    groups = scorer.label_groups
     comps = _compositions(groups, size)
-    weights = np.array([float(_composition_count(groups, c)) for c in comps])
+    weights = np.array([float(math.prod(math.comb(len(d), m) * math.perm(len(o), m)
+                                        for (d, o), m in zip(groups, c, strict=True)))
+                        for c in comps])
     if len(comps) == 0 or weights.sum() == 0:
         return
     p = weights / weights.sum()
@@ -649,50 +515,41 @@ def _most_promising_first(
     numbers of compatible objects: a detection whose label has one object in the map can only
     be matched to it), then the largest image triangle of the detection centres (P3P's
     conditioning). A stable sort on fixed keys: still independent of the seed."""
-    n_compat = np.array([len(scorer.compatible_objects(d)) for d in range(scorer.n_det)],
-                        dtype=float)
+    n_compat = scorer.compat.sum(axis=1).astype(float)
     dets = np.array([sm[0] for sm in samples]).reshape(-1, 3)
-    c = scorer.params[dets, :2]  # (S, 3, 2)
-    area = np.abs((c[:, 1, 0] - c[:, 0, 0]) * (c[:, 2, 1] - c[:, 0, 1])
-                  - (c[:, 2, 0] - c[:, 0, 0]) * (c[:, 1, 1] - c[:, 0, 1]))
-    order = np.lexsort((-area, np.prod(n_compat[dets], axis=1)))
+    order = np.lexsort((-_triangle_areas(scorer, dets), np.prod(n_compat[dets], axis=1)))
     return iter([samples[k] for k in order.tolist()])
 
 
+def _triangle_areas(scorer: MatchScorer, dets: np.ndarray) -> np.ndarray:
+    """Twice the image areas (S,) px^2 of the triangles of detection centres ``dets`` (S, 3)
+    (P3P's conditioning)."""
+    c = scorer.params[dets, :2]  # (S, 3, 2)
+    return np.abs((c[:, 1, 0] - c[:, 0, 0]) * (c[:, 2, 1] - c[:, 0, 1])
+                  - (c[:, 2, 0] - c[:, 0, 0]) * (c[:, 1, 1] - c[:, 0, 1]))
+
+
 def _sweep_samples(scorer: MatchScorer) -> list[tuple[tuple[int, ...], tuple[int, ...]]]:
-    """The minimal samples of the competitor sweep run after an early exit: every
-    label-compatible assignment (distinct objects) of ONE detection triple. A competing pose
-    that explains every usable detection (what the ambiguity check looks for) also explains
-    these three, with one of these assignments, so P3P on them finds it whatever the rest of
-    the search skipped. The triple: among the :data:`SWEEP_CANDIDATES` detections with the
-    fewest compatible objects, the one with the largest image triangle (P3P conditioning) of
-    those with at most :data:`SWEEP_MAX_SAMPLES` assignments; none (empty list) if no triple
-    qualifies (many same-label objects: the search then stops as it did without the sweep)."""
-    groups = _label_groups(scorer)
+    """The minimal samples of the competitor sweep: every label-compatible assignment
+    (distinct objects) of ONE detection triple, the one with the largest image triangle among
+    the :data:`SWEEP_CANDIDATES` detections with the fewest compatible objects and at most
+    :data:`SWEEP_MAX_SAMPLES` assignments; empty if none qualifies (why:
+    ``docs/design/localization.md``)."""
+    groups = scorer.label_groups
     objects_of = {d: objs for dets, objs in groups for d in dets}
     label_of = {d: g for g, (dets, _) in enumerate(groups) for d in dets}
     order = sorted(range(scorer.n_det), key=lambda d: (len(objects_of[d]), d))
-    centres = scorer.params[:, :2]
-    best: tuple[float, tuple[int, ...]] | None = None
-    for tri in itertools.combinations(sorted(order[:SWEEP_CANDIDATES]), 3):
-        per_group: dict[int, int] = {}
-        for d in tri:
-            per_group[label_of[d]] = per_group.get(label_of[d], 0) + 1
-        count = math.prod(math.perm(len(groups[g][1]), m) for g, m in per_group.items())
-        if count == 0 or count > SWEEP_MAX_SAMPLES:
-            continue
-        (ax, ay), (bx, by), (cx, cy) = centres[list(tri)]
-        area = abs((bx - ax) * (cy - ay) - (cx - ax) * (by - ay))
-        if best is None or area > best[0]:
-            best = (area, tri)
-    if best is None:
+    tris = list(itertools.combinations(sorted(order[:SWEEP_CANDIDATES]), 3))
+    counts = np.array([math.prod(math.perm(len(groups[g][1]), m)
+                                 for g, m in Counter(label_of[d] for d in tri).items())
+                       for tri in tris])
+    ok = np.flatnonzero((counts > 0) & (counts <= SWEEP_MAX_SAMPLES))
+    if len(ok) == 0:
         return []
-    tri = best[1]
-    out = []
-    for objs in itertools.product(*(objects_of[d].tolist() for d in tri)):
-        if len(set(objs)) == 3:
-            out.append((tri, tuple(int(o) for o in objs)))
-    return out
+    tri = tris[ok[np.argmax(_triangle_areas(scorer, np.array(tris)[ok]))]]
+    return [(tri, tuple(int(o) for o in objs))
+            for objs in itertools.product(*(objects_of[d].tolist() for d in tri))
+            if len(set(objs)) == 3]
 
 
 def ransac(
@@ -718,22 +575,18 @@ def ransac(
             instant), checked before every batch and inside the scoring of a batch.
     """
     cm = scorer.compiled
-    best_T: np.ndarray | None = None
-    best_score, best_count = -1.0, 0
-    best_matches: list[Match] = []
-    kept: list[Hypothesis] = []  # distinct qualified hypotheses, best first
-    evaluated = 0
-    tried = 0
-    timed_out = False
-    exhaustive = True
+    # distinct qualified hypotheses, best first: kept[0] only ever changes to a better one
+    # (_keep_distinct), so it is the best pose found
+    kept: list[Hypothesis] = []
+    evaluated = tried = 0
+    timed_out, exhaustive = False, True
     need = scorer.n_det
-
     n_pairs = len(scorer.pair_d)
 
     def consider(poses: np.ndarray) -> bool:
         """Score candidate poses (vectorised over poses and pairs, memory bounded); keeps the
         best distinct hypotheses; returns True to stop early."""
-        nonlocal best_T, best_score, best_count, best_matches, evaluated, kept
+        nonlocal evaluated, kept
         if len(poses) == 0:
             return False
         evaluated += len(poses)
@@ -756,11 +609,8 @@ def ransac(
                 score = float(sum(x.iou for x in m))
                 if len(m) >= min_inliers and score > bar:
                     kept = _keep_distinct(kept, Hypothesis(poses[blk][h], tuple(m), score))
-        if kept and kept[0].score > best_score:
-            best_T, best_score = kept[0].camera_from_world, kept[0].score
-            best_matches, best_count = list(kept[0].matches), len(kept[0].matches)
-        return (need >= EARLY_EXIT_MIN_DETECTIONS and best_count >= need
-                and best_score >= EARLY_EXIT_MEAN_IOU * need)
+        return (need >= EARLY_EXIT_MIN_DETECTIONS and bool(kept)
+                and len(kept[0].matches) >= need and kept[0].score >= EARLY_EXIT_MEAN_IOU * need)
 
     def solve(chunk: list[tuple[tuple[int, ...], tuple[int, ...]]], size: int) -> np.ndarray:
         """Candidate poses (M, 4, 4) of minimal samples: one vectorised P3P call, or P2E."""
@@ -818,35 +668,26 @@ def ransac(
 
     if need < 2:
         return RansacOutcome(None, (), 0.0, 0, 0, True, False, "no_label_match")
-    has_any = False
-    if need >= 3:
-        has_any = _has_sample(scorer, 3)
-        stop = run(3, max_hypotheses) if has_any else False
-        if best_T is None and not stop and _has_sample(scorer, 2):
-            has_any = True
-            run(2, min(max_hypotheses, P2E_FALLBACK_BUDGET))
-    else:
-        has_any = _has_sample(scorer, 2)
-        if has_any:
-            run(2, max_hypotheses)
-    if best_T is None:
-        if timed_out:
-            reason = "time_budget_exceeded"
-        elif not has_any:
-            reason = "no_label_match"
-        else:
-            reason = "no_hypothesis_above_inlier_threshold"
+    has3 = need >= 3 and count_samples(scorer, 3) > 0
+    has2 = count_samples(scorer, 2) > 0
+    stop = run(3, max_hypotheses) if has3 else False
+    if not kept and not stop and has2:  # P2E: alone, or the fallback of P3P
+        run(2, max_hypotheses if need < 3 else min(max_hypotheses, P2E_FALLBACK_BUDGET))
+    if not kept:
+        reason = ("time_budget_exceeded" if timed_out else "no_label_match"
+                  if not (has3 or has2) else "no_hypothesis_above_inlier_threshold")
         return RansacOutcome(None, (), 0.0, evaluated, tried, exhaustive, timed_out, reason)
+    best = kept[0]
     try:
-        matches = tuple(scorer.matches(best_T, inlier_iou))
+        matches = tuple(scorer.matches(best.camera_from_world, inlier_iou))
     except ScoringTimeoutError:  # past the scorer's hard stop: keep the accepted assignment
         matches = ()
     if len(matches) < min_inliers:
         # the finer IoU estimate (256 points) lost an inlier at the threshold: keep the
         # assignment the pose was accepted with (96 points)
-        matches = tuple(best_matches)
-    return RansacOutcome(best_T, matches, best_score, evaluated, tried, exhaustive, timed_out,
-                         None, tuple(kept))
+        matches = best.matches
+    return RansacOutcome(best.camera_from_world, matches, best.score, evaluated, tried,
+                         exhaustive, timed_out, None, tuple(kept))
 
 
 def _keep_distinct(kept: list[Hypothesis], new: Hypothesis) -> list[Hypothesis]:

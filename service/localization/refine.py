@@ -3,61 +3,17 @@
 :func:`refine` takes matched detections and map ellipsoids (same order), the camera
 intrinsics and an initial ``world_from_camera`` pose (4x4, OpenCV camera axes) and minimises
 the paper's equation 8, ``sum_j sigma_j^-1 Delta_j``, over the pose with
-``gtsam.LevenbergMarquardtOptimizer``. The factors come from
-:func:`factors.pose_factors.pose_factors` (one vectorised evaluation of all pairs per pose):
-one batched factor with a Diagonal noise model (std ``sqrt(sigma_j)`` on detection ``j``'s rows)
-without robust kernel; one factor per detection, each with its own robust kernel, otherwise.
-An optional ``PriorFactorPose3`` carries a client's pose prior.
+``gtsam.LevenbergMarquardtOptimizer`` on the factors of :func:`factors.pose_factors.pose_factors`
+(one batched factor without robust kernel, one per detection with one), plus an optional
+``PriorFactorPose3``. Adaptive level-set samples grown at the start are re-laid once at the
+result and solved again (``iterations`` counts both solves; skipped past the ``deadline``:
+``RefinementResult.resample_skipped``).
 
-Level-set sampling: the samples of each detection are laid out at the start of a solve, over
-an area grown with the misalignment there (``factors.metrics.level_set_sampling_scale``). When
-some area was grown, a single solve stops at a pose biased by that wide layout, so ``refine``
-re-lays the samples at the result and solves once more (``bench.chess_eval``: from 0.4 m /
-20 deg starts, 47 % -> 77 % of noisy frames within 10 cm). ``iterations`` counts both solves.
-The second solve is skipped when the ``deadline`` has already passed
-(``RefinementResult.resample_skipped``).
-
-Stopping tolerances (deliberate, see GUIDE section 3)
------------------------------------------------------
-* ``errorTol = 1e-20`` (:data:`ERROR_TOL`): stop when the weighted error itself is ~0 (exact
-  detections: the residual is then at floating-point level and no step can decrease it; without
-  it LM would spend ~10 error evaluations raising lambda to its bound).
-* ``relativeErrorTol = 1e-6`` (:data:`RELATIVE_ERROR_TOL`): stop when an iteration decreases the
-  error by less than this fraction. Zero-residual problems converge quadratically, so the
-  relative decrease stays ~1 until ``ERROR_TOL`` is reached (the exact-detection accuracy test:
-  < 1e-6 m, 1e-4 deg). With noisy detections (bench scenes, 2-5 cm pose error from the noise)
-  the pose differs from a 1e-7 run by <= 1.2e-5 m while saving ~0.4 iterations; GTSAM's 1e-5
-  default left up to 4e-5 m.
-* ``iou`` / ``giou`` also stop after an ACCEPTED iteration that decreased the error by less
-  than 1e-3 of it (:data:`OVERLAP_RELATIVE_ERROR_TOL`; GTSAM's ``relativeErrorTol`` stays 1e-6,
-  because GTSAM also applies it to end the lambda search of a rejected step, which at 1e-3
-  stopped an exact giou solve before its first step): their
-  residual (areas of symmetric differences) is not smooth at a noisy optimum, so LM keeps
-  decreasing the error by tiny fractions: with 1e-6 alone, 39 % of noisy Chess solves hit the
-  50-iteration cap, and 400 iterations at 1e-12 still do not stop on half of them. With the rule
-  (tuning seed 3, 18 noisy Chess frames, giou) every solve stopped by itself after a median 10.5
-  iterations, a median 2.8 mm (max 8.6 cm) from where 400 iterations end, against ~2-3 cm of
-  error from the detection noise; exact detections still reach their zero-residual optimum
-  (``bench.overlap_refinement``, held-out seeds 7 and 1).
-* ``absoluteErrorTol = 0`` (:data:`ABSOLUTE_ERROR_TOL`): disabled, because the error's scale
-  depends on the metric and on sigma (an absolute threshold would stop at a different accuracy
-  for every metric).
-* ``maxIterations = max_iterations`` (default 50); lambda starts at 1e-5 (GTSAM default) and
-  LM gives up an iteration when lambda exceeds ``LAMBDA_UPPER_BOUND = 1e10`` (GTSAM's 1e5
-  stalls iou/giou, whose sqrt-of-area residuals have very steep Jacobians near the optimum).
-
-Covariance
-----------
-``covariance`` is the pose's marginal covariance: 6x6, order
-``[omega_x, omega_y, omega_z, v_x, v_y, v_z]`` (rad, m), right perturbation, expressed in the
-CAMERA (body) frame. It is the inverse of the Gauss-Newton information ``J^T W J`` at the solution
-(W from the sigma-scaled, robust-reweighted noise models, plus the prior). Without robust kernel
-and prior the graph is the one batched factor, and ``refine`` inverts its ``J^T W J`` from the
-memoised final evaluation directly (equal to ``gtsam.Marginals``, tested to 1e-8, at a fraction
-of its cost); otherwise ``gtsam.Marginals(graph, pose).marginalCovariance(key)``. Calibrated
-only as far as the metric residuals really have std ``sqrt(sigma_j)``. It is None, with
-``covariance_reason``, when that information matrix is singular or ill conditioned (e.g. one
-object only: an ellipse constrains 5 of the 6 DoF).
+``covariance``: 6x6, order ``[omega_x, omega_y, omega_z, v_x, v_y, v_z]`` (rad, m), right
+perturbation, CAMERA (body) frame: the inverse of the Gauss-Newton information ``J^T W J`` at
+the solution (None with ``covariance_reason`` when singular or ill conditioned). Why the
+stopping tolerances are what they are, and how the covariance is computed:
+``docs/design/localization.md``.
 """
 
 from __future__ import annotations
@@ -76,7 +32,12 @@ from factors.names import check_robust
 from factors.pose_factors import pose3, pose_factors
 from factors.pose_residuals import PoseResidualModel
 from service.localization.budget import Deadline, deadline_passed
-from service.localization.types import Detection, check_covariance
+from service.localization.types import (
+    Detection,
+    check_covariance,
+    check_detections,
+    check_options,
+)
 
 __all__ = [
     "ABSOLUTE_ERROR_TOL",
@@ -123,13 +84,9 @@ class RefinementResult:
             projection is not an ellipse.
         valid_projection: (N,) bool, the projection of pair ``j`` is an ellipse at the final pose.
         initial_error, total_error: GTSAM's weighted error ``0.5 sum_j ||r_j||^2 / sigma_j``
-            (plus the prior's) at the initial and final pose. Each is measured with the
-            level-set sample layout of its own solve: ``initial_error`` with the samples laid
-            out at the initial pose, ``total_error`` with those of the last solve (re-laid at
-            the first solve's result when adaptive level-set sampling was re-laid), so with a
-            re-lay the two are costs of *different* functions and need not decrease; compare
-            ``factors.metrics`` costs with one fixed layout instead. Without a re-lay
-            (other metrics, ``adaptive=False``, no grown area) they share one layout.
+            (plus the prior's) at the initial and final pose, each with the level-set sample
+            layout of its own solve: after a re-lay they are costs of different functions and
+            need not decrease.
         iterations: LM iterations performed.
         converged: ``status == "converged"``.
         status: one of :data:`STATUSES`: ``converged`` (LM met a stopping tolerance),
@@ -173,19 +130,6 @@ def _lm_params(max_iterations: int) -> gtsam.LevenbergMarquardtParams:
     params.setErrorTol(ERROR_TOL)
     params.setlambdaUpperBound(LAMBDA_UPPER_BOUND)
     return params
-
-
-
-def _check_prior(
-    prior_world_from_camera: np.ndarray | None, prior_covariance: np.ndarray | None
-) -> tuple[np.ndarray, np.ndarray] | None:
-    if prior_world_from_camera is None and prior_covariance is None:
-        return None
-    if prior_world_from_camera is None or prior_covariance is None:
-        raise GeometryError("prior_world_from_camera and prior_covariance must be given together")
-    T = check_pose(prior_world_from_camera, "prior_world_from_camera")
-    S = check_covariance("prior_covariance", prior_covariance, GeometryError)
-    return T, S
 
 
 def refine(
@@ -234,25 +178,19 @@ def refine(
         ValueError (``GeometryError``): bad input, the message names the field.
     """
     t_start = time.perf_counter()
-    if isinstance(detections, Detection) or not isinstance(detections, Sequence):
-        raise GeometryError("detections must be a sequence of Detection")
-    for j, d in enumerate(detections):
-        if not isinstance(d, Detection):
-            raise GeometryError(f"detections[{j}] must be a Detection, got {type(d).__name__}")
-    if len(detections) == 0:
-        raise GeometryError("detections must not be empty")
+    check_detections(detections, GeometryError)
     if len(ellipsoids) != len(detections):
         raise GeometryError(f"ellipsoids must match detections one to one: got "
                             f"{len(ellipsoids)} ellipsoids for {len(detections)} detections")
     T0 = check_pose(initial_world_from_camera, "initial_world_from_camera")
-    if isinstance(max_iterations, bool) or not isinstance(max_iterations, (int, np.integer)) \
-            or max_iterations < 1:
-        raise GeometryError(f"max_iterations must be an integer >= 1, got {max_iterations!r}")
+    check_options({"max_iterations": max_iterations, "use_sigma": use_sigma}, GeometryError, "")
     max_iterations = int(max_iterations)
-    if not isinstance(use_sigma, bool):
-        raise GeometryError(f"use_sigma must be a bool, got {use_sigma!r}")
     check_robust(robust, robust_scale, error=GeometryError)
-    prior = _check_prior(prior_world_from_camera, prior_covariance)
+    if (prior_world_from_camera is None) != (prior_covariance is None):
+        raise GeometryError("prior_world_from_camera and prior_covariance must be given together")
+    prior = None if prior_covariance is None else (
+        check_pose(prior_world_from_camera, "prior_world_from_camera"),
+        check_covariance("prior_covariance", prior_covariance, GeometryError))
 
     sigmas = [d.sigma if use_sigma else None for d in detections]
     resample = metric == "level_set" and bool((metric_options or {}).get("adaptive", True))

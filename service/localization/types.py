@@ -1,25 +1,17 @@
-"""Inputs and outputs of the localization pipeline (owned by the relocalization issue).
+"""Inputs and outputs of :func:`service.localization.pipeline.localize`, validated on
+construction (bad input raises :class:`LocalizationInputError` or
+:class:`factors.geometry.GeometryError`, both ``ValueError``, naming the field).
 
 Frames: ``world_from_camera`` is the camera's pose in the map (4x4, camera axes OpenCV:
 +X right, +Y down, +Z forward). Covariances are 6x6 in GTSAM's Pose3 tangent order
 ``[omega_x, omega_y, omega_z, v_x, v_y, v_z]`` (radians, metres), right perturbation, expressed
 in the camera (body) frame.
-
-Public names:
-
-* :class:`Detection` — one detected object (ellipse px, label, optional sigma / score).
-* :class:`LocalizationOptions` — every knob of :func:`service.localization.pipeline.localize`.
-* :class:`PosePrior` — an optional client pose prior (e.g. from the AR session's tracking).
-* :class:`InlierMatch` — one detection -> map object assignment of the returned pose.
-* :class:`LocalizationResult` — the answer; ``localized=False`` with a ``reason`` is a normal
-  answer, not an error. Bad input raises :class:`LocalizationInputError` (a ``ValueError``) or
-  :class:`factors.geometry.GeometryError` (also a ``ValueError``) naming the field.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
@@ -33,20 +25,14 @@ from service.limits import (
     AMBIGUITY_POLICIES,
     METRICS,
     NO_REFINEMENT,
-    POSE_SOURCES,
     REASONS,
     ROBUST_KERNELS,
     UNKNOWN_LABEL_POLICIES,
 )
 
-__all__ = [
-    "AMBIGUITY_POLICIES",
+__all__ = [  # METRICS and ROBUST_KERNELS: service.limits' names, re-exported for callers
     "METRICS",
-    "NO_REFINEMENT",
-    "POSE_SOURCES",
-    "REASONS",
     "ROBUST_KERNELS",
-    "UNKNOWN_LABEL_POLICIES",
     "Alternative",
     "Detection",
     "InlierMatch",
@@ -83,12 +69,59 @@ class Detection:
             raise GeometryError(f"Detection.score must be in [0, 1], got {self.score}")
 
 
+def check_detections(detections: object,
+                     error: type[FieldError] = LocalizationInputError) -> None:
+    """THE rule of a request's detections: a non-empty sequence of :class:`Detection`;
+    otherwise raises ``error`` with ``field`` ``"detections"`` or ``"detections[i]"``. Shared by
+    ``localize`` and :func:`service.localization.refine.refine`."""
+    if isinstance(detections, (str, bytes, Detection)) or not isinstance(detections, Sequence):
+        raise error(f"must be a sequence of Detection, got {type(detections).__name__}",
+                    field="detections")
+    if len(detections) == 0:
+        raise error("must not be empty", field="detections")
+    for i, d in enumerate(detections):
+        if not isinstance(d, Detection):
+            raise error(f"must be a Detection, got {type(d).__name__}", field=f"detections[{i}]")
+
+
 def _bad(field_name: str, problem: str) -> LocalizationInputError:
     return LocalizationInputError(problem, field=field_name)
 
 
 def _is_int(value: object) -> bool:
     return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+
+
+def _number(value: object) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+#: THE rules of the scalar options: name -> (test, rule), shared by
+#: :class:`LocalizationOptions` and :func:`service.localization.refine.refine`.
+_OPTION_RULES: dict[str, tuple[Callable[[Any], bool], str]] = {
+    "min_confidence": (lambda v: v is None or (_number(v) and 0.0 <= v <= 1.0),
+                       "must be in [0, 1] or None"),
+    "on_ambiguity": (lambda v: v in AMBIGUITY_POLICIES, f"must be one of {AMBIGUITY_POLICIES}"),
+    "ransac_max_hypotheses": (lambda v: _is_int(v) and v >= 1, "must be an integer >= 1"),
+    "inlier_iou": (lambda v: _number(v) and 0.0 < v <= 1.0, "must be in (0, 1]"),
+    "min_inliers": (lambda v: _is_int(v) and v >= 2, "must be an integer >= 2"),
+    "use_sigma": (lambda v: isinstance(v, bool), "must be a bool"),
+    "unknown_label_policy": (lambda v: v in UNKNOWN_LABEL_POLICIES,
+                             f"must be one of {UNKNOWN_LABEL_POLICIES}"),
+    "seed": (lambda v: v is None or _is_int(v), "must be an integer or None"),
+    "time_budget_ms": (lambda v: v is None or (_number(v) and v > 0), "must be > 0 or None"),
+    "max_iterations": (lambda v: _is_int(v) and v >= 1, "must be an integer >= 1"),
+}
+
+
+def check_options(values: Mapping[str, object], error: type[FieldError] = LocalizationInputError,
+                  prefix: str = "options.") -> None:
+    """Each ``values[name]`` obeys :data:`_OPTION_RULES` ``[name]``; otherwise raises ``error``
+    with ``field = prefix + name``."""
+    for name, value in values.items():
+        test, rule = _OPTION_RULES[name]
+        if not test(value):
+            raise error(f"{rule}, got {value!r}", field=prefix + name)
 
 
 @dataclass(frozen=True)
@@ -116,16 +149,12 @@ class LocalizationOptions:
             :class:`LocalizationInputError` naming ``detections[i].label``.
         seed: seed of the hypothesis sampler (``None`` = nondeterministic). Exhaustive runs do
             not depend on it.
-        time_budget_ms: budget (ms) of the whole ``localize`` call, from its start
-            (validation, prior, hypothesis search and refinement), counted in **CPU time of
-            the solving thread** (``time.thread_time``), so that a busy machine does not change
-            the result when the budget is not binding; a wall-clock hard limit of
-            ``service.localization.budget.WALL_LIMIT_FACTOR`` x the budget bounds the latency
-            (module ``service.localization.budget``). The hypothesis search stops
-            at it and the best hypothesis so far is used (or ``reason="time_budget_exceeded"``
-            if none qualifies); no refinement iteration starts after it (the result then has
-            ``refinement_status="time_budget"``). Overshoot is bounded by one batch of
-            hypotheses or one LM iteration. ``None`` = unbounded.
+        time_budget_ms: budget (ms) of the whole ``localize`` call, from its start, in CPU
+            time of the solving thread with a wall-clock hard limit
+            (:mod:`service.localization.budget`). The hypothesis search stops at it (the best
+            hypothesis so far is used, or ``reason="time_budget_exceeded"``); no refinement
+            iteration starts after it (``refinement_status="time_budget"``). ``None`` =
+            unbounded.
         max_iterations: Levenberg-Marquardt iteration cap of the refinement.
         metric_options: extra keyword options of the metric (e.g. level-set sampling),
             validated on construction (an unknown key or bad value raises naming
@@ -160,46 +189,13 @@ class LocalizationOptions:
     min_confidence: float | None = None
 
     def __post_init__(self) -> None:
-        if self.min_confidence is not None and (
-                isinstance(self.min_confidence, bool)
-                or not isinstance(self.min_confidence, (int, float))
-                or not (0.0 <= self.min_confidence <= 1.0)):
-            raise _bad("options.min_confidence",
-                       f"must be in [0, 1] or None, got {self.min_confidence!r}")
-        if self.on_ambiguity not in AMBIGUITY_POLICIES:
-            raise _bad("options.on_ambiguity",
-                       f"must be one of {AMBIGUITY_POLICIES}, got {self.on_ambiguity!r}")
         if self.metric not in METRICS and self.metric != NO_REFINEMENT:
             raise _bad("options.metric",
                        f"unknown metric {self.metric!r}; valid: {', '.join(METRICS)} "
                        f"or {NO_REFINEMENT!r}")
-        if not _is_int(self.ransac_max_hypotheses) or self.ransac_max_hypotheses < 1:
-            raise _bad("options.ransac_max_hypotheses",
-                       f"must be an integer >= 1, got {self.ransac_max_hypotheses!r}")
-        if (isinstance(self.inlier_iou, bool) or not isinstance(self.inlier_iou, (int, float))
-                or not (0.0 < float(self.inlier_iou) <= 1.0)):
-            raise _bad("options.inlier_iou", f"must be in (0, 1], got {self.inlier_iou!r}")
-        if not _is_int(self.min_inliers) or self.min_inliers < 2:
-            raise _bad("options.min_inliers", f"must be an integer >= 2, got {self.min_inliers!r}")
-        if not isinstance(self.use_sigma, bool):
-            raise _bad("options.use_sigma", f"must be a bool, got {self.use_sigma!r}")
         check_robust(self.robust, self.robust_scale, prefix="options.",
                      error=LocalizationInputError)
-        if self.unknown_label_policy not in UNKNOWN_LABEL_POLICIES:
-            raise _bad("options.unknown_label_policy",
-                       f"must be one of {UNKNOWN_LABEL_POLICIES}, "
-                       f"got {self.unknown_label_policy!r}")
-        if self.seed is not None and not _is_int(self.seed):
-            raise _bad("options.seed", f"must be an integer or None, got {self.seed!r}")
-        if self.time_budget_ms is not None and (
-                isinstance(self.time_budget_ms, bool)
-                or not isinstance(self.time_budget_ms, (int, float))
-                or not (self.time_budget_ms > 0) or math.isnan(self.time_budget_ms)):
-            raise _bad("options.time_budget_ms",
-                       f"must be > 0 or None, got {self.time_budget_ms!r}")
-        if not _is_int(self.max_iterations) or self.max_iterations < 1:
-            raise _bad("options.max_iterations",
-                       f"must be an integer >= 1, got {self.max_iterations!r}")
+        check_options({name: getattr(self, name) for name in _OPTION_RULES})
         # integral numbers (numpy ints too) are accepted and stored as Python ints
         for name in ("ransac_max_hypotheses", "min_inliers", "max_iterations", "seed"):
             value = getattr(self, name)
@@ -230,15 +226,6 @@ def _check_metric_options(metric: str, options: Mapping[str, Any]) -> None:
             residual(metric, *_PROBES, **{key: value})
         except (TypeError, ValueError) as exc:
             raise _bad(f"options.metric_options.{key}", str(exc)) from exc
-
-
-def _check_pose(field_name: str, value: object) -> np.ndarray:
-    try:
-        T = check_pose(value, field_name)
-    except GeometryError as exc:
-        raise LocalizationInputError(exc.problem, field=exc.field) from exc
-    T.setflags(write=False)
-    return T
 
 
 def check_covariance(field_name: str, value: object,
@@ -277,8 +264,12 @@ class PosePrior:
     covariance: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "world_from_camera",
-                           _check_pose("prior.world_from_camera", self.world_from_camera))
+        try:
+            T = check_pose(self.world_from_camera, "prior.world_from_camera")
+        except GeometryError as exc:
+            raise LocalizationInputError(exc.problem, field=exc.field) from exc
+        T.setflags(write=False)
+        object.__setattr__(self, "world_from_camera", T)
         if self.covariance is not None:
             object.__setattr__(self, "covariance",
                                check_covariance("prior.covariance", self.covariance))
