@@ -291,10 +291,10 @@ def test_budget_exhausted_at_the_refine_stage_is_reported(monkeypatch):
 def test_budget_counts_the_solving_threads_cpu_time_so_load_does_not_change_the_result(
         monkeypatch):
     """Issue 14 part 4: ``time_budget_ms`` counts CPU time of the solving thread. The same iou
-    solve with a budget of 10x its CPU cost gives the identical result quietly and while two
-    other threads of this process burn CPU holding the GIL: the solve then gets a small
-    fraction of the wall clock (measured: wall ~70x its quiet CPU time, so a wall-clock budget
-    of the same size would have cut it, which the test checks from the measured wall time),
+    solve with a budget of 10x its CPU cost gives the identical result quietly and while other
+    threads of this process burn CPU holding the GIL: the solve then gets a small fraction of
+    the wall clock (2 burners: wall 4x to 70x its quiet CPU time; burners are added until the
+    wall time exceeds the budget, so a wall-clock budget of the same size would have cut it),
     and its own CPU time grows too (GIL hand-offs: ~3-5x), hence the 10x budget. The
     wall-clock hard limit is widened here: it is the latency guarantee, tested in
     ``test_deadline_clocks``."""
@@ -325,17 +325,26 @@ def test_budget_counts_the_solving_threads_cpu_time_so_load_does_not_change_the_
         while not stop.is_set():
             x = (x * 31 + 7) % 1_000_003  # pure Python: holds the GIL
 
-    burners = [threading.Thread(target=burn, daemon=True) for _ in range(2)]
-    for t in burners:
-        t.start()
-    try:
-        busy, _, wall_busy = solve(opts)
-    finally:
-        stop.set()
+    # The GIL hand-offs vary from run to run (wall 4x to 70x the quiet CPU time with 2 burners):
+    # add burners until the busy solve's wall time exceeds the budget, i.e. until a wall-clock
+    # budget of the same size would have been binding.
+    results = [quiet]
+    for n_burners in (2, 4, 8, 16):
+        stop.clear()
+        burners = [threading.Thread(target=burn, daemon=True) for _ in range(n_burners)]
         for t in burners:
-            t.join()
-    assert wall_busy * 1e3 > budget_ms  # a wall-clock budget would have been binding
-    for r in (quiet, busy):
+            t.start()
+        try:
+            busy, _, wall_busy = solve(opts)
+        finally:
+            stop.set()
+            for t in burners:
+                t.join()
+        results.append(busy)
+        if wall_busy * 1e3 > budget_ms:
+            break
+    assert wall_busy * 1e3 > budget_ms, (n_burners, wall_busy, budget_ms)
+    for r in results:
         assert r.localized == ref.localized and r.reason == ref.reason
         assert r.refinement_status == ref.refinement_status
         np.testing.assert_array_equal(r.world_from_camera, ref.world_from_camera)
