@@ -258,19 +258,14 @@ def _freeze(value: Any) -> Any:
 def _nesting_depth(value: Any) -> int:
     """Nesting depth of JSON-like containers (a scalar is 0, ``{}`` is 1), without recursion;
     stops counting past ``LIMITS["max_metadata_depth"] + 1``."""
-    limit = int(LIMITS["max_metadata_depth"]) + 1
     depth, level = 0, [value]
-    while level and depth < limit:
-        children = []
-        for v in level:
-            if isinstance(v, Mapping):
-                children.extend(v.values())
-            elif isinstance(v, list | tuple):
-                children.extend(v)
-        if not children and not any(isinstance(v, Mapping | list | tuple) for v in level):
+    while depth <= LIMITS["max_metadata_depth"]:
+        level = [v.values() if isinstance(v, Mapping) else v for v in level
+                 if isinstance(v, Mapping | list | tuple)]
+        if not level:
             break
         depth += 1
-        level = children
+        level = [child for children in level for child in children]
     return depth
 
 

@@ -5,27 +5,12 @@
 (``maps/migrations``), run by :meth:`MapStore.migrate` (automatically at construction unless
 ``migrate=False``; idempotent, serialised between replicas on PostgreSQL by an advisory lock).
 
-Semantics
----------
-* A map has versions 1, 2, ...; each version is immutable and stays readable until the map is
-  deleted. ``create`` makes version 1, ``update`` makes version ``n + 1``.
-* Optimistic concurrency: ``update(map_id, scene_map, expected_version)`` succeeds only if
-  ``expected_version`` is the latest version; otherwise :class:`VersionConflict` (carrying
-  ``current_version``). Of several concurrent updates naming the same version exactly one wins:
-  the latest-version row is advanced by a conditional ``UPDATE ... WHERE latest_version = n``
-  and the new version row is inserted under the primary key ``(map_id, version)``, both in one
-  transaction (SQLite: ``BEGIN IMMEDIATE``; PostgreSQL: the row lock of the ``UPDATE``).
-* Atomicity: every write is one transaction, so a crash mid-write leaves nothing visible.
-* ``delete(map_id)`` deletes the map and **all** its versions. A later ``create`` with the same
-  id starts again at version 1 (its content hash differs unless the content is identical).
-* ``content_hash`` is :func:`maps.model.content_hash` of the version (sha256 of its canonical
-  JSON, geometric numbers rounded to 1e-12; it covers ``map_id`` and ``version``) — the HTTP
-  ETag. The stored content keeps every bit.
-* ``compiled(map_id, version)`` returns the solver arrays (:class:`maps.compiled.CompiledMap`),
-  held in the store's :class:`maps.cache.CompiledMapCache` (THE compiled-map cache) by
-  ``(map_id, version, content_hash)``: one small indexed query per call to resolve the version
-  (so replicas see each other's updates; skipped for the cache's ``resolve_ttl_s`` after a
-  resolution), no JSON parsing on a hit. Writes through the store invalidate at once.
+Semantics (docs/design/maps.md, "Map store"): versions 1, 2, ... of a map are immutable;
+``update`` succeeds only against the latest version (else :class:`VersionConflict`), each write
+is one transaction, ``delete`` removes every version. ``content_hash`` is
+:func:`maps.model.content_hash` (the ETag). ``compiled`` answers from the store's
+:class:`maps.cache.CompiledMapCache` (THE compiled-map cache); writes through the store
+invalidate it at once.
 """
 
 from __future__ import annotations
@@ -36,6 +21,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from datetime import UTC, datetime
+from functools import partialmethod
 from pathlib import Path
 from typing import Any
 
@@ -51,7 +37,7 @@ from sqlalchemy.exc import (
 )
 from sqlalchemy.pool import StaticPool
 
-from maps.cache import CompiledMapCache
+from maps.cache import CompiledMapCache, MapKey
 from maps.compiled import CompiledMap, compile_map
 from maps.errors import (
     MapAlreadyExists,
@@ -252,13 +238,11 @@ class MapStore:
 
     # ------------------------------------------------------------------ transactions
     @contextmanager
-    def _write(self) -> Iterator[Connection]:
-        """A write transaction (SQLite: ``BEGIN IMMEDIATE``, taking the write lock up front).
-
-        Connection-level database failures become :class:`StoreUnavailable`.
-        """
+    def _transaction(self, write: bool) -> Iterator[Connection]:
+        """A transaction (a write one on SQLite: ``BEGIN IMMEDIATE``, taking the write lock up
+        front). Connection-level database failures become :class:`StoreUnavailable`."""
         try:
-            with (self.engine.connect().execution_options(quadloc_write=True) as conn,
+            with (self.engine.connect().execution_options(quadloc_write=write) as conn,
                   conn.begin()):
                 yield conn
         except (OperationalError, InterfaceError) as exc:
@@ -268,17 +252,8 @@ class MapStore:
                 raise _unavailable(exc) from exc
             raise
 
-    @contextmanager
-    def _read(self) -> Iterator[Connection]:
-        try:
-            with self.engine.connect() as conn, conn.begin():
-                yield conn
-        except (OperationalError, InterfaceError) as exc:
-            raise _unavailable(exc) from exc
-        except ProgrammingError as exc:
-            if _schema_missing(exc):
-                raise _unavailable(exc) from exc
-            raise
+    _read = partialmethod(_transaction, False)
+    _write = partialmethod(_transaction, True)
 
     # ------------------------------------------------------------------ writes
     def create(self, scene_map: SceneMap) -> StoredMap:
@@ -320,11 +295,7 @@ class MapStore:
             raise MapValidationError([{"field": "map_id", "message":
                                        f"must be {map_id!r} (the map being updated), got "
                                        f"{scene_map.map_id!r}"}])
-        if isinstance(expected_version, bool) or not isinstance(expected_version, int):
-            raise ValueError(f"expected_version must be an integer, got {expected_version!r}")
-        if expected_version < 1:
-            raise ValueError(f"expected_version must be >= 1 (versions start at 1), got "
-                             f"{expected_version}")
+        _check_version(expected_version, "expected_version")
         new_version = expected_version + 1
         stored = replace(scene_map, version=new_version)
         text = canonical_json(stored)
@@ -389,15 +360,11 @@ class MapStore:
         return sa.select(*columns).where(versions_table.c.map_id == map_id,
                                          versions_table.c.version == version)
 
-    @staticmethod
-    def _check_version(version: int | None) -> None:
-        if version is not None and (isinstance(version, bool) or not isinstance(version, int)
-                                    or version < 1):
-            raise ValueError(f"version must be a positive integer or None, got {version!r}")
-
-    def get(self, map_id: str, version: int | None = None) -> StoredMap:
-        """The given version of a map (the latest if ``version`` is None). :class:`MapNotFound`."""
-        self._check_version(version)
+    def _load(self, map_id: str, version: int | None
+              ) -> tuple[MapKey, CompiledMap, datetime] | None:
+        """Resolve ``version`` (latest if None; :class:`MapNotFound`) and return its key, its
+        compiled map (from the cache, else parsed, compiled and cached) and its creation time;
+        None if the version was deleted (and maybe re-created) between the two reads."""
         v = versions_table.c
         with self._read() as conn:
             row = conn.execute(self._version_query(
@@ -405,17 +372,26 @@ class MapStore:
         if row is None:
             raise MapNotFound(map_id, version)
         key = (map_id, int(row.version), str(row.content_hash))
-        hit = self.cache.get(key)
-        if hit is not None:  # versions are immutable: reuse the parsed map (10,000 objects
-            return StoredMap(hit.scene_map, row.content_hash, _utc(row.created_at))  # ~3 s)
-        with self._read() as conn:
-            content = conn.execute(self._version_query(map_id, key[1], v.content,
-                                                       v.content_hash)).first()
-        if content is None or content.content_hash != key[2]:
-            raise MapNotFound(map_id, version)  # deleted (and maybe re-created) meanwhile
-        scene_map = scene_map_from_dict(json.loads(content.content), version=key[1])
-        self.cache.put(key, compile_map(scene_map))
-        return StoredMap(scene_map, row.content_hash, _utc(row.created_at))
+        compiled = self.cache.get(key)  # versions are immutable: reuse the parsed map
+        if compiled is None:  # (parsing 10,000 objects takes ~3 s)
+            with self._read() as conn:
+                content = conn.execute(self._version_query(map_id, key[1], v.content,
+                                                           v.content_hash)).first()
+            if content is None or content.content_hash != key[2]:
+                return None
+            compiled = compile_map(scene_map_from_dict(json.loads(content.content),
+                                                       version=key[1]))
+            self.cache.put(key, compiled)
+        return key, compiled, _utc(row.created_at)
+
+    def get(self, map_id: str, version: int | None = None) -> StoredMap:
+        """The given version of a map (the latest if ``version`` is None). :class:`MapNotFound`."""
+        _check_version(version)
+        loaded = self._load(map_id, version)
+        if loaded is None:
+            raise MapNotFound(map_id, version)
+        key, compiled, created_at = loaded
+        return StoredMap(compiled.scene_map, key[2], created_at)
 
     def versions(self, map_id: str) -> builtins.list[int]:
         """All stored version numbers of a map, ascending. :class:`MapNotFound`."""
@@ -456,35 +432,16 @@ class MapStore:
 
         Raises :class:`MapNotFound`.
         """
-        self._check_version(version)
+        _check_version(version)
         hit = self.cache.resolution(map_id, version)
         if hit is not None:
             return hit
         generation = self.cache.generation(map_id)
-        v = versions_table.c
-        for _attempt in range(3):
-            with self._read() as conn:
-                row = conn.execute(self._version_query(map_id, version, v.version,
-                                                       v.content_hash)).first()
-            if row is None:
-                raise MapNotFound(map_id, version)
-            key = (map_id, int(row.version), str(row.content_hash))
-            result = self.cache.get(key)
-            if result is not None:
-                self.cache.resolved_as(map_id, version, key, generation)
-                return result
-            try:
-                stored = self.get(map_id, key[1])  # parses, compiles and caches the version
-            except MapNotFound:
-                continue  # deleted between the two reads: resolve again
-            if stored.content_hash != key[2]:
-                continue  # deleted and re-created between the two reads: resolve again
-            result = self.cache.get(key)
-            if result is None:  # evicted at once by other maps: compile this one again
-                result = compile_map(stored.scene_map)
-                self.cache.put(key, result)
-            self.cache.resolved_as(map_id, version, key, generation)
-            return result
+        for _attempt in range(3):  # a None: deleted between the two reads, resolve again
+            loaded = self._load(map_id, version)
+            if loaded is not None:
+                self.cache.resolved_as(map_id, version, loaded[0], generation)
+                return loaded[1]
         raise MapStoreError(f"map {map_id!r} kept changing while being loaded")
 
 
@@ -501,6 +458,15 @@ def _unavailable(exc: Exception) -> StoreUnavailable:
         return SchemaNotMigrated(f"database schema not migrated: {exc.__class__.__name__}: "
                                  f"{first}")
     return StoreUnavailable(f"database unreachable or busy: {exc.__class__.__name__}: {first}")
+
+
+def _check_version(version: int | None, name: str = "version") -> None:
+    """``ValueError`` naming ``name`` unless ``version`` is None (the latest; not for
+    ``expected_version``) or an integer >= 1 (no version below 1 ever exists)."""
+    if (version is None and name == "version") or (
+            not isinstance(version, bool) and isinstance(version, int) and version >= 1):
+        return
+    raise ValueError(f"{name} must be an integer >= 1 (versions start at 1), got {version!r}")
 
 
 def _check_scene_map(scene_map: object) -> None:

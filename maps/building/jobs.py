@@ -15,11 +15,13 @@ from __future__ import annotations
 import json
 import uuid
 from dataclasses import dataclass
-from datetime import UTC, datetime, timedelta
+from datetime import datetime, timedelta
 from typing import Any
 
 import sqlalchemy as sa
 from sqlalchemy.engine import Engine
+
+from maps.store import _now, _utc
 
 __all__ = ["BuildJob", "JobNotFoundError", "JobStore", "jobs_table"]
 
@@ -67,14 +69,6 @@ class BuildJob:
     updated_at: datetime
 
 
-def _now() -> datetime:
-    return datetime.now(UTC)
-
-
-def _utc(value: datetime) -> datetime:
-    return value if value.tzinfo is not None else value.replace(tzinfo=UTC)
-
-
 class JobStore:
     """Build-job rows over the map store's engine (``MapStore.engine``)."""
 
@@ -104,42 +98,36 @@ class JobStore:
             report=json.loads(m["report"]) if m["report"] else None,
             created_at=_utc(m["created_at"]), updated_at=_utc(m["updated_at"]))
 
-    def _update(self, job_id: str, only_active: bool = True, **values: Any) -> bool:
-        stmt = jobs_table.update().where(jobs_table.c.job_id == job_id)
-        if only_active:
-            stmt = stmt.where(jobs_table.c.status.in_(ACTIVE))
+    def _update(self, *where: Any, **values: Any) -> int:
+        """Set ``values`` (and the heartbeat ``updated_at``) on the ACTIVE jobs matching
+        ``where``; returns how many."""
         with self.engine.begin() as conn:
-            return conn.execute(stmt.values(updated_at=_now(), **values)).rowcount == 1
+            return conn.execute(jobs_table.update().where(jobs_table.c.status.in_(ACTIVE), *where)
+                                .values(updated_at=_now(), **values)).rowcount
 
     def progress(self, job_id: str, stage: str, percent: float, objects_found: int) -> bool:
         """Heartbeat + progress of a running job; False if the job is no longer active (e.g.
         marked failed as stale): the runner should stop."""
-        return self._update(job_id, status="running", stage=stage,
+        return self._update(jobs_table.c.job_id == job_id, status="running", stage=stage,
                             percent=float(min(100.0, max(0.0, percent))),
-                            objects_found=int(objects_found))
+                            objects_found=int(objects_found)) == 1
 
     def heartbeat(self, job_ids: list[str]) -> int:
         """Refresh the heartbeat (``updated_at``) of the listed jobs that are still active
         (e.g. queued behind a running build on the same replica); returns how many."""
-        if not job_ids:
-            return 0
-        with self.engine.begin() as conn:
-            return conn.execute(
-                jobs_table.update()
-                .where(jobs_table.c.job_id.in_(job_ids), jobs_table.c.status.in_(ACTIVE))
-                .values(updated_at=_now())).rowcount
+        return self._update(jobs_table.c.job_id.in_(job_ids)) if job_ids else 0
 
     def succeed(self, job_id: str, map_version: int, report: dict[str, Any],
                 objects_found: int) -> bool:
-        return self._update(job_id, status="succeeded", stage="done", percent=100.0,
-                            map_version=map_version, objects_found=objects_found,
-                            report=json.dumps(report))
+        return self._update(jobs_table.c.job_id == job_id, status="succeeded", stage="done",
+                            percent=100.0, map_version=map_version, objects_found=objects_found,
+                            report=json.dumps(report)) == 1
 
     def fail(self, job_id: str, reason: str, detail: str,
              report: dict[str, Any] | None = None) -> bool:
-        return self._update(job_id, status="failed", stage="failed",
+        return self._update(jobs_table.c.job_id == job_id, status="failed", stage="failed",
                             error=json.dumps({"reason": reason, "detail": detail}),
-                            report=None if report is None else json.dumps(report))
+                            report=None if report is None else json.dumps(report)) == 1
 
     def fail_stale(self, stale_after_s: float) -> int:
         """Mark queued/running jobs without a heartbeat for ``stale_after_s`` as failed."""
@@ -147,9 +135,5 @@ class JobStore:
         err = json.dumps({"reason": "runner_lost",
                           "detail": f"no progress for {stale_after_s:g} s: the replica running "
                                     f"the job restarted or died; submit the recording again"})
-        with self.engine.begin() as conn:
-            return conn.execute(
-                jobs_table.update()
-                .where(jobs_table.c.status.in_(ACTIVE), jobs_table.c.updated_at < cutoff)
-                .values(status="failed", stage="failed", error=err, updated_at=_now())
-            ).rowcount
+        return self._update(jobs_table.c.updated_at < cutoff, status="failed", stage="failed",
+                            error=err)

@@ -1,33 +1,13 @@
 """A recording: posed frames with object detections, the input of map building.
 
-JSON document (what ``POST /v1/maps:build``, ``quadloc maps build`` and the SDK send)::
-
-    {
-      "intrinsics": {"fx": 585, "fy": 585, "cx": 320, "cy": 240, "width": 640, "height": 480},
-      "frames": [
-        {"frame_id": "0001",
-         "world_from_camera": {"quaternion_wxyz": [1, 0, 0, 0], "translation_m": [0, 0, 0]},
-         "detections": [
-            {"label": "TV", "ellipse": {"cx": 300, "cy": 200, "a": 80, "b": 40, "angle": 0.1},
-             "sigma": 0.02, "track_id": "t7"},
-            {"label": "Chair", "box": [10, 20, 110, 220]}]}
-      ],
-      "name": "My room", "up_axis": [0, 0, 1],
-      "size_priors": {"Chair": {"semi_axis_m": 0.4, "log_sigma": 0.5}},
-      "refine_camera_poses": true,
-      "odometry_noise": {"translation_m_per_sqrt_m": 0.01, "rotation_rad_per_sqrt_m": 0.005}
-    }
-
-Conventions: ``world_from_camera`` is the camera's pose in the app's world frame (its own
-SLAM/VIO), camera axes OpenCV (+X right, +Y down, +Z forward; an ARKit/ARCore pose must be
-right-multiplied by ``diag(1, -1, -1, 1)`` first), translation in metres, quaternion scalar
-first. Ellipses: centre px (origin top-left pixel corner), SEMI-axes px, angle radians;
-boxes ``[xmin, ymin, xmax, ymax]`` px become their inscribed axis-aligned ellipse. ``sigma``
-is the detector's uncertainty as in localize (factor std ``sqrt(sigma)``). ``track_id``: the
-app's tracker id; detections that carry one are grouped by it (per label) instead of being
-associated geometrically. ``refine_camera_poses`` (default true): refine the camera poses
-too, tied by the app's relative poses with the noise ``odometry_noise`` (:class:`OdometryNoise`,
-every field optional).
+JSON document (what ``POST /v1/maps:build``, ``quadloc maps build`` and the SDK send):
+docs/map_building.md, "The recording". Conventions: ``world_from_camera`` is the camera's pose
+in the app's world frame (camera axes OpenCV), translation in metres, quaternion scalar first;
+ellipses: centre px (origin top-left pixel corner), SEMI-axes px, angle radians; boxes
+``[xmin, ymin, xmax, ymax]`` px become their inscribed axis-aligned ellipse; ``sigma`` as in
+localize (factor std ``sqrt(sigma)``); detections with a ``track_id`` are grouped by it (per
+label); ``refine_camera_poses`` (default true) refines the camera poses too, tied by the app's
+relative poses with the noise ``odometry_noise`` (:class:`OdometryNoise`).
 
 :func:`parse_recording` validates everything and raises :class:`RecordingError` listing every
 problem as ``{"field": "frames[3].detections[0].ellipse.a", "message": ...}``.
