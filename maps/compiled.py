@@ -25,8 +25,23 @@ def _frozen(array: np.ndarray) -> np.ndarray:
     return array
 
 
+class MapVersionView:
+    """``map_id`` and ``version`` of a class holding a ``scene_map`` (a stored or compiled
+    version of a map)."""
+
+    scene_map: SceneMap
+
+    @property
+    def map_id(self) -> str:
+        return self.scene_map.map_id
+
+    @property
+    def version(self) -> int:
+        return self.scene_map.version
+
+
 @dataclass(frozen=True, eq=False)
-class CompiledMap:
+class CompiledMap(MapVersionView):
     """Immutable solver view of a :class:`SceneMap` (arrays are read-only).
 
     Attributes:
@@ -53,14 +68,6 @@ class CompiledMap:
     shape_matrices: np.ndarray
     dual_quadrics: np.ndarray
     indices_by_category: dict[str, np.ndarray]
-
-    @property
-    def map_id(self) -> str:
-        return self.scene_map.map_id
-
-    @property
-    def version(self) -> int:
-        return self.scene_map.version
 
     def __len__(self) -> int:
         return len(self.object_ids)
@@ -115,11 +122,8 @@ def compile_map(scene_map: SceneMap | CompiledMap) -> CompiledMap:
     dual_quadrics[:, 3, 3] = -1.0
     categories = tuple(o.category for o in objects)
     cats = np.array(categories, dtype=object)
-    indices_by_category: dict[str, np.ndarray] = {}
-    for category in dict.fromkeys(categories):
-        idx = np.flatnonzero(cats == category).astype(np.intp)
-        idx.setflags(write=False)
-        indices_by_category[category] = idx
+    indices_by_category = {c: _frozen(np.flatnonzero(cats == c).astype(np.intp))
+                           for c in dict.fromkeys(categories)}
     compiled = CompiledMap(
         scene_map=scene_map,
         object_ids=tuple(o.object_id for o in objects),

@@ -38,7 +38,7 @@ from sqlalchemy.exc import (
 from sqlalchemy.pool import StaticPool
 
 from maps.cache import CompiledMapCache, MapKey
-from maps.compiled import CompiledMap, compile_map
+from maps.compiled import CompiledMap, MapVersionView, compile_map
 from maps.errors import (
     MapAlreadyExists,
     MapNotFound,
@@ -104,20 +104,12 @@ versions_table = sa.Table(
 
 
 @dataclass(frozen=True)
-class StoredMap:
+class StoredMap(MapVersionView):
     """One stored version: the map (with its ``version``), its content hash, creation time (UTC)."""
 
     scene_map: SceneMap
     content_hash: str
     created_at: datetime
-
-    @property
-    def map_id(self) -> str:
-        return self.scene_map.map_id
-
-    @property
-    def version(self) -> int:
-        return self.scene_map.version
 
 
 @dataclass(frozen=True)

@@ -220,11 +220,14 @@ def _reconstruct(idx: Sequence[int], obs: Sequence[Observation], T_wc: np.ndarra
     return Ellipsoid(x, np.full(3, r))
 
 
-def _projection(ell: Ellipsoid, T_wc: np.ndarray, camera: Camera) -> Ellipse | None:
+def _projected_iou(ell: Ellipsoid, T_wc: np.ndarray, camera: Camera, detection: Ellipse
+                   ) -> float:
+    """IoU of ``detection`` with the projection of ``ell`` from ``T_wc`` (0 if none)."""
     try:
-        return project_ellipsoid(camera, invert_pose(T_wc), ell)
+        projection = project_ellipsoid(camera, invert_pose(T_wc), ell)
     except ValueError:
-        return None
+        return 0.0
+    return ellipse_iou(projection, detection)
 
 
 def associate(
@@ -271,59 +274,46 @@ def associate(
             o, d, rho = _rays(sub, camera, T_wc)
             frames = np.array([s.frame for s in sub])
             clusters = _geometric_clusters(o, d, rho, frames, opt, rng, tick)
-            assigned = np.zeros(len(un), dtype=bool)
-            for members in clusters:
-                assigned[members] = True
+            assigned: set[int] = set()  # observation indices in an object of this label
             label_objs = []
             for members in clusters:
                 glob = [int(un[m]) for m in members]
                 tick()
                 ell = _reconstruct(glob, observations, T_wc, camera, opt)
-                if ell is None:
-                    assigned[members] = False
-                    continue
-                label_objs.append([glob, ell])
+                if ell is not None:
+                    label_objs.append((glob, ell))
+                    assigned.update(glob)
             # verification: drop poor fits, recruit good unassigned ones, reconstruct again
-            for entry in label_objs:
-                glob, ell = entry
-                ious = {}
-                for k in glob:
-                    p = _projection(ell, T_wc[observations[k].frame], camera)
-                    ious[k] = ellipse_iou(p, observations[k].ellipse) if p is not None else 0.0
+            for glob, ell in label_objs:
+                ious = {k: _projected_iou(ell, T_wc[observations[k].frame], camera,
+                                          observations[k].ellipse) for k in glob}
                 keep = [k for k in glob if ious[k] >= opt.min_iou]
                 dropped = set(glob) - set(keep)
-                for k in dropped:
-                    assigned[np.flatnonzero(un == k)] = False
+                assigned -= dropped
                 used_frames = {observations[k].frame for k in keep}
                 best_new: dict[int, tuple[float, int]] = {}
-                for m in np.flatnonzero(~assigned):
-                    k = int(un[m])
-                    if k in dropped:
-                        continue
+                for k in untracked:
                     fr = observations[k].frame
-                    if fr in used_frames:
+                    if k in assigned or k in dropped or fr in used_frames:
                         continue
-                    p = _projection(ell, T_wc[fr], camera)
-                    if p is None:
-                        continue
-                    iou = ellipse_iou(p, observations[k].ellipse)
+                    iou = _projected_iou(ell, T_wc[fr], camera, observations[k].ellipse)
                     if iou >= opt.recruit_iou and iou > best_new.get(fr, (0.0, -1))[0]:
                         best_new[fr] = (iou, k)
                 for iou, k in best_new.values():
                     keep.append(k)
                     ious[k] = iou
-                    assigned[np.flatnonzero(un == k)] = True
+                    assigned.add(k)
                 if len(keep) < opt.min_views:
-                    for k in keep:
-                        assigned[np.flatnonzero(un == k)] = False
+                    assigned -= set(keep)
                     continue
                 if set(keep) != set(glob):
                     ell2 = _reconstruct(sorted(keep), observations, T_wc, camera, opt)
                     ell = ell2 if ell2 is not None else ell
                 objects.append(ObjectHypothesis(label, sorted(keep), ell, "geometric",
                                                 {k: ious[k] for k in keep}))
-            for m in np.flatnonzero(~assigned):
-                rejected[int(un[m])] = "fits_no_object"
+            for k in untracked:
+                if k not in assigned:
+                    rejected[k] = "fits_no_object"
         if progress is not None:
             progress(label, (li + 1) / len(labels))
     objects = _merge_duplicates(objects, observations, T_wc, camera, opt, tick)
