@@ -96,10 +96,9 @@ def compile_map(scene_map: SceneMap | CompiledMap) -> CompiledMap:
     """The solver's per-object arrays of ``scene_map`` (vectorised, O(N)); a
     :class:`CompiledMap` is returned as is.
 
-    Computed once per map object: the result is memoised on the (immutable) ``SceneMap``
-    itself, so every caller holding the same map shares one ``CompiledMap``. This is not a
-    cache (nothing to evict or invalidate: it lives and dies with the map); the process's one
-    cache of compiled map *versions* is :class:`maps.cache.CompiledMapCache`.
+    Memoised on the (immutable) ``SceneMap`` itself: it lives and dies with the map, nothing to
+    evict or invalidate (the cache of compiled map *versions* is
+    :class:`maps.cache.CompiledMapCache`).
     """
     if isinstance(scene_map, CompiledMap):
         return scene_map
@@ -124,17 +123,8 @@ def compile_map(scene_map: SceneMap | CompiledMap) -> CompiledMap:
     cats = np.array(categories, dtype=object)
     indices_by_category = {c: _frozen(np.flatnonzero(cats == c).astype(np.intp))
                            for c in dict.fromkeys(categories)}
-    compiled = CompiledMap(
-        scene_map=scene_map,
-        object_ids=tuple(o.object_id for o in objects),
-        categories=categories,
-        ellipsoids=ellipsoids,
-        centers=_frozen(centers),
-        axes=_frozen(axes),
-        rotations=_frozen(rotations),
-        shape_matrices=_frozen(shape_matrices),
-        dual_quadrics=_frozen(dual_quadrics),
-        indices_by_category=indices_by_category,
-    )
+    compiled = CompiledMap(scene_map, tuple(o.object_id for o in objects), categories, ellipsoids,
+                           *map(_frozen, (centers, axes, rotations, shape_matrices, dual_quadrics)),
+                           indices_by_category)
     object.__setattr__(scene_map, _MEMO, compiled)
     return compiled

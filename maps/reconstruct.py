@@ -63,13 +63,10 @@ MIN_RAY_ANGLE_DEG = 2.0
 #: Default number of points sampled on each observed ellipse for the refinement residual.
 SAMPLES_PER_VIEW = 16
 #: Smallest accepted ratio of the smallest to the largest semi-axis (1:100; the flattest Chess
-#: object is 1:3.5): flatter results are reconstructions collapsed along an axis the views do
-#: not constrain (``degenerate_shape``).
+#: object is 1:3.5): flatter results are ``degenerate_shape``.
 MIN_AXIS_RATIO = 0.01
 #: Largest accepted RMS of the (unweighted) level residual ``Phi_pred - 1`` at the observed
-#: contours. 1 means the observed contour points lie, on average, at the predicted ellipse's
-#: centre level or twice its boundary level: no ellipse of the views is reproduced
-#: (``inconsistent_views``). Noisy views of one object stay below 0.2 on the bench.
+#: contours, else ``inconsistent_views`` (noisy views of one object stay below 0.2 on the bench).
 MAX_RMS_LEVEL_RESIDUAL = 1.0
 
 _TRIU4 = np.triu_indices(4)
@@ -356,11 +353,6 @@ def reconstruct_ellipsoid(
         log_axes_prior_sigma: if given, a Gaussian prior (this sigma, in log metres) pulls the
             log semi-axes towards the apparent size ``median(depth * sqrt(ab) / f)``: keeps
             narrow-baseline reconstructions from collapsing to flat ellipsoids (biased, opt-in).
-
-    The result must be a plausible shape (:func:`degenerate_shape_reason`: semi-axes within
-    the map limits, not flatter than ``MIN_AXIS_RATIO``), else ``degenerate_shape``: the views
-    do not constrain the shape (typically a narrow baseline); and it must reproduce the views
-    (RMS level residual at most ``MAX_RMS_LEVEL_RESIDUAL``), else ``inconsistent_views``.
 
     Raises ``ReconstructionError`` (``reason`` in ``too_few_views``, ``bad_input``,
     ``near_parallel_rays``, ``not_an_ellipsoid``, ``not_in_front``, ``refinement_failed``,

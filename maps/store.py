@@ -387,13 +387,7 @@ class MapStore:
 
     def versions(self, map_id: str) -> builtins.list[int]:
         """All stored version numbers of a map, ascending. :class:`MapNotFound`."""
-        with self._read() as conn:
-            rows = conn.execute(sa.select(versions_table.c.version)
-                                .where(versions_table.c.map_id == map_id)
-                                .order_by(versions_table.c.version)).scalars().all()
-        if not rows:
-            raise MapNotFound(map_id)
-        return [int(r) for r in rows]
+        return [info.version for info in self.version_history(map_id)]
 
     def version_history(self, map_id: str) -> builtins.list[MapVersionInfo]:
         """Every stored version of a map with its content hash and creation time, ascending.

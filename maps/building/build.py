@@ -28,8 +28,7 @@ Progress = Callable[[str, float, int], None]
 #: Objects with an unconstrained axis need at least this many views to enter the map.
 MIN_VIEWS_UNCONSTRAINED = 15
 #: Objects whose centre std (quality report) exceeds this (m) are left out of the map; None
-#: keeps them (the default: on the Chess bench, leaving out the TVs, whose centre std is
-#: 0.6-0.9 m, did not change relocalization at 10 cm and lost their detections).
+#: keeps them (the default; why: docs/design/maps.md, "Build jobs").
 MAX_CENTER_STD_M: float | None = None
 
 

@@ -1,13 +1,10 @@
 """Map-building jobs as rows of the map store's database (table ``quadloc_build_jobs``, created by
 the Alembic migration ``0002_build_jobs``).
 
-A job is ``queued`` -> ``running`` -> ``succeeded`` | ``failed``. An active job's row is its
-heartbeat: the runner updates ``updated_at`` with every progress report of the running job (at
-least every 2 s), and the queued jobs' rows with it (:meth:`JobStore.heartbeat`). A job
-that is queued or running but whose heartbeat is older than ``stale_after_s`` lost its runner (the
-replica restarted or died): :meth:`JobStore.fail_stale` marks it ``failed`` with the error
-``runner_lost``; the API calls it at startup and before answering a job's status, so no job stays
-"running" forever. Times are UTC.
+A job is ``queued`` -> ``running`` -> ``succeeded`` | ``failed``; an active job's row is its
+heartbeat (``updated_at``), and :meth:`JobStore.fail_stale` fails the jobs whose heartbeat is
+older than ``stale_after_s`` with ``runner_lost`` (docs/design/maps.md, "Build jobs"). Times
+are UTC.
 """
 
 from __future__ import annotations
