@@ -47,6 +47,7 @@ __all__ = [
     "ReconstructionError",
     "ReconstructionResult",
     "build_scene_map",
+    "canonical_ellipsoid",
     "contour_samples",
     "degenerate_shape_reason",
     "dual_quadric_jacobians",
@@ -236,11 +237,19 @@ def ellipsoid_from_dual_quadric(dual_quadric: np.ndarray) -> Ellipsoid:
         raise ReconstructionError(
             "not_an_ellipsoid", f"the estimated quadric is not an ellipsoid (shape eigenvalues "
                                 f"{np.array2string(lam, precision=3)} m^2 are not all positive)")
-    order = np.argsort(lam)[::-1]
-    R = vec[:, order]
+    return canonical_ellipsoid(vec, center, np.sqrt(lam))
+
+
+def canonical_ellipsoid(rotation: np.ndarray, center: np.ndarray, axes: np.ndarray
+                        ) -> Ellipsoid:
+    """The ellipsoid with its semi-axes (m) in descending order, the rotation's columns
+    permuted alike and the last one negated if needed for det +1. Semi-axes that underflowed
+    are kept tiny (1e-300), not zero: callers check them against the map limits."""
+    order = np.argsort(axes)[::-1]
+    R = rotation[:, order]
     if np.linalg.det(R) < 0:
         R[:, 2] = -R[:, 2]
-    return Ellipsoid(center, np.sqrt(lam[order]), R)
+    return Ellipsoid(center, np.maximum(axes[order], 1e-300), R)
 
 
 # --------------------------------------------------------------------------- refinement

@@ -35,7 +35,7 @@ from factors.pose_factors import DEFAULT_ROBUST_SCALE, pose3
 from factors.pose_residuals import DEFAULT_MIN_DEPTH_MARGIN
 from maps.building.association import touches_border
 from maps.building.recording import Observation, OdometryNoise, SizePrior
-from maps.reconstruct import _max_ray_angle_deg
+from maps.reconstruct import _max_ray_angle_deg, canonical_ellipsoid
 
 __all__ = ["JointResult", "ObjectQuality", "refine_jointly"]
 
@@ -108,17 +108,6 @@ def _log_axis_std(T_cw: np.ndarray, R: np.ndarray, center: np.ndarray, axes: np.
     except np.linalg.LinAlgError:
         std, center_std = np.full(3, np.inf), math.inf
     return std, r, ok, center_std
-
-
-def _canonical(R: np.ndarray, center: np.ndarray, axes: np.ndarray) -> Ellipsoid:
-    """The ellipsoid with its semi-axes in descending order (rotation columns permuted alike,
-    handedness kept). Semi-axes that underflowed are kept tiny, not zero: the caller checks
-    them against the map limits (a collapsed axis is reported, not raised)."""
-    order = np.argsort(axes)[::-1]
-    R2 = R[:, order].copy()
-    if np.linalg.det(R2) < 0:
-        R2[:, 2] = -R2[:, 2]
-    return Ellipsoid(center, np.maximum(axes[order], 1e-300), R2)
 
 
 def _floor_factor(key: int, floor: float, sigma: float) -> gtsam.CustomFactor:
@@ -309,8 +298,7 @@ def refine_jointly(
         R = pose.rotation().matrix()
         c = np.asarray(pose.translation(), dtype=float)
         axes = np.exp(result.atVector(L[k]))
-        # canonical form: descending semi-axes, proper rotation
-        ell = _canonical(R, c, axes)
+        ell = canonical_ellipsoid(R, c, axes)
         ells.append(ell)
         frames_k = [observations[i].frame for i in idx]
         stacked = stack_samples([samples[i] for i in idx])
