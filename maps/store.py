@@ -75,10 +75,11 @@ _PG_MIGRATION_LOCK = 0x51_4C_4F_43_4D_41_50  # "QLOCMAP"
 #: SQLite busy timeout (seconds): how long a writer waits for another writer's lock.
 SQLITE_BUSY_TIMEOUT_S = 30.0
 
-# Table descriptions for building queries ONLY. The schema itself belongs to the Alembic
-# migrations (maps/migrations/versions/); these declarations mirror it, CHECK constraints
-# included, and are never used to create tables (no metadata.create_all). A schema change is a
-# new migration plus the matching edit here (tests/test_maps_store.py compares the two).
+# Table descriptions for building queries ONLY (the map store's and the build jobs'). The schema
+# itself belongs to the Alembic migrations (maps/migrations/versions/); these declarations mirror
+# it, CHECK constraints included, and are never used to create tables (no metadata.create_all).
+# A schema change is a new migration plus the matching edit here (tests/test_maps_store.py and
+# tests/test_api_build.py compare the two).
 _metadata = sa.MetaData()
 maps_table = sa.Table(
     "quadloc_maps",
@@ -100,6 +101,27 @@ versions_table = sa.Table(
     sa.Column("content_hash", sa.String(64), nullable=False),
     sa.Column("created_at", sa.DateTime(timezone=True), nullable=False),
     sa.CheckConstraint("version >= 1", name="ck_quadloc_map_versions_version"),
+)
+
+
+#: The build jobs of :mod:`maps.building.jobs` (migration ``0002_build_jobs``).
+jobs_table = sa.Table(
+    "quadloc_build_jobs",
+    _metadata,
+    sa.Column("job_id", sa.String(36), primary_key=True),
+    sa.Column("map_id", sa.String(128), nullable=False),
+    sa.Column("base_version", sa.Integer, nullable=True),
+    sa.Column("status", sa.String(16), nullable=False),
+    sa.Column("stage", sa.String(32), nullable=False),
+    sa.Column("percent", sa.Float, nullable=False),
+    sa.Column("objects_found", sa.Integer, nullable=False),
+    sa.Column("map_version", sa.Integer, nullable=True),
+    sa.Column("error", sa.Text, nullable=True),
+    sa.Column("report", sa.Text, nullable=True),
+    sa.Column("created_at", sa.DateTime(timezone=True), nullable=False),
+    sa.Column("updated_at", sa.DateTime(timezone=True), nullable=False),
+    sa.CheckConstraint("status IN ('queued', 'running', 'succeeded', 'failed')",
+                       name="ck_quadloc_build_jobs_status"),
 )
 
 

@@ -18,30 +18,9 @@ from typing import Any
 import sqlalchemy as sa
 from sqlalchemy.engine import Engine
 
-from maps.store import _now, _utc
+from maps.store import _now, _utc, jobs_table
 
 __all__ = ["BuildJob", "JobNotFoundError", "JobStore", "jobs_table"]
-
-_metadata = sa.MetaData()
-#: Query description only; the schema belongs to the migration (a test compares them).
-jobs_table = sa.Table(
-    "quadloc_build_jobs",
-    _metadata,
-    sa.Column("job_id", sa.String(36), primary_key=True),
-    sa.Column("map_id", sa.String(128), nullable=False),
-    sa.Column("base_version", sa.Integer, nullable=True),
-    sa.Column("status", sa.String(16), nullable=False),
-    sa.Column("stage", sa.String(32), nullable=False),
-    sa.Column("percent", sa.Float, nullable=False),
-    sa.Column("objects_found", sa.Integer, nullable=False),
-    sa.Column("map_version", sa.Integer, nullable=True),
-    sa.Column("error", sa.Text, nullable=True),
-    sa.Column("report", sa.Text, nullable=True),
-    sa.Column("created_at", sa.DateTime(timezone=True), nullable=False),
-    sa.Column("updated_at", sa.DateTime(timezone=True), nullable=False),
-    sa.CheckConstraint("status IN ('queued', 'running', 'succeeded', 'failed')",
-                       name="ck_quadloc_build_jobs_status"),
-)
 
 ACTIVE = ("queued", "running")
 
