@@ -630,7 +630,7 @@ def build_scene_map(
     objects = []
     for object_id, obs in views.items():
         votes = labels[object_id]
-        label = max(votes, key=lambda k: (votes[k], -list(votes).index(k)))
+        label = votes.most_common(1)[0][0]  # ties: the label seen first
         if len(votes) > 1:
             report.label_disagreements[object_id] = dict(votes)
         try:

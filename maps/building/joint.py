@@ -18,7 +18,7 @@ import itertools
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import gtsam
 import numpy as np
@@ -125,6 +125,7 @@ def _floor_factor(key: int, floor: float, sigma: float) -> gtsam.CustomFactor:
     return gtsam.CustomFactor(gtsam.noiseModel.Isotropic.Sigma(3, sigma), [key], error_fn)
 
 
+@dataclass
 class _Ticker:
     """Counts factor evaluations and reports fractional LM progress at most every
     ``interval_s`` from inside an iteration (one iteration of a large graph, e.g. with camera
@@ -132,15 +133,13 @@ class _Ticker:
     the evaluations so far over about three per factor and iteration (a linearisation and two
     error evaluations), capped below 1."""
 
-    def __init__(self, progress: Callable[[float, float], None] | None,
-                 interval_s: float = 0.5) -> None:
-        self.progress = progress
-        self.interval_s = interval_s
-        self.n_factors = 1
-        self.iteration = 0
-        self.error = math.nan
-        self.count = 0
-        self.last = time.monotonic()
+    progress: Callable[[float, float], None] | None
+    interval_s: float = 0.5
+    n_factors: int = 1
+    iteration: int = 0
+    error: float = math.nan
+    count: int = 0
+    last: float = field(default_factory=time.monotonic)
 
     def new_iteration(self, iteration: int, error: float) -> None:
         self.iteration, self.error, self.count = iteration, error, 0
