@@ -659,19 +659,14 @@ def _canonical_text(document: dict[str, Any]) -> str:
 HASH_DECIMALS = 12
 
 
-def _hash_numbers(values: Sequence[float]) -> list[float]:
-    return [round(float(v), HASH_DECIMALS) + 0.0 for v in values]  # + 0.0: -0.0 -> 0.0
-
-
 def content_hash(scene_map: SceneMap) -> str:
     """Hex sha256 of :func:`canonical_json` with the geometric numbers rounded to
     :data:`HASH_DECIMALS` decimals (the HTTP ETag of a map version; it covers ``map_id`` and
     ``version``: two versions never share a hash)."""
     doc = scene_map_to_dict(scene_map)
-    doc["up_axis"] = _hash_numbers(doc["up_axis"])
-    for obj in doc["objects"]:
-        for key in ("center", "axes", "quaternion_wxyz"):
-            obj[key] = _hash_numbers(obj[key])
+    for part, key in [(doc, "up_axis"), *((o, k) for o in doc["objects"]
+                                          for k in ("center", "axes", "quaternion_wxyz"))]:
+        part[key] = [round(float(v), HASH_DECIMALS) + 0.0 for v in part[key]]  # -0.0 -> 0.0
     return hashlib.sha256(_canonical_text(doc).encode("utf-8")).hexdigest()
 
 
