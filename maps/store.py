@@ -102,8 +102,6 @@ versions_table = sa.Table(
     sa.Column("created_at", sa.DateTime(timezone=True), nullable=False),
     sa.CheckConstraint("version >= 1", name="ck_quadloc_map_versions_version"),
 )
-
-
 #: The build jobs of :mod:`maps.building.jobs` (migration ``0002_build_jobs``).
 jobs_table = sa.Table(
     "quadloc_build_jobs",
