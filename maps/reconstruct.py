@@ -37,6 +37,7 @@ from factors.geometry import (
     Ellipsoid,
     ellipsoid_depth_margins,
     invert_pose,
+    pose_matrix,
 )
 from maps.model import LIMITS, MapObject, SceneMap
 
@@ -396,13 +397,10 @@ def reconstruct_ellipsoid(
     focal = np.array([math.sqrt(c.fx * c.fy) for c in cams])
     scale = float(np.median(depth * size / focal))
     # Conditioning: world X = scale * X' + X0; image x' = (x - c_e) / sqrt(ab).
-    T = np.eye(4)
-    T[:3, :3] *= scale
-    T[:3, 3] = X0
+    T = pose_matrix(scale * np.eye(3), X0)
     H = np.zeros((len(ells), 3, 3))
     H[:, 0, 0] = H[:, 1, 1] = 1.0 / size
-    H[:, 0, 2] = -np.array([e.cx for e in ells]) / size
-    H[:, 1, 2] = -np.array([e.cy for e in ells]) / size
+    H[:, :2, 2] = -np.array([[e.cx, e.cy] for e in ells]) / size[:, None]
     H[:, 2, 2] = 1.0
     C = np.array([e.dual_conic() for e in ells])
     Cn = np.einsum("nij,njk,nlk->nil", H, C, H)

@@ -321,17 +321,11 @@ class MapStore:
                            maps_table.c.latest_version == expected_version)
                     .values(latest_version=new_version, name=stored.name, updated_at=now))
                 if result.rowcount != 1:
-                    current = conn.execute(sa.select(maps_table.c.latest_version).where(
-                        maps_table.c.map_id == map_id)).scalar_one_or_none()
-                    if current is None:
-                        raise MapNotFound(map_id)
-                    raise VersionConflict(map_id, expected_version, int(current))
+                    raise _refusal(conn, map_id, expected_version)
                 self._insert_version(conn, map_id, new_version, text, digest, now)
         except IntegrityError as exc:  # (map_id, version) taken: another writer won
-            current = self._latest_version(map_id)
-            if current is None:
-                raise MapNotFound(map_id) from exc
-            raise VersionConflict(map_id, expected_version, current) from exc
+            with self._read() as conn:
+                raise _refusal(conn, map_id, expected_version) from exc
         finally:  # also on a conflict: the map changed (maybe through another replica)
             self.cache.invalidate(map_id)
         return StoredMap(stored, digest, now)
@@ -355,12 +349,6 @@ class MapStore:
             self.cache.forget(map_id)
 
     # ------------------------------------------------------------------ reads
-    def _latest_version(self, map_id: str) -> int | None:
-        with self._read() as conn:
-            v = conn.execute(sa.select(maps_table.c.latest_version).where(
-                maps_table.c.map_id == map_id)).scalar_one_or_none()
-        return None if v is None else int(v)
-
     def _version_query(self, map_id: str, version: int | None, *columns: Any) -> Any:
         if version is None:
             return (sa.select(*columns)
@@ -464,6 +452,15 @@ def _unavailable(exc: Exception) -> StoreUnavailable:
         return SchemaNotMigrated(f"database schema not migrated: {exc.__class__.__name__}: "
                                  f"{first}")
     return StoreUnavailable(f"database unreachable or busy: {exc.__class__.__name__}: {first}")
+
+
+def _refusal(conn: Connection, map_id: str, expected_version: int) -> MapStoreError:
+    """Why an update of ``map_id`` from ``expected_version`` was refused: :class:`MapNotFound`,
+    or :class:`VersionConflict` naming the latest version."""
+    current = conn.execute(sa.select(maps_table.c.latest_version).where(
+        maps_table.c.map_id == map_id)).scalar_one_or_none()
+    return (MapNotFound(map_id) if current is None
+            else VersionConflict(map_id, expected_version, int(current)))
 
 
 def _check_version(version: int | None, name: str = "version") -> None:
