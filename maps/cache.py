@@ -1,21 +1,11 @@
 """THE compiled-map cache of a process (one class, one place; used by :class:`maps.store.MapStore`).
 
-Two tables behind one lock:
-
-* ``(map_id, version, content_hash) -> CompiledMap``: versions are immutable, so an entry never
-  goes stale; least recently used evicted first, bounded by :data:`MAX_ENTRIES` maps and
-  :data:`MAX_OBJECTS` objects in all (a parsed + compiled map costs ~2.5 KB per object: ~120 MB
-  here; docs/deployment.md, "Worst-case cost of a request").
-* ``(map_id, requested version or None) -> key``: which version a request means. Resolving it
-  costs one indexed query (~0.5 ms on SQLite, a network round trip on PostgreSQL), so it may be
-  remembered for ``resolve_ttl_s`` seconds (``QUADLOC_MAP_CACHE_TTL_S``; 0 = always ask the
-  database). Writes through this process invalidate at once (:meth:`invalidate`); a write
-  through another replica is seen within ``resolve_ttl_s``.
-
-Race: a reader that resolved the old version and is slow to remember it could otherwise
-re-cache it *after* a local write invalidated the map. Each map has a generation counter, bumped
-by :meth:`invalidate`; a resolution is remembered only if the generation the reader saw before
-reading the database is still current.
+Two tables behind one lock (docs/design/maps.md, "Compiled-map cache"): compiled versions by
+``(map_id, version, content_hash)`` (LRU, bounded by :data:`MAX_ENTRIES` maps and
+:data:`MAX_OBJECTS` objects), and resolutions ``(map_id, requested version or None) -> key``
+remembered for ``resolve_ttl_s`` seconds (0: always ask the database). A per-map generation,
+bumped by :meth:`CompiledMapCache.invalidate`, keeps a slow reader from re-caching a resolution
+after a local write.
 
 Time comes from an injectable ``clock`` (``time.monotonic`` by default; tests pass a fake one).
 """

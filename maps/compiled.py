@@ -25,8 +25,23 @@ def _frozen(array: np.ndarray) -> np.ndarray:
     return array
 
 
+class MapVersionView:
+    """``map_id`` and ``version`` of a class holding a ``scene_map`` (a stored or compiled
+    version of a map)."""
+
+    scene_map: SceneMap
+
+    @property
+    def map_id(self) -> str:
+        return self.scene_map.map_id
+
+    @property
+    def version(self) -> int:
+        return self.scene_map.version
+
+
 @dataclass(frozen=True, eq=False)
-class CompiledMap:
+class CompiledMap(MapVersionView):
     """Immutable solver view of a :class:`SceneMap` (arrays are read-only).
 
     Attributes:
@@ -53,14 +68,6 @@ class CompiledMap:
     shape_matrices: np.ndarray
     dual_quadrics: np.ndarray
     indices_by_category: dict[str, np.ndarray]
-
-    @property
-    def map_id(self) -> str:
-        return self.scene_map.map_id
-
-    @property
-    def version(self) -> int:
-        return self.scene_map.version
 
     def __len__(self) -> int:
         return len(self.object_ids)
@@ -89,10 +96,9 @@ def compile_map(scene_map: SceneMap | CompiledMap) -> CompiledMap:
     """The solver's per-object arrays of ``scene_map`` (vectorised, O(N)); a
     :class:`CompiledMap` is returned as is.
 
-    Computed once per map object: the result is memoised on the (immutable) ``SceneMap``
-    itself, so every caller holding the same map shares one ``CompiledMap``. This is not a
-    cache (nothing to evict or invalidate: it lives and dies with the map); the process's one
-    cache of compiled map *versions* is :class:`maps.cache.CompiledMapCache`.
+    Memoised on the (immutable) ``SceneMap`` itself: it lives and dies with the map, nothing to
+    evict or invalidate (the cache of compiled map *versions* is
+    :class:`maps.cache.CompiledMapCache`).
     """
     if isinstance(scene_map, CompiledMap):
         return scene_map
@@ -115,22 +121,10 @@ def compile_map(scene_map: SceneMap | CompiledMap) -> CompiledMap:
     dual_quadrics[:, 3, 3] = -1.0
     categories = tuple(o.category for o in objects)
     cats = np.array(categories, dtype=object)
-    indices_by_category: dict[str, np.ndarray] = {}
-    for category in dict.fromkeys(categories):
-        idx = np.flatnonzero(cats == category).astype(np.intp)
-        idx.setflags(write=False)
-        indices_by_category[category] = idx
-    compiled = CompiledMap(
-        scene_map=scene_map,
-        object_ids=tuple(o.object_id for o in objects),
-        categories=categories,
-        ellipsoids=ellipsoids,
-        centers=_frozen(centers),
-        axes=_frozen(axes),
-        rotations=_frozen(rotations),
-        shape_matrices=_frozen(shape_matrices),
-        dual_quadrics=_frozen(dual_quadrics),
-        indices_by_category=indices_by_category,
-    )
+    indices_by_category = {c: _frozen(np.flatnonzero(cats == c).astype(np.intp))
+                           for c in dict.fromkeys(categories)}
+    compiled = CompiledMap(scene_map, tuple(o.object_id for o in objects), categories, ellipsoids,
+                           *map(_frozen, (centers, axes, rotations, shape_matrices, dual_quadrics)),
+                           indices_by_category)
     object.__setattr__(scene_map, _MEMO, compiled)
     return compiled

@@ -4,16 +4,11 @@ Frames: every ellipsoid is in the map's **world** frame (metres). ``up_axis`` is
 up direction (the Chess demo map has +Z up). Orientation of each ellipsoid is a unit
 ``quaternion_wxyz`` (ellipsoid frame -> world frame), its semi-axes are along the rotated x, y, z.
 
-(Owned by the maps issue; the field names below are the contract other modules rely on.)
-
-Validation, once: the pydantic models :class:`MapDocument` (the JSON document, ``docs/maps.md``)
-and :class:`ChessDocument` (the Chess import format) hold every rule (see :data:`LIMITS`) and
-parse documents into the in-process types :class:`SceneMap` / :class:`MapObject`, frozen
-dataclasses whose constructors validate through the same model (so maps built in code obey the
-same rules). A problem raises one :class:`MapValidationError` listing every problem found as
-``{"field", "message"}`` entries, fields as JSON paths such as ``objects[3].axes[1]``.
-:data:`MAP_JSON_SCHEMA` and :data:`CHESS_JSON_SCHEMA` are generated from the models
-(``model_json_schema``), so the published schema and the validator cannot disagree.
+Validation, once (docs/design/maps.md, "Map model"): the pydantic models :class:`MapDocument`
+(``docs/maps.md``) and :class:`ChessDocument` hold every rule (:data:`LIMITS`); the frozen
+dataclasses :class:`SceneMap` / :class:`MapObject` validate through the same model. A problem
+raises one :class:`MapValidationError` listing every problem found, fields as JSON paths such as
+``objects[3].axes[1]``. :data:`MAP_JSON_SCHEMA` and :data:`CHESS_JSON_SCHEMA` are generated.
 """
 
 from __future__ import annotations
@@ -127,9 +122,6 @@ def json_path(loc: Sequence[str | int], root: str = "$") -> str:
 
 
 # --------------------------------------------------------------------------- rules
-# Each rule once: the document models below (the JSON boundary) are built from these types and
-# functions, and the dataclass constructors (the in-process API) validate through the same
-# models, so the published JSON Schema, the importer and the constructors cannot disagree.
 
 def _fail(message: str, error_type: str = "map_rule") -> PydanticCustomError:
     """A rule's error (raise it in a validator: pydantic reports it at the field validated)."""
@@ -258,19 +250,14 @@ def _freeze(value: Any) -> Any:
 def _nesting_depth(value: Any) -> int:
     """Nesting depth of JSON-like containers (a scalar is 0, ``{}`` is 1), without recursion;
     stops counting past ``LIMITS["max_metadata_depth"] + 1``."""
-    limit = int(LIMITS["max_metadata_depth"]) + 1
     depth, level = 0, [value]
-    while level and depth < limit:
-        children = []
-        for v in level:
-            if isinstance(v, Mapping):
-                children.extend(v.values())
-            elif isinstance(v, list | tuple):
-                children.extend(v)
-        if not children and not any(isinstance(v, Mapping | list | tuple) for v in level):
+    while depth <= LIMITS["max_metadata_depth"]:
+        level = [v.values() if isinstance(v, Mapping) else v for v in level
+                 if isinstance(v, Mapping | list | tuple)]
+        if not level:
             break
         depth += 1
-        level = children
+        level = [child for children in level for child in children]
     return depth
 
 
@@ -524,14 +511,10 @@ class SceneMap:
     """A versioned ellipsoid map. ``version`` is 1 for a new map and grows by one per update.
 
     Validated on construction through :class:`MapDocument` (raises
-    :class:`MapValidationError`): ``map_id`` matches :data:`MAP_ID_PATTERN`; ``up_axis`` finite
-    and non-zero (stored as given, see :attr:`up`); categories unique non-empty strings; object
-    ids unique; each object's category in ``categories``; semi-axes and coordinates within
-    :data:`LIMITS`; ``metadata`` a JSON object (``None``: empty). ``up_axis``, ``categories``
-    and ``objects`` are converted to tuples; ``metadata`` to a
-    read-only deep copy (``MappingProxyType``, arrays as tuples): maps are shared, e.g. by the
-    compiled-map cache, and must not change under their content hash. ``to_dict`` returns
-    plain, mutable copies.
+    :class:`MapValidationError`); ``up_axis`` is stored as given (see :attr:`up`), ``metadata``
+    ``None`` means empty. ``up_axis``, ``categories`` and ``objects`` become tuples, ``metadata`` a
+    read-only deep copy (``MappingProxyType``, arrays as tuples): maps are shared and must not
+    change under their content hash. ``to_dict`` returns plain, mutable copies.
     """
 
     map_id: str
@@ -672,31 +655,18 @@ def _canonical_text(document: dict[str, Any]) -> str:
 
 
 #: Decimal places kept of the geometric numbers (``up_axis``; ``center`` and ``axes`` in metres;
-#: ``quaternion_wxyz``) in the document that :func:`content_hash` hashes: 1e-12 m and 1e-12 per
-#: quaternion component, far below any geometric meaning and far above the last-bit (~1e-16)
-#: differences between CPUs and LAPACK builds. The stored document keeps every bit.
+#: ``quaternion_wxyz``) in the document that :func:`content_hash` hashes (why: design doc).
 HASH_DECIMALS = 12
-
-
-def _hash_numbers(values: Sequence[float]) -> list[float]:
-    return [round(float(v), HASH_DECIMALS) + 0.0 for v in values]  # + 0.0: -0.0 -> 0.0
 
 
 def content_hash(scene_map: SceneMap) -> str:
     """Hex sha256 of :func:`canonical_json` with the geometric numbers rounded to
-    :data:`HASH_DECIMALS` decimals (the HTTP ETag of a map version).
-
-    So a map re-imported on another machine or through another route (rotation matrix or
-    quaternion) hashes the same when its numbers agree to 1e-12; the import itself avoids
-    LAPACK for rotations that are already orthonormal (:func:`factors.geometry.snap_to_rotation`),
-    so such maps agree bit for bit. The hashed document includes ``map_id`` and ``version``:
-    two versions never share a hash.
-    """
+    :data:`HASH_DECIMALS` decimals (the HTTP ETag of a map version; it covers ``map_id`` and
+    ``version``: two versions never share a hash)."""
     doc = scene_map_to_dict(scene_map)
-    doc["up_axis"] = _hash_numbers(doc["up_axis"])
-    for obj in doc["objects"]:
-        for key in ("center", "axes", "quaternion_wxyz"):
-            obj[key] = _hash_numbers(obj[key])
+    for part, key in [(doc, "up_axis"), *((o, k) for o in doc["objects"]
+                                          for k in ("center", "axes", "quaternion_wxyz"))]:
+        part[key] = [round(float(v), HASH_DECIMALS) + 0.0 for v in part[key]]  # -0.0 -> 0.0
     return hashlib.sha256(_canonical_text(doc).encode("utf-8")).hexdigest()
 
 

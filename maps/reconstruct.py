@@ -1,37 +1,10 @@
 """Ellipsoids from multi-view ellipses with known camera poses (Rubino et al.), then LM refinement.
 
-Method
-------
-1. **Linear estimate** (Rubino, Crocco, Del Bue, "3D object localization from 2D ellipses",
-   TPAMI 2018). Each view ``i`` with ``P_i = K_i [R | t]_camera_from_world`` (3x4) satisfies
-   ``s_i C*_i = P_i Q* P_i^T`` for the observed dual conic ``C*_i`` and an unknown scale ``s_i``.
-   With ``vech`` (6 / 10 upper-triangular entries, off-diagonals weighted by sqrt 2 so that the
-   norm is Frobenius), ``G_i vech(Q*) - s_i vech(C*_i) = 0``. The equations of all views are
-   stacked into one homogeneous system in ``(vech Q*, s_1..s_n)`` solved by SVD. Conditioning:
-   each image is normalised by a similarity ``H_i`` mapping its ellipse to a unit-size ellipse at
-   the origin, the world by ``T`` centring the object (triangulated from the ellipse centres) at
-   unit scale, and each ``vech(C*_i)`` has unit norm.
-2. **Extraction**: ``Q*`` normalised to ``Q*[3, 3] = -1`` gives the centre ``c = -Q*[:3, 3]`` and
-   ``M = Q*[:3, :3] + c c^T = R diag(axes^2) R^T``; ``M`` must be positive definite (else
-   ``not_an_ellipsoid``).
-3. **Refinement**: Levenberg-Marquardt in GTSAM over a ``Pose3`` (ellipsoid frame -> world:
-   rotation and centre) and a ``Vector3`` of log semi-axes, with the ellipsoid factor shared
-   with map building, :func:`factors.ellipsoid_factors.ellipsoid_views_factor` (the level-set
-   residual of localization, :func:`factors.ellipsoid_residuals.observation_residual`, and its
-   analytic Jacobians; one factor over all views, no robust kernel). Samples: ``samples_per_view``
-   points on each *observed* ellipse (``Phi_det = 1`` there), so each residual is
-   ``1 - Phi_pred(x_j)`` (zero for every j iff the predicted ellipse passes through them;
-   dimensionless, a relative level error), each view's divided by its sigma. The camera enters
-   as its projection ``K [R|t]`` with the samples in homogeneous pixels (the residual is
-   invariant to that change of image coordinates). LM runs from the linear estimate and from a
-   sphere at the triangulated centre (radius from the apparent sizes); the valid result (in
-   front of every camera, a plausible shape, reproducing the views) with the lowest residual
-   wins — the linear estimate alone is fragile under noise and narrow baselines.
-4. **Checks**: every result must be entirely in front of every camera (``not_in_front``), a
-   plausible shape (:func:`degenerate_shape_reason`: semi-axes within the map limits and not
-   flatter than ``MIN_AXIS_RATIO``, else ``degenerate_shape``) and reproduce the views (RMS
-   level residual at most ``MAX_RMS_LEVEL_RESIDUAL``, else ``inconsistent_views``: e.g. views of
-   different objects, where LM may shrink the ellipsoid to a few millimetres).
+Method (docs/design/maps.md, "Reconstruction"): a linear estimate of the dual quadric by SVD
+(Rubino, Crocco, Del Bue, TPAMI 2018), refined by Levenberg-Marquardt with the level-set factor
+of :func:`factors.ellipsoid_factors.ellipsoid_views_factor` from the linear estimate and from a
+sphere at the triangulated centre; the best valid result wins (in front of every camera,
+:func:`degenerate_shape_reason`, RMS level residual at most ``MAX_RMS_LEVEL_RESIDUAL``).
 
 Conventions: poses are ``world_from_camera`` 4x4 (camera axes OpenCV), ellipses in pixels,
 semi-axes in metres, output rotations ellipsoid frame -> world.
@@ -39,6 +12,7 @@ semi-axes in metres, output rotations ellipsoid frame -> world.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections import Counter
 from collections.abc import Mapping, Sequence
@@ -63,6 +37,7 @@ from factors.geometry import (
     Ellipsoid,
     ellipsoid_depth_margins,
     invert_pose,
+    pose_matrix,
 )
 from maps.model import LIMITS, MapObject, SceneMap
 
@@ -73,6 +48,7 @@ __all__ = [
     "ReconstructionError",
     "ReconstructionResult",
     "build_scene_map",
+    "canonical_ellipsoid",
     "contour_samples",
     "degenerate_shape_reason",
     "dual_quadric_jacobians",
@@ -89,13 +65,10 @@ MIN_RAY_ANGLE_DEG = 2.0
 #: Default number of points sampled on each observed ellipse for the refinement residual.
 SAMPLES_PER_VIEW = 16
 #: Smallest accepted ratio of the smallest to the largest semi-axis (1:100; the flattest Chess
-#: object is 1:3.5): flatter results are reconstructions collapsed along an axis the views do
-#: not constrain (``degenerate_shape``).
+#: object is 1:3.5): flatter results are ``degenerate_shape``.
 MIN_AXIS_RATIO = 0.01
 #: Largest accepted RMS of the (unweighted) level residual ``Phi_pred - 1`` at the observed
-#: contours. 1 means the observed contour points lie, on average, at the predicted ellipse's
-#: centre level or twice its boundary level: no ellipse of the views is reproduced
-#: (``inconsistent_views``). Noisy views of one object stay below 0.2 on the bench.
+#: contours, else ``inconsistent_views`` (noisy views of one object stay below 0.2 on the bench).
 MAX_RMS_LEVEL_RESIDUAL = 1.0
 
 _TRIU4 = np.triu_indices(4)
@@ -234,12 +207,10 @@ def linear_dual_quadric(dual_conics: np.ndarray, projections: np.ndarray) -> np.
     n = C.shape[0]
     c = C[:, _TRIU3[0], _TRIU3[1]] * _W3
     c /= np.linalg.norm(c, axis=1, keepdims=True)
-    G = _vech_design(P)
-    A = np.zeros((6 * n, 10 + n))
-    for i in range(n):
-        A[6 * i:6 * i + 6, :10] = G[i]
-        A[6 * i:6 * i + 6, 10 + i] = -c[i]
-    _, _, Vt = np.linalg.svd(A, full_matrices=False)
+    A = np.zeros((n, 6, 10 + n))
+    A[:, :, :10] = _vech_design(P)
+    A[np.arange(n), :, 10 + np.arange(n)] = -c
+    _, _, Vt = np.linalg.svd(A.reshape(6 * n, 10 + n), full_matrices=False)
     q = Vt[-1, :10] / _W4
     Q = np.zeros((4, 4))
     Q[_TRIU4] = q
@@ -267,11 +238,19 @@ def ellipsoid_from_dual_quadric(dual_quadric: np.ndarray) -> Ellipsoid:
         raise ReconstructionError(
             "not_an_ellipsoid", f"the estimated quadric is not an ellipsoid (shape eigenvalues "
                                 f"{np.array2string(lam, precision=3)} m^2 are not all positive)")
-    order = np.argsort(lam)[::-1]
-    R = vec[:, order]
+    return canonical_ellipsoid(vec, center, np.sqrt(lam))
+
+
+def canonical_ellipsoid(rotation: np.ndarray, center: np.ndarray, axes: np.ndarray
+                        ) -> Ellipsoid:
+    """The ellipsoid with its semi-axes (m) in descending order, the rotation's columns
+    permuted alike and the last one negated if needed for det +1. Semi-axes that underflowed
+    are kept tiny (1e-300), not zero: callers check them against the map limits."""
+    order = np.argsort(axes)[::-1]
+    R = rotation[:, order]
     if np.linalg.det(R) < 0:
         R[:, 2] = -R[:, 2]
-    return Ellipsoid(center, np.sqrt(lam[order]), R)
+    return Ellipsoid(center, np.maximum(axes[order], 1e-300), R)
 
 
 # --------------------------------------------------------------------------- refinement
@@ -385,11 +364,6 @@ def reconstruct_ellipsoid(
             log semi-axes towards the apparent size ``median(depth * sqrt(ab) / f)``: keeps
             narrow-baseline reconstructions from collapsing to flat ellipsoids (biased, opt-in).
 
-    The result must be a plausible shape (:func:`degenerate_shape_reason`: semi-axes within
-    the map limits, not flatter than ``MIN_AXIS_RATIO``), else ``degenerate_shape``: the views
-    do not constrain the shape (typically a narrow baseline); and it must reproduce the views
-    (RMS level residual at most ``MAX_RMS_LEVEL_RESIDUAL``), else ``inconsistent_views``.
-
     Raises ``ReconstructionError`` (``reason`` in ``too_few_views``, ``bad_input``,
     ``near_parallel_rays``, ``not_an_ellipsoid``, ``not_in_front``, ``refinement_failed``,
     ``degenerate_shape``, ``inconsistent_views``).
@@ -423,13 +397,10 @@ def reconstruct_ellipsoid(
     focal = np.array([math.sqrt(c.fx * c.fy) for c in cams])
     scale = float(np.median(depth * size / focal))
     # Conditioning: world X = scale * X' + X0; image x' = (x - c_e) / sqrt(ab).
-    T = np.eye(4)
-    T[:3, :3] *= scale
-    T[:3, 3] = X0
+    T = pose_matrix(scale * np.eye(3), X0)
     H = np.zeros((len(ells), 3, 3))
     H[:, 0, 0] = H[:, 1, 1] = 1.0 / size
-    H[:, 0, 2] = -np.array([e.cx for e in ells]) / size
-    H[:, 1, 2] = -np.array([e.cy for e in ells]) / size
+    H[:, :2, 2] = -np.array([[e.cx, e.cy] for e in ells]) / size[:, None]
     H[:, 2, 2] = 1.0
     C = np.array([e.dual_conic() for e in ells])
     Cn = np.einsum("nij,njk,nlk->nil", H, C, H)
@@ -454,8 +425,7 @@ def reconstruct_ellipsoid(
     if not refine:
         if linear is None:
             raise ReconstructionError("not_an_ellipsoid", f"linear estimate: {linear_problem}")
-        _check_shape(linear)
-        _check_fit(linear, ells, P, samples_per_view)
+        _check_result(linear, ells, P, samples_per_view)
         return ReconstructionResult(linear, linear, len(ells), lin_rms, lin_rms, spread, 0,
                                     "linear")
     # Refine from the linear estimate and from a sphere at the triangulated centre (radius from
@@ -474,8 +444,7 @@ def reconstruct_ellipsoid(
                                               samples_per_view=samples_per_view,
                                               log_axes_prior=prior)
             _check_in_front(refined, cfw)
-            _check_shape(refined)
-            _check_fit(refined, ells, P, samples_per_view)
+            _check_result(refined, ells, P, samples_per_view)
         except (ReconstructionError, ValueError, RuntimeError) as exc:  # RuntimeError: GTSAM
             problems.append(f"{label}: {exc}")
             reasons.add(getattr(exc, "reason", "refinement_failed"))
@@ -490,8 +459,7 @@ def reconstruct_ellipsoid(
         # Every refinement collapsed (e.g. a flat object under noise): keep the linear estimate
         # if it is a valid shape.
         try:
-            _check_shape(linear)
-            _check_fit(linear, ells, P, samples_per_view)
+            _check_result(linear, ells, P, samples_per_view)
             best = (lin_rms, linear, 0, "linear")
         except ReconstructionError as exc:
             problems.append(f"linear: {exc}")
@@ -517,19 +485,17 @@ def degenerate_shape_reason(ellipsoid: Ellipsoid) -> str | None:
     return None
 
 
-def _check_shape(ellipsoid: Ellipsoid) -> None:
+def _check_result(ellipsoid: Ellipsoid, ells: Sequence[Ellipse], P: np.ndarray,
+                  samples_per_view: int) -> None:
+    """``degenerate_shape`` unless :func:`degenerate_shape_reason` is None; then
+    ``inconsistent_views`` if the unweighted RMS level residual exceeds
+    ``MAX_RMS_LEVEL_RESIDUAL`` (the views are not of one ellipsoid, e.g. mixed objects: a tiny
+    ellipsoid that fits none of them may be all LM finds)."""
     problem = degenerate_shape_reason(ellipsoid)
     if problem is not None:
         raise ReconstructionError(
             "degenerate_shape", f"the views do not constrain the shape: {problem} (narrow "
                                 f"baseline? try more spread views or log_axes_prior_sigma)")
-
-
-def _check_fit(ellipsoid: Ellipsoid, ells: Sequence[Ellipse], P: np.ndarray,
-               samples_per_view: int) -> float:
-    """The unweighted RMS level residual of ``ellipsoid``; ``inconsistent_views`` above
-    ``MAX_RMS_LEVEL_RESIDUAL`` (the views are not of one ellipsoid, e.g. mixed objects: a
-    tiny ellipsoid that fits none of them may be all LM finds)."""
     rms = float(np.sqrt(np.mean(view_residuals(ellipsoid, ells, P, samples_per_view) ** 2)))
     if not rms <= MAX_RMS_LEVEL_RESIDUAL:
         raise ReconstructionError(
@@ -537,12 +503,11 @@ def _check_fit(ellipsoid: Ellipsoid, ells: Sequence[Ellipse], P: np.ndarray,
                                   f"{np.array2string(ellipsoid.axes, precision=4)} m) misses "
                                   f"the observed ellipses: RMS level residual {rms:.3g} > "
                                   f"{MAX_RMS_LEVEL_RESIDUAL:g} (views of different objects?)")
-    return rms
 
 
 def _check_in_front(ellipsoid: Ellipsoid, cfw: np.ndarray) -> None:
-    margins = np.array([ellipsoid_depth_margins(T, ellipsoid.center[None],
-                                                ellipsoid.shape_matrix()[None])[0] for T in cfw])
+    margins = ellipsoid_depth_margins(cfw, ellipsoid.center[None],
+                                      ellipsoid.shape_matrix()[None])[:, 0]
     if np.any(margins <= 0):
         bad = int(np.argmin(margins))
         raise ReconstructionError(
@@ -553,21 +518,11 @@ def _check_in_front(ellipsoid: Ellipsoid, cfw: np.ndarray) -> None:
 # --------------------------------------------------------------------------- evaluation
 
 
-def _signed_permutations() -> np.ndarray:
-    """The 24 proper signed permutation matrices (symmetries of an ellipsoid's frame)."""
-    import itertools
-
-    out = []
-    for perm in itertools.permutations(range(3)):
-        for signs in itertools.product((1.0, -1.0), repeat=3):
-            S = np.zeros((3, 3))
-            S[list(perm), range(3)] = signs
-            if np.linalg.det(S) > 0:
-                out.append(S)
-    return np.array(out)
-
-
-_SYMMETRIES = _signed_permutations()
+#: The 24 proper signed permutation matrices (symmetries of an ellipsoid's frame): column k is
+#: ``signs[k] e_perm[k]``.
+_SYMMETRIES = np.array([S for perm in itertools.permutations(range(3))
+                        for signs in itertools.product((1.0, -1.0), repeat=3)
+                        if np.linalg.det(S := np.eye(3)[:, list(perm)] * signs) > 0])
 
 
 def ellipsoid_errors(estimate: Ellipsoid, truth: Ellipsoid) -> dict[str, float]:
@@ -673,7 +628,7 @@ def build_scene_map(
     objects = []
     for object_id, obs in views.items():
         votes = labels[object_id]
-        label = max(votes, key=lambda k: (votes[k], -list(votes).index(k)))
+        label = votes.most_common(1)[0][0]  # ties: the label seen first
         if len(votes) > 1:
             report.label_disagreements[object_id] = dict(votes)
         try:

@@ -5,27 +5,12 @@
 (``maps/migrations``), run by :meth:`MapStore.migrate` (automatically at construction unless
 ``migrate=False``; idempotent, serialised between replicas on PostgreSQL by an advisory lock).
 
-Semantics
----------
-* A map has versions 1, 2, ...; each version is immutable and stays readable until the map is
-  deleted. ``create`` makes version 1, ``update`` makes version ``n + 1``.
-* Optimistic concurrency: ``update(map_id, scene_map, expected_version)`` succeeds only if
-  ``expected_version`` is the latest version; otherwise :class:`VersionConflict` (carrying
-  ``current_version``). Of several concurrent updates naming the same version exactly one wins:
-  the latest-version row is advanced by a conditional ``UPDATE ... WHERE latest_version = n``
-  and the new version row is inserted under the primary key ``(map_id, version)``, both in one
-  transaction (SQLite: ``BEGIN IMMEDIATE``; PostgreSQL: the row lock of the ``UPDATE``).
-* Atomicity: every write is one transaction, so a crash mid-write leaves nothing visible.
-* ``delete(map_id)`` deletes the map and **all** its versions. A later ``create`` with the same
-  id starts again at version 1 (its content hash differs unless the content is identical).
-* ``content_hash`` is :func:`maps.model.content_hash` of the version (sha256 of its canonical
-  JSON, geometric numbers rounded to 1e-12; it covers ``map_id`` and ``version``) — the HTTP
-  ETag. The stored content keeps every bit.
-* ``compiled(map_id, version)`` returns the solver arrays (:class:`maps.compiled.CompiledMap`),
-  held in the store's :class:`maps.cache.CompiledMapCache` (THE compiled-map cache) by
-  ``(map_id, version, content_hash)``: one small indexed query per call to resolve the version
-  (so replicas see each other's updates; skipped for the cache's ``resolve_ttl_s`` after a
-  resolution), no JSON parsing on a hit. Writes through the store invalidate at once.
+Semantics (docs/design/maps.md, "Map store"): versions 1, 2, ... of a map are immutable;
+``update`` succeeds only against the latest version (else :class:`VersionConflict`), each write
+is one transaction, ``delete`` removes every version. ``content_hash`` is
+:func:`maps.model.content_hash` (the ETag). ``compiled`` answers from the store's
+:class:`maps.cache.CompiledMapCache` (THE compiled-map cache); writes through the store
+invalidate it at once.
 """
 
 from __future__ import annotations
@@ -36,6 +21,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from datetime import UTC, datetime
+from functools import partialmethod
 from pathlib import Path
 from typing import Any
 
@@ -51,8 +37,8 @@ from sqlalchemy.exc import (
 )
 from sqlalchemy.pool import StaticPool
 
-from maps.cache import CompiledMapCache
-from maps.compiled import CompiledMap, compile_map
+from maps.cache import CompiledMapCache, MapKey
+from maps.compiled import CompiledMap, MapVersionView, compile_map
 from maps.errors import (
     MapAlreadyExists,
     MapNotFound,
@@ -89,10 +75,11 @@ _PG_MIGRATION_LOCK = 0x51_4C_4F_43_4D_41_50  # "QLOCMAP"
 #: SQLite busy timeout (seconds): how long a writer waits for another writer's lock.
 SQLITE_BUSY_TIMEOUT_S = 30.0
 
-# Table descriptions for building queries ONLY. The schema itself belongs to the Alembic
-# migrations (maps/migrations/versions/); these declarations mirror it, CHECK constraints
-# included, and are never used to create tables (no metadata.create_all). A schema change is a
-# new migration plus the matching edit here (tests/test_maps_store.py compares the two).
+# Table descriptions for building queries ONLY (the map store's and the build jobs'). The schema
+# itself belongs to the Alembic migrations (maps/migrations/versions/); these declarations mirror
+# it, CHECK constraints included, and are never used to create tables (no metadata.create_all).
+# A schema change is a new migration plus the matching edit here (tests/test_maps_store.py and
+# tests/test_api_build.py compare the two).
 _metadata = sa.MetaData()
 maps_table = sa.Table(
     "quadloc_maps",
@@ -115,23 +102,34 @@ versions_table = sa.Table(
     sa.Column("created_at", sa.DateTime(timezone=True), nullable=False),
     sa.CheckConstraint("version >= 1", name="ck_quadloc_map_versions_version"),
 )
+#: The build jobs of :mod:`maps.building.jobs` (migration ``0002_build_jobs``).
+jobs_table = sa.Table(
+    "quadloc_build_jobs",
+    _metadata,
+    sa.Column("job_id", sa.String(36), primary_key=True),
+    sa.Column("map_id", sa.String(128), nullable=False),
+    sa.Column("base_version", sa.Integer, nullable=True),
+    sa.Column("status", sa.String(16), nullable=False),
+    sa.Column("stage", sa.String(32), nullable=False),
+    sa.Column("percent", sa.Float, nullable=False),
+    sa.Column("objects_found", sa.Integer, nullable=False),
+    sa.Column("map_version", sa.Integer, nullable=True),
+    sa.Column("error", sa.Text, nullable=True),
+    sa.Column("report", sa.Text, nullable=True),
+    sa.Column("created_at", sa.DateTime(timezone=True), nullable=False),
+    sa.Column("updated_at", sa.DateTime(timezone=True), nullable=False),
+    sa.CheckConstraint("status IN ('queued', 'running', 'succeeded', 'failed')",
+                       name="ck_quadloc_build_jobs_status"),
+)
 
 
 @dataclass(frozen=True)
-class StoredMap:
+class StoredMap(MapVersionView):
     """One stored version: the map (with its ``version``), its content hash, creation time (UTC)."""
 
     scene_map: SceneMap
     content_hash: str
     created_at: datetime
-
-    @property
-    def map_id(self) -> str:
-        return self.scene_map.map_id
-
-    @property
-    def version(self) -> int:
-        return self.scene_map.version
 
 
 @dataclass(frozen=True)
@@ -252,13 +250,11 @@ class MapStore:
 
     # ------------------------------------------------------------------ transactions
     @contextmanager
-    def _write(self) -> Iterator[Connection]:
-        """A write transaction (SQLite: ``BEGIN IMMEDIATE``, taking the write lock up front).
-
-        Connection-level database failures become :class:`StoreUnavailable`.
-        """
+    def _transaction(self, write: bool) -> Iterator[Connection]:
+        """A transaction (a write one on SQLite: ``BEGIN IMMEDIATE``, taking the write lock up
+        front). Connection-level database failures become :class:`StoreUnavailable`."""
         try:
-            with (self.engine.connect().execution_options(quadloc_write=True) as conn,
+            with (self.engine.connect().execution_options(quadloc_write=write) as conn,
                   conn.begin()):
                 yield conn
         except (OperationalError, InterfaceError) as exc:
@@ -268,17 +264,8 @@ class MapStore:
                 raise _unavailable(exc) from exc
             raise
 
-    @contextmanager
-    def _read(self) -> Iterator[Connection]:
-        try:
-            with self.engine.connect() as conn, conn.begin():
-                yield conn
-        except (OperationalError, InterfaceError) as exc:
-            raise _unavailable(exc) from exc
-        except ProgrammingError as exc:
-            if _schema_missing(exc):
-                raise _unavailable(exc) from exc
-            raise
+    _read = partialmethod(_transaction, False)
+    _write = partialmethod(_transaction, True)
 
     # ------------------------------------------------------------------ writes
     def create(self, scene_map: SceneMap) -> StoredMap:
@@ -320,11 +307,7 @@ class MapStore:
             raise MapValidationError([{"field": "map_id", "message":
                                        f"must be {map_id!r} (the map being updated), got "
                                        f"{scene_map.map_id!r}"}])
-        if isinstance(expected_version, bool) or not isinstance(expected_version, int):
-            raise ValueError(f"expected_version must be an integer, got {expected_version!r}")
-        if expected_version < 1:
-            raise ValueError(f"expected_version must be >= 1 (versions start at 1), got "
-                             f"{expected_version}")
+        _check_version(expected_version, "expected_version")
         new_version = expected_version + 1
         stored = replace(scene_map, version=new_version)
         text = canonical_json(stored)
@@ -338,17 +321,11 @@ class MapStore:
                            maps_table.c.latest_version == expected_version)
                     .values(latest_version=new_version, name=stored.name, updated_at=now))
                 if result.rowcount != 1:
-                    current = conn.execute(sa.select(maps_table.c.latest_version).where(
-                        maps_table.c.map_id == map_id)).scalar_one_or_none()
-                    if current is None:
-                        raise MapNotFound(map_id)
-                    raise VersionConflict(map_id, expected_version, int(current))
+                    raise _refusal(conn, map_id, expected_version)
                 self._insert_version(conn, map_id, new_version, text, digest, now)
         except IntegrityError as exc:  # (map_id, version) taken: another writer won
-            current = self._latest_version(map_id)
-            if current is None:
-                raise MapNotFound(map_id) from exc
-            raise VersionConflict(map_id, expected_version, current) from exc
+            with self._read() as conn:
+                raise _refusal(conn, map_id, expected_version) from exc
         finally:  # also on a conflict: the map changed (maybe through another replica)
             self.cache.invalidate(map_id)
         return StoredMap(stored, digest, now)
@@ -372,12 +349,6 @@ class MapStore:
             self.cache.forget(map_id)
 
     # ------------------------------------------------------------------ reads
-    def _latest_version(self, map_id: str) -> int | None:
-        with self._read() as conn:
-            v = conn.execute(sa.select(maps_table.c.latest_version).where(
-                maps_table.c.map_id == map_id)).scalar_one_or_none()
-        return None if v is None else int(v)
-
     def _version_query(self, map_id: str, version: int | None, *columns: Any) -> Any:
         if version is None:
             return (sa.select(*columns)
@@ -389,15 +360,11 @@ class MapStore:
         return sa.select(*columns).where(versions_table.c.map_id == map_id,
                                          versions_table.c.version == version)
 
-    @staticmethod
-    def _check_version(version: int | None) -> None:
-        if version is not None and (isinstance(version, bool) or not isinstance(version, int)
-                                    or version < 1):
-            raise ValueError(f"version must be a positive integer or None, got {version!r}")
-
-    def get(self, map_id: str, version: int | None = None) -> StoredMap:
-        """The given version of a map (the latest if ``version`` is None). :class:`MapNotFound`."""
-        self._check_version(version)
+    def _load(self, map_id: str, version: int | None
+              ) -> tuple[MapKey, CompiledMap, datetime] | None:
+        """Resolve ``version`` (latest if None; :class:`MapNotFound`) and return its key, its
+        compiled map (from the cache, else parsed, compiled and cached) and its creation time;
+        None if the version was deleted (and maybe re-created) between the two reads."""
         v = versions_table.c
         with self._read() as conn:
             row = conn.execute(self._version_query(
@@ -405,27 +372,30 @@ class MapStore:
         if row is None:
             raise MapNotFound(map_id, version)
         key = (map_id, int(row.version), str(row.content_hash))
-        hit = self.cache.get(key)
-        if hit is not None:  # versions are immutable: reuse the parsed map (10,000 objects
-            return StoredMap(hit.scene_map, row.content_hash, _utc(row.created_at))  # ~3 s)
-        with self._read() as conn:
-            content = conn.execute(self._version_query(map_id, key[1], v.content,
-                                                       v.content_hash)).first()
-        if content is None or content.content_hash != key[2]:
-            raise MapNotFound(map_id, version)  # deleted (and maybe re-created) meanwhile
-        scene_map = scene_map_from_dict(json.loads(content.content), version=key[1])
-        self.cache.put(key, compile_map(scene_map))
-        return StoredMap(scene_map, row.content_hash, _utc(row.created_at))
+        compiled = self.cache.get(key)  # versions are immutable: reuse the parsed map
+        if compiled is None:  # (parsing 10,000 objects takes ~3 s)
+            with self._read() as conn:
+                content = conn.execute(self._version_query(map_id, key[1], v.content,
+                                                           v.content_hash)).first()
+            if content is None or content.content_hash != key[2]:
+                return None
+            compiled = compile_map(scene_map_from_dict(json.loads(content.content),
+                                                       version=key[1]))
+            self.cache.put(key, compiled)
+        return key, compiled, _utc(row.created_at)
+
+    def get(self, map_id: str, version: int | None = None) -> StoredMap:
+        """The given version of a map (the latest if ``version`` is None). :class:`MapNotFound`."""
+        _check_version(version)
+        loaded = self._load(map_id, version)
+        if loaded is None:
+            raise MapNotFound(map_id, version)
+        key, compiled, created_at = loaded
+        return StoredMap(compiled.scene_map, key[2], created_at)
 
     def versions(self, map_id: str) -> builtins.list[int]:
         """All stored version numbers of a map, ascending. :class:`MapNotFound`."""
-        with self._read() as conn:
-            rows = conn.execute(sa.select(versions_table.c.version)
-                                .where(versions_table.c.map_id == map_id)
-                                .order_by(versions_table.c.version)).scalars().all()
-        if not rows:
-            raise MapNotFound(map_id)
-        return [int(r) for r in rows]
+        return [info.version for info in self.version_history(map_id)]
 
     def version_history(self, map_id: str) -> builtins.list[MapVersionInfo]:
         """Every stored version of a map with its content hash and creation time, ascending.
@@ -456,35 +426,16 @@ class MapStore:
 
         Raises :class:`MapNotFound`.
         """
-        self._check_version(version)
+        _check_version(version)
         hit = self.cache.resolution(map_id, version)
         if hit is not None:
             return hit
         generation = self.cache.generation(map_id)
-        v = versions_table.c
-        for _attempt in range(3):
-            with self._read() as conn:
-                row = conn.execute(self._version_query(map_id, version, v.version,
-                                                       v.content_hash)).first()
-            if row is None:
-                raise MapNotFound(map_id, version)
-            key = (map_id, int(row.version), str(row.content_hash))
-            result = self.cache.get(key)
-            if result is not None:
-                self.cache.resolved_as(map_id, version, key, generation)
-                return result
-            try:
-                stored = self.get(map_id, key[1])  # parses, compiles and caches the version
-            except MapNotFound:
-                continue  # deleted between the two reads: resolve again
-            if stored.content_hash != key[2]:
-                continue  # deleted and re-created between the two reads: resolve again
-            result = self.cache.get(key)
-            if result is None:  # evicted at once by other maps: compile this one again
-                result = compile_map(stored.scene_map)
-                self.cache.put(key, result)
-            self.cache.resolved_as(map_id, version, key, generation)
-            return result
+        for _attempt in range(3):  # a None: deleted between the two reads, resolve again
+            loaded = self._load(map_id, version)
+            if loaded is not None:
+                self.cache.resolved_as(map_id, version, loaded[0], generation)
+                return loaded[1]
         raise MapStoreError(f"map {map_id!r} kept changing while being loaded")
 
 
@@ -501,6 +452,24 @@ def _unavailable(exc: Exception) -> StoreUnavailable:
         return SchemaNotMigrated(f"database schema not migrated: {exc.__class__.__name__}: "
                                  f"{first}")
     return StoreUnavailable(f"database unreachable or busy: {exc.__class__.__name__}: {first}")
+
+
+def _refusal(conn: Connection, map_id: str, expected_version: int) -> MapStoreError:
+    """Why an update of ``map_id`` from ``expected_version`` was refused: :class:`MapNotFound`,
+    or :class:`VersionConflict` naming the latest version."""
+    current = conn.execute(sa.select(maps_table.c.latest_version).where(
+        maps_table.c.map_id == map_id)).scalar_one_or_none()
+    return (MapNotFound(map_id) if current is None
+            else VersionConflict(map_id, expected_version, int(current)))
+
+
+def _check_version(version: int | None, name: str = "version") -> None:
+    """``ValueError`` naming ``name`` unless ``version`` is None (the latest; not for
+    ``expected_version``) or an integer >= 1 (no version below 1 ever exists)."""
+    if (version is None and name == "version") or (
+            not isinstance(version, bool) and isinstance(version, int) and version >= 1):
+        return
+    raise ValueError(f"{name} must be an integer >= 1 (versions start at 1), got {version!r}")
 
 
 def _check_scene_map(scene_map: object) -> None:

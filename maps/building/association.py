@@ -1,27 +1,11 @@
 """Association of detections across posed views into objects, without track ids.
 
-Per label (detections of different labels never share an object):
-
-1. **Rays.** Each detection ``i`` gives the ray ``o_i + t d_i`` (world) from its camera centre
-   through its ellipse centre, and its angular size ``rho_i = sqrt(a b) / f`` (rad), so an
-   object on the ray at depth ``t`` has a size of about ``t rho_i`` m.
-2. **Hypotheses from pairs.** For every pair of detections in different frames whose rays
-   diverge by at least ``min_pair_angle_deg``, the closest points of the two rays
-   (``t_i, t_j > 0``) are a candidate object centre when the rays pass within
-   ``ray_tolerance`` x the implied size of each other and the two implied sizes agree within a
-   factor ``size_ratio``.
-3. **Support and greedy clustering.** A candidate's support is the number of frames with a
-   detection whose ray passes within ``ray_tolerance x size`` of it with a consistent implied
-   size (at most one detection per frame: the closest). The best-supported candidate is
-   re-triangulated from its supporters (twice), accepted if it has ``min_views`` supporters
-   whose rays spread by at least ``min_spread_deg``, and its supporters are removed; repeat.
-4. **Verification by reprojection.** Each hypothesis is reconstructed
-   (:func:`maps.reconstruct.reconstruct_ellipsoid`, Rubino's linear estimate + LM) and
-   projected into every frame of the label's detections: supporters whose IoU with the
-   projection is below ``min_iou`` are dropped, unassigned detections of the label whose IoU is at
-   least ``recruit_iou`` are added (one per frame), and the object is reconstructed again.
-   An object left with fewer than ``min_views`` views is dissolved.
-5. Detections in no object are **rejected** (returned with the reason ``fits_no_object``).
+Per label (detections of different labels never share an object; docs/design/maps.md,
+"Association"): candidate centres from pairs of diverging viewing rays, greedy clustering of the
+detections whose rays support a candidate (one per frame), verification by reconstruction and
+reprojection (IoU at least ``min_iou`` kept, ``recruit_iou`` recruited), then same-label
+duplicates merged and ghosts of another label's object dissolved. Detections in no object are
+rejected (``fits_no_object``).
 
 With track ids (:attr:`Observation.track_id`), detections are grouped by ``(label,
 track_id)`` directly; detections without one go through the steps above.
@@ -40,7 +24,12 @@ import numpy as np
 from factors.geometry import Camera, Ellipse, Ellipsoid, invert_pose, project_ellipsoid
 from factors.overlap import intersection_area
 from maps.building.recording import Observation
-from maps.reconstruct import ReconstructionError, reconstruct_ellipsoid
+from maps.reconstruct import (
+    ReconstructionError,
+    _max_ray_angle_deg,
+    _triangulate,
+    reconstruct_ellipsoid,
+)
 
 __all__ = ["AssociationOptions", "ObjectHypothesis", "associate", "ellipse_iou", "touches_border"]
 
@@ -149,15 +138,6 @@ def _one_per_frame(idx: np.ndarray, dist: np.ndarray, frames: np.ndarray) -> np.
     return np.array(sorted(best.values()), dtype=int)
 
 
-def _triangulate(o: np.ndarray, d: np.ndarray) -> np.ndarray:
-    proj = np.eye(3) - d[:, :, None] * d[:, None, :]
-    return np.linalg.solve(proj.sum(0), np.einsum("nij,nj->i", proj, o))
-
-
-def _spread_deg(d: np.ndarray) -> float:
-    return float(np.degrees(np.arccos(np.clip((d @ d.T).min(), -1.0, 1.0))))
-
-
 def _geometric_clusters(o: np.ndarray, d: np.ndarray, rho: np.ndarray, frames: np.ndarray,
                         opt: AssociationOptions, rng: np.random.Generator,
                         tick: Callable[[], None] | None = None) -> list[np.ndarray]:
@@ -177,10 +157,8 @@ def _geometric_clusters(o: np.ndarray, d: np.ndarray, rho: np.ndarray, frames: n
         if counts[best] < opt.min_views:
             break
         x, s = X[best], S[best]
-        ok = ok_all & free[None]
-        dist = dist_all
-        members = np.flatnonzero(ok[best])
-        dist_row = dist[best]
+        members = np.flatnonzero(ok_all[best] & free)
+        dist_row = dist_all[best]
         for _ in range(2):
             members = _one_per_frame(members, dist_row, frames)
             if len(members) < 2:
@@ -197,7 +175,7 @@ def _geometric_clusters(o: np.ndarray, d: np.ndarray, rho: np.ndarray, frames: n
         near = np.linalg.norm(X - x, axis=1) <= opt.ray_tolerance * s
         near[best] = True
         alive &= ~near
-        if len(members) >= opt.min_views and _spread_deg(d[members]) >= opt.min_spread_deg:
+        if len(members) >= opt.min_views and _max_ray_angle_deg(d[members]) >= opt.min_spread_deg:
             clusters.append(members)
             free[members] = False
     return clusters
@@ -242,11 +220,14 @@ def _reconstruct(idx: Sequence[int], obs: Sequence[Observation], T_wc: np.ndarra
     return Ellipsoid(x, np.full(3, r))
 
 
-def _projection(ell: Ellipsoid, T_wc: np.ndarray, camera: Camera) -> Ellipse | None:
+def _projected_iou(ell: Ellipsoid, T_wc: np.ndarray, camera: Camera, detection: Ellipse
+                   ) -> float:
+    """IoU of ``detection`` with the projection of ``ell`` from ``T_wc`` (0 if none)."""
     try:
-        return project_ellipsoid(camera, invert_pose(T_wc), ell)
+        projection = project_ellipsoid(camera, invert_pose(T_wc), ell)
     except ValueError:
-        return None
+        return 0.0
+    return ellipse_iou(projection, detection)
 
 
 def associate(
@@ -293,59 +274,46 @@ def associate(
             o, d, rho = _rays(sub, camera, T_wc)
             frames = np.array([s.frame for s in sub])
             clusters = _geometric_clusters(o, d, rho, frames, opt, rng, tick)
-            assigned = np.zeros(len(un), dtype=bool)
-            for members in clusters:
-                assigned[members] = True
+            assigned: set[int] = set()  # observation indices in an object of this label
             label_objs = []
             for members in clusters:
                 glob = [int(un[m]) for m in members]
                 tick()
                 ell = _reconstruct(glob, observations, T_wc, camera, opt)
-                if ell is None:
-                    assigned[members] = False
-                    continue
-                label_objs.append([glob, ell])
+                if ell is not None:
+                    label_objs.append((glob, ell))
+                    assigned.update(glob)
             # verification: drop poor fits, recruit good unassigned ones, reconstruct again
-            for entry in label_objs:
-                glob, ell = entry
-                ious = {}
-                for k in glob:
-                    p = _projection(ell, T_wc[observations[k].frame], camera)
-                    ious[k] = ellipse_iou(p, observations[k].ellipse) if p is not None else 0.0
+            for glob, ell in label_objs:
+                ious = {k: _projected_iou(ell, T_wc[observations[k].frame], camera,
+                                          observations[k].ellipse) for k in glob}
                 keep = [k for k in glob if ious[k] >= opt.min_iou]
                 dropped = set(glob) - set(keep)
-                for k in dropped:
-                    assigned[np.flatnonzero(un == k)] = False
+                assigned -= dropped
                 used_frames = {observations[k].frame for k in keep}
                 best_new: dict[int, tuple[float, int]] = {}
-                for m in np.flatnonzero(~assigned):
-                    k = int(un[m])
-                    if k in dropped:
-                        continue
+                for k in untracked:
                     fr = observations[k].frame
-                    if fr in used_frames:
+                    if k in assigned or k in dropped or fr in used_frames:
                         continue
-                    p = _projection(ell, T_wc[fr], camera)
-                    if p is None:
-                        continue
-                    iou = ellipse_iou(p, observations[k].ellipse)
+                    iou = _projected_iou(ell, T_wc[fr], camera, observations[k].ellipse)
                     if iou >= opt.recruit_iou and iou > best_new.get(fr, (0.0, -1))[0]:
                         best_new[fr] = (iou, k)
                 for iou, k in best_new.values():
                     keep.append(k)
                     ious[k] = iou
-                    assigned[np.flatnonzero(un == k)] = True
+                    assigned.add(k)
                 if len(keep) < opt.min_views:
-                    for k in keep:
-                        assigned[np.flatnonzero(un == k)] = False
+                    assigned -= set(keep)
                     continue
                 if set(keep) != set(glob):
                     ell2 = _reconstruct(sorted(keep), observations, T_wc, camera, opt)
                     ell = ell2 if ell2 is not None else ell
                 objects.append(ObjectHypothesis(label, sorted(keep), ell, "geometric",
                                                 {k: ious[k] for k in keep}))
-            for m in np.flatnonzero(~assigned):
-                rejected[int(un[m])] = "fits_no_object"
+            for k in untracked:
+                if k not in assigned:
+                    rejected[k] = "fits_no_object"
         if progress is not None:
             progress(label, (li + 1) / len(labels))
     objects = _merge_duplicates(objects, observations, T_wc, camera, opt, tick)

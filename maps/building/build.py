@@ -28,8 +28,7 @@ Progress = Callable[[str, float, int], None]
 #: Objects with an unconstrained axis need at least this many views to enter the map.
 MIN_VIEWS_UNCONSTRAINED = 15
 #: Objects whose centre std (quality report) exceeds this (m) are left out of the map; None
-#: keeps them (the default: on the Chess bench, leaving out the TVs, whose centre std is
-#: 0.6-0.9 m, did not change relocalization at 10 cm and lost their detections).
+#: keeps them (the default; why: docs/design/maps.md, "Build jobs").
 MAX_CENTER_STD_M: float | None = None
 
 
@@ -69,21 +68,18 @@ def build_map(
     T_wc = np.array([f.world_from_camera for f in recording.frames])
     obs = recording.observations
     report_progress("associating", 0.0, 0)
-    found = [0]
 
     def on_label(_label: str, fraction: float) -> None:
         if deadline is not None and time.monotonic() > deadline:
             raise BuildTimeoutError("time budget exhausted during association")
-        report_progress("associating", 50.0 * fraction, found[0])
+        report_progress("associating", 50.0 * fraction, 0)
 
     objects, rejected = associate(obs, T_wc, recording.camera, association, on_label)
-    found[0] = len(objects)
     t_assoc = time.perf_counter() - t0
     report_progress("refining", 50.0, len(objects))
-    max_it = max_iterations
 
     def on_iter(it: float, _err: float) -> None:
-        report_progress("refining", 50.0 + 45.0 * min(1.0, it / max_it), len(objects))
+        report_progress("refining", 50.0 + 45.0 * min(1.0, it / max_iterations), len(objects))
 
     joint = None
     if objects:

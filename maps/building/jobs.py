@@ -1,13 +1,10 @@
 """Map-building jobs as rows of the map store's database (table ``quadloc_build_jobs``, created by
 the Alembic migration ``0002_build_jobs``).
 
-A job is ``queued`` -> ``running`` -> ``succeeded`` | ``failed``. An active job's row is its
-heartbeat: the runner updates ``updated_at`` with every progress report of the running job (at
-least every 2 s), and the queued jobs' rows with it (:meth:`JobStore.heartbeat`). A job
-that is queued or running but whose heartbeat is older than ``stale_after_s`` lost its runner (the
-replica restarted or died): :meth:`JobStore.fail_stale` marks it ``failed`` with the error
-``runner_lost``; the API calls it at startup and before answering a job's status, so no job stays
-"running" forever. Times are UTC.
+A job is ``queued`` -> ``running`` -> ``succeeded`` | ``failed``; an active job's row is its
+heartbeat (``updated_at``), and :meth:`JobStore.fail_stale` fails the jobs whose heartbeat is
+older than ``stale_after_s`` with ``runner_lost`` (docs/design/maps.md, "Build jobs"). Times
+are UTC.
 """
 
 from __future__ import annotations
@@ -15,34 +12,15 @@ from __future__ import annotations
 import json
 import uuid
 from dataclasses import dataclass
-from datetime import UTC, datetime, timedelta
+from datetime import datetime, timedelta
 from typing import Any
 
 import sqlalchemy as sa
 from sqlalchemy.engine import Engine
 
-__all__ = ["BuildJob", "JobNotFoundError", "JobStore", "jobs_table"]
+from maps.store import _now, _utc, jobs_table
 
-_metadata = sa.MetaData()
-#: Query description only; the schema belongs to the migration (a test compares them).
-jobs_table = sa.Table(
-    "quadloc_build_jobs",
-    _metadata,
-    sa.Column("job_id", sa.String(36), primary_key=True),
-    sa.Column("map_id", sa.String(128), nullable=False),
-    sa.Column("base_version", sa.Integer, nullable=True),
-    sa.Column("status", sa.String(16), nullable=False),
-    sa.Column("stage", sa.String(32), nullable=False),
-    sa.Column("percent", sa.Float, nullable=False),
-    sa.Column("objects_found", sa.Integer, nullable=False),
-    sa.Column("map_version", sa.Integer, nullable=True),
-    sa.Column("error", sa.Text, nullable=True),
-    sa.Column("report", sa.Text, nullable=True),
-    sa.Column("created_at", sa.DateTime(timezone=True), nullable=False),
-    sa.Column("updated_at", sa.DateTime(timezone=True), nullable=False),
-    sa.CheckConstraint("status IN ('queued', 'running', 'succeeded', 'failed')",
-                       name="ck_quadloc_build_jobs_status"),
-)
+__all__ = ["BuildJob", "JobNotFoundError", "JobStore", "jobs_table"]
 
 ACTIVE = ("queued", "running")
 
@@ -65,14 +43,6 @@ class BuildJob:
     report: dict[str, Any] | None
     created_at: datetime
     updated_at: datetime
-
-
-def _now() -> datetime:
-    return datetime.now(UTC)
-
-
-def _utc(value: datetime) -> datetime:
-    return value if value.tzinfo is not None else value.replace(tzinfo=UTC)
 
 
 class JobStore:
@@ -104,42 +74,36 @@ class JobStore:
             report=json.loads(m["report"]) if m["report"] else None,
             created_at=_utc(m["created_at"]), updated_at=_utc(m["updated_at"]))
 
-    def _update(self, job_id: str, only_active: bool = True, **values: Any) -> bool:
-        stmt = jobs_table.update().where(jobs_table.c.job_id == job_id)
-        if only_active:
-            stmt = stmt.where(jobs_table.c.status.in_(ACTIVE))
+    def _update(self, *where: Any, **values: Any) -> int:
+        """Set ``values`` (and the heartbeat ``updated_at``) on the ACTIVE jobs matching
+        ``where``; returns how many."""
         with self.engine.begin() as conn:
-            return conn.execute(stmt.values(updated_at=_now(), **values)).rowcount == 1
+            return conn.execute(jobs_table.update().where(jobs_table.c.status.in_(ACTIVE), *where)
+                                .values(updated_at=_now(), **values)).rowcount
 
     def progress(self, job_id: str, stage: str, percent: float, objects_found: int) -> bool:
         """Heartbeat + progress of a running job; False if the job is no longer active (e.g.
         marked failed as stale): the runner should stop."""
-        return self._update(job_id, status="running", stage=stage,
+        return self._update(jobs_table.c.job_id == job_id, status="running", stage=stage,
                             percent=float(min(100.0, max(0.0, percent))),
-                            objects_found=int(objects_found))
+                            objects_found=int(objects_found)) == 1
 
     def heartbeat(self, job_ids: list[str]) -> int:
         """Refresh the heartbeat (``updated_at``) of the listed jobs that are still active
         (e.g. queued behind a running build on the same replica); returns how many."""
-        if not job_ids:
-            return 0
-        with self.engine.begin() as conn:
-            return conn.execute(
-                jobs_table.update()
-                .where(jobs_table.c.job_id.in_(job_ids), jobs_table.c.status.in_(ACTIVE))
-                .values(updated_at=_now())).rowcount
+        return self._update(jobs_table.c.job_id.in_(job_ids)) if job_ids else 0
 
     def succeed(self, job_id: str, map_version: int, report: dict[str, Any],
                 objects_found: int) -> bool:
-        return self._update(job_id, status="succeeded", stage="done", percent=100.0,
-                            map_version=map_version, objects_found=objects_found,
-                            report=json.dumps(report))
+        return self._update(jobs_table.c.job_id == job_id, status="succeeded", stage="done",
+                            percent=100.0, map_version=map_version, objects_found=objects_found,
+                            report=json.dumps(report)) == 1
 
     def fail(self, job_id: str, reason: str, detail: str,
              report: dict[str, Any] | None = None) -> bool:
-        return self._update(job_id, status="failed", stage="failed",
+        return self._update(jobs_table.c.job_id == job_id, status="failed", stage="failed",
                             error=json.dumps({"reason": reason, "detail": detail}),
-                            report=None if report is None else json.dumps(report))
+                            report=None if report is None else json.dumps(report)) == 1
 
     def fail_stale(self, stale_after_s: float) -> int:
         """Mark queued/running jobs without a heartbeat for ``stale_after_s`` as failed."""
@@ -147,9 +111,5 @@ class JobStore:
         err = json.dumps({"reason": "runner_lost",
                           "detail": f"no progress for {stale_after_s:g} s: the replica running "
                                     f"the job restarted or died; submit the recording again"})
-        with self.engine.begin() as conn:
-            return conn.execute(
-                jobs_table.update()
-                .where(jobs_table.c.status.in_(ACTIVE), jobs_table.c.updated_at < cutoff)
-                .values(status="failed", stage="failed", error=err, updated_at=_now())
-            ).rowcount
+        return self._update(jobs_table.c.updated_at < cutoff, status="failed", stage="failed",
+                            error=err)

@@ -4,42 +4,12 @@ Variables: per object ``E_k`` (``Pose3``: ellipsoid frame -> world, translation 
 ``L_k`` (``Vector3``: log semi-axes, metres); with ``refine_cameras`` also per frame ``X_f``
 (``Pose3`` ``world_from_camera``, OpenCV camera axes).
 
-Factors:
-
-* the level-set residual of localization over the observations
-  (:func:`factors.ellipsoid_factors.ellipsoid_views_factor`, the factor
-  ``maps.reconstruct`` uses too; residual :func:`factors.ellipsoid_residuals.observation_residual`,
-  the samples of ``factors.metrics.level_set_sample_points``), each view weighted as
-  localization weights a detection (whitened by ``sqrt(sigma)``, the std of
-  ``factors.pose_factors.make_noise_model``; truncated detections by ``truncated_weight`` more)
-  under a Huber kernel per view (threshold ``factors.pose_factors.DEFAULT_ROBUST_SCALE
-  ["level_set"]``); views not in front of their camera get a constant penalty. Cameras fixed:
-  one factor per object over all its views. Cameras refined: one factor per run of
-  ``frames_per_factor`` consecutive frames over all their views (each view touches one
-  camera; fewer, larger factors: the Python round trips, not the arithmetic, dominate, GUIDE 3);
-* ``size_priors``: ``PriorFactorVector`` on ``L_k`` (``N(log semi_axis_m, log_sigma^2)`` per
-  axis). For labels without one, the log semi-axes that the views leave unconstrained at the
-  initial estimate (marginal std above ``unconstrained_log_std``, computed as in the quality
-  report) get a weak prior (std ``UNCONSTRAINED_PRIOR_SIGMA`` = 0.5, a factor 1.65) towards the
-  object's mean log semi-axis, so that they cannot collapse; constrained axes get none (no bias
-  where the views decide);
-* a floor on every semi-axis (``AXIS_FLOOR_FRACTION`` = 1/20 of the object's initial mean
-  semi-axis), a one-sided prior: an axis constrained at the start may not be at the end, once
-  the object and the cameras have moved; no cost above the floor;
-* with ``refine_cameras``: ``PriorFactorPose3`` on the first frame (gauge) and
-  ``BetweenFactorPose3`` between consecutive frames with the app's relative poses
-  (noise ``odometry``, :class:`maps.building.recording.OdometryNoise`) — object-level bundle
-  adjustment.
-
-Quality of each object (:class:`ObjectQuality`): views, spread of the viewing directions (the
-largest angle between two rays from the camera centres to the refined centre), residual cost
-(``0.5 sum_v |r_v|^2 / sigma_v`` over its views, without kernel or truncation weight) and RMS level
-residual, and the semi-axes the views do not constrain: the marginal standard deviation of
-each log semi-axis from the object's own 9x9 Gauss-Newton information (cameras held fixed;
-views weighted by ``1/sigma``, ``QUALITY_DEFAULT_SIGMA`` for detections without one);
-an axis with a std above ``unconstrained_log_std`` (default 0.3, i.e. +-35 %) is flagged; and
-the largest standard deviation of the centre along any direction (``center_std_m``, same
-information).
+Factors (docs/design/maps.md, "Joint refinement"): the level-set views factor of localization
+(:func:`factors.ellipsoid_factors.ellipsoid_views_factor`, Huber kernel per view, truncated
+detections down-weighted); ``size_priors`` or a weak prior on the semi-axes the views leave
+unconstrained; a one-sided floor on every semi-axis; with ``refine_cameras`` a gauge prior and
+odometry between factors. :class:`ObjectQuality` reports each object's views, spread, residual
+and the marginal std of its log semi-axes and centre.
 """
 
 from __future__ import annotations
@@ -48,7 +18,7 @@ import itertools
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import gtsam
 import numpy as np
@@ -60,11 +30,12 @@ from factors.ellipsoid_residuals import (
     observation_residual,
     stack_samples,
 )
-from factors.geometry import Camera, Ellipsoid, invert_pose
+from factors.geometry import Camera, Ellipsoid, invert_pose, pose_matrix
 from factors.pose_factors import DEFAULT_ROBUST_SCALE, pose3
 from factors.pose_residuals import DEFAULT_MIN_DEPTH_MARGIN
 from maps.building.association import touches_border
 from maps.building.recording import Observation, OdometryNoise, SizePrior
+from maps.reconstruct import _max_ray_angle_deg, canonical_ellipsoid
 
 __all__ = ["JointResult", "ObjectQuality", "refine_jointly"]
 
@@ -74,10 +45,8 @@ UNCONSTRAINED_LOG_STD = 0.3
 #: that of the visible part, not of the object's projection).
 TRUNCATED_WEIGHT = 0.3
 #: Std (log metres) of the prior on the log semi-axes that the views leave unconstrained at the
-#: initial estimate (towards the object's mean log semi-axis); None disables it. 0.5 (a factor
-#: 1.65): on the bench's tuning seed 0, 0.3, 0.5 and 1 relocalize alike and 0.5 converges in
-#: the fewest LM iterations (9 vs 17 at 1); at 1, a TV seen within a narrow cone collapsed to a
-#: 1.2 m x 1 cm disc on another seed (left out as degenerate by ``maps.reconstruct``).
+#: initial estimate (towards the object's mean log semi-axis); None disables it (tuning: design
+#: doc).
 UNCONSTRAINED_PRIOR_SIGMA: float | None = 0.5
 #: ``sigma`` assumed for detections without one in the quality report's axis uncertainty (a
 #: level-set residual std of ``sqrt(2.5e-3) = 0.05``, typical of a fine-tuned detector; the
@@ -85,10 +54,7 @@ UNCONSTRAINED_PRIOR_SIGMA: float | None = 0.5
 QUALITY_DEFAULT_SIGMA = 2.5e-3
 #: Floor of every semi-axis, as a fraction of the object's initial mean semi-axis (geometric),
 #: held by a one-sided prior (zero cost above it, std ``AXIS_FLOOR_LOG_SIGMA`` in log below;
-#: None: no floor). An axis the views constrain at the start may not be constrained at the end,
-#: once the object and the cameras have moved (a TV seen truncated within a narrow cone
-#: collapsed to a disc of 1e-159 m); the floor stops such collapses without biasing any axis
-#: above it (a Gaussian prior on every axis would).
+#: None: no floor; why: design doc).
 AXIS_FLOOR_FRACTION: float | None = 0.05
 AXIS_FLOOR_LOG_SIGMA = 0.1
 #: With ``refine_cameras``: consecutive frames whose views share one factor.
@@ -144,17 +110,6 @@ def _log_axis_std(T_cw: np.ndarray, R: np.ndarray, center: np.ndarray, axes: np.
     return std, r, ok, center_std
 
 
-def _canonical(R: np.ndarray, center: np.ndarray, axes: np.ndarray) -> Ellipsoid:
-    """The ellipsoid with its semi-axes in descending order (rotation columns permuted alike,
-    handedness kept). Semi-axes that underflowed are kept tiny, not zero: the caller checks
-    them against the map limits (a collapsed axis is reported, not raised)."""
-    order = np.argsort(axes)[::-1]
-    R2 = R[:, order].copy()
-    if np.linalg.det(R2) < 0:
-        R2[:, 2] = -R2[:, 2]
-    return Ellipsoid(center, np.maximum(axes[order], 1e-300), R2)
-
-
 def _floor_factor(key: int, floor: float, sigma: float) -> gtsam.CustomFactor:
     """One-sided prior on a ``Vector3`` (log semi-axes): residual ``max(0, floor - x_i)``,
     std ``sigma``: no cost at or above ``floor``."""
@@ -170,6 +125,7 @@ def _floor_factor(key: int, floor: float, sigma: float) -> gtsam.CustomFactor:
     return gtsam.CustomFactor(gtsam.noiseModel.Isotropic.Sigma(3, sigma), [key], error_fn)
 
 
+@dataclass
 class _Ticker:
     """Counts factor evaluations and reports fractional LM progress at most every
     ``interval_s`` from inside an iteration (one iteration of a large graph, e.g. with camera
@@ -177,15 +133,13 @@ class _Ticker:
     the evaluations so far over about three per factor and iteration (a linearisation and two
     error evaluations), capped below 1."""
 
-    def __init__(self, progress: Callable[[float, float], None] | None,
-                 interval_s: float = 0.5) -> None:
-        self.progress = progress
-        self.interval_s = interval_s
-        self.n_factors = 1
-        self.iteration = 0
-        self.error = math.nan
-        self.count = 0
-        self.last = time.monotonic()
+    progress: Callable[[float, float], None] | None
+    interval_s: float = 0.5
+    n_factors: int = 1
+    iteration: int = 0
+    error: float = math.nan
+    count: int = 0
+    last: float = field(default_factory=time.monotonic)
 
     def new_iteration(self, iteration: int, error: float) -> None:
         self.iteration, self.error, self.count = iteration, error, 0
@@ -232,29 +186,29 @@ def refine_jointly(
     samples: dict[int, LevelSetSamples] = {}
     info_w: list[np.ndarray] = []
     view_rows: list[tuple[int, int, int, float]] = []  # (frame, object, observation, weight)
+    sigmas: list[np.ndarray] = []  # per object: its views' sigma, NaN where none is given
     robust = DEFAULT_ROBUST_SCALE["level_set"]
     ticker = _Ticker(progress)
+    T_cw = np.array([invert_pose(T) for T in T_wc])
     for k, (label, idx, ell) in enumerate(objects):
-        values.insert(E[k], pose3(np.block([[ell.rotation, ell.center[:, None]],
-                                             [np.zeros((1, 3)), np.ones((1, 1))]])))
+        values.insert(E[k], pose3(pose_matrix(ell.rotation, ell.center)))
         values.insert(L[k], np.log(ell.axes))
         for i in idx:
             samples[i] = level_set_samples(observations[i].ellipse, camera)
         stacked = stack_samples([samples[i] for i in idx])
-        weights = np.array([1.0 / math.sqrt(observations[i].sigma)
-                            if observations[i].sigma is not None else 1.0 for i in idx])
-        weights *= np.array([truncated_weight if touches_border(observations[i].ellipse, camera)
-                             else 1.0 for i in idx])
+        sigma = np.array([np.nan if observations[i].sigma is None else observations[i].sigma
+                          for i in idx], dtype=float)
+        sigmas.append(sigma)
+        truncated = np.array([touches_border(observations[i].ellipse, camera) for i in idx])
+        weights = (np.where(np.isnan(sigma), 1.0, 1.0 / np.sqrt(sigma))
+                   * np.where(truncated, truncated_weight, 1.0))
         frames_k = [observations[i].frame for i in idx]
-        info_w.append(np.array([
-            (truncated_weight**2 if touches_border(observations[i].ellipse, camera) else 1.0)
-            / (observations[i].sigma if observations[i].sigma is not None
-               else QUALITY_DEFAULT_SIGMA) for i in idx]))
+        info_w.append(np.where(truncated, truncated_weight**2, 1.0)
+                      / np.where(np.isnan(sigma), QUALITY_DEFAULT_SIGMA, sigma))
         if not refine_cameras:  # one factor per object over all its views
             graph.add(ellipsoid_views_factor(
                 stacked, weights, [(E[k], L[k])], np.zeros(len(idx), int),
-                camera_from_world=np.array([invert_pose(T_wc[f]) for f in frames_k]),
-                robust_scale=robust, on_evaluate=ticker))
+                camera_from_world=T_cw[frames_k], robust_scale=robust, on_evaluate=ticker))
         else:
             for v, i in enumerate(idx):
                 view_rows.append((observations[i].frame, k, i, weights[v]))
@@ -266,8 +220,8 @@ def refine_jointly(
         elif unconstrained_prior_sigma is not None:
             # axes the views do not constrain at the initial estimate: a weak prior towards the
             # object's mean log semi-axis keeps them from collapsing (module doc)
-            std, _, _, _ = _log_axis_std(np.array([invert_pose(T_wc[f]) for f in frames_k]),
-                                      ell.rotation, ell.center, ell.axes, stacked, info_w[k])
+            std, _, _, _ = _log_axis_std(T_cw[frames_k], ell.rotation, ell.center, ell.axes,
+                                         stacked, info_w[k])
             loose = ~(std <= unconstrained_log_std)
             if loose.any():
                 sig = np.where(loose, unconstrained_prior_sigma, 1e6)
@@ -337,31 +291,28 @@ def refine_jointly(
     for f, key in X.items():
         T_out[f] = result.atPose3(key).matrix()
     quality = []
+    T_cw_out = np.array([invert_pose(T) for T in T_out])
     for k, (_label, idx, _ell) in enumerate(objects):
         pose = result.atPose3(E[k])
         R = pose.rotation().matrix()
         c = np.asarray(pose.translation(), dtype=float)
         axes = np.exp(result.atVector(L[k]))
-        # canonical form: descending semi-axes, proper rotation
-        ell = _canonical(R, c, axes)
+        ell = canonical_ellipsoid(R, c, axes)
         ells.append(ell)
-        T_cw_all = np.array([invert_pose(T_out[observations[i].frame]) for i in idx])
+        frames_k = [observations[i].frame for i in idx]
         stacked = stack_samples([samples[i] for i in idx])
-        std, r_ok, ok, center_std = _log_axis_std(T_cw_all, R, c, axes, stacked, info_w[k])
-        w_cost = np.array([1.0 / observations[i].sigma if observations[i].sigma is not None
-                           else 1.0 for i in idx])[ok]
+        std, r_ok, ok, center_std = _log_axis_std(T_cw_out[frames_k], R, c, axes, stacked,
+                                                  info_w[k])
+        w_cost = np.where(np.isnan(sigmas[k]), 1.0, 1.0 / sigmas[k])[ok]
         cost = 0.5 * float(np.sum(w_cost[:, None] * r_ok**2))
-        rs = [r_ok.reshape(-1)] if r_ok.size else []
-        centres = np.array([T_out[observations[i].frame][:3, 3] for i in idx])
-        rays = c - centres
+        rays = c - T_out[frames_k, :3, 3]
         rays /= np.linalg.norm(rays, axis=1, keepdims=True)
-        spread = float(np.degrees(np.arccos(np.clip((rays @ rays.T).min(), -1.0, 1.0))))
-        allr = np.concatenate(rs) if rs else np.zeros(1)
+        allr = r_ok.reshape(-1) if r_ok.size else np.zeros(1)
         # std per axis of the refined frame; report in the canonical (descending) order
         order = np.argsort(axes)[::-1]
         std_c = std[order]
         quality.append(ObjectQuality(
-            n_views=len(idx), view_spread_deg=spread, residual_cost=cost,
+            n_views=len(idx), view_spread_deg=_max_ray_angle_deg(rays), residual_cost=cost,
             rms_level_residual=float(np.sqrt(np.mean(allr**2))),
             log_axis_std=tuple(float(x) for x in std_c), center_std_m=center_std,
             unconstrained_axes=tuple(int(a) for a in np.flatnonzero(

@@ -1,33 +1,13 @@
 """A recording: posed frames with object detections, the input of map building.
 
-JSON document (what ``POST /v1/maps:build``, ``quadloc maps build`` and the SDK send)::
-
-    {
-      "intrinsics": {"fx": 585, "fy": 585, "cx": 320, "cy": 240, "width": 640, "height": 480},
-      "frames": [
-        {"frame_id": "0001",
-         "world_from_camera": {"quaternion_wxyz": [1, 0, 0, 0], "translation_m": [0, 0, 0]},
-         "detections": [
-            {"label": "TV", "ellipse": {"cx": 300, "cy": 200, "a": 80, "b": 40, "angle": 0.1},
-             "sigma": 0.02, "track_id": "t7"},
-            {"label": "Chair", "box": [10, 20, 110, 220]}]}
-      ],
-      "name": "My room", "up_axis": [0, 0, 1],
-      "size_priors": {"Chair": {"semi_axis_m": 0.4, "log_sigma": 0.5}},
-      "refine_camera_poses": true,
-      "odometry_noise": {"translation_m_per_sqrt_m": 0.01, "rotation_rad_per_sqrt_m": 0.005}
-    }
-
-Conventions: ``world_from_camera`` is the camera's pose in the app's world frame (its own
-SLAM/VIO), camera axes OpenCV (+X right, +Y down, +Z forward; an ARKit/ARCore pose must be
-right-multiplied by ``diag(1, -1, -1, 1)`` first), translation in metres, quaternion scalar
-first. Ellipses: centre px (origin top-left pixel corner), SEMI-axes px, angle radians;
-boxes ``[xmin, ymin, xmax, ymax]`` px become their inscribed axis-aligned ellipse. ``sigma``
-is the detector's uncertainty as in localize (factor std ``sqrt(sigma)``). ``track_id``: the
-app's tracker id; detections that carry one are grouped by it (per label) instead of being
-associated geometrically. ``refine_camera_poses`` (default true): refine the camera poses
-too, tied by the app's relative poses with the noise ``odometry_noise`` (:class:`OdometryNoise`,
-every field optional).
+JSON document (what ``POST /v1/maps:build``, ``quadloc maps build`` and the SDK send):
+docs/map_building.md, "The recording". Conventions: ``world_from_camera`` is the camera's pose
+in the app's world frame (camera axes OpenCV), translation in metres, quaternion scalar first;
+ellipses: centre px (origin top-left pixel corner), SEMI-axes px, angle radians; boxes
+``[xmin, ymin, xmax, ymax]`` px become their inscribed axis-aligned ellipse; ``sigma`` as in
+localize (factor std ``sqrt(sigma)``); detections with a ``track_id`` are grouped by it (per
+label); ``refine_camera_poses`` (default true) refines the camera poses too, tied by the app's
+relative poses with the noise ``odometry_noise`` (:class:`OdometryNoise`).
 
 :func:`parse_recording` validates everything and raises :class:`RecordingError` listing every
 problem as ``{"field": "frames[3].detections[0].ellipse.a", "message": ...}``.
@@ -42,7 +22,13 @@ from typing import Any
 
 import numpy as np
 
-from factors.geometry import Camera, Ellipse, pose_matrix, rotation_from_quaternion_wxyz
+from factors.geometry import (
+    Camera,
+    Ellipse,
+    pose_matrix,
+    quaternion_wxyz_from_rotation,
+    rotation_from_quaternion_wxyz,
+)
 
 __all__ = [
     "BuildLimits",
@@ -139,19 +125,23 @@ class Recording:
     odometry_noise: OdometryNoise = field(default_factory=OdometryNoise)
 
 
+def _bad(errors: list[dict[str, str]], field: str, message: str) -> None:
+    errors.append({"field": field, "message": message})
+
+
 def _num(errors: list, path: str, value: Any, positive: bool = False) -> float | None:
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        errors.append({"field": path, "message": "must be a finite number"})
+        _bad(errors, path, "must be a finite number")
         return None
     if positive and value <= 0:
-        errors.append({"field": path, "message": "must be > 0"})
+        _bad(errors, path, "must be > 0")
         return None
     return float(value)
 
 
 def _vec(errors: list, path: str, value: Any, n: int) -> np.ndarray | None:
     if not isinstance(value, list | tuple) or len(value) != n:
-        errors.append({"field": path, "message": f"must be an array of {n} numbers"})
+        _bad(errors, path, f"must be an array of {n} numbers")
         return None
     out = [_num(errors, f"{path}[{i}]", v) for i, v in enumerate(value)]
     return None if any(v is None for v in out) else np.array(out, dtype=float)
@@ -159,16 +149,15 @@ def _vec(errors: list, path: str, value: Any, n: int) -> np.ndarray | None:
 
 def _pose(errors: list, path: str, value: Any) -> np.ndarray | None:
     if not isinstance(value, Mapping):
-        errors.append({"field": path, "message": "must be an object with quaternion_wxyz and "
-                                                 "translation_m"})
+        _bad(errors, path, "must be an object with quaternion_wxyz and translation_m")
         return None
     q = _vec(errors, f"{path}.quaternion_wxyz", value.get("quaternion_wxyz"), 4)
     t = _vec(errors, f"{path}.translation_m", value.get("translation_m"), 3)
     if q is None or t is None:
         return None
     if abs(np.linalg.norm(q) - 1.0) > 1e-3:
-        errors.append({"field": f"{path}.quaternion_wxyz",
-                       "message": f"must have unit norm (got {np.linalg.norm(q):.6g})"})
+        _bad(errors, f"{path}.quaternion_wxyz",
+             f"must have unit norm (got {np.linalg.norm(q):.6g})")
         return None
     return pose_matrix(rotation_from_quaternion_wxyz(q / np.linalg.norm(q)), t)
 
@@ -176,20 +165,19 @@ def _pose(errors: list, path: str, value: Any) -> np.ndarray | None:
 def _ellipse(errors: list, path: str, det: Mapping) -> Ellipse | None:
     has_e, has_b = det.get("ellipse") is not None, det.get("box") is not None
     if has_e == has_b:
-        errors.append({"field": path, "message": "give exactly one of ellipse or box"})
+        _bad(errors, path, "give exactly one of ellipse or box")
         return None
     if has_b:
         box = _vec(errors, f"{path}.box", det["box"], 4)
         if box is None:
             return None
         if not (box[2] > box[0] and box[3] > box[1]):
-            errors.append({"field": f"{path}.box", "message": "must have xmax > xmin and "
-                                                              "ymax > ymin"})
+            _bad(errors, f"{path}.box", "must have xmax > xmin and ymax > ymin")
             return None
         return Ellipse.from_bbox(*box)
     e = det["ellipse"]
     if not isinstance(e, Mapping):
-        errors.append({"field": f"{path}.ellipse", "message": "must be {cx, cy, a, b, angle}"})
+        _bad(errors, f"{path}.ellipse", "must be {cx, cy, a, b, angle}")
         return None
     vals = [_num(errors, f"{path}.ellipse.{k}", e.get(k), positive=k in ("a", "b"))
             for k in ("cx", "cy", "a", "b", "angle")]
@@ -205,8 +193,7 @@ def parse_recording(data: Any, limits: BuildLimits | None = None) -> Recording:
     intr = data.get("intrinsics")
     camera = None
     if not isinstance(intr, Mapping):
-        errors.append({"field": "intrinsics", "message": "required: {fx, fy, cx, cy, width, "
-                                                         "height}"})
+        _bad(errors, "intrinsics", "required: {fx, fy, cx, cy, width, height}")
     else:
         v = {k: _num(errors, f"intrinsics.{k}", intr.get(k), positive=k not in ("cx", "cy"))
              for k in ("fx", "fy", "cx", "cy", "width", "height")}
@@ -215,10 +202,10 @@ def parse_recording(data: Any, limits: BuildLimits | None = None) -> Recording:
                             int(v["height"]))
     frames_in = data.get("frames")
     if not isinstance(frames_in, list) or not frames_in:
-        errors.append({"field": "frames", "message": "must be a non-empty array"})
+        _bad(errors, "frames", "must be a non-empty array")
         frames_in = []
     elif len(frames_in) > lim.max_frames:
-        errors.append({"field": "frames", "message": f"at most {lim.max_frames} frames"})
+        _bad(errors, "frames", f"at most {lim.max_frames} frames")
         frames_in = []
     frames: list[FrameRecord] = []
     obs: list[Observation] = []
@@ -226,36 +213,34 @@ def parse_recording(data: Any, limits: BuildLimits | None = None) -> Recording:
     for fi, f in enumerate(frames_in):
         path = f"frames[{fi}]"
         if not isinstance(f, Mapping):
-            errors.append({"field": path, "message": "must be an object"})
+            _bad(errors, path, "must be an object")
             continue
         fid = f.get("frame_id", str(fi))
         if not isinstance(fid, str | int) or isinstance(fid, bool) or len(str(fid)) > 128:
-            errors.append({"field": f"{path}.frame_id", "message": "must be a string of at most "
-                                                                   "128 characters"})
+            _bad(errors, f"{path}.frame_id", "must be a string of at most 128 characters")
         T = _pose(errors, f"{path}.world_from_camera", f.get("world_from_camera"))
         dets = f.get("detections", [])
         if not isinstance(dets, list):
-            errors.append({"field": f"{path}.detections", "message": "must be an array"})
+            _bad(errors, f"{path}.detections", "must be an array")
             dets = []
         if len(dets) > lim.max_detections_per_frame:
-            errors.append({"field": f"{path}.detections",
-                           "message": f"at most {lim.max_detections_per_frame} detections"})
+            _bad(errors, f"{path}.detections",
+                 f"at most {lim.max_detections_per_frame} detections")
             dets = []
         n_det += len(dets)
         if n_det > lim.max_detections:
-            errors.append({"field": "frames", "message": f"at most {lim.max_detections} "
-                                                         f"detections in total"})
+            _bad(errors, "frames", f"at most {lim.max_detections} detections in total")
             break
         frames.append(FrameRecord(str(fid), T if T is not None else np.eye(4)))
         for di, d in enumerate(dets):
             dp = f"{path}.detections[{di}]"
             if not isinstance(d, Mapping):
-                errors.append({"field": dp, "message": "must be an object"})
+                _bad(errors, dp, "must be an object")
                 continue
             label = d.get("label")
             if not isinstance(label, str) or not 0 < len(label) <= 128:
-                errors.append({"field": f"{dp}.label", "message": "must be a non-empty string "
-                                                                  "of at most 128 characters"})
+                _bad(errors, f"{dp}.label",
+                     "must be a non-empty string of at most 128 characters")
             ell = _ellipse(errors, dp, d)
             sigma = d.get("sigma")
             if sigma is not None:
@@ -263,26 +248,25 @@ def parse_recording(data: Any, limits: BuildLimits | None = None) -> Recording:
             track = d.get("track_id")
             if track is not None and (not isinstance(track, str | int) or isinstance(track, bool)
                                       or len(str(track)) > 128):
-                errors.append({"field": f"{dp}.track_id", "message": "must be a string"})
+                _bad(errors, f"{dp}.track_id", "must be a string")
                 track = None
             if ell is not None and isinstance(label, str):
                 obs.append(Observation(len(frames) - 1, di, label, ell, sigma,
                                        None if track is None else str(track)))
     name = data.get("name", "Built map")
     if not isinstance(name, str) or not 0 < len(name) <= 256:
-        errors.append({"field": "name", "message": "must be a non-empty string"})
+        _bad(errors, "name", "must be a non-empty string")
     up = data.get("up_axis", [0.0, 0.0, 1.0])
     upv = _vec(errors, "up_axis", up, 3)
     priors: dict[str, SizePrior] = {}
     sp = data.get("size_priors", {}) or {}
     if not isinstance(sp, Mapping):
-        errors.append({"field": "size_priors", "message": "must be an object label -> "
-                                                          "{semi_axis_m, log_sigma}"})
+        _bad(errors, "size_priors", "must be an object label -> {semi_axis_m, log_sigma}")
         sp = {}
     for label, p in sp.items():
         path = f"size_priors.{label}"
         if not isinstance(p, Mapping):
-            errors.append({"field": path, "message": "must be {semi_axis_m, log_sigma}"})
+            _bad(errors, path, "must be {semi_axis_m, log_sigma}")
             continue
         a = _num(errors, f"{path}.semi_axis_m", p.get("semi_axis_m"), positive=True)
         s = _num(errors, f"{path}.log_sigma", p.get("log_sigma", 0.5), positive=True)
@@ -290,27 +274,26 @@ def parse_recording(data: Any, limits: BuildLimits | None = None) -> Recording:
             priors[str(label)] = SizePrior(a, s)
     refine = data.get("refine_camera_poses", True)
     if not isinstance(refine, bool):
-        errors.append({"field": "refine_camera_poses", "message": "must be a boolean"})
+        _bad(errors, "refine_camera_poses", "must be a boolean")
     odo = data.get("odometry_noise", {}) or {}
     noise = OdometryNoise()
     if not isinstance(odo, Mapping):
-        errors.append({"field": "odometry_noise", "message": "must be an object"})
+        _bad(errors, "odometry_noise", "must be an object")
     else:
         known = set(OdometryNoise.__dataclass_fields__)
         for key in sorted(set(odo) - known):
-            errors.append({"field": f"odometry_noise.{key}",
-                           "message": f"unknown; expected one of {sorted(known)}"})
+            _bad(errors, f"odometry_noise.{key}", f"unknown; expected one of {sorted(known)}")
         vals = {}
         for key in known & set(odo):
             v = _num(errors, f"odometry_noise.{key}", odo[key])
             if v is not None and not 0 <= v <= 10:
-                errors.append({"field": f"odometry_noise.{key}", "message": "must be in [0, 10]"})
+                _bad(errors, f"odometry_noise.{key}", "must be in [0, 10]")
             elif v is not None:
                 vals[key] = v
         noise = OdometryNoise(**{**noise.__dict__, **vals})
         if not errors and (noise.rotation_rad_per_step <= 0 or noise.translation_m_per_step <= 0):
-            errors.append({"field": "odometry_noise", "message": "the per-step floors "
-                           "rotation_rad_per_step and translation_m_per_step must be > 0"})
+            _bad(errors, "odometry_noise", "the per-step floors rotation_rad_per_step and "
+                 "translation_m_per_step must be > 0")
     if errors:
         raise RecordingError(errors)
     assert camera is not None and upv is not None
@@ -322,8 +305,6 @@ def recording_to_dict(camera: Camera, frames: Sequence[tuple[str, np.ndarray, Se
                       **extra: Any) -> dict[str, Any]:
     """A recording document from ``(frame_id, world_from_camera 4x4, detections)`` triples
     (detections already in the JSON form). Used by the benchmark and the tests."""
-    from factors.geometry import quaternion_wxyz_from_rotation
-
     out = {"intrinsics": {"fx": camera.fx, "fy": camera.fy, "cx": camera.cx, "cy": camera.cy,
                           "width": camera.width, "height": camera.height},
            "frames": [{"frame_id": fid,

@@ -22,10 +22,14 @@ def _run(connection) -> None:  # type: ignore[no-untyped-def]
         context.run_migrations()
 
 
-def run_migrations_offline() -> None:
-    url = context.get_x_argument(as_dictionary=True).get("url") or config.get_main_option(
+def _url() -> str | None:
+    """``-x url=...`` on the command line, else ``sqlalchemy.url`` of the ini file."""
+    return context.get_x_argument(as_dictionary=True).get("url") or config.get_main_option(
         "sqlalchemy.url")
-    context.configure(url=url, literal_binds=True, version_table=VERSION_TABLE)
+
+
+def run_migrations_offline() -> None:
+    context.configure(url=_url(), literal_binds=True, version_table=VERSION_TABLE)
     with context.begin_transaction():
         context.run_migrations()
 
@@ -35,11 +39,9 @@ def run_migrations_online() -> None:
     if connection is not None:
         _run(connection)
         return
-    url = context.get_x_argument(as_dictionary=True).get("url") or config.get_main_option(
-        "sqlalchemy.url")
     from maps.store import normalize_url  # local import: only for the command-line path
 
-    engine = create_engine(normalize_url(url))
+    engine = create_engine(normalize_url(_url()))
     try:
         with engine.begin() as conn:
             _run(conn)
