@@ -61,7 +61,14 @@ import gtsam
 import numpy as np
 
 from factors.geometry import Ellipse
-from factors.metrics import METRIC_NAMES, level_set_sampling_scale, residual
+from factors.metrics import (
+    CONIC_METRICS,
+    METRIC_NAMES,
+    conic_residuals,
+    level_set_sampling_scale,
+    overlap_residual,
+    residual,
+)
 
 IMAGE_SIZE = (640, 480)
 MAX_ITERATIONS = 100
@@ -98,31 +105,52 @@ def transformed(e: np.ndarray, x: float, y: float, theta: float) -> Ellipse:
     return Ellipse(e[0] + x, e[1] + y, e[2], e[3], e[4] + theta)
 
 
-def _residual_fn(name: str, moving: np.ndarray, ref: Ellipse, options: dict):
-    def f(pose: gtsam.Pose2) -> np.ndarray:
-        return residual(name, transformed(moving, pose.x(), pose.y(), pose.theta()), ref,
-                        **options)
+def _residuals_fn(name: str, moving: np.ndarray, ref: Ellipse, options: dict):
+    """``poses`` (list of Pose2) -> residual rows (len(poses), m) of ``T(E, pose)`` against
+    ``E_ref``: one batched call for the metrics that have a batched form (the smooth conic
+    metrics and iou / giou, whose one-pair calls are N = 1 views of the same code), else one
+    :func:`factors.metrics.residual` per pose."""
+    def params(poses: list[gtsam.Pose2]) -> np.ndarray:
+        return np.array([transformed(moving, p.x(), p.y(), p.theta()).params() for p in poses])
+
+    if name in CONIC_METRICS:
+        mu, S = ref.gaussian()
+        Cn = ref.dual_conic()
+
+        def f(poses: list[gtsam.Pose2]) -> np.ndarray:
+            n = len(poses)
+            return conic_residuals(name, params(poses), np.broadcast_to(Cn, (n, 3, 3)),
+                                   gaussians=(np.broadcast_to(mu, (n, 2)),
+                                              np.broadcast_to(S, (n, 2, 2))))[0]
+    elif name in ("iou", "giou"):
+        ref_params = ref.params()
+
+        def f(poses: list[gtsam.Pose2]) -> np.ndarray:
+            return overlap_residual(name, params(poses),
+                                    np.broadcast_to(ref_params, (len(poses), 5)))[0]
+    else:
+        def f(poses: list[gtsam.Pose2]) -> np.ndarray:
+            return np.array([residual(name, transformed(moving, p.x(), p.y(), p.theta()), ref,
+                                      **options) for p in poses])
     return f
 
 
 def make_factor(name: str, moving: np.ndarray, ref: Ellipse, key: int,
                 options: dict) -> gtsam.CustomFactor:
-    """CustomFactor on one Pose2 with the metric's residual and a central-difference Jacobian."""
-    f = _residual_fn(name, moving, ref, options)
-    m = len(f(gtsam.Pose2()))
+    """CustomFactor on one Pose2 with the metric's residual and a central-difference Jacobian
+    (the pose and its 6 perturbations evaluated in one batched call where the metric allows)."""
+    f = _residuals_fn(name, moving, ref, options)
+    m = f([gtsam.Pose2()]).shape[1]
     noise = gtsam.noiseModel.Unit.Create(m)
+    steps = [s * d for d in np.diag(NUMERICAL_STEP) for s in (1.0, -1.0)]
 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H) -> np.ndarray:
         pose = values.atPose2(this.keys()[0])
-        r = f(pose)
-        if H is not None:
-            J = np.empty((m, 3))
-            for j in range(3):
-                d = np.zeros(3)
-                d[j] = NUMERICAL_STEP[j]
-                J[:, j] = (f(pose.retract(d)) - f(pose.retract(-d))) / (2.0 * NUMERICAL_STEP[j])
-            H[0] = J
-        return r
+        if H is None:
+            return f([pose])[0]
+        rows = f([pose] + [pose.retract(d) for d in steps])
+        H[0] = ((rows[1::2] - rows[2::2]) / (2.0 * NUMERICAL_STEP[:, None])).T
+        return rows[0]
 
     return gtsam.CustomFactor(noise, [key], error)
 

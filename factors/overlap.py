@@ -510,10 +510,18 @@ def quadrant_areas(
     return {k: (a[0], None if g is None else g[0]) for k, (a, g) in q.items()}
 
 
+def intersection_areas(p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
+    """Areas (N,) px^2 of the intersections of N pairs of filled ellipses given as params
+    (N, 5) each, clamped to ``[0, min(area1, area2)]`` against rounding."""
+    p1, p2 = np.asarray(p1, dtype=float), np.asarray(p2, dtype=float)
+    area = quadrant_areas_batch(p1, p2, False, HULL_DIRECTIONS, False)["intersection"][0].sum(
+        axis=1)
+    return np.clip(area, 0.0, math.pi * np.minimum(p1[:, 2] * p1[:, 3], p2[:, 2] * p2[:, 3]))
+
+
 def intersection_area(p1: np.ndarray, p2: np.ndarray) -> float:
     """Area (px^2) of the intersection of two filled ellipses given as params (5,)."""
-    area = float(quadrant_areas(p1, p2, False)["intersection"][0].sum())
-    return min(max(area, 0.0), math.pi * min(float(p1[2] * p1[3]), float(p2[2] * p2[3])))
+    return float(intersection_areas(np.reshape(p1, (1, 5)), np.reshape(p2, (1, 5)))[0])
 
 
 def hull_area(p1: np.ndarray, p2: np.ndarray, n_directions: int = HULL_DIRECTIONS) -> float:

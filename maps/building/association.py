@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from factors.geometry import Camera, Ellipse, Ellipsoid, invert_pose, project_ellipsoid
-from factors.overlap import intersection_area
+from factors.overlap import intersection_areas
 from maps.building.recording import Observation
 from maps.reconstruct import (
     ReconstructionError,
@@ -67,11 +67,20 @@ class ObjectHypothesis:
     ious: dict[int, float] = field(default_factory=dict)
 
 
+def ellipse_ious(p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
+    """Intersection over union (N,) of N pairs of filled ellipses given as params (N, 5) each
+    (exact areas, ``factors.overlap``); 0 where the union is empty."""
+    p1, p2 = np.asarray(p1, dtype=float).reshape(-1, 5), np.asarray(p2, dtype=float).reshape(-1, 5)
+    if len(p1) == 0:
+        return np.zeros(0)
+    inter = intersection_areas(p1, p2)
+    union = np.pi * (p1[:, 2] * p1[:, 3] + p2[:, 2] * p2[:, 3]) - inter
+    return np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
+
+
 def ellipse_iou(e1: Ellipse, e2: Ellipse) -> float:
-    """Intersection over union of two filled ellipses (exact areas, ``factors.overlap``)."""
-    inter = intersection_area(e1.params(), e2.params())
-    union = e1.area + e2.area - inter
-    return float(inter / union) if union > 0 else 0.0
+    """Intersection over union of two filled ellipses (one pair of :func:`ellipse_ious`)."""
+    return float(ellipse_ious(e1.params(), e2.params())[0])
 
 
 def _rays(obs: Sequence[Observation], camera: Camera, T_wc: np.ndarray
@@ -220,14 +229,21 @@ def _reconstruct(idx: Sequence[int], obs: Sequence[Observation], T_wc: np.ndarra
     return Ellipsoid(x, np.full(3, r))
 
 
-def _projected_iou(ell: Ellipsoid, T_wc: np.ndarray, camera: Camera, detection: Ellipse
-                   ) -> float:
-    """IoU of ``detection`` with the projection of ``ell`` from ``T_wc`` (0 if none)."""
-    try:
-        projection = project_ellipsoid(camera, invert_pose(T_wc), ell)
-    except ValueError:
-        return 0.0
-    return ellipse_iou(projection, detection)
+def _projected_ious(ell: Ellipsoid, T_wc: np.ndarray, camera: Camera,
+                    detections: Sequence[Ellipse]) -> np.ndarray:
+    """IoUs (k,) of ``detections`` (k) with the projections of ``ell`` from the poses ``T_wc``
+    (k, 4, 4) (0 where it does not project), the areas of all pairs in one batched call."""
+    proj, det, ok = [], [], np.zeros(len(detections), dtype=bool)
+    for i, (T, d) in enumerate(zip(T_wc, detections, strict=True)):
+        try:
+            proj.append(project_ellipsoid(camera, invert_pose(T), ell).params())
+        except ValueError:
+            continue
+        det.append(d.params())
+        ok[i] = True
+    ious = np.zeros(len(detections))
+    ious[ok] = ellipse_ious(np.array(proj).reshape(-1, 5), np.array(det).reshape(-1, 5))
+    return ious
 
 
 def associate(
@@ -285,18 +301,21 @@ def associate(
                     assigned.update(glob)
             # verification: drop poor fits, recruit good unassigned ones, reconstruct again
             for glob, ell in label_objs:
-                ious = {k: _projected_iou(ell, T_wc[observations[k].frame], camera,
-                                          observations[k].ellipse) for k in glob}
+                ious = dict(zip(glob, _projected_ious(
+                    ell, T_wc[[observations[k].frame for k in glob]], camera,
+                    [observations[k].ellipse for k in glob]).tolist(), strict=True))
                 keep = [k for k in glob if ious[k] >= opt.min_iou]
                 dropped = set(glob) - set(keep)
                 assigned -= dropped
                 used_frames = {observations[k].frame for k in keep}
                 best_new: dict[int, tuple[float, int]] = {}
-                for k in untracked:
+                candidates = [k for k in untracked if k not in assigned and k not in dropped
+                              and observations[k].frame not in used_frames]
+                cand_ious = _projected_ious(
+                    ell, T_wc[[observations[k].frame for k in candidates]],
+                    camera, [observations[k].ellipse for k in candidates])
+                for k, iou in zip(candidates, cand_ious.tolist(), strict=True):
                     fr = observations[k].frame
-                    if k in assigned or k in dropped or fr in used_frames:
-                        continue
-                    iou = _projected_iou(ell, T_wc[fr], camera, observations[k].ellipse)
                     if iou >= opt.recruit_iou and iou > best_new.get(fr, (0.0, -1))[0]:
                         best_new[fr] = (iou, k)
                 for iou, k in best_new.values():
