@@ -256,9 +256,16 @@ def test_queued_jobs_beat_while_waiting_and_a_lost_job_stores_nothing(
             time.sleep(0.02)
         assert jobs.get(second).updated_at.year > 2000  # refreshed by the running build
         assert jobs.fail_stale(3600.0) == 0
-        # another replica's sweep marks the running job failed: its runner stops
-        _old_heartbeat(app, first)
-        assert jobs.fail_stale(60.0) == 1
+        # another replica's sweep marks the running job failed: its runner stops. The runner
+        # beats every 0 s; pause its beats for the sweep (a beat already past its check may
+        # still land after _old_heartbeat: the sweep is retried), then let it beat again.
+        monkeypatch.setattr(bj, "HEARTBEAT_S", 3600.0)
+        for _ in range(5):
+            _old_heartbeat(app, first)
+            if (failed := jobs.fail_stale(60.0)) == 1:
+                break
+        assert failed == 1
+        monkeypatch.setattr(bj, "HEARTBEAT_S", 0.0)
         t0 = time.monotonic()
         while first in app.state.build_runner.pending() and time.monotonic() - t0 < 10:
             time.sleep(0.02)
