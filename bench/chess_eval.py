@@ -610,8 +610,8 @@ the tables above by `bench.chess_eval.explanation`; the text around it explains 
   detections, which is what hurts the shape-matching metrics (Wasserstein, Bhattacharyya),
   so with sigma their gap to level set shrinks.
 * *Refinement vs no refinement* (P3P/P2E pose, {_pct(base)} % at 5 cm): metrics below it:
-  {_names(below)}. iou and giou have the residual `sqrt(1 - IoU)`, non-smooth at the optimum
-  and flat for disjoint ellipses, so LM converges slowly and hardly moves from far starts;
+  {_names(below)}. iou and giou refine with their quadrant residual (4 rows per object, exact area
+  gradients; iou gives a disjoint pair the giou rows, `factors/metrics.py`);
   they give nearly the same poses because near the optimum the ellipses overlap and GIoU's
   hull term is ~0.
 * *Sigma weighting* (same frames with and without sigma{"; " + ", ".join(
