@@ -33,6 +33,7 @@ import gtsam
 import numpy as np
 
 from factors.ellipsoid_residuals import LevelSetSamples, observation_residual
+from factors.geometry import depth_margin
 from factors.pose_residuals import DEFAULT_MIN_DEPTH_MARGIN
 
 __all__ = ["PENALTY_COST", "depth_margins", "ellipsoid_views_factor", "huber_row_scale",
@@ -68,14 +69,13 @@ def depth_margins(camera_from_world: np.ndarray, rotation: np.ndarray, center: n
     """Smallest depth (m) of the ellipsoid in each camera (batched like
     :func:`factors.ellipsoid_residuals.observation_residual`): ``d . c + t_z - sqrt(d^T S d)``
     with ``d`` the camera's optical axis in the world (third row of ``R_cw``) and ``S`` the
-    shape matrix ``R diag(axes^2) R^T`` (the same quantity as
-    ``factors.geometry.ellipsoid_depth_margins``)."""
+    shape matrix ``R diag(axes^2) R^T`` (the formula: :func:`factors.geometry.depth_margin`)."""
     R = np.asarray(rotation, dtype=float)
     S = (R * (np.asarray(axes, dtype=float) ** 2)[..., None, :]) @ np.swapaxes(R, -1, -2)
     d = camera_from_world[..., 2, :3]
     spread = np.einsum("...i,...ij,...j->...", d, S, d)
-    return (np.einsum("...i,...i->...", d, center) + camera_from_world[..., 2, 3]
-            - np.sqrt(np.maximum(spread, 0.0)))
+    return depth_margin(np.einsum("...i,...i->...", d, center) + camera_from_world[..., 2, 3],
+                        spread)
 
 
 def ellipsoid_views_factor(

@@ -644,6 +644,15 @@ class Camera:
 # --------------------------------------------------------------------------- projection
 
 
+def depth_margin(center_depth: np.ndarray, axis_variance: np.ndarray) -> np.ndarray:
+    """Smallest camera-frame depth (m) of an ellipsoid: ``z_c - sqrt(d^T S d)``, from its
+    centre's depth ``z_c`` (m) and ``d^T S d`` (m^2), its shape matrix ``S = R diag(axes^2)
+    R^T`` along the camera's optical axis ``d`` (``S_c[2, 2]`` in the camera frame); any
+    matching shapes. The one place of this formula (the pose factors, the map-building
+    factors and :func:`ellipsoid_depth_margins` call it)."""
+    return center_depth - np.sqrt(np.maximum(axis_variance, 0.0))
+
+
 def ellipsoid_depth_margins(
     camera_from_world: np.ndarray, centers: np.ndarray, shape_matrices: np.ndarray
 ) -> np.ndarray:
@@ -657,8 +666,7 @@ def ellipsoid_depth_margins(
     T = np.asarray(camera_from_world, dtype=float)
     r3 = T[..., 2, :3]
     zc = r3 @ np.asarray(centers).T + T[..., 2, 3, None]
-    extent = np.sqrt(np.maximum(np.einsum("...i,nij,...j->...n", r3, shape_matrices, r3), 0.0))
-    return zc - extent
+    return depth_margin(zc, np.einsum("...i,nij,...j->...n", r3, shape_matrices, r3))
 
 
 def project_ellipsoids_dual(

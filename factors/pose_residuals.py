@@ -78,6 +78,7 @@ from factors.geometry import (
     Ellipsoid,
     GeometryError,
     check_pose,
+    depth_margin,
     ellipse_params_and_validity,
     gaussian_derivatives_from_dual_conics,
     gaussians_from_dual_conics,
@@ -441,7 +442,7 @@ class PoseResidualModel:
         RL = Rwc.T @ self._L
         S = RL @ RL.transpose(0, 2, 1)
         A = S - c[:, :, None] * c[:, None, :]
-        margins = c[:, 2] - np.sqrt(S[:, 2, 2])
+        margins = depth_margin(c[:, 2], S[:, 2, 2])
         return A, c, S, margins
 
     def evaluate(self, world_from_camera: np.ndarray, jacobian: bool = True) -> PoseEvaluation:
@@ -504,7 +505,7 @@ class PoseResidualModel:
         z = d @ R[:, 2]
         sr3 = self._S_world @ R[:, 2]  # S_w R e3 (N, 3)
         a3 = (sr3 - d * z[:, None]) @ R  # R^T (S_w R e3 - d z)
-        return d, z, a3, z - np.sqrt(sr3 @ R[:, 2])  # margin z_c - sqrt(S_c[2, 2])
+        return d, z, a3, depth_margin(z, sr3 @ R[:, 2])  # z_c - sqrt(S_c[2, 2])
 
     def _evaluate_level_set(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
         """Level-set residuals and Jacobians of all pairs: ONE batched matmul of per-object
