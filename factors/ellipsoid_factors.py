@@ -33,11 +33,10 @@ import gtsam
 import numpy as np
 
 from factors.ellipsoid_residuals import LevelSetSamples, observation_residual
-from factors.geometry import depth_margin
+from factors.geometry import depth_margin, invert_pose
 from factors.pose_residuals import DEFAULT_MIN_DEPTH_MARGIN
 
-__all__ = ["PENALTY_COST", "depth_margins", "ellipsoid_views_factor", "huber_row_scale",
-           "invert_poses"]
+__all__ = ["PENALTY_COST", "depth_margins", "ellipsoid_views_factor", "huber_row_scale"]
 
 #: Cost of one view whose ellipsoid is not in front of its camera (before the view's weight).
 PENALTY_COST = 1e6
@@ -50,17 +49,6 @@ def huber_row_scale(norms: np.ndarray, k: float) -> np.ndarray:
     out = np.ones_like(norms)
     big = norms > k
     out[big] = np.sqrt(2.0 * k * (norms[big] - 0.5 * k)) / norms[big]
-    return out
-
-
-def invert_poses(a_from_b: np.ndarray) -> np.ndarray:
-    """``b_from_a`` of rigid 4x4 transforms, batched (..., 4, 4)."""
-    T = np.asarray(a_from_b, dtype=float)
-    Rt = np.swapaxes(T[..., :3, :3], -1, -2)
-    out = np.zeros(T.shape)
-    out[..., :3, :3] = Rt
-    out[..., :3, 3] = -np.einsum("...ij,...j->...i", Rt, T[..., :3, 3])
-    out[..., 3, 3] = 1.0
     return out
 
 
@@ -166,7 +154,7 @@ def ellipsoid_views_factor(
         if fixed is not None:
             T_cw = fixed
         else:
-            T_cw = invert_poses(np.array([values.atPose3(x).matrix() for x in cam_keys]))[cam]
+            T_cw = invert_pose(np.array([values.atPose3(x).matrix() for x in cam_keys]))[cam]
         ok = depth_margins(T_cw, R, c, axes) > min_depth_margin
         want = H is not None
         out = np.empty((V, M))

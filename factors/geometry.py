@@ -310,10 +310,14 @@ def pose_matrix(rotation: np.ndarray, translation: Sequence[float]) -> np.ndarra
 
 
 def invert_pose(a_from_b: np.ndarray) -> np.ndarray:
-    """Inverse of a rigid 4x4 transform: ``b_from_a`` from ``a_from_b``."""
-    R = a_from_b[:3, :3]
-    t = a_from_b[:3, 3]
-    return pose_matrix(R.T, -R.T @ t)
+    """Inverse of rigid 4x4 transforms: ``b_from_a`` from ``a_from_b``, batched (..., 4, 4)."""
+    T = np.asarray(a_from_b, dtype=float)
+    Rt = np.swapaxes(T[..., :3, :3], -1, -2)
+    out = np.zeros(T.shape)
+    out[..., :3, :3] = Rt
+    out[..., :3, 3] = -(Rt @ T[..., :3, 3, None])[..., 0]
+    out[..., 3, 3] = 1.0
+    return out
 
 
 # --------------------------------------------------------------------------- ellipse
