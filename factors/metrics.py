@@ -103,6 +103,7 @@ __all__ = [
     "METRIC_NAMES",
     "canonical_axes",
     "clipped_bbox",
+    "conic_detection_terms",
     "conic_residuals",
     "convex_hull_area",
     "cost",
@@ -370,9 +371,27 @@ def canonical_axes(P: np.ndarray) -> np.ndarray:
     return out
 
 
+def conic_detection_terms(name: str, detections: np.ndarray) -> tuple[np.ndarray, ...]:
+    """What the smooth metric ``name`` needs of detections given as params ``detections``
+    (N, 5) (px, rad); they are fixed during a refinement, so the pose factors compute this once
+    and pass it to every :func:`conic_residuals` call (the solver's inner loop)."""
+    P = np.asarray(detections, dtype=float)
+    if name in ("algebraic", "frobenius"):
+        return (dual_conics_from_params(P).reshape(len(P), 9)[:, _VEC5],)
+    if name == "bbox":  # the axis-aligned box [cx - hx, cy - hy, cx + hx, cy + hy]
+        c, s = np.cos(P[:, 4]), np.sin(P[:, 4])
+        hd = np.stack([np.hypot(P[:, 2] * c, P[:, 3] * s), np.hypot(P[:, 2] * s, P[:, 3] * c)], 1)
+        return (np.concatenate((P[:, :2] - hd, P[:, :2] + hd), axis=1),)
+    if name == "wasserstein":  # centre, canonical semi-axes (a >= b) and angle
+        return (P[:, :2], *canonical_axes(P).T)
+    # bhattacharyya: params, Sigma_D entries, cos / sin of the angle
+    return (P, *sigma_entries(P[:, 2], P[:, 3], P[:, 4]), np.cos(P[:, 4]), np.sin(P[:, 4]))
+
+
 def conic_residuals(
     name: str, detections: np.ndarray, Cn: np.ndarray, dCn: np.ndarray | None = None,
     gaussians: tuple[np.ndarray, np.ndarray] | None = None,
+    detection_terms: tuple[np.ndarray, ...] | None = None,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Residual rows (N, dim) of the smooth metric ``name`` (one of :data:`CONIC_METRICS`)
     between detections given as params ``detections`` (N, 5) (px, rad) and projections given
@@ -380,15 +399,17 @@ def conic_residuals(
     derivatives of ``Cn`` along K directions (e.g. the 6 pose tangents), also ``dr`` (N, dim,
     K) along them, else None. ``gaussians``: the projections' ``(mu (N, 2), Sigma (N, 2, 2))``
     if known more precisely than from ``Cn`` (whose entries carry ~eps |mu|^2 of rounding).
+    ``detection_terms``: :func:`conic_detection_terms` of ``detections`` if already computed.
 
     The one implementation of these metrics: :func:`residual` is its N = 1 view and
     :class:`factors.pose_residuals.PoseResidualModel` chains it to the pose (the scalar forms
     are the tests' oracle, ``tests/oracles/metrics_reference.py``).
     """
     n = Cn.shape[0]
+    terms = conic_detection_terms(name, detections) if detection_terms is None \
+        else detection_terms
     if name in ("algebraic", "frobenius"):
-        r = dual_conics_from_params(detections).reshape(n, 9)[:, _VEC5] - Cn.reshape(n, 9)[
-            :, _VEC5]
+        r = terms[0] - Cn.reshape(n, 9)[:, _VEC5]
         J = None if dCn is None else -dCn.reshape(n, -1, 9)[:, :, _VEC5].transpose(0, 2, 1)
         if name == "frobenius":
             r = r * _FRO_W
@@ -398,7 +419,7 @@ def conic_residuals(
     d = None if dCn is None else gaussian_derivatives_from_dual_conics(mu, dCn)
     rows = {"bbox": _bbox_rows, "wasserstein": _wasserstein_rows,
             "bhattacharyya": _bhattacharyya_rows}[name]
-    return rows(detections, mu, S, d)
+    return rows(terms, mu, S, d)
 
 
 def _conic_residual(name: str, det: Ellipse, proj: Ellipse) -> np.ndarray:
@@ -407,16 +428,14 @@ def _conic_residual(name: str, det: Ellipse, proj: Ellipse) -> np.ndarray:
                            gaussians=(mu[None], S[None]))[0][0]
 
 
-def _bbox_rows(P: np.ndarray, mu: np.ndarray, S: np.ndarray,
+def _bbox_rows(terms: tuple[np.ndarray, ...], mu: np.ndarray, S: np.ndarray,
                d: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray | None]:
     """``r = B_D - B_P``, ``B = [cx - hx, cy - hy, cx + hx, cy + hy]`` with the half-sizes
     ``hx = sqrt(Sigma00)``, ``hy = sqrt(Sigma11)`` of the axis-aligned box (arguments as
     passed by :func:`conic_residuals`)."""
-    c, s = np.cos(P[:, 4]), np.sin(P[:, 4])
-    hd = np.stack([np.hypot(P[:, 2] * c, P[:, 3] * s), np.hypot(P[:, 2] * s, P[:, 3] * c)], 1)
+    (box_d,) = terms
     h = np.sqrt(np.diagonal(S, axis1=1, axis2=2))  # (N, 2) half-sizes (hx, hy)
-    r = np.concatenate((P[:, :2] - hd, P[:, :2] + hd), axis=1) - np.concatenate(
-        (mu - h, mu + h), axis=1)
+    r = box_d - np.concatenate((mu - h, mu + h), axis=1)
     if d is None:
         return r, None
     dmu, dsig = d  # (N, K, 2), (N, K, 2, 2)
@@ -424,7 +443,7 @@ def _bbox_rows(P: np.ndarray, mu: np.ndarray, S: np.ndarray,
     return r, np.concatenate((dh - dmu, -dmu - dh), axis=2).transpose(0, 2, 1)
 
 
-def _wasserstein_rows(det: np.ndarray, mu: np.ndarray, S: np.ndarray,
+def _wasserstein_rows(terms: tuple[np.ndarray, ...], mu: np.ndarray, S: np.ndarray,
                       d: tuple[np.ndarray, np.ndarray] | None
                       ) -> tuple[np.ndarray, np.ndarray | None]:
     """The W2 residual ``[mu_D - mu_P, a_D - a_P, b_D - b_P, k sin(delta)]``
@@ -441,7 +460,7 @@ def _wasserstein_rows(det: np.ndarray, mu: np.ndarray, S: np.ndarray,
     rho = np.sqrt(h * h + s01 * s01)
     a2, b2 = np.sqrt(m + rho), np.sqrt(np.maximum(m - rho, 0.0))
     t2 = 0.5 * np.arctan2(s01, h)
-    a1, b1, t1 = canonical_axes(det).T
+    mu_d, a1, b1, t1 = terms
     delta = (t1 - t2 + 0.5 * np.pi) % np.pi - 0.5 * np.pi
     sn, cs = np.sin(delta), np.cos(delta)
     P = (a1 * a1 - b1 * b1) * (a2 * a2 - b2 * b2)
@@ -449,7 +468,6 @@ def _wasserstein_rows(det: np.ndarray, mu: np.ndarray, S: np.ndarray,
     Rq = np.sqrt(np.maximum(Q * Q - P * sn * sn, 0.0))
     D = Q + Rq
     k = np.sqrt(2.0 * P / D)
-    mu_d = det[:, :2]
     r = np.stack([mu_d[:, 0] - mu[:, 0], mu_d[:, 1] - mu[:, 1], a1 - a2, b1 - b2, k * sn],
                  axis=1)
     if d is None:
@@ -480,7 +498,7 @@ def _wasserstein_rows(det: np.ndarray, mu: np.ndarray, S: np.ndarray,
     return r, J
 
 
-def _bhattacharyya_rows(P: np.ndarray, mu: np.ndarray, Q: np.ndarray,
+def _bhattacharyya_rows(terms: tuple[np.ndarray, ...], mu: np.ndarray, Q: np.ndarray,
                         d: tuple[np.ndarray, np.ndarray] | None
                         ) -> tuple[np.ndarray, np.ndarray | None]:
     """The Bhattacharyya residual ``[L^-1 dmu / sqrt 8, G00, G11, sqrt2 G01]``
@@ -490,7 +508,7 @@ def _bhattacharyya_rows(P: np.ndarray, mu: np.ndarray, Q: np.ndarray,
     differences of ``h(log lambda)``, its derivative when the eigenvalues coincide).
     """
     q00, q01, q11 = Q[:, 0, 0], Q[:, 0, 1], Q[:, 1, 1]
-    d00, d01, d11 = sigma_entries(P[:, 2], P[:, 3], P[:, 4])
+    P, d00, d01, d11, c, s = terms
     s00, s01, s11 = 0.5 * (d00 + q00), 0.5 * (d01 + q01), 0.5 * (d11 + q11)
     l00 = np.sqrt(s00)
     l10 = s01 / l00
@@ -500,7 +518,6 @@ def _bhattacharyya_rows(P: np.ndarray, mu: np.ndarray, Q: np.ndarray,
     y0 = dx / l00
     y1 = (dy - l10 * y0) / l11
     a, b = P[:, 2], P[:, 3]
-    c, s = np.cos(P[:, 4]), np.sin(P[:, 4])
 
     def to_n(x00, x01, x11):  # D^-1 R^T X R D^-1 (detection frame), elementwise
         t00 = c * (x00 * c + x01 * s) + s * (x01 * c + x11 * s)

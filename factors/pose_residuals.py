@@ -310,6 +310,9 @@ class PoseResidualModel:
             self._S_world = self._L @ self._L.transpose(0, 2, 1)
             self._S_world_inv = (rot / (axes * axes)[:, None, :]) @ rot.transpose(0, 2, 1)
         self._det_params = np.array([(d.cx, d.cy, d.a, d.b, d.angle) for d in self.detections])
+        #: what the smooth metric needs of the (fixed) detections, computed once
+        self._det_terms = metrics.conic_detection_terms(metric, self._det_params) \
+            if metric in metrics.CONIC_METRICS else None
         self._cache_key: bytes | None = None
         self._cache_jac = False
         self._cache: PoseEvaluation | None = None
@@ -599,7 +602,8 @@ class PoseResidualModel:
         if self.metric in ("iou", "giou"):
             r, J = self._overlap_rows(Cn, dCn, valid)
         else:
-            r, J = metrics.conic_residuals(self.metric, self._det_params, Cn, dCn)
+            r, J = metrics.conic_residuals(self.metric, self._det_params, Cn, dCn,
+                                           detection_terms=self._det_terms)
             J = None if J is None else np.ascontiguousarray(J)
         if not valid.all():
             self._apply_penalty(r, J, ~valid, c, S, margins)
