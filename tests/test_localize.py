@@ -374,6 +374,34 @@ def test_deadline_clocks():
     assert deadline_passed(time.perf_counter() - 1.0)  # a perf_counter instant still works
 
 
+def test_deadline_reads_the_cpu_clock_only_once_the_cpu_stop_is_reachable(monkeypatch):
+    """Before ``cpu_check_from`` (the wall instant at which the thread's CPU time could first
+    reach the stop: CPU time grows no faster than wall time) ``passed`` reads no CPU clock;
+    a busy loop still stops exactly when its CPU time passes the budget (checked against the
+    CPU clock read directly), and the bound held (the stop came after ``cpu_check_from``)."""
+    import time
+
+    from service.localization import budget
+    from service.localization.budget import Deadline, earliest
+
+    c0 = time.thread_time()
+    d = Deadline.after(30.0)
+    d = Deadline(cpu=d.cpu, cpu_check_from=d.cpu_check_from)  # no wall limit (load)
+    assert d.cpu_check_from >= time.perf_counter() - 1e-3
+    reads = []
+    real = time.thread_time
+    monkeypatch.setattr(budget.time, "thread_time", lambda: reads.append(1) or real())
+    assert not d.passed() and not reads  # 30 ms of CPU cannot have gone yet
+    while not d.passed():
+        pass
+    stop_wall, stop_cpu = time.perf_counter(), real()
+    assert stop_cpu - c0 >= 0.030 and stop_cpu <= d.cpu + 5e-3
+    assert stop_wall >= d.cpu_check_from and reads
+    # combining deadlines keeps the earliest of each instant, the CPU check bound included
+    e = earliest(d, Deadline(cpu=1.0, wall=2.0))
+    assert e.cpu_check_from == -float("inf") and e.cpu == min(d.cpu, 1.0)
+
+
 def test_a_capped_alternative_that_competes_is_refined_in_full(monkeypatch):
     """Alternatives are refined with at most ``ALTERNATIVE_MAX_ITERATIONS`` LM iterations; one
     that competes (as many inliers as the first answer) is then refined in full, so the pose

@@ -24,10 +24,17 @@ class Deadline:
     """A stop instant on two clocks: ``cpu`` (``time.thread_time()`` of the solving thread,
     seconds; ``inf`` = none) and ``wall`` (``time.perf_counter()``, seconds; ``inf`` = none).
     It has passed when either has. Only meaningful in the thread that created it (the CPU
-    clock is per thread)."""
+    clock is per thread).
+
+    ``cpu_check_from`` (a ``time.perf_counter()`` instant, ``-inf`` = always) is when the CPU
+    stop can first have been reached: a thread's CPU time grows no faster than wall time, so
+    before that instant :meth:`passed` reads only the cheap wall clock (``time.thread_time()``
+    is a system call, ~2.4 us against ~0.2 us here, and the search checks its deadline often).
+    """
 
     cpu: float = math.inf
     wall: float = math.inf
+    cpu_check_from: float = -math.inf
 
     @classmethod
     def after(cls, budget_ms: float | None, factor: float = 1.0, *,
@@ -38,14 +45,20 @@ class Deadline:
         after ``wall_start`` (default: now); None without a budget."""
         if budget_ms is None:
             return None
-        cpu0 = time.thread_time() if cpu_start is None else cpu_start
-        wall0 = time.perf_counter() if wall_start is None else wall_start
+        cpu_now, wall_now = time.thread_time(), time.perf_counter()
+        cpu0 = cpu_now if cpu_start is None else cpu_start
+        wall0 = wall_now if wall_start is None else wall_start
         budget_s = factor * float(budget_ms) / 1e3
-        return cls(cpu0 + budget_s, wall0 + WALL_LIMIT_FACTOR * budget_s)
+        cpu_stop = cpu0 + budget_s
+        return cls(cpu_stop, wall0 + WALL_LIMIT_FACTOR * budget_s,
+                   wall_now + (cpu_stop - cpu_now))
 
     def passed(self) -> bool:
         """Whether either clock is past its stop."""
-        return time.thread_time() > self.cpu or time.perf_counter() > self.wall
+        wall = time.perf_counter()
+        if wall > self.wall:
+            return True
+        return wall >= self.cpu_check_from and time.thread_time() > self.cpu
 
 
 def as_deadline(deadline: Deadline | float | None) -> Deadline | None:
@@ -66,4 +79,5 @@ def earliest(a: Deadline | float | None, b: Deadline | float | None) -> Deadline
     da, db = as_deadline(a), as_deadline(b)
     if da is None or db is None:
         return da if db is None else db
-    return Deadline(min(da.cpu, db.cpu), min(da.wall, db.wall))
+    return Deadline(min(da.cpu, db.cpu), min(da.wall, db.wall),
+                    min(da.cpu_check_from, db.cpu_check_from))
