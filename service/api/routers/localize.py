@@ -2,6 +2,9 @@
 
 Plain ``def`` routes: FastAPI runs them in its threadpool, so the CPU-bound solve never blocks
 the event loop. "Not localized" is a normal 200 answer with ``localized: false`` and a reason.
+A plain valid single-frame request skips FastAPI's dependency injection (``_plain_frame``, same
+work in the same threadpool; every other request and every error goes through FastAPI):
+docs/design/service.md#request-fast-path.
 """
 
 from __future__ import annotations
