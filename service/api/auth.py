@@ -8,6 +8,7 @@ docs/design/service.md#api-key-access-control.
 
 from __future__ import annotations
 
+import functools
 import hmac
 import ipaddress
 from typing import Annotated
@@ -57,18 +58,22 @@ def authenticate(keys: tuple[ApiKey, ...], presented: str | None, scope: str) ->
     return found
 
 
+@functools.lru_cache(maxsize=64)
+def _loopback_or_not_ip(host: str) -> bool:
+    """Whether ``host`` (a local address, from ``scope["server"]``) is a loopback IP address or
+    not an IP address at all (cached: a server has few local addresses)."""
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return True
+
+
 def _refuse_non_loopback(request: Request) -> None:
     """403 unless the request arrived on a loopback address (``scope["server"]``; non-IP
     names such as test clients and Unix sockets pass): an open server answers only there."""
     server = request.scope.get("server")
     host = server[0] if server else None
-    if not host:
-        return
-    try:
-        address = ipaddress.ip_address(str(host).strip("[]"))
-    except ValueError:
-        return
-    if not address.is_loopback:
+    if host and not _loopback_or_not_ip(str(host)):
         raise ProblemError("forbidden",
                            "this server has no API keys configured (QUADLOC_API_KEYS) and only "
                            "answers on loopback",
@@ -102,6 +107,8 @@ def check_access(request: Request, bearer: HTTPAuthorizationCredentials | None,
 async def request_access(request: Request, scope: str) -> ApiKey | None:
     """:func:`check_access` with the credentials read from ``request`` by the same security
     schemes (for code that runs outside FastAPI's dependency injection)."""
+    if not request.app.state.api_keys:  # an open server reads no credentials
+        return check_access(request, None, None, scope)
     return check_access(request, await _bearer(request), await _api_key_header(request), scope)
 
 
