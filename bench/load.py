@@ -373,10 +373,13 @@ def to_markdown(report: dict[str, Any]) -> str:
         b8 = next((lv for lv in report["baseline_levels"] if lv["concurrency"] == 8), None)
         if t8 and b8:
             ratio = t8["requests_per_s"] / max(b8["requests_per_s"], 1e-9)
-            met = ratio >= 2.0 and t8["p99_ms"] <= 60.0 and t8["errors"] == 0
-            lines += ["", f"Issue 14 target at concurrency 8 (>= 2 x the baseline's throughput "
-                          f"in the same run, p99 <= 60 ms): **{'met' if met else 'not met'}** "
-                          f"(x{ratio:.2f}, p99 {t8['p99_ms']:.0f} ms)."]
+            met = t8["p99_ms"] <= 60.0 and t8["errors"] == 0
+            lines += ["", f"At concurrency 8, this checkout against the baseline in the same "
+                          f"run: throughput x{ratio:.2f}, p99 {t8['p99_ms']:.0f} ms vs "
+                          f"{b8['p99_ms']:.0f} ms. Issue 14's p99 <= 60 ms (and no errors): "
+                          f"**{'met' if met else 'not met'} in this run** (its other target, "
+                          ">= 2 x the throughput of the tree it was filed against, is a "
+                          "comparison with that tree: run with `--baseline` on it)."]
     c1 = next((lv for lv in report["levels"] if lv["concurrency"] == 1), None)
     c8 = next((lv for lv in report["levels"] if lv["concurrency"] == 8), None)
     lines.append("")
