@@ -464,3 +464,51 @@ def test_metric_none_and_trust_fields_over_http(client: TestClient) -> None:
         field = next(iter(bad))
         problem = _problem(client.post(URL, json=_frame(options=bad)), 422, "validation-error")
         assert any(e["field"] == f"options.{field}" for e in problem["errors"]), problem
+
+
+def test_the_fast_path_answers_what_the_full_handling_answers(client: TestClient,
+                                                              monkeypatch) -> None:
+    """A plain request skips FastAPI's dependency injection (routers/localize.py,
+    ``_plain_frame``): same answer as through the full handling; anything else (errors
+    included) goes through the full handling; the route has no parameter the fast path ignores."""
+    import inspect
+
+    from service.api.deps import check_body_depth
+    from service.api.routers import localize as loc
+
+    assert tuple(inspect.signature(loc.localize_frame).parameters) == loc.FAST_PATH_PARAMETERS
+    assert [d.dependency for d in client.app.router.dependencies] == [check_body_depth]
+    seen: list[bool] = []
+    real = loc._plain_frame
+
+    async def spy(request):
+        frame = await real(request)
+        seen.append(frame is not None)
+        return frame
+
+    monkeypatch.setattr(loc, "_plain_frame", spy)
+    deep: object = []
+    for _ in range(client.app.state.settings.max_json_depth):
+        deep = [deep]
+    fast = client.post(URL, json=LOCALIZE_EXAMPLE)
+    full = client.post(URL + "?version=1", json=LOCALIZE_EXAMPLE)  # a query: full handling
+    assert seen == [True, False] and fast.status_code == full.status_code == 200
+    a, b = fast.json(), full.json()
+    assert a.pop("timings_ms").keys() == b.pop("timings_ms").keys()
+    assert a == b and a["localized"]
+    for url, kwargs, status in [
+        (URL, {"content": b"{", "headers": {"content-type": "application/json"}}, 400),
+        (URL, {"json": {**LOCALIZE_EXAMPLE, "extra": 1}}, 422),
+        (URL, {"json": {**LOCALIZE_EXAMPLE, "frame_id": deep}}, 422),  # QUADLOC_MAX_JSON_DEPTH
+        (URL, {"json": None}, 422),
+        ("/v1/maps/chess%0A/localize", {"json": LOCALIZE_EXAMPLE}, 422),  # "$" before "\n"
+        ("/v1/maps/nope/localize", {"json": LOCALIZE_EXAMPLE}, 404),
+    ]:
+        seen.clear()
+        r = client.post(url, **kwargs)
+        assert r.status_code == status, (url, r.text)
+        assert seen == [status == 404], url  # 404 is the route's own answer, after the fast path
+    seen.clear()
+    svg = client.post(URL, json=LOCALIZE_EXAMPLE, headers={"accept": "image/svg+xml"})
+    assert svg.status_code == 200 and svg.headers["content-type"].startswith("image/svg")
+    assert seen == [False]

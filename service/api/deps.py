@@ -1,7 +1,9 @@
 """Shared FastAPI dependencies (``Annotated`` aliases) for the routers.
 
 They are ``async def`` on purpose: they only read ``app.state``, and a plain ``def`` dependency
-costs a threadpool round trip per request.
+costs a threadpool round trip per request. The localize routes read ``request.app.state``
+themselves (each dependency costs FastAPI's injection tens of microseconds per request:
+docs/design/service.md#request-fast-path).
 """
 
 from __future__ import annotations
@@ -13,17 +15,13 @@ from fastapi import Depends, Path, Request
 from maps.model import MAP_ID_PATTERN
 from maps.store import MapStore
 from service.api.errors import ProblemError, json_depth_violation
-from service.api.map_loader import MapLoader
 from service.api.metrics import ApiMetrics
-from service.api.solver import Solver
 from service.settings import Settings
 
 __all__ = [
     "MapIdPath",
-    "MapLoaderDep",
     "MetricsDep",
     "SettingsDep",
-    "SolverDep",
     "StoreDep",
     "check_body_depth",
 ]
@@ -41,9 +39,7 @@ def _state(name: str) -> Any:
 
 StoreDep = Annotated[MapStore, _state("store")]
 SettingsDep = Annotated[Settings, _state("settings")]
-SolverDep = Annotated[Solver, _state("solver")]
 MetricsDep = Annotated[ApiMetrics, _state("metrics")]
-MapLoaderDep = Annotated[MapLoader, _state("map_loader")]
 
 #: The ``{map_id}`` path parameter of every map route, validated against ``MAP_ID_PATTERN``
 #: (422 ``path.map_id`` otherwise) before it reaches the database: a NUL or other character no

@@ -155,6 +155,8 @@ def json_depth_violation(document: Any, max_depth: int) -> str | None:
     depth 2, scalars add nothing. ``None`` when the document is within the limit. Iterative, so
     a document nested thousands deep cannot exhaust the Python stack here.
     """
+    if not _deeper_than(document, max_depth):  # the common case: no path to build
+        return None
     stack: list[tuple[Any, int, tuple[Any, ...]]] = [(document, 1, ())]
     while stack:
         node, depth, loc = stack.pop()
@@ -170,6 +172,21 @@ def json_depth_violation(document: Any, max_depth: int) -> str | None:
             if isinstance(child, dict | list):
                 stack.append((child, depth + 1, (*loc, key)))
     return None
+
+
+def _deeper_than(document: Any, max_depth: int) -> bool:
+    """Whether ``document`` has a container nested deeper than ``max_depth`` (the test of
+    :func:`json_depth_violation`, level by level over containers only, without paths)."""
+    level = [document] if isinstance(document, dict | list) else []
+    depth = 0
+    while level:
+        depth += 1
+        if depth > max_depth:
+            return True
+        level = [child for node in level
+                 for child in (node.values() if isinstance(node, dict) else node)
+                 if isinstance(child, dict | list)]
+    return False
 
 
 def field_path(loc: Sequence[Any]) -> str:

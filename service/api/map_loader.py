@@ -25,6 +25,9 @@ class MapLoader:
 
     def __init__(self, store: MapStore, max_wait_s: float, workers: int = 2) -> None:
         self.store = store
+        #: The store's cache of resolved versions (None for a store without one): a hit is
+        #: answered in the calling thread, without a hand-off to the loader pool.
+        self._cache = getattr(store, "cache", None)
         self.max_wait_s = max_wait_s
         self._workers = workers
         self._pool: ThreadPoolExecutor | None = self._new_pool()
@@ -34,6 +37,10 @@ class MapLoader:
     def get(self, map_id: str, version: int | None = None) -> CompiledMap:
         """The compiled map; raises the store's errors (``MapNotFound``...) or
         :class:`MapStillLoading` after ``max_wait_s``."""
+        if self._cache is not None:
+            hit = self._cache.resolution(map_id, version)  # what store.compiled checks first
+            if hit is not None:
+                return hit
         key = (map_id, version)
         with self._lock:
             future = self._pending.get(key)
