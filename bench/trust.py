@@ -56,7 +56,6 @@ from maps.compiled import compile_map
 from maps.model import MapObject, SceneMap
 from service.localization import calibration
 from service.localization.confidence import (
-    AMBIGUITY_CHI2_RATIO,
     TOLERANCE_POSITION_M,
     TOLERANCE_ROTATION_DEG,
     confidence_probability,
@@ -155,8 +154,15 @@ def run_frames(seed: int, metrics: tuple[str, ...], stride: int, slow_stride: in
             rb = localize(dets, cm, camera, options("level_set", on_ambiguity="best",
                                                     min_confidence=0.0))
             rec = _record(r, poses[i], frame=i, metric="level_set", setting=setting)
-            rec["best_pos"] = pose_errors(rb.world_from_camera if rb.localized else None,
-                                          poses[i])[0]
+            rec["best_pos"], best_rot = pose_errors(
+                rb.world_from_camera if rb.localized else None, poses[i])
+            # the unchecked answer (every verified pose): the fit re-decides the ambiguity and
+            # the threshold from it (``decide_reduced``)
+            rec["unchecked"] = {"localized": bool(rb.localized), "pos": rec["best_pos"],
+                                "rot": best_rot, "evidence": dict(rb.evidence or {}),
+                                "metric": "level_set"}
+            if rb.localized and rb.covariance is not None:
+                rec["unchecked"]["cov"] = np.asarray(rb.covariance).tolist()
             # the answer's most probable candidate when not localized (its alternatives)
             top = r.alternatives[0] if (not r.localized and r.alternatives) else None
             rec["candidate_pos"], rec["candidate_rot"] = pose_errors(
@@ -342,7 +348,23 @@ def reliability(rows: list[dict], bins: int = 10) -> dict:
                           "observed": float(y[sel].mean())})
             ece += sel.sum() / max(len(p), 1) * abs(p[sel].mean() - y[sel].mean())
     return {"n": len(rows), "ece": float(ece), "table": table,
-            "observed_rate": float(y.mean()) if len(y) else None}
+            "observed_rate": float(y.mean()) if len(y) else None,
+            "ece_if_calibrated": ece_sampling_noise(p, edges)}
+
+
+def ece_sampling_noise(p: np.ndarray, edges: np.ndarray, draws: int = 400) -> float | None:
+    """Mean ECE of a PERFECTLY calibrated model with these confidences ``p`` (outcomes drawn
+    as Bernoulli(p), fixed seed): the ECE that sampling alone gives with this many frames, the
+    scale against which a measured ECE is judged."""
+    if len(p) == 0:
+        return None
+    y = np.random.default_rng(0).random((draws, len(p))) < p
+    k = np.clip(np.searchsorted(edges, p, side="right") - 1, 0, len(edges) - 2)
+    ece = np.zeros(draws)
+    for b in np.unique(k):
+        sel = k == b
+        ece += sel.sum() / len(p) * np.abs(p[sel].mean() - y[:, sel].mean(axis=1))
+    return float(ece.mean())
 
 
 def reduced_table(reduced: dict) -> dict:
@@ -368,6 +390,23 @@ def reduced_table(reduced: dict) -> dict:
             "ambiguous": sum(r["reason"] == "ambiguous" for r in rows),
             "good": len(good_before),
         }
+    return out
+
+
+#: ``min_confidence`` values of the report's operating-point table (with the default).
+OPERATING_THRESHOLDS = (0.0, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5)
+
+
+def operating_points(reduced: dict, reduced_noisy: dict) -> dict:
+    """False accepts and kept good frames of each reduced set at the ``min_confidence`` values
+    of :data:`OPERATING_THRESHOLDS` and the default (``AMBIGUITY_CHI2_RATIO`` fixed): what a
+    client trades by choosing its own threshold (:func:`reduced_outcome`)."""
+    out: dict = {}
+    ts = sorted({*OPERATING_THRESHOLDS, calibration.MIN_CONFIDENCE})
+    for name, table in (("default", reduced), ("noisy", reduced_noisy)):
+        for n, rows in table.items():
+            out[f"{name} {n}"] = {f"{t:g}": reduced_outcome(
+                rows, calibration.AMBIGUITY_CHI2_RATIO, t) for t in ts}
     return out
 
 
@@ -446,7 +485,9 @@ def refeature(rows: list[dict], scale: dict, floor: dict) -> None:
             new = scale[m] * _factor(r, floor[m])
             ratio = new / ev["cov_scale"]
             cov = np.asarray(r["cov"]) * ratio
-            r["cov"], r["nees"] = cov.tolist(), r["nees"] / ratio
+            r["cov"] = cov.tolist()
+            if "nees" in r:
+                r["nees"] /= ratio
             ev["cov_scale"] = new
             p = gaussian_tolerance_probability(cov)
             p = min(max(p, 1e-6), 1 - 1e-6)
@@ -472,7 +513,8 @@ def fit_constants(data: dict, metric_offsets: bool = True,
         if k is not None:
             scale[m] = k
     rows = [r for r in confidence_rows(data) if r["localized"]]
-    refeature(rows, scale, floor)
+    refeature(rows + [r["unchecked"] for rr in data["reduced"].values() for r in rr
+                      if r.get("unchecked", {}).get("localized")], scale, floor)
     feats = FEATURES if features is None else features
     models = {}
     for name, sel in (("refined", lambda r: r["metric"] != "none"),
@@ -495,29 +537,82 @@ def fit_constants(data: dict, metric_offsets: bool = True,
         if offsets:
             models[name]["metric_offset"] = {
                 m: round(float(c), 6) for m, c in zip(offsets, w[1 + len(use):], strict=True)}
-    # the smallest min_confidence whose false accepts (> 0.5 m) on the reduced tuning frames
-    # are <= 1 % at 2 and at 3 detections
-    min_confidence = 0.0
-    for rr in data["reduced"].values():
-        loc = [r for r in rr if r["localized"]]
-        if not loc:
-            continue
-        p = np.array([confidence_probability(r["metric"], r["evidence"], models)
-                      for r in loc])
-        wrong = np.array([r["pos"] > 0.5 for r in loc])
-        for t in np.round(np.arange(0.0, 0.61, 0.01), 2):
-            if np.sum(wrong & (p >= t)) <= 0.01 * len(rr):
-                min_confidence = max(min_confidence, float(t))
-                break
+    chi2_ratio, min_confidence = choose_ambiguity_and_threshold(data["reduced"], models)
     return {"scale": scale, "floor": floor, "models": models, "min_confidence": min_confidence,
-            "features": tuple(feats)}
+            "chi2_ratio": chi2_ratio, "features": tuple(feats)}
+
+
+#: Candidate ``AMBIGUITY_CHI2_RATIO`` values tried by :func:`choose_ambiguity_and_threshold`.
+CHI2_RATIO_GRID = (1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0, 6.0)
+#: Candidate ``MIN_CONFIDENCE`` values (the smallest that meets :data:`FALSE_ACCEPT_TARGET`).
+MIN_CONFIDENCE_GRID = tuple(round(0.01 * k, 2) for k in range(61))
+#: Largest share of a reduced set (2 or 3 detections, one detector setting) answered
+#: ``localized: true`` more than 0.5 m off.
+FALSE_ACCEPT_TARGET = 0.01
+
+
+def decide_reduced(rec: dict, chi2_ratio: float, min_confidence: float,
+                   models: dict | None = None) -> tuple[bool, str | None, float]:
+    """(localized, reason, confidence) of a reduced-frame record under other constants, from
+    its unchecked answer (``rec["unchecked"]``: every verified pose, with its evidence): the
+    ambiguity rule of ``confidence.is_ambiguous`` (a runner-up whose chi2 compares competes
+    when ``chi2_competitor <= log(chi2_ratio)``, the others by IoU sum: ``iou_competitor``),
+    then ``min_confidence`` on the confidence recomputed with ``models``."""
+    u = rec["unchecked"]
+    if not u["localized"]:
+        return False, rec["reason"], 0.0
+    ev = u["evidence"]
+    conf = confidence_probability(rec["metric"], ev, models)
+    if ev.get("iou_competitor", 0.0) > 0 or ev["chi2_competitor"] <= math.log(chi2_ratio):
+        return False, "ambiguous", conf
+    if conf < min_confidence:
+        return False, "low_confidence", conf
+    return True, None, conf
+
+
+def reduced_outcome(rows: list[dict], chi2_ratio: float, min_confidence: float,
+                    models: dict | None = None) -> dict:
+    """False accepts (> 0.5 m) and good frames kept (unchecked pose within 10 cm, answered
+    ``localized``) of reduced-frame records under these constants (:func:`decide_reduced`)."""
+    fa = kept = good = 0
+    for r in rows:
+        loc = decide_reduced(r, chi2_ratio, min_confidence, models)[0]
+        fa += int(loc and r["unchecked"]["pos"] > 0.5)
+        if r["best_pos"] <= 0.10:
+            good += 1
+            kept += int(loc)
+    return {"frames": len(rows), "false_accepts": fa, "good": good, "kept": kept}
+
+
+def choose_ambiguity_and_threshold(reduced: dict, models: dict) -> tuple[float, float]:
+    """``(AMBIGUITY_CHI2_RATIO, MIN_CONFIDENCE)`` from the reduced tuning frames: for each
+    ratio of :data:`CHI2_RATIO_GRID`, the smallest threshold whose false accepts are <=
+    :data:`FALSE_ACCEPT_TARGET` in every reduced set (2 and 3 detections x detector setting);
+    of those, the pair keeping the most good frames (ties: the larger ratio, more cautious)."""
+    sets: dict[tuple[str, str], list[dict]] = {}
+    for n, rows in reduced.items():
+        for r in rows:
+            if "unchecked" in r:
+                sets.setdefault((n, r.get("setting", "default")), []).append(r)
+    best: tuple[int, float, float] | None = None
+    for ratio in CHI2_RATIO_GRID:
+        for t in MIN_CONFIDENCE_GRID:
+            outs = [reduced_outcome(rows, ratio, t, models) for rows in sets.values()]
+            if all(o["false_accepts"] <= FALSE_ACCEPT_TARGET * o["frames"] for o in outs):
+                kept = sum(o["kept"] for o in outs)
+                if best is None or (kept, ratio) >= (best[0], best[1]):
+                    best = (kept, ratio, t)
+                break
+    if best is None:
+        return calibration.AMBIGUITY_CHI2_RATIO, calibration.MIN_CONFIDENCE
+    return best[1], best[2]
 
 
 def fit(data: dict, seeds: list[int], command: str, metric_offsets: bool = True) -> str:
     """The text of ``calibration.py`` with the constants of :func:`fit_constants`."""
     c = fit_constants(data, metric_offsets)
     scale, floor, models = c["scale"], c["floor"], c["models"]
-    min_confidence, feats = c["min_confidence"], c["features"]
+    min_confidence, feats, chi2_ratio = c["min_confidence"], c["features"], c["chi2_ratio"]
     text = f'''"""Calibration constants of :mod:`service.localization.confidence` (generated).
 
 Provenance: written by ``python -m bench.trust --fit`` (see that module); the fit uses
@@ -537,13 +632,19 @@ COVARIANCE_SCALE = {pprint.pformat({m: round(v, 6) for m, v in scale.items()},
 S2_FLOOR = {pprint.pformat({m: round(v, 6) for m, v in floor.items()},
                             width=96, sort_dicts=False)}
 
-#: Runner-up / best score (sum of inlier IoUs) at and above which an answer is ambiguous.
+#: Runner-up / best refined chi2 (same detections, same metric) at and below which an answer is
+#: ambiguous (``confidence.is_ambiguous``; ``bench.trust.choose_ambiguity_and_threshold``).
+AMBIGUITY_CHI2_RATIO = {chi2_ratio!r}
+
+#: Runner-up / best score (sum of inlier IoUs) at and above which an answer is ambiguous, when
+#: their chi2 do not compare.
 AMBIGUITY_RATIO = {calibration.AMBIGUITY_RATIO!r}
 
 #: The same ratio for a runner-up matching the same map objects (``confidence.is_ambiguous``).
 AMBIGUITY_RATIO_SAME_OBJECTS = {calibration.AMBIGUITY_RATIO_SAME_OBJECTS!r}
 
-#: Default ``LocalizationOptions.min_confidence``.
+#: Default ``LocalizationOptions.min_confidence`` (with ``AMBIGUITY_CHI2_RATIO``:
+#: ``bench.trust.choose_ambiguity_and_threshold``).
 MIN_CONFIDENCE = {min_confidence!r}
 
 #: Features of the confidence model (``confidence.evidence_features``), in order.
@@ -597,13 +698,15 @@ def markdown(res: dict, command: str) -> str:
              "`k_metric` centring the tuning frames' smallest and largest mean NEES (two noise "
              "settings x three operating points) on 6; confidence = a logistic model of the "
              "solver's evidence (no per-frame IoU minimum: it does not transfer across noise "
-             "levels); ambiguity = a distinct runner-up with as many inliers and >= "
+             "levels); ambiguity = a distinct runner-up with as many inliers whose refined chi2 "
+             f"(same detections, same metric) is within {calibration.AMBIGUITY_CHI2_RATIO:g} x "
+             "the best's (its log ratio is also the confidence feature `chi2_competitor`), or, "
+             "when the chi2 do not compare, >= "
              f"{calibration.AMBIGUITY_RATIO} of the best's IoU sum on other map objects (>= "
-             f"{calibration.AMBIGUITY_RATIO_SAME_OBJECTS} on the same objects), or a refined "
-             f"chi2 within {AMBIGUITY_CHI2_RATIO:g} x the best's (its log ratio is also the "
-             "confidence feature `chi2_competitor`); "
-             f"`min_confidence` default {calibration.MIN_CONFIDENCE} (<= 1 % false accepts at "
-             "2 and 3 detections on the tuning frames). Refit (tuning seeds only): "
+             f"{calibration.AMBIGUITY_RATIO_SAME_OBJECTS} on the same objects); "
+             f"`min_confidence` default {calibration.MIN_CONFIDENCE} (fitted with the chi2 "
+             "ratio: the smallest threshold with <= 1 % false accepts in every reduced tuning "
+             "set, 2 and 3 detections x both detector settings). Refit (tuning seeds only): "
              "`python -m bench.trust --fit`.", "",
              "### Mean NEES (6-DoF, consistent = 6; target [4, 9]) over frames localized within "
              "5 / 10 / 20 cm", "",
@@ -618,9 +721,13 @@ def markdown(res: dict, command: str) -> str:
                   else "-" for t in OPERATING_POINTS_M]
         lines.append(f"| {m} | " + " | ".join(cells) + " |")
     lines += ["", "### Confidence = P(error <= 10 cm and 5 deg): reliability", "",
-              "| set | n | observed rate | ECE |", "|---|---|---|---|"]
+              "*ECE if calibrated*: the mean ECE a perfectly calibrated model with the same "
+              "confidences reaches on this many frames (outcomes drawn from the confidences): "
+              "the sampling noise of the ECE itself.", "",
+              "| set | n | observed rate | ECE | ECE if calibrated |", "|---|---|---|---|---|"]
     for name, r in res["reliability"].items():
-        lines.append(f"| {name} | {r['n']} | {r['observed_rate']:.3f} | {r['ece']:.3f} |")
+        lines.append(f"| {name} | {r['n']} | {r['observed_rate']:.3f} | {r['ece']:.3f} | "
+                     f"{r['ece_if_calibrated']:.3f} |")
     lines += ["", "![reliability](img/trust_reliability.png)", "",
               "| bin | n | mean confidence | observed |", "|---|---|---|---|"]
     for b in res["reliability"]["pooled"]["table"]:
@@ -650,6 +757,15 @@ def markdown(res: dict, command: str) -> str:
                 f"| {name} | {n} | {r['frames']} | {r['localized']} | {r['ambiguous']} | "
                 f"{r['false_accept_rate']:.3f} | {r['false_accept_rate_without_check']:.3f} | "
                 f"{r['good']} | {r['kept_of_good']:.3f} | {r['kept_of_good_as_candidate']:.3f} |")
+    ts = list(next(iter(res["operating_points"].values())))
+    lines += ["", "What a client trades with `min_confidence` (same frames; false accepts / "
+              "good frames kept, of the frames and good frames of each set; default "
+              f"{calibration.MIN_CONFIDENCE:g}):", "",
+              "| set | " + " | ".join(ts) + " |", "|---|" + "---|" * len(ts)]
+    for name, row in res["operating_points"].items():
+        lines.append(f"| {name} | " + " | ".join(
+            f"{o['false_accepts']}/{o['frames']} FA, {o['kept']}/{o['good']} kept"
+            for o in row.values()) + " |")
     lines += ["", "### Random detections against large maps (4 made-up ellipses)", "",
               "| map objects | trials | localized | reasons |", "|---|---|---|---|"]
     for n, r in res["random"].items():
@@ -751,6 +867,7 @@ def main(argv: list[str] | None = None) -> int:
         "reliability": rel,
         "reduced": reduced_table(data["reduced"]),
         "reduced_noisy": reduced_table(noisy["reduced"]),
+        "operating_points": operating_points(data["reduced"], noisy["reduced"]),
         "random": run_random((100, 1000, 10000),
                              tuple(int(t) for t in args.random_trials.split(",")), seeds[0],
                              camera),

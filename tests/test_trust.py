@@ -306,6 +306,13 @@ def test_chi2_ambiguity_rule_and_competitor_feature():
     assert is_ambiguous(2, 1.8, 2, 0.5, best_chi2=3.0, runner_up_chi2=1.0)  # fits better
     assert not is_ambiguous(3, 2.4, 2, 2.4, best_chi2=3.0, runner_up_chi2=1.0)  # fewer inliers
     assert not is_ambiguous(2, 1.8, 2, 0.5, best_chi2=math.nan, runner_up_chi2=1.0)
+    # comparable chi2 decide alone: an IoU sum above AMBIGUITY_RATIO does not make a runner-up
+    # that fits far worse a competitor (it does without a comparable chi2)
+    r = calibration.AMBIGUITY_RATIO
+    assert not is_ambiguous(2, 1.8, 2, 1.8 * r, best_chi2=3.0, runner_up_chi2=3.0 * k * 1.001)
+    assert is_ambiguous(2, 1.8, 2, 1.8 * r, best_chi2=3.0, runner_up_chi2=math.nan)
+    assert is_ambiguous(2, 1.8, 2, 0.5, best_chi2=3.0, runner_up_chi2=8.9, chi2_ratio=3.0)
+    assert not is_ambiguous(2, 1.8, 2, 0.5, best_chi2=3.0, runner_up_chi2=9.1, chi2_ratio=3.0)
     # the feature
     assert chi2_competitor(2.0, 2, [(8.0, 2), (1e9, 2)]) == pytest.approx(math.log(4.0))
     assert chi2_competitor(2.0, 3, [(2.2, 2)]) == CHI2_COMPETITOR_CAP  # fewer inliers
@@ -336,3 +343,26 @@ def test_localized_answers_have_no_chi2_competitor_within_the_ratio():
             assert -CHI2_COMPETITOR_CAP <= c <= CHI2_COMPETITOR_CAP
             close += c <= math.log(AMBIGUITY_CHI2_RATIO)
     assert localized >= 1 and close >= 1, (localized, close)
+
+
+def test_bench_re_decides_reduced_frames_as_localize_does():
+    """``bench.trust.decide_reduced`` (how ``--fit`` chooses AMBIGUITY_CHI2_RATIO and
+    MIN_CONFIDENCE) re-decides a frame from its unchecked answer's evidence
+    (``on_ambiguity="best"``, ``min_confidence=0``) exactly as ``localize`` decides it with
+    the default options: same localized flag and reason."""
+    from bench.trust import decide_reduced
+
+    seen = set()
+    for _, dets in _two_detection_frames(5, 920_000):
+        r = localize(dets, CM, CAMERA, LocalizationOptions(time_budget_ms=None))
+        b = localize(dets, CM, CAMERA, LocalizationOptions(
+            time_budget_ms=None, on_ambiguity="best", min_confidence=0.0))
+        rec = {"metric": "level_set", "reason": r.reason,
+               "unchecked": {"localized": b.localized, "evidence": dict(b.evidence or {})}}
+        loc, reason, conf = decide_reduced(rec, calibration.AMBIGUITY_CHI2_RATIO,
+                                           calibration.MIN_CONFIDENCE)
+        assert (loc, reason) == (r.localized, r.reason)
+        if b.localized:
+            assert conf == pytest.approx(b.confidence, abs=1e-12)
+        seen.add(reason)
+    assert {None, "ambiguous", "low_confidence"} <= seen, seen

@@ -4,42 +4,48 @@ Provenance: written by ``python -m bench.trust --fit`` (see that module); the fi
 only the tuning seeds named in :data:`PROVENANCE`, the bench reports on other seeds.
 """
 
-PROVENANCE = {'command': 'python -m bench.trust --fit --save-data /tmp/tune_final2.json',
+PROVENANCE = {'command': 'python -m bench.trust --fit --save-data /tmp/trust/tune1.json',
  'tuning_seeds': [100, 102, 101]}
 
 #: k_metric of ``cov = k * max(s^2, f) * (J^T W J)^-1`` (``bench.trust._scale_for``: the
 #: smallest and largest mean NEES over the 5 / 10 / 20 cm operating points and the two detector
 #: settings of the tuning frames centred on 6).
-COVARIANCE_SCALE = {'level_set': 2.846803,
- 'algebraic': 3.015398,
- 'frobenius': 2.991939,
- 'wasserstein': 0.457207,
- 'bhattacharyya': 0.382418,
+COVARIANCE_SCALE = {'level_set': 2.848987,
+ 'algebraic': 3.004169,
+ 'frobenius': 3.054766,
+ 'wasserstein': 0.457302,
+ 'bhattacharyya': 0.382505,
  'bbox': 0.449106,
- 'qbbox': 0.580953,
+ 'qbbox': 0.582003,
  'iou': 0.381245,
- 'giou': 0.362179}
+ 'giou': 0.362263}
 
 #: f_metric: floor of the a-posteriori variance factor (``bench.trust.S2_FLOOR_QUANTILE`` of
 #: the tuning frames' s^2).
 S2_FLOOR = {'iou': 0.033771,
- 'giou': 0.034747,
+ 'giou': 0.034738,
  'bbox': 558.366407,
- 'qbbox': 413.61146,
- 'algebraic': 18526189.938227,
- 'frobenius': 21995197.715379,
- 'wasserstein': 270.064654,
- 'bhattacharyya': 0.022344,
- 'level_set': 3.010206}
+ 'qbbox': 412.769714,
+ 'algebraic': 18480344.70224,
+ 'frobenius': 21373027.7585,
+ 'wasserstein': 270.002243,
+ 'bhattacharyya': 0.022338,
+ 'level_set': 3.007476}
 
-#: Runner-up / best score (sum of inlier IoUs) at and above which an answer is ambiguous.
+#: Runner-up / best refined chi2 (same detections, same metric) at and below which an answer is
+#: ambiguous (``confidence.is_ambiguous``; ``bench.trust.choose_ambiguity_and_threshold``).
+AMBIGUITY_CHI2_RATIO = 2.0
+
+#: Runner-up / best score (sum of inlier IoUs) at and above which an answer is ambiguous, when
+#: their chi2 do not compare.
 AMBIGUITY_RATIO = 0.9
 
 #: The same ratio for a runner-up matching the same map objects (``confidence.is_ambiguous``).
 AMBIGUITY_RATIO_SAME_OBJECTS = 0.95
 
-#: Default ``LocalizationOptions.min_confidence``.
-MIN_CONFIDENCE = 0.17
+#: Default ``LocalizationOptions.min_confidence`` (with ``AMBIGUITY_CHI2_RATIO``:
+#: ``bench.trust.choose_ambiguity_and_threshold``).
+MIN_CONFIDENCE = 0.25
 
 #: Features of the confidence model (``confidence.evidence_features``), in order.
 CONFIDENCE_FEATURES = ('inliers_ge3',
@@ -54,25 +60,25 @@ CONFIDENCE_FEATURES = ('inliers_ge3',
  'chi2_competitor')
 
 #: Logistic models: P = 1 / (1 + exp(-(intercept + sum coef * feature))).
-CONFIDENCE_MODELS = {'refined': {'intercept': -10.145605,
-             'coef': {'inliers_ge3': 0.002224,
-                      'inliers_ge4': -1.324987,
-                      'log_inliers': 0.742133,
-                      'inlier_fraction': 9.172052,
-                      'mean_iou': 1.578925,
-                      'log_s2': -1.193167,
-                      'logit_gauss': 0.419335,
-                      'margin': -0.511102,
-                      'log_samples': -0.083693,
-                      'chi2_competitor': 0.092807},
-             'metric_offset': {'algebraic': 1.22149,
-                               'bbox': 0.092336,
-                               'bhattacharyya': -0.154151,
-                               'frobenius': 1.174197,
-                               'giou': 1.179336,
-                               'iou': 1.163206,
-                               'qbbox': 0.253965,
-                               'wasserstein': 0.243669}},
+CONFIDENCE_MODELS = {'refined': {'intercept': -10.148943,
+             'coef': {'inliers_ge3': -0.05277,
+                      'inliers_ge4': -1.324491,
+                      'log_inliers': 0.740936,
+                      'inlier_fraction': 9.187871,
+                      'mean_iou': 1.579517,
+                      'log_s2': -1.185283,
+                      'logit_gauss': 0.42069,
+                      'margin': -0.493512,
+                      'log_samples': -0.081575,
+                      'chi2_competitor': 0.101009},
+             'metric_offset': {'algebraic': 1.210431,
+                               'bbox': 0.086429,
+                               'bhattacharyya': -0.163056,
+                               'frobenius': 1.166598,
+                               'giou': 1.175595,
+                               'iou': 1.159984,
+                               'qbbox': 0.24787,
+                               'wasserstein': 0.227518}},
  'none': {'intercept': -16.576849,
           'coef': {'inliers_ge3': 3.786856,
                    'inliers_ge4': 1.929234,

@@ -7,8 +7,9 @@
 * confidence: ``P(position error <= TOLERANCE_POSITION_M and rotation error <=
   TOLERANCE_ROTATION_DEG)`` from a logistic model of :func:`evidence_features`
   (:func:`confidence_probability`).
-* ambiguity: a distinct runner-up with as many inliers competes by its IoU sum or its refined
-  chi2 (:func:`is_ambiguous`).
+* ambiguity: a distinct runner-up with as many inliers competes by its refined chi2 (refined
+  over as many detections with the same metric), or, when the chi2 do not compare, by its IoU
+  sum (:func:`is_ambiguous`).
 
 Rationale and measurements: ``docs/design/localization.md``.
 """
@@ -22,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from service.localization.calibration import (
+    AMBIGUITY_CHI2_RATIO,
     AMBIGUITY_RATIO,
     AMBIGUITY_RATIO_SAME_OBJECTS,
     CONFIDENCE_MODELS,
@@ -48,9 +50,6 @@ __all__ = [
     "variance_factor",
 ]
 
-#: A distinct runner-up with as many inliers whose refined chi2 is at most this multiple of the
-#: best's is a competitor (:func:`is_ambiguous`): the detections do not tell the two apart.
-AMBIGUITY_CHI2_RATIO = 2.0
 #: ``chi2_competitor`` feature without a comparable runner-up (and its largest value): the log
 #: of a chi2 ratio of 100, far beyond any competitor.
 CHI2_COMPETITOR_CAP = math.log(100.0)
@@ -227,20 +226,27 @@ def chi2_competitor(best_chi2: float, best_inliers: int,
 
 def is_ambiguous(best_inliers: int, best_score: float, runner_up_inliers: int,
                  runner_up_score: float, same_objects: bool = False,
-                 best_chi2: float = math.nan, runner_up_chi2: float = math.nan) -> bool:
-    """Whether a distinct runner-up explains the detections comparably well: as many inliers,
-    and a sum of inlier IoUs >= :data:`AMBIGUITY_RATIO` x the best's when it assigns the
-    detections to other map objects (``same_objects=False``: e.g. the other Xbox, a label
-    ambiguity), >= :data:`AMBIGUITY_RATIO_SAME_OBJECTS` x when it matches the same objects
-    (another pose of the same correspondences: the refinement already chose between them by
-    their fit, so only a near tie is ambiguous; a weaker one lowers ``confidence`` through its
-    ``margin`` feature) — or a refined ``runner_up_chi2 <= AMBIGUITY_CHI2_RATIO x best_chi2``
-    (both finite: refined with the same metric). A runner-up that leaves a detection
-    unexplained is not a competitor: the best explains strictly more."""
+                 best_chi2: float = math.nan, runner_up_chi2: float = math.nan,
+                 chi2_ratio: float | None = None) -> bool:
+    """Whether a distinct runner-up explains the detections comparably well. A runner-up that
+    leaves a detection unexplained (fewer inliers) is not a competitor: the best explains
+    strictly more. With as many inliers:
+
+    * both chi2 finite (refined over as many detections, the same metric: the evidence the
+      solver has about which pose explains the ellipses): a competitor when ``runner_up_chi2
+      <= chi2_ratio x best_chi2`` (default :data:`AMBIGUITY_CHI2_RATIO`, fitted by
+      ``bench.trust --fit``), whatever the IoU sums say (with 2-3 detections a wrong pose
+      overlaps the detections almost as well, so the IoU sum alone rejected good answers
+      whose runner-up fits far worse);
+    * otherwise (no refinement, or refined over other detections): by the sum of inlier IoUs,
+      >= :data:`AMBIGUITY_RATIO` x the best's when it assigns the detections to other map
+      objects (``same_objects=False``: e.g. the other Xbox, a label ambiguity), >=
+      :data:`AMBIGUITY_RATIO_SAME_OBJECTS` x when it matches the same objects (another pose of
+      the same correspondences: only a near tie is ambiguous)."""
     if runner_up_inliers < best_inliers:
         return False
-    if (math.isfinite(best_chi2) and math.isfinite(runner_up_chi2)
-            and runner_up_chi2 <= AMBIGUITY_CHI2_RATIO * best_chi2):
-        return True
+    if math.isfinite(best_chi2) and math.isfinite(runner_up_chi2):
+        ratio = AMBIGUITY_CHI2_RATIO if chi2_ratio is None else chi2_ratio
+        return runner_up_chi2 <= ratio * best_chi2
     ratio = AMBIGUITY_RATIO_SAME_OBJECTS if same_objects else AMBIGUITY_RATIO
     return best_score > 0 and runner_up_score >= ratio * best_score

@@ -204,16 +204,28 @@ class _Answer:
         return len(self.inliers), self.score
 
 
+def _competes(best: _Answer, other: _Answer) -> bool:
+    """Whether ``other`` (a distinct runner-up) competes with ``best``
+    (:func:`service.localization.confidence.is_ambiguous`: by refined chi2 when they compare,
+    else by IoU sum, told whether it matches the same map objects)."""
+    return is_ambiguous(len(best.inliers), best.score, len(other.inliers), other.score,
+                        same_objects={m.object_id for m in other.inliers}
+                        == {m.object_id for m in best.inliers},
+                        best_chi2=best.chi2, runner_up_chi2=other.chi2_against(best))
+
+
 def _is_ambiguous_answer(ranked: Sequence[_Answer]) -> bool:
     """Whether some distinct runner-up of ``ranked`` (best first, mutually distinct) competes
-    with the best (:func:`service.localization.confidence.is_ambiguous`, told whether it
-    matches the same map objects)."""
-    best = ranked[0]
-    objects = {m.object_id for m in best.inliers}
-    return any(is_ambiguous(len(best.inliers), best.score, len(b.inliers), b.score,
-                            same_objects={m.object_id for m in b.inliers} == objects,
-                            best_chi2=best.chi2, runner_up_chi2=b.chi2_against(best))
-               for b in ranked[1:])
+    with the best (:func:`_competes`)."""
+    return any(_competes(ranked[0], b) for b in ranked[1:])
+
+
+def _iou_competitor(a: _Answer, others: Sequence[_Answer]) -> bool:
+    """Whether a runner-up whose chi2 does not compare with ``a``'s competes by its IoU sum
+    (the part of :func:`_competes` that does not depend on the chi2 ratio: with it and
+    ``chi2_competitor`` the bench re-decides the ambiguity for another ratio)."""
+    return any(_competes(a, b) for b in others if b is not a
+               and not (math.isfinite(a.chi2) and math.isfinite(b.chi2_against(a))))
 
 
 #: Alternatives (beyond the best) refined for the ambiguity check, and the RANSAC score ratio
@@ -332,8 +344,9 @@ def localize(
                                     for b in others if b is not a]))
         scale = math.nan if res is None else covariance_scale(metric, res.chi2, res.n_residuals,
                                                               n_refined)
-        return confidence_probability(metric, ev), {**ev, "s2": s2, "cov_scale": scale,
-                                                    "n_refined": float(n_refined)}, cov
+        return confidence_probability(metric, ev), {
+            **ev, "s2": s2, "cov_scale": scale, "n_refined": float(n_refined),
+            "iou_competitor": float(_iou_competitor(a, others))}, cov
 
     def finish(a: _Answer, ranked: list[_Answer], ambiguous: bool) -> LocalizationResult:
         runner_up = next((b for b in ranked if b is not a), None)
