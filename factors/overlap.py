@@ -37,7 +37,8 @@ _GRID_BASIS = np.stack([np.ones(GRID), np.cos(_T_GRID), np.sin(_T_GRID), np.cos(
 #: (5, GRID): their derivatives' rows 0, -sin t, cos t, -2 sin 2t, 2 cos 2t
 _GRID_DBASIS = np.stack([np.zeros(GRID), -np.sin(_T_GRID), np.cos(_T_GRID),
                          -2.0 * np.sin(2 * _T_GRID), 2.0 * np.cos(2 * _T_GRID)])
-_GRID_NEXT = (np.arange(GRID) + 1) % GRID
+_GRID_INDEX = np.arange(GRID)
+_GRID_NEXT = (_GRID_INDEX + 1) % GRID
 _NEXT4 = np.array([1, 2, 3, 0])
 #: A grid value above this is outside (rounding-level values, i.e. tangency, count as inside;
 #: as the oracle).
@@ -119,8 +120,8 @@ class _Frame:
 def _trig(k: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The trigonometric quadratics ``k`` (5, M, 1) and their derivatives at ``t`` (M, m)."""
     c, s = np.cos(t), np.sin(t)
-    t2 = t + t
-    c2, s2 = np.cos(t2), np.sin(t2)
+    cs = c * s
+    c2, s2 = c * c - s * s, cs + cs
     return (k[0] + k[1] * c + k[2] * s + k[3] * c2 + k[4] * s2,
             k[2] * c - k[1] * s + 2.0 * (k[4] * c2 - k[3] * s2))
 
@@ -134,11 +135,14 @@ def _brackets(k: np.ndarray, threshold: np.ndarray, skip: np.ndarray
     sign = f > threshold
     change = sign != sign[:, _GRID_NEXT]
     change[skip] = False
-    # a trigonometric quadratic changes sign at most 4 times: the first 4 such cells
-    cell = np.argsort(~change, axis=1, kind="stable")[:, :4]
+    # a trigonometric quadratic changes sign at most 4 times: those cells (in any order),
+    # GRID where a row has fewer
+    cell = np.partition(np.where(change, _GRID_INDEX, GRID), 3, axis=1)[:, :4]
+    has = cell < GRID
+    cell = np.where(has, cell, 0)
     rows = np.arange(f.shape[0])[:, None]
     lo = cell * _H
-    return f, change[rows, cell], lo, lo + _H, f[rows, cell], f[rows, _GRID_NEXT[cell]]
+    return f, has, lo, lo + _H, f[rows, cell], f[rows, _GRID_NEXT[cell]]
 
 
 def _add_pokes(k: np.ndarray, f: np.ndarray, brackets: list[np.ndarray], rows: np.ndarray,
@@ -169,7 +173,7 @@ def _add_pokes(k: np.ndarray, f: np.ndarray, brackets: list[np.ndarray], rows: n
     frac = np.linspace(0.0, 1.0, _POKE_SUBGRID + 1)
     for _ in range(_POKE_LEVELS):
         v = sign[:, None] * _trig(kk, lo[:, None] + width[:, None] * frac)[0]
-        j = np.clip(np.argmin(v, axis=1) - 1, 0, _POKE_SUBGRID - 2)
+        j = np.minimum(np.maximum(np.argmin(v, axis=1) - 1, 0), _POKE_SUBGRID - 2)
         lo = lo + j * width / _POKE_SUBGRID
         width = 2.0 * width / _POKE_SUBGRID
     t_min = lo + 0.5 * width
@@ -193,14 +197,14 @@ def _roots(k: np.ndarray, has: np.ndarray, lo: np.ndarray, hi: np.ndarray, f0: n
     Newton steps kept in the bracket); a row's empty slots repeat its first root (0 if none:
     extra split points, harmless)."""
     den = np.where(has, f0 - f1, 1.0)
-    t = lo + (hi - lo) * np.clip(np.where(has, f0 / den, 0.5), 0.0, 1.0)
+    t = lo + (hi - lo) * np.fmin(np.fmax(np.where(has, f0 / den, 0.5), 0.0), 1.0)
     kk = k[:, :, None]
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        for _ in range(_NEWTON_STEPS):
-            f, df = _trig(kk, t)
-            # a zero derivative: +-inf -> a bracket end, nan -> lo (np.fmax ignores nan)
-            t = np.fmin(np.fmax(t - f / df, lo), hi)
-    return np.where(has, t, np.where(has[:, :1], t[:, :1], 0.0)) % _TWO_PI
+    for _ in range(_NEWTON_STEPS):
+        f, df = _trig(kk, t)
+        # a zero derivative: +-inf -> a bracket end, nan -> lo (np.fmax ignores nan)
+        t = np.fmin(np.fmax(t - f / df, lo), hi)
+    first = np.max(np.where(has, t, -np.inf), axis=1, keepdims=True)  # -inf: none
+    return np.where(has, t, np.where(first > -np.inf, first, 0.0)) % _TWO_PI
 
 
 def _cyclic(t: np.ndarray) -> np.ndarray:
@@ -246,10 +250,10 @@ def _hull(fr: _Frame, phi: np.ndarray) -> tuple[np.ndarray, ...]:
 
 
 def _quadrants(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """One-hot (..., 4) float quadrant of points of the normalised frame (counter-clockwise
+    """One-hot (4, ...) float quadrant of points of the normalised frame (counter-clockwise
     from ``+u, +v``; as the oracle's ``quadrant``: ``y >= 0`` upper, ``x >= 0`` right)."""
     up, right = y >= 0.0, x >= 0.0
-    return np.stack([up & right, up & ~right, ~up & ~right, ~up & right], axis=-1).astype(float)
+    return np.array([up & right, up & ~right, ~up & ~right, ~up & right], dtype=float)
 
 
 def _circle_sums(fr: _Frame, t0: np.ndarray, t1: np.ndarray, weights: np.ndarray
@@ -272,9 +276,9 @@ def _ellipse_sums(fr: _Frame, t0: np.ndarray, t1: np.ndarray, weights: np.ndarra
     cx, cy, Px, Py, Qx, Qy = (v[:, None] for v in (fr.cx, fr.cy, fr.Px, fr.Py, fr.Qx, fr.Qy))
     # where x' = 0 and y' = 0 (cos s P + sin s Q = -c per coordinate): 4 angles; a line that
     # does not cut gives an extra split point, harmless (the pieces' sums are additive)
-    alpha, beta, gamma = np.stack([Px, Py]), np.stack([Qx, Qy]), np.stack([cx, cy])
+    alpha, beta, gamma = np.array([Px, Py]), np.array([Qx, Qy]), np.array([cx, cy])
     phi = np.arctan2(beta, alpha)
-    dphi = np.arccos(np.clip(-gamma / np.hypot(alpha, beta), -1.0, 1.0))
+    dphi = np.arccos(np.fmin(np.fmax(-gamma / np.hypot(alpha, beta), -1.0), 1.0))
     cuts = t0 + (np.concatenate([phi + dphi, phi - dphi]) - t0) % _TWO_PI  # (4, N, m)
     bounds = np.sort(np.concatenate([t0[None], np.minimum(cuts, t1), t1[None]]), axis=0)
     cb, sb = np.cos(bounds), np.sin(bounds)
@@ -282,7 +286,7 @@ def _ellipse_sums(fr: _Frame, t0: np.ndarray, t1: np.ndarray, weights: np.ndarra
     cl, sl, ch, sh = cb[:-1], sb[:-1], cb[1:], sb[1:]
     mid = 0.5 * (lo + hi)
     cm, sm = np.cos(mid), np.sin(mid)
-    onehot = _quadrants(cx + cm * Px + sm * Qx, cy + cm * Py + sm * Qy)  # (5, N, m, 4)
+    onehot = _quadrants(cx + cm * Px + sm * Qx, cy + cm * Py + sm * Qy)  # (4, 5, N, m)
     dc, ds = ch - cl, sh - sl
     vals = [(0.5 * fr.ab1)[:, None] * (fr.det[:, None] * (hi - lo) + cx * (dc * Py + ds * Qy)
                                        - cy * (dc * Px + ds * Qx))]
@@ -297,19 +301,17 @@ def _ellipse_sums(fr: _Frame, t0: np.ndarray, t1: np.ndarray, weights: np.ndarra
         vals += [w * (m00 * ds - m01 * dc), w * (m10 * ds - m11 * dc),
                  (0.5 * w) * (r00 * m00 + r01 * m01), w * (r00 * m10 + r01 * m11),
                  (0.5 * w) * (r10 * m10 + r11 * m11)]
-    return _accumulate(onehot, np.stack(vals, axis=-1), weights)
+    return _accumulate(onehot, np.array(vals), weights)
 
 
 def _accumulate(onehot: np.ndarray, vals: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """``sum_{p, j} onehot[p, n, j, q] weights[n, j, r] vals[p, n, j, v]`` -> (N, 4, R, V)
-    for pieces ``p`` of items ``j``: onehot (P, N, m, 4), vals (P, N, m, V), weights (N, m,
+    """``sum_{p, j} onehot[q, p, n, j] weights[n, j, r] vals[v, p, n, j]`` -> (N, 4, R, V)
+    for pieces ``p`` of items ``j``: onehot (4, P, N, m), vals (V, P, N, m), weights (N, m,
     R)."""
-    P, n, m, V = vals.shape
+    V, _, n, m = vals.shape
     R = weights.shape[-1]
-    x = vals.transpose(1, 2, 0, 3).reshape(n, m, P * V)
-    oh = onehot.transpose(1, 2, 0, 3)  # (N, m, P, 4)
-    # per item: (4, P) @ (P, V) -> (N, m, 4, V), then weights over the items
-    per_item = oh.transpose(0, 1, 3, 2) @ x.reshape(n, m, P, V)
+    # per item: (4, P) @ (P, V) -> (N, m, 4, V), then the weights over the items
+    per_item = onehot.transpose(2, 3, 0, 1) @ vals.transpose(2, 3, 1, 0)
     out = weights.transpose(0, 2, 1) @ per_item.reshape(n, m, 4 * V)  # (N, R, 4 V)
     return out.reshape(n, R, 4, V).transpose(0, 2, 1, 3)
 
@@ -319,9 +321,8 @@ def _segment_sums(fr: _Frame, segs: tuple[np.ndarray, ...], grad: bool) -> np.nd
     ``_piece_sums``), each split where it crosses the axes."""
     x0, y0, x1, y1, end2, par, switch = segs
     wx, wy = x1 - x0, y1 - y0
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        cut = np.stack([-x0 / wx, -y0 / wy])
-    cut = np.clip(np.where(np.isfinite(cut), cut, 1.0), 0.0, 1.0)
+    # where x' = 0, y' = 0 along the segment (a division by 0: +-inf or nan -> an end)
+    cut = np.fmin(np.fmax(np.array([-x0 / wx, -y0 / wy]), 0.0), 1.0)
     zero = np.zeros((1, *x0.shape))
     sb = np.sort(np.concatenate([zero, cut, zero + 1.0]), axis=0)
     s0, s1 = sb[:-1], sb[1:]
@@ -336,7 +337,7 @@ def _segment_sums(fr: _Frame, segs: tuple[np.ndarray, ...], grad: bool) -> np.nd
         v0, v1 = m00 * u0 + m01 * u1, m10 * u0 + m11 * u1
         vals += [share * Wy, -share * Wx, share * (0.5 * v0 * Wy),
                  share * (0.5 * (v1 * Wy - v0 * Wx)), -share * (0.5 * v1 * Wx)]
-    return _accumulate(onehot, np.stack(vals, axis=-1), switch[:, :, None].astype(float))
+    return _accumulate(onehot, np.array(vals), switch[:, :, None].astype(float))
 
 
 def quadrant_areas_batch(
@@ -355,10 +356,18 @@ def quadrant_areas_batch(
     if p1.shape != p2.shape:
         raise ValueError(f"p1 and p2 must have the same shape (N, 5), got {p1.shape}, {p2.shape}")
     names = ["second", "intersection", "hull"] if hull else ["second", "intersection"]
-    n, R = p1.shape[0], len(names)
-    if n == 0:
+    if p1.shape[0] == 0:
         return {k: (np.zeros((0, 4)), np.zeros((0, 4, 5)) if gradient else None)
                 for k in names}
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        return _quadrant_areas(p1, p2, hull, gradient, names)
+
+
+def _quadrant_areas(p1: np.ndarray, p2: np.ndarray, hull: bool, gradient: bool,
+                    names: list[str]) -> dict[str, tuple[np.ndarray, np.ndarray | None]]:
+    """:func:`quadrant_areas_batch` of N >= 1 pairs (divisions by zero allowed: a zero
+    derivative or segment direction is handled where it occurs)."""
+    n, R = p1.shape[0], len(names)
     fr = _Frame(p1, p2)
     k = fr.crossing_coefficients()
     # contours this close count as identical (oracle: f below 1e-9, area error <= 1e-9)
@@ -374,7 +383,7 @@ def quadrant_areas_batch(
     if hull:
         _add_pokes(k, f, brackets, np.arange(n, 2 * n), _THRESHOLD)
     roots = _roots(k, *brackets)
-    has = brackets[0][:n, 0]
+    has = brackets[0][:n].any(axis=1)
     # intersection: the unit circle's arcs between crossings inside the second ellipse (at
     # their middle), the second ellipse's inside the unit circle; without a crossing, the first
     # inside the second iff f < 0 where |f| is largest (tangency does not matter), else the
