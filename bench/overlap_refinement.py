@@ -17,12 +17,20 @@ and JSON (``--json PATH``); ``--write-results`` replaces its section of ``docs/r
 the table of another run (e.g. the same command on an earlier commit, started together) as
 "before"; ``--notes PATH`` appends a markdown file (observations from other benches of the
 same session, each stating its command) to the section.
+
+``--eval-cost`` measures instead the cost of ONE model evaluation (residuals and Jacobians of
+all pairs at a pose) of a 7-pair Chess frame, and of its exact areas alone
+(``factors.metrics.quadrant_areas_batch``, as that evaluation calls it), for iou and giou; with
+``--compare-tree DIR`` the same measurement runs alternately in another checkout (its own
+``.venv``), so that both are timed in the same period.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import subprocess
 import sys
 import time
 
@@ -97,6 +105,72 @@ def run(seed: int = 1, frames: int = 108, log=print) -> dict:
             "noisy_iterations_median": float(np.median(rec["noisy_iterations"])),
         }
     out["summary"] = summary
+    return out
+
+
+def eval_cost(reps: int = 200, seed: int = 3) -> dict:
+    """CPU ms (``time.process_time``) of one iou / giou model evaluation (Jacobians included,
+    each at a new pose near the start, so nothing is memoised) of the first noisy Chess frame
+    with 7 detections, and of the exact areas of that evaluation alone (the
+    ``quadrant_areas_batch`` calls it makes, replayed)."""
+    import factors.metrics as fm
+    from factors.pose_residuals import PoseResidualModel, expmap_pose3
+
+    compiled = compile_map(load_chess_map())
+    camera, poses, _ = load_chess_world_from_camera()
+    rng = np.random.default_rng(seed)
+    for truth in poses:
+        frame = simulate_frame(compiled, camera, truth, rng, SimulationConfig())
+        if len(frame) == 7:
+            break
+    ells = [compiled.ellipsoids[compiled.index_of(o)] for o in frame.object_ids]
+    start = perturb_pose(truth, rng, 0.05, 2.0)
+    out: dict = {"pairs": len(frame)}
+    for metric in ("iou", "giou"):
+        model = PoseResidualModel(metric, [d.ellipse for d in frame.detections], ells, camera,
+                                  initial_world_from_camera=start)
+        poses_ = [start @ expmap_pose3(rng.normal(0.0, 1e-3, 6)) for _ in range(reps)]
+        calls, original = [], fm.quadrant_areas_batch
+
+        def recording(*args, _calls=calls, _original=original, **kwargs):
+            _calls.append((args, kwargs))
+            return _original(*args, **kwargs)
+
+        fm.quadrant_areas_batch = recording
+        try:
+            model.evaluate(poses_[0])
+        finally:
+            fm.quadrant_areas_batch = original
+        t = time.process_time()
+        for T in poses_:
+            model.evaluate(T)
+        whole = (time.process_time() - t) / reps
+        t = time.process_time()
+        for _ in range(reps):
+            for args, kwargs in calls:
+                original(*args, **kwargs)
+        areas = (time.process_time() - t) / reps
+        out[metric] = {"evaluation_ms": 1e3 * whole, "areas_ms": 1e3 * areas,
+                       "area_calls": len(calls)}
+    return out
+
+
+def compare_eval_cost(other_tree: str, rounds: int = 3) -> dict:
+    """:func:`eval_cost` here and in ``other_tree`` (this file run by its ``.venv``, its code
+    on the path), alternately ``rounds`` times; the median of each."""
+    runs: dict[str, list[dict]] = {"this": [], "other": []}
+    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    for _ in range(rounds):
+        runs["this"].append(eval_cost())
+        env = dict(os.environ, PYTHONPATH=other_tree)
+        res = subprocess.run([os.path.join(other_tree, ".venv", "bin", "python"),
+                              os.path.abspath(__file__), "--eval-cost"], cwd=other_tree,
+                             env=env, capture_output=True, text=True, check=True)
+        runs["other"].append(json.loads(res.stdout))
+    out: dict = {"this_tree": here, "other_tree": other_tree, "rounds": rounds}
+    for side, results in runs.items():
+        out[side] = {m: {k: float(np.median([r[m][k] for r in results]))
+                         for k in ("evaluation_ms", "areas_ms")} for m in ("iou", "giou")}
     return out
 
 
@@ -182,7 +256,18 @@ def main(argv: list[str] | None = None) -> int:
                     help="append this markdown file to the section (runs of other benches)")
     ap.add_argument("--command", default=None,
                     help="with --from-json: the command line of that run, for the results text")
+    ap.add_argument("--eval-cost", action="store_true",
+                    help="only the cost of one model evaluation and of its areas (7 pairs)")
+    ap.add_argument("--compare-tree", default=None,
+                    help="with --eval-cost: also measure in this checkout, alternately")
     args = ap.parse_args(argv)
+    if args.eval_cost:
+        cost = compare_eval_cost(args.compare_tree) if args.compare_tree else eval_cost()
+        print(json.dumps(cost, indent=2))
+        if args.json:
+            with open(args.json, "w") as fh:
+                json.dump(cost, fh)
+        return 0
     if args.from_json:
         with open(args.from_json) as fh:
             result = json.load(fh)
