@@ -48,10 +48,14 @@ _H = _TWO_PI / GRID
 #: Newton steps polishing every root from the secant of its grid bracket (~1e-4 rad off a
 #: simple root; the hull's tangent functions curve more): at rounding level after 4.
 _NEWTON_STEPS = 4
+#: Iteration cap of the safeguarded Newton finishing the roots that the plain steps did not
+#: (bisection halves the bracket of 0.05 rad at least every other iteration).
+_SAFEGUARDED_MAX_ITER = 100
 #: Sub-grid points per level (and levels) locating the extremum of a tangent function inside
-#: a grid cell (:func:`_add_pokes`): 32^2 sub-intervals, the extremum's value is then off by
-#: ~1e-9 of the coefficients.
-_POKE_SUBGRID, _POKE_LEVELS = 32, 2
+#: a grid cell (:func:`_add_pokes`): each level keeps 2 of 32 sub-intervals, so the extremum is
+#: located to ~3e-9 rad (an ellipse 300 times longer than wide squeezes the normals where the
+#: other one pokes out to ~1e-5 rad in its normalised frame).
+_POKE_SUBGRID, _POKE_LEVELS = 32, 6
 #: (4 quadrants, 2 turns) bounds of the quadrants' angle intervals on the unit circle
 _QUADRANT_LO = (np.arange(4)[:, None] * 0.5 * np.pi + np.arange(2)[None, :] * _TWO_PI)
 _QUADRANT_HI = _QUADRANT_LO + 0.5 * np.pi
@@ -193,18 +197,48 @@ def _add_pokes(k: np.ndarray, f: np.ndarray, brackets: list[np.ndarray], rows: n
 
 def _roots(k: np.ndarray, has: np.ndarray, lo: np.ndarray, hi: np.ndarray, f0: np.ndarray,
            f1: np.ndarray) -> np.ndarray:
-    """Roots (M, 4) of ``k`` (5, M) in the brackets (from the secant, :data:`_NEWTON_STEPS`
-    Newton steps kept in the bracket); a row's empty slots repeat its first root (0 if none:
-    extra split points, harmless)."""
+    """Roots (M, 4) of ``k`` (5, M) in the brackets: from the secant, :data:`_NEWTON_STEPS`
+    Newton steps kept in the bracket; the roots whose last step was not at rounding level
+    (a function that curves a lot within its bracket) are finished by :func:`_safeguarded`. A
+    row's empty slots repeat one of its roots (0 if none: extra split points, harmless)."""
     den = np.where(has, f0 - f1, 1.0)
     t = lo + (hi - lo) * np.fmin(np.fmax(np.where(has, f0 / den, 0.5), 0.0), 1.0)
     kk = k[:, :, None]
     for _ in range(_NEWTON_STEPS):
         f, df = _trig(kk, t)
+        step = f / df
         # a zero derivative: +-inf -> a bracket end, nan -> lo (np.fmax ignores nan)
-        t = np.fmin(np.fmax(t - f / df, lo), hi)
+        t_new = np.fmin(np.fmax(t - step, lo), hi)
+        t, moved = t_new, t_new - t
+    # converged: at a root, or the last (unclamped) step below 1e-9 rad (now at rounding level)
+    bad = has & ~((f == 0.0) | ((np.abs(moved) < 1e-9) & (np.abs(step) < 1e-9)))
+    if bad.any():
+        r, j = np.nonzero(bad)
+        t[r, j] = _safeguarded(k[:, r], t[r, j], lo[r, j], hi[r, j], f0[r, j])
     first = np.max(np.where(has, t, -np.inf), axis=1, keepdims=True)  # -inf: none
     return np.where(has, t, np.where(first > -np.inf, first, 0.0)) % _TWO_PI
+
+
+def _safeguarded(k: np.ndarray, t: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                 f_lo: np.ndarray) -> np.ndarray:
+    """Roots (m,) of ``k`` (5, m) in brackets ``[lo, hi]`` (values ``f_lo`` at ``lo``), from
+    ``t``: Newton steps that stay in the bracket, else bisection, the bracket shrinking at
+    every iterate (oracle: ``_bracketed_root``); up to :data:`_SAFEGUARDED_MAX_ITER`
+    iterations, until a step or the bracket is below 1e-12 rad, or ``f`` is 0."""
+    neg_lo = ~(f_lo > _THRESHOLD)
+    kk = k[:, :, None]
+    for _ in range(_SAFEGUARDED_MAX_ITER):
+        f, df = (v[:, 0] for v in _trig(kk, t[:, None]))
+        left = (f < 0.0) == neg_lo  # the root is right of t
+        lo, hi = np.where(left, t, lo), np.where(left, hi, t)
+        t_new = t - f / df
+        newton = (lo < t_new) & (t_new < hi)
+        t_new = np.where(newton, t_new, 0.5 * (lo + hi))
+        done = (newton & (np.abs(t_new - t) < 1e-12)) | (hi - lo < 1e-12) | (f == 0.0)
+        t = np.where(f == 0.0, t, t_new)
+        if done.all():
+            break
+    return t
 
 
 def _cyclic(t: np.ndarray) -> np.ndarray:

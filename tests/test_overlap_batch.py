@@ -122,6 +122,34 @@ def test_batched_overlap_residual_equals_pairwise_calls():
             np.testing.assert_allclose(grads[j], g, rtol=0, atol=tol * np.abs(g).max())
 
 
+def test_thin_ellipses_equal_the_scalar_reference():
+    """Needles (found by random stress tests against the oracle): a crossing function that
+    curves so much within its grid cells that plain Newton steps stall at a bracket end (the
+    safeguarded finish), and needles (axis ratios 130 to 700) whose normalised frame squeezes
+    the normals where the other ellipse supports the hull into ~1e-5 rad (the pokes' sub-grid
+    search): areas equal to the oracle to 1e-9."""
+    pairs = np.array([
+        [[21.75992, -8.301219, 59.816758, 13.924303, -2.107873],
+         [-1.620865, 37.923887, 61.778497, 1.061468, -3.279553]],
+        [[39.469769, -20.793766, 7.378105, 0.539887, -0.25897],
+         [44.874411, 38.503654, 77.765479, 0.521244, 1.516488]],
+        [[8.529533, -36.128882, 17.080009, 0.062994, 1.625754],
+         [-42.643625, -2.08169, 0.3, 1.285043, 1.081093]],
+        [[-39.257198, 48.336418, 0.070768, 49.67406, -3.532909],
+         [-37.019152, -22.682585, 0.3, 0.334576, 3.148533]],
+    ])
+    batch = quadrant_areas_batch(pairs[:, 0], pairs[:, 1], True, gradient=True)
+    for j, (p1, p2) in enumerate(pairs):
+        ref = quadrant_areas(p1, p2, True, gradient=True)
+        for name, (areas, grads) in ref.items():
+            scale = max(float(np.abs(areas).sum()), math.pi * p1[2] * p1[3])
+            np.testing.assert_allclose(batch[name][0][j], areas, rtol=0, atol=1e-9 * scale,
+                                       err_msg=f"{name} pair {j}")
+            np.testing.assert_allclose(batch[name][1][j], grads, rtol=0,
+                                       atol=1e-7 * max(float(np.abs(grads).max()), 1.0),
+                                       err_msg=f"{name} gradient pair {j}")
+
+
 def test_batch_rejects_mismatched_shapes():
     with pytest.raises(ValueError, match="p1 and p2"):
         quadrant_areas_batch(np.zeros((2, 5)), np.zeros((3, 5)), False)
