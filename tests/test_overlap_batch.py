@@ -150,6 +150,33 @@ def test_thin_ellipses_equal_the_scalar_reference():
                                        err_msg=f"{name} gradient pair {j}")
 
 
+def test_random_pairs_of_any_eccentricity_equal_the_scalar_reference():
+    """Random pairs with semi-axes from 0.05 to 300 px (axis ratios up to ~6000; a quarter of
+    them close to identical, some concentric or circles): areas equal to the oracle to 1e-9
+    (the stress test that found the needle pairs above)."""
+    rng = np.random.default_rng(5)
+    n = 400
+
+    def params(k: int) -> np.ndarray:
+        return np.column_stack([rng.uniform(-50, 50, (k, 2)),
+                                np.exp(rng.uniform(np.log(0.05), np.log(300), (k, 2))),
+                                rng.uniform(-4, 4, k)])
+
+    p1, p2 = params(n), params(n)
+    m = n // 4
+    p2[:m] = p1[:m] + rng.normal(0, 1, (m, 5)) * np.array([1, 1, 0.5, 0.5, 0.05]) \
+        * rng.choice([1, 1e-2, 1e-4], (m, 1))
+    p2[m:m + 20, :2], p2[m:m + 20, 4] = p1[m:m + 20, :2], p1[m:m + 20, 4]  # concentric
+    p2[m + 20:m + 40, 2] = p2[m + 20:m + 40, 3]  # circles
+    p2[:, 2:4] = np.maximum(p2[:, 2:4], 0.3)
+    batch = quadrant_areas_batch(p1, p2, True)
+    for j in range(n):
+        for name, (areas, _) in quadrant_areas(p1[j], p2[j], True).items():
+            scale = max(float(np.abs(areas).sum()), math.pi * p1[j, 2] * p1[j, 3])
+            np.testing.assert_allclose(batch[name][0][j], areas, rtol=0, atol=1e-9 * scale,
+                                       err_msg=f"{name} pair {j}")
+
+
 def test_batch_rejects_mismatched_shapes():
     with pytest.raises(ValueError, match="p1 and p2"):
         quadrant_areas_batch(np.zeros((2, 5)), np.zeros((3, 5)), False)
