@@ -48,12 +48,35 @@ METRICS = ("iou", "giou", "level_set")
 EXACT_TOLERANCE_M = 1e-6
 
 
+#: model evaluations computed (not memoised) since the start, counted by :func:`_counting`
+_EVALUATIONS = [0]
+
+
+def _counting() -> None:
+    """Count the model's computed evaluations (every metric ends one in ``_saturate``); the
+    wrapper only counts (its time is part of the CPU measured, a few us per solve)."""
+    from factors.pose_residuals import PoseResidualModel
+
+    saturate = PoseResidualModel._saturate
+    if getattr(saturate, "_counts", False):
+        return
+
+    def counted(self, ev):
+        _EVALUATIONS[0] += 1
+        return saturate(self, ev)
+
+    counted._counts = True
+    PoseResidualModel._saturate = counted
+
+
 def _solve(frame, compiled, camera, start, metric):
     ids = [compiled.index_of(o) for o in frame.object_ids]
     ells = [compiled.ellipsoids[i] for i in ids]
+    n0 = _EVALUATIONS[0]
     t = time.process_time()
     res = refine(list(frame.detections), ells, camera, start, metric)
-    return res, (time.process_time() - t) * 1e3
+    ms = (time.process_time() - t) * 1e3
+    return res, ms, _EVALUATIONS[0] - n0
 
 
 def run(seed: int = 1, frames: int = 108, log=print) -> dict:
@@ -64,7 +87,9 @@ def run(seed: int = 1, frames: int = 108, log=print) -> dict:
     out: dict = {"seed": seed, "frames": len(poses), "start": "0.1 m / 5 deg",
                  "metrics": {m: {"exact_pos_m": [], "noisy_pos_m": [], "noisy_status": [],
                                  "noisy_cpu_ms": [], "exact_cpu_ms": [],
-                                 "noisy_iterations": []} for m in METRICS}}
+                                 "noisy_iterations": [], "noisy_evaluations": []}
+                             for m in METRICS}}
+    _counting()
     noisy_cfg = SimulationConfig()
     for i, truth in enumerate(poses):
         exact = simulate_frame(compiled, camera, truth, int(i), SimulationConfig.exact())
@@ -73,15 +98,16 @@ def run(seed: int = 1, frames: int = 108, log=print) -> dict:
         for m in METRICS:
             rec = out["metrics"][m]
             if len(exact) >= 3:
-                res, ms = _solve(exact, compiled, camera, start, m)
+                res, ms, _ = _solve(exact, compiled, camera, start, m)
                 rec["exact_pos_m"].append(pose_errors(res.world_from_camera, truth)[0])
                 rec["exact_cpu_ms"].append(ms)
             if len(noisy) >= 3:
-                res, ms = _solve(noisy, compiled, camera, start, m)
+                res, ms, evaluations = _solve(noisy, compiled, camera, start, m)
                 rec["noisy_pos_m"].append(pose_errors(res.world_from_camera, truth)[0])
                 rec["noisy_status"].append(res.status)
                 rec["noisy_cpu_ms"].append(ms)
                 rec["noisy_iterations"].append(int(res.iterations))
+                rec["noisy_evaluations"].append(evaluations)
         if (i + 1) % 20 == 0:
             log(f"  {i + 1}/{len(poses)} frames")
     summary = {}
@@ -104,6 +130,9 @@ def run(seed: int = 1, frames: int = 108, log=print) -> dict:
             "cpu_ms_p90": float(np.percentile(rec["noisy_cpu_ms"], 90)),
             "cpu_ratio_to_level_set": median_ms / ls_median,
             "noisy_iterations_median": float(np.median(rec["noisy_iterations"])),
+            "noisy_evaluations_median": float(np.median(rec["noisy_evaluations"])),
+            "noisy_evaluations_per_iteration": float(np.sum(rec["noisy_evaluations"])
+                                                     / max(np.sum(rec["noisy_iterations"]), 1)),
         }
     out["summary"] = summary
     return out
@@ -184,13 +213,17 @@ INTRO = (
     "non-negative rows summing to `Delta`), with exact analytic Jacobians (boundary integrals "
     "of the exact areas, `factors/overlap.py`; checked against central differences in "
     "`tests/test_metrics.py`). The areas of all pairs of a frame are computed in one "
-    "vectorised call (`factors.overlap.quadrant_areas_batch`, equal to the scalar reference "
-    "construction to ~1e-9, `tests/test_overlap_batch.py`). iou: a pair whose ellipses are "
+    "vectorised call with a fixed number of numpy calls (`factors.overlap.quadrant_areas_batch`, "
+    "equal to the scalar reference construction to ~1e-9, `tests/test_overlap_batch.py`; "
+    "docs/design/factors.md, \"Exact ellipse areas\"). iou: a pair whose ellipses are "
     "disjoint gets the giou rows (the hull gap term, informative when disjoint; every "
     "overlapping pair, hence the optimum, keeps the iou rows; `factors/metrics.py`, iou). "
     "Stopping: besides GTSAM's tolerances, iou/giou stop after an ACCEPTED LM iteration that "
     "decreased the error by less than 1e-3 of it "
-    "(`service.localization.refine.OVERLAP_RELATIVE_ERROR_TOL`). CPU times are "
+    "(`service.localization.refine.OVERLAP_RELATIVE_ERROR_TOL`); their LM damping follows "
+    "Nielsen's gain-ratio update relative to diag(J^T J) "
+    "(`service.localization.refine.OVERLAP_NIELSEN_DAMPING`). Model evaluations: those "
+    "computed (not memoised) per solve, rejected LM trials included. CPU times are "
     "`time.process_time` of `refine()` on a machine shared with other jobs: compare the ratio "
     "to level set, measured in the same run.")
 
@@ -198,17 +231,19 @@ INTRO = (
 def _table(result: dict) -> list[str]:
     lines = ["| metric | exact: max error (m) / within 1e-6 m | noisy: converged / capped | "
              "noisy: within 5 / 10 cm, median error | CPU ms median / p90 | x level set | "
-             "LM iterations (median, noisy) |",
-             "|---|---|---|---|---|---|---|"]
+             "LM iterations (median, noisy) | model evaluations (median; per LM iteration) |",
+             "|---|---|---|---|---|---|---|---|"]
     for m, s in result["summary"].items():
         its = s.get("noisy_iterations_median")
+        evs = s.get("noisy_evaluations_median")
+        evs = "–" if evs is None else f"{evs:.0f}; {s['noisy_evaluations_per_iteration']:.2f}"
         lines.append(
             f"| {m} | {s['exact_max_pos_m']:.1e} / {100 * s['exact_within_1e-6_m']:.1f}% | "
             f"{100 * s['noisy_converged']:.1f}% / {100 * s['noisy_capped']:.1f}% | "
             f"{100 * s['noisy_within_5cm']:.1f}% / {100 * s['noisy_within_10cm']:.1f}%, "
             f"{100 * s['noisy_median_pos_m']:.2f} cm | {s['cpu_ms_median']:.1f} / "
             f"{s['cpu_ms_p90']:.1f} | {s['cpu_ratio_to_level_set']:.1f} | "
-            f"{'–' if its is None else f'{its:.0f}'} |")
+            f"{'–' if its is None else f'{its:.0f}'} | {evs} |")
     return lines
 
 
