@@ -17,12 +17,21 @@ and JSON (``--json PATH``); ``--write-results`` replaces its section of ``docs/r
 the table of another run (e.g. the same command on an earlier commit, started together) as
 "before"; ``--notes PATH`` appends a markdown file (observations from other benches of the
 same session, each stating its command) to the section.
+
+``--eval-cost`` measures instead the cost of ONE model evaluation (residuals and Jacobians of
+all pairs at a pose) of a 7-pair Chess frame, and of its exact areas alone
+(``factors.metrics.quadrant_areas_batch``, as that evaluation calls it), for iou and giou; with
+``--compare-tree DIR`` the same measurement runs alternately in another checkout (its own
+``.venv``), so that both are timed in the same period.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
+import os
+import subprocess
 import sys
 import time
 
@@ -39,12 +48,35 @@ METRICS = ("iou", "giou", "level_set")
 EXACT_TOLERANCE_M = 1e-6
 
 
+#: model evaluations computed (not memoised) since the start, counted by :func:`_counting`
+_EVALUATIONS = [0]
+
+
+def _counting() -> None:
+    """Count the model's computed evaluations (every metric ends one in ``_saturate``); the
+    wrapper only counts (its time is part of the CPU measured, a few us per solve)."""
+    from factors.pose_residuals import PoseResidualModel
+
+    saturate = PoseResidualModel._saturate
+    if getattr(saturate, "_counts", False):
+        return
+
+    def counted(self, ev):
+        _EVALUATIONS[0] += 1
+        return saturate(self, ev)
+
+    counted._counts = True
+    PoseResidualModel._saturate = counted
+
+
 def _solve(frame, compiled, camera, start, metric):
     ids = [compiled.index_of(o) for o in frame.object_ids]
     ells = [compiled.ellipsoids[i] for i in ids]
+    n0 = _EVALUATIONS[0]
     t = time.process_time()
     res = refine(list(frame.detections), ells, camera, start, metric)
-    return res, (time.process_time() - t) * 1e3
+    ms = (time.process_time() - t) * 1e3
+    return res, ms, _EVALUATIONS[0] - n0
 
 
 def run(seed: int = 1, frames: int = 108, log=print) -> dict:
@@ -55,7 +87,9 @@ def run(seed: int = 1, frames: int = 108, log=print) -> dict:
     out: dict = {"seed": seed, "frames": len(poses), "start": "0.1 m / 5 deg",
                  "metrics": {m: {"exact_pos_m": [], "noisy_pos_m": [], "noisy_status": [],
                                  "noisy_cpu_ms": [], "exact_cpu_ms": [],
-                                 "noisy_iterations": []} for m in METRICS}}
+                                 "noisy_iterations": [], "noisy_evaluations": []}
+                             for m in METRICS}}
+    _counting()
     noisy_cfg = SimulationConfig()
     for i, truth in enumerate(poses):
         exact = simulate_frame(compiled, camera, truth, int(i), SimulationConfig.exact())
@@ -64,15 +98,16 @@ def run(seed: int = 1, frames: int = 108, log=print) -> dict:
         for m in METRICS:
             rec = out["metrics"][m]
             if len(exact) >= 3:
-                res, ms = _solve(exact, compiled, camera, start, m)
+                res, ms, _ = _solve(exact, compiled, camera, start, m)
                 rec["exact_pos_m"].append(pose_errors(res.world_from_camera, truth)[0])
                 rec["exact_cpu_ms"].append(ms)
             if len(noisy) >= 3:
-                res, ms = _solve(noisy, compiled, camera, start, m)
+                res, ms, evaluations = _solve(noisy, compiled, camera, start, m)
                 rec["noisy_pos_m"].append(pose_errors(res.world_from_camera, truth)[0])
                 rec["noisy_status"].append(res.status)
                 rec["noisy_cpu_ms"].append(ms)
                 rec["noisy_iterations"].append(int(res.iterations))
+                rec["noisy_evaluations"].append(evaluations)
         if (i + 1) % 20 == 0:
             log(f"  {i + 1}/{len(poses)} frames")
     summary = {}
@@ -95,8 +130,81 @@ def run(seed: int = 1, frames: int = 108, log=print) -> dict:
             "cpu_ms_p90": float(np.percentile(rec["noisy_cpu_ms"], 90)),
             "cpu_ratio_to_level_set": median_ms / ls_median,
             "noisy_iterations_median": float(np.median(rec["noisy_iterations"])),
+            "noisy_evaluations_median": float(np.median(rec["noisy_evaluations"])),
+            "noisy_evaluations_per_iteration": float(np.sum(rec["noisy_evaluations"])
+                                                     / max(np.sum(rec["noisy_iterations"]), 1)),
         }
     out["summary"] = summary
+    return out
+
+
+def eval_cost(reps: int = 400, seed: int = 3, blocks: int = 10) -> dict:
+    """CPU ms (``time.process_time``) of one iou / giou model evaluation (Jacobians included,
+    each at a new pose near the start, so nothing is memoised) of the first noisy Chess frame
+    with 7 detections, and of the exact areas of that evaluation alone (the
+    ``quadrant_areas_batch`` calls it makes, replayed); ``reps`` of each, timed in ``blocks``
+    alternating blocks, the fastest block's mean."""
+    import factors.metrics as fm
+    from factors.pose_residuals import PoseResidualModel, expmap_pose3
+
+    compiled = compile_map(load_chess_map())
+    camera, poses, _ = load_chess_world_from_camera()
+    rng = np.random.default_rng(seed)
+    for truth in poses:
+        frame = simulate_frame(compiled, camera, truth, rng, SimulationConfig())
+        if len(frame) == 7:
+            break
+    ells = [compiled.ellipsoids[compiled.index_of(o)] for o in frame.object_ids]
+    start = perturb_pose(truth, rng, 0.05, 2.0)
+    out: dict = {"pairs": len(frame)}
+    for metric in ("iou", "giou"):
+        model = PoseResidualModel(metric, [d.ellipse for d in frame.detections], ells, camera,
+                                  initial_world_from_camera=start)
+        poses_ = [start @ expmap_pose3(rng.normal(0.0, 1e-3, 6)) for _ in range(reps)]
+        calls, original = [], fm.quadrant_areas_batch
+
+        def recording(*args, _calls=calls, _original=original, **kwargs):
+            _calls.append((args, kwargs))
+            return _original(*args, **kwargs)
+
+        fm.quadrant_areas_batch = recording
+        try:
+            model.evaluate(poses_[0])
+        finally:
+            fm.quadrant_areas_batch = original
+        whole, areas = math.inf, math.inf
+        block = max(reps // blocks, 1)
+        for b in range(blocks):  # the fastest block of each: the least disturbed by other jobs
+            t = time.process_time()
+            for T in poses_[b * block:(b + 1) * block]:
+                model.evaluate(T)
+            whole = min(whole, (time.process_time() - t) / block)
+            t = time.process_time()
+            for _ in range(block):
+                for args, kwargs in calls:
+                    original(*args, **kwargs)
+            areas = min(areas, (time.process_time() - t) / block)
+        out[metric] = {"evaluation_ms": 1e3 * whole, "areas_ms": 1e3 * areas,
+                       "area_calls": len(calls)}
+    return out
+
+
+def compare_eval_cost(other_tree: str, rounds: int = 5) -> dict:
+    """:func:`eval_cost` here and in ``other_tree`` (this file run by its ``.venv``, its code
+    on the path), alternately ``rounds`` times; the median of each."""
+    runs: dict[str, list[dict]] = {"this": [], "other": []}
+    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    for _ in range(rounds):
+        runs["this"].append(eval_cost())
+        env = dict(os.environ, PYTHONPATH=other_tree)
+        res = subprocess.run([os.path.join(other_tree, ".venv", "bin", "python"),
+                              os.path.abspath(__file__), "--eval-cost"], cwd=other_tree,
+                             env=env, capture_output=True, text=True, check=True)
+        runs["other"].append(json.loads(res.stdout))
+    out: dict = {"this_tree": here, "other_tree": other_tree, "rounds": rounds}
+    for side, results in runs.items():
+        out[side] = {m: {k: float(np.median([r[m][k] for r in results]))
+                         for k in ("evaluation_ms", "areas_ms")} for m in ("iou", "giou")}
     return out
 
 
@@ -105,13 +213,17 @@ INTRO = (
     "non-negative rows summing to `Delta`), with exact analytic Jacobians (boundary integrals "
     "of the exact areas, `factors/overlap.py`; checked against central differences in "
     "`tests/test_metrics.py`). The areas of all pairs of a frame are computed in one "
-    "vectorised call (`factors.overlap.quadrant_areas_batch`, equal to the scalar reference "
-    "construction to ~1e-9, `tests/test_overlap_batch.py`). iou: a pair whose ellipses are "
+    "vectorised call with a fixed number of numpy calls (`factors.overlap.quadrant_areas_batch`, "
+    "equal to the scalar reference construction to ~1e-9, `tests/test_overlap_batch.py`; "
+    "docs/design/factors.md, \"Exact ellipse areas\"). iou: a pair whose ellipses are "
     "disjoint gets the giou rows (the hull gap term, informative when disjoint; every "
     "overlapping pair, hence the optimum, keeps the iou rows; `factors/metrics.py`, iou). "
     "Stopping: besides GTSAM's tolerances, iou/giou stop after an ACCEPTED LM iteration that "
     "decreased the error by less than 1e-3 of it "
-    "(`service.localization.refine.OVERLAP_RELATIVE_ERROR_TOL`). CPU times are "
+    "(`service.localization.refine.OVERLAP_RELATIVE_ERROR_TOL`); their LM damping follows "
+    "Nielsen's gain-ratio update relative to diag(J^T J) "
+    "(`service.localization.refine.OVERLAP_NIELSEN_DAMPING`). Model evaluations: those "
+    "computed (not memoised) per solve, rejected LM trials included. CPU times are "
     "`time.process_time` of `refine()` on a machine shared with other jobs: compare the ratio "
     "to level set, measured in the same run.")
 
@@ -119,17 +231,19 @@ INTRO = (
 def _table(result: dict) -> list[str]:
     lines = ["| metric | exact: max error (m) / within 1e-6 m | noisy: converged / capped | "
              "noisy: within 5 / 10 cm, median error | CPU ms median / p90 | x level set | "
-             "LM iterations (median, noisy) |",
-             "|---|---|---|---|---|---|---|"]
+             "LM iterations (median, noisy) | model evaluations (median; per LM iteration) |",
+             "|---|---|---|---|---|---|---|---|"]
     for m, s in result["summary"].items():
         its = s.get("noisy_iterations_median")
+        evs = s.get("noisy_evaluations_median")
+        evs = "–" if evs is None else f"{evs:.0f}; {s['noisy_evaluations_per_iteration']:.2f}"
         lines.append(
             f"| {m} | {s['exact_max_pos_m']:.1e} / {100 * s['exact_within_1e-6_m']:.1f}% | "
             f"{100 * s['noisy_converged']:.1f}% / {100 * s['noisy_capped']:.1f}% | "
             f"{100 * s['noisy_within_5cm']:.1f}% / {100 * s['noisy_within_10cm']:.1f}%, "
             f"{100 * s['noisy_median_pos_m']:.2f} cm | {s['cpu_ms_median']:.1f} / "
             f"{s['cpu_ms_p90']:.1f} | {s['cpu_ratio_to_level_set']:.1f} | "
-            f"{'–' if its is None else f'{its:.0f}'} |")
+            f"{'–' if its is None else f'{its:.0f}'} | {evs} |")
     return lines
 
 
@@ -182,7 +296,18 @@ def main(argv: list[str] | None = None) -> int:
                     help="append this markdown file to the section (runs of other benches)")
     ap.add_argument("--command", default=None,
                     help="with --from-json: the command line of that run, for the results text")
+    ap.add_argument("--eval-cost", action="store_true",
+                    help="only the cost of one model evaluation and of its areas (7 pairs)")
+    ap.add_argument("--compare-tree", default=None,
+                    help="with --eval-cost: also measure in this checkout, alternately")
     args = ap.parse_args(argv)
+    if args.eval_cost:
+        cost = compare_eval_cost(args.compare_tree) if args.compare_tree else eval_cost()
+        print(json.dumps(cost, indent=2))
+        if args.json:
+            with open(args.json, "w") as fh:
+                json.dump(cost, fh)
+        return 0
     if args.from_json:
         with open(args.from_json) as fh:
             result = json.load(fh)

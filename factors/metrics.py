@@ -35,7 +35,7 @@ Metrics, costs and residuals (``r``, length in brackets)
 ``giou`` [4]
     ``Delta = 1 - GIoU``, ``GIoU = IoU - |C \\ (D ∪ P)| / |C|``, ``C`` the convex hull of the
     two ellipses; in ``[0, 2]`` (the cost), flat when one ellipse contains the other. Option
-    ``hull_directions`` (default 128, >= 8): normals bracketing the common tangents.
+    ``hull_directions`` (default 128, >= 8): accepted, no longer used (exact tangents).
     ``r_k = |(D △ P) ∩ Q_k| / |D ∪ P| + |(C \\ (D ∪ P)) ∩ Q_k| / |C|``, ``sum_k r_k = Delta``.
 ``bbox`` [4]
     ``r = B_D - B_P``, ``B = [xmin, ymin, xmax, ymax]`` the axis-aligned boxes; cost the

@@ -619,21 +619,32 @@ class PoseResidualModel:
         mu, sigma = gaussians_from_dual_conics(Cn)
         params, ellipse = ellipse_params_and_validity(mu, sigma)
         valid &= ellipse
+        hull_directions = self.options.get("hull_directions", HULL_DIRECTIONS)
+        if valid.all():  # the usual case: no scatter into zero-filled rows
+            r, grad = metrics.overlap_residual(self.metric, self._det_params, params,
+                                               hull_directions, gradient=dCn is not None,
+                                               disjoint_hull=True)
+            return r, None if dCn is None else grad @ self._dg_dxi(mu, dCn)
         r = np.zeros((self.n, self.dim))
         J = None if dCn is None else np.zeros((self.n, self.dim, 6))
         idx = np.flatnonzero(valid)
         if idx.size:
             rows, grad = metrics.overlap_residual(
-                self.metric, self._det_params[idx], params[idx],
-                self.options.get("hull_directions", HULL_DIRECTIONS), gradient=J is not None,
-                disjoint_hull=True)
+                self.metric, self._det_params[idx], params[idx], hull_directions,
+                gradient=J is not None, disjoint_hull=True)
             r[idx] = rows
             if J is not None:
-                dmu, dsig = gaussian_derivatives_from_dual_conics(mu[idx], dCn[idx])
-                dg = np.concatenate([dmu, dsig[..., 0, 0, None], dsig[..., 0, 1, None],
-                                     dsig[..., 1, 1, None]], axis=-1)  # (n, 6, 5)
-                J[idx] = grad @ dg.transpose(0, 2, 1)
+                J[idx] = grad @ self._dg_dxi(mu[idx], dCn[idx])
         return r, J
+
+    @staticmethod
+    def _dg_dxi(mu: np.ndarray, dCn: np.ndarray) -> np.ndarray:
+        """``d g / d xi`` (n, 5, 6) of the projections' ``g = (mu_x, mu_y, s00, s01, s11)``
+        along the 6 pose tangents, from ``mu`` (n, 2) and ``dCn`` (n, 6, 3, 3)."""
+        dmu, dsig = gaussian_derivatives_from_dual_conics(mu, dCn)
+        dg = np.concatenate([dmu, dsig[..., 0, 0, None], dsig[..., 0, 1, None],
+                             dsig[..., 1, 1, None]], axis=-1)  # (n, 6, 5)
+        return dg.transpose(0, 2, 1)
 
     # ------------------------------------------------------------------ generic metrics
     def _metric_rows(self, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
