@@ -519,3 +519,18 @@ def test_pair_scores_with_a_detection_without_compatible_objects():
         dense[:, scorer.pair_d, scorer.pair_o] = iou
         for a, b in zip(scorer.pair_scores(iou, 0.2), dense_scores(dense, 0.2), strict=True):
             np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+
+
+def test_split_draw_is_numpy_choice_with_p():
+    """_random_samples draws its split as rng.choice(n, p=p) does (cdf search of one
+    rng.random()): the same values and the same generator stream."""
+    for trial in range(50):
+        n = 1 + trial % 7
+        p = np.random.default_rng(trial).random(n)
+        p /= p.sum()
+        a, b = np.random.default_rng([trial, 1]), np.random.default_rng([trial, 1])
+        cdf = p.cumsum()
+        cdf /= cdf[-1]
+        for _ in range(20):
+            assert int(a.choice(n, p=p)) == int(cdf.searchsorted(b.random(), side="right"))
+            assert a.choice(5, 2, replace=False).tolist() == b.choice(5, 2, replace=False).tolist()

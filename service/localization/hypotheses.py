@@ -154,14 +154,14 @@ def p3p_hypotheses_batch(
             n, rvecs, tvecs = cv2.solveP3P(obj[b], img[b], K, None, flags=cv2.SOLVEPNP_P3P)
         except cv2.error:
             continue
-        for k in range(n or 0):
-            rv.append(rvecs[k])
-            tv.append(tvecs[k])
-            owner.append(b)
+        if n:
+            rv.extend(rvecs[:n])
+            tv.extend(tvecs[:n])
+            owner.extend([b] * n)
     if not rv:
         return _EMPTY, np.zeros(0, dtype=int)
-    r = np.asarray(rv, dtype=float).reshape(-1, 3)
-    t = np.asarray(tv, dtype=float).reshape(-1, 3)
+    r = np.concatenate(rv, axis=None, dtype=float).reshape(-1, 3)
+    t = np.concatenate(tv, axis=None, dtype=float).reshape(-1, 3)
     sample = np.asarray(owner, dtype=int)
     R = so3_exp(r)
     depth = np.einsum("mpj,mj->mp", obj[sample], R[:, 2]) + t[:, 2, None]

@@ -461,8 +461,9 @@ def _distinct_keys(a: tuple[list[float], list[float]], b: tuple[list[float], lis
     if dx * dx + dy * dy + dz * dz > DISTINCT_POSITION_M ** 2:
         return True
     # cos of the relative angle from trace(Ra Rb^T) = sum(Ra * Rb)
-    cos = (sum(x * y for x, y in zip(ra, rb, strict=True)) - 1.0) / 2.0
-    return cos < _COS_DISTINCT
+    trace = (ra[0] * rb[0] + ra[1] * rb[1] + ra[2] * rb[2] + ra[3] * rb[3] + ra[4] * rb[4]
+             + ra[5] * rb[5] + ra[6] * rb[6] + ra[7] * rb[7] + ra[8] * rb[8])
+    return (trace - 1.0) / 2.0 < _COS_DISTINCT
 
 
 _COS_DISTINCT = math.cos(math.radians(DISTINCT_ANGLE_DEG))
@@ -563,8 +564,12 @@ def _random_samples(scorer: MatchScorer, size: int, count: int,
     if len(comps) == 0 or weights.sum() == 0:
         return
     p = weights / weights.sum()
+    # rng.choice(len(comps), p=p) without its per-call checks: the same cdf search of one
+    # rng.random() draw (the same stream; tests/test_ransac.py)
+    cdf = p.cumsum()
+    cdf /= cdf[-1]
     for _ in range(count):
-        k = int(rng.choice(len(comps), p=p))
+        k = int(cdf.searchsorted(rng.random(), side="right"))
         pairs = []
         for (d, o), m in zip(groups, comps[k], strict=True):
             if m == 0:
@@ -616,35 +621,37 @@ def _most_promising_first(scorer: MatchScorer) -> Iterator[tuple[tuple[int, ...]
             run.append(order[k + len(run)])
         k += len(run)
         if len(run) == 1:
-            yield from (sm for _, sm in _triple_samples(groups, comps, triples[run[0]],
-                                                         where[run[0]]))
+            yield from _triple_samples(groups, comps, triples[run[0]], where[run[0]])
         else:  # equal keys: every sample of the run, in _iter_samples' order
             merged = sorted(itertools.chain.from_iterable(
-                _triple_samples(groups, comps, triples[t], where[t]) for t in run))
+                _triple_samples(groups, comps, triples[t], where[t], keyed=True) for t in run))
             yield from (sm for _, sm in merged)
 
 
 def _triple_samples(
     groups: list[tuple[list[int], np.ndarray]], comps: list[tuple[int, ...]],
-    triple: tuple[int, ...], where: tuple[int, tuple[int, ...]],
-) -> Iterator[tuple[tuple[int, ...], tuple[tuple[int, ...], tuple[int, ...]]]]:
-    """The samples of one detection triple (every assignment of distinct compatible objects),
-    in :func:`_iter_samples`' order, each with its position key there: ``(key, (dets,
-    objs))``. ``where``: the triple's split index and per drawn group its combination index
-    (:func:`_most_promising_first`)."""
+    triple: tuple[int, ...], where: tuple[int, tuple[int, ...]], keyed: bool = False,
+) -> Iterator:
+    """The samples ``(dets, objs)`` of one detection triple (every assignment of distinct
+    compatible objects), in :func:`_iter_samples`' order; with ``keyed``, each as ``(key,
+    sample)``, ``key`` its position there. ``where``: the triple's split index and per drawn
+    group its combination index (:func:`_most_promising_first`)."""
     ci, combo_index = where
-    drawn = [(d, [int(x) for x in o], m)
+    drawn = [(set(d), [int(x) for x in o], m)
              for (d, o), m in zip(groups, comps[ci], strict=True) if m]
-    in_triple = [[x for x in triple if x in set(d)] for d, _, m in drawn]
-    n_perms = [math.perm(len(o), m) for _, o, m in drawn]
-    for perms in itertools.product(*(enumerate(itertools.permutations(o, m))
-                                     for _, o, m in drawn)):
-        pairs = sorted(itertools.chain.from_iterable(
-            zip(ds, p, strict=True) for ds, (_, p) in zip(in_triple, perms, strict=True)))
-        # position in _iter_samples: per group, combination index x permutations + permutation
-        key = (ci, *(c * n + j for c, n, (j, _) in zip(combo_index, n_perms, perms,
-                                                         strict=True)))
-        yield key, (tuple(q[0] for q in pairs), tuple(q[1] for q in pairs))
+    # per drawn group, the positions of its detections in the (ascending) triple
+    slots = [[k for k, x in enumerate(triple) if x in dets] for dets, _, _ in drawn]
+    perms = [list(itertools.permutations(o, m)) for _, o, m in drawn]
+    for choice in itertools.product(*(range(len(p)) for p in perms)):
+        objs = [0] * len(triple)
+        for sl, p, j in zip(slots, perms, choice, strict=True):
+            for k, o in zip(sl, p[j], strict=True):
+                objs[k] = o
+        if keyed:  # per group: combination index x permutations + permutation index
+            yield (ci, *(c * len(p) + j for c, p, j in zip(combo_index, perms, choice,
+                                                           strict=True))), (triple, tuple(objs))
+        else:
+            yield triple, tuple(objs)
 
 
 def _triangle_areas(scorer: MatchScorer, dets: np.ndarray) -> np.ndarray:
@@ -737,16 +744,17 @@ def ransac(
             iou = scorer.pair_iou(poses[blk], floor=inlier_iou, stop_at=deadline)
             # per-detection best object: an upper bound of the one-to-one score and count
             bound, count = scorer.pair_scores(iou, inlier_iou)
+            block, bounds, counts = poses[blk], bound.tolist(), count.tolist()
             # best bound first: the bar rises early and fewer assignments are needed
             for h in np.argsort(-bound, kind="stable").tolist():
                 bar = kept[-1].score if len(kept) >= KEEP_DISTINCT else -1.0
-                if bound[h] <= bar or count[h] < min_inliers:
+                if bounds[h] <= bar or counts[h] < min_inliers:
                     continue
                 # one-to-one (greedy) assignment, as in the final matches
                 m = scorer.pair_assignment(iou[h], inlier_iou)
                 score = float(sum(x.iou for x in m))
                 if len(m) >= min_inliers and score > bar:
-                    kept = _keep_distinct(kept, Hypothesis(poses[blk][h], tuple(m), score))
+                    kept = _keep_distinct(kept, Hypothesis(block[h], tuple(m), score))
         return (need >= EARLY_EXIT_MIN_DETECTIONS and bool(kept)
                 and len(kept[0].matches) >= need and kept[0].score >= EARLY_EXIT_MEAN_IOU * need)
 
