@@ -82,7 +82,8 @@ def projected_gaussians(
 def project_objects(
     camera: Camera, camera_from_world: np.ndarray, centers: np.ndarray,
     shape_matrices: np.ndarray, dual_quadrics: np.ndarray, min_depth: float = MIN_DEPTH,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    with_point_centres: bool = True,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
     """Projections of S ellipsoids at H poses, vectorised (THE batched projection of the RANSAC
     scorer, of the P2E residuals and of the tracker's association; computed by
     :func:`projected_gaussians`).
@@ -96,13 +97,13 @@ def project_objects(
         ``A^-1 = R diag(a^2, b^2) R^T`` (px^2, exactly symmetric), ``valid`` (H, S) bool
         (ellipsoid entirely at depth > ``min_depth`` and a real ellipse), ``point_centres``
         (H, S, 2) px: projections of the ellipsoid centres (garbage where the centre is behind
-        the camera).
+        the camera; None unless ``with_point_centres``).
     """
     mx, my, s00, s01, s11, valid, P = projected_gaussians(
         camera, camera_from_world, centers, shape_matrices, dual_quadrics, min_depth)
     cen = np.stack([mx, my], axis=-1)
     inv_shape = np.stack([s00, s01, s01, s11], axis=-1).reshape(*s00.shape, 2, 2)
-    return cen, inv_shape, valid, point_centres(P, centers)
+    return cen, inv_shape, valid, point_centres(P, centers) if with_point_centres else None
 
 
 def point_centres(P: np.ndarray, centers: np.ndarray) -> np.ndarray:
@@ -229,7 +230,8 @@ class _PairProblem:
         their validity (N,): both ellipsoids entirely in front of the camera (rows of invalid
         poses are not meaningful)."""
         Rt = np.concatenate([R, t[:, :, None]], axis=2)  # camera_from_world (N, 3, 4)
-        mu, S, valid, _ = project_objects(self.camera, Rt, self.X, self.M, self.Q, MIN_DEPTH)
+        mu, S, valid, _ = project_objects(self.camera, Rt, self.X, self.M, self.Q, MIN_DEPTH,
+                                          with_point_centres=False)
         valid = np.all(valid, axis=1)
         rc = (mu - self.c_det) / self.size[:, None]
         W = self.L_inv @ S @ self.L_inv.transpose(0, 2, 1)
