@@ -436,7 +436,7 @@ class Ellipse:
 
 def ellipse_params(ellipses: Sequence[Ellipse]) -> np.ndarray:
     """Stack ellipses into an array of shape (N, 5): ``[cx, cy, a, b, angle]`` per row."""
-    return np.array([e.params() for e in ellipses], dtype=float).reshape(-1, 5)
+    return np.array([(e.cx, e.cy, e.a, e.b, e.angle) for e in ellipses], dtype=float).reshape(-1, 5)
 
 
 def dual_conics_from_params(params: np.ndarray) -> np.ndarray:

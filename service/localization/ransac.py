@@ -119,14 +119,15 @@ def sunflower_disk(n: int) -> np.ndarray:
     return out
 
 
-def _ellipse_points(params: np.ndarray, unit: np.ndarray) -> np.ndarray:
-    """Points (D, M, 2) filling ellipses (D, 5) from unit-disk points (M, 2)."""
+def _ellipse_points(params: np.ndarray, unit: np.ndarray, axis: int = -1) -> np.ndarray:
+    """Points (D, M, 2) filling ellipses (D, 5) from unit-disk points (M, 2); with
+    ``axis=1``, (D, 2, M) (x and y rows contiguous)."""
     c, s = np.cos(params[:, 4]), np.sin(params[:, 4])
     u = unit[None, :, 0] * params[:, 2, None]
     v = unit[None, :, 1] * params[:, 3, None]
     x = params[:, 0, None] + c[:, None] * u - s[:, None] * v
     y = params[:, 1, None] + s[:, None] * u + c[:, None] * v
-    return np.stack([x, y], axis=-1)
+    return np.stack([x, y], axis=axis)
 
 
 def iou_estimates(
@@ -262,23 +263,22 @@ class MatchScorer:
         # first pair of each detection (pairs are sorted by detection; every usable detection
         # has a compatible object): the segments of np.maximum.reduceat
         self.pair_starts = np.searchsorted(self.pair_d, np.arange(self.n_det)).astype(np.intp)
-        self.points = _ellipse_points(self.params, sunflower_disk(n_points))
-        self.areas = math.pi * self.params[:, 2] * self.params[:, 3]
-        self.radii = np.max(self.params[:, 2:4], axis=1)
-        # per pair, once per call: the detection's centre, bounding radius and area
-        self._pair_cx, self._pair_cy, self._pair_radii, self._pair_areas = (
-            a[self.pair_d] for a in (self.params[:, 0], self.params[:, 1], self.radii,
-                                     self.areas))
-        # every detection has a pair (always in localize): pair_scores needs no mask
-        self._has_pairs = np.diff(np.append(self.pair_starts, len(self.pair_d))) > 0
         # filling points (D, 2, M) per number of points M (x and y contiguous)
-        self._xy = {n_points: np.ascontiguousarray(self.points.transpose(0, 2, 1))}
+        self._xy = {n_points: _ellipse_points(self.params, sunflower_disk(n_points), axis=1)}
+        self.points = self._xy[n_points].transpose(0, 2, 1)  # (D, M, 2)
+        self.areas = math.pi * self.params[:, 2] * self.params[:, 3]
+        self.radii = np.maximum(self.params[:, 2], self.params[:, 3])
+        # per pair, once per call: the detection's centre, bounding radius and area
+        pair_params = self.params[self.pair_d]
+        self._pair_cx, self._pair_cy = pair_params[:, 0], pair_params[:, 1]
+        self._pair_radii, self._pair_areas = self.radii[self.pair_d], self.areas[self.pair_d]
+        # every detection has a pair (always in localize): pair_scores needs no mask
+        self._has_pairs = np.bincount(self.pair_d, minlength=self.n_det) > 0
 
     def _points_xy(self, n_points: int) -> np.ndarray:
         """The detections' filling points, (D, 2, n_points), computed once per scorer."""
         if n_points not in self._xy:
-            self._xy[n_points] = np.ascontiguousarray(
-                _ellipse_points(self.params, sunflower_disk(n_points)).transpose(0, 2, 1))
+            self._xy[n_points] = _ellipse_points(self.params, sunflower_disk(n_points), axis=1)
         return self._xy[n_points]
 
     def compatible_objects(self, d: int) -> np.ndarray:
