@@ -9,13 +9,15 @@ Run::
 Frames: the relocalization frames of :mod:`bench.chess_eval` (108 real ground-truth poses,
 simulated detections with ``EVAL_MISS_PROBABILITY``, generator ``default_rng([seed, 0])``),
 level-set refinement, no time budget (``bench.chess_eval.eval_options``). Each code tree (this
-checkout and, with ``--baseline``, another checkout such as a ``git worktree`` of main) is run in
-its own subprocess (``PYTHONPATH`` = the tree), alternately for ``--rounds`` rounds, so both see
-the same machine load; per frame the best (smallest) CPU time over the rounds is kept. CPU time
-is ``time.thread_time()`` around the call (unlike wall time, it does not count waiting for a
-core). ``timings_ms`` (wall) give the split into hypothesis search and refinement. Accuracy:
-fraction localized, within 5 / 10 / 20 cm, and *wrong*: localized with a position error above
-0.5 m or a rotation error above 20 deg (the worst output).
+checkout and, with ``--baseline``, another checkout such as a ``git worktree`` of main) is served
+by its own persistent subprocess (``PYTHONPATH`` = the tree); the trees run each frame in turn
+(frame by frame, the first tree alternating), for ``--rounds`` rounds, so that both see the same
+machine load even when it drifts within seconds (on a shared machine, whole-run alternation gave
+ratios off by 15 % between two runs); per frame the best (smallest) CPU time over the rounds is
+kept. CPU time is ``time.thread_time()`` around the call (unlike wall time, it does not count
+waiting for a core). ``timings_ms`` (wall) give the split into hypothesis search and
+refinement. Accuracy: fraction localized, within 5 / 10 / 20 cm, and *wrong*: localized with
+a position error above 0.5 m or a rotation error above 20 deg (the worst output).
 """
 
 from __future__ import annotations
@@ -25,7 +27,6 @@ import json
 import os
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -37,54 +38,69 @@ WRONG_POSITION_M = 0.5
 WRONG_ROTATION_DEG = 20.0
 
 
-def worker(seeds: list[int]) -> dict[str, Any]:
-    """Per-frame CPU ms, wall split and errors of this tree's ``localize()`` (run in a
-    subprocess whose ``PYTHONPATH`` is the tree)."""
-    from bench.chess_eval import (
-        EVAL_MISS_PROBABILITY,
-        eval_options,
-        load_chess_world_from_camera,
-        pose_errors,
-    )
+def _frames(seeds: list[int]) -> tuple[Any, Any, Any, list[tuple[int, int, Any]]]:
+    """(compiled map, camera, ground-truth poses, [(seed, frame index, frame), ...])."""
+    from bench.chess_eval import EVAL_MISS_PROBABILITY, load_chess_world_from_camera
     from bench.reference_data import load_chess_map
     from bench.simulate import SimulationConfig, simulate_frame
     from maps.compiled import compile_map
-    from service.localization.pipeline import localize
 
     cm = compile_map(load_chess_map())
     camera, poses, _ = load_chess_world_from_camera()
     cfg = SimulationConfig(miss_probability=EVAL_MISS_PROBABILITY)
-    rows = []
+    frames = []
     for seed in seeds:
         gen = np.random.default_rng([seed, 0])
-        frames = [(i, simulate_frame(cm, camera, poses[i], gen, cfg)) for i in range(len(poses))]
-        for _, f in frames[:3]:  # warm caches
-            localize(f.detections, cm, camera, eval_options(seed=0))
-        for i, f in frames:
-            c0 = time.thread_time()
-            r = localize(f.detections, cm, camera, eval_options(seed=0))
-            cpu = (time.thread_time() - c0) * 1e3
-            pos, rot = pose_errors(r.world_from_camera if r.localized else None, poses[i])
-            rows.append({"seed": seed, "frame": i, "detections": len(f), "cpu_ms": cpu,
-                         "hypotheses_ms": r.timings_ms.get("hypotheses", 0.0),
-                         "refine_ms": r.timings_ms.get("refine", 0.0),
-                         "total_ms": r.timings_ms.get("total", 0.0),
-                         "localized": bool(r.localized), "reason": r.reason,
-                         "position_error_m": pos if np.isfinite(pos) else None,
-                         "rotation_error_deg": rot if np.isfinite(rot) else None})
-    return {"rows": rows}
+        frames += [(seed, i, simulate_frame(cm, camera, poses[i], gen, cfg))
+                   for i in range(len(poses))]
+    return cm, camera, poses, frames
 
 
-def _run_tree(tree: Path, seeds: list[int]) -> dict[str, Any]:
-    with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as tmp:
-        out = Path(tmp.name)
+def serve(seeds: list[int]) -> None:
+    """Worker (run in a subprocess whose ``PYTHONPATH`` is the tree): reads frame numbers (one
+    a line) on stdin, answers each with the JSON row of this tree's ``localize()`` on that
+    frame (CPU ms, wall split, errors)."""
+    from bench.chess_eval import eval_options, pose_errors
+    from service.localization.pipeline import localize
+
+    cm, camera, poses, frames = _frames(seeds)
+    for _, _, f in frames[:3]:  # warm caches
+        localize(f.detections, cm, camera, eval_options(seed=0))
+    print(f"ready {len(frames)}", flush=True)
+    for line in sys.stdin:
+        seed, i, f = frames[int(line)]
+        c0 = time.thread_time()
+        r = localize(f.detections, cm, camera, eval_options(seed=0))
+        cpu = (time.thread_time() - c0) * 1e3
+        pos, rot = pose_errors(r.world_from_camera if r.localized else None, poses[i])
+        print(json.dumps({
+            "seed": seed, "frame": i, "detections": len(f), "cpu_ms": cpu,
+            "hypotheses_ms": r.timings_ms.get("hypotheses", 0.0),
+            "refine_ms": r.timings_ms.get("refine", 0.0),
+            "total_ms": r.timings_ms.get("total", 0.0), "localized": bool(r.localized),
+            "reason": r.reason, "position_error_m": pos if np.isfinite(pos) else None,
+            "rotation_error_deg": rot if np.isfinite(rot) else None}), flush=True)
+
+
+def _start(tree: Path, seeds: list[int]) -> tuple[subprocess.Popen[str], int]:
+    """A :func:`serve` worker of ``tree`` and its number of frames."""
     env = {**os.environ, "PYTHONPATH": str(tree)}
     # this file's worker, with the tree's packages (a baseline need not have this bench)
-    subprocess.run([sys.executable, str(Path(__file__).resolve()), "--worker", "--seeds",
-                    *map(str, seeds), "--json", str(out)], cwd=tree, env=env, check=True)
-    data = json.loads(out.read_text())
-    out.unlink()
-    return data
+    proc = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--serve",
+                             "--seeds", *map(str, seeds)], cwd=tree, env=env,
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    assert proc.stdout is not None
+    ready = proc.stdout.readline().split()
+    if not ready or ready[0] != "ready":
+        raise RuntimeError(f"the worker of {tree} did not start")
+    return proc, int(ready[1])
+
+
+def _ask(proc: subprocess.Popen[str], k: int) -> dict[str, Any]:
+    assert proc.stdin is not None and proc.stdout is not None
+    proc.stdin.write(f"{k}\n")
+    proc.stdin.flush()
+    return json.loads(proc.stdout.readline())
 
 
 def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
@@ -113,11 +129,25 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 def run(seeds: list[int], baseline: Path | None, rounds: int) -> dict[str, Any]:
     trees = {"this": REPO, **({"baseline": baseline} if baseline else {})}
-    per: dict[str, list[list[dict[str, Any]]]] = {k: [] for k in trees}
-    for k in range(rounds):
-        for name, tree in (trees.items() if k % 2 == 0 else reversed(trees.items())):
-            per[name].append(_run_tree(tree, seeds)["rows"])
-            print(f"round {k} {name} done", file=sys.stderr)
+    started = {name: _start(tree, seeds) for name, tree in trees.items()}
+    procs = {name: proc for name, (proc, _) in started.items()}
+    n_frames = min(n for _, n in started.values())
+    per: dict[str, list[list[dict[str, Any]]]] = {name: [] for name in trees}
+    try:
+        for k in range(rounds):
+            rows: dict[str, list[dict[str, Any]]] = {name: [] for name in trees}
+            for i in range(n_frames):
+                names = list(trees) if (i + k) % 2 == 0 else list(reversed(trees))
+                for name in names:
+                    rows[name].append(_ask(procs[name], i))
+            for name in trees:
+                per[name].append(rows[name])
+            print(f"round {k} done", file=sys.stderr)
+    finally:
+        for proc in procs.values():
+            assert proc.stdin is not None
+            proc.stdin.close()
+            proc.wait()
     out: dict[str, Any] = {"seeds": seeds, "rounds": rounds,
                            "load_average": ", ".join(f"{x:.1f}" for x in os.getloadavg())}
     if baseline is not None:
@@ -138,7 +168,8 @@ def to_markdown(report: dict[str, Any], command: str) -> str:
         "",
         f"Command: `{command}`. Frames: the `bench.chess_eval` relocalization frames "
         f"(108 real poses x seeds {report['seeds']}, level set, no time budget); each tree in "
-        f"its own process, alternately, {report['rounds']} round(s), per frame the smallest "
+        f"its own process, frame by frame in turn, {report['rounds']} round(s), per frame the "
+        "smallest "
         "CPU time (`time.thread_time`) over the rounds; load average at the end "
         f"{report['load_average']} (2 shared cores). *wrong*: localized with an error above "
         f"{WRONG_POSITION_M} m or {WRONG_ROTATION_DEG:g} deg."
@@ -172,10 +203,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", help="write the JSON report here")
     parser.add_argument("--write-results", action="store_true",
                         help="write the 'localize_speed' section of docs/results.md")
-    parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--serve", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
-    if args.worker:
-        Path(args.json).write_text(json.dumps(worker(args.seeds)))
+    if args.serve:
+        serve(args.seeds)
         return 0
     report = run(args.seeds, args.baseline, args.rounds)
     text = json.dumps(report, indent=2)

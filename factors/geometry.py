@@ -205,10 +205,13 @@ def skew(w: np.ndarray) -> np.ndarray:
     """Cross-product matrices ``[w]x`` (..., 3, 3) of vectors ``w`` (..., 3):
     ``[w]x @ u = w x u``."""
     w = np.asarray(w, dtype=float)
-    out = np.zeros((*w.shape[:-1], 3, 3))
-    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -w[..., 2], w[..., 1], -w[..., 0]
-    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = w[..., 2], -w[..., 1], w[..., 0]
-    return out
+    # one gather from [0, w, -w]: exactly the entries 0, w_k and -w_k
+    padded = np.concatenate([np.zeros((*w.shape[:-1], 1)), w, -w], axis=-1)
+    return padded[..., _SKEW_GATHER].reshape(*w.shape[:-1], 3, 3)
+
+
+#: Index into ``[0, w0, w1, w2, -w0, -w1, -w2]`` of each entry of ``[w]x`` (row-major).
+_SKEW_GATHER = np.array([0, 6, 2, 3, 0, 4, 5, 1, 0])
 
 
 def so3_exp(omega: np.ndarray) -> np.ndarray:
@@ -433,7 +436,7 @@ class Ellipse:
 
 def ellipse_params(ellipses: Sequence[Ellipse]) -> np.ndarray:
     """Stack ellipses into an array of shape (N, 5): ``[cx, cy, a, b, angle]`` per row."""
-    return np.array([e.params() for e in ellipses], dtype=float).reshape(-1, 5)
+    return np.array([(e.cx, e.cy, e.a, e.b, e.angle) for e in ellipses], dtype=float).reshape(-1, 5)
 
 
 def dual_conics_from_params(params: np.ndarray) -> np.ndarray:

@@ -215,6 +215,61 @@ def test_sample_counts_are_per_label_and_enumeration_is_complete():
         assert _enumerate_samples(scorer, size, len(brute) - 1) is None
 
 
+@pytest.mark.parametrize("seed", [6, 7, 8])
+def test_most_promising_first_is_the_stable_sort_of_every_sample(seed):
+    """_most_promising_first (triples sorted, their samples generated lazily) == every sample
+    of _iter_samples stably sorted by (compatible-object product, -triangle area), also with
+    duplicate detections (equal keys of different triples: their samples interleave)."""
+    from service.localization.ransac import _iter_samples, _most_promising_first, _triangle_areas
+
+    rng = np.random.default_rng(seed)
+    cm = compile_map(synthetic_map(rng))  # labels a a a b b c d e
+    labs = ["a", "a", "b", "c", "a", "e", "a", "b"][:5 + seed % 3]
+    ells = [random_ellipse(rng) for _ in labs]
+    # duplicates: the triples (0, x, y) and (1, x, y) tie (their samples do not interleave),
+    # so do (x, y, 2) and (x, y, n) (their samples interleave: a later label group)
+    ells[1], labs[1] = ells[0], labs[0]
+    ells.append(ells[2])
+    labs.append(labs[2])
+    scorer = MatchScorer(cm, CAM, ells, labs, list(range(len(labs))))
+    every = list(_iter_samples(scorer.label_groups, 3))
+    n_compat = scorer.compat.sum(axis=1).astype(float)
+    dets = np.array([sm[0] for sm in every])
+    order = np.lexsort((-_triangle_areas(scorer, dets), np.prod(n_compat[dets], axis=1)))
+    expected = [every[k] for k in order.tolist()]
+    assert len(expected) > 50
+    assert list(_most_promising_first(scorer)) == expected
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_sweep_triple_counts_match_a_direct_count(seed):
+    """_sweep_samples' closed-form assignment counts pick the triple a direct count picks."""
+    import itertools
+    from collections import Counter
+
+    from service.localization.ransac import SWEEP_MAX_SAMPLES, _sweep_samples, _triangle_areas
+
+    rng = np.random.default_rng(seed)
+    cm = compile_map(synthetic_map(rng))  # labels a a a b b c d e
+    labs = list(rng.choice(["a", "b", "c", "d", "e"], size=int(rng.integers(3, 12))))
+    scorer = MatchScorer(cm, CAM, [random_ellipse(rng) for _ in labs], labs,
+                         list(range(len(labs))))
+    n_obj = {d: len(scorer.compatible_objects(d)) for d in range(len(labs))}
+    order = sorted(range(len(labs)), key=lambda d: (n_obj[d], d))
+    tris = list(itertools.combinations(sorted(order[:8]), 3))
+    counts = np.array([math.prod(math.perm(len(cm.indices_for(lab)), m)
+                                 for lab, m in Counter(labs[d] for d in tri).items())
+                       for tri in tris])
+    ok = np.flatnonzero((counts > 0) & (counts <= SWEEP_MAX_SAMPLES))
+    got = _sweep_samples(scorer)
+    if len(ok) == 0:
+        assert got == []
+        return
+    tri = tris[ok[np.argmax(_triangle_areas(scorer, np.array(tris)[ok]))]]
+    assert {sm[0] for sm in got} == {tri}
+    assert len(got) == counts[tris.index(tri)]
+
+
 def test_time_budget_holds_with_hundreds_of_same_label_detections():
     """256 detections all labelled like one of 2 map objects: no P3P sample exists and the
     P2E samples are too many to list; the search must stop near its deadline (it used to walk
@@ -262,6 +317,7 @@ class _FixedIouScorer:
         # every (detection, object) pair is compatible, in row-major order
         self.pair_d, self.pair_o = (i.ravel() for i in np.indices((3, 3)))
         self.pair_starts = np.array([0, 3, 6])
+        self._has_pairs = np.ones(3, dtype=bool)
         self.compat = np.ones((3, 3), dtype=bool)
         self.label_groups = [([0, 1, 2], np.array([0, 1, 2]))]
         self._sample_counts: dict[int, int] = {}
@@ -463,3 +519,18 @@ def test_pair_scores_with_a_detection_without_compatible_objects():
         dense[:, scorer.pair_d, scorer.pair_o] = iou
         for a, b in zip(scorer.pair_scores(iou, 0.2), dense_scores(dense, 0.2), strict=True):
             np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+
+
+def test_split_draw_is_numpy_choice_with_p():
+    """_random_samples draws its split as rng.choice(n, p=p) does (cdf search of one
+    rng.random()): the same values and the same generator stream."""
+    for trial in range(50):
+        n = 1 + trial % 7
+        p = np.random.default_rng(trial).random(n)
+        p /= p.sum()
+        a, b = np.random.default_rng([trial, 1]), np.random.default_rng([trial, 1])
+        cdf = p.cumsum()
+        cdf /= cdf[-1]
+        for _ in range(20):
+            assert int(a.choice(n, p=p)) == int(cdf.searchsorted(b.random(), side="right"))
+            assert a.choice(5, 2, replace=False).tolist() == b.choice(5, 2, replace=False).tolist()

@@ -23,22 +23,70 @@ from factors.geometry import (
     Camera,
     Ellipse,
     Ellipsoid,
-    ellipsoid_depth_margins,
-    gaussians_from_dual_conics,
+    depth_margin,
     so3_exp,
 )
 
-__all__ = ["p2e_hypotheses", "p3p_hypotheses", "p3p_hypotheses_batch", "project_objects"]
+__all__ = ["p2e_hypotheses", "p3p_hypotheses", "p3p_hypotheses_batch", "point_centres",
+           "project_objects", "projected_gaussians"]
 
 _EMPTY = np.zeros((0, 4, 4))
+
+
+#: The entries ``(i, l)`` of a projected dual conic ``C = P Q* P^T`` (3x3, symmetric) that the
+#: projections need, in this order (:func:`projected_gaussians`).
+_CONIC_ROWS = np.array([0, 0, 1, 0, 1, 2])
+_CONIC_COLS = np.array([0, 1, 1, 2, 2, 2])
+
+
+def projected_gaussians(
+    camera: Camera, camera_from_world: np.ndarray, centers: np.ndarray,
+    shape_matrices: np.ndarray, dual_quadrics: np.ndarray, min_depth: float = MIN_DEPTH,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`project_objects` as separate entries, the form the RANSAC scorer uses (one
+    matrix product for every pose x ellipsoid dual conic, no per-entry gathers).
+
+    Args:
+        camera_from_world: (H, 4, 4), or ``[R | t]`` (H, 3, 4).
+        centers, shape_matrices, dual_quadrics: (S, 3), (S, 3, 3), (S, 4, 4) world frame.
+
+    Returns:
+        ``(mu_x, mu_y, s00, s01, s11, valid, P)``: the projected ellipses' centres (px) and
+        ``A^-1`` entries (px^2), each (H, S); ``valid`` (H, S) as in :func:`project_objects`;
+        ``P = K [R | t]`` (H, 3, 4).
+    """
+    T = np.asarray(camera_from_world, dtype=float)
+    n_h, n_s = len(T), len(centers)
+    P = camera.K @ T[:, :3, :]
+    # C_il = (P_i (x) P_l) . vec(Q*) for the 6 entries: one (6 H, 16) x (16, S) product; then
+    # factors.geometry.gaussians_from_dual_conics in entry form
+    outer = (P[:, _CONIC_ROWS, :, None] * P[:, _CONIC_COLS, None, :]).reshape(n_h * 6, 16)
+    C = (outer @ np.reshape(dual_quadrics, (n_s, 16)).T).reshape(n_h, 6, n_s)
+    # depth margins z_c - sqrt(r3^T M r3) (r3: the camera's optical axis in world axes)
+    r3 = T[:, 2, :3]
+    zc = r3 @ np.asarray(centers).T + T[:, 2, 3, None]
+    var = (r3[:, :, None] * r3[:, None, :]).reshape(n_h, 9) @ np.reshape(
+        shape_matrices, (n_s, 9)).T
+    valid = depth_margin(zc, var) > min_depth
+    w = -C[:, 5]
+    ok = w != 0
+    Cn = C / np.where(ok, w, 1.0)[:, None]  # normalised: Cn[2, 2] = -1
+    mx, my = -Cn[:, 3], -Cn[:, 4]
+    s00 = Cn[:, 0] + mx * mx
+    s01 = Cn[:, 1] + mx * my
+    s11 = Cn[:, 2] + my * my
+    valid &= ok & (s00 * s11 - s01 * s01 > 0) & (s00 > 0)
+    return mx, my, s00, s01, s11, valid, P
 
 
 def project_objects(
     camera: Camera, camera_from_world: np.ndarray, centers: np.ndarray,
     shape_matrices: np.ndarray, dual_quadrics: np.ndarray, min_depth: float = MIN_DEPTH,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    with_point_centres: bool = True,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
     """Projections of S ellipsoids at H poses, vectorised (THE batched projection of the RANSAC
-    scorer and of the P2E residuals).
+    scorer, of the P2E residuals and of the tracker's association; computed by
+    :func:`projected_gaussians`).
 
     Args:
         camera_from_world: (H, 4, 4), or ``[R | t]`` (H, 3, 4).
@@ -46,24 +94,24 @@ def project_objects(
 
     Returns:
         ``centres`` (H, S, 2) px of the projected ellipses, ``inv_shape`` (H, S, 2, 2) their
-        ``A^-1 = R diag(a^2, b^2) R^T`` (px^2), ``valid`` (H, S) bool (ellipsoid entirely at
-        depth > ``min_depth`` and a real ellipse), ``point_centres`` (H, S, 2) px: projections
-        of the ellipsoid centres (garbage where the centre is behind the camera).
+        ``A^-1 = R diag(a^2, b^2) R^T`` (px^2, exactly symmetric), ``valid`` (H, S) bool
+        (ellipsoid entirely at depth > ``min_depth`` and a real ellipse), ``point_centres``
+        (H, S, 2) px: projections of the ellipsoid centres (garbage where the centre is behind
+        the camera; None unless ``with_point_centres``).
     """
-    T = np.asarray(camera_from_world, dtype=float)
-    valid = ellipsoid_depth_margins(T, centers, shape_matrices) > min_depth
-    P = np.einsum("ij,hjk->hik", camera.K, T[:, :3, :])
-    C = np.einsum("hij,sjk,hlk->hsil", P, dual_quadrics, P)
-    w = -C[..., 2, 2]
-    ok = np.abs(w) > 0
-    w = np.where(ok, w, 1.0)
-    Cn = C / w[..., None, None]
-    cen, inv_shape = gaussians_from_dual_conics(Cn)
-    det = inv_shape[..., 0, 0] * inv_shape[..., 1, 1] - inv_shape[..., 0, 1] ** 2
-    valid &= ok & (det > 0) & (inv_shape[..., 0, 0] > 0)
-    hom = np.einsum("hij,sj->hsi", P[:, :, :3], centers) + P[:, None, :, 3]
-    zh = np.where(np.abs(hom[..., 2]) > 1e-12, hom[..., 2], 1e-12)
-    return cen, inv_shape, valid, hom[..., :2] / zh[..., None]
+    mx, my, s00, s01, s11, valid, P = projected_gaussians(
+        camera, camera_from_world, centers, shape_matrices, dual_quadrics, min_depth)
+    cen = np.stack([mx, my], axis=-1)
+    inv_shape = np.stack([s00, s01, s01, s11], axis=-1).reshape(*s00.shape, 2, 2)
+    return cen, inv_shape, valid, point_centres(P, centers) if with_point_centres else None
+
+
+def point_centres(P: np.ndarray, centers: np.ndarray) -> np.ndarray:
+    """Pixel projections (H, S, 2) of points ``centers`` (S, 3) (world m) by ``P = K [R | t]``
+    (H, 3, 4) (garbage where a point is behind the camera)."""
+    hom = P[:, :, :3] @ np.asarray(centers).T + P[:, :, 3:]  # (H, 3, S)
+    zh = np.where(np.abs(hom[:, 2]) > 1e-12, hom[:, 2], 1e-12)
+    return (hom[:, :2] / zh[:, None]).transpose(0, 2, 1)
 
 
 def p3p_hypotheses(
@@ -107,14 +155,14 @@ def p3p_hypotheses_batch(
             n, rvecs, tvecs = cv2.solveP3P(obj[b], img[b], K, None, flags=cv2.SOLVEPNP_P3P)
         except cv2.error:
             continue
-        for k in range(n or 0):
-            rv.append(rvecs[k])
-            tv.append(tvecs[k])
-            owner.append(b)
+        if n:
+            rv.extend(rvecs[:n])
+            tv.extend(tvecs[:n])
+            owner.extend([b] * n)
     if not rv:
         return _EMPTY, np.zeros(0, dtype=int)
-    r = np.asarray(rv, dtype=float).reshape(-1, 3)
-    t = np.asarray(tv, dtype=float).reshape(-1, 3)
+    r = np.concatenate(rv, axis=None, dtype=float).reshape(-1, 3)
+    t = np.concatenate(tv, axis=None, dtype=float).reshape(-1, 3)
     sample = np.asarray(owner, dtype=int)
     R = so3_exp(r)
     depth = np.einsum("mpj,mj->mp", obj[sample], R[:, 2]) + t[:, 2, None]
@@ -182,7 +230,8 @@ class _PairProblem:
         their validity (N,): both ellipsoids entirely in front of the camera (rows of invalid
         poses are not meaningful)."""
         Rt = np.concatenate([R, t[:, :, None]], axis=2)  # camera_from_world (N, 3, 4)
-        mu, S, valid, _ = project_objects(self.camera, Rt, self.X, self.M, self.Q, MIN_DEPTH)
+        mu, S, valid, _ = project_objects(self.camera, Rt, self.X, self.M, self.Q, MIN_DEPTH,
+                                          with_point_centres=False)
         valid = np.all(valid, axis=1)
         rc = (mu - self.c_det) / self.size[:, None]
         W = self.L_inv @ S @ self.L_inv.transpose(0, 2, 1)

@@ -18,7 +18,6 @@ from __future__ import annotations
 import functools
 import itertools
 import math
-from collections import Counter
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
@@ -30,7 +29,9 @@ from service.localization.budget import Deadline, deadline_passed, earliest
 from service.localization.hypotheses import (
     p2e_hypotheses,
     p3p_hypotheses_batch,
+    point_centres,
     project_objects,
+    projected_gaussians,
 )
 
 __all__ = [
@@ -45,6 +46,7 @@ __all__ = [
     "distinct_poses",
     "greedy_assignment",
     "iou_estimates",
+    "project_objects",
     "ransac",
     "sunflower_disk",
 ]
@@ -117,14 +119,15 @@ def sunflower_disk(n: int) -> np.ndarray:
     return out
 
 
-def _ellipse_points(params: np.ndarray, unit: np.ndarray) -> np.ndarray:
-    """Points (D, M, 2) filling ellipses (D, 5) from unit-disk points (M, 2)."""
+def _ellipse_points(params: np.ndarray, unit: np.ndarray, axis: int = -1) -> np.ndarray:
+    """Points (D, M, 2) filling ellipses (D, 5) from unit-disk points (M, 2); with
+    ``axis=1``, (D, 2, M) (x and y rows contiguous)."""
     c, s = np.cos(params[:, 4]), np.sin(params[:, 4])
     u = unit[None, :, 0] * params[:, 2, None]
     v = unit[None, :, 1] * params[:, 3, None]
     x = params[:, 0, None] + c[:, None] * u - s[:, None] * v
     y = params[:, 1, None] + s[:, None] * u + c[:, None] * v
-    return np.stack([x, y], axis=-1)
+    return np.stack([x, y], axis=axis)
 
 
 def iou_estimates(
@@ -141,20 +144,41 @@ def iou_estimates(
 
     Returns:
         (...,) IoU in [0, 1]: ``I / (area_det + area_proj - I)`` with
-        ``I = area_det * fraction of the points inside the projection``.
+        ``I = area_det * fraction of the points inside the projection`` (:func:`_point_iou`).
     """
     S = proj_inv_shape
     det = S[..., 0, 0] * S[..., 1, 1] - S[..., 0, 1] * S[..., 1, 0]
+    a00, a01, a11 = _inverse_entries(S[..., 0, 0], S[..., 0, 1], S[..., 1, 1], det)
+    iou = _point_iou(det_points[..., 0], det_points[..., 1], det_areas, proj_centres[..., 0],
+                     proj_centres[..., 1], a00, a01, a11, _ellipse_area(det))
+    return np.where(det > 0, iou, 0.0)
+
+
+def _inverse_entries(s00: np.ndarray, s01: np.ndarray, s11: np.ndarray, det: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Entries ``(A00, A01, A11)`` of ``A = (A^-1)^-1`` from those of ``A^-1`` and its
+    determinant (any shapes; garbage where ``det <= 0``)."""
     safe = np.where(det > 0, det, 1.0)
-    a00, a11, a01 = S[..., 1, 1] / safe, S[..., 0, 0] / safe, -S[..., 0, 1] / safe
-    d = det_points - proj_centres[..., None, :]
-    phi = (a00[..., None] * d[..., 0] ** 2 + 2 * a01[..., None] * d[..., 0] * d[..., 1]
-           + a11[..., None] * d[..., 1] ** 2)
-    frac = np.mean(phi <= 1.0, axis=-1)
-    inter = frac * det_areas
-    area_proj = math.pi * np.sqrt(np.maximum(det, 0.0))
-    iou = inter / np.maximum(det_areas + area_proj - inter, 1e-300)
-    return np.where(det > 0, np.clip(iou, 0.0, 1.0), 0.0)
+    return s11 / safe, -s01 / safe, s00 / safe
+
+
+def _ellipse_area(det: np.ndarray) -> np.ndarray:
+    """Area (px^2) of ellipses from ``det(A^-1) = a^2 b^2``."""
+    return math.pi * np.sqrt(np.maximum(det, 0.0))
+
+
+def _point_iou(px: np.ndarray, py: np.ndarray, det_areas: np.ndarray, cx: np.ndarray,
+               cy: np.ndarray, a00: np.ndarray, a01: np.ndarray, a11: np.ndarray,
+               area_proj: np.ndarray) -> np.ndarray:
+    """THE IoU estimate: points ``(px, py)`` (..., M) filling the detections (areas (...,)),
+    the fraction inside the projected ellipses ``(x - c)^T A (x - c) <= 1`` (centres ``cx, cy``,
+    entries of ``A``, areas ``area_proj``, each (...,)) times the detection area as the
+    intersection; (...,) in [0, 1]."""
+    dx = px - cx[..., None]
+    dy = py - cy[..., None]
+    phi = a00[..., None] * dx ** 2 + 2 * a01[..., None] * dx * dy + a11[..., None] * dy ** 2
+    inter = np.count_nonzero(phi <= 1.0, axis=-1) / px.shape[-1] * det_areas
+    return np.minimum(inter / np.maximum(det_areas + area_proj - inter, 1e-300), 1.0)
 
 
 @dataclass(frozen=True)
@@ -183,15 +207,17 @@ def _greedy(pair_d: np.ndarray, pair_o: np.ndarray, iou: np.ndarray, threshold: 
     ``iou[p] >= threshold``, by decreasing IoU (ties: the later pair first), sorted by
     detection index."""
     cand = np.flatnonzero(iou >= threshold)
+    vals, ds, os_ = iou[cand].tolist(), pair_d[cand].tolist(), pair_o[cand].tolist()
     used_d: set[int] = set()
     used_o: set[int] = set()
     out = []
-    for p in cand[np.argsort(iou[cand], kind="stable")[::-1]].tolist():
-        d, o = int(pair_d[p]), int(pair_o[p])
+    # a stable ascending sort, walked backwards
+    for k in reversed(sorted(range(len(vals)), key=vals.__getitem__)):
+        d, o = ds[k], os_[k]
         if d not in used_d and o not in used_o:
             used_d.add(d)
             used_o.add(o)
-            out.append(Match(int(detection_indices[d]), o, float(iou[p])))
+            out.append(Match(int(detection_indices[d]), o, vals[k]))
     return sorted(out, key=lambda m: m.detection_index)
 
 
@@ -237,9 +263,23 @@ class MatchScorer:
         # first pair of each detection (pairs are sorted by detection; every usable detection
         # has a compatible object): the segments of np.maximum.reduceat
         self.pair_starts = np.searchsorted(self.pair_d, np.arange(self.n_det)).astype(np.intp)
-        self.points = _ellipse_points(self.params, sunflower_disk(n_points))
+        # filling points (D, 2, M) per number of points M (x and y contiguous)
+        self._xy = {n_points: _ellipse_points(self.params, sunflower_disk(n_points), axis=1)}
+        self.points = self._xy[n_points].transpose(0, 2, 1)  # (D, M, 2)
         self.areas = math.pi * self.params[:, 2] * self.params[:, 3]
-        self.radii = np.max(self.params[:, 2:4], axis=1)
+        self.radii = np.maximum(self.params[:, 2], self.params[:, 3])
+        # per pair, once per call: the detection's centre, bounding radius and area
+        pair_params = self.params[self.pair_d]
+        self._pair_cx, self._pair_cy = pair_params[:, 0], pair_params[:, 1]
+        self._pair_radii, self._pair_areas = self.radii[self.pair_d], self.areas[self.pair_d]
+        # every detection has a pair (always in localize): pair_scores needs no mask
+        self._has_pairs = np.bincount(self.pair_d, minlength=self.n_det) > 0
+
+    def _points_xy(self, n_points: int) -> np.ndarray:
+        """The detections' filling points, (D, 2, n_points), computed once per scorer."""
+        if n_points not in self._xy:
+            self._xy[n_points] = _ellipse_points(self.params, sunflower_disk(n_points), axis=1)
+        return self._xy[n_points]
 
     def compatible_objects(self, d: int) -> np.ndarray:
         """Object indices compatible with usable detection row ``d``."""
@@ -259,9 +299,9 @@ class MatchScorer:
         return earliest(stop_at, self.deadline)
 
     def _project(self, camera_from_world: np.ndarray) -> tuple[np.ndarray, ...]:
-        """:func:`project_objects` of the compatible objects (callers pass at most
+        """:func:`projected_gaussians` of the compatible objects (callers pass at most
         ``PROJECT_BLOCK // len(objects)`` poses)."""
-        return project_objects(self.camera, camera_from_world, *self._object_arrays)
+        return projected_gaussians(self.camera, camera_from_world, *self._object_arrays)
 
     def centre_hits(self, camera_from_world: np.ndarray,
                     stop_at: Deadline | float | None = None) -> np.ndarray:
@@ -272,7 +312,8 @@ class MatchScorer:
         step = max(1, PROJECT_BLOCK // max(1, len(self.objects)))
         for hb in _blocks(len(T), step):
             _check(stop_at)
-            _, _, valid, pc = self._project(T[hb])
+            *_, valid, P = self._project(T[hb])
+            pc = point_centres(P, self._object_arrays[0])
             for h in range(len(pc)):
                 per_det = np.zeros(self.n_det, dtype=bool)
                 for blk in _blocks(len(self.pair_d), PAIR_BLOCK):
@@ -294,10 +335,15 @@ class MatchScorer:
         plus blocks of at most :data:`PAIR_BLOCK` (pose, pair) tests and :data:`POINT_BLOCK`
         point evaluations; keep ``H x P`` bounded (callers pass
         ``max(1, PAIR_BLOCK // P)`` poses at a time)."""
+        xy = self._xy[self.points.shape[1]] if points is None else np.moveaxis(points, -1, -2)
+        return self._pair_iou(camera_from_world, xy, floor, stop_at)
+
+    def _pair_iou(self, camera_from_world: np.ndarray, xy: np.ndarray, floor: float,
+                  stop_at: Deadline | float | None) -> np.ndarray:
+        """:meth:`pair_iou` with the filling points as (D, 2, M)."""
         stop_at = self._stop(stop_at)
         T = np.asarray(camera_from_world, dtype=float)
-        pts = self.points if points is None else points
-        n_pts = pts.shape[1]
+        n_pts = xy.shape[2]
         n_pairs = len(self.pair_d)
         out = np.zeros((len(T), n_pairs))
         if n_pairs == 0:
@@ -306,31 +352,34 @@ class MatchScorer:
                           PAIR_BLOCK // n_pairs))
         for hb in _blocks(len(T), step):
             _check(stop_at)
-            cen, inv_shape, valid, _ = self._project(T[hb])
-            n_h = len(cen)
-            det = inv_shape[..., 0, 0] * inv_shape[..., 1, 1] - inv_shape[..., 0, 1] ** 2
-            half_tr = 0.5 * (inv_shape[..., 0, 0] + inv_shape[..., 1, 1])
-            # largest semi-axis of each projection: sqrt of the largest eigenvalue of A^-1
-            r_proj = np.sqrt(np.maximum(
-                half_tr + np.sqrt(np.maximum(half_tr ** 2 - det, 0.0)), 0.0))
-            area_proj = math.pi * np.sqrt(np.maximum(det, 0.0))
+            mx, my, s00, s01, s11, valid, _ = self._project(T[hb])
+            n_h = len(mx)
+            det = s00 * s11 - s01 * s01
+            half_tr = 0.5 * (s00 + s11)
+            # largest semi-axis of each projection: sqrt of the largest eigenvalue of A^-1;
+            # -inf where the projection is invalid (its bounding circle meets nothing)
+            r_proj = np.where(valid, np.sqrt(np.maximum(
+                half_tr + np.sqrt(np.maximum(half_tr ** 2 - det, 0.0)), 0.0)), -np.inf)
+            area_proj = _ellipse_area(det)
+            # what the point test needs of each (pose, object), gathered per surviving pair
+            grid = np.stack([mx, my, *_inverse_entries(s00, s01, s11, det), area_proj], axis=-1)
             for blk in _blocks(n_pairs, max(1, PAIR_BLOCK // n_h)):
                 _check(stop_at)
                 pd, ps = self.pair_d[blk], self.pair_s[blk]
-                gap = np.hypot(cen[:, ps, 0] - self.params[pd, 0],
-                               cen[:, ps, 1] - self.params[pd, 1])
+                gap = np.hypot(mx[:, ps] - self._pair_cx[blk], my[:, ps] - self._pair_cy[blk])
                 # disjoint bounding circles: no point inside
-                keep = valid[:, ps] & (gap <= (self.radii[pd] + r_proj[:, ps]) * (1 + 1e-9)
-                                       + 1e-9)
+                keep = gap <= (self._pair_radii[blk] + r_proj[:, ps]) * (1 + 1e-9) + 1e-9
                 if floor > 0:  # the estimate is <= area_d / area_p
-                    keep &= self.areas[pd] >= floor * area_proj[:, ps]
+                    keep &= self._pair_areas[blk] >= floor * area_proj[:, ps]
                 kh, kp = np.nonzero(keep)
                 for sub in _blocks(len(kh), POINT_BLOCK // n_pts):
                     _check(stop_at)
                     h, k = kh[sub], kp[sub]
-                    kd, ks = pd[k], ps[k]
-                    out[hb.start + h, blk.start + k] = iou_estimates(
-                        pts[kd], self.areas[kd], cen[h, ks], inv_shape[h, ks])
+                    g = grid[h, ps[k]]  # (K, 6)
+                    pts = xy[pd[k]]  # (K, 2, M)
+                    out[hb.start + h, blk.start + k] = _point_iou(
+                        pts[:, 0], pts[:, 1], self._pair_areas[blk][k], g[:, 0], g[:, 1],
+                        g[:, 2], g[:, 3], g[:, 4], g[:, 5])
         return out
 
     def dense_iou(self, camera_from_world: np.ndarray, points: np.ndarray | None = None,
@@ -351,10 +400,12 @@ class MatchScorer:
         assignment's)."""
         if iou.shape[1] == 0:
             return np.zeros(len(iou)), np.zeros(len(iou), dtype=int)
-        # detections without a compatible object (not in a localize() scorer) score 0
-        has = np.diff(np.append(self.pair_starts, iou.shape[1])) > 0
-        best = np.zeros((len(iou), len(self.pair_starts)))
-        best[:, has] = np.maximum.reduceat(iou, self.pair_starts[has], axis=1)
+        if self._has_pairs.all():
+            best = np.maximum.reduceat(iou, self.pair_starts, axis=1)
+        else:  # detections without a compatible object (not in a localize() scorer) score 0
+            has = self._has_pairs
+            best = np.zeros((len(iou), len(self.pair_starts)))
+            best[:, has] = np.maximum.reduceat(iou, self.pair_starts[has], axis=1)
         inl = best >= threshold
         return np.where(inl, best, 0.0).sum(axis=1), inl.sum(axis=1)
 
@@ -368,8 +419,8 @@ class MatchScorer:
                 n_points: int = 256) -> list[Match]:
         """One-to-one inlier matches at one pose (IoU with ``n_points`` per detection).
         Raises :class:`ScoringTimeoutError` past ``self.deadline``."""
-        pts = _ellipse_points(self.params, sunflower_disk(n_points))
-        iou = self.pair_iou(np.asarray(camera_from_world)[None], pts, floor=threshold)[0]
+        iou = self._pair_iou(np.asarray(camera_from_world)[None], self._points_xy(n_points),
+                             threshold, None)[0]
         return self.pair_assignment(iou, threshold)
 
 
@@ -382,17 +433,37 @@ class Hypothesis:
     matches: tuple[Match, ...]
     score: float
 
+    @functools.cached_property
+    def pose_key(self) -> tuple[list[float], list[float]]:
+        """:func:`_pose_key` of the pose, computed once (the search compares it often)."""
+        return _pose_key(self.camera_from_world)
+
 
 def distinct_poses(camera_from_world_a: np.ndarray, camera_from_world_b: np.ndarray) -> bool:
     """Whether two poses differ by more than :data:`DISTINCT_POSITION_M` (camera centres) or
     :data:`DISTINCT_ANGLE_DEG` (rotation angle)."""
-    Ra, Rb = camera_from_world_a[:3, :3], camera_from_world_b[:3, :3]
-    # camera centres -R^T t; cos of the relative angle from trace(Ra Rb^T) = sum(Ra * Rb)
-    dc = Rb.T @ camera_from_world_b[:3, 3] - Ra.T @ camera_from_world_a[:3, 3]
-    if float(dc @ dc) > DISTINCT_POSITION_M ** 2:
+    return _distinct_keys(_pose_key(camera_from_world_a), _pose_key(camera_from_world_b))
+
+
+def _pose_key(camera_from_world: np.ndarray) -> tuple[list[float], list[float]]:
+    """What :func:`distinct_poses` compares: ``R^T t`` (3,) (minus the camera centre) and the
+    row-major entries of ``R`` (9,), as Python floats."""
+    R = camera_from_world[:3, :3]
+    return (R.T @ camera_from_world[:3, 3]).tolist(), R.ravel().tolist()
+
+
+def _distinct_keys(a: tuple[list[float], list[float]], b: tuple[list[float], list[float]]
+                   ) -> bool:
+    """:func:`distinct_poses` of two :func:`_pose_key` (plain float arithmetic: 3- and 9-term
+    sums cost less than a numpy call)."""
+    (ca, ra), (cb, rb) = a, b
+    dx, dy, dz = cb[0] - ca[0], cb[1] - ca[1], cb[2] - ca[2]
+    if dx * dx + dy * dy + dz * dz > DISTINCT_POSITION_M ** 2:
         return True
-    cos = (float(np.sum(Ra * Rb)) - 1.0) / 2.0
-    return cos < _COS_DISTINCT
+    # cos of the relative angle from trace(Ra Rb^T) = sum(Ra * Rb)
+    trace = (ra[0] * rb[0] + ra[1] * rb[1] + ra[2] * rb[2] + ra[3] * rb[3] + ra[4] * rb[4]
+             + ra[5] * rb[5] + ra[6] * rb[6] + ra[7] * rb[7] + ra[8] * rb[8])
+    return (trace - 1.0) / 2.0 < _COS_DISTINCT
 
 
 _COS_DISTINCT = math.cos(math.radians(DISTINCT_ANGLE_DEG))
@@ -493,8 +564,12 @@ def _random_samples(scorer: MatchScorer, size: int, count: int,
     if len(comps) == 0 or weights.sum() == 0:
         return
     p = weights / weights.sum()
+    # rng.choice(len(comps), p=p) without its per-call checks: the same cdf search of one
+    # rng.random() draw (the same stream; tests/test_ransac.py)
+    cdf = p.cumsum()
+    cdf /= cdf[-1]
     for _ in range(count):
-        k = int(rng.choice(len(comps), p=p))
+        k = int(cdf.searchsorted(rng.random(), side="right"))
         pairs = []
         for (d, o), m in zip(groups, comps[k], strict=True):
             if m == 0:
@@ -506,19 +581,77 @@ def _random_samples(scorer: MatchScorer, size: int, count: int,
         yield tuple(q[0] for q in pairs), tuple(q[1] for q in pairs)
 
 
-def _most_promising_first(
-    scorer: MatchScorer, samples: list[tuple[tuple[int, ...], tuple[int, ...]]],
-) -> Iterator[tuple[tuple[int, ...], tuple[int, ...]]]:
-    """``samples`` (all of an exhaustive search) reordered so that the ones most likely to give
-    the right pose come first, which lets the early exit happen after the first batch: fewest
-    label-compatible alternatives first (the product over the sample's detections of their
-    numbers of compatible objects: a detection whose label has one object in the map can only
-    be matched to it), then the largest image triangle of the detection centres (P3P's
-    conditioning). A stable sort on fixed keys: still independent of the seed."""
+def _most_promising_first(scorer: MatchScorer) -> Iterator[tuple[tuple[int, ...], tuple[int, ...]]]:
+    """Every label-compatible triple sample (an exhaustive search), ordered so that the ones
+    most likely to give the right pose come first, which lets the early exit happen after the
+    first batch: fewest label-compatible alternatives first (the product over the sample's
+    detections of their numbers of compatible objects: a detection whose label has one object
+    in the map can only be matched to it), then the largest image triangle of the detection
+    centres (P3P's conditioning); ties in :func:`_iter_samples`' order. A stable order on fixed
+    keys: independent of the seed.
+
+    Both keys depend on the detection triple only, so the triples are sorted (not the samples)
+    and each triple's object assignments are generated lazily, when the search reaches them:
+    the samples after an early exit are never built. Triples with equal keys (duplicate
+    detections) have their samples merged in :func:`_iter_samples`' order."""
+    groups = scorer.label_groups
+    comps = _compositions(groups, 3)
+    # detection triples in order of first appearance in _iter_samples, with their position
+    # key there: (split, then per drawn group the index of its detection combination)
+    triples: list[tuple[int, ...]] = []
+    where: list[tuple[int, tuple[int, ...]]] = []
+    for ci, comp in enumerate(comps):
+        drawn = [(d, m) for (d, _), m in zip(groups, comp, strict=True) if m]
+        for combos in itertools.product(*(enumerate(itertools.combinations(d, m))
+                                          for d, m in drawn)):
+            triples.append(tuple(sorted(itertools.chain.from_iterable(c for _, c in combos))))
+            where.append((ci, tuple(k for k, _ in combos)))
+    if not triples:
+        return
     n_compat = scorer.compat.sum(axis=1).astype(float)
-    dets = np.array([sm[0] for sm in samples]).reshape(-1, 3)
-    order = np.lexsort((-_triangle_areas(scorer, dets), np.prod(n_compat[dets], axis=1)))
-    return iter([samples[k] for k in order.tolist()])
+    dets = np.array(triples)
+    prod = np.prod(n_compat[dets], axis=1)
+    area = _triangle_areas(scorer, dets)
+    order = np.lexsort((-area, prod)).tolist()
+    k = 0
+    while k < len(order):
+        run = [order[k]]
+        while (k + len(run) < len(order) and prod[order[k + len(run)]] == prod[order[k]]
+               and area[order[k + len(run)]] == area[order[k]]):
+            run.append(order[k + len(run)])
+        k += len(run)
+        if len(run) == 1:
+            yield from _triple_samples(groups, comps, triples[run[0]], where[run[0]])
+        else:  # equal keys: every sample of the run, in _iter_samples' order
+            merged = sorted(itertools.chain.from_iterable(
+                _triple_samples(groups, comps, triples[t], where[t], keyed=True) for t in run))
+            yield from (sm for _, sm in merged)
+
+
+def _triple_samples(
+    groups: list[tuple[list[int], np.ndarray]], comps: list[tuple[int, ...]],
+    triple: tuple[int, ...], where: tuple[int, tuple[int, ...]], keyed: bool = False,
+) -> Iterator:
+    """The samples ``(dets, objs)`` of one detection triple (every assignment of distinct
+    compatible objects), in :func:`_iter_samples`' order; with ``keyed``, each as ``(key,
+    sample)``, ``key`` its position there. ``where``: the triple's split index and per drawn
+    group its combination index (:func:`_most_promising_first`)."""
+    ci, combo_index = where
+    drawn = [(set(d), [int(x) for x in o], m)
+             for (d, o), m in zip(groups, comps[ci], strict=True) if m]
+    # per drawn group, the positions of its detections in the (ascending) triple
+    slots = [[k for k, x in enumerate(triple) if x in dets] for dets, _, _ in drawn]
+    perms = [list(itertools.permutations(o, m)) for _, o, m in drawn]
+    for choice in itertools.product(*(range(len(p)) for p in perms)):
+        objs = [0] * len(triple)
+        for sl, p, j in zip(slots, perms, choice, strict=True):
+            for k, o in zip(sl, p[j], strict=True):
+                objs[k] = o
+        if keyed:  # per group: combination index x permutations + permutation index
+            yield (ci, *(c * len(p) + j for c, p, j in zip(combo_index, perms, choice,
+                                                           strict=True))), (triple, tuple(objs))
+        else:
+            yield triple, tuple(objs)
 
 
 def _triangle_areas(scorer: MatchScorer, dets: np.ndarray) -> np.ndarray:
@@ -536,20 +669,32 @@ def _sweep_samples(scorer: MatchScorer) -> list[tuple[tuple[int, ...], tuple[int
     :data:`SWEEP_MAX_SAMPLES` assignments; empty if none qualifies (why:
     ``docs/design/localization.md``)."""
     groups = scorer.label_groups
-    objects_of = {d: objs for dets, objs in groups for d in dets}
-    label_of = {d: g for g, (dets, _) in enumerate(groups) for d in dets}
-    order = sorted(range(scorer.n_det), key=lambda d: (len(objects_of[d]), d))
-    tris = list(itertools.combinations(sorted(order[:SWEEP_CANDIDATES]), 3))
-    counts = np.array([math.prod(math.perm(len(groups[g][1]), m)
-                                 for g, m in Counter(label_of[d] for d in tri).items())
-                       for tri in tris])
+    group_of = np.zeros(scorer.n_det, dtype=np.intp)
+    for g, (dets, _) in enumerate(groups):
+        group_of[dets] = g
+    n_objects = np.array([len(o) for _, o in groups], dtype=np.int64)[group_of]  # per detection
+    # the candidates: fewest compatible objects, then lowest index; their triples ascending
+    cand = np.sort(np.lexsort((np.arange(scorer.n_det), n_objects))[:SWEEP_CANDIDATES])
+    tris = cand[_triples(len(cand))]
+    # assignments of distinct objects: n0 (n1 - [g1 = g0]) (n2 - [g2 = g0] - [g2 = g1])
+    g, n = group_of[tris], n_objects[tris]
+    counts = n[:, 0] * (n[:, 1] - (g[:, 1] == g[:, 0])) * (
+        n[:, 2] - (g[:, 2] == g[:, 0]) - (g[:, 2] == g[:, 1]))
     ok = np.flatnonzero((counts > 0) & (counts <= SWEEP_MAX_SAMPLES))
     if len(ok) == 0:
         return []
-    tri = tris[ok[np.argmax(_triangle_areas(scorer, np.array(tris)[ok]))]]
-    return [(tri, tuple(int(o) for o in objs))
-            for objs in itertools.product(*(objects_of[d].tolist() for d in tri))
+    tri = tuple(tris[ok[np.argmax(_triangle_areas(scorer, tris[ok]))]].tolist())
+    return [(tri, objs)
+            for objs in itertools.product(*(groups[group_of[d]][1].tolist() for d in tri))
             if len(set(objs)) == 3]
+
+
+@functools.lru_cache(maxsize=16)
+def _triples(n: int) -> np.ndarray:
+    """``itertools.combinations(range(n), 3)`` as an array (T, 3), read-only."""
+    out = np.array(list(itertools.combinations(range(n), 3)), dtype=np.intp).reshape(-1, 3)
+    out.setflags(write=False)
+    return out
 
 
 def ransac(
@@ -599,16 +744,17 @@ def ransac(
             iou = scorer.pair_iou(poses[blk], floor=inlier_iou, stop_at=deadline)
             # per-detection best object: an upper bound of the one-to-one score and count
             bound, count = scorer.pair_scores(iou, inlier_iou)
+            block, bounds, counts = poses[blk], bound.tolist(), count.tolist()
             # best bound first: the bar rises early and fewer assignments are needed
             for h in np.argsort(-bound, kind="stable").tolist():
                 bar = kept[-1].score if len(kept) >= KEEP_DISTINCT else -1.0
-                if bound[h] <= bar or count[h] < min_inliers:
+                if bounds[h] <= bar or counts[h] < min_inliers:
                     continue
                 # one-to-one (greedy) assignment, as in the final matches
                 m = scorer.pair_assignment(iou[h], inlier_iou)
                 score = float(sum(x.iou for x in m))
                 if len(m) >= min_inliers and score > bar:
-                    kept = _keep_distinct(kept, Hypothesis(poses[blk][h], tuple(m), score))
+                    kept = _keep_distinct(kept, Hypothesis(block[h], tuple(m), score))
         return (need >= EARLY_EXIT_MIN_DETECTIONS and bool(kept)
                 and len(kept[0].matches) >= need and kept[0].score >= EARLY_EXIT_MEAN_IOU * need)
 
@@ -638,7 +784,7 @@ def ransac(
             samples = itertools.chain(sweep_first, _random_samples(
                 scorer, size, budget - len(sweep_first), rng))
         elif size == 3 and count_samples(scorer, size) <= ORDER_CAP:
-            samples = _most_promising_first(scorer, list(samples))
+            samples = _most_promising_first(scorer)
         # exhaustive: every sample in a fixed order (the seed plays no part)
         batch = FIRST_BATCH if size == 3 else 4
         start = tried
@@ -694,7 +840,7 @@ def _keep_distinct(kept: list[Hypothesis], new: Hypothesis) -> list[Hypothesis]:
     """``kept`` (best first, mutually distinct) with ``new`` inserted: it replaces the kept
     hypotheses it is not distinct from if it scores better than all of them, is dropped if one
     of them scores at least as well; at most :data:`KEEP_DISTINCT` are kept."""
-    close = [h for h in kept if not distinct_poses(h.camera_from_world, new.camera_from_world)]
+    close = [h for h in kept if not _distinct_keys(h.pose_key, new.pose_key)]
     if any(h.score >= new.score for h in close):
         return kept
     out = [h for h in kept if all(h is not c for c in close)] + [new]
