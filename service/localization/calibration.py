@@ -4,7 +4,7 @@ Provenance: written by ``python -m bench.trust --fit`` (see that module); the fi
 only the tuning seeds named in :data:`PROVENANCE`, the bench reports on other seeds.
 """
 
-PROVENANCE = {'command': 'python -m bench.trust --fit --save-data /tmp/trust/tune1.json',
+PROVENANCE = {'command': 'python -m bench.trust --fit --save-data /tmp/tune_s22.json',
  'tuning_seeds': [100, 102, 101]}
 
 #: k_metric of ``cov = k * max(s^2, f) * (J^T W J)^-1`` (``bench.trust._scale_for``: the
@@ -17,13 +17,13 @@ COVARIANCE_SCALE = {'level_set': 2.848987,
  'bhattacharyya': 0.382505,
  'bbox': 0.449106,
  'qbbox': 0.582003,
- 'iou': 0.381245,
- 'giou': 0.362263}
+ 'iou': 0.366071,
+ 'giou': 0.355608}
 
 #: f_metric: floor of the a-posteriori variance factor (``bench.trust.S2_FLOOR_QUANTILE`` of
 #: the tuning frames' s^2).
-S2_FLOOR = {'iou': 0.033771,
- 'giou': 0.034738,
+S2_FLOOR = {'iou': 0.035787,
+ 'giou': 0.035789,
  'bbox': 558.366407,
  'qbbox': 412.769714,
  'algebraic': 18480344.70224,
@@ -45,7 +45,7 @@ AMBIGUITY_RATIO_SAME_OBJECTS = 0.95
 
 #: Default ``LocalizationOptions.min_confidence`` (with ``AMBIGUITY_CHI2_RATIO``:
 #: ``bench.trust.choose_ambiguity_and_threshold``).
-MIN_CONFIDENCE = 0.25
+MIN_CONFIDENCE = 0.28
 
 #: Features of the confidence model (``confidence.evidence_features``), in order.
 CONFIDENCE_FEATURES = ('inliers_ge3',
@@ -60,25 +60,25 @@ CONFIDENCE_FEATURES = ('inliers_ge3',
  'chi2_competitor')
 
 #: Logistic models: P = 1 / (1 + exp(-(intercept + sum coef * feature))).
-CONFIDENCE_MODELS = {'refined': {'intercept': -10.148943,
-             'coef': {'inliers_ge3': -0.05277,
-                      'inliers_ge4': -1.324491,
-                      'log_inliers': 0.740936,
-                      'inlier_fraction': 9.187871,
-                      'mean_iou': 1.579517,
-                      'log_s2': -1.185283,
-                      'logit_gauss': 0.42069,
-                      'margin': -0.493512,
-                      'log_samples': -0.081575,
-                      'chi2_competitor': 0.101009},
-             'metric_offset': {'algebraic': 1.210431,
-                               'bbox': 0.086429,
-                               'bhattacharyya': -0.163056,
-                               'frobenius': 1.166598,
-                               'giou': 1.175595,
-                               'iou': 1.159984,
-                               'qbbox': 0.24787,
-                               'wasserstein': 0.227518}},
+CONFIDENCE_MODELS = {'refined': {'intercept': -10.355432,
+             'coef': {'inliers_ge3': -0.084652,
+                      'inliers_ge4': -1.431211,
+                      'log_inliers': 0.646758,
+                      'inlier_fraction': 9.995523,
+                      'mean_iou': 0.948498,
+                      'log_s2': -1.208492,
+                      'logit_gauss': 0.420829,
+                      'margin': -0.428686,
+                      'log_samples': -0.032579,
+                      'chi2_competitor': 0.081931},
+             'metric_offset': {'algebraic': 1.254916,
+                               'bbox': 0.123545,
+                               'bhattacharyya': -0.136616,
+                               'frobenius': 1.212503,
+                               'giou': 1.171925,
+                               'iou': 1.174,
+                               'qbbox': 0.27956,
+                               'wasserstein': 0.257948}},
  'none': {'intercept': -16.576849,
           'coef': {'inliers_ge3': 3.786856,
                    'inliers_ge4': 1.929234,
