@@ -139,23 +139,33 @@ def test_localize_simulated_frames_accuracy_and_metrics(client: sdk.QuadLocClien
         assert pos < 1e-3 and rot < 0.05, (i, pos, rot)
         assert len(answer.inliers) == len(exact.detections)
         assert 0 < answer.confidence <= 1
-    noisy_errors = []
+    noisy_errors, localized = [], 0
     for i, truth, _, noisy in items:
         answer = client.localize(MAP_ID, camera=camera, detections=_sdk_detections(noisy),
                                  frame_id=f"noisy-{i}")
-        assert answer.localized, (i, answer.reason)
+        if not answer.localized:
+            # An honest "not sure" (confidence below the calibrated min_confidence) still
+            # returns its candidate pose with its probability; its accuracy counts below.
+            assert answer.reason in ("low_confidence", "ambiguous") and answer.alternatives, (
+                i, answer.reason)
+            noisy_errors.append(_errors(answer.alternatives[0].world_from_camera.as_matrix(),
+                                        truth))
+            continue
+        localized += 1
         noisy_errors.append(_errors(answer.world_from_camera.as_matrix(), truth))
         cov = answer.covariance.as_array()
         assert answer.covariance.order[:3] == ["omega_x", "omega_y", "omega_z"]
         np.testing.assert_allclose(cov, cov.T, atol=1e-12)
         assert np.all(np.linalg.eigvalsh(cov) > 0)
+    # several noisy detections per frame: nearly all are confident enough to be localized
+    assert localized >= len(items) - 2, localized
     pos = np.array([e[0] for e in noisy_errors])
     rot = np.array([e[1] for e in noisy_errors])
     # Realistic detector noise (bench/simulate.py defaults): centimetre-level poses.
     assert np.median(pos) < 0.1 and np.mean(pos < 0.25) >= 0.9, pos
     assert np.median(rot) < 5.0, rot
     after = _localizations(client)
-    n = 2 * len(items)
+    n = len(items) + localized
     assert after.get("localized", 0) - before.get("localized", 0) == n
 
 
