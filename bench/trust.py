@@ -58,6 +58,8 @@ from service.localization import calibration
 from service.localization.confidence import (
     TOLERANCE_POSITION_M,
     TOLERANCE_ROTATION_DEG,
+    UNIT_WEIGHTS_SUFFIX,
+    calibration_key,
     confidence_probability,
     gaussian_tolerance_probability,
     student_t_factor,
@@ -80,6 +82,9 @@ REFINED_ONLY = ("log_s2", "logit_gauss", "chi2_competitor")
 #: of a lucky small residual, which narrows the NEES spread between the two noise settings).
 S2_FLOOR_QUANTILE = 0.9
 ECE_TARGET = 0.05
+#: The refined metrics also run without sigma weights (``use_sigma=False``, their own
+#: calibration key) on every N-th frame.
+UNIT_WEIGHTS_STRIDE = 2
 #: The detector model of the report's second noise setting (twice the default noise).
 NOISY = dict(center_noise=0.08, axis_log_noise=0.12, angle_noise_rad=math.radians(8.0))
 CALIBRATION_PATH = REPO_ROOT / "service" / "localization" / "calibration.py"
@@ -130,21 +135,29 @@ def reduce_frame(detections, object_ids, n: int, rng: np.random.Generator):
 
 def run_frames(seed: int, metrics: tuple[str, ...], stride: int, slow_stride: int,
                config: SimulationConfig, log=print, min_confidence: float | None = None,
-               setting: str = "default") -> dict:
-    """Experiments 1-3 on one seed: records per metric, and the reduced frames
-    (``min_confidence``: the option used, 0 when tuning so every verified pose is seen;
-    ``setting``: the detector setting's name, kept in each record)."""
+               setting: str = "default", unit_stride: int = UNIT_WEIGHTS_STRIDE) -> dict:
+    """Experiments 1-3 on one seed: records per calibration key (the metric, and on every
+    ``unit_stride``-th frame the refined metrics without sigma weights, ``use_sigma=False``:
+    ``confidence.calibration_key``), and the reduced frames (``min_confidence``: the option
+    used, 0 when tuning so every verified pose is seen; ``setting``: the detector setting's
+    name, kept in each record)."""
     cm = compile_map(load_chess_map())
     camera, poses, _ = load_chess_world_from_camera()
-    out: dict = {"frames": {m: [] for m in metrics}, "reduced": {"2": [], "3": []}}
+    runs = [(m, True) for m in metrics] + [(m, False) for m in metrics if m != "none"]
+    out: dict = {"frames": {calibration_key(m, w): [] for m, w in runs},
+                 "reduced": {"2": [], "3": []}}
     t0 = time.perf_counter()
     for i in range(0, len(poses), stride):
         f = simulate_frame(cm, camera, poses[i], seed * 100_000 + i, config)
-        for m in metrics:
-            if m in SLOW and (i // stride) % slow_stride:
+        for m, weighted in runs:
+            k = i // stride
+            if (m in SLOW and k % slow_stride) or (not weighted and k % unit_stride):
                 continue
-            r = localize(f.detections, cm, camera, options(m, min_confidence=min_confidence))
-            out["frames"][m].append(_record(r, poses[i], frame=i, metric=m, setting=setting))
+            key = calibration_key(m, weighted)
+            r = localize(f.detections, cm, camera,
+                         options(m, min_confidence=min_confidence, use_sigma=weighted))
+            out["frames"][key].append(_record(r, poses[i], frame=i, metric=key,
+                                              setting=setting))
         rng = np.random.default_rng(seed * 100_000 + 50_000 + i)
         for n in (2, 3):
             dets = reduce_frame(f.detections, f.object_ids, n, rng)
@@ -410,6 +423,17 @@ def operating_points(reduced: dict, reduced_noisy: dict) -> dict:
     return out
 
 
+def merge_runs(runs: list[dict]) -> dict:
+    """The records of several :func:`run_frames` results, concatenated per key."""
+    data: dict = {"frames": {}, "reduced": {"2": [], "3": []}}
+    for d in runs:
+        for key, rows in d["frames"].items():
+            data["frames"].setdefault(key, []).extend(rows)
+        for n in ("2", "3"):
+            data["reduced"][n] += d["reduced"][n]
+    return data
+
+
 def candidate_rows(data: dict) -> list[dict]:
     """The top candidates (``alternatives[0]``) of the reduced frames answered ``localized:
     false`` after verification, as rows for :func:`reliability` (is the probability a client
@@ -420,9 +444,13 @@ def candidate_rows(data: dict) -> list[dict]:
             if r.get("candidate_confidence") is not None]
 
 
-def confidence_rows(data: dict) -> list[dict]:
-    rows = [r for m, rr in data["frames"].items() for r in rr]
-    return rows + [r for rr in data["reduced"].values() for r in rr]
+def confidence_rows(data: dict, unit_weights: bool | None = None) -> list[dict]:
+    """Records of the frames and the reduced frames; ``unit_weights``: only the frames refined
+    with (False) or without (True) sigma weights and, with False, the reduced frames (None:
+    all)."""
+    rows = [r for m, rr in data["frames"].items() for r in rr
+            if unit_weights is None or m.endswith(UNIT_WEIGHTS_SUFFIX) == unit_weights]
+    return rows + ([] if unit_weights else [r for rr in data["reduced"].values() for r in rr])
 
 
 # ------------------------------------------------------------------ fitting
@@ -823,16 +851,11 @@ def main(argv: list[str] | None = None) -> int:
         if args.load_data:
             data = json.loads(args.load_data.read_text())
         else:
-            data = {"frames": {m: [] for m in metrics}, "reduced": {"2": [], "3": []}}
             runs = [(s, args.stride, cfg, "default") for s in seeds]
             runs.append((args.tune_noisy_seed, args.noisy_stride, cfg.with_(**NOISY), "noisy"))
-            for s, stride, config, setting in runs:
-                d = run_frames(s, metrics, stride, args.slow_stride, config, min_confidence=0.0,
-                               setting=setting)
-                for m in metrics:
-                    data["frames"][m] += d["frames"][m]
-                for n in ("2", "3"):
-                    data["reduced"][n] += d["reduced"][n]
+            data = merge_runs([run_frames(s, metrics, stride, args.slow_stride, config,
+                                          min_confidence=0.0, setting=setting)
+                               for s, stride, config, setting in runs])
             if args.save_data:
                 args.save_data.write_text(json.dumps(data, default=float))  # keeps inf/NaN
         print(json.dumps(json_safe(nees_table(data["frames"])), indent=1))
@@ -842,18 +865,16 @@ def main(argv: list[str] | None = None) -> int:
         print(f"wrote {CALIBRATION_PATH}")
         return 0
     seeds = [int(s) for s in args.seeds.split(",")]
-    data = {"frames": {m: [] for m in metrics}, "reduced": {"2": [], "3": []}}
-    for s in seeds:
-        d = run_frames(s, metrics, args.stride, args.slow_stride, cfg)
-        for m in metrics:
-            data["frames"][m] += d["frames"][m]
-        for n in ("2", "3"):
-            data["reduced"][n] += d["reduced"][n]
+    data = merge_runs([run_frames(s, metrics, args.stride, args.slow_stride, cfg)
+                       for s in seeds])
     noisy = run_frames(args.noisy_seed, metrics, args.noisy_stride, args.slow_stride,
                        cfg.with_(**NOISY), setting="noisy")
     camera, _, _ = load_chess_world_from_camera()
-    rows = confidence_rows(data)
-    rel = {"pooled": reliability(rows), "noisy (pooled)": reliability(confidence_rows(noisy)),
+    rel = {"pooled": reliability(confidence_rows(data, unit_weights=False)),
+           "noisy (pooled)": reliability(confidence_rows(noisy, unit_weights=False)),
+           "without sigma (pooled, both settings)": reliability(
+               confidence_rows(data, unit_weights=True)
+               + confidence_rows(noisy, unit_weights=True)),
            "candidates of unlocalized 2-3 detection frames": reliability(
                candidate_rows(data) + candidate_rows(noisy))}
     for m in metrics:

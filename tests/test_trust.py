@@ -130,20 +130,24 @@ def test_covariance_does_not_depend_on_the_sigma_scale():
     assert np.trace(up.covariance) > 10 * np.trace(a.covariance)
 
 
-@pytest.mark.parametrize(("metric", "noisy"), [("level_set", False), ("bbox", False),
-                                             ("algebraic", False), ("level_set", True)])
-def test_calibration_does_not_regress_on_held_out_frames(metric, noisy):
+@pytest.mark.parametrize(("metric", "noisy", "with_sigma"), [
+    ("level_set", False, True), ("bbox", False, True), ("algebraic", False, True),
+    ("level_set", True, True), ("level_set", False, False), ("wasserstein", True, False)])
+def test_calibration_does_not_regress_on_held_out_frames(metric, noisy, with_sigma):
     """Guard (small sample, seeds 7/8 never used for tuning): 24 frames per case, the default
-    detector and the bench's second noise setting. Tolerances are wide for the sample size:
-    mean NEES over frames within 20 cm in [2.5, 14] (the bench reports [4, 9] on 100+ frames),
-    and the confidence's mean over localized answers within 0.2 of the observed success rate
-    (10 cm and 5 deg)."""
+    detector and the bench's second noise setting, detections with and without sigma (unit
+    weights, their own calibration key). Tolerances are wide for the sample size: mean NEES
+    over frames within 20 cm in [2.5, 14] (the bench reports [4, 9] on 100+ frames), and the
+    confidence's mean over localized answers within 0.2 of the observed success rate (10 cm
+    and 5 deg)."""
     config = EVAL.with_(**NOISY) if noisy else EVAL
     ne, conf, ok = [], [], []
     for i in range(0, 108, 9):
         for seed in (7, 8):
             f = simulate_frame(CM, CAMERA, POSES[i], seed * 1000 + i, config)
-            r = localize(f.detections, CM, CAMERA,
+            dets = f.detections if with_sigma else [
+                dataclasses.replace(d, sigma=None) for d in f.detections]
+            r = localize(dets, CM, CAMERA,
                          LocalizationOptions(metric=metric, time_budget_ms=None))
             if not r.localized:
                 continue
@@ -155,6 +159,23 @@ def test_calibration_does_not_regress_on_held_out_frames(metric, noisy):
     assert len(ne) >= 10, len(ne)
     assert 2.5 <= float(np.mean(ne)) <= 14.0, np.mean(ne)
     assert abs(float(np.mean(conf)) - float(np.mean(ok))) <= 0.2, (np.mean(conf), np.mean(ok))
+
+
+def test_sigma_weights_apply_only_when_every_detection_has_one():
+    """One detection without sigma: every weight is 1, exactly as ``use_sigma=False`` (pose,
+    covariance, confidence); with every sigma the weighted answer differs."""
+    f = simulate_frame(CM, CAMERA, POSES[30], 30, SimulationConfig())
+    opts = LocalizationOptions(time_budget_ms=None, min_confidence=0.0)
+    mixed = [dataclasses.replace(f.detections[0], sigma=None), *f.detections[1:]]
+    a = localize(mixed, CM, CAMERA, opts)
+    b = localize(f.detections, CM, CAMERA, dataclasses.replace(opts, use_sigma=False))
+    w = localize(f.detections, CM, CAMERA, opts)
+    assert a.localized and b.localized and w.localized
+    np.testing.assert_allclose(a.world_from_camera, b.world_from_camera, atol=1e-9)
+    np.testing.assert_allclose(a.covariance, b.covariance, rtol=1e-6,
+                               atol=1e-9 * np.abs(b.covariance).max())
+    assert a.confidence == pytest.approx(b.confidence, abs=1e-9)
+    assert np.abs(w.world_from_camera[:3, 3] - b.world_from_camera[:3, 3]).max() > 1e-6
 
 
 def test_ambiguity_rule_and_distinct_poses():

@@ -4,6 +4,9 @@
   ``s^2 = r^T W r / (m - 6)`` (:func:`calibrated_covariance`; with a prior only the detections'
   information is rescaled); constants in :mod:`service.localization.calibration`. Conditioned
   on the inlier associations and the detection noise model.
+* the constants are per calibration key (:func:`calibration_key`): the metric, refined with
+  sigma weights or with unit weights (a request without a sigma on every detection, or
+  ``use_sigma=False``): ``s^2`` and ``J^T W J`` are in other units without the weights.
 * confidence: ``P(position error <= TOLERANCE_POSITION_M and rotation error <=
   TOLERANCE_ROTATION_DEG)`` from a logistic model of :func:`evidence_features`
   (:func:`confidence_probability`).
@@ -38,7 +41,9 @@ __all__ = [
     "CHI2_COMPETITOR_CAP",
     "TOLERANCE_POSITION_M",
     "TOLERANCE_ROTATION_DEG",
+    "UNIT_WEIGHTS_SUFFIX",
     "calibrated_covariance",
+    "calibration_key",
     "chi2_competitor",
     "confidence_probability",
     "covariance_scale",
@@ -59,6 +64,18 @@ TOLERANCE_POSITION_M = 0.10
 TOLERANCE_ROTATION_DEG = 5.0
 
 
+#: Suffix of the calibration key of a refinement with unit weights (:func:`calibration_key`).
+UNIT_WEIGHTS_SUFFIX = ":unit_weights"
+
+
+def calibration_key(metric: str, sigma_weighted: bool) -> str:
+    """The key of the calibration constants (``COVARIANCE_SCALE``, ``S2_FLOOR``, the confidence
+    model's ``metric_offset``) of a refinement with ``metric``: the metric itself when the
+    costs were weighted by ``1 / sigma`` (paper eq. 8), ``metric + UNIT_WEIGHTS_SUFFIX`` when
+    every weight was 1 (no sigma weighting; ``"none"`` is never refined and keeps its key)."""
+    return metric if sigma_weighted or metric == "none" else metric + UNIT_WEIGHTS_SUFFIX
+
+
 def residual_variance(chi2: float, n_residuals: int) -> float:
     """A-posteriori residual variance ``s^2 = chi2 / (m - 6)`` (``m`` residuals, 6 pose DoF);
     NaN when ``m <= 6`` or ``chi2`` is not finite."""
@@ -73,9 +90,10 @@ def calibrated_covariance(
     n_detections: int, prior_covariance: np.ndarray | None = None,
 ) -> np.ndarray | None:
     """The reported 6x6 covariance (order ``[omega, v]``, rad/m, body frame, right
-    perturbation) from the refinement's raw one (see the module docstring; ``n_detections``
-    refined, ``n_residuals`` scalar residuals); None when the raw covariance is None, ``s^2``
-    is undefined (``m <= 6``) or the metric has no calibration."""
+    perturbation) from the refinement's raw one (see the module docstring; ``metric``: its
+    :func:`calibration_key`; ``n_detections`` refined, ``n_residuals`` scalar residuals); None
+    when the raw covariance is None, ``s^2`` is undefined (``m <= 6``) or the key has no
+    calibration."""
     if raw_covariance is None:
         return None
     scale = covariance_scale(metric, chi2, n_residuals, n_detections)
@@ -111,7 +129,8 @@ def student_t_factor(n_detections: int) -> float:
 
 
 def variance_factor(metric: str, chi2: float, n_residuals: int, n_detections: int) -> float:
-    """``max(s^2, f_metric) * student_t_factor(n_detections)``; NaN without ``s^2``."""
+    """``max(s^2, f_metric) * student_t_factor(n_detections)`` (``metric``: its
+    :func:`calibration_key`); NaN without ``s^2``."""
     s2 = residual_variance(chi2, n_residuals)
     if not math.isfinite(s2):
         return math.nan
@@ -119,8 +138,9 @@ def variance_factor(metric: str, chi2: float, n_residuals: int, n_detections: in
 
 
 def covariance_scale(metric: str, chi2: float, n_residuals: int, n_detections: int) -> float:
-    """``k_metric * max(s^2, f_metric) * t(n)`` (module docstring); NaN when undefined (no
-    ``s^2``, or a metric without calibration constants)."""
+    """``k_metric * max(s^2, f_metric) * t(n)`` (module docstring; ``metric``: its
+    :func:`calibration_key`); NaN when undefined (no ``s^2``, or a key without calibration
+    constants)."""
     if metric not in COVARIANCE_SCALE:
         return math.nan
     return COVARIANCE_SCALE[metric] * variance_factor(metric, chi2, n_residuals, n_detections)
@@ -198,9 +218,10 @@ def confidence_probability(metric: str, features: Mapping[str, float],
                            models: Mapping[str, Any] | None = None) -> float:
     """The calibrated probability (logistic model) that the pose is within the tolerance.
 
-    ``metric`` picks the coefficient set: ``"none"`` (unrefined poses: no residual variance or
-    covariance features) or the refined model (shared by the nine metrics, optionally with a
-    per-metric intercept offset; the calibrated covariance carries the metric's accuracy).
+    ``metric`` (its :func:`calibration_key`) picks the coefficient set: ``"none"`` (unrefined
+    poses: no residual variance or covariance features) or the refined model (shared by the
+    nine metrics with and without sigma weights, optionally with an intercept offset per key;
+    the calibrated covariance carries the metric's accuracy).
     ``models``: the coefficient sets (default :data:`CONFIDENCE_MODELS`; the bench passes
     candidates while fitting)."""
     model = (CONFIDENCE_MODELS if models is None else models)[

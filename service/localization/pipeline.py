@@ -29,6 +29,7 @@ from service.localization.budget import Deadline, deadline_passed
 from service.localization.calibration import MIN_CONFIDENCE, S2_FLOOR
 from service.localization.confidence import (
     calibrated_covariance,
+    calibration_key,
     chi2_competitor,
     confidence_probability,
     covariance_scale,
@@ -306,6 +307,11 @@ def localize(
     timings: dict[str, float] = {}
     compiled = _validate(detections, scene_map, camera, options, prior)
     metric = options.metric
+    if options.use_sigma and any(d.sigma is None for d in detections):
+        # sigma weights only when every detection has a sigma: mixed weights would have no
+        # calibrated covariance or confidence (confidence.calibration_key)
+        options = replace(options, use_sigma=False)
+    key = calibration_key(metric, options.use_sigma)
     usable = [i for i, d in enumerate(detections) if len(compiled.indices_for(d.label)) > 0]
     t1 = time.perf_counter()
     timings["validate"] = (t1 - t0) * 1e3
@@ -332,19 +338,19 @@ def localize(
         prior_cov = None if a.source != "prior" or prior is None else prior.covariance
         n_refined = 0 if res is None else len(res.per_detection_cost)
         cov = None if res is None else calibrated_covariance(
-            metric, a.raw_covariance, res.chi2, res.n_residuals, n_refined, prior_cov)
+            key, a.raw_covariance, res.chi2, res.n_residuals, n_refined, prior_cov)
         margin = 0.0 if runner_up is None else min(1.0, runner_up.score / max(a.score, 1e-12))
         ev = evidence_features(n_inliers=len(a.inliers), n_usable=len(usable),
                                ious=np.array([m.iou for m in a.inliers]), s2=s2,
                                covariance=cov, margin=margin, n_samples=n_samples,
-                               s2_floor=S2_FLOOR.get(metric, 0.0),
+                               s2_floor=S2_FLOOR.get(key, 0.0),
                                chi2_ratio_log=chi2_competitor(
                                    a.chi2, len(a.inliers),
                                    [(b.chi2_against(a), len(b.inliers))
                                     for b in others if b is not a]))
-        scale = math.nan if res is None else covariance_scale(metric, res.chi2, res.n_residuals,
+        scale = math.nan if res is None else covariance_scale(key, res.chi2, res.n_residuals,
                                                               n_refined)
-        return confidence_probability(metric, ev), {
+        return confidence_probability(key, ev), {
             **ev, "s2": s2, "cov_scale": scale, "n_refined": float(n_refined),
             "iou_competitor": float(_iou_competitor(a, others))}, cov
 

@@ -138,7 +138,9 @@ class LocalizationOptions:
         inlier_iou: a detection is an inlier of a pose when the IoU (intersection over union,
             in [0, 1]) of its ellipse and its assigned projected ellipsoid is >= this.
         min_inliers: minimum number of inlier detections (>= 2) for a pose to be accepted.
-        use_sigma: weight each detection's cost by ``sigma^-1`` (paper eq. 8) when it has one.
+        use_sigma: weight each detection's cost by ``sigma^-1`` (paper eq. 8). ``localize()``
+            weights only when every detection has a sigma, else all weights are 1; the
+            covariance and confidence are calibrated for either (``confidence.calibration_key``).
         robust: robust kernel of the refinement, ``None`` or one of :data:`ROBUST_KERNELS`.
         robust_scale: kernel scale (in units of the metric's residual); ``None`` = the
             refinement module's documented default. Only allowed with ``robust``.
