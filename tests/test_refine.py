@@ -447,7 +447,10 @@ def test_deadline_passed_before_the_relaid_solve_skips_it(monkeypatch):
 def test_overlap_metrics_stop_on_a_small_accepted_decrease(monkeypatch):
     """iou on noisy detections: LM creeps at the non-smooth optimum, so refine stops after an
     accepted iteration that decreased the error by < OVERLAP_RELATIVE_ERROR_TOL: converged (not
-    capped), moved from the start, and close to where a long solve without that rule ends."""
+    capped), moved from the start, and close to where a long solve without that rule ends: its
+    cost within 3 % (that optimum lies in a flat valley: here 265 creeping iterations lower
+    the cost by 2.4 % and move the camera 1.2 cm) and its position within 2 cm, below the
+    noise's error (3-4 cm)."""
     import sys
 
     refine_module = sys.modules[refine.__module__]
@@ -466,7 +469,8 @@ def test_overlap_metrics_stop_on_a_small_accepted_decrease(monkeypatch):
     moved = np.linalg.norm(res.world_from_camera[:3, 3] - start[:3, 3])
     gap = np.linalg.norm(res.world_from_camera[:3, 3] - long.world_from_camera[:3, 3])
     assert moved > 0.01  # the start is 5 cm off
-    assert gap < 0.01, (gap, long.status, long.iterations)  # the noise error is ~cm
+    assert res.total_error <= 1.03 * long.total_error, (res.total_error, long.total_error)
+    assert gap < 0.02, (gap, long.status, long.iterations)
 
 
 @pytest.mark.parametrize("metric", ["level_set", "bbox", "wasserstein", "algebraic"])
