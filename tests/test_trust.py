@@ -139,7 +139,9 @@ def test_calibration_does_not_regress_on_held_out_frames(metric, noisy, with_sig
     weights, their own calibration key). Tolerances are wide for the sample size: mean NEES
     over frames within 20 cm in [2.5, 14] (the bench reports [4, 9] on 100+ frames), and the
     confidence's mean over localized answers within 0.2 of the observed success rate (10 cm
-    and 5 deg)."""
+    and 5 deg). Without sigma the mean NEES may reach 25: the bench's unit-weight NEES spreads
+    from ~2 at 5 cm to ~15 at 20 cm (a detection with a large error has no sigma to flag it, so
+    the tail is not in the covariance; docs/results.md, "Trust")."""
     config = EVAL.with_(**NOISY) if noisy else EVAL
     ne, conf, ok = [], [], []
     for i in range(0, 108, 9):
@@ -157,7 +159,7 @@ def test_calibration_does_not_regress_on_held_out_frames(metric, noisy, with_sig
             if r.covariance is not None and pos <= 0.2:
                 ne.append(nees(r.world_from_camera, POSES[i], r.covariance))
     assert len(ne) >= 10, len(ne)
-    assert 2.5 <= float(np.mean(ne)) <= 14.0, np.mean(ne)
+    assert 2.5 <= float(np.mean(ne)) <= (14.0 if with_sigma else 25.0), np.mean(ne)
     assert abs(float(np.mean(conf)) - float(np.mean(ok))) <= 0.2, (np.mean(conf), np.mean(ok))
 
 
