@@ -64,6 +64,7 @@ __all__ = [
     "moment_ellipse",
     "simulate_frame",
     "simulate_frames",
+    "simulate_gravity",
     "sunflower_disk",
 ]
 
@@ -346,3 +347,23 @@ def simulate_frames(
     gen = np.random.default_rng(seed)
     compiled = scene_map if isinstance(scene_map, CompiledMap) else compile_map(scene_map)
     return [simulate_frame(compiled, camera, T, gen, config) for T in poses_world_from_camera]
+
+
+def simulate_gravity(world_from_camera: np.ndarray, up_world: np.ndarray, sigma_deg: float,
+                     gen: np.random.Generator | int) -> np.ndarray:
+    """What an IMU reports as gravity for a camera at ``world_from_camera`` (OpenCV axes): the
+    true down direction in the camera, ``R^T (-up_world)``, tilted by a Gaussian angle of
+    ``sigma_deg`` (degrees) along each of the two axes perpendicular to it. Returns (3,), unit
+    length, camera axes."""
+    gen = np.random.default_rng(gen) if not isinstance(gen, np.random.Generator) else gen
+    up = np.asarray(up_world, dtype=float)
+    down = -(np.asarray(world_from_camera, dtype=float)[:3, :3].T @ (up / np.linalg.norm(up)))
+    a = np.cross(down, [1.0, 0.0, 0.0] if abs(down[0]) < 0.9 else [0.0, 1.0, 0.0])
+    a /= np.linalg.norm(a)
+    b = np.cross(down, a)
+    w = math.radians(sigma_deg) * (gen.normal() * a + gen.normal() * b)  # rotation vector
+    angle = float(np.linalg.norm(w))
+    if angle == 0.0:
+        return down
+    k = w / angle  # Rodrigues: k is perpendicular to ``down``
+    return math.cos(angle) * down + math.sin(angle) * np.cross(k, down)

@@ -50,7 +50,7 @@ import numpy as np
 
 from bench.chess_eval import json_safe, load_chess_world_from_camera, pose_errors
 from bench.reference_data import REPO_ROOT, load_chess_map, perturb_pose
-from bench.simulate import SimulationConfig, simulate_frame
+from bench.simulate import SimulationConfig, simulate_frame, simulate_gravity
 from factors.geometry import Camera, Ellipse, Ellipsoid
 from maps.compiled import compile_map
 from maps.model import MapObject, SceneMap
@@ -65,7 +65,13 @@ from service.localization.confidence import (
     student_t_factor,
 )
 from service.localization.pipeline import localize
-from service.localization.types import METRICS, Detection, LocalizationOptions, PosePrior
+from service.localization.types import (
+    METRICS,
+    Detection,
+    Gravity,
+    LocalizationOptions,
+    PosePrior,
+)
 
 SLOW = ("iou", "giou")
 OPERATING_POINTS_M = (0.05, 0.10, 0.20)
@@ -85,6 +91,9 @@ ECE_TARGET = 0.05
 #: The refined metrics also run without sigma weights (``use_sigma=False``, their own
 #: calibration key) on every N-th frame.
 UNIT_WEIGHTS_STRIDE = 2
+#: The simulated IMU's gravity error (degrees per tilt axis) of the reduced frames' gravity runs
+#: (``Gravity``'s default declared sigma, 2 deg, is larger: an AR framework's is ~1 deg).
+IMU_SIGMA_DEG = 1.0
 #: The detector model of the report's second noise setting (twice the default noise).
 NOISY = dict(center_noise=0.08, axis_log_noise=0.12, angle_noise_rad=math.radians(8.0))
 CALIBRATION_PATH = REPO_ROOT / "service" / "localization" / "calibration.py"
@@ -135,12 +144,14 @@ def reduce_frame(detections, object_ids, n: int, rng: np.random.Generator):
 
 def run_frames(seed: int, metrics: tuple[str, ...], stride: int, slow_stride: int,
                config: SimulationConfig, log=print, min_confidence: float | None = None,
-               setting: str = "default", unit_stride: int = UNIT_WEIGHTS_STRIDE) -> dict:
+               setting: str = "default", unit_stride: int = UNIT_WEIGHTS_STRIDE,
+               with_gravity: bool = False) -> dict:
     """Experiments 1-3 on one seed: records per calibration key (the metric, and on every
     ``unit_stride``-th frame the refined metrics without sigma weights, ``use_sigma=False``:
     ``confidence.calibration_key``), and the reduced frames (``min_confidence``: the option
     used, 0 when tuning so every verified pose is seen; ``setting``: the detector setting's
-    name, kept in each record)."""
+    name, kept in each record; ``with_gravity``: each reduced frame also localized with a
+    simulated IMU gravity, :data:`IMU_SIGMA_DEG`, declared with the default sigma)."""
     cm = compile_map(load_chess_map())
     camera, poses, _ = load_chess_world_from_camera()
     runs = [(m, True) for m in metrics] + [(m, False) for m in metrics if m != "none"]
@@ -181,6 +192,14 @@ def run_frames(seed: int, metrics: tuple[str, ...], stride: int, slow_stride: in
             rec["candidate_pos"], rec["candidate_rot"] = pose_errors(
                 None if top is None else top.world_from_camera, poses[i])
             rec["candidate_confidence"] = None if top is None else top.confidence
+            if with_gravity:  # the same request with the IMU's gravity (a veto only)
+                g = Gravity(simulate_gravity(poses[i], cm.scene_map.up, IMU_SIGMA_DEG,
+                                             seed * 100_000 + 90_000 + 10 * i + n))
+                rg = localize(dets, cm, camera, options("level_set",
+                                                        min_confidence=min_confidence), None, g)
+                rec["gravity"] = {"localized": bool(rg.localized), "reason": rg.reason,
+                                  "pos": pose_errors(rg.world_from_camera if rg.localized
+                                                     else None, poses[i])[0]}
             out["reduced"][str(n)].append(rec)
     log(f"seed {seed}: {len(poses[::stride])} frames in {time.perf_counter() - t0:.0f} s")
     return out
@@ -403,6 +422,17 @@ def reduced_table(reduced: dict) -> dict:
             "ambiguous": sum(r["reason"] == "ambiguous" for r in rows),
             "good": len(good_before),
         }
+        grav = [r for r in rows if "gravity" in r]
+        if grav:  # the same frames with the IMU's gravity
+            out[n]["with_gravity"] = {
+                "false_accept_rate": float(np.mean([r["gravity"]["localized"]
+                                                    and r["gravity"]["pos"] > 0.5
+                                                    for r in grav])),
+                "kept_of_good": float(np.mean([r["gravity"]["localized"] for r in grav
+                                               if r["best_pos"] <= 0.10]))
+                if any(r["best_pos"] <= 0.10 for r in grav) else None,
+                "gravity_mismatch": sum(r["gravity"]["reason"] == "gravity_mismatch"
+                                        for r in grav)}
     return out
 
 
@@ -785,6 +815,19 @@ def markdown(res: dict, command: str) -> str:
                 f"| {name} | {n} | {r['frames']} | {r['localized']} | {r['ambiguous']} | "
                 f"{r['false_accept_rate']:.3f} | {r['false_accept_rate_without_check']:.3f} | "
                 f"{r['good']} | {r['kept_of_good']:.3f} | {r['kept_of_good_as_candidate']:.3f} |")
+    lines += ["", "With the device's gravity direction (`gravity`, a veto of tilted answers: "
+              "`service/localization/gravity.py`): the same requests with a simulated IMU "
+              f"gravity ({IMU_SIGMA_DEG:g} deg per tilt axis, declared with the default sigma "
+              "2 deg). *Vetoed*: answers `gravity_mismatch`.", "",
+              "| set | detections | false accepts without -> with gravity | kept without -> "
+              "with gravity | vetoed |", "|---|---|---|---|---|"]
+    for name, table in (("default", res["reduced"]), ("noisy", res["reduced_noisy"])):
+        for n, r in table.items():
+            g = r.get("with_gravity")
+            if g is not None:
+                lines.append(f"| {name} | {n} | {r['false_accept_rate']:.3f} -> "
+                             f"{g['false_accept_rate']:.3f} | {r['kept_of_good']:.3f} -> "
+                             f"{g['kept_of_good']:.3f} | {g['gravity_mismatch']} |")
     ts = list(next(iter(res["operating_points"].values())))
     lines += ["", "What a client trades with `min_confidence` (same frames; false accepts / "
               "good frames kept, of the frames and good frames of each set; default "
@@ -865,10 +908,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"wrote {CALIBRATION_PATH}")
         return 0
     seeds = [int(s) for s in args.seeds.split(",")]
-    data = merge_runs([run_frames(s, metrics, args.stride, args.slow_stride, cfg)
-                       for s in seeds])
+    data = merge_runs([run_frames(s, metrics, args.stride, args.slow_stride, cfg,
+                                  with_gravity=True) for s in seeds])
     noisy = run_frames(args.noisy_seed, metrics, args.noisy_stride, args.slow_stride,
-                       cfg.with_(**NOISY), setting="noisy")
+                       cfg.with_(**NOISY), setting="noisy", with_gravity=True)
     camera, _, _ = load_chess_world_from_camera()
     rel = {"pooled": reliability(confidence_rows(data, unit_weights=False)),
            "noisy (pooled)": reliability(confidence_rows(noisy, unit_weights=False)),
@@ -902,6 +945,7 @@ def main(argv: list[str] | None = None) -> int:
         from bench.results_doc import update_results_section
 
         reliability_plot({k: rel[k] for k in ("pooled", "noisy (pooled)", "level_set",
+                                              "without sigma (pooled, both settings)",
                                               "candidates of unlocalized 2-3 detection frames")},
                          RELIABILITY_PNG)
         update_results_section("trust", markdown(res, command))

@@ -38,6 +38,7 @@ from sdk.models import (
     BatchLocalizeResponse,
     Camera,
     Detection,
+    Gravity,
     LocalizeOptions,
     LocalizeRequest,
     LocalizeResponse,
@@ -230,21 +231,22 @@ class _Base:
         camera: Camera | Mapping[str, Any] | None,
         detections: Sequence[Detection | Mapping[str, Any]] | None,
         prior: PosePrior | Mapping[str, Any] | None,
+        gravity: Gravity | Mapping[str, Any] | None,
         options: LocalizeOptions | Mapping[str, Any] | None,
         frame_id: str | None,
         timestamp: float | None,
     ) -> LocalizeRequest:
         if request is not None:
-            if any(x is not None for x in (camera, detections, prior, options, frame_id,
-                                           timestamp)):
+            if any(x is not None for x in (camera, detections, prior, gravity, options,
+                                           frame_id, timestamp)):
                 raise ValueError("localize: give either 'request' or the separate fields")
             return (request if isinstance(request, LocalizeRequest)
                     else LocalizeRequest.model_validate(request))
         if camera is None or detections is None:
             raise ValueError("localize: 'camera' and 'detections' are required")
         fields: dict[str, Any] = {"camera": camera, "detections": list(detections)}
-        for name, value in (("prior", prior), ("options", options), ("frame_id", frame_id),
-                            ("timestamp", timestamp)):
+        for name, value in (("prior", prior), ("gravity", gravity), ("options", options),
+                            ("frame_id", frame_id), ("timestamp", timestamp)):
             if value is not None:
                 fields[name] = value
         return LocalizeRequest.model_validate(fields)
@@ -476,6 +478,7 @@ class QuadLocClient(_Base):
         camera: Camera | Mapping[str, Any] | None = None,
         detections: Sequence[Detection | Mapping[str, Any]] | None = None,
         prior: PosePrior | Mapping[str, Any] | None = None,
+        gravity: Gravity | Mapping[str, Any] | None = None,
         options: LocalizeOptions | Mapping[str, Any] | None = None,
         frame_id: str | None = None,
         timestamp: float | None = None,
@@ -484,8 +487,8 @@ class QuadLocClient(_Base):
         """Localize one frame against ``map_id`` (its latest version, or ``map_version``):
         pass a :class:`LocalizeRequest` or its fields. Invalid input raises
         ``pydantic.ValidationError`` (a ``ValueError`` naming the field) before sending."""
-        req = self._localize_request(request, camera, detections, prior, options, frame_id,
-                                     timestamp)
+        req = self._localize_request(request, camera, detections, prior, gravity, options,
+                                     frame_id, timestamp)
         return LocalizeResponse.model_validate(
             self._json(self._send(self._localize_call(map_id, req, map_version)))
         )
@@ -620,13 +623,14 @@ class AsyncQuadLocClient(_Base):
         camera: Camera | Mapping[str, Any] | None = None,
         detections: Sequence[Detection | Mapping[str, Any]] | None = None,
         prior: PosePrior | Mapping[str, Any] | None = None,
+        gravity: Gravity | Mapping[str, Any] | None = None,
         options: LocalizeOptions | Mapping[str, Any] | None = None,
         frame_id: str | None = None,
         timestamp: float | None = None,
         map_version: int | None = None,
     ) -> LocalizeResponse:
-        req = self._localize_request(request, camera, detections, prior, options, frame_id,
-                                     timestamp)
+        req = self._localize_request(request, camera, detections, prior, gravity, options,
+                                     frame_id, timestamp)
         return LocalizeResponse.model_validate(
             self._json(await self._send(self._localize_call(map_id, req, map_version)))
         )

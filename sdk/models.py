@@ -45,6 +45,7 @@ __all__ = [
     "Covariance",
     "Detection",
     "Ellipse",
+    "Gravity",
     "Inlier",
     "LocalizeOptions",
     "LocalizeRequest",
@@ -229,6 +230,25 @@ class PosePrior(BaseModel):
                    convention=convention)
 
 
+class Gravity(BaseModel):
+    """The gravity direction the device measures (e.g. ARKit/ARCore/CoreMotion gravity): the
+    direction gravity pulls (DOWN) in the camera axes ``convention``, any positive length, with
+    its angular uncertainty ``sigma_deg`` (1 sigma per tilt axis, default 2). An answer whose
+    tilt disagrees with it comes back ``localized: false``, reason ``gravity_mismatch``. An
+    accelerometer at rest measures the opposite (up): negate it."""
+
+    model_config = _REQUEST
+    direction: FloatList = Field(min_length=3, max_length=3)
+    sigma_deg: Float | None = Field(default=None, gt=0, le=30)
+    convention: Convention = "opencv"
+
+    @model_validator(mode="after")
+    def _nonzero(self) -> Gravity:
+        if sum(x * x for x in self.direction) <= 1e-18:
+            raise ValueError("direction: must not be the zero vector")
+        return self
+
+
 class LocalizeOptions(BaseModel):
     """Solver options. ``None`` fields are not sent: the server's defaults apply (level-set
     metric, RANSAC budget 300, inlier IoU 0.2, sigma weighting on, no robust kernel, OpenCV
@@ -258,6 +278,7 @@ class LocalizeRequest(BaseModel):
     camera: Camera
     detections: list[Detection]
     prior: PosePrior | None = None
+    gravity: Gravity | None = None
     frame_id: str | None = None
     timestamp: Float | None = None
     options: LocalizeOptions = Field(default_factory=LocalizeOptions)

@@ -12,6 +12,8 @@ from factors.names import METRIC_NAMES, ROBUST_KERNELS
 __all__ = [
     "AMBIGUITY_POLICIES",
     "COVARIANCE_ORDER",
+    "GRAVITY_DEFAULT_SIGMA_DEG",
+    "GRAVITY_MAX_SIGMA_DEG",
     "MAX_BATCH_FRAMES",
     "MAX_DETECTIONS",
     "MAX_PIXELS",
@@ -42,6 +44,10 @@ UNKNOWN_LABEL_POLICIES: tuple[str, ...] = ("ignore", "error")
 AMBIGUITY_POLICIES: tuple[str, ...] = ("not_localized", "best")
 #: ``LocalizationResult.pose_source`` values: the refined client prior or the RANSAC search.
 POSE_SOURCES: tuple[str, ...] = ("prior", "ransac")
+#: Largest accepted gravity ``sigma_deg`` (a coarser direction does not separate poses).
+GRAVITY_MAX_SIGMA_DEG = 30.0
+#: Default gravity ``sigma_deg``: an AR framework's gravity (IMU, filtered) is better than ~1 deg.
+GRAVITY_DEFAULT_SIGMA_DEG = 2.0
 #: Every ``LocalizationResult.reason`` when ``localized`` is false.
 REASONS: tuple[str, ...] = (
     "too_few_detections",
@@ -51,4 +57,5 @@ REASONS: tuple[str, ...] = (
     "ambiguous",
     "low_confidence",
     "time_budget_exceeded",
+    "gravity_mismatch",
 )

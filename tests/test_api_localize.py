@@ -135,6 +135,30 @@ def test_prior_in_either_convention(client: TestClient) -> None:
     assert q  # (matrix form used above)
 
 
+def test_gravity_in_either_convention(client: TestClient) -> None:
+    """The true down direction (any length, OpenCV or OpenGL camera axes) leaves the answer as
+    without; one 30 deg off answers ``gravity_mismatch`` with the candidate in
+    ``alternatives``."""
+    down_cv = -(TRUTH[:3, :3].T @ np.array([0.0, 0.0, 1.0]))  # the Chess map's up is +Z
+    plain = client.post(URL, json=_frame()).json()
+    a = client.post(URL, json=_frame(gravity={"direction": (9.81 * down_cv).tolist()})).json()
+    b = client.post(URL, json=_frame(gravity={"direction": (FLIP[:3, :3] @ down_cv).tolist(),
+                                              "convention": "opengl"})).json()
+    assert plain["localized"] and a["localized"] and b["localized"]
+    for r in (a, b):
+        np.testing.assert_allclose(r["world_from_camera"]["matrix"],
+                                   plain["world_from_camera"]["matrix"], atol=1e-12)
+    c, s = math.cos(math.radians(30.0)), math.sin(math.radians(30.0))
+    axis = np.cross(down_cv, [0.0, 0.0, 1.0])
+    axis /= np.linalg.norm(axis)
+    tilted = c * down_cv + s * np.cross(axis, down_cv)
+    off = client.post(URL, json=_frame(gravity={"direction": tilted.tolist(),
+                                                "sigma_deg": 1.0})).json()
+    assert not off["localized"] and off["reason"] == "gravity_mismatch"
+    np.testing.assert_allclose(off["alternatives"][0]["world_from_camera"]["matrix"],
+                               plain["world_from_camera"]["matrix"], atol=1e-12)
+
+
 def test_not_localized_is_a_200(client: TestClient) -> None:
     one = _frame(detections=LOCALIZE_EXAMPLE["detections"][:1])
     r = client.post(URL, json=one)
@@ -181,6 +205,13 @@ BAD_INPUTS = [
                                "covariance": (-np.eye(6)).tolist()}), 422, "prior.covariance"),
     (lambda b: b.update(prior={"world_from_camera": {"matrix": TRUTH.tolist()},
                                "covariance": [[1.0] * 5] * 6}), 422, "prior.covariance"),
+    (lambda b: b.update(gravity={"direction": [0, 0, 0]}), 422, "gravity"),
+    (lambda b: b.update(gravity={"direction": [0, 1]}), 422, "gravity.direction"),
+    (lambda b: b.update(gravity={"direction": [0, 1, 0], "sigma_deg": 0}), 422,
+     "gravity.sigma_deg"),
+    (lambda b: b.update(gravity={"direction": [0, 1, 0], "convention": "arkit"}), 422,
+     "gravity.convention"),
+    (lambda b: b.update(gravity={"direction": [0, 1, 0], "up": True}), 422, "gravity.up"),
     (lambda b: b.update(options={"unknown_label_policy": "error"},
                         detections=[*b["detections"], {**b["detections"][0], "label": "Sofa"}]),
      422, f"detections[{len(LOCALIZE_EXAMPLE['detections'])}].label"),
@@ -248,9 +279,9 @@ def test_time_budget_is_capped_by_the_server(tmp_path: Path, monkeypatch) -> Non
     seen = []
     real = solver_module.localize
 
-    def spy(detections, scene_map, camera, options, prior=None):
+    def spy(detections, scene_map, camera, options, prior=None, gravity=None):
         seen.append(options.time_budget_ms)
-        return real(detections, scene_map, camera, options, prior)
+        return real(detections, scene_map, camera, options, prior, gravity)
 
     monkeypatch.setattr(solver_module, "localize", spy)
     with TestClient(make_test_app(tmp_path, solve_time_budget_ms=250.0)) as c:
@@ -409,9 +440,9 @@ def test_batch_total_budget_answers_the_rest_not_localized(tmp_path: Path, monke
     real = solver_module.localize
     budgets = []
 
-    def slow(detections, scene_map, camera, options, prior=None):
+    def slow(detections, scene_map, camera, options, prior=None, gravity=None):
         budgets.append(options.time_budget_ms)
-        result = real(detections, scene_map, camera, options, prior)
+        result = real(detections, scene_map, camera, options, prior, gravity)
         clock["now"] += 0.2  # each solve takes 200 ms of the batch's clock
         return result
 

@@ -21,7 +21,15 @@ import pytest
 
 import sdk
 from sdk import errors as errs
-from sdk.models import Camera, Detection, Ellipse, LocalizeOptions, LocalizeRequest, PosePrior
+from sdk.models import (
+    Camera,
+    Detection,
+    Ellipse,
+    Gravity,
+    LocalizeOptions,
+    LocalizeRequest,
+    PosePrior,
+)
 from sdk.retry import RetryPolicy, parse_retry_after
 
 REPO = Path(__file__).resolve().parents[1]
@@ -264,6 +272,7 @@ def test_localize_request_wire_format_and_headers():
         "my map/1", camera=CAMERA, detections=DETS, frame_id="f1", timestamp=12.5,
         options=LocalizeOptions(metric="wasserstein", output_convention="opengl"),
         prior=PosePrior.from_matrix(np.eye(4), np.eye(6) * 0.01), map_version=3,
+        gravity=Gravity(direction=np.array([0.0, 9.8, 0.5]), sigma_deg=1.5),
     )
     req = rec.requests[0]
     assert req.method == "POST"
@@ -280,6 +289,8 @@ def test_localize_request_wire_format_and_headers():
                                             "ymax": 90.0}
     assert body["options"] == {"metric": "wasserstein", "output_convention": "opengl"}
     assert body["prior"]["world_from_camera"]["matrix"] == np.eye(4).tolist()
+    assert body["gravity"] == {"direction": [0.0, 9.8, 0.5], "sigma_deg": 1.5,
+                               "convention": "opencv"}
     assert body["frame_id"] == "f1" and body["timestamp"] == 12.5
     # response parsing: numpy helpers, unknown fields tolerated
     assert answer.frame_id == "f1" and answer.inliers[0].object_id == "3"
@@ -302,6 +313,10 @@ def test_invalid_requests_fail_before_sending():
                                      "ellipse": {"cx": 1, "cy": 1, "a": 1, "b": 1}}])
     with pytest.raises(pydantic.ValidationError, match="metric"):
         LocalizeOptions(metric="l2")
+    with pytest.raises(pydantic.ValidationError, match="zero vector"):
+        Gravity(direction=[0, 0, 0])
+    with pytest.raises(pydantic.ValidationError, match="sigma_deg"):
+        Gravity(direction=[0, 1, 0], sigma_deg=0)
     with pytest.raises(ValueError, match="'camera' and 'detections' are required"):
         client.localize("chess", detections=DETS)
     with pytest.raises(ValueError, match="map: contains NaN"):
@@ -446,6 +461,7 @@ def test_sdk_requests_validate_against_the_server_schema():
     req = LocalizeRequest(
         camera=CAMERA, detections=DETS, frame_id="x", timestamp=1.0,
         prior=PosePrior.from_matrix(np.eye(4), np.eye(6) * 0.01, convention="opengl"),
+        gravity=Gravity(direction=[0, 1, 0.2], sigma_deg=3, convention="opengl"),
         options=LocalizeOptions(metric="bhattacharyya", ransac_max_hypotheses=50, inlier_iou=0.3,
                                 use_sigma=False, robust="huber", robust_scale=1.5,
                                 output_convention="opengl", seed=3, time_budget_ms=200,
@@ -454,6 +470,8 @@ def test_sdk_requests_validate_against_the_server_schema():
     )
     server = schemas.LocalizeRequest.model_validate_json(json.dumps(req.to_wire()))
     assert server.options.metric == "bhattacharyya" and server.prior.convention == "opengl"
+    assert server.gravity.convention == "opengl" and server.gravity.sigma_deg == 3
+    assert set(schemas.GravityIn.model_fields) == set(Gravity.model_fields)
     # every option the server knows is expressible from the SDK, and vice versa
     assert set(schemas.LocalizeOptionsIn.model_fields) == set(LocalizeOptions.model_fields)
     assert set(schemas.DetectionIn.model_fields) == set(Detection.model_fields)

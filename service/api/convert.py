@@ -29,6 +29,7 @@ from service.api.schemas import (
     CameraIn,
     CovarianceOut,
     DetectionIn,
+    GravityIn,
     InlierOut,
     LocalizeOptionsIn,
     LocalizeResponse,
@@ -38,6 +39,7 @@ from service.api.schemas import (
 )
 from service.localization.types import (
     Detection,
+    Gravity,
     InlierMatch,
     LocalizationInputError,
     LocalizationOptions,
@@ -52,6 +54,7 @@ __all__ = [
     "convert_pose",
     "covariance_out",
     "detections_from_request",
+    "gravity_from_request",
     "inliers_out",
     "options_from_request",
     "pose_out",
@@ -121,6 +124,17 @@ def prior_from_request(prior: PosePriorIn | None) -> PosePrior | None:
     if np.all(np.isfinite(T)):
         T = convert_pose(T, prior.convention, "opencv")
     return PosePrior(T, cov)
+
+
+def gravity_from_request(gravity: GravityIn | None) -> Gravity | None:
+    """Wire gravity (any convention) -> :class:`Gravity` in OpenCV axes (``F`` maps a camera
+    vector between the conventions, both ways)."""
+    if gravity is None:
+        return None
+    g = np.array(gravity.direction, dtype=float)
+    if gravity.convention != "opencv":
+        g = OPENGL_FROM_OPENCV @ g
+    return Gravity(g, gravity.sigma_deg)
 
 
 #: The wire options that are :class:`LocalizationOptions` fields of the same name and meaning.

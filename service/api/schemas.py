@@ -27,6 +27,8 @@ from factors.names import check_robust
 from service.limits import (
     AMBIGUITY_POLICIES,
     COVARIANCE_ORDER,
+    GRAVITY_DEFAULT_SIGMA_DEG,
+    GRAVITY_MAX_SIGMA_DEG,
     MAX_BATCH_FRAMES,
     MAX_DETECTIONS,
     MAX_PIXELS,
@@ -49,6 +51,7 @@ __all__ = [
     "CovarianceOut",
     "DetectionIn",
     "EllipseIn",
+    "GravityIn",
     "HealthOut",
     "InlierOut",
     "LocalizeOptionsIn",
@@ -220,6 +223,30 @@ class PosePriorIn(_Model):
                                    description="Camera axes of this prior (opencv or opengl).")
 
 
+class GravityIn(_Model):
+    """Optional gravity direction measured by the client (e.g. ARKit/ARCore/CoreMotion gravity):
+    an answer whose tilt (roll, pitch) disagrees with it is not localized (reason
+    `gravity_mismatch`). The map's `up_axis` gives the world's up."""
+
+    direction: list[float] = Field(
+        min_length=3, max_length=3,
+        description="Direction gravity pulls (DOWN, toward the ground) in the camera axes of "
+                    "`convention`; any positive length. An accelerometer at rest measures the "
+                    "opposite (up): negate it.")
+    sigma_deg: float = Field(default=GRAVITY_DEFAULT_SIGMA_DEG, gt=0, le=GRAVITY_MAX_SIGMA_DEG,
+                             description="Angular uncertainty (1 sigma per tilt axis, degrees).")
+    convention: Convention = Field(default="opencv",
+                                   description="Camera axes of `direction` (opencv or opengl).")
+
+    @model_validator(mode="after")
+    def _usable(self) -> GravityIn:
+        if not all(math.isfinite(x) and abs(x) <= 1e6 for x in self.direction):
+            raise ValueError("'direction' entries must be finite and within +-1e6")
+        if math.hypot(*self.direction) <= 1e-9:
+            raise ValueError("'direction' must not be the zero vector")
+        return self
+
+
 class LocalizeOptionsIn(_Model):
     """Solver options; omitted fields take the server defaults (shown)."""
 
@@ -275,6 +302,7 @@ class LocalizeRequest(_Model):
     camera: CameraIn
     detections: list[DetectionIn] = Field(max_length=MAX_DETECTIONS)
     prior: PosePriorIn | None = None
+    gravity: GravityIn | None = None
     frame_id: str | None = Field(default=None, max_length=256, description="Echoed back.")
     timestamp: float | None = Field(default=None, description="Echoed back (client clock, s).")
     options: LocalizeOptionsIn = Field(default_factory=LocalizeOptionsIn)
@@ -337,8 +365,8 @@ class LocalizeResponse(BaseModel):
     reason: str | None = Field(
         description="Why not localized: too_few_detections, no_label_match, "
                     "no_hypothesis_above_inlier_threshold, refinement_diverged, "
-                    "time_budget_exceeded, ambiguous, low_confidence, numerical_failure; "
-                    "null when localized.")
+                    "time_budget_exceeded, ambiguous, low_confidence, gravity_mismatch, "
+                    "numerical_failure; null when localized.")
     world_from_camera: PoseOut | None
     covariance: CovarianceOut | None
     confidence: float = Field(
@@ -358,7 +386,8 @@ class LocalizeResponse(BaseModel):
                                   "'ransac'; null when not localized.")
     alternatives: list[AlternativeOut] = Field(
         default_factory=list,
-        description="Verified but not localized (ambiguous, low_confidence), or localized with "
+        description="Verified but not localized (ambiguous, low_confidence, gravity_mismatch), "
+                    "or localized with "
                     "on_ambiguity 'best' on an ambiguous frame: the distinct candidate poses, "
                     "most probable first, each with its probability (`confidence`).")
     map_id: str

@@ -18,6 +18,7 @@ from maps.compiled import CompiledMap
 from service.api.convert import (
     camera_from_request,
     detections_from_request,
+    gravity_from_request,
     options_from_request,
     prior_from_request,
     response_from_result,
@@ -38,7 +39,7 @@ NUMERICAL_FAILURE = "numerical_failure"
 #: Reason of a batch frame skipped because the batch's total budget ran out.
 TIME_BUDGET_EXCEEDED = "time_budget_exceeded"
 #: An input error raised inside ``localize`` is the client's when it names a request field.
-_REQUEST_FIELDS = ("detections", "camera", "prior", "options")
+_REQUEST_FIELDS = ("detections", "camera", "prior", "gravity", "options")
 
 
 def _is_request_field(exc: Exception) -> bool:
@@ -123,6 +124,7 @@ class Solver:
             camera = camera_from_request(frame.camera)
             detections = detections_from_request(frame.detections)
             prior = prior_from_request(frame.prior)
+            gravity = gravity_from_request(frame.gravity)
             options = options_from_request(
                 frame.options,
                 self.max_budget_ms if budget_ms is None else min(self.max_budget_ms, budget_ms))
@@ -136,7 +138,7 @@ class Solver:
                                           start)
             else:
                 response = response_from_result(
-                    localize(detections, compiled, camera, options, prior),
+                    localize(detections, compiled, camera, options, prior, gravity),
                     map_id=compiled.map_id, map_version=compiled.version,
                     convention=frame.options.output_convention, frame_id=frame.frame_id,
                     timestamp=frame.timestamp)

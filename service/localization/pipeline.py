@@ -37,6 +37,7 @@ from service.localization.confidence import (
     is_ambiguous,
     residual_variance,
 )
+from service.localization.gravity import answer_gate_deg, tilt_errors_deg
 from service.localization.ransac import (
     HARD_STOP_FACTOR,
     Hypothesis,
@@ -54,6 +55,7 @@ from service.localization.types import (
     NO_REFINEMENT,
     Alternative,
     Detection,
+    Gravity,
     InlierMatch,
     LocalizationInputError,
     LocalizationOptions,
@@ -66,14 +68,15 @@ __all__ = ["localize", "prior_gate_poses", "refine_pose"]
 
 def _validate(
     detections: Sequence[Detection], scene_map: SceneMap | CompiledMap, camera: Camera,
-    options: LocalizationOptions, prior: PosePrior | None,
+    options: LocalizationOptions, prior: PosePrior | None, gravity: Gravity | None = None,
 ) -> CompiledMap:
     check_detections(detections)
     for name, value, types, what in (
             ("scene_map", scene_map, (SceneMap, CompiledMap), "a SceneMap or CompiledMap"),
             ("camera", camera, Camera, "a Camera"),
             ("options", options, LocalizationOptions, "LocalizationOptions"),
-            ("prior", prior, (PosePrior, type(None)), "a PosePrior or None")):
+            ("prior", prior, (PosePrior, type(None)), "a PosePrior or None"),
+            ("gravity", gravity, (Gravity, type(None)), "a Gravity or None")):
         if not isinstance(value, types):
             raise LocalizationInputError(f"must be {what}, got {type(value).__name__}",
                                          field=name)
@@ -285,6 +288,7 @@ def localize(
     camera: Camera,
     options: LocalizationOptions = LocalizationOptions(),  # noqa: B008 (frozen, immutable)
     prior: PosePrior | None = None,
+    gravity: Gravity | None = None,
 ) -> LocalizationResult:
     """Estimate the camera pose from object detections (see the module docstring).
 
@@ -294,6 +298,10 @@ def localize(
         camera: intrinsics and image size of the image.
         options: :class:`LocalizationOptions`.
         prior: optional client pose prior (``world_from_camera``, optional covariance).
+        gravity: optional measured gravity direction (camera axes): an answer whose tilt
+            disagrees with it is not localized (reason ``gravity_mismatch``; a prior's answer
+            that disagrees leaves the search from scratch to decide); nothing else changes
+            (:mod:`service.localization.gravity`).
 
     Returns:
         :class:`LocalizationResult`; ``localized=False`` with a ``reason`` is a normal answer.
@@ -305,7 +313,7 @@ def localize(
     t0 = time.perf_counter()
     cpu0 = time.thread_time()  # the budget counts this thread's CPU time (budget module)
     timings: dict[str, float] = {}
-    compiled = _validate(detections, scene_map, camera, options, prior)
+    compiled = _validate(detections, scene_map, camera, options, prior, gravity)
     metric = options.metric
     if options.use_sigma and any(d.sigma is None for d in detections):
         # sigma weights only when every detection has a sigma: mixed weights would have no
@@ -328,6 +336,16 @@ def localize(
                                                  cpu_start=cpu0, wall_start=t0))
     evaluated = 0
     n_samples = count_samples(scorer, 2)
+    up_world = compiled.scene_map.up
+
+    def tilt_deg(a: _Answer) -> float:
+        """The answer's tilt error against the measured gravity (degrees; NaN without)."""
+        if gravity is None:
+            return math.nan
+        return float(tilt_errors_deg(a.world_from_camera[:3, :3].T, up_world, gravity))
+
+    def against_gravity(a: _Answer) -> bool:
+        return gravity is not None and not tilt_deg(a) <= answer_gate_deg(gravity)
 
     def assess(a: _Answer, runner_up: _Answer | None, others: Sequence[_Answer] = ()
                ) -> tuple[float, dict[str, float], np.ndarray | None]:
@@ -350,23 +368,26 @@ def localize(
                                     for b in others if b is not a]))
         scale = math.nan if res is None else covariance_scale(key, res.chi2, res.n_residuals,
                                                               n_refined)
-        return confidence_probability(key, ev), {
-            **ev, "s2": s2, "cov_scale": scale, "n_refined": float(n_refined),
-            "iou_competitor": float(_iou_competitor(a, others))}, cov
+        extra = {"s2": s2, "cov_scale": scale, "n_refined": float(n_refined),
+                 "iou_competitor": float(_iou_competitor(a, others))}
+        if gravity is not None:
+            extra["tilt_error_deg"] = tilt_deg(a)
+        return confidence_probability(key, ev), {**ev, **extra}, cov
 
     def finish(a: _Answer, ranked: list[_Answer], ambiguous: bool) -> LocalizationResult:
         runner_up = next((b for b in ranked if b is not a), None)
         conf, ev, cov = assess(a, runner_up, ranked)
         alternatives: tuple[Alternative, ...] = ()
         floor = MIN_CONFIDENCE if options.min_confidence is None else options.min_confidence
-        if ambiguous or conf < floor:  # the candidates, each with its probability
+        reason = ("ambiguous" if ambiguous and options.on_ambiguity == "not_localized"
+                  else "low_confidence" if conf < floor
+                  else "gravity_mismatch" if against_gravity(a) else None)
+        if ambiguous or reason is not None:  # the candidates, each with its probability
             alternatives = tuple(
                 Alternative(b.world_from_camera,
                             assess(b, a if b is not a else runner_up, ranked)[0],
                             len(b.inliers), b.score) for b in ranked)
         timings["total"] = (time.perf_counter() - t0) * 1e3
-        reason = ("ambiguous" if ambiguous and options.on_ambiguity == "not_localized"
-                  else "low_confidence" if conf < floor else None)
         if reason is not None:
             return LocalizationResult(False, reason, None, None, 0.0, (), metric, evaluated,
                                       False, timings, a.status, None, alternatives,
@@ -384,6 +405,8 @@ def localize(
         if len(matches) >= options.min_inliers:
             prior_answer, _ = _refine_and_verify(matches, detections, scorer,
                                                  prior.world_from_camera, options, prior, deadline)
+            if prior_answer is not None and against_gravity(prior_answer):
+                prior_answer = None  # the search from scratch decides
         timings["prior"] = (time.perf_counter() - tp) * 1e3
         if prior_answer is not None:
             prior_answer.source = "prior"
@@ -392,7 +415,7 @@ def localize(
 
     th = time.perf_counter()
     rng = np.random.default_rng(options.seed)
-    outcome = ransac(scorer, compiled.scene_map.up, inlier_iou=options.inlier_iou,
+    outcome = ransac(scorer, up_world, inlier_iou=options.inlier_iou,
                      min_inliers=options.min_inliers,
                      max_hypotheses=options.ransac_max_hypotheses, rng=rng, deadline=deadline)
     evaluated += outcome.hypotheses_evaluated

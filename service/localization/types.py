@@ -23,6 +23,8 @@ from factors.metrics import residual
 from factors.names import check_robust
 from service.limits import (
     AMBIGUITY_POLICIES,
+    GRAVITY_DEFAULT_SIGMA_DEG,
+    GRAVITY_MAX_SIGMA_DEG,
     METRICS,
     NO_REFINEMENT,
     REASONS,
@@ -35,6 +37,7 @@ __all__ = [  # METRICS and ROBUST_KERNELS: service.limits' names, re-exported fo
     "ROBUST_KERNELS",
     "Alternative",
     "Detection",
+    "Gravity",
     "InlierMatch",
     "LocalizationInputError",
     "LocalizationOptions",
@@ -278,6 +281,38 @@ class PosePrior:
 
 
 @dataclass(frozen=True)
+class Gravity:
+    """The direction of gravity measured by the client (e.g. the IMU of an AR framework).
+
+    Attributes:
+        direction_camera: (3,) the direction gravity pulls (DOWN, toward the ground) in the
+            image's OpenCV camera axes (+X right, +Y down, +Z forward); any positive length
+            (normalised here). An accelerometer at rest measures the opposite (up).
+        sigma_deg: its angular uncertainty (1 sigma, degrees), in (0, 30].
+    """
+
+    direction_camera: np.ndarray
+    sigma_deg: float = GRAVITY_DEFAULT_SIGMA_DEG
+
+    def __post_init__(self) -> None:
+        try:
+            g = np.asarray(self.direction_camera, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise _bad("gravity.direction", "must be 3 numbers") from exc
+        if g.shape != (3,) or not np.all(np.isfinite(g)):
+            raise _bad("gravity.direction", f"must be 3 finite numbers, got {g.tolist()}")
+        n = float(np.linalg.norm(g))
+        if not n > 1e-9:
+            raise _bad("gravity.direction", "must not be the zero vector")
+        g = g / n
+        g.setflags(write=False)
+        object.__setattr__(self, "direction_camera", g)
+        if not (_number(self.sigma_deg) and 0.0 < self.sigma_deg <= GRAVITY_MAX_SIGMA_DEG):
+            raise _bad("gravity.sigma_deg",
+                       f"must be in (0, {GRAVITY_MAX_SIGMA_DEG:g}], got {self.sigma_deg!r}")
+
+
+@dataclass(frozen=True)
 class InlierMatch:
     """One inlier of the returned pose.
 
@@ -330,7 +365,8 @@ class LocalizationResult:
             hypothesis qualified), ``ambiguous`` (a distinct pose explains the detections
             comparably well; see ``alternatives``), ``low_confidence`` (the best pose's
             ``confidence`` is below ``options.min_confidence``; its value is kept in
-            ``evidence``).
+            ``evidence``), ``gravity_mismatch`` (every refined candidate's tilt disagrees with
+            the client's measured gravity: :mod:`service.localization.gravity`).
         world_from_camera: 4x4 camera pose in the map frame, or ``None``.
         covariance: 6x6 pose covariance, order ``[omega, v]``, body frame, or ``None`` (not
             localized, ``metric="none"``, or a singular information matrix). Calibrated

@@ -1,0 +1,45 @@
+"""A client's measured gravity direction as a test of candidate poses.
+
+A pose ``camera_from_world = [R | t]`` predicts the map's up axis in the camera as ``R up``;
+the client measures gravity ``g`` (pointing down, OpenCV camera axes), so the camera's measured
+up is ``-g``. Their angle is the pose's **tilt error** (roll and pitch; the rotation about the
+vertical is not observed). An answer is rejected when its tilt error exceeds
+``confidence.TOLERANCE_ROTATION_DEG + GRAVITY_GATE_SIGMAS * sigma``: the tilt error is at most
+the rotation error, and an answer is correct (what ``confidence`` is the probability of) only
+within that rotation tolerance, so beyond the gate it is not a correct answer whatever its fit.
+
+Gravity is a veto only: the search, the refinement, the ambiguity check and the confidence are
+those without it (their calibration holds), and an answer it rejects is reported as
+``gravity_mismatch`` instead of being localized.
+
+Rationale and measurements: ``docs/design/localization.md`` ("Gravity").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from service.localization.confidence import TOLERANCE_ROTATION_DEG
+from service.localization.types import Gravity
+
+__all__ = ["GRAVITY_GATE_SIGMAS", "answer_gate_deg", "tilt_errors_deg"]
+
+#: Sensor sigmas of the gate (per tilt axis).
+GRAVITY_GATE_SIGMAS = 3.0
+
+
+def tilt_errors_deg(camera_from_world: np.ndarray, up_world: np.ndarray,
+                    gravity: Gravity) -> np.ndarray:
+    """Angles (degrees, shape ``(...)``) between the camera's up predicted by poses
+    ``camera_from_world`` (..., 4, 4) (or rotations (..., 3, 3)) from the map's ``up_world``
+    (3,) and the measured up ``-gravity.direction_camera``."""
+    R = np.asarray(camera_from_world, dtype=float)[..., :3, :3]
+    up = np.asarray(up_world, dtype=float)
+    predicted = R @ (up / np.linalg.norm(up))
+    cos = -(predicted @ gravity.direction_camera)
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def answer_gate_deg(gravity: Gravity) -> float:
+    """Largest tilt error (degrees) of a localized answer (module docstring)."""
+    return TOLERANCE_ROTATION_DEG + GRAVITY_GATE_SIGMAS * gravity.sigma_deg
