@@ -557,3 +557,15 @@ def test_batched_covariance_reasons_for_rank_deficient_and_non_finite_informatio
     bad[1, 2, 3] = np.nan
     cov, reason = _batched_covariance(model(bad), np.eye(4), weights)
     assert cov is None and "not finite" in reason
+
+
+def test_the_refine_module_is_reachable_by_its_name():
+    """``import service.localization.refine as m`` gives the module (whose constants the
+    solver reads), not the function of the same name: setting a constant on the function was
+    silently ignored before (a wrong conclusion of an experiment, docs/results.md)."""
+    import types
+
+    import service.localization.refine as m
+
+    assert isinstance(m, types.ModuleType) and m.refine is refine
+    assert hasattr(m, "OVERLAP_NIELSEN_DAMPING")

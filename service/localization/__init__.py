@@ -1,7 +1,10 @@
-"""The localization pipeline: RANSAC initialisation, metric refinement, result types."""
+"""The localization pipeline: RANSAC initialisation, metric refinement, result types.
+
+``refine()`` is not re-exported here: ``service.localization.refine`` is its module (its
+constants, e.g. ``OVERLAP_NIELSEN_DAMPING``, are set there), not the function.
+"""
 
 from service.localization.pipeline import localize
-from service.localization.refine import RefinementResult, refine
 from service.localization.types import (
     Detection,
     InlierMatch,
@@ -18,7 +21,5 @@ __all__ = [
     "LocalizationOptions",
     "LocalizationResult",
     "PosePrior",
-    "RefinementResult",
     "localize",
-    "refine",
 ]
