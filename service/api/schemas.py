@@ -266,7 +266,9 @@ class LocalizeOptionsIn(_Model):
     inlier_iou: float = Field(default=0.2, gt=0, le=1,
                               description="IoU threshold for a detection to be an inlier.")
     min_inliers: Int = Field(default=2, ge=2, le=MAX_DETECTIONS)
-    use_sigma: bool = Field(default=True, description="Weight costs by 1/sigma (paper eq. 8).")
+    use_sigma: bool = Field(
+        default=True, description="Weight costs by 1/sigma (paper eq. 8) when every detection "
+                                  "has a sigma (else every weight is 1; docs/api.md).")
     robust: Literal[ROBUST_KERNELS] | None = Field(  # type: ignore[valid-type]
         default=None, description="Robust kernel of the refinement.")
     robust_scale: float | None = Field(default=None, gt=0, le=1e6,
