@@ -55,6 +55,23 @@ def test_pose_error_tangent_is_gtsam_logmap_in_the_body_frame():
     assert nees(est, est @ expmap_pose3(xi), np.eye(6)) == pytest.approx(xi @ xi, rel=1e-9)
 
 
+def test_every_metric_has_constants_with_and_without_sigma_weights():
+    """``calibration_key``: the metric with sigma weights, ``<metric>:unit_weights`` without
+    (``none`` is never refined); each refined metric has ``k``, ``f`` and a confidence
+    offset under both keys (a refit must not drop one)."""
+    from service.localization.confidence import calibration_key
+    from service.localization.types import METRICS
+
+    assert calibration_key("bbox", True) == "bbox"
+    assert calibration_key("bbox", False) == "bbox:unit_weights"
+    assert calibration_key("none", False) == "none"
+    offsets = calibration.CONFIDENCE_MODELS["refined"]["metric_offset"]
+    for m in METRICS:
+        for key in (calibration_key(m, True), calibration_key(m, False)):
+            assert calibration.COVARIANCE_SCALE[key] > 0 and calibration.S2_FLOOR[key] > 0
+            assert key in offsets or key == "level_set", key
+
+
 def test_chi2_cdf_and_residual_variance():
     for x in (0.01, 0.5, 3.0, 7.8, 20.0):
         assert _chi2_3_cdf(x) == pytest.approx(stats.chi2.cdf(x, 3), abs=1e-12)
