@@ -358,7 +358,6 @@ class PoseResidualModel:
         self.penalty_costs.setflags(write=False)
         self._half_penalty = 0.5 * self.penalty_costs  # where the saturation starts
         self._saturation_floor = float(self._half_penalty.min())
-        self._pen_amp = np.sqrt(self.penalty_costs / self.dim)  # (N,)
 
     # ------------------------------------------------------------------ set-up
     def _penalty_costs(self) -> np.ndarray:
@@ -576,7 +575,7 @@ class PoseResidualModel:
         idx = np.flatnonzero(bad)
         d = self.min_depth_margin - margins[idx]
         ds = self._d_scale[idx]
-        amp = self._pen_amp[idx]
+        amp = np.sqrt(self.penalty_costs[idx] / self.dim)  # residual amplitude sqrt(P_j / dim)
         r[idx] = (amp * (1.0 + d / (d + ds)))[:, None]
         if J is not None:
             cb = c[idx]
