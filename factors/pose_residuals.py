@@ -172,6 +172,20 @@ def _unit_level_set_layout(n_azimuths: int, n_levels: int) -> tuple[np.ndarray, 
     return uv1, uv2
 
 
+@functools.lru_cache(maxsize=64)
+def _camera_constants(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What the dual-conic metrics need of the intrinsics, read-only: ``K`` (3, 3); the (9, 9)
+    map of ``X`` (3x3) to ``K X K^T`` on raveled matrices, ``ravel(K X K^T) = ravel(X) @
+    this``; and ``-K [e_k]x K^-1`` (3, 3, 3), so that ``K (-[e_k]x A) K^T = this_k @ C*``
+    (``C* = K A K^T``). Cached per camera (one per image size and calibration)."""
+    K = camera.K
+    KXKt = (K.T[:, None, :, None] * K.T[None, :, None, :]).reshape(9, 9)
+    neg_KSKinv = -(K @ _SKEW_BASIS @ np.linalg.inv(K))
+    for arr in (K, KXKt, neg_KSKinv):
+        arr.setflags(write=False)
+    return K, KXKt, neg_KSKinv
+
+
 def expmap_pose3(xi: np.ndarray) -> np.ndarray:
     """4x4 matrix of GTSAM's ``Pose3.Expmap(xi)``, ``xi = [omega (rad), v (m)]`` (SE(3) exp:
     rotation :func:`factors.geometry.so3_exp`, translation ``V v``)."""
@@ -264,9 +278,9 @@ class PoseResidualModel:
             )
         if len(detections) == 0:
             raise ValueError("detections must not be empty")
-        for j, pair in enumerate(zip(detections, ellipsoids, strict=True)):
-            for what, v, kind in zip(("detections", "ellipsoids"), pair, (Ellipse, Ellipsoid),
-                                     strict=True):
+        for what, items, kind in (("detections", detections, Ellipse),
+                                  ("ellipsoids", ellipsoids, Ellipsoid)):
+            for j, v in enumerate(items):
                 if not isinstance(v, kind):
                     raise GeometryError(
                         f"{what}[{j}] must be an {kind.__name__}, got {type(v).__name__}")
@@ -291,13 +305,8 @@ class PoseResidualModel:
         self.eager_jacobian = (metric in ANALYTIC_METRICS) if eager_jacobian is None \
             else bool(eager_jacobian)
         self.n = len(self.detections)
-        self._K = camera.K
-        if metric != "level_set":  # the dual-conic metrics
-            # X (3x3) -> K X K^T as a 9x9 matrix on raveled X: ravel(K X K^T) = ravel(X) @ this
-            self._KXKt = (self._K.T[:, None, :, None] * self._K.T[None, :, None, :]).reshape(
-                9, 9)
-            # -K [e_k]x K^-1 (3, 3, 3): K (-[e_k]x A) K^T = this_k @ C* (C* = K A K^T)
-            self._neg_KSKinv = -(self._K @ _SKEW_BASIS @ np.linalg.inv(self._K))
+        if metric != "level_set":  # the dual-conic metrics (and _projections)
+            self._K, self._KXKt, self._neg_KSKinv = _camera_constants(camera)
         # per-object constants (world frame)
         self._centers = np.array([q.center for q in self.ellipsoids])  # (N, 3) m
         axes = np.array([q.axes for q in self.ellipsoids])  # (N, 3) m
@@ -316,6 +325,10 @@ class PoseResidualModel:
         self._cache_key: bytes | None = None
         self._cache_jac = False
         self._cache: PoseEvaluation | None = None
+        #: :meth:`_level_set_frame`'s last pose (bytes) and result: the layout and the first
+        #: LM evaluation share the initial pose, a relayout and LM's last evaluation the result
+        self._frame_key: bytes | None = None
+        self._frame: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
         #: level set: some detection's sampled area was grown for the misalignment at the
         #: initial pose (see :meth:`relayout`); always False for the other metrics
         self.sampling_grown = False
@@ -345,7 +358,6 @@ class PoseResidualModel:
         self.penalty_costs.setflags(write=False)
         self._half_penalty = 0.5 * self.penalty_costs  # where the saturation starts
         self._saturation_floor = float(self._half_penalty.min())
-        self._pen_amp = np.sqrt(self.penalty_costs / self.dim)  # (N,)
 
     # ------------------------------------------------------------------ set-up
     def _penalty_costs(self) -> np.ndarray:
@@ -385,17 +397,16 @@ class PoseResidualModel:
             uv1, uv2 = _unit_level_set_layout(self.options.get("n_azimuths", 6),
                                               self.options.get("n_levels", 4))
             # canonical axes a >= b (the metric's layout does not depend on axis labelling)
-            a, b, ang = metrics.canonical_axes(self._det_params).T
-            ca, sa = np.cos(ang), np.sin(ang)
+            axes_angle = metrics.canonical_axes(self._det_params)
+            ca, sa = np.cos(axes_angle[:, 2]), np.sin(axes_angle[:, 2])
             cam = self.camera
-            # H without s_max: columns 0, 1 scale with s_max, column 2 is K^-1 (c_D, 1)
+            focal = np.array([cam.fx, cam.fy])
+            # H without s_max: columns 0, 1 (R(angle) diag(a, b) over the focal lengths) scale
+            # with s_max, column 2 is K^-1 (c_D, 1)
             H = np.zeros((self.n, 3, 3))
-            H[:, 0, 0] = ca * a / cam.fx
-            H[:, 0, 1] = -sa * b / cam.fx
-            H[:, 1, 0] = sa * a / cam.fy
-            H[:, 1, 1] = ca * b / cam.fy
-            H[:, 0, 2] = (self._det_params[:, 0] - cam.cx) / cam.fx
-            H[:, 1, 2] = (self._det_params[:, 1] - cam.cy) / cam.fy
+            H[:, :2, :2] = (np.stack((ca, -sa, sa, ca), axis=1).reshape(self.n, 2, 2)
+                            * axes_angle[:, None, :2] / focal[:, None])
+            H[:, :2, 2] = (self._det_params[:, :2] - (cam.cx, cam.cy)) / focal
             H[:, 2, 2] = 1.0
             self._ls_const = (M, float(scale), uv1, uv2, H, np.linalg.inv(H))
         self._M, scale, uv1, uv2, H, H_inv = self._ls_const
@@ -408,10 +419,12 @@ class PoseResidualModel:
             # axes over its semi-axes: Phi_D(c_P) = u^2 + v^2 = |(H^-1 A e3)[:2]|^2 / s^2
             # (factors.geometry.level_values; the same layout as factors.metrics, tested).
             p = (H_inv @ a3[:, :, None])[:, :, 0]
-            w = np.where(ok, p[:, 2], 1.0)
+            all_ok = bool(ok.all())  # the usual case: no masking
+            w = p[:, 2] if all_ok else np.where(ok, p[:, 2], 1.0)
             phi = (p[:, 0] * p[:, 0] + p[:, 1] * p[:, 1]) / (w * w)
-            s_max = np.where(ok, np.maximum(scale, metrics.LEVEL_SET_ADAPTIVE_GAIN
-                                            * np.sqrt(phi)), scale)
+            s_max = np.maximum(scale, metrics.LEVEL_SET_ADAPTIVE_GAIN * np.sqrt(phi))
+            if not all_ok:
+                s_max = np.where(ok, s_max, scale)
         else:
             s_max = np.full(self.n, scale)
         self.sampling_scale = s_max  # (N,) outermost level radius per detection
@@ -465,8 +478,10 @@ class PoseResidualModel:
         else:
             ev = self._evaluate_conic(T, jacobian)
         ev = self._saturate(ev)
-        for arr in (ev.residuals, ev.jacobians, ev.valid, ev.depth_margins,
-                    ev.factor_residuals, ev.factor_jacobians):
+        arrays = [ev.residuals, ev.jacobians, ev.valid, ev.depth_margins]
+        if ev.factor_residuals is not ev.residuals:  # saturated rows (else the same arrays)
+            arrays += [ev.factor_residuals, ev.factor_jacobians]
+        for arr in arrays:
             if arr is not None:
                 arr.setflags(write=False)
         self._cache_key, self._cache_jac, self._cache = key, jacobian, ev
@@ -502,13 +517,19 @@ class PoseResidualModel:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """What the level set needs of the camera frame at ``T`` (``world_from_camera``):
         ``d`` (N, 3) camera -> centre in world axes (m), the centres' depths ``z = c_c[2]``
-        (N,) m, ``A e3`` (N, 3) in camera axes (``A = S_c - c_c c_c^T``), depth margins (N,)."""
+        (N,) m, ``A e3`` (N, 3) in camera axes (``A = S_c - c_c c_c^T``), depth margins (N,).
+        Memoised on the pose value (callers must not write into the arrays)."""
+        key = T.tobytes()
+        if key == self._frame_key:
+            return self._frame  # type: ignore[return-value]
         R = T[:3, :3]
         d = self._centers - T[:3, 3]
         z = d @ R[:, 2]
         sr3 = self._S_world @ R[:, 2]  # S_w R e3 (N, 3)
         a3 = (sr3 - d * z[:, None]) @ R  # R^T (S_w R e3 - d z)
-        return d, z, a3, depth_margin(z, sr3 @ R[:, 2])  # z_c - sqrt(S_c[2, 2])
+        frame = d, z, a3, depth_margin(z, sr3 @ R[:, 2])  # z_c - sqrt(S_c[2, 2])
+        self._frame_key, self._frame = key, frame
+        return frame
 
     def _evaluate_level_set(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
         """Level-set residuals and Jacobians of all pairs: ONE batched matmul of per-object
@@ -554,7 +575,7 @@ class PoseResidualModel:
         idx = np.flatnonzero(bad)
         d = self.min_depth_margin - margins[idx]
         ds = self._d_scale[idx]
-        amp = self._pen_amp[idx]
+        amp = np.sqrt(self.penalty_costs[idx] / self.dim)  # residual amplitude sqrt(P_j / dim)
         r[idx] = (amp * (1.0 + d / (d + ds)))[:, None]
         if J is not None:
             cb = c[idx]

@@ -18,6 +18,7 @@ stopping tolerances are what they are, and how the covariance is computed:
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Mapping, Sequence
@@ -135,8 +136,15 @@ class RefinementResult:
     n_residuals: int = 0
 
 
+@functools.lru_cache(maxsize=64)
 def _lm_params(max_iterations: int, metric: str = "level_set") -> gtsam.LevenbergMarquardtParams:
+    """LM parameters of a solve (cached and shared: do not modify; the optimizer copies
+    them)."""
     params = gtsam.LevenbergMarquardtParams()
+    # one pose variable: sequential elimination solves the same dense 6x6 Cholesky as the
+    # default multifrontal one (bit-identical steps, tested) without building a junction
+    # tree: ~2 us less per LM iteration (measured with GTSAM 4.3.0)
+    params.setLinearSolverType("SEQUENTIAL_CHOLESKY")
     params.setMaxIterations(max_iterations)
     params.setRelativeErrorTol(RELATIVE_ERROR_TOL)
     params.setAbsoluteErrorTol(ABSOLUTE_ERROR_TOL)
@@ -247,7 +255,10 @@ def refine(
     else:
         covariance, reason = _covariance(graph, outcome.result)
     ok = outcome.valid
-    chi2 = float(np.sum(outcome.costs[ok] / weights[ok])) if ok.any() else math.inf
+    if ok.all():  # the usual case, without the masked copies
+        chi2 = float(np.sum(outcome.costs / weights))
+    else:
+        chi2 = float(np.sum(outcome.costs[ok] / weights[ok])) if ok.any() else math.inf
     return RefinementResult(
         world_from_camera=outcome.T, covariance=covariance, covariance_reason=reason,
         per_detection_cost=outcome.costs, valid_projection=outcome.valid,
@@ -337,15 +348,16 @@ def _solve(
                 initial_error = math.inf
         result, iterations, T, total_error = initial, 0, T0, initial_error
         status = "diverged"
-    if not (np.all(np.isfinite(T)) and math.isfinite(total_error)):
+    if not (math.isfinite(total_error) and np.isfinite(T).all()):
         result, T, total_error, status = initial, T0, initial_error, "diverged"
 
     ev = model.evaluate(T, jacobian=False)
     valid = ev.valid.copy()
     costs = (ev.residuals * ev.residuals).sum(axis=1)
-    costs[~valid] = np.inf
-    if status != "diverged" and not valid.all():
-        status = "invalid_projection"
+    if not valid.all():
+        costs[~valid] = np.inf
+        if status != "diverged":
+            status = "invalid_projection"
     return _SolveOutcome(T, result, costs, valid, initial_error, total_error, iterations,
                          status)
 
@@ -403,7 +415,7 @@ def _singular_reason(info_eigenvalues: np.ndarray) -> str | None:
     finite, not positive definite, or condition number >= ``INFORMATION_CONDITION_LIMIT``),
     else None."""
     eig = info_eigenvalues
-    if np.all(np.isfinite(eig)) and eig[0] > 0.0 \
+    if np.isfinite(eig).all() and eig[0] > 0.0 \
             and eig[-1] < eig[0] * INFORMATION_CONDITION_LIMIT:
         return None
     pos = eig[np.isfinite(eig) & (eig > 0)]
