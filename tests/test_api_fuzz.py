@@ -286,6 +286,10 @@ _prior = st.fixed_dictionaries(
          "translation_m": st.lists(st.floats(-20, 20), min_size=3, max_size=3)})},
     optional={"covariance": st.floats(1e-8, 10).map(lambda s: (np.eye(6) * s).tolist()),
               "convention": st.sampled_from(["opencv", "opengl"])})
+_gravity = st.fixed_dictionaries(
+    {"direction": st.lists(st.floats(-20, 20), min_size=3, max_size=3)},
+    optional={"sigma_deg": st.floats(1e-3, 30), "convention": st.sampled_from(["opencv",
+                                                                               "opengl"])})
 _frame = st.fixed_dictionaries(
     {"camera": st.fixed_dictionaries({"fx": st.floats(1, 1e5), "fy": st.floats(1, 1e5),
                                       "cx": st.floats(-1000, 2000), "cy": st.floats(-1000, 2000),
@@ -297,7 +301,7 @@ _frame = st.fixed_dictionaries(
           "robust": st.sampled_from([None, *ROBUST_KERNELS]),
           "use_sigma": st.booleans(), "ransac_max_hypotheses": st.integers(1, 50),
           "output_convention": st.sampled_from(["opencv", "opengl"])})},
-    optional={"prior": _prior})
+    optional={"prior": _prior, "gravity": _gravity})
 
 
 @pytest.fixture(scope="module")
