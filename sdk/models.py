@@ -351,7 +351,7 @@ class Inlier(BaseModel):
 
 class Alternative(BaseModel):
     """A distinct candidate pose of a verified answer that is not localized (ambiguous, low
-    confidence) or of an ambiguous one answered with ``on_ambiguity="best"``;
+    confidence, gravity mismatch) or of an ambiguous one answered with ``on_ambiguity="best"``;
     ``confidence``: its probability of being within 10 cm and 5 deg."""
 
     model_config = _RESPONSE

@@ -352,7 +352,8 @@ class InlierOut(BaseModel):
 
 
 class AlternativeOut(BaseModel):
-    """A distinct candidate pose of an ambiguous frame."""
+    """A distinct candidate pose of a verified answer that is not localized (ambiguous, low
+    confidence, gravity mismatch) or of an ambiguous one answered with on_ambiguity 'best'."""
 
     world_from_camera: PoseOut
     confidence: float = Field(ge=0, le=1, description="P(within 10 cm and 5 deg).")

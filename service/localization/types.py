@@ -389,7 +389,9 @@ class LocalizationResult:
             be without the budget.
         pose_source: ``"prior"`` (the refined client prior won) or ``"ransac"``; None when
             not localized.
-        alternatives: with an ambiguous frame, the distinct candidate poses (best first).
+        alternatives: the distinct candidate poses (best first) of a verified answer that is
+            not localized (``ambiguous``, ``low_confidence``, ``gravity_mismatch``) or of an
+            ambiguous one answered with ``on_ambiguity="best"``; empty otherwise.
         evidence: the confidence model's features and ``s2`` (for diagnostics and the bench).
     """
 
