@@ -157,8 +157,13 @@ METRICS = ("level_set", "bbox")
 
 def make_problems(seed: int) -> dict:
     """The 108 exact Chess problems as plain data (JSON-able, read by every worker)."""
-    from bench.reference_data import load_chess_map, load_chess_poses, perturb_pose
-    from factors.geometry import DegenerateProjectionError, invert_pose, project_ellipsoid
+    from bench.reference_data import (
+        exact_projections,
+        load_chess_map,
+        load_chess_poses,
+        perturb_pose,
+    )
+    from factors.geometry import invert_pose
 
     ells = [o.ellipsoid for o in load_chess_map().objects]
     cam, camera_from_world, _ = load_chess_poses()
@@ -166,16 +171,10 @@ def make_problems(seed: int) -> dict:
     problems = []
     for cfw in camera_from_world:
         truth = invert_pose(cfw)
-        objs = []
-        for e in ells:
-            try:
-                det = project_ellipsoid(cam, cfw, e)
-            except DegenerateProjectionError:
-                continue
-            objs.append({"center": e.center.tolist(), "axes": list(map(float, e.axes)),
-                         "rotation": np.asarray(e.rotation).tolist(),
-                         "ellipse": list(map(float, det.params())),
-                         "box": det.bbox().tolist()})
+        objs = [{"center": e.center.tolist(), "axes": list(map(float, e.axes)),
+                 "rotation": np.asarray(e.rotation).tolist(),
+                 "ellipse": list(map(float, det.params())), "box": det.bbox().tolist()}
+                for det, e in exact_projections(cam, cfw, ells)]
         problems.append({"truth": truth.tolist(),
                          "start": perturb_pose(truth, rng, 0.10, 5.0).tolist(),
                          "objects": objs})

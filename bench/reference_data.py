@@ -12,7 +12,15 @@ from pathlib import Path
 
 import numpy as np
 
-from factors.geometry import Camera, pose_matrix, snap_to_rotation
+from factors.geometry import (
+    Camera,
+    DegenerateProjectionError,
+    Ellipse,
+    Ellipsoid,
+    pose_matrix,
+    project_ellipsoid,
+    snap_to_rotation,
+)
 from maps.model import SceneMap, scene_map_from_chess
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
@@ -44,6 +52,20 @@ def load_chess_scene_json(path: Path = CHESS_SCENE_PATH) -> dict:
 def load_chess_map(path: Path = CHESS_SCENE_PATH) -> SceneMap:
     """The Chess ellipsoid map (11 objects, +Z up) via the maps importer."""
     return scene_map_from_chess(load_chess_scene_json(path))
+
+
+def exact_projections(camera: Camera, camera_from_world: np.ndarray,
+                      ellipsoids: list[Ellipsoid]) -> list[tuple[Ellipse, Ellipsoid]]:
+    """``(projection, ellipsoid)`` of every ellipsoid (world frame, m) whose projection at
+    ``camera_from_world`` (4x4, OpenCV axes) is an ellipse (px), in the given order: the exact
+    detections of a refinement problem (no image clipping)."""
+    out = []
+    for e in ellipsoids:
+        try:
+            out.append((project_ellipsoid(camera, camera_from_world, e), e))
+        except DegenerateProjectionError:
+            continue
+    return out
 
 
 def perturb_pose(

@@ -569,3 +569,15 @@ def test_the_refine_module_is_reachable_by_its_name():
 
     assert isinstance(m, types.ModuleType) and m.refine is refine
     assert hasattr(m, "OVERLAP_NIELSEN_DAMPING")
+
+
+def test_overlap_damping_flag_is_read_at_every_solve(monkeypatch):
+    """The LM parameters are cached, but on the flag's value: switching
+    ``OVERLAP_NIELSEN_DAMPING`` after a solve takes effect (an experiment that sets it is not
+    silently ignored)."""
+    import service.localization.refine as m
+
+    assert not m._lm_params(50, "iou").getUseFixedLambdaFactor()
+    assert m._lm_params(50, "level_set").getUseFixedLambdaFactor()
+    monkeypatch.setattr(m, "OVERLAP_NIELSEN_DAMPING", False)
+    assert m._lm_params(50, "iou").getUseFixedLambdaFactor()

@@ -11,12 +11,12 @@ import gtsam
 import numpy as np
 import pytest
 
-from bench.reference_data import load_chess_map, load_chess_poses, perturb_pose
+from bench.reference_data import exact_projections, load_chess_map, load_chess_poses, perturb_pose
 from factors import metrics
-from factors.geometry import Camera, DegenerateProjectionError, invert_pose, project_ellipsoid
+from factors.geometry import Camera, invert_pose, project_ellipsoid
 from factors.pose_factors import pose3, pose_factors
 from factors.pose_residuals import PoseResidualModel
-from service.localization.refine import _lm_params
+from service.localization.refine import _lm_params, _shared_lm_params
 
 
 def chess_problems(n: int, noise_px: float = 0.0, seed: int = 3):
@@ -27,16 +27,10 @@ def chess_problems(n: int, noise_px: float = 0.0, seed: int = 3):
     rng = np.random.default_rng(seed)
     out = []
     for cfw in camera_from_world[::9][:n]:
-        pairs = []
-        for e in ells:
-            try:
-                d = project_ellipsoid(cam, cfw, e)
-            except DegenerateProjectionError:
-                continue
-            if noise_px:
-                d = type(d)(d.cx + rng.normal(0, noise_px), d.cy + rng.normal(0, noise_px),
-                            d.a, d.b, d.angle)
-            pairs.append((d, e))
+        pairs = exact_projections(cam, cfw, ells)
+        if noise_px:
+            pairs = [(type(d)(d.cx + rng.normal(0, noise_px), d.cy + rng.normal(0, noise_px),
+                              d.a, d.b, d.angle), e) for d, e in pairs]
         start = perturb_pose(invert_pose(cfw), rng, 0.10, 5.0)
         out.append((cam, [p[0] for p in pairs], [p[1] for p in pairs], start))
     return out
@@ -53,7 +47,7 @@ def test_sequential_elimination_takes_the_multifrontal_steps_bit_for_bit(metric,
         values = gtsam.Values()
         values.insert(0, pose3(start))
         fast = gtsam.LevenbergMarquardtOptimizer(graph, values, _lm_params(50, metric))
-        reference_params = _lm_params.__wrapped__(50, metric)  # a fresh, unshared copy
+        reference_params = _shared_lm_params.__wrapped__(50, False)  # a fresh, unshared copy
         reference_params.setLinearSolverType("MULTIFRONTAL_CHOLESKY")
         reference = gtsam.LevenbergMarquardtOptimizer(graph, values, reference_params)
         got, want = fast.optimize(), reference.optimize()

@@ -136,10 +136,17 @@ class RefinementResult:
     n_residuals: int = 0
 
 
-@functools.lru_cache(maxsize=64)
 def _lm_params(max_iterations: int, metric: str = "level_set") -> gtsam.LevenbergMarquardtParams:
-    """LM parameters of a solve (cached and shared: do not modify; the optimizer copies
-    them)."""
+    """LM parameters of a solve of ``metric`` (shared: do not modify; the optimizer copies
+    them). :data:`OVERLAP_NIELSEN_DAMPING` is read at every call (part of the cache key)."""
+    return _shared_lm_params(max_iterations,
+                             metric in ("iou", "giou") and OVERLAP_NIELSEN_DAMPING)
+
+
+@functools.lru_cache(maxsize=64)
+def _shared_lm_params(max_iterations: int, nielsen: bool) -> gtsam.LevenbergMarquardtParams:
+    """:func:`_lm_params`, cached per ``(max_iterations, nielsen)``: ``nielsen``, Nielsen's
+    lambda update instead of GTSAM's fixed factor."""
     params = gtsam.LevenbergMarquardtParams()
     # one pose variable: sequential elimination solves the same dense 6x6 Cholesky as the
     # default multifrontal one (bit-identical steps, tested) without building a junction
@@ -150,7 +157,7 @@ def _lm_params(max_iterations: int, metric: str = "level_set") -> gtsam.Levenber
     params.setAbsoluteErrorTol(ABSOLUTE_ERROR_TOL)
     params.setErrorTol(ERROR_TOL)
     params.setlambdaUpperBound(LAMBDA_UPPER_BOUND)
-    if metric in ("iou", "giou") and OVERLAP_NIELSEN_DAMPING:
+    if nielsen:
         params.setUseFixedLambdaFactor(False)
     return params
 
