@@ -8,10 +8,12 @@ Usage::
 
 Frames: the 108 real Chess poses, detections simulated by :mod:`bench.simulate` (truncation,
 occlusion, misses at 0.2, noisy detections, sigma correlated with the error). Each seed draws
-new detections for every pose. ``--fit`` tunes on ``--tune-seeds`` (default 100 and 102, all
-108 poses) and ``--tune-noisy-seed`` (101, the second, noisier detector setting
-``NOISY``) and writes the constants; the report (seeds 200 and 202, plus seed 201 with
-``NOISY``) uses other seeds. Experiments:
+new detections for every pose. ``--fit`` tunes on ``--tune-seeds`` (default 100, 102, 104
+and 106, all 108 poses) and ``--tune-noisy-seeds`` (101 and 103, the second, noisier detector
+setting ``NOISY``) and writes the constants; the report (seeds 300, 302, 304 and 306, plus
+seeds 301 and 303 with ``NOISY``) uses other seeds (the 200 series, the report seeds until
+session 24, showed the threshold rule's optimism: :data:`FALSE_ACCEPT_TUNING_MARGIN`; new
+seeds report the rule chosen after it). Experiments:
 
 1. **NEES** per calibration key (each metric with sigma weights, and without them,
    ``<metric>:unit_weights``, on every :data:`UNIT_WEIGHTS_STRIDE`-th frame):
@@ -21,18 +23,21 @@ new detections for every pose. ``--fit`` tunes on ``--tune-seeds`` (default 100 
    covariance is conditioned on correct associations). A consistent 6-DoF estimator has mean 6.
 2. **Reliability** of ``confidence`` = P(error <= 10 cm and 5 deg): 10 bins, expected
    calibration error (ECE), pooled over the metrics and the reduced frames, per metric, and
-   pooled over the solves without sigma weights; diagram ``docs/img/trust_reliability.png``.
+   pooled over the solves without sigma weights and over those with the device's gravity;
+   diagram ``docs/img/trust_reliability.png``.
 3. **Reduced frames**: each frame reduced to 2 and to 3 of its detections (random subset),
    level set: share answered ``localized`` with position error > 0.5 m (false accepts), and of
    the frames localized within 10 cm with ``on_ambiguity="best"`` (no ambiguity rejection, the
-   previous behaviour) the share still localized; in the report, also with the device's
-   gravity (simulated IMU, :data:`IMU_SIGMA_DEG`): false accepts, kept, vetoed.
+   previous behaviour) the share still localized; also with the device's gravity (simulated
+   IMU, :data:`IMU_SIGMA_DEG`; every frame, level set, is solved with it too): false accepts,
+   kept, ``gravity_mismatch``. The fit uses the solves with gravity like the others.
 4. **Random detections** (4 made-up ellipses, random labels and sigma) against synthetic maps of
    100, 1,000 and 10,000 objects: number localized (must be 0).
 5. **Prior vs scratch** (level set): priors 0.1 m / 5 deg and 0.3 m / 15 deg from the truth
    (random direction, covariance diag(angle^2 x3, offset^2 x3)): frames ending > 2 cm worse than
-   from scratch, frames helped (> 2 cm better, or localized only with the prior), and which path
-   won.
+   from scratch (or losing a correct scratch answer), frames helped (> 2 cm better, localized
+   only with the prior, or a wrong scratch answer withdrawn: :func:`prior_outcome`), and which
+   path won.
 6. **Why 2-detection answers are wrong** (``--diagnose-2det``, tuning seeds only:
    :func:`diagnose_two_detections`): the wrong unchecked answers (> 0.5 m) against a refinement
    of the same two detections with their true objects, started at the true pose.
@@ -55,7 +60,7 @@ from bench.chess_eval import json_safe, load_chess_world_from_camera, pose_error
 from bench.reference_data import REPO_ROOT, load_chess_map, perturb_pose
 from bench.simulate import SimulationConfig, simulate_frame, simulate_gravity
 from factors.geometry import Camera, Ellipse, Ellipsoid
-from maps.compiled import compile_map
+from maps.compiled import CompiledMap, compile_map
 from maps.model import MapObject, SceneMap
 from service.localization import calibration
 from service.localization.confidence import (
@@ -83,7 +88,7 @@ NEES_RANGE = (4.0, 9.0)
 #: ``min_iou``: its distribution shifts with the detector's noise, and leaving it out transfers
 #: better between the two noise settings (tuning seeds, each setting fitted on the other).
 FEATURES = ("inliers_ge3", "inliers_ge4", "log_inliers", "inlier_fraction", "mean_iou",
-            "log_s2", "logit_gauss", "margin", "log_samples", "chi2_competitor")
+            "log_s2", "logit_gauss", "margin", "log_samples", "chi2_competitor", "gravity")
 #: Features that need a refinement (not in the ``none`` model).
 REFINED_ONLY = ("log_s2", "logit_gauss", "chi2_competitor")
 #: ``f_metric``, the floor of the a-posteriori variance factor: this quantile of the tuning
@@ -99,6 +104,8 @@ UNIT_WEIGHTS_STRIDE = 2
 IMU_SIGMA_DEG = 1.0
 #: The detector model of the report's second noise setting (twice the default noise).
 NOISY = dict(center_noise=0.08, axis_log_noise=0.12, angle_noise_rad=math.radians(8.0))
+#: The NEES table's row of the level set with the device's gravity.
+GRAVITY_NEES_ROW = "level_set with gravity"
 CALIBRATION_PATH = REPO_ROOT / "service" / "localization" / "calibration.py"
 RELIABILITY_PNG = REPO_ROOT / "docs" / "img" / "trust_reliability.png"
 
@@ -147,20 +154,25 @@ def reduce_frame(detections, object_ids, n: int, rng: np.random.Generator):
 
 def run_frames(seed: int, metrics: tuple[str, ...], stride: int, slow_stride: int,
                config: SimulationConfig, log=print, min_confidence: float | None = None,
-               setting: str = "default", unit_stride: int = UNIT_WEIGHTS_STRIDE,
-               with_gravity: bool = False) -> dict:
+               setting: str = "default", unit_stride: int = UNIT_WEIGHTS_STRIDE) -> dict:
     """Experiments 1-3 on one seed: records per calibration key (the metric, and on every
     ``unit_stride``-th frame the refined metrics without sigma weights, ``use_sigma=False``:
-    ``confidence.calibration_key``), and the reduced frames (``min_confidence``: the option
-    used, 0 when tuning so every verified pose is seen; ``setting``: the detector setting's
-    name, kept in each record; ``with_gravity``: each reduced frame also localized with a
-    simulated IMU gravity, :data:`IMU_SIGMA_DEG`, declared with the default sigma)."""
+    ``confidence.calibration_key``), the level set with the device's gravity (a simulated IMU,
+    :data:`IMU_SIGMA_DEG`, declared with the default sigma: ``gravity_frames``), and the
+    reduced frames, each also with gravity (``rec["gravity"]``, a record of its own)
+    (``min_confidence``: the option used, 0 when tuning so every verified pose is seen;
+    ``setting``: the detector setting's name, kept in each record)."""
     cm = compile_map(load_chess_map())
     camera, poses, _ = load_chess_world_from_camera()
     runs = [(m, True) for m in metrics] + [(m, False) for m in metrics if m != "none"]
     out: dict = {"frames": {calibration_key(m, w): [] for m, w in runs},
-                 "reduced": {"2": [], "3": []}}
+                 "gravity_frames": [], "reduced": {"2": [], "3": []}}
     t0 = time.perf_counter()
+
+    def imu(i: int, n: int) -> Gravity:
+        return Gravity(simulate_gravity(poses[i], cm.scene_map.up, IMU_SIGMA_DEG,
+                                        seed * 100_000 + 90_000 + 10 * i + n))
+
     for i in range(0, len(poses), stride):
         f = simulate_frame(cm, camera, poses[i], seed * 100_000 + i, config)
         for m, weighted in runs:
@@ -172,40 +184,49 @@ def run_frames(seed: int, metrics: tuple[str, ...], stride: int, slow_stride: in
                          options(m, min_confidence=min_confidence, use_sigma=weighted))
             out["frames"][key].append(_record(r, poses[i], frame=i, metric=key,
                                               setting=setting))
+        r = localize(f.detections, cm, camera, options("level_set", min_confidence=min_confidence),
+                     None, imu(i, 0))
+        out["gravity_frames"].append(_record(r, poses[i], frame=i, metric="level_set",
+                                             setting=setting, gravity=True))
         rng = np.random.default_rng(seed * 100_000 + 50_000 + i)
         for n in (2, 3):
             dets = reduce_frame(f.detections, f.object_ids, n, rng)
             if dets is None:
                 continue
-            r = localize(dets, cm, camera, options("level_set", min_confidence=min_confidence))
-            rb = localize(dets, cm, camera, options("level_set", on_ambiguity="best",
-                                                    min_confidence=0.0))
-            rec = _record(r, poses[i], frame=i, metric="level_set", setting=setting)
-            rec["best_pos"], best_rot = pose_errors(
-                rb.world_from_camera if rb.localized else None, poses[i])
-            # the unchecked answer (every verified pose): the fit re-decides the ambiguity and
-            # the threshold from it (``decide_reduced``)
-            rec["unchecked"] = {"localized": bool(rb.localized), "pos": rec["best_pos"],
-                                "rot": best_rot, "evidence": dict(rb.evidence or {}),
-                                "metric": "level_set"}
-            if rb.localized and rb.covariance is not None:
-                rec["unchecked"]["cov"] = np.asarray(rb.covariance).tolist()
-            # the answer's most probable candidate when not localized (its alternatives)
-            top = r.alternatives[0] if (not r.localized and r.alternatives) else None
-            rec["candidate_pos"], rec["candidate_rot"] = pose_errors(
-                None if top is None else top.world_from_camera, poses[i])
-            rec["candidate_confidence"] = None if top is None else top.confidence
-            if with_gravity:  # the same request with the IMU's gravity (a veto only)
-                g = Gravity(simulate_gravity(poses[i], cm.scene_map.up, IMU_SIGMA_DEG,
-                                             seed * 100_000 + 90_000 + 10 * i + n))
-                rg = localize(dets, cm, camera, options("level_set",
-                                                        min_confidence=min_confidence), None, g)
-                rec["gravity"] = {"localized": bool(rg.localized), "reason": rg.reason,
-                                  "pos": pose_errors(rg.world_from_camera if rg.localized
-                                                     else None, poses[i])[0]}
+            rec = reduced_record(dets, cm, camera, poses[i], min_confidence, frame=i,
+                                 setting=setting)
+            rec["gravity"] = reduced_record(dets, cm, camera, poses[i], min_confidence,
+                                            imu(i, n), frame=i, setting=setting)
             out["reduced"][str(n)].append(rec)
     log(f"seed {seed}: {len(poses[::stride])} frames in {time.perf_counter() - t0:.0f} s")
     return out
+
+
+def reduced_record(dets: list[Detection], cm: CompiledMap, camera: Camera, truth: np.ndarray,
+                   min_confidence: float | None, gravity: Gravity | None = None,
+                   **extra: object) -> dict:
+    """The record of a reduced frame (level set): the answer with ``min_confidence`` and the
+    unchecked answer (``on_ambiguity="best"``, ``min_confidence=0``: every verified pose, from
+    which the fit re-decides the ambiguity and the threshold, ``decide_reduced``), its error
+    ``best_pos``, and the top candidate of an answer not localized."""
+    r = localize(dets, cm, camera, options("level_set", min_confidence=min_confidence), None,
+                 gravity)
+    rb = localize(dets, cm, camera, options("level_set", on_ambiguity="best",
+                                            min_confidence=0.0), None, gravity)
+    rec = _record(r, truth, metric="level_set", gravity=gravity is not None, **extra)
+    rec["best_pos"], best_rot = pose_errors(rb.world_from_camera if rb.localized else None,
+                                            truth)
+    rec["unchecked"] = {"localized": bool(rb.localized), "pos": rec["best_pos"],
+                        "rot": best_rot, "evidence": dict(rb.evidence or {}),
+                        "metric": "level_set"}
+    if rb.localized and rb.covariance is not None:
+        rec["unchecked"]["cov"] = np.asarray(rb.covariance).tolist()
+    # the answer's most probable candidate when not localized (its alternatives)
+    top = r.alternatives[0] if (not r.localized and r.alternatives) else None
+    rec["candidate_pos"], rec["candidate_rot"] = pose_errors(
+        None if top is None else top.world_from_camera, truth)
+    rec["candidate_confidence"] = None if top is None else top.confidence
+    return rec
 
 
 # ------------------------------------------------------------------ random detections
@@ -261,13 +282,30 @@ def run_random(sizes: tuple[int, ...], trials: tuple[int, ...], seed: int, camer
 # ------------------------------------------------------------------ priors
 
 
+def prior_outcome(scratch_error: float, prior_error: float) -> str:
+    """How an answer with a prior compares with the answer from scratch (position errors in m,
+    ``inf`` when not localized): ``"worse"`` (> 2 cm farther, or a correct scratch answer,
+    within ``TOLERANCE_POSITION_M``, lost), ``"helped"`` (> 2 cm closer, localized only with
+    the prior, or a wrong scratch answer withdrawn: not localized instead of more than
+    ``TOLERANCE_POSITION_M`` off) or ``"same"``."""
+    loc0, loc1 = math.isfinite(scratch_error), math.isfinite(prior_error)
+    if loc0 and loc1:
+        d = prior_error - scratch_error
+        return "worse" if d > 0.02 else "helped" if d < -0.02 else "same"
+    if loc0:
+        return "worse" if scratch_error <= TOLERANCE_POSITION_M else "helped"
+    return "helped" if loc1 else "same"
+
+
 def run_priors(seed: int, stride: int, config: SimulationConfig, log=print) -> dict:
-    """Experiment 5 (level set)."""
+    """Experiment 5 (level set): :func:`prior_outcome` per frame; the largest degradation is
+    over the frames localized both ways."""
     cm = compile_map(load_chess_map())
     camera, poses, _ = load_chess_world_from_camera()
     out = {}
     for off, ang in ((0.1, 5.0), (0.3, 15.0)):
-        worse, helped, rows, sources = 0, 0, 0, {"prior": 0, "ransac": 0}
+        counts = {"worse": 0, "helped": 0, "same": 0}
+        sources = {"prior": 0, "ransac": 0}
         worst = 0.0
         cov = np.diag([math.radians(ang) ** 2] * 3 + [off**2] * 3)
         for i in range(0, len(poses), stride):
@@ -279,16 +317,15 @@ def run_priors(seed: int, stride: int, config: SimulationConfig, log=print) -> d
             e0 = pose_errors(scratch.world_from_camera if scratch.localized else None,
                              poses[i])[0]
             e1 = pose_errors(withp.world_from_camera if withp.localized else None, poses[i])[0]
-            rows += 1
             if withp.localized:
                 sources[withp.pose_source] += 1
-            d = (e1 if math.isfinite(e1) else 1e9) - (e0 if math.isfinite(e0) else 1e9)
-            worst = max(worst, d) if math.isfinite(e0) else worst
-            worse += int(d > 0.02)
-            helped += int(d < -0.02)
+            counts[prior_outcome(e0, e1)] += 1
+            if math.isfinite(e0) and math.isfinite(e1):
+                worst = max(worst, e1 - e0)
         key = f"{off:g}m_{ang:g}deg"
-        out[key] = {"frames": rows, "worse_by_more_than_2cm": worse, "helped": helped,
-                    "largest_degradation_m": worst, "pose_source": sources}
+        out[key] = {"frames": sum(counts.values()), "worse_by_more_than_2cm": counts["worse"],
+                    "helped": counts["helped"], "largest_degradation_m": worst,
+                    "pose_source": sources}
         log(f"prior {key}: {out[key]}")
     return out
 
@@ -425,17 +462,19 @@ def reduced_table(reduced: dict) -> dict:
             "ambiguous": sum(r["reason"] == "ambiguous" for r in rows),
             "good": len(good_before),
         }
-        grav = [r for r in rows if "gravity" in r]
-        if grav:  # the same frames with the IMU's gravity
+        grav = [r["gravity"] for r in rows if "gravity" in r]
+        if grav:  # the same frames with the IMU's gravity (kept: of the good frames above)
             out[n]["with_gravity"] = {
-                "false_accept_rate": float(np.mean([r["gravity"]["localized"]
-                                                    and r["gravity"]["pos"] > 0.5
-                                                    for r in grav])),
-                "kept_of_good": float(np.mean([r["gravity"]["localized"] for r in grav
-                                               if r["best_pos"] <= 0.10]))
-                if any(r["best_pos"] <= 0.10 for r in grav) else None,
-                "gravity_mismatch": sum(r["gravity"]["reason"] == "gravity_mismatch"
-                                        for r in grav)}
+                "localized": sum(g["localized"] for g in grav),
+                "false_accept_rate": float(np.mean([g["localized"] and g["pos"] > 0.5
+                                                    for g in grav])),
+                "false_accept_rate_without_check": float(np.mean(
+                    [math.isfinite(g["best_pos"]) and g["best_pos"] > 0.5 for g in grav])),
+                "kept_of_good": float(np.mean([r["gravity"]["localized"] for r in good_before
+                                               if "gravity" in r])) if good_before else None,
+                "good": sum(g["best_pos"] <= 0.10 for g in grav),
+                "ambiguous": sum(g["reason"] == "ambiguous" for g in grav),
+                "gravity_mismatch": sum(g["reason"] == "gravity_mismatch" for g in grav)}
     return out
 
 
@@ -449,41 +488,56 @@ def operating_points(reduced: dict, reduced_noisy: dict) -> dict:
     client trades by choosing its own threshold (:func:`reduced_outcome`)."""
     out: dict = {}
     ts = sorted({*OPERATING_THRESHOLDS, calibration.MIN_CONFIDENCE})
-    for name, table in (("default", reduced), ("noisy", reduced_noisy)):
-        for n, rows in table.items():
-            out[f"{name} {n}"] = {f"{t:g}": reduced_outcome(
+    for table in (reduced, reduced_noisy):
+        for (n, setting), rows in reduced_sets(table).items():
+            out[f"{setting} {n}"] = {f"{t:g}": reduced_outcome(
                 rows, calibration.AMBIGUITY_CHI2_RATIO, t) for t in ts}
     return out
 
 
 def merge_runs(runs: list[dict]) -> dict:
     """The records of several :func:`run_frames` results, concatenated per key."""
-    data: dict = {"frames": {}, "reduced": {"2": [], "3": []}}
+    data: dict = {"frames": {}, "gravity_frames": [], "reduced": {"2": [], "3": []}}
     for d in runs:
         for key, rows in d["frames"].items():
             data["frames"].setdefault(key, []).extend(rows)
+        data["gravity_frames"] += d.get("gravity_frames", [])
         for n in ("2", "3"):
             data["reduced"][n] += d["reduced"][n]
     return data
 
 
+def reduced_records(data: dict, gravity: bool | None = None) -> list[dict]:
+    """The reduced frames' records, without (``gravity=False``) or with (True) the device's
+    gravity, or both (None)."""
+    rows = [r for rr in data["reduced"].values() for r in rr]
+    return ([] if gravity else rows) + ([] if gravity is False else
+                                        [r["gravity"] for r in rows if "gravity" in r])
+
+
 def candidate_rows(data: dict) -> list[dict]:
-    """The top candidates (``alternatives[0]``) of the reduced frames answered ``localized:
-    false`` after verification, as rows for :func:`reliability` (is the probability a client
-    would act on calibrated?)."""
+    """The top candidates (``alternatives[0]``) of the reduced frames (with and without
+    gravity) answered ``localized: false`` after verification, as rows for
+    :func:`reliability` (is the probability a client would act on calibrated?)."""
     return [{"localized": True, "confidence": r["candidate_confidence"],
              "pos": r["candidate_pos"], "rot": r["candidate_rot"]}
-            for rr in data["reduced"].values() for r in rr
-            if r.get("candidate_confidence") is not None]
+            for r in reduced_records(data) if r.get("candidate_confidence") is not None]
+
+
+def gravity_rows(data: dict) -> list[dict]:
+    """Records of the solves with the device's gravity (frames and reduced frames)."""
+    return data.get("gravity_frames", []) + reduced_records(data, gravity=True)
 
 
 def confidence_rows(data: dict, unit_weights: bool | None = None) -> list[dict]:
-    """Records of the frames and the reduced frames; ``unit_weights``: only the frames refined
-    with (False) or without (True) sigma weights and, with False, the reduced frames (None:
-    all)."""
+    """Records of the frames, the solves with gravity and the reduced frames; ``unit_weights``:
+    only the frames refined with (False) or without (True) sigma weights and, with False, the
+    solves with gravity and the reduced frames (None: all)."""
     rows = [r for m, rr in data["frames"].items() for r in rr
             if unit_weights is None or m.endswith(UNIT_WEIGHTS_SUFFIX) == unit_weights]
-    return rows + ([] if unit_weights else [r for rr in data["reduced"].values() for r in rr])
+    return rows + ([] if unit_weights else
+                   data.get("gravity_frames", []) + reduced_records(data, gravity=False)
+                   + reduced_records(data, gravity=True))
 
 
 # ------------------------------------------------------------------ fitting
@@ -574,7 +628,7 @@ def fit_constants(data: dict, metric_offsets: bool = True,
         if k is not None:
             scale[m] = k
     rows = [r for r in confidence_rows(data) if r["localized"]]
-    refeature(rows + [r["unchecked"] for rr in data["reduced"].values() for r in rr
+    refeature(rows + [r["unchecked"] for r in reduced_records(data)
                       if r.get("unchecked", {}).get("localized")], scale, floor)
     feats = FEATURES if features is None else features
     models = {}
@@ -610,6 +664,13 @@ MIN_CONFIDENCE_GRID = tuple(round(0.01 * k, 2) for k in range(61))
 #: Largest share of a reduced set (2 or 3 detections, one detector setting) answered
 #: ``localized: true`` more than 0.5 m off.
 FALSE_ACCEPT_TARGET = 0.01
+#: The fit holds the tuning frames to this fraction of :data:`FALSE_ACCEPT_TARGET`: a
+#: threshold chosen AT the target on the tuning frames exceeds it on about half of new frame
+#: sets (session 24: 0.9 % on the tuning frames, 2.3 % on seeds 200-206). Chosen by
+#: cross-validation on the tuning seeds alone (constants fitted on half of them, false accepts
+#: counted on the other half): at 0.5 the 2-detection false accepts on the other half were
+#: 0-1 of 216 in both directions.
+FALSE_ACCEPT_TUNING_MARGIN = 0.5
 
 
 def decide_reduced(rec: dict, chi2_ratio: float, min_confidence: float,
@@ -645,21 +706,33 @@ def reduced_outcome(rows: list[dict], chi2_ratio: float, min_confidence: float,
     return {"frames": len(rows), "false_accepts": fa, "good": good, "kept": kept}
 
 
-def choose_ambiguity_and_threshold(reduced: dict, models: dict) -> tuple[float, float]:
-    """``(AMBIGUITY_CHI2_RATIO, MIN_CONFIDENCE)`` from the reduced tuning frames: for each
-    ratio of :data:`CHI2_RATIO_GRID`, the smallest threshold whose false accepts are <=
-    :data:`FALSE_ACCEPT_TARGET` in every reduced set (2 and 3 detections x detector setting);
-    of those, the pair keeping the most good frames (ties: the larger ratio, more cautious)."""
+def reduced_sets(reduced: dict) -> dict[tuple[str, str], list[dict]]:
+    """The reduced records per ``(detections, setting)``, the setting suffixed ``+gravity``
+    for the solves with the device's gravity."""
     sets: dict[tuple[str, str], list[dict]] = {}
     for n, rows in reduced.items():
         for r in rows:
-            if "unchecked" in r:
-                sets.setdefault((n, r.get("setting", "default")), []).append(r)
+            for rec, suffix in ((r, ""), (r.get("gravity"), "+gravity")):
+                if rec is not None and "unchecked" in rec:
+                    sets.setdefault((n, rec.get("setting", "default") + suffix), []).append(rec)
+    return sets
+
+
+def choose_ambiguity_and_threshold(reduced: dict, models: dict) -> tuple[float, float]:
+    """``(AMBIGUITY_CHI2_RATIO, MIN_CONFIDENCE)`` from the reduced tuning frames: for each
+    ratio of :data:`CHI2_RATIO_GRID`, the smallest threshold whose false accepts are <=
+    :data:`FALSE_ACCEPT_TARGET` x :data:`FALSE_ACCEPT_TUNING_MARGIN` in every reduced set (2
+    and 3 detections x detector setting, without and with the device's gravity:
+    :func:`reduced_sets`); of those, the pair keeping
+    the most good frames (ties: the larger ratio, more cautious)."""
+    sets = reduced_sets(reduced)
     best: tuple[int, float, float] | None = None
     for ratio in CHI2_RATIO_GRID:
         for t in MIN_CONFIDENCE_GRID:
             outs = [reduced_outcome(rows, ratio, t, models) for rows in sets.values()]
-            if all(o["false_accepts"] <= FALSE_ACCEPT_TARGET * o["frames"] for o in outs):
+            if all(o["false_accepts"]
+                   <= FALSE_ACCEPT_TARGET * FALSE_ACCEPT_TUNING_MARGIN * o["frames"]
+                   for o in outs):
                 kept = sum(o["kept"] for o in outs)
                 if best is None or (kept, ratio) >= (best[0], best[1]):
                     best = (kept, ratio, t)
@@ -750,7 +823,7 @@ def markdown(res: dict, command: str) -> str:
              "machine, under load). Tuning seeds "
              f"{calibration.PROVENANCE['tuning_seeds']} (`{calibration.PROVENANCE['command']}`); "
              f"report seeds {res['config']['seeds']} (default detector) and "
-             f"{res['config']['noisy_seed']} (second noise setting: twice the detector noise, "
+             f"{res['config']['noisy_seeds']} (second noise setting: twice the detector noise, "
              "not used for tuning).", "",
              "Method (`service/localization/confidence.py`): covariance = `k_metric * max(s^2, "
              "f_metric) * t(n) * (J^T W J)^-1` (`t(n)`: Student-t factor for `n` refined "
@@ -766,9 +839,14 @@ def markdown(res: dict, command: str) -> str:
              f"{calibration.AMBIGUITY_RATIO} of the best's IoU sum on other map objects (>= "
              f"{calibration.AMBIGUITY_RATIO_SAME_OBJECTS} on the same objects); "
              f"`min_confidence` default {calibration.MIN_CONFIDENCE} (fitted with the chi2 "
-             "ratio: the smallest threshold with <= 1 % false accepts in every reduced tuning "
-             "set, 2 and 3 detections x both detector settings). Refit (tuning seeds only): "
-             "`python -m bench.trust --fit`.", "",
+             "ratio: the smallest threshold with <= "
+             f"{100 * FALSE_ACCEPT_TARGET * FALSE_ACCEPT_TUNING_MARGIN:g} % false accepts, "
+             "half the 1 % target as a margin for new frames, in every reduced tuning set, 2 "
+             "and 3 detections x both detector settings, without and with gravity). "
+             "With the device's gravity (`gravity`): a factor on the pose's tilt in every "
+             "refinement (only the detections' information is rescaled), candidates whose "
+             "tilt it rules out dropped, and the confidence feature `gravity`. Refit (tuning "
+             "seeds only): `python -m bench.trust --fit`.", "",
              "### Mean NEES (6-DoF, consistent = 6; target [4, 9]) over frames localized within "
              "5 / 10 / 20 cm", "",
              "| metric | " + " | ".join(f"{t:g} m (n)" for t in OPERATING_POINTS_M)
@@ -818,18 +896,26 @@ def markdown(res: dict, command: str) -> str:
                 f"| {name} | {n} | {r['frames']} | {r['localized']} | {r['ambiguous']} | "
                 f"{r['false_accept_rate']:.3f} | {r['false_accept_rate_without_check']:.3f} | "
                 f"{r['good']} | {r['kept_of_good']:.3f} | {r['kept_of_good_as_candidate']:.3f} |")
-    lines += ["", "With the device's gravity direction (`gravity`, a veto of tilted answers: "
+    lines += ["", "With the device's gravity direction (`gravity`: a factor on the pose's tilt "
+              "in every refinement, tilted candidates dropped, `gravity_mismatch` when none "
+              "is left: "
               "`service/localization/gravity.py`): the same requests with a simulated IMU "
               f"gravity ({IMU_SIGMA_DEG:g} deg per tilt axis, declared with the default sigma "
-              "2 deg). *Vetoed*: answers `gravity_mismatch`.", "",
-              "| set | detections | false accepts without -> with gravity | kept without -> "
-              "with gravity | vetoed |", "|---|---|---|---|---|"]
+              "2 deg). *Kept*: of the good frames WITHOUT gravity (above), the share "
+              "localized; *good with gravity*: frames whose unchecked pose with gravity is "
+              "within 10 cm. *Vetoed*: answers `gravity_mismatch`.", "",
+              "| set | detections | localized | ambiguous | false accepts without -> with "
+              "gravity | without the checks, with gravity | good frames without -> with gravity "
+              "| kept without -> with gravity | vetoed |",
+              "|---|---|---|---|---|---|---|---|---|"]
     for name, table in (("default", res["reduced"]), ("noisy", res["reduced_noisy"])):
         for n, r in table.items():
             g = r.get("with_gravity")
             if g is not None:
-                lines.append(f"| {name} | {n} | {r['false_accept_rate']:.3f} -> "
-                             f"{g['false_accept_rate']:.3f} | {r['kept_of_good']:.3f} -> "
+                lines.append(f"| {name} | {n} | {g['localized']} | {g['ambiguous']} | "
+                             f"{r['false_accept_rate']:.3f} -> {g['false_accept_rate']:.3f} | "
+                             f"{g['false_accept_rate_without_check']:.3f} | {r['good']} -> "
+                             f"{g['good']} | {r['kept_of_good']:.3f} -> "
                              f"{g['kept_of_good']:.3f} | {g['gravity_mismatch']} |")
     ts = list(next(iter(res["operating_points"].values())))
     lines += ["", "What a client trades with `min_confidence` (same frames; false accepts / "
@@ -845,7 +931,11 @@ def markdown(res: dict, command: str) -> str:
     for n, r in res["random"].items():
         lines.append(f"| {n} | {r['trials']} | {r['localized']} | {r['reasons']} |")
     lines += ["", "### Prior vs scratch (level set)", "",
-              "| prior | frames | > 2 cm worse | helped | largest degradation (m) | won |",
+              "*Worse*: > 2 cm farther than from scratch, or a correct (within 10 cm) scratch "
+              "answer lost; *helped*: > 2 cm closer, localized only with the prior, or a wrong "
+              "scratch answer withdrawn (`bench.trust.prior_outcome`); largest degradation over "
+              "the frames localized both ways.", "",
+              "| prior | frames | worse | helped | largest degradation (m) | won |",
               "|---|---|---|---|---|---|"]
     for k, r in res["priors"].items():
         lines.append(f"| {k} | {r['frames']} | {r['worse_by_more_than_2cm']} | {r['helped']} "
@@ -856,11 +946,11 @@ def markdown(res: dict, command: str) -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--fit", action="store_true", help="tune and rewrite calibration.py")
-    ap.add_argument("--tune-seeds", default="100,102")
-    ap.add_argument("--tune-noisy-seed", type=int, default=101,
-                    help="tuning seed with the second noise setting (every --noisy-stride pose)")
-    ap.add_argument("--seeds", default="200,202")
-    ap.add_argument("--noisy-seed", type=int, default=201)
+    ap.add_argument("--tune-seeds", default="100,102,104,106")
+    ap.add_argument("--tune-noisy-seeds", default="101,103",
+                    help="tuning seeds with the second noise setting (every --noisy-stride pose)")
+    ap.add_argument("--seeds", default="300,302,304,306")
+    ap.add_argument("--noisy-seeds", default="301,303")
     ap.add_argument("--stride", type=int, default=1, help="use every N-th of the 108 poses")
     ap.add_argument("--slow-stride", type=int, default=1,
                     help="iou/giou on every N-th frame (1: all; 4 saves ~20 %% of the run time)")
@@ -879,15 +969,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--write-results", action="store_true")
     ap.add_argument("--diagnose-2det", action="store_true",
                     help="only the 2-detection diagnosis (diagnose_two_detections) on the "
-                    "tuning seeds (--tune-seeds and --tune-noisy-seed)")
+                    "tuning seeds (--tune-seeds and --tune-noisy-seeds)")
     args = ap.parse_args(argv)
     metrics = tuple(args.metrics.split(","))
     command = "python -m bench.trust " + " ".join(argv if argv is not None else sys.argv[1:])
     cfg = SimulationConfig(miss_probability=0.2)
     t0 = time.perf_counter()
+    tune_noisy_seeds = [int(s) for s in args.tune_noisy_seeds.split(",")]
     if args.diagnose_2det:
         runs = [(int(s), cfg) for s in args.tune_seeds.split(",")]
-        runs.append((args.tune_noisy_seed, cfg.with_(**NOISY)))
+        runs += [(s, cfg.with_(**NOISY)) for s in tune_noisy_seeds]
         res = diagnose_two_detections(runs)
         if args.json:
             args.json.write_text(json.dumps(json_safe(res), indent=1))
@@ -898,7 +989,8 @@ def main(argv: list[str] | None = None) -> int:
             data = json.loads(args.load_data.read_text())
         else:
             runs = [(s, args.stride, cfg, "default") for s in seeds]
-            runs.append((args.tune_noisy_seed, args.noisy_stride, cfg.with_(**NOISY), "noisy"))
+            runs += [(s, args.noisy_stride, cfg.with_(**NOISY), "noisy")
+                     for s in tune_noisy_seeds]
             data = merge_runs([run_frames(s, metrics, stride, args.slow_stride, config,
                                           min_confidence=0.0, setting=setting)
                                for s, stride, config, setting in runs])
@@ -906,31 +998,37 @@ def main(argv: list[str] | None = None) -> int:
                 args.save_data.write_text(json.dumps(data, default=float))  # keeps inf/NaN
         print(json.dumps(json_safe(nees_table(data["frames"])), indent=1))
         print(json.dumps(json_safe(reduced_table(data["reduced"])), indent=1))
-        CALIBRATION_PATH.write_text(fit(data, [*seeds, args.tune_noisy_seed], command,
+        CALIBRATION_PATH.write_text(fit(data, [*seeds, *tune_noisy_seeds], command,
                                         metric_offsets=args.metric_offsets))
         print(f"wrote {CALIBRATION_PATH}")
         return 0
     seeds = [int(s) for s in args.seeds.split(",")]
-    data = merge_runs([run_frames(s, metrics, args.stride, args.slow_stride, cfg,
-                                  with_gravity=True) for s in seeds])
-    noisy = run_frames(args.noisy_seed, metrics, args.noisy_stride, args.slow_stride,
-                       cfg.with_(**NOISY), setting="noisy", with_gravity=True)
+    data = merge_runs([run_frames(s, metrics, args.stride, args.slow_stride, cfg)
+                       for s in seeds])
+    noisy_seeds = [int(s) for s in args.noisy_seeds.split(",")]
+    noisy = merge_runs([run_frames(s, metrics, args.noisy_stride, args.slow_stride,
+                                   cfg.with_(**NOISY), setting="noisy")
+                        for s in noisy_seeds])
     camera, _, _ = load_chess_world_from_camera()
     rel = {"pooled": reliability(confidence_rows(data, unit_weights=False)),
            "noisy (pooled)": reliability(confidence_rows(noisy, unit_weights=False)),
            "without sigma (pooled, both settings)": reliability(
                confidence_rows(data, unit_weights=True)
                + confidence_rows(noisy, unit_weights=True)),
+           "with gravity (level set, pooled, both settings)": reliability(
+               gravity_rows(data) + gravity_rows(noisy)),
            "candidates of unlocalized 2-3 detection frames": reliability(
                candidate_rows(data) + candidate_rows(noisy))}
     for m in metrics:
         rel[m] = reliability(data["frames"][m])
     res = {
-        "config": {"seeds": seeds, "noisy_seed": args.noisy_seed, "stride": args.stride,
+        "config": {"seeds": seeds, "noisy_seeds": noisy_seeds, "stride": args.stride,
                    "slow_stride": args.slow_stride, "metrics": list(metrics),
                    "tuning": calibration.PROVENANCE},
-        "nees": nees_table({m: r for m, r in data["frames"].items() if m != "none"}),
-        "nees_noisy": nees_table({m: r for m, r in noisy["frames"].items() if m != "none"}),
+        "nees": nees_table({**{m: r for m, r in data["frames"].items() if m != "none"},
+                            GRAVITY_NEES_ROW: data["gravity_frames"]}),
+        "nees_noisy": nees_table({**{m: r for m, r in noisy["frames"].items() if m != "none"},
+                                  GRAVITY_NEES_ROW: noisy["gravity_frames"]}),
         "reliability": rel,
         "reduced": reduced_table(data["reduced"]),
         "reduced_noisy": reduced_table(noisy["reduced"]),
@@ -949,6 +1047,7 @@ def main(argv: list[str] | None = None) -> int:
 
         reliability_plot({k: rel[k] for k in ("pooled", "noisy (pooled)", "level_set",
                                               "without sigma (pooled, both settings)",
+                                              "with gravity (level set, pooled, both settings)",
                                               "candidates of unlocalized 2-3 detection frames")},
                          RELIABILITY_PNG)
         update_results_section("trust", markdown(res, command))

@@ -233,9 +233,10 @@ class PosePrior(BaseModel):
 class Gravity(BaseModel):
     """The gravity direction the device measures (e.g. ARKit/ARCore/CoreMotion gravity): the
     direction gravity pulls (DOWN) in the camera axes ``convention``, any positive length, with
-    its angular uncertainty ``sigma_deg`` (1 sigma per tilt axis, default 2). An answer whose
-    tilt disagrees with it comes back ``localized: false``, reason ``gravity_mismatch``. An
-    accelerometer at rest measures the opposite (up): negate it."""
+    its angular uncertainty ``sigma_deg`` (1 sigma per tilt axis, default 2). The server
+    refines the pose's tilt with it and drops candidates that disagree; an answer whose tilt
+    disagrees comes back ``localized: false``, reason ``gravity_mismatch``. An accelerometer at
+    rest measures the opposite (up): negate it."""
 
     model_config = _REQUEST
     direction: FloatList = Field(min_length=3, max_length=3)

@@ -136,18 +136,19 @@ def test_prior_in_either_convention(client: TestClient) -> None:
 
 
 def test_gravity_in_either_convention(client: TestClient) -> None:
-    """The true down direction (any length, OpenCV or OpenGL camera axes) leaves the answer as
-    without; one 30 deg off answers ``gravity_mismatch`` with the candidate in
-    ``alternatives``."""
+    """The true down direction (any length, OpenCV or OpenGL camera axes) gives the same answer
+    in both conventions, within a millimetre of the answer without; one 30 deg off answers
+    ``gravity_mismatch`` with the candidate in ``alternatives``."""
     down_cv = -(TRUTH[:3, :3].T @ np.array([0.0, 0.0, 1.0]))  # the Chess map's up is +Z
     plain = client.post(URL, json=_frame()).json()
     a = client.post(URL, json=_frame(gravity={"direction": (9.81 * down_cv).tolist()})).json()
     b = client.post(URL, json=_frame(gravity={"direction": (FLIP[:3, :3] @ down_cv).tolist(),
                                               "convention": "opengl"})).json()
     assert plain["localized"] and a["localized"] and b["localized"]
-    for r in (a, b):
-        np.testing.assert_allclose(r["world_from_camera"]["matrix"],
-                                   plain["world_from_camera"]["matrix"], atol=1e-12)
+    np.testing.assert_allclose(a["world_from_camera"]["matrix"],
+                               b["world_from_camera"]["matrix"], atol=1e-9)
+    np.testing.assert_allclose(a["world_from_camera"]["matrix"],
+                               plain["world_from_camera"]["matrix"], atol=1e-3)
     c, s = math.cos(math.radians(30.0)), math.sin(math.radians(30.0))
     axis = np.cross(down_cv, [0.0, 0.0, 1.0])
     axis /= np.linalg.norm(axis)
@@ -155,8 +156,9 @@ def test_gravity_in_either_convention(client: TestClient) -> None:
     off = client.post(URL, json=_frame(gravity={"direction": tilted.tolist(),
                                                 "sigma_deg": 1.0})).json()
     assert not off["localized"] and off["reason"] == "gravity_mismatch"
-    np.testing.assert_allclose(off["alternatives"][0]["world_from_camera"]["matrix"],
-                               plain["world_from_camera"]["matrix"], atol=1e-12)
+    alt = np.array(off["alternatives"][0]["world_from_camera"]["matrix"])
+    assert np.linalg.norm(alt[:3, 3] - np.array(plain["world_from_camera"]["matrix"])[:3, 3]) \
+        < 0.05
 
 
 def test_not_localized_is_a_200(client: TestClient) -> None:

@@ -1,5 +1,6 @@
-"""A client's gravity direction as a veto of tilted answers (``service.localization.gravity``,
-``Gravity``, ``bench.simulate.simulate_gravity``)."""
+"""A client's gravity direction: a factor on the pose's tilt (``factors.gravity_factor``), a
+test of candidates and a veto of tilted answers (``service.localization.gravity``, ``Gravity``,
+``bench.simulate.simulate_gravity``)."""
 
 from __future__ import annotations
 
@@ -12,11 +13,14 @@ from bench.chess_eval import load_chess_map, load_chess_world_from_camera, pose_
 from bench.simulate import SimulationConfig, simulate_frame, simulate_gravity
 from bench.trust import reduce_frame
 from factors.geometry import invert_pose
+from factors.gravity_factor import GravityMeasurement, gravity_factor
+from factors.pose_factors import pose3
 from factors.pose_residuals import expmap_pose3
 from maps.compiled import compile_map
 from service.localization.confidence import TOLERANCE_ROTATION_DEG
 from service.localization.gravity import GRAVITY_GATE_SIGMAS, answer_gate_deg, tilt_errors_deg
 from service.localization.pipeline import localize
+from service.localization.refine import refine
 from service.localization.types import (
     Gravity,
     LocalizationInputError,
@@ -104,9 +108,95 @@ def test_simulated_gravity_has_the_stated_tilt_distribution():
     assert np.mean(tilt > 6.0) == pytest.approx(math.exp(-4.5), abs=0.006)
 
 
-def test_consistent_gravity_changes_nothing_and_a_tilted_one_vetoes():
-    """The true gravity leaves the answer exactly as without; a gravity 30 deg off makes it
-    ``gravity_mismatch``, with the candidate (same pose, same probability) in
+def _measurement(world_from_camera: np.ndarray, sigma_deg: float = 2.0) -> GravityMeasurement:
+    return GravityMeasurement(_true_gravity(world_from_camera).direction_camera, -UP,
+                              math.radians(sigma_deg))
+
+
+def test_gravity_factor_error_is_the_tilt_and_its_jacobian_matches_central_differences():
+    """The factor's error norm is the tilt angle's sine (GTSAM's ``Unit3.error``: the
+    predicted down projected on the tangent plane of the map's down),
+    zero at a pose agreeing with the measurement and under yaw; its whitened Jacobian (GTSAM's
+    analytic one) matches central differences on ``retract`` and leaves the position out."""
+    import gtsam
+
+    T = POSES[12]
+    m = _measurement(T, sigma_deg=2.0)
+    f = gravity_factor(0, m)
+
+    def error(pose: np.ndarray) -> np.ndarray:
+        v = gtsam.Values()
+        v.insert(0, pose3(pose))
+        return np.asarray(f.unwhitenedError(v))
+
+    np.testing.assert_allclose(error(T), 0.0, atol=1e-12)
+    c, s_ = math.cos(1.1), math.sin(1.1)
+    yaw = np.eye(4)
+    yaw[:3, :3] = [[c, -s_, 0], [s_, c, 0], [0, 0, 1]]
+    np.testing.assert_allclose(error(yaw @ T), 0.0, atol=1e-12)
+    for angle in (0.5, 4.0, 25.0):
+        tilted = _tilted(T, angle)
+        assert tilt_errors_deg(invert_pose(tilted), UP, _true_gravity(T)) == pytest.approx(
+            angle, abs=1e-6)
+        assert np.linalg.norm(error(tilted)) == pytest.approx(math.sin(math.radians(angle)),
+                                                              rel=1e-9)
+    at = _tilted(T, 7.0)
+    v = gtsam.Values()
+    v.insert(0, pose3(at))
+    A, _ = f.linearize(v).jacobian()  # whitened: J / sigma
+    h = 1e-6
+    numeric = np.column_stack([
+        (error(at @ expmap_pose3(h * e)) - error(at @ expmap_pose3(-h * e))) / (2 * h)
+        for e in np.eye(6)])
+    np.testing.assert_allclose(A * m.sigma_rad, numeric, atol=1e-7)
+    np.testing.assert_allclose(A[:, 3:], 0.0, atol=0)
+
+
+def test_gravity_measurement_validation_names_the_field():
+    for kw, field in (({"down_camera": [0.0, 0.0, 0.0]}, "down_camera"),
+                      ({"down_world": [1.0, math.inf, 0.0]}, "down_world"),
+                      ({"down_world": [1.0, 0.0]}, "down_world"),
+                      ({"sigma_rad": 0.0}, "sigma_rad"), ({"sigma_rad": math.nan}, "sigma_rad")):
+        args = {"down_camera": [0.0, 1.0, 0.0], "down_world": [0.0, 0.0, -1.0],
+                "sigma_rad": 0.03, **kw}
+        with pytest.raises(ValueError, match=rf"^{field}:"):
+            GravityMeasurement(**args)
+    g = GravityMeasurement([0.0, 3.0, 0.0], [0.0, 0.0, -2.0], 0.03)
+    np.testing.assert_allclose(g.down_camera, [0.0, 1.0, 0.0])
+    np.testing.assert_allclose(g.down_world, [0.0, 0.0, -1.0])
+
+
+def test_refine_with_gravity_keeps_the_optimum_and_adds_only_tilt_information():
+    """Exact detections and the exact gravity: the same optimum as without; the factor's
+    information (``fixed_information``) is rank 2, in the rotation block, perpendicular to the
+    vertical (yaw is not observed), and the covariance shrinks (never grows) by it."""
+    T = POSES[50]
+    f = simulate_frame(CM, CAMERA, T, 50, SimulationConfig.exact())
+    ells = [CM.scene_map.object_by_id(o).ellipsoid for o in f.object_ids]
+    start = T @ expmap_pose3(np.r_[0.03, -0.02, 0.04, 0.05, -0.04, 0.03])
+    plain = refine(f.detections, ells, CAMERA, start)
+    got = refine(f.detections, ells, CAMERA, start, gravity=_measurement(T))
+    assert plain.fixed_information is None and plain.gravity_chi2 == 0.0
+    np.testing.assert_allclose(got.world_from_camera, plain.world_from_camera, atol=1e-9)
+    assert got.gravity_chi2 == pytest.approx(0.0, abs=1e-12)
+    info = got.fixed_information
+    np.testing.assert_allclose(info[3:], 0.0, atol=0)
+    np.testing.assert_allclose(info[:, 3:], 0.0, atol=0)
+    eig = np.linalg.eigvalsh(info[:3, :3])
+    assert eig[0] == pytest.approx(0.0, abs=1e-6 * eig[-1])
+    np.testing.assert_allclose(eig[1:], 1.0 / math.radians(2.0) ** 2, rtol=1e-6)
+    up_camera = T[:3, :3].T @ UP
+    np.testing.assert_allclose(info[:3, :3] @ up_camera, 0.0, atol=1e-6 * eig[-1])
+    # the covariance is the inverse of the detections' information plus the factor's
+    np.testing.assert_allclose(np.linalg.inv(got.covariance),
+                               np.linalg.inv(plain.covariance) + info, rtol=1e-6,
+                               atol=1e-6 * eig[-1])
+
+
+def test_consistent_gravity_barely_moves_the_answer_and_a_tilted_one_vetoes():
+    """The true gravity leaves the answer within a millimetre of the answer without it, with
+    a covariance no larger (the tilt directions tighter); a gravity 30 deg off makes it
+    ``gravity_mismatch`` (the detections outweigh the factor), with the candidate in
     ``alternatives`` and the tilt in ``evidence``."""
     T = POSES[30]
     f = simulate_frame(CM, CAMERA, T, 30, SimulationConfig())
@@ -114,16 +204,19 @@ def test_consistent_gravity_changes_nothing_and_a_tilted_one_vetoes():
     assert plain.localized
     with_g = localize(f.detections, CM, CAMERA, OPTS, gravity=_true_gravity(T))
     assert with_g.localized and with_g.reason is None
-    np.testing.assert_allclose(with_g.world_from_camera, plain.world_from_camera, atol=1e-12)
-    assert with_g.confidence == plain.confidence
+    assert np.linalg.norm(with_g.world_from_camera[:3, 3] - plain.world_from_camera[:3, 3]) \
+        < 1e-3
+    # no larger (up to the answers' slightly different s^2 and linearisation points)
+    scale = np.linalg.eigvalsh(plain.covariance)[-1]
+    assert np.all(np.linalg.eigvalsh(plain.covariance - with_g.covariance) > -1e-4 * scale)
+    assert with_g.evidence["gravity"] == 1.0 and plain.evidence["gravity"] == 0.0
     assert with_g.evidence["tilt_error_deg"] < answer_gate_deg(_true_gravity(T))
     off = localize(f.detections, CM, CAMERA, OPTS, gravity=_true_gravity(_tilted(T, 30.0)))
     assert not off.localized and off.reason == "gravity_mismatch"
     assert off.world_from_camera is None and off.confidence == 0.0
-    # 30 deg from the true down, so the answer's tilt is 30 deg +- its own (triangle inequality)
-    assert abs(off.evidence["tilt_error_deg"] - 30.0) <= with_g.evidence["tilt_error_deg"] + 1e-6
-    np.testing.assert_allclose(off.alternatives[0].world_from_camera, plain.world_from_camera)
-    assert off.alternatives[0].confidence == pytest.approx(plain.confidence, abs=1e-12)
+    assert off.evidence["tilt_error_deg"] > answer_gate_deg(_true_gravity(T))
+    assert np.linalg.norm(off.alternatives[0].world_from_camera[:3, 3]
+                          - plain.world_from_camera[:3, 3]) < 0.05
 
 
 def test_a_prior_answer_against_gravity_leaves_the_search_from_scratch_to_decide():
@@ -138,10 +231,13 @@ def test_a_prior_answer_against_gravity_leaves_the_search_from_scratch_to_decide
     assert not bad.localized and bad.reason == "gravity_mismatch" and not bad.used_prior
 
 
-def test_measured_gravity_never_adds_a_wrong_answer():
-    """Frames reduced to 2 detections, simulated IMU gravity (1 deg, declared 2 deg): gravity
-    only removes answers, and never one within 10 cm and 5 deg."""
-    vetoed = 0
+def test_measured_gravity_resolves_two_detection_frames():
+    """Frames reduced to 2 detections (seeds not used for tuning), simulated IMU gravity
+    (1 deg, declared 2 deg), every verified pose returned: with gravity in the solve, fewer
+    answers more than 0.5 m off and more within 10 cm (``bench.trust``: 2-detection frames
+    within 10 cm 50 -> 68 of 216, > 0.5 m off 78 -> 15 on tuning seeds)."""
+    good = {False: 0, True: 0}
+    wrong = {False: 0, True: 0}
     for i in range(0, len(POSES), 4):
         f = simulate_frame(CM, CAMERA, POSES[i], 700_000 + i, SimulationConfig())
         dets = reduce_frame(f.detections, f.object_ids, 2, np.random.default_rng(i))
@@ -149,12 +245,10 @@ def test_measured_gravity_never_adds_a_wrong_answer():
             continue
         g = Gravity(simulate_gravity(POSES[i], UP, 1.0, i), 2.0)
         opts = LocalizationOptions(time_budget_ms=None, on_ambiguity="best", min_confidence=0.0)
-        a = localize(dets, CM, CAMERA, opts)
-        b = localize(dets, CM, CAMERA, opts, gravity=g)
-        assert b.localized <= a.localized
-        if a.localized and not b.localized:
-            vetoed += 1
-            assert b.reason == "gravity_mismatch"
-            pos, rot = pose_errors(a.world_from_camera, POSES[i])
-            assert not (pos <= 0.1 and rot <= 5.0), (i, pos, rot)
-    assert vetoed >= 1
+        for with_g in (False, True):
+            r = localize(dets, CM, CAMERA, opts, gravity=g if with_g else None)
+            pos, _ = pose_errors(r.world_from_camera if r.localized else None, POSES[i])
+            good[with_g] += pos <= 0.1
+            wrong[with_g] += r.localized and pos > 0.5
+    assert good[True] > good[False]
+    assert wrong[True] < wrong[False]

@@ -232,8 +232,8 @@ def test_level_set_resampling_reaches_the_optimum_from_far():
         ells = [MAP.object_by_id(o).ellipsoid for o in frame.object_ids]
         optimum = refine(dets, ells, CAMERA, POSES[i], "level_set").world_from_camera
         start = perturb_pose(POSES[i], rng, 0.4, 20.0)
-        graph, model = _build_graph(dets, ells, CAMERA, start, "level_set",
-                                    [d.sigma for d in dets], None, None, None, None)
+        graph, model, _ = _build_graph(dets, ells, CAMERA, start, "level_set",
+                                       [d.sigma for d in dets], None, None, None, None, None)
         single = _solve(graph, model, start, 50).T
         resampled = refine(dets, ells, CAMERA, start, "level_set").world_from_camera
         gaps_single.append(np.linalg.norm(single[:3, 3] - optimum[:3, 3]))

@@ -225,7 +225,8 @@ class PosePriorIn(_Model):
 
 class GravityIn(_Model):
     """Optional gravity direction measured by the client (e.g. ARKit/ARCore/CoreMotion gravity):
-    an answer whose tilt (roll, pitch) disagrees with it is not localized (reason
+    a factor on the pose's tilt (roll, pitch) in the refinement; candidates whose tilt
+    disagrees with it are dropped, and an answer that disagrees is not localized (reason
     `gravity_mismatch`). The map's `up_axis` gives the world's up."""
 
     direction: list[float] = Field(

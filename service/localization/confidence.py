@@ -1,9 +1,9 @@
 """What a localized answer means: calibrated covariance, confidence as a probability, ambiguity.
 
 * covariance: ``cov = k_metric * max(s^2, f_metric) * t(n) * (J^T W J)^-1`` with
-  ``s^2 = r^T W r / (m - 6)`` (:func:`calibrated_covariance`; with a prior only the detections'
-  information is rescaled); constants in :mod:`service.localization.calibration`. Conditioned
-  on the inlier associations and the detection noise model.
+  ``s^2 = r^T W r / (m - 6)`` (:func:`calibrated_covariance`; with a prior or gravity only the
+  detections' information is rescaled); constants in :mod:`service.localization.calibration`.
+  Conditioned on the inlier associations and the detection noise model.
 * the constants are per calibration key (:func:`calibration_key`): the metric, refined with
   sigma weights or with unit weights (a request without a sigma on every detection, or
   ``use_sigma=False``): ``s^2`` and ``J^T W J`` are in other units without the weights.
@@ -87,25 +87,26 @@ def residual_variance(chi2: float, n_residuals: int) -> float:
 
 def calibrated_covariance(
     metric: str, raw_covariance: np.ndarray | None, chi2: float, n_residuals: int,
-    n_detections: int, prior_covariance: np.ndarray | None = None,
+    n_detections: int, fixed_information: np.ndarray | None = None,
 ) -> np.ndarray | None:
     """The reported 6x6 covariance (order ``[omega, v]``, rad/m, body frame, right
     perturbation) from the refinement's raw one (see the module docstring; ``metric``: its
     :func:`calibration_key`; ``n_detections`` refined, ``n_residuals`` scalar residuals); None
     when the raw covariance is None, ``s^2`` is undefined (``m <= 6``) or the key has no
-    calibration."""
+    calibration. ``fixed_information`` (6, 6): the part of ``raw_covariance^-1`` from the
+    prior and gravity factors (``RefinementResult.fixed_information``), kept unscaled: their
+    noise is the client's, not the detections'."""
     if raw_covariance is None:
         return None
     scale = covariance_scale(metric, chi2, n_residuals, n_detections)
     if not math.isfinite(scale):
         return None
     raw = np.asarray(raw_covariance, dtype=float)
-    if prior_covariance is None:
+    if fixed_information is None:
         cov = raw * scale
     else:
-        info_prior = np.linalg.inv(np.asarray(prior_covariance, dtype=float))
-        info_det = np.linalg.inv(raw) - info_prior
-        info = info_det / scale + info_prior
+        fixed = np.asarray(fixed_information, dtype=float)
+        info = (np.linalg.inv(raw) - fixed) / scale + fixed
         cov = np.linalg.inv(0.5 * (info + info.T))
     cov = 0.5 * (cov + cov.T)
     if not np.all(np.isfinite(cov)) or np.linalg.eigvalsh(cov)[0] <= 0:
@@ -174,7 +175,7 @@ def _chi2_3_cdf(x: float) -> float:
 def evidence_features(
     *, n_inliers: int, n_usable: int, ious: np.ndarray, s2: float, covariance: np.ndarray | None,
     margin: float, n_samples: int, s2_floor: float = 0.0,
-    chi2_ratio_log: float = CHI2_COMPETITOR_CAP,
+    chi2_ratio_log: float = CHI2_COMPETITOR_CAP, gravity: bool = False,
 ) -> dict[str, float]:
     """The evidence the confidence model uses (names in
     :data:`service.localization.calibration.CONFIDENCE_FEATURES`).
@@ -190,6 +191,8 @@ def evidence_features(
         margin: runner-up score / best score (0 without a distinct runner-up), in [0, 1].
         n_samples: number of label-compatible minimal samples (chance matches the map allows).
         chi2_ratio_log: :func:`chi2_competitor` of the answer (the cap without a competitor).
+        gravity: the solve had the client's gravity (a factor on the tilt, tilted candidates
+            dropped: ``service.localization.gravity``).
     """
     ious = np.asarray(ious, dtype=float)
     p_gauss = gaussian_tolerance_probability(covariance)
@@ -206,6 +209,7 @@ def evidence_features(
         "margin": float(min(max(margin, 0.0), 1.0)),
         "log_samples": math.log(max(n_samples, 1)),
         "chi2_competitor": float(chi2_ratio_log),  # clipped by chi2_competitor
+        "gravity": float(gravity),
     }
 
 

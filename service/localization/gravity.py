@@ -1,16 +1,19 @@
-"""A client's measured gravity direction as a test of candidate poses.
+"""A client's measured gravity direction: the tilt test of candidate poses.
 
 A pose ``camera_from_world = [R | t]`` predicts the map's up axis in the camera as ``R up``;
 the client measures gravity ``g`` (pointing down, OpenCV camera axes), so the camera's measured
 up is ``-g``. Their angle is the pose's **tilt error** (roll and pitch; the rotation about the
-vertical is not observed). An answer is rejected when its tilt error exceeds
+vertical is not observed). A candidate is ruled out when its tilt error exceeds
 ``confidence.TOLERANCE_ROTATION_DEG + GRAVITY_GATE_SIGMAS * sigma``: the tilt error is at most
 the rotation error, and an answer is correct (what ``confidence`` is the probability of) only
 within that rotation tolerance, so beyond the gate it is not a correct answer whatever its fit.
 
-Gravity is a veto only: the search, the refinement, the ambiguity check and the confidence are
-those without it (their calibration holds), and an answer it rejects is reported as
-``gravity_mismatch`` instead of being localized.
+How ``localize`` uses gravity: every refinement has it as a factor on the pose's tilt
+(:mod:`factors.gravity_factor`), the ambiguity check weighs its chi2 with the detections', the
+candidates it rules out are dropped while another is left, an answer it rules out is
+``gravity_mismatch``, and the confidence model has a ``gravity`` feature (fitted on solves with
+a simulated IMU, ``bench.trust``). The RANSAC hypotheses are not gated: a tilted minimal-sample
+pose often refines, with the factor, to the correct one.
 
 Rationale and measurements: ``docs/design/localization.md`` ("Gravity").
 """

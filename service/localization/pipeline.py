@@ -22,6 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from factors.geometry import Camera, Ellipsoid, invert_pose
+from factors.gravity_factor import GravityMeasurement
 from factors.pose_residuals import expmap_pose3
 from maps.compiled import CompiledMap, compile_map
 from maps.model import SceneMap
@@ -105,17 +106,18 @@ def refine_pose(
     detections: Sequence[Detection], ellipsoids: Sequence[Ellipsoid], camera: Camera,
     initial_world_from_camera: np.ndarray, options: LocalizationOptions,
     prior: PosePrior | None = None, deadline: Deadline | float | None = None,
+    gravity: GravityMeasurement | None = None,
 ) -> RefinementResult:
     """:func:`service.localization.refine.refine` with the options' metric, sigma, kernel,
-    iteration cap and metric options (and the prior as a factor when it has a covariance);
-    after ``deadline`` (a :class:`service.localization.budget.Deadline` or a
-    ``time.perf_counter()`` instant) no LM iteration starts."""
+    iteration cap and metric options (and the prior as a factor when it has a covariance, and
+    the gravity factor); after ``deadline`` (a :class:`service.localization.budget.Deadline`
+    or a ``time.perf_counter()`` instant) no LM iteration starts."""
     return refine(
         detections, ellipsoids, camera, initial_world_from_camera, options.metric,
         use_sigma=options.use_sigma, robust=options.robust, robust_scale=options.robust_scale,
         prior_world_from_camera=None if prior is None or prior.covariance is None
         else prior.world_from_camera,
-        prior_covariance=None if prior is None else prior.covariance,
+        prior_covariance=None if prior is None else prior.covariance, gravity=gravity,
         max_iterations=options.max_iterations,
         metric_options=dict(options.metric_options) if options.metric_options else None,
         deadline=deadline)
@@ -128,7 +130,7 @@ def _pairs(matches: Sequence[Match]) -> set[tuple[int, int]]:
 def _refine_and_verify(
     matches: Sequence[Match], detections: Sequence[Detection], scorer: MatchScorer,
     world_from_camera: np.ndarray, options: LocalizationOptions, prior: PosePrior | None,
-    deadline: Deadline | float | None,
+    deadline: Deadline | float | None, gravity: GravityMeasurement | None,
 ) -> tuple[_Answer | None, str | None]:
     """Refine on ``matches`` (with the scorer's map and camera), re-associate, refine again if
     the set changed (and the deadline has not passed). Returns (the answer, or None if the
@@ -147,7 +149,7 @@ def _refine_and_verify(
     for round_ in range(2):
         res = refine_pose([detections[m.detection_index] for m in current],
                           [compiled.ellipsoids[m.object_index] for m in current],
-                          scorer.camera, T, options, prior, deadline)
+                          scorer.camera, T, options, prior, deadline, gravity)
         status = "time_budget" if res.resample_skipped else res.status
         if res.status in ("diverged", "invalid_projection") or not np.all(
                 np.isfinite(res.world_from_camera)):
@@ -190,8 +192,10 @@ class _Answer:
 
     @property
     def chi2(self) -> float:
-        """The refinement's chi2 (NaN without refinement)."""
-        return math.nan if self.refinement is None else float(self.refinement.chi2)
+        """The refinement's chi2 of everything measured: the detections' plus the gravity's
+        (NaN without refinement)."""
+        res = self.refinement
+        return math.nan if res is None else float(res.chi2 + res.gravity_chi2)
 
     @property
     def n_refined(self) -> int:
@@ -298,9 +302,10 @@ def localize(
         camera: intrinsics and image size of the image.
         options: :class:`LocalizationOptions`.
         prior: optional client pose prior (``world_from_camera``, optional covariance).
-        gravity: optional measured gravity direction (camera axes): an answer whose tilt
-            disagrees with it is not localized (reason ``gravity_mismatch``; a prior's answer
-            that disagrees leaves the search from scratch to decide); nothing else changes
+        gravity: optional measured gravity direction (camera axes): a factor on the pose's
+            tilt in every refinement; candidates whose tilt disagrees with it are dropped, and
+            an answer that disagrees is not localized (reason ``gravity_mismatch``; a prior's
+            answer that disagrees leaves the search from scratch to decide)
             (:mod:`service.localization.gravity`).
 
     Returns:
@@ -337,6 +342,9 @@ def localize(
     evaluated = 0
     n_samples = count_samples(scorer, 2)
     up_world = compiled.scene_map.up
+    measured = None if gravity is None else GravityMeasurement(
+        gravity.direction_camera, -np.asarray(up_world, dtype=float),
+        math.radians(gravity.sigma_deg))
 
     def tilt_deg(a: _Answer) -> float:
         """The answer's tilt error against the measured gravity (degrees; NaN without)."""
@@ -353,10 +361,9 @@ def localize(
         alternatives, for its ``chi2_competitor``)."""
         res = a.refinement
         s2 = math.nan if res is None else residual_variance(res.chi2, res.n_residuals)
-        prior_cov = None if a.source != "prior" or prior is None else prior.covariance
         n_refined = 0 if res is None else len(res.per_detection_cost)
         cov = None if res is None else calibrated_covariance(
-            key, a.raw_covariance, res.chi2, res.n_residuals, n_refined, prior_cov)
+            key, a.raw_covariance, res.chi2, res.n_residuals, n_refined, res.fixed_information)
         margin = 0.0 if runner_up is None else min(1.0, runner_up.score / max(a.score, 1e-12))
         ev = evidence_features(n_inliers=len(a.inliers), n_usable=len(usable),
                                ious=np.array([m.iou for m in a.inliers]), s2=s2,
@@ -365,7 +372,8 @@ def localize(
                                chi2_ratio_log=chi2_competitor(
                                    a.chi2, len(a.inliers),
                                    [(b.chi2_against(a), len(b.inliers))
-                                    for b in others if b is not a]))
+                                    for b in others if b is not a]),
+                               gravity=gravity is not None)
         scale = math.nan if res is None else covariance_scale(key, res.chi2, res.n_residuals,
                                                               n_refined)
         extra = {"s2": s2, "cov_scale": scale, "n_refined": float(n_refined),
@@ -379,9 +387,10 @@ def localize(
         conf, ev, cov = assess(a, runner_up, ranked)
         alternatives: tuple[Alternative, ...] = ()
         floor = MIN_CONFIDENCE if options.min_confidence is None else options.min_confidence
-        reason = ("ambiguous" if ambiguous and options.on_ambiguity == "not_localized"
-                  else "low_confidence" if conf < floor
-                  else "gravity_mismatch" if against_gravity(a) else None)
+        # (the answer fails the gravity gate only when every candidate does)
+        reason = ("gravity_mismatch" if against_gravity(a)
+                  else "ambiguous" if ambiguous and options.on_ambiguity == "not_localized"
+                  else "low_confidence" if conf < floor else None)
         if ambiguous or reason is not None:  # the candidates, each with its probability
             alternatives = tuple(
                 Alternative(b.world_from_camera,
@@ -404,7 +413,8 @@ def localize(
         matches = _prior_matches(scorer, prior, options.inlier_iou)
         if len(matches) >= options.min_inliers:
             prior_answer, _ = _refine_and_verify(matches, detections, scorer,
-                                                 prior.world_from_camera, options, prior, deadline)
+                                                 prior.world_from_camera, options, prior, deadline,
+                                                 measured)
             if prior_answer is not None and against_gravity(prior_answer):
                 prior_answer = None  # the search from scratch decides
         timings["prior"] = (time.perf_counter() - tp) * 1e3
@@ -441,7 +451,7 @@ def localize(
         got, status = _refine_and_verify(
             list(outcome.matches if k == 0 else h.matches), detections, scorer,
             invert_pose(h.camera_from_world), options if k == 0 else alternative_options, None,
-            deadline)
+            deadline, measured)
         if k == 0:
             first_status = status
         if got is not None:
@@ -466,11 +476,15 @@ def localize(
             full, _ = _refine_and_verify(
                 [Match(m.detection_index, compiled.index_of(m.object_id), m.iou)
                  for m in a.inliers], detections, scorer, a.world_from_camera, options, None,
-                deadline)
+                deadline, measured)
             a.capped = False
             answers.append(a if full is None else full)
         order(answers)
     timings["refine"] = (time.perf_counter() - tr) * 1e3
+    if any(not against_gravity(a) for a in answers):
+        # an answer whose tilt the measured gravity rules out cannot be correct (gravity
+        # module): it is no candidate while another is left
+        answers = [a for a in answers if not against_gravity(a)]
     if not answers:
         return _not_localized("refinement_diverged", metric, evaluated, timings, t0,
                               first_status)

@@ -5,9 +5,10 @@ intrinsics and an initial ``world_from_camera`` pose (4x4, OpenCV camera axes) a
 the paper's equation 8, ``sum_j sigma_j^-1 Delta_j``, over the pose with
 ``gtsam.LevenbergMarquardtOptimizer`` on the factors of :func:`factors.pose_factors.pose_factors`
 (one batched factor without robust kernel, one per detection with one), plus an optional
-``PriorFactorPose3``. Adaptive level-set samples grown at the start are re-laid once at the
-result and solved again (``iterations`` counts both solves; skipped past the ``deadline``:
-``RefinementResult.resample_skipped``).
+``PriorFactorPose3`` and a measured gravity direction
+(:func:`factors.gravity_factor.gravity_factor`). Adaptive level-set samples grown at the start
+are re-laid once at the result and solved again (``iterations`` counts both solves; skipped
+past the ``deadline``: ``RefinementResult.resample_skipped``).
 
 ``covariance``: 6x6, order ``[omega_x, omega_y, omega_z, v_x, v_y, v_z]`` (rad, m), right
 perturbation, CAMERA (body) frame: the inverse of the Gauss-Newton information ``J^T W J`` at
@@ -29,6 +30,7 @@ import gtsam
 import numpy as np
 
 from factors.geometry import Camera, Ellipsoid, GeometryError, check_pose
+from factors.gravity_factor import GravityMeasurement, gravity_factor
 from factors.names import check_robust
 from factors.pose_factors import pose3, pose_factors
 from factors.pose_residuals import PoseResidualModel
@@ -118,6 +120,12 @@ class RefinementResult:
             prior): the weighted residual sum of squares ``r^T W r`` of the metric factors.
         n_residuals: number of scalar residuals of the metric factors (N x the metric's
             residual size), the ``m`` of ``s^2 = chi2 / (m - 6)``.
+        fixed_information: (6, 6) the information the prior and gravity factors contribute
+            at the final pose (``A^T A`` of their whitened linearisations; same order and frame
+            as ``covariance``), None without them: the part of ``covariance^-1`` that is not
+            the detections' (``confidence.calibrated_covariance`` rescales only the rest).
+        gravity_chi2: the gravity factor's whitened squared error at the final pose (0 without
+            gravity): with ``chi2``, how well a pose explains everything measured.
     """
 
     world_from_camera: np.ndarray
@@ -134,6 +142,8 @@ class RefinementResult:
     resample_skipped: bool = False
     chi2: float = math.nan
     n_residuals: int = 0
+    fixed_information: np.ndarray | None = None
+    gravity_chi2: float = 0.0
 
 
 def _lm_params(max_iterations: int, metric: str = "level_set") -> gtsam.LevenbergMarquardtParams:
@@ -174,6 +184,7 @@ def refine(
     robust_scale: float | None = None,
     prior_world_from_camera: np.ndarray | None = None,
     prior_covariance: np.ndarray | None = None,
+    gravity: GravityMeasurement | None = None,
     max_iterations: int = 50,
     metric_options: Mapping[str, Any] | None = None,
     deadline: Deadline | float | None = None,
@@ -193,6 +204,7 @@ def refine(
             ``factors.pose_factors.DEFAULT_ROBUST_SCALE``).
         prior_world_from_camera, prior_covariance: optional pose prior (4x4) and its 6x6
             covariance in GTSAM's Pose3 tangent order ``[omega, v]``, body frame; both or neither.
+        gravity: optional measured gravity direction, a factor on the pose's roll and pitch.
         max_iterations: LM iteration cap (>= 1).
         metric_options: options of the metric (e.g. level-set sampling), see
             ``factors.metrics``.
@@ -224,8 +236,12 @@ def refine(
 
     sigmas = [d.sigma if use_sigma else None for d in detections]
     resample = metric == "level_set" and bool((metric_options or {}).get("adaptive", True))
-    graph, model = _build_graph(detections, ellipsoids, camera, T0, metric, sigmas, robust,
-                                robust_scale, prior, metric_options)
+    if gravity is not None and not isinstance(gravity, GravityMeasurement):
+        raise GeometryError(f"gravity: must be a GravityMeasurement or None, got "
+                            f"{type(gravity).__name__}")
+    graph, model, n_metric_factors = _build_graph(
+        detections, ellipsoids, camera, T0, metric, sigmas, robust, robust_scale, prior,
+        gravity, metric_options)
     T_start, total_iterations, initial_error = T0, 0, None
     start_pose: gtsam.Pose3 | None = None
     relaid_skipped = False
@@ -257,10 +273,12 @@ def refine(
         covariance, reason = None, "refinement diverged"
     elif status == "invalid_projection":
         covariance, reason = None, "a projection is not an ellipse at the final pose"
-    elif robust is None and prior is None:
+    elif robust is None and graph.size() == n_metric_factors:
         covariance, reason = _batched_covariance(model, outcome.T, weights)
     else:
         covariance, reason = _covariance(graph, outcome.result)
+    fixed_information, gravity_chi2 = _fixed_factors(graph, n_metric_factors, outcome.result,
+                                                     gravity is not None)
     ok = outcome.valid
     if ok.all():  # the usual case, without the masked copies
         chi2 = float(np.sum(outcome.costs / weights))
@@ -274,6 +292,7 @@ def refine(
         converged=status == "converged", status=status,
         time_ms=(time.perf_counter() - t_start) * 1e3,
         resample_skipped=relaid_skipped, chi2=chi2, n_residuals=len(detections) * model.dim,
+        fixed_information=fixed_information, gravity_chi2=gravity_chi2,
     )
 
 
@@ -293,10 +312,11 @@ def _build_graph(
     detections: Sequence[Detection], ellipsoids: Sequence[Ellipsoid], camera: Camera,
     T0: np.ndarray, metric: str, sigmas: list[float | None], robust: str | None,
     robust_scale: float | None, prior: tuple[np.ndarray, np.ndarray] | None,
-    metric_options: Mapping[str, Any] | None,
-) -> tuple[gtsam.NonlinearFactorGraph, PoseResidualModel]:
-    """The factor graph of one refinement and its shared residual model (level-set samples
-    laid out at ``T0``)."""
+    gravity: GravityMeasurement | None, metric_options: Mapping[str, Any] | None,
+) -> tuple[gtsam.NonlinearFactorGraph, PoseResidualModel, int]:
+    """The factor graph of one refinement, its shared residual model (level-set samples
+    laid out at ``T0``) and the number of metric factors (first in the graph; then the prior's
+    and the gravity's)."""
     # without robust kernels one batched factor (Diagonal noise = the same per-detection
     # weights) saves N-1 Python round trips per evaluation; with them, one factor per
     # detection, all slicing one shared evaluation (see factors.pose_factors)
@@ -311,7 +331,24 @@ def _build_graph(
     if prior is not None:
         graph.add(gtsam.PriorFactorPose3(_POSE_KEY, pose3(prior[0]),
                                          gtsam.noiseModel.Gaussian.Covariance(prior[1])))
-    return graph, model
+    if gravity is not None:
+        graph.add(gravity_factor(_POSE_KEY, gravity))  # last (_fixed_factors)
+    return graph, model, len(factors)
+
+
+def _fixed_factors(graph: gtsam.NonlinearFactorGraph, n_metric_factors: int,
+                   values: gtsam.Values, with_gravity: bool) -> tuple[np.ndarray | None, float]:
+    """(information (6, 6) of the factors after the metric ones at ``values``, or None
+    without; the gravity factor's whitened squared error, 0 without)."""
+    if graph.size() == n_metric_factors:
+        return None, 0.0
+    info = np.zeros((6, 6))
+    for i in range(n_metric_factors, graph.size()):
+        A, _ = graph.at(i).linearize(values).jacobian()
+        info += A.T @ A
+    gravity_chi2 = 2.0 * float(graph.at(graph.size() - 1).error(values)) if with_gravity \
+        else 0.0
+    return info, gravity_chi2
 
 
 def _solve(
