@@ -44,7 +44,8 @@ def arcore_pose_to_matrix(column_major: Sequence[float]) -> list[list[float]]:
 
 
 def _frame(detections: Sequence[dict], odom_from_camera: Sequence[Sequence[float]],
-           timestamp: float, frame_id: str | None, prior: dict | None) -> dict[str, Any]:
+           timestamp: float, frame_id: str | None, prior: dict | None,
+           gravity: dict | None = None) -> dict[str, Any]:
     body: dict[str, Any] = {"detections": [dict(d) for d in detections],
                             "odom_from_camera": {"matrix": [list(map(float, r))
                                                             for r in odom_from_camera]},
@@ -53,6 +54,8 @@ def _frame(detections: Sequence[dict], odom_from_camera: Sequence[Sequence[float
         body["frame_id"] = frame_id
     if prior is not None:
         body["prior"] = prior
+    if gravity is not None:
+        body["gravity"] = dict(gravity)
     return body
 
 
@@ -69,10 +72,14 @@ class TrackingSession:
         return self.client._json(self.client._send(call))["results"]
 
     def add_frame(self, detections: Sequence[dict], *, odom_from_camera: Sequence[Sequence[float]],
-                  timestamp: float, frame_id: str | None = None,
-                  prior: dict | None = None) -> dict[str, Any]:
-        """Send one frame; returns its result document (state, world_from_camera, ...)."""
-        return self._post(_frame(detections, odom_from_camera, timestamp, frame_id, prior))[0]
+                  timestamp: float, frame_id: str | None = None, prior: dict | None = None,
+                  gravity: dict | None = None) -> dict[str, Any]:
+        """Send one frame; returns its result document (state, world_from_camera, ...).
+        ``gravity``: ``{"direction": [x, y, z], "sigma_deg": 2.0}``, the direction gravity pulls
+        in this frame's camera (in the session's convention unless ``"convention"`` says
+        otherwise): a factor on the frame's tilt."""
+        return self._post(_frame(detections, odom_from_camera, timestamp, frame_id, prior,
+                                 gravity))[0]
 
     def add_frames(self, frames: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
         """Send recorded frames (wire documents, time order) in one request (<= 900)."""
@@ -95,9 +102,10 @@ class AsyncTrackingSession(TrackingSession):
 
     async def add_frame(self, detections: Sequence[dict], *,  # type: ignore[override]
                         odom_from_camera: Sequence[Sequence[float]], timestamp: float,
-                        frame_id: str | None = None, prior: dict | None = None) -> dict[str, Any]:
+                        frame_id: str | None = None, prior: dict | None = None,
+                        gravity: dict | None = None) -> dict[str, Any]:
         return (await self._post(_frame(detections, odom_from_camera, timestamp, frame_id,
-                                         prior)))[0]
+                                         prior, gravity)))[0]
 
     async def add_frames(self, frames: Sequence[dict[str, Any]]  # type: ignore[override]
                          ) -> list[dict[str, Any]]:

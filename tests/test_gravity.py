@@ -164,6 +164,10 @@ def test_gravity_measurement_validation_names_the_field():
     g = GravityMeasurement([0.0, 3.0, 0.0], [0.0, 0.0, -2.0], 0.03)
     np.testing.assert_allclose(g.down_camera, [0.0, 1.0, 0.0])
     np.testing.assert_allclose(g.down_world, [0.0, 0.0, -1.0])
+    f = simulate_frame(CM, CAMERA, POSES[0], 0, SimulationConfig())
+    ells = [CM.scene_map.object_by_id(o).ellipsoid for o in f.object_ids]
+    with pytest.raises(ValueError, match=r"^gravity: must be a GravityMeasurement"):
+        refine(f.detections, ells, CAMERA, POSES[0], gravity=[0.0, 1.0, 0.0])  # type: ignore
 
 
 def test_refine_with_gravity_keeps_the_optimum_and_adds_only_tilt_information():
@@ -191,6 +195,26 @@ def test_refine_with_gravity_keeps_the_optimum_and_adds_only_tilt_information():
     np.testing.assert_allclose(np.linalg.inv(got.covariance),
                                np.linalg.inv(plain.covariance) + info, rtol=1e-6,
                                atol=1e-6 * eig[-1])
+
+
+@pytest.mark.parametrize(("metric", "robust"), [("bbox", "huber"), ("iou", None),
+                                               ("wasserstein", None)])
+def test_gravity_factor_with_other_metrics_and_kernels(metric, robust):
+    """The factor joins any metric's graph (batched or per-detection robust factors): exact
+    detections and gravity give the optimum found without it, and a covariance that includes
+    the factor's information."""
+    T = POSES[70]
+    f = simulate_frame(CM, CAMERA, T, 70, SimulationConfig.exact())
+    ells = [CM.scene_map.object_by_id(o).ellipsoid for o in f.object_ids]
+    start = T @ expmap_pose3(np.r_[0.02, 0.01, -0.02, 0.03, 0.02, -0.02])
+    plain = refine(f.detections, ells, CAMERA, start, metric, robust=robust)
+    got = refine(f.detections, ells, CAMERA, start, metric, robust=robust,
+                 gravity=_measurement(T))
+    assert got.status == "converged" and got.covariance is not None
+    np.testing.assert_allclose(got.world_from_camera, plain.world_from_camera, atol=1e-6)
+    np.testing.assert_allclose(np.linalg.inv(got.covariance),
+                               np.linalg.inv(plain.covariance) + got.fixed_information,
+                               rtol=1e-4, atol=1e-4 * np.abs(got.fixed_information).max())
 
 
 def test_consistent_gravity_barely_moves_the_answer_and_a_tilted_one_vetoes():

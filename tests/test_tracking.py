@@ -4,6 +4,7 @@ rule."""
 
 from __future__ import annotations
 
+import dataclasses
 import gc
 import math
 import re
@@ -16,13 +17,15 @@ from fastapi.testclient import TestClient
 from scipy.stats import chi
 
 from bench.reference_data import load_chess_map, load_chess_poses
-from bench.simulate import SimulationConfig, simulate_frame
+from bench.simulate import SimulationConfig, simulate_frame, simulate_gravity
 from bench.tracking import make_walk, pose_error, simulate_odometry
 from factors.geometry import invert_pose
 from factors.names import FieldError
 from factors.pose_residuals import expmap_pose3
 from maps.compiled import compile_map
 from service.api.errors import field_and_problem
+from service.localization.gravity import tilt_errors_deg
+from service.localization.types import Gravity
 from service.tracking.association import centre_jacobians
 from service.tracking.confidence import session_confidence
 from service.tracking.session import (
@@ -184,6 +187,40 @@ def test_bad_frames_name_the_field_and_leave_the_session_unchanged(walk: dict) -
                                                           exc.value.problem)
 
 
+def _with_gravity(walk: dict, seed: int = 11) -> list[FrameInput]:
+    """The walk's frames with a simulated IMU gravity (1 deg per tilt axis, declared 2 deg)."""
+    rng = np.random.default_rng(seed)
+    up = walk["cm"].scene_map.up
+    return [dataclasses.replace(f, gravity=Gravity(
+        simulate_gravity(walk["poses"][i], up, 1.0, rng), 2.0))
+        for i, f in enumerate(walk["frames"])]
+
+
+def test_gravity_tightens_the_tilt_of_a_tracked_walk(walk: dict) -> None:
+    """The same walk with the device's gravity on every frame (a factor on each frame's tilt):
+    over the frames tracked both ways, a smaller mean tilt error against the truth and a
+    smaller rotation covariance; a gravity that is not a ``Gravity`` names the field."""
+    up = walk["cm"].scene_map.up
+    runs = {}
+    for name, frames in (("plain", walk["frames"]), ("gravity", _with_gravity(walk))):
+        s = TrackingSession(walk["cm"], walk["camera"], SessionOptions())
+        runs[name] = [s.add_frame(f) for f in frames]
+    both = [i for i, (a, b) in enumerate(zip(runs["plain"], runs["gravity"], strict=True))
+            if a.state == "tracking" and b.state == "tracking"]
+    assert len(both) >= 80
+    tilt = {name: [float(tilt_errors_deg(invert_pose(runs[name][i].world_from_camera), up,
+                                         Gravity(-(walk["poses"][i][:3, :3].T @ up))))
+                   for i in both] for name in runs}
+    rot_var = {name: [float(np.trace(runs[name][i].covariance[:3, :3])) for i in both]
+               for name in runs}
+    assert np.mean(tilt["gravity"]) < np.mean(tilt["plain"])
+    assert np.mean(rot_var["gravity"]) < np.mean(rot_var["plain"])
+    s = TrackingSession(walk["cm"], walk["camera"], SessionOptions())
+    with pytest.raises(TrackingInputError, match=r"^gravity: must be a Gravity"):
+        s.add_frame(dataclasses.replace(walk["frames"][0], gravity=[0.0, 1.0, 0.0]))
+    assert s.frame_count == 0
+
+
 def test_store_bounds_count_and_expires_idle_sessions(walk: dict) -> None:
     now = [0.0]
     store = SessionStore(max_sessions=2, idle_timeout_s=10.0, clock=lambda: now[0])
@@ -276,6 +313,43 @@ def test_api_session_lifecycle(client: TestClient, walk: dict) -> None:
     assert r.status_code == 404 and r.json()["type"] == "urn:quadloc:problem:session-not-found"
 
 
+def test_api_session_gravity_defaults_to_the_session_convention(client: TestClient,
+                                                                walk: dict) -> None:
+    """A frame's ``gravity`` is in the session's convention unless it says otherwise: an
+    OpenGL session fed the OpenGL-axes odometry and gravity gives the OpenCV session's poses
+    (converted); a zero gravity direction is a 422 naming ``frames[i].gravity`` alone."""
+    cam = walk["camera"]
+    flip = np.diag([1.0, -1.0, -1.0, 1.0])
+    frames = _with_gravity(walk)[:40]
+    out = {}
+    for convention in ("opencv", "opengl"):
+        r = client.post("/v1/maps/chess/sessions", json={"convention": convention, "camera": {
+            "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy, "width": cam.width,
+            "height": cam.height}})
+        sid = r.json()["session_id"]
+        body = []
+        for f in frames:
+            g = f.gravity.direction_camera
+            doc = _frame_json(f)
+            if convention == "opengl":
+                doc["odom_from_camera"] = {"matrix": (f.odom_from_camera @ flip).tolist()}
+                g = flip[:3, :3] @ g
+            body.append({**doc, "gravity": {"direction": g.tolist(), "sigma_deg": 2.0}})
+        if convention == "opencv":
+            bad = [*body[:2], {**body[2], "gravity": {"direction": [0.0, 0.0, 0.0]}}]
+            r = client.post(f"/v1/sessions/{sid}/frames", json={"frames": bad})
+            assert r.status_code == 422
+            # the batch's own field path only (not also errors of the one-frame form)
+            assert [e["field"] for e in r.json()["errors"]] == ["frames[2].gravity"]
+        r = client.post(f"/v1/sessions/{sid}/frames", json={"frames": body})
+        assert r.status_code == 200, r.text
+        out[convention] = r.json()["results"][-1]
+    assert out["opencv"]["state"] == out["opengl"]["state"] == "tracking"
+    T_cv = np.array(out["opencv"]["world_from_camera"]["matrix"])
+    T_gl = np.array(out["opengl"]["world_from_camera"]["matrix"])
+    np.testing.assert_allclose(T_gl @ flip, T_cv, atol=1e-6)
+
+
 def test_api_unknown_session_after_restart_is_404(tmp_path: Path) -> None:
     with TestClient(make_test_app(tmp_path)) as c:
         r = c.post("/v1/sessions/s-quadloc-1.abcdef/frames",
@@ -330,22 +404,30 @@ def test_sdk_session_sync_and_async(client: TestClient, walk: dict) -> None:
     camera = {"fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy, "width": cam.width,
               "height": cam.height}
     frames = [_frame_json(f) for f in walk["frames"][:12]]
+    gravity = [{"direction": f.gravity.direction_camera.tolist(), "sigma_deg": 2.0}
+               for f in _with_gravity(walk)[:12]]
     with QuadLocClient("http://testserver", transport=client._transport) as qc:
         s = qc.start_session("chess", camera=camera)
         res = [s.add_frame(f["detections"], odom_from_camera=f["odom_from_camera"]["matrix"],
-                           timestamp=f["timestamp"]) for f in frames]
+                           timestamp=f["timestamp"], gravity=g)
+               for f, g in zip(frames, gravity, strict=True)]
         assert res[-1]["state"] == "tracking"
         s.close()
 
-    async def run() -> dict:
+    async def run() -> tuple[dict, dict]:
         transport = httpx.ASGITransport(app=client.app)
         async with AsyncQuadLocClient("http://testserver", transport=transport) as ac:
             s = await ac.start_session("chess", camera=camera)
-            out = await s.add_frames(frames)
+            out = await s.add_frames(frames[:-1])
+            last = frames[-1]
+            one = await s.add_frame(last["detections"],
+                                    odom_from_camera=last["odom_from_camera"]["matrix"],
+                                    timestamp=last["timestamp"], gravity=gravity[-1])
             await s.close()
-            return out[-1]
+            return out[-1], one
 
-    assert asyncio.run(run())["state"] == "tracking"
+    batch_last, one = asyncio.run(run())
+    assert batch_last["state"] == one["state"] == "tracking"
 
 
 # ----------------------------------------------------------------------------- CLI

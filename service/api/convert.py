@@ -126,13 +126,17 @@ def prior_from_request(prior: PosePriorIn | None) -> PosePrior | None:
     return PosePrior(T, cov)
 
 
-def gravity_from_request(gravity: GravityIn | None) -> Gravity | None:
-    """Wire gravity (any convention) -> :class:`Gravity` in OpenCV axes (``F`` maps a camera
-    vector between the conventions, both ways)."""
+def gravity_from_request(gravity: GravityIn | None,
+                         default_convention: str = "opencv") -> Gravity | None:
+    """Wire gravity -> :class:`Gravity` in OpenCV axes (``F`` maps a camera vector between the
+    conventions, both ways). Its axes: ``gravity.convention`` when the request sets it, else
+    ``default_convention`` (a tracking session's convention)."""
     if gravity is None:
         return None
     g = np.array(gravity.direction, dtype=float)
-    if gravity.convention != "opencv":
+    convention = (gravity.convention if "convention" in gravity.model_fields_set
+                  else default_convention)
+    if convention != "opencv":
         g = OPENGL_FROM_OPENCV @ g
     return Gravity(g, gravity.sigma_deg)
 

@@ -192,10 +192,13 @@ def _deeper_than(document: Any, max_depth: int) -> bool:
 def field_path(loc: Sequence[Any]) -> str:
     """``('body', 'detections', 2, 'ellipse', 'a')`` -> ``'detections[2].ellipse.a'``.
 
-    Body locations drop the ``body`` prefix; ``query``/``header``/``path`` keep it (the path
-    spelling is :func:`maps.model.json_path`'s, the map documents' own).
+    Body locations drop the ``body`` prefix and tagged-union tags (``~...``);
+    ``query``/``header``/``path`` keep it (the path spelling is :func:`maps.model.json_path`'s,
+    the map documents' own).
     """
-    parts = list(loc)
+    # a tagged union's tag (spelled with a leading "~", e.g. the session frames body's) is
+    # pydantic's, not a field of the request
+    parts = [p for p in loc if not (isinstance(p, str) and p.startswith("~"))]
     if parts and parts[0] in ("query", "header", "path", "cookie"):
         return f"{parts[0]}.{json_path(parts[1:], 'body')}"
     return json_path(parts[1:] if parts and parts[0] == "body" else parts, "body")

@@ -5,7 +5,9 @@
 
 from __future__ import annotations
 
-from pydantic import BaseModel, Field
+from typing import Annotated, Any
+
+from pydantic import BaseModel, Discriminator, Field, Tag
 
 from service.api.schemas import (
     MAX_DETECTIONS,
@@ -13,6 +15,7 @@ from service.api.schemas import (
     Convention,
     CovarianceOut,
     DetectionIn,
+    GravityIn,
     InlierOut,
     PoseIn,
     PoseOut,
@@ -21,7 +24,8 @@ from service.api.schemas import (
 )
 
 __all__ = ["MAX_SESSION_BATCH_FRAMES", "SessionCreate", "SessionFrameIn", "SessionFrameOut",
-           "SessionFramesIn", "SessionFramesOut", "SessionOptionsIn", "SessionOut"]
+           "SessionFramesBody", "SessionFramesIn", "SessionFramesOut", "SessionOptionsIn",
+           "SessionOut"]
 
 #: Frames per batch upload request (an offline recording is sent in chunks of this size).
 MAX_SESSION_BATCH_FRAMES = 900
@@ -77,12 +81,31 @@ class SessionFrameIn(_Model):
     timestamp: float = Field(ge=-1e12, le=1e12, description="Client clock (s), non-decreasing.")
     frame_id: str | None = Field(default=None, max_length=256)
     prior: PosePriorIn | None = None
+    gravity: GravityIn | None = Field(
+        default=None, description="The gravity direction the device measures in this frame's "
+        "camera (as for localize; `convention` defaults to the session's): a factor on the "
+        "frame's tilt against the map's up axis.")
 
 
 class SessionFramesIn(_Model):
     """Several frames in time order (offline recording)."""
 
     frames: list[SessionFrameIn] = Field(min_length=1, max_length=MAX_SESSION_BATCH_FRAMES)
+
+
+def _batch_or_frame(value: Any) -> str:
+    """Which body a frames request is: a batch (``{"frames": [...]}``) or one frame."""
+    if isinstance(value, dict):
+        return "~batch" if "frames" in value else "~frame"
+    return "~batch" if isinstance(value, SessionFramesIn) else "~frame"
+
+
+#: The body of ``POST /v1/sessions/{id}/frames``: a batch or one frame, told apart by a
+#: ``frames`` key, so that a bad body is reported against the form it is (not also as the
+#: other form). The ``~`` tags are not fields: ``service.api.errors.field_path`` drops them.
+SessionFramesBody = Annotated[
+    Annotated[SessionFramesIn, Tag("~batch")] | Annotated[SessionFrameIn, Tag("~frame")],
+    Discriminator(_batch_or_frame)]
 
 
 class SessionFrameOut(BaseModel):

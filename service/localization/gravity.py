@@ -20,12 +20,15 @@ Rationale and measurements: ``docs/design/localization.md`` ("Gravity").
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from factors.gravity_factor import GravityMeasurement
 from service.localization.confidence import TOLERANCE_ROTATION_DEG
 from service.localization.types import Gravity
 
-__all__ = ["GRAVITY_GATE_SIGMAS", "answer_gate_deg", "tilt_errors_deg"]
+__all__ = ["GRAVITY_GATE_SIGMAS", "answer_gate_deg", "gravity_measurement", "tilt_errors_deg"]
 
 #: Sensor sigmas of the gate (per tilt axis).
 GRAVITY_GATE_SIGMAS = 3.0
@@ -46,3 +49,10 @@ def tilt_errors_deg(camera_from_world: np.ndarray, up_world: np.ndarray,
 def answer_gate_deg(gravity: Gravity) -> float:
     """Largest tilt error (degrees) of a localized answer (module docstring)."""
     return TOLERANCE_ROTATION_DEG + GRAVITY_GATE_SIGMAS * gravity.sigma_deg
+
+
+def gravity_measurement(gravity: Gravity, up_world: np.ndarray) -> GravityMeasurement:
+    """The client's gravity as the refinement's factor input: its down in the camera, the
+    map's down (minus ``up_world``, (3,), any length) and its sigma in radians."""
+    return GravityMeasurement(gravity.direction_camera, -np.asarray(up_world, dtype=float),
+                              math.radians(gravity.sigma_deg))

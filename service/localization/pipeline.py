@@ -38,7 +38,7 @@ from service.localization.confidence import (
     is_ambiguous,
     residual_variance,
 )
-from service.localization.gravity import answer_gate_deg, tilt_errors_deg
+from service.localization.gravity import answer_gate_deg, gravity_measurement, tilt_errors_deg
 from service.localization.ransac import (
     HARD_STOP_FACTOR,
     Hypothesis,
@@ -342,9 +342,7 @@ def localize(
     evaluated = 0
     n_samples = count_samples(scorer, 2)
     up_world = compiled.scene_map.up
-    measured = None if gravity is None else GravityMeasurement(
-        gravity.direction_camera, -np.asarray(up_world, dtype=float),
-        math.radians(gravity.sigma_deg))
+    measured = None if gravity is None else gravity_measurement(gravity, up_world)
 
     def tilt_deg(a: _Answer) -> float:
         """The answer's tilt error against the measured gravity (degrees; NaN without)."""

@@ -2,8 +2,9 @@
 
 One GTSAM ``Pose3`` per frame, the camera's ``world_from_camera`` (OpenCV camera axes), key
 ``x<frame index>``; factors: the metric factors of the detections associated at the predicted
-pose, odometry ``BetweenFactorPose3`` (noise :class:`DriftModel`) and client priors with a
-covariance. States :data:`STATES`; poses are returned only while ``tracking``. Factors,
+pose, odometry ``BetweenFactorPose3`` (noise :class:`DriftModel`), client priors with a
+covariance and the device's measured gravity (:mod:`factors.gravity_factor`, on the frame's
+tilt). States :data:`STATES`; poses are returned only while ``tracking``. Factors,
 smoothers and the ``lost`` rules: docs/design/service.md#tracking-session.
 """
 
@@ -27,11 +28,13 @@ from factors.geometry import (
     invert_pose,
     snap_to_rotation,
 )
+from factors.gravity_factor import gravity_factor
 from factors.names import FieldError
 from factors.pose_factors import pose3, pose_factors
 from maps.compiled import CompiledMap
+from service.localization.gravity import gravity_measurement
 from service.localization.ransac import MatchScorer
-from service.localization.types import Detection, InlierMatch, PosePrior
+from service.localization.types import Detection, Gravity, InlierMatch, PosePrior
 from service.tracking.association import associate
 from service.tracking.confidence import session_confidence
 from service.tracking.multiframe import InitFrame, multi_frame_ransac
@@ -144,6 +147,8 @@ class FrameInput:
         frame_id: echoed back.
         prior: optional client prior on ``world_from_camera`` (a factor when it has a
             covariance).
+        gravity: optional gravity direction measured in this frame's camera (OpenCV axes): a
+            factor on the frame's tilt against the map's up axis.
     """
 
     detections: Sequence[Detection]
@@ -151,6 +156,7 @@ class FrameInput:
     timestamp: float
     frame_id: str | None = None
     prior: PosePrior | None = None
+    gravity: Gravity | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -196,6 +202,7 @@ class _Buffered:
     frame: InitFrame
     detections: tuple[Detection, ...]
     prior: PosePrior | None
+    gravity: Gravity | None
 
 
 class TrackingSession:
@@ -257,6 +264,9 @@ class TrackingSession:
         except GeometryError as exc:
             raise TrackingInputError(f"must be a rigid transform ({exc.problem})",
                                      field="odom_from_camera") from exc
+        if not isinstance(frame.gravity, (Gravity, type(None))):
+            raise TrackingInputError(f"must be a Gravity or None, got "
+                                     f"{type(frame.gravity).__name__}", field="gravity")
         ts = frame.timestamp
         if isinstance(ts, bool) or not isinstance(ts, (int, float)) or not math.isfinite(ts):
             raise TrackingInputError(f"must be a finite number, got {ts!r}", field="timestamp")
@@ -363,6 +373,7 @@ class TrackingSession:
                                        [a.object_index for a in assoc]):
                 graph.add(f)
         _add_prior(graph, key, frame.prior)
+        self._add_gravity(graph, key, frame.gravity)
         values = gtsam.Values()
         values.insert(key, pose3(T_pred))
         stamps = gtsam.FixedLagSmootherKeyTimestampMap()
@@ -412,7 +423,8 @@ class TrackingSession:
         dets = tuple(frame.detections)
         ell = ellipse_params([dets[i].ellipse for i in usable]) if usable else np.zeros((0, 5))
         self._buffer.append(_Buffered(index, float(frame.timestamp), InitFrame(
-            T_oc, ell, tuple(dets[i].label for i in usable), tuple(usable)), dets, frame.prior))
+            T_oc, ell, tuple(dets[i].label for i in usable), tuple(usable)), dets, frame.prior,
+            frame.gravity))
         waiting = "lost" if self.state == "lost" else "waiting_for_constraints"
         with_dets = [b for b in list(self._buffer)[:-1] if len(b.frame.labels)]
         chosen = [*_spread(with_dets, opts.init_max_frames - 1), self._buffer[-1]]
@@ -463,6 +475,7 @@ class TrackingSession:
                                        [by_det[i] for i in det_idx]):
                 graph.add(f)
             _add_prior(graph, key, b.prior)
+            self._add_gravity(graph, key, b.gravity)
             if j:
                 a = chosen[j - 1]
                 between, _, _ = self._between(_key(a.index), key, a.frame.odom_from_camera,
@@ -494,6 +507,14 @@ class TrackingSession:
             return None
         self._last = (last.index, last.timestamp, last.frame.odom_from_camera, T, cov)
         return T, cov
+
+
+    def _add_gravity(self, graph: gtsam.NonlinearFactorGraph, key: int,
+                     gravity: Gravity | None) -> None:
+        """The frame's measured gravity as a factor on its tilt against the map's up axis."""
+        if gravity is not None:
+            graph.add(gravity_factor(key, gravity_measurement(gravity,
+                                                              self.compiled.scene_map.up)))
 
 
 def _add_prior(graph: gtsam.NonlinearFactorGraph, key: int, prior: PosePrior | None) -> None:

@@ -21,6 +21,7 @@ from service.api.convert import (
     convert_pose,
     covariance_out,
     detections_from_request,
+    gravity_from_request,
     inliers_out,
     pose_out,
     prior_from_request,
@@ -37,6 +38,7 @@ from service.api.session_schemas import (
     SessionCreate,
     SessionFrameIn,
     SessionFrameOut,
+    SessionFramesBody,
     SessionFramesIn,
     SessionFramesOut,
     SessionOut,
@@ -160,7 +162,7 @@ def delete_session(session_id: SessionIdPath, request: Request, _key: ReadAccess
                         200: {"content": {"application/json": {
                             "example": FRAME_RESPONSE_EXAMPLE}}}})
 def add_frames(session_id: SessionIdPath,
-               body: Annotated[SessionFramesIn | SessionFrameIn, Body(openapi_examples={
+               body: Annotated[SessionFramesBody, Body(openapi_examples={
                    "one_frame": {"summary": "One frame", "value": FRAME_EXAMPLE},
                    "batch": {"summary": "A recording (batch)",
                              "value": {"frames": [FRAME_EXAMPLE]}}})],
@@ -203,9 +205,10 @@ def _frame_input(f: SessionFrameIn, convention: str, prefix: str) -> FrameInput:
         T = check_pose(convert_pose(T, convention, "opencv"), "odom_from_camera",
                        DOCUMENT_ROTATION_TOLERANCE)
         prior = prior_from_request(f.prior)
+        gravity = gravity_from_request(f.gravity, convention)
     except (GeometryError, LocalizationInputError, TrackingInputError) as exc:
         raise _unprocessable(exc, prefix) from exc
-    return FrameInput(dets, T, float(f.timestamp), f.frame_id, prior)
+    return FrameInput(dets, T, float(f.timestamp), f.frame_id, prior, gravity)
 
 
 def _frame_out(r: FrameResult, convention: str) -> SessionFrameOut:
