@@ -51,6 +51,7 @@ from factors.geometry import (
     level_values,
     params_from_dual_conics,
     project_ellipsoids_dual,
+    so3_exp,
 )
 from maps.compiled import CompiledMap, compile_map
 from maps.model import SceneMap
@@ -362,8 +363,4 @@ def simulate_gravity(world_from_camera: np.ndarray, up_world: np.ndarray, sigma_
     a /= np.linalg.norm(a)
     b = np.cross(down, a)
     w = math.radians(sigma_deg) * (gen.normal() * a + gen.normal() * b)  # rotation vector
-    angle = float(np.linalg.norm(w))
-    if angle == 0.0:
-        return down
-    k = w / angle  # Rodrigues: k is perpendicular to ``down``
-    return math.cos(angle) * down + math.sin(angle) * np.cross(k, down)
+    return so3_exp(w) @ down

@@ -479,10 +479,9 @@ def localize(
             answers.append(a if full is None else full)
         order(answers)
     timings["refine"] = (time.perf_counter() - tr) * 1e3
-    if any(not against_gravity(a) for a in answers):
-        # an answer whose tilt the measured gravity rules out cannot be correct (gravity
-        # module): it is no candidate while another is left
-        answers = [a for a in answers if not against_gravity(a)]
+    # an answer whose tilt the measured gravity rules out cannot be correct (gravity module):
+    # it is no candidate while another is left
+    answers = [a for a in answers if not against_gravity(a)] or answers
     if not answers:
         return _not_localized("refinement_diverged", metric, evaluated, timings, t0,
                               first_status)
