@@ -20,7 +20,7 @@ same session, each stating its command) to the section.
 
 ``--eval-cost`` measures instead the cost of ONE model evaluation (residuals and Jacobians of
 all pairs at a pose) of a 7-pair Chess frame, and of its exact areas alone
-(``factors.metrics.quadrant_areas_batch``, as that evaluation calls it), for iou and giou; with
+(``factors.overlap.quadrant_sums``, as that evaluation calls it), for iou and giou; with
 ``--compare-tree DIR`` the same measurement runs alternately in another checkout (its own
 ``.venv``), so that both are timed in the same period.
 """
@@ -142,8 +142,8 @@ def eval_cost(reps: int = 400, seed: int = 3, blocks: int = 10) -> dict:
     """CPU ms (``time.process_time``) of one iou / giou model evaluation (Jacobians included,
     each at a new pose near the start, so nothing is memoised) of the first noisy Chess frame
     with 7 detections, and of the exact areas of that evaluation alone (the
-    ``quadrant_areas_batch`` calls it makes, replayed); ``reps`` of each, timed in ``blocks``
-    alternating blocks, the fastest block's mean."""
+    ``factors.overlap.quadrant_sums`` calls it makes, replayed); ``reps`` of each, timed in
+    ``blocks`` alternating blocks, the fastest block's mean."""
     import factors.metrics as fm
     from factors.pose_residuals import PoseResidualModel, expmap_pose3
 
@@ -161,17 +161,17 @@ def eval_cost(reps: int = 400, seed: int = 3, blocks: int = 10) -> dict:
         model = PoseResidualModel(metric, [d.ellipse for d in frame.detections], ells, camera,
                                   initial_world_from_camera=start)
         poses_ = [start @ expmap_pose3(rng.normal(0.0, 1e-3, 6)) for _ in range(reps)]
-        calls, original = [], fm.quadrant_areas_batch
+        calls, original = [], fm.quadrant_sums
 
         def recording(*args, _calls=calls, _original=original, **kwargs):
             _calls.append((args, kwargs))
             return _original(*args, **kwargs)
 
-        fm.quadrant_areas_batch = recording
+        fm.quadrant_sums = recording
         try:
             model.evaluate(poses_[0])
         finally:
-            fm.quadrant_areas_batch = original
+            fm.quadrant_sums = original
         whole, areas = math.inf, math.inf
         block = max(reps // blocks, 1)
         for b in range(blocks):  # the fastest block of each: the least disturbed by other jobs
@@ -212,10 +212,12 @@ INTRO = (
     "Residual: the metric's `Delta` split over the four quadrants of the detection's frame (4 "
     "non-negative rows summing to `Delta`), with exact analytic Jacobians (boundary integrals "
     "of the exact areas, `factors/overlap.py`; checked against central differences in "
-    "`tests/test_metrics.py`). The areas of all pairs of a frame are computed in one "
-    "vectorised call with a fixed number of numpy calls (`factors.overlap.quadrant_areas_batch`, "
-    "equal to the scalar reference construction to ~1e-9, `tests/test_overlap_batch.py`; "
-    "docs/design/factors.md, \"Exact ellipse areas\"). iou: a pair whose ellipses are "
+    "`tests/test_metrics.py`). The areas of all pairs of a frame are computed in one call of "
+    "a compiled kernel (`factors.overlap.quadrant_sums`, numba, `factors/jit.py`; equal to the "
+    "scalar reference construction to ~1e-9, `tests/test_overlap_batch.py`; "
+    "docs/design/factors.md, \"Compiled kernels\", \"Exact ellipse areas\"), and so are the "
+    "rows (`factors.metrics._overlap_rows`) and the projections' dual conics. iou: a pair "
+    "whose ellipses are "
     "disjoint gets the giou rows (the hull gap term, informative when disjoint; every "
     "overlapping pair, hence the optimum, keeps the iou rows; `factors/metrics.py`, iou). "
     "Stopping: besides GTSAM's tolerances, iou/giou stop after an ACCEPTED LM iteration that "

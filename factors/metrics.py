@@ -87,13 +87,14 @@ from factors.geometry import (
     level_values,
     sigma_entries,
 )
+from factors.jit import jit
 from factors.names import METRIC_NAMES
 from factors.overlap import (
     HULL_DIRECTIONS,
     hull_area,
     intersection_area,
     quadrant_areas,
-    quadrant_areas_batch,
+    quadrant_sums,
 )
 
 __all__ = [
@@ -628,7 +629,7 @@ def overlap_residual(
     """The iou / giou residual: ``Delta`` split over the four quadrants ``Q_k`` of the
     detection's frame (module docstring), ``r_k >= 0``, ``sum_k r_k = Delta``; and, if
     ``gradient``, ``dr / dg`` w.r.t. the projection's Gaussian parameters ``g = (mu_x,
-    mu_y, s00, s01, s11)`` (px, px^2), exact (:func:`factors.overlap.quadrant_areas_batch`).
+    mu_y, s00, s01, s11)`` (px, px^2), exact (:func:`factors.overlap.quadrant_sums`).
 
     Params are one pair ``(5,)`` each (returns ``r`` (4,), ``dr/dg`` (4, 5)) or N pairs
     ``(N, 5)`` (returns (N, 4), (N, 4, 5); the pose factors evaluate all objects in one call).
@@ -640,65 +641,81 @@ def overlap_residual(
     a pair whose ellipses do not intersect gets the giou rows instead (``sum_k r_k = 2 - U/C``
     instead of the flat 1), so the refinement is pulled towards the detection.
     """
-    det = np.asarray(detection_params, dtype=float)
+    det = np.array(detection_params, dtype=float, order="C")  # a fresh copy (the kernels')
     single = det.ndim == 1
     det = det.reshape(-1, 5)
     proj = np.asarray(projection_params, dtype=float).reshape(-1, 5)
-    q = quadrant_areas_batch(det, proj, name == "giou", hull_directions, gradient)
-    r, d_r = _overlap_rows(name, det, q, gradient)
+    sums = quadrant_sums(det, proj, name == "giou", gradient)
+    r, d_r = _overlap_rows(det, sums, name == "giou")
     if name == "iou" and disjoint_hull:
-        disjoint = q["intersection"][0].sum(axis=1) <= 0.0
+        disjoint = sums[:, 1, :, 0].sum(axis=1) <= 0.0
         if disjoint.any():
-            q_h = quadrant_areas_batch(det[disjoint], proj[disjoint], True, hull_directions,
-                                       gradient)
-            r[disjoint], d_h = _overlap_rows("giou", det[disjoint], q_h, gradient)
-            if gradient:
-                d_r[disjoint] = d_h
+            r[disjoint], d_r[disjoint] = _overlap_rows(
+                det[disjoint], quadrant_sums(det[disjoint], proj[disjoint], True, gradient),
+                True)
     if single:
-        return r[0], None if d_r is None else d_r[0]
-    return r, d_r
+        return r[0], d_r[0] if gradient else None
+    return r, d_r if gradient else None
 
 
-def _overlap_rows(
-    name: str, det: np.ndarray, q: dict[str, tuple[np.ndarray, np.ndarray | None]],
-    gradient: bool,
-) -> tuple[np.ndarray, np.ndarray | None]:
-    """:func:`overlap_residual`'s rows (N, 4) and gradients (N, 4, 5) from the quadrant areas
-    ``q`` of :func:`factors.overlap.quadrant_areas_batch` (detections ``det`` (N, 5))."""
-    a_det = math.pi * det[:, 2] * det[:, 3]
-    proj_k, d_proj_k = q["second"]
-    inter_k, d_inter_k = q["intersection"]
-    # |D ∩ P ∩ Q_k| <= min(|D ∩ Q_k|, |P ∩ Q_k|): enforced against rounding and the "same
-    # ellipse" shortcut of factors.overlap (contours closer than 1e-9 count as identical, the
-    # intersection as the whole second ellipse), so the rows stay >= 0
-    cap = np.minimum(0.25 * a_det[:, None], proj_k)
-    capped = inter_k > cap
-    if capped.any():
-        inter_k = np.where(capped, cap, inter_k)
-        if gradient:
-            d_cap = np.where((proj_k < 0.25 * a_det[:, None])[:, :, None], d_proj_k, 0.0)
-            d_inter_k = np.where(capped[:, :, None], d_cap, d_inter_k)
-    union = a_det + proj_k.sum(axis=1) - inter_k.sum(axis=1)  # (N,)
-    union_k = 0.25 * a_det[:, None] + proj_k - inter_k
-    r = (union_k - inter_k) / union[:, None]
-    d_r = None
-    if gradient:
-        d_union_k = d_proj_k - d_inter_k
-        d_union = d_union_k.sum(axis=1)  # (N, 5)
-        d_r = ((d_union_k - d_inter_k) - r[:, :, None] * d_union[:, None, :]) / union[:, None, None]
-    if name == "giou":
-        hull_k, d_hull_k = q["hull"]
-        hull = hull_k.sum(axis=1)
+@jit
+def _overlap_rows(det: np.ndarray, sums: np.ndarray, giou: bool
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`overlap_residual`'s rows (N, 4) and gradients (N, 4, 5) (zeros where ``sums``
+    holds none) from the quadrant sums of :func:`factors.overlap.quadrant_sums` (detections
+    ``det`` (N, 5)); ``giou``: add the hull's gap term (``sums`` computed with the hull)."""
+    n = det.shape[0]
+    r = np.empty((n, 4))
+    d_r = np.empty((n, 4, 5))
+    inter = np.empty(4)
+    d_inter = np.empty((4, 5))
+    union_k = np.empty(4)
+    d_union_k = np.empty((4, 5))
+    d_union = np.empty(5)
+    d_hull = np.empty(5)
+    for i in range(n):
+        quarter = 0.25 * math.pi * det[i, 2] * det[i, 3]  # |D ∩ Q_k|
+        second, both, hull = sums[i, 0], sums[i, 1], sums[i, 2]
+        # |D ∩ P ∩ Q_k| <= min(|D ∩ Q_k|, |P ∩ Q_k|): enforced against rounding and the "same
+        # ellipse" shortcut of factors.overlap (contours closer than 1e-9 count as identical,
+        # the intersection as the whole second ellipse), so the rows stay >= 0
+        union = 4.0 * quarter
+        for k in range(4):
+            cap = min(quarter, second[k, 0])
+            if both[k, 0] > cap:
+                inter[k] = cap
+                for g in range(5):
+                    d_inter[k, g] = second[k, 1 + g] if second[k, 0] < quarter else 0.0
+            else:
+                inter[k] = both[k, 0]
+                for g in range(5):
+                    d_inter[k, g] = both[k, 1 + g]
+            union += second[k, 0] - inter[k]
+        d_union[:] = 0.0
+        for k in range(4):
+            union_k[k] = quarter + second[k, 0] - inter[k]
+            for g in range(5):
+                d_union_k[k, g] = second[k, 1 + g] - d_inter[k, g]
+                d_union[g] += d_union_k[k, g]
+        for k in range(4):
+            r[i, k] = (union_k[k] - inter[k]) / union
+            for g in range(5):
+                d_r[i, k, g] = ((d_union_k[k, g] - d_inter[k, g]) - r[i, k] * d_union[g]
+                                ) / union
+        if not giou:
+            continue
         # rounding: a hull below the union means the hull IS the union (one ellipse contains
         # the other), whose gap term is zero
-        use = hull >= union
-        hull_s = np.where(use, hull, 1.0)
-        gap = np.where(use[:, None], (hull_k - union_k) / hull_s[:, None], 0.0)
-        r = r + gap
-        if gradient:
-            d_gap = ((d_hull_k - d_union_k) - gap[:, :, None] * d_hull_k.sum(axis=1)[:, None, :]
-                     ) / hull_s[:, None, None]
-            d_r = d_r + np.where(use[:, None, None], d_gap, 0.0)
+        c = hull[0, 0] + hull[1, 0] + hull[2, 0] + hull[3, 0]
+        if not c >= union:
+            continue
+        for g in range(5):
+            d_hull[g] = hull[0, 1 + g] + hull[1, 1 + g] + hull[2, 1 + g] + hull[3, 1 + g]
+        for k in range(4):
+            gap = (hull[k, 0] - union_k[k]) / c
+            r[i, k] += gap
+            for g in range(5):
+                d_r[i, k, g] += ((hull[k, 1 + g] - d_union_k[k, g]) - gap * d_hull[g]) / c
     return r, d_r
 
 

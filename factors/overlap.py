@@ -1,20 +1,23 @@
-"""Exact ellipse areas for the IoU / GIoU metrics, vectorised over N pairs of ellipses.
+"""Exact ellipse areas for the IoU / GIoU metrics, for N pairs of ellipses (compiled kernel).
 
-Decided (issue 10): the batched :func:`quadrant_areas_batch` is the ONLY implementation; the
-single-pair :func:`intersection_area`, :func:`hull_area` and :func:`quadrant_areas` are views of
-it with N = 1. The former scalar construction is kept verbatim as the tests' independent oracle
+Decided (issue 10): :func:`quadrant_areas_batch` is the ONLY implementation; the single-pair
+:func:`intersection_area`, :func:`hull_area` and :func:`quadrant_areas` are views of it with
+N = 1. The former scalar construction is kept verbatim as the tests' independent oracle
 (``tests/oracles/overlap_reference.py``; equal to ~1e-9 relative, ``tests/test_overlap_batch.py``).
+Decided (issue 14): the construction is compiled (:func:`factors.jit.jit`, one loop over the
+pairs, scalar code per pair): the pose factors evaluate ~7 pairs per LM trial, where numpy's
+per-call overhead, not arithmetic, was the cost (docs/design/factors.md, "Exact ellipse areas").
 
 Ellipses are params ``(cx, cy, a, b, angle)`` (px, rad); areas px^2. Everything is computed in
 the first ellipse's normalised frame (the unit circle there; areas scale by ``a1 b1``), with a
-fixed number of pieces per pair (no ragged arrays, a fixed number of numpy calls). Intersection:
-arcs of each contour inside the other, between the contours' crossings. Convex hull: arcs joined
-by the outer common tangents. Both sets of angles are the roots of a trigonometric quadratic
-(bracketed on ``GRID`` angles, polished by Newton steps; the hull's also where an ellipse pokes
-out between two grid angles). Areas are closed-form Green integrals ``1/2 ∮ x × dx``; their
-gradients w.r.t. the second ellipse's Gaussian parameters ``g2 = (mu_x, mu_y, s00, s01, s11)``
-(px, px^2) are exact boundary integrals. The construction, its limits and the derivation:
-``docs/design/factors.md`` ("Exact ellipse areas").
+fixed number of pieces per pair. Intersection: arcs of each contour inside the other, between
+the contours' crossings. Convex hull: arcs joined by the outer common tangents. Both sets of
+angles are the roots of a trigonometric quadratic (bracketed on ``GRID`` angles, polished by
+Newton steps; the hull's also where an ellipse pokes out between two grid angles). Areas are
+closed-form Green integrals ``1/2 ∮ x × dx``; their gradients w.r.t. the second ellipse's
+Gaussian parameters ``g2 = (mu_x, mu_y, s00, s01, s11)`` (px, px^2) are exact boundary
+integrals. The construction, its limits and the derivation: ``docs/design/factors.md`` ("Exact
+ellipse areas").
 """
 
 from __future__ import annotations
@@ -23,6 +26,8 @@ import math
 
 import numpy as np
 
+from factors.jit import jit
+
 #: Number of parametric angles used to bracket the contour intersections and common tangents.
 GRID = 128
 #: Accepted for compatibility (option ``hull_directions`` of the metrics); unused: the common
@@ -30,20 +35,17 @@ GRID = 128
 HULL_DIRECTIONS = 128
 
 _T_GRID = np.linspace(0.0, 2.0 * np.pi, GRID, endpoint=False)
-#: (5, GRID): rows 1, cos t, sin t, cos 2t, sin 2t (a trigonometric quadratic on the grid is
-#: one matmul with its coefficients); the cyclic next index on the grid
+#: (5, GRID): rows 1, cos t, sin t, cos 2t, sin 2t (a trigonometric quadratic on the grid)
 _GRID_BASIS = np.stack([np.ones(GRID), np.cos(_T_GRID), np.sin(_T_GRID), np.cos(2 * _T_GRID),
                         np.sin(2 * _T_GRID)])
-#: (5, GRID): their derivatives' rows 0, -sin t, cos t, -2 sin 2t, 2 cos 2t
+#: (5, GRID): their derivatives 0, -sin t, cos t, -2 sin 2t, 2 cos 2t
 _GRID_DBASIS = np.stack([np.zeros(GRID), -np.sin(_T_GRID), np.cos(_T_GRID),
                          -2.0 * np.sin(2 * _T_GRID), 2.0 * np.cos(2 * _T_GRID)])
-_GRID_INDEX = np.arange(GRID)
-_GRID_NEXT = (_GRID_INDEX + 1) % GRID
-_NEXT4 = np.array([1, 2, 3, 0])
 #: A grid value above this is outside (rounding-level values, i.e. tangency, count as inside;
 #: as the oracle).
 _THRESHOLD = 1e-12
 _TWO_PI = 2.0 * math.pi
+_HALF_PI = 0.5 * math.pi
 _H = _TWO_PI / GRID
 #: Newton steps polishing every root from the secant of its grid bracket (~1e-4 rad off a
 #: simple root; the hull's tangent functions curve more): at rounding level after 4.
@@ -56,322 +58,485 @@ _SAFEGUARDED_MAX_ITER = 100
 #: located to ~3e-9 rad (an ellipse 300 times longer than wide squeezes the normals where the
 #: other one pokes out to ~1e-5 rad in its normalised frame).
 _POKE_SUBGRID, _POKE_LEVELS = 32, 6
-#: (4 quadrants, 2 turns) bounds of the quadrants' angle intervals on the unit circle
-_QUADRANT_LO = (np.arange(4)[:, None] * 0.5 * np.pi + np.arange(2)[None, :] * _TWO_PI)
-_QUADRANT_HI = _QUADRANT_LO + 0.5 * np.pi
+#: Region indices of the kernel's output: all of the second ellipse, the intersection, the hull.
+_REGIONS = ("second", "intersection", "hull")
+_SECOND, _INTER, _HULL = 0, 1, 2
+#: Slots of the per-pair frame vector (:func:`_frame`).
+(_CX, _CY, _PX, _PY, _QX, _QY, _DET, _S00, _S01, _S11, _AB1, _AB2, _A1, _B1, _COS1, _SIN1,
+ _M00, _M01, _M10, _M11, _CUTS) = range(21)
 
 
-class _Frame:
-    """Per-pair (N,) quantities of the second ellipse in the first one's normalised frame
-    ``x' = D1^-1 R1^T (x - c1)`` (the first ellipse is the unit circle there): centre ``c``,
+@jit
+def _frame(p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
+    """The second ellipse in the first one's normalised frame ``x' = D1^-1 R1^T (x - c1)`` (the
+    first is the unit circle there), as a vector indexed by the ``_CX``.. slots: centre ``c``,
     axis vectors ``P = D1^-1 R1^T a2 u2``, ``Q`` (its boundary ``c + P cos s + Q sin s``, ``s``
-    its own parametric angle), ``Sigma' = P P^T + Q Q^T`` and ``det = P × Q = a2 b2 / (a1
-    b1)``; and the world quantities of the gradients (``a2 b2``, ``M = L2^-T``)."""
-
-    def __init__(self, p1: np.ndarray, p2: np.ndarray) -> None:
-        a1, b1 = p1[:, 2], p1[:, 3]
-        self.a1, self.b1, self.ab1 = a1, b1, a1 * b1
-        c1, s1 = np.cos(p1[:, 4]), np.sin(p1[:, 4])
-        self.cos1, self.sin1 = c1, s1
-        dx, dy = p2[:, 0] - p1[:, 0], p2[:, 1] - p1[:, 1]
-        self.cx, self.cy = (c1 * dx + s1 * dy) / a1, (c1 * dy - s1 * dx) / b1
-        a2, b2 = p2[:, 2], p2[:, 3]
-        cd, sd = np.cos(p2[:, 4] - p1[:, 4]), np.sin(p2[:, 4] - p1[:, 4])
-        self.Px, self.Py = a2 * cd / a1, a2 * sd / b1
-        self.Qx, self.Qy = -b2 * sd / a1, b2 * cd / b1
-        self.det = self.Px * self.Qy - self.Py * self.Qx
-        self.s00 = self.Px * self.Px + self.Qx * self.Qx
-        self.s01 = self.Px * self.Py + self.Qx * self.Qy
-        self.s11 = self.Py * self.Py + self.Qy * self.Qy
-        self.ab2 = a2 * b2
-        c2, s2 = np.cos(p2[:, 4]), np.sin(p2[:, 4])
-        self.M = (c2 / a2, -s2 / b2, s2 / a2, c2 / b2)
-
-    def crossing_coefficients(self) -> np.ndarray:
-        """(5, N) ``k`` of ``f(t) = Phi_2(u(t)) - 1 = k0 + k1 cos t + k2 sin t + k3 cos 2t + k4
-        sin 2t`` on the unit circle ``u(t)`` (< 0 inside the second ellipse; oracle:
-        ``_crossing_coefficients``), with ``A' = Sigma'^-1 = adj(Sigma') / det^2``."""
-        d2 = self.det * self.det
-        A00, A01, A11 = self.s11 / d2, -self.s01 / d2, self.s00 / d2
-        cx, cy = self.cx, self.cy
-        Acx, Acy = A00 * cx + A01 * cy, A01 * cx + A11 * cy
-        return np.array([0.5 * (A00 + A11) + cx * Acx + cy * Acy - 1.0, -2.0 * Acx,
-                         -2.0 * Acy, 0.5 * (A00 - A11), A01])
-
-    def tangent_coefficients(self) -> np.ndarray:
-        """(5, N) ``k`` of ``g(phi) = (1 - c . n)^2 - n^T Sigma' n``, ``n = (cos phi, sin
-        phi)``: zero where the line of normal ``n`` touching the unit circle touches the second
-        ellipse too (common tangents; the outer ones, where the support ``c . n + sqrt(n^T
-        Sigma' n)`` of the second ellipse is 1, are the hull's)."""
-        cx, cy = self.cx, self.cy
-        return np.array([1.0 + 0.5 * (cx * cx + cy * cy - self.s00 - self.s11),
-                         -2.0 * cx, -2.0 * cy,
-                         0.5 * (cx * cx - cy * cy - self.s00 + self.s11), cx * cy - self.s01])
-
-    def point(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Points of the second ellipse at its angles ``s`` (N, m), normalised frame."""
-        cs, ss = np.cos(s), np.sin(s)
-        return (self.cx[:, None] + cs * self.Px[:, None] + ss * self.Qx[:, None],
-                self.cy[:, None] + cs * self.Py[:, None] + ss * self.Qy[:, None])
-
-    def to_world(self, wx: np.ndarray, wy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """A vector (N, m) of the normalised frame in world axes, ``R1 D1 w``."""
-        ax, by = self.a1[:, None] * wx, self.b1[:, None] * wy
-        c, s = self.cos1[:, None], self.sin1[:, None]
-        return c * ax - s * by, s * ax + c * by
+    its own parametric angle), ``det = P × Q = a2 b2 / (a1 b1)``, ``Sigma' = P P^T + Q Q^T``;
+    ``a1 b1``, ``a2 b2``, ``a1``, ``b1``, the first one's ``cos``/``sin`` of its angle, the
+    world quantity of the gradients ``M = L2^-T`` (row-major), and from ``_CUTS`` on the 4
+    angles ``s`` where the second ellipse crosses the axes (``cos s P + sin s Q = -c`` per
+    coordinate; a line that it does not cut gives an extra split point, harmless: the pieces'
+    sums are additive)."""
+    fr = np.empty(_CUTS + 4)
+    a1, b1 = p1[2], p1[3]
+    c1, s1 = math.cos(p1[4]), math.sin(p1[4])
+    dx, dy = p2[0] - p1[0], p2[1] - p1[1]
+    fr[_CX], fr[_CY] = (c1 * dx + s1 * dy) / a1, (c1 * dy - s1 * dx) / b1
+    a2, b2 = p2[2], p2[3]
+    cd, sd = math.cos(p2[4] - p1[4]), math.sin(p2[4] - p1[4])
+    Px, Py, Qx, Qy = a2 * cd / a1, a2 * sd / b1, -b2 * sd / a1, b2 * cd / b1
+    fr[_PX], fr[_PY], fr[_QX], fr[_QY] = Px, Py, Qx, Qy
+    fr[_DET] = Px * Qy - Py * Qx
+    fr[_S00], fr[_S01], fr[_S11] = Px * Px + Qx * Qx, Px * Py + Qx * Qy, Py * Py + Qy * Qy
+    fr[_AB1], fr[_AB2], fr[_A1], fr[_B1], fr[_COS1], fr[_SIN1] = a1 * b1, a2 * b2, a1, b1, c1, s1
+    c2, s2 = math.cos(p2[4]), math.sin(p2[4])
+    fr[_M00], fr[_M01], fr[_M10], fr[_M11] = c2 / a2, -s2 / b2, s2 / a2, c2 / b2
+    for m, al, be, ga in ((0, Px, Qx, fr[_CX]), (1, Py, Qy, fr[_CY])):
+        phi = math.atan2(be, al)
+        dphi = math.acos(min(max(-ga / math.hypot(al, be), -1.0), 1.0))
+        fr[_CUTS + m], fr[_CUTS + 2 + m] = phi + dphi, phi - dphi
+    return fr
 
 
-def _trig(k: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The trigonometric quadratics ``k`` (5, M, 1) and their derivatives at ``t`` (M, m)."""
-    c, s = np.cos(t), np.sin(t)
+@jit
+def _crossing_coefficients(fr: np.ndarray) -> np.ndarray:
+    """(5,) ``k`` of ``f(t) = Phi_2(u(t)) - 1 = k0 + k1 cos t + k2 sin t + k3 cos 2t + k4 sin
+    2t`` on the unit circle ``u(t)`` (< 0 inside the second ellipse; oracle:
+    ``_crossing_coefficients``), with ``A' = Sigma'^-1 = adj(Sigma') / det^2``."""
+    d2 = fr[_DET] * fr[_DET]
+    A00, A01, A11 = fr[_S11] / d2, -fr[_S01] / d2, fr[_S00] / d2
+    cx, cy = fr[_CX], fr[_CY]
+    Acx, Acy = A00 * cx + A01 * cy, A01 * cx + A11 * cy
+    k = np.empty(5)
+    k[0], k[1], k[2] = 0.5 * (A00 + A11) + cx * Acx + cy * Acy - 1.0, -2.0 * Acx, -2.0 * Acy
+    k[3], k[4] = 0.5 * (A00 - A11), A01
+    return k
+
+
+@jit
+def _tangent_coefficients(fr: np.ndarray) -> np.ndarray:
+    """(5,) ``k`` of ``g(phi) = (1 - c . n)^2 - n^T Sigma' n``, ``n = (cos phi, sin phi)``,
+    scaled to ``sum |k| = 1``: zero where the line of normal ``n`` touching the unit circle
+    touches the second ellipse too (common tangents; the outer ones, where the support ``c . n
+    + sqrt(n^T Sigma' n)`` of the second ellipse is 1, are the hull's)."""
+    cx, cy = fr[_CX], fr[_CY]
+    k = np.empty(5)
+    k[0] = 1.0 + 0.5 * (cx * cx + cy * cy - fr[_S00] - fr[_S11])
+    k[1], k[2] = -2.0 * cx, -2.0 * cy
+    k[3], k[4] = 0.5 * (cx * cx - cy * cy - fr[_S00] + fr[_S11]), cx * cy - fr[_S01]
+    scale = max(abs(k[0]) + abs(k[1]) + abs(k[2]) + abs(k[3]) + abs(k[4]), 1e-300)
+    for m in range(5):
+        k[m] /= scale
+    return k
+
+
+@jit
+def _trig(k: np.ndarray, t: float) -> tuple[float, float]:
+    """The trigonometric quadratic ``k`` (5,) and its derivative at ``t``."""
+    c, s = math.cos(t), math.sin(t)
     cs = c * s
     c2, s2 = c * c - s * s, cs + cs
     return (k[0] + k[1] * c + k[2] * s + k[3] * c2 + k[4] * s2,
             k[2] * c - k[1] * s + 2.0 * (k[4] * c2 - k[3] * s2))
 
 
-def _brackets(k: np.ndarray, threshold: np.ndarray, skip: np.ndarray
-              ) -> tuple[np.ndarray, ...]:
-    """Grid brackets of the roots of trigonometric quadratics ``k`` (5, M): the values on the
-    grid (M, GRID), and up to 4 cells per row where the sign (``f > threshold``, (M, 1))
-    changes (rows ``skip``: none): ``has`` (M, 4), their lower ends and values at both ends."""
-    f = k.T @ _GRID_BASIS
-    sign = f > threshold
-    change = sign != sign[:, _GRID_NEXT]
-    change[skip] = False
-    # a trigonometric quadratic changes sign at most 4 times: those cells (in any order),
-    # GRID where a row has fewer
-    cell = np.partition(np.where(change, _GRID_INDEX, GRID), 3, axis=1)[:, :4]
-    has = cell < GRID
-    cell = np.where(has, cell, 0)
-    rows = np.arange(f.shape[0])[:, None]
-    lo = cell * _H
-    return f, has, lo, lo + _H, f[rows, cell], f[rows, _GRID_NEXT[cell]]
+@jit
+def _sort(a: np.ndarray) -> None:
+    """Sort a short array in place (insertion sort: numba's np.sort costs seconds to compile)."""
+    for i in range(1, a.size):
+        v = a[i]
+        j = i - 1
+        while j >= 0 and a[j] > v:
+            a[j + 1] = a[j]
+            j -= 1
+        a[j + 1] = v
 
 
-def _add_pokes(k: np.ndarray, f: np.ndarray, brackets: list[np.ndarray], rows: np.ndarray,
-               threshold: float) -> None:
-    """Add to ``brackets`` (``has``, ``lo``, ``hi``, ``f0``, ``f1``; (M, 4), in place) the
-    root pairs of rows ``rows`` that lie between two grid angles (no sign change on the grid;
-    oracle: the extremum search of ``_hull_pieces``). With ``|f''| <= M = |k1| + |k2| + 4
-    (|k3| + |k4|)``, ``f`` keeps its sign over a cell if it does over the Taylor lower bound
-    ``sigma f_i + sigma f'_i tau - M tau^2 / 2`` from either end (concave: checked at the
-    other end); in the remaining cells the extremum is located on a sub-grid, and a sign
-    change there brackets both roots."""
-    kr = k[:, rows]
-    g = f[rows] - threshold
-    dg = kr.T @ _GRID_DBASIS
-    sigma = np.where(g > 0.0, 1.0, -1.0)
-    bound = (0.5 * _H * _H) * (np.abs(kr[1]) + np.abs(kr[2])
-                               + 4.0 * (np.abs(kr[3]) + np.abs(kr[4])))[:, None]
-    g1, dg1 = g[:, _GRID_NEXT], dg[:, _GRID_NEXT]
-    near = (sigma * (g + _H * dg) <= bound) & (sigma * (g1 - _H * dg1) <= bound) \
-        & (sigma * g1 > 0.0)
-    fr = f[rows]
-    if not near.any():
-        return
-    r, i = np.nonzero(near)
-    kk = k[:, rows[r]][:, :, None]
-    sign = np.where(fr[r, i] > 0.0, 1.0, -1.0)
-    lo, width = i * _H, np.full(r.size, _H)
-    frac = np.linspace(0.0, 1.0, _POKE_SUBGRID + 1)
-    for _ in range(_POKE_LEVELS):
-        v = sign[:, None] * _trig(kk, lo[:, None] + width[:, None] * frac)[0]
-        j = np.minimum(np.maximum(np.argmin(v, axis=1) - 1, 0), _POKE_SUBGRID - 2)
-        lo = lo + j * width / _POKE_SUBGRID
-        width = 2.0 * width / _POKE_SUBGRID
-    t_min = lo + 0.5 * width
-    f_min = _trig(kk, t_min[:, None])[0][:, 0]
-    has, b_lo, b_hi, f0, f1 = brackets
-    for rr, ii, tm, fm, sg in zip(rows[r], i, t_min, f_min, sign, strict=True):
-        free = np.flatnonzero(~has[rr])
-        if sg * fm >= 0.0 or free.size < 2:
+@jit
+def _grid_values(k: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """The trigonometric quadratic ``k`` (5,) at the :data:`GRID` angles (GRID,), ``basis``
+    :data:`_GRID_BASIS` (the grids are arguments: numba does not cache a function that reads a
+    global array)."""
+    f = np.empty(GRID)
+    for i in range(GRID):
+        f[i] = (k[0] + k[1] * basis[1, i] + k[2] * basis[2, i] + k[3] * basis[3, i]
+                + k[4] * basis[4, i])
+    return f
+
+
+@jit
+def _clamp01(x: float) -> float:
+    """``fmin(fmax(x, 0), 1)``: nan -> 0 (as numpy's fmax), +-inf -> 1 / 0."""
+    if not x > 0.0:
+        return 0.0
+    return 1.0 if x > 1.0 else x
+
+
+@jit
+def _brackets(f: np.ndarray, br: np.ndarray) -> None:
+    """Grid brackets of the roots of a trigonometric quadratic whose grid values are ``f``
+    (GRID,): the first 4 cells where the sign (``f > _THRESHOLD``) changes, written to ``br``
+    (5, 4): rows has (0/1), lower end, upper end, value at each end. A trigonometric quadratic
+    changes sign at most 4 times."""
+    for j in range(4):
+        br[0, j], br[1, j], br[2, j], br[3, j], br[4, j] = 0.0, 0.0, _H, f[0], f[1]
+    n = 0
+    for i in range(GRID):
+        i1 = i + 1 if i + 1 < GRID else 0
+        if (f[i] > _THRESHOLD) != (f[i1] > _THRESHOLD) and n < 4:
+            br[0, n], br[1, n], br[2, n], br[3, n], br[4, n] = 1.0, i * _H, i * _H + _H, f[i], \
+                f[i1]
+            n += 1
+
+
+@jit
+def _add_pokes(k: np.ndarray, f: np.ndarray, br: np.ndarray, dbasis: np.ndarray) -> None:
+    """Add to ``br`` (:func:`_brackets`) the root pairs of ``k`` that lie between two grid
+    angles (no sign change on the grid; oracle: the extremum search of ``_hull_pieces``). With
+    ``|f''| <= M = |k1| + |k2| + 4 (|k3| + |k4|)``, ``f`` keeps its sign over a cell if it does
+    over the Taylor lower bound ``sigma f_i + sigma f'_i tau - M tau^2 / 2`` from either end
+    (concave: checked at the other end); in the remaining cells the extremum is located on a
+    sub-grid, and a sign change there brackets both roots. ``dbasis``:
+    :data:`_GRID_DBASIS`."""
+    bound = (0.5 * _H * _H) * (abs(k[1]) + abs(k[2]) + 4.0 * (abs(k[3]) + abs(k[4])))
+    for i in range(GRID):
+        i1 = i + 1 if i + 1 < GRID else 0
+        g, g1 = f[i] - _THRESHOLD, f[i1] - _THRESHOLD
+        dg = dg1 = 0.0
+        for m in range(5):
+            dg += k[m] * dbasis[m, i]
+            dg1 += k[m] * dbasis[m, i1]
+        sigma = 1.0 if g > 0.0 else -1.0
+        if not (sigma * (g + _H * dg) <= bound and sigma * (g1 - _H * dg1) <= bound
+                and sigma * g1 > 0.0):
             continue
-        a, b = free[:2]
-        has[rr, [a, b]] = True
-        b_lo[rr, [a, b]] = ii * _H, tm
-        b_hi[rr, [a, b]] = tm, (ii + 1) * _H
-        f0[rr, [a, b]] = f[rr, ii], fm
-        f1[rr, [a, b]] = fm, f[rr, _GRID_NEXT[ii]]
+        sign = 1.0 if f[i] > 0.0 else -1.0
+        lo, width = i * _H, _H
+        for _ in range(_POKE_LEVELS):
+            best, jbest = np.inf, 0
+            for j in range(_POKE_SUBGRID + 1):
+                v = sign * _trig(k, lo + width * (j / _POKE_SUBGRID))[0]
+                if v < best:
+                    best, jbest = v, j
+            j = min(max(jbest - 1, 0), _POKE_SUBGRID - 2)
+            lo = lo + j * width / _POKE_SUBGRID
+            width = 2.0 * width / _POKE_SUBGRID
+        t_min = lo + 0.5 * width
+        f_min = _trig(k, t_min)[0]
+        a = b = -1
+        for j in range(4):
+            if br[0, j] == 0.0:
+                if a < 0:
+                    a = j
+                elif b < 0:
+                    b = j
+        if sign * f_min >= 0.0 or b < 0:
+            continue
+        br[0, a], br[1, a], br[2, a], br[3, a], br[4, a] = 1.0, i * _H, t_min, f[i], f_min
+        br[0, b], br[1, b], br[2, b], br[3, b], br[4, b] = 1.0, t_min, (i + 1) * _H, f_min, f[i1]
 
 
-def _roots(k: np.ndarray, has: np.ndarray, lo: np.ndarray, hi: np.ndarray, f0: np.ndarray,
-           f1: np.ndarray) -> np.ndarray:
-    """Roots (M, 4) of ``k`` (5, M) in the brackets: from the secant, :data:`_NEWTON_STEPS`
-    Newton steps kept in the bracket; the roots whose last step was not at rounding level
-    (a function that curves a lot within its bracket) are finished by :func:`_safeguarded`. A
-    row's empty slots repeat one of its roots (0 if none: extra split points, harmless)."""
-    den = np.where(has, f0 - f1, 1.0)
-    t = lo + (hi - lo) * np.fmin(np.fmax(np.where(has, f0 / den, 0.5), 0.0), 1.0)
-    kk = k[:, :, None]
-    for _ in range(_NEWTON_STEPS):
-        f, df = _trig(kk, t)
-        step = f / df
-        # a zero derivative: +-inf -> a bracket end, nan -> lo (np.fmax ignores nan)
-        t_new = np.fmin(np.fmax(t - step, lo), hi)
-        t, moved = t_new, t_new - t
-    # converged: at a root, or the last (unclamped) step below 1e-9 rad (now at rounding level)
-    bad = has & ~((f == 0.0) | ((np.abs(moved) < 1e-9) & (np.abs(step) < 1e-9)))
-    if bad.any():
-        r, j = np.nonzero(bad)
-        t[r, j] = _safeguarded(k[:, r], t[r, j], lo[r, j], hi[r, j], f0[r, j])
-    first = np.max(np.where(has, t, -np.inf), axis=1, keepdims=True)  # -inf: none
-    return np.where(has, t, np.where(first > -np.inf, first, 0.0)) % _TWO_PI
-
-
-def _safeguarded(k: np.ndarray, t: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                 f_lo: np.ndarray) -> np.ndarray:
-    """Roots (m,) of ``k`` (5, m) in brackets ``[lo, hi]`` (values ``f_lo`` at ``lo``), from
-    ``t``: Newton steps that stay in the bracket, else bisection, the bracket shrinking at
-    every iterate (oracle: ``_bracketed_root``); up to :data:`_SAFEGUARDED_MAX_ITER`
-    iterations, until a step or the bracket is below 1e-12 rad, or ``f`` is 0."""
-    neg_lo = ~(f_lo > _THRESHOLD)
-    kk = k[:, :, None]
+@jit
+def _safeguarded(k: np.ndarray, t: float, lo: float, hi: float, f_lo: float) -> float:
+    """The root of ``k`` in the bracket ``[lo, hi]`` (value ``f_lo`` at ``lo``), from ``t``:
+    Newton steps that stay in the bracket, else bisection, the bracket shrinking at every
+    iterate (oracle: ``_bracketed_root``); up to :data:`_SAFEGUARDED_MAX_ITER` iterations, until
+    a step or the bracket is below 1e-12 rad, or ``f`` is 0."""
+    neg_lo = not f_lo > _THRESHOLD
     for _ in range(_SAFEGUARDED_MAX_ITER):
-        f, df = (v[:, 0] for v in _trig(kk, t[:, None]))
-        left = (f < 0.0) == neg_lo  # the root is right of t
-        lo, hi = np.where(left, t, lo), np.where(left, hi, t)
+        f, df = _trig(k, t)
+        if f == 0.0:
+            break
+        if (f < 0.0) == neg_lo:  # the root is right of t
+            lo = t
+        else:
+            hi = t
         t_new = t - f / df
-        newton = (lo < t_new) & (t_new < hi)
-        t_new = np.where(newton, t_new, 0.5 * (lo + hi))
-        done = (newton & (np.abs(t_new - t) < 1e-12)) | (hi - lo < 1e-12) | (f == 0.0)
-        t = np.where(f == 0.0, t, t_new)
-        if done.all():
+        newton = lo < t_new < hi
+        if not newton:
+            t_new = 0.5 * (lo + hi)
+        done = (newton and abs(t_new - t) < 1e-12) or hi - lo < 1e-12
+        t = t_new
+        if done:
             break
     return t
 
 
-def _cyclic(t: np.ndarray) -> np.ndarray:
-    """The next of each sorted angle (N, m), the last one's wrapping to the first + 2 pi."""
-    return np.concatenate([t[:, 1:], t[:, :1] + _TWO_PI], axis=1)
+@jit
+def _roots(k: np.ndarray, br: np.ndarray) -> np.ndarray:
+    """The roots (4,) of ``k`` in the brackets ``br`` (:func:`_brackets`), sorted in ``[0, 2
+    pi)``: from the secant, :data:`_NEWTON_STEPS` Newton steps kept in the bracket; the roots
+    whose last step was not at rounding level (a function that curves a lot within its
+    bracket) are finished by :func:`_safeguarded`. Empty slots repeat the largest root (0 if
+    none: extra split points, harmless)."""
+    t = np.zeros(4)
+    first = -np.inf
+    for j in range(4):
+        if br[0, j] == 0.0:
+            continue
+        lo, hi, f0, f1 = br[1, j], br[2, j], br[3, j], br[4, j]
+        tj = lo + (hi - lo) * _clamp01(f0 / (f0 - f1))
+        f = step = moved = 0.0
+        for _ in range(_NEWTON_STEPS):
+            f, df = _trig(k, tj)
+            step = f / df
+            # a zero derivative: +-inf -> a bracket end, nan -> lo
+            t_new = tj - step
+            t_new = min(t_new, hi) if t_new >= lo else lo
+            moved = t_new - tj
+            tj = t_new
+        # converged: at a root, or the last (unclamped) step below 1e-9 rad
+        if not (f == 0.0 or (abs(moved) < 1e-9 and abs(step) < 1e-9)):
+            tj = _safeguarded(k, tj, lo, hi, f0)
+        t[j] = tj
+        first = max(first, tj)
+    for j in range(4):
+        if br[0, j] == 0.0:
+            t[j] = first if first > -np.inf else 0.0
+        t[j] = t[j] % _TWO_PI
+    _sort(t)
+    return t
 
 
-def _hull(fr: _Frame, phi: np.ndarray) -> tuple[np.ndarray, ...]:
-    """The hull's boundary (oracle: ``_hull_pieces``) over the four intervals of normal angles
-    between the sorted common tangents ``phi`` (N, 4): the unit circle's arcs ``[phi_j,
-    phi_j+1]`` (its contact angle is the normal angle), the second ellipse's ``[s_j, s_j +
-    span_j]``, which one supports each interval (``win2`` (N, 4) bool), and the tangent
-    segments at each ``phi_j+1`` where the support switches (start / end points, end on the
-    second ellipse, its angle there, switch)."""
-    p1 = _cyclic(phi)
-    # the second ellipse's support at the middle normal: > 1 where it is on the hull
-    mid = 0.5 * (phi + p1)
-    cm, sm = np.cos(mid), np.sin(mid)
-    quad = (fr.s00[:, None] * cm * cm + 2.0 * fr.s01[:, None] * cm * sm
-            + fr.s11[:, None] * sm * sm)
-    win2 = fr.cx[:, None] * cm + fr.cy[:, None] * sm + np.sqrt(quad) > 1.0
-    win2_next = win2[:, _NEXT4]
-    switch = win2 != win2_next
-    # one ellipse supports every normal (it contains the other): whole arcs from 0
-    whole = ~switch.any(axis=1)[:, None]
-    phi = np.where(whole, 0.0, phi)
-    p1 = _cyclic(phi)
-    # contact angle of the second ellipse at normal phi: maximises n . (P cos s + Q sin s)
-    cp, sp = np.cos(phi), np.sin(phi)
-    s = np.arctan2(cp * fr.Qx[:, None] + sp * fr.Qy[:, None],
-                   cp * fr.Px[:, None] + sp * fr.Py[:, None])
-    s_next = s[:, _NEXT4]
-    # [phi0, phi1] narrower than pi sweeps less than pi of the second ellipse's angle, a wider
-    # one more (a linear image of the circle): the turn of s1 - s0 follows
-    span = (s_next - s) % _TWO_PI
-    span = np.where(p1 - phi <= math.pi, np.where(span > 1.5 * math.pi, span - _TWO_PI, span),
-                    np.where(span < 0.5 * math.pi, span + _TWO_PI, span))
-    ux, uy = np.cos(p1), np.sin(p1)
-    xs, ys = fr.point(s_next)
-    segs = (np.where(win2, xs, ux), np.where(win2, ys, uy), np.where(win2_next, xs, ux),
-            np.where(win2_next, ys, uy), win2_next, s_next, switch)
-    return phi, p1, s, s + span, win2, segs
+@jit
+def _quadrant(x: float, y: float) -> int:
+    """Quadrant 0..3 of a point of the normalised frame, counter-clockwise from ``+u, +v`` (as
+    the oracle's ``quadrant``: ``y >= 0`` upper, ``x >= 0`` right)."""
+    if y >= 0.0:
+        return 0 if x >= 0.0 else 1
+    return 2 if x < 0.0 else 3
 
 
-def _quadrants(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """One-hot (4, ...) float quadrant of points of the normalised frame (counter-clockwise
-    from ``+u, +v``; as the oracle's ``quadrant``: ``y >= 0`` upper, ``x >= 0`` right)."""
-    up, right = y >= 0.0, x >= 0.0
-    return np.array([up & right, up & ~right, ~up & ~right, ~up & right], dtype=float)
+@jit
+def _circle_arc(fr: np.ndarray, t0: float, t1: float, out: np.ndarray) -> None:
+    """Add the area ``1/2 ∫ x × dx`` of the arc ``[t0, t1]`` (``0 <= t0 < 2 pi``, ``t1 <= t0 +
+    2 pi``) of the unit circle (the first ellipse, which does not move: no gradient) to a
+    region's sums ``out`` (4 quadrants, area + 5 gradient) ``[quadrant, 0]``: half the length
+    of its part in each quadrant, times ``a1 b1``."""
+    for q in range(4):
+        length = 0.0
+        for turn in range(2):
+            q_lo = q * _HALF_PI + turn * _TWO_PI
+            ov = min(t1, q_lo + _HALF_PI) - max(t0, q_lo)
+            if ov > 0.0:
+                length += ov
+        out[q, 0] += 0.5 * fr[_AB1] * length
 
 
-def _circle_sums(fr: _Frame, t0: np.ndarray, t1: np.ndarray, weights: np.ndarray
-                 ) -> np.ndarray:
-    """Areas (N, 4, R) ``1/2 ∫ x × dx`` of arcs ``[t0, t1]`` (N, m) (``0 <= t0 < 2 pi``, ``t1
-    <= t0 + 2 pi``) of the unit circle (the first ellipse, which does not move) per quadrant,
-    weighted (N, m, R): half the length of each arc's part in the quadrant, times ``a1 b1``."""
-    ov = np.minimum(t1[:, :, None, None], _QUADRANT_HI) - np.maximum(t0[:, :, None, None],
-                                                                     _QUADRANT_LO)
-    length = np.maximum(ov, 0.0).sum(axis=3)  # (N, m, 4)
-    return (0.5 * fr.ab1)[:, None, None] * (length.transpose(0, 2, 1) @ weights)
+@jit
+def _ellipse_arc(fr: np.ndarray, t0: float, t1: float, grad: bool, b: np.ndarray,
+                 out: np.ndarray) -> None:
+    """Add the arc ``[t0, t1]`` of the second ellipse to a region's sums ``out`` (4, 6) (oracle:
+    ``_piece_sums`` with ``axes``): split where the ellipse crosses the axes (the pieces then
+    lie in one quadrant each), areas ``1/2 ∫ x × dx`` (times ``a1 b1``) in column 0, gradients
+    w.r.t. ``g2`` in world units in columns 1..5 (oracle: ``_Boundary.arc``). ``b``: scratch
+    (6,)."""
+    cx, cy, Px, Py, Qx, Qy = fr[_CX], fr[_CY], fr[_PX], fr[_PY], fr[_QX], fr[_QY]
+    b[0], b[5] = t0, t1
+    for m in range(4):
+        b[1 + m] = min(t0 + (fr[_CUTS + m] - t0) % _TWO_PI, t1)
+    _sort(b[1:5])
+    h_ab1 = 0.5 * fr[_AB1]
+    w = fr[_AB2]
+    m00, m01, m10, m11 = fr[_M00], fr[_M01], fr[_M10], fr[_M11]
+    for p in range(5):
+        lo, hi = b[p], b[p + 1]
+        if not hi > lo:  # an empty piece (a cut outside the arc) adds nothing
+            continue
+        cl, sl, ch, sh = math.cos(lo), math.sin(lo), math.cos(hi), math.sin(hi)
+        mid = 0.5 * (lo + hi)
+        cm, sm = math.cos(mid), math.sin(mid)
+        q = _quadrant(cx + cm * Px + sm * Qx, cy + cm * Py + sm * Qy)
+        dc, ds = ch - cl, sh - sl
+        o = out[q]
+        o[0] += h_ab1 * (fr[_DET] * (hi - lo) + cx * (dc * Py + ds * Qy)
+                         - cy * (dc * Px + ds * Qx))
+        if grad:
+            half = 0.5 * (hi - lo)
+            qq = 0.5 * (sh * ch - sl * cl)  # 1/4 (sin 2 t1 - sin 2 t0)
+            cc, ss, cs_ = half + qq, half - qq, 0.5 * (sh * sh - sl * sl)
+            r00, r01 = m00 * cc + m01 * cs_, m00 * cs_ + m01 * ss
+            r10, r11 = m10 * cc + m11 * cs_, m10 * cs_ + m11 * ss
+            o[1] += w * (m00 * ds - m01 * dc)
+            o[2] += w * (m10 * ds - m11 * dc)
+            o[3] += (0.5 * w) * (r00 * m00 + r01 * m01)
+            o[4] += w * (r00 * m10 + r01 * m11)
+            o[5] += (0.5 * w) * (r10 * m10 + r11 * m11)
 
 
-def _ellipse_sums(fr: _Frame, t0: np.ndarray, t1: np.ndarray, weights: np.ndarray,
-                  grad: bool) -> np.ndarray:
-    """Quadrant sums (N, 4, R, 1 + 5 grad) of arcs ``[t0, t1]`` (N, m) of the second ellipse,
-    weighted (N, m, R) (oracle: ``_piece_sums`` with ``axes``): each arc is split where the
-    ellipse crosses the axes (pieces then lie in one quadrant each), areas ``1/2 ∫ x × dx``
-    (times ``a1 b1``), gradients w.r.t. ``g2`` in world units (oracle: ``_Boundary.arc``)."""
-    cx, cy, Px, Py, Qx, Qy = (v[:, None] for v in (fr.cx, fr.cy, fr.Px, fr.Py, fr.Qx, fr.Qy))
-    # where x' = 0 and y' = 0 (cos s P + sin s Q = -c per coordinate): 4 angles; a line that
-    # does not cut gives an extra split point, harmless (the pieces' sums are additive)
-    alpha, beta, gamma = np.array([Px, Py]), np.array([Qx, Qy]), np.array([cx, cy])
-    phi = np.arctan2(beta, alpha)
-    dphi = np.arccos(np.fmin(np.fmax(-gamma / np.hypot(alpha, beta), -1.0), 1.0))
-    cuts = t0 + (np.concatenate([phi + dphi, phi - dphi]) - t0) % _TWO_PI  # (4, N, m)
-    bounds = np.sort(np.concatenate([t0[None], np.minimum(cuts, t1), t1[None]]), axis=0)
-    cb, sb = np.cos(bounds), np.sin(bounds)
-    lo, hi = bounds[:-1], bounds[1:]
-    cl, sl, ch, sh = cb[:-1], sb[:-1], cb[1:], sb[1:]
-    mid = 0.5 * (lo + hi)
-    cm, sm = np.cos(mid), np.sin(mid)
-    onehot = _quadrants(cx + cm * Px + sm * Qx, cy + cm * Py + sm * Qy)  # (4, 5, N, m)
-    dc, ds = ch - cl, sh - sl
-    vals = [(0.5 * fr.ab1)[:, None] * (fr.det[:, None] * (hi - lo) + cx * (dc * Py + ds * Qy)
-                                       - cy * (dc * Px + ds * Qx))]
-    if grad:
-        w = fr.ab2[:, None]
-        m00, m01, m10, m11 = (x[:, None] for x in fr.M)
-        half = 0.5 * (hi - lo)
-        q = 0.5 * (sh * ch - sl * cl)  # 1/4 (sin 2 t1 - sin 2 t0)
-        cc, ss, cs_ = half + q, half - q, 0.5 * (sh * sh - sl * sl)
-        r00, r01 = m00 * cc + m01 * cs_, m00 * cs_ + m01 * ss
-        r10, r11 = m10 * cc + m11 * cs_, m10 * cs_ + m11 * ss
-        vals += [w * (m00 * ds - m01 * dc), w * (m10 * ds - m11 * dc),
-                 (0.5 * w) * (r00 * m00 + r01 * m01), w * (r00 * m10 + r01 * m11),
-                 (0.5 * w) * (r10 * m10 + r11 * m11)]
-    return _accumulate(onehot, np.array(vals), weights)
-
-
-def _accumulate(onehot: np.ndarray, vals: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """``sum_{p, j} onehot[q, p, n, j] weights[n, j, r] vals[v, p, n, j]`` -> (N, 4, R, V)
-    for pieces ``p`` of items ``j``: onehot (4, P, N, m), vals (V, P, N, m), weights (N, m,
-    R)."""
-    V, _, n, m = vals.shape
-    R = weights.shape[-1]
-    # per item: (4, P) @ (P, V) -> (N, m, 4, V), then the weights over the items
-    per_item = onehot.transpose(2, 3, 0, 1) @ vals.transpose(2, 3, 1, 0)
-    out = weights.transpose(0, 2, 1) @ per_item.reshape(n, m, 4 * V)  # (N, R, 4 V)
-    return out.reshape(n, R, 4, V).transpose(0, 2, 1, 3)
-
-
-def _segment_sums(fr: _Frame, segs: tuple[np.ndarray, ...], grad: bool) -> np.ndarray:
-    """Quadrant sums (N, 4, 1, 1 + 5 grad) of the hull's tangent segments (N, 4) (oracle:
-    ``_piece_sums``), each split where it crosses the axes."""
-    x0, y0, x1, y1, end2, par, switch = segs
+@jit
+def _segment(fr: np.ndarray, x0: float, y0: float, x1: float, y1: float, end2: bool,
+             par: float, grad: bool, out: np.ndarray) -> None:
+    """Add a tangent segment of the hull (start ``(x0, y0)``, end ``(x1, y1)`` in the
+    normalised frame; ``end2``: it ends on the second ellipse, at its angle ``par``, else
+    starts there) to the hull's sums ``out`` (4, 6) (oracle: ``_piece_sums``), split where it
+    crosses the axes.
+    The gradient: ``1/2 dx(q) × (end - start)``, shared along the segment."""
     wx, wy = x1 - x0, y1 - y0
-    # where x' = 0, y' = 0 along the segment (a division by 0: +-inf or nan -> an end)
-    cut = np.fmin(np.fmax(np.array([-x0 / wx, -y0 / wy]), 0.0), 1.0)
-    zero = np.zeros((1, *x0.shape))
-    sb = np.sort(np.concatenate([zero, cut, zero + 1.0]), axis=0)
-    s0, s1 = sb[:-1], sb[1:]
-    xa, ya, xb, yb = x0 + s0 * wx, y0 + s0 * wy, x0 + s1 * wx, y0 + s1 * wy
-    onehot = _quadrants(0.5 * (xa + xb), 0.5 * (ya + yb))
-    vals = [(0.5 * fr.ab1)[:, None] * (xa * yb - ya * xb)]
-    if grad:  # 1/2 dx(q) x (end - start) shared along the segment (oracle: _piece_sums)
-        share = 0.5 * np.where(end2, s1 * s1 - s0 * s0, (1 - s0) ** 2 - (1 - s1) ** 2)
-        Wx, Wy = fr.to_world(wx, wy)
-        m00, m01, m10, m11 = (x[:, None] for x in fr.M)
-        u0, u1 = np.cos(par), np.sin(par)
-        v0, v1 = m00 * u0 + m01 * u1, m10 * u0 + m11 * u1
-        vals += [share * Wy, -share * Wx, share * (0.5 * v0 * Wy),
-                 share * (0.5 * (v1 * Wy - v0 * Wx)), -share * (0.5 * v1 * Wx)]
-    return _accumulate(onehot, np.array(vals), switch[:, :, None].astype(float))
+    sb = np.empty(4)
+    sb[0], sb[1], sb[2], sb[3] = 0.0, _clamp01(-x0 / wx), _clamp01(-y0 / wy), 1.0
+    if sb[1] > sb[2]:
+        sb[1], sb[2] = sb[2], sb[1]
+    ax, by = fr[_A1] * wx, fr[_B1] * wy
+    Wx, Wy = fr[_COS1] * ax - fr[_SIN1] * by, fr[_SIN1] * ax + fr[_COS1] * by
+    u0, u1 = math.cos(par), math.sin(par)
+    v0, v1 = fr[_M00] * u0 + fr[_M01] * u1, fr[_M10] * u0 + fr[_M11] * u1
+    for p in range(3):
+        s0, s1 = sb[p], sb[p + 1]
+        xa, ya, xb, yb = x0 + s0 * wx, y0 + s0 * wy, x0 + s1 * wx, y0 + s1 * wy
+        o = out[_quadrant(0.5 * (xa + xb), 0.5 * (ya + yb))]
+        o[0] += 0.5 * fr[_AB1] * (xa * yb - ya * xb)
+        if grad:
+            share = 0.5 * (s1 * s1 - s0 * s0 if end2 else (1 - s0) ** 2 - (1 - s1) ** 2)
+            o[1] += share * Wy
+            o[2] += -share * Wx
+            o[3] += share * (0.5 * v0 * Wy)
+            o[4] += share * (0.5 * (v1 * Wy - v0 * Wx))
+            o[5] += -share * (0.5 * v1 * Wx)
+
+
+@jit
+def _point(fr: np.ndarray, s: float) -> tuple[float, float]:
+    """The second ellipse's point at its angle ``s``, normalised frame."""
+    cs, ss = math.cos(s), math.sin(s)
+    return fr[_CX] + cs * fr[_PX] + ss * fr[_QX], fr[_CY] + cs * fr[_PY] + ss * fr[_QY]
+
+
+@jit
+def _hull(fr: np.ndarray, phi: np.ndarray, grad: bool, b: np.ndarray, out: np.ndarray
+          ) -> None:
+    """Add the hull's boundary to its sums ``out`` (4, 6) (oracle: ``_hull_pieces``): over the four
+    intervals of normal angles between the sorted common tangents ``phi`` (4,), the unit
+    circle's arc ``[phi_j, phi_j+1]`` (its contact angle is the normal angle) or the second
+    ellipse's ``[s_j, s_j + span_j]``, whichever supports the interval, and the tangent segment
+    at each ``phi_j+1`` where the support switches. ``b``: scratch (6,)."""
+    p1 = np.empty(4)
+    p1[:3], p1[3] = phi[1:], phi[0] + _TWO_PI
+    # the second ellipse's support at the middle normal: > 1 where it is on the hull
+    win2 = np.empty(4, dtype=np.bool_)
+    for j in range(4):
+        mid = 0.5 * (phi[j] + p1[j])
+        cm, sm = math.cos(mid), math.sin(mid)
+        quad = fr[_S00] * cm * cm + 2.0 * fr[_S01] * cm * sm + fr[_S11] * sm * sm
+        win2[j] = fr[_CX] * cm + fr[_CY] * sm + math.sqrt(quad) > 1.0
+    # one ellipse supports every normal (it contains the other): whole arcs from 0
+    whole = True
+    for j in range(4):
+        if win2[j] != win2[(j + 1) % 4]:
+            whole = False
+    if whole:
+        phi = np.zeros(4)
+        p1[:3], p1[3] = 0.0, _TWO_PI
+    # contact angle of the second ellipse at normal phi: maximises n . (P cos s + Q sin s)
+    s = np.empty(4)
+    for j in range(4):
+        cp, sp = math.cos(phi[j]), math.sin(phi[j])
+        s[j] = math.atan2(cp * fr[_QX] + sp * fr[_QY], cp * fr[_PX] + sp * fr[_PY])
+    for j in range(4):
+        jn = (j + 1) % 4
+        s_next = s[jn]
+        # [phi0, phi1] narrower than pi sweeps less than pi of the second ellipse's angle, a
+        # wider one more (a linear image of the circle): the turn of s1 - s0 follows
+        span = (s_next - s[j]) % _TWO_PI
+        if p1[j] - phi[j] <= math.pi:
+            if span > 1.5 * math.pi:
+                span -= _TWO_PI
+        elif span < 0.5 * math.pi:
+            span += _TWO_PI
+        if win2[j]:
+            _ellipse_arc(fr, s[j], s[j] + span, grad, b, out)
+        else:
+            _circle_arc(fr, phi[j], p1[j], out)
+        if win2[j] != win2[jn]:
+            ux, uy = math.cos(p1[j]), math.sin(p1[j])
+            xs, ys = _point(fr, s_next)
+            x0, y0 = (xs, ys) if win2[j] else (ux, uy)
+            x1, y1 = (xs, ys) if win2[jn] else (ux, uy)
+            _segment(fr, x0, y0, x1, y1, win2[jn], s_next, grad, out)
+
+
+@jit
+def _pair(p1: np.ndarray, p2: np.ndarray, hull: bool, grad: bool, basis: np.ndarray,
+          dbasis: np.ndarray, out: np.ndarray) -> None:
+    """One pair's quadrant sums into ``out`` (3 regions, 4 quadrants, area + 5 gradient)."""
+    fr = _frame(p1, p2)
+    k = _crossing_coefficients(fr)
+    # contours this close count as identical (oracle: f below 1e-9, area error <= 1e-9)
+    same = abs(k[0]) + abs(k[1]) + abs(k[2]) + abs(k[3]) + abs(k[4]) <= 1e-9
+    f = _grid_values(k, basis)
+    br = np.empty((5, 4))
+    # rounding-level values (tangency) count as inside (oracle)
+    _brackets(f, br)
+    if same:
+        br[0] = 0.0
+    t0 = _roots(k, br)
+    cross = br[0, 0] + br[0, 1] + br[0, 2] + br[0, 3] > 0.0
+    # intersection: the unit circle's arcs between crossings inside the second ellipse (at
+    # their middle), the second ellipse's inside the unit circle; without a crossing, the first
+    # inside the second iff f < 0 where |f| is largest (tangency does not matter), else the
+    # second inside the first iff its centre is, else disjoint; the same ellipse: the second
+    i_max = 0
+    for i in range(GRID):
+        if abs(f[i]) > abs(f[i_max]):
+            i_max = i
+    first_in = f[i_max] < 0.0
+    second_in = same or (not first_in and fr[_CX] ** 2 + fr[_CY] ** 2 < 1.0)
+    s = np.zeros(4)
+    b = np.empty(6)
+    arc = np.empty((4, 6))
+    for j in range(4):
+        t1 = t0[j + 1] if j < 3 else t0[0] + _TWO_PI
+        inside = _trig(k, 0.5 * (t0[j] + t1))[0] < 0.0 if cross else first_in and not same
+        if inside:
+            _circle_arc(fr, t0[j], t1, out[_INTER])
+        if cross:
+            # the same point on the second ellipse: (cos s, sin s) ∝ [P Q]^-1 (u - c)
+            ux, uy = math.cos(t0[j]) - fr[_CX], math.sin(t0[j]) - fr[_CY]
+            s[j] = math.atan2(fr[_PX] * uy - fr[_PY] * ux, fr[_QY] * ux - fr[_QX] * uy) \
+                % _TWO_PI
+    _sort(s)
+    for j in range(4):
+        s1 = s[j + 1] if j < 3 else s[0] + _TWO_PI
+        arc[:] = 0.0
+        _ellipse_arc(fr, s[j], s1, grad, b, arc)
+        out[_SECOND] += arc
+        if cross:
+            mx, my = _point(fr, 0.5 * (s[j] + s1))
+            inside = mx * mx + my * my < 1.0
+        else:
+            inside = second_in
+        if inside:
+            out[_INTER] += arc
+    if hull:
+        kg = _tangent_coefficients(fr)
+        fg = _grid_values(kg, basis)
+        _brackets(fg, br)
+        _add_pokes(kg, fg, br, dbasis)
+        _hull(fr, _roots(kg, br), grad, b, out[_HULL])
+
+
+@jit
+def _batch(p1: np.ndarray, p2: np.ndarray, hull: bool, grad: bool, basis: np.ndarray,
+           dbasis: np.ndarray) -> np.ndarray:
+    """(N, 3, 4, 6): per pair, region (second, intersection, hull), quadrant, area + gradient."""
+    out = np.zeros((p1.shape[0], 3, 4, 6))
+    for i in range(p1.shape[0]):
+        _pair(p1[i], p2[i], hull, grad, basis, dbasis, out[i])
+    return out
+
+
+def quadrant_sums(p1: np.ndarray, p2: np.ndarray, hull: bool, gradient: bool = False
+                  ) -> np.ndarray:
+    """The kernel's output for N pairs of params ``p1``, ``p2`` (N, 5) (px, rad): (N, 3, 4, 6),
+    per pair the regions (second ellipse, intersection, hull: zeros unless ``hull``), the four
+    quadrants (:func:`quadrant_areas_batch`), and the area (px^2) followed by its gradient
+    w.r.t. ``g2`` (zeros unless ``gradient``)."""
+    # fresh C-ordered writable copies: the kernel is compiled for that one array type
+    p1 = np.array(p1, dtype=float, order="C").reshape(-1, 5)
+    p2 = np.array(p2, dtype=float, order="C").reshape(-1, 5)
+    if p1.shape != p2.shape:
+        raise ValueError(f"p1 and p2 must have the same shape (N, 5), got {p1.shape}, {p2.shape}")
+    return _batch(p1, p2, bool(hull), bool(gradient), _GRID_BASIS, _GRID_DBASIS)
 
 
 def quadrant_areas_batch(
@@ -385,86 +550,9 @@ def quadrant_areas_batch(
     ``(areas (N, 4) px^2, gradients (N, 4, 5) or None)``, gradients w.r.t. each second
     ellipse's ``g2 = (mu_x, mu_y, s00, s01, s11)``. ``n_directions``: unused (see
     :data:`HULL_DIRECTIONS`)."""
-    p1 = np.asarray(p1, dtype=float).reshape(-1, 5)
-    p2 = np.asarray(p2, dtype=float).reshape(-1, 5)
-    if p1.shape != p2.shape:
-        raise ValueError(f"p1 and p2 must have the same shape (N, 5), got {p1.shape}, {p2.shape}")
-    names = ["second", "intersection", "hull"] if hull else ["second", "intersection"]
-    if p1.shape[0] == 0:
-        return {k: (np.zeros((0, 4)), np.zeros((0, 4, 5)) if gradient else None)
-                for k in names}
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        return _quadrant_areas(p1, p2, hull, gradient, names)
-
-
-def _quadrant_areas(p1: np.ndarray, p2: np.ndarray, hull: bool, gradient: bool,
-                    names: list[str]) -> dict[str, tuple[np.ndarray, np.ndarray | None]]:
-    """:func:`quadrant_areas_batch` of N >= 1 pairs (divisions by zero allowed: a zero
-    derivative or segment direction is handled where it occurs)."""
-    n, R = p1.shape[0], len(names)
-    fr = _Frame(p1, p2)
-    k = fr.crossing_coefficients()
-    # contours this close count as identical (oracle: f below 1e-9, area error <= 1e-9)
-    same = np.abs(k).sum(axis=0) <= 1e-9
-    skip = same
-    if hull:  # both root problems at once: rows n.. are the common tangents' (normalised)
-        kg = fr.tangent_coefficients()
-        kg = kg / np.maximum(np.abs(kg).sum(axis=0), 1e-300)
-        k = np.concatenate([k, kg], axis=1)
-        skip = np.concatenate([same, np.zeros(n, dtype=bool)])
-    # rounding-level values (tangency) count as inside (oracle)
-    f, *brackets = _brackets(k, _THRESHOLD, skip)
-    if hull:
-        _add_pokes(k, f, brackets, np.arange(n, 2 * n), _THRESHOLD)
-    roots = _roots(k, *brackets)
-    has = brackets[0][:n].any(axis=1)
-    # intersection: the unit circle's arcs between crossings inside the second ellipse (at
-    # their middle), the second ellipse's inside the unit circle; without a crossing, the first
-    # inside the second iff f < 0 where |f| is largest (tangency does not matter), else the
-    # second inside the first iff its centre is, else disjoint; the same ellipse: the second
-    t0 = np.sort(roots[:n], axis=1)
-    t1 = _cyclic(t0)
-    f_mid = _trig(k[:, :n, None], 0.5 * (t0 + t1))[0]
-    fn = f[:n]
-    first_in = fn[np.arange(n), np.argmax(np.abs(fn), axis=1)] < 0.0
-    second_in = same | (~first_in & (fr.cx * fr.cx + fr.cy * fr.cy < 1.0))
-    cross = has[:, None]
-    w1 = np.zeros((n, 4, R))
-    w1[:, :, 1] = np.where(cross, f_mid < 0.0, (first_in & ~same)[:, None])
-    # the same points on the second ellipse: (cos s, sin s) ∝ [P Q]^-1 (u - c) (det > 0)
-    ux, uy = np.cos(t0) - fr.cx[:, None], np.sin(t0) - fr.cy[:, None]
-    s = np.arctan2(fr.Px[:, None] * uy - fr.Py[:, None] * ux,
-                   fr.Qy[:, None] * ux - fr.Qx[:, None] * uy)
-    s0 = np.sort(np.where(cross, s % _TWO_PI, 0.0), axis=1)
-    s1 = _cyclic(s0)
-    mx, my = fr.point(0.5 * (s0 + s1))
-    w2 = np.zeros((n, 4, R))
-    w2[:, :, 0] = 1.0  # all of the second ellipse
-    w2[:, :, 1] = np.where(cross, mx * mx + my * my < 1.0, second_in[:, None])
-    c0, c1, e0, e1, ew, cw = [t0], [t1], [s0], [s1], [w2], [w1]
-    if hull:
-        h0, h1, hs0, hs1, win2, segs = _hull(fr, np.sort(roots[n:], axis=1))
-        wh = np.zeros((n, 4, R))
-        wh[:, :, 2] = ~win2
-        c0.append(h0)
-        c1.append(h1)
-        cw.append(wh)
-        wh = np.zeros((n, 4, R))
-        wh[:, :, 2] = win2
-        e0.append(hs0)
-        e1.append(hs1)
-        ew.append(wh)
-    if hull:
-        c0, c1, cw = (np.concatenate(x, axis=1) for x in (c0, c1, cw))
-        e0, e1, ew = (np.concatenate(x, axis=1) for x in (e0, e1, ew))
-    else:
-        c0, c1, cw, e0, e1, ew = c0[0], c1[0], cw[0], e0[0], e1[0], ew[0]
-    acc = _ellipse_sums(fr, e0, e1, ew, gradient)  # (N, 4, R, V)
-    acc[:, :, :, 0] += _circle_sums(fr, c0, c1, cw)
-    if hull:
-        acc[:, :, 2:] += _segment_sums(fr, segs, gradient)
-    return {name: (acc[:, :, r, 0], acc[:, :, r, 1:] if gradient else None)
-            for r, name in enumerate(names)}
+    out = quadrant_sums(p1, p2, hull, gradient)
+    return {name: (out[:, r, :, 0], out[:, r, :, 1:] if gradient else None)
+            for r, name in enumerate(_REGIONS[:3 if hull else 2])}
 
 
 def quadrant_areas(

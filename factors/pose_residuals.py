@@ -21,8 +21,8 @@ Metrics
 -------
 * ``level_set`` (analytic): ``r = Phi_det(x) - Phi_proj(x) = (Phi_det(x) - 1) + s n^T A^-1 n``
   at the detection's samples ``x`` (rays ``n = K^-1 (x, y, 1)``, ``s = A[2,2]``), fixed at the
-  initial pose (the layout of ``factors.metrics.level_set_sample_points``); residual and
-  Jacobian rows are quadratic forms in ``n`` (:func:`_level_set_forms`).
+  initial pose (the layout of ``factors.metrics.level_set_sample_points``); residuals and
+  Jacobians of all pairs by one compiled kernel (:func:`_level_set_kernel`).
 * ``algebraic``, ``frobenius``, ``wasserstein``, ``bhattacharyya``, ``bbox`` (analytic):
   :func:`factors.metrics.conic_residuals` of the normalised dual conic
   ``Cn = C* / (-C*[2,2])``, differentiated through ``dC* = K dA K^T``,
@@ -85,6 +85,7 @@ from factors.geometry import (
     skew,
     so3_exp,
 )
+from factors.jit import jit
 from factors.metrics import METRIC_NAMES
 from factors.overlap import HULL_DIRECTIONS
 
@@ -95,6 +96,7 @@ __all__ = [
     "DEFAULT_PENALTY_COST",
     "PoseEvaluation",
     "PoseResidualModel",
+    "compile_kernels",
     "expmap_pose3",
 ]
 
@@ -120,41 +122,84 @@ assert set(_PENALTY_PIXEL_POWER) == set(METRIC_NAMES)
 _SKEW_BASIS = skew(np.eye(3)) + 0.0  # [e_k]x, k = 0, 1, 2
 
 
-def _level_set_forms(f: np.ndarray, Ai: np.ndarray) -> np.ndarray:
-    """The 7 quadratic forms ``Q_k`` (7, 3, 3) of one object whose values ``n^T Q_k n`` at a
-    sample's normalised ray ``n`` are ``r - Phi_det + 1 = s g`` (k = 0) and ``d r / d xi``
-    (k = 1..6, ``xi = [omega, v]``); docs/design/factors.md, "Level-set residual":
-    with ``u = A^-1 n``: ``g = n^T A^-1 n``, ``(n x u)_k = -n^T [e_k]x A^-1 n`` and
-    ``(c_c . u) u_k = n^T (A^-1 c_c) (A^-1 e_k)^T n``.
+@jit
+def _level_set_kernel(
+    T: np.ndarray, centers: np.ndarray, S_world: np.ndarray, S_world_inv: np.ndarray,
+    rays: np.ndarray, phi0: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Level-set residuals (N, M) and Jacobians (N, M, 6) of all pairs at ``T``
+    (``world_from_camera`` 4x4), and per object its centre's depth ``z_c`` (N,) m and ``S_c[2,
+    2]`` (N,) m^2 (for :func:`factors.geometry.depth_margin`; the rows of an invalid pair are
+    garbage, replaced by the penalty). Docs: docs/design/factors.md, "Level-set residual".
 
-    ``f = [(A e3)_0, (A e3)_1, s, z_c, s (A^-1 c_c)_0..2]`` (7,), ``Ai = A^-1`` (3, 3). The
-    forms are bilinear in ``(f, Ai)``: :data:`_LEVEL_SET_FORMS` is this map as one matrix."""
-    a0, a1, s, z = f[:4]
-    sw = f[4:]
-    Q = np.empty((7, 3, 3))
-    Q[0] = s * Ai
-    Q[1] = -2.0 * a1 * Ai - 2.0 * s * (_SKEW_BASIS[0] @ Ai)  # e3 x A e3 = (-a1, a0, 0)
-    Q[2] = 2.0 * a0 * Ai - 2.0 * s * (_SKEW_BASIS[1] @ Ai)
-    Q[3] = -2.0 * s * (_SKEW_BASIS[2] @ Ai)
-    for k in range(3):
-        Q[4 + k] = -2.0 * np.outer(sw, Ai[k])
-    Q[6] += 2.0 * z * Ai
-    return Q
+    Per object, ``A^-1`` by Sherman-Morrison from the world frame, ``A_w = S_w - d d^T`` (``d``
+    the centre seen from the camera, world axes): ``A_w^-1 = S_w^-1 + e e^T / (1 - d . e)``,
+    ``e = S_w^-1 d``, ``A^-1 = R^T A_w^-1 R``; then per sample ray ``n`` (``rays`` (N, 3, M)),
+    with ``u = A^-1 n``, ``g = n . u``, ``s = A[2, 2]``::
 
-
-def _level_set_form_matrix() -> np.ndarray:
-    """(63, 63): ``(f (x) A^-1).ravel() @ this = forms.ravel()`` (:func:`_level_set_forms` on
-    the basis of ``f`` and of the 9 entries of ``A^-1``)."""
-    G = np.empty((7, 9, 63))
-    for a in range(7):
-        for k in range(9):
-            G[a, k] = _level_set_forms(np.eye(7)[a], np.eye(9)[k].reshape(3, 3)).ravel()
-    G = G.reshape(63, 63)
-    G.setflags(write=False)
-    return G
-
-
-_LEVEL_SET_FORMS = _level_set_form_matrix()
+        r      = phi0 + s g                       (phi0 = Phi_det(x) - 1, (N, M))
+        dr/dw  = 2 g (e3 x A e3) + 2 s (n x u)
+        dr/dv  = 2 g z_c e3 - 2 (s A^-1 c_c . n) u
+    """
+    n_obj, m = phi0.shape
+    r = np.empty((n_obj, m))
+    J = np.empty((n_obj, m, 6))
+    z_out = np.empty(n_obj)
+    v_out = np.empty(n_obj)
+    Ai_w = np.empty((3, 3))
+    Ai = np.empty((3, 3))
+    for j in range(n_obj):
+        d0, d1, d2 = centers[j, 0] - T[0, 3], centers[j, 1] - T[1, 3], centers[j, 2] - T[2, 3]
+        z = d0 * T[0, 2] + d1 * T[1, 2] + d2 * T[2, 2]
+        # S_w R e3, and A e3 = R^T (S_w R e3 - d z) in camera axes
+        w0 = S_world[j, 0, 0] * T[0, 2] + S_world[j, 0, 1] * T[1, 2] + S_world[j, 0, 2] * T[2, 2]
+        w1 = S_world[j, 1, 0] * T[0, 2] + S_world[j, 1, 1] * T[1, 2] + S_world[j, 1, 2] * T[2, 2]
+        w2 = S_world[j, 2, 0] * T[0, 2] + S_world[j, 2, 1] * T[1, 2] + S_world[j, 2, 2] * T[2, 2]
+        z_out[j] = z
+        v_out[j] = w0 * T[0, 2] + w1 * T[1, 2] + w2 * T[2, 2]
+        w0, w1, w2 = w0 - d0 * z, w1 - d1 * z, w2 - d2 * z
+        a0 = T[0, 0] * w0 + T[1, 0] * w1 + T[2, 0] * w2
+        a1 = T[0, 1] * w0 + T[1, 1] * w1 + T[2, 1] * w2
+        s = T[0, 2] * w0 + T[1, 2] * w1 + T[2, 2] * w2
+        # e = S_w^-1 d, A_w^-1 = S_w^-1 + e e^T / den
+        e0 = S_world_inv[j, 0, 0] * d0 + S_world_inv[j, 0, 1] * d1 + S_world_inv[j, 0, 2] * d2
+        e1 = S_world_inv[j, 1, 0] * d0 + S_world_inv[j, 1, 1] * d1 + S_world_inv[j, 1, 2] * d2
+        e2 = S_world_inv[j, 2, 0] * d0 + S_world_inv[j, 2, 1] * d1 + S_world_inv[j, 2, 2] * d2
+        den = 1.0 - (d0 * e0 + d1 * e1 + d2 * e2)
+        e0, e1, e2 = e0 / den, e1 / den, e2 / den  # now A_w^-1 d; e e^T / den = den e' e'^T
+        for a in range(3):
+            ea = e0 if a == 0 else (e1 if a == 1 else e2)
+            for b in range(3):
+                eb = e0 if b == 0 else (e1 if b == 1 else e2)
+                Ai_w[a, b] = S_world_inv[j, a, b] + ea * eb * den
+        # A^-1 = R^T A_w^-1 R
+        for a in range(3):
+            for b in range(3):
+                acc = 0.0
+                for p in range(3):
+                    for q in range(3):
+                        acc += T[p, a] * Ai_w[p, q] * T[q, b]
+                Ai[a, b] = acc
+        # s A^-1 c_c = s R^T A_w^-1 d
+        sw0 = s * (T[0, 0] * e0 + T[1, 0] * e1 + T[2, 0] * e2)
+        sw1 = s * (T[0, 1] * e0 + T[1, 1] * e1 + T[2, 1] * e2)
+        sw2 = s * (T[0, 2] * e0 + T[1, 2] * e1 + T[2, 2] * e2)
+        for i in range(m):
+            n0, n1, n2 = rays[j, 0, i], rays[j, 1, i], rays[j, 2, i]
+            u0 = Ai[0, 0] * n0 + Ai[0, 1] * n1 + Ai[0, 2] * n2
+            u1 = Ai[1, 0] * n0 + Ai[1, 1] * n1 + Ai[1, 2] * n2
+            u2 = Ai[2, 0] * n0 + Ai[2, 1] * n1 + Ai[2, 2] * n2
+            g = n0 * u0 + n1 * u1 + n2 * u2
+            p = sw0 * n0 + sw1 * n1 + sw2 * n2
+            r[j, i] = phi0[j, i] + s * g
+            # (n x u) = -(u x n)
+            J[j, i, 0] = -2.0 * a1 * g - 2.0 * s * (u1 * n2 - u2 * n1)
+            J[j, i, 1] = 2.0 * a0 * g - 2.0 * s * (u2 * n0 - u0 * n2)
+            J[j, i, 2] = -2.0 * s * (u0 * n1 - u1 * n0)
+            J[j, i, 3] = -2.0 * p * u0
+            J[j, i, 4] = -2.0 * p * u1
+            J[j, i, 5] = -2.0 * p * u2 + 2.0 * z * g
+    return r, J, z_out, v_out
 
 
 @functools.lru_cache(maxsize=32)
@@ -173,17 +218,85 @@ def _unit_level_set_layout(n_azimuths: int, n_levels: int) -> tuple[np.ndarray, 
 
 
 @functools.lru_cache(maxsize=64)
-def _camera_constants(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """What the dual-conic metrics need of the intrinsics, read-only: ``K`` (3, 3); the (9, 9)
-    map of ``X`` (3x3) to ``K X K^T`` on raveled matrices, ``ravel(K X K^T) = ravel(X) @
-    this``; and ``-K [e_k]x K^-1`` (3, 3, 3), so that ``K (-[e_k]x A) K^T = this_k @ C*``
-    (``C* = K A K^T``). Cached per camera (one per image size and calibration)."""
-    K = camera.K
-    KXKt = (K.T[:, None, :, None] * K.T[None, :, None, :]).reshape(9, 9)
+def _camera_constants(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+    """What the dual-conic metrics need of the intrinsics, read-only: ``K`` (3, 3) and ``-K
+    [e_k]x K^-1`` (3, 3, 3), so that ``K (-[e_k]x A) K^T = this_k @ C*`` (``C* = K A K^T``).
+    Cached per camera (one per image size and calibration)."""
+    K = np.ascontiguousarray(camera.K)
     neg_KSKinv = -(K @ _SKEW_BASIS @ np.linalg.inv(K))
-    for arr in (K, KXKt, neg_KSKinv):
+    for arr in (K, neg_KSKinv):
         arr.setflags(write=False)
-    return K, KXKt, neg_KSKinv
+    return K, neg_KSKinv
+
+
+@jit
+def _camera_frame_kernel(T: np.ndarray, centers: np.ndarray, L: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """At ``T`` (``world_from_camera`` 4x4), per object in the camera frame: ``A = S_c - c_c
+    c_c^T`` (N, 3, 3), the centre ``c_c = R^T (c_w - t)`` (N, 3) m and the shape matrix ``S_c =
+    (R^T L)(R^T L)^T`` (N, 3, 3) m^2 (``L = R_e diag(axes)`` (N, 3, 3), world)."""
+    n = centers.shape[0]
+    A = np.empty((n, 3, 3))
+    c = np.empty((n, 3))
+    S = np.empty((n, 3, 3))
+    RL = np.empty((3, 3))
+    for j in range(n):
+        for k in range(3):
+            c[j, k] = ((centers[j, 0] - T[0, 3]) * T[0, k] + (centers[j, 1] - T[1, 3]) * T[1, k]
+                       + (centers[j, 2] - T[2, 3]) * T[2, k])
+            for m in range(3):
+                RL[k, m] = T[0, k] * L[j, 0, m] + T[1, k] * L[j, 1, m] + T[2, k] * L[j, 2, m]
+        for a in range(3):
+            for b in range(a, 3):
+                v = RL[a, 0] * RL[b, 0] + RL[a, 1] * RL[b, 1] + RL[a, 2] * RL[b, 2]
+                S[j, a, b] = S[j, b, a] = v
+                A[j, a, b] = A[j, b, a] = v - c[j, a] * c[j, b]
+    return A, c, S
+
+
+@jit
+def _dual_conic_kernel(A: np.ndarray, c: np.ndarray, K: np.ndarray, neg_KSKinv: np.ndarray,
+                       jacobian: bool) -> tuple[np.ndarray, np.ndarray]:
+    """``Cn = C* / (-C*[2,2])`` (N, 3, 3), ``C* = K A K^T``, and if ``jacobian`` its derivative
+    (N, 6, 3, 3) along the tangents ``[omega, v]`` (else (0, 6, 3, 3)): ``dC* = K dA K^T = G +
+    G^T`` with ``G = K G_k K^T`` for the generators of the module docstring, ``-[e_k]x A``
+    (rotation k) -> ``-K [e_k]x K^-1 C*``, ``e_k c^T`` (translation k) -> ``K e_k (K c)^T``;
+    ``dCn = (dC* + Cn dC*[2,2]) / (-C*[2,2])``."""
+    n = A.shape[0]
+    Cn = np.empty((n, 3, 3))
+    dCn = np.empty((n if jacobian else 0, 6, 3, 3))
+    Cs = np.empty((3, 3))
+    KA = np.empty((3, 3))
+    G = np.empty((3, 3))
+    Kc = np.empty(3)
+    for j in range(n):
+        for a in range(3):
+            for b in range(3):
+                KA[a, b] = K[a, 0] * A[j, 0, b] + K[a, 1] * A[j, 1, b] + K[a, 2] * A[j, 2, b]
+        for a in range(3):
+            for b in range(3):
+                Cs[a, b] = KA[a, 0] * K[b, 0] + KA[a, 1] * K[b, 1] + KA[a, 2] * K[b, 2]
+        w = -Cs[2, 2]
+        for a in range(3):
+            for b in range(3):
+                Cn[j, a, b] = Cs[a, b] / w
+        if not jacobian:
+            continue
+        for a in range(3):
+            Kc[a] = K[a, 0] * c[j, 0] + K[a, 1] * c[j, 1] + K[a, 2] * c[j, 2]
+        for k in range(6):
+            for a in range(3):
+                for b in range(3):
+                    if k < 3:
+                        G[a, b] = (neg_KSKinv[k, a, 0] * Cs[0, b] + neg_KSKinv[k, a, 1] * Cs[1, b]
+                                   + neg_KSKinv[k, a, 2] * Cs[2, b])
+                    else:
+                        G[a, b] = K[a, k - 3] * Kc[b]
+            d22 = 2.0 * G[2, 2]
+            for a in range(3):
+                for b in range(3):
+                    dCn[j, k, a, b] = (G[a, b] + G[b, a] + Cn[j, a, b] * d22) / w
+    return Cn, dCn
 
 
 def expmap_pose3(xi: np.ndarray) -> np.ndarray:
@@ -306,7 +419,7 @@ class PoseResidualModel:
             else bool(eager_jacobian)
         self.n = len(self.detections)
         if metric != "level_set":  # the dual-conic metrics (and _projections)
-            self._K, self._KXKt, self._neg_KSKinv = _camera_constants(camera)
+            self._K, self._neg_KSKinv = _camera_constants(camera)
         # per-object constants (world frame)
         self._centers = np.array([q.center for q in self.ellipsoids])  # (N, 3) m
         axes = np.array([q.axes for q in self.ellipsoids])  # (N, 3) m
@@ -325,10 +438,6 @@ class PoseResidualModel:
         self._cache_key: bytes | None = None
         self._cache_jac = False
         self._cache: PoseEvaluation | None = None
-        #: :meth:`_level_set_frame`'s last pose (bytes) and result: the layout and the first
-        #: LM evaluation share the initial pose, a relayout and LM's last evaluation the result
-        self._frame_key: bytes | None = None
-        self._frame: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
         #: level set: some detection's sampled area was grown for the misalignment at the
         #: initial pose (see :meth:`relayout`); always False for the other metrics
         self.sampling_grown = False
@@ -432,13 +541,7 @@ class PoseResidualModel:
         self._phi0 = uv2 * (s_max**2)[:, None] - 1.0
         Hs = H.copy()
         Hs[:, :, :2] *= s_max[:, None, None]
-        nT = Hs @ uv1  # (N, 3, M) normalised camera coordinates K^-1 (x, y, 1)
-        self._nT = nT
-        # the monomials n_i n_j of every sample (N, M, 9): each residual / Jacobian row is a
-        # quadratic form n^T Q n, i.e. this @ Q.ravel() (see _evaluate_level_set)
-        n_rows = nT.transpose(0, 2, 1)  # (N, M, 3)
-        self._n_monomials_t = (n_rows[:, :, :, None] * n_rows[:, :, None, :]).reshape(
-            self.n, self._M, 9)
+        self._nT = Hs @ uv1  # (N, 3, M) normalised camera coordinates K^-1 (x, y, 1)
 
     @property
     def sample_points(self) -> np.ndarray:
@@ -451,15 +554,11 @@ class PoseResidualModel:
     def _camera_frame(
         self, world_from_camera: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """``A`` (N,3,3), centres ``c_c`` (N,3) m, ``S_c`` (N,3,3), depth margins (N,) m."""
-        Rwc = world_from_camera[:3, :3]
-        t = -(world_from_camera[:3, 3] @ Rwc)  # camera_from_world translation
-        c = self._centers @ Rwc + t
-        RL = Rwc.T @ self._L
-        S = RL @ RL.transpose(0, 2, 1)
-        A = S - c[:, :, None] * c[:, None, :]
-        margins = depth_margin(c[:, 2], S[:, 2, 2])
-        return A, c, S, margins
+        """``A`` (N,3,3), centres ``c_c`` (N,3) m, ``S_c`` (N,3,3), depth margins (N,) m
+        (:func:`_camera_frame_kernel`)."""
+        A, c, S = _camera_frame_kernel(np.array(world_from_camera, float, order="C"),
+                                       self._centers, self._L)
+        return A, c, S, depth_margin(c[:, 2], S[:, 2, 2])
 
     def evaluate(self, world_from_camera: np.ndarray, jacobian: bool = True) -> PoseEvaluation:
         """Residuals (and Jacobians if ``jacobian``) of all pairs at ``world_from_camera`` (4x4).
@@ -515,54 +614,25 @@ class PoseResidualModel:
     def _level_set_frame(
         self, T: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """What the level set needs of the camera frame at ``T`` (``world_from_camera``):
+        """What the level-set layout needs of the camera frame at ``T`` (``world_from_camera``):
         ``d`` (N, 3) camera -> centre in world axes (m), the centres' depths ``z = c_c[2]``
-        (N,) m, ``A e3`` (N, 3) in camera axes (``A = S_c - c_c c_c^T``), depth margins (N,).
-        Memoised on the pose value (callers must not write into the arrays)."""
-        key = T.tobytes()
-        if key == self._frame_key:
-            return self._frame  # type: ignore[return-value]
+        (N,) m, ``A e3`` (N, 3) in camera axes (``A = S_c - c_c c_c^T``), depth margins (N,)."""
         R = T[:3, :3]
         d = self._centers - T[:3, 3]
         z = d @ R[:, 2]
         sr3 = self._S_world @ R[:, 2]  # S_w R e3 (N, 3)
         a3 = (sr3 - d * z[:, None]) @ R  # R^T (S_w R e3 - d z)
-        frame = d, z, a3, depth_margin(z, sr3 @ R[:, 2])  # z_c - sqrt(S_c[2, 2])
-        self._frame_key, self._frame = key, frame
-        return frame
+        return d, z, a3, depth_margin(z, sr3 @ R[:, 2])  # z_c - sqrt(S_c[2, 2])
 
     def _evaluate_level_set(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
-        """Level-set residuals and Jacobians of all pairs: ONE batched matmul of per-object
-        quadratic forms against the samples' monomials (docs/design/factors.md, "Level-set
-        residual").
-
-        ``A^-1`` comes from the world frame by Sherman-Morrison, ``A_w = S_w - d d^T`` (``d``
-        the centre seen from the camera, world axes): ``A_w^-1 = S_w^-1 + e e^T / (1 - d.e)``,
-        ``e = S_w^-1 d``, and ``A^-1 = R^T A_w^-1 R`` (``R`` = ``world_from_camera``'s rotation).
-        The Jacobian is always computed with the residual (the same matmul)."""
-        R = T[:3, :3]
-        d, z, a3, margins = self._level_set_frame(T)
-        s = a3[:, 2]
+        """Level-set residuals and Jacobians of all pairs (:func:`_level_set_kernel`; the
+        Jacobian is always computed with the residual)."""
+        # a fresh C-ordered copy of the pose: the kernels are compiled for that one type
+        r, J, z, v = _level_set_kernel(np.array(T, float, order="C"), self._centers,
+                                       self._S_world, self._S_world_inv, self._nT, self._phi0)
+        margins = depth_margin(z, v)
         valid = margins > self.min_depth_margin
-        all_valid = bool(valid.all())
-        e = self._S_world_inv @ d[:, :, None]  # (N, 3, 1)
-        den = 1.0 - d[:, None, :] @ e  # (N, 1, 1), 1 - d^T S_w^-1 d (0 only on the surface)
-        if not all_valid:
-            den[~valid] = 1.0  # rows replaced by the penalty below
-        e_den = e / den
-        Ai = R.T @ (self._S_world_inv + e_den @ e.transpose(0, 2, 1)) @ R  # A^-1
-        # features f of the forms (_LEVEL_SET_FORMS): [a3_0, a3_1, s, z, s A^-1 c_c], with
-        # A^-1 c_c = R^T A_w^-1 d = R^T e / den
-        f = np.concatenate((a3, z[:, None], (e_den[:, :, 0] @ R) * s[:, None]), axis=1)
-        forms = ((f[:, :, None] * Ai.reshape(self.n, 1, 9)).reshape(self.n, 63)
-                 @ _LEVEL_SET_FORMS).reshape(self.n, 7, 9)
-        # (N, M, 7): residual - phi0, then d r / d xi; laid out so that J (N, M, 6) is a view
-        # whose (N * M, 6) reshape (the batched factor's H) is one too
-        rows = self._n_monomials_t @ forms.transpose(0, 2, 1)
-        r = rows[:, :, 0] + self._phi0
-        J = rows[:, :, 1:]
-        if not all_valid:
-            J = np.ascontiguousarray(J)
+        if not valid.all():
             _, c, S, _ = self._camera_frame(T)
             self._apply_penalty(r, J, ~valid, c, S, margins)
         return PoseEvaluation(r, J, valid, margins)
@@ -592,26 +662,14 @@ class PoseResidualModel:
         self, A: np.ndarray, c: np.ndarray, valid: np.ndarray, jacobian: bool,
     ) -> tuple[np.ndarray, np.ndarray | None]:
         """``Cn = C* / (-C*[2,2])`` (N, 3, 3) of the projections and, if ``jacobian``, its
-        derivative (N, 6, 3, 3) along the 6 tangent directions ``[omega, v]`` (module doc).
-        Invalid rows (``~valid``) hold a stand-in ellipse, to be replaced by the penalty."""
+        derivative (N, 6, 3, 3) along the 6 tangent directions ``[omega, v]``
+        (:func:`_dual_conic_kernel`). Invalid rows (``~valid``) hold a stand-in ellipse, to be
+        replaced by the penalty."""
         if not valid.all():
             A = A.copy()
             A[~valid] = np.diag([1.0, 1.0, -1.0])
-        KXKt = self._KXKt
-        Cs = (A.reshape(self.n, 9) @ KXKt).reshape(self.n, 3, 3)  # C* = K A K^T
-        w = -Cs[:, 2, 2]
-        Cn = Cs / w[:, None, None]
-        if not jacobian:
-            return Cn, None
-        # dC* = K dA K^T = KG + KG^T with KG = K G K^T for the generators G of the module
-        # docstring: -[e_k]x A (rotation k) -> -K [e_k]x K^-1 C*; e_k c^T (translation k) ->
-        # K e_k (K c)^T
-        KG = np.empty((self.n, 6, 3, 3))
-        np.matmul(self._neg_KSKinv, Cs[:, None], out=KG[:, :3])
-        np.multiply(self._K.T[None, :, :, None], (c @ self._K.T)[:, None, None, :],
-                    out=KG[:, 3:])
-        dCs = KG + KG.transpose(0, 1, 3, 2)  # (N, 6, 3, 3)
-        return Cn, (dCs + Cn[:, None] * dCs[:, :, 2, 2, None, None]) / w[:, None, None, None]
+        Cn, dCn = _dual_conic_kernel(A, c, self._K, self._neg_KSKinv, jacobian)
+        return Cn, dCn if jacobian else None
 
     def _evaluate_conic(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
         """The metrics of the projections' normalised dual conics ``Cn`` (with their
@@ -715,3 +773,19 @@ class PoseResidualModel:
         the penalty's cost where the projection is invalid."""
         ev = self.evaluate(world_from_camera, jacobian=False)
         return np.einsum("nm,nm->n", ev.residuals, ev.residuals)
+
+
+def compile_kernels() -> None:
+    """Compile the numeric kernels of the pose residuals (level set, dual conics, exact areas
+    and iou / giou rows; :mod:`factors.jit`) now, or load them from numba's cache: one small
+    evaluation per kernel family, through the same calls as a refinement (so the same
+    specialisations). The service calls this at start-up so that no request pays the
+    compilation (~13 s once per machine and cache directory, well under 1 s from the cache;
+    docs/deployment.md)."""
+    camera = Camera(500.0, 500.0, 320.0, 240.0, 640, 480)
+    ellipsoid = Ellipsoid(np.array([0.0, 0.0, 3.0]), np.array([0.3, 0.2, 0.1]), np.eye(3))
+    detection = Ellipse(330.0, 245.0, 45.0, 30.0, 0.2)
+    for metric in ("level_set", "bbox", "iou", "giou"):
+        model = PoseResidualModel(metric, [detection], [ellipsoid], camera,
+                                  initial_world_from_camera=np.eye(4))
+        model.evaluate(np.eye(4))

@@ -207,18 +207,6 @@ def test_level_set_is_invariant_to_the_world_frame_and_matches_the_metric(seed):
     np.testing.assert_allclose(ev.jacobians, num, atol=1e-6 * np.abs(num).max())
 
 
-def test_level_set_form_matrix_is_the_bilinear_map_of_the_forms():
-    """``_LEVEL_SET_FORMS`` (built on basis vectors) reproduces :func:`_level_set_forms` for
-    arbitrary features and (non-symmetric) matrices: the forms are bilinear in them."""
-    from factors.pose_residuals import _LEVEL_SET_FORMS, _level_set_forms
-
-    rng = np.random.default_rng(3)
-    for _ in range(5):
-        f, Ai = rng.normal(size=7), rng.normal(size=(3, 3))
-        np.testing.assert_allclose((np.outer(f, Ai.ravel()).ravel() @ _LEVEL_SET_FORMS),
-                                   _level_set_forms(f, Ai).ravel(), rtol=1e-13, atol=1e-13)
-
-
 @pytest.mark.parametrize("metric", ["algebraic", "frobenius", "wasserstein", "bhattacharyya",
                                     "bbox", "qbbox", "iou", "giou"])
 def test_smooth_metric_jacobians_match_numerical(scene, metric):
@@ -479,7 +467,9 @@ def test_saturated_valid_cost_stays_below_the_penalty_and_reports_the_metric_cos
     # reported: the metric's own cost; minimised: the saturated one, below the penalty
     assert model.costs(pose)[0] == pytest.approx(cost, rel=1e-12)
     fr = ev.factor_residuals[0]
-    assert model.penalty_costs[0] / 2 < float(fr @ fr) < 0.9 * model.penalty_costs[0]
+    # h < 0.9 P; here c is ~3e4 P, so h is 0.9 P up to rounding
+    assert model.penalty_costs[0] / 2 < float(fr @ fr) <= 0.9 * model.penalty_costs[0] * (
+        1 + 1e-12)
     # the saturated Jacobian is the derivative of the saturated residual
     num = numeric_jacobian(
         lambda T: model.evaluate(T, jacobian=False).factor_residuals[0].copy(), pose, 1e-7)

@@ -17,6 +17,7 @@ from typing import Any
 from fastapi import Depends, FastAPI
 from fastapi.openapi.utils import get_openapi
 
+from factors.pose_residuals import compile_kernels
 from maps.cache import CompiledMapCache
 from maps.demo import DEMO_MAP_ID, load_demo_map
 from maps.errors import MapAlreadyExists, MapNotFound
@@ -114,6 +115,9 @@ def create_app(settings: Settings | None = None, *, store: MapStore | None = Non
 
     @asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
+        # before serving: no request pays the compilation of the numeric kernels
+        # (factors.jit)
+        compile_kernels()
         if not keys:
             log.warning("no API key configured (QUADLOC_API_KEYS): the API is OPEN and must "
                         "only listen on loopback")

@@ -1,0 +1,68 @@
+"""The one way the factors compile a numeric kernel: the :func:`jit` decorator (numba).
+
+Decided (issue 14): numba, a maintained compiler of numpy-style Python to machine code, for the
+few kernels whose cost was numpy's per-call overhead on small arrays (the exact ellipse areas of
+``factors.overlap``, the iou / giou rows of ``factors.metrics``, the level-set and dual-conic
+rows of ``factors.pose_residuals``): the kernels stay readable Python next to the formulas they
+implement, no C toolchain is needed to install, and the wheels come from the package registry.
+Why, costs and measurements: docs/design/factors.md, "Compiled kernels".
+
+Lazy: importing a module with kernels neither imports numba nor sets a kernel up (a process
+that never calls one, e.g. a CLI command on maps, starts ~0.4 s faster); the first call of any
+kernel binds them all (:func:`_bind_all`), each then compiled at its first call, or loaded from
+numba's on-disk cache.
+"""
+
+from __future__ import annotations
+
+import functools
+import threading
+from collections.abc import Callable
+from typing import Any
+
+#: numba options of every kernel: ``error_model="numpy"`` gives IEEE inf / nan on a division by
+#: zero (as numpy) instead of an exception, which the kernels rely on where a derivative or a
+#: direction vanishes; ``nogil``: a kernel releases the GIL while it runs.
+NUMBA_OPTIONS: dict[str, Any] = {"error_model": "numpy", "nogil": True}
+
+_PENDING: list[Callable[..., Any]] = []
+_LOCK = threading.Lock()
+
+
+def jit(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """Declare ``fn`` (a module-level function) a compiled kernel. Returns a stand-in under the
+    same module name that binds every declared kernel at its first call; from then on the
+    module's global IS the numba dispatcher (so kernels call each other compiled, and Python
+    callers that look the name up reach numba directly)."""
+    _PENDING.append(fn)
+
+    @functools.wraps(fn)
+    def first_call(*args: Any) -> Any:
+        _bind_all()
+        return fn.__globals__[fn.__name__](*args)
+
+    return first_call
+
+
+def _bind_all() -> None:
+    """Replace every declared kernel's module global by its numba dispatcher (once)."""
+    with _LOCK:
+        if not _PENDING:
+            return
+        from numba import njit
+
+        for fn in _PENDING:
+            fn.__globals__[fn.__name__] = _dispatcher(njit, fn)
+        _PENDING.clear()
+
+
+def _dispatcher(njit: Callable[..., Any], fn: Callable[..., Any]) -> Any:
+    """``njit`` with :data:`NUMBA_OPTIONS` and numba's on-disk cache (``__pycache__`` next to
+    the source, or ``NUMBA_CACHE_DIR``): a kernel compiles at its first call in a process that
+    finds no cache entry (seconds), else loads in milliseconds. Where no cache directory is
+    writable (a read-only file system) numba refuses to cache, and each process compiles
+    (``service.api.app`` compiles the kernels at start-up, before serving)."""
+    try:
+        return njit(cache=True, **NUMBA_OPTIONS)(fn)
+    except RuntimeError:  # numba: "cannot cache function ...: no locator available"
+        return njit(**NUMBA_OPTIONS)(fn)

@@ -1,0 +1,99 @@
+"""The compiled numeric kernels (``factors.jit``): compiled once, at start-up, for every request.
+
+Their results are checked where their formulas are (``test_overlap_batch.py`` against the scalar
+oracle, ``test_metrics.py`` / ``test_pose_factors.py`` against central differences, Monte Carlo
+and the independent metric functions). Here: numba compiles a kernel for each distinct argument
+type, a compilation takes seconds, so ``compile_kernels()`` (run by the service before it
+serves) must cover every type that the refinements, the metrics and the map building pass; and
+a kernel works where numba has no writable cache directory.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+_SCRIPT = textwrap.dedent("""
+    import json
+    import numpy as np
+    from factors import metrics, overlap, pose_residuals
+    from factors.geometry import Camera, Ellipse, Ellipsoid
+    from factors.overlap import intersection_areas
+    from service.localization.refine import refine
+    from service.localization.types import Detection
+
+    def signatures():
+        out = {}
+        for module in (overlap, pose_residuals, metrics):
+            for name, value in vars(module).items():
+                if hasattr(value, "signatures") and hasattr(value, "py_func"):
+                    out[f"{module.__name__}.{name}"] = [str(s) for s in value.signatures]
+        return out
+
+    pose_residuals.compile_kernels()
+    before = signatures()
+    # what requests do, with arguments of every origin: read-only, non-contiguous, scalar
+    camera = Camera(520.0, 515.0, 322.0, 241.0, 640, 480)
+    rng = np.random.default_rng(0)
+    ellipsoids = [Ellipsoid(np.array([x, y, 3.0]), np.array([0.3, 0.2, 0.15]), np.eye(3))
+                  for x, y in ((-0.5, 0.0), (0.4, 0.2), (0.0, -0.4), (0.6, -0.3))]
+    truth = np.eye(4)
+    dets = [Detection(Ellipse(*p), "o", sigma=1.0)
+            for p in ((233.0, 242.0, 52.0, 34.0, 0.1), (392.0, 276.0, 52.0, 35.0, -0.2),
+                      (322.0, 171.0, 52.0, 35.0, 0.3), (426.0, 189.0, 53.0, 35.0, 0.0))]
+    start = truth.copy()
+    start[:3, 3] += (0.03, -0.02, 0.05)
+    start.setflags(write=False)
+    for metric in metrics.METRIC_NAMES:
+        refine(dets, ellipsoids, camera, start, metric)
+        refine(dets, ellipsoids, camera, np.asfortranarray(start), metric, robust="huber")
+    p = rng.uniform(1.0, 50.0, (6, 10))
+    p.setflags(write=False)
+    intersection_areas(p[:, ::2], p[:, 1::2])
+    metrics.overlap_residual("giou", p[0, ::2], p[1, ::2], gradient=True)
+    metrics.overlap_residual("iou", p[:, ::2], p[:, 1::2], gradient=True, disjoint_hull=True)
+    for name in ("iou", "giou"):
+        metrics.cost(name, Ellipse(*p[0, :5]), Ellipse(*p[1, :5]))
+    print(json.dumps({"before": before, "after": signatures()}))
+""")
+
+
+def test_requests_compile_no_kernel_that_start_up_did_not():
+    out = subprocess.run([sys.executable, "-c", _SCRIPT], cwd=REPO, capture_output=True,
+                         text=True, timeout=600, check=True)
+    result = json.loads(out.stdout.strip().splitlines()[-1])
+    before, after = result["before"], result["after"]
+    assert set(before) >= {"factors.overlap._batch", "factors.metrics._overlap_rows",
+                           "factors.pose_residuals._level_set_kernel",
+                           "factors.pose_residuals._camera_frame_kernel",
+                           "factors.pose_residuals._dual_conic_kernel"}
+    for name, sigs in after.items():
+        assert sigs == before.get(name, []), f"{name} was compiled again for a request"
+
+
+def test_a_kernel_works_without_a_cache_directory():
+    """numba caches next to the source file; a function without one (here defined by exec:
+    no file; in production, a read-only file system) cannot be cached, and the kernel is then
+    compiled in the process instead of failing."""
+    from numba import njit
+
+    from factors.jit import _dispatcher
+
+    namespace: dict = {}
+    exec("def twice(x):\n    return 2.0 * x\n", namespace)
+    assert _dispatcher(njit, namespace["twice"])(1.5) == 3.0
+
+
+def test_importing_the_factors_does_not_import_numba():
+    """Kernels bind at their first call: a process that never calls one (a CLI command on
+    maps, the SDK's server-side peers) does not pay numba's import."""
+    code = ("import sys, factors.metrics, factors.pose_residuals, maps.store; "
+            "print('numba' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True,
+                         text=True, timeout=120, check=True)
+    assert out.stdout.strip() == "False"
