@@ -161,17 +161,20 @@ def eval_cost(reps: int = 400, seed: int = 3, blocks: int = 10) -> dict:
         model = PoseResidualModel(metric, [d.ellipse for d in frame.detections], ells, camera,
                                   initial_world_from_camera=start)
         poses_ = [start @ expmap_pose3(rng.normal(0.0, 1e-3, 6)) for _ in range(reps)]
-        calls, original = [], fm.quadrant_sums
+        # the areas' entry point in factors.metrics (quadrant_areas_batch before issue 14's
+        # compiled kernels: --compare-tree runs this file on older code)
+        entry = "quadrant_sums" if hasattr(fm, "quadrant_sums") else "quadrant_areas_batch"
+        calls, original = [], getattr(fm, entry)
 
         def recording(*args, _calls=calls, _original=original, **kwargs):
             _calls.append((args, kwargs))
             return _original(*args, **kwargs)
 
-        fm.quadrant_sums = recording
+        setattr(fm, entry, recording)
         try:
             model.evaluate(poses_[0])
         finally:
-            fm.quadrant_sums = original
+            setattr(fm, entry, original)
         whole, areas = math.inf, math.inf
         block = max(reps // blocks, 1)
         for b in range(blocks):  # the fastest block of each: the least disturbed by other jobs

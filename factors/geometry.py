@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from factors.jit import jit
 from factors.names import FieldError
 
 #: Largest ``max|R R^T - I|`` accepted for a rotation matrix (and ``|det R - 1|``).
@@ -67,6 +68,7 @@ __all__ = [
     "pose_matrix",
     "project_ellipsoid",
     "project_ellipsoids_dual",
+    "projected_gaussians",
     "quaternion_wxyz_from_rotation",
     "rotation_from_quaternion_wxyz",
     "sigma_entries",
@@ -674,6 +676,81 @@ def ellipsoid_depth_margins(
     r3 = T[..., 2, :3]
     zc = r3 @ np.asarray(centers).T + T[..., 2, 3, None]
     return depth_margin(zc, np.einsum("...i,nij,...j->...n", r3, shape_matrices, r3))
+
+
+@jit
+def _projected_gaussians_kernel(
+    P: np.ndarray, T: np.ndarray, centers: np.ndarray, shape_matrices: np.ndarray,
+    dual_quadrics: np.ndarray,
+) -> tuple[np.ndarray, ...]:
+    """:func:`projected_gaussians`' pose x ellipsoid loop: per (h, s), the entries of ``C* = P
+    Q* P^T`` normalised to ``Cn[2, 2] = -1``, the centre ``mu = -Cn[:2, 2]`` and ``Sigma =
+    Cn[:2, :2] + mu mu^T`` (the entries of :func:`gaussians_from_dual_conics`), the centre's
+    depth and the variance along the optical axis (for :func:`depth_margin`), and whether
+    ``C*[2, 2] != 0`` and ``Sigma`` is positive definite."""
+    n_h, n_s = P.shape[0], centers.shape[0]
+    mx, my = np.empty((n_h, n_s)), np.empty((n_h, n_s))
+    s00, s01, s11 = np.empty((n_h, n_s)), np.empty((n_h, n_s)), np.empty((n_h, n_s))
+    zc, var = np.empty((n_h, n_s)), np.empty((n_h, n_s))
+    ok = np.empty((n_h, n_s), dtype=np.bool_)
+    PQ = np.empty((3, 4))
+    for h in range(n_h):
+        for s in range(n_s):
+            Q = dual_quadrics[s]
+            for i in range(3):
+                for b in range(4):
+                    PQ[i, b] = (P[h, i, 0] * Q[0, b] + P[h, i, 1] * Q[1, b]
+                                + P[h, i, 2] * Q[2, b] + P[h, i, 3] * Q[3, b])
+            c00, c01, c11, c02, c12, c22 = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+            for b in range(4):
+                c00 += PQ[0, b] * P[h, 0, b]
+                c01 += PQ[0, b] * P[h, 1, b]
+                c11 += PQ[1, b] * P[h, 1, b]
+                c02 += PQ[0, b] * P[h, 2, b]
+                c12 += PQ[1, b] * P[h, 2, b]
+                c22 += PQ[2, b] * P[h, 2, b]
+            w = -c22
+            ok_w = w != 0.0
+            if not ok_w:
+                w = 1.0
+            x, y = -c02 / w, -c12 / w
+            a00, a01, a11 = c00 / w + x * x, c01 / w + x * y, c11 / w + y * y
+            mx[h, s], my[h, s], s00[h, s], s01[h, s], s11[h, s] = x, y, a00, a01, a11
+            ok[h, s] = ok_w and a00 * a11 - a01 * a01 > 0.0 and a00 > 0.0
+            z, v = T[h, 2, 3], 0.0
+            for i in range(3):
+                z += T[h, 2, i] * centers[s, i]
+                for j in range(3):
+                    v += T[h, 2, i] * shape_matrices[s, i, j] * T[h, 2, j]
+            zc[h, s], var[h, s] = z, v
+    return mx, my, s00, s01, s11, zc, var, ok
+
+
+def projected_gaussians(
+    camera: Camera, camera_from_world: np.ndarray, centers: np.ndarray,
+    shape_matrices: np.ndarray, dual_quadrics: np.ndarray, min_depth: float = MIN_DEPTH,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Projections of S ellipsoids at H poses as separate entries (the RANSAC scorer's, the
+    P2E residuals' and the tracker's batched projection; a compiled kernel).
+
+    Args:
+        camera_from_world: (H, 4, 4), or ``[R | t]`` (H, 3, 4).
+        centers, shape_matrices, dual_quadrics: (S, 3), (S, 3, 3), (S, 4, 4) world frame.
+
+    Returns:
+        ``(mu_x, mu_y, s00, s01, s11, valid, P)``: the projected ellipses' centres (px) and
+        ``A^-1`` entries (px^2), each (H, S); ``valid`` (H, S): the ellipsoid entirely at
+        depth > ``min_depth`` (:func:`depth_margin`) and a real ellipse; ``P = K [R | t]``
+        (H, 3, 4).
+    """
+    # fresh C-ordered copies: the kernel is compiled for that one array type
+    T = np.array(camera_from_world, dtype=float, order="C")
+    P = np.ascontiguousarray(camera.K @ T[:, :3, :])
+    mx, my, s00, s01, s11, zc, var, ok = _projected_gaussians_kernel(
+        P, T, np.array(centers, dtype=float, order="C"),
+        np.array(shape_matrices, dtype=float, order="C"),
+        np.array(dual_quadrics, dtype=float, order="C"))
+    return mx, my, s00, s01, s11, ok & (depth_margin(zc, var) > min_depth), P
 
 
 def project_ellipsoids_dual(

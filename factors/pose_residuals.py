@@ -82,6 +82,7 @@ from factors.geometry import (
     ellipse_params_and_validity,
     gaussian_derivatives_from_dual_conics,
     gaussians_from_dual_conics,
+    projected_gaussians,
     skew,
     so3_exp,
 )
@@ -776,8 +777,9 @@ class PoseResidualModel:
 
 
 def compile_kernels() -> None:
-    """Compile the numeric kernels of the pose residuals (level set, dual conics, exact areas
-    and iou / giou rows; :mod:`factors.jit`) now, or load them from numba's cache: one small
+    """Compile the numeric kernels (level set, dual conics, exact areas and iou / giou rows,
+    the batched projection of :func:`factors.geometry.projected_gaussians`; :mod:`factors.jit`)
+    now, or load them from numba's cache: one small
     evaluation per kernel family, through the same calls as a refinement (so the same
     specialisations). The service calls this at start-up so that no request pays the
     compilation (~13 s once per machine and cache directory, well under 1 s from the cache;
@@ -789,3 +791,5 @@ def compile_kernels() -> None:
         model = PoseResidualModel(metric, [detection], [ellipsoid], camera,
                                   initial_world_from_camera=np.eye(4))
         model.evaluate(np.eye(4))
+    projected_gaussians(camera, np.eye(4)[None], ellipsoid.center[None],
+                        ellipsoid.shape_matrix()[None], ellipsoid.dual_quadric()[None])

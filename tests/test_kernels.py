@@ -21,7 +21,7 @@ REPO = Path(__file__).resolve().parents[1]
 _SCRIPT = textwrap.dedent("""
     import json
     import numpy as np
-    from factors import metrics, overlap, pose_residuals
+    from factors import geometry, metrics, overlap, pose_residuals
     from factors.geometry import Camera, Ellipse, Ellipsoid
     from factors.overlap import intersection_areas
     from service.localization.refine import refine
@@ -29,7 +29,7 @@ _SCRIPT = textwrap.dedent("""
 
     def signatures():
         out = {}
-        for module in (overlap, pose_residuals, metrics):
+        for module in (overlap, pose_residuals, metrics, geometry):
             for name, value in vars(module).items():
                 if hasattr(value, "signatures") and hasattr(value, "py_func"):
                     out[f"{module.__name__}.{name}"] = [str(s) for s in value.signatures]
@@ -59,6 +59,23 @@ _SCRIPT = textwrap.dedent("""
     metrics.overlap_residual("iou", p[:, ::2], p[:, 1::2], gradient=True, disjoint_hull=True)
     for name in ("iou", "giou"):
         metrics.cost(name, Ellipse(*p[0, :5]), Ellipse(*p[1, :5]))
+    # the batched projection (RANSAC, P2E, tracking): [R | t] poses, read-only map arrays
+    centers = np.array([e.center for e in ellipsoids])
+    shapes = np.array([e.shape_matrix() for e in ellipsoids])
+    quadrics = np.array([e.dual_quadric() for e in ellipsoids])
+    for arr in (centers, shapes, quadrics):
+        arr.setflags(write=False)
+    geometry.projected_gaussians(camera, np.stack([start[:3], truth[:3]]), centers, shapes,
+                                 quadrics)
+    from bench.reference_data import load_chess_map
+    from bench.simulate import SimulationConfig, simulate_frame
+    from maps.compiled import compile_map
+    from service.localization.pipeline import localize
+    cm = compile_map(load_chess_map())
+    pose = np.eye(4)
+    pose[:3, 3] = cm.ellipsoids[0].center - (0.0, 0.0, 2.0)
+    frame = simulate_frame(cm, camera, pose, rng, SimulationConfig())
+    localize(list(frame.detections), cm, camera)
     print(json.dumps({"before": before, "after": signatures()}))
 """)
 
@@ -69,6 +86,7 @@ def test_requests_compile_no_kernel_that_start_up_did_not():
     result = json.loads(out.stdout.strip().splitlines()[-1])
     before, after = result["before"], result["after"]
     assert set(before) >= {"factors.overlap._batch", "factors.metrics._overlap_rows",
+                           "factors.geometry._projected_gaussians_kernel",
                            "factors.pose_residuals._level_set_kernel",
                            "factors.pose_residuals._camera_frame_kernel",
                            "factors.pose_residuals._dual_conic_kernel"}

@@ -23,7 +23,7 @@ from factors.geometry import (
     Camera,
     Ellipse,
     Ellipsoid,
-    depth_margin,
+    projected_gaussians,
     so3_exp,
 )
 
@@ -31,52 +31,6 @@ __all__ = ["p2e_hypotheses", "p3p_hypotheses", "p3p_hypotheses_batch", "point_ce
            "project_objects", "projected_gaussians"]
 
 _EMPTY = np.zeros((0, 4, 4))
-
-
-#: The entries ``(i, l)`` of a projected dual conic ``C = P Q* P^T`` (3x3, symmetric) that the
-#: projections need, in this order (:func:`projected_gaussians`).
-_CONIC_ROWS = np.array([0, 0, 1, 0, 1, 2])
-_CONIC_COLS = np.array([0, 1, 1, 2, 2, 2])
-
-
-def projected_gaussians(
-    camera: Camera, camera_from_world: np.ndarray, centers: np.ndarray,
-    shape_matrices: np.ndarray, dual_quadrics: np.ndarray, min_depth: float = MIN_DEPTH,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`project_objects` as separate entries, the form the RANSAC scorer uses (one
-    matrix product for every pose x ellipsoid dual conic, no per-entry gathers).
-
-    Args:
-        camera_from_world: (H, 4, 4), or ``[R | t]`` (H, 3, 4).
-        centers, shape_matrices, dual_quadrics: (S, 3), (S, 3, 3), (S, 4, 4) world frame.
-
-    Returns:
-        ``(mu_x, mu_y, s00, s01, s11, valid, P)``: the projected ellipses' centres (px) and
-        ``A^-1`` entries (px^2), each (H, S); ``valid`` (H, S) as in :func:`project_objects`;
-        ``P = K [R | t]`` (H, 3, 4).
-    """
-    T = np.asarray(camera_from_world, dtype=float)
-    n_h, n_s = len(T), len(centers)
-    P = camera.K @ T[:, :3, :]
-    # C_il = (P_i (x) P_l) . vec(Q*) for the 6 entries: one (6 H, 16) x (16, S) product; then
-    # factors.geometry.gaussians_from_dual_conics in entry form
-    outer = (P[:, _CONIC_ROWS, :, None] * P[:, _CONIC_COLS, None, :]).reshape(n_h * 6, 16)
-    C = (outer @ np.reshape(dual_quadrics, (n_s, 16)).T).reshape(n_h, 6, n_s)
-    # depth margins z_c - sqrt(r3^T M r3) (r3: the camera's optical axis in world axes)
-    r3 = T[:, 2, :3]
-    zc = r3 @ np.asarray(centers).T + T[:, 2, 3, None]
-    var = (r3[:, :, None] * r3[:, None, :]).reshape(n_h, 9) @ np.reshape(
-        shape_matrices, (n_s, 9)).T
-    valid = depth_margin(zc, var) > min_depth
-    w = -C[:, 5]
-    ok = w != 0
-    Cn = C / np.where(ok, w, 1.0)[:, None]  # normalised: Cn[2, 2] = -1
-    mx, my = -Cn[:, 3], -Cn[:, 4]
-    s00 = Cn[:, 0] + mx * mx
-    s01 = Cn[:, 1] + mx * my
-    s11 = Cn[:, 2] + my * my
-    valid &= ok & (s00 * s11 - s01 * s01 > 0) & (s00 > 0)
-    return mx, my, s00, s01, s11, valid, P
 
 
 def project_objects(
