@@ -31,11 +31,16 @@ COPY sdk/ sdk/
 # checkout (build backend from the lock); then a smoke test of the imports.
 # The numeric kernels (numba, factors/jit.py) are compiled here into their cache (~13 s), so
 # that a container starts from it (<1 s); numba needs the directory writable (the runtime user
-# owns it; on a read-only file system each process compiles them at start instead).
-ENV NUMBA_CACHE_DIR=/opt/quadloc/numba-cache
+# owns it; on a read-only file system each process compiles them at start instead). numba
+# checks each source file's mtime, which an image layer keeps to the second only: the sources
+# get whole-second mtimes before compiling, or every container would compile again; -P: the
+# installed package, not the copy in the working directory (numba caches per source path).
+ENV NUMBA_CACHE_DIR=/var/cache/quadloc-numba
 RUN /opt/quadloc/bin/python -m pip install --no-deps --no-build-isolation ./sdk . \
     && /opt/quadloc/bin/python -c "import cv2, gtsam, psycopg, service.api.app, maps.store" \
-    && /opt/quadloc/bin/python -c "__import__('factors.pose_residuals').pose_residuals.compile_kernels()" \
+    && find /opt/quadloc/lib/python3*/site-packages/factors -name "*.py" \
+       -exec touch -d "@$(date +%s)" {} + \
+    && /opt/quadloc/bin/python -P -c "__import__('factors.pose_residuals').pose_residuals.compile_kernels()" \
     && /opt/quadloc/bin/python -m pip uninstall --yes setuptools wheel
 
 # ---- runtime stage: the base + the venv, no compilers, no test tools, no build backend.
@@ -43,7 +48,7 @@ FROM ${BASE}
 ENV PYTHONDONTWRITEBYTECODE=1 \
     PYTHONUNBUFFERED=1 \
     PATH=/opt/quadloc/bin:$PATH \
-    NUMBA_CACHE_DIR=/opt/quadloc/numba-cache
+    NUMBA_CACHE_DIR=/var/cache/quadloc-numba
 
 # Unprivileged runtime user with a fixed uid/gid (volume permissions are predictable).
 RUN groupadd --system --gid 10001 quadloc \
@@ -53,7 +58,7 @@ RUN groupadd --system --gid 10001 quadloc \
     && chown quadloc:quadloc /data
 
 COPY --from=build /opt/quadloc /opt/quadloc
-COPY --from=build --chown=10001:10001 /opt/quadloc/numba-cache /opt/quadloc/numba-cache
+COPY --from=build --chown=10001:10001 /var/cache/quadloc-numba /var/cache/quadloc-numba
 
 USER 10001:10001
 WORKDIR /home/quadloc
