@@ -49,19 +49,19 @@ def _bind_all() -> None:
     with _LOCK:
         if not _PENDING:
             return
-        from numba import njit
-
         for fn in _PENDING:
-            fn.__globals__[fn.__name__] = _dispatcher(njit, fn)
+            fn.__globals__[fn.__name__] = _dispatcher(fn)
         _PENDING.clear()
 
 
-def _dispatcher(njit: Callable[..., Any], fn: Callable[..., Any]) -> Any:
+def _dispatcher(fn: Callable[..., Any]) -> Any:
     """``njit`` with :data:`NUMBA_OPTIONS` and numba's on-disk cache (``__pycache__`` next to
     the source, or ``NUMBA_CACHE_DIR``): a kernel compiles at its first call in a process that
     finds no cache entry (seconds), else loads in milliseconds. Where no cache directory is
     writable (a read-only file system) numba refuses to cache, and each process compiles
     (``service.api.app`` compiles the kernels at start-up, before serving)."""
+    from numba import njit  # here: importing the factors does not import numba
+
     try:
         return njit(cache=True, **NUMBA_OPTIONS)(fn)
     except RuntimeError:  # numba: "cannot cache function ...: no locator available"

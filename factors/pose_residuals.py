@@ -522,7 +522,8 @@ class PoseResidualModel:
         self._M, scale, uv1, uv2, H, H_inv = self._ls_const
         adaptive = bool(self.options.get("adaptive", True))
         if adaptive and T0 is not None:
-            _, _, a3, margins = self._level_set_frame(T0)
+            A, _, _, margins = self._camera_frame(T0)
+            a3 = A[:, :, 2]  # A e3, camera axes
             ok = margins > self.min_depth_margin
             # The projected centre c_P is the point of C* e3 = K A K^T e3 = K A e3, so its ray is
             # n = A e3 / s, and H^-1 n = (u, v, 1) are its coordinates in the detection's
@@ -611,19 +612,6 @@ class PoseResidualModel:
             Js = J * g[:, None, None] + (2.0 * dg[:, None] * r)[:, :, None] * rJ[:, None, :]
             J = np.where(big[:, None, None], Js, J)
         return PoseEvaluation(r, ev.jacobians, ev.valid, ev.depth_margins, rs, J)
-
-    def _level_set_frame(
-        self, T: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """What the level-set layout needs of the camera frame at ``T`` (``world_from_camera``):
-        ``d`` (N, 3) camera -> centre in world axes (m), the centres' depths ``z = c_c[2]``
-        (N,) m, ``A e3`` (N, 3) in camera axes (``A = S_c - c_c c_c^T``), depth margins (N,)."""
-        R = T[:3, :3]
-        d = self._centers - T[:3, 3]
-        z = d @ R[:, 2]
-        sr3 = self._S_world @ R[:, 2]  # S_w R e3 (N, 3)
-        a3 = (sr3 - d * z[:, None]) @ R  # R^T (S_w R e3 - d z)
-        return d, z, a3, depth_margin(z, sr3 @ R[:, 2])  # z_c - sqrt(S_c[2, 2])
 
     def _evaluate_level_set(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
         """Level-set residuals and Jacobians of all pairs (:func:`_level_set_kernel`; the

@@ -98,13 +98,11 @@ def test_a_kernel_works_without_a_cache_directory():
     """numba caches next to the source file; a function without one (here defined by exec:
     no file; in production, a read-only file system) cannot be cached, and the kernel is then
     compiled in the process instead of failing."""
-    from numba import njit
-
     from factors.jit import _dispatcher
 
     namespace: dict = {}
     exec("def twice(x):\n    return 2.0 * x\n", namespace)
-    assert _dispatcher(njit, namespace["twice"])(1.5) == 3.0
+    assert _dispatcher(namespace["twice"])(1.5) == 3.0
 
 
 def test_importing_the_factors_does_not_import_numba():

@@ -28,7 +28,7 @@ from factors.geometry import (
 )
 
 __all__ = ["p2e_hypotheses", "p3p_hypotheses", "p3p_hypotheses_batch", "point_centres",
-           "project_objects", "projected_gaussians"]
+           "project_objects"]
 
 _EMPTY = np.zeros((0, 4, 4))
 
@@ -40,7 +40,7 @@ def project_objects(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
     """Projections of S ellipsoids at H poses, vectorised (THE batched projection of the RANSAC
     scorer, of the P2E residuals and of the tracker's association; computed by
-    :func:`projected_gaussians`).
+    :func:`factors.geometry.projected_gaussians`).
 
     Args:
         camera_from_world: (H, 4, 4), or ``[R | t]`` (H, 3, 4).

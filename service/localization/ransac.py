@@ -23,7 +23,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from factors.geometry import Camera, Ellipse, ellipse_params, level_values
+from factors.geometry import (
+    Camera,
+    Ellipse,
+    ellipse_params,
+    level_values,
+    projected_gaussians,
+)
 from maps.compiled import CompiledMap
 from service.localization.budget import Deadline, deadline_passed, earliest
 from service.localization.hypotheses import (
@@ -31,7 +37,6 @@ from service.localization.hypotheses import (
     p3p_hypotheses_batch,
     point_centres,
     project_objects,
-    projected_gaussians,
 )
 
 __all__ = [
