@@ -26,8 +26,8 @@ COPY pyproject.toml README.md ./
 COPY factors/ factors/
 COPY maps/ maps/
 COPY service/ service/
-COPY sdk/ sdk/
-# The light SDK distribution (sdk/, which the server depends on) and the project from the
+COPY sdk/python/ sdk/python/
+# The light SDK distribution (sdk/python/, which the server depends on) and the project from the
 # checkout (build backend from the lock); then a smoke test of the imports.
 # The numeric kernels (numba, factors/jit.py) are compiled here into their cache (~13 s), so
 # that a container starts from it (<1 s); numba needs the directory writable (the runtime user
@@ -36,11 +36,11 @@ COPY sdk/ sdk/
 # get whole-second mtimes before compiling, or every container would compile again; -P: the
 # installed package, not the copy in the working directory (numba caches per source path).
 ENV NUMBA_CACHE_DIR=/var/cache/quadloc-numba
-RUN /opt/quadloc/bin/python -m pip install --no-deps --no-build-isolation ./sdk . \
-    && /opt/quadloc/bin/python -c "import cv2, gtsam, psycopg, service.api.app, maps.store" \
-    && find /opt/quadloc/lib/python3*/site-packages/factors -name "*.py" \
+RUN /opt/quadloc/bin/python -m pip install --no-deps --no-build-isolation ./sdk/python . \
+    && /opt/quadloc/bin/python -c "import cv2, gtsam, psycopg, quadloc.service.api.app, quadloc.maps.store" \
+    && find /opt/quadloc/lib/python3*/site-packages/quadloc/factors -name "*.py" \
        -exec touch -d "@$(date +%s)" {} + \
-    && /opt/quadloc/bin/python -P -c "__import__('factors.pose_residuals').pose_residuals.compile_kernels()" \
+    && /opt/quadloc/bin/python -P -c "__import__('quadloc.factors.pose_residuals').pose_residuals.compile_kernels()" \
     && /opt/quadloc/bin/python -m pip uninstall --yes setuptools wheel
 
 # ---- runtime stage: the base + the venv, no compilers, no test tools, no build backend.

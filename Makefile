@@ -24,8 +24,8 @@ STAMP    := $(VENV)/.installed
 DEV_LOCK := requirements-dev.lock
 RUN_LOCK := requirements.lock
 # Directories of this checkout installed editable, without dependencies (those come from the
-# lock): the server distribution and the light SDK distribution it depends on (sdk/).
-LOCAL_PKGS := . sdk
+# lock): the server distribution and the light SDK distribution it depends on (sdk/python/).
+LOCAL_PKGS := . sdk/python
 # Test tools that gtsam 4.3.0 lists as run-time requirements (pytest, and what pytest pulls in)
 # but never imports: left out of requirements.lock, so that the image carries no test tools.
 IMAGE_DROP := pytest pluggy iniconfig pygments
@@ -71,7 +71,7 @@ serve: $(STAMP)
 lock:
 	@$(LOCK_VENV)/bin/python -m pip --version >/dev/null 2>&1 || $(PYTHON) -m venv $(LOCK_VENV)
 	$(LOCK_VENV)/bin/python -m pip install --quiet "$(LOCK_PIP)" "$(PIP_TOOLS)"
-	# the checkout's own distributions (., sdk/) are never resolved from an index: compile
+	# the checkout's own distributions (., sdk/python/) are never resolved from an index: compile
 	# their dependencies (lock/requirements_in.py)
 	$(LOCK_VENV)/bin/python lock/requirements_in.py dev > $(LOCK_VENV)/dev.in
 	$(LOCK_VENV)/bin/python lock/requirements_in.py > $(LOCK_VENV)/run.in

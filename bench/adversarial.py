@@ -7,7 +7,7 @@ Run::
 
 What it does, in one run:
 
-1. Starts ``quadloc serve`` (``python -m service serve``: the deployed server, default
+1. Starts ``quadloc serve`` (``python -m quadloc.service serve``: the deployed server, default
    settings, open on loopback) in a subprocess on a temporary SQLite database (``--postgres``:
    a throw-away schema of 127.0.0.1:5432/test), and creates two maps of ``--objects`` ellipsoids
    crowded in front of one camera: ``crowd1`` (every object the same label: every detection is
@@ -133,8 +133,8 @@ def start_server(data_dir: Path, database_url: str,
                 "QUADLOC_LOG_LEVEL": "warning", "PYTHONPATH": str(REPO)})
     env.update(extra_env or {})
     log = open(data_dir / "server.log", "wb")  # noqa: SIM115 - lives with the server
-    proc = subprocess.Popen([sys.executable, "-m", "service", "serve", "--host", "127.0.0.1",
-                             "--port", str(port)], cwd=REPO, env=env, stdout=log,
+    proc = subprocess.Popen([sys.executable, "-m", "quadloc.service", "serve", "--host",
+                             "127.0.0.1", "--port", str(port)], cwd=REPO, env=env, stdout=log,
                             stderr=subprocess.STDOUT)
     base = f"http://127.0.0.1:{port}"
     wait_until_ready(proc, base, data_dir / "server.log")
@@ -248,9 +248,9 @@ def _pg_schema() -> tuple[str, Any]:
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    from maps.demo import load_demo_map
-    from service.localization.types import METRICS
-    from service.settings import Settings
+    from quadloc.maps.demo import load_demo_map
+    from quadloc.service.localization.types import METRICS
+    from quadloc.service.settings import Settings
 
     defaults = Settings()
     solve_ms = defaults.solve_time_budget_ms

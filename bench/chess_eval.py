@@ -30,8 +30,8 @@ misses; see ``docs/simulation.md``). Experiments:
    metric.
 
 ``iou`` and ``giou`` refinements cost ~10-30 x level set's (exact areas and their analytic
-gradients, ``factors.overlap``); ``--slow-stride N`` > 1 makes experiments 3-5 use every N-th
-frame for them (stated in the output; default 1: every frame). Writes JSON (``--json``), PNG
+gradients, ``quadloc.factors.overlap``); ``--slow-stride N`` > 1 makes experiments 3-5 use every
+N-th frame for them (stated in the output; default 1: every frame). Writes JSON (``--json``), PNG
 plots (``--plots``) and, with ``--write-results``, the ``chess_eval`` section of
 ``docs/results.md`` and its plots in ``docs/img``.
 """
@@ -49,9 +49,9 @@ import numpy as np
 
 from bench import reference_data
 from bench.reference_data import CHESS_POSES_PATH, load_chess_map, perturb_pose
-from factors.geometry import Camera, invert_pose
-from factors.metrics import METRIC_NAMES
-from service.localization.types import LocalizationOptions
+from quadloc.factors.geometry import Camera, invert_pose
+from quadloc.factors.metrics import METRIC_NAMES
+from quadloc.service.localization.types import LocalizationOptions
 
 # ``load_chess_map`` (from bench.reference_data) and ``load_chess_world_from_camera`` are imported
 # by tests.
@@ -164,8 +164,8 @@ def run(frames: int = 108, draws: int = 1, seed: int = 0, metrics: tuple[str, ..
     """Run every experiment; returns the JSON-ready results (raw errors under ``_raw``)."""
     # Imported here so that ``load_chess_*`` stay importable without the solver stack.
     from bench.simulate import SimulationConfig, simulate_frame
-    from maps.compiled import compile_map
-    from service.localization.pipeline import localize, refine_pose
+    from quadloc.maps.compiled import compile_map
+    from quadloc.service.localization.pipeline import localize, refine_pose
 
     scene = load_chess_map()
     cm = compile_map(scene)

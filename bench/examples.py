@@ -8,7 +8,7 @@ solves it with the service's solver, and writes ``service/api/example_frame.json
     .venv/bin/python -m bench.examples
 
 It lives in ``bench`` (not installed, not in the image) because it needs the simulator and the
-reference poses; the service only imports the generated data (:mod:`service.api.examples`).
+reference poses; the service only imports the generated data (:mod:`quadloc.service.api.examples`).
 """
 
 from __future__ import annotations
@@ -21,13 +21,13 @@ from typing import Any
 
 from bench.reference_data import CHESS_POSES_PATH, load_chess_poses
 from bench.simulate import simulate_frame
-from factors.geometry import invert_pose
-from maps.compiled import compile_map
-from maps.demo import load_demo_map
-from service.api.examples import EXAMPLE_FRAME_PATH, MAP_EXAMPLE
-from service.api.metrics import ApiMetrics
-from service.api.schemas import LocalizeRequest
-from service.api.solver import Solver
+from quadloc.factors.geometry import invert_pose
+from quadloc.maps.compiled import compile_map
+from quadloc.maps.demo import load_demo_map
+from quadloc.service.api.examples import EXAMPLE_FRAME_PATH, MAP_EXAMPLE
+from quadloc.service.api.metrics import ApiMetrics
+from quadloc.service.api.schemas import LocalizeRequest
+from quadloc.service.api.solver import Solver
 
 __all__ = ["FRAME_INDEX", "SEED", "build_example_frame", "regenerate"]
 
@@ -94,7 +94,7 @@ def regenerate() -> None:  # pragma: no cover - dev tool
     DOC_MAP_EXAMPLE_PATH.write_text(json.dumps(MAP_EXAMPLE, indent=2) + "\n")
     print(f"wrote {out}, {DOC_EXAMPLE_PATH} and {DOC_MAP_EXAMPLE_PATH}", file=sys.stderr)
     # The OpenAPI document embeds these examples: regenerate it in a fresh interpreter.
-    subprocess.run([sys.executable, "-m", "service.cli", "openapi", "--output",
+    subprocess.run([sys.executable, "-m", "quadloc.service.cli", "openapi", "--output",
                     str(_REPO / "docs" / "openapi.json")], check=True, cwd=_REPO)
 
 

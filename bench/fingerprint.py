@@ -66,11 +66,11 @@ def _result(r: Any) -> dict[str, Any]:
 def localize_cases() -> list[dict[str, Any]]:
     from bench.reference_data import load_chess_map, load_chess_poses, perturb_pose
     from bench.simulate import SimulationConfig, simulate_frame, simulate_gravity
-    from factors.geometry import invert_pose
-    from maps.compiled import compile_map
-    from service.limits import METRICS, NO_REFINEMENT
-    from service.localization.pipeline import localize
-    from service.localization.types import Gravity, LocalizationOptions, PosePrior
+    from quadloc.factors.geometry import invert_pose
+    from quadloc.maps.compiled import compile_map
+    from quadloc.service.limits import METRICS, NO_REFINEMENT
+    from quadloc.service.localization.pipeline import localize
+    from quadloc.service.localization.types import Gravity, LocalizationOptions, PosePrior
 
     cm = compile_map(load_chess_map())
     camera, cfw, _ = load_chess_poses()
@@ -110,9 +110,9 @@ def session_case() -> list[dict[str, Any]]:
     from bench.reference_data import load_chess_map, load_chess_poses
     from bench.simulate import SimulationConfig, simulate_frame
     from bench.tracking import make_walk, simulate_odometry
-    from factors.geometry import invert_pose
-    from maps.compiled import compile_map
-    from service.tracking.session import FrameInput, SessionOptions, TrackingSession
+    from quadloc.factors.geometry import invert_pose
+    from quadloc.maps.compiled import compile_map
+    from quadloc.service.tracking.session import FrameInput, SessionOptions, TrackingSession
 
     cm = compile_map(load_chess_map())
     camera, cfw, _ = load_chess_poses()
@@ -135,10 +135,10 @@ def build_case() -> dict[str, Any]:
     from bench.map_building import _det_json, odometry, walk
     from bench.reference_data import load_chess_map, load_chess_poses
     from bench.simulate import SimulationConfig, simulate_frame
-    from factors.geometry import invert_pose
-    from maps.building.build import build_map
-    from maps.building.recording import parse_recording, recording_to_dict
-    from maps.compiled import compile_map
+    from quadloc.factors.geometry import invert_pose
+    from quadloc.maps.building.build import build_map
+    from quadloc.maps.building.recording import parse_recording, recording_to_dict
+    from quadloc.maps.compiled import compile_map
 
     cm = compile_map(load_chess_map())
     camera, cfw, _ = load_chess_poses()

@@ -17,12 +17,12 @@ What it does, in one run (so the numbers are comparable on a noisy shared machin
 1. Simulates ``--frames`` frames of the demo Chess map at real ground-truth poses
    (``chess_test_poses.json``, evenly spaced; ``bench.simulate`` default detector noise) and
    builds their ``POST /v1/maps/chess/localize`` bodies.
-2. **In process**: calls ``service.localization.pipeline.localize`` on the same frames (same
+2. **In process**: calls ``quadloc.service.localization.pipeline.localize`` on the same frames (same
    options) back to back in this process, ``--duration`` seconds in all: half before the first
    level, half right after it (the CPU time of a call depends on what else runs on the shared
    machine, so the windows bracket the concurrency-1 level it is compared with): the
    per-worker ceiling.
-3. Starts ``--workers`` W single-worker ``uvicorn service.api.app:create_app --factory``
+3. Starts ``--workers`` W single-worker ``uvicorn quadloc.service.api.app:create_app --factory``
    replicas on free loopback ports, sharing a temporary SQLite database, default settings
    (``QUADLOC_MAX_CONCURRENT_SOLVES`` = 2 solves at a time per process, first come first
    served).
@@ -68,15 +68,15 @@ def build_frames(n_frames: int, seed: int = 0) -> tuple[list[dict[str, Any]], li
     """``n_frames`` request bodies (and the matching in-process inputs) of simulated frames."""
     from bench.reference_data import load_chess_poses
     from bench.simulate import simulate_frame
-    from factors.geometry import invert_pose
-    from maps.compiled import compile_map
-    from maps.demo import load_demo_map
-    from service.api.convert import (
+    from quadloc.factors.geometry import invert_pose
+    from quadloc.maps.compiled import compile_map
+    from quadloc.maps.demo import load_demo_map
+    from quadloc.service.api.convert import (
         camera_from_request,
         detections_from_request,
         options_from_request,
     )
-    from service.api.schemas import LocalizeRequest
+    from quadloc.service.api.schemas import LocalizeRequest
 
     camera, camera_from_world, names = load_chess_poses()
     compiled = compile_map(load_demo_map())
@@ -107,7 +107,7 @@ def build_frames(n_frames: int, seed: int = 0) -> tuple[list[dict[str, Any]], li
 def in_process_window(inputs: list[Any], duration_s: float) -> dict[str, Any]:
     """Back-to-back ``localize()`` calls for ``duration_s``: raw latencies (s), localized count
     and CPU seconds of this process (summarised by :func:`in_process_rate`)."""
-    from service.localization.pipeline import localize
+    from quadloc.service.localization.pipeline import localize
 
     for args in inputs[:4]:  # warm caches
         localize(*args)
@@ -163,7 +163,7 @@ def start_server(data_dir: Path, port: int | None = None, tree: Path = REPO,
                 "QUADLOC_DATA_DIR": str(data_dir), "PYTHONPATH": str(tree), **(settings or {})})
     log = open(data_dir / f"uvicorn-{port}.log", "wb")  # noqa: SIM115 - lives with the server
     proc = subprocess.Popen(
-        [sys.executable, "-m", "uvicorn", "service.api.app:create_app", "--factory",
+        [sys.executable, "-m", "uvicorn", "quadloc.service.api.app:create_app", "--factory",
          "--host", "127.0.0.1", "--port", str(port), "--log-level", "warning",
          "--no-access-log"],
         cwd=tree, env=env, stdout=log, stderr=subprocess.STDOUT)

@@ -43,7 +43,7 @@ def _frames(seeds: list[int]) -> tuple[Any, Any, Any, list[tuple[int, int, Any]]
     from bench.chess_eval import EVAL_MISS_PROBABILITY, load_chess_world_from_camera
     from bench.reference_data import load_chess_map
     from bench.simulate import SimulationConfig, simulate_frame
-    from maps.compiled import compile_map
+    from quadloc.maps.compiled import compile_map
 
     cm = compile_map(load_chess_map())
     camera, poses, _ = load_chess_world_from_camera()
@@ -61,7 +61,7 @@ def serve(seeds: list[int]) -> None:
     a line) on stdin, answers each with the JSON row of this tree's ``localize()`` on that
     frame (CPU ms, wall split, errors)."""
     from bench.chess_eval import eval_options, pose_errors
-    from service.localization.pipeline import localize
+    from quadloc.service.localization.pipeline import localize
 
     cm, camera, poses, frames = _frames(seeds)
     for _, _, f in frames[:3]:  # warm caches

@@ -16,7 +16,7 @@ Per seed:
 3. **Detections** from the TRUE poses by :mod:`bench.simulate` (its default detector noise,
    truncation at the border, occlusion, 10 % misses) plus 5 % wrong labels and 0.2 spurious
    detections per frame; no track ids.
-4. **Build** with :func:`maps.building.build.build_map` from the drifting poses (association
+4. **Build** with :func:`quadloc.maps.building.build.build_map` from the drifting poses (association
    not given; the recording's defaults: camera poses refined with the default odometry noise,
    or not refined with ``--fixed-cameras``) and time it (progress callbacks' largest gap is
    reported).
@@ -48,12 +48,12 @@ import numpy as np
 from bench.chess_eval import eval_options, load_chess_world_from_camera, pose_errors
 from bench.reference_data import load_chess_map
 from bench.simulate import SimulationConfig, simulate_frame
-from factors.geometry import pose_matrix
-from factors.pose_residuals import expmap_pose3
-from maps.building.build import build_map
-from maps.building.recording import parse_recording, recording_to_dict
-from maps.compiled import compile_map
-from maps.reconstruct import ellipsoid_errors
+from quadloc.factors.geometry import pose_matrix
+from quadloc.factors.pose_residuals import expmap_pose3
+from quadloc.maps.building.build import build_map
+from quadloc.maps.building.recording import parse_recording, recording_to_dict
+from quadloc.maps.compiled import compile_map
+from quadloc.maps.reconstruct import ellipsoid_errors
 
 ROT_NOISE_DEG = 0.05
 TRANS_NOISE_REL = 0.01
@@ -114,7 +114,7 @@ def _det_json(d) -> dict:
 
 def run_seed(seed: int, n_frames: int, n_test: int, log=print,
              refine_cameras: bool = True) -> dict:
-    from service.localization.pipeline import localize
+    from quadloc.service.localization.pipeline import localize
 
     real = load_chess_map()
     cm = compile_map(real)
@@ -259,8 +259,8 @@ def transform_scene(scene, T: np.ndarray):
     """The map with every ellipsoid moved by the rigid ``T`` (4x4)."""
     from dataclasses import replace
 
-    from factors.geometry import Ellipsoid
-    from maps.model import MapObject
+    from quadloc.factors.geometry import Ellipsoid
+    from quadloc.maps.model import MapObject
 
     objs = tuple(MapObject(o.object_id, o.category, Ellipsoid(
         T[:3, :3] @ o.ellipsoid.center + T[:3, 3], o.ellipsoid.axes,
@@ -274,7 +274,7 @@ def make_plot(result: dict, out_dir: Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from maps.model import scene_map_from_dict
+    from quadloc.maps.model import scene_map_from_dict
 
     real = load_chess_map()
     built = scene_map_from_dict(result["_scene"])
@@ -369,7 +369,7 @@ odometry-grade app poses (0.05 deg and 1 % + 1 mm noise per step, chained: they 
 simulated from the TRUE poses (default detector noise, truncation, occlusion, 10 % misses, 5 %
 wrong labels, 0.2 spurious per frame), no track ids; the map is built from the drifting poses
 (camera poses {"refined with the app's relative poses as between factors, the recording's "
-               "default odometry noise (maps.building.recording.OdometryNoise)"
+               "default odometry noise (quadloc.maps.building.recording.OdometryNoise)"
                if results.get("refine_cameras") else "not refined"}). Relocalization: the real
 test frames, fresh detections,
 `localize()` (level set) with the real map, the built map as built (app frame), and the built

@@ -20,7 +20,7 @@ same session, each stating its command) to the section.
 
 ``--eval-cost`` measures instead the cost of ONE model evaluation (residuals and Jacobians of
 all pairs at a pose) of a 7-pair Chess frame, and of its exact areas alone
-(``factors.overlap.quadrant_sums``, as that evaluation calls it), for iou and giou; with
+(``quadloc.factors.overlap.quadrant_sums``, as that evaluation calls it), for iou and giou; with
 ``--compare-tree DIR`` the same measurement runs alternately in another checkout (its own
 ``.venv``), so that both are timed in the same period.
 """
@@ -41,8 +41,8 @@ from bench.chess_eval import load_chess_world_from_camera, pose_errors
 from bench.reference_data import load_chess_map, perturb_pose
 from bench.results_doc import update_results_section
 from bench.simulate import SimulationConfig, simulate_frame
-from maps.compiled import compile_map
-from service.localization.refine import refine
+from quadloc.maps.compiled import compile_map
+from quadloc.service.localization.refine import refine
 
 METRICS = ("iou", "giou", "level_set")
 EXACT_TOLERANCE_M = 1e-6
@@ -55,7 +55,7 @@ _EVALUATIONS = [0]
 def _counting() -> None:
     """Count the model's computed evaluations (every metric ends one in ``_saturate``); the
     wrapper only counts (its time is part of the CPU measured, a few us per solve)."""
-    from factors.pose_residuals import PoseResidualModel
+    from quadloc.factors.pose_residuals import PoseResidualModel
 
     saturate = PoseResidualModel._saturate
     if getattr(saturate, "_counts", False):
@@ -142,10 +142,10 @@ def eval_cost(reps: int = 400, seed: int = 3, blocks: int = 10) -> dict:
     """CPU ms (``time.process_time``) of one iou / giou model evaluation (Jacobians included,
     each at a new pose near the start, so nothing is memoised) of the first noisy Chess frame
     with 7 detections, and of the exact areas of that evaluation alone (the
-    ``factors.overlap.quadrant_sums`` calls it makes, replayed); ``reps`` of each, timed in
+    ``quadloc.factors.overlap.quadrant_sums`` calls it makes, replayed); ``reps`` of each, timed in
     ``blocks`` alternating blocks, the fastest block's mean."""
-    import factors.metrics as fm
-    from factors.pose_residuals import PoseResidualModel, expmap_pose3
+    import quadloc.factors.metrics as fm
+    from quadloc.factors.pose_residuals import PoseResidualModel, expmap_pose3
 
     compiled = compile_map(load_chess_map())
     camera, poses, _ = load_chess_world_from_camera()
@@ -161,7 +161,7 @@ def eval_cost(reps: int = 400, seed: int = 3, blocks: int = 10) -> dict:
         model = PoseResidualModel(metric, [d.ellipse for d in frame.detections], ells, camera,
                                   initial_world_from_camera=start)
         poses_ = [start @ expmap_pose3(rng.normal(0.0, 1e-3, 6)) for _ in range(reps)]
-        # the areas' entry point in factors.metrics (quadrant_areas_batch before issue 14's
+        # the areas' entry point in quadloc.factors.metrics (quadrant_areas_batch before issue 14's
         # compiled kernels: --compare-tree runs this file on older code)
         entry = "quadrant_sums" if hasattr(fm, "quadrant_sums") else "quadrant_areas_batch"
         calls, original = [], getattr(fm, entry)
@@ -216,18 +216,19 @@ INTRO = (
     "non-negative rows summing to `Delta`), with exact analytic Jacobians (boundary integrals "
     "of the exact areas, `factors/overlap.py`; checked against central differences in "
     "`tests/test_metrics.py`). The areas of all pairs of a frame are computed in one call of "
-    "a compiled kernel (`factors.overlap.quadrant_sums`, numba, `factors/jit.py`; equal to the "
+    "a compiled kernel (`quadloc.factors.overlap.quadrant_sums`, numba, `factors/jit.py`; "
+    "equal to the "
     "scalar reference construction to ~1e-9, `tests/test_overlap_batch.py`; "
     "docs/design/factors.md, \"Compiled kernels\", \"Exact ellipse areas\"), and so are the "
-    "rows (`factors.metrics._overlap_rows`) and the projections' dual conics. iou: a pair "
+    "rows (`quadloc.factors.metrics._overlap_rows`) and the projections' dual conics. iou: a pair "
     "whose ellipses are "
     "disjoint gets the giou rows (the hull gap term, informative when disjoint; every "
     "overlapping pair, hence the optimum, keeps the iou rows; `factors/metrics.py`, iou). "
     "Stopping: besides GTSAM's tolerances, iou/giou stop after an ACCEPTED LM iteration that "
     "decreased the error by less than 1e-3 of it "
-    "(`service.localization.refine.OVERLAP_RELATIVE_ERROR_TOL`); their LM's lambda follows "
+    "(`quadloc.service.localization.refine.OVERLAP_RELATIVE_ERROR_TOL`); their LM's lambda follows "
     "Nielsen's gain-ratio update, damping lambda I "
-    "(`service.localization.refine.OVERLAP_NIELSEN_DAMPING`). Model evaluations: those "
+    "(`quadloc.service.localization.refine.OVERLAP_NIELSEN_DAMPING`). Model evaluations: those "
     "computed (not memoised) per solve, rejected LM trials included. CPU times are "
     "`time.process_time` of `refine()` on a machine shared with other jobs: compare the ratio "
     "to level set, measured in the same run.")

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from factors.geometry import (
+from quadloc.factors.geometry import (
     Camera,
     DegenerateProjectionError,
     Ellipse,
@@ -37,7 +37,7 @@ from factors.geometry import (
     project_ellipsoid,
     snap_to_rotation,
 )
-from service.localization.hypotheses import p2e_hypotheses
+from quadloc.service.localization.hypotheses import p2e_hypotheses
 
 CAM = Camera(500.0, 520.0, 320.0, 240.0, 640, 480)
 UP = np.array([0.0, 0.0, 1.0])

@@ -10,7 +10,7 @@ pose only (map fixed) and is timed per problem as the median CPU time of ``--rep
 the table gives the median (p90) over the problems, the accuracy the largest distance between
 refined and true camera centre.
 
-* QuadLoc: ``service.localization.refine.refine`` with ``level_set`` and ``bbox`` (the whole
+* QuadLoc: ``quadloc.service.localization.refine.refine`` with ``level_set`` and ``bbox`` (the whole
   call: validation, graph, GTSAM LM, covariance).
 * Peer (optional): pose-only LM (GTSAM defaults) over gtsam-quadrics' ``BoundingBoxFactor``
   with each quadric held fixed, graph build + ``optimize()``, C++ (``-O3``). It is never a
@@ -163,7 +163,7 @@ def make_problems(seed: int) -> dict:
         load_chess_poses,
         perturb_pose,
     )
-    from factors.geometry import invert_pose
+    from quadloc.factors.geometry import invert_pose
 
     ells = [o.ellipsoid for o in load_chess_map().objects]
     cam, camera_from_world, _ = load_chess_poses()
@@ -184,9 +184,9 @@ def make_problems(seed: int) -> dict:
 
 def worker(path: Path, metric: str, repeats: int) -> list[dict]:
     """Time ``refine`` (whichever tree is first on ``sys.path``) on every problem."""
-    from factors.geometry import Camera, Ellipse, Ellipsoid
-    from service.localization.refine import refine
-    from service.localization.types import Detection
+    from quadloc.factors.geometry import Camera, Ellipse, Ellipsoid
+    from quadloc.service.localization.refine import refine
+    from quadloc.service.localization.types import Detection
 
     data = json.loads(path.read_text())
     cam = Camera(*data["camera"][:4], int(data["camera"][4]), int(data["camera"][5]))

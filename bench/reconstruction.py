@@ -4,8 +4,8 @@ Views: the 108 real ground-truth poses of ``chess_test_poses.json`` (R, t camera
 snapped to rotations). An object is "visible" in a frame when the ellipsoid is entirely in front
 of the camera and its image centre is inside the 640x480 image; ``--views`` of those frames,
 evenly spaced in sequence order, are used. Observations are the exact projections, then noisy
-versions; each object is reconstructed with ``maps.reconstruct.reconstruct_ellipsoid`` (linear
-Rubino estimate + GTSAM LM refinement) and compared with the map's ellipsoid
+versions; each object is reconstructed with ``quadloc.maps.reconstruct.reconstruct_ellipsoid``
+(linear Rubino estimate + GTSAM LM refinement) and compared with the map's ellipsoid
 (``ellipsoid_errors``: matched over the 24 axis symmetries).
 
 Usage: ``.venv/bin/python -m bench.reconstruction [--trials 10] [--views 10] [--seed 0]
@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.reference_data import load_chess_poses
-from factors.geometry import (
+from quadloc.factors.geometry import (
     Camera,
     Ellipse,
     Ellipsoid,
@@ -32,8 +32,8 @@ from factors.geometry import (
     invert_pose,
     project_ellipsoid,
 )
-from maps.demo import load_demo_map
-from maps.reconstruct import (
+from quadloc.maps.demo import load_demo_map
+from quadloc.maps.reconstruct import (
     ReconstructionError,
     _max_ray_angle_deg,
     _rays,
@@ -169,7 +169,7 @@ def run(trials: int, n_views: int, seed: int, command: str = "") -> tuple[str, d
 Each of the 11 ellipsoids of the Chess map is reconstructed from {n_views} views at real
 ground-truth poses (`chess_test_poses.json`, frames where the ellipsoid is entirely in front of
 the camera and its image centre inside the image, evenly spaced), by
-`maps.reconstruct.reconstruct_ellipsoid`: Rubino et al.'s linear dual-quadric estimate
+`quadloc.maps.reconstruct.reconstruct_ellipsoid`: Rubino et al.'s linear dual-quadric estimate
 (normalised image and world coordinates), then GTSAM Levenberg-Marquardt on a Pose3 + log-axes
 with the level-set residual (16 contour samples per view; the refinement also starts from a
 sphere at the triangulated centre and keeps the better result). Errors against the map's
@@ -238,8 +238,8 @@ def _findings(raw: dict) -> str:
 
 def _spread_deg(cam: Camera, cfw: list[np.ndarray], sel: list[int], E: Ellipsoid) -> float:
     """Largest angle (deg) between the world rays through the exact projections' centres: the
-    same measure (``maps.reconstruct._rays`` / ``_max_ray_angle_deg``) the reconstruction uses
-    to refuse near-parallel views."""
+    same measure (``quadloc.maps.reconstruct._rays`` / ``_max_ray_angle_deg``) the reconstruction
+    uses to refuse near-parallel views."""
     ells = [project_ellipsoid(cam, cfw[i], E) for i in sel]
     return _max_ray_angle_deg(_rays(ells, [cam] * len(sel), np.asarray([cfw[i] for i in sel])))
 

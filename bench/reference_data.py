@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from factors.geometry import (
+from quadloc.factors.geometry import (
     Camera,
     DegenerateProjectionError,
     Ellipse,
@@ -21,7 +21,7 @@ from factors.geometry import (
     project_ellipsoid,
     snap_to_rotation,
 )
-from maps.model import SceneMap, scene_map_from_chess
+from quadloc.maps.model import SceneMap, scene_map_from_chess
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 DATA_DIR = REPO_ROOT / "bench" / "data"
@@ -45,7 +45,8 @@ def load_chess_poses(
 
 
 def load_chess_scene_json(path: Path = CHESS_SCENE_PATH) -> dict:
-    """The raw Chess scene document (authors' format; see ``maps.model.scene_map_from_chess``)."""
+    """The raw Chess scene document (authors' format; see
+    ``quadloc.maps.model.scene_map_from_chess``)."""
     return json.loads(Path(path).read_text())
 
 

@@ -10,15 +10,16 @@ angle +N(0, 1 deg)), no sigma. Start: the true pose moved 10 cm and rotated 5 de
 directions). Accuracy = distance between refined and true camera centres (m); with noisy
 detections this is the metric's accuracy, not the solver's.
 
-For every metric and N: median / p90 wall time of one :func:`service.localization.refine.refine`
-call (graph build, LM, covariance), median CPU time of the same call (robust to the shared
-machine's load), mean LM iterations, median position error, fraction ``status == converged``.
+For every metric and N: median / p90 wall time of one
+:func:`quadloc.service.localization.refine.refine` call (graph build, LM, covariance), median CPU
+time of the same call (robust to the shared machine's load), mean LM iterations, median position
+error, fraction ``status == converged``.
 
 Baseline (paper-style, same run): ``scipy.optimize.minimize(method="BFGS")`` with its default
 finite-difference gradient (2-point, default ``eps``) and default ``gtol = 1e-5``, over the same
 level-set cost (same fixed sample points: ``scale = s_max`` of the start, ``adaptive=False``),
-computed with a Python loop over objects (``project_ellipsoid`` + ``factors.metrics.cost``), on
-the pose parametrised as ``world_from_camera = T0 @ Exp(x)``, ``x`` in R^6.
+computed with a Python loop over objects (``project_ellipsoid`` + ``quadloc.factors.metrics.cost``),
+on the pose parametrised as ``world_from_camera = T0 @ Exp(x)``, ``x`` in R^6.
 
 Convergence basin (level set): exact detections of the real Chess map from its 108 real poses,
 starts 5 deg / 10 cm up to 30 deg / 75 cm away; fraction refined back within 1e-6 m.
@@ -42,8 +43,8 @@ import numpy as np
 from scipy.optimize import minimize
 
 from bench.reference_data import CHESS_SCENE_PATH, load_chess_map, load_chess_poses, perturb_pose
-from factors import metrics
-from factors.geometry import (
+from quadloc.factors import metrics
+from quadloc.factors.geometry import (
     Camera,
     DegenerateProjectionError,
     Ellipse,
@@ -53,10 +54,10 @@ from factors.geometry import (
     project_ellipsoid,
     rotation_from_quaternion_wxyz,
 )
-from factors.pose_factors import pose_factor, pose_factors
-from factors.pose_residuals import expmap_pose3
-from service.localization.refine import _lm_params, refine
-from service.localization.types import Detection
+from quadloc.factors.pose_factors import pose_factor, pose_factors
+from quadloc.factors.pose_residuals import expmap_pose3
+from quadloc.service.localization.refine import _lm_params, refine
+from quadloc.service.localization.types import Detection
 
 SIZES = (3, 5, 8, 16)
 CAMERA = Camera(532.57, 531.54, 320.0, 240.0, 640, 480)
@@ -349,7 +350,8 @@ def markdown(res: dict, command: str) -> str:
               "accuracy; the level set's advantages in the paper concern partially visible "
               "objects and detector errors, not Gaussian noise). `iou`/`giou` compute the exact "
               "areas and their gradients of all pairs per evaluation (one call of a compiled "
-              "kernel, `factors.overlap.quadrant_sums`) and take more LM iterations at their "
+              "kernel, `quadloc.factors.overlap.quadrant_sums`) and take more LM iterations at "
+              "their "
               "kinked noisy optimum, and `qbbox` uses central differences (12 extra metric "
               "evaluations per pair per linearisation), hence their times."]
     return "\n".join(lines)

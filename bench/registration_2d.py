@@ -60,8 +60,8 @@ from pathlib import Path
 import gtsam
 import numpy as np
 
-from factors.geometry import Ellipse
-from factors.metrics import (
+from quadloc.factors.geometry import Ellipse
+from quadloc.factors.metrics import (
     CONIC_METRICS,
     METRIC_NAMES,
     conic_residuals,
@@ -109,7 +109,7 @@ def _residuals_fn(name: str, moving: np.ndarray, ref: Ellipse, options: dict):
     """``poses`` (list of Pose2) -> residual rows (len(poses), m) of ``T(E, pose)`` against
     ``E_ref``: one batched call for the metrics that have a batched form (the smooth conic
     metrics and iou / giou, whose one-pair calls are N = 1 views of the same code), else one
-    :func:`factors.metrics.residual` per pose."""
+    :func:`quadloc.factors.metrics.residual` per pose."""
     def params(poses: list[gtsam.Pose2]) -> np.ndarray:
         return np.array([transformed(moving, p.x(), p.y(), p.theta()).params() for p in poses])
 
@@ -304,7 +304,7 @@ def markdown_table(summary: dict) -> str:
 
 def _disjoint_start_share(n_pairs: int, seed: int) -> float:
     """Share of the pairs whose start (``E``, no noise) does not overlap ``E_ref``."""
-    from factors.overlap import intersection_areas
+    from quadloc.factors.overlap import intersection_areas
 
     pairs = make_pairs(n_pairs, seed)
     starts = np.array([transformed(ref_p, float(t0[0]), float(t0[1]), float(th0)).params()

@@ -1,7 +1,7 @@
 """Simulated object detections: what a fine-tuned ellipse detector would report for one frame.
 
-Given a map (``SceneMap`` or ``CompiledMap``), a :class:`~factors.geometry.Camera` and the true
-``world_from_camera`` pose (4x4, OpenCV camera axes), :func:`simulate_frame` returns the
+Given a map (``SceneMap`` or ``CompiledMap``), a :class:`~quadloc.factors.geometry.Camera` and the
+true ``world_from_camera`` pose (4x4, OpenCV camera axes), :func:`simulate_frame` returns the
 detections of one image. The model (documented with its numbers in ``docs/simulation.md``):
 
 1. **Projection.** Every map object whose ellipsoid lies entirely in front of the camera
@@ -43,7 +43,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from factors.geometry import (
+from quadloc.factors.geometry import (
     Camera,
     Ellipse,
     ellipsoid_depth_margins,
@@ -53,10 +53,10 @@ from factors.geometry import (
     project_ellipsoids_dual,
     so3_exp,
 )
-from maps.compiled import CompiledMap, compile_map
-from maps.model import SceneMap
-from service.localization.ransac import sunflower_disk
-from service.localization.types import Detection
+from quadloc.maps.compiled import CompiledMap, compile_map
+from quadloc.maps.model import SceneMap
+from quadloc.service.localization.ransac import sunflower_disk
+from quadloc.service.localization.types import Detection
 
 __all__ = [
     "SimulatedFrame",

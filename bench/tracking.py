@@ -38,12 +38,12 @@ import numpy as np
 from bench.reference_data import load_chess_map, load_chess_poses
 from bench.results_doc import update_results_section
 from bench.simulate import SimulationConfig, simulate_frame
-from factors.geometry import invert_pose, pose_matrix, snap_to_rotation
-from factors.pose_residuals import expmap_pose3
-from maps.compiled import compile_map
-from service.localization.pipeline import localize
-from service.localization.types import LocalizationOptions
-from service.tracking.session import FrameInput, SessionOptions, TrackingSession
+from quadloc.factors.geometry import invert_pose, pose_matrix, snap_to_rotation
+from quadloc.factors.pose_residuals import expmap_pose3
+from quadloc.maps.compiled import compile_map
+from quadloc.service.localization.pipeline import localize
+from quadloc.service.localization.types import LocalizationOptions
+from quadloc.service.tracking.session import FrameInput, SessionOptions, TrackingSession
 
 HZ = 30.0
 ROOT = Path(__file__).resolve().parent.parent

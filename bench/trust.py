@@ -59,11 +59,11 @@ import numpy as np
 from bench.chess_eval import json_safe, load_chess_world_from_camera, pose_errors
 from bench.reference_data import REPO_ROOT, load_chess_map, perturb_pose
 from bench.simulate import SimulationConfig, simulate_frame, simulate_gravity
-from factors.geometry import Camera, Ellipse, Ellipsoid
-from maps.compiled import CompiledMap, compile_map
-from maps.model import MapObject, SceneMap
-from service.localization import calibration
-from service.localization.confidence import (
+from quadloc.factors.geometry import Camera, Ellipse, Ellipsoid
+from quadloc.maps.compiled import CompiledMap, compile_map
+from quadloc.maps.model import MapObject, SceneMap
+from quadloc.service.localization import calibration
+from quadloc.service.localization.confidence import (
     TOLERANCE_POSITION_M,
     TOLERANCE_ROTATION_DEG,
     UNIT_WEIGHTS_SUFFIX,
@@ -72,8 +72,8 @@ from service.localization.confidence import (
     gaussian_tolerance_probability,
     student_t_factor,
 )
-from service.localization.pipeline import localize
-from service.localization.types import (
+from quadloc.service.localization.pipeline import localize
+from quadloc.service.localization.types import (
     METRICS,
     Detection,
     Gravity,
@@ -342,7 +342,7 @@ def diagnose_two_detections(runs: list[tuple[int, SimulationConfig]], log=print)
     search or threshold can fix it, only the confidence can say so), and whether its residual
     variance is smaller than the answer's (the truth's basin fits better: a search/selection
     failure)."""
-    from service.localization.pipeline import refine_pose
+    from quadloc.service.localization.pipeline import refine_pose
 
     cm = compile_map(load_chess_map())
     camera, poses, _ = load_chess_world_from_camera()
@@ -747,7 +747,8 @@ def fit(data: dict, seeds: list[int], command: str, metric_offsets: bool = True)
     c = fit_constants(data, metric_offsets)
     scale, floor, models = c["scale"], c["floor"], c["models"]
     min_confidence, feats, chi2_ratio = c["min_confidence"], c["features"], c["chi2_ratio"]
-    text = f'''"""Calibration constants of :mod:`service.localization.confidence` (generated).
+    text = f'''"""Calibration constants of :mod:`quadloc.service.localization.confidence`
+    (generated).
 
 Provenance: written by ``python -m bench.trust --fit`` (see that module); the fit uses
 only the tuning seeds named in :data:`PROVENANCE`, the bench reports on other seeds.

@@ -1,13 +1,13 @@
 """GTSAM factor of the level-set residual over ellipsoids (and optionally camera poses).
 
 ONE factor type for everything that moves ellipsoids: the reconstruction of one object from
-known views (``maps.reconstruct``) and the joint refinement of a whole map, with or without the
-camera poses (``maps.building.joint``). The residual and its Jacobians are those of
-:func:`factors.ellipsoid_residuals.observation_residual` (the level-set residual of localization,
-tested equal to :class:`factors.pose_residuals.PoseResidualModel`).
+known views (``quadloc.maps.reconstruct``) and the joint refinement of a whole map, with or without
+the camera poses (``quadloc.maps.building.joint``). The residual and its Jacobians are those of
+:func:`quadloc.factors.ellipsoid_residuals.observation_residual` (the level-set residual of
+localization, tested equal to :class:`quadloc.factors.pose_residuals.PoseResidualModel`).
 
 A factor holds V observations (views). View ``v`` is a detection (its fixed samples, a row of a
-:func:`factors.ellipsoid_residuals.stack_samples` stack) of the ellipsoid in object slot
+:func:`quadloc.factors.ellipsoid_residuals.stack_samples` stack) of the ellipsoid in object slot
 ``view_objects[v]`` seen by the camera in camera slot ``view_cameras[v]`` (a refined ``Pose3``
 key, ``world_from_camera``, OpenCV axes) or by a fixed camera (``camera_from_world[v]``).
 
@@ -16,9 +16,9 @@ translation = centre, m) and a ``Vector3`` of log semi-axes (log m). Keys of the
 order: ``E_0, L_0, E_1, L_1, ..., X_0, X_1, ...``.
 
 Rows (V * M, dimensionless, view-major): view ``v``'s residual times ``weights[v]`` (e.g.
-``1 / sqrt(sigma)``, localization's whitening, ``factors.pose_factors.make_noise_model``), then,
-with ``robust_scale`` ``k``, scaled per view so that half its squared norm is Huber's cost of the
-view's weighted residual norm (the Jacobian gets the same scale, as iteratively reweighted least
+``1 / sqrt(sigma)``, localization's whitening, ``quadloc.factors.pose_factors.make_noise_model``),
+then, with ``robust_scale`` ``k``, scaled per view so that half its squared norm is Huber's cost of
+the view's weighted residual norm (the Jacobian gets the same scale, as iteratively reweighted least
 squares does; GTSAM's robust noise models reweight a whole factor, so a factor over many views
 needs its kernel inside). A view whose ellipsoid is not entirely in front of its camera (depth
 margin <= ``min_depth_margin`` m) gives constant rows (total cost ``penalty_cost * weight^2``,
@@ -32,9 +32,9 @@ from collections.abc import Callable, Sequence
 import gtsam
 import numpy as np
 
-from factors.ellipsoid_residuals import LevelSetSamples, observation_residual
-from factors.geometry import depth_margin, invert_pose
-from factors.pose_residuals import DEFAULT_MIN_DEPTH_MARGIN
+from quadloc.factors.ellipsoid_residuals import LevelSetSamples, observation_residual
+from quadloc.factors.geometry import depth_margin, invert_pose
+from quadloc.factors.pose_residuals import DEFAULT_MIN_DEPTH_MARGIN
 
 __all__ = ["PENALTY_COST", "depth_margins", "ellipsoid_views_factor", "huber_row_scale"]
 
@@ -55,9 +55,10 @@ def huber_row_scale(norms: np.ndarray, k: float) -> np.ndarray:
 def depth_margins(camera_from_world: np.ndarray, rotation: np.ndarray, center: np.ndarray,
                   axes: np.ndarray) -> np.ndarray:
     """Smallest depth (m) of the ellipsoid in each camera (batched like
-    :func:`factors.ellipsoid_residuals.observation_residual`): ``d . c + t_z - sqrt(d^T S d)``
-    with ``d`` the camera's optical axis in the world (third row of ``R_cw``) and ``S`` the
-    shape matrix ``R diag(axes^2) R^T`` (the formula: :func:`factors.geometry.depth_margin`)."""
+    :func:`quadloc.factors.ellipsoid_residuals.observation_residual`): ``d . c + t_z - sqrt(d^T S
+    d)`` with ``d`` the camera's optical axis in the world (third row of ``R_cw``) and ``S`` the
+    shape matrix ``R diag(axes^2) R^T`` (the formula:
+    :func:`quadloc.factors.geometry.depth_margin`)."""
     R = np.asarray(rotation, dtype=float)
     S = (R * (np.asarray(axes, dtype=float) ** 2)[..., None, :]) @ np.swapaxes(R, -1, -2)
     d = camera_from_world[..., 2, :3]
@@ -88,7 +89,7 @@ def ellipsoid_views_factor(
             may also be a projection ``K [R|t]`` (``K``'s last row ``(0, 0, 1)``) when the
             samples' rays are in homogeneous pixels (``K n``): the residual, the ellipsoid
             Jacobians and the depth margin are unchanged by that change of image coordinates
-            (``maps.reconstruct`` samples the observed contour in pixels this way).
+            (``quadloc.maps.reconstruct`` samples the observed contour in pixels this way).
         robust_scale: Huber threshold on each view's weighted residual norm; None: quadratic.
         penalty_cost, min_depth_margin: see the module docstring.
         on_evaluate: called at every evaluation (progress reporting).

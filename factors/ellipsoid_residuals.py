@@ -1,9 +1,9 @@
 """The level-set residual as a function of BOTH the camera pose and the ellipsoid (pure numpy).
 
-Localization (:mod:`factors.pose_residuals`, metric ``level_set``) moves only the camera; map
-building moves the ellipsoids (and optionally the cameras). Both minimise the same residual at
-the same samples of the detection (``factors.metrics.level_set_sample_points``, non-adaptive;
-equality with :class:`factors.pose_residuals.PoseResidualModel` is tested):
+Localization (:mod:`quadloc.factors.pose_residuals`, metric ``level_set``) moves only the camera;
+map building moves the ellipsoids (and optionally the cameras). Both minimise the same residual at
+the same samples of the detection (``quadloc.factors.metrics.level_set_sample_points``,
+non-adaptive; equality with :class:`quadloc.factors.pose_residuals.PoseResidualModel` is tested):
 ``r(x) = Phi_det(x) - Phi_proj(x)``, ``Phi_proj(x) = 1 - s n^T A^-1 n`` with ``n = K^-1 (x,
 y, 1)``, ``A = [R|t]_camera_from_world Q* [R|t]^T`` (3x3; ``C* = K A K^T``), ``s = A[2, 2]``.
 Its gradient w.r.t. ``A`` is contracted with ``dA`` along the camera's Pose3 tangent (right
@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from factors.geometry import Camera, Ellipse, level_values, skew
+from quadloc.factors.geometry import Camera, Ellipse, level_values, skew
 
 __all__ = [
     "LevelSetSamples",
@@ -34,7 +34,7 @@ _SKEW = skew(np.eye(3)) + 0.0  # [e_k]x, k = 0, 1, 2 (+ 0.0: no -0.0 entries)
 class LevelSetSamples:
     """Fixed samples of one detection: normalised rays ``n`` (3, M) and ``Phi_det - 1`` (M,).
 
-    Built by :func:`level_set_samples` from ``factors.metrics.level_set_sample_points`` (the
+    Built by :func:`level_set_samples` from ``quadloc.factors.metrics.level_set_sample_points`` (the
     localization layout, ``adaptive=False``) so both problems sample identically.
     """
 
@@ -51,7 +51,7 @@ def level_set_samples(detection: Ellipse, camera: Camera,
     """The level-set samples of ``detection`` (px) for ``camera``; ``metric_options`` as for the
     ``level_set`` metric (``n_azimuths``, ``n_levels``, ``scale``; ``adaptive`` is forced off:
     without a pose there is no misalignment to adapt to)."""
-    from factors import metrics
+    from quadloc.factors import metrics
 
     opts = {k: v for k, v in (metric_options or {}).items() if k != "adaptive"}
     pts = metrics.level_set_sample_points(detection, None, adaptive=False, **opts)
@@ -141,7 +141,8 @@ def observation_residual(
     (``rotation`` (V, 3, 3), ``center`` and ``axes`` (V, 3)).
 
     The caller must ensure the ellipsoid is in front of the camera (positive depth margin,
-    :func:`factors.geometry.ellipsoid_depth_margins`): otherwise ``A`` is no ellipse's conic.
+    :func:`quadloc.factors.geometry.ellipsoid_depth_margins`): otherwise ``A`` is no ellipse's
+    conic.
     """
     Q = dual_quadric(rotation, center, axes)
     P = np.asarray(camera_from_world, dtype=float)[..., :3, :]

@@ -27,8 +27,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from factors.jit import jit
-from factors.names import FieldError
+from quadloc.factors.jit import jit
+from quadloc.factors.names import FieldError
 
 #: Largest ``max|R R^T - I|`` accepted for a rotation matrix (and ``|det R - 1|``).
 ORTHONORMAL_TOLERANCE = 1e-6

@@ -7,7 +7,7 @@ that and ``down_world`` (GTSAM's ``Unit3.error``: norm ``sin(angle)``, the angle
 small angles),
 with an isotropic noise of ``sigma_rad`` per tilt axis. It constrains roll and pitch only: the
 rotation about the vertical and the position are not observed. (The tilt angle itself, for
-testing candidates: ``service.localization.gravity.tilt_errors_deg``.)
+testing candidates: ``quadloc.service.localization.gravity.tilt_errors_deg``.)
 
 GTSAM's own C++ ``AttitudeFactorPose3`` (navigation frame = the map, body frame = the camera):
 no Python round trip per evaluation. Its error and Jacobian are checked against the tilt angle

@@ -2,10 +2,10 @@
 
 Decided (issue 14): numba, a maintained compiler of numpy-style Python to machine code, for the
 few kernels whose cost was numpy's per-call overhead on small arrays (the exact ellipse areas of
-``factors.overlap``, the iou / giou rows of ``factors.metrics``, the level-set and dual-conic
-rows of ``factors.pose_residuals``): the kernels stay readable Python next to the formulas they
-implement, no C toolchain is needed to install, and the wheels come from the package registry.
-Why, costs and measurements: docs/design/factors.md, "Compiled kernels".
+``quadloc.factors.overlap``, the iou / giou rows of ``quadloc.factors.metrics``, the level-set and
+dual-conic rows of ``quadloc.factors.pose_residuals``): the kernels stay readable Python next to the
+formulas they implement, no C toolchain is needed to install, and the wheels come from the package
+registry. Why, costs and measurements: docs/design/factors.md, "Compiled kernels".
 
 Lazy: importing a module with kernels neither imports numba nor sets a kernel up (a process
 that never calls one, e.g. a CLI command on maps, starts ~0.4 s faster); the first call of any
@@ -59,7 +59,7 @@ def _dispatcher(fn: Callable[..., Any]) -> Any:
     the source, or ``NUMBA_CACHE_DIR``): a kernel compiles at its first call in a process that
     finds no cache entry (seconds), else loads in milliseconds. Where no cache directory is
     writable (a read-only file system) numba refuses to cache, and each process compiles
-    (``service.api.app`` compiles the kernels at start-up, before serving)."""
+    (``quadloc.service.api.app`` compiles the kernels at start-up, before serving)."""
     from numba import njit  # here: importing the factors does not import numba
 
     try:

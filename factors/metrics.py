@@ -13,15 +13,15 @@ Public entry points
 
 One implementation per metric (decided, issue 10): the smooth metrics (bbox, algebraic,
 frobenius, wasserstein, bhattacharyya) are :func:`conic_residuals`, iou / giou are
-:func:`overlap_residual` (exact areas of :mod:`factors.overlap`), both batched; ``residual``
-and ``cost`` are their N = 1 views and :mod:`factors.pose_residuals` chains them to the pose.
-The former scalar forms are the tests' oracle (``tests/oracles/metrics_reference.py``).
+:func:`overlap_residual` (exact areas of :mod:`quadloc.factors.overlap`), both batched; ``residual``
+and ``cost`` are their N = 1 views and :mod:`quadloc.factors.pose_residuals` chains them to the
+pose. The former scalar forms are the tests' oracle (``tests/oracles/metrics_reference.py``).
 ``qbbox`` and ``level_set`` exist here one pair at a time (the pose factors' level set is its
 own quadratic-form evaluation in the camera rays, tested equal to :func:`residual`).
 
 Argument order: the **detection** (fixed, measured) comes first, the **projection** (the
 moving, predicted ellipse) second. Every residual is "detection minus projection". All lengths
-are pixels, angles radians (see :mod:`factors.geometry` for the ellipse conventions). Design
+are pixels, angles radians (see :mod:`quadloc.factors.geometry` for the ellipse conventions). Design
 rationale: ``docs/design/factors.md`` ("Metrics").
 
 Metrics, costs and residuals (``r``, length in brackets)
@@ -79,7 +79,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from factors.geometry import (
+from quadloc.factors.geometry import (
     Ellipse,
     dual_conics_from_params,
     gaussian_derivatives_from_dual_conics,
@@ -87,9 +87,9 @@ from factors.geometry import (
     level_values,
     sigma_entries,
 )
-from factors.jit import jit
-from factors.names import METRIC_NAMES
-from factors.overlap import (
+from quadloc.factors.jit import jit
+from quadloc.factors.names import METRIC_NAMES
+from quadloc.factors.overlap import (
     HULL_DIRECTIONS,
     hull_area,
     intersection_area,
@@ -159,7 +159,8 @@ def _check_options(name: str, options: dict) -> None:
 
 def _check_ellipse(arg: str, value: object) -> Ellipse:
     if not isinstance(value, Ellipse):
-        raise TypeError(f"{arg} must be a factors.geometry.Ellipse, got {type(value).__name__}")
+        raise TypeError(f"{arg} must be a quadloc.factors.geometry.Ellipse, "
+                        f"got {type(value).__name__}")
     return value
 
 
@@ -247,12 +248,13 @@ def clipped_bbox(ellipse: Ellipse, image_size: Sequence[float]) -> np.ndarray | 
 
 
 def ellipse_intersection_area(e1: Ellipse, e2: Ellipse) -> float:
-    """Exact area (px^2) of ``e1 ∩ e2`` (see :mod:`factors.overlap`)."""
+    """Exact area (px^2) of ``e1 ∩ e2`` (see :mod:`quadloc.factors.overlap`)."""
     return intersection_area(e1.params(), e2.params())
 
 
 def convex_hull_area(e1: Ellipse, e2: Ellipse, hull_directions: int = HULL_DIRECTIONS) -> float:
-    """Area (px^2) of the convex hull of the two ellipses (exact, see :mod:`factors.overlap`)."""
+    """Area (px^2) of the convex hull of the two ellipses (exact, see
+    :mod:`quadloc.factors.overlap`)."""
     inter = ellipse_intersection_area(e1, e2)
     union = e1.area + e2.area - inter
     return max(hull_area(e1.params(), e2.params(), hull_directions), union)
@@ -403,8 +405,8 @@ def conic_residuals(
     ``detection_terms``: :func:`conic_detection_terms` of ``detections`` if already computed.
 
     The one implementation of these metrics: :func:`residual` is its N = 1 view and
-    :class:`factors.pose_residuals.PoseResidualModel` chains it to the pose (the scalar forms
-    are the tests' oracle, ``tests/oracles/metrics_reference.py``).
+    :class:`quadloc.factors.pose_residuals.PoseResidualModel` chains it to the pose (the scalar
+    forms are the tests' oracle, ``tests/oracles/metrics_reference.py``).
     """
     n = Cn.shape[0]
     terms = conic_detection_terms(name, detections) if detection_terms is None \
@@ -629,7 +631,7 @@ def overlap_residual(
     """The iou / giou residual: ``Delta`` split over the four quadrants ``Q_k`` of the
     detection's frame (module docstring), ``r_k >= 0``, ``sum_k r_k = Delta``; and, if
     ``gradient``, ``dr / dg`` w.r.t. the projection's Gaussian parameters ``g = (mu_x,
-    mu_y, s00, s01, s11)`` (px, px^2), exact (:func:`factors.overlap.quadrant_sums`).
+    mu_y, s00, s01, s11)`` (px, px^2), exact (:func:`quadloc.factors.overlap.quadrant_sums`).
 
     Params are one pair ``(5,)`` each (returns ``r`` (4,), ``dr/dg`` (4, 5)) or N pairs
     ``(N, 5)`` (returns (N, 4), (N, 4, 5); the pose factors evaluate all objects in one call).
@@ -662,7 +664,7 @@ def overlap_residual(
 def _overlap_rows(det: np.ndarray, sums: np.ndarray, giou: bool
                   ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`overlap_residual`'s rows (N, 4) and gradients (N, 4, 5) (zeros where ``sums``
-    holds none) from the quadrant sums of :func:`factors.overlap.quadrant_sums` (detections
+    holds none) from the quadrant sums of :func:`quadloc.factors.overlap.quadrant_sums` (detections
     ``det`` (N, 5)); ``giou``: add the hull's gap term (``sums`` computed with the hull)."""
     n = det.shape[0]
     r = np.empty((n, 4))
@@ -677,8 +679,8 @@ def _overlap_rows(det: np.ndarray, sums: np.ndarray, giou: bool
         quarter = 0.25 * math.pi * det[i, 2] * det[i, 3]  # |D ∩ Q_k|
         second, both, hull = sums[i, 0], sums[i, 1], sums[i, 2]
         # |D ∩ P ∩ Q_k| <= min(|D ∩ Q_k|, |P ∩ Q_k|): enforced against rounding and the "same
-        # ellipse" shortcut of factors.overlap (contours closer than 1e-9 count as identical,
-        # the intersection as the whole second ellipse), so the rows stay >= 0
+        # ellipse" shortcut of quadloc.factors.overlap (contours closer than 1e-9 count as
+        # identical, the intersection as the whole second ellipse), so the rows stay >= 0
         union = 4.0 * quarter
         for k in range(4):
             cap = min(quarter, second[k, 0])

@@ -2,7 +2,7 @@
 
 Importing this module loads neither numpy nor gtsam, so the service's settings and wire schemas
 can publish the valid names and apply the same rules without loading the solver
-(``service.limits`` re-exports the names).
+(``quadloc.service.limits`` re-exports the names).
 
 * :data:`METRIC_NAMES`, :data:`ROBUST_KERNELS`: the valid names.
 * :class:`FieldError`: THE error of invalid input, with a structured ``field``.
@@ -16,13 +16,14 @@ import numbers
 
 __all__ = ["METRIC_NAMES", "ROBUST_KERNELS", "FieldError", "check_robust", "is_real"]
 
-#: The nine ellipse metrics (``factors.metrics.residual``, ``factors.pose_factors``).
+#: The nine ellipse metrics (``quadloc.factors.metrics.residual``,
+# ``quadloc.factors.pose_factors``).
 METRIC_NAMES: tuple[str, ...] = (
     "iou", "giou", "bbox", "qbbox", "algebraic", "frobenius", "wasserstein", "bhattacharyya",
     "level_set",
 )
 
-#: Robust kernels accepted by name (``factors.pose_factors.make_noise_model``).
+#: Robust kernels accepted by name (``quadloc.factors.pose_factors.make_noise_model``).
 ROBUST_KERNELS: tuple[str, ...] = ("huber", "cauchy", "geman_mcclure")
 
 

@@ -4,7 +4,7 @@ Decided (issue 10): :func:`quadrant_areas_batch` is the ONLY implementation; the
 :func:`intersection_area`, :func:`hull_area` and :func:`quadrant_areas` are views of it with
 N = 1. The former scalar construction is kept verbatim as the tests' independent oracle
 (``tests/oracles/overlap_reference.py``; equal to ~1e-9 relative, ``tests/test_overlap_batch.py``).
-Decided (issue 14): the construction is compiled (:func:`factors.jit.jit`, one loop over the
+Decided (issue 14): the construction is compiled (:func:`quadloc.factors.jit.jit`, one loop over the
 pairs, scalar code per pair): the pose factors evaluate ~7 pairs per LM trial, where numpy's
 per-call overhead, not arithmetic, was the cost (docs/design/factors.md, "Exact ellipse areas").
 
@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 
-from factors.jit import jit
+from quadloc.factors.jit import jit
 
 #: Number of parametric angles used to bracket the contour intersections and common tangents.
 GRID = 128

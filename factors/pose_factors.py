@@ -2,7 +2,7 @@
 
 Every factor is a ``gtsam.CustomFactor`` on ONE ``Pose3`` key holding the camera's
 ``world_from_camera`` pose (OpenCV camera axes), for ONE detection/ellipsoid pair. Its
-unwhitened error is the metric residual ``r_j`` (``factors.metrics.residual``: cost
+unwhitened error is the metric residual ``r_j`` (``quadloc.factors.metrics.residual``: cost
 ``Delta_j = ||r_j||^2``) between the detected ellipse and the projection ``C* = P Q*_j P^T``.
 Jacobians are w.r.t. GTSAM's tangent ``xi = [omega, v]`` with right perturbation
 (``pose.retract(xi) = pose.compose(Pose3.Expmap(xi))``).
@@ -14,11 +14,11 @@ detection (``gtsam.noiseModel.Robust``), threshold ``k`` on the WHITENED residua
 ``sqrt(Delta_j / sigma_j)``, defaults in :data:`DEFAULT_ROBUST_SCALE`.
 
 All the factors of one solve share ONE memoised
-:class:`factors.pose_residuals.PoseResidualModel` (every pair evaluated at once per pose, the
-factors slice their rows). :func:`pose_factors` returns one factor per pair (default; needed for
+:class:`quadloc.factors.pose_residuals.PoseResidualModel` (every pair evaluated at once per pose,
+the factors slice their rows). :func:`pose_factors` returns one factor per pair (default; needed for
 per-detection robust kernels), or with ``batched=True`` ONE factor over all pairs with a
 Diagonal noise model (the same weighted error, one Python round trip). Jacobians, invalid
-projections (a bounded penalty) and the saturation: :mod:`factors.pose_residuals`. Why and
+projections (a bounded penalty) and the saturation: :mod:`quadloc.factors.pose_residuals`. Why and
 measurements: ``docs/design/factors.md`` ("Pose factors").
 """
 
@@ -31,9 +31,9 @@ from typing import Any
 import gtsam
 import numpy as np
 
-from factors.geometry import Camera, Ellipse, Ellipsoid, snap_to_rotation
-from factors.names import ROBUST_KERNELS, check_robust, is_real
-from factors.pose_residuals import PoseResidualModel
+from quadloc.factors.geometry import Camera, Ellipse, Ellipsoid, snap_to_rotation
+from quadloc.factors.names import ROBUST_KERNELS, check_robust, is_real
+from quadloc.factors.pose_residuals import PoseResidualModel
 
 __all__ = [
     "DEFAULT_ROBUST_SCALE",
@@ -50,7 +50,8 @@ __all__ = [
 def pose3(T: np.ndarray) -> gtsam.Pose3:
     """A 4x4 rigid transform (any direction: ``world_from_camera``, ``odom_from_camera``...) as
     a ``gtsam.Pose3`` of the same direction; the rotation block is snapped to the nearest
-    rotation (:func:`factors.geometry.snap_to_rotation`: unchanged when already orthonormal)."""
+    rotation (:func:`quadloc.factors.geometry.snap_to_rotation`: unchanged when already
+    orthonormal)."""
     return gtsam.Pose3(gtsam.Rot3(snap_to_rotation(T[:3, :3])), np.ascontiguousarray(T[:3, 3]))
 
 

@@ -2,8 +2,8 @@
 
 Pure numpy (no GTSAM): for ONE camera pose and ALL detection/ellipsoid pairs of a refinement
 at once, the metric residual of every pair and its Jacobian with respect to the pose;
-:mod:`factors.pose_factors` wraps it in GTSAM factors. Derivations and the reasons behind the
-penalty's constants: ``docs/design/factors.md`` ("Pose residuals").
+:mod:`quadloc.factors.pose_factors` wraps it in GTSAM factors. Derivations and the reasons behind
+the penalty's constants: ``docs/design/factors.md`` ("Pose residuals").
 
 Conventions
 -----------
@@ -21,16 +21,16 @@ Metrics
 -------
 * ``level_set`` (analytic): ``r = Phi_det(x) - Phi_proj(x) = (Phi_det(x) - 1) + s n^T A^-1 n``
   at the detection's samples ``x`` (rays ``n = K^-1 (x, y, 1)``, ``s = A[2,2]``), fixed at the
-  initial pose (the layout of ``factors.metrics.level_set_sample_points``); residuals and
+  initial pose (the layout of ``quadloc.factors.metrics.level_set_sample_points``); residuals and
   Jacobians of all pairs by one compiled kernel (:func:`_level_set_kernel`).
 * ``algebraic``, ``frobenius``, ``wasserstein``, ``bhattacharyya``, ``bbox`` (analytic):
-  :func:`factors.metrics.conic_residuals` of the normalised dual conic
+  :func:`quadloc.factors.metrics.conic_residuals` of the normalised dual conic
   ``Cn = C* / (-C*[2,2])``, differentiated through ``dC* = K dA K^T``,
   ``dCn = (dC* + Cn dC*[2,2]) / (-C*[2,2])``.
-* ``iou``, ``giou`` (analytic): :func:`factors.metrics.overlap_residual` of all pairs in one
+* ``iou``, ``giou`` (analytic): :func:`quadloc.factors.metrics.overlap_residual` of all pairs in one
   call (exact area gradients w.r.t. the projection's ``(mu, Sigma)``, chained through ``dCn``),
   with ``disjoint_hull`` (disjoint pairs get the giou rows).
-* ``qbbox``: ``factors.metrics.residual`` and central differences on ``retract`` (step
+* ``qbbox``: ``quadloc.factors.metrics.residual`` and central differences on ``retract`` (step
   :data:`DEFAULT_NUMERIC_STEP`), one-sided where a side is invalid.
 
 Evaluations are memoised on the pose value and their arrays are read-only (shared by the
@@ -40,7 +40,7 @@ Invalid projections (penalty) and saturation
 --------------------------------------------
 A projection is valid while the whole ellipsoid is in front of the camera: depth margin
 ``m = z_c - sqrt(S_c[2,2]) > min_depth_margin`` (m; as
-:func:`factors.geometry.ellipsoid_depth_margins`). Otherwise the pair's ``dim`` residual
+:func:`quadloc.factors.geometry.ellipsoid_depth_margins`). Otherwise the pair's ``dim`` residual
 components all equal ``sqrt(P_j / dim) * (1 + d / (d + d_s))``, ``d = min_depth_margin - m``,
 ``d_s`` the ellipsoid's largest semi-axis (m): cost in ``[P_j, 4 P_j)``, Jacobian
 ``-sqrt(P_j/dim) d_s / (d + d_s)^2 dm/dxi`` (``dm/dw = e3 x c_c - (e3 x S_c e3) /
@@ -57,7 +57,7 @@ c_0) / w))`` with ``w = 0.4 P_j`` (C^1, ``h < 0.9 P_j``), ``r_sat = r sqrt(h(c) 
 valid cost is below every penalty. Reported residuals and costs
 (:attr:`PoseEvaluation.residuals`, :meth:`PoseResidualModel.costs`) are the metric's own; the
 factors use :attr:`PoseEvaluation.factor_residuals`. A robust kernel
-(``factors.pose_factors``) flattens the penalty too.
+(``quadloc.factors.pose_factors``) flattens the penalty too.
 """
 
 from __future__ import annotations
@@ -70,8 +70,8 @@ from typing import Any
 
 import numpy as np
 
-from factors import metrics
-from factors.geometry import (
+from quadloc.factors import metrics
+from quadloc.factors.geometry import (
     Camera,
     DegenerateProjectionError,
     Ellipse,
@@ -86,9 +86,9 @@ from factors.geometry import (
     skew,
     so3_exp,
 )
-from factors.jit import jit
-from factors.metrics import METRIC_NAMES
-from factors.overlap import HULL_DIRECTIONS
+from quadloc.factors.jit import jit
+from quadloc.factors.metrics import METRIC_NAMES
+from quadloc.factors.overlap import HULL_DIRECTIONS
 
 __all__ = [
     "ANALYTIC_METRICS",
@@ -130,8 +130,8 @@ def _level_set_kernel(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Level-set residuals (N, M) and Jacobians (N, M, 6) of all pairs at ``T``
     (``world_from_camera`` 4x4), and per object its centre's depth ``z_c`` (N,) m and ``S_c[2,
-    2]`` (N,) m^2 (for :func:`factors.geometry.depth_margin`; the rows of an invalid pair are
-    garbage, replaced by the penalty). Docs: docs/design/factors.md, "Level-set residual".
+    2]`` (N,) m^2 (for :func:`quadloc.factors.geometry.depth_margin`; the rows of an invalid pair
+    are garbage, replaced by the penalty). Docs: docs/design/factors.md, "Level-set residual".
 
     Per object, ``A^-1`` by Sherman-Morrison from the world frame, ``A_w = S_w - d d^T`` (``d``
     the centre seen from the camera, world axes): ``A_w^-1 = S_w^-1 + e e^T / (1 - d . e)``,
@@ -205,7 +205,7 @@ def _level_set_kernel(
 
 @functools.lru_cache(maxsize=32)
 def _unit_level_set_layout(n_azimuths: int, n_levels: int) -> tuple[np.ndarray, np.ndarray]:
-    """``factors.metrics``' level-set layout for a unit circle, s_max = 1: the homogeneous
+    """``quadloc.factors.metrics``' level-set layout for a unit circle, s_max = 1: the homogeneous
     points ``(u, v, 1)`` as columns (3, M) and ``u^2 + v^2`` (1, M), read-only."""
     uv = metrics.level_set_sample_points(Ellipse(0.0, 0.0, 1.0, 1.0, 0.0), None,
                                          n_azimuths=n_azimuths, n_levels=n_levels, scale=1.0,
@@ -302,7 +302,7 @@ def _dual_conic_kernel(A: np.ndarray, c: np.ndarray, K: np.ndarray, neg_KSKinv: 
 
 def expmap_pose3(xi: np.ndarray) -> np.ndarray:
     """4x4 matrix of GTSAM's ``Pose3.Expmap(xi)``, ``xi = [omega (rad), v (m)]`` (SE(3) exp:
-    rotation :func:`factors.geometry.so3_exp`, translation ``V v``)."""
+    rotation :func:`quadloc.factors.geometry.so3_exp`, translation ``V v``)."""
     xi = np.asarray(xi, dtype=float)
     w, v = xi[:3], xi[3:]
     th = float(np.linalg.norm(w))
@@ -343,7 +343,7 @@ class PoseResidualModel:
     Parameters
     ----------
     metric:
-        One of ``factors.metrics.METRIC_NAMES``.
+        One of ``quadloc.factors.metrics.METRIC_NAMES``.
     detections, ellipsoids:
         Same length N >= 1, pair ``j`` = (detected ellipse in pixels, map ellipsoid in world m).
     camera:
@@ -353,7 +353,7 @@ class PoseResidualModel:
         (the sampling area depends on the distance between detection and projection). The
         samples are then frozen for the whole solve, so LM minimises one fixed function.
     metric_options:
-        Passed to ``factors.metrics.residual`` / ``level_set_sample_points``.
+        Passed to ``quadloc.factors.metrics.residual`` / ``level_set_sample_points``.
     min_depth_margin, penalty_cost:
         See the module docstring (invalid projections).
     numeric_step:
@@ -492,7 +492,7 @@ class PoseResidualModel:
         return [Ellipse(*params[j]) if ok[j] else None for j in range(self.n)]
 
     def _init_level_set(self, T0: np.ndarray | None) -> None:
-        """Fix the level-set samples: ``factors.metrics.level_set_sample_points``' layout,
+        """Fix the level-set samples: ``quadloc.factors.metrics.level_set_sample_points``' layout,
         computed for all detections at once (equality with it is tested). The parts that do
         not depend on ``T0`` (validated options, unit layout, detection axes) are computed on
         the first call only and reused by :meth:`relayout`.
@@ -528,7 +528,8 @@ class PoseResidualModel:
             # The projected centre c_P is the point of C* e3 = K A K^T e3 = K A e3, so its ray is
             # n = A e3 / s, and H^-1 n = (u, v, 1) are its coordinates in the detection's
             # axes over its semi-axes: Phi_D(c_P) = u^2 + v^2 = |(H^-1 A e3)[:2]|^2 / s^2
-            # (factors.geometry.level_values; the same layout as factors.metrics, tested).
+            # (quadloc.factors.geometry.level_values; the same layout as quadloc.factors.metrics,
+            # tested).
             p = (H_inv @ a3[:, :, None])[:, :, 0]
             all_ok = bool(ok.all())  # the usual case: no masking
             w = p[:, 2] if all_ok else np.where(ok, p[:, 2], 1.0)
@@ -662,7 +663,7 @@ class PoseResidualModel:
 
     def _evaluate_conic(self, T: np.ndarray, jacobian: bool) -> PoseEvaluation:
         """The metrics of the projections' normalised dual conics ``Cn`` (with their
-        derivatives ``dCn`` along the 6 tangents): :func:`factors.metrics.conic_residuals`,
+        derivatives ``dCn`` along the 6 tangents): :func:`quadloc.factors.metrics.conic_residuals`,
         or for iou / giou :meth:`_overlap_rows`."""
         A, c, S, margins = self._camera_frame(T)
         valid = margins > self.min_depth_margin
@@ -679,8 +680,8 @@ class PoseResidualModel:
 
     def _overlap_rows(self, Cn: np.ndarray, dCn: np.ndarray | None, valid: np.ndarray
                       ) -> tuple[np.ndarray, np.ndarray | None]:
-        """iou / giou rows (N, 4) of :func:`factors.metrics.overlap_residual` (all pairs in one
-        call, ``disjoint_hull``) and their pose Jacobian: the exact area gradients w.r.t. the
+        """iou / giou rows (N, 4) of :func:`quadloc.factors.metrics.overlap_residual` (all pairs in
+        one call, ``disjoint_hull``) and their pose Jacobian: the exact area gradients w.r.t. the
         projection's ``g = (mu_x, mu_y, s00, s01, s11)`` chained through ``dg / dxi``. A
         projection whose Sigma is not positive definite is invalid: ``valid`` is updated in
         place (its rows stay 0 for the penalty)."""
@@ -716,7 +717,7 @@ class PoseResidualModel:
 
     # ------------------------------------------------------------------ generic metrics
     def _metric_rows(self, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Residual rows (N, dim) via factors.metrics.residual, and validity (N,)."""
+        """Residual rows (N, dim) via quadloc.factors.metrics.residual, and validity (N,)."""
         projs = self._projections(T)
         r = np.empty((self.n, self.dim))
         valid = np.zeros(self.n, dtype=bool)
@@ -766,8 +767,8 @@ class PoseResidualModel:
 
 def compile_kernels() -> None:
     """Compile the numeric kernels (level set, dual conics, exact areas and iou / giou rows,
-    the batched projection of :func:`factors.geometry.projected_gaussians`; :mod:`factors.jit`)
-    now, or load them from numba's cache: one small
+    the batched projection of :func:`quadloc.factors.geometry.projected_gaussians`;
+    :mod:`quadloc.factors.jit`) now, or load them from numba's cache: one small
     evaluation per kernel family, through the same calls as a refinement (so the same
     specialisations). The service calls this at start-up so that no request pays the
     compilation (~13 s once per machine and cache directory, well under 1 s from the cache;

@@ -1,5 +1,5 @@
 """Print the requirements that `make lock` resolves: the dependencies (and the given extras) of
-the checkout's own distributions (pyproject.toml, sdk/pyproject.toml), minus those
+the checkout's own distributions (pyproject.toml, sdk/python/pyproject.toml), minus those
 distributions themselves, which are installed from the working tree, never from an index.
 
 Usage: python lock/requirements_in.py EXTRA... > FILE.in   (pip-compile input)
@@ -15,7 +15,7 @@ import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-PROJECTS = [ROOT / "pyproject.toml", ROOT / "sdk" / "pyproject.toml"]
+PROJECTS = [ROOT / "pyproject.toml", ROOT / "sdk" / "python" / "pyproject.toml"]
 
 
 def _name(requirement: str) -> str:

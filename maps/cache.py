@@ -1,4 +1,5 @@
-"""THE compiled-map cache of a process (one class, one place; used by :class:`maps.store.MapStore`).
+"""THE compiled-map cache of a process (one class, one place; used by
+:class:`quadloc.maps.store.MapStore`).
 
 Two tables behind one lock (docs/design/maps.md, "Compiled-map cache"): compiled versions by
 ``(map_id, version, content_hash)`` (LRU, bounded by :data:`MAX_ENTRIES` maps and
@@ -17,7 +18,7 @@ import time
 from collections import OrderedDict
 from collections.abc import Callable
 
-from maps.compiled import CompiledMap
+from quadloc.maps.compiled import CompiledMap
 
 __all__ = ["MAX_ENTRIES", "MAX_OBJECTS", "CompiledMapCache", "MapKey"]
 

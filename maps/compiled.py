@@ -3,7 +3,8 @@
 Frames and units: everything is in the map's world frame, metres. ``shape_matrices[i]`` is
 ``R_i diag(axes_i^2) R_i^T`` (m^2) and ``dual_quadrics[i]`` is
 ``Q*_i = T_i diag(a^2, b^2, c^2, -1) T_i^T`` with ``T_i = [[R_i, center_i], [0, 1]]``, the
-conventions of :mod:`factors.geometry`. Object ``i`` in every array is ``scene_map.objects[i]``.
+conventions of :mod:`quadloc.factors.geometry`. Object ``i`` in every array is
+``scene_map.objects[i]``.
 """
 
 from __future__ import annotations
@@ -13,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from factors.geometry import Ellipsoid
-from maps.model import SceneMap
+from quadloc.factors.geometry import Ellipsoid
+from quadloc.maps.model import SceneMap
 
 __all__ = ["CompiledMap", "compile_map"]
 
@@ -98,7 +99,7 @@ def compile_map(scene_map: SceneMap | CompiledMap) -> CompiledMap:
 
     Memoised on the (immutable) ``SceneMap`` itself: it lives and dies with the map, nothing to
     evict or invalidate (the cache of compiled map *versions* is
-    :class:`maps.cache.CompiledMapCache`).
+    :class:`quadloc.maps.cache.CompiledMapCache`).
     """
     if isinstance(scene_map, CompiledMap):
         return scene_map

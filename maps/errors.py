@@ -1,12 +1,12 @@
 """Errors of the map store. All derive from :class:`MapStoreError`.
 
-Validation problems of a map's *content* are :class:`maps.model.MapValidationError` (a
+Validation problems of a map's *content* are :class:`quadloc.maps.model.MapValidationError` (a
 ``ValueError``), re-exported here for convenience.
 """
 
 from __future__ import annotations
 
-from maps.model import MapValidationError
+from quadloc.maps.model import MapValidationError
 
 __all__ = [
     "MapAlreadyExists",

@@ -36,7 +36,7 @@ from pydantic import (
 from pydantic.json_schema import GenerateJsonSchema
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
-from factors.geometry import (
+from quadloc.factors.geometry import (
     DOCUMENT_ROTATION_TOLERANCE,
     Ellipsoid,
     canonical_quaternion_wxyz,
@@ -79,8 +79,8 @@ LIMITS: dict[str, float] = {
     "max_name_length": 256,
     "max_metadata_bytes": 65_536,
     "max_metadata_depth": 32,
-    # Tolerances of the JSON importer (factors.geometry.DOCUMENT_ROTATION_TOLERANCE: looser than
-    # the in-process ones, values are re-normalised / snapped):
+    # Tolerances of the JSON importer (quadloc.factors.geometry.DOCUMENT_ROTATION_TOLERANCE: looser
+    # than the in-process ones, values are re-normalised / snapped):
     "quaternion_norm_tolerance": DOCUMENT_ROTATION_TOLERANCE,
     "rotation_orthonormal_tolerance": DOCUMENT_ROTATION_TOLERANCE,
 }
@@ -469,7 +469,7 @@ class MapObject:
     ) -> MapObject:
         """Build from centre (m, world), semi-axes (m) and a unit ``(w, x, y, z)`` quaternion
         (ellipsoid frame -> world; renormalised, sign made canonical as in
-        :func:`factors.geometry.canonical_quaternion_wxyz`: ``w > 0``, and for a half-turn
+        :func:`quadloc.factors.geometry.canonical_quaternion_wxyz`: ``w > 0``, and for a half-turn
         (``w = 0``) the first non-zero of ``x, y, z`` positive, so ``q`` and ``-q`` give equal
         objects and equal map hashes)."""
         q = np.array(quaternion_wxyz, dtype=float)
@@ -545,7 +545,7 @@ class SceneMap:
 
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)  # mappingproxy does not pickle: store plain JSON data
-        state.pop("_compiled", None)  # the memoised CompiledMap (maps.compiled.compile_map)
+        state.pop("_compiled", None)  # the memoised CompiledMap (quadloc.maps.compiled.compile_map)
         state["metadata"] = _thaw(self.metadata)
         return state
 

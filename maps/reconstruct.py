@@ -2,8 +2,8 @@
 
 Method (docs/design/maps.md, "Reconstruction"): a linear estimate of the dual quadric by SVD
 (Rubino, Crocco, Del Bue, TPAMI 2018), refined by Levenberg-Marquardt with the level-set factor
-of :func:`factors.ellipsoid_factors.ellipsoid_views_factor` from the linear estimate and from a
-sphere at the triangulated centre; the best valid result wins (in front of every camera,
+of :func:`quadloc.factors.ellipsoid_factors.ellipsoid_views_factor` from the linear estimate and
+from a sphere at the triangulated centre; the best valid result wins (in front of every camera,
 :func:`degenerate_shape_reason`, RMS level residual at most ``MAX_RMS_LEVEL_RESIDUAL``).
 
 Conventions: poses are ``world_from_camera`` 4x4 (camera axes OpenCV), ellipses in pixels,
@@ -22,15 +22,15 @@ from typing import Any
 import gtsam
 import numpy as np
 
-from factors.ellipsoid_factors import ellipsoid_views_factor
-from factors.ellipsoid_residuals import (
+from quadloc.factors.ellipsoid_factors import ellipsoid_views_factor
+from quadloc.factors.ellipsoid_residuals import (
     LevelSetSamples,
     dual_quadric,
     dual_quadric_jacobians,
     observation_residual,
     stack_samples,
 )
-from factors.geometry import (
+from quadloc.factors.geometry import (
     ORTHONORMAL_TOLERANCE,
     Camera,
     Ellipse,
@@ -39,7 +39,7 @@ from factors.geometry import (
     invert_pose,
     pose_matrix,
 )
-from maps.model import LIMITS, MapObject, SceneMap
+from quadloc.maps.model import LIMITS, MapObject, SceneMap
 
 __all__ = [
     "FrameObservations",
@@ -161,7 +161,7 @@ def _prepare(
             or np.any(np.linalg.det(R) <= 0):
         raise ReconstructionError("bad_input", "world_from_camera rotations must be orthonormal "
                                                "with det +1 (snap them with "
-                                               "factors.geometry.snap_to_rotation)")
+                                               "quadloc.factors.geometry.snap_to_rotation)")
     cfw = np.array([invert_pose(T) for T in poses])
     P = np.array([c.projection_matrix(T) for c, T in zip(cams, cfw, strict=True)])
     return ells, cfw, cams, P
@@ -259,7 +259,7 @@ def canonical_ellipsoid(rotation: np.ndarray, center: np.ndarray, axes: np.ndarr
 def contour_samples(ellipse: Ellipse, n: int) -> LevelSetSamples:
     """``n`` points on the observed ellipse as level-set samples in homogeneous pixels
     (``Phi_det = 1`` there), for a camera given by its projection ``K [R|t]`` (see
-    :func:`factors.ellipsoid_factors.ellipsoid_views_factor`)."""
+    :func:`quadloc.factors.ellipsoid_factors.ellipsoid_views_factor`)."""
     pts = ellipse.contour_points(n)
     return LevelSetSamples(pts, np.vstack([pts.T, np.ones((1, n))]), np.zeros(n))
 
@@ -280,7 +280,7 @@ def view_residuals(
 ) -> np.ndarray:
     """Level residuals ``Phi_pred - 1`` (n, samples) of ``ellipsoid`` against observed ellipses,
     with ``projections`` the views' ``P = K [R|t]_camera_from_world`` (n, 3, 4): minus the
-    shared level-set residual (:func:`factors.ellipsoid_residuals.observation_residual`) at
+    shared level-set residual (:func:`quadloc.factors.ellipsoid_residuals.observation_residual`) at
     ``samples_per_view`` contour points of each observed ellipse."""
     samples = stack_samples([contour_samples(e, samples_per_view) for e in ellipses])
     r, _, _ = observation_residual(_projection_rows(projections), ellipsoid.rotation,
@@ -642,7 +642,7 @@ def build_scene_map(
         report.results[object_id] = result
         objects.append(MapObject(object_id, label, result.ellipsoid))
     cats = tuple(categories) if categories is not None else tuple(label_order)
-    meta = {"built_by": "maps.reconstruct.build_scene_map", "n_frames": len(frames)}
+    meta = {"built_by": "quadloc.maps.reconstruct.build_scene_map", "n_frames": len(frames)}
     meta.update(metadata or {})
     scene = SceneMap(map_id=map_id, name=name, up_axis=up_axis, categories=cats,
                      objects=tuple(objects), metadata=meta)

@@ -8,8 +8,8 @@
 Semantics (docs/design/maps.md, "Map store"): versions 1, 2, ... of a map are immutable;
 ``update`` succeeds only against the latest version (else :class:`VersionConflict`), each write
 is one transaction, ``delete`` removes every version. ``content_hash`` is
-:func:`maps.model.content_hash` (the ETag). ``compiled`` answers from the store's
-:class:`maps.cache.CompiledMapCache` (THE compiled-map cache); writes through the store
+:func:`quadloc.maps.model.content_hash` (the ETag). ``compiled`` answers from the store's
+:class:`quadloc.maps.cache.CompiledMapCache` (THE compiled-map cache); writes through the store
 invalidate it at once.
 """
 
@@ -37,9 +37,9 @@ from sqlalchemy.exc import (
 )
 from sqlalchemy.pool import StaticPool
 
-from maps.cache import CompiledMapCache, MapKey
-from maps.compiled import CompiledMap, MapVersionView, compile_map
-from maps.errors import (
+from quadloc.maps.cache import CompiledMapCache, MapKey
+from quadloc.maps.compiled import CompiledMap, MapVersionView, compile_map
+from quadloc.maps.errors import (
     MapAlreadyExists,
     MapNotFound,
     MapStoreError,
@@ -47,7 +47,7 @@ from maps.errors import (
     StoreUnavailable,
     VersionConflict,
 )
-from maps.model import (
+from quadloc.maps.model import (
     MapValidationError,
     SceneMap,
     canonical_json,
@@ -102,7 +102,7 @@ versions_table = sa.Table(
     sa.Column("created_at", sa.DateTime(timezone=True), nullable=False),
     sa.CheckConstraint("version >= 1", name="ck_quadloc_map_versions_version"),
 )
-#: The build jobs of :mod:`maps.building.jobs` (migration ``0002_build_jobs``).
+#: The build jobs of :mod:`quadloc.maps.building.jobs` (migration ``0002_build_jobs``).
 jobs_table = sa.Table(
     "quadloc_build_jobs",
     _metadata,

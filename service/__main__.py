@@ -1,7 +1,7 @@
-"""``python -m service`` = the ``quadloc`` command."""
+"""``python -m quadloc.service`` = the ``quadloc`` command."""
 
 import sys
 
-from service.cli import main
+from quadloc.service.cli import main
 
 sys.exit(main())

@@ -1,4 +1,4 @@
-"""The ``quadloc`` command line (entry point ``quadloc = service.cli:main``).
+"""The ``quadloc`` command line (entry point ``quadloc = quadloc.service.cli:main``).
 
 Map commands and ``localize`` talk to a running server through the SDK when a server URL is
 given (``--url`` or ``QUADLOC_URL``, with ``--api-key`` / ``QUADLOC_API_KEY``); without one they
@@ -50,7 +50,7 @@ select a server for the map commands and localize; flags override them.
 def _version_text() -> str:
     from importlib.metadata import PackageNotFoundError, version
 
-    from service.api.app import API_VERSION
+    from quadloc.service.api.app import API_VERSION
 
     def installed(name: str) -> str:
         try:
@@ -115,7 +115,7 @@ class Progress:
 
 
 def _settings(args: argparse.Namespace) -> Any:
-    from service.settings import Settings
+    from quadloc.service.settings import Settings
 
     url = getattr(args, "database_url", None)
     return Settings(**({"database_url": url} if url else {}))
@@ -123,8 +123,8 @@ def _settings(args: argparse.Namespace) -> Any:
 
 def _store(args: argparse.Namespace) -> Any:
     """The map store of the settings' database, with the demo map seeded like ``serve`` does."""
-    from maps.store import MapStore
-    from service.api.app import seed_demo_map
+    from quadloc.maps.store import MapStore
+    from quadloc.service.api.app import seed_demo_map
 
     settings = _settings(args)
     store = MapStore(settings.effective_database_url)
@@ -173,7 +173,7 @@ def _server(args: argparse.Namespace) -> str | None:
 
 def _client(args: argparse.Namespace) -> Any:
     """An SDK client for ``--url`` / ``QUADLOC_URL`` with ``--api-key`` / ``QUADLOC_API_KEY``."""
-    from sdk import QuadLocClient
+    from quadloc_sdk import QuadLocClient
 
     key = getattr(args, "api_key", None) or os.environ.get("QUADLOC_API_KEY") or None
     try:
@@ -202,8 +202,8 @@ def _show(args: argparse.Namespace, items: list[dict[str, Any]], headers: list[s
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
-    from service.api.server import serve, uvicorn_config
-    from service.settings import check_bind_allowed
+    from quadloc.service.api.server import serve, uvicorn_config
+    from quadloc.service.settings import check_bind_allowed
 
     if args.database_url:
         os.environ["QUADLOC_DATABASE_URL"] = args.database_url
@@ -258,8 +258,8 @@ def _print_stored(map_id: str, version: int, n_objects: int, content_hash: str) 
 
 
 def cmd_maps_import(args: argparse.Namespace) -> int:
-    from maps.errors import MapAlreadyExists, MapNotFound, VersionConflict
-    from maps.model import MapValidationError, scene_map_from_chess, scene_map_from_dict
+    from quadloc.maps.errors import MapAlreadyExists, MapNotFound, VersionConflict
+    from quadloc.maps.model import MapValidationError, scene_map_from_chess, scene_map_from_dict
 
     data = _read_json(args.file)
     if not isinstance(data, dict):
@@ -299,7 +299,7 @@ def _remote_import(args: argparse.Namespace, document: dict[str, Any]) -> int:
     """``maps import`` against a server: create the (locally validated) map, or with
     ``--update`` add a version guarded by the ETag just read, so a concurrent writer gets a
     refusal (412/409), never a silent overwrite."""
-    from sdk import Conflict
+    from quadloc_sdk import Conflict
 
     map_id = str(document["map_id"])
     with _client(args) as client:
@@ -370,8 +370,8 @@ def _print_answer(result: Any) -> None:
 def cmd_localize(args: argparse.Namespace) -> int:
     from pydantic import ValidationError
 
-    from service.api.errors import field_path
-    from service.api.schemas import LocalizeRequest
+    from quadloc.service.api.errors import field_path
+    from quadloc.service.api.schemas import LocalizeRequest
 
     overrides = {k: v for k, v in (
         ("metric", args.metric), ("on_ambiguity", getattr(args, "on_ambiguity", None)),
@@ -431,9 +431,9 @@ def _solver(args: argparse.Namespace) -> tuple[Any, Any]:
         return (lambda request: client.localize(
             args.map, request.model_dump(mode="json", exclude_none=True),
             map_version=args.version)), client.close
-    from service.api.errors import ProblemError
-    from service.api.metrics import ApiMetrics
-    from service.api.solver import Solver
+    from quadloc.service.api.errors import ProblemError
+    from quadloc.service.api.metrics import ApiMetrics
+    from quadloc.service.api.solver import Solver
 
     settings = _settings(args)
     compiled = _store(args).compiled(args.map, args.version)
@@ -454,9 +454,9 @@ class _CliError(Exception):
 
 def openapi_document() -> dict[str, Any]:
     """The API's OpenAPI document (built on an in-memory store, nothing seeded)."""
-    from maps.store import MapStore
-    from service.api.app import build_openapi, create_app
-    from service.settings import Settings
+    from quadloc.maps.store import MapStore
+    from quadloc.service.api.app import build_openapi, create_app
+    from quadloc.service.settings import Settings
 
     app = create_app(Settings(seed_demo_map=False, api_keys=""), store=MapStore("sqlite://"))
     return build_openapi(app)
@@ -486,7 +486,7 @@ def cmd_openapi(args: argparse.Namespace) -> int:
 
 
 def cmd_hash_key(args: argparse.Namespace) -> int:
-    from service.settings import SCOPES, hash_api_key
+    from quadloc.service.settings import SCOPES, hash_api_key
 
     key = args.key or secrets.token_urlsafe(32)
     bad = [s for s in args.scopes.split("+") if s not in SCOPES]
@@ -579,7 +579,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("map_id", metavar="ID")
     db(p)
     p.set_defaults(func=cmd_maps_delete)
-    from service.cli_build import add_build_parser  # issue 16: quadloc maps build
+    from quadloc.service.cli_build import add_build_parser  # issue 16: quadloc maps build
 
     add_build_parser(msub, db)
 
@@ -625,7 +625,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scopes", default="read", help="read, write or read+write (default read)")
     p.set_defaults(func=cmd_hash_key)
 
-    from service.tracking.cli_track import add_track_parser
+    from quadloc.service.tracking.cli_track import add_track_parser
 
     add_track_parser(sub, db)
     return parser
@@ -635,8 +635,8 @@ def main(argv: list[str] | None = None) -> int:
     """Run the CLI; returns the exit status."""
     from pydantic import ValidationError
 
-    from maps.errors import MapNotFound, MapStoreError, StoreUnavailable
-    from sdk import NotFound, QuadLocError, TransportError
+    from quadloc.maps.errors import MapNotFound, MapStoreError, StoreUnavailable
+    from quadloc_sdk import NotFound, QuadLocError, TransportError
 
     args = build_parser().parse_args(argv)
     try:

@@ -2,8 +2,8 @@
 
 With ``--url`` / ``QUADLOC_URL``: a ``POST /v1/maps:build`` job on that server through the SDK
 (``client.build_map``), its progress polled. Without: the same build
-(``maps.building.build.build_map``) in this process against the local database, like the other
-``quadloc maps`` commands. A progress bar goes to stderr either way. An existing map id needs
+(``quadloc.maps.building.build.build_map``) in this process against the local database, like the
+other ``quadloc maps`` commands. A progress bar goes to stderr either way. An existing map id needs
 ``--update`` (stored as its next version; refused if the map changed during the build).
 ``--report PATH`` writes the build report (which detections built which object, per-object
 quality, rejected detections) as JSON. Exit codes: 0 built, 1 no map (nothing associated, time
@@ -20,7 +20,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TextIO
 
-from service import cli
+from quadloc.service import cli
 
 __all__ = ["ProgressBar", "add_build_parser", "cmd_maps_build"]
 
@@ -56,8 +56,8 @@ def _print_objects(report: dict[str, Any]) -> None:
 
 
 def _remote_build(args: argparse.Namespace, client: Any, data: Any) -> int:
-    from sdk import errors as sdk_errors
-    from sdk.build import BuildFailedError
+    from quadloc_sdk import errors as sdk_errors
+    from quadloc_sdk.build import BuildFailedError
 
     bar = ProgressBar()
     t0 = time.monotonic()
@@ -97,10 +97,10 @@ def _write_report(path: str | None, report: Any) -> None:
 
 
 def cmd_maps_build(args: argparse.Namespace) -> int:
-    from maps.building.build import BuildTimeoutError, build_map
-    from maps.building.recording import RecordingError, parse_recording
-    from maps.errors import MapNotFound, VersionConflict
-    from service.api.build_jobs import build_limits
+    from quadloc.maps.building.build import BuildTimeoutError, build_map
+    from quadloc.maps.building.recording import RecordingError, parse_recording
+    from quadloc.maps.errors import MapNotFound, VersionConflict
+    from quadloc.service.api.build_jobs import build_limits
 
     data = cli._read_json(args.file)
     if cli._server(args):

@@ -1,13 +1,14 @@
 """Names and limits of the service, in ONE dependency-free module (stdlib only).
 
-``service.settings`` (bounds of its fields), the wire schemas (``service.api.schemas``) and the
-in-process API (``service.localization.types``) all import these, so reading the settings loads
-neither gtsam, numpy nor OpenCV (``tests/test_layers.py`` checks it).
+``quadloc.service.settings`` (bounds of its fields), the wire schemas
+(``quadloc.service.api.schemas``) and the in-process API (``quadloc.service.localization.types``)
+all import these, so reading the settings loads neither gtsam, numpy nor OpenCV
+(``tests/test_layers.py`` checks it).
 """
 
 from __future__ import annotations
 
-from factors.names import METRIC_NAMES, ROBUST_KERNELS
+from quadloc.factors.names import METRIC_NAMES, ROBUST_KERNELS
 
 __all__ = [
     "AMBIGUITY_POLICIES",
@@ -33,7 +34,7 @@ MAX_PIXELS = 1e6
 #: Order of the 6x6 pose covariances (GTSAM Pose3 tangent).
 COVARIANCE_ORDER: tuple[str, ...] = ("omega_x", "omega_y", "omega_z", "v_x", "v_y", "v_z")
 
-#: The nine refinement metrics (``factors.names.METRIC_NAMES``).
+#: The nine refinement metrics (``quadloc.factors.names.METRIC_NAMES``).
 METRICS: tuple[str, ...] = METRIC_NAMES
 #: ``LocalizationOptions.metric`` value that skips refinement (the RANSAC/P3P/P2E pose is
 #: returned as is; useful for evaluation).

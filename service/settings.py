@@ -21,7 +21,7 @@ from pathlib import Path
 from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-from service.limits import MAX_BATCH_FRAMES, MAX_DETECTIONS
+from quadloc.service.limits import MAX_BATCH_FRAMES, MAX_DETECTIONS
 
 __all__ = [
     "SCOPES",
@@ -140,7 +140,7 @@ class Settings(BaseSettings):
         description="Deepest nesting of objects/arrays accepted in a JSON request body; deeper "
                     "-> 422 naming the field (the top-level object is depth 1).",
     )
-    # The request schema caps these (service.limits); a larger setting would do nothing,
+    # The request schema caps these (quadloc.service.limits); a larger setting would do nothing,
     # so it is refused at start.
     max_detections: int = Field(default=MAX_DETECTIONS, ge=1, le=MAX_DETECTIONS,
                                 description="Detections per frame.")

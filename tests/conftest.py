@@ -33,8 +33,9 @@ def _free_port() -> int:
 @contextmanager
 def run_live_server(data_dir: Path, env: dict[str, str] | None = None,
                     startup_timeout_s: float = 60.0) -> Iterator[str]:
-    """Run ``quadloc serve`` (``python -m service serve``: Uvicorn with the connection limits
-    of service/api/server.py) on a free loopback port (log level warning unless ``env`` says).
+    """Run ``quadloc serve`` (``python -m quadloc.service serve``: Uvicorn with the connection
+    limits of service/api/server.py) on a free loopback port (log level warning unless ``env``
+    says).
 
     The database is ``sqlite:///<data_dir>/quadloc.db`` unless ``env`` sets
     ``QUADLOC_DATABASE_URL``. Yields the base URL; terminates the process on exit.
@@ -49,7 +50,7 @@ def run_live_server(data_dir: Path, env: dict[str, str] | None = None,
     log_path = data_dir / f"uvicorn-{port}.log"
     with open(log_path, "wb") as log:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "service", "serve", "--host", "127.0.0.1", "--port",
+            [sys.executable, "-m", "quadloc.service", "serve", "--host", "127.0.0.1", "--port",
              str(port)],
             cwd=REPO_ROOT, env=full_env, stdout=log, stderr=subprocess.STDOUT)
     base = f"http://127.0.0.1:{port}"
@@ -103,8 +104,8 @@ def live_server_factory(tmp_path: Path) -> Iterator[Callable[..., str]]:
 
 def make_test_app(data_dir: Path, **settings: object) -> Any:
     """An in-process app on a temp SQLite DB (demo map seeded) for TestClient tests."""
-    from service.api.app import create_app
-    from service.settings import Settings
+    from quadloc.service.api.app import create_app
+    from quadloc.service.settings import Settings
 
     return create_app(Settings(data_dir=data_dir,
                                database_url=f"sqlite:///{data_dir / 'quadloc.db'}",

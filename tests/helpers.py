@@ -19,7 +19,7 @@ from typing import Any
 import gtsam
 import numpy as np
 
-from factors.geometry import Ellipse, Ellipsoid
+from quadloc.factors.geometry import Ellipse, Ellipsoid
 
 __all__ = [
     "PROBLEM_MEDIA_TYPE",

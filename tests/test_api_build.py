@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from factors.geometry import Camera, Ellipsoid, invert_pose, pose_matrix, project_ellipsoid
-from maps.building.jobs import JobStore
-from maps.building.recording import recording_to_dict
+from quadloc.factors.geometry import Camera, Ellipsoid, invert_pose, pose_matrix, project_ellipsoid
+from quadloc.maps.building.jobs import JobStore
+from quadloc.maps.building.recording import recording_to_dict
 from tests.conftest import make_test_app
 
 CAM = Camera(500.0, 500.0, 320.0, 240.0, 640, 480)
@@ -139,7 +139,7 @@ def test_stale_running_job_is_marked_failed(tmp_path: Path) -> None:
         jobs.progress(job.job_id, "associating", 10.0, 0)
         assert jobs.fail_stale(3600.0) == 0  # fresh heartbeat: left alone
         # pretend the heartbeat stopped long ago (the replica died)
-        from maps.building.jobs import jobs_table
+        from quadloc.maps.building.jobs import jobs_table
 
         with app.state.store.engine.begin() as conn:
             conn.execute(jobs_table.update().values(
@@ -154,8 +154,8 @@ def test_stale_running_job_is_marked_failed(tmp_path: Path) -> None:
 def test_jobs_table_mirrors_the_migration(tmp_path: Path) -> None:
     import sqlalchemy as sa
 
-    from maps.building.jobs import jobs_table
-    from maps.store import MapStore
+    from quadloc.maps.building.jobs import jobs_table
+    from quadloc.maps.store import MapStore
 
     with MapStore(f"sqlite:///{tmp_path / 'j.db'}") as store:
         insp = sa.inspect(store.engine)
@@ -167,7 +167,7 @@ def test_jobs_table_mirrors_the_migration(tmp_path: Path) -> None:
 
 def _old_heartbeat(app: Any, job_id: str) -> None:
     """Pretend the job's heartbeat stopped long ago."""
-    from maps.building.jobs import jobs_table
+    from quadloc.maps.building.jobs import jobs_table
 
     with app.state.store.engine.begin() as conn:
         conn.execute(jobs_table.update().where(jobs_table.c.job_id == job_id).values(
@@ -197,7 +197,7 @@ class _BlockedBuild:
         self.started = threading.Event()
 
     def __call__(self, recording: Any, *, map_id: str, progress: Any, deadline: float) -> Any:
-        from maps.building.build import BuildTimeoutError
+        from quadloc.maps.building.build import BuildTimeoutError
 
         self.started.set()
         while not self.release.wait(0.01):
@@ -207,7 +207,7 @@ class _BlockedBuild:
 
 def test_a_full_build_queue_answers_503_with_retry_after(tmp_path: Path,
                                                          monkeypatch: pytest.MonkeyPatch) -> None:
-    import service.api.build_jobs as bj
+    import quadloc.service.api.build_jobs as bj
 
     blocked = _BlockedBuild()
     monkeypatch.setattr(bj, "build_map", blocked)
@@ -238,7 +238,7 @@ def test_a_full_build_queue_answers_503_with_retry_after(tmp_path: Path,
 
 def test_queued_jobs_beat_while_waiting_and_a_lost_job_stores_nothing(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    import service.api.build_jobs as bj
+    import quadloc.service.api.build_jobs as bj
 
     blocked = _BlockedBuild()
     monkeypatch.setattr(bj, "build_map", blocked)

@@ -16,10 +16,10 @@ from pathlib import Path
 import pytest
 from fastapi.testclient import TestClient
 
-from maps.store import MapStore
-from service.api.app import create_app
-from service.api.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
-from service.settings import Settings
+from quadloc.maps.store import MapStore
+from quadloc.service.api.app import create_app
+from quadloc.service.api.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
+from quadloc.service.settings import Settings
 from tests.test_maps_store import store_url  # noqa: F401 (fixture: sqlite + postgresql)
 
 PROBLEM = "application/problem+json"
@@ -140,9 +140,9 @@ def test_store_reuses_parsed_versions_within_an_object_bound(
         store_url: str, monkeypatch: pytest.MonkeyPatch) -> None:  # noqa: F811
     """GET of an unchanged version does not re-parse it (a 10,000-object map costs seconds to
     parse); the cache holds at most ``max_objects`` objects (the newest map always)."""
-    import maps.store as store_module
-    from maps.cache import CompiledMapCache
-    from maps.model import scene_map_from_dict
+    import quadloc.maps.store as store_module
+    from quadloc.maps.cache import CompiledMapCache
+    from quadloc.maps.model import scene_map_from_dict
 
     n = len(MAP_EXAMPLE["objects"])
     store = MapStore(store_url, cache=CompiledMapCache(max_objects=2 * n))
@@ -175,8 +175,8 @@ def test_a_slow_map_load_answers_503_within_the_budget_then_serves(
     import threading
     import time
 
-    import maps.store as store_module
-    from service.api.examples import LOCALIZE_EXAMPLE
+    import quadloc.maps.store as store_module
+    from quadloc.service.api.examples import LOCALIZE_EXAMPLE
 
     with _client(f"sqlite:///{tmp_path / 'q.db'}", solve_time_budget_ms=300.0) as c:
         store = c.app.state.store
@@ -214,8 +214,8 @@ def test_integral_floats_are_integers_and_the_schema_says_what_is_enforced(
         tmp_path: Path) -> None:
     """JSON Schema's ``integer`` includes 640.0: the server accepts it; 640.5 / "640" / true
     are refused naming the field. robust_scale without robust: the schema's if/then says it."""
-    from service.api.examples import LOCALIZE_EXAMPLE
-    from service.cli import openapi_document
+    from quadloc.service.api.examples import LOCALIZE_EXAMPLE
+    from quadloc.service.cli import openapi_document
 
     with _client(f"sqlite:///{tmp_path / 'q.db'}") as c:
         def frame(**camera_and_options):
@@ -251,7 +251,7 @@ def test_map_loader_returns_when_the_load_finishes_before_it_is_tracked() -> Non
     import threading
     from concurrent.futures import Future
 
-    from service.api.map_loader import MapLoader
+    from quadloc.service.api.map_loader import MapLoader
 
     class Store:
         def compiled(self, map_id, version=None):

@@ -14,8 +14,8 @@ import httpx
 import numpy as np
 import pytest
 
-from service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, LOCALIZE_EXAMPLE
-from service.settings import hash_api_key
+from quadloc.service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, LOCALIZE_EXAMPLE
+from quadloc.service.settings import hash_api_key
 
 #: Starts real servers / subprocesses: left out of the inner loop (pytest -m "not slow").
 pytestmark = pytest.mark.slow
@@ -149,7 +149,8 @@ def test_quadloc_serve_starts_on_loopback_with_the_demo_map(tmp_path: Path) -> N
     env["QUADLOC_DATA_DIR"] = str(tmp_path)
     log = tmp_path / "serve.log"
     with open(log, "wb") as out:
-        proc = subprocess.Popen([sys.executable, "-m", "service", "serve", "--port", str(port)],
+        proc = subprocess.Popen([sys.executable, "-m", "quadloc.service", "serve", "--port",
+                                 str(port)],
                                 cwd=REPO, env=env, stdout=out, stderr=subprocess.STDOUT)
     try:
         deadline = time.monotonic() + 60

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from factors.geometry import Ellipse, GeometryError, rotation_from_quaternion_wxyz
-from service.api import solver as solver_module
-from service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, LOCALIZE_EXAMPLE
+from quadloc.factors.geometry import Ellipse, GeometryError, rotation_from_quaternion_wxyz
+from quadloc.service.api import solver as solver_module
+from quadloc.service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, LOCALIZE_EXAMPLE
 from tests.conftest import make_test_app
 from tests.helpers import assert_problem as _problem
 
@@ -125,7 +125,7 @@ def test_prior_in_either_convention(client: TestClient) -> None:
     np.testing.assert_allclose(a["world_from_camera"]["matrix"], b["world_from_camera"]["matrix"],
                                atol=1e-9)
     q = prior_cv["world_from_camera"]
-    from factors.geometry import quaternion_wxyz_from_rotation
+    from quadloc.factors.geometry import quaternion_wxyz_from_rotation
 
     q_form = {"quaternion_wxyz": quaternion_wxyz_from_rotation(T_start[:3, :3]).tolist(),
               "translation_m": T_start[:3, 3].tolist()}
@@ -355,7 +355,7 @@ def test_solver_slots_are_first_come_first_served() -> None:
     import threading
     import time
 
-    from service.api.solver import FairSlots
+    from quadloc.service.api.solver import FairSlots
 
     slots = FairSlots(1)
     assert slots.acquire(timeout=0)
@@ -407,8 +407,8 @@ def _opengl_from_opencv_adjoint() -> np.ndarray:
 
 
 def test_opengl_prior_full_covariance_is_converted_to_opencv(client: TestClient) -> None:
-    from service.api.convert import prior_from_request
-    from service.api.schemas import PosePriorIn
+    from quadloc.service.api.convert import prior_from_request
+    from quadloc.service.api.schemas import PosePriorIn
 
     cov_cv = _full_spd_covariance()
     Ad = _opengl_from_opencv_adjoint()
@@ -474,7 +474,7 @@ def test_batch_total_budget_answers_the_rest_not_localized(tmp_path: Path, monke
 def test_batch_budget_setting_is_bounded() -> None:
     from pydantic import ValidationError
 
-    from service.settings import Settings
+    from quadloc.service.settings import Settings
 
     assert Settings(batch_time_budget_ms=300_000).batch_time_budget_ms == 300_000
     for bad in (0, -1, 300_001, float("inf")):
@@ -506,8 +506,8 @@ def test_the_fast_path_answers_what_the_full_handling_answers(client: TestClient
     included) goes through the full handling; the route has no parameter the fast path ignores."""
     import inspect
 
-    from service.api.deps import check_body_depth
-    from service.api.routers import localize as loc
+    from quadloc.service.api.deps import check_body_depth
+    from quadloc.service.api.routers import localize as loc
 
     assert tuple(inspect.signature(loc.localize_frame).parameters) == loc.FAST_PATH_PARAMETERS
     assert [d.dependency for d in client.app.router.dependencies] == [check_body_depth]

@@ -11,9 +11,9 @@ import pytest
 from fastapi.testclient import TestClient
 
 from bench.reference_data import CHESS_SCENE_PATH, load_chess_scene_json
-from maps.demo import load_demo_map
-from maps.model import content_hash, scene_map_from_dict
-from service.api.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
+from quadloc.maps.demo import load_demo_map
+from quadloc.maps.model import content_hash, scene_map_from_dict
+from quadloc.service.api.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
 from tests.conftest import make_test_app
 from tests.helpers import FakeClock
 from tests.helpers import assert_problem as _problem
@@ -190,7 +190,7 @@ def test_import_chess_format(client: TestClient) -> None:
     objs = r.json()["map"]["objects"]
     assert [o["category"] for o in objs] == ["TV", "Chair"]
     # Orientation: the returned quaternion reproduces the Chess R (independent conversion).
-    from factors.geometry import rotation_from_quaternion_wxyz
+    from quadloc.factors.geometry import rotation_from_quaternion_wxyz
 
     R = np.array(CHESS_IMPORT_EXAMPLE["objects"][0]["ellipsoid"]["R"])
     np.testing.assert_allclose(rotation_from_quaternion_wxyz(objs[0]["quaternion_wxyz"]), R,
@@ -209,7 +209,7 @@ def test_import_chess_format(client: TestClient) -> None:
 
 
 def _map_version_used(c: TestClient) -> int:
-    from service.api.examples import LOCALIZE_EXAMPLE
+    from quadloc.service.api.examples import LOCALIZE_EXAMPLE
 
     frame = {**LOCALIZE_EXAMPLE, "detections": LOCALIZE_EXAMPLE["detections"][:1]}
     r = c.post("/v1/maps/chess/localize", json=frame)
@@ -219,9 +219,9 @@ def _map_version_used(c: TestClient) -> int:
 
 def test_localize_sees_local_updates_at_once_and_other_replicas_within_the_ttl(
         tmp_path: Path) -> None:
-    from maps.store import MapStore
-    from service.api.app import seed_demo_map
-    from service.api.examples import LOCALIZE_EXAMPLE
+    from quadloc.maps.store import MapStore
+    from quadloc.service.api.app import seed_demo_map
+    from quadloc.service.api.examples import LOCALIZE_EXAMPLE
 
     # "chess" is not the default map here: the default map cannot be deleted (409).
     app = make_test_app(tmp_path, map_cache_ttl_s=0.3, default_map_id="chess-default")
@@ -253,7 +253,7 @@ def test_localize_sees_local_updates_at_once_and_other_replicas_within_the_ttl(
 
 def test_database_outage_is_a_503_problem(client: TestClient,
                                           monkeypatch: pytest.MonkeyPatch) -> None:
-    from maps.errors import StoreUnavailable
+    from quadloc.maps.errors import StoreUnavailable
 
     def down(*args, **kwargs):
         raise StoreUnavailable("database unreachable: OperationalError")
@@ -287,7 +287,7 @@ def _nested(depth: int) -> dict:
 
 
 def test_json_depth_counts_containers() -> None:
-    from service.api.errors import json_depth_violation
+    from quadloc.service.api.errors import json_depth_violation
 
     assert json_depth_violation({"a": 1}, 1) is None
     assert json_depth_violation({"a": {"b": 1}}, 1) == "a"
@@ -318,7 +318,7 @@ def test_over_deep_body_is_refused_before_anything_is_stored(client: TestClient)
     _problem(client.put("/v1/maps/deep-32", json={**bad, "map_id": "deep-32"},
                         headers={"If-Match": etag}), 422, "validation-error")
     assert client.get("/v1/maps/deep-32").json()["version"] == 1
-    from service.api.examples import LOCALIZE_EXAMPLE
+    from quadloc.service.api.examples import LOCALIZE_EXAMPLE
 
     frame = {**LOCALIZE_EXAMPLE, "frame_id": _nested(40)}
     body = _problem(client.post("/v1/maps/chess/localize", json=frame), 422, "validation-error")
@@ -332,7 +332,7 @@ def test_over_deep_body_is_refused_before_anything_is_stored(client: TestClient)
 ])
 def test_path_map_id_outside_the_pattern_is_a_422(client: TestClient, method: str,
                                                   path: str) -> None:
-    from service.api.examples import LOCALIZE_EXAMPLE
+    from quadloc.service.api.examples import LOCALIZE_EXAMPLE
 
     body = {"frames": [LOCALIZE_EXAMPLE]} if path.endswith(":batch") else (
         LOCALIZE_EXAMPLE if path.endswith("localize") else MAP_EXAMPLE)
@@ -380,7 +380,7 @@ def test_default_map_is_whatever_is_configured(tmp_path: Path) -> None:
 def test_map_cache_does_not_store_a_version_read_before_an_invalidation() -> None:
     """A reader resolves version 1, a concurrent write commits version 2 and invalidates, and
     only then the reader remembers its resolution: it must not be remembered."""
-    from maps.cache import CompiledMapCache
+    from quadloc.maps.cache import CompiledMapCache
 
     clock = FakeClock()
     cache = CompiledMapCache(resolve_ttl_s=60.0, clock=clock)
@@ -416,14 +416,14 @@ def pg_client():
 
     import sqlalchemy as sa
 
-    from maps.store import MapStore
+    from quadloc.maps.store import MapStore
     from tests.test_maps_store import _pg_unavailable_reason
 
     reason = _pg_unavailable_reason()
     if reason:
         pytest.skip(reason)
-    from service.api.app import create_app
-    from service.settings import Settings
+    from quadloc.service.api.app import create_app
+    from quadloc.service.settings import Settings
 
     schema = f"quadloc_api_{uuid.uuid4().hex[:12]}"
     admin = sa.create_engine(PG_BASE)
@@ -443,7 +443,7 @@ def pg_client():
 
 @pytest.mark.postgres
 def test_nul_characters_on_postgresql_are_4xx(pg_client: TestClient) -> None:
-    from service.api.examples import LOCALIZE_EXAMPLE
+    from quadloc.service.api.examples import LOCALIZE_EXAMPLE
 
     c = pg_client
     doc = c.get("/v1/maps/chess").json()["map"]
@@ -481,9 +481,9 @@ def test_database_data_error_is_a_422_problem(client: TestClient,
 
 def test_request_body_schemas_are_the_validating_models_schemas() -> None:
     """The published body schemas are generated from the pydantic models that validate the
-    bodies (maps.model.MapDocument / ChessDocument), not written by hand."""
-    from maps.model import CHESS_JSON_SCHEMA, MAP_JSON_SCHEMA
-    from service.cli import openapi_document
+    bodies (quadloc.maps.model.MapDocument / ChessDocument), not written by hand."""
+    from quadloc.maps.model import CHESS_JSON_SCHEMA, MAP_JSON_SCHEMA
+    from quadloc.service.cli import openapi_document
 
     paths = openapi_document()["paths"]
 

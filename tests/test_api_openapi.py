@@ -10,8 +10,8 @@ import numpy as np
 
 from bench.examples import FRAME_INDEX
 from bench.reference_data import CHESS_POSES_PATH as POSES_PATH
-from factors import metrics
-from factors.geometry import (
+from quadloc.factors import metrics
+from quadloc.factors.geometry import (
     Camera,
     DegenerateProjectionError,
     Ellipse,
@@ -20,13 +20,13 @@ from factors.geometry import (
     project_ellipsoid,
     snap_to_rotation,
 )
-from maps.demo import load_demo_map
-from service.api.examples import (
+from quadloc.maps.demo import load_demo_map
+from quadloc.service.api.examples import (
     EXAMPLE_TRUE_WORLD_FROM_CAMERA,
     LOCALIZE_EXAMPLE,
     MAP_EXAMPLE,
 )
-from service.cli import OPENAPI_PATH, openapi_document, openapi_text
+from quadloc.service.cli import OPENAPI_PATH, openapi_document, openapi_text
 
 REPO = Path(__file__).resolve().parents[1]
 POSES = POSES_PATH

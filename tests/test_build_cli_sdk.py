@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-import sdk
-from sdk.build import BuildFailedError
-from service.cli import main
+import quadloc_sdk as sdk
+from quadloc.service.cli import main
+from quadloc_sdk.build import BuildFailedError
 from tests.test_api_build import _recording
 
 #: Starts real servers / subprocesses: left out of the inner loop (pytest -m "not slow").

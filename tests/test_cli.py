@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from bench.reference_data import CHESS_SCENE_PATH
-from maps.model import content_hash, scene_map_from_dict
-from service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, MAP_EXAMPLE
-from service.cli import OPENAPI_PATH, main
-from service.settings import hash_api_key
+from quadloc.maps.model import content_hash, scene_map_from_dict
+from quadloc.service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, MAP_EXAMPLE
+from quadloc.service.cli import OPENAPI_PATH, main
+from quadloc.service.settings import hash_api_key
 
 REPO = Path(__file__).resolve().parents[1]
 CHESS_SCENE = CHESS_SCENE_PATH
@@ -143,7 +143,7 @@ def test_image_command_refuses_public_bind_without_keys_in_a_real_process() -> N
     import sys
 
     env = {k: v for k, v in os.environ.items() if not k.startswith("QUADLOC_")}
-    out = subprocess.run([sys.executable, "-m", "service", "serve", "--host", "0.0.0.0",
+    out = subprocess.run([sys.executable, "-m", "quadloc.service", "serve", "--host", "0.0.0.0",
                           "--port", "1"], env=env, cwd=REPO, capture_output=True, text=True,
                          timeout=60)
     assert out.returncode == 2
@@ -187,7 +187,7 @@ def test_database_down_in_a_real_process_prints_no_traceback() -> None:
     import sys
 
     env = {k: v for k, v in os.environ.items() if not k.startswith("QUADLOC_")}
-    out = subprocess.run([sys.executable, "-m", "service", "maps", "list", "--database-url",
+    out = subprocess.run([sys.executable, "-m", "quadloc.service", "maps", "list", "--database-url",
                           UNREACHABLE], env=env, cwd=REPO, capture_output=True, text=True,
                          timeout=60)
     assert out.returncode == 2, out.stderr

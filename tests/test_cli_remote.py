@@ -12,9 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from service.api.examples import MAP_EXAMPLE
-from service.cli import Progress, format_table
-from service.settings import hash_api_key
+from quadloc.service.api.examples import MAP_EXAMPLE
+from quadloc.service.cli import Progress, format_table
+from quadloc.service.settings import hash_api_key
 
 #: Starts real servers / subprocesses: left out of the inner loop (pytest -m "not slow").
 pytestmark = pytest.mark.slow
@@ -27,8 +27,8 @@ WRITE_KEY, READ_KEY = "cli-writer-key", "cli-reader-key"
 def quadloc(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
     full_env = {k: v for k, v in os.environ.items() if not k.startswith("QUADLOC_")}
     full_env.update(env or {})
-    return subprocess.run([sys.executable, "-c", "import sys; from service.cli import main; "
-                           "sys.exit(main(sys.argv[1:]))", *args], cwd=REPO, env=full_env,
+    return subprocess.run([sys.executable, "-c", "import sys; from quadloc.service.cli import "
+                           "main; sys.exit(main(sys.argv[1:]))", *args], cwd=REPO, env=full_env,
                           capture_output=True, text=True, timeout=120)
 
 

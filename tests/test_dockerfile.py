@@ -93,9 +93,9 @@ def test_install_steps_are_the_readmes():
     assert make_cmds, "no pip install in the Makefile"
     assert make_cmds[0] == ["--require-hashes", "-r", "requirements-dev.lock"]
     # the project and the light SDK distribution it depends on (issue 13), from the checkout
-    assert make_cmds[1] == ["--no-deps", "--no-build-isolation", "-e", ".", "-e", "sdk"]
+    assert make_cmds[1] == ["--no-deps", "--no-build-isolation", "-e", ".", "-e", "sdk/python"]
     assert docker_cmds[0] == ["--require-hashes", "--no-deps", "-r", "requirements.lock"]
-    assert docker_cmds[1] == ["--no-deps", "--no-build-isolation", "./sdk", "."]
+    assert docker_cmds[1] == ["--no-deps", "--no-build-isolation", "./sdk/python", "."]
     assert len(docker_cmds) == 2  # (plus the uninstall of the build backend)
     # No other download: no curl/wget/apt-get installs, no extra pip packages.
     text = "\n".join(f"{w} {r}" for w, r in _instructions())  # comments excluded
@@ -117,7 +117,7 @@ def test_lock_files_pin_everything_pyproject_asks_for():
     pyproject = tomllib.loads((REPO / "pyproject.toml").read_text())
     dev = _lock_pins(REPO / "requirements-dev.lock")
     run = _lock_pins(REPO / "requirements.lock")
-    sdk = tomllib.loads((REPO / "sdk" / "pyproject.toml").read_text())["project"]
+    sdk = tomllib.loads((REPO / "sdk" / "python" / "pyproject.toml").read_text())["project"]
     # the checkout's own distributions are installed from the working tree, never pinned
     local = _requirement_names([pyproject["project"]["name"], sdk["name"]])
     runtime = _requirement_names(pyproject["project"]["dependencies"] + sdk["dependencies"])
@@ -155,11 +155,11 @@ def test_dockerfile_runtime_contract():
     assert [rest for w, rest in ins if w == "VOLUME"] == ['["/data"]']
     # every package pyproject installs is copied into the image
     pyproject = tomllib.loads((REPO / "pyproject.toml").read_text())
-    includes = pyproject["tool"]["setuptools"]["packages"]["find"]["include"]
+    folders = pyproject["tool"]["setuptools"]["package-dir"].values()
     copied = {rest.split()[0].rstrip("/") for w, rest in ins
               if w == "COPY" and not rest.startswith("--from")}
-    for pattern in includes:
-        assert pattern.rstrip("*") in copied, f"package {pattern} not copied"
+    for folder in folders:
+        assert folder in copied, f"package folder {folder}/ not copied"
     assert {"pyproject.toml", "README.md", "requirements.lock"} <= {
         p for w, r in ins if w == "COPY" for p in r.split()[:-1]}
     # .dockerignore must not hide what the Dockerfile copies

@@ -140,7 +140,7 @@ def test_all_docs_examples_run_twice_in_a_row(live_server: str, tmp_path: Path) 
 def test_default_database_is_per_checkout(monkeypatch: pytest.MonkeyPatch) -> None:
     """``make serve`` in a checkout uses ``<checkout>/var`` (ignored by git), not a directory
     shared by every clone."""
-    from service.settings import Settings
+    from quadloc.service.settings import Settings
 
     monkeypatch.delenv("QUADLOC_DATA_DIR", raising=False)
     monkeypatch.delenv("QUADLOC_DATABASE_URL", raising=False)

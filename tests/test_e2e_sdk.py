@@ -19,15 +19,15 @@ import numpy as np
 import pytest
 from prometheus_client.parser import text_string_to_metric_families
 
-import sdk
+import quadloc_sdk as sdk
 from bench.reference_data import (
     CHESS_POSES_PATH,
     CHESS_SCENE_PATH,
     load_chess_poses,
     load_chess_scene_json,
 )
-from sdk import errors as sdk_errors
-from sdk import geometry as sg
+from quadloc_sdk import errors as sdk_errors
+from quadloc_sdk import geometry as sg
 
 #: Starts real servers / subprocesses: left out of the inner loop (pytest -m "not slow").
 pytestmark = pytest.mark.slow
@@ -60,7 +60,7 @@ def uploaded(client: sdk.QuadLocClient, chess_paths) -> sdk.MapRecord:
 def frames(uploaded: sdk.MapRecord, chess_paths):
     """(camera, [(world_from_camera_true, exact SimulatedFrame, noisy SimulatedFrame)])."""
     from bench.simulate import SimulationConfig, simulate_frame
-    from maps.model import scene_map_from_dict
+    from quadloc.maps.model import scene_map_from_dict
 
     _, poses_path = chess_paths
     geo_camera, camera_from_world_all, _ = load_chess_poses(poses_path)
@@ -328,7 +328,7 @@ def test_docs_demo_request_runs_as_written(live_server: str, capsys, monkeypatch
 
 
 def test_readme_tour_sdk_block_runs_as_written(live_server: str, capsys, monkeypatch):
-    from service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA
+    from quadloc.service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA
     from tests.test_api_live import readme_tour_block
 
     code = readme_tour_block("2", "python")

@@ -1,4 +1,4 @@
-"""The ellipsoid-side GTSAM factor (``factors.ellipsoid_factors``): rows equal to the shared
+"""The ellipsoid-side GTSAM factor (``quadloc.factors.ellipsoid_factors``): rows equal to the shared
 residual weighted and Huber-scaled, Jacobian blocks against central differences on the Pose3 /
 log-axes retractions, the behind-camera penalty, batched helpers against single evaluations."""
 
@@ -8,13 +8,17 @@ import gtsam
 import numpy as np
 import pytest
 
-from factors.ellipsoid_factors import (
+from quadloc.factors.ellipsoid_factors import (
     depth_margins,
     ellipsoid_views_factor,
     huber_row_scale,
 )
-from factors.ellipsoid_residuals import level_set_samples, observation_residual, stack_samples
-from factors.geometry import (
+from quadloc.factors.ellipsoid_residuals import (
+    level_set_samples,
+    observation_residual,
+    stack_samples,
+)
+from quadloc.factors.geometry import (
     Camera,
     Ellipse,
     Ellipsoid,
@@ -22,7 +26,7 @@ from factors.geometry import (
     invert_pose,
     project_ellipsoid,
 )
-from factors.pose_residuals import expmap_pose3
+from quadloc.factors.pose_residuals import expmap_pose3
 from tests.helpers import random_rotation
 
 CAM = Camera(500.0, 520.0, 320.0, 240.0, 640, 480)

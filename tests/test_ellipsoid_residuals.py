@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from factors.ellipsoid_residuals import level_set_samples, observation_residual
-from factors.geometry import Camera, Ellipse, Ellipsoid, invert_pose, project_ellipsoid
-from factors.pose_residuals import PoseResidualModel, expmap_pose3
+from quadloc.factors.ellipsoid_residuals import level_set_samples, observation_residual
+from quadloc.factors.geometry import Camera, Ellipse, Ellipsoid, invert_pose, project_ellipsoid
+from quadloc.factors.pose_residuals import PoseResidualModel, expmap_pose3
 from tests.helpers import random_rotation
 
 CAM = Camera(500.0, 520.0, 320.0, 240.0, 640, 480)
@@ -79,7 +79,7 @@ def test_zero_at_exact_projection() -> None:
 
 
 def test_batched_equals_single() -> None:
-    from factors.ellipsoid_residuals import stack_samples
+    from quadloc.factors.ellipsoid_residuals import stack_samples
 
     ell, T0, det0 = _setup(6)
     Ts, ss = [], []

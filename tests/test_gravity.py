@@ -1,6 +1,6 @@
-"""A client's gravity direction: a factor on the pose's tilt (``factors.gravity_factor``), a
-test of candidates and a veto of tilted answers (``service.localization.gravity``, ``Gravity``,
-``bench.simulate.simulate_gravity``)."""
+"""A client's gravity direction: a factor on the pose's tilt (``quadloc.factors.gravity_factor``), a
+test of candidates and a veto of tilted answers (``quadloc.service.localization.gravity``,
+``Gravity``, ``bench.simulate.simulate_gravity``)."""
 
 from __future__ import annotations
 
@@ -12,16 +12,20 @@ import pytest
 from bench.chess_eval import load_chess_map, load_chess_world_from_camera, pose_errors
 from bench.simulate import SimulationConfig, simulate_frame, simulate_gravity
 from bench.trust import reduce_frame
-from factors.geometry import invert_pose
-from factors.gravity_factor import GravityMeasurement, gravity_factor
-from factors.pose_factors import pose3
-from factors.pose_residuals import expmap_pose3
-from maps.compiled import compile_map
-from service.localization.confidence import TOLERANCE_ROTATION_DEG
-from service.localization.gravity import GRAVITY_GATE_SIGMAS, answer_gate_deg, tilt_errors_deg
-from service.localization.pipeline import localize
-from service.localization.refine import refine
-from service.localization.types import (
+from quadloc.factors.geometry import invert_pose
+from quadloc.factors.gravity_factor import GravityMeasurement, gravity_factor
+from quadloc.factors.pose_factors import pose3
+from quadloc.factors.pose_residuals import expmap_pose3
+from quadloc.maps.compiled import compile_map
+from quadloc.service.localization.confidence import TOLERANCE_ROTATION_DEG
+from quadloc.service.localization.gravity import (
+    GRAVITY_GATE_SIGMAS,
+    answer_gate_deg,
+    tilt_errors_deg,
+)
+from quadloc.service.localization.pipeline import localize
+from quadloc.service.localization.refine import refine
+from quadloc.service.localization.types import (
     Gravity,
     LocalizationInputError,
     LocalizationOptions,

@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 
 from bench.p2e import CAM, UP, look_at, random_pair_scene
-from factors.geometry import (
+from quadloc.factors.geometry import (
     Ellipse,
     Ellipsoid,
     invert_pose,
     project_ellipsoid,
     snap_to_rotation,
 )
-from service.localization.hypotheses import (
+from quadloc.service.localization.hypotheses import (
     DEDUPE_TOLERANCE,
     _frames,
     p2e_hypotheses,
@@ -182,7 +182,7 @@ def test_p3p_batch_equals_opencv_per_sample():
     sample's cv2.solveP3P solutions converted by cv2.Rodrigues and filtered by depth."""
     import cv2
 
-    from service.localization.hypotheses import p3p_hypotheses_batch
+    from quadloc.service.localization.hypotheses import p3p_hypotheses_batch
 
     rng = np.random.default_rng(5)
     img, obj, expected = [], [], []

@@ -1,4 +1,5 @@
-"""The compiled numeric kernels (``factors.jit``): compiled once, at start-up, for every request.
+"""The compiled numeric kernels (``quadloc.factors.jit``): compiled once, at start-up, for every
+request.
 
 Their results are checked where their formulas are (``test_overlap_batch.py`` against the scalar
 oracle, ``test_metrics.py`` / ``test_pose_factors.py`` against central differences, Monte Carlo
@@ -21,11 +22,11 @@ REPO = Path(__file__).resolve().parents[1]
 _SCRIPT = textwrap.dedent("""
     import json
     import numpy as np
-    from factors import geometry, metrics, overlap, pose_residuals
-    from factors.geometry import Camera, Ellipse, Ellipsoid
-    from factors.overlap import intersection_areas
-    from service.localization.refine import refine
-    from service.localization.types import Detection
+    from quadloc.factors import geometry, metrics, overlap, pose_residuals
+    from quadloc.factors.geometry import Camera, Ellipse, Ellipsoid
+    from quadloc.factors.overlap import intersection_areas
+    from quadloc.service.localization.refine import refine
+    from quadloc.service.localization.types import Detection
 
     def signatures():
         out = {}
@@ -69,8 +70,8 @@ _SCRIPT = textwrap.dedent("""
                                  quadrics)
     from bench.reference_data import load_chess_map
     from bench.simulate import SimulationConfig, simulate_frame
-    from maps.compiled import compile_map
-    from service.localization.pipeline import localize
+    from quadloc.maps.compiled import compile_map
+    from quadloc.service.localization.pipeline import localize
     cm = compile_map(load_chess_map())
     pose = np.eye(4)
     pose[:3, 3] = cm.ellipsoids[0].center - (0.0, 0.0, 2.0)
@@ -85,11 +86,12 @@ def test_requests_compile_no_kernel_that_start_up_did_not():
                          text=True, timeout=600, check=True)
     result = json.loads(out.stdout.strip().splitlines()[-1])
     before, after = result["before"], result["after"]
-    assert set(before) >= {"factors.overlap._batch", "factors.metrics._overlap_rows",
-                           "factors.geometry._projected_gaussians_kernel",
-                           "factors.pose_residuals._level_set_kernel",
-                           "factors.pose_residuals._camera_frame_kernel",
-                           "factors.pose_residuals._dual_conic_kernel"}
+    assert set(before) >= {"quadloc.factors.overlap._batch",
+                           "quadloc.factors.metrics._overlap_rows",
+                           "quadloc.factors.geometry._projected_gaussians_kernel",
+                           "quadloc.factors.pose_residuals._level_set_kernel",
+                           "quadloc.factors.pose_residuals._camera_frame_kernel",
+                           "quadloc.factors.pose_residuals._dual_conic_kernel"}
     for name, sigs in after.items():
         assert sigs == before.get(name, []), f"{name} was compiled again for a request"
 
@@ -98,7 +100,7 @@ def test_a_kernel_works_without_a_cache_directory():
     """numba caches next to the source file; a function without one (here defined by exec:
     no file; in production, a read-only file system) cannot be cached, and the kernel is then
     compiled in the process instead of failing."""
-    from factors.jit import _dispatcher
+    from quadloc.factors.jit import _dispatcher
 
     namespace: dict = {}
     exec("def twice(x):\n    return 2.0 * x\n", namespace)
@@ -108,7 +110,8 @@ def test_a_kernel_works_without_a_cache_directory():
 def test_importing_the_factors_does_not_import_numba():
     """Kernels bind at their first call: a process that never calls one (a CLI command on
     maps, the SDK's server-side peers) does not pay numba's import."""
-    code = ("import sys, factors.metrics, factors.pose_residuals, maps.store; "
+    code = ("import sys, quadloc.factors.metrics, quadloc.factors.pose_residuals, "
+            "quadloc.maps.store; "
             "print('numba' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True,
                          text=True, timeout=120, check=True)

@@ -1,9 +1,10 @@
 """The import graph matches the layers of docs/architecture.md.
 
-``factors`` (math, metrics, GTSAM factors) <- ``maps`` <- ``service.localization`` <-
-``service.api``; ``sdk`` stands alone (neither gtsam nor the server). Checked statically on every
-``import`` statement (function-level ones included), plus two run-time checks that reading the
-settings or the wire schemas loads neither gtsam nor OpenCV.
+``quadloc.factors`` (math, metrics, GTSAM factors) <- ``quadloc.maps`` <-
+``quadloc.service.localization`` <- ``quadloc.service.api``; ``quadloc_sdk`` stands alone (neither
+gtsam nor the server). Checked statically on every ``import`` statement (function-level ones
+included), plus two run-time checks that reading the settings or the wire schemas loads neither
+gtsam nor OpenCV.
 """
 
 from __future__ import annotations
@@ -19,18 +20,21 @@ REPO = Path(__file__).resolve().parents[1]
 
 #: package (path prefix, dotted) -> top-level names it must never import.
 FORBIDDEN: dict[str, tuple[str, ...]] = {
-    "factors": ("maps", "service", "bench", "sdk", "fastapi", "sqlalchemy"),
-    "maps": ("service", "bench", "fastapi"),
-    "service": ("bench",),
-    "service.localization": ("service.api", "service.tracking", "service.cli"),
-    "sdk": ("gtsam", "service", "factors", "maps", "bench"),
+    "quadloc.factors": ("quadloc.maps", "quadloc.service", "bench", "tests", "quadloc_sdk",
+                        "fastapi", "sqlalchemy"),
+    "quadloc.maps": ("quadloc.service", "bench", "tests", "fastapi"),
+    "quadloc.service": ("bench", "tests"),
+    "quadloc.service.localization": ("quadloc.service.api", "quadloc.service.tracking",
+                                     "quadloc.service.cli"),
+    "quadloc_sdk": ("gtsam", "quadloc", "bench", "tests"),
 }
+#: where each installed package's sources live in the repository
+SOURCES = {"quadloc": REPO, "quadloc_sdk": REPO / "sdk" / "python" / "quadloc_sdk"}
 
 
 def _modules(package: str) -> list[Path]:
-    root = REPO / Path(*package.split("."))
-    if package == "sdk":
-        root = REPO / "sdk"
+    top, *rest = package.split(".")
+    root = SOURCES[top].joinpath(*rest)
     return sorted(p for p in root.rglob("*.py") if ".venv" not in p.parts)
 
 
@@ -61,11 +65,12 @@ def test_import_graph_follows_the_layers(package: str) -> None:
 def test_the_checker_sees_a_violation(tmp_path: Path) -> None:
     """The static check would fail on a wrong arrow (guards against a checker that cannot fail)."""
     path = tmp_path / "m.py"
-    path.write_text("def f():\n    from service.api import app\n")
-    assert any(_hits(n, "service") for n in _imports(path))
+    path.write_text("def f():\n    from quadloc.service.api import app\n")
+    assert any(_hits(n, "quadloc.service") for n in _imports(path))
 
 
-@pytest.mark.parametrize("module", ["service.settings", "service.api.schemas", "service.limits"])
+@pytest.mark.parametrize("module", ["quadloc.service.settings", "quadloc.service.api.schemas",
+                                    "quadloc.service.limits"])
 def test_reading_settings_loads_neither_gtsam_nor_cv2(module: str) -> None:
     code = (f"import sys, {module}\n"
             "print(','.join(m for m in ('gtsam', 'cv2') if m in sys.modules))")

@@ -8,14 +8,14 @@ import math
 import numpy as np
 import pytest
 
-import service.localization.pipeline as pipeline
+import quadloc.service.localization.pipeline as pipeline
 from bench.chess_eval import load_chess_map, load_chess_world_from_camera
 from bench.reference_data import perturb_pose
 from bench.simulate import SimulationConfig, simulate_frame
-from factors.geometry import Ellipse, GeometryError
-from maps.compiled import compile_map
-from service.localization.pipeline import localize
-from service.localization.types import (
+from quadloc.factors.geometry import Ellipse, GeometryError
+from quadloc.maps.compiled import compile_map
+from quadloc.service.localization.pipeline import localize
+from quadloc.service.localization.types import (
     Detection,
     LocalizationInputError,
     LocalizationOptions,
@@ -222,7 +222,7 @@ def test_level_set_resampling_reaches_the_optimum_from_far():
     """The adaptive level-set samples are laid out for the misalignment at the start of a
     solve; from a far start one solve stops at a biased pose, and refine()'s second solve with
     the samples re-laid at its result reaches the optimum found from the ground truth."""
-    from service.localization.refine import _build_graph, _solve, refine
+    from quadloc.service.localization.refine import _build_graph, _solve, refine
 
     rng = np.random.default_rng(1)
     gaps_single, gaps_resampled = [], []
@@ -301,7 +301,7 @@ def test_budget_counts_the_solving_threads_cpu_time_so_load_does_not_change_the_
     import threading
     import time
 
-    import service.localization.budget as budget
+    import quadloc.service.localization.budget as budget
 
     monkeypatch.setattr(budget, "WALL_LIMIT_FACTOR", 100.0)
 
@@ -356,7 +356,7 @@ def test_deadline_clocks():
     gets no CPU (sleeping), on its wall-clock hard limit (WALL_LIMIT_FACTOR x the budget)."""
     import time
 
-    from service.localization.budget import WALL_LIMIT_FACTOR, Deadline, deadline_passed
+    from quadloc.service.localization.budget import WALL_LIMIT_FACTOR, Deadline, deadline_passed
 
     c0 = time.thread_time()
     d = Deadline.after(20.0)
@@ -381,8 +381,8 @@ def test_deadline_reads_the_cpu_clock_only_once_the_cpu_stop_is_reachable(monkey
     CPU clock read directly), and the bound held (the stop came after ``cpu_check_from``)."""
     import time
 
-    from service.localization import budget
-    from service.localization.budget import Deadline, earliest
+    from quadloc.service.localization import budget
+    from quadloc.service.localization.budget import Deadline, earliest
 
     c0 = time.thread_time()
     d = Deadline.after(30.0)

@@ -10,12 +10,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from factors.geometry import Ellipse, Ellipsoid, invert_pose, project_ellipsoid
-from maps.building.association import associate
-from maps.building.build import BuildTimeoutError, build_map
-from maps.building.joint import refine_jointly
-from maps.building.recording import Observation, OdometryNoise, parse_recording
-from maps.reconstruct import ellipsoid_errors
+from quadloc.factors.geometry import Ellipse, Ellipsoid, invert_pose, project_ellipsoid
+from quadloc.maps.building.association import associate
+from quadloc.maps.building.build import BuildTimeoutError, build_map
+from quadloc.maps.building.joint import refine_jointly
+from quadloc.maps.building.recording import Observation, OdometryNoise, parse_recording
+from quadloc.maps.reconstruct import ellipsoid_errors
 from tests.test_api_build import CAM, OBJECTS, _look_at, _recording
 
 
@@ -106,7 +106,7 @@ def test_narrow_cone_flags_the_depth_axis_and_a_size_prior_constrains_it() -> No
     assert q.view_spread_deg < 5
     assert 2 in q.unconstrained_axes  # the smallest (depth) semi-axis
     assert 0 not in q.unconstrained_axes  # the visible extent is constrained
-    from maps.building.recording import SizePrior
+    from quadloc.maps.building.recording import SizePrior
 
     res2 = refine_jointly(CAM, poses, obs, [("X", list(range(len(obs))), start)],
                           size_priors={"X": SizePrior(0.02, 0.05)})
@@ -118,7 +118,7 @@ def test_camera_refinement_moves_noisy_app_poses_towards_the_truth() -> None:
     """Exact detections seen from the true poses; app poses = truth with independent noise
     (0.3 deg, 5 mm) on every frame but the first. Object-level bundle adjustment (between
     factors from the noisy app poses) brings cameras and objects closer to the truth."""
-    from factors.pose_residuals import expmap_pose3
+    from quadloc.factors.pose_residuals import expmap_pose3
 
     rec_doc, _ = _recording(16)
     for f in rec_doc["frames"]:
@@ -172,7 +172,7 @@ def test_box_detections_are_accepted() -> None:
 def test_axis_floor_is_one_sided_with_the_right_jacobian() -> None:
     import gtsam
 
-    from maps.building.joint import _floor_factor
+    from quadloc.maps.building.joint import _floor_factor
 
     key = gtsam.symbol("l", 0)
     f = _floor_factor(key, math.log(0.01), 0.1)
@@ -195,7 +195,7 @@ def test_axis_floor_is_one_sided_with_the_right_jacobian() -> None:
 
 
 def test_odometry_noise_is_parsed_validated_and_a_random_walk() -> None:
-    from maps.building.recording import RecordingError
+    from quadloc.maps.building.recording import RecordingError
 
     doc, _ = _recording(4)
     rec = parse_recording(doc)

@@ -13,14 +13,19 @@ import numpy as np
 import pytest
 
 from bench.reference_data import CHESS_SCENE_PATH
-from factors.geometry import (
+from quadloc.factors.geometry import (
     ROTATION_EXACT_TOLERANCE,
     exact_norm,
     quaternion_wxyz_from_rotation,
     snap_to_rotation,
 )
-from maps.demo import load_demo_map
-from maps.model import HASH_DECIMALS, content_hash, scene_map_from_chess, scene_map_from_dict
+from quadloc.maps.demo import load_demo_map
+from quadloc.maps.model import (
+    HASH_DECIMALS,
+    content_hash,
+    scene_map_from_chess,
+    scene_map_from_dict,
+)
 
 
 @pytest.fixture(scope="module")

@@ -1,8 +1,9 @@
-"""maps.cache.CompiledMapCache: the one compiled-map cache (LRU bounds, TTL on a fake clock)."""
+"""quadloc.maps.cache.CompiledMapCache: the one compiled-map cache (LRU bounds, TTL on a fake
+clock)."""
 
 from __future__ import annotations
 
-from maps.cache import CompiledMapCache
+from quadloc.maps.cache import CompiledMapCache
 from tests.helpers import FakeClock
 
 

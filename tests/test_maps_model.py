@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 from bench.reference_data import CHESS_SCENE_PATH
-from factors.geometry import Ellipsoid, rotation_from_quaternion_wxyz
-from maps.compiled import compile_map
-from maps.demo import DEMO_MAP_PATH, load_demo_map
-from maps.model import (
+from quadloc.factors.geometry import Ellipsoid, rotation_from_quaternion_wxyz
+from quadloc.maps.compiled import compile_map
+from quadloc.maps.demo import DEMO_MAP_PATH, load_demo_map
+from quadloc.maps.model import (
     CHESS_JSON_SCHEMA,
     LIMITS,
     MAP_JSON_SCHEMA,
@@ -141,7 +141,7 @@ def test_demo_map_is_the_chess_map(chess_source: dict[str, Any]) -> None:
     a, b = demo.to_dict(), imported.to_dict()
     assert a["categories"] == b["categories"]
     # Numbers with a stated tolerance (another CPU/LAPACK may differ in the last bits), and the
-    # content hash, which is defined to be insensitive to that (maps.model.HASH_DECIMALS).
+    # content hash, which is defined to be insensitive to that (quadloc.maps.model.HASH_DECIMALS).
     for oa, ob in zip(a["objects"], b["objects"], strict=True):
         assert (oa["object_id"], oa["category"]) == (ob["object_id"], ob["category"])
         for key in ("center", "axes", "quaternion_wxyz"):
@@ -481,7 +481,7 @@ def test_half_turn_quaternions_of_either_sign_give_equal_objects() -> None:
     maps = [SceneMap("m", "M", (0.0, 0.0, 1.0), ("chair",), (o,)) for o in (a, b)]
     assert maps[0].content_hash == maps[1].content_hash
     # the same tie-break as the rotation -> quaternion conversion
-    from factors.geometry import quaternion_wxyz_from_rotation
+    from quadloc.factors.geometry import quaternion_wxyz_from_rotation
     np.testing.assert_allclose(quaternion_wxyz_from_rotation(a.ellipsoid.rotation),
                                a.quaternion_wxyz, atol=1e-12)
 

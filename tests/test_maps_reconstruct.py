@@ -13,9 +13,9 @@ import pytest
 
 from bench.reconstruction import visible_frames
 from bench.reference_data import load_chess_poses
-from factors.ellipsoid_factors import ellipsoid_views_factor
-from factors.ellipsoid_residuals import dual_quadric, stack_samples
-from factors.geometry import (
+from quadloc.factors.ellipsoid_factors import ellipsoid_views_factor
+from quadloc.factors.ellipsoid_residuals import dual_quadric, stack_samples
+from quadloc.factors.geometry import (
     Camera,
     Ellipse,
     Ellipsoid,
@@ -24,8 +24,8 @@ from factors.geometry import (
     project_ellipsoid,
     snap_to_rotation,
 )
-from maps.demo import load_demo_map
-from maps.reconstruct import (
+from quadloc.maps.demo import load_demo_map
+from quadloc.maps.reconstruct import (
     FrameObservations,
     LabelledEllipse,
     ReconstructionError,
@@ -295,7 +295,7 @@ def test_build_scene_map_from_labelled_frames(chess_views) -> None:
         assert obj.category == truth.category  # majority vote beats the one wrong label
         err = ellipsoid_errors(obj.ellipsoid, truth.ellipsoid)
         assert err["center_m"] < 1e-6 and err["shape_rel"] < 1e-6, (obj.object_id, err)
-    assert scene.metadata["built_by"] == "maps.reconstruct.build_scene_map"
+    assert scene.metadata["built_by"] == "quadloc.maps.reconstruct.build_scene_map"
 
 
 def test_per_view_sigmas_downweight_a_bad_view(chess_views) -> None:

@@ -21,12 +21,12 @@ import numpy as np
 import pytest
 import sqlalchemy as sa
 
-from factors.geometry import Ellipsoid
-from maps.compiled import CompiledMap
-from maps.demo import load_demo_map
-from maps.errors import MapAlreadyExists, MapNotFound, StoreUnavailable, VersionConflict
-from maps.model import MapObject, MapValidationError, SceneMap
-from maps.store import MapStore, normalize_url, versions_table
+from quadloc.factors.geometry import Ellipsoid
+from quadloc.maps.compiled import CompiledMap
+from quadloc.maps.demo import load_demo_map
+from quadloc.maps.errors import MapAlreadyExists, MapNotFound, StoreUnavailable, VersionConflict
+from quadloc.maps.model import MapObject, MapValidationError, SceneMap
+from quadloc.maps.store import MapStore, normalize_url, versions_table
 
 PG_BASE = "postgresql+psycopg://postgres@127.0.0.1:5432/test"
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -94,7 +94,7 @@ def _small_map(map_id: str = "office", name: str = "Office", shift: float = 0.0)
 
 def _independent_hash(scene_map: SceneMap) -> str:
     """sha256 of the exported document, geometric numbers rounded to 12 decimals (the documented
-    hashed form, maps.model.HASH_DECIMALS), written independently of maps.model."""
+    hashed form, quadloc.maps.model.HASH_DECIMALS), written independently of quadloc.maps.model."""
     doc = scene_map.to_dict()
 
     def r12(values: list[float]) -> list[float]:
@@ -338,8 +338,8 @@ def test_exception_between_inserts_leaves_nothing(store: MapStore,
 
 _CRASH_CHILD = r"""
 import os, sys, time
-from maps.store import MapStore
-from maps.model import SceneMap
+from quadloc.maps.store import MapStore
+from quadloc.maps.model import SceneMap
 url, doc = sys.argv[1], sys.stdin.read()
 store = MapStore(url, migrate=False)
 original = MapStore._insert_version
@@ -441,7 +441,7 @@ def test_update_rejects_impossible_expected_versions_by_name(store: MapStore, ba
 
 def test_query_tables_mirror_the_migrated_schema(store: MapStore) -> None:
     """The Table declarations used for queries carry the migration's CHECK constraints."""
-    from maps.store import maps_table
+    from quadloc.maps.store import maps_table
 
     inspector = sa.inspect(store.engine)
     for table in (maps_table, versions_table):

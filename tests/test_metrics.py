@@ -13,8 +13,8 @@ from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 from scipy.linalg import sqrtm
 
-from factors.geometry import Ellipse
-from factors.metrics import (
+from quadloc.factors.geometry import Ellipse
+from quadloc.factors.metrics import (
     DEFAULT_LEVEL_SET_SCALE,
     METRIC_NAMES,
     clipped_bbox,
@@ -27,7 +27,7 @@ from factors.metrics import (
     residual,
     residual_size,
 )
-from factors.overlap import quadrant_areas
+from quadloc.factors.overlap import quadrant_areas
 from tests.helpers import level, transformed
 from tests.oracles import metrics_reference
 
@@ -214,7 +214,7 @@ def test_iou_is_flat_for_disjoint_ellipses():
     values = [cost("iou", ref, Ellipse(x, 5, 15, 8, 1.0)) for x in (60.0, 100.0, 500.0)]
     assert values == [1.0, 1.0, 1.0]
     # the quadrant rows still sum to Delta = 1 (their squares are not flat: they are smallest
-    # when the projection spreads evenly over the detection's quadrants, factors.metrics)
+    # when the projection spreads evenly over the detection's quadrants, quadloc.factors.metrics)
     assert residual("iou", ref, Ellipse(60, 5, 15, 8, 1.0)).sum() == pytest.approx(1.0)
 
 
@@ -580,7 +580,7 @@ def test_quadrant_areas_against_monte_carlo():
 
 @pytest.mark.parametrize("seed", range(4))
 def test_quadrant_gradients_match_central_differences(seed):
-    """The exact boundary-integral gradients (factors.overlap "Derivatives") of the quadrant
+    """The exact boundary-integral gradients (quadloc.factors.overlap "Derivatives") of the quadrant
     areas and of the iou / giou rows, against central differences of the exact values w.r.t.
     the second ellipse's (mu_x, mu_y, s00, s01, s11): random pairs (crossing, contained,
     disjoint, hulls with tangent segments)."""

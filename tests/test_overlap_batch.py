@@ -1,4 +1,4 @@
-"""The vectorised exact overlap areas (``factors.overlap.quadrant_areas_batch``, the pose
+"""The vectorised exact overlap areas (``quadloc.factors.overlap.quadrant_areas_batch``, the pose
 factors' path) against the scalar reference construction (the oracle
 ``tests.oracles.overlap_reference.quadrant_areas``; the production areas are also checked against
 Monte Carlo, rasters and central differences in ``test_metrics.py``),
@@ -14,8 +14,8 @@ import math
 import numpy as np
 import pytest
 
-from factors.metrics import overlap_residual
-from factors.overlap import quadrant_areas_batch
+from quadloc.factors.metrics import overlap_residual
+from quadloc.factors.overlap import quadrant_areas_batch
 from tests.oracles.overlap_reference import quadrant_areas
 
 
@@ -75,7 +75,7 @@ def test_batch_equals_the_scalar_reference(gradient):
 def _gradient_tol(j: int, tol: float, name: str = "") -> float:
     """Ellipses 1e-7 apart (pairs 120-159 of :func:`_cases`): the hull's common tangents are
     zeros of a support-function difference of size ~1e-7 of the ellipses' size. The batch
-    takes them as exact roots of the tangency condition (``factors.overlap._hull``); the
+    takes them as exact roots of the tangency condition (``quadloc.factors.overlap._hull``); the
     oracle compares the support functions on a direction grid with a tolerance of 1e-10 of the
     size, within which it cannot place a tangent: where the supports differ by < 3e-9 px over
     ~1e-2 rad (pair 121), its tangent is ~8e-3 rad off the root. With the two boundaries
@@ -202,7 +202,7 @@ def test_disjoint_hull_rows_are_giou_rows_only_for_disjoint_pairs():
 
 
 def test_iou_rows_stay_non_negative_for_nearly_identical_ellipses():
-    """Contours closer than 1e-9 count as identical in factors.overlap (the intersection is
+    """Contours closer than 1e-9 count as identical in quadloc.factors.overlap (the intersection is
     then the whole second ellipse); the rows cap the intersection per quadrant at both
     ellipses' quadrant areas, so they stay >= 0 and sum to ~Delta (~6e-10 here: a 1e-8 px
     shift of a 3 x 20 px ellipse)."""

@@ -1,6 +1,6 @@
 """The localization overlay: the SDK's pure-Python projection against the solver's
-(factors.geometry), the SVG drawn by the server (Accept: image/svg+xml) and by the SDK from the
-same answer, and content negotiation."""
+(quadloc.factors.geometry), the SVG drawn by the server (Accept: image/svg+xml) and by the SDK from
+the same answer, and content negotiation."""
 
 from __future__ import annotations
 
@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from factors.geometry import Camera, DegenerateProjectionError, Ellipsoid, invert_pose
-from factors.geometry import project_ellipsoid as solver_projection
-from maps.demo import load_demo_map
-from sdk.overlay import overlay_svg, project_ellipsoid
-from service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, LOCALIZE_EXAMPLE
-from service.api.inspector import wants_svg
+from quadloc.factors.geometry import Camera, DegenerateProjectionError, Ellipsoid, invert_pose
+from quadloc.factors.geometry import project_ellipsoid as solver_projection
+from quadloc.maps.demo import load_demo_map
+from quadloc.service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, LOCALIZE_EXAMPLE
+from quadloc.service.api.inspector import wants_svg
+from quadloc_sdk.overlay import overlay_svg, project_ellipsoid
 from tests.conftest import make_test_app
 from tests.helpers import angle_diff, surface_points
 
@@ -168,7 +168,12 @@ def test_offline_docs_pages_point_at_local_assets(client: TestClient) -> None:
 
 
 def test_drawing_escapes_text_and_skips_what_is_off_frame() -> None:
-    from sdk.overlay import DrawnDetection, DrawnProjection, ImageEllipse, render_overlay_svg
+    from quadloc_sdk.overlay import (
+        DrawnDetection,
+        DrawnProjection,
+        ImageEllipse,
+        render_overlay_svg,
+    )
 
     inside = DrawnProjection("in", "chair", ImageEllipse(100, 100, 20, 10, 0.3))
     outside = DrawnProjection("out", "chair", ImageEllipse(900, 100, 20, 10, 0.0))

@@ -1,11 +1,11 @@
 """The metric GTSAM factors on the camera pose: residuals, Jacobians, noise, penalty.
 
 Independent references: residuals against the scalar oracle (``tests.oracles.metrics_reference``,
-which is ``factors.metrics.residual`` for the metrics without a second implementation) on
+which is ``quadloc.factors.metrics.residual`` for the metrics without a second implementation) on
 ellipses projected by
-``factors.geometry.project_ellipsoid`` (and the level set against ``Ellipse.level`` directly);
-Jacobians against central differences through ``gtsam.Pose3.retract``; GTSAM's weighted error
-against ``0.5 * cost / sigma``.
+``quadloc.factors.geometry.project_ellipsoid`` (and the level set against ``Ellipse.level``
+directly); Jacobians against central differences through ``gtsam.Pose3.retract``; GTSAM's weighted
+error against ``0.5 * cost / sigma``.
 """
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ import gtsam
 import numpy as np
 import pytest
 
-from factors import metrics
-from factors.geometry import (
+from quadloc.factors import metrics
+from quadloc.factors.geometry import (
     Camera,
     Ellipse,
     Ellipsoid,
@@ -26,14 +26,14 @@ from factors.geometry import (
     project_ellipsoid,
     rotation_from_quaternion_wxyz,
 )
-from factors.pose_factors import (
+from quadloc.factors.pose_factors import (
     ROBUST_KERNELS,
     batched_pose_factor,
     make_noise_model,
     pose_factor,
     pose_factors,
 )
-from factors.pose_residuals import (
+from quadloc.factors.pose_residuals import (
     ANALYTIC_METRICS,
     DEFAULT_PENALTY_COST,
     PoseResidualModel,
@@ -100,7 +100,7 @@ def test_level_set_residual_matches_independent_level_functions(scene):
         proj = project_ellipsoid(CAMERA, invert_pose(pose), e)
         x = model.sample_points[j]
         np.testing.assert_allclose(r[j], level(d, x) - level(proj, x), atol=1e-9)
-        # the same layout as factors.metrics (samples fixed at the initial pose)
+        # the same layout as quadloc.factors.metrics (samples fixed at the initial pose)
         np.testing.assert_allclose(r[j], metrics.residual("level_set", d, proj), atol=1e-9)
         np.testing.assert_allclose(x, metrics.level_set_sample_points(d, proj), atol=1e-9)
 
@@ -171,8 +171,8 @@ def test_level_set_is_invariant_to_the_world_frame_and_matches_the_metric(seed):
     """The level set's evaluation runs in the world frame (A^-1 by Sherman-Morrison, then
     rotated into the camera): re-expressing the map and the pose in another world frame (large
     rotation and translation) must not change the residuals nor the Jacobians (camera-frame
-    tangent), and the Jacobians equal central differences of ``factors.metrics.residual`` with
-    the model's (grown) sample layout."""
+    tangent), and the Jacobians equal central differences of ``quadloc.factors.metrics.residual``
+    with the model's (grown) sample layout."""
     rng = np.random.default_rng(seed)
     ells = random_scene(rng, 6)
     dets = [transformed(project_ellipsoid(CAMERA, np.eye(4), e), 0.05, [25.0, -10.0])
@@ -210,7 +210,7 @@ def test_level_set_is_invariant_to_the_world_frame_and_matches_the_metric(seed):
 @pytest.mark.parametrize("metric", ["algebraic", "frobenius", "wasserstein", "bhattacharyya",
                                     "bbox", "qbbox", "iou", "giou"])
 def test_smooth_metric_jacobians_match_numerical(scene, metric):
-    """Analytic Jacobians against central differences of ``factors.metrics.residual``.
+    """Analytic Jacobians against central differences of ``quadloc.factors.metrics.residual``.
 
     qbbox has no analytic Jacobian: its model uses central differences too, so for it this is
     only a PLUMBING check (right pose perturbation, step and row order), not a check of
@@ -397,8 +397,8 @@ def test_lm_never_ends_behind_the_camera_when_the_truth_is_valid(metric):
     """Regression: with a fixed penalty cost of 1e8, the px^4-scaled algebraic/frobenius costs
     (~5e10 at these starts) were larger than the penalty, so LM stepped the close object
     behind the camera and stayed there (seeds 4 and 5 ended 'invalid_projection')."""
-    from service.localization.refine import refine
-    from service.localization.types import Detection
+    from quadloc.service.localization.refine import refine
+    from quadloc.service.localization.types import Detection
 
     truth = np.eye(4)  # world_from_camera
     for seed in range(8):
@@ -417,7 +417,7 @@ def test_lm_never_ends_behind_the_camera_when_the_truth_is_valid(metric):
 @pytest.mark.parametrize("metric", metrics.METRIC_NAMES)
 def test_penalty_exceeds_valid_costs_near_the_principal_plane(metric):
     """The module docstring's claim: at the smallest valid margin (just above
-    ``min_depth_margin``) the valid cost, from ``factors.metrics.cost`` on the independently
+    ``min_depth_margin``) the valid cost, from ``quadloc.factors.metrics.cost`` on the independently
     projected ellipse, is below the penalty cost of the same pair just across the boundary."""
     e = Ellipsoid(np.array([0.0, 0.0, 0.0]), np.array([1.0, 0.6, 0.8]), np.eye(3))  # d_s = 1 m
     camera = Camera(1000.0, 1000.0, 320.0, 240.0, 640, 480)

@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-import sdk
-from factors.geometry import rotation_from_quaternion_wxyz
-from sdk.geometry import (
+import quadloc_sdk as sdk
+from quadloc.factors.geometry import rotation_from_quaternion_wxyz
+from quadloc.service.api.examples import LOCALIZE_EXAMPLE, MAP_EXAMPLE
+from quadloc_sdk.geometry import (
     column_major_from_matrix,
     matrix_from_column_major,
     matrix_from_quaternion_wxyz,
@@ -21,7 +22,6 @@ from sdk.geometry import (
     unity_pose_from_world_from_camera,
     world_from_camera_opencv_to_opengl,
 )
-from service.api.examples import LOCALIZE_EXAMPLE, MAP_EXAMPLE
 from tests.conftest import make_test_app
 
 

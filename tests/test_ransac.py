@@ -7,16 +7,16 @@ import math
 import numpy as np
 import pytest
 
-from factors import metrics
-from factors.geometry import (
+from quadloc.factors import metrics
+from quadloc.factors.geometry import (
     Ellipse,
     Ellipsoid,
     invert_pose,
     project_ellipsoid,
 )
-from maps.compiled import compile_map
-from maps.model import MapObject, SceneMap
-from service.localization.ransac import (
+from quadloc.maps.compiled import compile_map
+from quadloc.maps.model import MapObject, SceneMap
+from quadloc.service.localization.ransac import (
     MatchScorer,
     _ellipse_points,
     greedy_assignment,
@@ -198,7 +198,7 @@ def test_sample_counts_are_per_label_and_enumeration_is_complete():
     """count_samples (closed form per label) == a brute-force walk over detection tuples."""
     import itertools
 
-    from service.localization.ransac import _enumerate_samples, count_samples
+    from quadloc.service.localization.ransac import _enumerate_samples, count_samples
 
     rng = np.random.default_rng(6)
     cm = compile_map(synthetic_map(rng))  # labels a a a b b c d e
@@ -220,7 +220,11 @@ def test_most_promising_first_is_the_stable_sort_of_every_sample(seed):
     """_most_promising_first (triples sorted, their samples generated lazily) == every sample
     of _iter_samples stably sorted by (compatible-object product, -triangle area), also with
     duplicate detections (equal keys of different triples: their samples interleave)."""
-    from service.localization.ransac import _iter_samples, _most_promising_first, _triangle_areas
+    from quadloc.service.localization.ransac import (
+        _iter_samples,
+        _most_promising_first,
+        _triangle_areas,
+    )
 
     rng = np.random.default_rng(seed)
     cm = compile_map(synthetic_map(rng))  # labels a a a b b c d e
@@ -247,7 +251,11 @@ def test_sweep_triple_counts_match_a_direct_count(seed):
     import itertools
     from collections import Counter
 
-    from service.localization.ransac import SWEEP_MAX_SAMPLES, _sweep_samples, _triangle_areas
+    from quadloc.service.localization.ransac import (
+        SWEEP_MAX_SAMPLES,
+        _sweep_samples,
+        _triangle_areas,
+    )
 
     rng = np.random.default_rng(seed)
     cm = compile_map(synthetic_map(rng))  # labels a a a b b c d e
@@ -344,7 +352,7 @@ def test_pose_acceptance_uses_min_inliers_and_one_to_one_counts(monkeypatch, cas
     """min_inliers=3. Pose 0 outscores pose 1 on the per-detection-best sum but has only 2
     one-to-one inliers (case 1: the third IoU is below the threshold; case 2: two detections
     share object 0); pose 1 has 3 one-to-one inliers at a lower score and must be chosen."""
-    import service.localization.ransac as ransac_module
+    import quadloc.service.localization.ransac as ransac_module
 
     dense = np.zeros((2, 3, 3))
     if case == "higher_score_fewer_inliers":
@@ -382,7 +390,7 @@ def _crowded(n: int, n_det: int, seed: int = 11):
 def test_blocked_and_pruned_iou_equals_the_direct_estimate(monkeypatch):
     """dense_iou (blocks, bounding-circle and area pruning) == iou_estimates of every pair at
     once (the unblocked formula), wherever the value can reach the floor."""
-    import service.localization.ransac as rm
+    import quadloc.service.localization.ransac as rm
 
     cm, scorer = _crowded(40, 12)
     poses = np.array([invert_pose(look_at(np.array([x, -4.0, 0.2]), np.zeros(3)))
@@ -432,7 +440,7 @@ def test_search_memory_does_not_grow_with_hypotheses_or_candidates():
 
 
 def test_scoring_past_the_scorers_deadline_raises():
-    from service.localization.ransac import ScoringTimeoutError
+    from quadloc.service.localization.ransac import ScoringTimeoutError
 
     _, scorer = _crowded(50, 10)
     scorer.deadline = 0.0  # long past
@@ -458,7 +466,7 @@ def test_early_exit_still_finds_every_competitor_that_explains_the_frame():
     """The first batch explains the frame (early exit), and the search still returns the rolled
     poses that explain it too (the competitor sweep runs every assignment of one detection
     triple): the ambiguity check gets them."""
-    from service.localization.ransac import _sweep_samples, distinct_poses
+    from quadloc.service.localization.ransac import _sweep_samples, distinct_poses
 
     _cm, scorer, _ = _square_of_spheres()
 
@@ -480,8 +488,8 @@ def test_early_exit_still_finds_every_competitor_that_explains_the_frame():
 
 
 def test_symmetric_map_is_ambiguous_not_a_confident_pose():
-    from service.localization.pipeline import localize
-    from service.localization.types import Detection, LocalizationOptions
+    from quadloc.service.localization.pipeline import localize
+    from quadloc.service.localization.types import Detection, LocalizationOptions
 
     cm, _scorer, camera_from_world = _square_of_spheres()
     dets = [Detection(project_ellipsoid(CAM, camera_from_world, e), "a", None)

@@ -3,9 +3,9 @@ reduces its cost, sigma weighting (paper eq. 8), robust kernels, prior, covarian
 projections, input validation.
 
 Independent references: ground-truth poses of the real data set; the weighted objective
-``sum_j sigma_j^-1 Delta_j`` recomputed from ``factors.metrics.cost`` on ellipses projected by
-``factors.geometry.project_ellipsoid`` (its numerical gradient vanishes at the refined pose); the
-covariance against the inverse of ``J^T W J`` built from numerical Jacobians.
+``sum_j sigma_j^-1 Delta_j`` recomputed from ``quadloc.factors.metrics.cost`` on ellipses projected
+by ``quadloc.factors.geometry.project_ellipsoid`` (its numerical gradient vanishes at the refined
+pose); the covariance against the inverse of ``J^T W J`` built from numerical Jacobians.
 """
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from bench.reference_data import CHESS_SCENE_PATH, load_chess_map, load_chess_poses, perturb_pose
-from factors import metrics
-from factors.geometry import (
+from quadloc.factors import metrics
+from quadloc.factors.geometry import (
     Camera,
     DegenerateProjectionError,
     Ellipse,
@@ -27,8 +27,8 @@ from factors.geometry import (
     project_ellipsoid,
     rotation_from_quaternion_wxyz,
 )
-from service.localization.refine import STATUSES, RefinementResult, refine
-from service.localization.types import Detection
+from quadloc.service.localization.refine import STATUSES, RefinementResult, refine
+from quadloc.service.localization.types import Detection
 from tests.helpers import PerfCounterJump, retract
 
 CAMERA = Camera(500.0, 510.0, 320.0, 240.0, 640, 480)
@@ -151,7 +151,7 @@ def test_lm_reduces_every_metric_cost(metric):
     pos0, _ = pose_errors(T0, T_true)
     pos, _ = pose_errors(res.world_from_camera, T_true)
     # exact detections: back to the true pose (iou / giou: cone-shaped quadrant rows, whose
-    # Gauss-Newton step lands on the apex, factors.metrics)
+    # Gauss-Newton step lands on the apex, quadloc.factors.metrics)
     assert end < 1e-8 * start, (metric, start, end, res.status)
     assert pos < 1e-6 < pos0
     # initial_error / total_error are GTSAM errors with the sample layout of their own solve;
@@ -482,7 +482,7 @@ def test_batched_covariance_equals_gtsam_marginals(metric):
     the Jacobians themselves are checked against central differences in test_pose_factors."""
     import gtsam
 
-    from factors.pose_factors import pose_factors
+    from quadloc.factors.pose_factors import pose_factors
 
     rng = np.random.default_rng(21)
     ells = synthetic_scene(rng, 6)
@@ -513,7 +513,7 @@ def test_batched_covariance_equals_gtsam_marginals(metric):
 def test_iou_recovers_from_a_start_where_a_projection_misses_its_detection(seed, n):
     """Exact detections, a small object (radii 3 cm at 3-6 m, ~3-5 px) whose projection at the
     start (0.12 m off) does not touch its detection, where 1 - IoU is flat: the pose factors'
-    iou rows use the giou hull term for disjoint pairs (factors.metrics, iou), so the solve
+    iou rows use the giou hull term for disjoint pairs (quadloc.factors.metrics, iou), so the solve
     returns to the true pose (with the plain iou rows these two solves end 6.3 m / 0.31 m
     away)."""
     rng = np.random.default_rng(seed)
@@ -536,7 +536,7 @@ def test_batched_covariance_reasons_for_rank_deficient_and_non_finite_informatio
     gives (J^T W J)^-1 (checked against numpy's inverse)."""
     from types import SimpleNamespace
 
-    from service.localization.refine import _batched_covariance
+    from quadloc.service.localization.refine import _batched_covariance
 
     rng = np.random.default_rng(4)
 
@@ -560,12 +560,12 @@ def test_batched_covariance_reasons_for_rank_deficient_and_non_finite_informatio
 
 
 def test_the_refine_module_is_reachable_by_its_name():
-    """``import service.localization.refine as m`` gives the module (whose constants the
+    """``import quadloc.service.localization.refine as m`` gives the module (whose constants the
     solver reads), not the function of the same name: setting a constant on the function was
     silently ignored before (a wrong conclusion of an experiment, docs/results.md)."""
     import types
 
-    import service.localization.refine as m
+    import quadloc.service.localization.refine as m
 
     assert isinstance(m, types.ModuleType) and m.refine is refine
     assert hasattr(m, "OVERLAP_NIELSEN_DAMPING")
@@ -575,7 +575,7 @@ def test_overlap_damping_flag_is_read_at_every_solve(monkeypatch):
     """The LM parameters are cached, but on the flag's value: switching
     ``OVERLAP_NIELSEN_DAMPING`` after a solve takes effect (an experiment that sets it is not
     silently ignored)."""
-    import service.localization.refine as m
+    import quadloc.service.localization.refine as m
 
     assert not m._lm_params(50, "iou").getUseFixedLambdaFactor()
     assert m._lm_params(50, "level_set").getUseFixedLambdaFactor()

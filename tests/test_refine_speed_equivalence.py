@@ -2,7 +2,8 @@
 memoised level-set camera frame, the per-camera constants of the dual-conic metrics.
 
 References: GTSAM's default (multifrontal) LM on the same graph; freshly built residual models;
-``factors.metrics.residual`` on ellipses projected by ``factors.geometry.project_ellipsoid``.
+``quadloc.factors.metrics.residual`` on ellipses projected by
+``quadloc.factors.geometry.project_ellipsoid``.
 """
 
 from __future__ import annotations
@@ -12,11 +13,11 @@ import numpy as np
 import pytest
 
 from bench.reference_data import exact_projections, load_chess_map, load_chess_poses, perturb_pose
-from factors import metrics
-from factors.geometry import Camera, invert_pose, project_ellipsoid
-from factors.pose_factors import pose3, pose_factors
-from factors.pose_residuals import PoseResidualModel
-from service.localization.refine import _lm_params, _shared_lm_params
+from quadloc.factors import metrics
+from quadloc.factors.geometry import Camera, invert_pose, project_ellipsoid
+from quadloc.factors.pose_factors import pose3, pose_factors
+from quadloc.factors.pose_residuals import PoseResidualModel
+from quadloc.service.localization.refine import _lm_params, _shared_lm_params
 
 
 def chess_problems(n: int, noise_px: float = 0.0, seed: int = 3):

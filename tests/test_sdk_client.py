@@ -1,5 +1,5 @@
 """SDK client against httpx.MockTransport: retries/backoff, error mapping, request building,
-response parsing, the async twin, and the import isolation of the ``sdk`` package."""
+response parsing, the async twin, and the import isolation of the ``quadloc_sdk`` package."""
 
 from __future__ import annotations
 
@@ -19,9 +19,9 @@ import numpy as np
 import pydantic
 import pytest
 
-import sdk
-from sdk import errors as errs
-from sdk.models import (
+import quadloc_sdk as sdk
+from quadloc_sdk import errors as errs
+from quadloc_sdk.models import (
     Camera,
     Detection,
     Ellipse,
@@ -30,7 +30,7 @@ from sdk.models import (
     LocalizeRequest,
     PosePrior,
 )
-from sdk.retry import RetryPolicy, parse_retry_after
+from quadloc_sdk.retry import RetryPolicy, parse_retry_after
 
 REPO = Path(__file__).resolve().parents[1]
 CAMERA = Camera(fx=532.57, fy=531.54, cx=320, cy=240, width=640, height=480)
@@ -457,7 +457,7 @@ def test_async_client_retries_and_maps_errors():
 
 
 def test_sdk_requests_validate_against_the_server_schema():
-    schemas = pytest.importorskip("service.api.schemas")
+    schemas = pytest.importorskip("quadloc.service.api.schemas")
     req = LocalizeRequest(
         camera=CAMERA, detections=DETS, frame_id="x", timestamp=1.0,
         prior=PosePrior.from_matrix(np.eye(4), np.eye(6) * 0.01, convention="opengl"),
@@ -477,7 +477,7 @@ def test_sdk_requests_validate_against_the_server_schema():
     assert set(schemas.DetectionIn.model_fields) == set(Detection.model_fields)
     assert set(schemas.CameraIn.model_fields) == set(Camera.model_fields)
     assert set(schemas.LocalizeRequest.model_fields) == set(LocalizeRequest.model_fields)
-    assert set(sdk.METRICS) == set(__import__("service.localization.types",
+    assert set(sdk.METRICS) == set(__import__("quadloc.service.localization.types",
                                               fromlist=["METRICS"]).METRICS)
     # a response serialised by the server's model parses in the SDK with the same values
     body = _response_body()
@@ -489,16 +489,17 @@ def test_sdk_requests_validate_against_the_server_schema():
         assert dumped[key] == value, key
     assert set(schemas.LocalizeResponse.model_fields) <= set(sdk.LocalizeResponse.model_fields)
     # and the server's documented response example (once generated) parses too
-    examples = pytest.importorskip("service.api.examples")
+    examples = pytest.importorskip("quadloc.service.api.examples")
     if examples.LOCALIZE_RESPONSE_EXAMPLE:
         assert sdk.LocalizeResponse.model_validate(examples.LOCALIZE_RESPONSE_EXAMPLE).map_id
 
 
 def test_importing_sdk_pulls_in_neither_gtsam_nor_the_server():
     code = (
-        "import sys, sdk, sdk.geometry, sdk.client, sdk.models, sdk.errors, sdk.retry\n"
+        "import sys, quadloc_sdk, quadloc_sdk.geometry, quadloc_sdk.client, quadloc_sdk.models, "
+        "quadloc_sdk.errors, quadloc_sdk.retry\n"
         "bad = sorted(m for m in sys.modules if m.split('.')[0] in "
-        "('gtsam', 'service', 'factors', 'maps', 'fastapi', 'uvicorn', 'sqlalchemy'))\n"
+        "('gtsam', 'quadloc', 'fastapi', 'uvicorn', 'sqlalchemy'))\n"
         "print(','.join(bad))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

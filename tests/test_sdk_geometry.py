@@ -12,9 +12,9 @@ from hypothesis import strategies as st
 from scipy.linalg import expm
 from scipy.spatial.transform import Rotation
 
-from factors.geometry import Ellipse as RefEllipse
-from sdk import geometry as g
-from sdk.models import Box, Ellipse
+from quadloc.factors.geometry import Ellipse as RefEllipse
+from quadloc_sdk import geometry as g
+from quadloc_sdk.models import Box, Ellipse
 from tests.helpers import angle_diff, level
 
 RNG = np.random.default_rng(20261121)

@@ -1,4 +1,4 @@
-"""The light SDK distribution: ``pip install ./sdk`` into a fresh virtual environment (no
+"""The light SDK distribution: ``pip install ./sdk/python`` into a fresh virtual environment (no
 system site-packages) brings only httpx and pydantic, and the client, its models and the
 overlay work there without numpy, gtsam or the server.
 
@@ -23,10 +23,10 @@ CHECK = r'''
 import importlib.util, json, sys
 from pathlib import Path
 import httpx
-import sdk
-from sdk.overlay import overlay_svg
+import quadloc_sdk as sdk
+from quadloc_sdk.overlay import overlay_svg
 
-for heavy in ("numpy", "gtsam", "cv2", "fastapi", "sqlalchemy", "service", "factors", "maps"):
+for heavy in ("numpy", "gtsam", "cv2", "fastapi", "sqlalchemy", "quadloc"):
     assert importlib.util.find_spec(heavy) is None, f"{heavy} is installed with the light SDK"
 assert Path(sdk.__file__).parent.joinpath("py.typed").is_file()
 
@@ -73,7 +73,7 @@ print("LIGHT-SDK-OK", sdk.__version__)
 def test_light_sdk_installs_alone_and_works(tmp_path: Path) -> None:
     from fastapi.testclient import TestClient
 
-    from service.api.examples import LOCALIZE_EXAMPLE
+    from quadloc.service.api.examples import LOCALIZE_EXAMPLE
     from tests.conftest import make_test_app
 
     # A real answer and map document from the server, for the isolated client to consume.
@@ -85,7 +85,7 @@ def test_light_sdk_installs_alone_and_works(tmp_path: Path) -> None:
                                 "map": scene_map}))
 
     src = tmp_path / "sdk-src"
-    shutil.copytree(REPO / "sdk", src, ignore=shutil.ignore_patterns(
+    shutil.copytree(REPO / "sdk" / "python", src, ignore=shutil.ignore_patterns(
         "build", "*.egg-info", "__pycache__"))
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=60)

@@ -16,8 +16,8 @@ from bench.simulate import (
     simulate_frames,
     sunflower_disk,
 )
-from factors.geometry import Ellipse, invert_pose, project_ellipsoid
-from maps.compiled import compile_map
+from quadloc.factors.geometry import Ellipse, invert_pose, project_ellipsoid
+from quadloc.maps.compiled import compile_map
 from tests.helpers import level
 
 MAP = load_chess_map()

@@ -19,23 +19,23 @@ from scipy.stats import chi
 from bench.reference_data import load_chess_map, load_chess_poses
 from bench.simulate import SimulationConfig, simulate_frame, simulate_gravity
 from bench.tracking import make_walk, pose_error, simulate_odometry
-from factors.geometry import invert_pose
-from factors.names import FieldError
-from factors.pose_residuals import expmap_pose3
-from maps.compiled import compile_map
-from service.api.errors import field_and_problem
-from service.localization.gravity import tilt_errors_deg
-from service.localization.types import Gravity
-from service.tracking.association import centre_jacobians
-from service.tracking.confidence import session_confidence
-from service.tracking.session import (
+from quadloc.factors.geometry import invert_pose
+from quadloc.factors.names import FieldError
+from quadloc.factors.pose_residuals import expmap_pose3
+from quadloc.maps.compiled import compile_map
+from quadloc.service.api.errors import field_and_problem
+from quadloc.service.localization.gravity import tilt_errors_deg
+from quadloc.service.localization.types import Gravity
+from quadloc.service.tracking.association import centre_jacobians
+from quadloc.service.tracking.confidence import session_confidence
+from quadloc.service.tracking.session import (
     FrameInput,
     SessionOptions,
     TrackingInputError,
     TrackingSession,
     pose_adjoint,
 )
-from service.tracking.store import SessionCapacityError, SessionNotFound, SessionStore
+from quadloc.service.tracking.store import SessionCapacityError, SessionNotFound, SessionStore
 from tests.conftest import make_test_app
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -385,7 +385,7 @@ def test_nginx_routes_a_session_to_the_replica_that_created_it(monkeypatch, walk
 # ----------------------------------------------------------------------------- SDK
 
 def test_arkit_and_arcore_helpers_transpose_column_major_input() -> None:
-    from sdk.session import arcore_pose_to_matrix, arkit_transform_to_matrix
+    from quadloc_sdk.session import arcore_pose_to_matrix, arkit_transform_to_matrix
 
     T = [[0.0, -1.0, 0.0, 1.5], [1.0, 0.0, 0.0, -2.0], [0.0, 0.0, 1.0, 0.25], [0, 0, 0, 1]]
     columns = [[T[r][c] for r in range(4)] for c in range(4)]
@@ -400,7 +400,7 @@ def test_sdk_session_sync_and_async(client: TestClient, walk: dict) -> None:
 
     import httpx
 
-    from sdk.client import AsyncQuadLocClient, QuadLocClient
+    from quadloc_sdk.client import AsyncQuadLocClient, QuadLocClient
 
     cam = walk["camera"]
     camera = {"fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy, "width": cam.width,
@@ -437,7 +437,7 @@ def test_sdk_session_sync_and_async(client: TestClient, walk: dict) -> None:
 def test_cli_track_replays_the_example_recording(tmp_path: Path, capsys) -> None:
     import json
 
-    from service.cli import main
+    from quadloc.service.cli import main
 
     db = f"sqlite:///{tmp_path / 'maps.db'}"
     rec = ROOT / "docs" / "examples" / "track_chess.json"

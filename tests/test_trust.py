@@ -1,6 +1,6 @@
 """Answers a client can trust: calibrated covariance, confidence as a probability, ambiguity,
-priors that never hurt, random detections never localized (``service.localization.confidence``,
-``bench.trust``)."""
+priors that never hurt, random detections never localized
+(``quadloc.service.localization.confidence``, ``bench.trust``)."""
 
 from __future__ import annotations
 
@@ -16,11 +16,11 @@ from bench.chess_eval import load_chess_map, load_chess_world_from_camera, pose_
 from bench.reference_data import perturb_pose
 from bench.simulate import SimulationConfig, simulate_frame
 from bench.trust import NOISY, nees, pose_error_tangent, reduce_frame, synthetic_map
-from factors.geometry import Ellipse
-from factors.pose_residuals import expmap_pose3
-from maps.compiled import compile_map
-from service.localization import calibration
-from service.localization.confidence import (
+from quadloc.factors.geometry import Ellipse
+from quadloc.factors.pose_residuals import expmap_pose3
+from quadloc.maps.compiled import compile_map
+from quadloc.service.localization import calibration
+from quadloc.service.localization.confidence import (
     TOLERANCE_POSITION_M,
     _chi2_3_cdf,
     calibrated_covariance,
@@ -29,9 +29,9 @@ from service.localization.confidence import (
     residual_variance,
     student_t_factor,
 )
-from service.localization.pipeline import localize, prior_gate_poses
-from service.localization.ransac import distinct_poses
-from service.localization.types import (
+from quadloc.service.localization.pipeline import localize, prior_gate_poses
+from quadloc.service.localization.ransac import distinct_poses
+from quadloc.service.localization.types import (
     Detection,
     LocalizationInputError,
     LocalizationOptions,
@@ -59,8 +59,8 @@ def test_every_metric_has_constants_with_and_without_sigma_weights():
     """``calibration_key``: the metric with sigma weights, ``<metric>:unit_weights`` without
     (``none`` is never refined); each refined metric has ``k``, ``f`` and a confidence
     offset under both keys (a refit must not drop one)."""
-    from service.localization.confidence import calibration_key
-    from service.localization.types import METRICS
+    from quadloc.service.localization.confidence import calibration_key
+    from quadloc.service.localization.types import METRICS
 
     assert calibration_key("bbox", True) == "bbox"
     assert calibration_key("bbox", False) == "bbox:unit_weights"
@@ -326,7 +326,7 @@ def test_low_confidence_answers_say_so_and_keep_the_candidate():
 
 
 def test_ransac_keeps_mutually_distinct_hypotheses_best_first():
-    from service.localization.ransac import KEEP_DISTINCT, MatchScorer, ransac
+    from quadloc.service.localization.ransac import KEEP_DISTINCT, MatchScorer, ransac
 
     f = simulate_frame(CM, CAMERA, POSES[24], 24, EVAL)
     dets = reduce_frame(f.detections, f.object_ids, 2, np.random.default_rng(24))
@@ -348,7 +348,7 @@ def test_chi2_ambiguity_rule_and_competitor_feature():
     """A distinct runner-up with as many inliers whose refined chi2 is within
     AMBIGUITY_CHI2_RATIO of the best's is a competitor whatever its IoU sum; the feature is
     the log chi2 ratio of the closest comparable runner-up, capped."""
-    from service.localization.confidence import (
+    from quadloc.service.localization.confidence import (
         AMBIGUITY_CHI2_RATIO,
         CHI2_COMPETITOR_CAP,
         chi2_competitor,
@@ -383,7 +383,7 @@ def test_localized_answers_have_no_chi2_competitor_within_the_ratio():
     default has no comparable runner-up within AMBIGUITY_CHI2_RATIO (its chi2_competitor is
     above log(ratio)); the same frames with ``on_ambiguity="best"`` do have such runners-up
     (the feature is exercised, not always at its cap)."""
-    from service.localization.confidence import AMBIGUITY_CHI2_RATIO, CHI2_COMPETITOR_CAP
+    from quadloc.service.localization.confidence import AMBIGUITY_CHI2_RATIO, CHI2_COMPETITOR_CAP
 
     localized, close = 0, 0
     for _, dets in _two_detection_frames(8, 910_000):

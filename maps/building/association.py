@@ -21,10 +21,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from factors.geometry import Camera, Ellipse, Ellipsoid, invert_pose, project_ellipsoid
-from factors.overlap import intersection_areas
-from maps.building.recording import Observation
-from maps.reconstruct import (
+from quadloc.factors.geometry import Camera, Ellipse, Ellipsoid, invert_pose, project_ellipsoid
+from quadloc.factors.overlap import intersection_areas
+from quadloc.maps.building.recording import Observation
+from quadloc.maps.reconstruct import (
     ReconstructionError,
     _max_ray_angle_deg,
     _triangulate,
@@ -69,7 +69,7 @@ class ObjectHypothesis:
 
 def ellipse_ious(p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
     """Intersection over union (N,) of N pairs of filled ellipses given as params (N, 5) each
-    (exact areas, ``factors.overlap``); 0 where the union is empty."""
+    (exact areas, ``quadloc.factors.overlap``); 0 where the union is empty."""
     p1, p2 = np.asarray(p1, dtype=float).reshape(-1, 5), np.asarray(p2, dtype=float).reshape(-1, 5)
     if len(p1) == 0:
         return np.zeros(0)

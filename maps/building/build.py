@@ -1,5 +1,5 @@
 """Build a map from a recording: association -> per-object Rubino initialisation -> joint
-refinement -> :class:`maps.model.SceneMap` plus a JSON-ready report.
+refinement -> :class:`quadloc.maps.model.SceneMap` plus a JSON-ready report.
 
 Progress is reported as ``progress(stage, percent, objects_found)`` with ``stage`` in
 ``associating`` (0-50 %), ``refining`` (50-95 %), ``saving`` (95 %); callbacks come at least after
@@ -16,11 +16,11 @@ from typing import Any
 
 import numpy as np
 
-from maps.building.association import AssociationOptions, associate
-from maps.building.joint import refine_jointly
-from maps.building.recording import Recording
-from maps.model import MapObject, SceneMap
-from maps.reconstruct import degenerate_shape_reason
+from quadloc.maps.building.association import AssociationOptions, associate
+from quadloc.maps.building.joint import refine_jointly
+from quadloc.maps.building.recording import Recording
+from quadloc.maps.model import MapObject, SceneMap
+from quadloc.maps.reconstruct import degenerate_shape_reason
 
 __all__ = ["BuildTimeoutError", "build_map"]
 
@@ -132,7 +132,7 @@ def build_map(
     labels = sorted({o.label for o in obs} | {m.category for m in map_objects})
     cats = tuple(lab for lab in labels if any(m.category == lab for m in map_objects)) \
         or tuple(labels[:1] or ["object"])
-    meta = {"built_by": "maps.building", "n_frames": len(recording.frames),
+    meta = {"built_by": "quadloc.maps.building", "n_frames": len(recording.frames),
             "n_detections": len(obs)}
     meta.update(metadata or {})
     scene = SceneMap(map_id=map_id, name=recording.name, up_axis=recording.up_axis,

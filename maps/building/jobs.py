@@ -18,7 +18,7 @@ from typing import Any
 import sqlalchemy as sa
 from sqlalchemy.engine import Engine
 
-from maps.store import _now, _utc, jobs_table
+from quadloc.maps.store import _now, _utc, jobs_table
 
 __all__ = ["BuildJob", "JobNotFoundError", "JobStore", "jobs_table"]
 

@@ -5,7 +5,7 @@ Variables: per object ``E_k`` (``Pose3``: ellipsoid frame -> world, translation 
 (``Pose3`` ``world_from_camera``, OpenCV camera axes).
 
 Factors (docs/design/maps.md, "Joint refinement"): the level-set views factor of localization
-(:func:`factors.ellipsoid_factors.ellipsoid_views_factor`, Huber kernel per view, truncated
+(:func:`quadloc.factors.ellipsoid_factors.ellipsoid_views_factor`, Huber kernel per view, truncated
 detections down-weighted); ``size_priors`` or a weak prior on the semi-axes the views leave
 unconstrained; a one-sided floor on every semi-axis; with ``refine_cameras`` a gauge prior and
 odometry between factors. :class:`ObjectQuality` reports each object's views, spread, residual
@@ -23,19 +23,19 @@ from dataclasses import dataclass, field
 import gtsam
 import numpy as np
 
-from factors.ellipsoid_factors import depth_margins, ellipsoid_views_factor
-from factors.ellipsoid_residuals import (
+from quadloc.factors.ellipsoid_factors import depth_margins, ellipsoid_views_factor
+from quadloc.factors.ellipsoid_residuals import (
     LevelSetSamples,
     level_set_samples,
     observation_residual,
     stack_samples,
 )
-from factors.geometry import Camera, Ellipsoid, invert_pose, pose_matrix
-from factors.pose_factors import DEFAULT_ROBUST_SCALE, pose3
-from factors.pose_residuals import DEFAULT_MIN_DEPTH_MARGIN
-from maps.building.association import touches_border
-from maps.building.recording import Observation, OdometryNoise, SizePrior
-from maps.reconstruct import _max_ray_angle_deg, canonical_ellipsoid
+from quadloc.factors.geometry import Camera, Ellipsoid, invert_pose, pose_matrix
+from quadloc.factors.pose_factors import DEFAULT_ROBUST_SCALE, pose3
+from quadloc.factors.pose_residuals import DEFAULT_MIN_DEPTH_MARGIN
+from quadloc.maps.building.association import touches_border
+from quadloc.maps.building.recording import Observation, OdometryNoise, SizePrior
+from quadloc.maps.reconstruct import _max_ray_angle_deg, canonical_ellipsoid
 
 __all__ = ["JointResult", "ObjectQuality", "refine_jointly"]
 

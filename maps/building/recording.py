@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from factors.geometry import (
+from quadloc.factors.geometry import (
     Camera,
     Ellipse,
     pose_matrix,

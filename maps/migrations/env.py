@@ -1,7 +1,7 @@
 """Alembic environment of the map store (``maps/migrations``).
 
-Run programmatically by :meth:`maps.store.MapStore.migrate`, which passes an open connection in
-``config.attributes["connection"]``. From a shell: ``alembic -c maps/migrations/alembic.ini
+Run programmatically by :meth:`quadloc.maps.store.MapStore.migrate`, which passes an open connection
+in ``config.attributes["connection"]``. From a shell: ``alembic -c maps/migrations/alembic.ini
 -x url=sqlite:///quadloc.db upgrade head``.
 """
 
@@ -39,7 +39,7 @@ def run_migrations_online() -> None:
     if connection is not None:
         _run(connection)
         return
-    from maps.store import normalize_url  # local import: only for the command-line path
+    from quadloc.maps.store import normalize_url  # local import: only for the command-line path
 
     engine = create_engine(normalize_url(_url()))
     try:

@@ -1,1 +1,1 @@
-"""QuadLoc REST API (FastAPI). Build the app with :func:`service.api.app.create_app`."""
+"""QuadLoc REST API (FastAPI). Build the app with :func:`quadloc.service.api.app.create_app`."""

@@ -3,8 +3,8 @@
 ``create_app(settings)`` builds a self-contained app: its own map store (migrated at creation,
 demo Chess map seeded as ``settings.default_map_id`` when absent), its own Prometheus registry,
 its own solver slots. Run it with ``quadloc serve`` or
-``uvicorn service.api.app:create_app --factory`` (settings from ``QUADLOC_*`` variables; plain
-Uvicorn lacks ``quadloc serve``'s header-size and request-read limits: service/api/server.py).
+``uvicorn quadloc.service.api.app:create_app --factory`` (settings from ``QUADLOC_*`` variables;
+plain Uvicorn lacks ``quadloc serve``'s header-size and request-read limits: service/api/server.py).
 """
 
 from __future__ import annotations
@@ -17,21 +17,21 @@ from typing import Any
 from fastapi import Depends, FastAPI
 from fastapi.openapi.utils import get_openapi
 
-from factors.pose_residuals import compile_kernels
-from maps.cache import CompiledMapCache
-from maps.demo import DEMO_MAP_ID, load_demo_map
-from maps.errors import MapAlreadyExists, MapNotFound
-from maps.store import MapStore
-from service.api.build_jobs import install_map_building
-from service.api.deps import check_body_depth
-from service.api.docs_pages import install_offline_docs
-from service.api.errors import PROBLEM_MEDIA_TYPE, install_error_handlers
-from service.api.inspector import install_inspector
-from service.api.map_loader import MapLoader
-from service.api.metrics import ApiMetrics, MetricsAndLimitsMiddleware
-from service.api.routers import health, localize, maps, sessions
-from service.api.solver import Solver
-from service.settings import Settings
+from quadloc.factors.pose_residuals import compile_kernels
+from quadloc.maps.cache import CompiledMapCache
+from quadloc.maps.demo import DEMO_MAP_ID, load_demo_map
+from quadloc.maps.errors import MapAlreadyExists, MapNotFound
+from quadloc.maps.store import MapStore
+from quadloc.service.api.build_jobs import install_map_building
+from quadloc.service.api.deps import check_body_depth
+from quadloc.service.api.docs_pages import install_offline_docs
+from quadloc.service.api.errors import PROBLEM_MEDIA_TYPE, install_error_handlers
+from quadloc.service.api.inspector import install_inspector
+from quadloc.service.api.map_loader import MapLoader
+from quadloc.service.api.metrics import ApiMetrics, MetricsAndLimitsMiddleware
+from quadloc.service.api.routers import health, localize, maps, sessions
+from quadloc.service.api.solver import Solver
+from quadloc.service.settings import Settings
 
 __all__ = ["API_VERSION", "build_openapi", "create_app", "seed_demo_map"]
 
@@ -116,7 +116,7 @@ def create_app(settings: Settings | None = None, *, store: MapStore | None = Non
     @asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
         # before serving: no request pays the compilation of the numeric kernels
-        # (factors.jit)
+        # (quadloc.factors.jit)
         compile_kernels()
         if not keys:
             log.warning("no API key configured (QUADLOC_API_KEYS): the API is OPEN and must "

@@ -16,8 +16,8 @@ from typing import Annotated
 from fastapi import Depends, Request
 from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
 
-from service.api.errors import ProblemError
-from service.settings import ApiKey, hash_api_key
+from quadloc.service.api.errors import ProblemError
+from quadloc.service.settings import ApiKey, hash_api_key
 
 __all__ = ["ReadAccess", "WriteAccess", "authenticate", "check_access", "request_access",
            "require_scope"]

@@ -17,12 +17,12 @@ from typing import Any
 
 from sqlalchemy.exc import SQLAlchemyError
 
-from maps.building.build import BuildTimeoutError, build_map
-from maps.building.jobs import JobStore
-from maps.building.recording import BuildLimits, Recording
-from maps.errors import MapAlreadyExists, MapNotFound, StoreUnavailable, VersionConflict
-from maps.model import MapValidationError
-from maps.store import MapStore
+from quadloc.maps.building.build import BuildTimeoutError, build_map
+from quadloc.maps.building.jobs import JobStore
+from quadloc.maps.building.recording import BuildLimits, Recording
+from quadloc.maps.errors import MapAlreadyExists, MapNotFound, StoreUnavailable, VersionConflict
+from quadloc.maps.model import MapValidationError
+from quadloc.maps.store import MapStore
 
 __all__ = ["HEARTBEAT_S", "RETRY_AFTER_S", "BuildRunner", "JobLostError", "RunnerBusyError",
            "build_limits", "install_map_building"]
@@ -168,7 +168,7 @@ class BuildRunner:
 def install_map_building(app: Any, store: MapStore, settings: Any) -> None:
     """Wire map building into ``app``: the job store (jobs left running by a previous instance
     and silent for ``build_stale_after_s`` are marked failed now), the runner, the router."""
-    from service.api.routers import build
+    from quadloc.service.api.routers import build
 
     jobs = JobStore(store.engine)
     try:

@@ -1,4 +1,4 @@
-"""Conversions between the wire models (:mod:`service.api.schemas`) and the solver's types.
+"""Conversions between the wire models (:mod:`quadloc.service.api.schemas`) and the solver's types.
 
 Camera conventions: the solver works in OpenCV camera axes (+X right, +Y down, +Z forward).
 OpenGL/ARKit/ARCore axes (+X right, +Y up, -Z forward) differ by ``F = diag(1, -1, -1)`` on the
@@ -17,7 +17,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from factors.geometry import (
+from quadloc.factors.geometry import (
     QUATERNION_NORM_TOLERANCE,
     Camera,
     Ellipse,
@@ -25,7 +25,7 @@ from factors.geometry import (
     quaternion_wxyz_from_rotation,
     rotation_from_quaternion_wxyz,
 )
-from service.api.schemas import (
+from quadloc.service.api.schemas import (
     CameraIn,
     CovarianceOut,
     DetectionIn,
@@ -37,7 +37,7 @@ from service.api.schemas import (
     PoseOut,
     PosePriorIn,
 )
-from service.localization.types import (
+from quadloc.service.localization.types import (
     Detection,
     Gravity,
     InlierMatch,
@@ -63,7 +63,8 @@ __all__ = [
 ]
 
 #: ``diag(1, -1, -1)``: camera-side flip between OpenCV and OpenGL axes (its own inverse). The
-#: server's one copy; ``sdk/geometry.py`` keeps its own (the SDK imports nothing of the server).
+#: server's one copy; ``sdk/python/quadloc_sdk/geometry.py`` keeps its own (the SDK imports nothing
+# of the server).
 OPENGL_FROM_OPENCV = np.diag([1.0, -1.0, -1.0])
 
 

@@ -12,11 +12,11 @@ from typing import Annotated, Any
 
 from fastapi import Depends, Path, Request
 
-from maps.model import MAP_ID_PATTERN
-from maps.store import MapStore
-from service.api.errors import ProblemError, json_depth_violation
-from service.api.metrics import ApiMetrics
-from service.settings import Settings
+from quadloc.maps.model import MAP_ID_PATTERN
+from quadloc.maps.store import MapStore
+from quadloc.service.api.errors import ProblemError, json_depth_violation
+from quadloc.service.api.metrics import ApiMetrics
+from quadloc.service.settings import Settings
 
 __all__ = [
     "MapIdPath",
@@ -44,7 +44,7 @@ MetricsDep = Annotated[ApiMetrics, _state("metrics")]
 #: The ``{map_id}`` path parameter of every map route, validated against ``MAP_ID_PATTERN``
 #: (422 ``path.map_id`` otherwise) before it reaches the database: a NUL or other character no
 #: map id can contain never becomes a query (PostgreSQL refuses NUL in text with a DataError).
-MapIdPath = Annotated[str, Path(description="Map id (pattern: maps.model.MAP_ID_PATTERN).",
+MapIdPath = Annotated[str, Path(description="Map id (pattern: quadloc.maps.model.MAP_ID_PATTERN).",
                                 pattern=MAP_ID_PATTERN, examples=["chess"])]
 
 

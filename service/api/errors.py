@@ -19,9 +19,9 @@ from sqlalchemy.exc import DataError, OperationalError, ProgrammingError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
 
-from maps.errors import MapValidationError, SchemaNotMigrated, StoreUnavailable
-from maps.model import json_path
-from service.api.schemas import Problem
+from quadloc.maps.errors import MapValidationError, SchemaNotMigrated, StoreUnavailable
+from quadloc.maps.model import json_path
+from quadloc.service.api.schemas import Problem
 
 __all__ = [
     "PROBLEM_MEDIA_TYPE",
@@ -43,7 +43,7 @@ log = logging.getLogger("quadloc.api")
 def field_and_problem(exc: Exception, prefix: str = "") -> tuple[str, str]:
     """``(field, problem)`` of an input error, ``prefix`` prepended to the field.
 
-    The field is the error's structured ``field`` (:class:`factors.names.FieldError`:
+    The field is the error's structured ``field`` (:class:`quadloc.factors.names.FieldError`:
     ``GeometryError``, ``LocalizationInputError``, ``TrackingInputError``); errors raised
     without one answer ``"body"``. The message is never parsed.
     """
@@ -193,8 +193,8 @@ def field_path(loc: Sequence[Any]) -> str:
     """``('body', 'detections', 2, 'ellipse', 'a')`` -> ``'detections[2].ellipse.a'``.
 
     Body locations drop the ``body`` prefix and tagged-union tags (``~...``);
-    ``query``/``header``/``path`` keep it (the path spelling is :func:`maps.model.json_path`'s,
-    the map documents' own).
+    ``query``/``header``/``path`` keep it (the path spelling is
+    :func:`quadloc.maps.model.json_path`'s, the map documents' own).
     """
     # a tagged union's tag (spelled with a leading "~", e.g. the session frames body's) is
     # pydantic's, not a field of the request

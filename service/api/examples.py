@@ -23,7 +23,8 @@ __all__ = [
     "SESSION_EXAMPLE",
 ]
 
-#: The generated example frame (``bench/examples.py``; data, package data of ``service.api``).
+#: The generated example frame (``bench/examples.py``; data, package data of
+# ``quadloc.service.api``).
 EXAMPLE_FRAME_PATH = Path(__file__).with_name("example_frame.json")
 _FRAME: dict[str, Any] = json.loads(EXAMPLE_FRAME_PATH.read_text())
 #: Where the example frame comes from (simulator, seed, ground-truth pose).

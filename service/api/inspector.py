@@ -14,18 +14,23 @@ from fastapi import APIRouter, FastAPI
 from fastapi.responses import FileResponse, JSONResponse
 from fastapi.staticfiles import StaticFiles
 
-from factors.geometry import Camera, DegenerateProjectionError, invert_pose, project_ellipsoid
-from maps.compiled import CompiledMap
-from sdk.overlay import (
+from quadloc.factors.geometry import (
+    Camera,
+    DegenerateProjectionError,
+    invert_pose,
+    project_ellipsoid,
+)
+from quadloc.maps.compiled import CompiledMap
+from quadloc.service.api.convert import convert_pose
+from quadloc.service.api.examples import LOCALIZE_EXAMPLE
+from quadloc.service.api.schemas import LocalizeRequest, LocalizeResponse
+from quadloc_sdk.overlay import (
     DrawnProjection,
     ImageEllipse,
     drawn_detections,
     overlay_summary,
     render_overlay_svg,
 )
-from service.api.convert import convert_pose
-from service.api.examples import LOCALIZE_EXAMPLE
-from service.api.schemas import LocalizeRequest, LocalizeResponse
 
 __all__ = ["SVG_MEDIA_TYPE", "install_inspector", "render_localization_svg", "wants_svg"]
 

@@ -10,8 +10,8 @@ import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
 
-from maps.compiled import CompiledMap
-from maps.store import MapStore
+from quadloc.maps.compiled import CompiledMap
+from quadloc.maps.store import MapStore
 
 __all__ = ["MapLoader", "MapStillLoading"]
 

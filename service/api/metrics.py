@@ -15,7 +15,7 @@ from typing import Any
 
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
 
-from service.api.errors import PROBLEM_MEDIA_TYPE, problem_body
+from quadloc.service.api.errors import PROBLEM_MEDIA_TYPE, problem_body
 
 __all__ = ["ApiMetrics", "MetricsAndLimitsMiddleware"]
 

@@ -23,8 +23,8 @@ from pydantic import (
     model_validator,
 )
 
-from factors.names import check_robust
-from service.limits import (
+from quadloc.factors.names import check_robust
+from quadloc.service.limits import (
     AMBIGUITY_POLICIES,
     COVARIANCE_ORDER,
     GRAVITY_DEFAULT_SIGMA_DEG,

@@ -16,7 +16,7 @@ import h11
 import uvicorn
 from uvicorn.protocols.http.h11_impl import H11Protocol
 
-from service.settings import Settings
+from quadloc.service.settings import Settings
 
 __all__ = ["GuardedH11Protocol", "limit_malloc_arenas", "serve", "uvicorn_config"]
 
@@ -92,7 +92,7 @@ def uvicorn_config(settings: Settings, host: str, port: int, *, workers: int = 1
     """The Uvicorn config of ``quadloc serve``: the app factory, h11 with the header limit,
     the keep-alive timeout and :class:`GuardedH11Protocol` with the request read timeout."""
     config = uvicorn.Config(
-        "service.api.app:create_app", factory=True, host=host, port=port, workers=workers,
+        "quadloc.service.api.app:create_app", factory=True, host=host, port=port, workers=workers,
         log_level=log_level or settings.log_level, access_log=access_log,
         http=GuardedH11Protocol, h11_max_incomplete_event_size=settings.max_header_bytes,
         timeout_keep_alive=settings.keep_alive_timeout_s)  # type: ignore[arg-type] (float ok)

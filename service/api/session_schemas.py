@@ -1,6 +1,6 @@
 """Wire models of the tracking-session endpoints (``/v1/maps/{map_id}/sessions``,
 ``/v1/sessions/{id}...``). Shared pieces (camera, detections, poses, covariances) come from
-:mod:`service.api.schemas`; conventions are the same (OpenCV camera axes unless
+:mod:`quadloc.service.api.schemas`; conventions are the same (OpenCV camera axes unless
 ``convention: "opengl"``; covariances 6x6 ``[omega, v]``, body frame, right perturbation)."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from typing import Annotated, Any
 
 from pydantic import BaseModel, Discriminator, Field, Tag
 
-from service.api.schemas import (
+from quadloc.service.api.schemas import (
     MAX_DETECTIONS,
     CameraIn,
     Convention,
@@ -102,7 +102,7 @@ def _batch_or_frame(value: Any) -> str:
 
 #: The body of ``POST /v1/sessions/{id}/frames``: a batch or one frame, told apart by a
 #: ``frames`` key, so that a bad body is reported against the form it is (not also as the
-#: other form). The ``~`` tags are not fields: ``service.api.errors.field_path`` drops them.
+#: other form). The ``~`` tags are not fields: ``quadloc.service.api.errors.field_path`` drops them.
 SessionFramesBody = Annotated[
     Annotated[SessionFramesIn, Tag("~batch")] | Annotated[SessionFrameIn, Tag("~frame")],
     Discriminator(_batch_or_frame)]

@@ -13,9 +13,9 @@ import time
 from collections import deque
 from collections.abc import Sequence
 
-from factors.geometry import GeometryError
-from maps.compiled import CompiledMap
-from service.api.convert import (
+from quadloc.factors.geometry import GeometryError
+from quadloc.maps.compiled import CompiledMap
+from quadloc.service.api.convert import (
     camera_from_request,
     detections_from_request,
     gravity_from_request,
@@ -23,12 +23,12 @@ from service.api.convert import (
     prior_from_request,
     response_from_result,
 )
-from service.api.errors import ProblemError, field_and_problem
-from service.api.metrics import ApiMetrics
-from service.api.schemas import LocalizeRequest, LocalizeResponse
-from service.localization.pipeline import localize
-from service.localization.ransac import ScoringTimeoutError
-from service.localization.types import LocalizationInputError
+from quadloc.service.api.errors import ProblemError, field_and_problem
+from quadloc.service.api.metrics import ApiMetrics
+from quadloc.service.api.schemas import LocalizeRequest, LocalizeResponse
+from quadloc.service.localization.pipeline import localize
+from quadloc.service.localization.ransac import ScoringTimeoutError
+from quadloc.service.localization.types import LocalizationInputError
 
 __all__ = ["Solver"]
 

@@ -1,4 +1,4 @@
-"""Calibration constants of :mod:`service.localization.confidence` (generated).
+"""Calibration constants of :mod:`quadloc.service.localization.confidence` (generated).
 
 Provenance: written by ``python -m bench.trust --fit`` (see that module); the fit uses
 only the tuning seeds named in :data:`PROVENANCE`, the bench reports on other seeds.

@@ -2,8 +2,9 @@
 
 * covariance: ``cov = k_metric * max(s^2, f_metric) * t(n) * (J^T W J)^-1`` with
   ``s^2 = r^T W r / (m - 6)`` (:func:`calibrated_covariance`; with a prior or gravity only the
-  detections' information is rescaled); constants in :mod:`service.localization.calibration`.
-  Conditioned on the inlier associations and the detection noise model.
+  detections' information is rescaled); constants in
+  :mod:`quadloc.service.localization.calibration`. Conditioned on the inlier associations and the
+  detection noise model.
 * the constants are per calibration key (:func:`calibration_key`): the metric, refined with
   sigma weights or with unit weights (a request without a sigma on every detection, or
   ``use_sigma=False``): ``s^2`` and ``J^T W J`` are in other units without the weights.
@@ -25,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from service.localization.calibration import (
+from quadloc.service.localization.calibration import (
     AMBIGUITY_CHI2_RATIO,
     AMBIGUITY_RATIO,
     AMBIGUITY_RATIO_SAME_OBJECTS,
@@ -178,7 +179,7 @@ def evidence_features(
     chi2_ratio_log: float = CHI2_COMPETITOR_CAP, gravity: bool = False,
 ) -> dict[str, float]:
     """The evidence the confidence model uses (names in
-    :data:`service.localization.calibration.CONFIDENCE_FEATURES`).
+    :data:`quadloc.service.localization.calibration.CONFIDENCE_FEATURES`).
 
     Args:
         n_inliers, n_usable: inliers of the returned pose, detections with a map label.
@@ -192,7 +193,7 @@ def evidence_features(
         n_samples: number of label-compatible minimal samples (chance matches the map allows).
         chi2_ratio_log: :func:`chi2_competitor` of the answer (the cap without a competitor).
         gravity: the solve had the client's gravity (a factor on the tilt, tilted candidates
-            dropped: ``service.localization.gravity``).
+            dropped: ``quadloc.service.localization.gravity``).
     """
     ious = np.asarray(ious, dtype=float)
     p_gauss = gaussian_tolerance_probability(covariance)

@@ -9,8 +9,8 @@ the rotation error, and an answer is correct (what ``confidence`` is the probabi
 within that rotation tolerance, so beyond the gate it is not a correct answer whatever its fit.
 
 How ``localize`` uses gravity: every refinement has it as a factor on the pose's tilt
-(:mod:`factors.gravity_factor`), the ambiguity check weighs its chi2 with the detections', the
-candidates it rules out are dropped while another is left, an answer it rules out is
+(:mod:`quadloc.factors.gravity_factor`), the ambiguity check weighs its chi2 with the detections',
+the candidates it rules out are dropped while another is left, an answer it rules out is
 ``gravity_mismatch``, and the confidence model has a ``gravity`` feature (fitted on solves with
 a simulated IMU, ``bench.trust``). The RANSAC hypotheses are not gated: a tilted minimal-sample
 pose often refines, with the factor, to the correct one.
@@ -24,9 +24,9 @@ import math
 
 import numpy as np
 
-from factors.gravity_factor import GravityMeasurement
-from service.localization.confidence import TOLERANCE_ROTATION_DEG
-from service.localization.types import Gravity
+from quadloc.factors.gravity_factor import GravityMeasurement
+from quadloc.service.localization.confidence import TOLERANCE_ROTATION_DEG
+from quadloc.service.localization.types import Gravity
 
 __all__ = ["GRAVITY_GATE_SIGMAS", "answer_gate_deg", "gravity_measurement", "tilt_errors_deg"]
 

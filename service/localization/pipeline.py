@@ -3,11 +3,11 @@
 Stages (wall time of each in ``LocalizationResult.timings_ms``): ``validate`` (input, compiled
 map, usable detections), ``prior`` (only with a :class:`PosePrior`: gated association and
 refinement from it; an answer explaining every usable detection is returned at once),
-``hypotheses`` (:func:`service.localization.ransac.ransac`), ``refine``
-(:func:`service.localization.refine.refine` of the best hypothesis and up to
+``hypotheses`` (:func:`quadloc.service.localization.ransac.ransac`), ``refine``
+(:func:`quadloc.service.localization.refine.refine` of the best hypothesis and up to
 :data:`REFINED_ALTERNATIVES` distinct runners-up, with re-association) and ``assess``
-(:mod:`service.localization.confidence`: calibrated covariance, confidence, ambiguity).
-The time budget (:mod:`service.localization.budget`) bounds the whole call: no LM iteration
+(:mod:`quadloc.service.localization.confidence`: calibrated covariance, confidence, ambiguity).
+The time budget (:mod:`quadloc.service.localization.budget`) bounds the whole call: no LM iteration
 starts after it (``refinement_status == "time_budget"``). Each stage's rules in detail:
 ``docs/design/localization.md``.
 """
@@ -21,14 +21,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from factors.geometry import Camera, Ellipsoid, invert_pose
-from factors.gravity_factor import GravityMeasurement
-from factors.pose_residuals import expmap_pose3
-from maps.compiled import CompiledMap, compile_map
-from maps.model import SceneMap
-from service.localization.budget import Deadline, deadline_passed
-from service.localization.calibration import MIN_CONFIDENCE, S2_FLOOR
-from service.localization.confidence import (
+from quadloc.factors.geometry import Camera, Ellipsoid, invert_pose
+from quadloc.factors.gravity_factor import GravityMeasurement
+from quadloc.factors.pose_residuals import expmap_pose3
+from quadloc.maps.compiled import CompiledMap, compile_map
+from quadloc.maps.model import SceneMap
+from quadloc.service.localization.budget import Deadline, deadline_passed
+from quadloc.service.localization.calibration import MIN_CONFIDENCE, S2_FLOOR
+from quadloc.service.localization.confidence import (
     calibrated_covariance,
     calibration_key,
     chi2_competitor,
@@ -38,8 +38,12 @@ from service.localization.confidence import (
     is_ambiguous,
     residual_variance,
 )
-from service.localization.gravity import answer_gate_deg, gravity_measurement, tilt_errors_deg
-from service.localization.ransac import (
+from quadloc.service.localization.gravity import (
+    answer_gate_deg,
+    gravity_measurement,
+    tilt_errors_deg,
+)
+from quadloc.service.localization.ransac import (
     HARD_STOP_FACTOR,
     Hypothesis,
     Match,
@@ -51,8 +55,8 @@ from service.localization.ransac import (
     ransac,
     sunflower_disk,
 )
-from service.localization.refine import RefinementResult, refine
-from service.localization.types import (
+from quadloc.service.localization.refine import RefinementResult, refine
+from quadloc.service.localization.types import (
     NO_REFINEMENT,
     Alternative,
     Detection,
@@ -108,9 +112,9 @@ def refine_pose(
     prior: PosePrior | None = None, deadline: Deadline | float | None = None,
     gravity: GravityMeasurement | None = None,
 ) -> RefinementResult:
-    """:func:`service.localization.refine.refine` with the options' metric, sigma, kernel,
+    """:func:`quadloc.service.localization.refine.refine` with the options' metric, sigma, kernel,
     iteration cap and metric options (and the prior as a factor when it has a covariance, and
-    the gravity factor); after ``deadline`` (a :class:`service.localization.budget.Deadline`
+    the gravity factor); after ``deadline`` (a :class:`quadloc.service.localization.budget.Deadline`
     or a ``time.perf_counter()`` instant) no LM iteration starts."""
     return refine(
         detections, ellipsoids, camera, initial_world_from_camera, options.metric,
@@ -214,8 +218,8 @@ class _Answer:
 
 def _competes(best: _Answer, other: _Answer) -> bool:
     """Whether ``other`` (a distinct runner-up) competes with ``best``
-    (:func:`service.localization.confidence.is_ambiguous`: by refined chi2 when they compare,
-    else by IoU sum, told whether it matches the same map objects)."""
+    (:func:`quadloc.service.localization.confidence.is_ambiguous`: by refined chi2 when they
+    compare, else by IoU sum, told whether it matches the same map objects)."""
     return is_ambiguous(len(best.inliers), best.score, len(other.inliers), other.score,
                         same_objects={m.object_id for m in other.inliers}
                         == {m.object_id for m in best.inliers},
@@ -306,7 +310,7 @@ def localize(
             tilt in every refinement; candidates whose tilt disagrees with it are dropped, and
             an answer that disagrees is not localized (reason ``gravity_mismatch``; a prior's
             answer that disagrees leaves the search from scratch to decide)
-            (:mod:`service.localization.gravity`).
+            (:mod:`quadloc.service.localization.gravity`).
 
     Returns:
         :class:`LocalizationResult`; ``localized=False`` with a ``reason`` is a normal answer.
@@ -332,8 +336,8 @@ def localize(
         return _not_localized("too_few_detections", metric, 0, timings, t0)
     if len(usable) < 2:
         return _not_localized("no_label_match", metric, 0, timings, t0)
-    # CPU time of this thread, with a wall-clock hard limit (service.localization.budget); the
-    # scorer raises ScoringTimeoutError past HARD_STOP_FACTOR x the budget
+    # CPU time of this thread, with a wall-clock hard limit (quadloc.service.localization.budget);
+    # the scorer raises ScoringTimeoutError past HARD_STOP_FACTOR x the budget
     deadline = Deadline.after(options.time_budget_ms, cpu_start=cpu0, wall_start=t0)
     scorer = MatchScorer(compiled, camera, [detections[i].ellipse for i in usable],
                          [detections[i].label for i in usable], usable,

@@ -1,6 +1,6 @@
 """Label-constrained RANSAC over detection/object correspondences (paper section V-B).
 
-Candidate poses come from :mod:`service.localization.hypotheses` (P3P on centres with >= 3
+Candidate poses come from :mod:`quadloc.service.localization.hypotheses` (P3P on centres with >= 3
 usable detections, P2E with 2, P2E as a fallback of at most :data:`P2E_FALLBACK_BUDGET`
 samples). A pose is scored by the IoU of each detection with the projections of its
 label-compatible objects (:meth:`MatchScorer.pair_iou`, estimated by :func:`iou_estimates`); a
@@ -23,16 +23,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from factors.geometry import (
+from quadloc.factors.geometry import (
     Camera,
     Ellipse,
     ellipse_params,
     level_values,
     projected_gaussians,
 )
-from maps.compiled import CompiledMap
-from service.localization.budget import Deadline, deadline_passed, earliest
-from service.localization.hypotheses import (
+from quadloc.maps.compiled import CompiledMap
+from quadloc.service.localization.budget import Deadline, deadline_passed, earliest
+from quadloc.service.localization.hypotheses import (
     p2e_hypotheses,
     p3p_hypotheses_batch,
     point_centres,
@@ -76,7 +76,7 @@ SWEEP_MAX_SAMPLES = 24
 BATCH = 32
 #: Number of distinct hypotheses kept (:attr:`RansacOutcome.alternatives`), and what
 #: "distinct" means: camera centres further apart than this (m) or orientations differing by
-#: more than this (deg). Used by the ambiguity check of ``service.localization.confidence``.
+#: more than this (deg). Used by the ambiguity check of ``quadloc.service.localization.confidence``.
 KEEP_DISTINCT = 4
 DISTINCT_POSITION_M = 0.5
 DISTINCT_ANGLE_DEG = 20.0
@@ -93,8 +93,8 @@ POINT_BLOCK = 1 << 17
 #: Most pose x object projections per block (each holds a few 3x3 / 4x4 float arrays).
 PROJECT_BLOCK = 1 << 13
 #: The scorer's hard stop (``MatchScorer.deadline`` in ``localize``), as a multiple of the time
-#: budget on both clocks of a :class:`service.localization.budget.Deadline`: the search stops
-#: at the budget itself, this bounds the scoring after it (final matches, re-association).
+#: budget on both clocks of a :class:`quadloc.service.localization.budget.Deadline`: the search
+# stops : at the budget itself, this bounds the scoring after it (final matches, re-association).
 HARD_STOP_FACTOR = 1.05
 
 
@@ -232,7 +232,7 @@ class MatchScorer:
     ``detection_indices`` are the original indices of the usable detections (labels in the
     map); ``ellipses`` / ``labels`` are theirs. Only label-compatible pairs are evaluated, in
     bounded blocks (module docstring). ``deadline`` (a
-    :class:`service.localization.budget.Deadline`, a ``time.perf_counter()`` instant, or
+    :class:`quadloc.service.localization.budget.Deadline`, a ``time.perf_counter()`` instant, or
     None) is a hard stop for every scoring call: past it they raise :class:`ScoringTimeoutError`
     (a search passes its own, earlier, stop to the calls it makes).
     """
@@ -720,7 +720,7 @@ def ransac(
         inlier_iou, min_inliers: acceptance of a pose.
         max_hypotheses: budget of minimal samples per solver (P3P, then P2E).
         rng: sampler (only used when not exhaustive: exhaustive runs do not depend on it).
-        deadline: when the search stops (a :class:`service.localization.budget.Deadline`:
+        deadline: when the search stops (a :class:`quadloc.service.localization.budget.Deadline`:
             CPU time of this thread and a wall-clock hard limit; or a ``time.perf_counter()``
             instant), checked before every batch and inside the scoring of a batch.
     """

@@ -3,11 +3,11 @@
 :func:`refine` takes matched detections and map ellipsoids (same order), the camera
 intrinsics and an initial ``world_from_camera`` pose (4x4, OpenCV camera axes) and minimises
 the paper's equation 8, ``sum_j sigma_j^-1 Delta_j``, over the pose with
-``gtsam.LevenbergMarquardtOptimizer`` on the factors of :func:`factors.pose_factors.pose_factors`
-(one batched factor without robust kernel, one per detection with one), plus an optional
-``PriorFactorPose3`` and a measured gravity direction
-(:func:`factors.gravity_factor.gravity_factor`). Adaptive level-set samples grown at the start
-are re-laid once at the result and solved again (``iterations`` counts both solves; skipped
+``gtsam.LevenbergMarquardtOptimizer`` on the factors of
+:func:`quadloc.factors.pose_factors.pose_factors` (one batched factor without robust kernel, one per
+detection with one), plus an optional ``PriorFactorPose3`` and a measured gravity direction
+(:func:`quadloc.factors.gravity_factor.gravity_factor`). Adaptive level-set samples grown at the
+start are re-laid once at the result and solved again (``iterations`` counts both solves; skipped
 past the ``deadline``: ``RefinementResult.resample_skipped``).
 
 ``covariance``: 6x6, order ``[omega_x, omega_y, omega_z, v_x, v_y, v_z]`` (rad, m), right
@@ -29,13 +29,13 @@ from typing import Any
 import gtsam
 import numpy as np
 
-from factors.geometry import Camera, Ellipsoid, GeometryError, check_pose
-from factors.gravity_factor import GravityMeasurement, gravity_factor
-from factors.names import check_robust
-from factors.pose_factors import pose3, pose_factors
-from factors.pose_residuals import PoseResidualModel
-from service.localization.budget import Deadline, deadline_passed
-from service.localization.types import (
+from quadloc.factors.geometry import Camera, Ellipsoid, GeometryError, check_pose
+from quadloc.factors.gravity_factor import GravityMeasurement, gravity_factor
+from quadloc.factors.names import check_robust
+from quadloc.factors.pose_factors import pose3, pose_factors
+from quadloc.factors.pose_residuals import PoseResidualModel
+from quadloc.service.localization.budget import Deadline, deadline_passed
+from quadloc.service.localization.types import (
     Detection,
     check_covariance,
     check_detections,
@@ -197,19 +197,19 @@ def refine(
             ``detections[j]``.
         camera: pinhole intrinsics of the image.
         initial_world_from_camera: 4x4 starting pose (camera in the map, OpenCV axes).
-        metric: one of ``factors.metrics.METRIC_NAMES``.
+        metric: one of ``quadloc.factors.metrics.METRIC_NAMES``.
         use_sigma: weight detection ``j`` by ``sigma_j^-1`` when it has a sigma (else weight 1).
-        robust: None or a kernel in ``factors.pose_factors.ROBUST_KERNELS``, per detection.
+        robust: None or a kernel in ``quadloc.factors.pose_factors.ROBUST_KERNELS``, per detection.
         robust_scale: kernel threshold on the whitened residual norm (default per metric,
-            ``factors.pose_factors.DEFAULT_ROBUST_SCALE``).
+            ``quadloc.factors.pose_factors.DEFAULT_ROBUST_SCALE``).
         prior_world_from_camera, prior_covariance: optional pose prior (4x4) and its 6x6
             covariance in GTSAM's Pose3 tangent order ``[omega, v]``, body frame; both or neither.
         gravity: optional measured gravity direction, a factor on the pose's roll and pitch.
         max_iterations: LM iteration cap (>= 1).
         metric_options: options of the metric (e.g. level-set sampling), see
-            ``factors.metrics``.
+            ``quadloc.factors.metrics``.
         deadline: optional stop after which no further LM iteration starts (the per-request
-            solve budget of the service): a :class:`service.localization.budget.Deadline`
+            solve budget of the service): a :class:`quadloc.service.localization.budget.Deadline`
             (CPU time of this thread with a wall-clock hard limit) or a ``time.perf_counter()``
             instant; None = no limit.
 
@@ -260,7 +260,7 @@ def refine(
             relaid_skipped = True
             break
         # Some adaptive level-set sample areas were grown for the misalignment at T_start
-        # (factors.metrics.level_set_sampling_scale); re-lay them at the result and solve
+        # (quadloc.factors.metrics.level_set_sampling_scale); re-lay them at the result and solve
         # again (same factors: the model's samples change in place).
         T_start = outcome.T
         start_pose = outcome.result.atPose3(_POSE_KEY)
@@ -319,7 +319,7 @@ def _build_graph(
     and the gravity's)."""
     # without robust kernels one batched factor (Diagonal noise = the same per-detection
     # weights) saves N-1 Python round trips per evaluation; with them, one factor per
-    # detection, all slicing one shared evaluation (see factors.pose_factors)
+    # detection, all slicing one shared evaluation (see quadloc.factors.pose_factors)
     factors, model = pose_factors(
         metric, _POSE_KEY, [d.ellipse for d in detections], list(ellipsoids), camera,
         sigmas=sigmas, robust=robust, robust_scale=robust_scale,

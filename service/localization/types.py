@@ -1,6 +1,6 @@
-"""Inputs and outputs of :func:`service.localization.pipeline.localize`, validated on
+"""Inputs and outputs of :func:`quadloc.service.localization.pipeline.localize`, validated on
 construction (bad input raises :class:`LocalizationInputError` or
-:class:`factors.geometry.GeometryError`, both ``ValueError``, naming the field).
+:class:`quadloc.factors.geometry.GeometryError`, both ``ValueError``, naming the field).
 
 Frames: ``world_from_camera`` is the camera's pose in the map (4x4, camera axes OpenCV:
 +X right, +Y down, +Z forward). Covariances are 6x6 in GTSAM's Pose3 tangent order
@@ -18,10 +18,10 @@ from typing import Any
 
 import numpy as np
 
-from factors.geometry import Ellipse, FieldError, GeometryError, check_pose
-from factors.metrics import residual
-from factors.names import check_robust
-from service.limits import (
+from quadloc.factors.geometry import Ellipse, FieldError, GeometryError, check_pose
+from quadloc.factors.metrics import residual
+from quadloc.factors.names import check_robust
+from quadloc.service.limits import (
     AMBIGUITY_POLICIES,
     GRAVITY_DEFAULT_SIGMA_DEG,
     GRAVITY_MAX_SIGMA_DEG,
@@ -32,7 +32,7 @@ from service.limits import (
     UNKNOWN_LABEL_POLICIES,
 )
 
-__all__ = [  # METRICS and ROBUST_KERNELS: service.limits' names, re-exported for callers
+__all__ = [  # METRICS and ROBUST_KERNELS: quadloc.service.limits' names, re-exported for callers
     "METRICS",
     "ROBUST_KERNELS",
     "Alternative",
@@ -76,7 +76,7 @@ def check_detections(detections: object,
                      error: type[FieldError] = LocalizationInputError) -> None:
     """THE rule of a request's detections: a non-empty sequence of :class:`Detection`;
     otherwise raises ``error`` with ``field`` ``"detections"`` or ``"detections[i]"``. Shared by
-    ``localize`` and :func:`service.localization.refine.refine`."""
+    ``localize`` and :func:`quadloc.service.localization.refine.refine`."""
     if isinstance(detections, (str, bytes, Detection)) or not isinstance(detections, Sequence):
         raise error(f"must be a sequence of Detection, got {type(detections).__name__}",
                     field="detections")
@@ -100,7 +100,7 @@ def _number(value: object) -> bool:
 
 
 #: THE rules of the scalar options: name -> (test, rule), shared by
-#: :class:`LocalizationOptions` and :func:`service.localization.refine.refine`.
+#: :class:`LocalizationOptions` and :func:`quadloc.service.localization.refine.refine`.
 _OPTION_RULES: dict[str, tuple[Callable[[Any], bool], str]] = {
     "min_confidence": (lambda v: v is None or (_number(v) and 0.0 <= v <= 1.0),
                        "must be in [0, 1] or None"),
@@ -129,7 +129,8 @@ def check_options(values: Mapping[str, object], error: type[FieldError] = Locali
 
 @dataclass(frozen=True)
 class LocalizationOptions:
-    """Options of :func:`service.localization.pipeline.localize` (validated on construction).
+    """Options of :func:`quadloc.service.localization.pipeline.localize` (validated on
+    construction).
 
     Attributes:
         metric: refinement metric, one of :data:`METRICS` (default ``"level_set"``, the paper's),
@@ -156,8 +157,8 @@ class LocalizationOptions:
             not depend on it.
         time_budget_ms: budget (ms) of the whole ``localize`` call, from its start, in CPU
             time of the solving thread with a wall-clock hard limit
-            (:mod:`service.localization.budget`). The hypothesis search stops at it (the best
-            hypothesis so far is used, or ``reason="time_budget_exceeded"``); no refinement
+            (:mod:`quadloc.service.localization.budget`). The hypothesis search stops at it (the
+            best hypothesis so far is used, or ``reason="time_budget_exceeded"``); no refinement
             iteration starts after it (``refinement_status="time_budget"``). ``None`` =
             unbounded.
         max_iterations: Levenberg-Marquardt iteration cap of the refinement.
@@ -165,14 +166,14 @@ class LocalizationOptions:
             validated on construction (an unknown key or bad value raises naming
             ``options.metric_options.<key>``).
         on_ambiguity: what to answer when a distinct hypothesis explains the detections
-            comparably well (``service.localization.confidence``): ``"not_localized"``
+            comparably well (``quadloc.service.localization.confidence``): ``"not_localized"``
             (default: ``localized=False, reason="ambiguous"``, the hypotheses listed in
             ``alternatives``) or ``"best"`` (the best pose, localized, with the others in
             ``alternatives``; each with its probability).
         min_confidence: answers whose ``confidence`` is below this are returned as
             ``localized=False, reason="low_confidence"``; ``None`` = the calibrated default
-            ``service.localization.calibration.MIN_CONFIDENCE`` (chosen on the tuning seeds so
-            that 2-3 detection frames are not answered with a wrong pose); 0 accepts every
+            ``quadloc.service.localization.calibration.MIN_CONFIDENCE`` (chosen on the tuning seeds
+            so that 2-3 detection frames are not answered with a wrong pose); 0 accepts every
             verified pose.
 
     Integer fields accept any integral number (numpy integers too) and store a Python int.
@@ -237,7 +238,7 @@ def check_covariance(field_name: str, value: object,
                      error: type[FieldError] = LocalizationInputError) -> np.ndarray:
     """A 6x6 pose covariance (finite, symmetric to rtol 1e-9, positive definite) as a read-only
     float array; otherwise raises ``error`` (a :class:`FieldError`) with ``field=field_name``.
-    Shared by :class:`PosePrior` and :func:`service.localization.refine.refine`."""
+    Shared by :class:`PosePrior` and :func:`quadloc.service.localization.refine.refine`."""
     try:
         S = np.array(value, dtype=float)
     except (TypeError, ValueError) as exc:
@@ -338,7 +339,7 @@ class Alternative:
     Attributes:
         world_from_camera: 4x4 camera pose in the map frame.
         confidence: probability that this pose is within the confidence tolerance
-            (``service.localization.confidence``).
+            (``quadloc.service.localization.confidence``).
         n_inliers: its inlier count; score: the sum of its inliers' IoUs.
     """
 
@@ -366,15 +367,15 @@ class LocalizationResult:
             comparably well; see ``alternatives``), ``low_confidence`` (the best pose's
             ``confidence`` is below ``options.min_confidence``; its value is kept in
             ``evidence``), ``gravity_mismatch`` (every refined candidate's tilt disagrees with
-            the client's measured gravity: :mod:`service.localization.gravity`).
+            the client's measured gravity: :mod:`quadloc.service.localization.gravity`).
         world_from_camera: 4x4 camera pose in the map frame, or ``None``.
         covariance: 6x6 pose covariance, order ``[omega, v]``, body frame, or ``None`` (not
             localized, ``metric="none"``, or a singular information matrix). Calibrated
-            (``service.localization.confidence``): conditioned on the inlier associations and
-            the detection noise, scaled by the frame's residual level.
+            (``quadloc.service.localization.confidence``): conditioned on the inlier associations
+            and the detection noise, scaled by the frame's residual level.
         confidence: in [0, 1]; 0 when not localized. The probability that the returned pose
             is within 0.10 m and 5 deg of the truth, from a logistic model of the solver's
-            evidence, calibrated on simulated frames (``service.localization.confidence``).
+            evidence, calibrated on simulated frames (``quadloc.service.localization.confidence``).
         inliers: the inlier matches (sorted by detection index).
         metric: the refinement metric used (``"none"`` when unrefined).
         hypotheses_evaluated: number of candidate poses scored (P3P/P2E solutions + prior).

@@ -13,9 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from factors.geometry import Camera, invert_pose, skew
-from maps.compiled import CompiledMap
-from service.localization.ransac import project_objects
+from quadloc.factors.geometry import Camera, invert_pose, skew
+from quadloc.maps.compiled import CompiledMap
+from quadloc.service.localization.ransac import project_objects
 
 __all__ = ["GATE_CHI2", "Association", "associate", "centre_jacobians"]
 

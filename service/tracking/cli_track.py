@@ -38,11 +38,11 @@ def cmd_track(args: argparse.Namespace) -> int:
     import numpy as np
     from pydantic import ValidationError
 
-    from service.api.convert import convert_pose
-    from service.api.errors import ProblemError, field_path
-    from service.api.routers.sessions import _frame_input, _frame_out, new_session
-    from service.api.session_schemas import SessionCreate, SessionFramesIn
-    from service.cli import _die, _invalid, _read_json, _store
+    from quadloc.service.api.convert import convert_pose
+    from quadloc.service.api.errors import ProblemError, field_path
+    from quadloc.service.api.routers.sessions import _frame_input, _frame_out, new_session
+    from quadloc.service.api.session_schemas import SessionCreate, SessionFramesIn
+    from quadloc.service.cli import _die, _invalid, _read_json, _store
 
     doc = _read_json(args.file)
     if not isinstance(doc, dict):

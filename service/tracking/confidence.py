@@ -1,8 +1,8 @@
 """The ONE place where a tracking frame's ``confidence`` is computed: P(within 10 cm and 5 deg of
 the truth) under the pose's Gaussian posterior (6x6 ``[omega, v]`` marginal, body frame, scaled
 by :data:`COVARIANCE_SCALE`), with
-:func:`service.localization.confidence.gaussian_tolerance_probability`; 0 unless ``tracking``
-and on a ``detections_unexplained`` frame. Rationale:
+:func:`quadloc.service.localization.confidence.gaussian_tolerance_probability`; 0 unless
+``tracking`` and on a ``detections_unexplained`` frame. Rationale:
 docs/design/service.md#tracking-confidence.
 """
 
@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from service.localization.confidence import (
+from quadloc.service.localization.confidence import (
     TOLERANCE_POSITION_M,
     TOLERANCE_ROTATION_DEG,
     gaussian_tolerance_probability,

@@ -3,7 +3,7 @@
 One GTSAM ``Pose3`` per frame, the camera's ``world_from_camera`` (OpenCV camera axes), key
 ``x<frame index>``; factors: the metric factors of the detections associated at the predicted
 pose, odometry ``BetweenFactorPose3`` (noise :class:`DriftModel`), client priors with a
-covariance and the device's measured gravity (:mod:`factors.gravity_factor`, on the frame's
+covariance and the device's measured gravity (:mod:`quadloc.factors.gravity_factor`, on the frame's
 tilt). States :data:`STATES`; poses are returned only while ``tracking``. Factors,
 smoothers and the ``lost`` rules: docs/design/service.md#tracking-session.
 """
@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import gtsam
 import numpy as np
 
-from factors.geometry import (
+from quadloc.factors.geometry import (
     DOCUMENT_ROTATION_TOLERANCE,
     Camera,
     GeometryError,
@@ -28,16 +28,16 @@ from factors.geometry import (
     invert_pose,
     snap_to_rotation,
 )
-from factors.gravity_factor import gravity_factor
-from factors.names import FieldError
-from factors.pose_factors import pose3, pose_factors
-from maps.compiled import CompiledMap
-from service.localization.gravity import gravity_measurement
-from service.localization.ransac import MatchScorer
-from service.localization.types import Detection, Gravity, InlierMatch, PosePrior
-from service.tracking.association import associate
-from service.tracking.confidence import session_confidence
-from service.tracking.multiframe import InitFrame, multi_frame_ransac
+from quadloc.factors.gravity_factor import gravity_factor
+from quadloc.factors.names import FieldError
+from quadloc.factors.pose_factors import pose3, pose_factors
+from quadloc.maps.compiled import CompiledMap
+from quadloc.service.localization.gravity import gravity_measurement
+from quadloc.service.localization.ransac import MatchScorer
+from quadloc.service.localization.types import Detection, Gravity, InlierMatch, PosePrior
+from quadloc.service.tracking.association import associate
+from quadloc.service.tracking.confidence import session_confidence
+from quadloc.service.tracking.multiframe import InitFrame, multi_frame_ransac
 
 __all__ = [
     "SMOOTHERS",
@@ -60,8 +60,9 @@ SMOOTHERS = ("isam2", "batch")
 
 
 class TrackingInputError(FieldError):
-    """Bad session or frame input naming its ``field`` (a :class:`factors.names.FieldError`);
-    ``str()`` reads ``"<field>: <problem>"``, e.g. ``"timestamp: must be a finite number ..."``."""
+    """Bad session or frame input naming its ``field`` (a
+    :class:`quadloc.factors.names.FieldError`); ``str()`` reads ``"<field>: <problem>"``, e.g.
+    ``"timestamp: must be a finite number ..."``."""
 
 
 @dataclass(frozen=True)
@@ -165,7 +166,7 @@ class FrameResult:
     right perturbation, body frame of the pose they belong to (``world_from_odom``'s: the odometry
     frame). ``world_from_camera``/``world_from_odom`` are None unless ``state == "tracking"``.
     ``inliers``: detections whose IoU with their object's projection at the returned pose is >=
-    ``inlier_iou`` (one-to-one). ``confidence``: :func:`service.tracking.confidence.
+    ``inlier_iou`` (one-to-one). ``confidence``: :func:`quadloc.service.tracking.confidence.
     session_confidence`. ``reason``: why there is no pose (``waiting_for_constraints``,
     ``ambiguous``, ``lost``), ``detections_unexplained`` for a tracking frame whose usable
     detections are all unexplained by its (odometry-predicted) pose, else None."""

@@ -16,7 +16,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 
-from service.tracking.session import TrackingSession
+from quadloc.service.tracking.session import TrackingSession
 
 __all__ = ["SessionCapacityError", "SessionEntry", "SessionNotFound", "SessionStore"]
 
@@ -29,7 +29,7 @@ def replica_id() -> str:
     return re.sub(r"[^a-z0-9-]", "-", tag)[:40] or "local"
 
 
-class SessionNotFound(KeyError):  # noqa: N818 (like maps.errors.MapNotFound)
+class SessionNotFound(KeyError):  # noqa: N818 (like quadloc.maps.errors.MapNotFound)
     """No live session with that id (never created, deleted, expired, or replica restarted)."""
 
 

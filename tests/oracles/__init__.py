@@ -1,6 +1,6 @@
 """Reference ("oracle") implementations the tests compare production code against.
 
 They were the production code's scalar forms before issue 10 made the batched implementations
-the only production path (``factors.overlap``, ``factors.metrics``); kept here verbatim, one
-pair at a time, as independent checks.
+the only production path (``quadloc.factors.overlap``, ``quadloc.factors.metrics``); kept here
+verbatim, one pair at a time, as independent checks.
 """

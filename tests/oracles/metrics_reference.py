@@ -1,9 +1,9 @@
 """The scalar forms of the smooth metrics (one pair of ellipses at a time): the tests' oracle
-for the batched :func:`factors.metrics.conic_residuals` (the only production implementation of
-``bbox``, ``algebraic``, ``frobenius``, ``wasserstein``, ``bhattacharyya``).
+for the batched :func:`quadloc.factors.metrics.conic_residuals` (the only production implementation
+of ``bbox``, ``algebraic``, ``frobenius``, ``wasserstein``, ``bhattacharyya``).
 
 Moved verbatim from ``factors/metrics.py`` (issue 10); the formulas are documented in
-:mod:`factors.metrics` and ``docs/design/factors.md``.
+:mod:`quadloc.factors.metrics` and ``docs/design/factors.md``.
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ import math
 
 import numpy as np
 
-from factors import metrics
-from factors.geometry import Ellipse, sigma_entries
+from quadloc.factors import metrics
+from quadloc.factors.geometry import Ellipse, sigma_entries
 
 _SQRT2 = math.sqrt(2.0)
 _INV_SQRT8 = 1.0 / math.sqrt(8.0)
@@ -121,7 +121,7 @@ _RESIDUALS = {
 
 def residual(name: str, detection: Ellipse, projection: Ellipse, **options: object) -> np.ndarray:
     """The oracle's residual of the smooth metrics; the others (iou, giou, qbbox, level_set:
-    no second implementation) are :func:`factors.metrics.residual`."""
+    no second implementation) are :func:`quadloc.factors.metrics.residual`."""
     if name in _RESIDUALS:
         return _RESIDUALS[name](detection, projection)
     return metrics.residual(name, detection, projection, **options)

@@ -1,5 +1,6 @@
 """The scalar exact-area construction (one pair of ellipses at a time): the tests' oracle for
-the batched :func:`factors.overlap.quadrant_areas_batch` (the only production implementation).
+the batched :func:`quadloc.factors.overlap.quadrant_areas_batch` (the only production
+implementation).
 
 Moved verbatim from ``factors/overlap.py`` (issue 10); the algorithm is described in
 ``docs/design/factors.md`` ("Exact ellipse areas").
@@ -13,7 +14,7 @@ import math
 
 import numpy as np
 
-from factors.geometry import sigma_entries
+from quadloc.factors.geometry import sigma_entries
 
 #: Number of parametric angles used to bracket the contour intersections.
 GRID = 128

@@ -1,6 +1,6 @@
 """``POST /v1/maps:build`` (start a map-building job) and ``GET /v1/build-jobs/{job_id}``.
 
-The body is a recording (``maps.building.recording``); the map id is the ``map_id`` query
+The body is a recording (``quadloc.maps.building.recording``); the map id is the ``map_id`` query
 parameter; an existing map needs ``If-Match`` (428 / 412 as for ``PUT /v1/maps/{map_id}``).
 Answers 202 with ``Location: /v1/build-jobs/{job_id}``. Details:
 docs/design/service.md#post-v1mapsbuild.
@@ -14,14 +14,14 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Body, Header, Path, Query, Request, Response, status
 from pydantic import BaseModel, Field
 
-from maps.building.jobs import BuildJob, JobNotFoundError
-from maps.building.recording import RecordingError, parse_recording
-from maps.errors import MapNotFound
-from maps.model import MAP_ID_PATTERN
-from service.api.auth import ReadAccess, WriteAccess
-from service.api.build_jobs import RETRY_AFTER_S, RunnerBusyError, build_limits
-from service.api.deps import SettingsDep, StoreDep
-from service.api.errors import ProblemError, problem_responses
+from quadloc.maps.building.jobs import BuildJob, JobNotFoundError
+from quadloc.maps.building.recording import RecordingError, parse_recording
+from quadloc.maps.errors import MapNotFound
+from quadloc.maps.model import MAP_ID_PATTERN
+from quadloc.service.api.auth import ReadAccess, WriteAccess
+from quadloc.service.api.build_jobs import RETRY_AFTER_S, RunnerBusyError, build_limits
+from quadloc.service.api.deps import SettingsDep, StoreDep
+from quadloc.service.api.errors import ProblemError, problem_responses
 
 __all__ = ["BuildJobOut", "job_out", "router"]
 
@@ -93,7 +93,7 @@ def job_out(job: BuildJob) -> BuildJobOut:
 
 
 def _base_version(store: Any, map_id: str, if_match: str | None) -> int | None:
-    from service.api.routers.maps import check_etag
+    from quadloc.service.api.routers.maps import check_etag
 
     try:
         current = store.get(map_id)

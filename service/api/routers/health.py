@@ -8,10 +8,10 @@ from fastapi import APIRouter, Response
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 from sqlalchemy.exc import SQLAlchemyError
 
-from maps.errors import MapNotFound, StoreUnavailable
-from service.api.deps import MetricsDep, SettingsDep, StoreDep
-from service.api.errors import ProblemError, log_database_error, problem_responses
-from service.api.schemas import HealthOut
+from quadloc.maps.errors import MapNotFound, StoreUnavailable
+from quadloc.service.api.deps import MetricsDep, SettingsDep, StoreDep
+from quadloc.service.api.errors import ProblemError, log_database_error, problem_responses
+from quadloc.service.api.schemas import HealthOut
 
 __all__ = ["router"]
 

@@ -18,16 +18,21 @@ from fastapi.routing import APIRoute
 from pydantic import ValidationError
 from starlette.concurrency import run_in_threadpool
 
-from maps.compiled import CompiledMap
-from maps.errors import MapNotFound
-from maps.model import MAP_ID_PATTERN
-from service.api.auth import ReadAccess, request_access
-from service.api.deps import MapIdPath
-from service.api.errors import ProblemError, json_depth_violation, map_not_found, problem_responses
-from service.api.examples import LOCALIZE_EXAMPLE, LOCALIZE_RESPONSE_EXAMPLE
-from service.api.inspector import SVG_MEDIA_TYPE, render_localization_svg, wants_svg
-from service.api.map_loader import MapLoader, MapStillLoading
-from service.api.schemas import (
+from quadloc.maps.compiled import CompiledMap
+from quadloc.maps.errors import MapNotFound
+from quadloc.maps.model import MAP_ID_PATTERN
+from quadloc.service.api.auth import ReadAccess, request_access
+from quadloc.service.api.deps import MapIdPath
+from quadloc.service.api.errors import (
+    ProblemError,
+    json_depth_violation,
+    map_not_found,
+    problem_responses,
+)
+from quadloc.service.api.examples import LOCALIZE_EXAMPLE, LOCALIZE_RESPONSE_EXAMPLE
+from quadloc.service.api.inspector import SVG_MEDIA_TYPE, render_localization_svg, wants_svg
+from quadloc.service.api.map_loader import MapLoader, MapStillLoading
+from quadloc.service.api.schemas import (
     BatchLocalizeRequest,
     BatchLocalizeResponse,
     LocalizeRequest,

@@ -13,8 +13,8 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Header, Query, Response, status
 
-from maps.errors import MapAlreadyExists, MapNotFound, VersionConflict
-from maps.model import (
+from quadloc.maps.errors import MapAlreadyExists, MapNotFound, VersionConflict
+from quadloc.maps.model import (
     CHESS_JSON_SCHEMA,
     MAP_ID_PATTERN,
     MAP_JSON_SCHEMA,
@@ -22,11 +22,11 @@ from maps.model import (
     scene_map_from_chess,
     scene_map_from_dict,
 )
-from service.api.auth import ReadAccess, WriteAccess
-from service.api.deps import MapIdPath, SettingsDep, StoreDep
-from service.api.errors import ProblemError, map_not_found, problem_responses
-from service.api.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
-from service.api.schemas import (
+from quadloc.service.api.auth import ReadAccess, WriteAccess
+from quadloc.service.api.deps import MapIdPath, SettingsDep, StoreDep
+from quadloc.service.api.errors import ProblemError, map_not_found, problem_responses
+from quadloc.service.api.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
+from quadloc.service.api.schemas import (
     MapListOut,
     MapOut,
     MapSummaryOut,
@@ -39,7 +39,8 @@ __all__ = ["router"]
 router = APIRouter(prefix="/v1", tags=["maps"])
 
 #: Request-body schemas, generated from the pydantic document models that validate the bodies
-#: (maps.model.MapDocument / ChessDocument), without the standalone document's ``$schema``/``$id``.
+#: (quadloc.maps.model.MapDocument / ChessDocument), without the standalone document's
+# ``$schema``/``$id``.
 _MAP_SCHEMA = {k: v for k, v in MAP_JSON_SCHEMA.items() if not k.startswith("$")}
 
 

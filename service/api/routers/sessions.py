@@ -11,11 +11,11 @@ from typing import Annotated
 
 from fastapi import APIRouter, Body, Path, Request, Response
 
-from factors.geometry import DOCUMENT_ROTATION_TOLERANCE, GeometryError, check_pose
-from maps.compiled import CompiledMap
-from maps.errors import MapNotFound
-from service.api.auth import ReadAccess
-from service.api.convert import (
+from quadloc.factors.geometry import DOCUMENT_ROTATION_TOLERANCE, GeometryError, check_pose
+from quadloc.maps.compiled import CompiledMap
+from quadloc.maps.errors import MapNotFound
+from quadloc.service.api.auth import ReadAccess
+from quadloc.service.api.convert import (
     _pose_matrix_in,
     camera_from_request,
     convert_pose,
@@ -26,15 +26,20 @@ from service.api.convert import (
     pose_out,
     prior_from_request,
 )
-from service.api.deps import MapIdPath, StoreDep
-from service.api.errors import ProblemError, field_and_problem, map_not_found, problem_responses
-from service.api.examples import (
+from quadloc.service.api.deps import MapIdPath, StoreDep
+from quadloc.service.api.errors import (
+    ProblemError,
+    field_and_problem,
+    map_not_found,
+    problem_responses,
+)
+from quadloc.service.api.examples import (
     FRAME_EXAMPLE,
     FRAME_RESPONSE_EXAMPLE,
     SESSION_CREATE_EXAMPLE,
     SESSION_EXAMPLE,
 )
-from service.api.session_schemas import (
+from quadloc.service.api.session_schemas import (
     SessionCreate,
     SessionFrameIn,
     SessionFrameOut,
@@ -43,8 +48,8 @@ from service.api.session_schemas import (
     SessionFramesOut,
     SessionOut,
 )
-from service.localization.types import LocalizationInputError
-from service.tracking.session import (
+from quadloc.service.localization.types import LocalizationInputError
+from quadloc.service.tracking.session import (
     DriftModel,
     FrameInput,
     FrameResult,
@@ -52,7 +57,7 @@ from service.tracking.session import (
     TrackingInputError,
     TrackingSession,
 )
-from service.tracking.store import (
+from quadloc.service.tracking.store import (
     SessionCapacityError,
     SessionEntry,
     SessionNotFound,

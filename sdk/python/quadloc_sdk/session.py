@@ -6,10 +6,11 @@
     scene_anchor = result["world_from_odom"]          # apply once to the app's scene
     session.close()
 
-Works with :class:`sdk.client.QuadLocClient` (sync) and :class:`sdk.client.AsyncQuadLocClient`
-(``await start_session_async(...)``, ``await session.add_frame(...)``). Results are the server's
-JSON documents (``docs/tracking.md``). A 404 ``session-not-found`` (the session expired or its
-server restarted) surfaces as the client's usual error: start a new session.
+Works with :class:`quadloc_sdk.client.QuadLocClient` (sync) and
+:class:`quadloc_sdk.client.AsyncQuadLocClient` (``await start_session_async(...)``, ``await
+session.add_frame(...)``). Results are the server's JSON documents (``docs/tracking.md``). A 404
+``session-not-found`` (the session expired or its server restarted) surfaces as the client's usual
+error: start a new session.
 
 ARKit / ARCore helpers: ``ARFrame.camera.transform`` (simd_float4x4, COLUMN-major, OpenGL
 camera axes +Y up, -Z forward) and ARCore ``Pose.toMatrix`` (column-major float[16]) are the
@@ -87,13 +88,13 @@ class TrackingSession:
 
     def close(self) -> None:
         """End the session on the server (DELETE)."""
-        from sdk.client import _Call
+        from quadloc_sdk.client import _Call
 
         self.client._send(_Call("DELETE", f"/v1/sessions/{self.session_id}"))
 
 
 class AsyncTrackingSession(TrackingSession):
-    """A live session with an :class:`sdk.client.AsyncQuadLocClient`."""
+    """A live session with an :class:`quadloc_sdk.client.AsyncQuadLocClient`."""
 
     async def _post(self, body: dict[str, Any]) -> list[dict[str, Any]]:  # type: ignore[override]
         call = self.client._json_call("POST", f"/v1/sessions/{self.session_id}/frames",
@@ -112,7 +113,7 @@ class AsyncTrackingSession(TrackingSession):
         return await self._post({"frames": list(frames)})
 
     async def close(self) -> None:  # type: ignore[override]
-        from sdk.client import _Call
+        from quadloc_sdk.client import _Call
 
         await self.client._send(_Call("DELETE", f"/v1/sessions/{self.session_id}"))
 
@@ -134,6 +135,6 @@ def start_session(client: Any, map_id: str, *, camera: dict, convention: str = "
 async def start_session_async(client: Any, map_id: str, *, camera: dict,
                               convention: str = "opencv",
                               options: dict | None = None) -> AsyncTrackingSession:
-    """:func:`start_session` for an :class:`sdk.client.AsyncQuadLocClient`."""
+    """:func:`start_session` for an :class:`quadloc_sdk.client.AsyncQuadLocClient`."""
     resp = await client._send(_create_call(client, map_id, camera, convention, options))
     return AsyncTrackingSession(client, client._json(resp))

@@ -297,7 +297,7 @@ class Pose(BaseModel):
     ``convention``. ``matrix`` is ROW-major (a list of rows, ``matrix[r][c]``);
     ``matrix_column_major`` the same 16 numbers column by column (simd, Unity, OpenGL);
     ``quaternion_xyzw`` the quaternion scalar last. :meth:`as_matrix` gives the 4x4 numpy array;
-    for Unity see :func:`sdk.geometry.unity_pose_from_world_from_camera`."""
+    for Unity see :func:`quadloc_sdk.geometry.unity_pose_from_world_from_camera`."""
 
     model_config = _RESPONSE
     quaternion_wxyz: list[float]

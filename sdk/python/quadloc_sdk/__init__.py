@@ -1,14 +1,14 @@
 """QuadLoc Python SDK: a typed client of the relocalization service for AR apps.
 
-Imports neither gtsam nor the server (``service``, ``factors``, ``maps``). ``import sdk`` needs
-only httpx and pydantic (the ``quadloc-sdk`` distribution in ``sdk/``); :mod:`sdk.overlay`
-(SVG drawing of a localization) is pure Python; :mod:`sdk.geometry` needs numpy (extra
-``quadloc-sdk[geometry]``) and OpenCV for its contour helpers (extra ``[contours]``, imported
-lazily). See docs/sdk.md.
+Imports neither gtsam nor the server (``quadloc.service``, ``quadloc.factors``, ``quadloc.maps``).
+``import quadloc_sdk`` needs only httpx and pydantic (the ``quadloc-sdk`` distribution in ``sdk/``);
+:mod:`quadloc_sdk.overlay` (SVG drawing of a localization) is pure Python;
+:mod:`quadloc_sdk.geometry` needs numpy (extra ``quadloc-sdk[geometry]``) and OpenCV for its contour
+helpers (extra ``[contours]``, imported lazily). See docs/sdk.md.
 """
 
-from sdk.client import DEFAULT_BASE_URL, SDK_VERSION, AsyncQuadLocClient, QuadLocClient
-from sdk.errors import (
+from quadloc_sdk.client import DEFAULT_BASE_URL, SDK_VERSION, AsyncQuadLocClient, QuadLocClient
+from quadloc_sdk.errors import (
     APIError,
     ClientError,
     Conflict,
@@ -26,7 +26,7 @@ from sdk.errors import (
     Unauthorized,
     ValidationError,
 )
-from sdk.models import (
+from quadloc_sdk.models import (
     METRICS,
     NO_REFINEMENT,
     ROBUST_KERNELS,
@@ -49,7 +49,7 @@ from sdk.models import (
     PoseInput,
     PosePrior,
 )
-from sdk.retry import RetryPolicy
+from quadloc_sdk.retry import RetryPolicy
 
 __version__ = SDK_VERSION
 

@@ -16,7 +16,7 @@ towards +y; ``world_from_camera`` (metres) maps camera to world coordinates; the
 ``opengl`` axes is flipped back with ``diag(1, -1, -1)`` first.
 
 The server's ``POST /v1/maps/{id}/localize`` with ``Accept: image/svg+xml`` draws with
-:func:`render_overlay_svg` too, from its own projections (``factors.geometry``); the two
+:func:`render_overlay_svg` too, from its own projections (``quadloc.factors.geometry``); the two
 projections are compared in ``tests/test_overlay.py``.
 """
 
@@ -45,7 +45,7 @@ __all__ = [
 Matrix = Sequence[Sequence[float]]
 
 #: Smallest camera-frame depth (m) of an ellipsoid for its projection to count as an ellipse
-#: (the server's ``factors.geometry.MIN_DEPTH``).
+#: (the server's ``quadloc.factors.geometry.MIN_DEPTH``).
 MIN_DEPTH_M = 1e-6
 
 
@@ -310,11 +310,11 @@ def _opencv_world_from_camera(pose: Mapping[str, Any]) -> list[list[float]]:
 def overlay_svg(request: Any, response: Any, scene_map: Any) -> str:
     """SVG overlay of a localization (see the module docstring), computed client-side.
 
-    ``request``: the :class:`~sdk.models.LocalizeRequest` (or its JSON dict) that was sent;
-    ``response``: the :class:`~sdk.models.LocalizeResponse` (or dict) received; ``scene_map``:
-    the map document of ``response.map_version`` (``MapRecord.map`` or the dict of docs/maps.md,
-    objects with ``quaternion_wxyz`` or ``rotation``). Not localized: only the detections (all
-    outliers) are drawn."""
+    ``request``: the :class:`~quadloc_sdk.models.LocalizeRequest` (or its JSON dict) that was sent;
+    ``response``: the :class:`~quadloc_sdk.models.LocalizeResponse` (or dict) received;
+    ``scene_map``: the map document of ``response.map_version`` (``MapRecord.map`` or the dict of
+    docs/maps.md, objects with ``quaternion_wxyz`` or ``rotation``). Not localized: only the
+    detections (all outliers) are drawn."""
     req, resp, doc = _plain(request), _plain(response), _plain(scene_map)
     if isinstance(doc, Mapping) and "map" in doc and "objects" not in doc:
         doc = doc["map"]  # a MapRecord dict

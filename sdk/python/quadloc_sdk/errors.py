@@ -4,7 +4,7 @@ Every error the server reports is a problem document
 ``{type, title, status, detail, instance, errors: [{field, message}, ...]}``; the SDK raises the
 subclass of :class:`QuadLocError` matching its HTTP status and keeps every member of the
 document on the exception. A "not localized" answer is NOT an error (HTTP 200 with
-``localized: false``): look at :attr:`sdk.models.LocalizeResponse.reason`.
+``localized: false``): look at :attr:`quadloc_sdk.models.LocalizeResponse.reason`.
 
 Hierarchy::
 
@@ -173,7 +173,7 @@ class RateLimited(ClientError):  # noqa: N818 - HTTP status names read best
 
     @property
     def retry_after(self) -> float | None:
-        from sdk.retry import parse_retry_after
+        from quadloc_sdk.retry import parse_retry_after
 
         return parse_retry_after(self.headers.get("retry-after"))
 
@@ -187,7 +187,7 @@ class ServiceUnavailable(ServerError):  # noqa: N818 - HTTP status names read be
 
     @property
     def retry_after(self) -> float | None:
-        from sdk.retry import parse_retry_after
+        from quadloc_sdk.retry import parse_retry_after
 
         return parse_retry_after(self.headers.get("retry-after"))
 

@@ -32,7 +32,7 @@ from typing import Literal
 
 import numpy as np
 
-from sdk.models import Box, Ellipse
+from quadloc_sdk.models import Box, Ellipse
 
 __all__ = [
     "OPENCV_FROM_OPENGL",
@@ -85,9 +85,9 @@ def canonical_ellipse(cx: float, cy: float, a: float, b: float, angle: float) ->
 def ellipse_from_box(box: Box | tuple[float, float, float, float]) -> Ellipse:
     """The axis-aligned ellipse **inscribed** in a detection box (what the server does with boxes).
 
-    ``box`` is a :class:`sdk.models.Box` or ``(xmin, ymin, xmax, ymax)`` in px (top-left origin).
-    Result: centre = box centre, semi-axes = half the box width / height, ``angle = 0`` (then made
-    canonical, so a tall box gives ``a`` = half height and ``angle = -pi/2``).
+    ``box`` is a :class:`quadloc_sdk.models.Box` or ``(xmin, ymin, xmax, ymax)`` in px (top-left
+    origin). Result: centre = box centre, semi-axes = half the box width / height, ``angle = 0``
+    (then made canonical, so a tall box gives ``a`` = half height and ``angle = -pi/2``).
     """
     if not isinstance(box, Box):
         if len(box) != 4:

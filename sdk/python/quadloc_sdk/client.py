@@ -3,7 +3,7 @@
 
 Example::
 
-    from sdk import QuadLocClient, Camera, Detection, Ellipse
+    from quadloc_sdk import QuadLocClient, Camera, Detection, Ellipse
 
     with QuadLocClient("http://127.0.0.1:8000", api_key=None) as client:
         answer = client.localize(
@@ -15,9 +15,9 @@ Example::
         if answer.localized:
             world_from_camera = answer.world_from_camera.as_matrix()   # 4x4, metres
 
-Errors are raised as :mod:`sdk.errors` exceptions; "not localized" is a normal answer
-(``answer.localized is False``, ``answer.reason``). Retries follow :class:`sdk.retry.RetryPolicy`
-(429/503 and connection failures; never other 4xx).
+Errors are raised as :mod:`quadloc_sdk.errors` exceptions; "not localized" is a normal answer
+(``answer.localized is False``, ``answer.reason``). Retries follow
+:class:`quadloc_sdk.retry.RetryPolicy` (429/503 and connection failures; never other 4xx).
 """
 
 from __future__ import annotations
@@ -33,8 +33,8 @@ from urllib.parse import quote
 
 import httpx
 
-from sdk.errors import PreconditionFailed, QuadLocError, TransportError, error_from_response
-from sdk.models import (
+from quadloc_sdk.errors import PreconditionFailed, QuadLocError, TransportError, error_from_response
+from quadloc_sdk.models import (
     BatchLocalizeResponse,
     Camera,
     Detection,
@@ -47,7 +47,7 @@ from sdk.models import (
     MapVersion,
     PosePrior,
 )
-from sdk.retry import RetryPolicy
+from quadloc_sdk.retry import RetryPolicy
 
 __all__ = ["DEFAULT_BASE_URL", "AsyncQuadLocClient", "QuadLocClient"]
 
@@ -61,7 +61,7 @@ MapDocument = Mapping[str, Any] | str | Path
 @dataclass(frozen=True)
 class _Call:
     """One HTTP exchange to perform (with retries); ``idempotent`` allows replay after a
-    failure that may have reached the server (see :mod:`sdk.retry`)."""
+    failure that may have reached the server (see :mod:`quadloc_sdk.retry`)."""
 
     method: str
     path: str
@@ -338,8 +338,8 @@ class QuadLocClient(_Base):
 
     ``base_url``: e.g. ``http://127.0.0.1:8000``. ``api_key``: sent as
     ``Authorization: Bearer <key>`` (``None`` for an open loopback server). ``timeout``: seconds
-    or an ``httpx.Timeout``. ``retry``: :class:`~sdk.retry.RetryPolicy`. ``transport``: an httpx
-    transport (e.g. ``httpx.MockTransport`` in tests). ``sleep``: waiting function (tests).
+    or an ``httpx.Timeout``. ``retry``: :class:`~quadloc_sdk.retry.RetryPolicy`. ``transport``: an
+    httpx transport (e.g. ``httpx.MockTransport`` in tests). ``sleep``: waiting function (tests).
     """
 
     def __init__(
@@ -361,8 +361,9 @@ class QuadLocClient(_Base):
 
     def start_session(self, map_id: str, *, camera: dict[str, Any], convention: str = "opencv",
                       options: dict[str, Any] | None = None) -> Any:
-        """Start a tracking session (:class:`sdk.session.TrackingSession`, docs/tracking.md)."""
-        from sdk.session import start_session
+        """Start a tracking session (:class:`quadloc_sdk.session.TrackingSession`,
+        docs/tracking.md)."""
+        from quadloc_sdk.session import start_session
 
         return start_session(self, map_id, camera=camera, convention=convention,
                              options=options)
@@ -395,7 +396,7 @@ class QuadLocClient(_Base):
 
     def readyz(self) -> dict[str, Any]:
         """``GET /readyz``: database reachable and default map loadable (503 raises
-        :class:`~sdk.errors.ServiceUnavailable` after the retries)."""
+        :class:`~quadloc_sdk.errors.ServiceUnavailable` after the retries)."""
         return self._json(self._send(_Call("GET", "/readyz", idempotent=True)))
 
     def metrics(self) -> str:
@@ -417,7 +418,7 @@ class QuadLocClient(_Base):
 
     def create_map(self, document: MapDocument) -> MapRecord:
         """Create a map (version 1) from a document in the docs/maps.md format (a dict, or a
-        path to a JSON file). :class:`~sdk.errors.Conflict` if the id exists."""
+        path to a JSON file). :class:`~quadloc_sdk.errors.Conflict` if the id exists."""
         return self._map_record(self._send(self._create_map_call(document)))
 
     def import_chess_map(
@@ -439,10 +440,10 @@ class QuadLocClient(_Base):
         """Replace a map by a new version (n + 1). Say which version you edited, with exactly
         one of ``if_match`` (the ``etag`` of :meth:`get_map`) or ``expected_version`` (checked
         against the latest version, then guarded by its ETag). Stale ->
-        :class:`~sdk.errors.PreconditionFailed`; lost race -> :class:`~sdk.errors.Conflict`
-        (``PreconditionFailed`` is a ``Conflict``).
+        :class:`~quadloc_sdk.errors.PreconditionFailed`; lost race ->
+        :class:`~quadloc_sdk.errors.Conflict` (``PreconditionFailed`` is a ``Conflict``).
 
-        Retries (:mod:`sdk.retry`): like every call, retried on 429/503 and on connection
+        Retries (:mod:`quadloc_sdk.retry`): like every call, retried on 429/503 and on connection
         failures before the request was sent; never after a failure that may have reached the
         server. Replaying this PUT is safe only because ``If-Match`` makes it conditional: if
         an earlier attempt did write, the replay no longer matches the ETag and fails with
@@ -457,9 +458,9 @@ class QuadLocClient(_Base):
     def build_map(self, recording: Any, *, map_id: str, if_match: str | None = None,
                   wait: bool = True, on_progress: Callable[..., None] | None = None,
                   poll_interval_s: float = 0.5, timeout_s: float = 600.0) -> Any:
-        """Build a map from a recording (``POST /v1/maps:build``); see :mod:`sdk.build`.
-        Returns the :class:`sdk.build.BuildJob` (finished unless ``wait=False``)."""
-        from sdk.build import build_map
+        """Build a map from a recording (``POST /v1/maps:build``); see :mod:`quadloc_sdk.build`.
+        Returns the :class:`quadloc_sdk.build.BuildJob` (finished unless ``wait=False``)."""
+        from quadloc_sdk.build import build_map
 
         return build_map(self, recording, map_id=map_id, if_match=if_match, wait=wait,
                          on_progress=on_progress, poll_interval_s=poll_interval_s,
@@ -532,8 +533,8 @@ class AsyncQuadLocClient(_Base):
     async def start_session(self, map_id: str, *, camera: dict[str, Any],
                             convention: str = "opencv",
                             options: dict[str, Any] | None = None) -> Any:
-        """Start a tracking session (:class:`sdk.session.AsyncTrackingSession`)."""
-        from sdk.session import start_session_async
+        """Start a tracking session (:class:`quadloc_sdk.session.AsyncTrackingSession`)."""
+        from quadloc_sdk.session import start_session_async
 
         return await start_session_async(self, map_id, camera=camera, convention=convention,
                                          options=options)
@@ -605,8 +606,8 @@ class AsyncQuadLocClient(_Base):
     async def build_map(self, recording: Any, *, map_id: str, if_match: str | None = None,
                         wait: bool = True, on_progress: Callable[..., None] | None = None,
                         poll_interval_s: float = 0.5, timeout_s: float = 600.0) -> Any:
-        """Build a map from a recording (``POST /v1/maps:build``); see :mod:`sdk.build`."""
-        from sdk.build import abuild_map
+        """Build a map from a recording (``POST /v1/maps:build``); see :mod:`quadloc_sdk.build`."""
+        from quadloc_sdk.build import abuild_map
 
         return await abuild_map(self, recording, map_id=map_id, if_match=if_match, wait=wait,
                                 on_progress=on_progress, poll_interval_s=poll_interval_s,

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from sdk.errors import QuadLocError
+from quadloc_sdk.errors import QuadLocError
 
 __all__ = ["BuildFailedError", "BuildJob", "abuild_map", "aget_build_job", "build_map",
            "get_build_job"]
@@ -75,14 +75,14 @@ def _load(recording: Recording) -> bytes:
 
 def get_build_job(client: Any, job_id_or_location: str) -> BuildJob:
     """The current state of a job (by id or by the ``Location`` path)."""
-    from sdk.client import _Call
+    from quadloc_sdk.client import _Call
 
     return BuildJob.from_wire(client._json(client._send(
         _Call("GET", _job_path(job_id_or_location), idempotent=True))))
 
 
 def _start_call(recording: Recording, map_id: str, if_match: str | None) -> Any:
-    from sdk.client import _Call
+    from quadloc_sdk.client import _Call
 
     headers = {"Content-Type": "application/json"}
     if if_match is not None:
@@ -110,7 +110,7 @@ def _timed_out(job: BuildJob, timeout_s: float) -> BuildFailedError:
 
 async def aget_build_job(client: Any, job_id_or_location: str) -> BuildJob:
     """:func:`get_build_job` for :class:`sdk.AsyncQuadLocClient`."""
-    from sdk.client import _Call
+    from quadloc_sdk.client import _Call
 
     response = await client._send(_Call("GET", _job_path(job_id_or_location), idempotent=True))
     return BuildJob.from_wire(client._json(response))
