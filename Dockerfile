@@ -40,7 +40,7 @@ RUN /opt/quadloc/bin/python -m pip install --no-deps --no-build-isolation ./sdk/
     && /opt/quadloc/bin/python -c "import cv2, gtsam, psycopg, quadloc.service.api.app, quadloc.maps.store" \
     && find /opt/quadloc/lib/python3*/site-packages/quadloc/factors -name "*.py" \
        -exec touch -d "@$(date +%s)" {} + \
-    && /opt/quadloc/bin/python -P -c "__import__('quadloc.factors.pose_residuals').pose_residuals.compile_kernels()" \
+    && /opt/quadloc/bin/python -P -c "__import__('quadloc.factors.pose_residuals', fromlist=['_']).compile_kernels()" \
     && /opt/quadloc/bin/python -m pip uninstall --yes setuptools wheel
 
 # ---- runtime stage: the base + the venv, no compilers, no test tools, no build backend.

@@ -5,12 +5,12 @@ Usage::
     python -m bench.chess_eval [--frames N] [--draws K] [--seed S] [--json PATH] [--plots DIR]
                                [--metrics m1,m2] [--slow-stride N] [--write-results]
 
-Data (read-only, shipped in ``bench/data``; located and loaded by
-:mod:`bench.reference_data`): ``chess_scene.json`` (11 ellipsoids, +Z up) through the maps importer,
-and the 108 real ground-truth poses of ``chess_test_poses.json`` (``R, t`` are
+Data (read-only, shipped in ``tests/support/data``; located and loaded by
+:mod:`tests.support.reference_data`): ``chess_scene.json`` (11 ellipsoids, +Z up) through the maps
+importer, and the 108 real ground-truth poses of ``chess_test_poses.json`` (``R, t`` are
 camera_from_world; ``R`` is snapped to the nearest rotation). Detections are simulated from the
-ground truth by :mod:`bench.simulate` (noise, truncation at the image border, occlusion, sigma,
-misses; see ``docs/simulation.md``). Experiments:
+ground truth by :mod:`tests.support.simulate` (noise, truncation at the image border, occlusion,
+sigma, misses; see ``docs/simulation.md``). Experiments:
 
 1. **exact** — exact projected ellipses, ``localize()`` with level set: fraction localized and
    the largest position error (target: every frame within 1 mm).
@@ -47,26 +47,14 @@ from pathlib import Path
 
 import numpy as np
 
-from bench import reference_data
-from bench.reference_data import CHESS_POSES_PATH, load_chess_map, perturb_pose
-from quadloc.factors.geometry import Camera, invert_pose
 from quadloc.factors.metrics import METRIC_NAMES
 from quadloc.service.localization.types import LocalizationOptions
+from tests.support.errors import pose_errors
+from tests.support.reference_data import load_chess_map, load_chess_world_from_camera, perturb_pose
 
-# ``load_chess_map`` (from bench.reference_data) and ``load_chess_world_from_camera`` are imported
-# by tests.
+# ``load_chess_map`` (from tests.support.reference_data) and ``load_chess_world_from_camera`` are
+# imported by tests.
 
-
-def load_chess_world_from_camera(
-    path: Path = CHESS_POSES_PATH,
-) -> tuple[Camera, list[np.ndarray], list[str]]:
-    """(camera, **world_from_camera** poses (4x4), frame names) of the 108 real test frames.
-
-    Unlike :func:`bench.reference_data.load_chess_poses` (camera_from_world, the file's ``R, t``
-    with ``R`` snapped to the nearest rotation), this returns their inverses.
-    """
-    camera, camera_from_world, names = reference_data.load_chess_poses(path)
-    return camera, [invert_pose(T) for T in camera_from_world], names
 
 
 # --------------------------------------------------------------------------- evaluation
@@ -91,15 +79,6 @@ def eval_options(**kwargs: object) -> LocalizationOptions:
     deadline; RANSAC stays bounded by its hypothesis count)."""
     return LocalizationOptions(time_budget_ms=None, **kwargs)  # type: ignore[arg-type]
 
-
-def pose_errors(estimate: np.ndarray | None, truth: np.ndarray) -> tuple[float, float]:
-    """(camera position error m, rotation angle error deg) of two world_from_camera poses;
-    (inf, inf) when there is no estimate."""
-    if estimate is None:
-        return math.inf, math.inf
-    pos = float(np.linalg.norm(estimate[:3, 3] - truth[:3, 3]))
-    c = (np.trace(estimate[:3, :3].T @ truth[:3, :3]) - 1.0) / 2.0
-    return pos, math.degrees(math.acos(min(1.0, max(-1.0, c))))
 
 
 def group_of(n_objects: int) -> str:
@@ -163,9 +142,9 @@ def run(frames: int = 108, draws: int = 1, seed: int = 0, metrics: tuple[str, ..
         slow_stride: int = 1, log=print) -> dict:
     """Run every experiment; returns the JSON-ready results (raw errors under ``_raw``)."""
     # Imported here so that ``load_chess_*`` stay importable without the solver stack.
-    from bench.simulate import SimulationConfig, simulate_frame
     from quadloc.maps.compiled import compile_map
     from quadloc.service.localization.pipeline import localize, refine_pose
+    from tests.support.simulate import SimulationConfig, simulate_frame
 
     scene = load_chess_map()
     cm = compile_map(scene)

@@ -1,7 +1,7 @@
 """Dev-time generator of the REAL localization example (``service/api/example_frame.json``).
 
-Simulates the demo frame with ``bench.simulate`` at a ground-truth pose of the Chess test set,
-solves it with the service's solver, and writes ``service/api/example_frame.json``,
+Simulates the demo frame with ``tests.support.simulate`` at a ground-truth pose of the Chess test
+set, solves it with the service's solver, and writes ``service/api/example_frame.json``,
 ``docs/examples/localize_chess.json``, ``docs/examples/office_map.json`` and
 ``docs/openapi.json``. Run from the checkout::
 
@@ -19,8 +19,6 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from bench.reference_data import CHESS_POSES_PATH, load_chess_poses
-from bench.simulate import simulate_frame
 from quadloc.factors.geometry import invert_pose
 from quadloc.maps.compiled import compile_map
 from quadloc.maps.demo import load_demo_map
@@ -28,6 +26,8 @@ from quadloc.service.api.examples import EXAMPLE_FRAME_PATH, MAP_EXAMPLE
 from quadloc.service.api.metrics import ApiMetrics
 from quadloc.service.api.schemas import LocalizeRequest
 from quadloc.service.api.solver import Solver
+from tests.support.reference_data import CHESS_POSES_PATH, load_chess_poses
+from tests.support.simulate import simulate_frame
 
 __all__ = ["FRAME_INDEX", "SEED", "build_example_frame", "regenerate"]
 
@@ -46,9 +46,10 @@ def build_example_frame(poses_path: Path | None = None, frame_index: int = FRAME
                         seed: int = SEED) -> tuple[dict[str, Any], list[list[float]], str]:
     """Simulate the demo frame: (request body, true world_from_camera 4x4, source text).
 
-    Needs the source tree (``bench.simulate``, ``bench.reference_data``) and the reference poses
-    (default ``bench.reference_data.CHESS_POSES_PATH``, ``bench/data`` in the checkout);
-    dev-time only (the service imports the generated data, never this module).
+    Needs the source tree (``tests.support.simulate``, ``tests.support.reference_data``) and the
+    reference poses (default ``tests.support.reference_data.CHESS_POSES_PATH``,
+    ``tests/support/data`` in the checkout); dev-time only (the service imports the generated data,
+    never this module).
     """
     camera, camera_from_world_all, names = load_chess_poses(
         CHESS_POSES_PATH if poses_path is None else poses_path)
@@ -72,7 +73,8 @@ def build_example_frame(poses_path: Path | None = None, frame_index: int = FRAME
         "timestamp": 1700000000.0 + frame_index / 30.0,
         "options": {"metric": "level_set", "output_convention": "opencv"},
     }
-    source = (f"simulated detections (bench.simulate defaults, seed {seed}) of the Chess demo "
+    source = (f"simulated detections (tests.support.simulate defaults, seed {seed}) of the Chess "
+              "demo "
               f"map at the ground-truth pose of chess_test_poses.json frames[{frame_index}] "
               f"({sequence} frame {frame_number})")
     return body, [[float(x) for x in row] for row in world_from_camera], source

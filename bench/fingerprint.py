@@ -64,13 +64,13 @@ def _result(r: Any) -> dict[str, Any]:
 
 
 def localize_cases() -> list[dict[str, Any]]:
-    from bench.reference_data import load_chess_map, load_chess_poses, perturb_pose
-    from bench.simulate import SimulationConfig, simulate_frame, simulate_gravity
     from quadloc.factors.geometry import invert_pose
     from quadloc.maps.compiled import compile_map
     from quadloc.service.limits import METRICS, NO_REFINEMENT
     from quadloc.service.localization.pipeline import localize
     from quadloc.service.localization.types import Gravity, LocalizationOptions, PosePrior
+    from tests.support.reference_data import load_chess_map, load_chess_poses, perturb_pose
+    from tests.support.simulate import SimulationConfig, simulate_frame, simulate_gravity
 
     cm = compile_map(load_chess_map())
     camera, cfw, _ = load_chess_poses()
@@ -107,12 +107,12 @@ def localize_cases() -> list[dict[str, Any]]:
 
 
 def session_case() -> list[dict[str, Any]]:
-    from bench.reference_data import load_chess_map, load_chess_poses
-    from bench.simulate import SimulationConfig, simulate_frame
-    from bench.tracking import make_walk, simulate_odometry
     from quadloc.factors.geometry import invert_pose
     from quadloc.maps.compiled import compile_map
     from quadloc.service.tracking.session import FrameInput, SessionOptions, TrackingSession
+    from tests.support.reference_data import load_chess_map, load_chess_poses
+    from tests.support.simulate import SimulationConfig, simulate_frame
+    from tests.support.walks import make_walk, simulate_odometry
 
     cm = compile_map(load_chess_map())
     camera, cfw, _ = load_chess_poses()
@@ -132,13 +132,15 @@ def session_case() -> list[dict[str, Any]]:
 
 
 def build_case() -> dict[str, Any]:
-    from bench.map_building import _det_json, odometry, walk
-    from bench.reference_data import load_chess_map, load_chess_poses
-    from bench.simulate import SimulationConfig, simulate_frame
+    from bench.map_building import _det_json
     from quadloc.factors.geometry import invert_pose
     from quadloc.maps.building.build import build_map
     from quadloc.maps.building.recording import parse_recording, recording_to_dict
     from quadloc.maps.compiled import compile_map
+    from tests.support.reference_data import load_chess_map, load_chess_poses
+    from tests.support.simulate import SimulationConfig, simulate_frame
+    from tests.support.walks import drifting_odometry as odometry
+    from tests.support.walks import resampled_walk as walk
 
     cm = compile_map(load_chess_map())
     camera, cfw, _ = load_chess_poses()

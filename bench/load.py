@@ -15,7 +15,7 @@ measure a setting before changing its default: ``--baseline .`` and ``--set`` on
 What it does, in one run (so the numbers are comparable on a noisy shared machine):
 
 1. Simulates ``--frames`` frames of the demo Chess map at real ground-truth poses
-   (``chess_test_poses.json``, evenly spaced; ``bench.simulate`` default detector noise) and
+   (``chess_test_poses.json``, evenly spaced; ``tests.support.simulate`` default detector noise) and
    builds their ``POST /v1/maps/chess/localize`` bodies.
 2. **In process**: calls ``quadloc.service.localization.pipeline.localize`` on the same frames (same
    options) back to back in this process, ``--duration`` seconds in all: half before the first
@@ -66,8 +66,6 @@ REPO = Path(__file__).resolve().parents[1]
 
 def build_frames(n_frames: int, seed: int = 0) -> tuple[list[dict[str, Any]], list[Any]]:
     """``n_frames`` request bodies (and the matching in-process inputs) of simulated frames."""
-    from bench.reference_data import load_chess_poses
-    from bench.simulate import simulate_frame
     from quadloc.factors.geometry import invert_pose
     from quadloc.maps.compiled import compile_map
     from quadloc.maps.demo import load_demo_map
@@ -77,6 +75,8 @@ def build_frames(n_frames: int, seed: int = 0) -> tuple[list[dict[str, Any]], li
         options_from_request,
     )
     from quadloc.service.api.schemas import LocalizeRequest
+    from tests.support.reference_data import load_chess_poses
+    from tests.support.simulate import simulate_frame
 
     camera, camera_from_world, names = load_chess_poses()
     compiled = compile_map(load_demo_map())

@@ -40,10 +40,10 @@ WRONG_ROTATION_DEG = 20.0
 
 def _frames(seeds: list[int]) -> tuple[Any, Any, Any, list[tuple[int, int, Any]]]:
     """(compiled map, camera, ground-truth poses, [(seed, frame index, frame), ...])."""
-    from bench.chess_eval import EVAL_MISS_PROBABILITY, load_chess_world_from_camera
-    from bench.reference_data import load_chess_map
-    from bench.simulate import SimulationConfig, simulate_frame
+    from bench.chess_eval import EVAL_MISS_PROBABILITY
     from quadloc.maps.compiled import compile_map
+    from tests.support.reference_data import load_chess_map, load_chess_world_from_camera
+    from tests.support.simulate import SimulationConfig, simulate_frame
 
     cm = compile_map(load_chess_map())
     camera, poses, _ = load_chess_world_from_camera()
@@ -60,8 +60,9 @@ def serve(seeds: list[int]) -> None:
     """Worker (run in a subprocess whose ``PYTHONPATH`` is the tree): reads frame numbers (one
     a line) on stdin, answers each with the JSON row of this tree's ``localize()`` on that
     frame (CPU ms, wall split, errors)."""
-    from bench.chess_eval import eval_options, pose_errors
+    from bench.chess_eval import eval_options
     from quadloc.service.localization.pipeline import localize
+    from tests.support.errors import pose_errors
 
     cm, camera, poses, frames = _frames(seeds)
     for _, _, f in frames[:3]:  # warm caches

@@ -7,13 +7,13 @@ Usage::
 
 Per seed:
 
-1. **Walk.** The 108 real ground-truth poses (``bench/data``), in file order, with
+1. **Walk.** The 108 real ground-truth poses (``tests/support/data``), in file order, with
    ``--frames`` poses interpolated along the walk between consecutive ones (rotation slerp,
    translation linear): real viewpoints plus the in-between views an app would record.
 2. **Odometry-grade poses.** The app's poses are the walk's relative motions with noise per
    step (rotation ``N(0, 0.05 deg)`` about a random axis, translation ``N(0, (1 % step + 1 mm))``
    per axis), chained from the true first pose: they drift like VIO.
-3. **Detections** from the TRUE poses by :mod:`bench.simulate` (its default detector noise,
+3. **Detections** from the TRUE poses by :mod:`tests.support.simulate` (its default detector noise,
    truncation at the border, occlusion, 10 % misses) plus 5 % wrong labels and 0.2 spurious
    detections per frame; no track ids.
 4. **Build** with :func:`quadloc.maps.building.build.build_map` from the drifting poses (association
@@ -45,62 +45,16 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.chess_eval import eval_options, load_chess_world_from_camera, pose_errors
-from bench.reference_data import load_chess_map
-from bench.simulate import SimulationConfig, simulate_frame
+from bench.chess_eval import eval_options
 from quadloc.factors.geometry import pose_matrix
-from quadloc.factors.pose_residuals import expmap_pose3
 from quadloc.maps.building.build import build_map
 from quadloc.maps.building.recording import parse_recording, recording_to_dict
 from quadloc.maps.compiled import compile_map
 from quadloc.maps.reconstruct import ellipsoid_errors
-
-ROT_NOISE_DEG = 0.05
-TRANS_NOISE_REL = 0.01
-TRANS_NOISE_ABS_M = 0.001
-
-
-def _slerp(R0: np.ndarray, R1: np.ndarray, s: float) -> np.ndarray:
-    from scipy.spatial.transform import Rotation, Slerp
-
-    return Slerp([0, 1], Rotation.from_matrix([R0, R1]))(s).as_matrix()
-
-
-def walk(poses: list[np.ndarray], n: int) -> list[np.ndarray]:
-    """``n`` world_from_camera poses along the real poses (each real pose included)."""
-    k = len(poses)
-    if n <= k:
-        return [poses[i] for i in np.linspace(0, k - 1, n).astype(int)]
-    per = (n - k) / (k - 1)
-    out = []
-    acc = 0.0
-    for i in range(k - 1):
-        out.append(poses[i])
-        acc += per
-        m = round(acc)
-        acc -= m
-        for j in range(m):
-            s = (j + 1) / (m + 1)
-            R = _slerp(poses[i][:3, :3], poses[i + 1][:3, :3], s)
-            out.append(pose_matrix(R, (1 - s) * poses[i][:3, 3] + s * poses[i + 1][:3, 3]))
-    out.append(poses[-1])
-    return out[:n]
-
-
-def odometry(true_poses: list[np.ndarray], rng: np.random.Generator) -> list[np.ndarray]:
-    """Drifting app poses: noisy relative motions chained from the true first pose."""
-    out = [true_poses[0].copy()]
-    for a, b in itertools.pairwise(true_poses):
-        rel = np.linalg.inv(a) @ b
-        step = float(np.linalg.norm(rel[:3, 3]))
-        axis = rng.normal(size=3)
-        axis /= np.linalg.norm(axis)
-        xi = np.zeros(6)
-        xi[:3] = axis * math.radians(rng.normal(0, ROT_NOISE_DEG))
-        noisy = rel @ expmap_pose3(xi)
-        noisy[:3, 3] += rng.normal(0, TRANS_NOISE_REL * step + TRANS_NOISE_ABS_M, 3)
-        out.append(out[-1] @ noisy)
-    return out
+from tests.support.errors import pose_errors
+from tests.support.reference_data import load_chess_map, load_chess_world_from_camera
+from tests.support.simulate import SimulationConfig, simulate_frame
+from tests.support.walks import drifting_odometry, resampled_walk
 
 
 def _det_json(d) -> dict:
@@ -120,8 +74,8 @@ def run_seed(seed: int, n_frames: int, n_test: int, log=print,
     cm = compile_map(real)
     camera, poses, _ = load_chess_world_from_camera()
     rng = np.random.default_rng([seed, 16])
-    truth_walk = walk(poses, n_frames)
-    app = odometry(truth_walk, rng)
+    truth_walk = resampled_walk(poses, n_frames)
+    app = drifting_odometry(truth_walk, rng)
     cfg = SimulationConfig(wrong_label_probability=0.05, spurious_rate=0.2)
     frames = [simulate_frame(cm, camera, T, rng, cfg) for T in truth_walk]
     doc = recording_to_dict(camera, [(str(i), app[i], [_det_json(d) for d in f.detections])

@@ -1,11 +1,11 @@
 """IoU / GIoU as refinement metrics on the real Chess map (issue 14, part 1), against level set.
 
-For each of the 108 real poses (``bench/data``), with the TRUE associations (this measures the
-refinement alone, not the hypothesis search):
+For each of the 108 real poses (``tests/support/data``), with the TRUE associations (this measures
+the refinement alone, not the hypothesis search):
 
 * exact detections (``SimulationConfig.exact()``, every object overlapping the image), start
-  0.1 m / 5 degrees off the truth (``bench.reference_data.perturb_pose``): the position error
-  after ``refine()``, which must be <= 1e-6 m on every frame;
+  0.1 m / 5 degrees off the truth (``tests.support.reference_data.perturb_pose``): the position
+  error after ``refine()``, which must be <= 1e-6 m on every frame;
 * noisy detections (``SimulationConfig()``: truncation, occlusion, misses, noise, sigma),
   same kind of start: the share of solves that end ``converged`` (not capped by the iteration
   limit), the position error, and the refinement CPU time (``time.process_time``; the solve is
@@ -37,12 +37,12 @@ import time
 
 import numpy as np
 
-from bench.chess_eval import load_chess_world_from_camera, pose_errors
-from bench.reference_data import load_chess_map, perturb_pose
 from bench.results_doc import update_results_section
-from bench.simulate import SimulationConfig, simulate_frame
 from quadloc.maps.compiled import compile_map
 from quadloc.service.localization.refine import refine
+from tests.support.errors import pose_errors
+from tests.support.reference_data import load_chess_map, load_chess_world_from_camera, perturb_pose
+from tests.support.simulate import SimulationConfig, simulate_frame
 
 METRICS = ("iou", "giou", "level_set")
 EXACT_TOLERANCE_M = 1e-6
@@ -215,10 +215,11 @@ INTRO = (
     "Residual: the metric's `Delta` split over the four quadrants of the detection's frame (4 "
     "non-negative rows summing to `Delta`), with exact analytic Jacobians (boundary integrals "
     "of the exact areas, `factors/overlap.py`; checked against central differences in "
-    "`tests/test_metrics.py`). The areas of all pairs of a frame are computed in one call of "
+    "`tests/factors/test_metrics.py`). The areas of all pairs of a frame are computed in one "
+    "call of "
     "a compiled kernel (`quadloc.factors.overlap.quadrant_sums`, numba, `factors/jit.py`; "
     "equal to the "
-    "scalar reference construction to ~1e-9, `tests/test_overlap_batch.py`; "
+    "scalar reference construction to ~1e-9, `tests/factors/test_overlap_batch.py`; "
     "docs/design/factors.md, \"Compiled kernels\", \"Exact ellipse areas\"), and so are the "
     "rows (`quadloc.factors.metrics._overlap_rows`) and the projections' dual conics. iou: a pair "
     "whose ellipses are "

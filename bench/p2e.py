@@ -2,8 +2,8 @@
 
 ``python -m bench.p2e [--scenes N] [--seed S] [--max-roll DEG] [--compare PATH]``
 
-Scenes (synthetic, seeded; the generator of ``tests/test_hypotheses.py``): two ellipsoids
-(semi-axes 0.1-0.4 m, random orientations) about 4 m in front of a camera with the test
+Scenes (synthetic, seeded; the generator of ``tests/service/localization/test_hypotheses.py``): two
+ellipsoids (semi-axes 0.1-0.4 m, random orientations) about 4 m in front of a camera with the test
 intrinsics (640 x 480), looking at their midpoint, rolled uniformly within ``+-max_roll``
 degrees about the optical axis. For exact projections: share of scenes whose true pose is among
 the hypotheses (every entry of ``[R | t]`` within 1e-6), hypotheses per call, mean wall time
@@ -28,49 +28,11 @@ from pathlib import Path
 import numpy as np
 
 from quadloc.factors.geometry import (
-    Camera,
-    DegenerateProjectionError,
     Ellipse,
-    Ellipsoid,
     invert_pose,
-    pose_matrix,
-    project_ellipsoid,
-    snap_to_rotation,
 )
 from quadloc.service.localization.hypotheses import p2e_hypotheses
-
-CAM = Camera(500.0, 520.0, 320.0, 240.0, 640, 480)
-UP = np.array([0.0, 0.0, 1.0])
-
-
-def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = UP,
-            roll: float = 0.0) -> np.ndarray:
-    """world_from_camera of a camera at ``eye`` looking at ``target`` with +X horizontal
-    (zero roll) then rolled by ``roll`` radians about its optical axis."""
-    z = target - eye
-    z /= np.linalg.norm(z)
-    x = np.cross(z, up)
-    x /= np.linalg.norm(x)
-    c, s = math.cos(roll), math.sin(roll)
-    R = np.column_stack([x, np.cross(z, x), z]) @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
-    return pose_matrix(R, eye)
-
-
-def random_pair_scene(rng: np.random.Generator, axes_range: tuple[float, float] = (0.1, 0.4),
-                      roll: float = 0.0):
-    """(ellipsoids, exact ellipses, camera_from_world) of a camera ~4 m from two random
-    ellipsoids (semi-axes in ``axes_range`` m), looking near their midpoint, rolled by ``roll``
-    radians about its optical axis (also the tests' scene generator)."""
-    while True:
-        E = [Ellipsoid(rng.uniform(-1, 1, 3), rng.uniform(*axes_range, 3),
-                       snap_to_rotation(rng.normal(size=(3, 3)))) for _ in range(2)]
-        eye = rng.uniform(-1, 1, 3) + np.array([0.0, -4.0, 0.5])
-        T_cw = invert_pose(look_at(eye, (E[0].center + E[1].center) / 2
-                                   + rng.normal(0, 0.2, 3), roll=roll))
-        try:
-            return E, [project_ellipsoid(CAM, T_cw, e) for e in E], T_cw
-        except DegenerateProjectionError:
-            continue
+from tests.support.scenes import CAM, UP, random_pair_scene
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -5,7 +5,7 @@
 
 Problems (issue 14, part 3): the real Chess map at its 108 real poses, exact detections (the
 projections of the map ellipsoids, objects whose projection is an ellipse), starts 0.1 m /
-5 deg off (``bench.reference_data.perturb_pose``, seed ``--seed``). Each solver refines the
+5 deg off (``tests.support.reference_data.perturb_pose``, seed ``--seed``). Each solver refines the
 pose only (map fixed) and is timed per problem as the median CPU time of ``--repeats`` calls;
 the table gives the median (p90) over the problems, the accuracy the largest distance between
 refined and true camera centre.
@@ -157,13 +157,13 @@ METRICS = ("level_set", "bbox")
 
 def make_problems(seed: int) -> dict:
     """The 108 exact Chess problems as plain data (JSON-able, read by every worker)."""
-    from bench.reference_data import (
+    from quadloc.factors.geometry import invert_pose
+    from tests.support.reference_data import (
         exact_projections,
         load_chess_map,
         load_chess_poses,
         perturb_pose,
     )
-    from quadloc.factors.geometry import invert_pose
 
     ells = [o.ellipsoid for o in load_chess_map().objects]
     cam, camera_from_world, _ = load_chess_poses()

@@ -23,12 +23,10 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.reference_data import load_chess_poses
 from quadloc.factors.geometry import (
     Camera,
     Ellipse,
     Ellipsoid,
-    ellipsoid_depth_margins,
     invert_pose,
     project_ellipsoid,
 )
@@ -40,25 +38,14 @@ from quadloc.maps.reconstruct import (
     ellipsoid_errors,
     reconstruct_ellipsoid,
 )
+from tests.support.reference_data import load_chess_poses
+from tests.support.scenes import visible_frames
 
 
 def load_views() -> tuple[Camera, list[np.ndarray]]:
     cam, cfw, _ = load_chess_poses()
     return cam, cfw
 
-
-def visible_frames(cam: Camera, cfw: list[np.ndarray], ellipsoid: Ellipsoid) -> list[int]:
-    """Frames where ``ellipsoid`` is entirely in front and its image centre is in the image."""
-    out = []
-    for i, T in enumerate(cfw):
-        margin = ellipsoid_depth_margins(T, ellipsoid.center[None],
-                                         ellipsoid.shape_matrix()[None])[0]
-        if margin <= 0:
-            continue
-        e = project_ellipsoid(cam, T, ellipsoid)
-        if 0 <= e.cx < cam.width and 0 <= e.cy < cam.height:
-            out.append(i)
-    return out
 
 
 def ellipse_noise(sigma_px: float, sigma_rel: float, sigma_deg: float) -> Callable:

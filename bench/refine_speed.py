@@ -42,7 +42,6 @@ import gtsam
 import numpy as np
 from scipy.optimize import minimize
 
-from bench.reference_data import CHESS_SCENE_PATH, load_chess_map, load_chess_poses, perturb_pose
 from quadloc.factors import metrics
 from quadloc.factors.geometry import (
     Camera,
@@ -58,6 +57,12 @@ from quadloc.factors.pose_factors import pose_factor, pose_factors
 from quadloc.factors.pose_residuals import expmap_pose3
 from quadloc.service.localization.refine import _lm_params, refine
 from quadloc.service.localization.types import Detection
+from tests.support.reference_data import (
+    CHESS_SCENE_PATH,
+    load_chess_map,
+    load_chess_poses,
+    perturb_pose,
+)
 
 SIZES = (3, 5, 8, 16)
 CAMERA = Camera(532.57, 531.54, 320.0, 240.0, 640, 480)

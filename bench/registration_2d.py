@@ -399,7 +399,7 @@ def discussion(summary: dict, n_pairs: int, seed: int) -> str:
             "shrinks with it). A gradient-based optimiser, as the paper presumably used, "
             "follows the large centre gradient and is not held there. qbbox equals bbox here "
             "because every ellipse lies inside the 640 x 480 image, so the truncation never "
-            "acts (the truncation itself is tested in `tests/test_metrics.py`).")
+            "acts (the truncation itself is tested in `tests/factors/test_metrics.py`).")
     alg = [m for m in ("algebraic", "frobenius") if has(m)]
     if alg:
         def pr(cond: str) -> str:

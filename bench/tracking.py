@@ -3,9 +3,9 @@
     python -m bench.tracking [--seeds 0 1] [--max-frames N] [--smoother isam2|batch]
                              [--window 30] [--json PATH] [--write-results]
 
-Walks: the 108 real ground-truth poses (``bench.reference_data``; chunks of 12 poses 0.1 s
+Walks: the 108 real ground-truth poses (``tests.support.reference_data``; chunks of 12 poses 0.1 s
 apart) in order, joined by smooth 30 Hz interpolation (SLERP + cubic Hermite positions; gaps
-travelled at <= 0.4 m/s and <= 45 deg/s). Detections: ``bench.simulate.simulate_frame``
+travelled at <= 0.4 m/s and <= 45 deg/s). Detections: ``tests.support.simulate.simulate_frame``
 (truncation, occlusion, misses, sigma). "Sparse" stretches: in every other 3-second stretch
 each frame keeps at most ``seed-random`` 0-2 of its detections (an app looking at few objects).
 Odometry (a drift model DIFFERENT from the session's random-walk noise model): the true
@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import gc
-import itertools
 import json
 import math
 import os
@@ -35,77 +34,20 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.reference_data import load_chess_map, load_chess_poses
 from bench.results_doc import update_results_section
-from bench.simulate import SimulationConfig, simulate_frame
-from quadloc.factors.geometry import invert_pose, pose_matrix, snap_to_rotation
-from quadloc.factors.pose_residuals import expmap_pose3
+from quadloc.factors.geometry import invert_pose
 from quadloc.maps.compiled import compile_map
 from quadloc.service.localization.pipeline import localize
 from quadloc.service.localization.types import LocalizationOptions
 from quadloc.service.tracking.session import FrameInput, SessionOptions, TrackingSession
+from tests.support.errors import pose_errors
+from tests.support.reference_data import load_chess_map, load_chess_poses
+from tests.support.simulate import SimulationConfig, simulate_frame
+from tests.support.walks import HZ, make_walk, simulate_odometry
 
-HZ = 30.0
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def _log_so3(R: np.ndarray) -> np.ndarray:
-    c = max(-1.0, min(1.0, (np.trace(R) - 1) / 2))
-    a = math.acos(c)
-    if a < 1e-9:
-        return np.zeros(3)
-    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    return a * w / (2 * math.sin(a))
-
-
-def _exp_so3(w: np.ndarray) -> np.ndarray:
-    """Rotation ``exp([w]x)`` (rad): the rotation block of the shared SE(3) exponential."""
-    return expmap_pose3(np.concatenate([w, np.zeros(3)]))[:3, :3]
-
-
-def make_walk(keyposes: list[np.ndarray]) -> list[np.ndarray]:
-    """30 Hz world_from_camera poses through the key poses (module docstring)."""
-    out: list[np.ndarray] = []
-    for a, b in itertools.pairwise(keyposes):
-        d = float(np.linalg.norm(b[:3, 3] - a[:3, 3]))
-        ang = float(np.linalg.norm(_log_so3(a[:3, :3].T @ b[:3, :3])))
-        dur = max(0.1, d / 0.4, ang / math.radians(45))
-        n = max(1, round(dur * HZ))
-        w = _log_so3(a[:3, :3].T @ b[:3, :3])
-        for i in range(n):
-            s = i / n
-            h = 3 * s * s - 2 * s ** 3  # smooth start/stop on long gaps
-            s2 = h if dur > 0.15 else s
-            out.append(pose_matrix(a[:3, :3] @ _exp_so3(s2 * w),
-                                   (1 - s2) * a[:3, 3] + s2 * b[:3, 3]))
-    out.append(keyposes[-1])
-    return out
-
-
-def simulate_odometry(walk: list[np.ndarray], rng: np.random.Generator) -> list[np.ndarray]:
-    """odom_from_camera poses with drift (module docstring)."""
-    offset = pose_matrix(_exp_so3(rng.normal(size=3)), rng.normal(size=3) * 2)
-    bias = rng.normal(size=3)
-    bias *= math.radians(0.03) / np.linalg.norm(bias)
-    scale = 1.0 + 0.01 * (1 if rng.random() < 0.5 else -1)
-    dt = 1.0 / HZ
-    odom = [offset @ walk[0]]
-    for a, b in itertools.pairwise(walk):
-        rel = invert_pose(a) @ b
-        d = float(np.linalg.norm(rel[:3, 3]))
-        R = rel[:3, :3] @ _exp_so3(bias * dt + rng.normal(size=3) * math.radians(0.1)
-                                   * math.sqrt(dt))
-        t = rel[:3, 3] * scale + rng.normal(size=3) * 0.005 * math.sqrt(d)
-        odom.append(odom[-1] @ pose_matrix(snap_to_rotation(R), t))
-    return odom
-
-
-def pose_error(T: np.ndarray | None, truth: np.ndarray) -> tuple[float, float]:
-    if T is None:
-        return math.inf, math.inf
-    dp = float(np.linalg.norm(T[:3, 3] - truth[:3, 3]))
-    da = math.degrees(float(np.linalg.norm(_log_so3(T[:3, :3].T @ truth[:3, :3]))))
-    return dp, da
 
 
 def run_seed(seed: int, max_frames: int | None, options: SessionOptions,
@@ -136,16 +78,16 @@ def run_seed(seed: int, max_frames: int | None, options: SessionOptions,
         c0 = time.process_time()
         res = session.add_frame(inputs[-1])
         cpu_ms.append((time.process_time() - c0) * 1e3)
-        e_s = pose_error(res.world_from_camera, T)
+        e_s = pose_errors(res.world_from_camera, T)
         wo_err = None
         if res.world_from_odom is not None:
             true_wo = T @ invert_pose(To)
-            wo_err = pose_error(res.world_from_odom, true_wo)[0]
+            wo_err = pose_errors(res.world_from_odom, true_wo)[0]
         e_l = (math.inf, math.inf)
         l_xy = None
         if with_localize and len(dets) >= 2:
             r = localize(dets, cm, camera, LocalizationOptions(seed=seed))
-            e_l = pose_error(r.world_from_camera if r.localized else None, T)
+            e_l = pose_errors(r.world_from_camera if r.localized else None, T)
             l_xy = r.world_from_camera[:2, 3].tolist() if r.localized else None
         rows.append(dict(i=i, n=len(dets), sparse=sparse, state=res.state,
                          truth_xy=T[:2, 3].tolist(),

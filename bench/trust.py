@@ -6,7 +6,7 @@ Usage::
     python -m bench.trust --fit   # rewrites service/localization/calibration.py (tuning seeds)
     python -m bench.trust --diagnose-2det   # experiment 6 (tuning seeds)
 
-Frames: the 108 real Chess poses, detections simulated by :mod:`bench.simulate` (truncation,
+Frames: the 108 real Chess poses, detections simulated by :mod:`tests.support.simulate` (truncation,
 occlusion, misses at 0.2, noisy detections, sigma correlated with the error). Each seed draws
 new detections for every pose. ``--fit`` tunes on ``--tune-seeds`` (default 100, 102, 104
 and 106, all 108 poses) and ``--tune-noisy-seeds`` (101 and 103, the second, noisier detector
@@ -53,15 +53,11 @@ import sys
 import time
 from pathlib import Path
 
-import gtsam
 import numpy as np
 
-from bench.chess_eval import json_safe, load_chess_world_from_camera, pose_errors
-from bench.reference_data import REPO_ROOT, load_chess_map, perturb_pose
-from bench.simulate import SimulationConfig, simulate_frame, simulate_gravity
-from quadloc.factors.geometry import Camera, Ellipse, Ellipsoid
+from bench.chess_eval import json_safe
+from quadloc.factors.geometry import Camera, Ellipse
 from quadloc.maps.compiled import CompiledMap, compile_map
-from quadloc.maps.model import MapObject, SceneMap
 from quadloc.service.localization import calibration
 from quadloc.service.localization.confidence import (
     TOLERANCE_POSITION_M,
@@ -79,6 +75,21 @@ from quadloc.service.localization.types import (
     Gravity,
     LocalizationOptions,
     PosePrior,
+)
+from tests.support.errors import nees, pose_error_tangent, pose_errors
+from tests.support.reference_data import (
+    load_chess_map,
+    load_chess_world_from_camera,
+    perturb_pose,
+)
+from tests.support.scenes import synthetic_map
+from tests.support.simulate import (
+    NOISY,
+    SimulationConfig,
+    reduce_frame,
+    reduce_indices,
+    simulate_frame,
+    simulate_gravity,
 )
 
 SLOW = ("iou", "giou")
@@ -102,10 +113,9 @@ UNIT_WEIGHTS_STRIDE = 2
 #: The simulated IMU's gravity error (degrees per tilt axis) of the reduced frames' gravity runs
 #: (``Gravity``'s default declared sigma, 2 deg, is larger: an AR framework's is ~1 deg).
 IMU_SIGMA_DEG = 1.0
-#: The detector model of the report's second noise setting (twice the default noise).
-NOISY = dict(center_noise=0.08, axis_log_noise=0.12, angle_noise_rad=math.radians(8.0))
 #: The NEES table's row of the level set with the device's gravity.
 GRAVITY_NEES_ROW = "level_set with gravity"
+REPO_ROOT = Path(__file__).resolve().parents[1]
 CALIBRATION_PATH = REPO_ROOT / "service" / "localization" / "calibration.py"
 RELIABILITY_PNG = REPO_ROOT / "docs" / "img" / "trust_reliability.png"
 
@@ -113,17 +123,6 @@ RELIABILITY_PNG = REPO_ROOT / "docs" / "img" / "trust_reliability.png"
 def options(metric: str, **kw: object) -> LocalizationOptions:
     return LocalizationOptions(metric=metric, time_budget_ms=None, **kw)  # type: ignore[arg-type]
 
-
-def pose_error_tangent(estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:
-    """``Logmap(estimate^-1 truth)``: GTSAM Pose3 tangent ``[omega, v]`` of the truth in the
-    estimate's body frame (right perturbation), the frame of the reported covariance."""
-    e, t = gtsam.Pose3(estimate), gtsam.Pose3(truth)
-    return np.asarray(gtsam.Pose3.Logmap(e.between(t)))
-
-
-def nees(estimate: np.ndarray, truth: np.ndarray, covariance: np.ndarray) -> float:
-    xi = pose_error_tangent(estimate, truth)
-    return float(xi @ np.linalg.solve(covariance, xi))
 
 
 def _record(result, truth: np.ndarray, **extra: object) -> dict:
@@ -137,19 +136,6 @@ def _record(result, truth: np.ndarray, **extra: object) -> dict:
         rec["nees"] = nees(result.world_from_camera, truth, result.covariance)
     return rec
 
-
-def reduce_indices(object_ids, n: int, rng: np.random.Generator) -> list[int] | None:
-    """Indices of ``n`` of the frame's true detections (random subset), or None if fewer."""
-    true = [i for i, o in enumerate(object_ids) if o is not None]
-    if len(true) < n:
-        return None
-    return sorted(rng.choice(true, n, replace=False).tolist())
-
-
-def reduce_frame(detections, object_ids, n: int, rng: np.random.Generator):
-    """``n`` of the frame's true detections (random subset), or None if it has fewer."""
-    keep = reduce_indices(object_ids, n, rng)
-    return None if keep is None else [detections[i] for i in keep]
 
 
 def run_frames(seed: int, metrics: tuple[str, ...], stride: int, slow_stride: int,
@@ -231,23 +217,6 @@ def reduced_record(dets: list[Detection], cm: CompiledMap, camera: Camera, truth
 
 # ------------------------------------------------------------------ random detections
 
-
-def synthetic_map(n_objects: int, seed: int, n_categories: int = 8) -> SceneMap:
-    """``n_objects`` ellipsoids (semi-axes 0.1-0.5 m, random yaw) on a floor of side
-    ``2 sqrt(n)`` m (one object per 4 m^2), heights 0-2 m, ``n_categories`` labels; +Z up."""
-    rng = np.random.default_rng(seed)
-    side = 2.0 * math.sqrt(n_objects)
-    cats = tuple(f"c{k}" for k in range(n_categories))
-    objs = []
-    for k in range(n_objects):
-        yaw = rng.uniform(-math.pi, math.pi)
-        R = np.array([[math.cos(yaw), -math.sin(yaw), 0], [math.sin(yaw), math.cos(yaw), 0],
-                      [0, 0, 1]])
-        e = Ellipsoid(np.array([rng.uniform(0, side), rng.uniform(0, side),
-                                rng.uniform(0.1, 2.0)]), rng.uniform(0.1, 0.5, 3), R)
-        objs.append(MapObject(f"o{k}", cats[k % n_categories], e))
-    return SceneMap(f"synthetic-{n_objects}", f"synthetic {n_objects}", (0.0, 0.0, 1.0), cats,
-                    tuple(objs))
 
 
 def run_random(sizes: tuple[int, ...], trials: tuple[int, ...], seed: int, camera: Camera,

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Build the container image from this checkout and run the image checks against it
-# (tests/test_docker_image.py: non-root, lean, /healthz + /readyz, the demo frame through the
+# (tests/e2e/test_docker_image.py: non-root, lean, /healthz + /readyz, the demo frame through the
 # SDK, API keys enforced / 0.0.0.0 refused without keys, maps surviving a restart on /data,
 # SIGTERM stop within 10 s without lost writes, two replicas + PostgreSQL + nginx).
 #
@@ -17,6 +17,6 @@ report="$(mktemp)"
 trap 'rm -f "$report"' EXIT
 status=0
 QUADLOC_DOCKER_REPORT="$report" .venv/bin/python -m pytest -m docker -v -rs \
-    -p no:cacheprovider tests/test_docker_image.py || status=$?
+    -p no:cacheprovider tests/e2e/test_docker_image.py || status=$?
 if [ -s "$report" ]; then echo "image measurements:"; cat "$report"; fi
 exit "$status"

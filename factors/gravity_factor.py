@@ -11,7 +11,7 @@ testing candidates: ``quadloc.service.localization.gravity.tilt_errors_deg``.)
 
 GTSAM's own C++ ``AttitudeFactorPose3`` (navigation frame = the map, body frame = the camera):
 no Python round trip per evaluation. Its error and Jacobian are checked against the tilt angle
-and central differences in ``tests/test_gravity.py``.
+and central differences in ``tests/service/localization/test_gravity.py``.
 """
 
 from __future__ import annotations

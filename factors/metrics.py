@@ -15,9 +15,10 @@ One implementation per metric (decided, issue 10): the smooth metrics (bbox, alg
 frobenius, wasserstein, bhattacharyya) are :func:`conic_residuals`, iou / giou are
 :func:`overlap_residual` (exact areas of :mod:`quadloc.factors.overlap`), both batched; ``residual``
 and ``cost`` are their N = 1 views and :mod:`quadloc.factors.pose_residuals` chains them to the
-pose. The former scalar forms are the tests' oracle (``tests/oracles/metrics_reference.py``).
-``qbbox`` and ``level_set`` exist here one pair at a time (the pose factors' level set is its
-own quadratic-form evaluation in the camera rays, tested equal to :func:`residual`).
+pose. The former scalar forms are the tests' oracle
+(``tests/support/oracles/metrics_reference.py``). ``qbbox`` and ``level_set`` exist here one pair at
+a time (the pose factors' level set is its own quadratic-form evaluation in the camera rays, tested
+equal to :func:`residual`).
 
 Argument order: the **detection** (fixed, measured) comes first, the **projection** (the
 moving, predicted ellipse) second. Every residual is "detection minus projection". All lengths
@@ -406,7 +407,7 @@ def conic_residuals(
 
     The one implementation of these metrics: :func:`residual` is its N = 1 view and
     :class:`quadloc.factors.pose_residuals.PoseResidualModel` chains it to the pose (the scalar
-    forms are the tests' oracle, ``tests/oracles/metrics_reference.py``).
+    forms are the tests' oracle, ``tests/support/oracles/metrics_reference.py``).
     """
     n = Cn.shape[0]
     terms = conic_detection_terms(name, detections) if detection_terms is None \

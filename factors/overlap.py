@@ -3,10 +3,11 @@
 Decided (issue 10): :func:`quadrant_areas_batch` is the ONLY implementation; the single-pair
 :func:`intersection_area`, :func:`hull_area` and :func:`quadrant_areas` are views of it with
 N = 1. The former scalar construction is kept verbatim as the tests' independent oracle
-(``tests/oracles/overlap_reference.py``; equal to ~1e-9 relative, ``tests/test_overlap_batch.py``).
-Decided (issue 14): the construction is compiled (:func:`quadloc.factors.jit.jit`, one loop over the
-pairs, scalar code per pair): the pose factors evaluate ~7 pairs per LM trial, where numpy's
-per-call overhead, not arithmetic, was the cost (docs/design/factors.md, "Exact ellipse areas").
+(``tests/support/oracles/overlap_reference.py``; equal to ~1e-9 relative,
+``tests/factors/test_overlap_batch.py``). Decided (issue 14): the construction is compiled
+(:func:`quadloc.factors.jit.jit`, one loop over the pairs, scalar code per pair): the pose factors
+evaluate ~7 pairs per LM trial, where numpy's per-call overhead, not arithmetic, was the cost
+(docs/design/factors.md, "Exact ellipse areas").
 
 Ellipses are params ``(cx, cy, a, b, angle)`` (px, rad); areas px^2. Everything is computed in
 the first ellipse's normalised frame (the unit circle there; areas scale by ``a1 b1``), with a

@@ -416,7 +416,7 @@ class _ChessObject(BaseModel):
 
 
 class ChessDocument(BaseModel):
-    """The Chess scene format (bench/data/chess_scene.json); unknown fields are ignored."""
+    """The Chess scene format (tests/support/data/chess_scene.json); unknown fields are ignored."""
 
     category_id_to_label: Annotated[dict[str, Label], Field(min_length=1)]
     objects: Annotated[list[_ChessObject], Field(max_length=int(LIMITS["max_objects"]))]
@@ -702,7 +702,8 @@ def scene_map_from_chess(
     data: Mapping[str, Any], *, map_id: str = "chess", name: str = "Chess",
     metadata: Mapping[str, Any] | None = None,
 ) -> SceneMap:
-    """Import the Chess scene format (``bench/data/chess_scene.json``, :class:`ChessDocument`).
+    """Import the Chess scene format (``tests/support/data/chess_scene.json``,
+    :class:`ChessDocument`).
 
     Format: ``category_id_to_label`` ``{"0": "TV", ...}``; ``objects[]`` with ``category_id``,
     ``object_id`` (integer, kept as its decimal string) and ``ellipsoid {axes (semi-axes, m),

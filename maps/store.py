@@ -78,8 +78,8 @@ SQLITE_BUSY_TIMEOUT_S = 30.0
 # Table descriptions for building queries ONLY (the map store's and the build jobs'). The schema
 # itself belongs to the Alembic migrations (maps/migrations/versions/); these declarations mirror
 # it, CHECK constraints included, and are never used to create tables (no metadata.create_all).
-# A schema change is a new migration plus the matching edit here (tests/test_maps_store.py and
-# tests/test_api_build.py compare the two).
+# A schema change is a new migration plus the matching edit here (tests/maps/test_maps_store.py and
+# tests/service/api/test_api_build.py compare the two).
 _metadata = sa.MetaData()
 maps_table = sa.Table(
     "quadloc_maps",

@@ -570,7 +570,7 @@ def _random_samples(scorer: MatchScorer, size: int, count: int,
         return
     p = weights / weights.sum()
     # rng.choice(len(comps), p=p) without its per-call checks: the same cdf search of one
-    # rng.random() draw (the same stream; tests/test_ransac.py)
+    # rng.random() draw (the same stream; tests/service/localization/test_ransac.py)
     cdf = p.cumsum()
     cdf /= cdf[-1]
     for _ in range(count):

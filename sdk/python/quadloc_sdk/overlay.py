@@ -17,7 +17,7 @@ towards +y; ``world_from_camera`` (metres) maps camera to world coordinates; the
 
 The server's ``POST /v1/maps/{id}/localize`` with ``Accept: image/svg+xml`` draws with
 :func:`render_overlay_svg` too, from its own projections (``quadloc.factors.geometry``); the two
-projections are compared in ``tests/test_overlay.py``.
+projections are compared in ``tests/service/api/test_overlay.py``.
 """
 
 from __future__ import annotations

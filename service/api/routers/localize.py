@@ -88,7 +88,8 @@ def localize_frame(
 
 
 #: Every parameter of :func:`localize_frame` (and the app-wide ``check_body_depth``) that
-#: :func:`_plain_frame` checks by hand; tests/test_api_localize.py compares it with the route's.
+#: :func:`_plain_frame` checks by hand; tests/service/api/test_api_localize.py compares it with the
+# route's.
 FAST_PATH_PARAMETERS = ("map_id", "frame", "request", "_key", "version", "accept")
 
 

@@ -1,0 +1,148 @@
+"""Every fenced ``python`` and ``bash`` block of README.md and docs/*.md runs as written, twice
+in a row, against a real server (the ``live_server`` fixture stands in for ``make serve`` at
+http://127.0.0.1:8000; the URL is rewritten to its port). A second run that conflicts with the
+first (an id created and never cleaned up, 409) fails the test.
+
+A block that cannot run here says why in a comment right above it,
+``<!-- not run: <reason> -->`` (Docker engine, the setup commands themselves); those are listed
+and must give a reason. ``<!-- expect: TEXT -->`` above a block: its output must contain TEXT.
+Bash blocks of one page share one shell (a variable set in one block is used by the next, as a
+reader typing them would); python blocks run each in a fresh interpreter from the repository
+root with the venv's ``python`` and ``quadloc`` first on PATH.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+DOCS = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]
+DOC_BASE = "http://127.0.0.1:8000"
+FENCE = re.compile(r"^(?:<!-- (?P<marker>[^\n]*?) -->\n)?```(?P<lang>[A-Za-z]*)\n"
+                   r"(?P<code>.*?)^```[ \t]*$", re.M | re.S)
+#: Commands a docs test must never run on a shared machine (they start containers, publish
+#: ports, install packages into the venv, or run the whole suite); blocks using them must be
+#: marked ``not run``.
+NEVER_RUN = re.compile(r"^\s*(docker|make|podman|kubectl|pip|pip3|apt-get)\b|-m pip\b", re.M)
+
+
+@dataclass(frozen=True)
+class Block:
+    doc: Path
+    line: int
+    lang: str
+    code: str
+    marker: str
+
+    @property
+    def where(self) -> str:
+        return f"{self.doc.relative_to(REPO)}:{self.line}"
+
+    @property
+    def skip_reason(self) -> str | None:
+        m = re.match(r"not run:\s*(.*)", self.marker)
+        return m.group(1).strip() if m else None
+
+    @property
+    def expect(self) -> str | None:
+        m = re.match(r"expect:\s*(.*)", self.marker)
+        return m.group(1).strip() if m else None
+
+
+def blocks(doc: Path) -> list[Block]:
+    text = doc.read_text()
+    return [Block(doc, text.count("\n", 0, m.start("lang")) + 1, m.group("lang"), m.group("code"),
+                  (m.group("marker") or "").strip()) for m in FENCE.finditer(text)]
+
+
+def runnable(doc: Path) -> list[Block]:
+    out = [b for b in blocks(doc) if b.lang in ("python", "bash") and b.skip_reason is None]
+    unsafe = [b.where for b in out if NEVER_RUN.search(b.code)]
+    if unsafe:  # fail before running anything
+        raise AssertionError(f"blocks running docker/make/pip/... must be 'not run': {unsafe}")
+    return out
+
+
+def test_every_block_runs_or_says_why_not() -> None:
+    for d in DOCS:
+        runnable(d)  # raises on an unmarked docker/make block
+    skipped = [b for d in DOCS for b in blocks(d)
+               if b.lang in ("python", "bash") and b.skip_reason is not None]
+    assert all(b.skip_reason for b in skipped), [b.where for b in skipped if not b.skip_reason]
+    # a handful, each for a reason a test cannot provide (a Docker engine, make itself)
+    assert len(skipped) <= 7, [(b.where, b.skip_reason) for b in skipped]
+    n = sum(len(runnable(d)) for d in DOCS)
+    assert n >= 30, n
+    for d in DOCS:  # python blocks are programs, not signatures or fragments
+        for b in runnable(d):
+            if b.lang == "python":
+                compile(b.code, b.where, "exec")
+
+
+def _env(tmp: Path) -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if not k.startswith("QUADLOC_")}
+    env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
+    env["QUADLOC_DATA_DIR"] = str(tmp)  # local CLI commands never touch a real database
+    env["PYTHONPATH"] = str(REPO)
+    return env
+
+
+def _run_page(doc: Path, base: str, env: dict[str, str]) -> list[str]:
+    """Run one page's blocks in order; returns failure messages."""
+    failures = []
+    bash = [b for b in runnable(doc) if b.lang == "bash"]
+    if bash:
+        script = ["set -u -o pipefail"]
+        for i, b in enumerate(bash):
+            script += [f"echo '@@BLOCK {i}@@'", b.code.replace(DOC_BASE, base),
+                       f"echo \"@@RC {i} $?@@\""]
+        proc = subprocess.run(["bash", "-c", "\n".join(script)], cwd=REPO, env=env,
+                              capture_output=True, text=True, timeout=300)
+        outputs = re.split(r"@@BLOCK \d+@@\n", proc.stdout)[1:]
+        if len(outputs) != len(bash):
+            return [f"{doc.name}: bash stopped early:\n{proc.stdout[-2000:]}\n"
+                    f"{proc.stderr[-2000:]}"]
+        for b, out in zip(bash, outputs, strict=True):
+            rc = re.search(r"@@RC \d+ (\d+)@@", out)
+            if rc is None or rc.group(1) != "0":
+                failures.append(f"{b.where}: exit {rc.group(1) if rc else '?'}\n{out[-1500:]}"
+                                f"\n{proc.stderr[-1500:]}")
+            elif b.expect and b.expect.lower() not in out.lower():
+                failures.append(f"{b.where}: expected {b.expect!r} in\n{out[-1500:]}")
+    for b in (b for b in runnable(doc) if b.lang == "python"):
+        proc = subprocess.run([sys.executable, "-c", b.code.replace(DOC_BASE, base)], cwd=REPO,
+                              env=env, capture_output=True, text=True, timeout=120)
+        if proc.returncode != 0:
+            failures.append(f"{b.where}: exit {proc.returncode}\n{proc.stderr[-2000:]}")
+        elif b.expect and b.expect.lower() not in proc.stdout.lower():
+            failures.append(f"{b.where}: expected {b.expect!r} in\n{proc.stdout[-1500:]}")
+    return failures
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(600)
+def test_all_docs_examples_run_twice_in_a_row(live_server: str, tmp_path: Path) -> None:
+    env = _env(tmp_path)
+    for attempt in (1, 2):
+        failures = []
+        for doc in DOCS:
+            failures += _run_page(doc, live_server, env)
+        assert not failures, f"run {attempt}:\n\n" + "\n\n".join(failures)
+
+
+def test_default_database_is_per_checkout(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``make serve`` in a checkout uses ``<checkout>/var`` (ignored by git), not a directory
+    shared by every clone."""
+    from quadloc.service.settings import Settings
+
+    monkeypatch.delenv("QUADLOC_DATA_DIR", raising=False)
+    monkeypatch.delenv("QUADLOC_DATABASE_URL", raising=False)
+    assert Path(Settings().data_dir) == REPO / "var"
+    assert "/var/" in (REPO / ".gitignore").read_text().splitlines()

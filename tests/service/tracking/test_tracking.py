@@ -1,0 +1,454 @@
+"""Tracking sessions: geometry checks against numerical/closed forms, the session on a short
+simulated walk, input errors, the store's bounds, memory flatness, the API and the proxy routing
+rule."""
+
+from __future__ import annotations
+
+import dataclasses
+import gc
+import math
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+from scipy.stats import chi
+
+from quadloc.factors.geometry import invert_pose
+from quadloc.factors.names import FieldError
+from quadloc.factors.pose_residuals import expmap_pose3
+from quadloc.maps.compiled import compile_map
+from quadloc.service.api.errors import field_and_problem
+from quadloc.service.localization.gravity import tilt_errors_deg
+from quadloc.service.localization.types import Gravity
+from quadloc.service.tracking.association import centre_jacobians
+from quadloc.service.tracking.confidence import session_confidence
+from quadloc.service.tracking.session import (
+    FrameInput,
+    SessionOptions,
+    TrackingInputError,
+    TrackingSession,
+    pose_adjoint,
+)
+from quadloc.service.tracking.store import SessionCapacityError, SessionNotFound, SessionStore
+from tests.conftest import make_test_app
+from tests.support.errors import pose_errors as pose_error
+from tests.support.reference_data import load_chess_map, load_chess_poses
+from tests.support.simulate import SimulationConfig, simulate_frame, simulate_gravity
+from tests.support.walks import make_walk, simulate_odometry
+
+ROOT = Path(__file__).resolve().parents[3]
+
+
+@pytest.fixture(scope="module")
+def walk() -> dict:
+    cm = compile_map(load_chess_map())
+    camera, cfw, _ = load_chess_poses()
+    poses = make_walk([invert_pose(T) for T in cfw])[:120]
+    rng = np.random.default_rng(7)
+    odom = simulate_odometry(poses, rng)
+    frames = []
+    for i, (T, To) in enumerate(zip(poses, odom, strict=True)):
+        dets = list(simulate_frame(cm, camera, T, rng, SimulationConfig()).detections)
+        if 30 <= i < 90:  # a sparse stretch: at most 2 detections per frame
+            dets = dets[:2]
+        frames.append(FrameInput(dets, To, i / 30.0, str(i)))
+    return dict(cm=cm, camera=camera, poses=poses, frames=frames)
+
+
+def test_centre_jacobian_matches_central_differences(walk: dict) -> None:
+    cam, T = walk["camera"], walk["poses"][10]
+    pts = walk["cm"].centers
+    _, J = centre_jacobians(cam, T, pts)
+    h = 1e-6
+    for k in range(6):
+        xi = np.zeros(6)
+        xi[k] = h
+        up, _ = centre_jacobians(cam, T @ expmap_pose3(xi), pts)
+        um, _ = centre_jacobians(cam, T @ expmap_pose3(-xi), pts)
+        np.testing.assert_allclose(J[:, :, k], (up - um) / (2 * h), rtol=1e-4, atol=1e-3)
+
+
+def test_pose_adjoint_moves_a_perturbation_across_a_composition() -> None:
+    rng = np.random.default_rng(0)
+    A = expmap_pose3(rng.normal(size=6))
+    B = expmap_pose3(rng.normal(size=6))
+    xi = rng.normal(size=6) * 0.1
+    # A Exp(xi) B == A B Exp(Ad_{B^-1} xi)  (the world_from_odom covariance uses this)
+    lhs = A @ expmap_pose3(xi) @ B
+    rhs = A @ B @ expmap_pose3(pose_adjoint(invert_pose(B)) @ xi)
+    np.testing.assert_allclose(lhs, rhs, atol=1e-9)
+
+
+def test_confidence_matches_the_closed_form_for_isotropic_covariances() -> None:
+    for s_rot, s_pos in [(math.radians(2), 0.04), (math.radians(3), 0.08), (0.01, 0.2)]:
+        cov = np.diag([s_rot ** 2] * 3 + [s_pos ** 2] * 3)
+        exact = chi.cdf(math.radians(5) / s_rot, 3) * chi.cdf(0.1 / s_pos, 3)
+        assert session_confidence("tracking", cov) == pytest.approx(exact, abs=1e-9)
+    assert session_confidence("lost", np.eye(6) * 1e-6) == 0.0
+    assert session_confidence("tracking", None) == 0.0
+
+
+def test_session_initializes_and_tracks_through_a_sparse_stretch(walk: dict) -> None:
+    s = TrackingSession(walk["cm"], walk["camera"], SessionOptions())
+    results = [s.add_frame(f) for f in walk["frames"]]
+    first = next(r.frame_index for r in results if r.state == "tracking")
+    assert first < 30
+    sparse = [r for r in results[30:90] if r.state == "tracking"]
+    assert len(sparse) >= 50
+    errs = [pose_error(r.world_from_camera, walk["poses"][r.frame_index]) for r in sparse]
+    assert np.mean([e[0] <= 0.10 and e[1] <= 5 for e in errs]) >= 0.8
+    r = results[-1]
+    # world_from_odom maps this frame's odometry pose onto its world pose
+    np.testing.assert_allclose(r.world_from_odom @ walk["frames"][-1].odom_from_camera,
+                               r.world_from_camera, atol=1e-9)
+    assert r.covariance.shape == (6, 6) and 0.0 <= r.confidence <= 1.0
+    # the window is bounded
+    assert len(s._smoother.timestamps()) <= SessionOptions().window_frames
+
+
+def test_one_detection_per_frame_initializes_once_the_frames_see_three_objects(
+        walk: dict) -> None:
+    # single-frame localize cannot use any of these frames (one detection each)
+    rng = np.random.default_rng(11)
+    s = TrackingSession(walk["cm"], walk["camera"], SessionOptions())
+    out = []
+    for f, T in zip(walk["frames"][:45], walk["poses"][:45], strict=True):
+        one = [f.detections[int(rng.integers(len(f.detections)))]] if f.detections else []
+        r = s.add_frame(FrameInput(one, f.odom_from_camera, f.timestamp))
+        out.append((r, T))
+    tracked = [(r, T) for r, T in out if r.state == "tracking"]
+    assert tracked and tracked[0][0].frame_index < 30
+    errs = [pose_error(r.world_from_camera, T) for r, T in tracked]
+    assert max(e[0] for e in errs) < 0.10 and max(e[1] for e in errs) < 5.0
+
+
+def test_a_kidnapped_session_goes_lost_then_relocalizes(walk: dict) -> None:
+    """Track 40 frames, then the camera is elsewhere in the room while the odometry claims a
+    continuous motion (a different odometry frame): the detections stop matching, the session
+    says ``lost`` (no pose) and relocalizes with multi-frame RANSAC."""
+    cm, camera = walk["cm"], walk["camera"]
+    s = TrackingSession(cm, camera, SessionOptions())
+    for f in walk["frames"][:40]:
+        s.add_frame(f)
+    assert s.state == "tracking"
+    _, cfw, _ = load_chess_poses()
+    far = make_walk([invert_pose(T) for T in cfw])[600:700]
+    rng = np.random.default_rng(3)
+    odom = simulate_odometry(far, rng)
+    # continue the first odometry smoothly: the kidnapping is invisible to the odometry
+    bridge = walk["frames"][39].odom_from_camera @ invert_pose(odom[0])
+    states, errs = [], []
+    for k, (T, To) in enumerate(zip(far, odom, strict=True)):
+        dets = simulate_frame(cm, camera, T, rng).detections
+        r = s.add_frame(FrameInput(dets, bridge @ To, 40 / 30.0 + (k + 1) / 30.0))
+        states.append(r.state)
+        # never a wrong pose with a confidence
+        if r.world_from_camera is not None and pose_error(r.world_from_camera, T)[0] > 0.1:
+            assert r.confidence == 0.0 and r.reason == "detections_unexplained"
+        if r.state == "tracking" and "lost" in states:
+            errs.append(pose_error(r.world_from_camera, T))
+    assert "lost" in states
+    first_lost = states.index("lost")
+    assert first_lost < 30
+    assert errs, states
+    assert np.mean([e[0] <= 0.10 and e[1] <= 5 for e in errs]) >= 0.95
+
+
+def test_frames_with_two_objects_each_do_not_initialize_alone(walk: dict) -> None:
+    # the same frame repeated (no motion, 2 objects): never three distinct objects -> no pose
+    f = next(f for f in walk["frames"] if len(f.detections) == 2)
+    s = TrackingSession(walk["cm"], walk["camera"], SessionOptions())
+    rs = [s.add_frame(FrameInput(f.detections, f.odom_from_camera, k / 30.0))
+          for k in range(20)]
+    assert all(r.state == "initializing" and r.world_from_camera is None for r in rs)
+
+
+def test_bad_frames_name_the_field_and_leave_the_session_unchanged(walk: dict) -> None:
+    s = TrackingSession(walk["cm"], walk["camera"], SessionOptions())
+    s.add_frame(walk["frames"][0])
+    bad = np.eye(4)
+    bad[0, 0] = 2.0
+    with pytest.raises(TrackingInputError, match=r"^odom_from_camera: must be a rigid"):
+        s.add_frame(FrameInput([], bad, 1.0))
+    with pytest.raises(TrackingInputError, match=r"^timestamp: .* before"):
+        s.add_frame(FrameInput([], np.eye(4), -1.0))
+    assert s.frame_count == 1
+    with pytest.raises(TrackingInputError, match=r"^options\.smoother") as exc:
+        SessionOptions(smoother="kalman")
+    # structured, a FieldError like the localization's errors: the API reads exc.field
+    assert isinstance(exc.value, FieldError) and exc.value.field == "options.smoother"
+    assert exc.value.problem.startswith("must be one of")
+    with pytest.raises(TrackingInputError) as exc:
+        s.add_frame(FrameInput([], np.eye(4), float("nan")))
+    assert (exc.value.field, exc.value.problem) == ("timestamp", "must be a finite number, got nan")
+    assert field_and_problem(exc.value, "frames[3].") == ("frames[3].timestamp",
+                                                          exc.value.problem)
+
+
+def _with_gravity(walk: dict, seed: int = 11) -> list[FrameInput]:
+    """The walk's frames with a simulated IMU gravity (1 deg per tilt axis, declared 2 deg)."""
+    rng = np.random.default_rng(seed)
+    up = walk["cm"].scene_map.up
+    return [dataclasses.replace(f, gravity=Gravity(
+        simulate_gravity(walk["poses"][i], up, 1.0, rng), 2.0))
+        for i, f in enumerate(walk["frames"])]
+
+
+def test_gravity_tightens_the_tilt_of_a_tracked_walk(walk: dict) -> None:
+    """The same walk with the device's gravity on every frame (a factor on each frame's tilt):
+    over the frames tracked both ways, a smaller mean tilt error against the truth and a
+    smaller rotation covariance (small gains: odometry and detections already pin the tilt,
+    0.150 -> 0.146 deg; docs/tracking.md); a gravity that is not a ``Gravity`` names the
+    field."""
+    up = walk["cm"].scene_map.up
+    runs = {}
+    for name, frames in (("plain", walk["frames"]), ("gravity", _with_gravity(walk))):
+        s = TrackingSession(walk["cm"], walk["camera"], SessionOptions())
+        runs[name] = [s.add_frame(f) for f in frames]
+    both = [i for i, (a, b) in enumerate(zip(runs["plain"], runs["gravity"], strict=True))
+            if a.state == "tracking" and b.state == "tracking"]
+    assert len(both) >= 80
+    tilt = {name: [float(tilt_errors_deg(invert_pose(runs[name][i].world_from_camera), up,
+                                         Gravity(-(walk["poses"][i][:3, :3].T @ up))))
+                   for i in both] for name in runs}
+    rot_var = {name: [float(np.trace(runs[name][i].covariance[:3, :3])) for i in both]
+               for name in runs}
+    assert np.mean(tilt["gravity"]) < np.mean(tilt["plain"])
+    assert np.mean(rot_var["gravity"]) < np.mean(rot_var["plain"])
+    s = TrackingSession(walk["cm"], walk["camera"], SessionOptions())
+    with pytest.raises(TrackingInputError, match=r"^gravity: must be a Gravity"):
+        s.add_frame(dataclasses.replace(walk["frames"][0], gravity=[0.0, 1.0, 0.0]))
+    assert s.frame_count == 0
+
+
+def test_store_bounds_count_and_expires_idle_sessions(walk: dict) -> None:
+    now = [0.0]
+    store = SessionStore(max_sessions=2, idle_timeout_s=10.0, clock=lambda: now[0])
+    mk = lambda: TrackingSession(walk["cm"], walk["camera"])  # noqa: E731
+    a = store.create("chess", 1, mk(), "opencv")
+    store.create("chess", 1, mk(), "opencv")
+    with pytest.raises(SessionCapacityError):
+        store.create("chess", 1, mk(), "opencv")
+    now[0] = 5.0
+    store.get(a.session_id)  # touched: stays alive
+    now[0] = 12.0
+    store.create("chess", 1, mk(), "opencv")  # the idle one was expired
+    assert len(store) == 2
+    now[0] = 30.0
+    with pytest.raises(SessionNotFound):
+        store.get(a.session_id)
+
+
+@pytest.mark.slow
+def test_long_session_memory_is_flat(walk: dict) -> None:
+    """450 frames (15 s at 30 Hz, the walk replayed back and forth): the graph stays within its
+    window and the Python heap does not grow with the frame count (``bench.tracking
+    --long-minutes 10`` runs the 10-minute version: docs/tracking.md)."""
+    frames = walk["frames"]
+    s = TrackingSession(walk["cm"], walk["camera"], SessionOptions())
+    seq = frames + frames[::-1]
+    last_T = last_src = None
+    blocks = []
+    for k in range(450):
+        f = seq[k % len(seq)]
+        T = f.odom_from_camera if last_T is None else last_T @ invert_pose(last_src) \
+            @ f.odom_from_camera
+        last_T, last_src = T, f.odom_from_camera
+        s.add_frame(FrameInput(f.detections, T, k / 30.0))
+        if (k + 1) % 75 == 0:
+            gc.collect()
+            blocks.append(sys.getallocatedblocks())
+            assert s.state != "tracking" or len(s._smoother.timestamps()) <= 30
+    # Python objects alive (pymalloc blocks; tracemalloc would make this test 20x slower):
+    # flat after the first window. Leaking one frame's factor (a closure, its residual model
+    # and its arrays: > 50 blocks) would add > 10000 blocks over the last 225 frames.
+    assert max(blocks[3:]) < max(blocks[:3]) + 3000, blocks
+
+
+# ----------------------------------------------------------------------------- API
+
+@pytest.fixture(scope="module")
+def client(tmp_path_factory: pytest.TempPathFactory):
+    with TestClient(make_test_app(tmp_path_factory.mktemp("trk"))) as c:
+        yield c
+
+
+def _frame_json(f: FrameInput) -> dict:
+    return {"detections": [{"ellipse": {"cx": d.ellipse.cx, "cy": d.ellipse.cy,
+                                        "a": d.ellipse.a, "b": d.ellipse.b,
+                                        "angle": d.ellipse.angle},
+                            "label": d.label, "sigma": d.sigma} for d in f.detections],
+            "odom_from_camera": {"matrix": f.odom_from_camera.tolist()},
+            "timestamp": f.timestamp, "frame_id": f.frame_id}
+
+
+def test_api_session_lifecycle(client: TestClient, walk: dict) -> None:
+    cam = walk["camera"]
+    r = client.post("/v1/maps/chess/sessions", json={"camera": {
+        "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy, "width": cam.width,
+        "height": cam.height}})
+    assert r.status_code == 201, r.text
+    sid = r.json()["session_id"]
+    assert r.headers["location"] == f"/v1/sessions/{sid}"
+    frames = [_frame_json(f) for f in walk["frames"][:40]]
+    # a bad frame in a batch: 422 naming it, nothing fused
+    bad = [*frames[:3], {**frames[3], "odom_from_camera": {"matrix": [[2, 0, 0, 0], [0, 1, 0, 0],
+                                                                      [0, 0, 1, 0],
+                                                                      [0, 0, 0, 1]]}}]
+    r = client.post(f"/v1/sessions/{sid}/frames", json={"frames": bad})
+    assert r.status_code == 422
+    assert r.json()["errors"][0]["field"] == "frames[3].odom_from_camera"
+    assert client.get(f"/v1/sessions/{sid}").json()["frames"] == 0
+    r = client.post(f"/v1/sessions/{sid}/frames", json={"frames": frames[:39]})
+    assert r.status_code == 200, r.text
+    r = client.post(f"/v1/sessions/{sid}/frames", json=frames[39])
+    out = r.json()["results"][0]
+    assert out["state"] == "tracking"
+    T = np.array(out["world_from_camera"]["matrix"])
+    assert pose_error(T, walk["poses"][39])[0] < 0.1
+    assert len(out["covariance"]["matrix"]) == 6 and out["world_from_odom"] is not None
+    assert client.get(f"/v1/sessions/{sid}").json()["state"] == "tracking"
+    assert client.delete(f"/v1/sessions/{sid}").status_code == 204
+    r = client.get(f"/v1/sessions/{sid}")
+    assert r.status_code == 404 and r.json()["type"] == "urn:quadloc:problem:session-not-found"
+
+
+def test_api_session_gravity_defaults_to_the_session_convention(client: TestClient,
+                                                                walk: dict) -> None:
+    """A frame's ``gravity`` is in the session's convention unless it says otherwise: an
+    OpenGL session fed the OpenGL-axes odometry and gravity gives the OpenCV session's poses
+    (converted); a zero gravity direction is a 422 naming ``frames[i].gravity`` alone."""
+    cam = walk["camera"]
+    flip = np.diag([1.0, -1.0, -1.0, 1.0])
+    frames = _with_gravity(walk)[:40]
+    out = {}
+    for convention in ("opencv", "opengl"):
+        r = client.post("/v1/maps/chess/sessions", json={"convention": convention, "camera": {
+            "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy, "width": cam.width,
+            "height": cam.height}})
+        sid = r.json()["session_id"]
+        body = []
+        for f in frames:
+            g = f.gravity.direction_camera
+            doc = _frame_json(f)
+            if convention == "opengl":
+                doc["odom_from_camera"] = {"matrix": (f.odom_from_camera @ flip).tolist()}
+                g = flip[:3, :3] @ g
+            body.append({**doc, "gravity": {"direction": g.tolist(), "sigma_deg": 2.0}})
+        if convention == "opencv":
+            bad = [*body[:2], {**body[2], "gravity": {"direction": [0.0, 0.0, 0.0]}}]
+            r = client.post(f"/v1/sessions/{sid}/frames", json={"frames": bad})
+            assert r.status_code == 422
+            # the batch's own field path only (not also errors of the one-frame form)
+            assert [e["field"] for e in r.json()["errors"]] == ["frames[2].gravity"]
+        r = client.post(f"/v1/sessions/{sid}/frames", json={"frames": body})
+        assert r.status_code == 200, r.text
+        out[convention] = r.json()["results"][-1]
+    assert out["opencv"]["state"] == out["opengl"]["state"] == "tracking"
+    T_cv = np.array(out["opencv"]["world_from_camera"]["matrix"])
+    T_gl = np.array(out["opengl"]["world_from_camera"]["matrix"])
+    np.testing.assert_allclose(T_gl @ flip, T_cv, atol=1e-6)
+
+
+def test_api_unknown_session_after_restart_is_404(tmp_path: Path) -> None:
+    with TestClient(make_test_app(tmp_path)) as c:
+        r = c.post("/v1/sessions/s-quadloc-1.abcdef/frames",
+                   json={"odom_from_camera": {"matrix": np.eye(4).tolist()}, "timestamp": 0})
+        assert r.status_code == 404
+        assert r.json()["type"] == "urn:quadloc:problem:session-not-found"
+
+
+def test_nginx_routes_a_session_to_the_replica_that_created_it(monkeypatch, walk) -> None:
+    conf = (ROOT / "deploy" / "nginx.conf").read_text()
+    block = re.search(r"map \$uri \$quadloc_session_upstream \{(.*?)\}", conf, re.S).group(1)
+    rules = [(re.compile(m.group(1)), m.group(2))
+             for m in re.finditer(r"~(\S+)\s+(\S+);", block)]
+    default = re.search(r"default\s+(\S+);", block).group(1)
+    upstreams = set(re.findall(r"upstream (\S+) \{", conf))
+
+    def route(uri: str) -> str:
+        return next((u for rx, u in rules if rx.search(uri)), default)
+
+    for replica in ("quadloc-1", "quadloc-2"):
+        monkeypatch.setenv("QUADLOC_REPLICA_ID", replica)
+        sid = SessionStore().create("chess", 1, TrackingSession(walk["cm"], walk["camera"]),
+                                    "opencv").session_id
+        up = route(f"/v1/sessions/{sid}/frames")
+        assert up in upstreams and f"server {replica}:8000" in conf.split(
+            f"upstream {up} {{")[1].split("}")[0]
+    assert route("/v1/maps/chess/sessions") == "quadloc"
+    assert route("/v1/sessions/s-other.x") == "quadloc"
+
+
+# ----------------------------------------------------------------------------- SDK
+
+def test_arkit_and_arcore_helpers_transpose_column_major_input() -> None:
+    from quadloc_sdk.session import arcore_pose_to_matrix, arkit_transform_to_matrix
+
+    T = [[0.0, -1.0, 0.0, 1.5], [1.0, 0.0, 0.0, -2.0], [0.0, 0.0, 1.0, 0.25], [0, 0, 0, 1]]
+    columns = [[T[r][c] for r in range(4)] for c in range(4)]
+    assert arkit_transform_to_matrix(columns) == T
+    assert arcore_pose_to_matrix([x for col in columns for x in col]) == T
+    with pytest.raises(ValueError, match="column_major"):
+        arcore_pose_to_matrix([0.0] * 15)
+
+
+def test_sdk_session_sync_and_async(client: TestClient, walk: dict) -> None:
+    import asyncio
+
+    import httpx
+
+    from quadloc_sdk.client import AsyncQuadLocClient, QuadLocClient
+
+    cam = walk["camera"]
+    camera = {"fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy, "width": cam.width,
+              "height": cam.height}
+    frames = [_frame_json(f) for f in walk["frames"][:12]]
+    gravity = [{"direction": f.gravity.direction_camera.tolist(), "sigma_deg": 2.0}
+               for f in _with_gravity(walk)[:12]]
+    with QuadLocClient("http://testserver", transport=client._transport) as qc:
+        s = qc.start_session("chess", camera=camera)
+        res = [s.add_frame(f["detections"], odom_from_camera=f["odom_from_camera"]["matrix"],
+                           timestamp=f["timestamp"], gravity=g)
+               for f, g in zip(frames, gravity, strict=True)]
+        assert res[-1]["state"] == "tracking"
+        s.close()
+
+    async def run() -> tuple[dict, dict]:
+        transport = httpx.ASGITransport(app=client.app)
+        async with AsyncQuadLocClient("http://testserver", transport=transport) as ac:
+            s = await ac.start_session("chess", camera=camera)
+            out = await s.add_frames(frames[:-1])
+            last = frames[-1]
+            one = await s.add_frame(last["detections"],
+                                    odom_from_camera=last["odom_from_camera"]["matrix"],
+                                    timestamp=last["timestamp"], gravity=gravity[-1])
+            await s.close()
+            return out[-1], one
+
+    batch_last, one = asyncio.run(run())
+    assert batch_last["state"] == one["state"] == "tracking"
+
+
+# ----------------------------------------------------------------------------- CLI
+
+def test_cli_track_replays_the_example_recording(tmp_path: Path, capsys) -> None:
+    import json
+
+    from quadloc.service.cli import main
+
+    db = f"sqlite:///{tmp_path / 'maps.db'}"
+    rec = ROOT / "docs" / "examples" / "track_chess.json"
+    assert main(["track", "--map", "chess", str(rec), "--database-url", db]) == 0
+    out = capsys.readouterr().out
+    m = re.search(r"within 10 cm and 5 deg ([0-9.]+) %", out)
+    assert m and float(m.group(1)) >= 90.0, out[-500:]
+    doc = json.loads(rec.read_text())
+    doc["ground_truth_world_from_camera"] = doc["ground_truth_world_from_camera"][:3]
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(doc))
+    assert main(["track", "--map", "chess", str(bad), "--database-url", db]) == 2
+    assert "one entry per frame" in capsys.readouterr().err

@@ -1,0 +1,127 @@
+"""Camera trajectories of the tests and benchmarks, and the drifting odometry of an AR app.
+
+* :func:`make_walk`: 30 Hz ``world_from_camera`` poses through key poses (smooth start / stop
+  on long gaps), and :func:`simulate_odometry`: the app's ``odom_from_camera`` poses along it
+  (random frame offset, gyro bias, 1 % scale error, noise): the tracking sessions' walks.
+* :func:`resampled_walk`: ``n`` poses along key poses (each key pose kept, slerp between), and
+  :func:`drifting_odometry`: app poses chained from noisy relative motions, starting at the
+  true first pose: the map-building recordings.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+
+from quadloc.factors.geometry import invert_pose, pose_matrix, snap_to_rotation
+from quadloc.factors.pose_residuals import expmap_pose3
+
+__all__ = ["HZ", "drifting_odometry", "make_walk", "resampled_walk", "simulate_odometry"]
+
+
+HZ = 30.0
+
+
+def _log_so3(R: np.ndarray) -> np.ndarray:
+    c = max(-1.0, min(1.0, (np.trace(R) - 1) / 2))
+    a = math.acos(c)
+    if a < 1e-9:
+        return np.zeros(3)
+    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    return a * w / (2 * math.sin(a))
+
+
+def _exp_so3(w: np.ndarray) -> np.ndarray:
+    """Rotation ``exp([w]x)`` (rad): the rotation block of the shared SE(3) exponential."""
+    return expmap_pose3(np.concatenate([w, np.zeros(3)]))[:3, :3]
+
+
+def make_walk(keyposes: list[np.ndarray]) -> list[np.ndarray]:
+    """30 Hz world_from_camera poses through the key poses (module docstring)."""
+    out: list[np.ndarray] = []
+    for a, b in itertools.pairwise(keyposes):
+        d = float(np.linalg.norm(b[:3, 3] - a[:3, 3]))
+        ang = float(np.linalg.norm(_log_so3(a[:3, :3].T @ b[:3, :3])))
+        dur = max(0.1, d / 0.4, ang / math.radians(45))
+        n = max(1, round(dur * HZ))
+        w = _log_so3(a[:3, :3].T @ b[:3, :3])
+        for i in range(n):
+            s = i / n
+            h = 3 * s * s - 2 * s ** 3  # smooth start/stop on long gaps
+            s2 = h if dur > 0.15 else s
+            out.append(pose_matrix(a[:3, :3] @ _exp_so3(s2 * w),
+                                   (1 - s2) * a[:3, 3] + s2 * b[:3, 3]))
+    out.append(keyposes[-1])
+    return out
+
+
+def simulate_odometry(walk: list[np.ndarray], rng: np.random.Generator) -> list[np.ndarray]:
+    """odom_from_camera poses with drift (module docstring)."""
+    offset = pose_matrix(_exp_so3(rng.normal(size=3)), rng.normal(size=3) * 2)
+    bias = rng.normal(size=3)
+    bias *= math.radians(0.03) / np.linalg.norm(bias)
+    scale = 1.0 + 0.01 * (1 if rng.random() < 0.5 else -1)
+    dt = 1.0 / HZ
+    odom = [offset @ walk[0]]
+    for a, b in itertools.pairwise(walk):
+        rel = invert_pose(a) @ b
+        d = float(np.linalg.norm(rel[:3, 3]))
+        R = rel[:3, :3] @ _exp_so3(bias * dt + rng.normal(size=3) * math.radians(0.1)
+                                   * math.sqrt(dt))
+        t = rel[:3, 3] * scale + rng.normal(size=3) * 0.005 * math.sqrt(d)
+        odom.append(odom[-1] @ pose_matrix(snap_to_rotation(R), t))
+    return odom
+
+
+ROT_NOISE_DEG = 0.05
+
+
+TRANS_NOISE_REL = 0.01
+
+
+TRANS_NOISE_ABS_M = 0.001
+
+
+def _slerp(R0: np.ndarray, R1: np.ndarray, s: float) -> np.ndarray:
+    from scipy.spatial.transform import Rotation, Slerp
+
+    return Slerp([0, 1], Rotation.from_matrix([R0, R1]))(s).as_matrix()
+
+
+def resampled_walk(poses: list[np.ndarray], n: int) -> list[np.ndarray]:
+    """``n`` world_from_camera poses along the real poses (each real pose included)."""
+    k = len(poses)
+    if n <= k:
+        return [poses[i] for i in np.linspace(0, k - 1, n).astype(int)]
+    per = (n - k) / (k - 1)
+    out = []
+    acc = 0.0
+    for i in range(k - 1):
+        out.append(poses[i])
+        acc += per
+        m = round(acc)
+        acc -= m
+        for j in range(m):
+            s = (j + 1) / (m + 1)
+            R = _slerp(poses[i][:3, :3], poses[i + 1][:3, :3], s)
+            out.append(pose_matrix(R, (1 - s) * poses[i][:3, 3] + s * poses[i + 1][:3, 3]))
+    out.append(poses[-1])
+    return out[:n]
+
+
+def drifting_odometry(true_poses: list[np.ndarray], rng: np.random.Generator) -> list[np.ndarray]:
+    """Drifting app poses: noisy relative motions chained from the true first pose."""
+    out = [true_poses[0].copy()]
+    for a, b in itertools.pairwise(true_poses):
+        rel = np.linalg.inv(a) @ b
+        step = float(np.linalg.norm(rel[:3, 3]))
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        xi = np.zeros(6)
+        xi[:3] = axis * math.radians(rng.normal(0, ROT_NOISE_DEG))
+        noisy = rel @ expmap_pose3(xi)
+        noisy[:3, 3] += rng.normal(0, TRANS_NOISE_REL * step + TRANS_NOISE_ABS_M, 3)
+        out.append(out[-1] @ noisy)
+    return out
