@@ -19,7 +19,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from quadloc.factors.geometry import invert_pose
+from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import compile_map
 from quadloc.maps.demo import load_demo_map
 from quadloc.service.api.examples import EXAMPLE_FRAME_PATH, MAP_EXAMPLE

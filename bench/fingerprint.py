@@ -64,7 +64,7 @@ def _result(r: Any) -> dict[str, Any]:
 
 
 def localize_cases() -> list[dict[str, Any]]:
-    from quadloc.factors.geometry import invert_pose
+    from quadloc.factors.rotations import invert_pose
     from quadloc.maps.compiled import compile_map
     from quadloc.service.limits import METRICS, NO_REFINEMENT
     from quadloc.service.localization.pipeline import localize
@@ -107,7 +107,7 @@ def localize_cases() -> list[dict[str, Any]]:
 
 
 def session_case() -> list[dict[str, Any]]:
-    from quadloc.factors.geometry import invert_pose
+    from quadloc.factors.rotations import invert_pose
     from quadloc.maps.compiled import compile_map
     from quadloc.service.tracking.session import FrameInput, SessionOptions, TrackingSession
     from tests.support.reference_data import load_chess_map, load_chess_poses
@@ -133,7 +133,7 @@ def session_case() -> list[dict[str, Any]]:
 
 def build_case() -> dict[str, Any]:
     from bench.map_building import _det_json
-    from quadloc.factors.geometry import invert_pose
+    from quadloc.factors.rotations import invert_pose
     from quadloc.maps.building.build import build_map
     from quadloc.maps.building.recording import parse_recording, recording_to_dict
     from quadloc.maps.compiled import compile_map

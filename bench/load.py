@@ -66,7 +66,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 def build_frames(n_frames: int, seed: int = 0) -> tuple[list[dict[str, Any]], list[Any]]:
     """``n_frames`` request bodies (and the matching in-process inputs) of simulated frames."""
-    from quadloc.factors.geometry import invert_pose
+    from quadloc.factors.rotations import invert_pose
     from quadloc.maps.compiled import compile_map
     from quadloc.maps.demo import load_demo_map
     from quadloc.service.api.convert import (

@@ -46,7 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.chess_eval import eval_options
-from quadloc.factors.geometry import pose_matrix
+from quadloc.factors.rotations import pose_matrix
 from quadloc.maps.building.build import build_map
 from quadloc.maps.building.recording import parse_recording, recording_to_dict
 from quadloc.maps.compiled import compile_map
@@ -213,7 +213,7 @@ def transform_scene(scene, T: np.ndarray):
     """The map with every ellipsoid moved by the rigid ``T`` (4x4)."""
     from dataclasses import replace
 
-    from quadloc.factors.geometry import Ellipsoid
+    from quadloc.factors.camera import Ellipsoid
     from quadloc.maps.model import MapObject
 
     objs = tuple(MapObject(o.object_id, o.category, Ellipsoid(

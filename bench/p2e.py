@@ -27,10 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from quadloc.factors.geometry import (
-    Ellipse,
-    invert_pose,
-)
+from quadloc.factors.conics import Ellipse
+from quadloc.factors.rotations import invert_pose
 from quadloc.service.localization.hypotheses import p2e_hypotheses
 from tests.support.scenes import CAM, UP, random_pair_scene
 

@@ -157,7 +157,7 @@ METRICS = ("level_set", "bbox")
 
 def make_problems(seed: int) -> dict:
     """The 108 exact Chess problems as plain data (JSON-able, read by every worker)."""
-    from quadloc.factors.geometry import invert_pose
+    from quadloc.factors.rotations import invert_pose
     from tests.support.reference_data import (
         exact_projections,
         load_chess_map,
@@ -184,7 +184,8 @@ def make_problems(seed: int) -> dict:
 
 def worker(path: Path, metric: str, repeats: int) -> list[dict]:
     """Time ``refine`` (whichever tree is first on ``sys.path``) on every problem."""
-    from quadloc.factors.geometry import Camera, Ellipse, Ellipsoid
+    from quadloc.factors.camera import Camera, Ellipsoid
+    from quadloc.factors.conics import Ellipse
     from quadloc.service.localization.refine import refine
     from quadloc.service.localization.types import Detection
 

@@ -23,13 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from quadloc.factors.geometry import (
-    Camera,
-    Ellipse,
-    Ellipsoid,
-    invert_pose,
-    project_ellipsoid,
-)
+from quadloc.factors.camera import Camera, Ellipsoid, project_ellipsoid
+from quadloc.factors.conics import Ellipse
+from quadloc.factors.rotations import invert_pose
 from quadloc.maps.demo import load_demo_map
 from quadloc.maps.reconstruct import (
     ReconstructionError,

@@ -43,18 +43,11 @@ import numpy as np
 from scipy.optimize import minimize
 
 from quadloc.factors import metrics
-from quadloc.factors.geometry import (
-    Camera,
-    DegenerateProjectionError,
-    Ellipse,
-    Ellipsoid,
-    ellipsoid_depth_margins,
-    invert_pose,
-    project_ellipsoid,
-    rotation_from_quaternion_wxyz,
-)
+from quadloc.factors.camera import Camera, Ellipsoid, ellipsoid_depth_margins, project_ellipsoid
+from quadloc.factors.conics import DegenerateProjectionError, Ellipse
 from quadloc.factors.pose_factors import pose_factor, pose_factors
 from quadloc.factors.pose_residuals import expmap_pose3
+from quadloc.factors.rotations import invert_pose, rotation_from_quaternion_wxyz
 from quadloc.service.localization.refine import _lm_params, refine
 from quadloc.service.localization.types import Detection
 from tests.support.reference_data import (

@@ -60,7 +60,7 @@ from pathlib import Path
 import gtsam
 import numpy as np
 
-from quadloc.factors.geometry import Ellipse
+from quadloc.factors.conics import Ellipse
 from quadloc.factors.metrics import (
     CONIC_METRICS,
     METRIC_NAMES,

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.results_doc import update_results_section
-from quadloc.factors.geometry import invert_pose
+from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import compile_map
 from quadloc.service.localization.pipeline import localize
 from quadloc.service.localization.types import LocalizationOptions

@@ -56,7 +56,8 @@ from pathlib import Path
 import numpy as np
 
 from bench.chess_eval import json_safe
-from quadloc.factors.geometry import Camera, Ellipse
+from quadloc.factors.camera import Camera
+from quadloc.factors.conics import Ellipse
 from quadloc.maps.compiled import CompiledMap, compile_map
 from quadloc.service.localization import calibration
 from quadloc.service.localization.confidence import (

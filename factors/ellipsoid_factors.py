@@ -32,9 +32,10 @@ from collections.abc import Callable, Sequence
 import gtsam
 import numpy as np
 
+from quadloc.factors.camera import depth_margin
 from quadloc.factors.ellipsoid_residuals import LevelSetSamples, observation_residual
-from quadloc.factors.geometry import depth_margin, invert_pose
 from quadloc.factors.pose_residuals import DEFAULT_MIN_DEPTH_MARGIN
+from quadloc.factors.rotations import invert_pose
 
 __all__ = ["PENALTY_COST", "depth_margins", "ellipsoid_views_factor", "huber_row_scale"]
 
@@ -58,7 +59,7 @@ def depth_margins(camera_from_world: np.ndarray, rotation: np.ndarray, center: n
     :func:`quadloc.factors.ellipsoid_residuals.observation_residual`): ``d . c + t_z - sqrt(d^T S
     d)`` with ``d`` the camera's optical axis in the world (third row of ``R_cw``) and ``S`` the
     shape matrix ``R diag(axes^2) R^T`` (the formula:
-    :func:`quadloc.factors.geometry.depth_margin`)."""
+    :func:`quadloc.factors.camera.depth_margin`)."""
     R = np.asarray(rotation, dtype=float)
     S = (R * (np.asarray(axes, dtype=float) ** 2)[..., None, :]) @ np.swapaxes(R, -1, -2)
     d = camera_from_world[..., 2, :3]

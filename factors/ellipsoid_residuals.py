@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from quadloc.factors.geometry import Camera, Ellipse, level_values, skew
+from quadloc.factors.camera import Camera
+from quadloc.factors.conics import Ellipse, level_values
+from quadloc.factors.rotations import skew
 
 __all__ = [
     "LevelSetSamples",
@@ -141,7 +143,7 @@ def observation_residual(
     (``rotation`` (V, 3, 3), ``center`` and ``axes`` (V, 3)).
 
     The caller must ensure the ellipsoid is in front of the camera (positive depth margin,
-    :func:`quadloc.factors.geometry.ellipsoid_depth_margins`): otherwise ``A`` is no ellipse's
+    :func:`quadloc.factors.camera.ellipsoid_depth_margins`): otherwise ``A`` is no ellipse's
     conic.
     """
     Q = dual_quadric(rotation, center, axes)

@@ -22,7 +22,7 @@ equal to :func:`residual`).
 
 Argument order: the **detection** (fixed, measured) comes first, the **projection** (the
 moving, predicted ellipse) second. Every residual is "detection minus projection". All lengths
-are pixels, angles radians (see :mod:`quadloc.factors.geometry` for the ellipse conventions). Design
+are pixels, angles radians (see :mod:`quadloc.factors.conics` for the ellipse conventions). Design
 rationale: ``docs/design/factors.md`` ("Metrics").
 
 Metrics, costs and residuals (``r``, length in brackets)
@@ -80,7 +80,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from quadloc.factors.geometry import (
+from quadloc.factors.conics import (
     Ellipse,
     dual_conics_from_params,
     gaussian_derivatives_from_dual_conics,
@@ -160,7 +160,7 @@ def _check_options(name: str, options: dict) -> None:
 
 def _check_ellipse(arg: str, value: object) -> Ellipse:
     if not isinstance(value, Ellipse):
-        raise TypeError(f"{arg} must be a quadloc.factors.geometry.Ellipse, "
+        raise TypeError(f"{arg} must be a quadloc.factors.conics.Ellipse, "
                         f"got {type(value).__name__}")
     return value
 

@@ -5,7 +5,8 @@ can publish the valid names and apply the same rules without loading the solver
 (``quadloc.service.limits`` re-exports the names).
 
 * :data:`METRIC_NAMES`, :data:`ROBUST_KERNELS`: the valid names.
-* :class:`FieldError`: THE error of invalid input, with a structured ``field``.
+* :class:`FieldError`: THE error of invalid input, with a structured ``field``;
+  :class:`GeometryError`, its kind for geometric input.
 * :func:`is_real`, :func:`check_robust`: rules used by every layer that takes these inputs.
 """
 
@@ -14,7 +15,14 @@ from __future__ import annotations
 import math
 import numbers
 
-__all__ = ["METRIC_NAMES", "ROBUST_KERNELS", "FieldError", "check_robust", "is_real"]
+__all__ = [
+    "METRIC_NAMES",
+    "ROBUST_KERNELS",
+    "FieldError",
+    "GeometryError",
+    "check_robust",
+    "is_real",
+]
 
 #: The nine ellipse metrics (``quadloc.factors.metrics.residual``,
 # ``quadloc.factors.pose_factors``).
@@ -37,6 +45,10 @@ class FieldError(ValueError):
         super().__init__(f"{field}: {problem}" if field else problem)
         self.field = field
         self.problem = problem
+
+
+class GeometryError(FieldError):
+    """Invalid geometric input (a :class:`FieldError`)."""
 
 
 def is_real(x: object) -> bool:

@@ -31,9 +31,11 @@ from typing import Any
 import gtsam
 import numpy as np
 
-from quadloc.factors.geometry import Camera, Ellipse, Ellipsoid, snap_to_rotation
+from quadloc.factors.camera import Camera, Ellipsoid
+from quadloc.factors.conics import Ellipse
 from quadloc.factors.names import ROBUST_KERNELS, check_robust, is_real
 from quadloc.factors.pose_residuals import PoseResidualModel
+from quadloc.factors.rotations import snap_to_rotation
 
 __all__ = [
     "DEFAULT_ROBUST_SCALE",
@@ -50,7 +52,7 @@ __all__ = [
 def pose3(T: np.ndarray) -> gtsam.Pose3:
     """A 4x4 rigid transform (any direction: ``world_from_camera``, ``odom_from_camera``...) as
     a ``gtsam.Pose3`` of the same direction; the rotation block is snapped to the nearest
-    rotation (:func:`quadloc.factors.geometry.snap_to_rotation`: unchanged when already
+    rotation (:func:`quadloc.factors.rotations.snap_to_rotation`: unchanged when already
     orthonormal)."""
     return gtsam.Pose3(gtsam.Rot3(snap_to_rotation(T[:3, :3])), np.ascontiguousarray(T[:3, 3]))
 

@@ -40,7 +40,7 @@ Invalid projections (penalty) and saturation
 --------------------------------------------
 A projection is valid while the whole ellipsoid is in front of the camera: depth margin
 ``m = z_c - sqrt(S_c[2,2]) > min_depth_margin`` (m; as
-:func:`quadloc.factors.geometry.ellipsoid_depth_margins`). Otherwise the pair's ``dim`` residual
+:func:`quadloc.factors.camera.ellipsoid_depth_margins`). Otherwise the pair's ``dim`` residual
 components all equal ``sqrt(P_j / dim) * (1 + d / (d + d_s))``, ``d = min_depth_margin - m``,
 ``d_s`` the ellipsoid's largest semi-axis (m): cost in ``[P_j, 4 P_j)``, Jacobian
 ``-sqrt(P_j/dim) d_s / (d + d_s)^2 dm/dxi`` (``dm/dw = e3 x c_c - (e3 x S_c e3) /
@@ -71,24 +71,19 @@ from typing import Any
 import numpy as np
 
 from quadloc.factors import metrics
-from quadloc.factors.geometry import (
-    Camera,
+from quadloc.factors.camera import Camera, Ellipsoid, depth_margin, projected_gaussians
+from quadloc.factors.conics import (
     DegenerateProjectionError,
     Ellipse,
-    Ellipsoid,
-    GeometryError,
-    check_pose,
-    depth_margin,
     ellipse_params_and_validity,
     gaussian_derivatives_from_dual_conics,
     gaussians_from_dual_conics,
-    projected_gaussians,
-    skew,
-    so3_exp,
 )
 from quadloc.factors.jit import jit
 from quadloc.factors.metrics import METRIC_NAMES
+from quadloc.factors.names import GeometryError
 from quadloc.factors.overlap import HULL_DIRECTIONS
+from quadloc.factors.rotations import check_pose, skew, so3_exp
 
 __all__ = [
     "ANALYTIC_METRICS",
@@ -130,7 +125,7 @@ def _level_set_kernel(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Level-set residuals (N, M) and Jacobians (N, M, 6) of all pairs at ``T``
     (``world_from_camera`` 4x4), and per object its centre's depth ``z_c`` (N,) m and ``S_c[2,
-    2]`` (N,) m^2 (for :func:`quadloc.factors.geometry.depth_margin`; the rows of an invalid pair
+    2]`` (N,) m^2 (for :func:`quadloc.factors.camera.depth_margin`; the rows of an invalid pair
     are garbage, replaced by the penalty). Docs: docs/design/factors.md, "Level-set residual".
 
     Per object, ``A^-1`` by Sherman-Morrison from the world frame, ``A_w = S_w - d d^T`` (``d``
@@ -302,7 +297,7 @@ def _dual_conic_kernel(A: np.ndarray, c: np.ndarray, K: np.ndarray, neg_KSKinv: 
 
 def expmap_pose3(xi: np.ndarray) -> np.ndarray:
     """4x4 matrix of GTSAM's ``Pose3.Expmap(xi)``, ``xi = [omega (rad), v (m)]`` (SE(3) exp:
-    rotation :func:`quadloc.factors.geometry.so3_exp`, translation ``V v``)."""
+    rotation :func:`quadloc.factors.rotations.so3_exp`, translation ``V v``)."""
     xi = np.asarray(xi, dtype=float)
     w, v = xi[:3], xi[3:]
     th = float(np.linalg.norm(w))
@@ -528,7 +523,7 @@ class PoseResidualModel:
             # The projected centre c_P is the point of C* e3 = K A K^T e3 = K A e3, so its ray is
             # n = A e3 / s, and H^-1 n = (u, v, 1) are its coordinates in the detection's
             # axes over its semi-axes: Phi_D(c_P) = u^2 + v^2 = |(H^-1 A e3)[:2]|^2 / s^2
-            # (quadloc.factors.geometry.level_values; the same layout as quadloc.factors.metrics,
+            # (quadloc.factors.conics.level_values; the same layout as quadloc.factors.metrics,
             # tested).
             p = (H_inv @ a3[:, :, None])[:, :, 0]
             all_ok = bool(ok.all())  # the usual case: no masking
@@ -767,7 +762,7 @@ class PoseResidualModel:
 
 def compile_kernels() -> None:
     """Compile the numeric kernels (level set, dual conics, exact areas and iou / giou rows,
-    the batched projection of :func:`quadloc.factors.geometry.projected_gaussians`;
+    the batched projection of :func:`quadloc.factors.camera.projected_gaussians`;
     :mod:`quadloc.factors.jit`) now, or load them from numba's cache: one small
     evaluation per kernel family, through the same calls as a refinement (so the same
     specialisations). The service calls this at start-up so that no request pays the

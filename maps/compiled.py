@@ -3,7 +3,7 @@
 Frames and units: everything is in the map's world frame, metres. ``shape_matrices[i]`` is
 ``R_i diag(axes_i^2) R_i^T`` (m^2) and ``dual_quadrics[i]`` is
 ``Q*_i = T_i diag(a^2, b^2, c^2, -1) T_i^T`` with ``T_i = [[R_i, center_i], [0, 1]]``, the
-conventions of :mod:`quadloc.factors.geometry`. Object ``i`` in every array is
+conventions of :mod:`quadloc.factors.camera`. Object ``i`` in every array is
 ``scene_map.objects[i]``.
 """
 
@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from quadloc.factors.geometry import Ellipsoid
+from quadloc.factors.camera import Ellipsoid
 from quadloc.maps.model import SceneMap
 
 __all__ = ["CompiledMap", "compile_map"]

@@ -36,9 +36,9 @@ from pydantic import (
 from pydantic.json_schema import GenerateJsonSchema
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
-from quadloc.factors.geometry import (
+from quadloc.factors.camera import Ellipsoid
+from quadloc.factors.rotations import (
     DOCUMENT_ROTATION_TOLERANCE,
-    Ellipsoid,
     canonical_quaternion_wxyz,
     exact_norm,
     quaternion_wxyz_from_rotation,
@@ -79,7 +79,7 @@ LIMITS: dict[str, float] = {
     "max_name_length": 256,
     "max_metadata_bytes": 65_536,
     "max_metadata_depth": 32,
-    # Tolerances of the JSON importer (quadloc.factors.geometry.DOCUMENT_ROTATION_TOLERANCE: looser
+    # Tolerances of the JSON importer (quadloc.factors.rotations.DOCUMENT_ROTATION_TOLERANCE: looser
     # than the in-process ones, values are re-normalised / snapped):
     "quaternion_norm_tolerance": DOCUMENT_ROTATION_TOLERANCE,
     "rotation_orthonormal_tolerance": DOCUMENT_ROTATION_TOLERANCE,
@@ -469,7 +469,7 @@ class MapObject:
     ) -> MapObject:
         """Build from centre (m, world), semi-axes (m) and a unit ``(w, x, y, z)`` quaternion
         (ellipsoid frame -> world; renormalised, sign made canonical as in
-        :func:`quadloc.factors.geometry.canonical_quaternion_wxyz`: ``w > 0``, and for a half-turn
+        :func:`quadloc.factors.rotations.canonical_quaternion_wxyz`: ``w > 0``, and for a half-turn
         (``w = 0``) the first non-zero of ``x, y, z`` positive, so ``q`` and ``-q`` give equal
         objects and equal map hashes)."""
         q = np.array(quaternion_wxyz, dtype=float)

@@ -22,6 +22,8 @@ from typing import Any
 import gtsam
 import numpy as np
 
+from quadloc.factors.camera import Camera, Ellipsoid, ellipsoid_depth_margins
+from quadloc.factors.conics import Ellipse
 from quadloc.factors.ellipsoid_factors import ellipsoid_views_factor
 from quadloc.factors.ellipsoid_residuals import (
     LevelSetSamples,
@@ -30,15 +32,7 @@ from quadloc.factors.ellipsoid_residuals import (
     observation_residual,
     stack_samples,
 )
-from quadloc.factors.geometry import (
-    ORTHONORMAL_TOLERANCE,
-    Camera,
-    Ellipse,
-    Ellipsoid,
-    ellipsoid_depth_margins,
-    invert_pose,
-    pose_matrix,
-)
+from quadloc.factors.rotations import ORTHONORMAL_TOLERANCE, invert_pose, pose_matrix
 from quadloc.maps.model import LIMITS, MapObject, SceneMap
 
 __all__ = [
@@ -161,7 +155,7 @@ def _prepare(
             or np.any(np.linalg.det(R) <= 0):
         raise ReconstructionError("bad_input", "world_from_camera rotations must be orthonormal "
                                                "with det +1 (snap them with "
-                                               "quadloc.factors.geometry.snap_to_rotation)")
+                                               "quadloc.factors.rotations.snap_to_rotation)")
     cfw = np.array([invert_pose(T) for T in poses])
     P = np.array([c.projection_matrix(T) for c, T in zip(cams, cfw, strict=True)])
     return ells, cfw, cams, P

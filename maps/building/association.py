@@ -21,8 +21,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from quadloc.factors.geometry import Camera, Ellipse, Ellipsoid, invert_pose, project_ellipsoid
+from quadloc.factors.camera import Camera, Ellipsoid, project_ellipsoid
+from quadloc.factors.conics import Ellipse
 from quadloc.factors.overlap import intersection_areas
+from quadloc.factors.rotations import invert_pose
 from quadloc.maps.building.recording import Observation
 from quadloc.maps.reconstruct import (
     ReconstructionError,

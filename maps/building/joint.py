@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import gtsam
 import numpy as np
 
+from quadloc.factors.camera import Camera, Ellipsoid
 from quadloc.factors.ellipsoid_factors import depth_margins, ellipsoid_views_factor
 from quadloc.factors.ellipsoid_residuals import (
     LevelSetSamples,
@@ -30,9 +31,9 @@ from quadloc.factors.ellipsoid_residuals import (
     observation_residual,
     stack_samples,
 )
-from quadloc.factors.geometry import Camera, Ellipsoid, invert_pose, pose_matrix
 from quadloc.factors.pose_factors import DEFAULT_ROBUST_SCALE, pose3
 from quadloc.factors.pose_residuals import DEFAULT_MIN_DEPTH_MARGIN
+from quadloc.factors.rotations import invert_pose, pose_matrix
 from quadloc.maps.building.association import touches_border
 from quadloc.maps.building.recording import Observation, OdometryNoise, SizePrior
 from quadloc.maps.reconstruct import _max_ray_angle_deg, canonical_ellipsoid

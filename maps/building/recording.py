@@ -22,9 +22,9 @@ from typing import Any
 
 import numpy as np
 
-from quadloc.factors.geometry import (
-    Camera,
-    Ellipse,
+from quadloc.factors.camera import Camera
+from quadloc.factors.conics import Ellipse
+from quadloc.factors.rotations import (
     pose_matrix,
     quaternion_wxyz_from_rotation,
     rotation_from_quaternion_wxyz,

@@ -17,10 +17,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from quadloc.factors.geometry import (
+from quadloc.factors.camera import Camera
+from quadloc.factors.conics import Ellipse
+from quadloc.factors.rotations import (
     QUATERNION_NORM_TOLERANCE,
-    Camera,
-    Ellipse,
     pose_matrix,
     quaternion_wxyz_from_rotation,
     rotation_from_quaternion_wxyz,

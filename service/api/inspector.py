@@ -14,12 +14,9 @@ from fastapi import APIRouter, FastAPI
 from fastapi.responses import FileResponse, JSONResponse
 from fastapi.staticfiles import StaticFiles
 
-from quadloc.factors.geometry import (
-    Camera,
-    DegenerateProjectionError,
-    invert_pose,
-    project_ellipsoid,
-)
+from quadloc.factors.camera import Camera, project_ellipsoid
+from quadloc.factors.conics import DegenerateProjectionError
+from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import CompiledMap
 from quadloc.service.api.convert import convert_pose
 from quadloc.service.api.examples import LOCALIZE_EXAMPLE

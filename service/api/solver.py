@@ -13,7 +13,7 @@ import time
 from collections import deque
 from collections.abc import Sequence
 
-from quadloc.factors.geometry import GeometryError
+from quadloc.factors.names import GeometryError
 from quadloc.maps.compiled import CompiledMap
 from quadloc.service.api.convert import (
     camera_from_request,

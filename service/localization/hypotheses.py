@@ -2,7 +2,7 @@
 
 Both return **camera_from_world** poses as an array of shape (S, 4, 4) (S may be 0): the
 OpenCV ``[R | t]`` direction, ``x_cam = R x_world + t``, camera axes +X right, +Y down,
-+Z forward. Invert with :func:`quadloc.factors.geometry.invert_pose` for ``world_from_camera``.
++Z forward. Invert with :func:`quadloc.factors.rotations.invert_pose` for ``world_from_camera``.
 
 * :func:`p3p_hypotheses` — ``cv2.solveP3P`` on three ellipse centres (px) vs the three
   ellipsoid centres (world m); up to 4 solutions (biased by perspective: refinement removes it).
@@ -18,14 +18,9 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-from quadloc.factors.geometry import (
-    MIN_DEPTH,
-    Camera,
-    Ellipse,
-    Ellipsoid,
-    projected_gaussians,
-    so3_exp,
-)
+from quadloc.factors.camera import MIN_DEPTH, Camera, Ellipsoid, projected_gaussians
+from quadloc.factors.conics import Ellipse
+from quadloc.factors.rotations import so3_exp
 
 __all__ = ["p2e_hypotheses", "p3p_hypotheses", "p3p_hypotheses_batch", "point_centres",
            "project_objects"]
@@ -40,7 +35,7 @@ def project_objects(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
     """Projections of S ellipsoids at H poses, vectorised (THE batched projection of the RANSAC
     scorer, of the P2E residuals and of the tracker's association; computed by
-    :func:`quadloc.factors.geometry.projected_gaussians`).
+    :func:`quadloc.factors.camera.projected_gaussians`).
 
     Args:
         camera_from_world: (H, 4, 4), or ``[R | t]`` (H, 3, 4).

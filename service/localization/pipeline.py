@@ -21,9 +21,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from quadloc.factors.geometry import Camera, Ellipsoid, invert_pose
+from quadloc.factors.camera import Camera, Ellipsoid
 from quadloc.factors.gravity_factor import GravityMeasurement
 from quadloc.factors.pose_residuals import expmap_pose3
+from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import CompiledMap, compile_map
 from quadloc.maps.model import SceneMap
 from quadloc.service.localization.budget import Deadline, deadline_passed

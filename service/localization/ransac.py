@@ -23,13 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from quadloc.factors.geometry import (
-    Camera,
-    Ellipse,
-    ellipse_params,
-    level_values,
-    projected_gaussians,
-)
+from quadloc.factors.camera import Camera, projected_gaussians
+from quadloc.factors.conics import Ellipse, ellipse_params, level_values
 from quadloc.maps.compiled import CompiledMap
 from quadloc.service.localization.budget import Deadline, deadline_passed, earliest
 from quadloc.service.localization.hypotheses import (

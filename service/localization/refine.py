@@ -29,11 +29,12 @@ from typing import Any
 import gtsam
 import numpy as np
 
-from quadloc.factors.geometry import Camera, Ellipsoid, GeometryError, check_pose
+from quadloc.factors.camera import Camera, Ellipsoid
 from quadloc.factors.gravity_factor import GravityMeasurement, gravity_factor
-from quadloc.factors.names import check_robust
+from quadloc.factors.names import GeometryError, check_robust
 from quadloc.factors.pose_factors import pose3, pose_factors
 from quadloc.factors.pose_residuals import PoseResidualModel
+from quadloc.factors.rotations import check_pose
 from quadloc.service.localization.budget import Deadline, deadline_passed
 from quadloc.service.localization.types import (
     Detection,

@@ -1,6 +1,6 @@
 """Inputs and outputs of :func:`quadloc.service.localization.pipeline.localize`, validated on
 construction (bad input raises :class:`LocalizationInputError` or
-:class:`quadloc.factors.geometry.GeometryError`, both ``ValueError``, naming the field).
+:class:`quadloc.factors.names.GeometryError`, both ``ValueError``, naming the field).
 
 Frames: ``world_from_camera`` is the camera's pose in the map (4x4, camera axes OpenCV:
 +X right, +Y down, +Z forward). Covariances are 6x6 in GTSAM's Pose3 tangent order
@@ -18,9 +18,10 @@ from typing import Any
 
 import numpy as np
 
-from quadloc.factors.geometry import Ellipse, FieldError, GeometryError, check_pose
+from quadloc.factors.conics import Ellipse
 from quadloc.factors.metrics import residual
-from quadloc.factors.names import check_robust
+from quadloc.factors.names import FieldError, GeometryError, check_robust
+from quadloc.factors.rotations import check_pose
 from quadloc.service.limits import (
     AMBIGUITY_POLICIES,
     GRAVITY_DEFAULT_SIGMA_DEG,

@@ -13,7 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from quadloc.factors.geometry import Camera, invert_pose, skew
+from quadloc.factors.camera import Camera
+from quadloc.factors.rotations import invert_pose, skew
 from quadloc.maps.compiled import CompiledMap
 from quadloc.service.localization.ransac import project_objects
 

@@ -16,7 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from quadloc.factors.geometry import Camera, Ellipse, invert_pose
+from quadloc.factors.camera import Camera
+from quadloc.factors.conics import Ellipse
+from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import CompiledMap
 from quadloc.service.localization.hypotheses import p3p_hypotheses
 from quadloc.service.localization.ransac import Match, MatchScorer, greedy_assignment

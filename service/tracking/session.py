@@ -19,18 +19,17 @@ from dataclasses import dataclass, field
 import gtsam
 import numpy as np
 
-from quadloc.factors.geometry import (
+from quadloc.factors.camera import Camera
+from quadloc.factors.conics import ellipse_params
+from quadloc.factors.gravity_factor import gravity_factor
+from quadloc.factors.names import FieldError, GeometryError
+from quadloc.factors.pose_factors import pose3, pose_factors
+from quadloc.factors.rotations import (
     DOCUMENT_ROTATION_TOLERANCE,
-    Camera,
-    GeometryError,
     check_pose,
-    ellipse_params,
     invert_pose,
     snap_to_rotation,
 )
-from quadloc.factors.gravity_factor import gravity_factor
-from quadloc.factors.names import FieldError
-from quadloc.factors.pose_factors import pose3, pose_factors
 from quadloc.maps.compiled import CompiledMap
 from quadloc.service.localization.gravity import gravity_measurement
 from quadloc.service.localization.ransac import MatchScorer

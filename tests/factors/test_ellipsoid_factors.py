@@ -8,6 +8,8 @@ import gtsam
 import numpy as np
 import pytest
 
+from quadloc.factors.camera import Camera, Ellipsoid, ellipsoid_depth_margins, project_ellipsoid
+from quadloc.factors.conics import Ellipse
 from quadloc.factors.ellipsoid_factors import (
     depth_margins,
     ellipsoid_views_factor,
@@ -18,15 +20,8 @@ from quadloc.factors.ellipsoid_residuals import (
     observation_residual,
     stack_samples,
 )
-from quadloc.factors.geometry import (
-    Camera,
-    Ellipse,
-    Ellipsoid,
-    ellipsoid_depth_margins,
-    invert_pose,
-    project_ellipsoid,
-)
 from quadloc.factors.pose_residuals import expmap_pose3
+from quadloc.factors.rotations import invert_pose
 from tests.support.helpers import random_rotation
 
 CAM = Camera(500.0, 520.0, 320.0, 240.0, 640, 480)

@@ -6,9 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from quadloc.factors.camera import Camera, Ellipsoid, project_ellipsoid
+from quadloc.factors.conics import Ellipse
 from quadloc.factors.ellipsoid_residuals import level_set_samples, observation_residual
-from quadloc.factors.geometry import Camera, Ellipse, Ellipsoid, invert_pose, project_ellipsoid
 from quadloc.factors.pose_residuals import PoseResidualModel, expmap_pose3
+from quadloc.factors.rotations import invert_pose
 from tests.support.helpers import random_rotation
 
 CAM = Camera(500.0, 520.0, 320.0, 240.0, 640, 480)

@@ -11,19 +11,19 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from quadloc.factors.geometry import (
-    Camera,
+from quadloc.factors.camera import Camera, Ellipsoid, project_ellipsoid
+from quadloc.factors.conics import (
     DegenerateProjectionError,
     Ellipse,
-    Ellipsoid,
-    GeometryError,
     dual_conics_from_params,
     ellipse_params,
-    invert_pose,
     level_values,
     params_from_dual_conics,
+)
+from quadloc.factors.names import GeometryError
+from quadloc.factors.rotations import (
+    invert_pose,
     pose_matrix,
-    project_ellipsoid,
     quaternion_wxyz_from_rotation,
     rotation_from_quaternion_wxyz,
     snap_to_rotation,
@@ -317,7 +317,7 @@ def test_camera_from_matrix_rejects_what_it_cannot_represent(K) -> None:
 
 
 def test_canonical_quaternion_tie_break_for_half_turns() -> None:
-    from quadloc.factors.geometry import canonical_quaternion_wxyz
+    from quadloc.factors.rotations import canonical_quaternion_wxyz
 
     q = np.array([0.0, 0.0, -0.6, 0.8])
     for s in (1.0, -1.0):
@@ -332,11 +332,11 @@ def test_canonical_quaternion_tie_break_for_half_turns() -> None:
 
 
 def test_so3_exp_is_gtsams_rot3_expmap_batched():
-    """quadloc.factors.geometry.so3_exp (batched Rodrigues, series below 1e-8 rad) against GTSAM's
+    """quadloc.factors.rotations.so3_exp (batched Rodrigues, series below 1e-8 rad) against GTSAM's
     Rot3.Expmap, for random, tiny (1e-10 rad) and zero rotation vectors; skew(w) @ u = w x u."""
     import gtsam
 
-    from quadloc.factors.geometry import skew, so3_exp
+    from quadloc.factors.rotations import skew, so3_exp
 
     rng = np.random.default_rng(3)
     w = np.vstack([rng.normal(0, 1.5, (20, 3)), rng.normal(0, 1e-10, (3, 3)), np.zeros((1, 3))])

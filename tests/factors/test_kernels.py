@@ -22,15 +22,17 @@ REPO = Path(__file__).resolve().parents[2]
 _SCRIPT = textwrap.dedent("""
     import json
     import numpy as np
-    from quadloc.factors import geometry, metrics, overlap, pose_residuals
-    from quadloc.factors.geometry import Camera, Ellipse, Ellipsoid
+    from quadloc.factors import camera as camera_module
+    from quadloc.factors import metrics, overlap, pose_residuals
+    from quadloc.factors.camera import Camera, Ellipsoid
+    from quadloc.factors.conics import Ellipse
     from quadloc.factors.overlap import intersection_areas
     from quadloc.service.localization.refine import refine
     from quadloc.service.localization.types import Detection
 
     def signatures():
         out = {}
-        for module in (overlap, pose_residuals, metrics, geometry):
+        for module in (overlap, pose_residuals, metrics, camera_module):
             for name, value in vars(module).items():
                 if hasattr(value, "signatures") and hasattr(value, "py_func"):
                     out[f"{module.__name__}.{name}"] = [str(s) for s in value.signatures]
@@ -66,7 +68,7 @@ _SCRIPT = textwrap.dedent("""
     quadrics = np.array([e.dual_quadric() for e in ellipsoids])
     for arr in (centers, shapes, quadrics):
         arr.setflags(write=False)
-    geometry.projected_gaussians(camera, np.stack([start[:3], truth[:3]]), centers, shapes,
+    camera_module.projected_gaussians(camera, np.stack([start[:3], truth[:3]]), centers, shapes,
                                  quadrics)
     from tests.support.reference_data import load_chess_map
     from tests.support.simulate import SimulationConfig, simulate_frame
@@ -88,7 +90,7 @@ def test_requests_compile_no_kernel_that_start_up_did_not():
     before, after = result["before"], result["after"]
     assert set(before) >= {"quadloc.factors.overlap._batch",
                            "quadloc.factors.metrics._overlap_rows",
-                           "quadloc.factors.geometry._projected_gaussians_kernel",
+                           "quadloc.factors.camera._projected_gaussians_kernel",
                            "quadloc.factors.pose_residuals._level_set_kernel",
                            "quadloc.factors.pose_residuals._camera_frame_kernel",
                            "quadloc.factors.pose_residuals._dual_conic_kernel"}

@@ -13,7 +13,7 @@ from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 from scipy.linalg import sqrtm
 
-from quadloc.factors.geometry import Ellipse
+from quadloc.factors.conics import Ellipse
 from quadloc.factors.metrics import (
     DEFAULT_LEVEL_SET_SCALE,
     METRIC_NAMES,

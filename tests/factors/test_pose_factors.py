@@ -3,7 +3,7 @@
 Independent references: residuals against the scalar oracle
 (``tests.support.oracles.metrics_reference``, which is ``quadloc.factors.metrics.residual`` for the
 metrics without a second implementation) on ellipses projected by
-``quadloc.factors.geometry.project_ellipsoid`` (and the level set against ``Ellipse.level``
+``quadloc.factors.camera.project_ellipsoid`` (and the level set against ``Ellipse.level``
 directly); Jacobians against central differences through ``gtsam.Pose3.retract``; GTSAM's weighted
 error against ``0.5 * cost / sigma``.
 """
@@ -17,15 +17,8 @@ import numpy as np
 import pytest
 
 from quadloc.factors import metrics
-from quadloc.factors.geometry import (
-    Camera,
-    Ellipse,
-    Ellipsoid,
-    ellipsoid_depth_margins,
-    invert_pose,
-    project_ellipsoid,
-    rotation_from_quaternion_wxyz,
-)
+from quadloc.factors.camera import Camera, Ellipsoid, ellipsoid_depth_margins, project_ellipsoid
+from quadloc.factors.conics import Ellipse
 from quadloc.factors.pose_factors import (
     ROBUST_KERNELS,
     batched_pose_factor,
@@ -39,6 +32,7 @@ from quadloc.factors.pose_residuals import (
     PoseResidualModel,
     expmap_pose3,
 )
+from quadloc.factors.rotations import invert_pose, rotation_from_quaternion_wxyz
 from tests.support.helpers import level, random_rotation, retract, transformed
 from tests.support.oracles import metrics_reference
 

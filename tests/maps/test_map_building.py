@@ -10,7 +10,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from quadloc.factors.geometry import Ellipse, Ellipsoid, invert_pose, project_ellipsoid
+from quadloc.factors.camera import Ellipsoid, project_ellipsoid
+from quadloc.factors.conics import Ellipse
+from quadloc.factors.rotations import invert_pose
 from quadloc.maps.building.association import associate
 from quadloc.maps.building.build import BuildTimeoutError, build_map
 from quadloc.maps.building.joint import refine_jointly

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from quadloc.factors.geometry import (
+from quadloc.factors.rotations import (
     ROTATION_EXACT_TOLERANCE,
     exact_norm,
     quaternion_wxyz_from_rotation,

@@ -13,7 +13,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from quadloc.factors.geometry import Ellipsoid, rotation_from_quaternion_wxyz
+from quadloc.factors.camera import Ellipsoid
+from quadloc.factors.rotations import rotation_from_quaternion_wxyz
 from quadloc.maps.compiled import compile_map
 from quadloc.maps.demo import DEMO_MAP_PATH, load_demo_map
 from quadloc.maps.model import (
@@ -481,7 +482,7 @@ def test_half_turn_quaternions_of_either_sign_give_equal_objects() -> None:
     maps = [SceneMap("m", "M", (0.0, 0.0, 1.0), ("chair",), (o,)) for o in (a, b)]
     assert maps[0].content_hash == maps[1].content_hash
     # the same tie-break as the rotation -> quaternion conversion
-    from quadloc.factors.geometry import quaternion_wxyz_from_rotation
+    from quadloc.factors.rotations import quaternion_wxyz_from_rotation
     np.testing.assert_allclose(quaternion_wxyz_from_rotation(a.ellipsoid.rotation),
                                a.quaternion_wxyz, atol=1e-12)
 

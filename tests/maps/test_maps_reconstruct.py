@@ -11,17 +11,11 @@ import gtsam
 import numpy as np
 import pytest
 
+from quadloc.factors.camera import Camera, Ellipsoid, project_ellipsoid
+from quadloc.factors.conics import Ellipse
 from quadloc.factors.ellipsoid_factors import ellipsoid_views_factor
 from quadloc.factors.ellipsoid_residuals import dual_quadric, stack_samples
-from quadloc.factors.geometry import (
-    Camera,
-    Ellipse,
-    Ellipsoid,
-    invert_pose,
-    pose_matrix,
-    project_ellipsoid,
-    snap_to_rotation,
-)
+from quadloc.factors.rotations import invert_pose, pose_matrix, snap_to_rotation
 from quadloc.maps.demo import load_demo_map
 from quadloc.maps.reconstruct import (
     FrameObservations,

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 import sqlalchemy as sa
 
-from quadloc.factors.geometry import Ellipsoid
+from quadloc.factors.camera import Ellipsoid
 from quadloc.maps.compiled import CompiledMap
 from quadloc.maps.demo import load_demo_map
 from quadloc.maps.errors import MapAlreadyExists, MapNotFound, StoreUnavailable, VersionConflict

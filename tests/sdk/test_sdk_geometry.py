@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from scipy.linalg import expm
 from scipy.spatial.transform import Rotation
 
-from quadloc.factors.geometry import Ellipse as RefEllipse
+from quadloc.factors.conics import Ellipse as RefEllipse
 from quadloc_sdk import geometry as g
 from quadloc_sdk.models import Box, Ellipse
 from tests.support.helpers import angle_diff, level

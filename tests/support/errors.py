@@ -9,7 +9,7 @@ import math
 import gtsam
 import numpy as np
 
-from quadloc.factors.geometry import rotation_angle
+from quadloc.factors.rotations import rotation_angle
 
 __all__ = ["nees", "pose_error_tangent", "pose_errors"]
 
@@ -31,7 +31,7 @@ def nees(estimate: np.ndarray, truth: np.ndarray, covariance: np.ndarray) -> flo
 def pose_errors(estimate: np.ndarray | None, truth: np.ndarray) -> tuple[float, float]:
     """(camera position error m, rotation error deg) of two ``world_from_camera`` poses (4x4);
     (inf, inf) when there is no estimate. The rotation error is
-    :func:`quadloc.factors.geometry.rotation_angle`."""
+    :func:`quadloc.factors.rotations.rotation_angle`."""
     if estimate is None:
         return math.inf, math.inf
     pos = float(np.linalg.norm(estimate[:3, 3] - truth[:3, 3]))

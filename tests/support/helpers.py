@@ -19,7 +19,8 @@ from typing import Any
 import gtsam
 import numpy as np
 
-from quadloc.factors.geometry import Ellipse, Ellipsoid
+from quadloc.factors.camera import Ellipsoid
+from quadloc.factors.conics import Ellipse
 
 __all__ = [
     "PROBLEM_MEDIA_TYPE",

@@ -12,16 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from quadloc.factors.geometry import (
-    Camera,
-    DegenerateProjectionError,
-    Ellipse,
-    Ellipsoid,
-    invert_pose,
-    pose_matrix,
-    project_ellipsoid,
-    snap_to_rotation,
-)
+from quadloc.factors.camera import Camera, Ellipsoid, project_ellipsoid
+from quadloc.factors.conics import DegenerateProjectionError, Ellipse
+from quadloc.factors.rotations import invert_pose, pose_matrix, snap_to_rotation
 from quadloc.maps.model import SceneMap, scene_map_from_chess
 
 DATA_DIR = Path(__file__).resolve().parent / "data"

@@ -10,16 +10,9 @@ import math
 
 import numpy as np
 
-from quadloc.factors.geometry import (
-    Camera,
-    DegenerateProjectionError,
-    Ellipsoid,
-    ellipsoid_depth_margins,
-    invert_pose,
-    pose_matrix,
-    project_ellipsoid,
-    snap_to_rotation,
-)
+from quadloc.factors.camera import Camera, Ellipsoid, ellipsoid_depth_margins, project_ellipsoid
+from quadloc.factors.conics import DegenerateProjectionError
+from quadloc.factors.rotations import invert_pose, pose_matrix, snap_to_rotation
 from quadloc.maps.model import MapObject, SceneMap
 
 __all__ = ["CAM", "UP", "look_at", "random_pair_scene", "synthetic_map", "visible_frames"]

@@ -1,6 +1,6 @@
 """Simulated object detections: what a fine-tuned ellipse detector would report for one frame.
 
-Given a map (``SceneMap`` or ``CompiledMap``), a :class:`~quadloc.factors.geometry.Camera` and the
+Given a map (``SceneMap`` or ``CompiledMap``), a :class:`~quadloc.factors.camera.Camera` and the
 true ``world_from_camera`` pose (4x4, OpenCV camera axes), :func:`simulate_frame` returns the
 detections of one image. The model (documented with its numbers in ``docs/simulation.md``):
 
@@ -43,16 +43,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from quadloc.factors.geometry import (
-    Camera,
-    Ellipse,
-    ellipsoid_depth_margins,
-    invert_pose,
-    level_values,
-    params_from_dual_conics,
-    project_ellipsoids_dual,
-    so3_exp,
-)
+from quadloc.factors.camera import Camera, ellipsoid_depth_margins, project_ellipsoids_dual
+from quadloc.factors.conics import Ellipse, level_values, params_from_dual_conics
+from quadloc.factors.rotations import invert_pose, so3_exp
 from quadloc.maps.compiled import CompiledMap, compile_map
 from quadloc.maps.model import SceneMap
 from quadloc.service.localization.ransac import sunflower_disk

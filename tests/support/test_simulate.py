@@ -7,7 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from quadloc.factors.geometry import Ellipse, invert_pose, project_ellipsoid
+from quadloc.factors.camera import project_ellipsoid
+from quadloc.factors.conics import Ellipse
+from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import compile_map
 from tests.support.helpers import level
 from tests.support.reference_data import load_chess_map, load_chess_world_from_camera

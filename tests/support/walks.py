@@ -15,8 +15,8 @@ import math
 
 import numpy as np
 
-from quadloc.factors.geometry import invert_pose, pose_matrix, snap_to_rotation
 from quadloc.factors.pose_residuals import expmap_pose3
+from quadloc.factors.rotations import invert_pose, pose_matrix, snap_to_rotation
 
 __all__ = ["HZ", "drifting_odometry", "make_walk", "resampled_walk", "simulate_odometry"]
 

@@ -16,7 +16,7 @@ towards +y; ``world_from_camera`` (metres) maps camera to world coordinates; the
 ``opengl`` axes is flipped back with ``diag(1, -1, -1)`` first.
 
 The server's ``POST /v1/maps/{id}/localize`` with ``Accept: image/svg+xml`` draws with
-:func:`render_overlay_svg` too, from its own projections (``quadloc.factors.geometry``); the two
+:func:`render_overlay_svg` too, from its own projections (``quadloc.factors.camera``); the two
 projections are compared in ``tests/service/api/test_overlay.py``.
 """
 
@@ -45,7 +45,7 @@ __all__ = [
 Matrix = Sequence[Sequence[float]]
 
 #: Smallest camera-frame depth (m) of an ellipsoid for its projection to count as an ellipse
-#: (the server's ``quadloc.factors.geometry.MIN_DEPTH``).
+#: (the server's ``quadloc.factors.camera.MIN_DEPTH``).
 MIN_DEPTH_M = 1e-6
 
 

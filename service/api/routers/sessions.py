@@ -11,7 +11,8 @@ from typing import Annotated
 
 from fastapi import APIRouter, Body, Path, Request, Response
 
-from quadloc.factors.geometry import DOCUMENT_ROTATION_TOLERANCE, GeometryError, check_pose
+from quadloc.factors.names import GeometryError
+from quadloc.factors.rotations import DOCUMENT_ROTATION_TOLERANCE, check_pose
 from quadloc.maps.compiled import CompiledMap
 from quadloc.maps.errors import MapNotFound
 from quadloc.service.api.auth import ReadAccess

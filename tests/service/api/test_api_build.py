@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from quadloc.factors.geometry import Camera, Ellipsoid, invert_pose, pose_matrix, project_ellipsoid
+from quadloc.factors.camera import Camera, Ellipsoid, project_ellipsoid
+from quadloc.factors.rotations import invert_pose, pose_matrix
 from quadloc.maps.building.jobs import JobStore
 from quadloc.maps.building.recording import recording_to_dict
 from tests.conftest import make_test_app

@@ -13,7 +13,9 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from quadloc.factors.geometry import Ellipse, GeometryError, rotation_from_quaternion_wxyz
+from quadloc.factors.conics import Ellipse
+from quadloc.factors.names import GeometryError
+from quadloc.factors.rotations import rotation_from_quaternion_wxyz
 from quadloc.service.api import solver as solver_module
 from quadloc.service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, LOCALIZE_EXAMPLE
 from tests.conftest import make_test_app
@@ -125,7 +127,7 @@ def test_prior_in_either_convention(client: TestClient) -> None:
     np.testing.assert_allclose(a["world_from_camera"]["matrix"], b["world_from_camera"]["matrix"],
                                atol=1e-9)
     q = prior_cv["world_from_camera"]
-    from quadloc.factors.geometry import quaternion_wxyz_from_rotation
+    from quadloc.factors.rotations import quaternion_wxyz_from_rotation
 
     q_form = {"quaternion_wxyz": quaternion_wxyz_from_rotation(T_start[:3, :3]).tolist(),
               "translation_m": T_start[:3, 3].tolist()}

@@ -190,7 +190,7 @@ def test_import_chess_format(client: TestClient) -> None:
     objs = r.json()["map"]["objects"]
     assert [o["category"] for o in objs] == ["TV", "Chair"]
     # Orientation: the returned quaternion reproduces the Chess R (independent conversion).
-    from quadloc.factors.geometry import rotation_from_quaternion_wxyz
+    from quadloc.factors.rotations import rotation_from_quaternion_wxyz
 
     R = np.array(CHESS_IMPORT_EXAMPLE["objects"][0]["ellipsoid"]["R"])
     np.testing.assert_allclose(rotation_from_quaternion_wxyz(objs[0]["quaternion_wxyz"]), R,

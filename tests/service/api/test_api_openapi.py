@@ -10,15 +10,9 @@ import numpy as np
 
 from bench.examples import FRAME_INDEX
 from quadloc.factors import metrics
-from quadloc.factors.geometry import (
-    Camera,
-    DegenerateProjectionError,
-    Ellipse,
-    invert_pose,
-    pose_matrix,
-    project_ellipsoid,
-    snap_to_rotation,
-)
+from quadloc.factors.camera import Camera, project_ellipsoid
+from quadloc.factors.conics import DegenerateProjectionError, Ellipse
+from quadloc.factors.rotations import invert_pose, pose_matrix, snap_to_rotation
 from quadloc.maps.demo import load_demo_map
 from quadloc.service.api.examples import (
     EXAMPLE_TRUE_WORLD_FROM_CAMERA,

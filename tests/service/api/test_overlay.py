@@ -1,5 +1,5 @@
 """The localization overlay: the SDK's pure-Python projection against the solver's
-(quadloc.factors.geometry), the SVG drawn by the server (Accept: image/svg+xml) and by the SDK from
+(quadloc.factors.camera), the SVG drawn by the server (Accept: image/svg+xml) and by the SDK from
 the same answer, and content negotiation."""
 
 from __future__ import annotations
@@ -13,8 +13,10 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from quadloc.factors.geometry import Camera, DegenerateProjectionError, Ellipsoid, invert_pose
-from quadloc.factors.geometry import project_ellipsoid as solver_projection
+from quadloc.factors.camera import Camera, Ellipsoid
+from quadloc.factors.camera import project_ellipsoid as solver_projection
+from quadloc.factors.conics import DegenerateProjectionError
+from quadloc.factors.rotations import invert_pose
 from quadloc.maps.demo import load_demo_map
 from quadloc.service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, LOCALIZE_EXAMPLE
 from quadloc.service.api.inspector import wants_svg

@@ -10,7 +10,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 import quadloc_sdk as sdk
-from quadloc.factors.geometry import rotation_from_quaternion_wxyz
+from quadloc.factors.rotations import rotation_from_quaternion_wxyz
 from quadloc.service.api.examples import LOCALIZE_EXAMPLE, MAP_EXAMPLE
 from quadloc_sdk.geometry import (
     column_major_from_matrix,

@@ -9,10 +9,10 @@ import math
 import numpy as np
 import pytest
 
-from quadloc.factors.geometry import invert_pose
 from quadloc.factors.gravity_factor import GravityMeasurement, gravity_factor
 from quadloc.factors.pose_factors import pose3
 from quadloc.factors.pose_residuals import expmap_pose3
+from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import compile_map
 from quadloc.service.localization.confidence import TOLERANCE_ROTATION_DEG
 from quadloc.service.localization.gravity import (

@@ -7,13 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from quadloc.factors.geometry import (
-    Ellipse,
-    Ellipsoid,
-    invert_pose,
-    project_ellipsoid,
-    snap_to_rotation,
-)
+from quadloc.factors.camera import Ellipsoid, project_ellipsoid
+from quadloc.factors.conics import Ellipse
+from quadloc.factors.rotations import invert_pose, snap_to_rotation
 from quadloc.service.localization.hypotheses import (
     DEDUPE_TOLERANCE,
     _frames,

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 import quadloc.service.localization.pipeline as pipeline
-from quadloc.factors.geometry import Ellipse, GeometryError
+from quadloc.factors.conics import Ellipse
+from quadloc.factors.names import GeometryError
 from quadloc.maps.compiled import compile_map
 from quadloc.service.localization.pipeline import localize
 from quadloc.service.localization.types import (

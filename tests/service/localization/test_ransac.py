@@ -8,12 +8,9 @@ import numpy as np
 import pytest
 
 from quadloc.factors import metrics
-from quadloc.factors.geometry import (
-    Ellipse,
-    Ellipsoid,
-    invert_pose,
-    project_ellipsoid,
-)
+from quadloc.factors.camera import Ellipsoid, project_ellipsoid
+from quadloc.factors.conics import Ellipse
+from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import compile_map
 from quadloc.maps.model import MapObject, SceneMap
 from quadloc.service.localization.ransac import (

@@ -4,7 +4,7 @@ projections, input validation.
 
 Independent references: ground-truth poses of the real data set; the weighted objective
 ``sum_j sigma_j^-1 Delta_j`` recomputed from ``quadloc.factors.metrics.cost`` on ellipses projected
-by ``quadloc.factors.geometry.project_ellipsoid`` (its numerical gradient vanishes at the refined
+by ``quadloc.factors.camera.project_ellipsoid`` (its numerical gradient vanishes at the refined
 pose); the covariance against the inverse of ``J^T W J`` built from numerical Jacobians.
 """
 
@@ -16,16 +16,10 @@ import numpy as np
 import pytest
 
 from quadloc.factors import metrics
-from quadloc.factors.geometry import (
-    Camera,
-    DegenerateProjectionError,
-    Ellipse,
-    Ellipsoid,
-    GeometryError,
-    invert_pose,
-    project_ellipsoid,
-    rotation_from_quaternion_wxyz,
-)
+from quadloc.factors.camera import Camera, Ellipsoid, project_ellipsoid
+from quadloc.factors.conics import DegenerateProjectionError, Ellipse
+from quadloc.factors.names import GeometryError
+from quadloc.factors.rotations import invert_pose, rotation_from_quaternion_wxyz
 from quadloc.service.localization.refine import STATUSES, RefinementResult, refine
 from quadloc.service.localization.types import Detection
 from tests.support.helpers import PerfCounterJump, retract

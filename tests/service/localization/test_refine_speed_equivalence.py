@@ -3,7 +3,7 @@ memoised level-set camera frame, the per-camera constants of the dual-conic metr
 
 References: GTSAM's default (multifrontal) LM on the same graph; freshly built residual models;
 ``quadloc.factors.metrics.residual`` on ellipses projected by
-``quadloc.factors.geometry.project_ellipsoid``.
+``quadloc.factors.camera.project_ellipsoid``.
 """
 
 from __future__ import annotations
@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 
 from quadloc.factors import metrics
-from quadloc.factors.geometry import Camera, invert_pose, project_ellipsoid
+from quadloc.factors.camera import Camera, project_ellipsoid
 from quadloc.factors.pose_factors import pose3, pose_factors
 from quadloc.factors.pose_residuals import PoseResidualModel
+from quadloc.factors.rotations import invert_pose
 from quadloc.service.localization.refine import _lm_params, _shared_lm_params
 from tests.support.reference_data import (
     exact_projections,

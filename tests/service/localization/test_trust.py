@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from quadloc.factors.geometry import Ellipse
+from quadloc.factors.conics import Ellipse
 from quadloc.factors.pose_residuals import expmap_pose3
 from quadloc.maps.compiled import compile_map
 from quadloc.service.localization import calibration

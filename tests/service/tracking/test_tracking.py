@@ -16,9 +16,9 @@ import pytest
 from fastapi.testclient import TestClient
 from scipy.stats import chi
 
-from quadloc.factors.geometry import invert_pose
 from quadloc.factors.names import FieldError
 from quadloc.factors.pose_residuals import expmap_pose3
+from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import compile_map
 from quadloc.service.api.errors import field_and_problem
 from quadloc.service.localization.gravity import tilt_errors_deg

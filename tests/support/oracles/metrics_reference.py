@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from quadloc.factors import metrics
-from quadloc.factors.geometry import Ellipse, sigma_entries
+from quadloc.factors.conics import Ellipse, sigma_entries
 
 _SQRT2 = math.sqrt(2.0)
 _INV_SQRT8 = 1.0 / math.sqrt(8.0)

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from quadloc.factors.geometry import sigma_entries
+from quadloc.factors.conics import sigma_entries
 
 #: Number of parametric angles used to bracket the contour intersections.
 GRID = 128
