@@ -204,6 +204,17 @@ class Settings(BaseSettings):
                     "restarted) and is marked failed (runner_lost).",
     )
 
+    max_sessions: int = Field(
+        default=200, ge=1, le=100_000,
+        description="Live tracking sessions per process; more -> 503 session-capacity (after "
+                    "idle ones expire).",
+    )
+    session_idle_timeout_s: float = Field(
+        default=300.0, gt=0, le=86_400.0,
+        description="A tracking session without a request for this long expires (404 "
+                    "session-not-found).",
+    )
+
     map_cache_ttl_s: float = Field(
         default=1.0, ge=0,
         description="How long a replica may serve a cached map version (0 = always ask the "

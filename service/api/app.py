@@ -32,6 +32,7 @@ from quadloc.service.api.metrics import ApiMetrics, MetricsAndLimitsMiddleware
 from quadloc.service.api.routers import health, localize, maps, sessions
 from quadloc.service.api.solver import Solver
 from quadloc.service.settings import Settings
+from quadloc.service.tracking.store import SessionStore
 
 __all__ = ["API_VERSION", "build_openapi", "create_app", "seed_demo_map"]
 
@@ -149,7 +150,7 @@ def create_app(settings: Settings | None = None, *, store: MapStore | None = Non
     app.include_router(maps.router)
     install_map_building(app, store, settings)
     app.include_router(health.router)
-    app.state.sessions = sessions.session_store_from_env()
+    app.state.sessions = SessionStore(settings.max_sessions, settings.session_idle_timeout_s)
     app.include_router(sessions.router)
     install_offline_docs(app)
     install_inspector(app)

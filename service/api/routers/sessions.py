@@ -6,7 +6,6 @@
 from __future__ import annotations
 
 import math
-import os
 from typing import Annotated
 
 from fastapi import APIRouter, Body, Path, Request, Response
@@ -65,19 +64,12 @@ from quadloc.service.tracking.store import (
     SessionStore,
 )
 
-__all__ = ["new_session", "router", "session_store_from_env"]
+__all__ = ["new_session", "router"]
 
 router = APIRouter(prefix="/v1", tags=["tracking"])
 
 SessionIdPath = Annotated[str, Path(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$",
                                     description="Session id returned at creation.")]
-
-
-def session_store_from_env() -> SessionStore:
-    """The app's session store, bounds from ``QUADLOC_MAX_SESSIONS`` and
-    ``QUADLOC_SESSION_IDLE_TIMEOUT_S``."""
-    return SessionStore(int(os.environ.get("QUADLOC_MAX_SESSIONS", "200")),
-                        float(os.environ.get("QUADLOC_SESSION_IDLE_TIMEOUT_S", "300")))
 
 
 def _store(request: Request) -> SessionStore:
