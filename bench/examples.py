@@ -1,14 +1,15 @@
-"""Dev-time generator of the REAL localization example (``service/api/example_frame.json``).
+"""Dev-time generator of the REAL localization example (``service/schemas/example_frame.json``).
 
 Simulates the demo frame with ``tests.support.simulate`` at a ground-truth pose of the Chess test
-set, solves it with the service's solver, and writes ``service/api/example_frame.json``,
+set, solves it with the service's solver, and writes ``service/schemas/example_frame.json``,
 ``docs/examples/localize_chess.json``, ``docs/examples/office_map.json`` and
 ``docs/openapi.json``. Run from the checkout::
 
     .venv/bin/python -m bench.examples
 
 It lives in ``bench`` (not installed, not in the image) because it needs the simulator and the
-reference poses; the service only imports the generated data (:mod:`quadloc.service.api.examples`).
+reference poses; the service only imports the generated data
+(:mod:`quadloc.service.schemas.examples`).
 """
 
 from __future__ import annotations
@@ -22,10 +23,10 @@ from typing import Any
 from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import compile_map
 from quadloc.maps.demo import load_demo_map
-from quadloc.service.api.examples import EXAMPLE_FRAME_PATH, MAP_EXAMPLE
 from quadloc.service.api.metrics import ApiMetrics
-from quadloc.service.api.schemas import LocalizeRequest
 from quadloc.service.api.solver import Solver
+from quadloc.service.schemas.examples import EXAMPLE_FRAME_PATH, MAP_EXAMPLE
+from quadloc.service.schemas.localize import LocalizeRequest
 from tests.support.reference_data import CHESS_POSES_PATH, load_chess_poses
 from tests.support.simulate import simulate_frame
 

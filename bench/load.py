@@ -74,7 +74,7 @@ def build_frames(n_frames: int, seed: int = 0) -> tuple[list[dict[str, Any]], li
         detections_from_request,
         options_from_request,
     )
-    from quadloc.service.api.schemas import LocalizeRequest
+    from quadloc.service.schemas.localize import LocalizeRequest
     from tests.support.reference_data import load_chess_poses
     from tests.support.simulate import simulate_frame
 

@@ -371,7 +371,7 @@ def cmd_localize(args: argparse.Namespace) -> int:
     from pydantic import ValidationError
 
     from quadloc.service.api.errors import field_path
-    from quadloc.service.api.schemas import LocalizeRequest
+    from quadloc.service.schemas.localize import LocalizeRequest
 
     overrides = {k: v for k, v in (
         ("metric", args.metric), ("on_ambiguity", getattr(args, "on_ambiguity", None)),

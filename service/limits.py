@@ -1,7 +1,7 @@
 """Names and limits of the service, in ONE dependency-free module (stdlib only).
 
 ``quadloc.service.settings`` (bounds of its fields), the wire schemas
-(``quadloc.service.api.schemas``) and the in-process API (``quadloc.service.localization.types``)
+(``quadloc.service.schemas``) and the in-process API (``quadloc.service.localization.types``)
 all import these, so reading the settings loads neither gtsam, numpy nor OpenCV
 (``tests/test_layers.py`` checks it).
 """

@@ -69,7 +69,7 @@ def test_the_checker_sees_a_violation(tmp_path: Path) -> None:
     assert any(_hits(n, "quadloc.service") for n in _imports(path))
 
 
-@pytest.mark.parametrize("module", ["quadloc.service.settings", "quadloc.service.api.schemas",
+@pytest.mark.parametrize("module", ["quadloc.service.settings", "quadloc.service.schemas",
                                     "quadloc.service.limits"])
 def test_reading_settings_loads_neither_gtsam_nor_cv2(module: str) -> None:
     code = (f"import sys, {module}\n"

@@ -1,4 +1,4 @@
-"""Conversions between the wire models (:mod:`quadloc.service.api.schemas`) and the solver's types.
+"""Conversions between the wire models (:mod:`quadloc.service.schemas`) and the solver's types.
 
 Camera conventions: the solver works in OpenCV camera axes (+X right, +Y down, +Z forward).
 OpenGL/ARKit/ARCore axes (+X right, +Y up, -Z forward) differ by ``F = diag(1, -1, -1)`` on the
@@ -25,7 +25,16 @@ from quadloc.factors.rotations import (
     quaternion_wxyz_from_rotation,
     rotation_from_quaternion_wxyz,
 )
-from quadloc.service.api.schemas import (
+from quadloc.service.localization.types import (
+    Detection,
+    Gravity,
+    InlierMatch,
+    LocalizationInputError,
+    LocalizationOptions,
+    LocalizationResult,
+    PosePrior,
+)
+from quadloc.service.schemas.localize import (
     CameraIn,
     CovarianceOut,
     DetectionIn,
@@ -36,15 +45,6 @@ from quadloc.service.api.schemas import (
     PoseIn,
     PoseOut,
     PosePriorIn,
-)
-from quadloc.service.localization.types import (
-    Detection,
-    Gravity,
-    InlierMatch,
-    LocalizationInputError,
-    LocalizationOptions,
-    LocalizationResult,
-    PosePrior,
 )
 
 __all__ = [

@@ -21,7 +21,7 @@ from starlette.routing import Match
 
 from quadloc.maps.errors import MapValidationError, SchemaNotMigrated, StoreUnavailable
 from quadloc.maps.model import json_path
-from quadloc.service.api.schemas import Problem
+from quadloc.service.schemas.common import Problem
 
 __all__ = [
     "PROBLEM_MEDIA_TYPE",

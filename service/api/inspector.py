@@ -19,8 +19,8 @@ from quadloc.factors.conics import DegenerateProjectionError
 from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import CompiledMap
 from quadloc.service.api.convert import convert_pose
-from quadloc.service.api.examples import LOCALIZE_EXAMPLE
-from quadloc.service.api.schemas import LocalizeRequest, LocalizeResponse
+from quadloc.service.schemas.examples import LOCALIZE_EXAMPLE
+from quadloc.service.schemas.localize import LocalizeRequest, LocalizeResponse
 from quadloc_sdk.overlay import (
     DrawnProjection,
     ImageEllipse,

@@ -25,10 +25,10 @@ from quadloc.service.api.convert import (
 )
 from quadloc.service.api.errors import ProblemError, field_and_problem
 from quadloc.service.api.metrics import ApiMetrics
-from quadloc.service.api.schemas import LocalizeRequest, LocalizeResponse
 from quadloc.service.localization.pipeline import localize
 from quadloc.service.localization.ransac import ScoringTimeoutError
 from quadloc.service.localization.types import LocalizationInputError
+from quadloc.service.schemas.localize import LocalizeRequest, LocalizeResponse
 
 __all__ = ["Solver"]
 

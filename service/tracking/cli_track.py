@@ -41,8 +41,8 @@ def cmd_track(args: argparse.Namespace) -> int:
     from quadloc.service.api.convert import convert_pose
     from quadloc.service.api.errors import ProblemError, field_path
     from quadloc.service.api.routers.sessions import _frame_input, _frame_out, new_session
-    from quadloc.service.api.session_schemas import SessionCreate, SessionFramesIn
     from quadloc.service.cli import _die, _invalid, _read_json, _store
+    from quadloc.service.schemas.sessions import SessionCreate, SessionFramesIn
 
     doc = _read_json(args.file)
     if not isinstance(doc, dict):

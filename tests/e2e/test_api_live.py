@@ -14,7 +14,7 @@ import httpx
 import numpy as np
 import pytest
 
-from quadloc.service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, LOCALIZE_EXAMPLE
+from quadloc.service.schemas.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, LOCALIZE_EXAMPLE
 from quadloc.service.settings import hash_api_key
 
 #: Starts real servers / subprocesses: left out of the inner loop (pytest -m "not slow").

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from quadloc.service.api.examples import MAP_EXAMPLE
 from quadloc.service.cli import Progress, format_table
+from quadloc.service.schemas.examples import MAP_EXAMPLE
 from quadloc.service.settings import hash_api_key
 
 #: Starts real servers / subprocesses: left out of the inner loop (pytest -m "not slow").

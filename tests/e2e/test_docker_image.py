@@ -245,7 +245,7 @@ def test_health_readiness_and_keys_enforced(server: Container) -> None:
 
 
 def test_demo_frame_localizes_through_the_sdk(server: Container) -> None:
-    from quadloc.service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA
+    from quadloc.service.schemas.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA
 
     body = json.loads((REPO / "docs" / "examples" / "localize_chess.json").read_text())
     with _client(server, READ_KEY) as client:

@@ -328,7 +328,7 @@ def test_docs_demo_request_runs_as_written(live_server: str, capsys, monkeypatch
 
 
 def test_readme_tour_sdk_block_runs_as_written(live_server: str, capsys, monkeypatch):
-    from quadloc.service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA
+    from quadloc.service.schemas.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA
     from tests.e2e.test_api_live import readme_tour_block
 
     code = readme_tour_block("2", "python")

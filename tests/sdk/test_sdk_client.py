@@ -457,7 +457,7 @@ def test_async_client_retries_and_maps_errors():
 
 
 def test_sdk_requests_validate_against_the_server_schema():
-    schemas = pytest.importorskip("quadloc.service.api.schemas")
+    schemas = pytest.importorskip("quadloc.service.schemas.localize")
     req = LocalizeRequest(
         camera=CAMERA, detections=DETS, frame_id="x", timestamp=1.0,
         prior=PosePrior.from_matrix(np.eye(4), np.eye(6) * 0.01, convention="opengl"),
@@ -489,7 +489,7 @@ def test_sdk_requests_validate_against_the_server_schema():
         assert dumped[key] == value, key
     assert set(schemas.LocalizeResponse.model_fields) <= set(sdk.LocalizeResponse.model_fields)
     # and the server's documented response example (once generated) parses too
-    examples = pytest.importorskip("quadloc.service.api.examples")
+    examples = pytest.importorskip("quadloc.service.schemas.examples")
     if examples.LOCALIZE_RESPONSE_EXAMPLE:
         assert sdk.LocalizeResponse.model_validate(examples.LOCALIZE_RESPONSE_EXAMPLE).map_id
 

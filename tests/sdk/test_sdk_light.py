@@ -73,7 +73,7 @@ print("LIGHT-SDK-OK", sdk.__version__)
 def test_light_sdk_installs_alone_and_works(tmp_path: Path) -> None:
     from fastapi.testclient import TestClient
 
-    from quadloc.service.api.examples import LOCALIZE_EXAMPLE
+    from quadloc.service.schemas.examples import LOCALIZE_EXAMPLE
     from tests.conftest import make_test_app
 
     # A real answer and map document from the server, for the isolated client to consume.

@@ -11,7 +11,7 @@ from sqlalchemy.exc import SQLAlchemyError
 from quadloc.maps.errors import MapNotFound, StoreUnavailable
 from quadloc.service.api.deps import MetricsDep, SettingsDep, StoreDep
 from quadloc.service.api.errors import ProblemError, log_database_error, problem_responses
-from quadloc.service.api.schemas import HealthOut
+from quadloc.service.schemas.common import HealthOut
 
 __all__ = ["router"]
 

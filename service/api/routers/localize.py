@@ -29,10 +29,10 @@ from quadloc.service.api.errors import (
     map_not_found,
     problem_responses,
 )
-from quadloc.service.api.examples import LOCALIZE_EXAMPLE, LOCALIZE_RESPONSE_EXAMPLE
 from quadloc.service.api.inspector import SVG_MEDIA_TYPE, render_localization_svg, wants_svg
 from quadloc.service.api.map_loader import MapLoader, MapStillLoading
-from quadloc.service.api.schemas import (
+from quadloc.service.schemas.examples import LOCALIZE_EXAMPLE, LOCALIZE_RESPONSE_EXAMPLE
+from quadloc.service.schemas.localize import (
     BatchLocalizeRequest,
     BatchLocalizeResponse,
     LocalizeRequest,

@@ -25,8 +25,8 @@ from quadloc.maps.model import (
 from quadloc.service.api.auth import ReadAccess, WriteAccess
 from quadloc.service.api.deps import MapIdPath, SettingsDep, StoreDep
 from quadloc.service.api.errors import ProblemError, map_not_found, problem_responses
-from quadloc.service.api.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
-from quadloc.service.api.schemas import (
+from quadloc.service.schemas.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
+from quadloc.service.schemas.maps import (
     MapListOut,
     MapOut,
     MapSummaryOut,

@@ -33,13 +33,14 @@ from quadloc.service.api.errors import (
     map_not_found,
     problem_responses,
 )
-from quadloc.service.api.examples import (
+from quadloc.service.localization.types import LocalizationInputError
+from quadloc.service.schemas.examples import (
     FRAME_EXAMPLE,
     FRAME_RESPONSE_EXAMPLE,
     SESSION_CREATE_EXAMPLE,
     SESSION_EXAMPLE,
 )
-from quadloc.service.api.session_schemas import (
+from quadloc.service.schemas.sessions import (
     SessionCreate,
     SessionFrameIn,
     SessionFrameOut,
@@ -48,7 +49,6 @@ from quadloc.service.api.session_schemas import (
     SessionFramesOut,
     SessionOut,
 )
-from quadloc.service.localization.types import LocalizationInputError
 from quadloc.service.tracking.session import (
     DriftModel,
     FrameInput,

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from fastapi.testclient import TestClient
 
-from quadloc.service.api.examples import MAP_EXAMPLE
+from quadloc.service.schemas.examples import MAP_EXAMPLE
 from quadloc.service.settings import (
     Settings,
     check_bind_allowed,
@@ -199,7 +199,7 @@ def test_settings_beyond_the_schema_caps_fail_at_start(field: str, ok: int, bad:
                                                        monkeypatch: pytest.MonkeyPatch) -> None:
     from pydantic import ValidationError
 
-    from quadloc.service.api.schemas import MAX_BATCH_FRAMES, MAX_DETECTIONS
+    from quadloc.service.limits import MAX_BATCH_FRAMES, MAX_DETECTIONS
 
     assert (MAX_DETECTIONS, MAX_BATCH_FRAMES) == (256, 64)  # the caps of the request schema
     assert getattr(Settings(**{field: ok}), field) == ok

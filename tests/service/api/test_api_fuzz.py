@@ -40,8 +40,8 @@ from schemathesis.specs.openapi.checks import positive_data_acceptance
 
 from quadloc.maps.store import MapStore
 from quadloc.service.api.app import create_app, seed_demo_map
-from quadloc.service.api.examples import MAP_EXAMPLE
 from quadloc.service.localization.types import METRICS, ROBUST_KERNELS
+from quadloc.service.schemas.examples import MAP_EXAMPLE
 from quadloc.service.settings import Settings, hash_api_key
 from tests.conftest import make_test_app
 from tests.maps.test_maps_store import PG_BASE, _pg_unavailable_reason
@@ -191,7 +191,7 @@ def test_the_schemas_own_examples_get_the_documented_success(
                 c.post("/v1/maps", json=example, headers=headers)
             headers["If-Match"] = c.get(f"/v1/maps/{map_id}", headers=headers).headers["etag"]
         if "{session_id}" in url:  # a tracking session to send the frames to
-            from quadloc.service.api.examples import SESSION_CREATE_EXAMPLE
+            from quadloc.service.schemas.examples import SESSION_CREATE_EXAMPLE
 
             created = c.post("/v1/maps/chess/sessions", json=SESSION_CREATE_EXAMPLE,
                              headers=headers)

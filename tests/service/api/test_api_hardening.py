@@ -18,7 +18,7 @@ from fastapi.testclient import TestClient
 
 from quadloc.maps.store import MapStore
 from quadloc.service.api.app import create_app
-from quadloc.service.api.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
+from quadloc.service.schemas.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
 from quadloc.service.settings import Settings
 from tests.maps.test_maps_store import store_url  # noqa: F401 (fixture: sqlite + postgresql)
 
@@ -176,7 +176,7 @@ def test_a_slow_map_load_answers_503_within_the_budget_then_serves(
     import time
 
     import quadloc.maps.store as store_module
-    from quadloc.service.api.examples import LOCALIZE_EXAMPLE
+    from quadloc.service.schemas.examples import LOCALIZE_EXAMPLE
 
     with _client(f"sqlite:///{tmp_path / 'q.db'}", solve_time_budget_ms=300.0) as c:
         store = c.app.state.store
@@ -214,8 +214,8 @@ def test_integral_floats_are_integers_and_the_schema_says_what_is_enforced(
         tmp_path: Path) -> None:
     """JSON Schema's ``integer`` includes 640.0: the server accepts it; 640.5 / "640" / true
     are refused naming the field. robust_scale without robust: the schema's if/then says it."""
-    from quadloc.service.api.examples import LOCALIZE_EXAMPLE
     from quadloc.service.cli import openapi_document
+    from quadloc.service.schemas.examples import LOCALIZE_EXAMPLE
 
     with _client(f"sqlite:///{tmp_path / 'q.db'}") as c:
         def frame(**camera_and_options):

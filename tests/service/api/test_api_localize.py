@@ -17,7 +17,7 @@ from quadloc.factors.conics import Ellipse
 from quadloc.factors.names import GeometryError
 from quadloc.factors.rotations import rotation_from_quaternion_wxyz
 from quadloc.service.api import solver as solver_module
-from quadloc.service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, LOCALIZE_EXAMPLE
+from quadloc.service.schemas.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, LOCALIZE_EXAMPLE
 from tests.conftest import make_test_app
 from tests.support.helpers import assert_problem as _problem
 
@@ -410,7 +410,7 @@ def _opengl_from_opencv_adjoint() -> np.ndarray:
 
 def test_opengl_prior_full_covariance_is_converted_to_opencv(client: TestClient) -> None:
     from quadloc.service.api.convert import prior_from_request
-    from quadloc.service.api.schemas import PosePriorIn
+    from quadloc.service.schemas.localize import PosePriorIn
 
     cov_cv = _full_spd_covariance()
     Ad = _opengl_from_opencv_adjoint()

@@ -12,7 +12,7 @@ from fastapi.testclient import TestClient
 
 from quadloc.maps.demo import load_demo_map
 from quadloc.maps.model import content_hash, scene_map_from_dict
-from quadloc.service.api.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
+from quadloc.service.schemas.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
 from tests.conftest import make_test_app
 from tests.support.helpers import FakeClock
 from tests.support.helpers import assert_problem as _problem
@@ -209,7 +209,7 @@ def test_import_chess_format(client: TestClient) -> None:
 
 
 def _map_version_used(c: TestClient) -> int:
-    from quadloc.service.api.examples import LOCALIZE_EXAMPLE
+    from quadloc.service.schemas.examples import LOCALIZE_EXAMPLE
 
     frame = {**LOCALIZE_EXAMPLE, "detections": LOCALIZE_EXAMPLE["detections"][:1]}
     r = c.post("/v1/maps/chess/localize", json=frame)
@@ -221,7 +221,7 @@ def test_localize_sees_local_updates_at_once_and_other_replicas_within_the_ttl(
         tmp_path: Path) -> None:
     from quadloc.maps.store import MapStore
     from quadloc.service.api.app import seed_demo_map
-    from quadloc.service.api.examples import LOCALIZE_EXAMPLE
+    from quadloc.service.schemas.examples import LOCALIZE_EXAMPLE
 
     # "chess" is not the default map here: the default map cannot be deleted (409).
     app = make_test_app(tmp_path, map_cache_ttl_s=0.3, default_map_id="chess-default")
@@ -318,7 +318,7 @@ def test_over_deep_body_is_refused_before_anything_is_stored(client: TestClient)
     _problem(client.put("/v1/maps/deep-32", json={**bad, "map_id": "deep-32"},
                         headers={"If-Match": etag}), 422, "validation-error")
     assert client.get("/v1/maps/deep-32").json()["version"] == 1
-    from quadloc.service.api.examples import LOCALIZE_EXAMPLE
+    from quadloc.service.schemas.examples import LOCALIZE_EXAMPLE
 
     frame = {**LOCALIZE_EXAMPLE, "frame_id": _nested(40)}
     body = _problem(client.post("/v1/maps/chess/localize", json=frame), 422, "validation-error")
@@ -332,7 +332,7 @@ def test_over_deep_body_is_refused_before_anything_is_stored(client: TestClient)
 ])
 def test_path_map_id_outside_the_pattern_is_a_422(client: TestClient, method: str,
                                                   path: str) -> None:
-    from quadloc.service.api.examples import LOCALIZE_EXAMPLE
+    from quadloc.service.schemas.examples import LOCALIZE_EXAMPLE
 
     body = {"frames": [LOCALIZE_EXAMPLE]} if path.endswith(":batch") else (
         LOCALIZE_EXAMPLE if path.endswith("localize") else MAP_EXAMPLE)
@@ -443,7 +443,7 @@ def pg_client():
 
 @pytest.mark.postgres
 def test_nul_characters_on_postgresql_are_4xx(pg_client: TestClient) -> None:
-    from quadloc.service.api.examples import LOCALIZE_EXAMPLE
+    from quadloc.service.schemas.examples import LOCALIZE_EXAMPLE
 
     c = pg_client
     doc = c.get("/v1/maps/chess").json()["map"]

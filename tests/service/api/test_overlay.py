@@ -18,8 +18,8 @@ from quadloc.factors.camera import project_ellipsoid as solver_projection
 from quadloc.factors.conics import DegenerateProjectionError
 from quadloc.factors.rotations import invert_pose
 from quadloc.maps.demo import load_demo_map
-from quadloc.service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, LOCALIZE_EXAMPLE
 from quadloc.service.api.inspector import wants_svg
+from quadloc.service.schemas.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, LOCALIZE_EXAMPLE
 from quadloc_sdk.overlay import overlay_svg, project_ellipsoid
 from tests.conftest import make_test_app
 from tests.support.helpers import angle_diff, surface_points

@@ -11,7 +11,7 @@ from fastapi.testclient import TestClient
 
 import quadloc_sdk as sdk
 from quadloc.factors.rotations import rotation_from_quaternion_wxyz
-from quadloc.service.api.examples import LOCALIZE_EXAMPLE, MAP_EXAMPLE
+from quadloc.service.schemas.examples import LOCALIZE_EXAMPLE, MAP_EXAMPLE
 from quadloc_sdk.geometry import (
     column_major_from_matrix,
     matrix_from_column_major,

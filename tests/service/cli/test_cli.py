@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from quadloc.maps.model import content_hash, scene_map_from_dict
-from quadloc.service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, MAP_EXAMPLE
 from quadloc.service.cli import OPENAPI_PATH, main
+from quadloc.service.schemas.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, MAP_EXAMPLE
 from quadloc.service.settings import hash_api_key
 from tests.support.reference_data import CHESS_SCENE_PATH
 

@@ -1,6 +1,6 @@
 """Wire models of the tracking-session endpoints (``/v1/maps/{map_id}/sessions``,
 ``/v1/sessions/{id}...``). Shared pieces (camera, detections, poses, covariances) come from
-:mod:`quadloc.service.api.schemas`; conventions are the same (OpenCV camera axes unless
+:mod:`quadloc.service.schemas`; conventions are the same (OpenCV camera axes unless
 ``convention: "opengl"``; covariances 6x6 ``[omega, v]``, body frame, right perturbation)."""
 
 from __future__ import annotations
@@ -9,10 +9,10 @@ from typing import Annotated, Any
 
 from pydantic import BaseModel, Discriminator, Field, Tag
 
-from quadloc.service.api.schemas import (
-    MAX_DETECTIONS,
+from quadloc.service.limits import MAX_DETECTIONS
+from quadloc.service.schemas.common import Convention, WireModel
+from quadloc.service.schemas.localize import (
     CameraIn,
-    Convention,
     CovarianceOut,
     DetectionIn,
     GravityIn,
@@ -20,7 +20,6 @@ from quadloc.service.api.schemas import (
     PoseIn,
     PoseOut,
     PosePriorIn,
-    _Model,
 )
 
 __all__ = ["MAX_SESSION_BATCH_FRAMES", "SessionCreate", "SessionFrameIn", "SessionFrameOut",
@@ -31,7 +30,7 @@ __all__ = ["MAX_SESSION_BATCH_FRAMES", "SessionCreate", "SessionFrameIn", "Sessi
 MAX_SESSION_BATCH_FRAMES = 900
 
 
-class SessionOptionsIn(_Model):
+class SessionOptionsIn(WireModel):
     """Session options; omitted fields take the defaults shown."""
 
     window_frames: int = Field(default=30, ge=2, le=300,
@@ -48,7 +47,7 @@ class SessionOptionsIn(_Model):
     odometry_rotation_deg_per_sqrt_s: float = Field(default=0.05, ge=0, le=90)
 
 
-class SessionCreate(_Model):
+class SessionCreate(WireModel):
     """Start a tracking session on a map."""
 
     camera: CameraIn
@@ -72,7 +71,7 @@ class SessionOut(BaseModel):
     idle_timeout_s: float = Field(description="The session expires after this idle time.")
 
 
-class SessionFrameIn(_Model):
+class SessionFrameIn(WireModel):
     """One frame: detections as for localize plus the app's odometry pose."""
 
     detections: list[DetectionIn] = Field(default_factory=list, max_length=MAX_DETECTIONS)
@@ -87,7 +86,7 @@ class SessionFrameIn(_Model):
         "frame's tilt against the map's up axis.")
 
 
-class SessionFramesIn(_Model):
+class SessionFramesIn(WireModel):
     """Several frames in time order (offline recording)."""
 
     frames: list[SessionFrameIn] = Field(min_length=1, max_length=MAX_SESSION_BATCH_FRAMES)

@@ -1,19 +1,12 @@
-"""Wire format of the REST API (pydantic v2 models; the OpenAPI document is generated from them).
-
-Conventions (also in the OpenAPI descriptions and docs/api.md): pixels from the top-left pixel
-corner, +x right, +y down; ellipses ``{cx, cy, a, b, angle}``: centre px, SEMI-axes px (``a``
-along ``angle``), ``angle`` in radians from +x towards +y; a box becomes its inscribed ellipse;
-``sigma = exp(alpha / 2)`` for ``log_variance = alpha``. Poses ``world_from_camera`` (m) as unit
-``quaternion_wxyz`` (``w >= 0``) + ``translation_m`` and a 4x4, OpenCV camera axes unless
-``"opengl"`` (``world_from_camera_gl = world_from_camera_cv @ diag(1, -1, -1, 1)``).
-Covariances 6x6 ``[omega_x, omega_y, omega_z, v_x, v_y, v_z]`` (rad, m), right perturbation,
-camera (body) frame. Floats must be finite and unknown fields are rejected (422 naming the field).
+"""Wire models of localization: ``POST /v1/maps/{map_id}/localize`` and ``...:batch``; also the
+shared request pieces (camera, detections, poses, priors, gravity) and answer pieces (poses,
+covariances, inliers) of the other resources. Conventions: :mod:`quadloc.service.schemas.common`.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, Literal
+from typing import Annotated, Literal
 
 from pydantic import (
     BaseModel,
@@ -38,11 +31,17 @@ from quadloc.service.limits import (
     ROBUST_KERNELS,
     UNKNOWN_LABEL_POLICIES,
 )
+from quadloc.service.schemas.common import (
+    COVARIANCE_FRAME,
+    Convention,
+    Int,
+    Row4,
+    Row6,
+    WireModel,
+    integral,
+)
 
 __all__ = [
-    "COVARIANCE_ORDER",
-    "MAX_BATCH_FRAMES",
-    "MAX_DETECTIONS",
     "AlternativeOut",
     "BatchLocalizeRequest",
     "BatchLocalizeResponse",
@@ -52,51 +51,17 @@ __all__ = [
     "DetectionIn",
     "EllipseIn",
     "GravityIn",
-    "HealthOut",
     "InlierOut",
     "LocalizeOptionsIn",
     "LocalizeRequest",
     "LocalizeResponse",
-    "MapListOut",
-    "MapOut",
-    "MapSummaryOut",
-    "MapVersionOut",
-    "MapVersionsOut",
     "PoseIn",
     "PoseOut",
     "PosePriorIn",
-    "Problem",
-    "ProblemField",
 ]
 
-COVARIANCE_FRAME = "camera (body) frame, right perturbation T*exp(xi), omega in rad, v in m"
 
-Convention = Literal["opencv", "opengl"]
-
-
-def _integral(value: Any) -> Any:
-    """JSON Schema's ``integer`` includes integral floats (``640.0``): accept them as ints
-    (other floats, strings and booleans still fail the strict check, naming the field)."""
-    if isinstance(value, float) and value.is_integer() and abs(value) <= 2**53:
-        return int(value)
-    return value
-
-
-#: An integer field that also accepts integral JSON numbers such as ``640.0``.
-Int = Annotated[int, BeforeValidator(_integral)]
-#: Rows of a pose matrix / covariance (the shapes are in the schema).
-_Row4 = Annotated[list[float], Field(min_length=4, max_length=4)]
-_Row6 = Annotated[list[float], Field(min_length=6, max_length=6)]
-
-
-class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
-
-
-# ----------------------------------------------------------------------------------- requests
-
-
-class EllipseIn(_Model):
+class EllipseIn(WireModel):
     """Image ellipse: centre px, semi-axes px, angle radians (from +x towards +y)."""
 
     cx: float = Field(ge=-MAX_PIXELS, le=MAX_PIXELS, description="Centre x (px).")
@@ -113,7 +78,7 @@ class EllipseIn(_Model):
         return self
 
 
-class BoxIn(_Model):
+class BoxIn(WireModel):
     """Axis-aligned box in px; the detection becomes its inscribed ellipse."""
 
     xmin: float = Field(ge=-MAX_PIXELS, le=MAX_PIXELS)
@@ -133,7 +98,7 @@ class BoxIn(_Model):
         return self
 
 
-class DetectionIn(_Model):
+class DetectionIn(WireModel):
     """One detected object: exactly one of `ellipse` or `box`, its label, optional uncertainty
     (`sigma` or `log_variance`, not both) and optional detector `score`."""
 
@@ -161,7 +126,7 @@ class DetectionIn(_Model):
         return self.sigma
 
 
-class CameraIn(_Model):
+class CameraIn(WireModel):
     """Pinhole intrinsics (px, zero skew, undistorted detections) and image size (px)."""
 
     fx: float = Field(gt=0, le=1e7)
@@ -172,7 +137,7 @@ class CameraIn(_Model):
     height: Int = Field(ge=1, le=100_000)
 
 
-class PoseIn(_Model):
+class PoseIn(WireModel):
     """A ``world_from_camera`` pose: `quaternion_wxyz` (or `quaternion_xyzw`) + `translation_m`,
     or a 4x4 `matrix` given as a list of ROWS (row-major)."""
 
@@ -184,7 +149,7 @@ class PoseIn(_Model):
         description="The same unit quaternion scalar LAST (ARKit/ARCore/Unity order); give "
                     "it instead of `quaternion_wxyz`.")
     translation_m: list[float] | None = Field(default=None, min_length=3, max_length=3)
-    matrix: list[_Row4] | None = Field(
+    matrix: list[Row4] | None = Field(
         default=None, min_length=4, max_length=4,
         description="4x4 homogeneous matrix [[R, t], [0, 0, 0, 1]] given as a list of 4 ROWS "
                     "(row-major): R orthonormal within 1e-6 with det +1, last row [0, 0, 0, 1], "
@@ -210,11 +175,11 @@ class PoseIn(_Model):
         return self
 
 
-class PosePriorIn(_Model):
+class PosePriorIn(WireModel):
     """Optional pose prior (e.g. from the AR session's tracking)."""
 
     world_from_camera: PoseIn
-    covariance: list[_Row6] | None = Field(
+    covariance: list[Row6] | None = Field(
         default=None, min_length=6, max_length=6,
         description="Optional 6x6 covariance in GTSAM Pose3 tangent order [omega_x, omega_y, "
                     "omega_z, v_x, v_y, v_z], " + COVARIANCE_FRAME + ". Symmetric positive "
@@ -223,7 +188,7 @@ class PosePriorIn(_Model):
                                    description="Camera axes of this prior (opencv or opengl).")
 
 
-class GravityIn(_Model):
+class GravityIn(WireModel):
     """Optional gravity direction measured by the client (e.g. ARKit/ARCore/CoreMotion gravity):
     a factor on the pose's tilt (roll, pitch) in the refinement; candidates whose tilt
     disagrees with it are dropped, and an answer that disagrees is not localized (reason
@@ -248,7 +213,7 @@ class GravityIn(_Model):
         return self
 
 
-class LocalizeOptionsIn(_Model):
+class LocalizeOptionsIn(WireModel):
     """Solver options; omitted fields take the server defaults (shown)."""
 
     # `robust_scale` (a number) requires `robust` (a kernel): said in the schema as well.
@@ -275,7 +240,7 @@ class LocalizeOptionsIn(_Model):
     robust_scale: float | None = Field(default=None, gt=0, le=1e6,
                                        description="Kernel scale (needs `robust`).")
     unknown_label_policy: Literal[UNKNOWN_LABEL_POLICIES] = "ignore"  # type: ignore[valid-type]
-    seed: Annotated[int, Field(ge=0, le=2**32 - 1), BeforeValidator(_integral)] | None = 0
+    seed: Annotated[int, Field(ge=0, le=2**32 - 1), BeforeValidator(integral)] | None = 0
     time_budget_ms: float | None = Field(
         default=None, gt=0, le=60_000,
         description="Solve budget (ms); capped by the server's QUADLOC_SOLVE_TIME_BUDGET_MS.")
@@ -299,7 +264,7 @@ class LocalizeOptionsIn(_Model):
         return self
 
 
-class LocalizeRequest(_Model):
+class LocalizeRequest(WireModel):
     """One frame to localize against the map."""
 
     camera: CameraIn
@@ -311,13 +276,10 @@ class LocalizeRequest(_Model):
     options: LocalizeOptionsIn = Field(default_factory=LocalizeOptionsIn)
 
 
-class BatchLocalizeRequest(_Model):
+class BatchLocalizeRequest(WireModel):
     """Several frames (bounded count) localized in order with the same map version."""
 
     frames: list[LocalizeRequest] = Field(min_length=1, max_length=MAX_BATCH_FRAMES)
-
-
-# ----------------------------------------------------------------------------------- responses
 
 
 class PoseOut(BaseModel):
@@ -405,59 +367,3 @@ class BatchLocalizeResponse(BaseModel):
     map_id: str
     map_version: int
     results: list[LocalizeResponse]
-
-
-class MapSummaryOut(BaseModel):
-    map_id: str
-    name: str
-    version: int
-    content_hash: str
-    updated_at: str | None = None
-
-
-class MapListOut(BaseModel):
-    maps: list[MapSummaryOut]
-
-
-class MapOut(BaseModel):
-    """A stored map version: its metadata and the map document (docs/maps.md format)."""
-
-    map_id: str
-    version: int
-    content_hash: str = Field(description="sha256 of the canonical map content (the ETag).")
-    created_at: str | None = None
-    map: dict[str, Any] = Field(description="The map in the documented JSON format.")
-
-
-class MapVersionOut(BaseModel):
-    version: int
-    content_hash: str = Field(description="sha256 of the version's canonical content (its ETag).")
-    created_at: str | None = None
-
-
-class MapVersionsOut(BaseModel):
-    """Every stored version of a map, ascending (the last one is the latest)."""
-
-    map_id: str
-    versions: list[MapVersionOut]
-
-
-class HealthOut(BaseModel):
-    status: str
-    checks: dict[str, str] = Field(default_factory=dict)
-
-
-class ProblemField(BaseModel):
-    field: str
-    message: str
-
-
-class Problem(BaseModel):
-    """RFC 9457 problem details (media type application/problem+json)."""
-
-    type: str
-    title: str
-    status: int
-    detail: str
-    instance: str | None = None
-    errors: list[ProblemField] = Field(default_factory=list)

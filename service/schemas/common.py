@@ -1,0 +1,88 @@
+"""Wire format of the REST API (pydantic v2 models; the OpenAPI document is generated from them).
+
+Conventions (also in the OpenAPI descriptions and docs/api.md): pixels from the top-left pixel
+corner, +x right, +y down; ellipses ``{cx, cy, a, b, angle}``: centre px, SEMI-axes px (``a``
+along ``angle``), ``angle`` in radians from +x towards +y; a box becomes its inscribed ellipse;
+``sigma = exp(alpha / 2)`` for ``log_variance = alpha``. Poses ``world_from_camera`` (m) as unit
+``quaternion_wxyz`` (``w >= 0``) + ``translation_m`` and a 4x4, OpenCV camera axes unless
+``"opengl"`` (``world_from_camera_gl = world_from_camera_cv @ diag(1, -1, -1, 1)``).
+Covariances 6x6 ``[omega_x, omega_y, omega_z, v_x, v_y, v_z]`` (rad, m), right perturbation,
+camera (body) frame. Floats must be finite and unknown fields are rejected (422 naming the field).
+
+This module: the shared pieces (the strict base model, integral numbers, matrix rows, the camera
+convention), the health answer and the RFC 9457 problem document.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+)
+
+__all__ = [
+    "COVARIANCE_FRAME",
+    "Convention",
+    "HealthOut",
+    "Int",
+    "Problem",
+    "ProblemField",
+    "Row4",
+    "Row6",
+    "WireModel",
+    "integral",
+]
+
+
+COVARIANCE_FRAME = "camera (body) frame, right perturbation T*exp(xi), omega in rad, v in m"
+
+
+Convention = Literal["opencv", "opengl"]
+
+
+def integral(value: Any) -> Any:
+    """JSON Schema's ``integer`` includes integral floats (``640.0``): accept them as ints
+    (other floats, strings and booleans still fail the strict check, naming the field)."""
+    if isinstance(value, float) and value.is_integer() and abs(value) <= 2**53:
+        return int(value)
+    return value
+
+
+#: An integer field that also accepts integral JSON numbers such as ``640.0``.
+Int = Annotated[int, BeforeValidator(integral)]
+
+
+#: Rows of a pose matrix / covariance (the shapes are in the schema).
+Row4 = Annotated[list[float], Field(min_length=4, max_length=4)]
+
+
+Row6 = Annotated[list[float], Field(min_length=6, max_length=6)]
+
+
+class WireModel(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
+
+
+class HealthOut(BaseModel):
+    status: str
+    checks: dict[str, str] = Field(default_factory=dict)
+
+
+class ProblemField(BaseModel):
+    field: str
+    message: str
+
+
+class Problem(BaseModel):
+    """RFC 9457 problem details (media type application/problem+json)."""
+
+    type: str
+    title: str
+    status: int
+    detail: str
+    instance: str | None = None
+    errors: list[ProblemField] = Field(default_factory=list)
