@@ -21,12 +21,11 @@ from pathlib import Path
 from typing import Any
 
 from quadloc.factors.rotations import invert_pose
-from quadloc.maps.compiled import compile_map
 from quadloc.maps.demo import load_demo_map
-from quadloc.service.api.metrics import ApiMetrics
-from quadloc.service.api.solver import Solver
+from quadloc.service.app.context import App
 from quadloc.service.schemas.examples import EXAMPLE_FRAME_PATH, MAP_EXAMPLE
 from quadloc.service.schemas.localize import LocalizeRequest
+from quadloc.service.settings import Settings
 from tests.support.reference_data import CHESS_POSES_PATH, load_chess_poses
 from tests.support.simulate import simulate_frame
 
@@ -83,9 +82,8 @@ def build_example_frame(poses_path: Path | None = None, frame_index: int = FRAME
 
 def regenerate() -> None:  # pragma: no cover - dev tool
     body, truth, source = build_example_frame()
-    solver = Solver(ApiMetrics(), 1, 1.0, 1000.0, 256)
-    response = solver.localize_frames(compile_map(load_demo_map()),
-                                      [LocalizeRequest.model_validate(body)], batch=False)[0]
+    app = App.create(Settings(database_url="sqlite://", default_map_id="chess"))
+    response = app.localizer.localize("chess", LocalizeRequest.model_validate(body))[1]
     resp = response.model_dump(mode="json")
     resp["timings_ms"] = {k: round(v, 2) for k, v in resp["timings_ms"].items()}
     out = EXAMPLE_FRAME_PATH

@@ -152,7 +152,7 @@ def build_case() -> dict[str, Any]:
     doc = recording_to_dict(camera, [(str(i), app[i], [_det_json(d) for d in f.detections])
                                      for i, f in enumerate(frames)], name="fingerprint")
     scene, report = build_map(parse_recording(doc), map_id="fp")
-    report = json.loads(json.dumps(report, default=_f))
+    report = json.loads(json.dumps(report.model_dump(mode="json"), default=_f))
     return {"objects": [{"object_id": o.object_id, "category": o.category,
                          "center": _f(o.ellipsoid.center), "axes": _f(o.ellipsoid.axes),
                          "rotation": _f(o.ellipsoid.rotation)} for o in scene.objects],

@@ -69,7 +69,7 @@ def build_frames(n_frames: int, seed: int = 0) -> tuple[list[dict[str, Any]], li
     from quadloc.factors.rotations import invert_pose
     from quadloc.maps.compiled import compile_map
     from quadloc.maps.demo import load_demo_map
-    from quadloc.service.api.convert import (
+    from quadloc.service.app.conversions import (
         camera_from_request,
         detections_from_request,
         options_from_request,

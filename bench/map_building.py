@@ -99,7 +99,8 @@ def run_seed(seed: int, n_frames: int, n_test: int, log=print,
     t = time.monotonic()
     cpu = time.process_time()
     stamps.append(t)
-    scene, report = build_map(rec, map_id="chess-built", progress=progress)
+    scene, built_report = build_map(rec, map_id="chess-built", progress=progress)
+    report = built_report.model_dump(mode="json")
     build_s = time.monotonic() - t
     build_cpu_s = time.process_time() - cpu
     stamps.append(time.monotonic())

@@ -29,9 +29,9 @@ from quadloc.factors.rotations import invert_pose
 from quadloc.maps.demo import load_demo_map
 from quadloc.maps.reconstruct import (
     ReconstructionError,
-    _max_ray_angle_deg,
     _rays,
     ellipsoid_errors,
+    max_ray_angle_deg,
     reconstruct_ellipsoid,
 )
 from tests.support.reference_data import load_chess_poses
@@ -221,10 +221,10 @@ def _findings(raw: dict) -> str:
 
 def _spread_deg(cam: Camera, cfw: list[np.ndarray], sel: list[int], E: Ellipsoid) -> float:
     """Largest angle (deg) between the world rays through the exact projections' centres: the
-    same measure (``quadloc.maps.reconstruct._rays`` / ``_max_ray_angle_deg``) the reconstruction
+    same measure (``quadloc.maps.reconstruct._rays`` / ``max_ray_angle_deg``) the reconstruction
     uses to refuse near-parallel views."""
     ells = [project_ellipsoid(cam, cfw[i], E) for i in sel]
-    return _max_ray_angle_deg(_rays(ells, [cam] * len(sel), np.asarray([cfw[i] for i in sel])))
+    return max_ray_angle_deg(_rays(ells, [cam] * len(sel), np.asarray([cfw[i] for i in sel])))
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -18,6 +18,7 @@ import numpy as np
 
 from quadloc.factors.camera import Camera
 from quadloc.factors.conics import Ellipse, level_values
+from quadloc.factors.metrics import level_set_sample_points
 from quadloc.factors.rotations import skew
 
 __all__ = [
@@ -53,10 +54,8 @@ def level_set_samples(detection: Ellipse, camera: Camera,
     """The level-set samples of ``detection`` (px) for ``camera``; ``metric_options`` as for the
     ``level_set`` metric (``n_azimuths``, ``n_levels``, ``scale``; ``adaptive`` is forced off:
     without a pose there is no misalignment to adapt to)."""
-    from quadloc.factors import metrics
-
     opts = {k: v for k, v in (metric_options or {}).items() if k != "adaptive"}
-    pts = metrics.level_set_sample_points(detection, None, adaptive=False, **opts)
+    pts = level_set_sample_points(detection, None, adaptive=False, **opts)
     n = np.ones((3, len(pts)))
     n[0] = (pts[:, 0] - camera.cx) / camera.fx
     n[1] = (pts[:, 1] - camera.cy) / camera.fy

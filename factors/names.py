@@ -8,12 +8,14 @@ can publish the valid names and apply the same rules without loading the solver
 * :class:`FieldError`: THE error of invalid input, with a structured ``field``;
   :class:`GeometryError`, its kind for geometric input.
 * :func:`is_real`, :func:`check_robust`: rules used by every layer that takes these inputs.
+* :func:`json_path`: THE spelling of a field path in every error (``objects[3].axes[1]``).
 """
 
 from __future__ import annotations
 
 import math
 import numbers
+from collections.abc import Sequence
 
 __all__ = [
     "METRIC_NAMES",
@@ -22,6 +24,7 @@ __all__ = [
     "GeometryError",
     "check_robust",
     "is_real",
+    "json_path",
 ]
 
 #: The nine ellipse metrics (``quadloc.factors.metrics.residual``,
@@ -72,3 +75,17 @@ def check_robust(robust: object, robust_scale: object, *, prefix: str = "",
     if not (is_real(robust_scale) and math.isfinite(robust_scale) and robust_scale > 0):
         raise error(f"must be finite and > 0, got {robust_scale!r}",
                     field=prefix + "robust_scale")
+
+
+def json_path(loc: Sequence[str | int], root: str = "$") -> str:
+    """``("objects", 3, "axes", 1)`` -> ``"objects[3].axes[1]"``; ``root`` for an empty path.
+
+    Pydantic's validator tags (``function-after[...]``, ``model-...``) are skipped.
+    """
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        elif not str(part).startswith(("function-", "model-")):
+            out += ("." if out else "") + str(part)
+    return out or root

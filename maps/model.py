@@ -37,6 +37,7 @@ from pydantic.json_schema import GenerateJsonSchema
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from quadloc.factors.camera import Ellipsoid
+from quadloc.factors.names import json_path
 from quadloc.factors.rotations import (
     DOCUMENT_ROTATION_TOLERANCE,
     canonical_quaternion_wxyz,
@@ -59,7 +60,6 @@ __all__ = [
     "SceneMap",
     "canonical_json",
     "content_hash",
-    "json_path",
     "scene_map_from_chess",
     "scene_map_from_dict",
     "scene_map_to_dict",
@@ -105,20 +105,6 @@ class MapValidationError(ValueError):
         shown = "; ".join(f"{e['field']}: {e['message']}" for e in self.errors[:5])
         more = f" (and {len(self.errors) - 5} more)" if len(self.errors) > 5 else ""
         super().__init__(f"invalid map: {shown}{more}")
-
-
-def json_path(loc: Sequence[str | int], root: str = "$") -> str:
-    """``("objects", 3, "axes", 1)`` -> ``"objects[3].axes[1]"``; ``root`` for an empty path.
-
-    Pydantic's validator tags (``function-after[...]``, ``model-...``) are skipped.
-    """
-    out = ""
-    for part in loc:
-        if isinstance(part, int):
-            out += f"[{part}]"
-        elif not str(part).startswith(("function-", "model-")):
-            out += ("." if out else "") + str(part)
-    return out or root
 
 
 # --------------------------------------------------------------------------- rules

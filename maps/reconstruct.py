@@ -49,8 +49,10 @@ __all__ = [
     "ellipsoid_errors",
     "ellipsoid_from_dual_quadric",
     "linear_dual_quadric",
+    "max_ray_angle_deg",
     "reconstruct_ellipsoid",
     "refine_ellipsoid",
+    "triangulate",
     "view_residuals",
 ]
 
@@ -169,12 +171,13 @@ def _rays(ells: Sequence[Ellipse], cams: Sequence[Camera], cfw: np.ndarray) -> n
     return d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
-def _max_ray_angle_deg(rays: np.ndarray) -> float:
+def max_ray_angle_deg(rays: np.ndarray) -> float:
+    """Largest angle (deg) between two of the unit rays (n, 3): the spread of the views."""
     cos = np.clip(rays @ rays.T, -1.0, 1.0)
     return float(np.degrees(np.arccos(cos.min())))
 
 
-def _triangulate(origins: np.ndarray, rays: np.ndarray) -> np.ndarray:
+def triangulate(origins: np.ndarray, rays: np.ndarray) -> np.ndarray:
     """Least-squares point closest to the rays ``origins + t rays`` (n, 3)."""
     proj = np.eye(3) - rays[:, :, None] * rays[:, None, :]
     return np.linalg.solve(proj.sum(0), np.einsum("nij,nj->i", proj, origins))
@@ -376,14 +379,14 @@ def reconstruct_ellipsoid(
         raise ReconstructionError("bad_input", f"log_axes_prior_sigma must be finite and > 0, "
                                                f"got {log_axes_prior_sigma!r}")
     rays = _rays(ells, cams, cfw)
-    spread = _max_ray_angle_deg(rays)
+    spread = max_ray_angle_deg(rays)
     if spread < min_ray_angle_deg:
         raise ReconstructionError(
             "near_parallel_rays", f"the {len(ells)} viewing rays are nearly parallel (largest "
                                   f"angle {spread:.3g} deg < {min_ray_angle_deg:g} deg): the "
                                   f"object's depth is not observable")
     origins = -np.einsum("nji,nj->ni", cfw[:, :3, :3], cfw[:, :3, 3])  # camera centres
-    X0 = _triangulate(origins, rays)
+    X0 = triangulate(origins, rays)
     depth = np.einsum("nj,nj->n", cfw[:, 2, :3], np.broadcast_to(X0, origins.shape)) + cfw[:, 2, 3]
     if np.any(depth <= 0):
         raise ReconstructionError("not_in_front", "the viewing rays meet behind a camera")

@@ -66,7 +66,9 @@ __all__ = [
     "StoreUnavailable",
     "StoredMap",
     "VersionConflict",
+    "as_utc",
     "normalize_url",
+    "utc_now",
 ]
 
 MIGRATIONS_DIR = Path(__file__).resolve().parent / "migrations"
@@ -75,7 +77,8 @@ _PG_MIGRATION_LOCK = 0x51_4C_4F_43_4D_41_50  # "QLOCMAP"
 #: SQLite busy timeout (seconds): how long a writer waits for another writer's lock.
 SQLITE_BUSY_TIMEOUT_S = 30.0
 
-# Table descriptions for building queries ONLY (the map store's and the build jobs'). The schema
+# Table descriptions for building queries ONLY (the map store's; the build jobs' are in
+# quadloc.maps.building.jobs). The schema
 # itself belongs to the Alembic migrations (maps/migrations/versions/); these declarations mirror
 # it, CHECK constraints included, and are never used to create tables (no metadata.create_all).
 # A schema change is a new migration plus the matching edit here (tests/maps/test_maps_store.py and
@@ -101,25 +104,6 @@ versions_table = sa.Table(
     sa.Column("content_hash", sa.String(64), nullable=False),
     sa.Column("created_at", sa.DateTime(timezone=True), nullable=False),
     sa.CheckConstraint("version >= 1", name="ck_quadloc_map_versions_version"),
-)
-#: The build jobs of :mod:`quadloc.maps.building.jobs` (migration ``0002_build_jobs``).
-jobs_table = sa.Table(
-    "quadloc_build_jobs",
-    _metadata,
-    sa.Column("job_id", sa.String(36), primary_key=True),
-    sa.Column("map_id", sa.String(128), nullable=False),
-    sa.Column("base_version", sa.Integer, nullable=True),
-    sa.Column("status", sa.String(16), nullable=False),
-    sa.Column("stage", sa.String(32), nullable=False),
-    sa.Column("percent", sa.Float, nullable=False),
-    sa.Column("objects_found", sa.Integer, nullable=False),
-    sa.Column("map_version", sa.Integer, nullable=True),
-    sa.Column("error", sa.Text, nullable=True),
-    sa.Column("report", sa.Text, nullable=True),
-    sa.Column("created_at", sa.DateTime(timezone=True), nullable=False),
-    sa.Column("updated_at", sa.DateTime(timezone=True), nullable=False),
-    sa.CheckConstraint("status IN ('queued', 'running', 'succeeded', 'failed')",
-                       name="ck_quadloc_build_jobs_status"),
 )
 
 
@@ -165,12 +149,14 @@ def normalize_url(url: str) -> str:
     return url
 
 
-def _utc(value: datetime) -> datetime:
-    """Datetimes come back naive from SQLite: they are stored in UTC."""
+def as_utc(value: datetime) -> datetime:
+    """A datetime read from the database as UTC (they come back naive from SQLite: they are
+    stored in UTC)."""
     return value.replace(tzinfo=UTC) if value.tzinfo is None else value.astimezone(UTC)
 
 
-def _now() -> datetime:
+def utc_now() -> datetime:
+    """The current time, UTC (what the store writes)."""
     return datetime.now(UTC)
 
 
@@ -277,7 +263,7 @@ class MapStore:
         stored = replace(scene_map, version=1)
         text = canonical_json(stored)
         digest = content_hash(stored)
-        now = _now()
+        now = utc_now()
         try:
             with self._write() as conn:
                 exists = conn.execute(sa.select(maps_table.c.map_id).where(
@@ -312,7 +298,7 @@ class MapStore:
         stored = replace(scene_map, version=new_version)
         text = canonical_json(stored)
         digest = content_hash(stored)
-        now = _now()
+        now = utc_now()
         try:
             with self._write() as conn:
                 result = conn.execute(
@@ -382,7 +368,7 @@ class MapStore:
             compiled = compile_map(scene_map_from_dict(json.loads(content.content),
                                                        version=key[1]))
             self.cache.put(key, compiled)
-        return key, compiled, _utc(row.created_at)
+        return key, compiled, as_utc(row.created_at)
 
     def get(self, map_id: str, version: int | None = None) -> StoredMap:
         """The given version of a map (the latest if ``version`` is None). :class:`MapNotFound`."""
@@ -406,7 +392,7 @@ class MapStore:
                                 .where(v.map_id == map_id).order_by(v.version)).all()
         if not rows:
             raise MapNotFound(map_id)
-        return [MapVersionInfo(int(r.version), r.content_hash, _utc(r.created_at)) for r in rows]
+        return [MapVersionInfo(int(r.version), r.content_hash, as_utc(r.created_at)) for r in rows]
 
     def list(self) -> builtins.list[MapSummary]:
         """Every map with its latest version, ordered by ``map_id``."""
@@ -419,7 +405,7 @@ class MapStore:
         with self._read() as conn:
             rows = conn.execute(query).all()
         return [MapSummary(r.map_id, r.name, int(r.latest_version), r.content_hash,
-                           _utc(r.updated_at), _utc(r.created_at)) for r in rows]
+                           as_utc(r.updated_at), as_utc(r.created_at)) for r in rows]
 
     def compiled(self, map_id: str, version: int | None = None) -> CompiledMap:
         """Solver arrays of a map version (latest if None), cached per process.

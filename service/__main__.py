@@ -2,6 +2,6 @@
 
 import sys
 
-from quadloc.service.cli import main
+from quadloc.service.cli.main import main
 
 sys.exit(main())

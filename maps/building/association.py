@@ -28,9 +28,9 @@ from quadloc.factors.rotations import invert_pose
 from quadloc.maps.building.recording import Observation
 from quadloc.maps.reconstruct import (
     ReconstructionError,
-    _max_ray_angle_deg,
-    _triangulate,
+    max_ray_angle_deg,
     reconstruct_ellipsoid,
+    triangulate,
 )
 
 __all__ = ["AssociationOptions", "ObjectHypothesis", "associate", "ellipse_iou", "touches_border"]
@@ -174,7 +174,7 @@ def _geometric_clusters(o: np.ndarray, d: np.ndarray, rho: np.ndarray, frames: n
             members = _one_per_frame(members, dist_row, frames)
             if len(members) < 2:
                 break
-            x = _triangulate(o[members], d[members])
+            x = triangulate(o[members], d[members])
             t = np.einsum("nk,nk->n", x - o[members], d[members])
             s = float(np.median(np.maximum(t, 1e-9) * rho[members]))
             ok1, dist1 = _support(x[None], np.array([s]), o, d, rho, opt)
@@ -186,7 +186,7 @@ def _geometric_clusters(o: np.ndarray, d: np.ndarray, rho: np.ndarray, frames: n
         near = np.linalg.norm(X - x, axis=1) <= opt.ray_tolerance * s
         near[best] = True
         alive &= ~near
-        if len(members) >= opt.min_views and _max_ray_angle_deg(d[members]) >= opt.min_spread_deg:
+        if len(members) >= opt.min_views and max_ray_angle_deg(d[members]) >= opt.min_spread_deg:
             clusters.append(members)
             free[members] = False
     return clusters
@@ -221,7 +221,7 @@ def _reconstruct(idx: Sequence[int], obs: Sequence[Observation], T_wc: np.ndarra
     sub = [obs[k] for k in idx]
     o, d, rho = _rays(sub, camera, T_wc)
     try:
-        x = _triangulate(o, d)
+        x = triangulate(o, d)
     except np.linalg.LinAlgError:
         return None
     t = np.einsum("nk,nk->n", x - o, d)

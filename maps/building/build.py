@@ -1,5 +1,6 @@
 """Build a map from a recording: association -> per-object Rubino initialisation -> joint
-refinement -> :class:`quadloc.maps.model.SceneMap` plus a JSON-ready report.
+refinement -> :class:`quadloc.maps.model.SceneMap` plus its
+:class:`quadloc.maps.building.report.BuildReport`.
 
 Progress is reported as ``progress(stage, percent, objects_found)`` with ``stage`` in
 ``associating`` (0-50 %), ``refining`` (50-95 %), ``saving`` (95 %); callbacks come at least after
@@ -19,6 +20,16 @@ import numpy as np
 from quadloc.maps.building.association import AssociationOptions, associate
 from quadloc.maps.building.joint import refine_jointly
 from quadloc.maps.building.recording import Recording
+from quadloc.maps.building.report import (
+    BuildCounts,
+    BuildReport,
+    DetectionRef,
+    DroppedObject,
+    ObjectQuality,
+    ObjectReport,
+    RefinementReport,
+    RejectedDetection,
+)
 from quadloc.maps.model import MapObject, SceneMap
 from quadloc.maps.reconstruct import degenerate_shape_reason
 
@@ -30,6 +41,9 @@ MIN_VIEWS_UNCONSTRAINED = 15
 #: Objects whose centre std (quality report) exceeds this (m) are left out of the map; None
 #: keeps them (the default; why: docs/design/maps.md, "Build jobs").
 MAX_CENTER_STD_M: float | None = None
+#: The report's warning when the time budget stopped the joint refinement.
+REFINEMENT_STOPPED_WARNING = ("time budget reached during refinement: the map holds the "
+                              "estimate at that point")
 
 
 def _drop_detail(reason: str, shape_problem: str | None, q: Any) -> str:
@@ -52,10 +66,10 @@ def build_map(
     max_iterations: int = 30, metadata: Mapping[str, Any] | None = None,
     min_views_unconstrained: int = MIN_VIEWS_UNCONSTRAINED,
     max_center_std_m: float | None = MAX_CENTER_STD_M,
-) -> tuple[SceneMap, dict[str, Any]]:
+) -> tuple[SceneMap, BuildReport]:
     """The map (version 1, ``map_id``) and the report (module docstring).
 
-    Objects are left out of the map (listed in ``report["dropped_objects"]``, their detections
+    Objects are left out of the map (listed in ``report.dropped_objects``, their detections
     rejected) when their semi-axes leave the map limits (``degenerate_shape``) or when an axis
     is not constrained by the views and fewer than ``min_views_unconstrained`` views support
     them (``unconstrained``: a handful of mislabelled or inconsistent views), or, if
@@ -92,9 +106,9 @@ def build_map(
     t_refine = time.perf_counter() - t0 - t_assoc
     report_progress("saving", 95.0, len(objects))
     map_objects = []
-    obj_reports = []
+    obj_reports: list[ObjectReport] = []
     counters: dict[str, int] = {}
-    dropped = []
+    dropped: list[DroppedObject] = []
     for k, h in enumerate(objects):
         ell = joint.ellipsoids[k]
         q = joint.quality[k]
@@ -109,26 +123,24 @@ def build_map(
         elif max_center_std_m is not None and not q.center_std_m <= max_center_std_m:
             reason = "center_unconstrained"
         if reason is not None:
-            dropped.append({"object_id": oid, "label": h.label, "reason": reason,
-                            "detail": _drop_detail(reason, shape_problem, q),
-                            "n_views": q.n_views, "semi_axes_m": ell.axes.tolist()})
+            dropped.append(DroppedObject(
+                object_id=oid, label=h.label, reason=reason,
+                detail=_drop_detail(reason, shape_problem, q), n_views=q.n_views,
+                semi_axes_m=ell.axes.tolist()))
             for i in h.observations:
                 rejected[i] = f"object_{reason}"
             continue
         map_objects.append(MapObject(oid, h.label, ell))
-        obj_reports.append({
-            "object_id": oid, "label": h.label, "association": h.source,
-            "detections": [{"frame_id": recording.frames[obs[i].frame].frame_id,
-                            "frame_index": obs[i].frame, "detection_index": obs[i].index}
-                           for i in h.observations],
-            "quality": {"n_views": q.n_views, "view_spread_deg": q.view_spread_deg,
-                        "residual_cost": q.residual_cost,
-                        "rms_level_residual": q.rms_level_residual,
-                        "log_semi_axis_std": list(q.log_axis_std),
-                        "center_std_m": q.center_std_m,
-                        "unconstrained_axes": list(q.unconstrained_axes),
-                        "semi_axes_m": ell.axes.tolist()},
-        })
+        obj_reports.append(ObjectReport(
+            object_id=oid, label=h.label, association=h.source,
+            detections=[DetectionRef(frame_id=recording.frames[obs[i].frame].frame_id,
+                                     frame_index=obs[i].frame, detection_index=obs[i].index)
+                        for i in h.observations],
+            quality=ObjectQuality(
+                n_views=q.n_views, view_spread_deg=q.view_spread_deg,
+                residual_cost=q.residual_cost, rms_level_residual=q.rms_level_residual,
+                log_semi_axis_std=list(q.log_axis_std), center_std_m=q.center_std_m,
+                unconstrained_axes=list(q.unconstrained_axes), semi_axes_m=ell.axes.tolist())))
     labels = sorted({o.label for o in obs} | {m.category for m in map_objects})
     cats = tuple(lab for lab in labels if any(m.category == lab for m in map_objects)) \
         or tuple(labels[:1] or ["object"])
@@ -137,20 +149,23 @@ def build_map(
     meta.update(metadata or {})
     scene = SceneMap(map_id=map_id, name=recording.name, up_axis=recording.up_axis,
                      categories=cats, objects=tuple(map_objects), metadata=meta)
-    report = {
-        "objects": obj_reports,
-        "dropped_objects": dropped,
-        "rejected_detections": [
-            {"frame_id": recording.frames[obs[i].frame].frame_id, "frame_index": obs[i].frame,
-             "detection_index": obs[i].index, "label": obs[i].label, "reason": reason}
+    refinement = None if joint is None else RefinementReport(
+        iterations=joint.iterations, initial_error=joint.initial_error,
+        final_error=joint.final_error, stopped_early=joint.stopped_early,
+        camera_poses_refined=recording.refine_camera_poses)
+    report = BuildReport(
+        objects=obj_reports,
+        dropped_objects=dropped,
+        rejected_detections=[
+            RejectedDetection(frame_id=recording.frames[obs[i].frame].frame_id,
+                              frame_index=obs[i].frame, detection_index=obs[i].index,
+                              label=obs[i].label, reason=reason)
             for i, reason in sorted(rejected.items())],
-        "counts": {"frames": len(recording.frames), "detections": len(obs),
-                   "objects": len(map_objects), "rejected_detections": len(rejected)},
-        "refinement": None if joint is None else {
-            "iterations": joint.iterations, "initial_error": joint.initial_error,
-            "final_error": joint.final_error, "stopped_early": joint.stopped_early,
-            "camera_poses_refined": recording.refine_camera_poses},
-        "timings_s": {"association": t_assoc, "refinement": t_refine,
-                      "total": time.perf_counter() - t0},
-    }
+        counts=BuildCounts(frames=len(recording.frames), detections=len(obs),
+                           objects=len(map_objects), rejected_detections=len(rejected)),
+        refinement=refinement,
+        timings_s={"association": t_assoc, "refinement": t_refine,
+                   "total": time.perf_counter() - t0},
+        warnings=[REFINEMENT_STOPPED_WARNING] if refinement and refinement.stopped_early
+        else [])
     return scene, report

@@ -18,11 +18,36 @@ from typing import Any
 import sqlalchemy as sa
 from sqlalchemy.engine import Engine
 
-from quadloc.maps.store import _now, _utc, jobs_table
+from quadloc.maps.building.report import BuildReport
+from quadloc.maps.store import as_utc, utc_now
 
 __all__ = ["BuildJob", "JobNotFoundError", "JobStore", "jobs_table"]
 
 ACTIVE = ("queued", "running")
+
+# The table's description for building queries ONLY: the schema belongs to the Alembic migration
+# ``0002_build_jobs`` (maps/migrations/versions/), which this mirrors, CHECK constraint included
+# (tests/service/api/test_api_build.py compares the two).
+#: The build jobs (migration ``0002_build_jobs``).
+jobs_table = sa.Table(
+    "quadloc_build_jobs",
+    sa.MetaData(),
+    sa.Column("job_id", sa.String(36), primary_key=True),
+    sa.Column("map_id", sa.String(128), nullable=False),
+    sa.Column("base_version", sa.Integer, nullable=True),
+    sa.Column("status", sa.String(16), nullable=False),
+    sa.Column("stage", sa.String(32), nullable=False),
+    sa.Column("percent", sa.Float, nullable=False),
+    sa.Column("objects_found", sa.Integer, nullable=False),
+    sa.Column("map_version", sa.Integer, nullable=True),
+    sa.Column("error", sa.Text, nullable=True),
+    sa.Column("report", sa.Text, nullable=True),
+    sa.Column("created_at", sa.DateTime(timezone=True), nullable=False),
+    sa.Column("updated_at", sa.DateTime(timezone=True), nullable=False),
+    sa.CheckConstraint("status IN ('queued', 'running', 'succeeded', 'failed')",
+                       name="ck_quadloc_build_jobs_status"),
+)
+
 
 
 class JobNotFoundError(KeyError):
@@ -40,7 +65,7 @@ class BuildJob:
     objects_found: int
     map_version: int | None
     error: dict[str, Any] | None
-    report: dict[str, Any] | None
+    report: BuildReport | None
     created_at: datetime
     updated_at: datetime
 
@@ -52,7 +77,7 @@ class JobStore:
         self.engine = engine
 
     def create(self, map_id: str, base_version: int | None) -> BuildJob:
-        now = _now()
+        now = utc_now()
         job_id = str(uuid.uuid4())
         with self.engine.begin() as conn:
             conn.execute(jobs_table.insert().values(
@@ -71,15 +96,15 @@ class JobStore:
             status=m["status"], stage=m["stage"], percent=float(m["percent"]),
             objects_found=int(m["objects_found"]), map_version=m["map_version"],
             error=json.loads(m["error"]) if m["error"] else None,
-            report=json.loads(m["report"]) if m["report"] else None,
-            created_at=_utc(m["created_at"]), updated_at=_utc(m["updated_at"]))
+            report=BuildReport.model_validate_json(m["report"]) if m["report"] else None,
+            created_at=as_utc(m["created_at"]), updated_at=as_utc(m["updated_at"]))
 
     def _update(self, *where: Any, **values: Any) -> int:
         """Set ``values`` (and the heartbeat ``updated_at``) on the ACTIVE jobs matching
         ``where``; returns how many."""
         with self.engine.begin() as conn:
             return conn.execute(jobs_table.update().where(jobs_table.c.status.in_(ACTIVE), *where)
-                                .values(updated_at=_now(), **values)).rowcount
+                                .values(updated_at=utc_now(), **values)).rowcount
 
     def progress(self, job_id: str, stage: str, percent: float, objects_found: int) -> bool:
         """Heartbeat + progress of a running job; False if the job is no longer active (e.g.
@@ -93,21 +118,21 @@ class JobStore:
         (e.g. queued behind a running build on the same replica); returns how many."""
         return self._update(jobs_table.c.job_id.in_(job_ids)) if job_ids else 0
 
-    def succeed(self, job_id: str, map_version: int, report: dict[str, Any],
+    def succeed(self, job_id: str, map_version: int, report: BuildReport,
                 objects_found: int) -> bool:
         return self._update(jobs_table.c.job_id == job_id, status="succeeded", stage="done",
                             percent=100.0, map_version=map_version, objects_found=objects_found,
-                            report=json.dumps(report)) == 1
+                            report=report.model_dump_json()) == 1
 
     def fail(self, job_id: str, reason: str, detail: str,
-             report: dict[str, Any] | None = None) -> bool:
+             report: BuildReport | None = None) -> bool:
         return self._update(jobs_table.c.job_id == job_id, status="failed", stage="failed",
                             error=json.dumps({"reason": reason, "detail": detail}),
-                            report=None if report is None else json.dumps(report)) == 1
+                            report=None if report is None else report.model_dump_json()) == 1
 
     def fail_stale(self, stale_after_s: float) -> int:
         """Mark queued/running jobs without a heartbeat for ``stale_after_s`` as failed."""
-        cutoff = _now() - timedelta(seconds=stale_after_s)
+        cutoff = utc_now() - timedelta(seconds=stale_after_s)
         err = json.dumps({"reason": "runner_lost",
                           "detail": f"no progress for {stale_after_s:g} s: the replica running "
                                     f"the job restarted or died; submit the recording again"})

@@ -36,7 +36,7 @@ from quadloc.factors.pose_residuals import DEFAULT_MIN_DEPTH_MARGIN
 from quadloc.factors.rotations import invert_pose, pose_matrix
 from quadloc.maps.building.association import touches_border
 from quadloc.maps.building.recording import Observation, OdometryNoise, SizePrior
-from quadloc.maps.reconstruct import _max_ray_angle_deg, canonical_ellipsoid
+from quadloc.maps.reconstruct import canonical_ellipsoid, max_ray_angle_deg
 
 __all__ = ["JointResult", "ObjectQuality", "refine_jointly"]
 
@@ -313,7 +313,7 @@ def refine_jointly(
         order = np.argsort(axes)[::-1]
         std_c = std[order]
         quality.append(ObjectQuality(
-            n_views=len(idx), view_spread_deg=_max_ray_angle_deg(rays), residual_cost=cost,
+            n_views=len(idx), view_spread_deg=max_ray_angle_deg(rays), residual_cost=cost,
             rms_level_residual=float(np.sqrt(np.mean(allr**2))),
             log_axis_std=tuple(float(x) for x in std_c), center_std_m=center_std,
             unconstrained_axes=tuple(int(a) for a in np.flatnonzero(

@@ -10,6 +10,8 @@ from __future__ import annotations
 from alembic import context
 from sqlalchemy import create_engine
 
+from quadloc.maps.store import normalize_url
+
 VERSION_TABLE = "quadloc_alembic_version"
 
 config = context.config
@@ -39,8 +41,6 @@ def run_migrations_online() -> None:
     if connection is not None:
         _run(connection)
         return
-    from quadloc.maps.store import normalize_url  # local import: only for the command-line path
-
     engine = create_engine(normalize_url(_url()))
     try:
         with engine.begin() as conn:

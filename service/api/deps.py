@@ -13,16 +13,16 @@ from typing import Annotated, Any
 from fastapi import Depends, Path, Request
 
 from quadloc.maps.model import MAP_ID_PATTERN
-from quadloc.maps.store import MapStore
 from quadloc.service.api.errors import ProblemError, json_depth_violation
 from quadloc.service.api.metrics import ApiMetrics
+from quadloc.service.app.context import App
 from quadloc.service.settings import Settings
 
 __all__ = [
+    "AppDep",
     "MapIdPath",
     "MetricsDep",
     "SettingsDep",
-    "StoreDep",
     "check_body_depth",
 ]
 
@@ -37,7 +37,8 @@ def _state(name: str) -> Any:
     return Depends(dependency)
 
 
-StoreDep = Annotated[MapStore, _state("store")]
+#: The application (its use cases): every route calls it and nothing below it.
+AppDep = Annotated[App, _state("services")]
 SettingsDep = Annotated[Settings, _state("settings")]
 MetricsDep = Annotated[ApiMetrics, _state("metrics")]
 

@@ -9,6 +9,7 @@ logged 500 for bugs): docs/design/service.md#problem-documents.
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
@@ -19,38 +20,22 @@ from sqlalchemy.exc import DataError, OperationalError, ProgrammingError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
 
-from quadloc.maps.errors import MapValidationError, SchemaNotMigrated, StoreUnavailable
-from quadloc.maps.model import json_path
-from quadloc.service.schemas.common import Problem
+from quadloc.maps.errors import MapValidationError, StoreUnavailable
+from quadloc.service.app.errors import AppError, first_line, log_database_error
+from quadloc.service.schemas.common import Problem, field_path
 
 __all__ = [
     "PROBLEM_MEDIA_TYPE",
     "PROBLEM_TYPES",
     "ProblemError",
-    "field_and_problem",
-    "field_path",
     "install_error_handlers",
     "json_depth_violation",
-    "log_database_error",
-    "map_not_found",
     "problem_body",
     "problem_response",
     "problem_responses",
 ]
 
 log = logging.getLogger("quadloc.api")
-
-def field_and_problem(exc: Exception, prefix: str = "") -> tuple[str, str]:
-    """``(field, problem)`` of an input error, ``prefix`` prepended to the field.
-
-    The field is the error's structured ``field`` (:class:`quadloc.factors.names.FieldError`:
-    ``GeometryError``, ``LocalizationInputError``, ``TrackingInputError``); errors raised
-    without one answer ``"body"``. The message is never parsed.
-    """
-    field = getattr(exc, "field", None)
-    if field:
-        return prefix + field, str(getattr(exc, "problem", exc))
-    return prefix + "body", str(exc)
 
 
 PROBLEM_MEDIA_TYPE = "application/problem+json"
@@ -140,13 +125,6 @@ def problem_body(slug: str, detail: str, instance: str | None,
             "errors": [{"field": str(e["field"]), "message": str(e["message"])} for e in errors]}
 
 
-def map_not_found(map_id: str, version: int | None = None) -> ProblemError:
-    """The 404 ``map-not-found`` problem for ``map_id`` (or one of its versions)."""
-    what = f"map {map_id!r}" if version is None else f"version {version} of map {map_id!r}"
-    return ProblemError("map-not-found", f"{what} not found",
-                        field="path.map_id" if version is None else "query.version",
-                        message="not found")
-
 
 def json_depth_violation(document: Any, max_depth: int) -> str | None:
     """Path (``field_path`` spelling) of the first container nested deeper than ``max_depth``.
@@ -187,21 +165,6 @@ def _deeper_than(document: Any, max_depth: int) -> bool:
                  for child in (node.values() if isinstance(node, dict) else node)
                  if isinstance(child, dict | list)]
     return False
-
-
-def field_path(loc: Sequence[Any]) -> str:
-    """``('body', 'detections', 2, 'ellipse', 'a')`` -> ``'detections[2].ellipse.a'``.
-
-    Body locations drop the ``body`` prefix and tagged-union tags (``~...``);
-    ``query``/``header``/``path`` keep it (the path spelling is
-    :func:`quadloc.maps.model.json_path`'s, the map documents' own).
-    """
-    # a tagged union's tag (spelled with a leading "~", e.g. the session frames body's) is
-    # pydantic's, not a field of the request
-    parts = [p for p in loc if not (isinstance(p, str) and p.startswith("~"))]
-    if parts and parts[0] in ("query", "header", "path", "cookie"):
-        return f"{parts[0]}.{json_path(parts[1:], 'body')}"
-    return json_path(parts[1:] if parts and parts[0] == "body" else parts, "body")
 
 
 def _validation_errors(exc: RequestValidationError) -> tuple[str, list[dict[str, str]]]:
@@ -285,25 +248,6 @@ async def _on_invalid_map(request: Request, exc: Exception) -> JSONResponse:
                             errors=getattr(exc, "errors", None) or [])
 
 
-#: Logged when the database lacks the map tables (the answer is a 503 like any outage).
-MIGRATE_HINT = ("the map database schema is missing or not migrated to this version: restart "
-                "the service (it migrates at start) or run 'alembic -c "
-                "maps/migrations/alembic.ini -x url=<database url> upgrade head'")
-
-
-def log_database_error(where: str, exc: Exception) -> None:
-    """Log a database failure ``where`` (with :data:`MIGRATE_HINT` when the schema is missing;
-    the driver's text goes to the log, never to a client)."""
-    if isinstance(exc, SchemaNotMigrated | ProgrammingError):
-        log.error("%s: %s (%s)", where, MIGRATE_HINT, _first_line(exc))
-    else:
-        log.error("%s: %s", where, exc)
-
-
-def _first_line(exc: Exception) -> str:
-    return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-
-
 async def _on_database_error(request: Request, exc: Exception) -> JSONResponse:
     log_database_error(f"database error on {request.method} {request.url.path}", exc)
     return problem_response(request, "database-unavailable",
@@ -314,7 +258,7 @@ async def _on_database_error(request: Request, exc: Exception) -> JSONResponse:
 async def _on_data_error(request: Request, exc: Exception) -> JSONResponse:
     """The database refused a value of the request (e.g. a NUL character on PostgreSQL)."""
     log.warning("database refused a value on %s %s: %s", request.method, request.url.path,
-                _first_line(exc))
+                first_line(exc))
     return problem_response(request, "validation-error",
                             "the database refused a value of this request (for example a NUL "
                             "character in a string); remove control characters and retry",
@@ -327,8 +271,21 @@ async def _on_unexpected(request: Request, exc: Exception) -> JSONResponse:  # p
                             "unexpected server error (logged); please report it")
 
 
+async def _on_app_error(request: Request, exc: Exception) -> JSONResponse:
+    """A use case's refusal (:class:`AppError`): its code's problem, with ``Retry-After`` /
+    ``ETag`` when it carries them."""
+    assert isinstance(exc, AppError)
+    headers = {}
+    if exc.retry_after_s is not None:
+        headers["Retry-After"] = str(max(1, math.ceil(exc.retry_after_s)))
+    if exc.etag is not None:
+        headers["ETag"] = exc.etag
+    return problem_response(request, exc.code, exc.detail, errors=exc.errors, headers=headers)
+
+
 def install_error_handlers(app: FastAPI) -> None:
     """Register the problem+json handlers on ``app``."""
+    app.add_exception_handler(AppError, _on_app_error)
     app.add_exception_handler(RequestValidationError, _on_validation_error)  # type: ignore[arg-type]
     app.add_exception_handler(ProblemError, _on_problem)  # type: ignore[arg-type]
     app.add_exception_handler(StarletteHTTPException, _on_http_exception)  # type: ignore[arg-type]

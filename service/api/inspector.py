@@ -1,35 +1,20 @@
-"""The visual inspector: a localization drawn as SVG (``Accept: image/svg+xml`` on ``POST
-/v1/maps/{map_id}/localize``, :func:`render_localization_svg`) and the ``/inspector`` page
-(assets in ``service/api/static/inspector``). What is drawn:
+"""The visual inspector: the ``/inspector`` page (assets in ``service/api/static/inspector``) and
+the content negotiation of a localization drawn as SVG (``Accept: image/svg+xml`` on ``POST
+/v1/maps/{map_id}/localize``; the drawing: :mod:`quadloc.service.app.drawing`). What is drawn:
 docs/design/service.md#visual-inspector.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
-import numpy as np
 from fastapi import APIRouter, FastAPI
 from fastapi.responses import FileResponse, JSONResponse
 from fastapi.staticfiles import StaticFiles
 
-from quadloc.factors.camera import Camera, project_ellipsoid
-from quadloc.factors.conics import DegenerateProjectionError
-from quadloc.factors.rotations import invert_pose
-from quadloc.maps.compiled import CompiledMap
-from quadloc.service.api.convert import convert_pose
 from quadloc.service.schemas.examples import LOCALIZE_EXAMPLE
-from quadloc.service.schemas.localize import LocalizeRequest, LocalizeResponse
-from quadloc_sdk.overlay import (
-    DrawnProjection,
-    ImageEllipse,
-    drawn_detections,
-    overlay_summary,
-    render_overlay_svg,
-)
 
-__all__ = ["SVG_MEDIA_TYPE", "install_inspector", "render_localization_svg", "wants_svg"]
+__all__ = ["SVG_MEDIA_TYPE", "install_inspector", "wants_svg"]
 
 SVG_MEDIA_TYPE = "image/svg+xml"
 STATIC_DIR = Path(__file__).resolve().parent / "static" / "inspector"
@@ -67,35 +52,6 @@ def wants_svg(accept: str | None) -> bool:
     svg = ranges.get(SVG_MEDIA_TYPE, 0.0)
     json_q = max(ranges.get("application/json", 0.0), ranges.get("application/*", 0.0))
     return svg > 0.0 and svg >= json_q
-
-
-def _image_ellipse(e: Any) -> ImageEllipse:
-    return ImageEllipse(float(e.cx), float(e.cy), float(e.a), float(e.b), float(e.angle))
-
-
-def render_localization_svg(compiled: CompiledMap, request: LocalizeRequest,
-                            response: LocalizeResponse) -> str:
-    """The frame of ``request`` drawn with the answer ``response`` against ``compiled`` (the map
-    version the answer used); what is drawn: docs/design/service.md#visual-inspector."""
-    req: dict[str, Any] = request.model_dump(mode="json")
-    resp: dict[str, Any] = response.model_dump(mode="json")
-    c = request.camera
-    projections: list[DrawnProjection] = []
-    pose = response.world_from_camera
-    if response.localized and pose is not None:
-        world_from_camera = convert_pose(np.array(pose.matrix), pose.convention, "opencv")
-        camera = Camera(c.fx, c.fy, c.cx, c.cy, c.width, c.height)
-        camera_from_world = invert_pose(world_from_camera)
-        for object_id, category, ellipsoid in zip(compiled.object_ids, compiled.categories,
-                                                  compiled.ellipsoids, strict=True):
-            try:
-                ellipse = _image_ellipse(project_ellipsoid(camera, camera_from_world, ellipsoid))
-            except DegenerateProjectionError:
-                ellipse = None
-            projections.append(DrawnProjection(object_id, category, ellipse))
-    detections = drawn_detections(req, resp)
-    return render_overlay_svg(c.width, c.height, detections, projections,
-                              overlay_summary(resp, len(detections)), metadata=resp)
 
 
 def install_inspector(app: FastAPI) -> None:

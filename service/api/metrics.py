@@ -24,7 +24,8 @@ _LATENCY_BUCKETS = (0.001, 0.0025, 0.005, 0.01, 0.02, 0.03, 0.05, 0.075, 0.1, 0.
 
 
 class ApiMetrics:
-    """The service's metric families in their own ``CollectorRegistry``."""
+    """The service's metric families in their own ``CollectorRegistry``; also the localizer's
+    :class:`quadloc.service.app.localization.SolveObserver`."""
 
     def __init__(self) -> None:
         self.registry = CollectorRegistry(auto_describe=True)
@@ -41,6 +42,16 @@ class ApiMetrics:
                                        buckets=_LATENCY_BUCKETS, registry=self.registry)
         self.in_progress = Gauge("quadloc_solves_in_progress", "Frames being solved now.",
                                  registry=self.registry)
+
+    def solve_started(self) -> None:
+        self.in_progress.inc()
+
+    def solve_finished(self, seconds: float) -> None:
+        self.in_progress.dec()
+        self.solve_seconds.observe(seconds)
+
+    def frame_answered(self, outcome: str) -> None:
+        self.localizations.labels(outcome).inc()
 
 
 def _problem_413(path: str, limit: int) -> bytes:

@@ -49,9 +49,9 @@ from quadloc.service.localization.ransac import (
     Hypothesis,
     Match,
     MatchScorer,
-    _ellipse_points,
     count_samples,
     distinct_poses,
+    ellipse_points,
     greedy_assignment,
     ransac,
     sunflower_disk,
@@ -286,7 +286,7 @@ def _prior_matches(scorer: MatchScorer, prior: PosePrior, threshold: float) -> l
     """One-to-one matches gated by the prior: each pair's best IoU over
     :func:`prior_gate_poses` (projected-ellipse gating under the prior's uncertainty)."""
     cw = np.array([invert_pose(T) for T in prior_gate_poses(prior)])
-    pts = _ellipse_points(scorer.params, sunflower_disk(256))
+    pts = ellipse_points(scorer.params, sunflower_disk(256))
     dense = scorer.dense_iou(cw, pts).max(axis=0)
     return greedy_assignment(dense, scorer.detection_indices, threshold)
 

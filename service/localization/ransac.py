@@ -44,6 +44,7 @@ __all__ = [
     "RansacOutcome",
     "ScoringTimeoutError",
     "distinct_poses",
+    "ellipse_points",
     "greedy_assignment",
     "iou_estimates",
     "project_objects",
@@ -119,7 +120,7 @@ def sunflower_disk(n: int) -> np.ndarray:
     return out
 
 
-def _ellipse_points(params: np.ndarray, unit: np.ndarray, axis: int = -1) -> np.ndarray:
+def ellipse_points(params: np.ndarray, unit: np.ndarray, axis: int = -1) -> np.ndarray:
     """Points (D, M, 2) filling ellipses (D, 5) from unit-disk points (M, 2); with
     ``axis=1``, (D, 2, M) (x and y rows contiguous)."""
     c, s = np.cos(params[:, 4]), np.sin(params[:, 4])
@@ -264,7 +265,7 @@ class MatchScorer:
         # has a compatible object): the segments of np.maximum.reduceat
         self.pair_starts = np.searchsorted(self.pair_d, np.arange(self.n_det)).astype(np.intp)
         # filling points (D, 2, M) per number of points M (x and y contiguous)
-        self._xy = {n_points: _ellipse_points(self.params, sunflower_disk(n_points), axis=1)}
+        self._xy = {n_points: ellipse_points(self.params, sunflower_disk(n_points), axis=1)}
         self.points = self._xy[n_points].transpose(0, 2, 1)  # (D, M, 2)
         self.areas = math.pi * self.params[:, 2] * self.params[:, 3]
         self.radii = np.maximum(self.params[:, 2], self.params[:, 3])
@@ -278,7 +279,7 @@ class MatchScorer:
     def _points_xy(self, n_points: int) -> np.ndarray:
         """The detections' filling points, (D, 2, n_points), computed once per scorer."""
         if n_points not in self._xy:
-            self._xy[n_points] = _ellipse_points(self.params, sunflower_disk(n_points), axis=1)
+            self._xy[n_points] = ellipse_points(self.params, sunflower_disk(n_points), axis=1)
         return self._xy[n_points]
 
     def compatible_objects(self, d: int) -> np.ndarray:

@@ -15,6 +15,7 @@ convention), the health answer and the RFC 9457 problem document.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Annotated, Any, Literal
 
 from pydantic import (
@@ -24,7 +25,10 @@ from pydantic import (
     Field,
 )
 
+from quadloc.factors.names import json_path
+
 __all__ = [
+    "API_VERSION",
     "COVARIANCE_FRAME",
     "Convention",
     "HealthOut",
@@ -34,9 +38,13 @@ __all__ = [
     "Row4",
     "Row6",
     "WireModel",
+    "field_path",
     "integral",
 ]
 
+
+#: Version of the REST API (the wire format): the OpenAPI document's ``info.version``.
+API_VERSION = "1.0.0"
 
 COVARIANCE_FRAME = "camera (body) frame, right perturbation T*exp(xi), omega in rad, v in m"
 
@@ -86,3 +94,18 @@ class Problem(BaseModel):
     detail: str
     instance: str | None = None
     errors: list[ProblemField] = Field(default_factory=list)
+
+
+def field_path(loc: Sequence[Any]) -> str:
+    """``('body', 'detections', 2, 'ellipse', 'a')`` -> ``'detections[2].ellipse.a'``.
+
+    Body locations drop the ``body`` prefix and tagged-union tags (``~...``);
+    ``query``/``header``/``path`` keep it (the path spelling is
+    :func:`quadloc.factors.names.json_path`'s, the map documents' own).
+    """
+    # a tagged union's tag (spelled with a leading "~", e.g. the session frames body's) is
+    # pydantic's, not a field of the request
+    parts = [p for p in loc if not (isinstance(p, str) and p.startswith("~"))]
+    if parts and parts[0] in ("query", "header", "path", "cookie"):
+        return f"{parts[0]}.{json_path(parts[1:], 'body')}"
+    return json_path(parts[1:] if parts and parts[0] == "body" else parts, "body")

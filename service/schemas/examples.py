@@ -10,6 +10,8 @@ from pathlib import Path
 from typing import Any
 
 __all__ = [
+    "BUILD_JOB_DONE_EXAMPLE",
+    "BUILD_JOB_EXAMPLE",
     "CHESS_IMPORT_EXAMPLE",
     "EXAMPLE_FRAME_PATH",
     "EXAMPLE_FRAME_SOURCE",
@@ -19,6 +21,7 @@ __all__ = [
     "LOCALIZE_EXAMPLE",
     "LOCALIZE_RESPONSE_EXAMPLE",
     "MAP_EXAMPLE",
+    "RECORDING_EXAMPLE",
     "SESSION_CREATE_EXAMPLE",
     "SESSION_EXAMPLE",
 ]
@@ -96,3 +99,49 @@ FRAME_RESPONSE_EXAMPLE: dict[str, Any] = {
         "world_from_odom": None, "world_from_odom_covariance": None, "confidence": 0.0,
         "inliers": [], "n_usable_detections": len(LOCALIZE_EXAMPLE["detections"]),
         "timings_ms": {"total": 0.4}}]}
+
+# ------------------------------------------------------------------- map building
+
+#: A recording (the body of ``POST /v1/maps:build``).
+RECORDING_EXAMPLE: dict[str, Any] = {
+    "intrinsics": {"fx": 585.0, "fy": 585.0, "cx": 320.0, "cy": 240.0, "width": 640,
+                   "height": 480},
+    "name": "My room",
+    "frames": [{"frame_id": "0001",
+                "world_from_camera": {"quaternion_wxyz": [1.0, 0.0, 0.0, 0.0],
+                                      "translation_m": [0.0, 0.0, 0.0]},
+                "detections": [{"label": "TV", "ellipse": {"cx": 300.0, "cy": 200.0, "a": 80.0,
+                                                           "b": 40.0, "angle": 0.1},
+                                "sigma": 0.02},
+                               {"label": "Chair", "box": [10.0, 200.0, 110.0, 420.0]}]}],
+}
+
+#: A running build job.
+BUILD_JOB_EXAMPLE: dict[str, Any] = {
+    "job_id": "5f0c3c1e-8a53-4b7c-9a56-0f1f7e3f2b11", "map_id": "my-room", "status": "running",
+    "stage": "refining", "percent": 62.5, "objects_found": 9, "base_version": None,
+    "map_version": None, "error": None, "report": None,
+    "created_at": "2026-11-23T20:00:00+00:00", "updated_at": "2026-11-23T20:00:04+00:00"}
+
+#: A build job that succeeded, with (part of) its report.
+BUILD_JOB_DONE_EXAMPLE: dict[str, Any] = {
+    **BUILD_JOB_EXAMPLE, "status": "succeeded", "stage": "done", "percent": 100.0,
+    "map_version": 1,
+    "report": {"objects": [{"object_id": "TV_1", "label": "TV", "association": "geometric",
+                            "detections": [{"frame_id": "0001", "frame_index": 0,
+                                            "detection_index": 0}],
+                            "quality": {"n_views": 69, "view_spread_deg": 27.0,
+                                        "residual_cost": 12.3, "rms_level_residual": 0.21,
+                                        "log_semi_axis_std": [0.05, 0.4, 0.6],
+                                        "center_std_m": 0.012,
+                                        "unconstrained_axes": [1, 2],
+                                        "semi_axes_m": [0.42, 0.34, 0.18]}}],
+               "rejected_detections": [{"frame_id": "0003", "frame_index": 2,
+                                        "detection_index": 1, "label": "Chair",
+                                        "reason": "fits_no_object"}],
+               "dropped_objects": [], "counts": {"frames": 300, "detections": 1855,
+                                                 "objects": 10, "rejected_detections": 64},
+               "refinement": {"iterations": 12, "initial_error": 5210.4, "final_error": 1893.2,
+                              "stopped_early": False, "camera_poses_refined": True},
+               "timings_s": {"association": 0.8, "refinement": 6.1, "total": 7.0},
+               "warnings": []}}

@@ -101,7 +101,8 @@ def _batch_or_frame(value: Any) -> str:
 
 #: The body of ``POST /v1/sessions/{id}/frames``: a batch or one frame, told apart by a
 #: ``frames`` key, so that a bad body is reported against the form it is (not also as the
-#: other form). The ``~`` tags are not fields: ``quadloc.service.api.errors.field_path`` drops them.
+#: other form). The ``~`` tags are not fields: ``quadloc.service.schemas.common.field_path`` drops
+#: them.
 SessionFramesBody = Annotated[
     Annotated[SessionFramesIn, Tag("~batch")] | Annotated[SessionFrameIn, Tag("~frame")],
     Discriminator(_batch_or_frame)]

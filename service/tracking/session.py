@@ -224,6 +224,11 @@ class TrackingSession:
         self._last_timestamp: float | None = None
 
     # ------------------------------------------------------------------ public
+    @property
+    def last_timestamp(self) -> float | None:
+        """The timestamp (s, the client's clock) of the last frame fused; None before any."""
+        return self._last_timestamp
+
     def add_frame(self, frame: FrameInput) -> FrameResult:
         """Fuse one frame; returns its :class:`FrameResult`. Raises
         :class:`TrackingInputError` naming the field on bad input (the session is unchanged)."""

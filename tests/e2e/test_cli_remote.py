@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from quadloc.service.cli import Progress, format_table
+from quadloc.service.cli.common import Progress, format_table
 from quadloc.service.schemas.examples import MAP_EXAMPLE
 from quadloc.service.settings import hash_api_key
 
@@ -27,7 +27,7 @@ WRITE_KEY, READ_KEY = "cli-writer-key", "cli-reader-key"
 def quadloc(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
     full_env = {k: v for k, v in os.environ.items() if not k.startswith("QUADLOC_")}
     full_env.update(env or {})
-    return subprocess.run([sys.executable, "-c", "import sys; from quadloc.service.cli import "
+    return subprocess.run([sys.executable, "-c", "import sys; from quadloc.service.cli.main import "
                            "main; sys.exit(main(sys.argv[1:]))", *args], cwd=REPO, env=full_env,
                           capture_output=True, text=True, timeout=120)
 

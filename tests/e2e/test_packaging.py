@@ -82,4 +82,4 @@ def test_wheels_install_only_the_quadloc_names(tmp_path: Path) -> None:
     assert (site / "quadloc" / "service" / "api" / "static" / "inspector").is_dir()
     # the console script points into the namespace
     script = (venv / "bin" / "quadloc").read_text()
-    assert "from quadloc.service.cli import main" in script
+    assert "from quadloc.service.cli.main import main" in script

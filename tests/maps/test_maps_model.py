@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from quadloc.factors.camera import Ellipsoid
+from quadloc.factors.names import json_path
 from quadloc.factors.rotations import rotation_from_quaternion_wxyz
 from quadloc.maps.compiled import compile_map
 from quadloc.maps.demo import DEMO_MAP_PATH, load_demo_map
@@ -26,7 +27,6 @@ from quadloc.maps.model import (
     SceneMap,
     canonical_json,
     content_hash,
-    json_path,
     scene_map_from_chess,
     scene_map_from_dict,
 )

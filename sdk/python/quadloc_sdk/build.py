@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from quadloc_sdk.errors import QuadLocError
+from quadloc_sdk.transport import Call
 
 __all__ = ["BuildFailedError", "BuildJob", "abuild_map", "aget_build_job", "build_map",
            "get_build_job"]
@@ -75,20 +76,16 @@ def _load(recording: Recording) -> bytes:
 
 def get_build_job(client: Any, job_id_or_location: str) -> BuildJob:
     """The current state of a job (by id or by the ``Location`` path)."""
-    from quadloc_sdk.client import _Call
-
     return BuildJob.from_wire(client._json(client._send(
-        _Call("GET", _job_path(job_id_or_location), idempotent=True))))
+        Call("GET", _job_path(job_id_or_location), idempotent=True))))
 
 
 def _start_call(recording: Recording, map_id: str, if_match: str | None) -> Any:
-    from quadloc_sdk.client import _Call
-
     headers = {"Content-Type": "application/json"}
     if if_match is not None:
         headers["If-Match"] = if_match if if_match.startswith(('"', "W/")) else f'"{if_match}"'
     # Not idempotent: a replay after a lost answer would start a second job.
-    return _Call("POST", "/v1/maps:build", params={"map_id": map_id}, body=_load(recording),
+    return Call("POST", "/v1/maps:build", params={"map_id": map_id}, body=_load(recording),
                  headers=headers)
 
 
@@ -110,9 +107,7 @@ def _timed_out(job: BuildJob, timeout_s: float) -> BuildFailedError:
 
 async def aget_build_job(client: Any, job_id_or_location: str) -> BuildJob:
     """:func:`get_build_job` for :class:`sdk.AsyncQuadLocClient`."""
-    from quadloc_sdk.client import _Call
-
-    response = await client._send(_Call("GET", _job_path(job_id_or_location), idempotent=True))
+    response = await client._send(Call("GET", _job_path(job_id_or_location), idempotent=True))
     return BuildJob.from_wire(client._json(response))
 
 

@@ -26,13 +26,13 @@ import asyncio
 import json
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 from urllib.parse import quote
 
 import httpx
 
+from quadloc_sdk.build import abuild_map, build_map
 from quadloc_sdk.errors import PreconditionFailed, QuadLocError, TransportError, error_from_response
 from quadloc_sdk.models import (
     BatchLocalizeResponse,
@@ -48,6 +48,8 @@ from quadloc_sdk.models import (
     PosePrior,
 )
 from quadloc_sdk.retry import RetryPolicy
+from quadloc_sdk.session import start_session, start_session_async
+from quadloc_sdk.transport import Call
 
 __all__ = ["DEFAULT_BASE_URL", "AsyncQuadLocClient", "QuadLocClient"]
 
@@ -58,17 +60,6 @@ DEFAULT_TIMEOUT = httpx.Timeout(30.0, connect=5.0)
 MapDocument = Mapping[str, Any] | str | Path
 
 
-@dataclass(frozen=True)
-class _Call:
-    """One HTTP exchange to perform (with retries); ``idempotent`` allows replay after a
-    failure that may have reached the server (see :mod:`quadloc_sdk.retry`)."""
-
-    method: str
-    path: str
-    params: dict[str, Any] | None = None
-    body: bytes | None = None
-    headers: dict[str, str] = field(default_factory=dict)
-    idempotent: bool = False
 
 
 def _segment(name: str, value: str) -> str:
@@ -139,35 +130,35 @@ class _Base:
     # -- builders --------------------------------------------------------------------------
     def _json_call(
         self, method: str, path: str, field_name: str, payload: Any, **kw: Any
-    ) -> _Call:
+    ) -> Call:
         headers = {"Content-Type": "application/json", **kw.pop("headers", {})}
-        return _Call(method, path, body=_dumps(field_name, payload), headers=headers, **kw)
+        return Call(method, path, body=_dumps(field_name, payload), headers=headers, **kw)
 
     def _map_path(self, map_id: str) -> str:
         return f"{self.MAPS}/{_segment('map_id', map_id)}"
 
-    def _list_maps_call(self) -> _Call:
-        return _Call("GET", self.MAPS, idempotent=True)
+    def _list_maps_call(self) -> Call:
+        return Call("GET", self.MAPS, idempotent=True)
 
-    def _get_map_call(self, map_id: str, version: int | None) -> _Call:
+    def _get_map_call(self, map_id: str, version: int | None) -> Call:
         params = None
         if version is not None:
             if isinstance(version, bool) or not isinstance(version, int) or version < 1:
                 raise ValueError(f"version: must be an integer >= 1, got {version!r}")
             params = {"version": version}
-        return _Call("GET", self._map_path(map_id), params=params, idempotent=True)
+        return Call("GET", self._map_path(map_id), params=params, idempotent=True)
 
-    def _versions_call(self, map_id: str) -> _Call:
-        return _Call("GET", f"{self._map_path(map_id)}/versions", idempotent=True)
+    def _versions_call(self, map_id: str) -> Call:
+        return Call("GET", f"{self._map_path(map_id)}/versions", idempotent=True)
 
     def _map_versions(self, response: httpx.Response) -> list[MapVersion]:
         data = self._json(response)
         return [MapVersion.model_validate(v) for v in data["versions"]]
 
-    def _create_map_call(self, document: MapDocument) -> _Call:
+    def _create_map_call(self, document: MapDocument) -> Call:
         return self._json_call("POST", self.MAPS, "map", _load_document("map", document))
 
-    def _import_chess_call(self, chess: MapDocument, map_id: str, name: str | None) -> _Call:
+    def _import_chess_call(self, chess: MapDocument, map_id: str, name: str | None) -> Call:
         _segment("map_id", map_id)  # validates
         params: dict[str, Any] = {"map_id": map_id}
         if name is not None:
@@ -193,7 +184,7 @@ class _Base:
                 f"expected_version: must be an integer >= 1, got {expected_version!r}"
             )
 
-    def _update_map_call(self, map_id: str, document: MapDocument, if_match: str) -> _Call:
+    def _update_map_call(self, map_id: str, document: MapDocument, if_match: str) -> Call:
         return self._json_call(
             "PUT", self._map_path(map_id), "map", _load_document("map", document),
             headers={"If-Match": _etag_value(if_match)},
@@ -222,8 +213,8 @@ class _Base:
             return latest.etag
         return _etag_value(latest.content_hash)
 
-    def _delete_map_call(self, map_id: str) -> _Call:
-        return _Call("DELETE", self._map_path(map_id))
+    def _delete_map_call(self, map_id: str) -> Call:
+        return Call("DELETE", self._map_path(map_id))
 
     def _localize_request(
         self,
@@ -261,7 +252,7 @@ class _Base:
 
     def _localize_call(
         self, map_id: str, request: LocalizeRequest, map_version: int | None
-    ) -> _Call:
+    ) -> Call:
         return self._json_call("POST", f"{self._map_path(map_id)}/localize", "request",
                                request.to_wire(), idempotent=True,
                                params=self._version_params(map_version))
@@ -271,7 +262,7 @@ class _Base:
         map_id: str,
         frames: Sequence[LocalizeRequest | Mapping[str, Any]],
         map_version: int | None,
-    ) -> _Call:
+    ) -> Call:
         if isinstance(frames, LocalizeRequest | Mapping) or not len(frames):
             raise ValueError("frames: must be a non-empty sequence of LocalizeRequest")
         models = [
@@ -303,14 +294,14 @@ class _Base:
         return [MapSummary.model_validate(m) for m in items]
 
     # -- retry loop pieces -----------------------------------------------------------------
-    def _request_kwargs(self, call: _Call) -> dict[str, Any]:
+    def _request_kwargs(self, call: Call) -> dict[str, Any]:
         return {
             "params": call.params,
             "content": call.body,
             "headers": {**self._default_headers, **call.headers},
         }
 
-    def _on_exception(self, call: _Call, exc: httpx.TransportError, attempt: int) -> float:
+    def _on_exception(self, call: Call, exc: httpx.TransportError, attempt: int) -> float:
         """Delay before the next attempt, or raise the SDK's TransportError."""
         if attempt < self.retry.max_attempts and self.retry.retryable_exception(
             exc, idempotent=call.idempotent
@@ -363,8 +354,6 @@ class QuadLocClient(_Base):
                       options: dict[str, Any] | None = None) -> Any:
         """Start a tracking session (:class:`quadloc_sdk.session.TrackingSession`,
         docs/tracking.md)."""
-        from quadloc_sdk.session import start_session
-
         return start_session(self, map_id, camera=camera, convention=convention,
                              options=options)
 
@@ -374,7 +363,7 @@ class QuadLocClient(_Base):
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def _send(self, call: _Call) -> httpx.Response:
+    def _send(self, call: Call) -> httpx.Response:
         attempt = 0
         while True:
             attempt += 1
@@ -392,16 +381,16 @@ class QuadLocClient(_Base):
     # -- service ---------------------------------------------------------------------------
     def healthz(self) -> dict[str, Any]:
         """``GET /healthz``: the process is alive."""
-        return self._json(self._send(_Call("GET", "/healthz", idempotent=True)))
+        return self._json(self._send(Call("GET", "/healthz", idempotent=True)))
 
     def readyz(self) -> dict[str, Any]:
         """``GET /readyz``: database reachable and default map loadable (503 raises
         :class:`~quadloc_sdk.errors.ServiceUnavailable` after the retries)."""
-        return self._json(self._send(_Call("GET", "/readyz", idempotent=True)))
+        return self._json(self._send(Call("GET", "/readyz", idempotent=True)))
 
     def metrics(self) -> str:
         """``GET /metrics``: the Prometheus text exposition."""
-        return self._send(_Call("GET", "/metrics", idempotent=True)).text
+        return self._send(Call("GET", "/metrics", idempotent=True)).text
 
     # -- maps ------------------------------------------------------------------------------
     def list_maps(self) -> list[MapSummary]:
@@ -460,8 +449,6 @@ class QuadLocClient(_Base):
                   poll_interval_s: float = 0.5, timeout_s: float = 600.0) -> Any:
         """Build a map from a recording (``POST /v1/maps:build``); see :mod:`quadloc_sdk.build`.
         Returns the :class:`quadloc_sdk.build.BuildJob` (finished unless ``wait=False``)."""
-        from quadloc_sdk.build import build_map
-
         return build_map(self, recording, map_id=map_id, if_match=if_match, wait=wait,
                          on_progress=on_progress, poll_interval_s=poll_interval_s,
                          timeout_s=timeout_s)
@@ -534,8 +521,6 @@ class AsyncQuadLocClient(_Base):
                             convention: str = "opencv",
                             options: dict[str, Any] | None = None) -> Any:
         """Start a tracking session (:class:`quadloc_sdk.session.AsyncTrackingSession`)."""
-        from quadloc_sdk.session import start_session_async
-
         return await start_session_async(self, map_id, camera=camera, convention=convention,
                                          options=options)
 
@@ -545,7 +530,7 @@ class AsyncQuadLocClient(_Base):
     async def __aexit__(self, *exc: object) -> None:
         await self.aclose()
 
-    async def _send(self, call: _Call) -> httpx.Response:
+    async def _send(self, call: Call) -> httpx.Response:
         attempt = 0
         while True:
             attempt += 1
@@ -561,13 +546,13 @@ class AsyncQuadLocClient(_Base):
             await self._sleep(delay)
 
     async def healthz(self) -> dict[str, Any]:
-        return self._json(await self._send(_Call("GET", "/healthz", idempotent=True)))
+        return self._json(await self._send(Call("GET", "/healthz", idempotent=True)))
 
     async def readyz(self) -> dict[str, Any]:
-        return self._json(await self._send(_Call("GET", "/readyz", idempotent=True)))
+        return self._json(await self._send(Call("GET", "/readyz", idempotent=True)))
 
     async def metrics(self) -> str:
-        return (await self._send(_Call("GET", "/metrics", idempotent=True))).text
+        return (await self._send(Call("GET", "/metrics", idempotent=True))).text
 
     async def list_maps(self) -> list[MapSummary]:
         return self._map_list(await self._send(self._list_maps_call()))
@@ -607,8 +592,6 @@ class AsyncQuadLocClient(_Base):
                         wait: bool = True, on_progress: Callable[..., None] | None = None,
                         poll_interval_s: float = 0.5, timeout_s: float = 600.0) -> Any:
         """Build a map from a recording (``POST /v1/maps:build``); see :mod:`quadloc_sdk.build`."""
-        from quadloc_sdk.build import abuild_map
-
         return await abuild_map(self, recording, map_id=map_id, if_match=if_match, wait=wait,
                                 on_progress=on_progress, poll_interval_s=poll_interval_s,
                                 timeout_s=timeout_s)

@@ -33,6 +33,8 @@ from typing import Any
 
 import httpx
 
+from quadloc_sdk.retry import parse_retry_after
+
 __all__ = [
     "APIError",
     "ClientError",
@@ -173,8 +175,6 @@ class RateLimited(ClientError):  # noqa: N818 - HTTP status names read best
 
     @property
     def retry_after(self) -> float | None:
-        from quadloc_sdk.retry import parse_retry_after
-
         return parse_retry_after(self.headers.get("retry-after"))
 
 
@@ -187,8 +187,6 @@ class ServiceUnavailable(ServerError):  # noqa: N818 - HTTP status names read be
 
     @property
     def retry_after(self) -> float | None:
-        from quadloc_sdk.retry import parse_retry_after
-
         return parse_retry_after(self.headers.get("retry-after"))
 
 

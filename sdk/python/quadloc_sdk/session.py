@@ -22,6 +22,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+from quadloc_sdk.transport import Call
+
 __all__ = ["AsyncTrackingSession", "TrackingSession", "arcore_pose_to_matrix",
            "arkit_transform_to_matrix", "start_session", "start_session_async"]
 
@@ -88,9 +90,7 @@ class TrackingSession:
 
     def close(self) -> None:
         """End the session on the server (DELETE)."""
-        from quadloc_sdk.client import _Call
-
-        self.client._send(_Call("DELETE", f"/v1/sessions/{self.session_id}"))
+        self.client._send(Call("DELETE", f"/v1/sessions/{self.session_id}"))
 
 
 class AsyncTrackingSession(TrackingSession):
@@ -113,9 +113,7 @@ class AsyncTrackingSession(TrackingSession):
         return await self._post({"frames": list(frames)})
 
     async def close(self) -> None:  # type: ignore[override]
-        from quadloc_sdk.client import _Call
-
-        await self.client._send(_Call("DELETE", f"/v1/sessions/{self.session_id}"))
+        await self.client._send(Call("DELETE", f"/v1/sessions/{self.session_id}"))
 
 
 def _create_call(client: Any, map_id: str, camera: dict, convention: str,

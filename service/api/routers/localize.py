@@ -18,19 +18,16 @@ from fastapi.routing import APIRoute
 from pydantic import ValidationError
 from starlette.concurrency import run_in_threadpool
 
-from quadloc.maps.compiled import CompiledMap
-from quadloc.maps.errors import MapNotFound
 from quadloc.maps.model import MAP_ID_PATTERN
 from quadloc.service.api.auth import ReadAccess, request_access
 from quadloc.service.api.deps import MapIdPath
 from quadloc.service.api.errors import (
     ProblemError,
     json_depth_violation,
-    map_not_found,
     problem_responses,
 )
-from quadloc.service.api.inspector import SVG_MEDIA_TYPE, render_localization_svg, wants_svg
-from quadloc.service.api.map_loader import MapLoader, MapStillLoading
+from quadloc.service.api.inspector import SVG_MEDIA_TYPE, wants_svg
+from quadloc.service.app.drawing import render_localization_svg
 from quadloc.service.schemas.examples import LOCALIZE_EXAMPLE, LOCALIZE_RESPONSE_EXAMPLE
 from quadloc.service.schemas.localize import (
     BatchLocalizeRequest,
@@ -50,23 +47,11 @@ VersionQuery = Annotated[int | None, Query(ge=1, le=2**31 - 1,
                                            description="Map version (default: latest).")]
 
 
-def _compiled(loader: MapLoader, map_id: str, version: int | None) -> CompiledMap:
-    try:
-        return loader.get(map_id, version)
-    except MapNotFound as exc:
-        raise map_not_found(map_id, version) from exc
-    except MapStillLoading as exc:  # a new version's first use on this replica: bounded wait
-        raise ProblemError("map-loading", f"map {map_id!r} is being loaded on this server "
-                           "(first use of this version); retry shortly",
-                           headers={"Retry-After": "2"}) from exc
-
-
 def _localize_one(state: Any, map_id: str, frame: LocalizeRequest, version: int | None,
                   accept: str | None) -> Response:
     """The single-frame route's work, blocking (runs in the threadpool); ``state`` is the
     app's ``app.state``."""
-    compiled = _compiled(state.map_loader, map_id, version)
-    result = state.solver.localize_frames(compiled, [frame], batch=False)[0]
+    compiled, result = state.services.localizer.localize(map_id, frame, version)
     if wants_svg(accept):
         return Response(render_localization_svg(compiled, frame, result),
                         media_type=SVG_MEDIA_TYPE)
@@ -173,14 +158,5 @@ def localize_batch(
                        "value": {"frames": [LOCALIZE_EXAMPLE, LOCALIZE_EXAMPLE]}}})],
     request: Request, _key: ReadAccess, version: VersionQuery = None,
 ) -> Response:
-    state = request.app.state
-    settings = state.settings
-    if len(batch.frames) > settings.max_batch_frames:
-        raise ProblemError("validation-error",
-                           f"frames: at most {settings.max_batch_frames} frames per batch",
-                           field="frames", message=f"at most {settings.max_batch_frames} frames")
-    compiled = _compiled(state.map_loader, map_id, version)
-    results = state.solver.localize_frames(compiled, batch.frames, batch=True)
-    out = BatchLocalizeResponse(map_id=compiled.map_id, map_version=compiled.version,
-                                results=results)
+    out = request.app.state.services.localizer.localize_batch(map_id, batch.frames, version)
     return Response(out.model_dump_json(), media_type="application/json")

@@ -8,29 +8,25 @@ check and the write gets 409 (the store's version conflict) - never a silent ove
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Header, Query, Response, status
 
-from quadloc.maps.errors import MapAlreadyExists, MapNotFound, VersionConflict
 from quadloc.maps.model import (
     CHESS_JSON_SCHEMA,
     MAP_ID_PATTERN,
     MAP_JSON_SCHEMA,
     content_hash,
-    scene_map_from_chess,
     scene_map_from_dict,
 )
 from quadloc.service.api.auth import ReadAccess, WriteAccess
-from quadloc.service.api.deps import MapIdPath, SettingsDep, StoreDep
-from quadloc.service.api.errors import ProblemError, map_not_found, problem_responses
+from quadloc.service.api.deps import AppDep, MapIdPath
+from quadloc.service.api.errors import problem_responses
+from quadloc.service.app.maps import etag_of
 from quadloc.service.schemas.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
 from quadloc.service.schemas.maps import (
     MapListOut,
     MapOut,
-    MapSummaryOut,
-    MapVersionOut,
     MapVersionsOut,
 )
 
@@ -86,40 +82,6 @@ _CREATED_RESPONSES = {**problem_responses(400, 401, 403, 409, 413, 415, 422, 503
                       **_ok(201, _MAP_OUT_EXAMPLE)}
 
 
-def etag_of(content_hash: str) -> str:
-    """Strong ETag of a map version."""
-    return f'"{content_hash}"'
-
-
-def _iso(when: Any) -> str | None:
-    return when.isoformat() if when is not None else None
-
-
-def _map_out(stored: Any) -> MapOut:
-    sm = stored.scene_map
-    return MapOut(map_id=sm.map_id, version=sm.version, content_hash=stored.content_hash,
-                  created_at=_iso(getattr(stored, "created_at", None)), map=sm.to_dict())
-
-
-def _check_object_limit(body: Any, settings: Any) -> None:
-    objs = body.get("objects") if isinstance(body, dict) else None
-    if isinstance(objs, list) and len(objs) > settings.max_map_objects:
-        raise ProblemError("invalid-map", f"objects: at most {settings.max_map_objects} objects",
-                           field="objects", message=f"at most {settings.max_map_objects} objects")
-
-
-def _created(store: Any, scene_map: Any, response: Response) -> MapOut:
-    try:
-        stored = store.create(scene_map)
-    except MapAlreadyExists as exc:
-        raise ProblemError("map-exists", f"map {scene_map.map_id!r} already exists; use PUT "
-                           "/v1/maps/{map_id} with If-Match to update it",
-                           field="map_id", message="already exists") from exc
-    response.headers["ETag"] = etag_of(stored.content_hash)
-    response.headers["Location"] = f"/v1/maps/{scene_map.map_id}"
-    return _map_out(stored)
-
-
 @router.post(
     "/maps", status_code=status.HTTP_201_CREATED, response_model=MapOut,
     summary="Create a map (version 1)",
@@ -129,11 +91,9 @@ def _created(store: Any, scene_map: Any, response: Response) -> MapOut:
     responses=_CREATED_RESPONSES,
     openapi_extra=_body_doc(_MAP_SCHEMA, MAP_EXAMPLE),
 )
-def create_map(body: Annotated[dict[str, Any], Body()], response: Response, store: StoreDep,
-               settings: SettingsDep, _key: WriteAccess) -> MapOut:
-    _check_object_limit(body, settings)
-    scene_map = scene_map_from_dict(body, version=1)  # invalid: 422 (errors.py's handler)
-    return _created(store, scene_map, response)
+def create_map(body: Annotated[dict[str, Any], Body()], response: Response, app: AppDep,
+               _key: WriteAccess) -> MapOut:
+    return _created(app.maps.create(body), response)
 
 
 @router.post(
@@ -146,23 +106,24 @@ def create_map(body: Annotated[dict[str, Any], Body()], response: Response, stor
     openapi_extra=_body_doc(CHESS_JSON_SCHEMA, CHESS_IMPORT_EXAMPLE),
 )
 def import_chess_map(
-    body: Annotated[dict[str, Any], Body()], response: Response, store: StoreDep,
-    settings: SettingsDep, _key: WriteAccess,
+    body: Annotated[dict[str, Any], Body()], response: Response, app: AppDep,
+    _key: WriteAccess,
     map_id: Annotated[str, Query(pattern=MAP_ID_PATTERN, description="Id of the new map.")],
     name: Annotated[str, Query(min_length=1, max_length=256)] = "Chess",
 ) -> MapOut:
-    _check_object_limit(body, settings)
-    scene_map = scene_map_from_chess(body, map_id=map_id, name=name)
-    return _created(store, scene_map, response)
+    return _created(app.maps.import_chess(body, map_id, name), response)
+
+
+def _created(stored: MapOut, response: Response) -> MapOut:
+    response.headers["ETag"] = etag_of(stored.content_hash)
+    response.headers["Location"] = f"/v1/maps/{stored.map_id}"
+    return stored
 
 
 @router.get("/maps", response_model=MapListOut, summary="List maps (latest versions)",
             responses={**problem_responses(401, 403, 503), **_ok(200, _LIST_EXAMPLE, False)})
-def list_maps(store: StoreDep, _key: ReadAccess) -> MapListOut:
-    return MapListOut(maps=[
-        MapSummaryOut(map_id=s.map_id, name=s.name, version=s.latest_version,
-                      content_hash=s.content_hash, updated_at=_iso(getattr(s, "updated_at", None)))
-        for s in store.list()])
+def list_maps(app: AppDep, _key: ReadAccess) -> MapListOut:
+    return app.maps.list()
 
 
 @router.get(
@@ -171,14 +132,11 @@ def list_maps(store: StoreDep, _key: ReadAccess) -> MapListOut:
                 "to update. Old versions stay readable with `?version=n`.",
     responses={**problem_responses(401, 403, 404, 422, 503), **_ok(200, _MAP_OUT_EXAMPLE)},
 )
-def get_map(map_id: MapIdPath, response: Response, store: StoreDep, _key: ReadAccess,
+def get_map(map_id: MapIdPath, response: Response, app: AppDep, _key: ReadAccess,
             version: Annotated[int | None, Query(ge=1, le=2**31 - 1)] = None) -> MapOut:
-    try:
-        stored = store.get(map_id, version)
-    except MapNotFound as exc:
-        raise map_not_found(map_id, version) from exc
+    stored = app.maps.get(map_id, version)
     response.headers["ETag"] = etag_of(stored.content_hash)
-    return _map_out(stored)
+    return stored
 
 
 @router.get(
@@ -190,41 +148,8 @@ def get_map(map_id: MapIdPath, response: Response, store: StoreDep, _key: ReadAc
                    {"version": 1, "content_hash": content_hash(_EXAMPLE_MAP),
                     "created_at": "2026-01-05T10:00:00+00:00"}]}, False)},
 )
-def list_map_versions(map_id: MapIdPath, store: StoreDep, _key: ReadAccess) -> MapVersionsOut:
-    try:
-        history = store.version_history(map_id)
-    except MapNotFound as exc:
-        raise map_not_found(map_id) from exc
-    return MapVersionsOut(map_id=map_id, versions=[
-        MapVersionOut(version=h.version, content_hash=h.content_hash,
-                      created_at=h.created_at.isoformat()) for h in history])
-
-
-def _parse_if_match(if_match: str | None) -> set[str]:
-    if if_match is None or not if_match.strip():
-        raise ProblemError("precondition-required",
-                           "PUT needs 'If-Match: \"<ETag>\"' with the ETag of the version you "
-                           "edited (GET /v1/maps/{map_id} returns it)",
-                           field="header.if-match", message="missing")
-    tags = {t.strip() for t in if_match.split(",") if t.strip()}
-    if "*" in tags:
-        raise ProblemError("precondition-required",
-                           "'If-Match: *' would overwrite blindly; send the map's ETag",
-                           field="header.if-match", message="'*' not accepted")
-    # RFC 9110 13.1.1: If-Match uses the strong comparison, so a weak tag (W/"...") never
-    # matches; it is kept as is and fails the comparison below (412).
-    return tags
-
-
-def check_etag(map_id: str, current: Any, tags: set[str], hint: str = "") -> None:
-    """412 ``precondition-failed`` (with the current ETag) unless ``current`` (the stored
-    latest version) has one of the If-Match ``tags``; ``hint`` ends the detail."""
-    etag = etag_of(current.content_hash)
-    if etag not in tags:
-        raise ProblemError("precondition-failed",
-                           f"map {map_id!r} is at version {current.scene_map.version} with ETag "
-                           f"{etag}{hint}", field="header.if-match", message="stale ETag",
-                           headers={"ETag": etag})
+def list_map_versions(map_id: MapIdPath, app: AppDep, _key: ReadAccess) -> MapVersionsOut:
+    return app.maps.versions(map_id)
 
 
 @router.put(
@@ -245,34 +170,12 @@ def check_etag(map_id: str, current: Any, tags: set[str], hint: str = "") -> Non
 )
 def update_map(
     map_id: MapIdPath, body: Annotated[dict[str, Any], Body()], response: Response,
-    store: StoreDep, settings: SettingsDep, _key: WriteAccess,
+    app: AppDep, _key: WriteAccess,
     if_match: Annotated[str | None, Header(include_in_schema=False)] = None,
 ) -> MapOut:
-    _check_object_limit(body, settings)
-    if body.get("map_id", map_id) != map_id:
-        raise ProblemError("invalid-map", "map_id in the body differs from the path",
-                           field="map_id", message=f"must be {map_id!r}")
-    # the body first: an invalid document is the client's error whatever If-Match says
-    scene_map = scene_map_from_dict({**body, "map_id": map_id}, version=1)
-    tags = _parse_if_match(if_match)
-    try:
-        current = store.get(map_id)
-    except MapNotFound as exc:
-        raise map_not_found(map_id) from exc
-    check_etag(map_id, current, tags, "; fetch it, re-apply your change and retry")
-    expected = current.scene_map.version
-    scene_map = dataclasses.replace(scene_map, version=expected + 1)
-    try:
-        stored = store.update(map_id, scene_map, expected_version=expected)
-    except VersionConflict as exc:
-        raise ProblemError("version-conflict",
-                           f"map {map_id!r} changed concurrently (now version "
-                           f"{exc.current_version}); fetch it and retry",
-                           field="header.if-match", message="lost a race") from exc
-    except MapNotFound as exc:
-        raise map_not_found(map_id) from exc
+    stored = app.maps.update(map_id, body, if_match)
     response.headers["ETag"] = etag_of(stored.content_hash)
-    return _map_out(stored)
+    return stored
 
 
 @router.delete("/maps/{map_id}", status_code=status.HTTP_204_NO_CONTENT,
@@ -282,17 +185,6 @@ def update_map(
                            "409: /readyz checks it, so deleting it would take every replica out "
                            "of service. Update it with PUT instead.",
                responses=problem_responses(401, 403, 404, 409, 422, 503))
-def delete_map(map_id: MapIdPath, store: StoreDep, settings: SettingsDep,
-               _key: WriteAccess) -> Response:
-    if settings.default_map_id and map_id == settings.default_map_id:
-        raise ProblemError("default-map",
-                           f"map {map_id!r} is this server's default map "
-                           "(QUADLOC_DEFAULT_MAP_ID): the readiness probe needs it, so deleting "
-                           "it would make every replica unready; update it with PUT, or "
-                           "configure another default map first",
-                           field="path.map_id", message="is the default map")
-    try:
-        store.delete(map_id)
-    except MapNotFound as exc:
-        raise map_not_found(map_id) from exc
+def delete_map(map_id: MapIdPath, app: AppDep, _key: WriteAccess) -> Response:
+    app.maps.delete(map_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)

@@ -135,14 +135,14 @@ def test_unknown_job_is_404(client: TestClient) -> None:
 def test_stale_running_job_is_marked_failed(tmp_path: Path) -> None:
     app = make_test_app(tmp_path)
     with TestClient(app) as c:
-        jobs: JobStore = app.state.build_jobs
+        jobs: JobStore = app.state.services.builds.jobs
         job = jobs.create("lost", None)
         jobs.progress(job.job_id, "associating", 10.0, 0)
         assert jobs.fail_stale(3600.0) == 0  # fresh heartbeat: left alone
         # pretend the heartbeat stopped long ago (the replica died)
         from quadloc.maps.building.jobs import jobs_table
 
-        with app.state.store.engine.begin() as conn:
+        with app.state.services.store.engine.begin() as conn:
             conn.execute(jobs_table.update().values(
                 updated_at=job.updated_at.replace(year=2000)))
         out = c.get(f"/v1/build-jobs/{job.job_id}").json()
@@ -170,20 +170,20 @@ def _old_heartbeat(app: Any, job_id: str) -> None:
     """Pretend the job's heartbeat stopped long ago."""
     from quadloc.maps.building.jobs import jobs_table
 
-    with app.state.store.engine.begin() as conn:
+    with app.state.services.store.engine.begin() as conn:
         conn.execute(jobs_table.update().where(jobs_table.c.job_id == job_id).values(
-            updated_at=app.state.build_jobs.get(job_id).updated_at.replace(year=2000)))
+            updated_at=app.state.services.builds.jobs.get(job_id).updated_at.replace(year=2000)))
 
 
 def test_a_restarted_replica_marks_the_running_job_failed_at_startup(tmp_path: Path) -> None:
     app = make_test_app(tmp_path)
     with TestClient(app):
-        job = app.state.build_jobs.create("lost", None)
-        app.state.build_jobs.progress(job.job_id, "refining", 60.0, 3)
+        job = app.state.services.builds.jobs.create("lost", None)
+        app.state.services.builds.jobs.progress(job.job_id, "refining", 60.0, 3)
         _old_heartbeat(app, job.job_id)  # the replica died mid-build
     restarted = make_test_app(tmp_path)  # same database
     with TestClient(restarted):
-        out = restarted.state.build_jobs.get(job.job_id)  # no status read needed
+        out = restarted.state.services.builds.jobs.get(job.job_id)  # no status read needed
         assert out.status == "failed" and out.error["reason"] == "runner_lost"
 
 
@@ -208,7 +208,7 @@ class _BlockedBuild:
 
 def test_a_full_build_queue_answers_503_with_retry_after(tmp_path: Path,
                                                          monkeypatch: pytest.MonkeyPatch) -> None:
-    import quadloc.service.api.build_jobs as bj
+    import quadloc.service.app.builds as bj
 
     blocked = _BlockedBuild()
     monkeypatch.setattr(bj, "build_map", blocked)
@@ -222,10 +222,10 @@ def test_a_full_build_queue_answers_503_with_retry_after(tmp_path: Path,
         assert queued.status_code == 202 and queued.json()["status"] == "queued"
         full = c.post("/v1/maps:build", params={"map_id": "three"}, json=rec)
         assert full.status_code == 503
-        assert int(full.headers["Retry-After"]) == bj.RETRY_AFTER_S
+        assert int(full.headers["Retry-After"]) == bj.BUSY_RETRY_AFTER_S
         assert full.json()["type"].endswith("busy")
         # the request thread answered at once; the builds run in the runner's thread
-        assert sorted(app.state.build_runner.pending()) == sorted(
+        assert sorted(app.state.services.builds.runner.pending()) == sorted(
             [first.json()["job_id"], queued.json()["job_id"]])
         blocked.release.set()
         for r in (first, queued):
@@ -239,7 +239,7 @@ def test_a_full_build_queue_answers_503_with_retry_after(tmp_path: Path,
 
 def test_queued_jobs_beat_while_waiting_and_a_lost_job_stores_nothing(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    import quadloc.service.api.build_jobs as bj
+    import quadloc.service.app.builds as bj
 
     blocked = _BlockedBuild()
     monkeypatch.setattr(bj, "build_map", blocked)
@@ -247,7 +247,7 @@ def test_queued_jobs_beat_while_waiting_and_a_lost_job_stores_nothing(
     app = make_test_app(tmp_path, max_concurrent_builds=1, max_queued_builds=1)
     rec = _recording(6)[0]
     with TestClient(app) as c:
-        jobs: JobStore = app.state.build_jobs
+        jobs: JobStore = app.state.services.builds.jobs
         first = c.post("/v1/maps:build", params={"map_id": "one"}, json=rec).json()["job_id"]
         assert blocked.started.wait(10)
         second = c.post("/v1/maps:build", params={"map_id": "two"}, json=rec).json()["job_id"]
@@ -268,9 +268,9 @@ def test_queued_jobs_beat_while_waiting_and_a_lost_job_stores_nothing(
         assert failed == 1
         monkeypatch.setattr(bj, "HEARTBEAT_S", 0.0)
         t0 = time.monotonic()
-        while first in app.state.build_runner.pending() and time.monotonic() - t0 < 10:
+        while first in app.state.services.builds.runner.pending() and time.monotonic() - t0 < 10:
             time.sleep(0.02)
-        assert first not in app.state.build_runner.pending()
+        assert first not in app.state.services.builds.runner.pending()
         out = jobs.get(first)
         assert out.status == "failed" and out.error["reason"] == "runner_lost"
         blocked.release.set()

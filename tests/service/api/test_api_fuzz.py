@@ -39,7 +39,8 @@ from hypothesis import strategies as st
 from schemathesis.specs.openapi.checks import positive_data_acceptance
 
 from quadloc.maps.store import MapStore
-from quadloc.service.api.app import create_app, seed_demo_map
+from quadloc.service.api.app import create_app
+from quadloc.service.app.maps import seed_demo_map
 from quadloc.service.localization.types import METRICS, ROBUST_KERNELS
 from quadloc.service.schemas.examples import MAP_EXAMPLE
 from quadloc.service.settings import Settings, hash_api_key
@@ -66,7 +67,7 @@ def _backend_app(backend: str, tmp_path_factory: pytest.TempPathFactory) -> Iter
     if backend == "sqlite":
         app = _fuzz_app(tmp_path_factory, "fuzz")
         yield app
-        app.state.store.close()
+        app.state.services.store.close()
         return
     reason = _pg_unavailable_reason()
     if reason:
@@ -103,8 +104,8 @@ schema = schemathesis.openapi.from_path(OPENAPI)
 def _reset(app: Any) -> None:
     # The default map cannot be deleted (409 default-map); re-seed anyway (a no-op while it
     # exists) so that /readyz's answer never depends on the order of generated requests.
-    seed_demo_map(app.state.store)
-    app.state.store.cache.invalidate("chess")
+    seed_demo_map(app.state.services.store)
+    app.state.services.store.cache.invalidate("chess")
 
 
 @schema.parametrize()
@@ -130,7 +131,7 @@ def test_stateful_workflows_follow_the_links(fuzz_app: Any) -> None:
         def setup(self) -> None:
             # every scenario starts from the same state (only the demo map): schemathesis
             # draws from what earlier responses returned, which hypothesis needs reproducible
-            store = fuzz_app.state.store
+            store = fuzz_app.state.services.store
             for summary in store.list():
                 if summary.map_id != "chess":
                     store.delete(summary.map_id)  # invalidates the store's cache

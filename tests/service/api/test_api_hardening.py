@@ -35,7 +35,7 @@ def _client(url: str, **settings: object) -> TestClient:
 def client(store_url: str) -> Iterator[TestClient]:  # noqa: F811
     with _client(store_url) as c:
         yield c
-        c.app.state.store.close()
+        c.app.state.services.store.close()
 
 
 def _post(c: TestClient, path: str, body: object):
@@ -105,7 +105,7 @@ def test_readyz_names_the_check_without_driver_text(caplog: pytest.LogCaptureFix
         assert "secretdb" in caplog.text or "127.0.0.1" in caplog.text  # the operator's log
         r = c.get("/v1/maps")
         assert r.status_code == 503 and "127.0.0.1" not in r.text
-        c.app.state.store.close()
+        c.app.state.services.store.close()
 
 
 def test_unmigrated_database_is_503_with_a_migrate_log_line(
@@ -122,9 +122,9 @@ def test_unmigrated_database_is_503_with_a_migrate_log_line(
         r = c.get("/readyz")
         assert r.status_code == 503 and r.json()["detail"] == "database: unavailable"
         assert "upgrade head" in caplog.text and "not migrated" in caplog.text
-        c.app.state.store.migrate()  # the operator migrates: the same process recovers
+        c.app.state.services.store.migrate()  # the operator migrates: the same process recovers
         assert c.get("/v1/maps").status_code == 200
-        c.app.state.store.close()
+        c.app.state.services.store.close()
 
 
 def test_readyz_names_a_missing_default_map(tmp_path: Path) -> None:
@@ -133,7 +133,7 @@ def test_readyz_names_a_missing_default_map(tmp_path: Path) -> None:
         r = c.get("/readyz")
         assert r.status_code == 503
         assert r.json()["errors"] == [{"field": "default_map", "message": "not found"}]
-        c.app.state.store.close()
+        c.app.state.services.store.close()
 
 
 def test_store_reuses_parsed_versions_within_an_object_bound(
@@ -179,7 +179,7 @@ def test_a_slow_map_load_answers_503_within_the_budget_then_serves(
     from quadloc.service.schemas.examples import LOCALIZE_EXAMPLE
 
     with _client(f"sqlite:///{tmp_path / 'q.db'}", solve_time_budget_ms=300.0) as c:
-        store = c.app.state.store
+        store = c.app.state.services.store
         real = store_module.scene_map_from_dict
         release = threading.Event()
         calls = []
@@ -214,7 +214,7 @@ def test_integral_floats_are_integers_and_the_schema_says_what_is_enforced(
         tmp_path: Path) -> None:
     """JSON Schema's ``integer`` includes 640.0: the server accepts it; 640.5 / "640" / true
     are refused naming the field. robust_scale without robust: the schema's if/then says it."""
-    from quadloc.service.cli import openapi_document
+    from quadloc.service.api.app import openapi_document
     from quadloc.service.schemas.examples import LOCALIZE_EXAMPLE
 
     with _client(f"sqlite:///{tmp_path / 'q.db'}") as c:
@@ -236,7 +236,7 @@ def test_integral_floats_are_integers_and_the_schema_says_what_is_enforced(
             r = c.post("/v1/maps/chess/localize", json=bad)
             assert r.status_code == 422, (bad, r.text)
             assert any(e["field"].startswith(field) for e in r.json()["errors"]), r.text
-        c.app.state.store.close()
+        c.app.state.services.store.close()
     options = openapi_document()["components"]["schemas"]["LocalizeOptionsIn"]
     assert options["then"]["required"] == ["robust"]
     assert options["if"]["required"] == ["robust_scale"]
@@ -251,7 +251,7 @@ def test_map_loader_returns_when_the_load_finishes_before_it_is_tracked() -> Non
     import threading
     from concurrent.futures import Future
 
-    from quadloc.service.api.map_loader import MapLoader
+    from quadloc.service.app.map_loader import MapLoader
 
     class Store:
         def compiled(self, map_id, version=None):

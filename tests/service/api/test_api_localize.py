@@ -16,7 +16,7 @@ from fastapi.testclient import TestClient
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.names import GeometryError
 from quadloc.factors.rotations import rotation_from_quaternion_wxyz
-from quadloc.service.api import solver as solver_module
+from quadloc.service.app import localization as solver_module
 from quadloc.service.schemas.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, LOCALIZE_EXAMPLE
 from tests.conftest import make_test_app
 from tests.support.helpers import assert_problem as _problem
@@ -327,7 +327,7 @@ def test_batch_limit_from_settings(tmp_path: Path) -> None:
 def test_busy_solver_answers_503_with_retry_after(tmp_path: Path) -> None:
     with TestClient(make_test_app(tmp_path, max_concurrent_solves=1,
                                   solve_queue_timeout_s=0.0)) as c:
-        slots = c.app.state.solver.slots
+        slots = c.app.state.services.localizer.slots
         assert slots.acquire(timeout=1)
         try:
             r = c.post(URL, json=LOCALIZE_EXAMPLE)
@@ -357,7 +357,7 @@ def test_solver_slots_are_first_come_first_served() -> None:
     import threading
     import time
 
-    from quadloc.service.api.solver import FairSlots
+    from quadloc.service.app.localization import FairSlots
 
     slots = FairSlots(1)
     assert slots.acquire(timeout=0)
@@ -409,7 +409,7 @@ def _opengl_from_opencv_adjoint() -> np.ndarray:
 
 
 def test_opengl_prior_full_covariance_is_converted_to_opencv(client: TestClient) -> None:
-    from quadloc.service.api.convert import prior_from_request
+    from quadloc.service.app.conversions import prior_from_request
     from quadloc.service.schemas.localize import PosePriorIn
 
     cov_cv = _full_spd_covariance()

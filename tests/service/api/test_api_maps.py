@@ -164,7 +164,7 @@ def test_update_rejects_a_different_map_id_and_unknown_maps(client: TestClient) 
 
 def test_lost_race_is_a_409(client: TestClient, monkeypatch: pytest.MonkeyPatch) -> None:
     """Another writer commits between the If-Match check and the write: 409, not overwrite."""
-    store = client.app.state.store
+    store = client.app.state.services.store
     r = client.get("/v1/maps/chess")
     etag, doc = r.headers["etag"], r.json()["map"]
     real_update = store.update
@@ -220,14 +220,14 @@ def _map_version_used(c: TestClient) -> int:
 def test_localize_sees_local_updates_at_once_and_other_replicas_within_the_ttl(
         tmp_path: Path) -> None:
     from quadloc.maps.store import MapStore
-    from quadloc.service.api.app import seed_demo_map
+    from quadloc.service.app.maps import seed_demo_map
     from quadloc.service.schemas.examples import LOCALIZE_EXAMPLE
 
     # "chess" is not the default map here: the default map cannot be deleted (409).
     app = make_test_app(tmp_path, map_cache_ttl_s=0.3, default_map_id="chess-default")
     clock = FakeClock()
-    app.state.store.cache.clock = clock  # the TTL runs on the fake clock: no sleeping
-    assert seed_demo_map(app.state.store, "chess")
+    app.state.services.store.cache.clock = clock  # the TTL runs on the fake clock: no sleeping
+    assert seed_demo_map(app.state.services.store, "chess")
     with TestClient(app) as c:
         assert _map_version_used(c) == 1
         r = c.get("/v1/maps/chess")
@@ -258,7 +258,7 @@ def test_database_outage_is_a_503_problem(client: TestClient,
     def down(*args, **kwargs):
         raise StoreUnavailable("database unreachable: OperationalError")
 
-    store = client.app.state.store
+    store = client.app.state.services.store
     monkeypatch.setattr(store, "list", down)
     monkeypatch.setattr(store, "ping", down)
     body = _problem(client.get("/v1/maps"), 503, "database-unavailable")
@@ -474,7 +474,7 @@ def test_database_data_error_is_a_422_problem(client: TestClient,
         raise DataError("INSERT ...", {}, ValueError("PostgreSQL text fields cannot contain "
                                                      "NUL (0x00) bytes"))
 
-    monkeypatch.setattr(client.app.state.store, "create", refuse)
+    monkeypatch.setattr(client.app.state.services.store, "create", refuse)
     body = _problem(client.post("/v1/maps", json=MAP_EXAMPLE), 422, "validation-error")
     assert "NUL" in body["detail"]
 
@@ -483,7 +483,7 @@ def test_request_body_schemas_are_the_validating_models_schemas() -> None:
     """The published body schemas are generated from the pydantic models that validate the
     bodies (quadloc.maps.model.MapDocument / ChessDocument), not written by hand."""
     from quadloc.maps.model import CHESS_JSON_SCHEMA, MAP_JSON_SCHEMA
-    from quadloc.service.cli import openapi_document
+    from quadloc.service.api.app import openapi_document
 
     paths = openapi_document()["paths"]
 

@@ -14,7 +14,7 @@ from quadloc.factors.camera import Camera, project_ellipsoid
 from quadloc.factors.conics import DegenerateProjectionError, Ellipse
 from quadloc.factors.rotations import invert_pose, pose_matrix, snap_to_rotation
 from quadloc.maps.demo import load_demo_map
-from quadloc.service.cli import OPENAPI_PATH, openapi_document, openapi_text
+from quadloc.service.api.app import openapi_document, openapi_text
 from quadloc.service.schemas.examples import (
     EXAMPLE_TRUE_WORLD_FROM_CAMERA,
     LOCALIZE_EXAMPLE,
@@ -23,6 +23,7 @@ from quadloc.service.schemas.examples import (
 from tests.support.reference_data import CHESS_POSES_PATH as POSES_PATH
 
 REPO = Path(__file__).resolve().parents[3]
+OPENAPI_PATH = REPO / "docs" / "openapi.json"
 POSES = POSES_PATH
 
 

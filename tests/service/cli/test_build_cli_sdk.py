@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 import quadloc_sdk as sdk
-from quadloc.service.cli import main
+from quadloc.service.cli.main import main
 from quadloc_sdk.build import BuildFailedError
 from tests.service.api.test_api_build import _recording
 

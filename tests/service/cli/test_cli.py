@@ -10,12 +10,13 @@ import numpy as np
 import pytest
 
 from quadloc.maps.model import content_hash, scene_map_from_dict
-from quadloc.service.cli import OPENAPI_PATH, main
+from quadloc.service.cli.main import main
 from quadloc.service.schemas.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, MAP_EXAMPLE
 from quadloc.service.settings import hash_api_key
 from tests.support.reference_data import CHESS_SCENE_PATH
 
 REPO = Path(__file__).resolve().parents[3]
+OPENAPI_PATH = REPO / "docs" / "openapi.json"
 CHESS_SCENE = CHESS_SCENE_PATH
 EXAMPLE = REPO / "docs" / "examples" / "localize_chess.json"
 

@@ -15,7 +15,7 @@ from quadloc.maps.compiled import compile_map
 from quadloc.maps.model import MapObject, SceneMap
 from quadloc.service.localization.ransac import (
     MatchScorer,
-    _ellipse_points,
+    ellipse_points,
     greedy_assignment,
     iou_estimates,
     project_objects,
@@ -32,7 +32,7 @@ def random_ellipse(rng: np.random.Generator) -> Ellipse:
 
 def estimate_iou(detection: Ellipse, projection: Ellipse, n_points: int = 256) -> float:
     """The production estimator (:func:`iou_estimates`) on one pair of ellipses."""
-    pts = _ellipse_points(detection.params()[None], sunflower_disk(n_points))[0]
+    pts = ellipse_points(detection.params()[None], sunflower_disk(n_points))[0]
     _, S = projection.gaussian()
     return float(iou_estimates(pts, np.array(detection.area), projection.center, S))
 

@@ -20,7 +20,8 @@ from quadloc.factors.names import FieldError
 from quadloc.factors.pose_residuals import expmap_pose3
 from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import compile_map
-from quadloc.service.api.errors import field_and_problem
+from quadloc.service.app.errors import field_and_problem
+from quadloc.service.app.session_store import SessionCapacityError, SessionNotFound, SessionStore
 from quadloc.service.localization.gravity import tilt_errors_deg
 from quadloc.service.localization.types import Gravity
 from quadloc.service.tracking.association import centre_jacobians
@@ -32,7 +33,6 @@ from quadloc.service.tracking.session import (
     TrackingSession,
     pose_adjoint,
 )
-from quadloc.service.tracking.store import SessionCapacityError, SessionNotFound, SessionStore
 from tests.conftest import make_test_app
 from tests.support.errors import pose_errors as pose_error
 from tests.support.reference_data import load_chess_map, load_chess_poses
@@ -438,7 +438,7 @@ def test_sdk_session_sync_and_async(client: TestClient, walk: dict) -> None:
 def test_cli_track_replays_the_example_recording(tmp_path: Path, capsys) -> None:
     import json
 
-    from quadloc.service.cli import main
+    from quadloc.service.cli.main import main
 
     db = f"sqlite:///{tmp_path / 'maps.db'}"
     rec = ROOT / "docs" / "examples" / "track_chess.json"

@@ -1,6 +1,7 @@
-"""Loading a map version for a localization without exceeding the request's time budget:
-:class:`MapLoader` compiles it in a background thread (single flight) and waits at most
-``max_wait_s``; a request that gives up answers 503 ``map-loading``. Why:
+"""Loading a map version for a request without exceeding its time budget: :class:`MapLoader`
+compiles it in a background thread (single flight) and waits at most ``max_wait_s``; a request
+that gives up is refused with ``map-loading`` (503, retry after 2 s). Every use case that needs
+a compiled map (localize, batches, tracking sessions) gets it here. Why:
 docs/design/service.md#map-loader.
 """
 
@@ -11,13 +12,14 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
 
 from quadloc.maps.compiled import CompiledMap
+from quadloc.maps.errors import MapNotFound
 from quadloc.maps.store import MapStore
+from quadloc.service.app.errors import AppError, map_not_found
 
-__all__ = ["MapLoader", "MapStillLoading"]
+__all__ = ["MAP_LOADING_RETRY_AFTER_S", "MapLoader"]
 
-
-class MapStillLoading(Exception):  # noqa: N818 (a state, not a failure)
-    """The map version is still being loaded after the request's wait."""
+#: ``Retry-After`` (s) of a request that gave up waiting for its map version to load.
+MAP_LOADING_RETRY_AFTER_S = 2.0
 
 
 class MapLoader:
@@ -35,8 +37,9 @@ class MapLoader:
         self._lock = threading.Lock()
 
     def get(self, map_id: str, version: int | None = None) -> CompiledMap:
-        """The compiled map; raises the store's errors (``MapNotFound``...) or
-        :class:`MapStillLoading` after ``max_wait_s``."""
+        """The compiled map (latest version, or ``version``). Refusals: :class:`AppError`
+        ``map-not-found``, or ``map-loading`` after ``max_wait_s`` (the load goes on; the next
+        request finds it); the store's availability errors pass through."""
         if self._cache is not None:
             hit = self._cache.resolution(map_id, version)  # what store.compiled checks first
             if hit is not None:
@@ -54,8 +57,12 @@ class MapLoader:
             future.add_done_callback(lambda f, k=key: self._forget(k, f))
         try:
             return future.result(timeout=self.max_wait_s)
-        except FutureTimeout as exc:
-            raise MapStillLoading(f"map {map_id!r} is being loaded") from exc
+        except MapNotFound as exc:
+            raise map_not_found(map_id, version) from exc
+        except FutureTimeout as exc:  # a new version's first use on this replica
+            raise AppError("map-loading", f"map {map_id!r} is being loaded on this server "
+                           "(first use of this version); retry shortly",
+                           retry_after_s=MAP_LOADING_RETRY_AFTER_S) from exc
 
     def _forget(self, key: tuple[str, int | None], future: Future[CompiledMap]) -> None:
         with self._lock:

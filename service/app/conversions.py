@@ -1,4 +1,5 @@
-"""Conversions between the wire models (:mod:`quadloc.service.schemas`) and the solver's types.
+"""Conversions between the wire models (:mod:`quadloc.service.schemas`) and the domain types of
+localization and tracking: the edge of the application layer.
 
 Camera conventions: the solver works in OpenCV camera axes (+X right, +Y down, +Z forward).
 OpenGL/ARKit/ARCore axes (+X right, +Y up, -Z forward) differ by ``F = diag(1, -1, -1)`` on the
@@ -20,7 +21,9 @@ import numpy as np
 from quadloc.factors.camera import Camera
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.rotations import (
+    DOCUMENT_ROTATION_TOLERANCE,
     QUATERNION_NORM_TOLERANCE,
+    check_pose,
     pose_matrix,
     quaternion_wxyz_from_rotation,
     rotation_from_quaternion_wxyz,
@@ -46,6 +49,13 @@ from quadloc.service.schemas.localize import (
     PoseOut,
     PosePriorIn,
 )
+from quadloc.service.schemas.sessions import SessionFrameIn, SessionFrameOut, SessionOptionsIn
+from quadloc.service.tracking.session import (
+    DriftModel,
+    FrameInput,
+    FrameResult,
+    SessionOptions,
+)
 
 __all__ = [
     "OPENGL_FROM_OPENCV",
@@ -54,12 +64,16 @@ __all__ = [
     "convert_pose",
     "covariance_out",
     "detections_from_request",
+    "frame_input_from_wire",
+    "frame_out",
     "gravity_from_request",
     "inliers_out",
     "options_from_request",
+    "pose_matrix_from_wire",
     "pose_out",
     "prior_from_request",
     "response_from_result",
+    "session_options_from_wire",
 ]
 
 #: ``diag(1, -1, -1)``: camera-side flip between OpenCV and OpenGL axes (its own inverse). The
@@ -101,7 +115,10 @@ def detections_from_request(detections: list[DetectionIn]) -> list[Detection]:
     return [Detection(ellipse(d), d.label, d.effective_sigma(), d.score) for d in detections]
 
 
-def _pose_matrix_in(pose: PoseIn, field: str) -> np.ndarray:
+def pose_matrix_from_wire(pose: PoseIn, field: str) -> np.ndarray:
+    """The 4x4 of a wire pose (its ``matrix``, or its unit ``quaternion_wxyz`` and
+    ``translation_m``), in the pose's own camera convention; a quaternion off unit norm raises
+    :class:`LocalizationInputError` naming ``<field>.quaternion_wxyz``."""
     if pose.matrix is not None:
         return np.array(pose.matrix, dtype=float)
     q = np.array(pose.quaternion_wxyz, dtype=float)
@@ -116,7 +133,7 @@ def prior_from_request(prior: PosePriorIn | None) -> PosePrior | None:
     """Wire prior (any convention) -> :class:`PosePrior` in OpenCV axes."""
     if prior is None:
         return None
-    T = _pose_matrix_in(prior.world_from_camera, "prior.world_from_camera")
+    T = pose_matrix_from_wire(prior.world_from_camera, "prior.world_from_camera")
     cov = None
     if prior.covariance is not None:
         cov = np.array(prior.covariance, dtype=float)
@@ -240,3 +257,55 @@ def response_from_result(
         "frame_id": frame_id,
         "timestamp": timestamp,
     })
+
+
+# --------------------------------------------------------------------------- tracking sessions
+
+
+def session_options_from_wire(options: SessionOptionsIn) -> SessionOptions:
+    """Wire session options -> :class:`SessionOptions` (odometry rotation noise from degrees to
+    radians)."""
+    return SessionOptions(
+        window_frames=options.window_frames, smoother=options.smoother,
+        inlier_iou=options.inlier_iou,
+        drift=DriftModel(
+            translation_m_per_sqrt_m=options.odometry_translation_m_per_sqrt_m,
+            translation_m_per_sqrt_s=options.odometry_translation_m_per_sqrt_s,
+            rotation_rad_per_sqrt_m=math.radians(options.odometry_rotation_deg_per_sqrt_m),
+            rotation_rad_per_sqrt_s=math.radians(options.odometry_rotation_deg_per_sqrt_s)))
+
+
+def frame_input_from_wire(frame: SessionFrameIn, convention: str) -> FrameInput:
+    """Wire session frame (poses and gravity in the session's ``convention`` unless they say
+    otherwise) -> :class:`FrameInput` in OpenCV axes. Raises the domain input errors
+    (``GeometryError``, ``LocalizationInputError``, ``TrackingInputError``) naming the field
+    relative to the frame."""
+    detections = detections_from_request(frame.detections)
+    T = pose_matrix_from_wire(frame.odom_from_camera, "odom_from_camera")
+    T = check_pose(convert_pose(T, convention, "opencv"), "odom_from_camera",
+                   DOCUMENT_ROTATION_TOLERANCE)
+    return FrameInput(detections, T, float(frame.timestamp), frame.frame_id,
+                      prior_from_request(frame.prior), gravity_from_request(frame.gravity,
+                                                                            convention))
+
+
+def frame_out(result: FrameResult, convention: str) -> SessionFrameOut:
+    """A session frame's answer -> wire (``world_from_camera`` and its covariance in the
+    session's ``convention``; ``world_from_odom`` maps odometry to map coordinates, so its
+    matrix is convention-free and its covariance stays in the odometry (OpenCV body) frame)."""
+    return SessionFrameOut(
+        frame_index=result.frame_index, frame_id=result.frame_id, timestamp=result.timestamp,
+        state=result.state, reason=result.reason,
+        world_from_camera=None if result.world_from_camera is None
+        else pose_out(result.world_from_camera, convention),
+        covariance=covariance_out(result.covariance, "opencv", convention),
+        world_from_odom=None if result.world_from_odom is None
+        else pose_out(result.world_from_odom, "opencv").model_copy(
+            update={"convention": convention}),
+        world_from_odom_covariance=covariance_out(result.world_from_odom_covariance, "opencv",
+                                                  "opencv"),
+        confidence=result.confidence,
+        inliers=inliers_out(result.inliers),
+        n_usable_detections=result.n_usable_detections,
+        timings_ms={k: float(v) for k, v in result.timings_ms.items()})
+

@@ -1,0 +1,321 @@
+"""The map-building use cases: start a build job from a recording, follow it, and build in this
+process (the CLI without a server).
+
+A job is a row of the map store's database (``quadloc.maps.building.jobs.JobStore``):
+``queued`` -> ``running`` -> ``succeeded`` | ``failed``, its row the heartbeat. One
+:class:`BuildRunner` per process runs at most ``max_concurrent_builds`` builds (threads) and
+queues ``max_queued_builds`` more (beyond: ``busy``, retry after 10 s); each build has a time
+budget (``build_time_budget_s``). A job ends ``succeeded`` (a new map or version) or
+``failed`` with a reason: ``time_budget_exceeded``, ``invalid_map``, ``no_objects``,
+``version_conflict``, ``map_exists``, ``map_not_found``, ``store_unavailable``, ``busy``,
+``runner_lost``, ``internal_error``. A job's steps: docs/design/service.md#map-building-jobs.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import Any
+
+from sqlalchemy.exc import SQLAlchemyError
+
+from quadloc.maps.building.build import BuildTimeoutError, build_map
+from quadloc.maps.building.jobs import BuildJob, JobNotFoundError, JobStore
+from quadloc.maps.building.recording import BuildLimits, Recording, RecordingError, parse_recording
+from quadloc.maps.building.report import BuildReport
+from quadloc.maps.errors import MapAlreadyExists, MapNotFound, StoreUnavailable, VersionConflict
+from quadloc.maps.model import MapValidationError, SceneMap
+from quadloc.maps.store import MapStore, StoredMap
+from quadloc.service.app.errors import AppError
+from quadloc.service.app.maps import MapService, parse_if_match
+from quadloc.service.schemas.builds import BuildErrorOut, BuildJobOut
+from quadloc.service.settings import Settings
+
+__all__ = [
+    "BUSY_RETRY_AFTER_S",
+    "HEARTBEAT_S",
+    "BuildRunner",
+    "BuildService",
+    "LocalBuild",
+    "build_limits",
+]
+
+log = logging.getLogger("quadloc.build")
+
+#: Longest interval between two progress writes of a running job (s).
+HEARTBEAT_S = 1.0
+#: ``Retry-After`` (s) when this process's build queue is full.
+BUSY_RETRY_AFTER_S = 10.0
+
+#: ``progress(stage, percent, objects_found)``, as :func:`build_map` reports it.
+Progress = Callable[[str, float, int], None]
+
+
+def build_limits(settings: Settings) -> BuildLimits:
+    """The recording limits of the settings (``QUADLOC_MAX_BUILD_*``, ``MAX_DETECTIONS``)."""
+    return BuildLimits(max_frames=settings.max_build_frames,
+                       max_detections_per_frame=settings.max_detections,
+                       max_detections=settings.max_build_detections)
+
+
+class _RunnerBusyError(RuntimeError):
+    """Too many builds queued on this replica."""
+
+
+class _JobLostError(RuntimeError):
+    """The job's row is no longer active (marked failed, e.g. as stale): stop, store nothing."""
+
+
+class BuildRunner:
+    """The process's build threads (see the module docstring)."""
+
+    def __init__(self, store: MapStore, jobs: JobStore, *, max_concurrent: int, max_queued: int,
+                 time_budget_s: float) -> None:
+        self.store = store
+        self.jobs = jobs
+        self.time_budget_s = float(time_budget_s)
+        self.max_pending = int(max_concurrent) + int(max_queued)
+        self._pool = ThreadPoolExecutor(max_workers=int(max_concurrent),
+                                        thread_name_prefix="quadloc-build")
+        self._pending: set[str] = set()  # job ids queued or running here
+        self._lock = threading.Lock()
+
+    def submit(self, job_id: str, recording: Recording) -> None:
+        """Queue the job; ``_RunnerBusyError`` when ``max_concurrent + max_queued`` jobs are
+        already running or queued here, ``RuntimeError`` after :meth:`shutdown`."""
+        with self._lock:
+            if len(self._pending) >= self.max_pending:
+                raise _RunnerBusyError(f"{len(self._pending)} builds running or queued on "
+                                       "this replica")
+            self._pending.add(job_id)
+        try:
+            self._pool.submit(self._run, job_id, recording)
+        except RuntimeError:  # pool shut down
+            with self._lock:
+                self._pending.discard(job_id)
+            raise
+
+    def pending(self) -> list[str]:
+        """Ids of the jobs running or queued on this replica."""
+        with self._lock:
+            return sorted(self._pending)
+
+    def shutdown(self) -> None:
+        """Stop taking jobs; queued ones are dropped (their rows go stale: ``runner_lost``)."""
+        self._pool.shutdown(wait=False, cancel_futures=True)
+
+    def _run(self, job_id: str, recording: Recording) -> None:
+        try:
+            self._build(job_id, recording)
+        except _JobLostError:
+            log.warning("build job %s stopped: its row is no longer active (marked failed "
+                        "meanwhile); nothing stored", job_id)
+        except Exception as exc:
+            log.exception("build job %s failed", job_id)
+            try:
+                self.jobs.fail(job_id, "internal_error", f"{type(exc).__name__}: {exc}")
+            except Exception:
+                log.exception("could not mark job %s failed", job_id)
+        finally:
+            with self._lock:
+                self._pending.discard(job_id)
+
+    def _heartbeat(self, job_id: str) -> Progress:
+        """The build's progress callback: writes the job's progress at every stage change and
+        at most every :data:`HEARTBEAT_S`, refreshing the jobs queued behind it too; raises
+        ``_JobLostError`` when the row is no longer active."""
+        last_time, last_stage = 0.0, ""
+
+        def progress(stage: str, percent: float, objects: int) -> None:
+            nonlocal last_time, last_stage
+            now = time.monotonic()
+            if stage != last_stage or now - last_time >= HEARTBEAT_S:
+                last_time, last_stage = now, stage
+                if not self.jobs.progress(job_id, stage, percent, objects):
+                    raise _JobLostError(job_id)
+                # the jobs waiting behind this one are alive too: their heartbeat
+                waiting = [j for j in self.pending() if j != job_id]
+                if waiting:
+                    self.jobs.heartbeat(waiting)
+
+        return progress
+
+    def _build(self, job_id: str, recording: Recording) -> None:
+        job = self.jobs.get(job_id)
+        progress = self._heartbeat(job_id)
+        progress("associating", 0.0, 0)
+        try:
+            scene, report = build_map(recording, map_id=job.map_id, progress=progress,
+                                      deadline=time.monotonic() + self.time_budget_s)
+        except BuildTimeoutError as exc:
+            self.jobs.fail(job_id, "time_budget_exceeded",
+                           f"{exc} (budget {self.time_budget_s:g} s); send fewer frames")
+            return
+        except MapValidationError as exc:
+            self.jobs.fail(job_id, "invalid_map", str(exc))
+            return
+        if not scene.objects:
+            self.jobs.fail(job_id, "no_objects", "no object could be associated and "
+                           "reconstructed from the recording (see the report)", report)
+            return
+        progress("saving", 95.0, len(scene.objects))
+        if self.jobs.get(job_id).status != "running":
+            raise _JobLostError(job_id)
+        try:
+            stored = _store_build(self.store, scene, job.base_version)
+        except AppError as exc:
+            self.jobs.fail(job_id, _FAILURE_OF[exc.code], exc.detail, report)
+            return
+        self.jobs.succeed(job_id, stored.scene_map.version, report, len(scene.objects))
+
+
+#: A job's failure reason for each refusal of :func:`_store_build`.
+_FAILURE_OF = {"map-exists": "map_exists", "version-conflict": "version_conflict",
+               "map-not-found": "map_not_found", "database-unavailable": "store_unavailable"}
+
+
+def _store_build(store: MapStore, scene: SceneMap, base_version: int | None) -> StoredMap:
+    """Store a built map: a new map (``base_version`` None) or the version after
+    ``base_version``; refusals as :class:`AppError` (``map-exists``, ``version-conflict``,
+    ``map-not-found``, ``database-unavailable``), nothing overwritten."""
+    map_id = scene.map_id
+    try:
+        if base_version is None:
+            return store.create(scene)
+        return store.update(map_id, scene, expected_version=base_version)
+    except MapAlreadyExists as exc:
+        raise AppError("map-exists", f"map {map_id!r} was created meanwhile; build again "
+                       "with If-Match to add a version") from exc
+    except VersionConflict as exc:
+        raise AppError("version-conflict", f"map {map_id!r} changed meanwhile (now version "
+                       f"{exc.current_version}); nothing was overwritten") from exc
+    except MapNotFound as exc:
+        raise AppError("map-not-found", f"map {map_id!r} was deleted meanwhile") from exc
+    except StoreUnavailable as exc:
+        raise AppError("database-unavailable", str(exc)) from exc
+
+
+def job_out(job: BuildJob) -> BuildJobOut:
+    """The wire form of a job (times as ISO 8601 text)."""
+    return BuildJobOut(
+        job_id=job.job_id, map_id=job.map_id, status=job.status,  # type: ignore[arg-type]
+        stage=job.stage, percent=job.percent, objects_found=job.objects_found,
+        base_version=job.base_version, map_version=job.map_version,
+        error=None if job.error is None else BuildErrorOut(**job.error),
+        report=job.report, created_at=job.created_at.isoformat(),
+        updated_at=job.updated_at.isoformat())
+
+
+@dataclass(frozen=True)
+class LocalBuild:
+    """A build run in this process: the stored map and the report, or (``stored`` None) the
+    reason no map came of it (``failure``: ``time_budget_exceeded`` or ``no_objects``, as a
+    job's, with ``detail``; the report when the build got that far)."""
+
+    stored: StoredMap | None
+    report: BuildReport | None
+    failure: str | None = None
+    detail: str = ""
+
+
+class BuildService:
+    """The map-building use cases of a process (see the module docstring)."""
+
+    def __init__(self, store: MapStore, maps: MapService, settings: Settings) -> None:
+        self.store = store
+        self.maps = maps
+        self.settings = settings
+        self.jobs = JobStore(store.engine)
+        self.runner = BuildRunner(
+            store, self.jobs, max_concurrent=settings.max_concurrent_builds,
+            max_queued=settings.max_queued_builds, time_budget_s=settings.build_time_budget_s)
+
+    def sweep_stale(self) -> int:
+        """Mark failed (``runner_lost``) the jobs silent for ``build_stale_after_s`` (their
+        replica stopped); returns how many. At start-up a database that is unreachable or not
+        migrated is logged, not raised: the app still starts (its requests answer 503)."""
+        try:
+            stale = self.jobs.fail_stale(self.settings.build_stale_after_s)
+        except SQLAlchemyError as exc:
+            log.error("build jobs not swept (%s): the database is unavailable or not "
+                      "migrated; they are swept again before any job's status is answered",
+                      type(exc).__name__)
+            return 0
+        if stale:
+            log.warning("marked %d build job(s) failed: their runner stopped reporting", stale)
+        return stale
+
+    def parse(self, document: Any) -> Recording:
+        """A recording document checked against the limits; ``validation-error`` naming
+        every invalid field."""
+        try:
+            return parse_recording(document, build_limits(self.settings))
+        except RecordingError as exc:
+            raise AppError("validation-error", f"invalid recording: {exc}",
+                           errors=exc.errors) from exc
+
+    def base_version(self, map_id: str, if_match: str | None) -> int | None:
+        """The version a build of ``map_id`` replaces: None for a new map (then ``If-Match``
+        must be absent: ``precondition-failed``); for an existing map ``If-Match`` must name
+        its latest ETag (``precondition-required`` / ``precondition-failed``)."""
+        if self.maps.latest_version(map_id) is None:
+            if if_match is not None:
+                raise AppError("precondition-failed",
+                               f"map {map_id!r} does not exist, so If-Match cannot match; omit "
+                               "it to build a new map",
+                               field="header.if-match", message="map does not exist")
+            return None
+        tags = parse_if_match(if_match, what=f"map {map_id!r} exists: building a new version")
+        return self.maps.check_etag(map_id, tags)
+
+    def start(self, document: Any, map_id: str, if_match: str | None) -> BuildJobOut:
+        """Start a build job (``busy`` when this process's queue is full)."""
+        recording = self.parse(document)
+        base = self.base_version(map_id, if_match)
+        job = self.jobs.create(map_id, base)
+        try:
+            self.runner.submit(job.job_id, recording)
+        except RuntimeError as exc:  # the queue is full, or the runner stopped
+            self.jobs.fail(job.job_id, "busy", str(exc))
+            raise AppError("busy", f"too many map builds on this replica ({exc}); retry later",
+                           retry_after_s=BUSY_RETRY_AFTER_S) from exc
+        return job_out(self.jobs.get(job.job_id))
+
+    def get(self, job_id: str) -> BuildJobOut:
+        """A job (stale ones marked failed first); ``not-found``."""
+        self.jobs.fail_stale(self.settings.build_stale_after_s)
+        try:
+            return job_out(self.jobs.get(job_id))
+        except JobNotFoundError as exc:
+            raise AppError("not-found", f"no build job {job_id!r}",
+                           field="path.job_id", message="not found") from exc
+
+    def build_now(self, document: Any, map_id: str, *, update: bool,
+                  progress: Progress | None = None) -> LocalBuild:
+        """Build in this process (no job row) and store the map: a new map, or with
+        ``update`` the next version of an existing one (refused if it changed meanwhile).
+        Refusals: ``validation-error``, ``map-exists`` (the map exists and not ``update``), the
+        store's (``version-conflict``...); a build that gives no map is a :class:`LocalBuild`
+        with its ``failure``."""
+        recording = self.parse(document)
+        base = self.maps.latest_version(map_id)
+        if base is not None and not update:
+            raise AppError("map-exists", f"map {map_id!r} exists; build its next version "
+                           "with update (CLI: --update)", field="map_id",
+                           message="already exists")
+        try:
+            scene, report = build_map(recording, map_id=map_id, progress=progress,
+                                      deadline=time.monotonic()
+                                      + self.settings.build_time_budget_s)
+        except BuildTimeoutError as exc:
+            return LocalBuild(None, None, "time_budget_exceeded",
+                              f"{exc} (QUADLOC_BUILD_TIME_BUDGET_S="
+                              f"{self.settings.build_time_budget_s:g})")
+        if not scene.objects:
+            return LocalBuild(None, report, "no_objects", "no object could be associated and "
+                              "reconstructed (see the report)")
+        return LocalBuild(_store_build(self.store, scene, base), report)
