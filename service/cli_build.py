@@ -97,6 +97,7 @@ def _write_report(path: str | None, report: Any) -> None:
 
 
 def cmd_maps_build(args: argparse.Namespace) -> int:
+    from quadloc.factors.budget import Deadline
     from quadloc.maps.building.build import BuildTimeoutError, build_map
     from quadloc.maps.building.recording import RecordingError, parse_recording
     from quadloc.maps.errors import MapNotFound, VersionConflict
@@ -123,7 +124,7 @@ def cmd_maps_build(args: argparse.Namespace) -> int:
     t0 = time.monotonic()
     try:
         scene, report = build_map(recording, map_id=args.map_id, progress=bar,
-                                  deadline=t0 + settings.build_time_budget_s)
+                                  deadline=Deadline.wall_budget(settings.build_time_budget_s))
     except BuildTimeoutError as exc:
         bar.close()
         return cli._die(f"{exc} (QUADLOC_BUILD_TIME_BUDGET_S={settings.build_time_budget_s:g})", 1)

@@ -17,6 +17,7 @@ from typing import Any
 
 from sqlalchemy.exc import SQLAlchemyError
 
+from quadloc.factors.budget import Deadline
 from quadloc.maps.building.build import BuildTimeoutError, build_map
 from quadloc.maps.building.jobs import JobStore
 from quadloc.maps.building.recording import BuildLimits, Recording
@@ -105,7 +106,7 @@ class BuildRunner:
 
     def _build(self, job_id: str, recording: Recording) -> None:
         job = self.jobs.get(job_id)
-        deadline = time.monotonic() + self.time_budget_s
+        deadline = Deadline.wall_budget(self.time_budget_s)
         last = [0.0, ""]
 
         def progress(stage: str, percent: float, objects: int) -> None:

@@ -7,7 +7,7 @@ refinement from it; an answer explaining every usable detection is returned at o
 (:func:`quadloc.service.localization.refine.refine` of the best hypothesis and up to
 :data:`REFINED_ALTERNATIVES` distinct runners-up, with re-association) and ``assess``
 (:mod:`quadloc.service.localization.confidence`: calibrated covariance, confidence, ambiguity).
-The time budget (:mod:`quadloc.service.localization.budget`) bounds the whole call: no LM iteration
+The time budget (:class:`quadloc.factors.budget.Deadline`) bounds the whole call: no LM iteration
 starts after it (``refinement_status == "time_budget"``). Each stage's rules in detail:
 ``docs/design/localization.md``.
 """
@@ -21,13 +21,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.factors.camera import Camera, Ellipsoid
 from quadloc.factors.gravity_factor import GravityMeasurement
 from quadloc.factors.pose_residuals import expmap_pose3
 from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import CompiledMap, compile_map
 from quadloc.maps.model import SceneMap
-from quadloc.service.localization.budget import Deadline, deadline_passed
 from quadloc.service.localization.calibration import MIN_CONFIDENCE, S2_FLOOR
 from quadloc.service.localization.confidence import (
     calibrated_covariance,
@@ -110,13 +110,12 @@ def _not_localized(reason: str, metric: str, evaluated: int, timings: dict[str, 
 def refine_pose(
     detections: Sequence[Detection], ellipsoids: Sequence[Ellipsoid], camera: Camera,
     initial_world_from_camera: np.ndarray, options: LocalizationOptions,
-    prior: PosePrior | None = None, deadline: Deadline | float | None = None,
+    prior: PosePrior | None = None, deadline: Deadline | None = None,
     gravity: GravityMeasurement | None = None,
 ) -> RefinementResult:
     """:func:`quadloc.service.localization.refine.refine` with the options' metric, sigma, kernel,
     iteration cap and metric options (and the prior as a factor when it has a covariance, and
-    the gravity factor); after ``deadline`` (a :class:`quadloc.service.localization.budget.Deadline`
-    or a ``time.perf_counter()`` instant) no LM iteration starts."""
+    the gravity factor); after ``deadline`` (None: no limit) no LM iteration starts."""
     return refine(
         detections, ellipsoids, camera, initial_world_from_camera, options.metric,
         use_sigma=options.use_sigma, robust=options.robust, robust_scale=options.robust_scale,
@@ -135,7 +134,7 @@ def _pairs(matches: Sequence[Match]) -> set[tuple[int, int]]:
 def _refine_and_verify(
     matches: Sequence[Match], detections: Sequence[Detection], scorer: MatchScorer,
     world_from_camera: np.ndarray, options: LocalizationOptions, prior: PosePrior | None,
-    deadline: Deadline | float | None, gravity: GravityMeasurement | None,
+    deadline: Deadline | None, gravity: GravityMeasurement | None,
 ) -> tuple[_Answer | None, str | None]:
     """Refine on ``matches`` (with the scorer's map and camera), re-associate, refine again if
     the set changed (and the deadline has not passed). Returns (the answer, or None if the
@@ -321,7 +320,7 @@ def localize(
         ScoringTimeoutError: scoring ran past 1.05 x ``time_budget_ms`` (huge map x detections).
     """
     t0 = time.perf_counter()
-    cpu0 = time.thread_time()  # the budget counts this thread's CPU time (budget module)
+    cpu0 = time.thread_time()  # the budget counts this thread's CPU time (quadloc.factors.budget)
     timings: dict[str, float] = {}
     compiled = _validate(detections, scene_map, camera, options, prior, gravity)
     metric = options.metric
@@ -337,13 +336,13 @@ def localize(
         return _not_localized("too_few_detections", metric, 0, timings, t0)
     if len(usable) < 2:
         return _not_localized("no_label_match", metric, 0, timings, t0)
-    # CPU time of this thread, with a wall-clock hard limit (quadloc.service.localization.budget);
-    # the scorer raises ScoringTimeoutError past HARD_STOP_FACTOR x the budget
-    deadline = Deadline.after(options.time_budget_ms, cpu_start=cpu0, wall_start=t0)
+    # CPU time of this thread, with a wall-clock hard limit (quadloc.factors.budget); the scorer
+    # raises ScoringTimeoutError past HARD_STOP_FACTOR x the budget
+    deadline = Deadline.cpu_budget(options.time_budget_ms, cpu_start=cpu0, wall_start=t0)
     scorer = MatchScorer(compiled, camera, [detections[i].ellipse for i in usable],
                          [detections[i].label for i in usable], usable,
-                         deadline=Deadline.after(options.time_budget_ms, HARD_STOP_FACTOR,
-                                                 cpu_start=cpu0, wall_start=t0))
+                         deadline=Deadline.cpu_budget(options.time_budget_ms, HARD_STOP_FACTOR,
+                                                      cpu_start=cpu0, wall_start=t0))
     evaluated = 0
     n_samples = count_samples(scorer, 2)
     up_world = compiled.scene_map.up

@@ -23,10 +23,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from quadloc.factors.budget import Deadline, deadline_passed, earliest
 from quadloc.factors.camera import Camera, projected_gaussians
 from quadloc.factors.conics import Ellipse, ellipse_params, level_values
 from quadloc.maps.compiled import CompiledMap
-from quadloc.service.localization.budget import Deadline, deadline_passed, earliest
 from quadloc.service.localization.hypotheses import (
     p2e_hypotheses,
     p3p_hypotheses_batch,
@@ -88,8 +88,8 @@ POINT_BLOCK = 1 << 17
 #: Most pose x object projections per block (each holds a few 3x3 / 4x4 float arrays).
 PROJECT_BLOCK = 1 << 13
 #: The scorer's hard stop (``MatchScorer.deadline`` in ``localize``), as a multiple of the time
-#: budget on both clocks of a :class:`quadloc.service.localization.budget.Deadline`: the search
-# stops : at the budget itself, this bounds the scoring after it (final matches, re-association).
+#: budget on both clocks of a :class:`quadloc.factors.budget.Deadline`: the search stops at the
+#: budget itself, this bounds the scoring after it (final matches, re-association).
 HARD_STOP_FACTOR = 1.05
 
 
@@ -97,7 +97,7 @@ class ScoringTimeoutError(RuntimeError):
     """The scorer's deadline passed in the middle of scoring (see :class:`MatchScorer`)."""
 
 
-def _check(stop_at: Deadline | float | None) -> None:
+def _check(stop_at: Deadline | None) -> None:
     if deadline_passed(stop_at):
         raise ScoringTimeoutError("time budget exceeded while scoring poses")
 
@@ -226,16 +226,15 @@ class MatchScorer:
 
     ``detection_indices`` are the original indices of the usable detections (labels in the
     map); ``ellipses`` / ``labels`` are theirs. Only label-compatible pairs are evaluated, in
-    bounded blocks (module docstring). ``deadline`` (a
-    :class:`quadloc.service.localization.budget.Deadline`, a ``time.perf_counter()`` instant, or
-    None) is a hard stop for every scoring call: past it they raise :class:`ScoringTimeoutError`
-    (a search passes its own, earlier, stop to the calls it makes).
+    bounded blocks (module docstring). ``deadline`` (a :class:`quadloc.factors.budget.Deadline`
+    or None) is a hard stop for every scoring call: past it they raise
+    :class:`ScoringTimeoutError` (a search passes its own, earlier, stop to the calls it makes).
     """
 
     def __init__(
         self, compiled: CompiledMap, camera: Camera, ellipses: Sequence[Ellipse],
         labels: Sequence[str], detection_indices: Sequence[int], n_points: int = 96,
-        deadline: Deadline | float | None = None,
+        deadline: Deadline | None = None,
     ) -> None:
         self.compiled = compiled
         self.camera = camera
@@ -295,7 +294,7 @@ class MatchScorer:
             groups.setdefault(label, []).append(d)
         return [(dets, self.compatible_objects(dets[0]).astype(int)) for dets in groups.values()]
 
-    def _stop(self, stop_at: Deadline | float | None) -> Deadline | None:
+    def _stop(self, stop_at: Deadline | None) -> Deadline | None:
         return earliest(stop_at, self.deadline)
 
     def _project(self, camera_from_world: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -304,7 +303,7 @@ class MatchScorer:
         return projected_gaussians(self.camera, camera_from_world, *self._object_arrays)
 
     def centre_hits(self, camera_from_world: np.ndarray,
-                    stop_at: Deadline | float | None = None) -> np.ndarray:
+                    stop_at: Deadline | None = None) -> np.ndarray:
         """Stage 1: number of detections hit by a compatible valid object's centre, (H,)."""
         stop_at = self._stop(stop_at)
         T = np.asarray(camera_from_world, dtype=float)
@@ -325,7 +324,7 @@ class MatchScorer:
         return out
 
     def pair_iou(self, camera_from_world: np.ndarray, points: np.ndarray | None = None,
-                 floor: float = 0.0, stop_at: Deadline | float | None = None) -> np.ndarray:
+                 floor: float = 0.0, stop_at: Deadline | None = None) -> np.ndarray:
         """IoU (H, P) of every label-compatible pair (``pair_d[p]``, ``pair_o[p]``) at H poses,
         vectorised over poses and pairs (0 where the projection is invalid, and 0 where the
         estimate cannot reach ``floor``: callers that only use IoUs >= a threshold get the same
@@ -339,7 +338,7 @@ class MatchScorer:
         return self._pair_iou(camera_from_world, xy, floor, stop_at)
 
     def _pair_iou(self, camera_from_world: np.ndarray, xy: np.ndarray, floor: float,
-                  stop_at: Deadline | float | None) -> np.ndarray:
+                  stop_at: Deadline | None) -> np.ndarray:
         """:meth:`pair_iou` with the filling points as (D, 2, M)."""
         stop_at = self._stop(stop_at)
         T = np.asarray(camera_from_world, dtype=float)
@@ -383,7 +382,7 @@ class MatchScorer:
         return out
 
     def dense_iou(self, camera_from_world: np.ndarray, points: np.ndarray | None = None,
-                  floor: float = 0.0, stop_at: Deadline | float | None = None) -> np.ndarray:
+                  floor: float = 0.0, stop_at: Deadline | None = None) -> np.ndarray:
         """IoU (H, D, N) of every usable detection with every map object: :meth:`pair_iou`
         scattered into the (detections x objects) matrix (0 if incompatible). Memory: the
         output plus bounded blocks; call it with few poses (H) on large maps."""
@@ -705,7 +704,7 @@ def ransac(
     min_inliers: int,
     max_hypotheses: int,
     rng: np.random.Generator,
-    deadline: Deadline | float | None = None,
+    deadline: Deadline | None = None,
 ) -> RansacOutcome:
     """Search poses from minimal samples (see the module docstring).
 
@@ -715,9 +714,9 @@ def ransac(
         inlier_iou, min_inliers: acceptance of a pose.
         max_hypotheses: budget of minimal samples per solver (P3P, then P2E).
         rng: sampler (only used when not exhaustive: exhaustive runs do not depend on it).
-        deadline: when the search stops (a :class:`quadloc.service.localization.budget.Deadline`:
-            CPU time of this thread and a wall-clock hard limit; or a ``time.perf_counter()``
-            instant), checked before every batch and inside the scoring of a batch.
+        deadline: when the search stops (e.g. CPU time of this thread with a wall-clock hard
+            limit, :meth:`quadloc.factors.budget.Deadline.cpu_budget`; None: never), checked
+            before every batch and inside the scoring of a batch.
     """
     cm = scorer.compiled
     # distinct qualified hypotheses, best first: kept[0] only ever changes to a better one

@@ -29,13 +29,13 @@ from typing import Any
 import gtsam
 import numpy as np
 
+from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.factors.camera import Camera, Ellipsoid
 from quadloc.factors.gravity_factor import GravityMeasurement, gravity_factor
 from quadloc.factors.names import GeometryError, check_robust
 from quadloc.factors.pose_factors import pose3, pose_factors
 from quadloc.factors.pose_residuals import PoseResidualModel
 from quadloc.factors.rotations import check_pose
-from quadloc.service.localization.budget import Deadline, deadline_passed
 from quadloc.service.localization.types import (
     Detection,
     check_covariance,
@@ -188,7 +188,7 @@ def refine(
     gravity: GravityMeasurement | None = None,
     max_iterations: int = 50,
     metric_options: Mapping[str, Any] | None = None,
-    deadline: Deadline | float | None = None,
+    deadline: Deadline | None = None,
 ) -> RefinementResult:
     """Refine the camera pose by minimising ``sum_j sigma_j^-1 Delta_j`` (paper eq. 8) with LM.
 
@@ -210,9 +210,8 @@ def refine(
         metric_options: options of the metric (e.g. level-set sampling), see
             ``quadloc.factors.metrics``.
         deadline: optional stop after which no further LM iteration starts (the per-request
-            solve budget of the service): a :class:`quadloc.service.localization.budget.Deadline`
-            (CPU time of this thread with a wall-clock hard limit) or a ``time.perf_counter()``
-            instant; None = no limit.
+            solve budget of the service: CPU time of this thread with a wall-clock hard limit,
+            :meth:`quadloc.factors.budget.Deadline.cpu_budget`); None = no limit.
 
     Returns:
         :class:`RefinementResult`.
@@ -354,7 +353,7 @@ def _fixed_factors(graph: gtsam.NonlinearFactorGraph, n_metric_factors: int,
 
 def _solve(
     graph: gtsam.NonlinearFactorGraph, model: PoseResidualModel, T0: np.ndarray,
-    max_iterations: int, deadline: Deadline | float | None = None,
+    max_iterations: int, deadline: Deadline | None = None,
     start_pose: gtsam.Pose3 | None = None,
 ) -> _SolveOutcome:
     """One LM solve of ``graph`` from ``T0`` (``start_pose``: the same pose as a ``Pose3``, e.g.
@@ -409,7 +408,7 @@ def _solve(
 
 def _optimize_until(
     optimizer: gtsam.LevenbergMarquardtOptimizer, params: gtsam.LevenbergMarquardtParams,
-    deadline: Deadline | float | None, accepted_relative_tol: float | None = None,
+    deadline: Deadline | None, accepted_relative_tol: float | None = None,
 ) -> bool:
     """GTSAM's ``optimize()`` loop (same stopping rules), stepped from Python so that no
     iteration starts after ``deadline`` (None: no deadline). With ``accepted_relative_tol`` it

@@ -158,10 +158,10 @@ class LocalizationOptions:
             not depend on it.
         time_budget_ms: budget (ms) of the whole ``localize`` call, from its start, in CPU
             time of the solving thread with a wall-clock hard limit
-            (:mod:`quadloc.service.localization.budget`). The hypothesis search stops at it (the
-            best hypothesis so far is used, or ``reason="time_budget_exceeded"``); no refinement
-            iteration starts after it (``refinement_status="time_budget"``). ``None`` =
-            unbounded.
+            (:meth:`quadloc.factors.budget.Deadline.cpu_budget`). The hypothesis search stops
+            at it (the best hypothesis so far is used, or ``reason="time_budget_exceeded"``); no
+            refinement iteration starts after it (``refinement_status="time_budget"``).
+            ``None`` = unbounded.
         max_iterations: Levenberg-Marquardt iteration cap of the refinement.
         metric_options: extra keyword options of the metric (e.g. level-set sampling),
             validated on construction (an unknown key or bad value raises naming

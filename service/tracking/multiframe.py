@@ -10,12 +10,12 @@ method: docs/design/service.md#multi-frame-ransac.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.factors.camera import Camera
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.rotations import invert_pose
@@ -82,7 +82,7 @@ def _virtual_points(frames: Sequence[InitFrame], ref_from_k: list[np.ndarray],
 def multi_frame_ransac(
     frames: Sequence[InitFrame], compiled: CompiledMap, camera: Camera, *,
     inlier_iou: float = 0.2, max_samples: int = 300, rng: np.random.Generator | None = None,
-    deadline: float | None = None, extra_hypotheses: Sequence[np.ndarray] = (),
+    deadline: Deadline | None = None, extra_hypotheses: Sequence[np.ndarray] = (),
 ) -> MultiFrameOutcome:
     """Search a pose of the newest frame explaining the detections of all ``frames``.
 
@@ -92,6 +92,8 @@ def multi_frame_ransac(
             (e.g. a client prior).
         max_samples: minimal samples drawn (uniform over frames' detections and compatible
             objects, seeded by ``rng``).
+        deadline: no sample is drawn after it (None: no limit; the session passes a
+            wall-clock budget, :meth:`quadloc.factors.budget.Deadline.wall_budget`).
     """
     rng = rng or np.random.default_rng(0)
     ref = frames[-1].odom_from_camera
@@ -106,7 +108,7 @@ def multi_frame_ransac(
     hyps: list[np.ndarray] = [np.asarray(h, float) for h in extra_hypotheses]
     if len(pool) >= 3:
         for _ in range(max_samples):
-            if deadline is not None and time.perf_counter() > deadline:
+            if deadline_passed(deadline):
                 break
             idx = rng.choice(len(pool), 3, replace=False)
             sample, used = [], set()

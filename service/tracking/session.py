@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import gtsam
 import numpy as np
 
+from quadloc.factors.budget import Deadline
 from quadloc.factors.camera import Camera
 from quadloc.factors.conics import ellipse_params
 from quadloc.factors.gravity_factor import gravity_factor
@@ -438,7 +439,7 @@ class TrackingSession:
         out = multi_frame_ransac([b.frame for b in chosen], self.compiled, self.camera,
                                  inlier_iou=opts.inlier_iou, max_samples=opts.init_max_samples,
                                  rng=self._rng, extra_hypotheses=extra,
-                                 deadline=time.perf_counter() + opts.init_time_budget_ms / 1e3)
+                                 deadline=Deadline.wall_budget(opts.init_time_budget_ms / 1e3))
         timings["multi_frame_ransac"] = (time.perf_counter() - t) * 1e3
         if out.camera_from_world is None:
             reason = "ambiguous" if out.reason == "ambiguous" else waiting

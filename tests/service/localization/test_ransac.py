@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from quadloc.factors import metrics
+from quadloc.factors.budget import Deadline
 from quadloc.factors.camera import Ellipsoid, project_ellipsoid
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.rotations import invert_pose
@@ -287,7 +288,7 @@ def test_time_budget_holds_with_hundreds_of_same_label_detections():
     scorer = MatchScorer(cm, CAM, ells, ["a"] * 256, list(range(256)))
     t0 = time.perf_counter()
     out = ransac(scorer, UP, inlier_iou=0.2, min_inliers=2, max_hypotheses=300,
-                 rng=np.random.default_rng(0), deadline=t0 + 0.1)
+                 rng=np.random.default_rng(0), deadline=Deadline.wall_budget(0.1, start=t0))
     assert time.perf_counter() - t0 < 1.0  # budget 0.1 s, generous bound
     assert not out.exhaustive
 
@@ -428,7 +429,7 @@ def test_search_memory_does_not_grow_with_hypotheses_or_candidates():
         tracemalloc.start()
         t0 = time.perf_counter()
         ransac(scorer, UP, inlier_iou=0.2, min_inliers=2, max_hypotheses=budget,
-               rng=np.random.default_rng(0), deadline=t0 + 0.3)
+               rng=np.random.default_rng(0), deadline=Deadline.wall_budget(0.3, start=t0))
         peaks.append(tracemalloc.get_traced_memory()[1])
         tracemalloc.stop()
         assert time.perf_counter() - t0 < 3.0  # deadline 0.3 s; generous bound (shared CI)
@@ -440,7 +441,7 @@ def test_scoring_past_the_scorers_deadline_raises():
     from quadloc.service.localization.ransac import ScoringTimeoutError
 
     _, scorer = _crowded(50, 10)
-    scorer.deadline = 0.0  # long past
+    scorer.deadline = Deadline(wall=0.0)  # long past
     pose = invert_pose(look_at(np.array([0.0, -4.0, 0.2]), np.zeros(3)))
     with pytest.raises(ScoringTimeoutError):
         scorer.matches(pose, 0.2)
