@@ -26,7 +26,7 @@ from quadloc.service.api.convert import (
 from quadloc.service.api.errors import ProblemError, field_and_problem
 from quadloc.service.api.metrics import ApiMetrics
 from quadloc.service.localization.pipeline import localize
-from quadloc.service.localization.ransac import ScoringTimeoutError
+from quadloc.service.localization.scoring import ScoringTimeoutError
 from quadloc.service.localization.types import LocalizationInputError
 from quadloc.service.schemas.localize import LocalizeRequest, LocalizeResponse
 

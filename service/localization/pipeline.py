@@ -3,7 +3,7 @@
 Stages (wall time of each in ``LocalizationResult.timings_ms``): ``validate`` (input, compiled
 map, usable detections), ``prior`` (only with a :class:`PosePrior`: gated association and
 refinement from it; an answer explaining every usable detection is returned at once),
-``hypotheses`` (:func:`quadloc.service.localization.ransac.ransac`), ``refine``
+``hypotheses`` (:func:`quadloc.service.localization.search.ransac`), ``refine``
 (:func:`quadloc.service.localization.refine.refine` of the best hypothesis and up to
 :data:`REFINED_ALTERNATIVES` distinct runners-up, with re-association) and ``assess``
 (:mod:`quadloc.service.localization.confidence`: calibrated covariance, confidence, ambiguity).
@@ -44,19 +44,17 @@ from quadloc.service.localization.gravity import (
     gravity_measurement,
     tilt_errors_deg,
 )
-from quadloc.service.localization.ransac import (
+from quadloc.service.localization.refine import RefinementResult, refine
+from quadloc.service.localization.sampling import count_samples
+from quadloc.service.localization.scoring import (
     HARD_STOP_FACTOR,
-    Hypothesis,
     Match,
     MatchScorer,
-    _ellipse_points,
-    count_samples,
-    distinct_poses,
+    ellipse_points,
     greedy_assignment,
-    ransac,
     sunflower_disk,
 )
-from quadloc.service.localization.refine import RefinementResult, refine
+from quadloc.service.localization.search import Hypothesis, distinct_poses, ransac
 from quadloc.service.localization.types import (
     NO_REFINEMENT,
     Alternative,
@@ -285,7 +283,7 @@ def _prior_matches(scorer: MatchScorer, prior: PosePrior, threshold: float) -> l
     """One-to-one matches gated by the prior: each pair's best IoU over
     :func:`prior_gate_poses` (projected-ellipse gating under the prior's uncertainty)."""
     cw = np.array([invert_pose(T) for T in prior_gate_poses(prior)])
-    pts = _ellipse_points(scorer.params, sunflower_disk(256))
+    pts = ellipse_points(scorer.params, sunflower_disk(256))
     dense = scorer.dense_iou(cw, pts).max(axis=0)
     return greedy_assignment(dense, scorer.detection_indices, threshold)
 

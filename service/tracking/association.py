@@ -16,7 +16,7 @@ import numpy as np
 from quadloc.factors.camera import Camera
 from quadloc.factors.rotations import invert_pose, skew
 from quadloc.maps.compiled import CompiledMap
-from quadloc.service.localization.ransac import project_objects
+from quadloc.service.localization.hypotheses import project_objects
 
 __all__ = ["GATE_CHI2", "Association", "associate", "centre_jacobians"]
 

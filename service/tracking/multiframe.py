@@ -2,7 +2,7 @@
 
 Detections of the buffered frames become virtual image points of the newest (reference) frame
 through the odometry; P3P on three of them gives ``camera_r_from_world`` hypotheses, scored on
-every frame with :class:`quadloc.service.localization.ransac.MatchScorer`. Accepted with at least
+every frame with :class:`quadloc.service.localization.scoring.MatchScorer`. Accepted with at least
 :data:`MIN_DISTINCT_OBJECTS` objects and :data:`MIN_TOTAL_INLIERS` inliers and no distinct rival
 within :data:`AMBIGUITY_RATIO`. Poses are ``camera_from_world`` unless named otherwise. The
 method: docs/design/service.md#multi-frame-ransac.
@@ -21,7 +21,7 @@ from quadloc.factors.conics import Ellipse
 from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import CompiledMap
 from quadloc.service.localization.hypotheses import p3p_hypotheses
-from quadloc.service.localization.ransac import Match, MatchScorer, greedy_assignment
+from quadloc.service.localization.scoring import Match, MatchScorer, greedy_assignment
 
 __all__ = ["AMBIGUITY_RATIO", "MIN_DISTINCT_OBJECTS", "MIN_TOTAL_INLIERS", "InitFrame",
            "MultiFrameOutcome", "multi_frame_ransac"]

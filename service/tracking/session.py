@@ -33,7 +33,7 @@ from quadloc.factors.rotations import (
 )
 from quadloc.maps.compiled import CompiledMap
 from quadloc.service.localization.gravity import gravity_measurement
-from quadloc.service.localization.ransac import MatchScorer
+from quadloc.service.localization.scoring import MatchScorer
 from quadloc.service.localization.types import Detection, Gravity, InlierMatch, PosePrior
 from quadloc.service.tracking.association import associate
 from quadloc.service.tracking.confidence import session_confidence
