@@ -4,7 +4,8 @@ refinement -> :class:`quadloc.maps.model.SceneMap` plus its
 
 Progress is reported as ``progress(stage, percent, objects_found)`` with ``stage`` in
 ``associating`` (0-50 %), ``refining`` (50-95 %), ``saving`` (95 %); callbacks come at least after
-every label and every LM iteration. A ``deadline`` (``time.monotonic()``) bounds the whole build:
+every label and every LM iteration. A ``deadline`` (:class:`quadloc.factors.budget.Deadline`, e.g.
+``Deadline.wall_budget(seconds)``) bounds the whole build:
 association raises :class:`BuildTimeoutError` when it passes, the refinement stops early and keeps
 its current estimate (reported as ``refinement.stopped_early``).
 """
@@ -17,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.maps.building.association import AssociationOptions, associate
 from quadloc.maps.building.joint import refine_jointly
 from quadloc.maps.building.recording import Recording
@@ -62,7 +64,7 @@ class BuildTimeoutError(RuntimeError):
 
 def build_map(
     recording: Recording, *, map_id: str, progress: Progress | None = None,
-    deadline: float | None = None, association: AssociationOptions | None = None,
+    deadline: Deadline | None = None, association: AssociationOptions | None = None,
     max_iterations: int = 30, metadata: Mapping[str, Any] | None = None,
     min_views_unconstrained: int = MIN_VIEWS_UNCONSTRAINED,
     max_center_std_m: float | None = MAX_CENTER_STD_M,
@@ -84,7 +86,7 @@ def build_map(
     report_progress("associating", 0.0, 0)
 
     def on_label(_label: str, fraction: float) -> None:
-        if deadline is not None and time.monotonic() > deadline:
+        if deadline_passed(deadline):
             raise BuildTimeoutError("time budget exhausted during association")
         report_progress("associating", 50.0 * fraction, 0)
 

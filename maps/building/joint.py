@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import gtsam
 import numpy as np
 
+from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.factors.camera import Camera, Ellipsoid
 from quadloc.factors.ellipsoid_factors import depth_margins, ellipsoid_views_factor
 from quadloc.factors.ellipsoid_residuals import (
@@ -162,7 +163,7 @@ def refine_jointly(
     objects: Sequence[tuple[str, Sequence[int], Ellipsoid]], *,
     size_priors: Mapping[str, SizePrior] | None = None, refine_cameras: bool = False,
     odometry: OdometryNoise | None = None, max_iterations: int = 30,
-    deadline: float | None = None,
+    deadline: Deadline | None = None,
     progress: Callable[[float, float], None] | None = None,
     unconstrained_log_std: float = UNCONSTRAINED_LOG_STD,
     truncated_weight: float = TRUNCATED_WEIGHT,
@@ -172,8 +173,8 @@ def refine_jointly(
 ) -> JointResult:
     """Refine ``objects`` = ``(label, observation indices, initial ellipsoid)`` jointly.
 
-    ``world_from_camera`` (F, 4, 4): the frames' poses (app's world frame). ``deadline``: a
-    ``time.monotonic()`` value after which LM stops (the result so far is kept;
+    ``world_from_camera`` (F, 4, 4): the frames' poses (app's world frame). ``deadline``: the
+    :class:`quadloc.factors.budget.Deadline` after which LM stops (the result so far is kept;
     ``stopped_early``). ``progress(iteration, error)`` after each LM iteration, and with a
     fractional iteration at least every 0.5 s during one (see ``_Ticker``).
     """
@@ -273,7 +274,7 @@ def refine_jointly(
     it = 0
     stopped = False
     while it < max_iterations:
-        if deadline is not None and time.monotonic() > deadline:
+        if deadline_passed(deadline):
             stopped = True
             break
         ticker.new_iteration(it, err)

@@ -23,6 +23,7 @@ from typing import Any
 
 from sqlalchemy.exc import SQLAlchemyError
 
+from quadloc.factors.budget import Deadline
 from quadloc.maps.building.build import BuildTimeoutError, build_map
 from quadloc.maps.building.jobs import BuildJob, JobNotFoundError, JobStore
 from quadloc.maps.building.recording import BuildLimits, Recording, RecordingError, parse_recording
@@ -150,7 +151,7 @@ class BuildRunner:
         progress("associating", 0.0, 0)
         try:
             scene, report = build_map(recording, map_id=job.map_id, progress=progress,
-                                      deadline=time.monotonic() + self.time_budget_s)
+                                      deadline=Deadline.wall_budget(self.time_budget_s))
         except BuildTimeoutError as exc:
             self.jobs.fail(job_id, "time_budget_exceeded",
                            f"{exc} (budget {self.time_budget_s:g} s); send fewer frames")
@@ -308,9 +309,9 @@ class BuildService:
                            "with update (CLI: --update)", field="map_id",
                            message="already exists")
         try:
-            scene, report = build_map(recording, map_id=map_id, progress=progress,
-                                      deadline=time.monotonic()
-                                      + self.settings.build_time_budget_s)
+            scene, report = build_map(
+                recording, map_id=map_id, progress=progress,
+                deadline=Deadline.wall_budget(self.settings.build_time_budget_s))
         except BuildTimeoutError as exc:
             return LocalBuild(None, None, "time_budget_exceeded",
                               f"{exc} (QUADLOC_BUILD_TIME_BUDGET_S="

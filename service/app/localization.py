@@ -19,6 +19,7 @@ from collections import deque
 from collections.abc import Sequence
 from typing import Protocol
 
+from quadloc.factors.budget import Deadline
 from quadloc.factors.names import GeometryError
 from quadloc.maps.compiled import CompiledMap
 from quadloc.service.app.conversions import (
@@ -32,7 +33,7 @@ from quadloc.service.app.conversions import (
 from quadloc.service.app.errors import AppError, field_and_problem
 from quadloc.service.app.map_loader import MapLoader
 from quadloc.service.localization.pipeline import localize
-from quadloc.service.localization.ransac import ScoringTimeoutError
+from quadloc.service.localization.scoring import ScoringTimeoutError
 from quadloc.service.localization.types import LocalizationInputError
 from quadloc.service.schemas.localize import (
     BatchLocalizeResponse,
@@ -189,13 +190,12 @@ class Localizer:
                         batch: bool) -> list[LocalizeResponse]:
         """Solve ``frames`` in order against ``compiled`` (blocking; call from a worker
         thread), one solver slot per frame; batch errors name ``frames[i]....``; a batch stops
-        solving when ``batch_time_budget_ms`` (``time.perf_counter``, from this call) runs
-        out."""
+        solving when ``batch_time_budget_ms`` (wall clock, from this call) runs out."""
         out: list[LocalizeResponse] = []
-        deadline = time.perf_counter() + self.batch_budget_ms / 1e3 if batch else float("inf")
+        deadline = Deadline.wall_budget(self.batch_budget_ms / 1e3) if batch else Deadline()
         for i, frame in enumerate(frames):
             prefix = f"frames[{i}]." if batch else ""
-            remaining_s = deadline - time.perf_counter()
+            remaining_s = deadline.remaining_wall_s()
             if remaining_s <= 0:
                 out.append(self._budget_exceeded(compiled, frame, prefix))
                 continue
@@ -207,7 +207,7 @@ class Localizer:
                 raise AppError("busy", "all solver slots are busy; retry shortly",
                                retry_after_s=BUSY_RETRY_AFTER_S)
             try:
-                remaining_ms = (deadline - time.perf_counter()) * 1e3
+                remaining_ms = deadline.remaining_wall_s() * 1e3
                 if remaining_ms <= 0:
                     out.append(self._budget_exceeded(compiled, frame, prefix))
                 else:

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from quadloc.service.localization.arrays import FloatArray
 from quadloc.service.localization.calibration import (
     AMBIGUITY_CHI2_RATIO,
     AMBIGUITY_RATIO,
@@ -87,9 +88,9 @@ def residual_variance(chi2: float, n_residuals: int) -> float:
 
 
 def calibrated_covariance(
-    metric: str, raw_covariance: np.ndarray | None, chi2: float, n_residuals: int,
-    n_detections: int, fixed_information: np.ndarray | None = None,
-) -> np.ndarray | None:
+    metric: str, raw_covariance: FloatArray | None, chi2: float, n_residuals: int,
+    n_detections: int, fixed_information: FloatArray | None = None,
+) -> FloatArray | None:
     """The reported 6x6 covariance (order ``[omega, v]``, rad/m, body frame, right
     perturbation) from the refinement's raw one (see the module docstring; ``metric``: its
     :func:`calibration_key`; ``n_detections`` refined, ``n_residuals`` scalar residuals); None
@@ -148,7 +149,7 @@ def covariance_scale(metric: str, chi2: float, n_residuals: int, n_detections: i
     return COVARIANCE_SCALE[metric] * variance_factor(metric, chi2, n_residuals, n_detections)
 
 
-def gaussian_tolerance_probability(covariance: np.ndarray | None) -> float:
+def gaussian_tolerance_probability(covariance: FloatArray | None) -> float:
     """P(|position error| <= TOLERANCE_POSITION_M and |rotation| <= TOLERANCE_ROTATION_DEG)
     for a zero-mean Gaussian error with this covariance, approximated per block by the
     chi-square with 3 DoF of the isotropic equivalent (``sigma^2 = trace / 3``); NaN without a
@@ -174,7 +175,7 @@ def _chi2_3_cdf(x: float) -> float:
 
 
 def evidence_features(
-    *, n_inliers: int, n_usable: int, ious: np.ndarray, s2: float, covariance: np.ndarray | None,
+    *, n_inliers: int, n_usable: int, ious: FloatArray, s2: float, covariance: FloatArray | None,
     margin: float, n_samples: int, s2_floor: float = 0.0,
     chi2_ratio_log: float = CHI2_COMPETITOR_CAP, gravity: bool = False,
 ) -> dict[str, float]:
@@ -229,8 +230,8 @@ def confidence_probability(metric: str, features: Mapping[str, float],
     the calibrated covariance carries the metric's accuracy).
     ``models``: the coefficient sets (default :data:`CONFIDENCE_MODELS`; the bench passes
     candidates while fitting)."""
-    model = (CONFIDENCE_MODELS if models is None else models)[
-        "none" if metric == "none" else "refined"]
+    sets: Mapping[str, Any] = CONFIDENCE_MODELS if models is None else models
+    model = sets["none" if metric == "none" else "refined"]
     z = model["intercept"] + model.get("metric_offset", {}).get(metric, 0.0)
     for name, coef in model["coef"].items():
         z += coef * features[name]

@@ -25,6 +25,7 @@ import math
 import numpy as np
 
 from quadloc.factors.gravity_factor import GravityMeasurement
+from quadloc.service.localization.arrays import FloatArray
 from quadloc.service.localization.confidence import TOLERANCE_ROTATION_DEG
 from quadloc.service.localization.types import Gravity
 
@@ -34,8 +35,8 @@ __all__ = ["GRAVITY_GATE_SIGMAS", "answer_gate_deg", "gravity_measurement", "til
 GRAVITY_GATE_SIGMAS = 3.0
 
 
-def tilt_errors_deg(camera_from_world: np.ndarray, up_world: np.ndarray,
-                    gravity: Gravity) -> np.ndarray:
+def tilt_errors_deg(camera_from_world: FloatArray, up_world: FloatArray,
+                    gravity: Gravity) -> FloatArray:
     """Angles (degrees, shape ``(...)``) between the camera's up predicted by poses
     ``camera_from_world`` (..., 4, 4) (or rotations (..., 3, 3)) from the map's ``up_world``
     (3,) and the measured up ``-gravity.direction_camera``."""
@@ -43,7 +44,8 @@ def tilt_errors_deg(camera_from_world: np.ndarray, up_world: np.ndarray,
     up = np.asarray(up_world, dtype=float)
     predicted = R @ (up / np.linalg.norm(up))
     cos = -(predicted @ gravity.direction_camera)
-    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    angles: FloatArray = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    return angles
 
 
 def answer_gate_deg(gravity: Gravity) -> float:
@@ -51,7 +53,7 @@ def answer_gate_deg(gravity: Gravity) -> float:
     return TOLERANCE_ROTATION_DEG + GRAVITY_GATE_SIGMAS * gravity.sigma_deg
 
 
-def gravity_measurement(gravity: Gravity, up_world: np.ndarray) -> GravityMeasurement:
+def gravity_measurement(gravity: Gravity, up_world: FloatArray) -> GravityMeasurement:
     """The client's gravity as the refinement's factor input: its down in the camera, the
     map's down (minus ``up_world``, (3,), any length) and its sigma in radians."""
     return GravityMeasurement(gravity.direction_camera, -np.asarray(up_world, dtype=float),

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -21,6 +22,10 @@ import numpy as np
 from quadloc.factors.camera import MIN_DEPTH, Camera, Ellipsoid, projected_gaussians
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.rotations import so3_exp
+from quadloc.service.localization.arrays import BoolArray, FloatArray, IndexArray
+
+if TYPE_CHECKING:
+    from cv2.typing import MatLike
 
 __all__ = ["p2e_hypotheses", "p3p_hypotheses", "p3p_hypotheses_batch", "point_centres",
            "project_objects"]
@@ -29,10 +34,10 @@ _EMPTY = np.zeros((0, 4, 4))
 
 
 def project_objects(
-    camera: Camera, camera_from_world: np.ndarray, centers: np.ndarray,
-    shape_matrices: np.ndarray, dual_quadrics: np.ndarray, min_depth: float = MIN_DEPTH,
+    camera: Camera, camera_from_world: FloatArray, centers: FloatArray,
+    shape_matrices: FloatArray, dual_quadrics: FloatArray, min_depth: float = MIN_DEPTH,
     with_point_centres: bool = True,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+) -> tuple[FloatArray, FloatArray, BoolArray, FloatArray | None]:
     """Projections of S ellipsoids at H poses, vectorised (THE batched projection of the RANSAC
     scorer, of the P2E residuals and of the tracker's association; computed by
     :func:`quadloc.factors.camera.projected_gaussians`).
@@ -55,7 +60,7 @@ def project_objects(
     return cen, inv_shape, valid, point_centres(P, centers) if with_point_centres else None
 
 
-def point_centres(P: np.ndarray, centers: np.ndarray) -> np.ndarray:
+def point_centres(P: FloatArray, centers: FloatArray) -> FloatArray:
     """Pixel projections (H, S, 2) of points ``centers`` (S, 3) (world m) by ``P = K [R | t]``
     (H, 3, 4) (garbage where a point is behind the camera)."""
     hom = P[:, :, :3] @ np.asarray(centers).T + P[:, :, 3:]  # (H, 3, S)
@@ -64,8 +69,8 @@ def point_centres(P: np.ndarray, centers: np.ndarray) -> np.ndarray:
 
 
 def p3p_hypotheses(
-    image_points: np.ndarray, world_points: np.ndarray, camera: Camera
-) -> np.ndarray:
+    image_points: FloatArray, world_points: FloatArray, camera: Camera
+) -> FloatArray:
     """Up to four ``camera_from_world`` poses (S, 4, 4) from three 2D-3D point pairs.
 
     Args:
@@ -82,8 +87,8 @@ def p3p_hypotheses(
 
 
 def p3p_hypotheses_batch(
-    image_points: np.ndarray, world_points: np.ndarray, camera: Camera
-) -> tuple[np.ndarray, np.ndarray]:
+    image_points: FloatArray, world_points: FloatArray, camera: Camera
+) -> tuple[FloatArray, IndexArray]:
     """:func:`p3p_hypotheses` of B samples at once: ``cv2.solveP3P`` per sample, the rotation
     vectors converted and the depths checked for all solutions together (Rodrigues' formula,
     vectorised).
@@ -98,7 +103,9 @@ def p3p_hypotheses_batch(
     img = np.ascontiguousarray(np.asarray(image_points, dtype=np.float64).reshape(-1, 3, 2))
     obj = np.ascontiguousarray(np.asarray(world_points, dtype=np.float64).reshape(-1, 3, 3))
     K = camera.K
-    rv, tv, owner = [], [], []
+    rv: list[MatLike] = []  # cv2.solveP3P's rotation / translation vectors (3, 1)
+    tv: list[MatLike] = []
+    owner: list[int] = []
     for b in range(len(img)):
         try:
             n, rvecs, tvecs = cv2.solveP3P(obj[b], img[b], K, None, flags=cv2.SOLVEPNP_P3P)
@@ -110,8 +117,8 @@ def p3p_hypotheses_batch(
             owner.extend([b] * n)
     if not rv:
         return _EMPTY, np.zeros(0, dtype=int)
-    r = np.concatenate(rv, axis=None, dtype=float).reshape(-1, 3)
-    t = np.concatenate(tv, axis=None, dtype=float).reshape(-1, 3)
+    r = np.concatenate(rv, axis=None, dtype=np.float64).reshape(-1, 3)
+    t = np.concatenate(tv, axis=None, dtype=np.float64).reshape(-1, 3)
     sample = np.asarray(owner, dtype=int)
     R = so3_exp(r)
     depth = np.einsum("mpj,mj->mp", obj[sample], R[:, 2]) + t[:, 2, None]
@@ -144,7 +151,7 @@ DEDUPE_TOLERANCE = 1e-4
 _FD_STEP = 1e-7  # forward-difference step of the LM Jacobian (rad, m)
 
 
-def _frames(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def _frames(a: FloatArray, b: FloatArray) -> FloatArray:
     """Orthonormal frames ``[a, b_perp, a x b_perp]`` (..., 3, 3) (columns) of direction pairs
     (..., 3) (Gram-Schmidt): ``R = F(a_to, b_to) F(a_from, b_from)^T`` maps ``a_from`` to
     ``a_to`` exactly and ``b_from`` as close as possible to ``b_to``."""
@@ -166,15 +173,15 @@ class _PairProblem:
     def __init__(self, ellipses: Sequence[Ellipse], ellipsoids: Sequence[Ellipsoid],
                  camera: Camera) -> None:
         self.camera = camera
-        self.X = np.array([e.center for e in ellipsoids])
-        self.Q = np.array([e.dual_quadric() for e in ellipsoids])
-        self.M = np.array([e.shape_matrix() for e in ellipsoids])
-        self.c_det = np.array([e.center for e in ellipses])
-        self.size = np.array([math.sqrt(e.a * e.b) for e in ellipses])
-        self.L_inv = np.array([np.linalg.inv(np.linalg.cholesky(e.gaussian()[1]))
+        self.X: FloatArray = np.array([e.center for e in ellipsoids])
+        self.Q: FloatArray = np.array([e.dual_quadric() for e in ellipsoids])
+        self.M: FloatArray = np.array([e.shape_matrix() for e in ellipsoids])
+        self.c_det: FloatArray = np.array([e.center for e in ellipses])
+        self.size: FloatArray = np.array([math.sqrt(e.a * e.b) for e in ellipses])
+        self.L_inv: FloatArray = np.array([np.linalg.inv(np.linalg.cholesky(e.gaussian()[1]))
                                for e in ellipses])
 
-    def residuals(self, R: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def residuals(self, R: FloatArray, t: FloatArray) -> tuple[FloatArray, BoolArray]:
         """Residuals (N, 10) of ``camera_from_world = [R | t]`` (R (N, 3, 3), t (N, 3)) and
         their validity (N,): both ellipsoids entirely in front of the camera (rows of invalid
         poses are not meaningful)."""
@@ -202,8 +209,8 @@ class _PairProblem:
         return r, valid & np.all(np.isfinite(r), axis=1)
 
 
-def _lm_batch(problem: _PairProblem, R: np.ndarray, t: np.ndarray, iterations: int
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _lm_batch(problem: _PairProblem, R: FloatArray, t: FloatArray, iterations: int
+              ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Levenberg-Marquardt (Marquardt's diagonal damping) on the 10 residuals of every start at
     once. Pose update ``[R | t] <- [Exp(w) R | Exp(w) t + v]`` (a left perturbation
     ``(w, v)`` in the camera frame); forward-difference Jacobian. Returns the final R, t and
@@ -260,14 +267,14 @@ def p2e_hypotheses(
     ellipses: Sequence[Ellipse],
     ellipsoids: Sequence[Ellipsoid],
     camera: Camera,
-    up_world: np.ndarray,
+    up_world: FloatArray,
     *,
     rolls_deg: Sequence[float] = ROLL_STARTS_DEG,
     n_ratio_samples: int = N_RATIO_SAMPLES,
     iterations: int = LM_ITERATIONS,
     max_hypotheses: int = MAX_P2E_HYPOTHESES,
     starts_per_group: int = STARTS_PER_GROUP,
-) -> np.ndarray:
+) -> FloatArray:
     """Camera poses from two ellipse/ellipsoid pairs (6 DoF; derivation in ``docs/p2e.md``).
 
     Starts at ``n_ratio_samples`` depth ratios x camera rolls ``rolls_deg`` x both pitch
@@ -317,7 +324,7 @@ def p2e_hypotheses(
     R, t = R[sel], t[sel]
     R, t, cost = _lm_batch(problem, R, t, iterations)
     order = np.argsort(cost, kind="stable")
-    out: list[np.ndarray] = []
+    out: list[FloatArray] = []
     for i in order:
         if not math.isfinite(cost[i]) or len(out) >= max_hypotheses:
             break
@@ -330,9 +337,9 @@ def p2e_hypotheses(
 
 def _p2e_starts(
     ellipses: Sequence[Ellipse], ellipsoids: Sequence[Ellipsoid], camera: Camera,
-    X: np.ndarray, dist: float, v_w: np.ndarray, up: np.ndarray, kappa: float,
-    rolls: np.ndarray, n_ratio_samples: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    X: FloatArray, dist: float, v_w: FloatArray, up: FloatArray, kappa: float,
+    rolls: FloatArray, n_ratio_samples: int,
+) -> tuple[FloatArray, FloatArray, IndexArray]:
     """Start poses ``(R (N, 3, 3), t (N, 3), group (N,))`` of :func:`p2e_hypotheses`
     (``docs/p2e.md`` steps 1-5): depth ratios x rolls x pitch branches, vectorised; ``group``
     numbers the (roll, pitch branch) of each start."""

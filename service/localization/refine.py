@@ -29,13 +29,14 @@ from typing import Any
 import gtsam
 import numpy as np
 
+from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.factors.camera import Camera, Ellipsoid
 from quadloc.factors.gravity_factor import GravityMeasurement, gravity_factor
 from quadloc.factors.names import GeometryError, check_robust
 from quadloc.factors.pose_factors import pose3, pose_factors
 from quadloc.factors.pose_residuals import PoseResidualModel
 from quadloc.factors.rotations import check_pose
-from quadloc.service.localization.budget import Deadline, deadline_passed
+from quadloc.service.localization.arrays import BoolArray, FloatArray
 from quadloc.service.localization.types import (
     Detection,
     check_covariance,
@@ -129,11 +130,11 @@ class RefinementResult:
             gravity): with ``chi2``, how well a pose explains everything measured.
     """
 
-    world_from_camera: np.ndarray
-    covariance: np.ndarray | None
+    world_from_camera: FloatArray
+    covariance: FloatArray | None
     covariance_reason: str | None
-    per_detection_cost: np.ndarray
-    valid_projection: np.ndarray
+    per_detection_cost: FloatArray
+    valid_projection: BoolArray
     initial_error: float
     total_error: float
     iterations: int
@@ -143,7 +144,7 @@ class RefinementResult:
     resample_skipped: bool = False
     chi2: float = math.nan
     n_residuals: int = 0
-    fixed_information: np.ndarray | None = None
+    fixed_information: FloatArray | None = None
     gravity_chi2: float = 0.0
 
 
@@ -177,18 +178,18 @@ def refine(
     detections: Sequence[Detection],
     ellipsoids: Sequence[Ellipsoid],
     camera: Camera,
-    initial_world_from_camera: np.ndarray,
+    initial_world_from_camera: FloatArray,
     metric: str = "level_set",
     *,
     use_sigma: bool = True,
     robust: str | None = None,
     robust_scale: float | None = None,
-    prior_world_from_camera: np.ndarray | None = None,
-    prior_covariance: np.ndarray | None = None,
+    prior_world_from_camera: FloatArray | None = None,
+    prior_covariance: FloatArray | None = None,
     gravity: GravityMeasurement | None = None,
     max_iterations: int = 50,
     metric_options: Mapping[str, Any] | None = None,
-    deadline: Deadline | float | None = None,
+    deadline: Deadline | None = None,
 ) -> RefinementResult:
     """Refine the camera pose by minimising ``sum_j sigma_j^-1 Delta_j`` (paper eq. 8) with LM.
 
@@ -210,9 +211,8 @@ def refine(
         metric_options: options of the metric (e.g. level-set sampling), see
             ``quadloc.factors.metrics``.
         deadline: optional stop after which no further LM iteration starts (the per-request
-            solve budget of the service): a :class:`quadloc.service.localization.budget.Deadline`
-            (CPU time of this thread with a wall-clock hard limit) or a ``time.perf_counter()``
-            instant; None = no limit.
+            solve budget of the service: CPU time of this thread with a wall-clock hard limit,
+            :meth:`quadloc.factors.budget.Deadline.cpu_budget`); None = no limit.
 
     Returns:
         :class:`RefinementResult`.
@@ -243,14 +243,14 @@ def refine(
     graph, model, n_metric_factors = _build_graph(
         detections, ellipsoids, camera, T0, metric, sigmas, robust, robust_scale, prior,
         gravity, metric_options)
-    T_start, total_iterations, initial_error = T0, 0, None
+    T_start, total_iterations, initial_error = T0, 0, math.nan
     start_pose: gtsam.Pose3 | None = None
     relaid_skipped = False
     for pass_ in range(2 if resample else 1):
         outcome = _solve(graph, model, T_start, max_iterations - total_iterations, deadline,
                          start_pose)
         total_iterations += outcome.iterations
-        if initial_error is None:
+        if pass_ == 0:
             initial_error = outcome.initial_error
         if pass_ == 1 or outcome.status in ("diverged", "invalid_projection", "time_budget") \
                 or total_iterations >= max_iterations or not model.sampling_grown:
@@ -270,6 +270,8 @@ def refine(
     if status == "converged" and total_iterations >= max_iterations:
         status = "max_iterations"
     weights = np.array([s if s is not None else 1.0 for s in sigmas])
+    covariance: FloatArray | None
+    reason: str | None
     if status == "diverged":
         covariance, reason = None, "refinement diverged"
     elif status == "invalid_projection":
@@ -299,10 +301,10 @@ def refine(
 
 @dataclass(frozen=True)
 class _SolveOutcome:
-    T: np.ndarray
+    T: FloatArray
     result: gtsam.Values
-    costs: np.ndarray
-    valid: np.ndarray
+    costs: FloatArray
+    valid: BoolArray
     initial_error: float
     total_error: float
     iterations: int
@@ -311,8 +313,8 @@ class _SolveOutcome:
 
 def _build_graph(
     detections: Sequence[Detection], ellipsoids: Sequence[Ellipsoid], camera: Camera,
-    T0: np.ndarray, metric: str, sigmas: list[float | None], robust: str | None,
-    robust_scale: float | None, prior: tuple[np.ndarray, np.ndarray] | None,
+    T0: FloatArray, metric: str, sigmas: list[float | None], robust: str | None,
+    robust_scale: float | None, prior: tuple[FloatArray, FloatArray] | None,
     gravity: GravityMeasurement | None, metric_options: Mapping[str, Any] | None,
 ) -> tuple[gtsam.NonlinearFactorGraph, PoseResidualModel, int]:
     """The factor graph of one refinement, its shared residual model (level-set samples
@@ -338,7 +340,7 @@ def _build_graph(
 
 
 def _fixed_factors(graph: gtsam.NonlinearFactorGraph, n_metric_factors: int,
-                   values: gtsam.Values, with_gravity: bool) -> tuple[np.ndarray | None, float]:
+                   values: gtsam.Values, with_gravity: bool) -> tuple[FloatArray | None, float]:
     """(information (6, 6) of the factors after the metric ones at ``values``, or None
     without; the gravity factor's whitened squared error, 0 without)."""
     if graph.size() == n_metric_factors:
@@ -353,8 +355,8 @@ def _fixed_factors(graph: gtsam.NonlinearFactorGraph, n_metric_factors: int,
 
 
 def _solve(
-    graph: gtsam.NonlinearFactorGraph, model: PoseResidualModel, T0: np.ndarray,
-    max_iterations: int, deadline: Deadline | float | None = None,
+    graph: gtsam.NonlinearFactorGraph, model: PoseResidualModel, T0: FloatArray,
+    max_iterations: int, deadline: Deadline | None = None,
     start_pose: gtsam.Pose3 | None = None,
 ) -> _SolveOutcome:
     """One LM solve of ``graph`` from ``T0`` (``start_pose``: the same pose as a ``Pose3``, e.g.
@@ -409,7 +411,7 @@ def _solve(
 
 def _optimize_until(
     optimizer: gtsam.LevenbergMarquardtOptimizer, params: gtsam.LevenbergMarquardtParams,
-    deadline: Deadline | float | None, accepted_relative_tol: float | None = None,
+    deadline: Deadline | None, accepted_relative_tol: float | None = None,
 ) -> bool:
     """GTSAM's ``optimize()`` loop (same stopping rules), stepped from Python so that no
     iteration starts after ``deadline`` (None: no deadline). With ``accepted_relative_tol`` it
@@ -437,13 +439,14 @@ def _optimize_until(
 
 
 def _batched_covariance(
-    model: PoseResidualModel, T: np.ndarray, weights: np.ndarray
-) -> tuple[np.ndarray | None, str | None]:
+    model: PoseResidualModel, T: FloatArray, weights: FloatArray
+) -> tuple[FloatArray | None, str | None]:
     """Covariance of the pose from the batched factor alone (no robust kernel, no prior):
     ``(J^T W J)^-1`` with ``J`` (N*m, 6) the factor's Jacobian at ``T`` (the memoised
     evaluation LM ended with) and ``W`` the rows' weights ``1 / w_j`` (``weights`` (N,)), which
     is what ``gtsam.Marginals`` computes for that graph (tested), without linearising it."""
     J = model.evaluate(T, jacobian=True).factor_jacobians
+    assert J is not None  # evaluated with jacobian=True
     Jw = J / weights[:, None, None]
     info = Jw.reshape(-1, 6).T @ J.reshape(-1, 6)
     if not np.isfinite(info).all():
@@ -455,7 +458,7 @@ def _batched_covariance(
     return (V / eig) @ V.T, None
 
 
-def _singular_reason(info_eigenvalues: np.ndarray) -> str | None:
+def _singular_reason(info_eigenvalues: FloatArray) -> str | None:
     """Why an information matrix with these eigenvalues (ascending) gives no covariance (not
     finite, not positive definite, or condition number >= ``INFORMATION_CONDITION_LIMIT``),
     else None."""
@@ -471,7 +474,7 @@ def _singular_reason(info_eigenvalues: np.ndarray) -> str | None:
 
 def _covariance(
     graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
-) -> tuple[np.ndarray | None, str | None]:
+) -> tuple[FloatArray | None, str | None]:
     """Marginal covariance of the pose (``gtsam.Marginals``: robust kernels, prior), or None
     and the reason."""
     try:

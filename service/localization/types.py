@@ -32,6 +32,7 @@ from quadloc.service.limits import (
     ROBUST_KERNELS,
     UNKNOWN_LABEL_POLICIES,
 )
+from quadloc.service.localization.arrays import FloatArray
 
 __all__ = [  # METRICS and ROBUST_KERNELS: quadloc.service.limits' names, re-exported for callers
     "METRICS",
@@ -158,10 +159,10 @@ class LocalizationOptions:
             not depend on it.
         time_budget_ms: budget (ms) of the whole ``localize`` call, from its start, in CPU
             time of the solving thread with a wall-clock hard limit
-            (:mod:`quadloc.service.localization.budget`). The hypothesis search stops at it (the
-            best hypothesis so far is used, or ``reason="time_budget_exceeded"``); no refinement
-            iteration starts after it (``refinement_status="time_budget"``). ``None`` =
-            unbounded.
+            (:meth:`quadloc.factors.budget.Deadline.cpu_budget`). The hypothesis search stops
+            at it (the best hypothesis so far is used, or ``reason="time_budget_exceeded"``); no
+            refinement iteration starts after it (``refinement_status="time_budget"``).
+            ``None`` = unbounded.
         max_iterations: Levenberg-Marquardt iteration cap of the refinement.
         metric_options: extra keyword options of the metric (e.g. level-set sampling),
             validated on construction (an unknown key or bad value raises naming
@@ -236,7 +237,7 @@ def _check_metric_options(metric: str, options: Mapping[str, Any]) -> None:
 
 
 def check_covariance(field_name: str, value: object,
-                     error: type[FieldError] = LocalizationInputError) -> np.ndarray:
+                     error: type[FieldError] = LocalizationInputError) -> FloatArray:
     """A 6x6 pose covariance (finite, symmetric to rtol 1e-9, positive definite) as a read-only
     float array; otherwise raises ``error`` (a :class:`FieldError`) with ``field=field_name``.
     Shared by :class:`PosePrior` and :func:`quadloc.service.localization.refine.refine`."""
@@ -267,8 +268,8 @@ class PosePrior:
             factor in the refinement; without, it is only the starting point.
     """
 
-    world_from_camera: np.ndarray
-    covariance: np.ndarray | None = None
+    world_from_camera: FloatArray
+    covariance: FloatArray | None = None
 
     def __post_init__(self) -> None:
         try:
@@ -293,7 +294,7 @@ class Gravity:
         sigma_deg: its angular uncertainty (1 sigma, degrees), in (0, 30].
     """
 
-    direction_camera: np.ndarray
+    direction_camera: FloatArray
     sigma_deg: float = GRAVITY_DEFAULT_SIGMA_DEG
 
     def __post_init__(self) -> None:
@@ -344,7 +345,7 @@ class Alternative:
         n_inliers: its inlier count; score: the sum of its inliers' IoUs.
     """
 
-    world_from_camera: np.ndarray
+    world_from_camera: FloatArray
     confidence: float
     n_inliers: int
     score: float
@@ -399,8 +400,8 @@ class LocalizationResult:
 
     localized: bool
     reason: str | None
-    world_from_camera: np.ndarray | None
-    covariance: np.ndarray | None
+    world_from_camera: FloatArray | None
+    covariance: FloatArray | None
     confidence: float
     inliers: tuple[InlierMatch, ...]
     metric: str

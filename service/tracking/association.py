@@ -16,7 +16,8 @@ import numpy as np
 from quadloc.factors.camera import Camera
 from quadloc.factors.rotations import invert_pose, skew
 from quadloc.maps.compiled import CompiledMap
-from quadloc.service.localization.ransac import project_objects
+from quadloc.service.localization.arrays import FloatArray
+from quadloc.service.localization.hypotheses import project_objects
 
 __all__ = ["GATE_CHI2", "Association", "associate", "centre_jacobians"]
 
@@ -36,8 +37,8 @@ class Association:
     mahalanobis2: float
 
 
-def centre_jacobians(camera: Camera, world_from_camera: np.ndarray,
-                     points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def centre_jacobians(camera: Camera, world_from_camera: FloatArray,
+                     points_world: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Pixel projections (N, 2) of world points (N, 3) and their Jacobians (N, 2, 6) w.r.t. the
     pose tangent ``[omega, v]`` (right perturbation: ``T @ Exp(xi)``).
 
@@ -58,8 +59,8 @@ def centre_jacobians(camera: Camera, world_from_camera: np.ndarray,
 
 
 def associate(
-    compiled: CompiledMap, camera: Camera, world_from_camera: np.ndarray,
-    covariance: np.ndarray, ellipses: np.ndarray, labels: list[str],
+    compiled: CompiledMap, camera: Camera, world_from_camera: FloatArray,
+    covariance: FloatArray, ellipses: FloatArray, labels: list[str],
     detection_indices: list[int],
 ) -> list[Association]:
     """One-to-one gated associations (module docstring).

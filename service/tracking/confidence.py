@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from quadloc.service.localization.arrays import FloatArray
 from quadloc.service.localization.confidence import (
     TOLERANCE_POSITION_M,
     TOLERANCE_ROTATION_DEG,
@@ -26,7 +27,7 @@ __all__ = ["COVARIANCE_SCALE", "TOLERANCE_POSITION_M", "TOLERANCE_ROTATION_DEG",
 COVARIANCE_SCALE = 1.0
 
 
-def session_confidence(state: str, covariance: np.ndarray | None,
+def session_confidence(state: str, covariance: FloatArray | None,
                        contradicted: bool = False) -> float:
     """P(position error <= 10 cm and rotation error <= 5 deg) in [0, 1] (module docstring).
 

@@ -2,7 +2,7 @@
 
 Detections of the buffered frames become virtual image points of the newest (reference) frame
 through the odometry; P3P on three of them gives ``camera_r_from_world`` hypotheses, scored on
-every frame with :class:`quadloc.service.localization.ransac.MatchScorer`. Accepted with at least
+every frame with :class:`quadloc.service.localization.scoring.MatchScorer`. Accepted with at least
 :data:`MIN_DISTINCT_OBJECTS` objects and :data:`MIN_TOTAL_INLIERS` inliers and no distinct rival
 within :data:`AMBIGUITY_RATIO`. Poses are ``camera_from_world`` unless named otherwise. The
 method: docs/design/service.md#multi-frame-ransac.
@@ -10,18 +10,19 @@ method: docs/design/service.md#multi-frame-ransac.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.factors.camera import Camera
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import CompiledMap
+from quadloc.service.localization.arrays import FloatArray
 from quadloc.service.localization.hypotheses import p3p_hypotheses
-from quadloc.service.localization.ransac import Match, MatchScorer, greedy_assignment
+from quadloc.service.localization.scoring import Match, MatchScorer, greedy_assignment
 
 __all__ = ["AMBIGUITY_RATIO", "MIN_DISTINCT_OBJECTS", "MIN_TOTAL_INLIERS", "InitFrame",
            "MultiFrameOutcome", "multi_frame_ransac"]
@@ -43,8 +44,8 @@ class InitFrame:
         labels: their D labels; detection_indices: their indices in the frame's request.
     """
 
-    odom_from_camera: np.ndarray
-    ellipses: np.ndarray
+    odom_from_camera: FloatArray
+    ellipses: FloatArray
     labels: tuple[str, ...]
     detection_indices: tuple[int, ...]
 
@@ -53,7 +54,7 @@ class InitFrame:
 class MultiFrameOutcome:
     """``camera_from_world`` of every input frame (or None) and each frame's inlier matches."""
 
-    camera_from_world: list[np.ndarray] | None
+    camera_from_world: list[FloatArray] | None
     matches: list[list[Match]]
     n_objects: int
     n_inliers: int
@@ -61,9 +62,9 @@ class MultiFrameOutcome:
     reason: str | None
 
 
-def _virtual_points(frames: Sequence[InitFrame], ref_from_k: list[np.ndarray],
+def _virtual_points(frames: Sequence[InitFrame], ref_from_k: list[FloatArray],
                     camera: Camera, sample: list[tuple[int, int, int]],
-                    compiled: CompiledMap) -> np.ndarray | None:
+                    compiled: CompiledMap) -> FloatArray | None:
     pts = []
     Kinv = np.linalg.inv(camera.K)
     for k, d, o in sample:
@@ -82,7 +83,7 @@ def _virtual_points(frames: Sequence[InitFrame], ref_from_k: list[np.ndarray],
 def multi_frame_ransac(
     frames: Sequence[InitFrame], compiled: CompiledMap, camera: Camera, *,
     inlier_iou: float = 0.2, max_samples: int = 300, rng: np.random.Generator | None = None,
-    deadline: float | None = None, extra_hypotheses: Sequence[np.ndarray] = (),
+    deadline: Deadline | None = None, extra_hypotheses: Sequence[FloatArray] = (),
 ) -> MultiFrameOutcome:
     """Search a pose of the newest frame explaining the detections of all ``frames``.
 
@@ -92,6 +93,8 @@ def multi_frame_ransac(
             (e.g. a client prior).
         max_samples: minimal samples drawn (uniform over frames' detections and compatible
             objects, seeded by ``rng``).
+        deadline: no sample is drawn after it (None: no limit; the session passes a
+            wall-clock budget, :meth:`quadloc.factors.budget.Deadline.wall_budget`).
     """
     rng = rng or np.random.default_rng(0)
     ref = frames[-1].odom_from_camera
@@ -103,10 +106,10 @@ def multi_frame_ransac(
                for f in frames]
     pool = [(k, d, compiled.indices_for(lab)) for k, f in enumerate(frames)
             for d, lab in enumerate(f.labels) if len(compiled.indices_for(lab))]
-    hyps: list[np.ndarray] = [np.asarray(h, float) for h in extra_hypotheses]
+    hyps: list[FloatArray] = [np.asarray(h, float) for h in extra_hypotheses]
     if len(pool) >= 3:
         for _ in range(max_samples):
-            if deadline is not None and time.perf_counter() > deadline:
+            if deadline_passed(deadline):
                 break
             idx = rng.choice(len(pool), 3, replace=False)
             sample, used = [], set()
@@ -147,15 +150,15 @@ def multi_frame_ransac(
             score[h] += sum(x.iou for x in m)
     order = np.argsort(-score, kind="stable")
     best = int(order[0])
-    objs = {m.object_index for ms in per_frame[best] for m in ms}
+    matched = {m.object_index for ms in per_frame[best] for m in ms}
     n_inl = sum(len(ms) for ms in per_frame[best])
-    if len(objs) < MIN_DISTINCT_OBJECTS or n_inl < MIN_TOTAL_INLIERS:
-        return MultiFrameOutcome(None, [], len(objs), n_inl, len(hyps), "too_few_objects")
+    if len(matched) < MIN_DISTINCT_OBJECTS or n_inl < MIN_TOTAL_INLIERS:
+        return MultiFrameOutcome(None, [], len(matched), n_inl, len(hyps), "too_few_objects")
     c_best = invert_pose(H[best])[:3, 3]
     for h in order[1:]:
         if score[h] < AMBIGUITY_RATIO * score[best]:
             break
         if np.linalg.norm(invert_pose(H[h])[:3, 3] - c_best) > AMBIGUITY_DISTANCE_M:
-            return MultiFrameOutcome(None, [], len(objs), n_inl, len(hyps), "ambiguous")
+            return MultiFrameOutcome(None, [], len(matched), n_inl, len(hyps), "ambiguous")
     poses = [k_from_ref[k] @ H[best] for k in range(len(frames))]
-    return MultiFrameOutcome(poses, per_frame[best], len(objs), n_inl, len(hyps), None)
+    return MultiFrameOutcome(poses, per_frame[best], len(matched), n_inl, len(hyps), None)

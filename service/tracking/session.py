@@ -15,10 +15,12 @@ import time
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 import gtsam
 import numpy as np
 
+from quadloc.factors.budget import Deadline
 from quadloc.factors.camera import Camera
 from quadloc.factors.conics import ellipse_params
 from quadloc.factors.gravity_factor import gravity_factor
@@ -31,8 +33,9 @@ from quadloc.factors.rotations import (
     snap_to_rotation,
 )
 from quadloc.maps.compiled import CompiledMap
+from quadloc.service.localization.arrays import FloatArray
 from quadloc.service.localization.gravity import gravity_measurement
-from quadloc.service.localization.ransac import MatchScorer
+from quadloc.service.localization.scoring import Match, MatchScorer
 from quadloc.service.localization.types import Detection, Gravity, InlierMatch, PosePrior
 from quadloc.service.tracking.association import associate
 from quadloc.service.tracking.confidence import session_confidence
@@ -56,6 +59,8 @@ STATES = ("initializing", "tracking", "lost")
 #: ``lost_after_misses`` such frames in a row).
 LOST_UNEXPLAINED_DETECTIONS = 3
 SMOOTHERS = ("isam2", "batch")
+
+_T = TypeVar("_T")
 
 
 class TrackingInputError(FieldError):
@@ -86,7 +91,7 @@ class DriftModel:
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise TrackingInputError("must be finite and >= 0", field=f"options.drift.{name}")
 
-    def sigmas(self, distance_m: float, dt_s: float) -> np.ndarray:
+    def sigmas(self, distance_m: float, dt_s: float) -> FloatArray:
         """Per-axis stds ``[omega (3) rad, v (3) m]`` of one odometry step."""
         dt_s = max(dt_s, 0.0)
         r = math.sqrt(self.rotation_rad_per_sqrt_m ** 2 * distance_m
@@ -152,7 +157,7 @@ class FrameInput:
     """
 
     detections: Sequence[Detection]
-    odom_from_camera: np.ndarray
+    odom_from_camera: FloatArray
     timestamp: float
     frame_id: str | None = None
     prior: PosePrior | None = None
@@ -174,10 +179,10 @@ class FrameResult:
     frame_id: str | None
     timestamp: float
     state: str
-    world_from_camera: np.ndarray | None
-    covariance: np.ndarray | None
-    world_from_odom: np.ndarray | None
-    world_from_odom_covariance: np.ndarray | None
+    world_from_camera: FloatArray | None
+    covariance: FloatArray | None
+    world_from_odom: FloatArray | None
+    world_from_odom_covariance: FloatArray | None
     inliers: tuple[InlierMatch, ...]
     confidence: float
     n_usable_detections: int
@@ -185,7 +190,7 @@ class FrameResult:
     timings_ms: dict[str, float]
 
 
-def pose_adjoint(T: np.ndarray) -> np.ndarray:
+def pose_adjoint(T: FloatArray) -> FloatArray:
     """6x6 adjoint of a 4x4 pose in GTSAM's ``[omega, v]`` order:
     ``T Exp(xi) T^-1 = Exp(Ad_T xi)``."""
     return pose3(T).AdjointMap()
@@ -218,8 +223,9 @@ class TrackingSession:
         self._rng = np.random.default_rng(self.options.seed)
         self._buffer: deque[_Buffered] = deque(maxlen=self.options.init_buffer_frames)
         self._last_attempt = -10 ** 9
-        self._smoother: gtsam.FixedLagSmoother | None = None
-        self._last: tuple[int, float, np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._smoother: gtsam.BatchFixedLagSmoother | gtsam.IncrementalFixedLagSmoother | None \
+            = None
+        self._last: tuple[int, float, FloatArray, FloatArray, FloatArray] | None = None
         self._misses = 0
         self._last_timestamp: float | None = None
 
@@ -256,7 +262,7 @@ class TrackingSession:
         self.state = "lost"
 
     # ------------------------------------------------------------------ input
-    def _check(self, frame: FrameInput) -> np.ndarray:
+    def _check(self, frame: FrameInput) -> FloatArray:
         if not isinstance(frame, FrameInput):
             raise TrackingInputError(f"must be a FrameInput, got {type(frame).__name__}",
                                      field="frame")
@@ -283,8 +289,8 @@ class TrackingSession:
         return T
 
     # ------------------------------------------------------------------ tracking
-    def _factors_for(self, key: int, T_pred: np.ndarray, detections: Sequence[Detection],
-                     objects: Sequence[int]) -> list[gtsam.NonlinearFactor]:
+    def _factors_for(self, key: int, T_pred: FloatArray, detections: Sequence[Detection],
+                     objects: Sequence[int]) -> Sequence[gtsam.NonlinearFactor]:
         if not objects:
             return []
         opts = self.options
@@ -296,14 +302,14 @@ class TrackingSession:
             batched=opts.robust is None)
         return factors
 
-    def _between(self, key_a: int, key_b: int, T_oa: np.ndarray, T_ob: np.ndarray,
-                 dt: float) -> tuple[gtsam.BetweenFactorPose3, np.ndarray, np.ndarray]:
+    def _between(self, key_a: int, key_b: int, T_oa: FloatArray, T_ob: FloatArray,
+                 dt: float) -> tuple[gtsam.BetweenFactorPose3, FloatArray, FloatArray]:
         rel = invert_pose(T_oa) @ T_ob
         sig = self.options.drift.sigmas(float(np.linalg.norm(rel[:3, 3])), dt)
         noise = gtsam.noiseModel.Diagonal.Sigmas(sig)
         return gtsam.BetweenFactorPose3(key_a, key_b, pose3(rel), noise), rel, np.diag(sig ** 2)
 
-    def _new_smoother(self) -> gtsam.FixedLagSmoother:
+    def _new_smoother(self) -> gtsam.BatchFixedLagSmoother | gtsam.IncrementalFixedLagSmoother:
         lag = float(self.options.window_frames - 1)
         if self.options.smoother == "batch":
             return gtsam.BatchFixedLagSmoother(lag)
@@ -313,21 +319,24 @@ class TrackingSession:
         params.findUnusedFactorSlots = True
         return gtsam.IncrementalFixedLagSmoother(lag, params)
 
-    def _marginal(self, key: int) -> np.ndarray | None:
+    def _marginal(self, key: int) -> FloatArray | None:
+        """The smoother's 6x6 marginal covariance of pose ``key`` (symmetrised), None when
+        it cannot be computed or is not finite."""
+        sm = self._smoother
+        assert sm is not None
         try:
-            if self.options.smoother == "batch":
-                sm = self._smoother
-                cov = gtsam.Marginals(sm.getFactors(), sm.calculateEstimate()) \
+            if isinstance(sm, gtsam.BatchFixedLagSmoother):  # options.smoother == "batch"
+                marginal = gtsam.Marginals(sm.getFactors(), sm.calculateEstimate()) \
                     .marginalCovariance(key)
             else:
-                cov = self._smoother.marginalCovariance(key)
+                marginal = sm.marginalCovariance(key)
         except RuntimeError:
             return None
-        cov = 0.5 * (np.asarray(cov) + np.asarray(cov).T)
+        cov: FloatArray = 0.5 * (np.asarray(marginal) + np.asarray(marginal).T)
         return cov if np.all(np.isfinite(cov)) else None
 
     def _verify(self, detections: Sequence[Detection], usable: list[int],
-                world_from_camera: np.ndarray) -> list[InlierMatch]:
+                world_from_camera: FloatArray) -> list[InlierMatch]:
         if not usable:
             return []
         sc = MatchScorer(self.compiled, self.camera, [detections[i].ellipse for i in usable],
@@ -336,8 +345,8 @@ class TrackingSession:
         return [InlierMatch(m.detection_index, self.compiled.object_ids[m.object_index],
                             float(m.iou), 1.0 - float(m.iou)) for m in ms]
 
-    def _result(self, index: int, frame: FrameInput, T_oc: np.ndarray, T: np.ndarray | None,
-                cov: np.ndarray | None, inliers: list[InlierMatch], n_usable: int,
+    def _result(self, index: int, frame: FrameInput, T_oc: FloatArray, T: FloatArray | None,
+                cov: FloatArray | None, inliers: list[InlierMatch], n_usable: int,
                 reason: str | None, timings: dict[str, float],
                 contradicted: bool = False) -> FrameResult:
         T_wo = cov_wo = None
@@ -351,11 +360,11 @@ class TrackingSession:
                            session_confidence(self.state, cov, contradicted), n_usable, reason,
                            timings)
 
-    def _no_pose(self, index: int, frame: FrameInput, T_oc: np.ndarray, usable: list[int],
+    def _no_pose(self, index: int, frame: FrameInput, T_oc: FloatArray, usable: list[int],
                  reason: str, timings: dict[str, float]) -> FrameResult:
         return self._result(index, frame, T_oc, None, None, [], len(usable), reason, timings)
 
-    def _track(self, index: int, frame: FrameInput, T_oc: np.ndarray, usable: list[int],
+    def _track(self, index: int, frame: FrameInput, T_oc: FloatArray, usable: list[int],
                timings: dict[str, float]) -> FrameResult:
         assert self._last is not None and self._smoother is not None
         t = time.perf_counter()
@@ -382,7 +391,7 @@ class TrackingSession:
         values = gtsam.Values()
         values.insert(key, pose3(T_pred))
         stamps = gtsam.FixedLagSmootherKeyTimestampMap()
-        stamps.insert((key, float(index)))
+        stamps[key] = float(index)
         timings["associate"] = (time.perf_counter() - t) * 1e3
         t = time.perf_counter()
         try:
@@ -411,7 +420,7 @@ class TrackingSession:
                             "detections_unexplained" if contradicted else None, timings,
                             contradicted)
 
-    def _predicted_visible(self, world_from_camera: np.ndarray) -> bool:
+    def _predicted_visible(self, world_from_camera: FloatArray) -> bool:
         cfw = invert_pose(world_from_camera)
         pc = self.compiled.centers @ cfw[:3, :3].T + cfw[:3, 3]
         z = pc[:, 2]
@@ -422,7 +431,7 @@ class TrackingSession:
                            & (v < self.camera.height)))
 
     # ------------------------------------------------------------------ (re)initialization
-    def _initialize(self, index: int, frame: FrameInput, T_oc: np.ndarray, usable: list[int],
+    def _initialize(self, index: int, frame: FrameInput, T_oc: FloatArray, usable: list[int],
                     timings: dict[str, float]) -> FrameResult:
         opts = self.options
         dets = tuple(frame.detections)
@@ -443,7 +452,7 @@ class TrackingSession:
         out = multi_frame_ransac([b.frame for b in chosen], self.compiled, self.camera,
                                  inlier_iou=opts.inlier_iou, max_samples=opts.init_max_samples,
                                  rng=self._rng, extra_hypotheses=extra,
-                                 deadline=time.perf_counter() + opts.init_time_budget_ms / 1e3)
+                                 deadline=Deadline.wall_budget(opts.init_time_budget_ms / 1e3))
         timings["multi_frame_ransac"] = (time.perf_counter() - t) * 1e3
         if out.camera_from_world is None:
             reason = "ambiguous" if out.reason == "ambiguous" else waiting
@@ -461,8 +470,8 @@ class TrackingSession:
         inliers = self._verify(dets, usable, T)
         return self._result(index, frame, T_oc, T, cov, inliers, len(usable), None, timings)
 
-    def _start_graph(self, chosen: list[_Buffered], poses: list[np.ndarray],
-                     matches: list) -> tuple[np.ndarray, np.ndarray] | None:
+    def _start_graph(self, chosen: list[_Buffered], poses: list[FloatArray],
+                     matches: list[list[Match]]) -> tuple[FloatArray, FloatArray] | None:
         """Joint LM over the chosen frames (odometry between consecutive ones, detection
         factors of the RANSAC inliers, a weak prior on the first), then seed the smoother."""
         graph = gtsam.NonlinearFactorGraph()
@@ -473,7 +482,7 @@ class TrackingSession:
         for j, (b, T, ms) in enumerate(zip(chosen, poses, matches, strict=True)):
             key = _key(b.index)
             values.insert(key, pose3(T))
-            stamps.insert((key, float(b.index)))
+            stamps[key] = float(b.index)
             by_det = {m.detection_index: m.object_index for m in ms}
             det_idx = sorted(by_det)
             for f in self._factors_for(key, T, [b.detections[i] for i in det_idx],
@@ -530,7 +539,7 @@ def _add_prior(graph: gtsam.NonlinearFactorGraph, key: int, prior: PosePrior | N
                                              np.asarray(prior.covariance))))
 
 
-def _spread(items: list, n: int) -> list:
+def _spread(items: Sequence[_T], n: int) -> list[_T]:
     """At most ``n`` items evenly spread over ``items`` (keeping the newest)."""
     if n <= 0:
         return []

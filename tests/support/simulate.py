@@ -48,7 +48,7 @@ from quadloc.factors.conics import Ellipse, level_values, params_from_dual_conic
 from quadloc.factors.rotations import invert_pose, so3_exp
 from quadloc.maps.compiled import CompiledMap, compile_map
 from quadloc.maps.model import SceneMap
-from quadloc.service.localization.ransac import sunflower_disk
+from quadloc.service.localization.scoring import sunflower_disk
 from quadloc.service.localization.types import Detection
 
 __all__ = [
@@ -59,7 +59,6 @@ __all__ = [
     "simulate_frame",
     "simulate_frames",
     "simulate_gravity",
-    "sunflower_disk",
 ]
 
 

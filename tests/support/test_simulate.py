@@ -11,6 +11,7 @@ from quadloc.factors.camera import project_ellipsoid
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import compile_map
+from quadloc.service.localization.scoring import sunflower_disk
 from tests.support.helpers import level
 from tests.support.reference_data import load_chess_map, load_chess_world_from_camera
 from tests.support.simulate import (
@@ -19,7 +20,6 @@ from tests.support.simulate import (
     moment_ellipse,
     simulate_frame,
     simulate_frames,
-    sunflower_disk,
 )
 
 MAP = load_chess_map()

@@ -197,7 +197,7 @@ class _BlockedBuild:
         self.release = threading.Event()
         self.started = threading.Event()
 
-    def __call__(self, recording: Any, *, map_id: str, progress: Any, deadline: float) -> Any:
+    def __call__(self, recording: Any, *, map_id: str, progress: Any, deadline: Any) -> Any:
         from quadloc.maps.building.build import BuildTimeoutError
 
         self.started.set()

@@ -6,6 +6,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+import time
 from pathlib import Path
 
 import gtsam
@@ -13,6 +14,7 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
+from quadloc.factors import budget as budget_module
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.names import GeometryError
 from quadloc.factors.rotations import rotation_from_quaternion_wxyz
@@ -439,8 +441,11 @@ def test_batch_total_budget_answers_the_rest_not_localized(tmp_path: Path, monke
     # The solver's clock is simulated: each solve "takes" 200 ms of it, whatever the machine's
     # load, so the test is deterministic (no wall-clock assertions).
     clock = {"now": 1000.0}
-    monkeypatch.setattr(solver_module, "time",
-                        types.SimpleNamespace(perf_counter=lambda: clock["now"]))
+    fake_time = types.SimpleNamespace(perf_counter=lambda: clock["now"],
+                                      thread_time=time.thread_time)
+    # the batch's budget (a Deadline) and the frames' timings read the simulated clock
+    monkeypatch.setattr(solver_module, "time", fake_time)
+    monkeypatch.setattr(budget_module, "time", fake_time)
     real = solver_module.localize
     budgets = []
 

@@ -302,7 +302,7 @@ def test_budget_counts_the_solving_threads_cpu_time_so_load_does_not_change_the_
     import threading
     import time
 
-    import quadloc.service.localization.budget as budget
+    import quadloc.factors.budget as budget
 
     monkeypatch.setattr(budget, "WALL_LIMIT_FACTOR", 100.0)
 
@@ -357,22 +357,21 @@ def test_deadline_clocks():
     gets no CPU (sleeping), on its wall-clock hard limit (WALL_LIMIT_FACTOR x the budget)."""
     import time
 
-    from quadloc.service.localization.budget import WALL_LIMIT_FACTOR, Deadline, deadline_passed
+    from quadloc.factors.budget import WALL_LIMIT_FACTOR, Deadline, deadline_passed
 
     c0 = time.thread_time()
-    d = Deadline.after(20.0)
+    d = Deadline.cpu_budget(20.0)
     d = Deadline(cpu=d.cpu)  # the CPU clock alone (the wall limit may pass first under load)
     while not d.passed():
         pass
     assert time.thread_time() - c0 >= 0.020
     t0 = time.perf_counter()
-    d = Deadline.after(20.0)
+    d = Deadline.cpu_budget(20.0)
     while not d.passed():
         time.sleep(0.002)  # no CPU used: only the wall limit can stop it
     assert time.perf_counter() - t0 >= WALL_LIMIT_FACTOR * 0.020
     assert d.cpu > time.thread_time()  # the CPU budget was not the one that passed
-    assert Deadline.after(None) is None and not deadline_passed(None)
-    assert deadline_passed(time.perf_counter() - 1.0)  # a perf_counter instant still works
+    assert Deadline.cpu_budget(None) is None and not deadline_passed(None)
 
 
 def test_deadline_reads_the_cpu_clock_only_once_the_cpu_stop_is_reachable(monkeypatch):
@@ -382,11 +381,11 @@ def test_deadline_reads_the_cpu_clock_only_once_the_cpu_stop_is_reachable(monkey
     CPU clock read directly), and the bound held (the stop came after ``cpu_check_from``)."""
     import time
 
-    from quadloc.service.localization import budget
-    from quadloc.service.localization.budget import Deadline, earliest
+    from quadloc.factors import budget
+    from quadloc.factors.budget import Deadline, earliest
 
     c0 = time.thread_time()
-    d = Deadline.after(30.0)
+    d = Deadline.cpu_budget(30.0)
     d = Deadline(cpu=d.cpu, cpu_check_from=d.cpu_check_from)  # no wall limit (load)
     assert d.cpu_check_from >= time.perf_counter() - 1e-3
     reads = []
@@ -401,6 +400,28 @@ def test_deadline_reads_the_cpu_clock_only_once_the_cpu_stop_is_reachable(monkey
     # combining deadlines keeps the earliest of each instant, the CPU check bound included
     e = earliest(d, Deadline(cpu=1.0, wall=2.0))
     assert e.cpu_check_from == -float("inf") and e.cpu == min(d.cpu, 1.0)
+
+
+def test_a_wall_clock_budget_passes_on_the_wall_clock_and_never_reads_the_cpu_clock(
+        monkeypatch):
+    """``Deadline.wall_budget`` (a map build, a session's initialisation) passes once its wall
+    time has gone, for a thread that uses no CPU (sleeping), and never reads the CPU clock."""
+    import time
+
+    from quadloc.factors import budget
+    from quadloc.factors.budget import Deadline
+
+    reads = []
+    real = time.thread_time
+    monkeypatch.setattr(budget.time, "thread_time", lambda: reads.append(1) or real())
+    t0 = time.perf_counter()
+    d = Deadline.wall_budget(0.05)
+    while not d.passed():
+        time.sleep(0.002)
+    assert time.perf_counter() - t0 >= 0.05
+    assert not reads
+    assert Deadline.wall_budget(1.0, start=t0 - 2.0).passed()
+    assert not Deadline.wall_budget(60.0).passed()
 
 
 def test_a_capped_alternative_that_competes_is_refined_in_full(monkeypatch):

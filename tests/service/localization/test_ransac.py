@@ -8,20 +8,21 @@ import numpy as np
 import pytest
 
 from quadloc.factors import metrics
+from quadloc.factors.budget import Deadline
 from quadloc.factors.camera import Ellipsoid, project_ellipsoid
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import compile_map
 from quadloc.maps.model import MapObject, SceneMap
-from quadloc.service.localization.ransac import (
+from quadloc.service.localization.hypotheses import project_objects
+from quadloc.service.localization.scoring import (
     MatchScorer,
     ellipse_points,
     greedy_assignment,
     iou_estimates,
-    project_objects,
-    ransac,
     sunflower_disk,
 )
+from quadloc.service.localization.search import ransac
 from tests.service.localization.test_hypotheses import BACK, CAM, UP, look_at
 
 
@@ -195,7 +196,7 @@ def test_sample_counts_are_per_label_and_enumeration_is_complete():
     """count_samples (closed form per label) == a brute-force walk over detection tuples."""
     import itertools
 
-    from quadloc.service.localization.ransac import _enumerate_samples, count_samples
+    from quadloc.service.localization.sampling import count_samples, enumerate_samples
 
     rng = np.random.default_rng(6)
     cm = compile_map(synthetic_map(rng))  # labels a a a b b c d e
@@ -208,19 +209,19 @@ def test_sample_counts_are_per_label_and_enumeration_is_complete():
             for objs in itertools.product(*(scorer.compatible_objects(d).tolist() for d in dets))
             if len(set(objs)) == size)
         assert count_samples(scorer, size) == len(brute)
-        assert sorted(_enumerate_samples(scorer, size, len(brute))) == brute
-        assert _enumerate_samples(scorer, size, len(brute) - 1) is None
+        assert sorted(enumerate_samples(scorer, size, len(brute))) == brute
+        assert enumerate_samples(scorer, size, len(brute) - 1) is None
 
 
 @pytest.mark.parametrize("seed", [6, 7, 8])
 def test_most_promising_first_is_the_stable_sort_of_every_sample(seed):
-    """_most_promising_first (triples sorted, their samples generated lazily) == every sample
-    of _iter_samples stably sorted by (compatible-object product, -triangle area), also with
+    """most_promising_first (triples sorted, their samples generated lazily) == every sample
+    of all_samples stably sorted by (compatible-object product, -triangle area), also with
     duplicate detections (equal keys of different triples: their samples interleave)."""
-    from quadloc.service.localization.ransac import (
-        _iter_samples,
-        _most_promising_first,
-        _triangle_areas,
+    from quadloc.service.localization.sampling import (
+        all_samples,
+        most_promising_first,
+        triangle_areas,
     )
 
     rng = np.random.default_rng(seed)
@@ -233,25 +234,25 @@ def test_most_promising_first_is_the_stable_sort_of_every_sample(seed):
     ells.append(ells[2])
     labs.append(labs[2])
     scorer = MatchScorer(cm, CAM, ells, labs, list(range(len(labs))))
-    every = list(_iter_samples(scorer.label_groups, 3))
+    every = list(all_samples(scorer.label_groups, 3))
     n_compat = scorer.compat.sum(axis=1).astype(float)
     dets = np.array([sm[0] for sm in every])
-    order = np.lexsort((-_triangle_areas(scorer, dets), np.prod(n_compat[dets], axis=1)))
+    order = np.lexsort((-triangle_areas(scorer, dets), np.prod(n_compat[dets], axis=1)))
     expected = [every[k] for k in order.tolist()]
     assert len(expected) > 50
-    assert list(_most_promising_first(scorer)) == expected
+    assert list(most_promising_first(scorer)) == expected
 
 
 @pytest.mark.parametrize("seed", range(6))
 def test_sweep_triple_counts_match_a_direct_count(seed):
-    """_sweep_samples' closed-form assignment counts pick the triple a direct count picks."""
+    """sweep_samples' closed-form assignment counts pick the triple a direct count picks."""
     import itertools
     from collections import Counter
 
-    from quadloc.service.localization.ransac import (
+    from quadloc.service.localization.sampling import (
         SWEEP_MAX_SAMPLES,
-        _sweep_samples,
-        _triangle_areas,
+        sweep_samples,
+        triangle_areas,
     )
 
     rng = np.random.default_rng(seed)
@@ -266,11 +267,11 @@ def test_sweep_triple_counts_match_a_direct_count(seed):
                                  for lab, m in Counter(labs[d] for d in tri).items())
                        for tri in tris])
     ok = np.flatnonzero((counts > 0) & (counts <= SWEEP_MAX_SAMPLES))
-    got = _sweep_samples(scorer)
+    got = sweep_samples(scorer)
     if len(ok) == 0:
         assert got == []
         return
-    tri = tris[ok[np.argmax(_triangle_areas(scorer, np.array(tris)[ok]))]]
+    tri = tris[ok[np.argmax(triangle_areas(scorer, np.array(tris)[ok]))]]
     assert {sm[0] for sm in got} == {tri}
     assert len(got) == counts[tris.index(tri)]
 
@@ -287,7 +288,7 @@ def test_time_budget_holds_with_hundreds_of_same_label_detections():
     scorer = MatchScorer(cm, CAM, ells, ["a"] * 256, list(range(256)))
     t0 = time.perf_counter()
     out = ransac(scorer, UP, inlier_iou=0.2, min_inliers=2, max_hypotheses=300,
-                 rng=np.random.default_rng(0), deadline=t0 + 0.1)
+                 rng=np.random.default_rng(0), deadline=Deadline.wall_budget(0.1, start=t0))
     assert time.perf_counter() - t0 < 1.0  # budget 0.1 s, generous bound
     assert not out.exhaustive
 
@@ -325,7 +326,6 @@ class _FixedIouScorer:
         self._has_pairs = np.ones(3, dtype=bool)
         self.compat = np.ones((3, 3), dtype=bool)
         self.label_groups = [([0, 1, 2], np.array([0, 1, 2]))]
-        self._sample_counts: dict[int, int] = {}
 
     def compatible_objects(self, d: int) -> np.ndarray:
         return np.array([0, 1, 2])
@@ -349,7 +349,7 @@ def test_pose_acceptance_uses_min_inliers_and_one_to_one_counts(monkeypatch, cas
     """min_inliers=3. Pose 0 outscores pose 1 on the per-detection-best sum but has only 2
     one-to-one inliers (case 1: the third IoU is below the threshold; case 2: two detections
     share object 0); pose 1 has 3 one-to-one inliers at a lower score and must be chosen."""
-    import quadloc.service.localization.ransac as ransac_module
+    import quadloc.service.localization.search as search_module
 
     dense = np.zeros((2, 3, 3))
     if case == "higher_score_fewer_inliers":
@@ -360,7 +360,7 @@ def test_pose_acceptance_uses_min_inliers_and_one_to_one_counts(monkeypatch, cas
     dense[1, 0, 0] = dense[1, 1, 1] = dense[1, 2, 2] = 0.5
     poses = np.stack([np.eye(4), np.eye(4)])
     poses[1, 0, 3] = 1.0  # pose k's IoUs are dense[k]
-    monkeypatch.setattr(ransac_module, "p3p_hypotheses_batch",
+    monkeypatch.setattr(search_module, "p3p_hypotheses_batch",
                         lambda *a: (poses, np.zeros(len(poses), dtype=int)))
     out = ransac(_FixedIouScorer(dense), UP, inlier_iou=0.2, min_inliers=3, max_hypotheses=10,
                  rng=np.random.default_rng(0))
@@ -387,7 +387,7 @@ def _crowded(n: int, n_det: int, seed: int = 11):
 def test_blocked_and_pruned_iou_equals_the_direct_estimate(monkeypatch):
     """dense_iou (blocks, bounding-circle and area pruning) == iou_estimates of every pair at
     once (the unblocked formula), wherever the value can reach the floor."""
-    import quadloc.service.localization.ransac as rm
+    import quadloc.service.localization.scoring as rm
 
     cm, scorer = _crowded(40, 12)
     poses = np.array([invert_pose(look_at(np.array([x, -4.0, 0.2]), np.zeros(3)))
@@ -428,7 +428,7 @@ def test_search_memory_does_not_grow_with_hypotheses_or_candidates():
         tracemalloc.start()
         t0 = time.perf_counter()
         ransac(scorer, UP, inlier_iou=0.2, min_inliers=2, max_hypotheses=budget,
-               rng=np.random.default_rng(0), deadline=t0 + 0.3)
+               rng=np.random.default_rng(0), deadline=Deadline.wall_budget(0.3, start=t0))
         peaks.append(tracemalloc.get_traced_memory()[1])
         tracemalloc.stop()
         assert time.perf_counter() - t0 < 3.0  # deadline 0.3 s; generous bound (shared CI)
@@ -437,10 +437,10 @@ def test_search_memory_does_not_grow_with_hypotheses_or_candidates():
 
 
 def test_scoring_past_the_scorers_deadline_raises():
-    from quadloc.service.localization.ransac import ScoringTimeoutError
+    from quadloc.service.localization.scoring import ScoringTimeoutError
 
     _, scorer = _crowded(50, 10)
-    scorer.deadline = 0.0  # long past
+    scorer.deadline = Deadline(wall=0.0)  # long past
     pose = invert_pose(look_at(np.array([0.0, -4.0, 0.2]), np.zeros(3)))
     with pytest.raises(ScoringTimeoutError):
         scorer.matches(pose, 0.2)
@@ -463,7 +463,8 @@ def test_early_exit_still_finds_every_competitor_that_explains_the_frame():
     """The first batch explains the frame (early exit), and the search still returns the rolled
     poses that explain it too (the competitor sweep runs every assignment of one detection
     triple): the ambiguity check gets them."""
-    from quadloc.service.localization.ransac import _sweep_samples, distinct_poses
+    from quadloc.service.localization.sampling import sweep_samples
+    from quadloc.service.localization.search import distinct_poses
 
     _cm, scorer, _ = _square_of_spheres()
 
@@ -478,7 +479,7 @@ def test_early_exit_still_finds_every_competitor_that_explains_the_frame():
     out, full = explaining(ransac(scorer, UP, inlier_iou=0.2, min_inliers=2,
                                   max_hypotheses=300, rng=np.random.default_rng(0)))
     assert out.samples_tried < 96  # the early exit happened (96 samples in all)
-    assert len(_sweep_samples(scorer)) == 24  # one triple, every assignment to 4 objects
+    assert len(sweep_samples(scorer)) == 24  # one triple, every assignment to 4 objects
     assert len(full) >= 2
     for h in full:  # each is an exact explanation
         assert all(m.iou > 0.9 for m in h.matches)
@@ -527,7 +528,7 @@ def test_pair_scores_with_a_detection_without_compatible_objects():
 
 
 def test_split_draw_is_numpy_choice_with_p():
-    """_random_samples draws its split as rng.choice(n, p=p) does (cdf search of one
+    """random_samples draws its split as rng.choice(n, p=p) does (cdf search of one
     rng.random()): the same values and the same generator stream."""
     for trial in range(50):
         n = 1 + trial % 7

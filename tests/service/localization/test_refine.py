@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from quadloc.factors import metrics
+from quadloc.factors.budget import Deadline
 from quadloc.factors.camera import Camera, Ellipsoid, project_ellipsoid
 from quadloc.factors.conics import DegenerateProjectionError, Ellipse
 from quadloc.factors.names import GeometryError
@@ -368,7 +369,7 @@ def test_deadline_loop_reproduces_gtsam_optimize(metric):
     dets = [Detection(bad, dets[0].label), *dets[1:]]  # a non-zero-residual problem
     start = perturb_pose(T_true, rng, 0.15, 4.0)
     free = refine(dets, ells, CAMERA, start, metric)
-    stepped = refine(dets, ells, CAMERA, start, metric, deadline=math.inf)
+    stepped = refine(dets, ells, CAMERA, start, metric, deadline=Deadline())
     assert stepped.iterations == free.iterations
     assert stepped.status == free.status
     np.testing.assert_allclose(stepped.world_from_camera, free.world_from_camera,
@@ -380,7 +381,7 @@ def test_a_passed_deadline_stops_before_any_iteration():
     ells = synthetic_scene(rng, 4)
     dets = exact_detections(ells, np.eye(4))
     start = perturb_pose(np.eye(4), rng, 0.1, 3.0)
-    res = refine(dets, ells, CAMERA, start, "iou", deadline=0.0)
+    res = refine(dets, ells, CAMERA, start, "iou", deadline=Deadline(wall=0.0))
     assert res.status == "time_budget" and not res.converged
     assert res.iterations == 0
     np.testing.assert_allclose(res.world_from_camera, start, atol=1e-12)
@@ -401,7 +402,6 @@ def test_deadline_passed_before_the_relaid_solve_skips_it(monkeypatch):
     solves again -- unless the deadline has passed by then: no second solve (which would stop
     at once and be mislabelled ``time_budget``)."""
     import sys
-    import time
 
     refine_module = sys.modules[refine.__module__]
 
@@ -430,11 +430,11 @@ def test_deadline_passed_before_the_relaid_solve_skips_it(monkeypatch):
     def first_solve_then_late(*args, **kwargs):
         calls.append(1)
         out = real(*args, **kwargs)
-        clock.past(deadline)  # the deadline passes right after the first solve
+        clock.past(deadline.wall)  # the deadline passes right after the first solve
         return out
 
     monkeypatch.setattr(refine_module, "_solve", first_solve_then_late)
-    deadline = time.perf_counter() + budget
+    deadline = Deadline.wall_budget(budget)
     res = refine(dets, ells, CAMERA, start, deadline=deadline)
     assert len(calls) == 1
     assert res.resample_skipped

@@ -26,7 +26,7 @@ from quadloc.service.localization.confidence import (
     student_t_factor,
 )
 from quadloc.service.localization.pipeline import localize, prior_gate_poses
-from quadloc.service.localization.ransac import distinct_poses
+from quadloc.service.localization.search import distinct_poses
 from quadloc.service.localization.types import (
     Detection,
     LocalizationInputError,
@@ -326,7 +326,8 @@ def test_low_confidence_answers_say_so_and_keep_the_candidate():
 
 
 def test_ransac_keeps_mutually_distinct_hypotheses_best_first():
-    from quadloc.service.localization.ransac import KEEP_DISTINCT, MatchScorer, ransac
+    from quadloc.service.localization.scoring import MatchScorer
+    from quadloc.service.localization.search import KEEP_DISTINCT, ransac
 
     f = simulate_frame(CM, CAMERA, POSES[24], 24, EVAL)
     dets = reduce_frame(f.detections, f.object_ids, 2, np.random.default_rng(24))

@@ -1,0 +1,412 @@
+"""Scoring candidate poses against detections: the IoU estimate, one-to-one matches, the scorer.
+
+A pose (``camera_from_world``, 4x4 OpenCV ``[R | t]``) is scored by the IoU of each detection
+with the projections of its label-compatible map objects (:meth:`MatchScorer.pair_iou`,
+estimated by :func:`iou_estimates` from points filling the detections); a pair is an inlier
+when its IoU reaches a threshold, and a pose's matches are the one-to-one greedy assignment of
+its inliers (:func:`greedy_assignment`). Memory and time are bounded: pairs, points and
+projections are processed in blocks (:data:`PAIR_BLOCK`, :data:`POINT_BLOCK`,
+:data:`PROJECT_BLOCK`) with a deadline check between blocks (:class:`ScoringTimeoutError`).
+The search that uses the scorer: :mod:`quadloc.service.localization.search`; the stages and
+bounds in detail: ``docs/design/localization.md``.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from quadloc.factors.budget import Deadline, deadline_passed, earliest
+from quadloc.factors.camera import Camera, projected_gaussians
+from quadloc.factors.conics import Ellipse, ellipse_params, level_values
+from quadloc.maps.compiled import CompiledMap
+from quadloc.service.localization.arrays import BoolArray, FloatArray, IndexArray, Int32Array
+from quadloc.service.localization.hypotheses import point_centres
+
+__all__ = [
+    "HARD_STOP_FACTOR",
+    "PAIR_BLOCK",
+    "POINT_BLOCK",
+    "PROJECT_BLOCK",
+    "LabelGroup",
+    "Match",
+    "MatchScorer",
+    "ScoringTimeoutError",
+    "blocks",
+    "ellipse_points",
+    "greedy_assignment",
+    "iou_estimates",
+    "sunflower_disk",
+]
+
+#: Most (detection, object) pairs per block of the cheap per-pair tests (stage 1, pruning).
+PAIR_BLOCK = 1 << 16
+#: Most pair x point evaluations per block of the IoU estimate (stage 2): ~16 MB of temporaries.
+POINT_BLOCK = 1 << 17
+#: Most pose x object projections per block (each holds a few 3x3 / 4x4 float arrays).
+PROJECT_BLOCK = 1 << 13
+#: The scorer's hard stop (``MatchScorer.deadline`` in ``localize``), as a multiple of the time
+#: budget on both clocks of a :class:`quadloc.factors.budget.Deadline`: the search stops at the
+#: budget itself, this bounds the scoring after it (final matches, re-association).
+HARD_STOP_FACTOR = 1.05
+
+#: Usable detection rows of one label and the indices of the map objects compatible with them
+#: (:attr:`MatchScorer.label_groups`).
+LabelGroup = tuple[list[int], IndexArray]
+
+
+class ScoringTimeoutError(RuntimeError):
+    """The scorer's deadline passed in the middle of scoring (see :class:`MatchScorer`)."""
+
+
+def _check(stop_at: Deadline | None) -> None:
+    if deadline_passed(stop_at):
+        raise ScoringTimeoutError("time budget exceeded while scoring poses")
+
+
+def blocks(n: int, size: int) -> Iterator[slice]:
+    """Consecutive slices of at most ``size`` (at least 1) items covering ``range(n)``."""
+    for start in range(0, n, max(1, size)):
+        yield slice(start, min(n, start + max(1, size)))
+
+
+@functools.lru_cache(maxsize=8)
+def sunflower_disk(n: int) -> FloatArray:
+    """``n`` points spread uniformly over the unit disk (Vogel's sunflower), shape (n, 2),
+    read-only (computed once per ``n``)."""
+    i = np.arange(n) + 0.5
+    r = np.sqrt(i / n)
+    th = i * (math.pi * (3.0 - math.sqrt(5.0)))
+    out = np.column_stack([r * np.cos(th), r * np.sin(th)])
+    out.setflags(write=False)
+    return out
+
+
+def ellipse_points(params: FloatArray, unit: FloatArray, axis: int = -1) -> FloatArray:
+    """Points (D, M, 2) px filling ellipses ``params`` (D, 5) ``(cx, cy, a, b, angle)`` (px,
+    rad) from unit-disk points ``unit`` (M, 2) (e.g. :func:`sunflower_disk`); with ``axis=1``,
+    (D, 2, M) (x and y rows contiguous)."""
+    c, s = np.cos(params[:, 4]), np.sin(params[:, 4])
+    u = unit[None, :, 0] * params[:, 2, None]
+    v = unit[None, :, 1] * params[:, 3, None]
+    x = params[:, 0, None] + c[:, None] * u - s[:, None] * v
+    y = params[:, 1, None] + s[:, None] * u + c[:, None] * v
+    return np.stack([x, y], axis=axis)
+
+
+def iou_estimates(
+    det_points: FloatArray, det_areas: FloatArray, proj_centres: FloatArray,
+    proj_inv_shape: FloatArray,
+) -> FloatArray:
+    """IoU of detections and projected ellipses, estimated from points inside the detections.
+
+    Args:
+        det_points: (..., M, 2) points uniformly filling each detection (sunflower pattern).
+        det_areas: (...,) detection areas px^2.
+        proj_centres: (..., 2), proj_inv_shape: (..., 2, 2) the projected ellipses
+            (``A^-1``, must be positive definite where the result is used).
+
+    Returns:
+        (...,) IoU in [0, 1]: ``I / (area_det + area_proj - I)`` with
+        ``I = area_det * fraction of the points inside the projection`` (:func:`_point_iou`).
+    """
+    S = proj_inv_shape
+    det = S[..., 0, 0] * S[..., 1, 1] - S[..., 0, 1] * S[..., 1, 0]
+    a00, a01, a11 = _inverse_entries(S[..., 0, 0], S[..., 0, 1], S[..., 1, 1], det)
+    iou = _point_iou(det_points[..., 0], det_points[..., 1], det_areas, proj_centres[..., 0],
+                     proj_centres[..., 1], a00, a01, a11, _ellipse_area(det))
+    out: FloatArray = np.where(det > 0, iou, 0.0)
+    return out
+
+
+def _inverse_entries(s00: FloatArray, s01: FloatArray, s11: FloatArray, det: FloatArray
+                     ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Entries ``(A00, A01, A11)`` of ``A = (A^-1)^-1`` from those of ``A^-1`` and its
+    determinant (any shapes; garbage where ``det <= 0``)."""
+    safe = np.where(det > 0, det, 1.0)
+    return s11 / safe, -s01 / safe, s00 / safe
+
+
+def _ellipse_area(det: FloatArray) -> FloatArray:
+    """Area (px^2) of ellipses from ``det(A^-1) = a^2 b^2``."""
+    area: FloatArray = math.pi * np.sqrt(np.maximum(det, 0.0))
+    return area
+
+
+def _point_iou(px: FloatArray, py: FloatArray, det_areas: FloatArray, cx: FloatArray,
+               cy: FloatArray, a00: FloatArray, a01: FloatArray, a11: FloatArray,
+               area_proj: FloatArray) -> FloatArray:
+    """THE IoU estimate: points ``(px, py)`` (..., M) filling the detections (areas (...,)),
+    the fraction inside the projected ellipses ``(x - c)^T A (x - c) <= 1`` (centres ``cx, cy``,
+    entries of ``A``, areas ``area_proj``, each (...,)) times the detection area as the
+    intersection; (...,) in [0, 1]."""
+    dx = px - cx[..., None]
+    dy = py - cy[..., None]
+    phi = a00[..., None] * dx ** 2 + 2 * a01[..., None] * dx * dy + a11[..., None] * dy ** 2
+    inter = np.count_nonzero(phi <= 1.0, axis=-1) / px.shape[-1] * det_areas
+    iou: FloatArray = np.minimum(inter / np.maximum(det_areas + area_proj - inter, 1e-300), 1.0)
+    return iou
+
+
+@dataclass(frozen=True)
+class Match:
+    """A detection (index into the usable detections' original indices) -> map object index."""
+
+    detection_index: int
+    object_index: int
+    iou: float
+
+
+def greedy_assignment(
+    iou: FloatArray, detection_indices: Sequence[int], threshold: float
+) -> list[Match]:
+    """One-to-one matches from a dense IoU matrix (D, N), greedily by decreasing IoU, keeping
+    pairs with IoU >= ``threshold``. ``detection_indices[d]`` is row d's original index."""
+    # only the entries at or above the threshold are listed (the matrix may be large)
+    flat_iou = np.ravel(iou)
+    cand = np.flatnonzero(flat_iou >= threshold)
+    pair_d, pair_o = np.divmod(cand, iou.shape[1])
+    return _greedy(pair_d, pair_o, flat_iou[cand], threshold, detection_indices)
+
+
+def _greedy(pair_d: IndexArray | Int32Array, pair_o: IndexArray | Int32Array, iou: FloatArray,
+            threshold: float, detection_indices: Sequence[int]) -> list[Match]:
+    """THE greedy one-to-one assignment of pairs (``pair_d[p]``, ``pair_o[p]``) with
+    ``iou[p] >= threshold``, by decreasing IoU (ties: the later pair first), sorted by
+    detection index."""
+    cand = np.flatnonzero(iou >= threshold)
+    vals: list[float] = iou[cand].tolist()
+    ds: list[int] = pair_d[cand].tolist()
+    os_: list[int] = pair_o[cand].tolist()
+    used_d: set[int] = set()
+    used_o: set[int] = set()
+    out = []
+    # a stable ascending sort, walked backwards
+    for k in reversed(sorted(range(len(vals)), key=vals.__getitem__)):
+        d, o = ds[k], os_[k]
+        if d not in used_d and o not in used_o:
+            used_d.add(d)
+            used_o.add(o)
+            out.append(Match(int(detection_indices[d]), o, vals[k]))
+    return sorted(out, key=lambda m: m.detection_index)
+
+
+class MatchScorer:
+    """Scores candidate poses against a fixed set of detections and a compiled map.
+
+    ``detection_indices`` are the original indices of the usable detections (labels in the
+    map); ``ellipses`` / ``labels`` are theirs. Only label-compatible pairs are evaluated, in
+    bounded blocks (module docstring). ``deadline`` (a :class:`quadloc.factors.budget.Deadline`
+    or None) is a hard stop for every scoring call: past it they raise
+    :class:`ScoringTimeoutError` (a search passes its own, earlier, stop to the calls it makes).
+
+    Attributes (read-only after construction): ``params`` (D, 5) the detections' ellipses
+    ``(cx, cy, a, b, angle)`` px / rad; ``compat`` (D, N) bool, label compatibility with the N
+    map objects; ``pair_d``, ``pair_o`` (P,) the compatible (detection row, object index)
+    pairs in row-major order; ``pair_starts`` (D,) each detection's first pair; ``objects``
+    the sorted indices of the objects with a compatible detection; ``points`` (D, M, 2) px
+    filling the detections; ``areas``, ``radii`` (D,) px^2 / px.
+    """
+
+    def __init__(
+        self, compiled: CompiledMap, camera: Camera, ellipses: Sequence[Ellipse],
+        labels: Sequence[str], detection_indices: Sequence[int], n_points: int = 96,
+        deadline: Deadline | None = None,
+    ) -> None:
+        self.compiled = compiled
+        self.camera = camera
+        self.deadline = deadline
+        self.detection_indices = list(detection_indices)
+        self.labels = list(labels)
+        self.params: FloatArray = ellipse_params(ellipses)
+        self.n_det = len(ellipses)
+        self.n_obj = len(compiled)
+        compat = np.zeros((self.n_det, self.n_obj), dtype=bool)
+        for d, label in enumerate(labels):
+            compat[d, compiled.indices_for(label)] = True
+        self.compat: BoolArray = compat
+        # int32 indices (maps hold <= QUADLOC_MAX_MAP_OBJECTS objects): 12 bytes per pair
+        pair_d, pair_o = np.nonzero(compat)
+        self.pair_d: Int32Array = pair_d.astype(np.int32)
+        self.pair_o: Int32Array = pair_o.astype(np.int32)
+        # sorted, like np.unique(pair_o)
+        self.objects: IndexArray = np.flatnonzero(compat.any(axis=0))
+        # Position of each pair's object within self.objects (a gather: no sort of the pairs).
+        position = np.zeros(self.n_obj, dtype=np.int32)
+        position[self.objects] = np.arange(len(self.objects), dtype=np.int32)
+        self.pair_s: Int32Array = position[self.pair_o]
+        # the compatible objects' arrays, gathered once per call (not per projection)
+        self._object_arrays: tuple[FloatArray, FloatArray, FloatArray] = (
+            compiled.centers[self.objects], compiled.shape_matrices[self.objects],
+            compiled.dual_quadrics[self.objects])
+        # first pair of each detection (pairs are sorted by detection; every usable detection
+        # has a compatible object): the segments of np.maximum.reduceat
+        self.pair_starts: IndexArray = np.searchsorted(
+            self.pair_d, np.arange(self.n_det)).astype(np.intp)
+        # filling points (D, 2, M) per number of points M (x and y contiguous)
+        self._xy: dict[int, FloatArray] = {
+            n_points: ellipse_points(self.params, sunflower_disk(n_points), axis=1)}
+        self.points: FloatArray = self._xy[n_points].transpose(0, 2, 1)  # (D, M, 2)
+        self.areas: FloatArray = math.pi * self.params[:, 2] * self.params[:, 3]
+        self.radii: FloatArray = np.maximum(self.params[:, 2], self.params[:, 3])
+        # per pair, once per call: the detection's centre, bounding radius and area
+        pair_params = self.params[self.pair_d]
+        self._pair_cx, self._pair_cy = pair_params[:, 0], pair_params[:, 1]
+        self._pair_radii, self._pair_areas = self.radii[self.pair_d], self.areas[self.pair_d]
+        # every detection has a pair (always in localize): pair_scores needs no mask
+        self._has_pairs: BoolArray = np.bincount(self.pair_d, minlength=self.n_det) > 0
+
+    def _points_xy(self, n_points: int) -> FloatArray:
+        """The detections' filling points, (D, 2, n_points), computed once per scorer."""
+        if n_points not in self._xy:
+            self._xy[n_points] = ellipse_points(self.params, sunflower_disk(n_points), axis=1)
+        return self._xy[n_points]
+
+    def compatible_objects(self, d: int) -> IndexArray:
+        """Object indices compatible with usable detection row ``d``."""
+        return np.flatnonzero(self.compat[d])
+
+    @functools.cached_property
+    def label_groups(self) -> list[LabelGroup]:
+        """Usable detections grouped by their compatible objects (= by label, since a map
+        object has one category): ``[(detection rows, compatible object indices), ...]`` in
+        order of first detection. Groups of different labels have disjoint objects."""
+        groups: dict[str, list[int]] = {}
+        for d, label in enumerate(self.labels):
+            groups.setdefault(label, []).append(d)
+        return [(dets, self.compatible_objects(dets[0]).astype(np.intp))
+                for dets in groups.values()]
+
+    def _stop(self, stop_at: Deadline | None) -> Deadline | None:
+        return earliest(stop_at, self.deadline)
+
+    def _project(self, camera_from_world: FloatArray) -> tuple[FloatArray, ...]:
+        """:func:`projected_gaussians` of the compatible objects (callers pass at most
+        ``PROJECT_BLOCK // len(objects)`` poses)."""
+        centers, shape_matrices, dual_quadrics = self._object_arrays
+        return projected_gaussians(self.camera, camera_from_world, centers, shape_matrices,
+                                   dual_quadrics)
+
+    def centre_hits(self, camera_from_world: FloatArray,
+                    stop_at: Deadline | None = None) -> FloatArray:
+        """Stage 1: number of detections hit by a compatible valid object's centre, (H,)."""
+        stop_at = self._stop(stop_at)
+        T = np.asarray(camera_from_world, dtype=float)
+        out = np.zeros(len(T))
+        step = max(1, PROJECT_BLOCK // max(1, len(self.objects)))
+        for hb in blocks(len(T), step):
+            _check(stop_at)
+            *_, valid, P = self._project(T[hb])
+            pc = point_centres(P, self._object_arrays[0])
+            for h in range(len(pc)):
+                per_det = np.zeros(self.n_det, dtype=bool)
+                for blk in blocks(len(self.pair_d), PAIR_BLOCK):
+                    _check(stop_at)
+                    pd, ps = self.pair_d[blk], self.pair_s[blk]
+                    phi = level_values(self.params[pd], pc[h, ps][:, None])[:, 0]
+                    per_det[pd[(phi <= 4.0) & valid[h, ps]]] = True
+                out[hb.start + h] = per_det.sum()
+        return out
+
+    def pair_iou(self, camera_from_world: FloatArray, points: FloatArray | None = None,
+                 floor: float = 0.0, stop_at: Deadline | None = None) -> FloatArray:
+        """IoU (H, P) of every label-compatible pair (``pair_d[p]``, ``pair_o[p]``) at H poses,
+        vectorised over poses and pairs (0 where the projection is invalid, and 0 where the
+        estimate cannot reach ``floor``: callers that only use IoUs >= a threshold get the same
+        results). Cheap closed-form pre-filters run first on every (pose, pair): disjoint
+        bounding circles (the IoU is exactly 0) and the area ratio (the estimate is at most
+        ``area_det / area_proj``); only the survivors get the point test. Memory: the output
+        plus blocks of at most :data:`PAIR_BLOCK` (pose, pair) tests and :data:`POINT_BLOCK`
+        point evaluations; keep ``H x P`` bounded (callers pass
+        ``max(1, PAIR_BLOCK // P)`` poses at a time)."""
+        xy = self._xy[self.points.shape[1]] if points is None else np.moveaxis(points, -1, -2)
+        return self._pair_iou(camera_from_world, xy, floor, stop_at)
+
+    def _pair_iou(self, camera_from_world: FloatArray, xy: FloatArray, floor: float,
+                  stop_at: Deadline | None) -> FloatArray:
+        """:meth:`pair_iou` with the filling points as (D, 2, M)."""
+        stop_at = self._stop(stop_at)
+        T = np.asarray(camera_from_world, dtype=float)
+        n_pts = xy.shape[2]
+        n_pairs = len(self.pair_d)
+        out = np.zeros((len(T), n_pairs))
+        if n_pairs == 0:
+            return out
+        step = max(1, min(PROJECT_BLOCK // max(1, len(self.objects)),
+                          PAIR_BLOCK // n_pairs))
+        for hb in blocks(len(T), step):
+            _check(stop_at)
+            mx, my, s00, s01, s11, valid, _ = self._project(T[hb])
+            n_h = len(mx)
+            det = s00 * s11 - s01 * s01
+            half_tr = 0.5 * (s00 + s11)
+            # largest semi-axis of each projection: sqrt of the largest eigenvalue of A^-1;
+            # -inf where the projection is invalid (its bounding circle meets nothing)
+            r_proj = np.where(valid, np.sqrt(np.maximum(
+                half_tr + np.sqrt(np.maximum(half_tr ** 2 - det, 0.0)), 0.0)), -np.inf)
+            area_proj = _ellipse_area(det)
+            # what the point test needs of each (pose, object), gathered per surviving pair
+            grid = np.stack([mx, my, *_inverse_entries(s00, s01, s11, det), area_proj], axis=-1)
+            for blk in blocks(n_pairs, max(1, PAIR_BLOCK // n_h)):
+                _check(stop_at)
+                pd, ps = self.pair_d[blk], self.pair_s[blk]
+                gap = np.hypot(mx[:, ps] - self._pair_cx[blk], my[:, ps] - self._pair_cy[blk])
+                # disjoint bounding circles: no point inside
+                keep = gap <= (self._pair_radii[blk] + r_proj[:, ps]) * (1 + 1e-9) + 1e-9
+                if floor > 0:  # the estimate is <= area_d / area_p
+                    keep &= self._pair_areas[blk] >= floor * area_proj[:, ps]
+                kh, kp = np.nonzero(keep)
+                for sub in blocks(len(kh), POINT_BLOCK // n_pts):
+                    _check(stop_at)
+                    h, k = kh[sub], kp[sub]
+                    g = grid[h, ps[k]]  # (K, 6)
+                    pts = xy[pd[k]]  # (K, 2, M)
+                    out[hb.start + h, blk.start + k] = _point_iou(
+                        pts[:, 0], pts[:, 1], self._pair_areas[blk][k], g[:, 0], g[:, 1],
+                        g[:, 2], g[:, 3], g[:, 4], g[:, 5])
+        return out
+
+    def dense_iou(self, camera_from_world: FloatArray, points: FloatArray | None = None,
+                  floor: float = 0.0, stop_at: Deadline | None = None) -> FloatArray:
+        """IoU (H, D, N) of every usable detection with every map object: :meth:`pair_iou`
+        scattered into the (detections x objects) matrix (0 if incompatible). Memory: the
+        output plus bounded blocks; call it with few poses (H) on large maps."""
+        T = np.asarray(camera_from_world, dtype=float)
+        out = np.zeros((len(T), self.n_det, self.n_obj))
+        for h in range(len(T)):
+            out[h, self.pair_d, self.pair_o] = self.pair_iou(T[h:h + 1], points, floor,
+                                                             stop_at)[0]
+        return out
+
+    def pair_scores(self, iou: FloatArray, threshold: float) -> tuple[FloatArray, IndexArray]:
+        """(score (H,), inlier count (H,)) from pair IoUs (H, P) (:meth:`pair_iou`), each
+        detection taking its best compatible object (an upper bound of the one-to-one
+        assignment's)."""
+        if iou.shape[1] == 0:
+            return np.zeros(len(iou)), np.zeros(len(iou), dtype=np.intp)
+        if self._has_pairs.all():
+            best = np.maximum.reduceat(iou, self.pair_starts, axis=1)
+        else:  # detections without a compatible object (not in a localize() scorer) score 0
+            has = self._has_pairs
+            best = np.zeros((len(iou), len(self.pair_starts)))
+            best[:, has] = np.maximum.reduceat(iou, self.pair_starts[has], axis=1)
+        inl = best >= threshold
+        return np.where(inl, best, 0.0).sum(axis=1), inl.sum(axis=1)
+
+    def pair_assignment(self, iou: FloatArray, threshold: float) -> list[Match]:
+        """:func:`greedy_assignment` of one pose's pair IoUs (P,) (:meth:`pair_iou`): the same
+        matches as on the dense (detections x objects) matrix (pairs are in its row-major
+        order, so ties break the same way)."""
+        return _greedy(self.pair_d, self.pair_o, iou, threshold, self.detection_indices)
+
+    def matches(self, camera_from_world: FloatArray, threshold: float,
+                n_points: int = 256) -> list[Match]:
+        """One-to-one inlier matches at one pose (IoU with ``n_points`` per detection).
+        Raises :class:`ScoringTimeoutError` past ``self.deadline``."""
+        iou = self._pair_iou(np.asarray(camera_from_world)[None], self._points_xy(n_points),
+                             threshold, None)[0]
+        return self.pair_assignment(iou, threshold)

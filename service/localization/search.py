@@ -1,0 +1,317 @@
+"""Label-constrained RANSAC over detection/object correspondences (paper section V-B).
+
+Candidate poses come from :mod:`quadloc.service.localization.hypotheses` (P3P on centres with
+>= 3 usable detections, P2E with 2, P2E as a fallback of at most :data:`P2E_FALLBACK_BUDGET`
+samples) on the minimal samples of :mod:`quadloc.service.localization.sampling`, in its order.
+A pose is scored by :class:`quadloc.service.localization.scoring.MatchScorer` (a pair is an
+inlier when IoU >= ``inlier_iou``; a pose's score is the sum of its one-to-one inliers' IoUs);
+the search keeps the best :data:`KEEP_DISTINCT` mutually distinct qualified hypotheses
+(:func:`distinct_poses`). Early exit once a pose explains every usable detection (after the
+competitor sweep); time bounded by deadline checks before every batch and inside the scoring
+of a batch. All poses here are ``camera_from_world`` (4x4, OpenCV ``[R | t]``). Stages,
+ordering and bounds in detail: ``docs/design/localization.md``.
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from quadloc.factors.budget import Deadline, deadline_passed
+from quadloc.factors.conics import Ellipse
+from quadloc.service.localization.arrays import FloatArray
+from quadloc.service.localization.hypotheses import p2e_hypotheses, p3p_hypotheses_batch
+from quadloc.service.localization.sampling import Sample, count_samples, sample_order
+from quadloc.service.localization.scoring import (
+    PAIR_BLOCK,
+    Match,
+    MatchScorer,
+    ScoringTimeoutError,
+    blocks,
+)
+
+__all__ = [
+    "DISTINCT_ANGLE_DEG",
+    "DISTINCT_POSITION_M",
+    "EARLY_EXIT_MEAN_IOU",
+    "KEEP_DISTINCT",
+    "P2E_FALLBACK_BUDGET",
+    "STAGE2_CANDIDATES",
+    "Hypothesis",
+    "RansacOutcome",
+    "distinct_poses",
+    "ransac",
+]
+
+#: Stop sampling once a pose explains every usable detection with this mean IoU.
+EARLY_EXIT_MEAN_IOU = 0.5
+#: Early exit only with at least this many usable detections: with 2-3 the search is small and
+#: must go on to find competing hypotheses (ambiguity check).
+EARLY_EXIT_MIN_DETECTIONS = 4
+#: Candidates per batch whose IoUs are computed (the best by the stage-1 centre test).
+STAGE2_CANDIDATES = 24
+#: Stage 1 (the centre test keeping :data:`STAGE2_CANDIDATES` poses of a batch) only when a
+#: batch has more (pose, pair) tests than this: below, every pose is scored (vectorised).
+STAGE1_MIN_WORK = 1 << 14
+#: Minimal samples of the first P3P batch (a frame explained by it stops the search early).
+FIRST_BATCH = 8
+#: Minimal samples per P3P batch (P3P calls between score / budget checks), and per P2E batch.
+BATCH = 32
+P2E_BATCH = 4
+#: At most this many P2E samples when P2E is the fallback of a frame with >= 3 detections
+#: (one P2E solve costs ~10-30 ms in Python, a P3P solve ~0.05 ms).
+P2E_FALLBACK_BUDGET = 24
+#: Number of distinct hypotheses kept (:attr:`RansacOutcome.alternatives`), and what
+#: "distinct" means: camera centres further apart than this (m) or orientations differing by
+#: more than this (deg). Used by the ambiguity check of
+#: ``quadloc.service.localization.confidence``.
+KEEP_DISTINCT = 4
+DISTINCT_POSITION_M = 0.5
+DISTINCT_ANGLE_DEG = 20.0
+
+#: What :func:`distinct_poses` compares (:func:`_pose_key`).
+_PoseKey = tuple[list[float], list[float]]
+
+
+@dataclass(frozen=True)
+class Hypothesis:
+    """A qualified pose (``camera_from_world`` 4x4), its one-to-one matches and score (sum of
+    the matches' IoUs)."""
+
+    camera_from_world: FloatArray
+    matches: tuple[Match, ...]
+    score: float
+
+    @functools.cached_property
+    def pose_key(self) -> _PoseKey:
+        """:func:`_pose_key` of the pose, computed once (the search compares it often)."""
+        return _pose_key(self.camera_from_world)
+
+
+@dataclass(frozen=True)
+class RansacOutcome:
+    """Best pose found. ``camera_from_world`` is None when nothing qualified; then ``reason`` is
+    ``"no_label_match"``, ``"no_hypothesis_above_inlier_threshold"`` or
+    ``"time_budget_exceeded"``. ``alternatives``: up to :data:`KEEP_DISTINCT` qualified,
+    mutually distinct hypotheses (:func:`distinct_poses`), best first (the first is the
+    returned pose, with the 96-point matches it was accepted with)."""
+
+    camera_from_world: FloatArray | None
+    matches: tuple[Match, ...]
+    score: float
+    hypotheses_evaluated: int
+    samples_tried: int
+    exhaustive: bool
+    timed_out: bool
+    reason: str | None
+    alternatives: tuple[Hypothesis, ...] = ()
+
+
+def ransac(
+    scorer: MatchScorer,
+    up_world: FloatArray,
+    *,
+    inlier_iou: float,
+    min_inliers: int,
+    max_hypotheses: int,
+    rng: np.random.Generator,
+    deadline: Deadline | None = None,
+) -> RansacOutcome:
+    """Search poses from minimal samples (see the module docstring).
+
+    Args:
+        scorer: detections + map + camera.
+        up_world: the map's up axis (3,) (P2E starts its searches at camera rolls around it).
+        inlier_iou, min_inliers: acceptance of a pose.
+        max_hypotheses: budget of minimal samples per solver (P3P, then P2E).
+        rng: sampler (only used when not exhaustive: exhaustive runs do not depend on it).
+        deadline: when the search stops (e.g. CPU time of this thread with a wall-clock hard
+            limit, :meth:`quadloc.factors.budget.Deadline.cpu_budget`; None: never), checked
+            before every batch and inside the scoring of a batch.
+    """
+    need = scorer.n_det
+    if need < 2:
+        return RansacOutcome(None, (), 0.0, 0, 0, True, False, "no_label_match")
+    search = _Search(scorer, up_world, inlier_iou, min_inliers, rng, deadline)
+    has3 = need >= 3 and count_samples(scorer, 3) > 0
+    has2 = count_samples(scorer, 2) > 0
+    stop = search.run(3, max_hypotheses) if has3 else False
+    if not search.kept and not stop and has2:  # P2E: alone, or the fallback of P3P
+        search.run(2, max_hypotheses if need < 3 else min(max_hypotheses, P2E_FALLBACK_BUDGET))
+    if not search.kept:
+        reason = ("time_budget_exceeded" if search.timed_out else "no_label_match"
+                  if not (has3 or has2) else "no_hypothesis_above_inlier_threshold")
+        return RansacOutcome(None, (), 0.0, search.evaluated, search.tried, search.exhaustive,
+                             search.timed_out, reason)
+    best = search.kept[0]
+    try:
+        matches = tuple(scorer.matches(best.camera_from_world, inlier_iou))
+    except ScoringTimeoutError:  # past the scorer's hard stop: keep the accepted assignment
+        matches = ()
+    if len(matches) < min_inliers:
+        # the finer IoU estimate (256 points) lost an inlier at the threshold: keep the
+        # assignment the pose was accepted with (96 points)
+        matches = best.matches
+    return RansacOutcome(best.camera_from_world, matches, best.score, search.evaluated,
+                         search.tried, search.exhaustive, search.timed_out, None,
+                         tuple(search.kept))
+
+
+class _Search:
+    """The state of one :func:`ransac` call and its steps.
+
+    Attributes:
+        kept: distinct qualified hypotheses, best first (:func:`_keep_distinct`); ``kept[0]``
+            only ever changes to a better one, so it is the best pose found.
+        evaluated: candidate poses scored; tried: minimal samples solved.
+        exhaustive: every run so far tried every label-compatible sample.
+        timed_out: the deadline stopped the search.
+    """
+
+    def __init__(self, scorer: MatchScorer, up_world: FloatArray, inlier_iou: float,
+                 min_inliers: int, rng: np.random.Generator, deadline: Deadline | None) -> None:
+        self.scorer = scorer
+        self.up_world = up_world
+        self.inlier_iou = inlier_iou
+        self.min_inliers = min_inliers
+        self.rng = rng
+        self.deadline = deadline
+        self.n_pairs = len(scorer.pair_d)
+        self.kept: list[Hypothesis] = []
+        self.evaluated = 0
+        self.tried = 0
+        self.exhaustive = True
+        self.timed_out = False
+
+    def run(self, size: int, budget: int) -> bool:
+        """Solve and score the samples of ``size`` (3: P3P, 2: P2E) in
+        :func:`quadloc.service.localization.sampling.sample_order`, batch by batch, up to
+        ``budget`` samples; True when the search must stop (the frame is explained, after the
+        competitor sweep; or the deadline passed)."""
+        order = sample_order(self.scorer, size, budget, self.rng)
+        if not order.exhaustive:
+            self.exhaustive = False
+        batch = FIRST_BATCH if size == 3 else P2E_BATCH
+        start = self.tried
+        while True:
+            if deadline_passed(self.deadline):
+                self.timed_out = True
+                return True
+            chunk = list(itertools.islice(order.samples, batch))
+            if not chunk:
+                return False
+            self.tried += len(chunk)
+            batch = BATCH if size == 3 else P2E_BATCH
+            try:
+                if self.consider(self.solve(chunk, size)):
+                    # the frame is explained: before stopping, look for the competitors the
+                    # ambiguity check needs (every other explanation of one detection triple;
+                    # those not tried yet when the sweep came first)
+                    sweep = order.competitor_sweep(self.tried - start)
+                    self.tried += len(sweep)
+                    if sweep:
+                        self.consider(self.solve(sweep, size))
+                    return True
+            except ScoringTimeoutError:
+                self.timed_out = True
+                return True
+
+    def solve(self, chunk: list[Sample], size: int) -> FloatArray:
+        """Candidate poses (M, 4, 4) ``camera_from_world`` of minimal samples: one vectorised
+        P3P call, or P2E."""
+        scorer, cm = self.scorer, self.scorer.compiled
+        if size == 3:
+            poses, _ = p3p_hypotheses_batch(scorer.params[np.array([c[0] for c in chunk]), :2],
+                                            cm.centers[np.array([c[1] for c in chunk])],
+                                            scorer.camera)
+            return poses
+        found: list[FloatArray] = []
+        for dets, objs in chunk:
+            ells = [Ellipse(*scorer.params[d]) for d in dets]
+            found.extend(p2e_hypotheses(ells, [cm.ellipsoids[o] for o in objs], scorer.camera,
+                                        self.up_world))
+        return np.array(found).reshape(-1, 4, 4)
+
+    def consider(self, poses: FloatArray) -> bool:
+        """Score candidate poses (vectorised over poses and pairs, memory bounded); keeps the
+        best distinct hypotheses; returns True to stop early (:meth:`explained`)."""
+        if len(poses) == 0:
+            return False
+        scorer, inlier_iou = self.scorer, self.inlier_iou
+        self.evaluated += len(poses)
+        if len(poses) > STAGE2_CANDIDATES and len(poses) * self.n_pairs > STAGE1_MIN_WORK:
+            # large problems only: the cheap centre test picks the candidates worth an IoU
+            hits = scorer.centre_hits(poses, stop_at=self.deadline)
+            keep = np.argsort(-hits, kind="stable")[:STAGE2_CANDIDATES]
+            poses = poses[keep]
+        for blk in blocks(len(poses), max(1, PAIR_BLOCK // max(1, self.n_pairs))):
+            iou = scorer.pair_iou(poses[blk], floor=inlier_iou, stop_at=self.deadline)
+            # per-detection best object: an upper bound of the one-to-one score and count
+            bound, count = scorer.pair_scores(iou, inlier_iou)
+            block = poses[blk]
+            bounds: list[float] = bound.tolist()
+            counts: list[int] = count.tolist()
+            # best bound first: the bar rises early and fewer assignments are needed
+            for h in np.argsort(-bound, kind="stable").tolist():
+                bar = self.kept[-1].score if len(self.kept) >= KEEP_DISTINCT else -1.0
+                if bounds[h] <= bar or counts[h] < self.min_inliers:
+                    continue
+                # one-to-one (greedy) assignment, as in the final matches
+                m = scorer.pair_assignment(iou[h], inlier_iou)
+                score = float(sum(x.iou for x in m))
+                if len(m) >= self.min_inliers and score > bar:
+                    self.kept = _keep_distinct(self.kept, Hypothesis(block[h], tuple(m), score))
+        return self.explained()
+
+    def explained(self) -> bool:
+        """Whether the best pose explains every usable detection (at least
+        :data:`EARLY_EXIT_MIN_DETECTIONS`) with mean IoU >= :data:`EARLY_EXIT_MEAN_IOU`."""
+        need = self.scorer.n_det
+        return (need >= EARLY_EXIT_MIN_DETECTIONS and bool(self.kept)
+                and len(self.kept[0].matches) >= need
+                and self.kept[0].score >= EARLY_EXIT_MEAN_IOU * need)
+
+
+def _keep_distinct(kept: list[Hypothesis], new: Hypothesis) -> list[Hypothesis]:
+    """``kept`` (best first, mutually distinct) with ``new`` inserted: it replaces the kept
+    hypotheses it is not distinct from if it scores better than all of them, is dropped if one
+    of them scores at least as well; at most :data:`KEEP_DISTINCT` are kept."""
+    close = [h for h in kept if not _distinct_keys(h.pose_key, new.pose_key)]
+    if any(h.score >= new.score for h in close):
+        return kept
+    out = [h for h in kept if all(h is not c for c in close)] + [new]
+    out.sort(key=lambda h: -h.score)
+    return out[:KEEP_DISTINCT]
+
+
+def distinct_poses(camera_from_world_a: FloatArray, camera_from_world_b: FloatArray) -> bool:
+    """Whether two poses differ by more than :data:`DISTINCT_POSITION_M` (camera centres) or
+    :data:`DISTINCT_ANGLE_DEG` (rotation angle)."""
+    return _distinct_keys(_pose_key(camera_from_world_a), _pose_key(camera_from_world_b))
+
+
+def _pose_key(camera_from_world: FloatArray) -> _PoseKey:
+    """What :func:`distinct_poses` compares: ``R^T t`` (3,) (minus the camera centre) and the
+    row-major entries of ``R`` (9,), as Python floats."""
+    R = camera_from_world[:3, :3]
+    return (R.T @ camera_from_world[:3, 3]).tolist(), R.ravel().tolist()
+
+
+def _distinct_keys(a: _PoseKey, b: _PoseKey) -> bool:
+    """:func:`distinct_poses` of two :func:`_pose_key` (plain float arithmetic: 3- and 9-term
+    sums cost less than a numpy call)."""
+    (ca, ra), (cb, rb) = a, b
+    dx, dy, dz = cb[0] - ca[0], cb[1] - ca[1], cb[2] - ca[2]
+    if dx * dx + dy * dy + dz * dz > DISTINCT_POSITION_M ** 2:
+        return True
+    # cos of the relative angle from trace(Ra Rb^T) = sum(Ra * Rb)
+    trace = (ra[0] * rb[0] + ra[1] * rb[1] + ra[2] * rb[2] + ra[3] * rb[3] + ra[4] * rb[4]
+             + ra[5] * rb[5] + ra[6] * rb[6] + ra[7] * rb[7] + ra[8] * rb[8])
+    return (trace - 1.0) / 2.0 < _COS_DISTINCT
+
+
+_COS_DISTINCT = math.cos(math.radians(DISTINCT_ANGLE_DEG))
