@@ -367,26 +367,28 @@ namespace QuadLoc.Client
         {
             int start = pos;
             if (pos < s.Length && s[pos] == '-') pos++;
-            if (pos >= s.Length || !char.IsDigit(s[pos])) throw Error(s, start, "expected a value");
+            if (pos >= s.Length || !IsDigit(s[pos])) throw Error(s, start, "expected a value");
             if (s[pos] == '0') pos++;
-            else while (pos < s.Length && char.IsDigit(s[pos])) pos++;
+            else while (pos < s.Length && IsDigit(s[pos])) pos++;
             if (pos < s.Length && s[pos] == '.')
             {
                 pos++;
-                if (pos >= s.Length || !char.IsDigit(s[pos])) throw Error(s, pos, "expected a digit");
-                while (pos < s.Length && char.IsDigit(s[pos])) pos++;
+                if (pos >= s.Length || !IsDigit(s[pos])) throw Error(s, pos, "expected a digit");
+                while (pos < s.Length && IsDigit(s[pos])) pos++;
             }
             if (pos < s.Length && (s[pos] == 'e' || s[pos] == 'E'))
             {
                 pos++;
                 if (pos < s.Length && (s[pos] == '+' || s[pos] == '-')) pos++;
-                if (pos >= s.Length || !char.IsDigit(s[pos])) throw Error(s, pos, "expected a digit");
-                while (pos < s.Length && char.IsDigit(s[pos])) pos++;
+                if (pos >= s.Length || !IsDigit(s[pos])) throw Error(s, pos, "expected a digit");
+                while (pos < s.Length && IsDigit(s[pos])) pos++;
             }
             double d = double.Parse(s.Substring(start, pos - start), NumberStyles.Float, CultureInfo.InvariantCulture);
             if (double.IsInfinity(d)) throw Error(s, start, "number out of range");
             return new JsonValue(d);
         }
+
+        private static bool IsDigit(char c) { return c >= '0' && c <= '9'; }
 
         private static string ReadString(string s, ref int pos)
         {
