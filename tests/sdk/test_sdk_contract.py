@@ -26,7 +26,8 @@ def _recorded_sha256(path: Path) -> str:
 def test_typescript_models_were_generated_from_this_openapi_json() -> None:
     assert _recorded_sha256(TS_GENERATED) == hashlib.sha256(SPEC.read_bytes()).hexdigest(), (
         "docs/openapi.json changed since the TypeScript wire types were generated: run "
-        "`npm run generate` in sdk/typescript (npm ci first) and commit "
+        "`npm run generate` in sdk/typescript (npm ci first; `make sdk-models` regenerates "
+        "both SDKs' models) and commit "
         "sdk/typescript/src/generated/openapi.ts")
 
 
@@ -38,7 +39,7 @@ def test_csharp_models_are_what_the_generator_makes_of_this_openapi_json() -> No
     spec.loader.exec_module(module)
     assert CS_GENERATED.read_text() == module.render(), (
         "docs/openapi.json changed since the C# wire models were generated: run "
-        "`python3 sdk/csharp/generate_models.py` and commit "
+        "`python3 sdk/csharp/generate_models.py` (or `make sdk-models`) and commit "
         "sdk/csharp/QuadLoc.Client/Models.g.cs")
 
 
