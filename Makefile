@@ -37,7 +37,7 @@ COMPILE    := CUSTOM_COMPILE_COMMAND="make lock" $(LOCK_VENV)/bin/pip-compile --
               --generate-hashes --allow-unsafe --strip-extras --no-emit-options \
               $(if $(UPGRADE),--upgrade)
 
-.PHONY: serve test lint typecheck install bench clean lock _install_locked
+.PHONY: serve test lint typecheck install bench clean lock sdk-models _install_locked
 
 # `make serve` and `make test` may start together and share the venv: the install runs under an
 # exclusive flock, and re-checks under the lock whether another make already did it.
@@ -72,9 +72,21 @@ typecheck: $(STAMP)
 	    $(foreach p,$(TYPED_PKGS),-p quadloc.$(p)) -p quadloc_sdk \
 	    | sed 's|^build/typecheck/quadloc/||'
 
+# pytest also builds and tests the TypeScript and C# SDKs against live servers where node / mono
+# are installed (tests/e2e/test_sdk_typescript.py, test_sdk_csharp.py; skipped with the reason
+# elsewhere) and checks that their wire models match docs/openapi.json (tests/sdk).
 test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest
+
+# The TypeScript and C# wire models regenerated from docs/openapi.json (after an API change and
+# `quadloc openapi -o docs/openapi.json`); commit the two files it writes.
+TS_SDK := sdk/typescript
+sdk-models: $(STAMP)
+	@[ $(TS_SDK)/node_modules/.package-lock.json -nt $(TS_SDK)/package-lock.json ] \
+	    || (cd $(TS_SDK) && npm ci --no-audit --no-fund)
+	cd $(TS_SDK) && npm run generate
+	$(BIN)/python sdk/csharp/generate_models.py
 
 serve: $(STAMP)
 	$(BIN)/quadloc serve

@@ -9,12 +9,20 @@ and must give a reason. ``<!-- expect: TEXT -->`` above a block: its output must
 Bash blocks of one page share one shell (a variable set in one block is used by the next, as a
 reader typing them would); python blocks run each in a fresh interpreter from the repository
 root with the venv's ``python`` and ``quadloc`` first on PATH.
+
+The SDK quick starts run too, where their toolchains are installed (else skipped, saying why):
+``typescript`` blocks are compiled by tsc against the built package (types checked; the
+``@quadloc/client`` import resolves to sdk/typescript itself) and run with node, ``csharp``
+blocks (each a program with ``Main``) are compiled by Mono's mcs against the built
+QuadLoc.Client.dll and run with mono; both from the repository root, once.
 """
 
 from __future__ import annotations
 
+import json
 import os
 import re
+import shutil
 import subprocess
 import sys
 from dataclasses import dataclass
@@ -76,8 +84,10 @@ def test_every_block_runs_or_says_why_not() -> None:
     skipped = [b for d in DOCS for b in blocks(d)
                if b.lang in ("python", "bash") and b.skip_reason is not None]
     assert all(b.skip_reason for b in skipped), [b.where for b in skipped if not b.skip_reason]
-    # a handful, each for a reason a test cannot provide (a Docker engine, make itself)
-    assert len(skipped) <= 7, [(b.where, b.skip_reason) for b in skipped]
+    # a handful, each for a reason a test cannot provide (a Docker engine, make itself), plus
+    # the SDKs' build commands and the example server of docs/sdk-typescript.md and
+    # docs/sdk-csharp.md, which tests/e2e/conftest.py's fixtures run instead
+    assert len(skipped) <= 10, [(b.where, b.skip_reason) for b in skipped]
     n = sum(len(runnable(d)) for d in DOCS)
     assert n >= 30, n
     for d in DOCS:  # python blocks are programs, not signatures or fragments
@@ -146,3 +156,62 @@ def test_default_database_is_per_checkout(monkeypatch: pytest.MonkeyPatch) -> No
     monkeypatch.delenv("QUADLOC_DATABASE_URL", raising=False)
     assert Path(Settings().data_dir) == REPO / "var"
     assert "/var/" in (REPO / ".gitignore").read_text().splitlines()
+
+
+def _sdk_blocks(lang: str) -> list[Block]:
+    return [b for d in DOCS for b in blocks(d) if b.lang == lang and b.skip_reason is None]
+
+
+def _check_output(b: Block, proc: subprocess.CompletedProcess[str]) -> str | None:
+    if proc.returncode != 0:
+        return f"{b.where}: exit {proc.returncode}\n{proc.stdout[-1500:]}\n{proc.stderr[-2000:]}"
+    if b.expect and b.expect.lower() not in proc.stdout.lower():
+        return f"{b.where}: expected {b.expect!r} in\n{proc.stdout[-1500:]}"
+    return None
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(600)
+def test_typescript_quick_starts_compile_and_run(live_server: str, ts_package: Path) -> None:
+    found = _sdk_blocks("typescript")
+    assert len(found) >= 3, [b.where for b in found]
+    out = ts_package / "build-docs"
+    shutil.rmtree(out, ignore_errors=True)
+    out.mkdir()
+    for i, b in enumerate(found):
+        (out / f"block{i}.ts").write_text(f"// {b.where}\n" + b.code.replace(DOC_BASE, live_server))
+    (out / "tsconfig.json").write_text(json.dumps({
+        "extends": "../tsconfig.json", "include": ["*.ts"],
+        "compilerOptions": {"rootDir": ".", "outDir": "js", "types": ["node"],
+                            "declaration": False, "sourceMap": False}}))
+    tsc = subprocess.run(["node", "node_modules/typescript/bin/tsc", "-p", "build-docs"],
+                         cwd=ts_package, capture_output=True, text=True, timeout=180)
+    assert tsc.returncode == 0, f"the TypeScript quick starts do not compile:\n{tsc.stdout}"
+    failures = []
+    for i, b in enumerate(found):
+        proc = subprocess.run(["node", str(out / "js" / f"block{i}.js")], cwd=REPO,
+                              capture_output=True, text=True, timeout=120,
+                              stdin=subprocess.DEVNULL)
+        failures.append(_check_output(b, proc))
+    assert not any(failures), "\n\n".join(f for f in failures if f)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(600)
+def test_csharp_quick_starts_compile_and_run(live_server: str, csharp_build: Path) -> None:
+    found = _sdk_blocks("csharp")
+    assert len(found) >= 2, [b.where for b in found]
+    failures = []
+    for i, b in enumerate(found):
+        src, exe = csharp_build / f"docs_block{i}.cs", csharp_build / f"docs_block{i}.exe"
+        src.write_text(f"// {b.where}\n" + b.code.replace(DOC_BASE, live_server))
+        mcs = subprocess.run(["mcs", "-langversion:7.2", "-r:System.Net.Http.dll",
+                              f"-r:{csharp_build / 'QuadLoc.Client.dll'}", f"-out:{exe}", str(src)],
+                             capture_output=True, text=True, timeout=120)
+        if mcs.returncode != 0:
+            failures.append(f"{b.where}: does not compile\n{mcs.stdout}{mcs.stderr}")
+            continue
+        proc = subprocess.run(["mono", str(exe)], cwd=REPO, capture_output=True, text=True,
+                              timeout=120, stdin=subprocess.DEVNULL)
+        failures.append(_check_output(b, proc))
+    assert not any(failures), "\n\n".join(f for f in failures if f)

@@ -1,0 +1,235 @@
+"""Generates sdk/csharp/QuadLoc.Client/Models.g.cs, the C# wire models, from docs/openapi.json.
+
+    python3 sdk/csharp/generate_models.py            # rewrite the file
+    python3 sdk/csharp/generate_models.py --check    # exit 1 when it is stale
+
+One class per schema of ``components.schemas``, named as in the document (``CameraIn``,
+``LocalizeResponse``, ``PoseOut``, ...), one property per schema property, in PascalCase
+(``world_from_camera`` -> ``WorldFromCamera``), with ``FromJson(JsonValue)`` / ``ToJson()``
+written out (no reflection: safe under IL2CPP code stripping). Types: number -> double,
+integer -> long, boolean -> bool, string (and enums) -> string, arrays -> List<T>, a $ref ->
+its class, a free-form object -> JsonValue, an object of numbers / strings ->
+Dictionary<string, double / string>; optional or nullable -> null when absent (value types
+become Nullable). Optional members left null are not written. Members a newer server adds are
+kept in ``Extra`` and written back. Standard library only (run it with any Python >= 3.9);
+tests/sdk/test_sdk_contract.py fails when the committed file differs from its output.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+import sys
+from pathlib import Path
+from typing import Any
+
+HERE = Path(__file__).resolve().parent
+SPEC = HERE.parent.parent / "docs" / "openapi.json"
+OUT = HERE / "QuadLoc.Client" / "Models.g.cs"
+VALUE_TYPES = {"double", "long", "bool"}
+
+
+def pascal(name: str) -> str:
+    return "".join(p[:1].upper() + p[1:] for p in re.split(r"[_\-\s]+", name) if p)
+
+
+def _non_null(schema: dict[str, Any]) -> tuple[dict[str, Any], bool]:
+    """The schema without its ``null`` alternative, and whether null was allowed."""
+    if "anyOf" in schema:
+        alts = [a for a in schema["anyOf"] if a.get("type") != "null"]
+        nullable = len(alts) < len(schema["anyOf"])
+        if len(alts) == 1:
+            return alts[0], nullable
+        raise ValueError(f"unsupported anyOf: {schema}")
+    return schema, False
+
+
+def cs_type(schema: dict[str, Any]) -> str:
+    s, _ = _non_null(schema)
+    if "$ref" in s:
+        return s["$ref"].rsplit("/", 1)[1]
+    t = s.get("type")
+    if t == "number":
+        return "double"
+    if t == "integer":
+        return "long"
+    if t == "boolean":
+        return "bool"
+    if t == "string":
+        return "string"
+    if t == "array":
+        return f"List<{cs_type(s.get('items', {}))}>"
+    if t == "object":
+        ap = s.get("additionalProperties")
+        if isinstance(ap, dict) and not s.get("properties"):
+            return f"Dictionary<string, {cs_type(ap)}>"
+        return "JsonValue"
+    if t is None and not s:
+        return "JsonValue"
+    raise ValueError(f"unsupported schema: {s}")
+
+
+def read_expr(t: str, v: str, depth: int = 0) -> str:
+    """C# expression reading the JsonValue ``v`` as type ``t``."""
+    if t == "double":
+        return f"{v}.AsDouble()"
+    if t == "long":
+        return f"{v}.AsLong()"
+    if t == "bool":
+        return f"{v}.AsBool()"
+    if t == "string":
+        return f"{v}.AsString()"
+    if t == "JsonValue":
+        return v
+    if t.startswith("List<"):
+        inner = t[5:-1]
+        x = f"x{depth}"
+        return f"{v}.AsList({x} => {read_expr(inner, x, depth + 1)})"
+    if t.startswith("Dictionary<string, "):
+        inner = t[len("Dictionary<string, "):-1]
+        x = f"x{depth}"
+        return f"{v}.AsDictionary({x} => {read_expr(inner, x, depth + 1)})"
+    return f"{t}.FromJson({v})"
+
+
+def write_expr(t: str, v: str, depth: int = 0) -> str:
+    """C# expression turning the (non-null) value ``v`` of type ``t`` into a JsonValue."""
+    if t in VALUE_TYPES or t == "string":
+        return f"new JsonValue({v})"
+    if t == "JsonValue":
+        return v
+    if t.startswith("List<"):
+        inner = t[5:-1]
+        x = f"x{depth}"
+        return f"JsonValue.FromList({v}, {x} => {write_expr(inner, x, depth + 1)})"
+    if t.startswith("Dictionary<string, "):
+        inner = t[len("Dictionary<string, "):-1]
+        x = f"x{depth}"
+        return f"JsonValue.FromDictionary({v}, {x} => {write_expr(inner, x, depth + 1)})"
+    return f"{v}.ToJson()"
+
+
+def doc(text: str | None, indent: str) -> list[str]:
+    if not text:
+        return []
+    esc = text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+    lines = [ln.rstrip() for ln in esc.strip().splitlines()]
+    return [f"{indent}/// <summary>"] + [f"{indent}/// {ln}".rstrip() for ln in lines] + [
+        f"{indent}/// </summary>"]
+
+
+def render() -> str:
+    raw = SPEC.read_bytes()
+    spec = json.loads(raw)
+    schemas = spec["components"]["schemas"]
+    out = [
+        "// GENERATED FILE: do not edit. `python3 sdk/csharp/generate_models.py` rewrites it from",
+        "// docs/openapi.json (one class per schema, FromJson / ToJson written out).",
+        f"// openapi-sha256: {hashlib.sha256(raw).hexdigest()}",
+        "// <auto-generated />",
+        "using System.Collections.Generic;",
+        "",
+        "namespace QuadLoc.Client",
+        "{",
+    ]
+    names = []
+    for name, schema in schemas.items():
+        names.append(name)
+        props = schema.get("properties", {})
+        required = set(schema.get("required", []))
+        out += doc(schema.get("description") or schema.get("title"), "    ")
+        out.append(f"    public sealed partial class {name}")
+        out.append("    {")
+        fields = []
+        for pname, pschema in props.items():
+            t = cs_type(pschema)
+            _, nullable = _non_null(pschema)
+            optional = nullable or pname not in required
+            prop = pascal(pname)
+            if prop == name:
+                prop += "Value"
+            decl = f"{t}?" if optional and t in VALUE_TYPES else t
+            fields.append((pname, prop, t, optional))
+            inner, _ = _non_null(pschema)
+            text = pschema.get("description") or inner.get("description") or pschema.get("title")
+            if "enum" in inner:
+                text = (text + " " if text else "") + "One of: " + ", ".join(
+                    f'"{e}"' for e in inner["enum"]) + "."
+            out += doc(text, "        ")
+            out.append(f"        public {decl} {prop} {{ get; set; }}")
+        out.append("        /// <summary>Members this SDK does not know (a newer server's), kept "
+                   "and written back.</summary>")
+        out.append("        public Dictionary<string, JsonValue> Extra { get; set; } = "
+                   "new Dictionary<string, JsonValue>();")
+        out.append("")
+        out.append(f"        /// <summary>Reads a {name} from its JSON object.</summary>")
+        out.append(f"        public static {name} FromJson(JsonValue json)")
+        out.append("        {")
+        out.append(f'            json.ExpectObject("{name}");')
+        out.append(f"            var o = new {name}();")
+        out.append("            foreach (var member in json.Members)")
+        out.append("            {")
+        out.append("                var v = member.Value;")
+        out.append("                switch (member.Key)")
+        out.append("                {")
+        for pname, prop, t, optional in fields:
+            expr = read_expr(t, "v")
+            if optional and t in VALUE_TYPES:
+                expr = f"v.IsNull ? ({t}?)null : {expr}"
+            elif optional:
+                expr = f"v.IsNull ? null : {expr}"
+            out.append(f'                    case "{pname}": o.{prop} = {expr}; break;')
+        out.append("                    default: o.Extra[member.Key] = v; break;")
+        out.append("                }")
+        out.append("            }")
+        out.append("            return o;")
+        out.append("        }")
+        out.append("")
+        out.append("        /// <summary>The JSON object (null optional members left out)."
+                   "</summary>")
+        out.append("        public JsonValue ToJson()")
+        out.append("        {")
+        out.append("            var o = JsonValue.NewObject();")
+        for pname, prop, t, optional in fields:
+            value = f"{prop}.Value" if optional and t in VALUE_TYPES else prop
+            line = f'o.Set("{pname}", {write_expr(t, value)});'
+            if optional or t not in VALUE_TYPES:
+                line = f"if ({prop} != null) {line}"
+            out.append(f"            {line}")
+        out.append("            foreach (var member in Extra) o.Set(member.Key, member.Value);")
+        out.append("            return o;")
+        out.append("        }")
+        out.append("    }")
+        out.append("")
+    out.append("    /// <summary>The schemas of docs/openapi.json these models were generated "
+               "from.</summary>")
+    out.append("    public static class WireSchemas")
+    out.append("    {")
+    out.append("        /// <summary>sha256 of the docs/openapi.json they were generated "
+               "from.</summary>")
+    out.append(f'        public const string OpenApiSha256 = "{hashlib.sha256(raw).hexdigest()}";')
+    out.append("        /// <summary>Every schema name, in the document's order.</summary>")
+    out.append("        public static readonly string[] Names = { "
+               + ", ".join(f'"{n}"' for n in names) + " };")
+    out.append("    }")
+    out.append("}")
+    return "\n".join(out) + "\n"
+
+
+def main(argv: list[str]) -> int:
+    text = render()
+    if "--check" in argv:
+        if not OUT.exists() or OUT.read_text() != text:
+            print("sdk/csharp/QuadLoc.Client/Models.g.cs is stale: docs/openapi.json changed. "
+                  "Run `python3 sdk/csharp/generate_models.py` and commit the file.",
+                  file=sys.stderr)
+            return 1
+        return 0
+    OUT.write_text(text)
+    print("wrote sdk/csharp/QuadLoc.Client/Models.g.cs")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
