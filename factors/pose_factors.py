@@ -17,9 +17,10 @@ All the factors of one solve share ONE memoised
 :class:`quadloc.factors.pose_residuals.PoseResidualModel` (every pair evaluated at once per pose,
 the factors slice their rows). :func:`pose_factors` returns one factor per pair (default; needed for
 per-detection robust kernels), or with ``batched=True`` ONE factor over all pairs with a
-Diagonal noise model (the same weighted error, one Python round trip). Jacobians, invalid
-projections (a bounded penalty) and the saturation: :mod:`quadloc.factors.pose_residuals`. Why and
-measurements: ``docs/design/factors.md`` ("Pose factors").
+Diagonal noise model (the same weighted error, one Python round trip). Jacobians:
+:mod:`quadloc.factors.pose_residuals` and its metric families; invalid projections (a bounded
+penalty) and the saturation: :mod:`quadloc.factors.pose_penalty`. Why and measurements:
+``docs/design/factors.md`` ("Pose factors").
 """
 
 from __future__ import annotations
