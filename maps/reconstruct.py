@@ -32,7 +32,12 @@ from quadloc.factors.ellipsoid_residuals import (
     observation_residual,
     stack_samples,
 )
-from quadloc.factors.rotations import ORTHONORMAL_TOLERANCE, invert_pose, pose_matrix
+from quadloc.factors.rotations import (
+    ORTHONORMAL_TOLERANCE,
+    invert_pose,
+    pose_matrix,
+    rotation_angle,
+)
 from quadloc.maps.model import LIMITS, MapObject, SceneMap
 
 __all__ = [
@@ -529,12 +534,9 @@ def ellipsoid_errors(estimate: Ellipsoid, truth: Ellipsoid) -> dict[str, float]:
     equal semi-axes) and ``shape_rel`` (``|M_est - M_true|_F / |M_true|_F``, frame-free).
     """
     frames = np.einsum("ij,sjk->sik", estimate.rotation, _SYMMETRIES)  # R_est S
-    rel = np.einsum("ji,sjk->sik", truth.rotation, frames)  # R_true^T R_est S
-    cos = np.clip((np.trace(rel, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
-    best = int(np.argmax(cos))
-    # angle from |R - I|_F = 2 sqrt(2) sin(angle / 2): accurate for small angles, unlike arccos
-    angle = 2.0 * math.asin(min(1.0, float(np.linalg.norm(rel[best] - np.eye(3)))
-                                / (2.0 * math.sqrt(2.0))))
+    angles = rotation_angle(truth.rotation, frames)  # (24,) rad
+    best = int(np.argmin(angles))
+    angle = float(angles[best])
     axes = np.abs(_SYMMETRIES[best]).T @ estimate.axes  # axes permuted like the columns
     m_true = truth.shape_matrix()
     return {

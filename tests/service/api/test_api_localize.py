@@ -15,7 +15,7 @@ from fastapi.testclient import TestClient
 
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.names import GeometryError
-from quadloc.factors.rotations import rotation_from_quaternion_wxyz
+from quadloc.factors.rotations import rotation_angle, rotation_from_quaternion_wxyz
 from quadloc.service.api import solver as solver_module
 from quadloc.service.api.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, LOCALIZE_EXAMPLE
 from tests.conftest import make_test_app
@@ -39,8 +39,7 @@ def _frame(**changes: object) -> dict:
 
 
 def _rot_err_deg(A: np.ndarray, B: np.ndarray) -> float:
-    c = (np.trace(A[:3, :3].T @ B[:3, :3]) - 1) / 2
-    return math.degrees(math.acos(min(1.0, max(-1.0, c))))
+    return math.degrees(float(rotation_angle(A[:3, :3], B[:3, :3])))
 
 
 def test_demo_frame_localizes_near_the_ground_truth(client: TestClient) -> None:
