@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import numbers
+from typing import TypeGuard
 
 __all__ = [
     "METRIC_NAMES",
@@ -51,8 +52,8 @@ class GeometryError(FieldError):
     """Invalid geometric input (a :class:`FieldError`)."""
 
 
-def is_real(x: object) -> bool:
-    """A real number (Python or numpy scalar), not a bool."""
+def is_real(x: object) -> TypeGuard[float]:
+    """A real number (Python or numpy scalar), not a bool (for mypy: usable as a float)."""
     return isinstance(x, numbers.Real) and not isinstance(x, bool)
 
 

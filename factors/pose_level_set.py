@@ -164,7 +164,7 @@ class LevelSetResiduals:
         H[:, :2, 2] = (detection_params[:, :2] - (camera.cx, camera.cy)) / focal
         H[:, 2, 2] = 1.0
         self._H = H
-        self._H_inv: FloatArray = np.linalg.inv(H)
+        self._H_inv = np.linalg.inv(H)
         self.lay_out(initial_world_from_camera)
 
     def lay_out(self, world_from_camera: FloatArray | None) -> None:

@@ -22,7 +22,6 @@ from quadloc.factors.conics import (
     gaussian_derivatives_from_dual_conics,
     gaussians_from_dual_conics,
 )
-from quadloc.factors.overlap import HULL_DIRECTIONS
 from quadloc.factors.pose_frame import EllipsoidArrays, PairRows, ProjectionConics
 
 __all__ = ["OverlapResiduals"]
@@ -40,7 +39,7 @@ def _dg_dxi(mu: FloatArray, dCn: FloatArray) -> FloatArray:
 class OverlapResiduals:
     """iou / giou residuals of N pairs (:class:`PoseResidualFamily
     <quadloc.factors.pose_frame.PoseResidualFamily>`); ``detection_params`` (N, 5) px / rad,
-    ``options`` the metric's (``hull_directions``)."""
+    ``options`` the metric's (``hull_directions``: accepted, unused by the exact areas)."""
 
     def __init__(self, metric: str, detection_params: FloatArray, ellipsoids: EllipsoidArrays,
                  camera: Camera, options: Mapping[str, object], min_depth_margin: float) -> None:
@@ -49,7 +48,6 @@ class OverlapResiduals:
         self._ellipsoids = ellipsoids
         self._min_depth_margin = min_depth_margin
         self._conics = ProjectionConics(camera)
-        self._hull_directions = options.get("hull_directions", HULL_DIRECTIONS)
         #: residual components per pair
         self.dim = int(metrics.residual_size(metric, **options))
 
@@ -74,18 +72,17 @@ class OverlapResiduals:
         valid &= ellipse
         if valid.all():  # the usual case: no scatter into zero-filled rows
             r, grad = metrics.overlap_residual(self._metric, self._detection_params, params,
-                                               self._hull_directions, gradient=dCn is not None,
-                                               disjoint_hull=True)
-            return r, None if dCn is None else grad @ _dg_dxi(mu, dCn)
+                                               gradient=dCn is not None, disjoint_hull=True)
+            return r, None if dCn is None or grad is None else grad @ _dg_dxi(mu, dCn)
         n = len(valid)
         r = np.zeros((n, self.dim))
         J = None if dCn is None else np.zeros((n, self.dim, 6))
         idx = np.flatnonzero(valid)
         if idx.size:
             rows, grad = metrics.overlap_residual(
-                self._metric, self._detection_params[idx], params[idx], self._hull_directions,
+                self._metric, self._detection_params[idx], params[idx],
                 gradient=J is not None, disjoint_hull=True)
             r[idx] = rows
-            if J is not None:
+            if J is not None and dCn is not None and grad is not None:
                 J[idx] = grad @ _dg_dxi(mu[idx], dCn[idx])
         return r, J

@@ -45,6 +45,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import TypedDict
 
 import numpy as np
 
@@ -67,6 +68,7 @@ __all__ = [
     "DEFAULT_MIN_DEPTH_MARGIN",
     "DEFAULT_NUMERIC_STEP",
     "DEFAULT_PENALTY_COST",
+    "ModelOptions",
     "PoseEvaluation",
     "PoseResidualModel",
     "compile_kernels",
@@ -102,6 +104,16 @@ def expmap_pose3(xi: FloatArray) -> FloatArray:
     T[:3, :3] = so3_exp(w)
     T[:3, 3] = V @ v
     return T
+
+
+class ModelOptions(TypedDict, total=False):
+    """:class:`PoseResidualModel`'s tuning keywords (forwarded by
+    :func:`quadloc.factors.pose_factors.pose_factors`)."""
+
+    min_depth_margin: float
+    penalty_cost: float
+    numeric_step: float | None
+    eager_jacobian: bool | None
 
 
 @dataclass(frozen=True)
