@@ -188,7 +188,7 @@ def snap_to_rotation(matrix: FloatArray) -> FloatArray:
     return R
 
 
-def rotation_from_quaternion_wxyz(quaternion_wxyz: Sequence[float]) -> FloatArray:
+def rotation_from_quaternion_wxyz(quaternion_wxyz: FloatArray | Sequence[float]) -> FloatArray:
     """3x3 rotation from a unit quaternion ``(w, x, y, z)``.
 
     The norm must be 1 within ``QUATERNION_NORM_TOLERANCE``; the quaternion is renormalised.

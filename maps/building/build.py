@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from quadloc.maps.building.association import AssociationOptions, associate
-from quadloc.maps.building.joint import refine_jointly
+from quadloc.maps.building.joint import ObjectQuality, refine_jointly
 from quadloc.maps.building.recording import Recording
 from quadloc.maps.model import MapObject, SceneMap
 from quadloc.maps.reconstruct import degenerate_shape_reason
@@ -32,7 +32,7 @@ MIN_VIEWS_UNCONSTRAINED = 15
 MAX_CENTER_STD_M: float | None = None
 
 
-def _drop_detail(reason: str, shape_problem: str | None, q: Any) -> str:
+def _drop_detail(reason: str, shape_problem: str | None, q: ObjectQuality) -> str:
     """A sentence for the report on why an object was left out of the map."""
     if reason == "degenerate_shape":
         return f"not an object's shape: {shape_problem}"
@@ -96,6 +96,7 @@ def build_map(
     counters: dict[str, int] = {}
     dropped = []
     for k, h in enumerate(objects):
+        assert joint is not None  # refined whenever there are objects
         ell = joint.ellipsoids[k]
         q = joint.quality[k]
         counters[h.label] = counters.get(h.label, 0) + 1
