@@ -233,17 +233,18 @@ class PoseResidualModel:
         self._memo: tuple[bytes, bool, PoseEvaluation] | None = None
         T0 = None if initial_world_from_camera is None else check_pose(
             initial_world_from_camera, "initial_world_from_camera")
-        self._level_set: LevelSetResiduals | None = None
-        self._family = self._make_family(T0)
+        #: the level-set family (its samples: relayout, sampling_scale), None for other metrics
+        self._level_set = None if metric != "level_set" else LevelSetResiduals(
+            self._detection_params, self._ellipsoid_arrays, camera, self.options,
+            self.min_depth_margin, T0)
+        self._family: PoseResidualFamily = self._level_set if self._level_set is not None \
+            else self._make_family()
         self.dim = self._family.dim
         self._penalty = self._make_penalty()
 
-    def _make_family(self, T0: FloatArray | None) -> PoseResidualFamily:
-        """The metric's residual family (level set: laid out at ``T0``)."""
+    def _make_family(self) -> PoseResidualFamily:
+        """The residual family of a metric other than the level set."""
         args = (self._ellipsoid_arrays, self.camera, self.options, self.min_depth_margin)
-        if self.metric == "level_set":
-            self._level_set = LevelSetResiduals(self._detection_params, *args, T0)
-            return self._level_set
         if not self.analytic:
             return CentralDifferenceResiduals(self.metric, self.detections, *args,
                                               self.numeric_step, expmap_pose3)
