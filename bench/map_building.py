@@ -46,7 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.chess_eval import eval_options
-from quadloc.factors.rotations import pose_matrix
+from quadloc.factors.rotations import pose_matrix, rotation_angle
 from quadloc.maps.building.build import build_map
 from quadloc.maps.building.recording import parse_recording, recording_to_dict
 from quadloc.maps.compiled import compile_map
@@ -188,8 +188,8 @@ def run_seed(seed: int, n_frames: int, n_test: int, log=print,
                           "within_10cm": float(np.mean(eb <= 0.10))},
             "built_map_aligned": {"within_5cm": float(np.mean(ea <= 0.05)),
                                   "within_10cm": float(np.mean(ea <= 0.10)),
-                                  "alignment_rotation_deg": float(np.degrees(np.arccos(np.clip(
-                                      (np.trace(T_align[:3, :3]) - 1) / 2, -1, 1)))),
+                                  "alignment_rotation_deg": math.degrees(float(
+                                      rotation_angle(T_align[:3, :3], np.eye(3)))),
                                   "alignment_translation_m": float(np.linalg.norm(
                                       T_align[:3, 3]))},
         },

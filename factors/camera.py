@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from quadloc.factors.arrays import BoolArray, FloatArray
 from quadloc.factors.conics import DegenerateProjectionError, Ellipse, params_from_dual_conics
 from quadloc.factors.jit import jit
 from quadloc.factors.names import GeometryError
@@ -57,9 +58,9 @@ class Ellipsoid:
     ``(X - center)^T rotation diag(axes^-2) rotation^T (X - center) <= 1``.
     """
 
-    center: np.ndarray
-    axes: np.ndarray
-    rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
+    center: FloatArray
+    axes: FloatArray
+    rotation: FloatArray = field(default_factory=lambda: np.eye(3))
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "center", finite_array("Ellipsoid", "center", self.center, (3,)))
@@ -78,16 +79,16 @@ class Ellipsoid:
                    rotation_from_quaternion_wxyz(quaternion_wxyz))
 
     @property
-    def quaternion_wxyz(self) -> np.ndarray:
+    def quaternion_wxyz(self) -> FloatArray:
         """Orientation as a unit quaternion ``(w, x, y, z)``, ``w >= 0``."""
         return quaternion_wxyz_from_rotation(self.rotation)
 
-    def dual_quadric(self) -> np.ndarray:
+    def dual_quadric(self) -> FloatArray:
         """``Q* = T diag(a^2, b^2, c^2, -1) T^T`` (4x4), ``T = [[rotation, center], [0, 1]]``."""
         T = pose_matrix(self.rotation, self.center)
         return T @ np.diag([*(self.axes**2), -1.0]) @ T.T
 
-    def shape_matrix(self) -> np.ndarray:
+    def shape_matrix(self) -> FloatArray:
         """``M = rotation diag(axes^2) rotation^T`` (3x3, m^2): the quadric's inverse shape."""
         return self.rotation @ np.diag(self.axes**2) @ self.rotation.T
 
@@ -120,7 +121,7 @@ class Camera:
             object.__setattr__(self, name, int(v))
 
     @classmethod
-    def from_matrix(cls, K: np.ndarray, width: int, height: int) -> Camera:
+    def from_matrix(cls, K: FloatArray, width: int, height: int) -> Camera:
         """From a 3x3 intrinsic matrix ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`` (pixels).
 
         Raises ``GeometryError`` naming ``K`` for another shape, non-finite entries, a nonzero
@@ -145,23 +146,25 @@ class Camera:
         return cls(M[0, 0], M[1, 1], M[0, 2], M[1, 2], width, height)
 
     @property
-    def K(self) -> np.ndarray:
+    def K(self) -> FloatArray:
         """3x3 intrinsic matrix."""
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
-    def projection_matrix(self, camera_from_world: np.ndarray) -> np.ndarray:
+    def projection_matrix(self, camera_from_world: FloatArray) -> FloatArray:
         """``P = K [R | t]`` (3x4) from the 4x4 ``camera_from_world`` transform."""
-        return self.K @ np.asarray(camera_from_world, dtype=float)[:3, :]
+        P: FloatArray = self.K @ np.asarray(camera_from_world, dtype=float)[:3, :]
+        return P
 
-    def project_points(self, camera_from_world: np.ndarray, points_world: np.ndarray) -> np.ndarray:
+    def project_points(self, camera_from_world: FloatArray, points_world: FloatArray) -> FloatArray:
         """Pixels (N, 2) of world points (N, 3); points must be in front of the camera."""
         T = np.asarray(camera_from_world, dtype=float)
         pc = np.asarray(points_world, dtype=float) @ T[:3, :3].T + T[:3, 3]
         uv = pc @ self.K.T
-        return uv[:, :2] / uv[:, 2:3]
+        pixels: FloatArray = uv[:, :2] / uv[:, 2:3]
+        return pixels
 
 
-def depth_margin(center_depth: np.ndarray, axis_variance: np.ndarray) -> np.ndarray:
+def depth_margin(center_depth: FloatArray, axis_variance: FloatArray) -> FloatArray:
     """Smallest camera-frame depth (m) of an ellipsoid: ``z_c - sqrt(d^T S d)``, from its
     centre's depth ``z_c`` (m) and ``d^T S d`` (m^2), its shape matrix ``S = R diag(axes^2)
     R^T`` along the camera's optical axis ``d`` (``S_c[2, 2]`` in the camera frame); any
@@ -171,8 +174,8 @@ def depth_margin(center_depth: np.ndarray, axis_variance: np.ndarray) -> np.ndar
 
 
 def ellipsoid_depth_margins(
-    camera_from_world: np.ndarray, centers: np.ndarray, shape_matrices: np.ndarray
-) -> np.ndarray:
+    camera_from_world: FloatArray, centers: FloatArray, shape_matrices: FloatArray
+) -> FloatArray:
     """Smallest camera-frame depth (m) of each ellipsoid: ``z_c - sqrt(n^T M n)``, shape
     (..., N) for poses (..., 4, 4) (or ``[R | t]`` (..., 3, 4)).
 
@@ -182,15 +185,17 @@ def ellipsoid_depth_margins(
     """
     T = np.asarray(camera_from_world, dtype=float)
     r3 = T[..., 2, :3]
-    zc = r3 @ np.asarray(centers).T + T[..., 2, 3, None]
-    return depth_margin(zc, np.einsum("...i,nij,...j->...n", r3, shape_matrices, r3))
+    zc: FloatArray = r3 @ np.asarray(centers).T + T[..., 2, 3, None]
+    spread: FloatArray = np.einsum("...i,nij,...j->...n", r3, shape_matrices, r3)
+    return depth_margin(zc, spread)
 
 
 @jit
 def _projected_gaussians_kernel(
-    P: np.ndarray, T: np.ndarray, centers: np.ndarray, shape_matrices: np.ndarray,
-    dual_quadrics: np.ndarray,
-) -> tuple[np.ndarray, ...]:
+    P: FloatArray, T: FloatArray, centers: FloatArray, shape_matrices: FloatArray,
+    dual_quadrics: FloatArray,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray,
+           BoolArray]:
     """:func:`projected_gaussians`' pose x ellipsoid loop: per (h, s), the entries of ``C* = P
     Q* P^T`` normalised to ``Cn[2, 2] = -1``, the centre ``mu = -Cn[:2, 2]`` and ``Sigma =
     Cn[:2, :2] + mu mu^T`` (the entries of :func:`gaussians_from_dual_conics`), the centre's
@@ -235,9 +240,9 @@ def _projected_gaussians_kernel(
 
 
 def projected_gaussians(
-    camera: Camera, camera_from_world: np.ndarray, centers: np.ndarray,
-    shape_matrices: np.ndarray, dual_quadrics: np.ndarray, min_depth: float = MIN_DEPTH,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    camera: Camera, camera_from_world: FloatArray, centers: FloatArray,
+    shape_matrices: FloatArray, dual_quadrics: FloatArray, min_depth: float = MIN_DEPTH,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, BoolArray, FloatArray]:
     """Projections of S ellipsoids at H poses as separate entries (the RANSAC scorer's, the
     P2E residuals' and the tracker's batched projection; a compiled kernel).
 
@@ -262,18 +267,19 @@ def projected_gaussians(
 
 
 def project_ellipsoids_dual(
-    camera: Camera, camera_from_world: np.ndarray, dual_quadrics: np.ndarray
-) -> np.ndarray:
+    camera: Camera, camera_from_world: FloatArray, dual_quadrics: FloatArray
+) -> FloatArray:
     """Projected dual conics ``C* = P Q* P^T`` (N, 3, 3), unnormalised, for (N, 4, 4) quadrics.
 
     No validity check: use :func:`ellipsoid_depth_margins` (or :func:`project_ellipsoid`).
     """
     P = camera.projection_matrix(camera_from_world)
-    return np.einsum("ij,njk,lk->nil", P, np.asarray(dual_quadrics, dtype=float), P)
+    conics: FloatArray = np.einsum("ij,njk,lk->nil", P, np.asarray(dual_quadrics, dtype=float), P)
+    return conics
 
 
 def project_ellipsoid(
-    camera: Camera, camera_from_world: np.ndarray, ellipsoid: Ellipsoid,
+    camera: Camera, camera_from_world: FloatArray, ellipsoid: Ellipsoid,
     min_depth: float = MIN_DEPTH,
 ) -> Ellipse:
     """The image ellipse of ``ellipsoid`` seen with the 4x4 ``camera_from_world`` pose.

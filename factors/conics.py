@@ -17,9 +17,11 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 
+from quadloc.factors.arrays import BoolArray, FloatArray
 from quadloc.factors.names import GeometryError
 from quadloc.factors.rotations import finite_array, finite_float
 
@@ -51,16 +53,21 @@ class DegenerateProjectionError(ValueError):
         self.reason = reason
 
 
-def sigma_entries(a: float | np.ndarray, b: float | np.ndarray, angle: float | np.ndarray
-                  ) -> tuple[float, float, float] | tuple[np.ndarray, np.ndarray, np.ndarray]:
+#: floats or float arrays, the same for all the arguments of a call
+_Real = TypeVar("_Real", float, FloatArray)
+
+
+def sigma_entries(a: _Real, b: _Real, angle: _Real) -> tuple[_Real, _Real, _Real]:
     """``Sigma = R(angle) diag(a^2, b^2) R(angle)^T`` of an ellipse as ``(s00, s01, s11)``;
     with ``(1 / a, 1 / b)`` the entries of its implicit form ``A = Sigma^-1``.
 
     Floats (``math``, cheap per ellipse: the metrics) or arrays (elementwise: the batched
     paths). ``Sigma`` is the ellipse's covariance-like shape (:meth:`Ellipse.gaussian`).
     """
-    trig = (math.cos, math.sin) if isinstance(angle, float | int) else (np.cos, np.sin)
-    c, s = trig[0](angle), trig[1](angle)
+    if isinstance(angle, float | int):
+        c, s = math.cos(angle), math.sin(angle)
+    else:
+        c, s = np.cos(angle), np.sin(angle)
     a2, b2 = a * a, b * b
     return a2 * c * c + b2 * s * s, (a2 - b2) * c * s, a2 * s * s + b2 * c * c
 
@@ -90,12 +97,12 @@ class Ellipse:
 
     # -- basic properties
     @property
-    def center(self) -> np.ndarray:
+    def center(self) -> FloatArray:
         """Centre ``(cx, cy)`` in pixels, shape (2,)."""
         return np.array([self.cx, self.cy])
 
     @property
-    def rotation(self) -> np.ndarray:
+    def rotation(self) -> FloatArray:
         """2x2 rotation by ``angle`` (from +x towards +y): its first column is the direction of
         semi-axis ``a``."""
         c, s = math.cos(self.angle), math.sin(self.angle)
@@ -106,40 +113,41 @@ class Ellipse:
         """Area in px^2: ``pi a b``."""
         return math.pi * self.a * self.b
 
-    def shape_matrix(self) -> np.ndarray:
+    def shape_matrix(self) -> FloatArray:
         """``A = R diag(a^-2, b^-2) R^T`` (2x2, px^-2)."""
         R = self.rotation
         return R @ np.diag([self.a**-2, self.b**-2]) @ R.T
 
-    def params(self) -> np.ndarray:
+    def params(self) -> FloatArray:
         """``[cx, cy, a, b, angle]`` as a float array of shape (5,)."""
         return np.array([self.cx, self.cy, self.a, self.b, self.angle])
 
     # -- conics
-    def dual_conic(self) -> np.ndarray:
+    def dual_conic(self) -> FloatArray:
         """Dual conic ``C* = C^-1`` normalised so that ``C*[2, 2] = -1`` (3x3, px^2)."""
-        return dual_conics_from_params(self.params()[None])[0]
+        conic: FloatArray = dual_conics_from_params(self.params()[None])[0]
+        return conic
 
     @classmethod
-    def from_dual_conic(cls, dual_conic: np.ndarray) -> Ellipse:
+    def from_dual_conic(cls, dual_conic: FloatArray) -> Ellipse:
         """Ellipse of a dual conic of any scale; raises ``DegenerateProjectionError`` if none."""
         return cls(*params_from_dual_conics(np.asarray(dual_conic, dtype=float)[None])[0])
 
     # -- Gaussian
-    def gaussian(self) -> tuple[np.ndarray, np.ndarray]:
+    def gaussian(self) -> tuple[FloatArray, FloatArray]:
         """``(mu, Sigma)``: ``mu = c`` (2,), ``Sigma = R diag(a^2, b^2) R^T`` (2x2)."""
         s00, s01, s11 = sigma_entries(self.a, self.b, self.angle)
         return self.center, np.array([[s00, s01], [s01, s11]])
 
     @classmethod
-    def from_gaussian(cls, mu: Sequence[float], sigma: np.ndarray) -> Ellipse:
+    def from_gaussian(cls, mu: Sequence[float], sigma: FloatArray) -> Ellipse:
         """Inverse of :meth:`gaussian` (``sigma`` symmetric positive definite)."""
-        mu = finite_array("Ellipse.from_gaussian", "mu", mu, (2,))
+        m = finite_array("Ellipse.from_gaussian", "mu", mu, (2,))
         S = finite_array("Ellipse.from_gaussian", "sigma", sigma, (2, 2))
-        return cls(*params_from_gaussians(mu[None], S[None])[0])
+        return cls(*params_from_gaussians(m[None], S[None])[0])
 
     # -- boxes, levels, contour
-    def bbox(self) -> np.ndarray:
+    def bbox(self) -> FloatArray:
         """Axis-aligned bounding box ``[xmin, ymin, xmax, ymax]`` in pixels."""
         c, s = math.cos(self.angle), math.sin(self.angle)
         hx = math.hypot(self.a * c, self.b * s)
@@ -155,7 +163,7 @@ class Ellipse:
             )
         return cls((xmin + xmax) / 2, (ymin + ymax) / 2, (xmax - xmin) / 2, (ymax - ymin) / 2, 0.0)
 
-    def contour_points(self, n: int = 64) -> np.ndarray:
+    def contour_points(self, n: int = 64) -> FloatArray:
         """``n`` points on the contour at equal parametric angles, shape (n, 2) px."""
         t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
         local = np.stack([self.a * np.cos(t), self.b * np.sin(t)], axis=-1)
@@ -170,12 +178,12 @@ class Ellipse:
         return Ellipse(self.cx, self.cy, a, b, ang)
 
 
-def ellipse_params(ellipses: Sequence[Ellipse]) -> np.ndarray:
+def ellipse_params(ellipses: Sequence[Ellipse]) -> FloatArray:
     """Stack ellipses into an array of shape (N, 5): ``[cx, cy, a, b, angle]`` per row."""
     return np.array([(e.cx, e.cy, e.a, e.b, e.angle) for e in ellipses], dtype=float).reshape(-1, 5)
 
 
-def dual_conics_from_params(params: np.ndarray) -> np.ndarray:
+def dual_conics_from_params(params: FloatArray) -> FloatArray:
     """Normalised dual conics (N, 3, 3), ``C*[2, 2] = -1``, from ellipse params (N, 5)."""
     p = np.asarray(params, dtype=float)
     s00, s01, s11 = sigma_entries(p[:, 2], p[:, 3], p[:, 4])
@@ -190,8 +198,8 @@ def dual_conics_from_params(params: np.ndarray) -> np.ndarray:
     return out
 
 
-def ellipse_params_and_validity(center: np.ndarray, sigma: np.ndarray
-                                ) -> tuple[np.ndarray, np.ndarray]:
+def ellipse_params_and_validity(center: FloatArray, sigma: FloatArray
+                                ) -> tuple[FloatArray, BoolArray]:
     """(N, 5) canonical params (a >= b, angle in [-pi/2, pi/2)) from centres (N, 2) px and
     ``Sigma = A^-1`` (N, 2, 2) px^2, and (N,) bool: ``Sigma`` positive definite (its smaller
     eigenvalue > 0; the rows where it is not are NaN or meaningless)."""
@@ -207,7 +215,7 @@ def ellipse_params_and_validity(center: np.ndarray, sigma: np.ndarray
     return params, ok
 
 
-def params_from_gaussians(center: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+def params_from_gaussians(center: FloatArray, sigma: FloatArray) -> FloatArray:
     """:func:`ellipse_params_and_validity`'s params; raises ``DegenerateProjectionError`` if a
     ``Sigma`` is not positive definite."""
     params, ok = ellipse_params_and_validity(center, sigma)
@@ -218,7 +226,7 @@ def params_from_gaussians(center: np.ndarray, sigma: np.ndarray) -> np.ndarray:
     return params
 
 
-def gaussians_from_dual_conics(Cn: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def gaussians_from_dual_conics(Cn: FloatArray) -> tuple[FloatArray, FloatArray]:
     """THE centre and Sigma of NORMALISED dual conics ``Cn`` (..., 3, 3), ``Cn[2, 2] = -1``:
     ``mu = -Cn[:2, 2]`` (..., 2) px and ``Sigma = Cn[:2, :2] + mu mu^T`` (..., 2, 2) px^2
     (``Sigma = R diag(a^2, b^2) R^T`` for an ellipse; not positive definite otherwise)."""
@@ -226,8 +234,8 @@ def gaussians_from_dual_conics(Cn: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return mu, Cn[..., :2, :2] + mu[..., :, None] * mu[..., None, :]
 
 
-def gaussian_derivatives_from_dual_conics(mu: np.ndarray, dCn: np.ndarray
-                                          ) -> tuple[np.ndarray, np.ndarray]:
+def gaussian_derivatives_from_dual_conics(mu: FloatArray, dCn: FloatArray
+                                          ) -> tuple[FloatArray, FloatArray]:
     """Derivatives of :func:`gaussians_from_dual_conics` along K directions: given the centres
     ``mu`` (N, 2) px and the derivatives ``dCn`` (N, K, 3, 3) of the normalised dual conics
     (e.g. K = 6 pose tangent directions), return ``dmu`` (N, K, 2) px and ``dSigma``
@@ -239,7 +247,7 @@ def gaussian_derivatives_from_dual_conics(mu: np.ndarray, dCn: np.ndarray
     return dmu, dsigma
 
 
-def params_from_dual_conics(dual_conics: np.ndarray) -> np.ndarray:
+def params_from_dual_conics(dual_conics: FloatArray) -> FloatArray:
     """Ellipse params (N, 5) from dual conics (N, 3, 3) of any scale.
 
     Raises ``DegenerateProjectionError`` if a conic is not a real ellipse. Output is canonical:
@@ -255,11 +263,12 @@ def params_from_dual_conics(dual_conics: np.ndarray) -> np.ndarray:
     return params_from_gaussians(*gaussians_from_dual_conics(C / (-w)[:, None, None]))
 
 
-def level_values(params: np.ndarray, points: np.ndarray) -> np.ndarray:
+def level_values(params: FloatArray, points: FloatArray) -> FloatArray:
     """``Phi_j(x)`` for ellipses (N, 5) at points (N, M, 2); returns (N, M)."""
     p = np.asarray(params, dtype=float)
     d = np.asarray(points, dtype=float) - p[:, None, :2]
     c, s = np.cos(p[:, 4])[:, None], np.sin(p[:, 4])[:, None]
     u = d[..., 0] * c + d[..., 1] * s
     v = -d[..., 0] * s + d[..., 1] * c
-    return (u / p[:, 2, None]) ** 2 + (v / p[:, 3, None]) ** 2
+    values: FloatArray = (u / p[:, 2, None]) ** 2 + (v / p[:, 3, None]) ** 2
+    return values

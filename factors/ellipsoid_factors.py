@@ -32,6 +32,7 @@ from collections.abc import Callable, Sequence
 import gtsam
 import numpy as np
 
+from quadloc.factors.arrays import BoolArray, FloatArray, IntArray
 from quadloc.factors.camera import depth_margin
 from quadloc.factors.ellipsoid_residuals import LevelSetSamples, observation_residual
 from quadloc.factors.pose_residuals import DEFAULT_MIN_DEPTH_MARGIN
@@ -43,7 +44,7 @@ __all__ = ["PENALTY_COST", "depth_margins", "ellipsoid_views_factor", "huber_row
 PENALTY_COST = 1e6
 
 
-def huber_row_scale(norms: np.ndarray, k: float) -> np.ndarray:
+def huber_row_scale(norms: FloatArray, k: float) -> FloatArray:
     """Row scale (same shape as ``norms``) so that ``0.5 (scale |w|)^2`` is Huber's cost of
     ``|w|`` with threshold ``k``: 1 inside, ``sqrt(2 k (|w| - k / 2)) / |w|`` outside."""
     norms = np.asarray(norms, dtype=float)
@@ -53,8 +54,8 @@ def huber_row_scale(norms: np.ndarray, k: float) -> np.ndarray:
     return out
 
 
-def depth_margins(camera_from_world: np.ndarray, rotation: np.ndarray, center: np.ndarray,
-                  axes: np.ndarray) -> np.ndarray:
+def depth_margins(camera_from_world: FloatArray, rotation: FloatArray, center: FloatArray,
+                  axes: FloatArray) -> FloatArray:
     """Smallest depth (m) of the ellipsoid in each camera (batched like
     :func:`quadloc.factors.ellipsoid_residuals.observation_residual`): ``d . c + t_z - sqrt(d^T S
     d)`` with ``d`` the camera's optical axis in the world (third row of ``R_cw``) and ``S`` the
@@ -69,10 +70,10 @@ def depth_margins(camera_from_world: np.ndarray, rotation: np.ndarray, center: n
 
 
 def ellipsoid_views_factor(
-    samples: LevelSetSamples, weights: np.ndarray,
-    object_keys: Sequence[tuple[int, int]], view_objects: Sequence[int] | np.ndarray, *,
-    camera_keys: Sequence[int] = (), view_cameras: Sequence[int] | np.ndarray | None = None,
-    camera_from_world: np.ndarray | None = None, robust_scale: float | None = None,
+    samples: LevelSetSamples, weights: FloatArray,
+    object_keys: Sequence[tuple[int, int]], view_objects: Sequence[int] | IntArray, *,
+    camera_keys: Sequence[int] = (), view_cameras: Sequence[int] | IntArray | None = None,
+    camera_from_world: FloatArray | None = None, robust_scale: float | None = None,
     penalty_cost: float = PENALTY_COST, min_depth_margin: float = DEFAULT_MIN_DEPTH_MARGIN,
     on_evaluate: Callable[[], None] | None = None,
 ) -> gtsam.CustomFactor:
@@ -124,7 +125,7 @@ def ellipsoid_views_factor(
     noise = gtsam.noiseModel.Unit.Create(V * M)
     all_samples = LevelSetSamples(None, n, phi)
 
-    def blocks(J: np.ndarray, sel: list[np.ndarray] | None, count: int) -> list[np.ndarray]:
+    def blocks(J: FloatArray, sel: list[BoolArray] | None, count: int) -> list[FloatArray]:
         """Per-slot Jacobian blocks (V * M, d): rows of other slots' views are zero."""
         d = J.shape[-1]
         if sel is None:
@@ -137,7 +138,7 @@ def ellipsoid_views_factor(
         return out
 
     def error_fn(this: gtsam.CustomFactor, values: gtsam.Values,
-                 H: list[np.ndarray] | None) -> np.ndarray:
+                 H: gtsam.JacobianVector | None) -> FloatArray:
         if on_evaluate is not None:
             on_evaluate()
         Rs = np.empty((n_obj, 3, 3))
@@ -176,14 +177,14 @@ def ellipsoid_views_factor(
                 scale = scale * huber_row_scale(np.abs(scale) * np.sqrt((r * r).sum(axis=1)),
                                                 robust_scale)
             out[ok] = r * scale[:, None]
-            if want:
+            if J_e is not None and Je is not None:
                 J_e[ok] = Je * scale[:, None, None]
-                if J_c is not None:
+                if J_c is not None and Jc is not None:
                     J_c[ok] = Jc * scale[:, None, None]
-        if want:
+        if H is not None and J_e is not None:
             Hs = [np.ascontiguousarray(B[:, part]) for B in blocks(J_e, obj_sel, n_obj)
                   for part in (slice(0, 6), slice(6, 9))]  # pose, log-axes of each object
-            if cam is not None:
+            if J_c is not None:  # cameras refined
                 Hs += blocks(J_c, cam_sel, len(cam_keys))
             for i, B in enumerate(Hs):
                 H[i] = B

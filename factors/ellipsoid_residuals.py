@@ -16,9 +16,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from quadloc.factors.arrays import FloatArray
 from quadloc.factors.camera import Camera
 from quadloc.factors.conics import Ellipse, level_values
-from quadloc.factors.metrics import level_set_sample_points
+from quadloc.factors.metrics import LevelSetOptions, level_set_sample_points
 from quadloc.factors.rotations import skew
 
 __all__ = [
@@ -35,7 +36,8 @@ _SKEW = skew(np.eye(3)) + 0.0  # [e_k]x, k = 0, 1, 2 (+ 0.0: no -0.0 entries)
 
 
 class LevelSetSamples:
-    """Fixed samples of one detection: normalised rays ``n`` (3, M) and ``Phi_det - 1`` (M,).
+    """Fixed samples of one detection: normalised rays ``n`` (3, M) and ``Phi_det - 1`` (M,)
+    (and its ``points`` (M, 2) px; None for a :func:`stack_samples` stack).
 
     Built by :func:`level_set_samples` from ``quadloc.factors.metrics.level_set_sample_points`` (the
     localization layout, ``adaptive=False``) so both problems sample identically.
@@ -43,19 +45,20 @@ class LevelSetSamples:
 
     __slots__ = ("n", "phi_det_minus_1", "points")
 
-    def __init__(self, points: np.ndarray, n: np.ndarray, phi_det_minus_1: np.ndarray) -> None:
+    def __init__(self, points: FloatArray | None, n: FloatArray, phi_det_minus_1: FloatArray
+                 ) -> None:
         self.points = points
         self.n = n
         self.phi_det_minus_1 = phi_det_minus_1
 
 
 def level_set_samples(detection: Ellipse, camera: Camera,
-                      metric_options: dict | None = None) -> LevelSetSamples:
+                      metric_options: LevelSetOptions | None = None) -> LevelSetSamples:
     """The level-set samples of ``detection`` (px) for ``camera``; ``metric_options`` as for the
     ``level_set`` metric (``n_azimuths``, ``n_levels``, ``scale``; ``adaptive`` is forced off:
     without a pose there is no misalignment to adapt to)."""
-    opts = {k: v for k, v in (metric_options or {}).items() if k != "adaptive"}
-    pts = level_set_sample_points(detection, None, adaptive=False, **opts)
+    options: LevelSetOptions = {**(metric_options or {}), "adaptive": False}
+    pts = level_set_sample_points(detection, None, **options)
     n = np.ones((3, len(pts)))
     n[0] = (pts[:, 0] - camera.cx) / camera.fx
     n[1] = (pts[:, 1] - camera.cy) / camera.fy
@@ -63,7 +66,7 @@ def level_set_samples(detection: Ellipse, camera: Camera,
     return LevelSetSamples(pts, n, phi)
 
 
-def dual_quadric(rotation: np.ndarray, center: np.ndarray, axes: np.ndarray) -> np.ndarray:
+def dual_quadric(rotation: FloatArray, center: FloatArray, axes: FloatArray) -> FloatArray:
     """``Q* = T diag(a^2, b^2, c^2, -1) T^T`` (4x4) of an ellipsoid (rotation ellipsoid ->
     world, centre m, semi-axes m). Batched: ``rotation`` (..., 3, 3), ``center`` and ``axes``
     (..., 3) give (..., 4, 4)."""
@@ -79,8 +82,8 @@ def dual_quadric(rotation: np.ndarray, center: np.ndarray, axes: np.ndarray) -> 
     return Q
 
 
-def dual_quadric_jacobians(rotation: np.ndarray, center: np.ndarray,
-                           axes: np.ndarray) -> np.ndarray:
+def dual_quadric_jacobians(rotation: FloatArray, center: FloatArray,
+                           axes: FloatArray) -> FloatArray:
     """``dQ*/d theta`` (9, 4, 4) for ``theta = [omega (3), v (3), d log axes (3)]``.
 
     ``omega, v``: the Pose3 right perturbation of the ellipsoid pose (rotation ellipsoid ->
@@ -106,8 +109,8 @@ def dual_quadric_jacobians(rotation: np.ndarray, center: np.ndarray,
 
 
 def level_set_residual_and_gradient(
-    A: np.ndarray, samples: LevelSetSamples, gradient: bool = True,
-) -> tuple[np.ndarray, np.ndarray | None]:
+    A: FloatArray, samples: LevelSetSamples, gradient: bool = True,
+) -> tuple[FloatArray, FloatArray | None]:
     """Residuals ``r`` (M,) and gradients ``dr/dA`` (M, 3, 3) (None if not ``gradient``).
 
     Batched: ``A`` (V, 3, 3) with ``samples.n`` (V, 3, M) and ``samples.phi_det_minus_1``
@@ -130,9 +133,9 @@ def stack_samples(samples: list[LevelSetSamples]) -> LevelSetSamples:
 
 
 def observation_residual(
-    camera_from_world: np.ndarray, rotation: np.ndarray, center: np.ndarray, axes: np.ndarray,
+    camera_from_world: FloatArray, rotation: FloatArray, center: FloatArray, axes: FloatArray,
     samples: LevelSetSamples, jacobians: bool = True,
-) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
     """Residual (M,) of one detection against one ellipsoid seen from one camera, with the
     Jacobians w.r.t. the ellipsoid ``[omega, v, d log axes]`` (M, 9) and w.r.t. the camera's
     ``world_from_camera`` Pose3 tangent ``[omega, v]`` (M, 6) when ``jacobians``.
@@ -149,7 +152,7 @@ def observation_residual(
     P = np.asarray(camera_from_world, dtype=float)[..., :3, :]
     A = P @ Q @ np.swapaxes(P, -1, -2)
     r, G = level_set_residual_and_gradient(A, samples, jacobians)
-    if not jacobians:
+    if G is None:  # not jacobians
         return r, None, None
     dQ = dual_quadric_jacobians(rotation, center, axes)
     dA = np.einsum("...ai,...kij,...bj->...kab", P, dQ, P)  # (..., 9, 3, 3)

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 import gtsam
 import numpy as np
 
+from quadloc.factors.arrays import FloatArray
+
 __all__ = ["GravityMeasurement", "gravity_factor"]
 
 
@@ -37,8 +39,8 @@ class GravityMeasurement:
         sigma_rad: 1-sigma angular noise per tilt axis (radians), > 0.
     """
 
-    down_camera: np.ndarray
-    down_world: np.ndarray
+    down_camera: FloatArray
+    down_world: FloatArray
     sigma_rad: float
 
     def __post_init__(self) -> None:

@@ -2,8 +2,9 @@
 
 Decided (issue 14): numba, a maintained compiler of numpy-style Python to machine code, for the
 few kernels whose cost was numpy's per-call overhead on small arrays (the exact ellipse areas of
-``quadloc.factors.overlap``, the iou / giou rows of ``quadloc.factors.metrics``, the level-set and
-dual-conic rows of ``quadloc.factors.pose_residuals``): the kernels stay readable Python next to the
+``quadloc.factors.overlap``, the iou / giou rows of ``quadloc.factors.metrics``, the level-set rows
+of ``quadloc.factors.pose_level_set``, the camera frame and dual conics of
+``quadloc.factors.pose_frame``): the kernels stay readable Python next to the
 formulas they implement, no C toolchain is needed to install, and the wheels come from the package
 registry. Why, costs and measurements: docs/design/factors.md, "Compiled kernels".
 
@@ -18,7 +19,7 @@ from __future__ import annotations
 import functools
 import threading
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypeVar, cast
 
 #: numba options of every kernel: ``error_model="numpy"`` gives IEEE inf / nan on a division by
 #: zero (as numpy) instead of an exception, which the kernels rely on where a derivative or a
@@ -27,13 +28,16 @@ NUMBA_OPTIONS: dict[str, Any] = {"error_model": "numpy", "nogil": True}
 
 _PENDING: list[Callable[..., Any]] = []
 _LOCK = threading.Lock()
+#: a kernel's type: the annotated Python function, whose signature its stand-in keeps
+_Kernel = TypeVar("_Kernel", bound=Callable[..., Any])
 
 
-def jit(fn: Callable[..., Any]) -> Callable[..., Any]:
+def jit(fn: _Kernel) -> _Kernel:
     """Declare ``fn`` (a module-level function) a compiled kernel. Returns a stand-in under the
     same module name that binds every declared kernel at its first call; from then on the
     module's global IS the numba dispatcher (so kernels call each other compiled, and Python
-    callers that look the name up reach numba directly)."""
+    callers that look the name up reach numba directly). Typed as ``fn`` itself: callers are
+    checked against the kernel's annotations."""
     _PENDING.append(fn)
 
     @functools.wraps(fn)
@@ -41,7 +45,7 @@ def jit(fn: Callable[..., Any]) -> Callable[..., Any]:
         _bind_all()
         return fn.__globals__[fn.__name__](*args)
 
-    return first_call
+    return cast(_Kernel, first_call)  # wraps(fn): the same signature
 
 
 def _bind_all() -> None:

@@ -3,7 +3,7 @@
 Public entry points
 -------------------
 * ``cost(name, detection, projection, **options) -> float``
-* ``residual(name, detection, projection, **options) -> np.ndarray`` (1-D, fixed length per
+* ``residual(name, detection, projection, **options) -> FloatArray`` (1-D, fixed length per
   metric and options) with ``cost == ||residual||^2`` (to rounding, ~1e-12 relative), except
   iou / giou: ``cost == sum(residual)`` (non-negative rows, see below).
 * ``residual_size(name, **options) -> int``.
@@ -14,11 +14,11 @@ Public entry points
 One implementation per metric (decided, issue 10): the smooth metrics (bbox, algebraic,
 frobenius, wasserstein, bhattacharyya) are :func:`conic_residuals`, iou / giou are
 :func:`overlap_residual` (exact areas of :mod:`quadloc.factors.overlap`), both batched; ``residual``
-and ``cost`` are their N = 1 views and :mod:`quadloc.factors.pose_residuals` chains them to the
-pose. The former scalar forms are the tests' oracle
-(``tests/support/oracles/metrics_reference.py``). ``qbbox`` and ``level_set`` exist here one pair at
-a time (the pose factors' level set is its own quadratic-form evaluation in the camera rays, tested
-equal to :func:`residual`).
+and ``cost`` are their N = 1 views and :mod:`quadloc.factors.pose_conic_metrics` /
+:mod:`quadloc.factors.pose_overlap_metrics` chain them to the pose. The former scalar forms are the
+tests' oracle (``tests/support/oracles/metrics_reference.py``). ``qbbox`` and ``level_set`` exist
+here one pair at a time (the pose factors' level set is its own evaluation in the camera rays,
+:mod:`quadloc.factors.pose_level_set`, tested equal to :func:`residual`).
 
 Argument order: the **detection** (fixed, measured) comes first, the **projection** (the
 moving, predicted ellipse) second. Every residual is "detection minus projection". All lengths
@@ -76,10 +76,12 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import SupportsFloat, TypedDict, cast
 
 import numpy as np
 
+from quadloc.factors.arrays import FloatArray
 from quadloc.factors.conics import (
     Ellipse,
     dual_conics_from_params,
@@ -103,6 +105,7 @@ __all__ = [
     "DEFAULT_LEVEL_SET_SCALE",
     "LEVEL_SET_ADAPTIVE_GAIN",
     "METRIC_NAMES",
+    "LevelSetOptions",
     "canonical_axes",
     "clipped_bbox",
     "conic_detection_terms",
@@ -130,6 +133,17 @@ CONIC_METRICS = ("algebraic", "frobenius", "wasserstein", "bhattacharyya", "bbox
 _VEC5 = np.array([0, 1, 2, 4, 5])  # upper elements [C00, C01, C02, C11, C12], flat indices
 _FRO_W = np.array([1.0, _SQRT2, _SQRT2, 1.0, _SQRT2])
 
+
+class LevelSetOptions(TypedDict, total=False):
+    """The ``level_set`` metric's options, as keywords of :func:`level_set_sample_points`
+    (defaults there; validated at run time like every metric option)."""
+
+    n_azimuths: int
+    n_levels: int
+    scale: float
+    adaptive: bool
+
+
 #: Per metric: its options and its residual length (level_set: ``n_azimuths * n_levels``).
 _OPTIONS: dict[str, tuple[tuple[str, ...], int]] = {
     "iou": ((), 4),
@@ -147,7 +161,7 @@ _OPTIONS: dict[str, tuple[tuple[str, ...], int]] = {
 # --------------------------------------------------------------------------- validation
 
 
-def _check_options(name: str, options: dict) -> None:
+def _check_options(name: str, options: Mapping[str, object]) -> None:
     """Known metric ``name`` (``ValueError``), known ``options`` (``TypeError``)."""
     if name not in _OPTIONS:
         raise ValueError(f"unknown metric {name!r}; valid names: {', '.join(METRIC_NAMES)}")
@@ -175,7 +189,7 @@ def _positive_float(name: str, value: object) -> float:
     if isinstance(value, str | bytes | bool):  # float("2") and float(True) would pass
         raise ValueError(f"option {name} must be a number, got {value!r}")
     try:
-        f = float(value)  # type: ignore[arg-type]
+        f = float(cast("SupportsFloat", value))  # or TypeError / ValueError
     except (TypeError, ValueError) as exc:
         raise ValueError(f"option {name} must be a number, got {value!r}") from exc
     if not (math.isfinite(f) and f > 0.0):
@@ -187,7 +201,7 @@ def _image_size(value: object) -> tuple[float, float]:
     if value is None:
         raise ValueError("metric 'qbbox' needs the option image_size=(width, height) in pixels")
     try:
-        w, h = value  # type: ignore[misc]
+        w, h = cast("tuple[object, object]", value)  # unpacked or TypeError / ValueError
     except (TypeError, ValueError) as exc:
         raise ValueError(f"option image_size must be (width, height), got {value!r}") from exc
     return _positive_float("image_size[0] (width)", w), _positive_float("image_size[1] (height)", h)
@@ -196,7 +210,7 @@ def _image_size(value: object) -> tuple[float, float]:
 # --------------------------------------------------------------------------- boxes
 
 
-def clipped_bbox(ellipse: Ellipse, image_size: Sequence[float]) -> np.ndarray | None:
+def clipped_bbox(ellipse: Ellipse, image_size: Sequence[float]) -> FloatArray | None:
     """Exact box ``[xmin, ymin, xmax, ymax]`` of ``ellipse ∩ [0, W] x [0, H]`` (pixels).
 
     The extremes of the (convex) intersection are attained among: the ellipse's own axis
@@ -265,7 +279,7 @@ def convex_hull_area(e1: Ellipse, e2: Ellipse, hull_directions: int = HULL_DIREC
 
 
 @functools.lru_cache(maxsize=64)
-def _level_template(n_azimuths: int, n_levels: int) -> tuple[np.ndarray, np.ndarray]:
+def _level_template(n_azimuths: int, n_levels: int) -> tuple[FloatArray, FloatArray]:
     """Unit-scale layout ``(radius, phi)`` arrays of length ``n_levels * n_azimuths``.
 
     Level-major order: index ``i = l * n_azimuths + k`` is azimuth ``k`` of level ``l``.
@@ -312,19 +326,20 @@ def level_set_sampling_scale(
     return _adaptive_scale(detection, projection, _positive_float("scale", scale), adaptive)
 
 
-def _sample_points(det: Ellipse, s_max: float, n_azimuths: int, n_levels: int) -> np.ndarray:
+def _sample_points(det: Ellipse, s_max: float, n_azimuths: int, n_levels: int) -> FloatArray:
     uv, _ = _level_template(n_azimuths, n_levels)
     a, b, ang = canonical_axes(det.params()[None])[0]
     c, s = math.cos(ang), math.sin(ang)
     # x = c_D + uv @ (s_max R diag(a, b))^T
     Mt = np.array([[a * c * s_max, a * s * s_max], [-b * s * s_max, b * c * s_max]])
-    return uv @ Mt + (det.cx, det.cy)
+    points: FloatArray = uv @ Mt + (det.cx, det.cy)
+    return points
 
 
 def level_set_sample_points(
     detection: Ellipse, projection: Ellipse | None = None, *, n_azimuths: int = 6,
     n_levels: int = 4, scale: float = DEFAULT_LEVEL_SET_SCALE, adaptive: bool = True,
-) -> np.ndarray:
+) -> FloatArray:
     """Sample points (M, 2) px, ``M = n_levels * n_azimuths``, on the detection's level curves.
 
     Layout (level-major, index ``i = l * n_azimuths + k``, ``l < n_levels``, ``k < n_azimuths``)::
@@ -349,7 +364,7 @@ def level_set_sample_points(
 
 def _level_set_residual(det: Ellipse, proj: Ellipse, n_azimuths: int = 6, n_levels: int = 4,
                         scale: float = DEFAULT_LEVEL_SET_SCALE,
-                        adaptive: bool = True) -> np.ndarray:
+                        adaptive: bool = True) -> FloatArray:
     n_azimuths = _positive_int("n_azimuths", n_azimuths)  # always: 6.0 == 6 but is no int
     n_levels = _positive_int("n_levels", n_levels)
     scale = _positive_float("scale", scale)
@@ -357,13 +372,14 @@ def _level_set_residual(det: Ellipse, proj: Ellipse, n_azimuths: int = 6, n_leve
     pts = _sample_points(det, s_max, n_azimuths, n_levels)
     _, r2 = _level_template(n_azimuths, n_levels)
     phi_det = r2 * (s_max * s_max)  # exact Phi_D on the sampled level curves
-    return phi_det - level_values(proj.params()[None], pts[None])[0]
+    r: FloatArray = phi_det - level_values(proj.params()[None], pts[None])[0]
+    return r
 
 
 # --------------------------------------------------------------------------- smooth metrics
 
 
-def canonical_axes(P: np.ndarray) -> np.ndarray:
+def canonical_axes(P: FloatArray) -> FloatArray:
     """``(a, b, angle)`` (N, 3) with ``a >= b`` of ellipse params ``P`` (N, 5), the angle
     shifted by pi/2 where the axes are swapped. Unlike :meth:`Ellipse.canonical` it is NOT
     wrapped to ``[-pi/2, pi/2)``: the level-set layout rotates with ``angle``, and a wrap by pi
@@ -375,7 +391,7 @@ def canonical_axes(P: np.ndarray) -> np.ndarray:
     return out
 
 
-def conic_detection_terms(name: str, detections: np.ndarray) -> tuple[np.ndarray, ...]:
+def conic_detection_terms(name: str, detections: FloatArray) -> tuple[FloatArray, ...]:
     """What the smooth metric ``name`` needs of detections given as params ``detections``
     (N, 5) (px, rad); they are fixed during a refinement, so the pose factors compute this once
     and pass it to every :func:`conic_residuals` call (the solver's inner loop)."""
@@ -393,10 +409,10 @@ def conic_detection_terms(name: str, detections: np.ndarray) -> tuple[np.ndarray
 
 
 def conic_residuals(
-    name: str, detections: np.ndarray, Cn: np.ndarray, dCn: np.ndarray | None = None,
-    gaussians: tuple[np.ndarray, np.ndarray] | None = None,
-    detection_terms: tuple[np.ndarray, ...] | None = None,
-) -> tuple[np.ndarray, np.ndarray | None]:
+    name: str, detections: FloatArray, Cn: FloatArray, dCn: FloatArray | None = None,
+    gaussians: tuple[FloatArray, FloatArray] | None = None,
+    detection_terms: tuple[FloatArray, ...] | None = None,
+) -> tuple[FloatArray, FloatArray | None]:
     """Residual rows (N, dim) of the smooth metric ``name`` (one of :data:`CONIC_METRICS`)
     between detections given as params ``detections`` (N, 5) (px, rad) and projections given
     as normalised dual conics ``Cn`` (N, 3, 3) (``Cn[2, 2] = -1``); with ``dCn`` (N, K, 3, 3),
@@ -426,14 +442,15 @@ def conic_residuals(
     return rows(terms, mu, S, d)
 
 
-def _conic_residual(name: str, det: Ellipse, proj: Ellipse) -> np.ndarray:
+def _conic_residual(name: str, det: Ellipse, proj: Ellipse) -> FloatArray:
     mu, S = proj.gaussian()
-    return conic_residuals(name, det.params()[None], proj.dual_conic()[None],
-                           gaussians=(mu[None], S[None]))[0][0]
+    r: FloatArray = conic_residuals(name, det.params()[None], proj.dual_conic()[None],
+                                    gaussians=(mu[None], S[None]))[0][0]
+    return r
 
 
-def _bbox_rows(terms: tuple[np.ndarray, ...], mu: np.ndarray, S: np.ndarray,
-               d: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray | None]:
+def _bbox_rows(terms: tuple[FloatArray, ...], mu: FloatArray, S: FloatArray,
+               d: tuple[FloatArray, FloatArray] | None) -> tuple[FloatArray, FloatArray | None]:
     """``r = B_D - B_P``, ``B = [cx - hx, cy - hy, cx + hx, cy + hy]`` with the half-sizes
     ``hx = sqrt(Sigma00)``, ``hy = sqrt(Sigma11)`` of the axis-aligned box (arguments as
     passed by :func:`conic_residuals`)."""
@@ -447,9 +464,9 @@ def _bbox_rows(terms: tuple[np.ndarray, ...], mu: np.ndarray, S: np.ndarray,
     return r, np.concatenate((dh - dmu, -dmu - dh), axis=2).transpose(0, 2, 1)
 
 
-def _wasserstein_rows(terms: tuple[np.ndarray, ...], mu: np.ndarray, S: np.ndarray,
-                      d: tuple[np.ndarray, np.ndarray] | None
-                      ) -> tuple[np.ndarray, np.ndarray | None]:
+def _wasserstein_rows(terms: tuple[FloatArray, ...], mu: FloatArray, S: FloatArray,
+                      d: tuple[FloatArray, FloatArray] | None
+                      ) -> tuple[FloatArray, FloatArray | None]:
     """The W2 residual ``[mu_D - mu_P, a_D - a_P, b_D - b_P, k sin(delta)]``
     (canonical semi-axes ``a >= b``, ``delta`` the angle between the major axes mod pi,
     ``k = sqrt(2 P / (Q + sqrt(Q^2 - P sin^2 delta)))``, ``P = (a_D^2 - b_D^2)(a_P^2 -
@@ -502,9 +519,9 @@ def _wasserstein_rows(terms: tuple[np.ndarray, ...], mu: np.ndarray, S: np.ndarr
     return r, J
 
 
-def _bhattacharyya_rows(terms: tuple[np.ndarray, ...], mu: np.ndarray, Q: np.ndarray,
-                        d: tuple[np.ndarray, np.ndarray] | None
-                        ) -> tuple[np.ndarray, np.ndarray | None]:
+def _bhattacharyya_rows(terms: tuple[FloatArray, ...], mu: FloatArray, Q: FloatArray,
+                        d: tuple[FloatArray, FloatArray] | None
+                        ) -> tuple[FloatArray, FloatArray | None]:
     """The Bhattacharyya residual ``[L^-1 dmu / sqrt 8, G00, G11, sqrt2 G01]``
     (``S = (S_D + S_P) / 2 = L L^T``, ``G = h(log N)``, ``N = S_D^-1/2 S_P S_D^-1/2``,
     ``h(u) = sign(u) sqrt(ln cosh(u / 2) / 2)``) and its derivative. The spectral
@@ -523,7 +540,9 @@ def _bhattacharyya_rows(terms: tuple[np.ndarray, ...], mu: np.ndarray, Q: np.nda
     y1 = (dy - l10 * y0) / l11
     a, b = P[:, 2], P[:, 3]
 
-    def to_n(x00, x01, x11):  # D^-1 R^T X R D^-1 (detection frame), elementwise
+    def to_n(x00: FloatArray, x01: FloatArray, x11: FloatArray
+             ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """``D^-1 R^T X R D^-1`` (the detection frame), elementwise."""
         t00 = c * (x00 * c + x01 * s) + s * (x01 * c + x11 * s)
         t01 = c * (-x00 * s + x01 * c) + s * (-x01 * s + x11 * c)
         t11 = -s * (-x00 * s + x01 * c) + c * (-x01 * s + x11 * c)
@@ -571,7 +590,7 @@ def _bhattacharyya_rows(terms: tuple[np.ndarray, ...], mu: np.ndarray, Q: np.nda
     return r, J
 
 
-def _log_cosh(x: np.ndarray) -> np.ndarray:
+def _log_cosh(x: FloatArray) -> FloatArray:
     """``ln cosh(x)`` without overflow, accurate near 0 (series), elementwise."""
     ax = np.abs(x)
     x2 = ax * ax
@@ -580,12 +599,12 @@ def _log_cosh(x: np.ndarray) -> np.ndarray:
     return np.where(ax < 1e-2, series, big)
 
 
-def _h(u: np.ndarray) -> np.ndarray:
+def _h(u: FloatArray) -> FloatArray:
     """``sign(u) sqrt(ln cosh(u / 2) / 2)``: odd, analytic, ``~ u / (2 sqrt 2)`` near 0."""
     return np.sign(u) * np.sqrt(0.5 * _log_cosh(0.5 * u))
 
 
-def _dh_dlambda(u: np.ndarray, h: np.ndarray, lam: np.ndarray) -> np.ndarray:
+def _dh_dlambda(u: FloatArray, h: FloatArray, lam: FloatArray) -> FloatArray:
     """``d h(ln lambda) / d lambda`` for ``h(u) = sign(u) sqrt(ln cosh(u / 2) / 2)``:
     ``h'(u) = tanh(|u| / 2) / (8 |h|)`` (-> 1/4 as u -> 0), divided by ``lambda``."""
     ah = np.abs(h)
@@ -606,7 +625,7 @@ def _hull_directions(value: object) -> int:
 
 
 def overlap_delta(
-    name: str, detection_params: np.ndarray, projection_params: np.ndarray,
+    name: str, detection_params: FloatArray, projection_params: FloatArray,
     hull_directions: int = HULL_DIRECTIONS,
 ) -> float:
     """``Delta`` of ``iou`` (``1 - IoU``) or ``giou`` (``1 - GIoU``) between a detection and a
@@ -625,10 +644,10 @@ def overlap_delta(
 
 
 def overlap_residual(
-    name: str, detection_params: np.ndarray, projection_params: np.ndarray,
+    name: str, detection_params: FloatArray, projection_params: FloatArray,
     hull_directions: int = HULL_DIRECTIONS, gradient: bool = False,
     disjoint_hull: bool = False,
-) -> tuple[np.ndarray, np.ndarray | None]:
+) -> tuple[FloatArray, FloatArray | None]:
     """The iou / giou residual: ``Delta`` split over the four quadrants ``Q_k`` of the
     detection's frame (module docstring), ``r_k >= 0``, ``sum_k r_k = Delta``; and, if
     ``gradient``, ``dr / dg`` w.r.t. the projection's Gaussian parameters ``g = (mu_x,
@@ -662,8 +681,8 @@ def overlap_residual(
 
 
 @jit
-def _overlap_rows(det: np.ndarray, sums: np.ndarray, giou: bool
-                  ) -> tuple[np.ndarray, np.ndarray]:
+def _overlap_rows(det: FloatArray, sums: FloatArray, giou: bool
+                  ) -> tuple[FloatArray, FloatArray]:
     """:func:`overlap_residual`'s rows (N, 4) and gradients (N, 4, 5) (zeros where ``sums``
     holds none) from the quadrant sums of :func:`quadloc.factors.overlap.quadrant_sums` (detections
     ``det`` (N, 5)); ``giou``: add the hull's gap term (``sums`` computed with the hull)."""
@@ -722,35 +741,43 @@ def _overlap_rows(det: np.ndarray, sums: np.ndarray, giou: bool
     return r, d_r
 
 
-def _overlap(name: str, det: Ellipse, proj: Ellipse, hull_directions: int = HULL_DIRECTIONS,
-             as_cost: bool = False) -> np.ndarray | float:
-    """iou / giou of one pair: the residual rows (4,), or the cost ``Delta`` if ``as_cost``."""
-    n = _hull_directions(hull_directions)
-    if as_cost:
-        return overlap_delta(name, det.params(), proj.params(), n)
-    return overlap_residual(name, det.params(), proj.params(), n)[0]
+def _overlap_rows_of_pair(name: str, det: Ellipse, proj: Ellipse,
+                          hull_directions: int = HULL_DIRECTIONS) -> FloatArray:
+    """iou / giou of one pair: the residual rows (4,)."""
+    return overlap_residual(name, det.params(), proj.params(),
+                            _hull_directions(hull_directions))[0]
 
 
-def _qbbox_residual(det: Ellipse, proj: Ellipse, image_size: object = None) -> np.ndarray:
+def _overlap_cost(name: str, det: Ellipse, proj: Ellipse,
+                  hull_directions: int = HULL_DIRECTIONS) -> float:
+    """iou / giou of one pair: the cost ``Delta``."""
+    return overlap_delta(name, det.params(), proj.params(), _hull_directions(hull_directions))
+
+
+def _qbbox_residual(det: Ellipse, proj: Ellipse, image_size: object = None) -> FloatArray:
     W, H = _image_size(image_size)
     return _truncated_box(det, W, H) - _truncated_box(proj, W, H)
 
 
-def _truncated_box(e: Ellipse, W: float, H: float) -> np.ndarray:
+def _truncated_box(e: Ellipse, W: float, H: float) -> FloatArray:
     box = clipped_bbox(e, (W, H))
     return np.clip(e.bbox(), 0.0, [W, H, W, H]) if box is None else box
 
 
-_RESIDUALS = {
+#: per metric, ``(detection, projection, **options) -> residual``; the options differ per
+#: metric (checked by :func:`_check_options` first)
+_RESIDUALS: dict[str, Callable[..., FloatArray]] = {
     **{m: functools.partial(_conic_residual, m) for m in CONIC_METRICS},
     "qbbox": _qbbox_residual,
     "level_set": _level_set_residual,
-    **{m: functools.partial(_overlap, m) for m in ("iou", "giou")},
+    **{m: functools.partial(_overlap_rows_of_pair, m) for m in ("iou", "giou")},
 }
-_SCALAR_COSTS = {m: functools.partial(_overlap, m, as_cost=True) for m in ("iou", "giou")}
+#: the metrics whose cost is not the residual's squared norm, same signature
+_SCALAR_COSTS: dict[str, Callable[..., float]] = {
+    m: functools.partial(_overlap_cost, m) for m in ("iou", "giou")}
 
 
-def residual(name: str, detection: Ellipse, projection: Ellipse, **options: object) -> np.ndarray:
+def residual(name: str, detection: Ellipse, projection: Ellipse, **options: object) -> FloatArray:
     """Residual vector of metric ``name`` (1-D float array, length :func:`residual_size`).
 
     ``cost(name, ...) == ||residual(name, ...)||^2``, except iou / giou (``cost ==

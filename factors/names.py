@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 import numbers
 from collections.abc import Sequence
+from typing import TypeGuard
 
 __all__ = [
     "METRIC_NAMES",
@@ -54,8 +55,8 @@ class GeometryError(FieldError):
     """Invalid geometric input (a :class:`FieldError`)."""
 
 
-def is_real(x: object) -> bool:
-    """A real number (Python or numpy scalar), not a bool."""
+def is_real(x: object) -> TypeGuard[float]:
+    """A real number (Python or numpy scalar), not a bool (for mypy: usable as a float)."""
     return isinstance(x, numbers.Real) and not isinstance(x, bool)
 
 

@@ -27,6 +27,7 @@ import math
 
 import numpy as np
 
+from quadloc.factors.arrays import FloatArray
 from quadloc.factors.jit import jit
 
 #: Number of parametric angles used to bracket the contour intersections and common tangents.
@@ -68,7 +69,7 @@ _SECOND, _INTER, _HULL = 0, 1, 2
 
 
 @jit
-def _frame(p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
+def _frame(p1: FloatArray, p2: FloatArray) -> FloatArray:
     """The second ellipse in the first one's normalised frame ``x' = D1^-1 R1^T (x - c1)`` (the
     first is the unit circle there), as a vector indexed by the ``_CX``.. slots: centre ``c``,
     axis vectors ``P = D1^-1 R1^T a2 u2``, ``Q`` (its boundary ``c + P cos s + Q sin s``, ``s``
@@ -100,7 +101,7 @@ def _frame(p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
 
 
 @jit
-def _crossing_coefficients(fr: np.ndarray) -> np.ndarray:
+def _crossing_coefficients(fr: FloatArray) -> FloatArray:
     """(5,) ``k`` of ``f(t) = Phi_2(u(t)) - 1 = k0 + k1 cos t + k2 sin t + k3 cos 2t + k4 sin
     2t`` on the unit circle ``u(t)`` (< 0 inside the second ellipse; oracle:
     ``_crossing_coefficients``), with ``A' = Sigma'^-1 = adj(Sigma') / det^2``."""
@@ -115,7 +116,7 @@ def _crossing_coefficients(fr: np.ndarray) -> np.ndarray:
 
 
 @jit
-def _tangent_coefficients(fr: np.ndarray) -> np.ndarray:
+def _tangent_coefficients(fr: FloatArray) -> FloatArray:
     """(5,) ``k`` of ``g(phi) = (1 - c . n)^2 - n^T Sigma' n``, ``n = (cos phi, sin phi)``,
     scaled to ``sum |k| = 1``: zero where the line of normal ``n`` touching the unit circle
     touches the second ellipse too (common tangents; the outer ones, where the support ``c . n
@@ -132,7 +133,7 @@ def _tangent_coefficients(fr: np.ndarray) -> np.ndarray:
 
 
 @jit
-def _trig(k: np.ndarray, t: float) -> tuple[float, float]:
+def _trig(k: FloatArray, t: float) -> tuple[float, float]:
     """The trigonometric quadratic ``k`` (5,) and its derivative at ``t``."""
     c, s = math.cos(t), math.sin(t)
     cs = c * s
@@ -142,7 +143,7 @@ def _trig(k: np.ndarray, t: float) -> tuple[float, float]:
 
 
 @jit
-def _sort(a: np.ndarray) -> None:
+def _sort(a: FloatArray) -> None:
     """Sort a short array in place (insertion sort: numba's np.sort costs seconds to compile)."""
     for i in range(1, a.size):
         v = a[i]
@@ -154,7 +155,7 @@ def _sort(a: np.ndarray) -> None:
 
 
 @jit
-def _grid_values(k: np.ndarray, basis: np.ndarray) -> np.ndarray:
+def _grid_values(k: FloatArray, basis: FloatArray) -> FloatArray:
     """The trigonometric quadratic ``k`` (5,) at the :data:`GRID` angles (GRID,), ``basis``
     :data:`_GRID_BASIS` (the grids are arguments: numba does not cache a function that reads a
     global array)."""
@@ -174,7 +175,7 @@ def _clamp01(x: float) -> float:
 
 
 @jit
-def _brackets(f: np.ndarray, br: np.ndarray) -> None:
+def _brackets(f: FloatArray, br: FloatArray) -> None:
     """Grid brackets of the roots of a trigonometric quadratic whose grid values are ``f``
     (GRID,): the first 4 cells where the sign (``f > _THRESHOLD``) changes, written to ``br``
     (5, 4): rows has (0/1), lower end, upper end, value at each end. A trigonometric quadratic
@@ -191,7 +192,7 @@ def _brackets(f: np.ndarray, br: np.ndarray) -> None:
 
 
 @jit
-def _add_pokes(k: np.ndarray, f: np.ndarray, br: np.ndarray, dbasis: np.ndarray) -> None:
+def _add_pokes(k: FloatArray, f: FloatArray, br: FloatArray, dbasis: FloatArray) -> None:
     """Add to ``br`` (:func:`_brackets`) the root pairs of ``k`` that lie between two grid
     angles (no sign change on the grid; oracle: the extremum search of ``_hull_pieces``). With
     ``|f''| <= M = |k1| + |k2| + 4 (|k3| + |k4|)``, ``f`` keeps its sign over a cell if it does
@@ -238,7 +239,7 @@ def _add_pokes(k: np.ndarray, f: np.ndarray, br: np.ndarray, dbasis: np.ndarray)
 
 
 @jit
-def _safeguarded(k: np.ndarray, t: float, lo: float, hi: float, f_lo: float) -> float:
+def _safeguarded(k: FloatArray, t: float, lo: float, hi: float, f_lo: float) -> float:
     """The root of ``k`` in the bracket ``[lo, hi]`` (value ``f_lo`` at ``lo``), from ``t``:
     Newton steps that stay in the bracket, else bisection, the bracket shrinking at every
     iterate (oracle: ``_bracketed_root``); up to :data:`_SAFEGUARDED_MAX_ITER` iterations, until
@@ -264,7 +265,7 @@ def _safeguarded(k: np.ndarray, t: float, lo: float, hi: float, f_lo: float) -> 
 
 
 @jit
-def _roots(k: np.ndarray, br: np.ndarray) -> np.ndarray:
+def _roots(k: FloatArray, br: FloatArray) -> FloatArray:
     """The roots (4,) of ``k`` in the brackets ``br`` (:func:`_brackets`), sorted in ``[0, 2
     pi)``: from the secant, :data:`_NEWTON_STEPS` Newton steps kept in the bracket; the roots
     whose last step was not at rounding level (a function that curves a lot within its
@@ -309,7 +310,7 @@ def _quadrant(x: float, y: float) -> int:
 
 
 @jit
-def _circle_arc(fr: np.ndarray, t0: float, t1: float, out: np.ndarray) -> None:
+def _circle_arc(fr: FloatArray, t0: float, t1: float, out: FloatArray) -> None:
     """Add the area ``1/2 ∫ x × dx`` of the arc ``[t0, t1]`` (``0 <= t0 < 2 pi``, ``t1 <= t0 +
     2 pi``) of the unit circle (the first ellipse, which does not move: no gradient) to a
     region's sums ``out`` (4 quadrants, area + 5 gradient) ``[quadrant, 0]``: half the length
@@ -325,8 +326,8 @@ def _circle_arc(fr: np.ndarray, t0: float, t1: float, out: np.ndarray) -> None:
 
 
 @jit
-def _ellipse_arc(fr: np.ndarray, t0: float, t1: float, grad: bool, b: np.ndarray,
-                 out: np.ndarray) -> None:
+def _ellipse_arc(fr: FloatArray, t0: float, t1: float, grad: bool, b: FloatArray,
+                 out: FloatArray) -> None:
     """Add the arc ``[t0, t1]`` of the second ellipse to a region's sums ``out`` (4, 6) (oracle:
     ``_piece_sums`` with ``axes``): split where the ellipse crosses the axes (the pieces then
     lie in one quadrant each), areas ``1/2 ∫ x × dx`` (times ``a1 b1``) in column 0, gradients
@@ -366,8 +367,8 @@ def _ellipse_arc(fr: np.ndarray, t0: float, t1: float, grad: bool, b: np.ndarray
 
 
 @jit
-def _segment(fr: np.ndarray, x0: float, y0: float, x1: float, y1: float, end2: bool,
-             par: float, grad: bool, out: np.ndarray) -> None:
+def _segment(fr: FloatArray, x0: float, y0: float, x1: float, y1: float, end2: bool,
+             par: float, grad: bool, out: FloatArray) -> None:
     """Add a tangent segment of the hull (start ``(x0, y0)``, end ``(x1, y1)`` in the
     normalised frame; ``end2``: it ends on the second ellipse, at its angle ``par``, else
     starts there) to the hull's sums ``out`` (4, 6) (oracle: ``_piece_sums``), split where it
@@ -397,14 +398,14 @@ def _segment(fr: np.ndarray, x0: float, y0: float, x1: float, y1: float, end2: b
 
 
 @jit
-def _point(fr: np.ndarray, s: float) -> tuple[float, float]:
+def _point(fr: FloatArray, s: float) -> tuple[float, float]:
     """The second ellipse's point at its angle ``s``, normalised frame."""
     cs, ss = math.cos(s), math.sin(s)
     return fr[_CX] + cs * fr[_PX] + ss * fr[_QX], fr[_CY] + cs * fr[_PY] + ss * fr[_QY]
 
 
 @jit
-def _hull(fr: np.ndarray, phi: np.ndarray, grad: bool, b: np.ndarray, out: np.ndarray
+def _hull(fr: FloatArray, phi: FloatArray, grad: bool, b: FloatArray, out: FloatArray
           ) -> None:
     """Add the hull's boundary to its sums ``out`` (4, 6) (oracle: ``_hull_pieces``): over the four
     intervals of normal angles between the sorted common tangents ``phi`` (4,), the unit
@@ -457,8 +458,8 @@ def _hull(fr: np.ndarray, phi: np.ndarray, grad: bool, b: np.ndarray, out: np.nd
 
 
 @jit
-def _pair(p1: np.ndarray, p2: np.ndarray, hull: bool, grad: bool, basis: np.ndarray,
-          dbasis: np.ndarray, out: np.ndarray) -> None:
+def _pair(p1: FloatArray, p2: FloatArray, hull: bool, grad: bool, basis: FloatArray,
+          dbasis: FloatArray, out: FloatArray) -> None:
     """One pair's quadrant sums into ``out`` (3 regions, 4 quadrants, area + 5 gradient)."""
     fr = _frame(p1, p2)
     k = _crossing_coefficients(fr)
@@ -517,8 +518,8 @@ def _pair(p1: np.ndarray, p2: np.ndarray, hull: bool, grad: bool, basis: np.ndar
 
 
 @jit
-def _batch(p1: np.ndarray, p2: np.ndarray, hull: bool, grad: bool, basis: np.ndarray,
-           dbasis: np.ndarray) -> np.ndarray:
+def _batch(p1: FloatArray, p2: FloatArray, hull: bool, grad: bool, basis: FloatArray,
+           dbasis: FloatArray) -> FloatArray:
     """(N, 3, 4, 6): per pair, region (second, intersection, hull), quadrant, area + gradient."""
     out = np.zeros((p1.shape[0], 3, 4, 6))
     for i in range(p1.shape[0]):
@@ -526,8 +527,8 @@ def _batch(p1: np.ndarray, p2: np.ndarray, hull: bool, grad: bool, basis: np.nda
     return out
 
 
-def quadrant_sums(p1: np.ndarray, p2: np.ndarray, hull: bool, gradient: bool = False
-                  ) -> np.ndarray:
+def quadrant_sums(p1: FloatArray, p2: FloatArray, hull: bool, gradient: bool = False
+                  ) -> FloatArray:
     """The kernel's output for N pairs of params ``p1``, ``p2`` (N, 5) (px, rad): (N, 3, 4, 6),
     per pair the regions (second ellipse, intersection, hull: zeros unless ``hull``), the four
     quadrants (:func:`quadrant_areas_batch`), and the area (px^2) followed by its gradient
@@ -541,9 +542,9 @@ def quadrant_sums(p1: np.ndarray, p2: np.ndarray, hull: bool, gradient: bool = F
 
 
 def quadrant_areas_batch(
-    p1: np.ndarray, p2: np.ndarray, hull: bool, n_directions: int = HULL_DIRECTIONS,
+    p1: FloatArray, p2: FloatArray, hull: bool, n_directions: int = HULL_DIRECTIONS,
     gradient: bool = False,
-) -> dict[str, tuple[np.ndarray, np.ndarray | None]]:
+) -> dict[str, tuple[FloatArray, FloatArray | None]]:
     """Areas in the four quadrants of the first ellipse's frame (centred on it, along its
     axes, counter-clockwise from ``+u, +v``; the first ellipse has ``A1 / 4`` in each) of the
     second ellipse, of the intersection and, if ``hull``, of the convex hull, for N pairs:
@@ -557,29 +558,31 @@ def quadrant_areas_batch(
 
 
 def quadrant_areas(
-    p1: np.ndarray, p2: np.ndarray, hull: bool, n_directions: int = HULL_DIRECTIONS,
+    p1: FloatArray, p2: FloatArray, hull: bool, n_directions: int = HULL_DIRECTIONS,
     gradient: bool = False,
-) -> dict[str, tuple[np.ndarray, np.ndarray | None]]:
+) -> dict[str, tuple[FloatArray, FloatArray | None]]:
     """:func:`quadrant_areas_batch` of one pair (params (5,) each): areas (4,) px^2 and
     gradients (4, 5) or None per region."""
     q = quadrant_areas_batch(p1, p2, hull, n_directions, gradient)
     return {k: (a[0], None if g is None else g[0]) for k, (a, g) in q.items()}
 
 
-def intersection_areas(p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
+def intersection_areas(p1: FloatArray, p2: FloatArray) -> FloatArray:
     """Areas (N,) px^2 of the intersections of N pairs of filled ellipses given as params
     (N, 5) each, clamped to ``[0, min(area1, area2)]`` against rounding."""
     p1, p2 = np.asarray(p1, dtype=float), np.asarray(p2, dtype=float)
     area = quadrant_areas_batch(p1, p2, False, HULL_DIRECTIONS, False)["intersection"][0].sum(
         axis=1)
-    return np.clip(area, 0.0, math.pi * np.minimum(p1[:, 2] * p1[:, 3], p2[:, 2] * p2[:, 3]))
+    areas: FloatArray = np.clip(
+        area, 0.0, math.pi * np.minimum(p1[:, 2] * p1[:, 3], p2[:, 2] * p2[:, 3]))
+    return areas
 
 
-def intersection_area(p1: np.ndarray, p2: np.ndarray) -> float:
+def intersection_area(p1: FloatArray, p2: FloatArray) -> float:
     """Area (px^2) of the intersection of two filled ellipses given as params (5,)."""
     return float(intersection_areas(np.reshape(p1, (1, 5)), np.reshape(p2, (1, 5)))[0])
 
 
-def hull_area(p1: np.ndarray, p2: np.ndarray, n_directions: int = HULL_DIRECTIONS) -> float:
+def hull_area(p1: FloatArray, p2: FloatArray, n_directions: int = HULL_DIRECTIONS) -> float:
     """Area (px^2) of the convex hull of two ellipses given as params (5,), exact."""
     return float(quadrant_areas(p1, p2, True, n_directions)["hull"][0].sum())

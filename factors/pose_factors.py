@@ -17,24 +17,26 @@ All the factors of one solve share ONE memoised
 :class:`quadloc.factors.pose_residuals.PoseResidualModel` (every pair evaluated at once per pose,
 the factors slice their rows). :func:`pose_factors` returns one factor per pair (default; needed for
 per-detection robust kernels), or with ``batched=True`` ONE factor over all pairs with a
-Diagonal noise model (the same weighted error, one Python round trip). Jacobians, invalid
-projections (a bounded penalty) and the saturation: :mod:`quadloc.factors.pose_residuals`. Why and
-measurements: ``docs/design/factors.md`` ("Pose factors").
+Diagonal noise model (the same weighted error, one Python round trip). Jacobians:
+:mod:`quadloc.factors.pose_residuals` and its metric families; invalid projections (a bounded
+penalty) and the saturation: :mod:`quadloc.factors.pose_penalty`. Why and measurements:
+``docs/design/factors.md`` ("Pose factors").
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import Unpack
 
 import gtsam
 import numpy as np
 
+from quadloc.factors.arrays import FloatArray
 from quadloc.factors.camera import Camera, Ellipsoid
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.names import ROBUST_KERNELS, check_robust, is_real
-from quadloc.factors.pose_residuals import PoseResidualModel
+from quadloc.factors.pose_residuals import ModelOptions, PoseResidualModel
 from quadloc.factors.rotations import snap_to_rotation
 
 __all__ = [
@@ -49,7 +51,7 @@ __all__ = [
 ]
 
 
-def pose3(T: np.ndarray) -> gtsam.Pose3:
+def pose3(T: FloatArray) -> gtsam.Pose3:
     """A 4x4 rigid transform (any direction: ``world_from_camera``, ``odom_from_camera``...) as
     a ``gtsam.Pose3`` of the same direction; the rotation block is snapped to the nearest
     rotation (:func:`quadloc.factors.rotations.snap_to_rotation`: unchanged when already
@@ -82,7 +84,7 @@ def _std(sigma: float | None, name: str = "sigma") -> float:
     return math.sqrt(float(sigma))
 
 
-def _check_sigmas(sigmas: Sequence[float | None], n: int) -> np.ndarray:
+def _check_sigmas(sigmas: Sequence[float | None], n: int) -> FloatArray:
     """The stds (n,) of ``sigmas`` (one per detection)."""
     if len(sigmas) != n:
         raise ValueError(f"sigmas must have one entry per detection ({n}), got {len(sigmas)}")
@@ -107,11 +109,12 @@ def make_noise_model(
     if robust is None:
         return base
     k = DEFAULT_ROBUST_SCALE.get(metric, 1.0) if robust_scale is None else robust_scale
-    est = {
-        "huber": gtsam.noiseModel.mEstimator.Huber,
-        "cauchy": gtsam.noiseModel.mEstimator.Cauchy,
-        "geman_mcclure": gtsam.noiseModel.mEstimator.GemanMcClure,
-    }[robust].Create(float(k))
+    create: dict[str, Callable[[float], gtsam.noiseModel.mEstimator.Base]] = {
+        "huber": gtsam.noiseModel.mEstimator.Huber.Create,
+        "cauchy": gtsam.noiseModel.mEstimator.Cauchy.Create,
+        "geman_mcclure": gtsam.noiseModel.mEstimator.GemanMcClure.Create,
+    }
+    est = create[robust](float(k))
     return gtsam.noiseModel.Robust.Create(est, base)
 
 
@@ -136,10 +139,10 @@ def pose_factors(
     sigmas: Sequence[float | None] | None = None,
     robust: str | None = None,
     robust_scale: float | None = None,
-    initial_world_from_camera: np.ndarray | None = None,
-    metric_options: Mapping[str, Any] | None = None,
+    initial_world_from_camera: FloatArray | None = None,
+    metric_options: Mapping[str, object] | None = None,
     batched: bool = False,
-    **model_options: Any,
+    **model_options: Unpack[ModelOptions],
 ) -> tuple[list[gtsam.CustomFactor], PoseResidualModel]:
     """Factors for N detection/ellipsoid pairs, all sharing one memoised evaluation.
 
@@ -181,9 +184,9 @@ def pose_factor(
     sigma: float | None = None,
     robust: str | None = None,
     robust_scale: float | None = None,
-    initial_world_from_camera: np.ndarray | None = None,
-    metric_options: Mapping[str, Any] | None = None,
-    **model_options: Any,
+    initial_world_from_camera: FloatArray | None = None,
+    metric_options: Mapping[str, object] | None = None,
+    **model_options: Unpack[ModelOptions],
 ) -> gtsam.CustomFactor:
     """A ``gtsam.CustomFactor`` on the ``world_from_camera`` Pose3 ``key`` for one pair.
 
@@ -216,16 +219,18 @@ def batched_pose_factor(
 
 
 def _model_factor(key: int, model: PoseResidualModel, noise: gtsam.noiseModel.Base,
-                  rows: Callable[[np.ndarray], np.ndarray]) -> gtsam.CustomFactor:
+                  rows: Callable[[FloatArray], FloatArray]) -> gtsam.CustomFactor:
     """A ``CustomFactor`` on ``key`` whose error and Jacobian are ``rows`` of the model's
     memoised (N, dim) factor residuals and (N, dim, 6) factor Jacobians."""
     evaluate = model.evaluate
 
-    def error_fn(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
+    def error_fn(this: gtsam.CustomFactor, values: gtsam.Values,
+                 H: gtsam.JacobianVector | None) -> FloatArray:
         T = values.atPose3(key).matrix()
         if H is None:
             return rows(evaluate(T, False).factor_residuals)
         ev = evaluate(T, True)
+        assert ev.factor_jacobians is not None  # asked for
         H[0] = rows(ev.factor_jacobians)
         return rows(ev.factor_residuals)
 

@@ -13,9 +13,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import SupportsFloat, cast
 
 import numpy as np
 
+from quadloc.factors.arrays import FloatArray
 from quadloc.factors.names import GeometryError
 
 __all__ = [
@@ -63,7 +65,7 @@ _I3 = np.eye(3)
 
 def finite_float(owner: str, name: str, value: object) -> float:
     try:
-        f = float(value)  # type: ignore[arg-type]
+        f = float(cast("SupportsFloat", value))  # or TypeError / ValueError
     except (TypeError, ValueError) as exc:
         raise GeometryError(f"{owner}.{name} must be a number, got {value!r}") from exc
     if not math.isfinite(f):
@@ -71,7 +73,7 @@ def finite_float(owner: str, name: str, value: object) -> float:
     return f
 
 
-def finite_array(owner: str, name: str, value: object, shape: tuple[int, ...]) -> np.ndarray:
+def finite_array(owner: str, name: str, value: object, shape: tuple[int, ...]) -> FloatArray:
     try:
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError) as exc:
@@ -84,7 +86,7 @@ def finite_array(owner: str, name: str, value: object, shape: tuple[int, ...]) -
     return arr
 
 
-def check_rotation(owner: str, name: str, value: object) -> np.ndarray:
+def check_rotation(owner: str, name: str, value: object) -> FloatArray:
     """Validate a 3x3 rotation matrix (orthonormal within ``ORTHONORMAL_TOLERANCE``, det +1)."""
     R = finite_array(owner, name, value, (3, 3))
     err = float(np.max(np.abs(R @ R.T - np.eye(3))))
@@ -100,7 +102,7 @@ def check_rotation(owner: str, name: str, value: object) -> np.ndarray:
 
 
 def check_pose(T: object, name: str = "world_from_camera",
-               tolerance: float = ORTHONORMAL_TOLERANCE) -> np.ndarray:
+               tolerance: float = ORTHONORMAL_TOLERANCE) -> FloatArray:
     """THE rule for a 4x4 rigid transform: finite, last row [0, 0, 0, 1] (within 1e-9),
     rotation block orthonormal within ``tolerance`` (:data:`ORTHONORMAL_TOLERANCE` in process,
     :data:`DOCUMENT_ROTATION_TOLERANCE` for numbers read from a document), det > 0. Raises
@@ -126,7 +128,7 @@ def check_pose(T: object, name: str = "world_from_camera",
     return M
 
 
-def exact_norm(values: Sequence[float]) -> float:
+def exact_norm(values: FloatArray | Sequence[float]) -> float:
     """Euclidean norm of a short vector, the same bits on every machine: squares summed with
     ``math.fsum`` (correctly rounded), unlike ``np.linalg.norm`` whose BLAS dot product may
     round differently on another CPU. Used where the result is hashed (map content hashes)."""
@@ -142,7 +144,7 @@ def _is_rotation(rows: list[list[float]], tol: float) -> bool:
     return err <= tol and det > 0  # False for NaN
 
 
-def skew(w: np.ndarray) -> np.ndarray:
+def skew(w: FloatArray) -> FloatArray:
     """Cross-product matrices ``[w]x`` (..., 3, 3) of vectors ``w`` (..., 3):
     ``[w]x @ u = w x u``."""
     w = np.asarray(w, dtype=float)
@@ -155,7 +157,7 @@ def skew(w: np.ndarray) -> np.ndarray:
 _SKEW_GATHER = np.array([0, 6, 2, 3, 0, 4, 5, 1, 0])
 
 
-def so3_exp(omega: np.ndarray) -> np.ndarray:
+def so3_exp(omega: FloatArray) -> FloatArray:
     """Rotation matrices (..., 3, 3) of rotation vectors ``omega`` (..., 3) rad:
     ``exp([omega]x) = I + (sin th / th) W + ((1 - cos th) / th^2) W^2`` (Rodrigues, ``W =
     [omega]x``, ``th = |omega|``; the second-order series below 1e-8 rad)."""
@@ -169,7 +171,7 @@ def so3_exp(omega: np.ndarray) -> np.ndarray:
     return np.eye(3) + a * W + b * (W @ W)
 
 
-def snap_to_rotation(matrix: np.ndarray) -> np.ndarray:
+def snap_to_rotation(matrix: FloatArray) -> FloatArray:
     """Nearest rotation matrix (Frobenius norm) to a 3x3 ``matrix``, via SVD, det forced to +1.
 
     A matrix that is already a rotation to :data:`ROTATION_EXACT_TOLERANCE` (1e-12) is returned
@@ -182,10 +184,11 @@ def snap_to_rotation(matrix: np.ndarray) -> np.ndarray:
         return M.copy()
     U, _, Vt = np.linalg.svd(M)
     D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
-    return U @ D @ Vt
+    R: FloatArray = U @ D @ Vt
+    return R
 
 
-def rotation_from_quaternion_wxyz(quaternion_wxyz: Sequence[float]) -> np.ndarray:
+def rotation_from_quaternion_wxyz(quaternion_wxyz: FloatArray | Sequence[float]) -> FloatArray:
     """3x3 rotation from a unit quaternion ``(w, x, y, z)``.
 
     The norm must be 1 within ``QUATERNION_NORM_TOLERANCE``; the quaternion is renormalised.
@@ -204,7 +207,7 @@ def rotation_from_quaternion_wxyz(quaternion_wxyz: Sequence[float]) -> np.ndarra
     )
 
 
-def quaternion_wxyz_from_rotation(rotation: np.ndarray) -> np.ndarray:
+def quaternion_wxyz_from_rotation(rotation: FloatArray) -> FloatArray:
     """Unit quaternion ``(w, x, y, z)`` with ``w >= 0`` of a 3x3 rotation matrix.
 
     Sign convention: ``w > 0``; for half-turns (``|w| <= 1e-12``, returned as exactly 0) the
@@ -232,7 +235,7 @@ def quaternion_wxyz_from_rotation(rotation: np.ndarray) -> np.ndarray:
     return canonical_quaternion_wxyz(q)
 
 
-def canonical_quaternion_wxyz(q: np.ndarray) -> np.ndarray:
+def canonical_quaternion_wxyz(q: FloatArray) -> FloatArray:
     """The canonical sign of a unit ``(w, x, y, z)`` quaternion (``q`` and ``-q`` are the same
     rotation): ``w > 0``; for a half-turn (``|w| <= 1e-12``, then set to exactly 0) the first
     non-zero (``> 1e-12``) of ``x, y, z`` is positive. Returns a new array."""
@@ -245,7 +248,7 @@ def canonical_quaternion_wxyz(q: np.ndarray) -> np.ndarray:
     return q + 0.0  # -0.0 -> 0.0: equal rotations give equal text (hashes)
 
 
-def pose_matrix(rotation: np.ndarray, translation: Sequence[float]) -> np.ndarray:
+def pose_matrix(rotation: FloatArray, translation: FloatArray | Sequence[float]) -> FloatArray:
     """4x4 homogeneous matrix ``[[rotation, translation], [0, 1]]`` (direction kept by caller)."""
     T = np.eye(4)
     T[:3, :3] = rotation
@@ -253,7 +256,7 @@ def pose_matrix(rotation: np.ndarray, translation: Sequence[float]) -> np.ndarra
     return T
 
 
-def invert_pose(a_from_b: np.ndarray) -> np.ndarray:
+def invert_pose(a_from_b: FloatArray) -> FloatArray:
     """Inverse of rigid 4x4 transforms: ``b_from_a`` from ``a_from_b``, batched (..., 4, 4)."""
     T = np.asarray(a_from_b, dtype=float)
     Rt = np.swapaxes(T[..., :3, :3], -1, -2)
@@ -264,7 +267,7 @@ def invert_pose(a_from_b: np.ndarray) -> np.ndarray:
     return out
 
 
-def rotation_angle(rotation_a: np.ndarray, rotation_b: np.ndarray) -> np.ndarray:
+def rotation_angle(rotation_a: FloatArray, rotation_b: FloatArray) -> FloatArray:
     """THE rotation error: the angle (radians, in [0, pi]) of the rotation between
     ``rotation_a`` and ``rotation_b`` (3x3 rotations, batched over leading axes: (..., 3, 3)),
     i.e. ``|Log(R_a^T R_b)|``. Computed from ``|R_a - R_b|_F = 2 sqrt(2) sin(angle / 2)``: exact
@@ -273,4 +276,5 @@ def rotation_angle(rotation_a: np.ndarray, rotation_b: np.ndarray) -> np.ndarray
     ``float()`` it)."""
     d = np.asarray(rotation_a, dtype=float) - np.asarray(rotation_b, dtype=float)
     half_chord = np.sqrt(np.sum(d * d, axis=(-2, -1))) / (2.0 * math.sqrt(2.0))
-    return 2.0 * np.arcsin(np.minimum(half_chord, 1.0))
+    angle: FloatArray = 2.0 * np.arcsin(np.minimum(half_chord, 1.0))
+    return angle

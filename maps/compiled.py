@@ -14,16 +14,24 @@ from typing import Any
 
 import numpy as np
 
+from quadloc.factors.arrays import FloatArray, IntArray
 from quadloc.factors.camera import Ellipsoid
 from quadloc.maps.model import SceneMap
 
 __all__ = ["CompiledMap", "compile_map"]
 
 
-def _frozen(array: np.ndarray) -> np.ndarray:
-    array = np.ascontiguousarray(array, dtype=float) if array.dtype.kind == "f" else array
-    array.setflags(write=False)
-    return array
+def _frozen(array: FloatArray) -> FloatArray:
+    """``array`` as a read-only C-contiguous float64 array (the same array when it is one)."""
+    frozen = np.ascontiguousarray(array, dtype=float)
+    frozen.setflags(write=False)
+    return frozen
+
+
+def _frozen_indices(indices: IntArray) -> IntArray:
+    """``indices``, made read-only."""
+    indices.setflags(write=False)
+    return indices
 
 
 class MapVersionView:
@@ -63,17 +71,17 @@ class CompiledMap(MapVersionView):
     object_ids: tuple[str, ...]
     categories: tuple[str, ...]
     ellipsoids: tuple[Ellipsoid, ...]
-    centers: np.ndarray
-    axes: np.ndarray
-    rotations: np.ndarray
-    shape_matrices: np.ndarray
-    dual_quadrics: np.ndarray
-    indices_by_category: dict[str, np.ndarray]
+    centers: FloatArray
+    axes: FloatArray
+    rotations: FloatArray
+    shape_matrices: FloatArray
+    dual_quadrics: FloatArray
+    indices_by_category: dict[str, IntArray]
 
     def __len__(self) -> int:
         return len(self.object_ids)
 
-    def indices_for(self, category: str) -> np.ndarray:
+    def indices_for(self, category: str) -> IntArray:
         """Object indices of ``category`` (empty ``int`` array if none)."""
         found = self.indices_by_category.get(category)
         return found if found is not None else np.zeros(0, dtype=np.intp)
@@ -103,7 +111,7 @@ def compile_map(scene_map: SceneMap | CompiledMap) -> CompiledMap:
     """
     if isinstance(scene_map, CompiledMap):
         return scene_map
-    memo = scene_map.__dict__.get(_MEMO)
+    memo: CompiledMap | None = scene_map.__dict__.get(_MEMO)
     if memo is not None:
         return memo
     objects = scene_map.objects
@@ -122,10 +130,10 @@ def compile_map(scene_map: SceneMap | CompiledMap) -> CompiledMap:
     dual_quadrics[:, 3, 3] = -1.0
     categories = tuple(o.category for o in objects)
     cats = np.array(categories, dtype=object)
-    indices_by_category = {c: _frozen(np.flatnonzero(cats == c).astype(np.intp))
+    indices_by_category = {c: _frozen_indices(np.flatnonzero(cats == c).astype(np.intp))
                            for c in dict.fromkeys(categories)}
     compiled = CompiledMap(scene_map, tuple(o.object_id for o in objects), categories, ellipsoids,
-                           *map(_frozen, (centers, axes, rotations, shape_matrices, dual_quadrics)),
-                           indices_by_category)
+                           _frozen(centers), _frozen(axes), _frozen(rotations),
+                           _frozen(shape_matrices), _frozen(dual_quadrics), indices_by_category)
     object.__setattr__(scene_map, _MEMO, compiled)
     return compiled

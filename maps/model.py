@@ -19,7 +19,7 @@ import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Final, Literal, TypeVar
 
 import numpy as np
 from pydantic import (
@@ -33,9 +33,11 @@ from pydantic import (
     ValidationError,
     model_validator,
 )
+from pydantic.fields import FieldInfo
 from pydantic.json_schema import GenerateJsonSchema
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
+from quadloc.factors.arrays import FloatArray
 from quadloc.factors.camera import Ellipsoid
 from quadloc.factors.names import json_path
 from quadloc.factors.rotations import (
@@ -66,7 +68,7 @@ __all__ = [
 ]
 
 #: Value of the optional ``format`` field of the JSON document.
-FORMAT = "quadloc.map/1"
+FORMAT: Final = "quadloc.map/1"
 
 #: Sanity limits enforced on every map (documented in docs/maps.md).
 LIMITS: dict[str, float] = {
@@ -139,20 +141,21 @@ def _printable(text: str) -> str:
     return text
 
 
-def _text(max_length: float) -> Any:
-    return Annotated[StrictStr, Field(min_length=1, max_length=int(max_length)),
-                     AfterValidator(_printable)]
+def _length(low: float, high: float | None = None, *, description: str | None = None
+            ) -> FieldInfo:
+    """pydantic's length constraints ``[low, high]`` (``high`` defaults to ``low``: exactly
+    ``low`` items) and the schema's ``description``, as ``Annotated`` metadata."""
+    field_info: FieldInfo = Field(min_length=int(low),
+                                  max_length=int(low if high is None else high),
+                                  description=description)
+    return field_info
 
 
 #: Ids and category labels; the map's display name.
-Label = _text(LIMITS["max_id_length"])
-Name = _text(LIMITS["max_name_length"])
+Label = Annotated[StrictStr, _length(1, LIMITS["max_id_length"]), AfterValidator(_printable)]
+Name = Annotated[StrictStr, _length(1, LIMITS["max_name_length"]), AfterValidator(_printable)]
 #: A finite JSON number (booleans refused).
 Number = Annotated[float, Field(strict=True, allow_inf_nan=False)]
-
-
-def _vector(n: int, item: Any = Number, **constraints: Any) -> Any:
-    return Annotated[list[item], Field(min_length=n, max_length=n, **constraints)]
 
 
 def _nonzero(v: list[float]) -> list[float]:
@@ -181,17 +184,20 @@ def _proper_rotation(rows: list[list[float]]) -> list[list[float]]:
 
 _lim = LIMITS["max_abs_coordinate_m"]
 #: World metres, each coordinate within +-LIMITS["max_abs_coordinate_m"].
-Center = _vector(3, Annotated[Number, Field(ge=-_lim, le=_lim)], description="World metres.")
+Center = Annotated[list[Annotated[Number, Field(ge=-_lim, le=_lim)]],
+                   _length(3, description="World metres.")]
 #: Semi-axes (metres) in [LIMITS["min_semi_axis_m"], LIMITS["max_semi_axis_m"]].
-SemiAxes = _vector(3, Annotated[Number, Field(ge=LIMITS["min_semi_axis_m"],
-                                              le=LIMITS["max_semi_axis_m"])],
-                   description="Semi-axes in metres.")
-Quaternion = Annotated[_vector(4, description="Unit quaternion (w, x, y, z), ellipsoid frame "
+SemiAxes = Annotated[list[Annotated[Number, Field(ge=LIMITS["min_semi_axis_m"],
+                                                  le=LIMITS["max_semi_axis_m"])]],
+                     _length(3, description="Semi-axes in metres.")]
+Quaternion = Annotated[list[Number],
+                       _length(4, description="Unit quaternion (w, x, y, z), ellipsoid frame "
                                               "-> world."), AfterValidator(_unit_quaternion)]
-Rotation = Annotated[_vector(3, _vector(3), description="3x3 rotation, ellipsoid frame -> world "
-                                                        "(alternative to quaternion_wxyz)."),
+Rotation = Annotated[list[Annotated[list[Number], _length(3)]],
+                     _length(3, description="3x3 rotation, ellipsoid frame -> world "
+                                            "(alternative to quaternion_wxyz)."),
                      AfterValidator(_proper_rotation)]
-UpAxis = Annotated[_vector(3, description="World up direction (default [0, 0, 1])."),
+UpAxis = Annotated[list[Number], _length(3, description="World up direction (default [0, 0, 1])."),
                    AfterValidator(_nonzero)]
 
 
@@ -200,16 +206,16 @@ def _metadata(value: Mapping[str, Any]) -> dict[str, Any]:
     limit = int(LIMITS["max_metadata_depth"])
     if _nesting_depth(value) > limit:  # before any recursion: no RecursionError
         raise _fail(f"at most {limit} levels of nesting, got more than {limit}")
-    value = _thaw(value)
+    plain: dict[str, Any] = _thaw(value)
     try:
-        size = len(json.dumps(value, allow_nan=False, sort_keys=True))
+        size = len(json.dumps(plain, allow_nan=False, sort_keys=True))
     except (TypeError, ValueError) as exc:
         raise _fail(f"must be JSON-serialisable (finite numbers): {exc}") from None
     if size > LIMITS["max_metadata_bytes"]:
         raise _fail(f"at most {int(LIMITS['max_metadata_bytes'])} bytes of JSON, got {size}")
-    if not _is_utf8(json.dumps(value, ensure_ascii=False)):
+    if not _is_utf8(json.dumps(plain, ensure_ascii=False)):
         raise _fail(f"keys and strings {_SURROGATE_MESSAGE}")
-    return value
+    return plain
 
 
 Metadata = Annotated[Mapping[str, Any], AfterValidator(_metadata)]
@@ -310,7 +316,11 @@ _MESSAGES = {"missing": "required field missing", "extra_forbidden": "unknown fi
              "mapping_type": "must be a JSON object"}
 
 
-def _validated(model: type[BaseModel], data: Any) -> Any:
+#: a document model (:func:`_validated` returns an instance of the model it is given)
+_Model = TypeVar("_Model", bound=BaseModel)
+
+
+def _validated(model: type[_Model], data: Any) -> _Model:
     """``model.model_validate(data)``, every error as one :class:`MapValidationError` naming
     each field by its :func:`json_path`."""
     try:
@@ -338,9 +348,14 @@ class ObjectDocument(_Document):
     category: Label
     center: Center
     axes: SemiAxes
-    # Optional, but not nullable: absent means "not given" (the default is not validated).
-    quaternion_wxyz: Quaternion = None  # type: ignore[assignment]
-    rotation: Rotation = None  # type: ignore[assignment]
+    # Optional, but not nullable: absent means "not given" (pydantic does not validate the
+    # default None, and refuses an explicit null). mypy is told the truth: it may be None.
+    if TYPE_CHECKING:
+        quaternion_wxyz: Quaternion | None = None
+        rotation: Rotation | None = None
+    else:
+        quaternion_wxyz: Quaternion = None
+        rotation: Rotation = None
 
     @model_validator(mode="after")
     def _one_orientation(self) -> ObjectDocument:
@@ -411,13 +426,14 @@ class ChessDocument(BaseModel):
     @classmethod
     def _known_categories(cls, data: Any, handler: Any) -> Any:
         labels = data.get("category_id_to_label") if isinstance(data, Mapping) else None
+        known: Mapping[str, Any] = labels if isinstance(labels, Mapping) else {}
         objs = data.get("objects") if isinstance(labels, Mapping) else None
         ids = [(i, o.get("category_id")) for i, o in
                enumerate(objs if isinstance(objs, list) else ()) if isinstance(o, Mapping)]
         return _with_problems(handler, data, [
             (("objects", i, "category_id"), f"unknown category id {cid!r}") for i, cid in ids
             if isinstance(cid, int | float | str) and not isinstance(cid, bool)
-            and str(_integral(cid)) not in labels], cls.__name__)
+            and str(_integral(cid)) not in known], cls.__name__)
 
 
 class _MapObjectLabels(_Document):
@@ -451,7 +467,7 @@ class MapObject:
     @classmethod
     def from_quaternion_wxyz(
         cls, object_id: str, category: str, center: Sequence[float], axes: Sequence[float],
-        quaternion_wxyz: Sequence[float],
+        quaternion_wxyz: FloatArray | Sequence[float],
     ) -> MapObject:
         """Build from centre (m, world), semi-axes (m) and a unit ``(w, x, y, z)`` quaternion
         (ellipsoid frame -> world; renormalised, sign made canonical as in
@@ -468,15 +484,16 @@ class MapObject:
         q.setflags(write=False)
         obj = cls.__new__(cls)
         object.__setattr__(obj, "_quaternion_wxyz", q)
-        obj.__init__(object_id, category,  # type: ignore[misc]
+        cls.__init__(obj, object_id, category,
                      Ellipsoid(np.asarray(center, float), np.asarray(axes, float),
                                rotation_from_quaternion_wxyz(q)))
         return obj
 
     @property
-    def quaternion_wxyz(self) -> np.ndarray:
+    def quaternion_wxyz(self) -> FloatArray:
         """Orientation (ellipsoid frame -> world) as a unit ``(w, x, y, z)``, ``w >= 0``."""
-        return self._quaternion_wxyz  # type: ignore[attr-defined]
+        q: FloatArray = self.__dict__["_quaternion_wxyz"]  # set in __post_init__ (frozen)
+        return q
 
     def __eq__(self, other: object) -> bool:
         """Same id, category, centre, semi-axes and ``quaternion_wxyz`` (exactly: the same
@@ -512,7 +529,7 @@ class SceneMap:
     metadata: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        objs = self.objects
+        objs: object = self.objects  # any sequence of MapObject is accepted (made a tuple)
         if isinstance(objs, str) or not isinstance(objs, Sequence):
             raise MapValidationError([{"field": "objects", "message": "must be a list of "
                                                                       "MapObject"}])
@@ -556,10 +573,11 @@ class SceneMap:
         raise KeyError(object_id)
 
     @property
-    def up(self) -> np.ndarray:
+    def up(self) -> FloatArray:
         """World up axis as a unit vector, shape (3,)."""
         u = np.asarray(self.up_axis, dtype=float)
-        return u / np.linalg.norm(u)
+        unit: FloatArray = u / np.linalg.norm(u)
+        return unit
 
     # -- JSON
     def to_dict(self) -> dict[str, Any]:
@@ -658,7 +676,8 @@ def content_hash(scene_map: SceneMap) -> str:
 
 
 def _map_object(object_id: str, category: str, center: Sequence[float], axes: Sequence[float],
-                quaternion_wxyz: Sequence[float] | None, rotation: Any | None) -> MapObject:
+                quaternion_wxyz: FloatArray | Sequence[float] | None,
+                rotation: Sequence[Sequence[float]] | None) -> MapObject:
     """The object of a validated document entry; a ``rotation`` is stored as its quaternion
     (the exported form, so that a re-import is exact); neither means axis-aligned."""
     if rotation is not None:

@@ -22,6 +22,7 @@ from typing import Any
 import gtsam
 import numpy as np
 
+from quadloc.factors.arrays import FloatArray
 from quadloc.factors.camera import Camera, Ellipsoid, ellipsoid_depth_margins
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.ellipsoid_factors import ellipsoid_views_factor
@@ -32,7 +33,12 @@ from quadloc.factors.ellipsoid_residuals import (
     observation_residual,
     stack_samples,
 )
-from quadloc.factors.rotations import ORTHONORMAL_TOLERANCE, invert_pose, pose_matrix
+from quadloc.factors.rotations import (
+    ORTHONORMAL_TOLERANCE,
+    invert_pose,
+    pose_matrix,
+    rotation_angle,
+)
 from quadloc.maps.model import LIMITS, MapObject, SceneMap
 
 __all__ = [
@@ -134,9 +140,9 @@ def _as_ellipse(value: Any, index: int) -> Ellipse:
 
 
 def _prepare(
-    ellipses: Sequence[Any], world_from_camera: Sequence[np.ndarray],
+    ellipses: Sequence[Any], world_from_camera: Sequence[FloatArray],
     camera: Camera | Sequence[Camera], min_views: int,
-) -> tuple[list[Ellipse], np.ndarray, list[Camera], np.ndarray]:
+) -> tuple[list[Ellipse], FloatArray, list[Camera], FloatArray]:
     """Validate inputs; returns ellipses, camera_from_world (n,4,4), cameras, P (n,3,4)."""
     ells = [_as_ellipse(e, i) for i, e in enumerate(ellipses)]
     n = len(ells)
@@ -163,36 +169,38 @@ def _prepare(
     return ells, cfw, cams, P
 
 
-def _rays(ells: Sequence[Ellipse], cams: Sequence[Camera], cfw: np.ndarray) -> np.ndarray:
+def _rays(ells: Sequence[Ellipse], cams: Sequence[Camera], cfw: FloatArray) -> FloatArray:
     """Unit world directions (n, 3) of the rays through the ellipse centres."""
     d = np.array([[(e.cx - c.cx) / c.fx, (e.cy - c.cy) / c.fy, 1.0]
                   for e, c in zip(ells, cams, strict=True)])
     d = np.einsum("nji,nj->ni", cfw[:, :3, :3], d)  # R_cw^T d: camera -> world
-    return d / np.linalg.norm(d, axis=1, keepdims=True)
+    rays: FloatArray = d / np.linalg.norm(d, axis=1, keepdims=True)
+    return rays
 
 
-def max_ray_angle_deg(rays: np.ndarray) -> float:
+def max_ray_angle_deg(rays: FloatArray) -> float:
     """Largest angle (deg) between two of the unit rays (n, 3): the spread of the views."""
     cos = np.clip(rays @ rays.T, -1.0, 1.0)
     return float(np.degrees(np.arccos(cos.min())))
 
 
-def triangulate(origins: np.ndarray, rays: np.ndarray) -> np.ndarray:
+def triangulate(origins: FloatArray, rays: FloatArray) -> FloatArray:
     """Least-squares point closest to the rays ``origins + t rays`` (n, 3)."""
     proj = np.eye(3) - rays[:, :, None] * rays[:, None, :]
-    return np.linalg.solve(proj.sum(0), np.einsum("nij,nj->i", proj, origins))
+    point: FloatArray = np.linalg.solve(proj.sum(0), np.einsum("nij,nj->i", proj, origins))
+    return point
 
 
 # --------------------------------------------------------------------------- linear estimate
 
 
-def _vech_design(P: np.ndarray) -> np.ndarray:
+def _vech_design(P: FloatArray) -> FloatArray:
     """``G`` (n, 6, 10): weighted ``vech(P B_k P^T)`` for the weighted vech basis ``B_k``."""
-    PBP = np.einsum("nai,kij,nbj->nkab", P, _BASIS4, P)
+    PBP: FloatArray = np.einsum("nai,kij,nbj->nkab", P, _BASIS4, P)
     return (PBP[:, :, _TRIU3[0], _TRIU3[1]] * _W3).transpose(0, 2, 1)
 
 
-def linear_dual_quadric(dual_conics: np.ndarray, projections: np.ndarray) -> np.ndarray:
+def linear_dual_quadric(dual_conics: FloatArray, projections: FloatArray) -> FloatArray:
     """Least-squares dual quadric (4x4, scale arbitrary) from dual conics ``C*_i`` (n, 3, 3) and
     projection matrices ``P_i`` (n, 3, 4), solving ``s_i vech(C*_i) = G_i vech(Q*)`` by SVD.
 
@@ -215,7 +223,7 @@ def linear_dual_quadric(dual_conics: np.ndarray, projections: np.ndarray) -> np.
     return Q / np.linalg.norm(Q)
 
 
-def ellipsoid_from_dual_quadric(dual_quadric: np.ndarray) -> Ellipsoid:
+def ellipsoid_from_dual_quadric(dual_quadric: FloatArray) -> Ellipsoid:
     """Ellipsoid (centre, semi-axes descending, proper rotation) of a dual quadric of any scale.
 
     Raises ``ReconstructionError("not_an_ellipsoid")`` if ``Q*[3, 3] = 0`` or the shape matrix
@@ -238,7 +246,7 @@ def ellipsoid_from_dual_quadric(dual_quadric: np.ndarray) -> Ellipsoid:
     return canonical_ellipsoid(vec, center, np.sqrt(lam))
 
 
-def canonical_ellipsoid(rotation: np.ndarray, center: np.ndarray, axes: np.ndarray
+def canonical_ellipsoid(rotation: FloatArray, center: FloatArray, axes: FloatArray
                         ) -> Ellipsoid:
     """The ellipsoid with its semi-axes (m) in descending order, the rotation's columns
     permuted alike and the last one negated if needed for det +1. Semi-axes that underflowed
@@ -261,7 +269,7 @@ def contour_samples(ellipse: Ellipse, n: int) -> LevelSetSamples:
     return LevelSetSamples(pts, np.vstack([pts.T, np.ones((1, n))]), np.zeros(n))
 
 
-def _projection_rows(projections: np.ndarray) -> np.ndarray:
+def _projection_rows(projections: FloatArray) -> FloatArray:
     """``K [R|t]`` (n, 3, 4) padded to (n, 4, 4): the factor's ``camera_from_world`` for
     samples in homogeneous pixels."""
     P = np.asarray(projections, dtype=float)
@@ -272,9 +280,9 @@ def _projection_rows(projections: np.ndarray) -> np.ndarray:
 
 
 def view_residuals(
-    ellipsoid: Ellipsoid, ellipses: Sequence[Ellipse], projections: np.ndarray,
+    ellipsoid: Ellipsoid, ellipses: Sequence[Ellipse], projections: FloatArray,
     samples_per_view: int = SAMPLES_PER_VIEW,
-) -> np.ndarray:
+) -> FloatArray:
     """Level residuals ``Phi_pred - 1`` (n, samples) of ``ellipsoid`` against observed ellipses,
     with ``projections`` the views' ``P = K [R|t]_camera_from_world`` (n, 3, 4): minus the
     shared level-set residual (:func:`quadloc.factors.ellipsoid_residuals.observation_residual`) at
@@ -286,9 +294,9 @@ def view_residuals(
 
 
 def refine_ellipsoid(
-    initial: Ellipsoid, ellipses: Sequence[Ellipse], projections: np.ndarray, *,
+    initial: Ellipsoid, ellipses: Sequence[Ellipse], projections: FloatArray, *,
     sigmas: Sequence[float] | None = None, samples_per_view: int = SAMPLES_PER_VIEW,
-    max_iterations: int = 100, log_axes_prior: tuple[np.ndarray, float] | None = None,
+    max_iterations: int = 100, log_axes_prior: tuple[FloatArray, float] | None = None,
 ) -> tuple[Ellipsoid, int]:
     """Levenberg-Marquardt refinement (GTSAM) of ``initial`` against the observed ellipses.
 
@@ -334,7 +342,7 @@ def refine_ellipsoid(
 
 def reconstruct_ellipsoid(
     ellipses: Sequence[Ellipse | Sequence[float]],
-    world_from_camera: Sequence[np.ndarray],
+    world_from_camera: Sequence[FloatArray],
     camera: Camera | Sequence[Camera],
     *,
     refine: bool = True,
@@ -449,7 +457,7 @@ def reconstruct_ellipsoid(
         rms = rms_of(refined)
         if label == "linear" and rms > lin_rms:
             # only at round-off level (LM never accepts an increase): keep the linear estimate
-            refined, rms = linear, lin_rms
+            refined, rms = start, lin_rms  # the "linear" start is the linear estimate
         if best is None or rms < best[0]:
             best = (rms, refined, iters, label)
     if best is None and linear is not None:
@@ -482,7 +490,7 @@ def degenerate_shape_reason(ellipsoid: Ellipsoid) -> str | None:
     return None
 
 
-def _check_result(ellipsoid: Ellipsoid, ells: Sequence[Ellipse], P: np.ndarray,
+def _check_result(ellipsoid: Ellipsoid, ells: Sequence[Ellipse], P: FloatArray,
                   samples_per_view: int) -> None:
     """``degenerate_shape`` unless :func:`degenerate_shape_reason` is None; then
     ``inconsistent_views`` if the unweighted RMS level residual exceeds
@@ -502,7 +510,7 @@ def _check_result(ellipsoid: Ellipsoid, ells: Sequence[Ellipse], P: np.ndarray,
                                   f"{MAX_RMS_LEVEL_RESIDUAL:g} (views of different objects?)")
 
 
-def _check_in_front(ellipsoid: Ellipsoid, cfw: np.ndarray) -> None:
+def _check_in_front(ellipsoid: Ellipsoid, cfw: FloatArray) -> None:
     margins = ellipsoid_depth_margins(cfw, ellipsoid.center[None],
                                       ellipsoid.shape_matrix()[None])[:, 0]
     if np.any(margins <= 0):
@@ -532,12 +540,9 @@ def ellipsoid_errors(estimate: Ellipsoid, truth: Ellipsoid) -> dict[str, float]:
     equal semi-axes) and ``shape_rel`` (``|M_est - M_true|_F / |M_true|_F``, frame-free).
     """
     frames = np.einsum("ij,sjk->sik", estimate.rotation, _SYMMETRIES)  # R_est S
-    rel = np.einsum("ji,sjk->sik", truth.rotation, frames)  # R_true^T R_est S
-    cos = np.clip((np.trace(rel, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
-    best = int(np.argmax(cos))
-    # angle from |R - I|_F = 2 sqrt(2) sin(angle / 2): accurate for small angles, unlike arccos
-    angle = 2.0 * math.asin(min(1.0, float(np.linalg.norm(rel[best] - np.eye(3)))
-                                / (2.0 * math.sqrt(2.0))))
+    angles = rotation_angle(truth.rotation, frames)  # (24,) rad
+    best = int(np.argmin(angles))
+    angle = float(angles[best])
     axes = np.abs(_SYMMETRIES[best]).T @ estimate.axes  # axes permuted like the columns
     m_true = truth.shape_matrix()
     return {
@@ -569,14 +574,18 @@ class LabelledEllipse:
                              f"ellipse or box")
 
     def as_ellipse(self) -> Ellipse:
-        return self.ellipse if self.ellipse is not None else Ellipse.from_bbox(*self.box)
+        """The ellipse, or the one inscribed in the box (px)."""
+        if self.ellipse is not None:
+            return self.ellipse
+        assert self.box is not None  # exactly one of the two (__post_init__)
+        return Ellipse.from_bbox(*self.box)
 
 
 @dataclass(frozen=True)
 class FrameObservations:
     """The detections of one image with its known ``world_from_camera`` pose (4x4) and camera."""
 
-    world_from_camera: np.ndarray
+    world_from_camera: FloatArray
     camera: Camera
     detections: Sequence[LabelledEllipse]
 
@@ -608,7 +617,7 @@ def build_scene_map(
     """
     if on_failure not in ("raise", "skip"):
         raise ValueError(f"on_failure must be 'raise' or 'skip', got {on_failure!r}")
-    views: dict[str, list[tuple[Ellipse, np.ndarray, Camera]]] = {}
+    views: dict[str, list[tuple[Ellipse, FloatArray, Camera]]] = {}
     labels: dict[str, Counter[str]] = {}
     label_order: dict[str, None] = {}
     for fi, frame in enumerate(frames):

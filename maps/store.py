@@ -138,7 +138,7 @@ class MapVersionInfo:
     created_at: datetime
 
 
-def normalize_url(url: str) -> str:
+def normalize_url(url: str | None) -> str:
     """SQLAlchemy URL with the psycopg 3 driver for PostgreSQL (``postgresql://`` or
     ``postgres://`` -> ``postgresql+psycopg://``); other URLs unchanged."""
     if not isinstance(url, str) or not url:

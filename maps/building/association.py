@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from quadloc.factors.arrays import BoolArray, FloatArray, IntArray
 from quadloc.factors.camera import Camera, Ellipsoid, project_ellipsoid
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.overlap import intersection_areas
@@ -64,12 +65,12 @@ class ObjectHypothesis:
 
     label: str
     observations: list[int]
-    ellipsoid: Ellipsoid | None = None
+    ellipsoid: Ellipsoid
     source: str = "geometric"
     ious: dict[int, float] = field(default_factory=dict)
 
 
-def ellipse_ious(p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
+def ellipse_ious(p1: FloatArray, p2: FloatArray) -> FloatArray:
     """Intersection over union (N,) of N pairs of filled ellipses given as params (N, 5) each
     (exact areas, ``quadloc.factors.overlap``); 0 where the union is empty."""
     p1, p2 = np.asarray(p1, dtype=float).reshape(-1, 5), np.asarray(p2, dtype=float).reshape(-1, 5)
@@ -85,8 +86,8 @@ def ellipse_iou(e1: Ellipse, e2: Ellipse) -> float:
     return float(ellipse_ious(e1.params(), e2.params())[0])
 
 
-def _rays(obs: Sequence[Observation], camera: Camera, T_wc: np.ndarray
-          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _rays(obs: Sequence[Observation], camera: Camera, T_wc: FloatArray
+          ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Origins (n, 3), unit directions (n, 3) and angular sizes (n,) of the detections."""
     f = np.array([o.frame for o in obs])
     d = np.stack([np.array([(o.ellipse.cx - camera.cx) / camera.fx,
@@ -98,9 +99,9 @@ def _rays(obs: Sequence[Observation], camera: Camera, T_wc: np.ndarray
     return T_wc[f, :3, 3], d, rho
 
 
-def _pair_candidates(o: np.ndarray, d: np.ndarray, rho: np.ndarray, frames: np.ndarray,
+def _pair_candidates(o: FloatArray, d: FloatArray, rho: FloatArray, frames: IntArray,
                      opt: AssociationOptions, rng: np.random.Generator
-                     ) -> tuple[np.ndarray, np.ndarray]:
+                     ) -> tuple[FloatArray, FloatArray]:
     n = len(o)
     i, j = np.triu_indices(n, 1)
     keep = frames[i] != frames[j]
@@ -128,8 +129,8 @@ def _pair_candidates(o: np.ndarray, d: np.ndarray, rho: np.ndarray, frames: np.n
     return X, S
 
 
-def _support(X: np.ndarray, S: np.ndarray, o: np.ndarray, d: np.ndarray, rho: np.ndarray,
-             opt: AssociationOptions) -> tuple[np.ndarray, np.ndarray]:
+def _support(X: FloatArray, S: FloatArray, o: FloatArray, d: FloatArray, rho: FloatArray,
+             opt: AssociationOptions) -> tuple[BoolArray, FloatArray]:
     """Consistency (m, n) bool and normalised ray distance (m, n) of candidates vs detections."""
     v = X[:, None, :] - o[None, :, :]  # (m, n, 3)
     t = np.einsum("mnk,nk->mn", v, d)
@@ -141,7 +142,7 @@ def _support(X: np.ndarray, S: np.ndarray, o: np.ndarray, d: np.ndarray, rho: np
     return ok, dist
 
 
-def _one_per_frame(idx: np.ndarray, dist: np.ndarray, frames: np.ndarray) -> np.ndarray:
+def _one_per_frame(idx: IntArray, dist: FloatArray, frames: IntArray) -> IntArray:
     """Of detections ``idx`` keep the closest (smallest ``dist``) per frame."""
     best: dict[int, int] = {}
     for k in idx[np.argsort(dist[idx])]:
@@ -149,12 +150,12 @@ def _one_per_frame(idx: np.ndarray, dist: np.ndarray, frames: np.ndarray) -> np.
     return np.array(sorted(best.values()), dtype=int)
 
 
-def _geometric_clusters(o: np.ndarray, d: np.ndarray, rho: np.ndarray, frames: np.ndarray,
+def _geometric_clusters(o: FloatArray, d: FloatArray, rho: FloatArray, frames: IntArray,
                         opt: AssociationOptions, rng: np.random.Generator,
-                        tick: Callable[[], None] | None = None) -> list[np.ndarray]:
+                        tick: Callable[[], None] | None = None) -> list[IntArray]:
     X, S = _pair_candidates(o, d, rho, frames, opt, rng)
     free = np.ones(len(o), dtype=bool)
-    clusters: list[np.ndarray] = []
+    clusters: list[IntArray] = []
     if not len(X):
         return clusters
     ok_all, dist_all = _support(X, S, o, d, rho, opt)  # once per label; masked below
@@ -200,7 +201,7 @@ def touches_border(ellipse: Ellipse, camera: Camera, margin_px: float = 4.0) -> 
                 or y1 > camera.height - margin_px)
 
 
-def _reconstruct(idx: Sequence[int], obs: Sequence[Observation], T_wc: np.ndarray,
+def _reconstruct(idx: Sequence[int], obs: Sequence[Observation], T_wc: FloatArray,
                  camera: Camera, opt: AssociationOptions) -> Ellipsoid | None:
     """Initial ellipsoid: Rubino + LM (``reconstruct_ellipsoid``, weak log-axes prior against
     flat collapse) from an evenly spread subset of the untruncated views (all views if fewer
@@ -231,8 +232,8 @@ def _reconstruct(idx: Sequence[int], obs: Sequence[Observation], T_wc: np.ndarra
     return Ellipsoid(x, np.full(3, r))
 
 
-def _projected_ious(ell: Ellipsoid, T_wc: np.ndarray, camera: Camera,
-                    detections: Sequence[Ellipse]) -> np.ndarray:
+def _projected_ious(ell: Ellipsoid, T_wc: FloatArray, camera: Camera,
+                    detections: Sequence[Ellipse]) -> FloatArray:
     """IoUs (k,) of ``detections`` (k) with the projections of ``ell`` from the poses ``T_wc``
     (k, 4, 4) (0 where it does not project), the areas of all pairs in one batched call."""
     proj, det, ok = [], [], np.zeros(len(detections), dtype=bool)
@@ -249,7 +250,7 @@ def _projected_ious(ell: Ellipsoid, T_wc: np.ndarray, camera: Camera,
 
 
 def associate(
-    observations: Sequence[Observation], world_from_camera: np.ndarray, camera: Camera,
+    observations: Sequence[Observation], world_from_camera: FloatArray, camera: Camera,
     options: AssociationOptions | None = None,
     progress: Callable[[str, float], None] | None = None,
 ) -> tuple[list[ObjectHypothesis], dict[int, str]]:
@@ -262,7 +263,7 @@ def associate(
     opt = options or AssociationOptions()
     rng = np.random.default_rng(opt.seed)
     labels = sorted({o.label for o in observations})
-    state = {"label": "", "fraction": 0.0}
+    state: dict[str, str | float] = {"label": "", "fraction": 0.0}
 
     def tick() -> None:
         if progress is not None:
@@ -274,7 +275,7 @@ def associate(
         state["label"], state["fraction"] = label, li / max(1, len(labels))
         idx_all = np.array([k for k, o in enumerate(observations) if o.label == label])
         tracked: dict[str, list[int]] = {}
-        untracked = []
+        untracked: list[int] = []
         for k in idx_all:
             t = observations[k].track_id
             (tracked.setdefault(t, []) if t is not None else untracked).append(int(k))
@@ -294,8 +295,8 @@ def associate(
             clusters = _geometric_clusters(o, d, rho, frames, opt, rng, tick)
             assigned: set[int] = set()  # observation indices in an object of this label
             label_objs = []
-            for members in clusters:
-                glob = [int(un[m]) for m in members]
+            for cluster in clusters:
+                glob = [int(un[m]) for m in cluster]
                 tick()
                 ell = _reconstruct(glob, observations, T_wc, camera, opt)
                 if ell is not None:
@@ -343,16 +344,17 @@ def associate(
 
 
 def _overlapping(a: Ellipsoid, b: Ellipsoid, factor: float) -> bool:
-    return float(np.linalg.norm(a.center - b.center)) <= factor * max(a.axes.max(), b.axes.max())
+    return bool(float(np.linalg.norm(a.center - b.center))
+                <= factor * max(a.axes.max(), b.axes.max()))
 
 
-def _inside(point: np.ndarray, ell: Ellipsoid) -> bool:
+def _inside(point: FloatArray, ell: Ellipsoid) -> bool:
     d = ell.rotation.T @ (point - ell.center)
     return float(np.sum((d / ell.axes) ** 2)) <= 1.0
 
 
 def _merge_duplicates(objects: list[ObjectHypothesis], obs: Sequence[Observation],
-                      T_wc: np.ndarray, camera: Camera, opt: AssociationOptions,
+                      T_wc: FloatArray, camera: Camera, opt: AssociationOptions,
                       tick: Callable[[], None]) -> list[ObjectHypothesis]:
     """Merge same-label objects whose centres lie within ``merge_factor`` x the larger one's
     largest semi-axis and that (almost) never appear in the same frame: one physical object split

@@ -20,14 +20,14 @@ import numpy as np
 
 from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.maps.building.association import AssociationOptions, associate
-from quadloc.maps.building.joint import refine_jointly
+from quadloc.maps.building.joint import ObjectQuality, refine_jointly
 from quadloc.maps.building.recording import Recording
 from quadloc.maps.building.report import (
     BuildCounts,
     BuildReport,
     DetectionRef,
     DroppedObject,
-    ObjectQuality,
+    ObjectQualityReport,
     ObjectReport,
     RefinementReport,
     RejectedDetection,
@@ -48,7 +48,7 @@ REFINEMENT_STOPPED_WARNING = ("time budget reached during refinement: the map ho
                               "estimate at that point")
 
 
-def _drop_detail(reason: str, shape_problem: str | None, q: Any) -> str:
+def _drop_detail(reason: str, shape_problem: str | None, q: ObjectQuality) -> str:
     """A sentence for the report on why an object was left out of the map."""
     if reason == "degenerate_shape":
         return f"not an object's shape: {shape_problem}"
@@ -112,6 +112,7 @@ def build_map(
     counters: dict[str, int] = {}
     dropped: list[DroppedObject] = []
     for k, h in enumerate(objects):
+        assert joint is not None  # refined whenever there are objects
         ell = joint.ellipsoids[k]
         q = joint.quality[k]
         counters[h.label] = counters.get(h.label, 0) + 1
@@ -138,7 +139,7 @@ def build_map(
             detections=[DetectionRef(frame_id=recording.frames[obs[i].frame].frame_id,
                                      frame_index=obs[i].frame, detection_index=obs[i].index)
                         for i in h.observations],
-            quality=ObjectQuality(
+            quality=ObjectQualityReport(
                 n_views=q.n_views, view_spread_deg=q.view_spread_deg,
                 residual_cost=q.residual_cost, rms_level_residual=q.rms_level_residual,
                 log_semi_axis_std=list(q.log_axis_std), center_std_m=q.center_std_m,

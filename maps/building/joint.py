@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import gtsam
 import numpy as np
 
+from quadloc.factors.arrays import BoolArray, FloatArray
 from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.factors.camera import Camera, Ellipsoid
 from quadloc.factors.ellipsoid_factors import depth_margins, ellipsoid_views_factor
@@ -80,7 +81,7 @@ class ObjectQuality:
 class JointResult:
     ellipsoids: list[Ellipsoid]
     quality: list[ObjectQuality]
-    world_from_camera: np.ndarray
+    world_from_camera: FloatArray
     iterations: int
     initial_error: float
     final_error: float
@@ -88,9 +89,9 @@ class JointResult:
 
 
 
-def _log_axis_std(T_cw: np.ndarray, R: np.ndarray, center: np.ndarray, axes: np.ndarray,
-                  samples: LevelSetSamples, info_weights: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+def _log_axis_std(T_cw: FloatArray, R: FloatArray, center: FloatArray, axes: FloatArray,
+                  samples: LevelSetSamples, info_weights: FloatArray
+                  ) -> tuple[FloatArray, FloatArray, BoolArray, float]:
     """Marginal std (3,) of the log semi-axes (in the order of ``axes``) from the views'
     Gauss-Newton information on ``[omega, v, log axes]`` (cameras fixed), each view weighted by
     ``info_weights`` (1/sigma); also the residuals (V', M) of the views in front, their mask and
@@ -101,10 +102,11 @@ def _log_axis_std(T_cw: np.ndarray, R: np.ndarray, center: np.ndarray, axes: np.
         return np.full(3, np.inf), np.zeros((0, samples.n.shape[-1])), ok, math.inf
     sub = LevelSetSamples(None, samples.n[ok], samples.phi_det_minus_1[ok])
     r, J, _ = observation_residual(T_cw[ok], R, center, axes, sub)
+    assert J is not None  # jacobians asked for (the default)
     H = np.einsum("v,vmi,vmj->ij", info_weights[ok], J, J)
     try:
         cov = np.linalg.inv(H + 1e-12 * np.trace(H) * np.eye(9))
-        std = np.sqrt(np.maximum(np.diag(cov)[6:], 0.0))
+        std: FloatArray = np.sqrt(np.maximum(np.diag(cov)[6:], 0.0))
         # centre: c -> c + R v, so its covariance is R cov_v R^T; largest std of any direction
         center_std = float(np.sqrt(max(np.linalg.eigvalsh(R @ cov[3:6, 3:6] @ R.T).max(), 0)))
     except np.linalg.LinAlgError:
@@ -117,7 +119,7 @@ def _floor_factor(key: int, floor: float, sigma: float) -> gtsam.CustomFactor:
     std ``sigma``: no cost at or above ``floor``."""
 
     def error_fn(this: gtsam.CustomFactor, values: gtsam.Values,
-                 H: list[np.ndarray] | None) -> np.ndarray:
+                 H: gtsam.JacobianVector | None) -> FloatArray:
         x = values.atVector(key)
         below = x < floor
         if H is not None:
@@ -159,7 +161,7 @@ class _Ticker:
 
 
 def refine_jointly(
-    camera: Camera, world_from_camera: np.ndarray, observations: Sequence[Observation],
+    camera: Camera, world_from_camera: FloatArray, observations: Sequence[Observation],
     objects: Sequence[tuple[str, Sequence[int], Ellipsoid]], *,
     size_priors: Mapping[str, SizePrior] | None = None, refine_cameras: bool = False,
     odometry: OdometryNoise | None = None, max_iterations: int = 30,
@@ -186,9 +188,9 @@ def refine_jointly(
     used_frames = sorted({observations[i].frame for _, idx, _ in objects for i in idx})
     X = {f: gtsam.symbol("x", f) for f in used_frames} if refine_cameras else {}
     samples: dict[int, LevelSetSamples] = {}
-    info_w: list[np.ndarray] = []
+    info_w: list[FloatArray] = []
     view_rows: list[tuple[int, int, int, float]] = []  # (frame, object, observation, weight)
-    sigmas: list[np.ndarray] = []  # per object: its views' sigma, NaN where none is given
+    sigmas: list[FloatArray] = []  # per object: its views' sigma, NaN where none is given
     robust = DEFAULT_ROBUST_SCALE["level_set"]
     ticker = _Ticker(progress)
     T_cw = np.array([invert_pose(T) for T in T_wc])
@@ -316,7 +318,8 @@ def refine_jointly(
         quality.append(ObjectQuality(
             n_views=len(idx), view_spread_deg=max_ray_angle_deg(rays), residual_cost=cost,
             rms_level_residual=float(np.sqrt(np.mean(allr**2))),
-            log_axis_std=tuple(float(x) for x in std_c), center_std_m=center_std,
+            log_axis_std=(float(std_c[0]), float(std_c[1]), float(std_c[2])),
+            center_std_m=center_std,
             unconstrained_axes=tuple(int(a) for a in np.flatnonzero(
                 ~(std_c <= unconstrained_log_std)))))
     return JointResult(ells, quality, T_out, it, initial_error, err, stopped)

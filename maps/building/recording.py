@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from quadloc.factors.arrays import FloatArray
 from quadloc.factors.camera import Camera
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.rotations import (
@@ -77,7 +78,7 @@ class FrameRecord:
     """One frame: id, ``world_from_camera`` (4x4, app's world frame, OpenCV camera axes)."""
 
     frame_id: str
-    world_from_camera: np.ndarray
+    world_from_camera: FloatArray
 
 
 @dataclass(frozen=True)
@@ -103,7 +104,7 @@ class OdometryNoise:
     rotation_rad_per_step: float = 0.0005
     translation_m_per_step: float = 0.001
 
-    def sigmas(self, distance_m: float, steps: int) -> np.ndarray:
+    def sigmas(self, distance_m: float, steps: int) -> FloatArray:
         """Between-factor stds ``[rotation x3 (rad), translation x3 (m)]`` (GTSAM Pose3 tangent
         order) over ``distance_m`` and ``steps``."""
         r = math.sqrt(self.rotation_rad_per_sqrt_m ** 2 * distance_m
@@ -129,7 +130,8 @@ def _bad(errors: list[dict[str, str]], field: str, message: str) -> None:
     errors.append({"field": field, "message": message})
 
 
-def _num(errors: list, path: str, value: Any, positive: bool = False) -> float | None:
+def _num(errors: list[dict[str, str]], path: str, value: Any, positive: bool = False
+         ) -> float | None:
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         _bad(errors, path, "must be a finite number")
         return None
@@ -139,7 +141,7 @@ def _num(errors: list, path: str, value: Any, positive: bool = False) -> float |
     return float(value)
 
 
-def _vec(errors: list, path: str, value: Any, n: int) -> np.ndarray | None:
+def _vec(errors: list[dict[str, str]], path: str, value: Any, n: int) -> FloatArray | None:
     if not isinstance(value, list | tuple) or len(value) != n:
         _bad(errors, path, f"must be an array of {n} numbers")
         return None
@@ -147,7 +149,7 @@ def _vec(errors: list, path: str, value: Any, n: int) -> np.ndarray | None:
     return None if any(v is None for v in out) else np.array(out, dtype=float)
 
 
-def _pose(errors: list, path: str, value: Any) -> np.ndarray | None:
+def _pose(errors: list[dict[str, str]], path: str, value: Any) -> FloatArray | None:
     if not isinstance(value, Mapping):
         _bad(errors, path, "must be an object with quaternion_wxyz and translation_m")
         return None
@@ -162,7 +164,7 @@ def _pose(errors: list, path: str, value: Any) -> np.ndarray | None:
     return pose_matrix(rotation_from_quaternion_wxyz(q / np.linalg.norm(q)), t)
 
 
-def _ellipse(errors: list, path: str, det: Mapping) -> Ellipse | None:
+def _ellipse(errors: list[dict[str, str]], path: str, det: Mapping[str, Any]) -> Ellipse | None:
     has_e, has_b = det.get("ellipse") is not None, det.get("box") is not None
     if has_e == has_b:
         _bad(errors, path, "give exactly one of ellipse or box")
@@ -181,7 +183,8 @@ def _ellipse(errors: list, path: str, det: Mapping) -> Ellipse | None:
         return None
     vals = [_num(errors, f"{path}.ellipse.{k}", e.get(k), positive=k in ("a", "b"))
             for k in ("cx", "cy", "a", "b", "angle")]
-    return None if any(v is None for v in vals) else Ellipse(*vals)
+    nums = [v for v in vals if v is not None]
+    return Ellipse(*nums) if len(nums) == len(vals) else None
 
 
 def parse_recording(data: Any, limits: BuildLimits | None = None) -> Recording:
@@ -197,9 +200,10 @@ def parse_recording(data: Any, limits: BuildLimits | None = None) -> Recording:
     else:
         v = {k: _num(errors, f"intrinsics.{k}", intr.get(k), positive=k not in ("cx", "cy"))
              for k in ("fx", "fy", "cx", "cy", "width", "height")}
-        if all(x is not None for x in v.values()):
-            camera = Camera(v["fx"], v["fy"], v["cx"], v["cy"], int(v["width"]),
-                            int(v["height"]))
+        n = {k: x for k, x in v.items() if x is not None}
+        if len(n) == len(v):
+            camera = Camera(n["fx"], n["fy"], n["cx"], n["cy"], int(n["width"]),
+                            int(n["height"]))
     frames_in = data.get("frames")
     if not isinstance(frames_in, list) or not frames_in:
         _bad(errors, "frames", "must be a non-empty array")
@@ -283,13 +287,13 @@ def parse_recording(data: Any, limits: BuildLimits | None = None) -> Recording:
         known = set(OdometryNoise.__dataclass_fields__)
         for key in sorted(set(odo) - known):
             _bad(errors, f"odometry_noise.{key}", f"unknown; expected one of {sorted(known)}")
-        vals = {}
+        vals: dict[str, float] = {}
         for key in known & set(odo):
-            v = _num(errors, f"odometry_noise.{key}", odo[key])
-            if v is not None and not 0 <= v <= 10:
+            x = _num(errors, f"odometry_noise.{key}", odo[key])
+            if x is not None and not 0 <= x <= 10:
                 _bad(errors, f"odometry_noise.{key}", "must be in [0, 10]")
-            elif v is not None:
-                vals[key] = v
+            elif x is not None:
+                vals[key] = x
         noise = OdometryNoise(**{**noise.__dict__, **vals})
         if not errors and (noise.rotation_rad_per_step <= 0 or noise.translation_m_per_step <= 0):
             _bad(errors, "odometry_noise", "the per-step floors rotation_rad_per_step and "
@@ -301,7 +305,8 @@ def parse_recording(data: Any, limits: BuildLimits | None = None) -> Recording:
                      bool(refine), noise)
 
 
-def recording_to_dict(camera: Camera, frames: Sequence[tuple[str, np.ndarray, Sequence[dict]]],
+def recording_to_dict(camera: Camera,
+                      frames: Sequence[tuple[str, FloatArray, Sequence[dict[str, Any]]]],
                       **extra: Any) -> dict[str, Any]:
     """A recording document from ``(frame_id, world_from_camera 4x4, detections)`` triples
     (detections already in the JSON form). Used by the benchmark and the tests."""

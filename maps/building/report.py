@@ -15,7 +15,7 @@ __all__ = [
     "BuildReport",
     "DetectionRef",
     "DroppedObject",
-    "ObjectQuality",
+    "ObjectQualityReport",
     "ObjectReport",
     "RefinementReport",
     "RejectedDetection",
@@ -34,7 +34,7 @@ class DetectionRef(_ReportModel):
     detection_index: int
 
 
-class ObjectQuality(_ReportModel):
+class ObjectQualityReport(_ReportModel):
     """How well the views determine an object (``quadloc.maps.building.joint``)."""
 
     n_views: int
@@ -54,7 +54,7 @@ class ObjectReport(_ReportModel):
     label: str
     association: str = Field(description="How its detections were grouped (track or geometry).")
     detections: list[DetectionRef]
-    quality: ObjectQuality
+    quality: ObjectQualityReport
 
 
 class DroppedObject(_ReportModel):

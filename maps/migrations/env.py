@@ -8,7 +8,7 @@ in ``config.attributes["connection"]``. From a shell: ``alembic -c maps/migratio
 from __future__ import annotations
 
 from alembic import context
-from sqlalchemy import create_engine
+from sqlalchemy import Connection, create_engine
 
 from quadloc.maps.store import normalize_url
 
@@ -17,7 +17,7 @@ VERSION_TABLE = "quadloc_alembic_version"
 config = context.config
 
 
-def _run(connection) -> None:  # type: ignore[no-untyped-def]
+def _run(connection: Connection) -> None:
     context.configure(connection=connection, target_metadata=None,
                       version_table=VERSION_TABLE, render_as_batch=True)
     with context.begin_transaction():

@@ -245,6 +245,7 @@ def test_health_readiness_and_keys_enforced(server: Container) -> None:
 
 
 def test_demo_frame_localizes_through_the_sdk(server: Container) -> None:
+    from quadloc.factors.rotations import rotation_angle
     from quadloc.service.schemas.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA
 
     body = json.loads((REPO / "docs" / "examples" / "localize_chess.json").read_text())
@@ -254,8 +255,7 @@ def test_demo_frame_localizes_through_the_sdk(server: Container) -> None:
     got = np.array(answer.world_from_camera.matrix)
     truth = np.array(EXAMPLE_TRUE_WORLD_FROM_CAMERA)
     assert np.linalg.norm(got[:3, 3] - truth[:3, 3]) < 0.05
-    cos = (np.trace(got[:3, :3].T @ truth[:3, :3]) - 1) / 2
-    assert np.degrees(np.arccos(np.clip(cos, -1, 1))) < 2.0
+    assert np.degrees(rotation_angle(got[:3, :3], truth[:3, :3])) < 2.0
 
 
 # --------------------------------------------------------------------------- persistence, stop

@@ -11,7 +11,6 @@ from __future__ import annotations
 import asyncio
 import hashlib
 import json
-import math
 from pathlib import Path
 
 import httpx
@@ -22,6 +21,7 @@ from prometheus_client.parser import text_string_to_metric_families
 import quadloc_sdk as sdk
 from quadloc_sdk import errors as sdk_errors
 from quadloc_sdk import geometry as sg
+from tests.support.errors import pose_errors
 from tests.support.reference_data import (
     CHESS_POSES_PATH,
     CHESS_SCENE_PATH,
@@ -88,13 +88,6 @@ def _sdk_detections(sim_frame) -> list[sdk.Detection]:
     ]
 
 
-def _errors(world_from_camera_est: np.ndarray, world_from_camera_true: np.ndarray):
-    pos = float(np.linalg.norm(world_from_camera_est[:3, 3] - world_from_camera_true[:3, 3]))
-    R = world_from_camera_est[:3, :3].T @ world_from_camera_true[:3, :3]
-    rot = math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(R) - 1) / 2))))
-    return pos, rot
-
-
 def _localizations(client: sdk.QuadLocClient) -> dict[str, float]:
     out: dict[str, float] = {}
     for family in text_string_to_metric_families(client.metrics()):
@@ -135,7 +128,7 @@ def test_localize_simulated_frames_accuracy_and_metrics(client: sdk.QuadLocClien
     for (i, truth, exact, _), answer in zip(items, exact_batch.results, strict=True):
         assert answer.frame_id == f"exact-{i}" and answer.timestamp == float(i)
         assert answer.localized, (i, answer.reason)
-        pos, rot = _errors(answer.world_from_camera.as_matrix(), truth)
+        pos, rot = pose_errors(answer.world_from_camera.as_matrix(), truth)
         assert pos < 1e-3 and rot < 0.05, (i, pos, rot)
         assert len(answer.inliers) == len(exact.detections)
         assert 0 < answer.confidence <= 1
@@ -148,11 +141,11 @@ def test_localize_simulated_frames_accuracy_and_metrics(client: sdk.QuadLocClien
             # returns its candidate pose with its probability; its accuracy counts below.
             assert answer.reason in ("low_confidence", "ambiguous") and answer.alternatives, (
                 i, answer.reason)
-            noisy_errors.append(_errors(answer.alternatives[0].world_from_camera.as_matrix(),
+            noisy_errors.append(pose_errors(answer.alternatives[0].world_from_camera.as_matrix(),
                                         truth))
             continue
         localized += 1
-        noisy_errors.append(_errors(answer.world_from_camera.as_matrix(), truth))
+        noisy_errors.append(pose_errors(answer.world_from_camera.as_matrix(), truth))
         cov = answer.covariance.as_array()
         assert answer.covariance.order[:3] == ["omega_x", "omega_y", "omega_z"]
         np.testing.assert_allclose(cov, cov.T, atol=1e-12)
@@ -192,7 +185,7 @@ def test_opengl_output_matches_the_sdk_conversion(client: sdk.QuadLocClient, fra
                                       convention="opengl")
     with_prior = client.localize(MAP_ID, camera=camera, detections=dets, prior=prior)
     assert with_prior.localized
-    assert _errors(with_prior.world_from_camera.as_matrix(), truth)[0] < 1e-3
+    assert pose_errors(with_prior.world_from_camera.as_matrix(), truth)[0] < 1e-3
 
 
 def test_not_localized_and_request_errors(client: sdk.QuadLocClient, frames):
@@ -251,7 +244,7 @@ def test_async_client_and_delete(live_server: str, client: sdk.QuadLocClient, fr
                 ac.localize(MAP_ID, camera=camera, detections=_sdk_detections(exact),
                             frame_id=str(k)) for k in range(3)])
             assert [a.frame_id for a in answers] == ["0", "1", "2"]
-            assert all(_errors(a.world_from_camera.as_matrix(), truth)[0] < 1e-3
+            assert all(pose_errors(a.world_from_camera.as_matrix(), truth)[0] < 1e-3
                        for a in answers)
             tmp = await ac.import_chess_map(scene, map_id="chess-async")
             assert tmp.version == 1

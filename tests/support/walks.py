@@ -16,7 +16,7 @@ import math
 import numpy as np
 
 from quadloc.factors.pose_residuals import expmap_pose3
-from quadloc.factors.rotations import invert_pose, pose_matrix, snap_to_rotation
+from quadloc.factors.rotations import invert_pose, pose_matrix, rotation_angle, snap_to_rotation
 
 __all__ = ["HZ", "drifting_odometry", "make_walk", "resampled_walk", "simulate_odometry"]
 
@@ -25,6 +25,7 @@ HZ = 30.0
 
 
 def _log_so3(R: np.ndarray) -> np.ndarray:
+    """Rotation vector ``w`` (rad) of ``R`` (``R = exp([w]x)``): the interpolation's log map."""
     c = max(-1.0, min(1.0, (np.trace(R) - 1) / 2))
     a = math.acos(c)
     if a < 1e-9:
@@ -43,7 +44,7 @@ def make_walk(keyposes: list[np.ndarray]) -> list[np.ndarray]:
     out: list[np.ndarray] = []
     for a, b in itertools.pairwise(keyposes):
         d = float(np.linalg.norm(b[:3, 3] - a[:3, 3]))
-        ang = float(np.linalg.norm(_log_so3(a[:3, :3].T @ b[:3, :3])))
+        ang = float(rotation_angle(a[:3, :3], b[:3, :3]))
         dur = max(0.1, d / 0.4, ang / math.radians(45))
         n = max(1, round(dur * HZ))
         w = _log_so3(a[:3, :3].T @ b[:3, :3])

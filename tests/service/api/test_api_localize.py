@@ -17,7 +17,7 @@ from fastapi.testclient import TestClient
 from quadloc.factors import budget as budget_module
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.names import GeometryError
-from quadloc.factors.rotations import rotation_from_quaternion_wxyz
+from quadloc.factors.rotations import rotation_angle, rotation_from_quaternion_wxyz
 from quadloc.service.app import localization as solver_module
 from quadloc.service.schemas.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, LOCALIZE_EXAMPLE
 from tests.conftest import make_test_app
@@ -41,8 +41,7 @@ def _frame(**changes: object) -> dict:
 
 
 def _rot_err_deg(A: np.ndarray, B: np.ndarray) -> float:
-    c = (np.trace(A[:3, :3].T @ B[:3, :3]) - 1) / 2
-    return math.degrees(math.acos(min(1.0, max(-1.0, c))))
+    return math.degrees(float(rotation_angle(A[:3, :3], B[:3, :3])))
 
 
 def test_demo_frame_localizes_near_the_ground_truth(client: TestClient) -> None:

@@ -11,6 +11,7 @@ import pytest
 import quadloc.service.localization.pipeline as pipeline
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.names import GeometryError
+from quadloc.factors.rotations import rotation_angle
 from quadloc.maps.compiled import compile_map
 from quadloc.service.localization.pipeline import localize
 from quadloc.service.localization.types import (
@@ -30,8 +31,7 @@ CAMERA, POSES, _ = load_chess_world_from_camera()  # POSES: world_from_camera
 
 
 def rot_err_deg(A: np.ndarray, B: np.ndarray) -> float:
-    c = (np.trace(A[:3, :3].T @ B[:3, :3]) - 1) / 2
-    return math.degrees(math.acos(min(1.0, max(-1.0, c))))
+    return math.degrees(float(rotation_angle(A[:3, :3], B[:3, :3])))
 
 
 @pytest.mark.parametrize("index", [0, 20, 40, 60, 80, 100])

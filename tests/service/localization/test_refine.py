@@ -23,6 +23,7 @@ from quadloc.factors.names import GeometryError
 from quadloc.factors.rotations import invert_pose, rotation_from_quaternion_wxyz
 from quadloc.service.localization.refine import STATUSES, RefinementResult, refine
 from quadloc.service.localization.types import Detection
+from tests.support.errors import pose_errors
 from tests.support.helpers import PerfCounterJump, retract
 from tests.support.reference_data import (
     CHESS_SCENE_PATH,
@@ -35,13 +36,6 @@ CAMERA = Camera(500.0, 510.0, 320.0, 240.0, 640, 480)
 
 
 # --------------------------------------------------------------------------- helpers
-
-
-def pose_errors(T: np.ndarray, T_ref: np.ndarray) -> tuple[float, float]:
-    """(camera-centre distance in m, rotation angle in degrees) between two world_from_camera."""
-    dR = T[:3, :3].T @ T_ref[:3, :3]
-    ang = math.degrees(math.acos(min(1.0, max(-1.0, (np.trace(dR) - 1) / 2))))
-    return float(np.linalg.norm(T[:3, 3] - T_ref[:3, 3])), ang
 
 
 def synthetic_scene(rng: np.random.Generator, n: int) -> list[Ellipsoid]:

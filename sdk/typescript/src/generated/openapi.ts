@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: 35b7106995028f9c658f866bd05c989e58d343b3716d7f4039f6cbda388e1436
+// openapi-sha256: af4397c34a6761aa1884112e107bb49cd01384c4301dc848ab0ba2b6f7bfe8b1
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -846,10 +846,10 @@ export interface components {
             versions: components["schemas"]["MapVersionOut"][];
         };
         /**
-         * ObjectQuality
+         * ObjectQualityReport
          * @description How well the views determine an object (``quadloc.maps.building.joint``).
          */
-        ObjectQuality: {
+        ObjectQualityReport: {
             /** N Views */
             n_views: number;
             /**
@@ -898,7 +898,7 @@ export interface components {
             association: string;
             /** Detections */
             detections: components["schemas"]["DetectionRef"][];
-            quality: components["schemas"]["ObjectQuality"];
+            quality: components["schemas"]["ObjectQualityReport"];
         };
         /**
          * PoseIn
