@@ -77,6 +77,7 @@ typecheck: $(STAMP)
 # elsewhere) and checks that their wire models match docs/openapi.json (tests/sdk).
 test: $(STAMP)
 	$(BIN)/ruff check .
+	$(MAKE) --no-print-directory typecheck
 	$(BIN)/python -m pytest
 
 # The TypeScript and C# wire models regenerated from docs/openapi.json (after an API change and

@@ -11,7 +11,8 @@ from __future__ import annotations
 import functools
 import hmac
 import ipaddress
-from typing import Annotated
+from collections.abc import Callable, Coroutine
+from typing import Annotated, Any
 
 from fastapi import Depends, Request
 from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
@@ -112,7 +113,7 @@ async def request_access(request: Request, scope: str) -> ApiKey | None:
     return check_access(request, await _bearer(request), await _api_key_header(request), scope)
 
 
-def require_scope(scope: str):
+def require_scope(scope: str) -> Callable[..., Coroutine[Any, Any, ApiKey | None]]:
     """FastAPI dependency enforcing ``scope`` for the route."""
 
     async def dependency(

@@ -138,6 +138,7 @@ def json_depth_violation(document: Any, max_depth: int) -> str | None:
     stack: list[tuple[Any, int, tuple[Any, ...]]] = [(document, 1, ())]
     while stack:
         node, depth, loc = stack.pop()
+        children: Iterable[tuple[Any, Any]]
         if isinstance(node, dict):
             children = node.items()
         elif isinstance(node, list):

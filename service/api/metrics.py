@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import json
 import time
-from typing import Any
 
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from quadloc.service.api.errors import PROBLEM_MEDIA_TYPE, problem_body
 
@@ -63,12 +63,12 @@ def _problem_413(path: str, limit: int) -> bytes:
 class MetricsAndLimitsMiddleware:
     """Pure ASGI middleware: body size limit (413 problem) and request metrics."""
 
-    def __init__(self, app: Any, metrics: ApiMetrics, max_body_bytes: int) -> None:
+    def __init__(self, app: ASGIApp, metrics: ApiMetrics, max_body_bytes: int) -> None:
         self.app = app
         self.metrics = metrics
         self.max_body_bytes = max_body_bytes
 
-    async def _reject(self, scope: dict, send: Any) -> None:
+    async def _reject(self, scope: Scope, send: Send) -> None:
         body = _problem_413(scope.get("path", ""), self.max_body_bytes)
         await send({"type": "http.response.start", "status": 413,
                     "headers": [(b"content-type", PROBLEM_MEDIA_TYPE.encode()),
@@ -76,7 +76,7 @@ class MetricsAndLimitsMiddleware:
                                 (b"connection", b"close")]})
         await send({"type": "http.response.body", "body": body})
 
-    async def __call__(self, scope: dict, receive: Any, send: Any) -> None:
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
@@ -84,7 +84,7 @@ class MetricsAndLimitsMiddleware:
         status = 500
         limit = self.max_body_bytes
 
-        async def send_wrapper(message: dict) -> None:
+        async def send_wrapper(message: Message) -> None:
             nonlocal status
             if message["type"] == "http.response.start":
                 status = message["status"]
@@ -104,7 +104,7 @@ class MetricsAndLimitsMiddleware:
             chunks: list[bytes] = []
             size = 0
             more = True
-            disconnect: dict | None = None
+            disconnect: Message | None = None
             while more:
                 message = await receive()
                 if message["type"] != "http.request":
@@ -121,7 +121,7 @@ class MetricsAndLimitsMiddleware:
             body = b"".join(chunks)
             replayed = False
 
-            async def replay() -> dict:
+            async def replay() -> Message:
                 nonlocal replayed
                 if not replayed:
                     replayed = True

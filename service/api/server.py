@@ -95,7 +95,8 @@ def uvicorn_config(settings: Settings, host: str, port: int, *, workers: int = 1
         "quadloc.service.api.app:create_app", factory=True, host=host, port=port, workers=workers,
         log_level=log_level or settings.log_level, access_log=access_log,
         http=GuardedH11Protocol, h11_max_incomplete_event_size=settings.max_header_bytes,
-        timeout_keep_alive=settings.keep_alive_timeout_s)  # type: ignore[arg-type] (float ok)
+        # (typed int, used as a float timeout: sub-second settings are honoured)
+        timeout_keep_alive=settings.keep_alive_timeout_s)  # type: ignore[arg-type]
     config.request_read_timeout_s = settings.request_read_timeout_s  # type: ignore[attr-defined]
     return config
 
@@ -123,6 +124,6 @@ def serve(config: uvicorn.Config) -> None:
         from uvicorn.supervisors import Multiprocess
 
         sock = config.bind_socket()
-        Multiprocess(config, target=server.run, sockets=[sock]).run()
+        Multiprocess(config, sockets=[sock]).run()
     else:
         server.run()

@@ -18,6 +18,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from quadloc.factors.arrays import FloatArray
 from quadloc.factors.camera import Camera
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.rotations import (
@@ -82,7 +83,7 @@ __all__ = [
 OPENGL_FROM_OPENCV = np.diag([1.0, -1.0, -1.0])
 
 
-def convert_pose(world_from_camera: np.ndarray, source: str, target: str) -> np.ndarray:
+def convert_pose(world_from_camera: FloatArray, source: str, target: str) -> FloatArray:
     """Re-express a 4x4 ``world_from_camera`` from ``source`` to ``target`` camera axes
     (``"opencv"`` or ``"opengl"``)."""
     T = np.array(world_from_camera, dtype=float)
@@ -92,13 +93,14 @@ def convert_pose(world_from_camera: np.ndarray, source: str, target: str) -> np.
     return T
 
 
-def convert_covariance(covariance: np.ndarray, source: str, target: str) -> np.ndarray:
+def convert_covariance(covariance: FloatArray, source: str, target: str) -> FloatArray:
     """Re-express a 6x6 body-frame ``[omega, v]`` covariance between camera conventions."""
     S = np.array(covariance, dtype=float)
     if source == target:
         return S
-    ad = np.kron(np.eye(2), OPENGL_FROM_OPENCV)
-    return ad @ S @ ad.T
+    ad = np.kron(np.eye(2), OPENGL_FROM_OPENCV).astype(np.float64)
+    out: FloatArray = ad @ S @ ad.T
+    return out
 
 
 def camera_from_request(camera: CameraIn) -> Camera:
@@ -115,12 +117,14 @@ def detections_from_request(detections: list[DetectionIn]) -> list[Detection]:
     return [Detection(ellipse(d), d.label, d.effective_sigma(), d.score) for d in detections]
 
 
-def pose_matrix_from_wire(pose: PoseIn, field: str) -> np.ndarray:
+def pose_matrix_from_wire(pose: PoseIn, field: str) -> FloatArray:
     """The 4x4 of a wire pose (its ``matrix``, or its unit ``quaternion_wxyz`` and
     ``translation_m``), in the pose's own camera convention; a quaternion off unit norm raises
     :class:`LocalizationInputError` naming ``<field>.quaternion_wxyz``."""
     if pose.matrix is not None:
         return np.array(pose.matrix, dtype=float)
+    # PoseIn's validator: a pose without a matrix has both of these
+    assert pose.quaternion_wxyz is not None and pose.translation_m is not None
     q = np.array(pose.quaternion_wxyz, dtype=float)
     n = float(np.linalg.norm(q))
     if not abs(n - 1.0) <= QUATERNION_NORM_TOLERANCE:
@@ -172,7 +176,7 @@ def options_from_request(options: LocalizeOptionsIn, max_budget_ms: float) -> Lo
                                   "time_budget_ms": float(budget)})
 
 
-def _pose_fields(world_from_camera_cv: np.ndarray, convention: str) -> dict[str, object]:
+def _pose_fields(world_from_camera_cv: FloatArray, convention: str) -> dict[str, object]:
     """The :class:`PoseOut` fields (plain Python lists of floats) of a 4x4 OpenCV-axes
     ``world_from_camera`` re-expressed in ``convention`` axes."""
     T = convert_pose(world_from_camera_cv, "opencv", convention)
@@ -182,7 +186,7 @@ def _pose_fields(world_from_camera_cv: np.ndarray, convention: str) -> dict[str,
             "matrix_column_major": T.T.reshape(16).tolist(), "convention": convention}
 
 
-def pose_out(world_from_camera_cv: np.ndarray, convention: str) -> PoseOut:
+def pose_out(world_from_camera_cv: FloatArray, convention: str) -> PoseOut:
     """4x4 OpenCV-axes ``world_from_camera`` -> wire pose in ``convention`` axes."""
     return PoseOut(**_pose_fields(world_from_camera_cv, convention))  # type: ignore[arg-type]
 
@@ -191,7 +195,7 @@ def _finite(x: float) -> float:
     return float(x) if math.isfinite(float(x)) else 0.0
 
 
-def _covariance_fields(covariance: np.ndarray | None, source: str,
+def _covariance_fields(covariance: FloatArray | None, source: str,
                        target: str) -> dict[str, object] | None:
     """The :class:`CovarianceOut` fields (``order`` and ``frame`` default) of a 6x6 covariance;
     None when absent or not finite."""
@@ -200,7 +204,7 @@ def _covariance_fields(covariance: np.ndarray | None, source: str,
     return {"matrix": convert_covariance(covariance, source, target).tolist()}
 
 
-def covariance_out(covariance: np.ndarray | None, source: str,
+def covariance_out(covariance: FloatArray | None, source: str,
                    target: str) -> CovarianceOut | None:
     """6x6 ``[omega, v]`` covariance in ``source`` camera axes -> wire covariance in ``target``
     axes; None when absent or not finite."""
@@ -229,9 +233,9 @@ def response_from_result(
 ) -> LocalizeResponse:
     """Solver result -> wire response (pose and covariance in ``convention`` camera axes)."""
     pose = cov = None
-    if result.localized and not np.all(np.isfinite(result.world_from_camera)):
-        raise FloatingPointError("localize() returned a non-finite pose")
     if result.localized and result.world_from_camera is not None:
+        if not np.all(np.isfinite(result.world_from_camera)):
+            raise FloatingPointError("localize() returned a non-finite pose")
         pose = _pose_fields(result.world_from_camera, convention)
         cov = _covariance_fields(result.covariance, "opencv", convention)
     # Plain fields validated in ONE pydantic call (nested models built in its core): the same

@@ -7,6 +7,7 @@ docs/design/service.md#map-loader.
 
 from __future__ import annotations
 
+import functools
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
@@ -41,8 +42,8 @@ class MapLoader:
         ``map-not-found``, or ``map-loading`` after ``max_wait_s`` (the load goes on; the next
         request finds it); the store's availability errors pass through."""
         if self._cache is not None:
-            hit = self._cache.resolution(map_id, version)  # what store.compiled checks first
-            if hit is not None:
+            hit: CompiledMap | None = self._cache.resolution(map_id, version)
+            if hit is not None:  # (what store.compiled checks first)
                 return hit
         key = (map_id, version)
         with self._lock:
@@ -54,7 +55,7 @@ class MapLoader:
                 future = self._pool.submit(self.store.compiled, map_id, version)
                 self._pending[key] = future
         if fresh:  # outside the lock: a future already done runs the callback right here
-            future.add_done_callback(lambda f, k=key: self._forget(k, f))
+            future.add_done_callback(functools.partial(self._forget, key))
         try:
             return future.result(timeout=self.max_wait_s)
         except MapNotFound as exc:

@@ -14,8 +14,10 @@ import secrets
 import socket
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from quadloc.service.schemas.common import Convention
 from quadloc.service.tracking.session import TrackingSession
 
 __all__ = ["SessionCapacityError", "SessionEntry", "SessionNotFound", "SessionStore"]
@@ -45,7 +47,7 @@ class SessionEntry:
     map_id: str
     map_version: int
     session: TrackingSession
-    convention: str
+    convention: Convention
     last_used: float
     lock: threading.Lock = field(default_factory=threading.Lock)
 
@@ -54,7 +56,7 @@ class SessionStore:
     """Thread-safe registry of :class:`SessionEntry` (see the module docstring)."""
 
     def __init__(self, max_sessions: int = 200, idle_timeout_s: float = 300.0,
-                 clock: object = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic) -> None:
         if max_sessions < 1 or not idle_timeout_s > 0:
             raise ValueError("max_sessions must be >= 1 and idle_timeout_s > 0")
         self.max_sessions = int(max_sessions)
@@ -69,7 +71,7 @@ class SessionStore:
 
     def expire(self) -> int:
         """Drop sessions idle for more than ``idle_timeout_s``; returns how many."""
-        now = self._clock()  # type: ignore[operator]
+        now = self._clock()
         with self._lock:
             dead = [k for k, e in self._entries.items()
                     if now - e.last_used > self.idle_timeout_s and not e.lock.locked()]
@@ -78,10 +80,10 @@ class SessionStore:
         return len(dead)
 
     def create(self, map_id: str, map_version: int, session: TrackingSession,
-               convention: str) -> SessionEntry:
+               convention: Convention) -> SessionEntry:
         """Register a new session under a fresh id ``s-<replica_id()>.<22 url-safe chars>``."""
         self.expire()
-        now = self._clock()  # type: ignore[operator]
+        now = self._clock()
         with self._lock:
             if len(self._entries) >= self.max_sessions:
                 raise SessionCapacityError(
@@ -93,7 +95,7 @@ class SessionStore:
 
     def get(self, session_id: str) -> SessionEntry:
         """The live entry (touching its idle clock) or :class:`SessionNotFound`."""
-        now = self._clock()  # type: ignore[operator]
+        now = self._clock()
         with self._lock:
             entry = self._entries.get(session_id)
             if entry is None or now - entry.last_used > self.idle_timeout_s:

@@ -17,8 +17,8 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from quadloc.factors.arrays import FloatArray
 from quadloc.factors.rotations import invert_pose
-from quadloc.service.localization.arrays import FloatArray
 from quadloc.service.localization.confidence import is_ambiguous
 from quadloc.service.localization.refine import RefinementResult
 from quadloc.service.localization.search import distinct_poses

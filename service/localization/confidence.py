@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from quadloc.service.localization.arrays import FloatArray
+from quadloc.factors.arrays import FloatArray
 from quadloc.service.localization.calibration import (
     AMBIGUITY_CHI2_RATIO,
     AMBIGUITY_RATIO,

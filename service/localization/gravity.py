@@ -24,8 +24,8 @@ import math
 
 import numpy as np
 
+from quadloc.factors.arrays import FloatArray
 from quadloc.factors.gravity_factor import GravityMeasurement
-from quadloc.service.localization.arrays import FloatArray
 from quadloc.service.localization.confidence import TOLERANCE_ROTATION_DEG
 from quadloc.service.localization.types import Gravity
 

@@ -19,10 +19,10 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
+from quadloc.factors.arrays import BoolArray, FloatArray, IntArray
 from quadloc.factors.camera import MIN_DEPTH, Camera, Ellipsoid, projected_gaussians
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.rotations import so3_exp
-from quadloc.service.localization.arrays import BoolArray, FloatArray, IndexArray
 
 if TYPE_CHECKING:
     from cv2.typing import MatLike
@@ -88,7 +88,7 @@ def p3p_hypotheses(
 
 def p3p_hypotheses_batch(
     image_points: FloatArray, world_points: FloatArray, camera: Camera
-) -> tuple[FloatArray, IndexArray]:
+) -> tuple[FloatArray, IntArray]:
     """:func:`p3p_hypotheses` of B samples at once: ``cv2.solveP3P`` per sample, the rotation
     vectors converted and the depths checked for all solutions together (Rodrigues' formula,
     vectorised).
@@ -244,7 +244,7 @@ def _lm_batch(problem: _PairProblem, R: FloatArray, t: FloatArray, iterations: i
         g = (Jt @ ra[:, :, None])[:, :, 0]
         diag = np.diagonal(A, axis1=1, axis2=2) + 1e-12
         step = -np.linalg.solve(A + (lam[a, None] * diag)[:, :, None] * np.eye(6),
-                                g[:, :, None])[:, :, 0]
+                                g[:, :, None])[:, :, 0].astype(np.float64, copy=False)
         Ea = so3_exp(step[:, :3])
         Rn = Ea @ R[a]
         tn = (Ea @ t[a][:, :, None])[:, :, 0] + step[:, 3:]
@@ -339,7 +339,7 @@ def _p2e_starts(
     ellipses: Sequence[Ellipse], ellipsoids: Sequence[Ellipsoid], camera: Camera,
     X: FloatArray, dist: float, v_w: FloatArray, up: FloatArray, kappa: float,
     rolls: FloatArray, n_ratio_samples: int,
-) -> tuple[FloatArray, FloatArray, IndexArray]:
+) -> tuple[FloatArray, FloatArray, IntArray]:
     """Start poses ``(R (N, 3, 3), t (N, 3), group (N,))`` of :func:`p2e_hypotheses`
     (``docs/p2e.md`` steps 1-5): depth ratios x rolls x pitch branches, vectorised; ``group``
     numbers the (roll, pitch branch) of each start."""

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from quadloc.factors.arrays import FloatArray
 from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.factors.camera import Camera, Ellipsoid
 from quadloc.factors.gravity_factor import GravityMeasurement
@@ -32,7 +33,6 @@ from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import CompiledMap, compile_map
 from quadloc.maps.model import SceneMap
 from quadloc.service.limits import NO_REFINEMENT
-from quadloc.service.localization.arrays import FloatArray
 from quadloc.service.localization.calibration import MIN_CONFIDENCE, S2_FLOOR
 from quadloc.service.localization.candidates import (
     Candidate,

@@ -29,6 +29,7 @@ from typing import Any
 import gtsam
 import numpy as np
 
+from quadloc.factors.arrays import BoolArray, FloatArray
 from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.factors.camera import Camera, Ellipsoid
 from quadloc.factors.gravity_factor import GravityMeasurement, gravity_factor
@@ -36,7 +37,6 @@ from quadloc.factors.names import GeometryError, check_robust
 from quadloc.factors.pose_factors import pose3, pose_factors
 from quadloc.factors.pose_residuals import PoseResidualModel
 from quadloc.factors.rotations import check_pose
-from quadloc.service.localization.arrays import BoolArray, FloatArray
 from quadloc.service.localization.types import (
     Detection,
     check_covariance,

@@ -28,7 +28,7 @@ from typing import Literal, overload
 
 import numpy as np
 
-from quadloc.service.localization.arrays import FloatArray, IndexArray
+from quadloc.factors.arrays import FloatArray, IntArray
 from quadloc.service.localization.scoring import LabelGroup, MatchScorer
 
 __all__ = [
@@ -284,7 +284,7 @@ def _triple_samples(
             yield triple, tuple(objs)
 
 
-def triangle_areas(scorer: MatchScorer, dets: IndexArray) -> FloatArray:
+def triangle_areas(scorer: MatchScorer, dets: IntArray) -> FloatArray:
     """Twice the image areas (S,) px^2 of the triangles of the scorer's detection centres
     ``dets`` (S, 3) (detection rows; P3P's conditioning)."""
     c = scorer.params[dets, :2]  # (S, 3, 2)
@@ -320,7 +320,7 @@ def sweep_samples(scorer: MatchScorer) -> list[Sample]:
 
 
 @functools.lru_cache(maxsize=16)
-def _triples(n: int) -> IndexArray:
+def _triples(n: int) -> IntArray:
     """``itertools.combinations(range(n), 3)`` as an array (T, 3), read-only."""
     out = np.array(list(itertools.combinations(range(n), 3)), dtype=np.intp).reshape(-1, 3)
     out.setflags(write=False)

@@ -20,11 +20,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from quadloc.factors.arrays import BoolArray, FloatArray, Int32Array, IntArray
 from quadloc.factors.budget import Deadline, deadline_passed, earliest
 from quadloc.factors.camera import Camera, projected_gaussians
 from quadloc.factors.conics import Ellipse, ellipse_params, level_values
 from quadloc.maps.compiled import CompiledMap
-from quadloc.service.localization.arrays import BoolArray, FloatArray, IndexArray, Int32Array
 from quadloc.service.localization.hypotheses import point_centres
 
 __all__ = [
@@ -56,7 +56,7 @@ HARD_STOP_FACTOR = 1.05
 
 #: Usable detection rows of one label and the indices of the map objects compatible with them
 #: (:attr:`MatchScorer.label_groups`).
-LabelGroup = tuple[list[int], IndexArray]
+LabelGroup = tuple[list[int], IntArray]
 
 
 class ScoringTimeoutError(RuntimeError):
@@ -173,7 +173,7 @@ def greedy_assignment(
     return _greedy(pair_d, pair_o, flat_iou[cand], threshold, detection_indices)
 
 
-def _greedy(pair_d: IndexArray | Int32Array, pair_o: IndexArray | Int32Array, iou: FloatArray,
+def _greedy(pair_d: IntArray | Int32Array, pair_o: IntArray | Int32Array, iou: FloatArray,
             threshold: float, detection_indices: Sequence[int]) -> list[Match]:
     """THE greedy one-to-one assignment of pairs (``pair_d[p]``, ``pair_o[p]``) with
     ``iou[p] >= threshold``, by decreasing IoU (ties: the later pair first), sorted by
@@ -234,7 +234,7 @@ class MatchScorer:
         self.pair_d: Int32Array = pair_d.astype(np.int32)
         self.pair_o: Int32Array = pair_o.astype(np.int32)
         # sorted, like np.unique(pair_o)
-        self.objects: IndexArray = np.flatnonzero(compat.any(axis=0))
+        self.objects: IntArray = np.flatnonzero(compat.any(axis=0))
         # Position of each pair's object within self.objects (a gather: no sort of the pairs).
         position = np.zeros(self.n_obj, dtype=np.int32)
         position[self.objects] = np.arange(len(self.objects), dtype=np.int32)
@@ -245,7 +245,7 @@ class MatchScorer:
             compiled.dual_quadrics[self.objects])
         # first pair of each detection (pairs are sorted by detection; every usable detection
         # has a compatible object): the segments of np.maximum.reduceat
-        self.pair_starts: IndexArray = np.searchsorted(
+        self.pair_starts: IntArray = np.searchsorted(
             self.pair_d, np.arange(self.n_det)).astype(np.intp)
         # filling points (D, 2, M) per number of points M (x and y contiguous)
         self._xy: dict[int, FloatArray] = {
@@ -266,7 +266,7 @@ class MatchScorer:
             self._xy[n_points] = ellipse_points(self.params, sunflower_disk(n_points), axis=1)
         return self._xy[n_points]
 
-    def compatible_objects(self, d: int) -> IndexArray:
+    def compatible_objects(self, d: int) -> IntArray:
         """Object indices compatible with usable detection row ``d``."""
         return np.flatnonzero(self.compat[d])
 
@@ -284,7 +284,8 @@ class MatchScorer:
     def _stop(self, stop_at: Deadline | None) -> Deadline | None:
         return earliest(stop_at, self.deadline)
 
-    def _project(self, camera_from_world: FloatArray) -> tuple[FloatArray, ...]:
+    def _project(self, camera_from_world: FloatArray) -> tuple[
+            FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, BoolArray, FloatArray]:
         """:func:`projected_gaussians` of the compatible objects (callers pass at most
         ``PROJECT_BLOCK // len(objects)`` poses)."""
         centers, shape_matrices, dual_quadrics = self._object_arrays
@@ -382,7 +383,7 @@ class MatchScorer:
                                                              stop_at)[0]
         return out
 
-    def pair_scores(self, iou: FloatArray, threshold: float) -> tuple[FloatArray, IndexArray]:
+    def pair_scores(self, iou: FloatArray, threshold: float) -> tuple[FloatArray, IntArray]:
         """(score (H,), inlier count (H,)) from pair IoUs (H, P) (:meth:`pair_iou`), each
         detection taking its best compatible object (an upper bound of the one-to-one
         assignment's)."""

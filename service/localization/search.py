@@ -21,9 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from quadloc.factors.arrays import FloatArray
 from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.factors.conics import Ellipse
-from quadloc.service.localization.arrays import FloatArray
 from quadloc.service.localization.hypotheses import p2e_hypotheses, p3p_hypotheses_batch
 from quadloc.service.localization.sampling import Sample, count_samples, sample_order
 from quadloc.service.localization.scoring import (

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from quadloc.factors.arrays import FloatArray
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.metrics import residual
 from quadloc.factors.names import FieldError, GeometryError, check_robust
@@ -32,7 +33,6 @@ from quadloc.service.limits import (
     ROBUST_KERNELS,
     UNKNOWN_LABEL_POLICIES,
 )
-from quadloc.service.localization.arrays import FloatArray
 
 __all__ = [  # METRICS and ROBUST_KERNELS: quadloc.service.limits' names, re-exported for callers
     "METRICS",

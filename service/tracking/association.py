@@ -13,10 +13,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from quadloc.factors.arrays import FloatArray
 from quadloc.factors.camera import Camera
 from quadloc.factors.rotations import invert_pose, skew
 from quadloc.maps.compiled import CompiledMap
-from quadloc.service.localization.arrays import FloatArray
 from quadloc.service.localization.hypotheses import project_objects
 
 __all__ = ["GATE_CHI2", "Association", "associate", "centre_jacobians"]

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from quadloc.service.localization.arrays import FloatArray
+from quadloc.factors.arrays import FloatArray
 from quadloc.service.localization.confidence import (
     TOLERANCE_POSITION_M,
     TOLERANCE_ROTATION_DEG,

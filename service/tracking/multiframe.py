@@ -15,12 +15,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from quadloc.factors.arrays import FloatArray
 from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.factors.camera import Camera
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import CompiledMap
-from quadloc.service.localization.arrays import FloatArray
 from quadloc.service.localization.hypotheses import p3p_hypotheses
 from quadloc.service.localization.scoring import Match, MatchScorer, greedy_assignment
 

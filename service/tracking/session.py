@@ -20,6 +20,7 @@ from typing import TypeVar
 import gtsam
 import numpy as np
 
+from quadloc.factors.arrays import FloatArray
 from quadloc.factors.budget import Deadline
 from quadloc.factors.camera import Camera
 from quadloc.factors.conics import ellipse_params
@@ -33,7 +34,6 @@ from quadloc.factors.rotations import (
     snap_to_rotation,
 )
 from quadloc.maps.compiled import CompiledMap
-from quadloc.service.localization.arrays import FloatArray
 from quadloc.service.localization.gravity import gravity_measurement
 from quadloc.service.localization.scoring import Match, MatchScorer
 from quadloc.service.localization.types import Detection, Gravity, InlierMatch, PosePrior

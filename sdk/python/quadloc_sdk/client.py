@@ -27,7 +27,7 @@ import json
 import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 from urllib.parse import quote
 
 import httpx
@@ -381,12 +381,14 @@ class QuadLocClient(_Base):
     # -- service ---------------------------------------------------------------------------
     def healthz(self) -> dict[str, Any]:
         """``GET /healthz``: the process is alive."""
-        return self._json(self._send(Call("GET", "/healthz", idempotent=True)))
+        return cast(dict[str, Any], self._json(self._send(Call("GET", "/healthz",
+                                                                idempotent=True))))
 
     def readyz(self) -> dict[str, Any]:
         """``GET /readyz``: database reachable and default map loadable (503 raises
         :class:`~quadloc_sdk.errors.ServiceUnavailable` after the retries)."""
-        return self._json(self._send(Call("GET", "/readyz", idempotent=True)))
+        return cast(dict[str, Any], self._json(self._send(Call("GET", "/readyz",
+                                                                idempotent=True))))
 
     def metrics(self) -> str:
         """``GET /metrics``: the Prometheus text exposition."""
@@ -546,10 +548,12 @@ class AsyncQuadLocClient(_Base):
             await self._sleep(delay)
 
     async def healthz(self) -> dict[str, Any]:
-        return self._json(await self._send(Call("GET", "/healthz", idempotent=True)))
+        return cast(dict[str, Any], self._json(await self._send(Call("GET", "/healthz",
+                                                                      idempotent=True))))
 
     async def readyz(self) -> dict[str, Any]:
-        return self._json(await self._send(Call("GET", "/readyz", idempotent=True)))
+        return cast(dict[str, Any], self._json(await self._send(Call("GET", "/readyz",
+                                                                      idempotent=True))))
 
     async def metrics(self) -> str:
         return (await self._send(Call("GET", "/metrics", idempotent=True))).text

@@ -28,6 +28,7 @@ All pose / quaternion functions accept stacks: leading dimensions ``(...)`` are 
 from __future__ import annotations
 
 import math
+from types import ModuleType
 from typing import Literal
 
 import numpy as np
@@ -119,7 +120,7 @@ def _ellipse_from_second_moments(
     )
 
 
-def _cv2():  # lazy: importing OpenCV costs ~0.1-0.3 s and only the contour helpers need it
+def _cv2() -> ModuleType:  # lazy: importing OpenCV costs ~0.1-0.3 s; only the contours need it
     import cv2
 
     return cv2
@@ -302,7 +303,8 @@ def covariance_opencv_to_opengl(covariance: np.ndarray) -> np.ndarray:
     if C.shape[-2:] != (6, 6):
         raise ValueError(f"covariance: expected shape (..., 6, 6), got {C.shape}")
     j = np.array([1.0, -1.0, -1.0, 1.0, -1.0, -1.0])
-    return C * j[:, None] * j[None, :]
+    out: np.ndarray = C * j[:, None] * j[None, :]
+    return out
 
 
 def session_from_map(
@@ -316,7 +318,9 @@ def session_from_map(
     or convert with :func:`world_from_camera_opencv_to_opengl`). Map points then go to the
     session with ``session_from_map @ [X, 1]``.
     """
-    return _check_pose("session_from_camera", session_from_camera) @ invert_pose(map_from_camera)
+    out: np.ndarray = (_check_pose("session_from_camera", session_from_camera)
+                       @ invert_pose(map_from_camera))
+    return out
 
 
 def matrix_from_quaternion_wxyz(quaternion_wxyz: np.ndarray) -> np.ndarray:
@@ -376,7 +380,8 @@ def quaternion_wxyz_from_matrix(rotation: np.ndarray) -> np.ndarray:
     q = cand[np.arange(len(r)), pivot]
     q /= np.linalg.norm(q, axis=-1, keepdims=True)
     q *= np.where(q[:, :1] < 0, -1.0, 1.0)
-    return q.reshape((*R.shape[:-2], 4))
+    out: np.ndarray = q.reshape((*R.shape[:-2], 4))
+    return out
 
 
 def _embed(R: np.ndarray) -> np.ndarray:

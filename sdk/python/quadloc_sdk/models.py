@@ -220,12 +220,12 @@ class PosePrior(BaseModel):
         T = np.asarray(world_from_camera, dtype=float)
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise ValueError("world_from_camera: expected a finite 4x4 matrix")
-        cov = None
+        cov: list[list[float]] | None = None
         if covariance is not None:
-            cov = np.asarray(covariance, dtype=float)
-            if cov.shape != (6, 6) or not np.all(np.isfinite(cov)):
+            array = np.asarray(covariance, dtype=float)
+            if array.shape != (6, 6) or not np.all(np.isfinite(array)):
                 raise ValueError("covariance: expected a finite 6x6 matrix")
-            cov = cov.tolist()
+            cov = array.tolist()
         return cls(world_from_camera=PoseInput(matrix=T.tolist()), covariance=cov,
                    convention=convention)
 

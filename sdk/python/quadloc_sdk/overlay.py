@@ -163,7 +163,8 @@ def project_ellipsoid(
     if not zc - extent > MIN_DEPTH_M:
         return None
     T = [R_e[0] + [center[0]], R_e[1] + [center[1]], R_e[2] + [center[2]], [0.0, 0.0, 0.0, 1.0]]
-    D = [[axes[0] ** 2, 0, 0, 0], [0, axes[1] ** 2, 0, 0], [0, 0, axes[2] ** 2, 0], [0, 0, 0, -1]]
+    D = [[axes[0] ** 2, 0.0, 0.0, 0.0], [0.0, axes[1] ** 2, 0.0, 0.0],
+         [0.0, 0.0, axes[2] ** 2, 0.0], [0.0, 0.0, 0.0, -1.0]]
     Q = _matmul(_matmul(T, D), _transpose(T))
     K = [[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]]
     P = _matmul(K, [R_cw[i] + [t_cw[i]] for i in range(3)])
@@ -227,16 +228,16 @@ def render_overlay_svg(
                           or e.cy - e.a > height):
             continue
         cls = "projection matched" if p.object_id in matched else "projection"
-        out.append(_ellipse_svg(p.ellipse, cls, f" data-object-id={quoteattr(p.object_id)}"))
+        out.append(_ellipse_svg(e, cls, f" data-object-id={quoteattr(p.object_id)}"))
         if p.object_id not in matched:  # a matched object is named by its detection's label
-            out.append(f'<text class="pid" x="{p.ellipse.cx:.1f}" y="{p.ellipse.cy:.1f}" '
+            out.append(f'<text class="pid" x="{e.cx:.1f}" y="{e.cy:.1f}" '
                        f'text-anchor="middle">{escape(p.object_id)} {escape(p.category)}</text>')
     for d in detections:
         inlier = d.object_id is not None
         cls = "detection inlier" if inlier else "detection outlier"
         out.append(_ellipse_svg(d.ellipse, cls, f' data-detection-index="{d.index}"'))
         label = f"#{d.index} {d.label}"
-        proj = by_id.get(d.object_id) if inlier else None
+        proj = by_id.get(d.object_id) if d.object_id is not None else None
         if proj is not None and proj.ellipse is not None:
             out.append(f'<line class="match" x1="{d.ellipse.cx:.2f}" y1="{d.ellipse.cy:.2f}" '
                        f'x2="{proj.ellipse.cx:.2f}" y2="{proj.ellipse.cy:.2f}"/>')

@@ -20,7 +20,7 @@ camera's pose in the AR session frame: ``odom_from_camera`` with ``convention="o
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, cast
 
 from quadloc_sdk.transport import Call
 
@@ -46,9 +46,9 @@ def arcore_pose_to_matrix(column_major: Sequence[float]) -> list[list[float]]:
     return [[m[c * 4 + r] for c in range(4)] for r in range(4)]
 
 
-def _frame(detections: Sequence[dict], odom_from_camera: Sequence[Sequence[float]],
-           timestamp: float, frame_id: str | None, prior: dict | None,
-           gravity: dict | None = None) -> dict[str, Any]:
+def _frame(detections: Sequence[dict[str, Any]], odom_from_camera: Sequence[Sequence[float]],
+           timestamp: float, frame_id: str | None, prior: dict[str, Any] | None,
+           gravity: dict[str, Any] | None = None) -> dict[str, Any]:
     body: dict[str, Any] = {"detections": [dict(d) for d in detections],
                             "odom_from_camera": {"matrix": [list(map(float, r))
                                                             for r in odom_from_camera]},
@@ -72,11 +72,12 @@ class TrackingSession:
     def _post(self, body: dict[str, Any]) -> list[dict[str, Any]]:
         call = self.client._json_call("POST", f"/v1/sessions/{self.session_id}/frames",
                                       "frames", body)
-        return self.client._json(self.client._send(call))["results"]
+        return cast(list[dict[str, Any]], self.client._json(self.client._send(call))["results"])
 
-    def add_frame(self, detections: Sequence[dict], *, odom_from_camera: Sequence[Sequence[float]],
-                  timestamp: float, frame_id: str | None = None, prior: dict | None = None,
-                  gravity: dict | None = None) -> dict[str, Any]:
+    def add_frame(self, detections: Sequence[dict[str, Any]], *,
+                  odom_from_camera: Sequence[Sequence[float]], timestamp: float,
+                  frame_id: str | None = None, prior: dict[str, Any] | None = None,
+                  gravity: dict[str, Any] | None = None) -> dict[str, Any]:
         """Send one frame; returns its result document (state, world_from_camera, ...).
         ``gravity``: ``{"direction": [x, y, z], "sigma_deg": 2.0}``, the direction gravity pulls
         in this frame's camera (in the session's convention unless ``"convention"`` says
@@ -99,12 +100,13 @@ class AsyncTrackingSession(TrackingSession):
     async def _post(self, body: dict[str, Any]) -> list[dict[str, Any]]:  # type: ignore[override]
         call = self.client._json_call("POST", f"/v1/sessions/{self.session_id}/frames",
                                       "frames", body)
-        return self.client._json(await self.client._send(call))["results"]
+        results = self.client._json(await self.client._send(call))["results"]
+        return cast(list[dict[str, Any]], results)
 
-    async def add_frame(self, detections: Sequence[dict], *,  # type: ignore[override]
+    async def add_frame(self, detections: Sequence[dict[str, Any]], *,  # type: ignore[override]
                         odom_from_camera: Sequence[Sequence[float]], timestamp: float,
-                        frame_id: str | None = None, prior: dict | None = None,
-                        gravity: dict | None = None) -> dict[str, Any]:
+                        frame_id: str | None = None, prior: dict[str, Any] | None = None,
+                        gravity: dict[str, Any] | None = None) -> dict[str, Any]:
         return (await self._post(_frame(detections, odom_from_camera, timestamp, frame_id,
                                          prior, gravity)))[0]
 
@@ -116,23 +118,23 @@ class AsyncTrackingSession(TrackingSession):
         await self.client._send(Call("DELETE", f"/v1/sessions/{self.session_id}"))
 
 
-def _create_call(client: Any, map_id: str, camera: dict, convention: str,
-                 options: dict | None) -> Any:
+def _create_call(client: Any, map_id: str, camera: dict[str, Any], convention: str,
+                 options: dict[str, Any] | None) -> Any:
     body = {"camera": dict(camera), "convention": convention, "options": dict(options or {})}
     return client._json_call("POST", f"/v1/maps/{map_id}/sessions", "session", body)
 
 
-def start_session(client: Any, map_id: str, *, camera: dict, convention: str = "opencv",
-                  options: dict | None = None) -> TrackingSession:
+def start_session(client: Any, map_id: str, *, camera: dict[str, Any], convention: str = "opencv",
+                  options: dict[str, Any] | None = None) -> TrackingSession:
     """Start a session on ``map_id`` with a sync client (``camera``: fx, fy, cx, cy, width,
     height; ``convention``: camera axes of odometry and returned poses)."""
     resp = client._send(_create_call(client, map_id, camera, convention, options))
     return TrackingSession(client, client._json(resp))
 
 
-async def start_session_async(client: Any, map_id: str, *, camera: dict,
+async def start_session_async(client: Any, map_id: str, *, camera: dict[str, Any],
                               convention: str = "opencv",
-                              options: dict | None = None) -> AsyncTrackingSession:
+                              options: dict[str, Any] | None = None) -> AsyncTrackingSession:
     """:func:`start_session` for an :class:`quadloc_sdk.client.AsyncQuadLocClient`."""
     resp = await client._send(_create_call(client, map_id, camera, convention, options))
     return AsyncTrackingSession(client, client._json(resp))

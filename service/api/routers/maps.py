@@ -64,7 +64,8 @@ _MAP_LINKS: dict[str, Any] = {
 }
 
 
-def _ok(status_code: int, example: dict[str, Any], headers: bool = True) -> dict[int, Any]:
+def _ok(status_code: int, example: dict[str, Any], headers: bool = True
+        ) -> dict[int | str, dict[str, Any]]:
     doc: dict[str, Any] = {"content": {"application/json": {"example": example}}}
     if headers:
         doc["headers"] = {"ETag": {"description": "Strong ETag: the version's content hash.",
