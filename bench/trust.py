@@ -64,7 +64,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.chess_eval import json_safe
-from bench.results_doc import run_commit
+from bench.results_doc import public_command, run_commit
 from quadloc.factors.camera import Camera
 from quadloc.factors.conics import Ellipse
 from quadloc.maps.compiled import CompiledMap, compile_map
@@ -608,11 +608,15 @@ def reliability_plot(rel: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def markdown(res: dict, command: str) -> str:
+def markdown(res: dict) -> str:
     lines = ["## Trust: covariance, confidence, ambiguity, priors (`bench/trust.py`)", "",
-             f"Command: `{command}` ({res['config']['seconds']:.0f} s on the shared 2-core "
-             "machine, under load). Tuning seeds "
-             f"{calibration.PROVENANCE['tuning_seeds']} (`{calibration.PROVENANCE['command']}`); "
+             f"{res['config']['seconds']:.0f} s on the shared 2-core machine. Constants "
+             "(`service/localization/calibration.py`) fitted on the tuning seeds "
+             f"{calibration.PROVENANCE['tuning_seeds']} only: records "
+             f"`{calibration.PROVENANCE['records']}` (made by "
+             f"`{calibration.PROVENANCE['records_command']}` at "
+             f"{calibration.PROVENANCE['records_commit']}), refit "
+             f"`{calibration.PROVENANCE['command']}`; "
              f"report seeds {res['config']['seeds']} (default detector) and "
              f"{res['config']['noisy_seeds']} (second noise setting: twice the detector noise, "
              "not used for tuning).", "",
@@ -763,7 +767,7 @@ def main(argv: list[str] | None = None) -> int:
                     "tuning seeds (--tune-seeds and --tune-noisy-seeds)")
     args = ap.parse_args(argv)
     metrics = tuple(args.metrics.split(","))
-    command = "python -m bench.trust " + " ".join(argv if argv is not None else sys.argv[1:])
+    command = public_command(argv if argv is not None else sys.argv[1:], module="bench.trust")
     cfg = SimulationConfig(miss_probability=0.2)
     t0 = time.perf_counter()
     tune_noisy_seeds = [int(s) for s in args.tune_noisy_seeds.split(",")]
@@ -779,7 +783,8 @@ def main(argv: list[str] | None = None) -> int:
         records = make_tuning_records(seeds, tune_noisy_seeds, metrics, args.stride,
                                       args.noisy_stride, args.slow_stride, cfg)
         write_records(args.records, records, {
-            "command": command, "commit": run_commit(), "date": time.strftime("%Y-%m-%d"),
+            "command": command, "commit": run_commit(),
+            "date": time.strftime("%Y-%m-%d", time.gmtime()),
             "tuning_seeds": [*seeds, *tune_noisy_seeds], "tune_seeds": seeds,
             "tune_noisy_seeds": tune_noisy_seeds, "stride": args.stride,
             "noisy_stride": args.noisy_stride, "slow_stride": args.slow_stride,
@@ -839,7 +844,7 @@ def main(argv: list[str] | None = None) -> int:
                                               "with gravity (level set, pooled, both settings)",
                                               "candidates of unlocalized 2-3 detection frames")},
                          RELIABILITY_PNG)
-        update_results_section("trust", markdown(res, command))
+        update_results_section("trust", markdown(res))
     return 0
 
 
