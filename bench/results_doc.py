@@ -115,7 +115,10 @@ def update_results_section(name: str, markdown: str, path: Path = RESULTS_PATH, 
     line = stamp(public_command() if command is None else scrub_machine_paths(command))
     lines = clean.split("\n")
     at = next((i + 1 for i, s in enumerate(lines) if s.startswith("#")), 0)
-    lines[at:at] = ([""] if at else []) + [line] + ([""] if at < len(lines) else [])
+    head, rest = lines[:at], lines[at:]
+    while rest and not rest[0].strip():
+        rest.pop(0)
+    lines = head + ([""] if head else []) + [line] + ([""] + rest if rest else [])
     begin, end = f"<!-- BEGIN {name} -->", f"<!-- END {name} -->"
     block = f"{begin}\n" + "\n".join(lines).strip() + f"\n{end}"
     path.parent.mkdir(parents=True, exist_ok=True)
