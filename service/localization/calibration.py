@@ -6,16 +6,16 @@ Fitted (:mod:`quadloc.service.localization.calibration_fit`) from the solve reco
 
     python -m quadloc.service.localization.calibration_fit bench/data/calibration_records.json.gz
 
-The records were made by ``python -m bench.trust --fit`` at commit 71d380b;
+The records were made by ``python -m bench.trust --fit`` at commit ebaffa4;
 tuning seeds only (:data:`PROVENANCE`): ``bench.trust`` reports on other seeds.
 """
 
 PROVENANCE = {'records': 'bench/data/calibration_records.json.gz',
- 'records_sha256': 'b572c62b58153fce86348a19d6cc75488b88a53f1e45e130faa6a6d89820fed4',
+ 'records_sha256': 'b9a24248d80e0c5eb2b51ca7b2b4d2bf134aaa413246768bcad4cb071a420509',
  'command': 'python -m quadloc.service.localization.calibration_fit '
             'bench/data/calibration_records.json.gz',
  'records_command': 'python -m bench.trust --fit',
- 'records_commit': '71d380b',
+ 'records_commit': 'ebaffa4',
  'tuning_seeds': [100, 102, 104, 106, 101, 103]}
 
 #: k_key of ``cov = k * max(s^2, f) * t(n) * (J^T W J)^-1`` (``calibration_fit.
@@ -90,33 +90,33 @@ CONFIDENCE_FEATURES = ('inliers_ge3',
  'gravity')
 
 #: Logistic models: P = 1 / (1 + exp(-(intercept + metric_offset + sum coef * feature))).
-CONFIDENCE_MODELS = {'refined': {'intercept': -14.033699,
-             'coef': {'inliers_ge3': 1.017203,
-                      'inliers_ge4': -0.163845,
-                      'log_inliers': 0.471616,
-                      'inlier_fraction': 7.27821,
-                      'mean_iou': 7.584739,
-                      'log_s2': -0.625407,
-                      'logit_gauss': 0.351906,
-                      'margin': 0.013684,
-                      'log_samples': -0.105701,
+CONFIDENCE_MODELS = {'refined': {'intercept': -14.033732,
+             'coef': {'inliers_ge3': 1.017204,
+                      'inliers_ge4': -0.163843,
+                      'log_inliers': 0.471651,
+                      'inlier_fraction': 7.27819,
+                      'mean_iou': 7.584767,
+                      'log_s2': -0.625262,
+                      'logit_gauss': 0.351904,
+                      'margin': 0.013686,
+                      'log_samples': -0.10571,
                       'chi2_competitor': 0.107625,
-                      'gravity': -0.390886},
-             'metric_offset': {'algebraic': 1.03832,
-                               'algebraic:unit_weights': -0.35519,
-                               'bbox': 0.074259,
-                               'bbox:unit_weights': -0.710212,
-                               'bhattacharyya': -0.183564,
+                      'gravity': -0.390908},
+             'metric_offset': {'algebraic': 1.038311,
+                               'algebraic:unit_weights': -0.355195,
+                               'bbox': 0.074257,
+                               'bbox:unit_weights': -0.710213,
+                               'bhattacharyya': -0.183562,
                                'bhattacharyya:unit_weights': -1.012036,
-                               'frobenius': 0.920892,
-                               'frobenius:unit_weights': -0.184597,
-                               'giou': 0.799602,
-                               'giou:unit_weights': -0.314016,
-                               'iou': 0.851302,
-                               'iou:unit_weights': -0.20788,
-                               'level_set:unit_weights': -0.336454,
-                               'qbbox': 0.381382,
-                               'qbbox:unit_weights': 0.341402,
+                               'frobenius': 0.920884,
+                               'frobenius:unit_weights': -0.184604,
+                               'giou': 0.799599,
+                               'giou:unit_weights': -0.314018,
+                               'iou': 0.851299,
+                               'iou:unit_weights': -0.207883,
+                               'level_set:unit_weights': -0.336453,
+                               'qbbox': 0.381381,
+                               'qbbox:unit_weights': 0.341397,
                                'wasserstein': 0.115265,
                                'wasserstein:unit_weights': -0.616519}},
  'none': {'intercept': -15.733101,
