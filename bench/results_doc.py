@@ -10,9 +10,10 @@ under the section's heading::
     Command: `python -m bench.trust --write-results` · Commit: 71d380b · Date: 2026-11-27
 
 ``Command`` is the command line that ran (machine-local paths replaced by ``PATH``:
-:func:`public_command`), ``Commit`` the checkout's HEAD (``+dirty`` when tracked files other
-than ``docs/`` and ``bench/data/`` differed from it: commit the code first, then run the
-benchmark, then commit the figures), ``Date`` the UTC day of the run. A section whose figures
+:func:`public_command`), ``Commit`` the checkout's HEAD when the benchmark started
+(``bench.START_COMMIT``; ``+dirty`` when tracked files other than ``docs/`` and
+``bench/data/`` differed from it: commit the code first, then run the benchmark, then commit
+the figures), ``Date`` the UTC day of the run. A section whose figures
 were not re-run carries `` · Not re-run since <commit>`` after the date (its commit and date
 are those of its last run). ``tests/test_docs.py`` checks every section has a stamp and no
 section names a machine-local path (:data:`MACHINE_LOCAL_PATH_RE`).
@@ -90,8 +91,12 @@ def _public_path(value: str) -> str:
 
 
 def stamp(command: str, commit: str | None = None, date: str | None = None) -> str:
-    """The stamp line of a run (defaults: :func:`run_commit`, today's UTC date)."""
-    commit = run_commit() if commit is None else commit
+    """The stamp line of a run (defaults: the commit when the benchmark started,
+    ``bench.START_COMMIT``, and today's UTC date)."""
+    if commit is None:
+        from bench import START_COMMIT
+
+        commit = START_COMMIT
     date = time.strftime("%Y-%m-%d", time.gmtime()) if date is None else date
     return f"Command: `{command}` · Commit: {commit} · Date: {date}"
 
@@ -118,7 +123,7 @@ def update_results_section(name: str, markdown: str, path: Path = RESULTS_PATH, 
     head, rest = lines[:at], lines[at:]
     while rest and not rest[0].strip():
         rest.pop(0)
-    lines = head + ([""] if head else []) + [line] + ([""] + rest if rest else [])
+    lines = head + ([""] if head else []) + [line] + (["", *rest] if rest else [])
     begin, end = f"<!-- BEGIN {name} -->", f"<!-- END {name} -->"
     block = f"{begin}\n" + "\n".join(lines).strip() + f"\n{end}"
     path.parent.mkdir(parents=True, exist_ok=True)
