@@ -203,8 +203,7 @@ def reduced_record(dets: list[Detection], cm: CompiledMap, camera: Camera, truth
     """The record of a reduced frame (level set): the answer with ``min_confidence`` and the
     unchecked answer (``on_ambiguity="best"``, ``min_confidence=0``: every verified pose, from
     which the fit re-decides the ambiguity and the threshold, ``calibration_fit.decide``), its
-    error
-    ``best_pos``, and the top candidate of an answer not localized."""
+    error ``best_pos``, and the top candidate of an answer not localized."""
     r = localize(dets, cm, camera, options("level_set", min_confidence=min_confidence), None,
                  gravity)
     rb = localize(dets, cm, camera, options("level_set", on_ambiguity="best",
