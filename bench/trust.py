@@ -2,9 +2,17 @@
 
 Usage::
 
-    python -m bench.trust [--seeds 200,202] [--stride 1] [--json PATH] [--write-results]
-    python -m bench.trust --fit   # rewrites service/localization/calibration.py (tuning seeds)
+    python -m bench.trust [--seeds 300,302] [--stride 1] [--json PATH] [--write-results]
+    python -m bench.trust --fit   # tuning records -> bench/data/calibration_records.json.gz,
+                                  # refit -> service/localization/calibration.py
     python -m bench.trust --diagnose-2det   # experiment 6 (tuning seeds)
+
+The fit itself is product code (:mod:`quadloc.service.localization.calibration_fit`: solve
+records in, constants out); this module makes its records by simulation and reports on other
+seeds. Refit from the committed records alone (no simulation; what the test
+``tests/service/localization/test_calibration_fit.py`` checks)::
+
+    python -m quadloc.service.localization.calibration_fit bench/data/calibration_records.json.gz
 
 Frames: the 108 real Chess poses, detections simulated by :mod:`tests.support.simulate` (truncation,
 occlusion, misses at 0.2, noisy detections, sigma correlated with the error). Each seed draws
@@ -12,8 +20,8 @@ new detections for every pose. ``--fit`` tunes on ``--tune-seeds`` (default 100,
 and 106, all 108 poses) and ``--tune-noisy-seeds`` (101 and 103, the second, noisier detector
 setting ``NOISY``) and writes the constants; the report (seeds 300, 302, 304 and 306, plus
 seeds 301 and 303 with ``NOISY``) uses other seeds (the 200 series, the report seeds until
-session 24, showed the threshold rule's optimism: :data:`FALSE_ACCEPT_TUNING_MARGIN`; new
-seeds report the rule chosen after it). Experiments:
+session 24, showed the threshold rule's optimism: ``FitSettings.false_accept_tuning_margin``;
+new seeds report the rule chosen after it). Experiments:
 
 1. **NEES** per calibration key (each metric with sigma weights, and without them,
    ``<metric>:unit_weights``, on every :data:`UNIT_WEIGHTS_STRIDE`-th frame):
@@ -46,9 +54,9 @@ seeds report the rule chosen after it). Experiments:
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
-import pprint
 import sys
 import time
 from pathlib import Path
@@ -56,18 +64,25 @@ from pathlib import Path
 import numpy as np
 
 from bench.chess_eval import json_safe
+from bench.results_doc import public_command, run_commit
 from quadloc.factors.camera import Camera
 from quadloc.factors.conics import Ellipse
 from quadloc.maps.compiled import CompiledMap, compile_map
 from quadloc.service.localization import calibration
+from quadloc.service.localization.calibration_fit import (
+    FitSettings,
+    SolveRecord,
+    calibration_source,
+    decision_outcome,
+    fit_file,
+    record_from_evidence,
+    write_records,
+)
 from quadloc.service.localization.confidence import (
     TOLERANCE_POSITION_M,
     TOLERANCE_ROTATION_DEG,
     UNIT_WEIGHTS_SUFFIX,
     calibration_key,
-    confidence_probability,
-    gaussian_tolerance_probability,
-    student_t_factor,
 )
 from quadloc.service.localization.pipeline import localize
 from quadloc.service.localization.types import (
@@ -96,17 +111,6 @@ from tests.support.simulate import (
 SLOW = ("iou", "giou")
 OPERATING_POINTS_M = (0.05, 0.10, 0.20)
 NEES_RANGE = (4.0, 9.0)
-#: Features of the confidence model (names of ``confidence.evidence_features``). Not
-#: ``min_iou``: its distribution shifts with the detector's noise, and leaving it out transfers
-#: better between the two noise settings (tuning seeds, each setting fitted on the other).
-FEATURES = ("inliers_ge3", "inliers_ge4", "log_inliers", "inlier_fraction", "mean_iou",
-            "log_s2", "logit_gauss", "margin", "log_samples", "chi2_competitor", "gravity")
-#: Features that need a refinement (not in the ``none`` model).
-REFINED_ONLY = ("log_s2", "logit_gauss", "chi2_competitor")
-#: ``f_metric``, the floor of the a-posteriori variance factor: this quantile of the tuning
-#: frames' ``s^2`` (0.9 rather than the median: fewer default-noise frames claim the precision
-#: of a lucky small residual, which narrows the NEES spread between the two noise settings).
-S2_FLOOR_QUANTILE = 0.9
 ECE_TARGET = 0.05
 #: The refined metrics also run without sigma weights (``use_sigma=False``, their own
 #: calibration key) on every N-th frame.
@@ -116,7 +120,11 @@ UNIT_WEIGHTS_STRIDE = 2
 IMU_SIGMA_DEG = 1.0
 #: The NEES table's row of the level set with the device's gravity.
 GRAVITY_NEES_ROW = "level_set with gravity"
+#: The fit's settings (``calibration_fit.FitSettings`` defaults: those of the shipped constants).
+FIT = FitSettings()
 REPO_ROOT = Path(__file__).resolve().parents[1]
+#: The fit's input, committed: the tuning records written by ``--fit`` (gzip JSON).
+RECORDS_PATH = REPO_ROOT / "bench" / "data" / "calibration_records.json.gz"
 CALIBRATION_PATH = REPO_ROOT / "service" / "localization" / "calibration.py"
 RELIABILITY_PNG = REPO_ROOT / "docs" / "img" / "trust_reliability.png"
 
@@ -194,8 +202,8 @@ def reduced_record(dets: list[Detection], cm: CompiledMap, camera: Camera, truth
                    **extra: object) -> dict:
     """The record of a reduced frame (level set): the answer with ``min_confidence`` and the
     unchecked answer (``on_ambiguity="best"``, ``min_confidence=0``: every verified pose, from
-    which the fit re-decides the ambiguity and the threshold, ``decide_reduced``), its error
-    ``best_pos``, and the top candidate of an answer not localized."""
+    which the fit re-decides the ambiguity and the threshold, ``calibration_fit.decide``), its
+    error ``best_pos``, and the top candidate of an answer not localized."""
     r = localize(dets, cm, camera, options("level_set", min_confidence=min_confidence), None,
                  gravity)
     rb = localize(dets, cm, camera, options("level_set", on_ambiguity="best",
@@ -455,13 +463,17 @@ OPERATING_THRESHOLDS = (0.0, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5)
 def operating_points(reduced: dict, reduced_noisy: dict) -> dict:
     """False accepts and kept good frames of each reduced set at the ``min_confidence`` values
     of :data:`OPERATING_THRESHOLDS` and the default (``AMBIGUITY_CHI2_RATIO`` fixed): what a
-    client trades by choosing its own threshold (:func:`reduced_outcome`)."""
+    client trades by choosing its own threshold (``calibration_fit.decision_outcome`` on the
+    reduced frames' unchecked answers)."""
     out: dict = {}
     ts = sorted({*OPERATING_THRESHOLDS, calibration.MIN_CONFIDENCE})
     for table in (reduced, reduced_noisy):
         for (n, setting), rows in reduced_sets(table).items():
-            out[f"{setting} {n}"] = {f"{t:g}": reduced_outcome(
-                rows, calibration.AMBIGUITY_CHI2_RATIO, t) for t in ts}
+            recs = [solve_record(r["unchecked"], covariance=False, confidence=False,
+                                 group=r.get("setting", "default"), reason=r["reason"])
+                    for r in rows]
+            out[f"{setting} {n}"] = {f"{t:g}": dataclasses.asdict(decision_outcome(
+                recs, calibration.AMBIGUITY_CHI2_RATIO, t)) for t in ts}
     return out
 
 
@@ -510,170 +522,7 @@ def confidence_rows(data: dict, unit_weights: bool | None = None) -> list[dict]:
                    + reduced_records(data, gravity=True))
 
 
-# ------------------------------------------------------------------ fitting
-
-
-def _fit_logistic(X: np.ndarray, y: np.ndarray, ridge: float = 1e-2) -> np.ndarray:
-    """Logistic regression (intercept first) by Newton's method with an L2 penalty."""
-    A = np.column_stack([np.ones(len(X)), X])
-    w = np.zeros(A.shape[1])
-    R = ridge * np.eye(A.shape[1])
-    R[0, 0] = 0.0
-    for _ in range(100):
-        p = 1.0 / (1.0 + np.exp(-np.clip(A @ w, -50, 50)))
-        g = A.T @ (p - y) + R @ w
-        H = (A * (p * (1 - p))[:, None]).T @ A + R + 1e-9 * np.eye(len(w))
-        step = np.linalg.solve(H, g)
-        w -= step
-        if np.abs(step).max() < 1e-8:
-            break
-    return w
-
-
-def _scale_for(rows: list[dict], floor: float) -> float | None:
-    """``k`` centring the tuning frames' mean NEES in [4, 9]: each detector setting's mean raw
-    NEES (covariance ``max(s^2, f) t(n) (J^T W J)^-1``) over the frames within 5, 10 and 20 cm
-    (cells with >= 5 frames) is a cell; ``k`` puts the geometric mean of the smallest and
-    largest cell at 6, the geometric centre of [4, 9] (the cells grow with the operating point:
-    a wider error bound keeps frames further in the tail)."""
-    cells = []
-    for setting in sorted({r.get("setting", "default") for r in rows}):
-        for t in OPERATING_POINTS_M:
-            v = [r["nees"] * r["evidence"]["cov_scale"] / _factor(r, floor)
-                 for r in rows if "nees" in r and r["pos"] <= t
-                 and r.get("setting", "default") == setting]
-            if len(v) >= 5:
-                cells.append(float(np.mean(v)))
-    if not cells:
-        return None
-    return math.sqrt(min(cells) * max(cells)) / 6.0
-
-
-def _factor(r: dict, floor: float) -> float:
-    """The record's ``max(s^2, f) t(n)`` for the floor ``f`` (``confidence.variance_factor``)."""
-    ev = r["evidence"]
-    n = ev.get("n_refined") or round(math.exp(ev["log_inliers"]))
-    return max(ev["s2"], floor) * student_t_factor(int(n))
-
-
-def refeature(rows: list[dict], scale: dict, floor: dict) -> None:
-    """Recompute the records' residual (``log_s2``) and covariance (``logit_gauss``) features
-    and their ``cov`` / ``nees`` for new constants ``scale`` / ``floor`` (in place)."""
-    for r in rows:
-        m = r["metric"]
-        ev = r["evidence"]
-        s2 = ev.get("s2", math.nan)
-        if m not in floor or s2 is None or not math.isfinite(s2):
-            continue
-        ev["log_s2"] = math.log(max(s2, floor[m]) / floor[m])
-        if "cov" in r:
-            new = scale[m] * _factor(r, floor[m])
-            ratio = new / ev["cov_scale"]
-            cov = np.asarray(r["cov"]) * ratio
-            r["cov"] = cov.tolist()
-            if "nees" in r:
-                r["nees"] /= ratio
-            ev["cov_scale"] = new
-            p = gaussian_tolerance_probability(cov)
-            p = min(max(p, 1e-6), 1 - 1e-6)
-            ev["logit_gauss"] = math.log(p / (1 - p))
-
-
-def fit_constants(data: dict, metric_offsets: bool = True,
-                  features: tuple[str, ...] | None = None) -> dict:
-    """New calibration constants (``scale``, ``floor``, ``models``, ``min_confidence``) from
-    tuning records made with the current constants (updates the records' residual and
-    covariance features in place). ``metric_offsets``: a per-metric intercept in the
-    confidence model (the reference is the level set); ``features``: default
-    :data:`FEATURES`."""
-    scale = dict(calibration.COVARIANCE_SCALE)
-    floor = dict(calibration.S2_FLOOR)
-    for m, rows in data["frames"].items():
-        s2 = [r["evidence"]["s2"] for r in rows if r["localized"]
-              and math.isfinite(r["evidence"].get("s2", math.nan))]
-        if m == "none" or not s2:
-            continue
-        floor[m] = float(np.quantile(s2, S2_FLOOR_QUANTILE))
-        k = _scale_for(rows, floor[m])
-        if k is not None:
-            scale[m] = k
-    rows = [r for r in confidence_rows(data) if r["localized"]]
-    refeature(rows + [r["unchecked"] for r in reduced_records(data)
-                      if r.get("unchecked", {}).get("localized")], scale, floor)
-    feats = FEATURES if features is None else features
-    models = {}
-    for name, sel in (("refined", lambda r: r["metric"] != "none"),
-                      ("none", lambda r: r["metric"] == "none")):
-        rr = [r for r in rows if sel(r)]
-        if not rr:
-            models[name] = calibration.CONFIDENCE_MODELS[name]
-            continue
-        use = [f for f in feats if not (name == "none" and f in REFINED_ONLY)]
-        # per-metric intercept offsets (level set, the default, is the reference)
-        offsets = sorted({r["metric"] for r in rr} - {"level_set", "none"}) \
-            if metric_offsets else []
-        X = np.array([[r["evidence"][f] for f in use] + [float(r["metric"] == m) for m in offsets]
-                      for r in rr])
-        y = np.array([_success(r) for r in rr], dtype=float)
-        w = _fit_logistic(X, y)
-        models[name] = {"intercept": round(float(w[0]), 6),
-                        "coef": {f: round(float(c), 6)
-                                 for f, c in zip(use, w[1:1 + len(use)], strict=True)}}
-        if offsets:
-            models[name]["metric_offset"] = {
-                m: round(float(c), 6) for m, c in zip(offsets, w[1 + len(use):], strict=True)}
-    chi2_ratio, min_confidence = choose_ambiguity_and_threshold(data["reduced"], models)
-    return {"scale": scale, "floor": floor, "models": models, "min_confidence": min_confidence,
-            "chi2_ratio": chi2_ratio, "features": tuple(feats)}
-
-
-#: Candidate ``AMBIGUITY_CHI2_RATIO`` values tried by :func:`choose_ambiguity_and_threshold`.
-CHI2_RATIO_GRID = (1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0, 6.0)
-#: Candidate ``MIN_CONFIDENCE`` values (the smallest that meets :data:`FALSE_ACCEPT_TARGET`).
-MIN_CONFIDENCE_GRID = tuple(round(0.01 * k, 2) for k in range(61))
-#: Largest share of a reduced set (2 or 3 detections, one detector setting) answered
-#: ``localized: true`` more than 0.5 m off.
-FALSE_ACCEPT_TARGET = 0.01
-#: The fit holds the tuning frames to this fraction of :data:`FALSE_ACCEPT_TARGET`: a
-#: threshold chosen AT the target on the tuning frames exceeds it on about half of new frame
-#: sets (session 24: 0.9 % on the tuning frames, 2.3 % on seeds 200-206). Chosen by
-#: cross-validation on the tuning seeds alone (constants fitted on half of them, false accepts
-#: counted on the other half): at 0.5 the 2-detection false accepts on the other half were
-#: 0-1 of 216 in both directions.
-FALSE_ACCEPT_TUNING_MARGIN = 0.5
-
-
-def decide_reduced(rec: dict, chi2_ratio: float, min_confidence: float,
-                   models: dict | None = None) -> tuple[bool, str | None, float]:
-    """(localized, reason, confidence) of a reduced-frame record under other constants, from
-    its unchecked answer (``rec["unchecked"]``: every verified pose, with its evidence): the
-    ambiguity rule of ``confidence.is_ambiguous`` (a runner-up whose chi2 compares competes
-    when ``chi2_competitor <= log(chi2_ratio)``, the others by IoU sum: ``iou_competitor``),
-    then ``min_confidence`` on the confidence recomputed with ``models``."""
-    u = rec["unchecked"]
-    if not u["localized"]:
-        return False, rec["reason"], 0.0
-    ev = u["evidence"]
-    conf = confidence_probability(rec["metric"], ev, models)
-    if ev.get("iou_competitor", 0.0) > 0 or ev["chi2_competitor"] <= math.log(chi2_ratio):
-        return False, "ambiguous", conf
-    if conf < min_confidence:
-        return False, "low_confidence", conf
-    return True, None, conf
-
-
-def reduced_outcome(rows: list[dict], chi2_ratio: float, min_confidence: float,
-                    models: dict | None = None) -> dict:
-    """False accepts (> 0.5 m) and good frames kept (unchecked pose within 10 cm, answered
-    ``localized``) of reduced-frame records under these constants (:func:`decide_reduced`)."""
-    fa = kept = good = 0
-    for r in rows:
-        loc = decide_reduced(r, chi2_ratio, min_confidence, models)[0]
-        fa += int(loc and r["unchecked"]["pos"] > 0.5)
-        if r["best_pos"] <= 0.10:
-            good += 1
-            kept += int(loc)
-    return {"frames": len(rows), "false_accepts": fa, "good": good, "kept": kept}
+# ------------------------------------------------------------------ fitting (records)
 
 
 def reduced_sets(reduced: dict) -> dict[tuple[str, str], list[dict]]:
@@ -688,77 +537,47 @@ def reduced_sets(reduced: dict) -> dict[tuple[str, str], list[dict]]:
     return sets
 
 
-def choose_ambiguity_and_threshold(reduced: dict, models: dict) -> tuple[float, float]:
-    """``(AMBIGUITY_CHI2_RATIO, MIN_CONFIDENCE)`` from the reduced tuning frames: for each
-    ratio of :data:`CHI2_RATIO_GRID`, the smallest threshold whose false accepts are <=
-    :data:`FALSE_ACCEPT_TARGET` x :data:`FALSE_ACCEPT_TUNING_MARGIN` in every reduced set (2
-    and 3 detections x detector setting, without and with the device's gravity:
-    :func:`reduced_sets`); of those, the pair keeping
-    the most good frames (ties: the larger ratio, more cautious)."""
-    sets = reduced_sets(reduced)
-    best: tuple[int, float, float] | None = None
-    for ratio in CHI2_RATIO_GRID:
-        for t in MIN_CONFIDENCE_GRID:
-            outs = [reduced_outcome(rows, ratio, t, models) for rows in sets.values()]
-            if all(o["false_accepts"]
-                   <= FALSE_ACCEPT_TARGET * FALSE_ACCEPT_TUNING_MARGIN * o["frames"]
-                   for o in outs):
-                kept = sum(o["kept"] for o in outs)
-                if best is None or (kept, ratio) >= (best[0], best[1]):
-                    best = (kept, ratio, t)
-                break
-    if best is None:
-        return calibration.AMBIGUITY_CHI2_RATIO, calibration.MIN_CONFIDENCE
-    return best[1], best[2]
+def solve_record(rec: dict, *, covariance: bool, confidence: bool, decision_set: str = "",
+                 group: str | None = None, reason: str | None = None) -> SolveRecord:
+    """The :class:`~quadloc.service.localization.calibration_fit.SolveRecord` of one bench
+    record (:func:`_record`, or a reduced record's ``unchecked`` answer, whose ``group`` and
+    ``reason`` are its frame's)."""
+    return record_from_evidence(
+        key=rec["metric"], group=group or rec.get("setting", "default"),
+        localized=rec["localized"], reason=rec.get("reason", reason),
+        position_error_m=rec["pos"], rotation_error_deg=rec["rot"], evidence=rec["evidence"],
+        covariance_6x6=rec.get("cov"), nees=rec.get("nees"), covariance=covariance,
+        confidence=confidence, decision_set=decision_set)
 
 
-def fit(data: dict, seeds: list[int], command: str, metric_offsets: bool = True) -> str:
-    """The text of ``calibration.py`` with the constants of :func:`fit_constants`."""
-    c = fit_constants(data, metric_offsets)
-    scale, floor, models = c["scale"], c["floor"], c["models"]
-    min_confidence, feats, chi2_ratio = c["min_confidence"], c["features"], c["chi2_ratio"]
-    text = f'''"""Calibration constants of :mod:`quadloc.service.localization.confidence`
-    (generated).
+def solve_records(data: dict) -> list[SolveRecord]:
+    """The fit's input from :func:`run_frames` / :func:`merge_runs` data: the frames of every
+    calibration key (covariance and confidence), the solves with gravity and the reduced
+    frames' answers (confidence), and the reduced frames' unchecked answers (decision sets
+    ``"<detections> <setting>[+gravity]"``), in this order."""
+    out = [solve_record(r, covariance=True, confidence=True)
+           for rows in data["frames"].values() for r in rows]
+    out += [solve_record(r, covariance=False, confidence=True)
+            for r in [*data.get("gravity_frames", []), *reduced_records(data, gravity=False),
+                      *reduced_records(data, gravity=True)]]
+    for (n, setting), rows in reduced_sets(data["reduced"]).items():
+        out += [solve_record(r["unchecked"], covariance=False, confidence=False,
+                             decision_set=f"{n} {setting}", group=r.get("setting", "default"),
+                             reason=r["reason"]) for r in rows]
+    return out
 
-Provenance: written by ``python -m bench.trust --fit`` (see that module); the fit uses
-only the tuning seeds named in :data:`PROVENANCE`, the bench reports on other seeds.
-"""
 
-PROVENANCE = {pprint.pformat({"command": command, "tuning_seeds": seeds}, width=84)}
+def make_tuning_records(tune_seeds: list[int], tune_noisy_seeds: list[int],
+                        metrics: tuple[str, ...], stride: int, noisy_stride: int,
+                        slow_stride: int, config: SimulationConfig) -> list[SolveRecord]:
+    """Experiments 1-3 on the tuning seeds (``min_confidence=0``: every verified pose is
+    seen) as the fit's records."""
+    runs = [(s, stride, config, "default") for s in tune_seeds]
+    runs += [(s, noisy_stride, config.with_(**NOISY), "noisy") for s in tune_noisy_seeds]
+    return solve_records(merge_runs([
+        run_frames(s, metrics, st, slow_stride, c, min_confidence=0.0, setting=setting)
+        for s, st, c, setting in runs]))
 
-#: k_metric of ``cov = k * max(s^2, f) * (J^T W J)^-1`` (``bench.trust._scale_for``: the
-#: smallest and largest mean NEES over the 5 / 10 / 20 cm operating points and the two detector
-#: settings of the tuning frames centred on 6).
-COVARIANCE_SCALE = {pprint.pformat({m: round(v, 6) for m, v in scale.items()},
-                                    width=96, sort_dicts=False)}
-
-#: f_metric: floor of the a-posteriori variance factor (``bench.trust.S2_FLOOR_QUANTILE`` of
-#: the tuning frames' s^2).
-S2_FLOOR = {pprint.pformat({m: round(v, 6) for m, v in floor.items()},
-                            width=96, sort_dicts=False)}
-
-#: Runner-up / best refined chi2 (same detections, same metric) at and below which an answer is
-#: ambiguous (``confidence.is_ambiguous``; ``bench.trust.choose_ambiguity_and_threshold``).
-AMBIGUITY_CHI2_RATIO = {chi2_ratio!r}
-
-#: Runner-up / best score (sum of inlier IoUs) at and above which an answer is ambiguous, when
-#: their chi2 do not compare.
-AMBIGUITY_RATIO = {calibration.AMBIGUITY_RATIO!r}
-
-#: The same ratio for a runner-up matching the same map objects (``confidence.is_ambiguous``).
-AMBIGUITY_RATIO_SAME_OBJECTS = {calibration.AMBIGUITY_RATIO_SAME_OBJECTS!r}
-
-#: Default ``LocalizationOptions.min_confidence`` (with ``AMBIGUITY_CHI2_RATIO``:
-#: ``bench.trust.choose_ambiguity_and_threshold``).
-MIN_CONFIDENCE = {min_confidence!r}
-
-#: Features of the confidence model (``confidence.evidence_features``), in order.
-CONFIDENCE_FEATURES = {pprint.pformat(feats, width=96)}
-
-#: Logistic models: P = 1 / (1 + exp(-(intercept + sum coef * feature))).
-CONFIDENCE_MODELS = {pprint.pformat(models, width=96, sort_dicts=False)}
-'''
-    return text
 
 
 # ------------------------------------------------------------------ report
@@ -788,11 +607,15 @@ def reliability_plot(rel: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def markdown(res: dict, command: str) -> str:
+def markdown(res: dict) -> str:
     lines = ["## Trust: covariance, confidence, ambiguity, priors (`bench/trust.py`)", "",
-             f"Command: `{command}` ({res['config']['seconds']:.0f} s on the shared 2-core "
-             "machine, under load). Tuning seeds "
-             f"{calibration.PROVENANCE['tuning_seeds']} (`{calibration.PROVENANCE['command']}`); "
+             f"{res['config']['seconds']:.0f} s on the shared 2-core machine. Constants "
+             "(`service/localization/calibration.py`) fitted on the tuning seeds "
+             f"{calibration.PROVENANCE['tuning_seeds']} only: records "
+             f"`{calibration.PROVENANCE['records']}` (made by "
+             f"`{calibration.PROVENANCE['records_command']}` at "
+             f"{calibration.PROVENANCE['records_commit']}), refit "
+             f"`{calibration.PROVENANCE['command']}`; "
              f"report seeds {res['config']['seeds']} (default detector) and "
              f"{res['config']['noisy_seeds']} (second noise setting: twice the detector noise, "
              "not used for tuning).", "",
@@ -811,7 +634,8 @@ def markdown(res: dict, command: str) -> str:
              f"{calibration.AMBIGUITY_RATIO_SAME_OBJECTS} on the same objects); "
              f"`min_confidence` default {calibration.MIN_CONFIDENCE} (fitted with the chi2 "
              "ratio: the smallest threshold with <= "
-             f"{100 * FALSE_ACCEPT_TARGET * FALSE_ACCEPT_TUNING_MARGIN:g} % false accepts, "
+             f"{100 * FIT.false_accept_target * FIT.false_accept_tuning_margin:g} % false "
+             "accepts, "
              "half the 1 % target as a margin for new frames, in every reduced tuning set, 2 "
              "and 3 detections x both detector settings, without and with gravity). "
              "With the device's gravity (`gravity`): a factor on the pose's tilt in every "
@@ -931,10 +755,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--random-trials", default="10,10,5",
                     help="trials against the 100 / 1,000 / 10,000-object maps")
     ap.add_argument("--json", type=Path)
-    ap.add_argument("--save-data", type=Path,
-                    help="with --fit: also write the tuning records (JSON) to this path")
-    ap.add_argument("--load-data", type=Path,
-                    help="with --fit: fit from records saved by --save-data (no simulation)")
+    ap.add_argument("--records", type=Path, default=RECORDS_PATH,
+                    help="with --fit: where the tuning records go (default: the committed "
+                    "bench/data/calibration_records.json.gz)")
     ap.add_argument("--no-metric-offsets", dest="metric_offsets", action="store_false",
                     help="with --fit: no per-metric intercepts in the confidence model")
     ap.add_argument("--write-results", action="store_true")
@@ -943,7 +766,7 @@ def main(argv: list[str] | None = None) -> int:
                     "tuning seeds (--tune-seeds and --tune-noisy-seeds)")
     args = ap.parse_args(argv)
     metrics = tuple(args.metrics.split(","))
-    command = "python -m bench.trust " + " ".join(argv if argv is not None else sys.argv[1:])
+    command = public_command(argv if argv is not None else sys.argv[1:], module="bench.trust")
     cfg = SimulationConfig(miss_probability=0.2)
     t0 = time.perf_counter()
     tune_noisy_seeds = [int(s) for s in args.tune_noisy_seeds.split(",")]
@@ -956,22 +779,21 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if args.fit:
         seeds = [int(s) for s in args.tune_seeds.split(",")]
-        if args.load_data:
-            data = json.loads(args.load_data.read_text())
-        else:
-            runs = [(s, args.stride, cfg, "default") for s in seeds]
-            runs += [(s, args.noisy_stride, cfg.with_(**NOISY), "noisy")
-                     for s in tune_noisy_seeds]
-            data = merge_runs([run_frames(s, metrics, stride, args.slow_stride, config,
-                                          min_confidence=0.0, setting=setting)
-                               for s, stride, config, setting in runs])
-            if args.save_data:
-                args.save_data.write_text(json.dumps(data, default=float))  # keeps inf/NaN
-        print(json.dumps(json_safe(nees_table(data["frames"])), indent=1))
-        print(json.dumps(json_safe(reduced_table(data["reduced"])), indent=1))
-        CALIBRATION_PATH.write_text(fit(data, [*seeds, *tune_noisy_seeds], command,
-                                        metric_offsets=args.metric_offsets))
-        print(f"wrote {CALIBRATION_PATH}")
+        records = make_tuning_records(seeds, tune_noisy_seeds, metrics, args.stride,
+                                      args.noisy_stride, args.slow_stride, cfg)
+        write_records(args.records, records, {
+            "command": command, "commit": run_commit(),
+            "date": time.strftime("%Y-%m-%d", time.gmtime()),
+            "tuning_seeds": [*seeds, *tune_noisy_seeds], "tune_seeds": seeds,
+            "tune_noisy_seeds": tune_noisy_seeds, "stride": args.stride,
+            "noisy_stride": args.noisy_stride, "slow_stride": args.slow_stride,
+            "metrics": list(metrics), "unit_weights_stride": UNIT_WEIGHTS_STRIDE,
+            "imu_sigma_deg": IMU_SIGMA_DEG, "miss_probability": cfg.miss_probability,
+            "seconds": round(time.perf_counter() - t0)})
+        fitted = fit_file(args.records,
+                          settings=dataclasses.replace(FIT, metric_offsets=args.metric_offsets))
+        CALIBRATION_PATH.write_text(calibration_source(fitted))
+        print(f"wrote {args.records.name} ({len(records)} records) and {CALIBRATION_PATH.name}")
         return 0
     seeds = [int(s) for s in args.seeds.split(",")]
     data = merge_runs([run_frames(s, metrics, args.stride, args.slow_stride, cfg)
@@ -1021,7 +843,7 @@ def main(argv: list[str] | None = None) -> int:
                                               "with gravity (level set, pooled, both settings)",
                                               "candidates of unlocalized 2-3 detection frames")},
                          RELIABILITY_PNG)
-        update_results_section("trust", markdown(res, command))
+        update_results_section("trust", markdown(res))
     return 0
 
 

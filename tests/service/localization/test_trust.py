@@ -402,24 +402,26 @@ def test_localized_answers_have_no_chi2_competitor_within_the_ratio():
     assert localized >= 1 and close >= 1, (localized, close)
 
 
-def test_bench_re_decides_reduced_frames_as_localize_does():
-    """``bench.trust.decide_reduced`` (how ``--fit`` chooses AMBIGUITY_CHI2_RATIO and
-    MIN_CONFIDENCE) re-decides a frame from its unchecked answer's evidence
+def test_the_fit_re_decides_reduced_frames_as_localize_does():
+    """``calibration_fit.decide`` (how the fit chooses AMBIGUITY_CHI2_RATIO and
+    MIN_CONFIDENCE) re-decides a frame from the record of its unchecked answer
     (``on_ambiguity="best"``, ``min_confidence=0``) exactly as ``localize`` decides it with
     the default options: same localized flag and reason."""
-    from bench.trust import decide_reduced
+    from quadloc.service.localization.calibration_fit import decide, record_from_evidence
 
     seen = set()
     for _, dets in _two_detection_frames(5, 920_000):
         r = localize(dets, CM, CAMERA, LocalizationOptions(time_budget_ms=None))
         b = localize(dets, CM, CAMERA, LocalizationOptions(
             time_budget_ms=None, on_ambiguity="best", min_confidence=0.0))
-        rec = {"metric": "level_set", "reason": r.reason,
-               "unchecked": {"localized": b.localized, "evidence": dict(b.evidence or {})}}
-        loc, reason, conf = decide_reduced(rec, calibration.AMBIGUITY_CHI2_RATIO,
-                                           calibration.MIN_CONFIDENCE)
-        assert (loc, reason) == (r.localized, r.reason)
+        rec = record_from_evidence(
+            key="level_set", group="default", localized=b.localized, reason=r.reason,
+            position_error_m=math.inf, rotation_error_deg=math.inf,
+            evidence=dict(b.evidence or {}), covariance_6x6=b.covariance, nees=None,
+            covariance=False, confidence=False, decision_set="2 default")
+        d = decide(rec, calibration.AMBIGUITY_CHI2_RATIO, calibration.MIN_CONFIDENCE)
+        assert (d.localized, d.reason) == (r.localized, r.reason)
         if b.localized:
-            assert conf == pytest.approx(b.confidence, abs=1e-12)
-        seen.add(reason)
+            assert d.confidence == pytest.approx(b.confidence, abs=1e-12)
+        seen.add(d.reason)
     assert {None, "ambiguous", "low_confidence"} <= seen, seen

@@ -1,0 +1,197 @@
+"""The calibration fit (``quadloc.service.localization.calibration_fit``): the shipped constants
+are the refit of the committed tuning records, the generated module names its data and
+command, and the fit's parts recover what synthetic records were made with."""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from quadloc.service.localization import calibration
+from quadloc.service.localization.calibration_fit import (
+    FEATURES,
+    CalibrationConstants,
+    CalibrationFitError,
+    FitSettings,
+    SolveRecord,
+    calibration_source,
+    choose_ambiguity_and_threshold,
+    decide,
+    fit_covariance_scale,
+    fit_file,
+    fit_logistic,
+    fit_s2_floor,
+    read_records,
+    refeature,
+    sha256_file,
+    write_records,
+)
+from quadloc.service.localization.confidence import gaussian_tolerance_probability
+
+REPO_ROOT = Path(__file__).resolve().parents[3]
+RECORDS = REPO_ROOT / "bench" / "data" / "calibration_records.json.gz"
+#: The generator rounds every fitted number to 6 decimals: a refit on another machine (other
+#: BLAS, other summation order) may move the last digit, never more.
+ABS_TOL = 2e-6
+
+
+@pytest.fixture(scope="module")
+def refit() -> CalibrationConstants:
+    """The refit, run from the checkout's root as the documented command is."""
+    cwd = os.getcwd()
+    os.chdir(REPO_ROOT)
+    try:
+        return fit_file(RECORDS)
+    finally:
+        os.chdir(cwd)
+
+
+def test_the_shipped_constants_are_the_refit_of_the_committed_records(refit):
+    """``python -m quadloc.service.localization.calibration_fit
+    bench/data/calibration_records.json.gz`` reproduces calibration.py: every fitted number
+    within 2e-6 (its 6 decimals), the ambiguity ratio and the threshold exactly, and the
+    provenance."""
+    shipped = CalibrationConstants.shipped()
+    assert shipped.differences(refit, abs_tol=ABS_TOL) == []
+    assert refit.min_confidence == shipped.min_confidence
+    assert refit.ambiguity_chi2_ratio == shipped.ambiguity_chi2_ratio
+    assert refit.provenance == calibration.PROVENANCE
+
+
+def test_the_generated_module_names_its_data_and_command():
+    """The header and PROVENANCE name the committed records (their sha256: the file is the
+    one fitted), the refit command and the command that made the records; no machine-local
+    path."""
+    prov = calibration.PROVENANCE
+    assert prov["records"] == "bench/data/calibration_records.json.gz"
+    assert prov["records_sha256"] == sha256_file(RECORDS)
+    assert prov["command"] == ("python -m quadloc.service.localization.calibration_fit "
+                               "bench/data/calibration_records.json.gz")
+    assert prov["records_command"].startswith("python -m bench.trust --fit")
+    _, made = read_records(RECORDS)
+    assert made["command"] == prov["records_command"] and made["commit"] == prov["records_commit"]
+    assert re.fullmatch(r"[0-9a-f]{7}", made["commit"]), made["commit"]
+    assert sorted(prov["tuning_seeds"]) == sorted(made["tuning_seeds"])
+    # tuning seeds never overlap the report's (bench.trust defaults)
+    assert not set(prov["tuning_seeds"]) & {300, 301, 302, 303, 304, 306}
+    text = (REPO_ROOT / "service" / "localization" / "calibration.py").read_text()
+    assert "bench/data/calibration_records.json.gz" in text.split('"""')[1]
+    assert not re.search(r"(?<![\w.])/(tmp|work|root|home)/", text)
+
+
+def test_generated_source_round_trips(refit):
+    """``calibration_source`` writes a module whose constants are the object's."""
+    namespace: dict[str, object] = {}
+    exec(compile(calibration_source(refit), "calibration.py", "exec"), namespace)
+
+    class Module:
+        pass
+
+    module = Module()
+    module.__dict__.update(namespace)
+    back = CalibrationConstants.from_module(module)  # type: ignore[arg-type]
+    assert back == refit
+
+
+def test_record_files_round_trip_nan_and_inf(tmp_path):
+    rec = _record(localized=False, pos=math.inf, s2=math.nan, nees=math.nan, reason="ambiguous",
+                  decision_set="2 default")
+    path = tmp_path / "r.json.gz"
+    write_records(path, [rec, _record()], {"command": "x"})
+    (back, prov) = read_records(path)
+    assert prov == {"command": "x"}
+    assert back[1] == _record()
+    assert back[0].position_error_m == math.inf and math.isnan(back[0].s2)
+    assert back[0].reason == "ambiguous" and back[0].decision_set == "2 default"
+    write_records(tmp_path / "again.json.gz", [rec, _record()], {"command": "x"})
+    assert sha256_file(path) == sha256_file(tmp_path / "again.json.gz")  # no timestamp
+    (tmp_path / "bad.json.gz").write_bytes(b"not gzip")
+    with pytest.raises(CalibrationFitError):
+        read_records(tmp_path / "bad.json.gz")
+
+
+# ------------------------------------------------------------------ the parts, on synthetic records
+
+
+def _record(*, key: str = "level_set", group: str = "default", localized: bool = True,
+            pos: float = 0.05, rot: float = 1.0, s2: float = 2.0, n: int = 5,
+            cov_scale: float = 1.0, nees: float = 6.0, tr_rot: float = 1e-4, tr_pos: float = 1e-3,
+            features: dict[str, float] | None = None, reason: str | None = None,
+            decision_set: str = "") -> SolveRecord:
+    return SolveRecord(key=key, group=group, localized=localized, reason=reason,
+                       position_error_m=pos, rotation_error_deg=rot,
+                       features=features or {f: 0.0 for f in FEATURES}, s2=s2, n_refined=n,
+                       cov_scale=cov_scale, nees=nees, cov_trace_rotation_rad2=tr_rot,
+                       cov_trace_position_m2=tr_pos, decision_set=decision_set)
+
+
+def test_s2_floor_is_the_quantile_of_the_localized_records():
+    recs = [_record(s2=float(v)) for v in range(1, 11)] + [_record(s2=1e6, localized=False),
+                                                           _record(s2=math.nan)]
+    assert fit_s2_floor(recs, 0.9) == pytest.approx(np.quantile(range(1, 11), 0.9), rel=1e-12)
+    assert fit_s2_floor([_record(localized=False)], 0.9) is None
+
+
+def test_covariance_scale_centres_the_nees_cells_on_six():
+    """Records whose NEES at k = 1 is 3 in one group and 12 in the other (at every operating
+    point): k = sqrt(3 x 12) / 6 = 1, and with NEES doubled k doubles. A cell needs 5
+    records; with none the scale is undefined."""
+    floor = 1.0
+    recs = []
+    for group, nees1 in (("a", 3.0), ("b", 12.0)):
+        for pos in (0.01, 0.02, 0.03, 0.04, 0.045):
+            r = _record(group=group, pos=pos, s2=4.0, n=5)
+            factor = max(r.s2, floor) * (9.0 / 7.0)  # student_t_factor(5) = 9 / 7
+            recs.append(_record(group=group, pos=pos, s2=4.0, n=5, cov_scale=2.5,
+                                nees=nees1 * factor / 2.5))
+    assert fit_covariance_scale(recs, floor) == pytest.approx(1.0, rel=1e-12)
+    doubled = [_record(group=r.group, pos=r.position_error_m, s2=4.0, n=5, cov_scale=2.5,
+                       nees=2 * r.nees) for r in recs]
+    assert fit_covariance_scale(doubled, floor) == pytest.approx(2.0, rel=1e-12)
+    assert fit_covariance_scale(recs[:4], floor) is None
+
+
+def test_refeature_rescales_the_covariance_and_its_features():
+    r = _record(s2=0.5, n=5, cov_scale=2.0, nees=8.0, tr_rot=3e-4, tr_pos=3e-3)
+    new = refeature(r, {"level_set": 3.0}, {"level_set": 1.0})
+    ratio = 3.0 * 1.0 * (9.0 / 7.0) / 2.0  # k * max(s2, f) * t(5) / old scale
+    assert new.cov_scale == pytest.approx(2.0 * ratio, rel=1e-12)
+    assert new.nees == pytest.approx(8.0 / ratio, rel=1e-12)
+    assert new.features["log_s2"] == 0.0  # s2 below the floor: no excess
+    p = gaussian_tolerance_probability(np.diag([1e-4 * ratio] * 3 + [1e-3 * ratio] * 3))
+    assert new.features["logit_gauss"] == pytest.approx(math.log(p / (1 - p)), rel=1e-9)
+    assert refeature(r, {}, {}) is r  # no constants for the key: unchanged
+
+
+def test_logistic_fit_recovers_known_coefficients():
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(20_000, 2))
+    w_true = np.array([-0.5, 1.5, -2.0])
+    y = (rng.random(20_000) < 1 / (1 + np.exp(-(w_true[0] + X @ w_true[1:])))).astype(float)
+    np.testing.assert_allclose(fit_logistic(X, y, ridge=0.0), w_true, atol=0.08)
+
+
+def test_threshold_is_the_smallest_meeting_the_false_accept_target():
+    """Ten 'wrong' answers (1 m off) with confidence below ten 'good' ones: the threshold is
+    the smallest grid value above every wrong one (margin: no false accept allowed in 100
+    frames at 0.5 % x 100 = 0.5); an answer whose chi2 runner-up is within the ratio is
+    ambiguous."""
+    def rec(pos: float, z: float, chi2c: float = 4.0) -> SolveRecord:
+        feats = {f: 0.0 for f in FEATURES}
+        feats.update(mean_iou=z, chi2_competitor=chi2c, iou_competitor=0.0)
+        return _record(pos=pos, features=feats, decision_set="2 default")
+
+    models = {"refined": {"intercept": 0.0, "coef": {"mean_iou": 1.0}},
+              "none": {"intercept": 0.0, "coef": {}}}
+    sets = {"2 default": [rec(1.0, z) for z in np.linspace(-3, -1, 10)]
+            + [rec(0.05, z) for z in np.linspace(0.5, 2, 10)] + [rec(0.05, 3.0)] * 80}
+    ratio, t = choose_ambiguity_and_threshold(sets, models, FitSettings(
+        chi2_ratio_grid=(2.0,), min_confidence_grid=tuple(k / 100 for k in range(61))))
+    assert ratio == 2.0 and t == pytest.approx(0.27)  # sigmoid(-1) = 0.269 -> 0.27
+    assert decide(rec(0.05, 2.0, chi2c=math.log(1.9)), 2.0, 0.0, models).reason == "ambiguous"
+    assert decide(rec(0.05, 2.0), 2.0, 0.0, models).localized
