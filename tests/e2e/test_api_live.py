@@ -135,8 +135,11 @@ def test_solves_do_not_block_the_event_loop(live_server: str) -> None:
     assert float(np.median(probes)) < 0.25 * solve["seconds"], (probes, solve)
 
 
-def test_quadloc_serve_starts_on_loopback_with_the_demo_map(tmp_path: Path) -> None:
-    """`quadloc serve` (what `make serve` runs): SQLite + demo map, says it is open/loopback."""
+@pytest.mark.parametrize("workers", [1, 2])
+def test_quadloc_serve_starts_on_loopback_with_the_demo_map(tmp_path: Path, workers: int) -> None:
+    """`quadloc serve` (what `make serve` runs): SQLite + demo map, says it is open/loopback;
+    with `--workers 2` too (uvicorn's supervisor: both workers seed the same database and
+    SIGTERM ends the supervisor and its workers)."""
     import os
     import socket
     import sys
@@ -150,7 +153,7 @@ def test_quadloc_serve_starts_on_loopback_with_the_demo_map(tmp_path: Path) -> N
     log = tmp_path / "serve.log"
     with open(log, "wb") as out:
         proc = subprocess.Popen([sys.executable, "-m", "quadloc.service", "serve", "--port",
-                                 str(port)],
+                                 str(port), "--workers", str(workers)],
                                 cwd=REPO, env=env, stdout=out, stderr=subprocess.STDOUT)
     try:
         deadline = time.monotonic() + 60
@@ -167,9 +170,12 @@ def test_quadloc_serve_starts_on_loopback_with_the_demo_map(tmp_path: Path) -> N
         assert r.json()["checks"]["default_map"] == "chess v1"
         assert (tmp_path / "quadloc.db").exists()  # the default SQLite file under the data dir
         assert "loopback" in log.read_text()
+        localized = httpx.post(f"http://127.0.0.1:{port}/v1/maps/chess/localize",
+                               json=LOCALIZE_EXAMPLE, timeout=30)
+        assert localized.status_code == 200 and localized.json()["localized"]
     finally:
         proc.terminate()
-        proc.wait(timeout=10)
+        proc.wait(timeout=20)
 
 
 README = REPO / "README.md"
