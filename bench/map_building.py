@@ -48,9 +48,10 @@ import numpy as np
 from bench.chess_eval import eval_options
 from quadloc.factors.rotations import pose_matrix, rotation_angle
 from quadloc.maps.building.build import build_map
-from quadloc.maps.building.recording import parse_recording, recording_to_dict
+from quadloc.maps.building.recording import recording_to_dict
 from quadloc.maps.compiled import compile_map
 from quadloc.maps.reconstruct import ellipsoid_errors
+from quadloc.service.app.builds import recording_of
 from tests.support.errors import pose_errors
 from tests.support.reference_data import load_chess_map, load_chess_world_from_camera
 from tests.support.simulate import SimulationConfig, simulate_frame
@@ -83,7 +84,7 @@ def run_seed(seed: int, n_frames: int, n_test: int, log=print,
     from dataclasses import replace
 
     # the recording's defaults (odometry noise, ...) except, for the ablation, no camera poses
-    rec = replace(parse_recording(doc), refine_camera_poses=refine_cameras)
+    rec = replace(recording_of(doc), refine_camera_poses=refine_cameras)
     truth_ids = [frames[o.frame].object_ids[o.index] for o in rec.observations]
     truth_label_ok = [frames[o.frame].true_labels[o.index] == o.label
                       for o in rec.observations]

@@ -104,16 +104,18 @@ FRAME_RESPONSE_EXAMPLE: dict[str, Any] = {
 
 #: A recording (the body of ``POST /v1/maps:build``).
 RECORDING_EXAMPLE: dict[str, Any] = {
-    "intrinsics": {"fx": 585.0, "fy": 585.0, "cx": 320.0, "cy": 240.0, "width": 640,
-                   "height": 480},
+    "camera": {"fx": 585.0, "fy": 585.0, "cx": 320.0, "cy": 240.0, "width": 640,
+               "height": 480},
     "name": "My room",
+    "holdout_every": 5,
     "frames": [{"frame_id": "0001",
                 "world_from_camera": {"quaternion_wxyz": [1.0, 0.0, 0.0, 0.0],
                                       "translation_m": [0.0, 0.0, 0.0]},
                 "detections": [{"label": "TV", "ellipse": {"cx": 300.0, "cy": 200.0, "a": 80.0,
                                                            "b": 40.0, "angle": 0.1},
                                 "sigma": 0.02},
-                               {"label": "Chair", "box": [10.0, 200.0, 110.0, 420.0]}]}],
+                               {"label": "Chair", "box": {"xmin": 10.0, "ymin": 200.0,
+                                                           "xmax": 110.0, "ymax": 420.0}}]}],
 }
 
 #: A running build job.

@@ -22,6 +22,7 @@ from quadloc.service.schemas.examples import (
     BUILD_JOB_EXAMPLE,
     RECORDING_EXAMPLE,
 )
+from quadloc.service.schemas.recording import RecordingBody
 
 __all__ = ["router"]
 
@@ -45,12 +46,11 @@ def _ok(code: int, example: dict[str, Any]) -> dict[int | str, Any]:
     responses={**problem_responses(400, 401, 403, 412, 413, 415, 422, 428, 503),
                **_ok(202, {**BUILD_JOB_EXAMPLE, "status": "queued", "stage": "queued",
                            "percent": 0.0, "objects_found": 0})},
-    openapi_extra={"requestBody": {"required": True, "content": {"application/json": {
-        "schema": {"type": "object", "required": ["intrinsics", "frames"]},
+    openapi_extra={"requestBody": {"content": {"application/json": {
         "example": RECORDING_EXAMPLE}}}},
 )
 def start_build(
-    body: Annotated[dict[str, Any], Body()], response: Response, app: AppDep,
+    body: Annotated[RecordingBody, Body()], response: Response, app: AppDep,
     _key: WriteAccess,
     map_id: Annotated[str, Query(pattern=MAP_ID_PATTERN, description="Id of the map to build.")],
     if_match: Annotated[str | None, Header(description="ETag of the map's latest version "

@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: af4397c34a6761aa1884112e107bb49cd01384c4301dc848ab0ba2b6f7bfe8b1
+// openapi-sha256: c413b5e5e2d7c1d41c7db0a653eb9606107c23de0cbda75b9d252cf917076132
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -618,6 +618,105 @@ export interface components {
             cost: number;
         };
         /**
+         * LegacyDetectionIn
+         * @description A detection of the deprecated form: ``box`` may be an array ``[xmin, ymin, xmax, ymax]``.
+         */
+        LegacyDetectionIn: {
+            ellipse?: components["schemas"]["EllipseIn"] | null;
+            box?: components["schemas"]["BoxIn"] | null;
+            /**
+             * Label
+             * @description Category label of the map.
+             */
+            label: string;
+            /**
+             * Sigma
+             * @description Predicted uncertainty (> 0); cost weight 1/sigma.
+             */
+            sigma?: number | null;
+            /**
+             * Log Variance
+             * @description alpha = log sigma^2; sigma = exp(alpha/2).
+             */
+            log_variance?: number | null;
+            /**
+             * Score
+             * @description Detector score.
+             */
+            score?: number | null;
+            /**
+             * Track Id
+             * @description The detector's / tracker's object track.
+             */
+            track_id?: string | null;
+        };
+        /**
+         * LegacyFrameIn
+         * @description A frame of the deprecated form.
+         */
+        LegacyFrameIn: {
+            /**
+             * Frame Id
+             * @description Defaults to the frame's position.
+             */
+            frame_id?: string | null;
+            /** @description The app's camera pose (m), in the recording's `convention`. */
+            world_from_camera: components["schemas"]["PoseIn"];
+            /**
+             * Timestamp
+             * @description Client clock (s); informative.
+             */
+            timestamp?: number | null;
+            /** Detections */
+            detections?: components["schemas"]["LegacyDetectionIn"][];
+        };
+        /**
+         * LegacyRecordingIn
+         * @deprecated
+         * @description DEPRECATED form of earlier releases (``intrinsics``, boxes as arrays); read for one more
+         *     release, its build report carries a deprecation warning.
+         */
+        LegacyRecordingIn: {
+            /**
+             * Name
+             * @description Name of the built map.
+             * @default Built map
+             */
+            name?: string;
+            /**
+             * Up Axis
+             * @description World up direction of the app's world frame.
+             * @default [
+             *       0,
+             *       0,
+             *       1
+             *     ]
+             */
+            up_axis?: number[];
+            /**
+             * Size Priors
+             * @description Label -> prior on its objects' semi-axes.
+             */
+            size_priors?: {
+                [key: string]: components["schemas"]["SizePriorIn"];
+            };
+            /**
+             * Refine Camera Poses
+             * @description Refine the app's camera poses with the objects (tied by their relative poses with `odometry_noise`).
+             * @default true
+             */
+            refine_camera_poses?: boolean;
+            odometry_noise?: components["schemas"]["OdometryNoiseIn"];
+            /**
+             * Holdout Every
+             * @description Hold every k-th frame (positions k-1, 2k-1, ...) out of the build: those frames, with their app poses as reference, calibrate the map (POST /v1/maps/{map_id}/calibration with the same recording).
+             */
+            holdout_every?: number | null;
+            intrinsics: components["schemas"]["CameraIn"];
+            /** Frames */
+            frames: components["schemas"]["LegacyFrameIn"][];
+        };
+        /**
          * LocalizeOptionsIn
          * @description Solver options; omitted fields take the server defaults (shown).
          */
@@ -901,6 +1000,35 @@ export interface components {
             quality: components["schemas"]["ObjectQualityReport"];
         };
         /**
+         * OdometryNoiseIn
+         * @description Noise of the app's poses between two recorded frames, a random walk (defaults shown;
+         *     ``quadloc.maps.building.recording.OdometryNoise`` states the model).
+         */
+        OdometryNoiseIn: {
+            /**
+             * Rotation Rad Per Sqrt M
+             * @default 0.005
+             */
+            rotation_rad_per_sqrt_m?: number;
+            /**
+             * Translation M Per Sqrt M
+             * @default 0.01
+             */
+            translation_m_per_sqrt_m?: number;
+            /**
+             * Rotation Rad Per Step
+             * @description Floor per frame step (rad), > 0.
+             * @default 0.0005
+             */
+            rotation_rad_per_step?: number;
+            /**
+             * Translation M Per Step
+             * @description Floor per frame step (m), > 0.
+             * @default 0.001
+             */
+            translation_m_per_step?: number;
+        };
+        /**
          * PoseIn
          * @description A ``world_from_camera`` pose: `quaternion_wxyz` (or `quaternion_xyzw`) + `translation_m`,
          *     or a 4x4 `matrix` given as a list of ROWS (row-major).
@@ -1004,6 +1132,111 @@ export interface components {
             field: string;
             /** Message */
             message: string;
+        };
+        /**
+         * RecordingDetectionIn
+         * @description A detection as for localize, plus an optional ``track_id``: detections of one track (and
+         *     label) are one object.
+         */
+        RecordingDetectionIn: {
+            ellipse?: components["schemas"]["EllipseIn"] | null;
+            box?: components["schemas"]["BoxIn"] | null;
+            /**
+             * Label
+             * @description Category label of the map.
+             */
+            label: string;
+            /**
+             * Sigma
+             * @description Predicted uncertainty (> 0); cost weight 1/sigma.
+             */
+            sigma?: number | null;
+            /**
+             * Log Variance
+             * @description alpha = log sigma^2; sigma = exp(alpha/2).
+             */
+            log_variance?: number | null;
+            /**
+             * Score
+             * @description Detector score.
+             */
+            score?: number | null;
+            /**
+             * Track Id
+             * @description The detector's / tracker's object track.
+             */
+            track_id?: string | null;
+        };
+        /**
+         * RecordingFrameIn
+         * @description One recorded frame: the app's camera pose and the frame's detections.
+         */
+        RecordingFrameIn: {
+            /**
+             * Frame Id
+             * @description Defaults to the frame's position.
+             */
+            frame_id?: string | null;
+            /** @description The app's camera pose (m), in the recording's `convention`. */
+            world_from_camera: components["schemas"]["PoseIn"];
+            /**
+             * Timestamp
+             * @description Client clock (s); informative.
+             */
+            timestamp?: number | null;
+            /** Detections */
+            detections?: components["schemas"]["RecordingDetectionIn"][];
+        };
+        /**
+         * RecordingIn
+         * @description A recording: the camera, posed frames with detections, build options.
+         */
+        RecordingIn: {
+            /**
+             * Name
+             * @description Name of the built map.
+             * @default Built map
+             */
+            name?: string;
+            /**
+             * Up Axis
+             * @description World up direction of the app's world frame.
+             * @default [
+             *       0,
+             *       0,
+             *       1
+             *     ]
+             */
+            up_axis?: number[];
+            /**
+             * Size Priors
+             * @description Label -> prior on its objects' semi-axes.
+             */
+            size_priors?: {
+                [key: string]: components["schemas"]["SizePriorIn"];
+            };
+            /**
+             * Refine Camera Poses
+             * @description Refine the app's camera poses with the objects (tied by their relative poses with `odometry_noise`).
+             * @default true
+             */
+            refine_camera_poses?: boolean;
+            odometry_noise?: components["schemas"]["OdometryNoiseIn"];
+            /**
+             * Holdout Every
+             * @description Hold every k-th frame (positions k-1, 2k-1, ...) out of the build: those frames, with their app poses as reference, calibrate the map (POST /v1/maps/{map_id}/calibration with the same recording).
+             */
+            holdout_every?: number | null;
+            camera: components["schemas"]["CameraIn"];
+            /**
+             * Convention
+             * @description Camera axes of every `world_from_camera` (opengl = ARKit/ARCore).
+             * @default opencv
+             * @enum {string}
+             */
+            convention?: "opencv" | "opengl";
+            /** Frames */
+            frames: components["schemas"]["RecordingFrameIn"][];
         };
         /**
          * RefinementReport
@@ -1212,6 +1445,23 @@ export interface components {
              * @description The session expires after this idle time.
              */
             idle_timeout_s: number;
+        };
+        /**
+         * SizePriorIn
+         * @description Prior on every log semi-axis of a label's objects: ``N(log semi_axis_m, log_sigma^2)``.
+         */
+        SizePriorIn: {
+            /**
+             * Semi Axis M
+             * @description Typical semi-axis (m).
+             */
+            semi_axis_m: number;
+            /**
+             * Log Sigma
+             * @description Std of the log semi-axis (dimensionless).
+             * @default 0.5
+             */
+            log_sigma?: number;
         };
     };
     responses: never;
@@ -2795,8 +3045,6 @@ export interface operations {
                             center: number[];
                         };
                     }[];
-                } & {
-                    [key: string]: unknown;
                 };
             };
         };
@@ -4021,7 +4269,7 @@ export interface operations {
             content: {
                 /**
                  * @example {
-                 *       "intrinsics": {
+                 *       "camera": {
                  *         "fx": 585,
                  *         "fy": 585,
                  *         "cx": 320,
@@ -4030,6 +4278,7 @@ export interface operations {
                  *         "height": 480
                  *       },
                  *       "name": "My room",
+                 *       "holdout_every": 5,
                  *       "frames": [
                  *         {
                  *           "frame_id": "0001",
@@ -4060,21 +4309,19 @@ export interface operations {
                  *             },
                  *             {
                  *               "label": "Chair",
-                 *               "box": [
-                 *                 10,
-                 *                 200,
-                 *                 110,
-                 *                 420
-                 *               ]
+                 *               "box": {
+                 *                 "xmin": 10,
+                 *                 "ymin": 200,
+                 *                 "xmax": 110,
+                 *                 "ymax": 420
+                 *               }
                  *             }
                  *           ]
                  *         }
                  *       ]
                  *     }
                  */
-                "application/json": {
-                    [key: string]: unknown;
-                };
+                "application/json": components["schemas"]["RecordingIn"] | components["schemas"]["LegacyRecordingIn"];
             };
         };
         responses: {
