@@ -34,6 +34,7 @@ COMMANDS: dict[str, str] = {
     "localize": "localize:cmd_localize",
     "track": "track:cmd_track",
     "import-recording": "importing:cmd_import_recording",
+    "calibrate": "calibrate:cmd_calibrate",
 }
 
 EPILOG = """\
@@ -265,6 +266,21 @@ def build_parser() -> argparse.ArgumentParser:
     _db(p, server=False)
 
     _import_parser(sub, fmt)
+
+    p = _command(sub.add_parser(
+        "calibrate", formatter_class=fmt,
+        help="calibrate a map version from the recording it was built from",
+        description="Fit the covariance scale and the confidence model of a map version from "
+                    "the frames its recording held out of the build (holdout_every; their app "
+                    "poses the reference), store them with the version (localize uses them), "
+                    "and print the mean NEES and the confidence calibration error before / "
+                    "after on half of those frames the fit did not use. Local database only.",
+        epilog="example:\n  quadloc calibrate room.json --map my-room\n"), "calibrate")
+    p.add_argument("file", help="recording JSON with holdout_every ('-' = stdin, .gz ok)")
+    p.add_argument("--map", required=True, metavar="ID", help="map id")
+    p.add_argument("--version", type=int, help="map version (default: latest)")
+    p.add_argument("--json", action="store_true", help="also print the result as JSON (stderr)")
+    _db(p)
 
     p = _command(sub.add_parser("openapi", help="print or write the OpenAPI document"),
                  "openapi")

@@ -83,6 +83,7 @@ __all__ = [
     "fit_covariance_scale",
     "fit_logistic",
     "fit_s2_floor",
+    "map_calibration_applies",
     "read_records",
     "record_from_evidence",
     "refeature",
@@ -305,6 +306,14 @@ class CalibrationConstants:
             table(f"confidence_models[{m!r}].metric_offset", a.get("metric_offset", {}),
                   b.get("metric_offset", {}))
         return out
+
+
+def map_calibration_applies(calibration: CalibrationConstants | None, key: str) -> bool:
+    """A map's own calibration replaces the shipped constants for the calibration keys it was
+    fitted for (``provenance["fitted_keys"]``, set by
+    ``quadloc.service.localization.map_calibration``), only: its confidence model was fitted
+    on those keys' answers."""
+    return calibration is not None and key in calibration.provenance.get("fitted_keys", ())
 
 
 # ------------------------------------------------------------------ settings

@@ -12,6 +12,7 @@ from typing import Any
 __all__ = [
     "BUILD_JOB_DONE_EXAMPLE",
     "BUILD_JOB_EXAMPLE",
+    "CALIBRATION_EXAMPLE",
     "CHESS_IMPORT_EXAMPLE",
     "EXAMPLE_FRAME_PATH",
     "EXAMPLE_FRAME_SOURCE",
@@ -147,3 +148,14 @@ BUILD_JOB_DONE_EXAMPLE: dict[str, Any] = {
                               "stopped_early": False, "camera_poses_refined": True},
                "timings_s": {"association": 0.8, "refinement": 6.1, "total": 7.0},
                "warnings": []}}
+
+
+#: A map version's calibration (``POST`` / ``GET /v1/maps/{map_id}/calibration``).
+CALIBRATION_EXAMPLE: dict[str, Any] = {
+    "map_id": "my-room", "map_version": 1, "key": "level_set", "fit_frames": 250,
+    "covariance_scale": 39.9, "shipped_covariance_scale": 1.83, "s2_floor": 3.6,
+    "min_confidence": 0.36,
+    "before": {"frames": 250, "localized": 247, "nees_frames": 125, "mean_nees": 382.9,
+               "calibration_error": 0.105, "mean_confidence": 0.54, "success_rate": 0.49},
+    "after": {"frames": 250, "localized": 247, "nees_frames": 125, "mean_nees": 8.7,
+              "calibration_error": 0.074, "mean_confidence": 0.52, "success_rate": 0.49}}
