@@ -40,6 +40,7 @@ import numpy as np
 
 from bench.map_building import simulated_recording
 from quadloc.maps.building.build import build_map
+from quadloc.maps.building.recording import BuildLimits
 from quadloc.maps.compiled import compile_map
 from quadloc.service.app.builds import recording_of, validate_recording
 from quadloc.service.app.conversions import held_out_frames_from_wire
@@ -61,7 +62,8 @@ def run(seed: int, detector: str, frames: int, holdout_every: int, log: Any = pr
                            **DETECTORS[detector])  # type: ignore[arg-type]
     doc, _, _, _ = simulated_recording(seed, frames, cfg, holdout_every=holdout_every)
     t = time.monotonic()
-    scene, _ = build_map(recording_of(doc), map_id="calibration-bench")
+    limits = BuildLimits(max_frames=10 * frames, max_detections=100 * frames)
+    scene, _ = build_map(recording_of(doc, limits), map_id="calibration-bench")
     camera, held = held_out_frames_from_wire(validate_recording(doc))
     refs = [ReferenceFrame(fid, T, dets) for fid, T, dets in held]
     t_build = time.monotonic() - t

@@ -543,7 +543,10 @@ def choose_ambiguity_and_threshold(
     """``(AMBIGUITY_CHI2_RATIO, MIN_CONFIDENCE)``: for each ratio of the grid, the smallest
     threshold whose false accepts are <= ``false_accept_target x false_accept_tuning_margin``
     of the frames in every set; of those, the pair keeping the most good frames (ties: the
-    larger ratio, more cautious). None when no pair meets the target."""
+    larger ratio, more cautious). None when no pair meets the target, or without decision
+    sets (nothing to choose on: e.g. a map's calibration from the user's frames)."""
+    if not sets:
+        return None
     confs = {name: [confidence_probability(r.key, r.features, models) if r.localized else 0.0
                     for r in rows] for name, rows in sets.items()}
     limit = settings.false_accept_target * settings.false_accept_tuning_margin

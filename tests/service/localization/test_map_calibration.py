@@ -88,3 +88,8 @@ def test_fit_on_a_noisier_detector_brings_nees_into_band(chess: tuple) -> None:
     assert 3 <= cal.after.mean_nees <= 12, cal
     assert cal.constants.provenance["fitted_keys"] == ["level_set"] and cal.key == "level_set"
     assert cal.before.frames == cal.after.frames == 45 and cal.fit_frames == 45
+    # no decision sets among the user's frames: the ambiguity ratio and the default
+    # min_confidence are the shipped ones
+    shipped = CalibrationConstants.shipped()
+    assert cal.constants.min_confidence == shipped.min_confidence
+    assert cal.constants.ambiguity_chi2_ratio == shipped.ambiguity_chi2_ratio
