@@ -98,9 +98,9 @@ def markdown(res: dict[str, Any], command: str) -> str:
     s = res["summary"]
     return "\n".join([
         "A map's own calibration (`quadloc calibrate`, issue 30) on recordings made with a "
-        "detector other than the default one: the map is built without every "
-        f"{res['holdout_every']}rd frame; those frames (app poses as reference) are split, "
-        "half fit the covariance scale and confidence model "
+        "detector other than the default one: the map is built without every k-th frame "
+        f"(k = {res['holdout_every']}, {res['frames']} frames); those frames (app poses as "
+        "reference) are split, half fit the covariance scale and confidence model "
         "(`quadloc.service.localization.calibration_fit`), half report. Mean NEES over the "
         "localized report frames within 10 cm (6 = a well-scaled 6-DoF covariance); "
         "calibration error = expected calibration error of `confidence` (10 bins).",

@@ -121,7 +121,8 @@ def calibration_error(confidence: FloatArray, outcome: FloatArray, bins: int = 1
     y = np.asarray(outcome, dtype=float)
     if p.size == 0:
         return math.nan
-    k = np.clip((p * bins).astype(int), 0, bins - 1)
+    edges = np.linspace(0.0, 1.0, bins + 1)
+    k = np.clip(np.searchsorted(edges, p, side="right") - 1, 0, bins - 1)
     total = 0.0
     for b in np.unique(k):
         sel = k == b
