@@ -3,7 +3,7 @@ covariance and confidence mean what they say for a detector other than the defau
 
 Usage::
 
-    python -m bench.map_calibration [--seeds 11,12] [--frames 600] [--holdout-every 3]
+    python -m bench.map_calibration [--seeds 21,22] [--frames 3000] [--holdout-every 2]
                                     [--detectors sharp,noisy] [--json PATH] [--write-results]
 
 Per seed and detector:
@@ -20,9 +20,11 @@ Per seed and detector:
 
 Detectors (``tests.support.simulate.SimulationConfig``; the shipped constants were fitted on
 the default one, centre noise 0.04 sqrt(ab), log-axis noise 0.06, angle 4 deg): ``sharp``
-(0.02, 0.03, 2 deg) and ``noisy`` (0.08, 0.12, 8 deg). Nothing here is tuned: the fit's
-settings are the shipped ones (``FitSettings()``), and the seeds are not those of the shipped
-constants (bench.trust tunes on 0-9 and 100-109).
+(0.02, 0.03, 2 deg) and ``noisy`` (0.08, 0.12, 8 deg). Seeds 11 and 12 were looked at while
+choosing the protocol (3000 frames, every 2nd held out: 750 report frames; fewer gave a
+calibration error dominated by sampling noise) and the fit's single operating point
+(``map_calibration.USER_FIT_SETTINGS``); the figures of docs/results.md are on other seeds
+(and not those of the shipped constants: bench.trust tunes on 0-9 and 100-109).
 """
 
 from __future__ import annotations
@@ -112,9 +114,9 @@ def markdown(res: dict[str, Any], command: str) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", default="11,12")
-    ap.add_argument("--frames", type=int, default=600)
-    ap.add_argument("--holdout-every", type=int, default=3)
+    ap.add_argument("--seeds", default="21,22")
+    ap.add_argument("--frames", type=int, default=3000)
+    ap.add_argument("--holdout-every", type=int, default=2)
     ap.add_argument("--detectors", default="sharp,noisy")
     ap.add_argument("--json", type=Path)
     ap.add_argument("--write-results", action="store_true")
