@@ -13,8 +13,8 @@ Steps of :func:`fit_map_calibration`:
    :class:`~quadloc.service.localization.calibration_fit.SolveRecord` (errors against the
    reference: position m, rotation deg, NEES of the reported covariance);
 3. :func:`~quadloc.service.localization.calibration_fit.fit_calibration` (base: the shipped
-   constants, settings :data:`USER_FIT_SETTINGS`) fits ``k``, ``f`` and the confidence model for the solve's calibration key
-   (``provenance["fitted_keys"]``: only that key uses them, see
+   constants, settings :data:`USER_FIT_SETTINGS`) fits ``k``, ``f`` and the confidence model
+   for the solve's calibration key (``provenance["fitted_keys"]``: only that key uses them, see
    :func:`~quadloc.service.localization.calibration_fit.map_calibration_applies`); the
    ambiguity ratio and the default ``min_confidence`` are carried over (no decision sets);
 4. the report frames are localized with the shipped and with the new constants:
