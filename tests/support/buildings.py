@@ -15,8 +15,9 @@ up) and moved to its grid cell. How rooms repeat (``mode``):
   random place of the room's floor box, its height kept, random yaw).
 
 With ``corridors``, a corridor runs along each row of rooms with a few objects (random Chess
-shapes) every few metres. Maps hold at most ``LIMITS["max_objects"]`` objects: a building that
-would exceed it drops one object per room (the same one in every room of an exact building).
+shapes) every :data:`CORRIDOR_STEP_M`. Maps hold at most ``LIMITS["max_objects"]`` objects: a
+building that would exceed it drops the fewest objects per room that fit (the same ones in every
+room of an exact building; 1,000 rooms with corridors: 8 objects per room).
 
 Zones: every room is a zone ``"f<floor>-r<row>-c<col>"`` (:attr:`Building.rooms`), corridors
 zones ``"f<floor>-corridor-<row>"``. Object ids are ``"<zone>/<chess id>"`` (``+<k>`` for added
@@ -69,7 +70,7 @@ TUNE_SEEDS = tuple(range(0, 100))
 #: ... and report on these (never used for tuning).
 REPORT_SEEDS = tuple(range(1000, 1100))
 #: Corridor objects: one every this many metres along a row of rooms.
-CORRIDOR_STEP_M = 4.0
+CORRIDOR_STEP_M = 6.0
 
 
 @dataclass(frozen=True)
@@ -161,8 +162,11 @@ def make_building(n_rooms: int, mode: str = "perturbed", seed: int = 0, *,
     centres = np.array([o.ellipsoid.center for o in base])
     middle = np.array([*centres[:, :2].mean(axis=0), 0.0])
     lo, hi = centres[:, :2].min(axis=0) - 0.5, centres[:, :2].max(axis=0) + 0.5
-    drop_all = n_rooms * len(base) > LIMITS["max_objects"] - (4 * n_rooms if corridors else 0)
-    exact_drop = int(rng.integers(len(base))) if drop_all else -1
+    per_room_hall = ROOM_SPACING_M / CORRIDOR_STEP_M if corridors else 0.0
+    room_budget = (LIMITS["max_objects"] - per_room_hall * n_rooms) / n_rooms
+    n_drop = max(0, math.ceil(len(base) - room_budget))
+    drop_all = n_drop > 0
+    exact_drop = set(rng.choice(len(base), n_drop, replace=False).tolist())
     side = math.ceil(math.sqrt(min(n_rooms, ROOMS_PER_FLOOR)))
     objects: list[MapObject] = []
     rooms: list[Room] = []
@@ -175,11 +179,12 @@ def make_building(n_rooms: int, mode: str = "perturbed", seed: int = 0, *,
         R = _yaw(theta)
         world_from_room = pose_matrix(R, origin - R @ middle)
         mine: list[MapObject] = []
-        drop = exact_drop if mode == "exact" or (drop_all and mode != "perturbed") else -1
+        drop = exact_drop
         if mode == "perturbed":
-            drop = int(rng.integers(len(base))) if drop_all or rng.random() < 0.5 else -1
+            drop = set(rng.choice(len(base), max(n_drop, int(rng.random() < 0.5)),
+                                  replace=False).tolist())
         for j, obj in enumerate(base):
-            if j == drop:
+            if j in drop:
                 continue
             oid = f"{zone}/{obj.object_id}"
             if mode == "exact":
