@@ -30,8 +30,9 @@ from quadloc.factors.camera import Camera, Ellipsoid
 from quadloc.factors.gravity_factor import GravityMeasurement
 from quadloc.factors.pose_residuals import expmap_pose3
 from quadloc.factors.rotations import invert_pose
-from quadloc.maps.compiled import CompiledMap, compile_map
+from quadloc.maps.compiled import CompiledMap, compile_map, compiled_subset
 from quadloc.maps.model import SceneMap
+from quadloc.maps.places import place_index
 from quadloc.service.limits import NO_REFINEMENT
 from quadloc.service.localization.calibration import MIN_CONFIDENCE, S2_FLOOR
 from quadloc.service.localization.calibration_fit import (
@@ -53,6 +54,11 @@ from quadloc.service.localization.confidence import (
     covariance_scale,
     evidence_features,
     residual_variance,
+)
+from quadloc.service.localization.constellations import (
+    PLACE_SEARCH_MIN_OBJECTS,
+    PlaceSeeds,
+    place_seeds,
 )
 from quadloc.service.localization.gravity import (
     answer_gate_deg,
@@ -199,12 +205,22 @@ def localize(
         return _not_localized("too_few_detections", options.metric, 0, timings, t0)
     if len(usable) < 2:
         return _not_localized("no_label_match", options.metric, 0, timings, t0)
+    seeds: PlaceSeeds | None = None
+    if len(compiled) >= PLACE_SEARCH_MIN_OBJECTS and len(usable) >= 3:
+        compiled, seeds = _place_stage(detections, usable, compiled, camera, options, t0, cpu0,
+                                       timings)
+        if seeds is None:
+            return _not_localized("no_hypothesis_above_inlier_threshold", options.metric, 0,
+                                  timings, t0)
+        usable = [i for i in usable if len(compiled.indices_for(detections[i].label)) > 0]
+        if len(usable) < 2:
+            return _not_localized("no_label_match", options.metric, 0, timings, t0)
     solve = _start(detections, usable, compiled, camera, options, gravity, t0, cpu0, timings,
                    calibration)
     prior_candidate = None if prior is None else _prior_stage(solve, prior)
     if prior_candidate is not None and len(prior_candidate.inliers) >= len(usable):
         return _answer(solve, prior_candidate, [prior_candidate], ambiguous=False)
-    outcome = _search_stage(solve)
+    outcome = _search_stage(solve, seeds)
     if outcome.camera_from_world is None:
         if prior_candidate is not None:
             return _answer(solve, prior_candidate, [prior_candidate], ambiguous=False)
@@ -346,15 +362,37 @@ def _prior_matches(scorer: MatchScorer, prior: PosePrior, threshold: float) -> l
 # ------------------------------------------------------------------ hypotheses
 
 
-def _search_stage(solve: _Solve) -> RansacOutcome:
+def _place_stage(
+    detections: Sequence[Detection], usable: list[int], compiled: CompiledMap, camera: Camera,
+    options: LocalizationOptions, t0: float, cpu0: float, timings: dict[str, float],
+) -> tuple[CompiledMap, PlaceSeeds | None]:
+    """The ``places`` stage of a large map (>= ``PLACE_SEARCH_MIN_OBJECTS`` objects): the
+    constellation search (:func:`quadloc.service.localization.constellations.place_seeds`);
+    returns the sub-map of the places it keeps (the later stages score and refine there) and
+    the seeds, or (``compiled``, None) when no pose came up."""
+    tp = time.perf_counter()
+    params = np.array([detections[i].ellipse.params() for i in usable])
+    seeds = place_seeds(compiled, place_index(compiled), camera, params,
+                        [detections[i].label for i in usable],
+                        np.random.default_rng(options.seed),
+                        Deadline.cpu_budget(options.time_budget_ms, cpu_start=cpu0,
+                                            wall_start=t0))
+    timings["places"] = (time.perf_counter() - tp) * 1e3
+    if len(seeds.poses) == 0:
+        return compiled, None
+    return compiled_subset(compiled, seeds.objects), seeds
+
+
+def _search_stage(solve: _Solve, seeds: PlaceSeeds | None = None) -> RansacOutcome:
     """The ``hypotheses`` stage: the RANSAC search (seeded by ``options.seed``) up to the
-    budget."""
+    budget; with a large map's ``seeds`` (:func:`_place_stage`), those poses only."""
     th = time.perf_counter()
     options = solve.options
     outcome = ransac(solve.scorer, solve.up_world, inlier_iou=options.inlier_iou,
                      min_inliers=options.min_inliers,
                      max_hypotheses=options.ransac_max_hypotheses,
-                     rng=np.random.default_rng(options.seed), deadline=solve.deadline)
+                     rng=np.random.default_rng(options.seed), deadline=solve.deadline,
+                     seeds=None if seeds is None else seeds.poses, sample=seeds is None)
     solve.evaluated += outcome.hypotheses_evaluated
     solve.timings["hypotheses"] = (time.perf_counter() - th) * 1e3
     return outcome
