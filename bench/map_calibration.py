@@ -107,9 +107,11 @@ def markdown(res: dict[str, Any], command: str) -> str:
         "localized report frames within 10 cm (6 = a well-scaled 6-DoF covariance); "
         "calibration error = expected calibration error of `confidence` (10 bins).",
         "", *rows, "",
-        f"Over all runs: mean NEES after {_f(s['mean_nees_after'])} (target [4, 9]), largest "
-        f"calibration error after {_f(s['max_calibration_error_after'], '.3f')} (target "
-        f"<= 0.05). Reproduce: `{command}`."])
+        "Per recording after calibration: mean NEES from "
+        + (" to ".join(_f(v) for v in s["nees_after_range"]) if s["nees_after_range"] else "-")
+        + " (target [4, 9]), calibration error at most "
+        f"{_f(s['max_calibration_error_after'], '.3f')} (target <= 0.05). Reproduce: "
+        f"`{command}`."])
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -120,14 +122,23 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--detectors", default="sharp,noisy")
     ap.add_argument("--json", type=Path)
     ap.add_argument("--write-results", action="store_true")
+    ap.add_argument("--combine", type=Path, nargs="+", metavar="JSON",
+                    help="instead of running: the runs of these --json files (parts of the "
+                         "default command run in parallel, e.g. one per seed and detector)")
     args = ap.parse_args(argv)
     log = lambda m: print(m, file=sys.stderr)  # noqa: E731
-    runs = [run(int(s), d, args.frames, args.holdout_every, log)
-            for d in args.detectors.split(",") for s in args.seeds.split(",")]
+    if args.combine:
+        parts = [json.loads(p.read_text()) for p in args.combine]
+        runs = [r for part in parts for r in part["runs"]]
+        args.frames, args.holdout_every = parts[0]["frames"], parts[0]["holdout_every"]
+    else:
+        runs = [run(int(s), d, args.frames, args.holdout_every, log)
+                for d in args.detectors.split(",") for s in args.seeds.split(",")]
     after = [r["after"]["mean_nees"] for r in runs if r["after"]["mean_nees"] is not None]
     res = {"frames": args.frames, "holdout_every": args.holdout_every, "runs": runs,
            "summary": {
                "mean_nees_after": float(np.mean(after)) if after else None,
+               "nees_after_range": [min(after), max(after)] if after else None,
                "max_calibration_error_after": max(
                    (r["after"]["calibration_error"] for r in runs
                     if r["after"]["calibration_error"] is not None), default=None)}}
@@ -138,9 +149,15 @@ def main(argv: list[str] | None = None) -> int:
     if args.write_results:
         from bench.results_doc import update_results_section
 
-        cmd = "python -m bench.map_calibration " + " ".join(
-            argv if argv is not None else sys.argv[1:])
-        update_results_section("map_calibration", markdown(res, cmd.strip()))
+        if args.combine:  # the parts' command: the default one, split by seed and detector
+            cmd = ("python -m bench.map_calibration --seeds "
+                   + ",".join(sorted({str(r["seed"]) for r in runs})) + " --detectors "
+                   + ",".join(sorted({r["detector"] for r in runs})) + " --write-results")
+        else:
+            cmd = "python -m bench.map_calibration " + " ".join(
+                argv if argv is not None else sys.argv[1:])
+        update_results_section("map_calibration", markdown(res, cmd.strip()),
+                               command=cmd.strip())
     return 0
 
 
