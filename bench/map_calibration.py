@@ -125,6 +125,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--combine", type=Path, nargs="+", metavar="JSON",
                     help="instead of running: the runs of these --json files (parts of the "
                          "default command run in parallel, e.g. one per seed and detector)")
+    ap.add_argument("--note", action="append", default=[],
+                    help="with --combine: a sentence for the results section (e.g. a part "
+                         "that did not finish, and why)")
     args = ap.parse_args(argv)
     log = lambda m: print(m, file=sys.stderr)  # noqa: E731
     if args.combine:
@@ -156,8 +159,10 @@ def main(argv: list[str] | None = None) -> int:
         else:
             cmd = "python -m bench.map_calibration " + " ".join(
                 argv if argv is not None else sys.argv[1:])
-        update_results_section("map_calibration", markdown(res, cmd.strip()),
-                               command=cmd.strip())
+        text = markdown(res, cmd.strip())
+        if args.note:
+            text += "\n\n" + " ".join(args.note)
+        update_results_section("map_calibration", text, command=cmd.strip())
     return 0
 
 
