@@ -99,6 +99,7 @@ def markdown(res: dict[str, Any], command: str) -> str:
                     f" | {_f(a['mean_confidence'])} / {_f(a['success_rate'])} |")
     s = res["summary"]
     return "\n".join([
+        "## A map's own calibration from the user's recording", "",
         "A map's own calibration (`quadloc calibrate`, issue 30) on recordings made with a "
         "detector other than the default one: the map is built without every k-th frame "
         f"(k = {res['holdout_every']}, {res['frames']} frames); those frames (app poses as "
