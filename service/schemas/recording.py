@@ -123,14 +123,19 @@ class RecordingIn(_RecordingOptions):
 
 
 class LegacyDetectionIn(RecordingDetectionIn):
-    """A detection of the deprecated form: ``box`` may be an array ``[xmin, ymin, xmax, ymax]``."""
+    """A detection of the deprecated form: ``box`` may be an array ``[xmin, ymin, xmax, ymax]``
+    and ``track_id`` an integer."""
 
     @model_validator(mode="before")
     @classmethod
     def _box_array(cls, data: Any) -> Any:
-        box = data.get("box") if isinstance(data, dict) else None
+        if not isinstance(data, dict):
+            return data
+        box, track = data.get("box"), data.get("track_id")
         if isinstance(box, list) and len(box) == 4:
-            return {**data, "box": dict(zip(("xmin", "ymin", "xmax", "ymax"), box, strict=True))}
+            data = {**data, "box": dict(zip(("xmin", "ymin", "xmax", "ymax"), box, strict=True))}
+        if isinstance(track, int) and not isinstance(track, bool):  # ids were str | int
+            data = {**data, "track_id": str(track)}
         return data
 
 
@@ -139,6 +144,14 @@ class LegacyFrameIn(RecordingFrameIn):
 
     detections: list[LegacyDetectionIn] = Field(  # type: ignore[assignment]
         default_factory=list, max_length=MAX_DETECTIONS)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _integer_id(cls, data: Any) -> Any:
+        fid = data.get("frame_id") if isinstance(data, dict) else None
+        if isinstance(fid, int) and not isinstance(fid, bool):  # ids were str | int
+            return {**data, "frame_id": str(fid)}
+        return data
 
 
 class LegacyRecordingIn(_RecordingOptions):

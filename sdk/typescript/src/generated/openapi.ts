@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: 2167e190043cf7826d47ebbe9312cbb05dbcab69042f355d0328324677818c64
+// openapi-sha256: 12743be012bcec7cf49f18dd440e75c1eb37d841b498bb758eb82f009f99f38f
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -714,7 +714,8 @@ export interface components {
         };
         /**
          * LegacyDetectionIn
-         * @description A detection of the deprecated form: ``box`` may be an array ``[xmin, ymin, xmax, ymax]``.
+         * @description A detection of the deprecated form: ``box`` may be an array ``[xmin, ymin, xmax, ymax]``
+         *     and ``track_id`` an integer.
          */
         LegacyDetectionIn: {
             ellipse?: components["schemas"]["EllipseIn"] | null;
