@@ -25,11 +25,13 @@ import numpy as np
 from quadloc.factors.arrays import FloatArray
 from quadloc.factors.camera import Camera
 from quadloc.factors.conics import Ellipse
+from quadloc.factors.names import text_problem
 from quadloc.factors.rotations import (
     pose_matrix,
     quaternion_wxyz_from_rotation,
     rotation_from_quaternion_wxyz,
 )
+from quadloc.maps.model import label_problem
 
 __all__ = [
     "BuildLimits",
@@ -187,6 +189,21 @@ def _ellipse(errors: list[dict[str, str]], path: str, det: Mapping[str, Any]) ->
     return Ellipse(*nums) if len(nums) == len(vals) else None
 
 
+def _text(errors: list[dict[str, str]], field: str, value: object, *,
+          label: bool = False) -> bool:
+    """Check a text (or integer id) of the recording that is stored (in the map or the job's
+    report) and echoed: :func:`quadloc.maps.model.label_problem` for what becomes a map label
+    or name (``label``), :func:`quadloc.factors.names.text_problem` otherwise; False and an
+    error naming ``field`` when refused (422 at intake, not a job failing at 95 %)."""
+    if not isinstance(value, str):
+        return True
+    problem = label_problem(value) if label else text_problem(value)
+    if problem is not None:
+        _bad(errors, field, problem)
+        return False
+    return True
+
+
 def parse_recording(data: Any, limits: BuildLimits | None = None) -> Recording:
     """Validate a recording document (module docstring) into a :class:`Recording`."""
     lim = limits or BuildLimits()
@@ -222,6 +239,8 @@ def parse_recording(data: Any, limits: BuildLimits | None = None) -> Recording:
         fid = f.get("frame_id", str(fi))
         if not isinstance(fid, str | int) or isinstance(fid, bool) or len(str(fid)) > 128:
             _bad(errors, f"{path}.frame_id", "must be a string of at most 128 characters")
+        else:
+            _text(errors, f"{path}.frame_id", fid)
         T = _pose(errors, f"{path}.world_from_camera", f.get("world_from_camera"))
         dets = f.get("detections", [])
         if not isinstance(dets, list):
@@ -245,6 +264,8 @@ def parse_recording(data: Any, limits: BuildLimits | None = None) -> Recording:
             if not isinstance(label, str) or not 0 < len(label) <= 128:
                 _bad(errors, f"{dp}.label",
                      "must be a non-empty string of at most 128 characters")
+            elif not _text(errors, f"{dp}.label", label, label=True):
+                label = None
             ell = _ellipse(errors, dp, d)
             sigma = d.get("sigma")
             if sigma is not None:
@@ -254,12 +275,16 @@ def parse_recording(data: Any, limits: BuildLimits | None = None) -> Recording:
                                       or len(str(track)) > 128):
                 _bad(errors, f"{dp}.track_id", "must be a string")
                 track = None
+            elif not _text(errors, f"{dp}.track_id", track):
+                track = None
             if ell is not None and isinstance(label, str):
                 obs.append(Observation(len(frames) - 1, di, label, ell, sigma,
                                        None if track is None else str(track)))
     name = data.get("name", "Built map")
     if not isinstance(name, str) or not 0 < len(name) <= 256:
         _bad(errors, "name", "must be a non-empty string")
+    else:
+        _text(errors, "name", name, label=True)
     up = data.get("up_axis", [0.0, 0.0, 1.0])
     upv = _vec(errors, "up_axis", up, 3)
     priors: dict[str, SizePrior] = {}
@@ -269,6 +294,8 @@ def parse_recording(data: Any, limits: BuildLimits | None = None) -> Recording:
         sp = {}
     for label, p in sp.items():
         path = f"size_priors.{label}"
+        if not _text(errors, "size_priors", label, label=True):
+            continue
         if not isinstance(p, Mapping):
             _bad(errors, path, "must be {semi_axis_m, log_sigma}")
             continue

@@ -261,10 +261,11 @@ class BuildService:
 
     def base_version(self, map_id: str, if_match: str | None) -> int | None:
         """The version a build of ``map_id`` replaces: None for a new map (then ``If-Match``
-        must be absent: ``precondition-failed``); for an existing map ``If-Match`` must name
-        its latest ETag (``precondition-required`` / ``precondition-failed``)."""
+        must be absent: ``precondition-failed``, ``*`` included); for an existing map
+        ``If-Match`` must name its latest ETag or be ``*`` (``precondition-required`` /
+        ``precondition-failed``; the rule of :meth:`MapService.check_etag`)."""
         if self.maps.latest_version(map_id) is None:
-            if if_match is not None:
+            if if_match is not None:  # no current version: no tag matches, not even '*'
                 raise AppError("precondition-failed",
                                f"map {map_id!r} does not exist, so If-Match cannot match; omit "
                                "it to build a new map",

@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: af4397c34a6761aa1884112e107bb49cd01384c4301dc848ab0ba2b6f7bfe8b1
+// openapi-sha256: 8ff11f8420ebf9700e4c1c8c2899be84e22e8e5c136faab6f71ca2d526ba7b16
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -1069,7 +1069,10 @@ export interface components {
              * @description Client clock (s), non-decreasing.
              */
             timestamp: number;
-            /** Frame Id */
+            /**
+             * Frame Id
+             * @description Echoed back.
+             */
             frame_id?: string | null;
             prior?: components["schemas"]["PosePriorIn"] | null;
             /** @description The gravity direction the device measures in this frame's camera (as for localize; `convention` defaults to the session's): a factor on the frame's tilt against the map's up axis. */
