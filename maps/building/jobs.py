@@ -30,10 +30,10 @@ log = logging.getLogger("quadloc.build")
 
 ACTIVE = ("queued", "running")
 
-# The table's description for building queries ONLY: the schema belongs to the Alembic migration
-# ``0002_build_jobs`` (maps/migrations/versions/), which this mirrors, CHECK constraint included
-# (tests/service/api/test_api_build.py compares the two).
-#: The build jobs (migration ``0002_build_jobs``).
+# The table's description for building queries ONLY: the schema belongs to the Alembic migrations
+# ``0002_build_jobs`` and ``0003_build_job_owner`` (maps/migrations/versions/), which this
+# mirrors, CHECK constraint included (tests/service/api/test_api_build.py compares the two).
+#: The build jobs (migrations ``0002_build_jobs``, ``0003_build_job_owner``).
 jobs_table = sa.Table(
     "quadloc_build_jobs",
     sa.MetaData(),
@@ -49,6 +49,8 @@ jobs_table = sa.Table(
     sa.Column("report", sa.Text, nullable=True),
     sa.Column("created_at", sa.DateTime(timezone=True), nullable=False),
     sa.Column("updated_at", sa.DateTime(timezone=True), nullable=False),
+    # the sha256 of the API key that started the job (None: no keys, or before 0003)
+    sa.Column("owner", sa.String(64), nullable=True),
     sa.CheckConstraint("status IN ('queued', 'running', 'succeeded', 'failed')",
                        name="ck_quadloc_build_jobs_status"),
 )
@@ -113,6 +115,7 @@ class BuildJob:
     report: BuildReport | None
     created_at: datetime
     updated_at: datetime
+    owner: str | None = None
 
 
 class JobStore:
@@ -121,13 +124,16 @@ class JobStore:
     def __init__(self, engine: Engine) -> None:
         self.engine = engine
 
-    def create(self, map_id: str, base_version: int | None) -> BuildJob:
+    def create(self, map_id: str, base_version: int | None,
+               owner: str | None = None) -> BuildJob:
+        """A new ``queued`` job of ``owner`` (the sha256 of the API key starting it)."""
         now = utc_now()
         job_id = str(uuid.uuid4())
         with self.engine.begin() as conn:
             conn.execute(jobs_table.insert().values(
                 job_id=job_id, map_id=map_id, base_version=base_version, status="queued",
-                stage="queued", percent=0.0, objects_found=0, created_at=now, updated_at=now))
+                stage="queued", percent=0.0, objects_found=0, created_at=now, updated_at=now,
+                owner=owner))
         return self.get(job_id)
 
     def get(self, job_id: str) -> BuildJob:
@@ -142,7 +148,8 @@ class JobStore:
             objects_found=int(m["objects_found"]), map_version=m["map_version"],
             error=_stored_error(m["job_id"], m["error"]),
             report=_stored_report(m["job_id"], m["report"]),
-            created_at=as_utc(m["created_at"]), updated_at=as_utc(m["updated_at"]))
+            created_at=as_utc(m["created_at"]), updated_at=as_utc(m["updated_at"]),
+            owner=m["owner"])
 
     def _update(self, *where: Any, **values: Any) -> int:
         """Set ``values`` (and the heartbeat ``updated_at``) on the ACTIVE jobs matching

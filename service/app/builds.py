@@ -33,6 +33,7 @@ from quadloc.maps.model import MapValidationError, SceneMap
 from quadloc.maps.store import MapStore, StoredMap
 from quadloc.service.app.errors import AppError
 from quadloc.service.app.maps import MapService, parse_if_match
+from quadloc.service.app.ownership import INTERNAL, Caller
 from quadloc.service.schemas.builds import BuildErrorOut, BuildJobOut
 from quadloc.service.settings import Settings
 
@@ -274,11 +275,12 @@ class BuildService:
         tags = parse_if_match(if_match, what=f"map {map_id!r} exists: building a new version")
         return self.maps.check_etag(map_id, tags)
 
-    def start(self, document: Any, map_id: str, if_match: str | None) -> BuildJobOut:
-        """Start a build job (``busy`` when this process's queue is full)."""
+    def start(self, document: Any, map_id: str, if_match: str | None,
+              caller: Caller = INTERNAL) -> BuildJobOut:
+        """Start a build job of ``caller`` (``busy`` when this process's queue is full)."""
         recording = self.parse(document)
         base = self.base_version(map_id, if_match)
-        job = self.jobs.create(map_id, base)
+        job = self.jobs.create(map_id, base, caller.owner)
         try:
             self.runner.submit(job.job_id, recording)
         except RuntimeError as exc:  # the queue is full, or the runner stopped
@@ -287,14 +289,18 @@ class BuildService:
                            retry_after_s=BUSY_RETRY_AFTER_S) from exc
         return job_out(self.jobs.get(job.job_id))
 
-    def get(self, job_id: str) -> BuildJobOut:
-        """A job (stale ones marked failed first); ``not-found``."""
+    def get(self, job_id: str, caller: Caller = INTERNAL) -> BuildJobOut:
+        """A job (stale ones marked failed first); ``not-found``, also for a job of another
+        key (:mod:`quadloc.service.app.ownership`: the same answer as an unknown id)."""
         self.jobs.fail_stale(self.settings.build_stale_after_s)
         try:
-            return job_out(self.jobs.get(job_id))
-        except JobNotFoundError as exc:
+            job = self.jobs.get(job_id)
+        except JobNotFoundError:
+            job = None
+        if job is None or not caller.may_access(job.owner):
             raise AppError("not-found", f"no build job {job_id!r}",
-                           field="path.job_id", message="not found") from exc
+                           field="path.job_id", message="not found")
+        return job_out(job)
 
     def build_now(self, document: Any, map_id: str, *, update: bool,
                   progress: Progress | None = None) -> LocalBuild:

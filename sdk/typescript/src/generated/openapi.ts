@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: 8ff11f8420ebf9700e4c1c8c2899be84e22e8e5c136faab6f71ca2d526ba7b16
+// openapi-sha256: aee0571bde3a64be2546809a3724aa480ab7add4ad5da381cb9f305063395535
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -161,7 +161,7 @@ export interface paths {
         };
         /**
          * A map-building job
-         * @description Status, stage, percent, objects found; the map version and the report when it succeeded, `error {reason, detail}` when it failed. A job whose runner stopped reporting (replica restarted) is marked failed (`runner_lost`).
+         * @description Status, stage, percent, objects found; the map version and the report when it succeeded, `error {reason, detail}` when it failed. A job whose runner stopped reporting (replica restarted) is marked failed (`runner_lost`). A job belongs to the API key that started it: other keys get 404 (an `admin` key sees all).
          */
         get: operations["get_build_job_v1_build_jobs__job_id__get"];
         put?: never;
@@ -238,7 +238,10 @@ export interface paths {
         };
         get?: never;
         put?: never;
-        /** Start a tracking session */
+        /**
+         * Start a tracking session
+         * @description The session belongs to the API key that created it: other keys get 404 (an `admin` key sees all). 429 `session-quota` when this key holds `QUADLOC_MAX_SESSIONS_PER_KEY` live sessions on this replica, 503 `session-capacity` when the replica holds `QUADLOC_MAX_SESSIONS`.
+         */
         post: operations["create_session_v1_maps__map_id__sessions_post"];
         delete?: never;
         options?: never;
@@ -4750,6 +4753,25 @@ export interface operations {
                      *           "message": "Input should be greater than 0"
                      *         }
                      *       ]
+                     *     }
+                     */
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description This API key holds its quota of tracking sessions */
+            429: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    /**
+                     * @example {
+                     *       "type": "urn:quadloc:problem:session-quota",
+                     *       "title": "This API key holds its quota of tracking sessions",
+                     *       "status": 429,
+                     *       "detail": "This API key holds its quota of tracking sessions",
+                     *       "instance": "/v1/maps/chess",
+                     *       "errors": []
                      *     }
                      */
                     "application/problem+json": components["schemas"]["Problem"];
