@@ -32,6 +32,7 @@ __all__ = [
     "check_robust",
     "is_real",
     "json_path",
+    "label_problem",
     "scrubbed_text",
     "text_problem",
 ]
@@ -121,6 +122,15 @@ def text_problem(text: str) -> str | None:
     if _SURROGATE.search(text):
         return SURROGATE_MESSAGE
     return None
+
+
+def label_problem(text: str) -> str | None:
+    """Why ``text`` is refused as an id, label or name of a map (beyond its length), or None:
+    blank, or :func:`text_problem`. The map document applies it to its ids, labels and names,
+    recordings to the labels and the name that become the built map's."""
+    if not text.strip():
+        return "must be a non-empty string (not only whitespace)"
+    return text_problem(text)
 
 
 def scrubbed_text(text: str) -> str:

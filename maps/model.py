@@ -38,7 +38,7 @@ from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from quadloc.factors.arrays import FloatArray
 from quadloc.factors.camera import Ellipsoid
-from quadloc.factors.names import SURROGATE_MESSAGE, json_path, text_problem
+from quadloc.factors.names import SURROGATE_MESSAGE, json_path, label_problem
 from quadloc.factors.rotations import (
     DOCUMENT_ROTATION_TOLERANCE,
     canonical_quaternion_wxyz,
@@ -123,16 +123,6 @@ def _is_utf8(text: str) -> bool:
     except UnicodeEncodeError:
         return False
     return True
-
-
-def label_problem(text: str) -> str | None:
-    """Why ``text`` is refused as an id, label or name of a map (beyond its length), or None:
-    blank, or the rule of every stored text (:func:`quadloc.factors.names.text_problem`: no
-    control character, valid Unicode). Recordings apply it to the labels and the name that
-    become the built map's (``quadloc.maps.building.recording``)."""
-    if not text.strip():
-        return "must be a non-empty string (not only whitespace)"
-    return text_problem(text)
 
 
 def _printable(text: str) -> str:
@@ -406,20 +396,21 @@ def _set_fields(scene: SceneMap, doc: MapDocument, objects: tuple[MapObject, ...
     return scene
 
 
-class _ChessEllipsoid(BaseModel):
+class _ChessEllipsoid(_Document):
     axes: SemiAxes
     R: Rotation  # the Chess format's name
     center: Center
 
 
-class _ChessObject(BaseModel):
+class _ChessObject(_Document):
     category_id: ChessId
     object_id: Annotated[int, BeforeValidator(_integral), Strict()] | Label
     ellipsoid: _ChessEllipsoid
 
 
-class ChessDocument(BaseModel):
-    """The Chess scene format (tests/support/data/chess_scene.json); unknown fields are ignored."""
+class ChessDocument(_Document):
+    """The Chess scene format (tests/support/data/chess_scene.json); unknown fields are refused
+    (naming them), as everywhere in the API."""
 
     category_id_to_label: Annotated[dict[str, Label], Field(min_length=1)]
     objects: Annotated[list[_ChessObject], Field(max_length=int(LIMITS["max_objects"]))]

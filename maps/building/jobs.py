@@ -31,9 +31,9 @@ log = logging.getLogger("quadloc.build")
 ACTIVE = ("queued", "running")
 
 # The table's description for building queries ONLY: the schema belongs to the Alembic migrations
-# ``0002_build_jobs`` and ``0003_build_job_owner`` (maps/migrations/versions/), which this
+# ``0002_build_jobs`` and ``0004_build_job_owner`` (maps/migrations/versions/), which this
 # mirrors, CHECK constraint included (tests/service/api/test_api_build.py compares the two).
-#: The build jobs (migrations ``0002_build_jobs``, ``0003_build_job_owner``).
+#: The build jobs (migrations ``0002_build_jobs``, ``0004_build_job_owner``).
 jobs_table = sa.Table(
     "quadloc_build_jobs",
     sa.MetaData(),

@@ -27,7 +27,7 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
-from quadloc.factors.names import json_path, text_problem
+from quadloc.factors.names import json_path, label_problem, text_problem
 
 __all__ = [
     "API_VERSION",
@@ -35,6 +35,7 @@ __all__ = [
     "Convention",
     "HealthOut",
     "Int",
+    "LabelText",
     "Problem",
     "ProblemField",
     "Row4",
@@ -85,6 +86,18 @@ def _checked_text(value: str) -> str:
 #: :func:`quadloc.factors.names.text_problem` (no control character, no lone surrogate), 422
 #: naming the field; lengths are the field's own.
 Text = Annotated[str, AfterValidator(_checked_text)]
+
+
+def _checked_label(value: str) -> str:
+    problem = label_problem(value)
+    if problem is not None:
+        raise PydanticCustomError("text", "{message}", {"message": problem})
+    return value
+
+
+#: A text that becomes a map's label or name (a recording's): :data:`Text` and not blank, the
+#: map document's rule (:func:`quadloc.factors.names.label_problem`), checked at intake.
+LabelText = Annotated[str, AfterValidator(_checked_label)]
 
 
 class WireModel(BaseModel):

@@ -2,8 +2,8 @@
 without keys, or before this revision; such a job is seen only by an ``admin`` key when the
 server has keys).
 
-Revision ID: 0003_build_job_owner
-Revises: 0002_build_jobs
+Revision ID: 0004_build_job_owner
+Revises: 0003_map_calibrations
 Create Date: 2026-11-27
 """
 
@@ -12,8 +12,8 @@ from __future__ import annotations
 import sqlalchemy as sa
 from alembic import op
 
-revision = "0003_build_job_owner"
-down_revision = "0002_build_jobs"
+revision = "0004_build_job_owner"
+down_revision = "0003_map_calibrations"
 branch_labels = None
 depends_on = None
 
