@@ -73,6 +73,17 @@ def _hostile_recordings() -> list[tuple[str, dict[str, Any]]]:
     return cases
 
 
+def test_blank_labels_and_names_of_a_recording_are_refused_up_front(
+        store_clients: ClientFactory) -> None:
+    client = store_clients()
+    rec, _ = _recording(6)
+    rec["frames"][3]["detections"][2]["label"] = "   "
+    rec["name"] = " "
+    body = assert_problem(client.post("/v1/maps:build", params={"map_id": "blank"}, json=rec),
+                          422, "validation-error")
+    assert {"frames[3].detections[2].label", "name"} <= {e["field"] for e in body["errors"]}
+
+
 def test_the_text_rule_itself() -> None:
     for bad in BAD_TEXT:
         assert text_problem(bad) is not None, repr(bad)
