@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -39,7 +38,7 @@ from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from quadloc.factors.arrays import FloatArray
 from quadloc.factors.camera import Ellipsoid
-from quadloc.factors.names import json_path
+from quadloc.factors.names import SURROGATE_MESSAGE, json_path, label_problem
 from quadloc.factors.rotations import (
     DOCUMENT_ROTATION_TOLERANCE,
     canonical_quaternion_wxyz,
@@ -116,10 +115,6 @@ def _fail(message: str, error_type: str = "map_rule") -> PydanticCustomError:
     return PydanticCustomError(error_type, "{message}", {"message": message})
 
 
-_CONTROL = re.compile(r"[\x00-\x1f]")
-_SURROGATE_MESSAGE = "must be valid Unicode text (a lone surrogate such as \\ud800 is not)"
-
-
 def _is_utf8(text: str) -> bool:
     """False for text with a lone surrogate (it has no UTF-8 encoding: cannot be hashed or
     stored)."""
@@ -131,13 +126,10 @@ def _is_utf8(text: str) -> bool:
 
 
 def _printable(text: str) -> str:
-    """Text rule beyond the length limits: not blank, no control characters, valid Unicode."""
-    if not text.strip():
-        raise _fail("must be a non-empty string (not only whitespace)")
-    if _CONTROL.search(text):
-        raise _fail("must not contain control characters")
-    if not _is_utf8(text):
-        raise _fail(_SURROGATE_MESSAGE)
+    """The map document's validator of :func:`label_problem`."""
+    problem = label_problem(text)
+    if problem is not None:
+        raise _fail(problem)
     return text
 
 
@@ -214,7 +206,7 @@ def _metadata(value: Mapping[str, Any]) -> dict[str, Any]:
     if size > LIMITS["max_metadata_bytes"]:
         raise _fail(f"at most {int(LIMITS['max_metadata_bytes'])} bytes of JSON, got {size}")
     if not _is_utf8(json.dumps(plain, ensure_ascii=False)):
-        raise _fail(f"keys and strings {_SURROGATE_MESSAGE}")
+        raise _fail(f"keys and strings {SURROGATE_MESSAGE}")
     return plain
 
 

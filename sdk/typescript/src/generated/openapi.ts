@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: 12743be012bcec7cf49f18dd440e75c1eb37d841b498bb758eb82f009f99f38f
+// openapi-sha256: 10abc2da107463ba093e7d31dab62be1adc819faa17e2c3871c68f5be5670659
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -161,7 +161,7 @@ export interface paths {
         };
         /**
          * A map-building job
-         * @description Status, stage, percent, objects found; the map version and the report when it succeeded, `error {reason, detail}` when it failed. A job whose runner stopped reporting (replica restarted) is marked failed (`runner_lost`).
+         * @description Status, stage, percent, objects found; the map version and the report when it succeeded, `error {reason, detail}` when it failed. A job whose runner stopped reporting (replica restarted) is marked failed (`runner_lost`). A job belongs to the API key that started it: other keys get 404 (an `admin` key sees all).
          */
         get: operations["get_build_job_v1_build_jobs__job_id__get"];
         put?: never;
@@ -259,7 +259,10 @@ export interface paths {
         };
         get?: never;
         put?: never;
-        /** Start a tracking session */
+        /**
+         * Start a tracking session
+         * @description The session belongs to the API key that created it: other keys get 404 (an `admin` key sees all). 429 `session-quota` when this key holds `QUADLOC_MAX_SESSIONS_PER_KEY` live sessions on this replica, 503 `session-capacity` when the replica holds `QUADLOC_MAX_SESSIONS`.
+         */
         post: operations["create_session_v1_maps__map_id__sessions_post"];
         delete?: never;
         options?: never;
@@ -714,15 +717,14 @@ export interface components {
         };
         /**
          * LegacyDetectionIn
-         * @description A detection of the deprecated form: ``box`` may be an array ``[xmin, ymin, xmax, ymax]``
-         *     and ``track_id`` an integer.
+         * @description A detection of the deprecated form: ``box`` may be an array ``[xmin, ymin, xmax, ymax]``.
          */
         LegacyDetectionIn: {
             ellipse?: components["schemas"]["EllipseIn"] | null;
             box?: components["schemas"]["BoxIn"] | null;
             /**
              * Label
-             * @description Category label of the map.
+             * @description Category label: the built object's category.
              */
             label: string;
             /**
@@ -1239,7 +1241,7 @@ export interface components {
             box?: components["schemas"]["BoxIn"] | null;
             /**
              * Label
-             * @description Category label of the map.
+             * @description Category label: the built object's category.
              */
             label: string;
             /**
@@ -1398,7 +1400,10 @@ export interface components {
              * @description Client clock (s), non-decreasing.
              */
             timestamp: number;
-            /** Frame Id */
+            /**
+             * Frame Id
+             * @description Echoed back.
+             */
             frame_id?: string | null;
             prior?: components["schemas"]["PosePriorIn"] | null;
             /** @description The gravity direction the device measures in this frame's camera (as for localize; `convention` defaults to the session's): a factor on the frame's tilt against the map's up axis. */
@@ -5517,6 +5522,25 @@ export interface operations {
                      *           "message": "Input should be greater than 0"
                      *         }
                      *       ]
+                     *     }
+                     */
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description This API key holds its quota of tracking sessions */
+            429: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    /**
+                     * @example {
+                     *       "type": "urn:quadloc:problem:session-quota",
+                     *       "title": "This API key holds its quota of tracking sessions",
+                     *       "status": 429,
+                     *       "detail": "This API key holds its quota of tracking sessions",
+                     *       "instance": "/v1/maps/chess",
+                     *       "errors": []
                      *     }
                      */
                     "application/problem+json": components["schemas"]["Problem"];
