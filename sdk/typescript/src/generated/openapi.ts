@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: 10abc2da107463ba093e7d31dab62be1adc819faa17e2c3871c68f5be5670659
+// openapi-sha256: ba961d04331863b4803cc222d30fab852641a82771c215151a5a5caf87527137
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -717,7 +717,8 @@ export interface components {
         };
         /**
          * LegacyDetectionIn
-         * @description A detection of the deprecated form: ``box`` may be an array ``[xmin, ymin, xmax, ymax]``.
+         * @description A detection of the deprecated form: ``box`` may be an array ``[xmin, ymin, xmax, ymax]``
+         *     and ``track_id`` an integer.
          */
         LegacyDetectionIn: {
             ellipse?: components["schemas"]["EllipseIn"] | null;
