@@ -689,11 +689,14 @@ def scene_map_from_dict(data: Mapping[str, Any], *, version: int | None = None) 
     Each object gives its orientation as ``quaternion_wxyz`` (unit within 1e-4, renormalised)
     or a 3x3 ``rotation`` (orthonormal within 1e-4, snapped to the nearest rotation); neither
     means axis-aligned. ``version`` defaults to 1 when absent; the ``version`` argument, if
-    given, overrides it. Every problem found is reported in one :class:`MapValidationError`.
+    given, overrides it (the document's own ``version``, which the store ignores, is still
+    validated: a document that breaks its schema is refused, whatever the store does with the
+    field). Every problem found is reported in one :class:`MapValidationError`.
     """
-    if version is not None and isinstance(data, Mapping):
-        data = {**data, "version": version}
-    return _validated(MapDocument, data).to_scene_map()
+    scene = _validated(MapDocument, data).to_scene_map()
+    if version is not None:  # the new, unshared map: set before anyone sees it
+        object.__setattr__(scene, "version", version)
+    return scene
 
 
 def scene_map_from_chess(

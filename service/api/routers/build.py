@@ -91,7 +91,9 @@ VersionQuery = Annotated[int | None, Query(ge=1, le=2**31 - 1,
                 "confidence calibration error before / after on the other half, and stores the "
                 "calibration with the map version: localize uses it for the calibration key "
                 "it was fitted for. Synchronous (tens of seconds for hundreds of frames). 422 "
-                "when the recording holds no frame out or too few localize.",
+                "when the recording holds no frame out or too few localize (at least 20 "
+                "must: the inline example shows the body's form only and gets that 422; "
+                "docs/map_building.md calibrates the shipped example recording).",
     responses={**problem_responses(400, 401, 403, 404, 413, 415, 422, 503),
                **_ok(200, CALIBRATION_EXAMPLE)},
     openapi_extra={"requestBody": {"content": {"application/json": {

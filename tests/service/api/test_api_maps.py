@@ -67,6 +67,12 @@ def test_create_get_list_delete(client: TestClient) -> None:
 def test_create_ignores_client_version(client: TestClient) -> None:
     doc = {**MAP_EXAMPLE, "version": 7}
     assert client.post("/v1/maps", json=doc).json()["version"] == 1
+    # ignored, but still held to its schema (an integer >= 1): nothing is stored
+    for bad in (0, 0.0, -3, "2"):
+        body = _problem(client.post("/v1/maps", json={**MAP_EXAMPLE, "map_id": "v-bad",
+                                                      "version": bad}), 422, "invalid-map")
+        assert [e["field"] for e in body["errors"]] == ["version"], bad
+    _problem(client.get("/v1/maps/v-bad"), 404, "map-not-found")
 
 
 def test_invalid_maps_name_the_field(client: TestClient) -> None:

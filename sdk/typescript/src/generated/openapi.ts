@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: ba961d04331863b4803cc222d30fab852641a82771c215151a5a5caf87527137
+// openapi-sha256: 9742bda395d7c972e654d7c6b1cd8fb6cb5ea4ec5f3dc1d3652e34f381ce0d5a
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -184,7 +184,7 @@ export interface paths {
         put?: never;
         /**
          * Calibrate a map version from a recording's held-out frames
-         * @description Body: the recording the map was built from, with `holdout_every` (the frames held out of the build, their app poses the reference). Fits the covariance scale and the confidence model on half of them, reports mean NEES and the confidence calibration error before / after on the other half, and stores the calibration with the map version: localize uses it for the calibration key it was fitted for. Synchronous (tens of seconds for hundreds of frames). 422 when the recording holds no frame out or too few localize.
+         * @description Body: the recording the map was built from, with `holdout_every` (the frames held out of the build, their app poses the reference). Fits the covariance scale and the confidence model on half of them, reports mean NEES and the confidence calibration error before / after on the other half, and stores the calibration with the map version: localize uses it for the calibration key it was fitted for. Synchronous (tens of seconds for hundreds of frames). 422 when the recording holds no frame out or too few localize (at least 20 must: the inline example shows the body's form only and gets that 422; docs/map_building.md calibrates the shipped example recording).
          */
         post: operations["calibrate_map_v1_maps__map_id__calibration_post"];
         delete?: never;
