@@ -341,15 +341,14 @@ def markdown(res: dict, command: str) -> str:
               "N times the numpy calls, see the last column.",
               "", "Notes: the baseline's cost per function evaluation is N projections "
               "(`project_ellipsoid`, validated `Ellipse`) and N `metrics.cost` calls, and BFGS "
-              "needs 7 evaluations per iteration for its forward-difference gradient; the "
-              "ratio, not the absolute time, is what this run shows (a shared machine). "
-              "Position errors are dominated by the simulated detection noise (all metrics "
-              "reach similar accuracy; the level set's advantages in the paper concern partially visible "
+              "needs 7 evaluations per iteration for its forward-difference gradient; the ratio, "
+              "not the absolute time, is what this run shows (a shared machine). Position errors "
+              "are dominated by the simulated detection noise (all metrics reach similar "
+              "accuracy; the level set's advantages in the paper concern partially visible "
               "objects and detector errors, not Gaussian noise). `iou`/`giou` compute the exact "
               "areas and their gradients of all pairs per evaluation (one call of a compiled "
               "kernel, `quadloc.factors.overlap.quadrant_sums`) and take more LM iterations at "
-              "their "
-              "kinked noisy optimum, and `qbbox` uses central differences (12 extra metric "
+              "their kinked noisy optimum, and `qbbox` uses central differences (12 extra metric "
               "evaluations per pair per linearisation), hence their times."]
     return "\n".join(lines)
 
