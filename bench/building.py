@@ -44,7 +44,11 @@ from quadloc.factors.camera import Camera
 from quadloc.maps.compiled import CompiledMap, compile_map
 from quadloc.service.localization.pipeline import localize
 from quadloc.service.localization.scoring import ScoringTimeoutError
-from quadloc.service.localization.types import LocalizationOptions, LocalizationResult
+from quadloc.service.localization.types import (
+    LocalizationOptions,
+    LocalizationResult,
+    PlaceHint,
+)
 from tests.support.buildings import (
     MODES,
     REPORT_SEEDS,
@@ -60,6 +64,9 @@ ALTERNATIVE_TOLERANCE_DEG = 10.0
 #: A localized answer further than this from the truth is a false accept.
 FALSE_ACCEPT_M = 0.5
 SIZES = (1, 10, 50, 200, 1000)
+#: The position hint's sigma (m); the hinted position is the truth moved by N(0, sigma^2)
+#: along each horizontal axis.
+HINT_SIGMA_M = 5.0
 
 
 def _percentile(values: list[float], q: float) -> float | None:
@@ -67,13 +74,14 @@ def _percentile(values: list[float], q: float) -> float | None:
 
 
 def solve(bf: BuildingFrame, compiled: CompiledMap, camera: Camera,
-          options: LocalizationOptions) -> tuple[LocalizationResult | None, float]:
+          options: LocalizationOptions, hint: PlaceHint | None = None
+          ) -> tuple[LocalizationResult | None, float]:
     """``localize`` of one frame as the server runs it (a scoring past the hard stop is a
     ``time_budget_exceeded`` answer: None) and its wall time, ms."""
     t0 = time.perf_counter()
     try:
         result: LocalizationResult | None = localize(bf.frame.detections, compiled, camera,
-                                                     options)
+                                                     options, hint=hint)
     except ScoringTimeoutError:
         result = None
     return result, (time.perf_counter() - t0) * 1e3
@@ -142,7 +150,8 @@ def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def run_case(rooms: int, mode: str, frames: int, seed: int, memory_frames: int,
-             options: LocalizationOptions, log: Callable[[str], None]) -> dict[str, Any]:
+             options: LocalizationOptions, log: Callable[[str], None], hints: bool = True
+             ) -> dict[str, Any]:
     """One (map size, mode): build, simulate, localize; the records and their summary."""
     t0 = time.perf_counter()
     building = make_building(rooms, mode, seed + rooms, corridors=rooms > 1)
@@ -157,6 +166,18 @@ def run_case(rooms: int, mode: str, frames: int, seed: int, memory_frames: int,
         solve(bf, compiled, camera, options)
         peaks.append(tracemalloc.get_traced_memory()[1] / 2**20)
         tracemalloc.stop()
+    hinted: dict[str, Any] = {}
+    if hints:
+        rng = np.random.default_rng(seed + 13 * rooms)
+        zone = [frame_record(bf, *solve(bf, compiled, camera, options,
+                                        PlaceHint(object_ids=frozenset(bf.room.object_ids))))
+                for bf in bfs]
+        fixes = [bf.world_from_camera[:3, 3] + np.array(
+            [*rng.normal(0.0, HINT_SIGMA_M, 2), 0.0]) for bf in bfs]
+        near = [frame_record(bf, *solve(bf, compiled, camera, options,
+                                        PlaceHint(position=p, sigma_m=HINT_SIGMA_M)))
+                for bf, p in zip(bfs, fixes, strict=True)]
+        hinted = {"zone_hint": summarise(zone), "position_hint": summarise(near)}
     times = [r["time_ms"] for r in records]
     out = {
         "rooms": rooms, "mode": mode, "objects": len(compiled),
@@ -166,6 +187,7 @@ def run_case(rooms: int, mode: str, frames: int, seed: int, memory_frames: int,
         "time_ms": {"median": _percentile(times, 50), "p90": _percentile(times, 90),
                     "p99": _percentile(times, 99)},
         "peak_memory_mb": max(peaks) if peaks else None,
+        **hinted,
         "setup_s": t_build,
         "records": records,
     }
@@ -173,7 +195,12 @@ def run_case(rooms: int, mode: str, frames: int, seed: int, memory_frames: int,
     log(f"{rooms:5d} rooms {mode:9s} {len(compiled):6d} objects: "
         f"10cm {a['within_10cm_5deg_pct']:5.1f} % FA {a['false_accept_pct']:4.1f} % "
         f"amb {a['ambiguous_pct']:5.1f} % lowc {a['low_confidence_pct']:5.1f} % "
-        f"median {out['time_ms']['median']:.0f} ms ({time.perf_counter() - t0:.0f} s)")
+        f"median {out['time_ms']['median']:.0f} ms"
+        + (f" | hints zone {out['zone_hint']['within_10cm_5deg_pct']:.0f} % "
+           f"(FA {out['zone_hint']['false_accept_pct']:.0f} %), 5 m "
+           f"{out['position_hint']['within_10cm_5deg_pct']:.0f} % "
+           f"(FA {out['position_hint']['false_accept_pct']:.0f} %)" if hints else "")
+        + f" ({time.perf_counter() - t0:.0f} s)")
     return out
 
 
@@ -228,6 +255,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--memory-frames", type=int, default=3)
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--records", action="store_true", help="keep per-frame records in JSON")
+    parser.add_argument("--no-hints", action="store_true",
+                        help="skip the runs with a zone hint and with a 5 m position hint")
     parser.add_argument("--write-results", action="store_true",
                         help="write the building section of docs/results.md")
     args = parser.parse_args(argv)
@@ -244,7 +273,8 @@ def main(argv: list[str] | None = None) -> int:
                 continue  # one room: the modes are the same map up to a layout
             n = args.frames if rooms < 200 else min(args.frames, args.max_frames_large)
             cases.append(run_case(rooms, mode, n, args.seed, args.memory_frames, options,
-                                  lambda m: print(m, file=sys.stderr, flush=True)))
+                                  lambda m: print(m, file=sys.stderr, flush=True),
+                                  hints=not args.no_hints))
     results = {"frames": args.frames, "max_frames_large": args.max_frames_large,
                "seed": args.seed, "cases": cases}
     public = {**results, "cases": [{k: v for k, v in c.items()
