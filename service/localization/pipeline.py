@@ -63,7 +63,7 @@ from quadloc.service.localization.gravity import (
     tilt_errors_deg,
 )
 from quadloc.service.localization.refine import RefinementResult, refine
-from quadloc.service.localization.sampling import count_samples
+from quadloc.service.localization.sampling import count_map_samples, count_samples
 from quadloc.service.localization.scoring import (
     HARD_STOP_FACTOR,
     Match,
@@ -206,6 +206,7 @@ def localize(
     if len(usable) < 2:
         return _not_localized("no_label_match", options.metric, 0, timings, t0)
     seeds: PlaceSeeds | None = None
+    whole = compiled
     if len(compiled) >= PLACE_SEARCH_MIN_OBJECTS and len(usable) >= 3:
         compiled, seeds = _place_stage(detections, usable, compiled, camera, options, t0, cpu0,
                                        timings, hint)
@@ -216,6 +217,8 @@ def localize(
         if len(usable) < 2:
             return _not_localized("no_label_match", options.metric, 0, timings, t0)
     solve = _start(detections, usable, compiled, camera, options, gravity, t0, cpu0, timings)
+    if seeds is not None:  # the chance matches of the whole map, not of the places kept
+        solve.n_samples = count_map_samples(whole, [detections[i].label for i in usable], 2)
     prior_candidate = None if prior is None else _prior_stage(solve, prior)
     if prior_candidate is not None and len(prior_candidate.inliers) >= len(usable):
         return _answer(solve, prior_candidate, [prior_candidate], ambiguous=False)
