@@ -215,11 +215,14 @@ def markdown(results: dict[str, Any]) -> str:
         "`>=5` / `3-4`: frames by their number of detections. FA: localized > 0.5 m off. "
         "Honest: within 10 cm / 5 deg, or `ambiguous` / `low_confidence` with the true pose "
         "among the alternatives. Time: the server's `localize` (median / p90 / p99 ms); "
-        "memory: tracemalloc peak per request.",
+        "memory: tracemalloc peak per request. Hints: the same frames with a zone hint (the "
+        "room's objects) and with a position hint of sigma 5 m (the true position moved by "
+        "N(0, 5 m) along each horizontal axis).",
         "",
         "| rooms (objects) | mode | within 5 / 10 cm, 5 deg | >=5: within 10 cm | 3-4: honest "
-        "| FA | ambiguous (truth in alt.) | low_conf. (truth in alt.) | time ms | MB |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| FA | ambiguous (truth in alt.) | low_conf. (truth in alt.) | time ms | MB "
+        "| zone hint: 10 cm (FA) | 5 m hint: 10 cm (FA) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for c in results["cases"]:
         a, f5, f3 = c["all"], c["5plus"], c["3to4"]
@@ -236,8 +239,16 @@ def markdown(results: dict[str, Any]) -> str:
             f"| {a['ambiguous_pct']:.0f} % ({a['ambiguous_with_truth_pct']:.0f} %) "
             f"| {a['low_confidence_pct']:.0f} % ({a['low_confidence_with_truth_pct']:.0f} %) "
             f"| {t['median']:.0f} / {t['p90']:.0f} / {t['p99']:.0f} "
-            f"| {c['peak_memory_mb']:.0f} |")
+            f"| {c['peak_memory_mb']:.0f} | {_hint_cell(c, 'zone_hint')} "
+            f"| {_hint_cell(c, 'position_hint')} |")
     return "\n".join(lines)
+
+
+def _hint_cell(case: dict[str, Any], key: str) -> str:
+    h = case.get(key)
+    if not h:
+        return "-"
+    return f"{h['within_10cm_5deg_pct']:.0f} % ({h['false_accept_pct']:.0f} %)"
 
 
 def _ints(text: str) -> tuple[int, ...]:
