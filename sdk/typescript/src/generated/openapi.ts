@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: af4397c34a6761aa1884112e107bb49cd01384c4301dc848ab0ba2b6f7bfe8b1
+// openapi-sha256: 0349e2ab521aeaad79d7d3b23876c0d639981393c0c2e0757b9999c30285e192
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -606,6 +606,30 @@ export interface components {
                 [key: string]: string;
             };
         };
+        /**
+         * HintIn
+         * @description Optional coarse hint of where the camera is: a position with a large uncertainty (a GPS /
+         *     Wi-Fi / beacon fix, the app's last known position) or the objects of a zone (a room, a
+         *     floor). It weights the search of a large map and settles a tie between places in its
+         *     favour; it never makes an answer win that the detections do not support.
+         */
+        HintIn: {
+            /**
+             * Position
+             * @description The camera's position in the map's world frame, metres.
+             */
+            position?: number[] | null;
+            /**
+             * Sigma M
+             * @description 1-sigma uncertainty of `position` (m).
+             */
+            sigma_m?: number | null;
+            /**
+             * Object Ids
+             * @description The objects of the zone the camera is in (ids of the map's objects).
+             */
+            object_ids?: string[] | null;
+        };
         /** InlierOut */
         InlierOut: {
             /** Detection Index */
@@ -714,6 +738,7 @@ export interface components {
             detections: components["schemas"]["DetectionIn"][];
             prior?: components["schemas"]["PosePriorIn"] | null;
             gravity?: components["schemas"]["GravityIn"] | null;
+            hint?: components["schemas"]["HintIn"] | null;
             /**
              * Frame Id
              * @description Echoed back.
