@@ -145,6 +145,7 @@ class _Solve:
         up_world: the map's up axis (3,).
         n_samples: label-compatible P2E samples (an evidence feature).
         t0: ``time.perf_counter()`` at the start of the call, s.
+        hinted: the best hypothesis of a place hint's places, refined besides the search's.
         evaluated: candidate poses scored so far; timings: wall ms per stage.
     """
 
@@ -161,6 +162,7 @@ class _Solve:
     t0: float
     timings: dict[str, float] = field(default_factory=dict)
     evaluated: int = 0
+    hinted: Hypothesis | None = None
 
 
 def localize(
@@ -444,8 +446,9 @@ def _search_stage(solve: _Solve, seeds: PlaceSeeds | None = None,
                   hint: PlaceHint | None = None) -> RansacOutcome:
     """The ``hypotheses`` stage: the RANSAC search (seeded by ``options.seed``) up to the
     budget; with a large map's ``seeds`` (:func:`_place_stage`), those poses only, and with a
-    ``hint`` the best hypothesis of the hint's places made the first runner-up (so it is
-    refined and weighed: :func:`_hint_ranking`) when none of the kept ones agrees with it."""
+    ``hint`` the best hypothesis of the hint's places kept aside (``solve.hinted``: refined as
+    an extra runner-up and weighed, :func:`_hint_ranking`) when none of the kept ones agrees
+    with it."""
     th = time.perf_counter()
     options = solve.options
     outcome = ransac(solve.scorer, solve.up_world, inlier_iou=options.inlier_iou,
@@ -462,8 +465,7 @@ def _search_stage(solve: _Solve, seeds: PlaceSeeds | None = None,
                        seeds=seeds.poses[seeds.hinted], sample=False)
         solve.evaluated += local.hypotheses_evaluated
         if local.alternatives:
-            outcome = replace(outcome, alternatives=(
-                outcome.alternatives[0], local.alternatives[0], *outcome.alternatives[1:]))
+            solve.hinted = local.alternatives[0]
     solve.evaluated += outcome.hypotheses_evaluated
     solve.timings["hypotheses"] = (time.perf_counter() - th) * 1e3
     return outcome
@@ -480,6 +482,13 @@ def _refine_stage(solve: _Solve, outcome: RansacOutcome, prior_candidate: Candid
     refinement status of the best hypothesis (None if it was not refined)."""
     tr = time.perf_counter()
     candidates, first_status = _refine_hypotheses(solve, outcome)
+    if solve.hinted is not None and not deadline_passed(solve.deadline):
+        got, _ = _refine_and_verify(
+            solve, list(solve.hinted.matches), invert_pose(solve.hinted.camera_from_world),
+            replace(solve.options, max_iterations=min(solve.options.max_iterations,
+                                                      ALTERNATIVE_MAX_ITERATIONS)), None)
+        if got is not None:
+            candidates.append(got)
     if prior_candidate is not None:
         candidates.append(prior_candidate)
     sort_by_support(candidates)
