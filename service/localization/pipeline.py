@@ -35,6 +35,10 @@ from quadloc.maps.model import SceneMap
 from quadloc.maps.places import place_index
 from quadloc.service.limits import NO_REFINEMENT
 from quadloc.service.localization.calibration import MIN_CONFIDENCE, S2_FLOOR
+from quadloc.service.localization.calibration_fit import (
+    CalibrationConstants,
+    map_calibration_applies,
+)
 from quadloc.service.localization.candidates import (
     Candidate,
     competes,
@@ -139,6 +143,8 @@ class _Solve:
         detections: the request's detections; usable: indices of those with a map label.
         options: the options in effect (``use_sigma`` off unless every detection has a sigma).
         calibration_key: :func:`quadloc.service.localization.confidence.calibration_key`.
+        calibration: the map's own calibration constants when they apply to the key
+            (:func:`map_calibration_applies`), else None (the shipped constants).
         scorer: the usable detections' scorer (its deadline: the hard stop).
         deadline: the budget (CPU time with a wall-clock hard limit); None: no budget.
         gravity, measured_gravity: the client's gravity and its factor input (or None).
@@ -154,6 +160,7 @@ class _Solve:
     options: LocalizationOptions
     calibration_key: str
     scorer: MatchScorer
+    calibration: CalibrationConstants | None
     deadline: Deadline | None
     gravity: Gravity | None
     measured_gravity: GravityMeasurement | None
@@ -172,6 +179,7 @@ def localize(
     options: LocalizationOptions = LocalizationOptions(),  # noqa: B008 (frozen, immutable)
     prior: PosePrior | None = None,
     gravity: Gravity | None = None,
+    calibration: CalibrationConstants | None = None,
     hint: PlaceHint | None = None,
 ) -> LocalizationResult:
     """Estimate the camera pose from object detections (see the module docstring).
@@ -187,6 +195,10 @@ def localize(
             an answer that disagrees is not localized (reason ``gravity_mismatch``; a prior's
             answer that disagrees leaves the search from scratch to decide)
             (:mod:`quadloc.service.localization.gravity`).
+        calibration: the map's own calibration (``quadloc calibrate``;
+            :mod:`quadloc.service.localization.map_calibration`): its covariance scale, s^2
+            floor, confidence model and default ``min_confidence`` replace the shipped ones for
+            the calibration keys it was fitted for; None: the shipped constants.
         hint: optional coarse place hint (:class:`PlaceHint`): weights the search of a large
             map and settles an ambiguity between places in its favour (:func:`_hint_ranking`).
 
@@ -218,7 +230,8 @@ def localize(
         usable = [i for i in usable if len(compiled.indices_for(detections[i].label)) > 0]
         if len(usable) < 2:
             return _not_localized("no_label_match", options.metric, 0, timings, t0)
-    solve = _start(detections, usable, compiled, camera, options, gravity, t0, cpu0, timings)
+    solve = _start(detections, usable, compiled, camera, options, gravity, t0, cpu0, timings,
+                   calibration)
     if seeds is not None:  # the chance matches of the whole map, not of the places kept
         solve.n_samples = count_map_samples(whole, [detections[i].label for i in usable], 2)
     prior_candidate = None if prior is None else _prior_stage(solve, prior)
@@ -331,7 +344,7 @@ def _validate(
 def _start(
     detections: Sequence[Detection], usable: list[int], compiled: CompiledMap, camera: Camera,
     options: LocalizationOptions, gravity: Gravity | None, t0: float, cpu0: float,
-    timings: dict[str, float],
+    timings: dict[str, float], calibration: CalibrationConstants | None = None,
 ) -> _Solve:
     """The state of a validated call started at ``t0`` (``time.perf_counter()``, s) and
     ``cpu0`` (``time.thread_time()``, s): the budget (CPU time of this thread, with a wall-clock
@@ -344,9 +357,11 @@ def _start(
                                                       cpu_start=cpu0, wall_start=t0))
     n_samples = count_samples(scorer, 2)
     up_world = compiled.scene_map.up
+    key = calibration_key(options.metric, options.use_sigma)
     return _Solve(
-        detections=detections, usable=usable, options=options,
-        calibration_key=calibration_key(options.metric, options.use_sigma), scorer=scorer,
+        detections=detections, usable=usable, options=options, calibration_key=key,
+        calibration=calibration if map_calibration_applies(calibration, key) else None,
+        scorer=scorer,
         deadline=deadline, gravity=gravity,
         measured_gravity=None if gravity is None else gravity_measurement(gravity, up_world),
         up_world=up_world, n_samples=n_samples, t0=t0, timings=timings)
@@ -643,7 +658,9 @@ def _answer(solve: _Solve, best: Candidate, ranked: list[Candidate], *, ambiguou
     runner_up = next((b for b in ranked if b is not best), None)
     assessment = _assess(solve, best, runner_up, ranked)
     conf, ev = assessment.confidence, assessment.evidence
-    floor = MIN_CONFIDENCE if options.min_confidence is None else options.min_confidence
+    default_floor = MIN_CONFIDENCE if solve.calibration is None \
+        else solve.calibration.min_confidence
+    floor = default_floor if options.min_confidence is None else options.min_confidence
     reason = ("gravity_mismatch" if _against_gravity(solve, best)
               else "ambiguous" if ambiguous and options.on_ambiguity == "not_localized"
               else "low_confidence" if conf < floor else None)
@@ -678,28 +695,32 @@ def _assess(solve: _Solve, a: Candidate, runner_up: Candidate | None,
     """The :class:`Assessment` of candidate ``a`` against its ``runner_up`` (its score margin)
     and ``others`` (the distinct candidates, for its ``chi2_competitor``)."""
     key = solve.calibration_key
+    c = solve.calibration
+    scale, floors = (None, None) if c is None else (c.covariance_scale, c.s2_floor)
     res = a.refinement
     s2 = math.nan if res is None else residual_variance(res.chi2, res.n_residuals)
     n_refined = 0 if res is None else len(res.per_detection_cost)
     cov = None if res is None else calibrated_covariance(
-        key, a.raw_covariance, res.chi2, res.n_residuals, n_refined, res.fixed_information)
+        key, a.raw_covariance, res.chi2, res.n_residuals, n_refined, res.fixed_information,
+        scale, floors)
     margin = 0.0 if runner_up is None else min(1.0, runner_up.score / max(a.score, 1e-12))
     ev = evidence_features(n_inliers=len(a.inliers), n_usable=len(solve.usable),
                            ious=np.array([m.iou for m in a.inliers]), s2=s2,
                            covariance=cov, margin=margin, n_samples=solve.n_samples,
-                           s2_floor=S2_FLOOR.get(key, 0.0),
+                           s2_floor=(S2_FLOOR if floors is None else floors).get(key, 0.0),
                            chi2_ratio_log=chi2_competitor(
                                a.chi2, len(a.inliers),
                                [(b.chi2_against(a), len(b.inliers))
                                 for b in others if b is not a]),
                            gravity=solve.gravity is not None)
-    scale = math.nan if res is None else covariance_scale(key, res.chi2, res.n_residuals,
-                                                          n_refined)
-    extra = {"s2": s2, "cov_scale": scale, "n_refined": float(n_refined),
+    factor = math.nan if res is None else covariance_scale(key, res.chi2, res.n_residuals,
+                                                           n_refined, scale, floors)
+    extra = {"s2": s2, "cov_scale": factor, "n_refined": float(n_refined),
              "iou_competitor": float(iou_competitor(a, others))}
     if solve.gravity is not None:
         extra["tilt_error_deg"] = _tilt_deg(solve, a)
-    return Assessment(confidence=confidence_probability(key, ev), evidence={**ev, **extra},
+    return Assessment(confidence=confidence_probability(
+        key, ev, None if c is None else c.confidence_models), evidence={**ev, **extra},
                       covariance=cov)
 
 
