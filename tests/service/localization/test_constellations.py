@@ -25,6 +25,7 @@ from quadloc.service.localization.hypotheses import (
     size_depths,
 )
 from quadloc.service.localization.pipeline import localize
+from quadloc.service.localization.sampling import count_map_samples
 from quadloc.service.localization.types import LocalizationInputError, PlaceHint
 from tests.support.buildings import building_frames, make_building
 from tests.support.errors import pose_errors
@@ -185,3 +186,16 @@ def test_place_hint_checks_its_fields() -> None:
     with pytest.raises(LocalizationInputError) as e:
         PlaceHint(object_ids=frozenset())
     assert e.value.field == "hint.zone"
+
+
+def test_count_map_samples_equals_brute_force() -> None:
+    b = make_building(3, "perturbed", seed=61)
+    cm = b.compiled
+    labels = ["Chair", "Chair", "TV", "Xbox", "Nope"]
+    cats = list(cm.categories)
+    for size in (2, 3):
+        brute = 0
+        for dets in itertools.combinations(range(len(labels)), size):
+            for objs in itertools.permutations(range(len(cm)), size):
+                brute += all(cats[o] == labels[d] for d, o in zip(dets, objs, strict=True))
+        assert count_map_samples(cm, labels, size) == brute
