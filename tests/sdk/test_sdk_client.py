@@ -591,3 +591,24 @@ def test_session_routes_exist_in_the_servers_openapi() -> None:
     sid = _session_path("s-x.y").replace("s-x.y", "{session_id}")
     assert set(paths[sid]) >= {"get", "delete"}
     assert "post" in paths[sid + "/frames"] and "post" in paths["/v1/maps/{map_id}/sessions"]
+
+def test_hint_is_sent_and_checked_before_sending():
+    """``hint`` reaches the body as the server's ``HintIn`` (position + sigma_m, or object_ids);
+    a position without sigma or both kinds fail before sending."""
+    from quadloc_sdk.models import Hint
+
+    rec = Recorder(httpx.Response(200, json=_response_body()),
+                   httpx.Response(200, json=_response_body()))
+    client, _ = _client(rec)
+    client.localize("chess", camera=CAMERA, detections=DETS,
+                    hint={"position": [1.0, 2.0, 0.5], "sigma_m": 5.0})
+    client.localize("chess", camera=CAMERA, detections=DETS,
+                    hint=Hint(object_ids=["0", "3"]))
+    bodies = [json.loads(r.content) for r in rec.requests]
+    assert bodies[0]["hint"] == {"position": [1.0, 2.0, 0.5], "sigma_m": 5.0}
+    assert bodies[1]["hint"] == {"object_ids": ["0", "3"]}
+    with pytest.raises(pydantic.ValidationError, match="sigma_m"):
+        Hint(position=[0, 0, 0])
+    with pytest.raises(pydantic.ValidationError, match="either"):
+        Hint(position=[0, 0, 0], sigma_m=1, object_ids=["0"])
+    assert len(rec.requests) == 2
