@@ -39,6 +39,7 @@ from quadloc.maps.building.recording import (
     SizePrior,
     held_out,
 )
+from quadloc.maps.compiled import CompiledMap
 from quadloc.service.localization.types import (
     Detection,
     Gravity,
@@ -46,6 +47,7 @@ from quadloc.service.localization.types import (
     LocalizationInputError,
     LocalizationOptions,
     LocalizationResult,
+    PlaceHint,
     PosePrior,
 )
 from quadloc.service.schemas.localize import (
@@ -53,6 +55,7 @@ from quadloc.service.schemas.localize import (
     CovarianceOut,
     DetectionIn,
     GravityIn,
+    HintIn,
     InlierOut,
     LocalizeOptionsIn,
     LocalizeResponse,
@@ -86,6 +89,7 @@ __all__ = [
     "frame_out",
     "gravity_from_request",
     "held_out_frames_from_wire",
+    "hint_from_request",
     "inliers_out",
     "options_from_request",
     "pose_matrix_from_wire",
@@ -165,6 +169,21 @@ def prior_from_request(prior: PosePriorIn | None) -> PosePrior | None:
     if np.all(np.isfinite(T)):
         T = convert_pose(T, prior.convention, "opencv")
     return PosePrior(T, cov)
+
+
+def hint_from_request(hint: HintIn | None, compiled: CompiledMap) -> PlaceHint | None:
+    """Wire hint -> :class:`PlaceHint`; an object id the map does not have is refused
+    (:class:`LocalizationInputError` naming ``hint.object_ids[k]``)."""
+    if hint is None:
+        return None
+    if hint.object_ids is not None:
+        known = set(compiled.object_ids)
+        for k, o in enumerate(hint.object_ids):
+            if o not in known:
+                raise LocalizationInputError(f"{o!r} is not an object of the map",
+                                             field=f"hint.object_ids[{k}]")
+        return PlaceHint(object_ids=frozenset(hint.object_ids))
+    return PlaceHint(position=np.array(hint.position, dtype=float), sigma_m=hint.sigma_m)
 
 
 def gravity_from_request(gravity: GravityIn | None,

@@ -26,6 +26,7 @@ from quadloc.service.app.conversions import (
     camera_from_request,
     detections_from_request,
     gravity_from_request,
+    hint_from_request,
     options_from_request,
     prior_from_request,
     response_from_result,
@@ -239,6 +240,7 @@ class Localizer:
             detections = detections_from_request(frame.detections)
             prior = prior_from_request(frame.prior)
             gravity = gravity_from_request(frame.gravity)
+            hint = hint_from_request(frame.hint, compiled)
             options = options_from_request(
                 frame.options,
                 self.max_budget_ms if budget_ms is None else min(self.max_budget_ms, budget_ms))
@@ -253,7 +255,8 @@ class Localizer:
             else:
                 response = response_from_result(
                     localize(detections, compiled, camera, options, prior, gravity,
-                             calibration=self.calibration_of(compiled.map_id, compiled.version)),
+                             calibration=self.calibration_of(compiled.map_id, compiled.version),
+                             hint=hint),
                     map_id=compiled.map_id, map_version=compiled.version,
                     convention=frame.options.output_convention, frame_id=frame.frame_id,
                     timestamp=frame.timestamp)

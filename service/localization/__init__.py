@@ -11,6 +11,7 @@ from quadloc.service.localization.types import (
     LocalizationInputError,
     LocalizationOptions,
     LocalizationResult,
+    PlaceHint,
     PosePrior,
 )
 
@@ -20,6 +21,7 @@ __all__ = [
     "LocalizationInputError",
     "LocalizationOptions",
     "LocalizationResult",
+    "PlaceHint",
     "PosePrior",
     "localize",
 ]

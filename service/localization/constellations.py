@@ -60,12 +60,15 @@ MAX_TRIPLETS = 3000
 #: :func:`place_seeds`: a pose with support >= ``STOP_SUPPORT`` x D and >= ``STOP_MIN_SUPPORT``
 #: ends the search over triples; at most ``MAX_TOTAL_TRIPLETS`` triplets per frame.
 TOP_DETECTIONS = 6
-STOP_SUPPORT = 0.65
+STOP_SUPPORT = 0.95
 STOP_MIN_SUPPORT = 2.5
-MAX_TOTAL_TRIPLETS = 6000
+MAX_TOTAL_TRIPLETS = 12000
+#: A P3P pose is kept only when its triplet's objects are at depths within this factor of the
+#: depths their sizes give (:func:`quadloc.service.localization.hypotheses.size_depths`).
+TRIPLET_DEPTH_RATIO = 1.6
 #: Places kept (best centre-hit count first) and seed poses per place.
-MAX_PLACES = 12
-SEEDS_PER_PLACE = 2
+MAX_PLACES = 24
+SEEDS_PER_PLACE = 1
 #: Pair-distance test: ``|predicted - map| <= rel * max(predicted, map) + abs``.
 GEOMETRY_RELATIVE_TOLERANCE = 0.5
 GEOMETRY_ABSOLUTE_TOLERANCE_M = 0.3
@@ -90,6 +93,7 @@ class PlaceSeeds:
         hits: (S,) their support (:func:`centre_hits`).
         objects: sorted indices of the map objects of the kept places (the sub-map to score).
         places: number of distinct places with a pose; triplets: map triplets solved.
+        hinted: (S,) whether each seed's place is one of the hint's (all False without).
     """
 
     poses: FloatArray
@@ -97,6 +101,7 @@ class PlaceSeeds:
     objects: IntArray
     places: int
     triplets: int
+    hinted: BoolArray
 
 
 #: Six triples of the six largest detections such that every pair of them is avoided by one
@@ -239,17 +244,23 @@ def _local_objects(index: PlaceIndex, compiled: CompiledMap, i: int) -> IntArray
 
 def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params: FloatArray,
                 labels: list[str], rng: np.random.Generator,
-                deadline: Deadline | None = None) -> PlaceSeeds:
+                deadline: Deadline | None = None, hinted: BoolArray | None = None
+                ) -> PlaceSeeds:
     """The constellation search (module docstring) for the usable detections ``params``
     (D, 5) px / rad with ``labels`` (D,); D >= 3. Detection triples are tried in the order of
     :func:`detection_triples` until one gives a pose of support >= :data:`STOP_SUPPORT` x D
     (and >= :data:`STOP_MIN_SUPPORT`), :data:`MAX_TOTAL_TRIPLETS` triplets were solved, or the
-    ``deadline`` passed."""
+    ``deadline`` passed. ``hinted`` (N,) marks the objects of a place hint: half of the
+    :data:`MAX_PLACES` places are the best whose triplet's first object is hinted."""
     cats = sorted(set(compiled.categories))
     code = {c: k for k, c in enumerate(cats)}
     object_codes = np.array([code[c] for c in compiled.categories], dtype=np.intp)
     label_codes = np.array([code.get(x, -1) for x in labels], dtype=np.intp)
-    local: dict[int, IntArray] = {}
+    local: dict[int, IntArray] = {}  # anchor -> its place's objects (the sub-map)
+    scored: dict[int, IntArray] = {}  # anchor -> those with a detected label (the scoring)
+    wanted = np.zeros(len(cats), dtype=bool)
+    wanted[label_codes[label_codes >= 0]] = True
+    radius = np.prod(compiled.axes, axis=1) ** (1.0 / 3.0)
     all_poses, all_scores, all_anchor = [], [], []
     n_triplets = 0
     for triple in detection_triples(params):
@@ -262,11 +273,23 @@ def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params
             continue
         img = np.broadcast_to(params[list(triple), :2], (len(trip), 3, 2))
         poses, owner = p3p_grunert_batch(img, compiled.centers[trip], camera)
+        # the triplet's own objects must sit at depths their sizes allow
+        X = compiled.centers[trip[owner]]
+        z = np.einsum("mkj,mj->mk", X, poses[:, 2, :3]) + poses[:, 2, 3, None]
+        ratio = z / size_depths(camera, params[list(triple), None, 2:4].transpose(1, 0, 2),
+                                radius[trip[owner]])
+        fits = np.all((ratio > 1.0 / TRIPLET_DEPTH_RATIO) & (ratio < TRIPLET_DEPTH_RATIO),
+                      axis=1)
+        poses, owner = poses[fits], owner[fits]
         if len(poses) == 0:
             continue
         anchor = trip[owner, 0]
         uniq, inv = np.unique(anchor, return_inverse=True)
-        lists = [local.setdefault(i, _local_objects(index, compiled, i)) for i in uniq.tolist()]
+        for i in uniq.tolist():
+            if i not in local:
+                local[i] = _local_objects(index, compiled, i)
+                scored[i] = local[i][wanted[object_codes[local[i]]]]
+        lists = [scored[i] for i in uniq.tolist()]
         width = max(len(x) for x in lists)
         table = np.zeros((len(uniq), width), dtype=np.intp)
         valid = np.zeros((len(uniq), width), dtype=bool)
@@ -282,24 +305,30 @@ def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params
             break
     if not all_poses:
         return PlaceSeeds(np.zeros((0, 4, 4)), np.zeros(0), np.zeros(0, dtype=np.intp), 0,
-                          n_triplets)
+                          n_triplets, np.zeros(0, dtype=bool))
     poses = np.concatenate(all_poses)
     hits = np.concatenate(all_scores)
     anchor = np.concatenate(all_anchor)
     # places: the grid cell of the anchor; the best poses of the best places
     place_key = np.unique(index.cells[anchor], axis=0, return_inverse=True)[1].ravel()
-    order = np.lexsort((np.arange(len(hits)), -hits))
+    order = np.lexsort((np.arange(len(hits)), -hits)).tolist()
     chosen: dict[int, list[int]] = {}
-    for m in order.tolist():
-        key = int(place_key[m])
-        if key not in chosen:
-            if len(chosen) >= MAX_PLACES:
-                continue
-            chosen[key] = []
-        if len(chosen[key]) < SEEDS_PER_PLACE:
-            chosen[key].append(m)
+    passes = [(order, MAX_PLACES)]
+    if hinted is not None:
+        passes.insert(0, ([m for m in order if hinted[anchor[m]]], MAX_PLACES // 2))
+    for ranking, cap in passes:
+        for m in ranking:
+            key = int(place_key[m])
+            if key not in chosen:
+                if len(chosen) >= cap:
+                    continue
+                chosen[key] = []
+            if len(chosen[key]) < SEEDS_PER_PLACE and m not in chosen[key]:
+                chosen[key].append(m)
     picked = np.array(sorted((m for ms in chosen.values() for m in ms),
                              key=lambda m: (-float(hits[m]), m)), dtype=np.intp)
     objects = np.unique(np.concatenate([local[int(anchor[m])] for m in picked]))
+    hinted_seed = (np.zeros(len(picked), dtype=bool) if hinted is None
+                   else np.asarray(hinted, dtype=bool)[anchor[picked]])
     return PlaceSeeds(poses[picked], hits[picked], objects, int(place_key.max()) + 1,
-                      n_triplets)
+                      n_triplets, hinted_seed)

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from quadloc.factors.arrays import FloatArray
+from quadloc.factors.arrays import BoolArray, FloatArray
 from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.factors.camera import Camera, Ellipsoid
 from quadloc.factors.gravity_factor import GravityMeasurement
@@ -41,6 +41,7 @@ from quadloc.service.localization.calibration_fit import (
 )
 from quadloc.service.localization.candidates import (
     Candidate,
+    competes,
     distinct_ranking,
     iou_competitor,
     is_ambiguous_ranking,
@@ -66,7 +67,7 @@ from quadloc.service.localization.gravity import (
     tilt_errors_deg,
 )
 from quadloc.service.localization.refine import RefinementResult, refine
-from quadloc.service.localization.sampling import count_samples
+from quadloc.service.localization.sampling import count_map_samples, count_samples
 from quadloc.service.localization.scoring import (
     HARD_STOP_FACTOR,
     Match,
@@ -84,6 +85,7 @@ from quadloc.service.localization.types import (
     LocalizationInputError,
     LocalizationOptions,
     LocalizationResult,
+    PlaceHint,
     PosePrior,
     check_detections,
 )
@@ -105,6 +107,13 @@ PRIOR_GATE_SIGMAS = 2.0
 #: An alternative whose matches are a subset of the best hypothesis' is not refined when the
 #: best has at least this many matches (``_same_explanation``).
 SAME_EXPLANATION_MIN_MATCHES = 4
+#: A position hint settles a tie between places in favour of the most likely one when every
+#: other is at least this many times less likely under the hint (:func:`_hint_ranking`).
+HINT_PRIOR_RATIO = 20.0
+#: ... over every place the search found with at least this share of the best seed's support
+#: (camera centres further than ``HINT_SAME_PLACE_M`` from the chosen one's).
+HINT_SEED_SUPPORT = 0.8
+HINT_SAME_PLACE_M = 1.0
 
 
 @dataclass(frozen=True)
@@ -142,6 +151,7 @@ class _Solve:
         up_world: the map's up axis (3,).
         n_samples: label-compatible P2E samples (an evidence feature).
         t0: ``time.perf_counter()`` at the start of the call, s.
+        hinted: the best hypothesis of a place hint's places, refined besides the search's.
         evaluated: candidate poses scored so far; timings: wall ms per stage.
     """
 
@@ -159,6 +169,7 @@ class _Solve:
     t0: float
     timings: dict[str, float] = field(default_factory=dict)
     evaluated: int = 0
+    hinted: Hypothesis | None = None
 
 
 def localize(
@@ -169,6 +180,7 @@ def localize(
     prior: PosePrior | None = None,
     gravity: Gravity | None = None,
     calibration: CalibrationConstants | None = None,
+    hint: PlaceHint | None = None,
 ) -> LocalizationResult:
     """Estimate the camera pose from object detections (see the module docstring).
 
@@ -187,6 +199,8 @@ def localize(
             :mod:`quadloc.service.localization.map_calibration`): its covariance scale, s^2
             floor, confidence model and default ``min_confidence`` replace the shipped ones for
             the calibration keys it was fitted for; None: the shipped constants.
+        hint: optional coarse place hint (:class:`PlaceHint`): weights the search of a large
+            map and settles an ambiguity between places in its favour (:func:`_hint_ranking`).
 
     Returns:
         :class:`LocalizationResult`; ``localized=False`` with a ``reason`` is a normal answer.
@@ -199,16 +213,17 @@ def localize(
     cpu0 = time.thread_time()  # the budget counts this thread's CPU time (quadloc.factors.budget)
     timings: dict[str, float] = {}
     compiled, options, usable = _validate(detections, scene_map, camera, options, prior,
-                                          gravity)
+                                          gravity, hint)
     timings["validate"] = (time.perf_counter() - t0) * 1e3
     if len(detections) < 2:
         return _not_localized("too_few_detections", options.metric, 0, timings, t0)
     if len(usable) < 2:
         return _not_localized("no_label_match", options.metric, 0, timings, t0)
     seeds: PlaceSeeds | None = None
+    whole = compiled
     if len(compiled) >= PLACE_SEARCH_MIN_OBJECTS and len(usable) >= 3:
         compiled, seeds = _place_stage(detections, usable, compiled, camera, options, t0, cpu0,
-                                       timings)
+                                       timings, hint)
         if seeds is None:
             return _not_localized("no_hypothesis_above_inlier_threshold", options.metric, 0,
                                   timings, t0)
@@ -217,10 +232,12 @@ def localize(
             return _not_localized("no_label_match", options.metric, 0, timings, t0)
     solve = _start(detections, usable, compiled, camera, options, gravity, t0, cpu0, timings,
                    calibration)
+    if seeds is not None:  # the chance matches of the whole map, not of the places kept
+        solve.n_samples = count_map_samples(whole, [detections[i].label for i in usable], 2)
     prior_candidate = None if prior is None else _prior_stage(solve, prior)
     if prior_candidate is not None and len(prior_candidate.inliers) >= len(usable):
         return _answer(solve, prior_candidate, [prior_candidate], ambiguous=False)
-    outcome = _search_stage(solve, seeds)
+    outcome = _search_stage(solve, seeds, hint)
     if outcome.camera_from_world is None:
         if prior_candidate is not None:
             return _answer(solve, prior_candidate, [prior_candidate], ambiguous=False)
@@ -234,7 +251,53 @@ def localize(
         return _not_localized("refinement_diverged", options.metric, solve.evaluated, timings,
                               t0, first_status)
     ranked = distinct_ranking(candidates)
-    return _answer(solve, ranked[0], ranked, ambiguous=is_ambiguous_ranking(ranked))
+    ambiguous = is_ambiguous_ranking(ranked)
+    if ambiguous and hint is not None:
+        ranked = _hint_ranking(ranked, hint, seeds)
+        ambiguous = is_ambiguous_ranking(ranked)
+    return _answer(solve, ranked[0], ranked, ambiguous=ambiguous)
+
+
+def _hypothesis_agrees(solve: _Solve, h: Hypothesis, hint: PlaceHint) -> bool:
+    """:meth:`PlaceHint.agrees` of a search hypothesis (its pose, its matches' objects)."""
+    ids = solve.scorer.compiled.object_ids
+    return hint.agrees(invert_pose(h.camera_from_world), [ids[m.object_index] for m in h.matches])
+
+
+def _hint_ranking(ranked: list[Candidate], hint: PlaceHint, seeds: PlaceSeeds | None = None
+                  ) -> list[Candidate]:
+    """``ranked`` (best first, mutually distinct, ambiguous) with the hint's say: among the
+    best and the runners-up that compete with it (the tie the evidence cannot break), those
+    where the hint says (:meth:`PlaceHint.agrees`) are kept, best-supported first, and the
+    others of the tie dropped; the candidates the evidence already ranks below the tie are kept
+    after them. Unchanged when no candidate of the tie agrees with the hint (the evidence
+    rules: a hint never forces an answer the detections do not support). A position hint keeps
+    only the most likely of them, and only when every other place the search found about as
+    well supported (the candidates of the tie, and the ``seeds`` of a large map with at least
+    :data:`HINT_SEED_SUPPORT` of the best seed's support) is :data:`HINT_PRIOR_RATIO` times
+    less likely under the hint; else the ranking is unchanged (still ambiguous)."""
+    tie = [ranked[0]] + [b for b in ranked[1:] if competes(ranked[0], b)]
+    agree = [a for a in tie if hint.agrees(a.world_from_camera,
+                                            [m.object_id for m in a.inliers])]
+    if not agree:
+        return ranked
+    if hint.position is not None and hint.sigma_m is not None:
+        position, var2 = hint.position, 2.0 * hint.sigma_m ** 2
+
+        def nll(centre: FloatArray) -> float:
+            return float(np.sum((centre - position) ** 2)) / var2
+
+        best = min(agree, key=lambda a: nll(a.world_from_camera[:3, 3]))
+        centre = best.world_from_camera[:3, 3]
+        others = [a.world_from_camera[:3, 3] for a in tie if a is not best]
+        if seeds is not None and len(seeds.poses):
+            good = seeds.hits >= HINT_SEED_SUPPORT * seeds.hits.max()
+            others += list(invert_pose(seeds.poses[good])[:, :3, 3])
+        rivals = [c for c in others if np.linalg.norm(c - centre) > HINT_SAME_PLACE_M]
+        if any(nll(c) - nll(centre) < math.log(HINT_PRIOR_RATIO) for c in rivals):
+            return ranked
+        agree = [best]
+    return agree + [b for b in ranked if all(b is not t for t in tie)]
 
 
 # ------------------------------------------------------------------ validate
@@ -243,6 +306,7 @@ def localize(
 def _validate(
     detections: Sequence[Detection], scene_map: SceneMap | CompiledMap, camera: Camera,
     options: LocalizationOptions, prior: PosePrior | None, gravity: Gravity | None = None,
+    hint: PlaceHint | None = None,
 ) -> tuple[CompiledMap, LocalizationOptions, list[int]]:
     """The ``validate`` stage: checks the input (raises :class:`LocalizationInputError` naming
     the field), compiles the map; returns it, the options in effect (sigma weights only when
@@ -255,7 +319,8 @@ def _validate(
             ("camera", camera, Camera, "a Camera"),
             ("options", options, LocalizationOptions, "LocalizationOptions"),
             ("prior", prior, (PosePrior, type(None)), "a PosePrior or None"),
-            ("gravity", gravity, (Gravity, type(None)), "a Gravity or None")):
+            ("gravity", gravity, (Gravity, type(None)), "a Gravity or None"),
+            ("hint", hint, (PlaceHint, type(None)), "a PlaceHint or None")):
         if not isinstance(value, types):
             raise LocalizationInputError(f"must be {what}, got {type(value).__name__}",
                                          field=name)
@@ -365,6 +430,7 @@ def _prior_matches(scorer: MatchScorer, prior: PosePrior, threshold: float) -> l
 def _place_stage(
     detections: Sequence[Detection], usable: list[int], compiled: CompiledMap, camera: Camera,
     options: LocalizationOptions, t0: float, cpu0: float, timings: dict[str, float],
+    hint: PlaceHint | None = None,
 ) -> tuple[CompiledMap, PlaceSeeds | None]:
     """The ``places`` stage of a large map (>= ``PLACE_SEARCH_MIN_OBJECTS`` objects): the
     constellation search (:func:`quadloc.service.localization.constellations.place_seeds`);
@@ -372,20 +438,32 @@ def _place_stage(
     the seeds, or (``compiled``, None) when no pose came up."""
     tp = time.perf_counter()
     params = np.array([detections[i].ellipse.params() for i in usable])
-    seeds = place_seeds(compiled, place_index(compiled), camera, params,
-                        [detections[i].label for i in usable],
+    index = place_index(compiled)
+    hinted: BoolArray | None = None
+    if hint is not None:
+        hinted = np.zeros(len(compiled), dtype=bool)
+        if hint.position is not None and hint.sigma_m is not None:
+            hinted[index.near(hint.position, PlaceHint.AGREE_SIGMAS * hint.sigma_m
+                              + index.view_range_m)] = True
+        elif hint.object_ids is not None:
+            hinted[[k for k, o in enumerate(compiled.object_ids) if o in hint.object_ids]] = True
+    seeds = place_seeds(compiled, index, camera, params, [detections[i].label for i in usable],
                         np.random.default_rng(options.seed),
                         Deadline.cpu_budget(options.time_budget_ms, cpu_start=cpu0,
-                                            wall_start=t0))
+                                            wall_start=t0), hinted)
     timings["places"] = (time.perf_counter() - tp) * 1e3
     if len(seeds.poses) == 0:
         return compiled, None
     return compiled_subset(compiled, seeds.objects), seeds
 
 
-def _search_stage(solve: _Solve, seeds: PlaceSeeds | None = None) -> RansacOutcome:
+def _search_stage(solve: _Solve, seeds: PlaceSeeds | None = None,
+                  hint: PlaceHint | None = None) -> RansacOutcome:
     """The ``hypotheses`` stage: the RANSAC search (seeded by ``options.seed``) up to the
-    budget; with a large map's ``seeds`` (:func:`_place_stage`), those poses only."""
+    budget; with a large map's ``seeds`` (:func:`_place_stage`), those poses only, and with a
+    ``hint`` the best hypothesis of the hint's places kept aside (``solve.hinted``: refined as
+    an extra runner-up and weighed, :func:`_hint_ranking`) when none of the kept ones agrees
+    with it."""
     th = time.perf_counter()
     options = solve.options
     outcome = ransac(solve.scorer, solve.up_world, inlier_iou=options.inlier_iou,
@@ -393,6 +471,16 @@ def _search_stage(solve: _Solve, seeds: PlaceSeeds | None = None) -> RansacOutco
                      max_hypotheses=options.ransac_max_hypotheses,
                      rng=np.random.default_rng(options.seed), deadline=solve.deadline,
                      seeds=None if seeds is None else seeds.poses, sample=seeds is None)
+    if (hint is not None and seeds is not None and outcome.camera_from_world is not None
+            and seeds.hinted.any()
+            and not any(_hypothesis_agrees(solve, h, hint) for h in outcome.alternatives)):
+        local = ransac(solve.scorer, solve.up_world, inlier_iou=options.inlier_iou,
+                       min_inliers=options.min_inliers, max_hypotheses=0,
+                       rng=np.random.default_rng(options.seed), deadline=solve.deadline,
+                       seeds=seeds.poses[seeds.hinted], sample=False)
+        solve.evaluated += local.hypotheses_evaluated
+        if local.alternatives:
+            solve.hinted = local.alternatives[0]
     solve.evaluated += outcome.hypotheses_evaluated
     solve.timings["hypotheses"] = (time.perf_counter() - th) * 1e3
     return outcome
@@ -409,6 +497,13 @@ def _refine_stage(solve: _Solve, outcome: RansacOutcome, prior_candidate: Candid
     refinement status of the best hypothesis (None if it was not refined)."""
     tr = time.perf_counter()
     candidates, first_status = _refine_hypotheses(solve, outcome)
+    if solve.hinted is not None and not deadline_passed(solve.deadline):
+        got, _ = _refine_and_verify(
+            solve, list(solve.hinted.matches), invert_pose(solve.hinted.camera_from_world),
+            replace(solve.options, max_iterations=min(solve.options.max_iterations,
+                                                      ALTERNATIVE_MAX_ITERATIONS)), None)
+        if got is not None:
+            candidates.append(got)
     if prior_candidate is not None:
         candidates.append(prior_candidate)
     sort_by_support(candidates)

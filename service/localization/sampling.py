@@ -19,16 +19,18 @@ Samples are generated lazily (bounded memory whatever the budget). Why these ord
 
 from __future__ import annotations
 
+import collections
 import functools
 import itertools
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Literal, overload
 
 import numpy as np
 
 from quadloc.factors.arrays import FloatArray, IntArray
+from quadloc.maps.compiled import CompiledMap
 from quadloc.service.localization.scoring import LabelGroup, MatchScorer
 
 __all__ = [
@@ -38,6 +40,7 @@ __all__ = [
     "Sample",
     "SampleOrder",
     "all_samples",
+    "count_map_samples",
     "count_samples",
     "enumerate_samples",
     "most_promising_first",
@@ -127,6 +130,15 @@ def count_samples(scorer: MatchScorer, size: int) -> int:
     objects), from per-label counts: ``sum over splits of prod_g C(n_det_g, m_g) P(n_obj_g, m_g)``
     (no walk over detection tuples, so it costs nothing with hundreds of detections)."""
     return _count_samples(tuple((len(d), len(o)) for d, o in scorer.label_groups), size)
+
+
+def count_map_samples(compiled: CompiledMap, labels: Sequence[str], size: int) -> int:
+    """:func:`count_samples` of detections with ``labels`` against every object of
+    ``compiled`` (a whole map, where the scorer holds a part of it: the places the
+    constellation search kept)."""
+    counts = collections.Counter(labels)
+    return _count_samples(tuple((n, len(compiled.indices_for(label)))
+                                for label, n in sorted(counts.items())), size)
 
 
 @functools.lru_cache(maxsize=256)

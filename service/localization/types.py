@@ -44,6 +44,7 @@ __all__ = [  # METRICS and ROBUST_KERNELS: quadloc.service.limits' names, re-exp
     "LocalizationInputError",
     "LocalizationOptions",
     "LocalizationResult",
+    "PlaceHint",
     "PosePrior",
 ]
 
@@ -281,6 +282,60 @@ class PosePrior:
         if self.covariance is not None:
             object.__setattr__(self, "covariance",
                                check_covariance("prior.covariance", self.covariance))
+
+
+@dataclass(frozen=True, eq=False)
+class PlaceHint:
+    """A coarse hint of where the camera is (a zone, or a position with a large uncertainty:
+    a GPS / Wi-Fi / beacon fix, the app's last known position).
+
+    It weights the search of a large map (half of the places searched are the hint's,
+    :func:`quadloc.service.localization.constellations.place_seeds`) and settles an ambiguity
+    between places in its favour, never more: a candidate outside the hint that the evidence
+    favours is still the answer, and the answer passes the same checks.
+
+    Attributes:
+        position: (3,) the camera's position, world metres, or None.
+        sigma_m: the position's 1-sigma uncertainty (isotropic, m, > 0) when ``position`` is
+            given.
+        object_ids: the objects of the hinted zone (the application resolves a zone id to
+            them), or None.
+    """
+
+    position: FloatArray | None = None
+    sigma_m: float | None = None
+    object_ids: frozenset[str] | None = None
+
+    def __post_init__(self) -> None:
+        if (self.position is None) == (self.object_ids is None):
+            raise LocalizationInputError("give either a position or the objects of a zone",
+                                         field="hint")
+        if self.position is not None:
+            p = np.asarray(self.position, dtype=float)
+            if p.shape != (3,) or not np.all(np.isfinite(p)):
+                raise LocalizationInputError("must be 3 finite numbers (m)",
+                                             field="hint.position")
+            s = self.sigma_m
+            if s is None or not (math.isfinite(s) and s > 0):
+                raise LocalizationInputError("must be a number > 0 (m)", field="hint.sigma_m")
+            p.setflags(write=False)
+            object.__setattr__(self, "position", p)
+        elif self.object_ids is not None and not self.object_ids:
+            raise LocalizationInputError("the zone has no objects", field="hint.zone")
+
+    #: A camera within this many sigmas of a position hint agrees with it.
+    AGREE_SIGMAS = 3.0
+
+    def agrees(self, world_from_camera: FloatArray, object_ids: Sequence[str]) -> bool:
+        """Whether a candidate (its pose, the ids of its inlier objects) is where the hint says:
+        within :attr:`AGREE_SIGMAS` sigmas of the position, or most of its inliers in the
+        zone."""
+        if self.position is not None and self.sigma_m is not None:
+            d = float(np.linalg.norm(np.asarray(world_from_camera)[:3, 3] - self.position))
+            return d <= self.AGREE_SIGMAS * self.sigma_m
+        assert self.object_ids is not None
+        inside = sum(1 for o in object_ids if o in self.object_ids)
+        return 2 * inside > len(object_ids)
 
 
 @dataclass(frozen=True)

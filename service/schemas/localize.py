@@ -37,6 +37,7 @@ from quadloc.service.schemas.common import (
     Int,
     Row4,
     Row6,
+    Text,
     WireModel,
     integral,
 )
@@ -104,7 +105,7 @@ class DetectionIn(WireModel):
 
     ellipse: EllipseIn | None = None
     box: BoxIn | None = None
-    label: str = Field(min_length=1, max_length=128, description="Category label of the map.")
+    label: Text = Field(min_length=1, max_length=128, description="Category label of the map.")
     sigma: float | None = Field(default=None, gt=0, le=1e6,
                                 description="Predicted uncertainty (> 0); cost weight 1/sigma.")
     log_variance: float | None = Field(default=None, ge=-60, le=60,
@@ -213,6 +214,33 @@ class GravityIn(WireModel):
         return self
 
 
+class HintIn(WireModel):
+    """Optional coarse hint of where the camera is: a position with a large uncertainty (a GPS /
+    Wi-Fi / beacon fix, the app's last known position) or the objects of a zone (a room, a
+    floor). It weights the search of a large map and settles a tie between places in its
+    favour; it never makes an answer win that the detections do not support."""
+
+    position: list[float] | None = Field(
+        default=None, min_length=3, max_length=3,
+        description="The camera's position in the map's world frame, metres.")
+    sigma_m: float | None = Field(default=None, gt=0, le=1e4,
+                                  description="1-sigma uncertainty of `position` (m).")
+    object_ids: list[str] | None = Field(
+        default=None, min_length=1, max_length=10_000,
+        description="The objects of the zone the camera is in (ids of the map's objects).")
+
+    @model_validator(mode="after")
+    def _one_kind(self) -> HintIn:
+        if (self.position is None) == (self.object_ids is None):
+            raise ValueError("give either 'position' (with 'sigma_m') or 'object_ids'")
+        if self.position is not None:
+            if self.sigma_m is None:
+                raise ValueError("'sigma_m' is required with 'position'")
+            if not all(math.isfinite(x) and abs(x) <= 1e6 for x in self.position):
+                raise ValueError("'position' entries must be finite and within +-1e6")
+        return self
+
+
 class LocalizeOptionsIn(WireModel):
     """Solver options; omitted fields take the server defaults (shown)."""
 
@@ -271,7 +299,8 @@ class LocalizeRequest(WireModel):
     detections: list[DetectionIn] = Field(max_length=MAX_DETECTIONS)
     prior: PosePriorIn | None = None
     gravity: GravityIn | None = None
-    frame_id: str | None = Field(default=None, max_length=256, description="Echoed back.")
+    hint: HintIn | None = None
+    frame_id: Text | None = Field(default=None, max_length=256, description="Echoed back.")
     timestamp: float | None = Field(default=None, description="Echoed back (client clock, s).")
     options: LocalizeOptionsIn = Field(default_factory=LocalizeOptionsIn)
 

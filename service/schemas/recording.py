@@ -21,7 +21,7 @@ from typing import Annotated, Any
 from pydantic import ConfigDict, Discriminator, Field, Tag, model_validator
 
 from quadloc.service.limits import MAX_DETECTIONS
-from quadloc.service.schemas.common import Convention, Int, WireModel
+from quadloc.service.schemas.common import Convention, Int, LabelText, Text, WireModel
 from quadloc.service.schemas.localize import CameraIn, DetectionIn, PoseIn
 
 __all__ = [
@@ -73,14 +73,16 @@ class RecordingDetectionIn(DetectionIn):
     """A detection as for localize, plus an optional ``track_id``: detections of one track (and
     label) are one object."""
 
-    track_id: str | None = Field(default=None, min_length=1, max_length=128,
+    label: LabelText = Field(min_length=1, max_length=128,
+                             description="Category label: the built object's category.")
+    track_id: Text | None = Field(default=None, min_length=1, max_length=128,
                                  description="The detector's / tracker's object track.")
 
 
 class RecordingFrameIn(WireModel):
     """One recorded frame: the app's camera pose and the frame's detections."""
 
-    frame_id: str | None = Field(default=None, min_length=1, max_length=128,
+    frame_id: Text | None = Field(default=None, min_length=1, max_length=128,
                                  description="Defaults to the frame's position.")
     world_from_camera: PoseIn = Field(description="The app's camera pose (m), in the "
                                                   "recording's `convention`.")
@@ -93,11 +95,11 @@ class RecordingFrameIn(WireModel):
 class _RecordingOptions(WireModel):
     """The build options of a recording (both forms)."""
 
-    name: str = Field(default="Built map", min_length=1, max_length=256,
-                      description="Name of the built map.")
+    name: LabelText = Field(default="Built map", min_length=1, max_length=256,
+                            description="Name of the built map.")
     up_axis: list[float] = Field(default=[0.0, 0.0, 1.0], min_length=3, max_length=3,
                                  description="World up direction of the app's world frame.")
-    size_priors: dict[str, SizePriorIn] = Field(
+    size_priors: dict[LabelText, SizePriorIn] = Field(
         default_factory=dict, description="Label -> prior on its objects' semi-axes.")
     refine_camera_poses: bool = Field(
         default=True, description="Refine the app's camera poses with the objects (tied by "

@@ -564,3 +564,51 @@ def test_update_map_retries_as_its_docstring_says():
     with pytest.raises(errs.TransportError):
         client.update_map("m", {"map_id": "m"}, if_match='"h1"')
     assert len(rec.requests) == 1 and sleeps == []
+
+
+@pytest.mark.parametrize(("model", "schema"), [
+    ("SessionOptions", "SessionOptionsIn"), ("SessionFrame", "SessionFrameIn"),
+    ("SessionInfo", "SessionOut"), ("SessionFrameResult", "SessionFrameOut"),
+])
+def test_session_models_have_the_fields_of_the_wire_schemas(model: str, schema: str) -> None:
+    """The SDK's session models have exactly the fields of the server's schemas in
+    docs/openapi.json (the contract), and the fields the server requires are required."""
+    spec = json.loads((Path(__file__).resolve().parents[2] / "docs" / "openapi.json")
+                      .read_text())["components"]["schemas"]
+    cls = getattr(sdk, model)
+    assert set(cls.model_fields) == set(spec[schema]["properties"]), model
+    if model in ("SessionFrame", "SessionOptions"):  # requests: required where the server requires
+        required = {n for n, f in cls.model_fields.items() if f.is_required()}
+        assert required == set(spec[schema].get("required", [])), model
+
+
+def test_session_routes_exist_in_the_servers_openapi() -> None:
+    """Every path the session helpers call is a route of the server."""
+    from quadloc_sdk.session import _session_path
+
+    paths = json.loads((Path(__file__).resolve().parents[2] / "docs" / "openapi.json")
+                       .read_text())["paths"]
+    sid = _session_path("s-x.y").replace("s-x.y", "{session_id}")
+    assert set(paths[sid]) >= {"get", "delete"}
+    assert "post" in paths[sid + "/frames"] and "post" in paths["/v1/maps/{map_id}/sessions"]
+
+def test_hint_is_sent_and_checked_before_sending():
+    """``hint`` reaches the body as the server's ``HintIn`` (position + sigma_m, or object_ids);
+    a position without sigma or both kinds fail before sending."""
+    from quadloc_sdk.models import Hint
+
+    rec = Recorder(httpx.Response(200, json=_response_body()),
+                   httpx.Response(200, json=_response_body()))
+    client, _ = _client(rec)
+    client.localize("chess", camera=CAMERA, detections=DETS,
+                    hint={"position": [1.0, 2.0, 0.5], "sigma_m": 5.0})
+    client.localize("chess", camera=CAMERA, detections=DETS,
+                    hint=Hint(object_ids=["0", "3"]))
+    bodies = [json.loads(r.content) for r in rec.requests]
+    assert bodies[0]["hint"] == {"position": [1.0, 2.0, 0.5], "sigma_m": 5.0}
+    assert bodies[1]["hint"] == {"object_ids": ["0", "3"]}
+    with pytest.raises(pydantic.ValidationError, match="sigma_m"):
+        Hint(position=[0, 0, 0])
+    with pytest.raises(pydantic.ValidationError, match="either"):
+        Hint(position=[0, 0, 0], sigma_m=1, object_ids=["0"])
+    assert len(rec.requests) == 2

@@ -65,7 +65,8 @@ ROOM_SPACING_M = 12.0
 FLOOR_HEIGHT_M = 4.0
 ROOMS_PER_FLOOR = 100
 MODES = ("exact", "perturbed", "random")
-#: Seeds of the building and frame generators: tune (thresholds, calibration) on these ...
+#: Base seeds of the benchmark (``bench.building --seed``; it derives each case's building and
+#: frame seeds from one): tune (thresholds, calibration) on these ...
 TUNE_SEEDS = tuple(range(0, 100))
 #: ... and report on these (never used for tuning).
 REPORT_SEEDS = tuple(range(1000, 1100))

@@ -40,6 +40,7 @@ from quadloc_sdk.models import (
     Convention,
     Detection,
     Gravity,
+    Hint,
     LocalizeOptions,
     LocalizeRequest,
     LocalizeResponse,
@@ -236,10 +237,11 @@ class _Base:
         options: LocalizeOptions | Mapping[str, Any] | None,
         frame_id: str | None,
         timestamp: float | None,
+        hint: Hint | Mapping[str, Any] | None = None,
     ) -> LocalizeRequest:
         if request is not None:
             if any(x is not None for x in (camera, detections, prior, gravity, options,
-                                           frame_id, timestamp)):
+                                           frame_id, timestamp, hint)):
                 raise ValueError("localize: give either 'request' or the separate fields")
             return (request if isinstance(request, LocalizeRequest)
                     else LocalizeRequest.model_validate(request))
@@ -247,7 +249,7 @@ class _Base:
             raise ValueError("localize: 'camera' and 'detections' are required")
         fields: dict[str, Any] = {"camera": camera, "detections": list(detections)}
         for name, value in (("prior", prior), ("gravity", gravity), ("options", options),
-                            ("frame_id", frame_id), ("timestamp", timestamp)):
+                            ("frame_id", frame_id), ("timestamp", timestamp), ("hint", hint)):
             if value is not None:
                 fields[name] = value
         return LocalizeRequest.model_validate(fields)
@@ -489,12 +491,14 @@ class QuadLocClient(_Base):
         frame_id: str | None = None,
         timestamp: float | None = None,
         map_version: int | None = None,
+        hint: Hint | Mapping[str, Any] | None = None,
     ) -> LocalizeResponse:
         """Localize one frame against ``map_id`` (its latest version, or ``map_version``):
-        pass a :class:`LocalizeRequest` or its fields. Invalid input raises
-        ``pydantic.ValidationError`` (a ``ValueError`` naming the field) before sending."""
+        pass a :class:`LocalizeRequest` or its fields (``hint``: :class:`quadloc_sdk.models.Hint`,
+        where the camera roughly is). Invalid input raises ``pydantic.ValidationError`` (a
+        ``ValueError`` naming the field) before sending."""
         req = self._localize_request(request, camera, detections, prior, gravity, options,
-                                     frame_id, timestamp)
+                                     frame_id, timestamp, hint)
         return LocalizeResponse.model_validate(
             self._json(self._send(self._localize_call(map_id, req, map_version)))
         )
@@ -637,9 +641,10 @@ class AsyncQuadLocClient(_Base):
         frame_id: str | None = None,
         timestamp: float | None = None,
         map_version: int | None = None,
+        hint: Hint | Mapping[str, Any] | None = None,
     ) -> LocalizeResponse:
         req = self._localize_request(request, camera, detections, prior, gravity, options,
-                                     frame_id, timestamp)
+                                     frame_id, timestamp, hint)
         return LocalizeResponse.model_validate(
             self._json(await self._send(self._localize_call(map_id, req, map_version)))
         )

@@ -254,6 +254,26 @@ class Gravity(BaseModel):
         return self
 
 
+class Hint(BaseModel):
+    """A coarse hint of where the camera is, for maps of many similar rooms: a ``position``
+    (map world frame, m) with its 1-sigma ``sigma_m`` (a GPS / Wi-Fi / beacon fix, the app's
+    last known position), or the ``object_ids`` of the zone the camera is in. The server uses
+    it to settle a tie between places, never against the detections (docs/api.md, "Hints")."""
+
+    model_config = _REQUEST
+    position: FloatList | None = Field(default=None, min_length=3, max_length=3)
+    sigma_m: Float | None = Field(default=None, gt=0, le=1e4)
+    object_ids: list[str] | None = Field(default=None, min_length=1)
+
+    @model_validator(mode="after")
+    def _one_kind(self) -> Hint:
+        if (self.position is None) == (self.object_ids is None):
+            raise ValueError("give either 'position' (with 'sigma_m') or 'object_ids'")
+        if self.position is not None and self.sigma_m is None:
+            raise ValueError("sigma_m: required with 'position'")
+        return self
+
+
 class LocalizeOptions(BaseModel):
     """Solver options. ``None`` fields are not sent: the server's defaults apply (level-set
     metric, RANSAC budget 300, inlier IoU 0.2, sigma weighting on, no robust kernel, OpenCV
@@ -284,6 +304,7 @@ class LocalizeRequest(BaseModel):
     detections: list[Detection]
     prior: PosePrior | None = None
     gravity: Gravity | None = None
+    hint: Hint | None = None
     frame_id: str | None = None
     timestamp: Float | None = None
     options: LocalizeOptions = Field(default_factory=LocalizeOptions)

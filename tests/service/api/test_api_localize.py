@@ -284,7 +284,8 @@ def test_time_budget_is_capped_by_the_server(tmp_path: Path, monkeypatch) -> Non
     seen = []
     real = solver_module.localize
 
-    def spy(detections, scene_map, camera, options, prior=None, gravity=None, calibration=None):
+    def spy(detections, scene_map, camera, options, prior=None, gravity=None, calibration=None,
+            hint=None):
         seen.append(options.time_budget_ms)
         return real(detections, scene_map, camera, options, prior, gravity)
 
@@ -449,7 +450,7 @@ def test_batch_total_budget_answers_the_rest_not_localized(tmp_path: Path, monke
     budgets = []
 
     def slow(detections, scene_map, camera, options, prior=None, gravity=None,
-             calibration=None):
+             calibration=None, hint=None):
         budgets.append(options.time_budget_ms)
         result = real(detections, scene_map, camera, options, prior, gravity)
         clock["now"] += 0.2  # each solve takes 200 ms of the batch's clock
@@ -552,3 +553,60 @@ def test_the_fast_path_answers_what_the_full_handling_answers(client: TestClient
     svg = client.post(URL, json=LOCALIZE_EXAMPLE, headers={"accept": "image/svg+xml"})
     assert svg.status_code == 200 and svg.headers["content-type"].startswith("image/svg")
     assert seen == [False]
+
+
+def _building_frame(building, bf, cam, **changes: object) -> dict:
+    """The wire request of a simulated building frame."""
+    body = {"camera": {"fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy,
+                       "width": cam.width, "height": cam.height},
+            "detections": [{"label": d.label, "sigma": d.sigma, "ellipse": {
+                "cx": d.ellipse.cx, "cy": d.ellipse.cy, "a": d.ellipse.a, "b": d.ellipse.b,
+                "angle": d.ellipse.angle}} for d in bf.frame.detections]}
+    body.update(changes)
+    return body
+
+
+def test_hint_settles_exact_copies_and_bad_hints_are_422(client: TestClient) -> None:
+    """A building of exact copies of a room: without a hint the answer is ``ambiguous`` with
+    the rooms as alternatives; with the room's objects (or a position 1 m off, sigma 2 m) it is
+    the truth (or, when the pose is too uncertain or another pose competes, an honest refusal
+    with the true room's pose among the candidates); an unknown object id or a position
+    without sigma is a 422 naming the field."""
+    from tests.support.buildings import building_frames, make_building
+
+    b = make_building(8, "exact", seed=51)
+    doc = b.scene_map.to_dict()
+    doc["map_id"] = "building-api"
+    assert client.post("/v1/maps", json=doc).status_code in (200, 201)
+    url = "/v1/maps/building-api/localize"
+    cam, frames = building_frames(b, 3, seed=52, min_detections=5)
+    settled = 0
+    for bf in frames:
+        r = client.post(url, json=_building_frame(b, bf, cam))
+        assert r.status_code == 200, r.text
+        plain = r.json()
+        assert not plain["localized"] and plain["reason"] == "ambiguous"
+        assert len(plain["alternatives"]) >= 2
+        truth = bf.world_from_camera
+        for hint in ({"object_ids": list(bf.room.object_ids)},
+                     {"position": (truth[:3, 3] + [1.0, 0.0, 0.0]).tolist(), "sigma_m": 2.0}):
+            out = client.post(url, json=_building_frame(b, bf, cam, hint=hint)).json()
+            if out["localized"]:
+                settled += 1
+                T = np.array(out["world_from_camera"]["matrix"])
+                assert np.linalg.norm(T[:3, 3] - truth[:3, 3]) < 0.1
+            else:  # honest: a refusal (with a zone hint, the true room among the candidates)
+                assert out["reason"] in ("low_confidence", "ambiguous"), out
+                gaps = [np.linalg.norm(np.array(a["world_from_camera"]["matrix"])[:3, 3]
+                                       - truth[:3, 3]) for a in out["alternatives"]]
+                assert "position" in hint or min(gaps) < 0.5
+    assert settled >= 3
+    bf = frames[0]
+    body = _problem(client.post(url, json=_building_frame(b, bf, cam,
+                                                          hint={"object_ids": ["nope"]})),
+                    422, "invalid-geometry")
+    assert body["errors"][0]["field"] == "hint.object_ids[0]"
+    body = _problem(client.post(url, json=_building_frame(b, bf, cam,
+                                                          hint={"position": [0.0, 0.0, 0.0]})),
+                    422, "validation-error")
+    assert body["errors"][0]["field"].startswith("hint") and "sigma_m" in json.dumps(body)

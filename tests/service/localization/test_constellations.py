@@ -25,6 +25,8 @@ from quadloc.service.localization.hypotheses import (
     size_depths,
 )
 from quadloc.service.localization.pipeline import localize
+from quadloc.service.localization.sampling import count_map_samples
+from quadloc.service.localization.types import LocalizationInputError, PlaceHint
 from tests.support.buildings import building_frames, make_building
 from tests.support.errors import pose_errors
 from tests.support.scenes import CAM, look_at
@@ -136,3 +138,64 @@ def test_exact_copies_are_ambiguous_never_a_wrong_pose() -> None:
                      res.alternatives}
             assert len(rooms) >= 2  # the candidates are in different rooms
     assert ambiguous >= 0.8 * len(frames)
+
+
+def test_zone_hint_settles_exact_copies_and_a_wrong_hint_forces_nothing() -> None:
+    b = make_building(12, "exact", seed=41)
+    cam, frames = building_frames(b, 8, seed=42, min_detections=4)
+    settled = 0
+    for k, bf in enumerate(frames):
+        right = PlaceHint(object_ids=frozenset(bf.room.object_ids))
+        res = localize(bf.frame.detections, b.compiled, cam, hint=right)
+        pos, rot = pose_errors(res.world_from_camera, bf.world_from_camera)
+        assert not (res.localized and pos > 0.5)
+        settled += res.localized and pos <= 0.1 and rot <= 5
+        # a hint naming another room of an exact building: its copy is as good as the truth,
+        # the answer may follow the hint there (the evidence cannot tell) ...
+        other = b.rooms[(b.rooms.index(bf.room) + 1 + k) % len(b.rooms)]
+        res = localize(bf.frame.detections, b.compiled, cam,
+                       hint=PlaceHint(object_ids=frozenset(other.object_ids)))
+        if res.localized:
+            assert {b.zone_of(m.object_id) for m in res.inliers} <= {other.zone_id,
+                                                                      bf.room.zone_id}
+    assert settled >= 0.6 * len(frames)
+
+
+def test_a_wrong_hint_never_beats_the_evidence_in_distinct_rooms(perturbed: tuple) -> None:
+    b, cam, frames = perturbed
+    for k, bf in enumerate(frames[:6]):
+        other = b.rooms[(b.rooms.index(bf.room) + 3 + k) % len(b.rooms)]
+        far = other.world_from_room[:3, 3]
+        for hint in (PlaceHint(object_ids=frozenset(other.object_ids)),
+                     PlaceHint(position=far, sigma_m=2.0)):
+            res = localize(bf.frame.detections, b.compiled, cam, hint=hint)
+            pos, _ = pose_errors(res.world_from_camera, bf.world_from_camera)
+            assert not (res.localized and pos > 0.5)
+
+
+def test_place_hint_checks_its_fields() -> None:
+    with pytest.raises(LocalizationInputError) as e:
+        PlaceHint()
+    assert e.value.field == "hint"
+    with pytest.raises(LocalizationInputError) as e:
+        PlaceHint(position=np.array([0.0, 1.0]), sigma_m=1.0)
+    assert e.value.field == "hint.position"
+    with pytest.raises(LocalizationInputError) as e:
+        PlaceHint(position=np.zeros(3), sigma_m=0.0)
+    assert e.value.field == "hint.sigma_m"
+    with pytest.raises(LocalizationInputError) as e:
+        PlaceHint(object_ids=frozenset())
+    assert e.value.field == "hint.zone"
+
+
+def test_count_map_samples_equals_brute_force() -> None:
+    b = make_building(3, "perturbed", seed=61)
+    cm = b.compiled
+    labels = ["Chair", "Chair", "TV", "Xbox", "Nope"]
+    cats = list(cm.categories)
+    for size in (2, 3):
+        brute = 0
+        for dets in itertools.combinations(range(len(labels)), size):
+            for objs in itertools.permutations(range(len(cm)), size):
+                brute += all(cats[o] == labels[d] for d, o in zip(dets, objs, strict=True))
+        assert count_map_samples(cm, labels, size) == brute
