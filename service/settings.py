@@ -213,6 +213,17 @@ class Settings(BaseSettings):
         description="Live tracking sessions per process; more -> 503 session-capacity (after "
                     "idle ones expire).",
     )
+    session_frame_budget_ms: float = Field(
+        default=1000.0, gt=0, le=60_000.0,
+        description="CPU time of one tracking-session frame; a frame past it is answered "
+                    "without a pose, reason time_budget_exceeded (the session goes on).",
+    )
+    session_request_budget_ms: float = Field(
+        default=20_000.0, gt=0, le=300_000.0,
+        description="CPU time of one session frames request (a batch included; wall-clock "
+                    "hard limit 2x, slot waits included); frames past it are answered "
+                    "time_budget_exceeded. Keep it below the proxy's read timeout.",
+    )
     session_idle_timeout_s: float = Field(
         default=300.0, gt=0, le=86_400.0,
         description="A tracking session without a request for this long expires (404 "

@@ -12,6 +12,7 @@ single frames share the CPU fairly. Design: docs/design/service.md#tracking-sess
 
 from __future__ import annotations
 
+from quadloc.factors.budget import Deadline, earliest
 from quadloc.factors.names import GeometryError
 from quadloc.service.app.conversions import (
     camera_from_request,
@@ -60,6 +61,8 @@ class SessionService:
         self.maps = maps
         self.slots = slots
         self.queue_timeout_s = settings.solve_queue_timeout_s
+        self.frame_budget_ms = settings.session_frame_budget_ms
+        self.request_budget_ms = settings.session_request_budget_ms
         self.store = SessionStore(settings.max_sessions, settings.session_idle_timeout_s)
 
     def create(self, map_id: str, body: SessionCreate) -> SessionOut:
@@ -98,15 +101,22 @@ class SessionService:
         frames = body.frames if isinstance(body, SessionFramesIn) else [body]
         with entry.lock:
             inputs = self._validated(entry, frames, batch)
+            # CPU time of this thread (it fuses every frame of the request), from here
+            request = Deadline.cpu_budget(self.request_budget_ms)
             results = []
             for i, frame in enumerate(inputs):
+                if request.passed():  # counted, not fused: no slot needed
+                    results.append(frame_out(entry.session.add_frame(frame, request),
+                                             entry.convention))
+                    continue
                 # the first frame may wait for a slot only as long as a localize would; later
                 # ones take their turn (a batch half fused is never refused)
                 if not self.slots.acquire(timeout=self.queue_timeout_s if i == 0 else None):
                     raise AppError("busy", "all solver slots are busy; retry shortly",
                                    retry_after_s=BUSY_RETRY_AFTER_S)
                 try:
-                    result = entry.session.add_frame(frame)
+                    result = entry.session.add_frame(
+                        frame, earliest(request, Deadline.cpu_budget(self.frame_budget_ms)))
                 except _INPUT_ERRORS as exc:
                     raise invalid_input(exc, f"frames[{i}]." if batch else "") from exc
                 finally:

@@ -92,9 +92,10 @@ def multi_frame_ransac(
         extra_hypotheses: ``camera_from_world`` poses of the reference frame to score as well
             (e.g. a client prior).
         max_samples: minimal samples drawn (uniform over frames' detections and compatible
-            objects, seeded by ``rng``).
-        deadline: no sample is drawn after it (None: no limit; the session passes a
-            wall-clock budget, :meth:`quadloc.factors.budget.Deadline.wall_budget`).
+            objects, seeded by ``rng``): always all of them, so that the answer depends on the
+            inputs and the seed only, never on the machine's speed.
+        deadline: checked between the scoring stages (None: no limit); once it has passed
+            the search gives up: reason ``time_budget_exceeded``, no pose.
     """
     rng = rng or np.random.default_rng(0)
     ref = frames[-1].odom_from_camera
@@ -109,8 +110,6 @@ def multi_frame_ransac(
     hyps: list[FloatArray] = [np.asarray(h, float) for h in extra_hypotheses]
     if len(pool) >= 3:
         for _ in range(max_samples):
-            if deadline_passed(deadline):
-                break
             idx = rng.choice(len(pool), 3, replace=False)
             sample, used = [], set()
             for i in idx:
@@ -134,6 +133,8 @@ def multi_frame_ransac(
     # stage 1: centre hits summed over frames; stage 2: IoU scores on the best STAGE2
     hits = np.zeros(len(H))
     for k, sc in enumerate(scorers):
+        if deadline_passed(deadline):
+            return MultiFrameOutcome(None, [], 0, 0, len(hyps), "time_budget_exceeded")
         if sc is not None:
             hits += sc.centre_hits(np.einsum("ij,hjk->hik", k_from_ref[k], H))
     keep = np.argsort(-hits, kind="stable")[:STAGE2]
@@ -141,6 +142,8 @@ def multi_frame_ransac(
     score = np.zeros(len(H))
     per_frame: list[list[list[Match]]] = [[[] for _ in frames] for _ in range(len(H))]
     for k, sc in enumerate(scorers):
+        if deadline_passed(deadline):
+            return MultiFrameOutcome(None, [], 0, 0, len(hyps), "time_budget_exceeded")
         if sc is None:
             continue
         dense = sc.dense_iou(np.einsum("ij,hjk->hik", k_from_ref[k], H))

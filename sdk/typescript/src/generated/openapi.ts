@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: af4397c34a6761aa1884112e107bb49cd01384c4301dc848ab0ba2b6f7bfe8b1
+// openapi-sha256: b15cfe63411eaa1dceabbfd990418ab77845e0c51097847fb7041e0aa29651a6
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -1093,7 +1093,7 @@ export interface components {
             state: string;
             /**
              * Reason
-             * @description Why no pose: waiting_for_constraints, ambiguous, lost; with a pose: detections_unexplained (the frame's detections contradict the pose; confidence 0); else None.
+             * @description Why no pose: waiting_for_constraints, ambiguous, lost, time_budget_exceeded (the frame was counted but not fused: its CPU budget or its request's ran out); with a pose: detections_unexplained (the frame's detections contradict the pose; confidence 0); else None.
              */
             reason: string | null;
             world_from_camera: components["schemas"]["PoseOut"] | null;
@@ -1138,7 +1138,7 @@ export interface components {
         SessionOptionsIn: {
             /**
              * Window Frames
-             * @description Camera poses kept in the sliding window.
+             * @description Camera poses kept in the sliding window (at most 300 with isam2, 60 with batch).
              * @default 30
              */
             window_frames?: number;
