@@ -186,6 +186,12 @@ class Settings(BaseSettings):
         default=5.0, gt=0, le=300,
         description="Idle keep-alive connections are closed after this many seconds.",
     )
+    shutdown_grace_s: float = Field(
+        default=30.0, ge=3.0, le=3600.0,
+        description="On SIGTERM, requests in progress get this long to end (quadloc serve): "
+                    "2 s before it, session frames and builds still running are cancelled, "
+                    "and the process exits.",
+    )
     max_build_frames: int = Field(default=2000, ge=1, le=100_000,
                                   description="Frames per map-building recording.")
     max_build_detections: int = Field(default=20_000, ge=1,

@@ -12,6 +12,8 @@ single frames share the CPU fairly. Design: docs/design/service.md#tracking-sess
 
 from __future__ import annotations
 
+import threading
+
 from quadloc.factors.budget import Deadline, earliest
 from quadloc.factors.names import GeometryError
 from quadloc.service.app.conversions import (
@@ -63,6 +65,7 @@ class SessionService:
         self.queue_timeout_s = settings.solve_queue_timeout_s
         self.frame_budget_ms = settings.session_frame_budget_ms
         self.request_budget_ms = settings.session_request_budget_ms
+        self._stopping = threading.Event()
         self.store = SessionStore(settings.max_sessions, settings.session_idle_timeout_s)
 
     def create(self, map_id: str, body: SessionCreate) -> SessionOut:
@@ -92,17 +95,30 @@ class SessionService:
         except SessionNotFound as exc:
             raise _not_found(session_id) from exc
 
-    def add_frames(self, session_id: str,
-                   body: SessionFramesIn | SessionFrameIn) -> SessionFramesOut:
+    def close(self, stop: bool = True) -> None:
+        """The process is stopping (``stop``; False: it serves again): the frames being fused
+        stop at their next stage, later ones are answered ``time_budget_exceeded`` without
+        work."""
+        if stop:
+            self._stopping.set()
+        else:
+            self._stopping.clear()
+
+    def add_frames(self, session_id: str, body: SessionFramesIn | SessionFrameIn,
+                   cancel: threading.Event | None = None) -> SessionFramesOut:
         """Fuse one frame, or a batch in time order (see the module docstring); errors name
-        ``frames[i]....`` for a batch, the frame's own fields otherwise."""
+        ``frames[i]....`` for a batch, the frame's own fields otherwise. Each frame has the
+        CPU budget ``session_frame_budget_ms``, the request ``session_request_budget_ms``;
+        ``cancel`` (set when the client went away) and :meth:`close` end the work like a
+        budget (frames answered ``time_budget_exceeded``)."""
         entry = self._entry(session_id)
         batch = isinstance(body, SessionFramesIn)
         frames = body.frames if isinstance(body, SessionFramesIn) else [body]
         with entry.lock:
             inputs = self._validated(entry, frames, batch)
             # CPU time of this thread (it fuses every frame of the request), from here
-            request = Deadline.cpu_budget(self.request_budget_ms)
+            request = Deadline.cpu_budget(self.request_budget_ms).cancelled_by(
+                self._stopping, *(() if cancel is None else (cancel,)))
             results = []
             for i, frame in enumerate(inputs):
                 if request.passed():  # counted, not fused: no slot needed

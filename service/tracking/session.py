@@ -69,6 +69,9 @@ MAX_WINDOW_FRAMES = {"isam2": 300, "batch": 60}
 #: Most detections an initializing session keeps buffered (over all buffered frames; the
 #: oldest frames are dropped first): bounds a session's memory whatever the frames hold.
 MAX_BUFFERED_DETECTIONS = 2048
+#: A tracking frame's smoother update starts only with this many times the previous update's
+#: CPU time left in its budget.
+UPDATE_COST_MARGIN = 1.5
 #: ``FrameResult.reason`` of a frame not fused because its time budget ran out.
 TIME_BUDGET_EXCEEDED = "time_budget_exceeded"
 
@@ -242,6 +245,7 @@ class TrackingSession:
         self._last: tuple[int, float, FloatArray, FloatArray, FloatArray] | None = None
         self._misses = 0
         self._last_timestamp: float | None = None
+        self._update_cpu_s = 0.0  # CPU time (s) of the last smoother update
 
     # ------------------------------------------------------------------ public
     @property
@@ -421,15 +425,19 @@ class TrackingSession:
         stamps = gtsam.FixedLagSmootherKeyTimestampMap()
         stamps[key] = float(index)
         timings["associate"] = (time.perf_counter() - t) * 1e3
-        if deadline_passed(deadline):
+        # the update cannot be interrupted: it starts only if the CPU time left covers the
+        # previous one's (the window's cost changes slowly from frame to frame)
+        if deadline_passed(deadline) or (deadline is not None and deadline.remaining_cpu_s()
+                                         < UPDATE_COST_MARGIN * self._update_cpu_s):
             return self._no_pose(index, frame, T_oc, usable, TIME_BUDGET_EXCEEDED, timings)
-        t = time.perf_counter()
+        t, cpu = time.perf_counter(), time.thread_time()
         try:
             self._smoother.update(graph, values, stamps)
             T = self._smoother.calculateEstimatePose3(key).matrix()
             cov = self._marginal(key)
         except RuntimeError:
             T, cov = None, None
+        self._update_cpu_s = time.thread_time() - cpu
         timings["update"] = (time.perf_counter() - t) * 1e3
         if T is None or cov is None or not np.all(np.isfinite(T)):
             self.reset()
