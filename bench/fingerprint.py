@@ -136,8 +136,9 @@ def build_case() -> dict[str, Any]:
     from bench.map_building import _det_json
     from quadloc.factors.rotations import invert_pose
     from quadloc.maps.building.build import build_map
-    from quadloc.maps.building.recording import parse_recording, recording_to_dict
+    from quadloc.maps.building.recording import recording_to_dict
     from quadloc.maps.compiled import compile_map
+    from quadloc.service.app.builds import recording_of
     from tests.support.reference_data import load_chess_map, load_chess_poses
     from tests.support.simulate import SimulationConfig, simulate_frame
     from tests.support.walks import drifting_odometry as odometry
@@ -152,7 +153,7 @@ def build_case() -> dict[str, Any]:
     frames = [simulate_frame(cm, camera, T, rng, cfg) for T in truth]
     doc = recording_to_dict(camera, [(str(i), app[i], [_det_json(d) for d in f.detections])
                                      for i, f in enumerate(frames)], name="fingerprint")
-    scene, report = build_map(parse_recording(doc), map_id="fp")
+    scene, report = build_map(recording_of(doc), map_id="fp")
     report = json.loads(json.dumps(report.model_dump(mode="json"), default=_f))
     return {"objects": [{"object_id": o.object_id, "category": o.category,
                          "center": _f(o.ellipsoid.center), "axes": _f(o.ellipsoid.axes),

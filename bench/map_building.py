@@ -4,6 +4,8 @@ Usage::
 
     python -m bench.map_building [--frames 300] [--seeds 1,2] [--test-frames 108]
                                  [--fixed-cameras] [--json PATH] [--plots DIR] [--write-results]
+    python -m bench.map_building --write-recording PATH [--frames N] [--seeds S]
+                                 [--holdout-every K]
 
 Per seed:
 
@@ -35,6 +37,7 @@ results are reported on other seeds.
 from __future__ import annotations
 
 import argparse
+import gzip
 import itertools
 import json
 import math
@@ -48,9 +51,10 @@ import numpy as np
 from bench.chess_eval import eval_options
 from quadloc.factors.rotations import pose_matrix, rotation_angle
 from quadloc.maps.building.build import build_map
-from quadloc.maps.building.recording import parse_recording, recording_to_dict
+from quadloc.maps.building.recording import recording_to_dict
 from quadloc.maps.compiled import compile_map
 from quadloc.maps.reconstruct import ellipsoid_errors
+from quadloc.service.app.builds import recording_of
 from tests.support.errors import pose_errors
 from tests.support.reference_data import load_chess_map, load_chess_world_from_camera
 from tests.support.simulate import SimulationConfig, simulate_frame
@@ -66,6 +70,47 @@ def _det_json(d) -> dict:
     return out
 
 
+def simulated_recording(seed: int, n_frames: int, config: SimulationConfig | None = None,
+                        **options: object) -> tuple[dict, list, list, list]:
+    """Steps 1-3 of the module docstring: ``(recording document (the API dialect), true
+    poses, app poses, simulated frames)``; ``config``: the detector (default: the simulator's
+    default noise with 5 % wrong labels and 0.2 spurious detections per frame); ``options``:
+    the recording's build options (``holdout_every``...)."""
+    cm = compile_map(load_chess_map())
+    camera, poses, _ = load_chess_world_from_camera()
+    rng = np.random.default_rng([seed, 16])
+    truth_walk = resampled_walk(poses, n_frames)
+    app = drifting_odometry(truth_walk, rng)
+    cfg = config or SimulationConfig(wrong_label_probability=0.05, spurious_rate=0.2)
+    frames = [simulate_frame(cm, camera, T, rng, cfg) for T in truth_walk]
+    doc = recording_to_dict(camera, [(str(i), app[i], [_det_json(d) for d in f.detections])
+                                     for i, f in enumerate(frames)],
+                            **{"name": "Chess (built)", **options})
+    return doc, truth_walk, app, frames
+
+
+def write_recording(path: Path, seed: int, n_frames: int, holdout_every: int | None) -> dict:
+    """Write a simulated recording (the API dialect, gzip when ``path`` ends in ``.gz``,
+    rounded to 0.1 mm / 1e-6 / 0.01 px to stay small); returns the document."""
+    doc, _, _, _ = simulated_recording(seed, n_frames, name="Chess room (simulated)",
+                                       **({"holdout_every": holdout_every} if holdout_every
+                                          else {}))
+    for f in doc["frames"]:
+        pose = f["world_from_camera"]
+        pose["quaternion_wxyz"] = [round(x, 7) for x in pose["quaternion_wxyz"]]
+        pose["translation_m"] = [round(x, 4) for x in pose["translation_m"]]
+        for d in f["detections"]:
+            d["ellipse"] = {k: round(v, 2 if k != "angle" else 4) for k, v in d["ellipse"].items()}
+            if "sigma" in d:
+                d["sigma"] = float(f"{d['sigma']:.3g}")
+    text = json.dumps(doc, separators=(",", ":")) + "\n"
+    if path.suffix == ".gz":
+        path.write_bytes(gzip.compress(text.encode(), mtime=0))
+    else:
+        path.write_text(text)
+    return doc
+
+
 def run_seed(seed: int, n_frames: int, n_test: int, log=print,
              refine_cameras: bool = True) -> dict:
     from quadloc.service.localization.pipeline import localize
@@ -73,17 +118,11 @@ def run_seed(seed: int, n_frames: int, n_test: int, log=print,
     real = load_chess_map()
     cm = compile_map(real)
     camera, poses, _ = load_chess_world_from_camera()
-    rng = np.random.default_rng([seed, 16])
-    truth_walk = resampled_walk(poses, n_frames)
-    app = drifting_odometry(truth_walk, rng)
-    cfg = SimulationConfig(wrong_label_probability=0.05, spurious_rate=0.2)
-    frames = [simulate_frame(cm, camera, T, rng, cfg) for T in truth_walk]
-    doc = recording_to_dict(camera, [(str(i), app[i], [_det_json(d) for d in f.detections])
-                                     for i, f in enumerate(frames)], name="Chess (built)")
+    doc, truth_walk, app, frames = simulated_recording(seed, n_frames)
     from dataclasses import replace
 
     # the recording's defaults (odometry noise, ...) except, for the ablation, no camera poses
-    rec = replace(parse_recording(doc), refine_camera_poses=refine_cameras)
+    rec = replace(recording_of(doc), refine_camera_poses=refine_cameras)
     truth_ids = [frames[o.frame].object_ids[o.index] for o in rec.observations]
     truth_label_ok = [frames[o.frame].true_labels[o.index] == o.label
                       for o in rec.observations]
@@ -359,6 +398,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", type=Path)
     ap.add_argument("--plots", type=Path)
     ap.add_argument("--write-results", action="store_true")
+    ap.add_argument("--write-recording", type=Path, metavar="PATH",
+                    help="only write the first seed's recording (the API dialect, .gz = gzip) "
+                         "with --frames frames and exit")
+    ap.add_argument("--holdout-every", type=int, metavar="K",
+                    help="with --write-recording: the recording's holdout_every")
     ap.add_argument("--fixed-cameras", action="store_true",
                     help="ablation: do not refine the camera poses (the default refines them, "
                          "object-level bundle adjustment); results go to the section "
@@ -366,6 +410,13 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(",")]
     log = lambda m: print(m, file=sys.stderr)  # noqa: E731
+    if args.write_recording:
+        doc = write_recording(args.write_recording, seeds[0], args.frames, args.holdout_every)
+        print(json.dumps({"recording": str(args.write_recording), "seed": seeds[0],
+                          "frames": len(doc["frames"]),
+                          "detections": sum(len(f["detections"]) for f in doc["frames"]),
+                          "bytes": args.write_recording.stat().st_size}))
+        return 0
     refine = not args.fixed_cameras
     results = {"refine_cameras": refine,
                "seeds": [run_seed(s, args.frames, args.test_frames, log, refine)

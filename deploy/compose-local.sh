@@ -7,7 +7,8 @@
 #   deploy/compose-local.sh down    # stop and remove the stack and its volumes
 #   deploy/compose-local.sh compose logs proxy   # any compose command on the project
 #
-# Environment: QUADLOC_API_KEYS (required, as for docker-compose.yml), QUADLOC_PROXY_PORT
+# Environment: QUADLOC_API_KEYS (required by `up` and `compose`, as for docker-compose.yml;
+# `down` works without it), QUADLOC_PROXY_PORT
 # (default 8080), QUADLOC_COMPOSE_PROJECT (default quadloc). Works with Debian's docker-compose
 # 1.29 (v1) or `docker compose` (v2).
 set -euo pipefail
@@ -43,8 +44,8 @@ up)
     done
     "${COMPOSE[@]}" ps >&2; "${COMPOSE[@]}" logs --tail 20 >&2
     echo "compose-local: nginx did not answer on 127.0.0.1:$PORT within 60 s" >&2; exit 1 ;;
-down)
-    "${COMPOSE[@]}" down -v --remove-orphans ;;
+down)  # the keys are not used to stop the stack, but compose refuses the file without them
+    QUADLOC_API_KEYS="${QUADLOC_API_KEYS:-unused-by-down}" "${COMPOSE[@]}" down -v --remove-orphans ;;
 compose)  # any other compose command on this project, e.g. `compose stop quadloc-1`
     "${COMPOSE[@]}" "${@:2}" ;;
 *)

@@ -5,8 +5,9 @@
 # On a machine of the development class (Debian bookworm, root, no systemd, no registry):
 #   apt-get install docker.io debootstrap (only with QUADLOC_INSTALL_DOCKER=1, or CI=true),
 #   then dockerd --iptables=false --ip6tables=false --bridge=none --data-root "$DATA_ROOT" &
-# (GUIDE.md §6 / docs/deployment.md). Each step is bounded in time; nothing here is fatal for
-# the caller: the image checks skip, with this reason, when no engine answers.
+# (docs/deployment.md, "On a machine without a registry"). Each step is bounded in time;
+# nothing here is fatal for the caller: the image checks skip, with this reason, when no
+# engine answers.
 set -uo pipefail
 DATA_ROOT="${QUADLOC_DOCKER_DATA_ROOT:-/var/lib/docker}"
 LOG="${QUADLOC_DOCKER_LOG:-/tmp/quadloc-dockerd.log}"

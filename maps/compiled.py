@@ -18,7 +18,7 @@ from quadloc.factors.arrays import FloatArray, IntArray
 from quadloc.factors.camera import Ellipsoid
 from quadloc.maps.model import SceneMap
 
-__all__ = ["CompiledMap", "compile_map"]
+__all__ = ["CompiledMap", "compile_map", "compiled_subset"]
 
 
 def _frozen(array: FloatArray) -> FloatArray:
@@ -137,3 +137,13 @@ def compile_map(scene_map: SceneMap | CompiledMap) -> CompiledMap:
                            _frozen(shape_matrices), _frozen(dual_quadrics), indices_by_category)
     object.__setattr__(scene_map, _MEMO, compiled)
     return compiled
+
+
+def compiled_subset(compiled: CompiledMap, indices: IntArray) -> CompiledMap:
+    """The compiled map of the objects ``indices`` (sorted, unique) of ``compiled``: same map
+    id, version, name, up axis and categories, the objects in their order (ids kept), so that an
+    answer on the subset names the map's objects."""
+    sm = compiled.scene_map
+    objects = tuple(sm.objects[int(i)] for i in np.asarray(indices, dtype=np.intp))
+    return compile_map(SceneMap(sm.map_id, sm.name, sm.up_axis, sm.categories, objects,
+                                sm.version))

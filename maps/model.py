@@ -404,20 +404,21 @@ def _set_fields(scene: SceneMap, doc: MapDocument, objects: tuple[MapObject, ...
     return scene
 
 
-class _ChessEllipsoid(BaseModel):
+class _ChessEllipsoid(_Document):
     axes: SemiAxes
     R: Rotation  # the Chess format's name
     center: Center
 
 
-class _ChessObject(BaseModel):
+class _ChessObject(_Document):
     category_id: ChessId
     object_id: Annotated[int, BeforeValidator(_integral), Strict()] | Label
     ellipsoid: _ChessEllipsoid
 
 
-class ChessDocument(BaseModel):
-    """The Chess scene format (tests/support/data/chess_scene.json); unknown fields are ignored."""
+class ChessDocument(_Document):
+    """The Chess scene format (tests/support/data/chess_scene.json); unknown fields are refused
+    (naming them), as everywhere in the API."""
 
     category_id_to_label: Annotated[dict[str, Label], Field(min_length=1)]
     objects: Annotated[list[_ChessObject], Field(max_length=int(LIMITS["max_objects"]))]

@@ -67,6 +67,7 @@ __all__ = [
     "StoredMap",
     "VersionConflict",
     "as_utc",
+    "calibrations_table",
     "normalize_url",
     "utc_now",
 ]
@@ -104,6 +105,21 @@ versions_table = sa.Table(
     sa.Column("content_hash", sa.String(64), nullable=False),
     sa.Column("created_at", sa.DateTime(timezone=True), nullable=False),
     sa.CheckConstraint("version >= 1", name="ck_quadloc_map_versions_version"),
+)
+
+
+#: A map version's own calibration (``quadloc calibrate``): an opaque JSON document written and
+#: read by ``quadloc.service.app.calibrations``; deleted with its version.
+calibrations_table = sa.Table(
+    "quadloc_map_calibrations",
+    _metadata,
+    sa.Column("map_id", sa.String(128), primary_key=True),
+    sa.Column("version", sa.Integer, primary_key=True),
+    sa.Column("content", sa.Text, nullable=False),
+    sa.Column("created_at", sa.DateTime(timezone=True), nullable=False),
+    sa.ForeignKeyConstraint(["map_id", "version"],
+                            ["quadloc_map_versions.map_id", "quadloc_map_versions.version"],
+                            ondelete="CASCADE", name="fk_quadloc_map_calibrations_version"),
 )
 
 
@@ -198,6 +214,8 @@ class MapStore:
             _configure_sqlite(self.engine, wal=not in_memory)
         #: THE compiled-map cache of this store (module docstring).
         self.cache = CompiledMapCache() if cache is None else cache
+        #: (map_id, version) -> (expiry on the cache's clock, calibration document or None)
+        self._calibrations: dict[tuple[str, int], tuple[float, dict[str, Any] | None]] = {}
         if migrate:
             self.migrate()
 
@@ -406,6 +424,42 @@ class MapStore:
             rows = conn.execute(query).all()
         return [MapSummary(r.map_id, r.name, int(r.latest_version), r.content_hash,
                            as_utc(r.updated_at), as_utc(r.created_at)) for r in rows]
+
+    def set_calibration(self, map_id: str, version: int, document: dict[str, Any]) -> None:
+        """Store (or replace) the calibration document of a map version (JSON-serialisable).
+        :class:`MapNotFound` when the version does not exist. Other replicas see it once their
+        cached copy expires (``calibration``)."""
+        _check_version(version)
+        content = json.dumps(document, allow_nan=False)
+        c = calibrations_table.c
+        with self._write() as conn:
+            exists = conn.execute(self._version_query(map_id, version,
+                                                      versions_table.c.version)).first()
+            if exists is None:
+                raise MapNotFound(map_id, version)
+            conn.execute(calibrations_table.delete().where(c.map_id == map_id,
+                                                           c.version == version))
+            conn.execute(calibrations_table.insert().values(
+                map_id=map_id, version=version, content=content, created_at=utc_now()))
+        self._calibrations.pop((map_id, version), None)
+
+    def calibration(self, map_id: str, version: int) -> dict[str, Any] | None:
+        """The calibration document of a map version, or None (none stored, or the version
+        does not exist). Remembered per process for the cache's ``resolve_ttl_s`` (a
+        calibration stored through another replica is seen after that)."""
+        key = (map_id, int(version))
+        now = self.cache.clock()
+        hit = self._calibrations.get(key)
+        if hit is not None and hit[0] > now:
+            return hit[1]
+        c = calibrations_table.c
+        with self._read() as conn:
+            row = conn.execute(sa.select(c.content).where(c.map_id == map_id,
+                                                          c.version == version)).first()
+        doc: dict[str, Any] | None = None if row is None else json.loads(row.content)
+        if self.cache.resolve_ttl_s > 0:
+            self._calibrations[key] = (now + self.cache.resolve_ttl_s, doc)
+        return doc
 
     def compiled(self, map_id: str, version: int | None = None) -> CompiledMap:
         """Solver arrays of a map version (latest if None), cached per process.

@@ -107,6 +107,9 @@ def build_map(
             max_iterations=max_iterations, deadline=deadline, progress=on_iter)
     t_refine = time.perf_counter() - t0 - t_assoc
     report_progress("saving", 95.0, len(objects))
+    # the report's frame indices are positions in the recording document
+    position = [k if f.source_index is None else f.source_index
+                for k, f in enumerate(recording.frames)]
     map_objects = []
     obj_reports: list[ObjectReport] = []
     counters: dict[str, int] = {}
@@ -137,7 +140,8 @@ def build_map(
         obj_reports.append(ObjectReport(
             object_id=oid, label=h.label, association=h.source,
             detections=[DetectionRef(frame_id=recording.frames[obs[i].frame].frame_id,
-                                     frame_index=obs[i].frame, detection_index=obs[i].index)
+                                     frame_index=position[obs[i].frame],
+                                     detection_index=obs[i].index)
                         for i in h.observations],
             quality=ObjectQualityReport(
                 n_views=q.n_views, view_spread_deg=q.view_spread_deg,
@@ -161,7 +165,7 @@ def build_map(
         dropped_objects=dropped,
         rejected_detections=[
             RejectedDetection(frame_id=recording.frames[obs[i].frame].frame_id,
-                              frame_index=obs[i].frame, detection_index=obs[i].index,
+                              frame_index=position[obs[i].frame], detection_index=obs[i].index,
                               label=obs[i].label, reason=reason)
             for i, reason in sorted(rejected.items())],
         counts=BuildCounts(frames=len(recording.frames), detections=len(obs),
@@ -169,6 +173,7 @@ def build_map(
         refinement=refinement,
         timings_s={"association": t_assoc, "refinement": t_refine,
                    "total": time.perf_counter() - t0},
-        warnings=[REFINEMENT_STOPPED_WARNING] if refinement and refinement.stopped_early
-        else [])
+        warnings=[*recording.warnings,
+                  *([REFINEMENT_STOPPED_WARNING] if refinement and refinement.stopped_early
+                    else [])])
     return scene, report

@@ -1,16 +1,15 @@
-"""A recording: posed frames with object detections, the input of map building.
+"""A recording: posed frames with object detections, the input of map building (domain types).
 
-JSON document (what ``POST /v1/maps:build``, ``quadloc maps build`` and the SDK send):
-docs/map_building.md, "The recording". Conventions: ``world_from_camera`` is the camera's pose
-in the app's world frame (camera axes OpenCV), translation in metres, quaternion scalar first;
-ellipses: centre px (origin top-left pixel corner), SEMI-axes px, angle radians; boxes
-``[xmin, ymin, xmax, ymax]`` px become their inscribed axis-aligned ellipse; ``sigma`` as in
-localize (factor std ``sqrt(sigma)``); detections with a ``track_id`` are grouped by it (per
-label); ``refine_camera_poses`` (default true) refines the camera poses too, tied by the app's
-relative poses with the noise ``odometry_noise`` (:class:`OdometryNoise`).
-
-:func:`parse_recording` validates everything and raises :class:`RecordingError` listing every
-problem as ``{"field": "frames[3].detections[0].ellipse.a", "message": ...}``.
+The JSON document (what ``POST /v1/maps:build``, ``quadloc maps build`` and the SDK send) is the
+wire model ``quadloc.service.schemas.recording.RecordingIn`` (docs/map_building.md, "The
+recording"); the application converts it into a :class:`Recording`: ``world_from_camera`` the
+camera's pose in the app's world frame (camera axes OpenCV), translation in metres; ellipses:
+centre px (origin top-left pixel corner), SEMI-axes px, angle radians; ``sigma`` as in localize
+(factor std ``sqrt(sigma)``); detections with a ``track_id`` are grouped by it (per label);
+``refine_camera_poses`` refines the camera poses too, tied by the app's relative poses with the
+noise ``odometry_noise`` (:class:`OdometryNoise`). Frames :func:`held_out` of the build are
+left out of the :class:`Recording` (each :class:`FrameRecord` keeps its position in the
+document, ``source_index``).
 """
 
 from __future__ import annotations
@@ -22,14 +21,10 @@ from typing import Any
 
 import numpy as np
 
-from quadloc.factors.arrays import FloatArray
+from quadloc.factors.arrays import BoolArray, FloatArray
 from quadloc.factors.camera import Camera
 from quadloc.factors.conics import Ellipse
-from quadloc.factors.rotations import (
-    pose_matrix,
-    quaternion_wxyz_from_rotation,
-    rotation_from_quaternion_wxyz,
-)
+from quadloc.factors.rotations import quaternion_wxyz_from_rotation
 
 __all__ = [
     "BuildLimits",
@@ -37,18 +32,10 @@ __all__ = [
     "Observation",
     "OdometryNoise",
     "Recording",
-    "RecordingError",
     "SizePrior",
-    "parse_recording",
+    "held_out",
+    "recording_to_dict",
 ]
-
-
-class RecordingError(ValueError):
-    """Invalid recording; ``errors`` lists ``{"field", "message"}`` entries."""
-
-    def __init__(self, errors: list[dict[str, str]]) -> None:
-        self.errors = errors
-        super().__init__("; ".join(f"{e['field']}: {e['message']}" for e in errors[:10]))
 
 
 @dataclass(frozen=True)
@@ -75,10 +62,12 @@ class Observation:
 
 @dataclass(frozen=True)
 class FrameRecord:
-    """One frame: id, ``world_from_camera`` (4x4, app's world frame, OpenCV camera axes)."""
+    """One frame: id, ``world_from_camera`` (4x4, app's world frame, OpenCV camera axes) and
+    its position in the recording document (``source_index``; None: its position here)."""
 
     frame_id: str
     world_from_camera: FloatArray
+    source_index: int | None = None
 
 
 @dataclass(frozen=True)
@@ -124,194 +113,26 @@ class Recording:
     size_priors: Mapping[str, SizePrior] = field(default_factory=dict)
     refine_camera_poses: bool = True
     odometry_noise: OdometryNoise = field(default_factory=OdometryNoise)
+    #: What the build report should tell the user about the recording itself.
+    warnings: tuple[str, ...] = ()
 
 
-def _bad(errors: list[dict[str, str]], field: str, message: str) -> None:
-    errors.append({"field": field, "message": message})
-
-
-def _num(errors: list[dict[str, str]], path: str, value: Any, positive: bool = False
-         ) -> float | None:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        _bad(errors, path, "must be a finite number")
-        return None
-    if positive and value <= 0:
-        _bad(errors, path, "must be > 0")
-        return None
-    return float(value)
-
-
-def _vec(errors: list[dict[str, str]], path: str, value: Any, n: int) -> FloatArray | None:
-    if not isinstance(value, list | tuple) or len(value) != n:
-        _bad(errors, path, f"must be an array of {n} numbers")
-        return None
-    out = [_num(errors, f"{path}[{i}]", v) for i, v in enumerate(value)]
-    return None if any(v is None for v in out) else np.array(out, dtype=float)
-
-
-def _pose(errors: list[dict[str, str]], path: str, value: Any) -> FloatArray | None:
-    if not isinstance(value, Mapping):
-        _bad(errors, path, "must be an object with quaternion_wxyz and translation_m")
-        return None
-    q = _vec(errors, f"{path}.quaternion_wxyz", value.get("quaternion_wxyz"), 4)
-    t = _vec(errors, f"{path}.translation_m", value.get("translation_m"), 3)
-    if q is None or t is None:
-        return None
-    if abs(np.linalg.norm(q) - 1.0) > 1e-3:
-        _bad(errors, f"{path}.quaternion_wxyz",
-             f"must have unit norm (got {np.linalg.norm(q):.6g})")
-        return None
-    return pose_matrix(rotation_from_quaternion_wxyz(q / np.linalg.norm(q)), t)
-
-
-def _ellipse(errors: list[dict[str, str]], path: str, det: Mapping[str, Any]) -> Ellipse | None:
-    has_e, has_b = det.get("ellipse") is not None, det.get("box") is not None
-    if has_e == has_b:
-        _bad(errors, path, "give exactly one of ellipse or box")
-        return None
-    if has_b:
-        box = _vec(errors, f"{path}.box", det["box"], 4)
-        if box is None:
-            return None
-        if not (box[2] > box[0] and box[3] > box[1]):
-            _bad(errors, f"{path}.box", "must have xmax > xmin and ymax > ymin")
-            return None
-        return Ellipse.from_bbox(*box)
-    e = det["ellipse"]
-    if not isinstance(e, Mapping):
-        _bad(errors, f"{path}.ellipse", "must be {cx, cy, a, b, angle}")
-        return None
-    vals = [_num(errors, f"{path}.ellipse.{k}", e.get(k), positive=k in ("a", "b"))
-            for k in ("cx", "cy", "a", "b", "angle")]
-    nums = [v for v in vals if v is not None]
-    return Ellipse(*nums) if len(nums) == len(vals) else None
-
-
-def parse_recording(data: Any, limits: BuildLimits | None = None) -> Recording:
-    """Validate a recording document (module docstring) into a :class:`Recording`."""
-    lim = limits or BuildLimits()
-    errors: list[dict[str, str]] = []
-    if not isinstance(data, Mapping):
-        raise RecordingError([{"field": "body", "message": "must be a JSON object"}])
-    intr = data.get("intrinsics")
-    camera = None
-    if not isinstance(intr, Mapping):
-        _bad(errors, "intrinsics", "required: {fx, fy, cx, cy, width, height}")
-    else:
-        v = {k: _num(errors, f"intrinsics.{k}", intr.get(k), positive=k not in ("cx", "cy"))
-             for k in ("fx", "fy", "cx", "cy", "width", "height")}
-        n = {k: x for k, x in v.items() if x is not None}
-        if len(n) == len(v):
-            camera = Camera(n["fx"], n["fy"], n["cx"], n["cy"], int(n["width"]),
-                            int(n["height"]))
-    frames_in = data.get("frames")
-    if not isinstance(frames_in, list) or not frames_in:
-        _bad(errors, "frames", "must be a non-empty array")
-        frames_in = []
-    elif len(frames_in) > lim.max_frames:
-        _bad(errors, "frames", f"at most {lim.max_frames} frames")
-        frames_in = []
-    frames: list[FrameRecord] = []
-    obs: list[Observation] = []
-    n_det = 0
-    for fi, f in enumerate(frames_in):
-        path = f"frames[{fi}]"
-        if not isinstance(f, Mapping):
-            _bad(errors, path, "must be an object")
-            continue
-        fid = f.get("frame_id", str(fi))
-        if not isinstance(fid, str | int) or isinstance(fid, bool) or len(str(fid)) > 128:
-            _bad(errors, f"{path}.frame_id", "must be a string of at most 128 characters")
-        T = _pose(errors, f"{path}.world_from_camera", f.get("world_from_camera"))
-        dets = f.get("detections", [])
-        if not isinstance(dets, list):
-            _bad(errors, f"{path}.detections", "must be an array")
-            dets = []
-        if len(dets) > lim.max_detections_per_frame:
-            _bad(errors, f"{path}.detections",
-                 f"at most {lim.max_detections_per_frame} detections")
-            dets = []
-        n_det += len(dets)
-        if n_det > lim.max_detections:
-            _bad(errors, "frames", f"at most {lim.max_detections} detections in total")
-            break
-        frames.append(FrameRecord(str(fid), T if T is not None else np.eye(4)))
-        for di, d in enumerate(dets):
-            dp = f"{path}.detections[{di}]"
-            if not isinstance(d, Mapping):
-                _bad(errors, dp, "must be an object")
-                continue
-            label = d.get("label")
-            if not isinstance(label, str) or not 0 < len(label) <= 128:
-                _bad(errors, f"{dp}.label",
-                     "must be a non-empty string of at most 128 characters")
-            ell = _ellipse(errors, dp, d)
-            sigma = d.get("sigma")
-            if sigma is not None:
-                sigma = _num(errors, f"{dp}.sigma", sigma, positive=True)
-            track = d.get("track_id")
-            if track is not None and (not isinstance(track, str | int) or isinstance(track, bool)
-                                      or len(str(track)) > 128):
-                _bad(errors, f"{dp}.track_id", "must be a string")
-                track = None
-            if ell is not None and isinstance(label, str):
-                obs.append(Observation(len(frames) - 1, di, label, ell, sigma,
-                                       None if track is None else str(track)))
-    name = data.get("name", "Built map")
-    if not isinstance(name, str) or not 0 < len(name) <= 256:
-        _bad(errors, "name", "must be a non-empty string")
-    up = data.get("up_axis", [0.0, 0.0, 1.0])
-    upv = _vec(errors, "up_axis", up, 3)
-    priors: dict[str, SizePrior] = {}
-    sp = data.get("size_priors", {}) or {}
-    if not isinstance(sp, Mapping):
-        _bad(errors, "size_priors", "must be an object label -> {semi_axis_m, log_sigma}")
-        sp = {}
-    for label, p in sp.items():
-        path = f"size_priors.{label}"
-        if not isinstance(p, Mapping):
-            _bad(errors, path, "must be {semi_axis_m, log_sigma}")
-            continue
-        a = _num(errors, f"{path}.semi_axis_m", p.get("semi_axis_m"), positive=True)
-        s = _num(errors, f"{path}.log_sigma", p.get("log_sigma", 0.5), positive=True)
-        if a is not None and s is not None:
-            priors[str(label)] = SizePrior(a, s)
-    refine = data.get("refine_camera_poses", True)
-    if not isinstance(refine, bool):
-        _bad(errors, "refine_camera_poses", "must be a boolean")
-    odo = data.get("odometry_noise", {}) or {}
-    noise = OdometryNoise()
-    if not isinstance(odo, Mapping):
-        _bad(errors, "odometry_noise", "must be an object")
-    else:
-        known = set(OdometryNoise.__dataclass_fields__)
-        for key in sorted(set(odo) - known):
-            _bad(errors, f"odometry_noise.{key}", f"unknown; expected one of {sorted(known)}")
-        vals: dict[str, float] = {}
-        for key in known & set(odo):
-            x = _num(errors, f"odometry_noise.{key}", odo[key])
-            if x is not None and not 0 <= x <= 10:
-                _bad(errors, f"odometry_noise.{key}", "must be in [0, 10]")
-            elif x is not None:
-                vals[key] = x
-        noise = OdometryNoise(**{**noise.__dict__, **vals})
-        if not errors and (noise.rotation_rad_per_step <= 0 or noise.translation_m_per_step <= 0):
-            _bad(errors, "odometry_noise", "the per-step floors rotation_rad_per_step and "
-                 "translation_m_per_step must be > 0")
-    if errors:
-        raise RecordingError(errors)
-    assert camera is not None and upv is not None
-    return Recording(camera, tuple(frames), tuple(obs), name, tuple(upv.tolist()), priors,
-                     bool(refine), noise)
+def held_out(n_frames: int, every: int | None) -> BoolArray:
+    """THE holdout rule: frame ``i`` of ``n_frames`` is held out of the build (kept for
+    calibration) iff ``every`` is set and ``i % every == every - 1``; shape ``(n_frames,)``."""
+    i = np.arange(n_frames)
+    out: BoolArray = (i % every == every - 1) if every else np.zeros(n_frames, dtype=bool)
+    return out
 
 
 def recording_to_dict(camera: Camera,
                       frames: Sequence[tuple[str, FloatArray, Sequence[dict[str, Any]]]],
                       **extra: Any) -> dict[str, Any]:
-    """A recording document from ``(frame_id, world_from_camera 4x4, detections)`` triples
-    (detections already in the JSON form). Used by the benchmark and the tests."""
-    out = {"intrinsics": {"fx": camera.fx, "fy": camera.fy, "cx": camera.cx, "cy": camera.cy,
-                          "width": camera.width, "height": camera.height},
+    """A recording document (``quadloc.service.schemas.recording.RecordingIn``, OpenCV axes)
+    from ``(frame_id, world_from_camera 4x4, detections)`` triples (detections already in the
+    JSON form). Used by the benchmark and the tests."""
+    out = {"camera": {"fx": camera.fx, "fy": camera.fy, "cx": camera.cx, "cy": camera.cy,
+                      "width": camera.width, "height": camera.height},
            "frames": [{"frame_id": fid,
                        "world_from_camera": {
                            "quaternion_wxyz": quaternion_wxyz_from_rotation(T[:3, :3]).tolist(),

@@ -21,19 +21,23 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
+from pydantic import TypeAdapter, ValidationError
 from sqlalchemy.exc import SQLAlchemyError
 
 from quadloc.factors.budget import Deadline
 from quadloc.maps.building.build import BuildTimeoutError, build_map
 from quadloc.maps.building.jobs import BuildJob, JobNotFoundError, JobStore
-from quadloc.maps.building.recording import BuildLimits, Recording, RecordingError, parse_recording
+from quadloc.maps.building.recording import BuildLimits, Recording
 from quadloc.maps.building.report import BuildReport
 from quadloc.maps.errors import MapAlreadyExists, MapNotFound, StoreUnavailable, VersionConflict
 from quadloc.maps.model import MapValidationError, SceneMap
 from quadloc.maps.store import MapStore, StoredMap
+from quadloc.service.app.conversions import RecordingInputError, recording_from_wire
 from quadloc.service.app.errors import AppError
 from quadloc.service.app.maps import MapService, parse_if_match
 from quadloc.service.schemas.builds import BuildErrorOut, BuildJobOut
+from quadloc.service.schemas.common import field_path
+from quadloc.service.schemas.recording import LegacyRecordingIn, RecordingBody, RecordingIn
 from quadloc.service.settings import Settings
 
 __all__ = [
@@ -43,6 +47,8 @@ __all__ = [
     "BuildService",
     "LocalBuild",
     "build_limits",
+    "recording_of",
+    "validate_recording",
 ]
 
 log = logging.getLogger("quadloc.build")
@@ -61,6 +67,34 @@ def build_limits(settings: Settings) -> BuildLimits:
     return BuildLimits(max_frames=settings.max_build_frames,
                        max_detections_per_frame=settings.max_detections,
                        max_detections=settings.max_build_detections)
+
+
+_RECORDING = TypeAdapter[RecordingIn | LegacyRecordingIn](RecordingBody)
+
+
+def validate_recording(document: Any) -> RecordingIn | LegacyRecordingIn:
+    """A recording document (parsed JSON) as its wire model (either form);
+    ``validation-error`` naming every invalid or unknown field."""
+    if isinstance(document, RecordingIn | LegacyRecordingIn):
+        return document
+    try:
+        return _RECORDING.validate_python(document)
+    except ValidationError as exc:
+        errors = [{"field": field_path(("body", *e["loc"])), "message": e["msg"]}
+                  for e in exc.errors()]
+        raise AppError("validation-error", f"invalid recording: {errors[0]['field']}: "
+                       f"{errors[0]['message']}", errors=errors) from exc
+
+
+def recording_of(document: Any, limits: BuildLimits | None = None) -> Recording:
+    """The :class:`Recording` to build from a recording document (parsed JSON or its wire
+    model; held-out frames left out), checked against ``limits``; ``validation-error`` naming
+    every invalid field."""
+    try:
+        return recording_from_wire(validate_recording(document), limits)
+    except RecordingInputError as exc:
+        raise AppError("validation-error", f"invalid recording: {exc}",
+                       errors=exc.errors) from exc
 
 
 class _RunnerBusyError(RuntimeError):
@@ -269,13 +303,9 @@ class BuildService:
         return stale
 
     def parse(self, document: Any) -> Recording:
-        """A recording document checked against the limits; ``validation-error`` naming
-        every invalid field."""
-        try:
-            return parse_recording(document, build_limits(self.settings))
-        except RecordingError as exc:
-            raise AppError("validation-error", f"invalid recording: {exc}",
-                           errors=exc.errors) from exc
+        """A recording (parsed JSON or its wire model) checked against the limits, without its
+        held-out frames; ``validation-error`` naming every invalid field."""
+        return recording_of(document, build_limits(self.settings))
 
     def base_version(self, map_id: str, if_match: str | None) -> int | None:
         """The version a build of ``map_id`` replaces: None for a new map (then ``If-Match``

@@ -16,6 +16,7 @@ from quadloc.factors.pose_residuals import compile_kernels
 from quadloc.maps.cache import CompiledMapCache
 from quadloc.maps.store import MapStore
 from quadloc.service.app.builds import BuildService
+from quadloc.service.app.calibrations import CalibrationService
 from quadloc.service.app.localization import Localizer, SolveObserver
 from quadloc.service.app.map_loader import MapLoader
 from quadloc.service.app.maps import MapService
@@ -38,6 +39,7 @@ class App:
     localizer: Localizer
     sessions: SessionService
     builds: BuildService
+    calibrations: CalibrationService
 
     @classmethod
     def create(cls, settings: Settings, *, store: MapStore | None = None,
@@ -51,13 +53,14 @@ class App:
         if maps.seed_demo():
             log.info("seeded the demo Chess map as %r", settings.default_map_id)
         loader = MapLoader(store, settings.solve_time_budget_ms / 1e3)
-        localizer = Localizer(settings, loader, observer)
+        calibrations = CalibrationService(store)
+        localizer = Localizer(settings, loader, observer, calibrations.constants_of)
         builds = BuildService(store, maps, settings)
         builds.sweep_stale()
         return cls(settings=settings, store=store, maps=maps, map_loader=loader,
                    localizer=localizer, sessions=SessionService(settings, loader,
                                                                 localizer.slots),
-                   builds=builds)
+                   builds=builds, calibrations=calibrations)
 
     def start(self) -> None:
         """Serve (again, after :meth:`close`): session frames and builds run."""

@@ -21,6 +21,7 @@ import numpy as np
 from quadloc.factors.arrays import FloatArray
 from quadloc.factors.camera import Camera
 from quadloc.factors.conics import Ellipse
+from quadloc.factors.names import FieldError
 from quadloc.factors.rotations import (
     DOCUMENT_ROTATION_TOLERANCE,
     QUATERNION_NORM_TOLERANCE,
@@ -28,6 +29,15 @@ from quadloc.factors.rotations import (
     pose_matrix,
     quaternion_wxyz_from_rotation,
     rotation_from_quaternion_wxyz,
+)
+from quadloc.maps.building.recording import (
+    BuildLimits,
+    FrameRecord,
+    Observation,
+    OdometryNoise,
+    Recording,
+    SizePrior,
+    held_out,
 )
 from quadloc.service.localization.types import (
     Detection,
@@ -50,6 +60,12 @@ from quadloc.service.schemas.localize import (
     PoseOut,
     PosePriorIn,
 )
+from quadloc.service.schemas.recording import (
+    LEGACY_RECORDING_WARNING,
+    LegacyRecordingIn,
+    RecordingFrameIn,
+    RecordingIn,
+)
 from quadloc.service.schemas.sessions import SessionFrameIn, SessionFrameOut, SessionOptionsIn
 from quadloc.service.tracking.session import (
     DriftModel,
@@ -60,6 +76,7 @@ from quadloc.service.tracking.session import (
 
 __all__ = [
     "OPENGL_FROM_OPENCV",
+    "RecordingInputError",
     "camera_from_request",
     "convert_covariance",
     "convert_pose",
@@ -68,11 +85,13 @@ __all__ = [
     "frame_input_from_wire",
     "frame_out",
     "gravity_from_request",
+    "held_out_frames_from_wire",
     "inliers_out",
     "options_from_request",
     "pose_matrix_from_wire",
     "pose_out",
     "prior_from_request",
+    "recording_from_wire",
     "response_from_result",
     "session_options_from_wire",
 ]
@@ -107,7 +126,7 @@ def camera_from_request(camera: CameraIn) -> Camera:
     return Camera(camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height)
 
 
-def detections_from_request(detections: list[DetectionIn]) -> list[Detection]:
+def detections_from_request(detections: Sequence[DetectionIn]) -> list[Detection]:
     """Wire detections -> :class:`Detection` (boxes become inscribed ellipses)."""
     def ellipse(d: DetectionIn) -> Ellipse:
         e, b = d.ellipse, d.box  # exactly one of them (DetectionIn's validator)
@@ -313,3 +332,100 @@ def frame_out(result: FrameResult, convention: str) -> SessionFrameOut:
         n_usable_detections=result.n_usable_detections,
         timings_ms={k: float(v) for k, v in result.timings_ms.items()})
 
+
+
+class RecordingInputError(FieldError):
+    """An invalid recording beyond its schema (poses, limits): ``errors`` lists every
+    ``{"field", "message"}``; ``field`` / ``problem`` are the first."""
+
+    def __init__(self, errors: list[dict[str, str]]) -> None:
+        super().__init__(errors[0]["message"], field=errors[0]["field"])
+        self.errors = errors
+
+
+def _current(body: RecordingIn | LegacyRecordingIn) -> tuple[RecordingIn, tuple[str, ...]]:
+    """The recording in the current form, and the warnings of its form."""
+    if isinstance(body, LegacyRecordingIn):
+        return body.upgraded(), (LEGACY_RECORDING_WARNING,)
+    return body, ()
+
+
+def _frame_poses(rec: RecordingIn, errors: list[dict[str, str]]) -> list[FloatArray | None]:
+    """Every frame's ``world_from_camera`` in OpenCV axes (None, with an error, when invalid)."""
+    poses: list[FloatArray | None] = []
+    for k, frame in enumerate(rec.frames):
+        path = f"frames[{k}].world_from_camera"
+        try:
+            T = pose_matrix_from_wire(frame.world_from_camera, path)
+            poses.append(check_pose(convert_pose(T, rec.convention, "opencv"), path,
+                                    DOCUMENT_ROTATION_TOLERANCE))
+        except FieldError as exc:
+            errors.append({"field": exc.field or path, "message": exc.problem})
+            poses.append(None)
+    return poses
+
+
+def _frame_id(frame: RecordingFrameIn, position: int) -> str:
+    return frame.frame_id if frame.frame_id is not None else str(position)
+
+
+def recording_from_wire(body: RecordingIn | LegacyRecordingIn,
+                        limits: BuildLimits | None = None) -> Recording:
+    """A wire recording (either form) -> the :class:`Recording` to build, in OpenCV axes,
+    without its held-out frames (``holdout_every``). Raises :class:`RecordingInputError`
+    naming every invalid pose and every exceeded limit (``limits``: the server's)."""
+    rec, warnings = _current(body)
+    lim = limits or BuildLimits()
+    errors: list[dict[str, str]] = []
+    if len(rec.frames) > lim.max_frames:
+        errors.append({"field": "frames", "message": f"at most {lim.max_frames} frames"})
+    for k, frame in enumerate(rec.frames):
+        if len(frame.detections) > lim.max_detections_per_frame:
+            errors.append({"field": f"frames[{k}].detections",
+                           "message": f"at most {lim.max_detections_per_frame} detections"})
+    if sum(len(f.detections) for f in rec.frames) > lim.max_detections:
+        errors.append({"field": "frames",
+                       "message": f"at most {lim.max_detections} detections in total"})
+    poses = _frame_poses(rec, errors)
+    if errors:
+        raise RecordingInputError(errors)
+    out = held_out(len(rec.frames), rec.holdout_every)
+    frames: list[FrameRecord] = []
+    observations: list[Observation] = []
+    for k, (frame, T) in enumerate(zip(rec.frames, poses, strict=True)):
+        if out[k] or T is None:
+            continue
+        for i, d in enumerate(detections_from_request(frame.detections)):
+            observations.append(Observation(len(frames), i, d.label, d.ellipse, d.sigma,
+                                            frame.detections[i].track_id))
+        frames.append(FrameRecord(_frame_id(frame, k), T, source_index=k))
+    if out.any():
+        warnings += (f"{int(out.sum())} of {len(rec.frames)} frames held out of the build "
+                     f"(every {rec.holdout_every}th) for calibration",)
+    noise = rec.odometry_noise
+    return Recording(
+        camera=camera_from_request(rec.camera), frames=tuple(frames),
+        observations=tuple(observations), name=rec.name,
+        up_axis=(rec.up_axis[0], rec.up_axis[1], rec.up_axis[2]),
+        size_priors={label: SizePrior(p.semi_axis_m, p.log_sigma)
+                     for label, p in rec.size_priors.items()},
+        refine_camera_poses=rec.refine_camera_poses,
+        odometry_noise=OdometryNoise(**noise.model_dump()), warnings=warnings)
+
+
+def held_out_frames_from_wire(
+    body: RecordingIn | LegacyRecordingIn,
+) -> tuple[Camera, list[tuple[str, FloatArray, list[Detection]]]]:
+    """The camera and the frames a recording holds out of its build (``holdout_every``; none
+    without it): ``(frame_id, world_from_camera 4x4 in OpenCV axes, detections)``. Raises
+    :class:`RecordingInputError` naming every invalid pose."""
+    rec, _ = _current(body)
+    errors: list[dict[str, str]] = []
+    poses = _frame_poses(rec, errors)
+    if errors:
+        raise RecordingInputError(errors)
+    out = held_out(len(rec.frames), rec.holdout_every)
+    return camera_from_request(rec.camera), [
+        (_frame_id(frame, k), T, detections_from_request(frame.detections))
+        for k, (frame, T) in enumerate(zip(rec.frames, poses, strict=True))
+        if out[k] and T is not None]

@@ -16,7 +16,7 @@ import logging
 import threading
 import time
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Protocol
 
 from quadloc.factors.budget import Deadline
@@ -32,6 +32,7 @@ from quadloc.service.app.conversions import (
 )
 from quadloc.service.app.errors import AppError, field_and_problem
 from quadloc.service.app.map_loader import MapLoader
+from quadloc.service.localization.calibration_fit import CalibrationConstants
 from quadloc.service.localization.pipeline import localize
 from quadloc.service.localization.scoring import ScoringTimeoutError
 from quadloc.service.localization.types import LocalizationInputError
@@ -152,8 +153,12 @@ class Localizer:
     """
 
     def __init__(self, settings: Settings, maps: MapLoader,
-                 observer: SolveObserver | None = None) -> None:
+                 observer: SolveObserver | None = None,
+                 calibration_of: Callable[[str, int], CalibrationConstants | None] | None = None,
+                 ) -> None:
         self.maps = maps
+        #: a map version's own calibration (``quadloc calibrate``), None: the shipped one
+        self.calibration_of = calibration_of or (lambda _map_id, _version: None)
         self.observer: SolveObserver = observer or _NoObserver()
         self.slots = FairSlots(settings.max_concurrent_solves)
         self.queue_timeout_s = settings.solve_queue_timeout_s
@@ -247,7 +252,8 @@ class Localizer:
                                           start)
             else:
                 response = response_from_result(
-                    localize(detections, compiled, camera, options, prior, gravity),
+                    localize(detections, compiled, camera, options, prior, gravity,
+                             calibration=self.calibration_of(compiled.map_id, compiled.version)),
                     map_id=compiled.map_id, map_version=compiled.version,
                     convention=frame.options.output_convention, frame_id=frame.frame_id,
                     timestamp=frame.timestamp)

@@ -10,6 +10,7 @@ no map built), 2 bad input or a store / server error (:class:`CliError`).
 from __future__ import annotations
 
 import argparse
+import gzip
 import json
 import os
 import sys
@@ -72,12 +73,17 @@ def report_app_error(exc: AppError) -> int:
 
 
 def read_json(path: str) -> Any:
-    """The JSON document of ``path`` (``-``: stdin); unreadable or malformed:
-    :class:`CliError` ``"<path>: <problem>"``."""
+    """The JSON document of ``path`` (``-``: stdin; ``.gz``: gzip-compressed); unreadable or
+    malformed: :class:`CliError` ``"<path>: <problem>"``."""
     try:
-        text = sys.stdin.read() if path == "-" else Path(path).read_text(encoding="utf-8")
+        if path == "-":
+            text = sys.stdin.read()
+        elif path.endswith(".gz"):
+            text = gzip.decompress(Path(path).read_bytes()).decode("utf-8")
+        else:
+            text = Path(path).read_text(encoding="utf-8")
         return json.loads(text)
-    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+    except (OSError, EOFError, json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise CliError(f"{path}: {exc}") from exc
 
 

@@ -33,6 +33,8 @@ COMMANDS: dict[str, str] = {
     "maps build": "build:cmd_maps_build",
     "localize": "localize:cmd_localize",
     "track": "track:cmd_track",
+    "import-recording": "importing:cmd_import_recording",
+    "calibrate": "calibrate:cmd_calibrate",
 }
 
 EPILOG = """\
@@ -45,7 +47,7 @@ examples (in this process, on the local database):
   quadloc maps import tests/support/data/chess_scene.json --chess --map-id chess2
   quadloc maps versions chess
   quadloc maps export chess --version 1 > chess_v1.json
-  quadloc maps build docs/examples/build_chess.json --map-id my-room   # docs/map_building.md
+  quadloc maps build sdk/test-vectors/build_recording.json --map-id my-room   # docs/map_building.md
   quadloc localize --map chess docs/examples/localize_chess.json
   quadloc track --map chess docs/examples/track_chess.json
   quadloc openapi --output docs/openapi.json     # regenerate the published schema
@@ -107,7 +109,7 @@ def _maps_parsers(sub: Any, fmt: type[argparse.HelpFormatter]) -> None:
                "  quadloc maps import docs/examples/office_map.json\n"
                "  quadloc maps import tests/support/data/chess_scene.json --chess "
                "--map-id chess2\n  quadloc maps export chess > chess.json\n"
-               "  quadloc maps build docs/examples/build_chess.json --map-id my-room\n"
+               "  quadloc maps build sdk/test-vectors/build_recording.json --map-id my-room\n"
                "  quadloc --url http://127.0.0.1:8000 maps versions chess\n")
     msub = maps_p.add_subparsers(dest="maps_command", metavar="ACTION", required=True)
     p = _command(msub.add_parser("list", help="list maps with their latest version"),
@@ -154,6 +156,41 @@ def _maps_parsers(sub: Any, fmt: type[argparse.HelpFormatter]) -> None:
                    help="if the id exists, store the build as its next version")
     p.add_argument("--report", metavar="PATH", help="write the build report (JSON) here")
     _db(p)
+
+
+def _import_parser(sub: Any, fmt: type[argparse.HelpFormatter]) -> None:
+    p = _command(sub.add_parser(
+        "import-recording", formatter_class=fmt,
+        help="write a recording (maps build's input) from a trajectory and COCO detections",
+        description="A camera trajectory (TUM RGB-D, COLMAP images.txt + cameras.txt, or an "
+                    "ARKit/ARCore JSON log) and detections in the COCO results format (boxes, "
+                    "polygons or RLE masks, scores) -> a recording JSON (docs/map_building.md, "
+                    "'Importing your data'; the functions: quadloc_sdk.importers). Frames are "
+                    "the trajectory's, matched to the detections by image name (COCO "
+                    "annotations' images[].file_name, or the image id).",
+        epilog="examples:\n  quadloc import-recording --colmap sparse/0 --coco-results det.json "
+               "--coco-annotations instances.json -o room.json\n"
+               "  quadloc import-recording --tum groundtruth.txt --tum-images rgb.txt "
+               "--camera 525,525,319.5,239.5,640,480 --coco-results det.json "
+               "--coco-annotations instances.json -o room.json\n"), "import-recording")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--tum", metavar="FILE", help="TUM RGB-D trajectory (OpenCV camera axes)")
+    src.add_argument("--colmap", metavar="DIR", help="COLMAP text model folder (images.txt, "
+                                                     "cameras.txt; PINHOLE cameras)")
+    src.add_argument("--ar-log", metavar="FILE", help="ARKit/ARCore JSON log (OpenGL axes)")
+    p.add_argument("--tum-images", metavar="FILE",
+                   help="TUM rgb.txt ('timestamp filename'): frames named by image file")
+    p.add_argument("--camera", metavar="FX,FY,CX,CY,W,H",
+                   help="intrinsics (px) and image size (required unless --colmap)")
+    p.add_argument("--coco-results", metavar="FILE", required=True,
+                   help="COCO results JSON (a list of detections)")
+    p.add_argument("--coco-annotations", metavar="FILE",
+                   help="COCO annotations JSON: its categories (labels) and images (names)")
+    p.add_argument("--min-score", type=float, default=0.0, help="drop detections below this")
+    p.add_argument("--holdout-every", type=int, metavar="K",
+                   help="hold every K-th frame out of the build, for quadloc calibrate")
+    p.add_argument("--name", help="name of the map to build")
+    p.add_argument("-o", "--output", required=True, help="recording JSON to write ('-' = stdout)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -227,6 +264,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--map", required=True, metavar="ID", help="map id")
     p.add_argument("--json", action="store_true", help="print the frame results as JSON")
     _db(p, server=False)
+
+    _import_parser(sub, fmt)
+
+    p = _command(sub.add_parser(
+        "calibrate", formatter_class=fmt,
+        help="calibrate a map version from the recording it was built from",
+        description="Fit the covariance scale and the confidence model of a map version from "
+                    "the frames its recording held out of the build (holdout_every; their app "
+                    "poses the reference), store them with the version (localize uses them), "
+                    "and print the mean NEES and the confidence calibration error before / "
+                    "after on half of those frames the fit did not use. Local database only.",
+        epilog="example:\n  quadloc calibrate room.json --map my-room\n"), "calibrate")
+    p.add_argument("file", help="recording JSON with holdout_every ('-' = stdin, .gz ok)")
+    p.add_argument("--map", required=True, metavar="ID", help="map id")
+    p.add_argument("--version", type=int, help="map version (default: latest)")
+    p.add_argument("--json", action="store_true", help="also print the result as JSON (stderr)")
+    _db(p)
 
     p = _command(sub.add_parser("openapi", help="print or write the OpenAPI document"),
                  "openapi")

@@ -83,6 +83,7 @@ __all__ = [
     "fit_covariance_scale",
     "fit_logistic",
     "fit_s2_floor",
+    "map_calibration_applies",
     "read_records",
     "record_from_evidence",
     "refeature",
@@ -305,6 +306,14 @@ class CalibrationConstants:
             table(f"confidence_models[{m!r}].metric_offset", a.get("metric_offset", {}),
                   b.get("metric_offset", {}))
         return out
+
+
+def map_calibration_applies(calibration: CalibrationConstants | None, key: str) -> bool:
+    """A map's own calibration replaces the shipped constants for the calibration keys it was
+    fitted for (``provenance["fitted_keys"]``, set by
+    ``quadloc.service.localization.map_calibration``), only: its confidence model was fitted
+    on those keys' answers."""
+    return calibration is not None and key in calibration.provenance.get("fitted_keys", ())
 
 
 # ------------------------------------------------------------------ settings
@@ -534,7 +543,10 @@ def choose_ambiguity_and_threshold(
     """``(AMBIGUITY_CHI2_RATIO, MIN_CONFIDENCE)``: for each ratio of the grid, the smallest
     threshold whose false accepts are <= ``false_accept_target x false_accept_tuning_margin``
     of the frames in every set; of those, the pair keeping the most good frames (ties: the
-    larger ratio, more cautious). None when no pair meets the target."""
+    larger ratio, more cautious). None when no pair meets the target, or without decision
+    sets (nothing to choose on: e.g. a map's calibration from the user's frames)."""
+    if not sets:
+        return None
     confs = {name: [confidence_probability(r.key, r.features, models) if r.localized else 0.0
                     for r in rows] for name, rows in sets.items()}
     limit = settings.false_accept_target * settings.false_accept_tuning_margin

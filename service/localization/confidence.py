@@ -90,6 +90,7 @@ def residual_variance(chi2: float, n_residuals: int) -> float:
 def calibrated_covariance(
     metric: str, raw_covariance: FloatArray | None, chi2: float, n_residuals: int,
     n_detections: int, fixed_information: FloatArray | None = None,
+    scale: Mapping[str, float] | None = None, s2_floor: Mapping[str, float] | None = None,
 ) -> FloatArray | None:
     """The reported 6x6 covariance (order ``[omega, v]``, rad/m, body frame, right
     perturbation) from the refinement's raw one (see the module docstring; ``metric``: its
@@ -97,18 +98,19 @@ def calibrated_covariance(
     when the raw covariance is None, ``s^2`` is undefined (``m <= 6``) or the key has no
     calibration. ``fixed_information`` (6, 6): the part of ``raw_covariance^-1`` from the
     prior and gravity factors (``RefinementResult.fixed_information``), kept unscaled: their
-    noise is the client's, not the detections'."""
+    noise is the client's, not the detections'. ``scale`` / ``s2_floor``: a map's own
+    constants (:func:`covariance_scale`)."""
     if raw_covariance is None:
         return None
-    scale = covariance_scale(metric, chi2, n_residuals, n_detections)
-    if not math.isfinite(scale):
+    factor = covariance_scale(metric, chi2, n_residuals, n_detections, scale, s2_floor)
+    if not math.isfinite(factor):
         return None
     raw = np.asarray(raw_covariance, dtype=float)
     if fixed_information is None:
-        cov = raw * scale
+        cov = raw * factor
     else:
         fixed = np.asarray(fixed_information, dtype=float)
-        info = (np.linalg.inv(raw) - fixed) / scale + fixed
+        info = (np.linalg.inv(raw) - fixed) / factor + fixed
         cov = np.linalg.inv(0.5 * (info + info.T))
     cov = 0.5 * (cov + cov.T)
     if not np.all(np.isfinite(cov)) or np.linalg.eigvalsh(cov)[0] <= 0:
@@ -131,22 +133,29 @@ def student_t_factor(n_detections: int) -> float:
     return nu / (nu - 2.0)
 
 
-def variance_factor(metric: str, chi2: float, n_residuals: int, n_detections: int) -> float:
+def variance_factor(metric: str, chi2: float, n_residuals: int, n_detections: int,
+                    s2_floor: Mapping[str, float] | None = None) -> float:
     """``max(s^2, f_metric) * student_t_factor(n_detections)`` (``metric``: its
-    :func:`calibration_key`); NaN without ``s^2``."""
+    :func:`calibration_key`; ``s2_floor``: the floors ``f``, default :data:`S2_FLOOR`); NaN
+    without ``s^2``."""
     s2 = residual_variance(chi2, n_residuals)
     if not math.isfinite(s2):
         return math.nan
-    return max(s2, S2_FLOOR.get(metric, 0.0)) * student_t_factor(n_detections)
+    floors = S2_FLOOR if s2_floor is None else s2_floor
+    return max(s2, floors.get(metric, 0.0)) * student_t_factor(n_detections)
 
 
-def covariance_scale(metric: str, chi2: float, n_residuals: int, n_detections: int) -> float:
+def covariance_scale(metric: str, chi2: float, n_residuals: int, n_detections: int,
+                     scale: Mapping[str, float] | None = None,
+                     s2_floor: Mapping[str, float] | None = None) -> float:
     """``k_metric * max(s^2, f_metric) * t(n)`` (module docstring; ``metric``: its
-    :func:`calibration_key`); NaN when undefined (no ``s^2``, or a key without calibration
-    constants)."""
-    if metric not in COVARIANCE_SCALE:
+    :func:`calibration_key`; ``scale`` / ``s2_floor``: the constants ``k`` / ``f``, default
+    :data:`COVARIANCE_SCALE` / :data:`S2_FLOOR`, a map's own calibration otherwise); NaN when
+    undefined (no ``s^2``, or a key without calibration constants)."""
+    scales = COVARIANCE_SCALE if scale is None else scale
+    if metric not in scales:
         return math.nan
-    return COVARIANCE_SCALE[metric] * variance_factor(metric, chi2, n_residuals, n_detections)
+    return scales[metric] * variance_factor(metric, chi2, n_residuals, n_detections, s2_floor)
 
 
 def gaussian_tolerance_probability(covariance: FloatArray | None) -> float:

@@ -27,8 +27,8 @@ from quadloc.factors.rotations import so3_exp
 if TYPE_CHECKING:
     from cv2.typing import MatLike
 
-__all__ = ["p2e_hypotheses", "p3p_hypotheses", "p3p_hypotheses_batch", "point_centres",
-           "project_objects"]
+__all__ = ["p2e_hypotheses", "p3p_grunert_batch", "p3p_hypotheses", "p3p_hypotheses_batch",
+           "point_centres", "project_objects", "size_depths"]
 
 _EMPTY = np.zeros((0, 4, 4))
 
@@ -58,6 +58,19 @@ def project_objects(
     cen = np.stack([mx, my], axis=-1)
     inv_shape = np.stack([s00, s01, s01, s11], axis=-1).reshape(*s00.shape, 2, 2)
     return cen, inv_shape, valid, point_centres(P, centers) if with_point_centres else None
+
+
+def size_depths(camera: Camera, semi_axes_px: FloatArray,
+                object_radius_m: FloatArray | float) -> FloatArray:
+    """Depth (m, along the optical axis) at which objects of radius ``object_radius_m`` (...,)
+    (the geometric mean of their semi-axes, m) look as large as an ellipse of semi-axes
+    ``semi_axes_px`` (2,) or (..., 2) px: ``z = f r / sqrt(a b)`` with ``f`` the mean focal
+    length (coarse: exact for a sphere seen near the image centre)."""
+    ab = np.asarray(semi_axes_px, dtype=float)
+    f = 0.5 * (camera.fx + camera.fy)
+    depth: FloatArray = f * np.asarray(object_radius_m, dtype=float) / np.sqrt(
+        ab[..., 0] * ab[..., 1])
+    return depth
 
 
 def point_centres(P: FloatArray, centers: FloatArray) -> FloatArray:
@@ -129,6 +142,97 @@ def p3p_hypotheses_batch(
     T[:, :3, 3] = t[ok]
     T[:, 3, 3] = 1.0
     return T, sample[ok]
+
+
+def p3p_grunert_batch(
+    image_points: FloatArray, world_points: FloatArray, camera: Camera,
+    newton_steps: int = 2,
+) -> tuple[FloatArray, IntArray]:
+    """:func:`p3p_hypotheses_batch` vectorised over samples (no Python loop): Grunert's
+    quartic in the ratio of two of the distances along the bearing rays (Haralick et al.
+    1994, "Review and analysis of solutions of the three point perspective pose estimation
+    problem", section 2), all its real roots from the companion matrices' eigenvalues, polished
+    by ``newton_steps`` Newton steps on the quartic, then the rigid transform of the three
+    camera-frame points onto the world points (Kabsch, batched SVD). The many-sample search of
+    large maps (:mod:`quadloc.service.localization.constellations`) calls it; the same poses as
+    ``cv2.solveP3P`` (tested), in a different order.
+
+    Args:
+        image_points: (B, 3, 2) pixels; world_points: (B, 3, 3) world metres.
+
+    Returns:
+        ``(poses (M, 4, 4), sample (M,))``: ``camera_from_world`` solutions with all three
+        points in front of the camera, and the sample each came from.
+    """
+    img = np.asarray(image_points, dtype=np.float64).reshape(-1, 3, 2)
+    X = np.asarray(world_points, dtype=np.float64).reshape(-1, 3, 3)
+    B = len(img)
+    if B == 0:
+        return _EMPTY, np.zeros(0, dtype=int)
+    j = np.stack([(img[..., 0] - camera.cx) / camera.fx, (img[..., 1] - camera.cy) / camera.fy,
+                  np.ones((B, 3))], axis=-1)
+    j /= np.linalg.norm(j, axis=-1, keepdims=True)
+    a2 = np.sum((X[:, 1] - X[:, 2]) ** 2, axis=1)
+    b2 = np.sum((X[:, 0] - X[:, 2]) ** 2, axis=1)
+    c2 = np.sum((X[:, 0] - X[:, 1]) ** 2, axis=1)
+    ca = np.sum(j[:, 1] * j[:, 2], axis=1)  # cos(alpha): rays 2, 3
+    cb = np.sum(j[:, 0] * j[:, 2], axis=1)  # cos(beta): rays 1, 3
+    cg = np.sum(j[:, 0] * j[:, 1], axis=1)  # cos(gamma): rays 1, 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        p = (a2 - c2) / b2
+        q = (a2 + c2) / b2
+        A4 = (p - 1.0) ** 2 - 4.0 * c2 / b2 * ca ** 2
+        A3 = 4.0 * (p * (1.0 - p) * cb - (1.0 - q) * ca * cg + 2.0 * c2 / b2 * ca ** 2 * cb)
+        A2 = 2.0 * (p ** 2 - 1.0 + 2.0 * p ** 2 * cb ** 2 + 2.0 * (b2 - c2) / b2 * ca ** 2
+                    - 4.0 * q * ca * cb * cg + 2.0 * (b2 - a2) / b2 * cg ** 2)
+        A1 = 4.0 * (-p * (1.0 + p) * cb + 2.0 * a2 / b2 * cg ** 2 * cb - (1.0 - q) * ca * cg)
+        A0 = (1.0 + p) ** 2 - 4.0 * a2 / b2 * cg ** 2
+        coeffs = np.stack([A4, A3, A2, A1, A0], axis=1)
+        good = np.all(np.isfinite(coeffs), axis=1) & (np.abs(A4) > 1e-12)
+        comp = np.zeros((B, 4, 4))
+        comp[:, 1:, :3] = np.eye(3)
+        comp[:, 0, :] = -coeffs[:, 1:] / np.where(good, A4, 1.0)[:, None]
+    comp[~good] = 0.0
+    roots = np.linalg.eigvals(comp)  # (B, 4)
+    real = good[:, None] & (np.abs(roots.imag) <= 1e-6 * np.maximum(1.0, np.abs(roots.real)))
+    v = roots.real
+    for _ in range(newton_steps):
+        f = (((A4[:, None] * v + A3[:, None]) * v + A2[:, None]) * v + A1[:, None]) * v \
+            + A0[:, None]
+        df = ((4.0 * A4[:, None] * v + 3.0 * A3[:, None]) * v + 2.0 * A2[:, None]) * v \
+            + A1[:, None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            step = np.where(np.abs(df) > 1e-15, f / df, 0.0)
+        v = v - np.where(np.isfinite(step), step, 0.0)
+    sample, k = np.nonzero(real & (v > 0))
+    v = v[sample, k]
+    P, Q, ca_, cb_, cg_ = p[sample], q[sample], ca[sample], cb[sample], cg[sample]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = (((-1.0 + P) * v ** 2 - 2.0 * P * cb_ * v + 1.0 + P)
+             / (2.0 * (cg_ - v * ca_)))
+        s1 = np.sqrt(b2[sample] / (1.0 + v ** 2 - 2.0 * v * cb_))
+    del Q
+    ok = np.isfinite(u) & np.isfinite(s1) & (u > 0) & (s1 > 0)
+    sample, u, v, s1 = sample[ok], u[ok], v[ok], s1[ok]
+    Y = j[sample] * np.stack([s1, u * s1, v * s1], axis=1)[:, :, None]  # camera points
+    W = X[sample]
+    my, mw = Y.mean(axis=1), W.mean(axis=1)
+    H = np.einsum("bki,bkj->bij", W - mw[:, None], Y - my[:, None])  # sum w y^T
+    U, _, Vt = np.linalg.svd(H)
+    d = np.sign(np.linalg.det(np.einsum("bji,bkj->bik", Vt, U.transpose(0, 2, 1))))
+    D = np.zeros((len(sample), 3, 3))
+    D[:, 0, 0] = 1.0
+    D[:, 1, 1] = 1.0
+    D[:, 2, 2] = d
+    R = np.einsum("bji,bjk,bkl->bil", Vt, D, U.transpose(0, 2, 1))  # R = V D U^T
+    t = my - np.einsum("bij,bj->bi", R, mw)
+    depth = np.einsum("bpj,bj->bp", W, R[:, 2]) + t[:, 2, None]
+    keep = np.all(np.isfinite(R), axis=(1, 2)) & np.all(depth > 0.0, axis=1)
+    T = np.zeros((int(keep.sum()), 4, 4))
+    T[:, :3, :3] = R[keep]
+    T[:, :3, 3] = t[keep]
+    T[:, 3, 3] = 1.0
+    return T, sample[keep]
 
 
 # ----------------------------------------------------------------------------------- P2E

@@ -30,10 +30,15 @@ from quadloc.factors.camera import Camera, Ellipsoid
 from quadloc.factors.gravity_factor import GravityMeasurement
 from quadloc.factors.pose_residuals import expmap_pose3
 from quadloc.factors.rotations import invert_pose
-from quadloc.maps.compiled import CompiledMap, compile_map
+from quadloc.maps.compiled import CompiledMap, compile_map, compiled_subset
 from quadloc.maps.model import SceneMap
+from quadloc.maps.places import place_index
 from quadloc.service.limits import NO_REFINEMENT
 from quadloc.service.localization.calibration import MIN_CONFIDENCE, S2_FLOOR
+from quadloc.service.localization.calibration_fit import (
+    CalibrationConstants,
+    map_calibration_applies,
+)
 from quadloc.service.localization.candidates import (
     Candidate,
     distinct_ranking,
@@ -49,6 +54,11 @@ from quadloc.service.localization.confidence import (
     covariance_scale,
     evidence_features,
     residual_variance,
+)
+from quadloc.service.localization.constellations import (
+    PLACE_SEARCH_MIN_OBJECTS,
+    PlaceSeeds,
+    place_seeds,
 )
 from quadloc.service.localization.gravity import (
     answer_gate_deg,
@@ -124,6 +134,8 @@ class _Solve:
         detections: the request's detections; usable: indices of those with a map label.
         options: the options in effect (``use_sigma`` off unless every detection has a sigma).
         calibration_key: :func:`quadloc.service.localization.confidence.calibration_key`.
+        calibration: the map's own calibration constants when they apply to the key
+            (:func:`map_calibration_applies`), else None (the shipped constants).
         scorer: the usable detections' scorer (its deadline: the hard stop).
         deadline: the budget (CPU time with a wall-clock hard limit); None: no budget.
         gravity, measured_gravity: the client's gravity and its factor input (or None).
@@ -138,6 +150,7 @@ class _Solve:
     options: LocalizationOptions
     calibration_key: str
     scorer: MatchScorer
+    calibration: CalibrationConstants | None
     deadline: Deadline | None
     gravity: Gravity | None
     measured_gravity: GravityMeasurement | None
@@ -155,6 +168,7 @@ def localize(
     options: LocalizationOptions = LocalizationOptions(),  # noqa: B008 (frozen, immutable)
     prior: PosePrior | None = None,
     gravity: Gravity | None = None,
+    calibration: CalibrationConstants | None = None,
 ) -> LocalizationResult:
     """Estimate the camera pose from object detections (see the module docstring).
 
@@ -169,6 +183,10 @@ def localize(
             an answer that disagrees is not localized (reason ``gravity_mismatch``; a prior's
             answer that disagrees leaves the search from scratch to decide)
             (:mod:`quadloc.service.localization.gravity`).
+        calibration: the map's own calibration (``quadloc calibrate``;
+            :mod:`quadloc.service.localization.map_calibration`): its covariance scale, s^2
+            floor, confidence model and default ``min_confidence`` replace the shipped ones for
+            the calibration keys it was fitted for; None: the shipped constants.
 
     Returns:
         :class:`LocalizationResult`; ``localized=False`` with a ``reason`` is a normal answer.
@@ -187,11 +205,22 @@ def localize(
         return _not_localized("too_few_detections", options.metric, 0, timings, t0)
     if len(usable) < 2:
         return _not_localized("no_label_match", options.metric, 0, timings, t0)
-    solve = _start(detections, usable, compiled, camera, options, gravity, t0, cpu0, timings)
+    seeds: PlaceSeeds | None = None
+    if len(compiled) >= PLACE_SEARCH_MIN_OBJECTS and len(usable) >= 3:
+        compiled, seeds = _place_stage(detections, usable, compiled, camera, options, t0, cpu0,
+                                       timings)
+        if seeds is None:
+            return _not_localized("no_hypothesis_above_inlier_threshold", options.metric, 0,
+                                  timings, t0)
+        usable = [i for i in usable if len(compiled.indices_for(detections[i].label)) > 0]
+        if len(usable) < 2:
+            return _not_localized("no_label_match", options.metric, 0, timings, t0)
+    solve = _start(detections, usable, compiled, camera, options, gravity, t0, cpu0, timings,
+                   calibration)
     prior_candidate = None if prior is None else _prior_stage(solve, prior)
     if prior_candidate is not None and len(prior_candidate.inliers) >= len(usable):
         return _answer(solve, prior_candidate, [prior_candidate], ambiguous=False)
-    outcome = _search_stage(solve)
+    outcome = _search_stage(solve, seeds)
     if outcome.camera_from_world is None:
         if prior_candidate is not None:
             return _answer(solve, prior_candidate, [prior_candidate], ambiguous=False)
@@ -250,7 +279,7 @@ def _validate(
 def _start(
     detections: Sequence[Detection], usable: list[int], compiled: CompiledMap, camera: Camera,
     options: LocalizationOptions, gravity: Gravity | None, t0: float, cpu0: float,
-    timings: dict[str, float],
+    timings: dict[str, float], calibration: CalibrationConstants | None = None,
 ) -> _Solve:
     """The state of a validated call started at ``t0`` (``time.perf_counter()``, s) and
     ``cpu0`` (``time.thread_time()``, s): the budget (CPU time of this thread, with a wall-clock
@@ -263,9 +292,11 @@ def _start(
                                                       cpu_start=cpu0, wall_start=t0))
     n_samples = count_samples(scorer, 2)
     up_world = compiled.scene_map.up
+    key = calibration_key(options.metric, options.use_sigma)
     return _Solve(
-        detections=detections, usable=usable, options=options,
-        calibration_key=calibration_key(options.metric, options.use_sigma), scorer=scorer,
+        detections=detections, usable=usable, options=options, calibration_key=key,
+        calibration=calibration if map_calibration_applies(calibration, key) else None,
+        scorer=scorer,
         deadline=deadline, gravity=gravity,
         measured_gravity=None if gravity is None else gravity_measurement(gravity, up_world),
         up_world=up_world, n_samples=n_samples, t0=t0, timings=timings)
@@ -331,15 +362,37 @@ def _prior_matches(scorer: MatchScorer, prior: PosePrior, threshold: float) -> l
 # ------------------------------------------------------------------ hypotheses
 
 
-def _search_stage(solve: _Solve) -> RansacOutcome:
+def _place_stage(
+    detections: Sequence[Detection], usable: list[int], compiled: CompiledMap, camera: Camera,
+    options: LocalizationOptions, t0: float, cpu0: float, timings: dict[str, float],
+) -> tuple[CompiledMap, PlaceSeeds | None]:
+    """The ``places`` stage of a large map (>= ``PLACE_SEARCH_MIN_OBJECTS`` objects): the
+    constellation search (:func:`quadloc.service.localization.constellations.place_seeds`);
+    returns the sub-map of the places it keeps (the later stages score and refine there) and
+    the seeds, or (``compiled``, None) when no pose came up."""
+    tp = time.perf_counter()
+    params = np.array([detections[i].ellipse.params() for i in usable])
+    seeds = place_seeds(compiled, place_index(compiled), camera, params,
+                        [detections[i].label for i in usable],
+                        np.random.default_rng(options.seed),
+                        Deadline.cpu_budget(options.time_budget_ms, cpu_start=cpu0,
+                                            wall_start=t0))
+    timings["places"] = (time.perf_counter() - tp) * 1e3
+    if len(seeds.poses) == 0:
+        return compiled, None
+    return compiled_subset(compiled, seeds.objects), seeds
+
+
+def _search_stage(solve: _Solve, seeds: PlaceSeeds | None = None) -> RansacOutcome:
     """The ``hypotheses`` stage: the RANSAC search (seeded by ``options.seed``) up to the
-    budget."""
+    budget; with a large map's ``seeds`` (:func:`_place_stage`), those poses only."""
     th = time.perf_counter()
     options = solve.options
     outcome = ransac(solve.scorer, solve.up_world, inlier_iou=options.inlier_iou,
                      min_inliers=options.min_inliers,
                      max_hypotheses=options.ransac_max_hypotheses,
-                     rng=np.random.default_rng(options.seed), deadline=solve.deadline)
+                     rng=np.random.default_rng(options.seed), deadline=solve.deadline,
+                     seeds=None if seeds is None else seeds.poses, sample=seeds is None)
     solve.evaluated += outcome.hypotheses_evaluated
     solve.timings["hypotheses"] = (time.perf_counter() - th) * 1e3
     return outcome
@@ -510,7 +563,9 @@ def _answer(solve: _Solve, best: Candidate, ranked: list[Candidate], *, ambiguou
     runner_up = next((b for b in ranked if b is not best), None)
     assessment = _assess(solve, best, runner_up, ranked)
     conf, ev = assessment.confidence, assessment.evidence
-    floor = MIN_CONFIDENCE if options.min_confidence is None else options.min_confidence
+    default_floor = MIN_CONFIDENCE if solve.calibration is None \
+        else solve.calibration.min_confidence
+    floor = default_floor if options.min_confidence is None else options.min_confidence
     reason = ("gravity_mismatch" if _against_gravity(solve, best)
               else "ambiguous" if ambiguous and options.on_ambiguity == "not_localized"
               else "low_confidence" if conf < floor else None)
@@ -545,28 +600,32 @@ def _assess(solve: _Solve, a: Candidate, runner_up: Candidate | None,
     """The :class:`Assessment` of candidate ``a`` against its ``runner_up`` (its score margin)
     and ``others`` (the distinct candidates, for its ``chi2_competitor``)."""
     key = solve.calibration_key
+    c = solve.calibration
+    scale, floors = (None, None) if c is None else (c.covariance_scale, c.s2_floor)
     res = a.refinement
     s2 = math.nan if res is None else residual_variance(res.chi2, res.n_residuals)
     n_refined = 0 if res is None else len(res.per_detection_cost)
     cov = None if res is None else calibrated_covariance(
-        key, a.raw_covariance, res.chi2, res.n_residuals, n_refined, res.fixed_information)
+        key, a.raw_covariance, res.chi2, res.n_residuals, n_refined, res.fixed_information,
+        scale, floors)
     margin = 0.0 if runner_up is None else min(1.0, runner_up.score / max(a.score, 1e-12))
     ev = evidence_features(n_inliers=len(a.inliers), n_usable=len(solve.usable),
                            ious=np.array([m.iou for m in a.inliers]), s2=s2,
                            covariance=cov, margin=margin, n_samples=solve.n_samples,
-                           s2_floor=S2_FLOOR.get(key, 0.0),
+                           s2_floor=(S2_FLOOR if floors is None else floors).get(key, 0.0),
                            chi2_ratio_log=chi2_competitor(
                                a.chi2, len(a.inliers),
                                [(b.chi2_against(a), len(b.inliers))
                                 for b in others if b is not a]),
                            gravity=solve.gravity is not None)
-    scale = math.nan if res is None else covariance_scale(key, res.chi2, res.n_residuals,
-                                                          n_refined)
-    extra = {"s2": s2, "cov_scale": scale, "n_refined": float(n_refined),
+    factor = math.nan if res is None else covariance_scale(key, res.chi2, res.n_residuals,
+                                                           n_refined, scale, floors)
+    extra = {"s2": s2, "cov_scale": factor, "n_refined": float(n_refined),
              "iou_competitor": float(iou_competitor(a, others))}
     if solve.gravity is not None:
         extra["tilt_error_deg"] = _tilt_deg(solve, a)
-    return Assessment(confidence=confidence_probability(key, ev), evidence={**ev, **extra},
+    return Assessment(confidence=confidence_probability(
+        key, ev, None if c is None else c.confidence_models), evidence={**ev, **extra},
                       covariance=cov)
 
 

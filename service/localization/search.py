@@ -120,6 +120,8 @@ def ransac(
     max_hypotheses: int,
     rng: np.random.Generator,
     deadline: Deadline | None = None,
+    seeds: FloatArray | None = None,
+    sample: bool = True,
 ) -> RansacOutcome:
     """Search poses from minimal samples (see the module docstring).
 
@@ -132,6 +134,10 @@ def ransac(
         deadline: when the search stops (e.g. CPU time of this thread with a wall-clock hard
             limit, :meth:`quadloc.factors.budget.Deadline.cpu_budget`; None: never), checked
             before every batch and inside the scoring of a batch.
+        seeds: candidate poses (S, 4, 4) ``camera_from_world`` scored before any sample (the
+            constellation search of large maps,
+            :mod:`quadloc.service.localization.constellations`); None: none.
+        sample: whether minimal samples are solved at all (False: the seeds only).
     """
     need = scorer.n_det
     if need < 2:
@@ -139,7 +145,14 @@ def ransac(
     search = _Search(scorer, up_world, inlier_iou, min_inliers, rng, deadline)
     has3 = need >= 3 and count_samples(scorer, 3) > 0
     has2 = count_samples(scorer, 2) > 0
-    stop = search.run(3, max_hypotheses) if has3 else False
+    stop = not sample
+    if seeds is not None and len(seeds):
+        try:
+            stop = search.consider(np.asarray(seeds, dtype=float)) or stop
+        except ScoringTimeoutError:
+            search.timed_out = stop = True
+    if has3 and not stop:
+        stop = search.run(3, max_hypotheses)
     if not search.kept and not stop and has2:  # P2E: alone, or the fallback of P3P
         search.run(2, max_hypotheses if need < 3 else min(max_hypotheses, P2E_FALLBACK_BUDGET))
     if not search.kept:

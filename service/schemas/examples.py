@@ -12,6 +12,7 @@ from typing import Any
 __all__ = [
     "BUILD_JOB_DONE_EXAMPLE",
     "BUILD_JOB_EXAMPLE",
+    "CALIBRATION_EXAMPLE",
     "CHESS_IMPORT_EXAMPLE",
     "EXAMPLE_FRAME_PATH",
     "EXAMPLE_FRAME_SOURCE",
@@ -104,16 +105,18 @@ FRAME_RESPONSE_EXAMPLE: dict[str, Any] = {
 
 #: A recording (the body of ``POST /v1/maps:build``).
 RECORDING_EXAMPLE: dict[str, Any] = {
-    "intrinsics": {"fx": 585.0, "fy": 585.0, "cx": 320.0, "cy": 240.0, "width": 640,
-                   "height": 480},
+    "camera": {"fx": 585.0, "fy": 585.0, "cx": 320.0, "cy": 240.0, "width": 640,
+               "height": 480},
     "name": "My room",
+    "holdout_every": 5,
     "frames": [{"frame_id": "0001",
                 "world_from_camera": {"quaternion_wxyz": [1.0, 0.0, 0.0, 0.0],
                                       "translation_m": [0.0, 0.0, 0.0]},
                 "detections": [{"label": "TV", "ellipse": {"cx": 300.0, "cy": 200.0, "a": 80.0,
                                                            "b": 40.0, "angle": 0.1},
                                 "sigma": 0.02},
-                               {"label": "Chair", "box": [10.0, 200.0, 110.0, 420.0]}]}],
+                               {"label": "Chair", "box": {"xmin": 10.0, "ymin": 200.0,
+                                                           "xmax": 110.0, "ymax": 420.0}}]}],
 }
 
 #: A running build job.
@@ -145,3 +148,14 @@ BUILD_JOB_DONE_EXAMPLE: dict[str, Any] = {
                               "stopped_early": False, "camera_poses_refined": True},
                "timings_s": {"association": 0.8, "refinement": 6.1, "total": 7.0},
                "warnings": []}}
+
+
+#: A map version's calibration (``POST`` / ``GET /v1/maps/{map_id}/calibration``).
+CALIBRATION_EXAMPLE: dict[str, Any] = {
+    "map_id": "my-room", "map_version": 1, "key": "level_set", "fit_frames": 250,
+    "covariance_scale": 39.9, "shipped_covariance_scale": 1.83, "s2_floor": 3.6,
+    "min_confidence": 0.36,
+    "before": {"frames": 250, "localized": 247, "nees_frames": 125, "mean_nees": 382.9,
+               "calibration_error": 0.105, "mean_confidence": 0.54, "success_rate": 0.49},
+    "after": {"frames": 250, "localized": 247, "nees_frames": 125, "mean_nees": 8.7,
+              "calibration_error": 0.074, "mean_confidence": 0.52, "success_rate": 0.49}}

@@ -21,7 +21,7 @@ from quadloc.factors.camera import Camera
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import CompiledMap
-from quadloc.service.localization.hypotheses import p3p_hypotheses
+from quadloc.service.localization.hypotheses import p3p_hypotheses, size_depths
 from quadloc.service.localization.scoring import Match, MatchScorer, greedy_assignment
 
 __all__ = ["AMBIGUITY_RATIO", "MIN_DISTINCT_OBJECTS", "MIN_TOTAL_INLIERS", "InitFrame",
@@ -70,7 +70,7 @@ def _virtual_points(frames: Sequence[InitFrame], ref_from_k: list[FloatArray],
     for k, d, o in sample:
         e = frames[k].ellipses[d]
         r_obj = float(np.prod(compiled.axes[o]) ** (1.0 / 3.0))
-        z = 0.5 * (camera.fx + camera.fy) * r_obj / np.sqrt(e[2] * e[3])
+        z = float(size_depths(camera, e[2:4], r_obj))
         p = ref_from_k[k][:3, :3] @ (z * (Kinv @ np.array([e[0], e[1], 1.0]))) \
             + ref_from_k[k][:3, 3]
         if p[2] <= 0.05:

@@ -9,6 +9,7 @@ Set ``QUADLOC_WRITE_SCREENSHOTS=1`` to refresh ``docs/img/inspector.png``.
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -16,9 +17,11 @@ from collections.abc import Iterator
 from pathlib import Path
 from urllib.parse import urlsplit
 
+import httpx
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
+EXAMPLE_REQUEST = json.loads((REPO / "docs" / "examples" / "localize_chess.json").read_text())
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 # Root in a container needs --no-sandbox; the rest keeps chromium from calling home.
 CHROMIUM_ARGS = ["--no-sandbox", "--headless", "--disable-gpu", "--no-first-run",
@@ -126,6 +129,122 @@ def test_inspector_shows_request_errors(browser: object, live_server: str) -> No
     page.click("#localize")
     page.wait_for_selector("#status[data-state=error]")
     assert "camera.fx" in page.inner_text("#status")
+    page.close()
+
+
+def _painted(page: object) -> int:
+    """Pixels of the 3D canvas that something was drawn on."""
+    return page.evaluate("""() => {
+        const c = document.getElementById('view3d');
+        const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+        let n = 0; for (let i = 3; i < d.length; i += 4) if (d[i] > 0) n++; return n; }""")
+
+
+def _status_colour(page: object) -> str:
+    return page.evaluate(  # type: ignore[attr-defined, no-any-return]
+        "() => getComputedStyle(document.getElementById('status')).color")
+
+
+def _localize(page: object, request: dict, state: str) -> None:
+    page.fill("#request", json.dumps(request))  # type: ignore[attr-defined]
+    page.click("#localize")  # type: ignore[attr-defined]
+    page.wait_for_selector(f"#status[data-state={state}]")  # type: ignore[attr-defined]
+
+
+def test_inspector_shows_the_map_before_localizing(browser: object, live_server: str) -> None:
+    """The 3D view draws the selected map as soon as the page has it (every object of the
+    map, counted from the API), without a camera until a localize answers."""
+    n_objects = len(httpx.get(f"{live_server}/v1/maps/chess").json()["map"]["objects"])
+    op = OfflinePage(browser, live_server)
+    page = op.page
+    page.goto(f"{live_server}/inspector")
+    page.wait_for_selector(f"#view3d[data-drawn='{n_objects}']")
+    assert page.get_attribute("#view3d", "data-camera") == "false"
+    assert _painted(page) > 1000
+    assert page.locator("#overlay svg").count() == 0
+    _localize(page, EXAMPLE_REQUEST, "done")
+    assert page.get_attribute("#view3d", "data-camera") == "true"
+    op.assert_offline_clean()
+    page.close()
+
+
+def test_inspector_clears_the_previous_result_after_a_failure(browser: object,
+                                                              live_server: str) -> None:
+    """A refused request, and a request that is not JSON, leave no trace of the previous
+    answer: no overlay, no inlier rows, no camera in the 3D view (the map stays)."""
+    op = OfflinePage(browser, live_server)
+    page = op.page
+    page.goto(f"{live_server}/inspector")
+    page.wait_for_selector("#map option[value=chess]", state="attached")
+    for bad in ('{"camera": {"fx": -1}, "detections": []}', "{not json"):
+        _localize(page, EXAMPLE_REQUEST, "done")
+        assert page.locator("#overlay svg").count() == 1
+        assert page.locator("#inliers tbody tr").count() == len(EXAMPLE_REQUEST["detections"])
+        assert page.get_attribute("#view3d", "data-camera") == "true"
+        page.fill("#request", bad)
+        page.click("#localize")
+        page.wait_for_selector("#status[data-state=error]")
+        assert page.locator("#overlay svg").count() == 0, bad
+        assert page.locator("#inliers tbody tr").count() == 0, bad
+        assert page.get_attribute("#view3d", "data-camera") == "false", bad
+        assert int(page.get_attribute("#view3d", "data-drawn") or 0) > 0  # the map stays
+    page.close()
+
+
+def test_inspector_shows_not_localized_apart_from_success(browser: object,
+                                                          live_server: str) -> None:
+    """'Not localized' is a normal answer, but not a success: its status is not drawn in the
+    colour of a localized one (nor in the error colour)."""
+    op = OfflinePage(browser, live_server)
+    page = op.page
+    page.goto(f"{live_server}/inspector")
+    page.wait_for_selector("#map option[value=chess]", state="attached")
+    _localize(page, EXAMPLE_REQUEST, "done")
+    localized = _status_colour(page)
+    two = {**EXAMPLE_REQUEST, "detections": EXAMPLE_REQUEST["detections"][:2]}
+    _localize(page, two, "not-localized")
+    assert page.inner_text("#status").startswith("Not localized: ")
+    not_localized = _status_colour(page)
+    page.fill("#request", "{not json")
+    page.click("#localize")
+    page.wait_for_selector("#status[data-state=error]")
+    assert len({localized, not_localized, _status_colour(page)}) == 3
+    page.close()
+
+
+def test_inspector_overlay_labels_neither_overlap_nor_leave_the_frame(browser: object,
+                                                                       live_server: str) -> None:
+    """The labels of the drawing, as the browser lays them out (``getBBox``): inside the
+    image frame and pairwise apart, for the demo frame and for one with detections crowded at
+    the right edge (their labels were cut there and drawn over each other)."""
+    crowded = {**EXAMPLE_REQUEST, "detections": [
+        *EXAMPLE_REQUEST["detections"],
+        *({"label": "Chair", "sigma": 0.01,
+           "ellipse": {"cx": 636.0, "cy": 60.0 + 4 * k, "a": 3.0, "b": 2.0, "angle": 0.0}}
+          for k in range(4))]}
+    op = OfflinePage(browser, live_server)
+    page = op.page
+    page.goto(f"{live_server}/inspector")
+    page.wait_for_selector("#map option[value=chess]", state="attached")
+    for request in (EXAMPLE_REQUEST, crowded):
+        _localize(page, request, "done")
+        frame, boxes = page.evaluate("""() => {
+            const svg = document.querySelector('#overlay svg');
+            const f = svg.querySelector('rect.frame').getBBox();
+            const boxes = [...svg.querySelectorAll('text:not(.summary)')].map((t) => {
+                const b = t.getBBox();
+                return [b.x, b.y, b.x + b.width, b.y + b.height, t.textContent]; });
+            return [[f.width, f.height], boxes]; }""")
+        assert len(boxes) >= len(request["detections"])
+        width, height = frame
+        for x0, y0, x1, y1, text in boxes:
+            assert x0 >= 0 and x1 <= width and y0 >= 0 and y1 <= height, (text, x0, x1, y0, y1)
+        for i, a in enumerate(boxes):
+            for b in boxes[i + 1:]:
+                apart = (a[2] <= b[0] + 0.5 or b[2] <= a[0] + 0.5 or a[3] <= b[1] + 0.5
+                         or b[3] <= a[1] + 0.5)
+                assert apart, (a, b)
+    op.assert_offline_clean()
     page.close()
 
 

@@ -244,9 +244,13 @@ def test_compose_stack_postgres_two_replicas_and_proxy():
     assert set(proxy["depends_on"]) == {"quadloc-1", "quadloc-2"}
 
 
+def _kubernetes() -> dict[tuple[str, str], dict]:
+    docs = yaml.safe_load_all((REPO / "deploy" / "kubernetes.yaml").read_text())
+    return {(d["kind"], d["metadata"]["name"]): d for d in docs}
+
+
 def test_kubernetes_probes():
-    docs = list(yaml.safe_load_all((REPO / "deploy" / "kubernetes.yaml").read_text()))
-    deployment = next(d for d in docs if d["kind"] == "Deployment")
+    deployment = _kubernetes()["StatefulSet", "quadloc"]
     spec = deployment["spec"]["template"]["spec"]
     container = spec["containers"][0]
     assert container["livenessProbe"]["httpGet"]["path"] == "/healthz"
@@ -258,3 +262,113 @@ def test_kubernetes_probes():
     env = {e["name"] for e in container["env"]}
     assert {"QUADLOC_DATABASE_URL", "QUADLOC_API_KEYS"} <= env
     assert deployment["spec"]["replicas"] >= 2
+
+
+# ------------------------------------------------------------------------- deploy/ scripts
+
+#: Where a deployment file may send its reader: files of this repository.
+DEPLOY_FILES = [*sorted((REPO / "deploy").rglob("*")), DOCKERFILE, REPO / "docker-compose.yml"]
+
+
+def test_deployment_files_cite_only_documents_of_the_repository() -> None:
+    """A comment that cites a document (``*.md``) names one that ships with the repository
+    (start-docker-engine.sh cited a guide section that does not exist)."""
+    cited: dict[str, list[str]] = {}
+    for path in (p for p in DEPLOY_FILES if p.is_file()):
+        for name in re.findall(r"[\w./-]+\.md\b", path.read_text()):
+            cited.setdefault(name, []).append(path.name)
+    assert "docs/deployment.md" in cited  # the pattern finds citations
+    missing = {name: files for name, files in cited.items() if not (REPO / name).is_file()}
+    assert not missing, f"cited but not in the repository: {missing}"
+
+
+def test_compose_local_down_works_without_the_api_keys(tmp_path: Path) -> None:
+    """``deploy/compose-local.sh down`` with no ``QUADLOC_API_KEYS``: compose refuses a file
+    whose ``${VAR:?message}`` is unset or empty (its interpolation rule), so the script must set
+    the keys it does not need. A stand-in ``docker-compose`` on PATH applies that rule to
+    docker-compose.yml and records the command; ``up`` still needs the real keys."""
+    fake = tmp_path / "bin" / "docker-compose"
+    fake.parent.mkdir()
+    log = tmp_path / "calls.log"
+    fake.write_text(f"""#!{sys.executable}
+import os, re, sys
+text = open("docker-compose.yml").read()
+for name, message in re.findall(r"\\$\\{{(\\w+):\\?([^}}]*)\\}}", text):
+    if not os.environ.get(name):
+        sys.exit(f"required variable {{name}} is missing a value: {{message}}")
+open({str(log)!r}, "a").write(" ".join(sys.argv[1:]) + "\\n")
+""")
+    fake.chmod(0o755)
+    env = {k: v for k, v in os.environ.items() if k != "QUADLOC_API_KEYS"}
+    env["PATH"] = f"{fake.parent}:{env['PATH']}"
+    script = str(REPO / "deploy" / "compose-local.sh")
+    down = subprocess.run(["bash", script, "down"], env=env, capture_output=True, text=True,
+                          timeout=60)
+    assert down.returncode == 0, down.stderr
+    assert log.read_text().splitlines() == ["-p quadloc -f docker-compose.yml down -v "
+                                            "--remove-orphans"]
+    ps = subprocess.run(["bash", script, "compose", "ps"], env=env, capture_output=True,
+                        text=True, timeout=60)
+    assert ps.returncode != 0 and "QUADLOC_API_KEYS" in ps.stderr  # the stand-in does refuse
+
+
+def test_kubernetes_routes_each_session_to_the_pod_that_created_it(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """deploy/kubernetes.yaml's session routing, without a cluster: the replicas are a
+    StatefulSet whose pods tag their session ids with their own name (QUADLOC_REPLICA_ID from
+    metadata.name) and have DNS names through a headless Service; the public Service is the
+    proxy, whose location for sessions takes the tag out of the id and proxies to that pod's
+    DNS name, everything else to the pool. Checked with ids made by the real SessionStore for
+    pod names of the StatefulSet; the template's ${...} are all env vars of the proxy."""
+    from quadloc.service.app.session_store import SessionStore
+
+    k8s = _kubernetes()
+    sts = k8s["StatefulSet", "quadloc"]
+    labels = sts["spec"]["template"]["metadata"]["labels"]
+    headless = k8s["Service", sts["spec"]["serviceName"]]
+    assert headless["spec"]["clusterIP"] == "None"
+    assert headless["spec"]["selector"] == labels
+    pool = k8s["Service", "quadloc-replicas"]
+    assert pool["spec"]["selector"] == labels and "clusterIP" not in pool["spec"]
+    env = {e["name"]: e for e in sts["spec"]["template"]["spec"]["containers"][0]["env"]}
+    assert env["QUADLOC_REPLICA_ID"]["valueFrom"]["fieldRef"]["fieldPath"] == "metadata.name"
+    hpa = k8s["HorizontalPodAutoscaler", "quadloc"]["spec"]["scaleTargetRef"]
+    assert (hpa["kind"], hpa["name"]) == ("StatefulSet", "quadloc")
+
+    proxy = k8s["Deployment", "quadloc-proxy"]
+    proxy_labels = proxy["spec"]["template"]["metadata"]["labels"]
+    assert k8s["Service", "quadloc"]["spec"]["selector"] == proxy_labels
+    pod = proxy["spec"]["template"]["spec"]
+    container = pod["containers"][0]
+    config_volume = next(v["name"] for v in pod["volumes"]
+                         if v.get("configMap", {}).get("name") == "quadloc-proxy")
+    mount = next(m for m in container["volumeMounts"] if m["name"] == config_volume)
+    assert mount["mountPath"] == "/etc/nginx/templates"  # the image's envsubst directory
+    template = k8s["ConfigMap", "quadloc-proxy"]["data"]["default.conf.template"]
+    proxy_env = {e["name"] for e in container["env"]}
+    assert set(re.findall(r"\$\{(\w+)\}", template)) <= proxy_env
+    namespace = "ns1"
+    conf = re.sub(r"\$\{(\w+)\}", namespace, template)  # what envsubst makes of it
+
+    location = re.search(r"location ~ (\S+) \{(.*?)\n\s*\}", conf, re.S)
+    assert location is not None, "no regex location for sessions"
+    pattern = re.compile(location.group(1).replace("(?<", "(?P<"))  # PCRE -> Python names
+    target = re.search(r"proxy_pass http://(\S+);", location.group(2)).group(1)
+    assert "error_page 502 = @replicas;" in location.group(2)
+
+    def routed(path: str) -> str | None:
+        m = pattern.match(path)
+        return None if m is None else re.sub(r"\$(\w+)", lambda v: m.group(v.group(1)), target)
+
+    service_dns = f"{headless['metadata']['name']}.{namespace}.svc.cluster.local"
+    for ordinal in (0, 1, 12):
+        pod_name = f"{sts['metadata']['name']}-{ordinal}"
+        monkeypatch.setenv("QUADLOC_REPLICA_ID", pod_name)
+        sid = SessionStore().create("chess", 1, object(), "opencv").session_id  # type: ignore[arg-type]
+        for path in (f"/v1/sessions/{sid}", f"/v1/sessions/{sid}/frames"):
+            assert routed(path) == f"{pod_name}.{service_dns}:8000", path
+    for path in ("/v1/maps/chess/sessions", "/v1/maps/chess/localize",
+                 "/v1/sessions/s-evil.example.com.abc", "/v1/sessions/s-quadloc-1x.abc"):
+        assert routed(path) is None, path  # -> location /: the pool
+    pool_dns = f"quadloc-replicas.{namespace}.svc.cluster.local:8000"
+    assert re.search(rf"upstream quadloc_replicas \{{\s*server {re.escape(pool_dns)};", conf)

@@ -15,6 +15,7 @@ import shutil
 import subprocess
 import sys
 import tomllib
+import zipfile
 from pathlib import Path
 
 import pytest
@@ -44,6 +45,21 @@ def _top_level_names(site: Path) -> set[str]:
             if not p.name.endswith((".dist-info", ".pth")) and p.name != "__pycache__"}
 
 
+@pytest.mark.parametrize("pyproject", ["pyproject.toml", "sdk/python/pyproject.toml"])
+def test_license_is_an_spdx_expression(pyproject: str) -> None:
+    """PEP 639, as setuptools >= 77 wants it: ``license`` an SPDX expression string (the TOML
+    table form is deprecated), no ``License ::`` classifier, and a backend that knows the
+    form; the license files, if any, listed in ``license-files`` and present."""
+    document = tomllib.loads((REPO / pyproject).read_text())
+    project = document["project"]
+    assert isinstance(project["license"], str), "license must be an SPDX string, not a table"
+    assert project["license"] == "MIT"
+    assert not [c for c in project.get("classifiers", []) if c.startswith("License ::")]
+    assert "setuptools>=77" in document["build-system"]["requires"]
+    for pattern in project.get("license-files", []):
+        assert list((REPO / pyproject).parent.glob(pattern)), f"{pattern}: no such file"
+
+
 @pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_wheels_install_only_the_quadloc_names(tmp_path: Path) -> None:
@@ -60,6 +76,12 @@ def test_wheels_install_only_the_quadloc_names(tmp_path: Path) -> None:
         assert built.returncode == 0, built.stdout[-2000:] + built.stderr[-2000:]
     files = sorted(wheels.glob("*.whl"))
     assert [f.name.split("-")[0] for f in files] == ["quadloc", "quadloc_sdk"]
+    for wheel in files:  # the metadata of PEP 639, not the deprecated License field
+        with zipfile.ZipFile(wheel) as z:
+            metadata = z.read(next(n for n in z.namelist()
+                                   if n.endswith(".dist-info/METADATA"))).decode()
+        assert "License-Expression: MIT" in metadata.splitlines(), wheel.name
+        assert not any(line.startswith("License:") for line in metadata.splitlines())
 
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=60)

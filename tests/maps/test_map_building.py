@@ -17,8 +17,10 @@ from quadloc.factors.rotations import invert_pose
 from quadloc.maps.building.association import associate
 from quadloc.maps.building.build import BuildTimeoutError, build_map
 from quadloc.maps.building.joint import refine_jointly
-from quadloc.maps.building.recording import Observation, OdometryNoise, parse_recording
+from quadloc.maps.building.recording import Observation, OdometryNoise
 from quadloc.maps.reconstruct import ellipsoid_errors
+from quadloc.service.app.builds import recording_of as parse_recording
+from quadloc.service.app.errors import AppError
 from tests.service.api.test_api_build import CAM, OBJECTS, _look_at, _recording
 
 
@@ -164,7 +166,7 @@ def test_box_detections_are_accepted() -> None:
     d = rec_doc["frames"][0]["detections"][0]
     e = Ellipse(**d.pop("ellipse"))
     x0, y0, x1, y1 = e.bbox()
-    d["box"] = [x0, y0, x1, y1]
+    d["box"] = {"xmin": x0, "ymin": y0, "xmax": x1, "ymax": y1}
     rec = parse_recording(rec_doc)
     assert rec.observations[0].ellipse.angle == 0.0
     assert math.isclose(rec.observations[0].ellipse.a, (x1 - x0) / 2)
@@ -196,23 +198,21 @@ def test_axis_floor_is_one_sided_with_the_right_jacobian() -> None:
 
 
 def test_odometry_noise_is_parsed_validated_and_a_random_walk() -> None:
-    from quadloc.maps.building.recording import RecordingError
-
     doc, _ = _recording(4)
     rec = parse_recording(doc)
     assert rec.refine_camera_poses is True and rec.odometry_noise == OdometryNoise()
     rec = parse_recording({**doc, "odometry_noise": {"translation_m_per_sqrt_m": 0.03}})
     assert rec.odometry_noise.translation_m_per_sqrt_m == 0.03
     assert rec.odometry_noise.rotation_rad_per_sqrt_m == OdometryNoise().rotation_rad_per_sqrt_m
-    with pytest.raises(RecordingError) as exc:
+    with pytest.raises(AppError) as exc:
         parse_recording({**doc, "odometry_noise": {"translation_m_per_sqrt_m": -1, "bogus": 1,
                                                    "rotation_rad_per_step": "x"}})
     fields = {e["field"] for e in exc.value.errors}
     assert fields == {"odometry_noise.translation_m_per_sqrt_m", "odometry_noise.bogus",
                       "odometry_noise.rotation_rad_per_step"}
-    with pytest.raises(RecordingError) as exc:
+    with pytest.raises(AppError) as exc:
         parse_recording({**doc, "odometry_noise": {"translation_m_per_step": 0}})
-    assert exc.value.errors[0]["field"] == "odometry_noise"
+    assert exc.value.errors[0]["field"] == "odometry_noise.translation_m_per_step"
     # variances add over path length and steps: two halves compose to the whole
     n = OdometryNoise(0.01, 0.02, 0.003, 0.004)
     whole = n.sigmas(2.0, 6)

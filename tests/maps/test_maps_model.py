@@ -571,12 +571,16 @@ def test_chess_ids_integral_floats_and_strings() -> None:
     """As before the models: integral floats are integers, decimal strings are kept; a
     fractional or boolean id is refused."""
     def doc(category_id: Any, object_id: Any) -> dict[str, Any]:
-        return {"category_id_to_label": {"0": "TV"}, "extra": "ignored",
+        return {"category_id_to_label": {"0": "TV"},
                 "objects": [{"category_id": category_id, "object_id": object_id,
                              "ellipsoid": {"axes": [0.3, 0.2, 0.1], "center": [0, 0, 1],
                                            "R": np.eye(3).tolist()}}]}
     for cid, oid in ((0.0, 12.0), ("0", "12"), (0, 12)):
         assert scene_map_from_chess(doc(cid, oid)).objects[0].object_id == "12"
+    # unknown fields are refused, naming them (issue 30: everywhere in the API)
+    with pytest.raises(MapValidationError) as exc:
+        scene_map_from_chess({**doc(0, 1), "extra": 1})
+    assert [e["field"] for e in exc.value.errors] == ["extra"]
     for cid, oid, field in ((0.5, 1, "objects[0].category_id"), (True, 1,
                             "objects[0].category_id"), (0, 1.5, "objects[0].object_id")):
         with pytest.raises(MapValidationError) as exc:

@@ -387,7 +387,7 @@ def test_migrations_are_idempotent_and_recorded(store: MapStore) -> None:
     with store.engine.connect() as conn:
         rev = conn.execute(sa.text("SELECT version_num FROM quadloc_alembic_version")).scalar_one()
         tables = set(sa.inspect(conn).get_table_names())
-    assert rev == "0002_build_jobs"
+    assert rev == "0003_map_calibrations"
     assert {"quadloc_maps", "quadloc_map_versions"} <= tables
     store.ping()
 
@@ -441,7 +441,7 @@ def test_update_rejects_impossible_expected_versions_by_name(store: MapStore, ba
 
 def test_query_tables_mirror_the_migrated_schema(store: MapStore) -> None:
     """The Table declarations used for queries carry the migration's CHECK constraints."""
-    from quadloc.maps.store import maps_table
+    from quadloc.maps.store import calibrations_table, maps_table
 
     inspector = sa.inspect(store.engine)
     for table in (maps_table, versions_table):
@@ -449,3 +449,28 @@ def test_query_tables_mirror_the_migrated_schema(store: MapStore) -> None:
         declared = {c.name for c in table.constraints if isinstance(c, sa.CheckConstraint)}
         assert declared and declared == migrated, table.name
         assert {c["name"] for c in inspector.get_columns(table.name)} == set(table.c.keys())
+    assert {c["name"] for c in inspector.get_columns(calibrations_table.name)} == set(
+        calibrations_table.c.keys())
+    fks = inspector.get_foreign_keys(calibrations_table.name)
+    assert [(f["constrained_columns"], f["referred_table"]) for f in fks] == [
+        (["map_id", "version"], "quadloc_map_versions")]
+
+
+def test_calibration_is_stored_per_version_and_deleted_with_the_map(store: MapStore) -> None:
+    from quadloc.maps.errors import MapNotFound
+
+    store.create(_small_map())
+    store.update("office", _small_map(shift=0.1), expected_version=1)
+    assert store.calibration("office", 1) is None
+    store.set_calibration("office", 1, {"k": 1.5})
+    store.set_calibration("office", 1, {"k": 2.5})  # replaced
+    assert store.calibration("office", 1) == {"k": 2.5}
+    assert store.calibration("office", 2) is None  # each version its own
+    with pytest.raises(MapNotFound):
+        store.set_calibration("office", 3, {"k": 1.0})
+    with pytest.raises(MapNotFound):
+        store.set_calibration("nowhere", 1, {"k": 1.0})
+    store.delete("office")
+    with store.engine.connect() as conn:
+        left = conn.execute(sa.text("SELECT count(*) FROM quadloc_map_calibrations")).scalar_one()
+    assert left == 0

@@ -4,9 +4,18 @@ Imports neither gtsam nor the server (``quadloc.service``, ``quadloc.factors``, 
 ``import quadloc_sdk`` needs only httpx and pydantic (the ``quadloc-sdk`` distribution in ``sdk/``);
 :mod:`quadloc_sdk.overlay` (SVG drawing of a localization) is pure Python;
 :mod:`quadloc_sdk.geometry` needs numpy (extra ``quadloc-sdk[geometry]``) and OpenCV for its contour
-helpers (extra ``[contours]``, imported lazily). See docs/sdk.md.
+helpers (extra ``[contours]``, imported lazily). See docs/sdk.md; its section "What the package
+exports" lists ``__all__`` (tests/sdk/test_sdk_exports.py compares the two).
 """
 
+from quadloc_sdk.build import (
+    BuildFailedError,
+    BuildJob,
+    abuild_map,
+    aget_build_job,
+    build_map,
+    get_build_job,
+)
 from quadloc_sdk.client import DEFAULT_BASE_URL, SDK_VERSION, AsyncQuadLocClient, QuadLocClient
 from quadloc_sdk.errors import (
     APIError,
@@ -48,8 +57,24 @@ from quadloc_sdk.models import (
     Pose,
     PoseInput,
     PosePrior,
+    SessionFrame,
+    SessionFrameResult,
+    SessionInfo,
+    SessionOptions,
 )
+from quadloc_sdk.overlay import overlay_svg, render_overlay_svg
 from quadloc_sdk.retry import RetryPolicy
+from quadloc_sdk.session import (
+    AsyncTrackingSession,
+    TrackingSession,
+    arcore_pose_to_matrix,
+    arkit_transform_to_matrix,
+    get_session,
+    get_session_async,
+    session_frame,
+    start_session,
+    start_session_async,
+)
 
 __version__ = SDK_VERSION
 
@@ -61,8 +86,11 @@ __all__ = [
     "APIError",
     "Alternative",
     "AsyncQuadLocClient",
+    "AsyncTrackingSession",
     "BatchLocalizeResponse",
     "Box",
+    "BuildFailedError",
+    "BuildJob",
     "Camera",
     "ClientError",
     "Conflict",
@@ -92,7 +120,25 @@ __all__ = [
     "RetryPolicy",
     "ServerError",
     "ServiceUnavailable",
+    "SessionFrame",
+    "SessionFrameResult",
+    "SessionInfo",
+    "SessionOptions",
+    "TrackingSession",
     "TransportError",
     "Unauthorized",
     "ValidationError",
+    "abuild_map",
+    "aget_build_job",
+    "arcore_pose_to_matrix",
+    "arkit_transform_to_matrix",
+    "build_map",
+    "get_build_job",
+    "get_session",
+    "get_session_async",
+    "overlay_svg",
+    "render_overlay_svg",
+    "session_frame",
+    "start_session",
+    "start_session_async",
 ]

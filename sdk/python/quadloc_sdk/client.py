@@ -37,6 +37,7 @@ from quadloc_sdk.errors import PreconditionFailed, QuadLocError, TransportError,
 from quadloc_sdk.models import (
     BatchLocalizeResponse,
     Camera,
+    Convention,
     Detection,
     Gravity,
     LocalizeOptions,
@@ -46,9 +47,18 @@ from quadloc_sdk.models import (
     MapSummary,
     MapVersion,
     PosePrior,
+    SessionInfo,
+    SessionOptions,
 )
 from quadloc_sdk.retry import RetryPolicy
-from quadloc_sdk.session import start_session, start_session_async
+from quadloc_sdk.session import (
+    AsyncTrackingSession,
+    TrackingSession,
+    get_session,
+    get_session_async,
+    start_session,
+    start_session_async,
+)
 from quadloc_sdk.transport import Call
 
 __all__ = ["DEFAULT_BASE_URL", "AsyncQuadLocClient", "QuadLocClient"]
@@ -350,12 +360,18 @@ class QuadLocClient(_Base):
     def close(self) -> None:
         self._http.close()
 
-    def start_session(self, map_id: str, *, camera: dict[str, Any], convention: str = "opencv",
-                      options: dict[str, Any] | None = None) -> Any:
-        """Start a tracking session (:class:`quadloc_sdk.session.TrackingSession`,
-        docs/tracking.md)."""
+    def start_session(self, map_id: str, *, camera: Camera | Mapping[str, Any],
+                      convention: Convention = "opencv",
+                      options: SessionOptions | Mapping[str, Any] | None = None
+                      ) -> TrackingSession:
+        """Start a tracking session (``POST /v1/maps/{id}/sessions``;
+        :class:`quadloc_sdk.session.TrackingSession`, docs/tracking.md)."""
         return start_session(self, map_id, camera=camera, convention=convention,
                              options=options)
+
+    def get_session(self, session_id: str) -> SessionInfo:
+        """A tracking session's state (``GET /v1/sessions/{id}``)."""
+        return get_session(self, session_id)
 
     def __enter__(self) -> QuadLocClient:
         return self
@@ -519,12 +535,17 @@ class AsyncQuadLocClient(_Base):
     async def aclose(self) -> None:
         await self._http.aclose()
 
-    async def start_session(self, map_id: str, *, camera: dict[str, Any],
-                            convention: str = "opencv",
-                            options: dict[str, Any] | None = None) -> Any:
+    async def start_session(self, map_id: str, *, camera: Camera | Mapping[str, Any],
+                            convention: Convention = "opencv",
+                            options: SessionOptions | Mapping[str, Any] | None = None
+                            ) -> AsyncTrackingSession:
         """Start a tracking session (:class:`quadloc_sdk.session.AsyncTrackingSession`)."""
         return await start_session_async(self, map_id, camera=camera, convention=convention,
                                          options=options)
+
+    async def get_session(self, session_id: str) -> SessionInfo:
+        """A tracking session's state (``GET /v1/sessions/{id}``)."""
+        return await get_session_async(self, session_id)
 
     async def __aenter__(self) -> AsyncQuadLocClient:
         return self

@@ -44,10 +44,12 @@ __all__ = [
     "ellipse_from_box",
     "ellipse_from_contour",
     "ellipse_from_mask",
+    "ellipse_from_moments",
     "invert_pose",
     "log_variance_from_sigma",
     "matrix_from_column_major",
     "matrix_from_quaternion_wxyz",
+    "polygon_moments",
     "pose_matrix_from_quaternion_wxyz",
     "quaternion_wxyz_from_matrix",
     "quaternion_wxyz_from_xyzw",
@@ -118,6 +120,35 @@ def _ellipse_from_second_moments(
     return canonical_ellipse(
         float(mean[0]), float(mean[1]), 2 * math.sqrt(eigval[1]), 2 * math.sqrt(eigval[0]), angle
     )
+
+
+def ellipse_from_moments(mean: np.ndarray, covariance: np.ndarray, field: str = "region"
+                         ) -> Ellipse:
+    """The moment-matched ellipse of a region with centroid ``mean`` (2,) and covariance
+    ``covariance`` (2, 2) about it (px, px^2): semi-axes ``2 sqrt(eigenvalues)`` (a uniform
+    filled ellipse's); ``ValueError`` naming ``field`` for a degenerate region."""
+    return _ellipse_from_second_moments(field, np.asarray(mean, float),
+                                        np.asarray(covariance, float))
+
+
+def polygon_moments(points: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """Area moments of a simple polygon (Green's theorem): ``(area px^2, centroid (2,),
+    covariance about the centroid (2, 2) px^2)``; ``points`` (N, 2), either orientation."""
+    p = np.asarray(points, dtype=float)
+    if p.ndim != 2 or p.shape[1] != 2 or len(p) < 3 or not np.all(np.isfinite(p)):
+        raise ValueError(f"polygon: expected >= 3 finite points (N, 2), got shape {p.shape}")
+    x, y = p[:, 0], p[:, 1]
+    xn, yn = np.roll(x, -1), np.roll(y, -1)
+    cross = x * yn - xn * y
+    a = cross.sum() / 2.0
+    if not abs(a) > 0:
+        raise ValueError("polygon: zero area")
+    c = np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (6.0 * a)
+    sxx = ((x * x + x * xn + xn * xn) * cross).sum() / (12.0 * a)
+    syy = ((y * y + y * yn + yn * yn) * cross).sum() / (12.0 * a)
+    sxy = ((x * yn + 2 * x * y + 2 * xn * yn + xn * y) * cross).sum() / (24.0 * a)
+    cov = np.array([[sxx, sxy], [sxy, syy]]) - np.outer(c, c)
+    return abs(float(a)), c, cov
 
 
 def _cv2() -> ModuleType:  # lazy: importing OpenCV costs ~0.1-0.3 s; only the contours need it

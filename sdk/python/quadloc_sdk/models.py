@@ -56,6 +56,10 @@ __all__ = [
     "Pose",
     "PoseInput",
     "PosePrior",
+    "SessionFrame",
+    "SessionFrameResult",
+    "SessionInfo",
+    "SessionOptions",
 ]
 
 Metric = Literal[
@@ -289,6 +293,44 @@ class LocalizeRequest(BaseModel):
         return self.model_dump(mode="json", exclude_none=True)
 
 
+class SessionOptions(BaseModel):
+    """Options of a tracking session (docs/tracking.md). ``None`` fields are not sent: the
+    server's defaults apply (a window of 30 frames, the ``isam2`` smoother, inlier IoU 0.2, the
+    odometry drift model of docs/tracking.md)."""
+
+    model_config = _REQUEST
+    window_frames: int | None = Field(default=None, ge=2, le=300)
+    smoother: Literal["isam2", "batch"] | None = None
+    inlier_iou: Float | None = Field(default=None, gt=0, le=1)
+    odometry_translation_m_per_sqrt_m: Float | None = Field(default=None, ge=0, le=10)
+    odometry_translation_m_per_sqrt_s: Float | None = Field(default=None, ge=0, le=10)
+    odometry_rotation_deg_per_sqrt_m: Float | None = Field(default=None, ge=0, le=90)
+    odometry_rotation_deg_per_sqrt_s: Float | None = Field(default=None, ge=0, le=90)
+
+
+class SessionFrame(BaseModel):
+    """One frame of a tracking session: the detections (as for localize), the camera's pose in
+    the app's odometry frame ``odom_from_camera`` (in the session's convention), the client
+    clock ``timestamp`` (s, non-decreasing), and optionally a ``prior`` and ``gravity``."""
+
+    model_config = _REQUEST
+    detections: list[Detection] = Field(default_factory=list)
+    odom_from_camera: PoseInput
+    timestamp: Float
+    frame_id: str | None = None
+    prior: PosePrior | None = None
+    gravity: Gravity | None = None
+
+    def to_wire(self) -> dict[str, Any]:
+        """JSON body for the server (unset optional fields omitted). A ``gravity`` whose
+        ``convention`` was not given is sent without one: the server then reads it in the
+        session's convention (docs/tracking.md), not in the model's default ``opencv``."""
+        wire = self.model_dump(mode="json", exclude_none=True)
+        if self.gravity is not None and "convention" not in self.gravity.model_fields_set:
+            del wire["gravity"]["convention"]
+        return wire
+
+
 # ----------------------------------------------------------------------------------- responses
 
 
@@ -424,3 +466,40 @@ class MapRecord(BaseModel):
     created_at: str | None = None
     map: dict[str, Any]
     etag: str | None = None
+
+
+class SessionInfo(BaseModel):
+    """A tracking session as the server describes it (``POST /v1/maps/{id}/sessions``,
+    ``GET /v1/sessions/{id}``): ``state`` is ``initializing``, ``tracking`` or ``lost``,
+    ``frames`` the frames received so far."""
+
+    model_config = _RESPONSE
+    session_id: str
+    url: str
+    map_id: str
+    map_version: int
+    convention: Convention
+    state: str
+    frames: int
+    idle_timeout_s: float
+
+
+class SessionFrameResult(BaseModel):
+    """The answer for one session frame. ``world_from_camera`` / ``covariance`` only while
+    ``state == "tracking"``; ``world_from_odom`` aligns the app's odometry frame to the map
+    (apply it once to the app's scene); ``confidence`` is P(pose within 10 cm and 5 deg)."""
+
+    model_config = _RESPONSE
+    frame_index: int
+    frame_id: str | None = None
+    timestamp: float
+    state: str
+    reason: str | None = None
+    world_from_camera: Pose | None = None
+    covariance: Covariance | None = None
+    world_from_odom: Pose | None = None
+    world_from_odom_covariance: Covariance | None = None
+    confidence: float = 0.0
+    inliers: list[Inlier] = Field(default_factory=list)
+    n_usable_detections: int = 0
+    timings_ms: dict[str, float] = Field(default_factory=dict)

@@ -37,6 +37,7 @@ __all__ = [
     "drawn_detections",
     "overlay_summary",
     "overlay_svg",
+    "place_labels",
     "project_ellipsoid",
     "render_overlay_svg",
     "rotation_from_quaternion_wxyz",
@@ -194,6 +195,60 @@ def _ellipse_svg(e: ImageEllipse, cls: str, extra: str = "") -> str:
             f'ry="{e.b:.2f}" transform="rotate({deg:.3f} {e.cx:.2f} {e.cy:.2f})"{extra}/>')
 
 
+#: Label text metrics (the style's 11 px font): each label is drawn exactly
+#: ``LABEL_CHAR_PX`` px per character wide (``textLength``: the same box in every browser and
+#: font), its box spans ``LABEL_ASCENT_PX`` above the baseline to ``LABEL_DESCENT_PX`` below.
+LABEL_CHAR_PX = 6.2
+LABEL_ASCENT_PX = 11.0
+LABEL_DESCENT_PX = 3.0
+#: Free space kept between two labels and between a label and the frame's edge (px).
+LABEL_GAP_PX = 2.0
+
+
+def place_labels(labels: Sequence[tuple[str, ImageEllipse]], width: int, height: int
+                 ) -> list[tuple[float, float, float]]:
+    """Where to write each ``(text, ellipse)`` label: ``(x centre, baseline y, width)`` px.
+
+    Greedy, in the given order (the first get the best places): a label goes under its
+    ellipse, else above it, else ever further from it in steps of one line, at the first place
+    whose box is inside the ``width`` x ``height`` frame and overlaps no label placed before
+    (boxes ``LABEL_GAP_PX`` apart); its x is moved inwards so the box never crosses the left or
+    right edge. When no free place exists within the frame the label goes under its ellipse
+    (clamped into the frame)."""
+    line = LABEL_ASCENT_PX + LABEL_DESCENT_PX + LABEL_GAP_PX
+    y_min = LABEL_ASCENT_PX + LABEL_GAP_PX
+    y_max = height - LABEL_DESCENT_PX - LABEL_GAP_PX
+    boxes: list[tuple[float, float, float, float]] = []
+    out: list[tuple[float, float, float]] = []
+    for text, e in labels:
+        w = max(len(text), 1) * LABEL_CHAR_PX
+        half = min(w / 2, width / 2 - LABEL_GAP_PX)
+        x = min(max(e.cx, half + LABEL_GAP_PX), width - half - LABEL_GAP_PX)
+        # vertical half-extent of the ellipse: sqrt(a^2 sin^2 + b^2 cos^2)
+        extent = math.hypot(e.a * math.sin(e.angle), e.b * math.cos(e.angle))
+        below = e.cy + extent + LABEL_ASCENT_PX + LABEL_GAP_PX
+        above = e.cy - extent - LABEL_DESCENT_PX - LABEL_GAP_PX
+        candidates = [below, above]
+        for k in range(1, int(height / line) + 2):
+            candidates += [below + k * line, above - k * line]
+        chosen = None
+        for y in candidates:
+            if not y_min <= y <= y_max:
+                continue
+            box = (x - half - LABEL_GAP_PX, y - LABEL_ASCENT_PX - LABEL_GAP_PX,
+                   x + half + LABEL_GAP_PX, y + LABEL_DESCENT_PX + LABEL_GAP_PX)
+            if all(box[2] <= b[0] or b[2] <= box[0] or box[3] <= b[1] or b[3] <= box[1]
+                   for b in boxes):
+                chosen = box, y
+                break
+        if chosen is None:
+            y = min(max(below, y_min), max(y_min, y_max))
+            chosen = (x - half, y - LABEL_ASCENT_PX, x + half, y + LABEL_DESCENT_PX), y
+        boxes.append(chosen[0])
+        out.append((x, chosen[1], 2 * half))
+    return out
+
+
 def render_overlay_svg(
     width: int,
     height: int,
@@ -220,6 +275,7 @@ def render_overlay_svg(
     out.append(f'<rect class="frame" x="0" y="0" width="{width}" height="{height}"/>')
     out.append(f'<clipPath id="image"><rect x="0" y="0" width="{width}" height="{height}"/>'
                "</clipPath><g clip-path=\"url(#image)\">")
+    labels: list[tuple[str, str, ImageEllipse]] = []  # (class, text, ellipse), in priority
     for p in projections:
         e = p.ellipse
         # not an ellipse at that pose, or wholly outside the frame (its circumscribed circle,
@@ -230,8 +286,8 @@ def render_overlay_svg(
         cls = "projection matched" if p.object_id in matched else "projection"
         out.append(_ellipse_svg(e, cls, f" data-object-id={quoteattr(p.object_id)}"))
         if p.object_id not in matched:  # a matched object is named by its detection's label
-            out.append(f'<text class="pid" x="{e.cx:.1f}" y="{e.cy:.1f}" '
-                       f'text-anchor="middle">{escape(p.object_id)} {escape(p.category)}</text>')
+            labels.append(("pid", f"{p.object_id} {p.category}", e))
+    detection_labels: list[tuple[str, str, ImageEllipse]] = []
     for d in detections:
         inlier = d.object_id is not None
         cls = "detection inlier" if inlier else "detection outlier"
@@ -245,11 +301,13 @@ def render_overlay_svg(
             label += f" -> {d.object_id}  IoU {d.iou:.2f}  cost {d.cost:.3g}"
         else:
             label += "  (outlier)"
-        # under the ellipse: its vertical half-extent is sqrt(a^2 sin^2 + b^2 cos^2)
-        e = d.ellipse
-        below = math.hypot(e.a * math.sin(e.angle), e.b * math.cos(e.angle)) + 13
-        out.append(f'<text x="{e.cx:.1f}" y="{e.cy + below:.1f}" text-anchor="middle">'
-                   f"{escape(label)}</text>")
+        detection_labels.append(("label", label, d.ellipse))
+    # labels on top of every drawing, detections' first (they get the best places)
+    placed = place_labels([(text, e) for _, text, e in detection_labels + labels], width,
+                          height)
+    for (cls, text, _), (x, y, w) in zip(detection_labels + labels, placed, strict=True):
+        out.append(f'<text class="{cls}" x="{x:.1f}" y="{y:.1f}" text-anchor="middle" '
+                   f'textLength="{w:.1f}" lengthAdjust="spacingAndGlyphs">{escape(text)}</text>')
     out.append("</g>")
     out.append(f'<text class="summary" x="6" y="{height + band - 9}">{escape(summary)}</text>')
     out.append("</svg>")

@@ -14,14 +14,17 @@ from fastapi import APIRouter, Body, Header, Path, Query, Response, status
 
 from quadloc.maps.model import MAP_ID_PATTERN
 from quadloc.service.api.auth import ReadAccess, WriteAccess
-from quadloc.service.api.deps import AppDep
+from quadloc.service.api.deps import AppDep, MapIdPath
 from quadloc.service.api.errors import problem_responses
 from quadloc.service.schemas.builds import BuildJobOut
+from quadloc.service.schemas.calibration import CalibrationOut
 from quadloc.service.schemas.examples import (
     BUILD_JOB_DONE_EXAMPLE,
     BUILD_JOB_EXAMPLE,
+    CALIBRATION_EXAMPLE,
     RECORDING_EXAMPLE,
 )
+from quadloc.service.schemas.recording import RecordingBody
 
 __all__ = ["router"]
 
@@ -45,12 +48,11 @@ def _ok(code: int, example: dict[str, Any]) -> dict[int | str, Any]:
     responses={**problem_responses(400, 401, 403, 412, 413, 415, 422, 428, 503),
                **_ok(202, {**BUILD_JOB_EXAMPLE, "status": "queued", "stage": "queued",
                            "percent": 0.0, "objects_found": 0})},
-    openapi_extra={"requestBody": {"required": True, "content": {"application/json": {
-        "schema": {"type": "object", "required": ["intrinsics", "frames"]},
+    openapi_extra={"requestBody": {"content": {"application/json": {
         "example": RECORDING_EXAMPLE}}}},
 )
 def start_build(
-    body: Annotated[dict[str, Any], Body()], response: Response, app: AppDep,
+    body: Annotated[RecordingBody, Body()], response: Response, app: AppDep,
     _key: WriteAccess,
     map_id: Annotated[str, Query(pattern=MAP_ID_PATTERN, description="Id of the map to build.")],
     if_match: Annotated[str | None, Header(description="ETag of the map's latest version "
@@ -71,3 +73,37 @@ def start_build(
 def get_build_job(job_id: Annotated[str, Path(pattern=JOB_ID_PATTERN, description="Job id.")],
                   app: AppDep, _key: ReadAccess) -> BuildJobOut:
     return app.builds.get(job_id)
+
+
+VersionQuery = Annotated[int | None, Query(ge=1, le=2**31 - 1,
+                                           description="Map version (default: the latest).")]
+
+
+@router.post(
+    "/maps/{map_id}/calibration", response_model=CalibrationOut,
+    summary="Calibrate a map version from a recording's held-out frames",
+    description="Body: the recording the map was built from, with `holdout_every` (the frames "
+                "held out of the build, their app poses the reference). Fits the covariance "
+                "scale and the confidence model on half of them, reports mean NEES and the "
+                "confidence calibration error before / after on the other half, and stores the "
+                "calibration with the map version: localize uses it for the calibration key "
+                "it was fitted for. Synchronous (tens of seconds for hundreds of frames). 422 "
+                "when the recording holds no frame out or too few localize.",
+    responses={**problem_responses(400, 401, 403, 404, 413, 415, 422, 503),
+               **_ok(200, CALIBRATION_EXAMPLE)},
+    openapi_extra={"requestBody": {"content": {"application/json": {
+        "example": RECORDING_EXAMPLE}}}},
+)
+def calibrate_map(map_id: MapIdPath, body: Annotated[RecordingBody, Body()], app: AppDep,
+                  _key: WriteAccess, version: VersionQuery = None) -> CalibrationOut:
+    return app.calibrations.calibrate(map_id, body, version)
+
+
+@router.get(
+    "/maps/{map_id}/calibration", response_model=CalibrationOut,
+    summary="A map version's calibration (404 when it has none: the shipped one applies)",
+    responses={**problem_responses(401, 403, 404, 422, 503), **_ok(200, CALIBRATION_EXAMPLE)},
+)
+def get_calibration(map_id: MapIdPath, app: AppDep, _key: ReadAccess,
+                    version: VersionQuery = None) -> CalibrationOut:
+    return app.calibrations.get(map_id, version)

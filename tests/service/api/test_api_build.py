@@ -3,6 +3,7 @@ recording, field-named errors, If-Match rules, stale jobs marked failed."""
 
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 from typing import Any
@@ -15,6 +16,9 @@ from quadloc.factors.camera import Camera, Ellipsoid, project_ellipsoid
 from quadloc.factors.rotations import invert_pose, pose_matrix
 from quadloc.maps.building.jobs import JobStore
 from quadloc.maps.building.recording import recording_to_dict
+from quadloc.service.app.builds import recording_of, validate_recording
+from quadloc.service.app.conversions import held_out_frames_from_wire
+from quadloc.service.schemas.recording import LEGACY_RECORDING_WARNING
 from tests.conftest import make_test_app
 
 CAM = Camera(500.0, 500.0, 320.0, 240.0, 640, 480)
@@ -107,12 +111,20 @@ def test_invalid_recording_names_fields_and_stores_nothing(client: TestClient) -
     rec, _ = _recording(4)
     rec["frames"][1]["detections"][0]["ellipse"]["a"] = -3
     rec["frames"][2]["world_from_camera"]["quaternion_wxyz"] = [2, 0, 0, 0]
-    del rec["intrinsics"]["fx"]
+    del rec["camera"]["fx"]
     r = client.post("/v1/maps:build", params={"map_id": "bad"}, json=rec)
     assert r.status_code == 422
     fields = {e["field"] for e in r.json()["errors"]}
-    assert {"frames[1].detections[0].ellipse.a", "frames[2].world_from_camera.quaternion_wxyz",
-            "intrinsics.fx"} <= fields
+    assert {"frames[1].detections[0].ellipse.a", "camera.fx"} == fields
+    # past the schema, the poses' rules (unit quaternion, rotation matrix) name their field
+    rec, _ = _recording(4)
+    rec["frames"][2]["world_from_camera"]["quaternion_wxyz"] = [2, 0, 0, 0]
+    rec["frames"][3]["world_from_camera"] = {"matrix": [[1, 0, 0, 0], [0, 2, 0, 0],
+                                                        [0, 0, 1, 0], [0, 0, 0, 1]]}
+    r = client.post("/v1/maps:build", params={"map_id": "bad"}, json=rec)
+    assert r.status_code == 422
+    assert {e["field"] for e in r.json()["errors"]} == {
+        "frames[2].world_from_camera.quaternion_wxyz", "frames[3].world_from_camera"}
     assert client.get("/v1/maps/bad").status_code == 404
     r = client.post("/v1/maps:build", params={"map_id": "bad map!"}, json=_recording(4)[0])
     assert r.status_code == 422
@@ -276,3 +288,103 @@ def test_queued_jobs_beat_while_waiting_and_a_lost_job_stores_nothing(
         blocked.release.set()
         _wait(c, f"/v1/build-jobs/{second}", 30)
         assert c.get("/v1/maps/one").status_code == 404
+
+
+@pytest.mark.parametrize(("where", "typo", "field"), [
+    ("detection", "sigmaa", "frames[0].detections[0].sigmaa"),
+    ("top", "refine_camera_pose", "refine_camera_pose"),
+    ("frame", "world_from_camara", "frames[0].world_from_camara"),
+    ("top", "holdout", "holdout"),
+])
+def test_recording_typos_are_refused_naming_them(client: TestClient, where: str, typo: str,
+                                                 field: str) -> None:
+    """The issue's typos: a misspelt field is never silently ignored (before, ``sigmaa`` and
+    ``refine_camera_pose: false`` were accepted and camera refinement silently stayed on)."""
+    rec, _ = _recording(4)
+    target = {"top": rec, "frame": rec["frames"][0],
+              "detection": rec["frames"][0]["detections"][0]}[where]
+    target[typo] = False if typo == "refine_camera_pose" else 0.5
+    r = client.post("/v1/maps:build", params={"map_id": "typo"}, json=rec)
+    assert r.status_code == 422, r.text
+    assert [e["field"] for e in r.json()["errors"]] == [field]
+    assert "extra" in r.json()["errors"][0]["message"].lower()
+    assert client.get("/v1/maps/typo").status_code == 404
+
+
+def _as_legacy(rec: dict[str, Any]) -> dict[str, Any]:
+    """The recording in the deprecated form (intrinsics, boxes as arrays)."""
+    old = json.loads(json.dumps(rec))
+    old["intrinsics"] = old.pop("camera")
+    for f in old["frames"]:
+        for d in f["detections"]:
+            if "box" in d:
+                b = d["box"]
+                d["box"] = [b["xmin"], b["ymin"], b["xmax"], b["ymax"]]
+    return old
+
+
+def test_pose_forms_conventions_and_legacy_form_give_the_same_recording() -> None:
+    """quaternion_wxyz, quaternion_xyzw, matrix (OpenCV), and matrix in OpenGL axes (the
+    OpenCV matrix times diag(1, -1, -1, 1), computed here independently) are one recording;
+    the deprecated form too, with the deprecation warning."""
+    rec, _ = _recording(5)
+    rec["frames"][0]["detections"][0] = {"label": "Box", "box": {
+        "xmin": 100.0, "ymin": 120.0, "xmax": 180.0, "ymax": 150.0}, "sigma": 0.3}
+    base = recording_of(rec)
+    assert base.warnings == ()
+    flip = np.diag([1.0, -1.0, -1.0, 1.0])
+    forms: dict[str, dict[str, Any]] = {}
+    for name in ("xyzw", "matrix", "opengl"):
+        doc = json.loads(json.dumps(rec))
+        for f, fr in zip(doc["frames"], base.frames, strict=True):
+            q = f["world_from_camera"]["quaternion_wxyz"]
+            if name == "xyzw":
+                f["world_from_camera"] = {"quaternion_xyzw": q[1:] + q[:1],
+                                          "translation_m": f["world_from_camera"]
+                                          ["translation_m"]}
+            else:
+                M = fr.world_from_camera @ (flip if name == "opengl" else np.eye(4))
+                f["world_from_camera"] = {"matrix": M.tolist()}
+        if name == "opengl":
+            doc["convention"] = "opengl"
+        forms[name] = doc
+    forms["legacy"] = _as_legacy(rec)
+    for name, doc in forms.items():
+        other = recording_of(doc)
+        assert len(other.frames) == len(base.frames)
+        for a, b in zip(other.frames, base.frames, strict=True):
+            np.testing.assert_allclose(a.world_from_camera, b.world_from_camera, atol=1e-12,
+                                       err_msg=name)
+        assert other.observations == base.observations, name
+        assert other.warnings == ((LEGACY_RECORDING_WARNING,) if name == "legacy" else ())
+    # the box became its inscribed ellipse, the sigma kept
+    o = base.observations[0]
+    assert (o.ellipse.cx, o.ellipse.cy, o.ellipse.a, o.ellipse.b) == (140.0, 135.0, 40.0, 15.0)
+    assert o.sigma == 0.3
+
+
+def test_holdout_keeps_every_kth_frame_out_of_the_build() -> None:
+    rec, _ = _recording(10)
+    rec["holdout_every"] = 3
+    built = recording_of(rec)
+    assert [f.source_index for f in built.frames] == [0, 1, 3, 4, 6, 7, 9]
+    assert [f.frame_id for f in built.frames] == [f"f{i}" for i in (0, 1, 3, 4, 6, 7, 9)]
+    assert {o.frame for o in built.observations} == set(range(7))
+    assert any("3 of 10 frames held out" in w for w in built.warnings)
+    camera, held = held_out_frames_from_wire(validate_recording(rec))
+    assert [fid for fid, _, _ in held] == ["f2", "f5", "f8"]
+    assert camera == CAM and all(len(d) == 3 for _, _, d in held)
+
+
+def test_legacy_recording_builds_with_a_deprecation_warning(client: TestClient) -> None:
+    rec, _ = _recording(12)
+    rec["holdout_every"] = 4
+    r = client.post("/v1/maps:build", params={"map_id": "old"}, json=_as_legacy(rec))
+    assert r.status_code == 202, r.text
+    job = _wait(client, r.headers["Location"])
+    assert job["status"] == "succeeded", job
+    assert LEGACY_RECORDING_WARNING in job["report"]["warnings"]
+    # frame indices of the report are positions in the document: no held-out frame built
+    refs = [d for o in job["report"]["objects"] for d in o["detections"]]
+    assert refs and all(d["frame_index"] % 4 != 3 for d in refs)
+    assert all(d["frame_id"] == f"f{d['frame_index']}" for d in refs)

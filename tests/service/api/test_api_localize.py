@@ -284,7 +284,7 @@ def test_time_budget_is_capped_by_the_server(tmp_path: Path, monkeypatch) -> Non
     seen = []
     real = solver_module.localize
 
-    def spy(detections, scene_map, camera, options, prior=None, gravity=None):
+    def spy(detections, scene_map, camera, options, prior=None, gravity=None, calibration=None):
         seen.append(options.time_budget_ms)
         return real(detections, scene_map, camera, options, prior, gravity)
 
@@ -448,7 +448,8 @@ def test_batch_total_budget_answers_the_rest_not_localized(tmp_path: Path, monke
     real = solver_module.localize
     budgets = []
 
-    def slow(detections, scene_map, camera, options, prior=None, gravity=None):
+    def slow(detections, scene_map, camera, options, prior=None, gravity=None,
+             calibration=None):
         budgets.append(options.time_budget_ms)
         result = real(detections, scene_map, camera, options, prior, gravity)
         clock["now"] += 0.2  # each solve takes 200 ms of the batch's clock

@@ -190,3 +190,40 @@ def test_drawing_escapes_text_and_skips_what_is_off_frame() -> None:
     import xml.etree.ElementTree as ET
 
     ET.fromstring(svg)  # well-formed XML
+
+
+def test_labels_are_placed_inside_the_frame_and_apart() -> None:
+    """``place_labels`` on crowded frames (random ellipses, some at the edges): every label box
+    (``LABEL_CHAR_PX`` per character wide, ascent/descent around the baseline) lies inside the
+    frame and overlaps no other; a lone label sits centred under its ellipse."""
+    import numpy as np
+
+    from quadloc_sdk.overlay import (
+        LABEL_ASCENT_PX,
+        LABEL_CHAR_PX,
+        LABEL_DESCENT_PX,
+        ImageEllipse,
+        place_labels,
+    )
+
+    width, height = 640, 480
+    rng = np.random.default_rng(3)
+    for n in (5, 12, 20):
+        labels = [(f"#{i} Chair -> {i}  IoU 0.{i:02d}  cost 0.0{i}" if i % 2 else f"o{i} Box",
+                   ImageEllipse(float(rng.uniform(-20, width + 20)),
+                                float(rng.uniform(0, height)), float(rng.uniform(3, 60)),
+                                float(rng.uniform(3, 40)), float(rng.uniform(-1.5, 1.5))))
+                  for i in range(n)]
+        placed = place_labels(labels, width, height)
+        boxes = []
+        for (text, _), (x, y, w) in zip(labels, placed, strict=True):
+            assert w == pytest.approx(min(len(text) * LABEL_CHAR_PX, width - 4))
+            box = (x - w / 2, y - LABEL_ASCENT_PX, x + w / 2, y + LABEL_DESCENT_PX)
+            assert box[0] >= 0 and box[2] <= width and box[1] >= 0 and box[3] <= height, box
+            boxes.append(box)
+        for i, a in enumerate(boxes):
+            for b in boxes[i + 1:]:
+                assert a[2] <= b[0] or b[2] <= a[0] or a[3] <= b[1] or b[3] <= a[1], (a, b)
+    e = ImageEllipse(300.0, 200.0, 40.0, 20.0, 0.0)
+    [(x, y, _)] = place_labels([("#0 TV", e)], width, height)
+    assert x == 300.0 and y > 200.0 + 20.0

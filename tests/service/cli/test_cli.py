@@ -42,6 +42,68 @@ def test_help_teaches_with_examples(capsys: pytest.CaptureFixture[str]) -> None:
         assert "usage: quadloc" in capsys.readouterr().out
 
 
+def _help_texts() -> dict[str, str]:
+    """The help of ``quadloc`` and of every (sub)command, by command path."""
+    import argparse
+
+    from quadloc.service.cli.main import build_parser
+
+    out: dict[str, str] = {}
+
+    def walk(parser: argparse.ArgumentParser, path: str) -> None:
+        out[path] = parser.format_help()
+        for action in parser._actions:  # argparse keeps its subparsers here
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    walk(sub, f"{path} {name}")
+
+    walk(build_parser(), "quadloc")
+    return out
+
+
+#: A repository path in a help text (a file a reader would pass as written).
+REPO_PATH = re.compile(r"(?<![\w/.-])((?:docs|tests|sdk|deploy|bench)/[\w./-]+\.\w+)")
+
+
+def test_help_lists_every_command_and_names_only_files_that_exist() -> None:
+    """Every command of ``COMMANDS`` has a help page and is listed by its parent's help
+    (``maps build``, ``maps versions``...); every repository file any help names exists."""
+    from quadloc.service.cli.main import COMMANDS
+
+    helps = _help_texts()
+    for command in COMMANDS:
+        *parent, leaf = command.split()
+        assert f"quadloc {command}" in helps, command
+        listed = re.search(rf"^\s+{re.escape(leaf)}\s", helps[" ".join(["quadloc", *parent])],
+                           re.M)
+        assert listed, f"{command} missing from the help of quadloc {' '.join(parent)}"
+    named = {m for text in helps.values() for m in REPO_PATH.findall(text)}
+    assert "docs/examples/localize_chess.json" in named  # the pattern finds paths
+    missing = sorted(path for path in named if not (REPO / path).is_file())
+    assert not missing, f"the CLI help names files that do not exist: {missing}"
+
+
+def test_local_localize_in_a_fresh_process_is_within_budget(tmp_path: Path) -> None:
+    """``quadloc localize`` without a server, in a new process on a new database: the kernels
+    are compiled / loaded before the frame's budget starts, so the example frame localizes
+    (it answered time_budget_exceeded when loading them counted against the 1 s budget)."""
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if not k.startswith("QUADLOC_")}
+    env["QUADLOC_DATA_DIR"] = str(tmp_path)
+    out = subprocess.run([sys.executable, "-m", "quadloc.service", "localize", "--map", "chess",
+                          str(EXAMPLE), "--json"], env=env, cwd=REPO, capture_output=True,
+                         text=True, timeout=600)
+    assert out.returncode == 0, out.stdout + out.stderr
+    answer = json.loads(out.stdout)
+    assert answer["localized"], answer
+    truth = np.asarray(EXAMPLE_TRUE_WORLD_FROM_CAMERA)
+    assert np.linalg.norm(np.asarray(answer["world_from_camera"]["translation_m"])
+                          - truth[:3, 3]) < 0.05
+
+
 def test_maps_import_list_export_delete(db: list[str], tmp_path: Path,
                                         capsys: pytest.CaptureFixture[str]) -> None:
     src = tmp_path / "office.json"

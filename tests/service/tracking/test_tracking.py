@@ -397,40 +397,121 @@ def test_arkit_and_arcore_helpers_transpose_column_major_input() -> None:
 
 
 def test_sdk_session_sync_and_async(client: TestClient, walk: dict) -> None:
+    """The SDK's sessions take its typed models (``Detection``, ``Camera``, ``Gravity``,
+    ``SessionFrame``) or wire dicts, and answer typed models: the same walk sent both ways
+    gives the same poses, within 5 cm of the truth once tracking; ``get`` is the server's
+    ``GET /v1/sessions/{id}``; an unknown session is ``NotFound``."""
     import asyncio
 
     import httpx
 
-    from quadloc_sdk.client import AsyncQuadLocClient, QuadLocClient
+    from quadloc_sdk import (
+        AsyncQuadLocClient,
+        Camera,
+        Detection,
+        Ellipse,
+        Gravity,
+        NotFound,
+        QuadLocClient,
+        SessionFrame,
+        SessionFrameResult,
+        SessionInfo,
+        SessionOptions,
+    )
 
     cam = walk["camera"]
-    camera = {"fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy, "width": cam.width,
-              "height": cam.height}
-    frames = [_frame_json(f) for f in walk["frames"][:12]]
-    gravity = [{"direction": f.gravity.direction_camera.tolist(), "sigma_deg": 2.0}
-               for f in _with_gravity(walk)[:12]]
+    camera = Camera(fx=cam.fx, fy=cam.fy, cx=cam.cx, cy=cam.cy, width=cam.width,
+                    height=cam.height)
+    n = 12
+    frames = [_frame_json(f) for f in walk["frames"][:n]]
+    gravity = [Gravity(direction=f.gravity.direction_camera.tolist(), sigma_deg=2.0)
+               for f in _with_gravity(walk)[:n]]
     with QuadLocClient("http://testserver", transport=client._transport) as qc:
-        s = qc.start_session("chess", camera=camera)
-        res = [s.add_frame(f["detections"], odom_from_camera=f["odom_from_camera"]["matrix"],
-                           timestamp=f["timestamp"], gravity=g)
-               for f, g in zip(frames, gravity, strict=True)]
-        assert res[-1]["state"] == "tracking"
+        s = qc.start_session("chess", camera=camera, options=SessionOptions(window_frames=20))
+        assert isinstance(s.info, SessionInfo) and s.info.state == "initializing"
+        res = []
+        for f, g in zip(walk["frames"][:n], gravity, strict=True):
+            detections = [Detection(label=d.label, sigma=d.sigma, ellipse=Ellipse(
+                cx=d.ellipse.cx, cy=d.ellipse.cy, a=d.ellipse.a, b=d.ellipse.b,
+                angle=d.ellipse.angle)) for d in f.detections]
+            res.append(s.add_frame(detections, odom_from_camera=f.odom_from_camera,
+                                   timestamp=f.timestamp, frame_id=f.frame_id, gravity=g))
+        assert all(isinstance(r, SessionFrameResult) for r in res)
+        assert [r.frame_index for r in res] == list(range(n))
+        assert res[-1].state == "tracking" and res[-1].world_from_camera is not None
+        info = s.get()
+        assert info == qc.get_session(s.session_id) == s.info
+        assert (info.frames, info.state, info.map_id) == (n, "tracking", "chess")
         s.close()
+        with pytest.raises(NotFound):
+            qc.get_session(s.session_id)
 
-    async def run() -> tuple[dict, dict]:
+    async def run() -> tuple[list[SessionFrameResult], SessionInfo]:
         transport = httpx.ASGITransport(app=client.app)
         async with AsyncQuadLocClient("http://testserver", transport=transport) as ac:
-            s = await ac.start_session("chess", camera=camera)
-            out = await s.add_frames(frames[:-1])
+            s = await ac.start_session("chess", camera=camera.model_dump(),
+                                       options={"window_frames": 20})
+            wire = [SessionFrame.model_validate({**f, "gravity": g.model_dump(
+                exclude_none=True)}) for f, g in zip(frames[:-1], gravity, strict=False)]
+            out = await s.add_frames(wire)
             last = frames[-1]
-            one = await s.add_frame(last["detections"],
-                                    odom_from_camera=last["odom_from_camera"]["matrix"],
-                                    timestamp=last["timestamp"], gravity=gravity[-1])
+            one = await s.add_frame(last["detections"], odom_from_camera=last["odom_from_camera"],
+                                    timestamp=last["timestamp"], frame_id=last["frame_id"],
+                                    gravity=gravity[-1].model_dump())
+            info = await s.get()
             await s.close()
-            return out[-1], one
+            return [*out, one], info
 
-    batch_last, one = asyncio.run(run())
-    assert batch_last["state"] == one["state"] == "tracking"
+    async_res, async_info = asyncio.run(run())
+    assert async_info.frames == n
+    for r, a, truth in zip(res, async_res, walk["poses"][:n], strict=True):
+        assert (r.state, r.frame_id) == (a.state, a.frame_id)
+        if r.state == "tracking":
+            assert r.world_from_camera is not None and a.world_from_camera is not None
+            np.testing.assert_allclose(a.world_from_camera.as_matrix(),
+                                       r.world_from_camera.as_matrix(), atol=1e-6)
+            assert np.linalg.norm(r.world_from_camera.as_matrix()[:3, 3] - truth[:3, 3]) < 0.05
+
+
+def test_sdk_session_refuses_bad_frames_before_sending() -> None:
+    """A typo'd or invalid frame raises before any request (no transport is touched)."""
+    import httpx
+    from pydantic import ValidationError
+
+    from quadloc_sdk import QuadLocClient, SessionInfo, TrackingSession
+
+    def fail(request: httpx.Request) -> httpx.Response:
+        raise AssertionError(f"sent {request.url}")
+
+    with QuadLocClient("http://x", transport=httpx.MockTransport(fail)) as qc:
+        s = TrackingSession(qc, SessionInfo(session_id="s1", url="/v1/sessions/s1", map_id="m",
+                                            map_version=1, convention="opencv",
+                                            state="initializing", frames=0,
+                                            idle_timeout_s=300))
+        with pytest.raises(ValidationError, match="sigmaa"):
+            s.add_frame([{"label": "TV", "sigmaa": 0.5, "ellipse": {"cx": 1, "cy": 1, "a": 2,
+                                                                      "b": 1}}],
+                        odom_from_camera=np.eye(4), timestamp=0.0)
+        with pytest.raises(ValidationError, match="odom_from_camera"):
+            s.add_frame([], odom_from_camera=[[1.0, 0.0]], timestamp=0.0)
+        with pytest.raises(ValueError, match="frames"):
+            s.add_frames([])
+
+
+def test_sdk_session_frame_gravity_takes_the_sessions_convention_unless_given() -> None:
+    """A ``Gravity`` without an explicit convention is sent without one (the server then uses
+    the session's, docs/tracking.md); an explicit one is sent as given."""
+    from quadloc_sdk import Gravity, SessionFrame
+
+    def wire(gravity: Gravity) -> dict:
+        return SessionFrame(odom_from_camera={"matrix": np.eye(4)}, timestamp=0.0,
+                            gravity=gravity).to_wire()["gravity"]
+
+    assert wire(Gravity(direction=[0, 1, 0])) == {"direction": [0.0, 1.0, 0.0]}
+    assert wire(Gravity(direction=[0, 1, 0], convention="opencv"))["convention"] == "opencv"
+    frame = SessionFrame.model_validate({"odom_from_camera": {"matrix": np.eye(4).tolist()},
+                                         "timestamp": 1.0, "gravity": {"direction": [0, -1, 0]}})
+    assert "convention" not in frame.to_wire()["gravity"]
 
 
 # ----------------------------------------------------------------------------- CLI

@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: b15cfe63411eaa1dceabbfd990418ab77845e0c51097847fb7041e0aa29651a6
+// openapi-sha256: 3c151b2d4bd77f4f8de17960b469edc5447355627f96c5e14ddc5f576a5a33be
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -166,6 +166,27 @@ export interface paths {
         get: operations["get_build_job_v1_build_jobs__job_id__get"];
         put?: never;
         post?: never;
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
+    "/v1/maps/{map_id}/calibration": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        /** A map version's calibration (404 when it has none: the shipped one applies) */
+        get: operations["get_calibration_v1_maps__map_id__calibration_get"];
+        put?: never;
+        /**
+         * Calibrate a map version from a recording's held-out frames
+         * @description Body: the recording the map was built from, with `holdout_every` (the frames held out of the build, their app poses the reference). Fits the covariance scale and the confidence model on half of them, reports mean NEES and the confidence calibration error before / after on the other half, and stores the calibration with the map version: localize uses it for the calibration key it was fitted for. Synchronous (tens of seconds for hundreds of frames). 422 when the recording holds no frame out or too few localize.
+         */
+        post: operations["calibrate_map_v1_maps__map_id__calibration_post"];
         delete?: never;
         options?: never;
         head?: never;
@@ -436,6 +457,80 @@ export interface components {
             warnings?: string[];
         };
         /**
+         * CalibrationOut
+         * @description A map version's own calibration (used by localize for the calibration key it was fitted
+         *     for; other keys keep the shipped constants).
+         */
+        CalibrationOut: {
+            /** Map Id */
+            map_id: string;
+            /** Map Version */
+            map_version: number;
+            /**
+             * Key
+             * @description Calibration key fitted (metric, ':unit_weights' without sigma on every detection).
+             */
+            key: string;
+            /**
+             * Fit Frames
+             * @description Held-out frames the fit used (every other one).
+             */
+            fit_frames: number;
+            /**
+             * Covariance Scale
+             * @description Fitted k of the key (shipped value in `shipped_covariance_scale`).
+             */
+            covariance_scale: number;
+            /** Shipped Covariance Scale */
+            shipped_covariance_scale: number;
+            /** S2 Floor */
+            s2_floor: number;
+            /**
+             * Min Confidence
+             * @description Default min_confidence with this calibration.
+             */
+            min_confidence: number;
+            /** @description Report frames, shipped constants. */
+            before: components["schemas"]["CalibrationQualityOut"];
+            /** @description Report frames, this calibration. */
+            after: components["schemas"]["CalibrationQualityOut"];
+        };
+        /**
+         * CalibrationQualityOut
+         * @description How well covariance and confidence describe the errors on the report frames.
+         */
+        CalibrationQualityOut: {
+            /**
+             * Frames
+             * @description Report frames solved.
+             */
+            frames: number;
+            /**
+             * Localized
+             * @description Of them localized (min_confidence 0).
+             */
+            localized: number;
+            /**
+             * Nees Frames
+             * @description Localized within 10 cm of the reference: the NEES frames.
+             */
+            nees_frames: number;
+            /**
+             * Mean Nees
+             * @description Mean NEES (6 = well scaled; the target band is [4, 9]).
+             */
+            mean_nees: number | null;
+            /**
+             * Calibration Error
+             * @description Expected calibration error of `confidence` (10 bins) against success = within 10 cm and 5 deg of the reference.
+             */
+            calibration_error: number | null;
+            /** Mean Confidence */
+            mean_confidence: number | null;
+            /** Success Rate */
+            success_rate: number | null;
+        };
+        /**
          * CameraIn
          * @description Pinhole intrinsics (px, zero skew, undistorted detections) and image size (px).
          */
@@ -616,6 +711,105 @@ export interface components {
             iou: number;
             /** Cost */
             cost: number;
+        };
+        /**
+         * LegacyDetectionIn
+         * @description A detection of the deprecated form: ``box`` may be an array ``[xmin, ymin, xmax, ymax]``.
+         */
+        LegacyDetectionIn: {
+            ellipse?: components["schemas"]["EllipseIn"] | null;
+            box?: components["schemas"]["BoxIn"] | null;
+            /**
+             * Label
+             * @description Category label of the map.
+             */
+            label: string;
+            /**
+             * Sigma
+             * @description Predicted uncertainty (> 0); cost weight 1/sigma.
+             */
+            sigma?: number | null;
+            /**
+             * Log Variance
+             * @description alpha = log sigma^2; sigma = exp(alpha/2).
+             */
+            log_variance?: number | null;
+            /**
+             * Score
+             * @description Detector score.
+             */
+            score?: number | null;
+            /**
+             * Track Id
+             * @description The detector's / tracker's object track.
+             */
+            track_id?: string | null;
+        };
+        /**
+         * LegacyFrameIn
+         * @description A frame of the deprecated form.
+         */
+        LegacyFrameIn: {
+            /**
+             * Frame Id
+             * @description Defaults to the frame's position.
+             */
+            frame_id?: string | null;
+            /** @description The app's camera pose (m), in the recording's `convention`. */
+            world_from_camera: components["schemas"]["PoseIn"];
+            /**
+             * Timestamp
+             * @description Client clock (s); informative.
+             */
+            timestamp?: number | null;
+            /** Detections */
+            detections?: components["schemas"]["LegacyDetectionIn"][];
+        };
+        /**
+         * LegacyRecordingIn
+         * @deprecated
+         * @description DEPRECATED form of earlier releases (``intrinsics``, boxes as arrays); read for one more
+         *     release, its build report carries a deprecation warning.
+         */
+        LegacyRecordingIn: {
+            /**
+             * Name
+             * @description Name of the built map.
+             * @default Built map
+             */
+            name?: string;
+            /**
+             * Up Axis
+             * @description World up direction of the app's world frame.
+             * @default [
+             *       0,
+             *       0,
+             *       1
+             *     ]
+             */
+            up_axis?: number[];
+            /**
+             * Size Priors
+             * @description Label -> prior on its objects' semi-axes.
+             */
+            size_priors?: {
+                [key: string]: components["schemas"]["SizePriorIn"];
+            };
+            /**
+             * Refine Camera Poses
+             * @description Refine the app's camera poses with the objects (tied by their relative poses with `odometry_noise`).
+             * @default true
+             */
+            refine_camera_poses?: boolean;
+            odometry_noise?: components["schemas"]["OdometryNoiseIn"];
+            /**
+             * Holdout Every
+             * @description Hold every k-th frame (positions k-1, 2k-1, ...) out of the build: those frames, with their app poses as reference, calibrate the map (POST /v1/maps/{map_id}/calibration with the same recording).
+             */
+            holdout_every?: number | null;
+            intrinsics: components["schemas"]["CameraIn"];
+            /** Frames */
+            frames: components["schemas"]["LegacyFrameIn"][];
         };
         /**
          * LocalizeOptionsIn
@@ -901,6 +1095,35 @@ export interface components {
             quality: components["schemas"]["ObjectQualityReport"];
         };
         /**
+         * OdometryNoiseIn
+         * @description Noise of the app's poses between two recorded frames, a random walk (defaults shown;
+         *     ``quadloc.maps.building.recording.OdometryNoise`` states the model).
+         */
+        OdometryNoiseIn: {
+            /**
+             * Rotation Rad Per Sqrt M
+             * @default 0.005
+             */
+            rotation_rad_per_sqrt_m?: number;
+            /**
+             * Translation M Per Sqrt M
+             * @default 0.01
+             */
+            translation_m_per_sqrt_m?: number;
+            /**
+             * Rotation Rad Per Step
+             * @description Floor per frame step (rad), > 0.
+             * @default 0.0005
+             */
+            rotation_rad_per_step?: number;
+            /**
+             * Translation M Per Step
+             * @description Floor per frame step (m), > 0.
+             * @default 0.001
+             */
+            translation_m_per_step?: number;
+        };
+        /**
          * PoseIn
          * @description A ``world_from_camera`` pose: `quaternion_wxyz` (or `quaternion_xyzw`) + `translation_m`,
          *     or a 4x4 `matrix` given as a list of ROWS (row-major).
@@ -1004,6 +1227,111 @@ export interface components {
             field: string;
             /** Message */
             message: string;
+        };
+        /**
+         * RecordingDetectionIn
+         * @description A detection as for localize, plus an optional ``track_id``: detections of one track (and
+         *     label) are one object.
+         */
+        RecordingDetectionIn: {
+            ellipse?: components["schemas"]["EllipseIn"] | null;
+            box?: components["schemas"]["BoxIn"] | null;
+            /**
+             * Label
+             * @description Category label of the map.
+             */
+            label: string;
+            /**
+             * Sigma
+             * @description Predicted uncertainty (> 0); cost weight 1/sigma.
+             */
+            sigma?: number | null;
+            /**
+             * Log Variance
+             * @description alpha = log sigma^2; sigma = exp(alpha/2).
+             */
+            log_variance?: number | null;
+            /**
+             * Score
+             * @description Detector score.
+             */
+            score?: number | null;
+            /**
+             * Track Id
+             * @description The detector's / tracker's object track.
+             */
+            track_id?: string | null;
+        };
+        /**
+         * RecordingFrameIn
+         * @description One recorded frame: the app's camera pose and the frame's detections.
+         */
+        RecordingFrameIn: {
+            /**
+             * Frame Id
+             * @description Defaults to the frame's position.
+             */
+            frame_id?: string | null;
+            /** @description The app's camera pose (m), in the recording's `convention`. */
+            world_from_camera: components["schemas"]["PoseIn"];
+            /**
+             * Timestamp
+             * @description Client clock (s); informative.
+             */
+            timestamp?: number | null;
+            /** Detections */
+            detections?: components["schemas"]["RecordingDetectionIn"][];
+        };
+        /**
+         * RecordingIn
+         * @description A recording: the camera, posed frames with detections, build options.
+         */
+        RecordingIn: {
+            /**
+             * Name
+             * @description Name of the built map.
+             * @default Built map
+             */
+            name?: string;
+            /**
+             * Up Axis
+             * @description World up direction of the app's world frame.
+             * @default [
+             *       0,
+             *       0,
+             *       1
+             *     ]
+             */
+            up_axis?: number[];
+            /**
+             * Size Priors
+             * @description Label -> prior on its objects' semi-axes.
+             */
+            size_priors?: {
+                [key: string]: components["schemas"]["SizePriorIn"];
+            };
+            /**
+             * Refine Camera Poses
+             * @description Refine the app's camera poses with the objects (tied by their relative poses with `odometry_noise`).
+             * @default true
+             */
+            refine_camera_poses?: boolean;
+            odometry_noise?: components["schemas"]["OdometryNoiseIn"];
+            /**
+             * Holdout Every
+             * @description Hold every k-th frame (positions k-1, 2k-1, ...) out of the build: those frames, with their app poses as reference, calibrate the map (POST /v1/maps/{map_id}/calibration with the same recording).
+             */
+            holdout_every?: number | null;
+            camera: components["schemas"]["CameraIn"];
+            /**
+             * Convention
+             * @description Camera axes of every `world_from_camera` (opengl = ARKit/ARCore).
+             * @default opencv
+             * @enum {string}
+             */
+            convention?: "opencv" | "opengl";
+            /** Frames */
+            frames: components["schemas"]["RecordingFrameIn"][];
         };
         /**
          * RefinementReport
@@ -1212,6 +1540,23 @@ export interface components {
              * @description The session expires after this idle time.
              */
             idle_timeout_s: number;
+        };
+        /**
+         * SizePriorIn
+         * @description Prior on every log semi-axis of a label's objects: ``N(log semi_axis_m, log_sigma^2)``.
+         */
+        SizePriorIn: {
+            /**
+             * Semi Axis M
+             * @description Typical semi-axis (m).
+             */
+            semi_axis_m: number;
+            /**
+             * Log Sigma
+             * @description Std of the log semi-axis (dimensionless).
+             * @default 0.5
+             */
+            log_sigma?: number;
         };
     };
     responses: never;
@@ -2795,8 +3140,6 @@ export interface operations {
                             center: number[];
                         };
                     }[];
-                } & {
-                    [key: string]: unknown;
                 };
             };
         };
@@ -4021,7 +4364,7 @@ export interface operations {
             content: {
                 /**
                  * @example {
-                 *       "intrinsics": {
+                 *       "camera": {
                  *         "fx": 585,
                  *         "fy": 585,
                  *         "cx": 320,
@@ -4030,6 +4373,7 @@ export interface operations {
                  *         "height": 480
                  *       },
                  *       "name": "My room",
+                 *       "holdout_every": 5,
                  *       "frames": [
                  *         {
                  *           "frame_id": "0001",
@@ -4060,21 +4404,19 @@ export interface operations {
                  *             },
                  *             {
                  *               "label": "Chair",
-                 *               "box": [
-                 *                 10,
-                 *                 200,
-                 *                 110,
-                 *                 420
-                 *               ]
+                 *               "box": {
+                 *                 "xmin": 10,
+                 *                 "ymin": 200,
+                 *                 "xmax": 110,
+                 *                 "ymax": 420
+                 *               }
                  *             }
                  *           ]
                  *         }
                  *       ]
                  *     }
                  */
-                "application/json": {
-                    [key: string]: unknown;
-                };
+                "application/json": components["schemas"]["RecordingIn"] | components["schemas"]["LegacyRecordingIn"];
             };
         };
         responses: {
@@ -4427,6 +4769,433 @@ export interface operations {
                      *       "title": "Map not found",
                      *       "status": 404,
                      *       "detail": "Map not found",
+                     *       "instance": "/v1/maps/chess",
+                     *       "errors": []
+                     *     }
+                     */
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description Validation failed (validation-error, invalid-geometry or invalid-map); errors name the fields */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    /**
+                     * @example {
+                     *       "type": "urn:quadloc:problem:validation-error",
+                     *       "title": "Request validation failed",
+                     *       "status": 422,
+                     *       "detail": "detections[0].ellipse.a: Input should be greater than 0",
+                     *       "instance": "/v1/maps/chess",
+                     *       "errors": [
+                     *         {
+                     *           "field": "detections[0].ellipse.a",
+                     *           "message": "Input should be greater than 0"
+                     *         }
+                     *       ]
+                     *     }
+                     */
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description Temporarily unavailable (solver busy or database unavailable); see Retry-After */
+            503: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    /**
+                     * @example {
+                     *       "type": "urn:quadloc:problem:busy",
+                     *       "title": "Solver busy, retry later",
+                     *       "status": 503,
+                     *       "detail": "Solver busy, retry later",
+                     *       "instance": "/v1/maps/chess",
+                     *       "errors": []
+                     *     }
+                     */
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+        };
+    };
+    get_calibration_v1_maps__map_id__calibration_get: {
+        parameters: {
+            query?: {
+                /** @description Map version (default: the latest). */
+                version?: number | null;
+            };
+            header?: never;
+            path: {
+                /** @description Map id (pattern: quadloc.maps.model.MAP_ID_PATTERN). */
+                map_id: string;
+            };
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description Successful Response */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    /**
+                     * @example {
+                     *       "map_id": "my-room",
+                     *       "map_version": 1,
+                     *       "key": "level_set",
+                     *       "fit_frames": 250,
+                     *       "covariance_scale": 39.9,
+                     *       "shipped_covariance_scale": 1.83,
+                     *       "s2_floor": 3.6,
+                     *       "min_confidence": 0.36,
+                     *       "before": {
+                     *         "frames": 250,
+                     *         "localized": 247,
+                     *         "nees_frames": 125,
+                     *         "mean_nees": 382.9,
+                     *         "calibration_error": 0.105,
+                     *         "mean_confidence": 0.54,
+                     *         "success_rate": 0.49
+                     *       },
+                     *       "after": {
+                     *         "frames": 250,
+                     *         "localized": 247,
+                     *         "nees_frames": 125,
+                     *         "mean_nees": 8.7,
+                     *         "calibration_error": 0.074,
+                     *         "mean_confidence": 0.52,
+                     *         "success_rate": 0.49
+                     *       }
+                     *     }
+                     */
+                    "application/json": components["schemas"]["CalibrationOut"];
+                };
+            };
+            /** @description Missing or invalid API key */
+            401: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    /**
+                     * @example {
+                     *       "type": "urn:quadloc:problem:unauthorized",
+                     *       "title": "Missing or invalid API key",
+                     *       "status": 401,
+                     *       "detail": "Missing or invalid API key",
+                     *       "instance": "/v1/maps/chess",
+                     *       "errors": []
+                     *     }
+                     */
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description API key lacks the required scope */
+            403: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    /**
+                     * @example {
+                     *       "type": "urn:quadloc:problem:forbidden",
+                     *       "title": "API key lacks the required scope",
+                     *       "status": 403,
+                     *       "detail": "API key lacks the required scope",
+                     *       "instance": "/v1/maps/chess",
+                     *       "errors": []
+                     *     }
+                     */
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description Map (or version) not found */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    /**
+                     * @example {
+                     *       "type": "urn:quadloc:problem:map-not-found",
+                     *       "title": "Map not found",
+                     *       "status": 404,
+                     *       "detail": "Map not found",
+                     *       "instance": "/v1/maps/chess",
+                     *       "errors": []
+                     *     }
+                     */
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description Validation failed (validation-error, invalid-geometry or invalid-map); errors name the fields */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    /**
+                     * @example {
+                     *       "type": "urn:quadloc:problem:validation-error",
+                     *       "title": "Request validation failed",
+                     *       "status": 422,
+                     *       "detail": "detections[0].ellipse.a: Input should be greater than 0",
+                     *       "instance": "/v1/maps/chess",
+                     *       "errors": [
+                     *         {
+                     *           "field": "detections[0].ellipse.a",
+                     *           "message": "Input should be greater than 0"
+                     *         }
+                     *       ]
+                     *     }
+                     */
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description Temporarily unavailable (solver busy or database unavailable); see Retry-After */
+            503: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    /**
+                     * @example {
+                     *       "type": "urn:quadloc:problem:busy",
+                     *       "title": "Solver busy, retry later",
+                     *       "status": 503,
+                     *       "detail": "Solver busy, retry later",
+                     *       "instance": "/v1/maps/chess",
+                     *       "errors": []
+                     *     }
+                     */
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+        };
+    };
+    calibrate_map_v1_maps__map_id__calibration_post: {
+        parameters: {
+            query?: {
+                /** @description Map version (default: the latest). */
+                version?: number | null;
+            };
+            header?: never;
+            path: {
+                /** @description Map id (pattern: quadloc.maps.model.MAP_ID_PATTERN). */
+                map_id: string;
+            };
+            cookie?: never;
+        };
+        requestBody: {
+            content: {
+                /**
+                 * @example {
+                 *       "camera": {
+                 *         "fx": 585,
+                 *         "fy": 585,
+                 *         "cx": 320,
+                 *         "cy": 240,
+                 *         "width": 640,
+                 *         "height": 480
+                 *       },
+                 *       "name": "My room",
+                 *       "holdout_every": 5,
+                 *       "frames": [
+                 *         {
+                 *           "frame_id": "0001",
+                 *           "world_from_camera": {
+                 *             "quaternion_wxyz": [
+                 *               1,
+                 *               0,
+                 *               0,
+                 *               0
+                 *             ],
+                 *             "translation_m": [
+                 *               0,
+                 *               0,
+                 *               0
+                 *             ]
+                 *           },
+                 *           "detections": [
+                 *             {
+                 *               "label": "TV",
+                 *               "ellipse": {
+                 *                 "cx": 300,
+                 *                 "cy": 200,
+                 *                 "a": 80,
+                 *                 "b": 40,
+                 *                 "angle": 0.1
+                 *               },
+                 *               "sigma": 0.02
+                 *             },
+                 *             {
+                 *               "label": "Chair",
+                 *               "box": {
+                 *                 "xmin": 10,
+                 *                 "ymin": 200,
+                 *                 "xmax": 110,
+                 *                 "ymax": 420
+                 *               }
+                 *             }
+                 *           ]
+                 *         }
+                 *       ]
+                 *     }
+                 */
+                "application/json": components["schemas"]["RecordingIn"] | components["schemas"]["LegacyRecordingIn"];
+            };
+        };
+        responses: {
+            /** @description Successful Response */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    /**
+                     * @example {
+                     *       "map_id": "my-room",
+                     *       "map_version": 1,
+                     *       "key": "level_set",
+                     *       "fit_frames": 250,
+                     *       "covariance_scale": 39.9,
+                     *       "shipped_covariance_scale": 1.83,
+                     *       "s2_floor": 3.6,
+                     *       "min_confidence": 0.36,
+                     *       "before": {
+                     *         "frames": 250,
+                     *         "localized": 247,
+                     *         "nees_frames": 125,
+                     *         "mean_nees": 382.9,
+                     *         "calibration_error": 0.105,
+                     *         "mean_confidence": 0.54,
+                     *         "success_rate": 0.49
+                     *       },
+                     *       "after": {
+                     *         "frames": 250,
+                     *         "localized": 247,
+                     *         "nees_frames": 125,
+                     *         "mean_nees": 8.7,
+                     *         "calibration_error": 0.074,
+                     *         "mean_confidence": 0.52,
+                     *         "success_rate": 0.49
+                     *       }
+                     *     }
+                     */
+                    "application/json": components["schemas"]["CalibrationOut"];
+                };
+            };
+            /** @description Malformed or unreadable body */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    /**
+                     * @example {
+                     *       "type": "urn:quadloc:problem:malformed-json",
+                     *       "title": "Malformed JSON body",
+                     *       "status": 400,
+                     *       "detail": "Malformed JSON body",
+                     *       "instance": "/v1/maps/chess",
+                     *       "errors": []
+                     *     }
+                     */
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description Missing or invalid API key */
+            401: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    /**
+                     * @example {
+                     *       "type": "urn:quadloc:problem:unauthorized",
+                     *       "title": "Missing or invalid API key",
+                     *       "status": 401,
+                     *       "detail": "Missing or invalid API key",
+                     *       "instance": "/v1/maps/chess",
+                     *       "errors": []
+                     *     }
+                     */
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description API key lacks the required scope */
+            403: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    /**
+                     * @example {
+                     *       "type": "urn:quadloc:problem:forbidden",
+                     *       "title": "API key lacks the required scope",
+                     *       "status": 403,
+                     *       "detail": "API key lacks the required scope",
+                     *       "instance": "/v1/maps/chess",
+                     *       "errors": []
+                     *     }
+                     */
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description Map (or version) not found */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    /**
+                     * @example {
+                     *       "type": "urn:quadloc:problem:map-not-found",
+                     *       "title": "Map not found",
+                     *       "status": 404,
+                     *       "detail": "Map not found",
+                     *       "instance": "/v1/maps/chess",
+                     *       "errors": []
+                     *     }
+                     */
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description Request body too large */
+            413: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    /**
+                     * @example {
+                     *       "type": "urn:quadloc:problem:payload-too-large",
+                     *       "title": "Request body too large",
+                     *       "status": 413,
+                     *       "detail": "Request body too large",
+                     *       "instance": "/v1/maps/chess",
+                     *       "errors": []
+                     *     }
+                     */
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description Unsupported media type */
+            415: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    /**
+                     * @example {
+                     *       "type": "urn:quadloc:problem:unsupported-media-type",
+                     *       "title": "Unsupported media type",
+                     *       "status": 415,
+                     *       "detail": "Unsupported media type",
                      *       "instance": "/v1/maps/chess",
                      *       "errors": []
                      *     }

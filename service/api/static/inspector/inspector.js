@@ -40,15 +40,44 @@
       sel.appendChild(o);
     }
     if (previous) sel.value = previous;
+    await showMap();
   }
 
   async function loadExample() {
     const r = await fetch("/inspector/example.json");
     $("request").value = JSON.stringify(await r.json(), null, 2);
-    if ([...$("map").options].some((o) => o.value === "chess")) $("map").value = "chess";
+    if ([...$("map").options].some((o) => o.value === "chess") && $("map").value !== "chess") {
+      $("map").value = "chess";
+      await showMap();
+    }
+  }
+
+  // The previous answer goes as soon as a new request starts: a failure must not leave it
+  // under its error (the map stays in the 3D view, without the camera).
+  function clearResult() {
+    state.result = null;
+    state.request = null;
+    $("overlay").replaceChildren();
+    $("inliers").querySelector("tbody").replaceChildren();
+    draw3d();
+  }
+
+  // The selected map's latest version in the 3D view (before any localize, and on a change).
+  async function showMap() {
+    const mapId = $("map").value;
+    if (!mapId) { state.map = null; draw3d(); return; }
+    const r = await fetch("/v1/maps/" + encodeURIComponent(mapId),
+                          { headers: headers({ Accept: "application/json" }) });
+    if ($("map").value !== mapId) return;  // the user picked another map meanwhile
+    if (!r.ok) { setStatus("Loading the map failed: " + (await problemText(r)), "error"); return; }
+    state.map = (await r.json()).map;
+    state.result = null;
+    state.request = null;
+    draw3d();
   }
 
   async function localize() {
+    clearResult();
     const mapId = $("map").value;
     if (!mapId) { setStatus("No map selected.", "error"); return; }
     let request;
@@ -80,7 +109,7 @@
                 t + "] m (map " + result.map_id + " v" + result.map_version + ")", "done");
     } else {
       setStatus("Not localized: " + result.reason + " (map " + result.map_id + " v" +
-                result.map_version + ")", "done");
+                result.map_version + ")", "not-localized");
     }
   }
 
@@ -169,7 +198,8 @@
     const canvas = $("view3d");
     const g = canvas.getContext("2d");
     g.clearRect(0, 0, canvas.width, canvas.height);
-    if (!state.map) return;
+    canvas.dataset.camera = String(Boolean(state.result && state.result.localized));
+    if (!state.map) { canvas.dataset.drawn = "0"; return; }
     const up = norm(state.map.up_axis || [0, 0, 1]);
     const any = Math.abs(up[0]) < 0.9 ? [1, 0, 0] : [0, 1, 0];
     const e1 = norm(cross(up, any));
@@ -228,6 +258,7 @@
   $("api-key").value = sessionStorage.getItem("quadloc-api-key") || "";
   $("api-key").addEventListener("change", loadMaps);
   $("load-example").addEventListener("click", loadExample);
+  $("map").addEventListener("change", () => showMap().catch((e) => setStatus(String(e), "error")));
   $("localize").addEventListener("click", () => localize().catch((e) => setStatus(String(e), "error")));
   $("upload").addEventListener("change", async (e) => {
     const file = e.target.files[0];

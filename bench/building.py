@@ -1,0 +1,264 @@
+"""Localization in buildings: many rooms with the same objects (issue 28's benchmark).
+
+Usage::
+
+    python -m bench.building [--rooms 1,10,50,200,1000] [--modes exact,perturbed,random]
+                             [--frames 40] [--max-frames-large 20] [--seed 1000]
+                             [--memory-frames 3] [--json PATH] [--write-results]
+
+Maps from :func:`tests.support.buildings.make_building` (the real Chess room repeated on a grid,
+12 m apart, several floors, each room turned by a random yaw; modes exact copies, perturbed
+copies, own random layouts), frames from :func:`tests.support.buildings.building_frames` (real
+Chess poses placed in a room and new poses looking at its objects; the simulator's noise,
+truncation, occlusion, misses, wrong labels at 0.05 and spurious detections at rate 0.3; at
+least 3 detections of true objects). Default seeds are report seeds
+(:data:`tests.support.buildings.REPORT_SEEDS`); tune on :data:`TUNE_SEEDS`.
+
+Per map size and mode, over the frames: % within 5 cm / 5 deg and 10 cm / 5 deg, false accepts
+(localized > 0.5 m off the truth; for exact copies any localized answer in another room), the
+answers ``ambiguous`` / ``low_confidence`` and among them those whose ``alternatives`` hold the
+true pose (within :data:`ALTERNATIVE_TOLERANCE_M` and :data:`ALTERNATIVE_TOLERANCE_DEG`),
+split by frames with >= 5 detections and with 3-4; the server time of ``localize`` (its
+wall time, default options: 1 s CPU budget) median / p90 / p99; the peak memory per
+request (``tracemalloc`` peak of a separate pass over ``--memory-frames`` frames, so the timed
+pass is not slowed by tracing). Each (size, mode) uses building seed ``seed + rooms`` and frame
+seed ``seed + 7 rooms + mode index``. Prints JSON (and with ``--write-results`` the markdown
+section ``building`` of ``docs/results.md``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+import tracemalloc
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from quadloc.factors.camera import Camera
+from quadloc.maps.compiled import CompiledMap, compile_map
+from quadloc.service.localization.pipeline import localize
+from quadloc.service.localization.scoring import ScoringTimeoutError
+from quadloc.service.localization.types import LocalizationOptions, LocalizationResult
+from tests.support.buildings import (
+    MODES,
+    REPORT_SEEDS,
+    BuildingFrame,
+    building_frames,
+    make_building,
+)
+from tests.support.errors import pose_errors
+
+#: An alternative "holds the true pose" within this distance and angle.
+ALTERNATIVE_TOLERANCE_M = 0.2
+ALTERNATIVE_TOLERANCE_DEG = 10.0
+#: A localized answer further than this from the truth is a false accept.
+FALSE_ACCEPT_M = 0.5
+SIZES = (1, 10, 50, 200, 1000)
+
+
+def _percentile(values: list[float], q: float) -> float | None:
+    return float(np.percentile(values, q)) if values else None
+
+
+def solve(bf: BuildingFrame, compiled: CompiledMap, camera: Camera,
+          options: LocalizationOptions) -> tuple[LocalizationResult | None, float]:
+    """``localize`` of one frame as the server runs it (a scoring past the hard stop is a
+    ``time_budget_exceeded`` answer: None) and its wall time, ms."""
+    t0 = time.perf_counter()
+    try:
+        result: LocalizationResult | None = localize(bf.frame.detections, compiled, camera,
+                                                     options)
+    except ScoringTimeoutError:
+        result = None
+    return result, (time.perf_counter() - t0) * 1e3
+
+
+def frame_record(bf: BuildingFrame, result: LocalizationResult | None, time_ms: float
+                 ) -> dict[str, Any]:
+    """What one answer scores (errors in m / deg, inf when not localized)."""
+    truth = bf.world_from_camera
+    if result is None:
+        return {"room": bf.room.zone_id, "kind": bf.kind,
+                "n_detections": len(bf.frame.detections), "localized": False,
+                "reason": "time_budget_exceeded", "position_error_m": math.inf,
+                "rotation_error_deg": math.inf, "confidence": 0.0,
+                "truth_among_alternatives": False, "n_alternatives": 0, "time_ms": time_ms}
+    pos, rot = pose_errors(result.world_from_camera, truth)
+    alt = [pose_errors(a.world_from_camera, truth) for a in result.alternatives]
+    return {
+        "room": bf.room.zone_id, "kind": bf.kind, "n_detections": len(bf.frame.detections),
+        "localized": result.localized, "reason": result.reason,
+        "position_error_m": pos, "rotation_error_deg": rot,
+        "confidence": result.confidence,
+        "truth_among_alternatives": any(p <= ALTERNATIVE_TOLERANCE_M
+                                        and r <= ALTERNATIVE_TOLERANCE_DEG for p, r in alt),
+        "n_alternatives": len(result.alternatives),
+        "time_ms": time_ms,
+    }
+
+
+def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
+    """Shares (%) and counts of a list of :func:`frame_record`."""
+    n = len(records)
+    if n == 0:
+        return {"frames": 0}
+
+    def share(pred: Callable[[dict[str, Any]], bool]) -> float:
+        return 100.0 * sum(1 for r in records if pred(r)) / n
+
+    def within(r: dict[str, Any], cm: float) -> bool:
+        return bool(r["localized"] and r["position_error_m"] <= cm / 100
+                    and r["rotation_error_deg"] <= 5.0)
+
+    def honest(r: dict[str, Any]) -> bool:
+        return within(r, 10) or (not r["localized"]
+                                 and r["reason"] in ("ambiguous", "low_confidence")
+                                 and r["truth_among_alternatives"])
+
+    return {
+        "frames": n,
+        "within_5cm_5deg_pct": share(lambda r: within(r, 5)),
+        "within_10cm_5deg_pct": share(lambda r: within(r, 10)),
+        "localized_pct": share(lambda r: r["localized"]),
+        "false_accept_pct": share(lambda r: r["localized"]
+                                  and r["position_error_m"] > FALSE_ACCEPT_M),
+        "ambiguous_pct": share(lambda r: r["reason"] == "ambiguous"),
+        "ambiguous_with_truth_pct": share(lambda r: r["reason"] == "ambiguous"
+                                          and r["truth_among_alternatives"]),
+        "low_confidence_pct": share(lambda r: r["reason"] == "low_confidence"),
+        "low_confidence_with_truth_pct": share(lambda r: r["reason"] == "low_confidence"
+                                               and r["truth_among_alternatives"]),
+        "correct_or_honest_pct": share(honest),
+        "time_budget_exceeded_pct": share(lambda r: r["reason"] == "time_budget_exceeded"),
+        "reasons": {k: sum(1 for r in records if r["reason"] == k)
+                    for k in sorted({str(r["reason"]) for r in records if r["reason"]})},
+    }
+
+
+def run_case(rooms: int, mode: str, frames: int, seed: int, memory_frames: int,
+             options: LocalizationOptions, log: Callable[[str], None]) -> dict[str, Any]:
+    """One (map size, mode): build, simulate, localize; the records and their summary."""
+    t0 = time.perf_counter()
+    building = make_building(rooms, mode, seed + rooms, corridors=rooms > 1)
+    compiled = compile_map(building.scene_map)
+    camera, bfs = building_frames(building, frames, seed + 7 * rooms + MODES.index(mode))
+    t_build = time.perf_counter() - t0
+    solve(bfs[0], compiled, camera, options)  # warm: caches, JIT
+    records = [frame_record(bf, *solve(bf, compiled, camera, options)) for bf in bfs]
+    peaks = []
+    for bf in bfs[:memory_frames]:
+        tracemalloc.start()
+        solve(bf, compiled, camera, options)
+        peaks.append(tracemalloc.get_traced_memory()[1] / 2**20)
+        tracemalloc.stop()
+    times = [r["time_ms"] for r in records]
+    out = {
+        "rooms": rooms, "mode": mode, "objects": len(compiled),
+        "all": summarise(records),
+        "5plus": summarise([r for r in records if r["n_detections"] >= 5]),
+        "3to4": summarise([r for r in records if r["n_detections"] < 5]),
+        "time_ms": {"median": _percentile(times, 50), "p90": _percentile(times, 90),
+                    "p99": _percentile(times, 99)},
+        "peak_memory_mb": max(peaks) if peaks else None,
+        "setup_s": t_build,
+        "records": records,
+    }
+    a = out["all"]
+    log(f"{rooms:5d} rooms {mode:9s} {len(compiled):6d} objects: "
+        f"10cm {a['within_10cm_5deg_pct']:5.1f} % FA {a['false_accept_pct']:4.1f} % "
+        f"amb {a['ambiguous_pct']:5.1f} % lowc {a['low_confidence_pct']:5.1f} % "
+        f"median {out['time_ms']['median']:.0f} ms ({time.perf_counter() - t0:.0f} s)")
+    return out
+
+
+def markdown(results: dict[str, Any]) -> str:
+    """The ``building`` section of docs/results.md."""
+    lines = [
+        "## Buildings: many rooms with the same objects (bench.building)",
+        "",
+        f"Generated buildings (the Chess room on a 12 m grid, random yaw per room; "
+        f"{results['frames']} frames per row, at most {results['max_frames_large']} from 200 "
+        f"rooms on; report seeds from {results['seed']}); default options (1 s CPU budget). "
+        "`>=5` / `3-4`: frames by their number of detections. FA: localized > 0.5 m off. "
+        "Honest: within 10 cm / 5 deg, or `ambiguous` / `low_confidence` with the true pose "
+        "among the alternatives. Time: the server's `localize` (median / p90 / p99 ms); "
+        "memory: tracemalloc peak per request.",
+        "",
+        "| rooms (objects) | mode | within 5 / 10 cm, 5 deg | >=5: within 10 cm | 3-4: honest "
+        "| FA | ambiguous (truth in alt.) | low_conf. (truth in alt.) | time ms | MB |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for c in results["cases"]:
+        a, f5, f3 = c["all"], c["5plus"], c["3to4"]
+        t = c["time_ms"]
+
+        def pct(d: dict[str, Any], key: str) -> str:
+            return f"{d[key]:.0f} % ({d['frames']})" if d.get("frames") else "-"
+
+        lines.append(
+            f"| {c['rooms']} ({c['objects']}) | {c['mode']} "
+            f"| {a['within_5cm_5deg_pct']:.0f} / {a['within_10cm_5deg_pct']:.0f} % "
+            f"| {pct(f5, 'within_10cm_5deg_pct')} | {pct(f3, 'correct_or_honest_pct')} "
+            f"| {a['false_accept_pct']:.1f} % "
+            f"| {a['ambiguous_pct']:.0f} % ({a['ambiguous_with_truth_pct']:.0f} %) "
+            f"| {a['low_confidence_pct']:.0f} % ({a['low_confidence_with_truth_pct']:.0f} %) "
+            f"| {t['median']:.0f} / {t['p90']:.0f} / {t['p99']:.0f} "
+            f"| {c['peak_memory_mb']:.0f} |")
+    return "\n".join(lines)
+
+
+def _ints(text: str) -> tuple[int, ...]:
+    return tuple(int(x) for x in text.split(",") if x)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--rooms", type=_ints, default=SIZES)
+    parser.add_argument("--modes", type=str, default=",".join(MODES))
+    parser.add_argument("--frames", type=int, default=40)
+    parser.add_argument("--max-frames-large", type=int, default=20,
+                        help="frames per case from 200 rooms on (2 shared cores)")
+    parser.add_argument("--seed", type=int, default=REPORT_SEEDS[0])
+    parser.add_argument("--memory-frames", type=int, default=3)
+    parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--records", action="store_true", help="keep per-frame records in JSON")
+    parser.add_argument("--write-results", action="store_true",
+                        help="write the building section of docs/results.md")
+    args = parser.parse_args(argv)
+    modes = tuple(m for m in args.modes.split(",") if m)
+    if any(m not in MODES for m in modes):
+        parser.error(f"--modes: one of {MODES}")
+    if args.frames < 1 or any(r < 1 for r in args.rooms):
+        parser.error("--frames and --rooms must be >= 1")
+    options = LocalizationOptions()
+    cases = []
+    for rooms in args.rooms:
+        for mode in modes:
+            if rooms == 1 and mode != modes[0]:
+                continue  # one room: the modes are the same map up to a layout
+            n = args.frames if rooms < 200 else min(args.frames, args.max_frames_large)
+            cases.append(run_case(rooms, mode, n, args.seed, args.memory_frames, options,
+                                  lambda m: print(m, file=sys.stderr, flush=True)))
+    results = {"frames": args.frames, "max_frames_large": args.max_frames_large,
+               "seed": args.seed, "cases": cases}
+    public = {**results, "cases": [{k: v for k, v in c.items()
+                                    if k != "records" or args.records} for c in cases]}
+    text = json.dumps(public, indent=2, default=float)
+    print(text)
+    if args.json:
+        args.json.write_text(text)
+    if args.write_results:
+        from bench.results_doc import update_results_section
+
+        update_results_section("building", markdown(results))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,207 @@
+"""A map's own calibration from the user's data: frames with reference poses (a recording's
+frames held out of the map's build, their app poses the reference) -> the covariance scale,
+s^2 floor and confidence model of :mod:`quadloc.service.localization.calibration_fit` (the one
+fit; this module only makes its records), and the NEES and confidence calibration error
+before / after on frames the fit did not see.
+
+Steps of :func:`fit_map_calibration`:
+
+1. the frames are split alternately (fit, report, fit, report, ...): tune on some frames,
+   report on others;
+2. every fit frame is localized with the shipped constants (``min_confidence = 0``: every
+   verified, unambiguous pose) and becomes a
+   :class:`~quadloc.service.localization.calibration_fit.SolveRecord` (errors against the
+   reference: position m, rotation deg, NEES of the reported covariance);
+3. :func:`~quadloc.service.localization.calibration_fit.fit_calibration` (base: the shipped
+   constants) fits ``k``, ``f`` and the confidence model for the solve's calibration key
+   (``provenance["fitted_keys"]``: only that key uses them, see
+   :func:`~quadloc.service.localization.calibration_fit.map_calibration_applies`); the
+   ambiguity ratio and the default ``min_confidence`` are carried over (no decision sets);
+4. the report frames are localized with the shipped and with the new constants:
+   :class:`CalibrationQuality` before and after.
+
+NEES (``xi^T Sigma^-1 xi``, ``xi = Logmap(estimate^-1 reference)``, GTSAM Pose3 tangent
+``[omega, v]``, body frame) is averaged over the localized report frames within
+``NEES_WITHIN_M`` of the reference (the covariance describes the error of a correct
+association, as in the fit's cells); the calibration error is the expected calibration error
+of ``confidence`` over the localized report frames (:func:`calibration_error`, 10 bins),
+success = within 10 cm and 5 degrees of the reference.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import gtsam
+import numpy as np
+
+from quadloc.factors.arrays import FloatArray
+from quadloc.factors.camera import Camera
+from quadloc.factors.pose_factors import pose3
+from quadloc.factors.rotations import rotation_angle
+from quadloc.maps.compiled import CompiledMap
+from quadloc.service.localization.calibration_fit import (
+    CalibrationConstants,
+    CalibrationFitError,
+    SolveRecord,
+    fit_calibration,
+    record_from_evidence,
+    success,
+)
+from quadloc.service.localization.confidence import calibration_key
+from quadloc.service.localization.pipeline import localize
+from quadloc.service.localization.types import Detection, LocalizationOptions, LocalizationResult
+
+__all__ = [
+    "MIN_FIT_FRAMES",
+    "NEES_WITHIN_M",
+    "CalibrationQuality",
+    "MapCalibration",
+    "ReferenceFrame",
+    "calibration_error",
+    "fit_map_calibration",
+    "quality",
+]
+
+#: The NEES of the report is averaged over answers within this distance of the reference (m).
+NEES_WITHIN_M = 0.10
+#: Fewest localized fit frames the fit accepts.
+MIN_FIT_FRAMES = 20
+
+
+@dataclass(frozen=True)
+class ReferenceFrame:
+    """A frame with a reference pose: ``world_from_camera`` 4x4 (map frame, OpenCV axes, m)."""
+
+    frame_id: str
+    world_from_camera: FloatArray
+    detections: Sequence[Detection]
+
+
+@dataclass(frozen=True)
+class CalibrationQuality:
+    """How well covariance and confidence describe the errors on some frames.
+
+    Attributes:
+        frames: frames solved; localized: answers localized (``min_confidence`` 0).
+        mean_nees: mean NEES of the localized answers within :data:`NEES_WITHIN_M` (6 for a
+            well-scaled 6-DoF covariance); None without any. nees_frames: how many.
+        calibration_error: expected calibration error of ``confidence`` (:func:`calibration_error`)
+            over the localized answers; None without any.
+        mean_confidence, success_rate: over the localized answers.
+    """
+
+    frames: int
+    localized: int
+    nees_frames: int
+    mean_nees: float | None
+    calibration_error: float | None
+    mean_confidence: float | None
+    success_rate: float | None
+
+
+@dataclass(frozen=True)
+class MapCalibration:
+    """The fitted constants and the quality before / after on the report frames."""
+
+    constants: CalibrationConstants
+    key: str
+    fit_frames: int
+    before: CalibrationQuality
+    after: CalibrationQuality
+
+
+def calibration_error(confidence: FloatArray, outcome: FloatArray, bins: int = 10) -> float:
+    """Expected calibration error: ``sum_b n_b / n |mean confidence_b - observed rate_b|`` over
+    ``bins`` equal-width confidence bins (the last one closed); ``confidence`` (n,) in [0, 1],
+    ``outcome`` (n,) in {0, 1}. NaN for n = 0."""
+    p = np.asarray(confidence, dtype=float)
+    y = np.asarray(outcome, dtype=float)
+    if p.size == 0:
+        return math.nan
+    k = np.clip((p * bins).astype(int), 0, bins - 1)
+    total = 0.0
+    for b in np.unique(k):
+        sel = k == b
+        total += sel.sum() / p.size * abs(p[sel].mean() - y[sel].mean())
+    return float(total)
+
+
+def _errors(result: LocalizationResult, reference: FloatArray) -> tuple[float, float, float | None]:
+    """Position error (m), rotation error (deg), NEES (None without a covariance)."""
+    if not result.localized or result.world_from_camera is None:
+        return math.inf, math.inf, None
+    T = np.asarray(result.world_from_camera, dtype=float)
+    pos = float(np.linalg.norm(T[:3, 3] - reference[:3, 3]))
+    rot = math.degrees(float(rotation_angle(T[:3, :3], reference[:3, :3])))
+    if result.covariance is None:
+        return pos, rot, None
+    xi = np.asarray(gtsam.Pose3.Logmap(pose3(T).between(pose3(reference))), dtype=float)
+    nees = float(xi @ np.linalg.solve(np.asarray(result.covariance, dtype=float), xi))
+    return pos, rot, nees
+
+
+def _solve(frames: Sequence[ReferenceFrame], compiled: CompiledMap, camera: Camera,
+           options: LocalizationOptions, calibration: CalibrationConstants | None
+           ) -> list[tuple[SolveRecord, float]]:
+    """Every frame localized: its record and its confidence."""
+    out = []
+    key = calibration_key(options.metric, options.use_sigma)
+    for f in frames:
+        r = localize(f.detections, compiled, camera, options, calibration=calibration)
+        pos, rot, nees = _errors(r, np.asarray(f.world_from_camera, dtype=float))
+        rec = record_from_evidence(
+            key=key if all(d.sigma is not None for d in f.detections) or not options.use_sigma
+            else calibration_key(options.metric, False),
+            group="user", localized=r.localized, reason=r.reason, position_error_m=pos,
+            rotation_error_deg=rot, evidence=dict(r.evidence or {}),
+            covariance_6x6=r.covariance, nees=nees)
+        out.append((rec, float(r.confidence)))
+    return out
+
+
+def quality(solved: Sequence[tuple[SolveRecord, float]]) -> CalibrationQuality:
+    """:class:`CalibrationQuality` of solved frames (records and confidences)."""
+    loc = [(r, c) for r, c in solved if r.localized]
+    nees = [r.nees for r, _ in loc if math.isfinite(r.nees) and r.position_error_m <= NEES_WITHIN_M]
+    conf = np.array([c for _, c in loc])
+    ok = np.array([success(r) for r, _ in loc], dtype=float)
+    return CalibrationQuality(
+        frames=len(solved), localized=len(loc), nees_frames=len(nees),
+        mean_nees=float(np.mean(nees)) if nees else None,
+        calibration_error=calibration_error(conf, ok) if loc else None,
+        mean_confidence=float(conf.mean()) if loc else None,
+        success_rate=float(ok.mean()) if loc else None)
+
+
+def fit_map_calibration(frames: Sequence[ReferenceFrame], compiled: CompiledMap, camera: Camera,
+                        *, metric: str = "level_set", time_budget_ms: float | None = None
+                        ) -> MapCalibration:
+    """Fit a map's calibration on half of ``frames`` and report on the other half (module
+    docstring). Raises :class:`CalibrationFitError` with fewer than :data:`MIN_FIT_FRAMES`
+    localized fit frames or when the fit finds no usable record."""
+    options = LocalizationOptions(metric=metric, min_confidence=0.0,
+                                  time_budget_ms=time_budget_ms)
+    fit_frames, report_frames = list(frames[0::2]), list(frames[1::2])
+    fitted = _solve(fit_frames, compiled, camera, options, None)
+    records = [r for r, _ in fitted]
+    keys = {r.key for r in records}
+    if sum(r.localized for r in records) < MIN_FIT_FRAMES:
+        raise CalibrationFitError(
+            f"{sum(r.localized for r in records)} of {len(records)} fit frames localized; "
+            f"at least {MIN_FIT_FRAMES} needed (hold out more frames)")
+    base = CalibrationConstants.shipped()
+    constants = fit_calibration(records, base)
+    k = constants.covariance_scale.get(sorted(keys)[0], math.nan)
+    if not (math.isfinite(k) and k > 0):
+        raise CalibrationFitError(f"the fitted covariance scale is {k}: the answers agree "
+                                  "with the reference poses to within rounding")
+    constants = replace(constants, provenance={
+        "fitted_keys": sorted(keys), "fit_frames": len(records),
+        "fit_localized": sum(r.localized for r in records), "metric": metric})
+    before = quality(_solve(report_frames, compiled, camera, options, None))
+    after = quality(_solve(report_frames, compiled, camera, options, constants))
+    return MapCalibration(constants=constants, key=sorted(keys)[0], fit_frames=len(records),
+                          before=before, after=after)

@@ -1,0 +1,75 @@
+"""The place index (quadloc.maps.places) against brute force: covisible pairs, neighbours,
+constellations by labels, the spatial grid; memoised on the compiled map."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from quadloc.maps.compiled import compile_map, compiled_subset
+from quadloc.maps.places import VIEW_RANGE_M, build_place_index, place_index
+from tests.support.buildings import make_building
+from tests.support.scenes import synthetic_map
+
+
+def _brute_pairs(centers: np.ndarray, radius: float) -> set[tuple[int, int]]:
+    d = np.linalg.norm(centers[:, None] - centers[None], axis=2)
+    i, j = np.nonzero((d <= radius) & np.triu(np.ones_like(d, dtype=bool), 1))
+    return set(zip(i.tolist(), j.tolist(), strict=True))
+
+
+def test_covisible_pairs_neighbours_and_constellations_equal_brute_force() -> None:
+    cm = compile_map(synthetic_map(400, seed=3))
+    for radius in (VIEW_RANGE_M, 2.5):
+        idx = build_place_index(cm, radius)
+        pairs = set(zip(idx.pair_i.tolist(), idx.pair_j.tolist(), strict=True))
+        assert pairs == _brute_pairs(np.asarray(cm.centers), radius)
+        assert np.allclose(idx.pair_distance, np.linalg.norm(
+            cm.centers[idx.pair_i] - cm.centers[idx.pair_j], axis=1), atol=1e-12)
+        for i in range(0, len(cm), 37):
+            expected = sorted({b for a, b in pairs if a == i} | {a for a, b in pairs if b == i})
+            assert idx.neighbours(i).tolist() == expected
+        cats = sorted(set(cm.categories))
+        for la in cats[:3]:
+            for lb in cats:
+                I, J, D = idx.pairs_for(la, lb)
+                expected_ordered = {(a, b) for a, b in pairs
+                                    if cm.categories[a] == la and cm.categories[b] == lb}
+                expected_ordered |= {(b, a) for a, b in pairs
+                                     if cm.categories[b] == la and cm.categories[a] == lb}
+                assert set(zip(I.tolist(), J.tolist(), strict=True)) == expected_ordered
+                assert np.all(np.diff(I) >= 0)  # sorted by the first object (the join needs it)
+                assert np.allclose(D, np.linalg.norm(cm.centers[I] - cm.centers[J], axis=1))
+    assert idx.pairs_for("no-such", "label")[0].size == 0
+
+
+def test_near_equals_brute_force() -> None:
+    cm = compile_map(synthetic_map(300, seed=5))
+    idx = place_index(cm)
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        p = rng.uniform(-2, 40, 3)
+        r = float(rng.uniform(0.5, 15))
+        expected = np.flatnonzero(np.linalg.norm(cm.centers - p, axis=1) <= r)
+        assert idx.near(p, r).tolist() == expected.tolist()
+
+
+def test_rooms_are_not_covisible_and_index_is_memoised() -> None:
+    b = make_building(6, "perturbed", seed=4)
+    cm = b.compiled
+    idx = place_index(cm)
+    assert place_index(cm) is idx
+    zone = [b.zone_of(o) for o in cm.object_ids]
+    assert all(zone[i] == zone[j] for i, j in zip(idx.pair_i, idx.pair_j, strict=True))
+    # every pair of one room is covisible (a room is smaller than the view range)
+    n_room_pairs = sum(len(r.object_ids) * (len(r.object_ids) - 1) // 2 for r in b.rooms)
+    assert len(idx.pair_i) == n_room_pairs
+
+
+def test_compiled_subset_keeps_ids_and_arrays() -> None:
+    cm = compile_map(synthetic_map(50, seed=1))
+    sel = np.array([3, 7, 8, 20, 49])
+    sub = compiled_subset(cm, sel)
+    assert sub.object_ids == tuple(cm.object_ids[i] for i in sel)
+    assert np.array_equal(sub.centers, cm.centers[sel])
+    assert np.array_equal(sub.dual_quadrics, cm.dual_quadrics[sel])
+    assert (sub.map_id, sub.version) == (cm.map_id, cm.version)

@@ -1,0 +1,138 @@
+"""The search of large maps (quadloc.service.localization.constellations) and what it relies on:
+the vectorised P3P against cv2 and the truth, the depth from size against the closed form of a
+sphere, the order of detection triples; end to end on generated buildings: the true place is
+found, exact copies of a room are answered ambiguous (never a wrong pose)."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from quadloc.factors.camera import Ellipsoid, project_ellipsoid
+from quadloc.factors.rotations import invert_pose
+from quadloc.maps.places import place_index
+from quadloc.service.localization.constellations import (
+    PLACE_SEARCH_MIN_OBJECTS,
+    detection_triples,
+    place_seeds,
+)
+from quadloc.service.localization.hypotheses import (
+    p3p_grunert_batch,
+    p3p_hypotheses_batch,
+    size_depths,
+)
+from quadloc.service.localization.pipeline import localize
+from tests.support.buildings import building_frames, make_building
+from tests.support.errors import pose_errors
+from tests.support.scenes import CAM, look_at
+from tests.support.simulate import SimulationConfig
+
+
+def _p3p_problems(n: int, seed: int) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    rng = np.random.default_rng(seed)
+    X = rng.uniform(-1, 1, (n, 3, 3))
+    back = np.array([0.0, -4.0, 0.5])
+    Ts = [invert_pose(look_at(rng.uniform(-1, 1, 3) + back, rng.normal(0, 0.3, 3)))
+          for _ in range(n)]
+    cam = np.einsum("bij,bkj->bki", np.array(Ts)[:, :3, :3], X) + np.array(Ts)[:, None, :3, 3]
+    img = np.einsum("ij,bkj->bki", CAM.K, cam)
+    return img[..., :2] / img[..., 2:], X, Ts
+
+
+def test_grunert_p3p_recovers_the_truth_and_every_cv2_solution() -> None:
+    img, X, Ts = _p3p_problems(300, seed=11)
+    poses, owner = p3p_grunert_batch(img, X, CAM)
+    ref, ref_owner = p3p_hypotheses_batch(img, X, CAM)
+    found = sum(min((np.abs(P - Ts[b]).max() for P in poses[owner == b]), default=9.0) < 1e-6
+                for b in range(len(Ts)))
+    assert found >= 0.99 * len(Ts)  # (near-degenerate draws aside)
+    missing = sum(min((np.abs(P - ref[m]).max() for P in poses[owner == ref_owner[m]]),
+                      default=9.0) > 1e-5 for m in range(len(ref)))
+    assert missing <= 0.01 * len(ref)
+    # every solution reprojects the three points (independent check)
+    cam = np.einsum("mij,mkj->mki", poses[:, :3, :3], X[owner]) + poses[:, None, :3, 3]
+    assert np.all(cam[..., 2] > 0)
+    px = np.einsum("ij,mkj->mki", CAM.K, cam)
+    assert np.allclose(px[..., :2] / px[..., 2:], img[owner], atol=1e-5)
+
+
+def test_size_depth_matches_a_sphere_seen_at_the_image_centre() -> None:
+    for z, r in ((2.0, 0.2), (5.0, 0.4), (1.2, 0.1)):
+        T = np.eye(4)
+        sphere = Ellipsoid(np.array([0.0, 0.0, z]), np.array([r, r, r]), np.eye(3))
+        e = project_ellipsoid(CAM, T, sphere)
+        # the image circle of a sphere: radius f r / sqrt(z^2 - r^2) (tangent cone)
+        assert e.a == pytest.approx(CAM.fx * r / math.sqrt(z * z - r * r), rel=0.05)
+        got = float(size_depths(CAM, np.array([e.a, e.b]), r))
+        assert got == pytest.approx(math.sqrt(z * z - r * r), rel=0.03)
+
+
+def test_detection_triples_avoid_every_pair_early() -> None:
+    params = np.zeros((8, 5))
+    params[:, 2] = np.arange(8, 0, -1)
+    params[:, 3] = 1.0
+    triples = detection_triples(params, max_triples=6)
+    assert triples[0] == (0, 1, 2)  # the largest first
+    assert len(set(triples)) == len(triples)
+    # any two of the six largest (e.g. a wrong label and a spurious one) are avoided by one
+    for x, y in itertools.combinations(range(6), 2):
+        assert any(x not in t and y not in t for t in triples), (x, y)
+
+
+@pytest.fixture(scope="module")
+def perturbed() -> tuple:
+    b = make_building(30, "perturbed", seed=21)
+    cam, frames = building_frames(b, 12, seed=22, config=SimulationConfig.exact(True),
+                                  min_detections=4)
+    return b, cam, frames
+
+
+def test_place_seeds_find_the_true_place_with_bounded_sub_map(perturbed: tuple) -> None:
+    b, cam, frames = perturbed
+    cm = b.compiled
+    assert len(cm) >= PLACE_SEARCH_MIN_OBJECTS
+    near = 0
+    for bf in frames:
+        dets = bf.frame.detections
+        params = np.array([d.ellipse.params() for d in dets])
+        seeds = place_seeds(cm, place_index(cm), cam, params, [d.label for d in dets],
+                            np.random.default_rng(0))
+        errs = [pose_errors(invert_pose(T), bf.world_from_camera)[0] for T in seeds.poses]
+        near += min(errs, default=math.inf) < 0.3
+        # the sub-map is a few places, not the building
+        assert len(seeds.objects) <= 12 * 40
+    assert near >= 0.9 * len(frames)
+
+
+def test_localize_in_a_perturbed_building_finds_the_room(perturbed: tuple) -> None:
+    b, cam, frames = perturbed
+    good = wrong = 0
+    for bf in frames:
+        res = localize(bf.frame.detections, b.compiled, cam)
+        pos, rot = pose_errors(res.world_from_camera, bf.world_from_camera)
+        good += res.localized and pos <= 0.1 and rot <= 5
+        wrong += res.localized and pos > 0.5
+        # the inliers name the map's own objects, of the true room
+        if res.localized and pos <= 0.1:
+            assert {b.zone_of(m.object_id) for m in res.inliers} == {bf.room.zone_id}
+    assert wrong == 0
+    assert good >= 0.8 * len(frames)
+
+
+def test_exact_copies_are_ambiguous_never_a_wrong_pose() -> None:
+    b = make_building(12, "exact", seed=31)
+    cam, frames = building_frames(b, 10, seed=32, min_detections=4)
+    ambiguous = 0
+    for bf in frames:
+        res = localize(bf.frame.detections, b.compiled, cam)
+        pos, _ = pose_errors(res.world_from_camera, bf.world_from_camera)
+        assert not (res.localized and pos > 0.5)
+        if res.reason == "ambiguous":
+            ambiguous += 1
+            rooms = {tuple(np.round(a.world_from_camera[:2, 3] / 12.0)) for a in
+                     res.alternatives}
+            assert len(rooms) >= 2  # the candidates are in different rooms
+    assert ambiguous >= 0.8 * len(frames)

@@ -1,0 +1,305 @@
+"""Generated buildings: many rooms with the same objects, and simulated frames inside them.
+
+A building is ``n_rooms`` rooms on a grid (:data:`ROOM_SPACING_M` apart, :data:`ROOMS_PER_FLOOR`
+rooms per floor, floors :data:`FLOOR_HEIGHT_M` apart), every room made from the real Chess map
+(``maps/data/chess.json``, 11 objects, 7 categories) turned by a random yaw about +Z (the map's
+up) and moved to its grid cell. How rooms repeat (``mode``):
+
+* ``"exact"``: exact copies (rigid copies of one room: truly ambiguous, the only right answer to
+  a frame is ``ambiguous``, or not localized);
+* ``"perturbed"``: every object moved by 0.1-0.5 m (uniform length, random horizontal
+  direction), one random object dropped with probability 0.5 and one object of a random
+  category added (a copy of a Chess object's shape at a random place of the room) with
+  probability 0.3;
+* ``"random"``: the room's own random layout of the Chess objects (each object at a uniformly
+  random place of the room's floor box, its height kept, random yaw).
+
+With ``corridors``, a corridor runs along each row of rooms with a few objects (random Chess
+shapes) every :data:`CORRIDOR_STEP_M`. Maps hold at most ``LIMITS["max_objects"]`` objects: a
+building that would exceed it drops the fewest objects per room that fit (the same ones in every
+room of an exact building; 1,000 rooms with corridors: 8 objects per room).
+
+Zones: every room is a zone ``"f<floor>-r<row>-c<col>"`` (:attr:`Building.rooms`), corridors
+zones ``"f<floor>-corridor-<row>"``. Object ids are ``"<zone>/<chess id>"`` (``+<k>`` for added
+objects).
+
+Frames (:func:`building_frames`): the 108 real Chess poses placed in a room (its rigid transform
+applied, perturbed and random rooms included), and new poses looking at the room's objects;
+detections by :func:`tests.support.simulate.simulate_frame` on the room's own objects only (walls
+hide the other rooms). Seeds: tune on :data:`TUNE_SEEDS`, report on :data:`REPORT_SEEDS`.
+
+Poses are ``world_from_camera`` (4x4, OpenCV camera axes) unless named otherwise; metres.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from quadloc.factors.camera import Camera
+from quadloc.factors.rotations import pose_matrix
+from quadloc.maps.compiled import CompiledMap, compile_map
+from quadloc.maps.demo import load_demo_map
+from quadloc.maps.model import LIMITS, MapObject, SceneMap
+from tests.support.reference_data import load_chess_world_from_camera
+from tests.support.scenes import look_at
+from tests.support.simulate import SimulatedFrame, SimulationConfig, simulate_frame
+
+__all__ = [
+    "FLOOR_HEIGHT_M",
+    "MODES",
+    "REPORT_SEEDS",
+    "ROOMS_PER_FLOOR",
+    "ROOM_SPACING_M",
+    "TUNE_SEEDS",
+    "Building",
+    "BuildingFrame",
+    "Room",
+    "building_frames",
+    "make_building",
+]
+
+ROOM_SPACING_M = 12.0
+FLOOR_HEIGHT_M = 4.0
+ROOMS_PER_FLOOR = 100
+MODES = ("exact", "perturbed", "random")
+#: Seeds of the building and frame generators: tune (thresholds, calibration) on these ...
+TUNE_SEEDS = tuple(range(0, 100))
+#: ... and report on these (never used for tuning).
+REPORT_SEEDS = tuple(range(1000, 1100))
+#: Corridor objects: one every this many metres along a row of rooms.
+CORRIDOR_STEP_M = 6.0
+
+
+@dataclass(frozen=True)
+class Room:
+    """One room of a building.
+
+    Attributes:
+        zone_id: ``"f<floor>-r<row>-c<col>"`` (corridors: ``"f<floor>-corridor-<row>"``).
+        world_from_room: (4, 4) the rigid transform of the Chess frame into the world (yaw
+            about +Z and a translation; for random layouts the frame the layout was drawn in).
+        object_ids: ids of the room's objects.
+    """
+
+    zone_id: str
+    world_from_room: np.ndarray
+    object_ids: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Building:
+    """A generated building: the map (world frame, metres, +Z up), its rooms (zones), corridors
+    and how it was made."""
+
+    scene_map: SceneMap
+    rooms: tuple[Room, ...]
+    corridors: tuple[Room, ...]
+    mode: str
+    seed: int
+
+    @property
+    def compiled(self) -> CompiledMap:
+        return compile_map(self.scene_map)
+
+    def zone_of(self, object_id: str) -> str:
+        """The zone of an object (the prefix of its id)."""
+        return object_id.split("/", 1)[0]
+
+    def room_map(self, room: Room) -> CompiledMap:
+        """The room's objects alone (what a camera inside it can see: walls hide the rest),
+        compiled; memoised on the room."""
+        memo: CompiledMap | None = room.__dict__.get("_compiled")
+        if memo is None:
+            sm = self.scene_map
+            ids = set(room.object_ids)
+            memo = compile_map(SceneMap(f"{sm.map_id}-{room.zone_id}", room.zone_id, sm.up_axis,
+                                        sm.categories,
+                                        tuple(o for o in sm.objects if o.object_id in ids)))
+            object.__setattr__(room, "_compiled", memo)
+        return memo
+
+
+def _yaw(theta: float) -> np.ndarray:
+    c, s = math.cos(theta), math.sin(theta)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _moved(obj: MapObject, object_id: str, world_from_room: np.ndarray,
+           offset_room: np.ndarray | None = None, yaw: float = 0.0) -> MapObject:
+    """``obj`` (Chess frame) with id ``object_id``, optionally moved by ``offset_room`` (m,
+    Chess frame) and turned by ``yaw`` (rad) about its centre, then placed by
+    ``world_from_room``."""
+    e = obj.ellipsoid
+    R = world_from_room[:3, :3]
+    centre = e.center + (0.0 if offset_room is None else offset_room)
+    rotation = R @ _yaw(yaw) @ e.rotation
+    return MapObject(object_id, obj.category, type(e)(R @ centre + world_from_room[:3, 3],
+                                                      e.axes.copy(), rotation))
+
+
+def make_building(n_rooms: int, mode: str = "perturbed", seed: int = 0, *,
+                  corridors: bool = False, yaw: bool = True) -> Building:
+    """A building of ``n_rooms`` rooms (see the module docstring); deterministic in ``seed``.
+
+    Args:
+        n_rooms: rooms (>= 1); the first room of an exact building is the Chess room itself
+            moved to its cell.
+        mode: ``"exact"``, ``"perturbed"`` or ``"random"`` (:data:`MODES`).
+        seed: the generator's seed.
+        corridors: add corridor objects along each row of rooms.
+        yaw: turn each room by a random yaw (else every room keeps the Chess orientation).
+    """
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+    if n_rooms < 1:
+        raise ValueError("n_rooms must be >= 1")
+    rng = np.random.default_rng(seed)
+    chess = load_demo_map()
+    base = list(chess.objects)
+    centres = np.array([o.ellipsoid.center for o in base])
+    middle = np.array([*centres[:, :2].mean(axis=0), 0.0])
+    lo, hi = centres[:, :2].min(axis=0) - 0.5, centres[:, :2].max(axis=0) + 0.5
+    per_room_hall = ROOM_SPACING_M / CORRIDOR_STEP_M if corridors else 0.0
+    room_budget = (LIMITS["max_objects"] - per_room_hall * n_rooms) / n_rooms
+    n_drop = max(0, math.ceil(len(base) - room_budget))
+    drop_all = n_drop > 0
+    exact_drop = set(rng.choice(len(base), n_drop, replace=False).tolist())
+    side = math.ceil(math.sqrt(min(n_rooms, ROOMS_PER_FLOOR)))
+    objects: list[MapObject] = []
+    rooms: list[Room] = []
+    for k in range(n_rooms):
+        floor, cell = divmod(k, ROOMS_PER_FLOOR)
+        row, col = divmod(cell, side)
+        zone = f"f{floor}-r{row}-c{col}"
+        origin = np.array([col * ROOM_SPACING_M, row * ROOM_SPACING_M, floor * FLOOR_HEIGHT_M])
+        theta = float(rng.uniform(-math.pi, math.pi)) if yaw else 0.0
+        R = _yaw(theta)
+        world_from_room = pose_matrix(R, origin - R @ middle)
+        mine: list[MapObject] = []
+        drop = exact_drop
+        if mode == "perturbed":
+            drop = set(rng.choice(len(base), max(n_drop, int(rng.random() < 0.5)),
+                                  replace=False).tolist())
+        for j, obj in enumerate(base):
+            if j in drop:
+                continue
+            oid = f"{zone}/{obj.object_id}"
+            if mode == "exact":
+                mine.append(_moved(obj, oid, world_from_room))
+            elif mode == "perturbed":
+                phi = rng.uniform(-math.pi, math.pi)
+                length = rng.uniform(0.1, 0.5)
+                mine.append(_moved(obj, oid, world_from_room,
+                                   length * np.array([math.cos(phi), math.sin(phi), 0.0])))
+            else:
+                target = np.array([*rng.uniform(lo, hi), obj.ellipsoid.center[2]])
+                mine.append(_moved(obj, oid, world_from_room, target - obj.ellipsoid.center,
+                                   float(rng.uniform(-math.pi, math.pi))))
+        if mode == "perturbed" and not drop_all and rng.random() < 0.3:
+            src = base[int(rng.integers(len(base)))]
+            target = np.array([*rng.uniform(lo, hi), src.ellipsoid.center[2]])
+            mine.append(_moved(src, f"{zone}/{src.object_id}+1", world_from_room,
+                               target - src.ellipsoid.center,
+                               float(rng.uniform(-math.pi, math.pi))))
+        objects += mine
+        rooms.append(Room(zone, world_from_room, tuple(o.object_id for o in mine)))
+    halls: list[Room] = []
+    if corridors:
+        halls = _corridors(rooms, side, base, rng, objects)
+    sm = SceneMap(f"building-{mode}-{n_rooms}-{seed}", f"{n_rooms} rooms ({mode}), seed {seed}",
+                  chess.up_axis, chess.categories, tuple(objects))
+    return Building(sm, tuple(rooms), tuple(halls), mode, seed)
+
+
+def _corridors(rooms: list[Room], side: int, base: list[MapObject], rng: np.random.Generator,
+               objects: list[MapObject]) -> list[Room]:
+    """Corridor zones (one per row of rooms per floor, half a spacing beside the row), their
+    objects appended to ``objects``."""
+    halls: list[Room] = []
+    rows: dict[tuple[int, int], int] = {}
+    for k in range(len(rooms)):
+        floor, cell = divmod(k, ROOMS_PER_FLOOR)
+        rows.setdefault((floor, cell // side), 0)
+        rows[(floor, cell // side)] += 1
+    for (floor, row), count in sorted(rows.items()):
+        zone = f"f{floor}-corridor-{row}"
+        y = (row + 0.5) * ROOM_SPACING_M
+        length = count * ROOM_SPACING_M
+        world_from_hall = pose_matrix(np.eye(3), [0.0, y, floor * FLOOR_HEIGHT_M])
+        ids = []
+        for j, x in enumerate(np.arange(-ROOM_SPACING_M / 2 + 1.0, length - ROOM_SPACING_M / 2,
+                                        CORRIDOR_STEP_M)):
+            src = base[int(rng.integers(len(base)))]
+            at = np.array([x, rng.uniform(-1.0, 1.0), src.ellipsoid.center[2]])
+            ob = _moved(src, f"{zone}/{j}", world_from_hall, at - src.ellipsoid.center,
+                        float(rng.uniform(-math.pi, math.pi)))
+            objects.append(ob)
+            ids.append(ob.object_id)
+        halls.append(Room(zone, world_from_hall, tuple(ids)))
+    return halls
+
+
+@dataclass(frozen=True, eq=False)
+class BuildingFrame:
+    """One simulated frame of a building: its room, the true pose, the detections, and how the
+    pose was made (``"chess"``: a real Chess pose placed in the room, ``"look"``: a new pose
+    looking at the room's objects)."""
+
+    room: Room
+    frame: SimulatedFrame
+    kind: str
+
+    @property
+    def world_from_camera(self) -> np.ndarray:
+        return self.frame.world_from_camera
+
+    @property
+    def n_true(self) -> int:
+        """Detections of true objects (with their true label or not)."""
+        return sum(o is not None for o in self.frame.object_ids)
+
+
+def _look_pose(room_map: CompiledMap, rng: np.random.Generator) -> np.ndarray:
+    """A pose looking at a random object of the room from 1.5-3.5 m away, eye 1.0-1.8 m above
+    the floor, aim jittered by 0.3 m, roll within +-5 degrees."""
+    target = room_map.centers[int(rng.integers(len(room_map)))]
+    floor_z = math.floor(target[2] / FLOOR_HEIGHT_M) * FLOOR_HEIGHT_M
+    phi = rng.uniform(-math.pi, math.pi)
+    dist = rng.uniform(1.5, 3.5)
+    eye = np.array([target[0] + dist * math.cos(phi), target[1] + dist * math.sin(phi),
+                    floor_z + rng.uniform(1.0, 1.8)])
+    return look_at(eye, target + rng.normal(0.0, 0.3, 3), roll=math.radians(rng.uniform(-5, 5)))
+
+
+def building_frames(building: Building, n_frames: int, seed: int, *,
+                    config: SimulationConfig | None = None, min_detections: int = 3,
+                    look_fraction: float = 0.5, max_tries: int = 50,
+                    ) -> tuple[Camera, list[BuildingFrame]]:
+    """``n_frames`` frames with at least ``min_detections`` detections of true objects, each in
+    a random room: a real Chess pose placed in the room, or (with probability
+    ``look_fraction``) a new pose looking at the room's objects; detections by
+    :func:`tests.support.simulate.simulate_frame` with ``config`` (default: the simulator's
+    default detector with wrong labels at 0.05 and spurious detections at rate 0.3) on the
+    room's objects only. Deterministic in ``seed``. Returns (the Chess camera, the frames)."""
+    camera, chess_poses, _ = load_chess_world_from_camera()
+    cfg = config or SimulationConfig(wrong_label_probability=0.05, spurious_rate=0.3)
+    rng = np.random.default_rng(seed)
+    out: list[BuildingFrame] = []
+    while len(out) < n_frames:
+        room = building.rooms[int(rng.integers(len(building.rooms)))]
+        room_map = building.room_map(room)
+        for _ in range(max_tries):
+            look = rng.random() < look_fraction
+            if look:
+                T = _look_pose(room_map, rng)
+            else:
+                T = room.world_from_room @ chess_poses[int(rng.integers(len(chess_poses)))]
+            f = simulate_frame(room_map, camera, T, rng, cfg)
+            bf = BuildingFrame(room, f, "look" if look else "chess")
+            if bf.n_true >= min_detections:
+                out.append(bf)
+                break
+    return camera, out
