@@ -14,7 +14,7 @@ from quadloc.factors.rotations import invert_pose
 from quadloc.maps.building import association as assoc
 from quadloc.maps.building.association import AssociationOptions, ellipse_iou
 from quadloc.maps.building.build import BuildTimeoutError, build_map
-from quadloc.maps.building.recording import parse_recording
+from quadloc.service.app.builds import recording_of as parse_recording
 from tests.support.helpers import random_rotation
 from tests.support.hostile import HOSTILE_CAMERA, hostile_recording, look_at
 
