@@ -14,7 +14,7 @@ from quadloc.factors.camera import Camera
 from quadloc.factors.rotations import pose_matrix
 from quadloc.maps.building.recording import recording_to_dict
 
-__all__ = ["HOSTILE_CAMERA", "hostile_recording", "look_at"]
+__all__ = ["HOSTILE_CAMERA", "grid_map", "grid_pose", "hostile_recording", "look_at"]
 
 #: The camera of the hostile recordings (VGA).
 HOSTILE_CAMERA = Camera(500.0, 500.0, 320.0, 240.0, 640, 480)
@@ -62,4 +62,36 @@ def hostile_recording(n_frames: int = 2000, per_frame: int = 10, n_box: int = 9,
                                      "a": a_px, "b": float(a_px * rng.uniform(0.3, 1.0)),
                                      "angle": float(rng.uniform(-1.5, 1.5))}})
         frames.append((f"f{f}", look_at(eye, target), dets))
-    return recording_to_dict(cam, frames, name="hostile")
+    doc = recording_to_dict(cam, frames, name="hostile")
+    for fr in doc["frames"]:  # rounded (0.1 px, 1e-7, 0.1 mm): 2,000 x 10 fit in 2 MB
+        pose = fr["world_from_camera"]
+        pose["quaternion_wxyz"] = [round(x, 7) for x in pose["quaternion_wxyz"]]
+        pose["translation_m"] = [round(x, 4) for x in pose["translation_m"]]
+        for det in fr["detections"]:
+            det["ellipse"] = {k: round(v, 1) for k, v in det["ellipse"].items()}
+    return doc
+
+
+def grid_map(map_id: str = "grid", side: int = 16, n_labels: int = 8) -> dict[str, Any]:
+    """A map document of ``side`` x ``side`` small ellipsoids on a wall 5 m in front of
+    :func:`grid_pose` (labels ``L0..`` in turn): every object visible and separate in the image,
+    so a session on it tracks with ``side**2`` associated detections per frame (the most
+    the schema allows at 16 x 16)."""
+    objects = []
+    for i in range(side):
+        for j in range(side):
+            k = i * side + j
+            objects.append({"object_id": f"o{k}", "category": f"L{k % n_labels}",
+                            "center": [round((i - (side - 1) / 2) * 0.35, 4),
+                                       5.0 + 0.3 * ((i + j) % 3),
+                                       round((j - (side - 1) / 2) * 0.26, 4)],
+                            "axes": [0.08, 0.1, 0.07]})
+    return {"map_id": map_id, "name": "grid", "up_axis": [0.0, 0.0, 1.0],
+            "categories": [f"L{i}" for i in range(n_labels)], "objects": objects}
+
+
+def grid_pose(frame: int) -> np.ndarray:
+    """``world_from_camera`` of frame ``frame`` of a slow walk (2 mm per frame along x) facing
+    the wall of :func:`grid_map`."""
+    eye = np.array([0.002 * frame, 0.0, 0.0])
+    return look_at(eye, eye + np.array([0.0, 1.0, 0.0]))
