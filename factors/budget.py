@@ -5,11 +5,11 @@ batches, LM iterations, map-build labels): a stop instant on the wall clock
 (``time.perf_counter()``) and, for a solve, on the CPU clock of the solving thread
 (``time.thread_time()``). ``None`` where a ``Deadline | None`` is expected means no limit.
 Constructors: :meth:`Deadline.cpu_budget` (CPU time of the calling thread with a wall-clock hard
-limit of :data:`WALL_LIMIT_FACTOR` x the budget: a ``localize()`` solve) and
-:meth:`Deadline.wall_budget` (wall-clock time only: a map build, a tracking session's
-initialisation). Why a solve counts CPU time: ``docs/design/localization.md``, "The solve
-budget". A deadline may also carry cancellation events (:meth:`Deadline.cancelled_by`): it has
-passed once any is set (the client went away, the server is stopping).
+limit of :data:`WALL_LIMIT_FACTOR` x the budget: a ``localize()`` solve, a session frame or
+request) and :meth:`Deadline.wall_budget` (wall-clock time only: a map build, a localize
+batch). Why a solve counts CPU time: ``docs/design/localization.md``, "The solve budget". A
+deadline may also carry cancellation events (:meth:`Deadline.cancelled_by`): it has passed once
+any is set (the client went away, the server is stopping).
 """
 
 from __future__ import annotations
