@@ -261,7 +261,8 @@ class TrackingSession:
         frame's stages: a frame past it is counted (its index and timestamp used) but not
         fused, answered with reason :data:`TIME_BUDGET_EXCEEDED` and no pose; the state stays
         (a tracking session chains the next frame's odometry from the last fused one; an
-        initializing one buffers the frame and abandons the attempt). The only stage not
+        initializing one abandons the attempt, keeping the frame in its buffer unless the
+        deadline had passed before the frame started). The only stage not
         interruptible is the smoother's update, bounded by :data:`MAX_WINDOW_FRAMES`.
         Initialization draws exactly ``init_max_samples`` samples (seeded): the same frames give
         the same answer whatever the machine's load, unless the deadline passes."""
