@@ -565,9 +565,10 @@ def sessions_builds_markdown(report: dict[str, Any]) -> str:
     lines = [
         f"## Hostile sessions and builds, {report['store']} (`bench/adversarial.py`)",
         "",
-        f"Command: `{report['command']}` ({report['machine']}; load average "
-        f"{report['load_average_start']} at start, {report['load_average_end']} at end: a "
-        "shared machine, wall times under load).",
+        f"{report['machine']}; load average {report['load_average_start']} at start, "
+        f"{report['load_average_end']} at end: a shared machine, wall times under load (a "
+        "request's wall-clock hard limit, 2 x its CPU budget, then stops it before its CPU "
+        "budget: the frames left answer `time_budget_exceeded`).",
         "",
         f"One `quadloc serve` process, {report['store']} store; session budgets "
         f"{report['session_frame_budget_ms']:.0f} ms CPU a frame, "
