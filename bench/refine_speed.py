@@ -337,20 +337,18 @@ def markdown(res: dict, command: str) -> str:
               "`sqrt(sigma_j)` per detection block: exactly the per-detection weights) when no "
               "robust kernel is asked for, and in one factor per detection slicing the shared "
               "evaluation when one is (a robust kernel must see one detection's residual). "
-              "Separate per-detection evaluations (the GUIDE's 'one factor per object') cost "
+              "Separate per-detection evaluations (the usual 'one factor per object') cost "
               "N times the numpy calls, see the last column.",
               "", "Notes: the baseline's cost per function evaluation is N projections "
               "(`project_ellipsoid`, validated `Ellipse`) and N `metrics.cost` calls, and BFGS "
-              "needs 7 evaluations per iteration for its forward-difference gradient; the GUIDE's "
-              "figures (105 / 188 / 382 ms at N = 3 / 8 / 16) were measured on a less loaded "
-              "machine with a leaner cost, the ratio is what this run shows. Position errors "
+              "needs 7 evaluations per iteration for its forward-difference gradient; the ratio, "
+              "not the absolute time, is what this run shows (a shared machine). Position errors "
               "are dominated by the simulated detection noise (all metrics reach similar "
               "accuracy; the level set's advantages in the paper concern partially visible "
               "objects and detector errors, not Gaussian noise). `iou`/`giou` compute the exact "
               "areas and their gradients of all pairs per evaluation (one call of a compiled "
               "kernel, `quadloc.factors.overlap.quadrant_sums`) and take more LM iterations at "
-              "their "
-              "kinked noisy optimum, and `qbbox` uses central differences (12 extra metric "
+              "their kinked noisy optimum, and `qbbox` uses central differences (12 extra metric "
               "evaluations per pair per linearisation), hence their times."]
     return "\n".join(lines)
 

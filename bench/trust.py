@@ -84,6 +84,7 @@ from quadloc.service.localization.confidence import (
     UNIT_WEIGHTS_SUFFIX,
     calibration_key,
 )
+from quadloc.service.localization.map_calibration import calibration_error
 from quadloc.service.localization.pipeline import localize
 from quadloc.service.localization.types import (
     METRICS,
@@ -389,14 +390,14 @@ def reliability(rows: list[dict], bins: int = 10) -> dict:
     p = np.array([r["confidence"] for r in rows])
     y = np.array([_success(r) for r in rows], dtype=float)
     edges = np.linspace(0, 1, bins + 1)
-    table, ece = [], 0.0
+    table = []
     for k in range(bins):
         sel = (p >= edges[k]) & ((p < edges[k + 1]) if k < bins - 1 else (p <= 1))
         if sel.any():
             table.append({"bin": f"{edges[k]:.1f}-{edges[k + 1]:.1f}", "n": int(sel.sum()),
                           "mean_confidence": float(p[sel].mean()),
                           "observed": float(y[sel].mean())})
-            ece += sel.sum() / max(len(p), 1) * abs(p[sel].mean() - y[sel].mean())
+    ece = calibration_error(p, y, bins) if len(p) else 0.0  # the product's one formula
     return {"n": len(rows), "ece": float(ece), "table": table,
             "observed_rate": float(y.mean()) if len(y) else None,
             "ece_if_calibrated": ece_sampling_noise(p, edges)}

@@ -9,23 +9,32 @@ can publish the valid names and apply the same rules without loading the solver
   :class:`GeometryError`, its kind for geometric input.
 * :func:`is_real`, :func:`check_robust`: rules used by every layer that takes these inputs.
 * :func:`json_path`: THE spelling of a field path in every error (``objects[3].axes[1]``).
+* :func:`text_problem`: THE rule for text a client sends that is stored or echoed (ids, labels,
+  names, frame and track ids): no control character, no lone surrogate; :func:`scrubbed_text`
+  makes text read back from storage serialisable whatever it holds.
 """
 
 from __future__ import annotations
 
 import math
 import numbers
+import re
 from collections.abc import Sequence
 from typing import TypeGuard
 
 __all__ = [
+    "CONTROL_MESSAGE",
     "METRIC_NAMES",
     "ROBUST_KERNELS",
+    "SURROGATE_MESSAGE",
     "FieldError",
     "GeometryError",
     "check_robust",
     "is_real",
     "json_path",
+    "label_problem",
+    "scrubbed_text",
+    "text_problem",
 ]
 
 #: The nine ellipse metrics (``quadloc.factors.metrics.residual``,
@@ -90,3 +99,41 @@ def json_path(loc: Sequence[str | int], root: str = "$") -> str:
         elif not str(part).startswith(("function-", "model-")):
             out += ("." if out else "") + str(part)
     return out or root
+
+
+#: C0 control characters (U+0000-U+001F: NUL, which PostgreSQL refuses in text; newlines and
+#: escapes that break logs, terminals and XML).
+_CONTROL = re.compile(r"[\x00-\x1f]")
+#: A surrogate code point in a ``str``: in text decoded from JSON a valid pair has become one
+#: character, so any left is a LONE surrogate (``"\ud800"``), which has no UTF-8 encoding.
+_SURROGATE = re.compile("[\ud800-\udfff]")
+CONTROL_MESSAGE = "must not contain control characters (U+0000-U+001F)"
+SURROGATE_MESSAGE = "must be valid Unicode text (a lone surrogate such as \\ud800 is not)"
+
+
+def text_problem(text: str) -> str | None:
+    """Why ``text`` (received from a client, to be stored or echoed) is refused, or None: a
+    control character U+0000-U+001F (:data:`CONTROL_MESSAGE`) or a lone surrogate, which cannot
+    be encoded as UTF-8, stored, hashed nor serialised (:data:`SURROGATE_MESSAGE`). The map
+    document's ids, labels and names, the recordings' and the wire models' text fields all
+    apply it (docs/api.md, "Text fields")."""
+    if _CONTROL.search(text):
+        return CONTROL_MESSAGE
+    if _SURROGATE.search(text):
+        return SURROGATE_MESSAGE
+    return None
+
+
+def label_problem(text: str) -> str | None:
+    """Why ``text`` is refused as an id, label or name of a map (beyond its length), or None:
+    blank, or :func:`text_problem`. The map document applies it to its ids, labels and names,
+    recordings to the labels and the name that become the built map's."""
+    if not text.strip():
+        return "must be a non-empty string (not only whitespace)"
+    return text_problem(text)
+
+
+def scrubbed_text(text: str) -> str:
+    """``text`` with every lone surrogate replaced by U+FFFD: for text read back from storage
+    that :func:`text_problem` did not guard when it was written (it always serialises)."""
+    return _SURROGATE.sub("\ufffd", text)

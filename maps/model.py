@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -39,7 +38,7 @@ from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from quadloc.factors.arrays import FloatArray
 from quadloc.factors.camera import Ellipsoid
-from quadloc.factors.names import json_path
+from quadloc.factors.names import SURROGATE_MESSAGE, json_path, label_problem
 from quadloc.factors.rotations import (
     DOCUMENT_ROTATION_TOLERANCE,
     canonical_quaternion_wxyz,
@@ -116,10 +115,6 @@ def _fail(message: str, error_type: str = "map_rule") -> PydanticCustomError:
     return PydanticCustomError(error_type, "{message}", {"message": message})
 
 
-_CONTROL = re.compile(r"[\x00-\x1f]")
-_SURROGATE_MESSAGE = "must be valid Unicode text (a lone surrogate such as \\ud800 is not)"
-
-
 def _is_utf8(text: str) -> bool:
     """False for text with a lone surrogate (it has no UTF-8 encoding: cannot be hashed or
     stored)."""
@@ -131,13 +126,10 @@ def _is_utf8(text: str) -> bool:
 
 
 def _printable(text: str) -> str:
-    """Text rule beyond the length limits: not blank, no control characters, valid Unicode."""
-    if not text.strip():
-        raise _fail("must be a non-empty string (not only whitespace)")
-    if _CONTROL.search(text):
-        raise _fail("must not contain control characters")
-    if not _is_utf8(text):
-        raise _fail(_SURROGATE_MESSAGE)
+    """The map document's validator of :func:`label_problem`."""
+    problem = label_problem(text)
+    if problem is not None:
+        raise _fail(problem)
     return text
 
 
@@ -214,7 +206,7 @@ def _metadata(value: Mapping[str, Any]) -> dict[str, Any]:
     if size > LIMITS["max_metadata_bytes"]:
         raise _fail(f"at most {int(LIMITS['max_metadata_bytes'])} bytes of JSON, got {size}")
     if not _is_utf8(json.dumps(plain, ensure_ascii=False)):
-        raise _fail(f"keys and strings {_SURROGATE_MESSAGE}")
+        raise _fail(f"keys and strings {SURROGATE_MESSAGE}")
     return plain
 
 
@@ -697,11 +689,14 @@ def scene_map_from_dict(data: Mapping[str, Any], *, version: int | None = None) 
     Each object gives its orientation as ``quaternion_wxyz`` (unit within 1e-4, renormalised)
     or a 3x3 ``rotation`` (orthonormal within 1e-4, snapped to the nearest rotation); neither
     means axis-aligned. ``version`` defaults to 1 when absent; the ``version`` argument, if
-    given, overrides it. Every problem found is reported in one :class:`MapValidationError`.
+    given, overrides it (the document's own ``version``, which the store ignores, is still
+    validated: a document that breaks its schema is refused, whatever the store does with the
+    field). Every problem found is reported in one :class:`MapValidationError`.
     """
-    if version is not None and isinstance(data, Mapping):
-        data = {**data, "version": version}
-    return _validated(MapDocument, data).to_scene_map()
+    scene = _validated(MapDocument, data).to_scene_map()
+    if version is not None:  # the new, unshared map: set before anyone sees it
+        object.__setattr__(scene, "version", version)
+    return scene
 
 
 def scene_map_from_chess(

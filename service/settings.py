@@ -4,9 +4,10 @@ pydantic-settings.
 API keys (``QUADLOC_API_KEYS``) are sha256 hex digests with scopes, never keys in clear:
 compact ``"<sha256hex>:read,<sha256hex>:read+write"`` (entries separated by ``,`` or whitespace,
 scopes joined by ``+``) or JSON ``[{"sha256": "<hex>", "scopes": ["read", "write"], "name":
-"ci"}]``. Scopes: ``read`` (localize, get and list maps), ``write`` (create, update, delete
-maps; implies ``read``); hash a key with ``quadloc hash-key``. With no key the service is open
-and binds only loopback (:func:`check_bind_allowed`).
+"ci"}]``. Scopes: ``read`` (localize, get and list maps, tracking sessions), ``write``
+(create, update, delete and build maps; implies ``read``), ``admin`` (sees and ends every key's
+sessions and build jobs; implies ``write``); hash a key with ``quadloc hash-key``. With no key
+the service is open and binds only loopback (:func:`check_bind_allowed`).
 """
 
 from __future__ import annotations
@@ -37,8 +38,9 @@ __all__ = [
     "settings_table_markdown",
 ]
 
-#: The two access scopes. ``write`` implies ``read``.
-SCOPES = ("read", "write")
+#: The access scopes, each implying the ones before it: ``write`` implies ``read``; ``admin``
+#: (every key's sessions and build jobs: quadloc.service.app.ownership) implies ``write``.
+SCOPES = ("read", "write", "admin")
 _HEX64 = re.compile(r"^[0-9a-f]{64}$")
 
 
@@ -51,8 +53,12 @@ class ApiKey:
     name: str = ""
 
     def allows(self, scope: str) -> bool:
-        """True when this key grants ``scope`` (``write`` implies ``read``)."""
-        return scope in self.scopes or (scope == "read" and "write" in self.scopes)
+        """True when this key grants ``scope``: one of its scopes is ``scope`` or comes after
+        it in :data:`SCOPES` (``admin`` implies ``write``, which implies ``read``)."""
+        if scope not in SCOPES:
+            return False
+        rank = SCOPES.index(scope)
+        return any(SCOPES.index(s) >= rank for s in self.scopes)
 
 
 def hash_api_key(key: str) -> str:
@@ -230,10 +236,22 @@ class Settings(BaseSettings):
                     "hard limit 2x, slot waits included); frames past it are answered "
                     "time_budget_exceeded. Keep it below the proxy's read timeout.",
     )
+    max_sessions_per_key: int = Field(
+        default=50, ge=1, le=100_000,
+        description="Live tracking sessions per API key and process (besides max_sessions); "
+                    "more -> 429 session-quota. Without keys the server has one caller: only "
+                    "max_sessions applies.",
+    )
+    replica_id: str = Field(
+        default="", pattern=r"^[a-z0-9-]{0,40}$",
+        description="This replica's tag in tracking session ids (s-<tag>.<random>), which "
+                    "the proxy routes by (deploy/nginx.conf). Empty: a random tag per process "
+                    "start (the host name is never used).",
+    )
     session_idle_timeout_s: float = Field(
         default=300.0, gt=0, le=86_400.0,
-        description="A tracking session without a request for this long expires (404 "
-                    "session-not-found).",
+        description="A tracking session without a request for this long (counted from the "
+                    "END of its last request) expires (404 session-not-found).",
     )
 
     map_cache_ttl_s: float = Field(

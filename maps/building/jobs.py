@@ -10,25 +10,30 @@ are UTC.
 from __future__ import annotations
 
 import json
+import logging
 import uuid
 from dataclasses import dataclass
 from datetime import datetime, timedelta
 from typing import Any
 
 import sqlalchemy as sa
+from pydantic import ValidationError
 from sqlalchemy.engine import Engine
 
+from quadloc.factors.names import scrubbed_text
 from quadloc.maps.building.report import BuildReport
 from quadloc.maps.store import as_utc, utc_now
 
 __all__ = ["BuildJob", "JobNotFoundError", "JobStore", "jobs_table"]
 
+log = logging.getLogger("quadloc.build")
+
 ACTIVE = ("queued", "running")
 
-# The table's description for building queries ONLY: the schema belongs to the Alembic migration
-# ``0002_build_jobs`` (maps/migrations/versions/), which this mirrors, CHECK constraint included
-# (tests/service/api/test_api_build.py compares the two).
-#: The build jobs (migration ``0002_build_jobs``).
+# The table's description for building queries ONLY: the schema belongs to the Alembic migrations
+# ``0002_build_jobs`` and ``0004_build_job_owner`` (maps/migrations/versions/), which this
+# mirrors, CHECK constraint included (tests/service/api/test_api_build.py compares the two).
+#: The build jobs (migrations ``0002_build_jobs``, ``0004_build_job_owner``).
 jobs_table = sa.Table(
     "quadloc_build_jobs",
     sa.MetaData(),
@@ -44,10 +49,52 @@ jobs_table = sa.Table(
     sa.Column("report", sa.Text, nullable=True),
     sa.Column("created_at", sa.DateTime(timezone=True), nullable=False),
     sa.Column("updated_at", sa.DateTime(timezone=True), nullable=False),
+    # the sha256 of the API key that started the job (None: no keys, or before 0003)
+    sa.Column("owner", sa.String(64), nullable=True),
     sa.CheckConstraint("status IN ('queued', 'running', 'succeeded', 'failed')",
                        name="ck_quadloc_build_jobs_status"),
 )
 
+
+
+def _scrubbed(value: Any) -> Any:
+    """A JSON value with every string (keys included) passed through
+    :func:`quadloc.factors.names.scrubbed_text`."""
+    if isinstance(value, str):
+        return scrubbed_text(value)
+    if isinstance(value, list):
+        return [_scrubbed(v) for v in value]
+    if isinstance(value, dict):
+        return {scrubbed_text(str(k)): _scrubbed(v) for k, v in value.items()}
+    return value
+
+
+def _stored_error(job_id: str, text: str | None) -> dict[str, Any] | None:
+    """A job's stored ``error`` column as ``{reason, detail}``, whatever the row holds (a row
+    written before intake checked its text, or by another version, never makes the job
+    unreadable: lone surrogates become U+FFFD, an unreadable value a stated one)."""
+    if not text:
+        return None
+    try:
+        error = _scrubbed(json.loads(text))
+    except ValueError:
+        error = None
+    if not isinstance(error, dict) or not isinstance(error.get("reason"), str):
+        log.warning("build job %s: stored error unreadable; served as 'internal_error'", job_id)
+        return {"reason": "internal_error", "detail": "the stored error could not be read"}
+    return {"reason": error["reason"], "detail": str(error.get("detail", ""))}
+
+
+def _stored_report(job_id: str, text: str | None) -> BuildReport | None:
+    """A job's stored ``report`` column, scrubbed as :func:`_stored_error`; None (logged) when
+    it is no report this version can read."""
+    if not text:
+        return None
+    try:
+        return BuildReport.model_validate(_scrubbed(json.loads(text)))
+    except (ValueError, ValidationError):
+        log.warning("build job %s: stored report unreadable; served without it", job_id)
+        return None
 
 
 class JobNotFoundError(KeyError):
@@ -68,6 +115,7 @@ class BuildJob:
     report: BuildReport | None
     created_at: datetime
     updated_at: datetime
+    owner: str | None = None
 
 
 class JobStore:
@@ -76,13 +124,16 @@ class JobStore:
     def __init__(self, engine: Engine) -> None:
         self.engine = engine
 
-    def create(self, map_id: str, base_version: int | None) -> BuildJob:
+    def create(self, map_id: str, base_version: int | None,
+               owner: str | None = None) -> BuildJob:
+        """A new ``queued`` job of ``owner`` (the sha256 of the API key starting it)."""
         now = utc_now()
         job_id = str(uuid.uuid4())
         with self.engine.begin() as conn:
             conn.execute(jobs_table.insert().values(
                 job_id=job_id, map_id=map_id, base_version=base_version, status="queued",
-                stage="queued", percent=0.0, objects_found=0, created_at=now, updated_at=now))
+                stage="queued", percent=0.0, objects_found=0, created_at=now, updated_at=now,
+                owner=owner))
         return self.get(job_id)
 
     def get(self, job_id: str) -> BuildJob:
@@ -95,9 +146,10 @@ class JobStore:
             job_id=m["job_id"], map_id=m["map_id"], base_version=m["base_version"],
             status=m["status"], stage=m["stage"], percent=float(m["percent"]),
             objects_found=int(m["objects_found"]), map_version=m["map_version"],
-            error=json.loads(m["error"]) if m["error"] else None,
-            report=BuildReport.model_validate_json(m["report"]) if m["report"] else None,
-            created_at=as_utc(m["created_at"]), updated_at=as_utc(m["updated_at"]))
+            error=_stored_error(m["job_id"], m["error"]),
+            report=_stored_report(m["job_id"], m["report"]),
+            created_at=as_utc(m["created_at"]), updated_at=as_utc(m["updated_at"]),
+            owner=m["owner"])
 
     def _update(self, *where: Any, **values: Any) -> int:
         """Set ``values`` (and the heartbeat ``updated_at``) on the ACTIVE jobs matching

@@ -61,6 +61,7 @@ PROBLEM_TYPES: dict[str, tuple[int, str]] = {
     "invalid-map": (422, "Invalid map"),
     "invalid-geometry": (422, "Invalid geometry"),
     "precondition-required": (428, "If-Match header required"),
+    "session-quota": (429, "This API key holds its quota of tracking sessions"),
     "busy": (503, "Solver busy, retry later"),
     "session-capacity": (503, "Too many tracking sessions on this replica, retry later"),
     "database-unavailable": (503, "Database unavailable, retry later"),
@@ -304,7 +305,7 @@ _SLUG_FOR_STATUS = {400: "malformed-json", 401: "unauthorized", 403: "forbidden"
                     404: "map-not-found", 409: "version-conflict", 412: "precondition-failed",
                     413: "payload-too-large", 415: "unsupported-media-type",
                     422: "validation-error",
-                    428: "precondition-required", 503: "busy"}
+                    428: "precondition-required", 429: "session-quota", 503: "busy"}
 
 
 _DESCRIPTIONS = {

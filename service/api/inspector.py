@@ -14,15 +14,27 @@ from fastapi.staticfiles import StaticFiles
 
 from quadloc.service.schemas.examples import LOCALIZE_EXAMPLE
 
-__all__ = ["SVG_MEDIA_TYPE", "install_inspector", "wants_svg"]
+__all__ = ["INSPECTOR_HEADERS", "SVG_HEADERS", "SVG_MEDIA_TYPE", "install_inspector",
+           "wants_svg"]
 
 SVG_MEDIA_TYPE = "image/svg+xml"
 STATIC_DIR = Path(__file__).resolve().parent / "static" / "inspector"
 STATIC_URL = "/static/inspector"
 #: The inspector page's Content-Security-Policy: nothing from another origin, and no inline
 #: script at all (the SVG answers it inserts carry only an inline <style>).
+#: No other site may frame it (``frame-ancestors``: clickjacking).
 INSPECTOR_CSP = ("default-src 'self'; script-src 'self'; style-src 'self' 'unsafe-inline'; "
-                 "img-src 'self' data:; font-src 'self'; connect-src 'self'")
+                 "img-src 'self' data:; font-src 'self'; connect-src 'self'; "
+                 "frame-ancestors 'none'; base-uri 'none'; form-action 'self'")
+#: Headers of the inspector page.
+INSPECTOR_HEADERS = {"Content-Security-Policy": INSPECTOR_CSP,
+                     "X-Content-Type-Options": "nosniff"}
+#: Headers of a localization drawn as SVG: the document opened on its own (a new tab, a saved
+#: link) runs nothing and loads nothing (only its inline <style>), no other site may frame it,
+#: and the browser never sniffs it as another type.
+SVG_HEADERS = {"Content-Security-Policy": "default-src 'none'; style-src 'unsafe-inline'; "
+                                          "frame-ancestors 'self'",
+               "X-Content-Type-Options": "nosniff"}
 
 
 def _media_ranges(accept: str) -> dict[str, float]:
@@ -62,7 +74,7 @@ def install_inspector(app: FastAPI) -> None:
     @router.get("/inspector")
     def inspector_page() -> FileResponse:
         return FileResponse(STATIC_DIR / "index.html", media_type="text/html",
-                            headers={"Content-Security-Policy": INSPECTOR_CSP})
+                            headers=INSPECTOR_HEADERS)
 
     @router.get("/inspector/example.json")
     def inspector_example() -> JSONResponse:

@@ -4,7 +4,9 @@ enforces the request-body size limit.
 Series: ``quadloc_http_requests_total{method, route, status}``,
 ``quadloc_http_request_duration_seconds{method, route}``, ``quadloc_localizations_total{outcome}``,
 ``quadloc_localization_solve_seconds``, ``quadloc_solves_in_progress``; ``route`` is the route
-template. Details: docs/design/service.md#metrics.
+template and ``method`` one of :data:`METHOD_LABELS` (any other method counts as ``other``):
+every label comes from a closed set, whatever a client sends. Details:
+docs/design/service.md#metrics.
 """
 
 from __future__ import annotations
@@ -17,7 +19,16 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from quadloc.service.api.errors import PROBLEM_MEDIA_TYPE, problem_body
 
-__all__ = ["ApiMetrics", "MetricsAndLimitsMiddleware"]
+__all__ = ["METHOD_LABELS", "OTHER_METHOD", "UNMATCHED_ROUTE", "ApiMetrics",
+           "MetricsAndLimitsMiddleware", "method_label", "route_label"]
+
+#: The ``method`` label values: the methods of RFC 9110 and PATCH; anything else a client sends
+#: (``curl -X FOO1``) is counted as :data:`OTHER_METHOD`, so a client cannot add series.
+METHOD_LABELS = frozenset({"GET", "HEAD", "POST", "PUT", "DELETE", "PATCH", "OPTIONS",
+                           "CONNECT", "TRACE"})
+OTHER_METHOD = "other"
+#: The ``route`` label of a request no route matched (the raw path is never a label).
+UNMATCHED_ROUTE = "<unmatched>"
 
 _LATENCY_BUCKETS = (0.001, 0.0025, 0.005, 0.01, 0.02, 0.03, 0.05, 0.075, 0.1, 0.15, 0.25, 0.5,
                     1.0, 2.5, 5.0, 10.0)
@@ -52,6 +63,19 @@ class ApiMetrics:
 
     def frame_answered(self, outcome: str) -> None:
         self.localizations.labels(outcome).inc()
+
+
+def method_label(method: str) -> str:
+    """The ``method`` label of a request method: itself if in :data:`METHOD_LABELS`, else
+    :data:`OTHER_METHOD`."""
+    return method if method in METHOD_LABELS else OTHER_METHOD
+
+
+def route_label(scope: Scope) -> str:
+    """The ``route`` label of a request: the template of the route that matched (a string
+    written in the code, e.g. ``/v1/maps/{map_id}``), else :data:`UNMATCHED_ROUTE`."""
+    path = getattr(scope.get("route"), "path", None)
+    return path if isinstance(path, str) and path else UNMATCHED_ROUTE
 
 
 def _problem_413(path: str, limit: int) -> bytes:
@@ -132,8 +156,7 @@ class MetricsAndLimitsMiddleware:
 
             await self.app(scope, replay, send_wrapper)
         finally:
-            route = scope.get("route")
-            template = getattr(route, "path", None) or "<unmatched>"
-            method = scope.get("method", "")
+            template = route_label(scope)
+            method = method_label(scope.get("method", ""))
             self.metrics.requests.labels(method, template, str(status)).inc()
             self.metrics.latency.labels(method, template).observe(time.perf_counter() - start)

@@ -1,5 +1,6 @@
 """Running the app under Uvicorn with connection-level limits (``quadloc serve``): h11 with
-``QUADLOC_MAX_HEADER_BYTES``, a request read deadline (:class:`GuardedH11Protocol`, 408), the
+``QUADLOC_MAX_HEADER_BYTES`` (however the bytes arrive: :class:`HeadLimitedConnection`), a
+request read deadline (:class:`GuardedH11Protocol`, 408), the
 keep-alive timeout and at most :data:`MALLOC_ARENAS` glibc arenas. Why each limit:
 docs/design/service.md#connection-limits-of-quadloc-serve.
 """
@@ -18,7 +19,8 @@ from uvicorn.protocols.http.h11_impl import H11Protocol
 
 from quadloc.service.settings import Settings
 
-__all__ = ["GuardedH11Protocol", "limit_malloc_arenas", "serve", "uvicorn_config"]
+__all__ = ["GuardedH11Protocol", "HeadLimitedConnection", "limit_malloc_arenas", "serve",
+           "uvicorn_config"]
 
 #: glibc malloc arenas of a server process (docs/design/service.md, connection limits).
 MALLOC_ARENAS = 2
@@ -32,11 +34,40 @@ _TIMEOUT_RESPONSE = (b"HTTP/1.1 408 Request Timeout\r\ncontent-type: text/plain\
                      b"request not received in time; closed")
 
 
+class HeadLimitedConnection(h11.Connection):
+    """An h11 server connection that refuses a request whose request line + headers are larger
+    than ``max_head_bytes``, however the bytes arrived.
+
+    h11's own ``max_incomplete_event_size`` only applies while the head is INCOMPLETE: a
+    60 KB head sent in one write is parsed whole and passes it. Here the bytes each request
+    head took from the receive buffer are counted when h11 returns the ``Request`` event, and a
+    head over the limit raises ``h11.RemoteProtocolError`` (Uvicorn answers 400 and closes the
+    connection, as for an incomplete head over the limit)."""
+
+    def __init__(self, max_head_bytes: int) -> None:
+        super().__init__(h11.SERVER, max_incomplete_event_size=max_head_bytes)
+        self.max_head_bytes = int(max_head_bytes)
+
+    def next_event(self) -> Any:
+        """h11's next event; ``RemoteProtocolError`` for a request head over the limit."""
+        buffered = len(self._receive_buffer)
+        event = super().next_event()
+        if isinstance(event, h11.Request):
+            head = buffered - len(self._receive_buffer)
+            if head > self.max_head_bytes:
+                raise h11.RemoteProtocolError(
+                    f"request line and headers are {head} bytes (max {self.max_head_bytes})",
+                    error_status_hint=431)
+        return event
+
+
 class GuardedH11Protocol(H11Protocol):
-    """Uvicorn's h11 protocol with a deadline for receiving each complete request."""
+    """Uvicorn's h11 protocol with a deadline for receiving each complete request and the header
+    limit of :class:`HeadLimitedConnection`."""
 
     def __init__(self, config: uvicorn.Config, *args: Any, **kwargs: Any) -> None:
         super().__init__(config, *args, **kwargs)
+        self.conn = HeadLimitedConnection(self.conn._max_incomplete_event_size)
         self.request_read_timeout_s = float(getattr(config, "request_read_timeout_s",
                                                     DEFAULT_REQUEST_READ_TIMEOUT_S))
         self._read_timer: asyncio.TimerHandle | None = None

@@ -5,7 +5,10 @@ A job is a row of the map store's database (``quadloc.maps.building.jobs.JobStor
 ``queued`` -> ``running`` -> ``succeeded`` | ``failed``, its row the heartbeat. One
 :class:`BuildRunner` per process runs at most ``max_concurrent_builds`` builds (threads) and
 queues ``max_queued_builds`` more (beyond: ``busy``, retry after 10 s); each build has a time
-budget (``build_time_budget_s``). A job ends ``succeeded`` (a new map or version) or
+budget (``build_time_budget_s``). While it has jobs, the runner's own heartbeat thread
+refreshes their rows every :func:`beat_interval_s` whatever the builds report, so a stage that
+runs longer than ``build_stale_after_s`` without progress is not taken for a lost runner.
+A job ends ``succeeded`` (a new map or version) or
 ``failed`` with a reason: ``time_budget_exceeded``, ``invalid_map``, ``no_objects``,
 ``version_conflict``, ``map_exists``, ``map_not_found``, ``store_unavailable``, ``busy``,
 ``runner_lost``, ``internal_error``. A job's steps: docs/design/service.md#map-building-jobs.
@@ -35,6 +38,7 @@ from quadloc.maps.store import MapStore, StoredMap
 from quadloc.service.app.conversions import RecordingInputError, recording_from_wire
 from quadloc.service.app.errors import AppError
 from quadloc.service.app.maps import MapService, parse_if_match
+from quadloc.service.app.ownership import INTERNAL, Caller
 from quadloc.service.schemas.builds import BuildErrorOut, BuildJobOut
 from quadloc.service.schemas.common import field_path
 from quadloc.service.schemas.recording import LegacyRecordingIn, RecordingBody, RecordingIn
@@ -43,9 +47,11 @@ from quadloc.service.settings import Settings
 __all__ = [
     "BUSY_RETRY_AFTER_S",
     "HEARTBEAT_S",
+    "RUNNER_BEAT_S",
     "BuildRunner",
     "BuildService",
     "LocalBuild",
+    "beat_interval_s",
     "build_limits",
     "recording_of",
     "validate_recording",
@@ -55,11 +61,21 @@ log = logging.getLogger("quadloc.build")
 
 #: Longest interval between two progress writes of a running job (s).
 HEARTBEAT_S = 1.0
+#: Longest interval between two beats of the runner's heartbeat thread (s): the rows of the
+#: jobs running or queued on this replica are refreshed that often, progress or not.
+RUNNER_BEAT_S = 5.0
 #: ``Retry-After`` (s) when this process's build queue is full.
 BUSY_RETRY_AFTER_S = 10.0
 
 #: ``progress(stage, percent, objects_found)``, as :func:`build_map` reports it.
 Progress = Callable[[str, float, int], None]
+
+
+def beat_interval_s(stale_after_s: float) -> float:
+    """The runner's beat interval for a liveness window of ``stale_after_s``: at most
+    :data:`RUNNER_BEAT_S` and a quarter of the window (three beats may be late or lost, e.g. to
+    a busy database or a long GIL hold, before a sweep takes the job for lost)."""
+    return min(RUNNER_BEAT_S, float(stale_after_s) / 4.0)
 
 
 def build_limits(settings: Settings) -> BuildLimits:
@@ -109,16 +125,19 @@ class BuildRunner:
     """The process's build threads (see the module docstring)."""
 
     def __init__(self, store: MapStore, jobs: JobStore, *, max_concurrent: int, max_queued: int,
-                 time_budget_s: float) -> None:
+                 time_budget_s: float, beat_s: float = RUNNER_BEAT_S) -> None:
         self.store = store
         self.jobs = jobs
         self.time_budget_s = float(time_budget_s)
         self.max_pending = int(max_concurrent) + int(max_queued)
+        self.beat_s = float(beat_s)
         self._pool = ThreadPoolExecutor(max_workers=int(max_concurrent),
                                         thread_name_prefix="quadloc-build")
         self._pending: set[str] = set()  # job ids queued or running here
         self._lock = threading.Lock()
         self._stopping = threading.Event()
+        self._stopped = threading.Event()
+        self._beat_thread: threading.Thread | None = None
 
     def submit(self, job_id: str, recording: Recording) -> None:
         """Queue the job; ``_RunnerBusyError`` when ``max_concurrent + max_queued`` jobs are
@@ -128,6 +147,10 @@ class BuildRunner:
                 raise _RunnerBusyError(f"{len(self._pending)} builds running or queued on "
                                        "this replica")
             self._pending.add(job_id)
+            if self._beat_thread is None or not self._beat_thread.is_alive():
+                self._beat_thread = threading.Thread(target=self._beat, daemon=True,
+                                                     name="quadloc-build-heartbeat")
+                self._beat_thread.start()
         try:
             self._pool.submit(self._run, job_id, recording)
         except RuntimeError:  # pool shut down
@@ -142,6 +165,7 @@ class BuildRunner:
 
     def shutdown(self) -> None:
         """Stop taking jobs; queued ones are dropped (their rows go stale: ``runner_lost``)."""
+        self._stopped.set()
         self._pool.shutdown(wait=False, cancel_futures=True)
 
     def stop_running(self, stop: bool = True) -> None:
@@ -151,6 +175,22 @@ class BuildRunner:
             self._stopping.set()
         else:
             self._stopping.clear()
+
+    def _beat(self) -> None:
+        """The heartbeat thread: every ``beat_s`` refresh the rows of the jobs running or
+        queued here (independent of the builds' progress); ends when none is left (the next
+        :meth:`submit` starts it again) or at :meth:`shutdown`. A failed write is logged and
+        retried at the next beat."""
+        while not self._stopped.wait(self.beat_s):
+            with self._lock:
+                ids = sorted(self._pending)
+                if not ids:
+                    self._beat_thread = None
+                    return
+            try:
+                self.jobs.heartbeat(ids)
+            except Exception as exc:  # database unavailable: the next beat retries
+                log.warning("build heartbeat not written (%s: %s)", type(exc).__name__, exc)
 
     def _run(self, job_id: str, recording: Recording) -> None:
         try:
@@ -170,8 +210,9 @@ class BuildRunner:
 
     def _heartbeat(self, job_id: str) -> Progress:
         """The build's progress callback: writes the job's progress at every stage change and
-        at most every :data:`HEARTBEAT_S`, refreshing the jobs queued behind it too; raises
-        ``_JobLostError`` when the row is no longer active."""
+        at most every :data:`HEARTBEAT_S` (the liveness of this job and of the ones queued
+        behind it is the heartbeat thread's, :meth:`_beat`); raises ``_JobLostError`` when the
+        row is no longer active."""
         last_time, last_stage = 0.0, ""
 
         def progress(stage: str, percent: float, objects: int) -> None:
@@ -181,10 +222,6 @@ class BuildRunner:
                 last_time, last_stage = now, stage
                 if not self.jobs.progress(job_id, stage, percent, objects):
                     raise _JobLostError(job_id)
-                # the jobs waiting behind this one are alive too: their heartbeat
-                waiting = [j for j in self.pending() if j != job_id]
-                if waiting:
-                    self.jobs.heartbeat(waiting)
 
         return progress
 
@@ -285,7 +322,8 @@ class BuildService:
         self.jobs = JobStore(store.engine)
         self.runner = BuildRunner(
             store, self.jobs, max_concurrent=settings.max_concurrent_builds,
-            max_queued=settings.max_queued_builds, time_budget_s=settings.build_time_budget_s)
+            max_queued=settings.max_queued_builds, time_budget_s=settings.build_time_budget_s,
+            beat_s=beat_interval_s(settings.build_stale_after_s))
 
     def sweep_stale(self) -> int:
         """Mark failed (``runner_lost``) the jobs silent for ``build_stale_after_s`` (their
@@ -309,10 +347,11 @@ class BuildService:
 
     def base_version(self, map_id: str, if_match: str | None) -> int | None:
         """The version a build of ``map_id`` replaces: None for a new map (then ``If-Match``
-        must be absent: ``precondition-failed``); for an existing map ``If-Match`` must name
-        its latest ETag (``precondition-required`` / ``precondition-failed``)."""
+        must be absent: ``precondition-failed``, ``*`` included); for an existing map
+        ``If-Match`` must name its latest ETag or be ``*`` (``precondition-required`` /
+        ``precondition-failed``; the rule of :meth:`MapService.check_etag`)."""
         if self.maps.latest_version(map_id) is None:
-            if if_match is not None:
+            if if_match is not None:  # no current version: no tag matches, not even '*'
                 raise AppError("precondition-failed",
                                f"map {map_id!r} does not exist, so If-Match cannot match; omit "
                                "it to build a new map",
@@ -321,11 +360,12 @@ class BuildService:
         tags = parse_if_match(if_match, what=f"map {map_id!r} exists: building a new version")
         return self.maps.check_etag(map_id, tags)
 
-    def start(self, document: Any, map_id: str, if_match: str | None) -> BuildJobOut:
-        """Start a build job (``busy`` when this process's queue is full)."""
+    def start(self, document: Any, map_id: str, if_match: str | None,
+              caller: Caller = INTERNAL) -> BuildJobOut:
+        """Start a build job of ``caller`` (``busy`` when this process's queue is full)."""
         recording = self.parse(document)
         base = self.base_version(map_id, if_match)
-        job = self.jobs.create(map_id, base)
+        job = self.jobs.create(map_id, base, caller.owner)
         try:
             self.runner.submit(job.job_id, recording)
         except RuntimeError as exc:  # the queue is full, or the runner stopped
@@ -334,14 +374,18 @@ class BuildService:
                            retry_after_s=BUSY_RETRY_AFTER_S) from exc
         return job_out(self.jobs.get(job.job_id))
 
-    def get(self, job_id: str) -> BuildJobOut:
-        """A job (stale ones marked failed first); ``not-found``."""
+    def get(self, job_id: str, caller: Caller = INTERNAL) -> BuildJobOut:
+        """A job (stale ones marked failed first); ``not-found``, also for a job of another
+        key (:mod:`quadloc.service.app.ownership`: the same answer as an unknown id)."""
         self.jobs.fail_stale(self.settings.build_stale_after_s)
         try:
-            return job_out(self.jobs.get(job_id))
-        except JobNotFoundError as exc:
+            job = self.jobs.get(job_id)
+        except JobNotFoundError:
+            job = None
+        if job is None or not caller.may_access(job.owner):
             raise AppError("not-found", f"no build job {job_id!r}",
-                           field="path.job_id", message="not found") from exc
+                           field="path.job_id", message="not found")
+        return job_out(job)
 
     def build_now(self, document: Any, map_id: str, *, update: bool,
                   progress: Progress | None = None) -> LocalBuild:

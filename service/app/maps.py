@@ -3,9 +3,12 @@ demo map, readiness.
 
 Concurrency (docs/design/maps.md): a map version is immutable and its ``content_hash`` is its
 strong ETag (``"<sha256hex>"``). An update names the ETag of the latest version it edited
-(``If-Match``): missing or ``*`` -> ``precondition-required``, stale -> ``precondition-failed``
-(with the current ETag), a lost race between the check and the write -> ``version-conflict``;
-never a silent overwrite.
+(``If-Match``): missing -> ``precondition-required``, stale -> ``precondition-failed`` (with the
+current ETag), a lost race between the check and the write -> ``version-conflict``; never a
+silent overwrite. ``If-Match: *`` follows RFC 9110 (13.1.1): it matches when the map exists
+(the write replaces its latest version, still refused with ``version-conflict`` if another
+write lands between the check and the write), and fails (``precondition-failed``) when it does
+not; one rule for ``PUT`` and ``maps:build`` (:data:`ANY_ETAG`, :meth:`MapService.check_etag`).
 """
 
 from __future__ import annotations
@@ -30,9 +33,12 @@ from quadloc.service.schemas.maps import (
 )
 from quadloc.service.settings import Settings
 
-__all__ = ["MapService", "etag_of", "parse_if_match", "seed_demo_map"]
+__all__ = ["ANY_ETAG", "MapService", "etag_of", "parse_if_match", "seed_demo_map"]
 
 log = logging.getLogger("quadloc.app")
+
+#: ``If-Match: *``: matches any current version of an existing map (RFC 9110, 13.1.1).
+ANY_ETAG = "*"
 
 
 def etag_of(content_hash: str) -> str:
@@ -41,20 +47,23 @@ def etag_of(content_hash: str) -> str:
 
 
 def parse_if_match(if_match: str | None, *, what: str = "the update") -> set[str]:
-    """The entity tags of an ``If-Match`` value; ``precondition-required`` when it is missing,
-    blank or ``*`` (which would overwrite blindly). A weak tag (``W/"..."``) is kept as is and
-    fails the strong comparison of :meth:`MapService.check_etag` (RFC 9110 13.1.1)."""
+    """The entity tags of an ``If-Match`` value (:data:`ANY_ETAG` included: it matches any
+    version of an existing map, :meth:`MapService.check_etag`); ``precondition-required`` when
+    it is missing or blank. A weak tag (``W/"..."``) is kept as is and fails the strong
+    comparison of :meth:`MapService.check_etag` (RFC 9110 13.1.1)."""
     if if_match is None or not if_match.strip():
         raise AppError("precondition-required",
                        f"{what} needs 'If-Match: \"<ETag>\"' with the ETag of the map's latest "
-                       "version (GET /v1/maps/{map_id} returns it)",
+                       "version (GET /v1/maps/{map_id} returns it), or 'If-Match: *'",
                        field="header.if-match", message="missing")
-    tags = {t.strip() for t in if_match.split(",") if t.strip()}
-    if "*" in tags:
-        raise AppError("precondition-required",
-                       "'If-Match: *' would overwrite blindly; send the map's ETag",
-                       field="header.if-match", message="'*' not accepted")
-    return tags
+    return {t.strip() for t in if_match.split(",") if t.strip()}
+
+
+def _star_on_missing(map_id: str) -> AppError:
+    """``If-Match: *`` on a map that does not exist: the precondition is false (412)."""
+    return AppError("precondition-failed",
+                    f"map {map_id!r} does not exist, so If-Match cannot match; omit it to "
+                    "create the map", field="header.if-match", message="map does not exist")
 
 
 def seed_demo_map(store: MapStore, map_id: str = DEMO_MAP_ID) -> bool:
@@ -159,15 +168,18 @@ class MapService:
                            field="map_id", message="already exists") from exc
 
     def check_etag(self, map_id: str, tags: set[str], hint: str = "") -> int:
-        """The latest version of ``map_id`` if its ETag is one of ``tags``; else
-        ``precondition-failed`` carrying the current ETag (``hint`` ends the detail);
-        ``map-not-found``."""
+        """The latest version of ``map_id`` if its ETag is one of ``tags`` or ``tags`` holds
+        :data:`ANY_ETAG`; else ``precondition-failed`` carrying the current ETag (``hint`` ends
+        the detail). A missing map: ``precondition-failed`` for ``*`` (RFC 9110: ``*`` is false
+        when there is no current representation), ``map-not-found`` otherwise."""
         try:
             current = self.store.get(map_id)
         except MapNotFound as exc:
+            if ANY_ETAG in tags:
+                raise _star_on_missing(map_id) from exc
             raise map_not_found(map_id) from exc
         etag = etag_of(current.content_hash)
-        if etag not in tags:
+        if etag not in tags and ANY_ETAG not in tags:
             raise AppError("precondition-failed",
                            f"map {map_id!r} is at version {current.scene_map.version} with ETag "
                            f"{etag}{hint}", field="header.if-match", message="stale ETag",
@@ -176,9 +188,10 @@ class MapService:
 
     def update(self, map_id: str, document: dict[str, Any], if_match: str | None) -> MapOut:
         """Store ``document`` as the next version of ``map_id``. Checked in this order: the
-        document (invalid -> ``invalid-map`` / ``MapValidationError``), ``If-Match`` (missing or
-        ``*`` -> ``precondition-required``), the map (absent -> ``map-not-found``), the ETag
-        (stale -> ``precondition-failed``); a lost race -> ``version-conflict``."""
+        document (invalid -> ``invalid-map`` / ``MapValidationError``), ``If-Match`` (missing ->
+        ``precondition-required``), the map (absent -> ``map-not-found``, or
+        ``precondition-failed`` for ``*``), the ETag (stale -> ``precondition-failed``;
+        ``*`` matches any); a lost race -> ``version-conflict``."""
         self.check_object_limit(document)
         if document.get("map_id", map_id) != map_id:
             raise AppError("invalid-map", "map_id in the body differs from the path",

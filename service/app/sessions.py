@@ -1,8 +1,11 @@
 """The tracking-session use cases: start a session on a map, describe it, end it, add frames.
 
 Sessions live in this process (:class:`quadloc.service.app.session_store.SessionStore`: at most
-``max_sessions`` live, each expiring after ``session_idle_timeout_s`` without a request; ids
-carry this replica's tag so that a proxy routes a session to its replica). The map version is
+``max_sessions`` live and ``max_sessions_per_key`` per key, each expiring
+``session_idle_timeout_s`` after the end of its last request; ids carry this replica's tag so
+that a proxy routes a session to its replica). A session belongs to the key that created it:
+another key gets ``session-not-found``, an ``admin`` key sees all
+(:mod:`quadloc.service.app.ownership`). The map version is
 loaded once at creation, through the :class:`MapLoader` (the same bounded wait as localize).
 A frames request is validated whole before any frame is fused (an error names
 ``frames[i]....`` and leaves the session unchanged); its frames are fused in order, each
@@ -25,10 +28,12 @@ from quadloc.service.app.conversions import (
 from quadloc.service.app.errors import AppError, invalid_input
 from quadloc.service.app.localization import BUSY_RETRY_AFTER_S, FairSlots
 from quadloc.service.app.map_loader import MapLoader
+from quadloc.service.app.ownership import INTERNAL, Caller
 from quadloc.service.app.session_store import (
     SessionCapacityError,
     SessionEntry,
     SessionNotFound,
+    SessionQuotaError,
     SessionStore,
 )
 from quadloc.service.localization.types import LocalizationInputError
@@ -66,11 +71,14 @@ class SessionService:
         self.frame_budget_ms = settings.session_frame_budget_ms
         self.request_budget_ms = settings.session_request_budget_ms
         self._stopping = threading.Event()
-        self.store = SessionStore(settings.max_sessions, settings.session_idle_timeout_s)
+        self.store = SessionStore(settings.max_sessions, settings.session_idle_timeout_s,
+                                  max_per_owner=settings.max_sessions_per_key,
+                                  replica_tag=settings.replica_id)
 
-    def create(self, map_id: str, body: SessionCreate) -> SessionOut:
-        """Start a session on the latest version of ``map_id``; ``map-not-found``,
-        ``validation-error`` (a bad camera or option), ``session-capacity``."""
+    def create(self, map_id: str, body: SessionCreate, caller: Caller = INTERNAL) -> SessionOut:
+        """Start a session of ``caller`` on the latest version of ``map_id``;
+        ``map-not-found``, ``validation-error`` (a bad camera or option), ``session-capacity``,
+        ``session-quota``."""
         compiled = self.maps.get(map_id)
         try:
             session = TrackingSession(compiled, camera_from_request(body.camera),
@@ -78,20 +86,28 @@ class SessionService:
         except _INPUT_ERRORS as exc:
             raise invalid_input(exc) from exc
         try:
-            entry = self.store.create(map_id, compiled.version, session, body.convention)
+            entry = self.store.create(map_id, compiled.version, session, body.convention,
+                                      caller.owner)
         except SessionCapacityError as exc:
             raise AppError("session-capacity", str(exc),
                            retry_after_s=SESSION_CAPACITY_RETRY_AFTER_S) from exc
+        except SessionQuotaError as exc:
+            raise AppError("session-quota", str(exc),
+                           retry_after_s=SESSION_CAPACITY_RETRY_AFTER_S) from exc
         return self._out(entry)
 
-    def get(self, session_id: str) -> SessionOut:
-        """The session's description (touches its idle clock); ``session-not-found``."""
-        return self._out(self._entry(session_id))
-
-    def delete(self, session_id: str) -> None:
-        """End the session; ``session-not-found``."""
+    def get(self, session_id: str, caller: Caller = INTERNAL) -> SessionOut:
+        """The session's description (touches its idle clock); ``session-not-found`` (also
+        for another key's session)."""
         try:
-            self.store.delete(session_id)
+            return self._out(self.store.get(session_id, caller))
+        except SessionNotFound as exc:
+            raise _not_found(session_id) from exc
+
+    def delete(self, session_id: str, caller: Caller = INTERNAL) -> None:
+        """End the session; ``session-not-found`` (also for another key's session)."""
+        try:
+            self.store.delete(session_id, caller)
         except SessionNotFound as exc:
             raise _not_found(session_id) from exc
 
@@ -105,13 +121,23 @@ class SessionService:
             self._stopping.clear()
 
     def add_frames(self, session_id: str, body: SessionFramesIn | SessionFrameIn,
-                   cancel: threading.Event | None = None) -> SessionFramesOut:
+                   caller: Caller = INTERNAL, cancel: threading.Event | None = None
+                   ) -> SessionFramesOut:
         """Fuse one frame, or a batch in time order (see the module docstring); errors name
-        ``frames[i]....`` for a batch, the frame's own fields otherwise. Each frame has the
-        CPU budget ``session_frame_budget_ms``, the request ``session_request_budget_ms``;
-        ``cancel`` (set when the client went away) and :meth:`close` end the work like a
-        budget (frames answered ``time_budget_exceeded``)."""
-        entry = self._entry(session_id)
+        ``frames[i]....`` for a batch, the frame's own fields otherwise. The session is held
+        for the whole request (:meth:`SessionStore.use`): its idle clock restarts at the end.
+        Each frame has the CPU budget ``session_frame_budget_ms``, the request
+        ``session_request_budget_ms``; ``cancel`` (set when the client went away) and
+        :meth:`close` end the work like a budget (frames answered ``time_budget_exceeded``)."""
+        try:
+            with self.store.use(session_id, caller) as entry:
+                return self._add_frames(entry, body, cancel)
+        except SessionNotFound as exc:
+            raise _not_found(session_id) from exc
+
+    def _add_frames(self, entry: SessionEntry, body: SessionFramesIn | SessionFrameIn,
+                    cancel: threading.Event | None = None) -> SessionFramesOut:
+        """:meth:`add_frames` on the held ``entry``."""
         batch = isinstance(body, SessionFramesIn)
         frames = body.frames if isinstance(body, SessionFramesIn) else [body]
         with entry.lock:
@@ -138,7 +164,7 @@ class SessionService:
                 finally:
                     self.slots.release()
                 results.append(frame_out(result, entry.convention))
-        return SessionFramesOut(session_id=session_id, results=results)
+        return SessionFramesOut(session_id=entry.session_id, results=results)
 
     # ---------------------------------------------------------------------------- helpers
 
@@ -161,12 +187,6 @@ class SessionService:
             last = inp.timestamp
             inputs.append(inp)
         return inputs
-
-    def _entry(self, session_id: str) -> SessionEntry:
-        try:
-            return self.store.get(session_id)
-        except SessionNotFound as exc:
-            raise _not_found(session_id) from exc
 
     def _out(self, entry: SessionEntry) -> SessionOut:
         return SessionOut(session_id=entry.session_id, url=f"/v1/sessions/{entry.session_id}",

@@ -47,7 +47,8 @@ examples (in this process, on the local database):
   quadloc maps import tests/support/data/chess_scene.json --chess --map-id chess2
   quadloc maps versions chess
   quadloc maps export chess --version 1 > chess_v1.json
-  quadloc maps build sdk/test-vectors/build_recording.json --map-id my-room   # docs/map_building.md
+  quadloc maps build docs/examples/room_recording.json.gz --map-id room   # docs/map_building.md
+  quadloc calibrate docs/examples/room_recording.json.gz --map room       # its held-out frames
   quadloc localize --map chess docs/examples/localize_chess.json
   quadloc track --map chess docs/examples/track_chess.json
   quadloc openapi --output docs/openapi.json     # regenerate the published schema
@@ -109,7 +110,7 @@ def _maps_parsers(sub: Any, fmt: type[argparse.HelpFormatter]) -> None:
                "  quadloc maps import docs/examples/office_map.json\n"
                "  quadloc maps import tests/support/data/chess_scene.json --chess "
                "--map-id chess2\n  quadloc maps export chess > chess.json\n"
-               "  quadloc maps build sdk/test-vectors/build_recording.json --map-id my-room\n"
+               "  quadloc maps build docs/examples/room_recording.json.gz --map-id room\n"
                "  quadloc --url http://127.0.0.1:8000 maps versions chess\n")
     msub = maps_p.add_subparsers(dest="maps_command", metavar="ACTION", required=True)
     p = _command(msub.add_parser("list", help="list maps with their latest version"),
@@ -275,7 +276,9 @@ def build_parser() -> argparse.ArgumentParser:
                     "poses the reference), store them with the version (localize uses them), "
                     "and print the mean NEES and the confidence calibration error before / "
                     "after on half of those frames the fit did not use. Local database only.",
-        epilog="example:\n  quadloc calibrate room.json --map my-room\n"), "calibrate")
+        epilog="example (docs/map_building.md):\n"
+               "  quadloc calibrate docs/examples/room_recording.json.gz --map room\n"),
+        "calibrate")
     p.add_argument("file", help="recording JSON with holdout_every ('-' = stdin, .gz ok)")
     p.add_argument("--map", required=True, metavar="ID", help="map id")
     p.add_argument("--version", type=int, help="map version (default: latest)")

@@ -13,8 +13,8 @@ Steps of :func:`fit_map_calibration`:
    :class:`~quadloc.service.localization.calibration_fit.SolveRecord` (errors against the
    reference: position m, rotation deg, NEES of the reported covariance);
 3. :func:`~quadloc.service.localization.calibration_fit.fit_calibration` (base: the shipped
-   constants) fits ``k``, ``f`` and the confidence model for the solve's calibration key
-   (``provenance["fitted_keys"]``: only that key uses them, see
+   constants, settings :data:`USER_FIT_SETTINGS`) fits ``k``, ``f`` and the confidence model
+   for the solve's calibration key (``provenance["fitted_keys"]``: only that key uses them, see
    :func:`~quadloc.service.localization.calibration_fit.map_calibration_applies`); the
    ambiguity ratio and the default ``min_confidence`` are carried over (no decision sets);
 4. the report frames are localized with the shipped and with the new constants:
@@ -45,6 +45,7 @@ from quadloc.maps.compiled import CompiledMap
 from quadloc.service.localization.calibration_fit import (
     CalibrationConstants,
     CalibrationFitError,
+    FitSettings,
     SolveRecord,
     fit_calibration,
     record_from_evidence,
@@ -57,6 +58,7 @@ from quadloc.service.localization.types import Detection, LocalizationOptions, L
 __all__ = [
     "MIN_FIT_FRAMES",
     "NEES_WITHIN_M",
+    "USER_FIT_SETTINGS",
     "CalibrationQuality",
     "MapCalibration",
     "ReferenceFrame",
@@ -69,6 +71,13 @@ __all__ = [
 NEES_WITHIN_M = 0.10
 #: Fewest localized fit frames the fit accepts.
 MIN_FIT_FRAMES = 20
+#: The fit's settings for a map's calibration: the shipped ones but ONE operating point, the
+#: report's (``NEES_WITHIN_M``). The shipped fit centres the cells of several operating points
+#: and detector groups on 6 (their spread is what it balances); a user's recording is one
+#: group, and its report is the mean NEES within ``NEES_WITHIN_M``: the fit targets that same
+#: quantity. (Chosen after seeing seed 12 of bench.map_calibration, whose 10 cm mean NEES was
+#: 11.0 with the three operating points; the figures of docs/results.md are on other seeds.)
+USER_FIT_SETTINGS = FitSettings(operating_points_m=(NEES_WITHIN_M,))
 
 
 @dataclass(frozen=True)
@@ -121,7 +130,8 @@ def calibration_error(confidence: FloatArray, outcome: FloatArray, bins: int = 1
     y = np.asarray(outcome, dtype=float)
     if p.size == 0:
         return math.nan
-    k = np.clip((p * bins).astype(int), 0, bins - 1)
+    edges = np.linspace(0.0, 1.0, bins + 1)
+    k = np.clip(np.searchsorted(edges, p, side="right") - 1, 0, bins - 1)
     total = 0.0
     for b in np.unique(k):
         sel = k == b
@@ -193,7 +203,7 @@ def fit_map_calibration(frames: Sequence[ReferenceFrame], compiled: CompiledMap,
             f"{sum(r.localized for r in records)} of {len(records)} fit frames localized; "
             f"at least {MIN_FIT_FRAMES} needed (hold out more frames)")
     base = CalibrationConstants.shipped()
-    constants = fit_calibration(records, base)
+    constants = fit_calibration(records, base, USER_FIT_SETTINGS)
     k = constants.covariance_scale.get(sorted(keys)[0], math.nan)
     if not (math.isfinite(k) and k > 0):
         raise CalibrationFitError(f"the fitted covariance scale is {k}: the answers agree "

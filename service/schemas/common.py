@@ -19,13 +19,15 @@ from collections.abc import Sequence
 from typing import Annotated, Any, Literal
 
 from pydantic import (
+    AfterValidator,
     BaseModel,
     BeforeValidator,
     ConfigDict,
     Field,
 )
+from pydantic_core import PydanticCustomError
 
-from quadloc.factors.names import json_path
+from quadloc.factors.names import json_path, label_problem, text_problem
 
 __all__ = [
     "API_VERSION",
@@ -33,10 +35,12 @@ __all__ = [
     "Convention",
     "HealthOut",
     "Int",
+    "LabelText",
     "Problem",
     "ProblemField",
     "Row4",
     "Row6",
+    "Text",
     "WireModel",
     "field_path",
     "integral",
@@ -69,6 +73,31 @@ Row4 = Annotated[list[float], Field(min_length=4, max_length=4)]
 
 
 Row6 = Annotated[list[float], Field(min_length=6, max_length=6)]
+
+
+def _checked_text(value: str) -> str:
+    problem = text_problem(value)
+    if problem is not None:
+        raise PydanticCustomError("text", "{message}", {"message": problem})
+    return value
+
+
+#: A text field that is stored or echoed (labels, frame ids): the rule of
+#: :func:`quadloc.factors.names.text_problem` (no control character, no lone surrogate), 422
+#: naming the field; lengths are the field's own.
+Text = Annotated[str, AfterValidator(_checked_text)]
+
+
+def _checked_label(value: str) -> str:
+    problem = label_problem(value)
+    if problem is not None:
+        raise PydanticCustomError("text", "{message}", {"message": problem})
+    return value
+
+
+#: A text that becomes a map's label or name (a recording's): :data:`Text` and not blank, the
+#: map document's rule (:func:`quadloc.factors.names.label_problem`), checked at intake.
+LabelText = Annotated[str, AfterValidator(_checked_label)]
 
 
 class WireModel(BaseModel):

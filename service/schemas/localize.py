@@ -37,6 +37,7 @@ from quadloc.service.schemas.common import (
     Int,
     Row4,
     Row6,
+    Text,
     WireModel,
     integral,
 )
@@ -104,7 +105,7 @@ class DetectionIn(WireModel):
 
     ellipse: EllipseIn | None = None
     box: BoxIn | None = None
-    label: str = Field(min_length=1, max_length=128, description="Category label of the map.")
+    label: Text = Field(min_length=1, max_length=128, description="Category label of the map.")
     sigma: float | None = Field(default=None, gt=0, le=1e6,
                                 description="Predicted uncertainty (> 0); cost weight 1/sigma.")
     log_variance: float | None = Field(default=None, ge=-60, le=60,
@@ -271,7 +272,7 @@ class LocalizeRequest(WireModel):
     detections: list[DetectionIn] = Field(max_length=MAX_DETECTIONS)
     prior: PosePriorIn | None = None
     gravity: GravityIn | None = None
-    frame_id: str | None = Field(default=None, max_length=256, description="Echoed back.")
+    frame_id: Text | None = Field(default=None, max_length=256, description="Echoed back.")
     timestamp: float | None = Field(default=None, description="Echoed back (client clock, s).")
     options: LocalizeOptionsIn = Field(default_factory=LocalizeOptionsIn)
 

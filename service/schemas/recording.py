@@ -21,7 +21,7 @@ from typing import Annotated, Any
 from pydantic import ConfigDict, Discriminator, Field, Tag, model_validator
 
 from quadloc.service.limits import MAX_DETECTIONS
-from quadloc.service.schemas.common import Convention, Int, WireModel
+from quadloc.service.schemas.common import Convention, Int, LabelText, Text, WireModel
 from quadloc.service.schemas.localize import CameraIn, DetectionIn, PoseIn
 
 __all__ = [
@@ -73,14 +73,16 @@ class RecordingDetectionIn(DetectionIn):
     """A detection as for localize, plus an optional ``track_id``: detections of one track (and
     label) are one object."""
 
-    track_id: str | None = Field(default=None, min_length=1, max_length=128,
+    label: LabelText = Field(min_length=1, max_length=128,
+                             description="Category label: the built object's category.")
+    track_id: Text | None = Field(default=None, min_length=1, max_length=128,
                                  description="The detector's / tracker's object track.")
 
 
 class RecordingFrameIn(WireModel):
     """One recorded frame: the app's camera pose and the frame's detections."""
 
-    frame_id: str | None = Field(default=None, min_length=1, max_length=128,
+    frame_id: Text | None = Field(default=None, min_length=1, max_length=128,
                                  description="Defaults to the frame's position.")
     world_from_camera: PoseIn = Field(description="The app's camera pose (m), in the "
                                                   "recording's `convention`.")
@@ -93,11 +95,11 @@ class RecordingFrameIn(WireModel):
 class _RecordingOptions(WireModel):
     """The build options of a recording (both forms)."""
 
-    name: str = Field(default="Built map", min_length=1, max_length=256,
-                      description="Name of the built map.")
+    name: LabelText = Field(default="Built map", min_length=1, max_length=256,
+                            description="Name of the built map.")
     up_axis: list[float] = Field(default=[0.0, 0.0, 1.0], min_length=3, max_length=3,
                                  description="World up direction of the app's world frame.")
-    size_priors: dict[str, SizePriorIn] = Field(
+    size_priors: dict[LabelText, SizePriorIn] = Field(
         default_factory=dict, description="Label -> prior on its objects' semi-axes.")
     refine_camera_poses: bool = Field(
         default=True, description="Refine the app's camera poses with the objects (tied by "
@@ -123,14 +125,19 @@ class RecordingIn(_RecordingOptions):
 
 
 class LegacyDetectionIn(RecordingDetectionIn):
-    """A detection of the deprecated form: ``box`` may be an array ``[xmin, ymin, xmax, ymax]``."""
+    """A detection of the deprecated form: ``box`` may be an array ``[xmin, ymin, xmax, ymax]``
+    and ``track_id`` an integer."""
 
     @model_validator(mode="before")
     @classmethod
     def _box_array(cls, data: Any) -> Any:
-        box = data.get("box") if isinstance(data, dict) else None
+        if not isinstance(data, dict):
+            return data
+        box, track = data.get("box"), data.get("track_id")
         if isinstance(box, list) and len(box) == 4:
-            return {**data, "box": dict(zip(("xmin", "ymin", "xmax", "ymax"), box, strict=True))}
+            data = {**data, "box": dict(zip(("xmin", "ymin", "xmax", "ymax"), box, strict=True))}
+        if isinstance(track, int) and not isinstance(track, bool):  # ids were str | int
+            data = {**data, "track_id": str(track)}
         return data
 
 
@@ -139,6 +146,14 @@ class LegacyFrameIn(RecordingFrameIn):
 
     detections: list[LegacyDetectionIn] = Field(  # type: ignore[assignment]
         default_factory=list, max_length=MAX_DETECTIONS)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _integer_id(cls, data: Any) -> Any:
+        fid = data.get("frame_id") if isinstance(data, dict) else None
+        if isinstance(fid, int) and not isinstance(fid, bool):  # ids were str | int
+            return {**data, "frame_id": str(fid)}
+        return data
 
 
 class LegacyRecordingIn(_RecordingOptions):

@@ -10,7 +10,7 @@ from typing import Annotated, Any
 from pydantic import BaseModel, Discriminator, Field, Tag
 
 from quadloc.service.limits import MAX_DETECTIONS
-from quadloc.service.schemas.common import Convention, WireModel
+from quadloc.service.schemas.common import Convention, Text, WireModel
 from quadloc.service.schemas.localize import (
     CameraIn,
     CovarianceOut,
@@ -79,7 +79,7 @@ class SessionFrameIn(WireModel):
     odom_from_camera: PoseIn = Field(description="Camera pose in the app's odometry (session) "
                                                  "frame, in the session's convention.")
     timestamp: float = Field(ge=-1e12, le=1e12, description="Client clock (s), non-decreasing.")
-    frame_id: str | None = Field(default=None, max_length=256)
+    frame_id: Text | None = Field(default=None, max_length=256, description="Echoed back.")
     prior: PosePriorIn | None = None
     gravity: GravityIn | None = Field(
         default=None, description="The gravity direction the device measures in this frame's "

@@ -221,6 +221,7 @@ def test_compose_stack_postgres_two_replicas_and_proxy():
 
     assert default(services["db"]["image"]).startswith("postgres:")
     replicas = [services["quadloc-1"], services["quadloc-2"]]
+    conf_text = (REPO / "deploy" / "nginx.conf").read_text()
     for svc in replicas:
         assert svc["build"]["context"] == "."
         assert default(svc["build"]["args"]["BASE"]) == "python:3.11-slim"
@@ -228,6 +229,8 @@ def test_compose_stack_postgres_two_replicas_and_proxy():
         assert re.match(r"postgresql://\w+:.+@db:5432/\w+$", env["QUADLOC_DATABASE_URL"])
         assert ":?" in env["QUADLOC_API_KEYS"], "API keys must be required, not defaulted"
         assert env["QUADLOC_WORKERS"] == "1"
+        # the proxy routes sessions by this tag (the host name is no default: issue 32)
+        assert f"s-{env['QUADLOC_REPLICA_ID']}\\." in conf_text
         assert svc["depends_on"]["db"]["condition"] == "service_healthy"
     proxy = services["proxy"]
     assert default(proxy["image"]).startswith("nginx:")

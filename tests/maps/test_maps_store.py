@@ -387,7 +387,7 @@ def test_migrations_are_idempotent_and_recorded(store: MapStore) -> None:
     with store.engine.connect() as conn:
         rev = conn.execute(sa.text("SELECT version_num FROM quadloc_alembic_version")).scalar_one()
         tables = set(sa.inspect(conn).get_table_names())
-    assert rev == "0003_map_calibrations"
+    assert rev == "0004_build_job_owner"
     assert {"quadloc_maps", "quadloc_map_versions"} <= tables
     store.ping()
 

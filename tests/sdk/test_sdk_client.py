@@ -564,3 +564,30 @@ def test_update_map_retries_as_its_docstring_says():
     with pytest.raises(errs.TransportError):
         client.update_map("m", {"map_id": "m"}, if_match='"h1"')
     assert len(rec.requests) == 1 and sleeps == []
+
+
+@pytest.mark.parametrize(("model", "schema"), [
+    ("SessionOptions", "SessionOptionsIn"), ("SessionFrame", "SessionFrameIn"),
+    ("SessionInfo", "SessionOut"), ("SessionFrameResult", "SessionFrameOut"),
+])
+def test_session_models_have_the_fields_of_the_wire_schemas(model: str, schema: str) -> None:
+    """The SDK's session models have exactly the fields of the server's schemas in
+    docs/openapi.json (the contract), and the fields the server requires are required."""
+    spec = json.loads((Path(__file__).resolve().parents[2] / "docs" / "openapi.json")
+                      .read_text())["components"]["schemas"]
+    cls = getattr(sdk, model)
+    assert set(cls.model_fields) == set(spec[schema]["properties"]), model
+    if model in ("SessionFrame", "SessionOptions"):  # requests: required where the server requires
+        required = {n for n, f in cls.model_fields.items() if f.is_required()}
+        assert required == set(spec[schema].get("required", [])), model
+
+
+def test_session_routes_exist_in_the_servers_openapi() -> None:
+    """Every path the session helpers call is a route of the server."""
+    from quadloc_sdk.session import _session_path
+
+    paths = json.loads((Path(__file__).resolve().parents[2] / "docs" / "openapi.json")
+                       .read_text())["paths"]
+    sid = _session_path("s-x.y").replace("s-x.y", "{session_id}")
+    assert set(paths[sid]) >= {"get", "delete"}
+    assert "post" in paths[sid + "/frames"] and "post" in paths["/v1/maps/{map_id}/sessions"]

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -41,6 +42,8 @@ __all__ = [
     "project_ellipsoid",
     "render_overlay_svg",
     "rotation_from_quaternion_wxyz",
+    "xml_attribute",
+    "xml_text",
 ]
 
 Matrix = Sequence[Sequence[float]]
@@ -189,6 +192,24 @@ text.summary{font-size:14px}
 """
 
 
+#: Characters XML 1.0 does not allow in a document (C0 controls but tab, LF, CR; lone
+#: surrogates; U+FFFE, U+FFFF): an SVG holding one is not well-formed, so text drawn from a
+#: request or a map has each replaced by U+FFFD.
+_NOT_XML = re.compile("[^\t\n\r\x20-\ud7ff\ue000-\ufffd\U00010000-\U0010ffff]")
+
+
+def xml_text(text: str) -> str:
+    """``text`` escaped as XML character data, every character XML 1.0 forbids replaced by
+    U+FFFD (the SVG stays well-formed whatever the labels hold)."""
+    return escape(_NOT_XML.sub("\ufffd", text))
+
+
+def xml_attribute(text: str) -> str:
+    """``text`` as a quoted XML attribute value, forbidden characters replaced as in
+    :func:`xml_text`."""
+    return quoteattr(_NOT_XML.sub("\ufffd", text))
+
+
 def _ellipse_svg(e: ImageEllipse, cls: str, extra: str = "") -> str:
     deg = math.degrees(e.angle)
     return (f'<ellipse class="{cls}" cx="{e.cx:.2f}" cy="{e.cy:.2f}" rx="{e.a:.2f}" '
@@ -271,7 +292,9 @@ def render_overlay_svg(
            f'viewBox="0 0 {width} {height + band}" class="quadloc-overlay">',
            f"<style>{_STYLE}</style>"]
     if metadata is not None:
-        out.append(f'<metadata id="quadloc-result">{escape(json.dumps(metadata))}</metadata>')
+        # (json.dumps escapes every non-ASCII character: the text is ASCII)
+        out.append(f'<metadata id="quadloc-result">{xml_text(json.dumps(metadata))}'
+                   "</metadata>")
     out.append(f'<rect class="frame" x="0" y="0" width="{width}" height="{height}"/>')
     out.append(f'<clipPath id="image"><rect x="0" y="0" width="{width}" height="{height}"/>'
                "</clipPath><g clip-path=\"url(#image)\">")
@@ -284,7 +307,7 @@ def render_overlay_svg(
                           or e.cy - e.a > height):
             continue
         cls = "projection matched" if p.object_id in matched else "projection"
-        out.append(_ellipse_svg(e, cls, f" data-object-id={quoteattr(p.object_id)}"))
+        out.append(_ellipse_svg(e, cls, f" data-object-id={xml_attribute(p.object_id)}"))
         if p.object_id not in matched:  # a matched object is named by its detection's label
             labels.append(("pid", f"{p.object_id} {p.category}", e))
     detection_labels: list[tuple[str, str, ImageEllipse]] = []
@@ -307,9 +330,9 @@ def render_overlay_svg(
                           height)
     for (cls, text, _), (x, y, w) in zip(detection_labels + labels, placed, strict=True):
         out.append(f'<text class="{cls}" x="{x:.1f}" y="{y:.1f}" text-anchor="middle" '
-                   f'textLength="{w:.1f}" lengthAdjust="spacingAndGlyphs">{escape(text)}</text>')
+                   f'textLength="{w:.1f}" lengthAdjust="spacingAndGlyphs">{xml_text(text)}</text>')
     out.append("</g>")
-    out.append(f'<text class="summary" x="6" y="{height + band - 9}">{escape(summary)}</text>')
+    out.append(f'<text class="summary" x="6" y="{height + band - 9}">{xml_text(summary)}</text>')
     out.append("</svg>")
     return "\n".join(out) + "\n"
 

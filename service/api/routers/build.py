@@ -16,6 +16,7 @@ from quadloc.maps.model import MAP_ID_PATTERN
 from quadloc.service.api.auth import ReadAccess, WriteAccess
 from quadloc.service.api.deps import AppDep, MapIdPath
 from quadloc.service.api.errors import problem_responses
+from quadloc.service.app.ownership import Caller
 from quadloc.service.schemas.builds import BuildJobOut
 from quadloc.service.schemas.calibration import CalibrationOut
 from quadloc.service.schemas.examples import (
@@ -58,7 +59,7 @@ def start_build(
     if_match: Annotated[str | None, Header(description="ETag of the map's latest version "
                                                        "(only when the map exists).")] = None,
 ) -> BuildJobOut:
-    job = app.builds.start(body, map_id, if_match)
+    job = app.builds.start(body, map_id, if_match, Caller.of(_key))
     response.headers["Location"] = f"/v1/build-jobs/{job.job_id}"
     return job
 
@@ -67,12 +68,14 @@ def start_build(
     "/build-jobs/{job_id}", response_model=BuildJobOut, summary="A map-building job",
     description="Status, stage, percent, objects found; the map version and the report when "
                 "it succeeded, `error {reason, detail}` when it failed. A job whose runner "
-                "stopped reporting (replica restarted) is marked failed (`runner_lost`).",
+                "stopped reporting (replica restarted) is marked failed (`runner_lost`). "
+                "A job belongs to the API key that started it: other keys get 404 (an "
+                "`admin` key sees all).",
     responses={**problem_responses(401, 403, 404, 422, 503), **_ok(200, BUILD_JOB_DONE_EXAMPLE)},
 )
 def get_build_job(job_id: Annotated[str, Path(pattern=JOB_ID_PATTERN, description="Job id.")],
                   app: AppDep, _key: ReadAccess) -> BuildJobOut:
-    return app.builds.get(job_id)
+    return app.builds.get(job_id, Caller.of(_key))
 
 
 VersionQuery = Annotated[int | None, Query(ge=1, le=2**31 - 1,
@@ -88,7 +91,9 @@ VersionQuery = Annotated[int | None, Query(ge=1, le=2**31 - 1,
                 "confidence calibration error before / after on the other half, and stores the "
                 "calibration with the map version: localize uses it for the calibration key "
                 "it was fitted for. Synchronous (tens of seconds for hundreds of frames). 422 "
-                "when the recording holds no frame out or too few localize.",
+                "when the recording holds no frame out or too few localize (at least 20 "
+                "must: the inline example shows the body's form only and gets that 422; "
+                "docs/map_building.md calibrates the shipped example recording).",
     responses={**problem_responses(400, 401, 403, 404, 413, 415, 422, 503),
                **_ok(200, CALIBRATION_EXAMPLE)},
     openapi_extra={"requestBody": {"content": {"application/json": {

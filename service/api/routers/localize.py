@@ -26,7 +26,7 @@ from quadloc.service.api.errors import (
     json_depth_violation,
     problem_responses,
 )
-from quadloc.service.api.inspector import SVG_MEDIA_TYPE, wants_svg
+from quadloc.service.api.inspector import SVG_HEADERS, SVG_MEDIA_TYPE, wants_svg
 from quadloc.service.app.drawing import render_localization_svg
 from quadloc.service.schemas.examples import LOCALIZE_EXAMPLE, LOCALIZE_RESPONSE_EXAMPLE
 from quadloc.service.schemas.localize import (
@@ -54,7 +54,7 @@ def _localize_one(state: Any, map_id: str, frame: LocalizeRequest, version: int 
     compiled, result = state.services.localizer.localize(map_id, frame, version)
     if wants_svg(accept):
         return Response(render_localization_svg(compiled, frame, result),
-                        media_type=SVG_MEDIA_TYPE)
+                        media_type=SVG_MEDIA_TYPE, headers=SVG_HEADERS)
     # Already a validated model: serialise it directly (skips FastAPI's re-validation).
     return Response(result.model_dump_json(), media_type="application/json")
 

@@ -349,6 +349,12 @@ def test_pose_forms_conventions_and_legacy_form_give_the_same_recording() -> Non
             doc["convention"] = "opengl"
         forms[name] = doc
     forms["legacy"] = _as_legacy(rec)
+    # the old form's integer ids are read as text
+    legacy_ids = _as_legacy(rec)
+    legacy_ids["frames"][1]["frame_id"] = 7
+    legacy_ids["frames"][1]["detections"][0]["track_id"] = 3
+    old = recording_of(legacy_ids)
+    assert old.frames[1].frame_id == "7" and old.observations[3].track_id == "3"
     for name, doc in forms.items():
         other = recording_of(doc)
         assert len(other.frames) == len(base.frames)

@@ -198,6 +198,14 @@ def test_the_schemas_own_examples_get_the_documented_success(
                              headers=headers)
             url = url.replace("{session_id}", created.json()["session_id"])
         r = c.request(method.upper(), url, json=example, headers=headers)
+        if method == "post" and path.endswith("/calibration"):
+            # the inline example shows the body's form: a calibration needs
+            # MIN_FIT_FRAMES localized held-out frames, which no inline example holds; the
+            # operation documents this 422 (tests/service/api/test_api_calibration.py
+            # calibrates a real recording)
+            assert r.status_code == 422, r.text[:500]
+            assert [e["field"] for e in r.json()["errors"]] == ["holdout_every"], r.text[:500]
+            return
         assert r.status_code in ok, (method, path, r.status_code, r.text[:500])
 
 

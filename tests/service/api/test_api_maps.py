@@ -67,6 +67,12 @@ def test_create_get_list_delete(client: TestClient) -> None:
 def test_create_ignores_client_version(client: TestClient) -> None:
     doc = {**MAP_EXAMPLE, "version": 7}
     assert client.post("/v1/maps", json=doc).json()["version"] == 1
+    # ignored, but still held to its schema (an integer >= 1): nothing is stored
+    for bad in (0, 0.0, -3, "2"):
+        body = _problem(client.post("/v1/maps", json={**MAP_EXAMPLE, "map_id": "v-bad",
+                                                      "version": bad}), 422, "invalid-map")
+        assert [e["field"] for e in body["errors"]] == ["version"], bad
+    _problem(client.get("/v1/maps/v-bad"), 404, "map-not-found")
 
 
 def test_invalid_maps_name_the_field(client: TestClient) -> None:
@@ -100,8 +106,7 @@ def test_update_requires_a_fresh_etag(client: TestClient) -> None:
     etag, doc = r.headers["etag"], r.json()["map"]
     doc["objects"][0]["axes"] = [0.2, 0.4, 0.3]
     _problem(client.put("/v1/maps/chess", json=doc), 428, "precondition-required")
-    _problem(client.put("/v1/maps/chess", json=doc, headers={"If-Match": "*"}),
-             428, "precondition-required")
+    # (If-Match: * is tests/service/api/test_api_if_match.py)
     stale = _problem(client.put("/v1/maps/chess", json=doc, headers={"If-Match": '"0000"'}),
                      412, "precondition-failed")
     assert stale["errors"][0]["field"] == "header.if-match"

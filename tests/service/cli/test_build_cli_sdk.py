@@ -11,6 +11,7 @@ import quadloc_sdk as sdk
 from quadloc.service.cli.main import main
 from quadloc_sdk.build import BuildFailedError
 from tests.service.api.test_api_build import _recording
+from tests.service.api.test_api_calibration import _noisy_recording
 
 #: Starts real servers / subprocesses: left out of the inner loop (pytest -m "not slow").
 pytestmark = pytest.mark.slow
@@ -103,3 +104,22 @@ def test_async_sdk_build_map(live_server: str) -> None:
     job = asyncio.run(go())
     assert job.status == "succeeded" and job.map_version == 1
     assert job.report["counts"]["objects"] == 3
+
+
+def test_cli_calibrate_needs_held_out_frames_then_stores(db: list[str], tmp_path: Path,
+                                                         capsys: pytest.CaptureFixture[str]
+                                                         ) -> None:
+    """``quadloc calibrate``: a recording without ``holdout_every`` is refused naming the field
+    (nothing stored); with it, the calibration is fitted and stored (before / after lines)."""
+    rec = _noisy_recording(120)
+    src = tmp_path / "rec.json"
+    src.write_text(json.dumps(rec))
+    assert main(["maps", "build", str(src), "--map-id", "room", *db]) == 0
+    capsys.readouterr()
+    assert main(["calibrate", str(src), "--map", "room", *db]) == 2
+    assert "holdout_every" in capsys.readouterr().err
+    src.write_text(json.dumps({**rec, "holdout_every": 2}))
+    assert main(["calibrate", str(src), "--map", "room", *db]) == 0
+    out = capsys.readouterr().out
+    assert "calibration stored for level_set" in out and "before" in out and "after" in out
+    assert main(["calibrate", str(src), "--map", "nowhere", *db]) == 1

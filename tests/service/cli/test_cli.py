@@ -188,7 +188,7 @@ def test_openapi_check_and_hash_key(capsys: pytest.CaptureFixture[str]) -> None:
     assert "up to date" in capsys.readouterr().out
     assert main(["hash-key", "s3cret", "--scopes", "read+write"]) == 0
     assert capsys.readouterr().out.strip() == f"{hash_api_key('s3cret')}:read+write"
-    assert main(["hash-key", "k", "--scopes", "admin"]) == 2
+    assert main(["hash-key", "k", "--scopes", "root"]) == 2
 
 
 def test_serve_refuses_public_bind_without_keys(db: list[str],

@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: 3c151b2d4bd77f4f8de17960b469edc5447355627f96c5e14ddc5f576a5a33be
+// openapi-sha256: 41e53892ae94bf8c7ea0e0902a6a548ceb4f45f86e1e8bedf8a9ea1f09602047
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -161,7 +161,7 @@ export interface paths {
         };
         /**
          * A map-building job
-         * @description Status, stage, percent, objects found; the map version and the report when it succeeded, `error {reason, detail}` when it failed. A job whose runner stopped reporting (replica restarted) is marked failed (`runner_lost`).
+         * @description Status, stage, percent, objects found; the map version and the report when it succeeded, `error {reason, detail}` when it failed. A job whose runner stopped reporting (replica restarted) is marked failed (`runner_lost`). A job belongs to the API key that started it: other keys get 404 (an `admin` key sees all).
          */
         get: operations["get_build_job_v1_build_jobs__job_id__get"];
         put?: never;
@@ -184,7 +184,7 @@ export interface paths {
         put?: never;
         /**
          * Calibrate a map version from a recording's held-out frames
-         * @description Body: the recording the map was built from, with `holdout_every` (the frames held out of the build, their app poses the reference). Fits the covariance scale and the confidence model on half of them, reports mean NEES and the confidence calibration error before / after on the other half, and stores the calibration with the map version: localize uses it for the calibration key it was fitted for. Synchronous (tens of seconds for hundreds of frames). 422 when the recording holds no frame out or too few localize.
+         * @description Body: the recording the map was built from, with `holdout_every` (the frames held out of the build, their app poses the reference). Fits the covariance scale and the confidence model on half of them, reports mean NEES and the confidence calibration error before / after on the other half, and stores the calibration with the map version: localize uses it for the calibration key it was fitted for. Synchronous (tens of seconds for hundreds of frames). 422 when the recording holds no frame out or too few localize (at least 20 must: the inline example shows the body's form only and gets that 422; docs/map_building.md calibrates the shipped example recording).
          */
         post: operations["calibrate_map_v1_maps__map_id__calibration_post"];
         delete?: never;
@@ -259,7 +259,10 @@ export interface paths {
         };
         get?: never;
         put?: never;
-        /** Start a tracking session */
+        /**
+         * Start a tracking session
+         * @description The session belongs to the API key that created it: other keys get 404 (an `admin` key sees all). 429 `session-quota` when this key holds `QUADLOC_MAX_SESSIONS_PER_KEY` live sessions on this replica, 503 `session-capacity` when the replica holds `QUADLOC_MAX_SESSIONS`.
+         */
         post: operations["create_session_v1_maps__map_id__sessions_post"];
         delete?: never;
         options?: never;
@@ -714,14 +717,15 @@ export interface components {
         };
         /**
          * LegacyDetectionIn
-         * @description A detection of the deprecated form: ``box`` may be an array ``[xmin, ymin, xmax, ymax]``.
+         * @description A detection of the deprecated form: ``box`` may be an array ``[xmin, ymin, xmax, ymax]``
+         *     and ``track_id`` an integer.
          */
         LegacyDetectionIn: {
             ellipse?: components["schemas"]["EllipseIn"] | null;
             box?: components["schemas"]["BoxIn"] | null;
             /**
              * Label
-             * @description Category label of the map.
+             * @description Category label: the built object's category.
              */
             label: string;
             /**
@@ -1238,7 +1242,7 @@ export interface components {
             box?: components["schemas"]["BoxIn"] | null;
             /**
              * Label
-             * @description Category label of the map.
+             * @description Category label: the built object's category.
              */
             label: string;
             /**
@@ -1397,7 +1401,10 @@ export interface components {
              * @description Client clock (s), non-decreasing.
              */
             timestamp: number;
-            /** Frame Id */
+            /**
+             * Frame Id
+             * @description Echoed back.
+             */
             frame_id?: string | null;
             prior?: components["schemas"]["PosePriorIn"] | null;
             /** @description The gravity direction the device measures in this frame's camera (as for localize; `convention` defaults to the session's): a factor on the frame's tilt against the map's up axis. */
@@ -5516,6 +5523,25 @@ export interface operations {
                      *           "message": "Input should be greater than 0"
                      *         }
                      *       ]
+                     *     }
+                     */
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description This API key holds its quota of tracking sessions */
+            429: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    /**
+                     * @example {
+                     *       "type": "urn:quadloc:problem:session-quota",
+                     *       "title": "This API key holds its quota of tracking sessions",
+                     *       "status": 429,
+                     *       "detail": "This API key holds its quota of tracking sessions",
+                     *       "instance": "/v1/maps/chess",
+                     *       "errors": []
                      *     }
                      */
                     "application/problem+json": components["schemas"]["Problem"];
