@@ -28,6 +28,16 @@ What it does, in one run:
 Prints JSON. Targets (issue 11): every request within 1.2 x its budget + 50 ms; peak RSS of the
 worst request <= 300 MB above idle on the 10,000-object map; normal clients' p99 <= 3 x quiet.
 The machine may be shared: the report carries the load average at start and end.
+
+``--sessions-builds`` (issue 32) runs instead the session and build repros against one server:
+map builds of hostile recordings (``tests.support.hostile``: 2,000 frames x 10 random ellipses, 9
+labelled Box, cameras on a ring or random; 4,000 and 11,000 detections; one frame over the
+limit), each polled to its end; session frames requests (a 256-object grid map with 256
+detections per frame under both smoothers at their largest windows, then one more frame; a
+900-frame batch on the demo map with the batch smoother); and the memory of ``--memory-sessions``
+sessions that stay initializing with full buffers. Targets: builds end within 1.2 x their budget
++ 50 ms, session requests within 1.2 x their CPU budget + 50 ms of server CPU, peak RSS <= 300 MB
+above idle, no 5xx.
 """
 
 from __future__ import annotations
@@ -348,6 +358,259 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     }
 
 
+# ------------------------------------------------------ sessions and builds (issue 32)
+
+
+def _cpu_s(pid: int) -> float:
+    """User + system CPU seconds of the process so far (``/proc/<pid>/stat``)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _timed(pid: int, idle_mb: float, name: str, send: Any) -> dict[str, Any]:
+    """Run ``send()`` (returns ``(status, extra dict)``) alone; wall and server CPU time, the
+    server's peak RSS above idle."""
+    reset_peak(pid)
+    cpu0, t0 = _cpu_s(pid), time.perf_counter()
+    status, extra = send()
+    return {"name": name, "status": status,
+            "wall_ms": round((time.perf_counter() - t0) * 1e3, 1),
+            "server_cpu_ms": round((_cpu_s(pid) - cpu0) * 1e3, 1),
+            "peak_rss_above_idle_mb": round(_status(pid)["VmHWM"] - idle_mb, 1), **extra}
+
+
+def _build(c: httpx.Client, map_id: str, doc: dict[str, Any]) -> tuple[int, dict[str, Any]]:
+    body = json.dumps(doc, separators=(",", ":")).encode()
+    r = c.post("/v1/maps:build", params={"map_id": map_id}, content=body,
+               headers={"content-type": "application/json"})
+    extra: dict[str, Any] = {"body_kb": round(len(body) / 1024)}
+    if r.status_code != 202:
+        return r.status_code, {**extra, "detail": r.json().get("detail", "")[:200]}
+    url = r.headers["location"]
+    while True:
+        job = c.get(url).json()
+        if job["status"] in ("succeeded", "failed"):
+            break
+        time.sleep(0.5)
+    err = job.get("error") or {}
+    return r.status_code, {**extra, "job_status": job["status"], "reason": err.get("reason"),
+                           "objects": job.get("objects_found")}
+
+
+def _frames_request(c: httpx.Client, sid: str, frames: list[dict[str, Any]]
+                    ) -> tuple[int, dict[str, Any]]:
+    body = json.dumps({"frames": frames}, separators=(",", ":")).encode()
+    r = c.post(f"/v1/sessions/{sid}/frames", content=body,
+               headers={"content-type": "application/json"})
+    extra: dict[str, Any] = {"body_kb": round(len(body) / 1024), "frames": len(frames)}
+    if r.status_code == 200:
+        res = r.json()["results"]
+        extra["states"] = sorted({x["state"] for x in res})
+        extra["over_budget_frames"] = sum(x["reason"] == "time_budget_exceeded" for x in res)
+        extra["slowest_frame_ms"] = round(max(x["timings_ms"].get("total", 0.0)
+                                              for x in res), 1)
+    return r.status_code, extra
+
+
+def _session_frame(dets: list[dict[str, Any]], T: Any, t: float) -> dict[str, Any]:
+    return {"detections": dets, "odom_from_camera": {"matrix": np.round(T, 6).tolist()},
+            "timestamp": t}
+
+
+def run_sessions_builds(args: argparse.Namespace) -> dict[str, Any]:
+    """The session and build repros of issue 32 against one server (module docstring)."""
+    from quadloc.factors.camera import Ellipsoid, project_ellipsoid
+    from quadloc.factors.rotations import invert_pose
+    from quadloc.service.settings import Settings
+    from quadloc.service.tracking.session import MAX_BUFFERED_DETECTIONS
+    from tests.support.hostile import HOSTILE_CAMERA, grid_map, grid_pose, hostile_recording
+
+    extra = dict(kv.split("=", 1) for kv in args.env)
+    settings = Settings(**{k.removeprefix("QUADLOC_").lower(): v for k, v in extra.items()})
+    frame_ms, request_ms = settings.session_frame_budget_ms, settings.session_request_budget_ms
+    build_s = settings.build_time_budget_s
+    builds: list[dict[str, Any]] = []
+    sessions: list[dict[str, Any]] = []
+    with tempfile.TemporaryDirectory(prefix="quadloc-adv-") as tmp:
+        drop = None
+        url = f"sqlite:///{Path(tmp) / 'adv.db'}"
+        if args.postgres:
+            url, drop = _pg_schema()
+        proc, base = start_server(Path(tmp), url, extra)
+        pid = proc.pid
+        try:
+            with httpx.Client(base_url=base, timeout=600.0) as c:
+                c.post("/v1/maps/chess/localize", json=build_frames(1)[0][0])
+                idle = _status(pid)["VmRSS"]
+                cases = [("2,000 frames x 10 detections (9 Box), cameras on a ring",
+                          hostile_recording(2000, 10, 9, layout="ring")),
+                         ("2,000 frames x 10 detections (9 Box), random cameras",
+                          hostile_recording(2000, 10, 9, layout="random")),
+                         ("4,000 detections (400 frames x 10 Box), ring",
+                          hostile_recording(400, 10, 10, layout="ring")),
+                         ("11,000 detections (1,100 frames x 10 Box), ring",
+                          hostile_recording(1100, 10, 10, layout="ring")),
+                         ("2,001 frames (over the frame limit)",
+                          hostile_recording(2001, 1, 1))]
+                for k, (name, doc) in enumerate(cases):
+                    out = _timed(pid, idle, f"build: {name}",
+                                 lambda d=doc, m=f"hostile{k}": _build(c, m, d))
+                    out["limit_ms"] = SLOW_FACTOR * build_s * 1e3 + SLACK_MS
+                    out["within_budget"] = out["wall_ms"] <= out["limit_ms"]
+                    builds.append(out)
+                    print(json.dumps(out), file=sys.stderr)
+                # sessions: the grid map (256 objects in view) and the demo map
+                c.post("/v1/maps", json=grid_map())
+                cam = HOSTILE_CAMERA
+                camera = {"fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy,
+                          "width": cam.width, "height": cam.height}
+                doc = grid_map()
+                ells = [(o["category"], Ellipsoid(np.array(o["center"]), np.array(o["axes"])))
+                        for o in doc["objects"]]
+
+                def grid_frame(f: int) -> dict[str, Any]:
+                    T = grid_pose(f)
+                    dets = []
+                    for label, e in ells:
+                        p = project_ellipsoid(cam, invert_pose(T), e)
+                        dets.append({"label": label, "ellipse": {
+                            "cx": round(p.cx, 2), "cy": round(p.cy, 2), "a": round(p.a, 2),
+                            "b": round(p.b, 2), "angle": round(p.angle, 4)}})
+                    return _session_frame(dets, T, f / 30.0)
+
+                def new_session(map_id: str, options: dict[str, Any],
+                                cam_json: dict[str, Any] = camera) -> str:
+                    r = c.post(f"/v1/maps/{map_id}/sessions",
+                               json={"camera": cam_json, "options": options})
+                    r.raise_for_status()
+                    return str(r.json()["session_id"])
+
+                while c.post("/v1/maps/grid/localize", json={
+                        "camera": camera, "detections": grid_frame(0)["detections"][:4]
+                        }).status_code == 503:
+                    time.sleep(0.2)
+                n_grid = 70  # 256 detections a frame: 70 frames fit the 2 MB body limit
+                grid_frames = [grid_frame(f) for f in range(n_grid)]
+                for smoother, window in (("batch", 60), ("isam2", 300)):
+                    sid = new_session("grid", {"smoother": smoother, "window_frames": window})
+                    out = _timed(pid, idle, f"session on a 256-object grid, {smoother} "
+                                 f"window {window}: batch of {n_grid} frames x 256 detections",
+                                 lambda s=sid: _frames_request(c, s, grid_frames))
+                    sessions.append(out)
+                    print(json.dumps(out), file=sys.stderr)
+                    nxt = grid_frame(n_grid)
+                    nxt["timestamp"] = 100.0
+                    out = _timed(pid, idle, f"... then one more frame ({smoother}, the window "
+                                 "full)", lambda s=sid, f=nxt: _frames_request(c, s, [f]))
+                    out["limit_ms"] = SLOW_FACTOR * frame_ms + SLACK_MS
+                    out["within_budget"] = out["server_cpu_ms"] <= out["limit_ms"]
+                    sessions.append(out)
+                    print(json.dumps(out), file=sys.stderr)
+                # the demo map: a 900-frame batch (the schema's maximum) of a walk
+                walk = build_frames(900)[0]
+                sid = new_session("chess", {"smoother": "batch", "window_frames": 60},
+                                  walk[0]["camera"])
+                walk_frames = [_session_frame(f["detections"], np.eye(4), i / 30.0)
+                               for i, f in enumerate(walk)]
+                out = _timed(pid, idle, "session on the demo map, batch window 60: 900 frames",
+                             lambda s=sid: _frames_request(c, s, walk_frames))
+                sessions.append(out)
+                print(json.dumps(out), file=sys.stderr)
+                for r in sessions[:-1:2] + sessions[-1:]:
+                    r["limit_ms"] = SLOW_FACTOR * request_ms + SLACK_MS
+                    r["within_budget"] = r["server_cpu_ms"] <= r["limit_ms"]
+                # memory: sessions that stay initializing, their buffers full
+                junk = [{"label": "no-such-label", "ellipse": {"cx": 100.0 + i, "cy": 200.0,
+                                                                "a": 30.0, "b": 20.0,
+                                                                "angle": 0.1}}
+                        for i in range(256)]
+                full = [_session_frame(junk, np.eye(4), float(i)) for i in range(12)]
+                before = _status(pid)["VmRSS"]
+                n_mem = args.memory_sessions
+                for _ in range(n_mem):
+                    _frames_request(c, new_session("chess", {}, walk[0]["camera"]), full)
+                after = _status(pid)["VmRSS"]
+                memory = {"sessions": n_mem, "frames_each": len(full),
+                          "detections_per_frame": 256,
+                          "buffered_detections_cap": MAX_BUFFERED_DETECTIONS,
+                          "rss_before_mb": round(before, 1), "rss_after_mb": round(after, 1),
+                          "mb_per_session": round((after - before) / n_mem, 3),
+                          "mb_at_cap": round((after - before) / n_mem * settings.max_sessions,
+                                             1),
+                          "max_sessions": settings.max_sessions}
+                print(json.dumps(memory), file=sys.stderr)
+        finally:
+            proc.terminate()
+            try:
+                proc.wait(timeout=60)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+            if drop is not None:
+                drop()
+    rows = builds + sessions
+    worst = max(r["peak_rss_above_idle_mb"] for r in rows)
+    return {"store": "postgresql" if args.postgres else "sqlite",
+            "session_frame_budget_ms": frame_ms, "session_request_budget_ms": request_ms,
+            "build_time_budget_s": build_s, "idle_rss_mb": round(idle, 1),
+            "builds": builds, "sessions": sessions, "session_memory": memory,
+            "all_within_budget": all(r["within_budget"] for r in rows if "within_budget" in r),
+            "worst_peak_rss_above_idle_mb": worst, "rss_within_target": worst <= RSS_TARGET_MB,
+            "no_5xx": all(r["status"] < 500 for r in rows)}
+
+
+def sessions_builds_markdown(report: dict[str, Any]) -> str:
+    """The results section of :func:`run_sessions_builds`."""
+    mem = report["session_memory"]
+    lines = [
+        f"## Hostile sessions and builds, {report['store']} (`bench/adversarial.py`)",
+        "",
+        f"{report['machine']}; load average {report['load_average_start']} at start, "
+        f"{report['load_average_end']} at end: a shared machine, wall times under load (a "
+        "request's wall-clock hard limit, 2 x its CPU budget, then stops it before its CPU "
+        "budget: the frames left answer `time_budget_exceeded`).",
+        "",
+        f"One `quadloc serve` process, {report['store']} store; session budgets "
+        f"{report['session_frame_budget_ms']:.0f} ms CPU a frame, "
+        f"{report['session_request_budget_ms']:.0f} ms CPU a request; build budget "
+        f"{report['build_time_budget_s']:g} s. Idle RSS {report['idle_rss_mb']} MB. Each "
+        "request alone; peak RSS = the server's `VmHWM` (mark reset before) minus idle; "
+        "server CPU = its user + system time during the request. Limits: builds 1.2 x budget "
+        "+ 50 ms of wall time (job polled every 0.5 s); sessions 1.2 x budget + 50 ms of CPU.",
+        "",
+        "| request | status | result | wall ms | server CPU ms | limit ms | peak RSS above "
+        "idle MB |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in report["builds"] + report["sessions"]:
+        if "job_status" in r:
+            result = f"{r['job_status']} {r.get('reason') or ''} ({r.get('objects')} objects)"
+        elif "states" in r:
+            result = (f"{'/'.join(r['states'])}; {r['over_budget_frames']} of {r['frames']} "
+                      f"frames time_budget_exceeded; slowest frame {r['slowest_frame_ms']} ms")
+        else:
+            result = r.get("detail", "")
+        limit = f"{r['limit_ms']:.0f}" if "limit_ms" in r else "-"
+        mark = "" if r.get("within_budget", True) else " **over**"
+        lines.append(f"| {r['name']} | {r['status']} | {result} | {r['wall_ms']:.0f} | "
+                     f"{r['server_cpu_ms']:.0f} | {limit}{mark} | "
+                     f"{r['peak_rss_above_idle_mb']:.0f} |")
+    lines += [
+        "",
+        f"Within the limits: **{report['all_within_budget']}**; worst peak RSS above idle "
+        f"**{report['worst_peak_rss_above_idle_mb']:.0f} MB** (target <= {RSS_TARGET_MB:.0f});"
+        f" no 5xx: **{report['no_5xx']}**.",
+        "",
+        f"Session memory: {mem['sessions']} sessions that stay `initializing`, each sent "
+        f"{mem['frames_each']} frames of {mem['detections_per_frame']} detections (the buffer "
+        f"holds at most {mem['buffered_detections_cap']} detections): RSS "
+        f"{mem['rss_before_mb']} -> {mem['rss_after_mb']} MB, **{mem['mb_per_session']} MB a "
+        f"session**, about {mem['mb_at_cap']} MB at the cap of {mem['max_sessions']} "
+        "sessions.",
+    ]
+    return "\n".join(lines)
+
+
 def to_markdown(report: dict[str, Any]) -> str:
     lines = [
         f"## Hostile and heavy requests, {report['store']} (`bench/adversarial.py`)",
@@ -406,12 +669,16 @@ def main(argv: list[str] | None = None) -> int:
                         help="PostgreSQL at 127.0.0.1:5432/test (a throw-away schema)")
     parser.add_argument("--env", nargs="*", default=[], metavar="QUADLOC_X=V",
                         help="extra server settings (default: none, the defaults)")
+    parser.add_argument("--sessions-builds", action="store_true",
+                        help="run the session and build repros of issue 32 instead")
+    parser.add_argument("--memory-sessions", type=int, default=50,
+                        help="sessions of the memory measurement (--sessions-builds)")
     parser.add_argument("--json", help="write the JSON report here")
     parser.add_argument("--write-results", action="store_true",
                         help="write the 'adversarial' section of docs/results.md")
     args = parser.parse_args(argv)
     load_start = ", ".join(f"{x:.1f}" for x in os.getloadavg())
-    report = run(args)
+    report = run_sessions_builds(args) if args.sessions_builds else run(args)
     command = "python -m bench.adversarial " + " ".join(argv if argv is not None
                                                          else sys.argv[1:])
     report = {"command": command.strip(),
@@ -427,7 +694,10 @@ def main(argv: list[str] | None = None) -> int:
         from bench.results_doc import update_results_section
 
         section = "adversarial-postgresql" if args.postgres else "adversarial"
-        update_results_section(section, to_markdown(report))
+        markdown = to_markdown
+        if args.sessions_builds:
+            section, markdown = section + "-sessions-builds", sessions_builds_markdown
+        update_results_section(section, markdown(report))
     return 0
 
 

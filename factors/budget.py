@@ -5,17 +5,19 @@ batches, LM iterations, map-build labels): a stop instant on the wall clock
 (``time.perf_counter()``) and, for a solve, on the CPU clock of the solving thread
 (``time.thread_time()``). ``None`` where a ``Deadline | None`` is expected means no limit.
 Constructors: :meth:`Deadline.cpu_budget` (CPU time of the calling thread with a wall-clock hard
-limit of :data:`WALL_LIMIT_FACTOR` x the budget: a ``localize()`` solve) and
-:meth:`Deadline.wall_budget` (wall-clock time only: a map build, a tracking session's
-initialisation). Why a solve counts CPU time: ``docs/design/localization.md``, "The solve
-budget".
+limit of :data:`WALL_LIMIT_FACTOR` x the budget: a ``localize()`` solve, a session frame or
+request) and :meth:`Deadline.wall_budget` (wall-clock time only: a map build, a localize
+batch). Why a solve counts CPU time: ``docs/design/localization.md``, "The solve budget". A
+deadline may also carry cancellation events (:meth:`Deadline.cancelled_by`): it has passed once
+any is set (the client went away, the server is stopping).
 """
 
 from __future__ import annotations
 
 import math
+import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import overload
 
 __all__ = ["WALL_LIMIT_FACTOR", "Deadline", "deadline_passed", "earliest"]
@@ -42,6 +44,7 @@ class Deadline:
     cpu: float = math.inf
     wall: float = math.inf
     cpu_check_from: float = -math.inf
+    cancel: tuple[threading.Event, ...] = ()
 
     @overload
     @classmethod
@@ -81,13 +84,24 @@ class Deadline:
         wall0 = time.perf_counter() if start is None else start
         return cls(wall=wall0 + float(budget_s), cpu_check_from=math.inf)
 
+    def cancelled_by(self, *events: threading.Event) -> Deadline:
+        """This deadline, passed as well once any of ``events`` is set."""
+        return replace(self, cancel=self.cancel + events)
+
+    def remaining_cpu_s(self) -> float:
+        """CPU seconds of this thread left before the CPU stop (negative once past; ``inf``
+        without one)."""
+        return self.cpu - time.thread_time() if math.isfinite(self.cpu) else math.inf
+
     def remaining_wall_s(self) -> float:
         """Wall-clock seconds left before the wall stop (negative once past; ``inf`` without
         one)."""
         return self.wall - time.perf_counter()
 
     def passed(self) -> bool:
-        """Whether either clock is past its stop."""
+        """Whether either clock is past its stop, or a cancellation event is set."""
+        if any(event.is_set() for event in self.cancel):
+            return True
         wall = time.perf_counter()
         if wall > self.wall:
             return True
@@ -104,4 +118,4 @@ def earliest(a: Deadline | None, b: Deadline | None) -> Deadline | None:
     if a is None or b is None:
         return a if b is None else b
     return Deadline(min(a.cpu, b.cpu), min(a.wall, b.wall),
-                    min(a.cpu_check_from, b.cpu_check_from))
+                    min(a.cpu_check_from, b.cpu_check_from), a.cancel + b.cancel)

@@ -192,6 +192,12 @@ class Settings(BaseSettings):
         default=5.0, gt=0, le=300,
         description="Idle keep-alive connections are closed after this many seconds.",
     )
+    shutdown_grace_s: float = Field(
+        default=30.0, ge=3.0, le=3600.0,
+        description="On SIGTERM, requests in progress get this long to end (quadloc serve): "
+                    "2 s before it, session frames and builds still running are cancelled, "
+                    "and the process exits.",
+    )
     max_build_frames: int = Field(default=2000, ge=1, le=100_000,
                                   description="Frames per map-building recording.")
     max_build_detections: int = Field(default=20_000, ge=1,
@@ -218,6 +224,17 @@ class Settings(BaseSettings):
         default=200, ge=1, le=100_000,
         description="Live tracking sessions per process; more -> 503 session-capacity (after "
                     "idle ones expire).",
+    )
+    session_frame_budget_ms: float = Field(
+        default=1000.0, gt=0, le=60_000.0,
+        description="CPU time of one tracking-session frame; a frame past it is answered "
+                    "without a pose, reason time_budget_exceeded (the session goes on).",
+    )
+    session_request_budget_ms: float = Field(
+        default=20_000.0, gt=0, le=300_000.0,
+        description="CPU time of one session frames request (a batch included; wall-clock "
+                    "hard limit 2x, slot waits included); frames past it are answered "
+                    "time_budget_exceeded. Keep it below the proxy's read timeout.",
     )
     max_sessions_per_key: int = Field(
         default=50, ge=1, le=100_000,

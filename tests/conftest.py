@@ -32,13 +32,16 @@ def _free_port() -> int:
 
 @contextmanager
 def run_live_server(data_dir: Path, env: dict[str, str] | None = None,
-                    startup_timeout_s: float = 60.0) -> Iterator[str]:
+                    startup_timeout_s: float = 60.0,
+                    on_start: Callable[[subprocess.Popen[bytes]], None] | None = None
+                    ) -> Iterator[str]:
     """Run ``quadloc serve`` (``python -m quadloc.service serve``: Uvicorn with the connection
     limits of service/api/server.py) on a free loopback port (log level warning unless ``env``
     says).
 
     The database is ``sqlite:///<data_dir>/quadloc.db`` unless ``env`` sets
     ``QUADLOC_DATABASE_URL``. Yields the base URL; terminates the process on exit.
+    ``on_start`` receives the process (e.g. to signal it).
     """
     data_dir.mkdir(parents=True, exist_ok=True)
     port = _free_port()
@@ -53,6 +56,8 @@ def run_live_server(data_dir: Path, env: dict[str, str] | None = None,
             [sys.executable, "-m", "quadloc.service", "serve", "--host", "127.0.0.1", "--port",
              str(port)],
             cwd=REPO_ROOT, env=full_env, stdout=log, stderr=subprocess.STDOUT)
+    if on_start is not None:
+        on_start(proc)
     base = f"http://127.0.0.1:{port}"
     try:
         deadline = time.monotonic() + startup_timeout_s

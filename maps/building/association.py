@@ -16,7 +16,7 @@ Coordinates: world frame of the recording's ``world_from_camera`` poses, metres.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -99,30 +99,116 @@ def _rays(obs: Sequence[Observation], camera: Camera, T_wc: FloatArray
     return T_wc[f, :3, 3], d, rho
 
 
+#: Most detection pairs of one label that :func:`_pair_candidates` evaluates: all pairs when
+#: ``n (n - 1) / 2`` is within it, else the pairs of frame buckets (:func:`_bucket_offsets`).
+MAX_LABEL_PAIRS = 2_000_000
+#: Pairs (or candidate x detection cells) evaluated per vectorised chunk: bounds the temporary
+#: arrays (about 30 float64 arrays of this length: ~60 MB).
+PAIR_CHUNK = 250_000
+
+
+def _all_pairs(n: int) -> Iterator[tuple[IntArray, IntArray]]:
+    """The pairs ``i < j`` of ``range(n)`` in ``np.triu_indices(n, 1)`` order, in chunks of
+    about :data:`PAIR_CHUNK` (whole rows of ``i``)."""
+    i0 = 0
+    while i0 < n - 1:
+        i1, count = i0, 0
+        while i1 < n - 1 and (count == 0 or count + (n - 1 - i1) <= PAIR_CHUNK):
+            count += n - 1 - i1
+            i1 += 1
+        rows = np.arange(i0, i1)
+        lengths = n - 1 - rows
+        i = np.repeat(rows, lengths)
+        starts = np.cumsum(lengths) - lengths
+        j = np.arange(len(i)) - np.repeat(starts, lengths) + i + 1
+        yield i, j
+        i0 = i1
+
+
+def _bucket_offsets(counts: IntArray, max_pairs: int) -> IntArray:
+    """Frame-rank offsets ``o`` (ascending) whose frame pairs ``(r, r + o)`` hold at most
+    ``max_pairs`` detection pairs in all (``counts[r]`` detections in the r-th frame of the
+    label): geometrically spaced from 1 (short baselines) to the whole walk (loop closures),
+    as many as fit."""
+    n_frames = len(counts)
+    best = np.ones(1, dtype=np.intp)
+    for k in range(2, n_frames):
+        offsets = np.unique(np.round(np.geomspace(1, n_frames - 1, k)).astype(np.intp))
+        pairs = sum(int(counts[:-o] @ counts[o:]) for o in offsets)
+        if pairs > max_pairs:
+            break
+        best = offsets
+        if len(offsets) == n_frames - 1:
+            break
+    return best
+
+
+def _bucket_pairs(frames: IntArray, max_pairs: int) -> Iterator[tuple[IntArray, IntArray]]:
+    """Pairs of detections in different frames, only between frames ``r`` and ``r + o`` (frame
+    ranks, ``o`` from :func:`_bucket_offsets`), in chunks of about :data:`PAIR_CHUNK`."""
+    order = np.argsort(frames, kind="stable")
+    ranks, starts, counts = np.unique(frames[order], return_index=True, return_counts=True)
+    del ranks
+    offsets = _bucket_offsets(counts, max_pairs)
+    for o in offsets.tolist():
+        ci, cj = counts[:-o], counts[o:]
+        si, sj = starts[:-o], starts[o:]
+        per = ci * cj
+        r0 = 0
+        while r0 < len(per):
+            r1, total = r0, 0
+            while r1 < len(per) and (total == 0 or total + per[r1] <= PAIR_CHUNK):
+                total += int(per[r1])
+                r1 += 1
+            blocks = np.arange(r0, r1)
+            size = per[blocks]
+            blk = np.repeat(blocks, size)
+            local = np.arange(int(size.sum())) - np.repeat(np.cumsum(size) - size, size)
+            i = si[blk] + local // cj[blk]
+            j = sj[blk] + local % cj[blk]
+            yield order[i], order[j]
+            r0 = r1
+
+
 def _pair_candidates(o: FloatArray, d: FloatArray, rho: FloatArray, frames: IntArray,
-                     opt: AssociationOptions, rng: np.random.Generator
-                     ) -> tuple[FloatArray, FloatArray]:
+                     opt: AssociationOptions, rng: np.random.Generator,
+                     tick: Callable[[], None] | None = None,
+                     max_pairs: int = MAX_LABEL_PAIRS) -> tuple[FloatArray, FloatArray]:
+    """Candidate centres (m, 3) and sizes (m,) from pairs of diverging rays (at most
+    ``max_candidates``, drawn by ``rng`` when more). All pairs when ``n (n - 1) / 2 <=
+    max_pairs`` (in ``np.triu_indices`` order), else the frame buckets of
+    :func:`_bucket_pairs`: memory and time bounded by ``max_pairs`` whatever ``n``."""
     n = len(o)
-    i, j = np.triu_indices(n, 1)
-    keep = frames[i] != frames[j]
-    i, j = i[keep], j[keep]
-    cos = np.einsum("ij,ij->i", d[i], d[j])
-    keep = cos < math.cos(math.radians(opt.min_pair_angle_deg))
-    i, j, cos = i[keep], j[keep], cos[keep]
-    w = o[i] - o[j]
-    a_dw = np.einsum("ij,ij->i", d[i], w)
-    b_dw = np.einsum("ij,ij->i", d[j], w)
-    den = 1.0 - cos * cos
-    ti = (cos * b_dw - a_dw) / den
-    tj = (b_dw - cos * a_dw) / den
-    pi = o[i] + ti[:, None] * d[i]
-    pj = o[j] + tj[:, None] * d[j]
-    si, sj = ti * rho[i], tj * rho[j]
-    gap = np.linalg.norm(pi - pj, axis=1)
-    size = 0.5 * (si + sj)
-    ok = (ti > 0.05) & (tj > 0.05) & (gap <= opt.ray_tolerance * size) \
-        & (np.abs(np.log(np.maximum(si, 1e-9) / np.maximum(sj, 1e-9))) <= math.log(opt.size_ratio))
-    X, S = 0.5 * (pi[ok] + pj[ok]), size[ok]
+    chunks = _all_pairs(n) if n * (n - 1) // 2 <= max_pairs else _bucket_pairs(frames, max_pairs)
+    cos_max = math.cos(math.radians(opt.min_pair_angle_deg))
+    xs: list[FloatArray] = []
+    ss: list[FloatArray] = []
+    for i, j in chunks:
+        if tick is not None:
+            tick()
+        keep = frames[i] != frames[j]
+        i, j = i[keep], j[keep]
+        cos = np.einsum("ij,ij->i", d[i], d[j])
+        keep = cos < cos_max
+        i, j, cos = i[keep], j[keep], cos[keep]
+        w = o[i] - o[j]
+        a_dw = np.einsum("ij,ij->i", d[i], w)
+        b_dw = np.einsum("ij,ij->i", d[j], w)
+        den = 1.0 - cos * cos
+        ti = (cos * b_dw - a_dw) / den
+        tj = (b_dw - cos * a_dw) / den
+        pi = o[i] + ti[:, None] * d[i]
+        pj = o[j] + tj[:, None] * d[j]
+        si, sj = ti * rho[i], tj * rho[j]
+        gap = np.linalg.norm(pi - pj, axis=1)
+        size = 0.5 * (si + sj)
+        ok = (ti > 0.05) & (tj > 0.05) & (gap <= opt.ray_tolerance * size) \
+            & (np.abs(np.log(np.maximum(si, 1e-9) / np.maximum(sj, 1e-9)))
+               <= math.log(opt.size_ratio))
+        xs.append(0.5 * (pi[ok] + pj[ok]))
+        ss.append(size[ok])
+    X = np.concatenate(xs) if xs else np.zeros((0, 3))
+    S = np.concatenate(ss) if ss else np.zeros(0)
     if len(X) > opt.max_candidates:
         sel = rng.choice(len(X), opt.max_candidates, replace=False)
         X, S = X[sel], S[sel]
@@ -142,6 +228,19 @@ def _support(X: FloatArray, S: FloatArray, o: FloatArray, d: FloatArray, rho: Fl
     return ok, dist
 
 
+def _support_mask(X: FloatArray, S: FloatArray, o: FloatArray, d: FloatArray, rho: FloatArray,
+                  opt: AssociationOptions, tick: Callable[[], None] | None = None) -> BoolArray:
+    """The consistency (m, n) of :func:`_support`, computed in chunks of candidates (its
+    temporaries stay within :data:`PAIR_CHUNK` cells)."""
+    ok = np.zeros((len(X), len(o)), dtype=bool)
+    step = max(1, PAIR_CHUNK // max(1, len(o)))
+    for r in range(0, len(X), step):
+        if tick is not None:
+            tick()
+        ok[r:r + step] = _support(X[r:r + step], S[r:r + step], o, d, rho, opt)[0]
+    return ok
+
+
 def _one_per_frame(idx: IntArray, dist: FloatArray, frames: IntArray) -> IntArray:
     """Of detections ``idx`` keep the closest (smallest ``dist``) per frame."""
     best: dict[int, int] = {}
@@ -153,24 +252,26 @@ def _one_per_frame(idx: IntArray, dist: FloatArray, frames: IntArray) -> IntArra
 def _geometric_clusters(o: FloatArray, d: FloatArray, rho: FloatArray, frames: IntArray,
                         opt: AssociationOptions, rng: np.random.Generator,
                         tick: Callable[[], None] | None = None) -> list[IntArray]:
-    X, S = _pair_candidates(o, d, rho, frames, opt, rng)
+    X, S = _pair_candidates(o, d, rho, frames, opt, rng, tick)
     free = np.ones(len(o), dtype=bool)
     clusters: list[IntArray] = []
     if not len(X):
         return clusters
-    ok_all, dist_all = _support(X, S, o, d, rho, opt)  # once per label; masked below
+    ok_all = _support_mask(X, S, o, d, rho, opt, tick)  # once per label; masked below
+    # support counted in detections of free rays (one per frame is enforced on members),
+    # kept up to date as detections leave the free set
+    free_support = ok_all.sum(axis=1)
     alive = np.ones(len(X), dtype=bool)
     while alive.any() and free.sum() >= opt.min_views:
         if tick is not None:
             tick()
-        # support counted in detections of free rays (one per frame is enforced on members)
-        counts = np.where(alive, (ok_all & free[None]).sum(axis=1), -1)
+        counts = np.where(alive, free_support, -1)
         best = int(np.argmax(counts))
         if counts[best] < opt.min_views:
             break
         x, s = X[best], S[best]
         members = np.flatnonzero(ok_all[best] & free)
-        dist_row = dist_all[best]
+        dist_row = _support(X[best:best + 1], S[best:best + 1], o, d, rho, opt)[1][0]
         for _ in range(2):
             members = _one_per_frame(members, dist_row, frames)
             if len(members) < 2:
@@ -190,6 +291,7 @@ def _geometric_clusters(o: FloatArray, d: FloatArray, rho: FloatArray, frames: I
         if len(members) >= opt.min_views and max_ray_angle_deg(d[members]) >= opt.min_spread_deg:
             clusters.append(members)
             free[members] = False
+            free_support -= ok_all[:, members].sum(axis=1)
     return clusters
 
 
@@ -232,12 +334,47 @@ def _reconstruct(idx: Sequence[int], obs: Sequence[Observation], T_wc: FloatArra
     return Ellipsoid(x, np.full(3, r))
 
 
+def _may_overlap(ell: Ellipsoid, T_wc: FloatArray, camera: Camera,
+                 detections: Sequence[Ellipse]) -> BoolArray:
+    """False (k,) where detection k CANNOT overlap the projection of ``ell`` from the pose
+    ``T_wc[k]`` (k, 4, 4): the angle between the ray through its centre and the direction of
+    the ellipsoid's centre exceeds the angular radius of the ellipsoid's bounding sphere plus
+    the detection's (its major semi-axis over ``min(fx, fy)``: a pixel step subtends at most
+    step / f radians). A necessary condition for a positive IoU, so filtering by it changes no
+    IoU test; it spares projecting the ellipsoid into frames that look elsewhere."""
+    if not len(detections):
+        return np.zeros(0, dtype=bool)
+    par = np.array([dt.params() for dt in detections]).reshape(-1, 5)
+    ray = np.column_stack([(par[:, 0] - camera.cx) / camera.fx,
+                           (par[:, 1] - camera.cy) / camera.fy, np.ones(len(par))])
+    ray = np.einsum("kij,kj->ki", T_wc[:, :3, :3], ray)
+    to_c = ell.center[None] - T_wc[:, :3, 3]
+    dist = np.linalg.norm(to_c, axis=1)
+    r = float(ell.axes.max())
+    cos = np.einsum("ki,ki->k", ray, to_c) / np.maximum(
+        np.linalg.norm(ray, axis=1) * dist, 1e-300)
+    angle = np.arccos(np.clip(cos, -1.0, 1.0))
+    reach = np.arcsin(np.minimum(1.0, r / np.maximum(dist, 1e-300))) \
+        + np.maximum(par[:, 2], par[:, 3]) / min(camera.fx, camera.fy) + 1e-6
+    out: BoolArray = (dist <= r) | (angle <= reach)
+    return out
+
+
 def _projected_ious(ell: Ellipsoid, T_wc: FloatArray, camera: Camera,
-                    detections: Sequence[Ellipse]) -> FloatArray:
+                    detections: Sequence[Ellipse], tick: Callable[[], None] | None = None
+                    ) -> FloatArray:
     """IoUs (k,) of ``detections`` (k) with the projections of ``ell`` from the poses ``T_wc``
-    (k, 4, 4) (0 where it does not project), the areas of all pairs in one batched call."""
-    proj, det, ok = [], [], np.zeros(len(detections), dtype=bool)
-    for i, (T, d) in enumerate(zip(T_wc, detections, strict=True)):
+    (k, 4, 4) (0 where it does not project or cannot overlap: :func:`_may_overlap`), the areas
+    of all pairs in one batched call; ``tick`` is called every 256 projections."""
+    T_wc = np.asarray(T_wc, dtype=float).reshape(-1, 4, 4)
+    may = _may_overlap(ell, T_wc, camera, detections)
+    proj: list[FloatArray] = []
+    det: list[FloatArray] = []
+    ok = np.zeros(len(detections), dtype=bool)
+    for n, i in enumerate(np.flatnonzero(may).tolist()):
+        T, d = T_wc[i], detections[i]
+        if tick is not None and n % 256 == 255:
+            tick()
         try:
             proj.append(project_ellipsoid(camera, invert_pose(T), ell).params())
         except ValueError:
@@ -314,9 +451,10 @@ def associate(
                 best_new: dict[int, tuple[float, int]] = {}
                 candidates = [k for k in untracked if k not in assigned and k not in dropped
                               and observations[k].frame not in used_frames]
+                tick()
                 cand_ious = _projected_ious(
                     ell, T_wc[[observations[k].frame for k in candidates]],
-                    camera, [observations[k].ellipse for k in candidates])
+                    camera, [observations[k].ellipse for k in candidates], tick)
                 for k, iou in zip(candidates, cand_ious.tolist(), strict=True):
                     fr = observations[k].frame
                     if iou >= opt.recruit_iou and iou > best_new.get(fr, (0.0, -1))[0]:

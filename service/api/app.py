@@ -63,6 +63,7 @@ def create_app(settings: Settings | None = None, *, store: MapStore | None = Non
     async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
         # before serving: no request pays the compilation of the numeric kernels
         # (quadloc.factors.jit)
+        services.start()
         services.warm_up()
         if not settings.keys:
             log.warning("no API key configured (QUADLOC_API_KEYS): the API is OPEN and must "

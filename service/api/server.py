@@ -118,6 +118,11 @@ class GuardedH11Protocol(H11Protocol):
         self.transport.close()
 
 
+#: Seconds before ``QUADLOC_SHUTDOWN_GRACE_S`` at which Uvicorn stops waiting for the requests
+#: in progress and the app cancels their work (``App.close``): the process ends within the grace.
+SHUTDOWN_CANCEL_MARGIN_S = 2.0
+
+
 def uvicorn_config(settings: Settings, host: str, port: int, *, workers: int = 1,
                    log_level: str | None = None, access_log: bool = True) -> uvicorn.Config:
     """The Uvicorn config of ``quadloc serve``: the app factory, h11 with the header limit,
@@ -127,7 +132,9 @@ def uvicorn_config(settings: Settings, host: str, port: int, *, workers: int = 1
         log_level=log_level or settings.log_level, access_log=access_log,
         http=GuardedH11Protocol, h11_max_incomplete_event_size=settings.max_header_bytes,
         # (typed int, used as a float timeout: sub-second settings are honoured)
-        timeout_keep_alive=settings.keep_alive_timeout_s)  # type: ignore[arg-type]
+        timeout_keep_alive=settings.keep_alive_timeout_s,  # type: ignore[arg-type]
+        timeout_graceful_shutdown=max(1.0, settings.shutdown_grace_s  # type: ignore[arg-type]
+                                      - SHUTDOWN_CANCEL_MARGIN_S))
     config.request_read_timeout_s = settings.request_read_timeout_s  # type: ignore[attr-defined]
     return config
 

@@ -135,6 +135,7 @@ class BuildRunner:
                                         thread_name_prefix="quadloc-build")
         self._pending: set[str] = set()  # job ids queued or running here
         self._lock = threading.Lock()
+        self._stopping = threading.Event()
         self._stopped = threading.Event()
         self._beat_thread: threading.Thread | None = None
 
@@ -166,6 +167,14 @@ class BuildRunner:
         """Stop taking jobs; queued ones are dropped (their rows go stale: ``runner_lost``)."""
         self._stopped.set()
         self._pool.shutdown(wait=False, cancel_futures=True)
+
+    def stop_running(self, stop: bool = True) -> None:
+        """The process is stopping (``stop``; False: it serves again): a running build stops
+        at its next progress check and is marked failed ``runner_lost``, storing nothing."""
+        if stop:
+            self._stopping.set()
+        else:
+            self._stopping.clear()
 
     def _beat(self) -> None:
         """The heartbeat thread: every ``beat_s`` refresh the rows of the jobs running or
@@ -222,8 +231,13 @@ class BuildRunner:
         progress("associating", 0.0, 0)
         try:
             scene, report = build_map(recording, map_id=job.map_id, progress=progress,
-                                      deadline=Deadline.wall_budget(self.time_budget_s))
+                                      deadline=Deadline.wall_budget(self.time_budget_s)
+                                      .cancelled_by(self._stopping))
         except BuildTimeoutError as exc:
+            if self._stopping.is_set():
+                self.jobs.fail(job_id, "runner_lost", "the replica stopped during the build; "
+                               "nothing was stored")
+                return
             self.jobs.fail(job_id, "time_budget_exceeded",
                            f"{exc} (budget {self.time_budget_s:g} s); send fewer frames")
             return
@@ -233,6 +247,10 @@ class BuildRunner:
         if not scene.objects:
             self.jobs.fail(job_id, "no_objects", "no object could be associated and "
                            "reconstructed from the recording (see the report)", report)
+            return
+        if self._stopping.is_set():
+            self.jobs.fail(job_id, "runner_lost", "the replica stopped during the build; "
+                           "nothing was stored")
             return
         progress("saving", 95.0, len(scene.objects))
         if self.jobs.get(job_id).status != "running":

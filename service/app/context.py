@@ -62,6 +62,11 @@ class App:
                                                                 localizer.slots),
                    builds=builds, calibrations=calibrations)
 
+    def start(self) -> None:
+        """Serve (again, after :meth:`close`): session frames and builds run."""
+        self.sessions.close(stop=False)
+        self.builds.runner.stop_running(stop=False)
+
     @staticmethod
     def warm_up() -> None:
         """Compile (or load from their cache) the numeric kernels of the solvers, so that no
@@ -70,7 +75,10 @@ class App:
         compile_kernels()
 
     def close(self) -> None:
-        """Stop the map loader's threads and close the store's connections (running builds
-        finish in their threads; the app may be used again: the loader restarts)."""
+        """The process is stopping: session frames and builds in progress stop at their next
+        check (answered ``time_budget_exceeded`` / marked ``runner_lost``), the map loader's
+        threads stop and the store's connections close."""
+        self.sessions.close()
+        self.builds.runner.stop_running()
         self.map_loader.close()
         self.store.close()

@@ -15,6 +15,9 @@ single frames share the CPU fairly. Design: docs/design/service.md#tracking-sess
 
 from __future__ import annotations
 
+import threading
+
+from quadloc.factors.budget import Deadline, earliest
 from quadloc.factors.names import GeometryError
 from quadloc.service.app.conversions import (
     camera_from_request,
@@ -65,6 +68,9 @@ class SessionService:
         self.maps = maps
         self.slots = slots
         self.queue_timeout_s = settings.solve_queue_timeout_s
+        self.frame_budget_ms = settings.session_frame_budget_ms
+        self.request_budget_ms = settings.session_request_budget_ms
+        self._stopping = threading.Event()
         self.store = SessionStore(settings.max_sessions, settings.session_idle_timeout_s,
                                   max_per_owner=settings.max_sessions_per_key,
                                   replica_tag=settings.replica_id)
@@ -105,33 +111,54 @@ class SessionService:
         except SessionNotFound as exc:
             raise _not_found(session_id) from exc
 
+    def close(self, stop: bool = True) -> None:
+        """The process is stopping (``stop``; False: it serves again): the frames being fused
+        stop at their next stage, later ones are answered ``time_budget_exceeded`` without
+        work."""
+        if stop:
+            self._stopping.set()
+        else:
+            self._stopping.clear()
+
     def add_frames(self, session_id: str, body: SessionFramesIn | SessionFrameIn,
-                   caller: Caller = INTERNAL) -> SessionFramesOut:
+                   caller: Caller = INTERNAL, cancel: threading.Event | None = None
+                   ) -> SessionFramesOut:
         """Fuse one frame, or a batch in time order (see the module docstring); errors name
         ``frames[i]....`` for a batch, the frame's own fields otherwise. The session is held
-        for the whole request (:meth:`SessionStore.use`): its idle clock restarts at the end."""
+        for the whole request (:meth:`SessionStore.use`): its idle clock restarts at the end.
+        Each frame has the CPU budget ``session_frame_budget_ms``, the request
+        ``session_request_budget_ms``; ``cancel`` (set when the client went away) and
+        :meth:`close` end the work like a budget (frames answered ``time_budget_exceeded``)."""
         try:
             with self.store.use(session_id, caller) as entry:
-                return self._add_frames(entry, body)
+                return self._add_frames(entry, body, cancel)
         except SessionNotFound as exc:
             raise _not_found(session_id) from exc
 
-    def _add_frames(self, entry: SessionEntry,
-                    body: SessionFramesIn | SessionFrameIn) -> SessionFramesOut:
+    def _add_frames(self, entry: SessionEntry, body: SessionFramesIn | SessionFrameIn,
+                    cancel: threading.Event | None = None) -> SessionFramesOut:
         """:meth:`add_frames` on the held ``entry``."""
         batch = isinstance(body, SessionFramesIn)
         frames = body.frames if isinstance(body, SessionFramesIn) else [body]
         with entry.lock:
             inputs = self._validated(entry, frames, batch)
+            # CPU time of this thread (it fuses every frame of the request), from here
+            request = Deadline.cpu_budget(self.request_budget_ms).cancelled_by(
+                self._stopping, *(() if cancel is None else (cancel,)))
             results = []
             for i, frame in enumerate(inputs):
+                if request.passed():  # counted, not fused: no slot needed
+                    results.append(frame_out(entry.session.add_frame(frame, request),
+                                             entry.convention))
+                    continue
                 # the first frame may wait for a slot only as long as a localize would; later
                 # ones take their turn (a batch half fused is never refused)
                 if not self.slots.acquire(timeout=self.queue_timeout_s if i == 0 else None):
                     raise AppError("busy", "all solver slots are busy; retry shortly",
                                    retry_after_s=BUSY_RETRY_AFTER_S)
                 try:
-                    result = entry.session.add_frame(frame)
+                    result = entry.session.add_frame(
+                        frame, earliest(request, Deadline.cpu_budget(self.frame_budget_ms)))
                 except _INPUT_ERRORS as exc:
                     raise invalid_input(exc, f"frames[{i}]." if batch else "") from exc
                 finally:

@@ -34,7 +34,8 @@ class SessionOptionsIn(WireModel):
     """Session options; omitted fields take the defaults shown."""
 
     window_frames: int = Field(default=30, ge=2, le=300,
-                               description="Camera poses kept in the sliding window.")
+                               description="Camera poses kept in the sliding window (at most "
+                                           "300 with isam2, 60 with batch).")
     smoother: str = Field(default="isam2", pattern="^(isam2|batch)$",
                           description="isam2 (incremental fixed-lag) or batch (LM per frame).")
     inlier_iou: float = Field(default=0.2, gt=0, le=1)
@@ -116,7 +117,9 @@ class SessionFrameOut(BaseModel):
     timestamp: float
     state: str = Field(description="initializing, tracking or lost.")
     reason: str | None = Field(description="Why no pose: waiting_for_constraints, ambiguous, "
-                                           "lost; with a pose: detections_unexplained (the "
+                                           "lost, time_budget_exceeded (the frame was counted "
+                                           "but not fused: its CPU budget or its request's ran "
+                                           "out); with a pose: detections_unexplained (the "
                                            "frame's detections contradict the pose; confidence "
                                            "0); else None.")
     world_from_camera: PoseOut | None

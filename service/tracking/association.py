@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from quadloc.factors.arrays import FloatArray
+from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.factors.camera import Camera
 from quadloc.factors.rotations import invert_pose, skew
 from quadloc.maps.compiled import CompiledMap
@@ -61,9 +62,10 @@ def centre_jacobians(camera: Camera, world_from_camera: FloatArray,
 def associate(
     compiled: CompiledMap, camera: Camera, world_from_camera: FloatArray,
     covariance: FloatArray, ellipses: FloatArray, labels: list[str],
-    detection_indices: list[int],
+    detection_indices: list[int], deadline: Deadline | None = None,
 ) -> list[Association]:
-    """One-to-one gated associations (module docstring).
+    """One-to-one gated associations (module docstring); none (an empty list) once
+    ``deadline`` (None: no limit) has passed: the caller checks it.
 
     Args:
         ellipses: (D, 5) detection params ``(cx, cy, a, b, angle)`` px / rad.
@@ -72,26 +74,37 @@ def associate(
     """
     cands: list[tuple[float, int, int]] = []
     cfw = invert_pose(world_from_camera)[None]
+    by_label: dict[str, list[int]] = {}
     for d, label in enumerate(labels):
+        by_label.setdefault(label, []).append(d)
+    for label, dets in by_label.items():  # the objects projected once per label
         objs = compiled.indices_for(label)
         if len(objs) == 0:
             continue
         cen, inv_shape, valid, _ = project_objects(
             camera, cfw, compiled.centers[objs], compiled.shape_matrices[objs],
             compiled.dual_quadrics[objs])
+        # only valid projections can pass the gate
+        keep = np.flatnonzero(valid[0])
+        objs, cen, inv_shape = objs[keep], cen[0][keep], inv_shape[0][keep]
         _, J = centre_jacobians(camera, world_from_camera, compiled.centers[objs])
-        e = ellipses[d]
-        s_d = DETECTION_CENTRE_FRACTION * np.sqrt(e[2] * e[3]) + DETECTION_CENTRE_FLOOR_PX
-        S = J @ covariance @ J.transpose(0, 2, 1) + (s_d ** 2) * np.eye(2)
-        r = e[:2] - cen[0]
-        m2 = np.einsum("ni,ni->n", r, np.linalg.solve(S, r[..., None])[..., 0])
-        det = np.maximum(inv_shape[0, :, 0, 0] * inv_shape[0, :, 1, 1]
-                         - inv_shape[0, :, 0, 1] ** 2, 1e-300)
-        ratio = np.sqrt(e[2] * e[3]) / det ** 0.25
-        ok = valid[0] & (m2 <= GATE_CHI2) & (ratio >= SIZE_RATIO_GATE[0]) \
-            & (ratio <= SIZE_RATIO_GATE[1])
-        for k in np.flatnonzero(ok):
-            cands.append((float(m2[k]), d, int(objs[k])))
+        JSJ = J @ covariance @ J.transpose(0, 2, 1)
+        det = np.maximum(inv_shape[:, 0, 0] * inv_shape[:, 1, 1] - inv_shape[:, 0, 1] ** 2,
+                         1e-300)
+        proj_size = det ** 0.25
+        for d in dets:
+            if deadline_passed(deadline):
+                return []
+            e = ellipses[d]
+            s_d = DETECTION_CENTRE_FRACTION * np.sqrt(e[2] * e[3]) + DETECTION_CENTRE_FLOOR_PX
+            S = JSJ + (s_d ** 2) * np.eye(2)
+            r = e[:2] - cen
+            m2 = np.einsum("ni,ni->n", r, np.linalg.solve(S, r[..., None])[..., 0])
+            ratio = np.sqrt(e[2] * e[3]) / proj_size
+            ok = (m2 <= GATE_CHI2) & (ratio >= SIZE_RATIO_GATE[0]) \
+                & (ratio <= SIZE_RATIO_GATE[1])
+            for k in np.flatnonzero(ok):
+                cands.append((float(m2[k]), d, int(objs[k])))
     cands.sort()
     used_d: set[int] = set()
     used_o: set[int] = set()

@@ -22,7 +22,12 @@ from quadloc.factors.conics import Ellipse
 from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import CompiledMap
 from quadloc.service.localization.hypotheses import p3p_hypotheses, size_depths
-from quadloc.service.localization.scoring import Match, MatchScorer, greedy_assignment
+from quadloc.service.localization.scoring import (
+    Match,
+    MatchScorer,
+    ScoringTimeoutError,
+    greedy_assignment,
+)
 
 __all__ = ["AMBIGUITY_RATIO", "MIN_DISTINCT_OBJECTS", "MIN_TOTAL_INLIERS", "InitFrame",
            "MultiFrameOutcome", "multi_frame_ransac"]
@@ -92,9 +97,10 @@ def multi_frame_ransac(
         extra_hypotheses: ``camera_from_world`` poses of the reference frame to score as well
             (e.g. a client prior).
         max_samples: minimal samples drawn (uniform over frames' detections and compatible
-            objects, seeded by ``rng``).
-        deadline: no sample is drawn after it (None: no limit; the session passes a
-            wall-clock budget, :meth:`quadloc.factors.budget.Deadline.wall_budget`).
+            objects, seeded by ``rng``): always all of them, so that the answer depends on the
+            inputs and the seed only, never on the machine's speed.
+        deadline: checked between samples and inside the scoring (None: no limit); once it
+            has passed the search gives up: reason ``time_budget_exceeded``, no pose.
     """
     rng = rng or np.random.default_rng(0)
     ref = frames[-1].odom_from_camera
@@ -109,8 +115,8 @@ def multi_frame_ransac(
     hyps: list[FloatArray] = [np.asarray(h, float) for h in extra_hypotheses]
     if len(pool) >= 3:
         for _ in range(max_samples):
-            if deadline_passed(deadline):
-                break
+            if deadline_passed(deadline):  # gives up (no pose), never answers from fewer
+                return MultiFrameOutcome(None, [], 0, 0, len(hyps), "time_budget_exceeded")
             idx = rng.choice(len(pool), 3, replace=False)
             sample, used = [], set()
             for i in idx:
@@ -132,10 +138,21 @@ def multi_frame_ransac(
         return MultiFrameOutcome(None, [], 0, 0, 0, "too_few_objects")
     H = np.array(hyps).reshape(-1, 4, 4)
     # stage 1: centre hits summed over frames; stage 2: IoU scores on the best STAGE2
+    try:
+        return _score(frames, scorers, k_from_ref, H, len(hyps), inlier_iou, deadline)
+    except ScoringTimeoutError:  # the scorers check the deadline inside their blocks
+        return MultiFrameOutcome(None, [], 0, 0, len(hyps), "time_budget_exceeded")
+
+
+def _score(frames: Sequence[InitFrame], scorers: Sequence[MatchScorer | None],
+           k_from_ref: list[FloatArray], H: FloatArray, n_hyps: int, inlier_iou: float,
+           deadline: Deadline | None) -> MultiFrameOutcome:
+    """The two scoring stages of :func:`multi_frame_ransac` over the hypotheses ``H`` (h, 4, 4)
+    of the reference frame; raises ``ScoringTimeoutError`` once ``deadline`` has passed."""
     hits = np.zeros(len(H))
     for k, sc in enumerate(scorers):
         if sc is not None:
-            hits += sc.centre_hits(np.einsum("ij,hjk->hik", k_from_ref[k], H))
+            hits += sc.centre_hits(np.einsum("ij,hjk->hik", k_from_ref[k], H), deadline)
     keep = np.argsort(-hits, kind="stable")[:STAGE2]
     H = H[keep]
     score = np.zeros(len(H))
@@ -143,7 +160,7 @@ def multi_frame_ransac(
     for k, sc in enumerate(scorers):
         if sc is None:
             continue
-        dense = sc.dense_iou(np.einsum("ij,hjk->hik", k_from_ref[k], H))
+        dense = sc.dense_iou(np.einsum("ij,hjk->hik", k_from_ref[k], H), stop_at=deadline)
         for h in range(len(H)):
             m = greedy_assignment(dense[h], sc.detection_indices, inlier_iou)
             per_frame[h][k] = m
@@ -153,12 +170,12 @@ def multi_frame_ransac(
     matched = {m.object_index for ms in per_frame[best] for m in ms}
     n_inl = sum(len(ms) for ms in per_frame[best])
     if len(matched) < MIN_DISTINCT_OBJECTS or n_inl < MIN_TOTAL_INLIERS:
-        return MultiFrameOutcome(None, [], len(matched), n_inl, len(hyps), "too_few_objects")
+        return MultiFrameOutcome(None, [], len(matched), n_inl, n_hyps, "too_few_objects")
     c_best = invert_pose(H[best])[:3, 3]
     for h in order[1:]:
         if score[h] < AMBIGUITY_RATIO * score[best]:
             break
         if np.linalg.norm(invert_pose(H[h])[:3, 3] - c_best) > AMBIGUITY_DISTANCE_M:
-            return MultiFrameOutcome(None, [], len(matched), n_inl, len(hyps), "ambiguous")
+            return MultiFrameOutcome(None, [], len(matched), n_inl, n_hyps, "ambiguous")
     poses = [k_from_ref[k] @ H[best] for k in range(len(frames))]
-    return MultiFrameOutcome(poses, per_frame[best], len(matched), n_inl, len(hyps), None)
+    return MultiFrameOutcome(poses, per_frame[best], len(matched), n_inl, n_hyps, None)

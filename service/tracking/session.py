@@ -21,7 +21,7 @@ import gtsam
 import numpy as np
 
 from quadloc.factors.arrays import FloatArray
-from quadloc.factors.budget import Deadline
+from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.factors.camera import Camera
 from quadloc.factors.conics import ellipse_params
 from quadloc.factors.gravity_factor import gravity_factor
@@ -42,8 +42,11 @@ from quadloc.service.tracking.confidence import session_confidence
 from quadloc.service.tracking.multiframe import InitFrame, multi_frame_ransac
 
 __all__ = [
+    "MAX_BUFFERED_DETECTIONS",
+    "MAX_WINDOW_FRAMES",
     "SMOOTHERS",
     "STATES",
+    "TIME_BUDGET_EXCEEDED",
     "DriftModel",
     "FrameInput",
     "FrameResult",
@@ -59,6 +62,18 @@ STATES = ("initializing", "tracking", "lost")
 #: ``lost_after_misses`` such frames in a row).
 LOST_UNEXPLAINED_DETECTIONS = 3
 SMOOTHERS = ("isam2", "batch")
+#: Largest ``window_frames`` of each smoother: the batch smoother re-solves its whole window at
+#: every frame, so its window is what bounds a frame's CPU time (measured by
+#: ``python -m bench.adversarial``; docs/tracking.md, "Limits").
+MAX_WINDOW_FRAMES = {"isam2": 300, "batch": 60}
+#: Most detections an initializing session keeps buffered (over all buffered frames; the
+#: oldest frames are dropped first): bounds a session's memory whatever the frames hold.
+MAX_BUFFERED_DETECTIONS = 2048
+#: A tracking frame's smoother update starts only with this many times the previous update's
+#: CPU time left in its budget.
+UPDATE_COST_MARGIN = 1.5
+#: ``FrameResult.reason`` of a frame not fused because its time budget ran out.
+TIME_BUDGET_EXCEEDED = "time_budget_exceeded"
 
 _T = TypeVar("_T")
 
@@ -119,7 +134,6 @@ class SessionOptions:
     init_max_frames: int = 8
     init_interval_frames: int = 5
     init_max_samples: int = 300
-    init_time_budget_ms: float = 60.0
     lost_position_std_m: float = 0.5
     lost_after_misses: int = 10
     seed: int = 0
@@ -132,6 +146,9 @@ class SessionOptions:
                       f"{self.window_frames!r}")
         if self.smoother not in SMOOTHERS:
             raise bad("smoother", f"must be one of {SMOOTHERS}, got {self.smoother!r}")
+        if self.window_frames > MAX_WINDOW_FRAMES[self.smoother]:
+            raise bad("window_frames", f"must be <= {MAX_WINDOW_FRAMES[self.smoother]} with the "
+                      f"{self.smoother} smoother, got {self.window_frames}")
         if not (0 < self.inlier_iou <= 1):
             raise bad("inlier_iou", f"must be in (0, 1], got {self.inlier_iou!r}")
         if not (isinstance(self.init_max_frames, int) and 1 <= self.init_max_frames
@@ -228,6 +245,7 @@ class TrackingSession:
         self._last: tuple[int, float, FloatArray, FloatArray, FloatArray] | None = None
         self._misses = 0
         self._last_timestamp: float | None = None
+        self._update_cpu_s = 0.0  # CPU time (s) of the last smoother update
 
     # ------------------------------------------------------------------ public
     @property
@@ -235,9 +253,19 @@ class TrackingSession:
         """The timestamp (s, the client's clock) of the last frame fused; None before any."""
         return self._last_timestamp
 
-    def add_frame(self, frame: FrameInput) -> FrameResult:
+    def add_frame(self, frame: FrameInput, deadline: Deadline | None = None) -> FrameResult:
         """Fuse one frame; returns its :class:`FrameResult`. Raises
-        :class:`TrackingInputError` naming the field on bad input (the session is unchanged)."""
+        :class:`TrackingInputError` naming the field on bad input (the session is unchanged).
+
+        ``deadline`` (e.g. :meth:`Deadline.cpu_budget`; None: no limit) is checked between the
+        frame's stages: a frame past it is counted (its index and timestamp used) but not
+        fused, answered with reason :data:`TIME_BUDGET_EXCEEDED` and no pose; the state stays
+        (a tracking session chains the next frame's odometry from the last fused one; an
+        initializing one abandons the attempt, keeping the frame in its buffer unless the
+        deadline had passed before the frame started). The only stage not
+        interruptible is the smoother's update, bounded by :data:`MAX_WINDOW_FRAMES`.
+        Initialization draws exactly ``init_max_samples`` samples (seeded): the same frames give
+        the same answer whatever the machine's load, unless the deadline passes."""
         t0 = time.perf_counter()
         T_oc = self._check(frame)
         index = self.frame_count
@@ -246,10 +274,12 @@ class TrackingSession:
         self.frame_count += 1
         self._last_timestamp = float(frame.timestamp)
         timings: dict[str, float] = {}
-        if self.state == "tracking":
-            result = self._track(index, frame, T_oc, usable, timings)
+        if deadline_passed(deadline):
+            result = self._no_pose(index, frame, T_oc, usable, TIME_BUDGET_EXCEEDED, timings)
+        elif self.state == "tracking":
+            result = self._track(index, frame, T_oc, usable, timings, deadline)
         else:
-            result = self._initialize(index, frame, T_oc, usable, timings)
+            result = self._initialize(index, frame, T_oc, usable, timings, deadline)
         timings["total"] = (time.perf_counter() - t0) * 1e3
         return result
 
@@ -365,7 +395,7 @@ class TrackingSession:
         return self._result(index, frame, T_oc, None, None, [], len(usable), reason, timings)
 
     def _track(self, index: int, frame: FrameInput, T_oc: FloatArray, usable: list[int],
-               timings: dict[str, float]) -> FrameResult:
+               timings: dict[str, float], deadline: Deadline | None = None) -> FrameResult:
         assert self._last is not None and self._smoother is not None
         t = time.perf_counter()
         last_index, last_ts, T_oc_last, T_last, cov_last = self._last
@@ -382,7 +412,10 @@ class TrackingSession:
             dets = frame.detections
             assoc = associate(self.compiled, self.camera, T_pred, cov_pred,
                               ellipse_params([dets[i].ellipse for i in usable]),
-                              [dets[i].label for i in usable], usable)
+                              [dets[i].label for i in usable], usable, deadline)
+            if deadline_passed(deadline):
+                timings["associate"] = (time.perf_counter() - t) * 1e3
+                return self._no_pose(index, frame, T_oc, usable, TIME_BUDGET_EXCEEDED, timings)
             for f in self._factors_for(key, T_pred, [dets[a.detection_index] for a in assoc],
                                        [a.object_index for a in assoc]):
                 graph.add(f)
@@ -393,13 +426,19 @@ class TrackingSession:
         stamps = gtsam.FixedLagSmootherKeyTimestampMap()
         stamps[key] = float(index)
         timings["associate"] = (time.perf_counter() - t) * 1e3
-        t = time.perf_counter()
+        # the update cannot be interrupted: it starts only if the CPU time left covers the
+        # previous one's (the window's cost changes slowly from frame to frame)
+        if deadline_passed(deadline) or (deadline is not None and deadline.remaining_cpu_s()
+                                         < UPDATE_COST_MARGIN * self._update_cpu_s):
+            return self._no_pose(index, frame, T_oc, usable, TIME_BUDGET_EXCEEDED, timings)
+        t, cpu = time.perf_counter(), time.thread_time()
         try:
             self._smoother.update(graph, values, stamps)
             T = self._smoother.calculateEstimatePose3(key).matrix()
             cov = self._marginal(key)
         except RuntimeError:
             T, cov = None, None
+        self._update_cpu_s = time.thread_time() - cpu
         timings["update"] = (time.perf_counter() - t) * 1e3
         if T is None or cov is None or not np.all(np.isfinite(T)):
             self.reset()
@@ -432,13 +471,18 @@ class TrackingSession:
 
     # ------------------------------------------------------------------ (re)initialization
     def _initialize(self, index: int, frame: FrameInput, T_oc: FloatArray, usable: list[int],
-                    timings: dict[str, float]) -> FrameResult:
+                    timings: dict[str, float], deadline: Deadline | None = None
+                    ) -> FrameResult:
         opts = self.options
         dets = tuple(frame.detections)
         ell = ellipse_params([dets[i].ellipse for i in usable]) if usable else np.zeros((0, 5))
         self._buffer.append(_Buffered(index, float(frame.timestamp), InitFrame(
             T_oc, ell, tuple(dets[i].label for i in usable), tuple(usable)), dets, frame.prior,
             frame.gravity))
+        # bounded in detections too, not only frames (the newest frame always stays)
+        buffered = sum(len(b.detections) for b in self._buffer)
+        while len(self._buffer) > 1 and buffered > MAX_BUFFERED_DETECTIONS:
+            buffered -= len(self._buffer.popleft().detections)
         waiting = "lost" if self.state == "lost" else "waiting_for_constraints"
         with_dets = [b for b in list(self._buffer)[:-1] if len(b.frame.labels)]
         chosen = [*_spread(with_dets, opts.init_max_frames - 1), self._buffer[-1]]
@@ -451,12 +495,14 @@ class TrackingSession:
         extra = [invert_pose(frame.prior.world_from_camera)] if frame.prior is not None else []
         out = multi_frame_ransac([b.frame for b in chosen], self.compiled, self.camera,
                                  inlier_iou=opts.inlier_iou, max_samples=opts.init_max_samples,
-                                 rng=self._rng, extra_hypotheses=extra,
-                                 deadline=Deadline.wall_budget(opts.init_time_budget_ms / 1e3))
+                                 rng=self._rng, extra_hypotheses=extra, deadline=deadline)
         timings["multi_frame_ransac"] = (time.perf_counter() - t) * 1e3
         if out.camera_from_world is None:
-            reason = "ambiguous" if out.reason == "ambiguous" else waiting
+            reason = out.reason if out.reason in ("ambiguous", TIME_BUDGET_EXCEEDED) \
+                else waiting
             return self._no_pose(index, frame, T_oc, usable, reason, timings)
+        if deadline_passed(deadline):
+            return self._no_pose(index, frame, T_oc, usable, TIME_BUDGET_EXCEEDED, timings)
         t = time.perf_counter()
         started = self._start_graph(chosen, [invert_pose(P) for P in out.camera_from_world],
                                     out.matches)

@@ -6,9 +6,12 @@ locking: docs/design/service.md#tracking-session-routes.
 
 from __future__ import annotations
 
+import asyncio
+import threading
 from typing import Annotated
 
-from fastapi import APIRouter, Body, Path, Response
+from fastapi import APIRouter, Body, Path, Request, Response
+from fastapi.concurrency import run_in_threadpool
 
 from quadloc.service.api.auth import ReadAccess
 from quadloc.service.api.deps import AppDep, MapIdPath
@@ -30,6 +33,9 @@ from quadloc.service.schemas.sessions import (
 __all__ = ["router"]
 
 router = APIRouter(prefix="/v1", tags=["tracking"])
+
+#: How often (s) a frames request checks whether its client went away.
+DISCONNECT_POLL_S = 0.2
 
 SessionIdPath = Annotated[str, Path(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$",
                                     description="Session id returned at creation.")]
@@ -74,10 +80,24 @@ def delete_session(session_id: SessionIdPath, app: AppDep, _key: ReadAccess) -> 
              responses={**problem_responses(400, 401, 403, 404, 413, 415, 422, 503),
                         200: {"content": {"application/json": {
                             "example": FRAME_RESPONSE_EXAMPLE}}}})
-def add_frames(session_id: SessionIdPath,
+async def add_frames(session_id: SessionIdPath,
                body: Annotated[SessionFramesBody, Body(openapi_examples={
                    "one_frame": {"summary": "One frame", "value": FRAME_EXAMPLE},
                    "batch": {"summary": "A recording (batch)",
                              "value": {"frames": [FRAME_EXAMPLE]}}})],
-               app: AppDep, _key: ReadAccess) -> SessionFramesOut:
-    return app.sessions.add_frames(session_id, body, Caller.of(_key))
+               app: AppDep, _key: ReadAccess, request: Request) -> SessionFramesOut:
+    # the frames are fused in a worker thread; this task watches the connection meanwhile and
+    # cancels the work when the client goes away (the frames left answer time_budget_exceeded)
+    gone = threading.Event()
+
+    async def watch() -> None:
+        while not await request.is_disconnected():
+            await asyncio.sleep(DISCONNECT_POLL_S)
+        gone.set()
+
+    watcher = asyncio.create_task(watch())
+    try:
+        return await run_in_threadpool(app.sessions.add_frames, session_id, body,
+                                       Caller.of(_key), gone)
+    finally:
+        watcher.cancel()

@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: 8bfd3333ea6b98718a9afa3eb2dfc3ceb0b871da63c68bd2bbc24b400a2af59e
+// openapi-sha256: 41e53892ae94bf8c7ea0e0902a6a548ceb4f45f86e1e8bedf8a9ea1f09602047
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -704,30 +704,6 @@ export interface components {
                 [key: string]: string;
             };
         };
-        /**
-         * HintIn
-         * @description Optional coarse hint of where the camera is: a position with a large uncertainty (a GPS /
-         *     Wi-Fi / beacon fix, the app's last known position) or the objects of a zone (a room, a
-         *     floor). It weights the search of a large map and settles a tie between places in its
-         *     favour; it never makes an answer win that the detections do not support.
-         */
-        HintIn: {
-            /**
-             * Position
-             * @description The camera's position in the map's world frame, metres.
-             */
-            position?: number[] | null;
-            /**
-             * Sigma M
-             * @description 1-sigma uncertainty of `position` (m).
-             */
-            sigma_m?: number | null;
-            /**
-             * Object Ids
-             * @description The objects of the zone the camera is in (ids of the map's objects).
-             */
-            object_ids?: string[] | null;
-        };
         /** InlierOut */
         InlierOut: {
             /** Detection Index */
@@ -936,7 +912,6 @@ export interface components {
             detections: components["schemas"]["DetectionIn"][];
             prior?: components["schemas"]["PosePriorIn"] | null;
             gravity?: components["schemas"]["GravityIn"] | null;
-            hint?: components["schemas"]["HintIn"] | null;
             /**
              * Frame Id
              * @description Echoed back.
@@ -1453,7 +1428,7 @@ export interface components {
             state: string;
             /**
              * Reason
-             * @description Why no pose: waiting_for_constraints, ambiguous, lost; with a pose: detections_unexplained (the frame's detections contradict the pose; confidence 0); else None.
+             * @description Why no pose: waiting_for_constraints, ambiguous, lost, time_budget_exceeded (the frame was counted but not fused: its CPU budget or its request's ran out); with a pose: detections_unexplained (the frame's detections contradict the pose; confidence 0); else None.
              */
             reason: string | null;
             world_from_camera: components["schemas"]["PoseOut"] | null;
@@ -1498,7 +1473,7 @@ export interface components {
         SessionOptionsIn: {
             /**
              * Window Frames
-             * @description Camera poses kept in the sliding window.
+             * @description Camera poses kept in the sliding window (at most 300 with isam2, 60 with batch).
              * @default 30
              */
             window_frames?: number;
