@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: 41e53892ae94bf8c7ea0e0902a6a548ceb4f45f86e1e8bedf8a9ea1f09602047
+// openapi-sha256: b24e0dda4089b547e7cdd8ed0c921c1f117fe72655012e060532ab2e50edc363
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -704,6 +704,30 @@ export interface components {
                 [key: string]: string;
             };
         };
+        /**
+         * HintIn
+         * @description Optional coarse hint of where the camera is: a position with a large uncertainty (a GPS /
+         *     Wi-Fi / beacon fix, the app's last known position) or the objects of a zone (a room, a
+         *     floor). It weights the search of a large map and settles a tie between places in its
+         *     favour; it never makes an answer win that the detections do not support.
+         */
+        HintIn: {
+            /**
+             * Position
+             * @description The camera's position in the map's world frame, metres.
+             */
+            position?: number[] | null;
+            /**
+             * Sigma M
+             * @description 1-sigma uncertainty of `position` (m).
+             */
+            sigma_m?: number | null;
+            /**
+             * Object Ids
+             * @description The objects of the zone the camera is in (ids of the map's objects).
+             */
+            object_ids?: string[] | null;
+        };
         /** InlierOut */
         InlierOut: {
             /** Detection Index */
@@ -912,6 +936,7 @@ export interface components {
             detections: components["schemas"]["DetectionIn"][];
             prior?: components["schemas"]["PosePriorIn"] | null;
             gravity?: components["schemas"]["GravityIn"] | null;
+            hint?: components["schemas"]["HintIn"] | null;
             /**
              * Frame Id
              * @description Echoed back.
