@@ -131,9 +131,9 @@ def test_a_frames_request_longer_than_the_idle_timeout_keeps_its_session(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     original = TrackingSession.add_frame
 
-    def slow_add_frame(self: TrackingSession, frame: Any) -> Any:
+    def slow_add_frame(self: TrackingSession, *args: Any, **kwargs: Any) -> Any:
         time.sleep(1.5)  # the request outlasts the 1 s idle timeout
-        return original(self, frame)
+        return original(self, *args, **kwargs)
 
     with TestClient(make_test_app(tmp_path, session_idle_timeout_s=1.0)) as c:
         url = _session(c, "")
