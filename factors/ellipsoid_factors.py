@@ -20,9 +20,11 @@ Rows (V * M, dimensionless, view-major): view ``v``'s residual times ``weights[v
 then, with ``robust_scale`` ``k``, scaled per view so that half its squared norm is Huber's cost of
 the view's weighted residual norm (the Jacobian gets the same scale, as iteratively reweighted least
 squares does; GTSAM's robust noise models reweight a whole factor, so a factor over many views
-needs its kernel inside). A view whose ellipsoid is not entirely in front of its camera (depth
-margin <= ``min_depth_margin`` m) gives constant rows (total cost ``penalty_cost * weight^2``,
-zero Jacobian): LM rejects steps that go there. The noise model is unit.
+needs its kernel inside). A view that is not valid (:func:`valid_views`: its ellipsoid not
+entirely in front of its camera, depth margin <= ``min_depth_margin`` m, or degenerate, a
+semi-axis below ``MIN_AXIS_DEPTH_RATIO`` times its centre's depth) gives constant rows (total
+cost ``penalty_cost * weight^2``, zero Jacobian): LM rejects steps that go there. The noise
+model is unit.
 """
 
 from __future__ import annotations
@@ -38,10 +40,19 @@ from quadloc.factors.ellipsoid_residuals import LevelSetSamples, observation_res
 from quadloc.factors.pose_residuals import DEFAULT_MIN_DEPTH_MARGIN
 from quadloc.factors.rotations import invert_pose
 
-__all__ = ["PENALTY_COST", "depth_margins", "ellipsoid_views_factor", "huber_row_scale"]
+__all__ = ["MIN_AXIS_DEPTH_RATIO", "PENALTY_COST", "depth_margins", "ellipsoid_views_factor",
+           "huber_row_scale", "valid_views"]
 
-#: Cost of one view whose ellipsoid is not in front of its camera (before the view's weight).
+#: Cost of one invalid view (:func:`valid_views`), before the view's weight.
 PENALTY_COST = 1e6
+#: Smallest semi-axis of a valid view's ellipsoid, as a fraction of its centre's depth in the
+#: camera. Below it the projected conic ``A = S_c - c_c c_c^T`` (``S_c`` the shape matrix and
+#: ``c_c`` the centre in the camera frame) is the point's ``-c_c c_c^T`` up to rounding: the
+#: ellipsoid's part, of eigenvalues ``~ axis^2``, is lost in the ``~1e-16 |c_c|^2`` rounding of
+#: the point's, and ``A`` is singular in floating point (an LM trial step that collapses the log
+#: semi-axes, e.g. to ``[-36, -318, -126]``, did that). At ``1e-6`` ``A``'s smallest eigenvalue
+#: is still ~1e4 times that rounding; no object is that thin (1 micron at 1 m).
+MIN_AXIS_DEPTH_RATIO = 1e-6
 
 
 def huber_row_scale(norms: FloatArray, k: float) -> FloatArray:
@@ -67,6 +78,23 @@ def depth_margins(camera_from_world: FloatArray, rotation: FloatArray, center: F
     spread = np.einsum("...i,...ij,...j->...", d, S, d)
     return depth_margin(np.einsum("...i,...i->...", d, center) + camera_from_world[..., 2, 3],
                         spread)
+
+
+def valid_views(camera_from_world: FloatArray, rotation: FloatArray, center: FloatArray,
+                axes: FloatArray, min_depth_margin: float = DEFAULT_MIN_DEPTH_MARGIN) -> BoolArray:
+    """Views (batched like :func:`depth_margins`) whose residual
+    :func:`quadloc.factors.ellipsoid_residuals.observation_residual` is defined: the ellipsoid
+    is entirely in front of the camera (depth margin > ``min_depth_margin`` m) and every
+    semi-axis is at least ``MIN_AXIS_DEPTH_RATIO`` times the depth of its centre (the projected
+    conic is not singular in floating point). False for non-finite poses or shapes."""
+    T = np.asarray(camera_from_world, dtype=float)
+    depth = np.einsum("...i,...i->...", T[..., 2, :3], np.asarray(center, dtype=float)) \
+        + T[..., 2, 3]
+    smallest = np.min(np.asarray(axes, dtype=float), axis=-1)
+    with np.errstate(invalid="ignore", over="ignore"):  # non-finite shapes: NaN, invalid
+        in_front = depth_margins(T, rotation, center, axes) > min_depth_margin
+    ok: BoolArray = in_front & (smallest >= MIN_AXIS_DEPTH_RATIO * depth)
+    return ok
 
 
 def ellipsoid_views_factor(
@@ -158,7 +186,7 @@ def ellipsoid_views_factor(
             T_cw = fixed
         else:
             T_cw = invert_pose(np.array([values.atPose3(x).matrix() for x in cam_keys]))[cam]
-        ok = depth_margins(T_cw, R, c, axes) > min_depth_margin
+        ok = valid_views(T_cw, R, c, axes, min_depth_margin)
         want = H is not None
         out = np.empty((V, M))
         out[~ok] = pen[~ok, None]

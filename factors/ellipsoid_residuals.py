@@ -144,9 +144,9 @@ def observation_residual(
     (V, M), (V, M, 9), (V, M, 6); the ellipsoid is shared (``rotation`` (3, 3)) or one per view
     (``rotation`` (V, 3, 3), ``center`` and ``axes`` (V, 3)).
 
-    The caller must ensure the ellipsoid is in front of the camera (positive depth margin,
-    :func:`quadloc.factors.camera.ellipsoid_depth_margins`): otherwise ``A`` is no ellipse's
-    conic.
+    The caller must ensure the views are valid
+    (:func:`quadloc.factors.ellipsoid_factors.valid_views`: the ellipsoid in front of the camera
+    and not degenerate): otherwise ``A`` is no ellipse's conic, or singular (LinAlgError).
     """
     Q = dual_quadric(rotation, center, axes)
     P = np.asarray(camera_from_world, dtype=float)[..., :3, :]

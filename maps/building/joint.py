@@ -26,7 +26,7 @@ import numpy as np
 from quadloc.factors.arrays import BoolArray, FloatArray
 from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.factors.camera import Camera, Ellipsoid
-from quadloc.factors.ellipsoid_factors import depth_margins, ellipsoid_views_factor
+from quadloc.factors.ellipsoid_factors import ellipsoid_views_factor, valid_views
 from quadloc.factors.ellipsoid_residuals import (
     LevelSetSamples,
     level_set_samples,
@@ -96,8 +96,9 @@ def _log_axis_std(T_cw: FloatArray, R: FloatArray, center: FloatArray, axes: Flo
     Gauss-Newton information on ``[omega, v, log axes]`` (cameras fixed), each view weighted by
     ``info_weights`` (1/sigma); also the residuals (V', M) of the views in front, their mask and
     the largest std (m) of the centre along any direction.
-    Views whose camera does not see the ellipsoid in front are skipped."""
-    ok = depth_margins(T_cw, R, center, axes) > DEFAULT_MIN_DEPTH_MARGIN
+    Views that are not valid (:func:`quadloc.factors.ellipsoid_factors.valid_views`) are
+    skipped."""
+    ok = valid_views(T_cw, R, center, axes, DEFAULT_MIN_DEPTH_MARGIN)
     if not ok.any():
         return np.full(3, np.inf), np.zeros((0, samples.n.shape[-1])), ok, math.inf
     sub = LevelSetSamples(None, samples.n[ok], samples.phi_det_minus_1[ok])

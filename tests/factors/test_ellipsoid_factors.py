@@ -11,9 +11,11 @@ import pytest
 from quadloc.factors.camera import Camera, Ellipsoid, ellipsoid_depth_margins, project_ellipsoid
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.ellipsoid_factors import (
+    MIN_AXIS_DEPTH_RATIO,
     depth_margins,
     ellipsoid_views_factor,
     huber_row_scale,
+    valid_views,
 )
 from quadloc.factors.ellipsoid_residuals import (
     level_set_samples,
@@ -152,6 +154,73 @@ def test_view_behind_the_camera_is_a_constant_penalty() -> None:
     np.testing.assert_allclose(0.5 * np.sum(rows[1] ** 2), 100.0 * 2.0**2, rtol=1e-12)
     A, _ = f.linearize(v).jacobian()
     assert np.all(A.reshape(2, -1, 9)[1] == 0.0)
+
+
+#: An LM trial point of a map build (bench.map_calibration.run(seed=21, detector="noisy",
+#: frames=3000, holdout_every=2)): a weakly observed object's log semi-axes stepped to
+#: [-36, -318, -126] while it stayed 1 m in front of the camera; its projected conic was singular.
+_COLLAPSED_CAMERA_FROM_WORLD = np.array([
+    [0.9949442241930777, 0.08992156491550844, 0.0447225100814, 0.07921944240008807],
+    [0.08892517608445157, -0.5818527080886583, -0.808418047267776, 0.4629393957696279],
+    [-0.04667230231287294, 0.8083078239464472, -0.5869072822378126, 0.7118258679760492],
+    [0.0, 0.0, 0.0, 1.0]])
+_COLLAPSED_ROTATION = np.array([
+    [0.22290382923681096, -0.650335395252789, -0.7262077916085486],
+    [0.2930261455136367, -0.6658006775324217, 0.6861815618644885],
+    [-0.9297577969326137, -0.3657503677083137, 0.0421557536315722]])
+_COLLAPSED_CENTER = np.array([-1.9042478446168598, 1.973324483329556, 2.3755256781285925])
+_COLLAPSED_LOG_AXES = np.array([-36.39045801747006, -318.27222452878124, -126.14521458754044])
+
+
+def test_collapsed_ellipsoid_is_a_constant_penalty_not_a_singular_matrix() -> None:
+    T, R, c = _COLLAPSED_CAMERA_FROM_WORLD, _COLLAPSED_ROTATION, _COLLAPSED_CENTER
+    # the detection: the projection of the object with 10 cm semi-axes
+    det = level_set_samples(project_ellipsoid(CAM, T, Ellipsoid(c, np.full(3, 0.1), R)), CAM)
+    # the trigger: in front of the camera (the old validity test passed), yet unguarded the
+    # residual raises
+    assert ellipsoid_depth_margins(T, c[None], np.zeros((1, 3, 3)))[0] > 1.0
+    with pytest.raises(np.linalg.LinAlgError):
+        observation_residual(T, R, c, np.exp(_COLLAPSED_LOG_AXES), det, False)
+    ek, lk = gtsam.symbol("e", 0), gtsam.symbol("l", 0)
+    f = ellipsoid_views_factor(stack_samples([det, det]), np.array([1.0, 2.0]), [(ek, lk)],
+                               [0, 0], camera_from_world=np.stack([T, T]), penalty_cost=100.0,
+                               robust_scale=1.0)
+    v = gtsam.Values()
+    v.insert(ek, gtsam.Pose3(gtsam.Rot3(R), c))
+    v.insert(lk, _COLLAPSED_LOG_AXES)
+    rows = f.unwhitenedError(v).reshape(2, -1)
+    for k, w in enumerate((1.0, 2.0)):  # each view: the documented penalty, penalty_cost w^2
+        np.testing.assert_allclose(0.5 * np.sum(rows[k] ** 2), 100.0 * w**2, rtol=1e-12)
+    A, _ = f.linearize(v).jacobian()
+    assert np.all(A == 0.0)
+    # the object with 10 cm semi-axes is a valid view of (near) zero cost: LM rejects the
+    # collapsing step
+    healthy = gtsam.Values()
+    healthy.insert(ek, gtsam.Pose3(gtsam.Rot3(R), c))
+    healthy.insert(lk, np.log([0.1, 0.1, 0.1]))
+    assert valid_views(T, R, c, np.full(3, 0.1))
+    assert f.error(healthy) < 1e-6 * f.error(v)
+
+
+def test_valid_views_depth_margin_and_smallest_semi_axis() -> None:
+    # camera at the origin looking along +z; a sphere-like ellipsoid 2 m ahead: depth 2 m
+    cfw = np.eye(4)
+    R = np.eye(3)
+    c = np.array([0.1, -0.2, 2.0])
+    limit = MIN_AXIS_DEPTH_RATIO * 2.0
+    assert valid_views(cfw, R, c, np.array([0.3, 0.2, limit * 1.01]))
+    assert not valid_views(cfw, R, c, np.array([0.3, 0.2, limit * 0.99]))
+    assert not valid_views(cfw, R, c, np.array([0.3, 0.2, 0.0]))
+    # a semi-axis reaching the camera's plane (depth margin 2 - 2.1 < 0): invalid
+    assert not valid_views(cfw, R, c, np.array([0.3, 0.2, 2.1]))
+    # non-finite shapes or centres: invalid
+    assert not valid_views(cfw, R, c, np.array([0.3, np.inf, 0.1]))
+    assert not valid_views(cfw, R, np.array([0.0, np.nan, 2.0]), np.array([0.3, 0.2, 0.1]))
+    # batched: the same answers view by view
+    Ts = np.stack([cfw, cfw])
+    a = np.array([[0.3, 0.2, limit * 1.01], [0.3, 0.2, limit * 0.99]])
+    np.testing.assert_array_equal(valid_views(Ts, np.stack([R, R]), np.stack([c, c]), a),
+                                  [True, False])
 
 
 def test_batched_helpers_equal_single_evaluations() -> None:
