@@ -220,3 +220,25 @@ def test_odometry_noise_is_parsed_validated_and_a_random_walk() -> None:
     np.testing.assert_allclose(whole**2, 2 * half**2, rtol=1e-12)
     np.testing.assert_allclose(whole[:3], math.sqrt(0.01**2 * 2 + 0.003**2 * 6), rtol=1e-12)
     np.testing.assert_allclose(whole[3:], math.sqrt(0.02**2 * 2 + 0.004**2 * 6), rtol=1e-12)
+
+
+def test_joint_refinement_survives_a_trial_step_that_collapses_an_object() -> None:
+    # Detections 10x smaller than the start's projections: LM trial steps shrink the log
+    # semi-axes by hundreds while the object stays in front of the cameras, and the projected
+    # conic is singular in floating point (a LinAlgError before views of a degenerate ellipsoid
+    # were invalid). The step is rejected (the factor's penalty) and the refinement finds an
+    # object about 10x smaller (the detections' ellipses are the start's scaled about their
+    # centres, not exactly the projections of one ellipsoid: mm-level errors; the start is
+    # 8 cm off in semi-axes).
+    start = Ellipsoid(np.array([0.0, 0.0, 2.0]), np.array([0.15, 0.1, 0.08]))
+    eyes = [np.array([2.0 * math.sin(a), 0.0, 2.0 - 2.0 * math.cos(a)])
+            for a in np.radians(np.linspace(-40, 40, 15))]
+    poses = np.array([_look_at(e, start.center) for e in eyes])
+    obs = []
+    for i, T in enumerate(poses):
+        p = project_ellipsoid(CAM, invert_pose(T), start)
+        obs.append(Observation(i, 0, "X", Ellipse(p.cx, p.cy, 0.1 * p.a, 0.1 * p.b, p.angle)))
+    res = refine_jointly(CAM, poses, obs, [("X", list(range(len(obs))), start)])
+    small = Ellipsoid(start.center, 0.1 * start.axes, start.rotation)
+    err = ellipsoid_errors(res.ellipsoids[0], small)
+    assert err["center_m"] < 0.01 and err["axes_m"] < 0.005, err
