@@ -21,12 +21,12 @@ refined and true camera centre.
 Every timed solver runs in its own subprocess, once per round, the rounds interleaved so that
 the shared machine's load hits them alike; a problem's time is its median over all calls.
 
-Building the peer (outside the repository; nothing of it is committed; GTSAM 4.2's C++ library is
-most of it: ~15 min on 2 idle cores, far longer on a loaded machine)::
+Building the peer (in a directory ``PEER_DIR`` outside the repository; nothing of it is
+committed; GTSAM 4.2's C++ library is most of it: ~15 min on 2 idle cores, far longer on a loaded machine)::
 
     apt-get install libboost-all-dev libeigen3-dev cmake g++
-    pip download gtsam-quadrics==0.3.0 --no-binary :all: --no-deps -d /work/peer
-    cd /work/peer && tar xzf gtsam_quadrics-0.3.0.tar.gz && mkdir build && cd build
+    pip download gtsam-quadrics==0.3.0 --no-binary :all: --no-deps -d "$PEER_DIR"
+    cd "$PEER_DIR" && tar xzf gtsam_quadrics-0.3.0.tar.gz && mkdir build && cd build
     cmake ../gtsam_quadrics-0.3.0 -DCMAKE_BUILD_TYPE=Release -DBUILD_PYTHON_WRAP=OFF \\
         -DGTSAM_BUILD_TESTS=OFF -DGTSAM_BUILD_EXAMPLES_ALWAYS=OFF -DGTSAM_WITH_TBB=OFF \\
         -DGTSAM_USE_SYSTEM_EIGEN=ON -DGTSAM_BUILD_WITH_MARCH_NATIVE=OFF -DGTSAM_BUILD_PYTHON=OFF
@@ -36,7 +36,7 @@ most of it: ~15 min on 2 idle cores, far longer on a loaded machine)::
         -I../gtsam_quadrics-0.3.0/gtsam -Igtsam -I/usr/include/eigen3 \\
         -L. -Lgtsam/gtsam -lgtsam_quadrics -lgtsam -lboost_serialization -lboost_timer \\
         -lboost_chrono -Wl,-rpath,$PWD:$PWD/gtsam/gtsam -o peer_refine
-    python -m bench.peer_refine --peer /work/peer/build/peer_refine
+    python -m bench.peer_refine --peer "$PEER_DIR/build/peer_refine"
 
 The driver reads the problems on stdin (``fx fy skew cx cy``, the problem count, then per
 problem the start and true ``world_from_camera`` 4x4 row-major, the object count and per
