@@ -22,7 +22,8 @@ Every timed solver runs in its own subprocess, once per round, the rounds interl
 the shared machine's load hits them alike; a problem's time is its median over all calls.
 
 Building the peer (in a directory ``PEER_DIR`` outside the repository; nothing of it is
-committed; GTSAM 4.2's C++ library is most of it: ~15 min on 2 idle cores, far longer on a loaded machine)::
+committed; GTSAM 4.2's C++ library is most of it: ~15 min on 2 idle cores, far longer on a
+loaded machine)::
 
     apt-get install libboost-all-dev libeigen3-dev cmake g++
     pip download gtsam-quadrics==0.3.0 --no-binary :all: --no-deps -d "$PEER_DIR"
