@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: 8bfd3333ea6b98718a9afa3eb2dfc3ceb0b871da63c68bd2bbc24b400a2af59e
+// openapi-sha256: 8b74ee281b3a28f5af037db01ca166adfb378998a2f0306359a8a0176d564dd3
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -2804,6 +2804,16 @@ export interface operations {
                     metadata?: {
                         [key: string]: unknown;
                     };
+                    /**
+                     * @description Optional named groups of objects (rooms, floors); answers name the zone of their pose (docs/maps.md).
+                     * @default []
+                     */
+                    zones?: {
+                        zone_id: string;
+                        object_ids: string[];
+                        name?: string;
+                        parent?: string;
+                    }[];
                 };
             };
         };
@@ -3784,6 +3794,16 @@ export interface operations {
                     metadata?: {
                         [key: string]: unknown;
                     };
+                    /**
+                     * @description Optional named groups of objects (rooms, floors); answers name the zone of their pose (docs/maps.md).
+                     * @default []
+                     */
+                    zones?: {
+                        zone_id: string;
+                        object_ids: string[];
+                        name?: string;
+                        parent?: string;
+                    }[];
                 };
             };
         };
