@@ -633,6 +633,7 @@ class SceneMap:
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)  # mappingproxy does not pickle: store plain JSON data
         state.pop("_compiled", None)  # the memoised CompiledMap (quadloc.maps.compiled.compile_map)
+        state.pop("_zone_index", None)  # the memoised quadloc.maps.zones.ZoneIndex
         state["metadata"] = _thaw(self.metadata)
         return state
 

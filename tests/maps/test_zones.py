@@ -138,3 +138,21 @@ def test_generated_buildings_name_their_rooms_and_floors_as_zones() -> None:
     floor_objects = [o.object_id for o in b.scene_map.objects]
     assert sorted(zones["f0"].object_ids) == sorted(floor_objects)
     assert SceneMap.from_dict(b.scene_map.to_dict()) == b.scene_map
+
+
+def test_the_zone_of_a_pose_is_the_zone_holding_most_of_its_inliers() -> None:
+    from quadloc.maps.zones import zone_index
+
+    scene = SceneMap.from_dict(_zoned(MAP_EXAMPLE))  # floor-0: every object; kitchen: the first
+    first, second = (o["object_id"] for o in MAP_EXAMPLE["objects"][:2])
+    index = zone_index(scene)
+    assert index is zone_index(scene)  # memoised
+    assert index.zone_of([first]) == "kitchen"  # both hold 1: the smaller zone
+    assert index.zone_of([first, second]) == "floor-0"  # 2 against 1
+    assert index.zone_of([]) is None and index.zone_of(["not-in-any-zone"]) is None
+    assert zone_index(load_demo_map()).zone_of([first]) is None  # no zones
+    # equal counts and sizes: the first in the map's zones
+    doc = _zoned(MAP_EXAMPLE)
+    doc["zones"] = [{"zone_id": "b", "object_ids": [second]},
+                    {"zone_id": "a", "object_ids": [first]}]
+    assert zone_index(SceneMap.from_dict(doc)).zone_of([first, second]) == "b"

@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: 8b74ee281b3a28f5af037db01ca166adfb378998a2f0306359a8a0176d564dd3
+// openapi-sha256: 7dc4814c6034ea3e2b9c9331d4b53f50954e1f1062edb09284b40b9b1859893f
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -331,6 +331,11 @@ export interface components {
              * @description Sum of the inliers' IoUs.
              */
             score: number;
+            /**
+             * Zone
+             * @description The map zone (docs/maps.md) holding the most of this pose's inlier objects; ties: the zone with the fewest objects (a room before its floor), then the first in the map's `zones`. null when the map has no zones or none holds an inlier.
+             */
+            zone?: string | null;
         };
         /**
          * BatchLocalizeRequest
@@ -727,6 +732,11 @@ export interface components {
              * @description The objects of the zone the camera is in (ids of the map's objects).
              */
             object_ids?: string[] | null;
+            /**
+             * Zone Id
+             * @description The zone the camera is in (a `zone_id` of the map's `zones`): stands for that zone's objects.
+             */
+            zone_id?: string | null;
         };
         /** InlierOut */
         InlierOut: {
@@ -986,6 +996,11 @@ export interface components {
              * @description Which path won: 'prior' (the refined client prior) or 'ransac'; null when not localized.
              */
             pose_source?: ("prior" | "ransac") | null;
+            /**
+             * Zone
+             * @description The map zone (docs/maps.md) holding the most of this pose's inlier objects; ties: the zone with the fewest objects (a room before its floor), then the first in the map's `zones`. null when the map has no zones or none holds an inlier. Set whenever the answer has a pose or its best candidate (localized, or not localized with `alternatives`).
+             */
+            zone?: string | null;
             /**
              * Alternatives
              * @description Verified but not localized (ambiguous, low_confidence, gravity_mismatch), or localized with on_ambiguity 'best' on an ambiguous frame: the distinct candidate poses, most probable first, each with its probability (`confidence`).
