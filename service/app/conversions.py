@@ -349,10 +349,12 @@ def frame_input_from_wire(frame: SessionFrameIn, convention: str) -> FrameInput:
                                                                             convention))
 
 
-def frame_out(result: FrameResult, convention: str) -> SessionFrameOut:
+def frame_out(result: FrameResult, convention: str,
+              zones: ZoneIndex | None = None) -> SessionFrameOut:
     """A session frame's answer -> wire (``world_from_camera`` and its covariance in the
     session's ``convention``; ``world_from_odom`` maps odometry to map coordinates, so its
-    matrix is convention-free and its covariance stays in the odometry (OpenCV body) frame)."""
+    matrix is convention-free and its covariance stays in the odometry (OpenCV body) frame);
+    ``zone`` of its inliers by the map's ``zones`` (:mod:`quadloc.maps.zones`)."""
     return SessionFrameOut(
         frame_index=result.frame_index, frame_id=result.frame_id, timestamp=result.timestamp,
         state=result.state, reason=result.reason,
@@ -366,6 +368,7 @@ def frame_out(result: FrameResult, convention: str) -> SessionFrameOut:
                                                   "opencv"),
         confidence=result.confidence,
         inliers=inliers_out(result.inliers),
+        zone=None if zones is None else zones.zone_of(m.object_id for m in result.inliers),
         n_usable_detections=result.n_usable_detections,
         timings_ms={k: float(v) for k, v in result.timings_ms.items()})
 

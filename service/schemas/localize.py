@@ -43,6 +43,7 @@ from quadloc.service.schemas.common import (
 )
 
 __all__ = [
+    "ZONE_RULE",
     "AlternativeOut",
     "BatchLocalizeRequest",
     "BatchLocalizeResponse",

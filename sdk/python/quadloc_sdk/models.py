@@ -527,5 +527,6 @@ class SessionFrameResult(BaseModel):
     world_from_odom_covariance: Covariance | None = None
     confidence: float = 0.0
     inliers: list[Inlier] = Field(default_factory=list)
+    zone: str | None = None  # the map zone of the pose (docs/api.md, "Zones")
     n_usable_detections: int = 0
     timings_ms: dict[str, float] = Field(default_factory=dict)

@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: 7dc4814c6034ea3e2b9c9331d4b53f50954e1f1062edb09284b40b9b1859893f
+// openapi-sha256: 773ab7d9cdad3e9312dbe21c219052e32bbe58bc8d4a0d7ee843c51708077cb8
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -1484,6 +1484,11 @@ export interface components {
             confidence: number;
             /** Inliers */
             inliers: components["schemas"]["InlierOut"][];
+            /**
+             * Zone
+             * @description The map zone (docs/maps.md) holding the most of this pose's inlier objects; ties: the zone with the fewest objects (a room before its floor), then the first in the map's `zones`. null when the map has no zones or none holds an inlier.
+             */
+            zone?: string | null;
             /** N Usable Detections */
             n_usable_detections: number;
             /** Timings Ms */
