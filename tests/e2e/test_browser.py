@@ -290,7 +290,8 @@ def test_inspector_lists_and_draws_the_candidate_places(browser: object,
     """An ambiguous answer on two exact copies of a room: the candidate table lists each
     alternative of the API's own JSON answer (zone, camera position, confidence), the 3D view
     draws one violet frustum per candidate (violet pixels painted, none before), and a
-    localized answer afterwards hides the table and draws no candidate."""
+    localized answer afterwards (hint: room-b) says its zone, hides the table and draws no
+    candidate."""
     doc = _two_rooms_map()
     assert httpx.post(f"{live_server}/v1/maps", json=doc).status_code == 201
     try:
@@ -323,6 +324,7 @@ def test_inspector_lists_and_draws_the_candidate_places(browser: object,
         assert violet_before == 0 and _violet(page) > 50
         # a localized answer (the hint settles it): no candidates left behind
         _localize(page, {**EXAMPLE_REQUEST, "hint": {"zone_id": "room-b"}}, "done")
+        assert "in zone room-b" in page.inner_text("#status")
         assert not page.is_visible("#candidates")
         assert page.get_attribute("#view3d", "data-candidates") == "0"
         assert _violet(page) == 0

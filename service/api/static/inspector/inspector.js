@@ -108,7 +108,8 @@
       const t = result.world_from_camera.translation_m.map((x) => x.toFixed(3)).join(", ");
       setStatus("Localized: confidence " + result.confidence.toFixed(2) + ", " +
                 result.inliers.length + "/" + request.detections.length + " inliers, camera at [" +
-                t + "] m (map " + result.map_id + " v" + result.map_version + ")", "done");
+                t + "] m" + (result.zone ? " in zone " + result.zone : "") + " (map " +
+                result.map_id + " v" + result.map_version + ")", "done");
     } else {
       const n = result.alternatives.length;
       setStatus("Not localized: " + result.reason + (n ? " (" + n + " candidate place" +
