@@ -44,6 +44,7 @@ import numpy as np
 
 from quadloc.factors.camera import Camera
 from quadloc.maps.compiled import CompiledMap, compile_map
+from quadloc.maps.zones import ZoneIndex, zone_index
 from quadloc.service.localization.pipeline import localize
 from quadloc.service.localization.scoring import ScoringTimeoutError
 from quadloc.service.localization.types import (
@@ -89,16 +90,19 @@ def solve(bf: BuildingFrame, compiled: CompiledMap, camera: Camera,
     return result, (time.perf_counter() - t0) * 1e3
 
 
-def frame_record(bf: BuildingFrame, result: LocalizationResult | None, time_ms: float
-                 ) -> dict[str, Any]:
-    """What one answer scores (errors in m / deg, inf when not localized)."""
+def frame_record(bf: BuildingFrame, result: LocalizationResult | None, time_ms: float,
+                 zones: ZoneIndex | None = None) -> dict[str, Any]:
+    """What one answer scores (errors in m / deg, inf when not localized); with the map's
+    ``zones``, the zone the answer names (its inliers', else its first alternative's, as the
+    server's ``zone``) and each alternative's."""
     truth = bf.world_from_camera
     if result is None:
         return {"room": bf.room.zone_id, "kind": bf.kind,
                 "n_detections": len(bf.frame.detections), "localized": False,
                 "reason": "time_budget_exceeded", "position_error_m": math.inf,
                 "rotation_error_deg": math.inf, "confidence": 0.0,
-                "truth_among_alternatives": False, "n_alternatives": 0, "time_ms": time_ms}
+                "truth_among_alternatives": False, "n_alternatives": 0, "time_ms": time_ms,
+                "zone": None, "alternative_zones": []}
     pos, rot = pose_errors(result.world_from_camera, truth)
     alt = [pose_errors(a.world_from_camera, truth) for a in result.alternatives]
     return {
@@ -110,6 +114,11 @@ def frame_record(bf: BuildingFrame, result: LocalizationResult | None, time_ms: 
                                         and r <= ALTERNATIVE_TOLERANCE_DEG for p, r in alt),
         "n_alternatives": len(result.alternatives),
         "time_ms": time_ms,
+        "zone": None if zones is None else zones.zone_of(m.object_id for m in result.inliers)
+        if result.inliers else zones.zone_of(result.alternatives[0].object_ids)
+        if result.alternatives else None,
+        "alternative_zones": [] if zones is None
+        else [zones.zone_of(a.object_ids) for a in result.alternatives],
     }
 
 
@@ -146,6 +155,12 @@ def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
                                                and r["truth_among_alternatives"]),
         "correct_or_honest_pct": share(honest),
         "time_budget_exceeded_pct": share(lambda r: r["reason"] == "time_budget_exceeded"),
+        # the zone named: a localized answer's is the frame's room; a refusal's candidates
+        # include the room
+        "localized_in_true_zone_pct": share(lambda r: r["localized"]
+                                            and r.get("zone") == r["room"]),
+        "refused_true_zone_among_alternatives_pct": share(
+            lambda r: not r["localized"] and r["room"] in r.get("alternative_zones", [])),
         "reasons": {k: sum(1 for r in records if r["reason"] == k)
                     for k in sorted({str(r["reason"]) for r in records if r["reason"]})},
     }
@@ -161,7 +176,8 @@ def run_case(rooms: int, mode: str, frames: int, seed: int, memory_frames: int,
     camera, bfs = building_frames(building, frames, seed + 7 * rooms + MODES.index(mode))
     t_build = time.perf_counter() - t0
     solve(bfs[0], compiled, camera, options)  # warm: caches, JIT
-    records = [frame_record(bf, *solve(bf, compiled, camera, options)) for bf in bfs]
+    zones = zone_index(building.scene_map)
+    records = [frame_record(bf, *solve(bf, compiled, camera, options), zones) for bf in bfs]
     peaks = []
     for bf in bfs[:memory_frames]:
         tracemalloc.start()
@@ -172,13 +188,13 @@ def run_case(rooms: int, mode: str, frames: int, seed: int, memory_frames: int,
     if hints:
         rng = np.random.default_rng(seed + 13 * rooms)
         zone = [frame_record(bf, *solve(bf, compiled, camera, options,
-                                        PlaceHint(object_ids=frozenset(bf.room.object_ids))))
-                for bf in bfs]
+                                        PlaceHint(object_ids=frozenset(bf.room.object_ids))),
+                             zones) for bf in bfs]
         fixes = [bf.world_from_camera[:3, 3] + np.array(
             [*rng.normal(0.0, HINT_SIGMA_M, 2), 0.0]) for bf in bfs]
         near = [frame_record(bf, *solve(bf, compiled, camera, options,
-                                        PlaceHint(position=p, sigma_m=HINT_SIGMA_M)))
-                for bf, p in zip(bfs, fixes, strict=True)]
+                                        PlaceHint(position=p, sigma_m=HINT_SIGMA_M)),
+                             zones) for bf, p in zip(bfs, fixes, strict=True)]
         hinted = {"zone_hint": summarise(zone), "position_hint": summarise(near)}
     times = [r["time_ms"] for r in records]
     out = {

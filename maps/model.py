@@ -58,7 +58,9 @@ __all__ = [
     "MapDocument",
     "MapObject",
     "MapValidationError",
+    "MapZone",
     "SceneMap",
+    "ZoneDocument",
     "canonical_json",
     "content_hash",
     "scene_map_from_chess",
@@ -80,6 +82,7 @@ LIMITS: dict[str, float] = {
     "max_name_length": 256,
     "max_metadata_bytes": 65_536,
     "max_metadata_depth": 32,
+    "max_zones": 10_000,
     # Tolerances of the JSON importer (quadloc.factors.rotations.DOCUMENT_ROTATION_TOLERANCE: looser
     # than the in-process ones, values are re-normalised / snapped):
     "quaternion_norm_tolerance": DOCUMENT_ROTATION_TOLERANCE,
@@ -299,6 +302,59 @@ def _reference_problems(data: Mapping[str, Any]) -> list[tuple[tuple[str | int, 
         if isinstance(cat, str) and isinstance(cats, list | tuple) and cat not in known:
             problems.append((("objects", i, "category"),
                              f"unknown category {cat!r} (not in categories)"))
+    return problems + _zone_problems(data.get("zones"), seen)
+
+
+def _zone_problems(zones: Any, object_ids: Mapping[str, int]
+                   ) -> list[tuple[tuple[str | int, ...], str]]:
+    """Rules of ``zones``: zone ids unique, each of a zone's ``object_ids`` an object of the map
+    (and listed once), each ``parent`` another zone's id, no cycle of parents (checked on the
+    entries that are well-formed; the others have their own error)."""
+    if not isinstance(zones, list | tuple) or len(zones) > LIMITS["max_zones"]:
+        return []
+    problems: list[tuple[tuple[str | int, ...], str]] = []
+    first: dict[str, int] = {}
+    for i, z in enumerate(zones):
+        zid = z.get("zone_id") if isinstance(z, Mapping) else None
+        if isinstance(zid, str):
+            if zid in first:
+                problems.append((("zones", i, "zone_id"),
+                                 f"duplicate zone id {zid!r} (also zones[{first[zid]}])"))
+            else:
+                first[zid] = i
+    parents: dict[str, str] = {}
+    for i, z in enumerate(zones):
+        if not isinstance(z, Mapping):
+            continue
+        ids = z.get("object_ids")
+        if isinstance(ids, list | tuple):
+            listed: set[str] = set()
+            for j, oid in enumerate(ids):
+                if not isinstance(oid, str):
+                    continue
+                if oid not in object_ids:
+                    problems.append((("zones", i, "object_ids", j),
+                                     f"unknown object id {oid!r} (not in objects)"))
+                elif oid in listed:
+                    problems.append((("zones", i, "object_ids", j),
+                                     f"object id {oid!r} listed twice"))
+                listed.add(oid)
+        zid, parent = z.get("zone_id"), z.get("parent")
+        if isinstance(parent, str):
+            if parent not in first:
+                problems.append((("zones", i, "parent"),
+                                 f"unknown parent zone {parent!r} (not in zones)"))
+            elif isinstance(zid, str):
+                parents.setdefault(zid, parent)
+    for i, z in enumerate(zones):
+        zid = z.get("zone_id") if isinstance(z, Mapping) else None
+        if not isinstance(zid, str) or first.get(zid) != i:
+            continue
+        step, hops = parents.get(zid), 0
+        while step is not None and step != zid and hops <= len(parents):
+            step, hops = parents.get(step), hops + 1
+        if step == zid:
+            problems.append((("zones", i, "parent"), f"zone {zid!r} is its own ancestor"))
     return problems
 
 
@@ -358,6 +414,22 @@ class ObjectDocument(_Document):
         return self
 
 
+class ZoneDocument(_Document):
+    """One zone of the map document (zones[i]): a named group of the map's objects (a room, a
+    floor), optionally inside a ``parent`` zone (a room on a floor)."""
+
+    zone_id: Label
+    object_ids: Annotated[list[Label], Field(min_length=1, max_length=int(LIMITS["max_objects"]),
+                                             json_schema_extra={"uniqueItems": True})]
+    # optional, not nullable (as ObjectDocument's orientation)
+    if TYPE_CHECKING:
+        name: Name | None = None
+        parent: Label | None = None
+    else:
+        name: Name = None
+        parent: Label = None
+
+
 class MapDocument(_Document):
     """The map document, format quadloc.map/1 (docs/maps.md)."""
 
@@ -373,6 +445,10 @@ class MapDocument(_Document):
                                              json_schema_extra={"uniqueItems": True})]
     objects: Annotated[list[ObjectDocument], Field(max_length=int(LIMITS["max_objects"]))]
     metadata: Metadata = {}
+    zones: Annotated[list[ZoneDocument], Field(
+        max_length=int(LIMITS["max_zones"]),
+        description="Optional named groups of objects (rooms, floors); answers name the zone "
+                    "of their pose (docs/maps.md).")] = []
 
     @model_validator(mode="wrap")
     @classmethod
@@ -391,7 +467,9 @@ def _set_fields(scene: SceneMap, doc: MapDocument, objects: tuple[MapObject, ...
     """Fill the frozen ``scene`` from its validated document: tuples, read-only metadata."""
     for key, value in (("map_id", doc.map_id), ("name", doc.name), ("version", doc.version),
                        ("up_axis", tuple(doc.up_axis)), ("categories", tuple(doc.categories)),
-                       ("objects", objects), ("metadata", _freeze(doc.metadata))):
+                       ("objects", objects), ("metadata", _freeze(doc.metadata)),
+                       ("zones", tuple(MapZone(z.zone_id, z.name, tuple(z.object_ids), z.parent)
+                                       for z in doc.zones))):
         object.__setattr__(scene, key, value)
     return scene
 
@@ -503,6 +581,17 @@ class MapObject:
 
 
 @dataclass(frozen=True)
+class MapZone:
+    """A zone of a map (a room, a floor): its id, optional name, the ids of its objects and the
+    id of the zone it is part of (``None``: a top-level zone)."""
+
+    zone_id: str
+    name: str | None
+    object_ids: tuple[str, ...]
+    parent: str | None = None
+
+
+@dataclass(frozen=True)
 class SceneMap:
     """A versioned ellipsoid map. ``version`` is 1 for a new map and grows by one per update.
 
@@ -520,6 +609,7 @@ class SceneMap:
     objects: tuple[MapObject, ...]
     version: int = 1
     metadata: Mapping[str, Any] = field(default_factory=dict)
+    zones: tuple[MapZone, ...] = ()
 
     def __post_init__(self) -> None:
         objs: object = self.objects  # any sequence of MapObject is accepted (made a tuple)
@@ -536,12 +626,14 @@ class SceneMap:
             "map_id": self.map_id, "name": self.name, "version": _plain(self.version),
             "up_axis": _plain(self.up_axis), "categories": _plain(self.categories),
             "objects": [_object_dict(o) for o in objs],
-            "metadata": {} if self.metadata is None else self.metadata})
+            "metadata": {} if self.metadata is None else self.metadata,
+            "zones": [_zone_dict(z) if isinstance(z, MapZone) else z for z in self.zones]})
         _set_fields(self, doc, objs)
 
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)  # mappingproxy does not pickle: store plain JSON data
         state.pop("_compiled", None)  # the memoised CompiledMap (quadloc.maps.compiled.compile_map)
+        state.pop("_zone_index", None)  # the memoised quadloc.maps.zones.ZoneIndex
         state["metadata"] = _thaw(self.metadata)
         return state
 
@@ -558,6 +650,13 @@ class SceneMap:
 
     def __hash__(self) -> int:
         return hash(canonical_json(self))
+
+    def zone_by_id(self, zone_id: str) -> MapZone:
+        """The zone ``zone_id`` (``KeyError`` when the map has none of that id)."""
+        for zone in self.zones:
+            if zone.zone_id == zone_id:
+                return zone
+        raise KeyError(zone_id)
 
     def object_by_id(self, object_id: str) -> MapObject:
         for obj in self.objects:
@@ -613,7 +712,21 @@ def scene_map_to_dict(scene_map: SceneMap) -> dict[str, Any]:
         "categories": list(scene_map.categories),
         "objects": [_object_dict(o) for o in scene_map.objects],
         "metadata": _thaw(scene_map.metadata),
+        # only when there are zones: the documents (and content hashes) of maps without zones
+        # are those of before zones existed
+        **({"zones": [_zone_dict(z) for z in scene_map.zones]} if scene_map.zones else {}),
     }
+
+
+def _zone_dict(zone: MapZone) -> dict[str, Any]:
+    """One zone as exported (``name`` and ``parent`` only when given)."""
+    out: dict[str, Any] = {"zone_id": zone.zone_id}
+    if zone.name is not None:
+        out["name"] = zone.name
+    out["object_ids"] = list(zone.object_ids)
+    if zone.parent is not None:
+        out["parent"] = zone.parent
+    return out
 
 
 def _object_dict(obj: MapObject) -> dict[str, Any]:

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 
@@ -40,6 +40,7 @@ from quadloc.maps.building.recording import (
     held_out,
 )
 from quadloc.maps.compiled import CompiledMap
+from quadloc.maps.zones import ZoneIndex
 from quadloc.service.localization.types import (
     Detection,
     Gravity,
@@ -172,10 +173,18 @@ def prior_from_request(prior: PosePriorIn | None) -> PosePrior | None:
 
 
 def hint_from_request(hint: HintIn | None, compiled: CompiledMap) -> PlaceHint | None:
-    """Wire hint -> :class:`PlaceHint`; an object id the map does not have is refused
-    (:class:`LocalizationInputError` naming ``hint.object_ids[k]``)."""
+    """Wire hint -> :class:`PlaceHint`; a zone is its objects. An object id or zone id the map
+    does not have is refused (:class:`LocalizationInputError` naming ``hint.object_ids[k]`` or
+    ``hint.zone_id``)."""
     if hint is None:
         return None
+    if hint.zone_id is not None:
+        try:
+            zone = compiled.scene_map.zone_by_id(hint.zone_id)
+        except KeyError:
+            raise LocalizationInputError(f"{hint.zone_id!r} is not a zone of the map",
+                                         field="hint.zone_id") from None
+        return PlaceHint(object_ids=frozenset(zone.object_ids))
     if hint.object_ids is not None:
         known = set(compiled.object_ids)
         for k, o in enumerate(hint.object_ids):
@@ -268,8 +277,14 @@ def response_from_result(
     convention: str,
     frame_id: str | None,
     timestamp: float | None,
+    zones: ZoneIndex | None = None,
 ) -> LocalizeResponse:
-    """Solver result -> wire response (pose and covariance in ``convention`` camera axes)."""
+    """Solver result -> wire response (pose and covariance in ``convention`` camera axes);
+    ``zones``: the map's zones, naming the ``zone`` of the answer and of each alternative
+    (:mod:`quadloc.maps.zones`; without: null)."""
+    def zone_of(object_ids: Iterable[str]) -> str | None:
+        return None if zones is None else zones.zone_of(object_ids)
+
     pose = cov = None
     if result.localized and result.world_from_camera is not None:
         if not np.all(np.isfinite(result.world_from_camera)):
@@ -290,9 +305,12 @@ def response_from_result(
         "used_prior": result.used_prior,
         "refinement_status": result.refinement_status,
         "pose_source": result.pose_source,
+        "zone": zone_of(i.object_id for i in result.inliers) if result.inliers
+        else zone_of(result.alternatives[0].object_ids) if result.alternatives else None,
         "alternatives": [{"world_from_camera": _pose_fields(a.world_from_camera, convention),
                           "confidence": _finite(a.confidence), "n_inliers": a.n_inliers,
-                          "score": _finite(a.score)} for a in result.alternatives],
+                          "score": _finite(a.score), "zone": zone_of(a.object_ids)}
+                         for a in result.alternatives],
         "map_id": map_id,
         "map_version": map_version,
         "timings_ms": {k: _finite(v) for k, v in result.timings_ms.items()},
@@ -331,10 +349,12 @@ def frame_input_from_wire(frame: SessionFrameIn, convention: str) -> FrameInput:
                                                                             convention))
 
 
-def frame_out(result: FrameResult, convention: str) -> SessionFrameOut:
+def frame_out(result: FrameResult, convention: str,
+              zones: ZoneIndex | None = None) -> SessionFrameOut:
     """A session frame's answer -> wire (``world_from_camera`` and its covariance in the
     session's ``convention``; ``world_from_odom`` maps odometry to map coordinates, so its
-    matrix is convention-free and its covariance stays in the odometry (OpenCV body) frame)."""
+    matrix is convention-free and its covariance stays in the odometry (OpenCV body) frame);
+    ``zone`` of its inliers by the map's ``zones`` (:mod:`quadloc.maps.zones`)."""
     return SessionFrameOut(
         frame_index=result.frame_index, frame_id=result.frame_id, timestamp=result.timestamp,
         state=result.state, reason=result.reason,
@@ -348,6 +368,7 @@ def frame_out(result: FrameResult, convention: str) -> SessionFrameOut:
                                                   "opencv"),
         confidence=result.confidence,
         inliers=inliers_out(result.inliers),
+        zone=None if zones is None else zones.zone_of(m.object_id for m in result.inliers),
         n_usable_detections=result.n_usable_detections,
         timings_ms={k: float(v) for k, v in result.timings_ms.items()})
 

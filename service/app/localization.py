@@ -22,6 +22,7 @@ from typing import Protocol
 from quadloc.factors.budget import Deadline
 from quadloc.factors.names import GeometryError
 from quadloc.maps.compiled import CompiledMap
+from quadloc.maps.zones import zone_index
 from quadloc.service.app.conversions import (
     camera_from_request,
     detections_from_request,
@@ -259,7 +260,7 @@ class Localizer:
                              hint=hint),
                     map_id=compiled.map_id, map_version=compiled.version,
                     convention=frame.options.output_convention, frame_id=frame.frame_id,
-                    timestamp=frame.timestamp)
+                    timestamp=frame.timestamp, zones=zone_index(compiled.scene_map))
         except (GeometryError, LocalizationInputError) as exc:
             if _is_request_field(exc):
                 raise _invalid_geometry(exc, prefix) from exc

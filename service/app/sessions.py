@@ -19,6 +19,7 @@ import threading
 
 from quadloc.factors.budget import Deadline, earliest
 from quadloc.factors.names import GeometryError
+from quadloc.maps.zones import zone_index
 from quadloc.service.app.conversions import (
     camera_from_request,
     frame_input_from_wire,
@@ -163,7 +164,8 @@ class SessionService:
                     raise invalid_input(exc, f"frames[{i}]." if batch else "") from exc
                 finally:
                     self.slots.release()
-                results.append(frame_out(result, entry.convention))
+                results.append(frame_out(result, entry.convention,
+                                         zone_index(entry.session.compiled.scene_map)))
         return SessionFramesOut(session_id=entry.session_id, results=results)
 
     # ---------------------------------------------------------------------------- helpers

@@ -35,6 +35,8 @@ __all__ = ["cmd_localize", "print_answer"]
 def print_answer(result: Any) -> None:
     """Human-readable answer (the server's wire model or the SDK's: the same fields)."""
     print(f"map {result.map_id} v{result.map_version}  frame {result.frame_id or '-'}")
+    if result.zone is not None:
+        print(f"zone {result.zone}")
     if not result.localized:
         print(f"NOT LOCALIZED: {result.reason}")
     else:
@@ -54,8 +56,23 @@ def print_answer(result: Any) -> None:
     # the candidate poses of an ambiguous or low-confidence answer, with their probabilities
     for k, a in enumerate(result.alternatives):
         t = " ".join(f"{v:+.3f}" for v in a.world_from_camera.translation_m)
+        zone = "" if a.zone is None else f"  zone {a.zone}"
         print(f"candidate {k}: confidence {a.confidence:.3f}  inliers {a.n_inliers}  "
-              f"score {a.score:.2f}  translation_m [{t}]")
+              f"score {a.score:.2f}  translation_m [{t}]{zone}")
+
+
+def _hint(args: argparse.Namespace) -> dict[str, Any] | None:
+    """The hint of ``--hint-zone`` / ``--hint-position`` with ``--hint-sigma`` (None: keep the
+    file's); a sigma without a position, or a position without a sigma, is refused."""
+    if args.hint_sigma is not None and args.hint_position is None:
+        raise CliError("--hint-sigma goes with --hint-position")
+    if args.hint_zone is not None:
+        return {"zone_id": args.hint_zone}
+    if args.hint_position is not None:
+        if args.hint_sigma is None:
+            raise CliError("--hint-position needs --hint-sigma (its 1-sigma uncertainty, m)")
+        return {"position": list(args.hint_position), "sigma_m": args.hint_sigma}
+    return None
 
 
 def _requests(args: argparse.Namespace) -> list[LocalizeRequest]:
@@ -63,9 +80,12 @@ def _requests(args: argparse.Namespace) -> list[LocalizeRequest]:
     overrides = {k: v for k, v in (
         ("metric", args.metric), ("on_ambiguity", args.on_ambiguity),
         ("min_confidence", args.min_confidence)) if v is not None}
+    hint = _hint(args)
     requests = []
     for path in args.file:
         body = read_json(path)
+        if hint is not None and isinstance(body, dict):
+            body["hint"] = hint  # validated with the request below
         if overrides and isinstance(body, dict):
             options = body.setdefault("options", {})
             if isinstance(options, dict):

@@ -230,7 +230,10 @@ def build_parser() -> argparse.ArgumentParser:
                     "progress bar on stderr. Exit status 0 when every frame localized, 1 when "
                     "one did not.",
         epilog="examples:\n  quadloc localize --map chess docs/examples/localize_chess.json\n"
-               "  quadloc --url http://127.0.0.1:8000 localize --map chess frames/*.json\n"),
+               "  quadloc --url http://127.0.0.1:8000 localize --map chess frames/*.json\n"
+               "  quadloc localize --map office --hint-zone room-301 frame.json\n"
+               "  quadloc localize --map office --hint-position 12 3 1.5 --hint-sigma 5 "
+               "frame.json\n"),
         "localize")
     p.add_argument("file", nargs="+", help="request JSON ('-' = stdin)")
     p.add_argument("--map", required=True, metavar="ID", help="map id")
@@ -246,6 +249,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--min-confidence", type=float, metavar="P",
                    help="answers below this confidence are not localized (their candidates "
                         "are printed); default: the calibrated one")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--hint-zone", metavar="ID",
+                       help="hint: the camera is in this zone of the map (replaces the file's "
+                            "hint)")
+    where.add_argument("--hint-position", type=float, nargs=3, metavar=("X", "Y", "Z"),
+                       help="hint: the camera is near this position (map world frame, m; needs "
+                            "--hint-sigma; replaces the file's hint)")
+    p.add_argument("--hint-sigma", type=float, metavar="M",
+                   help="1-sigma uncertainty of --hint-position (m)")
     p.add_argument("--json", action="store_true", help="print the full JSON response")
     _db(p)
 

@@ -670,7 +670,8 @@ def _answer(solve: _Solve, best: Candidate, ranked: list[Candidate], *, ambiguou
             Alternative(world_from_camera=b.world_from_camera,
                         confidence=_assess(solve, b, best if b is not best else runner_up,
                                            ranked).confidence,
-                        n_inliers=len(b.inliers), score=b.score) for b in ranked)
+                        n_inliers=len(b.inliers), score=b.score,
+                        object_ids=tuple(m.object_id for m in b.inliers)) for b in ranked)
     solve.timings["total"] = (time.perf_counter() - solve.t0) * 1e3
     if reason is not None:
         return LocalizationResult(

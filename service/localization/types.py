@@ -398,12 +398,14 @@ class Alternative:
         confidence: probability that this pose is within the confidence tolerance
             (``quadloc.service.localization.confidence``).
         n_inliers: its inlier count; score: the sum of its inliers' IoUs.
+        object_ids: the map objects of its inliers (in detection order).
     """
 
     world_from_camera: FloatArray
     confidence: float
     n_inliers: int
     score: float
+    object_ids: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True, eq=False)

@@ -43,6 +43,7 @@ from quadloc.service.schemas.common import (
 )
 
 __all__ = [
+    "ZONE_RULE",
     "AlternativeOut",
     "BatchLocalizeRequest",
     "BatchLocalizeResponse",
@@ -214,6 +215,12 @@ class GravityIn(WireModel):
         return self
 
 
+#: What a ``zone`` of an answer is (quadloc.maps.zones holds the rule).
+ZONE_RULE = ("The map zone (docs/maps.md) holding the most of this pose's inlier objects; ties: "
+             "the zone with the fewest objects (a room before its floor), then the first in the "
+             "map's `zones`. null when the map has no zones or none holds an inlier.")
+
+
 class HintIn(WireModel):
     """Optional coarse hint of where the camera is: a position with a large uncertainty (a GPS /
     Wi-Fi / beacon fix, the app's last known position) or the objects of a zone (a room, a
@@ -228,11 +235,16 @@ class HintIn(WireModel):
     object_ids: list[str] | None = Field(
         default=None, min_length=1, max_length=10_000,
         description="The objects of the zone the camera is in (ids of the map's objects).")
+    zone_id: str | None = Field(
+        default=None, min_length=1, max_length=128,
+        description="The zone the camera is in (a `zone_id` of the map's `zones`): stands for "
+                    "that zone's objects.")
 
     @model_validator(mode="after")
     def _one_kind(self) -> HintIn:
-        if (self.position is None) == (self.object_ids is None):
-            raise ValueError("give either 'position' (with 'sigma_m') or 'object_ids'")
+        if sum(x is not None for x in (self.position, self.object_ids, self.zone_id)) != 1:
+            raise ValueError("give one of 'position' (with 'sigma_m'), 'object_ids' or "
+                             "'zone_id'")
         if self.position is not None:
             if self.sigma_m is None:
                 raise ValueError("'sigma_m' is required with 'position'")
@@ -351,6 +363,7 @@ class AlternativeOut(BaseModel):
     confidence: float = Field(ge=0, le=1, description="P(within 10 cm and 5 deg).")
     n_inliers: int
     score: float = Field(description="Sum of the inliers' IoUs.")
+    zone: str | None = Field(default=None, description=ZONE_RULE)
 
 
 class LocalizeResponse(BaseModel):
@@ -379,6 +392,10 @@ class LocalizeResponse(BaseModel):
     pose_source: Literal[POSE_SOURCES] | None = Field(  # type: ignore[valid-type]
         default=None, description="Which path won: 'prior' (the refined client prior) or "
                                   "'ransac'; null when not localized.")
+    zone: str | None = Field(
+        default=None,
+        description=ZONE_RULE + " Set whenever the answer has a pose or its best candidate "
+                                "(localized, or not localized with `alternatives`).")
     alternatives: list[AlternativeOut] = Field(
         default_factory=list,
         description="Verified but not localized (ambiguous, low_confidence, gravity_mismatch), "

@@ -12,6 +12,7 @@ from pydantic import BaseModel, Discriminator, Field, Tag
 from quadloc.service.limits import MAX_DETECTIONS
 from quadloc.service.schemas.common import Convention, Text, WireModel
 from quadloc.service.schemas.localize import (
+    ZONE_RULE,
     CameraIn,
     CovarianceOut,
     DetectionIn,
@@ -134,6 +135,7 @@ class SessionFrameOut(BaseModel):
                                                       "the pose posterior; 0 unless tracking "
                                                       "and 0 when detections_unexplained.")
     inliers: list[InlierOut]
+    zone: str | None = Field(default=None, description=ZONE_RULE)
     n_usable_detections: int
     timings_ms: dict[str, float]
 

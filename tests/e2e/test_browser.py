@@ -267,3 +267,81 @@ def test_redoc_renders_offline(browser: object, live_server: str) -> None:
     assert "world_from_camera" in page.inner_text("body")
     op.assert_offline_clean()
     page.close()
+
+
+def _two_rooms_map() -> dict:
+    """Two exact copies of the Chess room 20 m apart along x, zones room-a and room-b (the
+    docs/api.md example's map): the demo frame is ambiguous between them."""
+    from quadloc.maps.demo import load_demo_map
+
+    chess = load_demo_map().to_dict()
+    objects, zones = [], []
+    for room, dx in (("room-a", 0.0), ("room-b", 20.0)):
+        ids = [f"{room}/{o['object_id']}" for o in chess["objects"]]
+        objects += [{**o, "object_id": i, "center": [o["center"][0] + dx, *o["center"][1:]]}
+                    for i, o in zip(ids, chess["objects"], strict=True)]
+        zones.append({"zone_id": room, "object_ids": ids})
+    return {"map_id": "inspector-two-rooms", "name": "Two rooms",
+            "categories": chess["categories"], "objects": objects, "zones": zones}
+
+
+def test_inspector_lists_and_draws_the_candidate_places(browser: object,
+                                                        live_server: str) -> None:
+    """An ambiguous answer on two exact copies of a room: the candidate table lists each
+    alternative of the API's own JSON answer (zone, camera position, confidence), the 3D view
+    draws one violet frustum per candidate (violet pixels painted, none before), and a
+    localized answer afterwards (hint: room-b) says its zone, hides the table and draws no
+    candidate."""
+    doc = _two_rooms_map()
+    assert httpx.post(f"{live_server}/v1/maps", json=doc).status_code == 201
+    try:
+        answer = httpx.post(f"{live_server}/v1/maps/{doc['map_id']}/localize",
+                            json=EXAMPLE_REQUEST).json()
+        assert answer["reason"] == "ambiguous" and len(answer["alternatives"]) == 2
+        op = OfflinePage(browser, live_server)
+        page = op.page
+        page.goto(f"{live_server}/inspector")
+        page.wait_for_selector(f"#map option[value={doc['map_id']}]", state="attached")
+        page.select_option("#map", doc["map_id"])
+        page.wait_for_selector(f"#view3d[data-drawn='{len(doc['objects'])}']")
+        assert not page.is_visible("#candidates")
+        violet_before = _violet(page)
+        _localize(page, EXAMPLE_REQUEST, "not-localized")
+        assert "ambiguous" in page.inner_text("#status")
+        assert page.is_visible("#candidates")
+        rows = page.eval_on_selector_all(
+            "#candidates tbody tr", "rs => rs.map(r => [...r.cells].map(c => c.textContent))")
+        assert len(rows) == len(answer["alternatives"])
+        for k, (row, alt) in enumerate(zip(rows, answer["alternatives"], strict=True)):
+            shown = [float(x) for x in row[2].strip("[]").split(",")]
+            assert row[0] == str(k) and row[1] == alt["zone"]
+            assert max(abs(a - b) for a, b in zip(shown, alt["world_from_camera"]["translation_m"],
+                                                   strict=True)) < 0.006
+            assert abs(float(row[3]) - alt["confidence"]) < 6e-4
+        assert sorted(r[1] for r in rows) == ["room-a", "room-b"]
+        assert page.get_attribute("#view3d", "data-candidates") == "2"
+        assert page.get_attribute("#view3d", "data-camera") == "false"
+        assert violet_before == 0 and _violet(page) > 50
+        # a localized answer (the hint settles it): no candidates left behind
+        _localize(page, {**EXAMPLE_REQUEST, "hint": {"zone_id": "room-b"}}, "done")
+        assert "in zone room-b" in page.inner_text("#status")
+        assert not page.is_visible("#candidates")
+        assert page.get_attribute("#view3d", "data-candidates") == "0"
+        assert _violet(page) == 0
+        op.assert_offline_clean()
+        page.close()
+    finally:
+        httpx.delete(f"{live_server}/v1/maps/{doc['map_id']}")
+
+
+def _violet(page: object) -> int:
+    """Pixels of the 3D canvas painted in the candidates' violet (#d2a8ff, within 40 per
+    channel, opaque)."""
+    return page.evaluate("""() => {
+        const c = document.getElementById('view3d');
+        const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+        let n = 0;
+        for (let i = 0; i < d.length; i += 4)
+            if (d[i + 3] > 200 && Math.abs(d[i] - 210) < 40 && Math.abs(d[i + 1] - 168) < 40
+                && Math.abs(d[i + 2] - 255) < 40) n++;
+        return n; }""")  # type: ignore[attr-defined, no-any-return]

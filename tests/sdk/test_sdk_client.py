@@ -598,17 +598,24 @@ def test_hint_is_sent_and_checked_before_sending():
     from quadloc_sdk.models import Hint
 
     rec = Recorder(httpx.Response(200, json=_response_body()),
-                   httpx.Response(200, json=_response_body()))
+                   httpx.Response(200, json=_response_body()),
+                   httpx.Response(200, json={**_response_body(), "zone": "room-2"}))
     client, _ = _client(rec)
     client.localize("chess", camera=CAMERA, detections=DETS,
                     hint={"position": [1.0, 2.0, 0.5], "sigma_m": 5.0})
     client.localize("chess", camera=CAMERA, detections=DETS,
                     hint=Hint(object_ids=["0", "3"]))
+    answer = client.localize("chess", camera=CAMERA, detections=DETS,
+                             hint=Hint(zone_id="room-2"))
+    assert answer.zone == "room-2"
     bodies = [json.loads(r.content) for r in rec.requests]
     assert bodies[0]["hint"] == {"position": [1.0, 2.0, 0.5], "sigma_m": 5.0}
     assert bodies[1]["hint"] == {"object_ids": ["0", "3"]}
+    assert bodies[2]["hint"] == {"zone_id": "room-2"}
     with pytest.raises(pydantic.ValidationError, match="sigma_m"):
         Hint(position=[0, 0, 0])
-    with pytest.raises(pydantic.ValidationError, match="either"):
+    with pytest.raises(pydantic.ValidationError, match="one of"):
         Hint(position=[0, 0, 0], sigma_m=1, object_ids=["0"])
-    assert len(rec.requests) == 2
+    with pytest.raises(pydantic.ValidationError, match="one of"):
+        Hint(zone_id="room-2", object_ids=["0"])
+    assert len(rec.requests) == 3

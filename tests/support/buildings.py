@@ -20,7 +20,8 @@ building that would exceed it drops the fewest objects per room that fit (the sa
 room of an exact building; 1,000 rooms with corridors: 8 objects per room).
 
 Zones: every room is a zone ``"f<floor>-r<row>-c<col>"`` (:attr:`Building.rooms`), corridors
-zones ``"f<floor>-corridor-<row>"``. Object ids are ``"<zone>/<chess id>"`` (``+<k>`` for added
+zones ``"f<floor>-corridor-<row>"``, both inside their floor's zone ``"f<floor>"`` (the map's
+``zones``). Object ids are ``"<zone>/<chess id>"`` (``+<k>`` for added
 objects).
 
 Frames (:func:`building_frames`): the 108 real Chess poses placed in a room (its rigid transform
@@ -42,7 +43,7 @@ from quadloc.factors.camera import Camera
 from quadloc.factors.rotations import pose_matrix
 from quadloc.maps.compiled import CompiledMap, compile_map
 from quadloc.maps.demo import load_demo_map
-from quadloc.maps.model import LIMITS, MapObject, SceneMap
+from quadloc.maps.model import LIMITS, MapObject, MapZone, SceneMap
 from tests.support.reference_data import load_chess_world_from_camera
 from tests.support.scenes import look_at
 from tests.support.simulate import SimulatedFrame, SimulationConfig, simulate_frame
@@ -211,8 +212,20 @@ def make_building(n_rooms: int, mode: str = "perturbed", seed: int = 0, *,
     if corridors:
         halls = _corridors(rooms, side, base, rng, objects)
     sm = SceneMap(f"building-{mode}-{n_rooms}-{seed}", f"{n_rooms} rooms ({mode}), seed {seed}",
-                  chess.up_axis, chess.categories, tuple(objects))
+                  chess.up_axis, chess.categories, tuple(objects),
+                  zones=_zones([*rooms, *halls]))
     return Building(sm, tuple(rooms), tuple(halls), mode, seed)
+
+
+def _zones(parts: list[Room]) -> tuple[MapZone, ...]:
+    """The map's zones: one per floor (``"f<floor>"``, every object of the floor) and each room
+    and corridor inside its floor (parts without objects have no zone)."""
+    floors: dict[str, list[str]] = {}
+    for part in parts:
+        floors.setdefault(part.zone_id.split("-", 1)[0], []).extend(part.object_ids)
+    return (*(MapZone(f, f"floor {f[1:]}", tuple(ids)) for f, ids in floors.items() if ids),
+            *(MapZone(p.zone_id, p.zone_id, p.object_ids, p.zone_id.split("-", 1)[0])
+              for p in parts if p.object_ids))
 
 
 def _corridors(rooms: list[Room], side: int, base: list[MapObject], rng: np.random.Generator,

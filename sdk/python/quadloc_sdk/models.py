@@ -257,18 +257,21 @@ class Gravity(BaseModel):
 class Hint(BaseModel):
     """A coarse hint of where the camera is, for maps of many similar rooms: a ``position``
     (map world frame, m) with its 1-sigma ``sigma_m`` (a GPS / Wi-Fi / beacon fix, the app's
-    last known position), or the ``object_ids`` of the zone the camera is in. The server uses
-    it to settle a tie between places, never against the detections (docs/api.md, "Hints")."""
+    last known position), the ``object_ids`` of the zone the camera is in, or that zone's
+    ``zone_id`` (one of the map's ``zones``). The server uses it to settle a tie between places,
+    never against the detections (docs/api.md, "Hints")."""
 
     model_config = _REQUEST
     position: FloatList | None = Field(default=None, min_length=3, max_length=3)
     sigma_m: Float | None = Field(default=None, gt=0, le=1e4)
     object_ids: list[str] | None = Field(default=None, min_length=1)
+    zone_id: str | None = Field(default=None, min_length=1, max_length=128)
 
     @model_validator(mode="after")
     def _one_kind(self) -> Hint:
-        if (self.position is None) == (self.object_ids is None):
-            raise ValueError("give either 'position' (with 'sigma_m') or 'object_ids'")
+        if sum(x is not None for x in (self.position, self.object_ids, self.zone_id)) != 1:
+            raise ValueError("give one of 'position' (with 'sigma_m'), 'object_ids' or "
+                             "'zone_id'")
         if self.position is not None and self.sigma_m is None:
             raise ValueError("sigma_m: required with 'position'")
         return self
@@ -423,6 +426,7 @@ class Alternative(BaseModel):
     confidence: float
     n_inliers: int
     score: float
+    zone: str | None = None  # the map zone of this candidate (docs/api.md, "Zones")
 
 
 class LocalizeResponse(BaseModel):
@@ -441,6 +445,7 @@ class LocalizeResponse(BaseModel):
     used_prior: bool | None = None
     refinement_status: str | None = None
     pose_source: str | None = None
+    zone: str | None = None  # the map zone of the answer (docs/api.md, "Zones")
     alternatives: list[Alternative] = Field(default_factory=list)
     map_id: str
     map_version: int
@@ -522,5 +527,6 @@ class SessionFrameResult(BaseModel):
     world_from_odom_covariance: Covariance | None = None
     confidence: float = 0.0
     inliers: list[Inlier] = Field(default_factory=list)
+    zone: str | None = None  # the map zone of the pose (docs/api.md, "Zones")
     n_usable_detections: int = 0
     timings_ms: dict[str, float] = Field(default_factory=dict)

@@ -610,3 +610,53 @@ def test_hint_settles_exact_copies_and_bad_hints_are_422(client: TestClient) -> 
                                                           hint={"position": [0.0, 0.0, 0.0]})),
                     422, "validation-error")
     assert body["errors"][0]["field"].startswith("hint") and "sigma_m" in json.dumps(body)
+
+
+def test_answers_name_their_zone_and_a_hint_may_name_one(client: TestClient) -> None:
+    """On exact copies of a room (zones: rooms inside their floor), the ambiguous answer names
+    each candidate's zone: the room nearest to the candidate's camera (computed here from the
+    rooms' object centroids, not by the zone rule), distinct rooms; the answer's zone is its best
+    candidate's. A hint naming the true room's zone gives the answer in that room (or an honest
+    refusal with the room among the candidates); an unknown zone or two kinds at once are 422."""
+    from tests.support.buildings import building_frames, make_building
+
+    b = make_building(6, "exact", seed=61)
+    doc = b.scene_map.to_dict()
+    doc["map_id"] = "building-zones"
+    assert client.post("/v1/maps", json=doc).status_code in (200, 201)
+    url = "/v1/maps/building-zones/localize"
+    centre = {o["object_id"]: np.array(o["center"]) for o in doc["objects"]}
+    rooms = {r.zone_id: np.mean([centre[o] for o in r.object_ids], axis=0) for r in b.rooms}
+
+    def nearest_room(out: dict) -> str:
+        t = np.array(out["world_from_camera"]["matrix"])[:3, 3]
+        return min(rooms, key=lambda z: float(np.linalg.norm(rooms[z] - t)))
+
+    cam, frames = building_frames(b, 3, seed=62, min_detections=5)
+    hinted_ok = 0
+    for bf in frames:
+        plain = client.post(url, json=_building_frame(b, bf, cam)).json()
+        assert plain["reason"] == "ambiguous" and len(plain["alternatives"]) >= 2
+        zones = [a["zone"] for a in plain["alternatives"]]
+        assert zones == [nearest_room(a) for a in plain["alternatives"]]
+        assert len(set(zones)) == len(zones)
+        assert plain["zone"] == zones[0]
+        out = client.post(url, json=_building_frame(
+            b, bf, cam, hint={"zone_id": bf.room.zone_id})).json()
+        if out["localized"]:
+            hinted_ok += 1
+            assert out["zone"] == bf.room.zone_id == nearest_room(out)
+        else:
+            assert bf.room.zone_id in [a["zone"] for a in out["alternatives"]]
+    assert hinted_ok >= 2
+    body = _problem(client.post(url, json=_building_frame(b, frames[0], cam,
+                                                          hint={"zone_id": "f9-r9-c9"})),
+                    422, "invalid-geometry")
+    assert body["errors"][0]["field"] == "hint.zone_id"
+    both = {"zone_id": "f0", "object_ids": list(frames[0].room.object_ids)}
+    body = _problem(client.post(url, json=_building_frame(b, frames[0], cam, hint=both)),
+                    422, "validation-error")
+    assert body["errors"][0]["field"].startswith("hint")
+    # a map without zones answers zone null
+    chess = client.post(URL, json=LOCALIZE_EXAMPLE).json()
+    assert chess["localized"] and chess["zone"] is None

@@ -285,3 +285,53 @@ def test_maps_versions_on_the_local_database(db: list[str], tmp_path: Path,
     # a server URL without a scheme is refused with a message naming the option
     assert main(["--url", "127.0.0.1:8000", "maps", "list"]) == 2
     assert "--url" in capsys.readouterr().err
+
+
+def _two_rooms(tmp_path: Path) -> Path:
+    """A map of two exact copies of the Chess room, 20 m apart along x, zones room-a and
+    room-b (the demo map's objects, as the docs/api.md example builds it)."""
+    from quadloc.maps.demo import load_demo_map
+
+    chess = load_demo_map().to_dict()
+    objects, zones = [], []
+    for room, dx in (("room-a", 0.0), ("room-b", 20.0)):
+        ids = [f"{room}/{o['object_id']}" for o in chess["objects"]]
+        objects += [{**o, "object_id": i, "center": [o["center"][0] + dx, *o["center"][1:]]}
+                    for i, o in zip(ids, chess["objects"], strict=True)]
+        zones.append({"zone_id": room, "object_ids": ids})
+    path = tmp_path / "two-rooms.json"
+    path.write_text(json.dumps({"map_id": "two-rooms", "name": "Two rooms",
+                                "categories": chess["categories"], "objects": objects,
+                                "zones": zones}))
+    return path
+
+
+def test_localize_hints_by_zone_or_position(db: list[str], tmp_path: Path,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """On two exact copies of a room the frame is ambiguous (candidates printed with their
+    zones); ``--hint-zone room-b`` or ``--hint-position`` near room-b's copy of the true pose
+    (``--hint-sigma`` 2 m) localizes it in room-b, 20 m from the true Chess pose along x; a
+    position without sigma, a sigma alone, or both kinds are refused."""
+    assert main(["maps", "import", str(_two_rooms(tmp_path)), *db]) == 0
+    capsys.readouterr()
+    truth_b = np.array(EXAMPLE_TRUE_WORLD_FROM_CAMERA)[:3, 3] + [20.0, 0.0, 0.0]
+    assert main(["localize", "--map", "two-rooms", str(EXAMPLE), *db]) == 1
+    out = capsys.readouterr().out
+    assert "NOT LOCALIZED: ambiguous" in out
+    assert "zone room-a" in out and "zone room-b" in out
+    near_b = [str(v) for v in truth_b + np.array([1.0, -1.0, 0.0])]
+    for hint in (["--hint-zone", "room-b"], ["--hint-position", *near_b, "--hint-sigma", "2"]):
+        assert main(["localize", "--map", "two-rooms", "--json", *hint, str(EXAMPLE), *db]) == 0
+        body = json.loads(capsys.readouterr().out)
+        assert body["localized"] and body["zone"] == "room-b", hint
+        assert np.linalg.norm(np.array(body["world_from_camera"]["translation_m"])
+                              - truth_b) < 0.05
+    assert main(["localize", "--map", "two-rooms", "--hint-zone", "attic", str(EXAMPLE),
+                 *db]) == 2
+    assert "hint.zone_id" in capsys.readouterr().err
+    for bad in (["--hint-position", "0", "0", "0"], ["--hint-sigma", "2"]):
+        assert main(["localize", "--map", "two-rooms", *bad, str(EXAMPLE), *db]) == 2
+        assert "--hint-" in capsys.readouterr().err
+    with pytest.raises(SystemExit):  # argparse: the two kinds are mutually exclusive
+        main(["localize", "--map", "two-rooms", "--hint-zone", "room-b", "--hint-position",
+              "0", "0", "0", "--hint-sigma", "2", str(EXAMPLE), *db])

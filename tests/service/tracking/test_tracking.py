@@ -533,3 +533,32 @@ def test_cli_track_replays_the_example_recording(tmp_path: Path, capsys) -> None
     bad.write_text(json.dumps(doc))
     assert main(["track", "--map", "chess", str(bad), "--database-url", db]) == 2
     assert "one entry per frame" in capsys.readouterr().err
+
+
+def test_api_session_frames_name_their_zone(client: TestClient, walk: dict) -> None:
+    """On the Chess map with zones (the whole room, and a 'corner' of three objects), each
+    tracked frame's ``zone`` is the zone holding the most of its inliers, the smaller on a tie
+    (counted here from the answer's own inliers); null without inliers."""
+    doc = client.get("/v1/maps/chess").json()["map"]
+    ids = [o["object_id"] for o in doc["objects"]]
+    zones = {"room": set(ids), "corner": set(ids[:3])}
+    doc = {**doc, "map_id": "chess-zoned", "zones": [
+        {"zone_id": "room", "object_ids": ids}, {"zone_id": "corner", "object_ids": ids[:3]}]}
+    assert client.post("/v1/maps", json=doc).status_code == 201
+    cam = walk["camera"]
+    r = client.post("/v1/maps/chess-zoned/sessions", json={"camera": {
+        "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy, "width": cam.width,
+        "height": cam.height}})
+    sid = r.json()["session_id"]
+    results = client.post(f"/v1/sessions/{sid}/frames", json={
+        "frames": [_frame_json(f) for f in walk["frames"][:40]]}).json()["results"]
+    seen = set()
+    for out in results:
+        used = [m["object_id"] for m in out["inliers"]]
+        counts = {z: sum(o in members for o in used) for z, members in zones.items()}
+        expected = None if not used else min(
+            zones, key=lambda z: (-counts[z], len(zones[z]))) if max(counts.values()) else None
+        assert out["zone"] == expected, (out["frame_index"], used)
+        seen.add(out["zone"])
+    assert "room" in seen
+    assert client.delete(f"/v1/sessions/{sid}").status_code == 204

@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: b24e0dda4089b547e7cdd8ed0c921c1f117fe72655012e060532ab2e50edc363
+// openapi-sha256: 773ab7d9cdad3e9312dbe21c219052e32bbe58bc8d4a0d7ee843c51708077cb8
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -331,6 +331,11 @@ export interface components {
              * @description Sum of the inliers' IoUs.
              */
             score: number;
+            /**
+             * Zone
+             * @description The map zone (docs/maps.md) holding the most of this pose's inlier objects; ties: the zone with the fewest objects (a room before its floor), then the first in the map's `zones`. null when the map has no zones or none holds an inlier.
+             */
+            zone?: string | null;
         };
         /**
          * BatchLocalizeRequest
@@ -727,6 +732,11 @@ export interface components {
              * @description The objects of the zone the camera is in (ids of the map's objects).
              */
             object_ids?: string[] | null;
+            /**
+             * Zone Id
+             * @description The zone the camera is in (a `zone_id` of the map's `zones`): stands for that zone's objects.
+             */
+            zone_id?: string | null;
         };
         /** InlierOut */
         InlierOut: {
@@ -986,6 +996,11 @@ export interface components {
              * @description Which path won: 'prior' (the refined client prior) or 'ransac'; null when not localized.
              */
             pose_source?: ("prior" | "ransac") | null;
+            /**
+             * Zone
+             * @description The map zone (docs/maps.md) holding the most of this pose's inlier objects; ties: the zone with the fewest objects (a room before its floor), then the first in the map's `zones`. null when the map has no zones or none holds an inlier. Set whenever the answer has a pose or its best candidate (localized, or not localized with `alternatives`).
+             */
+            zone?: string | null;
             /**
              * Alternatives
              * @description Verified but not localized (ambiguous, low_confidence, gravity_mismatch), or localized with on_ambiguity 'best' on an ambiguous frame: the distinct candidate poses, most probable first, each with its probability (`confidence`).
@@ -1453,7 +1468,7 @@ export interface components {
             state: string;
             /**
              * Reason
-             * @description Why no pose: waiting_for_constraints, ambiguous, lost, time_budget_exceeded (the frame was counted but not fused: its CPU budget or its request's ran out); with a pose: detections_unexplained (the frame's detections contradict the pose; confidence 0); else None.
+             * @description Why no pose: waiting_for_constraints, ambiguous, lost; with a pose: detections_unexplained (the frame's detections contradict the pose; confidence 0); else None.
              */
             reason: string | null;
             world_from_camera: components["schemas"]["PoseOut"] | null;
@@ -1469,6 +1484,11 @@ export interface components {
             confidence: number;
             /** Inliers */
             inliers: components["schemas"]["InlierOut"][];
+            /**
+             * Zone
+             * @description The map zone (docs/maps.md) holding the most of this pose's inlier objects; ties: the zone with the fewest objects (a room before its floor), then the first in the map's `zones`. null when the map has no zones or none holds an inlier.
+             */
+            zone?: string | null;
             /** N Usable Detections */
             n_usable_detections: number;
             /** Timings Ms */
@@ -1498,7 +1518,7 @@ export interface components {
         SessionOptionsIn: {
             /**
              * Window Frames
-             * @description Camera poses kept in the sliding window (at most 300 with isam2, 60 with batch).
+             * @description Camera poses kept in the sliding window.
              * @default 30
              */
             window_frames?: number;
@@ -2804,6 +2824,16 @@ export interface operations {
                     metadata?: {
                         [key: string]: unknown;
                     };
+                    /**
+                     * @description Optional named groups of objects (rooms, floors); answers name the zone of their pose (docs/maps.md).
+                     * @default []
+                     */
+                    zones?: {
+                        zone_id: string;
+                        object_ids: string[];
+                        name?: string;
+                        parent?: string;
+                    }[];
                 };
             };
         };
@@ -3784,6 +3814,16 @@ export interface operations {
                     metadata?: {
                         [key: string]: unknown;
                     };
+                    /**
+                     * @description Optional named groups of objects (rooms, floors); answers name the zone of their pose (docs/maps.md).
+                     * @default []
+                     */
+                    zones?: {
+                        zone_id: string;
+                        object_ids: string[];
+                        name?: string;
+                        parent?: string;
+                    }[];
                 };
             };
         };

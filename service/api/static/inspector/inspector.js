@@ -59,6 +59,7 @@
     state.request = null;
     $("overlay").replaceChildren();
     $("inliers").querySelector("tbody").replaceChildren();
+    fillCandidates(null);
     draw3d();
   }
 
@@ -101,14 +102,18 @@
                           { headers: headers({ Accept: "application/json" }) });
     state.map = m.ok ? (await m.json()).map : null;
     fillInliers(request, result);
+    fillCandidates(result);
     draw3d();
     if (result.localized) {
       const t = result.world_from_camera.translation_m.map((x) => x.toFixed(3)).join(", ");
       setStatus("Localized: confidence " + result.confidence.toFixed(2) + ", " +
                 result.inliers.length + "/" + request.detections.length + " inliers, camera at [" +
-                t + "] m (map " + result.map_id + " v" + result.map_version + ")", "done");
+                t + "] m" + (result.zone ? " in zone " + result.zone : "") + " (map " +
+                result.map_id + " v" + result.map_version + ")", "done");
     } else {
-      setStatus("Not localized: " + result.reason + " (map " + result.map_id + " v" +
+      const n = result.alternatives.length;
+      setStatus("Not localized: " + result.reason + (n ? " (" + n + " candidate place" +
+                (n > 1 ? "s" : "") + ", listed below)" : "") + " (map " + result.map_id + " v" +
                 result.map_version + ")", "not-localized");
     }
   }
@@ -122,6 +127,24 @@
       const tr = document.createElement("tr");
       const cells = [String(i), d.label, m ? m.object_id : "outlier",
                      m ? m.iou.toFixed(2) : "", m ? m.cost.toPrecision(3) : ""];
+      for (const c of cells) { const td = document.createElement("td"); td.textContent = c; tr.appendChild(td); }
+      tbody.appendChild(tr);
+    });
+  }
+
+  // The candidate places of an answer with alternatives (ambiguous, low confidence...): zone,
+  // camera position (map frame, m), probability and score; hidden when there are none.
+  function fillCandidates(result) {
+    const table = $("candidates");
+    const tbody = table.querySelector("tbody");
+    tbody.replaceChildren();
+    const alts = (result && result.alternatives) || [];
+    table.hidden = alts.length === 0;
+    alts.forEach((a, k) => {
+      const tr = document.createElement("tr");
+      const t = a.world_from_camera.translation_m.map((x) => x.toFixed(2)).join(", ");
+      const cells = [String(k), a.zone === null || a.zone === undefined ? "-" : a.zone,
+                     "[" + t + "]", a.confidence.toFixed(3), a.score.toFixed(2)];
       for (const c of cells) { const td = document.createElement("td"); td.textContent = c; tr.appendChild(td); }
       tbody.appendChild(tr);
     });
@@ -164,22 +187,36 @@
     }
     const res = state.result;
     if (res && res.localized && state.request) {
-      const T = res.world_from_camera.matrix;
-      const flip = res.world_from_camera.convention === "opengl" ? [1, -1, -1] : [1, 1, 1];
-      const R = [0, 1, 2].map((r) => [0, 1, 2].map((c) => T[r][c] * flip[c]));  // OpenCV axes
-      const C = [T[0][3], T[1][3], T[2][3]];
-      const cam = state.request.camera;
-      const depth = 0.25 * sceneRadius();
-      const corners = [[0, 0], [cam.width, 0], [cam.width, cam.height], [0, cam.height]].map(
-        ([u, v]) => add(C, mul(matvec(R, [(u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, 1]), depth)));
-      const orange = "#f0883e";
-      for (const p of corners) lines.push({ pts: [C, p], color: orange, width: 2 });
-      lines.push({ pts: corners.concat([corners[0]]), color: orange, width: 2 });
-      // "up" tick of the image (-y in OpenCV camera axes) so the roll is visible
-      const top = mul(add(corners[0], corners[1]), 0.5);
-      lines.push({ pts: [top, add(top, mul(matvec(R, [0, -1, 0]), depth * 0.3))], color: orange, width: 2 });
+      frustum(lines, res.world_from_camera, "#f0883e", 0.25 * sceneRadius());
     }
     return lines;
+  }
+
+  const CANDIDATE = "#d2a8ff";  // violet: the candidate places of an answer not localized
+
+  // The candidates drawn: those of an answer that is not localized (a localized answer's
+  // pose is its frustum; its runners-up are in the table).
+  function candidates() {
+    const res = state.result;
+    return res && !res.localized && state.request ? res.alternatives : [];
+  }
+
+  // The camera frustum of `pose` (the answer's world_from_camera) pushed onto `lines`; returns
+  // the camera centre (map frame, m).
+  function frustum(lines, pose, color, depth) {
+    const T = pose.matrix;
+    const flip = pose.convention === "opengl" ? [1, -1, -1] : [1, 1, 1];
+    const R = [0, 1, 2].map((r) => [0, 1, 2].map((c) => T[r][c] * flip[c]));  // OpenCV axes
+    const C = [T[0][3], T[1][3], T[2][3]];
+    const cam = state.request.camera;
+    const corners = [[0, 0], [cam.width, 0], [cam.width, cam.height], [0, cam.height]].map(
+      ([u, v]) => add(C, mul(matvec(R, [(u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, 1]), depth)));
+    for (const p of corners) lines.push({ pts: [C, p], color, width: 2 });
+    lines.push({ pts: corners.concat([corners[0]]), color, width: 2 });
+    // "up" tick of the image (-y in OpenCV camera axes) so the roll is visible
+    const top = mul(add(corners[0], corners[1]), 0.5);
+    lines.push({ pts: [top, add(top, mul(matvec(R, [0, -1, 0]), depth * 0.3))], color, width: 2 });
+    return C;
   }
 
   function sceneCenter() {
@@ -199,7 +236,7 @@
     const g = canvas.getContext("2d");
     g.clearRect(0, 0, canvas.width, canvas.height);
     canvas.dataset.camera = String(Boolean(state.result && state.result.localized));
-    if (!state.map) { canvas.dataset.drawn = "0"; return; }
+    if (!state.map) { canvas.dataset.drawn = "0"; canvas.dataset.candidates = "0"; return; }
     const up = norm(state.map.up_axis || [0, 0, 1]);
     const any = Math.abs(up[0]) < 0.9 ? [1, 0, 0] : [0, 1, 0];
     const e1 = norm(cross(up, any));
@@ -219,7 +256,14 @@
       if (z < 1e-3) return null;
       return [canvas.width / 2 + (f * dot(d, right)) / z, canvas.height / 2 - (f * dot(d, camUp)) / z];
     };
-    for (const line of polylines()) {
+    const lines = polylines();
+    const labels = [];
+    candidates().forEach((a, k) => {  // frusta numbered as the table's rows
+      const C = frustum(lines, a.world_from_camera, CANDIDATE, 0.12 * sceneRadius());
+      labels.push({ at: C, text: "#" + k + (a.zone ? " " + a.zone : "") });
+    });
+    canvas.dataset.candidates = String(labels.length);
+    for (const line of lines) {
       g.strokeStyle = line.color;
       g.lineWidth = line.width;
       g.beginPath();
@@ -231,6 +275,12 @@
         pen = true;
       }
       g.stroke();
+    }
+    g.fillStyle = CANDIDATE;
+    g.font = "13px system-ui, sans-serif";
+    for (const l of labels) {
+      const p = project(l.at);
+      if (p) g.fillText(l.text, p[0] + 6, p[1] - 6);
     }
     canvas.dataset.drawn = String(state.map.objects.length);
   }
