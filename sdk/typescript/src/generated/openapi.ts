@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: 773ab7d9cdad3e9312dbe21c219052e32bbe58bc8d4a0d7ee843c51708077cb8
+// openapi-sha256: 6e92d062c3a765439d97720c199113de0eea7a7d59a31620bdf2342f0f719daf
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -1468,7 +1468,7 @@ export interface components {
             state: string;
             /**
              * Reason
-             * @description Why no pose: waiting_for_constraints, ambiguous, lost; with a pose: detections_unexplained (the frame's detections contradict the pose; confidence 0); else None.
+             * @description Why no pose: waiting_for_constraints, ambiguous, lost, time_budget_exceeded (the frame was counted but not fused: its CPU budget or its request's ran out); with a pose: detections_unexplained (the frame's detections contradict the pose; confidence 0); else None.
              */
             reason: string | null;
             world_from_camera: components["schemas"]["PoseOut"] | null;
@@ -1518,7 +1518,7 @@ export interface components {
         SessionOptionsIn: {
             /**
              * Window Frames
-             * @description Camera poses kept in the sliding window.
+             * @description Camera poses kept in the sliding window (at most 300 with isam2, 60 with batch).
              * @default 30
              */
             window_frames?: number;
