@@ -116,6 +116,22 @@ def assert_problem(r: Any, status: int, slug: str) -> dict:
     return body
 
 
+def wait_for_job(client: Any, location: str, headers: dict[str, str] | None = None,
+                 timeout_s: float = 120.0) -> dict[str, Any]:
+    """Poll a build job's ``location`` with ``client`` (a TestClient or httpx client, sending
+    ``headers``) until it has ended; its last body. Every read must be a 200: a job read never
+    fails on stored data."""
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout_s:
+        r = client.get(location, headers=headers)
+        assert r.status_code == 200, r.text
+        job: dict[str, Any] = r.json()
+        if job["status"] in ("succeeded", "failed"):
+            return job
+        time.sleep(0.1)
+    raise AssertionError(f"job {location} did not end within {timeout_s} s")
+
+
 # ----------------------------------------------------------------------------- time
 
 

@@ -20,6 +20,7 @@ from quadloc.service.app.builds import recording_of, validate_recording
 from quadloc.service.app.conversions import held_out_frames_from_wire
 from quadloc.service.schemas.recording import LEGACY_RECORDING_WARNING
 from tests.conftest import make_test_app
+from tests.support.helpers import wait_for_job
 
 CAM = Camera(500.0, 500.0, 320.0, 240.0, 640, 480)
 # two objects of one label and one of another, 1.5-2.5 m in front of a camera arc
@@ -60,23 +61,13 @@ def client(tmp_path: Path):
         yield c
 
 
-def _wait(client: TestClient, location: str, timeout_s: float = 120.0) -> dict[str, Any]:
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < timeout_s:
-        job = client.get(location).json()
-        if job["status"] in ("succeeded", "failed"):
-            return job
-        time.sleep(0.2)
-    raise AssertionError("job did not finish")
-
-
 def test_build_new_map_then_new_version_with_if_match(client: TestClient) -> None:
     rec, truth = _recording()
     r = client.post("/v1/maps:build", params={"map_id": "room"}, json=rec)
     assert r.status_code == 202, r.text
     loc = r.headers["Location"]
     assert loc == f"/v1/build-jobs/{r.json()['job_id']}"
-    job = _wait(client, loc)
+    job = wait_for_job(client, loc)
     assert job["status"] == "succeeded", job
     assert job["map_version"] == 1 and job["percent"] == 100.0
     m = client.get("/v1/maps/room").json()["map"]
@@ -103,7 +94,7 @@ def test_build_new_map_then_new_version_with_if_match(client: TestClient) -> Non
     r = client.post("/v1/maps:build", params={"map_id": "room"}, json=rec,
                     headers={"If-Match": etag})
     assert r.status_code == 202
-    job = _wait(client, r.headers["Location"])
+    job = wait_for_job(client, r.headers["Location"])
     assert job["status"] == "succeeded" and job["map_version"] == 2
 
 
@@ -241,12 +232,12 @@ def test_a_full_build_queue_answers_503_with_retry_after(tmp_path: Path,
             [first.json()["job_id"], queued.json()["job_id"]])
         blocked.release.set()
         for r in (first, queued):
-            job = _wait(c, r.headers["Location"], 30)
+            job = wait_for_job(c, r.headers["Location"], timeout_s=30)
             assert job["error"]["reason"] == "time_budget_exceeded"
         # room again
         again = c.post("/v1/maps:build", params={"map_id": "four"}, json=rec)
         assert again.status_code == 202
-        _wait(c, again.headers["Location"], 30)
+        wait_for_job(c, again.headers["Location"], timeout_s=30)
 
 
 def test_queued_jobs_beat_while_waiting_and_a_lost_job_stores_nothing(
@@ -286,7 +277,7 @@ def test_queued_jobs_beat_while_waiting_and_a_lost_job_stores_nothing(
         out = jobs.get(first)
         assert out.status == "failed" and out.error["reason"] == "runner_lost"
         blocked.release.set()
-        _wait(c, f"/v1/build-jobs/{second}", 30)
+        wait_for_job(c, f"/v1/build-jobs/{second}", timeout_s=30)
         assert c.get("/v1/maps/one").status_code == 404
 
 
@@ -387,7 +378,7 @@ def test_legacy_recording_builds_with_a_deprecation_warning(client: TestClient) 
     rec["holdout_every"] = 4
     r = client.post("/v1/maps:build", params={"map_id": "old"}, json=_as_legacy(rec))
     assert r.status_code == 202, r.text
-    job = _wait(client, r.headers["Location"])
+    job = wait_for_job(client, r.headers["Location"])
     assert job["status"] == "succeeded", job
     assert LEGACY_RECORDING_WARNING in job["report"]["warnings"]
     # frame indices of the report are positions in the document: no held-out frame built

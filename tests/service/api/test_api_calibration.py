@@ -4,7 +4,6 @@ version and localize uses it; refusals name their field and store nothing."""
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import Any
 
@@ -14,6 +13,7 @@ from fastapi.testclient import TestClient
 
 from tests.conftest import make_test_app
 from tests.service.api.test_api_build import _recording
+from tests.support.helpers import wait_for_job
 
 
 def _noisy_recording(n: int, seed: int = 5) -> dict[str, Any]:
@@ -30,23 +30,14 @@ def _noisy_recording(n: int, seed: int = 5) -> dict[str, Any]:
     return rec
 
 
-def _wait(client: TestClient, location: str) -> dict[str, Any]:
-    for _ in range(600):
-        job = client.get(location).json()
-        if job["status"] in ("succeeded", "failed"):
-            return job
-        time.sleep(0.2)
-    raise AssertionError("job did not finish")
-
-
 @pytest.mark.slow
 def test_calibrate_store_and_use(tmp_path: Path) -> None:
     rec = _noisy_recording(120)
     rec["holdout_every"] = 2
     with TestClient(make_test_app(tmp_path)) as client:
         assert client.post("/v1/maps/room/calibration", json=rec).status_code == 404
-        job = _wait(client, client.post("/v1/maps:build", params={"map_id": "room"},
-                                        json=rec).headers["Location"])
+        built = client.post("/v1/maps:build", params={"map_id": "room"}, json=rec)
+        job = wait_for_job(client, built.headers["Location"])
         assert job["status"] == "succeeded", job
         r = client.get("/v1/maps/room/calibration")
         assert r.status_code == 404

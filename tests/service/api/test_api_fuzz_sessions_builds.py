@@ -5,9 +5,7 @@ PostgreSQL (skipped with a message where PostgreSQL is absent): every request an
 from __future__ import annotations
 
 import json
-import time
 from collections.abc import Iterator
-from typing import Any
 
 import numpy as np
 import pytest
@@ -26,6 +24,7 @@ from tests.service.api.test_api_fuzz import (
     _prior,
     _quaternion,
 )
+from tests.support.helpers import wait_for_job
 from tests.support.hostile import HOSTILE_CAMERA, hostile_recording
 
 pytestmark = pytest.mark.slow
@@ -91,24 +90,13 @@ def test_wild_session_frames_never_fail_the_server(client: TestClient, options: 
     client.delete(url.removesuffix("/frames"), headers=HEADERS)
 
 
-def _wait(client: TestClient, url: str) -> dict[str, Any]:
-    for _ in range(1200):
-        r = client.get(url, headers=HEADERS)
-        assert r.status_code == 200, r.text
-        job = r.json()
-        if job["status"] in ("succeeded", "failed"):
-            return dict(job)
-        time.sleep(0.1)
-    raise AssertionError(f"job {url} did not end")
-
-
 def test_build_repros_answer_a_documented_4xx_or_succeed(client: TestClient) -> None:
     # within the limits: 202, and the job ends with a map or a documented failure, readable
     doc = hostile_recording(60, 10, 9, layout="ring")
     r = client.post("/v1/maps:build", params={"map_id": "hostile-small"}, json=doc,
                     headers=HEADERS)
     assert r.status_code == 202, r.text
-    job = _wait(client, r.headers["location"])
+    job = wait_for_job(client, r.headers["location"], HEADERS)
     assert job["status"] == "succeeded" or job["error"]["reason"] in JOB_FAILURES, job
     # over the frame limit: 422 naming the field, no job
     r = client.post("/v1/maps:build", params={"map_id": "hostile-frames"},

@@ -4,32 +4,20 @@ its latest version) and fails with 412 when it does not; a missing header is sti
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
-from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
 
 from tests.conftest import make_test_app
 from tests.service.api.test_api_build import _recording
-from tests.support.helpers import assert_problem
+from tests.support.helpers import assert_problem, wait_for_job
 
 
 @pytest.fixture
 def client(tmp_path: Path):
     with TestClient(make_test_app(tmp_path)) as c:
         yield c
-
-
-def _wait(client: TestClient, location: str, timeout_s: float = 120.0) -> dict[str, Any]:
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < timeout_s:
-        job: dict[str, Any] = client.get(location).json()
-        if job["status"] in ("succeeded", "failed"):
-            return job
-        time.sleep(0.2)
-    raise AssertionError("job did not finish")
 
 
 def test_put_with_star_updates_an_existing_map_and_412_on_a_missing_one(
@@ -63,12 +51,12 @@ def test_build_with_star_builds_the_next_version_and_412_on_a_new_map(
     assert body["errors"][0]["field"] == "header.if-match"
     r = client.post("/v1/maps:build", params={"map_id": "room"}, json=rec)
     assert r.status_code == 202, r.text
-    assert _wait(client, r.headers["Location"])["map_version"] == 1
+    assert wait_for_job(client, r.headers["Location"])["map_version"] == 1
     assert_problem(client.post("/v1/maps:build", params={"map_id": "room"}, json=rec),
                    428, "precondition-required")
     r = client.post("/v1/maps:build", params={"map_id": "room"}, json=rec,
                     headers={"If-Match": "*"})
     assert r.status_code == 202, r.text
     assert r.json()["base_version"] == 1
-    job = _wait(client, r.headers["Location"])
+    job = wait_for_job(client, r.headers["Location"])
     assert job["status"] == "succeeded" and job["map_version"] == 2, job

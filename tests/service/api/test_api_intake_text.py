@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import copy
 import json
-import time
 import xml.etree.ElementTree as ET
 from typing import Any
 
@@ -28,7 +27,7 @@ from quadloc.maps.building.jobs import jobs_table
 from quadloc.service.schemas.examples import LOCALIZE_EXAMPLE, SESSION_CREATE_EXAMPLE
 from tests.service.api.conftest import ClientFactory
 from tests.service.api.test_api_build import _recording
-from tests.support.helpers import assert_problem
+from tests.support.helpers import assert_problem, wait_for_job
 
 #: Text the intake refuses: a lone surrogate of each half, C0 controls (NUL, U+0001, newline).
 BAD_TEXT = ["\ud800", "a\udc00b", "\u0000", "x\u0001", "two\nlines"]
@@ -40,16 +39,6 @@ def _post_json(client: TestClient, url: str, body: Any, **kwargs: Any) -> Any:
     return client.post(url, content=json.dumps(body),
                        headers={"content-type": "application/json",
                                 **kwargs.pop("headers", {})}, **kwargs)
-
-
-def _wait(client: TestClient, location: str, timeout_s: float = 120.0) -> dict[str, Any]:
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < timeout_s:
-        job: dict[str, Any] = client.get(location).json()
-        if job["status"] in ("succeeded", "failed"):
-            return job
-        time.sleep(0.2)
-    raise AssertionError("job did not finish")
 
 
 def _hostile_recordings() -> list[tuple[str, dict[str, Any]]]:
@@ -112,7 +101,7 @@ def test_a_job_row_stored_with_lone_surrogates_is_still_read(
     rec, _ = _recording(8)
     r = client.post("/v1/maps:build", params={"map_id": "room"}, json=rec)
     assert r.status_code == 202, r.text
-    job = _wait(client, r.headers["Location"])
+    job = wait_for_job(client, r.headers["Location"])
     assert job["status"] == "succeeded", job
     # as a row written before the intake check: lone surrogates escaped in the stored JSON
     report = json.dumps(job["report"]).replace('"f0"', '"f\\ud800"')

@@ -31,7 +31,7 @@ from quadloc.service.tracking.session import TrackingSession
 from tests.conftest import make_test_app
 from tests.service.api.conftest import ClientFactory
 from tests.service.api.test_api_build import _recording
-from tests.support.helpers import FakeClock, assert_problem
+from tests.support.helpers import FakeClock, assert_problem, wait_for_job
 
 KEYS = {"alice": "read", "bob": "read", "writer": "write", "writer2": "write", "ops": "admin"}
 API_KEYS = " ".join(f"{hash_api_key(k)}:{scope}" for k, scope in KEYS.items())
@@ -146,17 +146,6 @@ def test_a_frames_request_longer_than_the_idle_timeout_keeps_its_session(
         assert c.get(url).json()["frames"] == 2
 
 
-def _wait(client: TestClient, location: str, key: str, timeout_s: float = 120.0
-          ) -> dict[str, Any]:
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < timeout_s:
-        job: dict[str, Any] = client.get(location, headers=_as(key)).json()
-        if job["status"] in ("succeeded", "failed"):
-            return job
-        time.sleep(0.2)
-    raise AssertionError("job did not finish")
-
-
 def test_a_build_job_is_seen_only_by_its_key_and_admin(store_clients: ClientFactory) -> None:
     client = store_clients(api_keys=API_KEYS)
     rec, _ = _recording(8)
@@ -164,7 +153,7 @@ def test_a_build_job_is_seen_only_by_its_key_and_admin(store_clients: ClientFact
                     headers=_as("writer"))
     assert r.status_code == 202, r.text
     location = r.headers["Location"]
-    job = _wait(client, location, "writer")
+    job = wait_for_job(client, location, _as("writer"))
     assert job["status"] == "succeeded", job
     for key in ("alice", "writer2"):
         body = assert_problem(client.get(location, headers=_as(key)), 404, "not-found")
