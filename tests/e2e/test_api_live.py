@@ -28,7 +28,7 @@ DOC_BASE = "http://127.0.0.1:8000"
 def documented_blocks() -> list[tuple[str, str]]:
     """``(expected substring, bash block)`` for each block marked ``<!-- expect: ... -->``."""
     text = DOC.read_text()
-    return re.findall(r"<!-- expect: (.*?) -->\n```bash\n(.*?)```", text, flags=re.S)
+    return re.findall(r"<!-- expect: ([^\n]*?) -->\n```bash\n(.*?)```", text, flags=re.S)
 
 
 def test_docs_have_runnable_examples() -> None:
