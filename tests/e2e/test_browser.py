@@ -269,22 +269,6 @@ def test_redoc_renders_offline(browser: object, live_server: str) -> None:
     page.close()
 
 
-def _two_rooms_map() -> dict:
-    """Two exact copies of the Chess room 20 m apart along x, zones room-a and room-b (the
-    docs/api.md example's map): the demo frame is ambiguous between them."""
-    from quadloc.maps.demo import load_demo_map
-
-    chess = load_demo_map().to_dict()
-    objects, zones = [], []
-    for room, dx in (("room-a", 0.0), ("room-b", 20.0)):
-        ids = [f"{room}/{o['object_id']}" for o in chess["objects"]]
-        objects += [{**o, "object_id": i, "center": [o["center"][0] + dx, *o["center"][1:]]}
-                    for i, o in zip(ids, chess["objects"], strict=True)]
-        zones.append({"zone_id": room, "object_ids": ids})
-    return {"map_id": "inspector-two-rooms", "name": "Two rooms",
-            "categories": chess["categories"], "objects": objects, "zones": zones}
-
-
 def test_inspector_lists_and_draws_the_candidate_places(browser: object,
                                                         live_server: str) -> None:
     """An ambiguous answer on two exact copies of a room: the candidate table lists each
@@ -292,7 +276,9 @@ def test_inspector_lists_and_draws_the_candidate_places(browser: object,
     draws one violet frustum per candidate (violet pixels painted, none before), and a
     localized answer afterwards (hint: room-b) says its zone, hides the table and draws no
     candidate."""
-    doc = _two_rooms_map()
+    from tests.support.buildings import two_chess_rooms_document
+
+    doc = two_chess_rooms_document("inspector-two-rooms")
     assert httpx.post(f"{live_server}/v1/maps", json=doc).status_code == 201
     try:
         answer = httpx.post(f"{live_server}/v1/maps/{doc['map_id']}/localize",

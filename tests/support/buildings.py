@@ -317,3 +317,18 @@ def building_frames(building: Building, n_frames: int, seed: int, *,
                 out.append(bf)
                 break
     return camera, out
+
+
+def two_chess_rooms_document(map_id: str, name: str = "Two rooms") -> dict:
+    """A map document (docs/maps.md) of two exact copies of the demo Chess room, 20 m apart along
+    x, with zones ``room-a`` and ``room-b`` (as the docs/api.md example builds it): the demo frame
+    is ambiguous between them; object ids ``<zone>/<chess id>``."""
+    chess = load_demo_map().to_dict()
+    objects, zones = [], []
+    for room, dx in (("room-a", 0.0), ("room-b", 20.0)):
+        ids = [f"{room}/{o['object_id']}" for o in chess["objects"]]
+        objects += [{**o, "object_id": i, "center": [o["center"][0] + dx, *o["center"][1:]]}
+                    for i, o in zip(ids, chess["objects"], strict=True)]
+        zones.append({"zone_id": room, "object_ids": ids})
+    return {"map_id": map_id, "name": name, "categories": chess["categories"],
+            "objects": objects, "zones": zones}

@@ -13,6 +13,7 @@ from quadloc.maps.model import content_hash, scene_map_from_dict
 from quadloc.service.cli.main import main
 from quadloc.service.schemas.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, MAP_EXAMPLE
 from quadloc.service.settings import hash_api_key
+from tests.support.buildings import two_chess_rooms_document
 from tests.support.reference_data import CHESS_SCENE_PATH
 
 REPO = Path(__file__).resolve().parents[3]
@@ -287,22 +288,9 @@ def test_maps_versions_on_the_local_database(db: list[str], tmp_path: Path,
     assert "--url" in capsys.readouterr().err
 
 
-def _two_rooms(tmp_path: Path) -> Path:
-    """A map of two exact copies of the Chess room, 20 m apart along x, zones room-a and
-    room-b (the demo map's objects, as the docs/api.md example builds it)."""
-    from quadloc.maps.demo import load_demo_map
-
-    chess = load_demo_map().to_dict()
-    objects, zones = [], []
-    for room, dx in (("room-a", 0.0), ("room-b", 20.0)):
-        ids = [f"{room}/{o['object_id']}" for o in chess["objects"]]
-        objects += [{**o, "object_id": i, "center": [o["center"][0] + dx, *o["center"][1:]]}
-                    for i, o in zip(ids, chess["objects"], strict=True)]
-        zones.append({"zone_id": room, "object_ids": ids})
+def _two_rooms_file(tmp_path: Path) -> Path:
     path = tmp_path / "two-rooms.json"
-    path.write_text(json.dumps({"map_id": "two-rooms", "name": "Two rooms",
-                                "categories": chess["categories"], "objects": objects,
-                                "zones": zones}))
+    path.write_text(json.dumps(two_chess_rooms_document("two-rooms")))
     return path
 
 
@@ -312,7 +300,7 @@ def test_localize_hints_by_zone_or_position(db: list[str], tmp_path: Path,
     zones); ``--hint-zone room-b`` or ``--hint-position`` near room-b's copy of the true pose
     (``--hint-sigma`` 2 m) localizes it in room-b, 20 m from the true Chess pose along x; a
     position without sigma, a sigma alone, or both kinds are refused."""
-    assert main(["maps", "import", str(_two_rooms(tmp_path)), *db]) == 0
+    assert main(["maps", "import", str(_two_rooms_file(tmp_path)), *db]) == 0
     capsys.readouterr()
     truth_b = np.array(EXAMPLE_TRUE_WORLD_FROM_CAMERA)[:3, 3] + [20.0, 0.0, 0.0]
     assert main(["localize", "--map", "two-rooms", str(EXAMPLE), *db]) == 1
