@@ -59,7 +59,8 @@ class App:
         builds.sweep_stale()
         return cls(settings=settings, store=store, maps=maps, map_loader=loader,
                    localizer=localizer, sessions=SessionService(settings, loader,
-                                                                localizer.slots),
+                                                                localizer.slots,
+                                                                calibrations.constants_of),
                    builds=builds, calibrations=calibrations)
 
     def start(self) -> None:
