@@ -287,9 +287,13 @@ def build_parser() -> argparse.ArgumentParser:
                     "the frames its recording held out of the build (holdout_every; their app "
                     "poses the reference), store them with the version (localize uses them), "
                     "and print the mean NEES and the confidence calibration error before / "
-                    "after on half of those frames the fit did not use. Local database only.",
-        epilog="example (docs/map_building.md):\n"
-               "  quadloc calibrate docs/examples/room_recording.json.gz --map room\n"),
+                    "after on those frames (after: cross-fitted, each frame by a fit that did "
+                    "not see it). On the server of --url / QUADLOC_URL, or in this process on "
+                    "the local database.",
+        epilog="examples (docs/map_building.md):\n"
+               "  quadloc calibrate docs/examples/room_recording.json.gz --map room\n"
+               "  quadloc --url http://127.0.0.1:8000 calibrate "
+               "docs/examples/room_recording.json.gz --map room\n"),
         "calibrate")
     p.add_argument("file", help="recording JSON with holdout_every ('-' = stdin, .gz ok)")
     p.add_argument("--map", required=True, metavar="ID", help="map id")
