@@ -18,7 +18,7 @@ Steps of :func:`fit_map_calibration`:
    :func:`~quadloc.service.localization.calibration_fit.map_calibration_applies`); the
    ambiguity ratio and the default ``min_confidence`` are carried over (no decision sets):
    the stored calibration;
-3. the quality *after* is cross-fitted (:data:`FOLDS` folds of chunks of
+3. the quality *after* is cross-fitted (:data:`FOLDS` folds of chunks of up to
    :data:`CHUNK_FRAMES` consecutive frames, :func:`folds`): each fold's frames are localized
    with constants fitted on the other folds only, so that every frame reports on a fit that
    did not see it (nor, but at chunk edges, its neighbours). It estimates how the stored
@@ -179,8 +179,11 @@ def calibration_error_floor(confidence: FloatArray, draws: int = FLOOR_DRAWS,
 
 def folds(n: int) -> np.ndarray:
     """The fold (0 .. :data:`FOLDS` - 1) of each of ``n`` frames in recording order: chunks of
-    :data:`CHUNK_FRAMES` consecutive frames, dealt to the folds in turn. (n,) int."""
-    return (np.arange(n) // CHUNK_FRAMES) % FOLDS
+    consecutive frames dealt to the folds in turn, :data:`CHUNK_FRAMES` long, shorter when
+    ``n`` is small so that each fold gets at least two chunks (its frames spread over the
+    recording). (n,) int."""
+    chunk = max(1, min(CHUNK_FRAMES, n // (2 * FOLDS)))
+    return (np.arange(n) // chunk) % FOLDS
 
 
 def _errors(result: LocalizationResult, reference: FloatArray) -> tuple[float, float, float | None]:
@@ -231,12 +234,14 @@ def quality(solved: Sequence[tuple[SolveRecord, float]]) -> CalibrationQuality:
         success_rate=float(ok.mean()) if loc else None)
 
 
-def _fit(records: Sequence[SolveRecord], metric: str) -> CalibrationConstants:
-    """The map's constants fitted on ``records`` (step 2 of the module docstring)."""
+def _fit(records: Sequence[SolveRecord], metric: str, what: str = "held-out frames"
+         ) -> CalibrationConstants:
+    """The map's constants fitted on ``records`` (step 2 of the module docstring; ``what``
+    names them in an error)."""
     keys = sorted({r.key for r in records})
     if sum(r.localized for r in records) < MIN_FIT_FRAMES:
         raise CalibrationFitError(
-            f"{sum(r.localized for r in records)} of {len(records)} fit frames localized; "
+            f"{sum(r.localized for r in records)} of {len(records)} {what} localized; "
             f"at least {MIN_FIT_FRAMES} needed (hold out more frames)")
     constants = fit_calibration(records, CalibrationConstants.shipped(), USER_FIT_SETTINGS)
     k = constants.covariance_scale.get(keys[0], math.nan)
@@ -266,7 +271,8 @@ def fit_map_calibration(frames: Sequence[ReferenceFrame], compiled: CompiledMap,
         held = np.flatnonzero(fold == j)
         if held.size == 0:
             continue
-        fitted = _fit([r for r, f in zip(records, fold, strict=True) if f != j], metric)
+        fitted = _fit([r for r, f in zip(records, fold, strict=True) if f != j], metric,
+                      f"held-out frames outside fold {j + 1} of {FOLDS}")
         after += _solve([frames[int(i)] for i in held], compiled, camera, options, fitted)
     return MapCalibration(constants=constants, key=constants.provenance["fitted_keys"][0],
                           fit_frames=len(records), before=quality(solved),
