@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: 6e92d062c3a765439d97720c199113de0eea7a7d59a31620bdf2342f0f719daf
+// openapi-sha256: 8425713f0b8df35715f28f0be635d2ed53406fc1c7cb8a0526e3ec0db20e0f3b
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -184,7 +184,7 @@ export interface paths {
         put?: never;
         /**
          * Calibrate a map version from a recording's held-out frames
-         * @description Body: the recording the map was built from, with `holdout_every` (the frames held out of the build, their app poses the reference). Fits the covariance scale and the confidence model on half of them, reports mean NEES and the confidence calibration error before / after on the other half, and stores the calibration with the map version: localize uses it for the calibration key it was fitted for. Synchronous (tens of seconds for hundreds of frames). 422 when the recording holds no frame out or too few localize (at least 20 must: the inline example shows the body's form only and gets that 422; docs/map_building.md calibrates the shipped example recording).
+         * @description Body: the recording the map was built from, with `holdout_every` (the frames held out of the build, their app poses the reference). Fits the covariance scale and the confidence model on them, reports mean NEES and the confidence calibration error before / after on them (after: cross-fitted, each frame by a fit on the other folds), and stores the calibration with the map version: localize and tracking sessions use it for the calibration key it was fitted for. Synchronous: two solves per held-out frame (1,000 held-out frames in about 25 s measured; the body limit, 2 MB by default, bounds a recording to about 2,500 frames, so at most about 1,250 held out). 422 when the recording holds no frame out or too few localize (at least 20 must: the inline example shows the body's form only and gets that 422; docs/map_building.md calibrates the shipped example recording).
          */
         post: operations["calibrate_map_v1_maps__map_id__calibration_post"];
         delete?: never;
@@ -481,7 +481,7 @@ export interface components {
             key: string;
             /**
              * Fit Frames
-             * @description Held-out frames the fit used (every other one).
+             * @description Held-out frames the stored fit used (all of them; `after` is cross-fitted: each frame reported by a fit on the other folds).
              */
             fit_frames: number;
             /**
@@ -498,9 +498,9 @@ export interface components {
              * @description Default min_confidence with this calibration.
              */
             min_confidence: number;
-            /** @description Report frames, shipped constants. */
+            /** @description Held-out frames, shipped constants. */
             before: components["schemas"]["CalibrationQualityOut"];
-            /** @description Report frames, this calibration. */
+            /** @description Held-out frames, each with a calibration fitted without its fold (5 folds of 25-frame chunks). */
             after: components["schemas"]["CalibrationQualityOut"];
         };
         /**
@@ -533,6 +533,11 @@ export interface components {
              * @description Expected calibration error of `confidence` (10 bins) against success = within 10 cm and 5 deg of the reference.
              */
             calibration_error: number | null;
+            /**
+             * Calibration Error Floor
+             * @description The calibration error a perfectly calibrated `confidence` would show on these answers by sampling alone (mean over 200 draws of outcomes from the confidences): an error near it is as good as these frames can tell.
+             */
+            calibration_error_floor?: number | null;
             /** Mean Confidence */
             mean_confidence: number | null;
             /** Success Rate */
