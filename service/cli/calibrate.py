@@ -21,6 +21,8 @@ __all__ = ["cmd_calibrate"]
 def _line(name: str, q: CalibrationQualityOut | CalibrationQuality) -> str:
     nees = "-" if q.mean_nees is None else f"{q.mean_nees:.2f}"
     ece = "-" if q.calibration_error is None else f"{q.calibration_error:.3f}"
+    if q.calibration_error is not None and q.calibration_error_sd is not None:
+        ece += f" +- {q.calibration_error_sd:.3f}"
     floor = "" if q.calibration_error_floor is None \
         else f" (sampling floor {q.calibration_error_floor:.3f})"
     return (f"  {name:<7} mean NEES {nees:>8} ({q.nees_frames} frames within 10 cm)   "

@@ -77,6 +77,7 @@ __all__ = [
     "ReferenceFrame",
     "calibration_error",
     "calibration_error_floor",
+    "calibration_error_sd",
     "fit_map_calibration",
     "folds",
     "quality",
@@ -123,6 +124,9 @@ class CalibrationQuality:
         calibration_error_floor: the calibration error a perfectly calibrated ``confidence``
             would show on these answers by sampling alone (:func:`calibration_error_floor`);
             a ``calibration_error`` near it is as good as these frames can tell.
+        calibration_error_sd: the sampling standard deviation of ``calibration_error``
+            (:func:`calibration_error_sd`, blocks of consecutive frames); None with fewer than
+            two blocks.
         mean_confidence, success_rate: over the localized answers.
     """
 
@@ -132,6 +136,7 @@ class CalibrationQuality:
     mean_nees: float | None
     calibration_error: float | None
     calibration_error_floor: float | None
+    calibration_error_sd: float | None
     mean_confidence: float | None
     success_rate: float | None
 
@@ -177,6 +182,26 @@ def calibration_error_floor(confidence: FloatArray, draws: int = FLOOR_DRAWS,
     return float(np.mean([calibration_error(p, row.astype(float)) for row in y]))
 
 
+def calibration_error_sd(confidence: FloatArray, outcome: FloatArray,
+                         block: int = CHUNK_FRAMES, draws: int = FLOOR_DRAWS,
+                         seed: int = 0) -> float:
+    """Standard deviation of :func:`calibration_error` under a moving-block bootstrap:
+    ``draws`` resamples of ``n // block`` blocks of ``block`` consecutive answers (recording
+    order), generator ``seed``. Neighbouring frames' outcomes are correlated (the reference
+    poses drift slowly: a frame succeeds when its neighbours do), so the error varies more
+    than independent outcomes would make it vary; blocks keep that correlation. NaN for fewer
+    than two blocks."""
+    p = np.asarray(confidence, dtype=float)
+    y = np.asarray(outcome, dtype=float)
+    nb = p.size // block
+    if nb < 2:
+        return math.nan
+    rng = np.random.default_rng(seed)
+    starts = rng.integers(0, p.size - block + 1, (draws, nb))
+    idx = (starts[:, :, None] + np.arange(block)).reshape(draws, -1)
+    return float(np.std([calibration_error(p[i], y[i]) for i in idx]))
+
+
 def folds(n: int) -> np.ndarray:
     """The fold (0 .. :data:`FOLDS` - 1) of each of ``n`` frames in recording order: chunks of
     consecutive frames dealt to the folds in turn, :data:`CHUNK_FRAMES` long, shorter when
@@ -219,8 +244,13 @@ def _solve(frames: Sequence[ReferenceFrame], compiled: CompiledMap, camera: Came
     return out
 
 
+def _finite(v: float) -> float | None:
+    return v if math.isfinite(v) else None
+
+
 def quality(solved: Sequence[tuple[SolveRecord, float]]) -> CalibrationQuality:
-    """:class:`CalibrationQuality` of solved frames (records and confidences)."""
+    """:class:`CalibrationQuality` of solved frames (records and confidences), in recording
+    order."""
     loc = [(r, c) for r, c in solved if r.localized]
     nees = [r.nees for r, _ in loc if math.isfinite(r.nees) and r.position_error_m <= NEES_WITHIN_M]
     conf = np.array([c for _, c in loc])
@@ -230,6 +260,7 @@ def quality(solved: Sequence[tuple[SolveRecord, float]]) -> CalibrationQuality:
         mean_nees=float(np.mean(nees)) if nees else None,
         calibration_error=calibration_error(conf, ok) if loc else None,
         calibration_error_floor=calibration_error_floor(conf) if loc else None,
+        calibration_error_sd=_finite(calibration_error_sd(conf, ok)) if loc else None,
         mean_confidence=float(conf.mean()) if loc else None,
         success_rate=float(ok.mean()) if loc else None)
 
@@ -266,14 +297,16 @@ def fit_map_calibration(frames: Sequence[ReferenceFrame], compiled: CompiledMap,
     records = [r for r, _ in solved]
     constants = _fit(records, metric)
     fold = folds(len(frames))
-    after: list[tuple[SolveRecord, float]] = []
+    after: list[tuple[SolveRecord, float]] = list(solved)  # replaced fold by fold
     for j in range(FOLDS):
         held = np.flatnonzero(fold == j)
         if held.size == 0:
             continue
         fitted = _fit([r for r, f in zip(records, fold, strict=True) if f != j], metric,
                       f"held-out frames outside fold {j + 1} of {FOLDS}")
-        after += _solve([frames[int(i)] for i in held], compiled, camera, options, fitted)
+        for i, answer in zip(held, _solve([frames[int(i)] for i in held], compiled, camera,
+                                          options, fitted), strict=True):
+            after[int(i)] = answer
     return MapCalibration(constants=constants, key=constants.provenance["fitted_keys"][0],
                           fit_frames=len(records), before=quality(solved),
                           after=quality(after))

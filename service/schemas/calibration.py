@@ -26,6 +26,11 @@ class CalibrationQualityOut(BaseModel):
         description="The calibration error a perfectly calibrated `confidence` would show on "
                     "these answers by sampling alone (mean over 200 draws of outcomes from the "
                     "confidences): an error near it is as good as these frames can tell.")
+    calibration_error_sd: float | None = Field(
+        default=None,
+        description="Sampling standard deviation of `calibration_error`: moving-block bootstrap "
+                    "over blocks of 25 consecutive frames (their outcomes are correlated); "
+                    "null with fewer than 50 localized frames.")
     mean_confidence: float | None
     success_rate: float | None
 

@@ -178,3 +178,4 @@ def test_calibration_on_a_server_from_the_sdk_and_the_cli(server: str) -> None:
     assert Calibration.model_validate_json(cli.stderr) == stored == sdk
     assert f"covariance scale {stored.covariance_scale:.4g}" in cli.stdout
     assert f"calibration error {stored.after.calibration_error:.3f}" in cli.stdout
+    assert stored.after.calibration_error_sd is not None  # 100 held-out frames: 4 blocks

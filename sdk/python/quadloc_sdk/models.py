@@ -501,7 +501,8 @@ class CalibrationQuality(BaseModel):
     frames: mean NEES of the localized answers within 10 cm (6 = well scaled) and the expected
     calibration error of ``confidence`` (10 equal-width bins) against success = within 10 cm
     and 5 deg of the reference; ``calibration_error_floor``: what a perfectly calibrated
-    confidence would show on these frames by sampling alone."""
+    confidence would show on these frames by sampling alone; ``calibration_error_sd``: the
+    error's sampling standard deviation (blocks of consecutive frames)."""
 
     model_config = _RESPONSE
     frames: int
@@ -510,6 +511,7 @@ class CalibrationQuality(BaseModel):
     mean_nees: float | None = None
     calibration_error: float | None = None
     calibration_error_floor: float | None = None
+    calibration_error_sd: float | None = None
     mean_confidence: float | None = None
     success_rate: float | None = None
 

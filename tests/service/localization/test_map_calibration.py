@@ -18,6 +18,7 @@ from quadloc.service.localization.map_calibration import (
     ReferenceFrame,
     calibration_error,
     calibration_error_floor,
+    calibration_error_sd,
     fit_map_calibration,
     folds,
 )
@@ -44,6 +45,18 @@ def test_calibration_error_floor_is_the_sampling_error_of_a_calibrated_model() -
     assert calibration_error_floor(np.full(100, 0.5)) == pytest.approx(
         math.sqrt(0.25 / 100) * math.sqrt(2 / math.pi), abs=0.006)
     assert math.isnan(calibration_error_floor(np.array([])))
+
+
+def test_calibration_error_sd_grows_with_correlated_outcomes() -> None:
+    """The same outcomes in runs of 25 (correlated, as along a drifting walk) and shuffled
+    (independent): the block bootstrap gives the runs a larger spread."""
+    assert calibration_error_sd(np.ones(100), np.ones(100)) == 0.0
+    assert math.isnan(calibration_error_sd(np.full(30, 0.5), np.ones(30)))
+    rng = np.random.default_rng(1)
+    runs = np.repeat(rng.random(40) < 0.5, 25).astype(float)
+    p = np.full(runs.size, 0.5)
+    shuffled = rng.permutation(runs)
+    assert calibration_error_sd(p, runs) > 2 * calibration_error_sd(p, shuffled)
 
 
 def test_folds_are_chunks_dealt_in_turn_and_even() -> None:

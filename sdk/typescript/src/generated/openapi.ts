@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: 8425713f0b8df35715f28f0be635d2ed53406fc1c7cb8a0526e3ec0db20e0f3b
+// openapi-sha256: d3a8f73ce958d5b633fe28aed257537362dcaf854c1be1219f33af78967697d7
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -538,6 +538,11 @@ export interface components {
              * @description The calibration error a perfectly calibrated `confidence` would show on these answers by sampling alone (mean over 200 draws of outcomes from the confidences): an error near it is as good as these frames can tell.
              */
             calibration_error_floor?: number | null;
+            /**
+             * Calibration Error Sd
+             * @description Sampling standard deviation of `calibration_error`: moving-block bootstrap over blocks of 25 consecutive frames (their outcomes are correlated); null with fewer than 50 localized frames.
+             */
+            calibration_error_sd?: number | null;
             /** Mean Confidence */
             mean_confidence: number | null;
             /** Success Rate */
