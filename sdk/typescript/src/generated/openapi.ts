@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: d3a8f73ce958d5b633fe28aed257537362dcaf854c1be1219f33af78967697d7
+// openapi-sha256: 8527d9322af54cc63d9826cd05683b7c6578b7f7539e269f7d2ab85f5e4da5ee
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -4926,31 +4926,35 @@ export interface operations {
                 content: {
                     /**
                      * @example {
-                     *       "map_id": "my-room",
+                     *       "map_id": "room",
                      *       "map_version": 1,
                      *       "key": "level_set",
-                     *       "fit_frames": 250,
-                     *       "covariance_scale": 39.9,
-                     *       "shipped_covariance_scale": 1.83,
-                     *       "s2_floor": 3.6,
+                     *       "fit_frames": 100,
+                     *       "covariance_scale": 106.9,
+                     *       "shipped_covariance_scale": 3.06,
+                     *       "s2_floor": 2.5,
                      *       "min_confidence": 0.36,
                      *       "before": {
-                     *         "frames": 250,
-                     *         "localized": 247,
-                     *         "nees_frames": 125,
-                     *         "mean_nees": 382.9,
-                     *         "calibration_error": 0.105,
-                     *         "mean_confidence": 0.54,
-                     *         "success_rate": 0.49
+                     *         "frames": 100,
+                     *         "localized": 99,
+                     *         "nees_frames": 85,
+                     *         "mean_nees": 180.9,
+                     *         "calibration_error": 0.067,
+                     *         "calibration_error_floor": 0.066,
+                     *         "calibration_error_sd": 0.021,
+                     *         "mean_confidence": 0.82,
+                     *         "success_rate": 0.86
                      *       },
                      *       "after": {
-                     *         "frames": 250,
-                     *         "localized": 247,
-                     *         "nees_frames": 125,
-                     *         "mean_nees": 8.7,
-                     *         "calibration_error": 0.074,
-                     *         "mean_confidence": 0.52,
-                     *         "success_rate": 0.49
+                     *         "frames": 100,
+                     *         "localized": 99,
+                     *         "nees_frames": 85,
+                     *         "mean_nees": 6.46,
+                     *         "calibration_error": 0.065,
+                     *         "calibration_error_floor": 0.06,
+                     *         "calibration_error_sd": 0.03,
+                     *         "mean_confidence": 0.85,
+                     *         "success_rate": 0.86
                      *       }
                      *     }
                      */
@@ -5140,31 +5144,35 @@ export interface operations {
                 content: {
                     /**
                      * @example {
-                     *       "map_id": "my-room",
+                     *       "map_id": "room",
                      *       "map_version": 1,
                      *       "key": "level_set",
-                     *       "fit_frames": 250,
-                     *       "covariance_scale": 39.9,
-                     *       "shipped_covariance_scale": 1.83,
-                     *       "s2_floor": 3.6,
+                     *       "fit_frames": 100,
+                     *       "covariance_scale": 106.9,
+                     *       "shipped_covariance_scale": 3.06,
+                     *       "s2_floor": 2.5,
                      *       "min_confidence": 0.36,
                      *       "before": {
-                     *         "frames": 250,
-                     *         "localized": 247,
-                     *         "nees_frames": 125,
-                     *         "mean_nees": 382.9,
-                     *         "calibration_error": 0.105,
-                     *         "mean_confidence": 0.54,
-                     *         "success_rate": 0.49
+                     *         "frames": 100,
+                     *         "localized": 99,
+                     *         "nees_frames": 85,
+                     *         "mean_nees": 180.9,
+                     *         "calibration_error": 0.067,
+                     *         "calibration_error_floor": 0.066,
+                     *         "calibration_error_sd": 0.021,
+                     *         "mean_confidence": 0.82,
+                     *         "success_rate": 0.86
                      *       },
                      *       "after": {
-                     *         "frames": 250,
-                     *         "localized": 247,
-                     *         "nees_frames": 125,
-                     *         "mean_nees": 8.7,
-                     *         "calibration_error": 0.074,
-                     *         "mean_confidence": 0.52,
-                     *         "success_rate": 0.49
+                     *         "frames": 100,
+                     *         "localized": 99,
+                     *         "nees_frames": 85,
+                     *         "mean_nees": 6.46,
+                     *         "calibration_error": 0.065,
+                     *         "calibration_error_floor": 0.06,
+                     *         "calibration_error_sd": 0.03,
+                     *         "mean_confidence": 0.85,
+                     *         "success_rate": 0.86
                      *       }
                      *     }
                      */
