@@ -20,7 +20,8 @@ Writes, under ``--out``:
   compressed string form).
 
 The frames are those of ``bench.map_building.simulated_recording`` (the detector, drifting app
-poses and walk of the shipped ``room_recording.json.gz``, here ``--frames`` of them). The
+poses and walk of the shipped ``room_recording.json.gz``, the walk resampled to ``--frames``
+poses). The
 scores are drawn uniformly in [0.5, 1] (they set the importer's sigma, nothing else).
 """
 
@@ -81,9 +82,9 @@ def encode_coco_rle(mask: np.ndarray) -> dict[str, Any]:
     return {"size": [int(mask.shape[0]), int(mask.shape[1])], "counts": "".join(chars)}
 
 
-def example(seed: int, frames: int, holdout_every: int = 3) -> dict[str, Any]:
+def example(seed: int, frames: int) -> dict[str, Any]:
     """The files' contents: ``{"cameras.txt", "images.txt", "instances", "results"}``."""
-    doc, _, app, _ = simulated_recording(seed, frames, holdout_every=holdout_every)
+    doc, _, app, _ = simulated_recording(seed, frames)
     cam = doc["camera"]
     w, h = int(cam["width"]), int(cam["height"])
     rng = np.random.default_rng([seed, 30])

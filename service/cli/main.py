@@ -285,7 +285,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="calibrate a map version from the recording it was built from",
         description="Fit the covariance scale and the confidence model of a map version from "
                     "the frames its recording held out of the build (holdout_every; their app "
-                    "poses the reference), store them with the version (localize uses them), "
+                    "poses the reference), store them with the version (localize and sessions use "
+                    "them), "
                     "and print the mean NEES and the confidence calibration error before / "
                     "after on those frames (after: cross-fitted, each frame by a fit that did "
                     "not see it). On the server of --url / QUADLOC_URL, or in this process on "
