@@ -61,6 +61,8 @@ from typing import Any
 import httpx
 import numpy as np
 
+from bench.results_doc import tree_python
+
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -163,7 +165,7 @@ def start_server(data_dir: Path, port: int | None = None, tree: Path = REPO,
                 "QUADLOC_DATA_DIR": str(data_dir), "PYTHONPATH": str(tree), **(settings or {})})
     log = open(data_dir / f"uvicorn-{port}.log", "wb")  # noqa: SIM115 - lives with the server
     proc = subprocess.Popen(
-        [sys.executable, "-m", "uvicorn", "quadloc.service.api.app:create_app", "--factory",
+        [tree_python(tree), "-m", "uvicorn", "quadloc.service.api.app:create_app", "--factory",
          "--host", "127.0.0.1", "--port", str(port), "--log-level", "warning",
          "--no-access-log"],
         cwd=tree, env=env, stdout=log, stderr=subprocess.STDOUT)

@@ -33,6 +33,8 @@ from typing import Any
 
 import numpy as np
 
+from bench.results_doc import tree_python
+
 REPO = Path(__file__).resolve().parents[1]
 WRONG_POSITION_M = 0.5
 WRONG_ROTATION_DEG = 20.0
@@ -87,7 +89,7 @@ def _start(tree: Path, seeds: list[int]) -> tuple[subprocess.Popen[str], int]:
     """A :func:`serve` worker of ``tree`` and its number of frames."""
     env = {**os.environ, "PYTHONPATH": str(tree)}
     # this file's worker, with the tree's packages (a baseline need not have this bench)
-    proc = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--serve",
+    proc = subprocess.Popen([tree_python(tree), str(Path(__file__).resolve()), "--serve",
                              "--seeds", *map(str, seeds)], cwd=tree, env=env,
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     assert proc.stdout is not None

@@ -290,19 +290,9 @@ def run_peer(binary: Path, data: dict[str, Any], repeats: int) -> dict[str, Any]
                          for r in rows]}
 
 
-def tree_python(tree: Path) -> str:
-    """The interpreter that imports ``tree``'s QuadLoc: its own ``.venv`` (``make install``;
-    ``PYTHONPATH`` alone does not do it, the editable install of a venv maps the ``quadloc``
-    namespace to one checkout), this one for this checkout."""
-    if tree.resolve() == REPO:
-        return sys.executable
-    python = tree / ".venv" / "bin" / "python"
-    if not python.is_file():
-        raise SystemExit(f"{tree} has no .venv: run `make install` in it first")
-    return str(python)
-
-
 def run_worker(tree: Path, problems: Path, metric: str, repeats: int) -> dict[str, Any]:
+    from bench.results_doc import tree_python
+
     env = {**os.environ, "PYTHONPATH": str(tree)}
     out = subprocess.run(
         [tree_python(tree), str(Path(__file__).resolve()), "--worker", str(problems),
