@@ -389,7 +389,7 @@ def markdown(res: dict[str, Any], command: str) -> str:
     peer = res["peer_built"]
     versions = sorted({f"{k}: GTSAM {v['gtsam']}" for k, v in res["solvers"].items()
                        if not k.startswith("before")})
-    lines = ["## Refinement speed against a compiled peer (issue 33)", "",
+    lines = ["## Refinement speed against a compiled peer (issue 14, part 3)", "",
              f"Command: `{command}` (seed {res['seed']}, {res['rounds']} interleaved rounds x "
              f"{res['repeats']} calls per problem, CPU time, medians over all calls; CPython "
              f"{res['python']}; {'; '.join(versions)}; 2-core machine shared with other jobs, "
