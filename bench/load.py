@@ -61,8 +61,6 @@ from typing import Any
 import httpx
 import numpy as np
 
-from bench.results_doc import tree_python
-
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -159,6 +157,8 @@ def start_server(data_dir: Path, port: int | None = None, tree: Path = REPO,
     """One real Uvicorn process (one worker) on a loopback port, running the code of ``tree``
     (this checkout by default) with default settings plus ``settings`` (``QUADLOC_*``
     variables); returns (process, base URL)."""
+    from bench.results_doc import tree_python
+
     port = port or _free_port()
     env = {k: v for k, v in os.environ.items() if not k.startswith("QUADLOC_")}
     env.update({"QUADLOC_DATABASE_URL": f"sqlite:///{data_dir / 'load.db'}",

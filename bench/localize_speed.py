@@ -33,8 +33,6 @@ from typing import Any
 
 import numpy as np
 
-from bench.results_doc import tree_python
-
 REPO = Path(__file__).resolve().parents[1]
 WRONG_POSITION_M = 0.5
 WRONG_ROTATION_DEG = 20.0
@@ -87,6 +85,8 @@ def serve(seeds: list[int]) -> None:
 
 def _start(tree: Path, seeds: list[int]) -> tuple[subprocess.Popen[str], int]:
     """A :func:`serve` worker of ``tree`` and its number of frames."""
+    from bench.results_doc import tree_python  # here: a worker imports its tree's bench
+
     env = {**os.environ, "PYTHONPATH": str(tree)}
     # this file's worker, with the tree's packages (a baseline need not have this bench)
     proc = subprocess.Popen([tree_python(tree), str(Path(__file__).resolve()), "--serve",

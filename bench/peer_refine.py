@@ -385,13 +385,13 @@ def run(seed: int, rounds: int, repeats: int, peer: Path | None,
     return out
 
 
-def markdown(res: dict[str, Any], command: str) -> str:
+def markdown(res: dict[str, Any]) -> str:
     peer = res["peer_built"]
     versions = sorted({f"{k}: GTSAM {v['gtsam']}" for k, v in res["solvers"].items()
                        if not k.startswith("before")})
     lines = ["## Refinement speed against a compiled peer (issue 14, part 3)", "",
-             f"Command: `{command}` (seed {res['seed']}, {res['rounds']} interleaved rounds x "
-             f"{res['repeats']} calls per problem, CPU time, medians over all calls; CPython "
+             f"Seed {res['seed']}, {res['rounds']} interleaved rounds x "
+             f"{res['repeats']} calls per problem, CPU time, medians over all calls (CPython "
              f"{res['python']}; {'; '.join(versions)}; 2-core machine shared with other jobs, "
              f"1-min load average {min(res['load_average_1min'])}-"
              f"{max(res['load_average_1min'])} during the rounds: compare within this table "
@@ -488,9 +488,7 @@ def main(argv: list[str] | None = None) -> None:
     if args.write_results:
         from bench.results_doc import update_results_section
 
-        command = "python -m bench.peer_refine " + " ".join(argv if argv is not None
-                                                             else sys.argv[1:])
-        update_results_section("peer_refine", markdown(res, command.strip()))
+        update_results_section("peer_refine", markdown(res))
 
 
 if __name__ == "__main__":
