@@ -324,10 +324,12 @@ def session_variance_ratio(calibration: CalibrationConstants | None, key: str) -
     A session's covariance is the smoother's marginal of the detections' factors as the
     client's sigmas weight them, with no residual variance ``s^2`` of its own: it takes the
     detections' noise to be what the shipped constants say at their floor, ``k f`` (the
-    localize factor of a frame whose ``s^2`` is at most the floor, the common case). A map's
+    localize factor of a frame whose ``s^2`` is at most the floor). A map's
     calibration measured that noise for its detector as ``k' f'``: the session's covariance is
     multiplied by ``(k' f') / (k f)`` (dimensionless; key ``key``:
-    :func:`quadloc.service.localization.confidence.calibration_key`)."""
+    :func:`quadloc.service.localization.confidence.calibration_key`). A first-order transfer
+    of the map's calibration to sessions: no benchmark measures a session's NEES on a
+    calibrated map yet."""
     if calibration is None or not map_calibration_applies(calibration, key):
         return 1.0
     shipped = CalibrationConstants.shipped()
