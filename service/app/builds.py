@@ -429,15 +429,18 @@ class BuildService:
         elif self.queue is not None and stop:
             self.queue.close()
 
-    async def run_worker(self, name: str | None = None) -> None:
+    async def run_worker(self, name: str | None = None, *, wait: bool = True,
+                         install_signal_handlers: bool = True) -> None:
         """Run the queue's build jobs in this process (``quadloc worker``) until SIGTERM /
         SIGINT: finish the running builds within ``shutdown_grace_s`` - 2 s, else release
-        them (queued again). ``ValueError`` when builds run in-process (SQLite)."""
+        them (queued again); ``wait`` False: until the queue is empty. ``ValueError`` when
+        builds run in-process (SQLite)."""
         if self.queue is None:
             raise ValueError("builds run in the API process here (SQLite, or "
                              "QUADLOC_BUILD_RUNNER=in-process): a worker needs the job queue "
                              "(PostgreSQL)")
-        await self.queue.run_worker_async(name=name)
+        await self.queue.run_worker_async(name=name, wait=wait,
+                                          install_signal_handlers=install_signal_handlers)
 
     def parse(self, document: Any) -> Recording:
         """A recording (parsed JSON or its wire model) checked against the limits, without its

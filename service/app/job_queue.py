@@ -134,10 +134,10 @@ class ProcrastinateQueue:
                 self._opened = False
 
     # ------------------------------------------------------------------ the worker side
-    async def run_worker_async(self, *, name: str | None = None,
+    async def run_worker_async(self, *, name: str | None = None, wait: bool = True,
                                install_signal_handlers: bool = True) -> None:
         """Take and run up to ``concurrency`` jobs at once (threads) until SIGTERM / SIGINT
-        (then as the module docstring says)."""
+        (then as the module docstring says); ``wait`` False: until the queue is empty."""
         async with self.app.open_async():
             recovery = asyncio.create_task(self._recover_stalled_jobs(), name="stalled jobs")
             try:
@@ -148,7 +148,7 @@ class ProcrastinateQueue:
                     shutdown_graceful_timeout=self.shutdown_grace_s,
                     fetch_job_polling_interval=self.heartbeat_s,
                     abort_job_polling_interval=self.heartbeat_s,
-                    install_signal_handlers=install_signal_handlers,
+                    install_signal_handlers=install_signal_handlers, wait=wait,
                     delete_jobs="successful")
             finally:
                 recovery.cancel()
