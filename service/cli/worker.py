@@ -63,6 +63,7 @@ async def _health(app: App, worker: asyncio.Task[None], reader: asyncio.StreamRe
     answers, 503 otherwise; 404 for any other path."""
     try:
         line = (await asyncio.wait_for(reader.readline(), 5.0)).decode("latin-1").split()
+        body: dict[str, object]
         if len(line) < 2 or line[0] != "GET" or line[1] != "/healthz":
             status, body = "404 Not Found", {"status": "not found"}
         else:
