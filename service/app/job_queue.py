@@ -109,8 +109,11 @@ class ProcrastinateQueue:
         def run(context: procrastinate.JobContext, job_id: str) -> None:
             try:
                 kind.run(job_id, _AbortEvent(context))
-            except JobReleased:
-                kind.requeued(job_id)
+            except JobReleased:  # procrastinate retries it, unless this was the last run
+                if _last_run(context.job):
+                    kind.lost(job_id, _LOST_DETAIL)
+                else:
+                    kind.requeued(job_id)
                 raise
 
         self.app.task(name=self.task_name(kind.name), queue=QUEUE, pass_context=True,
@@ -167,31 +170,46 @@ class ProcrastinateQueue:
 
     async def recover_stalled_jobs(self) -> int:
         """One search for stalled jobs (see :meth:`_recover_stalled_jobs`); how many were put
-        back in the queue or given up."""
+        back in the queue or given up. One worker at a time searches (a PostgreSQL advisory
+        lock; the others skip that beat): a job put back and taken again by a live worker is
+        never taken for stalled by a search that read it before."""
         manager = self.app.job_manager
         done = 0
-        for job in await manager.get_stalled_jobs(seconds_since_heartbeat=self.stalled_after_s):
-            kind = self.kinds.get(job.task_name.removeprefix("quadloc."))
-            job_id = str(job.task_kwargs.get("job_id", ""))
-            if kind is None or job.id is None:
-                continue
+        async with self.app.connector.pool.connection() as conn:  # type: ignore[attr-defined]
+            locked = await conn.execute("SELECT pg_try_advisory_lock(%s)", (_RECOVERY_LOCK,))
+            if not (await locked.fetchone())[0]:
+                return 0
             try:
-                if job.attempts + 1 >= MAX_ATTEMPTS:
-                    await manager.finish_job_by_id_async(job.id, procrastinate.jobs.Status.FAILED,
-                                                         delete_job=False)
-                    await asyncio.to_thread(kind.lost, job_id, f"its worker stopped reporting "
-                                            f"{MAX_ATTEMPTS} times (killed, or its machine "
-                                            "gone); submit the recording again")
-                else:
-                    await manager.retry_job(job)
-                    await asyncio.to_thread(kind.requeued, job_id)
-            except ConnectorException as exc:  # another worker took it first
-                log.info("stalled job %s: %s", job_id, exc)
-                continue
-            log.warning("job %s (%s): its worker stopped reporting; %s", job_id, job.task_name,
-                        "given up" if job.attempts + 1 >= MAX_ATTEMPTS else "queued again")
-            done += 1
+                for job in await manager.get_stalled_jobs(
+                        seconds_since_heartbeat=self.stalled_after_s):
+                    kind = self.kinds.get(job.task_name.removeprefix("quadloc."))
+                    job_id = str(job.task_kwargs.get("job_id", ""))
+                    if kind is None or job.id is None:
+                        continue
+                    if _last_run(job):
+                        await manager.finish_job_by_id_async(
+                            job.id, procrastinate.jobs.Status.FAILED, delete_job=False)
+                        await asyncio.to_thread(kind.lost, job_id, _LOST_DETAIL)
+                    else:
+                        await manager.retry_job(job)
+                        await asyncio.to_thread(kind.requeued, job_id)
+                    log.warning("job %s (%s): its worker stopped reporting; %s", job_id,
+                                job.task_name, "given up" if _last_run(job) else "queued again")
+                    done += 1
+            finally:
+                await conn.execute("SELECT pg_advisory_unlock(%s)", (_RECOVERY_LOCK,))
         return done
+
+
+#: Key of the advisory lock of the search for stalled jobs (any constant 64-bit integer).
+_RECOVERY_LOCK = 0x51_4C_4F_43_4A_4F_42  # "QLOCJOB"
+_LOST_DETAIL = (f"the job was run {MAX_ATTEMPTS} times and each time its worker stopped "
+                "before the end (killed, or its machine gone); submit the recording again")
+
+
+def _last_run(job: procrastinate.jobs.Job) -> bool:
+    """Whether this run of ``job`` is its last (:data:`MAX_ATTEMPTS` in all)."""
+    return job.attempts + 1 >= MAX_ATTEMPTS
 
 
 class _AbortEvent(threading.Event):

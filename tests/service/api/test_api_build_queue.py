@@ -16,6 +16,7 @@ import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import pytest
@@ -150,6 +151,26 @@ def test_a_released_build_goes_back_to_the_queue_and_runs_again(pg_app: Any) -> 
     assert (job.status, job.stage, job.percent) == ("queued", "queued", 0.0)
     _drain(pg_app)  # the queue's task was never taken: it runs now
     assert builds.jobs.get(job_id).status == "succeeded"
+
+
+@pytest.mark.postgres
+@pytest.mark.parametrize("attempts", [0, MAX_ATTEMPTS - 1])
+def test_a_build_released_on_its_last_run_is_given_up(pg_app: Any, attempts: int) -> None:
+    """The queue's task itself (what a worker calls), asked to abort on its first run and on
+    its last one (:data:`MAX_ATTEMPTS` runs in all)."""
+    builds = pg_app.state.services.builds
+    job_id = builds.start(_recording()[0], "room", None).job_id
+    task = builds.queue.app.tasks["quadloc.build"]
+    context = SimpleNamespace(job=SimpleNamespace(attempts=attempts), should_abort=lambda: True)
+    with pytest.raises(JobReleased):
+        task.func(context, job_id=job_id)
+    job = builds.jobs.get(job_id)
+    if attempts == 0:
+        assert job.status == "queued"
+    else:
+        assert job.status == "failed" and job.error is not None
+        assert job.error["reason"] == "runner_lost"
+    assert "room" not in {m.map_id for m in pg_app.state.services.store.list()}
 
 
 class _ProgressUntilReleased:
