@@ -28,6 +28,7 @@ from quadloc.maps.building.build import BuildTimeoutError
 from quadloc.maps.store import MapStore
 from quadloc.service.api.app import create_app
 from quadloc.service.app.job_queue import MAX_ATTEMPTS, JobReleased
+from quadloc.service.cli.main import main as cli_main
 from quadloc.service.settings import Settings
 from tests.conftest import make_test_app
 from tests.service.api.test_api_build import _recording
@@ -222,3 +223,14 @@ def test_sqlite_builds_in_process_and_refuses_the_queue(tmp_path: Path) -> None:
     app.state.services.close()
     with pytest.raises(ValueError, match="QUADLOC_BUILD_RUNNER=queue needs PostgreSQL"):
         make_test_app(tmp_path / "queue", build_runner="queue")
+
+
+def test_the_worker_command_refuses_sqlite_with_the_reason(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("QUADLOC_DATA_DIR", str(tmp_path))
+    status = cli_main(["worker", "--database-url", f"sqlite:///{tmp_path / 'q.db'}",
+                       "--health-port", "0"])
+    assert status == 2
+    err = capsys.readouterr().err
+    assert "needs PostgreSQL" in err and "quadloc serve" in err
