@@ -29,6 +29,7 @@ from quadloc.service.limits import MAX_BATCH_FRAMES, MAX_DETECTIONS
 
 __all__ = [
     "SCOPES",
+    "SHUTDOWN_CANCEL_MARGIN_S",
     "ApiKey",
     "Settings",
     "check_bind_allowed",
@@ -41,6 +42,11 @@ __all__ = [
 #: The access scopes, each implying the ones before it: ``write`` implies ``read``; ``admin``
 #: (every key's sessions and build jobs: quadloc.service.app.ownership) implies ``write``.
 SCOPES = ("read", "write", "admin")
+#: Seconds before ``QUADLOC_SHUTDOWN_GRACE_S`` at which work still running is stopped on SIGTERM:
+#: ``quadloc serve`` stops waiting for the requests in progress and the app cancels their work
+#: (``App.close``); ``quadloc worker`` asks its running builds to stop (and releases them). The
+#: process ends within the grace.
+SHUTDOWN_CANCEL_MARGIN_S = 2.0
 _HEX64 = re.compile(r"^[0-9a-f]{64}$")
 
 

@@ -60,13 +60,12 @@ from quadloc.service.app.ownership import INTERNAL, Caller
 from quadloc.service.schemas.builds import BuildErrorOut, BuildJobOut
 from quadloc.service.schemas.common import field_path
 from quadloc.service.schemas.recording import LegacyRecordingIn, RecordingBody, RecordingIn
-from quadloc.service.settings import Settings
+from quadloc.service.settings import SHUTDOWN_CANCEL_MARGIN_S, Settings
 
 __all__ = [
     "BUSY_RETRY_AFTER_S",
     "HEARTBEAT_S",
     "RUNNER_BEAT_S",
-    "SHUTDOWN_MARGIN_S",
     "BuildJobs",
     "BuildRunner",
     "BuildService",
@@ -86,9 +85,6 @@ HEARTBEAT_S = 1.0
 RUNNER_BEAT_S = 5.0
 #: ``Retry-After`` (s) when this process's build queue is full.
 BUSY_RETRY_AFTER_S = 10.0
-#: On SIGTERM a worker's builds get ``shutdown_grace_s`` minus this to finish (s): the rest is
-#: for releasing them before the process is killed.
-SHUTDOWN_MARGIN_S = 2.0
 
 #: ``progress(stage, percent, objects_found)``, as :func:`build_map` reports it.
 Progress = Callable[[str, float, int], None]
@@ -394,7 +390,7 @@ class BuildService:
             self.queue = ProcrastinateQueue(
                 store.url, [self.kind], heartbeat_s=beat_interval_s(settings.build_stale_after_s),
                 stalled_after_s=settings.build_stale_after_s,
-                shutdown_grace_s=max(0.0, settings.shutdown_grace_s - SHUTDOWN_MARGIN_S),
+                shutdown_grace_s=max(0.0, settings.shutdown_grace_s - SHUTDOWN_CANCEL_MARGIN_S),
                 concurrency=settings.max_concurrent_builds)
         else:
             self.runner = BuildRunner(
