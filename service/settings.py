@@ -227,8 +227,14 @@ class Settings(BaseSettings):
     )
     max_queued_builds: int = Field(default=4, ge=0, le=1000,
                                    description="Builds waiting per API process with the "
-                                               "in-process runner; more -> 503 (the queue "
-                                               "of the workers has no such limit).")
+                                               "in-process runner; more -> 503.")
+    max_active_build_jobs: int = Field(
+        default=200, ge=1, le=100_000,
+        description="Build jobs queued or running at once in the whole deployment with the "
+                    "job queue (each holds its recording in the database until it ends); more "
+                    "-> 503 + Retry-After (a soft limit: requests at the same instant may pass "
+                    "it by a few).",
+    )
     build_stale_after_s: float = Field(
         default=30.0, ge=5.0,
         description="Liveness window of a build runner. In-process: a queued/running job "

@@ -141,6 +141,12 @@ class JobStore:
                 owner=owner, payload=payload))
         return self.get(job_id)
 
+    def count_active(self) -> int:
+        """How many jobs are queued or running."""
+        with self.engine.connect() as conn:
+            return int(conn.execute(sa.select(sa.func.count()).select_from(jobs_table)
+                                    .where(jobs_table.c.status.in_(ACTIVE))).scalar_one())
+
     def payload(self, job_id: str) -> str | None:
         """The input of an active job (None once it ended); :class:`JobNotFoundError`."""
         with self.engine.connect() as conn:

@@ -461,12 +461,18 @@ class BuildService:
     def start(self, document: Any, map_id: str, if_match: str | None,
               caller: Caller = INTERNAL) -> BuildJobOut:
         """Start a build job of ``caller``: its row (with the recording) queued for the
-        workers, or for this process's runner (``busy`` when its queue is full);
+        workers (``busy`` at ``max_active_build_jobs`` jobs queued or running), or for this
+        process's runner (``busy`` when its queue is full);
         ``database-unavailable`` when the job queue cannot be reached (the job failed
         ``store_unavailable``)."""
         wire = validate_recording(document)
         self.parse(wire)
         base = self.base_version(map_id, if_match)
+        if self.queue is not None and (
+                active := self.jobs.count_active()) >= self.settings.max_active_build_jobs:
+            raise AppError("busy", f"{active} map builds are queued or running (at most "
+                           f"QUADLOC_MAX_ACTIVE_BUILD_JOBS={self.settings.max_active_build_jobs})"
+                           "; retry later", retry_after_s=BUSY_RETRY_AFTER_S)
         job = self.jobs.create(map_id, base, caller.owner,
                                payload=wire.model_dump_json(exclude_unset=True))
         try:

@@ -156,6 +156,8 @@ class ProcrastinateQueue:
             finally:
                 recovery.cancel()
                 await asyncio.gather(recovery, return_exceptions=True)
+        with self._lock:  # opening the async pool closed the connector of defer: reopen it
+            self._opened = False
 
     async def _recover_stalled_jobs(self) -> None:
         """Every heartbeat: the jobs of workers silent for ``stalled_after_s`` back to the

@@ -234,3 +234,23 @@ def test_the_worker_command_refuses_sqlite_with_the_reason(
     assert status == 2
     err = capsys.readouterr().err
     assert "needs PostgreSQL" in err and "quadloc serve" in err
+
+
+@pytest.mark.postgres
+def test_the_queue_holds_at_most_max_active_build_jobs(tmp_path: Path) -> None:
+    reason = pg_unavailable_reason()
+    if reason is not None:
+        pytest.skip(reason)
+    rec = _recording(6)[0]
+    with pg_schema_url("quadloc_queue") as url:
+        app = create_app(Settings(data_dir=tmp_path, max_active_build_jobs=1),
+                         store=MapStore(url))
+        with TestClient(app) as c:
+            assert c.post("/v1/maps:build", params={"map_id": "one"}, json=rec).status_code == 202
+            full = c.post("/v1/maps:build", params={"map_id": "two"}, json=rec)
+            assert full.status_code == 503 and full.json()["type"].endswith("busy")
+            assert int(full.headers["Retry-After"]) == builds_module.BUSY_RETRY_AFTER_S
+            builds = app.state.services.builds
+            assert builds.jobs.count_active() == 1 and len(_queue_rows(app)) == 1  # no row
+            _drain(app)  # the worker ends the first: room again
+            assert c.post("/v1/maps:build", params={"map_id": "two"}, json=rec).status_code == 202
