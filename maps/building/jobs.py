@@ -147,6 +147,14 @@ class JobStore:
             return int(conn.execute(sa.select(sa.func.count()).select_from(jobs_table)
                                     .where(jobs_table.c.status.in_(ACTIVE))).scalar_one())
 
+    def silent(self, stale_after_s: float) -> list[str]:
+        """Ids of the queued/running jobs whose row was not written for ``stale_after_s``."""
+        cutoff = utc_now() - timedelta(seconds=stale_after_s)
+        with self.engine.connect() as conn:
+            return [r.job_id for r in conn.execute(
+                sa.select(jobs_table.c.job_id).where(jobs_table.c.status.in_(ACTIVE),
+                                                     jobs_table.c.updated_at < cutoff))]
+
     def payload(self, job_id: str) -> str | None:
         """The input of an active job (None once it ended); :class:`JobNotFoundError`."""
         with self.engine.connect() as conn:

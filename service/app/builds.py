@@ -180,6 +180,9 @@ class BuildJobs:
     def lost(self, job_id: str, detail: str) -> None:
         self.jobs.fail(job_id, "runner_lost", detail)
 
+    def silent(self, stale_after_s: float) -> list[str]:
+        return self.jobs.silent(stale_after_s)
+
     def _progress(self, job_id: str) -> Progress:
         """The build's progress callback: writes the job's progress at every stage change and
         at most every :data:`HEARTBEAT_S`; raises ``_JobLostError`` when the row is no longer

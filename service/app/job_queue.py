@@ -27,7 +27,7 @@ import asyncio
 import logging
 import threading
 from collections.abc import Iterable
-from typing import Protocol
+from typing import Any, Protocol
 
 import procrastinate
 import sqlalchemy as sa
@@ -63,7 +63,11 @@ class JobKind(Protocol):
         """The job is back in the queue (its worker stopped or died)."""
 
     def lost(self, job_id: str, detail: str) -> None:
-        """The job will not run again (:data:`MAX_ATTEMPTS` runs, each stopped)."""
+        """The job will not run again (:data:`MAX_ATTEMPTS` runs, each stopped; or no task
+        of the queue holds it)."""
+
+    def silent(self, stale_after_s: float) -> list[str]:
+        """Ids of the kind's unfinished jobs whose rows were not written for that long."""
 
 
 def conninfo(database_url: str) -> str:
@@ -198,8 +202,31 @@ class ProcrastinateQueue:
                     log.warning("job %s (%s): its worker stopped reporting; %s", job_id,
                                 job.task_name, "given up" if _last_run(job) else "queued again")
                     done += 1
+                done += await self._fail_orphans(conn)
             finally:
                 await conn.execute("SELECT pg_advisory_unlock(%s)", (_RECOVERY_LOCK,))
+        return done
+
+
+    async def _fail_orphans(self, conn: Any) -> int:
+        """The unfinished jobs (rows) silent for ``stalled_after_s`` that no task of the queue
+        holds (``todo`` / ``doing``) end as lost: e.g. a worker's database write that failed
+        when it ended its job, or a row whose task could not be queued. How many."""
+        done = 0
+        for name, kind in self.kinds.items():
+            silent = await asyncio.to_thread(kind.silent, self.stalled_after_s)
+            if not silent:
+                continue
+            cursor = await conn.execute(
+                "SELECT args->>'job_id' FROM procrastinate_jobs WHERE task_name = %s AND "
+                "status IN ('todo', 'doing') AND args->>'job_id' = ANY(%s)",
+                (self.task_name(name), silent))
+            held = {row[0] for row in await cursor.fetchall()}
+            for job_id in sorted(set(silent) - held):
+                await asyncio.to_thread(kind.lost, job_id, _ORPHAN_DETAIL)
+                log.warning("job %s (%s): no task of the queue holds it; given up", job_id,
+                            self.task_name(name))
+                done += 1
         return done
 
 
@@ -207,6 +234,10 @@ class ProcrastinateQueue:
 _RECOVERY_LOCK = 0x51_4C_4F_43_4A_4F_42  # "QLOCJOB"
 _LOST_DETAIL = (f"the job was run {MAX_ATTEMPTS} times and each time its worker stopped "
                 "before the end (killed, or its machine gone); submit the recording again")
+
+
+_ORPHAN_DETAIL = ("the job was left unfinished and no worker holds it (a database write "
+                  "failed when it ended); submit the recording again")
 
 
 def _last_run(job: procrastinate.jobs.Job) -> bool:

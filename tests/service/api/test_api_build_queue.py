@@ -139,6 +139,24 @@ def test_a_job_whose_worker_died_is_queued_again_then_given_up(pg_app: Any) -> N
 
 
 @pytest.mark.postgres
+def test_an_unfinished_job_no_task_holds_is_given_up(pg_app: Any) -> None:
+    """A row left running (its worker's final write failed) once silent for the window."""
+    builds = pg_app.state.services.builds
+    held = builds.start(_recording(6)[0], "held", None).job_id  # queued: its task holds it
+    orphan = builds.jobs.create("orphan", None, payload="{}").job_id  # no task
+    assert builds.jobs.progress(orphan, "refining", 60.0, 3)
+    assert _recover(pg_app) == 0  # not silent yet
+    with pg_app.state.services.store.engine.begin() as conn:
+        conn.execute(sa.text("UPDATE quadloc_build_jobs SET updated_at = updated_at - "
+                             "interval '1 hour'"))
+    assert _recover(pg_app) == 1
+    job = builds.jobs.get(orphan)
+    assert job.status == "failed" and job.error is not None
+    assert job.error["reason"] == "runner_lost"
+    assert builds.jobs.get(held).status == "queued"  # waiting in the queue: left alone
+
+
+@pytest.mark.postgres
 def test_a_released_build_goes_back_to_the_queue_and_runs_again(pg_app: Any) -> None:
     builds = pg_app.state.services.builds
     job_id = builds.start(_recording()[0], "room", None).job_id
