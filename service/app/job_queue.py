@@ -7,9 +7,10 @@ the request that started it.
   ``procrastinate_jobs``, a ``NOTIFY``); ``quadloc worker`` processes, scaled apart from the
   API replicas, take jobs with procrastinate's own locking (``SELECT ... FOR UPDATE SKIP
   LOCKED``), run them, and heartbeat as workers (``procrastinate_workers``). A job of a worker
-  that stopped heartbeating (killed, its machine gone) is a *stalled* job: every worker looks for
-  them every heartbeat and puts them back in the queue (procrastinate's ``get_stalled_jobs`` +
-  ``retry_job``), at most :data:`MAX_ATTEMPTS` runs in all, then the kind's ``lost``. SIGTERM:
+  that stopped heartbeating (killed, its machine gone) is a *stalled* job: every heartbeat a
+  worker (one at a time: an advisory lock) looks for them and puts them back in the queue
+  (procrastinate's ``get_stalled_jobs`` + ``retry_job``), at most :data:`MAX_ATTEMPTS` runs in
+  all, then the kind's ``lost``. SIGTERM:
   the worker takes no new job, lets the running ones finish for the grace period, then asks them
   to stop: a job that stops unfinished raises :class:`JobReleased` and goes back to the queue.
 * SQLite (the embedded default, ``make serve``): no queue tables, the jobs run in the API
@@ -31,7 +32,6 @@ from typing import Any, Protocol
 
 import procrastinate
 import sqlalchemy as sa
-from procrastinate.exceptions import ConnectorException
 
 __all__ = ["MAX_ATTEMPTS", "QUEUE", "JobKind", "JobReleased", "ProcrastinateQueue",
            "conninfo"]
@@ -171,8 +171,8 @@ class ProcrastinateQueue:
             await asyncio.sleep(self.heartbeat_s)
             try:
                 await self.recover_stalled_jobs()
-            except ConnectorException as exc:  # the database is away: the next beat retries
-                log.warning("stalled jobs not checked (%s)", exc)
+            except Exception as exc:  # e.g. the database is away: the next beat retries
+                log.warning("stalled jobs not checked (%s: %s)", type(exc).__name__, exc)
 
     async def recover_stalled_jobs(self) -> int:
         """One search for stalled jobs (see :meth:`_recover_stalled_jobs`); how many were put
