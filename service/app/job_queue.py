@@ -165,8 +165,8 @@ class ProcrastinateQueue:
 
     async def _recover_stalled_jobs(self) -> None:
         """Every heartbeat: the jobs of workers silent for ``stalled_after_s`` back to the
-        queue (or lost after :data:`MAX_ATTEMPTS` runs). Several workers may find the same job:
-        procrastinate's retry succeeds for one (the job must still be ``doing``)."""
+        queue (or lost after :data:`MAX_ATTEMPTS` runs), and the orphaned rows ended
+        (:meth:`recover_stalled_jobs`)."""
         while True:
             await asyncio.sleep(self.heartbeat_s)
             try:
