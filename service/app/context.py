@@ -66,7 +66,7 @@ class App:
     def start(self) -> None:
         """Serve (again, after :meth:`close`): session frames and builds run."""
         self.sessions.close(stop=False)
-        self.builds.runner.stop_running(stop=False)
+        self.builds.stop_running(stop=False)
 
     @staticmethod
     def warm_up() -> None:
@@ -80,6 +80,6 @@ class App:
         check (answered ``time_budget_exceeded`` / marked ``runner_lost``), the map loader's
         threads stop and the store's connections close."""
         self.sessions.close()
-        self.builds.runner.stop_running()
+        self.builds.stop_running()
         self.map_loader.close()
         self.store.close()
