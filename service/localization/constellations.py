@@ -9,9 +9,10 @@ together (:mod:`quadloc.maps.places`):
 1. detection triples, largest detections first (:func:`detection_triples`);
 2. for each, the covisible map triplets with the detections' labels
    (:meth:`quadloc.maps.places.PlaceIndex.pairs_for`, joined on the first object), kept when the
-   pair distances agree with the distances implied by the detections' rays at the depths their
-   sizes give (:func:`quadloc.service.localization.hypotheses.size_depths`; a coarse test,
-   :data:`GEOMETRY_RELATIVE_TOLERANCE`), at most :data:`MAX_TRIPLETS` per triple;
+   pair distances can be spanned by the detections' rays at depths within
+   :data:`TRIPLET_DEPTH_RATIO` of those their sizes give
+   (:func:`quadloc.service.localization.hypotheses.size_depths`; :func:`_pair_possible`, the
+   exact pairwise form of the depth test of step 3), at most :data:`MAX_TRIPLETS` per triple;
 3. P3P on the centres (:func:`quadloc.service.localization.hypotheses.p3p_hypotheses_batch`);
 4. each pose is scored against the objects covisible with its triplet's first object only
    (:func:`centre_hits`: detections whose centre sees a same-label object's projected centre
@@ -69,9 +70,8 @@ TRIPLET_DEPTH_RATIO = 1.6
 #: Places kept (best centre-hit count first) and seed poses per place.
 MAX_PLACES = 24
 SEEDS_PER_PLACE = 1
-#: Pair-distance test: ``|predicted - map| <= rel * max(predicted, map) + abs``.
-GEOMETRY_RELATIVE_TOLERANCE = 0.5
-GEOMETRY_ABSOLUTE_TOLERANCE_M = 0.3
+#: Rounding slack (m) of the pair-distance test :func:`_pair_possible`.
+GEOMETRY_SLACK_M = 0.01
 #: A detection is hit when a same-label object's projected centre is inside this multiple of
 #: its ellipse.
 HIT_SCALE = 1.5
@@ -141,10 +141,33 @@ def _rays(camera: Camera, params: FloatArray) -> FloatArray:
                             (params[:, 1] - camera.cy) / camera.fy, np.ones(len(params))])
 
 
-def _geometry_ok(pred: FloatArray, dist: FloatArray) -> BoolArray:
-    """Whether predicted and map pair distances (m) agree within the coarse tolerance."""
-    return np.abs(pred - dist) <= (GEOMETRY_RELATIVE_TOLERANCE * np.maximum(pred, dist)
-                                   + GEOMETRY_ABSOLUTE_TOLERANCE_M)
+def _pair_possible(ray_a: FloatArray, ray_b: FloatArray, za: FloatArray, zb: FloatArray,
+                   dist: FloatArray) -> BoolArray:
+    """Whether two objects ``dist`` (n,) m apart can sit on the rays ``ray_a``, ``ray_b`` (3,)
+    (unit depth, camera frame) at depths within :data:`TRIPLET_DEPTH_RATIO` of ``za``, ``zb``
+    (n,) (the depths their sizes give): ``dist`` between the least and the largest distance of
+    ``|x ray_a - y ray_b|`` over that box of depths ``(x, y)``. The largest is at a corner; the
+    least (a convex function, its only stationary point the origin, outside the box) on an
+    edge, where the free depth is the projection clipped to its interval. Exactly the pairwise
+    part of the depth test that :func:`place_seeds` applies after P3P: a necessary condition,
+    no triplet that test keeps is lost here (``GEOMETRY_SLACK_M`` for rounding)."""
+    rho = TRIPLET_DEPTH_RATIO
+    lo_a, hi_a, lo_b, hi_b = za / rho, za * rho, zb / rho, zb * rho
+    aa, bb, ab = float(ray_a @ ray_a), float(ray_b @ ray_b), float(ray_a @ ray_b)
+
+    def span(x: FloatArray, y: FloatArray) -> FloatArray:
+        d2: FloatArray = np.sqrt(np.maximum(x * x * aa + y * y * bb - 2.0 * x * y * ab, 0.0))
+        return d2
+
+    dmax = np.maximum(np.maximum(span(lo_a, lo_b), span(lo_a, hi_b)),
+                      np.maximum(span(hi_a, lo_b), span(hi_a, hi_b)))
+    dmin = np.minimum(
+        np.minimum(span(lo_a, np.clip(lo_a * ab / bb, lo_b, hi_b)),
+                   span(hi_a, np.clip(hi_a * ab / bb, lo_b, hi_b))),
+        np.minimum(span(np.clip(lo_b * ab / aa, lo_a, hi_a), lo_b),
+                   span(np.clip(hi_b * ab / aa, lo_a, hi_a), hi_b)))
+    ok: BoolArray = (dist >= dmin - GEOMETRY_SLACK_M) & (dist <= dmax + GEOMETRY_SLACK_M)
+    return ok
 
 
 def _triplets(index: PlaceIndex, compiled: CompiledMap, camera: Camera, params: FloatArray,
@@ -156,20 +179,20 @@ def _triplets(index: PlaceIndex, compiled: CompiledMap, camera: Camera, params: 
     rays = _rays(camera, sub)
     radius = np.prod(compiled.axes, axis=1) ** (1.0 / 3.0)
 
-    def points(k: int, objs: IntArray) -> FloatArray:
-        """Points (n, 3) camera frame of the triple's detection ``k`` (0, 1, 2) at the depths
-        of objects ``objs``."""
-        z = size_depths(camera, sub[k, 2:4], radius[objs])
-        pts: FloatArray = z[:, None] * rays[k][None]
-        return pts
+    def possible(k: int, m: int, objs_k: IntArray, objs_m: IntArray, dist: FloatArray
+                 ) -> BoolArray:
+        """:func:`_pair_possible` of the triple's detections ``k``, ``m`` (0, 1, 2) as the
+        objects ``objs_k``, ``objs_m`` ``dist`` apart."""
+        return _pair_possible(rays[k], rays[m], size_depths(camera, sub[k, 2:4], radius[objs_k]),
+                              size_depths(camera, sub[m, 2:4], radius[objs_m]), dist)
 
     i_ab, j_ab, d_ab = index.pairs_for(labels[a], labels[b])
     i_ac, k_ac, d_ac = index.pairs_for(labels[a], labels[c])
     if len(i_ab) == 0 or len(i_ac) == 0:
         return np.zeros((0, 3), dtype=np.intp)
-    ok = _geometry_ok(np.linalg.norm(points(0, i_ab) - points(1, j_ab), axis=1), d_ab)
+    ok = possible(0, 1, i_ab, j_ab, d_ab)
     i_ab, j_ab = i_ab[ok], j_ab[ok]
-    ok = _geometry_ok(np.linalg.norm(points(0, i_ac) - points(2, k_ac), axis=1), d_ac)
+    ok = possible(0, 2, i_ac, k_ac, d_ac)
     i_ac, k_ac = i_ac[ok], k_ac[ok]
     # join on the first object (the pairs come sorted by it)
     lo = np.searchsorted(i_ac, i_ab, side="left")
@@ -185,7 +208,7 @@ def _triplets(index: PlaceIndex, compiled: CompiledMap, camera: Camera, params: 
     d_jk = np.linalg.norm(compiled.centers[J] - compiled.centers[K], axis=1)
     keep = (J != K) & (d_jk <= index.view_range_m)
     I, J, K, d_jk = I[keep], J[keep], K[keep], d_jk[keep]
-    ok = _geometry_ok(np.linalg.norm(points(1, J) - points(2, K), axis=1), d_jk)
+    ok = possible(1, 2, J, K, d_jk)
     out = np.column_stack([I[ok], J[ok], K[ok]])
     if len(out) > MAX_TRIPLETS:
         out = out[np.sort(rng.choice(len(out), MAX_TRIPLETS, replace=False))]

@@ -144,6 +144,54 @@ def p3p_hypotheses_batch(
     return T, sample[ok]
 
 
+#: A root of Grunert's quartic whose imaginary part is at most this (relative, at least
+#: absolute) is taken as real (then polished by Newton steps; a spurious one only adds a pose
+#: that the depth test and the scoring drop).
+QUARTIC_IMAG_TOLERANCE = 1e-4
+
+
+def _quartic_roots(coeffs: FloatArray) -> np.ndarray:
+    """The four complex roots (B, 4) of the quartics ``coeffs`` (B, 5) (highest power first,
+    leading coefficient non-zero), in closed form (Ferrari, vectorised: no eigenvalue
+    problem per sample): the depressed quartic ``y^4 + p y^2 + q y + r``
+    (``v = y - a / 4``) factored as ``(y^2 + p/2 + m)^2 = (s y - q / (2 s))^2``, ``s = sqrt(2 m)``,
+    with ``m`` the largest-magnitude root of the resolvent cubic
+    ``m^3 + p m^2 + (p^2/4 - r) m - q^2/8`` (Cardano). Accurate to a few 1e-8 relative near
+    double roots: callers polish."""
+    c = np.asarray(coeffs, dtype=complex)
+    a, b, cc, d = (c[:, k] / c[:, 0] for k in range(1, 5))
+    p = b - 3.0 * a * a / 8.0
+    q = cc - a * b / 2.0 + a ** 3 / 8.0
+    r = d - a * cc / 4.0 + a * a * b / 16.0 - 3.0 * a ** 4 / 256.0
+    # resolvent cubic m^3 + B m^2 + C m + D, Cardano on w = m + B / 3
+    B, C, D = p, p * p / 4.0 - r, -q * q / 8.0
+    P = C - B * B / 3.0
+    Q = 2.0 * B ** 3 / 27.0 - B * C / 3.0 + D
+    root = np.sqrt(Q * Q / 4.0 + P ** 3 / 27.0)
+    u3 = np.where(np.abs(-Q / 2.0 + root) >= np.abs(-Q / 2.0 - root), -Q / 2.0 + root,
+                  -Q / 2.0 - root)
+    u = u3 ** (1.0 / 3.0)
+    omega = np.exp(2j * np.pi / 3.0)
+    us = np.stack([u, u * omega, u * omega * omega], axis=1)
+    safe = np.where(np.abs(us) > 0.0, us, 1.0)
+    ms = np.where(np.abs(us) > 0.0, us - P[:, None] / (3.0 * safe), 0.0) - B[:, None] / 3.0
+    m = ms[np.arange(len(ms)), np.argmax(np.abs(ms), axis=1)]
+    s = np.sqrt(2.0 * m)
+    s_safe = np.where(np.abs(s) > 0.0, s, 1.0)
+    qs = np.where(np.abs(s) > 0.0, q / s_safe, 0.0)
+    # q = 0 (m = 0): the biquadratic y^2 = (-p +- sqrt(p^2 - 4 r)) / 2
+    e1 = np.sqrt(-2.0 * p - 2.0 * m - 2.0 * qs)
+    e2 = np.sqrt(-2.0 * p - 2.0 * m + 2.0 * qs)
+    y = np.stack([(s + e1) / 2.0, (s - e1) / 2.0, (-s + e2) / 2.0, (-s - e2) / 2.0], axis=1)
+    bi = np.abs(s) == 0.0
+    if bi.any():
+        disc = np.sqrt(p[bi] ** 2 - 4.0 * r[bi])
+        y2a, y2b = np.sqrt((-p[bi] + disc) / 2.0), np.sqrt((-p[bi] - disc) / 2.0)
+        y[bi] = np.stack([y2a, -y2a, y2b, -y2b], axis=1)
+    out: np.ndarray = y - a[:, None] / 4.0
+    return out
+
+
 def p3p_grunert_batch(
     image_points: FloatArray, world_points: FloatArray, camera: Camera,
     newton_steps: int = 2,
@@ -151,11 +199,11 @@ def p3p_grunert_batch(
     """:func:`p3p_hypotheses_batch` vectorised over samples (no Python loop): Grunert's
     quartic in the ratio of two of the distances along the bearing rays (Haralick et al.
     1994, "Review and analysis of solutions of the three point perspective pose estimation
-    problem", section 2), all its real roots from the companion matrices' eigenvalues, polished
+    problem", section 2), all its real roots in closed form (:func:`_quartic_roots`), polished
     by ``newton_steps`` Newton steps on the quartic, then the rigid transform of the three
-    camera-frame points onto the world points (Kabsch, batched SVD). The many-sample search of
-    large maps (:mod:`quadloc.service.localization.constellations`) calls it; the same poses as
-    ``cv2.solveP3P`` (tested), in a different order.
+    camera-frame points onto the world points (the two congruent triangles' frames aligned).
+    The many-sample search of large maps (:mod:`quadloc.service.localization.constellations`)
+    calls it; the same poses as ``cv2.solveP3P`` (tested), in a different order.
 
     Args:
         image_points: (B, 3, 2) pixels; world_points: (B, 3, 3) world metres.
@@ -189,12 +237,9 @@ def p3p_grunert_batch(
         A0 = (1.0 + p) ** 2 - 4.0 * a2 / b2 * cg ** 2
         coeffs = np.stack([A4, A3, A2, A1, A0], axis=1)
         good = np.all(np.isfinite(coeffs), axis=1) & (np.abs(A4) > 1e-12)
-        comp = np.zeros((B, 4, 4))
-        comp[:, 1:, :3] = np.eye(3)
-        comp[:, 0, :] = -coeffs[:, 1:] / np.where(good, A4, 1.0)[:, None]
-    comp[~good] = 0.0
-    roots = np.linalg.eigvals(comp)  # (B, 4)
-    real = good[:, None] & (np.abs(roots.imag) <= 1e-6 * np.maximum(1.0, np.abs(roots.real)))
+        roots = _quartic_roots(np.where(good[:, None], coeffs, [1.0, 0.0, 0.0, 0.0, -1.0]))
+    real = good[:, None] & (np.abs(roots.imag) <= QUARTIC_IMAG_TOLERANCE
+                            * np.maximum(1.0, np.abs(roots.real)))
     v = roots.real
     for _ in range(newton_steps):
         f = (((A4[:, None] * v + A3[:, None]) * v + A2[:, None]) * v + A1[:, None]) * v \
@@ -216,16 +261,12 @@ def p3p_grunert_batch(
     sample, u, v, s1 = sample[ok], u[ok], v[ok], s1[ok]
     Y = j[sample] * np.stack([s1, u * s1, v * s1], axis=1)[:, :, None]  # camera points
     W = X[sample]
-    my, mw = Y.mean(axis=1), W.mean(axis=1)
-    H = np.einsum("bki,bkj->bij", W - mw[:, None], Y - my[:, None])  # sum w y^T
-    U, _, Vt = np.linalg.svd(H)
-    d = np.sign(np.linalg.det(np.einsum("bji,bkj->bik", Vt, U.transpose(0, 2, 1))))
-    D = np.zeros((len(sample), 3, 3))
-    D[:, 0, 0] = 1.0
-    D[:, 1, 1] = 1.0
-    D[:, 2, 2] = d
-    R = np.einsum("bji,bjk,bkl->bil", Vt, D, U.transpose(0, 2, 1))  # R = V D U^T
-    t = my - np.einsum("bij,bj->bi", R, mw)
+    # the camera points and the world points are congruent triangles: the rotation maps the
+    # frame of one onto the other's (:func:`_frames`; exact, no SVD)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        R = _frames(Y[:, 1] - Y[:, 0], Y[:, 2] - Y[:, 0]) @ _frames(
+            W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]).transpose(0, 2, 1)
+    t = Y[:, 0] - np.einsum("bij,bj->bi", R, W[:, 0])
     depth = np.einsum("bpj,bj->bp", W, R[:, 2]) + t[:, 2, None]
     keep = np.all(np.isfinite(R), axis=(1, 2)) & np.all(depth > 0.0, axis=1)
     T = np.zeros((int(keep.sum()), 4, 4))
