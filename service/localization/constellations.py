@@ -80,8 +80,6 @@ HIT_SCALE = 1.5
 SIZE_LOG_SIGMA = 0.25
 #: Most (pose, object, detection) evaluations per block of :func:`centre_hits`.
 HIT_BLOCK = 1 << 21
-#: Most covisible objects per pose in :func:`centre_hits` (the nearest to the triplet's first).
-MAX_LOCAL = 32
 
 
 @dataclass(frozen=True)
@@ -256,15 +254,6 @@ def centre_hits(camera: Camera, camera_from_world: FloatArray, local: IntArray,
     return out
 
 
-def _local_objects(index: PlaceIndex, compiled: CompiledMap, i: int) -> IntArray:
-    """Object ``i`` and its covisible neighbours, at most :data:`MAX_LOCAL` (nearest first)."""
-    nb = np.concatenate([[i], index.neighbours(i)]).astype(np.intp)
-    if len(nb) > MAX_LOCAL:
-        d = np.linalg.norm(compiled.centers[nb] - compiled.centers[i], axis=1)
-        nb = nb[np.argsort(d, kind="stable")[:MAX_LOCAL]]
-    return nb
-
-
 def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params: FloatArray,
                 labels: list[str], rng: np.random.Generator,
                 deadline: Deadline | None = None, hinted: BoolArray | None = None
@@ -275,14 +264,13 @@ def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params
     (and >= :data:`STOP_MIN_SUPPORT`), :data:`MAX_TOTAL_TRIPLETS` triplets were solved, or the
     ``deadline`` passed. ``hinted`` (N,) marks the objects of a place hint: half of the
     :data:`MAX_PLACES` places are the best whose triplet's first object is hinted."""
-    cats = sorted(set(compiled.categories))
-    code = {c: k for k, c in enumerate(cats)}
-    object_codes = np.array([code[c] for c in compiled.categories], dtype=np.intp)
+    code = {c: k for k, c in enumerate(index.labels)}
+    object_codes = index.codes
     label_codes = np.array([code.get(x, -1) for x in labels], dtype=np.intp)
-    local: dict[int, IntArray] = {}  # anchor -> its place's objects (the sub-map)
-    scored: dict[int, IntArray] = {}  # anchor -> those with a detected label (the scoring)
-    wanted = np.zeros(len(cats), dtype=bool)
+    wanted = np.zeros(len(index.labels), dtype=bool)
     wanted[label_codes[label_codes >= 0]] = True
+    # each anchor's local objects (:attr:`PlaceIndex.local`), scored: those of a detected label
+    scored_valid = index.local_valid & wanted[object_codes[index.local]]
     radius = np.prod(compiled.axes, axis=1) ** (1.0 / 3.0)
     all_poses, all_scores, all_anchor = [], [], []
     n_triplets = 0
@@ -307,19 +295,11 @@ def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params
         if len(poses) == 0:
             continue
         anchor = trip[owner, 0]
-        uniq, inv = np.unique(anchor, return_inverse=True)
-        for i in uniq.tolist():
-            if i not in local:
-                local[i] = _local_objects(index, compiled, i)
-                scored[i] = local[i][wanted[object_codes[local[i]]]]
-        lists = [scored[i] for i in uniq.tolist()]
-        width = max(len(x) for x in lists)
-        table = np.zeros((len(uniq), width), dtype=np.intp)
-        valid = np.zeros((len(uniq), width), dtype=bool)
-        for r, nb in enumerate(lists):
-            table[r, :len(nb)] = nb
-            valid[r, :len(nb)] = True
-        scores = centre_hits(camera, poses, table[inv], valid[inv], compiled, params,
+        # the scored objects first, the table cut to the widest row (the cost is per column)
+        valid = scored_valid[anchor]
+        cols = np.argsort(~valid, axis=1, kind="stable")[:, :max(1, int(valid.sum(1).max()))]
+        scores = centre_hits(camera, poses, np.take_along_axis(index.local[anchor], cols, 1),
+                             np.take_along_axis(valid, cols, 1), compiled, params,
                              label_codes, object_codes)
         all_poses.append(poses)
         all_scores.append(scores)
@@ -350,7 +330,7 @@ def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params
                 chosen[key].append(m)
     picked = np.array(sorted((m for ms in chosen.values() for m in ms),
                              key=lambda m: (-float(hits[m]), m)), dtype=np.intp)
-    objects = np.unique(np.concatenate([local[int(anchor[m])] for m in picked]))
+    objects = np.unique(index.local[anchor[picked]][index.local_valid[anchor[picked]]])
     hinted_seed = (np.zeros(len(picked), dtype=bool) if hinted is None
                    else np.asarray(hinted, dtype=bool)[anchor[picked]])
     return PlaceSeeds(poses[picked], hits[picked], objects, int(place_key.max()) + 1,
