@@ -64,6 +64,11 @@ TOP_DETECTIONS = 6
 STOP_SUPPORT = 0.95
 STOP_MIN_SUPPORT = 2.5
 MAX_TOTAL_TRIPLETS = 12000
+#: Detection triples (that gave poses) searched over the whole map; the later ones search only
+#: the :data:`FOCUS_PLACES` best places found by then (:func:`_focus`): the cost of a frame
+#: grows with the rooms for these first triples only.
+FULL_TRIPLES = 2
+FOCUS_PLACES = 48
 #: A P3P pose is kept only when its triplet's objects are at depths within this factor of the
 #: depths their sizes give (:func:`quadloc.service.localization.hypotheses.size_depths`).
 TRIPLET_DEPTH_RATIO = 1.6
@@ -169,9 +174,10 @@ def _pair_possible(ray_a: FloatArray, ray_b: FloatArray, za: FloatArray, zb: Flo
 
 
 def _triplets(index: PlaceIndex, compiled: CompiledMap, camera: Camera, params: FloatArray,
-              labels: list[str], triple: tuple[int, ...], rng: np.random.Generator
-              ) -> IntArray:
-    """Map triplets (T, 3) for a detection triple (module docstring, step 2)."""
+              labels: list[str], triple: tuple[int, ...], rng: np.random.Generator,
+              allowed: BoolArray | None = None) -> IntArray:
+    """Map triplets (T, 3) for a detection triple (module docstring, step 2); with
+    ``allowed`` (N,), only those whose first object it marks."""
     a, b, c = triple
     sub = params[[a, b, c]]
     rays = _rays(camera, sub)
@@ -186,6 +192,9 @@ def _triplets(index: PlaceIndex, compiled: CompiledMap, camera: Camera, params: 
 
     i_ab, j_ab, d_ab = index.pairs_for(labels[a], labels[b])
     i_ac, k_ac, d_ac = index.pairs_for(labels[a], labels[c])
+    if allowed is not None:
+        i_ab, j_ab, d_ab = (x[allowed[i_ab]] for x in (i_ab, j_ab, d_ab))
+        i_ac, k_ac, d_ac = (x[allowed[i_ac]] for x in (i_ac, k_ac, d_ac))
     if len(i_ab) == 0 or len(i_ac) == 0:
         return np.zeros((0, 3), dtype=np.intp)
     ok = possible(0, 1, i_ab, j_ab, d_ab)
@@ -254,6 +263,22 @@ def centre_hits(camera: Camera, camera_from_world: FloatArray, local: IntArray,
     return out
 
 
+def _focus(index: PlaceIndex, anchor: IntArray, hits: FloatArray, hinted: BoolArray | None
+           ) -> BoolArray:
+    """The objects (N,) mask the later detection triples search: the local objects of the
+    best anchor of each of the :data:`FOCUS_PLACES` best places (grid cells of the anchors,
+    by their best support) found so far, and the hint's objects."""
+    order = np.lexsort((np.arange(len(hits)), -hits))
+    cells = index.cells[anchor[order]]
+    _, first = np.unique(cells, axis=0, return_index=True)
+    best = anchor[order[np.sort(first)[:FOCUS_PLACES]]]
+    allowed = np.zeros(len(index.codes), dtype=bool)
+    allowed[index.local[best][index.local_valid[best]]] = True
+    if hinted is not None:
+        allowed |= hinted
+    return allowed
+
+
 def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params: FloatArray,
                 labels: list[str], rng: np.random.Generator,
                 deadline: Deadline | None = None, hinted: BoolArray | None = None
@@ -262,7 +287,8 @@ def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params
     (D, 5) px / rad with ``labels`` (D,); D >= 3. Detection triples are tried in the order of
     :func:`detection_triples` until one gives a pose of support >= :data:`STOP_SUPPORT` x D
     (and >= :data:`STOP_MIN_SUPPORT`), :data:`MAX_TOTAL_TRIPLETS` triplets were solved, or the
-    ``deadline`` passed. ``hinted`` (N,) marks the objects of a place hint: half of the
+    ``deadline`` passed; after :data:`FULL_TRIPLES` triples with poses, only in the best
+    places so far (:func:`_focus`). ``hinted`` (N,) marks the objects of a place hint: half of the
     :data:`MAX_PLACES` places are the best whose triplet's first object is hinted."""
     code = {c: k for k, c in enumerate(index.labels)}
     object_codes = index.codes
@@ -272,12 +298,18 @@ def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params
     # each anchor's local objects (:attr:`PlaceIndex.local`), scored: those of a detected label
     scored_valid = index.local_valid & wanted[object_codes[index.local]]
     radius = np.prod(compiled.axes, axis=1) ** (1.0 / 3.0)
-    all_poses, all_scores, all_anchor = [], [], []
+    all_poses: list[FloatArray] = []
+    all_scores: list[FloatArray] = []
+    all_anchor: list[IntArray] = []
     n_triplets = 0
+    allowed: BoolArray | None = None
     for triple in detection_triples(params):
         if n_triplets >= MAX_TOTAL_TRIPLETS or deadline_passed(deadline):
             break
-        trip = _triplets(index, compiled, camera, params, labels, triple, rng)
+        if allowed is None and len(all_poses) >= FULL_TRIPLES:
+            allowed = _focus(index, np.concatenate(all_anchor), np.concatenate(all_scores),
+                             hinted)
+        trip = _triplets(index, compiled, camera, params, labels, triple, rng, allowed)
         trip = trip[:MAX_TOTAL_TRIPLETS - n_triplets]
         n_triplets += len(trip)
         if len(trip) == 0:
