@@ -36,6 +36,7 @@ import numpy as np
 from quadloc.factors.arrays import BoolArray, FloatArray, IntArray
 from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.factors.camera import Camera
+from quadloc.factors.jit import jit
 from quadloc.maps.compiled import CompiledMap
 from quadloc.maps.places import PlaceIndex
 from quadloc.service.localization.hypotheses import p3p_grunert_batch, size_depths
@@ -47,6 +48,7 @@ __all__ = [
     "PLACE_SEARCH_MIN_OBJECTS",
     "PlaceSeeds",
     "centre_hits",
+    "compile_place_kernels",
     "detection_triples",
     "place_seeds",
 ]
@@ -83,8 +85,6 @@ HIT_SCALE = 1.5
 #: Spread of ``ln(depth / depth from size)`` in :func:`centre_hits` (measured on simulated
 #: frames: the 5-95 % range of the ratio is 0.76-1.27).
 SIZE_LOG_SIGMA = 0.25
-#: Most (pose, object, detection) evaluations per block of :func:`centre_hits`.
-HIT_BLOCK = 1 << 21
 
 
 @dataclass(frozen=True)
@@ -229,37 +229,79 @@ def centre_hits(camera: Camera, camera_from_world: FloatArray, local: IntArray,
     (D,)) with its local objects ``local`` (M, L) (``local_valid`` (M, L): padding False).
 
     A detection's support is the best, over same-label local objects in front of the camera
-    whose projected centre is inside :data:`HIT_SCALE` x the ellipse, of
+    (depth > 0.05 m) whose projected centre is inside :data:`HIT_SCALE` x the ellipse, of
     ``exp(-q / 2) exp(-(ln(z / z_size))^2 / (2 SIZE_LOG_SIGMA^2))`` (``q``: the centre's squared
     normalised distance in the ellipse, 1 on its contour; ``z``: the object's depth, ``z_size``:
     the depth its size implies, :func:`quadloc.service.localization.hypotheses.size_depths`);
-    0 when there is none. Returns (M,) the sums over the detections (at most D)."""
-    m_total, n_local = local.shape
-    n_det = len(params)
-    out = np.zeros(m_total)
-    cos, sin = np.cos(params[:, 4]), np.sin(params[:, 4])
+    0 when there is none. Returns (M,) the sums over the detections (at most D). One compiled
+    kernel (:func:`_centre_hits_kernel`): no (M, L, D) temporaries."""
     radius = np.prod(compiled.axes, axis=1) ** (1.0 / 3.0)
-    step = max(1, HIT_BLOCK // max(1, n_local * n_det))
-    for s in range(0, m_total, step):
-        T = camera_from_world[s:s + step]
-        L = local[s:s + step]
-        X = np.einsum("mij,mlj->mli", T[:, :3, :3], compiled.centers[L]) + T[:, None, :3, 3]
-        z = X[..., 2]
-        front = (z > 0.05) & local_valid[s:s + step]
-        zs = np.where(front, z, 1.0)
-        u = camera.fx * X[..., 0] / zs + camera.cx
-        v = camera.fy * X[..., 1] / zs + camera.cy
-        dx = u[..., None] - params[:, 0]
-        dy = v[..., None] - params[:, 1]
-        p = (dx * cos + dy * sin) / params[:, 2]
-        q = (-dx * sin + dy * cos) / params[:, 3]
-        q2 = p * p + q * q
-        ok = ((q2 <= HIT_SCALE ** 2) & (object_codes[L][..., None] == label_codes)
-              & front[..., None])
-        z_size = size_depths(camera, params[None, None, :, 2:4], radius[L][..., None])
-        log_ratio = np.log(zs[..., None] / z_size)
-        w = np.exp(-0.5 * q2 - 0.5 * (log_ratio / SIZE_LOG_SIGMA) ** 2)
-        out[s:s + step] = np.where(ok, w, 0.0).max(axis=1).sum(axis=1)
+    p = np.array(params, dtype=float)
+    # the depth each detection's size gives per unit object radius (size_depths, r = 1)
+    z_unit = np.array(size_depths(camera, p[:, 2:4], 1.0), dtype=float)
+    # writable C arrays of fixed dtypes: one kernel specialisation (compile_place_kernels)
+    out: FloatArray = _centre_hits_kernel(
+        np.array(camera_from_world, dtype=float), np.array(local, dtype=np.intp),
+        np.array(local_valid, dtype=bool), np.array(compiled.centers, dtype=float), radius,
+        np.array(object_codes, dtype=np.intp), p, z_unit,
+        np.array(label_codes, dtype=np.intp), float(camera.fx), float(camera.fy),
+        float(camera.cx), float(camera.cy), HIT_SCALE ** 2, 1.0 / SIZE_LOG_SIGMA ** 2)
+    return out
+
+
+def compile_place_kernels() -> None:
+    """Compile (or load from numba's cache) the place search's kernel
+    (:func:`_centre_hits_kernel`), so that no request pays for it: the service calls it at
+    start-up with :func:`quadloc.factors.pose_residuals.compile_kernels`."""
+    _centre_hits_kernel(np.eye(4)[None], np.zeros((1, 1), dtype=np.intp),
+                        np.ones((1, 1), dtype=bool), np.array([[0.0, 0.0, 2.0]]), np.ones(1),
+                        np.zeros(1, dtype=np.intp), np.array([[320.0, 240.0, 50.0, 40.0, 0.1]]),
+                        np.ones(1), np.zeros(1, dtype=np.intp), 500.0, 500.0, 320.0, 240.0,
+                        HIT_SCALE ** 2, 1.0 / SIZE_LOG_SIGMA ** 2)
+
+
+@jit
+def _centre_hits_kernel(T: FloatArray, local: IntArray, valid: BoolArray, centers: FloatArray,
+                        radius: FloatArray, codes: IntArray, params: FloatArray,
+                        z_unit: FloatArray, label_codes: IntArray, fx: float, fy: float,
+                        cx: float, cy: float, hit2: float, inv_s2: float) -> FloatArray:
+    """:func:`centre_hits` (its arguments as arrays; ``z_unit`` (D,): the size depth per metre
+    of object radius; ``hit2``: HIT_SCALE^2; ``inv_s2``: 1 / SIZE_LOG_SIGMA^2)."""
+    m_total, n_local = local.shape
+    n_det = params.shape[0]
+    out = np.zeros(m_total)
+    best = np.zeros(n_det)
+    cos = np.cos(params[:, 4])
+    sin = np.sin(params[:, 4])
+    for m in range(m_total):
+        best[:] = 0.0
+        for k in range(n_local):
+            if not valid[m, k]:
+                continue
+            o = local[m, k]
+            X = centers[o]
+            x = T[m, 0, 0] * X[0] + T[m, 0, 1] * X[1] + T[m, 0, 2] * X[2] + T[m, 0, 3]
+            y = T[m, 1, 0] * X[0] + T[m, 1, 1] * X[1] + T[m, 1, 2] * X[2] + T[m, 1, 3]
+            z = T[m, 2, 0] * X[0] + T[m, 2, 1] * X[1] + T[m, 2, 2] * X[2] + T[m, 2, 3]
+            if not z > 0.05:
+                continue
+            u = fx * x / z + cx
+            v = fy * y / z + cy
+            for d in range(n_det):
+                if label_codes[d] != codes[o]:
+                    continue
+                dx = u - params[d, 0]
+                dy = v - params[d, 1]
+                a = (dx * cos[d] + dy * sin[d]) / params[d, 2]
+                b = (-dx * sin[d] + dy * cos[d]) / params[d, 3]
+                q2 = a * a + b * b
+                if q2 > hit2:
+                    continue
+                lr = np.log(z / (z_unit[d] * radius[o]))
+                w = np.exp(-0.5 * q2 - 0.5 * lr * lr * inv_s2)
+                if w > best[d]:
+                    best[d] = w
+        out[m] = best.sum()
     return out
 
 

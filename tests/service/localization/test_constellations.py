@@ -14,8 +14,13 @@ import pytest
 from quadloc.factors.camera import Ellipsoid, project_ellipsoid
 from quadloc.factors.rotations import invert_pose
 from quadloc.maps.places import place_index
+from quadloc.service.localization import constellations
 from quadloc.service.localization.constellations import (
+    HIT_SCALE,
     PLACE_SEARCH_MIN_OBJECTS,
+    SIZE_LOG_SIGMA,
+    centre_hits,
+    compile_place_kernels,
     detection_triples,
     place_seeds,
 )
@@ -90,6 +95,61 @@ def perturbed() -> tuple:
     cam, frames = building_frames(b, 12, seed=22, config=SimulationConfig.exact(True),
                                   min_detections=4)
     return b, cam, frames
+
+
+def _centre_hits_reference(cam, poses, local, valid, cm, params, label_codes, object_codes):
+    """centre_hits written out one (pose, object, detection) at a time (the docstring's rule,
+    the projection by the camera matrix)."""
+    out = []
+    for T, objs, ok in zip(poses, local, valid, strict=True):
+        best = np.zeros(len(params))
+        for o, v in zip(objs, ok, strict=True):
+            if not v:
+                continue
+            Xc = T[:3, :3] @ cm.centers[o] + T[:3, 3]
+            if Xc[2] <= 0.05:
+                continue
+            uv = (cam.K @ Xc)[:2] / Xc[2]
+            for d, (x, y, a, b, th) in enumerate(params):
+                if label_codes[d] != object_codes[o]:
+                    continue
+                rot = np.array([[math.cos(th), math.sin(th)], [-math.sin(th), math.cos(th)]])
+                e = rot @ (uv - [x, y]) / [a, b]
+                q2 = float(e @ e)
+                if q2 > HIT_SCALE ** 2:
+                    continue
+                r = float(np.prod(cm.axes[o])) ** (1 / 3)
+                z_size = 0.5 * (cam.fx + cam.fy) * r / math.sqrt(a * b)
+                w = math.exp(-q2 / 2 - math.log(Xc[2] / z_size) ** 2 / (2 * SIZE_LOG_SIGMA ** 2))
+                best[d] = max(best[d], w)
+        out.append(best.sum())
+    return np.array(out)
+
+
+def test_centre_hits_equal_the_rule_written_out(perturbed: tuple) -> None:
+    b, cam, frames = perturbed
+    cm = b.compiled
+    index = place_index(cm)
+    rng = np.random.default_rng(4)
+    bf = frames[0]
+    params = np.array([d.ellipse.params() for d in bf.frame.detections])
+    code = {c: k for k, c in enumerate(index.labels)}
+    label_codes = np.array([code[d.label] for d in bf.frame.detections])
+    truth = invert_pose(bf.world_from_camera)
+    # the true pose, poses near it, and poses elsewhere; local objects of random anchors
+    ahead = np.array([0.0, 0.0, 3.0])
+    poses = np.array([truth] + [truth @ invert_pose(look_at(rng.normal(0, 0.3, 3),
+                                                            rng.normal(0, 1, 3) + ahead))
+                                for _ in range(30)])
+    anchors = np.concatenate([[cm.index_of(bf.room.object_ids[0])],
+                              rng.integers(0, len(cm), len(poses) - 1)])
+    local, valid = index.local[anchors], index.local_valid[anchors].copy()
+    valid[:, ::5] = False
+    got = centre_hits(cam, poses, local, valid, cm, params, label_codes, index.codes)
+    want = _centre_hits_reference(cam, poses, local, valid, cm, params, label_codes,
+                                  index.codes)
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12)
+    assert got[0] > 1.0  # the truth explains detections (not a test of zeros)
 
 
 def test_place_seeds_find_the_true_place_with_bounded_sub_map(perturbed: tuple) -> None:
@@ -199,3 +259,18 @@ def test_count_map_samples_equals_brute_force() -> None:
             for objs in itertools.permutations(range(len(cm)), size):
                 brute += all(cats[o] == labels[d] for d, o in zip(dets, objs, strict=True))
         assert count_map_samples(cm, labels, size) == brute
+
+
+def test_the_start_up_compilation_covers_the_place_search(perturbed: tuple) -> None:
+    """compile_place_kernels (run by the service before it serves) compiles the one
+    specialisation that requests use: a search after it compiles nothing more."""
+    b, cam, frames = perturbed
+    compile_place_kernels()
+    kernel = vars(constellations)["_centre_hits_kernel"]
+    before = list(kernel.signatures)
+    dets = frames[0].frame.detections
+    place_seeds(b.compiled, place_index(b.compiled), cam,
+                np.array([d.ellipse.params() for d in dets]), [d.label for d in dets],
+                np.random.default_rng(0))
+    assert len(before) == 1
+    assert list(kernel.signatures) == before
