@@ -76,7 +76,12 @@ from quadloc.service.localization.scoring import (
     greedy_assignment,
     sunflower_disk,
 )
-from quadloc.service.localization.search import Hypothesis, RansacOutcome, ransac
+from quadloc.service.localization.search import (
+    KEEP_DISTINCT,
+    Hypothesis,
+    RansacOutcome,
+    ransac,
+)
 from quadloc.service.localization.types import (
     Alternative,
     Detection,
@@ -97,6 +102,12 @@ __all__ = ["Assessment", "localize", "prior_gate_poses", "refine_pose"]
 #: far less than this).
 REFINED_ALTERNATIVES = 2
 ALTERNATIVE_PREFILTER_RATIO = 0.5
+#: A large map's search (places) keeps this many distinct hypotheses and refines, beyond the
+#: :data:`REFINED_ALTERNATIVES` runners-up, those scoring at least :data:`PLACE_TIE_RATIO` of
+#: the best: the candidate places of an ambiguous answer (exact copies of a room), at most
+#: this many listed, best-supported first.
+PLACE_CANDIDATES = 6
+PLACE_TIE_RATIO = 0.9
 #: LM iteration cap of an alternative's refinement (a capped alternative that competes is then
 #: refined in full from where it stopped; measurements: ``docs/design/localization.md``).
 ALTERNATIVE_MAX_ITERATIONS = 15
@@ -152,6 +163,8 @@ class _Solve:
         n_samples: label-compatible P2E samples (an evidence feature).
         t0: ``time.perf_counter()`` at the start of the call, s.
         hinted: the best hypothesis of a place hint's places, refined besides the search's.
+        places: whether the map was searched by places (:func:`_place_stage`): up to
+            :data:`PLACE_CANDIDATES` candidates.
         evaluated: candidate poses scored so far; timings: wall ms per stage.
     """
 
@@ -170,6 +183,7 @@ class _Solve:
     timings: dict[str, float] = field(default_factory=dict)
     evaluated: int = 0
     hinted: Hypothesis | None = None
+    places: bool = False
 
 
 def localize(
@@ -234,6 +248,7 @@ def localize(
                    calibration)
     if seeds is not None:  # the chance matches of the whole map, not of the places kept
         solve.n_samples = count_map_samples(whole, [detections[i].label for i in usable], 2)
+        solve.places = True
     prior_candidate = None if prior is None else _prior_stage(solve, prior)
     if prior_candidate is not None and len(prior_candidate.inliers) >= len(usable):
         return _answer(solve, prior_candidate, [prior_candidate], ambiguous=False)
@@ -470,7 +485,8 @@ def _search_stage(solve: _Solve, seeds: PlaceSeeds | None = None,
                      min_inliers=options.min_inliers,
                      max_hypotheses=options.ransac_max_hypotheses,
                      rng=np.random.default_rng(options.seed), deadline=solve.deadline,
-                     seeds=None if seeds is None else seeds.poses, sample=seeds is None)
+                     seeds=None if seeds is None else seeds.poses, sample=seeds is None,
+                     keep=PLACE_CANDIDATES if solve.places else KEEP_DISTINCT)
     if (hint is not None and seeds is not None and outcome.camera_from_world is not None
             and seeds.hinted.any()
             and not any(_hypothesis_agrees(solve, h, hint) for h in outcome.alternatives)):
@@ -517,8 +533,10 @@ def _refine_hypotheses(solve: _Solve, outcome: RansacOutcome
     """The verified candidates of the best hypothesis (with ``outcome.matches``) and of up to
     :data:`REFINED_ALTERNATIVES` distinct runners-up scoring at least
     :data:`ALTERNATIVE_PREFILTER_RATIO` of the best (not once the budget is spent; not those of
-    :func:`_same_explanation`), refined with at most :data:`ALTERNATIVE_MAX_ITERATIONS`; and the
-    best hypothesis' refinement status."""
+    :func:`_same_explanation`), refined with at most :data:`ALTERNATIVE_MAX_ITERATIONS`; on a
+    large map (``solve.places``) also the further ones scoring at least
+    :data:`PLACE_TIE_RATIO` of the best (the tied candidate places); and the best hypothesis'
+    refinement status."""
     assert outcome.camera_from_world is not None
     options = solve.options
     hyps = list(outcome.alternatives) or [
@@ -527,9 +545,9 @@ def _refine_hypotheses(solve: _Solve, outcome: RansacOutcome
     first_status: str | None = None
     alternative_options = replace(
         options, max_iterations=min(options.max_iterations, ALTERNATIVE_MAX_ITERATIONS))
-    for k, h in enumerate(hyps[:1 + REFINED_ALTERNATIVES]):
-        if k > 0 and (h.score < ALTERNATIVE_PREFILTER_RATIO * hyps[0].score
-                      or deadline_passed(solve.deadline)):
+    for k, h in enumerate(hyps[:PLACE_CANDIDATES if solve.places else 1 + REFINED_ALTERNATIVES]):
+        ratio = ALTERNATIVE_PREFILTER_RATIO if k <= REFINED_ALTERNATIVES else PLACE_TIE_RATIO
+        if k > 0 and (h.score < ratio * hyps[0].score or deadline_passed(solve.deadline)):
             break
         if k > 0 and _same_explanation(h, hyps[0]):
             continue  # refines to the best's pose: not a competitor (see _same_explanation)
@@ -539,7 +557,9 @@ def _refine_hypotheses(solve: _Solve, outcome: RansacOutcome
         if k == 0:
             first_status = status
         if got is not None:
-            got.capped = (k > 0 and status == "max_iterations"
+            # a tied place beyond the first runners-up is listed as refined so far (not
+            # refined in full: it only widens the candidate list)
+            got.capped = (0 < k <= REFINED_ALTERNATIVES and status == "max_iterations"
                           and alternative_options.max_iterations < options.max_iterations)
             candidates.append(got)
     return candidates, first_status
