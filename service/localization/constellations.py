@@ -250,9 +250,13 @@ def centre_hits(camera: Camera, camera_from_world: FloatArray, local: IntArray,
 
 
 def compile_place_kernels() -> None:
-    """Compile (or load from numba's cache) the place search's kernel
-    (:func:`_centre_hits_kernel`), so that no request pays for it: the service calls it at
-    start-up with :func:`quadloc.factors.pose_residuals.compile_kernels`."""
+    """Compile (or load from numba's cache) the place search's kernels (:func:`centre_hits`,
+    :func:`quadloc.service.localization.hypotheses.p3p_grunert_batch`), so that no request
+    pays for it: the service calls it at start-up with
+    :func:`quadloc.factors.pose_residuals.compile_kernels`."""
+    camera = Camera(500.0, 500.0, 320.0, 240.0, 640, 480)
+    p3p_grunert_batch(np.array([[[300.0, 200.0], [350.0, 260.0], [280.0, 250.0]]]),
+                      np.array([[[0.0, 0.0, 3.0], [0.3, 0.2, 3.1], [-0.1, 0.3, 2.9]]]), camera)
     _centre_hits_kernel(np.eye(4)[None], np.zeros((1, 1), dtype=np.intp),
                         np.ones((1, 1), dtype=bool), np.array([[0.0, 0.0, 2.0]]), np.ones(1),
                         np.zeros(1, dtype=np.intp), np.array([[320.0, 240.0, 50.0, 40.0, 0.1]]),

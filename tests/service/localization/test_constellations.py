@@ -14,7 +14,7 @@ import pytest
 from quadloc.factors.camera import Ellipsoid, project_ellipsoid
 from quadloc.factors.rotations import invert_pose
 from quadloc.maps.places import place_index
-from quadloc.service.localization import constellations
+from quadloc.service.localization import constellations, hypotheses
 from quadloc.service.localization.constellations import (
     HIT_SCALE,
     PLACE_SEARCH_MIN_OBJECTS,
@@ -273,11 +273,11 @@ def test_the_start_up_compilation_covers_the_place_search(perturbed: tuple) -> N
     specialisation that requests use: a search after it compiles nothing more."""
     b, cam, frames = perturbed
     compile_place_kernels()
-    kernel = vars(constellations)["_centre_hits_kernel"]
-    before = list(kernel.signatures)
+    kernels = [vars(constellations)["_centre_hits_kernel"], vars(hypotheses)["_p3p_kernel"]]
+    before = [list(k.signatures) for k in kernels]
     dets = frames[0].frame.detections
     place_seeds(b.compiled, place_index(b.compiled), cam,
                 np.array([d.ellipse.params() for d in dets]), [d.label for d in dets],
                 np.random.default_rng(0))
-    assert len(before) == 1
-    assert list(kernel.signatures) == before
+    assert [len(s) for s in before] == [1, 1]
+    assert [list(k.signatures) for k in kernels] == before
