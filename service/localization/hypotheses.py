@@ -197,6 +197,12 @@ def _p3p_kernel(j: FloatArray, X: FloatArray, newton_steps: int, imag_tol: float
     owner = np.zeros(4 * B, dtype=np.intp)
     count = 0
     Y = np.zeros((3, 3))
+    dy = np.zeros((2, 3))
+    dx = np.zeros((2, 3))
+    FY = np.zeros((3, 3))
+    FX = np.zeros((3, 3))
+    R = np.zeros((3, 3))
+    t = np.zeros(3)
     roots = np.zeros(4, dtype=np.complex128)
     for b in range(B):
         a2 = 0.0
@@ -248,18 +254,30 @@ def _p3p_kernel(j: FloatArray, X: FloatArray, newton_steps: int, imag_tol: float
                 Y[0, k] = j[b, 0, k] * s1
                 Y[1, k] = j[b, 1, k] * u * s1
                 Y[2, k] = j[b, 2, k] * v * s1
-            R = _frame_one(Y[1] - Y[0], Y[2] - Y[0]) @ _frame_one(
-                X[b, 1] - X[b, 0], X[b, 2] - X[b, 0]).T
-            t = Y[0] - R @ X[b, 0]
-            ok = np.all(np.isfinite(R)) and np.all(np.isfinite(t))
+                dy[0, k] = Y[1, k] - Y[0, k]
+                dy[1, k] = Y[2, k] - Y[0, k]
+                dx[0, k] = X[b, 1, k] - X[b, 0, k]
+                dx[1, k] = X[b, 2, k] - X[b, 0, k]
+            _frame_one(dy[0], dy[1], FY)
+            _frame_one(dx[0], dx[1], FX)
+            ok = True
+            for i in range(3):  # R = FY FX^T, t = Y0 - R X0
+                for k in range(3):
+                    R[i, k] = FY[i, 0] * FX[k, 0] + FY[i, 1] * FX[k, 1] + FY[i, 2] * FX[k, 2]
+                    ok = ok and np.isfinite(R[i, k])
+            for i in range(3):
+                t[i] = Y[0, i] - (R[i, 0] * X[b, 0, 0] + R[i, 1] * X[b, 0, 1]
+                                  + R[i, 2] * X[b, 0, 2])
             for k in range(3):
                 if not R[2, 0] * X[b, k, 0] + R[2, 1] * X[b, k, 1] + R[2, 2] * X[b, k, 2] \
                         + t[2] > 0.0:
                     ok = False
             if not ok:
                 continue
-            poses[count, :3, :3] = R
-            poses[count, :3, 3] = t
+            for i in range(3):
+                for k in range(3):
+                    poses[count, i, k] = R[i, k]
+                poses[count, i, 3] = t[i]
             poses[count, 3, 3] = 1.0
             owner[count] = b
             count += 1
@@ -267,16 +285,21 @@ def _p3p_kernel(j: FloatArray, X: FloatArray, newton_steps: int, imag_tol: float
 
 
 @jit
-def _frame_one(a: FloatArray, b: FloatArray) -> FloatArray:
-    """:func:`_frames` of one direction pair (3,): the columns ``[a, b_perp, a x b_perp]``."""
-    e1 = a / math.sqrt(a[0] ** 2 + a[1] ** 2 + a[2] ** 2)
-    e2 = b - (b[0] * e1[0] + b[1] * e1[1] + b[2] * e1[2]) * e1
-    e2 = e2 / math.sqrt(e2[0] ** 2 + e2[1] ** 2 + e2[2] ** 2)
-    F = np.empty((3, 3))
-    F[:, 0] = e1
-    F[:, 1] = e2
-    F[:, 2] = np.cross(e1, e2)
-    return F
+def _frame_one(a: FloatArray, b: FloatArray, F: FloatArray) -> None:
+    """:func:`_frames` of one direction pair (3,) into ``F`` (3, 3): the columns
+    ``[a, b_perp, a x b_perp]``."""
+    na = math.sqrt(a[0] ** 2 + a[1] ** 2 + a[2] ** 2)
+    for k in range(3):
+        F[k, 0] = a[k] / na
+    d = b[0] * F[0, 0] + b[1] * F[1, 0] + b[2] * F[2, 0]
+    for k in range(3):
+        F[k, 1] = b[k] - d * F[k, 0]
+    nb = math.sqrt(F[0, 1] ** 2 + F[1, 1] ** 2 + F[2, 1] ** 2)
+    for k in range(3):
+        F[k, 1] /= nb
+    F[0, 2] = F[1, 0] * F[2, 1] - F[2, 0] * F[1, 1]
+    F[1, 2] = F[2, 0] * F[0, 1] - F[0, 0] * F[2, 1]
+    F[2, 2] = F[0, 0] * F[1, 1] - F[1, 0] * F[0, 1]
 
 
 @jit
