@@ -334,8 +334,11 @@ def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params
     :func:`detection_triples` until one gives a pose of support >= :data:`STOP_SUPPORT` x D
     (and >= :data:`STOP_MIN_SUPPORT`), :data:`MAX_TOTAL_TRIPLETS` triplets were solved, or the
     ``deadline`` passed; after :data:`FULL_TRIPLES` triples with poses, only in the best
-    places so far (:func:`_focus`). ``hinted`` (N,) marks the objects of a place hint: half of the
-    :data:`MAX_PLACES` places are the best whose triplet's first object is hinted."""
+    places so far (:func:`_focus`). ``hinted`` (N,) marks the objects of a place hint: the
+    triples are first tried there only (until one explains the frame by the same rule), then
+    over the whole map as without a hint (a hint adds candidates, never removes the
+    evidence's); half of the :data:`MAX_PLACES` places are the best whose triplet's first
+    object is hinted."""
     code = {c: k for k, c in enumerate(index.labels)}
     object_codes = index.codes
     label_codes = np.array([code.get(x, -1) for x in labels], dtype=np.intp)
@@ -348,14 +351,26 @@ def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params
     all_scores: list[FloatArray] = []
     all_anchor: list[IntArray] = []
     n_triplets = 0
-    allowed: BoolArray | None = None
-    for triple in detection_triples(params):
+    n_full = 0  # triples of the whole map that gave poses
+    focus: BoolArray | None = None
+    triples = detection_triples(params)
+    # a hint's places first (every triple there: a few rooms, cheap), then the whole map
+    plan: list[tuple[tuple[int, ...], BoolArray | None]] = [
+        (t, hinted) for t in (triples if hinted is not None else [])]
+    plan += [(t, None) for t in triples]
+    hinted_done = hinted is None
+    for triple, restrict in plan:
         if n_triplets >= MAX_TOTAL_TRIPLETS or deadline_passed(deadline):
             break
-        if allowed is None and len(all_poses) >= FULL_TRIPLES:
-            allowed = _focus(index, np.concatenate(all_anchor), np.concatenate(all_scores),
-                             hinted)
-        trip = _triplets(index, compiled, camera, params, labels, triple, rng, allowed)
+        if restrict is None:
+            hinted_done = True
+        elif hinted_done:
+            continue  # the hint's places explained the frame: on to the whole map
+        if restrict is None and focus is None and n_full >= FULL_TRIPLES:
+            focus = _focus(index, np.concatenate(all_anchor), np.concatenate(all_scores),
+                           hinted)
+        trip = _triplets(index, compiled, camera, params, labels, triple, rng,
+                         restrict if restrict is not None else focus)
         trip = trip[:MAX_TOTAL_TRIPLETS - n_triplets]
         n_triplets += len(trip)
         if len(trip) == 0:
@@ -382,8 +397,11 @@ def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params
         all_poses.append(poses)
         all_scores.append(scores)
         all_anchor.append(anchor)
+        n_full += restrict is None
         if scores.max() >= max(STOP_MIN_SUPPORT, STOP_SUPPORT * len(params)):
-            break
+            if restrict is None:
+                break
+            hinted_done = True  # the evidence still searches the whole map
     if not all_poses:
         return PlaceSeeds(np.zeros((0, 4, 4)), np.zeros(0), np.zeros(0, dtype=np.intp), 0,
                           n_triplets, np.zeros(0, dtype=bool))

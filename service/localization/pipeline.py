@@ -165,6 +165,9 @@ class _Solve:
         hinted: the best hypothesis of a place hint's places, refined besides the search's.
         places: whether the map was searched by places (:func:`_place_stage`): up to
             :data:`PLACE_CANDIDATES` candidates.
+        hint_samples: with a place hint on such a map, the label-compatible samples of the
+            hint's places only: an answer that agrees with the hint has its chance matches
+            counted there (its confidence is conditional on the hint), not in the whole map.
         evaluated: candidate poses scored so far; timings: wall ms per stage.
     """
 
@@ -184,6 +187,7 @@ class _Solve:
     evaluated: int = 0
     hinted: Hypothesis | None = None
     places: bool = False
+    hint_samples: int | None = None
 
 
 def localize(
@@ -247,8 +251,12 @@ def localize(
     solve = _start(detections, usable, compiled, camera, options, gravity, t0, cpu0, timings,
                    calibration)
     if seeds is not None:  # the chance matches of the whole map, not of the places kept
-        solve.n_samples = count_map_samples(whole, [detections[i].label for i in usable], 2)
+        labels = [detections[i].label for i in usable]
+        solve.n_samples = count_map_samples(whole, labels, 2)
         solve.places = True
+        hinted = None if hint is None else np.flatnonzero(_hinted_objects(whole, hint))
+        if hinted is not None and len(hinted):
+            solve.hint_samples = count_map_samples(compiled_subset(whole, hinted), labels, 2)
     prior_candidate = None if prior is None else _prior_stage(solve, prior)
     if prior_candidate is not None and len(prior_candidate.inliers) >= len(usable):
         return _answer(solve, prior_candidate, [prior_candidate], ambiguous=False)
@@ -270,6 +278,9 @@ def localize(
     if ambiguous and hint is not None:
         ranked = _hint_ranking(ranked, hint, seeds)
         ambiguous = is_ambiguous_ranking(ranked)
+    if solve.hint_samples is not None and hint is not None and hint.agrees(
+            ranked[0].world_from_camera, [m.object_id for m in ranked[0].inliers]):
+        solve.n_samples = solve.hint_samples  # chance matches within the hint's places
     return _answer(solve, ranked[0], ranked, ambiguous=ambiguous)
 
 
@@ -454,14 +465,7 @@ def _place_stage(
     tp = time.perf_counter()
     params = np.array([detections[i].ellipse.params() for i in usable])
     index = place_index(compiled)
-    hinted: BoolArray | None = None
-    if hint is not None:
-        hinted = np.zeros(len(compiled), dtype=bool)
-        if hint.position is not None and hint.sigma_m is not None:
-            hinted[index.near(hint.position, PlaceHint.AGREE_SIGMAS * hint.sigma_m
-                              + index.view_range_m)] = True
-        elif hint.object_ids is not None:
-            hinted[[k for k, o in enumerate(compiled.object_ids) if o in hint.object_ids]] = True
+    hinted = None if hint is None else _hinted_objects(compiled, hint)
     seeds = place_seeds(compiled, index, camera, params, [detections[i].label for i in usable],
                         np.random.default_rng(options.seed),
                         Deadline.cpu_budget(options.time_budget_ms, cpu_start=cpu0,
@@ -470,6 +474,19 @@ def _place_stage(
     if len(seeds.poses) == 0:
         return compiled, None
     return compiled_subset(compiled, seeds.objects), seeds
+
+
+def _hinted_objects(compiled: CompiledMap, hint: PlaceHint) -> BoolArray:
+    """The objects (N,) of a hint's places: a zone's objects, or those within
+    ``PlaceHint.AGREE_SIGMAS`` sigmas plus the view range of a position."""
+    hinted = np.zeros(len(compiled), dtype=bool)
+    if hint.position is not None and hint.sigma_m is not None:
+        index = place_index(compiled)
+        hinted[index.near(hint.position, PlaceHint.AGREE_SIGMAS * hint.sigma_m
+                          + index.view_range_m)] = True
+    elif hint.object_ids is not None:
+        hinted[[k for k, o in enumerate(compiled.object_ids) if o in hint.object_ids]] = True
+    return hinted
 
 
 def _search_stage(solve: _Solve, seeds: PlaceSeeds | None = None,

@@ -281,3 +281,26 @@ def test_the_start_up_compilation_covers_the_place_search(perturbed: tuple) -> N
                 np.random.default_rng(0))
     assert [len(s) for s in before] == [1, 1]
     assert [list(k.signatures) for k in kernels] == before
+
+
+def test_a_right_hint_counts_chance_matches_in_its_places_only(perturbed: tuple) -> None:
+    """An answer that agrees with the hint has its chance matches counted in the hint's places
+    (the log_samples feature of one room, not of 30): its confidence is at least the one
+    without the hint, and the hint localizes at least as many frames, none wrong."""
+    b, cam, frames = perturbed
+    plain = hinted = compared = 0
+    for bf in frames:
+        res = localize(bf.frame.detections, b.compiled, cam)
+        hint = PlaceHint(object_ids=frozenset(bf.room.object_ids))
+        got = localize(bf.frame.detections, b.compiled, cam, hint=hint)
+        pos, _ = pose_errors(got.world_from_camera, bf.world_from_camera)
+        assert not (got.localized and pos > 0.5)
+        plain += res.localized
+        hinted += got.localized
+        if res.localized and got.localized and hint.agrees(
+                got.world_from_camera, [m.object_id for m in got.inliers]):
+            assert got.evidence["log_samples"] < res.evidence["log_samples"]
+            assert got.confidence >= res.confidence - 1e-9
+            compared += 1
+    assert hinted >= plain
+    assert compared >= len(frames) // 2
