@@ -193,8 +193,9 @@ def _triplets(index: PlaceIndex, compiled: CompiledMap, camera: Camera, params: 
     i_ab, j_ab, d_ab = index.pairs_for(labels[a], labels[b])
     i_ac, k_ac, d_ac = index.pairs_for(labels[a], labels[c])
     if allowed is not None:
-        i_ab, j_ab, d_ab = (x[allowed[i_ab]] for x in (i_ab, j_ab, d_ab))
-        i_ac, k_ac, d_ac = (x[allowed[i_ac]] for x in (i_ac, k_ac, d_ac))
+        sel_ab, sel_ac = allowed[i_ab], allowed[i_ac]
+        i_ab, j_ab, d_ab = i_ab[sel_ab], j_ab[sel_ab], d_ab[sel_ab]
+        i_ac, k_ac, d_ac = i_ac[sel_ac], k_ac[sel_ac], d_ac[sel_ac]
     if len(i_ab) == 0 or len(i_ac) == 0:
         return np.zeros((0, 3), dtype=np.intp)
     ok = possible(0, 1, i_ab, j_ab, d_ab)
