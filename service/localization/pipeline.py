@@ -239,9 +239,11 @@ def localize(
         return _not_localized("no_label_match", options.metric, 0, timings, t0)
     seeds: PlaceSeeds | None = None
     whole = compiled
+    hinted: BoolArray | None = None
     if len(compiled) >= PLACE_SEARCH_MIN_OBJECTS and len(usable) >= 3:
+        hinted = None if hint is None else _hinted_objects(compiled, hint)
         compiled, seeds = _place_stage(detections, usable, compiled, camera, options, t0, cpu0,
-                                       timings, hint)
+                                       timings, hinted)
         if seeds is None:
             return _not_localized("no_hypothesis_above_inlier_threshold", options.metric, 0,
                                   timings, t0)
@@ -254,9 +256,9 @@ def localize(
         labels = [detections[i].label for i in usable]
         solve.n_samples = count_map_samples(whole, labels, 2)
         solve.places = True
-        hinted = None if hint is None else np.flatnonzero(_hinted_objects(whole, hint))
-        if hinted is not None and len(hinted):
-            solve.hint_samples = count_map_samples(compiled_subset(whole, hinted), labels, 2)
+        if hinted is not None and hinted.any():
+            solve.hint_samples = count_map_samples(
+                compiled_subset(whole, np.flatnonzero(hinted)), labels, 2)
     prior_candidate = None if prior is None else _prior_stage(solve, prior)
     if prior_candidate is not None and len(prior_candidate.inliers) >= len(usable):
         return _answer(solve, prior_candidate, [prior_candidate], ambiguous=False)
@@ -456,16 +458,16 @@ def _prior_matches(scorer: MatchScorer, prior: PosePrior, threshold: float) -> l
 def _place_stage(
     detections: Sequence[Detection], usable: list[int], compiled: CompiledMap, camera: Camera,
     options: LocalizationOptions, t0: float, cpu0: float, timings: dict[str, float],
-    hint: PlaceHint | None = None,
+    hinted: BoolArray | None = None,
 ) -> tuple[CompiledMap, PlaceSeeds | None]:
     """The ``places`` stage of a large map (>= ``PLACE_SEARCH_MIN_OBJECTS`` objects): the
-    constellation search (:func:`quadloc.service.localization.constellations.place_seeds`);
+    constellation search (:func:`quadloc.service.localization.constellations.place_seeds`;
+    ``hinted``: the objects of a hint's places, :func:`_hinted_objects`);
     returns the sub-map of the places it keeps (the later stages score and refine there) and
     the seeds, or (``compiled``, None) when no pose came up."""
     tp = time.perf_counter()
     params = np.array([detections[i].ellipse.params() for i in usable])
     index = place_index(compiled)
-    hinted = None if hint is None else _hinted_objects(compiled, hint)
     seeds = place_seeds(compiled, index, camera, params, [detections[i].label for i in usable],
                         np.random.default_rng(options.seed),
                         Deadline.cpu_budget(options.time_budget_ms, cpu_start=cpu0,
