@@ -68,9 +68,15 @@ STOP_MIN_SUPPORT = 2.5
 MAX_TOTAL_TRIPLETS = 12000
 #: Detection triples (that gave poses) searched over the whole map; the later ones search only
 #: the :data:`FOCUS_PLACES` best places found by then (:func:`_focus`): the cost of a frame
-#: grows with the rooms for these first triples only.
+#: grows with the rooms for these first triples only. Only once they solved at least
+#: :data:`FOCUS_MIN_TRIPLETS` triplets (a small map is searched whole: cheap) and a pose
+#: explains at least :data:`FOCUS_MIN_SUPPORT` x D detections (and :data:`STOP_MIN_SUPPORT`):
+#: triples spoilt by a wrong detection find chance poses in a few places only, and focusing
+#: on those hid every copy of the true room (a false accept on exact copies, report seed).
 FULL_TRIPLES = 2
 FOCUS_PLACES = 48
+FOCUS_MIN_TRIPLETS = 1000
+FOCUS_MIN_SUPPORT = 0.6
 #: A P3P pose is kept only when its triplet's objects are at depths within this factor of the
 #: depths their sizes give (:func:`quadloc.service.localization.hypotheses.size_depths`).
 TRIPLET_DEPTH_RATIO = 1.6
@@ -334,9 +340,10 @@ def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params
     (D, 5) px / rad with ``labels`` (D,); D >= 3. Detection triples are tried in the order of
     :func:`detection_triples` until one gives a pose of support >= :data:`STOP_SUPPORT` x D
     (and >= :data:`STOP_MIN_SUPPORT`), :data:`MAX_TOTAL_TRIPLETS` triplets were solved, or the
-    ``deadline`` passed; after :data:`FULL_TRIPLES` triples with poses, only in the best
-    places so far (:func:`_focus`). ``hinted`` (N,) marks the objects of a place hint: the
-    triples are first tried there only (until one explains the frame by the same rule), then
+    ``deadline`` passed; after :data:`FULL_TRIPLES` triples with poses (and the conditions of
+    :data:`FOCUS_MIN_TRIPLETS`), only in the best places so far (:func:`_focus`). ``hinted``
+    (N,) marks the objects of a place hint: the triples are first tried there only (until one
+    explains the frame by the same rule), then
     over the whole map as without a hint (a hint adds candidates, never removes the
     evidence's); half of the :data:`MAX_PLACES` places are the best whose triplet's first
     object is hinted."""
@@ -367,7 +374,10 @@ def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params
             hinted_done = True
         elif hinted_done:
             continue  # the hint's places explained the frame: on to the whole map
-        if restrict is None and focus is None and n_full >= FULL_TRIPLES:
+        if (restrict is None and focus is None and n_full >= FULL_TRIPLES
+                and n_triplets >= FOCUS_MIN_TRIPLETS
+                and max(float(x.max()) for x in all_scores) >= max(
+                    STOP_MIN_SUPPORT, FOCUS_MIN_SUPPORT * len(params))):
             focus = _focus(index, np.concatenate(all_anchor), np.concatenate(all_scores),
                            hinted)
         trip = _triplets(index, compiled, camera, params, labels, triple, rng,
