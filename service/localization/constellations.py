@@ -13,7 +13,7 @@ together (:mod:`quadloc.maps.places`):
    :data:`TRIPLET_DEPTH_RATIO` of those their sizes give
    (:func:`quadloc.service.localization.hypotheses.size_depths`; :func:`_pair_possible`, the
    exact pairwise form of the depth test of step 3), at most :data:`MAX_TRIPLETS` per triple;
-3. P3P on the centres (:func:`quadloc.service.localization.hypotheses.p3p_hypotheses_batch`);
+3. P3P on the centres (:func:`quadloc.service.localization.hypotheses.p3p_grunert_batch`);
 4. each pose is scored against the objects covisible with its triplet's first object only
    (:func:`centre_hits`: detections whose centre sees a same-label object's projected centre
    inside 1.5 x the ellipse): the cost per pose does not depend on the map's size;
