@@ -20,7 +20,7 @@ version). Everything in the map's world frame, metres.
 Cost: O(N k) time and memory for N objects with k covisible neighbours each (a building of
 rooms: k is bounded by a room's content, not the number of rooms). Measured on the 1,000-room
 building of ``bench.building`` (10,000 objects, 95,000 covisible pairs): about 0.3 s to build,
-:meth:`PlaceIndex.nbytes` about 9 MB.
+:meth:`PlaceIndex.nbytes` about 11 MB.
 """
 
 from __future__ import annotations
