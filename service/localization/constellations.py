@@ -352,8 +352,6 @@ def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params
     label_codes = np.array([code.get(x, -1) for x in labels], dtype=np.intp)
     wanted = np.zeros(len(index.labels), dtype=bool)
     wanted[label_codes[label_codes >= 0]] = True
-    # each anchor's local objects (:attr:`PlaceIndex.local`), scored: those of a detected label
-    scored_valid = index.local_valid & wanted[object_codes[index.local]]
     radius = np.prod(compiled.axes, axis=1) ** (1.0 / 3.0)
     all_poses: list[FloatArray] = []
     all_scores: list[FloatArray] = []
@@ -400,7 +398,8 @@ def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params
             continue
         anchor = trip[owner, 0]
         # the scored objects first, the table cut to the widest row (the cost is per column)
-        valid = scored_valid[anchor]
+        # the anchors' local objects (:attr:`PlaceIndex.local`) scored: those of a detected label
+        valid = index.local_valid[anchor] & wanted[object_codes[index.local[anchor]]]
         cols = np.argsort(~valid, axis=1, kind="stable")[:, :max(1, int(valid.sum(1).max()))]
         scores = centre_hits(camera, poses, np.take_along_axis(index.local[anchor], cols, 1),
                              np.take_along_axis(valid, cols, 1), compiled, params,
