@@ -21,6 +21,7 @@ from quadloc.service.app.localization import Localizer, SolveObserver
 from quadloc.service.app.map_loader import MapLoader
 from quadloc.service.app.maps import MapService
 from quadloc.service.app.sessions import SessionService
+from quadloc.service.localization.constellations import compile_place_kernels
 from quadloc.service.settings import Settings
 
 __all__ = ["App"]
@@ -72,8 +73,9 @@ class App:
     def warm_up() -> None:
         """Compile (or load from their cache) the numeric kernels of the solvers, so that no
         request's time budget pays for it (numba; ~13 s the first time on a machine, < 1 s
-        from the cache: docs/design/factors.md)."""
+        from the cache: docs/design/factors.md), the place search's included."""
         compile_kernels()
+        compile_place_kernels()
 
     def close(self) -> None:
         """The process is stopping: session frames and builds in progress stop at their next
