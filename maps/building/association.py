@@ -587,8 +587,8 @@ def associate_windowed(
             if progress is not None:
                 progress(label, (w + fraction) / len(starts))
 
-        objs, rej = associate([observations[k] for k in sel], world_from_camera, camera, opt,
-                              sub_progress)
+        objs, rej = associate([observations[k] for k in sel.tolist()], world_from_camera,
+                              camera, opt, sub_progress)
         for h in objs:
             hyps.append(ObjectHypothesis(h.label, [int(sel[k]) for k in h.observations],
                                          h.ellipsoid, h.source,

@@ -13,7 +13,7 @@ its current estimate (reported as ``refinement.stopped_early``).
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -82,14 +82,16 @@ def _drop_detail(reason: str, shape_problem: str | None, q: ObjectQuality) -> st
     return f"centre uncertain by {q.center_std_m:.3g} m along some direction"
 
 
-def _in_view_counts(centres: FloatArray, object_frames: list[IntArray], T_wc: FloatArray,
+def _in_view_counts(centres: FloatArray, object_frames: Sequence[Sequence[int]],
+                    T_wc: FloatArray,
                     camera: Camera, min_shared_frames: int) -> IntArray:
     """Per object, how many frames of its place (:func:`places`: the frames detecting any of
     the place's objects) have its centre (n, 3) in front of the camera and inside the image
     (poses ``T_wc`` (F, 4, 4))."""
     out = np.zeros(len(centres), dtype=int)
     for group in places(object_frames, min_shared_frames):
-        fr = np.unique(np.concatenate([object_frames[k] for k in group]))
+        fr = np.unique(np.concatenate([np.asarray(object_frames[k], dtype=int)
+                                       for k in group]))
         R, t = T_wc[fr, :3, :3], T_wc[fr, :3, 3]
         # camera coordinates (frames, objects, 3) of the group's centres
         pc = np.einsum("fji,fkj->fki", R, centres[group][None] - t[:, None])

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import gtsam
 import numpy as np
 
-from quadloc.factors.arrays import FloatArray, IntArray
+from quadloc.factors.arrays import FloatArray
 from quadloc.factors.pose_factors import pose3
 from quadloc.factors.rotations import invert_pose, pose_matrix
 from quadloc.maps.building.recording import Observation, OdometryNoise
@@ -51,8 +51,8 @@ class LoopOptions:
     min_inlier_fraction: float = 0.6
     inlier_m: float = 0.15
     max_offset_m: float = 5.0
-    constraint_sigma_m: float = 0.05
-    constraint_sigma_rad: float = 0.01
+    constraint_sigma_m: float = 0.02
+    constraint_sigma_rad: float = 0.005
 
 
 @dataclass(frozen=True)
@@ -109,7 +109,8 @@ def places(object_frames: Sequence[Sequence[int]], min_shared_frames: int = 2
 def _yaw_rotation(theta: float, up: FloatArray) -> FloatArray:
     """Rotation by ``theta`` (rad) about the unit ``up`` axis (Rodrigues)."""
     K = np.array([[0.0, -up[2], up[1]], [up[2], 0.0, -up[0]], [-up[1], up[0], 0.0]])
-    return np.eye(3) + math.sin(theta) * K + (1.0 - math.cos(theta)) * K @ K
+    R: FloatArray = np.eye(3) + math.sin(theta) * K + (1.0 - math.cos(theta)) * K @ K
+    return R
 
 
 def _kabsch(src: FloatArray, dst: FloatArray) -> FloatArray:
@@ -245,7 +246,7 @@ def proposed_zones(object_ids: Sequence[str], object_frames: Sequence[Sequence[i
                    min_objects: int = 2, min_shared_frames: int = 2) -> tuple[MapZone, ...]:
     """Zones of the built map: one per place (:func:`places`) of at least ``min_objects``
     objects, ``"place-<k>"`` (k from 1, in walking order)."""
-    out = []
+    out: list[MapZone] = []
     for group in places(object_frames, min_shared_frames):
         if len(group) >= min_objects:
             k = len(out) + 1
@@ -255,7 +256,6 @@ def proposed_zones(object_ids: Sequence[str], object_frames: Sequence[Sequence[i
 
 
 def object_frames_of(objects: Sequence[Sequence[int]], observations: Sequence[Observation]
-                     ) -> list[IntArray]:
-    """Per object (its observation indices), the frames detecting it."""
-    return [np.array(sorted({observations[i].frame for i in idx}), dtype=int)
-            for idx in objects]
+                     ) -> list[list[int]]:
+    """Per object (its observation indices), the frames detecting it (sorted)."""
+    return [sorted({observations[i].frame for i in idx}) for idx in objects]
