@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: 6e92d062c3a765439d97720c199113de0eea7a7d59a31620bdf2342f0f719daf
+// openapi-sha256: 099e1afef388c3648f1aa41d6c3f91492a85bf8569367ab33455d243a3a05a89
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -631,7 +631,7 @@ export interface components {
             label: string;
             /**
              * Reason
-             * @description degenerate_shape, unconstrained or center_unconstrained.
+             * @description degenerate_shape, rarely_seen, unconstrained or center_unconstrained.
              */
             reason: string;
             /** Detail */
