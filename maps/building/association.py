@@ -57,6 +57,7 @@ class AssociationOptions:
     merge_factor: float = 1.0
     max_shared_frames: float = 0.1
     ghost_ratio: float = 3.0
+    verify_iou: float = 0.1
     seed: int = 0
 
 
@@ -567,8 +568,9 @@ def associate_windowed(
     overlapping windows chained where they share at least half of the detections either holds
     in the shared frames (and 2). A chain keeps one detection per frame (the one most windows
     gave it) and a detection claimed by two chains goes to the larger. A recording within one
-    window is :func:`associate` itself. Same arguments and result as :func:`associate`;
-    ``progress(label, fraction)`` over the whole recording."""
+    window is :func:`associate` itself. Then the same-label objects split by the drift between
+    two passes are merged (:func:`merge_duplicates`). Same arguments and result as
+    :func:`associate`; ``progress(label, fraction)`` over the whole recording."""
     opt = options or AssociationOptions()
     frames_all = np.array([o.frame for o in observations], dtype=int)
     if not len(frames_all) or frames_all.max() - frames_all.min() < window_frames:
@@ -663,6 +665,8 @@ def associate_windowed(
         objects.append(ObjectHypothesis(hyps[largest].label, idx, ell, hyps[largest].source,
                                         ious))
     objects = verify_objects(objects, observations, T_wc, camera, opt)
+    objects = merge_duplicates(objects, observations, T_wc, camera, opt,
+                               lambda: progress("", 1.0) if progress is not None else None)
     assigned = {k for h in objects for k in h.observations}
     rejected = {k: rejected_any.get(k, "fits_no_object") for k in range(len(observations))
                 if k not in assigned}
@@ -678,7 +682,8 @@ def verify_objects(objects: Sequence[ObjectHypothesis], observations: Sequence[O
                    world_from_camera: FloatArray, camera: Camera, opt: AssociationOptions
                    ) -> list[ObjectHypothesis]:
     """The objects with only their detections that overlap the projection of their ellipsoid
-    by at least ``min_iou`` (poses ``world_from_camera``), those left with fewer than
+    by at least ``verify_iou`` (poses ``world_from_camera``; lower than ``min_iou``: the
+    ellipsoid of a chain of windows sees the drift between them), those left with fewer than
     ``min_views`` dropped, and those whose largest semi-axis exceeds :data:`MAX_SIZE_FACTOR`
     times the median size their views imply (an ellipsoid stretched across views of two
     objects, e.g. of two rooms)."""
@@ -689,7 +694,7 @@ def verify_objects(objects: Sequence[ObjectHypothesis], observations: Sequence[O
         ious = _projected_ious(h.ellipsoid, T_wc[frames], camera,
                                [observations[k].ellipse for k in h.observations])
         keep = [k for k, iou in zip(h.observations, ious.tolist(), strict=True)
-                if iou >= opt.min_iou]
+                if iou >= opt.verify_iou]
         if len(keep) < opt.min_views:
             continue
         o, d, rho = _rays([observations[k] for k in keep], camera, T_wc)
