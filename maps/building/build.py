@@ -30,7 +30,7 @@ from quadloc.maps.building.association import (
     reconstruct_initial,
 )
 from quadloc.maps.building.joint import ObjectQuality, refine_jointly
-from quadloc.maps.building.places import (
+from quadloc.maps.building.loops import (
     LoopOptions,
     close_loops,
     corrected_poses,
@@ -112,7 +112,7 @@ def _move(ell: Ellipsoid, T: FloatArray) -> Ellipsoid:
 def _close_loops(objects: list[ObjectHypothesis], obs: tuple[Observation, ...],
                  T_wc: FloatArray, recording: Recording, opt: AssociationOptions,
                  loops: LoopOptions) -> tuple[list[ObjectHypothesis], FloatArray, int]:
-    """Loop closure through objects (:mod:`quadloc.maps.building.places`): the objects with
+    """Loop closure through objects (:mod:`quadloc.maps.building.loops`): the objects with
     the matched ones merged (one detection per frame, the larger object's on a clash), every
     object moved by its frames' correction, the corrected poses, and the number of loops."""
     frames = object_frames_of([h.observations for h in objects], obs)

@@ -182,7 +182,7 @@ def refine_jointly(
     ``stopped_early``). ``progress(iteration, error)`` after each LM iteration, and with a
     fractional iteration at least every 0.5 s during one (see ``_Ticker``).
     ``initial_world_from_camera`` (F, 4, 4): where the frames' poses start (e.g. after loop
-    closures, :func:`quadloc.maps.building.places.corrected_poses`; default the app's poses);
+    closures, :func:`quadloc.maps.building.loops.corrected_poses`; default the app's poses);
     the odometry between factors stay the app's relative poses.
     """
     T_app = np.asarray(world_from_camera, dtype=float)

@@ -1,124 +1,75 @@
-"""Places, loop closure through objects and proposed zones (quadloc.maps.building.places)."""
+"""The place index (quadloc.maps.places) against brute force: covisible pairs, neighbours,
+constellations by labels, the spatial grid; memoised on the compiled map."""
 
 from __future__ import annotations
 
-import math
-from collections import Counter
-
 import numpy as np
-import pytest
 
-from quadloc.factors.rotations import invert_pose, pose_matrix, rotation_angle
-from quadloc.maps.building.places import (
-    LoopOptions,
-    align_places,
-    close_loops,
-    corrected_poses,
-    places,
-    proposed_zones,
-)
-from quadloc.maps.building.recording import OdometryNoise
-
-UP = np.array([0.0, 0.0, 1.0])
-LABELS = ["Chair", "Chair", "TV", "Table", "Plant", "Lamp", "Sofa"]
+from quadloc.maps.compiled import compile_map, compiled_subset
+from quadloc.maps.places import VIEW_RANGE_M, build_place_index, place_index
+from tests.support.buildings import make_building
+from tests.support.scenes import synthetic_map
 
 
-def _yaw(theta: float) -> np.ndarray:
-    c, s = math.cos(theta), math.sin(theta)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+def _brute_pairs(centers: np.ndarray, radius: float) -> set[tuple[int, int]]:
+    d = np.linalg.norm(centers[:, None] - centers[None], axis=2)
+    i, j = np.nonzero((d <= radius) & np.triu(np.ones_like(d, dtype=bool), 1))
+    return set(zip(i.tolist(), j.tolist(), strict=True))
 
 
-def _room(rng: np.random.Generator) -> np.ndarray:
-    return np.column_stack([rng.uniform(-2, 2, (len(LABELS), 2)),
-                            rng.uniform(0.2, 1.2, len(LABELS))])
+def test_covisible_pairs_neighbours_and_constellations_equal_brute_force() -> None:
+    cm = compile_map(synthetic_map(400, seed=3))
+    for radius in (VIEW_RANGE_M, 2.5):
+        idx = build_place_index(cm, radius)
+        pairs = set(zip(idx.pair_i.tolist(), idx.pair_j.tolist(), strict=True))
+        assert pairs == _brute_pairs(np.asarray(cm.centers), radius)
+        assert np.allclose(idx.pair_distance, np.linalg.norm(
+            cm.centers[idx.pair_i] - cm.centers[idx.pair_j], axis=1), atol=1e-12)
+        for i in range(0, len(cm), 37):
+            expected = sorted({b for a, b in pairs if a == i} | {a for a, b in pairs if b == i})
+            assert idx.neighbours(i).tolist() == expected
+        cats = sorted(set(cm.categories))
+        for la in cats[:3]:
+            for lb in cats:
+                I, J, D = idx.pairs_for(la, lb)
+                expected_ordered = {(a, b) for a, b in pairs
+                                    if cm.categories[a] == la and cm.categories[b] == lb}
+                expected_ordered |= {(b, a) for a, b in pairs
+                                     if cm.categories[b] == la and cm.categories[a] == lb}
+                assert set(zip(I.tolist(), J.tolist(), strict=True)) == expected_ordered
+                assert np.all(np.diff(I) >= 0)  # sorted by the first object (the join needs it)
+                assert np.allclose(D, np.linalg.norm(cm.centers[I] - cm.centers[J], axis=1))
+    assert idx.pairs_for("no-such", "label")[0].size == 0
 
 
-def test_places_group_by_co_observation() -> None:
-    # objects 0-2 seen together, 3-4 together, 5 alone; one shared frame is not a link
-    frames = [[0, 1, 2], [1, 2, 3], [2, 3], [10, 11, 12], [11, 12], [3, 20]]
-    assert places(frames) == [[0, 1, 2], [5], [3, 4]]
-    zones = proposed_zones([f"o{k}" for k in range(6)], frames)
-    assert [z.object_ids for z in zones] == [("o0", "o1", "o2"), ("o3", "o4")]
+def test_near_equals_brute_force() -> None:
+    cm = compile_map(synthetic_map(300, seed=5))
+    idx = place_index(cm)
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        p = rng.uniform(-2, 40, 3)
+        r = float(rng.uniform(0.5, 15))
+        expected = np.flatnonzero(np.linalg.norm(cm.centers - p, axis=1) <= r)
+        assert idx.near(p, r).tolist() == expected.tolist()
 
 
-def test_align_places_recovers_the_drift_and_refuses_another_layout() -> None:
-    rng = np.random.default_rng(3)
-    Q = _room(rng)
-    G = pose_matrix(_yaw(0.2), [1.5, -0.8, 0.05])  # the drift between the two visits
-    P = (Q - G[:3, 3]) @ G[:3, :3] + rng.normal(0, 0.02, Q.shape)  # inv(G) applied, noise
-    found = align_places(P, LABELS, Q, LABELS, UP, LoopOptions())
-    assert found is not None
-    T, pairs = found
-    assert sorted(pairs) == [(k, k) for k in range(len(LABELS))]
-    assert np.allclose(T, G, atol=0.05)
-    # a perturbed copy (every object moved 0.3 m) is another room, however it is turned
-    moved = P.copy()
-    phi = rng.uniform(-math.pi, math.pi, len(P))
-    moved[:, :2] += 0.3 * np.column_stack([np.cos(phi), np.sin(phi)])
-    assert align_places(moved, LABELS, Q, LABELS, UP, LoopOptions()) is None
-    # the same layout farther than the drift allowed is not this place
-    far = P + np.array([12.0, 0.0, 0.0])
-    assert align_places(far, LABELS, Q, LABELS, UP, LoopOptions(max_offset_m=5.0)) is None
+def test_rooms_are_not_covisible_and_index_is_memoised() -> None:
+    b = make_building(6, "perturbed", seed=4)
+    cm = b.compiled
+    idx = place_index(cm)
+    assert place_index(cm) is idx
+    zone = [b.zone_of(o) for o in cm.object_ids]
+    assert all(zone[i] == zone[j] for i, j in zip(idx.pair_i, idx.pair_j, strict=True))
+    # every pair of one room is covisible (a room is smaller than the view range)
+    n_room_pairs = sum(len(r.object_ids) * (len(r.object_ids) - 1) // 2 for r in b.rooms)
+    assert len(idx.pair_i) == n_room_pairs
 
 
-def test_close_loops_and_pose_graph_correct_a_drifted_revisit() -> None:
-    rng = np.random.default_rng(5)
-    room = _room(rng)
-    # a straight walk out and back: 41 frames 0.25 m apart, the app's poses drifting by a
-    # yaw growing to 0.1 rad about the start and a shift growing to 0.3 m; the room is seen
-    # at frames 0-4 and 36-40
-    n = 41
-    x = np.concatenate([np.linspace(0, 5, 21), np.linspace(5, 0, 21)[1:]])
-    truth = np.array([pose_matrix(np.eye(3), [xi, 0.0, 0.0]) for xi in x])
-    drift = [pose_matrix(_yaw(0.1 * f / (n - 1)), [0.0, 0.3 * f / (n - 1), 0.0])
-             for f in range(n)]
-    app = np.array([D @ T for D, T in zip(drift, truth, strict=True)])
-    later = room @ drift[-1][:3, :3].T + drift[-1][:3, 3]  # as the drifted app sees it
-    centres = np.vstack([room, later])
-    labels = LABELS + LABELS
-    frames = [[0, 1, 2, 3, 4]] * len(LABELS) + [[36, 37, 38, 39, 40]] * len(LABELS)
-    closures = close_loops(centres, labels, frames, UP)
-    assert len(closures) == 1
-    assert sorted(closures[0].pairs) == [(k, k + len(LABELS)) for k in range(len(LABELS))]
-    # odometry noise of the order of this drift (10x the default)
-    fixed = corrected_poses(app, closures, OdometryNoise(0.05, 0.1, 0.005, 0.01))
-    err_before = max(float(np.linalg.norm(a[:3, 3] - t[:3, 3])) for a, t in zip(app, truth,
-                                                                               strict=True))
-    g, f = closures[0].frames
-    assert g in range(5) and f in range(36, 41)
-    # the revisit's frame now sits where it truly is relative to the first visit's frame
-    rel_true = invert_pose(truth[g]) @ truth[f]
-    rel_fixed = invert_pose(fixed[g]) @ fixed[f]
-    rel_app = invert_pose(app[g]) @ app[f]
-    assert np.linalg.norm(rel_app[:3, 3] - rel_true[:3, 3]) > 0.2
-    assert np.linalg.norm(rel_fixed[:3, 3] - rel_true[:3, 3]) < 0.05
-    assert rotation_angle(rel_fixed[:3, :3], rel_true[:3, :3]) < 0.02
-    assert err_before > 0.2
-
-
-@pytest.mark.slow
-def test_a_two_room_build_keeps_its_rooms_apart_and_proposes_them_as_zones() -> None:
-    from bench.map_building import _det_json
-    from quadloc.maps.building.build import build_map
-    from quadloc.maps.building.recording import recording_to_dict
-    from quadloc.service.app.builds import recording_of
-    from tests.support.buildings import building_recording
-
-    br = building_recording(2, 450, seed=7)
-    rec = recording_of(recording_to_dict(
-        br.camera, [(str(i), br.app_poses[i], [_det_json(d) for d in f.detections])
-                    for i, f in enumerate(br.frames)]))
-    truth = [br.frames[o.frame].object_ids[o.index] for o in rec.observations]
-    scene, report = build_map(rec, map_id="two")
-    index = {(o.frame, o.index): k for k, o in enumerate(rec.observations)}
-    room_of_object = {}
-    for obj in report.objects:
-        rooms = Counter(truth[index[(d.frame_index, d.detection_index)]].split("/")[0]
-                        for d in obj.detections
-                        if truth[index[(d.frame_index, d.detection_index)]] is not None)
-        assert len(rooms) == 1, obj.object_id
-        room_of_object[obj.object_id] = next(iter(rooms))
-    assert len(scene.zones) == 2
-    for zone in scene.zones:
-        assert len({room_of_object[o] for o in zone.object_ids}) == 1
-    assert {r.zone_id for r in br.building.rooms} == set(room_of_object.values())
+def test_compiled_subset_keeps_ids_and_arrays() -> None:
+    cm = compile_map(synthetic_map(50, seed=1))
+    sel = np.array([3, 7, 8, 20, 49])
+    sub = compiled_subset(cm, sel)
+    assert sub.object_ids == tuple(cm.object_ids[i] for i in sel)
+    assert np.array_equal(sub.centers, cm.centers[sel])
+    assert np.array_equal(sub.dual_quadrics, cm.dual_quadrics[sel])
+    assert (sub.map_id, sub.version) == (cm.map_id, cm.version)

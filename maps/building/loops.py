@@ -192,15 +192,15 @@ def close_loops(centres: FloatArray, labels: Sequence[str],
     groups = places(object_frames, opt.min_shared_frames)
     closures: list[LoopClosure] = []
     for gi, P in enumerate(groups):
-        best: tuple[int, FloatArray, list[tuple[int, int]]] | None = None
+        best: tuple[FloatArray, list[tuple[int, int]]] | None = None
         for Q in groups[:gi]:
             found = align_places(centres[P], [labels[k] for k in P], centres[Q],
                                  [labels[k] for k in Q], up, opt)
-            if found is not None and (best is None or len(found[1]) > len(best[2])):
-                best = (-1, found[0], [(Q[b], P[a]) for a, b in found[1]])
+            if found is not None and (best is None or len(found[1]) > len(best[1])):
+                best = (found[0], [(Q[b], P[a]) for a, b in found[1]])
         if best is None:
             continue
-        _, T, pairs = best
+        T, pairs = best
         later = sorted(f for _, b in pairs for f in object_frames[b])
         earlier = sorted(f for a, _ in pairs for f in object_frames[a])
         closures.append(LoopClosure(T, tuple(pairs), (earlier[len(earlier) // 2],
