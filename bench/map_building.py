@@ -6,6 +6,20 @@ Usage::
                                  [--fixed-cameras] [--json PATH] [--plots DIR] [--write-results]
     python -m bench.map_building --write-recording PATH [--frames N] [--seeds S]
                                  [--holdout-every K]
+    python -m bench.map_building --building [--rooms 20] [--sizes 1500,3000,6000]
+                                 [--seeds 1001] [--write-results]
+
+``--building`` (issue 29): a walk through a generated building of ``--rooms`` perturbed rooms
+(:func:`tests.support.buildings.building_recording`: every room visited, then revisits; app
+poses drifting over the whole walk), built at each of ``--sizes`` frames (the first frames of
+the same walk), each build in its own process (peak RSS of that process). Scores: association
+precision / recall per room (as below, the detections of each room's objects), objects merged
+across rooms (built objects holding detections of objects of two rooms), median centre error of
+the matched objects, relocalization within 10 cm with the built map vs the true building map
+(the visited rooms' real Chess poses placed in the room, fresh detections), build wall / CPU
+time, loop closures, proposed zones; and the one-room bench on the same seeds (``--frames``) in
+the same run. Seeds 0-999 are for tuning (:data:`tests.support.buildings.TUNE_SEEDS`); report on
+others.
 
 Per seed:
 
@@ -51,7 +65,7 @@ import numpy as np
 from bench.chess_eval import eval_options
 from quadloc.factors.rotations import pose_matrix, rotation_angle
 from quadloc.maps.building.build import build_map
-from quadloc.maps.building.recording import recording_to_dict
+from quadloc.maps.building.recording import BuildLimits, recording_to_dict
 from quadloc.maps.compiled import compile_map
 from quadloc.maps.reconstruct import ellipsoid_errors
 from quadloc.service.app.builds import recording_of
@@ -122,7 +136,8 @@ def run_seed(seed: int, n_frames: int, n_test: int, log=print,
     from dataclasses import replace
 
     # the recording's defaults (odometry noise, ...) except, for the ablation, no camera poses
-    rec = replace(recording_of(doc), refine_camera_poses=refine_cameras)
+    rec = replace(recording_of(doc, BuildLimits(max_frames=n_frames, max_detections=10 ** 7)),
+                  refine_camera_poses=refine_cameras)
     truth_ids = [frames[o.frame].object_ids[o.index] for o in rec.observations]
     truth_label_ok = [frames[o.frame].true_labels[o.index] == o.label
                       for o in rec.observations]
@@ -390,6 +405,231 @@ other engineers' jobs.
     return text
 
 
+def _build_and_score(seed: int, n_rooms: int, n_frames: int, n_test_per_room: int,
+                     queue: object) -> None:
+    """One building-scale build (``--building``), run in a child process: puts its result
+    dict on ``queue``."""
+    import resource
+
+    from quadloc.service.localization.pipeline import localize
+    from tests.support.buildings import building_recording
+
+    br = building_recording(n_rooms, n_frames, seed)
+    doc = recording_to_dict(br.camera, [(str(i), br.app_poses[i],
+                                         [_det_json(d) for d in f.detections])
+                                        for i, f in enumerate(br.frames)])
+    rec = recording_of(doc, BuildLimits(max_frames=n_frames, max_detections=10 ** 7))
+    truth = [br.frames[o.frame].object_ids[o.index] for o in rec.observations]
+    label_ok = [br.frames[o.frame].true_labels[o.index] == o.label for o in rec.observations]
+    stamps: list[float] = []
+    t, cpu = time.monotonic(), time.process_time()
+    stamps.append(t)
+    scene, built_report = build_map(rec, map_id="building-built",
+                                    progress=lambda *_: stamps.append(time.monotonic()))
+    build_s, build_cpu_s = time.monotonic() - t, time.process_time() - cpu
+    stamps.append(time.monotonic())
+    report = built_report.model_dump(mode="json")
+    obs_index = {(o.frame, o.index): k for k, o in enumerate(rec.observations)}
+    zone = br.building.zone_of
+    match: dict[str, str | None] = {}
+    assigned: dict[int, str] = {}
+    merged_across = 0
+    for obj in report["objects"]:
+        ks = [obs_index[(d["frame_index"], d["detection_index"])] for d in obj["detections"]]
+        for k in ks:
+            assigned[k] = obj["object_id"]
+        match[obj["object_id"]] = Counter(truth[k] for k in ks).most_common(1)[0][0]
+        merged_across += len({zone(truth[k]) for k in ks if truth[k] is not None}) > 1
+    per_room: dict[str, dict[str, int]] = {}
+    for k, tid in enumerate(truth):
+        if tid is None:
+            continue
+        room = per_room.setdefault(zone(tid), {"assigned": 0, "correct": 0, "relevant": 0,
+                                               "found": 0})
+        ok = k in assigned and match[assigned[k]] == tid
+        room["assigned"] += k in assigned
+        room["correct"] += ok
+        room["relevant"] += label_ok[k]
+        room["found"] += ok and label_ok[k]
+    for k, oid in assigned.items():  # spurious detections in an object count against it
+        if truth[k] is None and match[oid] is not None:
+            per_room[zone(match[oid])]["assigned"] += 1
+    rooms = {z: {"precision": r["correct"] / max(1, r["assigned"]),
+                 "recall": r["found"] / max(1, r["relevant"])} for z, r in per_room.items()}
+    real_by_id = {o.object_id: o for o in br.building.scene_map.objects}
+    built_by_id = {o.object_id: o for o in scene.objects}
+    centre = [ellipsoid_errors(built_by_id[b].ellipsoid, real_by_id[r].ellipsoid)["center_m"]
+              for b, r in match.items() if b in built_by_id and r is not None]
+    visited = sorted({z for z, _, _ in br.visits})
+    camera, chess_poses, _ = load_chess_world_from_camera()
+    rooms_by_id = {r.zone_id: r for r in br.building.rooms}
+    cm_true, cm_built = br.building.compiled, compile_map(scene)
+    test_rng = np.random.default_rng([seed, 1029])
+    errs: dict[str, list[float]] = {"true_map": [], "built_map": [], "built_map_room_aligned": []}
+    aligned_centre: list[float] = []
+    for z in visited:
+        room = rooms_by_id[z]
+        # the built map after the rigid alignment of this room's matched objects onto the true
+        # ones: how right the map is locally, the drift's far part removed
+        pairs = [(built_by_id[b].ellipsoid.center, real_by_id[r].ellipsoid.center)
+                 for b, r in match.items() if b in built_by_id and r is not None
+                 and zone(r) == z and list(match.values()).count(r) == 1]
+        cm_room = None
+        if len(pairs) >= 3:
+            T_z = kabsch(np.array([p for p, _ in pairs]), np.array([q for _, q in pairs]))
+            aligned_centre += [float(np.linalg.norm(T_z[:3, :3] @ p + T_z[:3, 3] - q))
+                               for p, q in pairs]
+            cm_room = compile_map(transform_scene(scene, T_z))
+        for i in np.linspace(0, len(chess_poses) - 1, n_test_per_room).astype(int):
+            T = room.world_from_room @ chess_poses[i]
+            f = simulate_frame(br.building.room_map(room), camera, T, test_rng,
+                               SimulationConfig())
+            for name, target in (("true_map", cm_true), ("built_map", cm_built),
+                                 ("built_map_room_aligned", cm_room)):
+                r = localize(f.detections, target, camera, eval_options(seed=seed)) \
+                    if target is not None else None
+                errs[name].append(pose_errors(r.world_from_camera if r is not None
+                                              and r.localized else None, T)[0])
+    drift = [float(np.linalg.norm(a[:3, 3] - b[:3, 3]))
+             for a, b in zip(br.app_poses, br.true_poses, strict=True)]
+    true_in_visited = sum(len(rooms_by_id[z].object_ids) for z in visited)
+    queue.put({  # type: ignore[attr-defined]
+        "seed": seed, "rooms": n_rooms, "frames": n_frames, "rooms_visited": len(visited),
+        "visits": len(br.visits), "detections": len(rec.observations),
+        "app_pose_drift_max_m": max(drift),
+        "objects_built": len(scene.objects), "true_objects_in_visited_rooms": true_in_visited,
+        "true_objects_found": len({m for m in match.values() if m is not None}),
+        "objects_merged_across_rooms": merged_across,
+        "precision_min_room": min(r["precision"] for r in rooms.values()),
+        "recall_min_room": min(r["recall"] for r in rooms.values()),
+        "precision_median_room": float(np.median([r["precision"] for r in rooms.values()])),
+        "recall_median_room": float(np.median([r["recall"] for r in rooms.values()])),
+        "per_room": rooms,
+        "centre_error_median_m": float(np.median(centre)) if centre else math.nan,
+        "centre_error_p90_m": float(np.percentile(centre, 90)) if centre else math.nan,
+        "centre_error_room_aligned_median_m": float(np.median(aligned_centre))
+        if aligned_centre else math.nan,
+        "loop_closures": scene.metadata.get("loop_closures"),
+        "zones_proposed": len(scene.zones),
+        "relocalization_within_10cm": {
+            name: float(np.mean(np.array(e) <= 0.10)) for name, e in errs.items()},
+        "test_frames": len(errs["true_map"]),
+        "build_s": build_s, "build_cpu_s": build_cpu_s,
+        "max_progress_gap_s": float(np.max(np.diff(stamps))),
+        "timings_s": report["timings_s"],
+        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+    })
+
+
+def run_building(seed: int, n_rooms: int, sizes: list[int], n_test_per_room: int,
+                 log=print) -> list[dict]:
+    """``--building``: one build per size, each in its own process (module docstring)."""
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("spawn")
+    out = []
+    for n in sizes:
+        queue = ctx.Queue()
+        proc = ctx.Process(target=_build_and_score, args=(seed, n_rooms, n, n_test_per_room,
+                                                          queue))
+        proc.start()
+        while True:  # the child's result, or its failure
+            try:
+                result = queue.get(timeout=5)
+                break
+            except Exception:  # queue.Empty
+                if not proc.is_alive():
+                    raise RuntimeError(f"the {n}-frame build failed (exit code "
+                                       f"{proc.exitcode})") from None
+        proc.join()
+        log(f"building seed {seed} {n} frames: {json.dumps(result)[:400]}")
+        out.append(result)
+    return out
+
+
+def building_markdown(results: dict, command: str) -> str:
+    """The ``map_building_building`` section of docs/results.md."""
+    header = ["seed", "frames", "rooms visited (visits)", "detections", "app drift max (m)",
+              "objects built / true (found)", "merged across rooms",
+              "precision per room min / median", "recall per room min / median",
+              "centre err median / p90 (cm)", "centre err room-aligned median (cm)",
+              "loop closures", "zones proposed",
+              "reloc 10 cm true / built / built room-aligned", "build (s)", "build CPU (s)",
+              "peak RSS (MB)"]
+    rows = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for r in results["building"]:
+        rl = r["relocalization_within_10cm"]
+        rows.append("| " + " | ".join(str(c) for c in [
+            r["seed"], r["frames"], f"{r['rooms_visited']} ({r['visits']})", r["detections"],
+            f"{r['app_pose_drift_max_m']:.2f}",
+            f"{r['objects_built']} / {r['true_objects_in_visited_rooms']} "
+            f"({r['true_objects_found']})", r["objects_merged_across_rooms"],
+            f"{r['precision_min_room']:.3f} / {r['precision_median_room']:.3f}",
+            f"{r['recall_min_room']:.3f} / {r['recall_median_room']:.3f}",
+            f"{r['centre_error_median_m'] * 100:.1f} / {r['centre_error_p90_m'] * 100:.1f}",
+            f"{r.get('centre_error_room_aligned_median_m', math.nan) * 100:.1f}",
+            r["loop_closures"], r["zones_proposed"],
+            f"{rl['true_map']:.0%} / {rl['built_map']:.0%} / "
+            f"{rl.get('built_map_room_aligned', math.nan):.0%}", f"{r['build_s']:.0f}",
+            f"{r['build_cpu_s']:.0f}", f"{r['peak_rss_mb']:.0f}"]) + " |")
+    one = ["| " + " | ".join(["seed", "frames", "precision", "recall", "objects built / real",
+                              "reloc 10 cm real / built", "build (s)"]) + " |",
+           "|" + "---|" * 7]
+    for r in results["one_room"]:
+        one.append("| " + " | ".join(str(c) for c in [
+            r["seed"], r["frames"], f"{r['association']['precision']:.3f}",
+            f"{r['association']['recall']:.3f}",
+            f"{r['objects_built']} / {r['real_objects']}",
+            f"{r['relocalization']['real_map']['within_10cm']:.0%} / "
+            f"{r['relocalization']['built_map']['within_10cm']:.0%}",
+            f"{r['build_s']:.1f}"]) + " |")
+    big = [r for r in results["building"] if r["frames"] >= 6000]
+
+    def ok(flag: bool) -> str:
+        return "met" if flag else "NOT met"
+
+    reloc = [r["relocalization_within_10cm"] for r in big]
+    merged_ok = all(r["objects_merged_across_rooms"] == 0 for r in big)
+    pr_ok = all(r["precision_min_room"] >= 0.95 and r["recall_min_room"] >= 0.95 for r in big)
+    reloc_ok = all(100 * (r["true_map"] - r["built_map"]) <= 5 for r in reloc)
+    cost_ok = all(r["build_s"] <= 600 and r["peak_rss_mb"] <= 2048 for r in big)
+    verdict = "\n".join([
+        "Targets (issue 29) on the >= 6,000-frame builds above:",
+        f"- 0 objects merged across rooms: {ok(merged_ok)}.",
+        f"- association precision and recall >= 0.95 in every room: {ok(pr_ok)}.",
+        "- relocalization with the built map within 5 points of the true map at 10 cm: "
+        f"{ok(reloc_ok)}.",
+        f"- build <= 10 min and peak memory <= 2 GB: {ok(cost_ok)}.",
+    ]) if big else "No build of >= 6,000 frames in this run."
+    return f"""## Map building at building scale (bench/map_building.py --building)
+
+Command: `{command}`
+
+A walk through a generated building of perturbed copies of the Chess room
+(`tests.support.buildings.building_recording`: every room once, row by row, then revisits; in a
+room the real Chess walk placed in it, between rooms a transit seeing nothing), app poses
+drifting over the whole walk (per step rotation N(0, 0.05 deg), translation N(0, 1 % of the
+step + 1 mm) per axis, chained, never reset), detections simulated from the true poses (default
+detector noise, truncation, occlusion, 10 % misses, 5 % wrong labels, 0.2 spurious per frame),
+no track ids. Each size is the first frames of the same walk, built in its own process (peak
+RSS of that process, recording included). Per room: the detections of that room's objects.
+Relocalization: 5 real Chess poses per visited room, placed in the room, fresh detections,
+`localize()` with the true building map, with the built one (its frame is the app's, which
+starts at the true first pose) and with the built one after the rigid alignment (Kabsch) of
+that room's matched objects onto the true ones ("room-aligned": is the map right locally, the
+far part of the drift removed; also its centre error). Held-out seeds (tuning used seed 1).
+Timings on the shared 2-core machine under load.
+
+{chr(10).join(rows)}
+
+The one-room bench (`run_seed`, the Chess walk) in the same run:
+
+{chr(10).join(one)}
+
+{verdict}
+"""
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=300)
@@ -407,9 +647,33 @@ def main(argv: list[str] | None = None) -> int:
                     help="ablation: do not refine the camera poses (the default refines them, "
                          "object-level bundle adjustment); results go to the section "
                          "map_building_fixed_cameras")
+    ap.add_argument("--building", action="store_true",
+                    help="the building-scale bench (module docstring); section "
+                         "map_building_building")
+    ap.add_argument("--rooms", type=int, default=20)
+    ap.add_argument("--sizes", default="1500,3000,6000")
+    ap.add_argument("--test-per-room", type=int, default=5)
     args = ap.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(",")]
     log = lambda m: print(m, file=sys.stderr)  # noqa: E731
+    if args.building:
+        sizes = [int(n) for n in args.sizes.split(",")]
+        building = {"building": [r for s in seeds for r in run_building(
+                        s, args.rooms, sizes, args.test_per_room, log)],
+                    "one_room": [{k: v for k, v in run_seed(
+                        s, args.frames, args.test_frames, log).items()
+                        if not k.startswith("_")} for s in seeds]}
+        print(json.dumps(building, indent=2))
+        if args.json:
+            args.json.write_text(json.dumps(building, indent=2))
+        if args.write_results:
+            from bench.results_doc import update_results_section
+
+            cmd = "python -m bench.map_building " + " ".join(
+                argv if argv is not None else sys.argv[1:])
+            update_results_section("map_building_building", building_markdown(building,
+                                                                               cmd.strip()))
+        return 0
     if args.write_recording:
         doc = write_recording(args.write_recording, seeds[0], args.frames, args.holdout_every)
         print(json.dumps({"recording": str(args.write_recording), "seed": seeds[0],

@@ -15,6 +15,7 @@ Coordinates: world frame of the recording's ``world_from_camera`` poses, metres.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -34,7 +35,9 @@ from quadloc.maps.reconstruct import (
     triangulate,
 )
 
-__all__ = ["AssociationOptions", "ObjectHypothesis", "associate", "ellipse_iou", "touches_border"]
+__all__ = ["AssociationOptions", "ObjectHypothesis", "associate", "associate_windowed",
+           "ellipse_iou", "merge_duplicates", "reconstruct_initial", "touches_border",
+           "verify_objects"]
 
 
 @dataclass(frozen=True)
@@ -54,6 +57,7 @@ class AssociationOptions:
     merge_factor: float = 1.0
     max_shared_frames: float = 0.1
     ghost_ratio: float = 3.0
+    verify_iou: float = 0.1
     seed: int = 0
 
 
@@ -303,7 +307,7 @@ def touches_border(ellipse: Ellipse, camera: Camera, margin_px: float = 4.0) -> 
                 or y1 > camera.height - margin_px)
 
 
-def _reconstruct(idx: Sequence[int], obs: Sequence[Observation], T_wc: FloatArray,
+def reconstruct_initial(idx: Sequence[int], obs: Sequence[Observation], T_wc: FloatArray,
                  camera: Camera, opt: AssociationOptions) -> Ellipsoid | None:
     """Initial ellipsoid: Rubino + LM (``reconstruct_ellipsoid``, weak log-axes prior against
     flat collapse) from an evenly spread subset of the untruncated views (all views if fewer
@@ -417,7 +421,7 @@ def associate(
             t = observations[k].track_id
             (tracked.setdefault(t, []) if t is not None else untracked).append(int(k))
         for tid, members in tracked.items():
-            ell = _reconstruct(members, observations, T_wc, camera, opt) \
+            ell = reconstruct_initial(members, observations, T_wc, camera, opt) \
                 if len(members) >= opt.min_views else None
             if ell is None:
                 for k in members:
@@ -435,7 +439,7 @@ def associate(
             for cluster in clusters:
                 glob = [int(un[m]) for m in cluster]
                 tick()
-                ell = _reconstruct(glob, observations, T_wc, camera, opt)
+                ell = reconstruct_initial(glob, observations, T_wc, camera, opt)
                 if ell is not None:
                     label_objs.append((glob, ell))
                     assigned.update(glob)
@@ -467,7 +471,7 @@ def associate(
                     assigned -= set(keep)
                     continue
                 if set(keep) != set(glob):
-                    ell2 = _reconstruct(sorted(keep), observations, T_wc, camera, opt)
+                    ell2 = reconstruct_initial(sorted(keep), observations, T_wc, camera, opt)
                     ell = ell2 if ell2 is not None else ell
                 objects.append(ObjectHypothesis(label, sorted(keep), ell, "geometric",
                                                 {k: ious[k] for k in keep}))
@@ -476,7 +480,7 @@ def associate(
                     rejected[k] = "fits_no_object"
         if progress is not None:
             progress(label, (li + 1) / len(labels))
-    objects = _merge_duplicates(objects, observations, T_wc, camera, opt, tick)
+    objects = merge_duplicates(objects, observations, T_wc, camera, opt, tick)
     objects = _drop_label_ghosts(objects, rejected, opt)
     return objects, rejected
 
@@ -491,7 +495,7 @@ def _inside(point: FloatArray, ell: Ellipsoid) -> bool:
     return float(np.sum((d / ell.axes) ** 2)) <= 1.0
 
 
-def _merge_duplicates(objects: list[ObjectHypothesis], obs: Sequence[Observation],
+def merge_duplicates(objects: list[ObjectHypothesis], obs: Sequence[Observation],
                       T_wc: FloatArray, camera: Camera, opt: AssociationOptions,
                       tick: Callable[[], None]) -> list[ObjectHypothesis]:
     """Merge same-label objects whose centres lie within ``merge_factor`` x the larger one's
@@ -517,7 +521,7 @@ def _merge_duplicates(objects: list[ObjectHypothesis], obs: Sequence[Observation
                 union = sorted(a.observations + [k for k in b.observations
                                                  if obs[k].frame not in fa])
                 tick()
-                ell = _reconstruct(union, obs, T_wc, camera, opt)
+                ell = reconstruct_initial(union, obs, T_wc, camera, opt)
                 if ell is None:
                     continue
                 objects[ia] = ObjectHypothesis(a.label, union, ell, a.source,
@@ -547,3 +551,156 @@ def _drop_label_ghosts(objects: list[ObjectHypothesis], rejected: dict[int, str]
         else:
             keep.append(a)
     return keep
+
+
+#: Frames per window of :func:`associate_windowed` (windows overlap by half).
+WINDOW_FRAMES = 400
+
+
+def associate_windowed(
+    observations: Sequence[Observation], world_from_camera: FloatArray, camera: Camera,
+    options: AssociationOptions | None = None,
+    progress: Callable[[str, float], None] | None = None,
+    window_frames: int = WINDOW_FRAMES,
+) -> tuple[list[ObjectHypothesis], dict[int, str]]:
+    """:func:`associate` in windows of ``window_frames`` consecutive frames overlapping by half
+    (time and memory linear in the frames; drift within a window is small), then the objects of
+    overlapping windows chained where they share at least half of the detections either holds
+    in the shared frames (and 2). A chain keeps one detection per frame (the one most windows
+    gave it) and a detection claimed by two chains goes to the larger. A recording within one
+    window is :func:`associate` itself. Then the same-label objects split by the drift between
+    two passes are merged (:func:`merge_duplicates`). Same arguments and result as
+    :func:`associate`; ``progress(label, fraction)`` over the whole recording."""
+    opt = options or AssociationOptions()
+    frames_all = np.array([o.frame for o in observations], dtype=int)
+    if not len(frames_all) or frames_all.max() - frames_all.min() < window_frames:
+        return associate(observations, world_from_camera, camera, opt, progress)
+    step = max(1, window_frames // 2)
+    starts = list(range(int(frames_all.min()), int(frames_all.max()) + 1, step))
+    hyps: list[ObjectHypothesis] = []
+    window_of: list[int] = []
+    rejected_any: dict[int, str] = {}
+    for w, s in enumerate(starts):
+        sel = np.flatnonzero((frames_all >= s) & (frames_all < s + window_frames))
+        if not len(sel):
+            continue
+
+        def sub_progress(label: str, fraction: float, w: int = w) -> None:
+            if progress is not None:
+                progress(label, (w + fraction) / len(starts))
+
+        objs, rej = associate([observations[k] for k in sel.tolist()], world_from_camera,
+                              camera, opt, sub_progress)
+        for h in objs:
+            hyps.append(ObjectHypothesis(h.label, [int(sel[k]) for k in h.observations],
+                                         h.ellipsoid, h.source,
+                                         {int(sel[k]): v for k, v in h.ious.items()}))
+            window_of.append(w)
+        for k, reason in rej.items():
+            rejected_any.setdefault(int(sel[k]), reason)
+    # chain the objects of overlapping windows
+    parent = list(range(len(hyps)))
+
+    def find(a: int) -> int:
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    owners: dict[int, list[int]] = {}
+    for h_i, h in enumerate(hyps):
+        for k in h.observations:
+            owners.setdefault(k, []).append(h_i)
+    shared: dict[tuple[int, int], int] = {}
+    for hs in owners.values():
+        for a, b in itertools.combinations(sorted(hs), 2):
+            shared[(a, b)] = shared.get((a, b), 0) + 1
+    for (a, b), n in shared.items():
+        lo = max(starts[window_of[b]], starts[window_of[a]])
+        hi = min(starts[window_of[a]], starts[window_of[b]]) + window_frames
+
+        def in_overlap(h: ObjectHypothesis, lo: int = lo, hi: int = hi) -> int:
+            return sum(lo <= observations[k].frame < hi for k in h.observations)
+
+        if n >= 2 and n >= 0.5 * min(in_overlap(hyps[a]), in_overlap(hyps[b])):
+            ra, rb = find(a), find(b)
+            if ra != rb:
+                parent[max(ra, rb)] = min(ra, rb)
+    chains: dict[int, list[int]] = {}
+    for h_i in range(len(hyps)):
+        chains.setdefault(find(h_i), []).append(h_i)
+    votes: list[dict[int, int]] = []  # per chain: detection -> windows that gave it
+    for members in chains.values():
+        v: dict[int, int] = {}
+        for h_i in members:
+            for k in hyps[h_i].observations:
+                v[k] = v.get(k, 0) + 1
+        votes.append(v)
+    chain_list = list(chains.values())
+    size = [len(v) for v in votes]
+    claim: dict[int, int] = {}
+    for c, v in enumerate(votes):
+        for k in v:
+            if k not in claim or size[c] > size[claim[k]]:
+                claim[k] = c
+    objects: list[ObjectHypothesis] = []
+    T_wc = np.asarray(world_from_camera, dtype=float)
+    for c, members in enumerate(chain_list):
+        per_frame: dict[int, int] = {}
+        for k, n in sorted(votes[c].items()):
+            if claim[k] != c:
+                continue
+            f = observations[k].frame
+            if f not in per_frame or n > votes[c][per_frame[f]]:
+                per_frame[f] = k
+        idx = sorted(per_frame.values())
+        if len(idx) < opt.min_views:
+            continue
+        largest = max(members, key=lambda h_i: len(hyps[h_i].observations))
+        ell = hyps[largest].ellipsoid
+        if len(members) > 1:
+            ell = reconstruct_initial(idx, observations, T_wc, camera, opt) or ell
+        kept = set(idx)
+        ious = {k: v for h_i in members for k, v in hyps[h_i].ious.items() if k in kept}
+        objects.append(ObjectHypothesis(hyps[largest].label, idx, ell, hyps[largest].source,
+                                        ious))
+    objects = verify_objects(objects, observations, T_wc, camera, opt)
+    objects = merge_duplicates(objects, observations, T_wc, camera, opt,
+                               lambda: progress("", 1.0) if progress is not None else None)
+    assigned = {k for h in objects for k in h.observations}
+    rejected = {k: rejected_any.get(k, "fits_no_object") for k in range(len(observations))
+                if k not in assigned}
+    return objects, rejected
+
+
+#: :func:`verify_objects` drops an object whose largest semi-axis exceeds this many times the
+#: median size its views imply (distance x angular radius).
+MAX_SIZE_FACTOR = 4.0
+
+
+def verify_objects(objects: Sequence[ObjectHypothesis], observations: Sequence[Observation],
+                   world_from_camera: FloatArray, camera: Camera, opt: AssociationOptions
+                   ) -> list[ObjectHypothesis]:
+    """The objects with only their detections that overlap the projection of their ellipsoid
+    by at least ``verify_iou`` (poses ``world_from_camera``; lower than ``min_iou``: the
+    ellipsoid of a chain of windows sees the drift between them), those left with fewer than
+    ``min_views`` dropped, and those whose largest semi-axis exceeds :data:`MAX_SIZE_FACTOR`
+    times the median size their views imply (an ellipsoid stretched across views of two
+    objects, e.g. of two rooms)."""
+    T_wc = np.asarray(world_from_camera, dtype=float)
+    out = []
+    for h in objects:
+        frames = [observations[k].frame for k in h.observations]
+        ious = _projected_ious(h.ellipsoid, T_wc[frames], camera,
+                               [observations[k].ellipse for k in h.observations])
+        keep = [k for k, iou in zip(h.observations, ious.tolist(), strict=True)
+                if iou >= opt.verify_iou]
+        if len(keep) < opt.min_views:
+            continue
+        o, d, rho = _rays([observations[k] for k in keep], camera, T_wc)
+        t = np.einsum("nk,nk->n", h.ellipsoid.center - o, d)
+        if h.ellipsoid.axes.max() > MAX_SIZE_FACTOR * float(np.median(np.maximum(t, 0) * rho)):
+            continue
+        out.append(h if len(keep) == len(h.observations) else ObjectHypothesis(
+            h.label, keep, h.ellipsoid, h.source, {k: h.ious[k] for k in keep if k in h.ious}))
+    return out

@@ -13,15 +13,32 @@ its current estimate (reported as ``refinement.stopped_early``).
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
+from quadloc.factors.arrays import FloatArray, IntArray
 from quadloc.factors.budget import Deadline, deadline_passed
-from quadloc.maps.building.association import AssociationOptions, associate
+from quadloc.factors.camera import Camera, Ellipsoid
+from quadloc.factors.rotations import invert_pose
+from quadloc.maps.building.association import (
+    AssociationOptions,
+    ObjectHypothesis,
+    associate_windowed,
+    merge_duplicates,
+    reconstruct_initial,
+)
 from quadloc.maps.building.joint import ObjectQuality, refine_jointly
-from quadloc.maps.building.recording import Recording
+from quadloc.maps.building.loops import (
+    LoopOptions,
+    close_loops,
+    corrected_poses,
+    object_frames_of,
+    places,
+    proposed_zones,
+)
+from quadloc.maps.building.recording import Observation, Recording
 from quadloc.maps.building.report import (
     BuildCounts,
     BuildReport,
@@ -43,6 +60,11 @@ MIN_VIEWS_UNCONSTRAINED = 15
 #: Objects whose centre std (quality report) exceeds this (m) are left out of the map; None
 #: keeps them (the default; why: docs/design/maps.md, "Build jobs").
 MAX_CENTER_STD_M: float | None = None
+#: Objects detected in fewer than this fraction of the frames of their place (:func:`places`)
+#: that had them in view (centre in front of the camera and inside the image) are left out
+#: (``rarely_seen``: a wrong label's phantom, a spurious cluster; a real object is detected in
+#: most frames that see it).
+MIN_VIEW_FRACTION = 0.25
 #: The report's warning when the time budget stopped the joint refinement.
 REFINEMENT_STOPPED_WARNING = ("time budget reached during refinement: the map holds the "
                               "estimate at that point")
@@ -52,10 +74,90 @@ def _drop_detail(reason: str, shape_problem: str | None, q: ObjectQuality) -> st
     """A sentence for the report on why an object was left out of the map."""
     if reason == "degenerate_shape":
         return f"not an object's shape: {shape_problem}"
+    if reason == "rarely_seen":
+        return f"detected in only {q.n_views} of the frames that had it in view"
     if reason == "unconstrained":
         return (f"semi-axes {list(q.unconstrained_axes)} not constrained by the views and only "
                 f"{q.n_views} views")
     return f"centre uncertain by {q.center_std_m:.3g} m along some direction"
+
+
+def _in_view_counts(centres: FloatArray, object_frames: Sequence[Sequence[int]],
+                    T_wc: FloatArray,
+                    camera: Camera, min_shared_frames: int) -> IntArray:
+    """Per object, how many frames of its place (:func:`places`: the frames detecting any of
+    the place's objects) have its centre (n, 3) in front of the camera and inside the image
+    (poses ``T_wc`` (F, 4, 4))."""
+    out = np.zeros(len(centres), dtype=int)
+    for group in places(object_frames, min_shared_frames):
+        fr = np.unique(np.concatenate([np.asarray(object_frames[k], dtype=int)
+                                       for k in group]))
+        R, t = T_wc[fr, :3, :3], T_wc[fr, :3, 3]
+        # camera coordinates (frames, objects, 3) of the group's centres
+        pc = np.einsum("fji,fkj->fki", R, centres[group][None] - t[:, None])
+        z = pc[..., 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = camera.fx * pc[..., 0] / z + camera.cx
+            v = camera.fy * pc[..., 1] / z + camera.cy
+        seen = (z > 0.05) & (u >= 0) & (u <= camera.width) & (v >= 0) & (v <= camera.height)
+        out[group] = seen.sum(axis=0)
+    return out
+
+
+def _move(ell: Ellipsoid, T: FloatArray) -> Ellipsoid:
+    """``ell`` moved by the rigid ``T`` (4x4)."""
+    return Ellipsoid(T[:3, :3] @ ell.center + T[:3, 3], ell.axes.copy(), T[:3, :3] @ ell.rotation)
+
+
+def _close_loops(objects: list[ObjectHypothesis], obs: tuple[Observation, ...],
+                 T_wc: FloatArray, recording: Recording, opt: AssociationOptions,
+                 loops: LoopOptions) -> tuple[list[ObjectHypothesis], FloatArray, int]:
+    """Loop closure through objects (:mod:`quadloc.maps.building.loops`): the objects with
+    the matched ones merged (one detection per frame, the larger object's on a clash), every
+    object moved by its frames' correction, the corrected poses, and the number of loops."""
+    frames = object_frames_of([h.observations for h in objects], obs)
+    closures = close_loops(np.array([h.ellipsoid.center for h in objects]),
+                           [h.label for h in objects], frames, np.asarray(recording.up_axis),
+                           loops)
+    if not closures:
+        return objects, T_wc, 0
+    T0 = corrected_poses(T_wc, closures, recording.odometry_noise, loops)
+    moved = []
+    for h, fr in zip(objects, frames, strict=True):
+        f = int(fr[len(fr) // 2])
+        moved.append(_move(h.ellipsoid, T0[f] @ invert_pose(T_wc[f])))
+    parent = list(range(len(objects)))
+
+    def find(a: int) -> int:
+        while parent[a] != a:
+            a = parent[a]
+        return a
+
+    for c in closures:
+        for a, b in c.pairs:
+            ra, rb = find(a), find(b)
+            if ra != rb:
+                parent[max(ra, rb)] = min(ra, rb)
+    groups: dict[int, list[int]] = {}
+    for k in range(len(objects)):
+        groups.setdefault(find(k), []).append(k)
+    out = []
+    for members in groups.values():
+        members.sort(key=lambda k: -len(objects[k].observations))
+        big = objects[members[0]]
+        if len(members) == 1:
+            out.append(ObjectHypothesis(big.label, big.observations, moved[members[0]],
+                                        big.source, big.ious))
+            continue
+        per_frame: dict[int, int] = {}
+        for k in members:
+            for i in objects[k].observations:
+                per_frame.setdefault(obs[i].frame, i)
+        idx = sorted(per_frame.values())
+        ell = reconstruct_initial(idx, obs, T0, recording.camera, opt) or moved[members[0]]
+        ious = {i: v for k in members for i, v in objects[k].ious.items()}
+        out.append(ObjectHypothesis(big.label, idx, ell, big.source, ious))
+    return out, T0, len(closures)
 
 
 class BuildTimeoutError(RuntimeError):
@@ -68,6 +170,7 @@ def build_map(
     max_iterations: int = 30, metadata: Mapping[str, Any] | None = None,
     min_views_unconstrained: int = MIN_VIEWS_UNCONSTRAINED,
     max_center_std_m: float | None = MAX_CENTER_STD_M,
+    min_view_fraction: float = MIN_VIEW_FRACTION, loops: LoopOptions | None = None,
 ) -> tuple[SceneMap, BuildReport]:
     """The map (version 1, ``map_id``) and the report (module docstring).
 
@@ -80,6 +183,7 @@ def build_map(
     narrow cone).
     """
     t0 = time.perf_counter()
+    loops = loops or LoopOptions()
     report_progress: Progress = progress or (lambda *_: None)
     T_wc = np.array([f.world_from_camera for f in recording.frames])
     obs = recording.observations
@@ -90,7 +194,12 @@ def build_map(
             raise BuildTimeoutError("time budget exhausted during association")
         report_progress("associating", 50.0 * fraction, 0)
 
-    objects, rejected = associate(obs, T_wc, recording.camera, association, on_label)
+    opt = association or AssociationOptions()
+    objects, rejected = associate_windowed(obs, T_wc, recording.camera, opt, on_label)
+    objects, T_init, n_loops = _close_loops(objects, obs, T_wc, recording, opt, loops)
+    if n_loops:
+        objects = merge_duplicates(objects, obs, T_init, recording.camera, opt,
+                                   lambda: on_label("", 1.0))
     t_assoc = time.perf_counter() - t0
     report_progress("refining", 50.0, len(objects))
 
@@ -104,7 +213,12 @@ def build_map(
             [(h.label, h.observations, h.ellipsoid) for h in objects],
             size_priors=recording.size_priors, refine_cameras=recording.refine_camera_poses,
             odometry=recording.odometry_noise,
-            max_iterations=max_iterations, deadline=deadline, progress=on_iter)
+            max_iterations=max_iterations, deadline=deadline, progress=on_iter,
+            initial_world_from_camera=T_init)
+        in_view = _in_view_counts(np.array([e.center for e in joint.ellipsoids]),
+                                  object_frames_of([h.observations for h in objects], obs),
+                                  joint.world_from_camera, recording.camera,
+                                  loops.min_shared_frames)
     t_refine = time.perf_counter() - t0 - t_assoc
     report_progress("saving", 95.0, len(objects))
     # the report's frame indices are positions in the recording document
@@ -124,6 +238,8 @@ def build_map(
         shape_problem = degenerate_shape_reason(ell)
         if shape_problem is not None:
             reason = "degenerate_shape"
+        elif q.n_views < min_view_fraction * in_view[k]:
+            reason = "rarely_seen"
         elif q.unconstrained_axes and q.n_views < min_views_unconstrained:
             reason = "unconstrained"
         elif max_center_std_m is not None and not q.center_std_m <= max_center_std_m:
@@ -154,8 +270,13 @@ def build_map(
     meta = {"built_by": "quadloc.maps.building", "n_frames": len(recording.frames),
             "n_detections": len(obs)}
     meta.update(metadata or {})
+    kept = [h for h in objects if h.observations[0] not in rejected]
+    zones = proposed_zones([m.object_id for m in map_objects],
+                           object_frames_of([h.observations for h in kept], obs),
+                           min_shared_frames=loops.min_shared_frames)
+    meta["loop_closures"] = n_loops
     scene = SceneMap(map_id=map_id, name=recording.name, up_axis=recording.up_axis,
-                     categories=cats, objects=tuple(map_objects), metadata=meta)
+                     categories=cats, objects=tuple(map_objects), metadata=meta, zones=zones)
     refinement = None if joint is None else RefinementReport(
         iterations=joint.iterations, initial_error=joint.initial_error,
         final_error=joint.final_error, stopped_early=joint.stopped_early,

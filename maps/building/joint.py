@@ -173,6 +173,7 @@ def refine_jointly(
     unconstrained_prior_sigma: float | None = UNCONSTRAINED_PRIOR_SIGMA,
     frames_per_factor: int = FRAMES_PER_FACTOR,
     axis_floor_fraction: float | None = AXIS_FLOOR_FRACTION,
+    initial_world_from_camera: FloatArray | None = None,
 ) -> JointResult:
     """Refine ``objects`` = ``(label, observation indices, initial ellipsoid)`` jointly.
 
@@ -180,8 +181,13 @@ def refine_jointly(
     :class:`quadloc.factors.budget.Deadline` after which LM stops (the result so far is kept;
     ``stopped_early``). ``progress(iteration, error)`` after each LM iteration, and with a
     fractional iteration at least every 0.5 s during one (see ``_Ticker``).
+    ``initial_world_from_camera`` (F, 4, 4): where the frames' poses start (e.g. after loop
+    closures, :func:`quadloc.maps.building.loops.corrected_poses`; default the app's poses);
+    the odometry between factors stay the app's relative poses.
     """
-    T_wc = np.asarray(world_from_camera, dtype=float)
+    T_app = np.asarray(world_from_camera, dtype=float)
+    T_wc = T_app if initial_world_from_camera is None else np.asarray(
+        initial_world_from_camera, dtype=float)
     graph = gtsam.NonlinearFactorGraph()
     values = gtsam.Values()
     E = [gtsam.symbol("e", k) for k in range(len(objects))]
@@ -260,9 +266,9 @@ def refine_jointly(
                                          gtsam.noiseModel.Isotropic.Sigma(6, 1e-6)))
         noise = odometry or OdometryNoise()
         path = np.concatenate([[0.0], np.cumsum(np.linalg.norm(
-            np.diff(T_wc[:, :3, 3], axis=0), axis=1))])  # app's path length to each frame (m)
+            np.diff(T_app[:, :3, 3], axis=0), axis=1))])  # app's path length to each frame (m)
         for a, b in itertools.pairwise(used_frames):
-            rel = invert_pose(T_wc[a]) @ T_wc[b]
+            rel = invert_pose(T_app[a]) @ T_app[b]
             sig = noise.sigmas(float(path[b] - path[a]), b - a)
             graph.add(gtsam.BetweenFactorPose3(X[a], X[b], pose3(rel),
                                                gtsam.noiseModel.Diagonal.Sigmas(sig)))

@@ -62,7 +62,8 @@ class DroppedObject(_ReportModel):
 
     object_id: str
     label: str
-    reason: str = Field(description="degenerate_shape, unconstrained or center_unconstrained.")
+    reason: str = Field(description="degenerate_shape, rarely_seen, unconstrained or "
+                                    "center_unconstrained.")
     detail: str
     n_views: int
     semi_axes_m: list[float]

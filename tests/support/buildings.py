@@ -57,8 +57,10 @@ __all__ = [
     "TUNE_SEEDS",
     "Building",
     "BuildingFrame",
+    "BuildingRecording",
     "Room",
     "building_frames",
+    "building_recording",
     "make_building",
 ]
 
@@ -332,3 +334,118 @@ def two_chess_rooms_document(map_id: str, name: str = "Two rooms") -> dict:
         zones.append({"zone_id": room, "object_ids": ids})
     return {"map_id": map_id, "name": name, "categories": chess["categories"],
             "objects": objects, "zones": zones}
+
+
+@dataclass(frozen=True, eq=False)
+class BuildingRecording:
+    """A map-building recording through a building (:func:`building_recording`).
+
+    Attributes:
+        building: the generated building (its map is the truth).
+        camera: the Chess camera.
+        true_poses: (F,) true ``world_from_camera`` 4x4 poses.
+        app_poses: (F,) the app's drifting ``world_from_camera`` poses
+            (:func:`tests.support.walks.drifting_odometry` over the whole walk).
+        frames: (F,) the simulated detections (``object_ids`` name the true objects; transit
+            frames between rooms see no object).
+        zone_of_frame: (F,) the room a frame is in (``None`` in transit).
+        visits: the rooms in walking order (``zone_id``, first frame, end frame exclusive).
+    """
+
+    building: Building
+    camera: Camera
+    true_poses: tuple[np.ndarray, ...]
+    app_poses: tuple[np.ndarray, ...]
+    frames: tuple[SimulatedFrame, ...]
+    zone_of_frame: tuple[str | None, ...]
+    visits: tuple[tuple[str, int, int], ...]
+
+
+def _room_route(building: Building, n_frames: int, frames_per_visit: int,
+                rng: np.random.Generator) -> list[int]:
+    """Room indices in walking order: every room once along the grid (row by row, alternating
+    direction), then revisits, each a random room within two grid steps of the current one or,
+    one time in four, any room (a long loop back), until ``n_frames`` are filled."""
+    n = len(building.rooms)
+    side = math.ceil(math.sqrt(min(n, ROOMS_PER_FLOOR)))
+    first = []
+    for k in range(n):
+        row, col = divmod(k % ROOMS_PER_FLOOR, side)
+        first.append((k // ROOMS_PER_FLOOR, row, col if row % 2 == 0 else side - 1 - col))
+    order = sorted(range(n), key=lambda k: first[k])
+    route = list(order)
+    centres = np.array([building.room_map(r).centers.mean(axis=0) for r in building.rooms])
+    while len(route) * frames_per_visit < n_frames:
+        here = route[-1]
+        near = np.flatnonzero((np.linalg.norm(centres - centres[here], axis=1)
+                               <= 2.5 * ROOM_SPACING_M) & (np.arange(n) != here))
+        pool = near if len(near) and rng.random() >= 0.25 else np.delete(np.arange(n), here)
+        route.append(int(rng.choice(pool)) if len(pool) else here)
+    return route
+
+
+def building_recording(n_rooms: int = 20, n_frames: int = 6000, seed: int = 0, *,
+                       mode: str = "perturbed", config: SimulationConfig | None = None,
+                       transit_step_m: float = 0.5) -> BuildingRecording:
+    """A walk through a generated building for map building; deterministic in ``seed``.
+
+    The building: :func:`make_building` (``n_rooms``, ``mode``; rooms turned by random yaws).
+    The walk visits every room once (row by row), then revisits rooms (:func:`_room_route`)
+    until ``n_frames`` frames: in a room, the real Chess walk (its 108 poses, interpolated:
+    :func:`tests.support.walks.resampled_walk`) placed in the room, the whole walk in
+    ``~200`` frames at the first visit (forwards or backwards), a random contiguous half of it
+    at a revisit; between rooms, a straight transit at eye height with ``transit_step_m`` steps
+    in which nothing is detected (walls hide the rooms). Detections: :func:`simulate_frame` on the
+    room's own objects with ``config`` (default: the simulator's detector noise, truncation,
+    occlusion, 10 % misses, 5 % wrong labels, 0.2 spurious detections per frame). The app's
+    poses drift over the whole walk: :func:`tests.support.walks.drifting_odometry` (per step,
+    rotation noise N(0, 0.05 deg) about a random axis and translation noise N(0, 1 % of the step
+    + 1 mm) per axis, chained from the true first pose: an unbounded random walk, no loop
+    closure by the app). The walk is cut at ``n_frames``.
+    """
+    from tests.support.walks import drifting_odometry, resampled_walk
+
+    building = make_building(n_rooms, mode, seed)
+    camera, chess_poses, _ = load_chess_world_from_camera()
+    cfg = config or SimulationConfig(wrong_label_probability=0.05, spurious_rate=0.2)
+    rng = np.random.default_rng([seed, 29])
+    per_visit = 200
+    full = resampled_walk(chess_poses, per_visit)
+    half_source = resampled_walk(chess_poses, 2 * per_visit)
+    route = _room_route(building, n_frames, per_visit, rng)
+    poses: list[np.ndarray] = []
+    zones: list[str | None] = []
+    visits: list[tuple[str, int, int]] = []
+    seen: set[int] = set()
+    for k in route:
+        room = building.rooms[k]
+        if k in seen:
+            start = int(rng.integers(0, per_visit))
+            stretch = half_source[start:start + per_visit]
+        else:
+            stretch = list(full)
+        seen.add(k)
+        if rng.random() < 0.5:
+            stretch = stretch[::-1]
+        inside = [room.world_from_room @ T for T in stretch]
+        if poses:  # transit from the last pose to the room's first one
+            a, b = poses[-1], inside[0]
+            steps = max(2, math.ceil(float(np.linalg.norm(b[:3, 3] - a[:3, 3]))
+                                     / transit_step_m))
+            transit = resampled_walk([a, b], steps + 1)[1:-1]
+            poses += transit
+            zones += [None] * len(transit)
+        visits.append((room.zone_id, len(poses), len(poses) + len(inside)))
+        poses += inside
+        zones += [room.zone_id] * len(inside)
+        if len(poses) >= n_frames:
+            break
+    poses, zones = poses[:n_frames], zones[:n_frames]
+    visits = [(z, a, min(b, n_frames)) for z, a, b in visits if a < n_frames]
+    rooms = {r.zone_id: r for r in building.rooms}
+    frames = [SimulatedFrame((), (), (), (), np.zeros(0), T) if z is None
+              else simulate_frame(building.room_map(rooms[z]), camera, T, rng, cfg)
+              for T, z in zip(poses, zones, strict=True)]
+    app = drifting_odometry(poses, rng)
+    return BuildingRecording(building, camera, tuple(poses), tuple(app), tuple(frames),
+                             tuple(zones), tuple(visits))

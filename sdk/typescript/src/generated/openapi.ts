@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: 8527d9322af54cc63d9826cd05683b7c6578b7f7539e269f7d2ab85f5e4da5ee
+// openapi-sha256: afdf3f5a58ba507ac45bea39fe105dfd126833f418e2229c7bf269ed3142400e
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -641,7 +641,7 @@ export interface components {
             label: string;
             /**
              * Reason
-             * @description degenerate_shape, unconstrained or center_unconstrained.
+             * @description degenerate_shape, rarely_seen, unconstrained or center_unconstrained.
              */
             reason: string;
             /** Detail */
