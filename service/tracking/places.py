@@ -58,7 +58,7 @@ MISS_PENALTY = 0.5
 NULL_GAIN = 1.2
 #: Per-frame weight of the evidence and the per-frame discount of past scores.
 TEMPERATURE = 0.25
-DISCOUNT = 0.97
+DISCOUNT = 0.93
 #: A session commits to a place when its posterior is at least this (and it explains
 #: :data:`MIN_COMMIT_OBJECTS` distinct objects); a committed place is given up when a rival's
 #: posterior exceeds its own.
@@ -87,7 +87,7 @@ class PlaceCandidate:
     zone: str | None
 
 
-@dataclass
+@dataclass(eq=False)
 class PlaceHypothesis:
     """One place: its odometry alignment, discounted score, the distinct map objects (indices)
     it matched, and its zone (None until it matched an object of a zone)."""
@@ -222,36 +222,37 @@ class PlaceSet:
         return out
 
     # ------------------------------------------------------------------ proposals
-    def propose(self, world_from_odom: FloatArray, odom_from_camera: FloatArray,
+    def propose(self, alignments: Sequence[FloatArray], odom_from_camera: FloatArray,
                 history: Sequence[tuple[FloatArray, FloatArray, tuple[str, ...]]],
-                protect: PlaceHypothesis | None = None) -> PlaceHypothesis:
-        """Add a proposed alignment, or refresh the hypothesis of the same place (its
-        alignment replaced by the newer one, its score kept). A new one is scored on
-        ``history`` (``(odom_from_camera, ellipses, labels)`` of the recent frames, oldest
-        first, with the discount), so that hypotheses born at different frames compare on
-        the same evidence. Beyond :data:`MAX_HYPOTHESES` the weakest (never ``protect``) is
-        dropped. Returns the hypothesis."""
-        T = world_from_odom @ odom_from_camera
-        for h in self.hypotheses:
-            Th = h.world_from_odom @ odom_from_camera
-            if np.linalg.norm(Th[:3, 3] - T[:3, 3]) < SAME_PLACE_M and math.degrees(
-                    rotation_angle(Th[:3, :3], T[:3, :3])) < SAME_PLACE_DEG:
-                if h is not protect:
-                    h.world_from_odom = world_from_odom
-                return h
-        new = PlaceHypothesis(np.asarray(world_from_odom, float))
+                protect: PlaceHypothesis | None = None) -> None:
+        """Add proposed alignments ``world_from_odom``; one of a place already held refreshes
+        that hypothesis (its alignment replaced by the newer one, its score kept; never
+        ``protect``'s). New ones are scored together on ``history`` (``(odom_from_camera,
+        ellipses, labels)`` of the recent frames, oldest first, with the discount), so that
+        hypotheses born at different frames compare on the same evidence. Beyond
+        :data:`MAX_HYPOTHESES` the weakest (never ``protect``) are dropped."""
+        new: list[PlaceHypothesis] = []
+        for W in alignments:
+            T = W @ odom_from_camera
+            same = next((h for h in [*self.hypotheses, *new] if _same_place(
+                h.world_from_odom @ odom_from_camera, T)), None)
+            if same is None:
+                new.append(PlaceHypothesis(np.asarray(W, float)))
+            elif same is not protect:
+                same.world_from_odom = np.asarray(W, float)
+        if not new:
+            return
         n = len(history)
         for k, (T_oc, ell, labels) in enumerate(history):
-            ll, matched, _ = self.frame_log_likelihoods((world_from_odom @ T_oc)[None], ell,
-                                                        labels)
-            new.score += DISCOUNT ** (n - 1 - k) * TEMPERATURE * float(ll[0])
-            self._remember(new, matched[0])
-        self.hypotheses.append(new)
-        if len(self.hypotheses) > MAX_HYPOTHESES:
-            weakest = min((h for h in self.hypotheses if h is not protect),
-                          key=lambda h: h.score)
-            self.hypotheses.remove(weakest)
-        return new
+            ll, matched, _ = self.frame_log_likelihoods(
+                np.array([h.world_from_odom @ T_oc for h in new]), ell, labels)
+            for h, x, m in zip(new, ll, matched, strict=True):
+                h.score += DISCOUNT ** (n - 1 - k) * TEMPERATURE * float(x)
+                self._remember(h, m)
+        self.hypotheses += new
+        while len(self.hypotheses) > MAX_HYPOTHESES:
+            self.hypotheses.remove(min((h for h in self.hypotheses if h is not protect),
+                                       key=lambda h: h.score))
 
     def candidates(self, odom_from_camera: FloatArray,
                    committed: PlaceHypothesis | None = None,
@@ -283,6 +284,12 @@ class PlaceSet:
         p = self.posteriors()
         k = int(np.argmax(p))
         return self.hypotheses[k], float(p[k])
+
+
+def _same_place(a: FloatArray, b: FloatArray) -> bool:
+    """Two camera poses of the same place (:data:`SAME_PLACE_M`, :data:`SAME_PLACE_DEG`)."""
+    return bool(np.linalg.norm(a[:3, 3] - b[:3, 3]) < SAME_PLACE_M and math.degrees(
+        float(rotation_angle(a[:3, :3], b[:3, :3]))) < SAME_PLACE_DEG)
 
 
 def alignment(world_from_camera: FloatArray, odom_from_camera: FloatArray) -> FloatArray:

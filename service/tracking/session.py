@@ -93,7 +93,7 @@ TIME_BUDGET_EXCEEDED = "time_budget_exceeded"
 #: (on a frame with >= 3 usable detections): a wrong place committed to meets its rival.
 CHECK_INTERVAL_FRAMES = 30
 #: Frames remembered (poses, usable detections) to score a newly proposed place on.
-HISTORY_FRAMES = 30
+HISTORY_FRAMES = 45
 #: Below this posterior a candidate place does not make an answer ``ambiguous``.
 AMBIGUOUS_PROBABILITY = 0.05
 
@@ -561,8 +561,7 @@ class TrackingSession:
             timings["localize"] = (time.perf_counter() - t) * 1e3
             if out.reason == TIME_BUDGET_EXCEEDED or deadline_passed(deadline):
                 return self._no_pose(index, frame, T_oc, usable, TIME_BUDGET_EXCEEDED, timings)
-            for T in proposals:
-                self._places.propose(alignment(T, T_oc), T_oc, self._history)
+            self._places.propose([alignment(T, T_oc) for T in proposals], T_oc, self._history)
         best, p = self._places.best()
         if best is not None and p >= COMMIT_PROBABILITY \
                 and len(best.objects) >= MIN_COMMIT_OBJECTS:
@@ -624,9 +623,9 @@ class TrackingSession:
         self._history.append(self._evidence)
         if index - self._last_check >= CHECK_INTERVAL_FRAMES and len(usable) >= 3:
             self._last_check = index
-            for Tw in self._localize_proposals(frame, usable):
-                self._places.propose(alignment(Tw, T_oc), T_oc, self._history,
-                                     protect=committed)
+            self._places.propose([alignment(Tw, T_oc)
+                                  for Tw in self._localize_proposals(frame, usable)],
+                                 T_oc, self._history, protect=committed)
         p_committed = self._places.probability(committed)
         if any(q > p_committed for h, q in zip(self._places.hypotheses,
                                                self._places.posteriors(), strict=True)

@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: 6e92d062c3a765439d97720c199113de0eea7a7d59a31620bdf2342f0f719daf
+// openapi-sha256: 6c7da94a2fdbc92b8a993507de00d22a2a308c8cd39f2bca75ecf7a52d7a4164
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -1168,6 +1168,24 @@ export interface components {
             translation_m_per_step?: number;
         };
         /**
+         * PlaceCandidateOut
+         * @description A place the session's walk may be in (docs/tracking.md, "Places").
+         */
+        PlaceCandidateOut: {
+            /** @description This frame's camera pose if the walk is in this place. */
+            world_from_camera: components["schemas"]["PoseOut"];
+            /**
+             * Probability
+             * @description Posterior probability that the walk is in this place (the rest: in none of those listed).
+             */
+            probability: number;
+            /**
+             * Zone
+             * @description The map zone of the objects this place matched (the zone rule of `zone`); null without zones.
+             */
+            zone?: string | null;
+        };
+        /**
          * PoseIn
          * @description A ``world_from_camera`` pose: `quaternion_wxyz` (or `quaternion_xyzw`) + `translation_m`,
          *     or a 4x4 `matrix` given as a list of ROWS (row-major).
@@ -1479,7 +1497,7 @@ export interface components {
             world_from_odom_covariance: components["schemas"]["CovarianceOut"] | null;
             /**
              * Confidence
-             * @description P(pose within 10 cm and 5 deg) under the pose posterior; 0 unless tracking and 0 when detections_unexplained.
+             * @description P(pose within 10 cm and 5 deg): the posterior probability of the session's place times P(within tolerance) under the pose posterior; 0 unless tracking and 0 when detections_unexplained.
              */
             confidence: number;
             /** Inliers */
@@ -1489,6 +1507,11 @@ export interface components {
              * @description The map zone (docs/maps.md) holding the most of this pose's inlier objects; ties: the zone with the fewest objects (a room before its floor), then the first in the map's `zones`. null when the map has no zones or none holds an inlier.
              */
             zone?: string | null;
+            /**
+             * Candidates
+             * @description The places the walk may be in with their probabilities (>= 0.01), most probable first; several while `ambiguous`.
+             */
+            candidates?: components["schemas"]["PlaceCandidateOut"][];
             /** N Usable Detections */
             n_usable_detections: number;
             /** Timings Ms */
