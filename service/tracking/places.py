@@ -42,6 +42,7 @@ from quadloc.service.localization.scoring import MatchScorer, greedy_assignment
 
 __all__ = [
     "COMMIT_PROBABILITY",
+    "KEEP_PROBABILITY",
     "MAX_HYPOTHESES",
     "PlaceCandidate",
     "PlaceHypothesis",
@@ -61,9 +62,11 @@ TEMPERATURE = 0.25
 DISCOUNT = 0.93
 #: A session commits to a place when its posterior is at least this (and it explains
 #: :data:`MIN_COMMIT_OBJECTS` distinct objects); a committed place is given up when a rival's
-#: posterior exceeds its own.
+#: posterior exceeds its own (``ambiguous``) or its own falls below :data:`KEEP_PROBABILITY`.
 COMMIT_PROBABILITY = 0.99
 MIN_COMMIT_OBJECTS = 3
+#: A committed place whose posterior falls below this is given up (the session is ``lost``).
+KEEP_PROBABILITY = 0.5
 #: Hypotheses whose posterior falls below this are dropped.
 DROP_PROBABILITY = 1e-4
 #: Candidates listed in an answer: posterior at least this.

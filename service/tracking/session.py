@@ -49,6 +49,7 @@ from quadloc.service.tracking.confidence import session_confidence
 from quadloc.service.tracking.multiframe import InitFrame, multi_frame_ransac
 from quadloc.service.tracking.places import (
     COMMIT_PROBABILITY,
+    KEEP_PROBABILITY,
     MIN_COMMIT_OBJECTS,
     PlaceCandidate,
     PlaceHypothesis,
@@ -76,6 +77,10 @@ STATES = ("initializing", "tracking", "lost")
 #: estimate (no inlier), sends the session to ``lost`` at once (fewer: after
 #: ``lost_after_misses`` such frames in a row).
 LOST_UNEXPLAINED_DETECTIONS = 3
+#: A tracking frame whose estimate moved from its odometry prediction by more than this squared
+#: Mahalanobis distance (6 dof, under the predicted covariance; chi-square 99.9 %) jumped: a
+#: wrong association pulled it, the session is ``lost``.
+JUMP_CHI2 = 22.5
 SMOOTHERS = ("isam2", "batch")
 #: Largest ``window_frames`` of each smoother: the batch smoother re-solves its whole window at
 #: every frame, so its window is what bounds a frame's CPU time (measured by
@@ -491,16 +496,18 @@ class TrackingSession:
             bool(assoc) or self._predicted_visible(T_pred))
         self._misses = self._misses + 1 if contradicted else 0
         pos_std = math.sqrt(max(float(np.linalg.eigvalsh(cov[3:, 3:]).max()), 0.0))
-        if pos_std > self.options.lost_position_std_m \
+        xi = gtsam.Pose3.Logmap(pose3(invert_pose(T_pred) @ T))
+        jumped = float(xi @ np.linalg.solve(cov_pred, xi)) > JUMP_CHI2
+        if pos_std > self.options.lost_position_std_m or jumped \
                 or self._misses >= self.options.lost_after_misses \
                 or (contradicted and len(usable) >= LOST_UNEXPLAINED_DETECTIONS):
             self.reset()
             return self._no_pose(index, frame, T_oc, usable, "lost", timings)
         t = time.perf_counter()
-        if not self._check_place(index, frame, T, usable):
-            timings["places"] = (time.perf_counter() - t) * 1e3
-            return self._no_pose(index, frame, T_oc, usable, "ambiguous", timings)
+        given_up = self._check_place(index, frame, T, usable)
         timings["places"] = (time.perf_counter() - t) * 1e3
+        if given_up is not None:
+            return self._no_pose(index, frame, T_oc, usable, given_up, timings)
         self._last = (index, float(frame.timestamp), T_oc, T, cov)
         return self._result(index, frame, T_oc, T, cov, inliers, len(usable),
                             "detections_unexplained" if contradicted else None, timings,
@@ -610,11 +617,12 @@ class TrackingSession:
         return out + [a.world_from_camera for a in r.alternatives]
 
     def _check_place(self, index: int, frame: FrameInput, T: FloatArray,
-                     usable: list[int]) -> bool:
+                     usable: list[int]) -> str | None:
         """A tracking frame scores the committed place (at the smoother's pose ``T``) and its
-        rivals, asking ``localize`` for new rivals every :data:`CHECK_INTERVAL_FRAMES`; False
-        (the session gives the place up, keeping the hypotheses) when a rival has become more
-        probable than the committed place."""
+        rivals, asking ``localize`` for new rivals every :data:`CHECK_INTERVAL_FRAMES`. The
+        session gives the place up (``lost``, keeping the hypotheses) when a rival has become
+        more probable (returns ``"ambiguous"``) or the place's posterior fell below
+        :data:`~quadloc.service.tracking.places.KEEP_PROBABILITY` (``"lost"``); else None."""
         T_oc, ell, labels = self._evidence
         committed = self._committed
         assert committed is not None
@@ -627,12 +635,16 @@ class TrackingSession:
                                   for Tw in self._localize_proposals(frame, usable)],
                                  T_oc, self._history, protect=committed)
         p_committed = self._places.probability(committed)
+        reason = None
         if any(q > p_committed for h, q in zip(self._places.hypotheses,
                                                self._places.posteriors(), strict=True)
                if h is not committed):
+            reason = "ambiguous"
+        elif p_committed < KEEP_PROBABILITY:
+            reason = "lost"
+        if reason is not None:
             self.reset(keep_places=True)
-            return False
-        return True
+        return reason
 
     def _start_graph(self, chosen: list[_Buffered], poses: list[FloatArray],
                      matches: list[list[Match]]) -> tuple[FloatArray, FloatArray] | None:
