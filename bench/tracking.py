@@ -483,7 +483,7 @@ def run_buildings(sizes: list[int], modes: list[str], seeds: list[int], walks: i
 
 def building_markdown(out: dict) -> str:
     """The ``tracking-buildings`` section of docs/results.md."""
-    lines = ["## tracking-buildings (bench/tracking.py --building)", "",
+    lines = [f"## tracking-buildings-{'-'.join(out['modes'])} (bench/tracking.py --building)", "",
              f"Walks through 2 rooms of generated buildings (tests/support/building_walks.py: "
              f"a start room drawn at random, 30 real Chess poses placed in it, a walk at 1.2 m/s "
              f"to the nearest room, 30 poses there; every third 3-s stretch with 0-2 detections; "
@@ -544,12 +544,13 @@ def main(argv: list[str] | None = None) -> dict:
         bout = run_buildings(args.sizes, args.modes, seeds, args.walks, opts)
         bout.update(command="python -m bench.tracking " + " ".join(
             sys.argv[1:] if argv is None else argv), seeds=seeds, seed_set=args.seed_set,
-            walks=args.walks)
+            walks=args.walks, modes=args.modes)
         print(json.dumps(bout, indent=1, default=float))
         if args.json:
             args.json.write_text(json.dumps(bout, indent=1, default=float))
         if args.write_results:
-            update_results_section("tracking-buildings", building_markdown(bout))
+            update_results_section("tracking-buildings-" + "-".join(args.modes),
+                                   building_markdown(bout))
         return bout
     if args.render:
         runs = [json.loads(p.read_text()) for p in args.render]
