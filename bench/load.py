@@ -157,13 +157,15 @@ def start_server(data_dir: Path, port: int | None = None, tree: Path = REPO,
     """One real Uvicorn process (one worker) on a loopback port, running the code of ``tree``
     (this checkout by default) with default settings plus ``settings`` (``QUADLOC_*``
     variables); returns (process, base URL)."""
+    from bench.results_doc import tree_python
+
     port = port or _free_port()
     env = {k: v for k, v in os.environ.items() if not k.startswith("QUADLOC_")}
     env.update({"QUADLOC_DATABASE_URL": f"sqlite:///{data_dir / 'load.db'}",
                 "QUADLOC_DATA_DIR": str(data_dir), "PYTHONPATH": str(tree), **(settings or {})})
     log = open(data_dir / f"uvicorn-{port}.log", "wb")  # noqa: SIM115 - lives with the server
     proc = subprocess.Popen(
-        [sys.executable, "-m", "uvicorn", "quadloc.service.api.app:create_app", "--factory",
+        [tree_python(tree), "-m", "uvicorn", "quadloc.service.api.app:create_app", "--factory",
          "--host", "127.0.0.1", "--port", str(port), "--log-level", "warning",
          "--no-access-log"],
         cwd=tree, env=env, stdout=log, stderr=subprocess.STDOUT)

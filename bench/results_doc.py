@@ -141,6 +141,18 @@ def update_results_section(name: str, markdown: str, path: Path = RESULTS_PATH, 
         os.replace(tmp, path)
 
 
+def tree_python(tree: Path) -> str:
+    """The interpreter that imports ``tree``'s QuadLoc: its own ``.venv`` (``make install``
+    there), this interpreter for this checkout. ``PYTHONPATH=tree`` alone does not do it: a
+    venv's editable install maps the ``quadloc`` namespace to the checkout it was made in."""
+    if tree.resolve() == REPO_ROOT:
+        return sys.executable
+    python = tree / ".venv" / "bin" / "python"
+    if not python.is_file():
+        raise SystemExit(f"{tree} has no .venv: run `make install` in it first")
+    return str(python)
+
+
 def tree_version(tree: Path) -> str:
     """``branch at <short commit>`` of a git checkout (worktree; ``HEAD at ...`` when
     detached), else ``a tree outside git``: names a compared tree in a results section

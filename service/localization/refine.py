@@ -23,7 +23,7 @@ import functools
 import math
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import gtsam
@@ -46,17 +46,21 @@ from quadloc.service.localization.types import (
 
 __all__ = [
     "ABSOLUTE_ERROR_TOL",
+    "DEFAULT_MAX_ITERATIONS",
     "ERROR_TOL",
     "INFORMATION_CONDITION_LIMIT",
     "LAMBDA_UPPER_BOUND",
     "OVERLAP_NIELSEN_DAMPING",
     "OVERLAP_RELATIVE_ERROR_TOL",
     "RELATIVE_ERROR_TOL",
+    "STAGES",
     "STATUSES",
     "RefinementResult",
     "refine",
 ]
 
+#: LM's iteration cap when the caller gives none (both solves together).
+DEFAULT_MAX_ITERATIONS = 50
 ERROR_TOL = 1e-20
 RELATIVE_ERROR_TOL = 1e-6
 #: iou / giou: their residual is not smooth at the optimum of noisy detections (areas of
@@ -128,6 +132,12 @@ class RefinementResult:
             the detections' (``confidence.calibrated_covariance`` rescales only the rest).
         gravity_chi2: the gravity factor's whitened squared error at the final pose (0 without
             gravity): with ``chi2``, how well a pose explains everything measured.
+        stages_ms: wall time of each stage of the call, milliseconds, keys :data:`STAGES`
+            (``validate``: the argument checks; ``build``: the residual model, its factors and
+            the graph; ``solve``: the LM solve(s); ``relayout``: the level-set samples laid out
+            again between them; ``covariance``: covariance and fixed factors' information;
+            ``finish``: costs, chi2, the result): where a refinement's time goes
+            (``bench.peer_refine`` reports them).
     """
 
     world_from_camera: FloatArray
@@ -146,6 +156,11 @@ class RefinementResult:
     n_residuals: int = 0
     fixed_information: FloatArray | None = None
     gravity_chi2: float = 0.0
+    stages_ms: Mapping[str, float] = field(default_factory=dict)
+
+
+#: The stages of :attr:`RefinementResult.stages_ms`, in their order.
+STAGES = ("validate", "build", "solve", "relayout", "covariance", "finish")
 
 
 def _lm_params(max_iterations: int, metric: str = "level_set") -> gtsam.LevenbergMarquardtParams:
@@ -187,7 +202,7 @@ def refine(
     prior_world_from_camera: FloatArray | None = None,
     prior_covariance: FloatArray | None = None,
     gravity: GravityMeasurement | None = None,
-    max_iterations: int = 50,
+    max_iterations: int = DEFAULT_MAX_ITERATIONS,
     metric_options: Mapping[str, Any] | None = None,
     deadline: Deadline | None = None,
 ) -> RefinementResult:
@@ -240,15 +255,22 @@ def refine(
     if gravity is not None and not isinstance(gravity, GravityMeasurement):
         raise GeometryError(f"gravity: must be a GravityMeasurement or None, got "
                             f"{type(gravity).__name__}")
+    stages = dict.fromkeys(STAGES, 0.0)
+    t = time.perf_counter()
+    stages["validate"] = t - t_start
     graph, model, n_metric_factors = _build_graph(
         detections, ellipsoids, camera, T0, metric, sigmas, robust, robust_scale, prior,
         gravity, metric_options)
+    t, t_prev = time.perf_counter(), t
+    stages["build"] = t - t_prev
     T_start, total_iterations, initial_error = T0, 0, math.nan
     start_pose: gtsam.Pose3 | None = None
     relaid_skipped = False
     for pass_ in range(2 if resample else 1):
         outcome = _solve(graph, model, T_start, max_iterations - total_iterations, deadline,
                          start_pose)
+        t, t_prev = time.perf_counter(), t
+        stages["solve"] += t - t_prev
         total_iterations += outcome.iterations
         if pass_ == 0:
             initial_error = outcome.initial_error
@@ -266,6 +288,8 @@ def refine(
         T_start = outcome.T
         start_pose = outcome.result.atPose3(_POSE_KEY)
         model.relayout(T_start)
+        t, t_prev = time.perf_counter(), t
+        stages["relayout"] += t - t_prev
     status = outcome.status
     if status == "converged" and total_iterations >= max_iterations:
         status = "max_iterations"
@@ -282,20 +306,25 @@ def refine(
         covariance, reason = _covariance(graph, outcome.result)
     fixed_information, gravity_chi2 = _fixed_factors(graph, n_metric_factors, outcome.result,
                                                      gravity is not None)
+    t, t_prev = time.perf_counter(), t
+    stages["covariance"] = t - t_prev
     ok = outcome.valid
     if ok.all():  # the usual case, without the masked copies
         chi2 = float(np.sum(outcome.costs / weights))
     else:
         chi2 = float(np.sum(outcome.costs[ok] / weights[ok])) if ok.any() else math.inf
+    t_end = time.perf_counter()
+    stages["finish"] = t_end - t
     return RefinementResult(
         world_from_camera=outcome.T, covariance=covariance, covariance_reason=reason,
         per_detection_cost=outcome.costs, valid_projection=outcome.valid,
         initial_error=initial_error,
         total_error=outcome.total_error, iterations=total_iterations,
         converged=status == "converged", status=status,
-        time_ms=(time.perf_counter() - t_start) * 1e3,
+        time_ms=(t_end - t_start) * 1e3,
         resample_skipped=relaid_skipped, chi2=chi2, n_residuals=len(detections) * model.dim,
         fixed_information=fixed_information, gravity_chi2=gravity_chi2,
+        stages_ms={k: v * 1e3 for k, v in stages.items()},
     )
 
 

@@ -23,7 +23,14 @@ _SCRIPT = textwrap.dedent("""
     import json
     import numpy as np
     from quadloc.factors import camera as camera_module
-    from quadloc.factors import metrics, overlap, pose_frame, pose_level_set, pose_residuals
+    from quadloc.factors import (
+        metrics,
+        overlap,
+        pose_conic_metrics,
+        pose_frame,
+        pose_level_set,
+        pose_residuals,
+    )
     from quadloc.factors.camera import Camera, Ellipsoid
     from quadloc.factors.conics import Ellipse
     from quadloc.factors.overlap import intersection_areas
@@ -32,7 +39,8 @@ _SCRIPT = textwrap.dedent("""
 
     def signatures():
         out = {}
-        for module in (overlap, pose_frame, pose_level_set, metrics, camera_module):
+        for module in (overlap, pose_frame, pose_level_set, pose_conic_metrics, metrics,
+                       camera_module):
             for name, value in vars(module).items():
                 if hasattr(value, "signatures") and hasattr(value, "py_func"):
                     out[f"{module.__name__}.{name}"] = [str(s) for s in value.signatures]
@@ -93,7 +101,8 @@ def test_requests_compile_no_kernel_that_start_up_did_not():
                            "quadloc.factors.camera._projected_gaussians_kernel",
                            "quadloc.factors.pose_level_set._level_set_kernel",
                            "quadloc.factors.pose_frame._camera_frame_kernel",
-                           "quadloc.factors.pose_frame._dual_conic_kernel"}
+                           "quadloc.factors.pose_frame._dual_conic_kernel",
+                           "quadloc.factors.pose_conic_metrics._bbox_kernel"}
     for name, sigs in after.items():
         assert sigs == before.get(name, []), f"{name} was compiled again for a request"
 

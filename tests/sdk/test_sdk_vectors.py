@@ -41,9 +41,50 @@ def _generator() -> Any:
 @pytest.mark.parametrize("name", ["poses.json", "ellipses.json", "problems.json",
                                   "build_recording.json"])
 def test_committed_vectors_are_what_the_generator_writes(name: str) -> None:
-    assert (VECTORS / name).read_text() == _generator().render(name), (
-        f"sdk/test-vectors/{name} is stale: run .venv/bin/python sdk/test-vectors/generate.py "
-        "(then the TypeScript and C# suites check their SDKs against the new values)")
+    """Same structure and values as the generator computes here; numbers within
+    :data:`REGENERATE_TOL` (another CPU or LAPACK kernel moves the last digits, never more)."""
+    stale = _differences(_load(name), json.loads(_generator().render(name)), name)
+    assert not stale, (
+        f"sdk/test-vectors/{name} is stale ({stale[:3]}): run .venv/bin/python "
+        "sdk/test-vectors/generate.py (then the TypeScript and C# suites check their SDKs "
+        "against the new values)")
+
+
+REGENERATE_TOL = 1e-12  # absolute and relative; 1000x below the files' stated tolerance
+
+
+def _differences(committed: Any, generated: Any, where: str) -> list[str]:
+    """Where ``committed`` and ``generated`` (parsed JSON) differ: keys, lengths, strings and
+    booleans exactly, numbers within :data:`REGENERATE_TOL`."""
+    if isinstance(committed, dict) and isinstance(generated, dict):
+        if committed.keys() != generated.keys():
+            return [f"{where}: keys {sorted(committed)} != {sorted(generated)}"]
+        return [d for k in committed
+                for d in _differences(committed[k], generated[k], f"{where}.{k}")]
+    if isinstance(committed, list) and isinstance(generated, list):
+        if len(committed) != len(generated):
+            return [f"{where}: {len(committed)} items != {len(generated)}"]
+        return [d for i, (a, b) in enumerate(zip(committed, generated, strict=True))
+                for d in _differences(a, b, f"{where}[{i}]")]
+    numbers = (int, float)
+    if (isinstance(committed, numbers) and isinstance(generated, numbers)
+            and not isinstance(committed, bool) and not isinstance(generated, bool)):
+        close = math.isclose(committed, generated, rel_tol=REGENERATE_TOL,
+                             abs_tol=REGENERATE_TOL)
+        return [] if close else [f"{where}: {committed!r} != {generated!r}"]
+    return [] if committed == generated else [f"{where}: {committed!r} != {generated!r}"]
+
+
+def test_vector_comparison_sees_a_changed_value() -> None:
+    poses = _load("poses.json")
+    assert _differences(poses, poses, "poses") == []
+    changed = json.loads(json.dumps(poses))
+    changed["poses"][0]["translation_m"][0] += 1e-9
+    assert _differences(poses, changed, "poses") == [
+        f"poses.poses[0].translation_m[0]: {poses['poses'][0]['translation_m'][0]!r} != "
+        f"{changed['poses'][0]['translation_m'][0]!r}"]
+    changed["poses"][0]["extra"] = 1
+    assert _differences(poses, changed, "poses")[0].startswith("poses.poses[0]: keys")
 
 
 def test_pose_vectors_against_independent_computations() -> None:

@@ -389,6 +389,38 @@ def test_solver_slots_are_first_come_first_served() -> None:
     slots.release()
 
 
+def test_solver_slot_handed_over_as_the_wait_times_out_is_taken(monkeypatch) -> None:
+    """``release`` hands the slot to a waiter whose timed wait has just given up: the waiter
+    must take it (not lose it: the slot would leak)."""
+    from quadloc.service.app import localization as app_localization
+
+    slots = app_localization.FairSlots(1)
+    assert slots.acquire(timeout=0)
+
+    class HandedOverAtTimeout:
+        """A hand-off lock whose timed wait ends just after ``release`` handed it over."""
+
+        def __init__(self) -> None:
+            self.held = False
+
+        def acquire(self, blocking: bool = True, timeout: float = -1) -> bool:
+            if not self.held:  # the waiter takes its own lock first
+                self.held = True
+                return True
+            slots.release()  # the holder releases during the wait...
+            return False  # ...which timed out anyway
+
+        def release(self) -> None:
+            self.held = False
+
+    monkeypatch.setattr(app_localization.threading, "Lock", HandedOverAtTimeout)
+    assert slots.acquire(timeout=0.01)
+    monkeypatch.undo()
+    assert not slots._waiters and slots._free == 0  # the slot is held, nothing leaked
+    slots.release()
+    assert slots.acquire(timeout=0)
+
+
 # ------------------------------------------------------------ review 6: prior covariance, batch
 
 

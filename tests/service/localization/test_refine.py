@@ -574,3 +574,28 @@ def test_overlap_damping_flag_is_read_at_every_solve(monkeypatch):
     assert m._lm_params(50, "level_set").getUseFixedLambdaFactor()
     monkeypatch.setattr(m, "OVERLAP_NIELSEN_DAMPING", False)
     assert m._lm_params(50, "iou").getUseFixedLambdaFactor()
+
+
+def test_stages_ms_account_for_the_call():
+    """``stages_ms``: every stage of :data:`STAGES`, non-negative, summing to the call's
+    ``time_ms`` (each stage ends where the next starts); ``relayout`` only with a re-lay."""
+    from quadloc.service.localization.refine import STAGES
+
+    ells, cam, frames = load_chess()
+    T_true = frames[0]
+    cfw = invert_pose(T_true)
+    dets, objs = [], []
+    for j, e in enumerate(ells):
+        try:
+            dets.append(Detection(project_ellipsoid(cam, cfw, e), f"o{j}"))
+        except DegenerateProjectionError:
+            continue
+        objs.append(e)
+    start = perturb_pose(T_true, np.random.default_rng(5), 0.10, 5.0)
+    for metric in ("level_set", "bbox"):
+        res = refine(dets, objs, cam, start, metric)
+        assert tuple(res.stages_ms) == STAGES
+        assert all(v >= 0.0 for v in res.stages_ms.values())
+        assert sum(res.stages_ms.values()) == pytest.approx(res.time_ms, rel=1e-9, abs=1e-9)
+        if metric == "bbox":
+            assert res.stages_ms["relayout"] == 0.0

@@ -93,3 +93,25 @@ def test_conic_metrics_use_the_constants_of_their_own_camera(metric):
         for j, (d, e) in enumerate(zip(dets, ells, strict=True)):
             want = metrics.residual(metric, d, project_ellipsoid(camera, cfw, e))
             np.testing.assert_allclose(r[j], want, rtol=1e-9, atol=1e-9)
+
+
+def test_compiled_bbox_rows_equal_the_metric_bit_for_bit():
+    """The pose path's bbox kernel (``pose_conic_metrics._bbox_kernel``) against the one
+    implementation of the metric, ``metrics.conic_residuals("bbox")``, on the same conics."""
+    from quadloc.factors.pose_conic_metrics import ConicMetricResiduals
+
+    for cam, dets, ells, start in chess_problems(6, 2.0):
+        model = PoseResidualModel("bbox", dets, ells, cam, initial_world_from_camera=start)
+        family = model._family
+        assert isinstance(family, ConicMetricResiduals)
+        frame = model._ellipsoid_arrays.camera_frame(start)
+        valid = frame.depth_margins > model.min_depth_margin
+        Cn, dCn = family._conics.normalised(frame, valid, True)
+        want_r, want_J = metrics.conic_residuals("bbox", model._detection_params, Cn, dCn)
+        for jacobian in (True, False):
+            rows = family.rows(start, jacobian)
+            np.testing.assert_array_equal(rows.residuals[valid], want_r[valid])
+            if jacobian:
+                np.testing.assert_array_equal(rows.jacobians[valid], want_J[valid])
+            else:
+                assert rows.jacobians is None
