@@ -135,10 +135,8 @@ class PlaceSet:
         self._rooms = _room_of_objects(compiled)
         self._zones = zone_index(compiled.scene_map)
 
-    def __len__(self) -> int:
-        return len(self.hypotheses)
-
     def clear(self) -> None:
+        """Drop every hypothesis and the null's score."""
         self.hypotheses.clear()
         self.null_score = 0.0
 
