@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Run docker-compose.yml (PostgreSQL + two QuadLoc replicas + nginx, on a compose bridge network)
+# Run docker-compose.yml (PostgreSQL + two QuadLoc replicas + nginx + build workers, on a compose
+# bridge network)
 # where no registry is reachable: local stand-ins for the three images, built from Debian
 # packages on the local base (deploy/build-base-image.sh), then `docker-compose up`.
 #
@@ -9,7 +10,7 @@
 #
 # Environment: QUADLOC_API_KEYS (required by `up` and `compose`, as for docker-compose.yml;
 # `down` works without it), QUADLOC_PROXY_PORT
-# (default 8080), QUADLOC_COMPOSE_PROJECT (default quadloc). Works with Debian's docker-compose
+# (default 8080), QUADLOC_WORKER_REPLICAS (build workers, default 2), QUADLOC_COMPOSE_PROJECT (default quadloc). Works with Debian's docker-compose
 # 1.29 (v1) or `docker compose` (v2).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -35,7 +36,8 @@ up)
         --build-arg BASE="$BASE" -f deploy/local/nginx.Dockerfile -t "$QUADLOC_NGINX_IMAGE" deploy/local
     # The replicas' image: built here (pip needs the host's network during the build).
     docker build -q --network host --build-arg BASE="$BASE" -t quadloc:latest . >/dev/null
-    "${COMPOSE[@]}" up -d --no-build
+    # (--scale: Debian's docker-compose 1.29 ignores the file's deploy.replicas)
+    "${COMPOSE[@]}" up -d --no-build --scale worker="${QUADLOC_WORKER_REPLICAS:-2}"
     for _ in $(seq 1 120); do
         if python3 -c "import urllib.request, sys; sys.exit(0 if urllib.request.urlopen('http://127.0.0.1:$PORT/nginx-health', timeout=2).status == 200 else 1)" 2>/dev/null; then
             echo "compose-local: stack up, nginx on 127.0.0.1:$PORT"; exit 0

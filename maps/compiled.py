@@ -143,7 +143,4 @@ def compiled_subset(compiled: CompiledMap, indices: IntArray) -> CompiledMap:
     """The compiled map of the objects ``indices`` (sorted, unique) of ``compiled``: same map
     id, version, name, up axis and categories, the objects in their order (ids kept), so that an
     answer on the subset names the map's objects."""
-    sm = compiled.scene_map
-    objects = tuple(sm.objects[int(i)] for i in np.asarray(indices, dtype=np.intp))
-    return compile_map(SceneMap(sm.map_id, sm.name, sm.up_axis, sm.categories, objects,
-                                sm.version))
+    return compile_map(compiled.scene_map.subset(np.asarray(indices, dtype=np.intp).tolist()))

@@ -630,6 +630,20 @@ class SceneMap:
             "zones": [_zone_dict(z) if isinstance(z, MapZone) else z for z in self.zones]})
         _set_fields(self, doc, objs)
 
+    def subset(self, indices: Sequence[int]) -> SceneMap:
+        """The map of the objects ``indices`` (in that order, unique) of this one: same id,
+        name, version, up axis and categories, no metadata, no zones. Not validated again (the
+        objects of a valid map, ids unique, categories listed: valid), so that a request may
+        take the sub-map of a few places of a large map at the cost of a tuple."""
+        sub = object.__new__(SceneMap)
+        for key, value in (("map_id", self.map_id), ("name", self.name),
+                           ("version", self.version), ("up_axis", self.up_axis),
+                           ("categories", self.categories),
+                           ("objects", tuple(self.objects[int(i)] for i in indices)),
+                           ("metadata", _freeze({})), ("zones", ())):
+            object.__setattr__(sub, key, value)
+        return sub
+
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)  # mappingproxy does not pickle: store plain JSON data
         state.pop("_compiled", None)  # the memoised CompiledMap (quadloc.maps.compiled.compile_map)

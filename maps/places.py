@@ -10,12 +10,17 @@ version). Everything in the map's world frame, metres.
   rooms 12 m apart are not), stored as the sorted pairs ``(i, j)``, ``i < j``
   (:attr:`PlaceIndex.pair_i`, ``pair_j``, ``pair_distance``) and per object as a CSR list of
   neighbours (:meth:`PlaceIndex.neighbours`).
+* **Local objects**: each object and its :data:`LOCAL_OBJECTS` - 1 nearest covisible
+  neighbours as one padded table (:attr:`PlaceIndex.local`, ``local_valid``): the objects a
+  pose anchored on that object is scored against, looked up, not gathered per request.
 * **Constellations**: the covisible pairs keyed by their labels, ordered: for labels
   ``(a, b)`` the pairs ``(i, j)`` with ``categories[i] == a`` and ``categories[j] == b`` (both
   orders of a pair of one label), with their centre distance (:meth:`PlaceIndex.pairs_for`).
 
 Cost: O(N k) time and memory for N objects with k covisible neighbours each (a building of
-rooms: k is bounded by a room's content, not the number of rooms).
+rooms: k is bounded by a room's content, not the number of rooms). Measured on the 1,000-room
+building of ``bench.building`` (10,000 objects, 95,000 covisible pairs): about 0.3 s to build,
+:meth:`PlaceIndex.nbytes` about 11 MB.
 """
 
 from __future__ import annotations
@@ -24,13 +29,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from quadloc.factors.arrays import FloatArray, IntArray
+from quadloc.factors.arrays import BoolArray, FloatArray, IntArray
 from quadloc.maps.compiled import CompiledMap
 
-__all__ = ["VIEW_RANGE_M", "PlaceIndex", "place_index"]
+__all__ = ["LOCAL_OBJECTS", "VIEW_RANGE_M", "PlaceIndex", "place_index"]
 
 #: Objects whose centres are further apart than this (m) are never seen together.
 VIEW_RANGE_M = 6.0
+#: Width of the local-object table: an object and at most this many minus one of its
+#: covisible neighbours (the nearest).
+LOCAL_OBJECTS = 32
 
 #: Attribute of a :class:`CompiledMap` holding its place index.
 _MEMO = "_place_index"
@@ -55,6 +63,9 @@ class PlaceIndex:
             are the objects covisible with ``i`` (sorted, ``i`` itself excluded).
         constellations: (label_a, label_b) -> (I, J, D): ordered pairs of those labels and their
             distance (m).
+        local, local_valid: (N, L) object ``i`` then its nearest covisible neighbours
+            (``L = min(LOCAL_OBJECTS, 1 + most neighbours)``), padding marked False.
+        codes: (N,) each object's label as an index into ``labels`` (the sorted categories).
     """
 
     view_range_m: float
@@ -67,6 +78,17 @@ class PlaceIndex:
     offsets: IntArray
     neighbour: IntArray
     constellations: dict[tuple[str, str], tuple[IntArray, IntArray, FloatArray]]
+    local: IntArray
+    local_valid: BoolArray
+    labels: tuple[str, ...]
+    codes: IntArray
+
+    def nbytes(self) -> int:
+        """Bytes held by the index's arrays (the grid's and the constellations' included)."""
+        arrays = [self.centers, self.cells, self.pair_i, self.pair_j, self.pair_distance,
+                  self.offsets, self.neighbour, self.local, self.local_valid, self.codes,
+                  *self.grid.values(), *(a for t in self.constellations.values() for a in t)]
+        return sum(int(a.nbytes) for a in arrays)
 
     def neighbours(self, i: int) -> IntArray:
         """Objects covisible with object ``i`` (sorted indices, ``i`` excluded)."""
@@ -151,9 +173,33 @@ def build_place_index(compiled: CompiledMap, view_range_m: float = VIEW_RANGE_M)
             sel = by_key[bounds[k]:bounds[k + 1]]
             a, b = key.split("\x1f")
             constellations[(a, b)] = (_frozen(src[sel]), _frozen(dst[sel]), _frozen(dist2[sel]))
+    local, local_valid = _local_table(src, dst, dist2, offsets, n)
+    labels = tuple(sorted(set(compiled.categories)))
+    code = {c: k for k, c in enumerate(labels)}
+    codes = np.array([code[c] for c in compiled.categories], dtype=np.intp)
     return PlaceIndex(view_range_m, _frozen(centers), _frozen(cells), grid_arrays,
                       _frozen(pi), _frozen(pj), _frozen(pd), _frozen(offsets), _frozen(dst),
-                      constellations)
+                      constellations, _frozen(local), _frozen(local_valid), labels,
+                      _frozen(codes))
+
+
+def _local_table(src: IntArray, dst: IntArray, dist: FloatArray, offsets: IntArray, n: int
+                 ) -> tuple[IntArray, BoolArray]:
+    """The local-object table (:attr:`PlaceIndex.local`) from the neighbour CSR (``src``,
+    ``dst``, ``dist`` sorted by ``src``; ``offsets`` (n + 1,))."""
+    counts = np.diff(offsets)
+    width = int(min(LOCAL_OBJECTS, 1 + (counts.max() if n else 0)))
+    local = np.zeros((n, width), dtype=np.intp)
+    valid = np.zeros((n, width), dtype=bool)
+    local[:, 0] = np.arange(n)
+    valid[:, 0] = True
+    order = np.lexsort((dist, src))  # by object, nearest first
+    s, d = src[order], dst[order]
+    rank = np.arange(len(s)) - offsets[s]
+    keep = rank < width - 1
+    local[s[keep], 1 + rank[keep]] = d[keep]
+    valid[s[keep], 1 + rank[keep]] = True
+    return local, valid
 
 
 def place_index(compiled: CompiledMap) -> PlaceIndex:

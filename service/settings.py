@@ -20,7 +20,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 from types import NoneType, UnionType
-from typing import Any, get_args
+from typing import Any, Literal, get_args, get_origin
 
 from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
@@ -29,6 +29,7 @@ from quadloc.service.limits import MAX_BATCH_FRAMES, MAX_DETECTIONS
 
 __all__ = [
     "SCOPES",
+    "SHUTDOWN_CANCEL_MARGIN_S",
     "ApiKey",
     "Settings",
     "check_bind_allowed",
@@ -41,6 +42,11 @@ __all__ = [
 #: The access scopes, each implying the ones before it: ``write`` implies ``read``; ``admin``
 #: (every key's sessions and build jobs: quadloc.service.app.ownership) implies ``write``.
 SCOPES = ("read", "write", "admin")
+#: Seconds before ``QUADLOC_SHUTDOWN_GRACE_S`` at which work still running is stopped on SIGTERM:
+#: ``quadloc serve`` stops waiting for the requests in progress and the app cancels their work
+#: (``App.close``); ``quadloc worker`` asks its running builds to stop (and releases them). The
+#: process ends within the grace.
+SHUTDOWN_CANCEL_MARGIN_S = 2.0
 _HEX64 = re.compile(r"^[0-9a-f]{64}$")
 
 
@@ -207,17 +213,39 @@ class Settings(BaseSettings):
         description="Wall time of one map build; association past it fails the job "
                     "(time_budget_exceeded), refinement past it keeps its estimate so far.",
     )
+    build_runner: Literal["auto", "in-process", "queue"] = Field(
+        default="auto",
+        description="Where map builds run. queue: in quadloc worker processes, through the "
+                    "job queue in PostgreSQL (procrastinate; the API only queues them); "
+                    "in-process: in the API process's own threads (one process, not several "
+                    "replicas); auto: queue on PostgreSQL, in-process on SQLite.",
+    )
     max_concurrent_builds: int = Field(
         default=1, ge=1, le=16,
-        description="Builds run at once per process (threads: they share the GIL with the "
-                    "solves; scale builds out with replicas).",
+        description="Builds run at once per process: per API process (in-process runner, "
+                    "threads sharing the GIL with the solves) or per quadloc worker.",
     )
     max_queued_builds: int = Field(default=4, ge=0, le=1000,
-                                   description="Builds waiting per process; more -> 503.")
+                                   description="Builds waiting per API process with the "
+                                               "in-process runner; more -> 503.")
+    max_active_build_jobs: int = Field(
+        default=200, ge=1, le=100_000,
+        description="Build jobs queued or running at once in the whole deployment with the "
+                    "job queue (each holds its recording in the database until it ends); more "
+                    "-> 503 + Retry-After (a soft limit: requests at the same instant may pass "
+                    "it by a few).",
+    )
     build_stale_after_s: float = Field(
         default=30.0, ge=5.0,
-        description="A queued/running build job silent this long lost its runner (replica "
-                    "restarted) and is marked failed (runner_lost).",
+        description="Liveness window of a build runner. In-process: a queued/running job "
+                    "silent this long lost its replica and is marked failed (runner_lost). "
+                    "Queue: a quadloc worker silent this long (killed) lost its jobs: they "
+                    "run again on another worker (3 runs at most, then runner_lost).",
+    )
+    worker_health_port: int = Field(
+        default=8001, ge=0, le=65535,
+        description="Port of a quadloc worker's health endpoint (GET /healthz: 200 while it "
+                    "runs and reaches the database, else 503), on QUADLOC_HOST; 0: none.",
     )
 
     max_sessions: int = Field(
@@ -319,6 +347,8 @@ def _type_name(annotation: Any) -> str:
         args = [a for a in get_args(annotation) if a is not NoneType]
         return " or ".join(_type_name(a) for a in args) + (
             " (optional)" if len(args) < len(get_args(annotation)) else "")
+    if get_origin(annotation) is Literal:
+        return "one of " + ", ".join(f"`{a}`" for a in get_args(annotation))
     return _TYPE_NAMES.get(annotation, getattr(annotation, "__name__", str(annotation)))
 
 

@@ -1,10 +1,12 @@
 """Map-building jobs as rows of the map store's database (table ``quadloc_build_jobs``, created by
 the Alembic migration ``0002_build_jobs``).
 
-A job is ``queued`` -> ``running`` -> ``succeeded`` | ``failed``; an active job's row is its
-heartbeat (``updated_at``), and :meth:`JobStore.fail_stale` fails the jobs whose heartbeat is
-older than ``stale_after_s`` with ``runner_lost`` (docs/design/maps.md, "Build jobs"). Times
-are UTC.
+A job is ``queued`` -> ``running`` -> ``succeeded`` | ``failed`` (a job whose worker died is put
+back to ``queued`` by :meth:`JobStore.requeue` when the job queue retries it); the row holds the
+job's input (``payload``) until it ends. With the in-process runner (SQLite) an active job's row
+is its heartbeat (``updated_at``), and :meth:`JobStore.fail_stale` fails the jobs whose
+heartbeat is older than ``stale_after_s`` with ``runner_lost`` (docs/design/maps.md, "Build
+jobs"). Times are UTC.
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ ACTIVE = ("queued", "running")
 # The table's description for building queries ONLY: the schema belongs to the Alembic migrations
 # ``0002_build_jobs`` and ``0004_build_job_owner`` (maps/migrations/versions/), which this
 # mirrors, CHECK constraint included (tests/service/api/test_api_build.py compares the two).
-#: The build jobs (migrations ``0002_build_jobs``, ``0004_build_job_owner``).
+#: The build jobs (migrations ``0002_build_jobs``, ``0004_build_job_owner``, ``0005_build_queue``).
 jobs_table = sa.Table(
     "quadloc_build_jobs",
     sa.MetaData(),
@@ -51,6 +53,8 @@ jobs_table = sa.Table(
     sa.Column("updated_at", sa.DateTime(timezone=True), nullable=False),
     # the sha256 of the API key that started the job (None: no keys, or before 0003)
     sa.Column("owner", sa.String(64), nullable=True),
+    # the job's input (JSON text) while it is active; NULL once it ended (0005)
+    sa.Column("payload", sa.Text, nullable=True),
     sa.CheckConstraint("status IN ('queued', 'running', 'succeeded', 'failed')",
                        name="ck_quadloc_build_jobs_status"),
 )
@@ -125,16 +129,40 @@ class JobStore:
         self.engine = engine
 
     def create(self, map_id: str, base_version: int | None,
-               owner: str | None = None) -> BuildJob:
-        """A new ``queued`` job of ``owner`` (the sha256 of the API key starting it)."""
+               owner: str | None = None, payload: str | None = None) -> BuildJob:
+        """A new ``queued`` job of ``owner`` (the sha256 of the API key starting it) with its
+        input ``payload`` (JSON text, kept until the job ends)."""
         now = utc_now()
         job_id = str(uuid.uuid4())
         with self.engine.begin() as conn:
             conn.execute(jobs_table.insert().values(
                 job_id=job_id, map_id=map_id, base_version=base_version, status="queued",
                 stage="queued", percent=0.0, objects_found=0, created_at=now, updated_at=now,
-                owner=owner))
+                owner=owner, payload=payload))
         return self.get(job_id)
+
+    def count_active(self) -> int:
+        """How many jobs are queued or running."""
+        with self.engine.connect() as conn:
+            return int(conn.execute(sa.select(sa.func.count()).select_from(jobs_table)
+                                    .where(jobs_table.c.status.in_(ACTIVE))).scalar_one())
+
+    def silent(self, stale_after_s: float) -> list[str]:
+        """Ids of the queued/running jobs whose row was not written for ``stale_after_s``."""
+        cutoff = utc_now() - timedelta(seconds=stale_after_s)
+        with self.engine.connect() as conn:
+            return [r.job_id for r in conn.execute(
+                sa.select(jobs_table.c.job_id).where(jobs_table.c.status.in_(ACTIVE),
+                                                     jobs_table.c.updated_at < cutoff))]
+
+    def payload(self, job_id: str) -> str | None:
+        """The input of an active job (None once it ended); :class:`JobNotFoundError`."""
+        with self.engine.connect() as conn:
+            row = conn.execute(sa.select(jobs_table.c.status, jobs_table.c.payload)
+                               .where(jobs_table.c.job_id == job_id)).first()
+        if row is None:
+            raise JobNotFoundError(job_id)
+        return row.payload if row.status in ACTIVE else None
 
     def get(self, job_id: str) -> BuildJob:
         with self.engine.connect() as conn:
@@ -170,23 +198,33 @@ class JobStore:
         (e.g. queued behind a running build on the same replica); returns how many."""
         return self._update(jobs_table.c.job_id.in_(job_ids)) if job_ids else 0
 
+    def requeue(self, job_id: str) -> bool:
+        """An active job back to ``queued`` (its progress reset): its worker stopped and the
+        job queue runs it again. False if the job is no longer active."""
+        return self._update(jobs_table.c.job_id == job_id, status="queued", stage="queued",
+                            percent=0.0, objects_found=0) == 1
+
     def succeed(self, job_id: str, map_version: int, report: BuildReport,
                 objects_found: int) -> bool:
         return self._update(jobs_table.c.job_id == job_id, status="succeeded", stage="done",
                             percent=100.0, map_version=map_version, objects_found=objects_found,
-                            report=report.model_dump_json()) == 1
+                            report=report.model_dump_json(), payload=None) == 1
 
     def fail(self, job_id: str, reason: str, detail: str,
              report: BuildReport | None = None) -> bool:
         return self._update(jobs_table.c.job_id == job_id, status="failed", stage="failed",
-                            error=json.dumps({"reason": reason, "detail": detail}),
+                            error=json.dumps({"reason": reason, "detail": detail}), payload=None,
                             report=None if report is None else report.model_dump_json()) == 1
 
-    def fail_stale(self, stale_after_s: float) -> int:
-        """Mark queued/running jobs without a heartbeat for ``stale_after_s`` as failed."""
+    def fail_stale(self, stale_after_s: float, *, without_payload: bool = False) -> int:
+        """Mark queued/running jobs without a heartbeat for ``stale_after_s`` as failed
+        (``without_payload``: only those whose row holds no input, i.e. no worker can run
+        them: started before migration ``0005_build_queue``)."""
         cutoff = utc_now() - timedelta(seconds=stale_after_s)
         err = json.dumps({"reason": "runner_lost",
                           "detail": f"no progress for {stale_after_s:g} s: the replica running "
                                     f"the job restarted or died; submit the recording again"})
-        return self._update(jobs_table.c.updated_at < cutoff, status="failed", stage="failed",
-                            error=err)
+        where = [jobs_table.c.updated_at < cutoff]
+        if without_payload:
+            where.append(jobs_table.c.payload.is_(None))
+        return self._update(*where, status="failed", stage="failed", error=err, payload=None)

@@ -17,7 +17,7 @@ import h11
 import uvicorn
 from uvicorn.protocols.http.h11_impl import H11Protocol
 
-from quadloc.service.settings import Settings
+from quadloc.service.settings import SHUTDOWN_CANCEL_MARGIN_S, Settings
 
 __all__ = ["GuardedH11Protocol", "HeadLimitedConnection", "limit_malloc_arenas", "serve",
            "uvicorn_config"]
@@ -116,11 +116,6 @@ class GuardedH11Protocol(H11Protocol):
         self.logger.info("closed a connection: request not received within %.1f s",
                          self.request_read_timeout_s)
         self.transport.close()
-
-
-#: Seconds before ``QUADLOC_SHUTDOWN_GRACE_S`` at which Uvicorn stops waiting for the requests
-#: in progress and the app cancels their work (``App.close``): the process ends within the grace.
-SHUTDOWN_CANCEL_MARGIN_S = 2.0
 
 
 def uvicorn_config(settings: Settings, host: str, port: int, *, workers: int = 1,

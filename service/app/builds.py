@@ -1,21 +1,37 @@
-"""The map-building use cases: start a build job from a recording, follow it, and build in this
-process (the CLI without a server).
+"""The map-building use cases: start a build job from a recording, follow it, run it (in a
+``quadloc worker`` or in this process), and build in this process without a job (the CLI
+without a server).
 
 A job is a row of the map store's database (``quadloc.maps.building.jobs.JobStore``):
-``queued`` -> ``running`` -> ``succeeded`` | ``failed``, its row the heartbeat. One
-:class:`BuildRunner` per process runs at most ``max_concurrent_builds`` builds (threads) and
-queues ``max_queued_builds`` more (beyond: ``busy``, retry after 10 s); each build has a time
-budget (``build_time_budget_s``). While it has jobs, the runner's own heartbeat thread
-refreshes their rows every :func:`beat_interval_s` whatever the builds report, so a stage that
-runs longer than ``build_stale_after_s`` without progress is not taken for a lost runner.
-A job ends ``succeeded`` (a new map or version) or
-``failed`` with a reason: ``time_budget_exceeded``, ``invalid_map``, ``no_objects``,
-``version_conflict``, ``map_exists``, ``map_not_found``, ``store_unavailable``, ``busy``,
-``runner_lost``, ``internal_error``. A job's steps: docs/design/service.md#map-building-jobs.
+``queued`` -> ``running`` -> ``succeeded`` | ``failed``, holding its recording until it ends.
+:class:`BuildJobs` runs one job from its row (the job kind ``build`` of
+:mod:`quadloc.service.app.job_queue`); where it runs is ``QUADLOC_BUILD_RUNNER``:
+
+* ``queue`` (the default on PostgreSQL): the API only queues the job
+  (:class:`~quadloc.service.app.job_queue.ProcrastinateQueue`); ``quadloc worker`` processes run
+  it (:meth:`BuildService.run_worker`). A worker that dies loses nothing: its job goes back to
+  ``queued`` and runs again on another worker (at most ``MAX_ATTEMPTS`` runs, then
+  ``runner_lost``). A worker stopped by SIGTERM finishes its build within the grace period or
+  releases it (back to ``queued``).
+* ``in-process`` (the default on SQLite, ``make serve``): one :class:`BuildRunner` per process
+  runs at most ``max_concurrent_builds`` builds (threads) and queues ``max_queued_builds``
+  more (beyond: ``busy``, retry after 10 s). While it has jobs, the runner's own heartbeat
+  thread refreshes their rows every :func:`beat_interval_s` whatever the builds report, so a
+  stage that runs longer than ``build_stale_after_s`` without progress is not taken for a lost
+  runner; a job whose process stopped is marked ``runner_lost`` by the next sweep. One process,
+  not several replicas.
+
+Each build has a time budget (``build_time_budget_s``). A job ends ``succeeded`` (a new map or
+version) or ``failed`` with a reason: ``time_budget_exceeded``, ``invalid_map``,
+``no_objects``, ``version_conflict``, ``map_exists``, ``map_not_found``, ``store_unavailable``,
+``busy``, ``runner_lost``, ``internal_error``. A job whose row was marked failed meanwhile
+stops at its next progress report and stores nothing. A job's steps:
+docs/design/service.md#map-building-jobs.
 """
 
 from __future__ import annotations
 
+import json
 import logging
 import threading
 import time
@@ -24,6 +40,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
+from procrastinate.exceptions import ConnectorException
 from pydantic import TypeAdapter, ValidationError
 from sqlalchemy.exc import SQLAlchemyError
 
@@ -37,17 +54,19 @@ from quadloc.maps.model import MapValidationError, SceneMap
 from quadloc.maps.store import MapStore, StoredMap
 from quadloc.service.app.conversions import RecordingInputError, recording_from_wire
 from quadloc.service.app.errors import AppError
+from quadloc.service.app.job_queue import JobReleased, ProcrastinateQueue
 from quadloc.service.app.maps import MapService, parse_if_match
 from quadloc.service.app.ownership import INTERNAL, Caller
 from quadloc.service.schemas.builds import BuildErrorOut, BuildJobOut
 from quadloc.service.schemas.common import field_path
 from quadloc.service.schemas.recording import LegacyRecordingIn, RecordingBody, RecordingIn
-from quadloc.service.settings import Settings
+from quadloc.service.settings import SHUTDOWN_CANCEL_MARGIN_S, Settings
 
 __all__ = [
     "BUSY_RETRY_AFTER_S",
     "HEARTBEAT_S",
     "RUNNER_BEAT_S",
+    "BuildJobs",
     "BuildRunner",
     "BuildService",
     "LocalBuild",
@@ -121,14 +140,110 @@ class _JobLostError(RuntimeError):
     """The job's row is no longer active (marked failed, e.g. as stale): stop, store nothing."""
 
 
-class BuildRunner:
-    """The process's build threads (see the module docstring)."""
+#: Why a released job stored nothing, when it cannot run again (in-process runner).
+STOPPED_DETAIL = "the replica stopped during the build; nothing was stored"
 
-    def __init__(self, store: MapStore, jobs: JobStore, *, max_concurrent: int, max_queued: int,
-                 time_budget_s: float, beat_s: float = RUNNER_BEAT_S) -> None:
+
+class BuildJobs:
+    """The job kind ``build`` (:class:`quadloc.service.app.job_queue.JobKind`): runs one job
+    from its row, whichever runner called it (a ``quadloc worker`` or :class:`BuildRunner`)."""
+
+    name = "build"
+
+    def __init__(self, store: MapStore, jobs: JobStore, time_budget_s: float) -> None:
         self.store = store
         self.jobs = jobs
         self.time_budget_s = float(time_budget_s)
+
+    def run(self, job_id: str, stop: threading.Event) -> None:
+        """Build the job's recording and store the map, ending the job; stops soon after
+        ``stop`` is set, raising :class:`JobReleased` (nothing stored). A job that is no
+        longer active (ended, or marked failed meanwhile) is left as it is."""
+        try:
+            self._build(job_id, stop)
+        except _JobLostError:
+            log.warning("build job %s stopped: its row is no longer active (marked failed "
+                        "meanwhile); nothing stored", job_id)
+        except JobReleased:
+            raise
+        except Exception as exc:
+            log.exception("build job %s failed", job_id)
+            try:
+                self.jobs.fail(job_id, "internal_error", f"{type(exc).__name__}: {exc}")
+            except Exception:
+                log.exception("could not mark job %s failed", job_id)
+
+    def requeued(self, job_id: str) -> None:
+        if self.jobs.requeue(job_id):
+            log.warning("build job %s is queued again: its worker stopped", job_id)
+
+    def lost(self, job_id: str, detail: str) -> None:
+        self.jobs.fail(job_id, "runner_lost", detail)
+
+    def silent(self, stale_after_s: float) -> list[str]:
+        return self.jobs.silent(stale_after_s)
+
+    def _progress(self, job_id: str) -> Progress:
+        """The build's progress callback: writes the job's progress at every stage change and
+        at most every :data:`HEARTBEAT_S`; raises ``_JobLostError`` when the row is no longer
+        active."""
+        last_time, last_stage = 0.0, ""
+
+        def progress(stage: str, percent: float, objects: int) -> None:
+            nonlocal last_time, last_stage
+            now = time.monotonic()
+            if stage != last_stage or now - last_time >= HEARTBEAT_S:
+                last_time, last_stage = now, stage
+                if not self.jobs.progress(job_id, stage, percent, objects):
+                    raise _JobLostError(job_id)
+
+        return progress
+
+    def _build(self, job_id: str, stop: threading.Event) -> None:
+        payload = self.jobs.payload(job_id)
+        if payload is None:
+            raise _JobLostError(job_id)
+        job = self.jobs.get(job_id)
+        recording = recording_of(json.loads(payload))  # the limits were checked at intake
+        progress = self._progress(job_id)
+        progress("associating", 0.0, 0)
+        try:
+            scene, report = build_map(recording, map_id=job.map_id, progress=progress,
+                                      deadline=Deadline.wall_budget(self.time_budget_s)
+                                      .cancelled_by(stop))
+        except BuildTimeoutError as exc:
+            if stop.is_set():
+                raise JobReleased(job_id) from exc
+            self.jobs.fail(job_id, "time_budget_exceeded",
+                           f"{exc} (budget {self.time_budget_s:g} s); send fewer frames")
+            return
+        except MapValidationError as exc:
+            self.jobs.fail(job_id, "invalid_map", str(exc))
+            return
+        if not scene.objects:
+            self.jobs.fail(job_id, "no_objects", "no object could be associated and "
+                           "reconstructed from the recording (see the report)", report)
+            return
+        if stop.is_set():
+            raise JobReleased(job_id)
+        progress("saving", 95.0, len(scene.objects))
+        if self.jobs.get(job_id).status != "running":
+            raise _JobLostError(job_id)
+        try:
+            stored = _store_build(self.store, scene, job.base_version)
+        except AppError as exc:
+            self.jobs.fail(job_id, _FAILURE_OF[exc.code], exc.detail, report)
+            return
+        self.jobs.succeed(job_id, stored.scene_map.version, report, len(scene.objects))
+
+
+class BuildRunner:
+    """The in-process runner: the process's build threads (see the module docstring)."""
+
+    def __init__(self, kind: BuildJobs, *, max_concurrent: int, max_queued: int,
+                 beat_s: float = RUNNER_BEAT_S) -> None:
+        self.kind = kind
+        self.jobs = kind.jobs
         self.max_pending = int(max_concurrent) + int(max_queued)
         self.beat_s = float(beat_s)
         self._pool = ThreadPoolExecutor(max_workers=int(max_concurrent),
@@ -139,7 +254,7 @@ class BuildRunner:
         self._stopped = threading.Event()
         self._beat_thread: threading.Thread | None = None
 
-    def submit(self, job_id: str, recording: Recording) -> None:
+    def submit(self, job_id: str) -> None:
         """Queue the job; ``_RunnerBusyError`` when ``max_concurrent + max_queued`` jobs are
         already running or queued here, ``RuntimeError`` after :meth:`shutdown`."""
         with self._lock:
@@ -152,7 +267,7 @@ class BuildRunner:
                                                      name="quadloc-build-heartbeat")
                 self._beat_thread.start()
         try:
-            self._pool.submit(self._run, job_id, recording)
+            self._pool.submit(self._run, job_id)
         except RuntimeError:  # pool shut down
             with self._lock:
                 self._pending.discard(job_id)
@@ -192,75 +307,17 @@ class BuildRunner:
             except Exception as exc:  # database unavailable: the next beat retries
                 log.warning("build heartbeat not written (%s: %s)", type(exc).__name__, exc)
 
-    def _run(self, job_id: str, recording: Recording) -> None:
+    def _run(self, job_id: str) -> None:
         try:
-            self._build(job_id, recording)
-        except _JobLostError:
-            log.warning("build job %s stopped: its row is no longer active (marked failed "
-                        "meanwhile); nothing stored", job_id)
-        except Exception as exc:
-            log.exception("build job %s failed", job_id)
+            self.kind.run(job_id, self._stopping)
+        except JobReleased:  # one process: nobody runs it again
             try:
-                self.jobs.fail(job_id, "internal_error", f"{type(exc).__name__}: {exc}")
+                self.jobs.fail(job_id, "runner_lost", STOPPED_DETAIL)
             except Exception:
                 log.exception("could not mark job %s failed", job_id)
         finally:
             with self._lock:
                 self._pending.discard(job_id)
-
-    def _heartbeat(self, job_id: str) -> Progress:
-        """The build's progress callback: writes the job's progress at every stage change and
-        at most every :data:`HEARTBEAT_S` (the liveness of this job and of the ones queued
-        behind it is the heartbeat thread's, :meth:`_beat`); raises ``_JobLostError`` when the
-        row is no longer active."""
-        last_time, last_stage = 0.0, ""
-
-        def progress(stage: str, percent: float, objects: int) -> None:
-            nonlocal last_time, last_stage
-            now = time.monotonic()
-            if stage != last_stage or now - last_time >= HEARTBEAT_S:
-                last_time, last_stage = now, stage
-                if not self.jobs.progress(job_id, stage, percent, objects):
-                    raise _JobLostError(job_id)
-
-        return progress
-
-    def _build(self, job_id: str, recording: Recording) -> None:
-        job = self.jobs.get(job_id)
-        progress = self._heartbeat(job_id)
-        progress("associating", 0.0, 0)
-        try:
-            scene, report = build_map(recording, map_id=job.map_id, progress=progress,
-                                      deadline=Deadline.wall_budget(self.time_budget_s)
-                                      .cancelled_by(self._stopping))
-        except BuildTimeoutError as exc:
-            if self._stopping.is_set():
-                self.jobs.fail(job_id, "runner_lost", "the replica stopped during the build; "
-                               "nothing was stored")
-                return
-            self.jobs.fail(job_id, "time_budget_exceeded",
-                           f"{exc} (budget {self.time_budget_s:g} s); send fewer frames")
-            return
-        except MapValidationError as exc:
-            self.jobs.fail(job_id, "invalid_map", str(exc))
-            return
-        if not scene.objects:
-            self.jobs.fail(job_id, "no_objects", "no object could be associated and "
-                           "reconstructed from the recording (see the report)", report)
-            return
-        if self._stopping.is_set():
-            self.jobs.fail(job_id, "runner_lost", "the replica stopped during the build; "
-                           "nothing was stored")
-            return
-        progress("saving", 95.0, len(scene.objects))
-        if self.jobs.get(job_id).status != "running":
-            raise _JobLostError(job_id)
-        try:
-            stored = _store_build(self.store, scene, job.base_version)
-        except AppError as exc:
-            self.jobs.fail(job_id, _FAILURE_OF[exc.code], exc.detail, report)
-            return
-        self.jobs.succeed(job_id, stored.scene_map.version, report, len(scene.objects))
 
 
 #: A job's failure reason for each refusal of :func:`_store_build`.
@@ -320,17 +377,39 @@ class BuildService:
         self.maps = maps
         self.settings = settings
         self.jobs = JobStore(store.engine)
-        self.runner = BuildRunner(
-            store, self.jobs, max_concurrent=settings.max_concurrent_builds,
-            max_queued=settings.max_queued_builds, time_budget_s=settings.build_time_budget_s,
-            beat_s=beat_interval_s(settings.build_stale_after_s))
+        self.kind = BuildJobs(store, self.jobs, settings.build_time_budget_s)
+        #: The job queue (``QUADLOC_BUILD_RUNNER`` queue), or None: the in-process runner.
+        self.queue: ProcrastinateQueue | None = None
+        #: The in-process runner, or None: the job queue.
+        self.runner: BuildRunner | None = None
+        runner = settings.build_runner
+        if runner == "auto":
+            runner = "queue" if store.dialect == "postgresql" else "in-process"
+        if runner == "queue":
+            if store.dialect != "postgresql":
+                raise ValueError("QUADLOC_BUILD_RUNNER=queue needs PostgreSQL "
+                                 "(QUADLOC_DATABASE_URL=postgresql://...); on SQLite builds "
+                                 "run in-process")
+            self.queue = ProcrastinateQueue(
+                store.url, [self.kind], heartbeat_s=beat_interval_s(settings.build_stale_after_s),
+                stalled_after_s=settings.build_stale_after_s,
+                shutdown_grace_s=max(0.0, settings.shutdown_grace_s - SHUTDOWN_CANCEL_MARGIN_S),
+                concurrency=settings.max_concurrent_builds)
+        else:
+            self.runner = BuildRunner(
+                self.kind, max_concurrent=settings.max_concurrent_builds,
+                max_queued=settings.max_queued_builds,
+                beat_s=beat_interval_s(settings.build_stale_after_s))
 
     def sweep_stale(self) -> int:
         """Mark failed (``runner_lost``) the jobs silent for ``build_stale_after_s`` (their
-        replica stopped); returns how many. At start-up a database that is unreachable or not
-        migrated is logged, not raised: the app still starts (its requests answer 503)."""
+        replica stopped; with the job queue only the jobs no queue holds: queued by an
+        in-process runner before the queue); returns how many. At start-up a database that is
+        unreachable or not migrated is logged, not raised: the app still starts (its requests
+        answer 503)."""
         try:
-            stale = self.jobs.fail_stale(self.settings.build_stale_after_s)
+            stale = self.jobs.fail_stale(self.settings.build_stale_after_s,
+                                         without_payload=self.queue is not None)
         except SQLAlchemyError as exc:
             log.error("build jobs not swept (%s): the database is unavailable or not "
                       "migrated; they are swept again before any job's status is answered",
@@ -339,6 +418,28 @@ class BuildService:
         if stale:
             log.warning("marked %d build job(s) failed: their runner stopped reporting", stale)
         return stale
+
+    def stop_running(self, stop: bool = True) -> None:
+        """The process is stopping (``stop``; False: it serves again): in-process builds stop
+        at their next progress check (``runner_lost``, nothing stored); the queue's
+        connections close (the workers' jobs are theirs)."""
+        if self.runner is not None:
+            self.runner.stop_running(stop)
+        elif self.queue is not None and stop:
+            self.queue.close()
+
+    async def run_worker(self, name: str | None = None, *, wait: bool = True,
+                         install_signal_handlers: bool = True) -> None:
+        """Run the queue's build jobs in this process (``quadloc worker``) until SIGTERM /
+        SIGINT: finish the running builds within ``shutdown_grace_s`` - 2 s, else release
+        them (queued again); ``wait`` False: until the queue is empty. ``ValueError`` when
+        builds run in-process (SQLite)."""
+        if self.queue is None:
+            raise ValueError("builds run in the API process here (SQLite, or "
+                             "QUADLOC_BUILD_RUNNER=in-process): a worker needs the job queue "
+                             "(PostgreSQL)")
+        await self.queue.run_worker_async(name=name, wait=wait,
+                                          install_signal_handlers=install_signal_handlers)
 
     def parse(self, document: Any) -> Recording:
         """A recording (parsed JSON or its wire model) checked against the limits, without its
@@ -362,12 +463,32 @@ class BuildService:
 
     def start(self, document: Any, map_id: str, if_match: str | None,
               caller: Caller = INTERNAL) -> BuildJobOut:
-        """Start a build job of ``caller`` (``busy`` when this process's queue is full)."""
-        recording = self.parse(document)
+        """Start a build job of ``caller``: its row (with the recording) queued for the
+        workers (``busy`` at ``max_active_build_jobs`` jobs queued or running), or for this
+        process's runner (``busy`` when its queue is full);
+        ``database-unavailable`` when the job queue cannot be reached (the job failed
+        ``store_unavailable``)."""
+        wire = validate_recording(document)
+        self.parse(wire)
         base = self.base_version(map_id, if_match)
-        job = self.jobs.create(map_id, base, caller.owner)
+        if self.queue is not None and (
+                active := self.jobs.count_active()) >= self.settings.max_active_build_jobs:
+            raise AppError("busy", f"{active} map builds are queued or running (at most "
+                           f"QUADLOC_MAX_ACTIVE_BUILD_JOBS={self.settings.max_active_build_jobs})"
+                           "; retry later", retry_after_s=BUSY_RETRY_AFTER_S)
+        job = self.jobs.create(map_id, base, caller.owner,
+                               payload=wire.model_dump_json(exclude_unset=True))
         try:
-            self.runner.submit(job.job_id, recording)
+            if self.queue is not None:
+                self.queue.defer(self.kind.name, job.job_id)
+            else:
+                assert self.runner is not None
+                self.runner.submit(job.job_id)
+        except ConnectorException as exc:
+            self.jobs.fail(job.job_id, "store_unavailable", f"the job queue refused the job: "
+                           f"{type(exc).__name__}")
+            raise AppError("database-unavailable", "the build job could not be queued; retry "
+                           "later", retry_after_s=BUSY_RETRY_AFTER_S) from exc
         except RuntimeError as exc:  # the queue is full, or the runner stopped
             self.jobs.fail(job.job_id, "busy", str(exc))
             raise AppError("busy", f"too many map builds on this replica ({exc}); retry later",
@@ -375,9 +496,11 @@ class BuildService:
         return job_out(self.jobs.get(job.job_id))
 
     def get(self, job_id: str, caller: Caller = INTERNAL) -> BuildJobOut:
-        """A job (stale ones marked failed first); ``not-found``, also for a job of another
-        key (:mod:`quadloc.service.app.ownership`: the same answer as an unknown id)."""
-        self.jobs.fail_stale(self.settings.build_stale_after_s)
+        """A job (with the in-process runner, stale ones marked failed first); ``not-found``,
+        also for a job of another key (:mod:`quadloc.service.app.ownership`: the same answer
+        as an unknown id)."""
+        if self.runner is not None:
+            self.jobs.fail_stale(self.settings.build_stale_after_s)
         try:
             job = self.jobs.get(job_id)
         except JobNotFoundError:

@@ -23,7 +23,16 @@ from quadloc.service.localization.calibration_fit import (
 from quadloc.service.localization.map_calibration import ReferenceFrame, fit_map_calibration
 from quadloc.service.schemas.calibration import CalibrationOut, CalibrationQualityOut
 
-__all__ = ["CalibrationService"]
+__all__ = ["CalibrationService", "calibration_document"]
+
+
+def calibration_document(constants: CalibrationConstants, report: CalibrationOut
+                         ) -> dict[str, Any]:
+    """The stored document of a map version's calibration (module docstring); read back by
+    :meth:`CalibrationService.constants_of` and :meth:`CalibrationService.get`."""
+    fields = dataclasses.asdict(constants)
+    fields["confidence_features"] = list(constants.confidence_features)
+    return {"constants": fields, "report": report.model_dump(mode="json")}
 
 
 class CalibrationService:
@@ -68,10 +77,8 @@ class CalibrationService:
             min_confidence=cal.constants.min_confidence,
             before=CalibrationQualityOut(**dataclasses.asdict(cal.before)),
             after=CalibrationQualityOut(**dataclasses.asdict(cal.after)))
-        constants = dataclasses.asdict(cal.constants)
-        constants["confidence_features"] = list(cal.constants.confidence_features)
-        self.store.set_calibration(compiled.map_id, compiled.version, {
-            "constants": constants, "report": out.model_dump(mode="json")})
+        self.store.set_calibration(compiled.map_id, compiled.version,
+                                   calibration_document(cal.constants, out))
         return out
 
     def get(self, map_id: str, version: int | None = None) -> CalibrationOut:

@@ -21,6 +21,7 @@ from quadloc.service.app.localization import Localizer, SolveObserver
 from quadloc.service.app.map_loader import MapLoader
 from quadloc.service.app.maps import MapService
 from quadloc.service.app.sessions import SessionService
+from quadloc.service.localization.constellations import compile_place_kernels
 from quadloc.service.settings import Settings
 
 __all__ = ["App"]
@@ -59,26 +60,28 @@ class App:
         builds.sweep_stale()
         return cls(settings=settings, store=store, maps=maps, map_loader=loader,
                    localizer=localizer, sessions=SessionService(settings, loader,
-                                                                localizer.slots),
+                                                                localizer.slots,
+                                                                calibrations.constants_of),
                    builds=builds, calibrations=calibrations)
 
     def start(self) -> None:
         """Serve (again, after :meth:`close`): session frames and builds run."""
         self.sessions.close(stop=False)
-        self.builds.runner.stop_running(stop=False)
+        self.builds.stop_running(stop=False)
 
     @staticmethod
     def warm_up() -> None:
         """Compile (or load from their cache) the numeric kernels of the solvers, so that no
         request's time budget pays for it (numba; ~13 s the first time on a machine, < 1 s
-        from the cache: docs/design/factors.md)."""
+        from the cache: docs/design/factors.md), the place search's included."""
         compile_kernels()
+        compile_place_kernels()
 
     def close(self) -> None:
         """The process is stopping: session frames and builds in progress stop at their next
         check (answered ``time_budget_exceeded`` / marked ``runner_lost``), the map loader's
         threads stop and the store's connections close."""
         self.sessions.close()
-        self.builds.runner.stop_running()
+        self.builds.stop_running()
         self.map_loader.close()
         self.store.close()

@@ -5,7 +5,8 @@ Sessions live in this process (:class:`quadloc.service.app.session_store.Session
 ``session_idle_timeout_s`` after the end of its last request; ids carry this replica's tag so
 that a proxy routes a session to its replica). A session belongs to the key that created it:
 another key gets ``session-not-found``, an ``admin`` key sees all
-(:mod:`quadloc.service.app.ownership`). The map version is
+(:mod:`quadloc.service.app.ownership`). The map version (and its own calibration, if stored:
+``calibration_of``) is
 loaded once at creation, through the :class:`MapLoader` (the same bounded wait as localize).
 A frames request is validated whole before any frame is fused (an error names
 ``frames[i]....`` and leaves the session unchanged); its frames are fused in order, each
@@ -16,6 +17,7 @@ single frames share the CPU fairly. Design: docs/design/service.md#tracking-sess
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 
 from quadloc.factors.budget import Deadline, earliest
 from quadloc.factors.names import GeometryError
@@ -37,6 +39,7 @@ from quadloc.service.app.session_store import (
     SessionQuotaError,
     SessionStore,
 )
+from quadloc.service.localization.calibration_fit import CalibrationConstants
 from quadloc.service.localization.types import LocalizationInputError
 from quadloc.service.schemas.sessions import (
     SessionCreate,
@@ -63,10 +66,15 @@ class SessionService:
         settings: ``max_sessions``, ``session_idle_timeout_s``, ``solve_queue_timeout_s``.
         maps: where map versions are loaded.
         slots: the process's solver slots (shared with localize).
+        calibration_of: a map version's own calibration (``quadloc calibrate``), None: the
+            shipped constants (the localizer's: ``CalibrationService.constants_of``).
     """
 
-    def __init__(self, settings: Settings, maps: MapLoader, slots: FairSlots) -> None:
+    def __init__(self, settings: Settings, maps: MapLoader, slots: FairSlots,
+                 calibration_of: Callable[[str, int], CalibrationConstants | None] | None
+                 = None) -> None:
         self.maps = maps
+        self.calibration_of = calibration_of or (lambda _map_id, _version: None)
         self.slots = slots
         self.queue_timeout_s = settings.solve_queue_timeout_s
         self.frame_budget_ms = settings.session_frame_budget_ms
@@ -83,7 +91,8 @@ class SessionService:
         compiled = self.maps.get(map_id)
         try:
             session = TrackingSession(compiled, camera_from_request(body.camera),
-                                      session_options_from_wire(body.options))
+                                      session_options_from_wire(body.options),
+                                      self.calibration_of(compiled.map_id, compiled.version))
         except _INPUT_ERRORS as exc:
             raise invalid_input(exc) from exc
         try:

@@ -23,6 +23,7 @@ __all__ = ["COMMANDS", "build_parser", "main"]
 #: The function of each command: ``"<module of quadloc.service.cli>:<function>"``.
 COMMANDS: dict[str, str] = {
     "serve": "serve:cmd_serve",
+    "worker": "worker:cmd_worker",
     "openapi": "serve:cmd_openapi",
     "hash-key": "serve:cmd_hash_key",
     "maps list": "maps:cmd_list",
@@ -41,6 +42,7 @@ EPILOG = """\
 examples (in this process, on the local database):
   quadloc serve                                  # http://127.0.0.1:8000, SQLite, demo map "chess"
   quadloc serve --port 9000 --database-url sqlite:////tmp/q.db
+  quadloc worker --database-url postgresql://quadloc@db/quadloc   # runs the API's map builds
   QUADLOC_API_KEYS="$(quadloc hash-key s3cret --scopes read+write)" quadloc serve --host 0.0.0.0
   quadloc maps list
   quadloc maps import docs/examples/office_map.json         # our map format (docs/maps.md)
@@ -220,6 +222,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--access-log", action="store_true", help="log every request")
     _db(p, server=False)
 
+    p = _command(sub.add_parser(
+        "worker", formatter_class=fmt, help="run map builds from the job queue (PostgreSQL)",
+        description="Take map-building jobs from the job queue in PostgreSQL and run them, "
+                    "apart from the API replicas (docs/deployment.md, 'Build workers'). "
+                    "SIGTERM: the running builds finish within QUADLOC_SHUTDOWN_GRACE_S - 2 s "
+                    "or go back to the queue. With SQLite builds run in the API process.",
+        epilog="examples:\n  QUADLOC_DATABASE_URL=postgresql://quadloc@db/quadloc quadloc worker\n"
+               "  quadloc worker --database-url postgresql://quadloc@db/quadloc "
+               "--health-port 0\n"), "worker")
+    p.add_argument("--name", help="the worker's name in the logs (default quadloc-worker)")
+    p.add_argument("--health-port", type=int, metavar="PORT",
+                   help="port of GET /healthz (default 8001 / QUADLOC_WORKER_HEALTH_PORT; "
+                        "0: none)")
+    _db(p, server=False)
+
     _maps_parsers(sub, fmt)
 
     p = _command(sub.add_parser(
@@ -285,11 +302,16 @@ def build_parser() -> argparse.ArgumentParser:
         help="calibrate a map version from the recording it was built from",
         description="Fit the covariance scale and the confidence model of a map version from "
                     "the frames its recording held out of the build (holdout_every; their app "
-                    "poses the reference), store them with the version (localize uses them), "
+                    "poses the reference), store them with the version (localize and sessions use "
+                    "them), "
                     "and print the mean NEES and the confidence calibration error before / "
-                    "after on half of those frames the fit did not use. Local database only.",
-        epilog="example (docs/map_building.md):\n"
-               "  quadloc calibrate docs/examples/room_recording.json.gz --map room\n"),
+                    "after on those frames (after: cross-fitted, each frame by a fit that did "
+                    "not see it). On the server of --url / QUADLOC_URL, or in this process on "
+                    "the local database.",
+        epilog="examples (docs/map_building.md):\n"
+               "  quadloc calibrate docs/examples/room_recording.json.gz --map room\n"
+               "  quadloc --url http://127.0.0.1:8000 calibrate "
+               "docs/examples/room_recording.json.gz --map room\n"),
         "calibrate")
     p.add_argument("file", help="recording JSON with holdout_every ('-' = stdin, .gz ok)")
     p.add_argument("--map", required=True, metavar="ID", help="map id")

@@ -87,6 +87,7 @@ __all__ = [
     "read_records",
     "record_from_evidence",
     "refeature",
+    "session_variance_ratio",
     "success",
     "write_records",
 ]
@@ -314,6 +315,26 @@ def map_calibration_applies(calibration: CalibrationConstants | None, key: str) 
     ``quadloc.service.localization.map_calibration``), only: its confidence model was fitted
     on those keys' answers."""
     return calibration is not None and key in calibration.provenance.get("fitted_keys", ())
+
+
+def session_variance_ratio(calibration: CalibrationConstants | None, key: str) -> float:
+    """How much a map's own calibration rescales a tracking session's covariance (1 when it
+    does not apply to ``key``: :func:`map_calibration_applies`).
+
+    A session's covariance is the smoother's marginal of the detections' factors as the
+    client's sigmas weight them, with no residual variance ``s^2`` of its own: it takes the
+    detections' noise to be what the shipped constants say at their floor, ``k f`` (the
+    localize factor of a frame whose ``s^2`` is at most the floor). A map's
+    calibration measured that noise for its detector as ``k' f'``: the session's covariance is
+    multiplied by ``(k' f') / (k f)`` (dimensionless; key ``key``:
+    :func:`quadloc.service.localization.confidence.calibration_key`). A first-order transfer
+    of the map's calibration to sessions: no benchmark measures a session's NEES on a
+    calibrated map yet."""
+    if calibration is None or not map_calibration_applies(calibration, key):
+        return 1.0
+    shipped = CalibrationConstants.shipped()
+    return (calibration.covariance_scale[key] * calibration.s2_floor[key]
+            / (shipped.covariance_scale[key] * shipped.s2_floor[key]))
 
 
 # ------------------------------------------------------------------ settings

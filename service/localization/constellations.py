@@ -9,10 +9,11 @@ together (:mod:`quadloc.maps.places`):
 1. detection triples, largest detections first (:func:`detection_triples`);
 2. for each, the covisible map triplets with the detections' labels
    (:meth:`quadloc.maps.places.PlaceIndex.pairs_for`, joined on the first object), kept when the
-   pair distances agree with the distances implied by the detections' rays at the depths their
-   sizes give (:func:`quadloc.service.localization.hypotheses.size_depths`; a coarse test,
-   :data:`GEOMETRY_RELATIVE_TOLERANCE`), at most :data:`MAX_TRIPLETS` per triple;
-3. P3P on the centres (:func:`quadloc.service.localization.hypotheses.p3p_hypotheses_batch`);
+   pair distances can be spanned by the detections' rays at depths within
+   :data:`TRIPLET_DEPTH_RATIO` of those their sizes give
+   (:func:`quadloc.service.localization.hypotheses.size_depths`; :func:`_pair_possible`, the
+   exact pairwise form of the depth test of step 3), at most :data:`MAX_TRIPLETS` per triple;
+3. P3P on the centres (:func:`quadloc.service.localization.hypotheses.p3p_grunert_batch`);
 4. each pose is scored against the objects covisible with its triplet's first object only
    (:func:`centre_hits`: detections whose centre sees a same-label object's projected centre
    inside 1.5 x the ellipse): the cost per pose does not depend on the map's size;
@@ -35,6 +36,7 @@ import numpy as np
 from quadloc.factors.arrays import BoolArray, FloatArray, IntArray
 from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.factors.camera import Camera
+from quadloc.factors.jit import jit
 from quadloc.maps.compiled import CompiledMap
 from quadloc.maps.places import PlaceIndex
 from quadloc.service.localization.hypotheses import p3p_grunert_batch, size_depths
@@ -46,6 +48,7 @@ __all__ = [
     "PLACE_SEARCH_MIN_OBJECTS",
     "PlaceSeeds",
     "centre_hits",
+    "compile_place_kernels",
     "detection_triples",
     "place_seeds",
 ]
@@ -63,25 +66,31 @@ TOP_DETECTIONS = 6
 STOP_SUPPORT = 0.95
 STOP_MIN_SUPPORT = 2.5
 MAX_TOTAL_TRIPLETS = 12000
+#: Detection triples (that gave poses) searched over the whole map; the later ones search only
+#: the :data:`FOCUS_PLACES` best places found by then (:func:`_focus`): the cost of a frame
+#: grows with the rooms for these first triples only. Only once they solved at least
+#: :data:`FOCUS_MIN_TRIPLETS` triplets (a small map is searched whole: cheap) and a pose
+#: explains at least :data:`FOCUS_MIN_SUPPORT` x D detections (and :data:`STOP_MIN_SUPPORT`):
+#: triples spoilt by a wrong detection find chance poses in a few places only, and focusing
+#: on those hid every copy of the true room (a false accept on exact copies, report seed).
+FULL_TRIPLES = 2
+FOCUS_PLACES = 48
+FOCUS_MIN_TRIPLETS = 1000
+FOCUS_MIN_SUPPORT = 0.6
 #: A P3P pose is kept only when its triplet's objects are at depths within this factor of the
 #: depths their sizes give (:func:`quadloc.service.localization.hypotheses.size_depths`).
 TRIPLET_DEPTH_RATIO = 1.6
 #: Places kept (best centre-hit count first) and seed poses per place.
 MAX_PLACES = 24
 SEEDS_PER_PLACE = 1
-#: Pair-distance test: ``|predicted - map| <= rel * max(predicted, map) + abs``.
-GEOMETRY_RELATIVE_TOLERANCE = 0.5
-GEOMETRY_ABSOLUTE_TOLERANCE_M = 0.3
+#: Rounding slack (m) of the pair-distance test :func:`_pair_possible`.
+GEOMETRY_SLACK_M = 0.01
 #: A detection is hit when a same-label object's projected centre is inside this multiple of
 #: its ellipse.
 HIT_SCALE = 1.5
 #: Spread of ``ln(depth / depth from size)`` in :func:`centre_hits` (measured on simulated
 #: frames: the 5-95 % range of the ratio is 0.76-1.27).
 SIZE_LOG_SIGMA = 0.25
-#: Most (pose, object, detection) evaluations per block of :func:`centre_hits`.
-HIT_BLOCK = 1 << 21
-#: Most covisible objects per pose in :func:`centre_hits` (the nearest to the triplet's first).
-MAX_LOCAL = 32
 
 
 @dataclass(frozen=True)
@@ -141,35 +150,63 @@ def _rays(camera: Camera, params: FloatArray) -> FloatArray:
                             (params[:, 1] - camera.cy) / camera.fy, np.ones(len(params))])
 
 
-def _geometry_ok(pred: FloatArray, dist: FloatArray) -> BoolArray:
-    """Whether predicted and map pair distances (m) agree within the coarse tolerance."""
-    return np.abs(pred - dist) <= (GEOMETRY_RELATIVE_TOLERANCE * np.maximum(pred, dist)
-                                   + GEOMETRY_ABSOLUTE_TOLERANCE_M)
+def _pair_possible(ray_a: FloatArray, ray_b: FloatArray, za: FloatArray, zb: FloatArray,
+                   dist: FloatArray) -> BoolArray:
+    """Whether two objects ``dist`` (n,) m apart can sit on the rays ``ray_a``, ``ray_b`` (3,)
+    (unit depth, camera frame) at depths within :data:`TRIPLET_DEPTH_RATIO` of ``za``, ``zb``
+    (n,) (the depths their sizes give): ``dist`` between the least and the largest distance of
+    ``|x ray_a - y ray_b|`` over that box of depths ``(x, y)``. The largest is at a corner; the
+    least (a convex function, its only stationary point the origin, outside the box) on an
+    edge, where the free depth is the projection clipped to its interval. Exactly the pairwise
+    part of the depth test that :func:`place_seeds` applies after P3P: a necessary condition,
+    no triplet that test keeps is lost here (``GEOMETRY_SLACK_M`` for rounding)."""
+    rho = TRIPLET_DEPTH_RATIO
+    lo_a, hi_a, lo_b, hi_b = za / rho, za * rho, zb / rho, zb * rho
+    aa, bb, ab = float(ray_a @ ray_a), float(ray_b @ ray_b), float(ray_a @ ray_b)
+
+    def span(x: FloatArray, y: FloatArray) -> FloatArray:
+        d2: FloatArray = np.sqrt(np.maximum(x * x * aa + y * y * bb - 2.0 * x * y * ab, 0.0))
+        return d2
+
+    dmax = np.maximum(np.maximum(span(lo_a, lo_b), span(lo_a, hi_b)),
+                      np.maximum(span(hi_a, lo_b), span(hi_a, hi_b)))
+    dmin = np.minimum(
+        np.minimum(span(lo_a, np.clip(lo_a * ab / bb, lo_b, hi_b)),
+                   span(hi_a, np.clip(hi_a * ab / bb, lo_b, hi_b))),
+        np.minimum(span(np.clip(lo_b * ab / aa, lo_a, hi_a), lo_b),
+                   span(np.clip(hi_b * ab / aa, lo_a, hi_a), hi_b)))
+    ok: BoolArray = (dist >= dmin - GEOMETRY_SLACK_M) & (dist <= dmax + GEOMETRY_SLACK_M)
+    return ok
 
 
 def _triplets(index: PlaceIndex, compiled: CompiledMap, camera: Camera, params: FloatArray,
-              labels: list[str], triple: tuple[int, ...], rng: np.random.Generator
-              ) -> IntArray:
-    """Map triplets (T, 3) for a detection triple (module docstring, step 2)."""
+              labels: list[str], triple: tuple[int, ...], rng: np.random.Generator,
+              allowed: BoolArray | None = None) -> IntArray:
+    """Map triplets (T, 3) for a detection triple (module docstring, step 2); with
+    ``allowed`` (N,), only those whose first object it marks."""
     a, b, c = triple
     sub = params[[a, b, c]]
     rays = _rays(camera, sub)
     radius = np.prod(compiled.axes, axis=1) ** (1.0 / 3.0)
 
-    def points(k: int, objs: IntArray) -> FloatArray:
-        """Points (n, 3) camera frame of the triple's detection ``k`` (0, 1, 2) at the depths
-        of objects ``objs``."""
-        z = size_depths(camera, sub[k, 2:4], radius[objs])
-        pts: FloatArray = z[:, None] * rays[k][None]
-        return pts
+    def possible(k: int, m: int, objs_k: IntArray, objs_m: IntArray, dist: FloatArray
+                 ) -> BoolArray:
+        """:func:`_pair_possible` of the triple's detections ``k``, ``m`` (0, 1, 2) as the
+        objects ``objs_k``, ``objs_m`` ``dist`` apart."""
+        return _pair_possible(rays[k], rays[m], size_depths(camera, sub[k, 2:4], radius[objs_k]),
+                              size_depths(camera, sub[m, 2:4], radius[objs_m]), dist)
 
     i_ab, j_ab, d_ab = index.pairs_for(labels[a], labels[b])
     i_ac, k_ac, d_ac = index.pairs_for(labels[a], labels[c])
+    if allowed is not None:
+        sel_ab, sel_ac = allowed[i_ab], allowed[i_ac]
+        i_ab, j_ab, d_ab = i_ab[sel_ab], j_ab[sel_ab], d_ab[sel_ab]
+        i_ac, k_ac, d_ac = i_ac[sel_ac], k_ac[sel_ac], d_ac[sel_ac]
     if len(i_ab) == 0 or len(i_ac) == 0:
         return np.zeros((0, 3), dtype=np.intp)
-    ok = _geometry_ok(np.linalg.norm(points(0, i_ab) - points(1, j_ab), axis=1), d_ab)
+    ok = possible(0, 1, i_ab, j_ab, d_ab)
     i_ab, j_ab = i_ab[ok], j_ab[ok]
-    ok = _geometry_ok(np.linalg.norm(points(0, i_ac) - points(2, k_ac), axis=1), d_ac)
+    ok = possible(0, 2, i_ac, k_ac, d_ac)
     i_ac, k_ac = i_ac[ok], k_ac[ok]
     # join on the first object (the pairs come sorted by it)
     lo = np.searchsorted(i_ac, i_ab, side="left")
@@ -185,7 +222,7 @@ def _triplets(index: PlaceIndex, compiled: CompiledMap, camera: Camera, params: 
     d_jk = np.linalg.norm(compiled.centers[J] - compiled.centers[K], axis=1)
     keep = (J != K) & (d_jk <= index.view_range_m)
     I, J, K, d_jk = I[keep], J[keep], K[keep], d_jk[keep]
-    ok = _geometry_ok(np.linalg.norm(points(1, J) - points(2, K), axis=1), d_jk)
+    ok = possible(1, 2, J, K, d_jk)
     out = np.column_stack([I[ok], J[ok], K[ok]])
     if len(out) > MAX_TRIPLETS:
         out = out[np.sort(rng.choice(len(out), MAX_TRIPLETS, replace=False))]
@@ -199,47 +236,100 @@ def centre_hits(camera: Camera, camera_from_world: FloatArray, local: IntArray,
     (D,)) with its local objects ``local`` (M, L) (``local_valid`` (M, L): padding False).
 
     A detection's support is the best, over same-label local objects in front of the camera
-    whose projected centre is inside :data:`HIT_SCALE` x the ellipse, of
+    (depth > 0.05 m) whose projected centre is inside :data:`HIT_SCALE` x the ellipse, of
     ``exp(-q / 2) exp(-(ln(z / z_size))^2 / (2 SIZE_LOG_SIGMA^2))`` (``q``: the centre's squared
     normalised distance in the ellipse, 1 on its contour; ``z``: the object's depth, ``z_size``:
     the depth its size implies, :func:`quadloc.service.localization.hypotheses.size_depths`);
-    0 when there is none. Returns (M,) the sums over the detections (at most D)."""
-    m_total, n_local = local.shape
-    n_det = len(params)
-    out = np.zeros(m_total)
-    cos, sin = np.cos(params[:, 4]), np.sin(params[:, 4])
+    0 when there is none. Returns (M,) the sums over the detections (at most D). One compiled
+    kernel (:func:`_centre_hits_kernel`): no (M, L, D) temporaries."""
     radius = np.prod(compiled.axes, axis=1) ** (1.0 / 3.0)
-    step = max(1, HIT_BLOCK // max(1, n_local * n_det))
-    for s in range(0, m_total, step):
-        T = camera_from_world[s:s + step]
-        L = local[s:s + step]
-        X = np.einsum("mij,mlj->mli", T[:, :3, :3], compiled.centers[L]) + T[:, None, :3, 3]
-        z = X[..., 2]
-        front = (z > 0.05) & local_valid[s:s + step]
-        zs = np.where(front, z, 1.0)
-        u = camera.fx * X[..., 0] / zs + camera.cx
-        v = camera.fy * X[..., 1] / zs + camera.cy
-        dx = u[..., None] - params[:, 0]
-        dy = v[..., None] - params[:, 1]
-        p = (dx * cos + dy * sin) / params[:, 2]
-        q = (-dx * sin + dy * cos) / params[:, 3]
-        q2 = p * p + q * q
-        ok = ((q2 <= HIT_SCALE ** 2) & (object_codes[L][..., None] == label_codes)
-              & front[..., None])
-        z_size = size_depths(camera, params[None, None, :, 2:4], radius[L][..., None])
-        log_ratio = np.log(zs[..., None] / z_size)
-        w = np.exp(-0.5 * q2 - 0.5 * (log_ratio / SIZE_LOG_SIGMA) ** 2)
-        out[s:s + step] = np.where(ok, w, 0.0).max(axis=1).sum(axis=1)
+    p = np.array(params, dtype=float)
+    # the depth each detection's size gives per unit object radius (size_depths, r = 1)
+    z_unit = np.array(size_depths(camera, p[:, 2:4], 1.0), dtype=float)
+    # writable C arrays of fixed dtypes: one kernel specialisation (compile_place_kernels)
+    out: FloatArray = _centre_hits_kernel(
+        np.array(camera_from_world, dtype=float), np.array(local, dtype=np.intp),
+        np.array(local_valid, dtype=bool), np.array(compiled.centers, dtype=float), radius,
+        np.array(object_codes, dtype=np.intp), p, z_unit,
+        np.array(label_codes, dtype=np.intp), float(camera.fx), float(camera.fy),
+        float(camera.cx), float(camera.cy), HIT_SCALE ** 2, 1.0 / SIZE_LOG_SIGMA ** 2)
     return out
 
 
-def _local_objects(index: PlaceIndex, compiled: CompiledMap, i: int) -> IntArray:
-    """Object ``i`` and its covisible neighbours, at most :data:`MAX_LOCAL` (nearest first)."""
-    nb = np.concatenate([[i], index.neighbours(i)]).astype(np.intp)
-    if len(nb) > MAX_LOCAL:
-        d = np.linalg.norm(compiled.centers[nb] - compiled.centers[i], axis=1)
-        nb = nb[np.argsort(d, kind="stable")[:MAX_LOCAL]]
-    return nb
+def compile_place_kernels() -> None:
+    """Compile (or load from numba's cache) the place search's kernels (:func:`centre_hits`,
+    :func:`quadloc.service.localization.hypotheses.p3p_grunert_batch`), so that no request
+    pays for it: the service calls it at start-up with
+    :func:`quadloc.factors.pose_residuals.compile_kernels`."""
+    camera = Camera(500.0, 500.0, 320.0, 240.0, 640, 480)
+    p3p_grunert_batch(np.array([[[300.0, 200.0], [350.0, 260.0], [280.0, 250.0]]]),
+                      np.array([[[0.0, 0.0, 3.0], [0.3, 0.2, 3.1], [-0.1, 0.3, 2.9]]]), camera)
+    _centre_hits_kernel(np.eye(4)[None], np.zeros((1, 1), dtype=np.intp),
+                        np.ones((1, 1), dtype=bool), np.array([[0.0, 0.0, 2.0]]), np.ones(1),
+                        np.zeros(1, dtype=np.intp), np.array([[320.0, 240.0, 50.0, 40.0, 0.1]]),
+                        np.ones(1), np.zeros(1, dtype=np.intp), 500.0, 500.0, 320.0, 240.0,
+                        HIT_SCALE ** 2, 1.0 / SIZE_LOG_SIGMA ** 2)
+
+
+@jit
+def _centre_hits_kernel(T: FloatArray, local: IntArray, valid: BoolArray, centers: FloatArray,
+                        radius: FloatArray, codes: IntArray, params: FloatArray,
+                        z_unit: FloatArray, label_codes: IntArray, fx: float, fy: float,
+                        cx: float, cy: float, hit2: float, inv_s2: float) -> FloatArray:
+    """:func:`centre_hits` (its arguments as arrays; ``z_unit`` (D,): the size depth per metre
+    of object radius; ``hit2``: HIT_SCALE^2; ``inv_s2``: 1 / SIZE_LOG_SIGMA^2)."""
+    m_total, n_local = local.shape
+    n_det = params.shape[0]
+    out = np.zeros(m_total)
+    best = np.zeros(n_det)
+    cos = np.cos(params[:, 4])
+    sin = np.sin(params[:, 4])
+    for m in range(m_total):
+        best[:] = 0.0
+        for k in range(n_local):
+            if not valid[m, k]:
+                continue
+            o = local[m, k]
+            X = centers[o]
+            x = T[m, 0, 0] * X[0] + T[m, 0, 1] * X[1] + T[m, 0, 2] * X[2] + T[m, 0, 3]
+            y = T[m, 1, 0] * X[0] + T[m, 1, 1] * X[1] + T[m, 1, 2] * X[2] + T[m, 1, 3]
+            z = T[m, 2, 0] * X[0] + T[m, 2, 1] * X[1] + T[m, 2, 2] * X[2] + T[m, 2, 3]
+            if not z > 0.05:
+                continue
+            u = fx * x / z + cx
+            v = fy * y / z + cy
+            for d in range(n_det):
+                if label_codes[d] != codes[o]:
+                    continue
+                dx = u - params[d, 0]
+                dy = v - params[d, 1]
+                a = (dx * cos[d] + dy * sin[d]) / params[d, 2]
+                b = (-dx * sin[d] + dy * cos[d]) / params[d, 3]
+                q2 = a * a + b * b
+                if q2 > hit2:
+                    continue
+                lr = np.log(z / (z_unit[d] * radius[o]))
+                w = np.exp(-0.5 * q2 - 0.5 * lr * lr * inv_s2)
+                if w > best[d]:
+                    best[d] = w
+        out[m] = best.sum()
+    return out
+
+
+def _focus(index: PlaceIndex, anchor: IntArray, hits: FloatArray, hinted: BoolArray | None
+           ) -> BoolArray:
+    """The objects (N,) mask the later detection triples search: the local objects of the
+    best anchor of each of the :data:`FOCUS_PLACES` best places (grid cells of the anchors,
+    by their best support) found so far, and the hint's objects."""
+    order = np.lexsort((np.arange(len(hits)), -hits))
+    cells = index.cells[anchor[order]]
+    _, first = np.unique(cells, axis=0, return_index=True)
+    best = anchor[order[np.sort(first)[:FOCUS_PLACES]]]
+    allowed = np.zeros(len(index.codes), dtype=bool)
+    allowed[index.local[best][index.local_valid[best]]] = True
+    if hinted is not None:
+        allowed |= hinted
+    return allowed
 
 
 def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params: FloatArray,
@@ -250,23 +340,46 @@ def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params
     (D, 5) px / rad with ``labels`` (D,); D >= 3. Detection triples are tried in the order of
     :func:`detection_triples` until one gives a pose of support >= :data:`STOP_SUPPORT` x D
     (and >= :data:`STOP_MIN_SUPPORT`), :data:`MAX_TOTAL_TRIPLETS` triplets were solved, or the
-    ``deadline`` passed. ``hinted`` (N,) marks the objects of a place hint: half of the
-    :data:`MAX_PLACES` places are the best whose triplet's first object is hinted."""
-    cats = sorted(set(compiled.categories))
-    code = {c: k for k, c in enumerate(cats)}
-    object_codes = np.array([code[c] for c in compiled.categories], dtype=np.intp)
+    ``deadline`` passed; after :data:`FULL_TRIPLES` triples with poses (and the conditions of
+    :data:`FOCUS_MIN_TRIPLETS`), only in the best places so far (:func:`_focus`). ``hinted``
+    (N,) marks the objects of a place hint: the triples are first tried there only (until one
+    explains the frame by the same rule), then
+    over the whole map as without a hint (a hint adds candidates, never removes the
+    evidence's); half of the :data:`MAX_PLACES` places are the best whose triplet's first
+    object is hinted."""
+    code = {c: k for k, c in enumerate(index.labels)}
+    object_codes = index.codes
     label_codes = np.array([code.get(x, -1) for x in labels], dtype=np.intp)
-    local: dict[int, IntArray] = {}  # anchor -> its place's objects (the sub-map)
-    scored: dict[int, IntArray] = {}  # anchor -> those with a detected label (the scoring)
-    wanted = np.zeros(len(cats), dtype=bool)
+    wanted = np.zeros(len(index.labels), dtype=bool)
     wanted[label_codes[label_codes >= 0]] = True
     radius = np.prod(compiled.axes, axis=1) ** (1.0 / 3.0)
-    all_poses, all_scores, all_anchor = [], [], []
+    all_poses: list[FloatArray] = []
+    all_scores: list[FloatArray] = []
+    all_anchor: list[IntArray] = []
     n_triplets = 0
-    for triple in detection_triples(params):
+    n_full = 0  # triples of the whole map that gave poses
+    focus: BoolArray | None = None
+    triples = detection_triples(params)
+    # a hint's places first (every triple there: a few rooms, cheap), then the whole map
+    plan: list[tuple[tuple[int, ...], BoolArray | None]] = [
+        (t, hinted) for t in (triples if hinted is not None else [])]
+    plan += [(t, None) for t in triples]
+    hinted_done = hinted is None
+    for triple, restrict in plan:
         if n_triplets >= MAX_TOTAL_TRIPLETS or deadline_passed(deadline):
             break
-        trip = _triplets(index, compiled, camera, params, labels, triple, rng)
+        if restrict is None:
+            hinted_done = True
+        elif hinted_done:
+            continue  # the hint's places explained the frame: on to the whole map
+        if (restrict is None and focus is None and n_full >= FULL_TRIPLES
+                and n_triplets >= FOCUS_MIN_TRIPLETS
+                and max(float(x.max()) for x in all_scores) >= max(
+                    STOP_MIN_SUPPORT, FOCUS_MIN_SUPPORT * len(params))):
+            focus = _focus(index, np.concatenate(all_anchor), np.concatenate(all_scores),
+                           hinted)
+        trip = _triplets(index, compiled, camera, params, labels, triple, rng,
+                         restrict if restrict is not None else focus)
         trip = trip[:MAX_TOTAL_TRIPLETS - n_triplets]
         n_triplets += len(trip)
         if len(trip) == 0:
@@ -284,25 +397,21 @@ def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params
         if len(poses) == 0:
             continue
         anchor = trip[owner, 0]
-        uniq, inv = np.unique(anchor, return_inverse=True)
-        for i in uniq.tolist():
-            if i not in local:
-                local[i] = _local_objects(index, compiled, i)
-                scored[i] = local[i][wanted[object_codes[local[i]]]]
-        lists = [scored[i] for i in uniq.tolist()]
-        width = max(len(x) for x in lists)
-        table = np.zeros((len(uniq), width), dtype=np.intp)
-        valid = np.zeros((len(uniq), width), dtype=bool)
-        for r, nb in enumerate(lists):
-            table[r, :len(nb)] = nb
-            valid[r, :len(nb)] = True
-        scores = centre_hits(camera, poses, table[inv], valid[inv], compiled, params,
+        # the scored objects first, the table cut to the widest row (the cost is per column)
+        # the anchors' local objects (:attr:`PlaceIndex.local`) scored: those of a detected label
+        valid = index.local_valid[anchor] & wanted[object_codes[index.local[anchor]]]
+        cols = np.argsort(~valid, axis=1, kind="stable")[:, :max(1, int(valid.sum(1).max()))]
+        scores = centre_hits(camera, poses, np.take_along_axis(index.local[anchor], cols, 1),
+                             np.take_along_axis(valid, cols, 1), compiled, params,
                              label_codes, object_codes)
         all_poses.append(poses)
         all_scores.append(scores)
         all_anchor.append(anchor)
+        n_full += restrict is None
         if scores.max() >= max(STOP_MIN_SUPPORT, STOP_SUPPORT * len(params)):
-            break
+            if restrict is None:
+                break
+            hinted_done = True  # the evidence still searches the whole map
     if not all_poses:
         return PlaceSeeds(np.zeros((0, 4, 4)), np.zeros(0), np.zeros(0, dtype=np.intp), 0,
                           n_triplets, np.zeros(0, dtype=bool))
@@ -327,7 +436,7 @@ def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params
                 chosen[key].append(m)
     picked = np.array(sorted((m for ms in chosen.values() for m in ms),
                              key=lambda m: (-float(hits[m]), m)), dtype=np.intp)
-    objects = np.unique(np.concatenate([local[int(anchor[m])] for m in picked]))
+    objects = np.unique(index.local[anchor[picked]][index.local_valid[anchor[picked]]])
     hinted_seed = (np.zeros(len(picked), dtype=bool) if hinted is None
                    else np.asarray(hinted, dtype=bool)[anchor[picked]])
     return PlaceSeeds(poses[picked], hits[picked], objects, int(place_key.max()) + 1,

@@ -12,6 +12,7 @@ OpenCV ``[R | t]`` direction, ``x_cam = R x_world + t``, camera axes +X right, +
 
 from __future__ import annotations
 
+import cmath
 import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
@@ -22,6 +23,7 @@ import numpy as np
 from quadloc.factors.arrays import BoolArray, FloatArray, IntArray
 from quadloc.factors.camera import MIN_DEPTH, Camera, Ellipsoid, projected_gaussians
 from quadloc.factors.conics import Ellipse
+from quadloc.factors.jit import jit
 from quadloc.factors.rotations import so3_exp
 
 if TYPE_CHECKING:
@@ -144,18 +146,24 @@ def p3p_hypotheses_batch(
     return T, sample[ok]
 
 
+#: A root of Grunert's quartic whose imaginary part is at most this (relative, at least
+#: absolute) is taken as real (then polished by Newton steps; a spurious one only adds a pose
+#: that the depth test and the scoring drop).
+QUARTIC_IMAG_TOLERANCE = 1e-4
+
+
 def p3p_grunert_batch(
     image_points: FloatArray, world_points: FloatArray, camera: Camera,
     newton_steps: int = 2,
 ) -> tuple[FloatArray, IntArray]:
-    """:func:`p3p_hypotheses_batch` vectorised over samples (no Python loop): Grunert's
+    """:func:`p3p_hypotheses_batch` over many samples in one compiled kernel: Grunert's
     quartic in the ratio of two of the distances along the bearing rays (Haralick et al.
     1994, "Review and analysis of solutions of the three point perspective pose estimation
-    problem", section 2), all its real roots from the companion matrices' eigenvalues, polished
-    by ``newton_steps`` Newton steps on the quartic, then the rigid transform of the three
-    camera-frame points onto the world points (Kabsch, batched SVD). The many-sample search of
-    large maps (:mod:`quadloc.service.localization.constellations`) calls it; the same poses as
-    ``cv2.solveP3P`` (tested), in a different order.
+    problem", section 2), all its real roots in closed form (:func:`_quartic_roots_one`),
+    polished by ``newton_steps`` Newton steps on the quartic, then the rigid transform of the three
+    camera-frame points onto the world points (the two congruent triangles' frames aligned).
+    The many-sample search of large maps (:mod:`quadloc.service.localization.constellations`)
+    calls it; the same poses as ``cv2.solveP3P`` (tested), in a different order.
 
     Args:
         image_points: (B, 3, 2) pixels; world_points: (B, 3, 3) world metres.
@@ -172,13 +180,46 @@ def p3p_grunert_batch(
     j = np.stack([(img[..., 0] - camera.cx) / camera.fx, (img[..., 1] - camera.cy) / camera.fy,
                   np.ones((B, 3))], axis=-1)
     j /= np.linalg.norm(j, axis=-1, keepdims=True)
-    a2 = np.sum((X[:, 1] - X[:, 2]) ** 2, axis=1)
-    b2 = np.sum((X[:, 0] - X[:, 2]) ** 2, axis=1)
-    c2 = np.sum((X[:, 0] - X[:, 1]) ** 2, axis=1)
-    ca = np.sum(j[:, 1] * j[:, 2], axis=1)  # cos(alpha): rays 2, 3
-    cb = np.sum(j[:, 0] * j[:, 2], axis=1)  # cos(beta): rays 1, 3
-    cg = np.sum(j[:, 0] * j[:, 1], axis=1)  # cos(gamma): rays 1, 2
-    with np.errstate(divide="ignore", invalid="ignore"):
+    poses, sample, count = _p3p_kernel(np.ascontiguousarray(j), np.array(X), newton_steps,
+                                       QUARTIC_IMAG_TOLERANCE)
+    return poses[:count], sample[:count]
+
+
+@jit
+def _p3p_kernel(j: FloatArray, X: FloatArray, newton_steps: int, imag_tol: float
+                ) -> tuple[FloatArray, IntArray, int]:
+    """:func:`p3p_grunert_batch` for unit bearings ``j`` (B, 3, 3) and world points ``X``
+    (B, 3, 3): Grunert's quartic, its roots (:func:`_quartic_roots_one`), Newton polish, the
+    camera points and the pose from the two triangles' frames. Returns poses (4 B, 4, 4),
+    their samples (4 B,) and how many of them are filled."""
+    B = X.shape[0]
+    poses = np.zeros((4 * B, 4, 4))
+    owner = np.zeros(4 * B, dtype=np.intp)
+    count = 0
+    Y = np.zeros((3, 3))
+    dy = np.zeros((2, 3))
+    dx = np.zeros((2, 3))
+    FY = np.zeros((3, 3))
+    FX = np.zeros((3, 3))
+    R = np.zeros((3, 3))
+    t = np.zeros(3)
+    roots = np.zeros(4, dtype=np.complex128)
+    for b in range(B):
+        a2 = 0.0
+        b2 = 0.0
+        c2 = 0.0
+        ca = 0.0
+        cb = 0.0
+        cg = 0.0
+        for k in range(3):
+            a2 += (X[b, 1, k] - X[b, 2, k]) ** 2
+            b2 += (X[b, 0, k] - X[b, 2, k]) ** 2
+            c2 += (X[b, 0, k] - X[b, 1, k]) ** 2
+            ca += j[b, 1, k] * j[b, 2, k]
+            cb += j[b, 0, k] * j[b, 2, k]
+            cg += j[b, 0, k] * j[b, 1, k]
+        if not b2 > 0.0:
+            continue
         p = (a2 - c2) / b2
         q = (a2 + c2) / b2
         A4 = (p - 1.0) ** 2 - 4.0 * c2 / b2 * ca ** 2
@@ -187,52 +228,125 @@ def p3p_grunert_batch(
                     - 4.0 * q * ca * cb * cg + 2.0 * (b2 - a2) / b2 * cg ** 2)
         A1 = 4.0 * (-p * (1.0 + p) * cb + 2.0 * a2 / b2 * cg ** 2 * cb - (1.0 - q) * ca * cg)
         A0 = (1.0 + p) ** 2 - 4.0 * a2 / b2 * cg ** 2
-        coeffs = np.stack([A4, A3, A2, A1, A0], axis=1)
-        good = np.all(np.isfinite(coeffs), axis=1) & (np.abs(A4) > 1e-12)
-        comp = np.zeros((B, 4, 4))
-        comp[:, 1:, :3] = np.eye(3)
-        comp[:, 0, :] = -coeffs[:, 1:] / np.where(good, A4, 1.0)[:, None]
-    comp[~good] = 0.0
-    roots = np.linalg.eigvals(comp)  # (B, 4)
-    real = good[:, None] & (np.abs(roots.imag) <= 1e-6 * np.maximum(1.0, np.abs(roots.real)))
-    v = roots.real
-    for _ in range(newton_steps):
-        f = (((A4[:, None] * v + A3[:, None]) * v + A2[:, None]) * v + A1[:, None]) * v \
-            + A0[:, None]
-        df = ((4.0 * A4[:, None] * v + 3.0 * A3[:, None]) * v + 2.0 * A2[:, None]) * v \
-            + A1[:, None]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            step = np.where(np.abs(df) > 1e-15, f / df, 0.0)
-        v = v - np.where(np.isfinite(step), step, 0.0)
-    sample, k = np.nonzero(real & (v > 0))
-    v = v[sample, k]
-    P, Q, ca_, cb_, cg_ = p[sample], q[sample], ca[sample], cb[sample], cg[sample]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = (((-1.0 + P) * v ** 2 - 2.0 * P * cb_ * v + 1.0 + P)
-             / (2.0 * (cg_ - v * ca_)))
-        s1 = np.sqrt(b2[sample] / (1.0 + v ** 2 - 2.0 * v * cb_))
-    del Q
-    ok = np.isfinite(u) & np.isfinite(s1) & (u > 0) & (s1 > 0)
-    sample, u, v, s1 = sample[ok], u[ok], v[ok], s1[ok]
-    Y = j[sample] * np.stack([s1, u * s1, v * s1], axis=1)[:, :, None]  # camera points
-    W = X[sample]
-    my, mw = Y.mean(axis=1), W.mean(axis=1)
-    H = np.einsum("bki,bkj->bij", W - mw[:, None], Y - my[:, None])  # sum w y^T
-    U, _, Vt = np.linalg.svd(H)
-    d = np.sign(np.linalg.det(np.einsum("bji,bkj->bik", Vt, U.transpose(0, 2, 1))))
-    D = np.zeros((len(sample), 3, 3))
-    D[:, 0, 0] = 1.0
-    D[:, 1, 1] = 1.0
-    D[:, 2, 2] = d
-    R = np.einsum("bji,bjk,bkl->bil", Vt, D, U.transpose(0, 2, 1))  # R = V D U^T
-    t = my - np.einsum("bij,bj->bi", R, mw)
-    depth = np.einsum("bpj,bj->bp", W, R[:, 2]) + t[:, 2, None]
-    keep = np.all(np.isfinite(R), axis=(1, 2)) & np.all(depth > 0.0, axis=1)
-    T = np.zeros((int(keep.sum()), 4, 4))
-    T[:, :3, :3] = R[keep]
-    T[:, :3, 3] = t[keep]
-    T[:, 3, 3] = 1.0
-    return T, sample[keep]
+        if not (abs(A4) > 1e-12 and np.isfinite(A3) and np.isfinite(A2) and np.isfinite(A1)
+                and np.isfinite(A0)):
+            continue
+        _quartic_roots_one(A3 / A4, A2 / A4, A1 / A4, A0 / A4, roots)
+        for r in range(4):
+            v = roots[r].real
+            if abs(roots[r].imag) > imag_tol * max(1.0, abs(v)):
+                continue
+            for _ in range(newton_steps):
+                f = (((A4 * v + A3) * v + A2) * v + A1) * v + A0
+                df = ((4.0 * A4 * v + 3.0 * A3) * v + 2.0 * A2) * v + A1
+                if abs(df) > 1e-15:
+                    step = f / df
+                    if np.isfinite(step):
+                        v -= step
+            if not v > 0.0:
+                continue
+            u = (((-1.0 + p) * v ** 2 - 2.0 * p * cb * v + 1.0 + p) / (2.0 * (cg - v * ca)))
+            s1 = math.sqrt(b2 / (1.0 + v ** 2 - 2.0 * v * cb)) \
+                if 1.0 + v ** 2 - 2.0 * v * cb > 0.0 else math.nan
+            if not (np.isfinite(u) and np.isfinite(s1) and u > 0.0 and s1 > 0.0):
+                continue
+            for k in range(3):
+                Y[0, k] = j[b, 0, k] * s1
+                Y[1, k] = j[b, 1, k] * u * s1
+                Y[2, k] = j[b, 2, k] * v * s1
+                dy[0, k] = Y[1, k] - Y[0, k]
+                dy[1, k] = Y[2, k] - Y[0, k]
+                dx[0, k] = X[b, 1, k] - X[b, 0, k]
+                dx[1, k] = X[b, 2, k] - X[b, 0, k]
+            _frame_one(dy[0], dy[1], FY)
+            _frame_one(dx[0], dx[1], FX)
+            ok = True
+            for i in range(3):  # R = FY FX^T, t = Y0 - R X0
+                for k in range(3):
+                    R[i, k] = FY[i, 0] * FX[k, 0] + FY[i, 1] * FX[k, 1] + FY[i, 2] * FX[k, 2]
+                    ok = ok and np.isfinite(R[i, k])
+            for i in range(3):
+                t[i] = Y[0, i] - (R[i, 0] * X[b, 0, 0] + R[i, 1] * X[b, 0, 1]
+                                  + R[i, 2] * X[b, 0, 2])
+            for k in range(3):
+                if not R[2, 0] * X[b, k, 0] + R[2, 1] * X[b, k, 1] + R[2, 2] * X[b, k, 2] \
+                        + t[2] > 0.0:
+                    ok = False
+            if not ok:
+                continue
+            for i in range(3):
+                for k in range(3):
+                    poses[count, i, k] = R[i, k]
+                poses[count, i, 3] = t[i]
+            poses[count, 3, 3] = 1.0
+            owner[count] = b
+            count += 1
+    return poses, owner, count
+
+
+@jit
+def _frame_one(a: FloatArray, b: FloatArray, F: FloatArray) -> None:
+    """:func:`_frames` of one direction pair (3,) into ``F`` (3, 3): the columns
+    ``[a, b_perp, a x b_perp]``."""
+    na = math.sqrt(a[0] ** 2 + a[1] ** 2 + a[2] ** 2)
+    for k in range(3):
+        F[k, 0] = a[k] / na
+    d = b[0] * F[0, 0] + b[1] * F[1, 0] + b[2] * F[2, 0]
+    for k in range(3):
+        F[k, 1] = b[k] - d * F[k, 0]
+    nb = math.sqrt(F[0, 1] ** 2 + F[1, 1] ** 2 + F[2, 1] ** 2)
+    for k in range(3):
+        F[k, 1] /= nb
+    F[0, 2] = F[1, 0] * F[2, 1] - F[2, 0] * F[1, 1]
+    F[1, 2] = F[2, 0] * F[0, 1] - F[0, 0] * F[2, 1]
+    F[2, 2] = F[0, 0] * F[1, 1] - F[1, 0] * F[0, 1]
+
+
+@jit
+def _quartic_roots_one(a: float, b: float, c: float, d: float, out: np.ndarray) -> None:
+    """The four complex roots of ``v^4 + a v^3 + b v^2 + c v + d`` into ``out`` (4,), in closed
+    form (Ferrari): the depressed quartic ``y^4 + p y^2 + q y + r`` (``v = y - a / 4``) factored
+    as ``(y^2 + p/2 + m)^2 = (s y - q / (2 s))^2``, ``s = sqrt(2 m)``, with ``m`` the
+    largest-magnitude root of the resolvent cubic ``m^3 + p m^2 + (p^2/4 - r) m - q^2/8``
+    (Cardano). Accurate to a few 1e-8 relative near double roots: callers polish."""
+    p = complex(b - 3.0 * a * a / 8.0)
+    q = complex(c - a * b / 2.0 + a ** 3 / 8.0)
+    r = complex(d - a * c / 4.0 + a * a * b / 16.0 - 3.0 * a ** 4 / 256.0)
+    B_ = p
+    C_ = p * p / 4.0 - r
+    D_ = -q * q / 8.0
+    P = C_ - B_ * B_ / 3.0
+    Q = 2.0 * B_ ** 3 / 27.0 - B_ * C_ / 3.0 + D_
+    root = cmath.sqrt(Q * Q / 4.0 + P ** 3 / 27.0)
+    u3 = -Q / 2.0 + root
+    if abs(-Q / 2.0 - root) > abs(u3):
+        u3 = -Q / 2.0 - root
+    u = cmath.exp(cmath.log(u3) / 3.0) if abs(u3) > 0.0 else 0j
+    omega = cmath.exp(2j * math.pi / 3.0)
+    m = 0j
+    for k in range(3):
+        uk = u * omega ** k
+        mk = (uk - P / (3.0 * uk) if abs(uk) > 0.0 else 0j) - B_ / 3.0
+        if abs(mk) > abs(m):
+            m = mk
+    s = cmath.sqrt(2.0 * m)
+    if abs(s) > 0.0:
+        qs = q / s
+        e1 = cmath.sqrt(-2.0 * p - 2.0 * m - 2.0 * qs)
+        e2 = cmath.sqrt(-2.0 * p - 2.0 * m + 2.0 * qs)
+        out[0] = (s + e1) / 2.0
+        out[1] = (s - e1) / 2.0
+        out[2] = (-s + e2) / 2.0
+        out[3] = (-s - e2) / 2.0
+    else:  # q = 0: the biquadratic
+        disc = cmath.sqrt(p * p - 4.0 * r)
+        ya, yb = cmath.sqrt((-p + disc) / 2.0), cmath.sqrt((-p - disc) / 2.0)
+        out[0] = ya
+        out[1] = -ya
+        out[2] = yb
+        out[3] = -yb
+    for k in range(4):
+        out[k] -= a / 4.0
 
 
 # ----------------------------------------------------------------------------------- P2E

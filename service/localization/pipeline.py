@@ -76,7 +76,12 @@ from quadloc.service.localization.scoring import (
     greedy_assignment,
     sunflower_disk,
 )
-from quadloc.service.localization.search import Hypothesis, RansacOutcome, ransac
+from quadloc.service.localization.search import (
+    KEEP_DISTINCT,
+    Hypothesis,
+    RansacOutcome,
+    ransac,
+)
 from quadloc.service.localization.types import (
     Alternative,
     Detection,
@@ -97,6 +102,12 @@ __all__ = ["Assessment", "localize", "prior_gate_poses", "refine_pose"]
 #: far less than this).
 REFINED_ALTERNATIVES = 2
 ALTERNATIVE_PREFILTER_RATIO = 0.5
+#: A large map's search (places) keeps this many distinct hypotheses and refines, beyond the
+#: :data:`REFINED_ALTERNATIVES` runners-up, those scoring at least :data:`PLACE_TIE_RATIO` of
+#: the best: the candidate places of an ambiguous answer (exact copies of a room), at most
+#: this many listed, best-supported first.
+PLACE_CANDIDATES = 6
+PLACE_TIE_RATIO = 0.9
 #: LM iteration cap of an alternative's refinement (a capped alternative that competes is then
 #: refined in full from where it stopped; measurements: ``docs/design/localization.md``).
 ALTERNATIVE_MAX_ITERATIONS = 15
@@ -152,6 +163,11 @@ class _Solve:
         n_samples: label-compatible P2E samples (an evidence feature).
         t0: ``time.perf_counter()`` at the start of the call, s.
         hinted: the best hypothesis of a place hint's places, refined besides the search's.
+        places: whether the map was searched by places (:func:`_place_stage`): up to
+            :data:`PLACE_CANDIDATES` candidates.
+        hint_samples: with a place hint on such a map, the label-compatible samples of the
+            hint's places only: an answer that agrees with the hint has its chance matches
+            counted there (its confidence is conditional on the hint), not in the whole map.
         evaluated: candidate poses scored so far; timings: wall ms per stage.
     """
 
@@ -170,6 +186,8 @@ class _Solve:
     timings: dict[str, float] = field(default_factory=dict)
     evaluated: int = 0
     hinted: Hypothesis | None = None
+    places: bool = False
+    hint_samples: int | None = None
 
 
 def localize(
@@ -221,9 +239,11 @@ def localize(
         return _not_localized("no_label_match", options.metric, 0, timings, t0)
     seeds: PlaceSeeds | None = None
     whole = compiled
+    hinted: BoolArray | None = None
     if len(compiled) >= PLACE_SEARCH_MIN_OBJECTS and len(usable) >= 3:
+        hinted = None if hint is None else _hinted_objects(compiled, hint)
         compiled, seeds = _place_stage(detections, usable, compiled, camera, options, t0, cpu0,
-                                       timings, hint)
+                                       timings, hinted)
         if seeds is None:
             return _not_localized("no_hypothesis_above_inlier_threshold", options.metric, 0,
                                   timings, t0)
@@ -233,7 +253,12 @@ def localize(
     solve = _start(detections, usable, compiled, camera, options, gravity, t0, cpu0, timings,
                    calibration)
     if seeds is not None:  # the chance matches of the whole map, not of the places kept
-        solve.n_samples = count_map_samples(whole, [detections[i].label for i in usable], 2)
+        labels = [detections[i].label for i in usable]
+        solve.n_samples = count_map_samples(whole, labels, 2)
+        solve.places = True
+        if hinted is not None and hinted.any():
+            solve.hint_samples = count_map_samples(
+                compiled_subset(whole, np.flatnonzero(hinted)), labels, 2)
     prior_candidate = None if prior is None else _prior_stage(solve, prior)
     if prior_candidate is not None and len(prior_candidate.inliers) >= len(usable):
         return _answer(solve, prior_candidate, [prior_candidate], ambiguous=False)
@@ -255,6 +280,9 @@ def localize(
     if ambiguous and hint is not None:
         ranked = _hint_ranking(ranked, hint, seeds)
         ambiguous = is_ambiguous_ranking(ranked)
+    if solve.hint_samples is not None and hint is not None and hint.agrees(
+            ranked[0].world_from_camera, [m.object_id for m in ranked[0].inliers]):
+        solve.n_samples = solve.hint_samples  # chance matches within the hint's places
     return _answer(solve, ranked[0], ranked, ambiguous=ambiguous)
 
 
@@ -430,23 +458,16 @@ def _prior_matches(scorer: MatchScorer, prior: PosePrior, threshold: float) -> l
 def _place_stage(
     detections: Sequence[Detection], usable: list[int], compiled: CompiledMap, camera: Camera,
     options: LocalizationOptions, t0: float, cpu0: float, timings: dict[str, float],
-    hint: PlaceHint | None = None,
+    hinted: BoolArray | None = None,
 ) -> tuple[CompiledMap, PlaceSeeds | None]:
     """The ``places`` stage of a large map (>= ``PLACE_SEARCH_MIN_OBJECTS`` objects): the
-    constellation search (:func:`quadloc.service.localization.constellations.place_seeds`);
+    constellation search (:func:`quadloc.service.localization.constellations.place_seeds`;
+    ``hinted``: the objects of a hint's places, :func:`_hinted_objects`);
     returns the sub-map of the places it keeps (the later stages score and refine there) and
     the seeds, or (``compiled``, None) when no pose came up."""
     tp = time.perf_counter()
     params = np.array([detections[i].ellipse.params() for i in usable])
     index = place_index(compiled)
-    hinted: BoolArray | None = None
-    if hint is not None:
-        hinted = np.zeros(len(compiled), dtype=bool)
-        if hint.position is not None and hint.sigma_m is not None:
-            hinted[index.near(hint.position, PlaceHint.AGREE_SIGMAS * hint.sigma_m
-                              + index.view_range_m)] = True
-        elif hint.object_ids is not None:
-            hinted[[k for k, o in enumerate(compiled.object_ids) if o in hint.object_ids]] = True
     seeds = place_seeds(compiled, index, camera, params, [detections[i].label for i in usable],
                         np.random.default_rng(options.seed),
                         Deadline.cpu_budget(options.time_budget_ms, cpu_start=cpu0,
@@ -455,6 +476,19 @@ def _place_stage(
     if len(seeds.poses) == 0:
         return compiled, None
     return compiled_subset(compiled, seeds.objects), seeds
+
+
+def _hinted_objects(compiled: CompiledMap, hint: PlaceHint) -> BoolArray:
+    """The objects (N,) of a hint's places: a zone's objects, or those within
+    ``PlaceHint.AGREE_SIGMAS`` sigmas plus the view range of a position."""
+    hinted = np.zeros(len(compiled), dtype=bool)
+    if hint.position is not None and hint.sigma_m is not None:
+        index = place_index(compiled)
+        hinted[index.near(hint.position, PlaceHint.AGREE_SIGMAS * hint.sigma_m
+                          + index.view_range_m)] = True
+    elif hint.object_ids is not None:
+        hinted[[k for k, o in enumerate(compiled.object_ids) if o in hint.object_ids]] = True
+    return hinted
 
 
 def _search_stage(solve: _Solve, seeds: PlaceSeeds | None = None,
@@ -470,7 +504,8 @@ def _search_stage(solve: _Solve, seeds: PlaceSeeds | None = None,
                      min_inliers=options.min_inliers,
                      max_hypotheses=options.ransac_max_hypotheses,
                      rng=np.random.default_rng(options.seed), deadline=solve.deadline,
-                     seeds=None if seeds is None else seeds.poses, sample=seeds is None)
+                     seeds=None if seeds is None else seeds.poses, sample=seeds is None,
+                     keep=PLACE_CANDIDATES if solve.places else KEEP_DISTINCT)
     if (hint is not None and seeds is not None and outcome.camera_from_world is not None
             and seeds.hinted.any()
             and not any(_hypothesis_agrees(solve, h, hint) for h in outcome.alternatives)):
@@ -517,8 +552,10 @@ def _refine_hypotheses(solve: _Solve, outcome: RansacOutcome
     """The verified candidates of the best hypothesis (with ``outcome.matches``) and of up to
     :data:`REFINED_ALTERNATIVES` distinct runners-up scoring at least
     :data:`ALTERNATIVE_PREFILTER_RATIO` of the best (not once the budget is spent; not those of
-    :func:`_same_explanation`), refined with at most :data:`ALTERNATIVE_MAX_ITERATIONS`; and the
-    best hypothesis' refinement status."""
+    :func:`_same_explanation`), refined with at most :data:`ALTERNATIVE_MAX_ITERATIONS`; on a
+    large map (``solve.places``) also the further ones scoring at least
+    :data:`PLACE_TIE_RATIO` of the best (the tied candidate places); and the best hypothesis'
+    refinement status."""
     assert outcome.camera_from_world is not None
     options = solve.options
     hyps = list(outcome.alternatives) or [
@@ -527,9 +564,9 @@ def _refine_hypotheses(solve: _Solve, outcome: RansacOutcome
     first_status: str | None = None
     alternative_options = replace(
         options, max_iterations=min(options.max_iterations, ALTERNATIVE_MAX_ITERATIONS))
-    for k, h in enumerate(hyps[:1 + REFINED_ALTERNATIVES]):
-        if k > 0 and (h.score < ALTERNATIVE_PREFILTER_RATIO * hyps[0].score
-                      or deadline_passed(solve.deadline)):
+    for k, h in enumerate(hyps[:PLACE_CANDIDATES if solve.places else 1 + REFINED_ALTERNATIVES]):
+        ratio = ALTERNATIVE_PREFILTER_RATIO if k <= REFINED_ALTERNATIVES else PLACE_TIE_RATIO
+        if k > 0 and (h.score < ratio * hyps[0].score or deadline_passed(solve.deadline)):
             break
         if k > 0 and _same_explanation(h, hyps[0]):
             continue  # refines to the best's pose: not a competitor (see _same_explanation)
@@ -539,7 +576,9 @@ def _refine_hypotheses(solve: _Solve, outcome: RansacOutcome
         if k == 0:
             first_status = status
         if got is not None:
-            got.capped = (k > 0 and status == "max_iterations"
+            # a tied place beyond the first runners-up is listed as refined so far (not
+            # refined in full: it only widens the candidate list)
+            got.capped = (0 < k <= REFINED_ALTERNATIVES and status == "max_iterations"
                           and alternative_options.max_iterations < options.max_iterations)
             candidates.append(got)
     return candidates, first_status

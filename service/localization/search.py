@@ -96,7 +96,7 @@ class Hypothesis:
 class RansacOutcome:
     """Best pose found. ``camera_from_world`` is None when nothing qualified; then ``reason`` is
     ``"no_label_match"``, ``"no_hypothesis_above_inlier_threshold"`` or
-    ``"time_budget_exceeded"``. ``alternatives``: up to :data:`KEEP_DISTINCT` qualified,
+    ``"time_budget_exceeded"``. ``alternatives``: up to ``keep`` (:data:`KEEP_DISTINCT`) qualified,
     mutually distinct hypotheses (:func:`distinct_poses`), best first (the first is the
     returned pose, with the 96-point matches it was accepted with)."""
 
@@ -122,6 +122,7 @@ def ransac(
     deadline: Deadline | None = None,
     seeds: FloatArray | None = None,
     sample: bool = True,
+    keep: int = KEEP_DISTINCT,
 ) -> RansacOutcome:
     """Search poses from minimal samples (see the module docstring).
 
@@ -138,11 +139,13 @@ def ransac(
             constellation search of large maps,
             :mod:`quadloc.service.localization.constellations`); None: none.
         sample: whether minimal samples are solved at all (False: the seeds only).
+        keep: distinct hypotheses kept (default :data:`KEEP_DISTINCT`; more for the candidate
+            places of a large map).
     """
     need = scorer.n_det
     if need < 2:
         return RansacOutcome(None, (), 0.0, 0, 0, True, False, "no_label_match")
-    search = _Search(scorer, up_world, inlier_iou, min_inliers, rng, deadline)
+    search = _Search(scorer, up_world, inlier_iou, min_inliers, rng, deadline, keep)
     has3 = need >= 3 and count_samples(scorer, 3) > 0
     has2 = count_samples(scorer, 2) > 0
     stop = not sample
@@ -186,8 +189,10 @@ class _Search:
     """
 
     def __init__(self, scorer: MatchScorer, up_world: FloatArray, inlier_iou: float,
-                 min_inliers: int, rng: np.random.Generator, deadline: Deadline | None) -> None:
+                 min_inliers: int, rng: np.random.Generator, deadline: Deadline | None,
+                 keep: int = KEEP_DISTINCT) -> None:
         self.scorer = scorer
+        self.keep = keep
         self.up_world = up_world
         self.inlier_iou = inlier_iou
         self.min_inliers = min_inliers
@@ -270,14 +275,15 @@ class _Search:
             counts: list[int] = count.tolist()
             # best bound first: the bar rises early and fewer assignments are needed
             for h in np.argsort(-bound, kind="stable").tolist():
-                bar = self.kept[-1].score if len(self.kept) >= KEEP_DISTINCT else -1.0
+                bar = self.kept[-1].score if len(self.kept) >= self.keep else -1.0
                 if bounds[h] <= bar or counts[h] < self.min_inliers:
                     continue
                 # one-to-one (greedy) assignment, as in the final matches
                 m = scorer.pair_assignment(iou[h], inlier_iou)
                 score = float(sum(x.iou for x in m))
                 if len(m) >= self.min_inliers and score > bar:
-                    self.kept = _keep_distinct(self.kept, Hypothesis(block[h], tuple(m), score))
+                    self.kept = _keep_distinct(self.kept, Hypothesis(block[h], tuple(m), score),
+                                               self.keep)
         return self.explained()
 
     def explained(self) -> bool:
@@ -289,16 +295,17 @@ class _Search:
                 and self.kept[0].score >= EARLY_EXIT_MEAN_IOU * need)
 
 
-def _keep_distinct(kept: list[Hypothesis], new: Hypothesis) -> list[Hypothesis]:
+def _keep_distinct(kept: list[Hypothesis], new: Hypothesis, keep: int = KEEP_DISTINCT
+                   ) -> list[Hypothesis]:
     """``kept`` (best first, mutually distinct) with ``new`` inserted: it replaces the kept
     hypotheses it is not distinct from if it scores better than all of them, is dropped if one
-    of them scores at least as well; at most :data:`KEEP_DISTINCT` are kept."""
+    of them scores at least as well; at most ``keep`` are kept."""
     close = [h for h in kept if not _distinct_keys(h.pose_key, new.pose_key)]
     if any(h.score >= new.score for h in close):
         return kept
     out = [h for h in kept if all(h is not c for c in close)] + [new]
     out.sort(key=lambda h: -h.score)
-    return out[:KEEP_DISTINCT]
+    return out[:keep]
 
 
 def distinct_poses(camera_from_world_a: FloatArray, camera_from_world_b: FloatArray) -> bool:

@@ -21,6 +21,16 @@ class CalibrationQualityOut(BaseModel):
     calibration_error: float | None = Field(
         description="Expected calibration error of `confidence` (10 bins) against success = "
                     "within 10 cm and 5 deg of the reference.")
+    calibration_error_floor: float | None = Field(
+        default=None,
+        description="The calibration error a perfectly calibrated `confidence` would show on "
+                    "these answers by sampling alone (mean over 200 draws of outcomes from the "
+                    "confidences): an error near it is as good as these frames can tell.")
+    calibration_error_sd: float | None = Field(
+        default=None,
+        description="Sampling standard deviation of `calibration_error`: moving-block bootstrap "
+                    "over blocks of 25 consecutive frames (their outcomes are correlated); "
+                    "null with fewer than 50 localized frames.")
     mean_confidence: float | None
     success_rate: float | None
 
@@ -33,11 +43,15 @@ class CalibrationOut(BaseModel):
     map_version: int
     key: str = Field(description="Calibration key fitted (metric, ':unit_weights' without "
                                  "sigma on every detection).")
-    fit_frames: int = Field(description="Held-out frames the fit used (every other one).")
+    fit_frames: int = Field(description="Held-out frames the stored fit used (all of them; "
+                                        "`after` is cross-fitted: each frame reported by a fit "
+                                        "on the other folds).")
     covariance_scale: float = Field(description="Fitted k of the key (shipped value in "
                                                 "`shipped_covariance_scale`).")
     shipped_covariance_scale: float
     s2_floor: float
     min_confidence: float = Field(description="Default min_confidence with this calibration.")
-    before: CalibrationQualityOut = Field(description="Report frames, shipped constants.")
-    after: CalibrationQualityOut = Field(description="Report frames, this calibration.")
+    before: CalibrationQualityOut = Field(description="Held-out frames, shipped constants.")
+    after: CalibrationQualityOut = Field(description="Held-out frames, each with a "
+                                                     "calibration fitted without its fold "
+                                                     "(5 folds of 25-frame chunks).")

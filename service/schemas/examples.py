@@ -150,12 +150,15 @@ BUILD_JOB_DONE_EXAMPLE: dict[str, Any] = {
                "warnings": []}}
 
 
-#: A map version's calibration (``POST`` / ``GET /v1/maps/{map_id}/calibration``).
+#: A map version's calibration (``POST`` / ``GET /v1/maps/{map_id}/calibration``): the shipped
+#: recording (docs/map_building.md, "Try it"), 100 held-out frames.
 CALIBRATION_EXAMPLE: dict[str, Any] = {
-    "map_id": "my-room", "map_version": 1, "key": "level_set", "fit_frames": 250,
-    "covariance_scale": 39.9, "shipped_covariance_scale": 1.83, "s2_floor": 3.6,
+    "map_id": "room", "map_version": 1, "key": "level_set", "fit_frames": 100,
+    "covariance_scale": 106.9, "shipped_covariance_scale": 3.06, "s2_floor": 2.5,
     "min_confidence": 0.36,
-    "before": {"frames": 250, "localized": 247, "nees_frames": 125, "mean_nees": 382.9,
-               "calibration_error": 0.105, "mean_confidence": 0.54, "success_rate": 0.49},
-    "after": {"frames": 250, "localized": 247, "nees_frames": 125, "mean_nees": 8.7,
-              "calibration_error": 0.074, "mean_confidence": 0.52, "success_rate": 0.49}}
+    "before": {"frames": 100, "localized": 99, "nees_frames": 85, "mean_nees": 180.9,
+               "calibration_error": 0.067, "calibration_error_floor": 0.066,
+               "calibration_error_sd": 0.021, "mean_confidence": 0.82, "success_rate": 0.86},
+    "after": {"frames": 100, "localized": 99, "nees_frames": 85, "mean_nees": 6.46,
+              "calibration_error": 0.065, "calibration_error_floor": 0.060,
+              "calibration_error_sd": 0.030, "mean_confidence": 0.85, "success_rate": 0.86}}

@@ -34,6 +34,11 @@ from quadloc.factors.rotations import (
     snap_to_rotation,
 )
 from quadloc.maps.compiled import CompiledMap
+from quadloc.service.localization.calibration_fit import (
+    CalibrationConstants,
+    session_variance_ratio,
+)
+from quadloc.service.localization.confidence import calibration_key
 from quadloc.service.localization.gravity import gravity_measurement
 from quadloc.service.localization.pipeline import localize
 from quadloc.service.localization.scoring import Match, MatchScorer, ScoringTimeoutError
@@ -264,10 +269,20 @@ class TrackingSession:
     """The state of one session (not thread-safe: the store serialises calls per session)."""
 
     def __init__(self, compiled: CompiledMap, camera: Camera,
-                 options: SessionOptions | None = None) -> None:
+                 options: SessionOptions | None = None,
+                 calibration: CalibrationConstants | None = None) -> None:
+        """``calibration``: the map version's own calibration (``quadloc calibrate``), None:
+        the shipped constants; it rescales the answers' covariances by
+        :func:`~quadloc.service.localization.calibration_fit.session_variance_ratio` for the
+        session's calibration key (its ``metric`` and ``use_sigma``), the same rule as
+        localize's (:func:`~quadloc.service.localization.calibration_fit.
+        map_calibration_applies`)."""
         self.compiled = compiled
         self.camera = camera
         self.options = options or SessionOptions()
+        #: multiplies the smoother's marginals in the answers (1: the shipped constants)
+        self.variance_ratio = session_variance_ratio(
+            calibration, calibration_key(self.options.metric, self.options.use_sigma))
         self.state = "initializing"
         self.frame_count = 0
         self._rng = np.random.default_rng(self.options.seed)
@@ -431,6 +446,8 @@ class TrackingSession:
                 reason: str | None, timings: dict[str, float],
                 contradicted: bool = False) -> FrameResult:
         T_wo = cov_wo = None
+        if cov is not None:
+            cov = self.variance_ratio * cov
         if T is not None:
             T_wo = T @ invert_pose(T_oc)
             if cov is not None:

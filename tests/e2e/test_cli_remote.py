@@ -144,3 +144,38 @@ def test_table_and_progress_helpers() -> None:
     q.update(2, "x")
     q.close()
     assert pipe.getvalue() == ""  # no bar in logs and pipes
+
+
+def test_calibration_on_a_server_from_the_sdk_and_the_cli(server: str) -> None:
+    """The shipped recording built on the server (SDK), calibrated by ``calibrate_map`` and
+    by ``quadloc --url ... calibrate``: both store the same fit (deterministic: same frames,
+    same constants), the CLI prints what ``get_calibration`` reads back, a read key is
+    refused (403) and an unknown map is exit status 1."""
+    from quadloc_sdk import Calibration, QuadLocClient
+
+    recording = REPO / "docs" / "examples" / "room_recording.json.gz"
+    doc = json.loads(__import__("gzip").decompress(recording.read_bytes()))
+    held = sum(1 for i in range(len(doc["frames"]))
+               if (i + 1) % int(doc["holdout_every"]) == 0)
+    with QuadLocClient(server, api_key=WRITE_KEY) as c:
+        c.build_map(doc, map_id="cli-calibrated")
+        sdk = c.calibrate_map("cli-calibrated", doc)
+        assert isinstance(sdk, Calibration) and sdk.map_version == 1
+        assert sdk.fit_frames == held == sdk.before.frames == sdk.after.frames
+        assert sdk.after.mean_nees is not None and sdk.covariance_scale > 0
+        assert c.get_calibration("cli-calibrated") == sdk
+    refused = quadloc("--url", server, "--api-key", READ_KEY, "calibrate", str(recording),
+                      "--map", "cli-calibrated")
+    assert refused.returncode == 2 and "403" in refused.stderr, refused.stderr
+    missing = quadloc("--url", server, "--api-key", WRITE_KEY, "calibrate", str(recording),
+                      "--map", "no-such-map")
+    assert missing.returncode == 1, missing.stderr
+    cli = quadloc("--url", server, "--api-key", WRITE_KEY, "calibrate", str(recording),
+                  "--map", "cli-calibrated", "--json")
+    assert cli.returncode == 0, cli.stderr
+    with QuadLocClient(server, api_key=READ_KEY) as c:
+        stored = c.get_calibration("cli-calibrated")
+    assert Calibration.model_validate_json(cli.stderr) == stored == sdk
+    assert f"covariance scale {stored.covariance_scale:.4g}" in cli.stdout
+    assert f"calibration error {stored.after.calibration_error:.3f}" in cli.stdout
+    assert stored.after.calibration_error_sd is not None  # 100 held-out frames: 4 blocks

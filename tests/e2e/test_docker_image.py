@@ -19,6 +19,7 @@ JSON to ``QUADLOC_DOCKER_REPORT`` when set.
 
 from __future__ import annotations
 
+import gzip
 import hashlib
 import json
 import os
@@ -455,6 +456,15 @@ def test_compose_stack_with_docker_compose(image: str) -> None:
                 assert client.get_map(created.map_id).content_hash == created.content_hash
             body = json.loads((REPO / "docs" / "examples" / "localize_chess.json").read_text())
             assert client.localize("chess", body).localized
+            # map builds run on the stack's workers (the replicas only queue them)
+            recording = json.loads(gzip.decompress(
+                (REPO / "docs" / "examples" / "room_recording.json.gz").read_bytes()))
+            t1 = time.monotonic()
+            job = client.build_map(recording, map_id=f"compose-room-{RUN_ID}", timeout_s=300)
+            REPORT["compose_build_seconds"] = round(time.monotonic() - t1, 1)
+            assert job.status == "succeeded" and job.map_version == 1
+        workers = compose("compose", "logs", "--no-color", "worker", timeout=60).stdout
+        assert f"job_id='{job.job_id}'" in workers, "the build did not run on a worker"
         logs = compose("compose", "logs", "--no-color", "proxy", timeout=60).stdout
         upstreams = set(re.findall(r"upstream=([\d.]+:8000)", logs))
         assert len(upstreams) == 2, f"requests did not reach both replicas: {upstreams}"

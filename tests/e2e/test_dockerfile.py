@@ -18,6 +18,8 @@ from pathlib import Path
 import pytest
 import yaml
 
+from quadloc.service.settings import Settings
+
 REPO = Path(__file__).resolve().parents[2]
 DOCKERFILE = REPO / "Dockerfile"
 
@@ -212,7 +214,7 @@ def test_healthcheck_command_really_probes_healthz(status):
 def test_compose_stack_postgres_two_replicas_and_proxy():
     compose = yaml.safe_load((REPO / "docker-compose.yml").read_text())
     services = compose["services"]
-    assert set(services) == {"db", "quadloc-1", "quadloc-2", "proxy"}
+    assert set(services) == {"db", "quadloc-1", "quadloc-2", "worker", "proxy"}
     assert "name" not in compose, "Debian's docker-compose 1.29 (v1) rejects a top-level name:"
 
     def default(value: str) -> str:  # "${VAR:-default}" -> "default" (what compose uses)
@@ -245,6 +247,17 @@ def test_compose_stack_postgres_two_replicas_and_proxy():
     assert any(p.endswith(f":{listen}") and default(p.rsplit(":", 1)[0]).isdigit()
                for p in proxy["ports"])
     assert set(proxy["depends_on"]) == {"quadloc-1", "quadloc-2"}
+    # build workers: the same image running `quadloc worker`, scaled apart from the replicas,
+    # given longer than the settings' SIGTERM grace to finish or release a build
+    worker = services["worker"]
+    assert worker["image"] == replicas[0]["image"] and worker["build"] == replicas[0]["build"]
+    assert worker["command"] == ["quadloc", "worker"]
+    assert worker["deploy"]["replicas"] >= 2
+    assert worker["environment"]["QUADLOC_DATABASE_URL"] == replicas[0]["environment"][
+        "QUADLOC_DATABASE_URL"]
+    assert int(worker["stop_grace_period"].rstrip("s")) > Settings().shutdown_grace_s
+    health = worker["healthcheck"]["test"]
+    assert f"127.0.0.1:{Settings().worker_health_port}/healthz" in health[-1]
 
 
 def _kubernetes() -> dict[tuple[str, str], dict]:
@@ -265,6 +278,24 @@ def test_kubernetes_probes():
     env = {e["name"] for e in container["env"]}
     assert {"QUADLOC_DATABASE_URL", "QUADLOC_API_KEYS"} <= env
     assert deployment["spec"]["replicas"] >= 2
+
+
+def test_kubernetes_build_workers():
+    worker = _kubernetes()["Deployment", "quadloc-worker"]
+    spec = worker["spec"]["template"]["spec"]
+    [container] = spec["containers"]
+    assert container["args"] == ["quadloc", "worker"]
+    assert container["image"] == _kubernetes()["StatefulSet", "quadloc"]["spec"]["template"][
+        "spec"]["containers"][0]["image"]
+    env = {e["name"]: e.get("value") for e in container["env"]}
+    assert "QUADLOC_DATABASE_URL" in env and env["QUADLOC_HOST"] == "0.0.0.0"
+    port = int(env["QUADLOC_WORKER_HEALTH_PORT"])
+    assert container["ports"] == [{"name": "health", "containerPort": port}]
+    assert container["livenessProbe"]["httpGet"] == {"path": "/healthz", "port": "health"}
+    assert spec["terminationGracePeriodSeconds"] > float(env["QUADLOC_SHUTDOWN_GRACE_S"])
+    uid = [r for w, r in _instructions() if w == "USER"][-1].split(":")[0]
+    assert str(spec["securityContext"]["runAsUser"]) == uid
+    assert worker["spec"]["replicas"] >= 2
 
 
 # ------------------------------------------------------------------------- deploy/ scripts

@@ -12,7 +12,6 @@ import json
 import subprocess
 import sys
 import threading
-import uuid
 from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
@@ -27,26 +26,9 @@ from quadloc.maps.demo import load_demo_map
 from quadloc.maps.errors import MapAlreadyExists, MapNotFound, StoreUnavailable, VersionConflict
 from quadloc.maps.model import MapObject, MapValidationError, SceneMap
 from quadloc.maps.store import MapStore, normalize_url, versions_table
+from tests.support.postgres import pg_schema_url, pg_unavailable_reason
 
-PG_BASE = "postgresql+psycopg://postgres@127.0.0.1:5432/test"
 REPO_ROOT = Path(__file__).resolve().parents[2]
-
-_pg_state: dict[str, str | None] = {}
-
-
-def _pg_unavailable_reason() -> str | None:
-    if "reason" not in _pg_state:
-        try:
-            import psycopg
-
-            with psycopg.connect("host=127.0.0.1 port=5432 user=postgres dbname=test",
-                                 connect_timeout=3) as conn:
-                conn.execute("SELECT 1")
-            _pg_state["reason"] = None
-        except Exception as exc:
-            _pg_state["reason"] = (f"PostgreSQL at 127.0.0.1:5432 (user postgres, db test) "
-                                   f"unreachable: {exc.__class__.__name__}: {exc}")
-    return _pg_state["reason"]
 
 
 @pytest.fixture(params=["sqlite", pytest.param("postgresql", marks=pytest.mark.postgres)])
@@ -54,19 +36,11 @@ def store_url(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[str]:
     if request.param == "sqlite":
         yield f"sqlite:///{tmp_path / 'maps.db'}"
         return
-    reason = _pg_unavailable_reason()
+    reason = pg_unavailable_reason()
     if reason is not None:
         pytest.skip(reason)
-    schema = f"quadloc_test_{uuid.uuid4().hex[:12]}"
-    admin = sa.create_engine(PG_BASE)
-    with admin.begin() as conn:
-        conn.execute(sa.text(f'CREATE SCHEMA "{schema}"'))
-    try:
-        yield f"{PG_BASE}?options=-csearch_path%3D{schema}"
-    finally:
-        with admin.begin() as conn:
-            conn.execute(sa.text(f'DROP SCHEMA "{schema}" CASCADE'))
-        admin.dispose()
+    with pg_schema_url() as url:
+        yield url
 
 
 @pytest.fixture
@@ -387,9 +361,47 @@ def test_migrations_are_idempotent_and_recorded(store: MapStore) -> None:
     with store.engine.connect() as conn:
         rev = conn.execute(sa.text("SELECT version_num FROM quadloc_alembic_version")).scalar_one()
         tables = set(sa.inspect(conn).get_table_names())
-    assert rev == "0004_build_job_owner"
+    assert rev == "0005_build_queue"
     assert {"quadloc_maps", "quadloc_map_versions"} <= tables
+    # the job queue's tables on PostgreSQL only (SQLite builds in-process)
+    queue_tables = {"procrastinate_jobs", "procrastinate_workers", "procrastinate_events",
+                    "procrastinate_periodic_defers"}
+    assert (queue_tables <= tables) == (store.dialect == "postgresql")
+    assert not any(t.startswith("procrastinate") for t in tables - queue_tables)
     store.ping()
+
+
+def test_the_queue_migration_downgrades_and_upgrades_again(store: MapStore) -> None:
+    from alembic import command
+    from alembic.config import Config
+
+    cfg = Config()
+    cfg.set_main_option("script_location", str(REPO_ROOT / "maps" / "migrations"))
+
+    def tables() -> set[str]:
+        with store.engine.connect() as conn:
+            return set(sa.inspect(conn).get_table_names())
+
+    for target in ("0004_build_job_owner", "head"):
+        with store.engine.begin() as conn:
+            cfg.attributes["connection"] = conn
+            if target == "head":
+                command.upgrade(cfg, target)
+            else:
+                command.downgrade(cfg, target)
+        with store.engine.connect() as conn:
+            columns = {c["name"] for c in sa.inspect(conn).get_columns("quadloc_build_jobs")}
+            if target == "head":
+                assert "payload" in columns
+            else:
+                assert "payload" not in columns
+                assert not any(t.startswith("procrastinate") for t in tables())
+                routines = (conn.execute(sa.text(
+                    "SELECT count(*) FROM pg_proc p JOIN pg_namespace n ON n.oid = "
+                    "p.pronamespace WHERE n.nspname = current_schema() AND p.proname LIKE "
+                    "'procrastinate%'")).scalar_one() if store.dialect == "postgresql" else 0)
+                assert routines == 0
+    assert ("procrastinate_jobs" in tables()) == (store.dialect == "postgresql")
 
 
 def test_sqlite_uses_wal(tmp_path: Path) -> None:

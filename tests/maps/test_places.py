@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from quadloc.maps.compiled import compile_map, compiled_subset
+from quadloc.maps.model import SceneMap
 from quadloc.maps.places import VIEW_RANGE_M, build_place_index, place_index
 from tests.support.buildings import make_building
 from tests.support.scenes import synthetic_map
@@ -73,3 +74,8 @@ def test_compiled_subset_keeps_ids_and_arrays() -> None:
     assert np.array_equal(sub.centers, cm.centers[sel])
     assert np.array_equal(sub.dual_quadrics, cm.dual_quadrics[sel])
     assert (sub.map_id, sub.version) == (cm.map_id, cm.version)
+    # the sub-map (not validated again) is the map a validated construction gives
+    sm = cm.scene_map
+    validated = SceneMap(sm.map_id, sm.name, sm.up_axis, sm.categories,
+                         [sm.objects[i] for i in sel], sm.version)
+    assert sub.scene_map.to_dict() == validated.to_dict()

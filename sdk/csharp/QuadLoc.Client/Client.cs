@@ -455,6 +455,26 @@ namespace QuadLoc.Client
             return job;
         }
 
+        /// <summary>Fits, stores and returns a map version's own calibration (POST
+        /// /v1/maps/{id}/calibration, docs/map_building.md "Calibrating the map") from the
+        /// recording it was built from (with holdout_every). Synchronous: <paramref name="timeout"/>
+        /// (default 10 minutes) bounds the wait (1,000 held-out frames take about 25 s).
+        /// Not replayed after a network failure.</summary>
+        public async Task<CalibrationOut> CalibrateMapAsync(string mapId, JsonValue recording, long? version = null,
+                                                            TimeSpan? timeout = null, CancellationToken ct = default(CancellationToken))
+        {
+            var call = new Call { Method = HttpMethod.Post, Path = MapPath(mapId) + "/calibration",
+                                  Query = Query(Q("version", Version("version", version))), Body = Body("recording", recording) };
+            return CalibrationOut.FromJson(Json(await SendAsync(call, ct, timeout ?? TimeSpan.FromMinutes(10)).ConfigureAwait(false)));
+        }
+
+        /// <summary>A map version's stored calibration (GET /v1/maps/{id}/calibration;
+        /// NotFoundException when it has none: the shipped constants apply).</summary>
+        public async Task<CalibrationOut> GetCalibrationAsync(string mapId, long? version = null, CancellationToken ct = default(CancellationToken))
+        {
+            return CalibrationOut.FromJson(Json(await Get(MapPath(mapId) + "/calibration", ct, Query(Q("version", Version("version", version)))).ConfigureAwait(false)));
+        }
+
         /// <summary>A build job's state, by id or by its Location path (GET /v1/build-jobs/{id}).</summary>
         public async Task<BuildJobOut> GetBuildJobAsync(string jobIdOrLocation, CancellationToken ct = default(CancellationToken))
         {

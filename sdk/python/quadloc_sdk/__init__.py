@@ -15,8 +15,15 @@ from quadloc_sdk.build import (
     aget_build_job,
     build_map,
     get_build_job,
+    load_recording,
 )
-from quadloc_sdk.client import DEFAULT_BASE_URL, SDK_VERSION, AsyncQuadLocClient, QuadLocClient
+from quadloc_sdk.client import (
+    CALIBRATION_TIMEOUT_S,
+    DEFAULT_BASE_URL,
+    SDK_VERSION,
+    AsyncQuadLocClient,
+    QuadLocClient,
+)
 from quadloc_sdk.errors import (
     APIError,
     ClientError,
@@ -42,6 +49,8 @@ from quadloc_sdk.models import (
     Alternative,
     BatchLocalizeResponse,
     Box,
+    Calibration,
+    CalibrationQuality,
     Camera,
     Covariance,
     Detection,
@@ -80,6 +89,7 @@ from quadloc_sdk.session import (
 __version__ = SDK_VERSION
 
 __all__ = [
+    "CALIBRATION_TIMEOUT_S",
     "DEFAULT_BASE_URL",
     "METRICS",
     "NO_REFINEMENT",
@@ -92,6 +102,8 @@ __all__ = [
     "Box",
     "BuildFailedError",
     "BuildJob",
+    "Calibration",
+    "CalibrationQuality",
     "Camera",
     "ClientError",
     "Conflict",
@@ -138,6 +150,7 @@ __all__ = [
     "get_build_job",
     "get_session",
     "get_session_async",
+    "load_recording",
     "overlay_svg",
     "render_overlay_svg",
     "session_frame",

@@ -25,8 +25,8 @@ from typing import Any
 from quadloc_sdk.errors import QuadLocError
 from quadloc_sdk.transport import Call
 
-__all__ = ["BuildFailedError", "BuildJob", "abuild_map", "aget_build_job", "build_map",
-           "get_build_job"]
+__all__ = ["BuildFailedError", "BuildJob", "Recording", "abuild_map", "aget_build_job",
+           "build_map", "get_build_job", "load_recording"]
 
 Recording = Mapping[str, Any] | str | Path
 
@@ -67,7 +67,9 @@ class BuildFailedError(QuadLocError):
         self.job = job
 
 
-def _load(recording: Recording) -> bytes:
+def load_recording(recording: Recording) -> bytes:
+    """The JSON body of a recording given as a dict or a path to a JSON file (the build and
+    the calibration send it as is)."""
     if isinstance(recording, str | Path):
         return Path(recording).read_bytes()
     if not isinstance(recording, Mapping):
@@ -86,7 +88,7 @@ def _start_call(recording: Recording, map_id: str, if_match: str | None) -> Any:
     if if_match is not None:
         headers["If-Match"] = if_match if if_match.startswith(('"', "W/")) else f'"{if_match}"'
     # Not idempotent: a replay after a lost answer would start a second job.
-    return Call("POST", "/v1/maps:build", params={"map_id": map_id}, body=_load(recording),
+    return Call("POST", "/v1/maps:build", params={"map_id": map_id}, body=load_recording(recording),
                  headers=headers)
 
 

@@ -32,10 +32,11 @@ from urllib.parse import quote
 
 import httpx
 
-from quadloc_sdk.build import abuild_map, build_map
+from quadloc_sdk.build import Recording, abuild_map, build_map, load_recording
 from quadloc_sdk.errors import PreconditionFailed, QuadLocError, TransportError, error_from_response
 from quadloc_sdk.models import (
     BatchLocalizeResponse,
+    Calibration,
     Camera,
     Convention,
     Detection,
@@ -62,11 +63,14 @@ from quadloc_sdk.session import (
 )
 from quadloc_sdk.transport import Call
 
-__all__ = ["DEFAULT_BASE_URL", "AsyncQuadLocClient", "QuadLocClient"]
+__all__ = ["CALIBRATION_TIMEOUT_S", "DEFAULT_BASE_URL", "AsyncQuadLocClient", "QuadLocClient"]
 
 SDK_VERSION = "0.1.0"
 DEFAULT_BASE_URL = "http://127.0.0.1:8000"
 DEFAULT_TIMEOUT = httpx.Timeout(30.0, connect=5.0)
+#: Read timeout (s) of ``calibrate_map`` (synchronous: the server answers when the fit is done;
+#: docs/map_building.md, "Calibrating the map", measures how long).
+CALIBRATION_TIMEOUT_S = 600.0
 
 MapDocument = Mapping[str, Any] | str | Path
 
@@ -161,6 +165,18 @@ class _Base:
 
     def _versions_call(self, map_id: str) -> Call:
         return Call("GET", f"{self._map_path(map_id)}/versions", idempotent=True)
+
+    def _calibrate_call(self, map_id: str, recording: Recording, version: int | None,
+                        timeout_s: float) -> Call:
+        # Not idempotent by the retry policy's rule (a POST); replaying it would refit and
+        # store the same calibration again, harmless but slow: not replayed.
+        return Call("POST", f"{self._map_path(map_id)}/calibration",
+                    params=self._version_params(version), body=load_recording(recording),
+                    headers={"Content-Type": "application/json"}, timeout_s=timeout_s)
+
+    def _get_calibration_call(self, map_id: str, version: int | None) -> Call:
+        return Call("GET", f"{self._map_path(map_id)}/calibration",
+                    params=self._version_params(version), idempotent=True)
 
     def _map_versions(self, response: httpx.Response) -> list[MapVersion]:
         data = self._json(response)
@@ -307,11 +323,14 @@ class _Base:
 
     # -- retry loop pieces -----------------------------------------------------------------
     def _request_kwargs(self, call: Call) -> dict[str, Any]:
-        return {
+        kw: dict[str, Any] = {
             "params": call.params,
             "content": call.body,
             "headers": {**self._default_headers, **call.headers},
         }
+        if call.timeout_s is not None:
+            kw["timeout"] = httpx.Timeout(call.timeout_s, connect=5.0)
+        return kw
 
     def _on_exception(self, call: Call, exc: httpx.TransportError, attempt: int) -> float:
         """Delay before the next attempt, or raise the SDK's TransportError."""
@@ -473,6 +492,22 @@ class QuadLocClient(_Base):
                          on_progress=on_progress, poll_interval_s=poll_interval_s,
                          timeout_s=timeout_s)
 
+    def calibrate_map(self, map_id: str, recording: Recording, *, version: int | None = None,
+                      timeout_s: float = CALIBRATION_TIMEOUT_S) -> Calibration:
+        """Fit, store and return a map version's own calibration (``POST
+        /v1/maps/{map_id}/calibration``; docs/map_building.md, "Calibrating the map") from the
+        recording it was built from (a dict or a JSON file path, with ``holdout_every``).
+        Synchronous: the answer comes when the fit is done (``timeout_s``, default
+        :data:`CALIBRATION_TIMEOUT_S`)."""
+        return Calibration.model_validate(self._json(self._send(
+            self._calibrate_call(map_id, recording, version, timeout_s))))
+
+    def get_calibration(self, map_id: str, *, version: int | None = None) -> Calibration:
+        """A map version's stored calibration (``GET /v1/maps/{map_id}/calibration``;
+        :class:`~quadloc_sdk.errors.NotFound` when it has none: the shipped one applies)."""
+        return Calibration.model_validate(self._json(self._send(
+            self._get_calibration_call(map_id, version))))
+
     def delete_map(self, map_id: str) -> None:
         """Delete a map and all its versions."""
         self._send(self._delete_map_call(map_id))
@@ -624,6 +659,19 @@ class AsyncQuadLocClient(_Base):
         return await abuild_map(self, recording, map_id=map_id, if_match=if_match, wait=wait,
                                 on_progress=on_progress, poll_interval_s=poll_interval_s,
                                 timeout_s=timeout_s)
+
+    async def calibrate_map(self, map_id: str, recording: Recording, *,
+                            version: int | None = None,
+                            timeout_s: float = CALIBRATION_TIMEOUT_S) -> Calibration:
+        """:meth:`QuadLocClient.calibrate_map`."""
+        return Calibration.model_validate(self._json(await self._send(
+            self._calibrate_call(map_id, recording, version, timeout_s))))
+
+    async def get_calibration(self, map_id: str, *, version: int | None = None
+                              ) -> Calibration:
+        """:meth:`QuadLocClient.get_calibration`."""
+        return Calibration.model_validate(self._json(await self._send(
+            self._get_calibration_call(map_id, version))))
 
     async def delete_map(self, map_id: str) -> None:
         await self._send(self._delete_map_call(map_id))

@@ -41,6 +41,8 @@ __all__ = [
     "Alternative",
     "BatchLocalizeResponse",
     "Box",
+    "Calibration",
+    "CalibrationQuality",
     "Camera",
     "Covariance",
     "Detection",
@@ -493,6 +495,45 @@ class MapRecord(BaseModel):
     created_at: str | None = None
     map: dict[str, Any]
     etag: str | None = None
+
+
+class CalibrationQuality(BaseModel):
+    """How well covariance and confidence describe the errors on a calibration's held-out
+    frames: mean NEES of the localized answers within 10 cm (6 = well scaled) and the expected
+    calibration error of ``confidence`` (10 equal-width bins) against success = within 10 cm
+    and 5 deg of the reference; ``calibration_error_floor``: what a perfectly calibrated
+    confidence would show on these frames by sampling alone; ``calibration_error_sd``: the
+    error's sampling standard deviation (blocks of consecutive frames)."""
+
+    model_config = _RESPONSE
+    frames: int
+    localized: int
+    nees_frames: int
+    mean_nees: float | None = None
+    calibration_error: float | None = None
+    calibration_error_floor: float | None = None
+    calibration_error_sd: float | None = None
+    mean_confidence: float | None = None
+    success_rate: float | None = None
+
+
+class Calibration(BaseModel):
+    """A map version's own calibration (``POST`` / ``GET /v1/maps/{map_id}/calibration``):
+    the fitted covariance scale ``k`` and residual floor of calibration key ``key``, the
+    default ``min_confidence``, and the quality ``before`` (shipped constants) / ``after``
+    (cross-fitted) on the recording's held-out frames."""
+
+    model_config = _RESPONSE
+    map_id: str
+    map_version: int
+    key: str
+    fit_frames: int
+    covariance_scale: float
+    shipped_covariance_scale: float
+    s2_floor: float
+    min_confidence: float
+    before: CalibrationQuality
+    after: CalibrationQuality
 
 
 class SessionInfo(BaseModel):

@@ -13,7 +13,8 @@ __all__ = ["Call"]
 @dataclass(frozen=True)
 class Call:
     """One HTTP exchange to perform (with retries); ``idempotent`` allows replay after a
-    failure that may have reached the server (see :mod:`quadloc_sdk.retry`)."""
+    failure that may have reached the server (see :mod:`quadloc_sdk.retry`); ``timeout_s``:
+    this exchange's read timeout (s) instead of the client's (a long synchronous request)."""
 
     method: str
     path: str
@@ -21,3 +22,4 @@ class Call:
     body: bytes | None = None
     headers: dict[str, str] = field(default_factory=dict)
     idempotent: bool = False
+    timeout_s: float | None = None

@@ -19,6 +19,7 @@ import {
 import type {
   BatchLocalizeResponse,
   BuildJob,
+  Calibration,
   Health,
   LocalizeRequest,
   LocalizeResponse,
@@ -469,6 +470,28 @@ export class QuadLocClient {
       throw new BuildFailedError(`build job ${job.job_id} failed: ${String(job.error?.reason)}: ${String(job.error?.detail)}`, job);
     }
     return job;
+  }
+
+  /**
+   * Fits, stores and returns a map version's own calibration (`POST
+   * /v1/maps/{id}/calibration`, docs/map_building.md "Calibrating the map") from the recording
+   * it was built from (with `holdout_every`). Synchronous: pass a `timeoutMs` long enough for
+   * the fit (1,000 held-out frames take about 25 s). Not replayed after a network failure.
+   */
+  async calibrateMap(mapId: string, recording: Record<string, unknown>,
+                     options: CallOptions & { version?: number } = {}): Promise<Calibration> {
+    const version = positiveInteger("version", options.version);
+    const call: Call = {
+      method: "POST", path: `${this.mapPath(mapId)}/calibration`, query: { version },
+      body: jsonBody("recording", recording), idempotent: false,
+    };
+    return QuadLocClient.json<Calibration>(await this.send(call, options));
+  }
+
+  /** A map version's stored calibration (`GET /v1/maps/{id}/calibration`; `NotFound`: none). */
+  getCalibration(mapId: string, options: CallOptions & { version?: number } = {}): Promise<Calibration> {
+    const version = positiveInteger("version", options.version);
+    return this.getJson<Calibration>(`${this.mapPath(mapId)}/calibration`, options, { version });
   }
 
   /** A build job's state, by id or by its `Location` path (`GET /v1/build-jobs/{id}`). */

@@ -65,6 +65,8 @@ export type MapDocument = Record<string, unknown>;
 export type SessionInfo = S["SessionOut"];
 /** One tracking frame's answer: `state`, `world_from_camera`, `world_from_odom`, ... */
 export type SessionFrameResult = S["SessionFrameOut"];
+/** A map version's own calibration (`POST` / `GET /v1/maps/{id}/calibration`). */
+export type Calibration = S["CalibrationOut"];
 /** A map-building job (`GET /v1/build-jobs/{job_id}`). */
 export type BuildJob = S["BuildJobOut"];
 /** `/healthz` and `/readyz` answers. */

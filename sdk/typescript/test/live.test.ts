@@ -167,6 +167,21 @@ describe("live server", { skip }, () => {
     await client.deleteMap(mapId);
   });
 
+  it("a map built from the shipped recording is calibrated and read back", async () => {
+    const recording = readJson("docs/examples/room_recording.json.gz");
+    const mapId = `calibrated-${RUN}`;
+    await client.buildMap(recording, { mapId, pollIntervalMs: 200, waitTimeoutMs: 180000 });
+    await expectProblem(client.getCalibration(mapId), "not-found", sdk.NotFound);
+    const cal = await client.calibrateMap(mapId, recording, { timeoutMs: 300000 });
+    const heldOut = recording.frames.filter((_: unknown, i: number) => (i + 1) % recording.holdout_every === 0).length;
+    assert.equal(cal.map_version, 1);
+    assert.equal(cal.fit_frames, heldOut);
+    assert.equal(cal.after.frames, heldOut);
+    assert.ok(cal.covariance_scale > 0 && typeof cal.after.mean_nees === "number");
+    assert.deepEqual(await client.getCalibration(mapId), cal);
+    await client.deleteMap(mapId);
+  });
+
   it("request errors are typed problem documents naming the field", async () => {
     const bad = structuredClone(demo);
     bad.camera.fx = -1;

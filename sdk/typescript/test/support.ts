@@ -3,12 +3,14 @@ import assert from "node:assert/strict";
 import { readFileSync } from "node:fs";
 import { dirname, join } from "node:path";
 import { fileURLToPath } from "node:url";
+import { gunzipSync } from "node:zlib";
 
 /** sdk/typescript/build-test -> the repository root. */
 export const REPO = join(dirname(fileURLToPath(import.meta.url)), "..", "..", "..");
 
 export function readJson<T = any>(relativePath: string): T {
-  return JSON.parse(readFileSync(join(REPO, relativePath), "utf8")) as T;
+  const bytes = readFileSync(join(REPO, relativePath));
+  return JSON.parse((relativePath.endsWith(".gz") ? gunzipSync(bytes) : bytes).toString("utf8")) as T;
 }
 
 /** Every entry of two (nested) number arrays within `tol` (absolute). */

@@ -3,25 +3,24 @@
 ``store_clients`` is parametrized over both stores (the PostgreSQL case is marked ``postgres``
 and skipped with the reason when the server at 127.0.0.1:5432 does not answer); it yields a
 factory ``make(**settings) -> TestClient`` of apps sharing that one database (so that two apps
-are two replicas of one deployment), each started and stopped by the fixture.
+are two replicas of one deployment), each started and stopped by the fixture. On PostgreSQL a
+build worker runs in a thread (the API only queues builds there).
 """
 
 from __future__ import annotations
 
-import uuid
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack
 from pathlib import Path
 from typing import Any
 
 import pytest
-import sqlalchemy as sa
 from fastapi.testclient import TestClient
 
 from quadloc.maps.store import MapStore
 from quadloc.service.api.app import create_app
 from quadloc.service.settings import Settings
-from tests.maps.test_maps_store import PG_BASE, _pg_unavailable_reason
+from tests.support.postgres import pg_schema_url, pg_unavailable_reason, worker_thread
 
 ClientFactory = Callable[..., TestClient]
 
@@ -34,21 +33,12 @@ def store_clients(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Cl
         if request.param == "sqlite":
             url = f"sqlite:///{tmp_path / 'quadloc.db'}"
         else:
-            reason = _pg_unavailable_reason()
+            reason = pg_unavailable_reason()
             if reason is not None:
                 pytest.skip(reason)
-            schema = f"quadloc_api_{uuid.uuid4().hex[:12]}"
-            admin = sa.create_engine(PG_BASE)
-            with admin.begin() as conn:
-                conn.execute(sa.text(f'CREATE SCHEMA "{schema}"'))
-
-            def drop() -> None:
-                with admin.begin() as conn:
-                    conn.execute(sa.text(f'DROP SCHEMA "{schema}" CASCADE'))
-                admin.dispose()
-
-            stack.callback(drop)
-            url = f"{PG_BASE}?options=-csearch_path%3D{schema}"
+            url = stack.enter_context(pg_schema_url("quadloc_api"))
+            # the API queues the builds: a worker runs them (as in a deployment)
+            stack.enter_context(worker_thread(url, build_stale_after_s=5.0))
 
         def make(**settings: Any) -> TestClient:
             store = MapStore(url)

@@ -53,7 +53,7 @@ def test_calibrate_store_and_use(tmp_path: Path) -> None:
         assert r.status_code == 200, r.text
         out = r.json()
         assert out["map_version"] == 1 and out["key"] == "level_set"
-        assert out["fit_frames"] == 30 and out["after"]["frames"] == 30
+        assert out["fit_frames"] == 60 == out["before"]["frames"] == out["after"]["frames"]
         assert out["after"]["mean_nees"] is not None
         assert client.get("/v1/maps/room/calibration").json() == out
         after = client.post("/v1/maps/room/localize", json=body).json()

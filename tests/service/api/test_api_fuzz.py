@@ -24,7 +24,6 @@ string field of a map document, both stores) finds both 500s within its 60 examp
 from __future__ import annotations
 
 import json
-import uuid
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -32,7 +31,6 @@ from typing import Any
 import numpy as np
 import pytest
 import schemathesis
-import sqlalchemy as sa
 from fastapi.testclient import TestClient
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
@@ -45,7 +43,7 @@ from quadloc.service.localization.types import METRICS, ROBUST_KERNELS
 from quadloc.service.schemas.examples import MAP_EXAMPLE
 from quadloc.service.settings import Settings, hash_api_key
 from tests.conftest import make_test_app
-from tests.maps.test_maps_store import PG_BASE, _pg_unavailable_reason
+from tests.support.postgres import pg_schema_url, pg_unavailable_reason
 
 #: Schemathesis / hypothesis fuzzing (minutes): left out of the inner loop (pytest -m "not slow").
 pytestmark = pytest.mark.slow
@@ -69,21 +67,15 @@ def _backend_app(backend: str, tmp_path_factory: pytest.TempPathFactory) -> Iter
         yield app
         app.state.services.store.close()
         return
-    reason = _pg_unavailable_reason()
+    reason = pg_unavailable_reason()
     if reason:
         pytest.skip(reason)
-    schema_name = f"quadloc_fuzz_{uuid.uuid4().hex[:12]}"
-    admin = sa.create_engine(PG_BASE)
-    with admin.begin() as conn:
-        conn.execute(sa.text(f'CREATE SCHEMA "{schema_name}"'))
-    store = MapStore(f"{PG_BASE}?options=-csearch_path%3D{schema_name}")
-    try:
-        yield create_app(Settings(**_FUZZ_SETTINGS), store=store)  # type: ignore[arg-type]
-    finally:
-        store.close()
-        with admin.begin() as conn:
-            conn.execute(sa.text(f'DROP SCHEMA "{schema_name}" CASCADE'))
-        admin.dispose()
+    with pg_schema_url("quadloc_fuzz") as url:
+        app = create_app(Settings(**_FUZZ_SETTINGS), store=MapStore(url))  # type: ignore[arg-type]
+        try:
+            yield app
+        finally:
+            app.state.services.close()
 
 
 _BACKENDS = ["sqlite", pytest.param("postgresql", marks=pytest.mark.postgres)]

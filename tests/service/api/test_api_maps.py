@@ -411,39 +411,25 @@ def test_map_cache_does_not_store_a_version_read_before_an_invalidation() -> Non
 # ------------------------------------------------------------ review 6: PostgreSQL
 
 
-PG_BASE = "postgresql+psycopg://postgres@127.0.0.1:5432/test"
-
-
 @pytest.fixture
 def pg_client():
-    """A TestClient on a throw-away PostgreSQL schema (as in tests/maps/test_maps_store.py)."""
-    import uuid
-
-    import sqlalchemy as sa
-
+    """A TestClient on a throw-away PostgreSQL schema (tests/support/postgres.py)."""
     from quadloc.maps.store import MapStore
-    from tests.maps.test_maps_store import _pg_unavailable_reason
-
-    reason = _pg_unavailable_reason()
-    if reason:
-        pytest.skip(reason)
     from quadloc.service.api.app import create_app
     from quadloc.service.settings import Settings
+    from tests.support.postgres import pg_schema_url, pg_unavailable_reason
 
-    schema = f"quadloc_api_{uuid.uuid4().hex[:12]}"
-    admin = sa.create_engine(PG_BASE)
-    with admin.begin() as conn:
-        conn.execute(sa.text(f'CREATE SCHEMA "{schema}"'))
-    store = MapStore(f"{PG_BASE}?options=-csearch_path%3D{schema}")
-    try:
-        with TestClient(create_app(Settings(api_keys=""), store=store),
-                        raise_server_exceptions=False) as c:
-            yield c
-    finally:
-        store.close()
-        with admin.begin() as conn:
-            conn.execute(sa.text(f'DROP SCHEMA "{schema}" CASCADE'))
-        admin.dispose()
+    reason = pg_unavailable_reason()
+    if reason:
+        pytest.skip(reason)
+    with pg_schema_url("quadloc_api") as url:
+        store = MapStore(url)
+        try:
+            with TestClient(create_app(Settings(api_keys=""), store=store),
+                            raise_server_exceptions=False) as c:
+                yield c
+        finally:
+            store.close()
 
 
 @pytest.mark.postgres

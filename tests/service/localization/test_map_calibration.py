@@ -14,9 +14,13 @@ import pytest
 from quadloc.maps.compiled import compile_map
 from quadloc.service.localization.calibration_fit import CalibrationConstants
 from quadloc.service.localization.map_calibration import (
+    FOLDS,
     ReferenceFrame,
     calibration_error,
+    calibration_error_floor,
+    calibration_error_sd,
     fit_map_calibration,
+    folds,
 )
 from quadloc.service.localization.pipeline import localize
 from quadloc.service.localization.types import LocalizationOptions
@@ -32,6 +36,35 @@ def test_calibration_error_is_the_binned_gap() -> None:
     assert calibration_error(p, y) == pytest.approx((0.05 + 2 * 0.35 + 4 * 0.2) / 7)
     assert calibration_error(np.array([1.0, 0.0]), np.array([1, 0])) == 0.0
     assert math.isnan(calibration_error(np.array([]), np.array([])))
+
+
+def test_calibration_error_floor_is_the_sampling_error_of_a_calibrated_model() -> None:
+    """Tolerance 0.006 (200 draws, sd of the mean about 0.002)."""
+    assert calibration_error_floor(np.array([0.0, 1.0, 1.0])) == 0.0
+    # one bin, n = 100 at p = 0.5: E|mean(y) - 0.5| = sqrt(0.25 / n) sqrt(2 / pi) (normal)
+    assert calibration_error_floor(np.full(100, 0.5)) == pytest.approx(
+        math.sqrt(0.25 / 100) * math.sqrt(2 / math.pi), abs=0.006)
+    assert math.isnan(calibration_error_floor(np.array([])))
+
+
+def test_calibration_error_sd_grows_with_correlated_outcomes() -> None:
+    """The same outcomes in runs of 25 (correlated, as along a drifting walk) and shuffled
+    (independent): the block bootstrap gives the runs a larger spread."""
+    assert calibration_error_sd(np.ones(100), np.ones(100)) == 0.0
+    assert math.isnan(calibration_error_sd(np.full(30, 0.5), np.ones(30)))
+    rng = np.random.default_rng(1)
+    runs = np.repeat(rng.random(40) < 0.5, 25).astype(float)
+    p = np.full(runs.size, 0.5)
+    shuffled = rng.permutation(runs)
+    assert calibration_error_sd(p, runs) > 2 * calibration_error_sd(p, shuffled)
+
+
+def test_folds_are_chunks_dealt_in_turn_and_even() -> None:
+    f = folds(1000)  # chunks of 25: 40 chunks, 8 per fold
+    assert list(f[:26]) == [0] * 25 + [1] and np.bincount(f).tolist() == [200] * FOLDS
+    g = folds(40)  # short: chunks of 4, two per fold
+    assert list(g[:8]) == [0] * 4 + [1] * 4 and np.bincount(g).tolist() == [8] * FOLDS
+    assert set(folds(7).tolist()) <= set(range(FOLDS))
 
 
 @pytest.fixture(scope="module")
@@ -87,7 +120,7 @@ def test_fit_on_a_noisier_detector_brings_nees_into_band(chess: tuple) -> None:
     assert cal.before.mean_nees is not None and cal.after.mean_nees is not None
     assert 3 <= cal.after.mean_nees <= 12, cal
     assert cal.constants.provenance["fitted_keys"] == ["level_set"] and cal.key == "level_set"
-    assert cal.before.frames == cal.after.frames == 45 and cal.fit_frames == 45
+    assert cal.before.frames == cal.after.frames == 90 == cal.fit_frames
     # no decision sets among the user's frames: the ambiguity ratio and the default
     # min_confidence are the shipped ones
     shipped = CalibrationConstants.shipped()

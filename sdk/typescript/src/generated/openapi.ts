@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: 6c7da94a2fdbc92b8a993507de00d22a2a308c8cd39f2bca75ecf7a52d7a4164
+// openapi-sha256: a4d64ebd8fb97635fec868467cd898966b02dcfde604099625d562e7a44d159b
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -184,7 +184,7 @@ export interface paths {
         put?: never;
         /**
          * Calibrate a map version from a recording's held-out frames
-         * @description Body: the recording the map was built from, with `holdout_every` (the frames held out of the build, their app poses the reference). Fits the covariance scale and the confidence model on half of them, reports mean NEES and the confidence calibration error before / after on the other half, and stores the calibration with the map version: localize uses it for the calibration key it was fitted for. Synchronous (tens of seconds for hundreds of frames). 422 when the recording holds no frame out or too few localize (at least 20 must: the inline example shows the body's form only and gets that 422; docs/map_building.md calibrates the shipped example recording).
+         * @description Body: the recording the map was built from, with `holdout_every` (the frames held out of the build, their app poses the reference). Fits the covariance scale and the confidence model on them, reports mean NEES and the confidence calibration error before / after on them (after: cross-fitted, each frame by a fit on the other folds), and stores the calibration with the map version: localize and tracking sessions use it for the calibration key it was fitted for. Synchronous: two solves per held-out frame (1,000 held-out frames in about 25 s measured; the body limit, 2 MB by default, bounds a recording to about 2,500 frames, so at most about 1,250 held out). 422 when the recording holds no frame out or too few localize (at least 20 must: the inline example shows the body's form only and gets that 422; docs/map_building.md calibrates the shipped example recording).
          */
         post: operations["calibrate_map_v1_maps__map_id__calibration_post"];
         delete?: never;
@@ -481,7 +481,7 @@ export interface components {
             key: string;
             /**
              * Fit Frames
-             * @description Held-out frames the fit used (every other one).
+             * @description Held-out frames the stored fit used (all of them; `after` is cross-fitted: each frame reported by a fit on the other folds).
              */
             fit_frames: number;
             /**
@@ -498,9 +498,9 @@ export interface components {
              * @description Default min_confidence with this calibration.
              */
             min_confidence: number;
-            /** @description Report frames, shipped constants. */
+            /** @description Held-out frames, shipped constants. */
             before: components["schemas"]["CalibrationQualityOut"];
-            /** @description Report frames, this calibration. */
+            /** @description Held-out frames, each with a calibration fitted without its fold (5 folds of 25-frame chunks). */
             after: components["schemas"]["CalibrationQualityOut"];
         };
         /**
@@ -533,6 +533,16 @@ export interface components {
              * @description Expected calibration error of `confidence` (10 bins) against success = within 10 cm and 5 deg of the reference.
              */
             calibration_error: number | null;
+            /**
+             * Calibration Error Floor
+             * @description The calibration error a perfectly calibrated `confidence` would show on these answers by sampling alone (mean over 200 draws of outcomes from the confidences): an error near it is as good as these frames can tell.
+             */
+            calibration_error_floor?: number | null;
+            /**
+             * Calibration Error Sd
+             * @description Sampling standard deviation of `calibration_error`: moving-block bootstrap over blocks of 25 consecutive frames (their outcomes are correlated); null with fewer than 50 localized frames.
+             */
+            calibration_error_sd?: number | null;
             /** Mean Confidence */
             mean_confidence: number | null;
             /** Success Rate */
@@ -4939,31 +4949,35 @@ export interface operations {
                 content: {
                     /**
                      * @example {
-                     *       "map_id": "my-room",
+                     *       "map_id": "room",
                      *       "map_version": 1,
                      *       "key": "level_set",
-                     *       "fit_frames": 250,
-                     *       "covariance_scale": 39.9,
-                     *       "shipped_covariance_scale": 1.83,
-                     *       "s2_floor": 3.6,
+                     *       "fit_frames": 100,
+                     *       "covariance_scale": 106.9,
+                     *       "shipped_covariance_scale": 3.06,
+                     *       "s2_floor": 2.5,
                      *       "min_confidence": 0.36,
                      *       "before": {
-                     *         "frames": 250,
-                     *         "localized": 247,
-                     *         "nees_frames": 125,
-                     *         "mean_nees": 382.9,
-                     *         "calibration_error": 0.105,
-                     *         "mean_confidence": 0.54,
-                     *         "success_rate": 0.49
+                     *         "frames": 100,
+                     *         "localized": 99,
+                     *         "nees_frames": 85,
+                     *         "mean_nees": 180.9,
+                     *         "calibration_error": 0.067,
+                     *         "calibration_error_floor": 0.066,
+                     *         "calibration_error_sd": 0.021,
+                     *         "mean_confidence": 0.82,
+                     *         "success_rate": 0.86
                      *       },
                      *       "after": {
-                     *         "frames": 250,
-                     *         "localized": 247,
-                     *         "nees_frames": 125,
-                     *         "mean_nees": 8.7,
-                     *         "calibration_error": 0.074,
-                     *         "mean_confidence": 0.52,
-                     *         "success_rate": 0.49
+                     *         "frames": 100,
+                     *         "localized": 99,
+                     *         "nees_frames": 85,
+                     *         "mean_nees": 6.46,
+                     *         "calibration_error": 0.065,
+                     *         "calibration_error_floor": 0.06,
+                     *         "calibration_error_sd": 0.03,
+                     *         "mean_confidence": 0.85,
+                     *         "success_rate": 0.86
                      *       }
                      *     }
                      */
@@ -5153,31 +5167,35 @@ export interface operations {
                 content: {
                     /**
                      * @example {
-                     *       "map_id": "my-room",
+                     *       "map_id": "room",
                      *       "map_version": 1,
                      *       "key": "level_set",
-                     *       "fit_frames": 250,
-                     *       "covariance_scale": 39.9,
-                     *       "shipped_covariance_scale": 1.83,
-                     *       "s2_floor": 3.6,
+                     *       "fit_frames": 100,
+                     *       "covariance_scale": 106.9,
+                     *       "shipped_covariance_scale": 3.06,
+                     *       "s2_floor": 2.5,
                      *       "min_confidence": 0.36,
                      *       "before": {
-                     *         "frames": 250,
-                     *         "localized": 247,
-                     *         "nees_frames": 125,
-                     *         "mean_nees": 382.9,
-                     *         "calibration_error": 0.105,
-                     *         "mean_confidence": 0.54,
-                     *         "success_rate": 0.49
+                     *         "frames": 100,
+                     *         "localized": 99,
+                     *         "nees_frames": 85,
+                     *         "mean_nees": 180.9,
+                     *         "calibration_error": 0.067,
+                     *         "calibration_error_floor": 0.066,
+                     *         "calibration_error_sd": 0.021,
+                     *         "mean_confidence": 0.82,
+                     *         "success_rate": 0.86
                      *       },
                      *       "after": {
-                     *         "frames": 250,
-                     *         "localized": 247,
-                     *         "nees_frames": 125,
-                     *         "mean_nees": 8.7,
-                     *         "calibration_error": 0.074,
-                     *         "mean_confidence": 0.52,
-                     *         "success_rate": 0.49
+                     *         "frames": 100,
+                     *         "localized": 99,
+                     *         "nees_frames": 85,
+                     *         "mean_nees": 6.46,
+                     *         "calibration_error": 0.065,
+                     *         "calibration_error_floor": 0.06,
+                     *         "calibration_error_sd": 0.03,
+                     *         "mean_confidence": 0.85,
+                     *         "success_rate": 0.86
                      *       }
                      *     }
                      */
