@@ -344,7 +344,7 @@ def _pct2(d: dict) -> str:
     return f"{d['within_5cm']:.0%} / {d['within_10cm']:.0%}"
 
 
-def markdown(results: dict, command: str, plot: Path | None) -> str:
+def markdown(results: dict, plot: Path | None) -> str:
     header = ["seed", "frames", "detections", "walk (m)", "app drift at end (m)",
               "assoc. precision", "assoc. recall", "real objects found (built)",
               "median centre err (cm)",
@@ -370,8 +370,6 @@ def markdown(results: dict, command: str, plot: Path | None) -> str:
              "BA)" if results.get("refine_cameras")
              else "Map building without camera-pose refinement (ablation)")
     text = f"""## {title} (bench/map_building.py)
-
-Command: `{command}`
 
 Synthetic walks through the real Chess scene (the 108 real poses + interpolated ones),
 odometry-grade app poses (0.05 deg and 1 % + 1 mm noise per step, chained: they drift), detections
@@ -547,7 +545,7 @@ def run_building(seed: int, n_rooms: int, sizes: list[int], n_test_per_room: int
     return out
 
 
-def building_markdown(results: dict, command: str) -> str:
+def building_markdown(results: dict) -> str:
     """The ``map_building_building`` section of docs/results.md."""
     header = ["seed", "frames", "rooms visited (visits)", "detections", "app drift max (m)",
               "objects built / true (found)", "merged across rooms",
@@ -602,8 +600,6 @@ def building_markdown(results: dict, command: str) -> str:
         f"- build <= 10 min and peak memory <= 2 GB: {ok(cost_ok)}.",
     ]) if big else "No build of >= 6,000 frames in this run."
     return f"""## Map building at building scale (bench/map_building.py --building)
-
-Command: `{command}`
 
 A walk through a generated building of perturbed copies of the Chess room
 (`tests.support.buildings.building_recording`: every room once, row by row, then revisits; in a
@@ -669,10 +665,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.write_results:
             from bench.results_doc import update_results_section
 
-            cmd = "python -m bench.map_building " + " ".join(
-                argv if argv is not None else sys.argv[1:])
-            update_results_section("map_building_building", building_markdown(building,
-                                                                               cmd.strip()))
+            update_results_section("map_building_building", building_markdown(building))
         return 0
     if args.write_recording:
         doc = write_recording(args.write_recording, seeds[0], args.frames, args.holdout_every)
@@ -698,10 +691,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.write_results:
         from bench.results_doc import update_results_section
 
-        cmd = "python -m bench.map_building " + " ".join(argv if argv is not None
-                                                         else sys.argv[1:])
         name = "map_building" if refine else "map_building_fixed_cameras"
-        update_results_section(name, markdown(results, cmd.strip(), plot))
+        update_results_section(name, markdown(results, plot))
     return 0
 
 

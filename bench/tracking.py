@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import gc
+import itertools
 import json
 import math
 import os
@@ -40,6 +41,8 @@ from quadloc.maps.compiled import compile_map
 from quadloc.service.localization.pipeline import localize
 from quadloc.service.localization.types import LocalizationOptions
 from quadloc.service.tracking.session import FrameInput, SessionOptions, TrackingSession
+from tests.support.building_walks import building_walk
+from tests.support.buildings import REPORT_SEEDS, TUNE_SEEDS, Building, make_building
 from tests.support.errors import pose_errors
 from tests.support.reference_data import load_chess_map, load_chess_poses
 from tests.support.simulate import SimulationConfig, simulate_frame
@@ -358,6 +361,155 @@ def results_markdown(out: dict, batch: dict | None = None, capped: dict | None =
     return "\n".join(lines)
 
 
+# ---------------------------------------------------------------------- building walks
+def run_building_walk(building: Building, seed: int, options: SessionOptions) -> dict:
+    """One walk through a building (tests.support.building_walks): per-frame rows."""
+    from_walk = building_walk(building, seed)
+    session = TrackingSession(building.compiled, from_walk.camera, options)
+    rows = []
+    seen: set[str] = set()
+    for f, T, room, ids in zip(from_walk.frames, from_walk.poses, from_walk.rooms,
+                               from_walk.object_ids, strict=True):
+        seen |= {o for o in ids if o is not None}
+        c0 = time.process_time()
+        res = session.add_frame(f)
+        cpu = (time.process_time() - c0) * 1e3
+        pos, rot = pose_errors(res.world_from_camera, T)
+        cands = [pose_errors(c.world_from_camera, T)[0] for c in res.candidates]
+        rows.append(dict(i=res.frame_index, n=len(f.detections), seen=len(seen),
+                         state=res.state, reason=res.reason, pos=pos, rot=rot,
+                         conf=res.confidence, cpu_ms=cpu, room=room.zone_id,
+                         n_candidates=len(res.candidates),
+                         true_among_candidates=any(c <= 0.5 for c in cands)))
+    return dict(seed=seed, rows=rows, inputs=from_walk.frames, camera=from_walk.camera)
+
+
+def summarize_walks(walks: list[dict]) -> dict:
+    """Per map size and mode: the issue's walk figures (module docstring of
+    tests.support.building_walks; frames without a pose count as misses after the fix)."""
+    per_walk = []
+    for w in walks:
+        rows = w["rows"]
+        first = next((x["i"] for x in rows if x["state"] == "tracking"), None)
+        t3 = next((x["i"] for x in rows if x["seen"] >= 3), None)
+        posed = [x for x in rows if math.isfinite(x["pos"])]
+        off = [math.isfinite(x["pos"]) and x["pos"] > 0.5 for x in rows]
+        run = longest = 0
+        for o in off:
+            run = run + 1 if o else 0
+            longest = max(longest, run)
+        after = [x for x in rows if first is not None and x["i"] >= first]
+        per_walk.append(dict(
+            seed=w["seed"], frames=len(rows),
+            first_fix_s=None if first is None else first / HZ,
+            fix_after_3_objects_s=None if first is None or t3 is None else (first - t3) / HZ,
+            posed=len(posed), off_05=int(sum(off)), longest_off_s=longest / HZ,
+            after=len(after),
+            after_within_10cm=int(sum(x["pos"] <= 0.1 and x["rot"] <= 5 for x in after)),
+            ambiguous=int(sum(x["reason"] == "ambiguous" for x in rows)),
+            ambiguous_true_listed=int(sum(x["reason"] == "ambiguous"
+                                          and x["true_among_candidates"] for x in rows))))
+    frames = sum(p["frames"] for p in per_walk)
+    cpu = np.array([x["cpu_ms"] for w in walks for x in w["rows"]])
+    fix = [p["fix_after_3_objects_s"] for p in per_walk]
+    after = sum(p["after"] for p in per_walk)
+    track = [x for w in walks for x in w["rows"] if x["state"] == "tracking"]
+    return {
+        "walks": len(per_walk), "frames": frames,
+        "off_05_frames": sum(p["off_05"] for p in per_walk),
+        "off_05_pct": 100.0 * sum(p["off_05"] for p in per_walk) / max(frames, 1),
+        "walks_off_05_over_1s": sum(p["longest_off_s"] > 1.0 for p in per_walk),
+        "walks_committed": sum(p["first_fix_s"] is not None for p in per_walk),
+        "walks_committed_within_5s_of_3_objects_pct": 100.0 * sum(
+            f is not None and f <= 5.0 for f in fix) / max(len(fix), 1),
+        "first_fix_s_median": float(np.median([p["first_fix_s"] for p in per_walk
+                                               if p["first_fix_s"] is not None]))
+        if any(p["first_fix_s"] is not None for p in per_walk) else None,
+        "after_fix_within_10cm_pct": 100.0 * sum(p["after_within_10cm"] for p in per_walk)
+        / after if after else None,
+        "ambiguous_frames": sum(p["ambiguous"] for p in per_walk),
+        "ambiguous_true_listed": sum(p["ambiguous_true_listed"] for p in per_walk),
+        "update_cpu_ms_median": float(np.median(cpu)),
+        "update_cpu_ms_p99": float(np.percentile(cpu, 99)),
+        "tracking_frames": len(track),
+        "mean_confidence_tracking": float(np.mean([x["conf"] for x in track]))
+        if track else None,
+        "fraction_within_10cm_5deg_tracking": float(np.mean(
+            [x["pos"] <= 0.1 and x["rot"] <= 5 for x in track])) if track else None,
+        "per_walk": per_walk,
+    }
+
+
+def confidence_reliability(walks: list[dict], edges: tuple[float, ...] = (
+        0.0, 0.5, 0.8, 0.9, 0.95, 0.99, 1.0)) -> list[dict]:
+    """Tracking frames binned by confidence: mean confidence vs fraction within 10 cm / 5°."""
+    track = [x for w in walks for x in w["rows"] if x["state"] == "tracking"]
+    out = []
+    for lo, hi in itertools.pairwise(edges):
+        b = [x for x in track if lo <= x["conf"] < hi or (hi == 1.0 and x["conf"] == 1.0)]
+        if b:
+            out.append({"bin": f"[{lo}, {hi})", "frames": len(b),
+                        "mean_confidence": float(np.mean([x["conf"] for x in b])),
+                        "within_10cm_5deg": float(np.mean([x["pos"] <= 0.1 and x["rot"] <= 5
+                                                           for x in b]))})
+    return out
+
+
+def run_buildings(sizes: list[int], modes: list[str], seeds: list[int], walks: int,
+                  options: SessionOptions) -> dict:
+    """Every (mode, size): ``walks`` walks per base seed (building seed = base seed, walk seeds
+    derived), summaries, memory of one session per size (heap after its walk)."""
+    out: dict = {"cases": {}, "reliability": []}
+    everything = []
+    for mode in modes:
+        for n in sizes:
+            done = []
+            for s in seeds:
+                b = make_building(n, mode, s)
+                for k in range(walks):
+                    done.append(run_building_walk(b, 1000 * s + k, options))
+            case = summarize_walks(done)
+            w0 = done[0]
+            case["memory"] = session_memory(make_building(n, mode, seeds[0]).compiled,
+                                            w0["camera"], options, w0["inputs"])
+            out["cases"][f"{mode}-{n}"] = case
+            everything += done
+            print(f"{mode}-{n}: " + json.dumps({k: v for k, v in case.items()
+                                                if k != "per_walk"}, default=float),
+                  file=sys.stderr)
+    out["reliability"] = confidence_reliability(everything)
+    return out
+
+
+def building_markdown(out: dict) -> str:
+    """The ``tracking-buildings`` section of docs/results.md."""
+    lines = [f"## tracking-buildings-{'-'.join(out['modes'])} (bench/tracking.py --building)", "",
+             f"Walks through 2 rooms of generated buildings (tests/support/building_walks.py: "
+             f"a start room drawn at random, 30 real Chess poses placed in it, a walk at 1.2 m/s "
+             f"to the nearest room, 30 poses there; every third 3-s stretch with 0-2 detections; "
+             f"drifting odometry), base seeds {out['seeds']} ({out['seed_set']} seeds), "
+             f"{out['walks']} walks per seed. A frame without a pose after the fix counts as a "
+             "miss. CPU per frame: process time of `add_frame` (shared 2-core machine).", "",
+             "| map | walks | frames | > 0.5 m off | walks > 0.5 m off > 1 s | committed "
+             "within 5 s of 3 objects | first fix (median s) | after fix within 10 cm/5° | "
+             "ambiguous (true listed) | CPU ms median / p99 | session heap MB |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for name, c in out["cases"].items():
+        lines.append(
+            f"| {name} | {c['walks']} | {c['frames']} | {c['off_05_frames']} "
+            f"({_f(c['off_05_pct'], 2)} %) | {c['walks_off_05_over_1s']} | "
+            f"{_f(c['walks_committed_within_5s_of_3_objects_pct'])} % | "
+            f"{_f(c['first_fix_s_median'], 2)} | {_f(c['after_fix_within_10cm_pct'])} % | "
+            f"{c['ambiguous_frames']} ({c['ambiguous_true_listed']}) | "
+            f"{_f(c['update_cpu_ms_median'], 2)} / {_f(c['update_cpu_ms_p99'], 1)} | "
+            f"{c['memory']['heap_bytes'] / 1e6:.2f} |")
+    lines += ["", "Confidence of tracking frames (all maps pooled) against the outcome: "
+              + "; ".join(
+        f"{r['bin']}: {r['frames']} frames, mean {_f(r['mean_confidence'], 3)}, within "
+        f"{_f(r['within_10cm_5deg'], 3)}" for r in out["reliability"]) + "."]
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
@@ -376,8 +528,30 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--write-recording", type=Path, metavar="PATH",
                     help="only write a recording of --max-frames frames (seed: first of --seeds)")
     ap.add_argument("--write-results", action="store_true")
+    ap.add_argument("--building", action="store_true",
+                    help="walks through generated buildings (tests/support/building_walks.py)")
+    ap.add_argument("--sizes", type=int, nargs="+", default=[1, 10, 50, 200])
+    ap.add_argument("--modes", nargs="+", default=["perturbed", "exact"])
+    ap.add_argument("--walks", type=int, default=2, help="walks per base seed (--building)")
+    ap.add_argument("--seed-set", choices=["report", "tune"], default="report",
+                    help="--building base seeds: the first --n-seeds of REPORT_SEEDS (held "
+                         "out) or TUNE_SEEDS (tests/support/buildings.py)")
+    ap.add_argument("--n-seeds", type=int, default=2)
     args = ap.parse_args(argv)
     opts = SessionOptions(window_frames=args.window, smoother=args.smoother)
+    if args.building:
+        seeds = list((REPORT_SEEDS if args.seed_set == "report" else TUNE_SEEDS)[:args.n_seeds])
+        bout = run_buildings(args.sizes, args.modes, seeds, args.walks, opts)
+        bout.update(command="python -m bench.tracking " + " ".join(
+            sys.argv[1:] if argv is None else argv), seeds=seeds, seed_set=args.seed_set,
+            walks=args.walks, modes=args.modes)
+        print(json.dumps(bout, indent=1, default=float))
+        if args.json:
+            args.json.write_text(json.dumps(bout, indent=1, default=float))
+        if args.write_results:
+            update_results_section("tracking-buildings-" + "-".join(args.modes),
+                                   building_markdown(bout))
+        return bout
     if args.render:
         runs = [json.loads(p.read_text()) for p in args.render]
         main_run = runs[0]

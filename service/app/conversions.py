@@ -70,7 +70,12 @@ from quadloc.service.schemas.recording import (
     RecordingFrameIn,
     RecordingIn,
 )
-from quadloc.service.schemas.sessions import SessionFrameIn, SessionFrameOut, SessionOptionsIn
+from quadloc.service.schemas.sessions import (
+    PlaceCandidateOut,
+    SessionFrameIn,
+    SessionFrameOut,
+    SessionOptionsIn,
+)
 from quadloc.service.tracking.session import (
     DriftModel,
     FrameInput,
@@ -369,6 +374,10 @@ def frame_out(result: FrameResult, convention: str,
         confidence=result.confidence,
         inliers=inliers_out(result.inliers),
         zone=None if zones is None else zones.zone_of(m.object_id for m in result.inliers),
+        candidates=[PlaceCandidateOut(world_from_camera=pose_out(c.world_from_camera,
+                                                                 convention),
+                                      probability=c.probability, zone=c.zone)
+                    for c in result.candidates],
         n_usable_detections=result.n_usable_detections,
         timings_ms={k: float(v) for k, v in result.timings_ms.items()})
 

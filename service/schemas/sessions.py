@@ -23,9 +23,9 @@ from quadloc.service.schemas.localize import (
     PosePriorIn,
 )
 
-__all__ = ["MAX_SESSION_BATCH_FRAMES", "SessionCreate", "SessionFrameIn", "SessionFrameOut",
-           "SessionFramesBody", "SessionFramesIn", "SessionFramesOut", "SessionOptionsIn",
-           "SessionOut"]
+__all__ = ["MAX_SESSION_BATCH_FRAMES", "PlaceCandidateOut", "SessionCreate", "SessionFrameIn",
+           "SessionFrameOut", "SessionFramesBody", "SessionFramesIn", "SessionFramesOut",
+           "SessionOptionsIn", "SessionOut"]
 
 #: Frames per batch upload request (an offline recording is sent in chunks of this size).
 MAX_SESSION_BATCH_FRAMES = 900
@@ -110,6 +110,19 @@ SessionFramesBody = Annotated[
     Discriminator(_batch_or_frame)]
 
 
+class PlaceCandidateOut(BaseModel):
+    """A place the session's walk may be in (docs/tracking.md, "Places")."""
+
+    world_from_camera: PoseOut = Field(description="This frame's camera pose if the walk is "
+                                                   "in this place.")
+    probability: float = Field(ge=0, le=1, description="Posterior probability that the walk is "
+                                                       "in this place (the rest: in none of "
+                                                       "those listed).")
+    zone: str | None = Field(default=None, description="The map zone of the objects this place "
+                                                       "matched (the zone rule of `zone`); "
+                                                       "null without zones.")
+
+
 class SessionFrameOut(BaseModel):
     """A frame's answer."""
 
@@ -131,11 +144,17 @@ class SessionFrameOut(BaseModel):
     world_from_odom_covariance: CovarianceOut | None = Field(
         description="6x6 [omega, v], right perturbation, in the ODOMETRY frame's axes, given "
                     "this frame's odometry pose.")
-    confidence: float = Field(ge=0, le=1, description="P(pose within 10 cm and 5 deg) under "
+    confidence: float = Field(ge=0, le=1, description="P(pose within 10 cm and 5 deg): the "
+                                                      "posterior probability of the session's "
+                                                      "place times P(within tolerance) under "
                                                       "the pose posterior; 0 unless tracking "
                                                       "and 0 when detections_unexplained.")
     inliers: list[InlierOut]
     zone: str | None = Field(default=None, description=ZONE_RULE)
+    candidates: list[PlaceCandidateOut] = Field(
+        default_factory=list,
+        description="The places the walk may be in with their probabilities (>= 0.01), most "
+                    "probable first; several while `ambiguous`.")
     n_usable_detections: int
     timings_ms: dict[str, float]
 

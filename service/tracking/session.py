@@ -40,15 +40,32 @@ from quadloc.service.localization.calibration_fit import (
 )
 from quadloc.service.localization.confidence import calibration_key
 from quadloc.service.localization.gravity import gravity_measurement
-from quadloc.service.localization.scoring import Match, MatchScorer
-from quadloc.service.localization.types import Detection, Gravity, InlierMatch, PosePrior
+from quadloc.service.localization.pipeline import localize
+from quadloc.service.localization.scoring import Match, MatchScorer, ScoringTimeoutError
+from quadloc.service.localization.types import (
+    Detection,
+    Gravity,
+    InlierMatch,
+    LocalizationOptions,
+    PosePrior,
+)
 from quadloc.service.tracking.association import associate
 from quadloc.service.tracking.confidence import session_confidence
 from quadloc.service.tracking.multiframe import InitFrame, multi_frame_ransac
+from quadloc.service.tracking.places import (
+    COMMIT_PROBABILITY,
+    KEEP_PROBABILITY,
+    MIN_COMMIT_OBJECTS,
+    PlaceCandidate,
+    PlaceHypothesis,
+    PlaceSet,
+    alignment,
+)
 
 __all__ = [
     "MAX_BUFFERED_DETECTIONS",
     "MAX_WINDOW_FRAMES",
+    "MIN_PROPOSAL_ROUNDS",
     "SMOOTHERS",
     "STATES",
     "TIME_BUDGET_EXCEEDED",
@@ -66,6 +83,10 @@ STATES = ("initializing", "tracking", "lost")
 #: estimate (no inlier), sends the session to ``lost`` at once (fewer: after
 #: ``lost_after_misses`` such frames in a row).
 LOST_UNEXPLAINED_DETECTIONS = 3
+#: A tracking frame whose estimate moved from its odometry prediction by more than this squared
+#: Mahalanobis distance (6 dof, under the predicted covariance; chi-square 99.9 %) jumped: a
+#: wrong association pulled it, the session is ``lost``.
+JUMP_CHI2 = 22.5
 SMOOTHERS = ("isam2", "batch")
 #: Largest ``window_frames`` of each smoother: the batch smoother re-solves its whole window at
 #: every frame, so its window is what bounds a frame's CPU time (measured by
@@ -79,6 +100,17 @@ MAX_BUFFERED_DETECTIONS = 2048
 UPDATE_COST_MARGIN = 1.5
 #: ``FrameResult.reason`` of a frame not fused because its time budget ran out.
 TIME_BUDGET_EXCEEDED = "time_budget_exceeded"
+#: A tracking session asks single-frame ``localize`` for rival places every this many frames
+#: (on a frame with >= 3 usable detections): a wrong place committed to meets its rival.
+CHECK_INTERVAL_FRAMES = 30
+#: Frames remembered (poses, usable detections) to score a newly proposed place on.
+HISTORY_FRAMES = 45
+#: A session commits to a place only after this many proposal rounds (one every
+#: ``init_interval_frames``): single proposals can all come from one of several identical rooms
+#: (a single frame's answer may be wrong on exact copies), the rounds let the copies be proposed.
+MIN_PROPOSAL_ROUNDS = 3
+#: Below this posterior a candidate place does not make an answer ``ambiguous``.
+AMBIGUOUS_PROBABILITY = 0.05
 
 _T = TypeVar("_T")
 
@@ -210,6 +242,7 @@ class FrameResult:
     n_usable_detections: int
     reason: str | None
     timings_ms: dict[str, float]
+    candidates: tuple[PlaceCandidate, ...] = ()
 
 
 def pose_adjoint(T: FloatArray) -> FloatArray:
@@ -261,6 +294,15 @@ class TrackingSession:
         self._misses = 0
         self._last_timestamp: float | None = None
         self._update_cpu_s = 0.0  # CPU time (s) of the last smoother update
+        self._places = PlaceSet(compiled, camera, self.options.inlier_iou)
+        self._committed: PlaceHypothesis | None = None
+        # (odom_from_camera, usable ellipses (D, 5), labels) of the last frames
+        self._history: deque[tuple[FloatArray, FloatArray, tuple[str, ...]]] = deque(
+            maxlen=HISTORY_FRAMES)
+        self._last_check = -10 ** 9
+        self._rounds = 0  # proposal rounds since the session (re)started initializing
+        self._evidence: tuple[FloatArray, FloatArray, tuple[str, ...]] = (
+            np.eye(4), np.zeros((0, 5)), ())
 
     # ------------------------------------------------------------------ public
     @property
@@ -289,6 +331,9 @@ class TrackingSession:
         self.frame_count += 1
         self._last_timestamp = float(frame.timestamp)
         timings: dict[str, float] = {}
+        dets = frame.detections
+        self._evidence = (T_oc, ellipse_params([dets[i].ellipse for i in usable]) if usable
+                          else np.zeros((0, 5)), tuple(dets[i].label for i in usable))
         if deadline_passed(deadline):
             result = self._no_pose(index, frame, T_oc, usable, TIME_BUDGET_EXCEEDED, timings)
         elif self.state == "tracking":
@@ -298,12 +343,18 @@ class TrackingSession:
         timings["total"] = (time.perf_counter() - t0) * 1e3
         return result
 
-    def reset(self) -> None:
-        """Drop the graph; the next frames relocalize (state ``lost``)."""
+    def reset(self, keep_places: bool = False) -> None:
+        """Drop the graph; the next frames relocalize (state ``lost``). The place hypotheses
+        are dropped too unless ``keep_places`` (a rival place won: they stay in competition)."""
         self._smoother = None
         self._last = None
         self._misses = 0
         self._buffer.clear()
+        self._committed = None
+        self._rounds = 0
+        if not keep_places:
+            self._places.clear()
+            self._history.clear()
         self.state = "lost"
 
     # ------------------------------------------------------------------ input
@@ -402,10 +453,13 @@ class TrackingSession:
             if cov is not None:
                 Ad = pose_adjoint(T_oc)
                 cov_wo = Ad @ cov @ Ad.T
+        committed = self._committed if self.state == "tracking" else None
+        place_p = self._places.probability(committed) if committed is not None else 0.0
         return FrameResult(index, frame.frame_id, float(frame.timestamp), self.state, T, cov,
                            T_wo, cov_wo, tuple(inliers),
-                           session_confidence(self.state, cov, contradicted), n_usable, reason,
-                           timings)
+                           session_confidence(self.state, cov, contradicted, place_p),
+                           n_usable, reason, timings,
+                           self._places.candidates(T_oc, committed, T))
 
     def _no_pose(self, index: int, frame: FrameInput, T_oc: FloatArray, usable: list[int],
                  reason: str, timings: dict[str, float]) -> FrameResult:
@@ -466,11 +520,18 @@ class TrackingSession:
             bool(assoc) or self._predicted_visible(T_pred))
         self._misses = self._misses + 1 if contradicted else 0
         pos_std = math.sqrt(max(float(np.linalg.eigvalsh(cov[3:, 3:]).max()), 0.0))
-        if pos_std > self.options.lost_position_std_m \
+        xi = gtsam.Pose3.Logmap(pose3(invert_pose(T_pred) @ T))
+        jumped = float(xi @ np.linalg.solve(cov_pred, xi)) > JUMP_CHI2
+        if pos_std > self.options.lost_position_std_m or jumped \
                 or self._misses >= self.options.lost_after_misses \
                 or (contradicted and len(usable) >= LOST_UNEXPLAINED_DETECTIONS):
             self.reset()
             return self._no_pose(index, frame, T_oc, usable, "lost", timings)
+        t = time.perf_counter()
+        given_up = self._check_place(index, frame, T, usable)
+        timings["places"] = (time.perf_counter() - t) * 1e3
+        if given_up is not None:
+            return self._no_pose(index, frame, T_oc, usable, given_up, timings)
         self._last = (index, float(frame.timestamp), T_oc, T, cov)
         return self._result(index, frame, T_oc, T, cov, inliers, len(usable),
                             "detections_unexplained" if contradicted else None, timings,
@@ -490,48 +551,123 @@ class TrackingSession:
     def _initialize(self, index: int, frame: FrameInput, T_oc: FloatArray, usable: list[int],
                     timings: dict[str, float], deadline: Deadline | None = None
                     ) -> FrameResult:
+        """Buffer the frame, score the place hypotheses on it, propose new ones every
+        ``init_interval_frames`` (multi-frame RANSAC over the buffer, single-frame ``localize``
+        with its alternatives), and commit to the most probable place once its posterior is
+        :data:`~quadloc.service.tracking.places.COMMIT_PROBABILITY` (docs/tracking.md,
+        "Places")."""
         opts = self.options
         dets = tuple(frame.detections)
-        ell = ellipse_params([dets[i].ellipse for i in usable]) if usable else np.zeros((0, 5))
+        _, ell, labels = self._evidence
         self._buffer.append(_Buffered(index, float(frame.timestamp), InitFrame(
-            T_oc, ell, tuple(dets[i].label for i in usable), tuple(usable)), dets, frame.prior,
-            frame.gravity))
+            T_oc, ell, labels, tuple(usable)), dets, frame.prior, frame.gravity))
         # bounded in detections too, not only frames (the newest frame always stays)
         buffered = sum(len(b.detections) for b in self._buffer)
         while len(self._buffer) > 1 and buffered > MAX_BUFFERED_DETECTIONS:
             buffered -= len(self._buffer.popleft().detections)
-        waiting = "lost" if self.state == "lost" else "waiting_for_constraints"
+        reason = "lost" if self.state == "lost" else "waiting_for_constraints"
+        t = time.perf_counter()
+        self._places.update(T_oc, ell, labels)
+        self._history.append(self._evidence)
+        timings["places"] = (time.perf_counter() - t) * 1e3
         with_dets = [b for b in list(self._buffer)[:-1] if len(b.frame.labels)]
         chosen = [*_spread(with_dets, opts.init_max_frames - 1), self._buffer[-1]]
         n_pool = sum(len(b.frame.labels) for b in chosen)
-        if n_pool < 3 or index - self._last_attempt < opts.init_interval_frames \
-                or not usable:
-            return self._no_pose(index, frame, T_oc, usable, waiting, timings)
-        self._last_attempt = index
-        t = time.perf_counter()
-        extra = [invert_pose(frame.prior.world_from_camera)] if frame.prior is not None else []
-        out = multi_frame_ransac([b.frame for b in chosen], self.compiled, self.camera,
-                                 inlier_iou=opts.inlier_iou, max_samples=opts.init_max_samples,
-                                 rng=self._rng, extra_hypotheses=extra, deadline=deadline)
-        timings["multi_frame_ransac"] = (time.perf_counter() - t) * 1e3
-        if out.camera_from_world is None:
-            reason = out.reason if out.reason in ("ambiguous", TIME_BUDGET_EXCEEDED) \
-                else waiting
-            return self._no_pose(index, frame, T_oc, usable, reason, timings)
-        if deadline_passed(deadline):
-            return self._no_pose(index, frame, T_oc, usable, TIME_BUDGET_EXCEEDED, timings)
-        t = time.perf_counter()
-        started = self._start_graph(chosen, [invert_pose(P) for P in out.camera_from_world],
-                                    out.matches)
-        timings["init_refine"] = (time.perf_counter() - t) * 1e3
-        if started is None:
-            return self._no_pose(index, frame, T_oc, usable, waiting, timings)
-        T, cov = started
-        self.state = "tracking"
-        self._buffer.clear()
-        self._misses = 0
-        inliers = self._verify(dets, usable, T)
-        return self._result(index, frame, T_oc, T, cov, inliers, len(usable), None, timings)
+        if n_pool >= 3 and usable and index - self._last_attempt >= opts.init_interval_frames:
+            self._last_attempt = index
+            self._rounds += 1
+            t = time.perf_counter()
+            extra = [invert_pose(frame.prior.world_from_camera)] if frame.prior is not None \
+                else []
+            out = multi_frame_ransac([b.frame for b in chosen], self.compiled, self.camera,
+                                     inlier_iou=opts.inlier_iou,
+                                     max_samples=opts.init_max_samples, rng=self._rng,
+                                     extra_hypotheses=extra, deadline=deadline)
+            timings["multi_frame_ransac"] = (time.perf_counter() - t) * 1e3
+            proposals = [] if out.camera_from_world is None \
+                else [invert_pose(out.camera_from_world[-1])]
+            t = time.perf_counter()
+            proposals += self._localize_proposals(frame, usable)
+            timings["localize"] = (time.perf_counter() - t) * 1e3
+            if out.reason == TIME_BUDGET_EXCEEDED or deadline_passed(deadline):
+                return self._no_pose(index, frame, T_oc, usable, TIME_BUDGET_EXCEEDED, timings)
+            self._places.propose([alignment(T, T_oc) for T in proposals], T_oc, self._history)
+        best, p = self._places.best()
+        if best is not None and p >= COMMIT_PROBABILITY and self._rounds >= MIN_PROPOSAL_ROUNDS \
+                and len(best.objects) >= MIN_COMMIT_OBJECTS:
+            t = time.perf_counter()
+            poses = [best.world_from_odom @ b.frame.odom_from_camera for b in chosen]
+            started = self._start_graph(chosen, poses, [
+                self._matches(b, T) for b, T in zip(chosen, poses, strict=True)])
+            timings["init_refine"] = (time.perf_counter() - t) * 1e3
+            if started is not None:
+                T, cov = started
+                best.world_from_odom = alignment(T, T_oc)
+                self._committed = best
+                self.state = "tracking"
+                self._buffer.clear()
+                self._misses = 0
+                inliers = self._verify(dets, usable, T)
+                return self._result(index, frame, T_oc, T, cov, inliers, len(usable), None,
+                                    timings)
+        if sum(q >= AMBIGUOUS_PROBABILITY for q in self._places.posteriors()) >= 2:
+            reason = "ambiguous"
+        return self._no_pose(index, frame, T_oc, usable, reason, timings)
+
+    def _matches(self, b: _Buffered, world_from_camera: FloatArray) -> list[Match]:
+        """The one-to-one inlier matches of a buffered frame at a pose."""
+        if not b.frame.labels:
+            return []
+        sc = MatchScorer(self.compiled, self.camera, [b.detections[i].ellipse
+                                                      for i in b.frame.detection_indices],
+                         list(b.frame.labels), list(b.frame.detection_indices))
+        return list(sc.matches(invert_pose(world_from_camera), self.options.inlier_iou))
+
+    def _localize_proposals(self, frame: FrameInput, usable: list[int]) -> list[FloatArray]:
+        """``world_from_camera`` of single-frame ``localize``'s pose and alternatives on a
+        frame with >= 3 usable detections (no time budget: its seeded search gives the same
+        answer whatever the load; the frame's own budget is checked after it)."""
+        if len(usable) < 3:
+            return []
+        try:
+            r = localize([frame.detections[i] for i in usable], self.compiled, self.camera,
+                         LocalizationOptions(seed=self.options.seed, time_budget_ms=None,
+                                             inlier_iou=self.options.inlier_iou),
+                         gravity=frame.gravity)
+        except ScoringTimeoutError:
+            return []
+        out = [r.world_from_camera] if r.world_from_camera is not None else []
+        return out + [a.world_from_camera for a in r.alternatives]
+
+    def _check_place(self, index: int, frame: FrameInput, T: FloatArray,
+                     usable: list[int]) -> str | None:
+        """A tracking frame scores the committed place (at the smoother's pose ``T``) and its
+        rivals, asking ``localize`` for new rivals every :data:`CHECK_INTERVAL_FRAMES`. The
+        session gives the place up (``lost``, keeping the hypotheses) when a rival has become
+        more probable (returns ``"ambiguous"``) or the place's posterior fell below
+        :data:`~quadloc.service.tracking.places.KEEP_PROBABILITY` (``"lost"``); else None."""
+        T_oc, ell, labels = self._evidence
+        committed = self._committed
+        assert committed is not None
+        committed.world_from_odom = alignment(T, T_oc)
+        self._places.update(T_oc, ell, labels, T, committed)
+        self._history.append(self._evidence)
+        if index - self._last_check >= CHECK_INTERVAL_FRAMES and len(usable) >= 3:
+            self._last_check = index
+            self._places.propose([alignment(Tw, T_oc)
+                                  for Tw in self._localize_proposals(frame, usable)],
+                                 T_oc, self._history, protect=committed)
+        p_committed = self._places.probability(committed)
+        reason = None
+        if any(q > p_committed for h, q in zip(self._places.hypotheses,
+                                               self._places.posteriors(), strict=True)
+               if h is not committed):
+            reason = "ambiguous"
+        elif p_committed < KEEP_PROBABILITY:
+            reason = "lost"
+        if reason is not None:
+            self.reset(keep_places=True)
+        return reason
 
     def _start_graph(self, chosen: list[_Buffered], poses: list[FloatArray],
                      matches: list[list[Match]]) -> tuple[FloatArray, FloatArray] | None:

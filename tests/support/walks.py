@@ -39,13 +39,14 @@ def _exp_so3(w: np.ndarray) -> np.ndarray:
     return expmap_pose3(np.concatenate([w, np.zeros(3)]))[:3, :3]
 
 
-def make_walk(keyposes: list[np.ndarray]) -> list[np.ndarray]:
-    """30 Hz world_from_camera poses through the key poses (module docstring)."""
+def make_walk(keyposes: list[np.ndarray], speed_m_s: float = 0.4) -> list[np.ndarray]:
+    """30 Hz world_from_camera poses through the key poses (module docstring), travelled at
+    <= ``speed_m_s`` and <= 45 deg/s."""
     out: list[np.ndarray] = []
     for a, b in itertools.pairwise(keyposes):
         d = float(np.linalg.norm(b[:3, 3] - a[:3, 3]))
         ang = float(rotation_angle(a[:3, :3], b[:3, :3]))
-        dur = max(0.1, d / 0.4, ang / math.radians(45))
+        dur = max(0.1, d / speed_m_s, ang / math.radians(45))
         n = max(1, round(dur * HZ))
         w = _log_so3(a[:3, :3].T @ b[:3, :3])
         for i in range(n):

@@ -55,6 +55,7 @@ __all__ = [
     "MapRecord",
     "MapSummary",
     "MapVersion",
+    "PlaceCandidate",
     "Pose",
     "PoseInput",
     "PosePrior",
@@ -551,6 +552,16 @@ class SessionInfo(BaseModel):
     idle_timeout_s: float
 
 
+class PlaceCandidate(BaseModel):
+    """A place a session's walk may be in (docs/tracking.md, "Places"): this frame's camera
+    pose if the walk is there, its posterior ``probability``, and its map ``zone``."""
+
+    model_config = _RESPONSE
+    world_from_camera: Pose
+    probability: float
+    zone: str | None = None
+
+
 class SessionFrameResult(BaseModel):
     """The answer for one session frame. ``world_from_camera`` / ``covariance`` only while
     ``state == "tracking"``; ``world_from_odom`` aligns the app's odometry frame to the map
@@ -569,5 +580,7 @@ class SessionFrameResult(BaseModel):
     confidence: float = 0.0
     inliers: list[Inlier] = Field(default_factory=list)
     zone: str | None = None  # the map zone of the pose (docs/api.md, "Zones")
+    #: the places the walk may be in, most probable first (several while ``ambiguous``)
+    candidates: list[PlaceCandidate] = Field(default_factory=list)
     n_usable_detections: int = 0
     timings_ms: dict[str, float] = Field(default_factory=dict)

@@ -18,6 +18,7 @@ from quadloc.service.localization.types import Detection
 from quadloc.service.tracking.session import (
     MAX_BUFFERED_DETECTIONS,
     MAX_WINDOW_FRAMES,
+    MIN_PROPOSAL_ROUNDS,
     TIME_BUDGET_EXCEEDED,
     FrameInput,
     SessionOptions,
@@ -89,8 +90,9 @@ def test_an_initialization_past_its_deadline_gives_up_without_a_pose(walk: dict)
     for f in walk["frames"][:12]:
         r = s.add_frame(f, PASSED)
         assert r.reason == TIME_BUDGET_EXCEEDED and s.state == "initializing"
-    # with time, the same buffer initializes
-    r = s.add_frame(walk["frames"][12])
+    # with time, the same buffer initializes (after MIN_PROPOSAL_ROUNDS rounds, one a frame)
+    for f in walk["frames"][12:12 + MIN_PROPOSAL_ROUNDS]:
+        r = s.add_frame(f)
     assert s.state == "tracking" and r.world_from_camera is not None
 
 

@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: afdf3f5a58ba507ac45bea39fe105dfd126833f418e2229c7bf269ed3142400e
+// openapi-sha256: 896df60bdb0685dc060f46a2043d1e8bc746fafab47c1ddfa18e88a2a08e938c
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -1178,6 +1178,24 @@ export interface components {
             translation_m_per_step?: number;
         };
         /**
+         * PlaceCandidateOut
+         * @description A place the session's walk may be in (docs/tracking.md, "Places").
+         */
+        PlaceCandidateOut: {
+            /** @description This frame's camera pose if the walk is in this place. */
+            world_from_camera: components["schemas"]["PoseOut"];
+            /**
+             * Probability
+             * @description Posterior probability that the walk is in this place (the rest: in none of those listed).
+             */
+            probability: number;
+            /**
+             * Zone
+             * @description The map zone of the objects this place matched (the zone rule of `zone`); null without zones.
+             */
+            zone?: string | null;
+        };
+        /**
          * PoseIn
          * @description A ``world_from_camera`` pose: `quaternion_wxyz` (or `quaternion_xyzw`) + `translation_m`,
          *     or a 4x4 `matrix` given as a list of ROWS (row-major).
@@ -1489,7 +1507,7 @@ export interface components {
             world_from_odom_covariance: components["schemas"]["CovarianceOut"] | null;
             /**
              * Confidence
-             * @description P(pose within 10 cm and 5 deg) under the pose posterior; 0 unless tracking and 0 when detections_unexplained.
+             * @description P(pose within 10 cm and 5 deg): the posterior probability of the session's place times P(within tolerance) under the pose posterior; 0 unless tracking and 0 when detections_unexplained.
              */
             confidence: number;
             /** Inliers */
@@ -1499,6 +1517,11 @@ export interface components {
              * @description The map zone (docs/maps.md) holding the most of this pose's inlier objects; ties: the zone with the fewest objects (a room before its floor), then the first in the map's `zones`. null when the map has no zones or none holds an inlier.
              */
             zone?: string | null;
+            /**
+             * Candidates
+             * @description The places the walk may be in with their probabilities (>= 0.01), most probable first; several while `ambiguous`.
+             */
+            candidates?: components["schemas"]["PlaceCandidateOut"][];
             /** N Usable Detections */
             n_usable_detections: number;
             /** Timings Ms */

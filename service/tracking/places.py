@@ -1,0 +1,303 @@
+"""Place hypotheses of a tracking session: which place (room) of the map the walk is in.
+
+A hypothesis is a rigid alignment ``world_from_odom`` (4x4) of the app's odometry frame to the
+map: the pose of frame ``k`` under it is ``world_from_odom @ odom_from_camera_k``, so the
+odometry's consistency is built in (a hypothesis is one rigid placement of the whole walk).
+Every frame scores every live hypothesis (at most :data:`MAX_HYPOTHESES`) with the
+frame's detections:
+
+    LL_h = IOU_GAIN * sum(min(IoU, IOU_SATURATION) of its one-to-one inliers) / IOU_SATURATION
+           - MISS_PENALTY * (objects of its place predicted in view, not detected)
+
+and a *null* hypothesis ("somewhere else") that explains each usable detection with
+``NULL_GAIN`` and misses as few predicted objects as the best-placed hypothesis (misses are
+evidence between listed places, not against the places not listed). Scores are discounted
+sums ``S_h <- DISCOUNT * S_h + TEMPERATURE * LL_h``
+(consecutive 30 Hz frames are far from independent: the temperature and discount make the
+evidence of about one second count, not of thirty frames); the posterior of the places is
+``softmax(S)`` over the hypotheses and the null. The constants were chosen on the tuning
+seeds of ``python -m bench.tracking --building`` (docs/tracking.md, "Places").
+
+"Predicted in view": the object's centre projects inside the image (inset by
+:data:`VIEW_INSET`) at a depth in ``(0.3, MAX_VIEW_DEPTH_M)`` m, and the object is in the
+hypothesis's own zone when the map has zones (walls hide other rooms). Poses are
+``world_from_camera`` (OpenCV camera axes) unless named otherwise.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from quadloc.factors.arrays import FloatArray
+from quadloc.factors.camera import Camera
+from quadloc.factors.conics import Ellipse
+from quadloc.factors.rotations import invert_pose, rotation_angle
+from quadloc.maps.compiled import CompiledMap
+from quadloc.maps.zones import zone_index
+from quadloc.service.localization.scoring import MatchScorer, greedy_assignment
+
+__all__ = [
+    "COMMIT_PROBABILITY",
+    "KEEP_PROBABILITY",
+    "MAX_HYPOTHESES",
+    "PlaceCandidate",
+    "PlaceHypothesis",
+    "PlaceSet",
+]
+
+#: Live hypotheses per session (the weakest are dropped beyond it).
+MAX_HYPOTHESES = 8
+#: Log-likelihood gain of an inlier whose IoU reaches :data:`IOU_SATURATION` (less below it),
+#: and penalty per object predicted in view but not detected (the detector misses about a third
+#: of visible objects, occlusion included). The saturation keeps a hypothesis's alignment error
+#: (a few cm: IoU 0.6-0.9) from counting as evidence: identical rooms stay tied, while objects
+#: moved by 0.1-0.5 m fall below it.
+IOU_GAIN = 3.0
+IOU_SATURATION = 0.5
+MISS_PENALTY = 0.5
+#: What the null hypothesis ("another place") gains per usable detection.
+NULL_GAIN = 1.2
+#: Per-frame weight of the evidence and the per-frame discount of past scores.
+TEMPERATURE = 0.25
+DISCOUNT = 0.93
+#: A session commits to a place when its posterior is at least this (and it explains
+#: :data:`MIN_COMMIT_OBJECTS` distinct objects); a committed place is given up when a rival's
+#: posterior exceeds its own (``ambiguous``) or its own falls below :data:`KEEP_PROBABILITY`.
+COMMIT_PROBABILITY = 0.99
+MIN_COMMIT_OBJECTS = 3
+#: A committed place whose posterior falls below this is given up (the session is ``lost``).
+KEEP_PROBABILITY = 0.5
+#: Hypotheses whose posterior falls below this are dropped.
+DROP_PROBABILITY = 1e-4
+#: Candidates listed in an answer: posterior at least this.
+LIST_PROBABILITY = 0.01
+#: Two alignments are the same place when the current camera positions they give are closer
+#: than this (m) and the orientations within :data:`SAME_PLACE_DEG`.
+SAME_PLACE_M = 0.5
+SAME_PLACE_DEG = 10.0
+VIEW_INSET = 0.1
+MAX_VIEW_DEPTH_M = 6.0
+
+
+@dataclass(frozen=True)
+class PlaceCandidate:
+    """A place of an answer: the camera pose ``world_from_camera`` under it, its posterior
+    ``probability`` and its ``zone`` (:mod:`quadloc.maps.zones`, from the objects it matched;
+    None without zones)."""
+
+    world_from_camera: FloatArray
+    probability: float
+    zone: str | None
+
+
+@dataclass(eq=False)
+class PlaceHypothesis:
+    """One place: its odometry alignment, discounted score, the distinct map objects (indices)
+    it matched, and its zone (None until it matched an object of a zone)."""
+
+    world_from_odom: FloatArray
+    score: float = 0.0
+    objects: set[int] = field(default_factory=set)
+    zone: str | None = None
+
+
+def _room_of_objects(compiled: CompiledMap) -> np.ndarray:
+    """Per map object, the index of its most specific zone (-1: none); memoised on the map."""
+    memo: np.ndarray | None = compiled.__dict__.get("_object_rooms")
+    if memo is None:
+        zi = zone_index(compiled.scene_map)
+        memo = np.full(len(compiled), -1, dtype=np.int64)
+        for i, oid in enumerate(compiled.object_ids):
+            ks = zi.zones_of.get(oid, ())
+            if ks:
+                memo[i] = min(ks, key=lambda k: (zi.sizes[k], k))
+        compiled.__dict__["_object_rooms"] = memo
+    return memo
+
+
+class PlaceSet:
+    """The live place hypotheses of a session and the null's score (module docstring).
+
+    Args:
+        compiled: the session's map; camera: its intrinsics; inlier_iou: the inlier threshold.
+    """
+
+    def __init__(self, compiled: CompiledMap, camera: Camera, inlier_iou: float) -> None:
+        self.compiled = compiled
+        self.camera = camera
+        self.inlier_iou = inlier_iou
+        self.hypotheses: list[PlaceHypothesis] = []
+        self.null_score = 0.0
+        self._rooms = _room_of_objects(compiled)
+        self._zones = zone_index(compiled.scene_map)
+
+    def clear(self) -> None:
+        """Drop every hypothesis and the null's score."""
+        self.hypotheses.clear()
+        self.null_score = 0.0
+
+    # ------------------------------------------------------------------ evidence
+    def frame_log_likelihoods(self, world_from_cameras: FloatArray, ellipses: FloatArray,
+                              labels: Sequence[str]
+                              ) -> tuple[FloatArray, list[set[int]], FloatArray]:
+        """``LL_h`` of one frame for poses (H, 4, 4), the matched objects of each and the
+        number of objects each predicts in view but were not detected.
+
+        Args:
+            ellipses: (D, 5) ``(cx, cy, a, b, angle)`` px / rad of the usable detections.
+            labels: their D labels.
+        """
+        H = len(world_from_cameras)
+        ll = np.zeros(H)
+        matched: list[set[int]] = [set() for _ in range(H)]
+        if H == 0:
+            return ll, matched, np.zeros(0)
+        cfw: FloatArray = np.linalg.inv(np.asarray(world_from_cameras, dtype=float))
+        if len(labels):
+            sc = MatchScorer(self.compiled, self.camera,
+                             [Ellipse(*map(float, e)) for e in ellipses], list(labels),
+                             list(range(len(labels))))
+            dense = sc.dense_iou(cfw)
+            for h in range(H):
+                ms = greedy_assignment(dense[h], sc.detection_indices, self.inlier_iou)
+                ll[h] += IOU_GAIN / IOU_SATURATION * sum(min(m.iou, IOU_SATURATION)
+                                                         for m in ms)
+                matched[h] = {int(m.object_index) for m in ms}
+        misses = np.array([len(self._in_view(cfw[h]) - matched[h]) for h in range(H)],
+                          dtype=float)
+        return ll - MISS_PENALTY * misses, matched, misses
+
+    def _in_view(self, camera_from_world: FloatArray) -> set[int]:
+        """Objects (indices) predicted in view (module docstring), restricted to the zone of
+        the objects nearest the optical axis when the map has zones."""
+        c = self.compiled.centers @ camera_from_world[:3, :3].T + camera_from_world[:3, 3]
+        z = c[:, 2]
+        ok = (z > 0.3) & (z < MAX_VIEW_DEPTH_M)
+        if not ok.any():
+            return set()
+        cam = self.camera
+        zs = np.where(ok, z, 1.0)
+        u = cam.fx * c[:, 0] / zs + cam.cx
+        v = cam.fy * c[:, 1] / zs + cam.cy
+        mx, my = VIEW_INSET * cam.width, VIEW_INSET * cam.height
+        ok &= (u >= mx) & (u < cam.width - mx) & (v >= my) & (v < cam.height - my)
+        idx = np.flatnonzero(ok)
+        if len(idx) and self._rooms.max() >= 0:
+            # the room of the nearest visible object: walls hide the others
+            room = self._rooms[idx[int(np.argmin(z[idx]))]]
+            idx = idx[self._rooms[idx] == room]
+        return {int(i) for i in idx}
+
+    def update(self, odom_from_camera: FloatArray, ellipses: FloatArray, labels: Sequence[str],
+               committed_world_from_camera: FloatArray | None = None,
+               committed: PlaceHypothesis | None = None) -> None:
+        """Score one frame: every hypothesis at ``world_from_odom @ odom_from_camera`` (the
+        ``committed`` one at ``committed_world_from_camera``, the smoother's estimate, when
+        given), the null with its gain; discounted sums; drops the hypotheses whose
+        posterior fell below :data:`DROP_PROBABILITY` (never ``committed``)."""
+        if not self.hypotheses:
+            return
+        poses = np.array([committed_world_from_camera
+                          if h is committed and committed_world_from_camera is not None
+                          else h.world_from_odom @ odom_from_camera for h in self.hypotheses])
+        ll, matched, misses = self.frame_log_likelihoods(poses, ellipses, labels)
+        for h, x, m in zip(self.hypotheses, ll, matched, strict=True):
+            h.score = DISCOUNT * h.score + TEMPERATURE * float(x)
+            self._remember(h, m)
+        self.null_score = DISCOUNT * self.null_score + TEMPERATURE * (
+            NULL_GAIN * len(labels) - MISS_PENALTY * float(misses.min()))
+        p = self.posteriors()
+        self.hypotheses = [h for h, q in zip(self.hypotheses, p, strict=True)
+                           if q >= DROP_PROBABILITY or h is committed]
+
+    def _remember(self, h: PlaceHypothesis, matched: set[int]) -> None:
+        if matched:
+            h.objects |= matched
+            zone = self._zones.zone_of(self.compiled.object_ids[i] for i in matched)
+            h.zone = zone if zone is not None else h.zone
+
+    def posteriors(self) -> FloatArray:
+        """Posterior of each hypothesis (same order); the null's is ``1 - sum``."""
+        s = np.array([h.score for h in self.hypotheses] + [self.null_score])
+        w = np.exp(s - s.max())
+        out: FloatArray = (w / w.sum())[:-1]
+        return out
+
+    # ------------------------------------------------------------------ proposals
+    def propose(self, alignments: Sequence[FloatArray], odom_from_camera: FloatArray,
+                history: Sequence[tuple[FloatArray, FloatArray, tuple[str, ...]]],
+                protect: PlaceHypothesis | None = None) -> None:
+        """Add proposed alignments ``world_from_odom``; one of a place already held refreshes
+        that hypothesis (its alignment replaced by the newer one, its score kept; never
+        ``protect``'s). New ones are scored together on ``history`` (``(odom_from_camera,
+        ellipses, labels)`` of the recent frames, oldest first, with the discount), so that
+        hypotheses born at different frames compare on the same evidence. Beyond
+        :data:`MAX_HYPOTHESES` the weakest (never ``protect``) are dropped."""
+        new: list[PlaceHypothesis] = []
+        for W in alignments:
+            T = W @ odom_from_camera
+            same = next((h for h in [*self.hypotheses, *new] if _same_place(
+                h.world_from_odom @ odom_from_camera, T)), None)
+            if same is None:
+                new.append(PlaceHypothesis(np.asarray(W, float)))
+            elif same is not protect:
+                same.world_from_odom = np.asarray(W, float)
+        if not new:
+            return
+        n = len(history)
+        for k, (T_oc, ell, labels) in enumerate(history):
+            ll, matched, _ = self.frame_log_likelihoods(
+                np.array([h.world_from_odom @ T_oc for h in new]), ell, labels)
+            for h, x, m in zip(new, ll, matched, strict=True):
+                h.score += DISCOUNT ** (n - 1 - k) * TEMPERATURE * float(x)
+                self._remember(h, m)
+        self.hypotheses += new
+        while len(self.hypotheses) > MAX_HYPOTHESES:
+            self.hypotheses.remove(min((h for h in self.hypotheses if h is not protect),
+                                       key=lambda h: h.score))
+
+    def candidates(self, odom_from_camera: FloatArray,
+                   committed: PlaceHypothesis | None = None,
+                   committed_world_from_camera: FloatArray | None = None
+                   ) -> tuple[PlaceCandidate, ...]:
+        """The places with posterior >= :data:`LIST_PROBABILITY`, most probable first."""
+        p = self.posteriors()
+        out = []
+        for h, q in sorted(zip(self.hypotheses, p, strict=True), key=lambda x: -x[1]):
+            if q < LIST_PROBABILITY:
+                continue
+            T = committed_world_from_camera if (h is committed and committed_world_from_camera
+                                                is not None) \
+                else h.world_from_odom @ odom_from_camera
+            out.append(PlaceCandidate(T, float(q), h.zone))
+        return tuple(out)
+
+    def probability(self, h: PlaceHypothesis) -> float:
+        """Posterior of ``h`` (0 when it is not live)."""
+        for x, q in zip(self.hypotheses, self.posteriors(), strict=True):
+            if x is h:
+                return float(q)
+        return 0.0
+
+    def best(self) -> tuple[PlaceHypothesis | None, float]:
+        """The most probable hypothesis and its posterior (None, 0 without any)."""
+        if not self.hypotheses:
+            return None, 0.0
+        p = self.posteriors()
+        k = int(np.argmax(p))
+        return self.hypotheses[k], float(p[k])
+
+
+def _same_place(a: FloatArray, b: FloatArray) -> bool:
+    """Two camera poses of the same place (:data:`SAME_PLACE_M`, :data:`SAME_PLACE_DEG`)."""
+    return bool(np.linalg.norm(a[:3, 3] - b[:3, 3]) < SAME_PLACE_M and math.degrees(
+        float(rotation_angle(a[:3, :3], b[:3, :3]))) < SAME_PLACE_DEG)
+
+
+def alignment(world_from_camera: FloatArray, odom_from_camera: FloatArray) -> FloatArray:
+    """``world_from_odom`` of a camera pose and its odometry pose."""
+    return np.asarray(world_from_camera, float) @ invert_pose(odom_from_camera)
