@@ -36,6 +36,7 @@ from quadloc.service.localization.scoring import LabelGroup, MatchScorer
 __all__ = [
     "ORDER_CAP",
     "SWEEP_CANDIDATES",
+    "SWEEP_FALLBACK_MAX_SAMPLES",
     "SWEEP_MAX_SAMPLES",
     "Sample",
     "SampleOrder",
@@ -56,6 +57,11 @@ ORDER_CAP = 4096
 #: Competitor sweep (:func:`sweep_samples`): detections considered and most samples.
 SWEEP_CANDIDATES = 8
 SWEEP_MAX_SAMPLES = 24
+#: ... and, when no triple has at most :data:`SWEEP_MAX_SAMPLES` assignments (every label
+#: repeated: a map of several copies of a room, k copies giving >= k^3 assignments), the most
+#: samples of the fallback triple (the one with the fewest assignments): without it an early
+#: exit would skip every copy, the competitors the ambiguity check needs (5 copies: 125).
+SWEEP_FALLBACK_MAX_SAMPLES = 1000
 
 #: A minimal sample: (detection rows, ascending; the map object index of each).
 Sample = tuple[tuple[int, ...], tuple[int, ...]]
@@ -304,25 +310,31 @@ def triangle_areas(scorer: MatchScorer, dets: IntArray) -> FloatArray:
                   - (c[:, 2, 0] - c[:, 0, 0]) * (c[:, 1, 1] - c[:, 0, 1]))
 
 
-def sweep_samples(scorer: MatchScorer) -> list[Sample]:
+def sweep_samples(scorer: MatchScorer, rows: IntArray | None = None) -> list[Sample]:
     """The minimal samples of the competitor sweep: every label-compatible assignment
     (distinct objects) of ONE detection triple, the one with the largest image triangle among
     the :data:`SWEEP_CANDIDATES` detections with the fewest compatible objects and at most
-    :data:`SWEEP_MAX_SAMPLES` assignments; empty if none qualifies (why:
-    ``docs/design/localization.md``)."""
+    :data:`SWEEP_MAX_SAMPLES` assignments; when none has so few, the one with the fewest
+    assignments (largest triangle among those) if at most :data:`SWEEP_FALLBACK_MAX_SAMPLES`;
+    empty if none qualifies (why: ``docs/design/localization.md``). ``rows``: the detections
+    (scorer rows) the triple is taken from (None: every usable detection)."""
     groups = scorer.label_groups
     group_of = np.zeros(scorer.n_det, dtype=np.intp)
     for gi, (dets, _) in enumerate(groups):
         group_of[dets] = gi
     n_objects = np.array([len(o) for _, o in groups], dtype=np.int64)[group_of]  # per detection
     # the candidates: fewest compatible objects, then lowest index; their triples ascending
-    cand = np.sort(np.lexsort((np.arange(scorer.n_det), n_objects))[:SWEEP_CANDIDATES])
+    pool = np.arange(scorer.n_det) if rows is None else np.asarray(rows, dtype=np.intp)
+    cand = np.sort(pool[np.lexsort((pool, n_objects[pool]))][:SWEEP_CANDIDATES])
     tris = cand[_triples(len(cand))]
     # assignments of distinct objects: n0 (n1 - [g1 = g0]) (n2 - [g2 = g0] - [g2 = g1])
     g, n = group_of[tris], n_objects[tris]
     counts = n[:, 0] * (n[:, 1] - (g[:, 1] == g[:, 0])) * (
         n[:, 2] - (g[:, 2] == g[:, 0]) - (g[:, 2] == g[:, 1]))
     ok = np.flatnonzero((counts > 0) & (counts <= SWEEP_MAX_SAMPLES))
+    if len(ok) == 0 and np.any(counts > 0):  # every label repeated (copies of a room)
+        fewest = int(counts[counts > 0].min())
+        ok = np.flatnonzero(counts == fewest) if fewest <= SWEEP_FALLBACK_MAX_SAMPLES else ok
     if len(ok) == 0:
         return []
     tri: tuple[int, ...] = tuple(tris[ok[np.argmax(triangle_areas(scorer, tris[ok]))]].tolist())

@@ -25,7 +25,12 @@ from quadloc.factors.arrays import FloatArray
 from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.factors.conics import Ellipse
 from quadloc.service.localization.hypotheses import p2e_hypotheses, p3p_hypotheses_batch
-from quadloc.service.localization.sampling import Sample, count_samples, sample_order
+from quadloc.service.localization.sampling import (
+    Sample,
+    count_samples,
+    sample_order,
+    sweep_samples,
+)
 from quadloc.service.localization.scoring import (
     PAIR_BLOCK,
     Match,
@@ -158,6 +163,8 @@ def ransac(
         stop = search.run(3, max_hypotheses)
     if not search.kept and not stop and has2:  # P2E: alone, or the fallback of P3P
         search.run(2, max_hypotheses if need < 3 else min(max_hypotheses, P2E_FALLBACK_BUDGET))
+    if has3 and sample and not search.exhaustive and not search.timed_out:
+        search.sweep_best()
     if not search.kept:
         reason = ("time_budget_exceeded" if search.timed_out else "no_label_match"
                   if not (has3 or has2) else "no_hypothesis_above_inlier_threshold")
@@ -204,6 +211,8 @@ class _Search:
         self.tried = 0
         self.exhaustive = True
         self.timed_out = False
+        #: detection triples (scorer rows) whose every assignment was tried (competitor sweeps)
+        self.swept: set[tuple[int, ...]] = set()
 
     def run(self, size: int, budget: int) -> bool:
         """Solve and score the samples of ``size`` (3: P3P, 2: P2E) in
@@ -213,6 +222,7 @@ class _Search:
         order = sample_order(self.scorer, size, budget, self.rng)
         if not order.exhaustive:
             self.exhaustive = False
+        self.swept.update(s[0] for s in order.sweep_first)
         batch = FIRST_BATCH if size == 3 else P2E_BATCH
         start = self.tried
         while True:
@@ -231,12 +241,36 @@ class _Search:
                     # those not tried yet when the sweep came first)
                     sweep = order.competitor_sweep(self.tried - start)
                     self.tried += len(sweep)
+                    self.swept.update(s[0] for s in sweep)
                     if sweep:
                         self.consider(self.solve(sweep, size))
                     return True
             except ScoringTimeoutError:
                 self.timed_out = True
                 return True
+
+    def sweep_best(self) -> None:
+        """The competitor sweep of the best hypothesis' own detections
+        (:func:`quadloc.service.localization.sampling.sweep_samples` over the rows it
+        matches), unless that triple was swept already or the deadline passed. A search that
+        was not exhaustive and did not exit early may have found one explanation only: a
+        distinct pose explaining the same detections (a copy of the room elsewhere in the map,
+        the other of two same-label objects) assigns this triple to other objects, so P3P on
+        its assignments finds it."""
+        if not self.kept or deadline_passed(self.deadline):
+            return
+        row = {d: r for r, d in enumerate(self.scorer.detection_indices)}
+        rows = np.array(sorted(row[m.detection_index] for m in self.kept[0].matches),
+                        dtype=np.intp)
+        sweep = sweep_samples(self.scorer, rows) if len(rows) >= 3 else []
+        if not sweep or sweep[0][0] in self.swept:
+            return
+        self.swept.add(sweep[0][0])
+        self.tried += len(sweep)
+        try:
+            self.consider(self.solve(sweep, 3))
+        except ScoringTimeoutError:
+            self.timed_out = True
 
     def solve(self, chunk: list[Sample], size: int) -> FloatArray:
         """Candidate poses (M, 4, 4) ``camera_from_world`` of minimal samples: one vectorised
