@@ -317,3 +317,32 @@ def test_a_spoilt_first_search_does_not_hide_the_copies_of_the_room() -> None:
     pos, _ = pose_errors(res.world_from_camera, frames[3].world_from_camera)
     assert not (res.localized and pos > 0.5)
     assert res.reason == "ambiguous"
+
+
+@pytest.mark.parametrize(("n_rooms", "seed", "frame"), [
+    (5, 1, 0),   # every detection explained: an early exit whose sweep had no triple
+    (3, 0, 3),   # a spurious detection: no early exit, the random samples met one copy
+    (4, 0, 11),
+])
+def test_small_exact_buildings_never_answer_a_wrong_copy(n_rooms: int, seed: int,
+                                                         frame: int) -> None:
+    """Exact copies of a room below the place search (< PLACE_SEARCH_MIN_OBJECTS objects: the
+    one-room RANSAC), frames that were localized ~10-20 m off in another copy (confidence
+    0.96-0.99): every triple had more than SWEEP_MAX_SAMPLES assignments, so the early exit
+    swept none, and a random search found a single copy. Now ambiguous with copies in
+    distinct rooms listed, or the right pose; a zone hint of the true room settles it."""
+    b = make_building(n_rooms, "exact", seed)
+    assert len(b.compiled) < PLACE_SEARCH_MIN_OBJECTS
+    cam, frames = building_frames(b, frame + 1, seed + 100)
+    bf = frames[frame]
+    res = localize(bf.frame.detections, b.compiled, cam)
+    pos, _ = pose_errors(res.world_from_camera, bf.world_from_camera)
+    assert not (res.localized and pos > 0.5)
+    if not res.localized:
+        assert res.reason == "ambiguous"
+        rooms = {b.zone_of(i) for a in res.alternatives for i in a.object_ids[:1]}
+        assert len(rooms) >= 2
+    hinted = localize(bf.frame.detections, b.compiled, cam,
+                      hint=PlaceHint(object_ids=frozenset(bf.room.object_ids)))
+    pos, _ = pose_errors(hinted.world_from_camera, bf.world_from_camera)
+    assert not (hinted.localized and pos > 0.5)
