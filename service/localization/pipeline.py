@@ -80,6 +80,8 @@ from quadloc.service.localization.search import (
     KEEP_DISTINCT,
     Hypothesis,
     RansacOutcome,
+    competitor_sweep,
+    distinct_poses,
     ransac,
 )
 from quadloc.service.localization.types import (
@@ -542,6 +544,7 @@ def _refine_stage(solve: _Solve, outcome: RansacOutcome, prior_candidate: Candid
     if prior_candidate is not None:
         candidates.append(prior_candidate)
     sort_by_support(candidates)
+    candidates = _sweep_refined_best(solve, outcome, candidates)
     candidates = _refine_capped_competitors(solve, candidates)
     solve.timings["refine"] = (time.perf_counter() - tr) * 1e3
     return candidates, first_status
@@ -582,6 +585,50 @@ def _refine_hypotheses(solve: _Solve, outcome: RansacOutcome
                           and alternative_options.max_iterations < options.max_iterations)
             candidates.append(got)
     return candidates, first_status
+
+
+def _sweep_refined_best(solve: _Solve, outcome: RansacOutcome, candidates: list[Candidate]
+                        ) -> list[Candidate]:
+    """``candidates`` (best-supported first) with the competitors of a best candidate that
+    refinement grew beyond the search's best hypothesis (other detections than it matched; a
+    search that was not exhaustive, one-room search only: a large map's places list their
+    candidates): the competitor sweep of its inliers
+    (:func:`quadloc.service.localization.search.competitor_sweep`; e.g. the copies of the room
+    it was found in), up to :data:`REFINED_ALTERNATIVES` hypotheses distinct from every
+    candidate and scoring at least :data:`ALTERNATIVE_PREFILTER_RATIO` of the best's score,
+    refined like the runners-up. Best-supported first."""
+    if (not candidates or solve.places or outcome.exhaustive
+            or deadline_passed(solve.deadline)):
+        return candidates
+    best = candidates[0]
+    rows = sorted(m.detection_index for m in best.inliers)
+    if set(rows) <= {m.detection_index for m in outcome.matches}:
+        return candidates  # the search swept the best's detections (search.ransac)
+    options = solve.options
+    hyps, evaluated = competitor_sweep(
+        solve.scorer, solve.up_world, rows, inlier_iou=options.inlier_iou,
+        min_inliers=options.min_inliers, deadline=solve.deadline)
+    solve.evaluated += evaluated
+    alternative_options = replace(
+        options, max_iterations=min(options.max_iterations, ALTERNATIVE_MAX_ITERATIONS))
+    added = 0
+    for h in hyps:
+        if (added >= REFINED_ALTERNATIVES or h.score < ALTERNATIVE_PREFILTER_RATIO * best.score
+                or deadline_passed(solve.deadline)):
+            break
+        if not all(distinct_poses(h.camera_from_world, invert_pose(a.world_from_camera))
+                   for a in candidates):
+            continue
+        got, status = _refine_and_verify(solve, list(h.matches),
+                                         invert_pose(h.camera_from_world),
+                                         alternative_options, None)
+        added += 1
+        if got is not None:
+            got.capped = (status == "max_iterations"
+                          and alternative_options.max_iterations < options.max_iterations)
+            candidates.append(got)
+    sort_by_support(candidates)
+    return candidates
 
 
 def _refine_capped_competitors(solve: _Solve, candidates: list[Candidate]) -> list[Candidate]:

@@ -17,6 +17,7 @@ from __future__ import annotations
 import functools
 import itertools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,6 +49,7 @@ __all__ = [
     "STAGE2_CANDIDATES",
     "Hypothesis",
     "RansacOutcome",
+    "competitor_sweep",
     "distinct_poses",
     "ransac",
 ]
@@ -257,11 +259,17 @@ class _Search:
         distinct pose explaining the same detections (a copy of the room elsewhere in the map,
         the other of two same-label objects) assigns this triple to other objects, so P3P on
         its assignments finds it."""
-        if not self.kept or deadline_passed(self.deadline):
+        if self.kept:
+            self.sweep([m.detection_index for m in self.kept[0].matches])
+
+    def sweep(self, detection_indices: Sequence[int]) -> None:
+        """Score every assignment of the sweep triple of these detections (original indices,
+        :func:`quadloc.service.localization.sampling.sweep_samples` over their rows), unless
+        that triple was swept already or the deadline passed."""
+        if deadline_passed(self.deadline):
             return
         row = {d: r for r, d in enumerate(self.scorer.detection_indices)}
-        rows = np.array(sorted(row[m.detection_index] for m in self.kept[0].matches),
-                        dtype=np.intp)
+        rows = np.array(sorted(row[d] for d in detection_indices), dtype=np.intp)
         sweep = sweep_samples(self.scorer, rows) if len(rows) >= 3 else []
         if not sweep or sweep[0][0] in self.swept:
             return
@@ -327,6 +335,22 @@ class _Search:
         return (need >= EARLY_EXIT_MIN_DETECTIONS and bool(self.kept)
                 and len(self.kept[0].matches) >= need
                 and self.kept[0].score >= EARLY_EXIT_MEAN_IOU * need)
+
+
+def competitor_sweep(scorer: MatchScorer, up_world: FloatArray,
+                     detection_indices: Sequence[int], *, inlier_iou: float, min_inliers: int,
+                     deadline: Deadline | None = None, keep: int = KEEP_DISTINCT
+                     ) -> tuple[tuple[Hypothesis, ...], int]:
+    """(The qualified, mutually distinct hypotheses (best first, at most ``keep``), the poses
+    scored) of the
+    competitor sweep of these detections (original indices; :meth:`_Search.sweep`): every
+    explanation of their sweep triple, e.g. the copies of a room whose objects explain them,
+    for a pose that refinement grew beyond what the search found (its inliers were never
+    swept)."""
+    search = _Search(scorer, up_world, inlier_iou, min_inliers, np.random.default_rng(0),
+                     deadline, keep)
+    search.sweep(detection_indices)
+    return tuple(search.kept), search.evaluated
 
 
 def _keep_distinct(kept: list[Hypothesis], new: Hypothesis, keep: int = KEEP_DISTINCT
