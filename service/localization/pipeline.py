@@ -589,40 +589,38 @@ def _refine_hypotheses(solve: _Solve, outcome: RansacOutcome
 
 def _sweep_refined_best(solve: _Solve, outcome: RansacOutcome, candidates: list[Candidate]
                         ) -> list[Candidate]:
-    """``candidates`` (best-supported first) with the competitors of a best candidate that
-    refinement grew beyond the search's best hypothesis (other detections than it matched; a
-    search that was not exhaustive, one-room search only: a large map's places list their
-    candidates): the competitor sweep of its inliers
-    (:func:`quadloc.service.localization.search.competitor_sweep`; e.g. the copies of the room
-    it was found in), up to :data:`REFINED_ALTERNATIVES` hypotheses distinct from every
-    candidate and scoring at least :data:`ALTERNATIVE_PREFILTER_RATIO` of the best's score,
-    refined like the runners-up. Best-supported first."""
+    """``candidates`` (best-supported first) with the competitors of a best that refinement
+    grew beyond the search's best hypothesis (inliers among other detections than it matched,
+    whose triple the search never swept; a search that was not exhaustive; one-room search
+    only: a large map's places list their candidates): the competitor sweep of its inliers,
+    :func:`quadloc.service.localization.search.competitor_sweep`, every explanation of its
+    sweep triple (e.g. the copies of the room it was found in), up to
+    :data:`REFINED_ALTERNATIVES` hypotheses distinct from every candidate refined like the
+    runners-up (whatever their score: a P3P pose of three centres is rough, the refinement
+    settles whether it explains as much as the best). Best-supported first."""
     if (not candidates or solve.places or outcome.exhaustive
             or deadline_passed(solve.deadline)):
         return candidates
-    best = candidates[0]
-    rows = sorted(m.detection_index for m in best.inliers)
-    if set(rows) <= {m.detection_index for m in outcome.matches}:
+    if ({m.detection_index for m in candidates[0].inliers}
+            <= {m.detection_index for m in outcome.matches}):
         return candidates  # the search swept the best's detections (search.ransac)
     options = solve.options
     hyps, evaluated = competitor_sweep(
-        solve.scorer, solve.up_world, rows, inlier_iou=options.inlier_iou,
-        min_inliers=options.min_inliers, deadline=solve.deadline)
+        solve.scorer, solve.up_world, [m.detection_index for m in candidates[0].inliers],
+        inlier_iou=options.inlier_iou, min_inliers=options.min_inliers,
+        deadline=solve.deadline)
     solve.evaluated += evaluated
     alternative_options = replace(
         options, max_iterations=min(options.max_iterations, ALTERNATIVE_MAX_ITERATIONS))
-    added = 0
-    for h in hyps:
-        if (added >= REFINED_ALTERNATIVES or h.score < ALTERNATIVE_PREFILTER_RATIO * best.score
-                or deadline_passed(solve.deadline)):
+    rivals = [h for h in hyps
+              if all(distinct_poses(h.camera_from_world, invert_pose(a.world_from_camera))
+                     for a in candidates)][:REFINED_ALTERNATIVES]
+    for h in rivals:
+        if deadline_passed(solve.deadline):
             break
-        if not all(distinct_poses(h.camera_from_world, invert_pose(a.world_from_camera))
-                   for a in candidates):
-            continue
         got, status = _refine_and_verify(solve, list(h.matches),
                                          invert_pose(h.camera_from_world),
                                          alternative_options, None)
-        added += 1
         if got is not None:
             got.capped = (status == "max_iterations"
                           and alternative_options.max_iterations < options.max_iterations)

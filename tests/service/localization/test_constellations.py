@@ -323,13 +323,15 @@ def test_a_spoilt_first_search_does_not_hide_the_copies_of_the_room() -> None:
     (5, 1, 0),   # every detection explained: an early exit whose sweep had no triple
     (3, 0, 3),   # a spurious detection: no early exit, the random samples met one copy
     (4, 0, 11),
+    (5, 1, 13),  # refinement grew a 3-match hypothesis to 10 inliers in a copy never swept
 ])
 def test_small_exact_buildings_never_answer_a_wrong_copy(n_rooms: int, seed: int,
                                                          frame: int) -> None:
     """Exact copies of a room below the place search (< PLACE_SEARCH_MIN_OBJECTS objects: the
     one-room RANSAC), frames that were localized ~10-20 m off in another copy (confidence
     0.96-0.99): every triple had more than SWEEP_MAX_SAMPLES assignments, so the early exit
-    swept none, and a random search found a single copy. Now ambiguous with copies in
+    swept none, a random search found a single copy, or refinement grew a hypothesis into a
+    copy whose detections no sweep had covered. Now ambiguous with copies in
     distinct rooms listed, or the right pose; a zone hint of the true room settles it."""
     b = make_building(n_rooms, "exact", seed)
     assert len(b.compiled) < PLACE_SEARCH_MIN_OBJECTS
