@@ -529,8 +529,9 @@ def _search_stage(solve: _Solve, seeds: PlaceSeeds | None = None,
 def _refine_stage(solve: _Solve, outcome: RansacOutcome, prior_candidate: Candidate | None
                   ) -> tuple[list[Candidate], str | None]:
     """The ``refine`` stage: the verified candidates (the search's best hypothesis and
-    runners-up, :func:`_refine_hypotheses`; the prior's candidate), best-supported first, the
-    capped ones that compete refined in full (:func:`_refine_capped_competitors`); and the
+    runners-up, :func:`_refine_hypotheses`; the prior's candidate; the rivals of a best that
+    refinement grew, :func:`_sweep_refined_best`), best-supported first, the capped ones that
+    compete refined in full (:func:`_refine_capped_competitors`); and the
     refinement status of the best hypothesis (None if it was not refined)."""
     tr = time.perf_counter()
     candidates, first_status = _refine_hypotheses(solve, outcome)

@@ -7,7 +7,9 @@ A pose is scored by :class:`quadloc.service.localization.scoring.MatchScorer` (a
 inlier when IoU >= ``inlier_iou``; a pose's score is the sum of its one-to-one inliers' IoUs);
 the search keeps the best :data:`KEEP_DISTINCT` mutually distinct qualified hypotheses
 (:func:`distinct_poses`). Early exit once a pose explains every usable detection (after the
-competitor sweep); time bounded by deadline checks before every batch and inside the scoring
+competitor sweep); a search neither exhaustive nor stopped early ends with the competitor sweep
+of its best hypothesis' detections (:meth:`_Search.sweep_best`: the copies of a room); time
+bounded by deadline checks before every batch and inside the scoring
 of a batch. All poses here are ``camera_from_world`` (4x4, OpenCV ``[R | t]``). Stages,
 ordering and bounds in detail: ``docs/design/localization.md``.
 """
