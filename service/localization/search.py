@@ -343,12 +343,11 @@ def competitor_sweep(scorer: MatchScorer, up_world: FloatArray,
                      detection_indices: Sequence[int], *, inlier_iou: float, min_inliers: int,
                      deadline: Deadline | None = None, keep: int = KEEP_DISTINCT
                      ) -> tuple[tuple[Hypothesis, ...], int]:
-    """(The qualified, mutually distinct hypotheses (best first, at most ``keep``), the poses
-    scored) of the
-    competitor sweep of these detections (original indices; :meth:`_Search.sweep`): every
-    explanation of their sweep triple, e.g. the copies of a room whose objects explain them,
-    for a pose that refinement grew beyond what the search found (its inliers were never
-    swept)."""
+    """The competitor sweep of these detections (original indices; :meth:`_Search.sweep`):
+    every explanation of their sweep triple, e.g. the copies of a room whose objects explain
+    them, for a pose that refinement grew beyond what the search found (its inliers were never
+    swept). Returns (the qualified, mutually distinct hypotheses, best first, at most ``keep``;
+    the number of poses scored)."""
     search = _Search(scorer, up_world, inlier_iou, min_inliers, np.random.default_rng(0),
                      deadline, keep)
     search.sweep(detection_indices)
