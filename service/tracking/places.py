@@ -97,10 +97,12 @@ class PlaceCandidate:
 @dataclass(eq=False)
 class PlaceHypothesis:
     """One place: its odometry alignment, discounted score, the distinct map objects (indices)
-    it matched, and its zone (None until it matched an object of a zone)."""
+    it matched, its zone (None until it matched an object of a zone), and ``rounds``: the
+    proposal rounds it has lived through (:meth:`PlaceSet.new_round`)."""
 
     world_from_odom: FloatArray
     score: float = 0.0
+    rounds: int = 0
     objects: set[int] = field(default_factory=set)
     zone: str | None = None
 
@@ -228,22 +230,33 @@ class PlaceSet:
         return out
 
     # ------------------------------------------------------------------ proposals
+    def new_round(self) -> None:
+        """A proposal round begins: every live hypothesis has lived through one more."""
+        for h in self.hypotheses:
+            h.rounds += 1
+
+    def restart_rounds(self) -> None:
+        """Every live hypothesis counts its proposal rounds from 0 again."""
+        for h in self.hypotheses:
+            h.rounds = 0
+
     def propose(self, alignments: Sequence[FloatArray], odom_from_camera: FloatArray,
                 history: Sequence[tuple[FloatArray, FloatArray, tuple[str, ...]]],
-                protect: PlaceHypothesis | None = None) -> None:
+                protect: PlaceHypothesis | None = None, rounds: int = 0) -> None:
         """Add proposed alignments ``world_from_odom``; one of a place already held refreshes
         that hypothesis (its alignment replaced by the newer one, its score kept; never
         ``protect``'s). New ones are scored together on ``history`` (``(odom_from_camera,
         ellipses, labels)`` of the recent frames, oldest first, with the discount), so that
         hypotheses born at different frames compare on the same evidence. Beyond
-        :data:`MAX_HYPOTHESES` the weakest (never ``protect``) are dropped."""
+        :data:`MAX_HYPOTHESES` the weakest (never ``protect``) are dropped. New hypotheses start
+        with ``rounds`` proposal rounds lived (1 when proposed by a round)."""
         new: list[PlaceHypothesis] = []
         for W in alignments:
             T = W @ odom_from_camera
             same = next((h for h in [*self.hypotheses, *new] if _same_place(
                 h.world_from_odom @ odom_from_camera, T)), None)
             if same is None:
-                new.append(PlaceHypothesis(np.asarray(W, float)))
+                new.append(PlaceHypothesis(np.asarray(W, float), rounds=rounds))
             elif same is not protect:
                 same.world_from_odom = np.asarray(W, float)
         if not new:

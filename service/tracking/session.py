@@ -105,9 +105,11 @@ TIME_BUDGET_EXCEEDED = "time_budget_exceeded"
 CHECK_INTERVAL_FRAMES = 30
 #: Frames remembered (poses, usable detections) to score a newly proposed place on.
 HISTORY_FRAMES = 45
-#: A session commits to a place only after this many proposal rounds (one every
-#: ``init_interval_frames``): single proposals can all come from one of several identical rooms
-#: (a single frame's answer may be wrong on exact copies), the rounds let the copies be proposed.
+#: A session commits to a place only after it has lived through this many proposal rounds (one
+#: every ``init_interval_frames``; the round that proposed it counts): single proposals can all
+#: come from one of several identical rooms (a single frame's answer may be wrong on exact
+#: copies), the rounds let the copies be proposed. Counted per place, not per session: a place
+#: proposed late in a long initialization (the walk entered a new room) waits its own rounds.
 MIN_PROPOSAL_ROUNDS = 3
 #: Below this posterior a candidate place does not make an answer ``ambiguous``.
 AMBIGUOUS_PROBABILITY = 0.05
@@ -300,7 +302,6 @@ class TrackingSession:
         self._history: deque[tuple[FloatArray, FloatArray, tuple[str, ...]]] = deque(
             maxlen=HISTORY_FRAMES)
         self._last_check = -10 ** 9
-        self._rounds = 0  # proposal rounds since the session (re)started initializing
         self._evidence: tuple[FloatArray, FloatArray, tuple[str, ...]] = (
             np.eye(4), np.zeros((0, 5)), ())
 
@@ -351,7 +352,7 @@ class TrackingSession:
         self._misses = 0
         self._buffer.clear()
         self._committed = None
-        self._rounds = 0
+        self._places.restart_rounds()  # every place waits its rounds again (as a new one)
         if not keep_places:
             self._places.clear()
             self._history.clear()
@@ -575,7 +576,7 @@ class TrackingSession:
         n_pool = sum(len(b.frame.labels) for b in chosen)
         if n_pool >= 3 and usable and index - self._last_attempt >= opts.init_interval_frames:
             self._last_attempt = index
-            self._rounds += 1
+            self._places.new_round()
             t = time.perf_counter()
             extra = [invert_pose(frame.prior.world_from_camera)] if frame.prior is not None \
                 else []
@@ -591,9 +592,10 @@ class TrackingSession:
             timings["localize"] = (time.perf_counter() - t) * 1e3
             if out.reason == TIME_BUDGET_EXCEEDED or deadline_passed(deadline):
                 return self._no_pose(index, frame, T_oc, usable, TIME_BUDGET_EXCEEDED, timings)
-            self._places.propose([alignment(T, T_oc) for T in proposals], T_oc, self._history)
+            self._places.propose([alignment(T, T_oc) for T in proposals], T_oc, self._history,
+                                 rounds=1)
         best, p = self._places.best()
-        if best is not None and p >= COMMIT_PROBABILITY and self._rounds >= MIN_PROPOSAL_ROUNDS \
+        if best is not None and p >= COMMIT_PROBABILITY and best.rounds >= MIN_PROPOSAL_ROUNDS \
                 and len(best.objects) >= MIN_COMMIT_OBJECTS:
             t = time.perf_counter()
             poses = [best.world_from_odom @ b.frame.odom_from_camera for b in chosen]
