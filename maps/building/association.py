@@ -495,13 +495,37 @@ def _inside(point: FloatArray, ell: Ellipsoid) -> bool:
     return float(np.sum((d / ell.axes) ** 2)) <= 1.0
 
 
+def _same_size(a: Ellipsoid, b: Ellipsoid, ratio: float) -> bool:
+    """True if the largest semi-axes of ``a`` and ``b`` are within ``ratio`` of each other."""
+    return bool(max(a.axes.max(), b.axes.max()) <= ratio * min(a.axes.max(), b.axes.max()))
+
+
+def _explains(ell: Ellipsoid, a: ObjectHypothesis, b: ObjectHypothesis,
+              obs: Sequence[Observation], T_wc: FloatArray, camera: Camera,
+              opt: AssociationOptions) -> bool:
+    """True if ``ell`` (reconstructed from the views of ``a`` and ``b`` together) is one object
+    of their size that overlaps the projection on at least half the views of EACH by ``verify_iou``
+    (two objects, e.g. of two rooms brought together by drift, give an ellipsoid stretched
+    between them that explains neither part's views)."""
+    if not _same_size(ell, a.ellipsoid, opt.size_ratio):
+        return False
+    for h in (a, b):
+        ious = _projected_ious(ell, T_wc[[obs[k].frame for k in h.observations]], camera,
+                               [obs[k].ellipse for k in h.observations])
+        if float(np.mean(ious >= opt.verify_iou)) < 0.5:
+            return False
+    return True
+
+
 def merge_duplicates(objects: list[ObjectHypothesis], obs: Sequence[Observation],
                       T_wc: FloatArray, camera: Camera, opt: AssociationOptions,
                       tick: Callable[[], None]) -> list[ObjectHypothesis]:
     """Merge same-label objects whose centres lie within ``merge_factor`` x the larger one's
     largest semi-axis and that (almost) never appear in the same frame: one physical object split
-    in two (typically by pose drift between two passes). In a shared frame the larger object's
-    detection is kept."""
+    in two (typically by pose drift between two passes). The merge needs spatial consistency:
+    both of a similar size (largest semi-axes within ``size_ratio``) and the ellipsoid of their
+    views together of that size and explaining each one's views (:func:`_explains`). In a shared
+    frame the larger object's detection is kept."""
     merged = True
     while merged:
         merged = False
@@ -518,11 +542,13 @@ def merge_duplicates(objects: list[ObjectHypothesis], obs: Sequence[Observation]
                 fb = {obs[k].frame for k in b.observations}
                 if len(fa & fb) > opt.max_shared_frames * min(len(fa), len(fb)):
                     continue
+                if not _same_size(a.ellipsoid, b.ellipsoid, opt.size_ratio):
+                    continue
                 union = sorted(a.observations + [k for k in b.observations
                                                  if obs[k].frame not in fa])
                 tick()
                 ell = reconstruct_initial(union, obs, T_wc, camera, opt)
-                if ell is None:
+                if ell is None or not _explains(ell, a, b, obs, T_wc, camera, opt):
                     continue
                 objects[ia] = ObjectHypothesis(a.label, union, ell, a.source,
                                                {**b.ious, **a.ious})
@@ -659,7 +685,15 @@ def associate_windowed(
         largest = max(members, key=lambda h_i: len(hyps[h_i].observations))
         ell = hyps[largest].ellipsoid
         if len(members) > 1:
-            ell = reconstruct_initial(idx, observations, T_wc, camera, opt) or ell
+            chained = reconstruct_initial(idx, observations, T_wc, camera, opt)
+            if chained is None or not _same_size(chained, ell, opt.size_ratio):
+                # the chain's ellipsoid is not the objects' size: the chain joins two objects
+                # (e.g. of two rooms); the largest window's object alone is kept
+                idx = sorted(k for k in hyps[largest].observations if claim[k] == c)
+                if len(idx) < opt.min_views:
+                    continue
+            else:
+                ell = chained
         kept = set(idx)
         ious = {k: v for h_i in members for k, v in hyps[h_i].ious.items() if k in kept}
         objects.append(ObjectHypothesis(hyps[largest].label, idx, ell, hyps[largest].source,
@@ -671,6 +705,49 @@ def associate_windowed(
     rejected = {k: rejected_any.get(k, "fits_no_object") for k in range(len(observations))
                 if k not in assigned}
     return objects, rejected
+
+
+#: Frames without a detection of an object that end one of its time segments
+#: (:func:`_anchored`).
+SEGMENT_GAP_FRAMES = 10
+
+
+def _anchored(h: ObjectHypothesis, obs: Sequence[Observation], T_wc: FloatArray,
+              camera: Camera, opt: AssociationOptions) -> ObjectHypothesis:
+    """``h``, or, if the ellipsoid of one of its time segments (runs of detections less than
+    :data:`SEGMENT_GAP_FRAMES` apart, those with ``min_views`` views or more) is not ``h``'s
+    (largest semi-axes beyond ``size_ratio`` or centres further apart than ``merge_factor`` x
+    the larger one's largest semi-axis), the object of its largest segment: that segment's
+    ellipsoid with those of ``h``'s detections whose views it explains (IoU >= ``min_iou``).
+    The detections of two objects (e.g. of two rooms visited within one window, brought
+    together by drift) give an ellipsoid stretched between them that neither visit's views
+    alone reconstruct."""
+    ks = sorted(h.observations, key=lambda k: obs[k].frame)
+    frames = np.array([obs[k].frame for k in ks])
+    cuts = np.flatnonzero(np.diff(frames) > SEGMENT_GAP_FRAMES) + 1
+    segments = [seg for seg in np.split(np.array(ks), cuts) if len(seg) >= opt.min_views]
+    if len(segments) < 2:
+        return h
+    segments.sort(key=len, reverse=True)
+    anchor: Ellipsoid | None = None
+    consistent = True
+    for seg in segments:
+        ell = reconstruct_initial(seg.tolist(), obs, T_wc, camera, opt)
+        if ell is None:
+            continue
+        anchor = anchor or ell
+        if not (_same_size(ell, h.ellipsoid, opt.size_ratio)
+                and _overlapping(ell, h.ellipsoid, opt.merge_factor)):
+            consistent = False
+            break
+    if consistent or anchor is None:
+        return h
+    ious = _projected_ious(anchor, T_wc[[obs[k].frame for k in h.observations]], camera,
+                           [obs[k].ellipse for k in h.observations])
+    keep = [k for k, iou in zip(h.observations, ious.tolist(), strict=True) if iou >= opt.min_iou]
+    return ObjectHypothesis(h.label, keep, anchor, h.source,
+                            {k: v for k, v in zip(h.observations, ious.tolist(), strict=True)
+                             if v >= opt.min_iou})
 
 
 #: :func:`verify_objects` drops an object whose largest semi-axis exceeds this many times the
@@ -690,6 +767,7 @@ def verify_objects(objects: Sequence[ObjectHypothesis], observations: Sequence[O
     T_wc = np.asarray(world_from_camera, dtype=float)
     out = []
     for h in objects:
+        h = _anchored(h, observations, T_wc, camera, opt)
         frames = [observations[k].frame for k in h.observations]
         ious = _projected_ious(h.ellipsoid, T_wc[frames], camera,
                                [observations[k].ellipse for k in h.observations])
