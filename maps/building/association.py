@@ -713,9 +713,11 @@ SEGMENT_GAP_FRAMES = 10
 
 
 def _anchored(h: ObjectHypothesis, obs: Sequence[Observation], T_wc: FloatArray,
-              camera: Camera, opt: AssociationOptions) -> ObjectHypothesis:
-    """``h``, or, if the ellipsoid of one of its time segments (runs of detections less than
-    :data:`SEGMENT_GAP_FRAMES` apart, those with ``min_views`` views or more) is not ``h``'s
+              camera: Camera, opt: AssociationOptions) -> ObjectHypothesis | None:
+    """``h``; None if it has two time segments or more (runs of detections less than
+    :data:`SEGMENT_GAP_FRAMES` apart) and none with ``min_views`` views (no visit alone
+    reconstructs it, so nothing shows that its visits saw one object); or, if the ellipsoid of
+    one of its segments with ``min_views`` views or more is not ``h``'s
     (largest semi-axes beyond ``size_ratio`` or centres further apart than ``merge_factor`` x
     the larger one's largest semi-axis), the object of its largest segment: that segment's
     ellipsoid with those of ``h``'s detections whose views it explains (IoU >= ``min_iou``).
@@ -725,10 +727,12 @@ def _anchored(h: ObjectHypothesis, obs: Sequence[Observation], T_wc: FloatArray,
     ks = sorted(h.observations, key=lambda k: obs[k].frame)
     frames = np.array([obs[k].frame for k in ks])
     cuts = np.flatnonzero(np.diff(frames) > SEGMENT_GAP_FRAMES) + 1
-    segments = [seg for seg in np.split(np.array(ks), cuts) if len(seg) >= opt.min_views]
+    segments = sorted(np.split(np.array(ks), cuts), key=len, reverse=True)
     if len(segments) < 2:
         return h
-    segments.sort(key=len, reverse=True)
+    if len(segments[0]) < opt.min_views:
+        return None
+    segments = [seg for seg in segments if len(seg) >= opt.min_views]
     anchor: Ellipsoid | None = None
     consistent = True
     for seg in segments:
@@ -767,7 +771,10 @@ def verify_objects(objects: Sequence[ObjectHypothesis], observations: Sequence[O
     T_wc = np.asarray(world_from_camera, dtype=float)
     out = []
     for h in objects:
-        h = _anchored(h, observations, T_wc, camera, opt)
+        anchored = _anchored(h, observations, T_wc, camera, opt)
+        if anchored is None:
+            continue
+        h = anchored
         frames = [observations[k].frame for k in h.observations]
         ious = _projected_ious(h.ellipsoid, T_wc[frames], camera,
                                [observations[k].ellipse for k in h.observations])
