@@ -594,7 +594,9 @@ def associate_windowed(
     overlapping windows chained where they share at least half of the detections either holds
     in the shared frames (and 2). A chain keeps one detection per frame (the one most windows
     gave it) and a detection claimed by two chains goes to the larger. A recording within one
-    window is :func:`associate` itself. Then the same-label objects split by the drift between
+    window is :func:`associate` itself; a chain whose ellipsoid (all its views) is not of its
+    largest object's size (``size_ratio``) is that object alone. The objects are verified
+    (:func:`verify_objects`). Then the same-label objects split by the drift between
     two passes are merged (:func:`merge_duplicates`). Same arguments and result as
     :func:`associate`; ``progress(label, fraction)`` over the whole recording."""
     opt = options or AssociationOptions()
@@ -687,8 +689,9 @@ def associate_windowed(
         if len(members) > 1:
             chained = reconstruct_initial(idx, observations, T_wc, camera, opt)
             if chained is None or not _same_size(chained, ell, opt.size_ratio):
-                # the chain's ellipsoid is not the objects' size: the chain joins two objects
-                # (e.g. of two rooms); the largest window's object alone is kept
+                # no ellipsoid of the objects' size fits the chain's views together: the
+                # chain joins two objects (e.g. of two rooms); the largest window's object
+                # alone is kept
                 idx = sorted(k for k in hyps[largest].observations if claim[k] == c)
                 if len(idx) < opt.min_views:
                     continue
@@ -746,12 +749,11 @@ def _anchored(h: ObjectHypothesis, obs: Sequence[Observation], T_wc: FloatArray,
             break
     if consistent or anchor is None:
         return h
-    ious = _projected_ious(anchor, T_wc[[obs[k].frame for k in h.observations]], camera,
-                           [obs[k].ellipse for k in h.observations])
-    keep = [k for k, iou in zip(h.observations, ious.tolist(), strict=True) if iou >= opt.min_iou]
-    return ObjectHypothesis(h.label, keep, anchor, h.source,
-                            {k: v for k, v in zip(h.observations, ious.tolist(), strict=True)
-                             if v >= opt.min_iou})
+    ious = dict(zip(h.observations, _projected_ious(
+        anchor, T_wc[[obs[k].frame for k in h.observations]], camera,
+        [obs[k].ellipse for k in h.observations]).tolist(), strict=True))
+    keep = {k: v for k, v in ious.items() if v >= opt.min_iou}
+    return ObjectHypothesis(h.label, list(keep), anchor, h.source, keep)
 
 
 #: :func:`verify_objects` drops an object whose largest semi-axis exceeds this many times the
@@ -762,7 +764,9 @@ MAX_SIZE_FACTOR = 4.0
 def verify_objects(objects: Sequence[ObjectHypothesis], observations: Sequence[Observation],
                    world_from_camera: FloatArray, camera: Camera, opt: AssociationOptions
                    ) -> list[ObjectHypothesis]:
-    """The objects with only their detections that overlap the projection of their ellipsoid
+    """The objects re-anchored on their time segments (:func:`_anchored`: none
+    reconstructible, dropped; one inconsistent with the whole, the largest segment's object),
+    with only their detections that overlap the projection of their ellipsoid
     by at least ``verify_iou`` (poses ``world_from_camera``; lower than ``min_iou``: the
     ellipsoid of a chain of windows sees the drift between them), those left with fewer than
     ``min_views`` dropped, and those whose largest semi-axis exceeds :data:`MAX_SIZE_FACTOR`
