@@ -519,12 +519,14 @@ def _explains(ell: Ellipsoid, a: ObjectHypothesis, b: ObjectHypothesis,
 
 def merge_duplicates(objects: list[ObjectHypothesis], obs: Sequence[Observation],
                       T_wc: FloatArray, camera: Camera, opt: AssociationOptions,
-                      tick: Callable[[], None]) -> list[ObjectHypothesis]:
+                      tick: Callable[[], None], *, verify_union: bool = False
+                      ) -> list[ObjectHypothesis]:
     """Merge same-label objects whose centres lie within ``merge_factor`` x the larger one's
     largest semi-axis and that (almost) never appear in the same frame: one physical object split
-    in two (typically by pose drift between two passes). The merge needs spatial consistency:
-    both of a similar size (largest semi-axes within ``size_ratio``) and the ellipsoid of their
-    views together of that size and explaining each one's views (:func:`_explains`). In a shared
+    in two (typically by pose drift between two passes). With ``verify_union`` (across windows,
+    where two rooms' objects can meet by drift) the merge also needs spatial consistency: both
+    of a similar size (largest semi-axes within ``size_ratio``) and the ellipsoid of their views
+    together of that size and explaining each one's views (:func:`_explains`). In a shared
     frame the larger object's detection is kept."""
     merged = True
     while merged:
@@ -542,13 +544,14 @@ def merge_duplicates(objects: list[ObjectHypothesis], obs: Sequence[Observation]
                 fb = {obs[k].frame for k in b.observations}
                 if len(fa & fb) > opt.max_shared_frames * min(len(fa), len(fb)):
                     continue
-                if not _same_size(a.ellipsoid, b.ellipsoid, opt.size_ratio):
+                if verify_union and not _same_size(a.ellipsoid, b.ellipsoid, opt.size_ratio):
                     continue
                 union = sorted(a.observations + [k for k in b.observations
                                                  if obs[k].frame not in fa])
                 tick()
                 ell = reconstruct_initial(union, obs, T_wc, camera, opt)
-                if ell is None or not _explains(ell, a, b, obs, T_wc, camera, opt):
+                if ell is None or (verify_union
+                                   and not _explains(ell, a, b, obs, T_wc, camera, opt)):
                     continue
                 objects[ia] = ObjectHypothesis(a.label, union, ell, a.source,
                                                {**b.ious, **a.ious})
@@ -703,7 +706,8 @@ def associate_windowed(
                                         ious))
     objects = verify_objects(objects, observations, T_wc, camera, opt)
     objects = merge_duplicates(objects, observations, T_wc, camera, opt,
-                               lambda: progress("", 1.0) if progress is not None else None)
+                               lambda: progress("", 1.0) if progress is not None else None,
+                               verify_union=True)
     assigned = {k for h in objects for k in h.observations}
     rejected = {k: rejected_any.get(k, "fits_no_object") for k in range(len(observations))
                 if k not in assigned}
