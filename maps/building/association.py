@@ -721,37 +721,25 @@ SEGMENT_GAP_FRAMES = 10
 
 def _anchored(h: ObjectHypothesis, obs: Sequence[Observation], T_wc: FloatArray,
               camera: Camera, opt: AssociationOptions) -> ObjectHypothesis | None:
-    """``h``; None if it has two time segments or more (runs of detections less than
-    :data:`SEGMENT_GAP_FRAMES` apart) and none with ``min_views`` views (no visit alone
-    reconstructs it, so nothing shows that its visits saw one object); or, if the ellipsoid of
-    one of its segments with ``min_views`` views or more is not ``h``'s
-    (largest semi-axes beyond ``size_ratio`` or centres further apart than ``merge_factor`` x
-    the larger one's largest semi-axis), the object of its largest segment: that segment's
-    ellipsoid with those of ``h``'s detections whose views it explains (IoU >= ``min_iou``).
-    The detections of two objects (e.g. of two rooms visited within one window, brought
-    together by drift) give an ellipsoid stretched between them that neither visit's views
-    alone reconstruct."""
+    """``h`` checked against its time segments (runs of its detections less than
+    :data:`SEGMENT_GAP_FRAMES` apart): with two segments or more, None if none has
+    ``min_views`` views (no visit alone reconstructs it, so nothing shows that its visits saw
+    one object), and the object of its largest segment if that segment's ellipsoid is not of
+    ``h``'s size (largest semi-axes beyond ``size_ratio``; not the centres: a segment's depth is
+    loosely constrained): that ellipsoid with those of ``h``'s detections whose views it
+    explains (IoU >= ``min_iou``). The detections of two objects (e.g. of two rooms visited
+    within one window, brought together by drift) give an ellipsoid stretched between them that
+    neither visit's views alone reconstruct."""
     ks = sorted(h.observations, key=lambda k: obs[k].frame)
     frames = np.array([obs[k].frame for k in ks])
-    cuts = np.flatnonzero(np.diff(frames) > SEGMENT_GAP_FRAMES) + 1
-    segments = sorted(np.split(np.array(ks), cuts), key=len, reverse=True)
+    segments = np.split(np.array(ks), np.flatnonzero(np.diff(frames) > SEGMENT_GAP_FRAMES) + 1)
     if len(segments) < 2:
         return h
-    if len(segments[0]) < opt.min_views:
+    largest = max(segments, key=len)
+    if len(largest) < opt.min_views:
         return None
-    segments = [seg for seg in segments if len(seg) >= opt.min_views]
-    anchor: Ellipsoid | None = None
-    consistent = True
-    for seg in segments:
-        ell = reconstruct_initial(seg.tolist(), obs, T_wc, camera, opt)
-        if ell is None:
-            continue
-        anchor = anchor or ell
-        if not (_same_size(ell, h.ellipsoid, opt.size_ratio)
-                and _overlapping(ell, h.ellipsoid, opt.merge_factor)):
-            consistent = False
-            break
-    if consistent or anchor is None:
+    anchor = reconstruct_initial(largest.tolist(), obs, T_wc, camera, opt)
+    if anchor is None or _same_size(anchor, h.ellipsoid, opt.size_ratio):
         return h
     ious = dict(zip(h.observations, _projected_ious(
         anchor, T_wc[[obs[k].frame for k in h.observations]], camera,
