@@ -34,6 +34,8 @@ import schemathesis
 from fastapi.testclient import TestClient
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
+from schemathesis.config import SchemathesisConfig
+from schemathesis.config._checks import NEGATIVE_DATA_REJECTION_EXPECTED_STATUSES
 from schemathesis.specs.openapi.checks import positive_data_acceptance
 
 from quadloc.maps.store import MapStore
@@ -43,7 +45,7 @@ from quadloc.service.localization.types import METRICS, ROBUST_KERNELS
 from quadloc.service.schemas.examples import MAP_EXAMPLE
 from quadloc.service.settings import Settings, hash_api_key
 from tests.conftest import make_test_app
-from tests.support.postgres import pg_schema_url, pg_unavailable_reason
+from tests.support.postgres import pg_schema_url, pg_unavailable_reason, worker_thread
 
 #: Schemathesis / hypothesis fuzzing (minutes): left out of the inner loop (pytest -m "not slow").
 pytestmark = pytest.mark.slow
@@ -70,7 +72,8 @@ def _backend_app(backend: str, tmp_path_factory: pytest.TempPathFactory) -> Iter
     reason = pg_unavailable_reason()
     if reason:
         pytest.skip(reason)
-    with pg_schema_url("quadloc_fuzz") as url:
+    # the API on PostgreSQL queues builds: a worker runs them, as in a deployment
+    with pg_schema_url("quadloc_fuzz") as url, worker_thread(url, build_stale_after_s=5.0):
         app = create_app(Settings(**_FUZZ_SETTINGS), store=MapStore(url))  # type: ignore[arg-type]
         try:
             yield app
@@ -90,7 +93,12 @@ def fuzz_app(request: pytest.FixtureRequest,
 # The committed document (a file read, no app at import time); tests/service/api/test_api_openapi.py
 # checks that it is the app's. Each case is sent to the fixture's app (``schema.app``) in process.
 OPENAPI = Path(__file__).resolve().parents[3] / "docs" / "openapi.json"
-schema = schemathesis.openapi.from_path(OPENAPI)
+# A request that breaks the schema must be refused with a 4xx: schemathesis' list, plus 413 (a
+# body over the documented size limit, e.g. more objects than a map's maxItems: refused before
+# it is parsed, as docs/api.md says).
+_CONFIG = SchemathesisConfig.from_dict({"checks": {"negative_data_rejection": {
+    "expected-statuses": [*NEGATIVE_DATA_REJECTION_EXPECTED_STATUSES, "413"]}}})
+schema = schemathesis.openapi.from_path(OPENAPI, config=_CONFIG)
 
 
 def _reset(app: Any) -> None:
@@ -113,7 +121,7 @@ def test_api_conforms_and_never_fails(case: schemathesis.Case, fuzz_app: Any) ->
 def test_stateful_workflows_follow_the_links(fuzz_app: Any) -> None:
     """Create -> get / update (If-Match from the ETag) / localize / delete, as the schema's
     links say; every response checked as above."""
-    stateful = schemathesis.openapi.from_path(OPENAPI)
+    stateful = schemathesis.openapi.from_path(OPENAPI, config=_CONFIG)
     stateful.app = fuzz_app
     assert any(op.get("responses", {}).get("201", {}).get("links")
                for item in stateful.raw_schema["paths"].values() for op in item.values())
