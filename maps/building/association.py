@@ -756,8 +756,8 @@ MAX_SIZE_FACTOR = 4.0
 def verify_objects(objects: Sequence[ObjectHypothesis], observations: Sequence[Observation],
                    world_from_camera: FloatArray, camera: Camera, opt: AssociationOptions
                    ) -> list[ObjectHypothesis]:
-    """The objects re-anchored on their time segments (:func:`_anchored`: none
-    reconstructible, dropped; one inconsistent with the whole, the largest segment's object),
+    """The objects checked against their time segments (:func:`_anchored`: none with
+    ``min_views`` views, dropped; the largest not of the object's size, its object instead),
     with only their detections that overlap the projection of their ellipsoid
     by at least ``verify_iou`` (poses ``world_from_camera``; lower than ``min_iou``: the
     ellipsoid of a chain of windows sees the drift between them), those left with fewer than
