@@ -495,13 +495,39 @@ def _inside(point: FloatArray, ell: Ellipsoid) -> bool:
     return float(np.sum((d / ell.axes) ** 2)) <= 1.0
 
 
+def _same_size(a: Ellipsoid, b: Ellipsoid, ratio: float) -> bool:
+    """True if the largest semi-axes of ``a`` and ``b`` are within ``ratio`` of each other."""
+    return bool(max(a.axes.max(), b.axes.max()) <= ratio * min(a.axes.max(), b.axes.max()))
+
+
+def _explains(ell: Ellipsoid, a: ObjectHypothesis, b: ObjectHypothesis,
+              obs: Sequence[Observation], T_wc: FloatArray, camera: Camera,
+              opt: AssociationOptions) -> bool:
+    """True if ``ell`` (reconstructed from the views of ``a`` and ``b`` together) is one object
+    of their size that overlaps the projection on at least half the views of EACH by ``verify_iou``
+    (two objects, e.g. of two rooms brought together by drift, give an ellipsoid stretched
+    between them that explains neither part's views)."""
+    if not _same_size(ell, a.ellipsoid, opt.size_ratio):
+        return False
+    for h in (a, b):
+        ious = _projected_ious(ell, T_wc[[obs[k].frame for k in h.observations]], camera,
+                               [obs[k].ellipse for k in h.observations])
+        if float(np.mean(ious >= opt.verify_iou)) < 0.5:
+            return False
+    return True
+
+
 def merge_duplicates(objects: list[ObjectHypothesis], obs: Sequence[Observation],
                       T_wc: FloatArray, camera: Camera, opt: AssociationOptions,
-                      tick: Callable[[], None]) -> list[ObjectHypothesis]:
+                      tick: Callable[[], None], *, verify_union: bool = False
+                      ) -> list[ObjectHypothesis]:
     """Merge same-label objects whose centres lie within ``merge_factor`` x the larger one's
     largest semi-axis and that (almost) never appear in the same frame: one physical object split
-    in two (typically by pose drift between two passes). In a shared frame the larger object's
-    detection is kept."""
+    in two (typically by pose drift between two passes). With ``verify_union`` (across windows,
+    where two rooms' objects can meet by drift) the merge also needs spatial consistency: both
+    of a similar size (largest semi-axes within ``size_ratio``) and the ellipsoid of their views
+    together of that size and explaining each one's views (:func:`_explains`). In a shared
+    frame the larger object's detection is kept."""
     merged = True
     while merged:
         merged = False
@@ -518,11 +544,14 @@ def merge_duplicates(objects: list[ObjectHypothesis], obs: Sequence[Observation]
                 fb = {obs[k].frame for k in b.observations}
                 if len(fa & fb) > opt.max_shared_frames * min(len(fa), len(fb)):
                     continue
+                if verify_union and not _same_size(a.ellipsoid, b.ellipsoid, opt.size_ratio):
+                    continue
                 union = sorted(a.observations + [k for k in b.observations
                                                  if obs[k].frame not in fa])
                 tick()
                 ell = reconstruct_initial(union, obs, T_wc, camera, opt)
-                if ell is None:
+                if ell is None or (verify_union
+                                   and not _explains(ell, a, b, obs, T_wc, camera, opt)):
                     continue
                 objects[ia] = ObjectHypothesis(a.label, union, ell, a.source,
                                                {**b.ious, **a.ious})
@@ -568,7 +597,9 @@ def associate_windowed(
     overlapping windows chained where they share at least half of the detections either holds
     in the shared frames (and 2). A chain keeps one detection per frame (the one most windows
     gave it) and a detection claimed by two chains goes to the larger. A recording within one
-    window is :func:`associate` itself. Then the same-label objects split by the drift between
+    window is :func:`associate` itself; a chain whose ellipsoid (all its views) is not of its
+    largest object's size (``size_ratio``) is that object alone. The objects are verified
+    (:func:`verify_objects`). Then the same-label objects split by the drift between
     two passes are merged (:func:`merge_duplicates`). Same arguments and result as
     :func:`associate`; ``progress(label, fraction)`` over the whole recording."""
     opt = options or AssociationOptions()
@@ -659,18 +690,62 @@ def associate_windowed(
         largest = max(members, key=lambda h_i: len(hyps[h_i].observations))
         ell = hyps[largest].ellipsoid
         if len(members) > 1:
-            ell = reconstruct_initial(idx, observations, T_wc, camera, opt) or ell
+            chained = reconstruct_initial(idx, observations, T_wc, camera, opt)
+            if chained is None or not _same_size(chained, ell, opt.size_ratio):
+                # no ellipsoid of the objects' size fits the chain's views together: the
+                # chain joins two objects (e.g. of two rooms); the largest window's object
+                # alone is kept
+                idx = sorted(k for k in hyps[largest].observations if claim[k] == c)
+                if len(idx) < opt.min_views:
+                    continue
+            else:
+                ell = chained
         kept = set(idx)
         ious = {k: v for h_i in members for k, v in hyps[h_i].ious.items() if k in kept}
         objects.append(ObjectHypothesis(hyps[largest].label, idx, ell, hyps[largest].source,
                                         ious))
     objects = verify_objects(objects, observations, T_wc, camera, opt)
     objects = merge_duplicates(objects, observations, T_wc, camera, opt,
-                               lambda: progress("", 1.0) if progress is not None else None)
+                               lambda: progress("", 1.0) if progress is not None else None,
+                               verify_union=True)
     assigned = {k for h in objects for k in h.observations}
     rejected = {k: rejected_any.get(k, "fits_no_object") for k in range(len(observations))
                 if k not in assigned}
     return objects, rejected
+
+
+#: Frames without a detection of an object that end one of its time segments
+#: (:func:`_anchored`).
+SEGMENT_GAP_FRAMES = 10
+
+
+def _anchored(h: ObjectHypothesis, obs: Sequence[Observation], T_wc: FloatArray,
+              camera: Camera, opt: AssociationOptions) -> ObjectHypothesis | None:
+    """``h`` checked against its time segments (runs of its detections less than
+    :data:`SEGMENT_GAP_FRAMES` apart): with two segments or more, None if none has
+    ``min_views`` views (no visit alone reconstructs it, so nothing shows that its visits saw
+    one object), and the object of its largest segment if that segment's ellipsoid is not of
+    ``h``'s size (largest semi-axes beyond ``size_ratio``; not the centres: a segment's depth is
+    loosely constrained): that ellipsoid with those of ``h``'s detections whose views it
+    explains (IoU >= ``min_iou``). The detections of two objects (e.g. of two rooms visited
+    within one window, brought together by drift) give an ellipsoid stretched between them that
+    neither visit's views alone reconstruct."""
+    ks = sorted(h.observations, key=lambda k: obs[k].frame)
+    frames = np.array([obs[k].frame for k in ks])
+    segments = np.split(np.array(ks), np.flatnonzero(np.diff(frames) > SEGMENT_GAP_FRAMES) + 1)
+    if len(segments) < 2:
+        return h
+    largest = max(segments, key=len)
+    if len(largest) < opt.min_views:
+        return None
+    anchor = reconstruct_initial(largest.tolist(), obs, T_wc, camera, opt)
+    if anchor is None or _same_size(anchor, h.ellipsoid, opt.size_ratio):
+        return h
+    ious = dict(zip(h.observations, _projected_ious(
+        anchor, T_wc[[obs[k].frame for k in h.observations]], camera,
+        [obs[k].ellipse for k in h.observations]).tolist(), strict=True))
+    keep = {k: v for k, v in ious.items() if v >= opt.min_iou}
+    return ObjectHypothesis(h.label, list(keep), anchor, h.source, keep)
 
 
 #: :func:`verify_objects` drops an object whose largest semi-axis exceeds this many times the
@@ -681,7 +756,9 @@ MAX_SIZE_FACTOR = 4.0
 def verify_objects(objects: Sequence[ObjectHypothesis], observations: Sequence[Observation],
                    world_from_camera: FloatArray, camera: Camera, opt: AssociationOptions
                    ) -> list[ObjectHypothesis]:
-    """The objects with only their detections that overlap the projection of their ellipsoid
+    """The objects checked against their time segments (:func:`_anchored`: none with
+    ``min_views`` views, dropped; the largest not of the object's size, its object instead),
+    with only their detections that overlap the projection of their ellipsoid
     by at least ``verify_iou`` (poses ``world_from_camera``; lower than ``min_iou``: the
     ellipsoid of a chain of windows sees the drift between them), those left with fewer than
     ``min_views`` dropped, and those whose largest semi-axis exceeds :data:`MAX_SIZE_FACTOR`
@@ -690,6 +767,10 @@ def verify_objects(objects: Sequence[ObjectHypothesis], observations: Sequence[O
     T_wc = np.asarray(world_from_camera, dtype=float)
     out = []
     for h in objects:
+        anchored = _anchored(h, observations, T_wc, camera, opt)
+        if anchored is None:
+            continue
+        h = anchored
         frames = [observations[k].frame for k in h.observations]
         ious = _projected_ious(h.ellipsoid, T_wc[frames], camera,
                                [observations[k].ellipse for k in h.observations])
