@@ -59,17 +59,19 @@ def _mask(e: dict[str, float], width: int, height: int) -> np.ndarray:
     return np.asarray((u / e["a"]) ** 2 + (v / e["b"]) ** 2 <= 1.0)
 
 
-def encode_coco_rle(mask: np.ndarray) -> dict[str, Any]:
-    """COCO's compressed RLE of a bool mask (h, w): runs over the pixels in column-major order,
-    starting with 0s, written as pycocotools ``rleToString`` does (each count after the second
-    as the difference to the count two before, 5-bit groups with a continuation bit, from
-    ``'0'``). The inverse of :func:`quadloc_sdk.importers.decode_coco_rle`."""
+def rle_counts(mask: np.ndarray) -> list[int]:
+    """The runs of a bool mask (h, w) over its pixels in column-major order, starting with 0s
+    (a leading 0 when the first pixel is set): COCO's uncompressed RLE counts."""
     flat = np.asarray(mask, dtype=bool).T.ravel()
     change = np.flatnonzero(np.diff(flat.astype(np.int8))) + 1
-    bounds = np.concatenate([[0], change, [flat.size]])
-    counts = np.diff(bounds).tolist()
-    if flat.size and flat[0]:
-        counts = [0, *counts]
+    counts: list[int] = np.diff(np.concatenate([[0], change, [flat.size]])).tolist()
+    return [0, *counts] if flat.size and flat[0] else counts
+
+
+def encode_rle_counts(counts: list[int]) -> str:
+    """COCO's compressed RLE string of ``counts``, as pycocotools ``rleToString`` writes it
+    (each count after the second as the difference to the count two before, 5-bit groups with
+    a continuation bit, from ``'0'``)."""
     chars = []
     for i, c in enumerate(counts):
         x = c - counts[i - 2] if i > 2 else c
@@ -79,7 +81,14 @@ def encode_coco_rle(mask: np.ndarray) -> dict[str, Any]:
             x >>= 5
             more = not ((x == 0 and not ch & 0x10) or (x == -1 and ch & 0x10))
             chars.append(chr(48 + (ch | (0x20 if more else 0))))
-    return {"size": [int(mask.shape[0]), int(mask.shape[1])], "counts": "".join(chars)}
+    return "".join(chars)
+
+
+def encode_coco_rle(mask: np.ndarray) -> dict[str, Any]:
+    """COCO's compressed RLE of a bool mask (h, w) (:func:`rle_counts`,
+    :func:`encode_rle_counts`). The inverse of :func:`quadloc_sdk.importers.decode_coco_rle`."""
+    return {"size": [int(mask.shape[0]), int(mask.shape[1])],
+            "counts": encode_rle_counts(rle_counts(mask))}
 
 
 def example(seed: int, frames: int) -> dict[str, Any]:

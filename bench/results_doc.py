@@ -42,7 +42,7 @@ STAMP_RE = re.compile(
 #: document may name.
 MACHINE_LOCAL_PATH_RE = re.compile(
     r"(?<![\w.])(?:/tmp|/work|/root|/home|/Users|/mnt|/var/tmp|/var/folders|/private)/\S*"
-    r"|\.\./shared\b")
+    r"|(?<![\w.])\.\./[A-Za-z_][\w-]*/\S*")
 #: A section: its name and its text between the markers.
 SECTION_RE = re.compile(r"<!-- BEGIN (?P<name>[\w.-]+) -->\n(?P<body>.*?)\n<!-- END (?P=name) -->",
                         re.DOTALL)

@@ -39,6 +39,12 @@ class ZoneIndex:
         best = min(counts, key=lambda k: (-counts[k], self.sizes[k], k))
         return self.ids[best]
 
+    def zone_positions(self, object_ids: Iterable[str]) -> tuple[int, ...]:
+        """Per object, the position (in the map's ``zones``) of the zone of a pose supported by
+        that object alone (the module's rule: its most specific zone), -1 where none holds it."""
+        return tuple(min(ks, key=lambda k: (self.sizes[k], k)) if ks else -1
+                     for ks in (self.zones_of.get(oid, ()) for oid in object_ids))
+
 
 def zone_index(scene_map: SceneMap) -> ZoneIndex:
     """The :class:`ZoneIndex` of ``scene_map`` (O(total zone members)); memoised on the

@@ -61,12 +61,12 @@ def test_record_documents_name_no_machine_local_path(doc):
 
 def test_machine_local_path_pattern():
     """The pattern of the check above finds what it must and leaves repository paths."""
-    beside_the_checkout = "/".join(("see ..", "shared", "notes"))  # a sibling folder's path
     for bad in ("--json /tmp/s25/x.json", "--baseline /work/wt/filed", "/root/.cache/x",
-                beside_the_checkout, "/home/me/q"):
+                "see ../notes/x.md", "/home/me/q"):
         assert MACHINE_LOCAL_PATH_RE.search(bad), bad
     for good in ("docs/img/x.png", "bench/data/calibration_records.json.gz",
-                 "`QUADLOC_DATA_DIR=/data`", "from `/proc`", "deploy/tmp/x", "a/work/b"):
+                 "`QUADLOC_DATA_DIR=/data`", "from `/proc`", "deploy/tmp/x", "a/work/b",
+                 "docs/../README.md"):
         assert not MACHINE_LOCAL_PATH_RE.search(good), good
 
 

@@ -108,15 +108,12 @@ class PlaceHypothesis:
 
 
 def _room_of_objects(compiled: CompiledMap) -> np.ndarray:
-    """Per map object, the index of its most specific zone (-1: none); memoised on the map."""
+    """Per map object, the position of its most specific zone (-1: none;
+    :meth:`~quadloc.maps.zones.ZoneIndex.zone_positions`); memoised on the map."""
     memo: np.ndarray | None = compiled.__dict__.get("_object_rooms")
     if memo is None:
-        zi = zone_index(compiled.scene_map)
-        memo = np.full(len(compiled), -1, dtype=np.int64)
-        for i, oid in enumerate(compiled.object_ids):
-            ks = zi.zones_of.get(oid, ())
-            if ks:
-                memo[i] = min(ks, key=lambda k: (zi.sizes[k], k))
+        memo = np.array(zone_index(compiled.scene_map).zone_positions(compiled.object_ids),
+                        dtype=np.int64).reshape(-1)
         compiled.__dict__["_object_rooms"] = memo
     return memo
 

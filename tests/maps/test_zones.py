@@ -149,6 +149,8 @@ def test_the_zone_of_a_pose_is_the_zone_holding_most_of_its_inliers() -> None:
     assert index is zone_index(scene)  # memoised
     assert index.zone_of([first]) == "kitchen"  # both hold 1: the smaller zone
     assert index.zone_of([first, second]) == "floor-0"  # 2 against 1
+    # per object, the zone of a pose it alone supports (as a position in the map's zones)
+    assert index.zone_positions([first, second, "not-in-any-zone"]) == (1, 0, -1)
     assert index.zone_of([]) is None and index.zone_of(["not-in-any-zone"]) is None
     assert zone_index(load_demo_map()).zone_of([first]) is None  # no zones
     # equal counts and sizes: the first in the map's zones

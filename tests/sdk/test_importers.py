@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bench.import_example import encode_rle_counts, rle_counts
 from quadloc.service.app.builds import recording_of
 from quadloc_sdk import importers
 from quadloc_sdk.geometry import polygon_moments
@@ -107,30 +108,6 @@ def test_ar_log_columns_and_column_major_are_the_same_pose() -> None:
 # ------------------------------------------------------------------ COCO
 
 
-def _encode_counts(counts: list[int]) -> str:
-    """COCO's compressed RLE string (pycocotools ``rleToString``), written from its definition."""
-    out = []
-    for i, c in enumerate(counts):
-        x = c - counts[i - 2] if i > 2 else c
-        more = True
-        while more:
-            ch = x & 0x1F
-            x >>= 5
-            more = (x != -1) if (ch & 0x10) else (x != 0)
-            if more:
-                ch |= 0x20
-            out.append(chr(ch + 48))
-    return "".join(out)
-
-
-def _counts(mask: np.ndarray) -> list[int]:
-    """Runs (0s first) of the mask in column-major order."""
-    flat = mask.T.reshape(-1).astype(int)
-    change = np.flatnonzero(np.diff(flat)) + 1
-    runs = np.diff(np.concatenate([[0], change, [flat.size]])).tolist()
-    return ([0] if flat[0] else []) + runs
-
-
 def test_rle_decoding_by_hand() -> None:
     # size 2x3, counts [2, 3, 1] column-major: columns (0, 0), (1, 1), (1, 0)
     expected = np.array([[0, 1, 1], [0, 1, 0]], bool)
@@ -138,7 +115,7 @@ def test_rle_decoding_by_hand() -> None:
         np.testing.assert_array_equal(
             importers.decode_coco_rle({"size": [2, 3], "counts": counts}), expected)
     # a count below the one two before it is stored negative: "O" is -1, + counts[1] = 1
-    assert _encode_counts([5, 2, 3, 1]) == "523O"
+    assert encode_rle_counts([5, 2, 3, 1]) == "523O"
     m = importers.decode_coco_rle({"size": [1, 11], "counts": "523O"})
     np.testing.assert_array_equal(m[0], [0] * 5 + [1] * 2 + [0] * 3 + [1])
     with pytest.raises(ValueError, match="add up"):
@@ -168,7 +145,7 @@ def test_masks_polygons_and_boxes_become_their_ellipses() -> None:
     and 0.5 deg (the pixelisation); a box gives its inscribed ellipse exactly."""
     cx, cy, a, b, ang = 100.3, 80.7, 40.0, 20.0, 0.5
     mask = _ellipse_mask(160, 200, cx, cy, a, b, ang)
-    counts = _counts(mask)
+    counts = rle_counts(mask)
     t = np.linspace(0, 2 * math.pi, 720, endpoint=False)
     poly = np.column_stack([cx + a * np.cos(t) * math.cos(ang) - b * np.sin(t) * math.sin(ang),
                             cy + a * np.cos(t) * math.sin(ang) + b * np.sin(t) * math.cos(ang)])
@@ -176,7 +153,7 @@ def test_masks_polygons_and_boxes_become_their_ellipses() -> None:
         {"image_id": 7, "category_id": 3, "score": 0.9, "bbox": [60, 50, 80, 60],
          "segmentation": {"size": [160, 200], "counts": counts}},
         {"image_id": 7, "category_id": 3, "score": 0.5, "bbox": [60, 50, 80, 60],
-         "segmentation": {"size": [160, 200], "counts": _encode_counts(counts)}},
+         "segmentation": {"size": [160, 200], "counts": encode_rle_counts(counts)}},
         {"image_id": 7, "category_id": 3, "score": 1.0, "segmentation": [poly.ravel().tolist()]},
         {"image_id": 8, "category_id": 4, "score": 0.25, "bbox": [10.0, 20.0, 30.0, 50.0]},
         {"image_id": 8, "category_id": 4, "score": 0.01, "bbox": [10.0, 20.0, 30.0, 50.0]},
