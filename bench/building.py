@@ -45,6 +45,16 @@ import numpy as np
 from quadloc.factors.camera import Camera
 from quadloc.maps.compiled import CompiledMap, compile_map
 from quadloc.maps.zones import ZoneIndex, zone_index
+from quadloc.service.localization.calibration_fit import SolveRecord, record_from_evidence
+from quadloc.service.localization.confidence import (
+    TOLERANCE_POSITION_M,
+    TOLERANCE_ROTATION_DEG,
+    calibration_key,
+)
+from quadloc.service.localization.map_calibration import (
+    calibration_error,
+    calibration_error_floor,
+)
 from quadloc.service.localization.pipeline import localize
 from quadloc.service.localization.scoring import ScoringTimeoutError
 from quadloc.service.localization.types import (
@@ -102,15 +112,27 @@ def frame_record(bf: BuildingFrame, result: LocalizationResult | None, time_ms: 
                 "n_detections": len(bf.frame.detections), "localized": False,
                 "reason": "time_budget_exceeded", "position_error_m": math.inf,
                 "rotation_error_deg": math.inf, "confidence": 0.0,
+                "answer_confidence": None, "answer_within": None,
                 "truth_among_alternatives": False, "n_alternatives": 0, "time_ms": time_ms,
                 "cpu_ms": cpu_ms, "zone": None, "alternative_zones": []}
     pos, rot = pose_errors(result.world_from_camera, truth)
     alt = [pose_errors(a.world_from_camera, truth) for a in result.alternatives]
+    # the single answer the confidence is about: the localized pose, or the best candidate of
+    # a low_confidence answer (its confidence in the evidence; as min_confidence=0 answers)
+    answer_conf: float | None = None
+    answer_within: bool | None = None
+    if result.localized:
+        answer_conf, (ap, ar) = result.confidence, (pos, rot)
+    elif result.reason == "low_confidence" and result.alternatives and result.evidence:
+        answer_conf, (ap, ar) = float(result.evidence["confidence"]), alt[0]
+    if answer_conf is not None:
+        answer_within = bool(ap <= TOLERANCE_POSITION_M and ar <= TOLERANCE_ROTATION_DEG)
     return {
         "room": bf.room.zone_id, "kind": bf.kind, "n_detections": len(bf.frame.detections),
         "localized": result.localized, "reason": result.reason,
         "position_error_m": pos, "rotation_error_deg": rot,
         "confidence": result.confidence,
+        "answer_confidence": answer_conf, "answer_within": answer_within,
         "truth_among_alternatives": any(p <= ALTERNATIVE_TOLERANCE_M
                                         and r <= ALTERNATIVE_TOLERANCE_DEG for p, r in alt),
         "n_alternatives": len(result.alternatives),
@@ -168,6 +190,61 @@ def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
+def calibration(records: list[dict[str, Any]], bins: int = 10) -> dict[str, Any]:
+    """Reliability of ``confidence`` over the frames with a single answer (localized, or
+    ``low_confidence`` with its best candidate: what ``min_confidence=0`` would localize):
+    success = within 10 cm / 5 deg of the truth; the expected calibration error
+    (:func:`quadloc.service.localization.map_calibration.calibration_error`, ``bins``
+    equal-width bins), its sampling floor (the error of a perfectly calibrated confidence on
+    the same answers) and the table per bin."""
+    rows = [r for r in records if r.get("answer_confidence") is not None]
+    p = np.array([r["answer_confidence"] for r in rows], dtype=float)
+    y = np.array([r["answer_within"] for r in rows], dtype=float)
+    edges = np.linspace(0.0, 1.0, bins + 1)
+    k = np.clip(np.searchsorted(edges, p, side="right") - 1, 0, bins - 1)
+    table = [{"bin": f"{edges[b]:.1f}-{edges[b + 1]:.1f}", "n": int((k == b).sum()),
+              "mean_confidence": float(p[k == b].mean()), "observed": float(y[k == b].mean())}
+             for b in range(bins) if (k == b).any()]
+    return {"n": len(rows), "ece": calibration_error(p, y, bins) if len(rows) else None,
+            "ece_if_calibrated": calibration_error_floor(p) if len(rows) else None,
+            "mean_confidence": float(p.mean()) if len(rows) else None,
+            "observed_rate": float(y.mean()) if len(rows) else None, "table": table}
+
+
+def building_records(rooms: tuple[int, ...], modes: tuple[str, ...], frames: int, seed: int,
+                     log: Callable[[str], None] = lambda _: None) -> list[SolveRecord]:
+    """The confidence fit's records of building frames
+    (:class:`quadloc.service.localization.calibration_fit.SolveRecord`, group
+    ``"building"``): each frame of each (size, mode) of :func:`run_case`'s maps and frames
+    (base ``seed``: tuning seeds for the fit) solved with ``min_confidence=0`` (every verified,
+    unambiguous pose is localized with its confidence); they feed the confidence model only
+    (``covariance=False``: the covariance scale stays the one-room frames')."""
+    options = LocalizationOptions(min_confidence=0.0)
+    key = calibration_key(options.metric, options.use_sigma)
+    out: list[SolveRecord] = []
+    for n in rooms:
+        for mode in modes:
+            if n == 1 and mode != modes[0]:
+                continue
+            building = make_building(n, mode, seed + n, corridors=n > 1)
+            compiled = compile_map(building.scene_map)
+            camera, bfs = building_frames(building, frames if n < 200 else min(frames, 20),
+                                          seed + 7 * n + MODES.index(mode))
+            for bf in bfs:
+                result, _, _ = solve(bf, compiled, camera, options)
+                if result is None:
+                    continue
+                pos, rot = (pose_errors(result.world_from_camera, bf.world_from_camera)
+                            if result.localized else (math.inf, math.inf))
+                out.append(record_from_evidence(
+                    key=key, group="building", localized=result.localized,
+                    reason=result.reason, position_error_m=pos, rotation_error_deg=rot,
+                    evidence=result.evidence or {}, covariance_6x6=result.covariance,
+                    nees=None, covariance=False, confidence=True))
+            log(f"records: {n} rooms {mode}: {len(out)} so far")
+    return out
+
+
 def run_case(rooms: int, mode: str, frames: int, seed: int, memory_frames: int,
              options: LocalizationOptions, log: Callable[[str], None], hints: bool = True
              ) -> dict[str, Any]:
@@ -205,6 +282,7 @@ def run_case(rooms: int, mode: str, frames: int, seed: int, memory_frames: int,
         "all": summarise(records),
         "5plus": summarise([r for r in records if r["n_detections"] >= 5]),
         "3to4": summarise([r for r in records if r["n_detections"] < 5]),
+        "calibration": calibration(records),
         "time_ms": {"median": _percentile(times, 50), "p90": _percentile(times, 90),
                     "p99": _percentile(times, 99), "cpu_median": _percentile(cpu, 50),
                     "cpu_p99": _percentile(cpu, 99)},

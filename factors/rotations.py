@@ -34,6 +34,7 @@ __all__ = [
     "invert_pose",
     "pose_matrix",
     "quaternion_wxyz_from_rotation",
+    "rigid_fit",
     "rotation_angle",
     "rotation_from_quaternion_wxyz",
     "skew",
@@ -254,6 +255,18 @@ def pose_matrix(rotation: FloatArray, translation: FloatArray | Sequence[float])
     T[:3, :3] = rotation
     T[:3, 3] = translation
     return T
+
+
+def rigid_fit(src: FloatArray, dst: FloatArray) -> FloatArray:
+    """The rigid 4x4 ``dst_from_src`` minimising ``sum |T src_i - dst_i|^2`` (points (n, 3) in
+    metres, n >= 3; Kabsch: a proper rotation, det +1)."""
+    src = np.asarray(src, dtype=float)
+    dst = np.asarray(dst, dtype=float)
+    cs, cd = src.mean(0), dst.mean(0)
+    U, _, Vt = np.linalg.svd((src - cs).T @ (dst - cd))
+    D = np.diag([1.0, 1.0, float(np.sign(np.linalg.det(Vt.T @ U.T)))])
+    R = Vt.T @ D @ U.T
+    return pose_matrix(R, cd - R @ cs)
 
 
 def invert_pose(a_from_b: FloatArray) -> FloatArray:

@@ -34,7 +34,7 @@ import numpy as np
 
 from quadloc.factors.arrays import FloatArray
 from quadloc.factors.pose_factors import pose3
-from quadloc.factors.rotations import invert_pose, pose_matrix
+from quadloc.factors.rotations import invert_pose, pose_matrix, rigid_fit
 from quadloc.maps.building.recording import Observation, OdometryNoise
 from quadloc.maps.model import MapZone
 
@@ -113,15 +113,6 @@ def _yaw_rotation(theta: float, up: FloatArray) -> FloatArray:
     return R
 
 
-def _kabsch(src: FloatArray, dst: FloatArray) -> FloatArray:
-    """Rigid 4x4 ``T`` minimising ``sum |T src_i - dst_i|^2`` (points (n, 3), n >= 3)."""
-    cs, cd = src.mean(0), dst.mean(0)
-    U, _, Vt = np.linalg.svd((src - cs).T @ (dst - cd))
-    D = np.diag([1.0, 1.0, float(np.sign(np.linalg.det(Vt.T @ U.T)))])
-    R = Vt.T @ D @ U.T
-    return pose_matrix(R, cd - R @ cs)
-
-
 def _inliers(T: FloatArray, P: FloatArray, p_labels: Sequence[str], Q: FloatArray,
              q_labels: Sequence[str], tol: float) -> list[tuple[int, int]]:
     """One-to-one same-label pairs ``(i in P, j in Q)`` within ``tol`` after ``T``, greedily by
@@ -172,7 +163,7 @@ def align_places(P: FloatArray, p_labels: Sequence[str], Q: FloatArray,
         pairs = _inliers(T, P, p_labels, Q, q_labels, opt.inlier_m)
         if len(pairs) < need or (best is not None and len(pairs) <= len(best[1])):
             continue
-        T = _kabsch(P[[a for a, _ in pairs]], Q[[b for _, b in pairs]])
+        T = rigid_fit(P[[a for a, _ in pairs]], Q[[b for _, b in pairs]])
         pairs = _inliers(T, P, p_labels, Q, q_labels, opt.inlier_m)
         centroid = P.mean(axis=0)
         offset = float(np.linalg.norm(T[:3, :3] @ centroid + T[:3, 3] - centroid))

@@ -44,7 +44,6 @@ from quadloc.service.localization.candidates import (
     competes,
     distinct_ranking,
     iou_competitor,
-    is_ambiguous_ranking,
     sort_by_support,
 )
 from quadloc.service.localization.confidence import (
@@ -61,11 +60,13 @@ from quadloc.service.localization.constellations import (
     PlaceSeeds,
     place_seeds,
 )
+from quadloc.service.localization.copies import copy_transforms
 from quadloc.service.localization.gravity import (
     answer_gate_deg,
     gravity_measurement,
     tilt_errors_deg,
 )
+from quadloc.service.localization.negative_evidence import weigh_misses
 from quadloc.service.localization.refine import RefinementResult, refine
 from quadloc.service.localization.sampling import count_map_samples, count_samples
 from quadloc.service.localization.scoring import (
@@ -277,11 +278,11 @@ def localize(
     if not candidates:
         return _not_localized("refinement_diverged", options.metric, solve.evaluated, timings,
                               t0, first_status)
-    ranked = distinct_ranking(candidates)
-    ambiguous = is_ambiguous_ranking(ranked)
+    # the places compared with the detections, then with the objects each predicts in view
+    # that were not detected (negative evidence: a tie between places broken by the misses)
+    ranked, ambiguous, _ = weigh_misses(distinct_ranking(candidates), whole, camera)
     if ambiguous and hint is not None:
-        ranked = _hint_ranking(ranked, hint, seeds)
-        ambiguous = is_ambiguous_ranking(ranked)
+        ranked, ambiguous, _ = weigh_misses(_hint_ranking(ranked, hint, seeds), whole, camera)
     if solve.hint_samples is not None and hint is not None and hint.agrees(
             ranked[0].world_from_camera, [m.object_id for m in ranked[0].inliers]):
         solve.n_samples = solve.hint_samples  # chance matches within the hint's places
@@ -546,6 +547,7 @@ def _refine_stage(solve: _Solve, outcome: RansacOutcome, prior_candidate: Candid
         candidates.append(prior_candidate)
     sort_by_support(candidates)
     candidates = _sweep_refined_best(solve, outcome, candidates)
+    candidates = _copy_competitors(solve, candidates)
     candidates = _refine_capped_competitors(solve, candidates)
     solve.timings["refine"] = (time.perf_counter() - tr) * 1e3
     return candidates, first_status
@@ -627,6 +629,44 @@ def _sweep_refined_best(solve: _Solve, outcome: RansacOutcome, candidates: list[
                           and alternative_options.max_iterations < options.max_iterations)
             candidates.append(got)
     sort_by_support(candidates)
+    return candidates
+
+
+def _copy_competitors(solve: _Solve, candidates: list[Candidate]) -> list[Candidate]:
+    """``candidates`` (best-supported first) with the best's view in every exact copy of its
+    supporting objects (:func:`quadloc.service.localization.copies.copy_transforms`: same
+    labels, same geometry within ``COPY_TOLERANCE_M``; e.g. the other copies of a room, which
+    the search may miss when its P3P of three centres is metres off), each refined like the
+    runners-up and verified unless a candidate as well supported as the best is already there
+    (one refined to a poorer optimum there does not count; the ambiguity check then
+    weighs it: a copy explains the detections as well, the answer is ``ambiguous``). One-room
+    search only: a large map's places list their candidates. Best-supported first."""
+    if not candidates or solve.places or deadline_passed(solve.deadline):
+        return candidates
+    best, scorer = candidates[0], solve.scorer
+    transforms = copy_transforms(scorer.compiled, np.array(
+        [scorer.compiled.index_of(m.object_id) for m in best.inliers], dtype=np.intp))
+    options = solve.options
+    alternative_options = replace(
+        options, max_iterations=min(options.max_iterations, ALTERNATIVE_MAX_ITERATIONS))
+    added = False
+    for G in transforms:
+        if deadline_passed(solve.deadline):
+            break
+        T = G @ best.world_from_camera
+        if any(a.support() >= best.support() and not distinct_poses(
+                invert_pose(T), invert_pose(a.world_from_camera)) for a in candidates):
+            continue  # that copy already has a candidate as well supported as the best
+        got, status = _refine_and_verify(solve, scorer.matches(invert_pose(T),
+                                                               options.inlier_iou),
+                                         T, alternative_options, None)
+        if got is not None:
+            got.capped = (status == "max_iterations"
+                          and alternative_options.max_iterations < options.max_iterations)
+            candidates.append(got)
+            added = True
+    if added:
+        sort_by_support(candidates)
     return candidates
 
 

@@ -18,9 +18,10 @@ evidence of about one second count, not of thirty frames); the posterior of the 
 ``softmax(S)`` over the hypotheses and the null. The constants were chosen on the tuning
 seeds of ``python -m bench.tracking --building`` (docs/tracking.md, "Places").
 
-"Predicted in view": the object's centre projects inside the image (inset by
-:data:`VIEW_INSET`) at a depth in ``(0.3, MAX_VIEW_DEPTH_M)`` m, and the object is in the
-hypothesis's own zone when the map has zones (walls hide other rooms). Poses are
+"Predicted in view": the shared rule :func:`quadloc.maps.visibility.predicted_in_view` with
+:data:`VIEW_RULE` (the object's centre projects inside the image inset by :data:`VIEW_INSET` at
+a depth in ``(0.3, MAX_VIEW_DEPTH_M)`` m, and the object is in the zone of the nearest such
+object when the map has zones: walls hide other rooms). Poses are
 ``world_from_camera`` (OpenCV camera axes) unless named otherwise.
 """
 
@@ -37,6 +38,7 @@ from quadloc.factors.camera import Camera
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.rotations import invert_pose, rotation_angle
 from quadloc.maps.compiled import CompiledMap
+from quadloc.maps.visibility import ViewRule, predicted_in_view
 from quadloc.maps.zones import zone_index
 from quadloc.service.localization.scoring import MatchScorer, greedy_assignment
 
@@ -81,6 +83,10 @@ SAME_PLACE_M = 0.5
 SAME_PLACE_DEG = 10.0
 VIEW_INSET = 0.1
 MAX_VIEW_DEPTH_M = 6.0
+#: "Predicted in view" (:func:`quadloc.maps.visibility.predicted_in_view`): the centre inside
+#: the image inset by :data:`VIEW_INSET`, depth in (0.3, :data:`MAX_VIEW_DEPTH_M`) m, the zone
+#: of the nearest such object.
+VIEW_RULE = ViewRule(min_depth_m=0.3, max_depth_m=MAX_VIEW_DEPTH_M, inset_fraction=VIEW_INSET)
 
 
 @dataclass(frozen=True)
@@ -107,17 +113,6 @@ class PlaceHypothesis:
     zone: str | None = None
 
 
-def _room_of_objects(compiled: CompiledMap) -> np.ndarray:
-    """Per map object, the position of its most specific zone (-1: none;
-    :meth:`~quadloc.maps.zones.ZoneIndex.zone_positions`); memoised on the map."""
-    memo: np.ndarray | None = compiled.__dict__.get("_object_rooms")
-    if memo is None:
-        memo = np.array(zone_index(compiled.scene_map).zone_positions(compiled.object_ids),
-                        dtype=np.int64).reshape(-1)
-        compiled.__dict__["_object_rooms"] = memo
-    return memo
-
-
 class PlaceSet:
     """The live place hypotheses of a session and the null's score (module docstring).
 
@@ -131,7 +126,6 @@ class PlaceSet:
         self.inlier_iou = inlier_iou
         self.hypotheses: list[PlaceHypothesis] = []
         self.null_score = 0.0
-        self._rooms = _room_of_objects(compiled)
         self._zones = zone_index(compiled.scene_map)
 
     def clear(self) -> None:
@@ -171,25 +165,10 @@ class PlaceSet:
         return ll - MISS_PENALTY * misses, matched, misses
 
     def _in_view(self, camera_from_world: FloatArray) -> set[int]:
-        """Objects (indices) predicted in view (module docstring), restricted to the zone of
-        the objects nearest the optical axis when the map has zones."""
-        c = self.compiled.centers @ camera_from_world[:3, :3].T + camera_from_world[:3, 3]
-        z = c[:, 2]
-        ok = (z > 0.3) & (z < MAX_VIEW_DEPTH_M)
-        if not ok.any():
-            return set()
-        cam = self.camera
-        zs = np.where(ok, z, 1.0)
-        u = cam.fx * c[:, 0] / zs + cam.cx
-        v = cam.fy * c[:, 1] / zs + cam.cy
-        mx, my = VIEW_INSET * cam.width, VIEW_INSET * cam.height
-        ok &= (u >= mx) & (u < cam.width - mx) & (v >= my) & (v < cam.height - my)
-        idx = np.flatnonzero(ok)
-        if len(idx) and self._rooms.max() >= 0:
-            # the room of the nearest visible object: walls hide the others
-            room = self._rooms[idx[int(np.argmin(z[idx]))]]
-            idx = idx[self._rooms[idx] == room]
-        return {int(i) for i in idx}
+        """Objects (indices) predicted in view (:data:`VIEW_RULE`,
+        :func:`quadloc.maps.visibility.predicted_in_view`)."""
+        return {int(i) for i in predicted_in_view(self.compiled, self.camera, camera_from_world,
+                                                  VIEW_RULE)}
 
     def update(self, odom_from_camera: FloatArray, ellipses: FloatArray, labels: Sequence[str],
                committed_world_from_camera: FloatArray | None = None,
