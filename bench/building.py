@@ -42,10 +42,15 @@ from typing import Any
 
 import numpy as np
 
+from bench.results_doc import run_commit
 from quadloc.factors.camera import Camera
 from quadloc.maps.compiled import CompiledMap, compile_map
 from quadloc.maps.zones import ZoneIndex, zone_index
-from quadloc.service.localization.calibration_fit import SolveRecord, record_from_evidence
+from quadloc.service.localization.calibration_fit import (
+    SolveRecord,
+    record_from_evidence,
+    write_records,
+)
 from quadloc.service.localization.confidence import (
     TOLERANCE_POSITION_M,
     TOLERANCE_ROTATION_DEG,
@@ -71,6 +76,13 @@ from tests.support.buildings import (
 )
 from tests.support.errors import pose_errors
 
+#: The building frames' records of the confidence fit (``--calibration-records``), committed;
+#: fitted with ``bench/data/calibration_records.json.gz`` (:mod:`bench.trust`).
+CALIBRATION_RECORDS_PATH = Path(__file__).resolve().parent / "data" / \
+    "building_calibration_records.json.gz"
+#: Their base seeds (tuning: the place search was tuned on 5, 7, 9 and 11) and map sizes.
+CALIBRATION_SEEDS = (5, 7)
+CALIBRATION_ROOMS = (3, 10, 50, 200)
 #: An alternative "holds the true pose" within this distance and angle.
 ALTERNATIVE_TOLERANCE_M = 0.2
 ALTERNATIVE_TOLERANCE_DEG = 10.0
@@ -388,7 +400,13 @@ def main(argv: list[str] | None = None) -> int:
                         help="skip the runs with a zone hint and with a 5 m position hint")
     parser.add_argument("--write-results", action="store_true",
                         help="write the building section of docs/results.md")
+    parser.add_argument("--calibration-records", action="store_true",
+                        help="write the confidence fit's building records (tuning base seeds "
+                             f"{CALIBRATION_SEEDS}, rooms {CALIBRATION_ROOMS}, every mode, "
+                             "--frames per case) and nothing else")
     args = parser.parse_args(argv)
+    if args.calibration_records:
+        return _write_calibration_records(args.frames)
     modes = tuple(m for m in args.modes.split(",") if m)
     if any(m not in MODES for m in modes):
         parser.error(f"--modes: one of {MODES}")
@@ -416,6 +434,23 @@ def main(argv: list[str] | None = None) -> int:
         from bench.results_doc import update_results_section
 
         update_results_section("building", markdown(results))
+    return 0
+
+
+def _write_calibration_records(frames: int) -> int:
+    """``--calibration-records``: :func:`building_records` of the tuning seeds to
+    :data:`CALIBRATION_RECORDS_PATH`, with their provenance."""
+    t0 = time.perf_counter()
+    records = [r for seed in CALIBRATION_SEEDS for r in building_records(
+        CALIBRATION_ROOMS, MODES, frames, seed,
+        lambda m: print(m, file=sys.stderr, flush=True))]
+    write_records(CALIBRATION_RECORDS_PATH, records, {
+        "command": f"python -m bench.building --calibration-records --frames {frames}",
+        "commit": run_commit(), "date": time.strftime("%Y-%m-%d", time.gmtime()),
+        "tuning_seeds": list(CALIBRATION_SEEDS), "rooms": list(CALIBRATION_ROOMS),
+        "modes": list(MODES), "frames": frames,
+        "seconds": round(time.perf_counter() - t0)})
+    print(f"wrote {CALIBRATION_RECORDS_PATH.name} ({len(records)} records)")
     return 0
 
 

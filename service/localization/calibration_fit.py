@@ -777,18 +777,32 @@ def _display_path(path: Path) -> str:
 
 def fit_file(records_path: Path, base: CalibrationConstants | None = None,
              settings: FitSettings = FitSettings(),
-             command: str | None = None) -> CalibrationConstants:
-    """:func:`fit_calibration` of a record file, its provenance (records, sha256, the
-    records' own provenance, ``command``) in the constants. ``base``: default the shipped
-    constants."""
+             command: str | None = None,
+             extra_records: Sequence[Path] = ()) -> CalibrationConstants:
+    """:func:`fit_calibration` of a record file (and of ``extra_records``, e.g. the building
+    frames' records of ``bench.building --calibration-records``, fitted together with it),
+    their provenance (records, sha256, the records' own provenance, ``command``) in the
+    constants. ``base``: default the shipped constants."""
     records, made = read_records(records_path)
     shown = _display_path(records_path)
     flags = "" if settings.metric_offsets else " --no-metric-offsets"
-    prov = {"records": shown, "records_sha256": sha256_file(records_path),
-            "command": command or f"python -m quadloc.service.localization.calibration_fit "
-                                  f"{shown}{flags}",
-            "records_command": made.get("command", ""), "records_commit": made.get("commit", ""),
-            "tuning_seeds": made.get("tuning_seeds", [])}
+    extra_shown = "".join(f" {_display_path(x)}" for x in extra_records)
+    prov: dict[str, Any] = {
+        "records": shown, "records_sha256": sha256_file(records_path),
+        "command": command or f"python -m quadloc.service.localization.calibration_fit "
+                              f"{shown}{extra_shown}{flags}",
+        "records_command": made.get("command", ""), "records_commit": made.get("commit", ""),
+        "tuning_seeds": made.get("tuning_seeds", [])}
+    if extra_records:
+        prov["extra_records"] = []
+        for path in extra_records:
+            more, made_more = read_records(path)
+            records = [*records, *more]
+            prov["extra_records"].append({
+                "records": _display_path(path), "records_sha256": sha256_file(path),
+                "records_command": made_more.get("command", ""),
+                "records_commit": made_more.get("commit", ""),
+                "tuning_seeds": made_more.get("tuning_seeds", [])})
     return fit_calibration(records, CalibrationConstants.shipped() if base is None else base,
                            settings, prov)
 
@@ -800,6 +814,8 @@ def main(argv: list[str] | None = None) -> int:
     differences otherwise)."""
     ap = argparse.ArgumentParser(description=main.__doc__)
     ap.add_argument("records", type=Path, help="gzip JSON solve records (write_records)")
+    ap.add_argument("extra_records", type=Path, nargs="*",
+                    help="more record files fitted with them (e.g. building frames')")
     ap.add_argument("--output", type=Path, default=Path(__file__).with_name("calibration.py"))
     ap.add_argument("--no-metric-offsets", dest="metric_offsets", action="store_false",
                     help="no per-key intercept offsets in the refined confidence model")
@@ -808,7 +824,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     try:
         fitted = fit_file(args.records,
-                          settings=FitSettings(metric_offsets=args.metric_offsets))
+                          settings=FitSettings(metric_offsets=args.metric_offsets),
+                          extra_records=args.extra_records)
     except CalibrationFitError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
