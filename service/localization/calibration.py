@@ -1,11 +1,10 @@
-# ruff: noqa: E501 (generated: a command or a sha256 may be longer than a line)
 """Calibration constants of :mod:`quadloc.service.localization.confidence`
 (generated: do not edit).
 
 Fitted (:mod:`quadloc.service.localization.calibration_fit`) from the solve records
 ``bench/data/calibration_records.json.gz`` by::
 
-    python -m quadloc.service.localization.calibration_fit bench/data/calibration_records.json.gz bench/data/building_calibration_records.json.gz
+    python -m quadloc.service.localization.calibration_fit bench/data/calibration_records.json.gz
 
 The records were made by ``python -m bench.trust --fit`` at commit ebaffa4;
 tuning seeds only (:data:`PROVENANCE`): ``bench.trust`` reports on other seeds.
@@ -14,17 +13,10 @@ tuning seeds only (:data:`PROVENANCE`): ``bench.trust`` reports on other seeds.
 PROVENANCE = {'records': 'bench/data/calibration_records.json.gz',
  'records_sha256': 'b9a24248d80e0c5eb2b51ca7b2b4d2bf134aaa413246768bcad4cb071a420509',
  'command': 'python -m quadloc.service.localization.calibration_fit '
-            'bench/data/calibration_records.json.gz '
-            'bench/data/building_calibration_records.json.gz',
+            'bench/data/calibration_records.json.gz',
  'records_command': 'python -m bench.trust --fit',
  'records_commit': 'ebaffa4',
- 'tuning_seeds': [100, 102, 104, 106, 101, 103],
- 'extra_records': [{'records': 'bench/data/building_calibration_records.json.gz',
-                    'records_sha256': 'edbee32634a39609f82d2a604bb134896ccc1b668f29c1de487f435947e29fc6',
-                    'records_command': 'python -m bench.building --calibration-records '
-                                       '--frames 40',
-                    'records_commit': '17d0f44',
-                    'tuning_seeds': [5, 7]}]}
+ 'tuning_seeds': [100, 102, 104, 106, 101, 103]}
 
 #: k_key of ``cov = k * max(s^2, f) * t(n) * (J^T W J)^-1`` (``calibration_fit.
 #: fit_covariance_scale``: the smallest and largest mean NEES over the 5 / 10 / 20 cm operating
@@ -82,7 +74,7 @@ AMBIGUITY_RATIO_SAME_OBJECTS = 0.95
 
 #: Default ``LocalizationOptions.min_confidence`` (with ``AMBIGUITY_CHI2_RATIO``:
 #: ``calibration_fit.choose_ambiguity_and_threshold``).
-MIN_CONFIDENCE = 0.37
+MIN_CONFIDENCE = 0.36
 
 #: Features of the confidence model (``confidence.evidence_features``), in order.
 CONFIDENCE_FEATURES = ('inliers_ge3',
@@ -98,35 +90,35 @@ CONFIDENCE_FEATURES = ('inliers_ge3',
  'gravity')
 
 #: Logistic models: P = 1 / (1 + exp(-(intercept + metric_offset + sum coef * feature))).
-CONFIDENCE_MODELS = {'refined': {'intercept': -12.426551,
-             'coef': {'inliers_ge3': 1.007755,
-                      'inliers_ge4': -0.155384,
-                      'log_inliers': 0.125677,
-                      'inlier_fraction': 5.884135,
-                      'mean_iou': 7.496529,
-                      'log_s2': -0.815537,
-                      'logit_gauss': 0.354526,
-                      'margin': 0.003665,
-                      'log_samples': 0.034674,
-                      'chi2_competitor': 0.101042,
-                      'gravity': -0.428251},
-             'metric_offset': {'algebraic': 0.993886,
-                               'algebraic:unit_weights': -0.406156,
-                               'bbox': 0.01327,
-                               'bbox:unit_weights': -0.773091,
-                               'bhattacharyya': -0.242878,
-                               'bhattacharyya:unit_weights': -1.054724,
-                               'frobenius': 0.878348,
-                               'frobenius:unit_weights': -0.230023,
-                               'giou': 0.751616,
-                               'giou:unit_weights': -0.353764,
-                               'iou': 0.801584,
-                               'iou:unit_weights': -0.247046,
-                               'level_set:unit_weights': -0.383266,
-                               'qbbox': 0.318383,
-                               'qbbox:unit_weights': 0.302732,
-                               'wasserstein': 0.050643,
-                               'wasserstein:unit_weights': -0.680794}},
+CONFIDENCE_MODELS = {'refined': {'intercept': -14.033732,
+             'coef': {'inliers_ge3': 1.017204,
+                      'inliers_ge4': -0.163843,
+                      'log_inliers': 0.471651,
+                      'inlier_fraction': 7.27819,
+                      'mean_iou': 7.584767,
+                      'log_s2': -0.625262,
+                      'logit_gauss': 0.351904,
+                      'margin': 0.013686,
+                      'log_samples': -0.10571,
+                      'chi2_competitor': 0.107625,
+                      'gravity': -0.390908},
+             'metric_offset': {'algebraic': 1.038311,
+                               'algebraic:unit_weights': -0.355195,
+                               'bbox': 0.074257,
+                               'bbox:unit_weights': -0.710213,
+                               'bhattacharyya': -0.183562,
+                               'bhattacharyya:unit_weights': -1.012036,
+                               'frobenius': 0.920884,
+                               'frobenius:unit_weights': -0.184604,
+                               'giou': 0.799599,
+                               'giou:unit_weights': -0.314018,
+                               'iou': 0.851299,
+                               'iou:unit_weights': -0.207883,
+                               'level_set:unit_weights': -0.336453,
+                               'qbbox': 0.381381,
+                               'qbbox:unit_weights': 0.341397,
+                               'wasserstein': 0.115265,
+                               'wasserstein:unit_weights': -0.616519}},
  'none': {'intercept': -15.733101,
           'coef': {'inliers_ge3': 3.911833,
                    'inliers_ge4': 1.845376,

@@ -651,8 +651,7 @@ def calibration_source(c: CalibrationConstants) -> str:
     def fmt(v: object, **kw: Any) -> str:
         return pprint.pformat(v, width=96, **kw)
 
-    return f'''# ruff: noqa: E501 (generated: a command or a sha256 may be longer than a line)
-"""{doc}
+    return f'''"""{doc}
 """
 
 PROVENANCE = {fmt(p, sort_dicts=False)}
