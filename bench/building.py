@@ -76,11 +76,8 @@ from tests.support.buildings import (
 )
 from tests.support.errors import pose_errors
 
-#: The building frames' records of the confidence fit (``--calibration-records``), committed;
-#: fitted with ``bench/data/calibration_records.json.gz`` (:mod:`bench.trust`).
-CALIBRATION_RECORDS_PATH = Path(__file__).resolve().parent / "data" / \
-    "building_calibration_records.json.gz"
-#: Their base seeds (tuning: the place search was tuned on 5, 7, 9 and 11) and map sizes.
+#: The base seeds (tuning: the place search was tuned on 5, 7, 9 and 11) and map sizes of the
+#: building frames' confidence-fit records (``--calibration-records PATH``).
 CALIBRATION_SEEDS = (5, 7)
 CALIBRATION_ROOMS = (3, 10, 50, 200)
 #: An alternative "holds the true pose" within this distance and angle.
@@ -355,8 +352,26 @@ def markdown(results: dict[str, Any]) -> str:
             f"| {t['median']:.0f} / {t['p90']:.0f} / {t['p99']:.0f} ({t['cpu_median']:.0f}) "
             f"| {c['peak_memory_mb']:.0f} | {_hint_cell(c, 'zone_hint')} "
             f"| {_hint_cell(c, 'position_hint')} |")
-    lines += ["", *_ratio_lines(results["cases"])]
+    lines += ["", *_ratio_lines(results["cases"]), "", *_calibration_lines(results["cases"])]
     return "\n".join(lines)
+
+
+def _calibration_lines(cases: list[dict[str, Any]]) -> list[str]:
+    """The reliability of ``confidence`` over every case's frames with one answer
+    (:func:`calibration`)."""
+    cal = calibration([r for c in cases for r in c.get("records", [])])
+    if not cal["n"]:
+        return []
+    rows = [f"| {b['bin']} | {b['n']} | {b['mean_confidence']:.3f} | {b['observed']:.3f} |"
+            for b in cal["table"]]
+    return [f"Confidence = P(within 10 cm / 5 deg) on these frames (every row above; those with "
+            f"one answer: localized, or `low_confidence` with its best candidate): "
+            f"{cal['n']} answers, mean confidence {cal['mean_confidence']:.3f}, observed "
+            f"{cal['observed_rate']:.3f}, ECE {cal['ece']:.3f} (a calibrated confidence on as "
+            f"many answers: {cal['ece_if_calibrated']:.3f}). The confidence model is fitted on "
+            "one-room frames only (docs/design/localization.md, \"Calibration fit\").", "",
+            "| confidence | answers | mean confidence | observed |", "|---|---|---|---|",
+            *rows]
 
 
 def _ratio_lines(cases: list[dict[str, Any]]) -> list[str]:
@@ -400,13 +415,14 @@ def main(argv: list[str] | None = None) -> int:
                         help="skip the runs with a zone hint and with a 5 m position hint")
     parser.add_argument("--write-results", action="store_true",
                         help="write the building section of docs/results.md")
-    parser.add_argument("--calibration-records", action="store_true",
-                        help="write the confidence fit's building records (tuning base seeds "
-                             f"{CALIBRATION_SEEDS}, rooms {CALIBRATION_ROOMS}, every mode, "
-                             "--frames per case) and nothing else")
+    parser.add_argument("--calibration-records", type=Path, default=None, metavar="PATH",
+                        help="write the confidence fit's building records to PATH (tuning base "
+                             f"seeds {CALIBRATION_SEEDS}, rooms {CALIBRATION_ROOMS}, every "
+                             "mode, --frames per case; an extra file of calibration_fit) and "
+                             "nothing else")
     args = parser.parse_args(argv)
     if args.calibration_records:
-        return _write_calibration_records(args.frames)
+        return _write_calibration_records(args.calibration_records, args.frames)
     modes = tuple(m for m in args.modes.split(",") if m)
     if any(m not in MODES for m in modes):
         parser.error(f"--modes: one of {MODES}")
@@ -437,20 +453,21 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _write_calibration_records(frames: int) -> int:
-    """``--calibration-records``: :func:`building_records` of the tuning seeds to
-    :data:`CALIBRATION_RECORDS_PATH`, with their provenance."""
+def _write_calibration_records(path: Path, frames: int) -> int:
+    """``--calibration-records PATH``: :func:`building_records` of the tuning seeds to
+    ``path``, with their provenance."""
     t0 = time.perf_counter()
     records = [r for seed in CALIBRATION_SEEDS for r in building_records(
         CALIBRATION_ROOMS, MODES, frames, seed,
         lambda m: print(m, file=sys.stderr, flush=True))]
-    write_records(CALIBRATION_RECORDS_PATH, records, {
-        "command": f"python -m bench.building --calibration-records --frames {frames}",
+    write_records(path, records, {
+        "command": f"python -m bench.building --calibration-records {path.name} "
+                   f"--frames {frames}",
         "commit": run_commit(), "date": time.strftime("%Y-%m-%d", time.gmtime()),
         "tuning_seeds": list(CALIBRATION_SEEDS), "rooms": list(CALIBRATION_ROOMS),
         "modes": list(MODES), "frames": frames,
         "seconds": round(time.perf_counter() - t0)})
-    print(f"wrote {CALIBRATION_RECORDS_PATH.name} ({len(records)} records)")
+    print(f"wrote {path.name} ({len(records)} records)")
     return 0
 
 

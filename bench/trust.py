@@ -63,7 +63,6 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.building import CALIBRATION_RECORDS_PATH as BUILDING_RECORDS_PATH
 from bench.chess_eval import json_safe
 from bench.results_doc import public_command, run_commit
 from quadloc.factors.camera import Camera
@@ -793,8 +792,7 @@ def main(argv: list[str] | None = None) -> int:
             "imu_sigma_deg": IMU_SIGMA_DEG, "miss_probability": cfg.miss_probability,
             "seconds": round(time.perf_counter() - t0)})
         fitted = fit_file(args.records,
-                          settings=dataclasses.replace(FIT, metric_offsets=args.metric_offsets),
-                          extra_records=[BUILDING_RECORDS_PATH])
+                          settings=dataclasses.replace(FIT, metric_offsets=args.metric_offsets))
         CALIBRATION_PATH.write_text(calibration_source(fitted))
         print(f"wrote {args.records.name} ({len(records)} records) and {CALIBRATION_PATH.name}")
         return 0

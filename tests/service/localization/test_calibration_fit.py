@@ -35,8 +35,6 @@ from quadloc.service.localization.confidence import gaussian_tolerance_probabili
 
 REPO_ROOT = Path(__file__).resolve().parents[3]
 RECORDS = REPO_ROOT / "bench" / "data" / "calibration_records.json.gz"
-#: The building frames' records (``bench.building --calibration-records``), fitted with them.
-BUILDING_RECORDS = REPO_ROOT / "bench" / "data" / "building_calibration_records.json.gz"
 #: The generator rounds every fitted number to 6 decimals: a refit on another machine (other
 #: BLAS, other summation order) may move the last digit, never more.
 ABS_TOL = 2e-6
@@ -48,15 +46,14 @@ def refit() -> CalibrationConstants:
     cwd = os.getcwd()
     os.chdir(REPO_ROOT)
     try:
-        return fit_file(RECORDS, extra_records=[BUILDING_RECORDS])
+        return fit_file(RECORDS)
     finally:
         os.chdir(cwd)
 
 
 def test_the_shipped_constants_are_the_refit_of_the_committed_records(refit):
     """``python -m quadloc.service.localization.calibration_fit
-    bench/data/calibration_records.json.gz bench/data/building_calibration_records.json.gz``
-    reproduces calibration.py: every fitted number
+    bench/data/calibration_records.json.gz`` reproduces calibration.py: every fitted number
     within 2e-6 (its 6 decimals), the ambiguity ratio and the threshold exactly, and the
     provenance."""
     shipped = CalibrationConstants.shipped()
@@ -74,14 +71,7 @@ def test_the_generated_module_names_its_data_and_command():
     assert prov["records"] == "bench/data/calibration_records.json.gz"
     assert prov["records_sha256"] == sha256_file(RECORDS)
     assert prov["command"] == ("python -m quadloc.service.localization.calibration_fit "
-                               "bench/data/calibration_records.json.gz "
-                               "bench/data/building_calibration_records.json.gz")
-    (extra,) = prov["extra_records"]
-    assert extra["records"] == "bench/data/building_calibration_records.json.gz"
-    assert extra["records_sha256"] == sha256_file(BUILDING_RECORDS)
-    assert extra["records_command"].startswith("python -m bench.building --calibration-records")
-    # the building records' base seeds are tuning seeds, not the report's (bench.building)
-    assert not set(extra["tuning_seeds"]) & {1000}
+                               "bench/data/calibration_records.json.gz")
     assert prov["records_command"].startswith("python -m bench.trust --fit")
     _, made = read_records(RECORDS)
     assert made["command"] == prov["records_command"] and made["commit"] == prov["records_commit"]
