@@ -22,6 +22,7 @@ from quadloc.service.localization.calibration_fit import (
     calibration_source,
     choose_ambiguity_and_threshold,
     decide,
+    fit_calibration,
     fit_covariance_scale,
     fit_file,
     fit_logistic,
@@ -195,3 +196,38 @@ def test_threshold_is_the_smallest_meeting_the_false_accept_target():
     assert ratio == 2.0 and t == pytest.approx(0.27)  # sigmoid(-1) = 0.269 -> 0.27
     assert decide(rec(0.05, 2.0, chi2c=math.log(1.9)), 2.0, 0.0, models).reason == "ambiguous"
     assert decide(rec(0.05, 2.0), 2.0, 0.0, models).localized
+
+
+def test_extra_record_files_are_fitted_with_the_first(tmp_path):
+    """``fit_file(first, extra_records=[...])`` (``calibration_fit RECORDS EXTRA``) fits the
+    records of every file together, and the provenance names each extra file with its sha256
+    and its own provenance."""
+    rng = np.random.default_rng(3)
+
+    def batch(n: int, shift: float, group: str) -> list[SolveRecord]:
+        out = []
+        for _ in range(n):
+            x = float(rng.normal(shift, 1.0))
+            feats = {f: 0.0 for f in FEATURES} | {"mean_iou": x}
+            ok = rng.random() < 1.0 / (1.0 + math.exp(-2.0 * x))
+            out.append(_record(group=group, features=feats, pos=0.05 if ok else 1.0,
+                               s2=float(rng.uniform(1.0, 3.0))))
+        return out
+
+    first, extra = batch(300, 0.0, "default"), batch(200, 1.0, "building")
+    write_records(tmp_path / "a.json.gz", first, {"command": "make a", "commit": "abc1234",
+                                                  "tuning_seeds": [1]})
+    write_records(tmp_path / "b.json.gz", extra, {"command": "make b", "commit": "def5678",
+                                                  "tuning_seeds": [5, 7]})
+    base = CalibrationConstants.shipped()
+    both = fit_file(tmp_path / "a.json.gz", base, extra_records=[tmp_path / "b.json.gz"])
+    alone = fit_file(tmp_path / "a.json.gz", base)
+    direct = fit_calibration([*first, *extra], base)
+    assert both.confidence_models == direct.confidence_models
+    assert both.confidence_models != alone.confidence_models
+    (info,) = both.provenance["extra_records"]
+    assert info["records"] == "b.json.gz" and info["records_command"] == "make b"
+    assert info["records_sha256"] == sha256_file(tmp_path / "b.json.gz")
+    assert info["tuning_seeds"] == [5, 7]
+    assert both.provenance["command"].endswith("a.json.gz b.json.gz")
+    assert "extra_records" not in alone.provenance
