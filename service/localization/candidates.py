@@ -7,7 +7,9 @@ RANSAC search or from the client's prior. Candidates are ranked by support (inli
 sum of their IoUs, :func:`sort_by_support`), reduced to mutually distinct ones
 (:func:`distinct_ranking`), and the best is ambiguous when a distinct runner-up competes with
 it (:func:`competes`, the rules of
-:func:`quadloc.service.localization.confidence.is_ambiguous`). Poses are
+:func:`quadloc.service.localization.confidence.is_ambiguous`) and the objects it predicts in
+view but were not detected do not rule it out
+(:func:`quadloc.service.localization.negative_evidence.weigh_misses`). Poses are
 ``world_from_camera`` (4x4, OpenCV camera axes).
 """
 
@@ -29,7 +31,6 @@ __all__ = [
     "competes",
     "distinct_ranking",
     "iou_competitor",
-    "is_ambiguous_ranking",
     "sort_by_support",
 ]
 
@@ -110,12 +111,6 @@ def competes(best: Candidate, other: Candidate) -> bool:
                         same_objects={m.object_id for m in other.inliers}
                         == {m.object_id for m in best.inliers},
                         best_chi2=best.chi2, runner_up_chi2=other.chi2_against(best))
-
-
-def is_ambiguous_ranking(ranked: Sequence[Candidate]) -> bool:
-    """Whether some distinct runner-up of ``ranked`` (best first, mutually distinct) competes
-    with the best (:func:`competes`)."""
-    return any(competes(ranked[0], b) for b in ranked[1:])
 
 
 def iou_competitor(a: Candidate, others: Sequence[Candidate]) -> bool:
