@@ -164,20 +164,24 @@ def _pair_possible(za: float, zb: float, dist: float, aa: float, bb: float, ab: 
     :func:`place_seeds` applies after P3P: a necessary condition, no triplet that test keeps
     is lost here (``slack``, :data:`GEOMETRY_SLACK_M`, for rounding)."""
     lo_a, hi_a, lo_b, hi_b = za / rho, za * rho, zb / rho, zb * rho
-    dmax = max(max(_span(lo_a, lo_b, aa, bb, ab), _span(lo_a, hi_b, aa, bb, ab)),
-               max(_span(hi_a, lo_b, aa, bb, ab), _span(hi_a, hi_b, aa, bb, ab)))
-    dmin = min(
-        min(_span(lo_a, min(max(lo_a * ab / bb, lo_b), hi_b), aa, bb, ab),
-            _span(hi_a, min(max(hi_a * ab / bb, lo_b), hi_b), aa, bb, ab)),
-        min(_span(min(max(lo_b * ab / aa, lo_a), hi_a), lo_b, aa, bb, ab),
-            _span(min(max(hi_b * ab / aa, lo_a), hi_a), hi_b, aa, bb, ab)))
-    return dist >= dmin - slack and dist <= dmax + slack
+    # squared distances (no roots): dist - slack <= dmax and dist + slack >= dmin
+    far = dist - slack
+    if far > 0.0 and far * far > max(
+            max(_span2(lo_a, lo_b, aa, bb, ab), _span2(lo_a, hi_b, aa, bb, ab)),
+            max(_span2(hi_a, lo_b, aa, bb, ab), _span2(hi_a, hi_b, aa, bb, ab))):
+        return False
+    near = dist + slack
+    return near * near >= min(
+        min(_span2(lo_a, min(max(lo_a * ab / bb, lo_b), hi_b), aa, bb, ab),
+            _span2(hi_a, min(max(hi_a * ab / bb, lo_b), hi_b), aa, bb, ab)),
+        min(_span2(min(max(lo_b * ab / aa, lo_a), hi_a), lo_b, aa, bb, ab),
+            _span2(min(max(hi_b * ab / aa, lo_a), hi_a), hi_b, aa, bb, ab)))
 
 
 @jit
-def _span(x: float, y: float, aa: float, bb: float, ab: float) -> float:
-    """``|x ray_a - y ray_b|`` from the rays' dot products (:func:`_pair_possible`)."""
-    return math.sqrt(max(x * x * aa + y * y * bb - 2.0 * x * y * ab, 0.0))
+def _span2(x: float, y: float, aa: float, bb: float, ab: float) -> float:
+    """``|x ray_a - y ray_b|^2`` from the rays' dot products (:func:`_pair_possible`)."""
+    return max(x * x * aa + y * y * bb - 2.0 * x * y * ab, 0.0)
 
 
 @jit
@@ -458,7 +462,6 @@ def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params
     label_codes = np.array([code.get(x, -1) for x in labels], dtype=np.intp)
     wanted = np.zeros(len(index.labels), dtype=bool)
     wanted[label_codes[label_codes >= 0]] = True
-    radius = index.radius
     all_poses: list[FloatArray] = []
     all_scores: list[FloatArray] = []
     all_anchor: list[IntArray] = []
@@ -491,15 +494,12 @@ def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params
         if len(trip) == 0:
             continue
         img = np.broadcast_to(params[list(triple), :2], (len(trip), 3, 2))
-        poses, owner = p3p_grunert_batch(img, compiled.centers[trip], camera)
-        # the triplet's own objects must sit at depths their sizes allow
-        X = compiled.centers[trip[owner]]
-        z = np.einsum("mkj,mj->mk", X, poses[:, 2, :3]) + poses[:, 2, 3, None]
-        ratio = z / size_depths(camera, params[list(triple), None, 2:4].transpose(1, 0, 2),
-                                radius[trip[owner]])
-        fits = np.all((ratio > 1.0 / TRIPLET_DEPTH_RATIO) & (ratio < TRIPLET_DEPTH_RATIO),
-                      axis=1)
-        poses, owner = poses[fits], owner[fits]
+        # the triplet's own objects must sit at depths their sizes allow (tested in P3P)
+        poses, owner = p3p_grunert_batch(
+            img, index.centers[trip], camera,
+            size_depth=size_depths(camera, params[list(triple), None, 2:4].transpose(1, 0, 2),
+                                   index.radius[trip]),
+            depth_ratio=TRIPLET_DEPTH_RATIO)
         if len(poses) == 0:
             continue
         anchor = trip[owner, 0]

@@ -154,7 +154,7 @@ QUARTIC_IMAG_TOLERANCE = 1e-4
 
 def p3p_grunert_batch(
     image_points: FloatArray, world_points: FloatArray, camera: Camera,
-    newton_steps: int = 2,
+    newton_steps: int = 2, size_depth: FloatArray | None = None, depth_ratio: float = math.inf,
 ) -> tuple[FloatArray, IntArray]:
     """:func:`p3p_hypotheses_batch` over many samples in one compiled kernel: Grunert's
     quartic in the ratio of two of the distances along the bearing rays (Haralick et al.
@@ -167,10 +167,15 @@ def p3p_grunert_batch(
 
     Args:
         image_points: (B, 3, 2) pixels; world_points: (B, 3, 3) world metres.
+        size_depth: optional (B, 3) depths (m) the points' objects' sizes give
+            (:func:`size_depths`): a solution is kept only when each point's depth ``z`` has
+            ``1 / depth_ratio < z / size_depth < depth_ratio`` (the test runs in the kernel,
+            before a rejected solution's pose is stored). None: no such test.
 
     Returns:
         ``(poses (M, 4, 4), sample (M,))``: ``camera_from_world`` solutions with all three
-        points in front of the camera, and the sample each came from.
+        points in front of the camera (and at depths their sizes allow), and the sample each
+        came from.
     """
     img = np.asarray(image_points, dtype=np.float64).reshape(-1, 3, 2)
     X = np.asarray(world_points, dtype=np.float64).reshape(-1, 3, 3)
@@ -180,18 +185,23 @@ def p3p_grunert_batch(
     j = np.stack([(img[..., 0] - camera.cx) / camera.fx, (img[..., 1] - camera.cy) / camera.fy,
                   np.ones((B, 3))], axis=-1)
     j /= np.linalg.norm(j, axis=-1, keepdims=True)
+    zs = np.zeros((0, 3)) if size_depth is None else np.array(size_depth, dtype=np.float64)
     poses, sample, count = _p3p_kernel(np.ascontiguousarray(j), np.array(X), newton_steps,
-                                       QUARTIC_IMAG_TOLERANCE)
+                                       QUARTIC_IMAG_TOLERANCE, zs.reshape(-1, 3),
+                                       float(depth_ratio))
     return poses[:count], sample[:count]
 
 
 @jit
-def _p3p_kernel(j: FloatArray, X: FloatArray, newton_steps: int, imag_tol: float
+def _p3p_kernel(j: FloatArray, X: FloatArray, newton_steps: int, imag_tol: float,
+                size_depth: FloatArray, depth_ratio: float
                 ) -> tuple[FloatArray, IntArray, int]:
     """:func:`p3p_grunert_batch` for unit bearings ``j`` (B, 3, 3) and world points ``X``
     (B, 3, 3): Grunert's quartic, its roots (:func:`_quartic_roots_one`), Newton polish, the
-    camera points and the pose from the two triangles' frames. Returns poses (4 B, 4, 4),
-    their samples (4 B,) and how many of them are filled."""
+    camera points and the pose from the two triangles' frames; with ``size_depth`` (B, 3)
+    (empty: no test) only the solutions whose depths are within ``depth_ratio`` of them.
+    Returns poses (4 B, 4, 4), their samples (4 B,) and how many of them are filled."""
+    sized = size_depth.shape[0] > 0
     B = X.shape[0]
     poses = np.zeros((4 * B, 4, 4))
     owner = np.zeros(4 * B, dtype=np.intp)
@@ -269,9 +279,13 @@ def _p3p_kernel(j: FloatArray, X: FloatArray, newton_steps: int, imag_tol: float
                 t[i] = Y[0, i] - (R[i, 0] * X[b, 0, 0] + R[i, 1] * X[b, 0, 1]
                                   + R[i, 2] * X[b, 0, 2])
             for k in range(3):
-                if not R[2, 0] * X[b, k, 0] + R[2, 1] * X[b, k, 1] + R[2, 2] * X[b, k, 2] \
-                        + t[2] > 0.0:
+                z = R[2, 0] * X[b, k, 0] + R[2, 1] * X[b, k, 1] + R[2, 2] * X[b, k, 2] + t[2]
+                if not z > 0.0:
                     ok = False
+                elif sized:
+                    ratio = z / size_depth[b, k]
+                    if not (ratio > 1.0 / depth_ratio and ratio < depth_ratio):
+                        ok = False
             if not ok:
                 continue
             for i in range(3):
