@@ -309,7 +309,7 @@ def centre_hits(camera: Camera, camera_from_world: FloatArray, local: IntArray,
 def _readonly(a: np.ndarray, dtype: type) -> np.ndarray:
     """``a`` as a read-only C array of ``dtype`` (the place index's arrays are: one kernel
     specialisation for both callers of :func:`_hits`)."""
-    out = np.array(a, dtype=dtype, order="C")
+    out: np.ndarray = np.array(a, dtype=dtype, order="C")
     out.setflags(write=False)
     return out
 
