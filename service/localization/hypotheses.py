@@ -260,6 +260,8 @@ def _p3p_kernel(j: FloatArray, X: FloatArray, newton_steps: int, imag_tol: float
                 if 1.0 + v ** 2 - 2.0 * v * cb > 0.0 else math.nan
             if not (np.isfinite(u) and np.isfinite(s1) and u > 0.0 and s1 > 0.0):
                 continue
+            if sized and _clearly_off_depth(j, b, s1, u * s1, v * s1, size_depth, depth_ratio):
+                continue  # the exact test below (on the pose) would reject it: no pose built
             for k in range(3):
                 Y[0, k] = j[b, 0, k] * s1
                 Y[1, k] = j[b, 1, k] * u * s1
@@ -299,6 +301,23 @@ def _p3p_kernel(j: FloatArray, X: FloatArray, newton_steps: int, imag_tol: float
 
 
 @jit
+def _clearly_off_depth(j: FloatArray, b: int, s0: float, s1: float, s2: float,
+                       size_depth: FloatArray, depth_ratio: float) -> bool:
+    """Whether the camera points ``j[b, k] s_k`` of a P3P solution have a depth outside the
+    size-depth interval of :func:`_p3p_kernel` by more than 1e-9 relative (the pose's own
+    depths, tested after, differ from these by rounding only): the solution is dropped before
+    its pose is built."""
+    lo = (1.0 - 1e-9) / depth_ratio
+    hi = (1.0 + 1e-9) * depth_ratio
+    for k in range(3):
+        s = s0 if k == 0 else s1 if k == 1 else s2
+        ratio = j[b, k, 2] * s / size_depth[b, k]
+        if not (ratio > lo and ratio < hi):
+            return True
+    return False
+
+
+@jit
 def _frame_one(a: FloatArray, b: FloatArray, F: FloatArray) -> None:
     """:func:`_frames` of one direction pair (3,) into ``F`` (3, 3): the columns
     ``[a, b_perp, a x b_perp]``."""
@@ -314,6 +333,10 @@ def _frame_one(a: FloatArray, b: FloatArray, F: FloatArray) -> None:
     F[0, 2] = F[1, 0] * F[2, 1] - F[2, 0] * F[1, 1]
     F[1, 2] = F[2, 0] * F[0, 1] - F[0, 0] * F[2, 1]
     F[2, 2] = F[0, 0] * F[1, 1] - F[1, 0] * F[0, 1]
+
+
+#: exp(2 pi i / 3), the cube root of unity of :func:`_quartic_roots_one`.
+_OMEGA = cmath.exp(2j * math.pi / 3.0)
 
 
 @jit
@@ -336,10 +359,11 @@ def _quartic_roots_one(a: float, b: float, c: float, d: float, out: np.ndarray) 
     if abs(-Q / 2.0 - root) > abs(u3):
         u3 = -Q / 2.0 - root
     u = cmath.exp(cmath.log(u3) / 3.0) if abs(u3) > 0.0 else 0j
-    omega = cmath.exp(2j * math.pi / 3.0)
     m = 0j
+    uk = u
     for k in range(3):
-        uk = u * omega ** k
+        if k > 0:
+            uk = uk * _OMEGA  # u omega^k, omega the cube root of unity
         mk = (uk - P / (3.0 * uk) if abs(uk) > 0.0 else 0j) - B_ / 3.0
         if abs(mk) > abs(m):
             m = mk

@@ -505,7 +505,8 @@ def _hinted_objects(compiled: CompiledMap, hint: PlaceHint) -> BoolArray:
         hinted[index.near(hint.position, PlaceHint.AGREE_SIGMAS * hint.sigma_m
                           + index.view_range_m)] = True
     elif hint.object_ids is not None:
-        hinted[[k for k, o in enumerate(compiled.object_ids) if o in hint.object_ids]] = True
+        positions = place_index(compiled).positions
+        hinted[[positions[o] for o in hint.object_ids if o in positions]] = True
     return hinted
 
 

@@ -81,9 +81,10 @@ def test_compiled_subset_keeps_ids_and_arrays() -> None:
     assert sub.scene_map.to_dict() == validated.to_dict()
 
 
-def test_radius_and_cell_ids_equal_their_definitions() -> None:
+def test_radius_cell_ids_and_positions_equal_their_definitions() -> None:
     cm = compile_map(synthetic_map(300, seed=9))
     idx = place_index(cm)
+    assert [idx.positions[o] for o in cm.object_ids] == [cm.index_of(o) for o in cm.object_ids]
     axes = np.asarray(cm.axes)
     want = np.array([(a * b * c) ** (1.0 / 3.0) for a, b, c in axes.tolist()])
     np.testing.assert_allclose(idx.radius, want, rtol=1e-12)
