@@ -218,18 +218,8 @@ def _triplets_kernel(i_ab: IntArray, j_ab: IntArray, d_ab: FloatArray, i_ac: Int
                           dots[0, 0], dots[2, 2], dots[0, 2], rho, slack):
             keep_ac[m_ac] = p
             m_ac += 1
-    # the join on the first object: both lists sorted by it
-    total = 0
-    q = 0
-    for r in range(m_ab):
-        i = i_ab[keep_ab[r]]
-        while q < m_ac and i_ac[keep_ac[q]] < i:
-            q += 1
-        e = q
-        while e < m_ac and i_ac[keep_ac[e]] == i:
-            e += 1
-        total += e - q
-    out = np.empty((total, 3), dtype=np.intp)
+    # the join on the first object (both lists sorted by it), into a buffer grown by doubling
+    out = np.empty((1024, 3), dtype=np.intp)
     n = 0
     q = 0
     for r in range(m_ab):
@@ -251,11 +241,15 @@ def _triplets_kernel(i_ab: IntArray, j_ab: IntArray, d_ab: FloatArray, i_ac: Int
                 continue
             if _pair_possible(z_unit[1] * radius[j], z_unit[2] * radius[k], d, dots[1, 1],
                               dots[2, 2], dots[1, 2], rho, slack):
+                if n == len(out):
+                    grown = np.empty((2 * len(out), 3), dtype=np.intp)
+                    grown[:n] = out
+                    out = grown
                 out[n, 0] = i
                 out[n, 1] = j
                 out[n, 2] = k
                 n += 1
-    return out[:n]
+    return out[:n].copy()
 
 
 def _triplets(index: PlaceIndex, camera: Camera, params: FloatArray,

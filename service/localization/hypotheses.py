@@ -189,7 +189,7 @@ def p3p_grunert_batch(
     poses, sample, count = _p3p_kernel(np.ascontiguousarray(j), np.array(X), newton_steps,
                                        QUARTIC_IMAG_TOLERANCE, zs.reshape(-1, 3),
                                        float(depth_ratio))
-    return poses[:count], sample[:count]
+    return poses[:count].copy(), sample[:count].copy()  # not views of the 4 B buffer
 
 
 @jit
