@@ -274,13 +274,14 @@ def test_the_start_up_compilation_covers_the_place_search(perturbed: tuple) -> N
     specialisation that requests use: a search after it compiles nothing more."""
     b, cam, frames = perturbed
     compile_place_kernels()
-    kernels = [vars(constellations)["_centre_hits_kernel"], vars(hypotheses)["_p3p_kernel"]]
+    kernels = [vars(constellations)["_centre_hits_kernel"],
+               vars(constellations)["_triplets_kernel"], vars(hypotheses)["_p3p_kernel"]]
     before = [list(k.signatures) for k in kernels]
     dets = frames[0].frame.detections
     place_seeds(b.compiled, place_index(b.compiled), cam,
                 np.array([d.ellipse.params() for d in dets]), [d.label for d in dets],
                 np.random.default_rng(0))
-    assert [len(s) for s in before] == [1, 1]
+    assert [len(s) for s in before] == [1, 1, 1]
     assert [list(k.signatures) for k in kernels] == before
 
 
