@@ -66,6 +66,12 @@ class PlaceIndex:
         local, local_valid: (N, L) object ``i`` then its nearest covisible neighbours
             (``L = min(LOCAL_OBJECTS, 1 + most neighbours)``), padding marked False.
         codes: (N,) each object's label as an index into ``labels`` (the sorted categories).
+        radius: (N,) each object's radius, m: the geometric mean of its semi-axes (the size
+            the place search compares with a detection's, per request: computed once here).
+        cell_ids: (N,) the grid cell of each object as one integer (equal cells, equal ids:
+            the place key of the search, no per-request unique over cell rows).
+        positions: object id -> its index (a hint's objects are looked up, not searched for
+            among all the map's ids per request).
     """
 
     view_range_m: float
@@ -82,11 +88,15 @@ class PlaceIndex:
     local_valid: BoolArray
     labels: tuple[str, ...]
     codes: IntArray
+    radius: FloatArray
+    cell_ids: IntArray
+    positions: dict[str, int]
 
     def nbytes(self) -> int:
         """Bytes held by the index's arrays (the grid's and the constellations' included)."""
         arrays = [self.centers, self.cells, self.pair_i, self.pair_j, self.pair_distance,
                   self.offsets, self.neighbour, self.local, self.local_valid, self.codes,
+                  self.radius, self.cell_ids,
                   *self.grid.values(), *(a for t in self.constellations.values() for a in t)]
         return sum(int(a.nbytes) for a in arrays)
 
@@ -177,10 +187,14 @@ def build_place_index(compiled: CompiledMap, view_range_m: float = VIEW_RANGE_M)
     labels = tuple(sorted(set(compiled.categories)))
     code = {c: k for k, c in enumerate(labels)}
     codes = np.array([code[c] for c in compiled.categories], dtype=np.intp)
+    radius = np.prod(np.asarray(compiled.axes, dtype=float).reshape(n, 3), axis=1) ** (1.0 / 3.0)
+    cell_ids = (np.unique(cells, axis=0, return_inverse=True)[1].ravel().astype(np.intp)
+                if n else np.zeros(0, dtype=np.intp))
     return PlaceIndex(view_range_m, _frozen(centers), _frozen(cells), grid_arrays,
                       _frozen(pi), _frozen(pj), _frozen(pd), _frozen(offsets), _frozen(dst),
                       constellations, _frozen(local), _frozen(local_valid), labels,
-                      _frozen(codes))
+                      _frozen(codes), _frozen(radius), _frozen(cell_ids),
+                      {o: k for k, o in enumerate(compiled.object_ids)})
 
 
 def _local_table(src: IntArray, dst: IntArray, dist: FloatArray, offsets: IntArray, n: int

@@ -29,6 +29,7 @@ whatever the number of rooms. All poses ``camera_from_world`` (4x4, OpenCV axes)
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,7 +39,7 @@ from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.factors.camera import Camera
 from quadloc.factors.jit import jit
 from quadloc.maps.compiled import CompiledMap
-from quadloc.maps.places import PlaceIndex
+from quadloc.maps.places import VIEW_RANGE_M, PlaceIndex
 from quadloc.service.localization.hypotheses import p3p_grunert_batch, size_depths
 
 __all__ = [
@@ -150,80 +151,127 @@ def _rays(camera: Camera, params: FloatArray) -> FloatArray:
                             (params[:, 1] - camera.cy) / camera.fy, np.ones(len(params))])
 
 
-def _pair_possible(ray_a: FloatArray, ray_b: FloatArray, za: FloatArray, zb: FloatArray,
-                   dist: FloatArray) -> BoolArray:
-    """Whether two objects ``dist`` (n,) m apart can sit on the rays ``ray_a``, ``ray_b`` (3,)
-    (unit depth, camera frame) at depths within :data:`TRIPLET_DEPTH_RATIO` of ``za``, ``zb``
-    (n,) (the depths their sizes give): ``dist`` between the least and the largest distance of
-    ``|x ray_a - y ray_b|`` over that box of depths ``(x, y)``. The largest is at a corner; the
-    least (a convex function, its only stationary point the origin, outside the box) on an
-    edge, where the free depth is the projection clipped to its interval. Exactly the pairwise
-    part of the depth test that :func:`place_seeds` applies after P3P: a necessary condition,
-    no triplet that test keeps is lost here (``GEOMETRY_SLACK_M`` for rounding)."""
-    rho = TRIPLET_DEPTH_RATIO
+@jit
+def _pair_possible(za: float, zb: float, dist: float, aa: float, bb: float, ab: float,
+                   rho: float, slack: float) -> bool:
+    """Whether two objects ``dist`` m apart can sit on two rays ``ray_a``, ``ray_b`` (unit
+    depth, camera frame; ``aa``, ``bb``, ``ab``: their dot products) at depths within ``rho``
+    (:data:`TRIPLET_DEPTH_RATIO`) of ``za``, ``zb`` (the depths their sizes give): ``dist``
+    between the least and the largest distance of ``|x ray_a - y ray_b|`` over that box of
+    depths ``(x, y)``. The largest is at a corner; the least (a convex function, its only
+    stationary point the origin, outside the box) on an edge, where the free depth is the
+    projection clipped to its interval. Exactly the pairwise part of the depth test that
+    :func:`place_seeds` applies after P3P: a necessary condition, no triplet that test keeps
+    is lost here (``slack``, :data:`GEOMETRY_SLACK_M`, for rounding)."""
     lo_a, hi_a, lo_b, hi_b = za / rho, za * rho, zb / rho, zb * rho
-    aa, bb, ab = float(ray_a @ ray_a), float(ray_b @ ray_b), float(ray_a @ ray_b)
-
-    def span(x: FloatArray, y: FloatArray) -> FloatArray:
-        d2: FloatArray = np.sqrt(np.maximum(x * x * aa + y * y * bb - 2.0 * x * y * ab, 0.0))
-        return d2
-
-    dmax = np.maximum(np.maximum(span(lo_a, lo_b), span(lo_a, hi_b)),
-                      np.maximum(span(hi_a, lo_b), span(hi_a, hi_b)))
-    dmin = np.minimum(
-        np.minimum(span(lo_a, np.clip(lo_a * ab / bb, lo_b, hi_b)),
-                   span(hi_a, np.clip(hi_a * ab / bb, lo_b, hi_b))),
-        np.minimum(span(np.clip(lo_b * ab / aa, lo_a, hi_a), lo_b),
-                   span(np.clip(hi_b * ab / aa, lo_a, hi_a), hi_b)))
-    ok: BoolArray = (dist >= dmin - GEOMETRY_SLACK_M) & (dist <= dmax + GEOMETRY_SLACK_M)
-    return ok
+    # squared distances (no roots): dist - slack <= dmax and dist + slack >= dmin
+    far = dist - slack
+    if far > 0.0 and far * far > max(
+            max(_span2(lo_a, lo_b, aa, bb, ab), _span2(lo_a, hi_b, aa, bb, ab)),
+            max(_span2(hi_a, lo_b, aa, bb, ab), _span2(hi_a, hi_b, aa, bb, ab))):
+        return False
+    near = dist + slack
+    return near * near >= min(
+        min(_span2(lo_a, min(max(lo_a * ab / bb, lo_b), hi_b), aa, bb, ab),
+            _span2(hi_a, min(max(hi_a * ab / bb, lo_b), hi_b), aa, bb, ab)),
+        min(_span2(min(max(lo_b * ab / aa, lo_a), hi_a), lo_b, aa, bb, ab),
+            _span2(min(max(hi_b * ab / aa, lo_a), hi_a), hi_b, aa, bb, ab)))
 
 
-def _triplets(index: PlaceIndex, compiled: CompiledMap, camera: Camera, params: FloatArray,
+@jit
+def _span2(x: float, y: float, aa: float, bb: float, ab: float) -> float:
+    """``|x ray_a - y ray_b|^2`` from the rays' dot products (:func:`_pair_possible`)."""
+    return max(x * x * aa + y * y * bb - 2.0 * x * y * ab, 0.0)
+
+
+@jit
+def _triplets_kernel(i_ab: IntArray, j_ab: IntArray, d_ab: FloatArray, i_ac: IntArray,
+                     k_ac: IntArray, d_ac: FloatArray, allowed: BoolArray, restrict: bool,
+                     dots: FloatArray, z_unit: FloatArray, radius: FloatArray,
+                     centers: FloatArray, rho: float, slack: float, view_range: float
+                     ) -> IntArray:
+    """:func:`_triplets` before its cap: the pairs ``(i, j)`` of detections 0-1 and ``(i, k)``
+    of 0-2 (sorted by ``i``; with ``restrict``, only those whose ``i`` ``allowed`` marks)
+    that pass :func:`_pair_possible`, joined on ``i`` (the 0-1 pairs' order, then the 0-2
+    pairs'), kept when ``j != k``, ``|c_j - c_k| <= view_range`` and the pair ``(j, k)``
+    passes :func:`_pair_possible` for detections 1-2. ``dots`` (3, 3): the rays' dot
+    products; ``z_unit`` (3,): each detection's size depth per metre of object radius.
+    Returns (T, 3) object indices."""
+    n_ab, n_ac = len(i_ab), len(i_ac)
+    keep_ab = np.empty(n_ab, dtype=np.intp)
+    keep_ac = np.empty(n_ac, dtype=np.intp)
+    m_ab = 0
+    for p in range(n_ab):
+        i = i_ab[p]
+        if restrict and not allowed[i]:
+            continue
+        if _pair_possible(z_unit[0] * radius[i], z_unit[1] * radius[j_ab[p]], d_ab[p],
+                          dots[0, 0], dots[1, 1], dots[0, 1], rho, slack):
+            keep_ab[m_ab] = p
+            m_ab += 1
+    m_ac = 0
+    for p in range(n_ac):
+        i = i_ac[p]
+        if restrict and not allowed[i]:
+            continue
+        if _pair_possible(z_unit[0] * radius[i], z_unit[2] * radius[k_ac[p]], d_ac[p],
+                          dots[0, 0], dots[2, 2], dots[0, 2], rho, slack):
+            keep_ac[m_ac] = p
+            m_ac += 1
+    # the join on the first object (both lists sorted by it), into a buffer grown by doubling
+    out = np.empty((1024, 3), dtype=np.intp)
+    n = 0
+    q = 0
+    for r in range(m_ab):
+        pa = keep_ab[r]
+        i, j = i_ab[pa], j_ab[pa]
+        while q < m_ac and i_ac[keep_ac[q]] < i:
+            q += 1
+        e = q
+        while e < m_ac and i_ac[keep_ac[e]] == i:
+            k = k_ac[keep_ac[e]]
+            e += 1
+            if j == k:
+                continue
+            dx = centers[j, 0] - centers[k, 0]
+            dy = centers[j, 1] - centers[k, 1]
+            dz = centers[j, 2] - centers[k, 2]
+            d = math.sqrt(dx * dx + dy * dy + dz * dz)
+            if not d <= view_range:
+                continue
+            if _pair_possible(z_unit[1] * radius[j], z_unit[2] * radius[k], d, dots[1, 1],
+                              dots[2, 2], dots[1, 2], rho, slack):
+                if n == len(out):
+                    grown = np.empty((2 * len(out), 3), dtype=np.intp)
+                    grown[:n] = out
+                    out = grown
+                out[n, 0] = i
+                out[n, 1] = j
+                out[n, 2] = k
+                n += 1
+    return out[:n].copy()
+
+
+def _triplets(index: PlaceIndex, camera: Camera, params: FloatArray,
               labels: list[str], triple: tuple[int, ...], rng: np.random.Generator,
               allowed: BoolArray | None = None) -> IntArray:
     """Map triplets (T, 3) for a detection triple (module docstring, step 2); with
-    ``allowed`` (N,), only those whose first object it marks."""
+    ``allowed`` (N,), only those whose first object it marks. One compiled kernel
+    (:func:`_triplets_kernel`) over the label pairs' covisible pairs: no temporaries of
+    their size."""
     a, b, c = triple
     sub = params[[a, b, c]]
     rays = _rays(camera, sub)
-    radius = np.prod(compiled.axes, axis=1) ** (1.0 / 3.0)
-
-    def possible(k: int, m: int, objs_k: IntArray, objs_m: IntArray, dist: FloatArray
-                 ) -> BoolArray:
-        """:func:`_pair_possible` of the triple's detections ``k``, ``m`` (0, 1, 2) as the
-        objects ``objs_k``, ``objs_m`` ``dist`` apart."""
-        return _pair_possible(rays[k], rays[m], size_depths(camera, sub[k, 2:4], radius[objs_k]),
-                              size_depths(camera, sub[m, 2:4], radius[objs_m]), dist)
-
     i_ab, j_ab, d_ab = index.pairs_for(labels[a], labels[b])
     i_ac, k_ac, d_ac = index.pairs_for(labels[a], labels[c])
-    if allowed is not None:
-        sel_ab, sel_ac = allowed[i_ab], allowed[i_ac]
-        i_ab, j_ab, d_ab = i_ab[sel_ab], j_ab[sel_ab], d_ab[sel_ab]
-        i_ac, k_ac, d_ac = i_ac[sel_ac], k_ac[sel_ac], d_ac[sel_ac]
     if len(i_ab) == 0 or len(i_ac) == 0:
         return np.zeros((0, 3), dtype=np.intp)
-    ok = possible(0, 1, i_ab, j_ab, d_ab)
-    i_ab, j_ab = i_ab[ok], j_ab[ok]
-    ok = possible(0, 2, i_ac, k_ac, d_ac)
-    i_ac, k_ac = i_ac[ok], k_ac[ok]
-    # join on the first object (the pairs come sorted by it)
-    lo = np.searchsorted(i_ac, i_ab, side="left")
-    hi = np.searchsorted(i_ac, i_ab, side="right")
-    count = hi - lo
-    total = int(count.sum())
-    if total == 0:
-        return np.zeros((0, 3), dtype=np.intp)
-    rows = np.repeat(np.arange(len(i_ab)), count)
-    starts = np.repeat(lo - np.concatenate([[0], np.cumsum(count)[:-1]]), count)
-    pos = np.arange(total) + starts
-    I, J, K = i_ab[rows], j_ab[rows], k_ac[pos]
-    d_jk = np.linalg.norm(compiled.centers[J] - compiled.centers[K], axis=1)
-    keep = (J != K) & (d_jk <= index.view_range_m)
-    I, J, K, d_jk = I[keep], J[keep], K[keep], d_jk[keep]
-    ok = possible(1, 2, J, K, d_jk)
-    out = np.column_stack([I[ok], J[ok], K[ok]])
+    out = _triplets_kernel(
+        i_ab, j_ab, d_ab, i_ac, k_ac, d_ac,
+        np.ones(1, dtype=bool) if allowed is None else np.array(allowed, dtype=bool),
+        allowed is not None, np.array(rays @ rays.T, dtype=float),
+        np.array(size_depths(camera, sub[:, 2:4], 1.0), dtype=float), index.radius,
+        index.centers, TRIPLET_DEPTH_RATIO, GEOMETRY_SLACK_M, index.view_range_m)
     if len(out) > MAX_TRIPLETS:
         out = out[np.sort(rng.choice(len(out), MAX_TRIPLETS, replace=False))]
     return out
@@ -241,44 +289,83 @@ def centre_hits(camera: Camera, camera_from_world: FloatArray, local: IntArray,
     normalised distance in the ellipse, 1 on its contour; ``z``: the object's depth, ``z_size``:
     the depth its size implies, :func:`quadloc.service.localization.hypotheses.size_depths`);
     0 when there is none. Returns (M,) the sums over the detections (at most D). One compiled
-    kernel (:func:`_centre_hits_kernel`): no (M, L, D) temporaries."""
+    kernel (:func:`_centre_hits_kernel`): no (M, L, D) temporaries. The place search calls
+    :func:`_anchor_hits` (the same kernel on the place index's own tables)."""
     radius = np.prod(compiled.axes, axis=1) ** (1.0 / 3.0)
+    codes = np.asarray(object_codes, dtype=np.intp)
+    return _hits(camera, camera_from_world, np.arange(len(camera_from_world), dtype=np.intp),
+                 _readonly(local, np.intp), _readonly(local_valid, bool),
+                 _readonly(compiled.centers, float), _readonly(radius, float),
+                 _readonly(codes, np.intp), np.ones(int(codes.max(initial=0)) + 1, dtype=bool),
+                 params, label_codes)
+
+
+def _readonly(a: np.ndarray, dtype: type) -> np.ndarray:
+    """``a`` as a read-only C array of ``dtype`` (the place index's arrays are: one kernel
+    specialisation for both callers of :func:`_hits`)."""
+    out: np.ndarray = np.array(a, dtype=dtype, order="C")
+    out.setflags(write=False)
+    return out
+
+
+def _anchor_hits(camera: Camera, camera_from_world: FloatArray, anchor: IntArray,
+                 index: PlaceIndex, wanted: BoolArray, params: FloatArray,
+                 label_codes: IntArray) -> FloatArray:
+    """:func:`centre_hits` of poses (M, 4, 4) with the local objects of their ``anchor`` (M,)
+    objects (:attr:`quadloc.maps.places.PlaceIndex.local`), those of a label ``wanted``
+    (labels,) only (the others hit no detection): read from the index, nothing gathered or
+    copied per request."""
+    return _hits(camera, camera_from_world, np.array(anchor, dtype=np.intp), index.local,
+                 index.local_valid, index.centers, index.radius, index.codes,
+                 np.array(wanted, dtype=bool), params, label_codes)
+
+
+def _hits(camera: Camera, camera_from_world: FloatArray, rows: IntArray, local: IntArray,
+          valid: BoolArray, centers: FloatArray, radius: FloatArray, codes: IntArray,
+          wanted: BoolArray, params: FloatArray, label_codes: IntArray) -> FloatArray:
+    """:func:`_centre_hits_kernel` with the camera's and the detections' arguments."""
     p = np.array(params, dtype=float)
     # the depth each detection's size gives per unit object radius (size_depths, r = 1)
     z_unit = np.array(size_depths(camera, p[:, 2:4], 1.0), dtype=float)
-    # writable C arrays of fixed dtypes: one kernel specialisation (compile_place_kernels)
     out: FloatArray = _centre_hits_kernel(
-        np.array(camera_from_world, dtype=float), np.array(local, dtype=np.intp),
-        np.array(local_valid, dtype=bool), np.array(compiled.centers, dtype=float), radius,
-        np.array(object_codes, dtype=np.intp), p, z_unit,
-        np.array(label_codes, dtype=np.intp), float(camera.fx), float(camera.fy),
-        float(camera.cx), float(camera.cy), HIT_SCALE ** 2, 1.0 / SIZE_LOG_SIGMA ** 2)
+        np.array(camera_from_world, dtype=float), rows, local, valid, centers, radius, codes,
+        wanted, p, z_unit, np.array(label_codes, dtype=np.intp), float(camera.fx),
+        float(camera.fy), float(camera.cx), float(camera.cy), HIT_SCALE ** 2,
+        1.0 / SIZE_LOG_SIGMA ** 2)
     return out
 
 
 def compile_place_kernels() -> None:
     """Compile (or load from numba's cache) the place search's kernels (:func:`centre_hits`,
-    :func:`quadloc.service.localization.hypotheses.p3p_grunert_batch`), so that no request
-    pays for it: the service calls it at start-up with
+    :func:`_triplets_kernel`, :func:`quadloc.service.localization.hypotheses.p3p_grunert_batch`),
+    so that no request pays for it: the service calls it at start-up with
     :func:`quadloc.factors.pose_residuals.compile_kernels`."""
     camera = Camera(500.0, 500.0, 320.0, 240.0, 640, 480)
     p3p_grunert_batch(np.array([[[300.0, 200.0], [350.0, 260.0], [280.0, 250.0]]]),
                       np.array([[[0.0, 0.0, 3.0], [0.3, 0.2, 3.1], [-0.1, 0.3, 2.9]]]), camera)
-    _centre_hits_kernel(np.eye(4)[None], np.zeros((1, 1), dtype=np.intp),
-                        np.ones((1, 1), dtype=bool), np.array([[0.0, 0.0, 2.0]]), np.ones(1),
-                        np.zeros(1, dtype=np.intp), np.array([[320.0, 240.0, 50.0, 40.0, 0.1]]),
-                        np.ones(1), np.zeros(1, dtype=np.intp), 500.0, 500.0, 320.0, 240.0,
-                        HIT_SCALE ** 2, 1.0 / SIZE_LOG_SIGMA ** 2)
+    # the argument types of the requests' calls: the place index's arrays are read-only
+    one_i, one_f = _readonly(np.zeros(1), np.intp), _readonly(np.ones(1), float)
+    _hits(camera, np.eye(4)[None], np.zeros(1, dtype=np.intp), _readonly(np.zeros((1, 1)), np.intp),
+          _readonly(np.ones((1, 1)), bool), _readonly(np.array([[0.0, 0.0, 2.0]]), float), one_f,
+          one_i, np.ones(1, dtype=bool), np.array([[320.0, 240.0, 50.0, 40.0, 0.1]]),
+          np.zeros(1, dtype=np.intp))
+    _triplets_kernel(one_i, one_i, one_f, one_i, one_i, one_f, np.ones(1, dtype=bool), False,
+                     np.eye(3), np.ones(3), one_f, _readonly(np.zeros((1, 3)), float),
+                     TRIPLET_DEPTH_RATIO, GEOMETRY_SLACK_M, VIEW_RANGE_M)
 
 
 @jit
-def _centre_hits_kernel(T: FloatArray, local: IntArray, valid: BoolArray, centers: FloatArray,
-                        radius: FloatArray, codes: IntArray, params: FloatArray,
-                        z_unit: FloatArray, label_codes: IntArray, fx: float, fy: float,
-                        cx: float, cy: float, hit2: float, inv_s2: float) -> FloatArray:
-    """:func:`centre_hits` (its arguments as arrays; ``z_unit`` (D,): the size depth per metre
-    of object radius; ``hit2``: HIT_SCALE^2; ``inv_s2``: 1 / SIZE_LOG_SIGMA^2)."""
-    m_total, n_local = local.shape
+def _centre_hits_kernel(T: FloatArray, rows: IntArray, local: IntArray, valid: BoolArray,
+                        centers: FloatArray, radius: FloatArray, codes: IntArray,
+                        wanted: BoolArray, params: FloatArray, z_unit: FloatArray,
+                        label_codes: IntArray, fx: float, fy: float, cx: float, cy: float,
+                        hit2: float, inv_s2: float) -> FloatArray:
+    """:func:`centre_hits` (its arguments as arrays): pose ``m`` against the objects of row
+    ``rows[m]`` of the table ``local`` / ``valid`` whose label ``wanted`` marks; ``z_unit``
+    (D,): the size depth per metre of object radius; ``hit2``: HIT_SCALE^2; ``inv_s2``:
+    1 / SIZE_LOG_SIGMA^2."""
+    m_total = len(rows)
+    n_local = local.shape[1]
     n_det = params.shape[0]
     out = np.zeros(m_total)
     best = np.zeros(n_det)
@@ -286,10 +373,13 @@ def _centre_hits_kernel(T: FloatArray, local: IntArray, valid: BoolArray, center
     sin = np.sin(params[:, 4])
     for m in range(m_total):
         best[:] = 0.0
+        row = rows[m]
         for k in range(n_local):
-            if not valid[m, k]:
+            if not valid[row, k]:
                 continue
-            o = local[m, k]
+            o = local[row, k]
+            if not wanted[codes[o]]:
+                continue
             X = centers[o]
             x = T[m, 0, 0] * X[0] + T[m, 0, 1] * X[1] + T[m, 0, 2] * X[2] + T[m, 0, 3]
             y = T[m, 1, 0] * X[0] + T[m, 1, 1] * X[1] + T[m, 1, 2] * X[2] + T[m, 1, 3]
@@ -322,14 +412,29 @@ def _focus(index: PlaceIndex, anchor: IntArray, hits: FloatArray, hinted: BoolAr
     best anchor of each of the :data:`FOCUS_PLACES` best places (grid cells of the anchors,
     by their best support) found so far, and the hint's objects."""
     order = np.lexsort((np.arange(len(hits)), -hits))
-    cells = index.cells[anchor[order]]
-    _, first = np.unique(cells, axis=0, return_index=True)
+    _, first = np.unique(index.cell_ids[anchor[order]], return_index=True)
     best = anchor[order[np.sort(first)[:FOCUS_PLACES]]]
     allowed = np.zeros(len(index.codes), dtype=bool)
     allowed[index.local[best][index.local_valid[best]]] = True
     if hinted is not None:
         allowed |= hinted
     return allowed
+
+
+def _first_per_place(ranking: IntArray, place_key: IntArray, per_place: int) -> IntArray:
+    """``ranking`` (pose indices, best first) kept to the first ``per_place`` poses of each
+    place (``place_key`` of every pose), in its order: the only ones the choice of seeds of
+    :func:`place_seeds` can take (a place takes its best poses not yet taken, at most
+    ``per_place``), so its loop runs over places, not over every pose."""
+    keys = place_key[ranking]
+    by_key = np.argsort(keys, kind="stable")
+    sorted_keys = keys[by_key]
+    starts = np.flatnonzero(np.r_[True, sorted_keys[1:] != sorted_keys[:-1]])
+    rank = np.arange(len(keys)) - np.repeat(starts, np.diff(np.r_[starts, len(keys)]))
+    keep = np.zeros(len(keys), dtype=bool)
+    keep[by_key[rank < per_place]] = True
+    out: IntArray = ranking[keep]
+    return out
 
 
 def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params: FloatArray,
@@ -348,11 +453,9 @@ def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params
     evidence's); half of the :data:`MAX_PLACES` places are the best whose triplet's first
     object is hinted."""
     code = {c: k for k, c in enumerate(index.labels)}
-    object_codes = index.codes
     label_codes = np.array([code.get(x, -1) for x in labels], dtype=np.intp)
     wanted = np.zeros(len(index.labels), dtype=bool)
     wanted[label_codes[label_codes >= 0]] = True
-    radius = np.prod(compiled.axes, axis=1) ** (1.0 / 3.0)
     all_poses: list[FloatArray] = []
     all_scores: list[FloatArray] = []
     all_anchor: list[IntArray] = []
@@ -378,32 +481,24 @@ def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params
                     STOP_MIN_SUPPORT, FOCUS_MIN_SUPPORT * len(params))):
             focus = _focus(index, np.concatenate(all_anchor), np.concatenate(all_scores),
                            hinted)
-        trip = _triplets(index, compiled, camera, params, labels, triple, rng,
+        trip = _triplets(index, camera, params, labels, triple, rng,
                          restrict if restrict is not None else focus)
         trip = trip[:MAX_TOTAL_TRIPLETS - n_triplets]
         n_triplets += len(trip)
         if len(trip) == 0:
             continue
         img = np.broadcast_to(params[list(triple), :2], (len(trip), 3, 2))
-        poses, owner = p3p_grunert_batch(img, compiled.centers[trip], camera)
-        # the triplet's own objects must sit at depths their sizes allow
-        X = compiled.centers[trip[owner]]
-        z = np.einsum("mkj,mj->mk", X, poses[:, 2, :3]) + poses[:, 2, 3, None]
-        ratio = z / size_depths(camera, params[list(triple), None, 2:4].transpose(1, 0, 2),
-                                radius[trip[owner]])
-        fits = np.all((ratio > 1.0 / TRIPLET_DEPTH_RATIO) & (ratio < TRIPLET_DEPTH_RATIO),
-                      axis=1)
-        poses, owner = poses[fits], owner[fits]
+        # the triplet's own objects must sit at depths their sizes allow (tested in P3P)
+        poses, owner = p3p_grunert_batch(
+            img, index.centers[trip], camera,
+            size_depth=size_depths(camera, params[list(triple), None, 2:4].transpose(1, 0, 2),
+                                   index.radius[trip]),
+            depth_ratio=TRIPLET_DEPTH_RATIO)
         if len(poses) == 0:
             continue
         anchor = trip[owner, 0]
-        # the scored objects first, the table cut to the widest row (the cost is per column)
         # the anchors' local objects (:attr:`PlaceIndex.local`) scored: those of a detected label
-        valid = index.local_valid[anchor] & wanted[object_codes[index.local[anchor]]]
-        cols = np.argsort(~valid, axis=1, kind="stable")[:, :max(1, int(valid.sum(1).max()))]
-        scores = centre_hits(camera, poses, np.take_along_axis(index.local[anchor], cols, 1),
-                             np.take_along_axis(valid, cols, 1), compiled, params,
-                             label_codes, object_codes)
+        scores = _anchor_hits(camera, poses, anchor, index, wanted, params, label_codes)
         all_poses.append(poses)
         all_scores.append(scores)
         all_anchor.append(anchor)
@@ -419,17 +514,19 @@ def place_seeds(compiled: CompiledMap, index: PlaceIndex, camera: Camera, params
     hits = np.concatenate(all_scores)
     anchor = np.concatenate(all_anchor)
     # places: the grid cell of the anchor; the best poses of the best places
-    place_key = np.unique(index.cells[anchor], axis=0, return_inverse=True)[1].ravel()
-    order = np.lexsort((np.arange(len(hits)), -hits)).tolist()
+    place_key = np.unique(index.cell_ids[anchor], return_inverse=True)[1].ravel()
+    order = np.lexsort((np.arange(len(hits)), -hits))
     chosen: dict[int, list[int]] = {}
     passes = [(order, MAX_PLACES)]
     if hinted is not None:
-        passes.insert(0, ([m for m in order if hinted[anchor[m]]], MAX_PLACES // 2))
+        passes.insert(0, (order[np.asarray(hinted, dtype=bool)[anchor[order]]], MAX_PLACES // 2))
     for ranking, cap in passes:
-        for m in ranking:
+        for m in _first_per_place(ranking, place_key, SEEDS_PER_PLACE).tolist():
             key = int(place_key[m])
             if key not in chosen:
                 if len(chosen) >= cap:
+                    if all(len(ms) >= SEEDS_PER_PLACE for ms in chosen.values()):
+                        break  # nothing more can be added
                     continue
                 chosen[key] = []
             if len(chosen[key]) < SEEDS_PER_PLACE and m not in chosen[key]:

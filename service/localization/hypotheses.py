@@ -154,7 +154,7 @@ QUARTIC_IMAG_TOLERANCE = 1e-4
 
 def p3p_grunert_batch(
     image_points: FloatArray, world_points: FloatArray, camera: Camera,
-    newton_steps: int = 2,
+    newton_steps: int = 2, size_depth: FloatArray | None = None, depth_ratio: float = math.inf,
 ) -> tuple[FloatArray, IntArray]:
     """:func:`p3p_hypotheses_batch` over many samples in one compiled kernel: Grunert's
     quartic in the ratio of two of the distances along the bearing rays (Haralick et al.
@@ -167,10 +167,15 @@ def p3p_grunert_batch(
 
     Args:
         image_points: (B, 3, 2) pixels; world_points: (B, 3, 3) world metres.
+        size_depth: optional (B, 3) depths (m) the points' objects' sizes give
+            (:func:`size_depths`): a solution is kept only when each point's depth ``z`` has
+            ``1 / depth_ratio < z / size_depth < depth_ratio`` (the test runs in the kernel,
+            before a rejected solution's pose is stored). None: no such test.
 
     Returns:
         ``(poses (M, 4, 4), sample (M,))``: ``camera_from_world`` solutions with all three
-        points in front of the camera, and the sample each came from.
+        points in front of the camera (and at depths their sizes allow), and the sample each
+        came from.
     """
     img = np.asarray(image_points, dtype=np.float64).reshape(-1, 3, 2)
     X = np.asarray(world_points, dtype=np.float64).reshape(-1, 3, 3)
@@ -180,18 +185,23 @@ def p3p_grunert_batch(
     j = np.stack([(img[..., 0] - camera.cx) / camera.fx, (img[..., 1] - camera.cy) / camera.fy,
                   np.ones((B, 3))], axis=-1)
     j /= np.linalg.norm(j, axis=-1, keepdims=True)
+    zs = np.zeros((0, 3)) if size_depth is None else np.array(size_depth, dtype=np.float64)
     poses, sample, count = _p3p_kernel(np.ascontiguousarray(j), np.array(X), newton_steps,
-                                       QUARTIC_IMAG_TOLERANCE)
-    return poses[:count], sample[:count]
+                                       QUARTIC_IMAG_TOLERANCE, zs.reshape(-1, 3),
+                                       float(depth_ratio))
+    return poses[:count].copy(), sample[:count].copy()  # not views of the 4 B buffer
 
 
 @jit
-def _p3p_kernel(j: FloatArray, X: FloatArray, newton_steps: int, imag_tol: float
+def _p3p_kernel(j: FloatArray, X: FloatArray, newton_steps: int, imag_tol: float,
+                size_depth: FloatArray, depth_ratio: float
                 ) -> tuple[FloatArray, IntArray, int]:
     """:func:`p3p_grunert_batch` for unit bearings ``j`` (B, 3, 3) and world points ``X``
     (B, 3, 3): Grunert's quartic, its roots (:func:`_quartic_roots_one`), Newton polish, the
-    camera points and the pose from the two triangles' frames. Returns poses (4 B, 4, 4),
-    their samples (4 B,) and how many of them are filled."""
+    camera points and the pose from the two triangles' frames; with ``size_depth`` (B, 3)
+    (empty: no test) only the solutions whose depths are within ``depth_ratio`` of them.
+    Returns poses (4 B, 4, 4), their samples (4 B,) and how many of them are filled."""
+    sized = size_depth.shape[0] > 0
     B = X.shape[0]
     poses = np.zeros((4 * B, 4, 4))
     owner = np.zeros(4 * B, dtype=np.intp)
@@ -250,6 +260,8 @@ def _p3p_kernel(j: FloatArray, X: FloatArray, newton_steps: int, imag_tol: float
                 if 1.0 + v ** 2 - 2.0 * v * cb > 0.0 else math.nan
             if not (np.isfinite(u) and np.isfinite(s1) and u > 0.0 and s1 > 0.0):
                 continue
+            if sized and _clearly_off_depth(j, b, s1, u * s1, v * s1, size_depth, depth_ratio):
+                continue  # the exact test below (on the pose) would reject it: no pose built
             for k in range(3):
                 Y[0, k] = j[b, 0, k] * s1
                 Y[1, k] = j[b, 1, k] * u * s1
@@ -269,9 +281,13 @@ def _p3p_kernel(j: FloatArray, X: FloatArray, newton_steps: int, imag_tol: float
                 t[i] = Y[0, i] - (R[i, 0] * X[b, 0, 0] + R[i, 1] * X[b, 0, 1]
                                   + R[i, 2] * X[b, 0, 2])
             for k in range(3):
-                if not R[2, 0] * X[b, k, 0] + R[2, 1] * X[b, k, 1] + R[2, 2] * X[b, k, 2] \
-                        + t[2] > 0.0:
+                z = R[2, 0] * X[b, k, 0] + R[2, 1] * X[b, k, 1] + R[2, 2] * X[b, k, 2] + t[2]
+                if not z > 0.0:
                     ok = False
+                elif sized:
+                    ratio = z / size_depth[b, k]
+                    if not (ratio > 1.0 / depth_ratio and ratio < depth_ratio):
+                        ok = False
             if not ok:
                 continue
             for i in range(3):
@@ -282,6 +298,23 @@ def _p3p_kernel(j: FloatArray, X: FloatArray, newton_steps: int, imag_tol: float
             owner[count] = b
             count += 1
     return poses, owner, count
+
+
+@jit
+def _clearly_off_depth(j: FloatArray, b: int, s0: float, s1: float, s2: float,
+                       size_depth: FloatArray, depth_ratio: float) -> bool:
+    """Whether the camera points ``j[b, k] s_k`` of a P3P solution have a depth outside the
+    size-depth interval of :func:`_p3p_kernel` by more than 1e-9 relative (the pose's own
+    depths, tested after, differ from these by rounding only): the solution is dropped before
+    its pose is built."""
+    lo = (1.0 - 1e-9) / depth_ratio
+    hi = (1.0 + 1e-9) * depth_ratio
+    for k in range(3):
+        s = s0 if k == 0 else s1 if k == 1 else s2
+        ratio = j[b, k, 2] * s / size_depth[b, k]
+        if not (ratio > lo and ratio < hi):
+            return True
+    return False
 
 
 @jit
@@ -300,6 +333,10 @@ def _frame_one(a: FloatArray, b: FloatArray, F: FloatArray) -> None:
     F[0, 2] = F[1, 0] * F[2, 1] - F[2, 0] * F[1, 1]
     F[1, 2] = F[2, 0] * F[0, 1] - F[0, 0] * F[2, 1]
     F[2, 2] = F[0, 0] * F[1, 1] - F[1, 0] * F[0, 1]
+
+
+#: exp(2 pi i / 3), the cube root of unity of :func:`_quartic_roots_one`.
+_OMEGA = cmath.exp(2j * math.pi / 3.0)
 
 
 @jit
@@ -322,10 +359,11 @@ def _quartic_roots_one(a: float, b: float, c: float, d: float, out: np.ndarray) 
     if abs(-Q / 2.0 - root) > abs(u3):
         u3 = -Q / 2.0 - root
     u = cmath.exp(cmath.log(u3) / 3.0) if abs(u3) > 0.0 else 0j
-    omega = cmath.exp(2j * math.pi / 3.0)
     m = 0j
+    uk = u
     for k in range(3):
-        uk = u * omega ** k
+        if k > 0:
+            uk = uk * _OMEGA  # u omega^k, omega the cube root of unity
         mk = (uk - P / (3.0 * uk) if abs(uk) > 0.0 else 0j) - B_ / 3.0
         if abs(mk) > abs(m):
             m = mk

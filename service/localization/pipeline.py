@@ -24,9 +24,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from quadloc.factors.arrays import BoolArray, FloatArray
+from quadloc.factors.arrays import BoolArray, FloatArray, IntArray
 from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.factors.camera import Camera, Ellipsoid
+from quadloc.factors.conics import Ellipse
 from quadloc.factors.gravity_factor import GravityMeasurement
 from quadloc.factors.pose_residuals import expmap_pose3
 from quadloc.factors.rotations import invert_pose
@@ -265,7 +266,12 @@ def localize(
     prior_candidate = None if prior is None else _prior_stage(solve, prior)
     if prior_candidate is not None and len(prior_candidate.inliers) >= len(usable):
         return _answer(solve, prior_candidate, [prior_candidate], ambiguous=False)
-    outcome = _search_stage(solve, seeds, hint)
+    room = None
+    if hint is not None and hinted is not None and _room_hint(hinted):
+        hint_ids = {whole.object_ids[k] for k in np.flatnonzero(hinted).tolist()}
+        room = np.array([k for k, o in enumerate(compiled.object_ids) if o in hint_ids],
+                        dtype=np.intp)
+    outcome = _search_stage(solve, seeds, hint, room)
     if outcome.camera_from_world is None:
         if prior_candidate is not None:
             return _answer(solve, prior_candidate, [prior_candidate], ambiguous=False)
@@ -478,7 +484,17 @@ def _place_stage(
     timings["places"] = (time.perf_counter() - tp) * 1e3
     if len(seeds.poses) == 0:
         return compiled, None
-    return compiled_subset(compiled, seeds.objects), seeds
+    objects = seeds.objects
+    if hinted is not None and _room_hint(hinted):  # searched as one room (_room_search)
+        objects = np.union1d(objects, np.flatnonzero(hinted))
+    return compiled_subset(compiled, objects), seeds
+
+
+def _room_hint(hinted: BoolArray | None) -> bool:
+    """Whether a hint's objects (N,) are few enough to be searched as one room
+    (:func:`_room_search`): fewer than ``PLACE_SEARCH_MIN_OBJECTS``, the size below which a
+    map is searched by sampling."""
+    return hinted is not None and 0 < int(hinted.sum()) < PLACE_SEARCH_MIN_OBJECTS
 
 
 def _hinted_objects(compiled: CompiledMap, hint: PlaceHint) -> BoolArray:
@@ -490,17 +506,21 @@ def _hinted_objects(compiled: CompiledMap, hint: PlaceHint) -> BoolArray:
         hinted[index.near(hint.position, PlaceHint.AGREE_SIGMAS * hint.sigma_m
                           + index.view_range_m)] = True
     elif hint.object_ids is not None:
-        hinted[[k for k, o in enumerate(compiled.object_ids) if o in hint.object_ids]] = True
+        positions = place_index(compiled).positions
+        hinted[[positions[o] for o in hint.object_ids if o in positions]] = True
     return hinted
 
 
 def _search_stage(solve: _Solve, seeds: PlaceSeeds | None = None,
-                  hint: PlaceHint | None = None) -> RansacOutcome:
+                  hint: PlaceHint | None = None, room: IntArray | None = None
+                  ) -> RansacOutcome:
     """The ``hypotheses`` stage: the RANSAC search (seeded by ``options.seed``) up to the
     budget; with a large map's ``seeds`` (:func:`_place_stage`), those poses only, and with a
     ``hint`` the best hypothesis of the hint's places kept aside (``solve.hinted``: refined as
     an extra runner-up and weighed, :func:`_hint_ranking`) when none of the kept ones agrees
-    with it."""
+    with it; with the ``room`` of a hint (indices of the hint's objects in the scorer's map,
+    :func:`_room_hint`), the best hypothesis of the one-room search there
+    (:func:`_room_search`) instead, whatever the kept ones."""
     th = time.perf_counter()
     options = solve.options
     outcome = ransac(solve.scorer, solve.up_world, inlier_iou=options.inlier_iou,
@@ -509,7 +529,9 @@ def _search_stage(solve: _Solve, seeds: PlaceSeeds | None = None,
                      rng=np.random.default_rng(options.seed), deadline=solve.deadline,
                      seeds=None if seeds is None else seeds.poses, sample=seeds is None,
                      keep=PLACE_CANDIDATES if solve.places else KEEP_DISTINCT)
-    if (hint is not None and seeds is not None and outcome.camera_from_world is not None
+    if room is not None and outcome.camera_from_world is not None:
+        solve.hinted = _room_search(solve, room)
+    elif (hint is not None and seeds is not None and outcome.camera_from_world is not None
             and seeds.hinted.any()
             and not any(_hypothesis_agrees(solve, h, hint) for h in outcome.alternatives)):
         local = ransac(solve.scorer, solve.up_world, inlier_iou=options.inlier_iou,
@@ -522,6 +544,36 @@ def _search_stage(solve: _Solve, seeds: PlaceSeeds | None = None,
     solve.evaluated += outcome.hypotheses_evaluated
     solve.timings["hypotheses"] = (time.perf_counter() - th) * 1e3
     return outcome
+
+
+def _room_search(solve: _Solve, room: IntArray) -> Hypothesis | None:
+    """The one-room search (:func:`quadloc.service.localization.search.ransac`, sampling, as
+    on a map of that room alone) over the objects ``room`` (indices in the scorer's map: a
+    hint's room, :func:`_room_hint`) with the usable detections of their labels, within the
+    call's budget; its best hypothesis, matches in the scorer's map (None when none
+    qualifies). With a zone hint the search space is that room: the place search's one seed
+    per place can miss the pose the room's own search finds."""
+    scorer, options = solve.scorer, solve.options
+    room_map = compiled_subset(scorer.compiled, room)
+    rows = [r for r, label in enumerate(scorer.labels)
+            if len(room_map.indices_for(label)) > 0]
+    if len(rows) < 2:
+        return None
+    room_scorer = MatchScorer(room_map, scorer.camera,
+                              [Ellipse(*scorer.params[r]) for r in rows],
+                              [scorer.labels[r] for r in rows],
+                              [scorer.detection_indices[r] for r in rows],
+                              deadline=scorer.deadline)
+    found = ransac(room_scorer, solve.up_world, inlier_iou=options.inlier_iou,
+                   min_inliers=options.min_inliers,
+                   max_hypotheses=options.ransac_max_hypotheses,
+                   rng=np.random.default_rng(options.seed), deadline=solve.deadline)
+    solve.evaluated += found.hypotheses_evaluated
+    if found.camera_from_world is None:
+        return None
+    return Hypothesis(found.camera_from_world,
+                      tuple(Match(m.detection_index, int(room[m.object_index]), m.iou)
+                            for m in found.matches), found.score)
 
 
 # ------------------------------------------------------------------ refine
@@ -537,11 +589,15 @@ def _refine_stage(solve: _Solve, outcome: RansacOutcome, prior_candidate: Candid
     tr = time.perf_counter()
     candidates, first_status = _refine_hypotheses(solve, outcome)
     if solve.hinted is not None and not deadline_passed(solve.deadline):
-        got, _ = _refine_and_verify(
+        capped = replace(solve.options, max_iterations=min(solve.options.max_iterations,
+                                                           ALTERNATIVE_MAX_ITERATIONS))
+        got, status = _refine_and_verify(
             solve, list(solve.hinted.matches), invert_pose(solve.hinted.camera_from_world),
-            replace(solve.options, max_iterations=min(solve.options.max_iterations,
-                                                      ALTERNATIVE_MAX_ITERATIONS)), None)
+            capped, None)
         if got is not None:
+            # refined in full when it competes (_refine_capped_competitors), as a runner-up
+            got.capped = (status == "max_iterations"
+                          and capped.max_iterations < solve.options.max_iterations)
             candidates.append(got)
     if prior_candidate is not None:
         candidates.append(prior_candidate)

@@ -79,3 +79,36 @@ def test_compiled_subset_keeps_ids_and_arrays() -> None:
     validated = SceneMap(sm.map_id, sm.name, sm.up_axis, sm.categories,
                          [sm.objects[i] for i in sel], sm.version)
     assert sub.scene_map.to_dict() == validated.to_dict()
+
+
+def test_radius_cell_ids_and_positions_equal_their_definitions() -> None:
+    cm = compile_map(synthetic_map(300, seed=9))
+    idx = place_index(cm)
+    assert [idx.positions[o] for o in cm.object_ids] == [cm.index_of(o) for o in cm.object_ids]
+    axes = np.asarray(cm.axes)
+    want = np.array([(a * b * c) ** (1.0 / 3.0) for a, b, c in axes.tolist()])
+    np.testing.assert_allclose(idx.radius, want, rtol=1e-12)
+    cells = [tuple(c) for c in np.floor(np.asarray(cm.centers) / idx.view_range_m)
+             .astype(int).tolist()]
+    ids = idx.cell_ids.tolist()
+    for a in range(0, len(cm), 7):
+        for b in range(len(cm)):
+            assert (ids[a] == ids[b]) == (cells[a] == cells[b])
+
+
+def test_compiled_subset_equals_compiling_the_sub_map() -> None:
+    """The subset's arrays are rows of the parent's: the same numbers compile_map gives a
+    map of those objects built anew (atol 1e-12), categories indexed in the subset."""
+    sm = synthetic_map(60, seed=4)
+    cm = compile_map(sm)
+    sel = np.array([0, 5, 6, 17, 33, 59])
+    sub = compiled_subset(cm, sel)
+    fresh = compile_map(SceneMap(sm.map_id, sm.name, sm.up_axis, sm.categories,
+                                 [sm.objects[i] for i in sel], sm.version))
+    assert sub.object_ids == fresh.object_ids and sub.categories == fresh.categories
+    for name in ("centers", "axes", "rotations", "shape_matrices", "dual_quadrics"):
+        np.testing.assert_allclose(getattr(sub, name), getattr(fresh, name), atol=1e-12)
+    assert sub.indices_by_category.keys() == fresh.indices_by_category.keys()
+    for c, ix in fresh.indices_by_category.items():
+        assert np.array_equal(sub.indices_by_category[c], ix)
+    assert compile_map(sub.scene_map) is sub  # memoised on its sub-map

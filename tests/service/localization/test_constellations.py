@@ -13,7 +13,8 @@ import pytest
 
 from quadloc.factors.camera import Ellipsoid, project_ellipsoid
 from quadloc.factors.rotations import invert_pose
-from quadloc.maps.places import place_index
+from quadloc.maps.compiled import compiled_subset
+from quadloc.maps.places import VIEW_RANGE_M, place_index
 from quadloc.service.localization import constellations, hypotheses
 from quadloc.service.localization.constellations import (
     HIT_SCALE,
@@ -273,13 +274,14 @@ def test_the_start_up_compilation_covers_the_place_search(perturbed: tuple) -> N
     specialisation that requests use: a search after it compiles nothing more."""
     b, cam, frames = perturbed
     compile_place_kernels()
-    kernels = [vars(constellations)["_centre_hits_kernel"], vars(hypotheses)["_p3p_kernel"]]
+    kernels = [vars(constellations)["_centre_hits_kernel"],
+               vars(constellations)["_triplets_kernel"], vars(hypotheses)["_p3p_kernel"]]
     before = [list(k.signatures) for k in kernels]
     dets = frames[0].frame.detections
     place_seeds(b.compiled, place_index(b.compiled), cam,
                 np.array([d.ellipse.params() for d in dets]), [d.label for d in dets],
                 np.random.default_rng(0))
-    assert [len(s) for s in before] == [1, 1]
+    assert [len(s) for s in before] == [1, 1, 1]
     assert [list(k.signatures) for k in kernels] == before
 
 
@@ -348,3 +350,107 @@ def test_small_exact_buildings_never_answer_a_wrong_copy(n_rooms: int, seed: int
                       hint=PlaceHint(object_ids=frozenset(bf.room.object_ids)))
     pos, _ = pose_errors(hinted.world_from_camera, bf.world_from_camera)
     assert not (hinted.localized and pos > 0.5)
+
+
+def test_pair_test_equals_the_extremes_over_a_dense_grid_of_depths() -> None:
+    """_pair_possible against the least / largest ``|x ray_a - y ray_b|`` over a 400 x 400
+    grid of the depth box (away from the bounds by more than the grid's resolution, 2 cm)."""
+    rng = np.random.default_rng(5)
+    rho, slack = constellations.TRIPLET_DEPTH_RATIO, constellations.GEOMETRY_SLACK_M
+    checked = 0
+    for _ in range(40):
+        ra, rb = np.r_[rng.uniform(-0.6, 0.6, 2), 1.0], np.r_[rng.uniform(-0.6, 0.6, 2), 1.0]
+        za, zb = rng.uniform(1.0, 5.0, 2)
+        x = np.linspace(za / rho, za * rho, 400)
+        y = np.linspace(zb / rho, zb * rho, 400)
+        d = np.linalg.norm(x[:, None, None] * ra - y[None, :, None] * rb, axis=2)
+        lo, hi = d.min(), d.max()
+        for dist in rng.uniform(0.0, 8.0, 25):
+            if min(abs(dist - lo), abs(dist - hi)) < 0.02 + slack:
+                continue
+            got = constellations._pair_possible(za, zb, dist, ra @ ra, rb @ rb, ra @ rb, rho,
+                                                slack)
+            assert got == (lo <= dist <= hi)
+            checked += 1
+    assert checked > 500
+
+
+def test_triplets_equal_a_brute_force_enumeration() -> None:
+    """The compiled join of _triplets against every label-consistent triplet of distinct
+    objects whose three centres are within the view range of each other and whose three pairs
+    pass the pair test, enumerated object by object (a small building, no cap reached)."""
+    b = make_building(3, "perturbed", seed=71, corridors=True)
+    cm = b.compiled
+    idx = place_index(cm)
+    cam, frames = building_frames(b, 4, seed=72, min_detections=4)
+    rho, slack = constellations.TRIPLET_DEPTH_RATIO, constellations.GEOMETRY_SLACK_M
+    f = 0.5 * (cam.fx + cam.fy)
+    radius = np.prod(cm.axes, axis=1) ** (1.0 / 3.0)
+    for bf in frames:
+        dets = bf.frame.detections
+        params = np.array([d.ellipse.params() for d in dets])
+        labels = [d.label for d in dets]
+        triple = (0, 1, 2)
+        got = constellations._triplets(idx, cam, params, labels, triple,
+                                       np.random.default_rng(0))
+        rays = np.column_stack([(params[:3, 0] - cam.cx) / cam.fx,
+                                (params[:3, 1] - cam.cy) / cam.fy, np.ones(3)])
+        z1 = f / np.sqrt(params[:3, 2] * params[:3, 3])  # depth per metre of radius
+
+        def ok(k: int, m: int, o: int, p: int, rays: np.ndarray = rays,
+               z1: np.ndarray = z1) -> bool:
+            dist = float(np.linalg.norm(cm.centers[o] - cm.centers[p]))
+            return dist <= VIEW_RANGE_M and bool(constellations._pair_possible(
+                z1[k] * radius[o], z1[m] * radius[p], dist, rays[k] @ rays[k],
+                rays[m] @ rays[m], rays[k] @ rays[m], rho, slack))
+
+        want = [(i, j, k) for i in cm.indices_for(labels[0]).tolist()
+                for j in cm.indices_for(labels[1]).tolist()
+                for k in cm.indices_for(labels[2]).tolist()
+                if len({i, j, k}) == 3 and ok(0, 1, i, j) and ok(0, 2, i, k)
+                and ok(1, 2, j, k)]
+        assert len(want) <= constellations.MAX_TRIPLETS
+        assert sorted(map(tuple, got.tolist())) == sorted(want)
+
+
+def test_p3p_size_depth_test_keeps_exactly_the_poses_at_allowed_depths() -> None:
+    """The depth test inside the P3P kernel against the depths of the poses P3P gives without
+    it, computed here: every solution whose three depths are within the ratio of the size
+    depths is kept (1e-12), no other (away from the bounds: 1e-9 in log ratio)."""
+    img, X, _ = _p3p_problems(200, seed=13)
+    zsize = np.random.default_rng(14).uniform(2.0, 6.0, (len(X), 3))
+    every, owner = p3p_grunert_batch(img, X, CAM)
+    kept, kept_owner = p3p_grunert_batch(img, X, CAM, size_depth=zsize, depth_ratio=1.6)
+    z = np.einsum("mkj,mj->mk", X[owner], every[:, 2, :3]) + every[:, 2, 3, None]
+    log_ratio = np.log(z / zsize[owner])
+    inside = np.all(np.abs(log_ratio) < math.log(1.6), axis=1)
+    clear = np.all(np.abs(np.abs(log_ratio) - math.log(1.6)) > 1e-9, axis=1)
+    assert 0 < inside.sum() < len(every) and clear.all()
+    assert len(kept) == int(inside.sum())
+    for P, b in zip(every[inside], owner[inside], strict=True):
+        assert min(np.abs(kept[kept_owner == b] - P).max(axis=(1, 2))) < 1e-12
+
+
+@pytest.mark.parametrize(("rooms", "mode", "seed"), [(60, "exact", 81), (60, "perturbed", 83)])
+def test_a_zone_hint_answers_as_the_room_alone(rooms: int, mode: str, seed: int) -> None:
+    """With a zone hint the search space is that room: every frame the room's own map
+    (one-room search) localizes within 10 cm / 5 deg is localized there with the hint on the
+    whole building too (the room's one-room search is a candidate, pipeline._room_search).
+    Frames of the simulator's default noise, truncation, wrong labels, spurious detections."""
+    b = make_building(rooms, mode, seed=seed)
+    cam, frames = building_frames(b, 24, seed=seed + 1)
+    ids = {o: k for k, o in enumerate(b.compiled.object_ids)}
+    room_within = both = 0
+    for bf in frames:
+        room = compiled_subset(b.compiled, np.array(sorted(ids[o] for o in bf.room.object_ids)))
+        alone = localize(bf.frame.detections, room, cam)
+        pos, rot = pose_errors(alone.world_from_camera, bf.world_from_camera)
+        if not (alone.localized and pos <= 0.1 and rot <= 5):
+            continue
+        room_within += 1
+        hinted = localize(bf.frame.detections, b.compiled, cam,
+                          hint=PlaceHint(object_ids=frozenset(bf.room.object_ids)))
+        pos, rot = pose_errors(hinted.world_from_camera, bf.world_from_camera)
+        both += hinted.localized and pos <= 0.1 and rot <= 5
+    assert room_within >= 0.5 * len(frames)
+    assert both == room_within
