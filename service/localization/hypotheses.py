@@ -29,7 +29,8 @@ from quadloc.factors.rotations import so3_exp
 if TYPE_CHECKING:
     from cv2.typing import MatLike
 
-__all__ = ["p2e_hypotheses", "p3p_grunert_batch", "p3p_hypotheses", "p3p_hypotheses_batch",
+__all__ = ["P3P_REPROJECTION_TOLERANCE_PX", "p2e_hypotheses", "p3p_checked_batch",
+           "p3p_grunert_batch", "p3p_hypotheses", "p3p_hypotheses_batch",
            "point_centres", "project_objects", "size_depths"]
 
 _EMPTY = np.zeros((0, 4, 4))
@@ -163,7 +164,10 @@ def p3p_grunert_batch(
     polished by ``newton_steps`` Newton steps on the quartic, then the rigid transform of the three
     camera-frame points onto the world points (the two congruent triangles' frames aligned).
     The many-sample search of large maps (:mod:`quadloc.service.localization.constellations`)
-    calls it; the same poses as ``cv2.solveP3P`` (tested), in a different order.
+    calls it; the same poses as ``cv2.solveP3P`` (tested), in a different order, except in
+    symmetric configurations where a root of the quartic is (nearly) double: there it may
+    return a pose that does not reproject the three points (a square of objects seen
+    head-on: 3 px off; :func:`p3p_checked_batch` falls back to ``cv2.solveP3P`` there).
 
     Args:
         image_points: (B, 3, 2) pixels; world_points: (B, 3, 3) world metres.
@@ -183,6 +187,46 @@ def p3p_grunert_batch(
     poses, sample, count = _p3p_kernel(np.ascontiguousarray(j), np.array(X), newton_steps,
                                        QUARTIC_IMAG_TOLERANCE)
     return poses[:count], sample[:count]
+
+
+#: A compiled P3P solution that reprojects one of its three points further than this (px)
+#: from its image point is not exact (:func:`p3p_checked_batch`); exact ones are at ~1e-9 px.
+P3P_REPROJECTION_TOLERANCE_PX = 1e-4
+
+
+def p3p_checked_batch(
+    image_points: FloatArray, world_points: FloatArray, camera: Camera
+) -> tuple[FloatArray, IntArray]:
+    """The poses of :func:`p3p_hypotheses_batch` (``cv2.solveP3P``) at the cost of the
+    compiled :func:`p3p_grunert_batch`: its solutions, except for the samples where one of
+    them reprojects a point further than :data:`P3P_REPROJECTION_TOLERANCE_PX` (a nearly
+    double root of the quartic): those samples are solved by ``cv2.solveP3P``. The RANSAC
+    search's P3P (:mod:`quadloc.service.localization.search`).
+
+    Args:
+        image_points: (B, 3, 2) pixels; world_points: (B, 3, 3) world metres.
+
+    Returns:
+        ``(poses (M, 4, 4), sample (M,))``: ``camera_from_world`` solutions, grouped by
+        sample in sample order, and the sample each came from.
+    """
+    img = np.asarray(image_points, dtype=np.float64).reshape(-1, 3, 2)
+    X = np.asarray(world_points, dtype=np.float64).reshape(-1, 3, 3)
+    poses, sample = p3p_grunert_batch(img, X, camera)
+    if len(poses) == 0:
+        return poses, sample
+    # the three points in each solution's camera (M, 3, 3) and their pixels
+    cam = np.einsum("mij,mkj->mki", poses[:, :3, :3], X[sample]) + poses[:, None, :3, 3]
+    px = np.einsum("ij,mkj->mki", camera.K, cam)
+    err = np.abs(px[..., :2] / px[..., 2:] - img[sample]).max(axis=(1, 2))
+    bad = np.unique(sample[~(err <= P3P_REPROJECTION_TOLERANCE_PX)])
+    if len(bad) == 0:
+        return poses, sample
+    ref, ref_sample = p3p_hypotheses_batch(img[bad], X[bad], camera)
+    keep = ~np.isin(sample, bad)
+    all_sample = np.concatenate([sample[keep], bad[ref_sample]])
+    order = np.argsort(all_sample, kind="stable")
+    return np.concatenate([poses[keep], ref])[order], all_sample[order]
 
 
 @jit

@@ -27,7 +27,7 @@ import numpy as np
 from quadloc.factors.arrays import FloatArray
 from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.factors.conics import Ellipse
-from quadloc.service.localization.hypotheses import p2e_hypotheses, p3p_hypotheses_batch
+from quadloc.service.localization.hypotheses import p2e_hypotheses, p3p_checked_batch
 from quadloc.service.localization.sampling import (
     Sample,
     count_samples,
@@ -283,13 +283,14 @@ class _Search:
             self.timed_out = True
 
     def solve(self, chunk: list[Sample], size: int) -> FloatArray:
-        """Candidate poses (M, 4, 4) ``camera_from_world`` of minimal samples: one vectorised
-        P3P call, or P2E."""
+        """Candidate poses (M, 4, 4) ``camera_from_world`` of minimal samples: one P3P call
+        (:func:`quadloc.service.localization.hypotheses.p3p_checked_batch`: the poses of
+        ``cv2.solveP3P`` from one compiled kernel for the batch), or P2E."""
         scorer, cm = self.scorer, self.scorer.compiled
         if size == 3:
-            poses, _ = p3p_hypotheses_batch(scorer.params[np.array([c[0] for c in chunk]), :2],
-                                            cm.centers[np.array([c[1] for c in chunk])],
-                                            scorer.camera)
+            poses, _ = p3p_checked_batch(scorer.params[np.array([c[0] for c in chunk]), :2],
+                                         cm.centers[np.array([c[1] for c in chunk])],
+                                         scorer.camera)
             return poses
         found: list[FloatArray] = []
         for dets, objs in chunk:

@@ -360,7 +360,7 @@ def test_pose_acceptance_uses_min_inliers_and_one_to_one_counts(monkeypatch, cas
     dense[1, 0, 0] = dense[1, 1, 1] = dense[1, 2, 2] = 0.5
     poses = np.stack([np.eye(4), np.eye(4)])
     poses[1, 0, 3] = 1.0  # pose k's IoUs are dense[k]
-    monkeypatch.setattr(search_module, "p3p_hypotheses_batch",
+    monkeypatch.setattr(search_module, "p3p_checked_batch",
                         lambda *a: (poses, np.zeros(len(poses), dtype=int)))
     out = ransac(_FixedIouScorer(dense), UP, inlier_iou=0.2, min_inliers=3, max_hypotheses=10,
                  rng=np.random.default_rng(0))
