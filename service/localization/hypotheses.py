@@ -215,10 +215,8 @@ def p3p_checked_batch(
     poses, sample = p3p_grunert_batch(img, X, camera)
     if len(poses) == 0:
         return poses, sample
-    # the three points in each solution's camera (M, 3, 3) and their pixels
-    cam = np.einsum("mij,mkj->mki", poses[:, :3, :3], X[sample]) + poses[:, None, :3, 3]
-    px = np.einsum("ij,mkj->mki", camera.K, cam)
-    err = np.abs(px[..., :2] / px[..., 2:] - img[sample]).max(axis=(1, 2))
+    err = _reprojection_errors(poses, sample, np.ascontiguousarray(img), np.ascontiguousarray(X),
+                               camera.fx, camera.fy, camera.cx, camera.cy)
     bad = np.unique(sample[~(err <= P3P_REPROJECTION_TOLERANCE_PX)])
     if len(bad) == 0:
         return poses, sample
@@ -227,6 +225,27 @@ def p3p_checked_batch(
     all_sample = np.concatenate([sample[keep], bad[ref_sample]])
     order = np.argsort(all_sample, kind="stable")
     return np.concatenate([poses[keep], ref])[order], all_sample[order]
+
+
+@jit
+def _reprojection_errors(poses: FloatArray, sample: IntArray, img: FloatArray, X: FloatArray,
+                         fx: float, fy: float, cx: float, cy: float) -> FloatArray:
+    """Largest pixel distance (per coordinate) of the three world points ``X[sample[m]]``
+    (B, 3, 3) m projected by ``poses[m]`` (M, 4, 4) ``camera_from_world`` (pinhole ``fx, fy,
+    cx, cy`` px) from their image points ``img[sample[m]]`` (B, 3, 2) px; (M,)."""
+    out = np.zeros(poses.shape[0])
+    c = np.zeros(3)
+    for m in range(poses.shape[0]):
+        b = sample[m]
+        worst = 0.0
+        for k in range(3):
+            for i in range(3):
+                c[i] = (poses[m, i, 0] * X[b, k, 0] + poses[m, i, 1] * X[b, k, 1]
+                        + poses[m, i, 2] * X[b, k, 2] + poses[m, i, 3])
+            worst = max(worst, abs(fx * c[0] / c[2] + cx - img[b, k, 0]),
+                        abs(fy * c[1] / c[2] + cy - img[b, k, 1]))
+        out[m] = worst
+    return out
 
 
 @jit
