@@ -232,15 +232,16 @@ def _pair_iou_kernel(mx: FloatArray, my: FloatArray, s00: FloatArray, s01: Float
 
 def compile_scoring_kernels() -> None:
     """Compile (or load from numba's cache) the scorer's kernels (:meth:`MatchScorer.pair_iou`,
-    :func:`iou_estimates`) with the argument types of the search's calls, so that no request
-    pays for it: the service calls it at start-up with
-    :func:`quadloc.factors.pose_residuals.compile_kernels`."""
+    :func:`iou_estimates`, the greedy assignment) with the argument types of the search's
+    calls, so that no request pays for it (called by
+    :func:`quadloc.service.localization.search.compile_search_kernels` at start-up)."""
     one = np.ones((1, 1))
     xy = np.zeros((1, 2, 4))
     _pair_iou_kernel(one, one, one, 0 * one, one, np.ones((1, 1), dtype=bool),
                      np.zeros(1, dtype=np.int32), np.zeros(1, dtype=np.int32), np.zeros(1),
                      np.zeros(1), np.ones(1), np.ones(1), xy, 0.0, np.zeros((1, 1)), 0, 0, 1)
     iou_estimates(np.zeros((4, 2)), np.ones(()), np.zeros(2), np.eye(2))
+    _greedy(np.zeros(1, dtype=np.int32), np.zeros(1, dtype=np.int32), np.ones(1), 0.5, [0])
 
 
 @dataclass(frozen=True)
@@ -268,22 +269,47 @@ def _greedy(pair_d: IntArray | Int32Array, pair_o: IntArray | Int32Array, iou: F
             threshold: float, detection_indices: Sequence[int]) -> list[Match]:
     """THE greedy one-to-one assignment of pairs (``pair_d[p]``, ``pair_o[p]``) with
     ``iou[p] >= threshold``, by decreasing IoU (ties: the later pair first), sorted by
-    detection index."""
-    cand = np.flatnonzero(iou >= threshold)
-    vals: list[float] = iou[cand].tolist()
-    ds: list[int] = pair_d[cand].tolist()
-    os_: list[int] = pair_o[cand].tolist()
-    used_d: set[int] = set()
-    used_o: set[int] = set()
-    out = []
-    # a stable ascending sort, walked backwards
-    for k in reversed(sorted(range(len(vals)), key=vals.__getitem__)):
-        d, o = ds[k], os_[k]
-        if d not in used_d and o not in used_o:
-            used_d.add(d)
-            used_o.add(o)
-            out.append(Match(int(detection_indices[d]), o, vals[k]))
+    detection index (the walk: :func:`_greedy_kernel`)."""
+    picked = _greedy_kernel(np.ascontiguousarray(pair_d, dtype=np.int64),
+                            np.ascontiguousarray(pair_o, dtype=np.int64),
+                            np.ascontiguousarray(iou, dtype=float), threshold)
+    vals: list[float] = iou[picked].tolist()
+    ds: list[int] = pair_d[picked].tolist()
+    os_: list[int] = pair_o[picked].tolist()
+    out = [Match(int(detection_indices[d]), o, v) for d, o, v in zip(ds, os_, vals, strict=True)]
     return sorted(out, key=lambda m: m.detection_index)
+
+
+@jit
+def _greedy_kernel(pair_d: IntArray, pair_o: IntArray, iou: FloatArray, threshold: float
+                   ) -> IntArray:
+    """The pairs :func:`_greedy` keeps, in the order it takes them: the pairs with
+    ``iou >= threshold`` in a stable ascending sort of their IoUs, walked backwards, each kept
+    when neither its detection nor its object is taken yet. Returns their indices (K,)."""
+    n = iou.shape[0]
+    cand = np.empty(n, dtype=np.int64)
+    n_cand = 0
+    n_d, n_o = 0, 0
+    for p in range(n):
+        if iou[p] >= threshold:
+            cand[n_cand] = p
+            n_cand += 1
+            n_d = max(n_d, pair_d[p] + 1)
+            n_o = max(n_o, pair_o[p] + 1)
+    cand = cand[:n_cand]
+    order = np.argsort(iou[cand], kind="mergesort")  # stable
+    used_d = np.zeros(n_d, dtype=np.bool_)
+    used_o = np.zeros(n_o, dtype=np.bool_)
+    picked = np.empty(n_cand, dtype=np.int64)
+    n_picked = 0
+    for k in range(n_cand - 1, -1, -1):
+        p = cand[order[k]]
+        if not used_d[pair_d[p]] and not used_o[pair_o[p]]:
+            used_d[pair_d[p]] = True
+            used_o[pair_o[p]] = True
+            picked[n_picked] = p
+            n_picked += 1
+    return picked[:n_picked]
 
 
 class MatchScorer:
