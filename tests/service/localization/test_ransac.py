@@ -540,3 +540,15 @@ def test_split_draw_is_numpy_choice_with_p():
         for _ in range(20):
             assert int(a.choice(n, p=p)) == int(cdf.searchsorted(b.random(), side="right"))
             assert a.choice(5, 2, replace=False).tolist() == b.choice(5, 2, replace=False).tolist()
+
+
+def test_combination_rank_is_the_position_in_itertools_combinations():
+    """_combination_rank (closed form) == the index in itertools.combinations' listing."""
+    import itertools
+
+    from quadloc.service.localization.sampling import _combination_rank
+
+    for n in range(1, 8):
+        for m in range(1, min(n, 3) + 1):
+            for k, c in enumerate(itertools.combinations(range(n), m)):
+                assert _combination_rank(c, n) == k
