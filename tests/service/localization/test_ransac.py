@@ -552,3 +552,35 @@ def test_combination_rank_is_the_position_in_itertools_combinations():
         for m in range(1, min(n, 3) + 1):
             for k, c in enumerate(itertools.combinations(range(n), m)):
                 assert _combination_rank(c, n) == k
+
+
+def test_iou_estimate_kernel_equals_the_rule_written_out_in_numpy():
+    """iou_estimates (the compiled point test) == its rule computed here with numpy: the
+    fraction of the detection's filling points with (x - c)^T (A^-1)^-1 (x - c) <= 1 (solved,
+    not inverted in closed form) times the detection area as the intersection, over the
+    union with the projection's area pi sqrt(det A^-1); 0 where det(A^-1) <= 0. A point on
+    the boundary may round the other way: at most one point of difference, in few pairs."""
+    rng = np.random.default_rng(3)
+    n_pairs, n_points = 400, 96
+    dets = [random_ellipse(rng) for _ in range(n_pairs)]
+    projs = [Ellipse(d.cx + rng.normal(0, 30), d.cy + rng.normal(0, 30),
+                     d.a * rng.uniform(0.5, 2), d.b * rng.uniform(0.5, 2),
+                     rng.uniform(-math.pi, math.pi)) for d in dets]
+    pts = ellipse_points(np.array([d.params() for d in dets]), sunflower_disk(n_points))
+    areas = np.array([d.area for d in dets])
+    centres = np.array([p.center for p in projs])
+    S = np.array([p.gaussian()[1] for p in projs])
+    S[:5] = np.array([[1.0, 2.0], [2.0, 1.0]])  # det < 0: no ellipse, IoU 0
+    got = iou_estimates(pts, areas, centres, S)
+    # the rule, written out
+    diff = pts - centres[:, None, :]
+    phi = np.einsum("kmi,kmi->km", diff, np.linalg.solve(S[:, None], diff[..., None])[..., 0])
+    inter = (phi <= 1.0).mean(axis=1) * areas
+    union = areas + math.pi * np.sqrt(np.maximum(np.linalg.det(S), 0.0)) - inter
+    want = np.where(np.linalg.det(S) > 0, np.minimum(inter / np.maximum(union, 1e-300), 1.0), 0.0)
+    assert np.all(got[:5] == 0.0)
+    assert (want > 0.3).sum() > 50  # real overlaps are compared
+    close = np.abs(got - want) <= 1e-12
+    assert close.mean() >= 0.98
+    one_point = areas / n_points / np.maximum(union - areas / n_points, 1e-300)
+    assert np.all(np.abs(got - want) <= 1.01 * one_point + 1e-12)
