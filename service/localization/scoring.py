@@ -241,7 +241,8 @@ def compile_scoring_kernels() -> None:
                      np.zeros(1, dtype=np.int32), np.zeros(1, dtype=np.int32), np.zeros(1),
                      np.zeros(1), np.ones(1), np.ones(1), xy, 0.0, np.zeros((1, 1)), 0, 0, 1)
     iou_estimates(np.zeros((4, 2)), np.ones(()), np.zeros(2), np.eye(2))
-    _greedy(np.zeros(1, dtype=np.int32), np.zeros(1, dtype=np.int32), np.ones(1), 0.5, [0])
+    for dtype in (np.int32, np.int64):
+        _greedy(np.zeros(1, dtype=dtype), np.zeros(1, dtype=dtype), np.ones(1), 0.5, [0])
 
 
 @dataclass(frozen=True)
@@ -270,9 +271,8 @@ def _greedy(pair_d: IntArray | Int32Array, pair_o: IntArray | Int32Array, iou: F
     """THE greedy one-to-one assignment of pairs (``pair_d[p]``, ``pair_o[p]``) with
     ``iou[p] >= threshold``, by decreasing IoU (ties: the later pair first), sorted by
     detection index (the walk: :func:`_greedy_kernel`)."""
-    picked = _greedy_kernel(np.ascontiguousarray(pair_d, dtype=np.int64),
-                            np.ascontiguousarray(pair_o, dtype=np.int64),
-                            np.ascontiguousarray(iou, dtype=float), threshold)
+    # int32 (a scorer's pairs) or int64 (a dense matrix's) indices: one specialisation each
+    picked = _greedy_kernel(pair_d, pair_o, np.ascontiguousarray(iou, dtype=float), threshold)
     vals: list[float] = iou[picked].tolist()
     ds: list[int] = pair_d[picked].tolist()
     os_: list[int] = pair_o[picked].tolist()
@@ -281,8 +281,8 @@ def _greedy(pair_d: IntArray | Int32Array, pair_o: IntArray | Int32Array, iou: F
 
 
 @jit
-def _greedy_kernel(pair_d: IntArray, pair_o: IntArray, iou: FloatArray, threshold: float
-                   ) -> IntArray:
+def _greedy_kernel(pair_d: IntArray | Int32Array, pair_o: IntArray | Int32Array, iou: FloatArray,
+                   threshold: float) -> IntArray:
     """The pairs :func:`_greedy` keeps, in the order it takes them: the pairs with
     ``iou >= threshold`` in a stable ascending sort of their IoUs, walked backwards, each kept
     when neither its detection nor its object is taken yet. Returns their indices (K,)."""
