@@ -121,13 +121,14 @@ def iou_estimates(
     shape = np.broadcast_shapes(pts.shape[:-2], np.shape(det_areas), np.shape(proj_centres)[:-1],
                                 S.shape[:-2])
     n_pts = pts.shape[-2]
-    # one row per estimate: (K, 2, M) points (x and y rows), (K,) area, (K, 2) centre, (K, 3)
-    xy = np.ascontiguousarray(np.moveaxis(np.broadcast_to(pts, (*shape, n_pts, 2)), -1, -2)
-                              .reshape(-1, 2, n_pts))
-    areas = np.ascontiguousarray(np.broadcast_to(det_areas, shape), dtype=float).reshape(-1)
-    centres = np.ascontiguousarray(np.broadcast_to(proj_centres, (*shape, 2)),
-                                   dtype=float).reshape(-1, 2)
-    s = np.ascontiguousarray(np.broadcast_to(S, (*shape, 2, 2))).reshape(-1, 2, 2)
+    # one row per estimate: (K, 2, M) points (x and y rows), (K,) area, (K, 2) centre and
+    # (K, 2, 2) A^-1, as fresh C-ordered float64 copies (the kernel's one argument type)
+    xy = np.array(np.moveaxis(np.broadcast_to(pts, (*shape, n_pts, 2)), -1, -2),
+                  dtype=float, order="C").reshape(-1, 2, n_pts)
+    areas = np.array(np.broadcast_to(det_areas, shape), dtype=float, order="C").reshape(-1)
+    centres = np.array(np.broadcast_to(proj_centres, (*shape, 2)), dtype=float,
+                       order="C").reshape(-1, 2)
+    s = np.array(np.broadcast_to(S, (*shape, 2, 2)), dtype=float, order="C").reshape(-1, 2, 2)
     out: FloatArray = _iou_rows_kernel(xy, areas, centres, s).reshape(shape)
     return out
 
