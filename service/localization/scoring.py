@@ -158,7 +158,8 @@ def _point_iou(xy: FloatArray, det_area: float, cx: float, cy: float, a00: float
         if a00 * dx ** 2 + 2 * a01 * dx * dy + a11 * dy ** 2 <= 1.0:
             inside += 1
     inter = inside / n_pts * det_area
-    return min(inter / max(det_area + area_proj - inter, 1e-300), 1.0)
+    iou: float = min(inter / max(det_area + area_proj - inter, 1e-300), 1.0)
+    return iou
 
 
 @jit
@@ -242,8 +243,8 @@ def compile_scoring_kernels() -> None:
                      np.zeros(1, dtype=np.int32), np.zeros(1, dtype=np.int32), np.zeros(1),
                      np.zeros(1), np.ones(1), np.ones(1), xy, 0.0, np.zeros((1, 1)), 0, 0, 1)
     iou_estimates(np.zeros((4, 2)), np.ones(()), np.zeros(2), np.eye(2))
-    for dtype in (np.int32, np.int64):
-        _greedy(np.zeros(1, dtype=dtype), np.zeros(1, dtype=dtype), np.ones(1), 0.5, [0])
+    _greedy(np.zeros(1, dtype=np.int32), np.zeros(1, dtype=np.int32), np.ones(1), 0.5, [0])
+    _greedy(np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64), np.ones(1), 0.5, [0])
 
 
 @dataclass(frozen=True)
