@@ -584,3 +584,27 @@ def test_iou_estimate_kernel_equals_the_rule_written_out_in_numpy():
     assert close.mean() >= 0.98
     one_point = areas / n_points / np.maximum(union - areas / n_points, 1e-300)
     assert np.all(np.abs(got - want) <= 1.01 * one_point + 1e-12)
+
+
+def test_greedy_assignment_equals_the_rule_written_out():
+    """greedy_assignment (the compiled walk) == its rule in plain Python: the pairs at or
+    above the threshold by decreasing IoU (ties: the later pair in row-major order first),
+    each kept when its detection and its object are both still free; sorted by detection.
+    IoUs quantised to tenths: many ties."""
+    rng = np.random.default_rng(12)
+    for _ in range(200):
+        n_det, n_obj = rng.integers(1, 7), rng.integers(1, 7)
+        iou = np.round(rng.uniform(0, 1, (n_det, n_obj)), 1)
+        rows = list(rng.permutation(20)[:n_det])
+        pairs = [(float(iou[d, o]), d * n_obj + o, d, o) for d in range(n_det)
+                 for o in range(n_obj) if iou[d, o] >= 0.3]
+        pairs.sort(key=lambda p: (-p[0], -p[1]))
+        used_d, used_o, want = set(), set(), []
+        for v, _, d, o in pairs:
+            if d not in used_d and o not in used_o:
+                used_d.add(d)
+                used_o.add(o)
+                want.append((int(rows[d]), o, v))
+        got = [(m.detection_index, m.object_index, m.iou)
+               for m in greedy_assignment(iou, rows, 0.3)]
+        assert got == sorted(want, key=lambda t: t[0])
