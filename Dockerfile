@@ -29,7 +29,8 @@ COPY service/ service/
 COPY sdk/python/ sdk/python/
 # The light SDK distribution (sdk/python/, which the server depends on) and the project from the
 # checkout (build backend from the lock); then a smoke test of the imports.
-# The numeric kernels (numba, factors/jit.py) are compiled here into their cache (~13 s), so
+# The numeric kernels (numba, factors/jit.py: the factors', the place search's and the RANSAC
+# search's, App.warm_up) are compiled here into their cache (~13 s), so
 # that a container starts from it (<1 s); numba needs the directory writable (the runtime user
 # owns it; on a read-only file system each process compiles them at start instead). numba
 # checks each source file's mtime, which an image layer keeps to the second only: the sources
@@ -38,9 +39,10 @@ COPY sdk/python/ sdk/python/
 ENV NUMBA_CACHE_DIR=/var/cache/quadloc-numba
 RUN /opt/quadloc/bin/python -m pip install --no-deps --no-build-isolation ./sdk/python . \
     && /opt/quadloc/bin/python -c "import cv2, gtsam, psycopg, quadloc.service.api.app, quadloc.maps.store" \
-    && find /opt/quadloc/lib/python3*/site-packages/quadloc/factors -name "*.py" \
+    && find /opt/quadloc/lib/python3*/site-packages/quadloc/factors \
+       /opt/quadloc/lib/python3*/site-packages/quadloc/service/localization -name "*.py" \
        -exec touch -d "@$(date +%s)" {} + \
-    && /opt/quadloc/bin/python -P -c "__import__('quadloc.factors.pose_residuals', fromlist=['_']).compile_kernels()" \
+    && /opt/quadloc/bin/python -P -c "__import__('quadloc.service.app.context', fromlist=['_']).App.warm_up()" \
     && /opt/quadloc/bin/python -m pip uninstall --yes setuptools wheel
 
 # ---- runtime stage: the base + the venv, no compilers, no test tools, no build backend.

@@ -6,6 +6,7 @@ Run::
                                    [--frames 48] [--json out.json] [--write-results]
                                    [--baseline DIR] [--set QUADLOC_X=V ...]
                                    [--baseline-set QUADLOC_X=V ...]
+                                   [--cpu-blocks 6] [--cpu-block-seconds 2]
 
 ``--baseline DIR`` serves another checkout (e.g. ``git worktree add DIR main``) the same way and
 runs every level against both, in alternation, so the comparison shares the machine's load.
@@ -35,6 +36,12 @@ What it does, in one run (so the numbers are comparable on a noisy shared machin
    least-connections mode). Reports requests/s, latency p50/p95/p99 (ms, client-measured),
    errors (transport errors, non-200 answers, or bodies that do not parse), the localized
    fraction, and for the same requests the server's solve time (``timings_ms.total``).
+
+5. **CPU in interleaved blocks** (issue 33; before the levels, this checkout only):
+   ``--cpu-blocks`` pairs of ``--cpu-block-seconds`` blocks, in process and over HTTP at
+   concurrency 1 in alternation (:func:`interleaved_cpu`): the server's CPU per request over
+   the in-process CPU per call from the same stretch of machine load, and both as per-core
+   rates (the server's per-core throughput and its in-process limit, in the same run).
 
 HTTP overhead per worker = ``in-process rate / (HTTP rate at concurrency 1)`` - 1: at
 concurrency 1 only one request is in flight, so one worker serves it and the difference is the
@@ -107,8 +114,10 @@ def build_frames(n_frames: int, seed: int = 0) -> tuple[list[dict[str, Any]], li
 def in_process_window(inputs: list[Any], duration_s: float) -> dict[str, Any]:
     """Back-to-back ``localize()`` calls for ``duration_s``: raw latencies (s), localized count
     and CPU seconds of this process (summarised by :func:`in_process_rate`)."""
+    from quadloc.service.app.context import App
     from quadloc.service.localization.pipeline import localize
 
+    App.warm_up()  # the kernels, as a server does before serving (not in any call's budget)
     for args in inputs[:4]:  # warm caches
         localize(*args)
     lat, localized = [], 0
@@ -138,6 +147,44 @@ def in_process_rate(windows: list[dict[str, Any]]) -> dict[str, Any]:
             "p95_ms": float(np.percentile(lat_ms, 95)),
             "p99_ms": float(np.percentile(lat_ms, 99)),
             "localized_fraction": sum(w["localized"] for w in windows) / calls}
+
+
+def interleaved_cpu(inputs: list[Any], bodies: list[dict[str, Any]], bases: list[str],
+                    pids: list[int], blocks: int, block_s: float) -> dict[str, Any]:
+    """CPU per call in process against server CPU per request at concurrency 1 (once the
+    replicas idle, after one unmeasured block), in ``blocks`` alternating pairs of blocks of
+    ``block_s`` seconds each (the order alternating too): both sides see the same machine
+    load, block by block. Per block, in process: this process's CPU seconds per
+    ``localize()`` call; over HTTP: the replicas' CPU seconds (from ``/proc``) per request
+    sent. Returns the per-block figures, their medians, the ratio of the medians and the
+    per-core rates (1000 / CPU ms: requests per second that one fully available core
+    sustains)."""
+    # the replicas' start-up work goes on after they answer (measured: the first blocks of a
+    # fresh server cost ~1.5 ms more per request): wait until they idle, then one unmeasured
+    # block of requests
+    deadline = time.perf_counter() + 60.0
+    while time.perf_counter() < deadline:
+        cpu0 = sum(process_cpu_s(p) for p in pids)
+        time.sleep(1.0)
+        if sum(process_cpu_s(p) for p in pids) - cpu0 < 0.02:
+            break
+    run_level(bases, bodies, 1, block_s, 0.2, pids)
+    inproc: list[float] = []
+    server: list[float] = []
+    for k in range(blocks):
+        for side in (("in", "http") if k % 2 == 0 else ("http", "in")):
+            if side == "in":
+                w = in_process_window(inputs, block_s)
+                inproc.append(w["cpu_s"] * 1e3 / max(len(w["lat"]), 1))
+            else:
+                lvl = run_level(bases, bodies, 1, block_s, 0.2, pids)
+                server.append(lvl["server_cpu_ms_per_request"])
+    i_ms, s_ms = float(np.median(inproc)), float(np.median(server))
+    return {"blocks": blocks, "block_s": block_s, "in_process_cpu_ms": inproc,
+            "server_cpu_ms": server, "in_process_cpu_ms_median": i_ms,
+            "server_cpu_ms_median": s_ms, "server_over_in_process": s_ms / i_ms,
+            "per_block_ratio": [b / a for a, b in zip(inproc, server, strict=True)],
+            "in_process_per_core_per_s": 1e3 / i_ms, "server_per_core_per_s": 1e3 / s_ms}
 
 
 def process_cpu_s(pid: int) -> float:
@@ -393,6 +440,24 @@ def to_markdown(report: dict[str, Any]) -> str:
             f"**{c1['latency_over_solve']:+.0%}** ({c1['http_overhead_p50_ms']:.1f} ms median); "
             f"CPU, server CPU per request / in-process CPU per call - 1 = "
             f"**{report['http_cpu_overhead_per_worker']:+.0%}** (target <= +30%).")
+    blocks = report.get("interleaved_cpu")
+    if blocks:
+        ratio = blocks["server_over_in_process"]
+        lines += [
+            "",
+            f"CPU in interleaved blocks ({blocks['blocks']} pairs of {blocks['block_s']:g} s "
+            "blocks, in process and over HTTP at concurrency 1 in alternation, before the "
+            f"levels): in process **{blocks['in_process_cpu_ms_median']:.2f} ms** per call "
+            "(median of the blocks: " + " / ".join(f"{x:.2f}" for x in
+                                                    blocks["in_process_cpu_ms"]) +
+            f"), server **{blocks['server_cpu_ms_median']:.2f} ms** per request ("
+            + " / ".join(f"{x:.2f}" for x in blocks["server_cpu_ms"]) +
+            f"): server / in process = **{ratio:.2f}** (per block: "
+            + " / ".join(f"{x:.2f}" for x in blocks["per_block_ratio"]) +
+            f"; issue 33's target <= 1.3: {'met' if ratio <= 1.3 else 'not met'}). Per "
+            f"fully available core: **{blocks['server_per_core_per_s']:.0f} /s** over HTTP "
+            f"(server CPU only), in-process limit **{blocks['in_process_per_core_per_s']:.0f}"
+            " /s**."]
     if c8:
         met = (c8["requests_per_s"] >= 100 and c8["p99_ms"] <= 150 and c8["errors"] == 0)
         server_cpu = c8.get("server_cpu_ms_per_request", float("nan"))
@@ -438,6 +503,10 @@ def main(argv: list[str] | None = None) -> int:
                         help="settings of this checkout's replicas (default: none)")
     parser.add_argument("--baseline-set", nargs="+", default=[], metavar="QUADLOC_X=VALUE",
                         help="settings of the baseline's replicas (default: none)")
+    parser.add_argument("--cpu-blocks", type=int, default=6,
+                        help="alternating in-process / HTTP (concurrency 1) blocks of the CPU "
+                             "comparison (0: none)")
+    parser.add_argument("--cpu-block-seconds", type=float, default=2.0)
     args = parser.parse_args(argv)
     settings = [_settings(args.set), _settings(args.baseline_set)]
 
@@ -450,6 +519,7 @@ def main(argv: list[str] | None = None) -> int:
     baseline_levels: list[dict[str, Any]] = []
     trees = [(REPO, levels)] + ([(args.baseline.resolve(), baseline_levels)]
                                if args.baseline else [])
+    cpu_blocks: dict[str, Any] | None = None
     with tempfile.TemporaryDirectory(prefix="quadloc-load-") as tmp:
         servers = []
         try:
@@ -457,6 +527,13 @@ def main(argv: list[str] | None = None) -> int:
                 (Path(tmp) / str(k)).mkdir()
                 servers.append(start_replicas(args.workers, Path(tmp) / str(k), tree,
                                               settings[k]))
+            if args.cpu_blocks > 0:  # this checkout's server against this process, interleaved
+                procs, bases = servers[0]
+                cpu_blocks = interleaved_cpu(inputs, bodies, bases, [p.pid for p in procs],
+                                             args.cpu_blocks, args.cpu_block_seconds)
+                print(f"interleaved CPU: in process {cpu_blocks['in_process_cpu_ms_median']:.2f}"
+                      f" ms/call, server {cpu_blocks['server_cpu_ms_median']:.2f} ms/request",
+                      file=sys.stderr)
             for i, c in enumerate(args.concurrency):
                 # with a baseline: both trees at each level, in alternating order
                 order = list(zip(trees, servers, strict=True))
@@ -496,7 +573,8 @@ def main(argv: list[str] | None = None) -> int:
               **({"baseline": f"{args.baseline} ({tree_version(Path(args.baseline))})",
                   "baseline_levels": baseline_levels} if args.baseline else {}),
               "http_overhead_per_worker": overhead,
-              "http_cpu_overhead_per_worker": cpu_overhead}
+              "http_cpu_overhead_per_worker": cpu_overhead,
+              **({"interleaved_cpu": cpu_blocks} if cpu_blocks else {})}
     text = json.dumps(report, indent=2)
     if args.json:
         Path(args.json).write_text(text + "\n")

@@ -22,6 +22,7 @@ from quadloc.service.app.map_loader import MapLoader
 from quadloc.service.app.maps import MapService
 from quadloc.service.app.sessions import SessionService
 from quadloc.service.localization.constellations import compile_place_kernels
+from quadloc.service.localization.search import compile_search_kernels
 from quadloc.service.settings import Settings
 
 __all__ = ["App"]
@@ -73,9 +74,10 @@ class App:
     def warm_up() -> None:
         """Compile (or load from their cache) the numeric kernels of the solvers, so that no
         request's time budget pays for it (numba; ~13 s the first time on a machine, < 1 s
-        from the cache: docs/design/factors.md), the place search's included."""
+        from the cache: docs/design/factors.md), the RANSAC and place searches' included."""
         compile_kernels()
         compile_place_kernels()
+        compile_search_kernels()
 
     def close(self) -> None:
         """The process is stopping: session frames and builds in progress stop at their next

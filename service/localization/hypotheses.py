@@ -29,7 +29,8 @@ from quadloc.factors.rotations import so3_exp
 if TYPE_CHECKING:
     from cv2.typing import MatLike
 
-__all__ = ["p2e_hypotheses", "p3p_grunert_batch", "p3p_hypotheses", "p3p_hypotheses_batch",
+__all__ = ["P3P_REPROJECTION_TOLERANCE_PX", "p2e_hypotheses", "p3p_checked_batch",
+           "p3p_grunert_batch", "p3p_hypotheses", "p3p_hypotheses_batch",
            "point_centres", "project_objects", "size_depths"]
 
 _EMPTY = np.zeros((0, 4, 4))
@@ -163,7 +164,10 @@ def p3p_grunert_batch(
     polished by ``newton_steps`` Newton steps on the quartic, then the rigid transform of the three
     camera-frame points onto the world points (the two congruent triangles' frames aligned).
     The many-sample search of large maps (:mod:`quadloc.service.localization.constellations`)
-    calls it; the same poses as ``cv2.solveP3P`` (tested), in a different order.
+    calls it; the same poses as ``cv2.solveP3P`` (tested), in a different order, except in
+    symmetric configurations where a root of the quartic is (nearly) double: there it may
+    return a pose that does not reproject the three points (a square of objects seen
+    head-on: 3 px off; :func:`p3p_checked_batch` falls back to ``cv2.solveP3P`` there).
 
     Args:
         image_points: (B, 3, 2) pixels; world_points: (B, 3, 3) world metres.
@@ -190,6 +194,65 @@ def p3p_grunert_batch(
                                        QUARTIC_IMAG_TOLERANCE, zs.reshape(-1, 3),
                                        float(depth_ratio))
     return poses[:count].copy(), sample[:count].copy()  # not views of the 4 B buffer
+
+
+#: A compiled P3P solution that reprojects one of its three points further than this (px)
+#: from its image point is not exact (:func:`p3p_checked_batch`); exact ones are at ~1e-9 px.
+P3P_REPROJECTION_TOLERANCE_PX = 1e-4
+
+
+def p3p_checked_batch(
+    image_points: FloatArray, world_points: FloatArray, camera: Camera
+) -> tuple[FloatArray, IntArray]:
+    """The poses of :func:`p3p_hypotheses_batch` (``cv2.solveP3P``) at the cost of the
+    compiled :func:`p3p_grunert_batch`: its solutions, except for the samples where one of
+    them reprojects a point further than :data:`P3P_REPROJECTION_TOLERANCE_PX` (a nearly
+    double root of the quartic): those samples are solved by ``cv2.solveP3P``. The RANSAC
+    search's P3P (:mod:`quadloc.service.localization.search`).
+
+    Args:
+        image_points: (B, 3, 2) pixels; world_points: (B, 3, 3) world metres.
+
+    Returns:
+        ``(poses (M, 4, 4), sample (M,))``: ``camera_from_world`` solutions, grouped by
+        sample in sample order, and the sample each came from.
+    """
+    img = np.asarray(image_points, dtype=np.float64).reshape(-1, 3, 2)
+    X = np.asarray(world_points, dtype=np.float64).reshape(-1, 3, 3)
+    poses, sample = p3p_grunert_batch(img, X, camera)
+    if len(poses) == 0:
+        return poses, sample
+    err = _reprojection_errors(poses, sample, np.ascontiguousarray(img), np.ascontiguousarray(X),
+                               camera.fx, camera.fy, camera.cx, camera.cy)
+    bad = np.unique(sample[~(err <= P3P_REPROJECTION_TOLERANCE_PX)])
+    if len(bad) == 0:
+        return poses, sample
+    ref, ref_sample = p3p_hypotheses_batch(img[bad], X[bad], camera)
+    keep = ~np.isin(sample, bad)
+    all_sample = np.concatenate([sample[keep], bad[ref_sample]])
+    order = np.argsort(all_sample, kind="stable")
+    return np.concatenate([poses[keep], ref])[order], all_sample[order]
+
+
+@jit
+def _reprojection_errors(poses: FloatArray, sample: IntArray, img: FloatArray, X: FloatArray,
+                         fx: float, fy: float, cx: float, cy: float) -> FloatArray:
+    """Largest pixel distance (per coordinate) of the three world points ``X[sample[m]]``
+    (B, 3, 3) m projected by ``poses[m]`` (M, 4, 4) ``camera_from_world`` (pinhole ``fx, fy,
+    cx, cy`` px) from their image points ``img[sample[m]]`` (B, 3, 2) px; (M,)."""
+    out = np.zeros(poses.shape[0])
+    c = np.zeros(3)
+    for m in range(poses.shape[0]):
+        b = sample[m]
+        worst = 0.0
+        for k in range(3):
+            for i in range(3):
+                c[i] = (poses[m, i, 0] * X[b, k, 0] + poses[m, i, 1] * X[b, k, 1]
+                        + poses[m, i, 2] * X[b, k, 2] + poses[m, i, 3])
+            worst = max(worst, abs(fx * c[0] / c[2] + cx - img[b, k, 0]),
+                        abs(fy * c[1] / c[2] + cy - img[b, k, 1]))
+        out[m] = worst
+    return out
 
 
 @jit

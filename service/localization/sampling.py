@@ -116,11 +116,17 @@ def sample_order(scorer: MatchScorer, size: int, budget: int,
 def _compositions(groups: list[LabelGroup], size: int) -> list[tuple[int, ...]]:
     """Ways to split a sample of ``size`` among the groups: ``m_g`` detections (and as many
     distinct objects) from group g, ``m_g <= min(#detections, #objects)``."""
-    caps = [min(len(d), len(o), size) for d, o in groups]
+    return _compositions_of(tuple(min(len(d), len(o), size) for d, o in groups), size)
+
+
+@functools.lru_cache(maxsize=256)
+def _compositions_of(caps: tuple[int, ...], size: int) -> list[tuple[int, ...]]:
+    """:func:`_compositions` from the groups' caps ``min(#detections, #objects, size)`` (the
+    same lists for the same caps: computed once; callers do not modify them)."""
     out: list[tuple[int, ...]] = []
 
     def rec(g: int, left: int, acc: tuple[int, ...]) -> None:
-        if g == len(groups):
+        if g == len(caps):
             if left == 0:
                 out.append(acc)
             return
@@ -232,36 +238,66 @@ def most_promising_first(scorer: MatchScorer) -> Iterator[Sample]:
     detections) have their samples merged in :func:`all_samples`' order."""
     groups = scorer.label_groups
     comps = _compositions(groups, 3)
-    # detection triples in order of first appearance in all_samples, with their position
-    # key there: (split, then per drawn group the index of its detection combination)
-    triples: list[tuple[int, ...]] = []
-    where: list[tuple[int, tuple[int, ...]]] = []
-    for ci, comp in enumerate(comps):
-        drawn = [(d, m) for (d, _), m in zip(groups, comp, strict=True) if m]
-        for combos in itertools.product(*(enumerate(itertools.combinations(d, m))
-                                          for d, m in drawn)):
-            triples.append(tuple(sorted(itertools.chain.from_iterable(c for _, c in combos))))
-            where.append((ci, tuple(k for k, _ in combos)))
-    if not triples:
+    if not comps:
+        return
+    group_of = np.zeros(scorer.n_det, dtype=np.intp)
+    for gi, (d, _) in enumerate(groups):
+        group_of[d] = gi
+    n_objects = np.array([len(o) for _, o in groups], dtype=np.intp)
+    # every detection triple (ascending rows) whose labels have enough distinct objects:
+    # per position, the triple's detections of its group are at most the group's objects
+    tris = _triples(scorer.n_det)
+    g = group_of[tris]
+    same = (g[:, :, None] == g[:, None, :]).sum(axis=2)
+    dets = tris[np.all(same <= n_objects[g], axis=1)]
+    if len(dets) == 0:
         return
     n_compat = scorer.compat.sum(axis=1).astype(float)
-    dets = np.array(triples)
     prod = np.prod(n_compat[dets], axis=1)
     area = triangle_areas(scorer, dets)
+    # a stable order of the keys; triples with equal keys are merged below in all_samples'
+    # order, so the order in which the triples were listed plays no part
     order: list[int] = np.lexsort((-area, prod)).tolist()
+    triples: list[tuple[int, ...]] = [tuple(t) for t in dets.tolist()]
+    keys: list[tuple[float, float]] = list(zip(prod.tolist(), area.tolist(), strict=True))
+    comp_index = {c: ci for ci, c in enumerate(comps)}
+    positions = [{x: k for k, x in enumerate(d)} for d, _ in groups]
+
+    def where(triple: tuple[int, ...]) -> tuple[int, tuple[int, ...]]:
+        """The triple's split index and per drawn group the index of its detection
+        combination among ``itertools.combinations`` of the group's detections."""
+        per_group: list[list[int]] = [[] for _ in groups]
+        for x in triple:
+            per_group[int(group_of[x])].append(positions[int(group_of[x])][x])
+        ci = comp_index[tuple(len(p) for p in per_group)]
+        return ci, tuple(_combination_rank(p, len(groups[gi][0]))
+                         for gi, p in enumerate(per_group) if p)
+
     k = 0
     while k < len(order):
         run = [order[k]]
-        while (k + len(run) < len(order) and prod[order[k + len(run)]] == prod[order[k]]
-               and area[order[k + len(run)]] == area[order[k]]):
+        while k + len(run) < len(order) and keys[order[k + len(run)]] == keys[order[k]]:
             run.append(order[k + len(run)])
         k += len(run)
         if len(run) == 1:
-            yield from _triple_samples(groups, comps, triples[run[0]], where[run[0]])
+            yield from _triple_samples(groups, comps, triples[run[0]], where(triples[run[0]]))
         else:  # equal keys: every sample of the run, in all_samples' order
             merged = sorted(itertools.chain.from_iterable(
-                _triple_samples(groups, comps, triples[t], where[t], keyed=True) for t in run))
+                _triple_samples(groups, comps, triples[t], where(triples[t]), keyed=True)
+                for t in run))
             yield from (sm for _, sm in merged)
+
+
+def _combination_rank(combination: Sequence[int], n: int) -> int:
+    """Position of ``combination`` (ascending indices in ``range(n)``) in
+    ``itertools.combinations(range(n), len(combination))`` (lexicographic)."""
+    m = len(combination)
+    rank, prev = 0, -1
+    for i, c in enumerate(combination):
+        for v in range(prev + 1, c):
+            rank += math.comb(n - 1 - v, m - 1 - i)
+        prev = c
+    return rank
 
 
 @overload

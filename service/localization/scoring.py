@@ -24,6 +24,7 @@ from quadloc.factors.arrays import BoolArray, FloatArray, Int32Array, IntArray
 from quadloc.factors.budget import Deadline, deadline_passed, earliest
 from quadloc.factors.camera import Camera, projected_gaussians
 from quadloc.factors.conics import Ellipse, ellipse_params, level_values
+from quadloc.factors.jit import jit
 from quadloc.maps.compiled import CompiledMap
 from quadloc.service.localization.hypotheses import point_centres
 
@@ -108,48 +109,142 @@ def iou_estimates(
         det_points: (..., M, 2) points uniformly filling each detection (sunflower pattern).
         det_areas: (...,) detection areas px^2.
         proj_centres: (..., 2), proj_inv_shape: (..., 2, 2) the projected ellipses
-            (``A^-1``, must be positive definite where the result is used).
+            (``A^-1``, symmetric: its upper entries are read).
 
     Returns:
         (...,) IoU in [0, 1]: ``I / (area_det + area_proj - I)`` with
-        ``I = area_det * fraction of the points inside the projection`` (:func:`_point_iou`).
+        ``I = area_det * fraction of the points inside the projection`` (:func:`_point_iou`);
+        0 where ``det(A^-1) <= 0``.
     """
-    S = proj_inv_shape
-    det = S[..., 0, 0] * S[..., 1, 1] - S[..., 0, 1] * S[..., 1, 0]
-    a00, a01, a11 = _inverse_entries(S[..., 0, 0], S[..., 0, 1], S[..., 1, 1], det)
-    iou = _point_iou(det_points[..., 0], det_points[..., 1], det_areas, proj_centres[..., 0],
-                     proj_centres[..., 1], a00, a01, a11, _ellipse_area(det))
-    out: FloatArray = np.where(det > 0, iou, 0.0)
+    S = np.asarray(proj_inv_shape, dtype=float)
+    pts = np.asarray(det_points, dtype=float)
+    shape = np.broadcast_shapes(pts.shape[:-2], np.shape(det_areas), np.shape(proj_centres)[:-1],
+                                S.shape[:-2])
+    n_pts = pts.shape[-2]
+    # one row per estimate: (K, 2, M) points (x and y rows), (K,) area, (K, 2) centre and
+    # (K, 2, 2) A^-1, as fresh C-ordered float64 copies (the kernel's one argument type)
+    xy = np.array(np.moveaxis(np.broadcast_to(pts, (*shape, n_pts, 2)), -1, -2),
+                  dtype=float, order="C").reshape(-1, 2, n_pts)
+    areas = np.array(np.broadcast_to(det_areas, shape), dtype=float, order="C").reshape(-1)
+    centres = np.array(np.broadcast_to(proj_centres, (*shape, 2)), dtype=float,
+                       order="C").reshape(-1, 2)
+    s = np.array(np.broadcast_to(S, (*shape, 2, 2)), dtype=float, order="C").reshape(-1, 2, 2)
+    out: FloatArray = _iou_rows_kernel(xy, areas, centres, s).reshape(shape)
     return out
 
 
-def _inverse_entries(s00: FloatArray, s01: FloatArray, s11: FloatArray, det: FloatArray
-                     ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Entries ``(A00, A01, A11)`` of ``A = (A^-1)^-1`` from those of ``A^-1`` and its
-    determinant (any shapes; garbage where ``det <= 0``)."""
-    safe = np.where(det > 0, det, 1.0)
-    return s11 / safe, -s01 / safe, s00 / safe
+@jit
+def _ellipse_entries(s00: float, s01: float, s11: float) -> tuple[float, float, float, float]:
+    """THE inverse and area of a projected ellipse from the entries of its ``A^-1`` (px^2):
+    ``(A00, A01, A11, area)`` with ``A = (A^-1)^-1`` (garbage where ``det(A^-1) <= 0``) and the
+    area ``pi sqrt(det(A^-1)) = pi a b`` px^2 (0 where the determinant is <= 0)."""
+    det = s00 * s11 - s01 * s01
+    safe = det if det > 0.0 else 1.0
+    return s11 / safe, -s01 / safe, s00 / safe, math.pi * math.sqrt(max(det, 0.0))
 
 
-def _ellipse_area(det: FloatArray) -> FloatArray:
-    """Area (px^2) of ellipses from ``det(A^-1) = a^2 b^2``."""
-    area: FloatArray = math.pi * np.sqrt(np.maximum(det, 0.0))
-    return area
-
-
-def _point_iou(px: FloatArray, py: FloatArray, det_areas: FloatArray, cx: FloatArray,
-               cy: FloatArray, a00: FloatArray, a01: FloatArray, a11: FloatArray,
-               area_proj: FloatArray) -> FloatArray:
-    """THE IoU estimate: points ``(px, py)`` (..., M) filling the detections (areas (...,)),
-    the fraction inside the projected ellipses ``(x - c)^T A (x - c) <= 1`` (centres ``cx, cy``,
-    entries of ``A``, areas ``area_proj``, each (...,)) times the detection area as the
-    intersection; (...,) in [0, 1]."""
-    dx = px - cx[..., None]
-    dy = py - cy[..., None]
-    phi = a00[..., None] * dx ** 2 + 2 * a01[..., None] * dx * dy + a11[..., None] * dy ** 2
-    inter = np.count_nonzero(phi <= 1.0, axis=-1) / px.shape[-1] * det_areas
-    iou: FloatArray = np.minimum(inter / np.maximum(det_areas + area_proj - inter, 1e-300), 1.0)
+@jit
+def _point_iou(xy: FloatArray, det_area: float, cx: float, cy: float, a00: float, a01: float,
+               a11: float, area_proj: float) -> float:
+    """THE IoU estimate of one (detection, projection) pair: the points ``xy`` (2, M) px
+    filling the detection (area ``det_area`` px^2), the fraction inside the projected ellipse
+    ``(x - c)^T A (x - c) <= 1`` (centre ``cx, cy``, entries of ``A``, area ``area_proj``)
+    times the detection area as the intersection; in [0, 1]."""
+    n_pts = xy.shape[1]
+    inside = 0
+    for m in range(n_pts):
+        dx = xy[0, m] - cx
+        dy = xy[1, m] - cy
+        if a00 * dx ** 2 + 2 * a01 * dx * dy + a11 * dy ** 2 <= 1.0:
+            inside += 1
+    inter = inside / n_pts * det_area
+    iou: float = min(inter / max(det_area + area_proj - inter, 1e-300), 1.0)
     return iou
+
+
+@jit
+def _iou_rows_kernel(xy: FloatArray, det_areas: FloatArray, centres: FloatArray,
+                     inv_shape: FloatArray) -> FloatArray:
+    """:func:`iou_estimates` of K rows: points (K, 2, M), areas (K,), projected centres (K, 2)
+    and ``A^-1`` (K, 2, 2); (K,), 0 where ``det(A^-1) <= 0``."""
+    n = xy.shape[0]
+    out = np.zeros(n)
+    for k in range(n):
+        s00, s01, s11 = inv_shape[k, 0, 0], inv_shape[k, 0, 1], inv_shape[k, 1, 1]
+        if s00 * s11 - s01 * s01 > 0.0:
+            a00, a01, a11, area = _ellipse_entries(s00, s01, s11)
+            out[k] = _point_iou(xy[k], det_areas[k], centres[k, 0], centres[k, 1], a00, a01,
+                                a11, area)
+    return out
+
+
+@jit
+def _pair_iou_kernel(mx: FloatArray, my: FloatArray, s00: FloatArray, s01: FloatArray,
+                     s11: FloatArray, valid: BoolArray, pair_d: Int32Array, pair_s: Int32Array,
+                     pair_cx: FloatArray, pair_cy: FloatArray, pair_radii: FloatArray,
+                     pair_areas: FloatArray, xy: FloatArray, floor: float, out: FloatArray,
+                     row0: int, h0: int, max_points: int) -> int:
+    """:meth:`MatchScorer.pair_iou` of the poses ``h0, h0 + 1, ...`` of a projected block
+    (``mx .. s11``, ``valid``: (H, S) per compatible object, :func:`projected_gaussians`), into
+    ``out[row0 + h]`` (P per row, left as they are where a pair is pruned: callers pass zeros);
+    pairs (``pair_d``, ``pair_s``: detection row, position in the compatible objects; the
+    detection's centre, bounding radius, area per pair), filling points ``xy`` (D, 2, M).
+    Per (pose, pair): the bounding-circle test (disjoint: IoU exactly 0), the area bound
+    ``area_det >= floor * area_proj`` when ``floor > 0`` (the estimate is at most their ratio),
+    then :func:`_point_iou`. Stops after the pose at which more than ``max_points`` point
+    evaluations were made (the caller checks its deadline between calls); returns the next
+    pose to do (H when done)."""
+    n_h, n_pairs = mx.shape[0], pair_d.shape[0]
+    n_pts = xy.shape[2]
+    # per compatible object of a pose: the inverse's entries, area, largest semi-axis
+    n_s = mx.shape[1]
+    a00 = np.empty(n_s)
+    a01 = np.empty(n_s)
+    a11 = np.empty(n_s)
+    area = np.empty(n_s)
+    r_proj = np.empty(n_s)
+    done = 0
+    h = h0
+    while h < n_h:
+        for s in range(n_s):
+            a00[s], a01[s], a11[s], area[s] = _ellipse_entries(s00[h, s], s01[h, s], s11[h, s])
+            if valid[h, s]:
+                # sqrt of the largest eigenvalue of A^-1
+                det = s00[h, s] * s11[h, s] - s01[h, s] * s01[h, s]
+                half_tr = 0.5 * (s00[h, s] + s11[h, s])
+                r_proj[s] = math.sqrt(max(
+                    half_tr + math.sqrt(max(half_tr ** 2 - det, 0.0)), 0.0))
+            else:  # an invalid projection's bounding circle meets nothing
+                r_proj[s] = -np.inf
+        for p in range(n_pairs):
+            s = pair_s[p]
+            gap = math.hypot(mx[h, s] - pair_cx[p], my[h, s] - pair_cy[p])
+            if not gap <= (pair_radii[p] + r_proj[s]) * (1 + 1e-9) + 1e-9:
+                continue  # disjoint bounding circles: no point inside
+            if floor > 0 and not pair_areas[p] >= floor * area[s]:
+                continue
+            out[row0 + h, p] = _point_iou(xy[pair_d[p]], pair_areas[p], mx[h, s], my[h, s],
+                                          a00[s], a01[s], a11[s], area[s])
+            done += n_pts
+        h += 1
+        if done > max_points:
+            break
+    return h
+
+
+def compile_scoring_kernels() -> None:
+    """Compile (or load from numba's cache) the scorer's kernels (:meth:`MatchScorer.pair_iou`,
+    :func:`iou_estimates`, the greedy assignment) with the argument types of the search's
+    calls, so that no request pays for it (called by
+    :func:`quadloc.service.localization.search.compile_search_kernels` at start-up)."""
+    one = np.ones((1, 1))
+    xy = np.zeros((1, 2, 4))
+    _pair_iou_kernel(one, one, one, 0 * one, one, np.ones((1, 1), dtype=bool),
+                     np.zeros(1, dtype=np.int32), np.zeros(1, dtype=np.int32), np.zeros(1),
+                     np.zeros(1), np.ones(1), np.ones(1), xy, 0.0, np.zeros((1, 1)), 0, 0, 1)
+    iou_estimates(np.zeros((4, 2)), np.ones(()), np.zeros(2), np.eye(2))
+    _greedy(np.zeros(1, dtype=np.int32), np.zeros(1, dtype=np.int32), np.ones(1), 0.5, [0])
+    _greedy(np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64), np.ones(1), 0.5, [0])
 
 
 @dataclass(frozen=True)
@@ -177,22 +272,46 @@ def _greedy(pair_d: IntArray | Int32Array, pair_o: IntArray | Int32Array, iou: F
             threshold: float, detection_indices: Sequence[int]) -> list[Match]:
     """THE greedy one-to-one assignment of pairs (``pair_d[p]``, ``pair_o[p]``) with
     ``iou[p] >= threshold``, by decreasing IoU (ties: the later pair first), sorted by
-    detection index."""
-    cand = np.flatnonzero(iou >= threshold)
-    vals: list[float] = iou[cand].tolist()
-    ds: list[int] = pair_d[cand].tolist()
-    os_: list[int] = pair_o[cand].tolist()
-    used_d: set[int] = set()
-    used_o: set[int] = set()
-    out = []
-    # a stable ascending sort, walked backwards
-    for k in reversed(sorted(range(len(vals)), key=vals.__getitem__)):
-        d, o = ds[k], os_[k]
-        if d not in used_d and o not in used_o:
-            used_d.add(d)
-            used_o.add(o)
-            out.append(Match(int(detection_indices[d]), o, vals[k]))
+    detection index (the walk: :func:`_greedy_kernel`)."""
+    # int32 (a scorer's pairs) or int64 (a dense matrix's) indices: one specialisation each
+    picked = _greedy_kernel(pair_d, pair_o, np.ascontiguousarray(iou, dtype=float), threshold)
+    vals: list[float] = iou[picked].tolist()
+    ds: list[int] = pair_d[picked].tolist()
+    os_: list[int] = pair_o[picked].tolist()
+    out = [Match(int(detection_indices[d]), o, v) for d, o, v in zip(ds, os_, vals, strict=True)]
     return sorted(out, key=lambda m: m.detection_index)
+
+
+@jit
+def _greedy_kernel(pair_d: IntArray | Int32Array, pair_o: IntArray | Int32Array, iou: FloatArray,
+                   threshold: float) -> IntArray:
+    """The pairs :func:`_greedy` keeps, in the order it takes them: the pairs with
+    ``iou >= threshold`` in a stable ascending sort of their IoUs, walked backwards, each kept
+    when neither its detection nor its object is taken yet. Returns their indices (K,)."""
+    n = iou.shape[0]
+    cand = np.empty(n, dtype=np.int64)
+    n_cand = 0
+    n_d, n_o = 0, 0
+    for p in range(n):
+        if iou[p] >= threshold:
+            cand[n_cand] = p
+            n_cand += 1
+            n_d = max(n_d, pair_d[p] + 1)
+            n_o = max(n_o, pair_o[p] + 1)
+    cand = cand[:n_cand]
+    order = np.argsort(iou[cand], kind="mergesort")  # stable
+    used_d = np.zeros(n_d, dtype=np.bool_)
+    used_o = np.zeros(n_o, dtype=np.bool_)
+    picked = np.empty(n_cand, dtype=np.int64)
+    n_picked = 0
+    for k in range(n_cand - 1, -1, -1):
+        p = cand[order[k]]
+        if not used_d[pair_d[p]] and not used_o[pair_o[p]]:
+            used_d[pair_d[p]] = True
+            used_o[pair_o[p]] = True
+            picked[n_picked] = p
+            n_picked += 1
+    return picked[:n_picked]
 
 
 class MatchScorer:
@@ -255,7 +374,8 @@ class MatchScorer:
         self.radii: FloatArray = np.maximum(self.params[:, 2], self.params[:, 3])
         # per pair, once per call: the detection's centre, bounding radius and area
         pair_params = self.params[self.pair_d]
-        self._pair_cx, self._pair_cy = pair_params[:, 0], pair_params[:, 1]
+        self._pair_cx = np.ascontiguousarray(pair_params[:, 0])
+        self._pair_cy = np.ascontiguousarray(pair_params[:, 1])
         self._pair_radii, self._pair_areas = self.radii[self.pair_d], self.areas[self.pair_d]
         # every detection has a pair (always in localize): pair_scores needs no mask
         self._has_pairs: BoolArray = np.bincount(self.pair_d, minlength=self.n_det) > 0
@@ -320,9 +440,10 @@ class MatchScorer:
         estimate cannot reach ``floor``: callers that only use IoUs >= a threshold get the same
         results). Cheap closed-form pre-filters run first on every (pose, pair): disjoint
         bounding circles (the IoU is exactly 0) and the area ratio (the estimate is at most
-        ``area_det / area_proj``); only the survivors get the point test. Memory: the output
-        plus blocks of at most :data:`PAIR_BLOCK` (pose, pair) tests and :data:`POINT_BLOCK`
-        point evaluations; keep ``H x P`` bounded (callers pass
+        ``area_det / area_proj``); only the survivors get the point test. One compiled kernel
+        (:func:`_pair_iou_kernel`) per block of :data:`PROJECT_BLOCK` projections, returning
+        to check the deadline after about :data:`POINT_BLOCK` point evaluations. Memory: the
+        output plus the block's projections; keep ``H x P`` bounded (callers pass
         ``max(1, PAIR_BLOCK // P)`` poses at a time)."""
         xy = self._xy[self.points.shape[1]] if points is None else np.moveaxis(points, -1, -2)
         return self._pair_iou(camera_from_world, xy, floor, stop_at)
@@ -332,43 +453,22 @@ class MatchScorer:
         """:meth:`pair_iou` with the filling points as (D, 2, M)."""
         stop_at = self._stop(stop_at)
         T = np.asarray(camera_from_world, dtype=float)
-        n_pts = xy.shape[2]
         n_pairs = len(self.pair_d)
         out = np.zeros((len(T), n_pairs))
         if n_pairs == 0:
             return out
-        step = max(1, min(PROJECT_BLOCK // max(1, len(self.objects)),
-                          PAIR_BLOCK // n_pairs))
-        for hb in blocks(len(T), step):
+        xy = np.ascontiguousarray(xy, dtype=float)
+        for hb in blocks(len(T), max(1, PROJECT_BLOCK // max(1, len(self.objects)))):
             _check(stop_at)
             mx, my, s00, s01, s11, valid, _ = self._project(T[hb])
-            n_h = len(mx)
-            det = s00 * s11 - s01 * s01
-            half_tr = 0.5 * (s00 + s11)
-            # largest semi-axis of each projection: sqrt of the largest eigenvalue of A^-1;
-            # -inf where the projection is invalid (its bounding circle meets nothing)
-            r_proj = np.where(valid, np.sqrt(np.maximum(
-                half_tr + np.sqrt(np.maximum(half_tr ** 2 - det, 0.0)), 0.0)), -np.inf)
-            area_proj = _ellipse_area(det)
-            # what the point test needs of each (pose, object), gathered per surviving pair
-            grid = np.stack([mx, my, *_inverse_entries(s00, s01, s11, det), area_proj], axis=-1)
-            for blk in blocks(n_pairs, max(1, PAIR_BLOCK // n_h)):
-                _check(stop_at)
-                pd, ps = self.pair_d[blk], self.pair_s[blk]
-                gap = np.hypot(mx[:, ps] - self._pair_cx[blk], my[:, ps] - self._pair_cy[blk])
-                # disjoint bounding circles: no point inside
-                keep = gap <= (self._pair_radii[blk] + r_proj[:, ps]) * (1 + 1e-9) + 1e-9
-                if floor > 0:  # the estimate is <= area_d / area_p
-                    keep &= self._pair_areas[blk] >= floor * area_proj[:, ps]
-                kh, kp = np.nonzero(keep)
-                for sub in blocks(len(kh), POINT_BLOCK // n_pts):
+            h = 0
+            while h < len(mx):  # the kernel returns after about POINT_BLOCK evaluations
+                if h:
                     _check(stop_at)
-                    h, k = kh[sub], kp[sub]
-                    g = grid[h, ps[k]]  # (K, 6)
-                    pts = xy[pd[k]]  # (K, 2, M)
-                    out[hb.start + h, blk.start + k] = _point_iou(
-                        pts[:, 0], pts[:, 1], self._pair_areas[blk][k], g[:, 0], g[:, 1],
-                        g[:, 2], g[:, 3], g[:, 4], g[:, 5])
+                h = _pair_iou_kernel(mx, my, s00, s01, s11, valid, self.pair_d, self.pair_s,
+                                     self._pair_cx, self._pair_cy, self._pair_radii,
+                                     self._pair_areas, xy, floor, out, hb.start, h,
+                                     POINT_BLOCK)
         return out
 
     def dense_iou(self, camera_from_world: FloatArray, points: FloatArray | None = None,

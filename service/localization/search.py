@@ -26,8 +26,9 @@ import numpy as np
 
 from quadloc.factors.arrays import FloatArray
 from quadloc.factors.budget import Deadline, deadline_passed
+from quadloc.factors.camera import Camera
 from quadloc.factors.conics import Ellipse
-from quadloc.service.localization.hypotheses import p2e_hypotheses, p3p_hypotheses_batch
+from quadloc.service.localization.hypotheses import p2e_hypotheses, p3p_checked_batch
 from quadloc.service.localization.sampling import (
     Sample,
     count_samples,
@@ -40,6 +41,7 @@ from quadloc.service.localization.scoring import (
     MatchScorer,
     ScoringTimeoutError,
     blocks,
+    compile_scoring_kernels,
 )
 
 __all__ = [
@@ -52,6 +54,7 @@ __all__ = [
     "Hypothesis",
     "RansacOutcome",
     "competitor_sweep",
+    "compile_search_kernels",
     "distinct_poses",
     "ransac",
 ]
@@ -283,13 +286,14 @@ class _Search:
             self.timed_out = True
 
     def solve(self, chunk: list[Sample], size: int) -> FloatArray:
-        """Candidate poses (M, 4, 4) ``camera_from_world`` of minimal samples: one vectorised
-        P3P call, or P2E."""
+        """Candidate poses (M, 4, 4) ``camera_from_world`` of minimal samples: one P3P call
+        (:func:`quadloc.service.localization.hypotheses.p3p_checked_batch`: the poses of
+        ``cv2.solveP3P`` from one compiled kernel for the batch), or P2E."""
         scorer, cm = self.scorer, self.scorer.compiled
         if size == 3:
-            poses, _ = p3p_hypotheses_batch(scorer.params[np.array([c[0] for c in chunk]), :2],
-                                            cm.centers[np.array([c[1] for c in chunk])],
-                                            scorer.camera)
+            poses, _ = p3p_checked_batch(scorer.params[np.array([c[0] for c in chunk]), :2],
+                                         cm.centers[np.array([c[1] for c in chunk])],
+                                         scorer.camera)
             return poses
         found: list[FloatArray] = []
         for dets, objs in chunk:
@@ -352,6 +356,18 @@ def competitor_sweep(scorer: MatchScorer, up_world: FloatArray,
                      deadline, keep)
     search.sweep(detection_indices)
     return tuple(search.kept), search.evaluated
+
+
+def compile_search_kernels() -> None:
+    """Compile (or load from numba's cache) the search's kernels (the scorer's,
+    :func:`quadloc.service.localization.scoring.compile_scoring_kernels`, and the P3P of
+    :func:`quadloc.service.localization.hypotheses.p3p_checked_batch`), so that no request
+    pays for it: the service calls it at start-up with
+    :func:`quadloc.factors.pose_residuals.compile_kernels`."""
+    compile_scoring_kernels()
+    camera = Camera(500.0, 500.0, 320.0, 240.0, 640, 480)
+    p3p_checked_batch(np.array([[[300.0, 200.0], [350.0, 260.0], [280.0, 250.0]]]),
+                      np.array([[[0.0, 0.0, 3.0], [0.3, 0.2, 3.1], [-0.1, 0.3, 2.9]]]), camera)
 
 
 def _keep_distinct(kept: list[Hypothesis], new: Hypothesis, keep: int = KEEP_DISTINCT

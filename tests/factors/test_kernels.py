@@ -37,16 +37,20 @@ _SCRIPT = textwrap.dedent("""
     from quadloc.service.localization.refine import refine
     from quadloc.service.localization.types import Detection
 
+    from quadloc.service.localization import hypotheses, scoring
+    from quadloc.service.localization.search import compile_search_kernels
+
     def signatures():
         out = {}
         for module in (overlap, pose_frame, pose_level_set, pose_conic_metrics, metrics,
-                       camera_module):
+                       camera_module, scoring, hypotheses):
             for name, value in vars(module).items():
                 if hasattr(value, "signatures") and hasattr(value, "py_func"):
                     out[f"{module.__name__}.{name}"] = [str(s) for s in value.signatures]
         return out
 
     pose_residuals.compile_kernels()
+    compile_search_kernels()
     before = signatures()
     # what requests do, with arguments of every origin: read-only, non-contiguous, scalar
     camera = Camera(520.0, 515.0, 322.0, 241.0, 640, 480)
@@ -102,7 +106,11 @@ def test_requests_compile_no_kernel_that_start_up_did_not():
                            "quadloc.factors.pose_level_set._level_set_kernel",
                            "quadloc.factors.pose_frame._camera_frame_kernel",
                            "quadloc.factors.pose_frame._dual_conic_kernel",
-                           "quadloc.factors.pose_conic_metrics._bbox_kernel"}
+                           "quadloc.factors.pose_conic_metrics._bbox_kernel",
+                           "quadloc.service.localization.scoring._pair_iou_kernel",
+                           "quadloc.service.localization.scoring._greedy_kernel",
+                           "quadloc.service.localization.hypotheses._p3p_kernel",
+                           "quadloc.service.localization.hypotheses._reprojection_errors"}
     for name, sigs in after.items():
         assert sigs == before.get(name, []), f"{name} was compiled again for a request"
 

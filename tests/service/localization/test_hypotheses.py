@@ -203,3 +203,51 @@ def test_p3p_batch_equals_opencv_per_sample():
         np.testing.assert_allclose(T[:3, :3], R, atol=1e-12)
         np.testing.assert_allclose(T[:3, 3], t, atol=1e-12)
         np.testing.assert_array_equal(T[3], [0, 0, 0, 1])
+
+
+def _same_solution_sets(poses_a, sample_a, poses_b, sample_b, n, atol):
+    """Per sample, every pose of a has one of b within ``atol`` (max abs entry) and back."""
+    for b in range(n):
+        a_b, b_b = poses_a[sample_a == b], poses_b[sample_b == b]
+        assert len(a_b) == len(b_b), b
+        for P in a_b:
+            assert min(np.abs(P - Q).max() for Q in b_b) < atol, b
+        for Q in b_b:
+            assert min(np.abs(P - Q).max() for P in a_b) < atol, b
+
+
+def test_checked_p3p_gives_the_opencv_solutions_also_in_symmetric_configurations():
+    """p3p_checked_batch == cv2.solveP3P's solutions (p3p_hypotheses_batch), as sets per
+    sample: on random problems (some with a wrong correspondence), and on a square of points
+    seen head-on, whose quartic has a double root where the compiled Grunert solver alone
+    returns poses that do not reproject (3 px off: the cv2 fallback's case)."""
+    from quadloc.service.localization.hypotheses import (
+        p3p_checked_batch,
+        p3p_grunert_batch,
+        p3p_hypotheses_batch,
+    )
+
+    rng = np.random.default_rng(7)
+    img, obj = [], []
+    for b in range(40):
+        X = rng.uniform(-1, 1, (3, 3))
+        T_cw = invert_pose(look_at(BACK + rng.uniform(-1, 1, 3), np.zeros(3)))
+        uv = CAM.project_points(T_cw, X) + rng.normal(0, 2.0, (3, 2))
+        img.append(uv)
+        obj.append(X[[1, 0, 2]] if b % 4 == 3 else X)
+    # the square: four corners seen head-on from 4 m on its axis, every ordered triple
+    square = np.array([(-0.5, 0.0, -0.5), (0.5, 0.0, -0.5), (0.5, 0.0, 0.5), (-0.5, 0.0, 0.5)])
+    T_sq = invert_pose(look_at(np.array([0.0, -4.0, 0.0]), np.zeros(3)))
+    uv_sq = CAM.project_points(T_sq, square)
+    for tri in ((0, 1, 2), (0, 1, 3), (1, 2, 3), (0, 2, 3), (1, 0, 2), (2, 0, 3)):
+        img.append(uv_sq[[0, 1, 2]])
+        obj.append(square[list(tri)])
+    img_a, obj_a = np.array(img), np.array(obj)
+    ref, ref_sample = p3p_hypotheses_batch(img_a, obj_a, CAM)
+    got, got_sample = p3p_checked_batch(img_a, obj_a, CAM)
+    assert np.all(np.diff(got_sample) >= 0)  # grouped by sample, in sample order
+    _same_solution_sets(got, got_sample, ref, ref_sample, len(img_a), atol=1e-6)
+    # the fallback was needed: the compiled solver alone misses some of the square's poses
+    grunert, grunert_sample = p3p_grunert_batch(img_a, obj_a, CAM)
+    with pytest.raises(AssertionError):
+        _same_solution_sets(grunert, grunert_sample, ref, ref_sample, len(img_a), atol=1e-6)

@@ -360,7 +360,7 @@ def test_pose_acceptance_uses_min_inliers_and_one_to_one_counts(monkeypatch, cas
     dense[1, 0, 0] = dense[1, 1, 1] = dense[1, 2, 2] = 0.5
     poses = np.stack([np.eye(4), np.eye(4)])
     poses[1, 0, 3] = 1.0  # pose k's IoUs are dense[k]
-    monkeypatch.setattr(search_module, "p3p_hypotheses_batch",
+    monkeypatch.setattr(search_module, "p3p_checked_batch",
                         lambda *a: (poses, np.zeros(len(poses), dtype=int)))
     out = ransac(_FixedIouScorer(dense), UP, inlier_iou=0.2, min_inliers=3, max_hypotheses=10,
                  rng=np.random.default_rng(0))
@@ -540,3 +540,71 @@ def test_split_draw_is_numpy_choice_with_p():
         for _ in range(20):
             assert int(a.choice(n, p=p)) == int(cdf.searchsorted(b.random(), side="right"))
             assert a.choice(5, 2, replace=False).tolist() == b.choice(5, 2, replace=False).tolist()
+
+
+def test_combination_rank_is_the_position_in_itertools_combinations():
+    """_combination_rank (closed form) == the index in itertools.combinations' listing."""
+    import itertools
+
+    from quadloc.service.localization.sampling import _combination_rank
+
+    for n in range(1, 8):
+        for m in range(1, min(n, 3) + 1):
+            for k, c in enumerate(itertools.combinations(range(n), m)):
+                assert _combination_rank(c, n) == k
+
+
+def test_iou_estimate_kernel_equals_the_rule_written_out_in_numpy():
+    """iou_estimates (the compiled point test) == its rule computed here with numpy: the
+    fraction of the detection's filling points with (x - c)^T (A^-1)^-1 (x - c) <= 1 (solved,
+    not inverted in closed form) times the detection area as the intersection, over the
+    union with the projection's area pi sqrt(det A^-1); 0 where det(A^-1) <= 0. A point on
+    the boundary may round the other way: at most one point of difference, in few pairs."""
+    rng = np.random.default_rng(3)
+    n_pairs, n_points = 400, 96
+    dets = [random_ellipse(rng) for _ in range(n_pairs)]
+    projs = [Ellipse(d.cx + rng.normal(0, 30), d.cy + rng.normal(0, 30),
+                     d.a * rng.uniform(0.5, 2), d.b * rng.uniform(0.5, 2),
+                     rng.uniform(-math.pi, math.pi)) for d in dets]
+    pts = ellipse_points(np.array([d.params() for d in dets]), sunflower_disk(n_points))
+    areas = np.array([d.area for d in dets])
+    centres = np.array([p.center for p in projs])
+    S = np.array([p.gaussian()[1] for p in projs])
+    S[:5] = np.array([[1.0, 2.0], [2.0, 1.0]])  # det < 0: no ellipse, IoU 0
+    got = iou_estimates(pts, areas, centres, S)
+    # the rule, written out
+    diff = pts - centres[:, None, :]
+    phi = np.einsum("kmi,kmi->km", diff, np.linalg.solve(S[:, None], diff[..., None])[..., 0])
+    inter = (phi <= 1.0).mean(axis=1) * areas
+    union = areas + math.pi * np.sqrt(np.maximum(np.linalg.det(S), 0.0)) - inter
+    want = np.where(np.linalg.det(S) > 0, np.minimum(inter / np.maximum(union, 1e-300), 1.0), 0.0)
+    assert np.all(got[:5] == 0.0)
+    assert (want > 0.3).sum() > 50  # real overlaps are compared
+    close = np.abs(got - want) <= 1e-12
+    assert close.mean() >= 0.98
+    one_point = areas / n_points / np.maximum(union - areas / n_points, 1e-300)
+    assert np.all(np.abs(got - want) <= 1.01 * one_point + 1e-12)
+
+
+def test_greedy_assignment_equals_the_rule_written_out():
+    """greedy_assignment (the compiled walk) == its rule in plain Python: the pairs at or
+    above the threshold by decreasing IoU (ties: the later pair in row-major order first),
+    each kept when its detection and its object are both still free; sorted by detection.
+    IoUs quantised to tenths: many ties."""
+    rng = np.random.default_rng(12)
+    for _ in range(200):
+        n_det, n_obj = rng.integers(1, 7), rng.integers(1, 7)
+        iou = np.round(rng.uniform(0, 1, (n_det, n_obj)), 1)
+        rows = list(rng.permutation(20)[:n_det])
+        pairs = [(float(iou[d, o]), d * n_obj + o, d, o) for d in range(n_det)
+                 for o in range(n_obj) if iou[d, o] >= 0.3]
+        pairs.sort(key=lambda p: (-p[0], -p[1]))
+        used_d, used_o, want = set(), set(), []
+        for v, _, d, o in pairs:
+            if d not in used_d and o not in used_o:
+                used_d.add(d)
+                used_o.add(o)
+                want.append((int(rows[d]), o, v))
+        got = [(m.detection_index, m.object_index, m.iou)
+               for m in greedy_assignment(iou, rows, 0.3)]
+        assert got == sorted(want, key=lambda t: t[0])
