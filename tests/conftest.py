@@ -24,6 +24,15 @@ import pytest
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
 
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """Compile the solvers' numeric kernels (or load them from numba's cache) once, before any
+    test, as a server does at start (``App.warm_up``): on a fresh checkout the compilation
+    (~13 s) would otherwise land inside the time budget of whichever test localizes first."""
+    from quadloc.service.app.context import App
+
+    App.warm_up()
+
+
 def _free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
