@@ -185,10 +185,12 @@ START_OFFSET = (0.10, 5.0)
 PEER = "peer BoundingBoxFactor (C++)"
 
 
-def make_problems(seed: int) -> dict[str, Any]:
+def make_problems(seed: int, clip_to_image: bool = True) -> dict[str, Any]:
     """The problems as plain data (JSON-able, read by every worker): per real Chess pose with
     at least :data:`MIN_OBJECTS` objects seen, the objects seen (noise-free detections,
-    truncated at the image border), the true pose and a start."""
+    truncated at the image border; ``clip_to_image=False``: the exact projections of the
+    objects that overlap the image, not truncated, the same random draws), the true pose and a
+    start."""
     from quadloc.maps.compiled import compile_map
     from tests.support.reference_data import (
         load_chess_map,
@@ -202,7 +204,7 @@ def make_problems(seed: int) -> dict[str, Any]:
     ellipsoids = {o.object_id: o.ellipsoid for o in scene.objects}
     cam, poses, _ = load_chess_world_from_camera()
     rng = np.random.default_rng(seed)
-    seen = SimulationConfig.exact(clip_to_image=True)
+    seen = SimulationConfig.exact(clip_to_image=clip_to_image)
     problems = []
     for truth in poses:
         frame = simulate_frame(compiled, cam, truth, rng, seen)
