@@ -164,12 +164,14 @@ class Camera:
         return pixels
 
 
+@jit
 def depth_margin(center_depth: FloatArray, axis_variance: FloatArray) -> FloatArray:
     """Smallest camera-frame depth (m) of an ellipsoid: ``z_c - sqrt(d^T S d)``, from its
     centre's depth ``z_c`` (m) and ``d^T S d`` (m^2), its shape matrix ``S = R diag(axes^2)
     R^T`` along the camera's optical axis ``d`` (``S_c[2, 2]`` in the camera frame); any
     matching shapes. The one place of this formula (the pose factors, the map-building
-    factors and :func:`ellipsoid_depth_margins` call it)."""
+    factors and :func:`ellipsoid_depth_margins` call it; a compiled kernel, so that the other
+    kernels call it too: scalars or arrays of any shape, positional arguments)."""
     return center_depth - np.sqrt(np.maximum(axis_variance, 0.0))
 
 

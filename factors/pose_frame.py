@@ -75,6 +75,8 @@ class PairRows(NamedTuple):
     depth_margins: FloatArray
     #: the frame the family computed at this pose, or None (the penalty then computes it)
     frame: CameraFrame | None
+    #: ``sum(residuals**2)`` when the family computed it and every pair is valid, else None
+    sum_squares: float | None = None
 
 
 class PoseResidualFamily(Protocol):

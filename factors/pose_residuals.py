@@ -311,7 +311,7 @@ class PoseResidualModel:
             return memo[2]
         jacobian = jacobian or self.eager_jacobian
         rows = self._family.rows(T, jacobian)
-        if not rows.valid.all():
+        if rows.sum_squares is None and not rows.valid.all():
             frame = self._ellipsoid_arrays.camera_frame(T) if rows.frame is None else rows.frame
             self._penalty.replace_invalid(rows.residuals, rows.jacobians, ~rows.valid, frame,
                                           rows.depth_margins)
@@ -328,7 +328,8 @@ class PoseResidualModel:
     def _saturate(self, rows: PairRows) -> PoseEvaluation:
         """The evaluation of ``rows`` (penalty applied) with the factors' residuals: the valid
         rows saturated (:meth:`quadloc.factors.pose_penalty.DepthMarginPenalty.saturate`)."""
-        r, J = self._penalty.saturate(rows.residuals, rows.jacobians, rows.valid)
+        r, J = self._penalty.saturate(rows.residuals, rows.jacobians, rows.valid,
+                                      rows.sum_squares)
         return PoseEvaluation(rows.residuals, rows.jacobians, rows.valid, rows.depth_margins,
                               r, J)
 
