@@ -35,8 +35,8 @@ def _level_set_kernel(
 ) -> FloatArray:
     """Level-set Jacobians (N, M, 6) and residuals (N, M) of all pairs at ``T``
     (``world_from_camera`` 4x4), per object its depth margin (N,) m
-    (:func:`quadloc.factors.camera.depth_margin` of its centre's depth ``z_c`` and ``S_c[2, 2]``,
-    called from here; the rows of a pair whose margin is ``<= min_depth_margin`` m are garbage,
+    (:func:`quadloc.factors.camera.depth_margin`'s compiled form, of its centre's depth ``z_c``
+    and ``S_c[2, 2]``; the rows of a pair whose margin is ``<= min_depth_margin`` m are garbage,
     replaced by the penalty), then the number of such pairs and the sum of all squared residuals,
     in ONE flat array of ``7 N M + N + 2`` values in that order (:func:`_split`: returning one
     array instead of several saves ~2.5 us of boxing per call; the margins, the validity count
@@ -68,7 +68,7 @@ def _level_set_kernel(
         w0 = S_world[j, 0, 0] * T[0, 2] + S_world[j, 0, 1] * T[1, 2] + S_world[j, 0, 2] * T[2, 2]
         w1 = S_world[j, 1, 0] * T[0, 2] + S_world[j, 1, 1] * T[1, 2] + S_world[j, 1, 2] * T[2, 2]
         w2 = S_world[j, 2, 0] * T[0, 2] + S_world[j, 2, 1] * T[1, 2] + S_world[j, 2, 2] * T[2, 2]
-        margins[j] = _camera.depth_margin(z, w0 * T[0, 2] + w1 * T[1, 2] + w2 * T[2, 2])
+        margins[j] = _camera.depth_margin_kernel(z, w0 * T[0, 2] + w1 * T[1, 2] + w2 * T[2, 2])
         if not margins[j] > min_depth_margin:
             n_invalid += 1
         w0, w1, w2 = w0 - d0 * z, w1 - d1 * z, w2 - d2 * z

@@ -44,8 +44,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from typing import TypedDict
+from typing import NamedTuple, TypedDict
 
 import numpy as np
 
@@ -116,8 +115,7 @@ class ModelOptions(TypedDict, total=False):
     eager_jacobian: bool | None
 
 
-@dataclass(frozen=True)
-class PoseEvaluation:
+class PoseEvaluation(NamedTuple):
     """Residuals of all pairs at one pose (read-only arrays).
 
     ``residuals`` (N, dim): the metric's residuals (rows of invalid pairs hold the penalty);
