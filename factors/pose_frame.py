@@ -76,7 +76,8 @@ class PairRows(NamedTuple):
     depth_margins: FloatArray
     #: the frame the family computed at this pose, or None (the penalty then computes it)
     frame: CameraFrame | None
-    #: ``sum(residuals**2)`` when the family computed it and every pair is valid, else None
+    #: ``sum(residuals**2)`` when the family computed it and every pair is valid, else None;
+    #: when given, ``residuals``, ``jacobians``, ``valid`` and ``depth_margins`` are read-only
     sum_squares: float | None = None
 
 

@@ -240,11 +240,15 @@ class LevelSetResiduals:
         Jacobian is always computed with the residual, whatever ``jacobian``)."""
         # a fresh C-ordered copy of the pose: the kernels are compiled for that one type
         phi0 = self._phi0
-        r, J, margins, n_invalid, sum_squares = _split(
-            _level_set_kernel(np.array(world_from_camera, float, order="C"),
-                              self._ellipsoids.centers, self._S_world, self._S_world_inv,
-                              self._rays, phi0, self._min_depth_margin),
-            *phi0.shape)
-        if n_invalid == 0:  # the usual case: no comparison, the margins' sum of squares
+        out = _level_set_kernel(np.array(world_from_camera, float, order="C"),
+                                self._ellipsoids.centers, self._S_world, self._S_world_inv,
+                                self._rays, phi0, self._min_depth_margin)
+        n, m = phi0.shape
+        if out[7 * n * m + n] == 0.0:
+            # the usual case, every pair valid: no comparison, the residuals' sum of squares
+            # given, and every array read-only already (views of a read-only result)
+            out.setflags(write=False)
+            r, J, margins, _, sum_squares = _split(out, n, m)
             return PairRows(r, J, self._all_valid, margins, None, sum_squares)
+        r, J, margins, _, _ = _split(out, n, m)
         return PairRows(r, J, margins > self._min_depth_margin, margins, None)

@@ -314,7 +314,9 @@ class PoseResidualModel:
             self._penalty.replace_invalid(rows.residuals, rows.jacobians, ~rows.valid, frame,
                                           rows.depth_margins)
         ev = self._saturate(rows)
-        arrays = [ev.residuals, ev.jacobians, ev.valid, ev.depth_margins]
+        # the family's arrays are read-only already when it gave sum_squares (PairRows)
+        arrays = [] if rows.sum_squares is not None else \
+            [ev.residuals, ev.jacobians, ev.valid, ev.depth_margins]
         if ev.factor_residuals is not ev.residuals:  # saturated rows (else the same arrays)
             arrays += [ev.factor_residuals, ev.factor_jacobians]
         for arr in arrays:
