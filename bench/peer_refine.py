@@ -19,6 +19,10 @@ only (map fixed), ``--repeats`` calls per problem per round.
   (``quadloc.service.localization.refine``: iteration cap, tolerances, lambda bound, sequential
   Cholesky), so that both stop by the same rule. It is never a dependency: without ``--peer``
   (or ``QUADLOC_PEER_REFINE``) the bench says so and skips it.
+* ``--untruncated``: the same poses and starts with exact, untruncated detections (the
+  residual vanishes at the true pose; ``bench.refine_convergence``: the level set then needs
+  the peer's few iterations), in the results section ``peer_refine_untruncated``: what the
+  overhead alone costs against the peer.
 * ``--compare-tree DIR``: QuadLoc as checked out in DIR (e.g. ``git worktree add /tmp/before
   <commit>``, then ``make install`` there: its workers run with DIR's own ``.venv``) timed in
   the same run, for before/after figures, and the largest distance
@@ -185,10 +189,12 @@ START_OFFSET = (0.10, 5.0)
 PEER = "peer BoundingBoxFactor (C++)"
 
 
-def make_problems(seed: int) -> dict[str, Any]:
+def make_problems(seed: int, clip_to_image: bool = True) -> dict[str, Any]:
     """The problems as plain data (JSON-able, read by every worker): per real Chess pose with
     at least :data:`MIN_OBJECTS` objects seen, the objects seen (noise-free detections,
-    truncated at the image border), the true pose and a start."""
+    truncated at the image border; ``clip_to_image=False``: the exact projections of the
+    objects that overlap the image, not truncated, the same random draws), the true pose and a
+    start."""
     from quadloc.maps.compiled import compile_map
     from tests.support.reference_data import (
         load_chess_map,
@@ -202,7 +208,7 @@ def make_problems(seed: int) -> dict[str, Any]:
     ellipsoids = {o.object_id: o.ellipsoid for o in scene.objects}
     cam, poses, _ = load_chess_world_from_camera()
     rng = np.random.default_rng(seed)
-    seen = SimulationConfig.exact(clip_to_image=True)
+    seen = SimulationConfig.exact(clip_to_image=clip_to_image)
     problems = []
     for truth in poses:
         frame = simulate_frame(compiled, cam, truth, rng, seen)
@@ -335,8 +341,8 @@ def summarise(rounds: list[dict[str, Any]], common: list[int]) -> dict[str, Any]
 
 
 def run(seed: int, rounds: int, repeats: int, peer: Path | None,
-        compare_tree: Path | None) -> dict[str, Any]:
-    data = make_problems(seed)
+        compare_tree: Path | None, untruncated: bool = False) -> dict[str, Any]:
+    data = make_problems(seed, clip_to_image=not untruncated)
     solvers: dict[str, tuple[Path, str] | Path] = {}
     if compare_tree is not None:
         from bench.results_doc import tree_version
@@ -365,6 +371,7 @@ def run(seed: int, rounds: int, repeats: int, peer: Path | None,
               if all(r[-1]["problems"][i]["converged"] for r in results.values())]
     out: dict[str, Any] = {
         "seed": seed, "rounds": rounds, "repeats": repeats, "poses": data["poses"],
+        "untruncated": untruncated,
         "problems": n, "common_problems": len(common),
         "median_objects": float(np.median([len(p["objects"]) for p in data["problems"]])),
         "python": platform.python_version(), "peer_built": peer is not None,
@@ -389,7 +396,13 @@ def markdown(res: dict[str, Any]) -> str:
     peer = res["peer_built"]
     versions = sorted({f"{k}: GTSAM {v['gtsam']}" for k, v in res["solvers"].items()
                        if not k.startswith("before")})
-    lines = ["## Refinement speed against a compiled peer (issue 14, part 3)", "",
+    untruncated = res.get("untruncated", False)
+    title = "## Refinement speed against a compiled peer (issue 14, part 3)" if not untruncated \
+        else "## Refinement speed against a compiled peer, untruncated detections (issue 33)"
+    seen = ("noise-free detections NOT truncated: the exact projections of the objects "
+            "overlapping the image") if untruncated \
+        else "noise-free detections truncated at the image border"
+    lines = [title, "",
              f"Seed {res['seed']}, {res['rounds']} interleaved rounds x "
              f"{res['repeats']} calls per problem, CPU time, medians over all calls (CPython "
              f"{res['python']}; {'; '.join(versions)}; 2-core machine shared with other jobs, "
@@ -397,7 +410,7 @@ def markdown(res: dict[str, Any]) -> str:
              f"{max(res['load_average_1min'])} during the rounds: compare within this table "
              f"only). {res['problems']} of the {res['poses']} real Chess poses (those seeing "
              f"at least {MIN_OBJECTS} objects; median {res['median_objects']:g} objects seen, "
-             "noise-free detections truncated at the image border), starts 0.1 m / 5 deg off; "
+             f"{seen}), starts 0.1 m / 5 deg off; "
              "the peer pose-only with QuadLoc's LM parameters; see `bench/peer_refine.py`.",
              ""]
     if not peer:
@@ -466,6 +479,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--compare-tree", type=Path, default=None)
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--write-results", action="store_true")
+    ap.add_argument("--untruncated", action="store_true",
+                    help="exact, untruncated detections (results section peer_refine_untruncated)")
     ap.add_argument("--worker", type=Path, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--metric", default="level_set", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -481,14 +496,15 @@ def main(argv: list[str] | None = None) -> None:
         print("no --peer given (nor QUADLOC_PEER_REFINE): skipping the gtsam-quadrics peer; "
               "see bench/peer_refine.py for how to build it", file=sys.stderr)
     res = run(args.seed, args.rounds, args.repeats, None if peer is None else Path(peer),
-              args.compare_tree)
+              args.compare_tree, args.untruncated)
     print(json.dumps(res, indent=2))
     if args.json:
         args.json.write_text(json.dumps(res, indent=2))
     if args.write_results:
         from bench.results_doc import update_results_section
 
-        update_results_section("peer_refine", markdown(res))
+        update_results_section("peer_refine_untruncated" if args.untruncated else "peer_refine",
+                               markdown(res))
 
 
 if __name__ == "__main__":

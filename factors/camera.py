@@ -20,7 +20,7 @@ import numpy as np
 
 from quadloc.factors.arrays import BoolArray, FloatArray
 from quadloc.factors.conics import DegenerateProjectionError, Ellipse, params_from_dual_conics
-from quadloc.factors.jit import jit
+from quadloc.factors.jit import jit, jit_for_kernels
 from quadloc.factors.names import GeometryError
 from quadloc.factors.rotations import (
     check_rotation,
@@ -169,8 +169,13 @@ def depth_margin(center_depth: FloatArray, axis_variance: FloatArray) -> FloatAr
     centre's depth ``z_c`` (m) and ``d^T S d`` (m^2), its shape matrix ``S = R diag(axes^2)
     R^T`` along the camera's optical axis ``d`` (``S_c[2, 2]`` in the camera frame); any
     matching shapes. The one place of this formula (the pose factors, the map-building
-    factors and :func:`ellipsoid_depth_margins` call it)."""
+    factors and :func:`ellipsoid_depth_margins` call it; the kernels call its compiled form
+    :data:`depth_margin_kernel`, with scalars)."""
     return center_depth - np.sqrt(np.maximum(axis_variance, 0.0))
+
+
+#: :func:`depth_margin` compiled, for the kernels (``camera.depth_margin_kernel(z, v)``)
+depth_margin_kernel = jit_for_kernels(depth_margin, "depth_margin_kernel")
 
 
 def ellipsoid_depth_margins(

@@ -26,7 +26,8 @@ from typing import Any, TypeVar, cast
 #: direction vanishes; ``nogil``: a kernel releases the GIL while it runs.
 NUMBA_OPTIONS: dict[str, Any] = {"error_model": "numpy", "nogil": True}
 
-_PENDING: list[Callable[..., Any]] = []
+#: the declared kernels not yet bound: (function, the module global its dispatcher becomes)
+_PENDING: list[tuple[Callable[..., Any], str]] = []
 _LOCK = threading.Lock()
 #: a kernel's type: the annotated Python function, whose signature its stand-in keeps
 _Kernel = TypeVar("_Kernel", bound=Callable[..., Any])
@@ -38,12 +39,28 @@ def jit(fn: _Kernel) -> _Kernel:
     module's global IS the numba dispatcher (so kernels call each other compiled, and Python
     callers that look the name up reach numba directly). Typed as ``fn`` itself: callers are
     checked against the kernel's annotations."""
-    _PENDING.append(fn)
+    return _declare(fn, fn.__name__)
+
+
+def jit_for_kernels(fn: _Kernel, name: str) -> _Kernel:
+    """Compile ``fn`` (a module-level function, numpy-style) for the OTHER kernels only: the
+    compiled form becomes the module global ``name`` (which the kernels call, e.g. as
+    ``module.name``), while Python callers keep calling ``fn`` itself, as numpy code. So one
+    formula serves both without a compilation per array type at a Python call (a request
+    would otherwise compile for every new array shape it passes). Returns the stand-in to
+    assign to ``name``."""
+    return _declare(fn, name)
+
+
+def _declare(fn: _Kernel, name: str) -> _Kernel:
+    """Declare ``fn`` compiled as its module's global ``name``; the stand-in binds every
+    declared kernel at its first call."""
+    _PENDING.append((fn, name))
 
     @functools.wraps(fn)
     def first_call(*args: Any) -> Any:
         _bind_all()
-        return fn.__globals__[fn.__name__](*args)
+        return fn.__globals__[name](*args)
 
     return cast(_Kernel, first_call)  # wraps(fn): the same signature
 
@@ -53,8 +70,8 @@ def _bind_all() -> None:
     with _LOCK:
         if not _PENDING:
             return
-        for fn in _PENDING:
-            fn.__globals__[fn.__name__] = _dispatcher(fn)
+        for fn, name in _PENDING:
+            fn.__globals__[name] = _dispatcher(fn)
         _PENDING.clear()
 
 

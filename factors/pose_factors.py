@@ -159,13 +159,13 @@ def pose_factors(
                               metric_options=metric_options, **model_options)
     if sigmas is None:
         sigmas = [None] * model.n
-    _check_sigmas(sigmas, model.n)
+    stds = _check_sigmas(sigmas, model.n)
     check_robust(robust, robust_scale)
     if batched:
         if robust is not None:
             raise ValueError("batched=True cannot carry per-detection robust kernels; "
                              "use batched=False with robust")
-        return [batched_pose_factor(key, model, sigmas)], model
+        return [_batched_factor(key, model, stds)], model
     factors = [
         shared_pose_factor(key, model, j,
                            make_noise_model(model.dim, s, robust, robust_scale, metric))
@@ -212,8 +212,14 @@ def batched_pose_factor(
     robust kernel is asked for (a per-detection robust kernel is impossible in this form);
     ``bench.refine_speed`` measures both designs. ``sigmas`` are validated as in
     :func:`pose_factors` (one per pair, finite and > 0, or None)."""
+    return _batched_factor(key, model,
+                           np.ones(model.n) if sigmas is None else _check_sigmas(sigmas, model.n))
+
+
+def _batched_factor(key: int, model: PoseResidualModel, stds: FloatArray) -> gtsam.CustomFactor:
+    """:func:`batched_pose_factor` with the pairs' stds (N,) already validated (one check per
+    refinement)."""
     n, m = model.n, model.dim
-    stds = np.ones(n) if sigmas is None else _check_sigmas(sigmas, n)
     noise = gtsam.noiseModel.Diagonal.Sigmas(np.repeat(stds, m))
     return _model_factor(key, model, noise, lambda a: a.reshape(n * m, *a.shape[2:]))
 

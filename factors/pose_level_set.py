@@ -17,9 +17,10 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from quadloc.factors import camera as _camera
 from quadloc.factors import metrics
-from quadloc.factors.arrays import FloatArray
-from quadloc.factors.camera import Camera, depth_margin
+from quadloc.factors.arrays import BoolArray, FloatArray
+from quadloc.factors.camera import Camera
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.jit import jit
 from quadloc.factors.pose_frame import EllipsoidArrays, PairRows
@@ -30,14 +31,17 @@ __all__ = ["LevelSetResiduals"]
 @jit
 def _level_set_kernel(
     T: FloatArray, centers: FloatArray, S_world: FloatArray, S_world_inv: FloatArray,
-    rays: FloatArray, phi0: FloatArray,
+    rays: FloatArray, phi0: FloatArray, min_depth_margin: float,
 ) -> FloatArray:
     """Level-set Jacobians (N, M, 6) and residuals (N, M) of all pairs at ``T``
-    (``world_from_camera`` 4x4), and per object its centre's depth ``z_c`` (N,) m and ``S_c[2,
-    2]`` (N,) m^2 (for :func:`quadloc.factors.camera.depth_margin`; the rows of an invalid pair
-    are garbage, replaced by the penalty), in ONE flat array of ``7 N M + 2 N`` values in that
-    order (:func:`_split`: returning one array instead of four saves ~2.5 us of boxing per
-    call). Docs: docs/design/factors.md, "Level-set residual".
+    (``world_from_camera`` 4x4), per object its depth margin (N,) m
+    (:func:`quadloc.factors.camera.depth_margin`'s compiled form, of its centre's depth ``z_c``
+    and ``S_c[2, 2]``; the rows of a pair whose margin is ``<= min_depth_margin`` m are garbage,
+    replaced by the penalty), then the number of such pairs and the sum of all squared residuals,
+    in ONE flat array of ``7 N M + N + 2`` values in that order (:func:`_split`: returning one
+    array instead of several saves ~2.5 us of boxing per call; the margins, the validity count
+    and the sum here instead of numpy calls on small arrays save ~5 us per evaluation). Docs:
+    docs/design/factors.md, "Level-set residual".
 
     Per object, ``A^-1`` by Sherman-Morrison from the world frame, ``A_w = S_w - d d^T`` (``d``
     the centre seen from the camera, world axes): ``A_w^-1 = S_w^-1 + e e^T / (1 - d . e)``,
@@ -49,11 +53,12 @@ def _level_set_kernel(
         dr/dv  = 2 g z_c e3 - 2 (s A^-1 c_c . n) u
     """
     n_obj, m = phi0.shape
-    out = np.empty(7 * n_obj * m + 2 * n_obj)
+    out = np.empty(7 * n_obj * m + n_obj + 2)
     J = out[:6 * n_obj * m].reshape((n_obj, m, 6))
     r = out[6 * n_obj * m:7 * n_obj * m].reshape((n_obj, m))
-    z_out = out[7 * n_obj * m:7 * n_obj * m + n_obj]
-    v_out = out[7 * n_obj * m + n_obj:]
+    margins = out[7 * n_obj * m:7 * n_obj * m + n_obj]
+    n_invalid = 0
+    sum_sq = 0.0
     Ai_w = np.empty((3, 3))
     Ai = np.empty((3, 3))
     for j in range(n_obj):
@@ -63,8 +68,9 @@ def _level_set_kernel(
         w0 = S_world[j, 0, 0] * T[0, 2] + S_world[j, 0, 1] * T[1, 2] + S_world[j, 0, 2] * T[2, 2]
         w1 = S_world[j, 1, 0] * T[0, 2] + S_world[j, 1, 1] * T[1, 2] + S_world[j, 1, 2] * T[2, 2]
         w2 = S_world[j, 2, 0] * T[0, 2] + S_world[j, 2, 1] * T[1, 2] + S_world[j, 2, 2] * T[2, 2]
-        z_out[j] = z
-        v_out[j] = w0 * T[0, 2] + w1 * T[1, 2] + w2 * T[2, 2]
+        margins[j] = _camera.depth_margin_kernel(z, w0 * T[0, 2] + w1 * T[1, 2] + w2 * T[2, 2])
+        if not margins[j] > min_depth_margin:
+            n_invalid += 1
         w0, w1, w2 = w0 - d0 * z, w1 - d1 * z, w2 - d2 * z
         a0 = T[0, 0] * w0 + T[1, 0] * w1 + T[2, 0] * w2
         a1 = T[0, 1] * w0 + T[1, 1] * w1 + T[2, 1] * w2
@@ -99,7 +105,9 @@ def _level_set_kernel(
             u2 = Ai[2, 0] * n0 + Ai[2, 1] * n1 + Ai[2, 2] * n2
             g = n0 * u0 + n1 * u1 + n2 * u2
             p = sw0 * n0 + sw1 * n1 + sw2 * n2
-            r[j, i] = phi0[j, i] + s * g
+            r_ji = phi0[j, i] + s * g
+            r[j, i] = r_ji
+            sum_sq += r_ji * r_ji
             # (n x u) = -(u x n)
             J[j, i, 0] = -2.0 * a1 * g - 2.0 * s * (u1 * n2 - u2 * n1)
             J[j, i, 1] = 2.0 * a0 * g - 2.0 * s * (u2 * n0 - u0 * n2)
@@ -107,16 +115,19 @@ def _level_set_kernel(
             J[j, i, 3] = -2.0 * p * u0
             J[j, i, 4] = -2.0 * p * u1
             J[j, i, 5] = -2.0 * p * u2 + 2.0 * z * g
+    out[7 * n_obj * m + n_obj] = n_invalid
+    out[7 * n_obj * m + n_obj + 1] = sum_sq
     return out
 
 
 def _split(out: FloatArray, n: int, m: int
-           ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """The residuals (N, M), Jacobians (N, M, 6), ``z_c`` (N,) and ``S_c[2, 2]`` (N,): views
-    of :func:`_level_set_kernel`'s flat result."""
+           ) -> tuple[FloatArray, FloatArray, FloatArray, int, float]:
+    """The residuals (N, M), Jacobians (N, M, 6), depth margins (N,), the number of invalid
+    pairs and the sum of squared residuals: views and values of :func:`_level_set_kernel`'s
+    flat result."""
     nm6, nm7 = 6 * n * m, 7 * n * m
     return (out[nm6:nm7].reshape(n, m), out[:nm6].reshape(n, m, 6), out[nm7:nm7 + n],
-            out[nm7 + n:])
+            int(out[nm7 + n]), float(out[nm7 + n + 1]))
 
 
 @functools.lru_cache(maxsize=32)
@@ -177,6 +188,9 @@ class LevelSetResiduals:
         H[:, 2, 2] = 1.0
         self._H = H
         self._H_inv = np.linalg.inv(H)
+        #: (N,) all True, read-only: :meth:`rows`' validity when every margin is above the minimum
+        self._all_valid: BoolArray = np.ones(n, dtype=bool)
+        self._all_valid.setflags(write=False)
         self.lay_out(initial_world_from_camera)
 
     def lay_out(self, world_from_camera: FloatArray | None) -> None:
@@ -226,9 +240,15 @@ class LevelSetResiduals:
         Jacobian is always computed with the residual, whatever ``jacobian``)."""
         # a fresh C-ordered copy of the pose: the kernels are compiled for that one type
         phi0 = self._phi0
-        r, J, z, v = _split(_level_set_kernel(np.array(world_from_camera, float, order="C"),
-                                              self._ellipsoids.centers, self._S_world,
-                                              self._S_world_inv, self._rays, phi0),
-                            *phi0.shape)
-        margins = depth_margin(z, v)
+        out = _level_set_kernel(np.array(world_from_camera, float, order="C"),
+                                self._ellipsoids.centers, self._S_world, self._S_world_inv,
+                                self._rays, phi0, self._min_depth_margin)
+        n, m = phi0.shape
+        if out[7 * n * m + n] == 0.0:
+            # the usual case, every pair valid: no comparison, the residuals' sum of squares
+            # given, and every array read-only already (views of a read-only result)
+            out.setflags(write=False)
+            r, J, margins, _, sum_squares = _split(out, n, m)
+            return PairRows(r, J, self._all_valid, margins, None, sum_squares)
+        r, J, margins, _, _ = _split(out, n, m)
         return PairRows(r, J, margins > self._min_depth_margin, margins, None)

@@ -103,14 +103,14 @@ class DepthMarginPenalty:
             coef = -amp * ds / (d + ds) ** 2
             jacobians[idx] = (coef[:, None] * dm)[:, None, :]
 
-    def saturate(self, residuals: FloatArray, jacobians: FloatArray | None, valid: BoolArray
-                 ) -> tuple[FloatArray, FloatArray | None]:
+    def saturate(self, residuals: FloatArray, jacobians: FloatArray | None, valid: BoolArray,
+                 sum_squares: float | None = None) -> tuple[FloatArray, FloatArray | None]:
         """The factors' residuals and Jacobians: the valid rows whose cost exceeds ``P_j / 2``
         saturated (module docstring). The SAME arrays when no row saturates (the usual case),
-        new ones otherwise."""
+        new ones otherwise. ``sum_squares``: ``sum(residuals**2)`` if the caller has it."""
         r = residuals
         # fast path: the total cost is below every pair's c_0, so none can reach it
-        if float(np.vdot(r, r)) <= self._floor:
+        if (float(np.vdot(r, r)) if sum_squares is None else sum_squares) <= self._floor:
             return r, jacobians
         c = (r * r).sum(axis=1)
         big = (c > self._half) & valid

@@ -44,8 +44,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from typing import TypedDict
+from typing import NamedTuple, TypedDict
 
 import numpy as np
 
@@ -116,8 +115,7 @@ class ModelOptions(TypedDict, total=False):
     eager_jacobian: bool | None
 
 
-@dataclass(frozen=True)
-class PoseEvaluation:
+class PoseEvaluation(NamedTuple):
     """Residuals of all pairs at one pose (read-only arrays).
 
     ``residuals`` (N, dim): the metric's residuals (rows of invalid pairs hold the penalty);
@@ -311,12 +309,14 @@ class PoseResidualModel:
             return memo[2]
         jacobian = jacobian or self.eager_jacobian
         rows = self._family.rows(T, jacobian)
-        if not rows.valid.all():
+        if rows.sum_squares is None and not rows.valid.all():
             frame = self._ellipsoid_arrays.camera_frame(T) if rows.frame is None else rows.frame
             self._penalty.replace_invalid(rows.residuals, rows.jacobians, ~rows.valid, frame,
                                           rows.depth_margins)
         ev = self._saturate(rows)
-        arrays = [ev.residuals, ev.jacobians, ev.valid, ev.depth_margins]
+        # the family's arrays are read-only already when it gave sum_squares (PairRows)
+        arrays = [] if rows.sum_squares is not None else \
+            [ev.residuals, ev.jacobians, ev.valid, ev.depth_margins]
         if ev.factor_residuals is not ev.residuals:  # saturated rows (else the same arrays)
             arrays += [ev.factor_residuals, ev.factor_jacobians]
         for arr in arrays:
@@ -328,7 +328,8 @@ class PoseResidualModel:
     def _saturate(self, rows: PairRows) -> PoseEvaluation:
         """The evaluation of ``rows`` (penalty applied) with the factors' residuals: the valid
         rows saturated (:meth:`quadloc.factors.pose_penalty.DepthMarginPenalty.saturate`)."""
-        r, J = self._penalty.saturate(rows.residuals, rows.jacobians, rows.valid)
+        r, J = self._penalty.saturate(rows.residuals, rows.jacobians, rows.valid,
+                                      rows.sum_squares)
         return PoseEvaluation(rows.residuals, rows.jacobians, rows.valid, rows.depth_margins,
                               r, J)
 

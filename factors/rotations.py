@@ -137,10 +137,16 @@ def exact_norm(values: FloatArray | Sequence[float]) -> float:
 
 
 def _is_rotation(rows: list[list[float]], tol: float) -> bool:
-    """``max|R R^T - I| <= tol`` and ``det R > 0``, in plain float arithmetic (no BLAS)."""
-    err = max(abs(math.fsum(a * b for a, b in zip(rows[i], rows[j], strict=True))
-                  - (1.0 if i == j else 0.0)) for i in range(3) for j in range(3))
+    """``max|R R^T - I| <= tol`` and ``det R > 0``, in plain float arithmetic (no BLAS; each
+    entry of ``R R^T`` a correctly rounded ``math.fsum``, the symmetric ones computed once: the
+    same decision as all nine, ~2 us instead of ~14 us: it runs on every refine() call)."""
     (a, b, c), (d, e, f), (g, h, k) = rows
+    err = max(abs(math.fsum((a * a, b * b, c * c)) - 1.0),
+              abs(math.fsum((d * d, e * e, f * f)) - 1.0),
+              abs(math.fsum((g * g, h * h, k * k)) - 1.0),
+              abs(math.fsum((a * d, b * e, c * f))),
+              abs(math.fsum((a * g, b * h, c * k))),
+              abs(math.fsum((d * g, e * h, f * k))))
     det = a * (e * k - f * h) - b * (d * k - f * g) + c * (d * h - e * g)
     return err <= tol and det > 0  # False for NaN
 

@@ -28,6 +28,7 @@ from quadloc.factors.pose_factors import (
 )
 from quadloc.factors.pose_residuals import (
     ANALYTIC_METRICS,
+    DEFAULT_MIN_DEPTH_MARGIN,
     DEFAULT_PENALTY_COST,
     PoseResidualModel,
     expmap_pose3,
@@ -551,3 +552,43 @@ def test_relayout_equals_a_model_built_at_that_pose(scene):
     np.testing.assert_array_equal(a.jacobians, b.jacobians)
     with pytest.raises(ValueError, match="level_set"):
         PoseResidualModel("wasserstein", dets, ells, CAMERA).relayout(near)
+
+
+@pytest.mark.parametrize("metric", ["level_set", "bbox"])
+def test_kernel_depth_margins_and_validity_match_the_numpy_formula(scene, metric):
+    """The margins, validity and (level set) sum of squares that the kernels now compute
+    (through depth_margin's compiled form) against the numpy formula
+    (``ellipsoid_depth_margins``, independent of the kernels) and numpy sums, with every pair
+    valid and with one behind the camera (1e-12 m / 1e-12 relative)."""
+    ells, dets, pose = scene
+    behind = np.eye(4)
+    behind[:3, 3] = ells[0].center + np.array([0.0, 0.0, 0.05])  # inside ellipsoid 0
+    centers = np.array([e.center for e in ells])
+    shapes = np.array([e.shape_matrix() for e in ells])
+    for T in (pose, behind):
+        model = PoseResidualModel(metric, dets, ells, CAMERA, initial_world_from_camera=pose)
+        ev = model.evaluate(T)
+        expected = ellipsoid_depth_margins(invert_pose(T), centers, shapes)
+        np.testing.assert_allclose(ev.depth_margins, expected, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(ev.valid, expected > DEFAULT_MIN_DEPTH_MARGIN)
+        assert not ev.residuals.flags.writeable and not ev.valid.flags.writeable
+        if metric == "level_set":
+            rows = model._family.rows(np.array(T), True)
+            if ev.valid.all():
+                assert rows.sum_squares == pytest.approx(
+                    float(np.sum(rows.residuals ** 2)), rel=1e-12)
+            else:
+                assert rows.sum_squares is None
+    assert not ev.valid[0] and ev.valid[1:].all()  # the second pose really has one invalid
+
+
+def test_depth_margin_stays_numpy_for_python_callers():
+    """``depth_margin`` is the numpy function for Python callers (no compilation per array
+    type at a request); its compiled form, for the kernels, gives the same value."""
+    from quadloc.factors import camera as camera_module
+
+    z, v = np.array([[2.0, 0.5], [1.0, 3.0]]), np.array([[0.25, 1.0], [-1e-3, 4.0]])
+    out = camera_module.depth_margin(z, v)
+    np.testing.assert_allclose(out, z - np.sqrt(np.maximum(v, 0.0)), rtol=0, atol=0)
+    assert not hasattr(camera_module.depth_margin, "signatures")  # not a numba dispatcher
+    assert camera_module.depth_margin_kernel(2.0, 0.25) == pytest.approx(1.5, abs=1e-15)
