@@ -7,7 +7,7 @@ Usage::
     python -m bench.map_building --write-recording PATH [--frames N] [--seeds S]
                                  [--holdout-every K]
     python -m bench.map_building --building [--rooms 20] [--sizes 1500,3000,6000]
-                                 [--seeds 1001] [--write-results]
+                                 [--seeds 1001] [--jobs 1] [--write-results]
 
 ``--building`` (issue 29): a walk through a generated building of ``--rooms`` perturbed rooms
 (:func:`tests.support.buildings.building_recording`: every room visited, then revisits; app
@@ -534,30 +534,41 @@ def _build_and_score(seed: int, n_rooms: int, n_frames: int, n_test_per_room: in
     })
 
 
-def run_building(seed: int, n_rooms: int, sizes: list[int], n_test_per_room: int,
-                 log=print) -> list[dict]:
-    """``--building``: one build per size, each in its own process (module docstring)."""
+def run_building(seeds: list[int], n_rooms: int, sizes: list[int], n_test_per_room: int,
+                 log=print, jobs: int = 1) -> list[dict]:
+    """``--building``: one build per seed and size, each in its own process (module
+    docstring), at most ``jobs`` at once (``--jobs``: the builds then share the CPU, so their
+    times grow; the peak RSS stays per build); results in seed, size order."""
     import multiprocessing
 
     ctx = multiprocessing.get_context("spawn")
-    out = []
-    for n in sizes:
-        queue = ctx.Queue()
-        proc = ctx.Process(target=_build_and_score, args=(seed, n_rooms, n, n_test_per_room,
-                                                          queue))
-        proc.start()
-        while True:  # the child's result, or its failure
+    tasks = [(seed, n) for seed in seeds for n in sizes]
+    results: dict[tuple[int, int], dict] = {}
+    running: list[tuple[tuple[int, int], object, object]] = []
+    pending = list(tasks)
+    while pending or running:
+        while pending and len(running) < max(1, jobs):
+            seed, n = pending.pop(0)
+            queue = ctx.Queue()
+            proc = ctx.Process(target=_build_and_score,
+                               args=(seed, n_rooms, n, n_test_per_room, queue))
+            proc.start()
+            running.append(((seed, n), proc, queue))
+        time.sleep(1.0)
+        for entry in list(running):
+            (seed, n), proc, queue = entry
             try:
-                result = queue.get(timeout=5)
-                break
-            except Exception:  # queue.Empty
-                if not proc.is_alive():
-                    raise RuntimeError(f"the {n}-frame build failed (exit code "
-                                       f"{proc.exitcode})") from None
-        proc.join()
-        log(f"building seed {seed} {n} frames: {json.dumps(result)[:400]}")
-        out.append(result)
-    return out
+                result = queue.get(timeout=0.1)  # type: ignore[attr-defined]
+            except Exception:  # queue.Empty: the child's result, or its failure
+                if not proc.is_alive():  # type: ignore[attr-defined]
+                    raise RuntimeError(f"the {n}-frame build of seed {seed} failed (exit "
+                                       f"code {proc.exitcode})") from None  # type: ignore
+                continue
+            proc.join()  # type: ignore[attr-defined]
+            running.remove(entry)
+            log(f"building seed {seed} {n} frames: {json.dumps(result)[:400]}")
+            results[(seed, n)] = result
+    return [results[t] for t in tasks]
 
 
 def building_markdown(results: dict) -> str:
@@ -642,7 +653,8 @@ target): after the rigid alignment of that room's matched objects onto the true 
 the true pose expressed in the built map's own frame around the camera; this is what a client
 relocalizing with the built map gets right or wrong relative to the map's objects (and
 content placed in it); also its centre error. Held-out seeds (tuning used seed 1).
-Timings on the shared 2-core machine under load.
+Timings on the shared 2-core machine under load; with `--jobs` N > 1, N builds ran at once and
+their times include that sharing.
 
 {chr(10).join(rows)}
 
@@ -677,13 +689,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rooms", type=int, default=20)
     ap.add_argument("--sizes", default="1500,3000,6000")
     ap.add_argument("--test-per-room", type=int, default=5)
+    ap.add_argument("--jobs", type=int, default=1,
+                    help="with --building: builds run at once (each in its own process; "
+                         "they share the CPU, so their times grow)")
     args = ap.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(",")]
     log = lambda m: print(m, file=sys.stderr)  # noqa: E731
     if args.building:
         sizes = [int(n) for n in args.sizes.split(",")]
-        building = {"building": [r for s in seeds for r in run_building(
-                        s, args.rooms, sizes, args.test_per_room, log)],
+        building = {"building": run_building(seeds, args.rooms, sizes, args.test_per_room,
+                                             log, args.jobs),
                     "one_room": [{k: v for k, v in run_seed(
                         s, args.frames, args.test_frames, log).items()
                         if not k.startswith("_")} for s in seeds]}
