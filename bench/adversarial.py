@@ -428,7 +428,9 @@ def run_sessions_builds(args: argparse.Namespace) -> dict[str, Any]:
     extra = dict(kv.split("=", 1) for kv in args.env)
     settings = Settings(**{k.removeprefix("QUADLOC_").lower(): v for k, v in extra.items()})
     frame_ms, request_ms = settings.session_frame_budget_ms, settings.session_request_budget_ms
-    build_s = settings.build_time_budget_s
+    runner = "queue" if settings.build_runner == "queue" or (
+        settings.build_runner == "auto" and args.postgres) else "in-process"
+    build_s = settings.build_limits_for(runner).time_budget_s
     builds: list[dict[str, Any]] = []
     sessions: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory(prefix="quadloc-adv-") as tmp:

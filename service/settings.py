@@ -28,9 +28,11 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 from quadloc.service.limits import MAX_BATCH_FRAMES, MAX_DETECTIONS
 
 __all__ = [
+    "BUILD_LIMIT_DEFAULTS",
     "SCOPES",
     "SHUTDOWN_CANCEL_MARGIN_S",
     "ApiKey",
+    "BuildLimitSettings",
     "Settings",
     "check_bind_allowed",
     "hash_api_key",
@@ -115,6 +117,32 @@ def parse_api_keys(text: str) -> tuple[ApiKey, ...]:
             raise ValueError(f"QUADLOC_API_KEYS entry {i}: expected '<sha256hex>:<scopes>'")
         keys.append(_make_key(f"QUADLOC_API_KEYS entry {i}", digest, scopes))
     return tuple(keys)
+
+
+@dataclass(frozen=True)
+class BuildLimitSettings:
+    """The limits of one map build (:attr:`Settings.build_limits`): recording frames and
+    detections (more -> 422), wall time of the build (s), request body (bytes; more -> 413;
+    0: the general ``max_body_bytes``)."""
+
+    max_frames: int
+    max_detections: int
+    time_budget_s: float
+    max_body_bytes: int
+
+
+#: The build limits of each runner when their settings are unset. In-process (the SQLite default,
+#: ``make serve``): a build shares the API process and its GIL with the solves, so it stays small
+#: and short. The job queue: builds run in ``quadloc worker`` processes apart from the API, so a
+#: building-scale recording (measured: 6,000 frames of a 20-room walk, about 230 s and 0.9 GB of
+#: RSS on the loaded 2-core machine, docs/results.md "Map building at building scale") fits with
+#: room to spare.
+BUILD_LIMIT_DEFAULTS: dict[str, BuildLimitSettings] = {
+    "in-process": BuildLimitSettings(max_frames=2000, max_detections=20_000,
+                                     time_budget_s=120.0, max_body_bytes=4_000_000),
+    "queue": BuildLimitSettings(max_frames=10_000, max_detections=200_000,
+                                time_budget_s=1800.0, max_body_bytes=32_000_000),
+}
 
 
 def _default_data_dir() -> Path:
@@ -204,14 +232,29 @@ class Settings(BaseSettings):
                     "2 s before it, session frames and builds still running are cancelled, "
                     "and the process exits.",
     )
-    max_build_frames: int = Field(default=2000, ge=1, le=100_000,
-                                  description="Frames per map-building recording.")
-    max_build_detections: int = Field(default=20_000, ge=1,
-                                      description="Detections per map-building recording.")
-    build_time_budget_s: float = Field(
-        default=120.0, gt=0, le=3600.0,
+    max_build_frames: int | None = Field(
+        default=None, ge=1, le=100_000,
+        description="Frames per map-building recording; more -> 422 naming frames. Unset: "
+                    "the build runner's default (BUILD_LIMIT_DEFAULTS: 2000 in-process, "
+                    "10000 with the job queue's workers).",
+    )
+    max_build_detections: int | None = Field(
+        default=None, ge=1, le=10_000_000,
+        description="Detections per map-building recording; more -> 422. Unset: the build "
+                    "runner's default (20000 in-process, 200000 with the job queue).",
+    )
+    build_time_budget_s: float | None = Field(
+        default=None, gt=0, le=86_400.0,
         description="Wall time of one map build; association past it fails the job "
-                    "(time_budget_exceeded), refinement past it keeps its estimate so far.",
+                    "(time_budget_exceeded), refinement past it keeps its estimate so far. "
+                    "Unset: the build runner's default (120 s in-process, 1800 s in a quadloc "
+                    "worker).",
+    )
+    max_build_body_bytes: int | None = Field(
+        default=None, ge=1024, le=1_000_000_000,
+        description="Largest body of POST /v1/maps:build (a recording); larger -> 413. "
+                    "Unset: the build runner's default (4000000 in-process, 32000000 "
+                    "with the job queue). Other requests: max_body_bytes.",
     )
     build_runner: Literal["auto", "in-process", "queue"] = Field(
         default="auto",
@@ -303,6 +346,18 @@ class Settings(BaseSettings):
         if self.database_url:
             return self.database_url
         return f"sqlite:///{(Path(self.data_dir) / 'quadloc.db').resolve()}"
+
+    def build_limits_for(self, runner: Literal["in-process", "queue"]) -> BuildLimitSettings:
+        """The map-building limits in force where builds run on ``runner`` (the resolved
+        ``build_runner``): each ``QUADLOC_MAX_BUILD_*`` / ``QUADLOC_BUILD_TIME_BUDGET_S`` that is
+        set, else :data:`BUILD_LIMIT_DEFAULTS` of that runner."""
+        base = BUILD_LIMIT_DEFAULTS[runner]
+        return BuildLimitSettings(
+            max_frames=self.max_build_frames or base.max_frames,
+            max_detections=self.max_build_detections or base.max_detections,
+            time_budget_s=self.build_time_budget_s or base.time_budget_s,
+            max_body_bytes=self.max_build_body_bytes or base.max_body_bytes
+            or self.max_body_bytes)
 
     @property
     def keys(self) -> tuple[ApiKey, ...]:

@@ -598,7 +598,9 @@ def associate_windowed(
     in the shared frames (and 2). A chain keeps one detection per frame (the one most windows
     gave it) and a detection claimed by two chains goes to the larger. A recording within one
     window is :func:`associate` itself; a chain whose ellipsoid (all its views) is not of its
-    largest object's size (``size_ratio``) is that object alone. The objects are verified
+    largest object's size (``size_ratio``) is that object alone; otherwise it keeps that
+    ellipsoid or its largest object's, whichever explains more of its views (IoU >=
+    ``verify_iou``). The objects are verified
     (:func:`verify_objects`). Then the same-label objects split by the drift between
     two passes are merged (:func:`merge_duplicates`). Same arguments and result as
     :func:`associate`; ``progress(label, fraction)`` over the whole recording."""
@@ -699,7 +701,14 @@ def associate_windowed(
                 if len(idx) < opt.min_views:
                     continue
             else:
-                ell = chained
+                # the chain's ellipsoid, unless its largest window's explains more of its views
+                # (a short object of another window chained in can pull the joint fit off)
+                views = T_wc[[observations[k].frame for k in idx]]
+                ellipses = [observations[k].ellipse for k in idx]
+                explained = [int(np.count_nonzero(_projected_ious(e, views, camera, ellipses)
+                                                  >= opt.verify_iou)) for e in (chained, ell)]
+                if explained[0] >= explained[1]:
+                    ell = chained
         kept = set(idx)
         ious = {k: v for h_i in members for k, v in hyps[h_i].ious.items() if k in kept}
         objects.append(ObjectHypothesis(hyps[largest].label, idx, ell, hyps[largest].source,
@@ -724,22 +733,31 @@ def _anchored(h: ObjectHypothesis, obs: Sequence[Observation], T_wc: FloatArray,
     """``h`` checked against its time segments (runs of its detections less than
     :data:`SEGMENT_GAP_FRAMES` apart): with two segments or more, None if none has
     ``min_views`` views (no visit alone reconstructs it, so nothing shows that its visits saw
-    one object), and the object of its largest segment if that segment's ellipsoid is not of
-    ``h``'s size (largest semi-axes beyond ``size_ratio``; not the centres: a segment's depth is
-    loosely constrained): that ellipsoid with those of ``h``'s detections whose views it
+    one object); ``h`` itself if one segment's ellipsoid is of ``h``'s size (largest semi-axes
+    within ``size_ratio``; not the centres: a segment's depth is loosely constrained), or if
+    the largest segment's ellipsoid is larger than ``h``'s (that segment's narrow cone of views
+    leaves its depth unconstrained, stretching it: it cannot show ``h`` too large); else the
+    object of the largest segment: its ellipsoid with those of ``h``'s detections whose views it
     explains (IoU >= ``min_iou``). The detections of two objects (e.g. of two rooms visited
-    within one window, brought together by drift) give an ellipsoid stretched between them that
-    neither visit's views alone reconstruct."""
+    within one window, brought together by drift) give an ellipsoid stretched between them,
+    larger than what any visit's views alone reconstruct."""
     ks = sorted(h.observations, key=lambda k: obs[k].frame)
     frames = np.array([obs[k].frame for k in ks])
     segments = np.split(np.array(ks), np.flatnonzero(np.diff(frames) > SEGMENT_GAP_FRAMES) + 1)
     if len(segments) < 2:
         return h
-    largest = max(segments, key=len)
-    if len(largest) < opt.min_views:
+    usable = sorted((seg for seg in segments if len(seg) >= opt.min_views), key=len,
+                    reverse=True)
+    if not usable:
         return None
-    anchor = reconstruct_initial(largest.tolist(), obs, T_wc, camera, opt)
-    if anchor is None or _same_size(anchor, h.ellipsoid, opt.size_ratio):
+    anchor = None
+    for seg in usable:
+        ell = reconstruct_initial(seg.tolist(), obs, T_wc, camera, opt)
+        if ell is not None and _same_size(ell, h.ellipsoid, opt.size_ratio):
+            return h
+        if seg is usable[0]:
+            anchor = ell
+    if anchor is None or anchor.axes.max() > h.ellipsoid.axes.max():
         return h
     ious = dict(zip(h.observations, _projected_ious(
         anchor, T_wc[[obs[k].frame for k in h.observations]], camera,

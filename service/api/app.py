@@ -93,7 +93,9 @@ def create_app(settings: Settings | None = None, *, store: MapStore | None = Non
     install_offline_docs(app)
     install_inspector(app)
     app.add_middleware(MetricsAndLimitsMiddleware, metrics=metrics,
-                       max_body_bytes=settings.max_body_bytes)
+                       max_body_bytes=settings.max_body_bytes,
+                       path_body_bytes={
+                           "/v1/maps:build": services.builds.limits.max_body_bytes})
     app.openapi = lambda: build_openapi(app)  # type: ignore[method-assign]
     return app
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Mapping
 
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
@@ -87,13 +88,16 @@ def _problem_413(path: str, limit: int) -> bytes:
 class MetricsAndLimitsMiddleware:
     """Pure ASGI middleware: body size limit (413 problem) and request metrics."""
 
-    def __init__(self, app: ASGIApp, metrics: ApiMetrics, max_body_bytes: int) -> None:
+    def __init__(self, app: ASGIApp, metrics: ApiMetrics, max_body_bytes: int,
+                 path_body_bytes: Mapping[str, int] | None = None) -> None:
         self.app = app
         self.metrics = metrics
         self.max_body_bytes = max_body_bytes
+        #: Body limits of given request paths (e.g. ``/v1/maps:build``), else max_body_bytes.
+        self.path_body_bytes = dict(path_body_bytes or {})
 
-    async def _reject(self, scope: Scope, send: Send) -> None:
-        body = _problem_413(scope.get("path", ""), self.max_body_bytes)
+    async def _reject(self, scope: Scope, send: Send, limit: int) -> None:
+        body = _problem_413(scope.get("path", ""), limit)
         await send({"type": "http.response.start", "status": 413,
                     "headers": [(b"content-type", PROBLEM_MEDIA_TYPE.encode()),
                                 (b"content-length", str(len(body)).encode()),
@@ -106,7 +110,7 @@ class MetricsAndLimitsMiddleware:
             return
         start = time.perf_counter()
         status = 500
-        limit = self.max_body_bytes
+        limit = self.path_body_bytes.get(scope.get("path", ""), self.max_body_bytes)
 
         async def send_wrapper(message: Message) -> None:
             nonlocal status
@@ -122,7 +126,7 @@ class MetricsAndLimitsMiddleware:
                 too_large = False
             if too_large:
                 status = 413
-                await self._reject(scope, send)
+                await self._reject(scope, send, limit)
                 return
             # Buffer the body (bounded) so chunked uploads are limited too, then replay it.
             chunks: list[bytes] = []
@@ -138,7 +142,7 @@ class MetricsAndLimitsMiddleware:
                 size += len(chunk)
                 if size > limit:
                     status = 413
-                    await self._reject(scope, send)
+                    await self._reject(scope, send, limit)
                     return
                 chunks.append(chunk)
                 more = message.get("more_body", False)

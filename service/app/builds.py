@@ -21,7 +21,9 @@ A job is a row of the map store's database (``quadloc.maps.building.jobs.JobStor
   runner; a job whose process stopped is marked ``runner_lost`` by the next sweep. One process,
   not several replicas.
 
-Each build has a time budget (``build_time_budget_s``). A job ends ``succeeded`` (a new map or
+Each build has a time budget and its recording size limits (``QUADLOC_BUILD_TIME_BUDGET_S``,
+``QUADLOC_MAX_BUILD_*``; unset: the runner's defaults, small in-process, building-scale in the
+workers: ``quadloc.service.settings.BUILD_LIMIT_DEFAULTS``). A job ends ``succeeded`` (a new map or
 version) or ``failed`` with a reason: ``time_budget_exceeded``, ``invalid_map``,
 ``no_objects``, ``version_conflict``, ``map_exists``, ``map_not_found``, ``store_unavailable``,
 ``busy``, ``runner_lost``, ``internal_error``. A job whose row was marked failed meanwhile
@@ -38,7 +40,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 from procrastinate.exceptions import ConnectorException
 from pydantic import TypeAdapter, ValidationError
@@ -73,6 +75,7 @@ __all__ = [
     "beat_interval_s",
     "build_limits",
     "recording_of",
+    "resolved_runner",
     "validate_recording",
 ]
 
@@ -88,6 +91,8 @@ BUSY_RETRY_AFTER_S = 10.0
 
 #: ``progress(stage, percent, objects_found)``, as :func:`build_map` reports it.
 Progress = Callable[[str, float, int], None]
+#: Where builds run (``QUADLOC_BUILD_RUNNER`` resolved).
+Runner = Literal["in-process", "queue"]
 
 
 def beat_interval_s(stale_after_s: float) -> float:
@@ -97,11 +102,22 @@ def beat_interval_s(stale_after_s: float) -> float:
     return min(RUNNER_BEAT_S, float(stale_after_s) / 4.0)
 
 
-def build_limits(settings: Settings) -> BuildLimits:
-    """The recording limits of the settings (``QUADLOC_MAX_BUILD_*``, ``MAX_DETECTIONS``)."""
-    return BuildLimits(max_frames=settings.max_build_frames,
+def build_limits(settings: Settings, runner: Runner = "in-process") -> BuildLimits:
+    """The recording limits of the settings where builds run on ``runner``
+    (``QUADLOC_MAX_BUILD_*`` or the runner's defaults: :meth:`Settings.build_limits_for`;
+    ``QUADLOC_MAX_DETECTIONS`` per frame)."""
+    limits = settings.build_limits_for(runner)
+    return BuildLimits(max_frames=limits.max_frames,
                        max_detections_per_frame=settings.max_detections,
-                       max_detections=settings.max_build_detections)
+                       max_detections=limits.max_detections)
+
+
+def resolved_runner(settings: Settings, dialect: str) -> Runner:
+    """Where builds run: ``QUADLOC_BUILD_RUNNER``, ``auto`` being the job queue on PostgreSQL
+    (the store's ``dialect``) and in-process otherwise."""
+    if settings.build_runner != "auto":
+        return settings.build_runner
+    return "queue" if dialect == "postgresql" else "in-process"
 
 
 _RECORDING = TypeAdapter[RecordingIn | LegacyRecordingIn](RecordingBody)
@@ -377,14 +393,16 @@ class BuildService:
         self.maps = maps
         self.settings = settings
         self.jobs = JobStore(store.engine)
-        self.kind = BuildJobs(store, self.jobs, settings.build_time_budget_s)
+        runner = resolved_runner(settings, store.dialect)
+        #: The build limits in force (recording size at intake, time of each build, request
+        #: body of ``POST /v1/maps:build``): the settings', else the runner's defaults.
+        self.limits = settings.build_limits_for(runner)
+        self.kind = BuildJobs(store, self.jobs, self.limits.time_budget_s)
         #: The job queue (``QUADLOC_BUILD_RUNNER`` queue), or None: the in-process runner.
         self.queue: ProcrastinateQueue | None = None
         #: The in-process runner, or None: the job queue.
         self.runner: BuildRunner | None = None
-        runner = settings.build_runner
-        if runner == "auto":
-            runner = "queue" if store.dialect == "postgresql" else "in-process"
+        self.runner_kind: Runner = runner
         if runner == "queue":
             if store.dialect != "postgresql":
                 raise ValueError("QUADLOC_BUILD_RUNNER=queue needs PostgreSQL "
@@ -444,7 +462,7 @@ class BuildService:
     def parse(self, document: Any) -> Recording:
         """A recording (parsed JSON or its wire model) checked against the limits, without its
         held-out frames; ``validation-error`` naming every invalid field."""
-        return recording_of(document, build_limits(self.settings))
+        return recording_of(document, build_limits(self.settings, self.runner_kind))
 
     def base_version(self, map_id: str, if_match: str | None) -> int | None:
         """The version a build of ``map_id`` replaces: None for a new map (then ``If-Match``
@@ -526,11 +544,11 @@ class BuildService:
         try:
             scene, report = build_map(
                 recording, map_id=map_id, progress=progress,
-                deadline=Deadline.wall_budget(self.settings.build_time_budget_s))
+                deadline=Deadline.wall_budget(self.limits.time_budget_s))
         except BuildTimeoutError as exc:
             return LocalBuild(None, None, "time_budget_exceeded",
                               f"{exc} (QUADLOC_BUILD_TIME_BUDGET_S="
-                              f"{self.settings.build_time_budget_s:g})")
+                              f"{self.limits.time_budget_s:g})")
         if not scene.objects:
             return LocalBuild(None, report, "no_objects", "no object could be associated and "
                               "reconstructed (see the report)")

@@ -44,7 +44,10 @@ def _ok(code: int, example: dict[str, Any]) -> dict[int | str, Any]:
     summary="Build a map from a recording (asynchronous job)",
     description="Body: a recording (docs/map_building.md). Answers 202 with the job and "
                 "`Location: /v1/build-jobs/{job_id}`; poll it for progress and the result. "
-                "422 names every invalid field; 428/412 for If-Match on an existing map; 503 "
+                "422 names every invalid field (`frames` beyond QUADLOC_MAX_BUILD_FRAMES); "
+                "413 beyond QUADLOC_MAX_BUILD_BODY_BYTES (both: 2,000 frames / 4 MB when builds "
+                "run in the API process, 10,000 / 32 MB with build workers; docs/deployment.md, "
+                "\"Build limits\"); 428/412 for If-Match on an existing map; 503 "
                 "+ Retry-After when this replica has too many builds queued.",
     responses={**problem_responses(400, 401, 403, 412, 413, 415, 422, 428, 503),
                **_ok(202, {**BUILD_JOB_EXAMPLE, "status": "queued", "stage": "queued",

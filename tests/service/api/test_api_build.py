@@ -128,6 +128,63 @@ def test_build_limits(tmp_path: Path) -> None:
         assert r.json()["errors"][0]["field"] == "frames"
 
 
+def test_building_scale_recording_needs_the_limit_configured(tmp_path: Path) -> None:
+    """A recording above the in-process default (2,000 frames) is refused with a 422 naming
+    ``frames`` by default and accepted (202, queued) where ``QUADLOC_MAX_BUILD_FRAMES`` allows
+    it; nothing is stored by the refusal."""
+    rec, _ = _recording(2001)
+    with TestClient(make_test_app(tmp_path / "default")) as c:
+        r = c.post("/v1/maps:build", params={"map_id": "big"}, json=rec)
+        assert r.status_code == 422
+        assert r.json()["errors"][0]["field"] == "frames"
+        assert "2000" in r.json()["errors"][0]["message"]
+        assert c.get("/v1/maps/big").status_code == 404
+    with TestClient(make_test_app(tmp_path / "configured", max_build_frames=2500)) as c:
+        r = c.post("/v1/maps:build", params={"map_id": "big"}, json=rec)
+        assert r.status_code == 202, r.text
+        assert r.json()["status"] in {"queued", "running"}
+
+
+def test_build_limit_defaults_follow_the_runner() -> None:
+    """Unset build limits take the runner's defaults: small in the API process, building-scale
+    (a 6,000-frame, 30,000-detection, 7.2 MB recording in under 30 min) in the workers; a set
+    limit applies to both."""
+    from quadloc.service.app.builds import resolved_runner
+    from quadloc.service.settings import Settings
+
+    settings = Settings()
+    assert resolved_runner(settings, "postgresql") == "queue"
+    assert resolved_runner(settings, "sqlite") == "in-process"
+    assert resolved_runner(Settings(build_runner="in-process"), "postgresql") == "in-process"
+    local, queue = settings.build_limits_for("in-process"), settings.build_limits_for("queue")
+    assert (local.max_frames, local.max_detections, local.time_budget_s) == (2000, 20_000, 120)
+    assert queue.max_frames >= 6000 and queue.max_detections >= 30_000
+    assert queue.time_budget_s >= 1800 and queue.max_body_bytes >= 8_000_000
+    custom = Settings(max_build_frames=7000, build_time_budget_s=60, max_build_body_bytes=5000)
+    for runner in ("in-process", "queue"):
+        limits = custom.build_limits_for(runner)  # type: ignore[arg-type]
+        assert (limits.max_frames, limits.time_budget_s, limits.max_body_bytes) == (
+            7000, 60, 5000)
+
+
+def test_build_body_limit_is_its_own(tmp_path: Path) -> None:
+    """``POST /v1/maps:build`` has its own body limit (``QUADLOC_MAX_BUILD_BODY_BYTES``);
+    other requests keep ``QUADLOC_MAX_BODY_BYTES`` (413 naming ``body``)."""
+    rec, _ = _recording(120)
+    body = json.dumps(rec)
+    assert 20_000 < len(body) < 200_000
+    headers = {"content-type": "application/json"}
+    with TestClient(make_test_app(tmp_path / "a", max_body_bytes=20_000,
+                                  max_build_body_bytes=200_000)) as c:
+        r = c.post("/v1/maps:build", params={"map_id": "m"}, content=body, headers=headers)
+        assert r.status_code == 202, r.text
+        r = c.post("/v1/maps/chess/localize", content=body, headers=headers)
+        assert r.status_code == 413 and r.json()["errors"][0]["field"] == "body"
+    with TestClient(make_test_app(tmp_path / "b", max_build_body_bytes=20_000)) as c:
+        r = c.post("/v1/maps:build", params={"map_id": "m"}, content=body, headers=headers)
+        assert r.status_code == 413 and r.json()["errors"][0]["field"] == "body"
+
+
 def test_unknown_job_is_404(client: TestClient) -> None:
     r = client.get("/v1/build-jobs/0000-1111")
     assert r.status_code == 404

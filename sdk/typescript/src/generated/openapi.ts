@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: 896df60bdb0685dc060f46a2043d1e8bc746fafab47c1ddfa18e88a2a08e938c
+// openapi-sha256: de385f504ae5887507d84d68f1b43a5597844a4bc757f4c07cb4f07644cb103d
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -143,7 +143,7 @@ export interface paths {
         put?: never;
         /**
          * Build a map from a recording (asynchronous job)
-         * @description Body: a recording (docs/map_building.md). Answers 202 with the job and `Location: /v1/build-jobs/{job_id}`; poll it for progress and the result. 422 names every invalid field; 428/412 for If-Match on an existing map; 503 + Retry-After when this replica has too many builds queued.
+         * @description Body: a recording (docs/map_building.md). Answers 202 with the job and `Location: /v1/build-jobs/{job_id}`; poll it for progress and the result. 422 names every invalid field (`frames` beyond QUADLOC_MAX_BUILD_FRAMES); 413 beyond QUADLOC_MAX_BUILD_BODY_BYTES (both: 2,000 frames / 4 MB when builds run in the API process, 10,000 / 32 MB with build workers; docs/deployment.md, "Build limits"); 428/412 for If-Match on an existing map; 503 + Retry-After when this replica has too many builds queued.
          */
         post: operations["start_build_v1_maps_build_post"];
         delete?: never;
