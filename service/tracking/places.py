@@ -47,6 +47,7 @@ __all__ = [
     "PlaceCandidate",
     "PlaceHypothesis",
     "PlaceSet",
+    "single_place",
 ]
 
 #: Live hypotheses per session (the weakest are dropped beyond it).
@@ -81,6 +82,10 @@ SAME_PLACE_M = 0.5
 SAME_PLACE_DEG = 10.0
 VIEW_INSET = 0.1
 MAX_VIEW_DEPTH_M = 6.0
+#: A map is one place (:func:`single_place`) when its objects are in at most one room and span
+#: at most this (m): about a large room (the Chess room's objects span 1.9 m; the generated
+#: buildings' rooms are 12 m apart).
+SINGLE_PLACE_EXTENT_M = 8.0
 
 
 @dataclass(frozen=True)
@@ -115,6 +120,24 @@ def _room_of_objects(compiled: CompiledMap) -> np.ndarray:
         memo = np.array(zone_index(compiled.scene_map).zone_positions(compiled.object_ids),
                         dtype=np.int64).reshape(-1)
         compiled.__dict__["_object_rooms"] = memo
+    return memo
+
+
+def single_place(compiled: CompiledMap) -> bool:
+    """Whether the map is one place: its objects are in at most one room (their most specific
+    zones, :func:`_room_of_objects`; objects of no zone count as one more room) and their
+    centres are at most :data:`SINGLE_PLACE_EXTENT_M` apart. Such a map has no copy of a room
+    elsewhere for a later proposal round to find, so a session need not wait for rounds
+    (``session.MIN_PROPOSAL_ROUNDS``); rivals inside the room are still the first round's
+    proposals (multi-frame RANSAC and ``localize`` with its alternatives), scored against each
+    other. Memoised on the map."""
+    memo: bool | None = compiled.__dict__.get("_single_place")
+    if memo is None:
+        c = np.asarray(compiled.centers, float).reshape(-1, 3)
+        extent = float(np.linalg.norm(c.max(axis=0) - c.min(axis=0))) if len(c) else 0.0
+        memo = len(set(_room_of_objects(compiled).tolist())) <= 1 \
+            and extent <= SINGLE_PLACE_EXTENT_M
+        compiled.__dict__["_single_place"] = memo
     return memo
 
 
@@ -163,8 +186,7 @@ class PlaceSet:
             dense = sc.dense_iou(cfw)
             for h in range(H):
                 ms = greedy_assignment(dense[h], sc.detection_indices, self.inlier_iou)
-                ll[h] += IOU_GAIN / IOU_SATURATION * sum(min(m.iou, IOU_SATURATION)
-                                                         for m in ms)
+                ll[h] = _inlier_gain([m.iou for m in ms])
                 matched[h] = {int(m.object_index) for m in ms}
         misses = np.array([len(self._in_view(cfw[h]) - matched[h]) for h in range(H)],
                           dtype=float)
@@ -193,21 +215,44 @@ class PlaceSet:
 
     def update(self, odom_from_camera: FloatArray, ellipses: FloatArray, labels: Sequence[str],
                committed_world_from_camera: FloatArray | None = None,
-               committed: PlaceHypothesis | None = None) -> None:
+               committed: PlaceHypothesis | None = None,
+               committed_inliers: Sequence[tuple[int, float]] | None = None) -> None:
         """Score one frame: every hypothesis at ``world_from_odom @ odom_from_camera`` (the
         ``committed`` one at ``committed_world_from_camera``, the smoother's estimate, when
         given), the null with its gain; discounted sums; drops the hypotheses whose
-        posterior fell below :data:`DROP_PROBABILITY` (never ``committed``)."""
+        posterior fell below :data:`DROP_PROBABILITY` (never ``committed``).
+
+        ``committed_inliers``: the ``(object index, IoU)`` one-to-one inliers the frame
+        already verified at ``committed_world_from_camera`` (the session's answer): the
+        committed place is scored on them instead of matching the frame again (a tracking
+        session's usual case, one live place, then needs no matching here)."""
         if not self.hypotheses:
             return
+        reuse = committed is not None and committed_world_from_camera is not None \
+            and committed_inliers is not None
+        rest = [h for h in self.hypotheses if not (reuse and h is committed)]
         poses = np.array([committed_world_from_camera
                           if h is committed and committed_world_from_camera is not None
-                          else h.world_from_odom @ odom_from_camera for h in self.hypotheses])
-        ll, matched, misses = self.frame_log_likelihoods(poses, ellipses, labels)
+                          else h.world_from_odom @ odom_from_camera for h in rest]
+                         ).reshape(-1, 4, 4)
+        ll_rest, matched_rest, misses_rest = self.frame_log_likelihoods(poses, ellipses, labels)
+        by_h = {id(h): (float(x), m, float(k)) for h, x, m, k in zip(
+            rest, ll_rest, matched_rest, misses_rest, strict=True)}
+        if reuse:
+            assert committed is not None and committed_inliers is not None
+            m = {int(o) for o, _ in committed_inliers}
+            k = float(len(self._in_view(invert_pose(np.asarray(committed_world_from_camera,
+                                                               float))) - m))
+            by_h[id(committed)] = (_inlier_gain([q for _, q in committed_inliers])
+                                   - MISS_PENALTY * k, m, k)
+        ll = np.array([by_h[id(h)][0] for h in self.hypotheses])
+        matched = [by_h[id(h)][1] for h in self.hypotheses]
+        misses = np.array([by_h[id(h)][2] for h in self.hypotheses])
+        d = _discount(labels)
         for h, x, m in zip(self.hypotheses, ll, matched, strict=True):
-            h.score = DISCOUNT * h.score + TEMPERATURE * float(x)
+            h.score = d * h.score + TEMPERATURE * float(x)
             self._remember(h, m)
-        self.null_score = DISCOUNT * self.null_score + TEMPERATURE * (
+        self.null_score = d * self.null_score + TEMPERATURE * (
             NULL_GAIN * len(labels) - MISS_PENALTY * float(misses.min()))
         p = self.posteriors()
         self.hypotheses = [h for h, q in zip(self.hypotheses, p, strict=True)
@@ -258,12 +303,15 @@ class PlaceSet:
                 same.world_from_odom = np.asarray(W, float)
         if not new:
             return
-        n = len(history)
-        for k, (T_oc, ell, labels) in enumerate(history):
+        # weight of each history frame: the discounts of the frames after it (as update's)
+        weights = np.ones(len(history))
+        for k in range(len(history) - 2, -1, -1):
+            weights[k] = weights[k + 1] * _discount(history[k + 1][2])
+        for (T_oc, ell, labels), w in zip(history, weights, strict=True):
             ll, matched, _ = self.frame_log_likelihoods(
                 np.array([h.world_from_odom @ T_oc for h in new]), ell, labels)
             for h, x, m in zip(new, ll, matched, strict=True):
-                h.score += DISCOUNT ** (n - 1 - k) * TEMPERATURE * float(x)
+                h.score += float(w) * TEMPERATURE * float(x)
                 self._remember(h, m)
         self.hypotheses += new
         while len(self.hypotheses) > MAX_HYPOTHESES:
@@ -300,6 +348,19 @@ class PlaceSet:
         p = self.posteriors()
         k = int(np.argmax(p))
         return self.hypotheses[k], float(p[k])
+
+
+def _inlier_gain(ious: Sequence[float]) -> float:
+    """The inlier part of ``LL_h`` (module docstring) of one-to-one inlier IoUs."""
+    return IOU_GAIN / IOU_SATURATION * float(sum(min(float(q), IOU_SATURATION) for q in ious))
+
+
+def _discount(labels: Sequence[str]) -> float:
+    """The discount a frame applies to the past scores: :data:`DISCOUNT` on a frame with usable
+    detections, 1 on a frame without any (it says nothing new about the places but its
+    predicted-in-view misses: the evidence gathered before it is not aged, so a walk between
+    rooms keeps its place's posterior)."""
+    return DISCOUNT if len(labels) else 1.0
 
 
 def _same_place(a: FloatArray, b: FloatArray) -> bool:

@@ -60,6 +60,7 @@ from quadloc.service.tracking.places import (
     PlaceHypothesis,
     PlaceSet,
     alignment,
+    single_place,
 )
 
 __all__ = [
@@ -529,7 +530,7 @@ class TrackingSession:
             self.reset()
             return self._no_pose(index, frame, T_oc, usable, "lost", timings)
         t = time.perf_counter()
-        given_up = self._check_place(index, frame, T, usable)
+        given_up = self._check_place(index, frame, T, usable, inliers)
         timings["places"] = (time.perf_counter() - t) * 1e3
         if given_up is not None:
             return self._no_pose(index, frame, T_oc, usable, given_up, timings)
@@ -595,7 +596,9 @@ class TrackingSession:
             self._places.propose([alignment(T, T_oc) for T in proposals], T_oc, self._history,
                                  rounds=1)
         best, p = self._places.best()
-        if best is not None and p >= COMMIT_PROBABILITY and best.rounds >= MIN_PROPOSAL_ROUNDS \
+        # a one-place map has no copy of its room for later rounds to propose
+        rounds = 1 if single_place(self.compiled) else MIN_PROPOSAL_ROUNDS
+        if best is not None and p >= COMMIT_PROBABILITY and best.rounds >= rounds \
                 and len(best.objects) >= MIN_COMMIT_OBJECTS:
             t = time.perf_counter()
             poses = [best.world_from_odom @ b.frame.odom_from_camera for b in chosen]
@@ -642,7 +645,7 @@ class TrackingSession:
         return out + [a.world_from_camera for a in r.alternatives]
 
     def _check_place(self, index: int, frame: FrameInput, T: FloatArray,
-                     usable: list[int]) -> str | None:
+                     usable: list[int], inliers: Sequence[InlierMatch]) -> str | None:
         """A tracking frame scores the committed place (at the smoother's pose ``T``) and its
         rivals, asking ``localize`` for new rivals every :data:`CHECK_INTERVAL_FRAMES`. The
         session gives the place up (``lost``, keeping the hypotheses) when a rival has become
@@ -652,7 +655,8 @@ class TrackingSession:
         committed = self._committed
         assert committed is not None
         committed.world_from_odom = alignment(T, T_oc)
-        self._places.update(T_oc, ell, labels, T, committed)
+        self._places.update(T_oc, ell, labels, T, committed,
+                            [(self.compiled.index_of(m.object_id), m.iou) for m in inliers])
         self._history.append(self._evidence)
         if index - self._last_check >= CHECK_INTERVAL_FRAMES and len(usable) >= 3:
             self._last_check = index
