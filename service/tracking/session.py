@@ -516,14 +516,25 @@ class TrackingSession:
         if T is None or cov is None or not np.all(np.isfinite(T)):
             self.reset()
             return self._no_pose(index, frame, T_oc, usable, "lost", timings)
+        xi = gtsam.Pose3.Logmap(pose3(invert_pose(T_pred) @ T))
+        jumped = float(xi @ np.linalg.solve(cov_pred, xi)) > JUMP_CHI2
+        if jumped and assoc and len(usable) < LOST_UNEXPLAINED_DETECTIONS:
+            # 1-2 detections pulled the estimate away from its odometry: a wrong association
+            # (a spurious detection, a neighbouring room's object). The frame's detections are
+            # dropped: the smoother restarts from the prediction and its covariance (the window
+            # marginalised into one prior), the place and its scores stay.
+            restarted = self._restart_at(key, index, T_pred, cov_pred)
+            if restarted is None:
+                self.reset()
+                return self._no_pose(index, frame, T_oc, usable, "lost", timings)
+            T, cov = restarted
+            jumped = False
         inliers = self._verify(frame.detections, usable, T)
         # a frame whose usable detections are all unexplained contradicts the estimate
         contradicted = bool(usable) and not inliers and (
             bool(assoc) or self._predicted_visible(T_pred))
         self._misses = self._misses + 1 if contradicted else 0
         pos_std = math.sqrt(max(float(np.linalg.eigvalsh(cov[3:, 3:]).max()), 0.0))
-        xi = gtsam.Pose3.Logmap(pose3(invert_pose(T_pred) @ T))
-        jumped = float(xi @ np.linalg.solve(cov_pred, xi)) > JUMP_CHI2
         if pos_std > self.options.lost_position_std_m or jumped \
                 or self._misses >= self.options.lost_after_misses \
                 or (contradicted and len(usable) >= LOST_UNEXPLAINED_DETECTIONS):
@@ -538,6 +549,26 @@ class TrackingSession:
         return self._result(index, frame, T_oc, T, cov, inliers, len(usable),
                             "detections_unexplained" if contradicted else None, timings,
                             contradicted)
+
+    def _restart_at(self, key: int, index: int, T: FloatArray, cov: FloatArray
+                    ) -> tuple[FloatArray, FloatArray] | None:
+        """A new smoother holding only pose ``key`` with a prior ``N(T, cov)`` (6x6
+        ``[omega, v]``, body frame); its estimate and marginal (None if it fails)."""
+        graph = gtsam.NonlinearFactorGraph()
+        graph.add(gtsam.PriorFactorPose3(key, pose3(T), gtsam.noiseModel.Gaussian.Covariance(
+            0.5 * (cov + cov.T))))
+        values = gtsam.Values()
+        values.insert(key, pose3(T))
+        stamps = gtsam.FixedLagSmootherKeyTimestampMap()
+        stamps[key] = float(index)
+        self._smoother = self._new_smoother()
+        try:
+            self._smoother.update(graph, values, stamps)
+            est = self._smoother.calculateEstimatePose3(key).matrix()
+        except RuntimeError:
+            return None
+        marginal = self._marginal(key)
+        return None if marginal is None else (est, marginal)
 
     def _predicted_visible(self, world_from_camera: FloatArray) -> bool:
         cfw = invert_pose(world_from_camera)
