@@ -65,6 +65,11 @@ NULL_GAIN = 1.2
 #: Per-frame weight of the evidence and the per-frame discount of past scores.
 TEMPERATURE = 0.25
 DISCOUNT = 0.93
+#: A frame with at least this many usable detections applies the whole :data:`DISCOUNT`; one
+#: with fewer, ``DISCOUNT ** (n / AGEING_DETECTIONS)`` (none without detections): the past
+#: evidence ages with the new evidence, not with the clock, so a sparse stretch (0-2
+#: detections) does not wash out what the dense frames before it established.
+AGEING_DETECTIONS = 3
 #: A session commits to a place when its posterior is at least this (and it explains
 #: :data:`MIN_COMMIT_OBJECTS` distinct objects); a committed place is given up when a rival's
 #: posterior exceeds its own (``ambiguous``) or its own falls below :data:`KEEP_PROBABILITY`.
@@ -360,7 +365,7 @@ def _discount(labels: Sequence[str]) -> float:
     detections, 1 on a frame without any (it says nothing new about the places but its
     predicted-in-view misses: the evidence gathered before it is not aged, so a walk between
     rooms keeps its place's posterior)."""
-    return DISCOUNT if len(labels) else 1.0
+    return DISCOUNT ** min(1.0, len(labels) / AGEING_DETECTIONS)
 
 
 def _same_place(a: FloatArray, b: FloatArray) -> bool:
