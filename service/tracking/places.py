@@ -12,9 +12,11 @@ frame's detections:
 and a *null* hypothesis ("somewhere else") that explains each usable detection with
 ``NULL_GAIN`` and misses as few predicted objects as the best-placed hypothesis (misses are
 evidence between listed places, not against the places not listed). Scores are discounted
-sums ``S_h <- DISCOUNT * S_h + TEMPERATURE * LL_h``
-(consecutive 30 Hz frames are far from independent: the temperature and discount make the
-evidence of about one second count, not of thirty frames); the posterior of the places is
+sums ``S_h <- d * S_h + TEMPERATURE * LL_h`` with ``d = DISCOUNT ** min(1, n /
+AGEING_DETECTIONS)`` for a frame of ``n`` usable detections (consecutive 30 Hz frames are far
+from independent: the temperature and discount make the evidence of about one second count, not
+of thirty frames; the past ages with new detections, not with the clock, so a walk between
+rooms keeps its place); the posterior of the places is
 ``softmax(S)`` over the hypotheses and the null. The constants were chosen on the tuning
 seeds of ``python -m bench.tracking --building`` (docs/tracking.md, "Places").
 
@@ -50,7 +52,7 @@ __all__ = [
     "single_place",
 ]
 
-#: Live hypotheses per session (the weakest are dropped beyond it).
+#: Live hypotheses per session (beyond it, the least supported are dropped: :func:`_support`).
 MAX_HYPOTHESES = 8
 #: Log-likelihood gain of an inlier whose IoU reaches :data:`IOU_SATURATION` (less below it),
 #: and penalty per object predicted in view but not detected (the detector misses about a third
@@ -321,7 +323,7 @@ class PlaceSet:
         self.hypotheses += new
         while len(self.hypotheses) > MAX_HYPOTHESES:
             self.hypotheses.remove(min((h for h in self.hypotheses if h is not protect),
-                                       key=lambda h: h.score))
+                                       key=_support))
 
     def candidates(self, odom_from_camera: FloatArray,
                    committed: PlaceHypothesis | None = None,
@@ -355,6 +357,14 @@ class PlaceSet:
         return self.hypotheses[k], float(p[k])
 
 
+def _support(h: PlaceHypothesis) -> tuple[int, float]:
+    """What keeps a hypothesis when the cap (:data:`MAX_HYPOTHESES`) is reached: the distinct
+    map objects it has matched over its life, then its score. Copies of a room tie on the
+    score of the recent frames; the alignment that also explains the rooms walked through
+    before has matched more objects."""
+    return len(h.objects), h.score
+
+
 def _inlier_gain(ious: Sequence[float]) -> float:
     """The inlier part of ``LL_h`` (module docstring) of one-to-one inlier IoUs."""
     return IOU_GAIN / IOU_SATURATION * float(sum(min(float(q), IOU_SATURATION) for q in ious))
@@ -365,7 +375,7 @@ def _discount(labels: Sequence[str]) -> float:
     detections, 1 on a frame without any (it says nothing new about the places but its
     predicted-in-view misses: the evidence gathered before it is not aged, so a walk between
     rooms keeps its place's posterior)."""
-    return DISCOUNT ** min(1.0, len(labels) / AGEING_DETECTIONS)
+    return float(DISCOUNT ** min(1.0, len(labels) / AGEING_DETECTIONS))
 
 
 def _same_place(a: FloatArray, b: FloatArray) -> bool:
