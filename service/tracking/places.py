@@ -371,10 +371,10 @@ def _inlier_gain(ious: Sequence[float]) -> float:
 
 
 def _discount(labels: Sequence[str]) -> float:
-    """The discount a frame applies to the past scores: :data:`DISCOUNT` on a frame with usable
-    detections, 1 on a frame without any (it says nothing new about the places but its
-    predicted-in-view misses: the evidence gathered before it is not aged, so a walk between
-    rooms keeps its place's posterior)."""
+    """The discount a frame of ``n`` usable detections applies to the past scores:
+    ``DISCOUNT ** min(1, n / AGEING_DETECTIONS)`` (1 without detections: such a frame says
+    nothing new about the places but its predicted-in-view misses, so the evidence gathered
+    before it is not aged and a walk between rooms keeps its place's posterior)."""
     return float(DISCOUNT ** min(1.0, len(labels) / AGEING_DETECTIONS))
 
 
