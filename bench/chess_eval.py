@@ -460,16 +460,16 @@ def verdicts(results: dict) -> list[tuple[str, str, str]]:
     return rows
 
 
-def markdown(results: dict, command: str, plots: list[Path]) -> str:
+def markdown(results: dict, plots: list[Path]) -> str:
     ex = results["exact"]
     lm = results["localize_ms"]
     cfg = results["config"]
     lines = [
         "## Chess 6-DoF evaluation (paper section VI)",
         "",
-        f"Command: `{command}` ({cfg['frames']} real ground-truth frames x {cfg['draws']} "
+        f"{cfg['frames']} real ground-truth frames x {cfg['draws']} "
         f"draw(s), seed {cfg['seed']}, {results['elapsed_s']:.0f} s on the shared 2-core "
-        "machine). Detections simulated as in `docs/simulation.md`; frames per number of "
+        "machine. Detections simulated as in `docs/simulation.md`; frames per number of "
         f"detections: {results['detections_per_frame']}."
         + (f" iou/giou use one frame in {cfg['slow_metrics_stride']} in the sigma, convergence "
            "and partial-visibility experiments." if cfg["slow_metrics_stride"] > 1 else ""),
@@ -635,8 +635,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--frames, --draws and --slow-stride must be >= 1")
     if args.report_from:
         results = json.loads(args.report_from.read_text())
-        command = (results.get("command", "python -m bench.chess_eval") + "`, report and plots "
-                   "rebuilt with `python -m bench.chess_eval --report-from RAW_JSON")
+        # the section states the command of the run whose raw results it renders
+        command = results.get("command", "python -m bench.chess_eval")
     else:
         results = run(args.frames, args.draws, args.seed, metrics, args.slow_stride,
                       log=lambda msg: print(msg, file=sys.stderr, flush=True))
@@ -648,7 +648,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.plots is None and args.write_results:
         args.plots = Path(__file__).resolve().parent.parent / "docs" / "img"
     plots = make_plots(results, args.plots) if args.plots else []
-    md = markdown(results, command.strip(), plots)
+    md = markdown(results, plots)
     print(md)
     if args.json:
         public = {k: v for k, v in results.items() if k not in ("_raw", "command")}
@@ -657,7 +657,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.write_results:
         from bench.results_doc import update_results_section
 
-        update_results_section("chess_eval", md)
+        update_results_section("chess_eval", md,
+                               command=command if args.report_from else None)
     return 0
 
 

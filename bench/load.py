@@ -316,7 +316,7 @@ def to_markdown(report: dict[str, Any]) -> str:
     lines = [
         "## HTTP load on loopback (`bench/load.py`)",
         "",
-        f"`{report['command']}` - {report['frames']} simulated Chess frames (real ground-truth "
+        f"{report['frames']} simulated Chess frames (real ground-truth "
         f"poses, default detector noise, level-set refinement) posted to {w} real single-worker "
         "Uvicorn replica(s) (shared SQLite, default settings: `QUADLOC_MAX_CONCURRENT_SOLVES` = "
         "2 solves at a time per process) "

@@ -170,12 +170,12 @@ def run(seeds: list[int], baseline: Path | None, rounds: int) -> dict[str, Any]:
     return out
 
 
-def to_markdown(report: dict[str, Any], command: str) -> str:
+def to_markdown(report: dict[str, Any]) -> str:
     names = [n for n in ("baseline", "this") if n in report]
     lines = [
         "## localize() CPU time on the Chess evaluation frames (`bench/localize_speed.py`)",
         "",
-        f"Command: `{command}`. Frames: the `bench.chess_eval` relocalization frames "
+        f"Frames: the `bench.chess_eval` relocalization frames "
         f"(108 real poses x seeds {report['seeds']}, level set, no time budget); each tree in "
         f"its own process, frame by frame in turn, {report['rounds']} round(s), CPU time "
         "(`time.thread_time`) over all calls (every frame of every round); load average at the "
@@ -229,9 +229,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.write_results:
         from bench.results_doc import update_results_section
 
-        command = "python -m bench.localize_speed " + " ".join(
-            argv if argv is not None else sys.argv[1:])
-        update_results_section("localize_speed", to_markdown(report, command.strip()))
+        update_results_section("localize_speed", to_markdown(report))
     return 0
 
 

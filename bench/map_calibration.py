@@ -98,7 +98,7 @@ def _f(v: float | None, fmt: str = ".2f") -> str:
     return "-" if v is None else format(v, fmt)
 
 
-def markdown(res: dict[str, Any], command: str) -> str:
+def markdown(res: dict[str, Any]) -> str:
     rows = ["| seed | detector | objects | held-out frames (localized) | mean NEES before -> "
             "after (frames within 10 cm) | calibration error before -> after +- sd (sampling "
             "floor) | mean confidence / success after |",
@@ -133,8 +133,7 @@ def markdown(res: dict[str, Any], command: str) -> str:
         "Per recording after calibration: mean NEES from "
         + (" to ".join(_f(v) for v in s["nees_after_range"]) if s["nees_after_range"] else "-")
         + " (target [4, 9]), calibration error at most "
-        f"{_f(s['max_calibration_error_after'], '.3f')} (target <= 0.05). Reproduce: "
-        f"`{command}`."])
+        f"{_f(s['max_calibration_error_after'], '.3f')} (target <= 0.05)."])
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -182,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
         else:
             cmd = "python -m bench.map_calibration " + " ".join(
                 argv if argv is not None else sys.argv[1:])
-        text = markdown(res, cmd.strip())
+        text = markdown(res)
         if args.note:
             text += "\n\n" + " ".join(args.note)
         update_results_section("map_calibration", text, command=cmd.strip())

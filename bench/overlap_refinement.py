@@ -34,10 +34,11 @@ import os
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
-from bench.results_doc import update_results_section
+from bench.results_doc import REPO_ROOT, tree_python, tree_version, update_results_section
 from quadloc.maps.compiled import compile_map
 from quadloc.service.localization.refine import refine
 from tests.support.errors import pose_errors
@@ -196,15 +197,15 @@ def compare_eval_cost(other_tree: str, rounds: int = 5) -> dict:
     """:func:`eval_cost` here and in ``other_tree`` (this file run by its ``.venv``, its code
     on the path), alternately ``rounds`` times; the median of each."""
     runs: dict[str, list[dict]] = {"this": [], "other": []}
-    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     for _ in range(rounds):
         runs["this"].append(eval_cost())
         env = dict(os.environ, PYTHONPATH=other_tree)
-        res = subprocess.run([os.path.join(other_tree, ".venv", "bin", "python"),
-                              os.path.abspath(__file__), "--eval-cost"], cwd=other_tree,
+        res = subprocess.run([tree_python(Path(other_tree)), os.path.abspath(__file__),
+                              "--eval-cost"], cwd=other_tree,
                              env=env, capture_output=True, text=True, check=True)
         runs["other"].append(json.loads(res.stdout))
-    out: dict = {"this_tree": here, "other_tree": other_tree, "rounds": rounds}
+    out: dict = {"this_tree": tree_version(REPO_ROOT), "other_tree": tree_version(Path(other_tree)),
+                 "rounds": rounds}
     for side, results in runs.items():
         out[side] = {m: {k: float(np.median([r[m][k] for r in results]))
                          for k in ("evaluation_ms", "areas_ms")} for m in ("iou", "giou")}
@@ -273,11 +274,11 @@ def _targets(result: dict) -> str:
     return "Targets (issue 14, part 1): " + "; ".join(parts) + "."
 
 
-def markdown(result: dict, command: str, before: dict | None = None,
+def markdown(result: dict, before: dict | None = None,
              before_label: str = "") -> str:
     lines = [INTRO, "",
-             f"Command: `{command}` (seed {result['seed']}, {result['frames']} real poses, true "
-             f"associations, starts {result['start']} off; CPU time of `refine()`).", ""]
+             f"Seed {result['seed']}, {result['frames']} real poses, true "
+             f"associations, starts {result['start']} off; CPU time of `refine()`.", ""]
     lines += _table(result)
     lines += ["", _targets(result)]
     if before is not None:
@@ -318,15 +319,16 @@ def main(argv: list[str] | None = None) -> int:
     if args.from_json:
         with open(args.from_json) as fh:
             result = json.load(fh)
-        command = args.command or f"python -m bench.overlap_refinement --seed {result['seed']}"
+        command: str | None = (args.command
+                               or f"python -m bench.overlap_refinement --seed {result['seed']}")
     else:
         result = run(args.seed, args.frames, log=lambda s: print(s, file=sys.stderr))
-        command = "python -m bench.overlap_refinement " + " ".join(argv or sys.argv[1:])
+        command = None  # this process's own command line
     before = None
     if args.before_json:
         with open(args.before_json) as fh:
             before = json.load(fh)
-    table = markdown(result, command, before, args.before_label)
+    table = markdown(result, before, args.before_label)
     if args.notes:
         with open(args.notes) as fh:
             table += "\n\n" + fh.read().strip()
@@ -338,7 +340,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.write_results:
         update_results_section(
             "overlap_refinement",
-            "## IoU / GIoU refinement on the Chess map (issue 14, part 1)\n\n" + table)
+            "## IoU / GIoU refinement on the Chess map (issue 14, part 1)\n\n" + table,
+            command=command)
     return 0
 
 

@@ -68,7 +68,7 @@ _HEADER = ("| setting | view set | solved | centre err cm (median / p90) "
            "|---|---|---|---|---|---|---|---|")
 
 
-def run(trials: int, n_views: int, seed: int, command: str = "") -> tuple[str, dict]:
+def run(trials: int, n_views: int, seed: int) -> tuple[str, dict]:
     cam, cfw = load_views()
     scene = load_demo_map()
     rng = np.random.default_rng(seed)
@@ -166,7 +166,6 @@ span >= {NARROW_DEG:g} deg ({describe("wide")}); "narrow": the others ({describe
 Times: median wall clock per solved
 object of the row's setting and view-set group (linear estimate + both LM refinements) on the
 shared 2-core machine, noisy between runs.
-{f"Command: `{command}`." if command else ""}
 
 | object | category | frames visible | views used | ray spread (deg) |
 |---|---|---|---|---|
@@ -236,9 +235,7 @@ def main(argv: list[str] | None = None) -> None:
                         help="write the section into docs/results.md (section reconstruction)")
     parser.add_argument("--json", type=Path, help="also write the raw errors here")
     args = parser.parse_args(argv)
-    command = (f"python -m bench.reconstruction --trials {args.trials} --views {args.views} "
-               f"--seed {args.seed} --write-results")
-    md, raw = run(args.trials, args.views, args.seed, command)
+    md, raw = run(args.trials, args.views, args.seed)
     print(md)
     if args.json:
         args.json.write_text(json.dumps(raw, indent=1, default=float))

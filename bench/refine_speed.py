@@ -267,11 +267,11 @@ def run(seed: int, trials_override: int | None) -> dict:
     return out
 
 
-def markdown(res: dict, command: str) -> str:
+def markdown(res: dict) -> str:
     lines = ["## Pose refinement speed (`refine_speed`)", "",
-             f"Command: `{command}` ({platform.python_implementation()} "
-             f"{platform.python_version()}, numpy {np.__version__}, 2-core shared machine; "
-             "wall times vary by up to ~40% between runs, compare within one run). "
+             f"Run on {platform.python_implementation()} "
+             f"{platform.python_version()}, numpy {np.__version__}, a 2-core shared machine ("
+             "wall times vary by up to ~40% between runs: compare within one run). "
              "Scenes, noise and baseline are described in `bench/refine_speed.py`.", "",
              "### Level-set refinement vs the paper's BFGS baseline (same run)", "",
              "| N | level-set median (ms) | p90 (ms) | CPU median (ms) | LM iterations | "
@@ -366,7 +366,7 @@ def main(argv: list[str] | None = None) -> None:
         f" --trials {args.trials}" if args.trials else "") + " --write-results"
     res = run(args.seed, args.trials)
     res["command"] = command
-    md = markdown(res, command)
+    md = markdown(res)
     print(md)
     if args.json:
         args.json.write_text(json.dumps(res, indent=2))

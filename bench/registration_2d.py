@@ -452,7 +452,7 @@ def discussion(summary: dict, n_pairs: int, seed: int) -> str:
     return "\n".join(out) + "\n"
 
 
-def results_markdown(summary: dict, command: str, n_pairs: int, wall_s: float | None,
+def results_markdown(summary: dict, n_pairs: int, wall_s: float | None,
                      seed: int = 0, workers: int = 2, code: str | None = None) -> str:
     """The ``registration_2d`` section of docs/results.md (``code``: the code version that
     ran, when it is not the checkout's)."""
@@ -461,8 +461,8 @@ def results_markdown(summary: dict, command: str, n_pairs: int, wall_s: float | 
         timing += f" Code: {code}."
     return (
         "## 2D ellipse registration (the paper's Table I)\n\n"
-        f"Command: `{command}` ({n_pairs} pairs, every metric, with and without detection "
-        f"noise).{timing}\n\n"
+        f"{n_pairs} pairs, every metric, with and without detection "
+        f"noise.{timing}\n\n"
         "Mean position error (px) and mean rotation error (degrees, modulo 180) of the "
         "recovered rigid transform; the paper's value in brackets (– : not in the paper). "
         "Success = both errors below 0.1 (px, degrees). Setup, LM settings and the "
@@ -514,10 +514,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.write_results:
         from bench.results_doc import update_results_section
 
-        command = (f"python -m bench.registration_2d --pairs {args.pairs} --seed {args.seed} "
-                   f"--workers {args.workers}")
         update_results_section("registration_2d",
-                               results_markdown(summary, command, args.pairs, wall,
+                               results_markdown(summary, args.pairs, wall,
                                                 args.seed, args.workers, args.code))
     return 0
 
