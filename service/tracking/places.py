@@ -12,9 +12,11 @@ frame's detections:
 and a *null* hypothesis ("somewhere else") that explains each usable detection with
 ``NULL_GAIN`` and misses as few predicted objects as the best-placed hypothesis (misses are
 evidence between listed places, not against the places not listed). Scores are discounted
-sums ``S_h <- DISCOUNT * S_h + TEMPERATURE * LL_h``
-(consecutive 30 Hz frames are far from independent: the temperature and discount make the
-evidence of about one second count, not of thirty frames); the posterior of the places is
+sums ``S_h <- d * S_h + TEMPERATURE * LL_h`` with ``d = DISCOUNT ** min(1, n /
+AGEING_DETECTIONS)`` for a frame of ``n`` usable detections (consecutive 30 Hz frames are far
+from independent: the temperature and discount make the evidence of about one second count, not
+of thirty frames; the past ages with new detections, not with the clock, so a walk between
+rooms keeps its place); the posterior of the places is
 ``softmax(S)`` over the hypotheses and the null. The constants were chosen on the tuning
 seeds of ``python -m bench.tracking --building`` (docs/tracking.md, "Places").
 
@@ -38,7 +40,7 @@ from quadloc.factors.camera import Camera
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.rotations import invert_pose, rotation_angle
 from quadloc.maps.compiled import CompiledMap
-from quadloc.maps.visibility import ViewRule, predicted_in_view
+from quadloc.maps.visibility import ViewRule, object_zones, predicted_in_view
 from quadloc.maps.zones import zone_index
 from quadloc.service.localization.scoring import MatchScorer, greedy_assignment
 
@@ -49,9 +51,10 @@ __all__ = [
     "PlaceCandidate",
     "PlaceHypothesis",
     "PlaceSet",
+    "single_place",
 ]
 
-#: Live hypotheses per session (the weakest are dropped beyond it).
+#: Live hypotheses per session (beyond it, the least supported are dropped: :func:`_support`).
 MAX_HYPOTHESES = 8
 #: Log-likelihood gain of an inlier whose IoU reaches :data:`IOU_SATURATION` (less below it),
 #: and penalty per object predicted in view but not detected (the detector misses about a third
@@ -66,6 +69,11 @@ NULL_GAIN = 1.2
 #: Per-frame weight of the evidence and the per-frame discount of past scores.
 TEMPERATURE = 0.25
 DISCOUNT = 0.93
+#: A frame with at least this many usable detections applies the whole :data:`DISCOUNT`; one
+#: with fewer, ``DISCOUNT ** (n / AGEING_DETECTIONS)`` (none without detections): the past
+#: evidence ages with the new evidence, not with the clock, so a sparse stretch (0-2
+#: detections) does not wash out what the dense frames before it established.
+AGEING_DETECTIONS = 3
 #: A session commits to a place when its posterior is at least this (and it explains
 #: :data:`MIN_COMMIT_OBJECTS` distinct objects); a committed place is given up when a rival's
 #: posterior exceeds its own (``ambiguous``) or its own falls below :data:`KEEP_PROBABILITY`.
@@ -87,6 +95,10 @@ MAX_VIEW_DEPTH_M = 6.0
 #: the image inset by :data:`VIEW_INSET`, depth in (0.3, :data:`MAX_VIEW_DEPTH_M`) m, the zone
 #: of the nearest such object.
 VIEW_RULE = ViewRule(min_depth_m=0.3, max_depth_m=MAX_VIEW_DEPTH_M, inset_fraction=VIEW_INSET)
+#: A map is one place (:func:`single_place`) when its objects are in at most one room and span
+#: at most this (m): about a large room (the Chess room's objects span 1.9 m; the generated
+#: buildings' rooms are 12 m apart).
+SINGLE_PLACE_EXTENT_M = 8.0
 
 
 @dataclass(frozen=True)
@@ -111,6 +123,24 @@ class PlaceHypothesis:
     rounds: int = 0
     objects: set[int] = field(default_factory=set)
     zone: str | None = None
+
+
+def single_place(compiled: CompiledMap) -> bool:
+    """Whether the map is one place: its objects are in at most one room (their most specific zones,
+    :func:`quadloc.maps.visibility.object_zones`; objects of no zone count as one more room) and
+    their centres are at most :data:`SINGLE_PLACE_EXTENT_M` apart. Such a map has no copy of a
+    room elsewhere for a later proposal round to find, so a session need not wait for rounds
+    (``session.MIN_PROPOSAL_ROUNDS``); rivals inside the room are still the first round's
+    proposals (multi-frame RANSAC and ``localize`` with its alternatives), scored against each
+    other. Memoised on the map."""
+    memo: bool | None = compiled.__dict__.get("_single_place")
+    if memo is None:
+        c = np.asarray(compiled.centers, float).reshape(-1, 3)
+        extent = float(np.linalg.norm(c.max(axis=0) - c.min(axis=0))) if len(c) else 0.0
+        memo = len(set(object_zones(compiled).tolist())) <= 1 \
+            and extent <= SINGLE_PLACE_EXTENT_M
+        compiled.__dict__["_single_place"] = memo
+    return memo
 
 
 class PlaceSet:
@@ -157,8 +187,7 @@ class PlaceSet:
             dense = sc.dense_iou(cfw)
             for h in range(H):
                 ms = greedy_assignment(dense[h], sc.detection_indices, self.inlier_iou)
-                ll[h] += IOU_GAIN / IOU_SATURATION * sum(min(m.iou, IOU_SATURATION)
-                                                         for m in ms)
+                ll[h] = _inlier_gain([m.iou for m in ms])
                 matched[h] = {int(m.object_index) for m in ms}
         misses = np.array([len(self._in_view(cfw[h]) - matched[h]) for h in range(H)],
                           dtype=float)
@@ -172,21 +201,44 @@ class PlaceSet:
 
     def update(self, odom_from_camera: FloatArray, ellipses: FloatArray, labels: Sequence[str],
                committed_world_from_camera: FloatArray | None = None,
-               committed: PlaceHypothesis | None = None) -> None:
+               committed: PlaceHypothesis | None = None,
+               committed_inliers: Sequence[tuple[int, float]] | None = None) -> None:
         """Score one frame: every hypothesis at ``world_from_odom @ odom_from_camera`` (the
         ``committed`` one at ``committed_world_from_camera``, the smoother's estimate, when
         given), the null with its gain; discounted sums; drops the hypotheses whose
-        posterior fell below :data:`DROP_PROBABILITY` (never ``committed``)."""
+        posterior fell below :data:`DROP_PROBABILITY` (never ``committed``).
+
+        ``committed_inliers``: the ``(object index, IoU)`` one-to-one inliers the frame
+        already verified at ``committed_world_from_camera`` (the session's answer): the
+        committed place is scored on them instead of matching the frame again (a tracking
+        session's usual case, one live place, then needs no matching here)."""
         if not self.hypotheses:
             return
+        reuse = committed is not None and committed_world_from_camera is not None \
+            and committed_inliers is not None
+        rest = [h for h in self.hypotheses if not (reuse and h is committed)]
         poses = np.array([committed_world_from_camera
                           if h is committed and committed_world_from_camera is not None
-                          else h.world_from_odom @ odom_from_camera for h in self.hypotheses])
-        ll, matched, misses = self.frame_log_likelihoods(poses, ellipses, labels)
+                          else h.world_from_odom @ odom_from_camera for h in rest]
+                         ).reshape(-1, 4, 4)
+        ll_rest, matched_rest, misses_rest = self.frame_log_likelihoods(poses, ellipses, labels)
+        by_h = {id(h): (float(x), m, float(k)) for h, x, m, k in zip(
+            rest, ll_rest, matched_rest, misses_rest, strict=True)}
+        if reuse:
+            assert committed is not None and committed_inliers is not None
+            m = {int(o) for o, _ in committed_inliers}
+            k = float(len(self._in_view(invert_pose(np.asarray(committed_world_from_camera,
+                                                               float))) - m))
+            by_h[id(committed)] = (_inlier_gain([q for _, q in committed_inliers])
+                                   - MISS_PENALTY * k, m, k)
+        ll = np.array([by_h[id(h)][0] for h in self.hypotheses])
+        matched = [by_h[id(h)][1] for h in self.hypotheses]
+        misses = np.array([by_h[id(h)][2] for h in self.hypotheses])
+        d = _discount(labels)
         for h, x, m in zip(self.hypotheses, ll, matched, strict=True):
-            h.score = DISCOUNT * h.score + TEMPERATURE * float(x)
+            h.score = d * h.score + TEMPERATURE * float(x)
             self._remember(h, m)
-        self.null_score = DISCOUNT * self.null_score + TEMPERATURE * (
+        self.null_score = d * self.null_score + TEMPERATURE * (
             NULL_GAIN * len(labels) - MISS_PENALTY * float(misses.min()))
         p = self.posteriors()
         self.hypotheses = [h for h, q in zip(self.hypotheses, p, strict=True)
@@ -237,17 +289,20 @@ class PlaceSet:
                 same.world_from_odom = np.asarray(W, float)
         if not new:
             return
-        n = len(history)
-        for k, (T_oc, ell, labels) in enumerate(history):
+        # weight of each history frame: the discounts of the frames after it (as update's)
+        weights = np.ones(len(history))
+        for k in range(len(history) - 2, -1, -1):
+            weights[k] = weights[k + 1] * _discount(history[k + 1][2])
+        for (T_oc, ell, labels), w in zip(history, weights, strict=True):
             ll, matched, _ = self.frame_log_likelihoods(
                 np.array([h.world_from_odom @ T_oc for h in new]), ell, labels)
             for h, x, m in zip(new, ll, matched, strict=True):
-                h.score += DISCOUNT ** (n - 1 - k) * TEMPERATURE * float(x)
+                h.score += float(w) * TEMPERATURE * float(x)
                 self._remember(h, m)
         self.hypotheses += new
         while len(self.hypotheses) > MAX_HYPOTHESES:
             self.hypotheses.remove(min((h for h in self.hypotheses if h is not protect),
-                                       key=lambda h: h.score))
+                                       key=_support))
 
     def candidates(self, odom_from_camera: FloatArray,
                    committed: PlaceHypothesis | None = None,
@@ -279,6 +334,27 @@ class PlaceSet:
         p = self.posteriors()
         k = int(np.argmax(p))
         return self.hypotheses[k], float(p[k])
+
+
+def _support(h: PlaceHypothesis) -> tuple[int, float]:
+    """What keeps a hypothesis when the cap (:data:`MAX_HYPOTHESES`) is reached: the distinct
+    map objects it has matched over its life, then its score. Copies of a room tie on the
+    score of the recent frames; the alignment that also explains the rooms walked through
+    before has matched more objects."""
+    return len(h.objects), h.score
+
+
+def _inlier_gain(ious: Sequence[float]) -> float:
+    """The inlier part of ``LL_h`` (module docstring) of one-to-one inlier IoUs."""
+    return IOU_GAIN / IOU_SATURATION * float(sum(min(float(q), IOU_SATURATION) for q in ious))
+
+
+def _discount(labels: Sequence[str]) -> float:
+    """The discount a frame of ``n`` usable detections applies to the past scores:
+    ``DISCOUNT ** min(1, n / AGEING_DETECTIONS)`` (1 without detections: such a frame says
+    nothing new about the places but its predicted-in-view misses, so the evidence gathered
+    before it is not aged and a walk between rooms keeps its place's posterior)."""
+    return float(DISCOUNT ** min(1.0, len(labels) / AGEING_DETECTIONS))
 
 
 def _same_place(a: FloatArray, b: FloatArray) -> bool:

@@ -60,6 +60,7 @@ from quadloc.service.tracking.places import (
     PlaceHypothesis,
     PlaceSet,
     alignment,
+    single_place,
 )
 
 __all__ = [
@@ -515,21 +516,32 @@ class TrackingSession:
         if T is None or cov is None or not np.all(np.isfinite(T)):
             self.reset()
             return self._no_pose(index, frame, T_oc, usable, "lost", timings)
+        xi = gtsam.Pose3.Logmap(pose3(invert_pose(T_pred) @ T))
+        jumped = float(xi @ np.linalg.solve(cov_pred, xi)) > JUMP_CHI2
+        if jumped and assoc and len(usable) < LOST_UNEXPLAINED_DETECTIONS:
+            # 1-2 detections pulled the estimate away from its odometry: a wrong association
+            # (a spurious detection, a neighbouring room's object). The frame's detections are
+            # dropped: the smoother restarts from the prediction and its covariance (the window
+            # marginalised into one prior), the place and its scores stay.
+            restarted = self._restart_at(key, index, T_pred, cov_pred)
+            if restarted is None:
+                self.reset()
+                return self._no_pose(index, frame, T_oc, usable, "lost", timings)
+            T, cov = restarted
+            jumped = False
         inliers = self._verify(frame.detections, usable, T)
         # a frame whose usable detections are all unexplained contradicts the estimate
         contradicted = bool(usable) and not inliers and (
             bool(assoc) or self._predicted_visible(T_pred))
         self._misses = self._misses + 1 if contradicted else 0
         pos_std = math.sqrt(max(float(np.linalg.eigvalsh(cov[3:, 3:]).max()), 0.0))
-        xi = gtsam.Pose3.Logmap(pose3(invert_pose(T_pred) @ T))
-        jumped = float(xi @ np.linalg.solve(cov_pred, xi)) > JUMP_CHI2
         if pos_std > self.options.lost_position_std_m or jumped \
                 or self._misses >= self.options.lost_after_misses \
                 or (contradicted and len(usable) >= LOST_UNEXPLAINED_DETECTIONS):
             self.reset()
             return self._no_pose(index, frame, T_oc, usable, "lost", timings)
         t = time.perf_counter()
-        given_up = self._check_place(index, frame, T, usable)
+        given_up = self._check_place(index, frame, T, usable, inliers)
         timings["places"] = (time.perf_counter() - t) * 1e3
         if given_up is not None:
             return self._no_pose(index, frame, T_oc, usable, given_up, timings)
@@ -537,6 +549,26 @@ class TrackingSession:
         return self._result(index, frame, T_oc, T, cov, inliers, len(usable),
                             "detections_unexplained" if contradicted else None, timings,
                             contradicted)
+
+    def _restart_at(self, key: int, index: int, T: FloatArray, cov: FloatArray
+                    ) -> tuple[FloatArray, FloatArray] | None:
+        """A new smoother holding only pose ``key`` with a prior ``N(T, cov)`` (6x6
+        ``[omega, v]``, body frame); its estimate and marginal (None if it fails)."""
+        graph = gtsam.NonlinearFactorGraph()
+        graph.add(gtsam.PriorFactorPose3(key, pose3(T), gtsam.noiseModel.Gaussian.Covariance(
+            0.5 * (cov + cov.T))))
+        values = gtsam.Values()
+        values.insert(key, pose3(T))
+        stamps = gtsam.FixedLagSmootherKeyTimestampMap()
+        stamps[key] = float(index)
+        self._smoother = self._new_smoother()
+        try:
+            self._smoother.update(graph, values, stamps)
+            est = self._smoother.calculateEstimatePose3(key).matrix()
+        except RuntimeError:
+            return None
+        marginal = self._marginal(key)
+        return None if marginal is None else (est, marginal)
 
     def _predicted_visible(self, world_from_camera: FloatArray) -> bool:
         cfw = invert_pose(world_from_camera)
@@ -595,7 +627,9 @@ class TrackingSession:
             self._places.propose([alignment(T, T_oc) for T in proposals], T_oc, self._history,
                                  rounds=1)
         best, p = self._places.best()
-        if best is not None and p >= COMMIT_PROBABILITY and best.rounds >= MIN_PROPOSAL_ROUNDS \
+        # a one-place map has no copy of its room for later rounds to propose
+        rounds = 1 if single_place(self.compiled) else MIN_PROPOSAL_ROUNDS
+        if best is not None and p >= COMMIT_PROBABILITY and best.rounds >= rounds \
                 and len(best.objects) >= MIN_COMMIT_OBJECTS:
             t = time.perf_counter()
             poses = [best.world_from_odom @ b.frame.odom_from_camera for b in chosen]
@@ -642,7 +676,7 @@ class TrackingSession:
         return out + [a.world_from_camera for a in r.alternatives]
 
     def _check_place(self, index: int, frame: FrameInput, T: FloatArray,
-                     usable: list[int]) -> str | None:
+                     usable: list[int], inliers: Sequence[InlierMatch]) -> str | None:
         """A tracking frame scores the committed place (at the smoother's pose ``T``) and its
         rivals, asking ``localize`` for new rivals every :data:`CHECK_INTERVAL_FRAMES`. The
         session gives the place up (``lost``, keeping the hypotheses) when a rival has become
@@ -652,7 +686,8 @@ class TrackingSession:
         committed = self._committed
         assert committed is not None
         committed.world_from_odom = alignment(T, T_oc)
-        self._places.update(T_oc, ell, labels, T, committed)
+        self._places.update(T_oc, ell, labels, T, committed,
+                            [(self.compiled.index_of(m.object_id), m.iou) for m in inliers])
         self._history.append(self._evidence)
         if index - self._last_check >= CHECK_INTERVAL_FRAMES and len(usable) >= 3:
             self._last_check = index

@@ -3,16 +3,37 @@ through generated buildings (tests/support/building_walks.py), seeds of the test
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 
-from quadloc.service.tracking.places import COMMIT_PROBABILITY, LIST_PROBABILITY
-from quadloc.service.tracking.session import FrameInput, SessionOptions, TrackingSession
+from quadloc.factors.conics import ellipse_params
+from quadloc.factors.rotations import invert_pose
+from quadloc.maps.compiled import compile_map
+from quadloc.service.tracking.places import (
+    COMMIT_PROBABILITY,
+    DISCOUNT,
+    LIST_PROBABILITY,
+    MAX_HYPOTHESES,
+    TEMPERATURE,
+    PlaceHypothesis,
+    PlaceSet,
+    alignment,
+    single_place,
+)
+from quadloc.service.tracking.session import (
+    MIN_PROPOSAL_ROUNDS,
+    FrameInput,
+    SessionOptions,
+    TrackingSession,
+)
 from tests.support.building_walks import building_walk
 from tests.support.buildings import make_building
 from tests.support.errors import pose_errors
+from tests.support.reference_data import load_chess_map, load_chess_poses
 from tests.support.simulate import SimulationConfig, simulate_frame
+from tests.support.walks import make_walk, simulate_odometry
 
 
 def _run(building, walk, frames=None):
@@ -94,3 +115,100 @@ def test_a_committed_session_carried_to_another_room_says_so_and_recovers() -> N
     back = [(r, e) for _, r, e in answers[first_off:] if r.state == "tracking"]
     assert back and all(e[0] <= 0.5 for _, e in back)
     assert math.isfinite(back[0][1][0])
+
+
+def _evidence(frame: FrameInput, compiled) -> tuple[np.ndarray, tuple[str, ...]]:
+    usable = [d for d in frame.detections if len(compiled.indices_for(d.label))]
+    ell = ellipse_params([d.ellipse for d in usable]) if usable else np.zeros((0, 5))
+    return ell, tuple(d.label for d in usable)
+
+
+def test_frames_without_detections_do_not_age_the_place_evidence() -> None:
+    """Walking between rooms (no detections, nothing predicted in view): the posteriors stay
+    as they were; a frame with n < 3 detections ages the scores by DISCOUNT ** (n / 3)."""
+    b = make_building(2, "perturbed", 4)
+    walk = building_walk(b, 5, n_rooms=1)
+    places = PlaceSet(b.compiled, walk.camera, 0.2)
+    T0, f0 = walk.poses[0], walk.frames[0]
+    true_w = alignment(T0, f0.odom_from_camera)
+    shift = np.eye(4)
+    shift[:3, 3] = [0.6, 0.0, 0.0]  # a rival 60 cm off: it explains the detections worse
+    places.propose([true_w, shift @ true_w], f0.odom_from_camera, [])
+    for f in walk.frames[:3]:
+        places.update(f.odom_from_camera, *_evidence(f, b.compiled))
+    before = places.posteriors().copy()
+    assert len(before) == 2 and before[0] > before[1] and before.sum() < 1 - 1e-6
+    # the camera 1 km away from every object: no detection, nothing predicted in view
+    away = walk.frames[2].odom_from_camera.copy()
+    away[:3, 3] += 1000.0
+    for _ in range(90):  # 3 s at 30 Hz
+        places.update(away, np.zeros((0, 5)), ())
+    np.testing.assert_allclose(places.posteriors(), before, rtol=0, atol=1e-12)
+    # one detection: the old scores are discounted by DISCOUNT ** (1 / 3), then the frame's
+    # log-likelihoods (computed apart) added
+    f = next(x for x in walk.frames[3:] if len(_evidence(x, b.compiled)[1]) >= 1)
+    ell, labels = _evidence(f, b.compiled)
+    ell, labels = ell[:1], labels[:1]
+    old = np.array([h.score for h in places.hypotheses] + [places.null_score])
+    poses = np.array([h.world_from_odom @ f.odom_from_camera for h in places.hypotheses])
+    ll, _, misses = places.frame_log_likelihoods(poses, ell, labels)
+    ll_null = 1.2 * 1 - 0.5 * misses.min()
+    places.update(f.odom_from_camera, ell, labels)
+    new = np.array([h.score for h in places.hypotheses] + [places.null_score])
+    expected = DISCOUNT ** (1 / 3) * old + TEMPERATURE * np.append(ll, ll_null)
+    np.testing.assert_allclose(new, expected, rtol=1e-12, atol=1e-12)
+
+
+def test_single_place_maps() -> None:
+    """One room (zoned or not) is one place; several rooms, or a map without zones whose
+    objects span more than a room (e.g. a building imported without its zones), are not."""
+    assert single_place(compile_map(load_chess_map()))
+    assert single_place(make_building(1, "exact", 1).compiled)
+    several = make_building(3, "exact", 1)
+    assert not single_place(several.compiled)
+    no_zones = dataclasses.replace(several.scene_map, zones=())
+    assert not single_place(compile_map(no_zones))
+
+
+def test_a_one_place_map_commits_without_waiting_for_proposal_rounds() -> None:
+    """The Chess room alone: the first fix comes before the rounds a building waits for (the
+    second round, ``init_interval_frames`` later), and every pose is within 10 cm."""
+    compiled = compile_map(load_chess_map())
+    camera, cfw, _ = load_chess_poses()
+    walk = make_walk([invert_pose(T) for T in cfw])[:60]
+    rng = np.random.default_rng(3)
+    odom = simulate_odometry(walk, rng)
+    opts = SessionOptions()
+    s = TrackingSession(compiled, camera, opts)
+    first = None
+    for i, (T, To) in enumerate(zip(walk, odom, strict=True)):
+        r = s.add_frame(FrameInput(list(simulate_frame(compiled, camera, T, rng).detections),
+                                   To, i / 30))
+        if r.state == "tracking":
+            first = i if first is None else first
+            pos, rot = pose_errors(r.world_from_camera, T)
+            assert pos <= 0.1 and rot <= 5
+    assert MIN_PROPOSAL_ROUNDS > 1
+    assert first is not None and first < opts.init_interval_frames
+
+
+def test_the_cap_keeps_the_places_with_the_most_support() -> None:
+    """Beyond MAX_HYPOTHESES the hypotheses that matched the fewest distinct objects go first
+    (copies tie on recent scores; the true alignment also explains the rooms walked before),
+    whatever their recent score."""
+    b = make_building(2, "exact", 1)
+    places = PlaceSet(b.compiled, load_chess_poses()[0], 0.2)
+
+    def at(x: float) -> np.ndarray:
+        W = np.eye(4)
+        W[:3, 3] = [x, 0.0, 0.0]
+        return W
+
+    supported = PlaceHypothesis(at(0.0), score=-5.0, objects=set(range(6)))
+    others = [PlaceHypothesis(at(2.0 * k), score=1.0, objects={0, 1})
+              for k in range(1, MAX_HYPOTHESES)]
+    places.hypotheses = [supported, *others]
+    places.propose([at(100.0)], np.eye(4), [])  # scored on no frame: matched nothing
+    assert len(places.hypotheses) == MAX_HYPOTHESES
+    assert supported in places.hypotheses
+    assert all(h in places.hypotheses for h in others)
