@@ -93,10 +93,14 @@ def test_a_session_scales_its_covariance_by_the_maps_calibration(walk: dict) -> 
         assert np.array_equal(o.covariance, d.covariance) and o.confidence == d.confidence
     for i in tracked[::4]:
         d, c = default[i], calibrated[i]
+        # confidence = P(the committed place) x P(within tolerance there): the committed
+        # place is the candidate whose pose is the answer's
+        place = next(p.probability for p in d.candidates
+                     if np.array_equal(p.world_from_camera, d.world_from_camera))
         assert d.confidence == pytest.approx(
-            _tolerance_probability_mc(d.covariance, rng), abs=0.005)
+            place * _tolerance_probability_mc(d.covariance, rng), abs=0.005)
         assert c.confidence == pytest.approx(
-            _tolerance_probability_mc(ratio * d.covariance, rng), abs=0.005)
+            place * _tolerance_probability_mc(ratio * d.covariance, rng), abs=0.005)
     assert any(c.confidence < d.confidence - 0.01 for d, c in zip(default, calibrated,
                                                                    strict=True))
 
