@@ -143,6 +143,7 @@ BUILD_LIMIT_DEFAULTS: dict[str, BuildLimitSettings] = {
     "queue": BuildLimitSettings(max_frames=10_000, max_detections=200_000,
                                 time_budget_s=1800.0, max_body_bytes=32_000_000),
 }
+_IN_PROCESS, _QUEUE = BUILD_LIMIT_DEFAULTS["in-process"], BUILD_LIMIT_DEFAULTS["queue"]
 
 
 def _default_data_dir() -> Path:
@@ -235,26 +236,29 @@ class Settings(BaseSettings):
     max_build_frames: int | None = Field(
         default=None, ge=1, le=100_000,
         description="Frames per map-building recording; more -> 422 naming frames. Unset: "
-                    "the build runner's default (BUILD_LIMIT_DEFAULTS: 2000 in-process, "
-                    "10000 with the job queue's workers).",
+                    "the build runner's default (BUILD_LIMIT_DEFAULTS: "
+                    f"{_IN_PROCESS.max_frames} in-process, {_QUEUE.max_frames} with the job "
+                    "queue's workers).",
     )
     max_build_detections: int | None = Field(
         default=None, ge=1, le=10_000_000,
         description="Detections per map-building recording; more -> 422. Unset: the build "
-                    "runner's default (20000 in-process, 200000 with the job queue).",
+                    f"runner's default ({_IN_PROCESS.max_detections} in-process, "
+                    f"{_QUEUE.max_detections} with the job queue).",
     )
     build_time_budget_s: float | None = Field(
         default=None, gt=0, le=86_400.0,
         description="Wall time of one map build; association past it fails the job "
                     "(time_budget_exceeded), refinement past it keeps its estimate so far. "
-                    "Unset: the build runner's default (120 s in-process, 1800 s in a quadloc "
-                    "worker).",
+                    f"Unset: the build runner's default ({_IN_PROCESS.time_budget_s:g} s "
+                    f"in-process, {_QUEUE.time_budget_s:g} s in a quadloc worker).",
     )
     max_build_body_bytes: int | None = Field(
         default=None, ge=1024, le=1_000_000_000,
         description="Largest body of POST /v1/maps:build (a recording); larger -> 413. "
-                    "Unset: the build runner's default (4000000 in-process, 32000000 "
-                    "with the job queue). Other requests: max_body_bytes.",
+                    f"Unset: the build runner's default ({_IN_PROCESS.max_body_bytes} "
+                    f"in-process, {_QUEUE.max_body_bytes} with the job queue). Other requests: "
+                    "max_body_bytes.",
     )
     build_runner: Literal["auto", "in-process", "queue"] = Field(
         default="auto",
