@@ -89,9 +89,12 @@ LOST_UNEXPLAINED_DETECTIONS = 3
 #: Mahalanobis distance (6 dof, under the predicted covariance; chi-square 99.9 %) jumped: a
 #: wrong association pulled it, the session is ``lost``.
 JUMP_CHI2 = 22.5
-#: A tracking frame whose detections, used by the smoother, are inliers of this many distinct
-#: objects constrains the pose (two ellipse-ellipsoid pairs determine it): the systematic drift
-#: (:meth:`DriftModel.systematic_covariance`) restarts from 0 there.
+#: A tracking frame whose detections were fused (used by the smoother) and include an inlier
+#: constrains the pose when the inliers of the fused frames of the smoother's window
+#: (``window_frames``, this one included) cover this many distinct objects (two
+#: ellipse-ellipsoid pairs determine a pose; frames of one object each, a short odometry step
+#: apart, do it jointly): the systematic drift (:meth:`DriftModel.systematic_covariance`)
+#: restarts from 0 there.
 CONSTRAINING_OBJECTS = 2
 SMOOTHERS = ("isam2", "batch")
 #: Largest ``window_frames`` of each smoother: the batch smoother re-solves its whole window at
@@ -369,6 +372,8 @@ class TrackingSession:
         self._last: tuple[int, float, FloatArray, FloatArray, FloatArray] | None = None
         self._misses = 0
         self._anchor: _DriftAnchor | None = None
+        #: the inlier objects of the fused tracking frames of the window (empty when not fused)
+        self._recent_objects: deque[frozenset[str]] = deque(maxlen=self.options.window_frames)
         self._last_timestamp: float | None = None
         self._update_cpu_s = 0.0  # CPU time (s) of the last smoother update
         self._places = PlaceSet(compiled, camera, self.options.inlier_iou)
@@ -425,6 +430,7 @@ class TrackingSession:
         self._smoother = None
         self._last = None
         self._anchor = None
+        self._recent_objects.clear()
         self._misses = 0
         self._buffer.clear()
         self._committed = None
@@ -626,7 +632,10 @@ class TrackingSession:
         timings["places"] = (time.perf_counter() - t) * 1e3
         if given_up is not None:
             return self._no_pose(index, frame, T_oc, usable, given_up, timings)
-        if fused and len({m.object_id for m in inliers}) >= CONSTRAINING_OBJECTS:
+        fused_objects = frozenset(m.object_id for m in inliers) if fused else frozenset()
+        self._recent_objects.append(fused_objects)
+        if fused_objects and len(frozenset().union(*self._recent_objects)) \
+                >= CONSTRAINING_OBJECTS:
             self._anchor = _DriftAnchor.at(T_oc, float(frame.timestamp))
         elif self._anchor is not None:
             self._anchor.advance(T_oc, float(frame.timestamp))
@@ -728,6 +737,7 @@ class TrackingSession:
                 self.state = "tracking"
                 # the pooled frames (>= 3 objects) constrain the pose: the drift restarts here
                 self._anchor = _DriftAnchor.at(T_oc, float(frame.timestamp))
+                self._recent_objects.clear()
                 self._buffer.clear()
                 self._misses = 0
                 inliers = self._verify(dets, usable, T)
