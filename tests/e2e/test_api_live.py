@@ -92,7 +92,8 @@ def test_real_server_with_keys(live_server_factory) -> None:
 
 
 def test_solves_do_not_block_the_event_loop(live_server: str) -> None:
-    """A long solve runs in the threadpool: probes keep answering while it runs."""
+    """A long solve (80 random detections, a 1.5 s budget; 40 no longer take 0.8 s) runs in the
+    threadpool: probes keep answering while it runs."""
     import threading
     import time
 
@@ -101,7 +102,7 @@ def test_solves_do_not_block_the_event_loop(live_server: str) -> None:
     heavy = {**LOCALIZE_EXAMPLE,
              "detections": [{"ellipse": {"cx": float(x), "cy": float(y), "a": 30.0, "b": 20.0,
                                          "angle": 0.3}, "label": labels[i % len(labels)]}
-                            for i, (x, y) in enumerate(rng.uniform(50, 450, size=(40, 2)))],
+                            for i, (x, y) in enumerate(rng.uniform(50, 450, size=(80, 2)))],
              "options": {"ransac_max_hypotheses": 100000, "time_budget_ms": 1500,
                          "inlier_iou": 0.99, "min_inliers": 30}}
     solve: dict[str, float] = {}
