@@ -1,7 +1,9 @@
 """The ONE place where a tracking frame's ``confidence`` is computed: P(within 10 cm and 5 deg of
 the truth) = P(the committed place is the right one) x P(within tolerance | that place), the
 first the place posterior (:mod:`quadloc.service.tracking.places`), the second under the
-pose's Gaussian posterior (6x6 ``[omega, v]`` marginal, body frame, scaled by
+pose's Gaussian posterior (the answered 6x6 ``[omega, v]`` covariance, body frame: the
+smoother's marginal plus the systematic odometry drift,
+:meth:`quadloc.service.tracking.session.DriftModel.systematic_covariance`; scaled by
 :data:`COVARIANCE_SCALE`), with
 :func:`quadloc.service.localization.confidence.gaussian_tolerance_probability`; 0 unless
 ``tracking`` and on a ``detections_unexplained`` frame. Rationale:

@@ -31,6 +31,7 @@ from quadloc.factors.rotations import (
     DOCUMENT_ROTATION_TOLERANCE,
     check_pose,
     invert_pose,
+    skew,
     snap_to_rotation,
 )
 from quadloc.maps.compiled import CompiledMap
@@ -88,6 +89,13 @@ LOST_UNEXPLAINED_DETECTIONS = 3
 #: Mahalanobis distance (6 dof, under the predicted covariance; chi-square 99.9 %) jumped: a
 #: wrong association pulled it, the session is ``lost``.
 JUMP_CHI2 = 22.5
+#: A tracking frame whose detections were fused (used by the smoother) and include an inlier
+#: constrains the pose when the inliers of the fused frames of the smoother's window
+#: (``window_frames``, this one included) cover this many distinct objects (two
+#: ellipse-ellipsoid pairs determine a pose; frames of one object each, a short odometry step
+#: apart, do it jointly): the systematic drift (:meth:`DriftModel.systematic_covariance`)
+#: restarts from 0 there.
+CONSTRAINING_OBJECTS = 2
 SMOOTHERS = ("isam2", "batch")
 #: Largest ``window_frames`` of each smoother: the batch smoother re-solves its whole window at
 #: every frame, so its window is what bounds a frame's CPU time (measured by
@@ -126,12 +134,21 @@ class TrackingInputError(FieldError):
 
 @dataclass(frozen=True)
 class DriftModel:
-    """Odometry noise as a random walk (documented in docs/tracking.md).
+    """Odometry noise: a random walk plus a systematic part (documented in docs/tracking.md,
+    "Odometry drift model").
 
-    Between two frames ``d`` metres and ``dt`` seconds apart the relative pose has independent
-    per-axis std ``sqrt(q_d d + q_t dt + floor^2)`` with, for rotation (rad) and translation
-    (m): ``q_d = (x_per_sqrt_m)^2`` per metre and ``q_t = (x_per_sqrt_s)^2`` per second. So the
+    Random walk (:meth:`sigmas`, the odometry factors): between two frames ``d`` metres and
+    ``dt`` seconds apart the relative pose has independent per-axis std
+    ``sqrt(q_d d + q_t dt + floor^2)`` with, for rotation (rad) and translation (m):
+    ``q_d = (x_per_sqrt_m)^2`` per metre and ``q_t = (x_per_sqrt_s)^2`` per second. So the
     defaults mean 2 cm and 0.5 deg of std after 1 m, 0.3 cm and 0.05 deg after 1 s standing.
+
+    Systematic part (:meth:`systematic_covariance`, added to the answered covariance): a scale
+    error of std ``scale_error`` (fraction of the displacement) and a constant gyro bias of std
+    ``gyro_bias_rad_per_s`` per axis, both unknown but the same over the whole stretch since the
+    last detection-constrained frame, so their error grows linearly with the displacement and
+    the time (not with their square roots). Defaults 1.5 % and 0.03 deg/s per axis:
+    ARKit/ARCore-class visual-inertial odometry.
     """
 
     translation_m_per_sqrt_m: float = 0.02
@@ -140,6 +157,8 @@ class DriftModel:
     rotation_rad_per_sqrt_s: float = math.radians(0.05)
     translation_floor_m: float = 1e-4
     rotation_floor_rad: float = math.radians(0.01)
+    scale_error: float = 0.015
+    gyro_bias_rad_per_s: float = math.radians(0.03)
 
     def __post_init__(self) -> None:
         for name, value in self.__dict__.items():
@@ -155,6 +174,63 @@ class DriftModel:
                       + self.translation_m_per_sqrt_s ** 2 * dt_s
                       + self.translation_floor_m ** 2)
         return np.array([r, r, r, t, t, t])
+
+    def systematic_covariance(self, odom_from_camera: FloatArray, displacement_m: FloatArray,
+                              elapsed_s: float, moment_m_s: FloatArray) -> FloatArray:
+        """6x6 covariance ``[omega (rad), v (m)]`` in the body frame of the camera
+        ``odom_from_camera`` (4x4) of the systematic drift accumulated since the anchor (the
+        last detection-constrained frame).
+
+        With a scale error ``s`` (std ``scale_error``) and a gyro bias ``b`` (rad/s, std
+        ``gyro_bias_rad_per_s`` per axis, any direction), the odometry-frame errors are
+        ``theta = b T`` (rotation) and ``e = s D + b x W`` (position), ``D`` =
+        ``displacement_m`` (3,) the camera's odometry displacement since the anchor (m), ``T``
+        = ``elapsed_s``, ``W`` = ``moment_m_s`` (3,) = sum over the steps of ``(t_i - t_anchor)
+        dp_i`` (m s: the rotation error at step i turns that step's displacement). Hence
+        ``Cov(theta) = sb^2 T^2 I``, ``Cov(e) = ss^2 D D^T + sb^2 (|W|^2 I - W W^T)``,
+        ``Cov(theta, e) = sb^2 T [W]_x``, rotated into the body frame by ``R^T``.
+        """
+        R = np.asarray(odom_from_camera, float)[:3, :3]
+        d = R.T @ np.asarray(displacement_m, float)
+        w = R.T @ np.asarray(moment_m_s, float)
+        b2 = self.gyro_bias_rad_per_s ** 2
+        T = max(float(elapsed_s), 0.0)
+        wx = skew(w)
+        cov = np.zeros((6, 6))
+        cov[:3, :3] = b2 * T * T * np.eye(3)
+        cov[3:, 3:] = self.scale_error ** 2 * np.outer(d, d) \
+            + b2 * (float(w @ w) * np.eye(3) - np.outer(w, w))
+        cov[:3, 3:] = b2 * T * wx
+        cov[3:, :3] = cov[:3, 3:].T
+        return cov
+
+
+@dataclass
+class _DriftAnchor:
+    """The odometry since the last detection-constrained frame (the anchor): what
+    :meth:`DriftModel.systematic_covariance` needs. Positions in the odometry frame (m), times
+    (s)."""
+
+    position: FloatArray
+    timestamp: float
+    last_position: FloatArray
+    last_timestamp: float
+    moment: FloatArray  # sum over the steps of (t_i - timestamp) * dp_i (m s)
+
+    @classmethod
+    def at(cls, odom_from_camera: FloatArray, timestamp: float) -> _DriftAnchor:
+        p = np.array(odom_from_camera[:3, 3], float)
+        return cls(p, timestamp, p.copy(), timestamp, np.zeros(3))
+
+    def advance(self, odom_from_camera: FloatArray, timestamp: float) -> None:
+        p = np.array(odom_from_camera[:3, 3], float)
+        self.moment = self.moment + (timestamp - self.timestamp) * (p - self.last_position)
+        self.last_position, self.last_timestamp = p, timestamp
+
+    def covariance(self, drift: DriftModel, odom_from_camera: FloatArray) -> FloatArray:
+        """The systematic drift's 6x6 covariance at the newest frame (``odom_from_camera``)."""
+        return drift.systematic_covariance(odom_from_camera, self.last_position - self.position,
+                                           self.last_timestamp - self.timestamp, self.moment)
 
 
 @dataclass(frozen=True)
@@ -295,6 +371,9 @@ class TrackingSession:
             = None
         self._last: tuple[int, float, FloatArray, FloatArray, FloatArray] | None = None
         self._misses = 0
+        self._anchor: _DriftAnchor | None = None
+        #: the inlier objects of the fused tracking frames of the window (empty when not fused)
+        self._recent_objects: deque[frozenset[str]] = deque(maxlen=self.options.window_frames)
         self._last_timestamp: float | None = None
         self._update_cpu_s = 0.0  # CPU time (s) of the last smoother update
         self._places = PlaceSet(compiled, camera, self.options.inlier_iou)
@@ -350,6 +429,8 @@ class TrackingSession:
         are dropped too unless ``keep_places`` (a rival place won: they stay in competition)."""
         self._smoother = None
         self._last = None
+        self._anchor = None
+        self._recent_objects.clear()
         self._misses = 0
         self._buffer.clear()
         self._committed = None
@@ -449,7 +530,11 @@ class TrackingSession:
                 contradicted: bool = False) -> FrameResult:
         T_wo = cov_wo = None
         if cov is not None:
+            # the smoother's marginal (random-walk drift, detections) plus the systematic drift
+            # since the last detection-constrained frame (DriftModel, docs/tracking.md)
             cov = self.variance_ratio * cov
+            if self._anchor is not None and self.state == "tracking":
+                cov = cov + self._anchor.covariance(self.options.drift, T_oc)
         if T is not None:
             T_wo = T @ invert_pose(T_oc)
             if cov is not None:
@@ -518,6 +603,7 @@ class TrackingSession:
             return self._no_pose(index, frame, T_oc, usable, "lost", timings)
         xi = gtsam.Pose3.Logmap(pose3(invert_pose(T_pred) @ T))
         jumped = float(xi @ np.linalg.solve(cov_pred, xi)) > JUMP_CHI2
+        fused = bool(assoc)  # detections in the smoother's update
         if jumped and assoc and len(usable) < LOST_UNEXPLAINED_DETECTIONS:
             # 1-2 detections pulled the estimate away from its odometry: a wrong association
             # (a spurious detection, a neighbouring room's object). The frame's detections are
@@ -529,6 +615,7 @@ class TrackingSession:
                 return self._no_pose(index, frame, T_oc, usable, "lost", timings)
             T, cov = restarted
             jumped = False
+            fused = False  # its detections were dropped: they constrain nothing
         inliers = self._verify(frame.detections, usable, T)
         # a frame whose usable detections are all unexplained contradicts the estimate
         contradicted = bool(usable) and not inliers and (
@@ -545,6 +632,13 @@ class TrackingSession:
         timings["places"] = (time.perf_counter() - t) * 1e3
         if given_up is not None:
             return self._no_pose(index, frame, T_oc, usable, given_up, timings)
+        fused_objects = frozenset(m.object_id for m in inliers) if fused else frozenset()
+        self._recent_objects.append(fused_objects)
+        if fused_objects and len(frozenset().union(*self._recent_objects)) \
+                >= CONSTRAINING_OBJECTS:
+            self._anchor = _DriftAnchor.at(T_oc, float(frame.timestamp))
+        elif self._anchor is not None:
+            self._anchor.advance(T_oc, float(frame.timestamp))
         self._last = (index, float(frame.timestamp), T_oc, T, cov)
         return self._result(index, frame, T_oc, T, cov, inliers, len(usable),
                             "detections_unexplained" if contradicted else None, timings,
@@ -641,6 +735,9 @@ class TrackingSession:
                 best.world_from_odom = alignment(T, T_oc)
                 self._committed = best
                 self.state = "tracking"
+                # the pooled frames (>= 3 objects) constrain the pose: the drift restarts here
+                self._anchor = _DriftAnchor.at(T_oc, float(frame.timestamp))
+                self._recent_objects.clear()
                 self._buffer.clear()
                 self._misses = 0
                 inliers = self._verify(dets, usable, T)
