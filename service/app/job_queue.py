@@ -197,8 +197,10 @@ class ProcrastinateQueue:
                             job.id, procrastinate.jobs.Status.FAILED, delete_job=False)
                         await asyncio.to_thread(kind.lost, job_id, _LOST_DETAIL)
                     else:
-                        await manager.retry_job(job)
+                        # the row first: once retried, a live worker may take the job and mark
+                        # it running at once, which a later `queued` would overwrite
                         await asyncio.to_thread(kind.requeued, job_id)
+                        await manager.retry_job(job)
                     log.warning("job %s (%s): its worker stopped reporting; %s", job_id,
                                 job.task_name, "given up" if _last_run(job) else "queued again")
                     done += 1
