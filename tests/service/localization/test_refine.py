@@ -88,6 +88,20 @@ def numeric_gradient(fn, T, h=1e-6):
 # --------------------------------------------------------------------------- real data accuracy
 
 
+def projectable_detections(cam, ells, world_from_camera):
+    """The exact detections (labels ``o{j}``) of the objects of ``ells`` whose projection
+    into ``cam`` at ``world_from_camera`` is an ellipse, and those objects."""
+    cfw = invert_pose(world_from_camera)
+    dets, objs = [], []
+    for j, e in enumerate(ells):
+        try:
+            dets.append(Detection(project_ellipsoid(cam, cfw, e), f"o{j}"))
+        except DegenerateProjectionError:
+            continue
+        objs.append(e)
+    return dets, objs
+
+
 def load_chess():
     """(ellipsoids, camera, world_from_camera 4x4 list) of the real Chess data."""
     if not CHESS_SCENE_PATH.exists():
@@ -102,14 +116,7 @@ def test_level_set_refinement_is_exact_on_real_chess_poses():
     rng = np.random.default_rng(2024)
     worst_pos, worst_rot, n_frames = 0.0, 0.0, 0
     for T_true in frames[:100]:
-        cfw = invert_pose(T_true)
-        dets, objs = [], []
-        for j, e in enumerate(ells):
-            try:
-                dets.append(Detection(project_ellipsoid(cam, cfw, e), f"o{j}"))
-            except DegenerateProjectionError:
-                continue
-            objs.append(e)
+        dets, objs = projectable_detections(cam, ells, T_true)
         assert len(objs) >= 3
         T0 = perturb_pose(T_true, rng, 0.10, 5.0)
         res = refine(dets, objs, cam, T0, "level_set")
@@ -583,14 +590,7 @@ def test_stages_ms_account_for_the_call():
 
     ells, cam, frames = load_chess()
     T_true = frames[0]
-    cfw = invert_pose(T_true)
-    dets, objs = [], []
-    for j, e in enumerate(ells):
-        try:
-            dets.append(Detection(project_ellipsoid(cam, cfw, e), f"o{j}"))
-        except DegenerateProjectionError:
-            continue
-        objs.append(e)
+    dets, objs = projectable_detections(cam, ells, T_true)
     start = perturb_pose(T_true, np.random.default_rng(5), 0.10, 5.0)
     for metric in ("level_set", "bbox"):
         res = refine(dets, objs, cam, start, metric)
