@@ -107,24 +107,15 @@ def localize_cases() -> list[dict[str, Any]]:
 
 
 def session_case() -> list[dict[str, Any]]:
-    from quadloc.factors.rotations import invert_pose
-    from quadloc.maps.compiled import compile_map
-    from quadloc.service.tracking.session import FrameInput, SessionOptions, TrackingSession
-    from tests.support.reference_data import load_chess_map, load_chess_poses
-    from tests.support.simulate import SimulationConfig, simulate_frame
-    from tests.support.walks import make_walk, simulate_odometry
+    from quadloc.service.tracking.session import SessionOptions, TrackingSession
+    from tests.support.walks import chess_walk
 
-    cm = compile_map(load_chess_map())
-    camera, cfw, _ = load_chess_poses()
-    walk = make_walk([invert_pose(T) for T in cfw])[:90]
-    rng = np.random.default_rng(2027)
-    odom = simulate_odometry(walk, rng)
+    walk = chess_walk(90, seed=2027)
     # no deadline (add_frame's default): the initialisation's sampling must not depend on the load
-    session = TrackingSession(cm, camera, SessionOptions())
+    session = TrackingSession(walk.compiled, walk.camera, SessionOptions())
     out = []
-    for i, (T, To) in enumerate(zip(walk, odom, strict=True)):
-        dets = list(simulate_frame(cm, camera, T, rng, SimulationConfig()).detections)
-        r = session.add_frame(FrameInput(dets, To, i / 30.0, str(i)))
+    for i, frame in enumerate(walk.frames):
+        r = session.add_frame(frame)
         out.append({"frame": i, "state": r.state, "world_from_camera": _f(r.world_from_camera),
                     "world_from_odom": _f(r.world_from_odom), "confidence": _f(r.confidence),
                     "covariance": _f(r.covariance),

@@ -46,7 +46,7 @@ from tests.support.buildings import REPORT_SEEDS, TUNE_SEEDS, Building, make_bui
 from tests.support.errors import pose_errors
 from tests.support.reference_data import load_chess_map, load_chess_poses
 from tests.support.simulate import SimulationConfig, simulate_frame
-from tests.support.walks import HZ, make_walk, simulate_odometry
+from tests.support.walks import HZ, chess_walk, make_walk, simulate_odometry
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -206,14 +206,11 @@ def _by_second(wo: list[tuple[float, float]]) -> dict[str, float]:
 def recording(seed: int, n_frames: int) -> dict:
     """A recording for ``quadloc track`` (docs/tracking.md format): the first ``n_frames`` of
     the walk of ``seed``, detections simulated, drifting odometry, ground truth included."""
-    cm = compile_map(load_chess_map())
-    camera, cfw, _ = load_chess_poses()
-    walk = make_walk([invert_pose(T) for T in cfw])[:n_frames]
-    rng = np.random.default_rng(seed)
-    odom = simulate_odometry(walk, rng)
+    walk = chess_walk(n_frames, seed)
+    camera = walk.camera
     frames = []
-    for i, (T, To) in enumerate(zip(walk, odom, strict=True)):
-        dets = simulate_frame(cm, camera, T, rng).detections
+    for i, (dets, To) in enumerate(zip((f.detections for f in walk.frames), walk.odometry,
+                                       strict=True)):
         frames.append({
             "detections": [{"ellipse": {"cx": round(d.ellipse.cx, 3),
                                         "cy": round(d.ellipse.cy, 3),
@@ -225,7 +222,7 @@ def recording(seed: int, n_frames: int) -> dict:
     return {"camera": {"fx": camera.fx, "fy": camera.fy, "cx": camera.cx, "cy": camera.cy,
                        "width": camera.width, "height": camera.height},
             "convention": "opencv", "frames": frames,
-            "ground_truth_world_from_camera": [np.round(T, 7).tolist() for T in walk]}
+            "ground_truth_world_from_camera": [np.round(T, 7).tolist() for T in walk.poses]}
 
 
 def make_plots(results: list[dict], out_dir: Path) -> list[Path]:

@@ -185,6 +185,27 @@ def _span2(x: float, y: float, aa: float, bb: float, ab: float) -> float:
 
 
 @jit
+def _possible_pairs(first: IntArray, second: IntArray, dist: FloatArray, allowed: BoolArray,
+                    restrict: bool, z_first: float, z_second: float, radius: FloatArray,
+                    aa: float, bb: float, ab: float, rho: float, slack: float) -> IntArray:
+    """Positions of the object pairs ``(first[p], second[p])`` (``dist[p]`` m apart) of two
+    detections that pass :func:`_pair_possible` (``z_first``, ``z_second``: the detections'
+    size depths per metre of object radius; ``aa``, ``bb``, ``ab``: their rays' dot
+    products); with ``restrict``, only pairs whose first object ``allowed`` marks. In order."""
+    keep = np.empty(len(first), dtype=np.intp)
+    m = 0
+    for p in range(len(first)):
+        i = first[p]
+        if restrict and not allowed[i]:
+            continue
+        if _pair_possible(z_first * radius[i], z_second * radius[second[p]], dist[p], aa, bb, ab,
+                          rho, slack):
+            keep[m] = p
+            m += 1
+    return keep[:m]
+
+
+@jit
 def _triplets_kernel(i_ab: IntArray, j_ab: IntArray, d_ab: FloatArray, i_ac: IntArray,
                      k_ac: IntArray, d_ac: FloatArray, allowed: BoolArray, restrict: bool,
                      dots: FloatArray, z_unit: FloatArray, radius: FloatArray,
@@ -197,27 +218,11 @@ def _triplets_kernel(i_ab: IntArray, j_ab: IntArray, d_ab: FloatArray, i_ac: Int
     passes :func:`_pair_possible` for detections 1-2. ``dots`` (3, 3): the rays' dot
     products; ``z_unit`` (3,): each detection's size depth per metre of object radius.
     Returns (T, 3) object indices."""
-    n_ab, n_ac = len(i_ab), len(i_ac)
-    keep_ab = np.empty(n_ab, dtype=np.intp)
-    keep_ac = np.empty(n_ac, dtype=np.intp)
-    m_ab = 0
-    for p in range(n_ab):
-        i = i_ab[p]
-        if restrict and not allowed[i]:
-            continue
-        if _pair_possible(z_unit[0] * radius[i], z_unit[1] * radius[j_ab[p]], d_ab[p],
-                          dots[0, 0], dots[1, 1], dots[0, 1], rho, slack):
-            keep_ab[m_ab] = p
-            m_ab += 1
-    m_ac = 0
-    for p in range(n_ac):
-        i = i_ac[p]
-        if restrict and not allowed[i]:
-            continue
-        if _pair_possible(z_unit[0] * radius[i], z_unit[2] * radius[k_ac[p]], d_ac[p],
-                          dots[0, 0], dots[2, 2], dots[0, 2], rho, slack):
-            keep_ac[m_ac] = p
-            m_ac += 1
+    keep_ab = _possible_pairs(i_ab, j_ab, d_ab, allowed, restrict, z_unit[0], z_unit[1], radius,
+                              dots[0, 0], dots[1, 1], dots[0, 1], rho, slack)
+    keep_ac = _possible_pairs(i_ac, k_ac, d_ac, allowed, restrict, z_unit[0], z_unit[2], radius,
+                              dots[0, 0], dots[2, 2], dots[0, 2], rho, slack)
+    m_ab, m_ac = len(keep_ab), len(keep_ac)
     # the join on the first object (both lists sorted by it), into a buffer grown by doubling
     out = np.empty((1024, 3), dtype=np.intp)
     n = 0

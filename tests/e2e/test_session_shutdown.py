@@ -17,15 +17,10 @@ import time
 from pathlib import Path
 
 import httpx
-import numpy as np
 import pytest
 
-from quadloc.factors.rotations import invert_pose
-from quadloc.maps.compiled import compile_map
 from tests.conftest import run_live_server
-from tests.support.reference_data import load_chess_map, load_chess_poses
-from tests.support.simulate import SimulationConfig, simulate_frame
-from tests.support.walks import make_walk, simulate_odometry
+from tests.support.walks import chess_walk, frame_json
 
 pytestmark = pytest.mark.slow
 
@@ -37,19 +32,9 @@ ENV = {"QUADLOC_SHUTDOWN_GRACE_S": str(GRACE_S),
 
 @pytest.fixture(scope="module")
 def long_batch() -> tuple[dict, list[dict]]:
-    cm = compile_map(load_chess_map())
-    camera, cfw, _ = load_chess_poses()
-    poses = make_walk([invert_pose(T) for T in cfw])[:900]
-    rng = np.random.default_rng(3)
-    odom = simulate_odometry(poses, rng)
-    frames = []
-    for i, (T, To) in enumerate(zip(poses, odom, strict=True)):
-        dets = simulate_frame(cm, camera, T, rng, SimulationConfig()).detections
-        frames.append({"detections": [{"ellipse": {"cx": d.ellipse.cx, "cy": d.ellipse.cy,
-                                                   "a": d.ellipse.a, "b": d.ellipse.b,
-                                                   "angle": d.ellipse.angle},
-                                       "label": d.label} for d in dets],
-                       "odom_from_camera": {"matrix": To.tolist()}, "timestamp": i / 30.0})
+    walk = chess_walk(900, seed=3)
+    camera = walk.camera
+    frames = [frame_json(f) for f in walk.frames]
     create = {"camera": {"fx": camera.fx, "fy": camera.fy, "cx": camera.cx, "cy": camera.cy,
                          "width": camera.width, "height": camera.height},
               "options": {"smoother": "batch", "window_frames": 60}}

@@ -3,6 +3,9 @@
 * :func:`make_walk`: 30 Hz ``world_from_camera`` poses through key poses (smooth start / stop
   on long gaps), and :func:`simulate_odometry`: the app's ``odom_from_camera`` poses along it
   (random frame offset, gyro bias, 1 % scale error, noise): the tracking sessions' walks.
+* :func:`chess_walk`: the tests' and benchmarks' walk through the real Chess poses, with its
+  drifting odometry and simulated detections (one seeded generator: odometry first, then each
+  frame's detections), as :class:`ChessWalk`.
 * :func:`resampled_walk`: ``n`` poses along key poses (each key pose kept, slerp between), and
   :func:`drifting_odometry`: app poses chained from noisy relative motions, starting at the
   true first pose: the map-building recordings.
@@ -12,13 +15,22 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
+from quadloc.factors.camera import Camera
 from quadloc.factors.pose_residuals import expmap_pose3
 from quadloc.factors.rotations import invert_pose, pose_matrix, rotation_angle, snap_to_rotation
+from quadloc.maps.compiled import CompiledMap, compile_map
+from quadloc.service.localization.types import Detection
+from quadloc.service.tracking.session import FrameInput
+from tests.support.reference_data import load_chess_map, load_chess_poses
+from tests.support.simulate import SimulationConfig, simulate_frame
 
-__all__ = ["HZ", "drifting_odometry", "make_walk", "resampled_walk", "simulate_odometry"]
+__all__ = ["HZ", "ChessWalk", "chess_walk", "drifting_odometry", "frame_json", "make_walk",
+           "resampled_walk", "simulate_odometry"]
 
 
 HZ = 30.0
@@ -75,6 +87,60 @@ def simulate_odometry(walk: list[np.ndarray], rng: np.random.Generator) -> list[
         t = rel[:3, 3] * scale + rng.normal(size=3) * 0.005 * math.sqrt(d)
         odom.append(odom[-1] @ pose_matrix(snap_to_rotation(R), t))
     return odom
+
+
+@dataclass(frozen=True)
+class ChessWalk:
+    """A simulated 30 Hz walk through the Chess room (:func:`chess_walk`).
+
+    Attributes:
+        compiled: the Chess map, compiled.
+        camera: the Chess camera (px).
+        poses: true ``world_from_camera`` 4x4 poses, one per frame.
+        odometry: the app's drifting ``odom_from_camera`` 4x4 poses, one per frame.
+        frames: the session frames (detections, odometry, timestamp ``i / HZ`` s, frame id
+            ``str(i)``), after the walk's ``keep`` rule.
+    """
+
+    compiled: CompiledMap
+    camera: Camera
+    poses: list[np.ndarray]
+    odometry: list[np.ndarray]
+    frames: list[FrameInput]
+
+
+def chess_walk(n_frames: int, seed: int, start: int = 0,
+               config: SimulationConfig | None = None,
+               keep: Callable[[int, list[Detection]], list[Detection]] | None = None,
+               ) -> ChessWalk:
+    """Frames ``start .. start + n_frames`` of the walk through the real Chess poses
+    (:func:`make_walk`), the odometry along them (:func:`simulate_odometry`) and each frame's
+    simulated detections, all drawn from ``default_rng(seed)`` in that order.
+
+    ``keep(i, detections)`` returns the detections frame ``i`` (counted from ``start``) keeps:
+    a sparse or blind stretch without changing what is drawn (default: all).
+    """
+    compiled = compile_map(load_chess_map())
+    camera, cfw, _ = load_chess_poses()
+    poses = make_walk([invert_pose(T) for T in cfw])[start:start + n_frames]
+    rng = np.random.default_rng(seed)
+    odometry = simulate_odometry(poses, rng)
+    frames = []
+    for i, (T, To) in enumerate(zip(poses, odometry, strict=True)):
+        dets = list(simulate_frame(compiled, camera, T, rng, config or SimulationConfig())
+                    .detections)
+        frames.append(FrameInput(keep(i, dets) if keep else dets, To, i / HZ, str(i)))
+    return ChessWalk(compiled, camera, poses, odometry, frames)
+
+
+def frame_json(frame: FrameInput) -> dict:
+    """A session frame as the API's JSON (``POST /v1/sessions/{id}/frames``)."""
+    return {"detections": [{"ellipse": {"cx": d.ellipse.cx, "cy": d.ellipse.cy,
+                                        "a": d.ellipse.a, "b": d.ellipse.b,
+                                        "angle": d.ellipse.angle},
+                            "label": d.label, "sigma": d.sigma} for d in frame.detections],
+            "odom_from_camera": {"matrix": frame.odom_from_camera.tolist()},
+            "timestamp": frame.timestamp, "frame_id": frame.frame_id}
 
 
 ROT_NOISE_DEG = 0.05

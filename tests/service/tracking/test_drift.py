@@ -11,21 +11,15 @@ import math
 import numpy as np
 import pytest
 
-from quadloc.factors.rotations import invert_pose, so3_exp
-from quadloc.maps.compiled import compile_map
+from quadloc.factors.rotations import so3_exp
 from quadloc.service.localization.confidence import gaussian_tolerance_probability
 from quadloc.service.tracking.session import (
     CONSTRAINING_OBJECTS,
     DriftModel,
-    FrameInput,
     SessionOptions,
     TrackingSession,
 )
-from tests.support.reference_data import load_chess_map, load_chess_poses
-from tests.support.simulate import SimulationConfig, simulate_frame
-from tests.support.walks import make_walk, simulate_odometry
-
-HZ = 30.0
+from tests.support.walks import HZ, ChessWalk, chess_walk
 
 
 def test_systematic_covariance_of_a_straight_walk_by_hand() -> None:
@@ -97,22 +91,13 @@ def test_systematic_covariance_matches_sampling_the_error_model() -> None:
 
 
 @pytest.fixture(scope="module")
-def blind_walk() -> dict:
+def blind_walk() -> ChessWalk:
     """40 Chess frames; from frame 25 on the detections are dropped (a stretch without
     objects)."""
-    cm = compile_map(load_chess_map())
-    camera, cfw, _ = load_chess_poses()
-    poses = make_walk([invert_pose(T) for T in cfw])[:40]
-    rng = np.random.default_rng(30)
-    odom = simulate_odometry(poses, rng)
-    frames = []
-    for i, (T, To) in enumerate(zip(poses, odom, strict=True)):
-        dets = list(simulate_frame(cm, camera, T, rng, SimulationConfig()).detections)
-        frames.append(FrameInput(dets if i < 25 else [], To, i / HZ, str(i)))
-    return dict(cm=cm, camera=camera, frames=frames)
+    return chess_walk(40, seed=30, keep=lambda i, dets: dets if i < 25 else [])
 
 
-def test_session_answers_the_marginal_plus_the_systematic_drift(blind_walk: dict) -> None:
+def test_session_answers_the_marginal_plus_the_systematic_drift(blind_walk: ChessWalk) -> None:
     """The same frames with the term off (scale error and gyro bias 0: the smoother's
     marginal alone) and on (the defaults): identical states and poses; on frames after the
     anchor (the commit, or the last frame with an inlier whose window's frames cover >= 2
@@ -120,11 +105,11 @@ def test_session_answers_the_marginal_plus_the_systematic_drift(blind_walk: dict
     odometry inputs (D, T and W summed by hand; 1e-9 absolute); the confidence is the committed
     place's posterior times the tolerance probability of the answered covariance (1e-9); the
     position variance has grown by the end of the stretch."""
-    frames = blind_walk["frames"]
+    frames = blind_walk.frames
     drift = DriftModel()
 
     def run(d: DriftModel) -> list:
-        s = TrackingSession(blind_walk["cm"], blind_walk["camera"], SessionOptions(drift=d))
+        s = TrackingSession(blind_walk.compiled, blind_walk.camera, SessionOptions(drift=d))
         return [s.add_frame(f) for f in frames]
 
     off = run(DriftModel(scale_error=0.0, gyro_bias_rad_per_s=0.0))

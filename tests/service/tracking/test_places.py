@@ -9,7 +9,6 @@ import math
 import numpy as np
 
 from quadloc.factors.conics import ellipse_params
-from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import compile_map
 from quadloc.service.tracking.places import (
     COMMIT_PROBABILITY,
@@ -33,7 +32,7 @@ from tests.support.buildings import make_building
 from tests.support.errors import pose_errors
 from tests.support.reference_data import load_chess_map, load_chess_poses
 from tests.support.simulate import SimulationConfig, simulate_frame
-from tests.support.walks import make_walk, simulate_odometry
+from tests.support.walks import chess_walk
 
 
 def _run(building, walk, frames=None):
@@ -173,17 +172,12 @@ def test_single_place_maps() -> None:
 def test_a_one_place_map_commits_without_waiting_for_proposal_rounds() -> None:
     """The Chess room alone: the first fix comes before the rounds a building waits for (the
     second round, ``init_interval_frames`` later), and every pose is within 10 cm."""
-    compiled = compile_map(load_chess_map())
-    camera, cfw, _ = load_chess_poses()
-    walk = make_walk([invert_pose(T) for T in cfw])[:60]
-    rng = np.random.default_rng(3)
-    odom = simulate_odometry(walk, rng)
+    walk = chess_walk(60, seed=3)
     opts = SessionOptions()
-    s = TrackingSession(compiled, camera, opts)
+    s = TrackingSession(walk.compiled, walk.camera, opts)
     first = None
-    for i, (T, To) in enumerate(zip(walk, odom, strict=True)):
-        r = s.add_frame(FrameInput(list(simulate_frame(compiled, camera, T, rng).detections),
-                                   To, i / 30))
+    for i, (T, frame) in enumerate(zip(walk.poses, walk.frames, strict=True)):
+        r = s.add_frame(frame)
         if r.state == "tracking":
             first = i if first is None else first
             pos, rot = pose_errors(r.world_from_camera, T)

@@ -12,48 +12,35 @@ from fastapi.testclient import TestClient
 
 from quadloc.factors.budget import Deadline
 from quadloc.factors.conics import Ellipse
-from quadloc.factors.rotations import invert_pose
-from quadloc.maps.compiled import compile_map
 from quadloc.service.localization.types import Detection
 from quadloc.service.tracking.session import (
     MAX_BUFFERED_DETECTIONS,
     MAX_WINDOW_FRAMES,
     MIN_PROPOSAL_ROUNDS,
     TIME_BUDGET_EXCEEDED,
-    FrameInput,
     SessionOptions,
     TrackingInputError,
     TrackingSession,
 )
 from tests.conftest import make_test_app
 from tests.support.errors import pose_errors
-from tests.support.reference_data import load_chess_map, load_chess_poses
-from tests.support.simulate import SimulationConfig, simulate_frame
-from tests.support.walks import make_walk, simulate_odometry
+from tests.support.walks import ChessWalk, chess_walk, frame_json
 
 #: A deadline that has passed (a budget of -1 s of wall time).
 PASSED = Deadline.wall_budget(-1.0)
 
 
 @pytest.fixture(scope="module")
-def walk() -> dict:
-    cm = compile_map(load_chess_map())
-    camera, cfw, _ = load_chess_poses()
-    poses = make_walk([invert_pose(T) for T in cfw])[:60]
-    rng = np.random.default_rng(32)
-    odom = simulate_odometry(poses, rng)
-    frames = [FrameInput(list(simulate_frame(cm, camera, T, rng, SimulationConfig()).detections),
-                         To, i / 30.0, str(i)) for i, (T, To) in enumerate(zip(poses, odom,
-                                                                                 strict=True))]
-    return dict(cm=cm, camera=camera, poses=poses, frames=frames)
+def walk() -> ChessWalk:
+    return chess_walk(60, seed=32)
 
 
-def _run(walk: dict, deadlines: dict[int, Deadline] | None = None) -> list:
-    s = TrackingSession(walk["cm"], walk["camera"], SessionOptions())
-    return [s.add_frame(f, (deadlines or {}).get(i)) for i, f in enumerate(walk["frames"])]
+def _run(walk: ChessWalk, deadlines: dict[int, Deadline] | None = None) -> list:
+    s = TrackingSession(walk.compiled, walk.camera, SessionOptions())
+    return [s.add_frame(f, (deadlines or {}).get(i)) for i, f in enumerate(walk.frames)]
 
 
-def test_the_same_frames_give_the_same_answers_however_slow_the_machine(walk: dict) -> None:
+def test_the_same_frames_give_the_same_answers_however_slow_the_machine(walk: ChessWalk) -> None:
     """No wall clock in initialization: two runs are identical, bit for bit, and the first
     fix is where it was without any budget."""
     a, b = _run(walk), _run(walk)
@@ -63,12 +50,12 @@ def test_the_same_frames_give_the_same_answers_however_slow_the_machine(walk: di
         assert ra.state == rb.state and ra.reason == rb.reason
         if ra.world_from_camera is not None:
             assert np.array_equal(ra.world_from_camera, rb.world_from_camera)
-    err = pose_errors(a[-1].world_from_camera, walk["poses"][-1])
+    err = pose_errors(a[-1].world_from_camera, walk.poses[-1])
     assert err[0] < 0.1
 
 
 def test_a_frame_past_its_deadline_is_counted_not_fused_and_the_session_goes_on(
-        walk: dict) -> None:
+        walk: ChessWalk) -> None:
     base = _run(walk)
     first = next(r.frame_index for r in base if r.state == "tracking")
     # one tracking frame and one initialization attempt past their deadline
@@ -82,16 +69,16 @@ def test_a_frame_past_its_deadline_is_counted_not_fused_and_the_session_goes_on(
     # the next frames chain their odometry from the last fused frame: still tracking, close
     r = res[first + 6]
     assert r.state == "tracking" and r.world_from_camera is not None
-    assert pose_errors(r.world_from_camera, walk["poses"][first + 6])[0] < 0.1
+    assert pose_errors(r.world_from_camera, walk.poses[first + 6])[0] < 0.1
 
 
-def test_an_initialization_past_its_deadline_gives_up_without_a_pose(walk: dict) -> None:
-    s = TrackingSession(walk["cm"], walk["camera"], SessionOptions(init_interval_frames=1))
-    for f in walk["frames"][:12]:
+def test_an_initialization_past_its_deadline_gives_up_without_a_pose(walk: ChessWalk) -> None:
+    s = TrackingSession(walk.compiled, walk.camera, SessionOptions(init_interval_frames=1))
+    for f in walk.frames[:12]:
         r = s.add_frame(f, PASSED)
         assert r.reason == TIME_BUDGET_EXCEEDED and s.state == "initializing"
     # with time, the same buffer initializes (after MIN_PROPOSAL_ROUNDS rounds, one a frame)
-    for f in walk["frames"][12:12 + MIN_PROPOSAL_ROUNDS]:
+    for f in walk.frames[12:12 + MIN_PROPOSAL_ROUNDS]:
         r = s.add_frame(f)
     assert s.state == "tracking" and r.world_from_camera is not None
 
@@ -104,13 +91,13 @@ def test_window_limits_per_smoother_are_refused_naming_the_field() -> None:
     assert exc.value.field == "options.window_frames"
 
 
-def test_an_initializing_session_buffers_a_bounded_number_of_detections(walk: dict) -> None:
+def test_an_initializing_session_buffers_a_bounded_number_of_detections(walk: ChessWalk) -> None:
     """256 detections per frame (none of them a map label's object, so the session never
     initializes): the buffer keeps at most MAX_BUFFERED_DETECTIONS, whatever the frame count."""
     det = Detection(Ellipse(320.0, 240.0, 30.0, 20.0, 0.1), "no-such-label")
-    s = TrackingSession(walk["cm"], walk["camera"], SessionOptions())
+    s = TrackingSession(walk.compiled, walk.camera, SessionOptions())
     for i in range(40):
-        s.add_frame(dataclasses.replace(walk["frames"][0], detections=[det] * 256,
+        s.add_frame(dataclasses.replace(walk.frames[0], detections=[det] * 256,
                                         timestamp=float(i)))
         held = sum(len(b.detections) for b in s._buffer)
         assert held <= max(MAX_BUFFERED_DETECTIONS, 256)
@@ -118,17 +105,8 @@ def test_an_initializing_session_buffers_a_bounded_number_of_detections(walk: di
     assert s.frame_count == 40
 
 
-def _frame_json(f: FrameInput) -> dict:
-    return {"detections": [{"ellipse": {"cx": d.ellipse.cx, "cy": d.ellipse.cy,
-                                        "a": d.ellipse.a, "b": d.ellipse.b,
-                                        "angle": d.ellipse.angle},
-                            "label": d.label, "sigma": d.sigma} for d in f.detections],
-            "odom_from_camera": {"matrix": f.odom_from_camera.tolist()},
-            "timestamp": f.timestamp, "frame_id": f.frame_id}
-
-
-def _session(c: TestClient, walk: dict, **options: object) -> str:
-    cam = walk["camera"]
+def _session(c: TestClient, walk: ChessWalk, **options: object) -> str:
+    cam = walk.camera
     r = c.post("/v1/maps/chess/sessions", json={"camera": {
         "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy, "width": cam.width,
         "height": cam.height}, "options": options})
@@ -136,9 +114,9 @@ def _session(c: TestClient, walk: dict, **options: object) -> str:
     return str(r.json()["session_id"])
 
 
-def test_api_a_batch_and_the_same_frames_one_by_one_agree(tmp_path, walk: dict) -> None:
+def test_api_a_batch_and_the_same_frames_one_by_one_agree(tmp_path, walk: ChessWalk) -> None:
     """Tolerance: identical (the same code path and seed; 1e-9 m / rad on the poses)."""
-    frames = [_frame_json(f) for f in walk["frames"][:40]]
+    frames = [frame_json(f) for f in walk.frames[:40]]
     with TestClient(make_test_app(tmp_path)) as c:
         sid = _session(c, walk)
         batch = c.post(f"/v1/sessions/{sid}/frames", json={"frames": frames}).json()["results"]
@@ -154,8 +132,8 @@ def test_api_a_batch_and_the_same_frames_one_by_one_agree(tmp_path, walk: dict) 
 
 
 def test_api_a_request_past_its_budget_answers_its_remaining_frames_without_work(
-        tmp_path, walk: dict) -> None:
-    frames = [_frame_json(f) for f in walk["frames"][:30]]
+        tmp_path, walk: ChessWalk) -> None:
+    frames = [frame_json(f) for f in walk.frames[:30]]
     with TestClient(make_test_app(tmp_path, session_request_budget_ms=1e-3)) as c:
         sid = _session(c, walk)
         r = c.post(f"/v1/sessions/{sid}/frames", json={"frames": frames})

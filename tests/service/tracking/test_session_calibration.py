@@ -15,18 +15,14 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from quadloc.factors.rotations import invert_pose
-from quadloc.maps.compiled import compile_map
 from quadloc.service.app.calibrations import calibration_document
 from quadloc.service.localization import calibration as shipped_module
 from quadloc.service.localization.calibration_fit import CalibrationConstants
 from quadloc.service.schemas.calibration import CalibrationOut, CalibrationQualityOut
-from quadloc.service.tracking.session import FrameInput, SessionOptions, TrackingSession
+from quadloc.service.tracking.session import SessionOptions, TrackingSession
 from tests.conftest import make_test_app
-from tests.service.tracking.test_session_bounds import _frame_json, _session
-from tests.support.reference_data import load_chess_map, load_chess_poses
-from tests.support.simulate import SimulationConfig, simulate_frame
-from tests.support.walks import make_walk, simulate_odometry
+from tests.service.tracking.test_session_bounds import _session
+from tests.support.walks import ChessWalk, chess_walk, frame_json
 
 KEY = "level_set"  # SessionOptions' metric, every simulated detection with a sigma
 #: The map's calibration below: k 10 and the floor 100 times the shipped ones.
@@ -34,16 +30,8 @@ K_FACTOR, F_FACTOR = 10.0, 100.0
 
 
 @pytest.fixture(scope="module")
-def walk() -> dict:
-    cm = compile_map(load_chess_map())
-    camera, cfw, _ = load_chess_poses()
-    poses = make_walk([invert_pose(T) for T in cfw])[:40]
-    rng = np.random.default_rng(30)
-    odom = simulate_odometry(poses, rng)
-    frames = [FrameInput(list(simulate_frame(cm, camera, T, rng, SimulationConfig()).detections),
-                         To, i / 30.0, str(i)) for i, (T, To) in enumerate(zip(poses, odom,
-                                                                                 strict=True))]
-    return dict(cm=cm, camera=camera, frames=frames)
+def walk() -> ChessWalk:
+    return chess_walk(40, seed=30)
 
 
 def _calibration(key: str) -> CalibrationConstants:
@@ -54,9 +42,9 @@ def _calibration(key: str) -> CalibrationConstants:
         s2_floor={**s.s2_floor, KEY: F_FACTOR * s.s2_floor[KEY]})
 
 
-def _answers(walk: dict, calibration: CalibrationConstants | None) -> list:
-    s = TrackingSession(walk["cm"], walk["camera"], SessionOptions(), calibration)
-    return [s.add_frame(f) for f in walk["frames"]]
+def _answers(walk: ChessWalk, calibration: CalibrationConstants | None) -> list:
+    s = TrackingSession(walk.compiled, walk.camera, SessionOptions(), calibration)
+    return [s.add_frame(f) for f in walk.frames]
 
 
 def _tolerance_probability_mc(cov: np.ndarray, rng: np.random.Generator, n: int = 400_000
@@ -70,7 +58,7 @@ def _tolerance_probability_mc(cov: np.ndarray, rng: np.random.Generator, n: int 
     return out
 
 
-def test_a_session_scales_its_covariance_by_the_maps_calibration(walk: dict) -> None:
+def test_a_session_scales_its_covariance_by_the_maps_calibration(walk: ChessWalk) -> None:
     """Tolerances: poses and states identical (the smoother is unchanged); covariances 1e-12
     relative; confidence within 0.005 of a 400,000-sample Monte Carlo (sampling sd <= 8e-4)."""
     default = _answers(walk, None)
@@ -106,8 +94,8 @@ def test_a_session_scales_its_covariance_by_the_maps_calibration(walk: dict) -> 
 
 
 def test_api_a_session_on_a_calibrated_map_version_uses_its_calibration(
-        tmp_path: Path, walk: dict) -> None:
-    frames = [_frame_json(f) for f in walk["frames"][:30]]
+        tmp_path: Path, walk: ChessWalk) -> None:
+    frames = [frame_json(f) for f in walk.frames[:30]]
     quality = CalibrationQualityOut(frames=0, localized=0, nees_frames=0, mean_nees=None,
                                     calibration_error=None, mean_confidence=None,
                                     success_rate=None)

@@ -19,7 +19,6 @@ from scipy.stats import chi
 from quadloc.factors.names import FieldError
 from quadloc.factors.pose_residuals import expmap_pose3
 from quadloc.factors.rotations import invert_pose
-from quadloc.maps.compiled import compile_map
 from quadloc.service.app.errors import field_and_problem
 from quadloc.service.app.session_store import SessionCapacityError, SessionNotFound, SessionStore
 from quadloc.service.localization.gravity import tilt_errors_deg
@@ -35,32 +34,21 @@ from quadloc.service.tracking.session import (
 )
 from tests.conftest import make_test_app
 from tests.support.errors import pose_errors as pose_error
-from tests.support.reference_data import load_chess_map, load_chess_poses
-from tests.support.simulate import SimulationConfig, simulate_frame, simulate_gravity
-from tests.support.walks import make_walk, simulate_odometry
+from tests.support.simulate import simulate_gravity
+from tests.support.walks import ChessWalk, chess_walk, frame_json
 
 ROOT = Path(__file__).resolve().parents[3]
 
 
 @pytest.fixture(scope="module")
-def walk() -> dict:
-    cm = compile_map(load_chess_map())
-    camera, cfw, _ = load_chess_poses()
-    poses = make_walk([invert_pose(T) for T in cfw])[:120]
-    rng = np.random.default_rng(7)
-    odom = simulate_odometry(poses, rng)
-    frames = []
-    for i, (T, To) in enumerate(zip(poses, odom, strict=True)):
-        dets = list(simulate_frame(cm, camera, T, rng, SimulationConfig()).detections)
-        if 30 <= i < 90:  # a sparse stretch: at most 2 detections per frame
-            dets = dets[:2]
-        frames.append(FrameInput(dets, To, i / 30.0, str(i)))
-    return dict(cm=cm, camera=camera, poses=poses, frames=frames)
+def walk() -> ChessWalk:
+    """120 Chess frames; frames 30-89 keep at most 2 detections (a sparse stretch)."""
+    return chess_walk(120, seed=7, keep=lambda i, dets: dets[:2] if 30 <= i < 90 else dets)
 
 
-def test_centre_jacobian_matches_central_differences(walk: dict) -> None:
-    cam, T = walk["camera"], walk["poses"][10]
-    pts = walk["cm"].centers
+def test_centre_jacobian_matches_central_differences(walk: ChessWalk) -> None:
+    cam, T = walk.camera, walk.poses[10]
+    pts = walk.compiled.centers
     _, J = centre_jacobians(cam, T, pts)
     h = 1e-6
     for k in range(6):
@@ -91,18 +79,18 @@ def test_confidence_matches_the_closed_form_for_isotropic_covariances() -> None:
     assert session_confidence("tracking", None) == 0.0
 
 
-def test_session_initializes_and_tracks_through_a_sparse_stretch(walk: dict) -> None:
-    s = TrackingSession(walk["cm"], walk["camera"], SessionOptions())
-    results = [s.add_frame(f) for f in walk["frames"]]
+def test_session_initializes_and_tracks_through_a_sparse_stretch(walk: ChessWalk) -> None:
+    s = TrackingSession(walk.compiled, walk.camera, SessionOptions())
+    results = [s.add_frame(f) for f in walk.frames]
     first = next(r.frame_index for r in results if r.state == "tracking")
     assert first < 30
     sparse = [r for r in results[30:90] if r.state == "tracking"]
     assert len(sparse) >= 50
-    errs = [pose_error(r.world_from_camera, walk["poses"][r.frame_index]) for r in sparse]
+    errs = [pose_error(r.world_from_camera, walk.poses[r.frame_index]) for r in sparse]
     assert np.mean([e[0] <= 0.10 and e[1] <= 5 for e in errs]) >= 0.8
     r = results[-1]
     # world_from_odom maps this frame's odometry pose onto its world pose
-    np.testing.assert_allclose(r.world_from_odom @ walk["frames"][-1].odom_from_camera,
+    np.testing.assert_allclose(r.world_from_odom @ walk.frames[-1].odom_from_camera,
                                r.world_from_camera, atol=1e-9)
     assert r.covariance.shape == (6, 6) and 0.0 <= r.confidence <= 1.0
     # the window is bounded
@@ -110,12 +98,12 @@ def test_session_initializes_and_tracks_through_a_sparse_stretch(walk: dict) -> 
 
 
 def test_one_detection_per_frame_initializes_once_the_frames_see_three_objects(
-        walk: dict) -> None:
+        walk: ChessWalk) -> None:
     # single-frame localize cannot use any of these frames (one detection each)
     rng = np.random.default_rng(11)
-    s = TrackingSession(walk["cm"], walk["camera"], SessionOptions())
+    s = TrackingSession(walk.compiled, walk.camera, SessionOptions())
     out = []
-    for f, T in zip(walk["frames"][:45], walk["poses"][:45], strict=True):
+    for f, T in zip(walk.frames[:45], walk.poses[:45], strict=True):
         one = [f.detections[int(rng.integers(len(f.detections)))]] if f.detections else []
         r = s.add_frame(FrameInput(one, f.odom_from_camera, f.timestamp))
         out.append((r, T))
@@ -125,25 +113,22 @@ def test_one_detection_per_frame_initializes_once_the_frames_see_three_objects(
     assert max(e[0] for e in errs) < 0.10 and max(e[1] for e in errs) < 5.0
 
 
-def test_a_kidnapped_session_goes_lost_then_relocalizes(walk: dict) -> None:
+def test_a_kidnapped_session_goes_lost_then_relocalizes(walk: ChessWalk) -> None:
     """Track 40 frames, then the camera is elsewhere in the room while the odometry claims a
     continuous motion (a different odometry frame): the detections stop matching, the session
     says ``lost`` (no pose) and relocalizes with multi-frame RANSAC."""
-    cm, camera = walk["cm"], walk["camera"]
+    cm, camera = walk.compiled, walk.camera
     s = TrackingSession(cm, camera, SessionOptions())
-    for f in walk["frames"][:40]:
+    for f in walk.frames[:40]:
         s.add_frame(f)
     assert s.state == "tracking"
-    _, cfw, _ = load_chess_poses()
-    far = make_walk([invert_pose(T) for T in cfw])[600:700]
-    rng = np.random.default_rng(3)
-    odom = simulate_odometry(far, rng)
+    far = chess_walk(100, seed=3, start=600)
     # continue the first odometry smoothly: the kidnapping is invisible to the odometry
-    bridge = walk["frames"][39].odom_from_camera @ invert_pose(odom[0])
+    bridge = walk.frames[39].odom_from_camera @ invert_pose(far.odometry[0])
     states, errs = [], []
-    for k, (T, To) in enumerate(zip(far, odom, strict=True)):
-        dets = simulate_frame(cm, camera, T, rng).detections
-        r = s.add_frame(FrameInput(dets, bridge @ To, 40 / 30.0 + (k + 1) / 30.0))
+    for k, (T, f) in enumerate(zip(far.poses, far.frames, strict=True)):
+        r = s.add_frame(FrameInput(f.detections, bridge @ f.odom_from_camera,
+                                   40 / 30.0 + (k + 1) / 30.0))
         states.append(r.state)
         # never a wrong pose with a confidence
         if r.world_from_camera is not None and pose_error(r.world_from_camera, T)[0] > 0.1:
@@ -157,18 +142,18 @@ def test_a_kidnapped_session_goes_lost_then_relocalizes(walk: dict) -> None:
     assert np.mean([e[0] <= 0.10 and e[1] <= 5 for e in errs]) >= 0.95
 
 
-def test_frames_with_two_objects_each_do_not_initialize_alone(walk: dict) -> None:
+def test_frames_with_two_objects_each_do_not_initialize_alone(walk: ChessWalk) -> None:
     # the same frame repeated (no motion, 2 objects): never three distinct objects -> no pose
-    f = next(f for f in walk["frames"] if len(f.detections) == 2)
-    s = TrackingSession(walk["cm"], walk["camera"], SessionOptions())
+    f = next(f for f in walk.frames if len(f.detections) == 2)
+    s = TrackingSession(walk.compiled, walk.camera, SessionOptions())
     rs = [s.add_frame(FrameInput(f.detections, f.odom_from_camera, k / 30.0))
           for k in range(20)]
     assert all(r.state == "initializing" and r.world_from_camera is None for r in rs)
 
 
-def test_bad_frames_name_the_field_and_leave_the_session_unchanged(walk: dict) -> None:
-    s = TrackingSession(walk["cm"], walk["camera"], SessionOptions())
-    s.add_frame(walk["frames"][0])
+def test_bad_frames_name_the_field_and_leave_the_session_unchanged(walk: ChessWalk) -> None:
+    s = TrackingSession(walk.compiled, walk.camera, SessionOptions())
+    s.add_frame(walk.frames[0])
     bad = np.eye(4)
     bad[0, 0] = 2.0
     with pytest.raises(TrackingInputError, match=r"^odom_from_camera: must be a rigid"):
@@ -188,46 +173,46 @@ def test_bad_frames_name_the_field_and_leave_the_session_unchanged(walk: dict) -
                                                           exc.value.problem)
 
 
-def _with_gravity(walk: dict, seed: int = 11) -> list[FrameInput]:
+def _with_gravity(walk: ChessWalk, seed: int = 11) -> list[FrameInput]:
     """The walk's frames with a simulated IMU gravity (1 deg per tilt axis, declared 2 deg)."""
     rng = np.random.default_rng(seed)
-    up = walk["cm"].scene_map.up
+    up = walk.compiled.scene_map.up
     return [dataclasses.replace(f, gravity=Gravity(
-        simulate_gravity(walk["poses"][i], up, 1.0, rng), 2.0))
-        for i, f in enumerate(walk["frames"])]
+        simulate_gravity(walk.poses[i], up, 1.0, rng), 2.0))
+        for i, f in enumerate(walk.frames)]
 
 
-def test_gravity_tightens_the_tilt_of_a_tracked_walk(walk: dict) -> None:
+def test_gravity_tightens_the_tilt_of_a_tracked_walk(walk: ChessWalk) -> None:
     """The same walk with the device's gravity on every frame (a factor on each frame's tilt):
     over the frames tracked both ways, a smaller mean tilt error against the truth and a
     smaller rotation covariance (small gains: odometry and detections already pin the tilt,
     0.150 -> 0.146 deg; docs/tracking.md); a gravity that is not a ``Gravity`` names the
     field."""
-    up = walk["cm"].scene_map.up
+    up = walk.compiled.scene_map.up
     runs = {}
-    for name, frames in (("plain", walk["frames"]), ("gravity", _with_gravity(walk))):
-        s = TrackingSession(walk["cm"], walk["camera"], SessionOptions())
+    for name, frames in (("plain", walk.frames), ("gravity", _with_gravity(walk))):
+        s = TrackingSession(walk.compiled, walk.camera, SessionOptions())
         runs[name] = [s.add_frame(f) for f in frames]
     both = [i for i, (a, b) in enumerate(zip(runs["plain"], runs["gravity"], strict=True))
             if a.state == "tracking" and b.state == "tracking"]
     assert len(both) >= 80
     tilt = {name: [float(tilt_errors_deg(invert_pose(runs[name][i].world_from_camera), up,
-                                         Gravity(-(walk["poses"][i][:3, :3].T @ up))))
+                                         Gravity(-(walk.poses[i][:3, :3].T @ up))))
                    for i in both] for name in runs}
     rot_var = {name: [float(np.trace(runs[name][i].covariance[:3, :3])) for i in both]
                for name in runs}
     assert np.mean(tilt["gravity"]) < np.mean(tilt["plain"])
     assert np.mean(rot_var["gravity"]) < np.mean(rot_var["plain"])
-    s = TrackingSession(walk["cm"], walk["camera"], SessionOptions())
+    s = TrackingSession(walk.compiled, walk.camera, SessionOptions())
     with pytest.raises(TrackingInputError, match=r"^gravity: must be a Gravity"):
-        s.add_frame(dataclasses.replace(walk["frames"][0], gravity=[0.0, 1.0, 0.0]))
+        s.add_frame(dataclasses.replace(walk.frames[0], gravity=[0.0, 1.0, 0.0]))
     assert s.frame_count == 0
 
 
-def test_store_bounds_count_and_expires_idle_sessions(walk: dict) -> None:
+def test_store_bounds_count_and_expires_idle_sessions(walk: ChessWalk) -> None:
     now = [0.0]
     store = SessionStore(max_sessions=2, idle_timeout_s=10.0, clock=lambda: now[0])
-    mk = lambda: TrackingSession(walk["cm"], walk["camera"])  # noqa: E731
+    mk = lambda: TrackingSession(walk.compiled, walk.camera)  # noqa: E731
     a = store.create("chess", 1, mk(), "opencv")
     store.create("chess", 1, mk(), "opencv")
     with pytest.raises(SessionCapacityError):
@@ -243,12 +228,12 @@ def test_store_bounds_count_and_expires_idle_sessions(walk: dict) -> None:
 
 
 @pytest.mark.slow
-def test_long_session_memory_is_flat(walk: dict) -> None:
+def test_long_session_memory_is_flat(walk: ChessWalk) -> None:
     """450 frames (15 s at 30 Hz, the walk replayed back and forth): the graph stays within its
     window and the Python heap does not grow with the frame count (``bench.tracking
     --long-minutes 10`` runs the 10-minute version: docs/tracking.md)."""
-    frames = walk["frames"]
-    s = TrackingSession(walk["cm"], walk["camera"], SessionOptions())
+    frames = walk.frames
+    s = TrackingSession(walk.compiled, walk.camera, SessionOptions())
     seq = frames + frames[::-1]
     last_T = last_src = None
     blocks = []
@@ -276,24 +261,15 @@ def client(tmp_path_factory: pytest.TempPathFactory):
         yield c
 
 
-def _frame_json(f: FrameInput) -> dict:
-    return {"detections": [{"ellipse": {"cx": d.ellipse.cx, "cy": d.ellipse.cy,
-                                        "a": d.ellipse.a, "b": d.ellipse.b,
-                                        "angle": d.ellipse.angle},
-                            "label": d.label, "sigma": d.sigma} for d in f.detections],
-            "odom_from_camera": {"matrix": f.odom_from_camera.tolist()},
-            "timestamp": f.timestamp, "frame_id": f.frame_id}
-
-
-def test_api_session_lifecycle(client: TestClient, walk: dict) -> None:
-    cam = walk["camera"]
+def test_api_session_lifecycle(client: TestClient, walk: ChessWalk) -> None:
+    cam = walk.camera
     r = client.post("/v1/maps/chess/sessions", json={"camera": {
         "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy, "width": cam.width,
         "height": cam.height}})
     assert r.status_code == 201, r.text
     sid = r.json()["session_id"]
     assert r.headers["location"] == f"/v1/sessions/{sid}"
-    frames = [_frame_json(f) for f in walk["frames"][:40]]
+    frames = [frame_json(f) for f in walk.frames[:40]]
     # a bad frame in a batch: 422 naming it, nothing fused
     bad = [*frames[:3], {**frames[3], "odom_from_camera": {"matrix": [[2, 0, 0, 0], [0, 1, 0, 0],
                                                                       [0, 0, 1, 0],
@@ -308,7 +284,7 @@ def test_api_session_lifecycle(client: TestClient, walk: dict) -> None:
     out = r.json()["results"][0]
     assert out["state"] == "tracking"
     T = np.array(out["world_from_camera"]["matrix"])
-    assert pose_error(T, walk["poses"][39])[0] < 0.1
+    assert pose_error(T, walk.poses[39])[0] < 0.1
     assert len(out["covariance"]["matrix"]) == 6 and out["world_from_odom"] is not None
     assert client.get(f"/v1/sessions/{sid}").json()["state"] == "tracking"
     assert client.delete(f"/v1/sessions/{sid}").status_code == 204
@@ -317,11 +293,11 @@ def test_api_session_lifecycle(client: TestClient, walk: dict) -> None:
 
 
 def test_api_session_gravity_defaults_to_the_session_convention(client: TestClient,
-                                                                walk: dict) -> None:
+                                                                walk: ChessWalk) -> None:
     """A frame's ``gravity`` is in the session's convention unless it says otherwise: an
     OpenGL session fed the OpenGL-axes odometry and gravity gives the OpenCV session's poses
     (converted); a zero gravity direction is a 422 naming ``frames[i].gravity`` alone."""
-    cam = walk["camera"]
+    cam = walk.camera
     flip = np.diag([1.0, -1.0, -1.0, 1.0])
     frames = _with_gravity(walk)[:40]
     out = {}
@@ -333,7 +309,7 @@ def test_api_session_gravity_defaults_to_the_session_convention(client: TestClie
         body = []
         for f in frames:
             g = f.gravity.direction_camera
-            doc = _frame_json(f)
+            doc = frame_json(f)
             if convention == "opengl":
                 doc["odom_from_camera"] = {"matrix": (f.odom_from_camera @ flip).tolist()}
                 g = flip[:3, :3] @ g
@@ -374,7 +350,7 @@ def test_nginx_routes_a_session_to_the_replica_that_created_it(monkeypatch, walk
 
     for replica in ("quadloc-1", "quadloc-2"):
         monkeypatch.setenv("QUADLOC_REPLICA_ID", replica)
-        sid = SessionStore().create("chess", 1, TrackingSession(walk["cm"], walk["camera"]),
+        sid = SessionStore().create("chess", 1, TrackingSession(walk.compiled, walk.camera),
                                     "opencv").session_id
         up = route(f"/v1/sessions/{sid}/frames")
         assert up in upstreams and f"server {replica}:8000" in conf.split(
@@ -396,7 +372,7 @@ def test_arkit_and_arcore_helpers_transpose_column_major_input() -> None:
         arcore_pose_to_matrix([0.0] * 15)
 
 
-def test_sdk_session_sync_and_async(client: TestClient, walk: dict) -> None:
+def test_sdk_session_sync_and_async(client: TestClient, walk: ChessWalk) -> None:
     """The SDK's sessions take its typed models (``Detection``, ``Camera``, ``Gravity``,
     ``SessionFrame``) or wire dicts, and answer typed models: the same walk sent both ways
     gives the same poses, within 5 cm of the truth once tracking; ``get`` is the server's
@@ -419,18 +395,18 @@ def test_sdk_session_sync_and_async(client: TestClient, walk: dict) -> None:
         SessionOptions,
     )
 
-    cam = walk["camera"]
+    cam = walk.camera
     camera = Camera(fx=cam.fx, fy=cam.fy, cx=cam.cx, cy=cam.cy, width=cam.width,
                     height=cam.height)
     n = 12
-    frames = [_frame_json(f) for f in walk["frames"][:n]]
+    frames = [frame_json(f) for f in walk.frames[:n]]
     gravity = [Gravity(direction=f.gravity.direction_camera.tolist(), sigma_deg=2.0)
                for f in _with_gravity(walk)[:n]]
     with QuadLocClient("http://testserver", transport=client._transport) as qc:
         s = qc.start_session("chess", camera=camera, options=SessionOptions(window_frames=20))
         assert isinstance(s.info, SessionInfo) and s.info.state == "initializing"
         res = []
-        for f, g in zip(walk["frames"][:n], gravity, strict=True):
+        for f, g in zip(walk.frames[:n], gravity, strict=True):
             detections = [Detection(label=d.label, sigma=d.sigma, ellipse=Ellipse(
                 cx=d.ellipse.cx, cy=d.ellipse.cy, a=d.ellipse.a, b=d.ellipse.b,
                 angle=d.ellipse.angle)) for d in f.detections]
@@ -464,7 +440,7 @@ def test_sdk_session_sync_and_async(client: TestClient, walk: dict) -> None:
 
     async_res, async_info = asyncio.run(run())
     assert async_info.frames == n
-    for r, a, truth in zip(res, async_res, walk["poses"][:n], strict=True):
+    for r, a, truth in zip(res, async_res, walk.poses[:n], strict=True):
         assert (r.state, r.frame_id) == (a.state, a.frame_id)
         if r.state == "tracking":
             assert r.world_from_camera is not None and a.world_from_camera is not None
@@ -535,7 +511,7 @@ def test_cli_track_replays_the_example_recording(tmp_path: Path, capsys) -> None
     assert "one entry per frame" in capsys.readouterr().err
 
 
-def test_api_session_frames_name_their_zone(client: TestClient, walk: dict) -> None:
+def test_api_session_frames_name_their_zone(client: TestClient, walk: ChessWalk) -> None:
     """On the Chess map with zones (the whole room, and a 'corner' of three objects), each
     tracked frame's ``zone`` is the zone holding the most of its inliers, the smaller on a tie
     (counted here from the answer's own inliers); null without inliers."""
@@ -545,13 +521,13 @@ def test_api_session_frames_name_their_zone(client: TestClient, walk: dict) -> N
     doc = {**doc, "map_id": "chess-zoned", "zones": [
         {"zone_id": "room", "object_ids": ids}, {"zone_id": "corner", "object_ids": ids[:3]}]}
     assert client.post("/v1/maps", json=doc).status_code == 201
-    cam = walk["camera"]
+    cam = walk.camera
     r = client.post("/v1/maps/chess-zoned/sessions", json={"camera": {
         "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy, "width": cam.width,
         "height": cam.height}})
     sid = r.json()["session_id"]
     results = client.post(f"/v1/sessions/{sid}/frames", json={
-        "frames": [_frame_json(f) for f in walk["frames"][:40]]}).json()["results"]
+        "frames": [frame_json(f) for f in walk.frames[:40]]}).json()["results"]
     seen = set()
     for out in results:
         used = [m["object_id"] for m in out["inliers"]]
