@@ -34,7 +34,7 @@ from quadloc.factors.pose_residuals import (
     expmap_pose3,
 )
 from quadloc.factors.rotations import invert_pose, rotation_from_quaternion_wxyz
-from tests.support.helpers import level, random_rotation, retract, transformed
+from tests.support.helpers import level, random_ellipsoids, random_rotation, retract, transformed
 from tests.support.oracles import metrics_reference
 
 CAMERA = Camera(500.0, 510.0, 320.0, 240.0, 640, 480)
@@ -42,14 +42,7 @@ CAMERA = Camera(500.0, 510.0, 320.0, 240.0, 640, 480)
 
 def random_scene(rng: np.random.Generator, n: int) -> list[Ellipsoid]:
     """n ellipsoids 3-6 m in front of an identity camera, semi-axes 0.1-0.4 m."""
-    out = []
-    for _ in range(n):
-        q = rng.normal(size=4)
-        q = q / np.linalg.norm(q) * np.sign(q[0])
-        out.append(Ellipsoid(np.array([rng.uniform(-1, 1), rng.uniform(-0.7, 0.7),
-                                       rng.uniform(3, 6)]),
-                             rng.uniform(0.1, 0.4, 3), rotation_from_quaternion_wxyz(q)))
-    return out
+    return random_ellipsoids(rng, n, 1.0, 0.7, (0.1, 0.4))
 
 
 def perturbation(rng: np.random.Generator, rot: float, trans: float) -> np.ndarray:

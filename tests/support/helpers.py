@@ -21,6 +21,7 @@ import numpy as np
 
 from quadloc.factors.camera import Ellipsoid
 from quadloc.factors.conics import Ellipse
+from quadloc.factors.rotations import rotation_from_quaternion_wxyz
 
 __all__ = [
     "PROBLEM_MEDIA_TYPE",
@@ -89,6 +90,23 @@ def random_rotation(rng: np.random.Generator) -> np.ndarray:
     """A random proper rotation (3, 3) (QR of a Gaussian matrix, determinant +1)."""
     q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
     return q * np.sign(np.linalg.det(q))
+
+
+def random_ellipsoids(rng: np.random.Generator, n: int, half_width_m: float,
+                      half_height_m: float, semi_axes_m: tuple[float, float],
+                      depth_m: tuple[float, float] = (3.0, 6.0)) -> list[Ellipsoid]:
+    """``n`` ellipsoids in front of an identity camera (OpenCV axes, metres): centres uniform in
+    ``|x| <= half_width_m``, ``|y| <= half_height_m``, ``z`` in ``depth_m``; semi-axes uniform
+    in ``semi_axes_m``; orientations from uniform unit quaternions (wxyz, w >= 0)."""
+    out = []
+    for _ in range(n):
+        q = rng.normal(size=4)
+        q = q / np.linalg.norm(q) * np.sign(q[0])
+        out.append(Ellipsoid(np.array([rng.uniform(-half_width_m, half_width_m),
+                                       rng.uniform(-half_height_m, half_height_m),
+                                       rng.uniform(*depth_m)]),
+                             rng.uniform(*semi_axes_m, 3), rotation_from_quaternion_wxyz(q)))
+    return out
 
 
 def retract(T: np.ndarray, xi: np.ndarray) -> np.ndarray:

@@ -20,11 +20,11 @@ from quadloc.factors.budget import Deadline
 from quadloc.factors.camera import Camera, Ellipsoid, project_ellipsoid
 from quadloc.factors.conics import DegenerateProjectionError, Ellipse
 from quadloc.factors.names import GeometryError
-from quadloc.factors.rotations import invert_pose, rotation_from_quaternion_wxyz
+from quadloc.factors.rotations import invert_pose
 from quadloc.service.localization.refine import STATUSES, RefinementResult, refine
 from quadloc.service.localization.types import Detection
 from tests.support.errors import pose_errors
-from tests.support.helpers import PerfCounterJump, retract
+from tests.support.helpers import PerfCounterJump, random_ellipsoids, retract
 from tests.support.reference_data import (
     CHESS_SCENE_PATH,
     load_chess_map,
@@ -39,14 +39,8 @@ CAMERA = Camera(500.0, 510.0, 320.0, 240.0, 640, 480)
 
 
 def synthetic_scene(rng: np.random.Generator, n: int) -> list[Ellipsoid]:
-    out = []
-    for _ in range(n):
-        q = rng.normal(size=4)
-        q = q / np.linalg.norm(q) * np.sign(q[0])
-        out.append(Ellipsoid(np.array([rng.uniform(-1.2, 1.2), rng.uniform(-0.8, 0.8),
-                                       rng.uniform(3, 6)]),
-                             rng.uniform(0.15, 0.45, 3), rotation_from_quaternion_wxyz(q)))
-    return out
+    """n ellipsoids 3-6 m in front of an identity camera, semi-axes 0.15-0.45 m."""
+    return random_ellipsoids(rng, n, 1.2, 0.8, (0.15, 0.45))
 
 
 def exact_detections(ells, world_from_camera, sigmas=None):
