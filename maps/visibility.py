@@ -56,36 +56,47 @@ def object_zones(compiled: CompiledMap) -> IntArray:
     return memo
 
 
+def _mean_radii(compiled: CompiledMap) -> FloatArray:
+    """Per map object (N,), the geometric mean of its semi-axes (m); memoised on the compiled
+    map."""
+    memo: FloatArray | None = compiled.__dict__.get("_mean_radii")
+    if memo is None:
+        memo = np.prod(compiled.axes, axis=1) ** (1.0 / 3.0)
+        compiled.__dict__["_mean_radii"] = memo
+    return memo
+
+
 def predicted_in_view(compiled: CompiledMap, camera: Camera, camera_from_world: FloatArray,
                       rule: ViewRule) -> IntArray:
     """Sorted indices (into ``compiled``) of the objects predicted in view from
     ``camera_from_world`` (4x4) under ``rule`` (module docstring)."""
     T = np.asarray(camera_from_world, dtype=float)
-    c = compiled.centers @ T[:3, :3].T + T[:3, 3]
-    z = c[:, 2]
-    ok = (z > rule.min_depth_m) & (z < rule.max_depth_m)
-    if not ok.any():
+    # the depth test on every object, the rest on those it keeps (a building map: thousands of
+    # objects, a few dozen within reach)
+    z_all = compiled.centers @ T[2, :3] + T[2, 3]
+    idx = np.flatnonzero((z_all > rule.min_depth_m) & (z_all < rule.max_depth_m))
+    if not len(idx):
         return np.zeros(0, dtype=np.intp)
-    zs = np.where(ok, z, 1.0)
-    u = camera.fx * c[:, 0] / zs + camera.cx
-    v = camera.fy * c[:, 1] / zs + camera.cy
+    c = compiled.centers[idx] @ T[:3, :3].T + T[:3, 3]
+    z = c[:, 2]
+    u = camera.fx * c[:, 0] / z + camera.cx
+    v = camera.fy * c[:, 1] / z + camera.cy
     w, h = float(camera.width), float(camera.height)
     mx, my = rule.inset_fraction * w, rule.inset_fraction * h
-    ok &= (u >= mx) & (u < w - mx) & (v >= my) & (v < h - my)
+    ok = (u >= mx) & (u < w - mx) & (v >= my) & (v < h - my)
     if rule.max_truncation is not None or rule.min_area_px is not None:
-        r = (0.5 * (camera.fx + camera.fy) * np.prod(compiled.axes, axis=1) ** (1.0 / 3.0)
-             / zs)
+        r = 0.5 * (camera.fx + camera.fy) * _mean_radii(compiled)[idx] / z
         if rule.min_area_px is not None:
             ok &= np.pi * r * r >= rule.min_area_px
         if rule.max_truncation is not None:
             inside = ((np.clip(u + r, 0.0, w) - np.clip(u - r, 0.0, w))
                       * (np.clip(v + r, 0.0, h) - np.clip(v - r, 0.0, h)))
             ok &= inside >= (1.0 - rule.max_truncation) * 4.0 * r * r
-    idx = np.flatnonzero(ok)
+    idx, z = idx[ok], z[ok]
     rooms = object_zones(compiled)
     if len(idx) and len(rooms) and rooms.max() >= 0:
         # the room of the nearest object in view: walls hide the others
-        room = rooms[idx[int(np.argmin(z[idx]))]]
+        room = rooms[idx[int(np.argmin(z))]]
         idx = idx[rooms[idx] == room]
     out: IntArray = idx.astype(np.intp)
     return out
