@@ -2,14 +2,15 @@
 
 Usage::
 
-    python -m bench.building [--rooms 1,10,50,200,1000] [--modes exact,perturbed,random]
+    python -m bench.building [--rooms 1,10,50,200,1000] [--modes exact,perturbed,random,twins]
                              [--frames 40] [--max-frames-large 20] [--seed 1000]
                              [--memory-frames 3] [--json PATH] [--write-results]
 
 Maps from :func:`tests.support.buildings.make_building` (the real Chess room repeated on a grid,
 12 m apart, several floors, each room turned by a random yaw; modes exact copies, perturbed
-copies, own random layouts), frames from :func:`tests.support.buildings.building_frames` (real
-Chess poses placed in a room and new poses looking at its objects; the simulator's noise,
+copies, own random layouts, and random layouts some of which repeat exactly: twins), frames
+from :func:`tests.support.buildings.building_frames` (real Chess poses placed in a room and new
+poses looking at its objects; the simulator's noise,
 truncation, occlusion, misses, wrong labels at 0.05 and spurious detections at rate 0.3; at
 least 3 detections of true objects). ``--seed`` is a base seed: each (size, mode) derives
 its building and frame seeds from it (below). The default, 1000, is the report's
@@ -70,6 +71,7 @@ from quadloc.service.localization.types import (
 from tests.support.buildings import (
     MODES,
     REPORT_SEEDS,
+    TWIN_PROBABILITY,
     BuildingFrame,
     building_frames,
     make_building,
@@ -111,13 +113,15 @@ def solve(bf: BuildingFrame, compiled: CompiledMap, camera: Camera,
 
 
 def frame_record(bf: BuildingFrame, result: LocalizationResult | None, time_ms: float,
-                 cpu_ms: float, zones: ZoneIndex | None = None) -> dict[str, Any]:
+                 cpu_ms: float, zones: ZoneIndex | None = None,
+                 twinned: frozenset[str] = frozenset()) -> dict[str, Any]:
     """What one answer scores (errors in m / deg, inf when not localized); with the map's
     ``zones``, the zone the answer names (its inliers', else its first alternative's, as the
-    server's ``zone``) and each alternative's."""
+    server's ``zone``) and each alternative's; whether the frame's room is one of the
+    building's ``twinned`` rooms (its layout repeated exactly elsewhere: truly ambiguous)."""
     truth = bf.world_from_camera
     if result is None:
-        return {"room": bf.room.zone_id, "kind": bf.kind,
+        return {"room": bf.room.zone_id, "twinned": bf.room.zone_id in twinned, "kind": bf.kind,
                 "n_detections": len(bf.frame.detections), "localized": False,
                 "reason": "time_budget_exceeded", "position_error_m": math.inf,
                 "rotation_error_deg": math.inf, "confidence": 0.0,
@@ -137,7 +141,8 @@ def frame_record(bf: BuildingFrame, result: LocalizationResult | None, time_ms: 
     if answer_conf is not None:
         answer_within = bool(ap <= TOLERANCE_POSITION_M and ar <= TOLERANCE_ROTATION_DEG)
     return {
-        "room": bf.room.zone_id, "kind": bf.kind, "n_detections": len(bf.frame.detections),
+        "room": bf.room.zone_id, "twinned": bf.room.zone_id in twinned, "kind": bf.kind,
+        "n_detections": len(bf.frame.detections),
         "localized": result.localized, "reason": result.reason,
         "position_error_m": pos, "rotation_error_deg": rot,
         "confidence": result.confidence,
@@ -194,6 +199,10 @@ def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
                                             and r.get("zone") == r["room"]),
         "refused_true_zone_among_alternatives_pct": share(
             lambda r: not r["localized"] and r["room"] in r.get("alternative_zones", [])),
+        "twinned_frames": sum(1 for r in records if r.get("twinned")),
+        "twinned_localized": sum(1 for r in records if r.get("twinned") and r["localized"]),
+        "twinned_ambiguous": sum(1 for r in records
+                                 if r.get("twinned") and r["reason"] == "ambiguous"),
         "reasons": {k: sum(1 for r in records if r["reason"] == k)
                     for k in sorted({str(r["reason"]) for r in records if r["reason"]})},
     }
@@ -265,7 +274,9 @@ def run_case(rooms: int, mode: str, frames: int, seed: int, memory_frames: int,
     t_build = time.perf_counter() - t0
     solve(bfs[0], compiled, camera, options)  # warm: caches, JIT
     zones = zone_index(building.scene_map)
-    records = [frame_record(bf, *solve(bf, compiled, camera, options), zones) for bf in bfs]
+    twinned = building.twinned
+    records = [frame_record(bf, *solve(bf, compiled, camera, options), zones, twinned)
+               for bf in bfs]
     peaks = []
     for bf in bfs[:memory_frames]:
         tracemalloc.start()
@@ -277,12 +288,12 @@ def run_case(rooms: int, mode: str, frames: int, seed: int, memory_frames: int,
         rng = np.random.default_rng(seed + 13 * rooms)
         zone = [frame_record(bf, *solve(bf, compiled, camera, options,
                                         PlaceHint(object_ids=frozenset(bf.room.object_ids))),
-                             zones) for bf in bfs]
+                             zones, twinned) for bf in bfs]
         fixes = [bf.world_from_camera[:3, 3] + np.array(
             [*rng.normal(0.0, HINT_SIGMA_M, 2), 0.0]) for bf in bfs]
         near = [frame_record(bf, *solve(bf, compiled, camera, options,
                                         PlaceHint(position=p, sigma_m=HINT_SIGMA_M)),
-                             zones) for bf, p in zip(bfs, fixes, strict=True)]
+                             zones, twinned) for bf, p in zip(bfs, fixes, strict=True)]
         hinted = {"zone_hint": summarise(zone), "position_hint": summarise(near)}
     times = [r["time_ms"] for r in records]
     cpu = [r["cpu_ms"] for r in records]
@@ -352,7 +363,8 @@ def markdown(results: dict[str, Any]) -> str:
             f"| {t['median']:.0f} / {t['p90']:.0f} / {t['p99']:.0f} ({t['cpu_median']:.0f}) "
             f"| {c['peak_memory_mb']:.0f} | {_hint_cell(c, 'zone_hint')} "
             f"| {_hint_cell(c, 'position_hint')} |")
-    lines += ["", *_ratio_lines(results["cases"]), "", *_calibration_lines(results["cases"])]
+    lines += ["", *_twin_lines(results["cases"]), *_ratio_lines(results["cases"]), "",
+              *_calibration_lines(results["cases"])]
     return "\n".join(lines)
 
 
@@ -372,6 +384,20 @@ def _calibration_lines(cases: list[dict[str, Any]]) -> list[str]:
             "one-room frames only (docs/design/localization.md, \"Calibration fit\").", "",
             "| confidence | answers | mean confidence | observed |", "|---|---|---|---|",
             *rows]
+
+
+def _twin_lines(cases: list[dict[str, Any]]) -> list[str]:
+    """What the answers were on frames in a twinned room of a ``"twins"`` building (the only
+    right answers there: ``ambiguous``, or not localized; a localized one is a guess)."""
+    parts = [f"{c['rooms']} rooms: {a['twinned_frames']} frames, {a['twinned_ambiguous']} "
+             f"ambiguous, {a['twinned_localized']} localized"
+             for c in cases if c["mode"] == "twins" and (a := c["all"]).get("twinned_frames")]
+    if not parts:
+        return []
+    return ["Twins (random layouts, each room repeating an earlier room's layout with "
+            f"probability {TWIN_PROBABILITY}): frames in a room whose layout another room has "
+            "exactly (truly ambiguous; a localized answer there is a guess between the copies, "
+            "and > 0.5 m off when it names the other one): " + "; ".join(parts) + ".", ""]
 
 
 def _ratio_lines(cases: list[dict[str, Any]]) -> list[str]:

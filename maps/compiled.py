@@ -9,7 +9,9 @@ conventions of :mod:`quadloc.factors.camera`. Object ``i`` in every array is
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -86,12 +88,20 @@ class CompiledMap(MapVersionView):
         found = self.indices_by_category.get(category)
         return found if found is not None else np.zeros(0, dtype=np.intp)
 
+    @property
+    def positions(self) -> Mapping[str, int]:
+        """Object id -> its position in the arrays, built on first use and memoised (a
+        building map has thousands of ids: looked up, not searched)."""
+        positions: Mapping[str, int] | None = self.__dict__.get("_positions")
+        if positions is None:
+            positions = MappingProxyType({o: k for k, o in enumerate(self.object_ids)})
+            object.__setattr__(self, "_positions", positions)
+        return positions
+
     def index_of(self, object_id: str) -> int:
-        """Position of ``object_id`` in the arrays; ``KeyError`` if absent."""
-        try:
-            return self.object_ids.index(object_id)
-        except ValueError:
-            raise KeyError(object_id) from None
+        """Position of ``object_id`` in the arrays (:attr:`positions`); ``KeyError`` if
+        absent."""
+        return self.positions[object_id]
 
     def summary(self) -> dict[str, Any]:
         return {"map_id": self.map_id, "version": self.version, "objects": len(self)}

@@ -70,8 +70,6 @@ class PlaceIndex:
             the place search compares with a detection's, per request: computed once here).
         cell_ids: (N,) the grid cell of each object as one integer (equal cells, equal ids:
             the place key of the search, no per-request unique over cell rows).
-        positions: object id -> its index (a hint's objects are looked up, not searched for
-            among all the map's ids per request).
     """
 
     view_range_m: float
@@ -90,7 +88,6 @@ class PlaceIndex:
     codes: IntArray
     radius: FloatArray
     cell_ids: IntArray
-    positions: dict[str, int]
 
     def nbytes(self) -> int:
         """Bytes held by the index's arrays (the grid's and the constellations' included)."""
@@ -193,8 +190,7 @@ def build_place_index(compiled: CompiledMap, view_range_m: float = VIEW_RANGE_M)
     return PlaceIndex(view_range_m, _frozen(centers), _frozen(cells), grid_arrays,
                       _frozen(pi), _frozen(pj), _frozen(pd), _frozen(offsets), _frozen(dst),
                       constellations, _frozen(local), _frozen(local_valid), labels,
-                      _frozen(codes), _frozen(radius), _frozen(cell_ids),
-                      {o: k for k, o in enumerate(compiled.object_ids)})
+                      _frozen(codes), _frozen(radius), _frozen(cell_ids))
 
 
 def _local_table(src: IntArray, dst: IntArray, dist: FloatArray, offsets: IntArray, n: int

@@ -61,7 +61,7 @@ from quadloc.service.localization.constellations import (
     PlaceSeeds,
     place_seeds,
 )
-from quadloc.service.localization.copies import copy_transforms
+from quadloc.service.localization.copies import COPY_TOLERANCE_M, copy_transforms, is_copy
 from quadloc.service.localization.gravity import (
     answer_gate_deg,
     gravity_measurement,
@@ -169,6 +169,8 @@ class _Solve:
         hinted: the best hypothesis of a place hint's places, refined besides the search's.
         places: whether the map was searched by places (:func:`_place_stage`): up to
             :data:`PLACE_CANDIDATES` candidates.
+        whole: the whole map when it was searched by places (the scorer's map is then the
+            places kept), else None.
         hint_samples: with a place hint on such a map, the label-compatible samples of the
             hint's places only: an answer that agrees with the hint has its chance matches
             counted there (its confidence is conditional on the hint), not in the whole map.
@@ -191,6 +193,7 @@ class _Solve:
     evaluated: int = 0
     hinted: Hypothesis | None = None
     places: bool = False
+    whole: CompiledMap | None = None
     hint_samples: int | None = None
 
 
@@ -260,6 +263,7 @@ def localize(
         labels = [detections[i].label for i in usable]
         solve.n_samples = count_map_samples(whole, labels, 2)
         solve.places = True
+        solve.whole = whole
         if hinted is not None and hinted.any():
             solve.hint_samples = count_map_samples(
                 compiled_subset(whole, np.flatnonzero(hinted)), labels, 2)
@@ -506,7 +510,7 @@ def _hinted_objects(compiled: CompiledMap, hint: PlaceHint) -> BoolArray:
         hinted[index.near(hint.position, PlaceHint.AGREE_SIGMAS * hint.sigma_m
                           + index.view_range_m)] = True
     elif hint.object_ids is not None:
-        positions = place_index(compiled).positions
+        positions = compiled.positions
         hinted[[positions[o] for o in hint.object_ids if o in positions]] = True
     return hinted
 
@@ -689,41 +693,95 @@ def _sweep_refined_best(solve: _Solve, outcome: RansacOutcome, candidates: list[
 
 
 def _copy_competitors(solve: _Solve, candidates: list[Candidate]) -> list[Candidate]:
-    """``candidates`` (best-supported first) with the best's view in every exact copy of its
+    """``candidates`` (best-supported first) with the best's view in the exact copies of its
     supporting objects (:func:`quadloc.service.localization.copies.copy_transforms`: same
     labels, same geometry within ``COPY_TOLERANCE_M``; e.g. the other copies of a room, which
-    the search may miss when its P3P of three centres is metres off), each refined like the
-    runners-up and verified unless a candidate as well supported as the best is already there
-    (one refined to a poorer optimum there does not count; the ambiguity check then
-    weighs it: a copy explains the detections as well, the answer is ``ambiguous``). One-room
-    search only: a large map's places list their candidates. Best-supported first."""
-    if not candidates or solve.places or deadline_passed(solve.deadline):
+    the search may miss when its P3P of three centres is metres off, or, on a large map, when
+    the place search's cap on map triplets left out the twin of the best's room), each refined
+    like the runners-up and verified unless a candidate that competes with the best
+    (:func:`~quadloc.service.localization.candidates.competes`) is already there (one refined
+    to a poorer optimum there does not count; the ambiguity check then weighs it: a copy
+    explains the detections as well, the answer is ``ambiguous``).
+
+    A small map: every such copy. A large map (>= ``PLACE_SEARCH_MIN_OBJECTS`` objects; the
+    whole map, ``solve.whole``, when it was searched by places): copies looked up in its place
+    index; none is refined when one is already a candidate (the tie is there), else they are
+    refined nearest first until one verifies, the scorer's map extended by the objects around
+    each copy's camera (:func:`_extend_scorer`). Best-supported first."""
+    if not candidates or deadline_passed(solve.deadline):
         return candidates
-    best, scorer = candidates[0], solve.scorer
-    transforms = copy_transforms(scorer.compiled, np.array(
-        [scorer.compiled.index_of(m.object_id) for m in best.inliers], dtype=np.intp))
+    best = candidates[0]
+    compiled = solve.scorer.compiled if solve.whole is None else solve.whole
+    index = place_index(compiled) if len(compiled) >= PLACE_SEARCH_MIN_OBJECTS else None
+    if index is not None and any(a is not best and competes(best, a)
+                                 and _copy_of(compiled, best, a) for a in candidates):
+        return candidates  # a copy is a competing candidate already: the tie is there
+    transforms = copy_transforms(compiled, np.array(
+        [compiled.index_of(m.object_id) for m in best.inliers], dtype=np.intp), index=index)
+    covered = [any(a is not best and competes(best, a) and not distinct_poses(
+        invert_pose(G @ best.world_from_camera), invert_pose(a.world_from_camera))
+        for a in candidates) for G in transforms]
+    if index is not None:
+        if any(covered):
+            return candidates  # a copy is a competing candidate: the tie is there
+        if solve.whole is not None and transforms:
+            centres = compiled.centers[[compiled.index_of(m.object_id) for m in best.inliers]]
+            _extend_scorer(solve, [G @ best.world_from_camera for G in transforms],
+                           [centres @ G[:3, :3].T + G[:3, 3] for G in transforms])
     options = solve.options
     alternative_options = replace(
         options, max_iterations=min(options.max_iterations, ALTERNATIVE_MAX_ITERATIONS))
     added = False
-    for G in transforms:
+    for G, done in zip(transforms, covered, strict=True):
         if deadline_passed(solve.deadline):
             break
+        if done:
+            continue  # that copy already has a competing candidate
         T = G @ best.world_from_camera
-        if any(a.support() >= best.support() and not distinct_poses(
-                invert_pose(T), invert_pose(a.world_from_camera)) for a in candidates):
-            continue  # that copy already has a candidate as well supported as the best
-        got, status = _refine_and_verify(solve, scorer.matches(invert_pose(T),
-                                                               options.inlier_iou),
+        got, status = _refine_and_verify(solve, solve.scorer.matches(invert_pose(T),
+                                                                     options.inlier_iou),
                                          T, alternative_options, None)
         if got is not None:
             got.capped = (status == "max_iterations"
                           and alternative_options.max_iterations < options.max_iterations)
             candidates.append(got)
             added = True
+            if index is not None:
+                break  # one verified copy makes the tie
     if added:
         sort_by_support(candidates)
     return candidates
+
+
+def _copy_of(compiled: CompiledMap, best: Candidate, other: Candidate) -> bool:
+    """Whether ``other``'s inliers on the detections both match are a copy of ``best``'s
+    (:func:`quadloc.service.localization.copies.is_copy`; objects of ``compiled``)."""
+    theirs = {m.detection_index: m.object_id for m in other.inliers}
+    pairs = [(compiled.index_of(m.object_id), compiled.index_of(theirs[m.detection_index]))
+             for m in best.inliers if m.detection_index in theirs]
+    return len(pairs) >= 3 and is_copy(compiled, *(np.array(x, dtype=np.intp)
+                                                    for x in zip(*pairs, strict=True)))
+
+
+def _extend_scorer(solve: _Solve, world_from_cameras: Sequence[FloatArray],
+                   copied_centres: Sequence[FloatArray]) -> None:
+    """Replace ``solve.scorer`` (a large map's places, :func:`_place_stage`) by the scorer of
+    its objects and those of the whole map within the place index's view range of each camera
+    position of ``world_from_cameras`` (4x4 each) or at ``COPY_TOLERANCE_M`` of a point of
+    ``copied_centres`` (each (n, 3) m: where a copy has the best's objects): the same
+    detections, deadline and camera. The objects keep their ids, so candidates found before
+    stay valid."""
+    assert solve.whole is not None
+    index, scorer = place_index(solve.whole), solve.scorer
+    kept = np.array([solve.whole.index_of(o) for o in scorer.compiled.object_ids], dtype=np.intp)
+    near = [index.near(T[:3, 3], index.view_range_m) for T in world_from_cameras]
+    near += [index.near(p, COPY_TOLERANCE_M) for ps in copied_centres for p in ps]
+    objects = np.unique(np.concatenate([kept, *near]))
+    if len(objects) == len(kept):
+        return
+    solve.scorer = MatchScorer(compiled_subset(solve.whole, objects), scorer.camera,
+                               [Ellipse(*p) for p in scorer.params], list(scorer.labels),
+                               list(scorer.detection_indices), deadline=scorer.deadline)
 
 
 def _refine_capped_competitors(solve: _Solve, candidates: list[Candidate]) -> list[Candidate]:

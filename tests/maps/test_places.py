@@ -4,6 +4,7 @@ constellations by labels, the spatial grid; memoised on the compiled map."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from quadloc.maps.compiled import compile_map, compiled_subset
 from quadloc.maps.model import SceneMap
@@ -84,7 +85,6 @@ def test_compiled_subset_keeps_ids_and_arrays() -> None:
 def test_radius_cell_ids_and_positions_equal_their_definitions() -> None:
     cm = compile_map(synthetic_map(300, seed=9))
     idx = place_index(cm)
-    assert [idx.positions[o] for o in cm.object_ids] == [cm.index_of(o) for o in cm.object_ids]
     axes = np.asarray(cm.axes)
     want = np.array([(a * b * c) ** (1.0 / 3.0) for a, b, c in axes.tolist()])
     np.testing.assert_allclose(idx.radius, want, rtol=1e-12)
@@ -94,6 +94,11 @@ def test_radius_cell_ids_and_positions_equal_their_definitions() -> None:
     for a in range(0, len(cm), 7):
         for b in range(len(cm)):
             assert (ids[a] == ids[b]) == (cells[a] == cells[b])
+    # the compiled map's positions: each id at its place in object_ids, unknown ids KeyError
+    assert [cm.positions[o] for o in cm.object_ids] == list(range(len(cm)))
+    assert cm.index_of(cm.object_ids[-1]) == len(cm) - 1
+    with pytest.raises(KeyError):
+        cm.index_of("no such object")
 
 
 def test_compiled_subset_equals_compiling_the_sub_map() -> None:

@@ -12,7 +12,11 @@ up) and moved to its grid cell. How rooms repeat (``mode``):
   category added (a copy of a Chess object's shape at a random place of the room) with
   probability 0.3;
 * ``"random"``: the room's own random layout of the Chess objects (each object at a uniformly
-  random place of the room's floor box, its height kept, random yaw).
+  random place of the room's floor box, its height kept, random yaw);
+* ``"twins"``: random layouts, but each room after the first repeats the layout of a random
+  earlier room with probability :data:`TWIN_PROBABILITY` (a hotel: a few identical rooms among
+  different ones). A frame in a room whose layout another room has (:attr:`Building.twinned`)
+  is truly ambiguous, as in an exact building.
 
 With ``corridors``, a corridor runs along each row of rooms with a few objects (random Chess
 shapes) every :data:`CORRIDOR_STEP_M`. Maps hold at most ``LIMITS["max_objects"]`` objects: a
@@ -67,7 +71,9 @@ __all__ = [
 ROOM_SPACING_M = 12.0
 FLOOR_HEIGHT_M = 4.0
 ROOMS_PER_FLOOR = 100
-MODES = ("exact", "perturbed", "random")
+MODES = ("exact", "perturbed", "random", "twins")
+#: ``"twins"`` buildings: probability that a room repeats an earlier room's layout.
+TWIN_PROBABILITY = 0.25
 #: Base seeds of the benchmark (``bench.building --seed``; it derives each case's building and
 #: frame seeds from one): tune (thresholds, calibration) on these ...
 TUNE_SEEDS = tuple(range(0, 100))
@@ -96,13 +102,16 @@ class Room:
 @dataclass(frozen=True)
 class Building:
     """A generated building: the map (world frame, metres, +Z up), its rooms (zones), corridors
-    and how it was made."""
+    and how it was made; ``twinned``: the zones of the rooms whose layout another room repeats
+    exactly (every room of an exact building with more than one room; ``"twins"`` buildings:
+    the rooms of a repeated layout)."""
 
     scene_map: SceneMap
     rooms: tuple[Room, ...]
     corridors: tuple[Room, ...]
     mode: str
     seed: int
+    twinned: frozenset[str] = frozenset()
 
     @property
     def compiled(self) -> CompiledMap:
@@ -151,7 +160,7 @@ def make_building(n_rooms: int, mode: str = "perturbed", seed: int = 0, *,
     Args:
         n_rooms: rooms (>= 1); the first room of an exact building is the Chess room itself
             moved to its cell.
-        mode: ``"exact"``, ``"perturbed"`` or ``"random"`` (:data:`MODES`).
+        mode: ``"exact"``, ``"perturbed"``, ``"random"`` or ``"twins"`` (:data:`MODES`).
         seed: the generator's seed.
         corridors: add corridor objects along each row of rooms.
         yaw: turn each room by a random yaw (else every room keeps the Chess orientation).
@@ -174,6 +183,8 @@ def make_building(n_rooms: int, mode: str = "perturbed", seed: int = 0, *,
     side = math.ceil(math.sqrt(min(n_rooms, ROOMS_PER_FLOOR)))
     objects: list[MapObject] = []
     rooms: list[Room] = []
+    layouts: list[list[tuple[np.ndarray, float]]] = []  # "twins": each room's (offset, yaw)
+    layout_of: list[int] = []  # "twins": the room whose layout each room has
     for k in range(n_rooms):
         floor, cell = divmod(k, ROOMS_PER_FLOOR)
         row, col = divmod(cell, side)
@@ -187,6 +198,15 @@ def make_building(n_rooms: int, mode: str = "perturbed", seed: int = 0, *,
         if mode == "perturbed":
             drop = set(rng.choice(len(base), max(n_drop, int(rng.random() < 0.5)),
                                   replace=False).tolist())
+        if mode == "twins":
+            layout_of.append(layout_of[int(rng.integers(k))] if k and
+                             rng.random() < TWIN_PROBABILITY else k)
+            if layout_of[k] == k:
+                layouts.append([(np.array([*rng.uniform(lo, hi), obj.ellipsoid.center[2]])
+                                 - obj.ellipsoid.center, float(rng.uniform(-math.pi, math.pi)))
+                                for obj in base])
+            else:
+                layouts.append(layouts[layout_of[k]])
         for j, obj in enumerate(base):
             if j in drop:
                 continue
@@ -198,6 +218,8 @@ def make_building(n_rooms: int, mode: str = "perturbed", seed: int = 0, *,
                 length = rng.uniform(0.1, 0.5)
                 mine.append(_moved(obj, oid, world_from_room,
                                    length * np.array([math.cos(phi), math.sin(phi), 0.0])))
+            elif mode == "twins":
+                mine.append(_moved(obj, oid, world_from_room, *layouts[k][j]))
             else:
                 target = np.array([*rng.uniform(lo, hi), obj.ellipsoid.center[2]])
                 mine.append(_moved(obj, oid, world_from_room, target - obj.ellipsoid.center,
@@ -216,7 +238,14 @@ def make_building(n_rooms: int, mode: str = "perturbed", seed: int = 0, *,
     sm = SceneMap(f"building-{mode}-{n_rooms}-{seed}", f"{n_rooms} rooms ({mode}), seed {seed}",
                   chess.up_axis, chess.categories, tuple(objects),
                   zones=_zones([*rooms, *halls]))
-    return Building(sm, tuple(rooms), tuple(halls), mode, seed)
+    twinned: frozenset[str] = frozenset()
+    if mode == "exact" and n_rooms > 1:
+        twinned = frozenset(r.zone_id for r in rooms)
+    elif mode == "twins":
+        repeated = {m for m in layout_of if layout_of.count(m) > 1}
+        twinned = frozenset(r.zone_id for r, m in zip(rooms, layout_of, strict=True)
+                            if m in repeated)
+    return Building(sm, tuple(rooms), tuple(halls), mode, seed, twinned)
 
 
 def _zones(parts: list[Room]) -> tuple[MapZone, ...]:

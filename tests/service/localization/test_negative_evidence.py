@@ -12,6 +12,7 @@ from quadloc.factors.camera import Camera, Ellipsoid
 from quadloc.factors.rotations import pose_matrix, so3_exp
 from quadloc.maps.compiled import compile_map
 from quadloc.maps.model import MapObject, MapZone, SceneMap
+from quadloc.maps.places import place_index
 from quadloc.service.localization.candidates import Candidate
 from quadloc.service.localization.copies import copy_transforms
 from quadloc.service.localization.negative_evidence import (
@@ -22,6 +23,7 @@ from quadloc.service.localization.negative_evidence import (
     weigh_misses,
 )
 from quadloc.service.localization.types import InlierMatch
+from tests.support.buildings import make_building
 
 CAMERA = Camera(500.0, 500.0, 320.0, 240.0, 640, 480)
 SHIFT = np.array([20.0, 0.0, 0.0])  # room B is room A moved by this
@@ -135,3 +137,26 @@ def test_copies_of_two_objects_are_upright() -> None:
     moved = turned.centers[a_pair] @ found[0][:3, :3].T + found[0][:3, 3]
     np.testing.assert_allclose(moved, turned.centers[[turned.index_of("b/0"),
                                                       turned.index_of("b/1")]], atol=1e-9)
+
+
+def test_copy_transforms_from_the_place_index_match_the_dense_search() -> None:
+    """A large map's lookup (the place index's constellations and grid) finds the same copies
+    as the search over every same-label triplet (and pair), and in the same order, when the
+    map has no more copies than asked for: a twins building, every room's first objects."""
+    b = make_building(40, "twins", seed=3)
+    cm = b.compiled
+    index = place_index(cm)
+    rooms = 0
+    for room in b.rooms:
+        for n in (2, 3, 5):
+            idx = np.array([cm.index_of(o) for o in room.object_ids[:n]])
+            dense = copy_transforms(cm, idx, max_copies=50)
+            indexed = copy_transforms(cm, idx, max_copies=50, index=index)
+            assert len(indexed) == len(dense)
+            for G, H in zip(indexed, dense, strict=True):
+                np.testing.assert_allclose(G, H, atol=1e-9)
+        rooms += room.zone_id in b.twinned
+        if room.zone_id in b.twinned:
+            idx = np.array([cm.index_of(o) for o in room.object_ids])
+            assert copy_transforms(cm, idx, index=index)  # its twin, at least
+    assert rooms >= 4
