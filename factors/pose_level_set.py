@@ -242,7 +242,7 @@ class LevelSetResiduals:
         (:func:`quadloc.factors.camera.border_touching`), so it is probably truncated: its
         ellipse is that of the visible part, whose centre differs from the projection's even
         at the true pose, so :meth:`lay_out` does not grow its samples for that "misalignment"
-        (grown, its sampled area reached thousands of detection radii, and the residuals far
+        (grown, its sampled area reached up to 1.9e9 detection radii, and the residuals far
         out, where the detected and the projected level sets differ most, pulled the pose
         metres off: docs/design/factors.md, "Truncated detections")."""
         if self._truncated is None:
