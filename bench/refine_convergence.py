@@ -25,7 +25,9 @@ the error and lambda. Per problem:
   final error; ~0 for quadratic convergence) and the final error (of the last solve) over the
   initial one (of the first; ~0 when the residual vanishes);
 * the largest relative difference between the factors' analytic pose Jacobian and central
-  differences (step :data:`JACOBIAN_STEP`) at the start.
+  differences (step :data:`JACOBIAN_STEP`) at the start;
+* the largest level-set sampling scale at the start (detection radii: how far the adaptive
+  sample areas were grown).
 
 Also the level set with Nielsen's gain-ratio lambda update (:data:`NIELSEN`, ``refine()``'s rule
 for iou / giou) instead of GTSAM's fixed factor 10: not ``refine()``'s solve, a measurement of
@@ -138,6 +140,8 @@ def trace_problem(cam: Camera, p: dict[str, Any], metric: str,
     jac = _jacobian_error(
         PoseResidualModel(metric, [d.ellipse for d in dets], ells, cam,
                           initial_world_from_camera=start), start)
+    # the largest adaptive level-set sampling scale at the start (detection radii)
+    start_scale = float(model.sampling_scale.max()) if metric == "level_set" else math.nan
     evaluations = [0]
     rows = model._family.rows  # count the residual evaluations (memo misses) of this model
 
@@ -174,7 +178,7 @@ def trace_problem(cam: Camera, p: dict[str, Any], metric: str,
             "linear_rate": float(np.nanmedian(rates)) if not np.isnan(rates).all() else math.nan,
             "final_over_initial_error": last_error / first_error if first_error > 0 else 0.0,
             "at_cap": iterations >= DEFAULT_MAX_ITERATIONS,
-            "jacobian_rel_error": jac,
+            "jacobian_rel_error": jac, "start_sampling_scale": start_scale,
             "position_error_m": float(np.linalg.norm(T[:3, 3] - truth[:3, 3]))}
 
 
@@ -202,6 +206,9 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "max_jacobian_rel_error": float(max(r["jacobian_rel_error"] for r in rows)),
         "median_position_error_m": float(np.median([r["position_error_m"] for r in rows])),
         "over_1m": int(sum(r["position_error_m"] > 1.0 for r in rows)),
+        "start_sampling_scale": [float(np.nanpercentile(
+            [r["start_sampling_scale"] for r in rows], q)) for q in (50, 90, 100)]
+        if not np.isnan([r["start_sampling_scale"] for r in rows]).all() else None,
     }
 
 
@@ -250,6 +257,13 @@ def markdown(res: dict[str, Any]) -> str:
             f"{v['median_final_over_initial_error']:.1e} | "
             f"{v['max_jacobian_rel_error']:.1e} | {v['median_position_error_m']:.1e} / "
             f"{v['over_1m']} |")
+    lines += ["", "Largest level-set sampling scale at the start (detection radii; the samples "
+              "of a detection touching the image border are not grown, "
+              "`factors/pose_level_set.py`), median / p90 / max: " + "; ".join(
+                  f"{k}: {v['start_sampling_scale'][0]:.2f} / {v['start_sampling_scale'][1]:.2f}"
+                  f" / {v['start_sampling_scale'][2]:.3g}"
+                  for k, v in res["cases"].items()
+                  if k.startswith("level_set,") and v["start_sampling_scale"] is not None) + "."]
     agree = all(v["iterations_equal_refine"] == v["problems"] and v["pose_equal_refine"]
                 == v["problems"] for k, v in res["cases"].items() if not k.startswith(NIELSEN))
     lines += ["", "The traced solves reproduce `refine()`'s iteration counts and poses on "

@@ -19,7 +19,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from quadloc.factors.arrays import BoolArray, FloatArray
-from quadloc.factors.conics import DegenerateProjectionError, Ellipse, params_from_dual_conics
+from quadloc.factors.conics import (
+    DegenerateProjectionError,
+    Ellipse,
+    params_from_dual_conics,
+    sigma_entries,
+)
 from quadloc.factors.jit import jit, jit_for_kernels
 from quadloc.factors.names import GeometryError
 from quadloc.factors.rotations import (
@@ -32,14 +37,17 @@ from quadloc.factors.rotations import (
 )
 
 __all__ = [
+    "BORDER_MARGIN_PX",
     "MIN_DEPTH",
     "Camera",
     "Ellipsoid",
+    "border_touching",
     "depth_margin",
     "ellipsoid_depth_margins",
     "project_ellipsoid",
     "project_ellipsoids_dual",
     "projected_gaussians",
+    "touches_border",
 ]
 
 
@@ -162,6 +170,33 @@ class Camera:
         uv = pc @ self.K.T
         pixels: FloatArray = uv[:, :2] / uv[:, 2:3]
         return pixels
+
+
+#: A detection whose bounding box comes within this many pixels of the image border (or crosses
+#: it) is taken as truncated (:func:`touches_border`).
+BORDER_MARGIN_PX = 4.0
+
+
+def border_touching(params: FloatArray, camera: Camera,
+                    margin_px: float = BORDER_MARGIN_PX) -> BoolArray:
+    """(N,) bool: ellipse ``j`` of ``params`` (N, 5) (px, rad) has an axis-aligned bounding box
+    (half-sizes ``sqrt(Sigma_00)``, ``sqrt(Sigma_11)``, :func:`quadloc.factors.conics.
+    sigma_entries`) that comes within ``margin_px`` (px) of the image border or crosses it: the
+    object is probably truncated, and a detector then gives an ellipse of its visible part,
+    which no pose projects exactly. The one place of this rule (map building down-weights such
+    views; pose refinement does not grow their level-set samples)."""
+    P = np.asarray(params, dtype=float).reshape(-1, 5)
+    s00, _, s11 = sigma_entries(P[:, 2], P[:, 3], P[:, 4])
+    hx, hy = np.sqrt(s00), np.sqrt(s11)
+    out: BoolArray = ((P[:, 0] - hx < margin_px) | (P[:, 1] - hy < margin_px)
+                      | (P[:, 0] + hx > camera.width - margin_px)
+                      | (P[:, 1] + hy > camera.height - margin_px))
+    return out
+
+
+def touches_border(ellipse: Ellipse, camera: Camera, margin_px: float = BORDER_MARGIN_PX) -> bool:
+    """:func:`border_touching` of one ellipse (px)."""
+    return bool(border_touching(ellipse.params(), camera, margin_px)[0])
 
 
 def depth_margin(center_depth: FloatArray, axis_variance: FloatArray) -> FloatArray:

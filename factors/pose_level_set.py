@@ -5,9 +5,11 @@ Jacobians (one compiled kernel), and the layout of their fixed samples.
 units) at the detection's samples ``x`` (px; rays ``n = K^-1 (x, y, 1)``, ``s = A[2,2]``, ``A``
 of :mod:`quadloc.factors.pose_frame`), fixed at the initial pose: the layout of
 ``quadloc.factors.metrics.level_set_sample_points`` (tested equal), grown for the misalignment
-at that pose when the sampling is adaptive. Residuals (N, M) and Jacobians (N, M, 6) w.r.t.
-the pose tangent of :mod:`quadloc.factors.pose_frame`. Derivation and measurements:
-``docs/design/factors.md`` ("Pose residuals", level-set residual).
+at that pose when the sampling is adaptive, except for a detection touching the image border
+(:func:`quadloc.factors.camera.border_touching`: its layout is the metric's with
+``adaptive=False``). Residuals (N, M) and Jacobians (N, M, 6) w.r.t. the pose tangent of
+:mod:`quadloc.factors.pose_frame`. Derivation and measurements: ``docs/design/factors.md``
+("Pose residuals", level-set residual; "Truncated detections").
 """
 
 from __future__ import annotations
@@ -188,6 +190,8 @@ class LevelSetResiduals:
         H[:, 2, 2] = 1.0
         self._H = H
         self._H_inv = np.linalg.inv(H)
+        self._detection_params = detection_params
+        self._truncated: BoolArray | None = None  # computed when first needed (truncated)
         #: (N,) all True, read-only: :meth:`rows`' validity when every margin is above the minimum
         self._all_valid: BoolArray = np.ones(n, dtype=bool)
         self._all_valid.setflags(write=False)
@@ -196,7 +200,8 @@ class LevelSetResiduals:
     def lay_out(self, world_from_camera: FloatArray | None) -> None:
         """Fix the samples: ``quadloc.factors.metrics.level_set_sample_points``' layout for all
         detections at once, grown (if adaptive) for the misalignment at ``world_from_camera``
-        (4x4; None: not grown).
+        (4x4; None: not grown), except a detection touching the image border
+        (:attr:`truncated`).
 
         Sample ``m`` of detection ``j`` is the affine image ``x = c_D + R_D diag(a, b) s_max
         (u_m, v_m)`` of the unit layout ``(u_m, v_m)``, so its normalised ray ``n = K^-1 (x,
@@ -218,6 +223,8 @@ class LevelSetResiduals:
             s_max = np.maximum(scale, metrics.LEVEL_SET_ADAPTIVE_GAIN * np.sqrt(phi))
             if not all_ok:
                 s_max = np.where(ok, s_max, scale)
+            if (s_max > scale).any():  # rare (a start far off): only then the border rule
+                s_max = np.where(self.truncated, scale, s_max)
         else:
             s_max = np.full(n, scale)
         #: (N,) outermost level radius per detection (in detection radii)
@@ -228,6 +235,20 @@ class LevelSetResiduals:
         Hs = self._H.copy()
         Hs[:, :, :2] *= s_max[:, None, None]
         self._rays: FloatArray = Hs @ self._uv1  # (N, 3, M) normalised camera coordinates
+
+    @property
+    def truncated(self) -> BoolArray:
+        """(N,) bool: detection ``j`` touches the image border
+        (:func:`quadloc.factors.camera.border_touching`), so it is probably truncated: its
+        ellipse is that of the visible part, whose centre differs from the projection's even
+        at the true pose, so :meth:`lay_out` does not grow its samples for that "misalignment"
+        (grown, its sampled area reached up to 1.9e9 detection radii, and the residuals far
+        out, where the detected and the projected level sets differ most, pulled the pose
+        metres off: docs/design/factors.md, "Truncated detections")."""
+        if self._truncated is None:
+            self._truncated = _camera.border_touching(self._detection_params, self._camera)
+            self._truncated.setflags(write=False)
+        return self._truncated
 
     @property
     def sample_points(self) -> FloatArray:

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from quadloc.factors.arrays import BoolArray, FloatArray, IntArray
-from quadloc.factors.camera import Camera, Ellipsoid, project_ellipsoid
+from quadloc.factors.camera import Camera, Ellipsoid, project_ellipsoid, touches_border
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.overlap import intersection_areas
 from quadloc.factors.rotations import invert_pose
@@ -36,7 +36,7 @@ from quadloc.maps.reconstruct import (
 )
 
 __all__ = ["AssociationOptions", "ObjectHypothesis", "associate", "associate_windowed",
-           "ellipse_iou", "merge_duplicates", "reconstruct_initial", "touches_border",
+           "ellipse_iou", "merge_duplicates", "reconstruct_initial",
            "verify_objects"]
 
 
@@ -297,14 +297,6 @@ def _geometric_clusters(o: FloatArray, d: FloatArray, rho: FloatArray, frames: I
             free[members] = False
             free_support -= ok_all[:, members].sum(axis=1)
     return clusters
-
-
-def touches_border(ellipse: Ellipse, camera: Camera, margin_px: float = 4.0) -> bool:
-    """True if the ellipse's bounding box comes within ``margin_px`` of the image border (or
-    crosses it): the object is probably truncated, and its ellipse is that of the visible part."""
-    x0, y0, x1, y1 = ellipse.bbox()
-    return bool(x0 < margin_px or y0 < margin_px or x1 > camera.width - margin_px
-                or y1 > camera.height - margin_px)
 
 
 def reconstruct_initial(idx: Sequence[int], obs: Sequence[Observation], T_wc: FloatArray,

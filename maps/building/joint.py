@@ -25,7 +25,7 @@ import numpy as np
 
 from quadloc.factors.arrays import BoolArray, FloatArray
 from quadloc.factors.budget import Deadline, deadline_passed
-from quadloc.factors.camera import Camera, Ellipsoid
+from quadloc.factors.camera import Camera, Ellipsoid, touches_border
 from quadloc.factors.ellipsoid_factors import ellipsoid_views_factor, valid_views
 from quadloc.factors.ellipsoid_residuals import (
     LevelSetSamples,
@@ -36,7 +36,6 @@ from quadloc.factors.ellipsoid_residuals import (
 from quadloc.factors.pose_factors import DEFAULT_ROBUST_SCALE, pose3
 from quadloc.factors.pose_residuals import DEFAULT_MIN_DEPTH_MARGIN
 from quadloc.factors.rotations import invert_pose, pose_matrix
-from quadloc.maps.building.association import touches_border
 from quadloc.maps.building.recording import Observation, OdometryNoise, SizePrior
 from quadloc.maps.reconstruct import canonical_ellipsoid, max_ray_angle_deg
 

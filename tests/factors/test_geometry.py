@@ -11,7 +11,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from quadloc.factors.camera import Camera, Ellipsoid, project_ellipsoid
+from quadloc.factors.camera import (
+    BORDER_MARGIN_PX,
+    Camera,
+    Ellipsoid,
+    border_touching,
+    project_ellipsoid,
+    touches_border,
+)
 from quadloc.factors.conics import (
     DegenerateProjectionError,
     Ellipse,
@@ -91,6 +98,30 @@ def test_contour_level_and_bbox_against_dense_contour(e: Ellipse):
     assert np.all(dense[:2] >= box[:2] - 1e-9) and np.all(dense[2:] <= box[2:] + 1e-9)
     step = 2 * math.pi / 4096 * max(e.a, e.b)
     np.testing.assert_allclose(dense, box, atol=step**2 / max(e.b, 1e-9) + 1e-9)
+
+
+def test_border_rule_against_the_dense_contour():
+    """``border_touching`` (batched) and ``touches_border`` (one ellipse) against the extent of
+    4096 contour points: an ellipse touches when its contour comes within BORDER_MARGIN_PX of
+    an image side (cases within 0.05 px of the threshold, below the contour's sampling error
+    of ~1e-3 px here, are skipped)."""
+    cam = Camera(500.0, 500.0, 320.0, 240.0, 640, 480)
+    rng = np.random.default_rng(3)
+    P = np.column_stack([rng.uniform(-60, 700, 4000), rng.uniform(-60, 540, 4000),
+                         rng.uniform(1, 150, 4000), rng.uniform(1, 150, 4000),
+                         rng.uniform(-4, 4, 4000)])
+    got = border_touching(P, cam)
+    checked = 0
+    for p, flag in zip(P, got, strict=True):
+        e = Ellipse(*p)
+        pts = e.contour_points(4096)
+        gap = min(pts[:, 0].min(), pts[:, 1].min(), cam.width - pts[:, 0].max(),
+                  cam.height - pts[:, 1].max()) - BORDER_MARGIN_PX
+        if abs(gap) < 0.05:
+            continue
+        assert flag == (gap < 0.0) == touches_border(e, cam), (p, gap)
+        checked += 1
+    assert checked > 3900 and 0.2 < got.mean() < 0.8
 
 
 @settings(max_examples=40, deadline=None)

@@ -118,6 +118,37 @@ def test_batched_sampling_is_the_metrics_layout(options):
         assert model.sampling_scale.max() > metrics.DEFAULT_LEVEL_SET_SCALE
 
 
+def test_samples_of_a_detection_touching_the_border_are_not_grown():
+    """At a start far off the adaptive areas grow for the misalignment (the metrics' adaptive
+    layout) except that of a detection touching the image border (``camera.border_touching``:
+    probably truncated, its centre is not the projection's even at the true pose), whose
+    samples keep the metrics' fixed layout."""
+    rng = np.random.default_rng(5)
+    ells = random_scene(rng, 5)
+    truth = np.eye(4)
+    dets = [project_ellipsoid(CAMERA, truth, e) for e in ells]
+    # the first detection moved to touch the left border (bbox from x = 1 px)
+    d0 = dets[0]
+    dets[0] = Ellipse(1.0 + d0.a, d0.cy, d0.a, d0.b, 0.0)
+    far = retract(truth, perturbation(rng, 0.3, 0.4))
+    model = PoseResidualModel("level_set", dets, ells, CAMERA, initial_world_from_camera=far)
+    boxes = np.array([d.bbox() for d in dets])  # independent of the rule's formula
+    flags = (boxes[:, 0] < 4.0) | (boxes[:, 1] < 4.0) | (boxes[:, 2] > CAMERA.width - 4.0) \
+        | (boxes[:, 3] > CAMERA.height - 4.0)
+    assert flags[0] and not flags[1:].any()
+    camera_from_world = invert_pose(far)
+    grown = []
+    for j, (d, e) in enumerate(zip(dets, ells, strict=True)):
+        proj = project_ellipsoid(CAMERA, camera_from_world, e)
+        grown.append(metrics.level_set_sampling_scale(d, proj))
+        want = metrics.level_set_sample_points(d, proj, adaptive=not flags[j])
+        np.testing.assert_allclose(model.sample_points[j], want, rtol=1e-12, atol=1e-9)
+    assert grown[0] > 2.0 * metrics.DEFAULT_LEVEL_SET_SCALE  # would have grown
+    assert model.sampling_scale[0] == metrics.DEFAULT_LEVEL_SET_SCALE
+    np.testing.assert_allclose(model.sampling_scale[1:], grown[1:], rtol=1e-12)
+    assert max(grown[1:]) > metrics.DEFAULT_LEVEL_SET_SCALE
+
+
 @pytest.mark.parametrize("metric", metrics.METRIC_NAMES)
 def test_factor_residual_equals_metric_residual(scene, metric):
     ells, dets, pose = scene

@@ -12,7 +12,9 @@ detections of one image. The model (documented with its numbers in ``docs/simula
    rectangular occluder (probability ``occluder_probability`` per object). The detection is
    the **moment-matched ellipse of the visible points** (mean, and ``4 x`` covariance, which is
    exact for a uniform ellipse), so a truncated or occluded object is detected as the ellipse
-   of its visible part (paper figure 2), not its full projection. Objects with a visible
+   of its visible part (paper figure 2), not its full projection. With
+   ``visible_ellipse="box"`` it is instead the axis-aligned ellipse inscribed in the bounding
+   box of the visible points (what box-based detectors mostly report). Objects with a visible
    fraction < ``min_visible_fraction`` or a visible area < ``min_visible_area_px`` are not
    detected. A fully visible object keeps its exact projection.
 3. **Detector noise** (per detection, applied to the visible ellipse): a difficulty factor
@@ -115,6 +117,9 @@ class SimulationConfig:
     wrong_label_probability: float = 0.0
     spurious_rate: float = 0.0
     n_visibility_samples: int = 600
+    #: the ellipse of a partly visible object: ``"moment"`` (moment-matched to the visible
+    #: points) or ``"box"`` (inscribed in their axis-aligned bounding box)
+    visible_ellipse: str = "moment"
 
     def __post_init__(self) -> None:
         for name in ("center_noise", "axis_log_noise", "angle_noise_rad", "difficulty_log_std",
@@ -127,6 +132,9 @@ class SimulationConfig:
             v = getattr(self, name)
             if not (0.0 <= v <= 1.0):
                 raise ValueError(f"SimulationConfig.{name} must be in [0, 1], got {v}")
+        if self.visible_ellipse not in ("moment", "box"):
+            raise ValueError(f"SimulationConfig.visible_ellipse must be 'moment' or 'box', got "
+                             f"{self.visible_ellipse!r}")
         if self.n_visibility_samples < 50:
             raise ValueError("SimulationConfig.n_visibility_samples must be >= 50")
 
@@ -251,7 +259,8 @@ def simulate_frame(
             seen = full
         else:
             try:
-                seen = moment_ellipse(pts[visible])
+                seen = moment_ellipse(pts[visible]) if cfg.visible_ellipse == "moment" \
+                    else Ellipse.from_bbox(*pts[visible].min(axis=0), *pts[visible].max(axis=0))
             except ValueError:  # degenerate visible set (a sliver): undetectable
                 continue
         noisy = _add_noise(seen, cfg, gen)

@@ -80,6 +80,33 @@ def test_partial_visibility_gives_the_ellipse_of_the_visible_part():
     assert checked >= 3  # the real poses do truncate objects
 
 
+def test_box_detector_gives_the_ellipse_inscribed_in_the_visible_box():
+    """``visible_ellipse="box"``: a partly visible object's ellipse is axis-aligned and
+    inscribed in the box of its visible part (independent reference: the box of a fine pixel
+    grid inside the projection and the image; up to the spacing of the visibility samples)."""
+    cfg = SimulationConfig.exact(clip_to_image=True).with_(visible_ellipse="box")
+    checked = 0
+    for i in range(0, 108, 7):
+        frame = simulate_frame(MAP, CAMERA, POSES[i], 0, cfg)
+        for det, full, frac in zip(frame.detections, frame.full_projections,
+                                   frame.visible_fraction, strict=True):
+            if frac >= 0.97 or frac < 0.3:
+                continue
+            e = det.ellipse
+            assert e.angle == 0.0
+            x0, y0, x1, y1 = np.clip(full.bbox(), 0.0, [CAMERA.width, CAMERA.height] * 2)
+            X, Y = np.meshgrid(np.arange(x0, x1, 0.25) + 0.125, np.arange(y0, y1, 0.25) + 0.125)
+            grid = np.column_stack([X.ravel(), Y.ravel()])
+            grid = grid[level(full, grid) <= 1.0]
+            box = np.r_[grid.min(axis=0), grid.max(axis=0)]
+            spacing = math.sqrt(full.area / cfg.n_visibility_samples)
+            np.testing.assert_allclose(e.bbox(), box, atol=2.0 * spacing)
+            checked += 1
+    assert checked >= 3
+    with pytest.raises(ValueError, match="visible_ellipse"):
+        SimulationConfig(visible_ellipse="hull")
+
+
 def test_occlusion_by_nearer_objects_shrinks_detections():
     base = SimulationConfig.exact(clip_to_image=False)
     occl = base.with_(occlusion_by_objects=True, occluder_shrink=1.0)
