@@ -759,8 +759,10 @@ def _copy_of(compiled: CompiledMap, best: Candidate, other: Candidate) -> bool:
     theirs = {m.detection_index: m.object_id for m in other.inliers}
     pairs = [(compiled.index_of(m.object_id), compiled.index_of(theirs[m.detection_index]))
              for m in best.inliers if m.detection_index in theirs]
-    return len(pairs) >= 3 and is_copy(compiled, *(np.array(x, dtype=np.intp)
-                                                    for x in zip(*pairs, strict=True)))
+    if len(pairs) < 3:
+        return False
+    mine, others = (np.array(x, dtype=np.intp) for x in zip(*pairs, strict=True))
+    return is_copy(compiled, mine, others)
 
 
 def _extend_scorer(solve: _Solve, world_from_cameras: Sequence[FloatArray],
