@@ -40,8 +40,11 @@ from quadloc.factors.camera import Camera
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.rotations import invert_pose, rotation_angle
 from quadloc.maps.compiled import CompiledMap
+from quadloc.maps.places import place_index
 from quadloc.maps.visibility import ViewRule, object_zones, predicted_in_view
 from quadloc.maps.zones import zone_index
+from quadloc.service.localization.constellations import PLACE_SEARCH_MIN_OBJECTS
+from quadloc.service.localization.copies import copy_transforms
 from quadloc.service.localization.scoring import MatchScorer, greedy_assignment
 
 __all__ = [
@@ -157,6 +160,7 @@ class PlaceSet:
         self.hypotheses: list[PlaceHypothesis] = []
         self.null_score = 0.0
         self._zones = zone_index(compiled.scene_map)
+        self._copies: dict[frozenset[int], bool] = {}
 
     def clear(self) -> None:
         """Drop every hypothesis and the null's score."""
@@ -249,6 +253,23 @@ class PlaceSet:
             h.objects |= matched
             zone = self._zones.zone_of(self.compiled.object_ids[i] for i in matched)
             h.zone = zone if zone is not None else h.zone
+
+    def has_copy(self, h: PlaceHypothesis) -> bool:
+        """Whether the objects ``h`` matched have an exact copy elsewhere in the map (same
+        labels, every centre within 5 cm after a rigid fit:
+        :func:`quadloc.service.localization.copies.copy_transforms`, through the place index
+        on a large map): the evidence so far cannot tell that place from the copy, whatever
+        the scores (copies differ only by how well each alignment was proposed). Memoised per
+        set of objects."""
+        key = frozenset(h.objects)
+        found = self._copies.get(key)
+        if found is None:
+            index = (place_index(self.compiled) if len(self.compiled) >= PLACE_SEARCH_MIN_OBJECTS
+                     else None)
+            found = bool(copy_transforms(self.compiled, np.array(sorted(key), dtype=np.intp),
+                                         max_copies=1, index=index))
+            self._copies[key] = found
+        return found
 
     def posteriors(self) -> FloatArray:
         """Posterior of each hypothesis (same order); the null's is ``1 - sum``."""

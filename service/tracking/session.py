@@ -723,8 +723,10 @@ class TrackingSession:
         best, p = self._places.best()
         # a one-place map has no copy of its room for later rounds to propose
         rounds = 1 if single_place(self.compiled) else MIN_PROPOSAL_ROUNDS
+        copied = False
         if best is not None and p >= COMMIT_PROBABILITY and best.rounds >= rounds \
-                and len(best.objects) >= MIN_COMMIT_OBJECTS:
+                and len(best.objects) >= MIN_COMMIT_OBJECTS \
+                and not (copied := self._places.has_copy(best)):
             t = time.perf_counter()
             poses = [best.world_from_odom @ b.frame.odom_from_camera for b in chosen]
             started = self._start_graph(chosen, poses, [
@@ -743,7 +745,7 @@ class TrackingSession:
                 inliers = self._verify(dets, usable, T)
                 return self._result(index, frame, T_oc, T, cov, inliers, len(usable), None,
                                     timings)
-        if sum(q >= AMBIGUOUS_PROBABILITY for q in self._places.posteriors()) >= 2:
+        if copied or sum(q >= AMBIGUOUS_PROBABILITY for q in self._places.posteriors()) >= 2:
             reason = "ambiguous"
         return self._no_pose(index, frame, T_oc, usable, reason, timings)
 

@@ -7,6 +7,7 @@ import dataclasses
 import math
 
 import numpy as np
+import pytest
 
 from quadloc.factors.conics import ellipse_params
 from quadloc.maps.compiled import compile_map
@@ -61,6 +62,22 @@ def test_exact_copies_are_ambiguous_with_the_true_room_listed_never_a_wrong_pose
         # the candidates are in different rooms (zones), the true one among them
         assert len({c.zone for c in r.candidates}) >= 2
         assert min(pose_errors(c.world_from_camera, T)[0] for c in r.candidates) <= 0.5
+
+
+@pytest.mark.slow
+def test_a_twinned_room_among_different_ones_is_never_committed_to_a_copy() -> None:
+    """200 rooms of random layouts, this walk's room repeated exactly six times elsewhere: the
+    copies' scores differ only by how well each alignment was proposed. Before, the session
+    committed at frame 109 to a copy 46 m away (posterior 0.99) and answered poses there for
+    7 s; a place whose matched objects have a copy (``PlaceSet.has_copy``) is not committed."""
+    b = make_building(200, "twins", 0)
+    walk = building_walk(b, 1)
+    assert walk.rooms[0].zone_id in b.twinned
+    s, out = _run(b, walk, 115)
+    assert all(e[0] <= 0.5 for r, e in out if r.world_from_camera is not None)
+    assert sum(r.reason == "ambiguous" for r, _ in out) >= 50
+    best, _ = s._places.best()
+    assert best is not None and s._places.has_copy(best)
 
 
 def test_perturbed_building_walk_commits_to_the_right_rooms_and_is_deterministic() -> None:
