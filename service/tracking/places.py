@@ -9,9 +9,10 @@ frame's detections:
     LL_h = IOU_GAIN * sum(min(IoU, IOU_SATURATION) of its one-to-one inliers) / IOU_SATURATION
            - MISS_PENALTY * (objects of its place predicted in view, not detected)
 
-and a *null* hypothesis ("somewhere else") that explains each usable detection with
-``NULL_GAIN`` and misses as few predicted objects as the best-placed hypothesis (misses are
-evidence between listed places, not against the places not listed). Scores are discounted
+and a *null* hypothesis ("somewhere else") that explains each usable detection of a frame of at
+least :data:`NULL_MIN_DETECTIONS` usable detections with ``NULL_GAIN`` (a lone detection gains it
+nothing) and misses as few predicted objects as the best-placed hypothesis (misses are evidence
+between listed places, not against the places not listed). Scores are discounted
 sums ``S_h <- d * S_h + TEMPERATURE * LL_h`` with ``d = DISCOUNT ** min(1, n /
 AGEING_DETECTIONS)`` for a frame of ``n`` usable detections (consecutive 30 Hz frames are far
 from independent: the temperature and discount make the evidence of about one second count, not
@@ -67,8 +68,17 @@ MAX_HYPOTHESES = 8
 IOU_GAIN = 3.0
 IOU_SATURATION = 0.5
 MISS_PENALTY = 0.5
-#: What the null hypothesis ("another place") gains per usable detection.
+#: What the null hypothesis ("another place") gains per usable detection of a frame of at least
+#: :data:`NULL_MIN_DETECTIONS` usable detections.
 NULL_GAIN = 1.2
+#: A frame with fewer usable detections than this is no evidence for a place not listed: one
+#: ellipse fits an object of its label at some pose of any place (one ellipse-ellipsoid pair
+#: leaves the 6-dof pose under-determined, two determine it), so a lone detection unexplained by
+#: the listed places cannot tell "another place" from a spurious detection. It still scores the
+#: listed hypotheses, whose poses are fixed by their alignments. (Before, a session walking
+#: between rooms with only spurious detections in view, 0-2 a frame, gave its place up to the
+#: null: ``python -m bench.tracking --building``, tuning seeds.)
+NULL_MIN_DETECTIONS = 2
 #: Per-frame weight of the evidence and the per-frame discount of past scores.
 TEMPERATURE = 0.25
 DISCOUNT = 0.93
@@ -197,6 +207,11 @@ class PlaceSet:
                           dtype=float)
         return ll - MISS_PENALTY * misses, matched, misses
 
+    def predicts_objects_in_view(self, world_from_camera: FloatArray) -> bool:
+        """Whether any object of the map is predicted in view from ``world_from_camera``
+        (:data:`VIEW_RULE`, the rule of the misses of ``LL_h``)."""
+        return bool(self._in_view(invert_pose(np.asarray(world_from_camera, float))))
+
     def _in_view(self, camera_from_world: FloatArray) -> set[int]:
         """Objects (indices) predicted in view (:data:`VIEW_RULE`,
         :func:`quadloc.maps.visibility.predicted_in_view`)."""
@@ -243,7 +258,7 @@ class PlaceSet:
             h.score = d * h.score + TEMPERATURE * float(x)
             self._remember(h, m)
         self.null_score = d * self.null_score + TEMPERATURE * (
-            NULL_GAIN * len(labels) - MISS_PENALTY * float(misses.min()))
+            _null_gain(len(labels)) - MISS_PENALTY * float(misses.min()))
         p = self.posteriors()
         self.hypotheses = [h for h, q in zip(self.hypotheses, p, strict=True)
                            if q >= DROP_PROBABILITY or h is committed]
@@ -368,6 +383,12 @@ def _support(h: PlaceHypothesis) -> tuple[int, float]:
 def _inlier_gain(ious: Sequence[float]) -> float:
     """The inlier part of ``LL_h`` (module docstring) of one-to-one inlier IoUs."""
     return IOU_GAIN / IOU_SATURATION * float(sum(min(float(q), IOU_SATURATION) for q in ious))
+
+
+def _null_gain(n: int) -> float:
+    """What the null gains on a frame of ``n`` usable detections: ``NULL_GAIN * n``, 0 below
+    :data:`NULL_MIN_DETECTIONS` (module docstring)."""
+    return NULL_GAIN * n if n >= NULL_MIN_DETECTIONS else 0.0
 
 
 def _discount(labels: Sequence[str]) -> float:

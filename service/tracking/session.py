@@ -83,11 +83,18 @@ __all__ = [
 STATES = ("initializing", "tracking", "lost")
 #: A tracking frame with at least this many usable detections, none of them explained by the
 #: estimate (no inlier), sends the session to ``lost`` at once (fewer: after
-#: ``lost_after_misses`` such frames in a row).
+#: ``lost_after_misses`` such frames in a row), when they contradict it: some were associated,
+#: or the estimate predicts objects of the map in view (the places' shared rule,
+#: :meth:`~quadloc.service.tracking.places.PlaceSet.predicts_objects_in_view`; walls hide
+#: other rooms). A frame looking at no object (a corridor, a wall) has only spurious
+#: detections to show, however many.
 LOST_UNEXPLAINED_DETECTIONS = 3
 #: A tracking frame whose estimate moved from its odometry prediction by more than this squared
-#: Mahalanobis distance (6 dof, under the predicted covariance; chi-square 99.9 %) jumped: a
-#: wrong association pulled it, the session is ``lost``.
+#: Mahalanobis distance (6 dof, under the predicted covariance; chi-square 99.9 %) jumped. With
+#: at least :data:`LOST_UNEXPLAINED_DETECTIONS` usable detections of which the jumped estimate
+#: explains more (one-to-one inliers) than the prediction, the prediction was wrong: the session
+#: is ``lost``. Otherwise a wrong association or a biased detection pulled the update: the
+#: frame's detections are dropped (:meth:`TrackingSession._track`).
 JUMP_CHI2 = 22.5
 #: A tracking frame whose detections were fused (used by the smoother) and include an inlier
 #: constrains the pose when the inliers of the fused frames of the smoother's window
@@ -604,11 +611,16 @@ class TrackingSession:
         xi = gtsam.Pose3.Logmap(pose3(invert_pose(T_pred) @ T))
         jumped = float(xi @ np.linalg.solve(cov_pred, xi)) > JUMP_CHI2
         fused = bool(assoc)  # detections in the smoother's update
-        if jumped and assoc and len(usable) < LOST_UNEXPLAINED_DETECTIONS:
-            # 1-2 detections pulled the estimate away from its odometry: a wrong association
-            # (a spurious detection, a neighbouring room's object). The frame's detections are
-            # dropped: the smoother restarts from the prediction and its covariance (the window
-            # marginalised into one prior), the place and its scores stay.
+        if jumped and assoc and (len(usable) < LOST_UNEXPLAINED_DETECTIONS or len(
+                self._verify(frame.detections, usable, T_pred))
+                >= len(self._verify(frame.detections, usable, T))):
+            # The detections pulled the estimate away from its odometry: 1-2 of them (too few
+            # to say which of estimate and detection is wrong), or more that the prediction
+            # explains at least as well as the estimate (as many one-to-one inliers): a wrong
+            # association (a spurious detection, a neighbouring room's object) or a biased
+            # detection (occluded) moved it, not a wrong prediction. The frame's detections
+            # are dropped: the smoother restarts from the prediction and its covariance (the
+            # window marginalised into one prior), the place and its scores stay.
             restarted = self._restart_at(key, index, T_pred, cov_pred)
             if restarted is None:
                 self.reset()
@@ -619,7 +631,7 @@ class TrackingSession:
         inliers = self._verify(frame.detections, usable, T)
         # a frame whose usable detections are all unexplained contradicts the estimate
         contradicted = bool(usable) and not inliers and (
-            bool(assoc) or self._predicted_visible(T_pred))
+            bool(assoc) or self._places.predicts_objects_in_view(T_pred))
         self._misses = self._misses + 1 if contradicted else 0
         pos_std = math.sqrt(max(float(np.linalg.eigvalsh(cov[3:, 3:]).max()), 0.0))
         if pos_std > self.options.lost_position_std_m or jumped \
@@ -663,16 +675,6 @@ class TrackingSession:
             return None
         marginal = self._marginal(key)
         return None if marginal is None else (est, marginal)
-
-    def _predicted_visible(self, world_from_camera: FloatArray) -> bool:
-        cfw = invert_pose(world_from_camera)
-        pc = self.compiled.centers @ cfw[:3, :3].T + cfw[:3, 3]
-        z = pc[:, 2]
-        ok = z > 0.1
-        u = self.camera.fx * pc[ok, 0] / z[ok] + self.camera.cx
-        v = self.camera.fy * pc[ok, 1] / z[ok] + self.camera.cy
-        return bool(np.any((u >= 0) & (u < self.camera.width) & (v >= 0)
-                           & (v < self.camera.height)))
 
     # ------------------------------------------------------------------ (re)initialization
     def _initialize(self, index: int, frame: FrameInput, T_oc: FloatArray, usable: list[int],
