@@ -27,6 +27,7 @@ from quadloc.factors.camera import Camera, Ellipsoid, project_ellipsoid
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.overlap import intersection_areas
 from quadloc.factors.rotations import invert_pose
+from quadloc.maps.building.loops import object_frames_of, places
 from quadloc.maps.building.recording import Observation
 from quadloc.maps.reconstruct import (
     ReconstructionError,
@@ -421,9 +422,12 @@ def _projected_cover(ell: Ellipsoid, T_wc: FloatArray, camera: Camera,
 
 def recruit_partial_views(objects: list[ObjectHypothesis], rejected: dict[int, str],
                           obs: Sequence[Observation], T_wc: FloatArray, camera: Camera,
-                          opt: AssociationOptions) -> int:
+                          opt: AssociationOptions, min_shared_frames: int = 2) -> int:
     """Give the objects their partial views: a detection rejected as ``fits_no_object`` joins
-    an object of its label that has no detection in its frame when at least
+    an object of its label that has no detection in its frame, in a frame of the object's
+    place (:func:`quadloc.maps.building.loops.places` with ``min_shared_frames``: the frames
+    detecting any object seen with it; walls hide other rooms, so another room's view of a
+    same-label object brought close by drift is never offered), when at least
     ``partial_cover`` of its area lies inside the object's projection from that frame's pose
     ``T_wc`` and their IoU is at least ``partial_min_iou`` (the visible part of a truncated or
     occluded object: its ellipse is that of the part, inside the whole's, so its IoU can fall
@@ -435,10 +439,17 @@ def recruit_partial_views(objects: list[ObjectHypothesis], rejected: dict[int, s
     for k in rejected:
         if rejected[k] == "fits_no_object":
             by_label.setdefault(obs[k].label, []).append(k)
+    object_frames = object_frames_of([h.observations for h in objects], obs)
+    place_frames: dict[int, set[int]] = {}
+    for group in places(object_frames, min_shared_frames):
+        frames = {f for j in group for f in object_frames[j]}
+        for j in group:
+            place_frames[j] = frames
     offers: dict[int, list[tuple[int, float]]] = {}  # detection -> (object, iou)
     for j, h in enumerate(objects):
-        used = {obs[k].frame for k in h.observations}
-        cand = [k for k in by_label.get(h.label, []) if obs[k].frame not in used]
+        used = set(object_frames[j])
+        cand = [k for k in by_label.get(h.label, [])
+                if obs[k].frame not in used and obs[k].frame in place_frames[j]]
         if not cand:
             continue
         cover, ious = _projected_cover(h.ellipsoid, T_wc[[obs[k].frame for k in cand]], camera,

@@ -212,7 +212,8 @@ def build_map(
     if n_loops:
         objects = merge_duplicates(objects, obs, T_init, recording.camera, opt,
                                    lambda: on_label("", 1.0))
-    recruit_partial_views(objects, rejected, obs, T_init, recording.camera, opt)
+    recruit_partial_views(objects, rejected, obs, T_init, recording.camera, opt,
+                          loops.min_shared_frames)
     t_assoc = time.perf_counter() - t0
     report_progress("refining", 50.0, len(objects))
 

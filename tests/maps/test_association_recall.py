@@ -116,30 +116,42 @@ def test_partial_views_join_their_object_unless_ambiguous_or_outside() -> None:
     iou = [ellipse_iou(p, o.ellipse) for p, o in zip(parts, obs[8:], strict=True)]
     assert iou[0] == pytest.approx(0.25, abs=1e-3) and iou[2] < 0.2
     assert iou[1] >= 0.2  # refused for lying outside, not for its IoU
-    observations = kept + [Observation(8 + i, 0, "Box", p) for i, p in enumerate(parts)]
+    # a chair next to the box, detected in every frame 0-11: the box's place (frames 0-11)
+    mate = Ellipsoid(BOX_A.center + np.array([0.0, 0.3, 0.0]), np.array([0.1, 0.1, 0.1]))
+    mate_obs = [Observation(f, 1, "Chair", project_ellipsoid(CAM, invert_pose(T[f]), mate))
+                for f in range(12)]
+    # frame 12: the view of frame 8 again with the same part, but in no frame of the place
+    # (another room's view of a box brought here by drift)
+    T = np.concatenate([T, T[8:9]])
+    observations = (kept + [Observation(8 + i, 0, "Box", p) for i, p in enumerate(parts)]
+                    + mate_obs + [Observation(12, 0, "Box", part_in)])
+    mate_h = ObjectHypothesis("Chair", list(range(12, 24)), mate)
     h = ObjectHypothesis("Box", list(range(8)), BOX_A)
-    rejected = {k: "fits_no_object" for k in range(8, 12)}
+    rejected = {k: "fits_no_object" for k in (8, 9, 10, 11, 24)}
     opt = AssociationOptions()
     assert all(v < opt.min_iou for v in iou[:3])  # the association's IoU test refuses them
-    n = recruit_partial_views([h], rejected, observations, T, CAM, opt)
+    n = recruit_partial_views([h, mate_h], rejected, observations, T, CAM, opt)
     assert n == 2
     assert h.observations == [0, 1, 2, 3, 4, 5, 6, 7, 8, 11]
     assert h.ious[8] == pytest.approx(0.25, abs=1e-3)
-    assert rejected == {9: "fits_no_object", 10: "fits_no_object"}
+    assert rejected == {9: "fits_no_object", 10: "fits_no_object", 24: "fits_no_object"}
+    # without the chair, frames 8-11 are not in the box's place either
+    h = ObjectHypothesis("Box", list(range(8)), BOX_A)
+    assert recruit_partial_views([h], {8: "fits_no_object"}, observations, T, CAM, opt) == 0
 
     # the same part inside the projections of two objects of its label: left rejected
     twin = Ellipsoid(BOX_A.center + np.array([0.02, 0.0, 0.0]), BOX_A.axes.copy())
     objects = [ObjectHypothesis("Box", list(range(8)), BOX_A),
-               ObjectHypothesis("Box", [], twin)]
+               ObjectHypothesis("Box", list(range(8)), twin), mate_h]
     rejected = {8: "fits_no_object"}
-    assert recruit_partial_views(objects, rejected, observations[:9], T, CAM, opt) == 0
+    assert recruit_partial_views(objects, rejected, observations, T, CAM, opt) == 0
     assert rejected == {8: "fits_no_object"}
     # another label's object, or a detection rejected for another reason: never recruited
     rejected = {8: "label_conflict"}
-    assert recruit_partial_views([ObjectHypothesis("Box", list(range(8)), BOX_A)], rejected,
-                                 observations[:9], T, CAM, opt) == 0
+    assert recruit_partial_views([ObjectHypothesis("Box", list(range(8)), BOX_A), mate_h],
+                                 rejected, observations, T, CAM, opt) == 0
     other = ObjectHypothesis("Chair", list(range(8)), BOX_A)
-    assert recruit_partial_views([other], {8: "fits_no_object"}, observations[:9], T, CAM,
+    assert recruit_partial_views([other, mate_h], {8: "fits_no_object"}, observations, T, CAM,
                                  opt) == 0
 
 
