@@ -27,6 +27,7 @@ from quadloc.factors.camera import Camera, Ellipsoid, project_ellipsoid, touches
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.overlap import intersection_areas
 from quadloc.factors.rotations import invert_pose
+from quadloc.maps.building.loops import object_frames_of, places
 from quadloc.maps.building.recording import Observation
 from quadloc.maps.reconstruct import (
     ReconstructionError,
@@ -36,7 +37,7 @@ from quadloc.maps.reconstruct import (
 )
 
 __all__ = ["AssociationOptions", "ObjectHypothesis", "associate", "associate_windowed",
-           "ellipse_iou", "merge_duplicates", "reconstruct_initial",
+           "ellipse_iou", "merge_duplicates", "reconstruct_initial", "recruit_partial_views",
            "verify_objects"]
 
 
@@ -58,6 +59,8 @@ class AssociationOptions:
     max_shared_frames: float = 0.1
     ghost_ratio: float = 3.0
     verify_iou: float = 0.1
+    partial_cover: float = 0.8
+    partial_min_iou: float = 0.2
     seed: int = 0
 
 
@@ -356,12 +359,13 @@ def _may_overlap(ell: Ellipsoid, T_wc: FloatArray, camera: Camera,
     return out
 
 
-def _projected_ious(ell: Ellipsoid, T_wc: FloatArray, camera: Camera,
-                    detections: Sequence[Ellipse], tick: Callable[[], None] | None = None
-                    ) -> FloatArray:
-    """IoUs (k,) of ``detections`` (k) with the projections of ``ell`` from the poses ``T_wc``
-    (k, 4, 4) (0 where it does not project or cannot overlap: :func:`_may_overlap`), the areas
-    of all pairs in one batched call; ``tick`` is called every 256 projections."""
+def _projected_pairs(ell: Ellipsoid, T_wc: FloatArray, camera: Camera,
+                     detections: Sequence[Ellipse], tick: Callable[[], None] | None = None
+                     ) -> tuple[BoolArray, FloatArray, FloatArray]:
+    """The detections (k) that may overlap the projection of ``ell`` from the poses ``T_wc``
+    (k, 4, 4) (:func:`_may_overlap`) and where it projects to an ellipse: the mask (k,), and
+    the params (n, 5) of those projections and of those detections (n = mask count); ``tick``
+    is called every 256 projections."""
     T_wc = np.asarray(T_wc, dtype=float).reshape(-1, 4, 4)
     may = _may_overlap(ell, T_wc, camera, detections)
     proj: list[FloatArray] = []
@@ -377,9 +381,87 @@ def _projected_ious(ell: Ellipsoid, T_wc: FloatArray, camera: Camera,
             continue
         det.append(d.params())
         ok[i] = True
+    return ok, np.array(proj).reshape(-1, 5), np.array(det).reshape(-1, 5)
+
+
+def _projected_ious(ell: Ellipsoid, T_wc: FloatArray, camera: Camera,
+                    detections: Sequence[Ellipse], tick: Callable[[], None] | None = None
+                    ) -> FloatArray:
+    """IoUs (k,) of ``detections`` (k) with the projections of ``ell`` from the poses ``T_wc``
+    (k, 4, 4) (0 where it does not project or cannot overlap: :func:`_projected_pairs`), the
+    areas of all pairs in one batched call; ``tick`` is called every 256 projections."""
+    ok, proj, det = _projected_pairs(ell, T_wc, camera, detections, tick)
     ious = np.zeros(len(detections))
-    ious[ok] = ellipse_ious(np.array(proj).reshape(-1, 5), np.array(det).reshape(-1, 5))
+    ious[ok] = ellipse_ious(proj, det)
     return ious
+
+
+def _projected_cover(ell: Ellipsoid, T_wc: FloatArray, camera: Camera,
+                     detections: Sequence[Ellipse]) -> tuple[FloatArray, FloatArray]:
+    """Per detection (k): the fraction of its area inside the projection of ``ell`` from the
+    pose ``T_wc`` (k, 4, 4), and its IoU with that projection (both 0 where it does not project
+    or cannot overlap: :func:`_projected_pairs`)."""
+    ok, proj, det = _projected_pairs(ell, T_wc, camera, detections)
+    cover, ious = np.zeros(len(detections)), np.zeros(len(detections))
+    if ok.any():
+        inter = intersection_areas(proj, det)
+        det_area = np.pi * det[:, 2] * det[:, 3]
+        union = np.pi * proj[:, 2] * proj[:, 3] + det_area - inter
+        cover[ok] = np.where(det_area > 0, inter / np.where(det_area > 0, det_area, 1.0), 0.0)
+        ious[ok] = np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
+    return cover, ious
+
+
+def recruit_partial_views(objects: list[ObjectHypothesis], rejected: dict[int, str],
+                          obs: Sequence[Observation], T_wc: FloatArray, camera: Camera,
+                          opt: AssociationOptions, min_shared_frames: int = 2) -> int:
+    """Give the objects their partial views: a detection rejected as ``fits_no_object`` joins
+    an object of its label that has no detection in its frame, in a frame of the object's
+    place (:func:`quadloc.maps.building.loops.places` with ``min_shared_frames``: the frames
+    detecting any object seen with it; walls hide other rooms, so another room's view of a
+    same-label object brought close by drift is never offered), when at least
+    ``partial_cover`` of its area lies inside the object's projection from that frame's pose
+    ``T_wc`` and their IoU is at least ``partial_min_iou`` (the visible part of a truncated or
+    occluded object: its ellipse is that of the part, inside the whole's, so its IoU can fall
+    below ``min_iou``; the IoU floor keeps out a small detection inside a large projection),
+    and no other object of its label qualifies (ambiguous detections stay rejected). Updates
+    ``objects`` (their ``observations`` and ``ious``) and ``rejected`` in place; returns how
+    many detections joined."""
+    by_label: dict[str, list[int]] = {}
+    for k in rejected:
+        if rejected[k] == "fits_no_object":
+            by_label.setdefault(obs[k].label, []).append(k)
+    object_frames = object_frames_of([h.observations for h in objects], obs)
+    place_frames: dict[int, set[int]] = {}
+    for group in places(object_frames, min_shared_frames):
+        frames = {f for j in group for f in object_frames[j]}
+        for j in group:
+            place_frames[j] = frames
+    offers: dict[int, list[tuple[int, float]]] = {}  # detection -> (object, iou)
+    for j, h in enumerate(objects):
+        used = set(object_frames[j])
+        cand = [k for k in by_label.get(h.label, [])
+                if obs[k].frame not in used and obs[k].frame in place_frames[j]]
+        if not cand:
+            continue
+        cover, ious = _projected_cover(h.ellipsoid, T_wc[[obs[k].frame for k in cand]], camera,
+                                       [obs[k].ellipse for k in cand])
+        for k, c, iou in zip(cand, cover.tolist(), ious.tolist(), strict=True):
+            if c >= opt.partial_cover and iou >= opt.partial_min_iou:
+                offers.setdefault(k, []).append((j, iou))
+    best: dict[tuple[int, int], tuple[float, int]] = {}  # (object, frame) -> (iou, detection)
+    for k, js in offers.items():
+        if len(js) != 1:
+            continue
+        j, iou = js[0]
+        if iou > best.get((j, obs[k].frame), (-1.0, -1))[0]:
+            best[(j, obs[k].frame)] = (iou, k)
+    for (j, _), (iou, k) in best.items():
+        h = objects[j]
+        h.observations = sorted([*h.observations, k])
+        h.ious[k] = iou
+        del rejected[k]
+    return len(best)
 
 
 def associate(
@@ -590,7 +672,9 @@ def associate_windowed(
     in the shared frames (and 2). A chain keeps one detection per frame (the one most windows
     gave it) and a detection claimed by two chains goes to the larger. A recording within one
     window is :func:`associate` itself; a chain whose ellipsoid (all its views) is not of its
-    largest object's size (``size_ratio``) is that object alone; otherwise it keeps that
+    largest object's size (``size_ratio``) is split into its agreeing parts
+    (:func:`_split_chain`), and a part that still fails is its largest object with the part's
+    detections that object's ellipsoid explains (IoU >= ``min_iou``); otherwise it keeps that
     ellipsoid or its largest object's, whichever explains more of its views (IoU >=
     ``verify_iou``). The objects are verified
     (:func:`verify_objects`). Then the same-label objects split by the drift between
@@ -637,6 +721,7 @@ def associate_windowed(
         for k in h.observations:
             owners.setdefault(k, []).append(h_i)
     shared: dict[tuple[int, int], int] = {}
+    links: list[tuple[int, int]] = []  # the pairs of window objects chained
     for hs in owners.values():
         for a, b in itertools.combinations(sorted(hs), 2):
             shared[(a, b)] = shared.get((a, b), 0) + 1
@@ -648,20 +733,17 @@ def associate_windowed(
             return sum(lo <= observations[k].frame < hi for k in h.observations)
 
         if n >= 2 and n >= 0.5 * min(in_overlap(hyps[a]), in_overlap(hyps[b])):
+            links.append((a, b))
             ra, rb = find(a), find(b)
             if ra != rb:
                 parent[max(ra, rb)] = min(ra, rb)
     chains: dict[int, list[int]] = {}
     for h_i in range(len(hyps)):
         chains.setdefault(find(h_i), []).append(h_i)
-    votes: list[dict[int, int]] = []  # per chain: detection -> windows that gave it
-    for members in chains.values():
-        v: dict[int, int] = {}
-        for h_i in members:
-            for k in hyps[h_i].observations:
-                v[k] = v.get(k, 0) + 1
-        votes.append(v)
-    chain_list = list(chains.values())
+    T_wc = np.asarray(world_from_camera, dtype=float)
+    chain_list = [part for members in chains.values()
+                  for part in _split_chain(members, hyps, links, observations, T_wc, camera, opt)]
+    votes = [_chain_votes(members, hyps) for members in chain_list]
     size = [len(v) for v in votes]
     claim: dict[int, int] = {}
     for c, v in enumerate(votes):
@@ -669,7 +751,6 @@ def associate_windowed(
             if k not in claim or size[c] > size[claim[k]]:
                 claim[k] = c
     objects: list[ObjectHypothesis] = []
-    T_wc = np.asarray(world_from_camera, dtype=float)
     for c, members in enumerate(chain_list):
         per_frame: dict[int, int] = {}
         for k, n in sorted(votes[c].items()):
@@ -688,8 +769,13 @@ def associate_windowed(
             if chained is None or not _same_size(chained, ell, opt.size_ratio):
                 # no ellipsoid of the objects' size fits the chain's views together: the
                 # chain joins two objects (e.g. of two rooms); the largest window's object
-                # alone is kept
-                idx = sorted(k for k in hyps[largest].observations if claim[k] == c)
+                # is kept with its detections and those of the chain its ellipsoid explains
+                # (IoU >= min_iou: the other object's views do not overlap it)
+                own = {k for k in hyps[largest].observations if claim[k] == c}
+                fit = _projected_ious(ell, T_wc[[observations[k].frame for k in idx]], camera,
+                                      [observations[k].ellipse for k in idx])
+                idx = sorted(k for k, v in zip(idx, fit.tolist(), strict=True)
+                             if k in own or v >= opt.min_iou)
                 if len(idx) < opt.min_views:
                     continue
             else:
@@ -713,6 +799,62 @@ def associate_windowed(
     rejected = {k: rejected_any.get(k, "fits_no_object") for k in range(len(observations))
                 if k not in assigned}
     return objects, rejected
+
+
+def _chain_votes(members: Sequence[int], hyps: Sequence[ObjectHypothesis]) -> dict[int, int]:
+    """Per detection of a chain of window objects (``members``, indices into ``hyps``): how
+    many of its windows' objects hold it."""
+    v: dict[int, int] = {}
+    for h_i in members:
+        for k in hyps[h_i].observations:
+            v[k] = v.get(k, 0) + 1
+    return v
+
+
+def _split_chain(members: list[int], hyps: Sequence[ObjectHypothesis],
+                 links: Sequence[tuple[int, int]], obs: Sequence[Observation],
+                 T_wc: FloatArray, camera: Camera, opt: AssociationOptions) -> list[list[int]]:
+    """A chain of window objects (``members``, indices into ``hyps``; ``links``: the chained
+    pairs) as it is when the ellipsoid of its views together (one detection per frame, the one
+    most windows gave) is of its largest object's size (``size_ratio``); otherwise split into
+    the connected parts of its AGREEING links only: both objects' ellipsoids of one size
+    (``size_ratio``) with centres within ``merge_factor`` x the larger largest semi-axis. A
+    chain fails when a window's object bridges two physical objects (e.g. a few detections of
+    another room's object, close by drift): its links to each side cannot both agree, so the
+    split gives each object back its chain instead of keeping only the chain's largest window
+    object (the others' detections were lost)."""
+    if len(members) < 2:
+        return [members]
+    votes = _chain_votes(members, hyps)
+    per_frame: dict[int, int] = {}
+    for k, n in sorted(votes.items()):
+        f = obs[k].frame
+        if f not in per_frame or n > votes[per_frame[f]]:
+            per_frame[f] = k
+    largest = max(members, key=lambda h_i: len(hyps[h_i].observations))
+    chained = reconstruct_initial(sorted(per_frame.values()), obs, T_wc, camera, opt)
+    if chained is not None and _same_size(chained, hyps[largest].ellipsoid, opt.size_ratio):
+        return [members]
+    inside = set(members)
+    parent = {h_i: h_i for h_i in members}
+
+    def find(a: int) -> int:
+        while parent[a] != a:
+            a = parent[a]
+        return a
+
+    for a, b in links:
+        if a not in inside or b not in inside:
+            continue
+        ea, eb = hyps[a].ellipsoid, hyps[b].ellipsoid
+        if _same_size(ea, eb, opt.size_ratio) and _overlapping(ea, eb, opt.merge_factor):
+            ra, rb = find(a), find(b)
+            if ra != rb:
+                parent[max(ra, rb)] = min(ra, rb)
+    parts: dict[int, list[int]] = {}
+    for h_i in members:
+        parts.setdefault(find(h_i), []).append(h_i)
+    return list(parts.values())
 
 
 #: Frames without a detection of an object that end one of its time segments

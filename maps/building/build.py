@@ -28,6 +28,7 @@ from quadloc.maps.building.association import (
     associate_windowed,
     merge_duplicates,
     reconstruct_initial,
+    recruit_partial_views,
 )
 from quadloc.maps.building.joint import ObjectQuality, refine_jointly
 from quadloc.maps.building.loops import (
@@ -61,7 +62,8 @@ MIN_VIEWS_UNCONSTRAINED = 15
 #: keeps them (the default; why: docs/design/maps.md, "Build jobs").
 MAX_CENTER_STD_M: float | None = None
 #: Objects detected in fewer than this fraction of the frames of their place (:func:`places`)
-#: that had them in view (centre in front of the camera and inside the image) are left out
+#: that had them in view (centre in front of the camera and inside the image, and looking at
+#: least as large as in the smallest view they were detected in) are left out
 #: (``rarely_seen``: a wrong label's phantom, a spurious cluster; a real object is detected in
 #: most frames that see it).
 MIN_VIEW_FRACTION = 0.25
@@ -82,12 +84,15 @@ def _drop_detail(reason: str, shape_problem: str | None, q: ObjectQuality) -> st
     return f"centre uncertain by {q.center_std_m:.3g} m along some direction"
 
 
-def _in_view_counts(centres: FloatArray, object_frames: Sequence[Sequence[int]],
-                    T_wc: FloatArray,
+def _in_view_counts(centres: FloatArray, radii: FloatArray,
+                    object_frames: Sequence[Sequence[int]], T_wc: FloatArray,
                     camera: Camera, min_shared_frames: int) -> IntArray:
     """Per object, how many frames of its place (:func:`places`: the frames detecting any of
     the place's objects) have its centre (n, 3) in front of the camera and inside the image
-    (poses ``T_wc`` (F, 4, 4))."""
+    (poses ``T_wc`` (F, 4, 4)) and show it at least as large as the smallest view it was
+    detected in (apparent size: ``radii`` (n,), its largest semi-axis in metres, over the
+    depth; frames where it looks smaller than in all of its detections do not count: a
+    detector misses small far objects, e.g. a light switch across the room)."""
     out = np.zeros(len(centres), dtype=int)
     for group in places(object_frames, min_shared_frames):
         fr = np.unique(np.concatenate([np.asarray(object_frames[k], dtype=int)
@@ -99,7 +104,14 @@ def _in_view_counts(centres: FloatArray, object_frames: Sequence[Sequence[int]],
         with np.errstate(divide="ignore", invalid="ignore"):
             u = camera.fx * pc[..., 0] / z + camera.cx
             v = camera.fy * pc[..., 1] / z + camera.cy
+            size = radii[group][None] / z  # apparent size (rad), (frames, objects)
         seen = (z > 0.05) & (u >= 0) & (u <= camera.width) & (v >= 0) & (v <= camera.height)
+        row = {int(f): i for i, f in enumerate(fr.tolist())}
+        for j, k in enumerate(group):
+            own = [row[int(f)] for f in object_frames[k]]
+            detected = size[own, j][z[own, j] > 0.05]
+            if len(detected):
+                seen[:, j] &= size[:, j] >= float(detected.min())
         out[group] = seen.sum(axis=0)
     return out
 
@@ -200,6 +212,8 @@ def build_map(
     if n_loops:
         objects = merge_duplicates(objects, obs, T_init, recording.camera, opt,
                                    lambda: on_label("", 1.0))
+    recruit_partial_views(objects, rejected, obs, T_init, recording.camera, opt,
+                          loops.min_shared_frames)
     t_assoc = time.perf_counter() - t0
     report_progress("refining", 50.0, len(objects))
 
@@ -216,6 +230,7 @@ def build_map(
             max_iterations=max_iterations, deadline=deadline, progress=on_iter,
             initial_world_from_camera=T_init)
         in_view = _in_view_counts(np.array([e.center for e in joint.ellipsoids]),
+                                  np.array([float(e.axes.max()) for e in joint.ellipsoids]),
                                   object_frames_of([h.observations for h in objects], obs),
                                   joint.world_from_camera, recording.camera,
                                   loops.min_shared_frames)
