@@ -98,6 +98,16 @@ class CompiledMap(MapVersionView):
             object.__setattr__(self, "_positions", positions)
         return positions
 
+    @property
+    def mean_radii(self) -> FloatArray:
+        """``(N,)`` each object's size as one radius, m: the geometric mean of its semi-axes;
+        memoised."""
+        radii: FloatArray | None = self.__dict__.get("_mean_radii")
+        if radii is None:
+            radii = _frozen(np.prod(self.axes, axis=1) ** (1.0 / 3.0))
+            object.__setattr__(self, "_mean_radii", radii)
+        return radii
+
     def index_of(self, object_id: str) -> int:
         """Position of ``object_id`` in the arrays (:attr:`positions`); ``KeyError`` if
         absent."""

@@ -184,7 +184,7 @@ def build_place_index(compiled: CompiledMap, view_range_m: float = VIEW_RANGE_M)
     labels = tuple(sorted(set(compiled.categories)))
     code = {c: k for k, c in enumerate(labels)}
     codes = np.array([code[c] for c in compiled.categories], dtype=np.intp)
-    radius = np.prod(np.asarray(compiled.axes, dtype=float).reshape(n, 3), axis=1) ** (1.0 / 3.0)
+    radius = compiled.mean_radii.reshape(n)
     cell_ids = (np.unique(cells, axis=0, return_inverse=True)[1].ravel().astype(np.intp)
                 if n else np.zeros(0, dtype=np.intp))
     return PlaceIndex(view_range_m, _frozen(centers), _frozen(cells), grid_arrays,

@@ -56,16 +56,6 @@ def object_zones(compiled: CompiledMap) -> IntArray:
     return memo
 
 
-def _mean_radii(compiled: CompiledMap) -> FloatArray:
-    """Per map object (N,), the geometric mean of its semi-axes (m); memoised on the compiled
-    map."""
-    memo: FloatArray | None = compiled.__dict__.get("_mean_radii")
-    if memo is None:
-        memo = np.prod(compiled.axes, axis=1) ** (1.0 / 3.0)
-        compiled.__dict__["_mean_radii"] = memo
-    return memo
-
-
 def predicted_in_view(compiled: CompiledMap, camera: Camera, camera_from_world: FloatArray,
                       rule: ViewRule) -> IntArray:
     """Sorted indices (into ``compiled``) of the objects predicted in view from
@@ -85,7 +75,7 @@ def predicted_in_view(compiled: CompiledMap, camera: Camera, camera_from_world: 
     mx, my = rule.inset_fraction * w, rule.inset_fraction * h
     ok = (u >= mx) & (u < w - mx) & (v >= my) & (v < h - my)
     if rule.max_truncation is not None or rule.min_area_px is not None:
-        r = 0.5 * (camera.fx + camera.fy) * _mean_radii(compiled)[idx] / z
+        r = 0.5 * (camera.fx + camera.fy) * compiled.mean_radii[idx] / z
         if rule.min_area_px is not None:
             ok &= np.pi * r * r >= rule.min_area_px
         if rule.max_truncation is not None:

@@ -296,7 +296,7 @@ def centre_hits(camera: Camera, camera_from_world: FloatArray, local: IntArray,
     0 when there is none. Returns (M,) the sums over the detections (at most D). One compiled
     kernel (:func:`_centre_hits_kernel`): no (M, L, D) temporaries. The place search calls
     :func:`_anchor_hits` (the same kernel on the place index's own tables)."""
-    radius = np.prod(compiled.axes, axis=1) ** (1.0 / 3.0)
+    radius = compiled.mean_radii
     codes = np.asarray(object_codes, dtype=np.intp)
     return _hits(camera, camera_from_world, np.arange(len(camera_from_world), dtype=np.intp),
                  _readonly(local, np.intp), _readonly(local_valid, bool),

@@ -20,6 +20,7 @@ left out of it: this lookup finds it again.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Iterable, Iterator
 
 import numpy as np
 
@@ -75,21 +76,33 @@ def copy_transforms(compiled: CompiledMap, objects: IntArray,
         candidates = _dense_triplets(compiled, P, labels, trip, tolerance_m)
     else:
         candidates = _indexed_triplets(index, P, labels, trip, tolerance_m)
-    centroid = P.mean(axis=0)
     own = {int(idx[a]), int(idx[b]), int(idx[c])}
-    out: list[tuple[float, FloatArray]] = []
-    for q in candidates:
-        if len(set(q.tolist())) < 3 or set(q.tolist()) == own:
-            continue
-        G = rigid_fit(P[[a, b, c]], compiled.centers[q])
-        moved = P @ G[:3, :3].T + G[:3, 3]
-        if not all(_has_object(compiled, moved[m], labels[m], tolerance_m, index)
+
+    def fits() -> Iterator[FloatArray]:
+        for q in candidates:
+            if len(set(q.tolist())) < 3 or set(q.tolist()) == own:
+                continue
+            G = rigid_fit(P[[a, b, c]], compiled.centers[q])
+            moved = P @ G[:3, :3].T + G[:3, 3]
+            if all(_has_object(compiled, moved[m], labels[m], tolerance_m, index)
                    for m in range(len(idx))):
-            continue
+                yield G
+
+    return _nearest_copies(fits(), P, max_copies, stop_early=index is not None)
+
+
+def _nearest_copies(transforms: Iterable[FloatArray], P: FloatArray, max_copies: int,
+                    stop_early: bool) -> list[FloatArray]:
+    """The transforms (4x4) of ``transforms`` other than the identity, ordered by how far
+    they move the centroid of ``P`` (n, 3), at most ``max_copies``; with ``stop_early``, the
+    first ``max_copies`` found (the candidates come nearest first)."""
+    centroid = P.mean(axis=0)
+    out: list[tuple[float, FloatArray]] = []
+    for G in transforms:
         if np.allclose(G, np.eye(4), atol=1e-6):
             continue
         out.append((float(np.linalg.norm(G[:3, :3] @ centroid + G[:3, 3] - centroid)), G))
-        if index is not None and len(out) >= max_copies:
+        if stop_early and len(out) >= max_copies:
             break
     out.sort(key=lambda x: x[0])
     return [G for _, G in out[:max_copies]]
@@ -202,19 +215,13 @@ def _pair_copies(compiled: CompiledMap, idx: IntArray, tolerance_m: float, max_c
         pa, pb = pa[sel], pb[sel]
         near_first = np.argsort(np.linalg.norm(cen[pa] - P[0], axis=1), kind="stable")
         pairs = list(zip(pa[near_first].tolist(), pb[near_first].tolist(), strict=True))
-    out: list[tuple[float, FloatArray]] = []
-    centroid = P.mean(axis=0)
-    for qa, qb in pairs:
-        if qa == qb or {qa, qb} == set(idx.tolist()):
-            continue
-        lq = flat(cen[qb] - cen[qa])
-        theta = float(np.arctan2(np.cross(lp, lq) @ up, lp @ lq))
-        R = so3_exp(theta * up)
-        G = pose_matrix(R, cen[qa] - R @ P[0])
-        if np.allclose(G, np.eye(4), atol=1e-6):
-            continue
-        out.append((float(np.linalg.norm(G[:3, :3] @ centroid + G[:3, 3] - centroid)), G))
-        if index is not None and len(out) >= max_copies:
-            break
-    out.sort(key=lambda x: x[0])
-    return [G for _, G in out[:max_copies]]
+    def fits() -> Iterator[FloatArray]:
+        for qa, qb in pairs:
+            if qa == qb or {qa, qb} == set(idx.tolist()):
+                continue
+            lq = flat(cen[qb] - cen[qa])
+            theta = float(np.arctan2(np.cross(lp, lq) @ up, lp @ lq))
+            R = so3_exp(theta * up)
+            yield pose_matrix(R, cen[qa] - R @ P[0])
+
+    return _nearest_copies(fits(), P, max_copies, stop_early=index is not None)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -12,6 +13,7 @@ from quadloc.factors.conics import Ellipse
 from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import compile_map
 from quadloc.service.localization.scoring import sunflower_disk
+from quadloc.service.localization.types import Detection
 from tests.support.helpers import level
 from tests.support.reference_data import load_chess_map, load_chess_world_from_camera
 from tests.support.simulate import (
@@ -59,24 +61,30 @@ def test_exact_detections_are_exact_projections():
         assert det.sigma is None
 
 
-def test_partial_visibility_gives_the_ellipse_of_the_visible_part():
-    cfg = SimulationConfig.exact(clip_to_image=True)
-    checked = 0
+def _partly_visible(cfg: SimulationConfig) -> Iterator[tuple[Detection, Ellipse, float]]:
+    """(detection, full projection, visible fraction) of the objects 30-97 % visible in every
+    7th real Chess pose simulated with ``cfg``."""
     for i in range(0, 108, 7):
         frame = simulate_frame(MAP, CAMERA, POSES[i], 0, cfg)
         for det, full, frac in zip(frame.detections, frame.full_projections,
                                    frame.visible_fraction, strict=True):
-            if frac >= 0.97 or frac < 0.3:
-                continue
-            ref, area = raster_moment_ellipse(full, CAMERA.width, CAMERA.height)
-            # shrinks to the visible part: smaller than the full projection, inside the image
-            assert det.ellipse.area < full.area
-            assert area == pytest.approx(frac * full.area, rel=0.02)
-            size = math.sqrt(ref.a * ref.b)
-            assert np.linalg.norm(det.ellipse.center - ref.center) < 0.01 * size + 0.2
-            assert det.ellipse.a == pytest.approx(ref.a, rel=0.02)
-            assert det.ellipse.b == pytest.approx(ref.b, rel=0.02)
-            checked += 1
+            if 0.3 <= frac < 0.97:
+                yield det, full, float(frac)
+
+
+def test_partial_visibility_gives_the_ellipse_of_the_visible_part():
+    cfg = SimulationConfig.exact(clip_to_image=True)
+    checked = 0
+    for det, full, frac in _partly_visible(cfg):
+        ref, area = raster_moment_ellipse(full, CAMERA.width, CAMERA.height)
+        # shrinks to the visible part: smaller than the full projection, inside the image
+        assert det.ellipse.area < full.area
+        assert area == pytest.approx(frac * full.area, rel=0.02)
+        size = math.sqrt(ref.a * ref.b)
+        assert np.linalg.norm(det.ellipse.center - ref.center) < 0.01 * size + 0.2
+        assert det.ellipse.a == pytest.approx(ref.a, rel=0.02)
+        assert det.ellipse.b == pytest.approx(ref.b, rel=0.02)
+        checked += 1
     assert checked >= 3  # the real poses do truncate objects
 
 
@@ -86,22 +94,17 @@ def test_box_detector_gives_the_ellipse_inscribed_in_the_visible_box():
     grid inside the projection and the image; up to the spacing of the visibility samples)."""
     cfg = SimulationConfig.exact(clip_to_image=True).with_(visible_ellipse="box")
     checked = 0
-    for i in range(0, 108, 7):
-        frame = simulate_frame(MAP, CAMERA, POSES[i], 0, cfg)
-        for det, full, frac in zip(frame.detections, frame.full_projections,
-                                   frame.visible_fraction, strict=True):
-            if frac >= 0.97 or frac < 0.3:
-                continue
-            e = det.ellipse
-            assert e.angle == 0.0
-            x0, y0, x1, y1 = np.clip(full.bbox(), 0.0, [CAMERA.width, CAMERA.height] * 2)
-            X, Y = np.meshgrid(np.arange(x0, x1, 0.25) + 0.125, np.arange(y0, y1, 0.25) + 0.125)
-            grid = np.column_stack([X.ravel(), Y.ravel()])
-            grid = grid[level(full, grid) <= 1.0]
-            box = np.r_[grid.min(axis=0), grid.max(axis=0)]
-            spacing = math.sqrt(full.area / cfg.n_visibility_samples)
-            np.testing.assert_allclose(e.bbox(), box, atol=2.0 * spacing)
-            checked += 1
+    for det, full, _ in _partly_visible(cfg):
+        e = det.ellipse
+        assert e.angle == 0.0
+        x0, y0, x1, y1 = np.clip(full.bbox(), 0.0, [CAMERA.width, CAMERA.height] * 2)
+        X, Y = np.meshgrid(np.arange(x0, x1, 0.25) + 0.125, np.arange(y0, y1, 0.25) + 0.125)
+        grid = np.column_stack([X.ravel(), Y.ravel()])
+        grid = grid[level(full, grid) <= 1.0]
+        box = np.r_[grid.min(axis=0), grid.max(axis=0)]
+        spacing = math.sqrt(full.area / cfg.n_visibility_samples)
+        np.testing.assert_allclose(e.bbox(), box, atol=2.0 * spacing)
+        checked += 1
     assert checked >= 3
     with pytest.raises(ValueError, match="visible_ellipse"):
         SimulationConfig(visible_ellipse="hull")
