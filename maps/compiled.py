@@ -18,7 +18,7 @@ import numpy as np
 
 from quadloc.factors.arrays import FloatArray, IntArray
 from quadloc.factors.camera import Ellipsoid
-from quadloc.maps.model import SceneMap
+from quadloc.maps.model import SceneMap, take
 
 __all__ = ["CompiledMap", "compile_map", "compiled_subset"]
 
@@ -167,13 +167,14 @@ def compiled_subset(compiled: CompiledMap, indices: IntArray) -> CompiledMap:
     request takes the sub-map of a few places of a large map), memoised on its sub-map like
     :func:`compile_map`'s."""
     idx = np.asarray(indices, dtype=np.intp)
-    sub = compiled.scene_map.subset(idx.tolist())
-    categories = tuple(compiled.categories[i] for i in idx.tolist())
+    rows = idx.tolist()
+    sub = compiled.scene_map.subset(rows)
+    categories = take(compiled.categories, rows)
     cats = np.array(categories, dtype=object)
     indices_by_category = {c: _frozen_indices(np.flatnonzero(cats == c).astype(np.intp))
                            for c in dict.fromkeys(categories)}
-    out = CompiledMap(sub, tuple(compiled.object_ids[i] for i in idx.tolist()), categories,
-                      tuple(compiled.ellipsoids[i] for i in idx.tolist()),
+    out = CompiledMap(sub, take(compiled.object_ids, rows), categories,
+                      take(compiled.ellipsoids, rows),
                       _frozen(compiled.centers[idx]), _frozen(compiled.axes[idx]),
                       _frozen(compiled.rotations[idx]), _frozen(compiled.shape_matrices[idx]),
                       _frozen(compiled.dual_quadrics[idx]), indices_by_category)

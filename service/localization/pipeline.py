@@ -482,7 +482,6 @@ def _place_stage(
     params = np.array([detections[i].ellipse.params() for i in usable])
     index = place_index(compiled)
     seeds = place_seeds(compiled, index, camera, params, [detections[i].label for i in usable],
-                        np.random.default_rng(options.seed),
                         Deadline.cpu_budget(options.time_budget_ms, cpu_start=cpu0,
                                             wall_start=t0), hinted)
     timings["places"] = (time.perf_counter() - tp) * 1e3
