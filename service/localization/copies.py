@@ -13,8 +13,8 @@ On a large map (with its :class:`~quadloc.maps.places.PlaceIndex`) the candidate
 the index's constellations (same-label pairs at the same distance) and the other objects are
 looked up in its grid: no pass over every object of a label. The place search keeps at most
 :data:`~quadloc.service.localization.constellations.MAX_TRIPLETS` map triplets per detection
-triple (a random subset when more are possible), so the other copy of a twinned room can be
-left out of it: this lookup finds it again.
+triple (those of least misfit, at most a few of one geometry), so the other copy of a twinned
+room can be left out of it: this lookup finds it again.
 """
 
 from __future__ import annotations
