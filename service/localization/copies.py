@@ -61,14 +61,18 @@ def copy_transforms(compiled: CompiledMap, objects: IntArray,
     if len(idx) == 2:
         return _pair_copies(compiled, idx, tolerance_m, max_copies, index)
 
+    # the objects' pairwise centre distances, once (not per triple: C(n, 3) triples)
+    dist = {(a, b): float(np.linalg.norm(P[a] - P[b]))
+            for a, b in itertools.combinations(range(len(idx)), 2)}
+
     def spread(t: tuple[int, ...]) -> float:
-        return sum(float(np.linalg.norm(P[a] - P[b])) for a, b in itertools.combinations(t, 2))
+        return sum(dist[pair] for pair in itertools.combinations(t, 2))
 
     triples = list(itertools.combinations(range(len(idx)), 3))
     if index is not None:
         reach = index.view_range_m - tolerance_m
-        triples = [t for t in triples if all(float(np.linalg.norm(P[a] - P[b])) <= reach
-                                             for a, b in itertools.combinations(t, 2))]
+        triples = [t for t in triples
+                   if all(dist[pair] <= reach for pair in itertools.combinations(t, 2))]
         if not triples:
             return []  # no covisible triplet: the objects are no constellation of the index
     a, b, c = trip = max(triples, key=spread)
