@@ -38,6 +38,10 @@ import numpy as np
 from bench.results_doc import update_results_section
 from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import compile_map
+from quadloc.service.localization.map_calibration import (
+    calibration_error,
+    calibration_error_floor,
+)
 from quadloc.service.localization.pipeline import localize
 from quadloc.service.localization.types import LocalizationOptions
 from quadloc.service.tracking.session import FrameInput, SessionOptions, TrackingSession
@@ -452,6 +456,17 @@ def confidence_reliability(walks: list[dict], edges: tuple[float, ...] = (
     return out
 
 
+def confidence_calibration(walks: list[dict]) -> dict:
+    """Expected calibration error of the tracking frames' confidence (10 equal-width bins,
+    success = within 10 cm / 5°) and the error a calibrated confidence shows on as many
+    frames by sampling alone (the shared formulas of map calibration)."""
+    track = [x for w in walks for x in w["rows"] if x["state"] == "tracking"]
+    p = np.array([x["conf"] for x in track], dtype=float)
+    y = np.array([x["pos"] <= 0.1 and x["rot"] <= 5 for x in track], dtype=float)
+    return {"frames": len(track), "ece": calibration_error(p, y),
+            "ece_floor": calibration_error_floor(p)}
+
+
 def run_buildings(sizes: list[int], modes: list[str], seeds: list[int], walks: int,
                   options: SessionOptions) -> dict:
     """Every (mode, size): ``walks`` walks per base seed (building seed = base seed, walk seeds
@@ -475,6 +490,7 @@ def run_buildings(sizes: list[int], modes: list[str], seeds: list[int], walks: i
                                                 if k != "per_walk"}, default=float),
                   file=sys.stderr)
     out["reliability"] = confidence_reliability(everything)
+    out["calibration"] = confidence_calibration(everything)
     return out
 
 
@@ -504,6 +520,12 @@ def building_markdown(out: dict) -> str:
               + "; ".join(
         f"{r['bin']}: {r['frames']} frames, mean {_f(r['mean_confidence'], 3)}, within "
         f"{_f(r['within_10cm_5deg'], 3)}" for r in out["reliability"]) + "."]
+    cal = out.get("calibration")
+    if cal:
+        lines += ["", f"Expected calibration error of that confidence over the {cal['frames']} "
+                  f"tracking frames (10 equal-width bins): {_f(cal['ece'], 4)}; a calibrated "
+                  f"confidence on as many frames shows {_f(cal['ece_floor'], 4)} by sampling "
+                  "alone."]
     return "\n".join(lines)
 
 

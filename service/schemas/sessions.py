@@ -134,8 +134,9 @@ class SessionFrameOut(BaseModel):
                                            "lost, time_budget_exceeded (the frame was counted "
                                            "but not fused: its CPU budget or its request's ran "
                                            "out); with a pose: detections_unexplained (the "
-                                           "frame's detections contradict the pose; confidence "
-                                           "0); else None.")
+                                           "frame's usable detections are all unexplained at "
+                                           "the pose; confidence 0 when two or more are, lowered "
+                                           "when one is); else None.")
     world_from_camera: PoseOut | None
     covariance: CovarianceOut | None
     world_from_odom: PoseOut | None = Field(
@@ -147,8 +148,11 @@ class SessionFrameOut(BaseModel):
     confidence: float = Field(ge=0, le=1, description="P(pose within 10 cm and 5 deg): the "
                                                       "posterior probability of the session's "
                                                       "place times P(within tolerance) under "
-                                                      "the pose posterior; 0 unless tracking "
-                                                      "and 0 when detections_unexplained.")
+                                                      "the pose posterior; 0 unless tracking; "
+                                                      "when detections_unexplained, 0 with two "
+                                                      "or more unexplained detections, lowered "
+                                                      "by Bayes' rule (likelihood ratio 0.1) "
+                                                      "with one.")
     inliers: list[InlierOut]
     zone: str | None = Field(default=None, description=ZONE_RULE)
     candidates: list[PlaceCandidateOut] = Field(

@@ -551,7 +551,8 @@ class TrackingSession:
         place_p = self._places.probability(committed) if committed is not None else 0.0
         return FrameResult(index, frame.frame_id, float(frame.timestamp), self.state, T, cov,
                            T_wo, cov_wo, tuple(inliers),
-                           session_confidence(self.state, cov, contradicted, place_p),
+                           session_confidence(self.state, cov, n_usable if contradicted else 0,
+                                              place_p),
                            n_usable, reason, timings,
                            self._places.candidates(T_oc, committed, T))
 

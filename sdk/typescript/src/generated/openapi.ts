@@ -1,6 +1,6 @@
 // GENERATED FILE: do not edit. `npm run generate` (in sdk/typescript) rewrites it from
 // docs/openapi.json with openapi-typescript 7.13.0.
-// openapi-sha256: de385f504ae5887507d84d68f1b43a5597844a4bc757f4c07cb4f07644cb103d
+// openapi-sha256: 0bb554bd25224c1e8e1d86cf61d4a35b3c7d1ca8b50499c88b9572798bbcaba9
 
 export interface paths {
     "/v1/maps/{map_id}/localize": {
@@ -1496,7 +1496,7 @@ export interface components {
             state: string;
             /**
              * Reason
-             * @description Why no pose: waiting_for_constraints, ambiguous, lost, time_budget_exceeded (the frame was counted but not fused: its CPU budget or its request's ran out); with a pose: detections_unexplained (the frame's detections contradict the pose; confidence 0); else None.
+             * @description Why no pose: waiting_for_constraints, ambiguous, lost, time_budget_exceeded (the frame was counted but not fused: its CPU budget or its request's ran out); with a pose: detections_unexplained (the frame's usable detections are all unexplained at the pose; confidence 0 when two or more are, lowered when one is); else None.
              */
             reason: string | null;
             world_from_camera: components["schemas"]["PoseOut"] | null;
@@ -1507,7 +1507,7 @@ export interface components {
             world_from_odom_covariance: components["schemas"]["CovarianceOut"] | null;
             /**
              * Confidence
-             * @description P(pose within 10 cm and 5 deg): the posterior probability of the session's place times P(within tolerance) under the pose posterior; 0 unless tracking and 0 when detections_unexplained.
+             * @description P(pose within 10 cm and 5 deg): the posterior probability of the session's place times P(within tolerance) under the pose posterior; 0 unless tracking; when detections_unexplained, 0 with two or more unexplained detections, lowered by Bayes' rule (likelihood ratio 0.1) with one.
              */
             confidence: number;
             /** Inliers */
