@@ -324,6 +324,15 @@ def _triplets(index: PlaceIndex, camera: Camera, params: FloatArray,
     return out
 
 
+def _rank_in_runs(sorted_keys: np.ndarray) -> IntArray:
+    """Each element's position (0, 1, ...) within its run of equal values of ``sorted_keys``
+    (n,) (equal values adjacent)."""
+    n = len(sorted_keys)
+    start = np.flatnonzero(np.r_[True, sorted_keys[1:] != sorted_keys[:-1]])
+    rank: IntArray = np.arange(n) - np.repeat(start, np.diff(np.r_[start, n]))
+    return rank
+
+
 def _least_misfit(misfit: FloatArray, cap: int, per_shape: int) -> IntArray:
     """Positions of the ``cap`` triplets of least ``misfit`` (T,), at most ``per_shape`` of
     each value (rounded to :data:`SAME_SHAPE_RESOLUTION`): exact copies of a room give the
@@ -335,9 +344,7 @@ def _least_misfit(misfit: FloatArray, cap: int, per_shape: int) -> IntArray:
         part = (np.argpartition(misfit, pool - 1)[:pool] if pool < len(misfit)
                 else np.arange(len(misfit)))
         order = part[np.argsort(misfit[part], kind="stable")]
-        key = np.round(misfit[order] / SAME_SHAPE_RESOLUTION)
-        start = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
-        rank = np.arange(len(key)) - np.repeat(start, np.diff(np.r_[start, len(key)]))
+        rank = _rank_in_runs(np.round(misfit[order] / SAME_SHAPE_RESOLUTION))
         picked: IntArray = order[rank < per_shape][:cap]
         if len(picked) == cap or pool == len(misfit):
             return picked
@@ -495,9 +502,7 @@ def _first_per_place(ranking: IntArray, place_key: IntArray, per_place: int) -> 
     ``per_place``), so its loop runs over places, not over every pose."""
     keys = place_key[ranking]
     by_key = np.argsort(keys, kind="stable")
-    sorted_keys = keys[by_key]
-    starts = np.flatnonzero(np.r_[True, sorted_keys[1:] != sorted_keys[:-1]])
-    rank = np.arange(len(keys)) - np.repeat(starts, np.diff(np.r_[starts, len(keys)]))
+    rank = _rank_in_runs(keys[by_key])
     keep = np.zeros(len(keys), dtype=bool)
     keep[by_key[rank < per_place]] = True
     out: IntArray = ranking[keep]
