@@ -447,6 +447,21 @@ def _misfits(cm, cam, params: np.ndarray, trip: np.ndarray) -> np.ndarray:
     return total
 
 
+def _whole_and_capped(idx, cam, bf, cap: int, monkeypatch: pytest.MonkeyPatch
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The detections' params (D, 5) of frame ``bf``, and the map triplets of its detections
+    0-1-2 without the cap (as the search sees them at the shipped MAX_TRIPLETS) and with
+    MAX_TRIPLETS = ``cap``."""
+    dets = bf.frame.detections
+    params = np.array([d.ellipse.params() for d in dets])
+    labels = [d.label for d in dets]
+    whole = constellations._triplets(idx, cam, params, labels, (0, 1, 2))
+    with monkeypatch.context() as m:
+        m.setattr(constellations, "MAX_TRIPLETS", cap)
+        kept = constellations._triplets(idx, cam, params, labels, (0, 1, 2))
+    return params, whole, kept
+
+
 def test_capped_triplets_are_those_of_least_misfit(monkeypatch: pytest.MonkeyPatch) -> None:
     """Past the cap, _triplets keeps the triplets whose misfit (written out in _misfits) is
     least: every kept one's misfit is at most every dropped one's (1e-9: rounding)."""
@@ -456,13 +471,7 @@ def test_capped_triplets_are_those_of_least_misfit(monkeypatch: pytest.MonkeyPat
     cam, frames = building_frames(b, 4, seed=72, min_detections=4)
     cap = 12
     for bf in frames:
-        dets = bf.frame.detections
-        params = np.array([d.ellipse.params() for d in dets])
-        labels = [d.label for d in dets]
-        whole = constellations._triplets(idx, cam, params, labels, (0, 1, 2))
-        monkeypatch.setattr(constellations, "MAX_TRIPLETS", cap)
-        kept = constellations._triplets(idx, cam, params, labels, (0, 1, 2))
-        monkeypatch.undo()
+        params, whole, kept = _whole_and_capped(idx, cam, bf, cap, monkeypatch)
         assert len(kept) == min(cap, len(whole))
         if len(whole) <= cap:
             continue
@@ -494,16 +503,10 @@ def test_the_cap_keeps_a_few_copies_of_one_geometry(monkeypatch: pytest.MonkeyPa
     cap, per_shape = 20, constellations.SAME_SHAPE_TRIPLETS
     capped = 0
     for bf in frames:
-        dets = bf.frame.detections
-        params = np.array([d.ellipse.params() for d in dets])
-        labels = [d.label for d in dets]
-        whole = constellations._triplets(idx, cam, params, labels, (0, 1, 2))
+        _, whole, kept = _whole_and_capped(idx, cam, bf, cap, monkeypatch)
         if len(whole) <= cap:
             continue
         capped += 1
-        monkeypatch.setattr(constellations, "MAX_TRIPLETS", cap)
-        kept = constellations._triplets(idx, cam, params, labels, (0, 1, 2))
-        monkeypatch.undo()
         _, counts = np.unique(_shapes(cm, kept), axis=0, return_counts=True)
         _, whole_counts = np.unique(_shapes(cm, whole), axis=0, return_counts=True)
         assert counts.max() <= per_shape
@@ -525,19 +528,13 @@ def test_the_cap_keeps_the_true_triplet_of_a_large_building(monkeypatch: pytest.
     found = kept_true = 0
     chance = []
     for bf in frames:
-        dets = bf.frame.detections
         ids = bf.frame.object_ids
         if any(ids[k] is None for k in range(3)):
             continue
         true = tuple(cm.index_of(ids[k]) for k in range(3))
-        params = np.array([d.ellipse.params() for d in dets])
-        labels = [d.label for d in dets]
-        whole = constellations._triplets(idx, cam, params, labels, (0, 1, 2))
+        _, whole, kept = _whole_and_capped(idx, cam, bf, cap, monkeypatch)
         if true not in {tuple(t) for t in whole.tolist()} or len(whole) <= cap:
             continue
-        monkeypatch.setattr(constellations, "MAX_TRIPLETS", cap)
-        kept = constellations._triplets(idx, cam, params, labels, (0, 1, 2))
-        monkeypatch.undo()
         found += 1
         kept_true += true in {tuple(t) for t in kept.tolist()}
         chance.append(cap / len(whole))
