@@ -3,7 +3,8 @@
 Innovation: detection ellipse centre minus projected object centre (px), covariance
 ``S = J Sigma J^T + s_d^2 I`` (``Sigma`` the 6x6 ``[omega, v]`` pose covariance, body frame,
 right perturbation; ``J`` from :func:`centre_jacobians`); gates :data:`GATE_CHI2` and
-:data:`SIZE_RATIO_GATE`; one-to-one greedy by distance. Details:
+:data:`SIZE_RATIO_GATE`; a detection with two gated objects of nearly equal distance is
+left out (:data:`AMBIGUITY_MARGIN_CHI2`); one-to-one greedy by distance. Details:
 docs/design/service.md#data-association.
 """
 
@@ -20,12 +21,18 @@ from quadloc.factors.rotations import invert_pose, skew
 from quadloc.maps.compiled import CompiledMap
 from quadloc.service.localization.hypotheses import project_objects
 
-__all__ = ["GATE_CHI2", "Association", "associate", "centre_jacobians"]
+__all__ = ["AMBIGUITY_MARGIN_CHI2", "GATE_CHI2", "Association", "associate", "centre_jacobians"]
 
 GATE_CHI2 = 11.6
 DETECTION_CENTRE_FRACTION = 0.25
 DETECTION_CENTRE_FLOOR_PX = 3.0
 SIZE_RATIO_GATE = (0.4, 2.5)
+#: A detection whose second-nearest gated object is within this of its nearest (squared
+#: Mahalanobis distance; a likelihood ratio below ``exp(2)``, about 7) is ambiguous and left
+#: unassociated: the pose is too uncertain to say which of two objects of its label it is
+#: (after odometry-only stretches, entering a room; the nearest was the wrong one in the
+#: building walks, and its factor dragged the estimate so that it stayed the nearest).
+AMBIGUITY_MARGIN_CHI2 = 4.0
 
 
 @dataclass(frozen=True)
@@ -103,7 +110,12 @@ def associate(
             ratio = np.sqrt(e[2] * e[3]) / proj_size
             ok = (m2 <= GATE_CHI2) & (ratio >= SIZE_RATIO_GATE[0]) \
                 & (ratio <= SIZE_RATIO_GATE[1])
-            for k in np.flatnonzero(ok):
+            gated = np.flatnonzero(ok)
+            if len(gated) >= 2:
+                best, second = np.partition(m2[gated], 1)[:2]
+                if second - best < AMBIGUITY_MARGIN_CHI2:
+                    continue  # ambiguous: left unassociated
+            for k in gated:
                 cands.append((float(m2[k]), d, int(objs[k])))
     cands.sort()
     used_d: set[int] = set()

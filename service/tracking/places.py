@@ -7,8 +7,10 @@ Every frame scores every live hypothesis (at most :data:`MAX_HYPOTHESES`) with t
 frame's detections:
 
     LL_h = IOU_GAIN * sum(min(IoU, IOU_SATURATION) of its one-to-one inliers) / IOU_SATURATION
-           - MISS_PENALTY * (objects of its place predicted in view, not detected)
+           - MISS_PENALTY * min(1, n / AGEING_DETECTIONS)
+             * (objects of its place predicted in view, not detected)
 
+for a frame of ``n`` usable detections (:func:`_miss_weight`: detectors drop out in bursts),
 and a *null* hypothesis ("somewhere else") that explains each usable detection of a frame of at
 least :data:`NULL_MIN_DETECTIONS` usable detections with ``NULL_GAIN`` (a lone detection gains it
 nothing) and misses as few predicted objects as the best-placed hypothesis (misses are evidence
@@ -205,7 +207,7 @@ class PlaceSet:
                 matched[h] = {int(m.object_index) for m in ms}
         misses = np.array([len(self._in_view(cfw[h]) - matched[h]) for h in range(H)],
                           dtype=float)
-        return ll - MISS_PENALTY * misses, matched, misses
+        return ll - MISS_PENALTY * _miss_weight(len(labels)) * misses, matched, misses
 
     def predicts_objects_in_view(self, world_from_camera: FloatArray) -> bool:
         """Whether any object of the map is predicted in view from ``world_from_camera``
@@ -249,7 +251,7 @@ class PlaceSet:
             k = float(len(self._in_view(invert_pose(np.asarray(committed_world_from_camera,
                                                                float))) - m))
             by_h[id(committed)] = (_inlier_gain([q for _, q in committed_inliers])
-                                   - MISS_PENALTY * k, m, k)
+                                   - MISS_PENALTY * _miss_weight(len(labels)) * k, m, k)
         ll = np.array([by_h[id(h)][0] for h in self.hypotheses])
         matched = [by_h[id(h)][1] for h in self.hypotheses]
         misses = np.array([by_h[id(h)][2] for h in self.hypotheses])
@@ -258,7 +260,8 @@ class PlaceSet:
             h.score = d * h.score + TEMPERATURE * float(x)
             self._remember(h, m)
         self.null_score = d * self.null_score + TEMPERATURE * (
-            _null_gain(len(labels)) - MISS_PENALTY * float(misses.min()))
+            _null_gain(len(labels))
+            - MISS_PENALTY * _miss_weight(len(labels)) * float(misses.min()))
         p = self.posteriors()
         self.hypotheses = [h for h, q in zip(self.hypotheses, p, strict=True)
                            if q >= DROP_PROBABILITY or h is committed]
@@ -389,6 +392,15 @@ def _null_gain(n: int) -> float:
     """What the null gains on a frame of ``n`` usable detections: ``NULL_GAIN * n``, 0 below
     :data:`NULL_MIN_DETECTIONS` (module docstring)."""
     return NULL_GAIN * n if n >= NULL_MIN_DETECTIONS else 0.0
+
+
+def _miss_weight(n: int) -> float:
+    """Weight of the misses of a frame of ``n`` usable detections in ``LL_h``:
+    ``min(1, n / AGEING_DETECTIONS)``. Detectors drop out in bursts (motion blur, light, a
+    hand over the lens): a frame of 0-2 detections where its place predicts more in view says
+    little of which objects are there, and missing objects are counted, like the ageing of the
+    past, only with the detections the frame has."""
+    return min(1.0, n / AGEING_DETECTIONS)
 
 
 def _discount(labels: Sequence[str]) -> float:

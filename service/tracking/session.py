@@ -612,16 +612,21 @@ class TrackingSession:
         xi = gtsam.Pose3.Logmap(pose3(invert_pose(T_pred) @ T))
         jumped = float(xi @ np.linalg.solve(cov_pred, xi)) > JUMP_CHI2
         fused = bool(assoc)  # detections in the smoother's update
-        if jumped and assoc and (len(usable) < LOST_UNEXPLAINED_DETECTIONS or len(
-                self._verify(frame.detections, usable, T_pred))
-                >= len(self._verify(frame.detections, usable, T))):
+        if jumped and ((not assoc and frame.prior is None) or (assoc and (
+                len(usable) < LOST_UNEXPLAINED_DETECTIONS or len(
+                    self._verify(frame.detections, usable, T_pred))
+                >= len(self._verify(frame.detections, usable, T))))):
             # The detections pulled the estimate away from its odometry: 1-2 of them (too few
             # to say which of estimate and detection is wrong), or more that the prediction
             # explains at least as well as the estimate (as many one-to-one inliers): a wrong
             # association (a spurious detection, a neighbouring room's object) or a biased
-            # detection (occluded) moved it, not a wrong prediction. The frame's detections
-            # are dropped: the smoother restarts from the prediction and its covariance (the
-            # window marginalised into one prior), the place and its scores stay.
+            # detection (occluded) moved it, not a wrong prediction. Or the update had nothing
+            # new but odometry (no detection, no client prior) and still moved it: the
+            # smoother re-linearised factors of earlier frames (iSAM2 takes one step per
+            # update, so a detection keeps pulling after its own frame's check), which is no
+            # evidence against the prediction. The frame's detections are dropped: the
+            # smoother restarts from the prediction and its covariance (the window
+            # marginalised into one prior), the place and its scores stay.
             restarted = self._restart_at(key, index, T_pred, cov_pred)
             if restarted is None:
                 self.reset()

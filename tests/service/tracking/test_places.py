@@ -9,7 +9,9 @@ import math
 import numpy as np
 import pytest
 
+from quadloc.factors.camera import project_ellipsoid
 from quadloc.factors.conics import Ellipse, ellipse_params
+from quadloc.factors.metrics import ellipse_intersection_area
 from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import compile_map
 from quadloc.maps.visibility import predicted_in_view
@@ -176,13 +178,55 @@ def test_frames_without_detections_do_not_age_the_place_evidence() -> None:
     old = np.array([h.score for h in places.hypotheses] + [places.null_score])
     poses = np.array([h.world_from_odom @ f.odom_from_camera for h in places.hypotheses])
     ll, _, misses = places.frame_log_likelihoods(poses, ell, labels)
-    # a lone detection gains the null nothing (NULL_MIN_DETECTIONS): only its misses count
+    # a lone detection gains the null nothing (NULL_MIN_DETECTIONS): only its misses count,
+    # weighted by the frame's detections (1 / 3, as the ageing)
     assert NULL_MIN_DETECTIONS > 1
-    ll_null = 0.0 - 0.5 * misses.min()
+    ll_null = 0.0 - 0.5 / 3 * misses.min()
     places.update(f.odom_from_camera, ell, labels)
     new = np.array([h.score for h in places.hypotheses] + [places.null_score])
     expected = DISCOUNT ** (1 / 3) * old + TEMPERATURE * np.append(ll, ll_null)
     np.testing.assert_allclose(new, expected, rtol=1e-12, atol=1e-12)
+
+
+def test_a_detector_dropout_is_no_evidence_against_the_place_in_view() -> None:
+    """Frames without detections at a pose whose place predicts objects in view (the detector
+    dropped out) leave the posteriors as they were, although a rival placed where nothing is in
+    view misses nothing; a frame of n < 3 detections counts its misses with weight n / 3
+    (independently: the inliers' gain from the matched IoUs, the misses from the view rule)."""
+    b = make_building(2, "perturbed", 4)
+    walk = building_walk(b, 5, n_rooms=1)
+    places = PlaceSet(b.compiled, walk.camera, 0.2)
+    T0, f0 = walk.poses[0], walk.frames[0]
+    true_w = alignment(T0, f0.odom_from_camera)
+    away = np.eye(4)
+    away[:3, 3] = [1000.0, 0.0, 0.0]  # a rival 1 km off: nothing in view
+    places.propose([true_w, away @ true_w], f0.odom_from_camera, [])
+    for f in walk.frames[:3]:
+        places.update(f.odom_from_camera, *_evidence(f, b.compiled))
+    in_view = predicted_in_view(b.compiled, walk.camera, invert_pose(T0), VIEW_RULE)
+    assert len(in_view) >= 3
+    before = places.posteriors().copy()
+    for _ in range(30):
+        places.update(f0.odom_from_camera, np.zeros((0, 5)), ())
+    np.testing.assert_allclose(places.posteriors(), before, rtol=0, atol=1e-12)
+    # one detection, matched to its object at the true pose: 3 * min(IoU, 0.5) / 0.5 minus
+    # 0.5 / 3 per object in view not matched
+    f = next(x for x in walk.frames[3:] if len(_evidence(x, b.compiled)[1]) >= 1)
+    ell, labels = _evidence(f, b.compiled)
+    ell, labels = ell[:1], labels[:1]
+    T = true_w @ f.odom_from_camera
+    ll, matched, misses = places.frame_log_likelihoods(T[None], ell, labels)
+    view = predicted_in_view(b.compiled, walk.camera, invert_pose(T), VIEW_RULE)
+    assert misses[0] == len({int(i) for i in view} - matched[0]) >= 1
+    gain = 0.0
+    if matched[0]:
+        (o,) = matched[0]
+        e = project_ellipsoid(walk.camera, invert_pose(T), b.compiled.ellipsoids[o])
+        d = Ellipse(*map(float, ell[0]))
+        inter = ellipse_intersection_area(d, e)
+        iou = inter / (math.pi * (d.a * d.b + e.a * e.b) - inter)
+        gain = 3.0 * min(iou, 0.5) / 0.5
+    np.testing.assert_allclose(ll[0], gain - 0.5 / 3 * misses[0], rtol=0, atol=1e-6)
 
 
 def test_single_place_maps() -> None:
