@@ -2,7 +2,8 @@
 
 Innovation: detection ellipse centre minus projected object centre (px), covariance
 ``S = J Sigma J^T + s_d^2 I`` (``Sigma`` the 6x6 ``[omega, v]`` pose covariance, body frame,
-right perturbation; ``J`` from :func:`centre_jacobians`); gates :data:`GATE_CHI2` and
+right perturbation; ``J`` from :func:`centre_jacobians`), for the objects in the field of view
+(:func:`_in_field_of_view`); gates :data:`GATE_CHI2` and
 :data:`SIZE_RATIO_GATE`; a detection with two gated objects of nearly equal distance is
 left out (:data:`AMBIGUITY_MARGIN_CHI2`); one-to-one greedy by distance. Details:
 docs/design/service.md#data-association.
@@ -14,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from quadloc.factors.arrays import FloatArray
+from quadloc.factors.arrays import BoolArray, FloatArray
 from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.factors.camera import Camera
 from quadloc.factors.rotations import invert_pose, skew
@@ -66,6 +67,21 @@ def centre_jacobians(camera: Camera, world_from_camera: FloatArray,
     return u, du_dp @ dp
 
 
+def _in_field_of_view(camera: Camera, camera_from_world: FloatArray, centers: FloatArray,
+                      radii: FloatArray, point_centres: FloatArray) -> BoolArray:
+    """Whether each object (centres (N, 3) m world frame, mean radii (N,) m, centre
+    projections (N, 2) px) can be in the image: its centre's projection within the image grown
+    by its apparent radius ``f r / distance`` px. Far off the optical axis the projected ellipse
+    of an object in front of the camera stretches over thousands of px and the centre Jacobian
+    grows as ``1 + x^2 / z^2``: the linearised gate then admits an object tens of metres away
+    behind a wall (building walks: a spurious detection associated with an object 57 m off)."""
+    p = centers @ camera_from_world[:3, :3].T + camera_from_world[:3, 3]
+    r = 0.5 * (camera.fx + camera.fy) * radii / np.linalg.norm(p, axis=1)
+    u, v = point_centres[:, 0], point_centres[:, 1]
+    inside: BoolArray = (u > -r) & (u < camera.width + r) & (v > -r) & (v < camera.height + r)
+    return inside
+
+
 def associate(
     compiled: CompiledMap, camera: Camera, world_from_camera: FloatArray,
     covariance: FloatArray, ellipses: FloatArray, labels: list[str],
@@ -88,11 +104,13 @@ def associate(
         objs = compiled.indices_for(label)
         if len(objs) == 0:
             continue
-        cen, inv_shape, valid, _ = project_objects(
+        cen, inv_shape, valid, point_cen = project_objects(
             camera, cfw, compiled.centers[objs], compiled.shape_matrices[objs],
             compiled.dual_quadrics[objs])
-        # only valid projections can pass the gate
-        keep = np.flatnonzero(valid[0])
+        # only valid projections in the field of view can pass the gate
+        assert point_cen is not None
+        keep = np.flatnonzero(valid[0] & _in_field_of_view(
+            camera, cfw[0], compiled.centers[objs], compiled.mean_radii[objs], point_cen[0]))
         objs, cen, inv_shape = objs[keep], cen[0][keep], inv_shape[0][keep]
         _, J = centre_jacobians(camera, world_from_camera, compiled.centers[objs])
         JSJ = J @ covariance @ J.transpose(0, 2, 1)

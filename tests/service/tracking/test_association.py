@@ -77,3 +77,32 @@ def test_the_margin_is_measured_between_the_two_nearest() -> None:
         assert (m2[1] - m2[0] < AMBIGUITY_MARGIN_CHI2) == (expect == [])
         got = associate(same, CAMERA, POSE, cov, det, ["chair"], [0])
         assert [same.object_ids[x.object_index] for x in got] == expect
+
+
+def test_objects_out_of_the_field_of_view_are_not_candidates() -> None:
+    """An object in front of the camera but 50 m to the side (its centre projects ~6,700 px
+    right of the image; the linearised gate, with the rotation uncertain by 0.05 rad, would
+    admit a detection at the image's right edge of its projected size) is not associated; an
+    object whose centre projects just outside the image, by less than its apparent radius
+    (truncated, partly in view), still is."""
+    far = compile_map(SceneMap("far", "far", (0.0, -1.0, 0.0), ("chair",), (
+        MapObject("far", "chair", Ellipsoid(np.array([50.0, 0.0, 3.9]), np.full(3, 0.3),
+                                            np.eye(3))),)))
+    e = project_ellipsoid(CAMERA, np.linalg.inv(POSE), far.ellipsoids[0])
+    assert e.cx > 10 * CAMERA.width
+    det = ellipse_params([e])
+    det[0, :2] = [CAMERA.width - 1.0, CAMERA.cy]
+    loose = np.diag([0.05 ** 2] * 3 + [0.01] * 3)
+    assert associate(far, CAMERA, POSE, loose, det, ["chair"], [0]) == []
+    # a chair 2 m deep whose centre is 20 px right of the image (apparent radius ~79 px): the
+    # detection of its visible part, centred inside the image
+    x = (CAMERA.width + 20.0 - CAMERA.cx) * 2.0 / CAMERA.fx
+    edge = compile_map(SceneMap("edge", "edge", (0.0, -1.0, 0.0), ("chair",), (
+        MapObject("edge", "chair", Ellipsoid(np.array([x, 0.0, 2.0]), np.full(3, 0.3),
+                                             np.eye(3))),)))
+    e = project_ellipsoid(CAMERA, np.linalg.inv(POSE), edge.ellipsoids[0])
+    assert CAMERA.width < e.cx < CAMERA.width + 0.5 * e.a
+    det = ellipse_params([e])
+    det[0, 0] = CAMERA.width - 20.0
+    got = associate(edge, CAMERA, POSE, np.diag([1e-6] * 3 + [1e-6] * 3), det, ["chair"], [0])
+    assert [edge.object_ids[x.object_index] for x in got] == ["edge"]
