@@ -33,6 +33,7 @@ object when the map has zones: walls hide other rooms). Poses are
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -94,6 +95,13 @@ AGEING_DETECTIONS = 3
 #: posterior exceeds its own (``ambiguous``) or its own falls below :data:`KEEP_PROBABILITY`.
 COMMIT_PROBABILITY = 0.99
 MIN_COMMIT_OBJECTS = 3
+#: On a map of several places, an object counts towards :data:`MIN_COMMIT_OBJECTS` once the
+#: place has matched it in this many frames: another room that explains the two objects a walk
+#: sees for seconds also matches, now and then, a spurious or mislabelled detection with a
+#: third object of its own (5 frames of 66, building walks, twins, tuning seed 0), while an
+#: object really in view is matched frame after frame. A one-place map (:func:`single_place`)
+#: has no other room to explain them: there one frame counts.
+MIN_OBJECT_FRAMES = 10
 #: A committed place whose posterior falls below this is given up (the session is ``lost``).
 KEEP_PROBABILITY = 0.5
 #: Hypotheses whose posterior falls below this are dropped.
@@ -138,6 +146,12 @@ class PlaceHypothesis:
     rounds: int = 0
     objects: set[int] = field(default_factory=set)
     zone: str | None = None
+    #: per matched object (index), the number of frames that matched it
+    frames_matched: Counter[int] = field(default_factory=Counter)
+
+    def established_objects(self, min_frames: int = MIN_OBJECT_FRAMES) -> int:
+        """The distinct objects matched in at least ``min_frames`` frames."""
+        return sum(n >= min_frames for n in self.frames_matched.values())
 
 
 def single_place(compiled: CompiledMap) -> bool:
@@ -269,6 +283,7 @@ class PlaceSet:
     def _remember(self, h: PlaceHypothesis, matched: set[int]) -> None:
         if matched:
             h.objects |= matched
+            h.frames_matched.update(matched)
             zone = self._zones.zone_of(self.compiled.object_ids[i] for i in matched)
             h.zone = zone if zone is not None else h.zone
 

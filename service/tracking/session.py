@@ -57,6 +57,7 @@ from quadloc.service.tracking.places import (
     COMMIT_PROBABILITY,
     KEEP_PROBABILITY,
     MIN_COMMIT_OBJECTS,
+    MIN_OBJECT_FRAMES,
     PlaceCandidate,
     PlaceHypothesis,
     PlaceSet,
@@ -729,11 +730,14 @@ class TrackingSession:
             self._places.propose([alignment(T, T_oc) for T in proposals], T_oc, self._history,
                                  rounds=1)
         best, p = self._places.best()
-        # a one-place map has no copy of its room for later rounds to propose
-        rounds = 1 if single_place(self.compiled) else MIN_PROPOSAL_ROUNDS
+        # a one-place map has no copy of its room for later rounds to propose, nor another
+        # room to explain the objects seen
+        one_place = single_place(self.compiled)
+        rounds = 1 if one_place else MIN_PROPOSAL_ROUNDS
         copied = False
         if best is not None and p >= COMMIT_PROBABILITY and best.rounds >= rounds \
-                and len(best.objects) >= MIN_COMMIT_OBJECTS \
+                and best.established_objects(1 if one_place else MIN_OBJECT_FRAMES) \
+                >= MIN_COMMIT_OBJECTS \
                 and not (copied := self._places.has_copy(best)):
             t = time.perf_counter()
             poses = [best.world_from_odom @ b.frame.odom_from_camera for b in chosen]
