@@ -137,17 +137,21 @@ class PlaceCandidate:
 
 @dataclass(eq=False)
 class PlaceHypothesis:
-    """One place: its odometry alignment, discounted score, the distinct map objects (indices)
-    it matched, its zone (None until it matched an object of a zone), and ``rounds``: the
-    proposal rounds it has lived through (:meth:`PlaceSet.new_round`)."""
+    """One place: its odometry alignment, discounted score, the map objects (indices) it
+    matched and in how many frames each, its zone (None until it matched an object of a zone),
+    and ``rounds``: the proposal rounds it has lived through (:meth:`PlaceSet.new_round`)."""
 
     world_from_odom: FloatArray
     score: float = 0.0
     rounds: int = 0
-    objects: set[int] = field(default_factory=set)
-    zone: str | None = None
-    #: per matched object (index), the number of frames that matched it
+    #: per matched map object (index), the number of frames that matched it
     frames_matched: Counter[int] = field(default_factory=Counter)
+    zone: str | None = None
+
+    @property
+    def objects(self) -> frozenset[int]:
+        """The distinct map objects (indices) matched over the hypothesis's life."""
+        return frozenset(self.frames_matched)
 
     def established_objects(self, min_frames: int = MIN_OBJECT_FRAMES) -> int:
         """The distinct objects matched in at least ``min_frames`` frames."""
@@ -282,7 +286,6 @@ class PlaceSet:
 
     def _remember(self, h: PlaceHypothesis, matched: set[int]) -> None:
         if matched:
-            h.objects |= matched
             h.frames_matched.update(matched)
             zone = self._zones.zone_of(self.compiled.object_ids[i] for i in matched)
             h.zone = zone if zone is not None else h.zone
@@ -294,7 +297,7 @@ class PlaceSet:
         on a large map): the evidence so far cannot tell that place from the copy, whatever
         the scores (copies differ only by how well each alignment was proposed). Memoised per
         set of objects."""
-        key = frozenset(h.objects)
+        key = h.objects
         found = self._copies.get(key)
         if found is None:
             index = (place_index(self.compiled) if len(self.compiled) >= PLACE_SEARCH_MIN_OBJECTS

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections import Counter
 
 import numpy as np
 import pytest
@@ -270,8 +271,8 @@ def test_the_cap_keeps_the_places_with_the_most_support() -> None:
         W[:3, 3] = [x, 0.0, 0.0]
         return W
 
-    supported = PlaceHypothesis(at(0.0), score=-5.0, objects=set(range(6)))
-    others = [PlaceHypothesis(at(2.0 * k), score=1.0, objects={0, 1})
+    supported = PlaceHypothesis(at(0.0), score=-5.0, frames_matched=Counter(range(6)))
+    others = [PlaceHypothesis(at(2.0 * k), score=1.0, frames_matched=Counter({0: 1, 1: 1}))
               for k in range(1, MAX_HYPOTHESES)]
     places.hypotheses = [supported, *others]
     places.propose([at(100.0)], np.eye(4), [])  # scored on no frame: matched nothing
