@@ -58,6 +58,7 @@ __all__ = [
     "PlaceCandidate",
     "PlaceHypothesis",
     "PlaceSet",
+    "same_place",
     "single_place",
 ]
 
@@ -377,12 +378,13 @@ class PlaceSet:
             out.append(PlaceCandidate(T, float(q), h.zone))
         return tuple(out)
 
-    def probability(self, h: PlaceHypothesis) -> float:
-        """Posterior of ``h`` (0 when it is not live)."""
-        for x, q in zip(self.hypotheses, self.posteriors(), strict=True):
-            if x is h:
-                return float(q)
-        return 0.0
+    def place_probability(self, h: PlaceHypothesis) -> float:
+        """Posterior of the place of ``h``: the sum over ``h`` and the live hypotheses of the
+        same place (:func:`same_place`; 0 when ``h`` is not live)."""
+        if not any(x is h for x in self.hypotheses):
+            return 0.0
+        return float(sum(q for x, q in zip(self.hypotheses, self.posteriors(), strict=True)
+                         if x is h or same_place(x, h)))
 
     def best(self) -> tuple[PlaceHypothesis | None, float]:
         """The most probable hypothesis and its posterior (None, 0 without any)."""
@@ -391,6 +393,15 @@ class PlaceSet:
         p = self.posteriors()
         k = int(np.argmax(p))
         return self.hypotheses[k], float(p[k])
+
+
+def same_place(a: PlaceHypothesis, b: PlaceHypothesis) -> bool:
+    """Whether two hypotheses are alignments of one place: they matched at least
+    :data:`MIN_COMMIT_OBJECTS` of the same map objects. Two alignments a few degrees apart in
+    one room both explain its objects (the IoU saturates at :data:`IOU_SATURATION`) and split
+    its posterior between them; they are two poses of one place, not two places (copies of a
+    room are other objects)."""
+    return len(a.objects & b.objects) >= MIN_COMMIT_OBJECTS
 
 
 def _support(h: PlaceHypothesis) -> tuple[int, float]:

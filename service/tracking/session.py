@@ -62,6 +62,7 @@ from quadloc.service.tracking.places import (
     PlaceHypothesis,
     PlaceSet,
     alignment,
+    same_place,
     single_place,
 )
 
@@ -549,7 +550,7 @@ class TrackingSession:
                 Ad = pose_adjoint(T_oc)
                 cov_wo = Ad @ cov @ Ad.T
         committed = self._committed if self.state == "tracking" else None
-        place_p = self._places.probability(committed) if committed is not None else 0.0
+        place_p = self._places.place_probability(committed) if committed is not None else 0.0
         return FrameResult(index, frame.frame_id, float(frame.timestamp), self.state, T, cov,
                            T_wo, cov_wo, tuple(inliers),
                            session_confidence(self.state, cov, n_usable if contradicted else 0,
@@ -729,7 +730,8 @@ class TrackingSession:
                 return self._no_pose(index, frame, T_oc, usable, TIME_BUDGET_EXCEEDED, timings)
             self._places.propose([alignment(T, T_oc) for T in proposals], T_oc, self._history,
                                  rounds=1)
-        best, p = self._places.best()
+        best, _ = self._places.best()
+        p = 0.0 if best is None else self._places.place_probability(best)
         # a one-place map has no copy of its room for later rounds to propose, nor another
         # room to explain the objects seen
         one_place = single_place(self.compiled)
@@ -805,11 +807,11 @@ class TrackingSession:
             self._places.propose([alignment(Tw, T_oc)
                                   for Tw in self._localize_proposals(frame, usable)],
                                  T_oc, self._history, protect=committed)
-        p_committed = self._places.probability(committed)
+        p_committed = self._places.place_probability(committed)
         reason = None
-        if any(q > p_committed for h, q in zip(self._places.hypotheses,
-                                               self._places.posteriors(), strict=True)
-               if h is not committed):
+        if any(self._places.place_probability(h) > p_committed
+               for h in self._places.hypotheses
+               if h is not committed and not same_place(h, committed)):
             reason = "ambiguous"
         elif p_committed < KEEP_PROBABILITY:
             reason = "lost"
