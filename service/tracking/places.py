@@ -254,6 +254,7 @@ class PlaceSet:
         session's usual case, one live place, then needs no matching here)."""
         if not self.hypotheses:
             return
+        miss_weight = _miss_weight(len(labels))
         reuse = committed is not None and committed_world_from_camera is not None \
             and committed_inliers is not None
         rest = [h for h in self.hypotheses if not (reuse and h is committed)]
@@ -270,7 +271,7 @@ class PlaceSet:
             k = float(len(self._in_view(invert_pose(np.asarray(committed_world_from_camera,
                                                                float))) - m))
             by_h[id(committed)] = (_inlier_gain([q for _, q in committed_inliers])
-                                   - MISS_PENALTY * _miss_weight(len(labels)) * k, m, k)
+                                   - MISS_PENALTY * miss_weight * k, m, k)
         ll = np.array([by_h[id(h)][0] for h in self.hypotheses])
         matched = [by_h[id(h)][1] for h in self.hypotheses]
         misses = np.array([by_h[id(h)][2] for h in self.hypotheses])
@@ -279,8 +280,7 @@ class PlaceSet:
             h.score = d * h.score + TEMPERATURE * float(x)
             self._remember(h, m)
         self.null_score = d * self.null_score + TEMPERATURE * (
-            _null_gain(len(labels))
-            - MISS_PENALTY * _miss_weight(len(labels)) * float(misses.min()))
+            _null_gain(len(labels)) - MISS_PENALTY * miss_weight * float(misses.min()))
         p = self.posteriors()
         self.hypotheses = [h for h, q in zip(self.hypotheses, p, strict=True)
                            if q >= DROP_PROBABILITY or h is committed]

@@ -152,19 +152,28 @@ def _evidence(frame: FrameInput, compiled) -> tuple[np.ndarray, tuple[str, ...]]
     return ell, tuple(d.label for d in usable)
 
 
-def test_frames_without_detections_do_not_age_the_place_evidence() -> None:
-    """Walking between rooms (no detections, nothing predicted in view): the posteriors stay
-    as they were; a frame with n < 3 detections ages the scores by DISCOUNT ** (n / 3)."""
+def _true_place_and_rival(rival_x_m: float):
+    """Two rooms (perturbed, seed 4), a one-room walk (seed 5), and its places: the true
+    alignment ``world_from_odom`` and a rival shifted by ``rival_x_m`` along the world x axis,
+    scored on the walk's first 3 frames. Returns (building, walk, places, true alignment)."""
     b = make_building(2, "perturbed", 4)
     walk = building_walk(b, 5, n_rooms=1)
     places = PlaceSet(b.compiled, walk.camera, 0.2)
-    T0, f0 = walk.poses[0], walk.frames[0]
-    true_w = alignment(T0, f0.odom_from_camera)
+    f0 = walk.frames[0]
+    true_w = alignment(walk.poses[0], f0.odom_from_camera)
     shift = np.eye(4)
-    shift[:3, 3] = [0.6, 0.0, 0.0]  # a rival 60 cm off: it explains the detections worse
+    shift[:3, 3] = [rival_x_m, 0.0, 0.0]
     places.propose([true_w, shift @ true_w], f0.odom_from_camera, [])
     for f in walk.frames[:3]:
         places.update(f.odom_from_camera, *_evidence(f, b.compiled))
+    return b, walk, places, true_w
+
+
+def test_frames_without_detections_do_not_age_the_place_evidence() -> None:
+    """Walking between rooms (no detections, nothing predicted in view): the posteriors stay
+    as they were; a frame with n < 3 detections ages the scores by DISCOUNT ** (n / 3)."""
+    # a rival 60 cm off: it explains the detections worse
+    b, walk, places, _ = _true_place_and_rival(0.6)
     before = places.posteriors().copy()
     assert len(before) == 2 and before[0] > before[1] and before.sum() < 1 - 1e-6
     # the camera 1 km away from every object: no detection, nothing predicted in view
@@ -196,16 +205,8 @@ def test_a_detector_dropout_is_no_evidence_against_the_place_in_view() -> None:
     dropped out) leave the posteriors as they were, although a rival placed where nothing is in
     view misses nothing; a frame of n < 3 detections counts its misses with weight n / 3
     (independently: the inliers' gain from the matched IoUs, the misses from the view rule)."""
-    b = make_building(2, "perturbed", 4)
-    walk = building_walk(b, 5, n_rooms=1)
-    places = PlaceSet(b.compiled, walk.camera, 0.2)
+    b, walk, places, true_w = _true_place_and_rival(1000.0)  # the rival: nothing in view
     T0, f0 = walk.poses[0], walk.frames[0]
-    true_w = alignment(T0, f0.odom_from_camera)
-    away = np.eye(4)
-    away[:3, 3] = [1000.0, 0.0, 0.0]  # a rival 1 km off: nothing in view
-    places.propose([true_w, away @ true_w], f0.odom_from_camera, [])
-    for f in walk.frames[:3]:
-        places.update(f.odom_from_camera, *_evidence(f, b.compiled))
     in_view = predicted_in_view(b.compiled, walk.camera, invert_pose(T0), VIEW_RULE)
     assert len(in_view) >= 3
     before = places.posteriors().copy()
