@@ -593,15 +593,20 @@ def _explains(ell: Ellipsoid, a: ObjectHypothesis, b: ObjectHypothesis,
 
 def merge_duplicates(objects: list[ObjectHypothesis], obs: Sequence[Observation],
                       T_wc: FloatArray, camera: Camera, opt: AssociationOptions,
-                      tick: Callable[[], None], *, verify_union: bool = False
-                      ) -> list[ObjectHypothesis]:
+                      tick: Callable[[], None], *, verify_union: bool = False,
+                      max_gap_frames: int | None = None) -> list[ObjectHypothesis]:
     """Merge same-label objects whose centres lie within ``merge_factor`` x the larger one's
     largest semi-axis and that (almost) never appear in the same frame: one physical object split
     in two (typically by pose drift between two passes). With ``verify_union`` (across windows,
     where two rooms' objects can meet by drift) the merge also needs spatial consistency: both
     of a similar size (largest semi-axes within ``size_ratio``) and the ellipsoid of their views
-    together of that size and explaining each one's views (:func:`_explains`). In a shared
-    frame the larger object's detection is kept."""
+    together of that size and explaining each one's views (:func:`_explains`). With
+    ``max_gap_frames``, objects whose detections are more than that many frames apart (the
+    frames between the last detection of one and the first of the other) are not merged: two
+    visits of a place are joined by loop closure only, where the whole place must agree
+    (:mod:`quadloc.maps.building.loops`); one object alone cannot tell the drift between two
+    visits from the spacing of two same-label objects. In a shared frame the larger object's
+    detection is kept."""
     merged = True
     while merged:
         merged = False
@@ -616,6 +621,9 @@ def merge_duplicates(objects: list[ObjectHypothesis], obs: Sequence[Observation]
                 if not _overlapping(a.ellipsoid, b.ellipsoid, opt.merge_factor):
                     continue
                 fb = {obs[k].frame for k in b.observations}
+                if max_gap_frames is not None and max(min(fa) - max(fb), min(fb) - max(fa)) \
+                        > max_gap_frames:
+                    continue
                 if len(fa & fb) > opt.max_shared_frames * min(len(fa), len(fb)):
                     continue
                 if verify_union and not _same_size(a.ellipsoid, b.ellipsoid, opt.size_ratio):
@@ -671,15 +679,21 @@ def associate_windowed(
     overlapping windows chained where they share at least half of the detections either holds
     in the shared frames (and 2). A chain keeps one detection per frame (the one most windows
     gave it) and a detection claimed by two chains goes to the larger. A recording within one
-    window is :func:`associate` itself; a chain whose ellipsoid (all its views) is not of its
+    window is :func:`associate` itself. Each window's objects are verified
+    (:func:`verify_objects`) before they are chained: a window can hold the visits of two
+    rooms, and an object stretched across two same-label objects is cut to its largest visit
+    there, where it would otherwise pass the chain's size test as the chain's largest object.
+    A chain whose ellipsoid (all its views) is not of its
     largest object's size (``size_ratio``) is split into its agreeing parts
     (:func:`_split_chain`), and a part that still fails is its largest object with the part's
     detections that object's ellipsoid explains (IoU >= ``min_iou``); otherwise it keeps that
     ellipsoid or its largest object's, whichever explains more of its views (IoU >=
     ``verify_iou``). The objects are verified
     (:func:`verify_objects`). Then the same-label objects split by the drift between
-    two passes are merged (:func:`merge_duplicates`). Same arguments and result as
-    :func:`associate`; ``progress(label, fraction)`` over the whole recording."""
+    two passes are merged (:func:`merge_duplicates`), only where their detections are at most
+    ``window_frames`` frames apart (visits further apart are loop closure's). Same arguments
+    and result as :func:`associate`; ``progress(label, fraction)`` over the whole
+    recording."""
     opt = options or AssociationOptions()
     frames_all = np.array([o.frame for o in observations], dtype=int)
     if not len(frames_all) or frames_all.max() - frames_all.min() < window_frames:
@@ -698,8 +712,11 @@ def associate_windowed(
             if progress is not None:
                 progress(label, (w + fraction) / len(starts))
 
-        objs, rej = associate([observations[k] for k in sel.tolist()], world_from_camera,
-                              camera, opt, sub_progress)
+        window_obs = [observations[k] for k in sel.tolist()]
+        objs, rej = associate(window_obs, world_from_camera, camera, opt, sub_progress)
+        # a window can hold two rooms' visits: an object stretched across two same-label
+        # objects is cut back to one before it is chained (its other views left free)
+        objs = verify_objects(objs, window_obs, world_from_camera, camera, opt)
         for h in objs:
             hyps.append(ObjectHypothesis(h.label, [int(sel[k]) for k in h.observations],
                                          h.ellipsoid, h.source,
@@ -794,7 +811,7 @@ def associate_windowed(
     objects = verify_objects(objects, observations, T_wc, camera, opt)
     objects = merge_duplicates(objects, observations, T_wc, camera, opt,
                                lambda: progress("", 1.0) if progress is not None else None,
-                               verify_union=True)
+                               verify_union=True, max_gap_frames=window_frames)
     assigned = {k for h in objects for k in h.observations}
     rejected = {k: rejected_any.get(k, "fits_no_object") for k in range(len(observations))
                 if k not in assigned}

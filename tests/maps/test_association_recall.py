@@ -18,6 +18,7 @@ from quadloc.maps.building.association import (
     ObjectHypothesis,
     associate_windowed,
     ellipse_iou,
+    merge_duplicates,
     recruit_partial_views,
 )
 from quadloc.maps.building.recording import Observation
@@ -187,3 +188,66 @@ def test_frames_showing_an_object_smaller_than_any_of_its_detections_are_not_in_
         assert n == int(np.sum(a >= a[own].min() * (1 - 1e-9))), (n, c)
     assert counts[0] == 15  # the 10 detections and the 5 near frames that missed it
     assert counts[1] == 75
+
+
+def test_two_visits_are_not_merged_object_by_object() -> None:
+    # issue 29, tuning seed 1: at a revisit 2,850 frames later the app's drift had carried one
+    # chair onto where the first visit built its neighbour (1 m away, same label, same size);
+    # the merge of duplicates joined them and the room lost 88 detections to the wrong chair.
+    # Two visits are joined by loop closure, where the whole place must agree; the merge of
+    # duplicates only joins objects whose detections are at most a window apart.
+    obs_a, poses_a = _arc_views(BOX_A, 30, 0)
+    obs_b, poses_b = _arc_views(BOX_B, 30, 30)
+    drift = pose_matrix(np.eye(3), BOX_A.center - BOX_B.center)  # B seen where A is
+    late = 3000
+    obs = obs_a + [Observation(o.frame + late, 0, o.label, o.ellipse) for o in obs_b]
+    T = np.array(poses_a + [np.eye(4)] * (late + 30 - len(poses_a))
+                 + [drift @ P for P in poses_b])
+    opt = AssociationOptions()
+
+    def objects() -> list[ObjectHypothesis]:
+        return [ObjectHypothesis("Box", list(range(30)), BOX_A),
+                ObjectHypothesis("Box", list(range(30, 60)), BOX_A)]  # B, reconstructed at A
+
+    merged = merge_duplicates(objects(), obs, T, CAM, opt, lambda: None, verify_union=True)
+    assert len(merged) == 1  # what the geometry alone allows: the two look like one object
+    kept = merge_duplicates(objects(), obs, T, CAM, opt, lambda: None, verify_union=True,
+                            max_gap_frames=400)
+    assert [h.observations for h in kept] == [list(range(30)), list(range(30, 60))]
+    # within a window's span the drift cannot be that large: a split object is merged
+    near = [Observation(o.frame - late + 70, 0, o.label, o.ellipse) for o in obs[30:]]
+    T_near = np.array(poses_a + [np.eye(4)] * 70 + [drift @ P for P in poses_b])
+    assert len(merge_duplicates(objects(), obs_a + near, T_near, CAM, opt, lambda: None,
+                                verify_union=True, max_gap_frames=400)) == 1
+
+
+def test_a_window_object_stretched_across_two_rooms_is_cut_before_chaining(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # issue 29, tuning seed 2: one window held the visits of two neighbouring rooms, and its
+    # TV object took the truncated views of both rooms' TVs (a 5 m ellipsoid). As the largest
+    # object of its chain it passed the chain's size test, took both TVs' windows with it, and
+    # the verification then dropped the whole chain: both rooms lost their TV. Each window's
+    # objects are now verified (cut to their largest visit) before they are chained.
+    obs_a, poses_a = _arc_views(BOX_A, 30, 0)
+    obs_b, poses_b = _arc_views(BOX_B, 30, 45)  # frames 30-44: the transit, nothing seen
+    obs = obs_a + obs_b
+    T = np.array(poses_a + [poses_a[-1]] * 15 + poses_b)
+    stretched = Ellipsoid(0.5 * (BOX_A.center + BOX_B.center), np.array([1.7, 0.1, 0.1]))
+
+    def windows(observations: Sequence[Observation], *_: object,
+                **__: object) -> tuple[list[ObjectHypothesis], dict[int, str]]:
+        # windows of 60 frames from 0, 30, 60: the first sees both boxes and makes one
+        # stretched object of them; the others see B alone and get it right
+        first = min(o.frame for o in observations)
+        ks = list(range(len(observations)))
+        out = [ObjectHypothesis("Box", ks, stretched if first == 0 else BOX_B)]
+        return out, {}
+
+    monkeypatch.setattr(association, "associate", windows)
+    monkeypatch.setattr(association, "reconstruct_initial",
+                        lambda idx, o, *_: BOX_A if o[idx[0]].frame < 30 else BOX_B)
+    objects, rejected = associate_windowed(obs, T, CAM, window_frames=60)
+    held = sorted((sum(obs[k].frame < 30 for k in h.observations),
+                   sum(obs[k].frame >= 45 for k in h.observations)) for h in objects)
+    assert held == [(0, 30), (30, 0)], held
+    assert len(rejected) + sum(len(h.observations) for h in objects) == len(obs)
