@@ -597,10 +597,12 @@ def merge_duplicates(objects: list[ObjectHypothesis], obs: Sequence[Observation]
                       max_gap_frames: int | None = None) -> list[ObjectHypothesis]:
     """Merge same-label objects whose centres lie within ``merge_factor`` x the larger one's
     largest semi-axis and that (almost) never appear in the same frame: one physical object split
-    in two (typically by pose drift between two passes). With ``verify_union`` (across windows,
-    where two rooms' objects can meet by drift) the merge also needs spatial consistency: both
-    of a similar size (largest semi-axes within ``size_ratio``) and the ellipsoid of their views
-    together of that size and explaining each one's views (:func:`_explains`). With
+    in two (typically by pose drift between two passes). With ``verify_union`` (across windows
+    and after the loop closure, where two rooms' objects can meet by drift, and an object
+    stretched over several of them overlaps everything near) the merge also needs spatial
+    consistency: both of a similar size (largest semi-axes within ``size_ratio``) and the
+    ellipsoid of their views together of that size and explaining each one's views
+    (:func:`_explains`). With
     ``max_gap_frames``, objects whose detections are more than that many frames apart (the
     frames between the last detection of one and the first of the other) are not merged: two
     visits of a place are joined by loop closure only, where the whole place must agree

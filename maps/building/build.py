@@ -211,7 +211,7 @@ def build_map(
     objects, T_init, n_loops = _close_loops(objects, obs, T_wc, recording, opt, loops)
     if n_loops:
         objects = merge_duplicates(objects, obs, T_init, recording.camera, opt,
-                                   lambda: on_label("", 1.0))
+                                   lambda: on_label("", 1.0), verify_union=True)
     recruit_partial_views(objects, rejected, obs, T_init, recording.camera, opt,
                           loops.min_shared_frames)
     t_assoc = time.perf_counter() - t0
