@@ -602,13 +602,12 @@ def merge_duplicates(objects: list[ObjectHypothesis], obs: Sequence[Observation]
     stretched over several of them overlaps everything near) the merge also needs spatial
     consistency: both of a similar size (largest semi-axes within ``size_ratio``) and the
     ellipsoid of their views together of that size and explaining each one's views
-    (:func:`_explains`). With
-    ``max_gap_frames``, objects whose detections are more than that many frames apart (the
-    frames between the last detection of one and the first of the other) are not merged: two
-    visits of a place are joined by loop closure only, where the whole place must agree
-    (:mod:`quadloc.maps.building.loops`); one object alone cannot tell the drift between two
-    visits from the spacing of two same-label objects. In a shared frame the larger object's
-    detection is kept."""
+    (:func:`_explains`). With ``max_gap_frames``, objects whose detections are more than that
+    many frames apart (the frames between the last detection of one and the first of the
+    other) are not merged: two visits of a place are joined by loop closure only, where the
+    whole place must agree (:mod:`quadloc.maps.building.loops`); one object alone cannot tell
+    the drift between two visits from the spacing of two same-label objects. In a shared frame
+    the larger object's detection is kept."""
     merged = True
     while merged:
         merged = False
@@ -685,8 +684,8 @@ def associate_windowed(
     (:func:`verify_objects`) before they are chained: a window can hold the visits of two
     rooms, and an object stretched across two same-label objects is cut to its largest visit
     there, where it would otherwise pass the chain's size test as the chain's largest object.
-    A chain whose ellipsoid (all its views) is not of its
-    largest object's size (``size_ratio``) is split into its agreeing parts
+    A chain whose ellipsoid (all its views) is not of its largest object's size
+    (``size_ratio``) is split into its agreeing parts
     (:func:`_split_chain`), and a part that still fails is its largest object with the part's
     detections that object's ellipsoid explains (IoU >= ``min_iou``); otherwise it keeps that
     ellipsoid or its largest object's, whichever explains more of its views (IoU >=
