@@ -378,9 +378,16 @@ class PlaceSet:
             out.append(PlaceCandidate(T, float(q), h.zone))
         return tuple(out)
 
+    def place_probabilities(self) -> list[float]:
+        """Per live hypothesis (in :attr:`hypotheses` order), the posterior of its place: the
+        sum over it and the live hypotheses of the same place (:func:`same_place`)."""
+        p = self.posteriors()
+        return [float(sum(q for x, q in zip(self.hypotheses, p, strict=True)
+                          if x is h or same_place(x, h))) for h in self.hypotheses]
+
     def place_probability(self, h: PlaceHypothesis) -> float:
-        """Posterior of the place of ``h``: the sum over ``h`` and the live hypotheses of the
-        same place (:func:`same_place`; 0 when ``h`` is not live)."""
+        """The posterior of the place of ``h`` (:meth:`place_probabilities`; 0 when ``h`` is not
+        live)."""
         if not any(x is h for x in self.hypotheses):
             return 0.0
         return float(sum(q for x, q in zip(self.hypotheses, self.posteriors(), strict=True)

@@ -809,8 +809,8 @@ class TrackingSession:
                                  T_oc, self._history, protect=committed)
         p_committed = self._places.place_probability(committed)
         reason = None
-        if any(self._places.place_probability(h) > p_committed
-               for h in self._places.hypotheses
+        if any(q > p_committed for h, q in zip(self._places.hypotheses,
+                                               self._places.place_probabilities(), strict=True)
                if h is not committed and not same_place(h, committed)):
             reason = "ambiguous"
         elif p_committed < KEEP_PROBABILITY:

@@ -58,6 +58,16 @@ def _run(building, walk, frames=None):
     return s, out
 
 
+def _assert_tracks_from_an_early_fix(out, first_by: int = 30) -> None:
+    """The session of ``_run``'s ``out`` is ``tracking`` before frame ``first_by`` and then on
+    every frame, each pose within 10 cm / 5 deg."""
+    first = next(k for k, (r, _) in enumerate(out) if r.state == "tracking")
+    assert first < first_by
+    for r, e in out[first:]:
+        assert r.state == "tracking", (r.frame_index, r.reason)
+        assert e[0] <= 0.1 and e[1] <= 5, (r.frame_index, e)
+
+
 def test_exact_copies_are_ambiguous_with_the_true_room_listed_never_a_wrong_pose() -> None:
     b = make_building(3, "exact", 5)
     walk = building_walk(b, 7, n_rooms=1)
@@ -438,6 +448,8 @@ def test_two_alignments_of_one_room_are_one_place() -> None:
     assert places.place_probability(a1) == pytest.approx(p[0] + p[1], abs=1e-12)
     assert places.place_probability(a2) == pytest.approx(p[0] + p[1], abs=1e-12)
     assert places.place_probability(other) == pytest.approx(p[2], abs=1e-12)
+    assert places.place_probabilities() == [places.place_probability(h)
+                                            for h in (a1, a2, other)]
     three = PlaceHypothesis(np.eye(4), frames_matched=Counter({0: 5, 1: 5, 9: 5}))
     assert not same_place(a1, three)  # two shared objects: not enough
     assert places.place_probability(three) == 0.0  # not live
@@ -452,10 +464,7 @@ def test_a_session_commits_when_two_alignments_of_its_room_split_the_posterior()
     b = make_building(50, "perturbed", 0)
     walk = building_walk(b, 0)
     _, out = _run(b, walk, 60)
-    first = next(k for k, (r, _) in enumerate(out) if r.state == "tracking")
-    assert first < 30
-    for r, e in out[first:]:
-        assert r.state == "tracking" and e[0] <= 0.1 and e[1] <= 5, (r.frame_index, e)
+    _assert_tracks_from_an_early_fix(out)
 
 
 def test_a_jump_the_prediction_explains_as_well_drops_the_frame_not_the_session() -> None:
@@ -468,8 +477,4 @@ def test_a_jump_the_prediction_explains_as_well_drops_the_frame_not_the_session(
     b = make_building(10, "perturbed", 1)
     walk = building_walk(b, 1000)
     _, out = _run(b, walk, 345)
-    first = next(k for k, (r, _) in enumerate(out) if r.state == "tracking")
-    assert first < 30
-    for r, e in out[first:]:
-        assert r.state == "tracking", (r.frame_index, r.reason)
-        assert e[0] <= 0.1 and e[1] <= 5, (r.frame_index, e)
+    _assert_tracks_from_an_early_fix(out)
