@@ -19,6 +19,7 @@ from quadloc.factors.conics import Ellipse
 from quadloc.factors.names import GeometryError
 from quadloc.factors.rotations import rotation_angle, rotation_from_quaternion_wxyz
 from quadloc.service.app import localization as solver_module
+from quadloc.service.localization import pipeline as pipeline_module
 from quadloc.service.schemas.examples import EXAMPLE_TRUE_WORLD_FROM_CAMERA, LOCALIZE_EXAMPLE
 from tests.conftest import make_test_app
 from tests.support.helpers import assert_problem as _problem
@@ -475,9 +476,13 @@ def test_batch_total_budget_answers_the_rest_not_localized(tmp_path: Path, monke
     clock = {"now": 1000.0}
     fake_time = types.SimpleNamespace(perf_counter=lambda: clock["now"],
                                       thread_time=time.thread_time)
-    # the batch's budget (a Deadline) and the frames' timings read the simulated clock
-    monkeypatch.setattr(solver_module, "time", fake_time)
-    monkeypatch.setattr(budget_module, "time", fake_time)
+    # every wall clock of the request reads the simulated clock: the batch's budget (a
+    # Deadline), the frames' timings and the start of each solve (its own Deadline's wall
+    # stop). A real clock beside the simulated one made the test depend on the machine's
+    # uptime: a solve's wall stop at real start + 0.9 s was read as passed at 1000 s while
+    # the machine had been up less than that.
+    for module in (solver_module, budget_module, pipeline_module):
+        monkeypatch.setattr(module, "time", fake_time)
     real = solver_module.localize
     budgets = []
 
