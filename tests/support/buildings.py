@@ -18,6 +18,11 @@ up) and moved to its grid cell. How rooms repeat (``mode``):
   different ones). A frame in a room whose layout another room has (:attr:`Building.twinned`)
   is truly ambiguous, as in an exact building.
 
+Objects of a room never interpenetrate, as in the real Chess room (no two of its ellipsoids
+intersect): every move, added object and random place is drawn again, up to
+:data:`PLACEMENT_DRAWS` times, until its ellipsoid intersects none of the room's objects placed
+before it (:func:`tests.support.scenes.ellipsoids_intersect`).
+
 With ``corridors``, a corridor runs along each row of rooms with a few objects (random Chess
 shapes) every :data:`CORRIDOR_STEP_M`. Maps hold at most ``LIMITS["max_objects"]`` objects: a
 building that would exceed it drops the fewest objects per room that fit (the same ones in every
@@ -39,17 +44,18 @@ Poses are ``world_from_camera`` (4x4, OpenCV camera axes) unless named otherwise
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from quadloc.factors.camera import Camera
+from quadloc.factors.camera import Camera, Ellipsoid
 from quadloc.factors.rotations import pose_matrix
 from quadloc.maps.compiled import CompiledMap, compile_map
 from quadloc.maps.demo import load_demo_map
 from quadloc.maps.model import LIMITS, MapObject, MapZone, SceneMap
 from tests.support.reference_data import load_chess_world_from_camera
-from tests.support.scenes import look_at
+from tests.support.scenes import ellipsoids_intersect, look_at
 from tests.support.simulate import SimulatedFrame, SimulationConfig, simulate_frame
 
 __all__ = [
@@ -81,6 +87,8 @@ TUNE_SEEDS = tuple(range(0, 100))
 REPORT_SEEDS = tuple(range(1000, 1100))
 #: Corridor objects: one every this many metres along a row of rooms.
 CORRIDOR_STEP_M = 6.0
+#: Draws of a move or place before the generator gives up (an error: the room is too full).
+PLACEMENT_DRAWS = 200
 
 
 @dataclass(frozen=True)
@@ -153,6 +161,21 @@ def _moved(obj: MapObject, object_id: str, world_from_room: np.ndarray,
                                                       e.axes.copy(), rotation))
 
 
+def _free_draw(obj: MapObject, placed: list[Ellipsoid],
+                draw: Callable[[MapObject], tuple[np.ndarray, float]]) -> tuple[np.ndarray, float]:
+    """The first ``(offset_room, yaw)`` of ``draw(obj)`` (see :func:`_moved`) that puts
+    ``obj``'s ellipsoid where it intersects none of ``placed`` (room frame), which it then
+    joins."""
+    for _ in range(PLACEMENT_DRAWS):
+        offset, yaw = draw(obj)
+        ell = _moved(obj, obj.object_id, np.eye(4), offset, yaw).ellipsoid
+        if not any(ellipsoids_intersect(ell, other) for other in placed):
+            placed.append(ell)
+            return offset, yaw
+    raise RuntimeError(f"no place for object {obj.object_id!r} that intersects no other in "
+                       f"{PLACEMENT_DRAWS} draws")
+
+
 def make_building(n_rooms: int, mode: str = "perturbed", seed: int = 0, *,
                   corridors: bool = False, yaw: bool = True) -> Building:
     """A building of ``n_rooms`` rooms (see the module docstring); deterministic in ``seed``.
@@ -185,6 +208,15 @@ def make_building(n_rooms: int, mode: str = "perturbed", seed: int = 0, *,
     rooms: list[Room] = []
     layouts: list[list[tuple[np.ndarray, float]]] = []  # "twins": each room's (offset, yaw)
     layout_of: list[int] = []  # "twins": the room whose layout each room has
+
+    def moved(obj: MapObject) -> tuple[np.ndarray, float]:  # "perturbed": 0.1-0.5 m sideways
+        phi, length = rng.uniform(-math.pi, math.pi), rng.uniform(0.1, 0.5)
+        return length * np.array([math.cos(phi), math.sin(phi), 0.0]), 0.0
+
+    def anywhere(obj: MapObject) -> tuple[np.ndarray, float]:  # the floor box, height kept
+        target = np.array([*rng.uniform(lo, hi), obj.ellipsoid.center[2]])
+        return target - obj.ellipsoid.center, float(rng.uniform(-math.pi, math.pi))
+
     for k in range(n_rooms):
         floor, cell = divmod(k, ROOMS_PER_FLOOR)
         row, col = divmod(cell, side)
@@ -198,13 +230,12 @@ def make_building(n_rooms: int, mode: str = "perturbed", seed: int = 0, *,
         if mode == "perturbed":
             drop = set(rng.choice(len(base), max(n_drop, int(rng.random() < 0.5)),
                                   replace=False).tolist())
+        placed: list[Ellipsoid] = []  # the room's objects so far, room frame
         if mode == "twins":
             layout_of.append(layout_of[int(rng.integers(k))] if k and
                              rng.random() < TWIN_PROBABILITY else k)
             if layout_of[k] == k:
-                layouts.append([(np.array([*rng.uniform(lo, hi), obj.ellipsoid.center[2]])
-                                 - obj.ellipsoid.center, float(rng.uniform(-math.pi, math.pi)))
-                                for obj in base])
+                layouts.append([_free_draw(obj, placed, anywhere) for obj in base])
             else:
                 layouts.append(layouts[layout_of[k]])
         for j, obj in enumerate(base):
@@ -213,23 +244,15 @@ def make_building(n_rooms: int, mode: str = "perturbed", seed: int = 0, *,
             oid = f"{zone}/{obj.object_id}"
             if mode == "exact":
                 mine.append(_moved(obj, oid, world_from_room))
-            elif mode == "perturbed":
-                phi = rng.uniform(-math.pi, math.pi)
-                length = rng.uniform(0.1, 0.5)
-                mine.append(_moved(obj, oid, world_from_room,
-                                   length * np.array([math.cos(phi), math.sin(phi), 0.0])))
             elif mode == "twins":
                 mine.append(_moved(obj, oid, world_from_room, *layouts[k][j]))
             else:
-                target = np.array([*rng.uniform(lo, hi), obj.ellipsoid.center[2]])
-                mine.append(_moved(obj, oid, world_from_room, target - obj.ellipsoid.center,
-                                   float(rng.uniform(-math.pi, math.pi))))
+                mine.append(_moved(obj, oid, world_from_room, *_free_draw(
+                    obj, placed, moved if mode == "perturbed" else anywhere)))
         if mode == "perturbed" and not drop_all and rng.random() < 0.3:
             src = base[int(rng.integers(len(base)))]
-            target = np.array([*rng.uniform(lo, hi), src.ellipsoid.center[2]])
             mine.append(_moved(src, f"{zone}/{src.object_id}+1", world_from_room,
-                               target - src.ellipsoid.center,
-                               float(rng.uniform(-math.pi, math.pi))))
+                               *_free_draw(src, placed, anywhere)))
         objects += mine
         rooms.append(Room(zone, world_from_room, tuple(o.object_id for o in mine)))
     halls: list[Room] = []

@@ -1,5 +1,6 @@
 """Synthetic scenes of the tests and benchmarks: a test camera, ``look_at`` poses, two-ellipsoid
-scenes for P2E, large synthetic maps, and the frames in which an ellipsoid is visible.
+scenes for P2E, large synthetic maps, the frames in which an ellipsoid is visible, and whether two
+ellipsoids intersect.
 
 Poses are ``world_from_camera`` (4x4, OpenCV camera axes) unless named otherwise; +Z is up.
 """
@@ -15,7 +16,8 @@ from quadloc.factors.conics import DegenerateProjectionError
 from quadloc.factors.rotations import invert_pose, pose_matrix, snap_to_rotation
 from quadloc.maps.model import MapObject, SceneMap
 
-__all__ = ["CAM", "UP", "look_at", "random_pair_scene", "synthetic_map", "visible_frames"]
+__all__ = ["CAM", "UP", "ellipsoids_intersect", "look_at", "random_pair_scene", "synthetic_map",
+           "visible_frames"]
 
 
 def synthetic_map(n_objects: int, seed: int, n_categories: int = 8) -> SceneMap:
@@ -34,6 +36,43 @@ def synthetic_map(n_objects: int, seed: int, n_categories: int = 8) -> SceneMap:
         objs.append(MapObject(f"o{k}", cats[k % n_categories], e))
     return SceneMap(f"synthetic-{n_objects}", f"synthetic {n_objects}", (0.0, 0.0, 1.0), cats,
                     tuple(objs))
+
+
+def ellipsoids_intersect(a: Ellipsoid, b: Ellipsoid) -> bool:
+    """True if the solid ellipsoids ``a`` and ``b`` share a point (touching counts).
+
+    The exact test of Gilitschenski and Hanebeck ("A robust computational test for overlap of
+    two arbitrary-dimensional ellipsoids in fault-detection of Kalman filters", FUSION 2012):
+    with shape matrices ``A = R diag(axes^2) R^T`` (m^2) and ``d = b.center - a.center`` (m),
+    the ellipsoids intersect iff ``K(s) = 1 - d^T (A / (1 - s) + B / s)^-1 d >= 0`` for every
+    ``s`` in (0, 1) (``K`` is convex in ``s``). After whitening ``a`` to the unit sphere
+    (``B' = L B L^T = Q diag(lam) Q^T``, ``d' = L d``, ``L = A^-1/2``),
+    ``K(s) = 1 - sum_i (Q^T d')_i^2 s (1 - s) / (s + lam_i (1 - s))``; its minimum is found on
+    a grid of ``s`` refined by golden-section search.
+    """
+    d = b.center - a.center
+    if float(np.linalg.norm(d)) > float(a.axes.max() + b.axes.max()):
+        return False  # the bounding spheres are apart
+    whiten = np.diag(1.0 / a.axes) @ a.rotation.T  # L: a -> the unit sphere
+    shape_b = whiten @ b.rotation @ np.diag(b.axes ** 2) @ b.rotation.T @ whiten.T
+    lam, Q = np.linalg.eigh(shape_b)
+    c = (Q.T @ (whiten @ d)) ** 2
+
+    def k(s: np.ndarray) -> np.ndarray:
+        s = s[:, None]
+        return 1.0 - np.sum(c * s * (1.0 - s) / (s + lam * (1.0 - s)), axis=1)
+
+    grid = np.linspace(0.0, 1.0, 65)[1:-1]
+    i = int(np.argmin(k(grid)))
+    lo, hi = grid[max(i - 1, 0)] if i else 0.0, grid[i + 1] if i + 1 < len(grid) else 1.0
+    golden = (math.sqrt(5.0) - 1.0) / 2.0
+    for _ in range(60):  # bracket shrinks by 0.618 per step: below 1e-13 of (0, 1)
+        m1, m2 = hi - golden * (hi - lo), lo + golden * (hi - lo)
+        if k(np.array([m1]))[0] <= k(np.array([m2]))[0]:
+            hi = m2
+        else:
+            lo = m1
+    return bool(k(np.array([(lo + hi) / 2.0]))[0] >= 0.0)
 
 
 CAM = Camera(500.0, 520.0, 320.0, 240.0, 640, 480)
