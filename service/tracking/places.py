@@ -193,6 +193,10 @@ class PlaceSet:
         self._zones = zone_index(compiled.scene_map)
         self._copies: dict[frozenset[int], bool] = {}
 
+    def discard(self, hypotheses: Sequence[PlaceHypothesis]) -> None:
+        """Drop ``hypotheses`` (by identity)."""
+        self.hypotheses = [h for h in self.hypotheses if not any(h is x for x in hypotheses)]
+
     def clear(self) -> None:
         """Drop every hypothesis and the null's score."""
         self.hypotheses.clear()

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TypeVar
 
@@ -40,6 +40,7 @@ from quadloc.service.localization.calibration_fit import (
     session_variance_ratio,
 )
 from quadloc.service.localization.confidence import calibration_key
+from quadloc.service.localization.copies import is_copy
 from quadloc.service.localization.gravity import gravity_measurement
 from quadloc.service.localization.pipeline import localize
 from quadloc.service.localization.scoring import Match, MatchScorer, ScoringTimeoutError
@@ -131,6 +132,11 @@ HISTORY_FRAMES = 45
 MIN_PROPOSAL_ROUNDS = 3
 #: Below this posterior a candidate place does not make an answer ``ambiguous``.
 AMBIGUOUS_PROBABILITY = 0.05
+#: A place is checked for being a copy of the committed one (``_copy_of_committed``) by
+#: carrying its objects by the transform between the two camera poses onto the nearest object
+#: of the label within this (m: the alignments' drift since proposed; the copy itself is then
+#: decided by the rigid fit's 5 cm).
+COPY_SEARCH_M = 0.3
 
 _T = TypeVar("_T")
 
@@ -794,7 +800,9 @@ class TrackingSession:
         rivals, asking ``localize`` for new rivals every :data:`CHECK_INTERVAL_FRAMES`. The
         session gives the place up (``lost``, keeping the hypotheses) when a rival has become
         more probable (returns ``"ambiguous"``) or the place's posterior fell below
-        :data:`~quadloc.service.tracking.places.KEEP_PROBABILITY` (``"lost"``); else None."""
+        :data:`~quadloc.service.tracking.places.KEEP_PROBABILITY` (``"lost"``); else None.
+        A pose in an exact copy of the committed place is no rival (:meth:`_copy_of_committed`):
+        not proposed, and dropped when it would decide."""
         T_oc, ell, labels = self._evidence
         committed = self._committed
         assert committed is not None
@@ -805,19 +813,64 @@ class TrackingSession:
         if index - self._last_check >= CHECK_INTERVAL_FRAMES and len(usable) >= 3:
             self._last_check = index
             self._places.propose([alignment(Tw, T_oc)
-                                  for Tw in self._localize_proposals(frame, usable)],
+                                  for Tw in self._localize_proposals(frame, usable)
+                                  if not self._copy_of_committed(Tw, [
+                                      self.compiled.index_of(m.object_id) for m in
+                                      self._verify(frame.detections, usable, Tw)], T)],
                                  T_oc, self._history, protect=committed)
         p_committed = self._places.place_probability(committed)
+        if self._rival_of(committed, p_committed) or p_committed < KEEP_PROBABILITY:
+            # copies of the committed place are no rivals (_copy_of_committed): dropped
+            copies = [h for h in self._places.hypotheses
+                      if h is not committed and not same_place(h, committed)
+                      and self._copy_of_committed(h.world_from_odom @ T_oc, h.objects, T)]
+            if copies:
+                self._places.discard(copies)
+                p_committed = self._places.place_probability(committed)
         reason = None
-        if any(q > p_committed for h, q in zip(self._places.hypotheses,
-                                               self._places.place_probabilities(), strict=True)
-               if h is not committed and not same_place(h, committed)):
+        if self._rival_of(committed, p_committed):
             reason = "ambiguous"
         elif p_committed < KEEP_PROBABILITY:
             reason = "lost"
         if reason is not None:
             self.reset(keep_places=True)
         return reason
+
+    def _rival_of(self, committed: PlaceHypothesis, p_committed: float) -> bool:
+        """Whether another place (not :func:`same_place` as ``committed``) is more probable
+        than the committed one's ``p_committed``."""
+        return any(q > p_committed for h, q in zip(self._places.hypotheses,
+                                                   self._places.place_probabilities(),
+                                                   strict=True)
+                   if h is not committed and not same_place(h, committed))
+
+    def _copy_of_committed(self, world_from_camera: FloatArray, objects: Iterable[int],
+                           committed_world_from_camera: FloatArray) -> bool:
+        """Whether a place at the camera pose ``world_from_camera`` that matched ``objects``
+        (map indices) is an exact copy of the committed place at
+        ``committed_world_from_camera``: each object, carried by the transform between the two
+        poses, lands within :data:`COPY_SEARCH_M` of an object of its label, and those
+        correspondences (at least 3) pass :func:`~quadloc.service.localization.copies.is_copy`
+        (rigid fit, 5 cm). Such a place is no rival: the session committed where the objects
+        it matched had no copy, and its odometry carried the alignment from there, so the walk
+        tells the copies apart where the frames cannot (a walk from a room into a room that is
+        repeated elsewhere)."""
+        mine = sorted(objects)
+        if len(mine) < 3:
+            return False
+        carry = committed_world_from_camera @ invert_pose(world_from_camera)
+        centers = self.compiled.centers
+        moved = centers[mine] @ carry[:3, :3].T + carry[:3, 3]
+        theirs = []
+        for j, p in zip(mine, moved, strict=True):
+            same = self.compiled.indices_for(self.compiled.categories[j])
+            d = np.linalg.norm(centers[same] - p, axis=1)
+            k = int(np.argmin(d))
+            if d[k] > COPY_SEARCH_M:
+                return False
+            theirs.append(int(same[k]))
+        return is_copy(self.compiled, np.array(mine, dtype=np.intp),
+                       np.array(theirs, dtype=np.intp))
 
     def _start_graph(self, chosen: list[_Buffered], poses: list[FloatArray],
                      matches: list[list[Match]]) -> tuple[FloatArray, FloatArray] | None:

@@ -411,6 +411,24 @@ def test_unexplained_detections_where_no_object_is_in_view_are_not_a_contradicti
     assert lost.state == "lost"
 
 
+def test_a_walk_into_a_repeated_room_keeps_tracking_it() -> None:
+    """50 rooms of random layouts, some repeated (``twins``; a tuning walk of ``python -m
+    bench.tracking --building --seed-set tune --modes twins``): the walk commits in a room of
+    its own, then walks into a room whose layout another room repeats. The frames there cannot
+    tell the copies apart, the walk can: the session committed where nothing had a copy and
+    its odometry carried the alignment. Before, the rivals check proposed the copy, which tied
+    with the committed place, and the session gave its place up (281 of the room's 390 frames
+    `lost`, then `ambiguous` between the copies); a place that is an exact copy of the
+    committed one is no rival (``TrackingSession._copy_of_committed``)."""
+    b = make_building(50, "twins", 2)
+    walk = building_walk(b, 2000)
+    first, second = dict.fromkeys(r.zone_id for r in walk.rooms)
+    assert first not in b.twinned and second in b.twinned
+    _, out = _run(b, walk)
+    _assert_tracks_from_an_early_fix([x for x, room in zip(out, walk.rooms, strict=True)
+                                      if room.zone_id in (first, second)])
+
+
 def test_a_place_explaining_two_objects_and_a_stray_third_does_not_commit() -> None:
     """50 rooms of random layouts, some repeated (``twins``; the tuning walk of ``python -m
     bench.tracking --building --seed-set tune --modes twins`` that showed it): for two seconds
