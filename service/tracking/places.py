@@ -386,15 +386,19 @@ class PlaceSet:
         """Per live hypothesis (in :attr:`hypotheses` order), the posterior of its place: the
         sum over it and the live hypotheses of the same place (:func:`same_place`)."""
         p = self.posteriors()
-        return [float(sum(q for x, q in zip(self.hypotheses, p, strict=True)
-                          if x is h or same_place(x, h))) for h in self.hypotheses]
+        return [self._place_posterior(h, p) for h in self.hypotheses]
 
     def place_probability(self, h: PlaceHypothesis) -> float:
         """The posterior of the place of ``h`` (:meth:`place_probabilities`; 0 when ``h`` is not
         live)."""
         if not any(x is h for x in self.hypotheses):
             return 0.0
-        return float(sum(q for x, q in zip(self.hypotheses, self.posteriors(), strict=True)
+        return self._place_posterior(h, self.posteriors())
+
+    def _place_posterior(self, h: PlaceHypothesis, posteriors: FloatArray) -> float:
+        """The sum of ``posteriors`` (per live hypothesis) over ``h`` and the live hypotheses of
+        its place (:func:`same_place`)."""
+        return float(sum(q for x, q in zip(self.hypotheses, posteriors, strict=True)
                          if x is h or same_place(x, h)))
 
     def best(self) -> tuple[PlaceHypothesis | None, float]:

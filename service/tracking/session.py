@@ -818,17 +818,17 @@ class TrackingSession:
                                       self.compiled.index_of(m.object_id) for m in
                                       self._verify(frame.detections, usable, Tw)], T)],
                                  T_oc, self._history, protect=committed)
-        p_committed = self._places.place_probability(committed)
-        if self._rival_of(committed, p_committed) or p_committed < KEEP_PROBABILITY:
+        p_committed, rival = self._standing(committed)
+        if rival or p_committed < KEEP_PROBABILITY:
             # copies of the committed place are no rivals (_copy_of_committed): dropped
             copies = [h for h in self._places.hypotheses
                       if h is not committed and not same_place(h, committed)
                       and self._copy_of_committed(h.world_from_odom @ T_oc, h.objects, T)]
             if copies:
                 self._places.discard(copies)
-                p_committed = self._places.place_probability(committed)
+                p_committed, rival = self._standing(committed)
         reason = None
-        if self._rival_of(committed, p_committed):
+        if rival:
             reason = "ambiguous"
         elif p_committed < KEEP_PROBABILITY:
             reason = "lost"
@@ -836,13 +836,15 @@ class TrackingSession:
             self.reset(keep_places=True)
         return reason
 
-    def _rival_of(self, committed: PlaceHypothesis, p_committed: float) -> bool:
-        """Whether another place (not :func:`same_place` as ``committed``) is more probable
-        than the committed one's ``p_committed``."""
-        return any(q > p_committed for h, q in zip(self._places.hypotheses,
-                                                   self._places.place_probabilities(),
-                                                   strict=True)
-                   if h is not committed and not same_place(h, committed))
+    def _standing(self, committed: PlaceHypothesis) -> tuple[float, bool]:
+        """The posterior of the committed place and whether another place (not
+        :func:`same_place` as ``committed``) is more probable, from one pass over the
+        hypotheses' place posteriors."""
+        probs = list(zip(self._places.hypotheses, self._places.place_probabilities(),
+                         strict=True))
+        p_committed = next((q for h, q in probs if h is committed), 0.0)
+        return p_committed, any(q > p_committed for h, q in probs
+                                if h is not committed and not same_place(h, committed))
 
     def _copy_of_committed(self, world_from_camera: FloatArray, objects: Iterable[int],
                            committed_world_from_camera: FloatArray) -> bool:

@@ -64,7 +64,7 @@ def ellipsoids_intersect(a: Ellipsoid, b: Ellipsoid) -> bool:
 
     grid = np.linspace(0.0, 1.0, 65)[1:-1]
     i = int(np.argmin(k(grid)))
-    lo, hi = grid[max(i - 1, 0)] if i else 0.0, grid[i + 1] if i + 1 < len(grid) else 1.0
+    lo, hi = grid[i - 1] if i else 0.0, grid[i + 1] if i + 1 < len(grid) else 1.0
     golden = (math.sqrt(5.0) - 1.0) / 2.0
     for _ in range(60):  # bracket shrinks by 0.618 per step: below 1e-13 of (0, 1)
         m1, m2 = hi - golden * (hi - lo), lo + golden * (hi - lo)
