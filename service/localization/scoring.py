@@ -20,13 +20,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from quadloc.factors import camera as _camera
 from quadloc.factors.arrays import BoolArray, FloatArray, Int32Array, IntArray
 from quadloc.factors.budget import Deadline, deadline_passed, earliest
-from quadloc.factors.camera import Camera, projected_gaussians
-from quadloc.factors.conics import Ellipse, ellipse_params, level_values
+from quadloc.factors.camera import MIN_DEPTH, Camera, projected_gaussians
+from quadloc.factors.conics import Ellipse, ellipse_params
 from quadloc.factors.jit import jit
 from quadloc.maps.compiled import CompiledMap
-from quadloc.service.localization.hypotheses import point_centres
 
 __all__ = [
     "HARD_STOP_FACTOR",
@@ -44,8 +44,12 @@ __all__ = [
     "sunflower_disk",
 ]
 
-#: Most (detection, object) pairs per block of the cheap per-pair tests (stage 1, pruning).
+#: Most (detection, object) pairs per block of the cheap per-pair tests (pruning).
 PAIR_BLOCK = 1 << 16
+#: Stage 1 (:meth:`MatchScorer.centre_hits`): a detection is hit when a compatible object's
+#: projected centre has at most this level value of its ellipse (``Phi <= 4``: within twice
+#: the ellipse).
+CENTRE_HIT_LEVEL = 4.0
 #: Most pair x point evaluations per block of the IoU estimate (stage 2): ~16 MB of temporaries.
 POINT_BLOCK = 1 << 17
 #: Most pose x object projections per block (each holds a few 3x3 / 4x4 float arrays).
@@ -179,6 +183,59 @@ def _iou_rows_kernel(xy: FloatArray, det_areas: FloatArray, centres: FloatArray,
 
 
 @jit
+def _centre_hit_counts_kernel(T: FloatArray, P: FloatArray, centers: FloatArray,
+                              shape_matrices: FloatArray, pair_d: Int32Array,
+                              pair_s: Int32Array, params: FloatArray, cos: FloatArray,
+                              sin: FloatArray, hit_level: float, min_depth: float
+                              ) -> FloatArray:
+    """:meth:`MatchScorer.centre_hits` of H poses ``T`` (H, 4, 4) ``camera_from_world`` (``P``
+    (H, 3, 4): ``K [R | t]``): per pose, the number of detections (rows of ``params`` (D, 5);
+    ``cos``, ``sin`` (D,) of their angles) with a compatible pair (``pair_d``, ``pair_s``:
+    detection row, object slot of ``centers`` (S, 3) and ``shape_matrices`` (S, 3, 3), world
+    m) whose object lies entirely at depth > ``min_depth``
+    (:func:`quadloc.factors.camera.depth_margin`; its projection is then an ellipse) and whose
+    projected centre (:func:`quadloc.service.localization.hypotheses.point_centres`) has level
+    value ``<= hit_level`` in the detection's ellipse
+    (:func:`quadloc.factors.conics.level_values`). Each object is projected once per pose
+    (not per pair, nor its dual quadric: stage 1 needs neither). Returns (H,)."""
+    n_h, n_s, n_det = P.shape[0], centers.shape[0], params.shape[0]
+    out = np.zeros(n_h)
+    hit = np.zeros(n_det, dtype=np.bool_)
+    u = np.empty(n_s)
+    v = np.empty(n_s)
+    front = np.empty(n_s, dtype=np.bool_)
+    for h in range(n_h):
+        for s in range(n_s):
+            X = centers[s]
+            z = T[h, 2, 0] * X[0] + T[h, 2, 1] * X[1] + T[h, 2, 2] * X[2] + T[h, 2, 3]
+            var = 0.0
+            for i in range(3):
+                for j in range(3):
+                    var += T[h, 2, i] * shape_matrices[s, i, j] * T[h, 2, j]
+            front[s] = _camera.depth_margin_kernel(z, var) > min_depth
+            x = P[h, 0, 0] * X[0] + P[h, 0, 1] * X[1] + P[h, 0, 2] * X[2] + P[h, 0, 3]
+            y = P[h, 1, 0] * X[0] + P[h, 1, 1] * X[1] + P[h, 1, 2] * X[2] + P[h, 1, 3]
+            w = P[h, 2, 0] * X[0] + P[h, 2, 1] * X[1] + P[h, 2, 2] * X[2] + P[h, 2, 3]
+            if not abs(w) > 1e-12:
+                w = 1e-12
+            u[s], v[s] = x / w, y / w
+        hit[:] = False
+        count = 0
+        for p in range(len(pair_d)):
+            d, s = pair_d[p], pair_s[p]
+            if hit[d] or not front[s]:
+                continue
+            dx, dy = u[s] - params[d, 0], v[s] - params[d, 1]
+            a = (dx * cos[d] + dy * sin[d]) / params[d, 2]
+            b = (-dx * sin[d] + dy * cos[d]) / params[d, 3]
+            if a * a + b * b <= hit_level:
+                hit[d] = True
+                count += 1
+        out[h] = count
+    return out
+
+
+@jit
 def _pair_iou_kernel(mx: FloatArray, my: FloatArray, s00: FloatArray, s01: FloatArray,
                      s11: FloatArray, valid: BoolArray, pair_d: Int32Array, pair_s: Int32Array,
                      pair_cx: FloatArray, pair_cy: FloatArray, pair_radii: FloatArray,
@@ -243,6 +300,10 @@ def compile_scoring_kernels() -> None:
                      np.zeros(1, dtype=np.int32), np.zeros(1, dtype=np.int32), np.zeros(1),
                      np.zeros(1), np.ones(1), np.ones(1), xy, 0.0, np.zeros((1, 1)), 0, 0, 1)
     iou_estimates(np.zeros((4, 2)), np.ones(()), np.zeros(2), np.eye(2))
+    _centre_hit_counts_kernel(np.eye(4)[None], np.zeros((1, 3, 4)), np.zeros((1, 3)),
+                              np.zeros((1, 3, 3)), np.zeros(1, dtype=np.int32),
+                              np.zeros(1, dtype=np.int32), np.ones((1, 5)), np.ones(1),
+                              np.zeros(1), CENTRE_HIT_LEVEL, MIN_DEPTH)
     _greedy(np.zeros(1, dtype=np.int32), np.zeros(1, dtype=np.int32), np.ones(1), 0.5, [0])
     _greedy(np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64), np.ones(1), 0.5, [0])
 
@@ -371,6 +432,9 @@ class MatchScorer:
             n_points: ellipse_points(self.params, sunflower_disk(n_points), axis=1)}
         self.points: FloatArray = self._xy[n_points].transpose(0, 2, 1)  # (D, M, 2)
         self.areas: FloatArray = math.pi * self.params[:, 2] * self.params[:, 3]
+        # the detections' axis directions (stage 1's level values)
+        self._cos: FloatArray = np.cos(self.params[:, 4])
+        self._sin: FloatArray = np.sin(self.params[:, 4])
         self.radii: FloatArray = np.maximum(self.params[:, 2], self.params[:, 3])
         # per pair, once per call: the detection's centre, bounding radius and area
         pair_params = self.params[self.pair_d]
@@ -414,23 +478,21 @@ class MatchScorer:
 
     def centre_hits(self, camera_from_world: FloatArray,
                     stop_at: Deadline | None = None) -> FloatArray:
-        """Stage 1: number of detections hit by a compatible valid object's centre, (H,)."""
+        """Stage 1: number of detections hit by a compatible valid object's centre (its
+        projection at level value ``<= CENTRE_HIT_LEVEL`` of the detection's ellipse), (H,).
+        One compiled kernel (:func:`_centre_hit_counts_kernel`) per block of
+        :data:`PROJECT_BLOCK` projections."""
         stop_at = self._stop(stop_at)
         T = np.asarray(camera_from_world, dtype=float)
         out = np.zeros(len(T))
         step = max(1, PROJECT_BLOCK // max(1, len(self.objects)))
         for hb in blocks(len(T), step):
             _check(stop_at)
-            *_, valid, P = self._project(T[hb])
-            pc = point_centres(P, self._object_arrays[0])
-            for h in range(len(pc)):
-                per_det = np.zeros(self.n_det, dtype=bool)
-                for blk in blocks(len(self.pair_d), PAIR_BLOCK):
-                    _check(stop_at)
-                    pd, ps = self.pair_d[blk], self.pair_s[blk]
-                    phi = level_values(self.params[pd], pc[h, ps][:, None])[:, 0]
-                    per_det[pd[(phi <= 4.0) & valid[h, ps]]] = True
-                out[hb.start + h] = per_det.sum()
+            Tb = np.array(T[hb], dtype=float, order="C")
+            out[hb] = _centre_hit_counts_kernel(
+                Tb, np.ascontiguousarray(self.camera.K @ Tb[:, :3, :]), self._object_arrays[0],
+                self._object_arrays[1], self.pair_d, self.pair_s, self.params, self._cos,
+                self._sin, CENTRE_HIT_LEVEL, MIN_DEPTH)
         return out
 
     def pair_iou(self, camera_from_world: FloatArray, points: FloatArray | None = None,

@@ -15,13 +15,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from quadloc.factors.arrays import FloatArray
+from quadloc.factors.arrays import FloatArray, IntArray
 from quadloc.factors.budget import Deadline, deadline_passed
 from quadloc.factors.camera import Camera
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import CompiledMap
-from quadloc.service.localization.hypotheses import p3p_hypotheses, size_depths
+from quadloc.service.localization.hypotheses import p3p_hypotheses_batch, size_depths
 from quadloc.service.localization.scoring import (
     Match,
     MatchScorer,
@@ -67,11 +67,27 @@ class MultiFrameOutcome:
     reason: str | None
 
 
+def _draw_unused(objects: IntArray, used: set[int], rng: np.random.Generator) -> int | None:
+    """One of ``objects`` (indices) not in ``used``, uniformly (one ``rng.integers`` call;
+    None, without a call, when every one is used): the j-th of them in their order, found by
+    skipping the positions of the used ones (at most two per sample) rather than by listing the
+    free ones (a label of a building map has hundreds of objects)."""
+    skip = np.flatnonzero(np.logical_or.reduce([objects == u for u in used])) if used else ()
+    if len(objects) == len(skip):
+        return None
+    j = int(rng.integers(len(objects) - len(skip)))
+    for q in skip:  # ascending positions
+        j += int(j >= q)
+    return int(objects[j])
+
+
 def _virtual_points(frames: Sequence[InitFrame], ref_from_k: list[FloatArray],
                     camera: Camera, sample: list[tuple[int, int, int]],
-                    compiled: CompiledMap) -> FloatArray | None:
+                    compiled: CompiledMap, Kinv: FloatArray) -> FloatArray | None:
+    """The sample's detections seen from the reference frame (3, 2) px: each ellipse centre
+    at the depth its size gives (``Kinv``: the camera's inverse intrinsics), carried by the
+    odometry; None when one falls behind the reference camera."""
     pts = []
-    Kinv = np.linalg.inv(camera.K)
     for k, d, o in sample:
         e = frames[k].ellipses[d]
         r_obj = float(np.prod(compiled.axes[o]) ** (1.0 / 3.0))
@@ -114,6 +130,9 @@ def multi_frame_ransac(
             for d, lab in enumerate(f.labels) if len(compiled.indices_for(lab))]
     hyps: list[FloatArray] = [np.asarray(h, float) for h in extra_hypotheses]
     if len(pool) >= 3:
+        K_inv = np.linalg.inv(camera.K)
+        image_points: list[FloatArray] = []
+        world_points: list[FloatArray] = []
         for _ in range(max_samples):
             if deadline_passed(deadline):  # gives up (no pose), never answers from fewer
                 return MultiFrameOutcome(None, [], 0, 0, len(hyps), "time_budget_exceeded")
@@ -121,19 +140,21 @@ def multi_frame_ransac(
             sample, used = [], set()
             for i in idx:
                 k, d, objs = pool[int(i)]
-                free = [int(o) for o in objs if int(o) not in used]
-                if not free:
+                o = _draw_unused(objs, used, rng)
+                if o is None:
                     break
-                o = free[int(rng.integers(len(free)))]
                 used.add(o)
                 sample.append((k, d, o))
             if len(sample) < 3:
                 continue
-            vp = _virtual_points(frames, ref_from_k, camera, sample, compiled)
+            vp = _virtual_points(frames, ref_from_k, camera, sample, compiled, K_inv)
             if vp is None:
                 continue
-            sols = p3p_hypotheses(vp, compiled.centers[[s[2] for s in sample]], camera)
-            hyps.extend(sols)
+            image_points.append(vp)
+            world_points.append(compiled.centers[[s[2] for s in sample]])
+        if image_points:  # every sample's P3P at once, in sample order
+            hyps.extend(p3p_hypotheses_batch(np.array(image_points), np.array(world_points),
+                                             camera)[0])
     if not hyps:
         return MultiFrameOutcome(None, [], 0, 0, 0, "too_few_objects")
     H = np.array(hyps).reshape(-1, 4, 4)

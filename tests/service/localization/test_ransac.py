@@ -414,6 +414,26 @@ def test_blocked_and_pruned_iou_equals_the_direct_estimate(monkeypatch):
     np.testing.assert_array_equal(scorer.centre_hits(poses), expected)
 
 
+def test_centre_hits_equal_the_direct_centre_test_on_many_poses():
+    """Stage 1 (the compiled kernel: centres and depth margins projected per object, not the
+    dual quadrics) == the direct test of every (pose, detection, object) with the batched
+    projection's validity, on 300 poses around a crowded map, some looking away or standing
+    inside objects."""
+    cm, scorer = _crowded(40, 12)
+    rng = np.random.default_rng(5)
+    poses = np.array([invert_pose(look_at(rng.uniform([-3, -5, -1], [3, 1, 1]),
+                                          rng.uniform([-2, -1, -1], [2, 1, 1])))
+                      for _ in range(300)])
+    _, _, valid, pc = project_objects(CAM, poses, cm.centers, cm.shape_matrices,
+                                      cm.dual_quadrics)
+    pc_minus = pc[:, None, :, :] - scorer.params[None, :, None, :2]
+    shape = np.array([Ellipse(*p).shape_matrix() for p in scorer.params])
+    phi = np.einsum("hdsi,dij,hdsj->hds", pc_minus, shape, pc_minus)
+    expected = ((phi <= 4.0) & valid[:, None, :]).any(axis=2).sum(axis=1)
+    assert expected.max() >= 3 and (~valid).any() and valid.any()  # hits, and invalid objects
+    np.testing.assert_array_equal(scorer.centre_hits(poses), expected)
+
+
 def test_search_memory_does_not_grow_with_hypotheses_or_candidates():
     """Peak traced memory of a search on 2,000 objects x 128 same-label detections stays within
     a small multiple of detections x objects (it used to hold candidates x pairs x points
