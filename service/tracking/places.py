@@ -296,19 +296,31 @@ class PlaceSet:
             h.zone = zone if zone is not None else h.zone
 
     def has_copy(self, h: PlaceHypothesis) -> bool:
-        """Whether the objects ``h`` matched have an exact copy elsewhere in the map (same
-        labels, every centre within 5 cm after a rigid fit:
-        :func:`quadloc.service.localization.copies.copy_transforms`, through the place index
-        on a large map): the evidence so far cannot tell that place from the copy, whatever
-        the scores (copies differ only by how well each alignment was proposed). Memoised per
-        set of objects."""
+        """Whether the evidence of ``h`` cannot tell its place from a copy: no room's share of
+        the objects it matched (those of one zone, :func:`quadloc.maps.visibility.object_zones`;
+        objects of no zone are one more room), of at least :data:`MIN_COMMIT_OBJECTS` objects,
+        is without an exact copy elsewhere in the map (same labels, every centre within 5 cm
+        after a rigid fit: :func:`quadloc.service.localization.copies.copy_transforms`,
+        through the place index on a large map). Such a place differs from its copies only
+        by how well each alignment was proposed, whatever the scores. The objects of two rooms
+        are not taken together: the session knows where one room lies from the other only
+        through the odometry of the walk between them, whose drift (degrees and decimetres
+        over a transit) hides the difference between two copied rooms and another pair of the
+        same copies placed a few degrees otherwise (a walk between two floors of 200 exact
+        copies committed 60 m off with confidence 1.0: the union of the two rooms' objects
+        had no copy, the pair it took was 5 deg and 16 cm from the true one). Memoised per set
+        of objects."""
         key = h.objects
         found = self._copies.get(key)
         if found is None:
             index = (place_index(self.compiled) if len(self.compiled) >= PLACE_SEARCH_MIN_OBJECTS
                      else None)
-            found = bool(copy_transforms(self.compiled, np.array(sorted(key), dtype=np.intp),
-                                         max_copies=1, index=index))
+            objects = np.array(sorted(key), dtype=np.intp)
+            zones = object_zones(self.compiled)[objects]
+            found = not any(
+                len(share) >= MIN_COMMIT_OBJECTS
+                and not copy_transforms(self.compiled, share, max_copies=1, index=index)
+                for share in (objects[zones == z] for z in np.unique(zones)))
             self._copies[key] = found
         return found
 

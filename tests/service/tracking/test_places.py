@@ -15,7 +15,9 @@ from quadloc.factors.conics import Ellipse, ellipse_params
 from quadloc.factors.metrics import ellipse_intersection_area
 from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import compile_map
+from quadloc.maps.places import place_index
 from quadloc.maps.visibility import predicted_in_view
+from quadloc.service.localization.copies import copy_transforms
 from quadloc.service.localization.types import Detection
 from quadloc.service.tracking.places import (
     COMMIT_PROBABILITY,
@@ -487,6 +489,36 @@ def test_a_session_commits_when_two_alignments_of_its_room_split_the_posterior()
     walk = building_walk(b, 0)
     _, out = _run(b, walk, 60)
     _assert_tracks_from_an_early_fix(out)
+
+
+def _matched(building, rooms: dict[str, int | None]) -> PlaceHypothesis:
+    """A hypothesis that matched the first ``n`` objects (all when None) of each room."""
+    h = PlaceHypothesis(np.eye(4))
+    by_zone = {r.zone_id: r.object_ids for r in building.rooms}
+    for zone, n in rooms.items():
+        h.frames_matched.update(building.compiled.index_of(o) for o in by_zone[zone][:n])
+    return h
+
+
+def test_a_place_of_copied_rooms_has_a_copy_whatever_rooms_it_joins() -> None:
+    """Exact copies of a room, each turned its own way: the objects of two rooms taken
+    together have no copy (no other pair of rooms is placed alike to 5 cm), but each room's
+    have; only the walk's odometry relates the two rooms, and its drift hides a pair placed a
+    few degrees otherwise, so the place counts as copied (no commit). A room without a copy
+    (perturbed) is evidence of its own."""
+    b = make_building(10, "exact", 3)
+    places = PlaceSet(b.compiled, load_chess_poses()[0], 0.2)
+    a, c = b.rooms[0].zone_id, b.rooms[1].zone_id
+    h = _matched(b, {a: None, c: 3})
+    union = np.array(sorted(h.objects), dtype=np.intp)
+    assert not copy_transforms(b.compiled, union, max_copies=1, index=place_index(b.compiled))
+    assert places.has_copy(h)
+    assert places.has_copy(_matched(b, {a: None}))
+    p = make_building(3, "perturbed", 3)
+    unique = PlaceSet(p.compiled, load_chess_poses()[0], 0.2)
+    assert not unique.has_copy(_matched(p, {p.rooms[0].zone_id: None}))
+    # two objects of a room are no evidence of their own, however unique
+    assert unique.has_copy(_matched(p, {p.rooms[0].zone_id: 2}))
 
 
 def test_a_correction_within_tolerance_keeps_tracking_a_repeated_room() -> None:
