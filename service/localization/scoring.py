@@ -208,10 +208,10 @@ def _centre_hit_counts_kernel(T: FloatArray, P: FloatArray, centers: FloatArray,
         for s in range(n_s):
             X = centers[s]
             z = T[h, 2, 0] * X[0] + T[h, 2, 1] * X[1] + T[h, 2, 2] * X[2] + T[h, 2, 3]
-            var = 0.0
-            for i in range(3):
-                for j in range(3):
-                    var += T[h, 2, i] * shape_matrices[s, i, j] * T[h, 2, j]
+            r0, r1, r2, M = T[h, 2, 0], T[h, 2, 1], T[h, 2, 2], shape_matrices[s]
+            var = (r0 * (M[0, 0] * r0 + M[0, 1] * r1 + M[0, 2] * r2)
+                   + r1 * (M[1, 0] * r0 + M[1, 1] * r1 + M[1, 2] * r2)
+                   + r2 * (M[2, 0] * r0 + M[2, 1] * r1 + M[2, 2] * r2))
             front[s] = _camera.depth_margin_kernel(z, var) > min_depth
             x = P[h, 0, 0] * X[0] + P[h, 0, 1] * X[1] + P[h, 0, 2] * X[2] + P[h, 0, 3]
             y = P[h, 1, 0] * X[0] + P[h, 1, 1] * X[1] + P[h, 1, 2] * X[2] + P[h, 1, 3]

@@ -130,14 +130,15 @@ def multi_frame_ransac(
             for d, lab in enumerate(f.labels) if len(compiled.indices_for(lab))]
     hyps: list[FloatArray] = [np.asarray(h, float) for h in extra_hypotheses]
     if len(pool) >= 3:
-        K_inv = np.linalg.inv(camera.K)
+        K_inv = np.array(np.linalg.inv(camera.K), dtype=np.float64)
         image_points: list[FloatArray] = []
         world_points: list[FloatArray] = []
         for _ in range(max_samples):
             if deadline_passed(deadline):  # gives up (no pose), never answers from fewer
                 return MultiFrameOutcome(None, [], 0, 0, len(hyps), "time_budget_exceeded")
             idx = rng.choice(len(pool), 3, replace=False)
-            sample, used = [], set()
+            sample: list[tuple[int, int, int]] = []
+            used: set[int] = set()
             for i in idx:
                 k, d, objs = pool[int(i)]
                 o = _draw_unused(objs, used, rng)
