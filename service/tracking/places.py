@@ -298,7 +298,8 @@ class PlaceSet:
     def has_copy(self, h: PlaceHypothesis) -> bool:
         """Whether the evidence of ``h`` cannot tell its place from a copy: no room's share of
         the objects it matched (those of one zone, :func:`quadloc.maps.visibility.object_zones`;
-        objects of no zone are one more room), of at least :data:`MIN_COMMIT_OBJECTS` objects,
+        objects of no zone, and of zones of fewer than :data:`MIN_COMMIT_OBJECTS` objects in the
+        map, are one more room), of at least :data:`MIN_COMMIT_OBJECTS` objects,
         is without an exact copy elsewhere in the map (same labels, every centre within 5 cm
         after a rigid fit: :func:`quadloc.service.localization.copies.copy_transforms`,
         through the place index on a large map). Such a place differs from its copies only
@@ -316,7 +317,10 @@ class PlaceSet:
             index = (place_index(self.compiled) if len(self.compiled) >= PLACE_SEARCH_MIN_OBJECTS
                      else None)
             objects = np.array(sorted(key), dtype=np.intp)
-            zones = object_zones(self.compiled)[objects]
+            room = object_zones(self.compiled)
+            # a zone of fewer objects than a constellation (e.g. one exhibit) is no room
+            small = np.bincount(room + 1) < MIN_COMMIT_OBJECTS
+            zones = np.where(small[room[objects] + 1], -1, room[objects])
             found = not any(
                 len(share) >= MIN_COMMIT_OBJECTS
                 and not copy_transforms(self.compiled, share, max_copies=1, index=index)

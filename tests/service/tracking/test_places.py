@@ -15,6 +15,7 @@ from quadloc.factors.conics import Ellipse, ellipse_params
 from quadloc.factors.metrics import ellipse_intersection_area
 from quadloc.factors.rotations import invert_pose
 from quadloc.maps.compiled import compile_map
+from quadloc.maps.model import MapZone
 from quadloc.maps.places import place_index
 from quadloc.maps.visibility import predicted_in_view
 from quadloc.service.localization.copies import copy_transforms
@@ -519,6 +520,14 @@ def test_a_place_of_copied_rooms_has_a_copy_whatever_rooms_it_joins() -> None:
     assert not unique.has_copy(_matched(p, {p.rooms[0].zone_id: None}))
     # two objects of a room are no evidence of their own, however unique
     assert unique.has_copy(_matched(p, {p.rooms[0].zone_id: 2}))
+    # zones of one object each (exhibits) are no rooms: the objects are taken together
+    room = p.rooms[0]
+    exhibits = dataclasses.replace(p.scene_map, zones=tuple(
+        MapZone(f"z{k}", None, (o,)) for k, o in enumerate(room.object_ids)))
+    one_each = compile_map(exhibits)
+    h = PlaceHypothesis(np.eye(4))
+    h.frames_matched.update(one_each.index_of(o) for o in room.object_ids)
+    assert not PlaceSet(one_each, load_chess_poses()[0], 0.2).has_copy(h)
 
 
 def test_a_correction_within_tolerance_keeps_tracking_a_repeated_room() -> None:
