@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from quadloc.factors.arrays import FloatArray
+from quadloc.factors.arrays import FloatArray, IntArray
 from quadloc.factors.camera import Camera
 from quadloc.factors.conics import Ellipse
 from quadloc.factors.rotations import invert_pose, rotation_angle
@@ -192,6 +192,11 @@ class PlaceSet:
         self.null_score = 0.0
         self._zones = zone_index(compiled.scene_map)
         self._copies: dict[frozenset[int], bool] = {}
+        # per object, its room for has_copy: its zone (object_zones), -1 for no zone and for
+        # a zone of fewer objects than a constellation (e.g. one exhibit: no room)
+        room = object_zones(compiled)
+        self._rooms: IntArray = np.where(
+            (np.bincount(room + 1) < MIN_COMMIT_OBJECTS)[room + 1], -1, room)
 
     def discard(self, hypotheses: Sequence[PlaceHypothesis]) -> None:
         """Drop ``hypotheses`` (by identity)."""
@@ -317,10 +322,7 @@ class PlaceSet:
             index = (place_index(self.compiled) if len(self.compiled) >= PLACE_SEARCH_MIN_OBJECTS
                      else None)
             objects = np.array(sorted(key), dtype=np.intp)
-            room = object_zones(self.compiled)
-            # a zone of fewer objects than a constellation (e.g. one exhibit) is no room
-            small = np.bincount(room + 1) < MIN_COMMIT_OBJECTS
-            zones = np.where(small[room[objects] + 1], -1, room[objects])
+            zones = self._rooms[objects]
             found = not any(
                 len(share) >= MIN_COMMIT_OBJECTS
                 and not copy_transforms(self.compiled, share, max_copies=1, index=index)

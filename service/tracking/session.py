@@ -879,8 +879,6 @@ class TrackingSession:
         tells the copies apart where the frames cannot (a walk from a room into a room that is
         repeated elsewhere)."""
         mine = sorted(objects)
-        if len(mine) < 3:
-            return False
         carry = committed_world_from_camera @ invert_pose(world_from_camera)
         centers = self.compiled.centers
         moved = centers[mine] @ carry[:3, :3].T + carry[:3, 3]

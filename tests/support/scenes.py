@@ -54,7 +54,7 @@ def ellipsoids_intersect(a: Ellipsoid, b: Ellipsoid) -> bool:
     if float(np.linalg.norm(d)) > float(a.axes.max() + b.axes.max()):
         return False  # the bounding spheres are apart
     whiten = np.diag(1.0 / a.axes) @ a.rotation.T  # L: a -> the unit sphere
-    shape_b = whiten @ b.rotation @ np.diag(b.axes ** 2) @ b.rotation.T @ whiten.T
+    shape_b = whiten @ b.shape_matrix() @ whiten.T
     lam, Q = np.linalg.eigh(shape_b)
     c = (Q.T @ (whiten @ d)) ** 2
 
