@@ -79,9 +79,10 @@ from tests.support.buildings import (
 from tests.support.errors import pose_errors
 
 #: The base seeds (tuning: the place search was tuned on 5, 7, 9 and 11) and map sizes of the
-#: building frames' confidence-fit records (``--calibration-records PATH``).
-CALIBRATION_SEEDS = (5, 7)
-CALIBRATION_ROOMS = (3, 10, 50, 200)
+#: building frames' confidence-fit records (``--calibration-records PATH``): maps large enough
+#: for the place search, whose answers fit the ``"places"`` confidence model.
+CALIBRATION_SEEDS = (5, 7, 9, 11)
+CALIBRATION_ROOMS = (10, 50, 200, 1000)
 #: An alternative "holds the true pose" within this distance and angle.
 ALTERNATIVE_TOLERANCE_M = 0.2
 ALTERNATIVE_TOLERANCE_DEG = 10.0
@@ -236,7 +237,8 @@ def building_records(rooms: tuple[int, ...], modes: tuple[str, ...], frames: int
     ``"building"``): each frame of each (size, mode) of :func:`run_case`'s maps and frames
     (base ``seed``: tuning seeds for the fit) solved with ``min_confidence=0`` (every verified,
     unambiguous pose is localized with its confidence); they feed the confidence model only
-    (``covariance=False``: the covariance scale stays the one-room frames')."""
+    (``covariance=False``: the covariance scale stays the one-room frames'): the ``"places"``
+    model where the place search answered (``calibration_fit.fit_confidence_models``)."""
     options = LocalizationOptions(min_confidence=0.0)
     key = calibration_key(options.metric, options.use_sigma)
     out: list[SolveRecord] = []

@@ -22,7 +22,8 @@ Steps of :func:`fit_calibration` (each formula is in one function below):
    recomputed for the new ``k`` / ``f`` (:func:`refeature`), then the logistic models of
    ``confidence`` are fitted (:func:`fit_confidence_models`): ``"refined"`` over every refined
    key with an intercept offset per key (``level_set`` is the reference), ``"none"`` over the
-   unrefined answers.
+   unrefined answers, ``"places"`` (the refined model's log-odds recalibrated) over the answers
+   of a large map's place search (building frames: ``bench.building --calibration-records``).
 4. ``AMBIGUITY_CHI2_RATIO`` and ``MIN_CONFIDENCE`` (:func:`choose_ambiguity_and_threshold`):
    on the decision sets (unchecked answers of hard frames, e.g. 2 or 3 detections), the pair
    that keeps the most good frames while every set's false accepts stay within
@@ -59,6 +60,7 @@ from quadloc.service.localization.confidence import (
     TOLERANCE_ROTATION_DEG,
     confidence_probability,
     gaussian_tolerance_probability,
+    refined_logit,
     student_t_factor,
 )
 
@@ -84,6 +86,7 @@ __all__ = [
     "fit_logistic",
     "fit_s2_floor",
     "map_calibration_applies",
+    "place_search",
     "read_records",
     "record_from_evidence",
     "refeature",
@@ -101,10 +104,13 @@ FEATURES = ("inliers_ge3", "inliers_ge4", "log_inliers", "inlier_fraction", "mea
 #: Features that need a refinement (not in the ``none`` model).
 REFINED_ONLY = ("log_s2", "logit_gauss", "chi2_competitor")
 #: Evidence a record keeps besides the features: a runner-up with a larger IoU sum on other
-#: map objects (> 0: ambiguous by the IoU rule, ``decide``).
-DECISION_EVIDENCE = ("iou_competitor",)
+#: map objects (> 0: ambiguous by the IoU rule, ``decide``); the answer came from the place
+#: search of a large map (> 0: its confidence is the ``"places"`` model's).
+RECORD_EVIDENCE = ("iou_competitor", "place_search")
 #: ``format`` of the record files of :func:`write_records`.
 RECORDS_FORMAT = "quadloc.calibration-records/1"
+#: Name of the confidence model of the place search's answers (``confidence.confidence_logit``).
+PLACES_MODEL = "places"
 #: Key of the reference model (no intercept offset) and of the unrefined answers.
 REFERENCE_KEY = "level_set"
 UNREFINED_KEY = "none"
@@ -132,7 +138,8 @@ class SolveRecord:
         position_error_m: camera position error against the reference (inf without a pose).
         rotation_error_deg: rotation error against the reference (inf without a pose).
         features: the answer's evidence (``LocalizationResult.evidence``): the confidence
-            features (:data:`FEATURES`) and ``iou_competitor``; NaN when the answer has none.
+            features (:data:`FEATURES`) and :data:`RECORD_EVIDENCE`; NaN when the answer has
+            none.
         s2: a-posteriori residual variance of the refinement (NaN without refinement).
         n_refined: detections in the refinement (0 without).
         cov_scale: ``k * max(s^2, f) * t(n)`` applied to the reported covariance (NaN
@@ -182,9 +189,9 @@ def record_from_evidence(
     """A :class:`SolveRecord` from an answer's evidence (``LocalizationResult.evidence``) and
     reported covariance (6x6 ``[omega, v]``, rad / m, or None), with its errors against the
     reference (computed by the caller: position m, rotation deg, NEES or None); ``features``:
-    the evidence names kept (with :data:`DECISION_EVIDENCE`)."""
+    the evidence names kept (with :data:`RECORD_EVIDENCE`)."""
     nan = math.nan
-    names = (*features, *(n for n in DECISION_EVIDENCE if n not in features))
+    names = (*features, *(n for n in RECORD_EVIDENCE if n not in features))
     feats = {n: _float(evidence.get(n)) for n in names}
     if covariance_6x6 is None:
         tr_rot = tr_pos = nan
@@ -203,6 +210,12 @@ def record_from_evidence(
 
 def _float(v: object) -> float:
     return math.nan if v is None else float(cast(float, v))
+
+
+def place_search(r: SolveRecord) -> bool:
+    """The record's answer came from the place search of a large map (feature
+    ``place_search``; records made before it existed have none: one-room solves)."""
+    return bool(r.features.get("place_search", 0.0) > 0)
 
 
 def success(r: SolveRecord) -> bool:
@@ -238,8 +251,9 @@ class CalibrationConstants:
             ``AMBIGUITY_RATIO_SAME_OBJECTS``; not fitted, carried over).
         min_confidence: default ``LocalizationOptions.min_confidence`` (``MIN_CONFIDENCE``).
         confidence_features: the models' features, in order (``CONFIDENCE_FEATURES``).
-        confidence_models: ``"refined"`` and ``"none"`` (``CONFIDENCE_MODELS``), the
-            ``models`` argument of ``confidence.confidence_probability``.
+        confidence_models: ``"refined"``, ``"none"`` and, fitted on building frames,
+            ``"places"`` (``CONFIDENCE_MODELS``), the ``models`` argument of
+            ``confidence.confidence_probability``.
         provenance: what the constants were fitted from (``PROVENANCE``): ``records`` (file),
             ``records_sha256``, ``command``, ``tuning_seeds``, ...
     """
@@ -464,10 +478,14 @@ def fit_confidence_models(records: Sequence[SolveRecord], settings: FitSettings 
     localized records (features as recorded: :func:`refeature` them first): ``"refined"``
     over every key but ``"none"``, with an intercept offset per key (``level_set`` the
     reference) when ``settings.metric_offsets``; ``"none"`` over the unrefined answers,
-    without :data:`REFINED_ONLY`. A model without records is ``base``'s."""
+    without :data:`REFINED_ONLY`; both without the answers of a place search
+    (:func:`place_search`), which fit ``"places"``: the refined model's log-odds recalibrated
+    (``intercept + coef["refined_logit"] * z``, ``confidence.confidence_logit``). A model
+    without records is ``base``'s (``"places"``: absent when ``base`` has none)."""
     models: dict[str, LogisticModel] = {}
     for name in ("refined", UNREFINED_KEY):
-        rr = [r for r in records if r.localized and (r.key == UNREFINED_KEY) == (name != "refined")]
+        rr = [r for r in records if r.localized and not place_search(r)
+              and (r.key == UNREFINED_KEY) == (name != "refined")]
         if not rr:
             if base is None or name not in base:
                 raise CalibrationFitError(f"no localized record for the {name!r} model")
@@ -487,6 +505,14 @@ def fit_confidence_models(records: Sequence[SolveRecord], settings: FitSettings 
             model["metric_offset"] = {
                 m: round(float(c), 6) for m, c in zip(offsets, w[1 + len(use):], strict=True)}
         models[name] = model
+    rp = [r for r in records if r.localized and place_search(r) and r.key != UNREFINED_KEY]
+    if rp:
+        z = np.array([[refined_logit(r.key, r.features, models)] for r in rp])
+        w = fit_logistic(z, np.array([success(r) for r in rp], dtype=float), settings.ridge)
+        models[PLACES_MODEL] = {"intercept": round(float(w[0]), 6),
+                                "coef": {"refined_logit": round(float(w[1]), 6)}}
+    elif base is not None and PLACES_MODEL in base:
+        models[PLACES_MODEL] = base[PLACES_MODEL]
     return models
 
 
@@ -683,7 +709,9 @@ MIN_CONFIDENCE = {c.min_confidence!r}
 #: Features of the confidence model (``confidence.evidence_features``), in order.
 CONFIDENCE_FEATURES = {fmt(c.confidence_features)}
 
-#: Logistic models: P = 1 / (1 + exp(-(intercept + metric_offset + sum coef * feature))).
+#: Logistic models: P = 1 / (1 + exp(-(intercept + metric_offset + sum coef * feature))); an
+#: answer of the place search: P = 1 / (1 + exp(-(places intercept + coef * z))), z the refined
+#: model's log-odds (``confidence.confidence_logit``).
 CONFIDENCE_MODELS = {fmt(c.confidence_models, sort_dicts=False)}
 '''
 

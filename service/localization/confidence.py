@@ -47,11 +47,13 @@ __all__ = [
     "calibrated_covariance",
     "calibration_key",
     "chi2_competitor",
+    "confidence_logit",
     "confidence_probability",
     "covariance_scale",
     "evidence_features",
     "gaussian_tolerance_probability",
     "is_ambiguous",
+    "refined_logit",
     "residual_variance",
     "student_t_factor",
     "variance_factor",
@@ -187,6 +189,7 @@ def evidence_features(
     *, n_inliers: int, n_usable: int, ious: FloatArray, s2: float, covariance: FloatArray | None,
     margin: float, n_samples: int, s2_floor: float = 0.0,
     chi2_ratio_log: float = CHI2_COMPETITOR_CAP, gravity: bool = False,
+    place_search: bool = False,
 ) -> dict[str, float]:
     """The evidence the confidence model uses (names in
     :data:`quadloc.service.localization.calibration.CONFIDENCE_FEATURES`).
@@ -204,6 +207,10 @@ def evidence_features(
         chi2_ratio_log: :func:`chi2_competitor` of the answer (the cap without a competitor).
         gravity: the solve had the client's gravity (a factor on the tilt, tilted candidates
             dropped: ``quadloc.service.localization.gravity``).
+        place_search: the answer came from the place search of a large map (the map's
+            constellations, negative evidence, the copies rule:
+            ``quadloc.service.localization.constellations``): :func:`confidence_probability`
+            recalibrates the refined model's probability with the ``"places"`` model.
     """
     ious = np.asarray(ious, dtype=float)
     p_gauss = gaussian_tolerance_probability(covariance)
@@ -221,6 +228,7 @@ def evidence_features(
         "log_samples": math.log(max(n_samples, 1)),
         "chi2_competitor": float(chi2_ratio_log),  # clipped by chi2_competitor
         "gravity": float(gravity),
+        "place_search": float(place_search),
     }
 
 
@@ -236,15 +244,39 @@ def confidence_probability(metric: str, features: Mapping[str, float],
     ``metric`` (its :func:`calibration_key`) picks the coefficient set: ``"none"`` (unrefined
     poses: no residual variance or covariance features) or the refined model (shared by the
     nine metrics with and without sigma weights, optionally with an intercept offset per key;
-    the calibrated covariance carries the metric's accuracy).
+    the calibrated covariance carries the metric's accuracy). A refined answer of the place
+    search (feature ``place_search`` > 0) has that model's logit ``z`` recalibrated by the
+    ``"places"`` model, ``intercept + coef["refined_logit"] * z`` (fitted on building frames:
+    the refined model, fitted in one room, counts every chance match of a whole building
+    against an answer the place search and the negative evidence already singled out).
     ``models``: the coefficient sets (default :data:`CONFIDENCE_MODELS`; the bench passes
     candidates while fitting)."""
+    return float(1.0 / (1.0 + math.exp(-min(max(confidence_logit(metric, features, models),
+                                                 -50.0), 50.0))))
+
+
+def confidence_logit(metric: str, features: Mapping[str, float],
+                     models: Mapping[str, Any] | None = None) -> float:
+    """The log-odds of :func:`confidence_probability` (same arguments)."""
+    sets: Mapping[str, Any] = CONFIDENCE_MODELS if models is None else models
+    refined = metric != "none"
+    z = refined_logit(metric, features, sets)
+    places = sets.get("places")
+    if refined and places is not None and features.get("place_search", 0.0) > 0:
+        z = places["intercept"] + places["coef"]["refined_logit"] * z
+    return z
+
+
+def refined_logit(metric: str, features: Mapping[str, float],
+                  models: Mapping[str, Any] | None = None) -> float:
+    """The log-odds of the ``"refined"`` model (``"none"`` for ``metric="none"``) alone,
+    before any ``"places"`` recalibration (same arguments as :func:`confidence_probability`)."""
     sets: Mapping[str, Any] = CONFIDENCE_MODELS if models is None else models
     model = sets["none" if metric == "none" else "refined"]
     z = model["intercept"] + model.get("metric_offset", {}).get(metric, 0.0)
     for name, coef in model["coef"].items():
         z += coef * features[name]
-    return float(1.0 / (1.0 + math.exp(-min(max(z, -50.0), 50.0))))
+    return float(z)
 
 
 def chi2_competitor(best_chi2: float, best_inliers: int,

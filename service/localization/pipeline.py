@@ -953,7 +953,7 @@ def _assess(solve: _Solve, a: Candidate, runner_up: Candidate | None,
                                a.chi2, len(a.inliers),
                                [(b.chi2_against(a), len(b.inliers))
                                 for b in others if b is not a]),
-                           gravity=solve.gravity is not None)
+                           gravity=solve.gravity is not None, place_search=solve.places)
     factor = math.nan if res is None else covariance_scale(key, res.chi2, res.n_residuals,
                                                            n_refined, scale, floors)
     extra = {"s2": s2, "cov_scale": factor, "n_refined": float(n_refined),
