@@ -49,6 +49,7 @@ from quadloc.maps.compiled import CompiledMap, compile_map
 from quadloc.maps.zones import ZoneIndex, zone_index
 from quadloc.service.localization.calibration_fit import (
     SolveRecord,
+    display_path,
     record_from_evidence,
     write_records,
 )
@@ -489,7 +490,7 @@ def _write_calibration_records(path: Path, frames: int) -> int:
         CALIBRATION_ROOMS, MODES, frames, seed,
         lambda m: print(m, file=sys.stderr, flush=True))]
     write_records(path, records, {
-        "command": f"python -m bench.building --calibration-records {path.name} "
+        "command": f"python -m bench.building --calibration-records {display_path(path)} "
                    f"--frames {frames}",
         "commit": run_commit(), "date": time.strftime("%Y-%m-%d", time.gmtime()),
         "tuning_seeds": list(CALIBRATION_SEEDS), "rooms": list(CALIBRATION_ROOMS),

@@ -80,6 +80,7 @@ __all__ = [
     "decide",
     "decision_outcome",
     "decision_sets",
+    "display_path",
     "fit_calibration",
     "fit_confidence_models",
     "fit_covariance_scale",
@@ -672,6 +673,10 @@ def calibration_source(c: CalibrationConstants) -> str:
                    f"{p.get('records_commit', '?')};",
                    "tuning seeds only (:data:`PROVENANCE`): ``bench.trust`` reports on other "
                    "seeds."]
+    for x in p.get("extra_records", []):
+        header += ["", f"With ``{x['records']}``, made by ``{x['records_command']}`` at commit "
+                       f"{x['records_commit']} (tuning seeds {x['tuning_seeds']}; "
+                       "``bench.building`` reports on other seeds)."]
     doc = "\n".join(header).rstrip()
 
     def fmt(v: object, **kw: Any) -> str:
@@ -679,6 +684,7 @@ def calibration_source(c: CalibrationConstants) -> str:
 
     return f'''"""{doc}
 """
+# ruff: noqa: E501  (generated: the commands and sha256 sums are not wrapped)
 
 PROVENANCE = {fmt(p, sort_dicts=False)}
 
@@ -793,7 +799,7 @@ def sha256_file(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
-def _display_path(path: Path) -> str:
+def display_path(path: Path) -> str:
     """``path`` relative to the working directory when inside it (a checkout's
     ``bench/data/...``), else its file name: never a machine-local absolute path."""
     p = Path(path).resolve()
@@ -812,9 +818,9 @@ def fit_file(records_path: Path, base: CalibrationConstants | None = None,
     their provenance (records, sha256, the records' own provenance, ``command``) in the
     constants. ``base``: default the shipped constants."""
     records, made = read_records(records_path)
-    shown = _display_path(records_path)
+    shown = display_path(records_path)
     flags = "" if settings.metric_offsets else " --no-metric-offsets"
-    extra_shown = "".join(f" {_display_path(x)}" for x in extra_records)
+    extra_shown = "".join(f" {display_path(x)}" for x in extra_records)
     prov: dict[str, Any] = {
         "records": shown, "records_sha256": sha256_file(records_path),
         "command": command or f"python -m quadloc.service.localization.calibration_fit "
@@ -827,7 +833,7 @@ def fit_file(records_path: Path, base: CalibrationConstants | None = None,
             more, made_more = read_records(path)
             records = [*records, *more]
             prov["extra_records"].append({
-                "records": _display_path(path), "records_sha256": sha256_file(path),
+                "records": display_path(path), "records_sha256": sha256_file(path),
                 "records_command": made_more.get("command", ""),
                 "records_commit": made_more.get("commit", ""),
                 "tuning_seeds": made_more.get("tuning_seeds", [])})
@@ -864,7 +870,7 @@ def main(argv: list[str] | None = None) -> int:
         print("shipped constants reproduced" if not diff else f"{len(diff)} difference(s)")
         return 1 if diff else 0
     args.output.write_text(calibration_source(fitted))
-    print(f"wrote {_display_path(args.output)}")
+    print(f"wrote {display_path(args.output)}")
     return 0
 
 

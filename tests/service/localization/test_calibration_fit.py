@@ -23,6 +23,7 @@ from quadloc.service.localization.calibration_fit import (
     choose_ambiguity_and_threshold,
     decide,
     fit_calibration,
+    fit_confidence_models,
     fit_covariance_scale,
     fit_file,
     fit_logistic,
@@ -32,10 +33,17 @@ from quadloc.service.localization.calibration_fit import (
     sha256_file,
     write_records,
 )
-from quadloc.service.localization.confidence import gaussian_tolerance_probability
+from quadloc.service.localization.confidence import (
+    confidence_probability,
+    gaussian_tolerance_probability,
+)
+from tests.support.buildings import REPORT_SEEDS as BUILDING_REPORT_SEEDS
 
 REPO_ROOT = Path(__file__).resolve().parents[3]
 RECORDS = REPO_ROOT / "bench" / "data" / "calibration_records.json.gz"
+#: The building frames' records (``bench.building --calibration-records``): the ``"places"``
+#: confidence model.
+BUILDING_RECORDS = REPO_ROOT / "bench" / "data" / "building_calibration_records.json.gz"
 #: The generator rounds every fitted number to 6 decimals: a refit on another machine (other
 #: BLAS, other summation order) may move the last digit, never more.
 ABS_TOL = 2e-6
@@ -47,14 +55,15 @@ def refit() -> CalibrationConstants:
     cwd = os.getcwd()
     os.chdir(REPO_ROOT)
     try:
-        return fit_file(RECORDS)
+        return fit_file(RECORDS, extra_records=[BUILDING_RECORDS.relative_to(REPO_ROOT)])
     finally:
         os.chdir(cwd)
 
 
 def test_the_shipped_constants_are_the_refit_of_the_committed_records(refit):
     """``python -m quadloc.service.localization.calibration_fit
-    bench/data/calibration_records.json.gz`` reproduces calibration.py: every fitted number
+    bench/data/calibration_records.json.gz bench/data/building_calibration_records.json.gz``
+    reproduces calibration.py: every fitted number
     within 2e-6 (its 6 decimals), the ambiguity ratio and the threshold exactly, and the
     provenance."""
     shipped = CalibrationConstants.shipped()
@@ -72,7 +81,13 @@ def test_the_generated_module_names_its_data_and_command():
     assert prov["records"] == "bench/data/calibration_records.json.gz"
     assert prov["records_sha256"] == sha256_file(RECORDS)
     assert prov["command"] == ("python -m quadloc.service.localization.calibration_fit "
-                               "bench/data/calibration_records.json.gz")
+                               "bench/data/calibration_records.json.gz "
+                               "bench/data/building_calibration_records.json.gz")
+    (extra,) = prov["extra_records"]
+    assert extra["records"] == "bench/data/building_calibration_records.json.gz"
+    assert extra["records_sha256"] == sha256_file(BUILDING_RECORDS)
+    assert extra["records_command"].startswith("python -m bench.building --calibration-records")
+    assert not set(extra["tuning_seeds"]) & set(BUILDING_REPORT_SEEDS)
     assert prov["records_command"].startswith("python -m bench.trust --fit")
     _, made = read_records(RECORDS)
     assert made["command"] == prov["records_command"] and made["commit"] == prov["records_commit"]
@@ -231,3 +246,44 @@ def test_extra_record_files_are_fitted_with_the_first(tmp_path):
     assert info["tuning_seeds"] == [5, 7]
     assert both.provenance["command"].endswith("a.json.gz b.json.gz")
     assert "extra_records" not in alone.provenance
+
+
+def test_place_search_answers_fit_their_own_recalibration_of_the_refined_model():
+    """Records of a place search (``place_search`` = 1) whose successes follow
+    ``sigmoid(1.5 + 0.8 z)``, ``z`` the refined model's log-odds, give the ``"places"`` model
+    (1.5, 0.8) within sampling error, and leave the refined model as the one-room records
+    alone fit it (the refined fit never sees them); ``confidence_probability`` applies it to
+    those answers only."""
+    rng = np.random.default_rng(11)
+
+    def rec(x: float, ok: bool, place: bool) -> SolveRecord:
+        feats = {f: 0.0 for f in FEATURES} | {"mean_iou": x, "place_search": float(place)}
+        return _record(features=feats, pos=0.05 if ok else 1.0)
+
+    one_room = []
+    for x in rng.normal(0.0, 1.0, 3000):
+        one_room.append(rec(float(x), bool(rng.random() < 1 / (1 + math.exp(-2.0 * x))), False))
+    none = {"intercept": 0.0, "coef": {}}
+    alone = fit_confidence_models(one_room, base={"none": none})
+    assert "places" not in alone
+    z_of = alone["refined"]["coef"]["mean_iou"]
+    places = []
+    for x in rng.normal(0.0, 1.5, 20_000):
+        z = alone["refined"]["intercept"] + z_of * x
+        places.append(rec(float(x), bool(rng.random() < 1 / (1 + math.exp(-(1.5 + 0.8 * z)))),
+                          True))
+    both = fit_confidence_models([*one_room, *places], base={"none": none})
+    assert both["refined"] == alone["refined"]
+    assert both["places"]["intercept"] == pytest.approx(1.5, abs=0.08)
+    assert both["places"]["coef"]["refined_logit"] == pytest.approx(0.8, abs=0.05)
+    x = 0.3
+    z = alone["refined"]["intercept"] + z_of * x
+    feats = {f: 0.0 for f in FEATURES} | {"mean_iou": x}
+    a, b = both["places"]["intercept"], both["places"]["coef"]["refined_logit"]
+    assert confidence_probability("level_set", feats | {"place_search": 1.0}, both) == \
+        pytest.approx(1 / (1 + math.exp(-(a + b * z))), rel=1e-12)
+    for f in (feats, feats | {"place_search": 0.0}, feats | {"place_search": math.nan}):
+        assert confidence_probability("level_set", f, both) == \
+            pytest.approx(1 / (1 + math.exp(-z)), rel=1e-12)
+    # a base with a places model keeps it when no record comes from a place search
+    assert fit_confidence_models(one_room, base=both)["places"] == both["places"]
