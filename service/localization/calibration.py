@@ -4,19 +4,30 @@
 Fitted (:mod:`quadloc.service.localization.calibration_fit`) from the solve records
 ``bench/data/calibration_records.json.gz`` by::
 
-    python -m quadloc.service.localization.calibration_fit bench/data/calibration_records.json.gz
+    python -m quadloc.service.localization.calibration_fit bench/data/calibration_records.json.gz bench/data/building_calibration_records.json.gz
 
 The records were made by ``python -m bench.trust --fit`` at commit ebaffa4;
 tuning seeds only (:data:`PROVENANCE`): ``bench.trust`` reports on other seeds.
+
+With ``bench/data/building_calibration_records.json.gz``, made by ``python -m bench.building --calibration-records bench/data/building_calibration_records.json.gz --frames 40`` at commit b30ac1e (tuning seeds [5, 7, 9, 11]; ``bench.building`` reports on other seeds).
 """
+# ruff: noqa: E501  (generated: the commands and sha256 sums are not wrapped)
 
 PROVENANCE = {'records': 'bench/data/calibration_records.json.gz',
  'records_sha256': 'b9a24248d80e0c5eb2b51ca7b2b4d2bf134aaa413246768bcad4cb071a420509',
  'command': 'python -m quadloc.service.localization.calibration_fit '
-            'bench/data/calibration_records.json.gz',
+            'bench/data/calibration_records.json.gz '
+            'bench/data/building_calibration_records.json.gz',
  'records_command': 'python -m bench.trust --fit',
  'records_commit': 'ebaffa4',
- 'tuning_seeds': [100, 102, 104, 106, 101, 103]}
+ 'tuning_seeds': [100, 102, 104, 106, 101, 103],
+ 'extra_records': [{'records': 'bench/data/building_calibration_records.json.gz',
+                    'records_sha256': '29ac115418aa53707481922867ec6f99392db5b1bc8b9c1593d5dc17cde705bb',
+                    'records_command': 'python -m bench.building --calibration-records '
+                                       'bench/data/building_calibration_records.json.gz '
+                                       '--frames 40',
+                    'records_commit': 'b30ac1e',
+                    'tuning_seeds': [5, 7, 9, 11]}]}
 
 #: k_key of ``cov = k * max(s^2, f) * t(n) * (J^T W J)^-1`` (``calibration_fit.
 #: fit_covariance_scale``: the smallest and largest mean NEES over the 5 / 10 / 20 cm operating
@@ -89,7 +100,9 @@ CONFIDENCE_FEATURES = ('inliers_ge3',
  'chi2_competitor',
  'gravity')
 
-#: Logistic models: P = 1 / (1 + exp(-(intercept + metric_offset + sum coef * feature))).
+#: Logistic models: P = 1 / (1 + exp(-(intercept + metric_offset + sum coef * feature))); an
+#: answer of the place search: P = 1 / (1 + exp(-(places intercept + coef * z))), z the refined
+#: model's log-odds (``confidence.confidence_logit``).
 CONFIDENCE_MODELS = {'refined': {'intercept': -14.033732,
              'coef': {'inliers_ge3': 1.017204,
                       'inliers_ge4': -0.163843,
@@ -127,4 +140,5 @@ CONFIDENCE_MODELS = {'refined': {'intercept': -14.033732,
                    'mean_iou': 12.736385,
                    'margin': -0.004131,
                    'log_samples': -1.021954,
-                   'gravity': 0.0}}}
+                   'gravity': 0.0}},
+ 'places': {'intercept': 1.545376, 'coef': {'refined_logit': 1.000462}}}
