@@ -237,9 +237,12 @@ def building_records(rooms: tuple[int, ...], modes: tuple[str, ...], frames: int
     (:class:`quadloc.service.localization.calibration_fit.SolveRecord`, group
     ``"building"``): each frame of each (size, mode) of :func:`run_case`'s maps and frames
     (base ``seed``: tuning seeds for the fit) solved with ``min_confidence=0`` (every verified,
-    unambiguous pose is localized with its confidence); they feed the confidence model only
+    unambiguous pose is localized with its confidence); they feed the confidence model
     (``covariance=False``: the covariance scale stays the one-room frames'): the ``"places"``
-    model where the place search answered (``calibration_fit.fit_confidence_models``)."""
+    model where the place search answered (``calibration_fit.fit_confidence_models``), and
+    the decision set ``"building N rooms"`` of their map size, on which ``MIN_CONFIDENCE_PLACES``
+    is chosen (``calibration_fit.choose_place_threshold``; an ambiguous answer stays
+    ``ambiguous``, as the server answers it by default)."""
     options = LocalizationOptions(min_confidence=0.0)
     key = calibration_key(options.metric, options.use_sigma)
     out: list[SolveRecord] = []
@@ -261,7 +264,8 @@ def building_records(rooms: tuple[int, ...], modes: tuple[str, ...], frames: int
                     key=key, group="building", localized=result.localized,
                     reason=result.reason, position_error_m=pos, rotation_error_deg=rot,
                     evidence=result.evidence or {}, covariance_6x6=result.covariance,
-                    nees=None, covariance=False, confidence=True))
+                    nees=None, covariance=False, confidence=True,
+                    decision_set=f"building {n} rooms"))
             log(f"records: {n} rooms {mode}: {len(out)} so far")
     return out
 

@@ -87,6 +87,8 @@ AMBIGUITY_RATIO_SAME_OBJECTS = 0.95
 #: ``calibration_fit.choose_ambiguity_and_threshold``).
 MIN_CONFIDENCE = 0.36
 
+MIN_CONFIDENCE_PLACES = 0.36
+
 #: Features of the confidence model (``confidence.evidence_features``), in order.
 CONFIDENCE_FEATURES = ('inliers_ge3',
  'inliers_ge4',

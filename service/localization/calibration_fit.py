@@ -27,7 +27,9 @@ Steps of :func:`fit_calibration` (each formula is in one function below):
 4. ``AMBIGUITY_CHI2_RATIO`` and ``MIN_CONFIDENCE`` (:func:`choose_ambiguity_and_threshold`):
    on the decision sets (unchecked answers of hard frames, e.g. 2 or 3 detections), the pair
    that keeps the most good frames while every set's false accepts stay within
-   ``false_accept_target x false_accept_tuning_margin``.
+   ``false_accept_target x false_accept_tuning_margin``; then ``MIN_CONFIDENCE_PLACES``
+   (:func:`choose_place_threshold`) on the decision records of place-search answers (building
+   frames, one set per map size) at that ratio.
 
 The generated module ``quadloc.service.localization.calibration`` is written by
 :func:`calibration_source`; records are stored by :func:`write_records` (gzip JSON, columns)::
@@ -77,6 +79,7 @@ __all__ = [
     "SolveRecord",
     "calibration_source",
     "choose_ambiguity_and_threshold",
+    "choose_place_threshold",
     "decide",
     "decision_outcome",
     "decision_sets",
@@ -251,6 +254,10 @@ class CalibrationConstants:
             rule when the chi2 do not compare (``AMBIGUITY_RATIO``,
             ``AMBIGUITY_RATIO_SAME_OBJECTS``; not fitted, carried over).
         min_confidence: default ``LocalizationOptions.min_confidence`` (``MIN_CONFIDENCE``).
+        min_confidence_places: the same default for the answers of a place search
+            (``MIN_CONFIDENCE_PLACES``; None: ``min_confidence``): chosen on the building
+            frames' decision sets, where a failure is more often a wrong place (metres off)
+            than a near miss, so the same false-accept target needs a higher threshold.
         confidence_features: the models' features, in order (``CONFIDENCE_FEATURES``).
         confidence_models: ``"refined"``, ``"none"`` and, fitted on building frames,
             ``"places"`` (``CONFIDENCE_MODELS``), the ``models`` argument of
@@ -268,6 +275,14 @@ class CalibrationConstants:
     confidence_features: tuple[str, ...]
     confidence_models: dict[str, LogisticModel]
     provenance: dict[str, Any] = field(default_factory=dict)
+    min_confidence_places: float | None = None
+
+    def default_min_confidence(self, place_search: bool) -> float:
+        """The default ``min_confidence`` of an answer: ``min_confidence_places`` for the
+        answers of a place search (when set), ``min_confidence`` otherwise."""
+        if place_search and self.min_confidence_places is not None:
+            return self.min_confidence_places
+        return self.min_confidence
 
     @classmethod
     def from_module(cls, module: ModuleType) -> CalibrationConstants:
@@ -279,6 +294,7 @@ class CalibrationConstants:
             ambiguity_ratio=float(module.AMBIGUITY_RATIO),
             ambiguity_ratio_same_objects=float(module.AMBIGUITY_RATIO_SAME_OBJECTS),
             min_confidence=float(module.MIN_CONFIDENCE),
+            min_confidence_places=float(module.MIN_CONFIDENCE_PLACES),
             confidence_features=tuple(module.CONFIDENCE_FEATURES),
             confidence_models=cast(dict[str, LogisticModel], dict(module.CONFIDENCE_MODELS)),
             provenance=dict(module.PROVENANCE))
@@ -310,6 +326,8 @@ class CalibrationConstants:
         for name in ("ambiguity_chi2_ratio", "ambiguity_ratio", "ambiguity_ratio_same_objects",
                      "min_confidence"):
             num(name, getattr(self, name), getattr(other, name))
+        num("min_confidence_places", self.default_min_confidence(True),
+            other.default_min_confidence(True))
         if self.confidence_features != other.confidence_features:
             out.append(f"confidence_features: {self.confidence_features} != "
                        f"{other.confidence_features}")
@@ -371,8 +389,8 @@ class FitSettings:
         features: the confidence model's features.
         metric_offsets: a per-key intercept offset in the refined model.
         ridge: L2 penalty of the logistic fit (not on the intercept).
-        chi2_ratio_grid, min_confidence_grid: candidate ``AMBIGUITY_CHI2_RATIO`` and
-            ``MIN_CONFIDENCE`` values.
+        chi2_ratio_grid, min_confidence_grid, min_confidence_grid_places: candidate
+            ``AMBIGUITY_CHI2_RATIO``, ``MIN_CONFIDENCE`` and ``MIN_CONFIDENCE_PLACES`` values.
         false_accept_error_m: a localized answer farther than this is a false accept.
         false_accept_target: largest share of false accepts in a decision set.
         false_accept_tuning_margin: the tuning records are held to this fraction of the
@@ -392,6 +410,8 @@ class FitSettings:
     ridge: float = 1e-2
     chi2_ratio_grid: tuple[float, ...] = (1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0, 6.0)
     min_confidence_grid: tuple[float, ...] = tuple(round(0.01 * k, 2) for k in range(61))
+    min_confidence_grid_places: tuple[float, ...] = tuple(round(0.01 * k, 2)
+                                                          for k in range(100))
     false_accept_error_m: float = 0.5
     false_accept_target: float = 0.01
     false_accept_tuning_margin: float = 0.5
@@ -611,6 +631,28 @@ def choose_ambiguity_and_threshold(
     return None if best is None else (best[1], best[2])
 
 
+def choose_place_threshold(
+    sets: Mapping[str, Sequence[SolveRecord]], models: Mapping[str, LogisticModel],
+    chi2_ratio: float, settings: FitSettings = FitSettings(),
+) -> float | None:
+    """``MIN_CONFIDENCE_PLACES``: the smallest threshold of the grid whose false accepts are
+    <= ``false_accept_target x false_accept_tuning_margin`` of the frames in every set, at the
+    ambiguity ratio ``chi2_ratio`` (chosen on the other sets); ``sets``: decision records of
+    place-search answers (:func:`place_search`), e.g. one set per map size of building
+    frames. None without sets or when no threshold meets the target."""
+    sets = {name: rows for name, rows in sets.items() if rows}
+    if not sets:
+        return None
+    confs = {name: [confidence_probability(r.key, r.features, models) if r.localized else 0.0
+                    for r in rows] for name, rows in sets.items()}
+    limit = settings.false_accept_target * settings.false_accept_tuning_margin
+    for t in settings.min_confidence_grid_places:
+        if all(decision_outcome(rows, chi2_ratio, t, models, settings, confs[name])
+               .false_accepts <= limit * len(rows) for name, rows in sets.items()):
+            return t
+    return None
+
+
 def fit_calibration(records: Sequence[SolveRecord], base: CalibrationConstants,
                     settings: FitSettings = FitSettings(),
                     provenance: Mapping[str, Any] | None = None) -> CalibrationConstants:
@@ -645,16 +687,23 @@ def fit_calibration(records: Sequence[SolveRecord], base: CalibrationConstants,
     fitted = [refeature(r, scale, floor) if r.localized else r for r in records]
     models = fit_confidence_models([r for r in fitted if r.confidence], settings,
                                    base.confidence_models)
-    chosen = choose_ambiguity_and_threshold(decision_sets(fitted), models, settings)
+    sets = decision_sets(fitted)
+    chosen = choose_ambiguity_and_threshold(
+        {n: kept for n, rows in sets.items()
+         if (kept := [r for r in rows if not place_search(r)])}, models, settings)
     ratio, threshold = chosen if chosen is not None else (base.ambiguity_chi2_ratio,
                                                           base.min_confidence)
+    places = choose_place_threshold(
+        {n: [r for r in rows if place_search(r)] for n, rows in sets.items()}, models, ratio,
+        settings)
     return CalibrationConstants(
         covariance_scale={k: round(v, 6) for k, v in scale.items()},
         s2_floor={k: round(v, 6) for k, v in floor.items()},
         ambiguity_chi2_ratio=ratio, ambiguity_ratio=base.ambiguity_ratio,
         ambiguity_ratio_same_objects=base.ambiguity_ratio_same_objects,
         min_confidence=threshold, confidence_features=tuple(settings.features),
-        confidence_models=models, provenance=dict(provenance or {}))
+        confidence_models=models, provenance=dict(provenance or {}),
+        min_confidence_places=base.min_confidence_places if places is None else places)
 
 
 # ------------------------------------------------------------------ the generated module
@@ -711,6 +760,10 @@ AMBIGUITY_RATIO_SAME_OBJECTS = {c.ambiguity_ratio_same_objects!r}
 #: Default ``LocalizationOptions.min_confidence`` (with ``AMBIGUITY_CHI2_RATIO``:
 #: ``calibration_fit.choose_ambiguity_and_threshold``).
 MIN_CONFIDENCE = {c.min_confidence!r}
+
+#: The same default for the answers of a place search (a large map), chosen on the building
+#: frames' decision sets at that ratio (``calibration_fit.choose_place_threshold``).
+MIN_CONFIDENCE_PLACES = {c.default_min_confidence(True)!r}
 
 #: Features of the confidence model (``confidence.evidence_features``), in order.
 CONFIDENCE_FEATURES = {fmt(c.confidence_features)}

@@ -35,7 +35,11 @@ from quadloc.maps.compiled import CompiledMap, compile_map, compiled_subset
 from quadloc.maps.model import SceneMap
 from quadloc.maps.places import place_index
 from quadloc.service.limits import NO_REFINEMENT
-from quadloc.service.localization.calibration import MIN_CONFIDENCE, S2_FLOOR
+from quadloc.service.localization.calibration import (
+    MIN_CONFIDENCE,
+    MIN_CONFIDENCE_PLACES,
+    S2_FLOOR,
+)
 from quadloc.service.localization.calibration_fit import (
     CalibrationConstants,
     map_calibration_applies,
@@ -898,8 +902,8 @@ def _answer(solve: _Solve, best: Candidate, ranked: list[Candidate], *, ambiguou
     runner_up = next((b for b in ranked if b is not best), None)
     assessment = _assess(solve, best, runner_up, ranked)
     conf, ev = assessment.confidence, assessment.evidence
-    default_floor = MIN_CONFIDENCE if solve.calibration is None \
-        else solve.calibration.min_confidence
+    default_floor = (MIN_CONFIDENCE_PLACES if solve.places else MIN_CONFIDENCE) \
+        if solve.calibration is None else solve.calibration.default_min_confidence(solve.places)
     floor = default_floor if options.min_confidence is None else options.min_confidence
     reason = ("gravity_mismatch" if _against_gravity(solve, best)
               else "ambiguous" if ambiguous and options.on_ambiguity == "not_localized"

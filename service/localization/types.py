@@ -176,7 +176,9 @@ class LocalizationOptions:
         min_confidence: answers whose ``confidence`` is below this are returned as
             ``localized=False, reason="low_confidence"``; ``None`` = the calibrated default
             ``quadloc.service.localization.calibration.MIN_CONFIDENCE`` (chosen on the tuning seeds
-            so that 2-3 detection frames are not answered with a wrong pose); 0 accepts every
+            so that 2-3 detection frames are not answered with a wrong pose), or
+            ``MIN_CONFIDENCE_PLACES`` for the answers of a large map's place search (chosen on
+            building frames: there a failure is more often a wrong place); 0 accepts every
             verified pose.
 
     Integer fields accept any integral number (numpy integers too) and store a Python int.

@@ -4,6 +4,7 @@ command, and the fit's parts recover what synthetic records were made with."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import re
@@ -21,6 +22,7 @@ from quadloc.service.localization.calibration_fit import (
     SolveRecord,
     calibration_source,
     choose_ambiguity_and_threshold,
+    choose_place_threshold,
     decide,
     fit_calibration,
     fit_confidence_models,
@@ -287,3 +289,41 @@ def test_place_search_answers_fit_their_own_recalibration_of_the_refined_model()
             pytest.approx(1 / (1 + math.exp(-z)), rel=1e-12)
     # a base with a places model keeps it when no record comes from a place search
     assert fit_confidence_models(one_room, base=both)["places"] == both["places"]
+
+
+def test_place_threshold_is_chosen_on_place_search_records_alone():
+    """Decision records of place-search answers (two sets, one per map size) choose
+    ``MIN_CONFIDENCE_PLACES``: the smallest grid value keeping every set's false accepts
+    within 0.5 % (no wrong answer accepted in 100 frames); the one-room threshold is chosen on
+    the records without a place search, whatever the place records hold."""
+    def rec(pos: float, z: float, place: bool, set_name: str) -> SolveRecord:
+        feats = {f: 0.0 for f in FEATURES} | {"mean_iou": z, "chi2_competitor": 4.0,
+                                               "iou_competitor": 0.0,
+                                               "place_search": float(place)}
+        return _record(pos=pos, features=feats, decision_set=set_name)
+
+    models = {"refined": {"intercept": 0.0, "coef": {"mean_iou": 1.0}},
+              "none": {"intercept": 0.0, "coef": {}}}
+    small = [rec(1.0, -2.0, True, "b10")] + [rec(0.05, 3.0, True, "b10")] * 99
+    large = [rec(1.0, 0.5, True, "b1000")] + [rec(0.05, 3.0, True, "b1000")] * 99
+    settings = FitSettings(chi2_ratio_grid=(2.0,))
+    # sigmoid(0.5) = 0.622: the large map's wrong answer sets the threshold
+    assert choose_place_threshold({"b10": small, "b1000": large}, models, 2.0, settings) \
+        == pytest.approx(0.63)
+    assert choose_place_threshold({"b10": small}, models, 2.0, settings) == pytest.approx(0.12)
+    assert choose_place_threshold({}, models, 2.0, settings) is None
+    one_room = [rec(1.0, -1.0, False, "2 default")] + [rec(0.05, 3.0, False, "2 default")] * 99
+    # wrong places among good answers of the same evidence: the place threshold rises above
+    # their probability, the one-room threshold stays where its own records put it
+    large = [rec(1.0, 1.0, True, "b1000")] * 2 + [rec(0.05, 1.0, True, "b1000")] * 8 \
+        + [rec(0.05, 3.0, True, "b1000")] * 90
+    fitted = fit_calibration([*one_room, *small, *large], CalibrationConstants.shipped(),
+                             settings)
+    ratio, t = choose_ambiguity_and_threshold({"2 default": one_room},
+                                              fitted.confidence_models, settings)
+    assert (fitted.ambiguity_chi2_ratio, fitted.min_confidence) == (ratio, t)
+    t_places = choose_place_threshold({"b10": small, "b1000": large},
+                                      fitted.confidence_models, ratio, settings)
+    assert t_places is not None and t_places > t
+    assert fitted.default_min_confidence(True) == t_places
+    assert fitted.default_min_confidence(False) == t
