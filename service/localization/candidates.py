@@ -49,6 +49,10 @@ class Candidate:
         source: ``"ransac"`` or ``"prior"`` (set by the prior stage).
         capped: an alternative whose refinement stopped at its iteration cap (refined in full
             if it competes).
+        copy_but_one: the view of a better candidate's supporting objects but its weakest in
+            an exact copy of them (``pipeline._copy_competitors``): one match fewer is no
+            evidence between exact copies (a spurious detection can land on an object beyond
+            the copied ones), so it competes with one inlier fewer (:func:`competes`).
     """
 
     world_from_camera: FloatArray
@@ -58,6 +62,7 @@ class Candidate:
     status: str | None
     source: str = "ransac"
     capped: bool = False
+    copy_but_one: bool = False
 
     @property
     def score(self) -> float:
@@ -106,7 +111,10 @@ def distinct_ranking(candidates: Sequence[Candidate]) -> list[Candidate]:
 def competes(best: Candidate, other: Candidate) -> bool:
     """Whether ``other`` (a distinct runner-up) competes with ``best``
     (:func:`quadloc.service.localization.confidence.is_ambiguous`: by refined chi2 when they
-    compare, else by IoU sum, told whether it matches the same map objects)."""
+    compare, else by IoU sum, told whether it matches the same map objects), or is an exact
+    copy's view short of one of its inliers (``Candidate.copy_but_one``)."""
+    if other.copy_but_one and len(other.inliers) + 1 >= len(best.inliers):
+        return True
     return is_ambiguous(len(best.inliers), best.score, len(other.inliers), other.score,
                         same_objects={m.object_id for m in other.inliers}
                         == {m.object_id for m in best.inliers},

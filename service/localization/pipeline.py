@@ -119,6 +119,12 @@ PLACE_TIE_RATIO = 0.9
 #: LM iteration cap of an alternative's refinement (a capped alternative that competes is then
 #: refined in full from where it stopped; measurements: ``docs/design/localization.md``).
 ALTERNATIVE_MAX_ITERATIONS = 15
+#: An answer with more inliers than this whose supporting objects have no exact copy is
+#: checked again without its weakest match, whose copies then compete with one inlier fewer
+#: (``Candidate.copy_but_one``). 4: a copy of the 4 or more objects left is a room's copy; 3
+#: objects of a label set recur by chance in a map of thousands (1,000 random rooms: good
+#: 4-5 detection answers turned ambiguous).
+COPY_BUT_ONE_MIN_INLIERS = 4
 #: Prior gating: the association at the prior pose also tries the poses at +-
 #: ``PRIOR_GATE_SIGMAS`` standard deviations along each principal axis of the prior's
 #: covariance (a pair is kept at its best IoU over these poses).
@@ -710,7 +716,13 @@ def _copy_competitors(solve: _Solve, candidates: list[Candidate]) -> list[Candid
     whole map, ``solve.whole``, when it was searched by places): copies looked up in its place
     index; none is refined when one is already a candidate (the tie is there), else they are
     refined nearest first until one verifies, the scorer's map extended by the objects around
-    each copy's camera (:func:`_extend_scorer`). Best-supported first."""
+    each copy's camera (:func:`_extend_scorer`). Best-supported first.
+
+    When the best's supporting objects have no copy and it has more than
+    :data:`COPY_BUT_ONE_MIN_INLIERS` inliers, the same without its weakest match: a spurious
+    detection that lands on an object of a neighbouring room makes the best's set unique, its
+    copy's view then explains every detection but that one and still competes
+    (``Candidate.copy_but_one``): one match is no evidence between exact copies."""
     if not candidates or deadline_passed(solve.deadline):
         return candidates
     best = candidates[0]
@@ -719,8 +731,15 @@ def _copy_competitors(solve: _Solve, candidates: list[Candidate]) -> list[Candid
     if index is not None and any(a is not best and competes(best, a)
                                  and _copy_of(compiled, best, a) for a in candidates):
         return candidates  # a copy is a competing candidate already: the tie is there
+    supporting = list(best.inliers)
     transforms = copy_transforms(compiled, np.array(
-        [compiled.index_of(m.object_id) for m in best.inliers], dtype=np.intp), index=index)
+        [compiled.index_of(m.object_id) for m in supporting], dtype=np.intp), index=index)
+    but_one = not transforms and len(supporting) > COPY_BUT_ONE_MIN_INLIERS
+    if but_one:  # without its weakest match (a spurious detection landing on an object)
+        weakest = min(range(len(supporting)), key=lambda k: supporting[k].iou)
+        supporting = supporting[:weakest] + supporting[weakest + 1:]
+        transforms = copy_transforms(compiled, np.array(
+            [compiled.index_of(m.object_id) for m in supporting], dtype=np.intp), index=index)
     covered = [any(a is not best and competes(best, a) and not distinct_poses(
         invert_pose(G @ best.world_from_camera), invert_pose(a.world_from_camera))
         for a in candidates) for G in transforms]
@@ -728,7 +747,7 @@ def _copy_competitors(solve: _Solve, candidates: list[Candidate]) -> list[Candid
         if any(covered):
             return candidates  # a copy is a competing candidate: the tie is there
         if solve.whole is not None and transforms:
-            centres = compiled.centers[[compiled.index_of(m.object_id) for m in best.inliers]]
+            centres = compiled.centers[[compiled.index_of(m.object_id) for m in supporting]]
             _extend_scorer(solve, [G @ best.world_from_camera for G in transforms],
                            [centres @ G[:3, :3].T + G[:3, 3] for G in transforms])
     options = solve.options
@@ -747,6 +766,7 @@ def _copy_competitors(solve: _Solve, candidates: list[Candidate]) -> list[Candid
         if got is not None:
             got.capped = (status == "max_iterations"
                           and alternative_options.max_iterations < options.max_iterations)
+            got.copy_but_one = but_one
             candidates.append(got)
             added = True
             if index is not None:
