@@ -9,7 +9,7 @@ Fitted (:mod:`quadloc.service.localization.calibration_fit`) from the solve reco
 The records were made by ``python -m bench.trust --fit`` at commit ebaffa4;
 tuning seeds only (:data:`PROVENANCE`): ``bench.trust`` reports on other seeds.
 
-With ``bench/data/building_calibration_records.json.gz``, made by ``python -m bench.building --calibration-records bench/data/building_calibration_records.json.gz --frames 40`` at commit 1bf8aec (tuning seeds [5, 7, 9, 11]; ``bench.building`` reports on other seeds).
+With ``bench/data/building_calibration_records.json.gz``, made by ``python -m bench.building --calibration-records bench/data/building_calibration_records.json.gz --frames 40`` at commit d9aa6b6 (tuning seeds [5, 7, 9, 11]; ``bench.building`` reports on other seeds).
 """
 # ruff: noqa: E501  (generated: the commands and sha256 sums are not wrapped)
 
@@ -22,11 +22,11 @@ PROVENANCE = {'records': 'bench/data/calibration_records.json.gz',
  'records_commit': 'ebaffa4',
  'tuning_seeds': [100, 102, 104, 106, 101, 103],
  'extra_records': [{'records': 'bench/data/building_calibration_records.json.gz',
-                    'records_sha256': 'ffa9ec713df2a87b6dec39327a1829b14416b40e633b98a5e8d52a6722cbb5de',
+                    'records_sha256': '8b51576782a1e69e8aa857e9443ca0be938eb96c7370e6b734355a3a810f6e1d',
                     'records_command': 'python -m bench.building --calibration-records '
                                        'bench/data/building_calibration_records.json.gz '
                                        '--frames 40',
-                    'records_commit': '1bf8aec',
+                    'records_commit': 'd9aa6b6',
                     'tuning_seeds': [5, 7, 9, 11]}]}
 
 #: k_key of ``cov = k * max(s^2, f) * t(n) * (J^T W J)^-1`` (``calibration_fit.
