@@ -4,7 +4,6 @@ command, and the fit's parts recover what synthetic records were made with."""
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
 import re
