@@ -10,7 +10,8 @@
   ``use_sigma=False``): ``s^2`` and ``J^T W J`` are in other units without the weights.
 * confidence: ``P(position error <= TOLERANCE_POSITION_M and rotation error <=
   TOLERANCE_ROTATION_DEG)`` from a logistic model of :func:`evidence_features`
-  (:func:`confidence_probability`).
+  (:func:`confidence_probability`), recalibrated on building frames for the answers of a large
+  map's place search (:func:`confidence_logit`).
 * ambiguity: a distinct runner-up with as many inliers competes by its refined chi2 (refined
   over as many detections with the same metric), or, when the chi2 do not compare, by its IoU
   sum (:func:`is_ambiguous`).
