@@ -387,8 +387,10 @@ def _calibration_lines(cases: list[dict[str, Any]]) -> list[str]:
             f"one answer: localized, or `low_confidence` with its best candidate): "
             f"{cal['n']} answers, mean confidence {cal['mean_confidence']:.3f}, observed "
             f"{cal['observed_rate']:.3f}, ECE {cal['ece']:.3f} (a calibrated confidence on as "
-            f"many answers: {cal['ece_if_calibrated']:.3f}). The confidence model is fitted on "
-            "one-room frames only (docs/design/localization.md, \"Calibration fit\").", "",
+            f"many answers: {cal['ece_if_calibrated']:.3f}). On maps of 64 objects or more (the "
+            f"place search) it is the \"places\" recalibration fitted on building frames of "
+            f"the tuning seeds {', '.join(map(str, CALIBRATION_SEEDS))} "
+            f"(docs/design/localization.md, \"Building frames\").", "",
             "| confidence | answers | mean confidence | observed |", "|---|---|---|---|",
             *rows]
 
