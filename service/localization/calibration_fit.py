@@ -58,6 +58,7 @@ import numpy as np
 
 from quadloc.service.localization import calibration
 from quadloc.service.localization.confidence import (
+    PLACES_MODEL,
     TOLERANCE_POSITION_M,
     TOLERANCE_ROTATION_DEG,
     confidence_probability,
@@ -113,8 +114,6 @@ REFINED_ONLY = ("log_s2", "logit_gauss", "chi2_competitor")
 RECORD_EVIDENCE = ("iou_competitor", "place_search")
 #: ``format`` of the record files of :func:`write_records`.
 RECORDS_FORMAT = "quadloc.calibration-records/1"
-#: Name of the confidence model of the place search's answers (``confidence.confidence_logit``).
-PLACES_MODEL = "places"
 #: Key of the reference model (no intercept offset) and of the unrefined answers.
 REFERENCE_KEY = "level_set"
 UNREFINED_KEY = "none"
@@ -399,6 +398,10 @@ class FitSettings:
             seeds); 0.5 chosen by cross-validation on the tuning seeds alone.
         good_error_m: a decision record's frame is good when its unchecked answer is within
             this (the kept share counts the good frames answered ``localized``).
+        places_model: fit the ``"places"`` recalibration on the place-search answers, the
+            refined model without them (the shipped fit: one-room and building frames); False:
+            every localized record fits the refined model and no ``"places"`` model is kept
+            (a map's own calibration: one map, its frames all of one kind).
     """
 
     s2_floor_quantile: float = 0.9
@@ -416,6 +419,7 @@ class FitSettings:
     false_accept_target: float = 0.01
     false_accept_tuning_margin: float = 0.5
     good_error_m: float = TOLERANCE_POSITION_M
+    places_model: bool = True
 
 
 # ------------------------------------------------------------------ the fit
@@ -499,13 +503,15 @@ def fit_confidence_models(records: Sequence[SolveRecord], settings: FitSettings 
     localized records (features as recorded: :func:`refeature` them first): ``"refined"``
     over every key but ``"none"``, with an intercept offset per key (``level_set`` the
     reference) when ``settings.metric_offsets``; ``"none"`` over the unrefined answers,
-    without :data:`REFINED_ONLY`; both without the answers of a place search
-    (:func:`place_search`), which fit ``"places"``: the refined model's log-odds recalibrated
-    (``intercept + coef["refined_logit"] * z``, ``confidence.confidence_logit``). A model
-    without records is ``base``'s (``"places"``: absent when ``base`` has none)."""
+    without :data:`REFINED_ONLY`; with ``settings.places_model``, both without the answers
+    of a place search (:func:`place_search`), which fit ``"places"``: the refined model's
+    log-odds recalibrated (``intercept + coef["refined_logit"] * z``,
+    ``confidence.confidence_logit``). A model without records is ``base``'s (``"places"``:
+    absent when ``base`` has none or without ``settings.places_model``)."""
     models: dict[str, LogisticModel] = {}
+    apart = settings.places_model
     for name in ("refined", UNREFINED_KEY):
-        rr = [r for r in records if r.localized and not place_search(r)
+        rr = [r for r in records if r.localized and not (apart and place_search(r))
               and (r.key == UNREFINED_KEY) == (name != "refined")]
         if not rr:
             if base is None or name not in base:
@@ -526,6 +532,8 @@ def fit_confidence_models(records: Sequence[SolveRecord], settings: FitSettings 
             model["metric_offset"] = {
                 m: round(float(c), 6) for m, c in zip(offsets, w[1 + len(use):], strict=True)}
         models[name] = model
+    if not apart:
+        return models
     rp = [r for r in records if r.localized and place_search(r) and r.key != UNREFINED_KEY]
     if rp:
         z = np.array([[refined_logit(r.key, r.features, models)] for r in rp])

@@ -42,6 +42,7 @@ __all__ = [
     "AMBIGUITY_RATIO",
     "AMBIGUITY_RATIO_SAME_OBJECTS",
     "CHI2_COMPETITOR_CAP",
+    "PLACES_MODEL",
     "TOLERANCE_POSITION_M",
     "TOLERANCE_ROTATION_DEG",
     "UNIT_WEIGHTS_SUFFIX",
@@ -68,6 +69,10 @@ CHI2_COMPETITOR_CAP = math.log(100.0)
 TOLERANCE_POSITION_M = 0.10
 TOLERANCE_ROTATION_DEG = 5.0
 
+
+#: Name of the model that recalibrates the refined model for the answers of a place search
+#: (:func:`confidence_logit`).
+PLACES_MODEL = "places"
 
 #: Suffix of the calibration key of a refinement with unit weights (:func:`calibration_key`).
 UNIT_WEIGHTS_SUFFIX = ":unit_weights"
@@ -262,7 +267,7 @@ def confidence_logit(metric: str, features: Mapping[str, float],
     sets: Mapping[str, Any] = CONFIDENCE_MODELS if models is None else models
     refined = metric != "none"
     z = refined_logit(metric, features, sets)
-    places = sets.get("places")
+    places = sets.get(PLACES_MODEL)
     if refined and places is not None and features.get("place_search", 0.0) > 0:
         z = places["intercept"] + places["coef"]["refined_logit"] * z
     return z

@@ -288,6 +288,10 @@ def test_place_search_answers_fit_their_own_recalibration_of_the_refined_model()
             pytest.approx(1 / (1 + math.exp(-z)), rel=1e-12)
     # a base with a places model keeps it when no record comes from a place search
     assert fit_confidence_models(one_room, base=both)["places"] == both["places"]
+    # a map's own calibration (places_model=False): every record fits the refined model
+    pooled = fit_confidence_models([*one_room, *places], FitSettings(places_model=False),
+                                   base=both)
+    assert "places" not in pooled and pooled["refined"] != alone["refined"]
 
 
 def test_place_threshold_is_chosen_on_place_search_records_alone():
