@@ -612,6 +612,13 @@ def decision_sets(records: Iterable[SolveRecord]) -> dict[str, list[SolveRecord]
     return sets
 
 
+def _set_confidences(sets: Mapping[str, Sequence[SolveRecord]],
+                     models: Mapping[str, LogisticModel]) -> dict[str, list[float]]:
+    """Each decision record's probability under ``models`` (0 when not localized), per set."""
+    return {name: [confidence_probability(r.key, r.features, models) if r.localized else 0.0
+                   for r in rows] for name, rows in sets.items()}
+
+
 def choose_ambiguity_and_threshold(
     sets: Mapping[str, Sequence[SolveRecord]], models: Mapping[str, LogisticModel],
     settings: FitSettings = FitSettings(),
@@ -623,8 +630,7 @@ def choose_ambiguity_and_threshold(
     sets (nothing to choose on: e.g. a map's calibration from the user's frames)."""
     if not sets:
         return None
-    confs = {name: [confidence_probability(r.key, r.features, models) if r.localized else 0.0
-                    for r in rows] for name, rows in sets.items()}
+    confs = _set_confidences(sets, models)
     limit = settings.false_accept_target * settings.false_accept_tuning_margin
     best: tuple[int, float, float] | None = None
     for ratio in settings.chi2_ratio_grid:
@@ -651,8 +657,7 @@ def choose_place_threshold(
     sets = {name: rows for name, rows in sets.items() if rows}
     if not sets:
         return None
-    confs = {name: [confidence_probability(r.key, r.features, models) if r.localized else 0.0
-                    for r in rows] for name, rows in sets.items()}
+    confs = _set_confidences(sets, models)
     limit = settings.false_accept_target * settings.false_accept_tuning_margin
     for t in settings.min_confidence_grid_places:
         if all(decision_outcome(rows, chi2_ratio, t, models, settings, confs[name])

@@ -35,11 +35,7 @@ from quadloc.maps.compiled import CompiledMap, compile_map, compiled_subset
 from quadloc.maps.model import SceneMap
 from quadloc.maps.places import place_index
 from quadloc.service.limits import NO_REFINEMENT
-from quadloc.service.localization.calibration import (
-    MIN_CONFIDENCE,
-    MIN_CONFIDENCE_PLACES,
-    S2_FLOOR,
-)
+from quadloc.service.localization.calibration import S2_FLOOR
 from quadloc.service.localization.calibration_fit import (
     CalibrationConstants,
     map_calibration_applies,
@@ -119,6 +115,8 @@ PLACE_TIE_RATIO = 0.9
 #: LM iteration cap of an alternative's refinement (a capped alternative that competes is then
 #: refined in full from where it stopped; measurements: ``docs/design/localization.md``).
 ALTERNATIVE_MAX_ITERATIONS = 15
+#: The shipped calibration constants (a map without its own calibration).
+SHIPPED_CALIBRATION = CalibrationConstants.shipped()
 #: An answer with more inliers than this whose supporting objects have no exact copy is
 #: checked again without its weakest match, whose copies then compete with one inlier fewer
 #: (``Candidate.copy_but_one``). 4: a copy of the 4 or more objects left is a room's copy; 3
@@ -922,8 +920,8 @@ def _answer(solve: _Solve, best: Candidate, ranked: list[Candidate], *, ambiguou
     runner_up = next((b for b in ranked if b is not best), None)
     assessment = _assess(solve, best, runner_up, ranked)
     conf, ev = assessment.confidence, assessment.evidence
-    default_floor = (MIN_CONFIDENCE_PLACES if solve.places else MIN_CONFIDENCE) \
-        if solve.calibration is None else solve.calibration.default_min_confidence(solve.places)
+    default_floor = (solve.calibration or SHIPPED_CALIBRATION).default_min_confidence(
+        solve.places)
     floor = default_floor if options.min_confidence is None else options.min_confidence
     reason = ("gravity_mismatch" if _against_gravity(solve, best)
               else "ambiguous" if ambiguous and options.on_ambiguity == "not_localized"
