@@ -5,6 +5,7 @@ Usage::
     python -m bench.building [--rooms 1,10,50,200,1000] [--modes exact,perturbed,random,twins]
                              [--frames 40] [--max-frames-large 20] [--seed 1000]
                              [--memory-frames 3] [--json PATH] [--write-results]
+    python -m bench.building --calibration-records PATH [--frames 40] [--jobs N]
 
 Maps from :func:`tests.support.buildings.make_building` (the real Chess room repeated on a grid,
 12 m apart, several floors, each room turned by a random yaw; modes exact copies, perturbed
@@ -38,6 +39,7 @@ import sys
 import time
 import tracemalloc
 from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -47,6 +49,7 @@ from bench.results_doc import run_commit
 from quadloc.factors.camera import Camera
 from quadloc.maps.compiled import CompiledMap, compile_map
 from quadloc.maps.zones import ZoneIndex, zone_index
+from quadloc.service.app.context import App
 from quadloc.service.localization.calibration_fit import (
     SolveRecord,
     display_path,
@@ -79,10 +82,11 @@ from tests.support.buildings import (
 )
 from tests.support.errors import pose_errors
 
-#: The base seeds (tuning: the place search was tuned on 5, 7, 9 and 11) and map sizes of the
-#: building frames' confidence-fit records (``--calibration-records PATH``): maps large enough
-#: for the place search, whose answers fit the ``"places"`` confidence model.
-CALIBRATION_SEEDS = (5, 7, 9, 11)
+#: The base seeds (tuning: the place search was tuned on 5, 7, 9 and 11; the confidence is
+#: fitted on the odd seeds 5-35) and map sizes of the building frames' confidence-fit records
+#: (``--calibration-records PATH``): maps large enough for the place search, whose answers fit
+#: the ``"places"`` confidence model.
+CALIBRATION_SEEDS = tuple(range(5, 37, 2))
 CALIBRATION_ROOMS = (10, 50, 200, 1000)
 #: An alternative "holds the true pose" within this distance and angle.
 ALTERNATIVE_TOLERANCE_M = 0.2
@@ -455,9 +459,14 @@ def main(argv: list[str] | None = None) -> int:
                              f"seeds {CALIBRATION_SEEDS}, rooms {CALIBRATION_ROOMS}, every "
                              "mode, --frames per case; an extra file of calibration_fit) and "
                              "nothing else")
+    parser.add_argument("--jobs", type=int, default=1,
+                        help="with --calibration-records: processes solving the seeds (the "
+                             "same records whatever the number)")
     args = parser.parse_args(argv)
+    if args.jobs < 1:
+        parser.error("--jobs must be >= 1")
     if args.calibration_records:
-        return _write_calibration_records(args.calibration_records, args.frames)
+        return _write_calibration_records(args.calibration_records, args.frames, args.jobs)
     modes = tuple(m for m in args.modes.split(",") if m)
     if any(m not in MODES for m in modes):
         parser.error(f"--modes: one of {MODES}")
@@ -488,13 +497,25 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _write_calibration_records(path: Path, frames: int) -> int:
+def _seed_records(seed: int, frames: int) -> list[SolveRecord]:
+    """:func:`building_records` of one tuning seed (a worker of ``--jobs``), the kernels
+    compiled first (as the service does at start-up: no frame's budget pays for it, whichever
+    process solves it)."""
+    App.warm_up()
+    return building_records(CALIBRATION_ROOMS, MODES, frames, seed,
+                            lambda m: print(f"seed {seed}: {m}", file=sys.stderr, flush=True))
+
+
+def _write_calibration_records(path: Path, frames: int, jobs: int = 1) -> int:
     """``--calibration-records PATH``: :func:`building_records` of the tuning seeds to
-    ``path``, with their provenance."""
+    ``path``, with their provenance; the seeds solved by ``jobs`` processes (the same records
+    in the same order whatever ``jobs``: each seed's frames are solved in one process, in
+    order)."""
     t0 = time.perf_counter()
-    records = [r for seed in CALIBRATION_SEEDS for r in building_records(
-        CALIBRATION_ROOMS, MODES, frames, seed,
-        lambda m: print(m, file=sys.stderr, flush=True))]
+    with ProcessPoolExecutor(max_workers=jobs) as pool:
+        per_seed = list(pool.map(_seed_records, CALIBRATION_SEEDS,
+                                 [frames] * len(CALIBRATION_SEEDS)))
+    records = [r for rows in per_seed for r in rows]
     write_records(path, records, {
         "command": f"python -m bench.building --calibration-records {display_path(path)} "
                    f"--frames {frames}",
