@@ -244,8 +244,9 @@ def building_records(rooms: tuple[int, ...], modes: tuple[str, ...], frames: int
     unambiguous pose is localized with its confidence); they feed the confidence model
     (``covariance=False``: the covariance scale stays the one-room frames'): the ``"places"``
     model where the place search answered (``calibration_fit.fit_confidence_models``), and
-    the decision set ``"building N rooms"`` of their map size, on which ``MIN_CONFIDENCE_PLACES``
-    is chosen (``calibration_fit.choose_place_threshold``; an ambiguous answer stays
+    the decision set ``"building N rooms MODE"`` of their map size and repetition mode, on
+    which ``MIN_CONFIDENCE_PLACES`` is chosen (``calibration_fit.choose_place_threshold``: the
+    false-accept target holds in every size and mode, issue 28's; an ambiguous answer stays
     ``ambiguous``, as the server answers it by default)."""
     options = LocalizationOptions(min_confidence=0.0)
     key = calibration_key(options.metric, options.use_sigma)
@@ -269,7 +270,7 @@ def building_records(rooms: tuple[int, ...], modes: tuple[str, ...], frames: int
                     reason=result.reason, position_error_m=pos, rotation_error_deg=rot,
                     evidence=result.evidence or {}, covariance_6x6=result.covariance,
                     nees=None, covariance=False, confidence=True,
-                    decision_set=f"building {n} rooms"))
+                    decision_set=f"building {n} rooms {mode}"))
             log(f"records: {n} rooms {mode}: {len(out)} so far")
     return out
 
