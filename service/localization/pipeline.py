@@ -717,10 +717,12 @@ def _copy_competitors(solve: _Solve, candidates: list[Candidate]) -> list[Candid
     each copy's camera (:func:`_extend_scorer`). Best-supported first.
 
     When the best's supporting objects have no copy and it has more than
-    :data:`COPY_BUT_ONE_MIN_INLIERS` inliers, the same without its weakest match: a spurious
-    detection that lands on an object of a neighbouring room makes the best's set unique, its
-    copy's view then explains every detection but that one and still competes
-    (``Candidate.copy_but_one``): one match is no evidence between exact copies."""
+    :data:`COPY_BUT_ONE_MIN_INLIERS` inliers, the same without one match (its weakest, else
+    the one farthest from the others: :func:`_odd_matches`): a spurious detection that lands
+    on an object of a neighbouring room, or an object of a corridor seen through a door,
+    makes the best's set unique, its copy's view then explains every detection but that one
+    and still competes (``Candidate.copy_but_one``): one match is no evidence between exact
+    copies."""
     if not candidates or deadline_passed(solve.deadline):
         return candidates
     best = candidates[0]
@@ -733,11 +735,14 @@ def _copy_competitors(solve: _Solve, candidates: list[Candidate]) -> list[Candid
     transforms = copy_transforms(compiled, np.array(
         [compiled.index_of(m.object_id) for m in supporting], dtype=np.intp), index=index)
     but_one = not transforms and len(supporting) > COPY_BUT_ONE_MIN_INLIERS
-    if but_one:  # without its weakest match (a spurious detection landing on an object)
-        weakest = min(range(len(supporting)), key=lambda k: supporting[k].iou)
-        supporting = supporting[:weakest] + supporting[weakest + 1:]
-        transforms = copy_transforms(compiled, np.array(
-            [compiled.index_of(m.object_id) for m in supporting], dtype=np.intp), index=index)
+    if but_one:  # without one match (a spurious detection landing on an object)
+        for drop in _odd_matches(compiled, supporting):
+            rest = supporting[:drop] + supporting[drop + 1:]
+            transforms = copy_transforms(compiled, np.array(
+                [compiled.index_of(m.object_id) for m in rest], dtype=np.intp), index=index)
+            if transforms:
+                supporting = rest
+                break
     covered = [any(a is not best and competes(best, a) and not distinct_poses(
         invert_pose(G @ best.world_from_camera), invert_pose(a.world_from_camera))
         for a in candidates) for G in transforms]
@@ -772,6 +777,19 @@ def _copy_competitors(solve: _Solve, candidates: list[Candidate]) -> list[Candid
     if added:
         sort_by_support(candidates)
     return candidates
+
+
+def _odd_matches(compiled: CompiledMap, matches: Sequence[InlierMatch]) -> list[int]:
+    """The positions in ``matches`` of the matches :func:`_copy_competitors` leaves out in
+    turn, each once: the weakest (least IoU), then the one whose object lies farthest from
+    the centroid of the others' (an object of a neighbouring room or corridor: a TV seen
+    through a door, or a spurious detection landing there)."""
+    centres = compiled.centers[[compiled.index_of(m.object_id) for m in matches]]
+    n = len(matches)
+    others = (centres.sum(axis=0) - centres) / (n - 1)  # (n, 3) centroid of the others
+    farthest = int(np.argmax(np.linalg.norm(centres - others, axis=1)))
+    weakest = min(range(n), key=lambda k: matches[k].iou)
+    return [weakest] if farthest == weakest else [weakest, farthest]
 
 
 def _copy_of(compiled: CompiledMap, best: Candidate, other: Candidate) -> bool:
