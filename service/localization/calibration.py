@@ -9,7 +9,7 @@ Fitted (:mod:`quadloc.service.localization.calibration_fit`) from the solve reco
 The records were made by ``python -m bench.trust --fit`` at commit ebaffa4;
 tuning seeds only (:data:`PROVENANCE`): ``bench.trust`` reports on other seeds.
 
-With ``bench/data/building_calibration_records.json.gz``, made by ``python -m bench.building --calibration-records bench/data/building_calibration_records.json.gz --frames 40`` at commit d9aa6b6 (tuning seeds [5, 7, 9, 11]; ``bench.building`` reports on other seeds).
+With ``bench/data/building_calibration_records.json.gz``, made by ``python -m bench.building --calibration-records bench/data/building_calibration_records.json.gz --frames 40`` at commit 262ca33 (tuning seeds [5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31, 33, 35]; ``bench.building`` reports on other seeds).
 """
 # ruff: noqa: E501  (generated: the commands and sha256 sums are not wrapped)
 
@@ -22,12 +22,27 @@ PROVENANCE = {'records': 'bench/data/calibration_records.json.gz',
  'records_commit': 'ebaffa4',
  'tuning_seeds': [100, 102, 104, 106, 101, 103],
  'extra_records': [{'records': 'bench/data/building_calibration_records.json.gz',
-                    'records_sha256': '8b51576782a1e69e8aa857e9443ca0be938eb96c7370e6b734355a3a810f6e1d',
+                    'records_sha256': '7e49e8ca15ca340fa549eda272debcf02812d267694d908bd017168b138d96ac',
                     'records_command': 'python -m bench.building --calibration-records '
                                        'bench/data/building_calibration_records.json.gz '
                                        '--frames 40',
-                    'records_commit': 'd9aa6b6',
-                    'tuning_seeds': [5, 7, 9, 11]}]}
+                    'records_commit': '262ca33',
+                    'tuning_seeds': [5,
+                                     7,
+                                     9,
+                                     11,
+                                     13,
+                                     15,
+                                     17,
+                                     19,
+                                     21,
+                                     23,
+                                     25,
+                                     27,
+                                     29,
+                                     31,
+                                     33,
+                                     35]}]}
 
 #: k_key of ``cov = k * max(s^2, f) * t(n) * (J^T W J)^-1`` (``calibration_fit.
 #: fit_covariance_scale``: the smallest and largest mean NEES over the 5 / 10 / 20 cm operating
@@ -89,7 +104,11 @@ MIN_CONFIDENCE = 0.36
 
 #: The same default for the answers of a place search (a large map), chosen on the building
 #: frames' decision sets at that ratio (``calibration_fit.choose_place_threshold``).
-MIN_CONFIDENCE_PLACES = 0.63
+MIN_CONFIDENCE_PLACES = 0.5
+
+#: The ambiguity chi2 ratio of a place-search answer held by a minimal sample of inliers
+#: (``confidence.answer_chi2_ratio``), chosen with ``MIN_CONFIDENCE_PLACES``.
+AMBIGUITY_CHI2_RATIO_MINIMAL_PLACES = 3.0
 
 #: Features of the confidence model (``confidence.evidence_features``), in order.
 CONFIDENCE_FEATURES = ('inliers_ge3',
@@ -145,4 +164,4 @@ CONFIDENCE_MODELS = {'refined': {'intercept': -14.033732,
                    'margin': -0.004131,
                    'log_samples': -1.021954,
                    'gravity': 0.0}},
- 'places': {'intercept': 1.545376, 'coef': {'refined_logit': 1.000462}}}
+ 'places': {'intercept': 1.333902, 'coef': {'refined_logit': 0.961724}}}

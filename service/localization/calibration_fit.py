@@ -27,9 +27,10 @@ Steps of :func:`fit_calibration` (each formula is in one function below):
 4. ``AMBIGUITY_CHI2_RATIO`` and ``MIN_CONFIDENCE`` (:func:`choose_ambiguity_and_threshold`):
    on the decision sets (unchecked answers of hard frames, e.g. 2 or 3 detections), the pair
    that keeps the most good frames while every set's false accepts stay within
-   ``false_accept_target x false_accept_tuning_margin``; then ``MIN_CONFIDENCE_PLACES``
-   (:func:`choose_place_threshold`) on the decision records of place-search answers (building
-   frames, one set per map size) at that ratio.
+   ``false_accept_target x false_accept_tuning_margin``; then
+   ``AMBIGUITY_CHI2_RATIO_MINIMAL_PLACES`` and ``MIN_CONFIDENCE_PLACES``
+   (:func:`choose_place_threshold`) by the same rule on the decision records of place-search
+   answers (building frames, one set per map size and repetition mode) at that ratio.
 
 The generated module ``quadloc.service.localization.calibration`` is written by
 :func:`calibration_source`; records are stored by :func:`write_records` (gzip JSON, columns)::
@@ -61,6 +62,7 @@ from quadloc.service.localization.confidence import (
     PLACES_MODEL,
     TOLERANCE_POSITION_M,
     TOLERANCE_ROTATION_DEG,
+    answer_chi2_ratio,
     confidence_probability,
     gaussian_tolerance_probability,
     refined_logit,
@@ -91,6 +93,7 @@ __all__ = [
     "fit_logistic",
     "fit_s2_floor",
     "map_calibration_applies",
+    "n_inliers",
     "place_search",
     "read_records",
     "record_from_evidence",
@@ -221,6 +224,12 @@ def place_search(r: SolveRecord) -> bool:
     return bool(r.features.get("place_search", 0.0) > 0)
 
 
+def n_inliers(r: SolveRecord) -> int:
+    """The inliers of the record's answer (from its feature ``log_inliers``, the log of at
+    least 1: 1 for a record without)."""
+    return round(math.exp(r.features.get("log_inliers", 0.0)))
+
+
 def success(r: SolveRecord) -> bool:
     """What ``confidence`` predicts: localized within ``TOLERANCE_POSITION_M`` and
     ``TOLERANCE_ROTATION_DEG`` of the reference."""
@@ -256,7 +265,11 @@ class CalibrationConstants:
         min_confidence_places: the same default for the answers of a place search
             (``MIN_CONFIDENCE_PLACES``; None: ``min_confidence``): chosen on the building
             frames' decision sets, where a failure is more often a wrong place (metres off)
-            than a near miss, so the same false-accept target needs a higher threshold.
+            than a near miss.
+        ambiguity_chi2_ratio_minimal_places: the ambiguity chi2 ratio of a place-search
+            answer held by a minimal sample of inliers
+            (``AMBIGUITY_CHI2_RATIO_MINIMAL_PLACES``, ``confidence.answer_chi2_ratio``; None:
+            ``ambiguity_chi2_ratio``), chosen with ``min_confidence_places``.
         confidence_features: the models' features, in order (``CONFIDENCE_FEATURES``).
         confidence_models: ``"refined"``, ``"none"`` and, fitted on building frames,
             ``"places"`` (``CONFIDENCE_MODELS``), the ``models`` argument of
@@ -275,6 +288,14 @@ class CalibrationConstants:
     confidence_models: dict[str, LogisticModel]
     provenance: dict[str, Any] = field(default_factory=dict)
     min_confidence_places: float | None = None
+    ambiguity_chi2_ratio_minimal_places: float | None = None
+
+    def answer_chi2_ratio(self, place_search: bool, n_inliers: int) -> float:
+        """The ambiguity chi2 ratio an answer is held to (``confidence.answer_chi2_ratio``
+        with these constants)."""
+        return answer_chi2_ratio(self.ambiguity_chi2_ratio,
+                                 self.ambiguity_chi2_ratio_minimal_places, place_search,
+                                 n_inliers)
 
     def default_min_confidence(self, place_search: bool) -> float:
         """The default ``min_confidence`` of an answer: ``min_confidence_places`` for the
@@ -294,6 +315,8 @@ class CalibrationConstants:
             ambiguity_ratio_same_objects=float(module.AMBIGUITY_RATIO_SAME_OBJECTS),
             min_confidence=float(module.MIN_CONFIDENCE),
             min_confidence_places=float(module.MIN_CONFIDENCE_PLACES),
+            ambiguity_chi2_ratio_minimal_places=float(
+                module.AMBIGUITY_CHI2_RATIO_MINIMAL_PLACES),
             confidence_features=tuple(module.CONFIDENCE_FEATURES),
             confidence_models=cast(dict[str, LogisticModel], dict(module.CONFIDENCE_MODELS)),
             provenance=dict(module.PROVENANCE))
@@ -327,6 +350,8 @@ class CalibrationConstants:
             num(name, getattr(self, name), getattr(other, name))
         num("min_confidence_places", self.default_min_confidence(True),
             other.default_min_confidence(True))
+        num("ambiguity_chi2_ratio_minimal_places", self.answer_chi2_ratio(True, 0),
+            other.answer_chi2_ratio(True, 0))
         if self.confidence_features != other.confidence_features:
             out.append(f"confidence_features: {self.confidence_features} != "
                        f"{other.confidence_features}")
@@ -556,18 +581,21 @@ class Decision:
 
 def decide(r: SolveRecord, chi2_ratio: float, min_confidence: float,
            models: Mapping[str, LogisticModel] | None = None,
-           confidence: float | None = None) -> Decision:
+           confidence: float | None = None, minimal_ratio: float | None = None) -> Decision:
     """The answer to a decision record's frame (its unchecked answer: every verified pose,
     with its evidence) under ``chi2_ratio`` / ``min_confidence`` / ``models`` (None: the
     shipped models): ambiguous as ``confidence.is_ambiguous`` decides (a runner-up whose chi2
     compares competes when ``chi2_competitor <= log(chi2_ratio)``, the others by IoU sum:
     ``iou_competitor > 0``), else ``low_confidence`` below ``min_confidence`` (``confidence``:
-    the record's probability under ``models`` when already computed)."""
+    the record's probability under ``models`` when already computed). ``minimal_ratio``: the
+    ratio of a place-search answer of a minimal sample of inliers
+    (``confidence.answer_chi2_ratio``)."""
     if not r.localized:
         return Decision(False, r.reason, 0.0)
     conf = confidence_probability(r.key, r.features, models) if confidence is None else confidence
     ev = r.features
-    if ev.get("iou_competitor", 0.0) > 0 or ev["chi2_competitor"] <= math.log(chi2_ratio):
+    ratio = answer_chi2_ratio(chi2_ratio, minimal_ratio, place_search(r), n_inliers(r))
+    if ev.get("iou_competitor", 0.0) > 0 or ev["chi2_competitor"] <= math.log(ratio):
         return Decision(False, "ambiguous", conf)
     if conf < min_confidence:
         return Decision(False, "low_confidence", conf)
@@ -589,13 +617,14 @@ class DecisionOutcome:
 def decision_outcome(records: Sequence[SolveRecord], chi2_ratio: float, min_confidence: float,
                      models: Mapping[str, LogisticModel] | None = None,
                      settings: FitSettings = FitSettings(),
-                     confidences: Sequence[float] | None = None) -> DecisionOutcome:
+                     confidences: Sequence[float] | None = None,
+                     minimal_ratio: float | None = None) -> DecisionOutcome:
     """:class:`DecisionOutcome` of decision records under these constants (:func:`decide`;
     ``confidences``: the records' probabilities under ``models``, when computed)."""
     fa = kept = good = 0
     for i, r in enumerate(records):
         loc = decide(r, chi2_ratio, min_confidence, models,
-                     None if confidences is None else confidences[i]).localized
+                     None if confidences is None else confidences[i], minimal_ratio).localized
         fa += int(loc and r.position_error_m > settings.false_accept_error_m)
         if r.position_error_m <= settings.good_error_m:
             good += 1
@@ -648,22 +677,31 @@ def choose_ambiguity_and_threshold(
 def choose_place_threshold(
     sets: Mapping[str, Sequence[SolveRecord]], models: Mapping[str, LogisticModel],
     chi2_ratio: float, settings: FitSettings = FitSettings(),
-) -> float | None:
-    """``MIN_CONFIDENCE_PLACES``: the smallest threshold of the grid whose false accepts are
-    <= ``false_accept_target x false_accept_tuning_margin`` of the frames in every set, at the
-    ambiguity ratio ``chi2_ratio`` (chosen on the other sets); ``sets``: decision records of
-    place-search answers (:func:`place_search`), e.g. one set per map size of building
-    frames. None without sets or when no threshold meets the target."""
+) -> tuple[float, float] | None:
+    """``(AMBIGUITY_CHI2_RATIO_MINIMAL_PLACES, MIN_CONFIDENCE_PLACES)`` by the rule of
+    :func:`choose_ambiguity_and_threshold`: for each ratio of the grid at least ``chi2_ratio``
+    (the ambiguity ratio chosen on the other sets, which holds every other answer), the
+    smallest threshold whose false accepts are <= ``false_accept_target x
+    false_accept_tuning_margin`` of the frames in every set; of those, the pair keeping the
+    most good frames (ties: the larger ratio). ``sets``: decision records of place-search
+    answers (:func:`place_search`), e.g. one set per map size and repetition mode of building
+    frames. None without sets or when no pair meets the target."""
     sets = {name: rows for name, rows in sets.items() if rows}
     if not sets:
         return None
     confs = _set_confidences(sets, models)
     limit = settings.false_accept_target * settings.false_accept_tuning_margin
-    for t in settings.min_confidence_grid_places:
-        if all(decision_outcome(rows, chi2_ratio, t, models, settings, confs[name])
-               .false_accepts <= limit * len(rows) for name, rows in sets.items()):
-            return t
-    return None
+    best: tuple[int, float, float] | None = None
+    for minimal in (r for r in settings.chi2_ratio_grid if r >= chi2_ratio):
+        for t in settings.min_confidence_grid_places:
+            outs = [decision_outcome(rows, chi2_ratio, t, models, settings, confs[name],
+                                     minimal) for name, rows in sets.items()]
+            if all(o.false_accepts <= limit * o.frames for o in outs):
+                kept = sum(o.kept for o in outs)
+                if best is None or (kept, minimal) >= (best[0], best[1]):
+                    best = (kept, minimal, t)
+                break
+    return None if best is None else (best[1], best[2])
 
 
 def fit_calibration(records: Sequence[SolveRecord], base: CalibrationConstants,
@@ -709,6 +747,8 @@ def fit_calibration(records: Sequence[SolveRecord], base: CalibrationConstants,
     places = choose_place_threshold(
         {n: [r for r in rows if place_search(r)] for n, rows in sets.items()}, models, ratio,
         settings)
+    minimal, place_threshold = ((base.ambiguity_chi2_ratio_minimal_places,
+                                 base.min_confidence_places) if places is None else places)
     return CalibrationConstants(
         covariance_scale={k: round(v, 6) for k, v in scale.items()},
         s2_floor={k: round(v, 6) for k, v in floor.items()},
@@ -716,7 +756,7 @@ def fit_calibration(records: Sequence[SolveRecord], base: CalibrationConstants,
         ambiguity_ratio_same_objects=base.ambiguity_ratio_same_objects,
         min_confidence=threshold, confidence_features=tuple(settings.features),
         confidence_models=models, provenance=dict(provenance or {}),
-        min_confidence_places=base.min_confidence_places if places is None else places)
+        min_confidence_places=place_threshold, ambiguity_chi2_ratio_minimal_places=minimal)
 
 
 # ------------------------------------------------------------------ the generated module
@@ -777,6 +817,10 @@ MIN_CONFIDENCE = {c.min_confidence!r}
 #: The same default for the answers of a place search (a large map), chosen on the building
 #: frames' decision sets at that ratio (``calibration_fit.choose_place_threshold``).
 MIN_CONFIDENCE_PLACES = {c.default_min_confidence(True)!r}
+
+#: The ambiguity chi2 ratio of a place-search answer held by a minimal sample of inliers
+#: (``confidence.answer_chi2_ratio``), chosen with ``MIN_CONFIDENCE_PLACES``.
+AMBIGUITY_CHI2_RATIO_MINIMAL_PLACES = {c.answer_chi2_ratio(True, 0)!r}
 
 #: Features of the confidence model (``confidence.evidence_features``), in order.
 CONFIDENCE_FEATURES = {fmt(c.confidence_features)}

@@ -929,7 +929,8 @@ def _refine_and_verify(
 def _answer(solve: _Solve, best: Candidate, ranked: list[Candidate], *, ambiguous: bool
             ) -> LocalizationResult:
     """The ``assess`` stage: the result for the best candidate among ``ranked`` (best first,
-    mutually distinct; ``ambiguous``: a runner-up competes). Not localized when its tilt
+    mutually distinct; ``ambiguous``: a runner-up competes, or, for a place-search answer of a
+    minimal sample of inliers, one within its larger chi2 ratio). Not localized when its tilt
     disagrees with the measured gravity (``gravity_mismatch``, only when every candidate's
     does), when ambiguous with ``on_ambiguity="not_localized"``, or when its confidence is
     below ``min_confidence``; the candidates (each with its confidence) are listed then, and
@@ -938,8 +939,14 @@ def _answer(solve: _Solve, best: Candidate, ranked: list[Candidate], *, ambiguou
     runner_up = next((b for b in ranked if b is not best), None)
     assessment = _assess(solve, best, runner_up, ranked)
     conf, ev = assessment.confidence, assessment.evidence
-    default_floor = (solve.calibration or SHIPPED_CALIBRATION).default_min_confidence(
-        solve.places)
+    constants = solve.calibration or SHIPPED_CALIBRATION
+    # a place-search answer of a minimal sample of inliers is held to a larger chi2 ratio
+    # (confidence.answer_chi2_ratio); the others' rule already decided (candidates.competes,
+    # a tie possibly broken by the misses)
+    ratio = constants.answer_chi2_ratio(solve.places, len(best.inliers))
+    if ratio > constants.ambiguity_chi2_ratio and ev["chi2_competitor"] <= math.log(ratio):
+        ambiguous = True
+    default_floor = constants.default_min_confidence(solve.places)
     floor = default_floor if options.min_confidence is None else options.min_confidence
     reason = ("gravity_mismatch" if _against_gravity(solve, best)
               else "ambiguous" if ambiguous and options.on_ambiguity == "not_localized"

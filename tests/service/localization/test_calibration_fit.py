@@ -29,12 +29,14 @@ from quadloc.service.localization.calibration_fit import (
     fit_file,
     fit_logistic,
     fit_s2_floor,
+    n_inliers,
     read_records,
     refeature,
     sha256_file,
     write_records,
 )
 from quadloc.service.localization.confidence import (
+    answer_chi2_ratio,
     confidence_probability,
     gaussian_tolerance_probability,
 )
@@ -312,8 +314,9 @@ def test_place_threshold_is_chosen_on_place_search_records_alone():
     settings = FitSettings(chi2_ratio_grid=(2.0,))
     # sigmoid(0.5) = 0.622: the large map's wrong answer sets the threshold
     assert choose_place_threshold({"b10": small, "b1000": large}, models, 2.0, settings) \
-        == pytest.approx(0.63)
-    assert choose_place_threshold({"b10": small}, models, 2.0, settings) == pytest.approx(0.12)
+        == (2.0, pytest.approx(0.63))
+    assert choose_place_threshold({"b10": small}, models, 2.0, settings) \
+        == (2.0, pytest.approx(0.12))
     assert choose_place_threshold({}, models, 2.0, settings) is None
     one_room = [rec(1.0, -1.0, False, "2 default")] + [rec(0.05, 3.0, False, "2 default")] * 99
     # wrong places among good answers of the same evidence: the place threshold rises above
@@ -325,8 +328,55 @@ def test_place_threshold_is_chosen_on_place_search_records_alone():
     ratio, t = choose_ambiguity_and_threshold({"2 default": one_room},
                                               fitted.confidence_models, settings)
     assert (fitted.ambiguity_chi2_ratio, fitted.min_confidence) == (ratio, t)
-    t_places = choose_place_threshold({"b10": small, "b1000": large},
-                                      fitted.confidence_models, ratio, settings)
-    assert t_places is not None and t_places > t
-    assert fitted.default_min_confidence(True) == t_places
+    chosen = choose_place_threshold({"b10": small, "b1000": large},
+                                    fitted.confidence_models, ratio, settings)
+    assert chosen is not None and chosen[1] > t
+    assert fitted.default_min_confidence(True) == chosen[1]
     assert fitted.default_min_confidence(False) == t
+
+
+def test_minimal_place_answers_get_their_own_chi2_ratio():
+    """``AMBIGUITY_CHI2_RATIO_MINIMAL_PLACES``: place-search answers of 3 inliers whose
+    runner-up is within 2 x the best's chi2 are wrong places 1 m off at a high probability,
+    those of 5 inliers with the same runner-up are right. Ratios (1.25, 3): at 1.25 only a
+    threshold above the wrong answers' probability keeps the false accepts within target
+    (losing the good answers of that probability too); at 3 those answers are ambiguous and the
+    lower threshold keeps every good answer: (3, lowest) is chosen. The ratio applies to
+    minimal place-search answers only (``confidence.answer_chi2_ratio``), and ``decide`` and
+    the fitted constants carry it."""
+    def rec(pos: float, z: float, inliers: int, chi2: float, place: bool = True) -> SolveRecord:
+        feats = {f: 0.0 for f in FEATURES} | {
+            "mean_iou": z, "chi2_competitor": chi2, "iou_competitor": 0.0,
+            "place_search": float(place), "log_inliers": math.log(inliers),
+            "inliers_ge4": float(inliers >= 4)}
+        return _record(pos=pos, features=feats, decision_set="b200")
+
+    models = {"refined": {"intercept": 0.0, "coef": {"mean_iou": 1.0}},
+              "none": {"intercept": 0.0, "coef": {}}}
+    wrong = [rec(1.0, 2.0, 3, math.log(2.0))] * 3
+    good_minimal = [rec(0.05, 2.0, 3, math.log(5.0))] * 20
+    good_same_runner_up = [rec(0.05, 2.0, 5, math.log(2.0))] * 20
+    good = [rec(0.05, 4.0, 6, 4.0)] * 57
+    rows = [*wrong, *good_minimal, *good_same_runner_up, *good]
+    settings = FitSettings(chi2_ratio_grid=(1.25, 3.0))
+    assert n_inliers(wrong[0]) == 3 and n_inliers(good[0]) == 6
+    minimal, t = choose_place_threshold({"b200": rows}, models, 1.25, settings)
+    assert minimal == 3.0 and t == pytest.approx(0.0)
+    assert decide(wrong[0], 1.25, 0.0, models, minimal_ratio=3.0).reason == "ambiguous"
+    assert decide(wrong[0], 1.25, 0.0, models).localized
+    assert decide(good_same_runner_up[0], 1.25, 0.0, models, minimal_ratio=3.0).localized
+    # a one-room answer of 3 inliers keeps the one-room ratio
+    assert decide(rec(1.0, 2.0, 3, math.log(2.0), place=False), 1.25, 0.0, models,
+                  minimal_ratio=3.0).localized
+    # at 1.25 alone, the threshold rises above sigmoid(2) = 0.881
+    only, t_only = choose_place_threshold({"b200": rows}, models, 1.25,
+                                          FitSettings(chi2_ratio_grid=(1.25,)))
+    assert only == 1.25 and t_only == pytest.approx(0.89)
+    assert answer_chi2_ratio(1.25, 3.0, True, 3) == 3.0
+    assert answer_chi2_ratio(1.25, 3.0, True, 4) == 1.25
+    assert answer_chi2_ratio(1.25, 3.0, False, 3) == 1.25
+    assert answer_chi2_ratio(1.25, None, True, 3) == 1.25
+    assert answer_chi2_ratio(2.0, 1.5, True, 3) == 2.0  # never weaker than the others' rule
+    shipped = CalibrationConstants.shipped()
+    assert shipped.answer_chi2_ratio(True, 3) >= shipped.ambiguity_chi2_ratio
+    assert shipped.answer_chi2_ratio(False, 3) == shipped.ambiguity_chi2_ratio
