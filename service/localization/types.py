@@ -179,7 +179,7 @@ class LocalizationOptions:
             so that 2-3 detection frames are not answered with a wrong pose), or
             ``MIN_CONFIDENCE_PLACES`` for the answers of a large map's place search (chosen on
             building frames: there a failure is more often a wrong place); 0 accepts every
-            verified pose.
+            verified pose (an ambiguous one is not: ``on_ambiguity``).
 
     Integer fields accept any integral number (numpy integers too) and store a Python int.
     """
