@@ -59,6 +59,7 @@ import numpy as np
 
 from quadloc.service.localization import calibration
 from quadloc.service.localization.confidence import (
+    MINIMAL_SAMPLE_INLIERS,
     PLACES_MODEL,
     TOLERANCE_POSITION_M,
     TOLERANCE_ROTATION_DEG,
@@ -350,8 +351,9 @@ class CalibrationConstants:
             num(name, getattr(self, name), getattr(other, name))
         num("min_confidence_places", self.default_min_confidence(True),
             other.default_min_confidence(True))
-        num("ambiguity_chi2_ratio_minimal_places", self.answer_chi2_ratio(True, 0),
-            other.answer_chi2_ratio(True, 0))
+        num("ambiguity_chi2_ratio_minimal_places",
+            self.answer_chi2_ratio(True, MINIMAL_SAMPLE_INLIERS),
+            other.answer_chi2_ratio(True, MINIMAL_SAMPLE_INLIERS))
         if self.confidence_features != other.confidence_features:
             out.append(f"confidence_features: {self.confidence_features} != "
                        f"{other.confidence_features}")
@@ -820,7 +822,7 @@ MIN_CONFIDENCE_PLACES = {c.default_min_confidence(True)!r}
 
 #: The ambiguity chi2 ratio of a place-search answer held by a minimal sample of inliers
 #: (``confidence.answer_chi2_ratio``), chosen with ``MIN_CONFIDENCE_PLACES``.
-AMBIGUITY_CHI2_RATIO_MINIMAL_PLACES = {c.answer_chi2_ratio(True, 0)!r}
+AMBIGUITY_CHI2_RATIO_MINIMAL_PLACES = {c.answer_chi2_ratio(True, MINIMAL_SAMPLE_INLIERS)!r}
 
 #: Features of the confidence model (``confidence.evidence_features``), in order.
 CONFIDENCE_FEATURES = {fmt(c.confidence_features)}
