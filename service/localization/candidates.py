@@ -108,17 +108,19 @@ def distinct_ranking(candidates: Sequence[Candidate]) -> list[Candidate]:
     return ranked
 
 
-def competes(best: Candidate, other: Candidate) -> bool:
+def competes(best: Candidate, other: Candidate, chi2_ratio: float | None = None) -> bool:
     """Whether ``other`` (a distinct runner-up) competes with ``best``
     (:func:`quadloc.service.localization.confidence.is_ambiguous`: by refined chi2 when they
-    compare, else by IoU sum, told whether it matches the same map objects), or is an exact
-    copy's view short of one of its inliers (``Candidate.copy_but_one``)."""
+    compare, within ``chi2_ratio``, default ``AMBIGUITY_CHI2_RATIO``, else by IoU sum, told
+    whether it matches the same map objects), or is an exact copy's view short of one of its
+    inliers (``Candidate.copy_but_one``)."""
     if other.copy_but_one and len(other.inliers) + 1 >= len(best.inliers):
         return True
     return is_ambiguous(len(best.inliers), best.score, len(other.inliers), other.score,
                         same_objects={m.object_id for m in other.inliers}
                         == {m.object_id for m in best.inliers},
-                        best_chi2=best.chi2, runner_up_chi2=other.chi2_against(best))
+                        best_chi2=best.chi2, runner_up_chi2=other.chi2_against(best),
+                        chi2_ratio=chi2_ratio)
 
 
 def iou_competitor(a: Candidate, others: Sequence[Candidate]) -> bool:

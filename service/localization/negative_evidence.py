@@ -68,17 +68,19 @@ def missed_objects(compiled: CompiledMap, camera: Camera, candidate: Candidate) 
 
 
 def weigh_misses(ranked: Sequence[Candidate], compiled: CompiledMap, camera: Camera,
-                 margin: int | None = None) -> tuple[list[Candidate], bool, dict[int, int]]:
+                 margin: int | None = None, chi2_ratio: float | None = None
+                 ) -> tuple[list[Candidate], bool, dict[int, int]]:
     """The place comparison with negative evidence (module docstring) of ``ranked`` (best
     first, mutually distinct). Returns the ranking (the best possibly replaced by a competitor
     with fewer misses, the others in their order), whether a runner-up still competes (the
     answer is ambiguous), and the misses of each candidate weighed (by ``id``). ``margin``:
-    default :func:`miss_margin`."""
+    default :func:`miss_margin`; ``chi2_ratio``: of :func:`competes` (the best's,
+    ``confidence.answer_chi2_ratio``; default ``AMBIGUITY_CHI2_RATIO``)."""
     k = miss_margin() if margin is None else margin
     out = list(ranked)
     if not out:
         return out, False, {}
-    tie = [out[0]] + [b for b in out[1:] if competes(out[0], b)]
+    tie = [out[0]] + [b for b in out[1:] if competes(out[0], b, chi2_ratio)]
     misses = {id(a): missed_objects(compiled, camera, a) for a in tie}
     if len(tie) > 1:
         fewest = min(tie, key=lambda a: misses[id(a)])
@@ -86,7 +88,7 @@ def weigh_misses(ranked: Sequence[Candidate], compiled: CompiledMap, camera: Cam
                                         for b in tie if b is not fewest):
             out = [fewest] + [b for b in out if b is not fewest]
     best = out[0]
-    rivals = [b for b in out[1:] if competes(best, b)]
+    rivals = [b for b in out[1:] if competes(best, b, chi2_ratio)]
     for b in rivals:
         if id(b) not in misses:
             misses[id(b)] = missed_objects(compiled, camera, b)

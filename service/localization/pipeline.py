@@ -298,9 +298,14 @@ def localize(
                               t0, first_status)
     # the places compared with the detections, then with the objects each predicts in view
     # that were not detected (negative evidence: a tie between places broken by the misses)
-    ranked, ambiguous, _ = weigh_misses(distinct_ranking(candidates), whole, camera)
+    ranked = distinct_ranking(candidates)
+    # a place-search answer of a minimal sample of inliers is held to a larger chi2 ratio
+    ratio = (solve.calibration or SHIPPED_CALIBRATION).answer_chi2_ratio(
+        solve.places, len(ranked[0].inliers))
+    ranked, ambiguous, _ = weigh_misses(ranked, whole, camera, chi2_ratio=ratio)
     if ambiguous and hint is not None:
-        ranked, ambiguous, _ = weigh_misses(_hint_ranking(ranked, hint, seeds), whole, camera)
+        ranked, ambiguous, _ = weigh_misses(_hint_ranking(ranked, hint, seeds, ratio), whole,
+                                            camera, chi2_ratio=ratio)
     if solve.hint_samples is not None and hint is not None and hint.agrees(
             ranked[0].world_from_camera, [m.object_id for m in ranked[0].inliers]):
         solve.n_samples = solve.hint_samples  # chance matches within the hint's places
@@ -313,8 +318,8 @@ def _hypothesis_agrees(solve: _Solve, h: Hypothesis, hint: PlaceHint) -> bool:
     return hint.agrees(invert_pose(h.camera_from_world), [ids[m.object_index] for m in h.matches])
 
 
-def _hint_ranking(ranked: list[Candidate], hint: PlaceHint, seeds: PlaceSeeds | None = None
-                  ) -> list[Candidate]:
+def _hint_ranking(ranked: list[Candidate], hint: PlaceHint, seeds: PlaceSeeds | None = None,
+                  chi2_ratio: float | None = None) -> list[Candidate]:
     """``ranked`` (best first, mutually distinct, ambiguous) with the hint's say: among the
     best and the runners-up that compete with it (the tie the evidence cannot break), those
     where the hint says (:meth:`PlaceHint.agrees`) are kept, best-supported first, and the
@@ -324,8 +329,10 @@ def _hint_ranking(ranked: list[Candidate], hint: PlaceHint, seeds: PlaceSeeds | 
     only the most likely of them, and only when every other place the search found about as
     well supported (the candidates of the tie, and the ``seeds`` of a large map with at least
     :data:`HINT_SEED_SUPPORT` of the best seed's support) is :data:`HINT_PRIOR_RATIO` times
-    less likely under the hint; else the ranking is unchanged (still ambiguous)."""
-    tie = [ranked[0]] + [b for b in ranked[1:] if competes(ranked[0], b)]
+    less likely under the hint; else the ranking is unchanged (still ambiguous).
+    ``chi2_ratio``: of the tie (:func:`competes`; the best's ratio,
+    ``confidence.answer_chi2_ratio``)."""
+    tie = [ranked[0]] + [b for b in ranked[1:] if competes(ranked[0], b, chi2_ratio)]
     agree = [a for a in tie if hint.agrees(a.world_from_camera,
                                             [m.object_id for m in a.inliers])]
     if not agree:
@@ -929,8 +936,7 @@ def _refine_and_verify(
 def _answer(solve: _Solve, best: Candidate, ranked: list[Candidate], *, ambiguous: bool
             ) -> LocalizationResult:
     """The ``assess`` stage: the result for the best candidate among ``ranked`` (best first,
-    mutually distinct; ``ambiguous``: a runner-up competes, or, for a place-search answer of a
-    minimal sample of inliers, one within its larger chi2 ratio). Not localized when its tilt
+    mutually distinct; ``ambiguous``: a runner-up competes). Not localized when its tilt
     disagrees with the measured gravity (``gravity_mismatch``, only when every candidate's
     does), when ambiguous with ``on_ambiguity="not_localized"``, or when its confidence is
     below ``min_confidence``; the candidates (each with its confidence) are listed then, and
@@ -939,14 +945,8 @@ def _answer(solve: _Solve, best: Candidate, ranked: list[Candidate], *, ambiguou
     runner_up = next((b for b in ranked if b is not best), None)
     assessment = _assess(solve, best, runner_up, ranked)
     conf, ev = assessment.confidence, assessment.evidence
-    constants = solve.calibration or SHIPPED_CALIBRATION
-    # a place-search answer of a minimal sample of inliers is held to a larger chi2 ratio
-    # (confidence.answer_chi2_ratio); the others' rule already decided (candidates.competes,
-    # a tie possibly broken by the misses)
-    ratio = constants.answer_chi2_ratio(solve.places, len(best.inliers))
-    if ratio > constants.ambiguity_chi2_ratio and ev["chi2_competitor"] <= math.log(ratio):
-        ambiguous = True
-    default_floor = constants.default_min_confidence(solve.places)
+    default_floor = (solve.calibration or SHIPPED_CALIBRATION).default_min_confidence(
+        solve.places)
     floor = default_floor if options.min_confidence is None else options.min_confidence
     reason = ("gravity_mismatch" if _against_gravity(solve, best)
               else "ambiguous" if ambiguous and options.on_ambiguity == "not_localized"
