@@ -6,6 +6,7 @@ Usage::
                              [--frames 40] [--max-frames-large 20] [--seed 1000]
                              [--memory-frames 3] [--json PATH] [--write-results]
     python -m bench.building --calibration-records PATH [--frames 40] [--jobs N]
+                             [--calibration-seeds 5,7,...]
 
 Maps from :func:`tests.support.buildings.make_building` (the real Chess room repeated on a grid,
 12 m apart, several floors, each room turned by a random yaw; modes exact copies, perturbed
@@ -463,11 +464,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--jobs", type=int, default=1,
                         help="with --calibration-records: processes solving the seeds (the "
                              "same records whatever the number)")
+    parser.add_argument("--calibration-seeds", type=_ints, default=CALIBRATION_SEEDS,
+                        help="with --calibration-records: the base seeds (default the tuning "
+                             "seeds; others give held-out records)")
     args = parser.parse_args(argv)
     if args.jobs < 1:
         parser.error("--jobs must be >= 1")
     if args.calibration_records:
-        return _write_calibration_records(args.calibration_records, args.frames, args.jobs)
+        return _write_calibration_records(args.calibration_records, args.frames, args.jobs,
+                                          tuple(args.calibration_seeds))
     modes = tuple(m for m in args.modes.split(",") if m)
     if any(m not in MODES for m in modes):
         parser.error(f"--modes: one of {MODES}")
@@ -507,21 +512,24 @@ def _seed_records(seed: int, frames: int) -> list[SolveRecord]:
                             lambda m: print(f"seed {seed}: {m}", file=sys.stderr, flush=True))
 
 
-def _write_calibration_records(path: Path, frames: int, jobs: int = 1) -> int:
-    """``--calibration-records PATH``: :func:`building_records` of the tuning seeds to
-    ``path``, with their provenance; the seeds solved by ``jobs`` processes (the same records
-    in the same order whatever ``jobs``: each seed's frames are solved in one process, in
-    order)."""
+def _write_calibration_records(path: Path, frames: int, jobs: int = 1,
+                               seeds: tuple[int, ...] = CALIBRATION_SEEDS) -> int:
+    """``--calibration-records PATH``: :func:`building_records` of the base ``seeds`` (default:
+    the tuning seeds the shipped fit uses; others, e.g. odd seeds 37-59, give held-out records
+    of the same kind) to ``path``, with their provenance; the seeds solved by ``jobs``
+    processes (the same records in the same order whatever ``jobs``: each seed's frames are
+    solved in one process, in order)."""
     t0 = time.perf_counter()
     with ProcessPoolExecutor(max_workers=jobs) as pool:
-        per_seed = list(pool.map(_seed_records, CALIBRATION_SEEDS,
-                                 [frames] * len(CALIBRATION_SEEDS)))
+        per_seed = list(pool.map(_seed_records, seeds, [frames] * len(seeds)))
     records = [r for rows in per_seed for r in rows]
+    extra = ("" if seeds == CALIBRATION_SEEDS
+             else f" --calibration-seeds {','.join(map(str, seeds))}")
     write_records(path, records, {
         "command": f"python -m bench.building --calibration-records {display_path(path)} "
-                   f"--frames {frames}",
+                   f"--frames {frames}{extra}",
         "commit": run_commit(), "date": time.strftime("%Y-%m-%d", time.gmtime()),
-        "tuning_seeds": list(CALIBRATION_SEEDS), "rooms": list(CALIBRATION_ROOMS),
+        "tuning_seeds": list(seeds), "rooms": list(CALIBRATION_ROOMS),
         "modes": list(MODES), "frames": frames,
         "seconds": round(time.perf_counter() - t0)})
     print(f"wrote {path.name} ({len(records)} records)")
