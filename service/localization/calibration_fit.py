@@ -49,7 +49,7 @@ import json
 import math
 import pprint
 import sys
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
@@ -662,12 +662,27 @@ def choose_ambiguity_and_threshold(
     if not sets:
         return None
     confs = _set_confidences(sets, models)
+    return _most_kept_pair(
+        sets, settings.chi2_ratio_grid, settings.min_confidence_grid, settings,
+        lambda name, rows, ratio, t: decision_outcome(rows, ratio, t, models, settings,
+                                                      confs[name]))
+
+
+def _most_kept_pair(
+    sets: Mapping[str, Sequence[SolveRecord]], ratios: Sequence[float],
+    thresholds: Sequence[float], settings: FitSettings,
+    outcome: Callable[[str, Sequence[SolveRecord], float, float], DecisionOutcome],
+) -> tuple[float, float] | None:
+    """The rule of both choosers: for each ratio of ``ratios``, the smallest of
+    ``thresholds`` whose false accepts (``outcome`` of each set at that ratio and threshold)
+    are <= ``false_accept_target x false_accept_tuning_margin`` of the frames in every set;
+    of those, the ``(ratio, threshold)`` keeping the most good frames (ties: the larger
+    ratio, more cautious). None when no pair meets the target."""
     limit = settings.false_accept_target * settings.false_accept_tuning_margin
     best: tuple[int, float, float] | None = None
-    for ratio in settings.chi2_ratio_grid:
-        for t in settings.min_confidence_grid:
-            outs = [decision_outcome(rows, ratio, t, models, settings, confs[name])
-                    for name, rows in sets.items()]
+    for ratio in ratios:
+        for t in thresholds:
+            outs = [outcome(name, rows, ratio, t) for name, rows in sets.items()]
             if all(o.false_accepts <= limit * o.frames for o in outs):
                 kept = sum(o.kept for o in outs)
                 if best is None or (kept, ratio) >= (best[0], best[1]):
@@ -692,18 +707,11 @@ def choose_place_threshold(
     if not sets:
         return None
     confs = _set_confidences(sets, models)
-    limit = settings.false_accept_target * settings.false_accept_tuning_margin
-    best: tuple[int, float, float] | None = None
-    for minimal in (r for r in settings.chi2_ratio_grid if r >= chi2_ratio):
-        for t in settings.min_confidence_grid_places:
-            outs = [decision_outcome(rows, chi2_ratio, t, models, settings, confs[name],
-                                     minimal) for name, rows in sets.items()]
-            if all(o.false_accepts <= limit * o.frames for o in outs):
-                kept = sum(o.kept for o in outs)
-                if best is None or (kept, minimal) >= (best[0], best[1]):
-                    best = (kept, minimal, t)
-                break
-    return None if best is None else (best[1], best[2])
+    return _most_kept_pair(
+        sets, [r for r in settings.chi2_ratio_grid if r >= chi2_ratio],
+        settings.min_confidence_grid_places, settings,
+        lambda name, rows, minimal, t: decision_outcome(rows, chi2_ratio, t, models, settings,
+                                                        confs[name], minimal))
 
 
 def fit_calibration(records: Sequence[SolveRecord], base: CalibrationConstants,
