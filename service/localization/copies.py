@@ -61,21 +61,18 @@ def copy_transforms(compiled: CompiledMap, objects: IntArray,
     if len(idx) == 2:
         return _pair_copies(compiled, idx, tolerance_m, max_copies, index)
 
-    # the objects' pairwise centre distances, once (not per triple: C(n, 3) triples)
-    dist = {(a, b): float(np.linalg.norm(P[a] - P[b]))
-            for a, b in itertools.combinations(range(len(idx)), 2)}
-
-    def spread(t: tuple[int, ...]) -> float:
-        return sum(dist[pair] for pair in itertools.combinations(t, 2))
-
-    triples = list(itertools.combinations(range(len(idx)), 3))
+    # the objects' pairwise centre distances and every triple's spread, once, as arrays
+    dist = np.sqrt(((P[:, None] - P[None]) ** 2).sum(axis=2))
+    triples = np.array(list(itertools.combinations(range(len(idx)), 3)), dtype=np.intp)
+    d_ab, d_ac, d_bc = (dist[triples[:, u], triples[:, v]] for u, v in ((0, 1), (0, 2), (1, 2)))
+    spread = d_ab + d_ac + d_bc
     if index is not None:
         reach = index.view_range_m - tolerance_m
-        triples = [t for t in triples
-                   if all(dist[pair] <= reach for pair in itertools.combinations(t, 2))]
-        if not triples:
+        covisible = (d_ab <= reach) & (d_ac <= reach) & (d_bc <= reach)
+        if not covisible.any():
             return []  # no covisible triplet: the objects are no constellation of the index
-    a, b, c = trip = max(triples, key=spread)
+        spread = np.where(covisible, spread, -np.inf)
+    a, b, c = trip = tuple(int(k) for k in triples[int(np.argmax(spread))])
     if index is None:
         candidates = _dense_triplets(compiled, P, labels, trip, tolerance_m)
     else:

@@ -777,6 +777,13 @@ def _copy_competitors(solve: _Solve, candidates: list[Candidate]) -> list[Candid
             got.capped = (status == "max_iterations"
                           and alternative_options.max_iterations < options.max_iterations)
             got.copy_but_one = but_one
+            if but_one:
+                # a runner-up refined there before is the same view: flagged too, so the
+                # place competes whichever of the two the ranking keeps (equal support)
+                for a in candidates:
+                    if a is not best and not distinct_poses(
+                            invert_pose(a.world_from_camera), invert_pose(got.world_from_camera)):
+                        a.copy_but_one = True
             candidates.append(got)
             added = True
             if index is not None:
