@@ -407,6 +407,26 @@ def test_a_spurious_match_beyond_the_room_does_not_pick_a_copy(
     _assert_copies_compete(localize(bf.frame.detections, b.compiled, cam), bf)
 
 
+def test_a_copy_view_refined_before_the_copy_lookup_still_competes() -> None:
+    """The first frame above, its ranking's ties broken against the flag: the runners-up of
+    the search had already refined both copies' views (10 inliers, the same support as the
+    copy lookup's refinements), and the ranking keeps one candidate per place. On one machine
+    class it kept the earlier, unflagged one and answered the wrong copy 15 m off; the copy
+    lookup now flags a runner-up at its copy's view too, so the tie order cannot matter."""
+    b = make_building(3, "exact", 10, corridors=True)
+    cam, frames = building_frames(b, 40, 28)
+    bf = frames[25]
+    ties = pipeline.sort_by_support
+
+    def unflagged_first(candidates: list) -> None:
+        ties(candidates)
+        candidates.sort(key=lambda a: (*a.support(), not a.copy_but_one), reverse=True)
+
+    with patch.object(pipeline, "sort_by_support", unflagged_first):
+        res = localize(bf.frame.detections, b.compiled, cam)
+    _assert_copies_compete(res, bf)
+
+
 def test_an_object_of_a_corridor_does_not_pick_a_copy() -> None:
     """Exact copies of a room (50 rooms, tuning seed 33 of the building benchmark's
     confidence records, frame 38): the wrong copy explained five detections with its own
