@@ -39,6 +39,7 @@ from quadloc.factors.rotations import (
 __all__ = [
     "BORDER_MARGIN_PX",
     "MIN_DEPTH",
+    "TRUNCATED_WEIGHT",
     "Camera",
     "Ellipsoid",
     "border_touching",
@@ -175,6 +176,13 @@ class Camera:
 #: A detection whose bounding box comes within this many pixels of the image border (or crosses
 #: it) is taken as truncated (:func:`touches_border`).
 BORDER_MARGIN_PX = 4.0
+#: Residual weight of a detection touching the image border (:func:`border_touching`) where
+#: views of the same objects are fused: map building's joint refinement and a tracking
+#: session's window. Its ellipse is that of the visible part, a bias that consecutive views
+#: share, which fusing would otherwise average as if it were independent noise (its noise
+#: std is divided by it, its ``sigma`` by its square). Tuning: docs/design/maps.md (map
+#: building), docs/tracking.md "Truncated detections" (sessions).
+TRUNCATED_WEIGHT = 0.3
 
 
 def border_touching(params: FloatArray, camera: Camera,

@@ -25,7 +25,7 @@ import numpy as np
 
 from quadloc.factors.arrays import BoolArray, FloatArray
 from quadloc.factors.budget import Deadline, deadline_passed
-from quadloc.factors.camera import Camera, Ellipsoid, touches_border
+from quadloc.factors.camera import TRUNCATED_WEIGHT, Camera, Ellipsoid, touches_border
 from quadloc.factors.ellipsoid_factors import ellipsoid_views_factor, valid_views
 from quadloc.factors.ellipsoid_residuals import (
     LevelSetSamples,
@@ -43,9 +43,6 @@ __all__ = ["JointResult", "ObjectQuality", "refine_jointly"]
 
 #: Marginal std of a log semi-axis above which the axis is reported unconstrained.
 UNCONSTRAINED_LOG_STD = 0.3
-#: Residual weight of a detection touching the image border (probably truncated: its ellipse is
-#: that of the visible part, not of the object's projection).
-TRUNCATED_WEIGHT = 0.3
 #: Std (log metres) of the prior on the log semi-axes that the views leave unconstrained at the
 #: initial estimate (towards the object's mean log semi-axis); None disables it (tuning: design
 #: doc).
