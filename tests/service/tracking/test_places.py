@@ -577,5 +577,4 @@ def test_truncated_detections_do_not_drag_a_session_leaving_a_room() -> None:
         return max(e[0] for _, e in out[380:])
 
     weighted, unweighted = worst(session_module.TRUNCATED_WEIGHT), worst(1.0)
-    assert unweighted > 0.1  # the drift this guards against
-    assert weighted < 0.1 and weighted < 0.75 * unweighted
+    assert weighted < 0.1 < unweighted  # 8.7 and 13 cm when written
