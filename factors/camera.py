@@ -181,7 +181,7 @@ BORDER_MARGIN_PX = 4.0
 #: session's window. Its ellipse is that of the visible part, a bias that consecutive views
 #: share, which fusing would otherwise average as if it were independent noise (its noise
 #: std is divided by it, its ``sigma`` by its square). Tuning: docs/design/maps.md (map
-#: building), docs/tracking.md "Truncated detections" (sessions).
+#: building), docs/tracking.md, "The factor graph" (sessions).
 TRUNCATED_WEIGHT = 0.3
 
 
