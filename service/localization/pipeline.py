@@ -204,6 +204,11 @@ class _Solve:
     whole: CompiledMap | None = None
     hint_samples: int | None = None
 
+    @property
+    def constants(self) -> CalibrationConstants:
+        """The calibration constants in effect: the map's own, else the shipped ones."""
+        return self.calibration or SHIPPED_CALIBRATION
+
 
 def localize(
     detections: Sequence[Detection],
@@ -300,8 +305,7 @@ def localize(
     # that were not detected (negative evidence: a tie between places broken by the misses)
     ranked = distinct_ranking(candidates)
     # a place-search answer of a minimal sample of inliers is held to a larger chi2 ratio
-    ratio = (solve.calibration or SHIPPED_CALIBRATION).answer_chi2_ratio(
-        solve.places, len(ranked[0].inliers))
+    ratio = solve.constants.answer_chi2_ratio(solve.places, len(ranked[0].inliers))
     ranked, ambiguous, _ = weigh_misses(ranked, whole, camera, chi2_ratio=ratio)
     if ambiguous and hint is not None:
         ranked, ambiguous, _ = weigh_misses(_hint_ranking(ranked, hint, seeds, ratio), whole,
@@ -952,8 +956,7 @@ def _answer(solve: _Solve, best: Candidate, ranked: list[Candidate], *, ambiguou
     runner_up = next((b for b in ranked if b is not best), None)
     assessment = _assess(solve, best, runner_up, ranked)
     conf, ev = assessment.confidence, assessment.evidence
-    default_floor = (solve.calibration or SHIPPED_CALIBRATION).default_min_confidence(
-        solve.places)
+    default_floor = solve.constants.default_min_confidence(solve.places)
     floor = default_floor if options.min_confidence is None else options.min_confidence
     reason = ("gravity_mismatch" if _against_gravity(solve, best)
               else "ambiguous" if ambiguous and options.on_ambiguity == "not_localized"
