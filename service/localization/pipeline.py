@@ -784,9 +784,10 @@ def _copy_competitors(solve: _Solve, candidates: list[Candidate]) -> list[Candid
             if but_one:
                 # a runner-up refined there before is the same view: flagged too, so the
                 # place competes whichever of the two the ranking keeps (equal support)
+                view = invert_pose(got.world_from_camera)
                 for a in candidates:
-                    if a is not best and not distinct_poses(
-                            invert_pose(a.world_from_camera), invert_pose(got.world_from_camera)):
+                    if a is not best and not distinct_poses(invert_pose(a.world_from_camera),
+                                                            view):
                         a.copy_but_one = True
             candidates.append(got)
             added = True
