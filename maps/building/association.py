@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Collection, Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -37,7 +37,7 @@ from quadloc.maps.reconstruct import (
 )
 
 __all__ = ["AssociationOptions", "ObjectHypothesis", "associate", "associate_windowed",
-           "ellipse_iou", "merge_duplicates", "reconstruct_initial", "recruit_partial_views",
+           "ellipse_iou", "merge_duplicates", "reconstruct_initial", "recruit_views",
            "verify_objects"]
 
 
@@ -412,24 +412,27 @@ def _projected_cover(ell: Ellipsoid, T_wc: FloatArray, camera: Camera,
     return cover, ious
 
 
-def recruit_partial_views(objects: list[ObjectHypothesis], rejected: dict[int, str],
-                          obs: Sequence[Observation], T_wc: FloatArray, camera: Camera,
-                          opt: AssociationOptions, min_shared_frames: int = 2) -> int:
-    """Give the objects their partial views: a detection rejected as ``fits_no_object`` joins
-    an object of its label that has no detection in its frame, in a frame of the object's
-    place (:func:`quadloc.maps.building.loops.places` with ``min_shared_frames``: the frames
-    detecting any object seen with it; walls hide other rooms, so another room's view of a
-    same-label object brought close by drift is never offered), when at least
+def recruit_views(objects: Sequence[ObjectHypothesis], rejected: dict[int, str],
+                  obs: Sequence[Observation], T_wc: FloatArray, camera: Camera,
+                  opt: AssociationOptions, min_shared_frames: int = 2, *,
+                  reasons: Collection[str] = ("fits_no_object",),
+                  whole_iou: float | None = None) -> int:
+    """Give the objects the views that fit them: a detection rejected for one of ``reasons``
+    joins an object of its label that has no detection in its frame, in a frame of the
+    object's place (:func:`quadloc.maps.building.loops.places` with ``min_shared_frames``: the
+    frames detecting any object seen with it; walls hide other rooms, so another room's view of
+    a same-label object brought close by drift is never offered), when at least
     ``partial_cover`` of its area lies inside the object's projection from that frame's pose
     ``T_wc`` and their IoU is at least ``partial_min_iou`` (the visible part of a truncated or
     occluded object: its ellipse is that of the part, inside the whole's, so its IoU can fall
     below ``min_iou``; the IoU floor keeps out a small detection inside a large projection),
-    and no other object of its label qualifies (ambiguous detections stay rejected). Updates
-    ``objects`` (their ``observations`` and ``ious``) and ``rejected`` in place; returns how
-    many detections joined."""
+    or, with ``whole_iou``, when their IoU is at least that whatever the cover; and no other
+    object of its label qualifies (ambiguous detections stay rejected). One detection per
+    object and frame (the largest IoU). Updates ``objects`` (their ``observations`` and
+    ``ious``) and ``rejected`` in place; returns how many detections joined."""
     by_label: dict[str, list[int]] = {}
     for k in rejected:
-        if rejected[k] == "fits_no_object":
+        if rejected[k] in reasons:
             by_label.setdefault(obs[k].label, []).append(k)
     object_frames = object_frames_of([h.observations for h in objects], obs)
     place_frames: dict[int, set[int]] = {}
@@ -447,7 +450,8 @@ def recruit_partial_views(objects: list[ObjectHypothesis], rejected: dict[int, s
         cover, ious = _projected_cover(h.ellipsoid, T_wc[[obs[k].frame for k in cand]], camera,
                                        [obs[k].ellipse for k in cand])
         for k, c, iou in zip(cand, cover.tolist(), ious.tolist(), strict=True):
-            if c >= opt.partial_cover and iou >= opt.partial_min_iou:
+            if ((c >= opt.partial_cover and iou >= opt.partial_min_iou)
+                    or (whole_iou is not None and iou >= whole_iou)):
                 offers.setdefault(k, []).append((j, iou))
     best: dict[tuple[int, int], tuple[float, int]] = {}  # (object, frame) -> (iou, detection)
     for k, js in offers.items():

@@ -2,6 +2,15 @@
 refinement -> :class:`quadloc.maps.model.SceneMap` plus its
 :class:`quadloc.maps.building.report.BuildReport`.
 
+After the joint refinement, objects that fail a quality test are left out (the report's
+``dropped_objects``), and the kept objects take the rejected detections that fit them from the
+refined camera poses (:func:`quadloc.maps.building.association.recruit_views` with
+``whole_iou`` = ``AssociationOptions.recruit_iou``; rejections of
+:data:`RECRUITED_AFTER_REFINEMENT`): views the association refused under the app's drift, and
+views of a left-out duplicate. They are listed with the object's detections in the report;
+the object's estimate and ``quality.n_views`` are those of the refinement, which did not use
+them.
+
 Progress is reported as ``progress(stage, percent, objects_found)`` with ``stage`` in
 ``associating`` (0-50 %), ``refining`` (50-95 %), ``saving`` (95 %); callbacks come at least after
 every label and every LM iteration. A ``deadline`` (:class:`quadloc.factors.budget.Deadline`, e.g.
@@ -28,7 +37,7 @@ from quadloc.maps.building.association import (
     associate_windowed,
     merge_duplicates,
     reconstruct_initial,
-    recruit_partial_views,
+    recruit_views,
 )
 from quadloc.maps.building.joint import ObjectQuality, refine_jointly
 from quadloc.maps.building.loops import (
@@ -67,6 +76,10 @@ MAX_CENTER_STD_M: float | None = None
 #: (``rarely_seen``: a wrong label's phantom, a spurious cluster; a real object is detected in
 #: most frames that see it).
 MIN_VIEW_FRACTION = 0.25
+#: Rejections that the views fitting a kept object from the refined poses lift (the
+#: association's refusals under the app's drift, and the views of objects left out).
+RECRUITED_AFTER_REFINEMENT = ("fits_no_object", "object_degenerate_shape", "object_rarely_seen",
+                              "object_unconstrained", "object_center_unconstrained")
 #: The report's warning when the time budget stopped the joint refinement.
 REFINEMENT_STOPPED_WARNING = ("time budget reached during refinement: the map holds the "
                               "estimate at that point")
@@ -212,8 +225,7 @@ def build_map(
     if n_loops:
         objects = merge_duplicates(objects, obs, T_init, recording.camera, opt,
                                    lambda: on_label("", 1.0), verify_union=True)
-    recruit_partial_views(objects, rejected, obs, T_init, recording.camera, opt,
-                          loops.min_shared_frames)
+    recruit_views(objects, rejected, obs, T_init, recording.camera, opt, loops.min_shared_frames)
     t_assoc = time.perf_counter() - t0
     report_progress("refining", 50.0, len(objects))
 
@@ -239,18 +251,12 @@ def build_map(
     # the report's frame indices are positions in the recording document
     position = [k if f.source_index is None else f.source_index
                 for k, f in enumerate(recording.frames)]
-    map_objects = []
-    obj_reports: list[ObjectReport] = []
-    counters: dict[str, int] = {}
-    dropped: list[DroppedObject] = []
+    drops: list[tuple[str | None, str | None]] = []  # per object: (reason, shape problem)
     for k, h in enumerate(objects):
         assert joint is not None  # refined whenever there are objects
-        ell = joint.ellipsoids[k]
-        q = joint.quality[k]
-        counters[h.label] = counters.get(h.label, 0) + 1
-        oid = f"{h.label}_{counters[h.label]}"
+        h.ellipsoid, q = joint.ellipsoids[k], joint.quality[k]
         reason = None
-        shape_problem = degenerate_shape_reason(ell)
+        shape_problem = degenerate_shape_reason(h.ellipsoid)
         if shape_problem is not None:
             reason = "degenerate_shape"
         elif q.n_views < min_view_fraction * in_view[k]:
@@ -259,13 +265,29 @@ def build_map(
             reason = "unconstrained"
         elif max_center_std_m is not None and not q.center_std_m <= max_center_std_m:
             reason = "center_unconstrained"
+        drops.append((reason, shape_problem))
+        for i in h.observations if reason is not None else ():
+            rejected[i] = f"object_{reason}"
+    kept = [h for h, (reason, _) in zip(objects, drops, strict=True) if reason is None]
+    if joint is not None:
+        # the views that fit a kept object from the refined poses (module docstring)
+        recruit_views(kept, rejected, obs, joint.world_from_camera, recording.camera, opt,
+                      loops.min_shared_frames, reasons=RECRUITED_AFTER_REFINEMENT,
+                      whole_iou=opt.recruit_iou)
+    map_objects = []
+    obj_reports: list[ObjectReport] = []
+    counters: dict[str, int] = {}
+    dropped: list[DroppedObject] = []
+    for k, (h, (reason, shape_problem)) in enumerate(zip(objects, drops, strict=True)):
+        assert joint is not None
+        ell, q = h.ellipsoid, joint.quality[k]
+        counters[h.label] = counters.get(h.label, 0) + 1
+        oid = f"{h.label}_{counters[h.label]}"
         if reason is not None:
             dropped.append(DroppedObject(
                 object_id=oid, label=h.label, reason=reason,
                 detail=_drop_detail(reason, shape_problem, q), n_views=q.n_views,
                 semi_axes_m=ell.axes.tolist()))
-            for i in h.observations:
-                rejected[i] = f"object_{reason}"
             continue
         map_objects.append(MapObject(oid, h.label, ell))
         obj_reports.append(ObjectReport(
@@ -285,7 +307,6 @@ def build_map(
     meta = {"built_by": "quadloc.maps.building", "n_frames": len(recording.frames),
             "n_detections": len(obs)}
     meta.update(metadata or {})
-    kept = [h for h in objects if h.observations[0] not in rejected]
     zones = proposed_zones([m.object_id for m in map_objects],
                            object_frames_of([h.observations for h in kept], obs),
                            min_shared_frames=loops.min_shared_frames)

@@ -19,7 +19,7 @@ from quadloc.maps.building.association import (
     associate_windowed,
     ellipse_iou,
     merge_duplicates,
-    recruit_partial_views,
+    recruit_views,
 )
 from quadloc.maps.building.recording import Observation
 
@@ -131,28 +131,28 @@ def test_partial_views_join_their_object_unless_ambiguous_or_outside() -> None:
     rejected = {k: "fits_no_object" for k in (8, 9, 10, 11, 24)}
     opt = AssociationOptions()
     assert all(v < opt.min_iou for v in iou[:3])  # the association's IoU test refuses them
-    n = recruit_partial_views([h, mate_h], rejected, observations, T, CAM, opt)
+    n = recruit_views([h, mate_h], rejected, observations, T, CAM, opt)
     assert n == 2
     assert h.observations == [0, 1, 2, 3, 4, 5, 6, 7, 8, 11]
     assert h.ious[8] == pytest.approx(0.25, abs=1e-3)
     assert rejected == {9: "fits_no_object", 10: "fits_no_object", 24: "fits_no_object"}
     # without the chair, frames 8-11 are not in the box's place either
     h = ObjectHypothesis("Box", list(range(8)), BOX_A)
-    assert recruit_partial_views([h], {8: "fits_no_object"}, observations, T, CAM, opt) == 0
+    assert recruit_views([h], {8: "fits_no_object"}, observations, T, CAM, opt) == 0
 
     # the same part inside the projections of two objects of its label: left rejected
     twin = Ellipsoid(BOX_A.center + np.array([0.02, 0.0, 0.0]), BOX_A.axes.copy())
     objects = [ObjectHypothesis("Box", list(range(8)), BOX_A),
                ObjectHypothesis("Box", list(range(8)), twin), mate_h]
     rejected = {8: "fits_no_object"}
-    assert recruit_partial_views(objects, rejected, observations, T, CAM, opt) == 0
+    assert recruit_views(objects, rejected, observations, T, CAM, opt) == 0
     assert rejected == {8: "fits_no_object"}
     # another label's object, or a detection rejected for another reason: never recruited
     rejected = {8: "label_conflict"}
-    assert recruit_partial_views([ObjectHypothesis("Box", list(range(8)), BOX_A), mate_h],
+    assert recruit_views([ObjectHypothesis("Box", list(range(8)), BOX_A), mate_h],
                                  rejected, observations, T, CAM, opt) == 0
     other = ObjectHypothesis("Chair", list(range(8)), BOX_A)
-    assert recruit_partial_views([other, mate_h], {8: "fits_no_object"}, observations, T, CAM,
+    assert recruit_views([other, mate_h], {8: "fits_no_object"}, observations, T, CAM,
                                  opt) == 0
 
 
