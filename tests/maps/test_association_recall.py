@@ -282,3 +282,49 @@ def test_a_stretched_object_is_not_merged_into_a_well_built_one() -> None:
     merged = merge_duplicates(split, obs_a + obs_a2, T2, CAM, opt, lambda: None,
                               verify_union=True)
     assert [h.observations for h in merged] == [list(range(39))]
+
+
+def test_views_refused_before_the_refinement_join_the_refined_object(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # issue 29: a room's objects lost the views the association refused (the initial ellipsoid
+    # or the drifting poses made them miss) although they fit the refined object; those of a
+    # left-out duplicate were lost with it. build_map hands them to the kept objects after the
+    # joint refinement (quadloc.maps.building.build, module docstring).
+    from quadloc.maps.building import build
+    from quadloc.maps.building.recording import FrameRecord, Recording
+
+    obs_box, poses = _arc_views(BOX_A, 30, 0)
+    T = np.array(poses + [_look_at(BOX_B.center + np.array([0.0, 0.0, -2.0]), BOX_B.center)])
+    mate = Ellipsoid(BOX_A.center + np.array([0.0, 0.3, 0.0]), np.array([0.1, 0.1, 0.1]))
+    mate_obs = [Observation(f, 1, "Chair", project_ellipsoid(CAM, invert_pose(T[f]), mate))
+                for f in range(30)]
+    # frame 30 looks at another room's box (BOX_B) from where BOX_A's projection would match
+    # it: in no frame of the box's place, never offered
+    far = Observation(30, 0, "Box", project_ellipsoid(CAM, invert_pose(T[0]), BOX_A))
+    observations = tuple(obs_box + mate_obs + [far])
+    # the association's result: the box from frames 0-19 with a rough initial ellipsoid (its
+    # projections cover under half of the exact views: the partial-view rule refuses frames
+    # 20-29 before the refinement), a duplicate of 4 views, as rough (frames 20-23: left out
+    # with its axes unconstrained), frames 24-29 rejected
+    rough = Ellipsoid(BOX_A.center.copy(), 0.6 * BOX_A.axes)
+    box = ObjectHypothesis("Box", list(range(20)), rough)
+    dup = ObjectHypothesis("Box", list(range(20, 24)), rough)
+    chair = ObjectHypothesis("Chair", list(range(30, 60)), mate)
+    rejected = {k: "fits_no_object" for k in [*range(24, 30), 60]}
+    monkeypatch.setattr(build, "associate_windowed",
+                        lambda *_a, **_k: ([box, dup, chair], dict(rejected)))
+    rec = Recording(CAM, tuple(FrameRecord(str(f), T[f]) for f in range(31)), observations,
+                    refine_camera_poses=False)
+    scene, report = build.build_map(rec, map_id="late")
+
+    boxes = [o for o in report.objects if o.label == "Box"]
+    assert len(boxes) == 1 and len(scene.objects) == 2
+    assert [d.reason for d in report.dropped_objects] == ["unconstrained"]  # the duplicate
+    frames = sorted(d.frame_index for d in boxes[0].detections)
+    # every view of the box, the refinement's 20 and the 10 that fit it from the refined pose
+    assert frames == list(range(30))
+    assert boxes[0].quality.n_views == 20
+    assert [(r.frame_index, r.reason) for r in report.rejected_detections] == [
+        (30, "fits_no_object")]
+    got = scene.objects[[o.category for o in scene.objects].index("Box")].ellipsoid
+    assert np.linalg.norm(got.center - BOX_A.center) < 0.01
