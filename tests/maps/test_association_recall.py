@@ -150,10 +150,10 @@ def test_partial_views_join_their_object_unless_ambiguous_or_outside() -> None:
     # another label's object, or a detection rejected for another reason: never recruited
     rejected = {8: "label_conflict"}
     assert recruit_views([ObjectHypothesis("Box", list(range(8)), BOX_A), mate_h],
-                                 rejected, observations, T, CAM, opt) == 0
+                         rejected, observations, T, CAM, opt) == 0
     other = ObjectHypothesis("Chair", list(range(8)), BOX_A)
     assert recruit_views([other, mate_h], {8: "fits_no_object"}, observations, T, CAM,
-                                 opt) == 0
+                         opt) == 0
 
 
 def test_frames_showing_an_object_smaller_than_any_of_its_detections_are_not_in_view() -> None:
@@ -294,12 +294,12 @@ def test_views_refused_before_the_refinement_join_the_refined_object(
     from quadloc.maps.building.recording import FrameRecord, Recording
 
     obs_box, poses = _arc_views(BOX_A, 30, 0)
-    T = np.array(poses + [_look_at(BOX_B.center + np.array([0.0, 0.0, -2.0]), BOX_B.center)])
+    # frame 30: another room's view of a box, put where frame 0 was by drift (BOX_A's
+    # projection fits it) but in no frame of the box's place: never offered
+    T = np.array([*poses, poses[0]])
     mate = Ellipsoid(BOX_A.center + np.array([0.0, 0.3, 0.0]), np.array([0.1, 0.1, 0.1]))
     mate_obs = [Observation(f, 1, "Chair", project_ellipsoid(CAM, invert_pose(T[f]), mate))
                 for f in range(30)]
-    # frame 30 looks at another room's box (BOX_B) from where BOX_A's projection would match
-    # it: in no frame of the box's place, never offered
     far = Observation(30, 0, "Box", project_ellipsoid(CAM, invert_pose(T[0]), BOX_A))
     observations = tuple(obs_box + mate_obs + [far])
     # the association's result: the box from frames 0-19 with a rough initial ellipsoid (its
