@@ -409,8 +409,8 @@ test frames, fresh detections,
 `localize()` (level set) with the real map, the built map as built (app frame), and the built
 map after the rigid alignment (Kabsch) of its constrained objects' centres onto the real ones
 (the app's frame is arbitrary; the non-rigid part of the drift remains). Seed 0 was used for
-tuning; the seeds below are others. Timings on the shared 2-core machine, under load from
-other engineers' jobs.
+tuning; the seeds below are others. Timings on a shared 2-core machine (other jobs may run:
+compare within one run).
 
 {chr(10).join(rows)}
 """
