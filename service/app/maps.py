@@ -30,20 +30,16 @@ from quadloc.service.schemas.maps import (
     MapSummaryOut,
     MapVersionOut,
     MapVersionsOut,
+    etag_of,
 )
 from quadloc.service.settings import Settings
 
-__all__ = ["ANY_ETAG", "MapService", "etag_of", "parse_if_match", "seed_demo_map"]
+__all__ = ["ANY_ETAG", "MapService", "parse_if_match", "seed_demo_map"]
 
 log = logging.getLogger("quadloc.app")
 
 #: ``If-Match: *``: matches any current version of an existing map (RFC 9110, 13.1.1).
 ANY_ETAG = "*"
-
-
-def etag_of(content_hash: str) -> str:
-    """Strong ETag of a map version (its content hash, quoted)."""
-    return f'"{content_hash}"'
 
 
 def parse_if_match(if_match: str | None, *, what: str = "the update") -> set[str]:

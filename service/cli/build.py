@@ -16,10 +16,8 @@ import argparse
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from quadloc.maps.building.report import BuildReport
-from quadloc.service.app.maps import etag_of
 from quadloc.service.cli.common import (
     CliError,
     ProgressBar,
@@ -29,9 +27,13 @@ from quadloc.service.cli.common import (
     read_json,
     server_url,
 )
+from quadloc.service.schemas.maps import etag_of
 from quadloc_sdk import QuadLocClient
 from quadloc_sdk.build import BuildFailedError
 from quadloc_sdk.errors import QuadLocError
+
+if TYPE_CHECKING:
+    from quadloc.maps.building.report import BuildReport
 
 __all__ = ["cmd_maps_build"]
 
@@ -51,6 +53,8 @@ def _summary(report: dict[str, Any], t0: float) -> str:
 
 
 def _write_report(path: str | None, report: BuildReport | dict[str, Any] | None) -> None:
+    from quadloc.maps.building.report import BuildReport
+
     if path and report is not None:
         text = (report.model_dump_json(indent=2) if isinstance(report, BuildReport)
                 else BuildReport.model_validate(report).model_dump_json(indent=2))

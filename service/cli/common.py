@@ -5,6 +5,9 @@ progress on a terminal, and the two places a command works on: a server (``--url
 
 Exit statuses of every command: 0 done, 1 a normal negative outcome (not localized, not found,
 no map built), 2 bad input or a store / server error (:class:`CliError`).
+
+A command on a server loads neither the application nor the solver: what works in this
+process (the application, its settings, its errors) is imported where a command uses it.
 """
 
 from __future__ import annotations
@@ -16,16 +19,16 @@ import os
 import sys
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 from pydantic import ValidationError
 
-from quadloc.maps.errors import MapStoreError, StoreUnavailable
-from quadloc.maps.model import MapValidationError
-from quadloc.service.app.context import App
-from quadloc.service.app.errors import AppError
-from quadloc.service.settings import Settings
 from quadloc_sdk import NotFound, QuadLocClient, QuadLocError, TransportError
+
+if TYPE_CHECKING:
+    from quadloc.service.app.context import App
+    from quadloc.service.app.errors import AppError
+    from quadloc.service.settings import Settings
 
 __all__ = [
     "CliError",
@@ -184,12 +187,16 @@ class ProgressBar(Progress):
 
 def settings(args: argparse.Namespace) -> Settings:
     """The ``QUADLOC_*`` settings, ``--database-url`` overriding the database."""
+    from quadloc.service.settings import Settings
+
     url = getattr(args, "database_url", None)
     return Settings(**({"database_url": url} if url else {}))
 
 
 def local_app(args: argparse.Namespace) -> App:
     """The application over the local database (the demo map seeded as ``serve`` does)."""
+    from quadloc.service.app.context import App
+
     return App.create(settings(args))
 
 
@@ -215,20 +222,11 @@ def run(command: Callable[[argparse.Namespace], int], args: argparse.Namespace) 
         return int(command(args) or 0)
     except CliError as exc:
         return die(str(exc), exc.status, exc.problems)
-    except AppError as exc:
-        return report_app_error(exc)
-    except MapValidationError as exc:
-        return die(f"invalid map ({len(exc.errors)} problem(s))", 2,
-                   [(e["field"], e["message"]) for e in exc.errors])
-    except StoreUnavailable as exc:  # database down: a message, not a traceback
-        return die(f"{exc} (check QUADLOC_DATABASE_URL / --database-url)")
     except TransportError as exc:
         return die(f"cannot reach the server: {exc} (check --url / QUADLOC_URL)")
     except NotFound as exc:
         return die(str(exc), 1)
     except QuadLocError as exc:  # the server's problem document: status, title, fields
-        return die(str(exc))
-    except MapStoreError as exc:
         return die(str(exc))
     except ValidationError as exc:  # QUADLOC_* settings out of range or malformed
         if exc.title != "Settings":
@@ -237,3 +235,28 @@ def run(command: Callable[[argparse.Namespace], int], args: argparse.Namespace) 
         return die("invalid settings (QUADLOC_* environment):\n" + "\n".join(lines))
     except KeyboardInterrupt:  # pragma: no cover
         return 130
+    except Exception as exc:
+        status = _local_error_status(exc)
+        if status is None:
+            raise
+        return status
+
+
+def _local_error_status(exc: Exception) -> int | None:
+    """The exit status of an error of this process' application or map store, its message
+    printed (None: not one of theirs). Their modules are imported here, where one of them was
+    raised (so they are loaded already), not by every command."""
+    from quadloc.maps.errors import MapStoreError, StoreUnavailable
+    from quadloc.maps.model import MapValidationError
+    from quadloc.service.app.errors import AppError
+
+    if isinstance(exc, AppError):
+        return report_app_error(exc)
+    if isinstance(exc, MapValidationError):
+        return die(f"invalid map ({len(exc.errors)} problem(s))", 2,
+                   [(e["field"], e["message"]) for e in exc.errors])
+    if isinstance(exc, StoreUnavailable):  # database down: a message, not a traceback
+        return die(f"{exc} (check QUADLOC_DATABASE_URL / --database-url)")
+    if isinstance(exc, MapStoreError):
+        return die(str(exc))
+    return None

@@ -1,5 +1,6 @@
 """``quadloc maps list | versions | import | export | delete``: on a server (``--url``, through
-the SDK) or on the local database (the application's map use cases)."""
+the SDK) or on the local database (the application's map use cases, imported where a command
+uses them: a command on a server loads neither them nor the solver)."""
 
 from __future__ import annotations
 
@@ -9,9 +10,6 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from quadloc.maps.model import MapValidationError, scene_map_from_chess, scene_map_from_dict
-from quadloc.service.app.errors import AppError
-from quadloc.service.app.maps import etag_of
 from quadloc.service.cli.common import (
     CliError,
     client,
@@ -22,7 +20,7 @@ from quadloc.service.cli.common import (
     show,
     table_time,
 )
-from quadloc.service.schemas.maps import MapOut
+from quadloc.service.schemas.maps import MapOut, etag_of
 from quadloc_sdk import Conflict
 
 __all__ = ["cmd_delete", "cmd_export", "cmd_import", "cmd_list", "cmd_versions"]
@@ -61,6 +59,8 @@ def _print_stored(map_id: str, version: int, n_objects: int, content_hash: str) 
 
 
 def cmd_import(args: argparse.Namespace) -> int:
+    from quadloc.maps.model import MapValidationError, scene_map_from_chess, scene_map_from_dict
+
     data = read_json(args.file)
     if not isinstance(data, dict):
         raise CliError(f"{args.file}: a map must be a JSON object, got a JSON "
@@ -79,6 +79,8 @@ def cmd_import(args: argparse.Namespace) -> int:
     document = scene_map.to_dict()
     if server_url(args):
         return _remote_import(args, document)
+    from quadloc.service.app.errors import AppError
+
     maps = local_app(args).maps
     try:
         stored = maps.create(document)

@@ -1,4 +1,5 @@
-"""Wire models of the map resources (``/v1/maps``...): summaries, stored versions, history."""
+"""Wire models of the map resources (``/v1/maps``...): summaries, stored versions, history, and
+the ``ETag`` of a version (:func:`etag_of`)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,13 @@ __all__ = [
     "MapSummaryOut",
     "MapVersionOut",
     "MapVersionsOut",
+    "etag_of",
 ]
+
+
+def etag_of(content_hash: str) -> str:
+    """Strong ETag of a map version (its content hash, quoted)."""
+    return f'"{content_hash}"'
 
 
 class MapSummaryOut(BaseModel):

@@ -22,12 +22,12 @@ from quadloc.maps.model import (
 from quadloc.service.api.auth import ReadAccess, WriteAccess
 from quadloc.service.api.deps import AppDep, MapIdPath
 from quadloc.service.api.errors import problem_responses
-from quadloc.service.app.maps import etag_of
 from quadloc.service.schemas.examples import CHESS_IMPORT_EXAMPLE, MAP_EXAMPLE
 from quadloc.service.schemas.maps import (
     MapListOut,
     MapOut,
     MapVersionsOut,
+    etag_of,
 )
 
 __all__ = ["router"]
