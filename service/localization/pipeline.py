@@ -710,7 +710,8 @@ def _sweep_refined_best(solve: _Solve, outcome: RansacOutcome, candidates: list[
     return candidates
 
 
-def _copy_competitors(solve: _Solve, candidates: list[Candidate]) -> list[Candidate]:
+def _copy_competitors(solve: _Solve, candidates: list[Candidate], *, again: bool = True
+                      ) -> list[Candidate]:
     """``candidates`` (best-supported first) with the best's view in the exact copies of its
     supporting objects (:func:`quadloc.service.localization.copies.copy_transforms`: same
     labels, same geometry within ``COPY_TOLERANCE_M``; e.g. the other copies of a room, which
@@ -733,7 +734,12 @@ def _copy_competitors(solve: _Solve, candidates: list[Candidate]) -> list[Candid
     on an object of a neighbouring room, or an object of a corridor seen through a door,
     makes the best's set unique, its copy's view then explains every detection but that one
     and still competes (``Candidate.copy_but_one``): one match is no evidence between exact
-    copies."""
+    copies.
+
+    When a copy refined here becomes the best-supported candidate (the search's best was a
+    poorer fit of the same detections, e.g. objects of two rooms), its own copies are looked up
+    the same way (``again``: once): without them, nothing competes with it, and in exact
+    copies of a room it would be answered as if its room were the only one."""
     if not candidates or deadline_passed(solve.deadline):
         return candidates
     best = candidates[0]
@@ -795,6 +801,8 @@ def _copy_competitors(solve: _Solve, candidates: list[Candidate]) -> list[Candid
                 break  # one verified copy makes the tie
     if added:
         sort_by_support(candidates)
+        if again and candidates[0] is not best:
+            return _copy_competitors(solve, candidates, again=False)
     return candidates
 
 
