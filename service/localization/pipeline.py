@@ -638,8 +638,9 @@ def _refine_hypotheses(solve: _Solve, outcome: RansacOutcome
     :data:`ALTERNATIVE_PREFILTER_RATIO` of the best (not once the budget is spent; not those of
     :func:`_same_explanation`), refined with at most :data:`ALTERNATIVE_MAX_ITERATIONS`; on a
     large map (``solve.places``) also the further ones scoring at least
-    :data:`PLACE_TIE_RATIO` of the best (the tied candidate places); and the best hypothesis'
-    refinement status."""
+    :data:`PLACE_TIE_RATIO` of the best (the tied candidate places) and, whatever their score,
+    those matching more detections than the best; and the best hypothesis' refinement
+    status."""
     assert outcome.camera_from_world is not None
     options = solve.options
     hyps = list(outcome.alternatives) or [
@@ -650,8 +651,13 @@ def _refine_hypotheses(solve: _Solve, outcome: RansacOutcome
         options, max_iterations=min(options.max_iterations, ALTERNATIVE_MAX_ITERATIONS))
     for k, h in enumerate(hyps[:PLACE_CANDIDATES if solve.places else 1 + REFINED_ALTERNATIVES]):
         ratio = ALTERNATIVE_PREFILTER_RATIO if k <= REFINED_ALTERNATIVES else PLACE_TIE_RATIO
-        if k > 0 and (h.score < ratio * hyps[0].score or deadline_passed(solve.deadline)):
+        if k > 0 and deadline_passed(solve.deadline):
             break
+        # a place whose seed matches more detections than the best's is refined whatever its
+        # score: a seed is the P3P pose of three centres, whose IoUs underrate it
+        more = solve.places and len(h.matches) > len(hyps[0].matches)
+        if k > 0 and h.score < ratio * hyps[0].score and not more:
+            continue
         if k > 0 and _same_explanation(h, hyps[0]):
             continue  # refines to the best's pose: not a competitor (see _same_explanation)
         got, status = _refine_and_verify(
@@ -662,7 +668,8 @@ def _refine_hypotheses(solve: _Solve, outcome: RansacOutcome
         if got is not None:
             # a tied place beyond the first runners-up is listed as refined so far (not
             # refined in full: it only widens the candidate list)
-            got.capped = (0 < k <= REFINED_ALTERNATIVES and status == "max_iterations"
+            got.capped = ((0 < k <= REFINED_ALTERNATIVES or more)
+                          and status == "max_iterations"
                           and alternative_options.max_iterations < options.max_iterations)
             candidates.append(got)
     return candidates, first_status
