@@ -1,7 +1,8 @@
 """Every fenced ``python`` and ``bash`` block of README.md and docs/*.md runs as written, twice
-in a row, against a real server (the ``live_server`` fixture stands in for ``make serve`` at
-http://127.0.0.1:8000; the URL is rewritten to its port). A second run that conflicts with the
-first (an id created and never cleaned up, 409) fails the test.
+in a row, against a real server (the ``live_server`` fixture, and a second one for the pages
+that run beside the others, stand in for ``make serve`` at http://127.0.0.1:8000; the URL is
+rewritten to the port). A second run that conflicts with the first (an id created and never
+cleaned up, 409) fails the test.
 
 A block that cannot run here says why in a comment right above it,
 ``<!-- not run: <reason> -->`` (Docker engine, the setup commands themselves); those are listed
@@ -30,6 +31,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+
+from tests.conftest import run_live_server
 
 REPO = Path(__file__).resolve().parents[2]
 DOCS = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]
@@ -100,6 +103,7 @@ def test_every_block_runs_or_says_why_not() -> None:
 def _env(tmp: Path) -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if not k.startswith("QUADLOC_")}
     env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
+    tmp.mkdir(parents=True, exist_ok=True)
     env["QUADLOC_DATA_DIR"] = str(tmp)  # local CLI commands never touch a real database
     env["PYTHONPATH"] = str(REPO)
     return env
@@ -137,18 +141,35 @@ def _run_page(doc: Path, base: str, env: dict[str, str]) -> list[str]:
     return failures
 
 
+#: The pages run on a second server and data directory of their own, beside the rest (the
+#: longest page: three builds and four calibrations), so that no page shares a map id or a
+#: job with a page running at the same time.
+OWN_LANE = ("map_building.md",)
+
+
 @pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_all_docs_examples_run_twice_in_a_row(live_server: str, tmp_path: Path) -> None:
-    """Pages run two at a time (their map ids differ; each page's blocks stay in order), the
-    longest first: docs/map_building.md (three builds and four calibrations) beside the rest."""
-    env = _env(tmp_path)
-    pages = sorted(DOCS, key=lambda d: d.name != "map_building.md")
-    with ThreadPoolExecutor(max_workers=2) as pool:
+    """Two lanes at a time, each its own server and ``QUADLOC_DATA_DIR``: the pages of
+    :data:`OWN_LANE`, and the rest in order. In each lane every page runs, then every page
+    again, on the same server as the first time (a second run that conflicts with the first
+    fails)."""
+    lanes = [[d for d in DOCS if d.name in OWN_LANE], [d for d in DOCS if d.name not in OWN_LANE]]
+    assert all(lanes), [len(lane) for lane in lanes]
+
+    def run_lane(pages: list[Path], base: str, env: dict[str, str]) -> list[str]:
         for attempt in (1, 2):
-            failures = [f for got in pool.map(lambda d: _run_page(d, live_server, env), pages)
-                        for f in got]
-            assert not failures, f"run {attempt}:\n\n" + "\n\n".join(failures)
+            failures = [f for d in pages for f in _run_page(d, base, env)]
+            if failures:
+                return [f"run {attempt}:", *failures]
+        return []
+
+    with run_live_server(tmp_path / "second_server") as second, \
+            ThreadPoolExecutor(max_workers=2) as pool:
+        jobs = [pool.submit(run_lane, pages, base, _env(tmp_path / f"lane{k}"))
+                for k, (pages, base) in enumerate(zip(lanes, (second, live_server), strict=True))]
+        failures = [f for job in jobs for f in job.result()]
+    assert not failures, "\n\n".join(failures)
 
 
 def test_default_database_is_per_checkout(monkeypatch: pytest.MonkeyPatch) -> None:
