@@ -49,6 +49,7 @@ __all__ = [
     "project_ellipsoids_dual",
     "projected_gaussians",
     "touches_border",
+    "truncation_sigma",
 ]
 
 
@@ -205,6 +206,19 @@ def border_touching(params: FloatArray, camera: Camera,
 def touches_border(ellipse: Ellipse, camera: Camera, margin_px: float = BORDER_MARGIN_PX) -> bool:
     """:func:`border_touching` of one ellipse (px)."""
     return bool(border_touching(ellipse.params(), camera, margin_px)[0])
+
+
+def truncation_sigma(sigma: FloatArray, truncated: BoolArray,
+                     weight: float = TRUNCATED_WEIGHT) -> FloatArray:
+    """(N,) the ``sigma`` (N,) views are weighted with where views of the same objects are
+    fused: divided by ``weight^2`` (:data:`TRUNCATED_WEIGHT`) where ``truncated`` (N,) bool
+    (:func:`border_touching`), so that such a view's residual weight ``1 / sqrt(sigma)`` is
+    multiplied by ``weight`` and its information ``1 / sigma`` by ``weight^2``; unchanged
+    elsewhere. The one place of this rule (map building's joint refinement, a tracking
+    session's window)."""
+    s = np.asarray(sigma, dtype=float)
+    out: FloatArray = np.where(truncated, s / (weight * weight), s)
+    return out
 
 
 def depth_margin(center_depth: FloatArray, axis_variance: FloatArray) -> FloatArray:

@@ -25,7 +25,13 @@ import numpy as np
 
 from quadloc.factors.arrays import BoolArray, FloatArray
 from quadloc.factors.budget import Deadline, deadline_passed
-from quadloc.factors.camera import TRUNCATED_WEIGHT, Camera, Ellipsoid, touches_border
+from quadloc.factors.camera import (
+    TRUNCATED_WEIGHT,
+    Camera,
+    Ellipsoid,
+    touches_border,
+    truncation_sigma,
+)
 from quadloc.factors.ellipsoid_factors import ellipsoid_views_factor, valid_views
 from quadloc.factors.ellipsoid_residuals import (
     LevelSetSamples,
@@ -207,11 +213,11 @@ def refine_jointly(
                           for i in idx], dtype=float)
         sigmas.append(sigma)
         truncated = np.array([touches_border(observations[i].ellipse, camera) for i in idx])
-        weights = (np.where(np.isnan(sigma), 1.0, 1.0 / np.sqrt(sigma))
-                   * np.where(truncated, truncated_weight, 1.0))
+        weights = 1.0 / np.sqrt(truncation_sigma(np.where(np.isnan(sigma), 1.0, sigma),
+                                                 truncated, truncated_weight))
         frames_k = [observations[i].frame for i in idx]
-        info_w.append(np.where(truncated, truncated_weight**2, 1.0)
-                      / np.where(np.isnan(sigma), QUALITY_DEFAULT_SIGMA, sigma))
+        info_w.append(1.0 / truncation_sigma(
+            np.where(np.isnan(sigma), QUALITY_DEFAULT_SIGMA, sigma), truncated, truncated_weight))
         if not refine_cameras:  # one factor per object over all its views
             graph.add(ellipsoid_views_factor(
                 stacked, weights, [(E[k], L[k])], np.zeros(len(idx), int),

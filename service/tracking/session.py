@@ -22,7 +22,12 @@ import numpy as np
 
 from quadloc.factors.arrays import FloatArray
 from quadloc.factors.budget import Deadline, deadline_passed
-from quadloc.factors.camera import TRUNCATED_WEIGHT, Camera, border_touching
+from quadloc.factors.camera import (
+    TRUNCATED_WEIGHT,
+    Camera,
+    border_touching,
+    truncation_sigma,
+)
 from quadloc.factors.conics import ellipse_params
 from quadloc.factors.gravity_factor import gravity_factor
 from quadloc.factors.names import FieldError, GeometryError
@@ -501,12 +506,15 @@ class TrackingSession:
         if not objects:
             return []
         opts = self.options
-        sigmas = [d.sigma if opts.use_sigma else None for d in detections]
+        sigmas: list[float | None] = [d.sigma if opts.use_sigma else None for d in detections]
         # a truncated detection's bias recurs in the next frames: weighted down (docs/tracking.md)
         truncated = border_touching(ellipse_params([d.ellipse for d in detections]),
                                     self.camera)
-        sigmas = [(1.0 if s is None else s) / TRUNCATED_WEIGHT ** 2 if cut else s
-                  for s, cut in zip(sigmas, truncated.tolist(), strict=True)]
+        if truncated.any():
+            scaled = truncation_sigma(np.array([1.0 if s is None else s for s in sigmas]),
+                                      truncated, TRUNCATED_WEIGHT)
+            sigmas = [float(w) if cut else s
+                      for s, w, cut in zip(sigmas, scaled, truncated.tolist(), strict=True)]
         factors, _ = pose_factors(
             opts.metric, key, [d.ellipse for d in detections],
             [self.compiled.ellipsoids[o] for o in objects], self.camera, sigmas=sigmas,
