@@ -118,6 +118,7 @@ def test_api_a_session_on_a_calibrated_map_version_uses_its_calibration(
     pairs = [(b, a) for b, a in zip(before, after, strict=True) if b["covariance"] is not None]
     assert pairs
     for b, a in pairs:
+        assert a["covariance"] is not None, (a["reason"], a.get("timings_ms"))
         np.testing.assert_allclose(a["covariance"]["matrix"],
                                    K_FACTOR * F_FACTOR * np.asarray(b["covariance"]["matrix"]),
                                    rtol=1e-9)
